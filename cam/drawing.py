@@ -1,0 +1,258 @@
+"""Stage 1: a drawing, its pixels classified as white, black, red or blue.
+
+Frames: a drawing is an image array indexed ``[row, col]``; points are given
+as ``(x, y)`` = ``(col, row)`` pixels, the origin at the top-left pixel, x to
+the right and y downward (thesis 4.1.4.2 scans rows top to bottom, columns
+left to right).
+
+Colour classes and thresholds
+-----------------------------
+Drawings come from paint programs, scanners and JPEG files, so colours are
+classified with tolerance.  For each pixel, with ``chroma = max(R,G,B) -
+min(R,G,B)``:
+
+* ``chroma < 80`` (a neutral grey): **black** when ``(R+G+B)/3 < 128``,
+  otherwise **white**.  Anti-aliased edges therefore snap to the nearer of
+  black and white.
+* ``chroma >= 80`` (a real colour): the hue decides.  **Red** when the hue is
+  within 30 degrees of 0, **blue** within 30 degrees of 240.  Any other hue
+  (green, yellow, cyan, magenta, ...) fits no class: that is an error naming
+  how many such pixels there are and where one is.
+
+Rule checks (thesis 4.1.1) give warnings with coordinates, never errors: a
+black pixel with more than two black 8-neighbours, a black pixel on the
+image border, an isolated black pixel.
+"""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from .errors import DrawingError
+
+__all__ = [
+    "WHITE",
+    "BLACK",
+    "RED",
+    "BLUE",
+    "Drawing",
+    "load_image",
+    "classify",
+    "neighbour_count",
+    "CHROMA_MIN",
+    "DARK_MAX",
+    "HUE_TOLERANCE_DEG",
+]
+
+WHITE, BLACK, RED, BLUE = 0, 1, 2, 3
+CLASS_NAMES = {WHITE: "white", BLACK: "black", RED: "red", BLUE: "blue"}
+_UNKNOWN = 255
+
+CHROMA_MIN = 80
+"""Pixels with max(R,G,B) - min(R,G,B) below this are neutral (black or white)."""
+DARK_MAX = 128
+"""Neutral pixels with mean(R,G,B) below this are black."""
+HUE_TOLERANCE_DEG = 30
+"""Coloured pixels within this many degrees of red (0) or blue (240) count as red or blue."""
+
+_MAX_LISTED = 5
+
+
+@dataclass
+class Drawing:
+    """A classified drawing.
+
+    Attributes:
+        classes: ``(H, W)`` uint8, one of :data:`WHITE`, :data:`BLACK`,
+            :data:`RED`, :data:`BLUE` per pixel, indexed ``[row, col]``.
+        warnings: rule violations (thesis 4.1.1), one string each, with (x, y) coordinates.
+        source: where the drawing came from (a path, or ``"<array>"``).
+    """
+
+    classes: np.ndarray
+    warnings: list[str] = field(default_factory=list)
+    source: str = "<array>"
+
+    @property
+    def height_px(self) -> int:
+        return int(self.classes.shape[0])
+
+    @property
+    def width_px(self) -> int:
+        return int(self.classes.shape[1])
+
+    @property
+    def black(self) -> np.ndarray:
+        """``(H, W)`` bool mask of black pixels."""
+        return self.classes == BLACK
+
+    @property
+    def kind(self) -> str:
+        """``"2d"`` (black only), ``"3d"`` (black contour, red interior) or ``"profile"`` (blue curve)."""
+        if np.any(self.classes == BLUE):
+            return "profile"
+        if np.any(self.classes == RED):
+            return "3d"
+        return "2d"
+
+    def to_rgb(self) -> np.ndarray:
+        """``(H, W, 3)`` uint8 RGB picture of the classes (pure white, black, red, blue)."""
+        palette = np.array([[255, 255, 255], [0, 0, 0], [255, 0, 0], [0, 0, 255]], np.uint8)
+        return palette[self.classes]
+
+    def _repr_png_(self) -> bytes:
+        ok, buf = cv2.imencode(".png", cv2.cvtColor(self.to_rgb(), cv2.COLOR_RGB2BGR))
+        return buf.tobytes()
+
+
+def classify(rgb: np.ndarray, *, source: str = "<array>") -> np.ndarray:
+    """Classify each pixel of an RGB image as WHITE, BLACK, RED or BLUE.
+
+    Args:
+        rgb: ``(H, W, 3)`` uint8 RGB image.
+        source: name used in error messages.
+
+    Returns:
+        ``(H, W)`` uint8 class array.
+
+    Raises:
+        DrawingError: if a pixel fits no class; gives the count and one (x, y).
+    """
+    rgb = np.asarray(rgb)
+    c = rgb.astype(np.int16)
+    hi = c.max(axis=2)
+    lo = c.min(axis=2)
+    chroma = hi - lo
+    neutral = chroma < CHROMA_MIN
+    out = np.full(rgb.shape[:2], _UNKNOWN, np.uint8)
+    dark = c.sum(axis=2) < 3 * DARK_MAX
+    out[neutral & dark] = BLACK
+    out[neutral & ~dark] = WHITE
+    coloured = ~neutral
+    if np.any(coloured):
+        hsv = cv2.cvtColor(np.ascontiguousarray(rgb.astype(np.uint8)), cv2.COLOR_RGB2HSV_FULL)
+        hue_deg = hsv[..., 0].astype(np.float32) * (360.0 / 256.0)
+        dist_red = np.minimum(hue_deg, 360.0 - hue_deg)
+        dist_blue = np.abs(hue_deg - 240.0)
+        out[coloured & (dist_red <= HUE_TOLERANCE_DEG)] = RED
+        out[coloured & (dist_blue <= HUE_TOLERANCE_DEG)] = BLUE
+    unknown = out == _UNKNOWN
+    n_bad = int(unknown.sum())
+    if n_bad:
+        row, col = np.argwhere(unknown)[0]
+        r, g, b = (int(v) for v in rgb[row, col])
+        raise DrawingError(
+            f"{source}: {n_bad} pixel(s) are not white, black, red or blue, "
+            f"e.g. pixel (x={col}, y={row}) has RGB ({r}, {g}, {b})"
+        )
+    return out
+
+
+def neighbour_count(mask: np.ndarray) -> np.ndarray:
+    """Number of set 8-neighbours of every pixel of a ``(H, W)`` bool mask (outside counts as unset)."""
+    m = mask.astype(np.uint8)
+    kernel = np.ones((3, 3), np.float32)
+    kernel[1, 1] = 0
+    return cv2.filter2D(m, cv2.CV_16S, kernel, borderType=cv2.BORDER_CONSTANT).astype(np.int16)
+
+
+def _listing(points_rc: np.ndarray) -> str:
+    pts = ", ".join(f"({c}, {r})" for r, c in points_rc[:_MAX_LISTED])
+    more = len(points_rc) - _MAX_LISTED
+    return pts + (f" and {more} more" if more > 0 else "")
+
+
+def check_rules(classes: np.ndarray) -> list[str]:
+    """Thesis 4.1.1 rule violations of black pixels as warning strings with (x, y) coordinates."""
+    black = classes == BLACK
+    warnings: list[str] = []
+    n = neighbour_count(black)
+    crowded = np.argwhere(black & (n > 2))
+    if len(crowded):
+        warnings.append(
+            f"{len(crowded)} black pixel(s) have more than two black neighbours (lines must be 1 pixel wide): "
+            + _listing(crowded)
+        )
+    border = np.zeros_like(black)
+    border[0, :] = border[-1, :] = True
+    border[:, 0] = border[:, -1] = True
+    on_border = np.argwhere(black & border)
+    if len(on_border):
+        warnings.append(f"{len(on_border)} black pixel(s) lie on the image border: " + _listing(on_border))
+    isolated = np.argwhere(black & (n == 0))
+    if len(isolated):
+        warnings.append(f"{len(isolated)} stray isolated black pixel(s): " + _listing(isolated))
+    return warnings
+
+
+def _read_rgb(path: Path) -> np.ndarray:
+    if not path.exists():
+        raise DrawingError(f"{path}: file not found")
+    if path.is_dir():
+        raise DrawingError(f"{path}: is a folder, not an image")
+    data = np.fromfile(str(path), dtype=np.uint8)
+    img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None
+    if img is None:
+        raise DrawingError(f"{path}: not a readable image (PNG, BMP, JPEG, GIF-free formats OpenCV reads)")
+    return _to_rgb(img, bgr=True, source=str(path))
+
+
+def _to_rgb(img: np.ndarray, *, bgr: bool, source: str) -> np.ndarray:
+    img = np.asarray(img)
+    if img.dtype == np.uint16:
+        img = (img >> 8).astype(np.uint8)
+    elif img.dtype == bool:
+        img = np.where(img, 0, 255).astype(np.uint8)  # True = ink
+    elif img.dtype != np.uint8:
+        raise DrawingError(f"{source}: image must be uint8, got dtype {img.dtype}")
+    if img.ndim == 2:
+        return np.repeat(img[:, :, None], 3, axis=2)
+    if img.ndim == 3 and img.shape[2] in (3, 4):
+        rgb = img[:, :, :3]
+        if bgr:
+            rgb = rgb[:, :, ::-1]
+        if img.shape[2] == 4:  # composite over white paper
+            alpha = img[:, :, 3:4].astype(np.float32) / 255.0
+            rgb = np.round(rgb.astype(np.float32) * alpha + 255.0 * (1.0 - alpha)).astype(np.uint8)
+        return np.ascontiguousarray(rgb)
+    raise DrawingError(f"{source}: image must be (H, W), (H, W, 3) or (H, W, 4), got shape {img.shape}")
+
+
+def load_image(path_or_array: str | os.PathLike | np.ndarray) -> Drawing:
+    """Load and classify a drawing.
+
+    Args:
+        path_or_array: an image file (anything OpenCV reads: PNG, BMP, JPEG,
+            TIFF, ...) or an array: ``(H, W)`` grey, ``(H, W, 3)`` RGB or
+            ``(H, W, 4)`` RGBA uint8; a bool array means True = black ink.
+
+    Returns:
+        A :class:`Drawing` with rule warnings.
+
+    Raises:
+        DrawingError: unreadable file, out-of-palette pixels, or a drawing with nothing drawn.
+
+    >>> import numpy as np
+    >>> img = np.full((5, 6), 255, np.uint8); img[2, 1:5] = 0
+    >>> d = load_image(img)
+    >>> d.width_px, d.height_px, int(d.black.sum()), d.warnings
+    (6, 5, 4, [])
+    """
+    if isinstance(path_or_array, np.ndarray):
+        source = "<array>"
+        rgb = _to_rgb(path_or_array, bgr=False, source=source)
+    else:
+        source = str(path_or_array)
+        rgb = _read_rgb(Path(path_or_array))
+    if rgb.shape[0] < 1 or rgb.shape[1] < 1:
+        raise DrawingError(f"{source}: image is empty (shape {rgb.shape})")
+    classes = classify(rgb, source=source)
+    if not np.any(classes != WHITE):
+        raise DrawingError(f"{source}: the drawing is empty (no black pixels)")
+    if not np.any(classes == BLACK):
+        raise DrawingError(f"{source}: the drawing has no black pixels (curves and contours must be black)")
+    return Drawing(classes=classes, warnings=check_rules(classes), source=source)

@@ -1,0 +1,156 @@
+"""The pin log: what a port was told, and how to read motion back out of it.
+
+CSV format (one row per port write)::
+
+    t_ns,data,strobe
+    0,168,0
+    2500000,186,0
+    ...
+
+``t_ns`` is nanoseconds from the start of the job, ``data`` the data register
+(pins 2..9 = bits 0..7, 0..255) after the write, ``strobe`` the level of pin 1
+(0 or 1).  :func:`decode_pin_log` turns it back into tool positions: a step
+is a rising edge of an axis's clock bit, in the + direction when that axis's
+direction bit is set in the same write.
+"""
+from __future__ import annotations
+
+import io
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import CamError, ParseError
+from ..fileio import atomic_write_text
+from ..settings import DEFAULT_SETTINGS, MachineSettings
+from .steps import axis_bits
+
+__all__ = ["PinLog", "Motion", "decode_pin_log", "read_pin_log", "write_pin_log", "carve"]
+
+HEADER = "t_ns,data,strobe"
+
+
+@dataclass
+class PinLog:
+    """Port writes: ``t_ns`` (M,) int64, ``data`` (M,) uint8, ``strobe`` (M,) uint8."""
+
+    t_ns: np.ndarray
+    data: np.ndarray
+    strobe: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.t_ns)
+
+
+@dataclass
+class Motion:
+    """Decoded motion.
+
+    Attributes:
+        t_ns: ``(M,)`` int64 time of each write.
+        position_steps: ``(M, 3)`` int64 machine position (x, y, z) in steps after each write.
+        step_counts: ``(3,)`` int64 steps made per axis (absolute).
+    """
+
+    t_ns: np.ndarray
+    position_steps: np.ndarray
+    step_counts: np.ndarray
+
+    @property
+    def final_steps(self) -> tuple[int, int, int]:
+        if len(self.position_steps) == 0:
+            return (0, 0, 0)
+        return tuple(int(v) for v in self.position_steps[-1])  # type: ignore[return-value]
+
+
+def write_pin_log(log: PinLog, path: str | os.PathLike) -> Path:
+    """Write the pin log CSV atomically."""
+    buf = io.StringIO()
+    buf.write(HEADER + "\n")
+    if len(log):
+        arr = np.column_stack([log.t_ns.astype(np.int64), log.data.astype(np.int64), log.strobe.astype(np.int64)])
+        np.savetxt(buf, arr, fmt="%d", delimiter=",")
+    return atomic_write_text(path, buf.getvalue())
+
+
+def read_pin_log(path: str | os.PathLike) -> PinLog:
+    """Read a pin log CSV (errors name the file and line)."""
+    p = Path(path)
+    try:
+        with open(p, encoding="utf-8") as handle:
+            first = handle.readline().strip()
+            if first != HEADER:
+                raise ParseError(f"{p}:1: not a pin log (expected header '{HEADER}')")
+            rows = np.loadtxt(handle, delimiter=",", dtype=np.int64, ndmin=2)
+    except FileNotFoundError:
+        raise ParseError(f"{p}: file not found") from None
+    except ValueError as exc:
+        raise ParseError(f"{p}: bad pin log row ({exc})") from None
+    if rows.size == 0:
+        rows = np.zeros((0, 3), np.int64)
+    if rows.shape[1] != 3:
+        raise ParseError(f"{p}:2: expected 3 columns t_ns,data,strobe")
+    return PinLog(rows[:, 0], rows[:, 1].astype(np.uint8), rows[:, 2].astype(np.uint8))
+
+
+def decode_pin_log(
+    log: PinLog | str | os.PathLike, settings: MachineSettings = DEFAULT_SETTINGS
+) -> Motion:
+    """Decode a pin log into machine positions (steps) after each write.
+
+    The register is taken to be 0 before the first write; the tool starts at (0, 0, 0).
+    """
+    if not isinstance(log, PinLog):
+        log = read_pin_log(log)
+    clock, dirbit = axis_bits(settings)
+    data = log.data.astype(np.uint8)
+    prev = np.concatenate([[0], data[:-1]]).astype(np.uint8)
+    pos = np.zeros((len(data), 3), np.int64)
+    counts = np.zeros(3, np.int64)
+    for a in range(3):
+        rising = ((data & clock[a]) != 0) & ((prev & clock[a]) == 0)
+        sign = np.where((data & dirbit[a]) != 0, 1, -1)
+        step = np.where(rising, sign, 0)
+        pos[:, a] = np.cumsum(step)
+        counts[a] = int(rising.sum())
+    return Motion(t_ns=np.asarray(log.t_ns, np.int64), position_steps=pos, step_counts=counts)
+
+
+def carve(
+    motion: Motion,
+    shape_hw: tuple[int, int],
+    settings: MachineSettings = DEFAULT_SETTINGS,
+    *,
+    origin_px: tuple[int, int, int] = (0, 0, 0),
+) -> np.ndarray:
+    """Cut surface left by a point tool that follows ``motion``.
+
+    A tool position (x, y, z) in steps lies over pixel
+    ``(round(x / spp_xy) - ox, round(y / spp_xy) - oy)`` and is
+    ``z - oz x spp_z`` steps below the surface there.
+
+    Returns:
+        ``(H, W)`` int64: the deepest cut at each drawing pixel in Z steps (0 = untouched).
+
+    Raises:
+        CamError: the tool went below the surface outside the drawing.
+    """
+    h, w = shape_hw
+    s = settings
+    ox, oy, oz = origin_px
+    p = motion.position_steps
+    depth = p[:, 2] - oz * s.steps_per_px_z
+    below = depth > 0
+    q = p[below]
+    d = depth[below]
+    col = np.floor(q[:, 0] / s.steps_per_px_xy + 0.5).astype(np.int64) - ox
+    row = np.floor(q[:, 1] / s.steps_per_px_xy + 0.5).astype(np.int64) - oy
+    outside = (col < 0) | (col >= w) | (row < 0) | (row >= h)
+    if np.any(outside):
+        i = int(np.flatnonzero(outside)[0])
+        raise CamError(f"the tool cut below the surface outside the drawing at pixel ({col[i]}, {row[i]})")
+    out = np.zeros((h, w), np.int64)
+    np.maximum.at(out, (row, col), d)
+    return out

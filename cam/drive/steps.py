@@ -1,0 +1,142 @@
+"""Stage 4: the step plan -- every parallel-port write of a job, with its time.
+
+Signals (thesis chapter 3): a step is a rising edge of an axis's clock bit;
+the direction bit, set for the + direction, is written half a step period
+before the edge.  Each step period of length ``T`` starting at ``t`` makes two
+writes::
+
+    t + T/2 : direction bits | clock bits of the axes that step   (rising edges)
+    t + T   : direction bits of the next period, clocks low         (falling edges)
+
+so the last write of a job lands exactly at the end of its last period, and
+the job time is the sum of its periods.  X and Y step together in diagonal
+moves (Eq. 4.4): a move of (dx, dy, dz) steps takes max(|dx|, |dy|, |dz|)
+periods, the shorter axes spread evenly over them (a DDA).  The period is the
+X/Y delay when X or Y moves, the Z delay for Z-only moves, and the larger of
+the two when both move.
+
+Pin 1 (strobe) carries Half/Full* and is held low for full steps.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..settings import MachineSettings
+from ..toolpath import Toolpath, check_travel
+
+__all__ = ["StepPlan", "plan_steps", "axis_bits"]
+
+
+def axis_bits(settings: MachineSettings) -> tuple[np.ndarray, np.ndarray]:
+    """(clock_bit_values, dir_bit_values): ``(3,)`` uint8 data-register masks for X, Y, Z."""
+    p = settings.pins
+    clock = np.array([1 << p.bit("clock_x"), 1 << p.bit("clock_y"), 1 << p.bit("clock_z")], np.uint8)
+    direction = np.array([1 << p.bit("dir_x"), 1 << p.bit("dir_y"), 1 << p.bit("dir_z")], np.uint8)
+    return clock, direction
+
+
+@dataclass
+class StepPlan:
+    """All port writes of a job.
+
+    Attributes:
+        t_ns: ``(M,)`` int64 scheduled time of each write, ns from the job start (non-decreasing).
+        data: ``(M,)`` uint8 data register (pins 2..9) after each write.
+        strobe: ``(M,)`` uint8 level of pin 1 after each write.
+        point_write: ``(N,)`` int64 index of the write at which toolpath point i is reached.
+        pause_writes: ``(P,)`` int64 write indices after which the job pauses (Pause At).
+        steps_total: ``(3,)`` int64 steps made by X, Y, Z (absolute).
+        settings: the machine settings.
+        end_steps: machine position (x, y, z) in steps after the last write.
+        safe_z_steps: Z a stop lifts the tool to (the surface or above it).
+    """
+
+    t_ns: np.ndarray
+    data: np.ndarray
+    strobe: np.ndarray
+    point_write: np.ndarray
+    pause_writes: np.ndarray
+    steps_total: np.ndarray
+    settings: MachineSettings
+    end_steps: tuple[int, int, int] = (0, 0, 0)
+    safe_z_steps: int = 0
+    warnings: list[str] = field(default_factory=list)
+
+    def __len__(self) -> int:
+        return len(self.t_ns)
+
+    @property
+    def estimated_time_s(self) -> float:
+        """Machine time of the job in seconds (pauses excluded)."""
+        return float(self.t_ns[-1]) / 1e9 if len(self.t_ns) else 0.0
+
+
+def plan_steps(toolpath: Toolpath) -> StepPlan:
+    """Turn a toolpath into the timed port writes that make it (vectorised, no Python loop per step)."""
+    s = toolpath.settings
+    check_travel(toolpath.points_px, s)
+    pts = np.vstack([np.zeros((1, 3), np.int64), toolpath.points_steps()])
+    delta = np.diff(pts, axis=0)  # (N, 3) per move
+    n_per_move = np.abs(delta).max(axis=1)  # periods per move
+    xy_moves = np.any(delta[:, :2] != 0, axis=1)
+    z_moves = delta[:, 2] != 0
+    period_ns = np.where(
+        xy_moves & z_moves,
+        max(s.delay_xy_ns, s.delay_z_ns),
+        np.where(xy_moves, s.delay_xy_ns, s.delay_z_ns),
+    ).astype(np.int64)
+
+    n_periods = int(n_per_move.sum())
+    move_of = np.repeat(np.arange(len(delta)), n_per_move)
+    first = np.cumsum(n_per_move) - n_per_move
+    k = np.arange(n_periods, dtype=np.int64) - np.repeat(first, n_per_move) + 1  # 1..n within the move
+    n_rep = n_per_move[move_of]
+    absd = np.abs(delta)[move_of]  # (P, 3)
+    stepped = (k[:, None] * absd) // n_rep[:, None] - ((k[:, None] - 1) * absd) // n_rep[:, None]  # 0/1
+
+    clock, dirbit = axis_bits(s)
+    # direction per move and axis: + where delta > 0; an idle axis keeps its last direction
+    sign = np.sign(delta)
+    dir_state = np.zeros_like(sign)
+    for a in range(3):
+        idx = np.where(sign[:, a] != 0, np.arange(len(sign)), -1)
+        idx = np.maximum.accumulate(idx)
+        dir_state[:, a] = np.where(idx >= 0, sign[np.maximum(idx, 0), a] > 0, 0)
+    dir_data_move = (dir_state * dirbit.astype(np.int64)).sum(axis=1).astype(np.uint8)  # (N,)
+    dir_data = dir_data_move[move_of]  # (P,)
+    clock_data = (stepped * clock.astype(np.int64)).sum(axis=1).astype(np.uint8)
+
+    per = period_ns[move_of]
+    end_t = np.cumsum(per)
+    start_t = end_t - per
+
+    m = 1 + 2 * n_periods
+    t_ns = np.empty(m, np.int64)
+    data = np.empty(m, np.uint8)
+    t_ns[0] = 0
+    data[0] = dir_data[0] if n_periods else 0
+    t_ns[1::2] = start_t + per // 2
+    data[1::2] = dir_data | clock_data
+    t_ns[2::2] = end_t
+    if n_periods:
+        data[2::2][:-1] = dir_data[1:]
+        data[-1] = dir_data[-1]
+    strobe = np.full(m, 1 if s.half_step else 0, np.uint8)
+
+    point_write = 2 * np.cumsum(n_per_move)
+    pause_writes = point_write[toolpath.pause]
+    end = tuple(int(v) for v in pts[-1])
+    return StepPlan(
+        t_ns=t_ns,
+        data=data,
+        strobe=strobe,
+        point_write=point_write,
+        pause_writes=pause_writes,
+        steps_total=np.abs(delta).sum(axis=0),
+        settings=s,
+        end_steps=end,  # type: ignore[arg-type]
+        safe_z_steps=min(0, int(toolpath.origin_px[2])) * s.steps_per_px_z,
+        warnings=list(toolpath.warnings),
+    )

@@ -1,0 +1,78 @@
+"""Reports: the image property report (thesis 4.2.2) and the job report (JSON)."""
+from __future__ import annotations
+
+from typing import Any, Optional
+
+from .digitized import Digitized
+from .settings import DEFAULT_SETTINGS, MachineSettings
+from .toolpath import Toolpath
+
+__all__ = ["image_report", "job_report", "format_report"]
+
+
+def image_report(digitized: Digitized, settings: MachineSettings = DEFAULT_SETTINGS) -> dict[str, Any]:
+    """Image property report: size of what will be cut in pixels and mm (Eq. 4.1), object count, warnings.
+
+    ``width_px``/``height_px`` are the extent of the traced pixels (the
+    material block needed), not the image size, which is ``image_width_px``/``image_height_px``.
+    """
+    x0, y0, x1, y1 = digitized.bounding_box_px()
+    width_px, height_px = x1 - x0 + 1, y1 - y0 + 1
+    rep: dict[str, Any] = {
+        "mode": digitized.mode,
+        "objects": len(digitized.objects),
+        "image_width_px": digitized.width_px,
+        "image_height_px": digitized.height_px,
+        "width_px": width_px,
+        "height_px": height_px,
+        "width_mm": round(settings.px_to_mm_xy(width_px), 4),
+        "height_mm": round(settings.px_to_mm_xy(height_px), 4),
+        "points": digitized.n_points,
+        "warnings": list(digitized.warnings),
+    }
+    if digitized.mode == "3d":
+        rep["layers"] = digitized.n_layers
+    return rep
+
+
+def job_report(
+    digitized: Optional[Digitized], toolpath: Toolpath, plan: Any
+) -> dict[str, Any]:
+    """The JSON job report: image report plus depth, points, retracts, steps and time.
+
+    ``plan`` is the :class:`~cam.drive.StepPlan` of ``toolpath``.
+    """
+    s = toolpath.settings
+    rep: dict[str, Any] = image_report(digitized, s) if digitized is not None else {"warnings": []}
+    depth_px = int(toolpath.asked_depth_px().max()) if toolpath.height_px and toolpath.n_targets else 0
+    rep.update(
+        {
+            "depth_px": depth_px,
+            "depth_mm": round(s.px_to_mm_z(depth_px), 4),
+            "points": toolpath.n_targets,
+            "retracts": toolpath.n_retracts,
+            "steps": {axis: int(v) for axis, v in zip("xyz", plan.steps_total)},
+            "estimated_time_s": round(plan.estimated_time_s, 6),
+        }
+    )
+    rep["warnings"] = list(rep.get("warnings", [])) + [w for w in toolpath.warnings if w not in rep["warnings"]]
+    return rep
+
+
+def format_report(rep: dict[str, Any]) -> str:
+    """Human-readable lines of a report."""
+    lines = [
+        f"objects:    {rep['objects']}" + (f"  (layers: {rep['layers']})" if "layers" in rep else ""),
+        f"size:       {rep['width_px']} x {rep['height_px']} px = {rep['width_mm']:.2f} x {rep['height_mm']:.2f} mm"
+        f"  (image {rep['image_width_px']} x {rep['image_height_px']} px)",
+        f"points:     {rep['points']}",
+    ]
+    if "depth_mm" in rep:
+        lines.append(f"depth:      {rep['depth_px']} Z px = {rep['depth_mm']:.3f} mm")
+        lines.append(f"retracts:   {rep['retracts']}")
+        st = rep["steps"]
+        lines.append(f"steps:      X {st['x']}  Y {st['y']}  Z {st['z']}")
+        lines.append(f"time:       {rep['estimated_time_s']:.1f} s")
+    for w in rep["warnings"]:
+        lines.append(f"warning:    {w}")
+    return "\n".join(lines)

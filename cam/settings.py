@@ -1,0 +1,228 @@
+"""Machine settings: one place for every number that describes the machine.
+
+The built-in values are the thesis's (``shared/seeds/001``):
+
+* steps per pixel X/Y = 8 and Z = 1, pulse delay X/Y = Z = 5 ms: the drilling
+  options of Table 5.1 (section 5.2);
+* mm per step X/Y = 0.0289 and Z = 0.0157: the constants of Eq. 4.1 and 4.2;
+* the parallel-port pin map of the drive circuit (chapter 3): pin 1 (strobe)
+  Half/Full*, held low for full steps; pins 2/3 clock and CW/CCW of Z, 4/5 of
+  Y, 6/7 of X.
+
+Settings load from a TOML file (``--machine FILE``); any key may be left out
+and then keeps its built-in value.  An unknown key or a bad value is a
+:class:`~cam.errors.SettingsError` naming the key.  Example::
+
+    steps_per_px_xy = 8
+    steps_per_px_z = 1
+    delay_xy_ms = 5.0
+    delay_z_ms = 5.0
+    mm_per_step_xy = 0.0289
+    mm_per_step_z = 0.0157
+    half_step = false
+
+    [travel]            # machine travel in steps, from the home (0, 0, 0)
+    x_min_steps = 0
+    x_max_steps = 10000
+    y_min_steps = 0
+    y_max_steps = 10000
+    z_min_steps = 0
+    z_max_steps = 2000
+
+    [pins]              # parallel-port connector pin numbers (2..9 are data bits D0..D7)
+    clock_x = 6
+    dir_x = 7
+    clock_y = 4
+    dir_y = 5
+    clock_z = 2
+    dir_z = 3
+"""
+from __future__ import annotations
+
+import dataclasses
+import os
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+
+from .errors import SettingsError
+
+__all__ = ["Travel", "Pins", "MachineSettings", "load_settings", "DEFAULT_SETTINGS"]
+
+
+@dataclass(frozen=True)
+class Travel:
+    """Machine travel limits in steps, in the machine frame (home = (0, 0, 0); +Z is deeper)."""
+
+    x_min_steps: int = 0
+    x_max_steps: int = 10000
+    y_min_steps: int = 0
+    y_max_steps: int = 10000
+    z_min_steps: int = 0
+    z_max_steps: int = 2000
+
+    def bounds_steps(self) -> tuple[tuple[int, int], tuple[int, int], tuple[int, int]]:
+        """((x_min, x_max), (y_min, y_max), (z_min, z_max)) in steps."""
+        return (
+            (self.x_min_steps, self.x_max_steps),
+            (self.y_min_steps, self.y_max_steps),
+            (self.z_min_steps, self.z_max_steps),
+        )
+
+
+@dataclass(frozen=True)
+class Pins:
+    """Parallel-port connector pins of the step/direction signals.
+
+    Pins 2..9 are data-register bits D0..D7; pin 1 is the strobe line, which
+    carries Half/Full* (low = full step).  Defaults are the thesis drive
+    circuit's wiring (``shared/seeds/001``, chapter 3, Tables 3.2/3.3).
+    """
+
+    clock_x: int = 6
+    dir_x: int = 7
+    clock_y: int = 4
+    dir_y: int = 5
+    clock_z: int = 2
+    dir_z: int = 3
+
+    def bit(self, name: str) -> int:
+        """Data-register bit (0..7) of the signal ``name`` (e.g. ``"clock_x"``)."""
+        return getattr(self, name) - 2
+
+
+@dataclass(frozen=True)
+class MachineSettings:
+    """Everything `cam` knows about the machine.  Frozen: make changed copies with :meth:`replace`."""
+
+    steps_per_px_xy: int = 8
+    steps_per_px_z: int = 1
+    delay_xy_ms: float = 5.0
+    delay_z_ms: float = 5.0
+    mm_per_step_xy: float = 0.0289
+    mm_per_step_z: float = 0.0157
+    half_step: bool = False
+    travel: Travel = field(default_factory=Travel)
+    pins: Pins = field(default_factory=Pins)
+
+    def replace(self, **changes: Any) -> "MachineSettings":
+        """A copy with some fields changed; values are validated."""
+        new = dataclasses.replace(self, **changes)
+        _validate(new, source="settings")
+        return new
+
+    @property
+    def delay_xy_ns(self) -> int:
+        """Step period of the X and Y motors in nanoseconds."""
+        return int(round(self.delay_xy_ms * 1_000_000))
+
+    @property
+    def delay_z_ns(self) -> int:
+        """Step period of the Z motor in nanoseconds."""
+        return int(round(self.delay_z_ms * 1_000_000))
+
+    def px_to_mm_xy(self, n_px: float) -> float:
+        """Eq. 4.1: mm = pixels x steps/pixel (X/Y) x mm/step (X/Y)."""
+        return n_px * self.steps_per_px_xy * self.mm_per_step_xy
+
+    def px_to_mm_z(self, n_px: float) -> float:
+        """Eq. 4.2: mm = pixels x steps/pixel (Z) x mm/step (Z)."""
+        return n_px * self.steps_per_px_z * self.mm_per_step_z
+
+
+DEFAULT_SETTINGS = MachineSettings()
+
+_SECTIONS = {"travel": Travel, "pins": Pins}
+
+
+def _type_ok(value: Any, kind: type) -> bool:
+    if kind is bool:
+        return isinstance(value, bool)
+    if kind is int:
+        return isinstance(value, int) and not isinstance(value, bool)
+    if kind is float:
+        return isinstance(value, (int, float)) and not isinstance(value, bool)
+    return False
+
+
+def _build(cls: type, table: Mapping[str, Any], prefix: str, source: str) -> Any:
+    fields = {f.name: f for f in dataclasses.fields(cls)}
+    values: dict[str, Any] = {}
+    for key, value in table.items():
+        name = f"{prefix}{key}"
+        if key not in fields:
+            known = ", ".join(sorted(fields))
+            raise SettingsError(f"{source}: unknown key '{name}' (known: {known})")
+        f = fields[key]
+        if key in _SECTIONS and prefix == "":
+            if not isinstance(value, dict):
+                raise SettingsError(f"{source}: '{name}' must be a table [{name}]")
+            values[key] = _build(_SECTIONS[key], value, f"{key}.", source)
+            continue
+        kind = {"int": int, "float": float, "bool": bool}[f.type if isinstance(f.type, str) else f.type.__name__]
+        if not _type_ok(value, kind):
+            raise SettingsError(f"{source}: '{name}' must be {kind.__name__}, got {value!r}")
+        values[key] = kind(value)
+    return cls(**values)
+
+
+def _validate(s: MachineSettings, source: str) -> None:
+    def bad(key: str, why: str) -> SettingsError:
+        return SettingsError(f"{source}: '{key}' {why}")
+
+    for key in ("steps_per_px_xy", "steps_per_px_z"):
+        if not (1 <= getattr(s, key) <= 10000):
+            raise bad(key, f"must be 1..10000 steps, got {getattr(s, key)}")
+    for key in ("delay_xy_ms", "delay_z_ms"):
+        if not (0.001 <= getattr(s, key) <= 10000):
+            raise bad(key, f"must be 0.001..10000 ms, got {getattr(s, key)}")
+    for key in ("mm_per_step_xy", "mm_per_step_z"):
+        if not (0 < getattr(s, key) <= 100):
+            raise bad(key, f"must be > 0 and <= 100 mm, got {getattr(s, key)}")
+    for axis, (lo, hi) in zip("xyz", s.travel.bounds_steps()):
+        if lo > 0 or hi < 0:
+            raise bad(f"travel.{axis}_min_steps", f"and travel.{axis}_max_steps must contain the home 0, got {lo}..{hi}")
+    pins = {f.name: getattr(s.pins, f.name) for f in dataclasses.fields(Pins)}
+    for name, pin in pins.items():
+        if not (2 <= pin <= 9):
+            raise bad(f"pins.{name}", f"must be a data pin 2..9, got {pin}")
+    seen: dict[int, str] = {}
+    for name, pin in pins.items():
+        if pin in seen:
+            raise bad(f"pins.{name}", f"uses pin {pin}, already used by pins.{seen[pin]}")
+        seen[pin] = name
+
+
+def settings_from_mapping(table: Mapping[str, Any], source: str = "settings") -> MachineSettings:
+    """Build validated settings from a parsed TOML table (keys as in the module docstring)."""
+    settings = _build(MachineSettings, table, "", source)
+    _validate(settings, source)
+    return settings
+
+
+def load_settings(path: str | os.PathLike | None = None) -> MachineSettings:
+    """Load machine settings from a TOML file; ``None`` gives the thesis defaults.
+
+    Raises :class:`SettingsError` for a missing file, bad TOML, an unknown key
+    or a bad value, always naming the file and the key.
+    """
+    if path is None:
+        return DEFAULT_SETTINGS
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise SettingsError(f"{p}: settings file not found") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise SettingsError(f"{p}: cannot read settings file ({exc})") from None
+    try:
+        table = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise SettingsError(f"{p}: not valid TOML ({exc})") from None
+    return settings_from_mapping(table, source=str(p))

@@ -1,0 +1,277 @@
+"""Stage 3: the toolpath -- ordered 3D points in pixel units (thesis 4.1.4.5, 4.2.3, B.2).
+
+Frame: ``x`` = image column and ``y`` = image row, in pixels, plus the Start
+At offset; ``z`` = depth below the home plane in Z pixels (+Z is deeper into
+the material, 0 is the surface when Start At Z is 0).  The tool starts at
+(0, 0, 0).  Consecutive points are straight moves; every move changes either
+X/Y or Z, never both, so a point tool's cut can be read off exactly.
+
+Rules the planner keeps (and tests check):
+
+* points are cut sorted by depth, shallowest first; the sort is stable, so
+  within a depth the traced order is kept;
+* a move between non-adjacent pixels (Chebyshev distance > 1) first rises to
+  the surface, travels there, and plunges at the next point;
+* Z never goes below the depth asked for at the pixel the tool is over:
+  going deeper, move then plunge; going shallower, lift then move;
+* the job ends at (0, 0, 0); a job with any point outside the machine travel
+  is refused before the first step, naming the first offending point.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import numpy as np
+
+from .digitized import Digitized
+from .errors import PlanError, TravelError
+from .settings import DEFAULT_SETTINGS, MachineSettings
+
+__all__ = ["Toolpath", "plan", "goto", "CUT", "RETRACT", "TRAVEL", "check_travel"]
+
+CUT = 0
+"""Point at or above the asked depth of a drawing pixel (the tool is in the material or at the surface over it)."""
+RETRACT = 1
+"""Tool lifted straight up to the surface (or the safe plane) before a travel."""
+TRAVEL = 2
+"""Move at the surface / safe plane to above the next point."""
+
+
+@dataclass
+class Toolpath:
+    """Ordered tool positions in pixel units.
+
+    Attributes:
+        points_px: ``(N, 3)`` int64 ``(x, y, z)``: x = column, y = row (Start
+            At offset included), z = depth in Z pixels, +Z deeper.  The tool
+            starts at (0, 0, 0) before point 0.
+        kind: ``(N,)`` uint8 :data:`CUT`, :data:`RETRACT` or :data:`TRAVEL`.
+        target: ``(N,)`` bool, True where the point is a digitized point at its
+            full (pass) depth -- what the drawing asks for.
+        pause: ``(N,)`` bool, pause when the tool reaches this point (Pause At).
+        settings: the machine settings the path was planned for.
+        width_px, height_px: size of the source drawing.
+        origin_px: Start At offset ``(x, y, z)`` in pixels.
+        warnings: planning warnings.
+    """
+
+    points_px: np.ndarray
+    kind: np.ndarray
+    target: np.ndarray
+    pause: np.ndarray
+    settings: MachineSettings = DEFAULT_SETTINGS
+    width_px: int = 0
+    height_px: int = 0
+    origin_px: tuple[int, int, int] = (0, 0, 0)
+    warnings: list[str] = field(default_factory=list)
+
+    def __len__(self) -> int:
+        return len(self.points_px)
+
+    @property
+    def n_retracts(self) -> int:
+        return int(np.count_nonzero(self.kind == RETRACT))
+
+    @property
+    def n_targets(self) -> int:
+        return int(np.count_nonzero(self.target))
+
+    def points_steps(self) -> np.ndarray:
+        """``(N, 3)`` int64 points in machine steps (pixel x steps/pixel, per axis)."""
+        s = self.settings
+        return self.points_px * np.array([s.steps_per_px_xy, s.steps_per_px_xy, s.steps_per_px_z], np.int64)
+
+    def asked_depth_px(self) -> np.ndarray:
+        """``(height_px, width_px)`` int64: deepest z asked at each drawing pixel (0 where nothing is asked).
+
+        Frame: drawing pixels (the Start At offset removed); depth relative to the surface.
+        """
+        out = np.zeros((self.height_px, self.width_px), np.int64)
+        p = self.points_px[self.target] - np.asarray(self.origin_px, np.int64)
+        np.maximum.at(out, (p[:, 1], p[:, 0]), p[:, 2])
+        return out
+
+
+def _depths_per_object(depth: int | Sequence[int], n_objects: int) -> tuple[np.ndarray, list[str]]:
+    warnings: list[str] = []
+    if np.isscalar(depth):
+        values = np.full(n_objects, int(depth), np.int64)  # type: ignore[arg-type]
+    else:
+        values = np.asarray(list(depth), np.int64)  # type: ignore[arg-type]
+        if len(values) < n_objects:
+            raise PlanError(
+                f"{len(values)} depth value(s) given for {n_objects} objects: give one depth per object"
+            )
+        if len(values) > n_objects:
+            warnings.append(f"{len(values)} depth values given for {n_objects} objects; the extra ones are unused")
+            values = values[:n_objects]
+    if np.any(values < 0):
+        raise PlanError(f"depths must be >= 0 Z pixels, got {int(values.min())}")
+    return values, warnings
+
+
+def _pass_targets(
+    digitized: Digitized, depth_px: np.ndarray, passes: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """All (x, y, z) cut targets in cutting order, with per-target drawing coordinates."""
+    chunks = []
+    for k in range(1, passes + 1):
+        for obj, d in zip(digitized.objects, depth_px):
+            d_k = (int(d) * k + passes - 1) // passes  # ceil(d * k / passes)
+            d_prev = (int(d) * (k - 1) + passes - 1) // passes
+            if d_k == 0 or (k > 1 and d_k == d_prev):
+                continue  # depth 0 skips the object; a pass that goes no deeper is skipped
+            block = np.empty((len(obj), 3), np.int64)
+            block[:, :2] = obj
+            block[:, 2] = d_k
+            chunks.append(block)
+    if not chunks:
+        return np.zeros((0, 3), np.int64), np.zeros(0, np.int64)
+    targets = np.concatenate(chunks)
+    order = np.argsort(targets[:, 2], kind="stable")
+    return targets[order], order
+
+
+def check_travel(points_px: np.ndarray, settings: MachineSettings) -> None:
+    """Raise :class:`TravelError` naming the first point of ``(N, 3)`` pixel points outside the travel."""
+    s = settings
+    steps = np.asarray(points_px, np.int64) * np.array([s.steps_per_px_xy, s.steps_per_px_xy, s.steps_per_px_z])
+    lo = np.array([b[0] for b in s.travel.bounds_steps()])
+    hi = np.array([b[1] for b in s.travel.bounds_steps()])
+    bad = np.flatnonzero(np.any((steps < lo) | (steps > hi), axis=1))
+    if len(bad):
+        i = int(bad[0])
+        x, y, z = (int(v) for v in points_px[i])
+        xs, ys, zs = (int(v) for v in steps[i])
+        axis = "XYZ"[int(np.flatnonzero((steps[i] < lo) | (steps[i] > hi))[0])]
+        a = "XYZ".index(axis)
+        raise TravelError(
+            f"job leaves the machine travel at point {i} (x={x}, y={y}, z={z} px = "
+            f"{xs}, {ys}, {zs} steps): {axis} travel is {lo[a]}..{hi[a]} steps"
+        )
+
+
+def plan(
+    digitized: Digitized,
+    *,
+    depth: int | Sequence[int] = 10,
+    settings: MachineSettings = DEFAULT_SETTINGS,
+    passes: int = 1,
+    start_at: tuple[int, int, int] = (0, 0, 0),
+    pause_at: Sequence[tuple[int, int]] = (),
+) -> Toolpath:
+    """Plan the toolpath of a digitized drawing.
+
+    Args:
+        digitized: the traced objects.
+        depth: Z pixels below the surface -- one number for every object
+            (Delta Z Uniform) or one per object (Delta Z1..Zn).  0 skips an object.
+        settings: machine settings (steps per pixel, travel).
+        passes: Repeat Drill -- cut the whole path ``passes`` times, each
+            pass deeper (pass k cuts ceil(depth x k / passes)).
+        start_at: Start At ``(x, y, z)`` offset in pixels for the whole job.
+        pause_at: Pause At drawing points ``(x, y)``; the job pauses each time
+            the tool reaches one at its cutting depth.
+
+    Returns:
+        The :class:`Toolpath`, ending at (0, 0, 0).
+
+    Raises:
+        PlanError: fewer depths than objects, bad options; TravelError: the job leaves the travel.
+    """
+    if passes < 1:
+        raise PlanError(f"passes must be >= 1, got {passes}")
+    n_obj = len(digitized.objects)
+    if n_obj == 0:
+        raise PlanError("nothing to cut: the digitized drawing has no objects")
+    depth_px, warnings = _depths_per_object(depth, n_obj)
+    targets, _ = _pass_targets(digitized, depth_px, passes)
+    if len(targets) == 0:
+        raise PlanError("nothing to cut: every depth is 0")
+    ox, oy, oz = (int(v) for v in start_at)
+    targets = targets + np.array([ox, oy, oz], np.int64)
+    surface = oz
+    safe = min(0, oz)
+
+    pause_set = {(int(x) + ox, int(y) + oy) for x, y in pause_at}
+    drawn = {(int(x) + ox, int(y) + oy) for obj in digitized.objects for x, y in obj} if pause_set else set()
+    for x, y in pause_at:
+        if (int(x) + ox, int(y) + oy) not in drawn:
+            warnings.append(f"Pause At ({x}, {y}) is not a point of the drawing; it has no effect")
+
+    pts: list[tuple[int, int, int]] = []
+    kinds: list[int] = []
+    tgt: list[bool] = []
+    pause: list[bool] = []
+
+    def emit(x: int, y: int, z: int, kind: int, is_target: bool = False) -> None:
+        if pts and pts[-1] == (x, y, z):
+            if is_target:
+                tgt[-1] = True
+                kinds[-1] = CUT
+                pause[-1] = pause[-1] or (x, y) in pause_set
+            return
+        pts.append((x, y, z))
+        kinds.append(kind)
+        tgt.append(is_target)
+        pause.append(is_target and (x, y) in pause_set)
+
+    cx, cy, cz = 0, 0, 0
+    on_drawing = False  # is the tool at a drawing pixel at or above its asked depth
+    for x, y, d in targets.tolist():
+        adjacent = on_drawing and max(abs(x - cx), abs(y - cy)) <= 1
+        if adjacent:
+            if d >= cz:  # deeper or level: move at the current depth, then plunge
+                emit(x, y, cz, CUT)
+            else:  # shallower: lift first, then move
+                emit(cx, cy, d, CUT)
+                emit(x, y, d, CUT)
+        else:
+            lift_z = surface if on_drawing else min(cz, safe)
+            if cz != lift_z:
+                emit(cx, cy, lift_z, RETRACT)
+            if (cx, cy) != (x, y):
+                emit(x, y, lift_z, TRAVEL)
+        emit(x, y, d, CUT, is_target=True)
+        cx, cy, cz = x, y, d
+        on_drawing = True
+    # end of job: lift, travel home, back to Z = 0
+    emit(cx, cy, safe, RETRACT)
+    emit(0, 0, safe, TRAVEL)
+    emit(0, 0, 0, TRAVEL)
+
+    points = np.array(pts, np.int64).reshape(-1, 3)
+    check_travel(points, settings)
+    return Toolpath(
+        points_px=points,
+        kind=np.array(kinds, np.uint8),
+        target=np.array(tgt, bool),
+        pause=np.array(pause, bool),
+        settings=settings,
+        width_px=digitized.width_px,
+        height_px=digitized.height_px,
+        origin_px=(ox, oy, oz),
+        warnings=warnings,
+    )
+
+
+def goto(position_px: tuple[int, int, int], *, settings: MachineSettings = DEFAULT_SETTINGS) -> Toolpath:
+    """Go To (thesis 4.1.2): from (0, 0, 0) travel at Z = 0 to ``(x, y)``, then move Z, and stop there.
+
+    Raises:
+        TravelError: the point is outside the machine travel.
+    """
+    x, y, z = (int(v) for v in position_px)
+    pts = [p for p in ((x, y, 0), (x, y, z)) if p != (0, 0, 0)]
+    pts = list(dict.fromkeys(pts))
+    points = np.array(pts, np.int64).reshape(-1, 3)
+    check_travel(points, settings)
+    n = len(points)
+    return Toolpath(
+        points_px=points,
+        kind=np.full(n, TRAVEL, np.uint8),
+        target=np.zeros(n, bool),
+        pause=np.zeros(n, bool),
+        settings=settings,
+    )
