@@ -195,7 +195,7 @@ def _validate(s: MachineSettings, source: str) -> None:
     seen: dict[int, str] = {}
     for name, pin in pins.items():
         if pin in seen:
-            raise bad(f"pins.{name}", f"uses pin {pin}, already used by pins.{seen[pin]}")
+            raise bad(f"pins.{name}", f"uses pin {pin}, already used by 'pins.{seen[pin]}'")
         seen[pin] = name
 
 

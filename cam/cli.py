@@ -1,0 +1,307 @@
+"""The command line: ``python -m cam COMMAND ...``.
+
+A thin adapter: it parses options, calls the library, and turns any
+:class:`~cam.errors.CamError` into one line on stderr and exit code 2.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import signal
+import sys
+from pathlib import Path
+from typing import Any, Callable, Optional, Sequence
+
+from . import __version__
+from .digitize import START_RULES, digitize
+from .digitized import Digitized, load_digitized, save_digitized
+from .drawing import load_image
+from .drive import Controller, MockPort, plan_steps, run, write_pin_log
+from .drive.runner import FINISHED, RunResult
+from .errors import CamError
+from .fileio import atomic_write_text
+from .report import format_report, image_report, job_report
+from .settings import MachineSettings, load_settings
+from .toolpath import goto, plan
+
+__all__ = ["main", "build_parser"]
+
+EXIT_BAD_INPUT = 2
+EXIT_INTERRUPTED = 130
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line errors (exit code 2)."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        self.exit(EXIT_BAD_INPUT, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+def _int_list(n: Optional[int], name: str, minimum: Optional[int] = None) -> Callable[[str], list[int]]:
+    def parse(text: str) -> list[int]:
+        try:
+            values = [int(v) for v in text.split(",")]
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} takes whole numbers separated by commas, got '{text}'") from None
+        if n is not None and len(values) != n:
+            raise argparse.ArgumentTypeError(f"{name} takes {n} comma-separated numbers, got '{text}'")
+        if minimum is not None and any(v < minimum for v in values):
+            raise argparse.ArgumentTypeError(f"{name} values must be >= {minimum}, got '{text}'")
+        return values
+
+    return parse
+
+
+def _float_pair(name: str) -> Callable[[str], list[float]]:
+    def parse(text: str) -> list[float]:
+        try:
+            values = [float(v) for v in text.split(",")]
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} takes two numbers separated by a comma, got '{text}'") from None
+        if len(values) != 2 or any(not (v > 0) for v in values):
+            raise argparse.ArgumentTypeError(f"{name} takes two positive numbers XY,Z, got '{text}'")
+        return values
+
+    return parse
+
+
+def _add_machine_options(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group("machine")
+    g.add_argument("--machine", metavar="FILE.toml", help="machine settings file (default: the thesis machine)")
+    g.add_argument(
+        "--steps-per-pixel", metavar="XY,Z", type=_int_list(2, "--steps-per-pixel", 1),
+        help="motor steps per drawing pixel for X/Y and for Z (default 8,1)",
+    )
+    g.add_argument(
+        "--delay", metavar="XY_MS,Z_MS", type=_float_pair("--delay"),
+        help="step period of the X/Y and of the Z motors in ms (default 5,5)",
+    )
+
+
+def _add_digitize_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--start", choices=START_RULES, default="top",
+        help="where each object starts: first pixel in scan order (top) or nearest the tool (min-distance)",
+    )
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of every command (used by ``main`` and the docs)."""
+    parser = _Parser(
+        prog="cam",
+        description="Turn drawings into exact, safe step/dir motion for a small 3-axis stepper machine.",
+        epilog="Run 'cam COMMAND --help' for the options of a command. Errors exit with code 2.",
+    )
+    parser.add_argument("--version", action="version", version=f"cam {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+
+    d = sub.add_parser(
+        "drill", help="digitize a drawing and cut it (mock port by default)",
+        description="Digitize a drawing (or reuse a saved digitized matrix), plan the depth-sorted toolpath "
+        "and send it to a port. The default port is the logging mock, so nothing moves unless you name a real port.",
+    )
+    d.add_argument("image", nargs="?", metavar="IMAGE", help="the drawing (PNG, BMP, JPEG, ...)")
+    _add_digitize_options(d)
+    d.add_argument(
+        "--depth", metavar="N|N1,N2,...", type=_int_list(None, "--depth", 0), default=[10],
+        help="cutting depth in Z pixels: one value for all objects, or one per object (0 skips one); default 10",
+    )
+    d.add_argument("--passes", type=int, default=1, metavar="N", help="Repeat Drill: cut in N passes of increasing depth")
+    d.add_argument("--start-at", metavar="X,Y,Z", type=_int_list(3, "--start-at"), default=[0, 0, 0],
+                   help="offset the whole job by this many pixels")
+    d.add_argument("--pause-at", metavar="X,Y", type=_int_list(2, "--pause-at"), action="append", default=[],
+                   help="pause when the tool reaches this drawing point (repeatable); Enter resumes")
+    _add_machine_options(d)
+    g = d.add_argument_group("port and outputs")
+    g.add_argument("--port", default="mock", help="'mock' (default: logs, moves nothing) or a device like /dev/parport0")
+    g.add_argument("--realtime", action="store_true", help="run the mock in real time, sleeping like the real port")
+    g.add_argument("--pin-log", metavar="FILE.csv", help="write the mock's pin log (t_ns,data,strobe)")
+    g.add_argument("--save-digitized", metavar="FILE", help="save the digitized matrix")
+    g.add_argument("--load-digitized", metavar="FILE", help="reuse a saved digitized matrix instead of digitizing")
+    g.add_argument("--report", metavar="FILE.json", help="write the job report as JSON")
+    g.add_argument("--no-progress", action="store_true", help="no progress bar")
+    d.set_defaults(func=cmd_drill)
+
+    z = sub.add_parser("digitize", help="digitize a drawing and save the digitized matrix",
+                       description="Digitize a drawing and save its digitized matrix for later jobs (--load-digitized).")
+    z.add_argument("image", metavar="IMAGE")
+    z.add_argument("-o", "--output", required=True, metavar="FILE", help="where to write the matrix")
+    _add_digitize_options(z)
+    z.set_defaults(func=cmd_digitize)
+
+    i = sub.add_parser("info", help="print the image property report of a drawing",
+                       description="Digitize a drawing and print its size in pixels and mm, its object count and warnings.")
+    i.add_argument("image", metavar="IMAGE")
+    _add_digitize_options(i)
+    _add_machine_options(i)
+    i.add_argument("--json", action="store_true", help="print the report as JSON")
+    i.set_defaults(func=cmd_info)
+
+    gt = sub.add_parser("goto", help="move the tool to X,Y,Z pixels and stop there",
+                        description="Go To: travel at Z=0 to X,Y, then move Z, and stop (thesis 4.1.2).")
+    gt.add_argument("position", metavar="X,Y,Z", type=_int_list(3, "X,Y,Z"))
+    _add_machine_options(gt)
+    gt.add_argument("--port", default="mock", help="'mock' (default) or a device like /dev/parport0")
+    gt.add_argument("--realtime", action="store_true", help="run the mock in real time")
+    gt.add_argument("--pin-log", metavar="FILE.csv", help="write the mock's pin log")
+    gt.add_argument("--no-progress", action="store_true", help="no progress bar")
+    gt.set_defaults(func=cmd_goto)
+    return parser
+
+
+def _settings(args: argparse.Namespace) -> MachineSettings:
+    s = load_settings(args.machine)
+    changes: dict[str, Any] = {}
+    if args.steps_per_pixel:
+        changes["steps_per_px_xy"], changes["steps_per_px_z"] = args.steps_per_pixel
+    if args.delay:
+        changes["delay_xy_ms"], changes["delay_z_ms"] = args.delay
+    return s.replace(**changes) if changes else s
+
+
+def _load_job_input(args: argparse.Namespace) -> Digitized:
+    if args.load_digitized:
+        d = load_digitized(args.load_digitized)
+        if args.image:
+            drawing = load_image(args.image)
+            if (drawing.width_px, drawing.height_px) != (d.width_px, d.height_px):
+                raise CamError(
+                    f"{args.load_digitized}: matrix is for a {d.width_px}x{d.height_px} image, "
+                    f"{args.image} is {drawing.width_px}x{drawing.height_px}"
+                )
+        return d
+    if not args.image:
+        raise CamError("drill needs an IMAGE or --load-digitized FILE")
+    return digitize(load_image(args.image), start=args.start)
+
+
+def _format_duration(seconds: float) -> str:
+    s = int(round(seconds))
+    return f"{s // 3600}:{s % 3600 // 60:02d}:{s % 60:02d}"
+
+
+def _execute(job: Any, args: argparse.Namespace, prompt_at_pause: bool = False) -> RunResult:
+    """Run a toolpath with a progress bar; Ctrl-C stops cleanly (tool lifted, position reported)."""
+    steps = plan_steps(job)
+    controller = Controller()
+
+    def on_pause(position: tuple[int, int, int]) -> None:
+        print(f"paused at X={position[0]} Y={position[1]} Z={position[2]} steps: press Enter to resume",
+              file=sys.stderr)
+        if sys.stdin.readline() == "":  # nobody can answer: stop rather than carry on blindly
+            print("no answer at the pause (stdin closed): stopping", file=sys.stderr)
+            controller.stop()
+    previous = signal.getsignal(signal.SIGINT)
+
+    def interrupt(signum: int, frame: Any) -> None:
+        controller.stop()
+
+    bar = None
+    progress = None
+    if not args.no_progress:
+        from tqdm import tqdm
+
+        total_s = steps.estimated_time_s
+        bar = tqdm(
+            total=round(total_s, 3), unit="s", unit_scale=False, desc="cutting", file=sys.stderr,
+            bar_format="{desc}: {percentage:3.0f}%|{bar}| {n:.1f}/{total:.1f} machine s [{elapsed}<{remaining}]",
+            mininterval=0.2,
+        )
+
+        def progress(done: int, total: int, t_ns: int) -> None:
+            bar.update(round(t_ns / 1e9, 3) - bar.n)
+
+    signal.signal(signal.SIGINT, interrupt)
+    try:
+        result = run(
+            steps, args.port, realtime=args.realtime, controller=controller, progress=progress,
+            on_pause=on_pause if prompt_at_pause else None,
+        )
+    finally:
+        signal.signal(signal.SIGINT, previous)
+        if bar is not None:
+            bar.close()
+    if args.pin_log:
+        if not isinstance(result.port, MockPort):
+            raise CamError("--pin-log needs the mock port")
+        write_pin_log(result.pin_log(), args.pin_log)
+    return result
+
+
+def cmd_drill(args: argparse.Namespace) -> int:
+    settings = _settings(args)
+    if args.passes < 1:
+        raise CamError(f"--passes must be >= 1, got {args.passes}")
+    digitized = _load_job_input(args)
+    if args.save_digitized:
+        save_digitized(digitized, args.save_digitized)
+    depth = args.depth[0] if len(args.depth) == 1 else args.depth
+    job = plan(
+        digitized, depth=depth, settings=settings, passes=args.passes,
+        start_at=tuple(args.start_at), pause_at=[tuple(p) for p in args.pause_at],
+    )
+    steps = plan_steps(job)
+    report = job_report(digitized, job, steps)
+    for w in report["warnings"]:
+        print(f"warning: {w}", file=sys.stderr)
+    result = _execute(job, args, prompt_at_pause=bool(args.pause_at))
+    report["status"] = result.status
+    if args.report:
+        atomic_write_text(args.report, json.dumps(report, indent=2) + "\n")
+    if result.status != FINISHED:
+        for m in result.messages:
+            print(m, file=sys.stderr)
+        return EXIT_INTERRUPTED
+    print(
+        f"job finished: {report['objects']} object(s), {report['points']} points, {report['retracts']} retracts; "
+        f"total time {_format_duration(result.machine_time_s)} ({result.machine_time_s:.1f} s machine time"
+        f"{'' if args.realtime or args.port != 'mock' else ', simulated'})"
+    )
+    return 0
+
+
+def cmd_digitize(args: argparse.Namespace) -> int:
+    d = digitize(load_image(args.image), start=args.start)
+    for w in d.warnings:
+        print(f"warning: {w}", file=sys.stderr)
+    save_digitized(d, args.output)
+    print(f"{args.output}: {len(d.objects)} object(s), {d.n_points} points")
+    return 0
+
+
+def cmd_info(args: argparse.Namespace) -> int:
+    settings = _settings(args)
+    d = digitize(load_image(args.image), start=args.start)
+    rep = image_report(d, settings)
+    print(json.dumps(rep, indent=2) if args.json else format_report(rep))
+    return 0
+
+
+def cmd_goto(args: argparse.Namespace) -> int:
+    settings = _settings(args)
+    job = goto(tuple(args.position), settings=settings)
+    result = _execute(job, args)
+    if result.status != FINISHED:
+        for m in result.messages:
+            print(m, file=sys.stderr)
+        return EXIT_INTERRUPTED
+    x, y, z = result.position_steps
+    print(f"at X={x} Y={y} Z={z} steps")
+    return 0
+
+
+def main(argv: Optional[Sequence[str]] = None) -> int:
+    """Entry point of ``python -m cam``; returns the exit code."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "func", None):
+        parser.print_help()
+        return EXIT_BAD_INPUT
+    try:
+        return int(args.func(args))
+    except CamError as exc:
+        print(f"cam: error: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except KeyboardInterrupt:
+        print("cam: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED

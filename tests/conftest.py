@@ -1,0 +1,54 @@
+"""Shared test helpers: tiny drawings and the carve check."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import cam
+
+ROOT = Path(__file__).resolve().parent.parent
+SAMPLES = ROOT / "samples"
+
+
+def drawing_from_rows(rows: list[str]) -> np.ndarray:
+    """A grey image from text rows: '#' = black, anything else white."""
+    h, w = len(rows), max(len(r) for r in rows)
+    img = np.full((h, w), 255, np.uint8)
+    for r, line in enumerate(rows):
+        for c, ch in enumerate(line):
+            if ch == "#":
+                img[r, c] = 0
+    return img
+
+
+def expected_surface_2d(digitized: cam.Digitized, depths_px: list[int], settings: cam.MachineSettings) -> np.ndarray:
+    """What the drawing asks for: each traced pixel at its object's depth (Z steps), 0 elsewhere."""
+    out = np.zeros((digitized.height_px, digitized.width_px), np.int64)
+    for obj, d in zip(digitized.objects, depths_px):
+        out[obj[:, 1], obj[:, 0]] = d * settings.steps_per_px_z
+    return out
+
+
+def carve_job(job: cam.Toolpath, **run_kwargs) -> tuple[np.ndarray, cam.RunResult, cam.Motion]:
+    """Run a toolpath on the mock, decode the pin log, carve with a point tool."""
+    result = cam.run(job, **run_kwargs)
+    motion = cam.decode_pin_log(result.pin_log(), job.settings)
+    surface = cam.carve(motion, (job.height_px, job.width_px), job.settings, origin_px=job.origin_px)
+    return surface, result, motion
+
+
+def assert_surface_equal(got: np.ndarray, want: np.ndarray) -> None:
+    diff = np.argwhere(got != want)
+    if len(diff):
+        r, c = diff[0]
+        raise AssertionError(
+            f"{len(diff)} pixel(s) differ; first at (x={c}, y={r}): cut {got[r, c]} Z steps, asked {want[r, c]}"
+        )
+
+
+@pytest.fixture
+def tiny_settings() -> cam.MachineSettings:
+    """Fast settings for real-time tests: 2 steps/pixel, 1 ms periods."""
+    return cam.MachineSettings().replace(steps_per_px_xy=2, delay_xy_ms=1.0, delay_z_ms=1.0)

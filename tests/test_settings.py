@@ -1,0 +1,57 @@
+import pytest
+
+import cam
+from cam.settings import DEFAULT_SETTINGS
+
+
+def test_thesis_defaults():
+    s = DEFAULT_SETTINGS
+    assert (s.steps_per_px_xy, s.steps_per_px_z) == (8, 1)
+    assert (s.delay_xy_ms, s.delay_z_ms) == (5.0, 5.0)
+    assert (s.mm_per_step_xy, s.mm_per_step_z) == (0.0289, 0.0157)
+    p = s.pins
+    assert (p.clock_z, p.dir_z, p.clock_y, p.dir_y, p.clock_x, p.dir_x) == (2, 3, 4, 5, 6, 7)
+    assert s.half_step is False
+    # Eq 4.1 / 4.2
+    assert s.px_to_mm_xy(286) == pytest.approx(286 * 8 * 0.0289)
+    assert s.px_to_mm_z(10) == pytest.approx(10 * 1 * 0.0157)
+
+
+def test_load_partial_file(tmp_path):
+    f = tmp_path / "m.toml"
+    f.write_text("steps_per_px_xy = 4\ndelay_xy_ms = 2.5\n[travel]\nx_max_steps = 500\n[pins]\nclock_x = 8\ndir_x = 9\n")
+    s = cam.load_settings(f)
+    assert s.steps_per_px_xy == 4 and s.delay_xy_ms == 2.5 and s.steps_per_px_z == 1
+    assert s.travel.x_max_steps == 500 and s.travel.y_max_steps == DEFAULT_SETTINGS.travel.y_max_steps
+    assert s.pins.clock_x == 8 and s.pins.bit("clock_x") == 6
+
+
+@pytest.mark.parametrize(
+    "text, key",
+    [
+        ("steps_per_pixel = 8\n", "steps_per_pixel"),
+        ("[travel]\nx_max = 3\n", "travel.x_max"),
+        ("steps_per_px_xy = 'eight'\n", "steps_per_px_xy"),
+        ("steps_per_px_xy = 0\n", "steps_per_px_xy"),
+        ("delay_z_ms = -1\n", "delay_z_ms"),
+        ("[pins]\nclock_x = 12\n", "pins.clock_x"),
+        ("[pins]\nclock_x = 2\n", "pins.clock_x"),  # clashes with clock_z
+        ("travel = 5\n", "travel"),
+        ("[travel]\nx_min_steps = 10\n", "travel.x_min_steps"),
+    ],
+)
+def test_bad_settings_name_the_key(tmp_path, text, key):
+    f = tmp_path / "bad.toml"
+    f.write_text(text)
+    with pytest.raises(cam.SettingsError) as info:
+        cam.load_settings(f)
+    assert f"'{key}'" in str(info.value) and "bad.toml" in str(info.value)
+
+
+def test_bad_toml_and_missing_file(tmp_path):
+    f = tmp_path / "x.toml"
+    f.write_text("steps_per_px_xy = = 3")
+    with pytest.raises(cam.SettingsError, match="not valid TOML"):
+        cam.load_settings(f)
+    with pytest.raises(cam.SettingsError, match="not found"):
+        cam.load_settings(tmp_path / "none.toml")

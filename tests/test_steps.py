@@ -1,0 +1,62 @@
+import numpy as np
+
+import cam
+from cam.drive.steps import plan_steps
+from cam.settings import DEFAULT_SETTINGS
+
+
+def one_move(x, y, z=0, settings=DEFAULT_SETTINGS):
+    job = cam.Toolpath(
+        points_px=np.array([[x, y, z]]), kind=np.zeros(1, np.uint8), target=np.zeros(1, bool),
+        pause=np.zeros(1, bool), settings=settings,
+    )
+    return plan_steps(job)
+
+
+def test_diagonal_pixel_move_steps_x_and_y_together():
+    p = one_move(1, 1)
+    # pins: X clock 6 / dir 7 -> bits 4/5 (16/32); Y clock 4 / dir 5 -> bits 2/3 (4/8)
+    assert p.data[:5].tolist() == [40, 60, 40, 60, 40]
+    assert p.t_ns[:5].tolist() == [0, 2_500_000, 5_000_000, 7_500_000, 10_000_000]
+    assert len(p) == 1 + 2 * 8
+    assert p.t_ns[-1] == 8 * 5_000_000  # Eq 4.4: max(dx, dy) * steps/pixel * delay
+    assert p.steps_total.tolist() == [8, 8, 0]
+    assert set(p.strobe.tolist()) == {0}  # Half/Full* held low: full steps
+
+
+def test_eq_4_4_time_is_max_of_axes():
+    p = one_move(3, 1)
+    assert p.estimated_time_s == 3 * 8 * 0.005
+    motion = cam.decode_pin_log(cam.PinLog(p.t_ns, p.data, p.strobe))
+    assert motion.final_steps == (24, 8, 0)
+    # Y steps are spread over the move, never two Y steps in one period
+    y = motion.position_steps[:, 1]
+    assert np.all(np.diff(y) >= 0) and np.all(np.diff(y) <= 1)
+
+
+def test_z_only_move_uses_z_delay_and_direction():
+    s = DEFAULT_SETTINGS.replace(delay_z_ms=2.0)
+    p = one_move(0, 0, 3, settings=s)
+    assert p.t_ns[-1] == 3 * 2_000_000
+    # Z clock pin 2 -> bit 0, Z dir pin 3 -> bit 1 (+Z = deeper = set)
+    assert p.data[:3].tolist() == [2, 3, 2]
+
+
+def test_negative_direction_clears_dir_bit():
+    job = cam.Toolpath(
+        points_px=np.array([[2, 0, 0], [1, 0, 0]]), kind=np.zeros(2, np.uint8), target=np.zeros(2, bool),
+        pause=np.zeros(2, bool),
+    )
+    p = plan_steps(job)
+    motion = cam.decode_pin_log(cam.PinLog(p.t_ns, p.data, p.strobe))
+    assert motion.final_steps == (8, 0, 0)
+    i = 2 * 16  # write that ends the first move: direction already set for the next, -X
+    assert p.data[i] & 32 == 0 and p.data[i - 1] & 32 == 32
+
+
+def test_custom_pin_map_is_used_by_plan_and_decoder():
+    from cam.settings import Pins
+    s = DEFAULT_SETTINGS.replace(pins=Pins(clock_x=9, dir_x=8, clock_y=7, dir_y=6, clock_z=5, dir_z=4))
+    p = one_move(1, 0, settings=s)
+    assert p.data[1] == (1 << 7) | (1 << 6)  # clock X on pin 9, dir X on pin 8
+    assert cam.decode_pin_log(cam.PinLog(p.t_ns, p.data, p.strobe), s).final_steps == (8, 0, 0)

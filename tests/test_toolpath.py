@@ -1,0 +1,92 @@
+import numpy as np
+import pytest
+
+import cam
+from cam.toolpath import CUT, RETRACT, TRAVEL
+
+from conftest import drawing_from_rows
+
+TWO = drawing_from_rows(["......", ".##...", "......", "...##.", "......"])
+
+
+def test_literal_path_depth_sorted_with_retracts():
+    d = cam.digitize(TWO)
+    job = cam.plan(d, depth=[2, 1])
+    assert job.points_px.tolist() == [
+        [3, 3, 0], [3, 3, 1], [4, 3, 1], [4, 3, 0], [1, 1, 0], [1, 1, 2], [2, 1, 2], [2, 1, 0], [0, 0, 0],
+    ]
+    assert job.kind.tolist() == [TRAVEL, CUT, CUT, RETRACT, TRAVEL, CUT, CUT, RETRACT, TRAVEL]
+    assert job.target.tolist() == [False, True, True, False, False, True, True, False, False]
+    assert job.n_retracts == 2
+
+
+def test_every_move_is_xy_or_z_and_non_adjacent_moves_happen_at_the_surface():
+    d = cam.digitize(TWO)
+    job = cam.plan(d, depth=3, passes=3)
+    pts = np.vstack([[0, 0, 0], job.points_px])
+    delta = np.diff(pts, axis=0)
+    assert not np.any(np.any(delta[:, :2] != 0, axis=1) & (delta[:, 2] != 0))
+    far = np.abs(delta[:, :2]).max(axis=1) > 1
+    assert np.all(pts[1:][far, 2] == 0) and np.all(pts[:-1][far, 2] == 0)
+
+
+def test_depth_list_too_short_states_both_counts():
+    d = cam.digitize(TWO)
+    with pytest.raises(cam.PlanError, match="1 depth value.*2 objects"):
+        cam.plan(d, depth=[3])
+
+
+def test_depth_sort_is_stable_and_shallowest_first():
+    img = drawing_from_rows(["........", ".##.##..", "........", ".##.....", "........"])
+    d = cam.digitize(img)
+    job = cam.plan(d, depth=[5, 2, 5])
+    cuts = job.points_px[job.target]
+    assert cuts[:, 2].tolist() == [2, 2, 5, 5, 5, 5]
+    assert cuts[:, :2].tolist() == [[4, 1], [5, 1], [1, 1], [2, 1], [1, 3], [2, 3]]
+
+
+def test_repeat_drill_passes_go_deeper():
+    d = cam.digitize(drawing_from_rows([".....", ".###.", "....."]))
+    job = cam.plan(d, depth=5, passes=3)
+    cuts = job.points_px[job.target]
+    assert cuts[:, 2].tolist() == [2] * 3 + [4] * 3 + [5] * 3
+
+
+def test_no_twenty_object_limit():
+    img = np.full((5, 100), 255, np.uint8)
+    img[2, 2:98:3] = 0  # 32 single dots
+    d = cam.digitize(img)
+    assert len(d.objects) == 32
+    job = cam.plan(d, depth=list(range(1, 33)))
+    assert job.n_targets == 32
+
+
+def test_start_at_offsets_everything():
+    d = cam.digitize(TWO)
+    base = cam.plan(d, depth=2)
+    moved = cam.plan(d, depth=2, start_at=(10, 20, 3))
+    assert np.array_equal(moved.points_px[moved.target], base.points_px[base.target] + [10, 20, 3])
+    assert moved.points_px[-1].tolist() == [0, 0, 0]
+
+
+def test_pause_at_marks_the_point_and_warns_for_unknown():
+    d = cam.digitize(TWO)
+    job = cam.plan(d, depth=2, pause_at=[(2, 1), (5, 4)])
+    assert job.points_px[job.pause].tolist() == [[2, 1, 2]]
+    assert any("(5, 4)" in w for w in job.warnings)
+
+
+def test_travel_limit_refused_naming_first_point():
+    d = cam.digitize(TWO)
+    small = cam.MachineSettings().replace(travel=cam.settings.Travel(x_max_steps=20))
+    with pytest.raises(cam.TravelError, match=r"point 4 \(x=3, y=3, z=0 px = 24, 24, 0 steps\): X travel is 0..20"):
+        cam.plan(d, depth=2, settings=small)
+    with pytest.raises(cam.TravelError, match="Z travel"):
+        cam.plan(d, depth=5000)
+
+
+def test_goto_moves_xy_first_then_z():
+    job = cam.goto((4, 5, 2))
+    assert job.points_px.tolist() == [[4, 5, 0], [4, 5, 2]]
+    result = cam.run(job)
+    assert result.position_steps == (32, 40, 2)
