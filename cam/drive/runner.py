@@ -85,6 +85,8 @@ class RunResult:
         wall_time_s: how long the run took.
         pauses: number of pauses honoured.
         port: the port written to (a :class:`MockPort` holds the pin log).
+        started_ns: ``time.monotonic_ns()`` at the job start; the real-time
+            mock logs write times relative to it.
     """
 
     status: str
@@ -95,6 +97,7 @@ class RunResult:
     pauses: int
     port: Port
     messages: list[str] = field(default_factory=list)
+    started_ns: int = 0
 
     def pin_log(self) -> PinLog:
         """The mock port's pin log (only for the mock)."""
@@ -196,7 +199,7 @@ def run(
                 break
         clock_now = lambda: int(t_ns[sent - 1]) if sent else 0  # noqa: E731
     else:
-        t0 = time.monotonic_ns()
+        t0 = wall0
         offset = 0
         last_progress = 0
         wake = ctl._wake
@@ -266,7 +269,7 @@ def run(
         p._flush()
     wall = (time.monotonic_ns() - wall0) / 1e9
     machine = float(t_ns[sent - 1]) / 1e9 if sent else 0.0
-    return RunResult(status, position, sent, machine, wall, pauses, p, messages)
+    return RunResult(status, position, sent, machine, wall, pauses, p, messages, wall0)
 
 
 def _wait_while_paused(ctl: Controller) -> bool:

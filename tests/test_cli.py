@@ -1,0 +1,165 @@
+"""The command line, run as a user would run it."""
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import cv2
+import numpy as np
+import pytest
+
+import cam
+
+from conftest import ROOT
+
+ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
+
+
+def cli(*args, cwd=None, timeout=120):
+    return subprocess.run(
+        [sys.executable, "-m", "cam", *map(str, args)], capture_output=True, text=True, env=ENV, cwd=cwd,
+        timeout=timeout,
+    )
+
+
+@pytest.fixture(scope="module")
+def drawing(tmp_path_factory):
+    """Two short curves, 40x30 px."""
+    folder = tmp_path_factory.mktemp("d")
+    img = np.full((30, 40, 3), 255, np.uint8)
+    img[5, 5:30] = 0
+    img[20, 10:35] = 0
+    path = folder / "two.png"
+    cv2.imwrite(str(path), img)
+    return path
+
+
+def assert_one_line_error(proc, *fragments):
+    assert proc.returncode == 2, proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1, proc.stderr
+    assert "Traceback" not in proc.stderr
+    for f in fragments:
+        assert f in lines[0], lines[0]
+
+
+@pytest.mark.parametrize("command", [[], ["drill"], ["digitize"], ["info"], ["goto"]])
+def test_help_everywhere(command):
+    proc = cli(*command, "--help")
+    assert proc.returncode == 0 and "usage: cam" in proc.stdout
+
+
+def test_drill_writes_report_pin_log_and_matrix(tmp_path, drawing):
+    proc = cli("drill", drawing, "--depth", "3,5", "--report", tmp_path / "r.json", "--pin-log", tmp_path / "p.csv",
+               "--save-digitized", tmp_path / "m.txt", "--no-progress")
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.startswith("job finished:") and "total time" in proc.stdout
+    rep = json.loads((tmp_path / "r.json").read_text())
+    for key in ("objects", "width_px", "height_px", "width_mm", "height_mm", "depth_mm", "points", "retracts",
+                "steps", "estimated_time_s", "warnings"):
+        assert key in rep
+    assert rep["objects"] == 2 and rep["points"] == 50 and rep["width_px"] == 30 and rep["height_px"] == 16
+    assert rep["depth_mm"] == pytest.approx(5 * 0.0157)
+    assert set(rep["steps"]) == {"x", "y", "z"} and rep["steps"]["z"] == 2 * (3 + 5)
+    log = cam.read_pin_log(tmp_path / "p.csv")
+    assert (tmp_path / "p.csv").read_text().splitlines()[0] == "t_ns,data,strobe"
+    assert abs(log.t_ns[-1] / 1e9 - rep["estimated_time_s"]) <= 0.01 * rep["estimated_time_s"]
+    assert cam.decode_pin_log(log).final_steps == (0, 0, 0)
+    # reuse the saved matrix: same job
+    proc2 = cli("drill", "--load-digitized", tmp_path / "m.txt", "--depth", "3,5", "--report", tmp_path / "r2.json",
+                "--no-progress")
+    assert proc2.returncode == 0, proc2.stderr
+    rep2 = json.loads((tmp_path / "r2.json").read_text())
+    assert rep2["steps"] == rep["steps"] and rep2["estimated_time_s"] == rep["estimated_time_s"]
+
+
+def test_progress_bar_shows_remaining_time(drawing):
+    proc = cli("drill", drawing)
+    assert proc.returncode == 0
+    assert "100%" in proc.stderr and "<" in proc.stderr  # tqdm: [elapsed<remaining]
+
+
+def test_info_and_digitize(tmp_path, drawing):
+    proc = cli("info", drawing, "--json")
+    rep = json.loads(proc.stdout)
+    assert rep["objects"] == 2 and rep["width_mm"] == pytest.approx(30 * 8 * 0.0289, abs=1e-3)
+    proc = cli("info", drawing)
+    assert "objects:    2" in proc.stdout and "mm" in proc.stdout
+    proc = cli("digitize", drawing, "-o", tmp_path / "m.txt")
+    assert proc.returncode == 0
+    assert len(cam.load_digitized(tmp_path / "m.txt").objects) == 2
+
+
+def test_goto_reports_position():
+    proc = cli("goto", "3,4,2", "--no-progress")
+    assert proc.returncode == 0 and "X=24 Y=32 Z=2" in proc.stdout
+
+
+def test_bad_inputs_one_line_exit_2(tmp_path, drawing):
+    assert_one_line_error(cli("drill", tmp_path / "nope.png"), "nope.png", "not found")
+    junk = tmp_path / "junk.png"
+    junk.write_bytes(b"\x89PNG but not really")
+    assert_one_line_error(cli("drill", junk), "junk.png", "not a readable image")
+    green = tmp_path / "green.png"
+    img = np.full((10, 10, 3), 255, np.uint8)
+    img[4, 2:8] = 0
+    img[7, 7] = (0, 255, 0)
+    cv2.imwrite(str(green), img)
+    assert_one_line_error(cli("drill", green), "1 pixel(s)", "(x=7, y=7)")
+    empty = tmp_path / "empty.png"
+    cv2.imwrite(str(empty), np.full((10, 10, 3), 255, np.uint8))
+    assert_one_line_error(cli("drill", empty), "empty")
+    assert_one_line_error(cli("drill", drawing, "--depth", "4,", "--no-progress"), "--depth")
+    assert_one_line_error(cli("drill", drawing, "--machine", tmp_path / "x.toml"),
+                          "x.toml", "not found")
+    short = cli("drill", drawing, "--depth", "3", "--no-progress")
+    assert short.returncode == 0  # a single value is uniform
+    bad_toml = tmp_path / "bad.toml"
+    bad_toml.write_text("stepz_per_px = 3\n")
+    assert_one_line_error(cli("drill", drawing, "--machine", bad_toml), "bad.toml", "'stepz_per_px'")
+    assert_one_line_error(cli("drill", drawing, "--start-at", "5000,0,0"), "travel")
+    matrix = tmp_path / "m.txt"
+    cli("digitize", drawing, "-o", matrix)
+    lines = matrix.read_text().splitlines()
+    lines[6] = "1,2,oops,1"
+    matrix.write_text("\n".join(lines) + "\n")
+    assert_one_line_error(cli("drill", "--load-digitized", matrix), "m.txt:7:")
+    assert_one_line_error(cli("drill", drawing, "--steps-per-pixel", "8"), "--steps-per-pixel")
+    assert_one_line_error(cli("drill"), "IMAGE")
+
+
+def test_depth_list_error_states_both_counts(tmp_path):
+    img = np.full((20, 30, 3), 255, np.uint8)
+    img[3, 3:10] = img[8, 3:10] = img[14, 3:10] = 0
+    path = tmp_path / "three.png"
+    cv2.imwrite(str(path), img)
+    assert_one_line_error(cli("drill", path, "--depth", "3,4"), "2 depth value(s)", "3 objects")
+
+
+def test_failed_run_keeps_earlier_outputs(tmp_path, drawing):
+    report = tmp_path / "r.json"
+    assert cli("drill", drawing, "--report", report, "--no-progress").returncode == 0
+    before = report.read_bytes()
+    assert cli("drill", drawing, "--report", report, "--start-at", "9999,0,0", "--no-progress").returncode == 2
+    assert report.read_bytes() == before
+
+
+def test_ctrl_c_stops_cleanly_with_position(tmp_path):
+    img = np.full((20, 120, 3), 255, np.uint8)
+    img[10, 5:115] = 0
+    path = tmp_path / "line.png"
+    cv2.imwrite(str(path), img)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "cam", "drill", str(path), "--realtime", "--delay", "2,2", "--no-progress",
+         "--pin-log", str(tmp_path / "p.csv")],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV,
+    )
+    time.sleep(1.5)
+    proc.send_signal(signal.SIGINT)
+    out, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, err
+    assert "stopped at X=" in err and "Traceback" not in err
+    motion = cam.decode_pin_log(tmp_path / "p.csv")
+    assert motion.final_steps[2] == 0 and motion.final_steps[0] > 0
