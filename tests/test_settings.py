@@ -55,3 +55,8 @@ def test_bad_toml_and_missing_file(tmp_path):
         cam.load_settings(f)
     with pytest.raises(cam.SettingsError, match="not found"):
         cam.load_settings(tmp_path / "none.toml")
+
+
+def test_shipped_thesis_machine_file_equals_builtin_defaults():
+    from conftest import ROOT
+    assert cam.load_settings(ROOT / "profiles" / "thesis-machine.toml") == DEFAULT_SETTINGS
