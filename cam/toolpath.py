@@ -26,6 +26,7 @@ import numpy as np
 
 from .digitized import Digitized
 from .errors import PlanError, TravelError
+from .profile import ProfileLike, as_profile
 from .settings import DEFAULT_SETTINGS, MachineSettings
 
 __all__ = ["Toolpath", "plan", "goto", "CUT", "RETRACT", "TRAVEL", "check_travel"]
@@ -160,6 +161,7 @@ def plan(
     passes: int = 1,
     start_at: tuple[int, int, int] = (0, 0, 0),
     pause_at: Sequence[tuple[int, int]] = (),
+    profile: ProfileLike | None = None,
 ) -> Toolpath:
     """Plan the toolpath of a digitized drawing.
 
@@ -173,6 +175,10 @@ def plan(
         start_at: Start At ``(x, y, z)`` offset in pixels for the whole job.
         pause_at: Pause At drawing points ``(x, y)``; the job pauses each time
             the tool reaches one at its cutting depth.
+        profile: for 3D drawings (required there, refused for 2D): depth per
+            layer -- a :class:`~cam.profile.Profile`, a profile drawing or CSV
+            path, a sequence of depths (layer 1 first) or a function of the
+            layer number.  A ring of layer k is cut at profile(k).
 
     Returns:
         The :class:`Toolpath`, ending at (0, 0, 0).
@@ -185,7 +191,15 @@ def plan(
     n_obj = len(digitized.objects)
     if n_obj == 0:
         raise PlanError("nothing to cut: the digitized drawing has no objects")
-    depth_px, warnings = _depths_per_object(depth, n_obj)
+    if digitized.mode == "3d":
+        if profile is None:
+            raise PlanError("this is a 3D drawing (red interior): a profile is needed for its depths (--profile)")
+        prof = as_profile(profile, digitized.n_layers)
+        depth_px, warnings = prof.depth_of(digitized.levels).astype(np.int64), []
+    else:
+        if profile is not None:
+            raise PlanError("a profile applies to 3D drawings only; this drawing is 2D (use --depth)")
+        depth_px, warnings = _depths_per_object(depth, n_obj)
     targets, _ = _pass_targets(digitized, depth_px, passes)
     if len(targets) == 0:
         raise PlanError("nothing to cut: every depth is 0")
@@ -217,23 +231,38 @@ def plan(
         tgt.append(is_target)
         pause.append(is_target and (x, y) in pause_set)
 
+    # deepest depth asked at each pixel (job frame, relative to the surface): moving through a
+    # pixel at or above that depth never cuts what the drawing does not ask for
+    asked = np.zeros((digitized.height_px + oy + 2, digitized.width_px + ox + 2), np.int64)
+    np.maximum.at(asked, (targets[:, 1], targets[:, 0]), targets[:, 2] - oz)
+    xy_period = settings.steps_per_px_xy * settings.delay_xy_ns
+    z_period = settings.steps_per_px_z * settings.delay_z_ns
+
     cx, cy, cz = 0, 0, 0
     on_drawing = False  # is the tool at a drawing pixel at or above its asked depth
     for x, y, d in targets.tolist():
-        adjacent = on_drawing and max(abs(x - cx), abs(y - cy)) <= 1
-        if adjacent:
-            if d >= cz:  # deeper or level: move at the current depth, then plunge
-                emit(x, y, cz, CUT)
-            else:  # shallower: lift first, then move
+        cheb = max(abs(x - cx), abs(y - cy))
+        route = None
+        if on_drawing and cheb > 1:
+            # a gap inside the material: go through pixels asked at least this deep when that is
+            # quicker than lifting, travelling and plunging again
+            z = min(cz, d)
+            retract_ns = (cz - surface) * z_period + cheb * xy_period + (d - surface) * z_period
+            budget_px = min(cheb + 256, (retract_ns - (cz - z) * z_period - (d - z) * z_period) // xy_period)
+            route = _route(asked, (cx, cy), (x, y), z - oz, int(budget_px))
+        if on_drawing and (cheb <= 1 or route is not None):
+            if d < cz:  # shallower: lift first, then move
                 emit(cx, cy, d, CUT)
-                emit(x, y, d, CUT)
+                cz = d
+            for rx, ry in route or [(x, y)]:  # move at the current depth ...
+                emit(rx, ry, cz, CUT)
         else:
             lift_z = surface if on_drawing else min(cz, safe)
             if cz != lift_z:
                 emit(cx, cy, lift_z, RETRACT)
             if (cx, cy) != (x, y):
                 emit(x, y, lift_z, TRAVEL)
-        emit(x, y, d, CUT, is_target=True)
+        emit(x, y, d, CUT, is_target=True)  # ... then plunge
         cx, cy, cz = x, y, d
         on_drawing = True
     # end of job: lift, travel home, back to Z = 0
@@ -254,6 +283,59 @@ def plan(
         origin_px=(ox, oy, oz),
         warnings=warnings,
     )
+
+
+def _route(
+    asked: np.ndarray, start: tuple[int, int], goal: tuple[int, int], z: int, max_len: int
+) -> list[tuple[int, int]] | None:
+    """Shortest 8-connected path from ``start`` to ``goal`` over pixels with ``asked >= z``.
+
+    Returns the pixels after ``start`` up to and including ``goal``, or None
+    when there is no such path of at most ``max_len`` moves.
+    """
+    if max_len < 2:
+        return None
+    h, w = asked.shape
+    sx, sy = start
+    gx, gy = goal
+    x0, x1 = max(0, min(sx, gx) - max_len), min(w - 1, max(sx, gx) + max_len)
+    y0, y1 = max(0, min(sy, gy) - max_len), min(h - 1, max(sy, gy) + max_len)
+    ok = asked[y0 : y1 + 1, x0 : x1 + 1] >= z
+    ww = x1 - x0 + 1
+    parent = {(sy - y0) * ww + (sx - x0): -1}
+    frontier = [(sy - y0) * ww + (sx - x0)]
+    goal_i = (gy - y0) * ww + (gx - x0)
+    hh = y1 - y0 + 1
+    for _ in range(max_len):
+        nxt = []
+        for i in frontier:
+            r, c = divmod(i, ww)
+            for dr in (-1, 0, 1):
+                rr = r + dr
+                if rr < 0 or rr >= hh:
+                    continue
+                for dc in (-1, 0, 1):
+                    cc = c + dc
+                    if (dr or dc) and 0 <= cc < ww and ok[rr, cc]:
+                        j = rr * ww + cc
+                        if j not in parent:
+                            parent[j] = i
+                            if j == goal_i:
+                                return [(x0 + k % ww, y0 + k // ww) for k in _unwind(parent, goal_i)]
+                            nxt.append(j)
+        if not nxt:
+            return None
+        frontier = nxt
+    return None
+
+
+def _unwind(parent: dict[int, int], goal: int) -> list[int]:
+    path = []
+    j = goal
+    while parent[j] != -1:
+        path.append(j)
+        j = parent[j]
+    return path[::-1]
 
 
 def goto(position_px: tuple[int, int, int], *, settings: MachineSettings = DEFAULT_SETTINGS) -> Toolpath:

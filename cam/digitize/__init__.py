@@ -9,6 +9,7 @@ import numpy as np
 from ..digitized import Digitized
 from ..drawing import BLACK, Drawing, load_image
 from ..errors import DrawingError
+from .peel3d import peel_layers, trace_layers
 from .trace2d import START_RULES, trace_curves
 
 __all__ = ["digitize", "START_RULES"]
@@ -34,8 +35,11 @@ def digitize(drawing: Drawing | np.ndarray | str, *, start: str = "top") -> Digi
             :func:`cam.digitize.trace2d.trace_curves`).
 
     Returns:
-        A :class:`Digitized` in 2D mode: one object per traced curve, its
-        ``level`` the object number.  Warnings of the drawing are carried over.
+        A :class:`Digitized`.  For a 2D drawing (black curves): one object per
+        traced curve, its ``level`` the object number.  For a 3D drawing
+        (black contour, red interior): one object per traced ring, its
+        ``level`` the layer (see :mod:`cam.digitize.peel3d`; ``start`` is not
+        used).  Warnings of the drawing are carried over.
 
     >>> import numpy as np
     >>> img = np.full((6, 7), 255, np.uint8); img[2, 1:4] = 0; img[4, 3:6] = 0
@@ -51,7 +55,10 @@ def digitize(drawing: Drawing | np.ndarray | str, *, start: str = "top") -> Digi
     if kind == "profile":
         raise DrawingError(f"{drawing.source}: this is a profile drawing (blue curve); use it with --profile")
     if kind == "3d":
-        raise DrawingError(f"{drawing.source}: 3D drawings (red interior) are not supported yet")
+        layer = peel_layers(drawing.classes, source=drawing.source)
+        objects, levels = trace_layers(layer)
+        warnings = list(drawing.warnings) + _stray_warning(objects)
+        return Digitized("3d", drawing.width_px, drawing.height_px, objects, levels, warnings)
     objects = trace_curves(drawing.classes == BLACK, start=start)
     levels = np.arange(1, len(objects) + 1, dtype=np.int32)
     warnings = list(drawing.warnings) + _stray_warning(objects)

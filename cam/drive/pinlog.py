@@ -118,6 +118,21 @@ def decode_pin_log(
     return Motion(t_ns=np.asarray(log.t_ns, np.int64), position_steps=pos, step_counts=counts)
 
 
+def _pixel_under(v_steps: np.ndarray, spp: int) -> np.ndarray:
+    """Pixel index along one axis of each position; border positions keep the previous pixel."""
+    v = np.asarray(v_steps, np.int64)
+    pix = np.floor_divide(2 * v + spp, 2 * spp)  # round half up
+    if spp % 2 == 0:
+        tie = np.mod(v, spp) == spp // 2
+        if np.any(tie):
+            idx = np.where(~tie, np.arange(len(v)), -1)
+            last = np.maximum.accumulate(idx)
+            # a border position at the very start of the log rounds toward the origin
+            prev = np.where(last >= 0, pix[np.maximum(last, 0)], pix - 1)
+            pix = np.where(tie, prev, pix)
+    return pix
+
+
 def carve(
     motion: Motion,
     shape_hw: tuple[int, int],
@@ -129,7 +144,11 @@ def carve(
 
     A tool position (x, y, z) in steps lies over pixel
     ``(round(x / spp_xy) - ox, round(y / spp_xy) - oy)`` and is
-    ``z - oz x spp_z`` steps below the surface there.
+    ``z - oz x spp_z`` steps below the surface there.  A coordinate exactly
+    on the border between two pixels (possible with an even number of steps
+    per pixel) still counts for the pixel the tool is leaving: a point tool
+    on a border has not yet entered the next pixel.  So a diagonal move
+    through the shared corner of four pixels touches only its two end pixels.
 
     Returns:
         ``(H, W)`` int64: the deepest cut at each drawing pixel in Z steps (0 = untouched).
@@ -141,12 +160,11 @@ def carve(
     s = settings
     ox, oy, oz = origin_px
     p = motion.position_steps
+    col = _pixel_under(p[:, 0], s.steps_per_px_xy) - ox
+    row = _pixel_under(p[:, 1], s.steps_per_px_xy) - oy
     depth = p[:, 2] - oz * s.steps_per_px_z
     below = depth > 0
-    q = p[below]
-    d = depth[below]
-    col = np.floor(q[:, 0] / s.steps_per_px_xy + 0.5).astype(np.int64) - ox
-    row = np.floor(q[:, 1] / s.steps_per_px_xy + 0.5).astype(np.int64) - oy
+    col, row, d = col[below], row[below], depth[below]
     outside = (col < 0) | (col >= w) | (row < 0) | (row >= h)
     if np.any(outside):
         i = int(np.flatnonzero(outside)[0])

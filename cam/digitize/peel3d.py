@@ -1,0 +1,173 @@
+"""3D digitizing (thesis 4.1.4.3): a black contour around a red interior, peeled inward into layers.
+
+Layers: the black contour is layer 1; layer k+1 is the red pixels that are
+4-adjacent to layer k (the thesis's PaintInner paints red next to the
+contour blue, and the blue pixels become the next contour).  Peeling repeats
+until no red is left.
+
+Each layer is split into rings (its 8-connected pieces: a dumbbell's layers
+split in two at the neck).  A ring is traced from its first pixel in scan
+order -- or, after the first ring of a layer, from the ring nearest the tool
+-- stepping to the first untraced neighbour in the order of Figure 4.15::
+
+    7 1 6        NW N  NE
+    4 X 2   =    W  X  E        order: N, E, S, W, SE, NE, NW, SW
+    8 3 5        SW S  SE
+
+When the trace stops with pixels of the ring left (a layer can be two pixels
+thick where it turns), it goes on from the untraced pixel of the ring nearest
+the tool.  Every pixel of every layer is traced exactly once, and each ring
+is one object of the digitized matrix, never a scatter of one-pixel objects.
+The toolpath planner bridges the small gaps inside a ring through pixels of
+the same layer, so they cost no retract.
+"""
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from ..drawing import BLACK, RED, WHITE
+from ..errors import DrawingError
+
+__all__ = ["peel_layers", "trace_layers", "NEIGHBOURS_3D"]
+
+NEIGHBOURS_3D = ((-1, 0), (0, 1), (1, 0), (0, -1), (1, 1), (-1, 1), (-1, -1), (1, -1))
+"""(drow, dcol) in the scan order of Figure 4.15: N, E, S, W, SE, NE, NW, SW."""
+
+
+def peel_layers(classes: np.ndarray, *, source: str = "<array>") -> np.ndarray:
+    """Layer number of every pixel of a 3D drawing.
+
+    Args:
+        classes: ``(H, W)`` uint8 class array (WHITE/BLACK/RED).
+
+    Returns:
+        ``(H, W)`` int32: 1 on the black contour, k+1 on red pixels 4-adjacent
+        to layer k, 0 on white.
+
+    Raises:
+        DrawingError: red 4-adjacent to white or to the image border (an open
+            contour), naming a pixel where the red leaks out; red enclosed by no contour.
+    """
+    red = classes == RED
+    black = classes == BLACK
+    white = classes == WHITE
+    four = np.array([[0, 1, 0], [1, 0, 1], [0, 1, 0]], np.uint8)
+    # red next to white, or on the border (outside the image is white paper)
+    white_pad = cv2.copyMakeBorder(white.astype(np.uint8), 1, 1, 1, 1, cv2.BORDER_CONSTANT, value=1)
+    near_white = cv2.dilate(white_pad, four)[1:-1, 1:-1].astype(bool)
+    leak = np.argwhere(red & near_white)
+    if len(leak):
+        r, c = leak[0]
+        raise DrawingError(
+            f"{source}: the contour is open: red pixel (x={c}, y={r}) touches white "
+            f"({len(leak)} such pixel(s)); close the black contour around the red"
+        )
+    # every red region must touch the contour
+    n, labels = cv2.connectedComponents(red.astype(np.uint8), connectivity=4)
+    if n > 1:
+        near_black = cv2.dilate(black.astype(np.uint8), four).astype(bool)
+        touching = np.unique(labels[near_black & red])
+        for lab in range(1, n):
+            if lab not in touching:
+                r, c = np.argwhere(labels == lab)[0]
+                raise DrawingError(f"{source}: red region at (x={c}, y={r}) has no black contour around it")
+    layer = np.zeros(classes.shape, np.int32)
+    layer[black] = 1
+    # layer k+1 = red at 4-distance k from the contour: one distance transform does all the peeling
+    if red.any():
+        not_contour = np.where(black, 0, 255).astype(np.uint8)
+        dist = cv2.distanceTransform(not_contour, cv2.DIST_L1, 3)
+        layer[red] = dist[red].astype(np.int32) + 1
+    return layer
+
+
+def _trace_ring(
+    flat: bytearray, ring_idx: np.ndarray, start: int, offsets: tuple[int, ...], wp: int
+) -> tuple[list[int], int]:
+    """Trace all pixels of one ring; returns (path, number of greedy segments)."""
+    path: list[int] = []
+    segments = 0
+    cur = start
+    remaining = ring_idx
+    while True:
+        flat[cur] = 0
+        path.append(cur)
+        segments += 1
+        while True:
+            for off in offsets:
+                q = cur + off
+                if flat[q]:
+                    flat[q] = 0
+                    path.append(q)
+                    cur = q
+                    break
+            else:
+                break
+        view = np.frombuffer(flat, np.uint8)
+        remaining = remaining[view[remaining] != 0]
+        if len(remaining) == 0:
+            return path, segments
+        rr, cc = remaining // wp, remaining % wp
+        d2 = (rr - cur // wp) ** 2 + (cc - cur % wp) ** 2
+        cur = int(remaining[int(np.argmin(d2))])
+
+
+def trace_layers(layer: np.ndarray) -> tuple[list[np.ndarray], np.ndarray]:
+    """Trace every layer into rings.
+
+    Args:
+        layer: ``(H, W)`` int32 layer numbers from :func:`peel_layers` (0 = not drawn).
+
+    Returns:
+        ``(objects, levels)``: one ``(n, 2)`` int32 ``(x, y)`` array per ring in
+        cutting order (layer by layer), and ``(n_rings,)`` int32 layer of each ring.
+    """
+    h, w = layer.shape
+    wp = w + 2
+    padded = np.zeros((h + 2, wp), np.int32)
+    padded[1:-1, 1:-1] = layer
+    offsets = tuple(dr * wp + dc for dr, dc in NEIGHBOURS_3D)
+    n_layers = int(layer.max())
+    objects: list[np.ndarray] = []
+    levels: list[int] = []
+    if n_layers == 0:
+        return objects, np.zeros(0, np.int32)
+    flat_all = padded.ravel()
+    order = np.argsort(flat_all, kind="stable")  # pixels grouped by layer, scan order within
+    counts = np.bincount(flat_all, minlength=n_layers + 1)
+    bounds = np.concatenate([[0], np.cumsum(counts)])
+    tool = None  # (row, col) in padded coordinates
+    for k in range(1, n_layers + 1):
+        idx = order[bounds[k] : bounds[k + 1]]  # scan order
+        if len(idx) == 0:
+            continue
+        mask = np.zeros((h + 2) * wp, np.uint8)
+        mask[idx] = 1
+        n_rings, labels = cv2.connectedComponents(mask.reshape(h + 2, wp), connectivity=8)
+        lab = labels.ravel()[idx]
+        flat = bytearray(mask.tobytes())
+        rings = {r: idx[lab == r] for r in range(1, n_rings)}
+        first = True
+        while rings:
+            if first:
+                r_id = int(lab[0])  # the ring of the layer's first pixel in scan order
+                start = int(rings[r_id][0])
+                first = False
+            else:
+                best = None
+                for r_cand, pix in rings.items():
+                    d2 = (pix // wp - tool[0]) ** 2 + (pix % wp - tool[1]) ** 2
+                    j = int(np.argmin(d2))
+                    if best is None or d2[j] < best[0]:
+                        best = (int(d2[j]), r_cand, int(pix[j]))
+                _, r_id, start = best
+            path, _ = _trace_ring(flat, rings.pop(r_id), start, offsets, wp)
+            p = np.asarray(path, np.int64)
+            obj = np.empty((len(p), 2), np.int32)
+            obj[:, 0] = p % wp - 1
+            obj[:, 1] = p // wp - 1
+            objects.append(obj)
+            levels.append(k)
+            tool = (int(p[-1] // wp), int(p[-1] % wp))
+    return objects, np.array(levels, np.int32)

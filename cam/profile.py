@@ -1,0 +1,198 @@
+"""Z profiles: the depth of each layer of a 3D object (thesis 4.1.1, 4.1.3, Figure 4.5).
+
+A profile drawing has a white background, black axes and a red origin pixel
+where they meet.  The horizontal axis counts layers, the vertical one gives
+depth: the blue curve's vertical distance in pixels from the horizontal axis
+(above or below it) is the depth of the layer of that column, and the first
+column after the origin is layer 1.  There must be only one blue pixel per
+column ("only one z depth value for a given layer").
+
+The same curve can come from code: a sequence of depths, a function of the
+layer number, a CSV file of depths, or a small arithmetic expression in ``k``
+(the layer, from 1) and ``n`` (the layer count), e.g. ``"40*sqrt(1-((n-k)/n)**2)"``.
+"""
+from __future__ import annotations
+
+import ast
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable, Sequence, Union
+
+import numpy as np
+
+from .drawing import BLACK, BLUE, RED, Drawing, load_image
+from .errors import DrawingError, ParseError, PlanError
+
+__all__ = ["Profile", "load_profile", "profile_from_expr", "profile_from_csv", "as_profile"]
+
+
+@dataclass(frozen=True)
+class Profile:
+    """Depth per layer.
+
+    Attributes:
+        depth_px: ``(n_layers,)`` int64, the depth of layer k at index k-1, in Z pixels (>= 0).
+        source: where it came from.
+    """
+
+    depth_px: np.ndarray
+    source: str = "<profile>"
+
+    @property
+    def n_layers(self) -> int:
+        return int(len(self.depth_px))
+
+    def depth_of(self, levels: np.ndarray) -> np.ndarray:
+        """Depth in Z pixels of each layer number in ``levels`` (from 1)."""
+        levels = np.asarray(levels)
+        if len(levels) and int(levels.max()) > self.n_layers:
+            raise PlanError(f"profile has {self.n_layers} layers, the object has {int(levels.max())}")
+        return self.depth_px[levels - 1]
+
+
+def _from_values(values: Sequence[float], source: str) -> Profile:
+    arr = np.asarray(values, np.float64)
+    if arr.ndim != 1 or len(arr) == 0:
+        raise PlanError(f"{source}: a profile needs at least one depth")
+    if not np.all(np.isfinite(arr)) or np.any(arr < 0):
+        bad = int(np.flatnonzero(~np.isfinite(arr) | (arr < 0))[0])
+        raise PlanError(f"{source}: depth of layer {bad + 1} must be a number >= 0, got {arr[bad]}")
+    return Profile(np.rint(arr).astype(np.int64), source)
+
+
+def profile_from_drawing(drawing: Drawing) -> Profile:
+    """Read a profile drawing (see the module docstring)."""
+    c = drawing.classes
+    src = drawing.source
+    reds = np.argwhere(c == RED)
+    if len(reds) == 0:
+        raise DrawingError(f"{src}: profile has no red origin pixel")
+    if len(reds) > 1:
+        r, col = reds[1]
+        raise DrawingError(f"{src}: profile must have one red origin pixel, found {len(reds)} (another at x={col}, y={r})")
+    r0, c0 = (int(v) for v in reds[0])
+    black = c == BLACK
+    if not (c0 + 1 < c.shape[1] and black[r0, c0 + 1]):
+        raise DrawingError(f"{src}: no black horizontal (layer) axis to the right of the origin (x={c0}, y={r0})")
+    if not ((r0 > 0 and black[r0 - 1, c0]) or (r0 + 1 < c.shape[0] and black[r0 + 1, c0])):
+        raise DrawingError(f"{src}: no black vertical (depth) axis at the origin (x={c0}, y={r0})")
+    blue = c == BLUE
+    if not blue.any():
+        raise DrawingError(f"{src}: profile has no blue curve")
+    per_col = blue.sum(axis=0)
+    crowded = np.flatnonzero(per_col > 1)
+    if len(crowded):
+        cols = ", ".join(str(int(v)) for v in crowded[:8]) + (" ..." if len(crowded) > 8 else "")
+        raise DrawingError(
+            f"{src}: only one z depth value for a given layer: columns {cols} have more than one blue pixel"
+        )
+    cols = np.flatnonzero(per_col == 1)
+    if cols.min() <= c0:
+        raise DrawingError(f"{src}: blue pixel at column {int(cols.min())} lies left of the origin column {c0}")
+    last = int(cols.max())
+    missing = [k for k in range(c0 + 1, last + 1) if per_col[k] == 0]
+    if missing:
+        raise DrawingError(
+            f"{src}: layer {missing[0] - c0} (column {missing[0]}) has no blue depth pixel; the curve must be continuous"
+        )
+    rows = np.argmax(blue[:, c0 + 1 : last + 1], axis=0)
+    return _from_values(np.abs(rows - r0), src)
+
+
+def profile_from_csv(path: str | os.PathLike) -> Profile:
+    """Depths from a CSV/text file: one depth per line, or ``layer,depth`` lines (a header line is allowed)."""
+    p = Path(path)
+    try:
+        lines = p.read_text(encoding="utf-8").splitlines()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ParseError(f"{p}: cannot read profile ({exc})") from None
+    depths: list[float] = []
+    for i, raw in enumerate(lines, start=1):
+        line = raw.split("#", 1)[0].strip()
+        if not line:
+            continue
+        parts = [s.strip() for s in line.split(",")]
+        try:
+            values = [float(s) for s in parts]
+        except ValueError:
+            if i == 1 and not depths:
+                continue  # header
+            raise ParseError(f'{p}:{i}: expected a depth or layer,depth, got "{raw[:40]}"') from None
+        if len(values) == 1:
+            depths.append(values[0])
+        elif len(values) == 2:
+            if int(values[0]) != len(depths) + 1:
+                raise ParseError(f"{p}:{i}: expected layer {len(depths) + 1}, got {values[0]:g}")
+            depths.append(values[1])
+        else:
+            raise ParseError(f'{p}:{i}: expected a depth or layer,depth, got "{raw[:40]}"')
+    if not depths:
+        raise ParseError(f"{p}: no depths in the profile file")
+    return _from_values(depths, str(p))
+
+
+_FUNCS = {name: getattr(math, name) for name in ("sqrt", "sin", "cos", "tan", "exp", "log", "floor", "ceil", "fabs")}
+_FUNCS.update({"abs": abs, "min": min, "max": max, "round": round})
+_CONSTS = {"pi": math.pi, "e": math.e}
+_NODES = (
+    ast.Expression, ast.BinOp, ast.UnaryOp, ast.Call, ast.Name, ast.Load, ast.Constant,
+    ast.Add, ast.Sub, ast.Mult, ast.Div, ast.FloorDiv, ast.Mod, ast.Pow, ast.USub, ast.UAdd,
+)
+
+
+def profile_from_expr(expr: str, n_layers: int) -> Profile:
+    """Depths ``f(k)`` for k = 1..n_layers from an arithmetic expression in ``k`` and ``n``.
+
+    Only numbers, + - * / // % **, ``k``, ``n``, ``pi``, ``e`` and the functions
+    sqrt sin cos tan exp log floor ceil fabs abs min max round are allowed.
+
+    >>> profile_from_expr("2*k", 3).depth_px.tolist()
+    [2, 4, 6]
+    """
+    try:
+        tree = ast.parse(expr, mode="eval")
+    except SyntaxError:
+        raise PlanError(f"profile expression '{expr}' is not valid arithmetic") from None
+    for node in ast.walk(tree):
+        if not isinstance(node, _NODES):
+            raise PlanError(f"profile expression '{expr}': '{type(node).__name__}' is not allowed")
+        if isinstance(node, ast.Name) and node.id not in _FUNCS and node.id not in _CONSTS and node.id not in ("k", "n"):
+            raise PlanError(f"profile expression '{expr}': unknown name '{node.id}' (use k, n, pi, e, sqrt, ...)")
+        if isinstance(node, ast.Call) and not (isinstance(node.func, ast.Name) and node.func.id in _FUNCS):
+            raise PlanError(f"profile expression '{expr}': only sqrt, sin, cos, ... may be called")
+    code = compile(tree, "<profile>", "eval")
+    values = []
+    for k in range(1, n_layers + 1):
+        try:
+            values.append(float(eval(code, {"__builtins__": {}}, {**_FUNCS, **_CONSTS, "k": k, "n": n_layers})))
+        except (ArithmeticError, ValueError, TypeError) as exc:
+            raise PlanError(f"profile expression '{expr}' fails at layer k={k}: {exc}") from None
+    return _from_values(values, f"expr:{expr}")
+
+
+ProfileLike = Union[Profile, str, os.PathLike, np.ndarray, Sequence[float], Callable[[int], float], Drawing]
+
+
+def load_profile(source: str | os.PathLike | np.ndarray | Drawing) -> Profile:
+    """Load a profile drawing (image file or array) or a CSV of depths (``.csv``/``.txt``)."""
+    if isinstance(source, Drawing):
+        return profile_from_drawing(source)
+    if isinstance(source, (str, os.PathLike)) and Path(source).suffix.lower() in (".csv", ".txt"):
+        return profile_from_csv(source)
+    return profile_from_drawing(load_image(source))
+
+
+def as_profile(profile: ProfileLike, n_layers: int) -> Profile:
+    """Anything that describes a profile, as a :class:`Profile` (a function is sampled at k = 1..n_layers)."""
+    if isinstance(profile, Profile):
+        return profile
+    if isinstance(profile, (str, os.PathLike, Drawing)):
+        return load_profile(profile)
+    if callable(profile):
+        return _from_values([profile(k) for k in range(1, n_layers + 1)], "<function>")
+    arr = np.asarray(profile)
+    if arr.ndim >= 2:
+        return load_profile(arr)
+    return _from_values(arr, "<sequence>")
