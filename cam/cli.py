@@ -20,6 +20,7 @@ from .drive import Controller, MockPort, plan_steps, run, write_pin_log
 from .drive.runner import FINISHED, RunResult
 from .errors import CamError
 from .fileio import atomic_write_text
+from .profile import Profile, load_profile, profile_from_expr
 from .report import format_report, image_report, job_report
 from .settings import MachineSettings, load_settings
 from .toolpath import goto, plan
@@ -81,8 +82,17 @@ def _add_machine_options(p: argparse.ArgumentParser) -> None:
 def _add_digitize_options(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--start", choices=START_RULES, default="top",
-        help="where each object starts: first pixel in scan order (top) or nearest the tool (min-distance)",
+        help="2D: where each object starts: first pixel in scan order (top) or nearest the tool (min-distance)",
     )
+
+
+def _add_profile_options(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group("3D depth profile (for drawings with a red interior)")
+    x = g.add_mutually_exclusive_group()
+    x.add_argument("--profile", metavar="PROFILE",
+                   help="profile drawing (blue curve over black axes, red origin) or CSV of depths per layer")
+    x.add_argument("--profile-expr", metavar="EXPR",
+                   help="depth of layer k as arithmetic in k and n (layers), e.g. '30*sqrt(1-((n-k)/n)**2)'")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -106,6 +116,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--depth", metavar="N|N1,N2,...", type=_int_list(None, "--depth", 0), default=[10],
         help="cutting depth in Z pixels: one value for all objects, or one per object (0 skips one); default 10",
     )
+    _add_profile_options(d)
     d.add_argument("--passes", type=int, default=1, metavar="N", help="Repeat Drill: cut in N passes of increasing depth")
     d.add_argument("--start-at", metavar="X,Y,Z", type=_int_list(3, "--start-at"), default=[0, 0, 0],
                    help="offset the whole job by this many pixels")
@@ -134,8 +145,15 @@ def build_parser() -> argparse.ArgumentParser:
     i.add_argument("image", metavar="IMAGE")
     _add_digitize_options(i)
     _add_machine_options(i)
+    _add_profile_options(i)
     i.add_argument("--json", action="store_true", help="print the report as JSON")
     i.set_defaults(func=cmd_info)
+
+    pr = sub.add_parser("profile", help="print a Z profile's layer count and depth range",
+                        description="Read a profile drawing or CSV and print its layer count and depth range.")
+    pr.add_argument("profile", metavar="PROFILE")
+    _add_machine_options(pr)
+    pr.set_defaults(func=cmd_profile)
 
     gt = sub.add_parser("goto", help="move the tool to X,Y,Z pixels and stop there",
                         description="Go To: travel at Z=0 to X,Y, then move Z, and stop (thesis 4.1.2).")
@@ -239,6 +257,7 @@ def cmd_drill(args: argparse.Namespace) -> int:
     job = plan(
         digitized, depth=depth, settings=settings, passes=args.passes,
         start_at=tuple(args.start_at), pause_at=[tuple(p) for p in args.pause_at],
+        profile=_profile(args, digitized),
     )
     steps = plan_steps(job)
     report = job_report(digitized, job, steps)
@@ -260,6 +279,23 @@ def cmd_drill(args: argparse.Namespace) -> int:
     return 0
 
 
+def _profile(args: argparse.Namespace, digitized: Digitized) -> Optional[Profile]:
+    if args.profile:
+        return load_profile(args.profile)
+    if args.profile_expr:
+        return profile_from_expr(args.profile_expr, max(1, digitized.n_layers))
+    return None
+
+
+def cmd_profile(args: argparse.Namespace) -> int:
+    settings = _settings(args)
+    prof = load_profile(args.profile)
+    lo, hi = int(prof.depth_px.min()), int(prof.depth_px.max())
+    print(f"{args.profile}: {prof.n_layers} layers, depth {lo}..{hi} Z px = "
+          f"{settings.px_to_mm_z(lo):.3f}..{settings.px_to_mm_z(hi):.3f} mm")
+    return 0
+
+
 def cmd_digitize(args: argparse.Namespace) -> int:
     d = digitize(load_image(args.image), start=args.start)
     for w in d.warnings:
@@ -273,6 +309,11 @@ def cmd_info(args: argparse.Namespace) -> int:
     settings = _settings(args)
     d = digitize(load_image(args.image), start=args.start)
     rep = image_report(d, settings)
+    prof = _profile(args, d)
+    if prof is not None and d.mode == "3d":
+        depth_px = int(prof.depth_of(d.levels).max())
+        rep["depth_px"] = depth_px
+        rep["depth_mm"] = round(settings.px_to_mm_z(depth_px), 4)
     print(json.dumps(rep, indent=2) if args.json else format_report(rep))
     return 0
 

@@ -3,6 +3,8 @@ from __future__ import annotations
 
 from typing import Any, Optional
 
+import numpy as np
+
 from .digitized import Digitized
 from .settings import DEFAULT_SETTINGS, MachineSettings
 from .toolpath import Toolpath
@@ -31,6 +33,11 @@ def image_report(digitized: Digitized, settings: MachineSettings = DEFAULT_SETTI
         "warnings": list(digitized.warnings),
     }
     if digitized.mode == "3d":
+        import cv2
+
+        drawn = (digitized.label_image() > 0).astype(np.uint8)
+        rep["objects"] = int(cv2.connectedComponents(drawn, connectivity=8)[0] - 1)
+        rep["rings"] = len(digitized.objects)
         rep["layers"] = digitized.n_layers
     return rep
 
@@ -62,13 +69,14 @@ def job_report(
 def format_report(rep: dict[str, Any]) -> str:
     """Human-readable lines of a report."""
     lines = [
-        f"objects:    {rep['objects']}" + (f"  (layers: {rep['layers']})" if "layers" in rep else ""),
+        f"objects:    {rep['objects']}" + (f"  (rings: {rep['rings']}, layers: {rep['layers']})" if "layers" in rep else ""),
         f"size:       {rep['width_px']} x {rep['height_px']} px = {rep['width_mm']:.2f} x {rep['height_mm']:.2f} mm"
         f"  (image {rep['image_width_px']} x {rep['image_height_px']} px)",
         f"points:     {rep['points']}",
     ]
     if "depth_mm" in rep:
         lines.append(f"depth:      {rep['depth_px']} Z px = {rep['depth_mm']:.3f} mm")
+    if "steps" in rep:
         lines.append(f"retracts:   {rep['retracts']}")
         st = rep["steps"]
         lines.append(f"steps:      X {st['x']}  Y {st['y']}  Z {st['z']}")

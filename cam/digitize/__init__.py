@@ -57,7 +57,7 @@ def digitize(drawing: Drawing | np.ndarray | str, *, start: str = "top") -> Digi
     if kind == "3d":
         layer = peel_layers(drawing.classes, source=drawing.source)
         objects, levels = trace_layers(layer)
-        warnings = list(drawing.warnings) + _stray_warning(objects)
+        warnings = list(drawing.warnings)
         return Digitized("3d", drawing.width_px, drawing.height_px, objects, levels, warnings)
     objects = trace_curves(drawing.classes == BLACK, start=start)
     levels = np.arange(1, len(objects) + 1, dtype=np.int32)

@@ -53,6 +53,15 @@ def peel_layers(classes: np.ndarray, *, source: str = "<array>") -> np.ndarray:
     black = classes == BLACK
     white = classes == WHITE
     four = np.array([[0, 1, 0], [1, 0, 1], [0, 1, 0]], np.uint8)
+    # every red region must touch a contour
+    n, labels = cv2.connectedComponents(red.astype(np.uint8), connectivity=4)
+    if n > 1:
+        near_black = cv2.dilate(black.astype(np.uint8), four).astype(bool)
+        touching = set(np.unique(labels[near_black & red]).tolist())
+        for lab in range(1, n):
+            if lab not in touching:
+                r, c = np.argwhere(labels == lab)[0]
+                raise DrawingError(f"{source}: red region at (x={c}, y={r}) has no black contour around it")
     # red next to white, or on the border (outside the image is white paper)
     white_pad = cv2.copyMakeBorder(white.astype(np.uint8), 1, 1, 1, 1, cv2.BORDER_CONSTANT, value=1)
     near_white = cv2.dilate(white_pad, four)[1:-1, 1:-1].astype(bool)
@@ -63,15 +72,6 @@ def peel_layers(classes: np.ndarray, *, source: str = "<array>") -> np.ndarray:
             f"{source}: the contour is open: red pixel (x={c}, y={r}) touches white "
             f"({len(leak)} such pixel(s)); close the black contour around the red"
         )
-    # every red region must touch the contour
-    n, labels = cv2.connectedComponents(red.astype(np.uint8), connectivity=4)
-    if n > 1:
-        near_black = cv2.dilate(black.astype(np.uint8), four).astype(bool)
-        touching = np.unique(labels[near_black & red])
-        for lab in range(1, n):
-            if lab not in touching:
-                r, c = np.argwhere(labels == lab)[0]
-                raise DrawingError(f"{source}: red region at (x={c}, y={r}) has no black contour around it")
     layer = np.zeros(classes.shape, np.int32)
     layer[black] = 1
     # layer k+1 = red at 4-distance k from the contour: one distance transform does all the peeling

@@ -1,0 +1,123 @@
+import numpy as np
+import pytest
+
+import cam
+from cam.digitize.peel3d import peel_layers, trace_layers
+from cam.drawing import BLACK, RED, WHITE
+
+from conftest import assert_surface_equal, carve_job
+
+
+def drawing3d(rows):
+    """RGB image from rows: '#' black, 'r' red, anything else white."""
+    h, w = len(rows), max(len(r) for r in rows)
+    img = np.full((h, w, 3), 255, np.uint8)
+    for y, line in enumerate(rows):
+        for x, ch in enumerate(line):
+            if ch == "#":
+                img[y, x] = 0
+            elif ch == "r":
+                img[y, x] = (255, 0, 0)
+    return img
+
+
+SMALL = [
+    ".......",
+    "..###..",
+    ".#rrr#.",
+    ".#rrr#.",
+    ".#rrr#.",
+    "..###..",
+    ".......",
+]
+
+
+def test_layers_peel_inward_by_4_adjacency():
+    d = cam.load_image(drawing3d(SMALL))
+    assert d.kind == "3d"
+    assert peel_layers(d.classes).tolist() == [
+        [0, 0, 0, 0, 0, 0, 0],
+        [0, 0, 1, 1, 1, 0, 0],
+        [0, 1, 2, 2, 2, 1, 0],
+        [0, 1, 2, 3, 2, 1, 0],
+        [0, 1, 2, 2, 2, 1, 0],
+        [0, 0, 1, 1, 1, 0, 0],
+        [0, 0, 0, 0, 0, 0, 0],
+    ]
+
+
+def test_rings_traced_in_figure_4_15_order():
+    dg = cam.digitize(drawing3d(SMALL))
+    assert dg.mode == "3d"
+    assert dg.levels.tolist() == [1, 2, 3]
+    # layer 1 starts at its first pixel in scan order, then N, E, S, W, SE, NE, NW, SW
+    assert dg.objects[0].tolist() == [[2, 1], [3, 1], [4, 1], [5, 2], [5, 3], [5, 4], [4, 5], [3, 5], [2, 5], [1, 4],
+                                      [1, 3], [1, 2]]
+    assert dg.objects[1].tolist() == [[2, 2], [3, 2], [4, 2], [4, 3], [4, 4], [3, 4], [2, 4], [2, 3]]
+    assert dg.objects[2].tolist() == [[3, 3]]
+    assert dg.to_array()[:, 3].tolist() == [1] * 12 + [2] * 8 + [3]
+
+
+def test_every_pixel_traced_once_and_rings_split_at_a_neck():
+    img = np.full((40, 80, 3), 255, np.uint8)
+    import cv2
+    mask = np.zeros((40, 80), np.uint8)
+    cv2.circle(mask, (20, 20), 14, 1, -1)
+    cv2.circle(mask, (58, 20), 14, 1, -1)
+    mask[18:23, 20:58] = 1  # neck 5 px wide
+    inner = cv2.erode(mask, np.array([[0, 1, 0], [1, 1, 1], [0, 1, 0]], np.uint8))
+    img[mask > 0] = (255, 0, 0)
+    img[(mask > 0) & (inner == 0)] = 0
+    dg = cam.digitize(img)
+    pts = np.concatenate(dg.objects)
+    assert len(pts) == len({tuple(p) for p in pts.tolist()}) == int(mask.sum())
+    per_layer = np.bincount(dg.levels)
+    assert per_layer.max() >= 2  # some layers split into one ring per lobe
+    assert min(len(o) for o, lv in zip(dg.objects, dg.levels) if lv < dg.n_layers) > 1  # no stray 1-pixel rings
+    job = cam.plan(dg, profile=lambda k: k)
+    surface, _, motion = carve_job(job)
+    assert_surface_equal(surface, peel_layers(cam.load_image(img).classes).astype(np.int64))
+    rep = cam.job_report(dg, job, cam.plan_steps(job))
+    assert rep["retracts"] <= rep["rings"] + rep["objects"]
+
+
+def test_open_contour_names_a_leaking_pixel():
+    rows = list(SMALL)
+    rows[5] = "..#.#.."
+    rows[5] = "..#r#.."
+    rows[6] = "...r..."
+    with pytest.raises(cam.DrawingError, match=r"open: red pixel \(x=3, y=6\)"):
+        cam.digitize(drawing3d(rows))
+
+
+def test_red_without_contour():
+    rows = [".....", ".rr..", ".....", "..#..", "..#.."]
+    with pytest.raises(cam.DrawingError, match=r"red region at \(x=1, y=1\) has no black contour"):
+        cam.digitize(drawing3d(rows))
+
+
+def test_3d_needs_a_profile_and_profile_must_be_long_enough():
+    dg = cam.digitize(drawing3d(SMALL))
+    with pytest.raises(cam.PlanError, match="profile is needed"):
+        cam.plan(dg)
+    with pytest.raises(cam.PlanError, match="profile has 2 layers, the object has 3"):
+        cam.plan(dg, profile=[1, 2])
+
+
+def test_small_3d_carves_to_profile_depths():
+    dg = cam.digitize(drawing3d(SMALL))
+    job = cam.plan(dg, profile=[2, 5, 9], settings=cam.MachineSettings().replace(steps_per_px_z=2))
+    surface, result, motion = carve_job(job)
+    layer = peel_layers(cam.load_image(drawing3d(SMALL)).classes)
+    want = np.choose(layer, [0, 2, 5, 9]) * 2
+    assert_surface_equal(surface, want)
+    assert motion.final_steps == (0, 0, 0)
+    assert job.n_retracts == 1  # one ring leads into the next without lifting
+
+
+def test_digitized_3d_round_trip(tmp_path):
+    dg = cam.digitize(drawing3d(SMALL))
+    cam.save_digitized(dg, tmp_path / "m.txt")
+    back = cam.load_digitized(tmp_path / "m.txt")
+    assert back.mode == "3d" and np.array_equal(back.to_array(), dg.to_array())
+    assert np.array_equal(back.levels, dg.levels)
