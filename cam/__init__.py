@@ -37,6 +37,7 @@ from .drive import (
     write_pin_log,
 )
 from .errors import CamError, DrawingError, ParseError, PlanError, PortError, SettingsError, TravelError
+from .profile import Profile, load_profile, profile_from_expr
 from .report import image_report, job_report
 from .settings import MachineSettings, load_settings
 from .toolpath import Toolpath, goto, plan
@@ -50,6 +51,7 @@ __all__ = [
     "plan_steps", "StepPlan",
     "run", "Controller", "RunResult", "open_port", "MockPort",
     "decode_pin_log", "read_pin_log", "write_pin_log", "PinLog", "Motion", "carve",
+    "Profile", "load_profile", "profile_from_expr",
     "image_report", "job_report",
     "MachineSettings", "load_settings",
     "CamError", "DrawingError", "ParseError", "PlanError", "PortError", "SettingsError", "TravelError",

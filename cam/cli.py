@@ -20,6 +20,7 @@ from .drive import Controller, MockPort, plan_steps, run, write_pin_log
 from .drive.runner import FINISHED, RunResult
 from .errors import CamError
 from .fileio import atomic_write_text
+from .gcode import save_gcode
 from .profile import Profile, load_profile, profile_from_expr
 from .report import format_report, image_report, job_report
 from .settings import MachineSettings, load_settings
@@ -95,6 +96,24 @@ def _add_profile_options(p: argparse.ArgumentParser) -> None:
                    help="depth of layer k as arithmetic in k and n (layers), e.g. '30*sqrt(1-((n-k)/n)**2)'")
 
 
+def _add_job_options(d: argparse.ArgumentParser) -> None:
+    """Options that say what to cut and how deep (shared by drill and export)."""
+    d.add_argument("image", nargs="?", metavar="IMAGE", help="the drawing (PNG, BMP, JPEG, ...)")
+    d.add_argument("--load-digitized", metavar="FILE", help="reuse a saved digitized matrix instead of digitizing")
+    _add_digitize_options(d)
+    d.add_argument(
+        "--depth", metavar="N|N1,N2,...", type=_int_list(None, "--depth", 0), default=[10],
+        help="2D cutting depth in Z pixels: one value for all objects, or one per object (0 skips one); default 10",
+    )
+    _add_profile_options(d)
+    d.add_argument("--passes", type=int, default=1, metavar="N", help="Repeat Drill: cut in N passes of increasing depth")
+    d.add_argument("--start-at", metavar="X,Y,Z", type=_int_list(3, "--start-at"), default=[0, 0, 0],
+                   help="offset the whole job by this many pixels")
+    d.add_argument("--pause-at", metavar="X,Y", type=_int_list(2, "--pause-at"), action="append", default=[],
+                   help="pause when the tool reaches this drawing point (repeatable); Enter resumes")
+    _add_machine_options(d)
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of every command (used by ``main`` and the docs)."""
     parser = _Parser(
@@ -110,28 +129,26 @@ def build_parser() -> argparse.ArgumentParser:
         description="Digitize a drawing (or reuse a saved digitized matrix), plan the depth-sorted toolpath "
         "and send it to a port. The default port is the logging mock, so nothing moves unless you name a real port.",
     )
-    d.add_argument("image", nargs="?", metavar="IMAGE", help="the drawing (PNG, BMP, JPEG, ...)")
-    _add_digitize_options(d)
-    d.add_argument(
-        "--depth", metavar="N|N1,N2,...", type=_int_list(None, "--depth", 0), default=[10],
-        help="cutting depth in Z pixels: one value for all objects, or one per object (0 skips one); default 10",
-    )
-    _add_profile_options(d)
-    d.add_argument("--passes", type=int, default=1, metavar="N", help="Repeat Drill: cut in N passes of increasing depth")
-    d.add_argument("--start-at", metavar="X,Y,Z", type=_int_list(3, "--start-at"), default=[0, 0, 0],
-                   help="offset the whole job by this many pixels")
-    d.add_argument("--pause-at", metavar="X,Y", type=_int_list(2, "--pause-at"), action="append", default=[],
-                   help="pause when the tool reaches this drawing point (repeatable); Enter resumes")
-    _add_machine_options(d)
+    _add_job_options(d)
     g = d.add_argument_group("port and outputs")
     g.add_argument("--port", default="mock", help="'mock' (default: logs, moves nothing) or a device like /dev/parport0")
     g.add_argument("--realtime", action="store_true", help="run the mock in real time, sleeping like the real port")
     g.add_argument("--pin-log", metavar="FILE.csv", help="write the mock's pin log (t_ns,data,strobe)")
     g.add_argument("--save-digitized", metavar="FILE", help="save the digitized matrix")
-    g.add_argument("--load-digitized", metavar="FILE", help="reuse a saved digitized matrix instead of digitizing")
     g.add_argument("--report", metavar="FILE.json", help="write the job report as JSON")
     g.add_argument("--no-progress", action="store_true", help="no progress bar")
     d.set_defaults(func=cmd_drill)
+
+    e = sub.add_parser(
+        "export", help="write the job as RS-274/NGC G-code (grbl, LinuxCNC)",
+        description="Plan a job exactly as 'drill' would and write it as G-code in mm. Machine Y grows upward, "
+        "image rows downward: by default Y = -row (the drawing stays upright); --flip-y writes Y = +row.",
+    )
+    _add_job_options(e)
+    e.add_argument("-o", "--output", required=True, metavar="FILE.ngc", help="where to write the G-code")
+    e.add_argument("--flip-y", action="store_true", help="write Y = +row (mirrored) instead of Y = -row")
+    e.add_argument("--safe-height", type=float, default=1.0, metavar="MM", help="travel height above the surface (mm)")
+    e.set_defaults(func=cmd_export)
 
     z = sub.add_parser("digitize", help="digitize a drawing and save the digitized matrix",
                        description="Digitize a drawing and save its digitized matrix for later jobs (--load-digitized).")
@@ -246,19 +263,34 @@ def _execute(job: Any, args: argparse.Namespace, prompt_at_pause: bool = False) 
     return result
 
 
-def cmd_drill(args: argparse.Namespace) -> int:
+def _plan_job(args: argparse.Namespace) -> tuple[Digitized, Any]:
     settings = _settings(args)
     if args.passes < 1:
         raise CamError(f"--passes must be >= 1, got {args.passes}")
     digitized = _load_job_input(args)
-    if args.save_digitized:
-        save_digitized(digitized, args.save_digitized)
     depth = args.depth[0] if len(args.depth) == 1 else args.depth
     job = plan(
         digitized, depth=depth, settings=settings, passes=args.passes,
         start_at=tuple(args.start_at), pause_at=[tuple(p) for p in args.pause_at],
         profile=_profile(args, digitized),
     )
+    return digitized, job
+
+
+def cmd_export(args: argparse.Namespace) -> int:
+    digitized, job = _plan_job(args)
+    if args.safe_height <= 0:
+        raise CamError(f"--safe-height must be > 0 mm, got {args.safe_height}")
+    save_gcode(job, args.output, flip_y=args.flip_y, safe_height_mm=args.safe_height,
+               title=f"cam: {args.image or args.load_digitized}")
+    print(f"{args.output}: {job.n_targets} points, {job.n_retracts} retracts")
+    return 0
+
+
+def cmd_drill(args: argparse.Namespace) -> int:
+    digitized, job = _plan_job(args)
+    if args.save_digitized:
+        save_digitized(digitized, args.save_digitized)
     steps = plan_steps(job)
     report = job_report(digitized, job, steps)
     for w in report["warnings"]:

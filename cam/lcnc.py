@@ -1,0 +1,144 @@
+"""LinuxCNC as an independent reference: run its ``rs274`` interpreter and read its canonical moves.
+
+Debian's ``linuxcnc-uspace`` package provides ``rs274``; ``rs274 -g FILE``
+interprets a G-code program without a machine and prints one canonical
+machining call per line (``STRAIGHT_TRAVERSE``, ``STRAIGHT_FEED``,
+``ARC_FEED``, ...).  Tests and benchmarks use it to check `cam`'s G-code.
+"""
+from __future__ import annotations
+
+import math
+import re
+import shutil
+import subprocess
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import CamError
+
+__all__ = ["CanonMove", "run_rs274", "parse_canonical", "canonical_polyline_mm", "carve_canonical"]
+
+_CALL = re.compile(r"^\s*\d+\s+N\.*\s*(\w+)\((.*)\)\s*$")
+
+
+@dataclass
+class CanonMove:
+    """One canonical move: ``kind`` is "traverse", "feed" or "arc"; positions in the program's units."""
+
+    kind: str
+    end: tuple[float, float, float]
+    center: tuple[float, float] | None = None
+    rotation: int = 0  # ARC_FEED: >0 counter-clockwise turns, <0 clockwise
+
+
+def run_rs274(path: str, *, units_mm: bool = True) -> str:
+    """Canonical output of LinuxCNC's interpreter for a G-code file (raises CamError on an interpreter error)."""
+    exe = shutil.which("rs274")
+    if exe is None:
+        raise CamError("rs274 not found: install Debian's linuxcnc-uspace")
+    proc = subprocess.run([exe, "-g", str(path)], capture_output=True, text=True, timeout=600)
+    if proc.returncode != 0:
+        msg = [ln for ln in proc.stderr.splitlines() if ln.strip() and ln.strip() != "executing"]
+        raise CamError(f"{path}: rs274 reports: {' / '.join(msg[:2]) or 'error'}")
+    return proc.stdout
+
+
+def parse_canonical(text: str) -> list[CanonMove]:
+    """Moves of rs274's canonical output, converted to mm when the program used inches."""
+    moves: list[CanonMove] = []
+    scale = 1.0
+    for line in text.splitlines():
+        m = _CALL.match(line)
+        if not m:
+            continue
+        name, args = m.group(1), [a.strip() for a in m.group(2).split(",")]
+        if name == "USE_LENGTH_UNITS":
+            scale = 25.4 if "INCH" in args[0] else 1.0
+        elif name in ("STRAIGHT_TRAVERSE", "STRAIGHT_FEED"):
+            x, y, z = (float(a) * scale for a in args[:3])
+            moves.append(CanonMove("traverse" if name == "STRAIGHT_TRAVERSE" else "feed", (x, y, z)))
+        elif name == "ARC_FEED":
+            # ARC_FEED(first_end, second_end, first_axis, second_axis, rotation, axis_end_point, ...)
+            e1, e2, c1, c2 = (float(a) * scale for a in args[:4])
+            rot = int(args[4])
+            z = float(args[5]) * scale
+            moves.append(CanonMove("arc", (e1, e2, z), (c1, c2), rot))
+    return moves
+
+
+def canonical_polyline_mm(moves: list[CanonMove], *, max_chord_mm: float = 0.005) -> tuple[np.ndarray, np.ndarray]:
+    """The path as a dense polyline: ``(K, 3)`` mm points and ``(K,)`` bool "reached by a feed move".
+
+    Arcs are split into chords no longer than ``max_chord_mm``.  The start is (0, 0, 0).
+    """
+    pts = [(0.0, 0.0, 0.0)]
+    feed = [False]
+    for mv in moves:
+        x0, y0, z0 = pts[-1]
+        if mv.kind != "arc":
+            pts.append(mv.end)
+            feed.append(mv.kind == "feed")
+            continue
+        cx, cy = mv.center
+        x1, y1, z1 = mv.end
+        a0 = math.atan2(y0 - cy, x0 - cx)
+        a1 = math.atan2(y1 - cy, x1 - cx)
+        r = math.hypot(x0 - cx, y0 - cy)
+        if mv.rotation > 0:
+            sweep = (a1 - a0) % (2 * math.pi) or 2 * math.pi
+            sweep += 2 * math.pi * (mv.rotation - 1)
+        else:
+            sweep = -((a0 - a1) % (2 * math.pi) or 2 * math.pi)
+            sweep -= 2 * math.pi * (-mv.rotation - 1)
+        n = max(1, int(math.ceil(abs(sweep) * max(r, 1e-9) / max_chord_mm)))
+        for k in range(1, n + 1):
+            t = k / n
+            a = a0 + sweep * t
+            pts.append((cx + r * math.cos(a), cy + r * math.sin(a), z0 + (z1 - z0) * t))
+            feed.append(True)
+        pts[-1] = (x1, y1, z1)
+    return np.array(pts, np.float64), np.array(feed, bool)
+
+
+def carve_canonical(
+    moves: list[CanonMove],
+    shape_hw: tuple[int, int],
+    settings,
+    *,
+    flip_y: bool = False,
+    samples_per_px: int = 4,
+) -> np.ndarray:
+    """Surface cut by a point tool following rs274's feed moves below Z = 0, on the drawing's pixel grid.
+
+    Frames as in :mod:`cam.gcode`: column = X / (steps/px x mm/step), row = -Y / (...) (or +Y with
+    ``flip_y``), depth in Z steps = -Z / mm/step Z.  Each feed segment is sampled at the midpoints of
+    an even number (about ``samples_per_px x length_px``) of equal parts plus its end, so a
+    move between pixel centres is never sampled exactly on a pixel border.
+
+    Returns:
+        ``(H, W)`` int64 deepest cut in Z steps (0 = untouched).
+    """
+    h, w = shape_hw
+    mm_px = settings.steps_per_px_xy * settings.mm_per_step_xy
+    y_sign = 1.0 if flip_y else -1.0
+    pts, feed = canonical_polyline_mm(moves)
+    out = np.zeros((h, w), np.int64)
+    for i in np.flatnonzero(feed):
+        p0, p1 = pts[i - 1], pts[i]
+        if p0[2] >= 0 and p1[2] >= 0:
+            continue
+        length_px = max(abs(p1[0] - p0[0]), abs(p1[1] - p0[1])) / mm_px
+        n = 2 * max(1, int(math.ceil(length_px * samples_per_px / 2)))  # even: no sample at t = 1/2
+        t = np.concatenate([(np.arange(n) + 0.5) / n, [1.0]])
+        seg = p0[None, :] + (p1 - p0)[None, :] * t[:, None]
+        seg = seg[seg[:, 2] < 0]
+        col = np.floor(seg[:, 0] / mm_px + 0.5).astype(np.int64)
+        row = np.floor(y_sign * seg[:, 1] / mm_px + 0.5).astype(np.int64)
+        depth = np.rint(-seg[:, 2] / settings.mm_per_step_z).astype(np.int64)
+        inside = (col >= 0) & (col < w) & (row >= 0) & (row < h)
+        if not np.all(inside):
+            j = int(np.flatnonzero(~inside)[0])
+            raise CamError(f"G-code cuts below the surface outside the drawing at pixel ({col[j]}, {row[j]})")
+        np.maximum.at(out, (row, col), depth)
+    return out
