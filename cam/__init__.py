@@ -34,8 +34,10 @@ from .drive import (
     plan_steps,
     read_pin_log,
     run,
+    simulate_surface,
     write_pin_log,
 )
+from .gcode import save_gcode, to_gcode
 from .errors import CamError, DrawingError, ParseError, PlanError, PortError, SettingsError, TravelError
 from .profile import Profile, load_profile, profile_from_expr
 from .report import image_report, job_report
@@ -50,6 +52,7 @@ __all__ = [
     "plan", "goto", "Toolpath",
     "plan_steps", "StepPlan",
     "run", "Controller", "RunResult", "open_port", "MockPort",
+    "simulate_surface", "to_gcode", "save_gcode",
     "decode_pin_log", "read_pin_log", "write_pin_log", "PinLog", "Motion", "carve",
     "Profile", "load_profile", "profile_from_expr",
     "image_report", "job_report",

@@ -136,6 +136,7 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--pin-log", metavar="FILE.csv", help="write the mock's pin log (t_ns,data,strobe)")
     g.add_argument("--save-digitized", metavar="FILE", help="save the digitized matrix")
     g.add_argument("--report", metavar="FILE.json", help="write the job report as JSON")
+    g.add_argument("--preview", metavar="OUT.png", help="write the toolpath picture before cutting")
     g.add_argument("--no-progress", action="store_true", help="no progress bar")
     d.set_defaults(func=cmd_drill)
 
@@ -149,6 +150,18 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--flip-y", action="store_true", help="write Y = +row (mirrored) instead of Y = -row")
     e.add_argument("--safe-height", type=float, default=1.0, metavar="MM", help="travel height above the surface (mm)")
     e.set_defaults(func=cmd_export)
+
+    pv = sub.add_parser(
+        "preview", help="draw the job (or the surface it would cut) as PNG or SVG",
+        description="Draw the job over its drawing: cutting moves coloured by depth, moves above the surface "
+        "dashed, start and end marked, size, depth range and time in a legend. --surface draws the surface "
+        "the job would cut (run on the mock, decoded, carved with a point tool) as a shaded depth map.",
+    )
+    _add_job_options(pv)
+    pv.add_argument("-o", "--output", required=True, metavar="OUT.png|OUT.svg", help="picture to write")
+    pv.add_argument("--surface", action="store_true", help="draw the cut surface instead of the toolpath")
+    pv.add_argument("--scale", type=int, metavar="N", help="picture pixels per drawing pixel (default: automatic)")
+    pv.set_defaults(func=cmd_preview)
 
     z = sub.add_parser("digitize", help="digitize a drawing and save the digitized matrix",
                        description="Digitize a drawing and save its digitized matrix for later jobs (--load-digitized).")
@@ -287,8 +300,43 @@ def cmd_export(args: argparse.Namespace) -> int:
     return 0
 
 
+def _write_preview(args: argparse.Namespace, job: Any, path: str, surface: bool = False) -> None:
+    from .drive import simulate_surface
+    from .picture import save_picture, surface_picture, toolpath_picture, toolpath_svg
+
+    if args.scale is not None and not (1 <= args.scale <= 64):
+        raise CamError(f"--scale must be 1..64, got {args.scale}")
+    suffix = Path(path).suffix.lower()
+    if suffix not in (".png", ".svg"):
+        raise CamError(f"{path}: pictures are written as .png or .svg")
+    time_s = plan_steps(job).estimated_time_s
+    if surface:
+        if suffix != ".png":
+            raise CamError(f"{path}: the surface picture is written as .png")
+        s = simulate_surface(job)
+        st = job.settings
+        legend = (f"cut surface, decoded from the mock pin log: depth 0..{st.px_to_mm_z(int(s.max()) / st.steps_per_px_z):.2f} mm"
+                  f" ({int(s.max())} Z steps)")
+        save_picture(surface_picture(s, scale=args.scale, legend=legend), path)
+    elif suffix == ".svg":
+        save_picture(toolpath_svg(job, scale=args.scale, estimated_time_s=time_s), path)
+    else:
+        rgb = load_image(args.image).to_rgb() if args.image else None
+        save_picture(toolpath_picture(job, drawing_rgb=rgb, scale=args.scale, estimated_time_s=time_s), path)
+
+
+def cmd_preview(args: argparse.Namespace) -> int:
+    _, job = _plan_job(args)
+    _write_preview(args, job, args.output, surface=args.surface)
+    print(f"{args.output}: {'cut surface' if args.surface else 'toolpath'} picture")
+    return 0
+
+
 def cmd_drill(args: argparse.Namespace) -> int:
     digitized, job = _plan_job(args)
+    if args.preview:
+        args.scale = None
+        _write_preview(args, job, args.preview)
     if args.save_digitized:
         save_digitized(digitized, args.save_digitized)
     steps = plan_steps(job)

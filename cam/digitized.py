@@ -98,6 +98,16 @@ class Digitized:
         pts = np.concatenate(self.objects)
         return (int(pts[:, 0].min()), int(pts[:, 1].min()), int(pts[:, 0].max()), int(pts[:, 1].max()))
 
+    def _repr_png_(self) -> bytes:
+        """Notebook picture: traced pixels coloured by level (shallow/first yellow, last purple)."""
+        from .picture import depth_colours, encode_png
+
+        rgb = np.full((self.height_px, self.width_px, 3), 255, np.uint8)
+        for obj, level in zip(self.objects, self.levels):
+            rgb[obj[:, 1], obj[:, 0]] = depth_colours([level], max(1, self.n_layers or len(self.objects)))[0]
+        k = max(1, min(8, 600 // max(1, self.width_px, self.height_px)))
+        return encode_png(np.repeat(np.repeat(rgb, k, axis=0), k, axis=1))
+
     def label_image(self) -> np.ndarray:
         """``(H, W)`` int32: object number (from 1) at each traced pixel, 0 elsewhere."""
         out = np.zeros((self.height_px, self.width_px), np.int32)

@@ -105,8 +105,11 @@ class Drawing:
         return palette[self.classes]
 
     def _repr_png_(self) -> bytes:
-        ok, buf = cv2.imencode(".png", cv2.cvtColor(self.to_rgb(), cv2.COLOR_RGB2BGR))
-        return buf.tobytes()
+        """Notebook picture: the classified drawing, scaled up so single pixels show."""
+        from .picture import auto_scale, encode_png
+
+        k = auto_scale(self.width_px, self.height_px, 600)
+        return encode_png(np.repeat(np.repeat(self.to_rgb(), k, axis=0), k, axis=1))
 
 
 def classify(rgb: np.ndarray, *, source: str = "<array>") -> np.ndarray:

@@ -83,6 +83,12 @@ class Toolpath:
         s = self.settings
         return self.points_px * np.array([s.steps_per_px_xy, s.steps_per_px_xy, s.steps_per_px_z], np.int64)
 
+    def _repr_png_(self) -> bytes:
+        """Notebook picture: see :func:`cam.picture.toolpath_picture`."""
+        from .picture import encode_png, toolpath_picture
+
+        return encode_png(toolpath_picture(self))
+
     def asked_depth_px(self) -> np.ndarray:
         """``(height_px, width_px)`` int64: deepest z asked at each drawing pixel (0 where nothing is asked).
 

@@ -27,9 +27,18 @@ from ..fileio import atomic_write_text
 from ..settings import DEFAULT_SETTINGS, MachineSettings
 from .steps import axis_bits
 
-__all__ = ["PinLog", "Motion", "decode_pin_log", "read_pin_log", "write_pin_log", "carve"]
+__all__ = ["Surface", "PinLog", "Motion", "decode_pin_log", "read_pin_log", "write_pin_log", "carve"]
 
 HEADER = "t_ns,data,strobe"
+
+
+class Surface(np.ndarray):
+    """A cut surface: ``(H, W)`` int64 depth in Z steps per drawing pixel; shows itself as a picture in notebooks."""
+
+    def _repr_png_(self) -> bytes:
+        from ..picture import encode_png, surface_picture
+
+        return encode_png(surface_picture(np.asarray(self)))
 
 
 @dataclass
@@ -151,7 +160,7 @@ def carve(
     through the shared corner of four pixels touches only its two end pixels.
 
     Returns:
-        ``(H, W)`` int64: the deepest cut at each drawing pixel in Z steps (0 = untouched).
+        ``(H, W)`` int64 :class:`Surface`: the deepest cut at each drawing pixel in Z steps (0 = untouched).
 
     Raises:
         CamError: the tool went below the surface outside the drawing.
@@ -171,4 +180,4 @@ def carve(
         raise CamError(f"the tool cut below the surface outside the drawing at pixel ({col[i]}, {row[i]})")
     out = np.zeros((h, w), np.int64)
     np.maximum.at(out, (row, col), d)
-    return out
+    return out.view(Surface)

@@ -28,7 +28,7 @@ from .pinlog import PinLog, decode_pin_log
 from .ports import MockPort, Port, open_port
 from .steps import StepPlan, axis_bits, plan_steps
 
-__all__ = ["Controller", "RunResult", "run", "FINISHED", "STOPPED", "EMERGENCY_STOPPED"]
+__all__ = ["Controller", "RunResult", "run", "simulate_surface", "FINISHED", "STOPPED", "EMERGENCY_STOPPED"]
 
 FINISHED = "finished"
 STOPPED = "stopped"
@@ -286,3 +286,16 @@ def _position_after(plan: StepPlan, n_writes: int) -> tuple[int, int, int]:
         return (0, 0, 0)
     log = PinLog(plan.t_ns[:n_writes], plan.data[:n_writes], plan.strobe[:n_writes])
     return decode_pin_log(log, plan.settings).final_steps
+
+
+def simulate_surface(job: Toolpath) -> "np.ndarray":
+    """The surface ``job`` would cut: run it on the mock, decode the pin log, carve with a point tool.
+
+    Returns:
+        ``(height_px, width_px)`` :class:`~cam.drive.pinlog.Surface`, depth in Z steps, drawing frame.
+    """
+    from .pinlog import carve
+
+    result = run(job, MockPort())
+    motion = decode_pin_log(result.pin_log(), job.settings)
+    return carve(motion, (job.height_px, job.width_px), job.settings, origin_px=job.origin_px)
