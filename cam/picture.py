@@ -107,15 +107,15 @@ def toolpath_picture(
     surface = toolpath.origin_px[2]
     d_max = max(1, int(pts[:, 2].max()) - surface)
     cols = depth_colours(pts[:, 2] - surface, d_max)
-    for i in range(1, len(pts)):
+    cutting = (pts[:-1, 2] > surface) & (pts[1:, 2] > surface)
+    for i in np.flatnonzero(~cutting) + 1:  # moves above the surface first, cuts drawn over them
         a, b = tuple(int(v) for v in centre[i - 1]), tuple(int(v) for v in centre[i])
-        if a == b:
-            continue
-        if pts[i - 1, 2] > surface and pts[i, 2] > surface:
-            c = tuple(int(v) for v in cols[i])
-            cv2.line(img, a, b, c, max(1, k // 2), cv2.LINE_8)
-        else:
+        if a != b:
             _dashed(img, a, b, _TRAVEL)
+    for i in np.flatnonzero(cutting) + 1:
+        a, b = tuple(int(v) for v in centre[i - 1]), tuple(int(v) for v in centre[i])
+        if a != b:
+            cv2.line(img, a, b, tuple(int(v) for v in cols[i]), max(1, k // 2), cv2.LINE_8)
     if toolpath.n_targets:
         first = toolpath.points_px[np.flatnonzero(toolpath.target)[0]]
         cv2.circle(img, (int(first[0] * k + k // 2), int(first[1] * k + k // 2)), max(4, k), _START, 2)
