@@ -16,11 +16,12 @@ from . import __version__
 from .digitize import START_RULES, digitize
 from .digitized import Digitized, load_digitized, save_digitized
 from .drawing import load_image
-from .drive import Controller, MockPort, plan_steps, run, write_pin_log
+from .drive import Controller, MockPort, StepPlan, plan_steps, run, write_pin_log
 from .drive.runner import FINISHED, RunResult
 from .errors import CamError
 from .fileio import atomic_write_text
 from .gcode import save_gcode
+from .gcode_in import GCODE_SUFFIXES, load_gcode, plan_gcode_steps
 from .profile import Profile, load_profile, profile_from_expr
 from .report import format_report, image_report, job_report
 from .settings import MachineSettings, load_settings
@@ -127,7 +128,7 @@ def build_parser() -> argparse.ArgumentParser:
     d = sub.add_parser(
         "drill", help="digitize a drawing and cut it (mock port by default)",
         description="Digitize a drawing (or reuse a saved digitized matrix), plan the depth-sorted toolpath "
-        "and send it to a port. The default port is the logging mock, so nothing moves unless you name a real port.",
+        "and send it to a port. A G-code file (.ngc, .nc, .gcode, .tap) runs as programmed. The default port is the logging mock, so nothing moves unless you name a real port.",
     )
     _add_job_options(d)
     g = d.add_argument_group("port and outputs")
@@ -137,6 +138,7 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--save-digitized", metavar="FILE", help="save the digitized matrix")
     g.add_argument("--report", metavar="FILE.json", help="write the job report as JSON")
     g.add_argument("--preview", metavar="OUT.png", help="write the toolpath picture before cutting")
+    g.add_argument("--flip-y", action="store_true", help="G-code input: machine Y = +Y mm instead of -Y mm")
     g.add_argument("--no-progress", action="store_true", help="no progress bar")
     d.set_defaults(func=cmd_drill)
 
@@ -229,12 +231,12 @@ def _format_duration(seconds: float) -> str:
 
 
 def _execute(job: Any, args: argparse.Namespace, prompt_at_pause: bool = False) -> RunResult:
-    """Run a toolpath with a progress bar; Ctrl-C stops cleanly (tool lifted, position reported)."""
-    steps = plan_steps(job)
+    """Run a toolpath or step plan with a progress bar; Ctrl-C stops cleanly (tool lifted, position reported)."""
+    steps = job if isinstance(job, StepPlan) else plan_steps(job)
     controller = Controller()
 
-    def on_pause(position: tuple[int, int, int]) -> None:
-        print(f"paused at X={position[0]} Y={position[1]} Z={position[2]} steps: press Enter to resume",
+    def on_pause(position: tuple[int, int, int], note: str) -> None:
+        print(f"{note}: paused at X={position[0]} Y={position[1]} Z={position[2]} steps; press Enter to resume",
               file=sys.stderr)
         if sys.stdin.readline() == "":  # nobody can answer: stop rather than carry on blindly
             print("no answer at the pause (stdin closed): stopping", file=sys.stderr)
@@ -332,7 +334,38 @@ def cmd_preview(args: argparse.Namespace) -> int:
     return 0
 
 
+def _finish(args: argparse.Namespace, result: RunResult, report: dict, summary: str) -> int:
+    report["status"] = result.status
+    if args.report:
+        atomic_write_text(args.report, json.dumps(report, indent=2) + "\n")
+    if result.status != FINISHED:
+        for m in result.messages:
+            print(m, file=sys.stderr)
+        return EXIT_INTERRUPTED
+    print(
+        f"job finished: {summary}; total time {_format_duration(result.machine_time_s)} "
+        f"({result.machine_time_s:.1f} s machine time{'' if args.realtime or args.port != 'mock' else ', simulated'})"
+    )
+    return 0
+
+
+def _drill_gcode(args: argparse.Namespace) -> int:
+    program = load_gcode(args.image)
+    steps = plan_gcode_steps(program, _settings(args), flip_y=args.flip_y)
+    for w in program.warnings:
+        print(f"warning: {w}", file=sys.stderr)
+    report = {
+        "source": args.image, "moves": len(program.moves), "warnings": list(program.warnings),
+        "steps": {axis: int(v) for axis, v in zip("xyz", steps.steps_total)},
+        "estimated_time_s": round(steps.estimated_time_s, 6), "tool_changes": len(steps.pause_writes),
+    }
+    result = _execute(steps, args, prompt_at_pause=True)
+    return _finish(args, result, report, f"{len(program.moves)} moves from {args.image}")
+
+
 def cmd_drill(args: argparse.Namespace) -> int:
+    if args.image and Path(args.image).suffix.lower() in GCODE_SUFFIXES:
+        return _drill_gcode(args)
     digitized, job = _plan_job(args)
     if args.preview:
         args.scale = None
@@ -344,19 +377,8 @@ def cmd_drill(args: argparse.Namespace) -> int:
     for w in report["warnings"]:
         print(f"warning: {w}", file=sys.stderr)
     result = _execute(job, args, prompt_at_pause=bool(args.pause_at))
-    report["status"] = result.status
-    if args.report:
-        atomic_write_text(args.report, json.dumps(report, indent=2) + "\n")
-    if result.status != FINISHED:
-        for m in result.messages:
-            print(m, file=sys.stderr)
-        return EXIT_INTERRUPTED
-    print(
-        f"job finished: {report['objects']} object(s), {report['points']} points, {report['retracts']} retracts; "
-        f"total time {_format_duration(result.machine_time_s)} ({result.machine_time_s:.1f} s machine time"
-        f"{'' if args.realtime or args.port != 'mock' else ', simulated'})"
-    )
-    return 0
+    return _finish(args, result, report,
+                   f"{report['objects']} object(s), {report['points']} points, {report['retracts']} retracts")
 
 
 def _profile(args: argparse.Namespace, digitized: Digitized) -> Optional[Profile]:

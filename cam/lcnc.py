@@ -19,7 +19,7 @@ from .errors import CamError
 
 __all__ = ["CanonMove", "run_rs274", "parse_canonical", "canonical_polyline_mm", "carve_canonical"]
 
-_CALL = re.compile(r"^\s*\d+\s+N\.*\s*(\w+)\((.*)\)\s*$")
+_CALL = re.compile(r"^\s*\d+\s+N[.\d]*\s*(\w+)\((.*)\)\s*$")
 
 
 @dataclass
@@ -45,25 +45,36 @@ def run_rs274(path: str, *, units_mm: bool = True) -> str:
 
 
 def parse_canonical(text: str) -> list[CanonMove]:
-    """Moves of rs274's canonical output, converted to mm when the program used inches."""
+    """Moves of rs274's canonical output in machine mm.
+
+    Canonical coordinates are in the program frame; the G5x and G92 offsets
+    that rs274 reports are added, and inches are converted to mm.
+    """
     moves: list[CanonMove] = []
     scale = 1.0
+    g5x = [0.0, 0.0, 0.0]
+    g92 = [0.0, 0.0, 0.0]
     for line in text.splitlines():
         m = _CALL.match(line)
         if not m:
             continue
         name, args = m.group(1), [a.strip() for a in m.group(2).split(",")]
+        off = [a + b for a, b in zip(g5x, g92)]
         if name == "USE_LENGTH_UNITS":
             scale = 25.4 if "INCH" in args[0] else 1.0
+        elif name == "SET_G5X_OFFSET":
+            g5x = [float(a) * scale for a in args[1:4]]
+        elif name == "SET_G92_OFFSET":
+            g92 = [float(a) * scale for a in args[0:3]]
         elif name in ("STRAIGHT_TRAVERSE", "STRAIGHT_FEED"):
-            x, y, z = (float(a) * scale for a in args[:3])
+            x, y, z = (float(a) * scale + o for a, o in zip(args[:3], off))
             moves.append(CanonMove("traverse" if name == "STRAIGHT_TRAVERSE" else "feed", (x, y, z)))
         elif name == "ARC_FEED":
             # ARC_FEED(first_end, second_end, first_axis, second_axis, rotation, axis_end_point, ...)
             e1, e2, c1, c2 = (float(a) * scale for a in args[:4])
             rot = int(args[4])
-            z = float(args[5]) * scale
-            moves.append(CanonMove("arc", (e1, e2, z), (c1, c2), rot))
+            z = float(args[5]) * scale + off[2]
+            moves.append(CanonMove("arc", (e1 + off[0], e2 + off[1], z), (c1 + off[0], c2 + off[1]), rot))
     return moves
 
 

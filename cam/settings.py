@@ -26,7 +26,7 @@ and then keeps its built-in value.  An unknown key or a bad value is a
     x_max_steps = 10000
     y_min_steps = 0
     y_max_steps = 10000
-    z_min_steps = 0
+    z_min_steps = -640
     z_max_steps = 2000
 
     [pins]              # parallel-port connector pin numbers (2..9 are data bits D0..D7)
@@ -64,7 +64,7 @@ class Travel:
     x_max_steps: int = 10000
     y_min_steps: int = 0
     y_max_steps: int = 10000
-    z_min_steps: int = 0
+    z_min_steps: int = -640
     z_max_steps: int = 2000
 
     def bounds_steps(self) -> tuple[tuple[int, int], tuple[int, int], tuple[int, int]]:

@@ -7,7 +7,7 @@ import pytest
 import cam
 from cam.drawing import BLACK
 
-from conftest import SAMPLES, assert_surface_equal, carve_job, expected_surface_2d
+from conftest import ROOT, SAMPLES, assert_surface_equal, carve_job, expected_surface_2d
 
 SAMPLES_2D = ["ellipse.png", "two_curves.png", "gear.png", "word.png", "stamp.png"]
 
@@ -67,3 +67,30 @@ def test_thesis_ellipse_dimensions_and_time():
     # diagonal moves: each 1-pixel move is 8 periods of 5 ms, plus travel and Z
     assert rep["estimated_time_s"] > d.n_points * 8 * 0.005
     json.dumps(rep)
+
+
+SAMPLES_3D = ["disc.png", "pyramid.png", "heart.png", "dumbbell.png", "ring.png"]
+PROFILES = ["dome.png", "cone.png", "pyramid.png", "flat.png"]
+
+
+@pytest.mark.parametrize("name", SAMPLES_3D)
+@pytest.mark.parametrize("profile_name", PROFILES)
+def test_3d_sample_carves_exactly(name, profile_name):
+    from cam.digitize.peel3d import peel_layers
+    from cam.drawing import WHITE
+
+    drawing = cam.load_image(SAMPLES / name)
+    assert drawing.kind == "3d" and drawing.warnings == []
+    d = cam.digitize(drawing)
+    profile = cam.load_profile(ROOT / "profiles" / profile_name)
+    job = cam.plan(d, profile=profile)
+    surface, result, motion = carve_job(job)
+    # target: every black and red pixel at profile(layer), white untouched -- computed independently
+    layer = peel_layers(drawing.classes)
+    want = np.where(layer > 0, profile.depth_px[np.maximum(layer, 1) - 1], 0) * job.settings.steps_per_px_z
+    assert np.all(want[drawing.classes == WHITE] == 0)
+    assert_surface_equal(surface, want)
+    assert motion.final_steps == (0, 0, 0)
+    rep = cam.job_report(d, job, cam.plan_steps(job))
+    assert rep["retracts"] <= rep["rings"] + rep["objects"]
+    assert rep["layers"] == int(layer.max())

@@ -117,8 +117,8 @@ def test_pause_at_point_calls_back_at_that_point():
     d = cam.digitize(drawing_from_rows(ROWS))
     job = cam.plan(d, depth=2, pause_at=[(10, 1)])
     seen = []
-    result = cam.run(job, on_pause=lambda pos: seen.append(pos))
-    assert seen == [(80, 8, 2)]
+    result = cam.run(job, on_pause=lambda pos, note: seen.append((pos, note)))
+    assert seen == [((80, 8, 2), "Pause At")]
     assert result.status == FINISHED and result.pauses == 1
 
 

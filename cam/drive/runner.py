@@ -108,8 +108,8 @@ class RunResult:
 
 ProgressFn = Callable[[int, int, int], None]
 """progress(writes_done, writes_total, machine_time_ns_done)."""
-PauseFn = Callable[[tuple[int, int, int]], None]
-"""on_pause(position_steps): called at a Pause At point; the job continues when it returns."""
+PauseFn = Callable[[tuple[int, int, int], str], None]
+"""on_pause(position_steps, note): called at a pause (Pause At, tool change); the job continues when it returns."""
 
 
 def _lift_writes(plan: StepPlan, data_now: int, z_now: int) -> tuple[np.ndarray, np.ndarray]:
@@ -163,6 +163,7 @@ def run(
     ctl = controller or Controller()
     total = len(plan)
     pause_set = set(int(i) for i in plan.pause_writes)
+    notes = dict(zip((int(i) for i in plan.pause_writes), plan.pause_notes or []))
     wall0 = time.monotonic_ns()
     sent = 0
     pauses = 0
@@ -176,7 +177,7 @@ def run(
         pauses += 1
         pos = _position_after(plan, sent)
         if on_pause is not None:
-            on_pause(pos)
+            on_pause(pos, notes.get(sent - 1, "pause"))
         elif external_controller:
             ctl.pause()
         return _wait_while_paused(ctl)

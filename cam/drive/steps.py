@@ -51,6 +51,7 @@ class StepPlan:
         settings: the machine settings.
         end_steps: machine position (x, y, z) in steps after the last write.
         safe_z_steps: Z a stop lifts the tool to (the surface or above it).
+        pause_notes: what each pause is for (same order as ``pause_writes``), e.g. a tool change.
     """
 
     t_ns: np.ndarray
@@ -62,6 +63,7 @@ class StepPlan:
     settings: MachineSettings
     end_steps: tuple[int, int, int] = (0, 0, 0)
     safe_z_steps: int = 0
+    pause_notes: list[str] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
 
     def __len__(self) -> int:
@@ -71,6 +73,50 @@ class StepPlan:
     def estimated_time_s(self) -> float:
         """Machine time of the job in seconds (pauses excluded)."""
         return float(self.t_ns[-1]) / 1e9 if len(self.t_ns) else 0.0
+
+
+def port_writes(
+    step_signed: np.ndarray, period_ns: np.ndarray, settings: MachineSettings
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The port writes of a sequence of step periods.
+
+    Args:
+        step_signed: ``(P, 3)`` int, the step each axis (X, Y, Z) makes in each period: -1, 0 or +1.
+        period_ns: ``(P,)`` int64 length of each period.
+        settings: pin map and Half/Full*.
+
+    Returns:
+        ``(t_ns, data, strobe)``, each ``(1 + 2P,)``: an initial write at t = 0 that sets the first
+        directions, then per period the rising edges at mid-period and the falling edges (with the
+        next period's directions) at its end.  An idle axis keeps its last direction.
+    """
+    step_signed = np.asarray(step_signed)
+    per = np.asarray(period_ns, np.int64)
+    n_periods = len(per)
+    clock, dirbit = axis_bits(settings)
+    dir_data = np.zeros(n_periods, np.int64)
+    clock_data = np.zeros(n_periods, np.int64)
+    rows = np.arange(n_periods)
+    for a in range(3):
+        moving = step_signed[:, a] != 0
+        last = np.maximum.accumulate(np.where(moving, rows, -1))
+        positive = np.where(last >= 0, step_signed[np.maximum(last, 0), a] > 0, False)
+        dir_data |= positive.astype(np.int64) * int(dirbit[a])
+        clock_data |= moving.astype(np.int64) * int(clock[a])
+    end_t = np.cumsum(per)
+    m = 1 + 2 * n_periods
+    t_ns = np.empty(m, np.int64)
+    data = np.empty(m, np.uint8)
+    t_ns[0] = 0
+    data[0] = dir_data[0] if n_periods else 0
+    t_ns[1::2] = end_t - per + per // 2
+    data[1::2] = dir_data | clock_data
+    t_ns[2::2] = end_t
+    if n_periods:
+        data[2::2][:-1] = dir_data[1:]
+        data[-1] = dir_data[-1]
+    strobe = np.full(m, 1 if settings.half_step else 0, np.uint8)
+    return t_ns, data, strobe
 
 
 def plan_steps(toolpath: Toolpath) -> StepPlan:
@@ -96,34 +142,8 @@ def plan_steps(toolpath: Toolpath) -> StepPlan:
     absd = np.abs(delta)[move_of]  # (P, 3)
     stepped = (k[:, None] * absd) // n_rep[:, None] - ((k[:, None] - 1) * absd) // n_rep[:, None]  # 0/1
 
-    clock, dirbit = axis_bits(s)
-    # direction per move and axis: + where delta > 0; an idle axis keeps its last direction
-    sign = np.sign(delta)
-    dir_state = np.zeros_like(sign)
-    for a in range(3):
-        idx = np.where(sign[:, a] != 0, np.arange(len(sign)), -1)
-        idx = np.maximum.accumulate(idx)
-        dir_state[:, a] = np.where(idx >= 0, sign[np.maximum(idx, 0), a] > 0, 0)
-    dir_data_move = (dir_state * dirbit.astype(np.int64)).sum(axis=1).astype(np.uint8)  # (N,)
-    dir_data = dir_data_move[move_of]  # (P,)
-    clock_data = (stepped * clock.astype(np.int64)).sum(axis=1).astype(np.uint8)
-
-    per = period_ns[move_of]
-    end_t = np.cumsum(per)
-    start_t = end_t - per
-
-    m = 1 + 2 * n_periods
-    t_ns = np.empty(m, np.int64)
-    data = np.empty(m, np.uint8)
-    t_ns[0] = 0
-    data[0] = dir_data[0] if n_periods else 0
-    t_ns[1::2] = start_t + per // 2
-    data[1::2] = dir_data | clock_data
-    t_ns[2::2] = end_t
-    if n_periods:
-        data[2::2][:-1] = dir_data[1:]
-        data[-1] = dir_data[-1]
-    strobe = np.full(m, 1 if s.half_step else 0, np.uint8)
+    signed = stepped * np.sign(delta)[move_of]  # (P, 3) in {-1, 0, 1}
+    t_ns, data, strobe = port_writes(signed, period_ns[move_of], s)
 
     point_write = 2 * np.cumsum(n_per_move)
     pause_writes = point_write[toolpath.pause]
@@ -138,5 +158,6 @@ def plan_steps(toolpath: Toolpath) -> StepPlan:
         settings=s,
         end_steps=end,  # type: ignore[arg-type]
         safe_z_steps=min(0, int(toolpath.origin_px[2])) * s.steps_per_px_z,
+        pause_notes=["Pause At"] * len(pause_writes),
         warnings=list(toolpath.warnings),
     )

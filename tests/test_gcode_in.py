@@ -1,0 +1,156 @@
+"""G-code in: programs from other CAM tools run on the mock; motion checked against LinuxCNC's rs274."""
+import shutil
+
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+import cam
+from cam.gcode_in import load_gcode, parse_gcode, plan_gcode_steps
+from cam.lcnc import canonical_polyline_mm, parse_canonical, run_rs274
+
+from test_cli import assert_one_line_error, cli
+
+needs_rs274 = pytest.mark.skipif(shutil.which("rs274") is None, reason="rs274 (linuxcnc-uspace) not installed")
+
+ENGRAVING = """%
+(engraving with arcs, as a CAM post-processor writes it)
+N10 G21 G90 G17 G94 G40 G49 G54
+N20 G0 Z2.0 S12000 M3
+N30 G0 X10 Y-10
+N40 G1 Z-0.3 F120
+N50 G2 X20 Y-10 I5 J0 F400 ; half circle by I/J
+N60 G3 X30 Y-10 R5          ; half circle by R
+N70 G1 X30 Y-20
+N80 G2 X30 Y-20 I-4 J0      ; full circle
+N90 G3 X22 Y-28 R-8         ; long way round (270 degrees)
+N100 G1 X12.5 Y-27.25 Z-0.5 (a ramp)
+N110 G0 Z2
+N120 M5
+N130 G0 X0 Y0
+N140 M30
+%
+"""
+
+DRILLING = """(drilling job: plunges, dwell and a tool change)
+G21 G90
+G0 Z3
+T1 M6 (0.8 mm drill)
+G0 X5 Y-5
+G1 Z-1.2 F60
+G4 P0.2
+G0 Z3
+G0 X15.5 Y-7.25
+G1 Z-1.2 F60
+G0 Z3
+T2 M6 (1.0 mm drill)
+G0 X40 Y-30
+G1 Z-1.2 F60
+G0 Z3
+G0 X0 Y0 Z0
+M2
+"""
+
+INCHES = """(a file in inches with incremental moves and G92)
+G20 G90
+G0 Z0.1
+G0 X0.5 Y-0.5
+G92 X0 Y0
+G91
+G1 Z-0.12 F10
+G1 X0.4 F20
+G2 X0.4 Y0 R0.2
+G1 Y-0.3
+G90
+G0 Z0.1
+G0 X0 Y0
+M2
+"""
+
+PROGRAMS = {"engraving": ENGRAVING, "drilling": DRILLING, "inches": INCHES}
+
+
+def _decoded_mm(plan):
+    result = cam.run(plan)
+    motion = cam.decode_pin_log(result.pin_log(), plan.settings)
+    s = plan.settings
+    p = motion.position_steps
+    return np.column_stack([p[:, 0] * s.mm_per_step_xy, -p[:, 1] * s.mm_per_step_xy, -p[:, 2] * s.mm_per_step_z]), result
+
+
+@needs_rs274
+@pytest.mark.parametrize("name", PROGRAMS)
+def test_motion_follows_rs274_within_half_a_step(tmp_path, name):
+    path = tmp_path / f"{name}.ngc"
+    path.write_text(PROGRAMS[name])
+    canon = parse_canonical(run_rs274(str(path)))
+    s = cam.MachineSettings()
+    step = np.array([s.mm_per_step_xy, s.mm_per_step_xy, s.mm_per_step_z])
+    pts, _ = canonical_polyline_mm(canon, max_chord_mm=0.0005)
+    # dense samples of the programmed path, in step units (spacing <= 0.02 step)
+    dense = [pts[:1] / step]
+    for a, b in zip(pts[:-1] / step, pts[1:] / step):
+        n = max(1, int(np.ceil(np.abs(b - a).max() / 0.02)))
+        dense.append(a + (b - a) * (np.arange(1, n + 1) / n)[:, None])
+    tree = cKDTree(np.vstack(dense))
+    plan = plan_gcode_steps(load_gcode(path), s)
+    decoded_mm, result = _decoded_mm(plan)
+    dist, _ = tree.query(decoded_mm / step, p=np.inf)
+    assert dist.max() <= 0.5 + 0.03, f"decoded motion strays {dist.max():.3f} steps from the path"
+    # and the motion reaches every programmed end point (within half a step)
+    ends = np.array([m.end for m in canon]) / step
+    d_end, _ = cKDTree(decoded_mm / step).query(ends, p=np.inf)
+    assert d_end.max() <= 0.5 + 1e-6
+    assert np.allclose(decoded_mm[-1] / step, np.rint(pts[-1] / step))
+
+
+def test_tool_changes_pause_in_order():
+    plan = plan_gcode_steps(parse_gcode(DRILLING, source="drill.ngc"))
+    seen = []
+    result = cam.run(plan, on_pause=lambda pos, note: seen.append(note))
+    assert seen == ["tool change: T1 (line 4)", "tool change: T2 (line 12)"]
+    assert result.status == "finished"
+
+
+def test_feed_rate_sets_step_periods():
+    plan = plan_gcode_steps(parse_gcode("G21 G90\nG1 X10 F60\nM2\n"))
+    # 10 mm at 1 mm/s = 10 s; never faster than the 5 ms step delay allows
+    assert plan.estimated_time_s == pytest.approx(10.0, rel=1e-3)
+    fast = plan_gcode_steps(parse_gcode("G21 G90\nG1 X10 F100000\nM2\n"))
+    assert fast.estimated_time_s == pytest.approx(np.ceil(10 / 0.0289) * 0.005, rel=1e-6)
+
+
+@pytest.mark.parametrize(
+    "text, line, fragment",
+    [
+        ("G21\nG1 X1 F100 Q3\n", 2, "unsupported word 'Q3'"),
+        ("G21\nG1 X F100\n", 2, "word 'X' has no number"),
+        ("G21\nG1 X1 F100\nG2 X5 Y0 R1\n", 3, "radius 1 is too small"),
+        ("G21\nG18\n", 2, "unsupported plane 'G18'"),
+        ("G21\nG2 X5 Y0\n", 2, "without a feed rate"),
+        ("G21\nG1 X1 F10\nG2 X5 Y0\n", 3, "needs I/J or R"),
+        ("G21\nM8\n", 2, "unsupported word 'M8'"),
+        ("G21 (open comment\n", 1, "not closed"),
+        ("G21\nG1 X1 F10\nG2 X3 Y0 I0.5 J0\n", 3, "not on the circle"),
+    ],
+)
+def test_bad_gcode_names_line_and_word(text, line, fragment):
+    with pytest.raises(cam.ParseError) as info:
+        parse_gcode(text, source="bad.ngc")
+    assert str(info.value).startswith(f"bad.ngc:{line}:") and fragment in str(info.value)
+
+
+def test_cli_runs_gcode_and_rejects_bad(tmp_path):
+    good = tmp_path / "e.ngc"
+    good.write_text(ENGRAVING)
+    proc = cli("drill", good, "--pin-log", tmp_path / "p.csv", "--no-progress")
+    assert proc.returncode == 0, proc.stderr
+    assert "job finished" in proc.stdout
+    motion = cam.decode_pin_log(tmp_path / "p.csv")
+    assert motion.final_steps == (0, 0, round(-2 / 0.0157))  # G0 X0 Y0 at Z2
+    bad = tmp_path / "b.ngc"
+    bad.write_text("G21\nG1 X1 F100\nG2 X5 Y0 R1\n")
+    assert_one_line_error(cli("drill", bad), "b.ngc:3:", "too small")
+    far = tmp_path / "far.ngc"
+    far.write_text("G21\nG0 X900\n")
+    assert_one_line_error(cli("drill", far), "far.ngc:2:", "travel")
