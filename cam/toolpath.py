@@ -55,6 +55,7 @@ class Toolpath:
         width_px, height_px: size of the source drawing.
         origin_px: Start At offset ``(x, y, z)`` in pixels.
         warnings: planning warnings.
+        pause_notes: what each pause is for, in order (default "Pause At").
     """
 
     points_px: np.ndarray
@@ -66,6 +67,7 @@ class Toolpath:
     height_px: int = 0
     origin_px: tuple[int, int, int] = (0, 0, 0)
     warnings: list[str] = field(default_factory=list)
+    pause_notes: list[str] | None = None
 
     def __len__(self) -> int:
         return len(self.points_px)

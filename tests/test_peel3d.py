@@ -121,3 +121,21 @@ def test_digitized_3d_round_trip(tmp_path):
     back = cam.load_digitized(tmp_path / "m.txt")
     assert back.mode == "3d" and np.array_equal(back.to_array(), dg.to_array())
     assert np.array_equal(back.levels, dg.levels)
+
+
+def test_compiled_ring_tracer_equals_reference():
+    import cv2
+    from cam.digitize.peel3d import trace_layers_reference
+
+    mask = np.zeros((90, 120), np.uint8)
+    cv2.ellipse(mask, (45, 45), (35, 25), 20, 0, 360, 1, -1)
+    cv2.circle(mask, (90, 50), 22, 1, -1)
+    mask[40:46, 60:80] = 1
+    inner = cv2.erode(mask, np.array([[0, 1, 0], [1, 1, 1], [0, 1, 0]], np.uint8))
+    classes = np.where(mask > 0, RED, WHITE).astype(np.uint8)
+    classes[(mask > 0) & (inner == 0)] = BLACK
+    layer = peel_layers(classes)
+    a, la = trace_layers(layer)
+    b, lb = trace_layers_reference(layer)
+    assert np.array_equal(la, lb) and len(a) == len(b)
+    assert all(np.array_equal(x, y) for x, y in zip(a, b))

@@ -122,3 +122,19 @@ def test_unknown_start_rule():
 def test_to_array_rows_object_x_y_level():
     d = cam.digitize(drawing_from_rows(["......", ".##...", "...##.", "......"]))
     assert d.to_array().tolist() == [[1, 1, 1, 1], [1, 2, 1, 1], [1, 3, 2, 1], [1, 4, 2, 1]]
+
+
+def test_compiled_tracer_equals_reference_on_random_curves():
+    import cv2
+    from cam.digitize.trace2d import trace_curves_reference
+
+    rng = np.random.default_rng(7)
+    m = np.zeros((120, 160), np.uint8)
+    for _ in range(12):
+        c = (int(rng.integers(15, 145)), int(rng.integers(15, 105)))
+        cv2.ellipse(m, c, (int(rng.integers(4, 14)), int(rng.integers(3, 10))), 0, 0, int(rng.integers(90, 361)),
+                    1, 1, cv2.LINE_8)
+    for start in ("top", "min-distance"):
+        a = trace_curves(m > 0, start=start)
+        b = trace_curves_reference(m > 0, start=start)
+        assert len(a) == len(b) and all(np.array_equal(x, y) for x, y in zip(a, b))

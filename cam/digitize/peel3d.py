@@ -29,7 +29,7 @@ import numpy as np
 from ..drawing import BLACK, RED, WHITE
 from ..errors import DrawingError
 
-__all__ = ["peel_layers", "trace_layers", "NEIGHBOURS_3D"]
+__all__ = ["peel_layers", "trace_layers", "trace_layers_reference", "NEIGHBOURS_3D"]
 
 NEIGHBOURS_3D = ((-1, 0), (0, 1), (1, 0), (0, -1), (1, 1), (-1, 1), (-1, -1), (1, -1))
 """(drow, dcol) in the scan order of Figure 4.15: N, E, S, W, SE, NE, NW, SW."""
@@ -114,6 +114,22 @@ def _trace_ring(
 
 
 def trace_layers(layer: np.ndarray) -> tuple[list[np.ndarray], np.ndarray]:
+    """Trace every layer into rings (compiled; the same result as :func:`trace_layers_reference`)."""
+    from ._kernels import trace_layers_kernel
+
+    h, w = layer.shape
+    wp = w + 2
+    padded = np.zeros((h + 2, wp), np.int64)
+    padded[1:-1, 1:-1] = layer
+    offsets = np.array([dr * wp + dc for dr, dc in NEIGHBOURS_3D], np.int64)
+    path, starts, levels = trace_layers_kernel(padded.ravel(), wp, offsets)
+    xy = np.empty((len(path), 2), np.int32)
+    xy[:, 0] = path % wp - 1
+    xy[:, 1] = path // wp - 1
+    return [xy[a:b] for a, b in zip(starts[:-1], starts[1:])], levels.astype(np.int32)
+
+
+def trace_layers_reference(layer: np.ndarray) -> tuple[list[np.ndarray], np.ndarray]:
     """Trace every layer into rings.
 
     Args:
@@ -155,13 +171,12 @@ def trace_layers(layer: np.ndarray) -> tuple[list[np.ndarray], np.ndarray]:
                 start = int(rings[r_id][0])
                 first = False
             else:
-                best = None
-                for r_cand, pix in rings.items():
-                    d2 = (pix // wp - tool[0]) ** 2 + (pix % wp - tool[1]) ** 2
-                    j = int(np.argmin(d2))
-                    if best is None or d2[j] < best[0]:
-                        best = (int(d2[j]), r_cand, int(pix[j]))
-                _, r_id, start = best
+                # the ring of the untraced pixel nearest the tool (ties: first in scan order)
+                left = np.concatenate(list(rings.values()))
+                left.sort()
+                d2 = (left // wp - tool[0]) ** 2 + (left % wp - tool[1]) ** 2
+                start = int(left[int(np.argmin(d2))])
+                r_id = int(labels.ravel()[start])
             path, _ = _trace_ring(flat, rings.pop(r_id), start, offsets, wp)
             p = np.asarray(path, np.int64)
             obj = np.empty((len(p), 2), np.int32)

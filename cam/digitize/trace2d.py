@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["trace_curves", "START_RULES", "NEIGHBOURS_2D"]
+__all__ = ["trace_curves", "trace_curves_reference", "START_RULES", "NEIGHBOURS_2D"]
 
 START_RULES = ("top", "min-distance")
 
@@ -43,6 +43,39 @@ def _walk(flat: bytearray, start: int, offsets: tuple[int, ...]) -> list[int]:
 
 
 def trace_curves(
+    black: np.ndarray,
+    *,
+    start: str = "top",
+    tool_xy_px: tuple[int, int] = (0, 0),
+) -> list[np.ndarray]:
+    """Trace every black pixel of ``black`` into ordered curves (compiled; see :func:`trace_curves_reference`).
+
+    >>> import numpy as np
+    >>> m = np.zeros((4, 5), bool); m[1, 1:4] = True   # a 3-pixel dash
+    >>> [o.tolist() for o in trace_curves(m, start="min-distance", tool_xy_px=(4, 1))]
+    [[[3, 1], [2, 1], [1, 1]]]
+    """
+    from ._kernels import trace2d_kernel
+
+    if start not in START_RULES:
+        raise ValueError(f"start must be one of {START_RULES}, got {start!r}")
+    black = np.asarray(black, bool)
+    h, w = black.shape
+    wp = w + 2
+    padded = np.zeros((h + 2, wp), np.uint8)
+    padded[1:-1, 1:-1] = black
+    flat = padded.ravel()
+    scan = np.flatnonzero(flat)
+    offsets = np.array([dr * wp + dc for dr, dc in NEIGHBOURS_2D], np.int64)
+    path, starts = trace2d_kernel(flat, scan, wp, offsets, start == "min-distance", int(tool_xy_px[0]),
+                                  int(tool_xy_px[1]))
+    xy = np.empty((len(path), 2), np.int32)
+    xy[:, 0] = path % wp - 1
+    xy[:, 1] = path // wp - 1
+    return [xy[a:b] for a, b in zip(starts[:-1], starts[1:])]
+
+
+def trace_curves_reference(
     black: np.ndarray,
     *,
     start: str = "top",

@@ -158,6 +158,6 @@ def plan_steps(toolpath: Toolpath) -> StepPlan:
         settings=s,
         end_steps=end,  # type: ignore[arg-type]
         safe_z_steps=min(0, int(toolpath.origin_px[2])) * s.steps_per_px_z,
-        pause_notes=["Pause At"] * len(pause_writes),
+        pause_notes=list(toolpath.pause_notes) if toolpath.pause_notes is not None else ["Pause At"] * len(pause_writes),
         warnings=list(toolpath.warnings),
     )

@@ -1,0 +1,149 @@
+"""PCB drilling jobs: a hole list to a toolpath for the step/dir machine.
+
+Frames: drill files use the board frame (X right, Y up, mm).  The machine
+frame is `cam`'s (+X right, +Y toward the operator = image rows, +Z deeper),
+so a board seen from above keeps its handedness with machine y = -Y.  By
+default the board's top-left corner (smallest X, largest Y of its holes) is
+placed where the tool stands when the job starts (the home, (0, 0, 0)), so
+every hole lies inside the travel; ``offset_mm=(X, Y)`` instead puts the
+board origin (0, 0) at machine (X, Y) mm from the home.  ``mirror_x`` mirrors
+the board about its vertical axis for drilling from the back side.
+
+The drill cycle for each hole (thesis-machine step/dir port): rapid at the
+safe height to above the hole, plunge to the drill depth, retract to the
+safe height.  Holes are grouped by tool, smallest diameter first; before
+each tool the job pauses with a prompt naming the tool and its diameter.
+Within a tool the holes are drilled in a short tour from the current
+position (:func:`cam.drilltour.drill_order`).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import PlanError, TravelError
+from .settings import DEFAULT_SETTINGS, MachineSettings
+from .toolpath import CUT, RETRACT, TRAVEL, Toolpath, check_travel
+
+__all__ = ["DrillPlan", "plan_drill", "DEFAULT_DEPTH_MM", "DEFAULT_SAFE_HEIGHT_MM"]
+
+DEFAULT_DEPTH_MM = 2.0
+"""Through a 1.6 mm board with a little margin into the spoil board."""
+DEFAULT_SAFE_HEIGHT_MM = 1.0
+
+
+@dataclass
+class DrillPlan:
+    """A planned drilling job.
+
+    Attributes:
+        toolpath: the motion, in machine steps (its settings have 1 step per "pixel").
+        holes_steps: ``(N, 2)`` int64 machine (x, y) steps of each hole, in drilling order.
+        hole_index: ``(N,)`` index of each drilled hole in the source hole list.
+        tool_sequence: ``[(tool, diameter_mm, n_holes)]`` in drilling order.
+    """
+
+    toolpath: Toolpath
+    holes_steps: np.ndarray
+    hole_index: np.ndarray
+    tool_sequence: list[tuple[int, float, int]]
+
+
+def _machine_mm(holes_mm: np.ndarray, offset_mm, mirror_x: bool) -> np.ndarray:
+    xy = np.asarray(holes_mm, np.float64).copy()
+    if mirror_x:
+        xy[:, 0] = -xy[:, 0]
+    if offset_mm is None:
+        ox, oy = -xy[:, 0].min(), xy[:, 1].max()
+    else:
+        ox, oy = offset_mm
+    return np.column_stack([ox + xy[:, 0], oy - xy[:, 1]])
+
+
+def plan_drill(
+    holes,
+    *,
+    settings: MachineSettings = DEFAULT_SETTINGS,
+    depth_mm: float = DEFAULT_DEPTH_MM,
+    safe_height_mm: float = DEFAULT_SAFE_HEIGHT_MM,
+    offset_mm: tuple[float, float] | None = None,
+    mirror_x: bool = False,
+    order: str = "tour",
+) -> DrillPlan:
+    """Plan the drilling of a :class:`~cam.excellon.HoleList`.
+
+    Args:
+        holes: the hole list (board frame, mm).
+        settings: machine settings (mm per step, delays, travel).
+        depth_mm: drill depth below the surface; safe_height_mm: travel height above it.
+        offset_mm: machine position (mm from the home) of the board origin; None = board top-left at the home.
+        mirror_x: mirror for drilling from the back side.
+        order: "tour" (short tour per tool) or "file" (file order).
+
+    Raises:
+        PlanError: bad options; TravelError: a hole outside the travel (naming the hole and its line).
+    """
+    from .drilltour import drill_order
+
+    if depth_mm <= 0 or safe_height_mm < 0:
+        raise PlanError("drill depth must be > 0 mm and the safe height >= 0 mm")
+    if order not in ("tour", "file"):
+        raise PlanError(f"order must be 'tour' or 'file', got {order!r}")
+    n = len(holes.holes_mm)
+    if n == 0:
+        raise PlanError(f"{holes.source}: no holes to drill")
+    machine_mm = _machine_mm(holes.holes_mm, offset_mm, mirror_x)
+    steps_xy = np.rint(machine_mm / settings.mm_per_step_xy).astype(np.int64)
+    depth_steps = int(round(depth_mm / settings.mm_per_step_z))
+    safe_steps = -int(round(safe_height_mm / settings.mm_per_step_z))
+    lo = np.array([b[0] for b in settings.travel.bounds_steps()])
+    hi = np.array([b[1] for b in settings.travel.bounds_steps()])
+    bad = np.flatnonzero(np.any((steps_xy < lo[:2]) | (steps_xy > hi[:2]), axis=1))
+    if len(bad):
+        i = int(bad[0])
+        raise TravelError(
+            f"{holes.source}: hole {i + 1} at X{holes.holes_mm[i, 0]:.3f} Y{holes.holes_mm[i, 1]:.3f} mm lies "
+            f"outside the machine travel (machine {machine_mm[i, 0]:.2f}, {machine_mm[i, 1]:.2f} mm)"
+        )
+    tools = sorted(set(int(t) for t in holes.tool_of_hole), key=lambda t: (holes.tools[t], t))
+    pts: list[tuple[int, int, int]] = []
+    kinds: list[int] = []
+    pause: list[bool] = []
+    notes: list[str] = []
+    order_all: list[int] = []
+    sequence: list[tuple[int, float, int]] = []
+    cur = np.array([0.0, 0.0])
+    if safe_steps != 0:
+        pts.append((0, 0, safe_steps)); kinds.append(RETRACT); pause.append(False)
+    for tool in tools:
+        idx = np.flatnonzero(holes.tool_of_hole == tool)
+        if order == "tour":
+            idx = idx[drill_order(machine_mm[idx], start_mm=tuple(cur))]
+        # tool change: pause at the safe height before the first hole of this tool
+        if not pts:
+            pts.append((0, 0, safe_steps)); kinds.append(TRAVEL); pause.append(False)
+        pause[-1] = True
+        notes.append(f"tool change: T{tool} {holes.tools[tool]:.3f} mm ({len(idx)} holes)")
+        sequence.append((tool, float(holes.tools[tool]), len(idx)))
+        for i in idx.tolist():
+            x, y = (int(v) for v in steps_xy[i])
+            pts.append((x, y, safe_steps)); kinds.append(TRAVEL); pause.append(False)
+            pts.append((x, y, depth_steps)); kinds.append(CUT); pause.append(False)
+            pts.append((x, y, safe_steps)); kinds.append(RETRACT); pause.append(False)
+            order_all.append(i)
+        cur = machine_mm[idx[-1]]
+    pts.append((0, 0, safe_steps)); kinds.append(TRAVEL); pause.append(False)
+    if safe_steps != 0:
+        pts.append((0, 0, 0)); kinds.append(TRAVEL); pause.append(False)
+    points = np.array(pts, np.int64)
+    unit = settings.replace(steps_per_px_xy=1, steps_per_px_z=1)
+    check_travel(points, unit)
+    kinds_arr = np.array(kinds, np.uint8)
+    tp = Toolpath(
+        points_px=points, kind=kinds_arr, target=kinds_arr == CUT, pause=np.array(pause, bool),
+        settings=unit, width_px=int(points[:, 0].max()) + 1, height_px=int(points[:, 1].max()) + 1,
+        warnings=list(holes.warnings), pause_notes=notes,
+    )
+    order_arr = np.array(order_all, np.int64)
+    return DrillPlan(tp, steps_xy[order_arr], order_arr, sequence)
