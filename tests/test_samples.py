@@ -1,5 +1,6 @@
 """The shipped samples and profiles are exactly what their scripts make, and keep the drawing rules."""
 import importlib.util
+import sys
 
 import pytest
 
@@ -11,6 +12,7 @@ from conftest import ROOT
 def _load(path):
     spec = importlib.util.spec_from_file_location(path.stem, path)
     module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # dataclasses look their module up while the script runs
     spec.loader.exec_module(module)
     return module
 
