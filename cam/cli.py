@@ -16,7 +16,7 @@ from . import __version__
 from .digitize import START_RULES, digitize
 from .digitized import Digitized, load_digitized, save_digitized
 from .drawing import load_image
-from .drive import Controller, MockPort, StepPlan, plan_steps, run, write_pin_log
+from .drive import Controller, MockPort, StepPlan, open_port, plan_steps, run, write_pin_log
 from .drive.runner import FINISHED, RunResult
 from .errors import CamError
 from .fileio import atomic_write_text
@@ -233,6 +233,7 @@ def _format_duration(seconds: float) -> str:
 def _execute(job: Any, args: argparse.Namespace, prompt_at_pause: bool = False) -> RunResult:
     """Run a toolpath or step plan with a progress bar; Ctrl-C stops cleanly (tool lifted, position reported)."""
     steps = job if isinstance(job, StepPlan) else plan_steps(job)
+    port = open_port(args.port)  # before the progress bar: a bad port is one clean line
     controller = Controller()
 
     def on_pause(position: tuple[int, int, int], note: str) -> None:
@@ -264,13 +265,15 @@ def _execute(job: Any, args: argparse.Namespace, prompt_at_pause: bool = False) 
     signal.signal(signal.SIGINT, interrupt)
     try:
         result = run(
-            steps, args.port, realtime=args.realtime, controller=controller, progress=progress,
+            steps, port, realtime=args.realtime, controller=controller, progress=progress,
             on_pause=on_pause if prompt_at_pause else None,
         )
     finally:
         signal.signal(signal.SIGINT, previous)
         if bar is not None:
             bar.close()
+        if not isinstance(port, MockPort):
+            port.close()
     if args.pin_log:
         if not isinstance(result.port, MockPort):
             raise CamError("--pin-log needs the mock port")

@@ -163,3 +163,10 @@ def test_ctrl_c_stops_cleanly_with_position(tmp_path):
     assert "stopped at X=" in err and "Traceback" not in err
     motion = cam.decode_pin_log(tmp_path / "p.csv")
     assert motion.final_steps[2] == 0 and motion.final_steps[0] > 0
+
+
+def test_missing_parallel_port_is_one_line_with_hint(drawing):
+    proc = cli("drill", drawing, "--port", "/dev/parport-does-not-exist", "--no-progress")
+    assert_one_line_error(proc, "/dev/parport-does-not-exist")
+    assert "modprobe ppdev" in proc.stderr or "permission" in proc.stderr
+    assert_one_line_error(cli("drill", drawing, "--port", "lpt1"), "unknown port 'lpt1'")

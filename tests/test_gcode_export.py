@@ -17,7 +17,8 @@ needs_rs274 = pytest.mark.skipif(
 
 JOBS = [(name, dict(depth=5, passes=2)) for name in
         ["ellipse.png", "two_curves.png", "gear.png", "word.png", "stamp.png"]]
-JOBS += [(name, dict(profile=ROOT / "profiles" / prof)) for name in ["heart.png", "ring.png"]
+JOBS += [(name, dict(profile=ROOT / "profiles" / prof))
+         for name in ["disc.png", "pyramid.png", "heart.png", "dumbbell.png", "ring.png"]
          for prof in ["dome.png", "cone.png", "pyramid.png", "flat.png"]]
 
 

@@ -154,6 +154,9 @@ def test_cli_runs_gcode_and_rejects_bad(tmp_path):
     bad = tmp_path / "b.ngc"
     bad.write_text("G21\nG1 X1 F100\nG2 X5 Y0 R1\n")
     assert_one_line_error(cli("drill", bad), "b.ngc:3:", "too small")
+    for text, fragment in (("G21\nG1 X1 F100 Q3\n", "'Q3'"), ("G21\nG19\n", "'G19'"), ("G21\nG1 Y F9\n", "'Y'")):
+        bad.write_text(text)
+        assert_one_line_error(cli("drill", bad), "b.ngc:2:", fragment)
     far = tmp_path / "far.ngc"
     far.write_text("G21\nG0 X900\n")
     assert_one_line_error(cli("drill", far), "far.ngc:2:", "travel")
