@@ -60,3 +60,14 @@ def test_flip_y_mirrors(tmp_path):
                              job.settings, flip_y=True)
     ours, _, _ = carve_job(job)
     assert_surface_equal(theirs, ours)
+
+
+def test_tool_changes_are_t_m6_with_comment():
+    d = cam.digitize(drawing_from_rows(["......", ".##...", "......", "...##.", "......"]))
+    job = cam.plan(d, depth=[2, 3])
+    g = to_gcode(job, tool_changes={0: (1, "0.8 mm drill"), 4: (2, "1.0 mm drill")})
+    lines = g.splitlines()
+    assert "T1 M6 (0.8 mm drill)" in lines and "T2 M6 (1.0 mm drill)" in lines
+    # the tool is above the surface at each change
+    i = lines.index("T2 M6 (1.0 mm drill)")
+    assert lines[i - 1].startswith("G0 Z")
