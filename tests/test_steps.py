@@ -60,3 +60,30 @@ def test_custom_pin_map_is_used_by_plan_and_decoder():
     p = one_move(1, 0, settings=s)
     assert p.data[1] == (1 << 7) | (1 << 6)  # clock X on pin 9, dir X on pin 8
     assert cam.decode_pin_log(cam.PinLog(p.t_ns, p.data, p.strobe), s).final_steps == (8, 0, 0)
+
+
+def test_compiled_step_kernel_equals_the_vectorised_reference():
+    from cam.drive.steps import port_writes
+
+    rng = np.random.default_rng(3)
+    pts = np.cumsum(rng.integers(-3, 4, size=(300, 3)), axis=0) + 50
+    job = cam.Toolpath(points_px=pts, kind=np.zeros(len(pts), np.uint8), target=np.zeros(len(pts), bool),
+                       pause=np.zeros(len(pts), bool))
+    plan = plan_steps(job)
+    # reference: DDA per move in numpy, then port_writes
+    s = job.settings
+    steps = np.vstack([[0, 0, 0], job.points_steps()])
+    signed, periods = [], []
+    for a, b in zip(steps[:-1], steps[1:]):
+        d = b - a
+        n = int(np.abs(d).max())
+        if n == 0:
+            continue
+        k = np.arange(1, n + 1)[:, None]
+        stepped = (k * np.abs(d)) // n - ((k - 1) * np.abs(d)) // n
+        signed.append(stepped * np.sign(d))
+        xy, z = bool(np.any(d[:2])), bool(d[2])
+        per = max(s.delay_xy_ns, s.delay_z_ns) if xy and z else (s.delay_xy_ns if xy else s.delay_z_ns)
+        periods.append(np.full(n, per))
+    t, data, strobe = port_writes(np.vstack(signed), np.concatenate(periods), s)
+    assert np.array_equal(t, plan.t_ns) and np.array_equal(data, plan.data)

@@ -25,6 +25,7 @@ import numpy as np
 
 from ..settings import MachineSettings
 from ..toolpath import Toolpath, check_travel
+from ._kernels import periods_kernel
 
 __all__ = ["StepPlan", "plan_steps", "axis_bits"]
 
@@ -103,18 +104,26 @@ def port_writes(
         positive = np.where(last >= 0, step_signed[np.maximum(last, 0), a] > 0, False)
         dir_data |= positive.astype(np.int64) * int(dirbit[a])
         clock_data |= moving.astype(np.int64) * int(clock[a])
+    return _writes((dir_data | clock_data).astype(np.uint8), dir_data.astype(np.uint8), per, settings)
+
+
+def _writes(
+    high: np.ndarray, dirs: np.ndarray, per: np.ndarray, settings: MachineSettings
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Writes of periods given their rising-edge data, direction data and lengths (see the module docstring)."""
+    n_periods = len(per)
     end_t = np.cumsum(per)
     m = 1 + 2 * n_periods
     t_ns = np.empty(m, np.int64)
     data = np.empty(m, np.uint8)
     t_ns[0] = 0
-    data[0] = dir_data[0] if n_periods else 0
+    data[0] = dirs[0] if n_periods else 0
     t_ns[1::2] = end_t - per + per // 2
-    data[1::2] = dir_data | clock_data
+    data[1::2] = high
     t_ns[2::2] = end_t
     if n_periods:
-        data[2::2][:-1] = dir_data[1:]
-        data[-1] = dir_data[-1]
+        data[2::2][:-1] = dirs[1:]
+        data[-1] = dirs[-1]
     strobe = np.full(m, 1 if settings.half_step else 0, np.uint8)
     return t_ns, data, strobe
 
@@ -125,25 +134,11 @@ def plan_steps(toolpath: Toolpath) -> StepPlan:
     check_travel(toolpath.points_px, s)
     pts = np.vstack([np.zeros((1, 3), np.int64), toolpath.points_steps()])
     delta = np.diff(pts, axis=0)  # (N, 3) per move
-    n_per_move = np.abs(delta).max(axis=1)  # periods per move
-    xy_moves = np.any(delta[:, :2] != 0, axis=1)
-    z_moves = delta[:, 2] != 0
-    period_ns = np.where(
-        xy_moves & z_moves,
-        max(s.delay_xy_ns, s.delay_z_ns),
-        np.where(xy_moves, s.delay_xy_ns, s.delay_z_ns),
-    ).astype(np.int64)
-
-    n_periods = int(n_per_move.sum())
-    move_of = np.repeat(np.arange(len(delta)), n_per_move)
-    first = np.cumsum(n_per_move) - n_per_move
-    k = np.arange(n_periods, dtype=np.int64) - np.repeat(first, n_per_move) + 1  # 1..n within the move
-    n_rep = n_per_move[move_of]
-    absd = np.abs(delta)[move_of]  # (P, 3)
-    stepped = (k[:, None] * absd) // n_rep[:, None] - ((k[:, None] - 1) * absd) // n_rep[:, None]  # 0/1
-
-    signed = stepped * np.sign(delta)[move_of]  # (P, 3) in {-1, 0, 1}
-    t_ns, data, strobe = port_writes(signed, period_ns[move_of], s)
+    clock, dirbit = axis_bits(s)
+    high, dirs, per, n_per_move = periods_kernel(
+        pts, s.delay_xy_ns, s.delay_z_ns, clock.astype(np.int64), dirbit.astype(np.int64)
+    )
+    t_ns, data, strobe = _writes(high, dirs, per, s)
 
     point_write = 2 * np.cumsum(n_per_move)
     pause_writes = point_write[toolpath.pause]

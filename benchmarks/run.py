@@ -1,0 +1,330 @@
+"""Benchmarks: `cam` against references measured in the same process and the same run.
+
+    python benchmarks/run.py            # full workloads (several minutes)
+    python benchmarks/run.py --quick    # small workloads, under a minute
+
+Each row gives `cam`'s median, the reference's median, and their ratio.
+Machines here are shared and noisy, so every time is the median of several
+repeats; nothing in the test suite asserts a time.
+"""
+from __future__ import annotations
+
+import argparse
+import datetime
+import gc
+import os
+import resource
+import shutil
+import statistics
+import subprocess
+import sys
+import tempfile
+import textwrap
+import threading
+import time
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+import cam  # noqa: E402
+from cam.drawing import BLACK, RED, WHITE, Drawing  # noqa: E402
+
+
+def median_time(fn, repeats: int) -> tuple[float, object]:
+    """Median wall time of ``fn()`` over ``repeats`` runs (after one warm-up), and its last result."""
+    out = fn()
+    times = []
+    for _ in range(repeats):
+        gc.collect()
+        t0 = time.perf_counter()
+        out = fn()
+        times.append(time.perf_counter() - t0)
+    return statistics.median(times), out
+
+
+# ---------------------------------------------------------------- workloads
+
+
+def drawing_2d(size_px: int, n_curves: int, seed: int = 1) -> np.ndarray:
+    """Black mask with closed curves and open arcs, kept apart so each is one 1-pixel curve."""
+    rng = np.random.default_rng(seed)
+    mask = np.zeros((size_px, size_px), np.uint8)
+    taken = np.zeros_like(mask)
+    placed = 0
+    scale = size_px / 4096
+    while placed < n_curves:
+        r = int(rng.integers(int(30 * scale) + 6, int(70 * scale) + 8))
+        c = (int(rng.integers(r + 4, size_px - r - 4)), int(rng.integers(r + 4, size_px - r - 4)))
+        box = taken[c[1] - r - 3:c[1] + r + 4, c[0] - r - 3:c[0] + r + 4]
+        if box.any():
+            continue
+        box[:] = 1
+        if placed % 2:
+            cv2.circle(mask, c, r, 1, 1, cv2.LINE_8)
+        else:
+            cv2.ellipse(mask, c, (r, max(4, r // 2)), int(rng.integers(0, 180)), 0, int(rng.integers(90, 300)), 1, 1,
+                        cv2.LINE_8)
+        placed += 1
+    return mask
+
+
+def disc_classes(size_px: int, radius_px: int) -> np.ndarray:
+    mask = np.zeros((size_px, size_px), np.uint8)
+    cv2.circle(mask, (size_px // 2, size_px // 2), radius_px, 1, -1)
+    inner = cv2.erode(mask, np.array([[0, 1, 0], [1, 1, 1], [0, 1, 0]], np.uint8))
+    classes = np.where(mask > 0, RED, WHITE).astype(np.uint8)
+    classes[(mask > 0) & (inner == 0)] = BLACK
+    return classes
+
+
+def row(name: str, cam_s: float | None, ref_s: float | None, ratio_text: str, target: str, met: bool | None,
+        note: str = "") -> dict:
+    return dict(name=name, cam=cam_s, ref=ref_s, ratio=ratio_text, target=target, met=met, note=note)
+
+
+def bench_trace_2d(quick: bool) -> dict:
+    size, n = (1024, 40) if quick else (4096, 400)
+    mask = drawing_2d(size, n)
+    drawing = Drawing(classes=np.where(mask > 0, BLACK, WHITE).astype(np.uint8))
+    reps = 5 if quick else 7
+    t_cam, d = median_time(lambda: cam.digitize(drawing), reps)
+    t_ref, _ = median_time(lambda: cv2.findContours(mask, cv2.RETR_LIST, cv2.CHAIN_APPROX_NONE), reps)
+    r = t_cam / t_ref
+    return row(f"2D trace {size}^2, {int(mask.sum())} px, {len(d.objects)} curves", t_cam, t_ref, f"{r:.2f}x",
+               "<= 3x cv2.findContours", r <= 3)
+
+
+def bench_peel_3d(quick: bool) -> dict:
+    from scipy.ndimage import distance_transform_cdt
+
+    size, radius = (512, 250) if quick else (2048, 1000)
+    classes = disc_classes(size, radius)
+    drawing = Drawing(classes=classes)
+    mask = (classes != WHITE).astype(np.uint8)
+    reps = 3 if quick else 5
+    t_cam, d = median_time(lambda: cam.digitize(drawing), reps)
+    t_ref, _ = median_time(lambda: distance_transform_cdt(mask, metric="taxicab"), reps)
+    r = t_cam / t_ref
+    return row(f"3D peel {size}^2 disc, {int(mask.sum())} px, {d.n_layers} layers", t_cam, t_ref, f"{r:.2f}x",
+               "<= 3x scipy cdt", r <= 3)
+
+
+def bench_planning(quick: bool) -> dict:
+    size, radius = (512, 250) if quick else (2048, 1000)
+    d = cam.digitize(Drawing(classes=disc_classes(size, radius)))
+    profile = cam.Profile(np.full(d.n_layers, 1, np.int64))
+    reps = 3
+
+    def full_plan():
+        job = cam.plan(d, profile=profile)
+        return cam.plan_steps(job)
+
+    t_cam, plan = median_time(full_plan, reps)
+    steps = int(plan.steps_total[:2].sum())
+    rate = steps / t_cam
+    return row(f"planning {size}^2 disc -> step plan, {steps / 1e6:.1f}M X/Y steps", t_cam, None,
+               f"{rate / 1e6:.1f}M steps/s", ">= 10M steps/s", rate >= 10e6)
+
+
+IMAGE_TO_GCODE_RUNNER = textwrap.dedent('''
+    import importlib.machinery, importlib.util, sys, io, time
+    loader = importlib.machinery.SourceFileLoader("itg", "/usr/bin/image-to-gcode")
+    spec = importlib.util.spec_from_loader("itg", loader)
+    itg = importlib.util.module_from_spec(spec)
+    sys.argv = ["image-to-gcode", sys.argv[1], sys.argv[2]]
+    loader.exec_module(itg)
+    options = dict(invert=False, normalize=False, expand=0, pixel_size=.006, depth=float(sys.argv[2]),
+                   pixelstep=1, tool_diameter=.006, safety_height=.012, tool_type=0, tolerance=.001,
+                   feed_rate=12, plunge_feed_rate=12, units=0, pattern=0, converter=0, bounded=0,
+                   contact_angle=45, spindle_speed=1000, roughing_offset=.1, roughing_depth=.25)
+    itg.ui = lambda im, nim, name: options
+    real_stdout = sys.stdout
+    sys.stdout = io.StringIO()
+    t0 = time.perf_counter()
+    itg.main()
+    elapsed = time.perf_counter() - t0
+    gcode = sys.stdout.getvalue()
+    sys.stdout = real_stdout
+    open(sys.argv[1] + ".ngc", "w").write(gcode)
+    print(elapsed)
+''')
+
+
+def _relief_job(size_px: int):
+    classes = disc_classes(size_px, size_px // 2 - 6)
+    d = cam.digitize(Drawing(classes=classes))
+    n = d.n_layers
+    depth = np.rint(1 + (n // 3) * np.sqrt(np.clip(1 - ((n - np.arange(1, n + 1)) / n) ** 2, 0, 1))).astype(int)
+    return classes, d, cam.Profile(depth)
+
+
+def bench_relief(quick: bool) -> tuple[dict, dict]:
+    """Rows 4 and 6: relief conversion time and machine path length against LinuxCNC's image-to-gcode."""
+    from cam.digitize.peel3d import peel_layers
+
+    size = 128 if quick else 512
+    classes, d, profile = _relief_job(size)
+    layer = peel_layers(classes)
+    target = np.where(layer > 0, profile.depth_px[np.maximum(layer, 1) - 1], 0)  # Z px
+    reps = 3
+
+    def convert():
+        dd = cam.digitize(Drawing(classes=classes))
+        return cam.plan(dd, profile=profile)
+
+    t_cam, job = median_time(convert, reps)
+    if not (Path("/usr/bin/image-to-gcode").exists() and Path("/usr/bin/python3").exists()):
+        return (row(f"relief {size}^2 dome: conversion", t_cam, None, "n/a", ">= 50x faster", None,
+                    "image-to-gcode not installed"), row("relief path length", None, None, "n/a", "<= 0.6x", None))
+    tmp = Path(tempfile.mkdtemp())
+    dmax = int(target.max())
+    grey = np.rint(255 * (1 - target / dmax)).astype(np.uint8)
+    cv2.imwrite(str(tmp / "relief.png"), grey)
+    depth_in = dmax * 0.006  # one Z pixel = one pixel size, in inches (image-to-gcode's default units)
+    script = tmp / "itg.py"
+    script.write_text(IMAGE_TO_GCODE_RUNNER)
+    times = []
+    for _ in range(1 if not quick else 1):
+        out = subprocess.run(["/usr/bin/python3", str(script), str(tmp / "relief.png"), f"{depth_in}"],
+                             capture_output=True, text=True, timeout=3600)
+        if out.returncode != 0:
+            return (row("relief conversion", t_cam, None, "error", ">= 50x faster", None, out.stderr[-200:]),
+                    row("relief path length", None, None, "n/a", "<= 0.6x", None))
+        times.append(float(out.stdout.strip().splitlines()[-1]))
+    t_ref = statistics.median(times)
+    r4 = row(f"relief {size}^2 dome: conversion vs image-to-gcode", t_cam, t_ref, f"{t_ref / t_cam:.0f}x faster",
+             ">= 50x faster", t_ref / t_cam >= 50)
+    # row 6: path length (cutting + travel) and surface error of both, in pixels
+    from cam.lcnc import canonical_polyline_mm, parse_canonical, run_rs274
+
+    pts = np.vstack([[0, 0, 0], job.points_px]).astype(np.float64)
+    cam_len = float(np.abs(np.diff(pts[:, :2], axis=0)).max(axis=1).sum())  # X/Y pixels moved (diagonal = 1)
+    cam_len_euclid = float(np.linalg.norm(np.diff(pts[:, :2], axis=0), axis=1).sum())
+    ours = cam.simulate_surface(job)
+    cam_err = int(np.abs(ours - target * job.settings.steps_per_px_z).max())
+    canon = parse_canonical(run_rs274(str(tmp / "relief.png.ngc")))
+    poly, feed = canonical_polyline_mm(canon, max_chord_mm=0.05)
+    px_mm = 0.006 * 25.4
+    xy = poly[:, :2] / px_mm
+    itg_len = float(np.linalg.norm(np.diff(xy, axis=0), axis=1).sum())
+    # their surface: sample feed moves on the pixel grid (row = -Y)
+    theirs = np.zeros_like(target)
+    for i in np.flatnonzero(feed):
+        a, b = poly[i - 1], poly[i]
+        n = max(2, int(np.ceil(np.abs((b - a)[:2]).max() / px_mm * 4)) * 2)
+        t = np.concatenate([(np.arange(n) + 0.5) / n, [1.0]])
+        seg = a + (b - a) * t[:, None]
+        seg = seg[seg[:, 2] < 0]
+        col = np.floor(seg[:, 0] / px_mm).astype(int)
+        rw = np.floor(-seg[:, 1] / px_mm).astype(int)
+        ok = (col >= 0) & (col < size) & (rw >= 0) & (rw < size)
+        np.maximum.at(theirs, (rw[ok], col[ok]), np.rint(-seg[ok, 2] / px_mm).astype(int))
+    their_err = int(np.abs(theirs - target).max())
+    ratio = cam_len_euclid / itg_len
+    r6 = row(f"relief {size}^2 dome: path length vs image-to-gcode", cam_len_euclid, itg_len, f"{ratio:.2f}x",
+             "<= 0.6x, cam surface exact", ratio <= 0.6 and cam_err == 0,
+             f"max surface error: cam {cam_err} Z px, image-to-gcode {their_err} Z px; lengths in pixels")
+    shutil.rmtree(tmp, ignore_errors=True)
+    return r4, r6
+
+
+def bench_memory(quick: bool) -> dict:
+    size, radius = (1024, 500) if quick else (4096, 2000)
+    code = textwrap.dedent(f'''
+        import resource, sys
+        sys.path.insert(0, {str(ROOT)!r})
+        import numpy as np, cam
+        sys.path.insert(0, {str(ROOT / "benchmarks")!r})
+        from run import disc_classes
+        from cam.drawing import Drawing
+        d0 = Drawing(classes=disc_classes(4, 1))
+        classes = disc_classes({size}, {radius})
+        base = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+        d = cam.digitize(Drawing(classes=classes))
+        peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+        print(base, peak)
+    ''')
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=1800)
+    base_kb, peak_kb = (int(v) for v in out.stdout.split())
+    per_px = (peak_kb * 1024) / (size * size)
+    return row(f"memory: 3D peel {size}^2 (peak RSS of the process)", None, None, f"{per_px:.1f} B/px",
+               "<= 40 B/px", per_px <= 40, f"peak {peak_kb / 1024:.0f} MB, before digitizing {base_kb / 1024:.0f} MB")
+
+
+def bench_drill_tour(quick: bool) -> dict:
+    try:
+        sys.path.insert(0, str(ROOT / "benchmarks"))
+        import drill_tour  # type: ignore
+    except ImportError:
+        return row("drill tour", None, None, "n/a", "<= 1.03x OR-tools, <= 1 s", None, "benchmarks/drill_tour.py missing")
+    return drill_tour.bench_row(quick)
+
+
+def bench_realtime(quick: bool) -> dict:
+    seconds = 2.0 if quick else 10.0
+    s = cam.MachineSettings().replace(steps_per_px_xy=1, delay_xy_ms=1.0, delay_z_ms=1.0)
+    n = int(seconds * 1000)
+    job = cam.Toolpath(points_px=np.array([[n, 0, 0]]), kind=np.zeros(1, np.uint8), target=np.zeros(1, bool),
+                       pause=np.zeros(1, bool), settings=s.replace(travel=cam.settings.Travel(x_max_steps=n)))
+    plan = cam.plan_steps(job)
+    stop = threading.Event()
+
+    def burn():
+        while not stop.is_set():
+            sum(range(1000))
+
+    busy = threading.Thread(target=burn, daemon=True)
+    procs = [subprocess.Popen([sys.executable, "-c", "import time\nt=time.time()\nwhile time.time()-t<%f: pass" % (seconds + 2)])]
+    try:
+        result = cam.run(plan, realtime=True)
+    finally:
+        stop.set()
+        for p in procs:
+            p.wait()
+    late_ns = result.pin_log().t_ns - plan.t_ns
+    p50, p99, mx = (float(np.percentile(late_ns, q)) / 1000 for q in (50, 99, 100))
+    return row(f"real-time mock 1 kHz steps for {seconds:.0f} s, other core busy", None, None,
+               f"p50 {p50:.0f} us, p99 {p99:.0f} us, max {mx:.0f} us", "p99 <= 100 us", p99 <= 100)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="small workloads (under a minute)")
+    ap.add_argument("--only", help="comma-separated row numbers to run (1..8)")
+    args = ap.parse_args(argv)
+    benches = {
+        1: bench_trace_2d, 2: bench_peel_3d, 3: bench_planning, 4: None, 5: bench_memory, 7: bench_drill_tour,
+        8: bench_realtime,
+    }
+    only = {int(v) for v in args.only.split(",")} if args.only else set(range(1, 9))
+    rows: list[dict] = []
+    for k in sorted(only):
+        if k in (4, 6):
+            if 4 in only or 6 in only:
+                if not any(r.get("_relief") for r in rows):
+                    r4, r6 = bench_relief(args.quick)
+                    r4["_relief"] = r6["_relief"] = True
+                    rows += [r4, r6]
+            continue
+        rows.append(benches[k](args.quick))
+        print(f"  ... {rows[-1]['name']}: {rows[-1]['ratio']}", file=sys.stderr, flush=True)
+    print(f"cam benchmarks, {datetime.date.today().isoformat()}, {'quick' if args.quick else 'full'} workloads, "
+          f"{os.cpu_count()} cores")
+    print()
+    print("| workload | cam (median s) | reference (median s) | result | target | met |")
+    print("| --- | ---: | ---: | --- | --- | --- |")
+    for r in rows:
+        c = f"{r['cam']:.3f}" if isinstance(r["cam"], float) and r["cam"] < 1e5 else ("" if r["cam"] is None else f"{r['cam']:.0f}")
+        f = f"{r['ref']:.3f}" if isinstance(r["ref"], float) and r["ref"] < 1e5 else ("" if r["ref"] is None else f"{r['ref']:.0f}")
+        met = {True: "yes", False: "**no**", None: "n/a"}[r["met"]]
+        note = f" ({r['note']})" if r["note"] else ""
+        print(f"| {r['name']} | {c} | {f} | {r['ratio']}{note} | {r['target']} | {met} |")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
