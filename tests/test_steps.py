@@ -66,7 +66,7 @@ def test_compiled_step_kernel_equals_the_vectorised_reference():
     from cam.drive.steps import port_writes
 
     rng = np.random.default_rng(3)
-    pts = np.cumsum(rng.integers(-3, 4, size=(300, 3)), axis=0) + 50
+    pts = np.abs(np.cumsum(rng.integers(-3, 4, size=(300, 3)), axis=0)) + 5
     job = cam.Toolpath(points_px=pts, kind=np.zeros(len(pts), np.uint8), target=np.zeros(len(pts), bool),
                        pause=np.zeros(len(pts), bool))
     plan = plan_steps(job)
