@@ -222,6 +222,34 @@ def plan(
         if (int(x) + ox, int(y) + oy) not in drawn:
             warnings.append(f"Pause At ({x}, {y}) is not a point of the drawing; it has no effect")
 
+    # deepest depth asked at each pixel (job frame, relative to the surface): moving through a
+    # pixel at or above that depth never cuts what the drawing does not ask for
+    asked = np.zeros((digitized.height_px + oy + 2, digitized.width_px + ox + 2), np.int64)
+    np.maximum.at(asked, (targets[:, 1], targets[:, 0]), targets[:, 2] - oz)
+    pause_px = np.zeros(asked.shape, bool)
+    for x, y in pause_set:
+        if 0 <= y < pause_px.shape[0] and 0 <= x < pause_px.shape[1]:
+            pause_px[y, x] = True
+    points, kinds, tgt, pause = _assemble(targets, pause_px, asked, settings, surface, safe, oz)
+    check_travel(points, settings)
+    return Toolpath(
+        points_px=points,
+        kind=kinds,
+        target=tgt,
+        pause=pause,
+        settings=settings,
+        width_px=digitized.width_px,
+        height_px=digitized.height_px,
+        origin_px=(ox, oy, oz),
+        warnings=warnings,
+    )
+
+
+def _assemble_reference(
+    targets: np.ndarray, pause_px: np.ndarray, asked: np.ndarray, settings: MachineSettings,
+    surface: int, safe: int, oz: int,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The planner's rules as a plain loop over the targets; :func:`_assemble` does the same faster."""
     pts: list[tuple[int, int, int]] = []
     kinds: list[int] = []
     tgt: list[bool] = []
@@ -232,44 +260,24 @@ def plan(
             if is_target:
                 tgt[-1] = True
                 kinds[-1] = CUT
-                pause[-1] = pause[-1] or (x, y) in pause_set
+                pause[-1] = pause[-1] or bool(pause_px[y, x])
             return
         pts.append((x, y, z))
         kinds.append(kind)
         tgt.append(is_target)
-        pause.append(is_target and (x, y) in pause_set)
-
-    # deepest depth asked at each pixel (job frame, relative to the surface): moving through a
-    # pixel at or above that depth never cuts what the drawing does not ask for
-    asked = np.zeros((digitized.height_px + oy + 2, digitized.width_px + ox + 2), np.int64)
-    np.maximum.at(asked, (targets[:, 1], targets[:, 0]), targets[:, 2] - oz)
-    xy_period = settings.steps_per_px_xy * settings.delay_xy_ns
-    z_period = settings.steps_per_px_z * settings.delay_z_ns
+        pause.append(is_target and bool(pause_px[y, x]))
 
     cx, cy, cz = 0, 0, 0
     on_drawing = False  # is the tool at a drawing pixel at or above its asked depth
     for x, y, d in targets.tolist():
-        cheb = max(abs(x - cx), abs(y - cy))
-        route = None
-        if on_drawing and cheb > 1:
-            # a gap inside the material: go through pixels asked at least this deep when that is
-            # quicker than lifting, travelling and plunging again
-            z = min(cz, d)
-            retract_ns = (cz - surface) * z_period + cheb * xy_period + (d - surface) * z_period
-            budget_px = min(cheb + 256, (retract_ns - (cz - z) * z_period - (d - z) * z_period) // xy_period)
-            route = _route(asked, (cx, cy), (x, y), z - oz, int(budget_px))
-        if on_drawing and (cheb <= 1 or route is not None):
+        if on_drawing and max(abs(x - cx), abs(y - cy)) <= 1:
             if d < cz:  # shallower: lift first, then move
                 emit(cx, cy, d, CUT)
                 cz = d
-            for rx, ry in route or [(x, y)]:  # move at the current depth ...
-                emit(rx, ry, cz, CUT)
+            emit(x, y, cz, CUT)  # move at the current depth ...
         else:
-            lift_z = surface if on_drawing else min(cz, safe)
-            if cz != lift_z:
-                emit(cx, cy, lift_z, RETRACT)
-            if (cx, cy) != (x, y):
-                emit(x, y, lift_z, TRAVEL)
+            for p in _gap_block((cx, cy, cz), (x, y, d), on_drawing, asked, settings, surface, safe, oz):
+                emit(*p)
         emit(x, y, d, CUT, is_target=True)  # ... then plunge
         cx, cy, cz = x, y, d
         on_drawing = True
@@ -277,20 +285,118 @@ def plan(
     emit(cx, cy, safe, RETRACT)
     emit(0, 0, safe, TRAVEL)
     emit(0, 0, 0, TRAVEL)
+    return (np.array(pts, np.int64).reshape(-1, 3), np.array(kinds, np.uint8), np.array(tgt, bool),
+            np.array(pause, bool))
 
-    points = np.array(pts, np.int64).reshape(-1, 3)
-    check_travel(points, settings)
-    return Toolpath(
-        points_px=points,
-        kind=np.array(kinds, np.uint8),
-        target=np.array(tgt, bool),
-        pause=np.array(pause, bool),
-        settings=settings,
-        width_px=digitized.width_px,
-        height_px=digitized.height_px,
-        origin_px=(ox, oy, oz),
-        warnings=warnings,
-    )
+
+def _gap_block(
+    cur: tuple[int, int, int], nxt: tuple[int, int, int], on_drawing: bool, asked: np.ndarray,
+    settings: MachineSettings, surface: int, safe: int, oz: int,
+) -> list[tuple[int, int, int, int]]:
+    """Points (x, y, z, kind) from ``cur`` to just before target ``nxt`` across a gap (non-adjacent pixels).
+
+    Inside the material, a route through pixels asked at least this deep is taken when it is quicker
+    than lifting, travelling and plunging; otherwise the tool lifts to the surface (the safe plane
+    before the first target), travels, and the caller plunges.
+    """
+    cx, cy, cz = cur
+    x, y, d = nxt
+    out: list[tuple[int, int, int, int]] = []
+    if on_drawing:
+        cheb = max(abs(x - cx), abs(y - cy))
+        xy_period = settings.steps_per_px_xy * settings.delay_xy_ns
+        z_period = settings.steps_per_px_z * settings.delay_z_ns
+        z = min(cz, d)
+        retract_ns = (cz - surface) * z_period + cheb * xy_period + (d - surface) * z_period
+        budget_px = min(cheb + 256, (retract_ns - (cz - z) * z_period - (d - z) * z_period) // xy_period)
+        route = _route(asked, (cx, cy), (x, y), z - oz, int(budget_px))
+        if route is not None:
+            if d < cz:
+                out.append((cx, cy, d, CUT))
+                cz = d
+            out.extend((rx, ry, cz, CUT) for rx, ry in route)
+            return out
+    lift_z = surface if on_drawing else min(cz, safe)
+    if cz != lift_z:
+        out.append((cx, cy, lift_z, RETRACT))
+    if (cx, cy) != (x, y):
+        out.append((x, y, lift_z, TRAVEL))
+    return out
+
+
+def _assemble(
+    targets: np.ndarray, pause_px: np.ndarray, asked: np.ndarray, settings: MachineSettings,
+    surface: int, safe: int, oz: int,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Vectorised :func:`_assemble_reference`: adjacent moves in bulk, only gaps in Python.
+
+    Returns ``(points (N, 3), kind (N,), target (N,), pause (N,))``.
+    """
+    m = len(targets)
+    x, y, d = targets[:, 0], targets[:, 1], targets[:, 2]
+    cheb = np.zeros(m, np.int64)
+    cheb[1:] = np.maximum(np.abs(np.diff(x)), np.abs(np.diff(y)))
+    simple = np.zeros(m, bool)
+    simple[1:] = cheb[1:] <= 1
+    d_prev = np.concatenate([[0], d[:-1]])
+    deeper = d >= d_prev
+    # slot A: the move before the plunge (deeper) or the lift before the move (shallower); slot B: the target
+    a_valid = simple & np.where(deeper, (cheb > 0) & (d > d_prev), cheb > 0)
+    b_valid = ~(simple & (cheb == 0) & (d == d_prev))
+    gaps = np.flatnonzero(~simple)
+    blocks = {}
+    extra = np.zeros(m, np.int64)
+    for i in gaps.tolist():
+        prev = (int(x[i - 1]), int(y[i - 1]), int(d[i - 1])) if i else (0, 0, 0)
+        here = (int(x[i]), int(y[i]), int(d[i]))
+        blk = _gap_block(prev, here, i > 0, asked, settings, surface, safe, oz)
+        if blk and blk[-1][:3] == here:
+            blk.pop()  # a route that ends at the target's depth: the target is that point
+        blocks[i] = blk
+        extra[i] = len(blk)
+    counts = a_valid.astype(np.int64) + b_valid + extra
+    cx, cy, cz = int(x[-1]), int(y[-1]), int(d[-1])
+    tail = [(cx, cy, safe, RETRACT)]
+    if (0, 0) != (cx, cy):
+        tail.append((0, 0, safe, TRAVEL))
+    if safe != 0:
+        tail.append((0, 0, 0, TRAVEL))
+    start = np.concatenate([[0], np.cumsum(counts)])
+    n = int(start[-1]) + len(tail)
+    pts = np.empty((n, 3), np.int64)
+    kind = np.full(n, CUT, np.uint8)
+    tgt = np.zeros(n, bool)
+    pause = np.zeros(n, bool)
+    # simple transitions, in bulk
+    ia = np.flatnonzero(a_valid)
+    pos_a = start[ia]
+    pts[pos_a, 0] = np.where(deeper[ia], x[ia], x[ia - 1])
+    pts[pos_a, 1] = np.where(deeper[ia], y[ia], y[ia - 1])
+    pts[pos_a, 2] = np.where(deeper[ia], d_prev[ia], d[ia])
+    ib = np.flatnonzero(b_valid)
+    pos_b = start[ib] + a_valid[ib] + extra[ib]
+    pts[pos_b] = targets[ib]
+    tgt[pos_b] = True
+    # gap blocks
+    for i, blk in blocks.items():
+        for j, (px, py, pz, k) in enumerate(blk):
+            pts[start[i] + j] = (px, py, pz)
+            kind[start[i] + j] = k
+    # pauses: on the target's own point, or the point it merged into
+    where = np.empty(m, np.int64)
+    where[ib] = pos_b
+    merged = np.flatnonzero(~b_valid)
+    if len(merged):
+        carry = np.where(b_valid, np.arange(m), -1)
+        carry = np.maximum.accumulate(carry)
+        where[merged] = where[carry[merged]]
+        tgt[where[merged]] = True
+    flagged = pause_px[y, x]
+    pause[where[flagged]] = True
+    for j, (px, py, pz, k) in enumerate(tail):
+        pts[start[-1] + j] = (px, py, pz)
+        kind[start[-1] + j] = k
+    return pts, kind, tgt, pause
 
 
 def _route(

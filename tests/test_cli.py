@@ -152,11 +152,11 @@ def test_ctrl_c_stops_cleanly_with_position(tmp_path):
     path = tmp_path / "line.png"
     cv2.imwrite(str(path), img)
     proc = subprocess.Popen(
-        [sys.executable, "-m", "cam", "drill", str(path), "--realtime", "--delay", "2,2", "--no-progress",
+        [sys.executable, "-m", "cam", "drill", str(path), "--realtime", "--delay", "5,5", "--no-progress",
          "--pin-log", str(tmp_path / "p.csv")],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV,
     )
-    time.sleep(1.5)
+    time.sleep(3.0)  # the job takes about 4.5 s; start-up (imports) takes about 1 s
     proc.send_signal(signal.SIGINT)
     out, err = proc.communicate(timeout=60)
     assert proc.returncode == 130, err

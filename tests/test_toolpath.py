@@ -90,3 +90,28 @@ def test_goto_moves_xy_first_then_z():
     assert job.points_px.tolist() == [[4, 5, 0], [4, 5, 2]]
     result = cam.run(job)
     assert result.position_steps == (32, 40, 2)
+
+
+@pytest.mark.parametrize("name", ["gear.png", "word.png", "heart.png", "dumbbell.png", "ring.png"])
+def test_fast_assembly_equals_the_reference_loop(name):
+    from cam.toolpath import _assemble, _assemble_reference
+    from conftest import SAMPLES
+
+    d = cam.digitize(cam.load_image(SAMPLES / name))
+    kw = dict(profile=lambda k: 1 + k % 7) if d.mode == "3d" else dict(depth=[3 + i for i in range(len(d.objects))])
+    job = cam.plan(d, passes=2, start_at=(2, 3, 1), pause_at=[tuple(d.objects[0][3])], **kw)
+    targets = job.points_px[job.target]
+    assert job.pause.sum() >= 1
+    asked = np.zeros((d.height_px + 5, d.width_px + 4), np.int64)
+    np.maximum.at(asked, (targets[:, 1], targets[:, 0]), targets[:, 2] - 1)
+    pause_px = np.zeros(asked.shape, bool)
+    pause_px[job.points_px[job.pause][:, 1], job.points_px[job.pause][:, 0]] = True
+    # rebuild the depth-sorted target list the planner used (with duplicates) from the digitized matrix
+    from cam.toolpath import _pass_targets
+    depth = cam.profile.as_profile(kw["profile"], d.n_layers).depth_of(d.levels) if d.mode == "3d" else np.array(kw["depth"])
+    t, _ = _pass_targets(d, np.asarray(depth, np.int64), 2)
+    t = t + [2, 3, 1]
+    a = _assemble(t, pause_px, asked, job.settings, 1, 0, 1)
+    b = _assemble_reference(t, pause_px, asked, job.settings, 1, 0, 1)
+    for u, v in zip(a, b):
+        assert np.array_equal(u, v)
