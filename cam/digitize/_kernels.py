@@ -162,9 +162,11 @@ def trace_layers_kernel(layer_flat, wp, offsets):
                     else:
                         parent[a] = b
     untraced = np.zeros(size, np.uint8)
+    ring_left = np.zeros(size, np.int64)  # untraced pixels per ring, indexed by the ring's root
     for i in range(size):
         if layer_flat[i] > 0:
             untraced[i] = 1
+            ring_left[_find(parent, i)] += 1
     n_px = size - counts[0]
     path = np.empty(n_px, np.int64)
     ring_starts = np.empty(n_px + 1, np.int64)
@@ -207,6 +209,7 @@ def trace_layers_kernel(layer_flat, wp, offsets):
                 path[n_path] = cur
                 n_path += 1
                 remaining -= 1
+                ring_left[ring] -= 1
                 # greedy walk in the Figure 4.15 order, within this layer
                 while True:
                     moved = False
@@ -217,12 +220,15 @@ def trace_layers_kernel(layer_flat, wp, offsets):
                             path[n_path] = q
                             n_path += 1
                             remaining -= 1
+                            ring_left[ring] -= 1
                             cur = q
                             moved = True
                             break
                     if not moved:
                         break
                 # pixels of this ring left behind: go on from the one nearest the tool
+                if ring_left[ring] == 0:
+                    break
                 best = np.int64(1) << 62
                 nxt = -1
                 cr = cur // wp

@@ -119,7 +119,7 @@ def trace_layers(layer: np.ndarray) -> tuple[list[np.ndarray], np.ndarray]:
 
     h, w = layer.shape
     wp = w + 2
-    padded = np.zeros((h + 2, wp), np.int64)
+    padded = np.zeros((h + 2, wp), np.int32)
     padded[1:-1, 1:-1] = layer
     offsets = np.array([dr * wp + dc for dr, dc in NEIGHBOURS_3D], np.int64)
     path, starts, levels = trace_layers_kernel(padded.ravel(), wp, offsets)
