@@ -455,7 +455,9 @@ class MaximusBoard:
         (Jog; the exit packet follows).  Between moves the firmware would
         read 0x80 as packet data, so nothing is sent: the running job stops
         before its next packet and closes Drill mode with the CDF-clear
-        packet, which moves nothing.
+        packet, which moves nothing.  (A stop between the offset move and the
+        Init move leaves Z ``depth_steps`` above the start; the Init move
+        itself cannot be stopped -- the listing runs it with interrupts off.)
 
         Returns:
             True if a move was stopped (MACHINESTOPPED received), False if no
@@ -467,17 +469,27 @@ class MaximusBoard:
         """
         with self._lock:
             ex = self._pending
-            if ex is None or not ex.moving:
+            between_moves = ex is None or not ex.moving
+            if between_moves:
                 self._stop_requested = True
-                idle_in_mode = ex is None and not self._job_active and self._state in (_OFFSET, _INIT, _DRILL, _JOG)
-                if idle_in_mode:
-                    self._unwind()
-                return False
-            if not self._estop_sent:
+                # no job left to act on the request (e.g. it was interrupted by Ctrl-C): finish here
+                orphan_reply = ex is not None and not self._reader_active
+                finish_here = not self._job_active and (ex is None or orphan_reply)
+            elif not self._estop_sent:
                 self._estop_sent = True
                 self._stop_error = None
                 self._write(bytes([EMERGENCYSTOP]))
             reader = self._reader_active
+        if between_moves:
+            if finish_here:
+                if ex is not None:
+                    try:
+                        self._settle(self._read_byte())  # the answer to a packet that moves nothing stoppable
+                    except PortError:
+                        pass
+                if self._state in (_OFFSET, _INIT, _DRILL, _JOG):
+                    self._unwind()
+            return False
         if reader:
             if not self._stop_done.wait(self.timeout_s + 1.0):
                 raise PortError("emergency stop sent; no answer was read within "

@@ -444,6 +444,7 @@ class MaximusEmulator:
         self._axis_delay = int(axis_delay) & 0xFF
         self._state = POWER_UP
         self.moves_started = 0
+        self.power_ups = 0  # banners printed so far
         self.error: BaseException | None = None
         # main()'s locals that survive from one label to the next
         self._delay_x = self._delay_y = self._delay_z_up = self._delay_z_down = 0
@@ -606,6 +607,7 @@ class MaximusEmulator:
         self._output_port(PORT_B, POWER_UP_B)
         self._output_port(PORT_D, POWER_UP_D)
         self._write_master(BANNER)
+        self.power_ups += 1
         self._gie = False  # disable_interrupts(GLOBAL)
         while self._getc(POWER_UP) != ISMACHINEREADY:
             pass

@@ -1,0 +1,404 @@
+"""The MAXIMUS board: host (cam.drive.maximus) against the firmware emulator over a real pty and pyserial."""
+from __future__ import annotations
+
+import signal
+import threading
+import time
+
+import numpy as np
+import pytest
+
+serial = pytest.importorskip("serial")
+
+from cam.errors import PlanError, PortError  # noqa: E402
+from cam.drive.maximus import (  # noqa: E402
+    MaximusBoard, close_drill_packet, drill_moves, drill_packet, init_packet, jog_exit_packet, jog_packet,
+    offset_packet, open_maximus, start_drill_packet,
+)
+from cam.drive.maximus_emulator import (  # noqa: E402
+    BANNER, DRILL_MODE1_INPUT, HOME_SWITCH_Y, JOG_DATA_INPUT, MODE_SELECTION, ONEHOLEDRILLED, PORT_B, PORT_D,
+    POWER_UP, STEPSBACKATLIMIT, PortLog, decode_port_log, drilled_holes, hole_strokes, start_emulator,
+)
+
+TIMEOUT_S = 0.5
+HOLES = np.array([[10, 5], [40, 5], [40, 30], [100, -20], [0, 50], [-30, -10]])
+
+
+@pytest.fixture
+def emu():
+    e = start_emulator(speed=None)
+    yield e
+    e.stop()
+    assert e.error is None, repr(e.error)
+
+
+@pytest.fixture
+def board(emu):
+    b = MaximusBoard(emu.device_path, timeout_s=TIMEOUT_S)
+    yield b
+    b.close()
+
+
+def raw_port(emu) -> "serial.Serial":
+    return serial.Serial(emu.device_path, 115200, timeout=0.3)
+
+
+def hole_packets(emu) -> list[bytes]:
+    """Drill Data Packets that move (CDF set, SDF clear) the firmware has read."""
+    return [p for kind, p in emu.packet_log() if kind == "drill" and p[0] & 0xC0 == 0x80]
+
+
+def final_ports(emu) -> dict[int, int]:
+    out = {}
+    for _, port, value in emu.port_log():
+        out[ord(port)] = value
+    return out
+
+
+# ---------------------------------------------------------------------- pure parts
+def test_packet_bytes_are_the_listed_layouts():
+    assert jog_packet("x", 300, delay=5) == bytes([0x50, 0x2C, 0x01, 5])
+    assert jog_packet("y", -2, delay=7, half_step=True, spindle=True) == bytes([0xA1, 2, 0, 7])
+    assert jog_packet("z", -1, delay=1) == bytes([0xD0, 1, 0, 1])  # z down: DIR_Z = 1
+    assert jog_exit_packet() == bytes(4)
+    assert offset_packet(-3, 4, -5, delay_x=1, delay_y=2, delay_z=3) == bytes([0x06, 3, 0, 4, 0, 5, 0, 1, 2, 3])
+    assert init_packet(0x102, 7, delay_x=1, delay_y=2, delay_z_up=3, delay_z_down=4, half_step=True) == \
+        bytes([0x07, 0x02, 0x01, 7, 0, 1, 2, 3, 4])
+    assert drill_packet(-1, 65535) == bytes([0x82, 1, 0, 0xFF, 0xFF])
+    assert start_drill_packet() == bytes([0xC0, 0, 0, 0, 0])
+    assert close_drill_packet() == bytes(5)
+    assert drill_moves(np.array([[5, 5], [5, 9]])).tolist() == [[5, 5], [0, 4]]
+    with pytest.raises(PlanError):
+        jog_packet("x", 70000)
+    with pytest.raises(PlanError):
+        jog_packet("q", 1)
+    with pytest.raises(PlanError):
+        drill_moves(np.array([[0, 0], [66000, 0]]))
+
+
+def test_decoder_reads_a_hand_built_log():
+    # X: one step +, one step -; Z: one step down; a step with ENABLE low does not count.
+    rows = [
+        (0, "B", 0xF0), (0, "D", 0xFF),
+        (1, "D", 0xFD), (2, "D", 0xFF),                  # STEP_X low-high, DIR_X = 1: x + 1
+        (3, "D", 0xFB), (4, "D", 0xF9), (5, "D", 0xFB),  # DIR_X = 0, pulse: x - 1
+        (6, "B", 0xD0), (7, "B", 0xF0),                  # STEP_Z pulse, DIR_Z = 1: z - 1
+        (8, "B", 0x70), (9, "B", 0x50), (10, "B", 0x70),  # ENABLE_Z low: no step
+        (11, "B", 0x30), (12, "B", 0x10), (13, "B", 0xB0),  # DIR_Z = 0, enabled again: z + 1
+    ]
+    pos = decode_port_log(rows)
+    assert pos.shape == (len(rows), 3)
+    assert pos[:, 0].tolist() == [0, 0, 0, 1, 1, 1, 0, 0, 0, 0, 0, 0, 0, 0, 0]
+    assert pos[-1].tolist() == [0, 0, 0]
+    assert pos[8].tolist() == [0, 0, -1] and pos[7].tolist() == [0, 0, 0]
+    assert drilled_holes(rows) == [(0, 0)]
+    assert hole_strokes(rows).tolist() == [[0, 0, 0, -1, 0]]
+    log = PortLog.from_rows(rows)
+    assert list(log)[1] == (0, "D", 0xFF) and len(log) == len(rows)
+
+
+# ---------------------------------------------------------------------- firmware behaviour
+def wait_for_power_ups(emu, n: int) -> None:
+    deadline = time.monotonic() + 2
+    while emu.power_ups < n and time.monotonic() < deadline:
+        time.sleep(0.002)
+    assert emu.wait_for_state(POWER_UP)
+
+
+def test_banner_and_handshake(emu):
+    wait_for_power_ups(emu, 1)
+    with raw_port(emu) as ser:
+        ser.reset_input_buffer()
+        emu.reset()  # power-up banner printed after the port is open
+        assert ser.read(len(BANNER)) == BANNER == b"MAXIMUS_V1.0"
+        wait_for_power_ups(emu, 2)
+        ser.write(bytes([0x00, 0x63, 0x80]))  # anything but ISMACHINEREADY: no answer
+        assert ser.read(1) == b""
+        ser.write(b"\x61")
+        assert ser.read(1) == b"\x62"
+        assert emu.wait_for_state(MODE_SELECTION)
+        ser.write(b"\x61")  # asked again at mode selection
+        assert ser.read(1) == b"\x62"
+        assert ser.read(1) == b""
+    board = MaximusBoard("maximus:" + emu.device_path, timeout_s=TIMEOUT_S, handshake=False)
+    try:
+        emu.reset()
+        wait_for_power_ups(emu, 3)
+        board.handshake()
+        assert board.banner == "MAXIMUS_V1.0" and board.in_step
+        assert emu.wait_for_state(MODE_SELECTION)
+    finally:
+        board.close()
+    # the power-up port writes come first
+    assert list(emu.port_log())[:2] == [(0, "B", 0xF0), (0, "D", 0xFF)]
+
+
+def test_unknown_byte_at_mode_selection_falls_into_jog_mode(emu, board):
+    with raw_port(emu) as ser:
+        ser.write(b"\x00")
+        assert ser.read(1) == b""  # no reply ...
+        assert emu.wait_for_state(JOG_DATA_INPUT)  # ... but the firmware is now in Jog mode
+        ser.write(jog_packet("x", 3, delay=1))
+        assert ser.read(1) == b"\x66"  # JOGMODEDONE
+        ser.write(jog_exit_packet())
+        assert ser.read(1) == b"\x65"  # JOGMODEOFF
+    assert emu.position_pulses == (3, 0, 0)
+
+
+def test_jog_moves_the_decoded_position_with_the_listed_timing(emu, board):
+    board.jog("x", 120, delay=3)
+    board.jog("y", -50, delay=1)
+    board.jog("z", 30, delay=2)
+    board.jog("z", -10, delay=2)
+    log = emu.port_log()
+    assert decode_port_log(log)[-1].tolist() == [120, -50, 20]
+    assert emu.position_pulses == (120, -50, 20)
+    # STEP_X rising edges of the first jog: period 2 * delay * 100 us
+    d = log.value.astype(int)
+    is_d = log.port == PORT_D
+    idx = np.flatnonzero(is_d)
+    rise = idx[1:][((d[idx[1:]] >> 1) & 1 == 1) & ((d[idx[:-1]] >> 1) & 1 == 0)]
+    periods = np.diff(log.t_ns[rise[:120]])
+    assert set(periods.tolist()) == {2 * 3 * 100_000}
+    assert emu.wait_for_state(MODE_SELECTION)
+
+
+def test_listed_drill_mode_drifts_with_the_pc_programs_init_values_and_dog_legs(emu, board):
+    """Raw protocol, PC-program values Zup = 10, Zdown = 30: Init lowers 10, each hole -20 then +10."""
+    with raw_port(emu) as ser:
+        ser.write(b"\x67")
+        assert ser.read(1) == b"\x68"
+        ser.write(offset_packet(0, 0, 0, delay_x=1, delay_y=1, delay_z=1))
+        assert ser.read(1) == b"\x75"
+        ser.write(init_packet(10, 30 - 10, delay_x=2, delay_y=5, delay_z_up=1, delay_z_down=1))
+        assert ser.read(1) == b"\x6a"
+        ser.write(start_drill_packet())
+        assert ser.read(1) == b"\x69"
+        n0 = len(emu.port_log())
+        ser.write(drill_packet(30, 4))
+        assert ser.read(1) == b"\x69"
+        ser.write(drill_packet(-30, -4))
+        assert ser.read(1) == b"\x69"
+        ser.write(close_drill_packet())
+        assert ser.read(1) == b"\x70"
+    log = emu.port_log()
+    strokes = hole_strokes(log)
+    assert strokes.tolist() == [[30, 4, -10, -30, -20], [0, 0, -20, -40, -30]]
+    # dog-leg: 4 pulses on both axes at max(2, 5) = 5, then 26 on X alone at 2
+    hole = PortLog(log.t_ns[n0:], log.port[n0:], log.value[n0:])
+    pos = decode_port_log(hole)
+    t = hole.t_ns
+    moved = np.flatnonzero(np.any(np.diff(pos, axis=0) != 0, axis=1)) + 1
+    xy = [i for i in moved if pos[i, 2] == pos[0, 2]]
+    y_steps = [i for i in xy if pos[i, 1] != pos[i - 1, 1]]
+    assert len(y_steps) == 4 and all(pos[i, 0] == k + 1 for k, i in enumerate(y_steps))
+    x_only = [i for i in xy if pos[i, 0] != pos[i - 1, 0] and i not in y_steps and pos[i, 1] == 4]
+    assert len(x_only) == 26
+    assert set(np.diff(t[x_only]).tolist()) == {2 * 2 * 100_000}
+    assert emu.wait_for_state(MODE_SELECTION)
+
+
+# ---------------------------------------------------------------------- the host's drill job
+def test_drill_six_holes_in_two_tool_groups(emu, board):
+    board.jog("x", 7, delay=1)  # the start is not the power-up position
+    start = decode_port_log(emu.port_log())[-1]
+    calls = []
+    n = board.drill(HOLES, depth_steps=25, delay=1, tool_changes=[(0, "T1 0.8 mm"), (3, "T2 1.0 mm")],
+                    on_tool_change=lambda i, m: calls.append((i, m, emu.position_pulses)))
+    assert n == len(HOLES)
+    assert [c[:2] for c in calls] == [(0, "T1 0.8 mm"), (3, "T2 1.0 mm")]
+    assert calls[1][2] == (start[0] + HOLES[2][0], start[1] + HOLES[2][1], start[2])  # over hole 2, Z up
+    log = emu.port_log()
+    strokes = hole_strokes(log)
+    got = strokes[:, :2] - start[:2]
+    assert got.tolist() == HOLES.tolist()  # each hole once, in order
+    assert (strokes[:, 2] == start[2]).all() and (strokes[:, 4] == start[2]).all()
+    assert (strokes[:, 3] == start[2] - 25).all()  # all to the same depth
+    assert decode_port_log(log)[-1].tolist() == start.tolist()  # back where it started, Z included
+    assert len(hole_packets(emu)) == len(HOLES)
+    assert emu.wait_for_state(MODE_SELECTION) and board.in_step
+
+
+def test_bad_drill_arguments_send_nothing(emu, board):
+    before = len(emu.rx_log())
+    with pytest.raises(PlanError):
+        board.drill(np.array([[0, 0], [70000, 0]]), depth_steps=5)
+    with pytest.raises(PlanError):
+        board.drill(HOLES, depth_steps=0)
+    with pytest.raises(PlanError):
+        board.drill(HOLES, depth_steps=5, tool_changes=[(6, "too late")])
+    assert len(emu.rx_log()) == before
+
+
+# ---------------------------------------------------------------------- faults
+def assert_stopped_at(emu, hole_index: int) -> None:
+    """No Drill Data Packet was read after the faulted hole's."""
+    time.sleep(0.05)
+    assert len(hole_packets(emu)) == hole_index + 1
+
+
+def test_dropped_reply_times_out_and_nothing_more_is_sent(emu, board):
+    emu.drop_next_reply(match=ONEHOLEDRILLED, skip=2)  # the SDF answer, hole 0, then hole 1's is lost
+    t0 = time.monotonic()
+    with pytest.raises(PortError, match=r"did not answer within 0.5 s after hole index 1") as info:
+        board.drill(HOLES, depth_steps=10, delay=1)
+    assert time.monotonic() - t0 < 3
+    assert "\n" not in str(info.value)
+    assert_stopped_at(emu, 1)
+    assert emu.wait_for_state(DRILL_MODE1_INPUT)  # the firmware waits; the host sends nothing
+    with pytest.raises(PortError, match="out of step"):
+        board.jog("x", 1)
+    assert_stopped_at(emu, 1)
+
+
+def test_corrupted_reply_is_refused(emu, board):
+    emu.corrupt_next_reply(match=ONEHOLEDRILLED, skip=3)
+    with pytest.raises(PortError, match=r"answered unknown byte \(0x96\) instead of ONEHOLEDRILLED \(0x69\) "
+                                        r"after hole index 2"):
+        board.drill(HOLES, depth_steps=10, delay=1)
+    assert_stopped_at(emu, 2)
+    assert not board.in_step
+
+
+def test_late_reply(emu, board):
+    emu.delay_next_reply(0.2, match=ONEHOLEDRILLED, skip=1)  # late but inside the timeout: fine
+    assert board.drill(HOLES[:2], depth_steps=5, delay=1) == 2
+    emu.delay_next_reply(1.5, match=ONEHOLEDRILLED, skip=4)  # hole index 3 answers after the timeout
+    n_before = len(hole_packets(emu))
+    t0 = time.monotonic()
+    with pytest.raises(PortError, match=r"did not answer within 0.5 s after hole index 3"):
+        board.drill(HOLES, depth_steps=5, delay=1)
+    assert time.monotonic() - t0 < 1.5
+    time.sleep(0.05)
+    assert len(hole_packets(emu)) - n_before == 4
+
+
+def test_limit_switch_at_the_travel_end_ends_the_job():
+    emu = start_emulator(speed=None, travel_x_pulses=(-1000, 150))
+    try:
+        with MaximusBoard(emu.device_path, timeout_s=TIMEOUT_S) as board:
+            holes = np.array([[20, 0], [60, 10], [100, 10], [300, 10], [0, 0]])
+            with pytest.raises(PortError, match=r"limit switch LIMIT_SWITCH_X \(0x02\) tripped during hole index 3"):
+                board.drill(holes, depth_steps=5, delay=1)
+            assert_stopped_at(emu, 3)
+            assert emu.wait_for_state(MODE_SELECTION) and board.in_step
+            # tripped on the first pulse past 150, backed off STEPSBACKATLIMIT pulses
+            assert decode_port_log(emu.port_log())[-1][0] == 151 - STEPSBACKATLIMIT
+            assert [r[1] for r in emu.tx_log()][-1] == 0x02  # the switch byte, no ONEHOLEDRILLED
+            board.jog("x", 100, delay=1)  # the board is usable again
+    finally:
+        emu.stop()
+    assert emu.error is None
+
+
+def test_injected_limit_switch_during_a_jog(emu, board):
+    emu.trip_limit_switch(HOME_SWITCH_Y)
+    with pytest.raises(PortError, match=r"limit switch HOME_SWITCH_Y \(0x04\) tripped during jog y -40"):
+        board.jog("y", -40, delay=2)
+    assert emu.position_pulses[1] == -1 + STEPSBACKATLIMIT  # one pulse, then the back-off in +Y
+    assert emu.wait_for_state(MODE_SELECTION)  # the host left Jog mode with the exit packet
+    assert board.in_step
+
+
+def test_emergency_stop_during_a_move():
+    emu = start_emulator(speed=1.0)  # real timing: the long move takes 0.4 s
+    try:
+        board = MaximusBoard(emu.device_path, timeout_s=2.0)
+        holes = np.array([[5, 0], [2005, 0], [2010, 0]])
+        result: dict[str, BaseException] = {}
+
+        def job() -> None:
+            try:
+                board.drill(holes, depth_steps=5, delay=1)
+            except BaseException as exc:  # noqa: BLE001 - handed to the test thread
+                result["error"] = exc
+
+        worker = threading.Thread(target=job)
+        worker.start()
+        deadline = time.monotonic() + 5
+        while emu.position_pulses[0] < 300 and time.monotonic() < deadline:
+            time.sleep(0.002)
+        assert board.emergency_stop() is True
+        worker.join(5)
+        assert not worker.is_alive()
+        error = result["error"]
+        assert isinstance(error, PortError)
+        assert "emergency stop during hole index 1" in str(error) and "MACHINESTOPPED" in str(error)
+        assert_stopped_at(emu, 1)
+        x = emu.position_pulses[0]
+        assert 300 <= x < 2005
+        time.sleep(0.1)
+        assert emu.position_pulses[0] == x  # nothing moves any more
+        ports = final_ports(emu)
+        assert ports[PORT_D] & 0x88 == 0 and ports[PORT_B] & 0x80 == 0  # ENABLE_X, _Y, _Z low
+        assert emu.wait_for_state(MODE_SELECTION) and board.in_step
+        board.close()
+    finally:
+        emu.stop()
+    assert emu.error is None
+
+
+def test_ctrl_c_during_a_move_then_emergency_stop_like_the_cli():
+    emu = start_emulator(speed=1.0)
+    main_ident = threading.get_ident()
+    try:
+        board = MaximusBoard(emu.device_path, timeout_s=2.0)
+
+        def press_ctrl_c() -> None:
+            deadline = time.monotonic() + 5
+            while emu.position_pulses[0] < 300 and time.monotonic() < deadline:
+                time.sleep(0.002)
+            signal.pthread_kill(main_ident, signal.SIGINT)
+
+        presser = threading.Thread(target=press_ctrl_c)
+        presser.start()
+        with pytest.raises(KeyboardInterrupt):
+            board.drill(np.array([[3000, 0]]), depth_steps=5, delay=1)
+        presser.join()
+        assert board.emergency_stop() is True
+        assert emu.position_pulses[0] < 3000
+        assert emu.wait_for_state(MODE_SELECTION) and board.in_step
+        board.close()
+    finally:
+        emu.stop()
+
+
+def test_emergency_stop_between_moves_sends_no_stop_byte(emu, board):
+    answers = []
+
+    def tool_change(index: int, message: str) -> None:
+        answers.append(board.emergency_stop())  # the head is between holes
+
+    with pytest.raises(PortError, match=r"emergency stop before hole index 3: no move was running; job closed"):
+        board.drill(HOLES, depth_steps=10, delay=1, tool_changes=[(3, "T2")], on_tool_change=tool_change)
+    assert answers == [False]
+    assert 0x80 not in [b for _, b, _ in emu.rx_log()]
+    assert_stopped_at(emu, 2)
+    assert emu.packet_log()[-1] == ("drill", bytes(5))  # the closing packet, which moves nothing
+    assert emu.wait_for_state(MODE_SELECTION) and board.in_step
+
+
+def test_emergency_stop_with_nothing_running_is_harmless(emu, board):
+    assert board.emergency_stop() is False
+    board.jog("x", 2, delay=1)
+    assert emu.position_pulses == (2, 0, 0)
+
+
+def test_open_maximus_url_and_bad_device(emu):
+    board = open_maximus("maximus:" + emu.device_path, timeout_s=TIMEOUT_S)
+    assert board.in_step
+    board.close()
+    with pytest.raises(PortError, match="cannot open MAXIMUS port"):
+        MaximusBoard("maximus:/dev/does-not-exist-maximus")
+
+
+def test_ctrl_c_at_a_tool_change_prompt_closes_drill_mode(emu, board):
+    def prompt(index: int, message: str) -> None:
+        raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        board.drill(HOLES, depth_steps=10, delay=1, tool_changes=[(2, "T2")], on_tool_change=prompt)
+    assert board.emergency_stop() is False  # nothing was moving; the job is already closed
+    assert_stopped_at(emu, 1)
+    assert emu.packet_log()[-1] == ("drill", bytes(5))
+    assert emu.wait_for_state(MODE_SELECTION) and board.in_step
