@@ -9,6 +9,7 @@ import argparse
 import json
 import signal
 import sys
+import time
 from pathlib import Path
 from typing import Any, Callable, Optional, Sequence
 
@@ -97,6 +98,99 @@ def _add_profile_options(p: argparse.ArgumentParser) -> None:
                    help="depth of layer k as arithmetic in k and n (layers), e.g. '30*sqrt(1-((n-k)/n)**2)'")
 
 
+DRILL_SUFFIXES = (".drl", ".xln", ".exc", ".drd")
+
+
+def _float_list(n: int, name: str) -> Callable[[str], list[float]]:
+    def parse(text: str) -> list[float]:
+        try:
+            values = [float(v) for v in text.split(",")]
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} takes {n} numbers separated by commas, got '{text}'") from None
+        if len(values) != n:
+            raise argparse.ArgumentTypeError(f"{name} takes {n} comma-separated numbers, got '{text}'")
+        return values
+
+    return parse
+
+
+def _add_drill_file_options(d: argparse.ArgumentParser) -> None:
+    g = d.add_argument_group("drill files (Excellon: .drl .xln .exc .drd)")
+    g.add_argument("--drill-depth", type=float, default=2.0, metavar="MM", help="drill depth below the surface (2.0)")
+    g.add_argument("--travel-height", type=float, default=1.0, metavar="MM", help="height above the surface between holes (1.0)")
+    g.add_argument("--offset", type=_float_list(2, "--offset"), metavar="X,Y",
+                   help="machine position (mm from where the tool stands) of the board origin; "
+                   "default: the board's top-left hole extent at the start position")
+    g.add_argument("--mirror-x", action="store_true", help="mirror the board for drilling from the back side")
+    g.add_argument("--drill-order", choices=("tour", "file"), default="tour", help="short tour per tool (default) or file order")
+    g.add_argument("--excellon-units", choices=("inch", "metric"), help="units when the file does not say")
+    g.add_argument("--excellon-format", metavar="I:F", help="integer:fraction digits when the file does not say (e.g. 2:4)")
+    g.add_argument("--excellon-zeros", choices=("LZ", "TZ"), help="zero suppression when the file does not say")
+
+
+def _load_drill_file(args: argparse.Namespace):
+    from .excellon import load_excellon
+
+    digits = None
+    if args.excellon_format:
+        try:
+            a, b = (int(v) for v in args.excellon_format.split(":"))
+        except ValueError:
+            raise CamError(f"--excellon-format takes I:F such as 2:4, got '{args.excellon_format}'") from None
+        digits = (a, b)
+    return load_excellon(args.image, units=args.excellon_units, digits=digits, zeros=args.excellon_zeros)
+
+
+def _drill_excellon(args: argparse.Namespace) -> int:
+    from .drilljob import plan_drill
+
+    holes = _load_drill_file(args)
+    settings = _settings(args)
+    dp = plan_drill(holes, settings=settings, depth_mm=args.drill_depth, safe_height_mm=args.travel_height,
+                    offset_mm=tuple(args.offset) if args.offset else None, mirror_x=args.mirror_x,
+                    order=args.drill_order)
+    for w in holes.warnings:
+        print(f"warning: {w}", file=sys.stderr)
+    tools = ", ".join(f"T{t} {dia:.3f} mm x{n}" for t, dia, n in dp.tool_sequence)
+    summary = f"{len(dp.holes_steps)} holes ({tools})"
+    if args.port.startswith("maximus:"):
+        return _drill_maximus(args, dp, settings, summary)
+    steps = plan_steps(dp.toolpath)
+    report = {"source": args.image, "holes": len(dp.holes_steps), "tools": [list(t) for t in dp.tool_sequence],
+              "warnings": list(holes.warnings), "steps": {a: int(v) for a, v in zip("xyz", steps.steps_total)},
+              "estimated_time_s": round(steps.estimated_time_s, 6)}
+    result = _execute(steps, args, prompt_at_pause=True)
+    return _finish(args, result, report, summary)
+
+
+def _drill_maximus(args: argparse.Namespace, dp, settings: MachineSettings, summary: str) -> int:
+    from .drive.maximus import MaximusBoard
+
+    depth_steps = int(round(args.drill_depth / settings.mm_per_step_z))
+    changes, start = [], 0
+    for tool, dia, n in dp.tool_sequence:
+        changes.append((start, f"tool change: T{tool} {dia:.3f} mm ({n} holes)"))
+        start += n
+    board = MaximusBoard(args.port)
+    previous = signal.getsignal(signal.SIGINT)
+
+    def on_tool_change(index: int, message: str) -> None:
+        print(f"{message}: press Enter when the drill is in", file=sys.stderr)
+        if not args.yes and sys.stdin.readline() == "":
+            print("no answer at the tool change (stdin closed): stopping", file=sys.stderr)
+            board.emergency_stop()
+
+    signal.signal(signal.SIGINT, lambda *a: board.emergency_stop())
+    t0 = time.monotonic()
+    try:
+        board.drill(dp.holes_steps, depth_steps=depth_steps, tool_changes=changes, on_tool_change=on_tool_change)
+    finally:
+        signal.signal(signal.SIGINT, previous)
+        board.close()
+    print(f"job finished: {summary}; total time {_format_duration(time.monotonic() - t0)}")
+    return 0
+
+
 def _add_job_options(d: argparse.ArgumentParser) -> None:
     """Options that say what to cut and how deep (shared by drill and export)."""
     d.add_argument("image", nargs="?", metavar="IMAGE", help="the drawing (PNG, BMP, JPEG, ...)")
@@ -139,6 +233,8 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--report", metavar="FILE.json", help="write the job report as JSON")
     g.add_argument("--preview", metavar="OUT.png", help="write the toolpath picture before cutting")
     g.add_argument("--flip-y", action="store_true", help="G-code input: machine Y = +Y mm instead of -Y mm")
+    g.add_argument("--yes", action="store_true", help="answer every prompt (tool changes, pauses) with Enter")
+    _add_drill_file_options(d)
     g.add_argument("--no-progress", action="store_true", help="no progress bar")
     d.set_defaults(func=cmd_drill)
 
@@ -179,6 +275,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_machine_options(i)
     _add_profile_options(i)
     i.add_argument("--json", action="store_true", help="print the report as JSON")
+    _add_drill_file_options(i)
     i.set_defaults(func=cmd_info)
 
     pr = sub.add_parser("profile", help="print a Z profile's layer count and depth range",
@@ -186,6 +283,24 @@ def build_parser() -> argparse.ArgumentParser:
     pr.add_argument("profile", metavar="PROFILE")
     _add_machine_options(pr)
     pr.set_defaults(func=cmd_profile)
+
+    jg = sub.add_parser("jog", help="move one axis by a number of steps (to set the board origin)",
+                        description="Jog one axis, as the MAXIMUS jog screen does: 'cam jog X+ 100' moves X by "
+                        "+100 steps. On a MAXIMUS board (--port maximus:/dev/ttyUSB0) this is its Jog mode.")
+    jg.add_argument("axis", metavar="AXIS", help="X+, X-, Y+, Y-, Z+ or Z-")
+    jg.add_argument("steps", type=int, metavar="STEPS", help="how many steps (> 0)")
+    jg.add_argument("--port", default="mock", help="'mock' (default), /dev/parport0 or maximus:/dev/ttyUSB0")
+    _add_machine_options(jg)
+    jg.add_argument("--realtime", action="store_true", help="run the mock in real time")
+    jg.add_argument("--pin-log", metavar="FILE.csv", help="write the mock's pin log")
+    jg.add_argument("--no-progress", action="store_true", help="no progress bar")
+    jg.set_defaults(func=cmd_jog)
+
+    em = sub.add_parser("emulate-maximus", help="run the MAXIMUS firmware emulator on a pseudo-terminal",
+                        description="Serve the MAXIMUS PIC firmware emulator on a pty and print its device path; "
+                        "point --port maximus:PATH at it. Ctrl-C ends it.")
+    em.add_argument("--speed", type=float, default=1.0, help="firmware time per real time (1 = real time)")
+    em.set_defaults(func=cmd_emulate)
 
     gt = sub.add_parser("goto", help="move the tool to X,Y,Z pixels and stop there",
                         description="Go To: travel at Z=0 to X,Y, then move Z, and stop (thesis 4.1.2).")
@@ -239,6 +354,8 @@ def _execute(job: Any, args: argparse.Namespace, prompt_at_pause: bool = False) 
     def on_pause(position: tuple[int, int, int], note: str) -> None:
         print(f"{note}: paused at X={position[0]} Y={position[1]} Z={position[2]} steps; press Enter to resume",
               file=sys.stderr)
+        if getattr(args, "yes", False):
+            return
         if sys.stdin.readline() == "":  # nobody can answer: stop rather than carry on blindly
             print("no answer at the pause (stdin closed): stopping", file=sys.stderr)
             controller.stop()
@@ -369,6 +486,8 @@ def _drill_gcode(args: argparse.Namespace) -> int:
 def cmd_drill(args: argparse.Namespace) -> int:
     if args.image and Path(args.image).suffix.lower() in GCODE_SUFFIXES:
         return _drill_gcode(args)
+    if args.image and Path(args.image).suffix.lower() in DRILL_SUFFIXES:
+        return _drill_excellon(args)
     digitized, job = _plan_job(args)
     if args.preview:
         args.scale = None
@@ -410,7 +529,21 @@ def cmd_digitize(args: argparse.Namespace) -> int:
     return 0
 
 
+def _info_excellon(args: argparse.Namespace) -> int:
+    holes = _load_drill_file(args)
+    x0, y0, x1, y1 = holes.extent_mm()
+    lines = [f"{args.image}: {len(holes.holes_mm)} holes, board extent X {x0:.3f}..{x1:.3f} mm, "
+             f"Y {y0:.3f}..{y1:.3f} mm ({x1 - x0:.2f} x {y1 - y0:.2f} mm)"]
+    for tool, dia, count in holes.tool_table():
+        lines.append(f"  T{tool}: {dia:.3f} mm, {count} holes")
+    lines += [f"warning: {w}" for w in holes.warnings]
+    print("\n".join(lines))
+    return 0
+
+
 def cmd_info(args: argparse.Namespace) -> int:
+    if Path(args.image).suffix.lower() in DRILL_SUFFIXES:
+        return _info_excellon(args)
     settings = _settings(args)
     d = digitize(load_image(args.image), start=args.start)
     rep = image_report(d, settings)
@@ -434,6 +567,49 @@ def cmd_goto(args: argparse.Namespace) -> int:
     x, y, z = result.position_steps
     print(f"at X={x} Y={y} Z={z} steps")
     return 0
+
+
+def cmd_jog(args: argparse.Namespace) -> int:
+    axis = args.axis.upper()
+    if len(axis) != 2 or axis[0] not in "XYZ" or axis[1] not in "+-":
+        raise CamError(f"axis must be X+, X-, Y+, Y-, Z+ or Z-, got '{args.axis}'")
+    if args.steps <= 0:
+        raise CamError(f"steps must be > 0, got {args.steps}")
+    n = args.steps if axis[1] == "+" else -args.steps
+    if args.port.startswith("maximus:"):
+        from .drive.maximus import MaximusBoard
+
+        with MaximusBoard(args.port) as board:
+            board.jog(axis[0].lower(), n)
+        print(f"jogged {axis[0]} by {n} steps")
+        return 0
+    import numpy as np
+
+    from .settings import Travel
+    from .toolpath import TRAVEL, Toolpath
+
+    settings = _settings(args)
+    lo, hi = settings.travel.bounds_steps()["XYZ".index(axis[0])]
+    if abs(n) > hi - lo:
+        raise CamError(f"a jog of {n} steps is longer than the {axis[0]} travel ({hi - lo} steps)")
+    span = hi - lo
+    unit = settings.replace(steps_per_px_xy=1, steps_per_px_z=1,
+                            travel=Travel(-span, span, -span, span, -span, span))  # from wherever it stands
+    point = [0, 0, 0]
+    point["XYZ".index(axis[0])] = n
+    job = Toolpath(points_px=np.array([point]), kind=np.array([TRAVEL], np.uint8), target=np.zeros(1, bool),
+                   pause=np.zeros(1, bool), settings=unit)
+    result = _execute(job, args)
+    if result.status != FINISHED:
+        return EXIT_INTERRUPTED
+    print(f"jogged {axis[0]} by {n} steps")
+    return 0
+
+
+def cmd_emulate(args: argparse.Namespace) -> int:
+    from .drive import maximus_emulator
+
+    return int(maximus_emulator.main(["--speed", str(args.speed)]) or 0)
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
