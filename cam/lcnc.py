@@ -30,6 +30,7 @@ class CanonMove:
     end: tuple[float, float, float]
     center: tuple[float, float] | None = None
     rotation: int = 0  # ARC_FEED: >0 counter-clockwise turns, <0 clockwise
+    plane: str = "XY"  # ARC_FEED: the arc's plane; ``center`` is in its (first, second) axes
 
 
 def run_rs274(path: str, *, units_mm: bool = True) -> str:
@@ -54,6 +55,7 @@ def parse_canonical(text: str) -> list[CanonMove]:
     scale = 1.0
     g5x = [0.0, 0.0, 0.0]
     g92 = [0.0, 0.0, 0.0]
+    plane = "XY"
     for line in text.splitlines():
         m = _CALL.match(line)
         if not m:
@@ -69,12 +71,19 @@ def parse_canonical(text: str) -> list[CanonMove]:
         elif name in ("STRAIGHT_TRAVERSE", "STRAIGHT_FEED"):
             x, y, z = (float(a) * scale + o for a, o in zip(args[:3], off))
             moves.append(CanonMove("traverse" if name == "STRAIGHT_TRAVERSE" else "feed", (x, y, z)))
+        elif name == "SELECT_PLANE":
+            plane = args[0].replace("CANON_PLANE_", "")
         elif name == "ARC_FEED":
-            # ARC_FEED(first_end, second_end, first_axis, second_axis, rotation, axis_end_point, ...)
+            # ARC_FEED(first_end, second_end, first_axis, second_axis, rotation, axis_end_point, ...);
+            # first/second are X/Y in the XY plane, Y/Z in YZ and Z/X in XZ
             e1, e2, c1, c2 = (float(a) * scale for a in args[:4])
             rot = int(args[4])
-            z = float(args[5]) * scale + off[2]
-            moves.append(CanonMove("arc", (e1 + off[0], e2 + off[1], z), (c1 + off[0], c2 + off[1]), rot))
+            e3 = float(args[5]) * scale
+            first, second, third = {"XY": (0, 1, 2), "YZ": (1, 2, 0), "XZ": (2, 0, 1)}[plane]
+            end = [0.0, 0.0, 0.0]
+            end[first], end[second], end[third] = e1, e2, e3
+            end = [v + o for v, o in zip(end, off)]
+            moves.append(CanonMove("arc", tuple(end), (c1 + off[first], c2 + off[second]), rot, plane))
     return moves
 
 
@@ -91,11 +100,14 @@ def canonical_polyline_mm(moves: list[CanonMove], *, max_chord_mm: float = 0.005
             pts.append(mv.end)
             feed.append(mv.kind == "feed")
             continue
-        cx, cy = mv.center
-        x1, y1, z1 = mv.end
-        a0 = math.atan2(y0 - cy, x0 - cx)
-        a1 = math.atan2(y1 - cy, x1 - cx)
-        r = math.hypot(x0 - cx, y0 - cy)
+        first, second, third = {"XY": (0, 1, 2), "YZ": (1, 2, 0), "XZ": (2, 0, 1)}[mv.plane]
+        p0 = (x0, y0, z0)
+        u0, v0, w0 = p0[first], p0[second], p0[third]
+        u1, v1, w1 = mv.end[first], mv.end[second], mv.end[third]
+        cu, cv = mv.center
+        a0 = math.atan2(v0 - cv, u0 - cu)
+        a1 = math.atan2(v1 - cv, u1 - cu)
+        r = math.hypot(u0 - cu, v0 - cv)
         if mv.rotation > 0:
             sweep = (a1 - a0) % (2 * math.pi) or 2 * math.pi
             sweep += 2 * math.pi * (mv.rotation - 1)
@@ -106,9 +118,11 @@ def canonical_polyline_mm(moves: list[CanonMove], *, max_chord_mm: float = 0.005
         for k in range(1, n + 1):
             t = k / n
             a = a0 + sweep * t
-            pts.append((cx + r * math.cos(a), cy + r * math.sin(a), z0 + (z1 - z0) * t))
+            q = [0.0, 0.0, 0.0]
+            q[first], q[second], q[third] = cu + r * math.cos(a), cv + r * math.sin(a), w0 + (w1 - w0) * t
+            pts.append(tuple(q))
             feed.append(True)
-        pts[-1] = (x1, y1, z1)
+        pts[-1] = mv.end
     return np.array(pts, np.float64), np.array(feed, bool)
 
 
