@@ -139,13 +139,16 @@ def trace_layers_kernel(layer_flat, wp, offsets):
     for k in range(1, n_layers + 2):
         bounds[k] = bounds[k - 1] + counts[k - 1]
     fill = bounds.copy()
-    order = np.empty(size, np.int64)
+    order = np.empty(size - counts[0], np.int32)  # pixels of layers 1.. only
     for i in range(size):
         k = layer_flat[i]
-        order[fill[k]] = i
-        fill[k] += 1
+        if k > 0:
+            order[fill[k] - counts[0]] = i
+            fill[k] += 1
     # rings: 8-connected pieces of a layer (union-find over forward neighbours)
-    parent = np.arange(size)
+    parent = np.empty(size, np.int32)
+    for i in range(size):
+        parent[i] = i
     fwd = np.array([1, wp - 1, wp, wp + 1])
     for i in range(size):
         k = layer_flat[i]
@@ -162,21 +165,25 @@ def trace_layers_kernel(layer_flat, wp, offsets):
                     else:
                         parent[a] = b
     untraced = np.zeros(size, np.uint8)
-    ring_left = np.zeros(size, np.int64)  # untraced pixels per ring, indexed by the ring's root
+    ring_left = np.zeros(size, np.int32)  # untraced pixels per ring, indexed by the ring's root
+    n_roots = 0
     for i in range(size):
         if layer_flat[i] > 0:
             untraced[i] = 1
-            ring_left[_find(parent, i)] += 1
+            r = _find(parent, i)
+            if ring_left[r] == 0:
+                n_roots += 1
+            ring_left[r] += 1
     n_px = size - counts[0]
-    path = np.empty(n_px, np.int64)
-    ring_starts = np.empty(n_px + 1, np.int64)
-    ring_levels = np.empty(n_px, np.int64)
+    path = np.empty(n_px, np.int32)
+    ring_starts = np.empty(n_roots + 1, np.int64)  # each ring is traced as one object
+    ring_levels = np.empty(n_roots, np.int64)
     n_path = 0
     n_rings = 0
     tool = -1
     for k in range(1, n_layers + 1):
-        lo = bounds[k]
-        hi = bounds[k + 1]
+        lo = bounds[k] - counts[0]
+        hi = bounds[k + 1] - counts[0]
         if lo == hi:
             continue
         first_ring = True
