@@ -93,11 +93,12 @@ class Drawing:
     @property
     def kind(self) -> str:
         """``"2d"`` (black only), ``"3d"`` (black contour, red interior) or ``"profile"`` (blue curve)."""
-        if np.any(self.classes == BLUE):
+        top = int(self.classes.max()) if self.classes.size else WHITE
+        if top <= BLACK:
+            return "2d"
+        if top == BLUE:
             return "profile"
-        if np.any(self.classes == RED):
-            return "3d"
-        return "2d"
+        return "3d"
 
     def to_rgb(self) -> np.ndarray:
         """``(H, W, 3)`` uint8 RGB picture of the classes (pure white, black, red, blue)."""

@@ -59,7 +59,7 @@ def digitize(drawing: Drawing | np.ndarray | str, *, start: str = "top") -> Digi
         objects, levels = trace_layers(layer)
         warnings = list(drawing.warnings)
         return Digitized("3d", drawing.width_px, drawing.height_px, objects, levels, warnings)
-    objects = trace_curves(drawing.classes == BLACK, start=start)
+    objects = trace_curves(drawing.classes, start=start, value=BLACK)
     levels = np.arange(1, len(objects) + 1, dtype=np.int32)
     warnings = list(drawing.warnings) + _stray_warning(objects)
     return Digitized("2d", drawing.width_px, drawing.height_px, objects, levels, warnings)

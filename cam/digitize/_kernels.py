@@ -109,6 +109,31 @@ def trace2d_kernel(flat, scan, wp, offsets, min_distance, tool_x, tool_y):
 
 
 @njit(cache=True)
+def pad_mask_kernel(classes, value):
+    """``(flat, scan)``: the pixels equal to ``value`` as a padded, flattened uint8 mask, and their flat
+    indices in scan order -- one pass, no full-size temporaries."""
+    h, w = classes.shape
+    wp = w + 2
+    flat = np.zeros((h + 2) * wp, np.uint8)
+    n = 0
+    for r in range(h):
+        base = (r + 1) * wp + 1
+        for c in range(w):
+            if classes[r, c] == value:
+                flat[base + c] = 1
+                n += 1
+    scan = np.empty(n, np.int64)
+    j = 0
+    for r in range(h):
+        base = (r + 1) * wp + 1
+        for c in range(w):
+            if flat[base + c]:
+                scan[j] = base + c
+                j += 1
+    return flat, scan
+
+
+@njit(cache=True)
 def _find(parent, i):
     root = i
     while parent[root] != root:

@@ -47,25 +47,27 @@ def trace_curves(
     *,
     start: str = "top",
     tool_xy_px: tuple[int, int] = (0, 0),
+    value: int = 1,
 ) -> list[np.ndarray]:
-    """Trace every black pixel of ``black`` into ordered curves (compiled; see :func:`trace_curves_reference`).
+    """Trace every pixel of ``black`` equal to ``value`` into ordered curves.
+
+    Compiled; the same result as :func:`trace_curves_reference` (see there for the rules).
+    ``black`` is a ``(H, W)`` bool mask (``value`` 1 = True) or a class array (``value`` = BLACK).
 
     >>> import numpy as np
     >>> m = np.zeros((4, 5), bool); m[1, 1:4] = True   # a 3-pixel dash
     >>> [o.tolist() for o in trace_curves(m, start="min-distance", tool_xy_px=(4, 1))]
     [[[3, 1], [2, 1], [1, 1]]]
     """
-    from ._kernels import trace2d_kernel
+    from ._kernels import pad_mask_kernel, trace2d_kernel
 
     if start not in START_RULES:
         raise ValueError(f"start must be one of {START_RULES}, got {start!r}")
-    black = np.asarray(black, bool)
-    h, w = black.shape
+    image = np.ascontiguousarray(black)
+    image = image.view(np.uint8) if image.dtype == bool else image.astype(np.uint8, copy=False)
+    h, w = image.shape
     wp = w + 2
-    padded = np.zeros((h + 2, wp), np.uint8)
-    padded[1:-1, 1:-1] = black
-    flat = padded.ravel()
-    scan = np.flatnonzero(flat)
+    flat, scan = pad_mask_kernel(image, np.uint8(value))
     offsets = np.array([dr * wp + dc for dr, dc in NEIGHBOURS_2D], np.int64)
     path, starts = trace2d_kernel(flat, scan, wp, offsets, start == "min-distance", int(tool_xy_px[0]),
                                   int(tool_xy_px[1]))
