@@ -134,20 +134,34 @@ def pad_mask_kernel(classes, value):
 
 
 @njit(cache=True)
-def _find(parent, i):
-    root = i
-    while parent[root] != root:
-        root = parent[root]
-    while parent[i] != root:
-        nxt = parent[i]
-        parent[i] = root
-        i = nxt
-    return root
+def _flood_ring(layer_flat, untraced, ring_of, start, k, ring, wp, stack):
+    """Mark the 8-connected piece of layer ``k`` holding ``start`` as ``ring``; return its untraced count."""
+    n = 0
+    left = 0
+    stack[0] = start
+    n = 1
+    ring_of[start] = ring
+    while n > 0:
+        n -= 1
+        p = stack[n]
+        if untraced[p] != 0:
+            left += 1
+        for dr in (-wp, 0, wp):
+            for dc in (-1, 0, 1):
+                q = p + dr + dc
+                if layer_flat[q] == k and ring_of[q] != ring:
+                    ring_of[q] = ring
+                    stack[n] = q
+                    n += 1
+    return left
 
 
 @njit(cache=True)
 def trace_layers_kernel(layer_flat, wp, offsets):
     """Trace every layer of a padded, flattened layer map into rings (see :mod:`.peel3d`).
+
+    A ring's extent (its 8-connected piece of the layer) is found by a flood fill only when a
+    walk stops with pixels of its layer left over; most rings are traced in one walk.
 
     Returns ``(path, ring_starts, ring_levels)``.
     """
@@ -164,45 +178,21 @@ def trace_layers_kernel(layer_flat, wp, offsets):
     for k in range(1, n_layers + 2):
         bounds[k] = bounds[k - 1] + counts[k - 1]
     fill = bounds.copy()
-    order = np.empty(size - counts[0], np.int32)  # pixels of layers 1.. only
+    n_px = size - counts[0]
+    order = np.empty(n_px, np.int32)  # pixels of layers 1.. only
+    untraced = np.zeros(size, np.uint8)
     for i in range(size):
         k = layer_flat[i]
         if k > 0:
             order[fill[k] - counts[0]] = i
             fill[k] += 1
-    # rings: 8-connected pieces of a layer (union-find over forward neighbours)
-    parent = np.empty(size, np.int32)
-    for i in range(size):
-        parent[i] = i
-    fwd = np.array([1, wp - 1, wp, wp + 1])
-    for i in range(size):
-        k = layer_flat[i]
-        if k == 0:
-            continue
-        for j in range(4):
-            q = i + fwd[j]
-            if q < size and layer_flat[q] == k:
-                a = _find(parent, i)
-                b = _find(parent, q)
-                if a != b:
-                    if a < b:
-                        parent[b] = a
-                    else:
-                        parent[a] = b
-    untraced = np.zeros(size, np.uint8)
-    ring_left = np.zeros(size, np.int32)  # untraced pixels per ring, indexed by the ring's root
-    n_roots = 0
-    for i in range(size):
-        if layer_flat[i] > 0:
             untraced[i] = 1
-            r = _find(parent, i)
-            if ring_left[r] == 0:
-                n_roots += 1
-            ring_left[r] += 1
-    n_px = size - counts[0]
+    ring_of = np.zeros(size, np.int32)  # flood-fill marks, by ring number (from 1)
+    stack = np.empty(n_px + 1, np.int32)
     path = np.empty(n_px, np.int32)
-    ring_starts = np.empty(n_roots + 1, np.int64)  # each ring is traced as one object
-    ring_levels = np.empty(n_roots, np.int64)
+    cap = 1024
+    ring_starts = np.empty(cap + 1, np.int64)  # grown as needed: rings are few next to pixels
+    ring_levels = np.empty(cap, np.int64)
     n_path = 0
     n_rings = 0
     tool = -1
@@ -218,6 +208,7 @@ def trace_layers_kernel(layer_flat, wp, offsets):
                 s = order[lo]
                 first_ring = False
             else:
+                # the ring of the untraced pixel nearest the tool (ties: first in scan order)
                 best = np.int64(1) << 62
                 s = -1
                 tr = tool // wp
@@ -231,17 +222,26 @@ def trace_layers_kernel(layer_flat, wp, offsets):
                         if d2 < best:
                             best = d2
                             s = p
-            ring = _find(parent, s)
+            if n_rings == cap:
+                cap *= 2
+                grown_s = np.empty(cap + 1, np.int64)
+                grown_s[:n_rings] = ring_starts[:n_rings]
+                grown_l = np.empty(cap, np.int64)
+                grown_l[:n_rings] = ring_levels[:n_rings]
+                ring_starts, ring_levels = grown_s, grown_l
             ring_starts[n_rings] = n_path
             ring_levels[n_rings] = k
             n_rings += 1
+            ring = n_rings
+            flooded = False
+            ring_left = 0
             cur = s
             while True:
                 untraced[cur] = 0
                 path[n_path] = cur
                 n_path += 1
                 remaining -= 1
-                ring_left[ring] -= 1
+                ring_left -= 1
                 # greedy walk in the Figure 4.15 order, within this layer
                 while True:
                     moved = False
@@ -252,31 +252,34 @@ def trace_layers_kernel(layer_flat, wp, offsets):
                             path[n_path] = q
                             n_path += 1
                             remaining -= 1
-                            ring_left[ring] -= 1
+                            ring_left -= 1
                             cur = q
                             moved = True
                             break
                     if not moved:
                         break
-                # pixels of this ring left behind: go on from the one nearest the tool
-                if ring_left[ring] == 0:
+                if remaining == 0:
                     break
+                if not flooded:
+                    ring_left = _flood_ring(layer_flat, untraced, ring_of, s, k, ring, wp, stack)
+                    flooded = True
+                if ring_left == 0:
+                    break
+                # pixels of this ring left behind: go on from the one nearest the tool
                 best = np.int64(1) << 62
                 nxt = -1
                 cr = cur // wp
                 cc = cur % wp
                 for t in range(lo, hi):
                     p = order[t]
-                    if untraced[p] != 0 and _find(parent, p) == ring:
+                    if untraced[p] != 0 and ring_of[p] == ring:
                         dr = p // wp - cr
                         dc = p % wp - cc
                         d2 = dr * dr + dc * dc
                         if d2 < best:
                             best = d2
                             nxt = p
-                if nxt < 0:
-                    break
                 cur = nxt
             tool = cur
     ring_starts[n_rings] = n_path
-    return path[:n_path], ring_starts[: n_rings + 1], ring_levels[:n_rings]
+    return path[:n_path], ring_starts[: n_rings + 1].copy(), ring_levels[:n_rings].copy()
