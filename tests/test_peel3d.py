@@ -139,3 +139,42 @@ def test_compiled_ring_tracer_equals_reference():
     b, lb = trace_layers_reference(layer)
     assert np.array_equal(la, lb) and len(a) == len(b)
     assert all(np.array_equal(x, y) for x, y in zip(a, b))
+
+
+def _blobs(seed: int, shape=(80, 110)) -> np.ndarray:
+    """Classes of a random 3D drawing: filled ellipses (some nested, some with holes) with black rims."""
+    import cv2
+
+    rng = np.random.default_rng(seed)
+    mask = np.zeros(shape, np.uint8)
+    for _ in range(6):
+        c = (int(rng.integers(10, shape[1] - 10)), int(rng.integers(10, shape[0] - 10)))
+        ax = (int(rng.integers(3, 25)), int(rng.integers(3, 20)))
+        cv2.ellipse(mask, c, ax, float(rng.uniform(0, 180)), 0, 360, int(rng.integers(0, 2)), -1)
+    mask[:2] = mask[-2:] = 0
+    mask[:, :2] = mask[:, -2:] = 0
+    inner = cv2.erode(mask, np.array([[0, 1, 0], [1, 1, 1], [0, 1, 0]], np.uint8))
+    classes = np.where(mask > 0, RED, WHITE).astype(np.uint8)
+    classes[(mask > 0) & (inner == 0)] = BLACK
+    return classes
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_compiled_peel_equals_the_checked_peel(seed):
+    from cam.digitize.peel3d import peel_layers_padded
+
+    classes = _blobs(seed)
+    padded = peel_layers_padded(classes)
+    assert padded.shape == (classes.shape[0] + 2, classes.shape[1] + 2)
+    assert not padded[0].any() and not padded[-1].any() and not padded[:, 0].any() and not padded[:, -1].any()
+    assert np.array_equal(padded[1:-1, 1:-1], peel_layers(classes))
+
+
+def test_compiled_peel_falls_back_to_the_named_errors():
+    from cam.digitize.peel3d import peel_layers_padded
+
+    classes = _blobs(3)
+    r, c = np.argwhere(classes == BLACK)[0]
+    classes[r, c] = WHITE  # a gap in the rim: red now touches white
+    with pytest.raises(cam.DrawingError, match=r"open: red pixel"):
+        peel_layers_padded(classes)

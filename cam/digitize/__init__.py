@@ -9,7 +9,7 @@ import numpy as np
 from ..digitized import Digitized
 from ..drawing import BLACK, Drawing, load_image
 from ..errors import DrawingError
-from .peel3d import peel_layers, trace_layers
+from .peel3d import peel_layers, peel_layers_padded, trace_layers, trace_padded
 from .trace2d import START_RULES, trace_curves
 
 __all__ = ["digitize", "START_RULES"]
@@ -55,8 +55,7 @@ def digitize(drawing: Drawing | np.ndarray | str, *, start: str = "top") -> Digi
     if kind == "profile":
         raise DrawingError(f"{drawing.source}: this is a profile drawing (blue curve); use it with --profile")
     if kind == "3d":
-        layer = peel_layers(drawing.classes, source=drawing.source)
-        objects, levels = trace_layers(layer)
+        objects, levels = trace_padded(peel_layers_padded(drawing.classes, source=drawing.source))
         warnings = list(drawing.warnings)
         return Digitized("3d", drawing.width_px, drawing.height_px, objects, levels, warnings)
     objects = trace_curves(drawing.classes, start=start, value=BLACK)

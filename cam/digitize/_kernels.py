@@ -157,13 +157,15 @@ def _flood_ring(layer_flat, untraced, ring_of, start, k, ring, wp, stack):
 
 
 @njit(cache=True)
-def trace_layers_kernel(layer_flat, wp, offsets):
+def trace_layers_kernel(layer_flat, wp, offsets, drow, dcol):
     """Trace every layer of a padded, flattened layer map into rings (see :mod:`.peel3d`).
 
     A ring's extent (its 8-connected piece of the layer) is found by a flood fill only when a
     walk stops with pixels of its layer left over; most rings are traced in one walk.
 
-    Returns ``(path, ring_starts, ring_levels)``.
+    Returns ``(xy, ring_starts, ring_levels)``: ``xy`` the ``(n, 2)`` int32 (x, y) image pixels
+    (unpadded) in path order; ``offsets``/``drow``/``dcol`` give each neighbour as a flat offset
+    and as (row, column) steps, so a pixel's row and column are carried along the walk.
     """
     size = layer_flat.shape[0]
     n_layers = 0
@@ -189,7 +191,7 @@ def trace_layers_kernel(layer_flat, wp, offsets):
             untraced[i] = 1
     ring_of = np.zeros(size, np.int32)  # flood-fill marks, by ring number (from 1)
     stack = np.empty(n_px + 1, np.int32)
-    path = np.empty(n_px, np.int32)
+    xy = np.empty((n_px, 2), np.int32)
     cap = 1024
     ring_starts = np.empty(cap + 1, np.int64)  # grown as needed: rings are few next to pixels
     ring_levels = np.empty(cap, np.int64)
@@ -236,9 +238,12 @@ def trace_layers_kernel(layer_flat, wp, offsets):
             flooded = False
             ring_left = 0
             cur = s
+            cr = cur // wp
+            cc = cur % wp
             while True:
                 untraced[cur] = 0
-                path[n_path] = cur
+                xy[n_path, 0] = cc - 1
+                xy[n_path, 1] = cr - 1
                 n_path += 1
                 remaining -= 1
                 ring_left -= 1
@@ -249,7 +254,10 @@ def trace_layers_kernel(layer_flat, wp, offsets):
                         q = cur + offsets[j]
                         if untraced[q] != 0 and layer_flat[q] == k:
                             untraced[q] = 0
-                            path[n_path] = q
+                            cr += drow[j]
+                            cc += dcol[j]
+                            xy[n_path, 0] = cc - 1
+                            xy[n_path, 1] = cr - 1
                             n_path += 1
                             remaining -= 1
                             ring_left -= 1
@@ -268,8 +276,6 @@ def trace_layers_kernel(layer_flat, wp, offsets):
                 # pixels of this ring left behind: go on from the one nearest the tool
                 best = np.int64(1) << 62
                 nxt = -1
-                cr = cur // wp
-                cc = cur % wp
                 for t in range(lo, hi):
                     p = order[t]
                     if untraced[p] != 0 and ring_of[p] == ring:
@@ -280,6 +286,75 @@ def trace_layers_kernel(layer_flat, wp, offsets):
                             best = d2
                             nxt = p
                 cur = nxt
+                cr = cur // wp
+                cc = cur % wp
             tool = cur
     ring_starts[n_rings] = n_path
-    return path[:n_path], ring_starts[: n_rings + 1].copy(), ring_levels[:n_rings].copy()
+    return xy, ring_starts[: n_rings + 1].copy(), ring_levels[:n_rings].copy()
+
+
+@njit(cache=True)
+def peel_padded_kernel(classes, black, red, white):
+    """Layer numbers of a 3D drawing, padded by one pixel, in two chamfer passes (see :mod:`.peel3d`).
+
+    Layer k+1 of a red pixel is 1 + its exact 4-neighbour (L1) distance to the nearest black pixel,
+    found by a forward and a backward chamfer pass; black is layer 1, anything else 0.
+
+    Returns ``(padded, suspect)``: the ``(H + 2, W + 2)`` int32 layer map, and True when some red
+    pixel touches white, the image border or a pixel of another class -- then the caller runs the
+    checks that name the offending pixel (the result is not used).
+    """
+    h, w = classes.shape
+    big = np.int32(1 << 30)
+    padded = np.zeros((h + 2, w + 2), np.int32)
+    suspect = False
+    # forward pass: distance from black above / to the left; also look for red next to non-red non-black
+    for r in range(h):
+        for c in range(w):
+            v = classes[r, c]
+            if v == black:
+                padded[r + 1, c + 1] = 0
+            elif v == red:
+                if r == 0 or c == 0 or r == h - 1 or c == w - 1:
+                    suspect = True
+                else:
+                    for n in (classes[r - 1, c], classes[r + 1, c], classes[r, c - 1], classes[r, c + 1]):
+                        if n != black and n != red:
+                            suspect = True
+                d = big
+                if r > 0:
+                    u = padded[r, c + 1] + 1
+                    if u < d:
+                        d = u
+                if c > 0:
+                    u = padded[r + 1, c] + 1
+                    if u < d:
+                        d = u
+                padded[r + 1, c + 1] = d
+            else:
+                padded[r + 1, c + 1] = big
+    # backward pass, then layer numbers: black 1, red distance + 1, others 0
+    for r in range(h - 1, -1, -1):
+        for c in range(w - 1, -1, -1):
+            d = padded[r + 1, c + 1]
+            v = classes[r, c]
+            if v == red:
+                if r < h - 1:
+                    u = padded[r + 2, c + 1] + 1
+                    if u < d:
+                        d = u
+                if c < w - 1:
+                    u = padded[r + 1, c + 2] + 1
+                    if u < d:
+                        d = u
+                padded[r + 1, c + 1] = d
+    for r in range(h):
+        for c in range(w):
+            v = classes[r, c]
+            if v == black:
+                padded[r + 1, c + 1] = 1
+            elif v == red:
+                padded[r + 1, c + 1] += 1
+            else:
+                padded[r + 1, c + 1] = 0
+    return padded, suspect

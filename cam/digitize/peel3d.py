@@ -29,7 +29,7 @@ import numpy as np
 from ..drawing import BLACK, RED, WHITE
 from ..errors import DrawingError
 
-__all__ = ["peel_layers", "trace_layers", "trace_layers_reference", "NEIGHBOURS_3D"]
+__all__ = ["peel_layers", "peel_layers_padded", "trace_layers", "trace_padded", "trace_layers_reference", "NEIGHBOURS_3D"]
 
 NEIGHBOURS_3D = ((-1, 0), (0, 1), (1, 0), (0, -1), (1, 1), (-1, 1), (-1, -1), (1, -1))
 """(drow, dcol) in the scan order of Figure 4.15: N, E, S, W, SE, NE, NW, SW."""
@@ -82,6 +82,21 @@ def peel_layers(classes: np.ndarray, *, source: str = "<array>") -> np.ndarray:
     return layer
 
 
+def peel_layers_padded(classes: np.ndarray, *, source: str = "<array>") -> np.ndarray:
+    """:func:`peel_layers` with a one-pixel border of zeros: ``(H + 2, W + 2)`` int32.
+
+    One compiled pass (two chamfer sweeps) when every red pixel lies inside the image and touches
+    only black or red; otherwise the checks of :func:`peel_layers` run and name the bad pixel.
+    """
+    from ._kernels import peel_padded_kernel
+
+    padded, suspect = peel_padded_kernel(np.ascontiguousarray(classes, np.uint8), BLACK, RED, WHITE)
+    if suspect:
+        padded = np.zeros((classes.shape[0] + 2, classes.shape[1] + 2), np.int32)
+        padded[1:-1, 1:-1] = peel_layers(classes, source=source)
+    return padded
+
+
 def _trace_ring(
     flat: bytearray, ring_idx: np.ndarray, start: int, offsets: tuple[int, ...], wp: int
 ) -> tuple[list[int], int]:
@@ -115,17 +130,21 @@ def _trace_ring(
 
 def trace_layers(layer: np.ndarray) -> tuple[list[np.ndarray], np.ndarray]:
     """Trace every layer into rings (compiled; the same result as :func:`trace_layers_reference`)."""
+    h, w = layer.shape
+    padded = np.zeros((h + 2, w + 2), np.int32)
+    padded[1:-1, 1:-1] = layer
+    return trace_padded(padded)
+
+
+def trace_padded(padded: np.ndarray) -> tuple[list[np.ndarray], np.ndarray]:
+    """:func:`trace_layers` of a layer map already padded by one pixel of zeros (``(H + 2, W + 2)``)."""
     from ._kernels import trace_layers_kernel
 
-    h, w = layer.shape
-    wp = w + 2
-    padded = np.zeros((h + 2, wp), np.int32)
-    padded[1:-1, 1:-1] = layer
+    wp = padded.shape[1]
     offsets = np.array([dr * wp + dc for dr, dc in NEIGHBOURS_3D], np.int64)
-    path, starts, levels = trace_layers_kernel(padded.ravel(), wp, offsets)
-    xy = np.empty((len(path), 2), np.int32)
-    xy[:, 0] = path % wp - 1
-    xy[:, 1] = path // wp - 1
+    drow = np.array([dr for dr, _ in NEIGHBOURS_3D], np.int64)
+    dcol = np.array([dc for _, dc in NEIGHBOURS_3D], np.int64)
+    xy, starts, levels = trace_layers_kernel(padded.ravel(), wp, offsets, drow, dcol)
     return [xy[a:b] for a, b in zip(starts[:-1], starts[1:])], levels.astype(np.int32)
 
 
