@@ -146,6 +146,10 @@ def _drill_excellon(args: argparse.Namespace) -> int:
 
     holes = _load_drill_file(args)
     settings = _settings(args)
+    if args.port.startswith("maximus:") and not args.machine:
+        from .drive.maximus import MAXIMUS_SETTINGS
+
+        settings = MAXIMUS_SETTINGS  # the board's own resolution and 16-bit travel, unless --machine says else
     dp = plan_drill(holes, settings=settings, depth_mm=args.drill_depth, safe_height_mm=args.travel_height,
                     offset_mm=tuple(args.offset) if args.offset else None, mirror_x=args.mirror_x,
                     order=args.drill_order)
@@ -164,7 +168,7 @@ def _drill_excellon(args: argparse.Namespace) -> int:
 
 
 def _drill_maximus(args: argparse.Namespace, dp, settings: MachineSettings, summary: str) -> int:
-    from .drive.maximus import MaximusBoard
+    from .drive.maximus import MaximusBoard, maximus_holes
 
     depth_steps = int(round(args.drill_depth / settings.mm_per_step_z))
     changes, start = [], 0
@@ -183,7 +187,7 @@ def _drill_maximus(args: argparse.Namespace, dp, settings: MachineSettings, summ
     signal.signal(signal.SIGINT, lambda *a: board.emergency_stop())
     t0 = time.monotonic()
     try:
-        board.drill(dp.holes_steps, depth_steps=depth_steps, tool_changes=changes, on_tool_change=on_tool_change)
+        board.drill(maximus_holes(dp.holes_steps), depth_steps=depth_steps, tool_changes=changes, on_tool_change=on_tool_change)
     finally:
         signal.signal(signal.SIGINT, previous)
         board.close()

@@ -36,6 +36,7 @@ from typing import Callable, Sequence
 import numpy as np
 
 from ..errors import PlanError, PortError
+from ..settings import DEFAULT_SETTINGS, Travel
 from .maximus_emulator import (
     ATOFFSETPOS, BANNER, BAUD_RATE, BYTE_NAMES, DRILLMODE1DONE, DRILLMODE1INITIALIZED, DRILLMODE1ON,
     EMERGENCYSTOP, ISMACHINEREADY, JOGMODEDONE, JOGMODEOFF, JOGMODEON, MACHINEREADY, MACHINESTOPPED,
@@ -43,12 +44,39 @@ from .maximus_emulator import (
 )
 
 __all__ = [
-    "MaximusBoard", "open_maximus", "URL_PREFIX",
+    "MaximusBoard", "open_maximus", "URL_PREFIX", "MAXIMUS_SETTINGS", "maximus_holes",
     "jog_packet", "jog_exit_packet", "offset_packet", "init_packet", "start_drill_packet",
     "drill_packet", "close_drill_packet", "drill_moves",
 ]
 
 URL_PREFIX = "maximus:"
+MAX_FIELD_PULSES = 0xFFFF
+
+MAXIMUS_SETTINGS = DEFAULT_SETTINGS.replace(
+    steps_per_px_xy=1,
+    steps_per_px_z=1,
+    # one L297 clock pulse moves an axis by the "theoretical resolution of 4.375 microns" of seed 000
+    # section 9 (12 mm lead screws, section 3; half steps, as the MODE bits select)
+    mm_per_step_xy=0.004375,
+    mm_per_step_z=0.004375,
+    half_step=True,
+    # the protocol's step fields are 16 bits (seed 000 Appendix 1, make16): no move beyond 65535 pulses
+    travel=Travel(x_min_steps=0, x_max_steps=MAX_FIELD_PULSES, y_min_steps=0, y_max_steps=MAX_FIELD_PULSES,
+                  z_min_steps=-MAX_FIELD_PULSES, z_max_steps=MAX_FIELD_PULSES),
+)
+"""The MAXIMUS machine: one "step" is one L297 clock pulse (a half step)."""
+
+
+def maximus_holes(holes_steps: np.ndarray) -> np.ndarray:
+    """Holes of a drill plan in the board's own pulses: ``(N, 2)`` int64 (x, y) with y up.
+
+    :func:`cam.drilljob.plan_drill` gives machine (x, y) with y toward the operator (image rows,
+    y = -Y of the drill file); the firmware counts Y up (DIR_Y = 1 is "Y up" in the PC program of
+    seed 000 Appendix 2), so y changes sign and the board keeps its handedness.
+    """
+    xy = np.asarray(holes_steps, np.int64).copy()
+    xy[:, 1] = -xy[:, 1]
+    return xy
 MAX_FIELD = 0xFFFF  # 16-bit step fields (seed 000, Appendix 1: make16(high, low))
 DEFAULT_DELAY = 10  # 10 * 100 us half period: 500 pulses/s
 _AXES = {"x": 1, "y": 2, "z": 3}  # Jog configuration bits 7-6: 01 = X, 10 = Y, 11 = Z (Appendix 1 JOG_DATA_INPUT)
