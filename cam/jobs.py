@@ -1,0 +1,554 @@
+"""A file and its options, to a job ready to run: one entry point for every job kind.
+
+The CLI and the web server are thin adapters over :func:`prepare_job`::
+
+    job = prepare_job("gear.png", JobOptions(depth=(4,)))
+    job.steps              # the StepPlan: every port write, timed
+    job.kind               # "drawing", "digitized", "gcode", "excellon" or "hpgl"
+    job.size_mm, job.estimated_time_s, job.warnings, job.tool_changes
+    job.preview_png()      # PNG bytes of the toolpath picture
+
+The kind comes from the file name's suffix (:func:`job_kind`); an unknown
+suffix is a :class:`~cam.errors.CamError` naming the file and the accepted
+types.  Every job is planned relative to where the tool stands when it
+starts (the job's home, (0, 0, 0) in machine steps); :attr:`PreparedJob.extent_steps`
+says how far it reaches from there, so a caller that knows where the tool
+stands can check the job against the machine travel before it starts.
+"""
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+from typing import Any, Mapping, Optional
+
+import numpy as np
+
+from .errors import CamError
+from .settings import DEFAULT_SETTINGS, MachineSettings
+
+__all__ = [
+    "JobOptions", "PreparedJob", "prepare_job", "job_kind", "accepted_suffixes", "KINDS",
+    "DRAWING_SUFFIXES", "DIGITIZED_SUFFIXES", "EXCELLON_SUFFIXES", "HPGL_SUFFIXES", "PROFILE_SUFFIXES",
+]
+
+KINDS = ("drawing", "digitized", "gcode", "excellon", "hpgl")
+DRAWING_SUFFIXES = (".png", ".bmp", ".jpg", ".jpeg", ".tif", ".tiff")
+DIGITIZED_SUFFIXES = (".txt", ".dig")
+EXCELLON_SUFFIXES = (".drl", ".xln", ".exc", ".drd")
+HPGL_SUFFIXES = (".plt", ".hpgl", ".hpg")
+PROFILE_SUFFIXES = DRAWING_SUFFIXES + (".csv", ".txt")
+"""Files a depth profile may come from (a profile drawing or a CSV of depths)."""
+
+
+def _gcode_suffixes() -> tuple[str, ...]:
+    from .gcode_in import GCODE_SUFFIXES
+
+    return tuple(GCODE_SUFFIXES)
+
+
+def accepted_suffixes() -> dict[str, tuple[str, ...]]:
+    """File name suffixes of each job kind (lower case, with the dot)."""
+    return {
+        "drawing": DRAWING_SUFFIXES,
+        "digitized": DIGITIZED_SUFFIXES,
+        "gcode": _gcode_suffixes(),
+        "excellon": EXCELLON_SUFFIXES,
+        "hpgl": HPGL_SUFFIXES,
+    }
+
+
+def job_kind(path: str | os.PathLike) -> str:
+    """The job kind of a file, from its suffix.
+
+    >>> job_kind("board.DRL"), job_kind("part.ngc"), job_kind("gear.png")
+    ('excellon', 'gcode', 'drawing')
+
+    Raises:
+        CamError: unknown suffix (the message names the file and the accepted types).
+    """
+    suffix = Path(path).suffix.lower()
+    for kind, suffixes in accepted_suffixes().items():
+        if suffix in suffixes:
+            return kind
+    listed = "; ".join(f"{k} {' '.join(v)}" for k, v in accepted_suffixes().items())
+    raise CamError(f"{Path(path).name}: unknown file type '{suffix or '(none)'}' (accepted: {listed})")
+
+
+@dataclass(frozen=True)
+class JobOptions:
+    """How to cut a file.  Each kind uses the options that apply to it and ignores the rest.
+
+    Drawings and digitized matrices (pixel units):
+        depth: Z pixels below the surface, one value for every object or one per object.
+        passes: cut in this many passes of increasing depth (Repeat Drill).
+        start: where each 2D object starts, "top" or "min-distance".
+        start_at: ``(x, y, z)`` pixel offset of the whole job (Start At).
+        pause_at: drawing points ``(x, y)`` where the job pauses (Pause At).
+        profile: path of a profile drawing or CSV (3D drawings); profile_expr: or an expression in k and n.
+    Excellon drill files (mm):
+        drill_depth_mm, travel_height_mm, offset_mm (board origin from the job home; None = top-left
+        hole extent at the home), mirror_x, drill_order ("tour" or "file"), excellon_units
+        ("inch"/"metric"), excellon_digits ``(integer, fraction)``, excellon_zeros ("LZ"/"TZ") for
+        files that do not say.
+    G-code and HPGL:
+        flip_y: G-code machine Y = +Y mm instead of -Y mm; depth_mm / travel_height_mm: HPGL pen-down
+        depth and pen-up height.
+    """
+
+    depth: tuple[int, ...] = (10,)
+    passes: int = 1
+    start: str = "top"
+    start_at: tuple[int, int, int] = (0, 0, 0)
+    pause_at: tuple[tuple[int, int], ...] = ()
+    profile: Optional[str] = None
+    profile_expr: Optional[str] = None
+    drill_depth_mm: float = 2.0
+    travel_height_mm: float = 1.0
+    offset_mm: Optional[tuple[float, float]] = None
+    mirror_x: bool = False
+    drill_order: str = "tour"
+    excellon_units: Optional[str] = None
+    excellon_digits: Optional[tuple[int, int]] = None
+    excellon_zeros: Optional[str] = None
+    flip_y: bool = False
+    depth_mm: float = 0.5
+
+    @classmethod
+    def from_mapping(cls, values: Mapping[str, Any], source: str = "options") -> "JobOptions":
+        """Options from a JSON-like mapping (numbers, strings, lists, booleans), checked.
+
+        Numbers may also be given as text (``"3"``, ``"3,4"`` for lists), as form fields send them.
+
+        >>> JobOptions.from_mapping({"depth": "3,4", "passes": 2}).depth
+        (3, 4)
+
+        Raises:
+            CamError: an unknown key or a bad value, naming the option.
+        """
+        if not isinstance(values, Mapping):
+            raise CamError(f"{source}: options must be an object of name: value")
+        known = {f.name for f in fields(cls)}
+        out: dict[str, Any] = {}
+        for key, value in values.items():
+            if key not in known:
+                raise CamError(f"{source}: unknown option '{key}' (known: {', '.join(sorted(known))})")
+            parse = _PARSERS[key]
+            try:
+                out[key] = parse(value)
+            except (TypeError, ValueError) as exc:
+                raise CamError(f"{source}: option '{key}' {exc}, got {value!r}") from None
+        return cls(**out).checked(source)
+
+    def checked(self, source: str = "options") -> "JobOptions":
+        """Range checks; returns self.  Raises CamError naming the option."""
+        def bad(key: str, why: str) -> CamError:
+            return CamError(f"{source}: option '{key}' {why}, got {getattr(self, key)!r}")
+
+        if not self.depth or any(d < 0 for d in self.depth):
+            raise bad("depth", "must be Z pixels >= 0")
+        if not (1 <= self.passes <= 1000):
+            raise bad("passes", "must be 1..1000")
+        if self.start not in ("top", "min-distance"):
+            raise bad("start", "must be 'top' or 'min-distance'")
+        if self.drill_order not in ("tour", "file"):
+            raise bad("drill_order", "must be 'tour' or 'file'")
+        if not (self.drill_depth_mm > 0):
+            raise bad("drill_depth_mm", "must be > 0 mm")
+        if not (self.travel_height_mm >= 0):
+            raise bad("travel_height_mm", "must be >= 0 mm")
+        if not (self.depth_mm >= 0):
+            raise bad("depth_mm", "must be >= 0 mm")
+        if self.excellon_units not in (None, "inch", "metric"):
+            raise bad("excellon_units", "must be 'inch' or 'metric'")
+        if self.excellon_zeros not in (None, "LZ", "TZ"):
+            raise bad("excellon_zeros", "must be 'LZ' or 'TZ'")
+        if self.excellon_digits is not None and not all(0 <= v <= 8 for v in self.excellon_digits):
+            raise bad("excellon_digits", "must be two digit counts 0..8")
+        if self.profile is not None and self.profile_expr is not None:
+            raise bad("profile_expr", "cannot be given together with a profile file")
+        return self
+
+
+def _int(value: Any) -> int:
+    if isinstance(value, bool):
+        raise ValueError("must be a whole number")
+    if isinstance(value, int):
+        return value
+    if isinstance(value, float) and value.is_integer():
+        return int(value)
+    if isinstance(value, str):
+        try:
+            return int(value.strip())
+        except ValueError:
+            pass
+    raise ValueError("must be a whole number")
+
+
+def _float(value: Any) -> float:
+    if isinstance(value, bool):
+        raise ValueError("must be a number")
+    try:
+        out = float(value.strip() if isinstance(value, str) else value)
+    except (TypeError, ValueError):
+        raise ValueError("must be a number") from None
+    if not math.isfinite(out):
+        raise ValueError("must be a finite number")
+    return out
+
+
+def _bool(value: Any) -> bool:
+    if isinstance(value, bool):
+        return value
+    if value in ("true", "1", 1, "on", "yes"):
+        return True
+    if value in ("false", "0", 0, "off", "no", "", None):
+        return False
+    raise ValueError("must be true or false")
+
+
+def _items(value: Any) -> list[Any]:
+    if isinstance(value, str):
+        return [v for v in value.replace(";", ",").split(",") if v.strip()]
+    if isinstance(value, (list, tuple)):
+        return list(value)
+    return [value]
+
+
+def _ints(n: Optional[int]):
+    def parse(value: Any) -> tuple[int, ...]:
+        out = tuple(_int(v) for v in _items(value))
+        if n is not None and len(out) != n:
+            raise ValueError(f"takes {n} whole numbers")
+        if not out:
+            raise ValueError("takes at least one whole number")
+        return out
+
+    return parse
+
+
+def _floats(n: int):
+    def parse(value: Any) -> tuple[float, ...]:
+        out = tuple(_float(v) for v in _items(value))
+        if len(out) != n:
+            raise ValueError(f"takes {n} numbers")
+        return out
+
+    return parse
+
+
+def _optional(parse):
+    def wrapped(value: Any) -> Any:
+        if value is None or (isinstance(value, str) and not value.strip()):
+            return None
+        return parse(value)
+
+    return wrapped
+
+
+def _text(value: Any) -> str:
+    if not isinstance(value, str):
+        raise ValueError("must be text")
+    return value.strip()
+
+
+def _points(value: Any) -> tuple[tuple[int, int], ...]:
+    if isinstance(value, str):
+        groups = [g for g in value.replace(";", " ").split() if g]
+        return tuple(_ints(2)(g) for g in groups)  # type: ignore[misc]
+    if isinstance(value, (list, tuple)):
+        return tuple(_ints(2)(p) for p in value)  # type: ignore[misc]
+    raise ValueError("must be a list of x,y points")
+
+
+_PARSERS = {
+    "depth": _ints(None),
+    "passes": _int,
+    "start": _text,
+    "start_at": _ints(3),
+    "pause_at": _points,
+    "profile": _optional(_text),
+    "profile_expr": _optional(_text),
+    "drill_depth_mm": _float,
+    "travel_height_mm": _float,
+    "offset_mm": _optional(_floats(2)),
+    "mirror_x": _bool,
+    "drill_order": _text,
+    "excellon_units": _optional(_text),
+    "excellon_digits": _optional(_ints(2)),
+    "excellon_zeros": _optional(lambda v: _text(v).upper()),
+    "flip_y": _bool,
+    "depth_mm": _float,
+}
+
+
+@dataclass
+class PreparedJob:
+    """A job ready to run.
+
+    Attributes:
+        source: the file it came from; kind: one of :data:`KINDS`.
+        steps: the :class:`~cam.drive.StepPlan` (machine frame, steps from the job home).
+        settings: the machine settings of ``steps``.
+        toolpath: the :class:`~cam.toolpath.Toolpath` when the kind has one (not G-code).
+        size_mm: ``(width, height)`` of what is cut (XY extent of the tool below the surface), mm.
+        depth_mm: deepest cut below the surface, mm.
+        extent_steps: ``(3, 2)`` int64 min and max machine position (x, y, z) in steps the job
+            reaches, relative to where it starts.
+        estimated_time_s: machine time without pauses.
+        warnings: planning and parsing warnings; tool_changes: what each pause of the job is for.
+        summary: one line saying what the job is.
+        report: JSON-able job report.
+    """
+
+    source: str
+    kind: str
+    steps: Any
+    settings: MachineSettings
+    toolpath: Any = None
+    size_mm: tuple[float, float] = (0.0, 0.0)
+    depth_mm: float = 0.0
+    extent_steps: np.ndarray = field(default_factory=lambda: np.zeros((3, 2), np.int64))
+    estimated_time_s: float = 0.0
+    warnings: list[str] = field(default_factory=list)
+    tool_changes: list[str] = field(default_factory=list)
+    summary: str = ""
+    report: dict[str, Any] = field(default_factory=dict)
+    drawing_rgb: Optional[np.ndarray] = None
+
+    def positions_steps(self) -> np.ndarray:
+        """``(M, 3)`` int64 machine position (x, y, z) in steps after each write of the plan."""
+        from .drive.pinlog import PinLog, decode_pin_log
+
+        plan = self.steps
+        return decode_pin_log(PinLog(plan.t_ns, plan.data, plan.strobe), self.settings).position_steps
+
+    def preview_picture(self) -> np.ndarray:
+        """The preview as an ``(H, W, 3)`` uint8 RGB array (see :mod:`cam.picture`)."""
+        if self.kind in ("drawing", "digitized"):
+            from .picture import toolpath_picture
+
+            return toolpath_picture(self.toolpath, drawing_rgb=self.drawing_rgb,
+                                    estimated_time_s=self.estimated_time_s)
+        return motion_picture(self.positions_steps(), self.settings, legend=self._legend(),
+                              holes=self.kind == "excellon")
+
+    def preview_png(self) -> bytes:
+        """PNG bytes of :meth:`preview_picture`."""
+        from .picture import encode_png
+
+        return encode_png(self.preview_picture())
+
+    def _legend(self) -> str:
+        m, s = divmod(int(round(self.estimated_time_s)), 60)
+        return (f"{self.size_mm[0]:.1f} x {self.size_mm[1]:.1f} mm   depth {self.depth_mm:.2f} mm   "
+                f"time {m // 60}:{m % 60:02d}:{s:02d}")
+
+
+def motion_picture(
+    positions_steps: np.ndarray, settings: MachineSettings, *, legend: str = "", holes: bool = False,
+    target_px: int = 800,
+) -> np.ndarray:
+    """Picture of decoded motion, seen from above, as an ``(H, W, 3)`` uint8 RGB array.
+
+    Args:
+        positions_steps: ``(M, 3)`` machine positions in steps (x right, y down the picture, +z deeper).
+        settings: for mm per step (X and Y are drawn to the same mm scale).
+        legend: text under the picture; holes: mark each plunge with a ring (drill jobs).
+        target_px: the longer side of the drawing area in picture pixels.
+
+    Moves with the tool below the surface (z > 0) are drawn coloured by depth
+    (shallow yellow to deep purple), moves above it in thin grey.
+    """
+    import cv2
+
+    from .picture import LEGEND_PX, depth_colours
+
+    p = np.vstack([np.zeros((1, 3), np.int64), np.asarray(positions_steps, np.int64).reshape(-1, 3)])
+    lo = p[:, :2].min(axis=0)
+    span = np.maximum(1, p[:, :2].max(axis=0) - lo)
+    margin = 12
+    k = (target_px - 2 * margin) / float(span.max())
+    xy = np.rint((p[:, :2] - lo) * k).astype(np.int64) + margin
+    z = p[:, 2]
+    keep = np.ones(len(p), bool)
+    keep[1:] = np.any(xy[1:] != xy[:-1], axis=1) | (z[1:] != z[:-1])
+    keep[-1] = True
+    xy, z = xy[keep], z[keep]
+    w = int(xy[:, 0].max()) + margin + 1
+    h = int(xy[:, 1].max()) + margin + 1
+    img = np.full((h + LEGEND_PX, max(w, 420), 3), 255, np.uint8)
+    zmax = max(1, int(z.max()))
+    cols = depth_colours(np.maximum(z, 0), zmax)
+    below = (z[1:] > 0) & (z[:-1] > 0)
+    for i in np.flatnonzero(~below):
+        a, b = tuple(int(v) for v in xy[i]), tuple(int(v) for v in xy[i + 1])
+        if a != b:
+            cv2.line(img, a, b, (170, 170, 170), 1, cv2.LINE_AA)
+    for i in np.flatnonzero(below):
+        a, b = tuple(int(v) for v in xy[i]), tuple(int(v) for v in xy[i + 1])
+        cv2.line(img, a, b, tuple(int(v) for v in cols[i + 1]), 2, cv2.LINE_8)
+    if holes:
+        deepest = np.flatnonzero((z > 0) & (np.r_[z[1:], 0] < z) & (np.r_[0, z[:-1]] <= z))
+        for i in deepest:
+            cv2.circle(img, (int(xy[i, 0]), int(xy[i, 1])), 5, tuple(int(v) for v in cols[i]), 2, cv2.LINE_AA)
+    cv2.circle(img, (int(xy[0, 0]), int(xy[0, 1])), 6, (0, 170, 0), 2)
+    img[h:] = 245
+    cv2.putText(img, legend, (6, h + 18), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (0, 0, 0), 1, cv2.LINE_AA)
+    cv2.putText(img, "start/home", (6, h + 36), cv2.FONT_HERSHEY_SIMPLEX, 0.4, (0, 170, 0), 1, cv2.LINE_AA)
+    cv2.putText(img, "grey: above the surface", (100, h + 36), cv2.FONT_HERSHEY_SIMPLEX, 0.4, (120, 120, 120), 1,
+                cv2.LINE_AA)
+    return img
+
+
+def _cut_extent(positions_steps: np.ndarray, settings: MachineSettings) -> tuple[tuple[float, float], float]:
+    """((width_mm, height_mm), depth_mm) of the positions below the surface (all positions if none)."""
+    p = positions_steps
+    if len(p) == 0:
+        return (0.0, 0.0), 0.0
+    cut = p[p[:, 2] > 0]
+    use = cut if len(cut) else p
+    span = use[:, :2].max(axis=0) - use[:, :2].min(axis=0)
+    depth = max(0, int(p[:, 2].max()))
+    return ((round(float(span[0]) * settings.mm_per_step_xy, 3), round(float(span[1]) * settings.mm_per_step_xy, 3)),
+            round(depth * settings.mm_per_step_z, 4))
+
+
+def _extent(positions_steps: np.ndarray) -> np.ndarray:
+    p = np.vstack([np.zeros((1, 3), np.int64), positions_steps])
+    return np.column_stack([p.min(axis=0), p.max(axis=0)]).astype(np.int64)
+
+
+def _finish(job: PreparedJob) -> PreparedJob:
+    """Fill the fields every kind computes the same way from the step plan."""
+    positions = job.positions_steps()
+    job.extent_steps = _extent(positions)
+    if job.size_mm == (0.0, 0.0):
+        job.size_mm, job.depth_mm = _cut_extent(positions, job.settings)
+    job.estimated_time_s = job.steps.estimated_time_s
+    job.tool_changes = list(job.steps.pause_notes or [])
+    for w in job.steps.warnings:
+        if w not in job.warnings:
+            job.warnings.append(w)
+    job.report.setdefault("source", job.source)
+    job.report.update({
+        "kind": job.kind,
+        "size_mm": list(job.size_mm),
+        "depth_mm": job.depth_mm,
+        "steps": {a: int(v) for a, v in zip("xyz", job.steps.steps_total)},
+        "estimated_time_s": round(job.estimated_time_s, 6),
+        "tool_changes": list(job.tool_changes),
+        "warnings": list(job.warnings),
+    })
+    return job
+
+
+def _prepare_pixels(path: Path, kind: str, options: JobOptions, settings: MachineSettings) -> PreparedJob:
+    from .digitize import digitize
+    from .digitized import load_digitized
+    from .drawing import load_image
+    from .drive.steps import plan_steps
+    from .profile import load_profile, profile_from_expr
+    from .report import job_report
+    from .toolpath import plan
+
+    rgb = None
+    if kind == "drawing":
+        drawing = load_image(path)
+        rgb = drawing.to_rgb()
+        digitized = digitize(drawing, start=options.start)
+    else:
+        digitized = load_digitized(path)
+    profile = None
+    if options.profile:
+        profile = load_profile(options.profile)
+    elif options.profile_expr:
+        profile = profile_from_expr(options.profile_expr, max(1, digitized.n_layers))
+    depth = options.depth[0] if len(options.depth) == 1 else list(options.depth)
+    toolpath = plan(digitized, depth=depth, settings=settings, passes=options.passes,
+                    start_at=options.start_at, pause_at=list(options.pause_at), profile=profile)
+    steps = plan_steps(toolpath)
+    report = job_report(digitized, toolpath, steps)
+    summary = (f"{path.name}: {report['objects']} object(s), {report['points']} points, "
+               f"{report['retracts']} retracts")
+    return PreparedJob(
+        source=str(path), kind=kind, steps=steps, settings=settings, toolpath=toolpath,
+        size_mm=(report["width_mm"], report["height_mm"]), depth_mm=report["depth_mm"],
+        warnings=list(report["warnings"]), summary=summary, report=report, drawing_rgb=rgb,
+    )
+
+
+def _prepare_gcode(path: Path, options: JobOptions, settings: MachineSettings) -> PreparedJob:
+    from .gcode_in import load_gcode, plan_gcode_steps
+
+    program = load_gcode(path)
+    steps = plan_gcode_steps(program, settings, flip_y=options.flip_y)
+    return PreparedJob(
+        source=str(path), kind="gcode", steps=steps, settings=settings, warnings=list(program.warnings),
+        summary=f"{path.name}: {len(program.moves)} moves", report={"moves": len(program.moves)},
+    )
+
+
+def _prepare_excellon(path: Path, options: JobOptions, settings: MachineSettings) -> PreparedJob:
+    from .drilljob import plan_drill
+    from .drive.steps import plan_steps
+    from .excellon import load_excellon  # lazy: only drill jobs need it
+
+    holes = load_excellon(path, units=options.excellon_units, digits=options.excellon_digits,
+                          zeros=options.excellon_zeros)
+    dp = plan_drill(holes, settings=settings, depth_mm=options.drill_depth_mm,
+                    safe_height_mm=options.travel_height_mm, offset_mm=options.offset_mm,
+                    mirror_x=options.mirror_x, order=options.drill_order)
+    steps = plan_steps(dp.toolpath)
+    tools = ", ".join(f"T{t} {dia:.3f} mm x{n}" for t, dia, n in dp.tool_sequence)
+    hole_xy = np.asarray(dp.holes_steps, np.int64).reshape(-1, 2)
+    span = hole_xy.max(axis=0) - hole_xy.min(axis=0)
+    return PreparedJob(
+        source=str(path), kind="excellon", steps=steps, settings=settings, toolpath=dp.toolpath,
+        size_mm=(round(float(span[0]) * settings.mm_per_step_xy, 3), round(float(span[1]) * settings.mm_per_step_xy, 3)),
+        depth_mm=round(options.drill_depth_mm, 4),
+        warnings=list(holes.warnings), summary=f"{path.name}: {len(hole_xy)} holes ({tools})",
+        report={"holes": len(hole_xy), "tools": [list(t) for t in dp.tool_sequence]},
+    )
+
+
+def _prepare_hpgl(path: Path, options: JobOptions, settings: MachineSettings) -> PreparedJob:
+    from . import hpgl  # lazy: only HPGL jobs need it
+
+    steps = hpgl.plan_hpgl_steps(hpgl.load_hpgl(path), settings, depth_mm=options.depth_mm,
+                                 safe_height_mm=options.travel_height_mm)
+    return PreparedJob(source=str(path), kind="hpgl", steps=steps, settings=settings,
+                       summary=f"{path.name}: HPGL drawing")
+
+
+def prepare_job(
+    path: str | os.PathLike, options: Optional[JobOptions] = None, settings: MachineSettings = DEFAULT_SETTINGS
+) -> PreparedJob:
+    """Read a job file and plan it into steps.
+
+    Args:
+        path: a drawing, a digitized matrix, a G-code, Excellon or HPGL file (kind by suffix).
+        options: how to cut it (:class:`JobOptions`); None = the defaults.
+        settings: the machine settings.
+
+    Returns:
+        The :class:`PreparedJob`, planned relative to where the tool stands when it starts.
+
+    Raises:
+        CamError: unknown file type, unreadable or bad file (file:line), bad options, travel exceeded.
+    """
+    p = Path(path)
+    kind = job_kind(p)
+    opts = (options or JobOptions()).checked()
+    if not p.is_file():
+        raise CamError(f"{p}: file not found")
+    if kind in ("drawing", "digitized"):
+        job = _prepare_pixels(p, kind, opts, settings)
+    elif kind == "gcode":
+        job = _prepare_gcode(p, opts, settings)
+    elif kind == "excellon":
+        job = _prepare_excellon(p, opts, settings)
+    else:
+        job = _prepare_hpgl(p, opts, settings)
+    return _finish(job)
