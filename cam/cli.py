@@ -248,6 +248,7 @@ def build_parser() -> argparse.ArgumentParser:
         "image rows downward: by default Y = -row (the drawing stays upright); --flip-y writes Y = +row.",
     )
     _add_job_options(e)
+    _add_drill_file_options(e)
     e.add_argument("-o", "--output", required=True, metavar="FILE.ngc", help="where to write the G-code")
     e.add_argument("--flip-y", action="store_true", help="write Y = +row (mirrored) instead of Y = -row")
     e.add_argument("--safe-height", type=float, default=1.0, metavar="MM", help="travel height above the surface (mm)")
@@ -416,7 +417,27 @@ def _plan_job(args: argparse.Namespace) -> tuple[Digitized, Any]:
     return digitized, job
 
 
+def _export_drill_file(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from .drilljob import plan_drill
+
+    holes = _load_drill_file(args)
+    dp = plan_drill(holes, settings=_settings(args), depth_mm=args.drill_depth, safe_height_mm=args.travel_height,
+                    offset_mm=tuple(args.offset) if args.offset else None, mirror_x=args.mirror_x,
+                    order=args.drill_order)
+    job = dp.toolpath
+    at = np.flatnonzero(job.pause) + 1  # the tool change comes before the point after each pause
+    changes = {int(i): (tool, f"T{tool} {dia:.3f} mm, {n} holes") for i, (tool, dia, n) in zip(at, dp.tool_sequence)}
+    save_gcode(job, args.output, flip_y=args.flip_y, safe_height_mm=args.travel_height,
+               title=f"cam: {args.image}", tool_changes=changes)
+    print(f"{args.output}: {len(dp.holes_steps)} holes, {len(dp.tool_sequence)} tools")
+    return 0
+
+
 def cmd_export(args: argparse.Namespace) -> int:
+    if args.image and Path(args.image).suffix.lower() in DRILL_SUFFIXES:
+        return _export_drill_file(args)
     digitized, job = _plan_job(args)
     if args.safe_height <= 0:
         raise CamError(f"--safe-height must be > 0 mm, got {args.safe_height}")
