@@ -1,0 +1,630 @@
+"""Drill order: a short open path through the holes of one tool.
+
+The tool stands at ``start_mm`` when a tool's holes begin; the path visits
+every hole once and does not come back (the next tool starts where this one
+ended).  Frame: machine (x, y) in mm, any origin; only distances matter.
+
+Method (all compiled with numba, ``cache=True``):
+
+1. Up to :data:`EXACT_MAX` holes: the exact shortest open path (Held-Karp
+   dynamic programme over subsets).
+2. Otherwise, a nearest-neighbour path from the start (exact nearest
+   neighbour, found on a uniform grid), then local search with neighbour
+   lists (the ``K_NEIGHBOURS`` nearest holes of each hole, from the same
+   grid) and a work queue of holes whose edges changed ("don't-look bits"):
+   2-opt (reverse a stretch of the path) and Or-opt (move a run of 1 to 3
+   holes elsewhere, either way round).
+3. Iterated local search: a local double-bridge kick (swap two adjacent
+   short stretches of the path), repaired by the same local search, kept
+   only if the path got shorter, else undone.  The number of kicks is fixed
+   by the hole count and the random generator is seeded, so the order is
+   deterministic: the same holes always give the same path.
+
+Every step only ever shortens the nearest-neighbour path, so the result is
+never longer than :func:`nearest_neighbour_order` (checked at the end).
+
+The open path with a fixed start is handled as a path array
+``[start, h1, ..., hN, end]`` whose virtual ``end`` is at distance 0 from
+everything: the start and the end never move.
+
+>>> import numpy as np
+>>> pts = np.array([[3.0, 0.0], [1.0, 0.0], [2.0, 0.0]])
+>>> drill_order(pts, start_mm=(0.0, 0.0)).tolist()
+[1, 2, 0]
+>>> float(tour_length_mm(pts, drill_order(pts), (0.0, 0.0)))
+3.0
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from .errors import PlanError
+
+__all__ = ["drill_order", "nearest_neighbour_order", "tour_length_mm", "EXACT_MAX", "K_NEIGHBOURS"]
+
+EXACT_MAX = 12
+"""Up to this many holes the exact shortest open path is computed."""
+K_NEIGHBOURS = 10
+"""Candidate neighbours per hole in the local search."""
+KICKS_PER_HOLE = 12
+"""Iterated-local-search kicks per hole (fixed, so the result is deterministic)."""
+MAX_KICKS = 400_000
+"""Upper bound on the kicks for very large hole sets (keeps the time about linear)."""
+_KICK_SEGMENT = 50
+_SEED = 20030
+
+
+def _check_points(points_mm: np.ndarray, start_mm) -> tuple[np.ndarray, np.ndarray]:
+    pts = np.ascontiguousarray(np.asarray(points_mm, dtype=np.float64))
+    if pts.ndim != 2 or (pts.shape[0] and pts.shape[1] != 2):
+        raise PlanError(f"drill points must be an (N, 2) array, got shape {pts.shape}")
+    pts = pts.reshape(-1, 2)
+    start = np.asarray(start_mm, dtype=np.float64).reshape(-1)
+    if start.shape != (2,):
+        raise PlanError(f"the tour start must be (x, y) mm, got {start_mm!r}")
+    if not (np.isfinite(pts).all() and np.isfinite(start).all()):
+        raise PlanError("drill points and the tour start must be finite numbers")
+    return pts, start
+
+
+def tour_length_mm(points_mm: np.ndarray, order: np.ndarray, start_mm: tuple[float, float] = (0.0, 0.0)) -> float:
+    """Length in mm of the open path from ``start_mm`` through ``points_mm[order]``.
+
+    Args:
+        points_mm: ``(N, 2)`` float (x, y) mm.
+        order: ``(N,)`` int indices into ``points_mm`` (a permutation, or any subset).
+        start_mm: (x, y) mm where the tool stands before the first hole.
+    """
+    pts, start = _check_points(points_mm, start_mm)
+    order = np.asarray(order, dtype=np.int64)
+    path = np.vstack([start[None, :], pts[order]])
+    return float(np.hypot(*np.diff(path, axis=0).T).sum())
+
+
+def nearest_neighbour_order(points_mm: np.ndarray, start_mm: tuple[float, float] = (0.0, 0.0)) -> np.ndarray:
+    """Greedy nearest-neighbour path from ``start_mm``: always go to the nearest hole not yet drilled.
+
+    Ties go to the lowest index.  Exact (a grid only speeds up the search).
+
+    Args:
+        points_mm: ``(N, 2)`` float (x, y) mm.
+        start_mm: (x, y) mm of the tool before the first hole.
+
+    Returns:
+        ``(N,)`` int64 permutation of ``range(N)``: the drilling order.
+
+    >>> nearest_neighbour_order(np.array([[5.0, 0.0], [1.0, 0.0], [-2.0, 0.0]])).tolist()
+    [1, 2, 0]
+    """
+    pts, start = _check_points(points_mm, start_mm)
+    if len(pts) == 0:
+        return np.zeros(0, np.int64)
+    return _nn_path(pts, start)
+
+
+def drill_order(points_mm: np.ndarray, start_mm: tuple[float, float] = (0.0, 0.0)) -> np.ndarray:
+    """A short open path from ``start_mm`` through every point once (start not included, no return).
+
+    Args:
+        points_mm: ``(N, 2)`` float (x, y) mm of the holes (duplicates allowed).
+        start_mm: (x, y) mm where the tool stands before the first hole.
+
+    Returns:
+        ``(N,)`` int64 permutation of ``range(N)``: the drilling order.  Deterministic, never longer than
+        :func:`nearest_neighbour_order`, exact up to :data:`EXACT_MAX` points.
+
+    Raises:
+        PlanError: points not ``(N, 2)`` or not finite.
+    """
+    pts, start = _check_points(points_mm, start_mm)
+    n = len(pts)
+    if n == 0:
+        return np.zeros(0, np.int64)
+    if n == 1:
+        return np.zeros(1, np.int64)
+    if n <= EXACT_MAX:
+        return _exact_path(pts, start)
+    nn = _nn_path(pts, start)
+    xy = np.vstack([pts, start[None, :]])  # index n = the start
+    neigh = _knn(xy, min(K_NEIGHBOURS, n))
+    tour = np.empty(n + 2, np.int64)
+    tour[0] = n
+    tour[1:n + 1] = nn
+    tour[n + 1] = n + 1  # the virtual end
+    kicks = min(KICKS_PER_HOLE * n, MAX_KICKS)
+    _improve(xy, tour, neigh, kicks, _KICK_SEGMENT, _SEED)
+    order = tour[1:n + 1].copy()
+    if tour_length_mm(pts, order, start) > tour_length_mm(pts, nn, start):  # pragma: no cover - safety net
+        return nn
+    return order
+
+
+# ---------------------------------------------------------------- compiled kernels
+
+
+@njit(cache=True)
+def _exact_path(pts, start):
+    """Held-Karp over subsets: the shortest open path from ``start`` through all ``pts`` (N <= ~15)."""
+    n = pts.shape[0]
+    full = (1 << n) - 1
+    inf = np.inf
+    cost = np.full((1 << n, n), inf)
+    prev = np.full((1 << n, n), -1, np.int64)
+    dist = np.empty((n, n))
+    for a in range(n):
+        for b in range(n):
+            dist[a, b] = math.hypot(pts[a, 0] - pts[b, 0], pts[a, 1] - pts[b, 1])
+    for a in range(n):
+        cost[1 << a, a] = math.hypot(pts[a, 0] - start[0], pts[a, 1] - start[1])
+    for mask in range(1, full + 1):
+        for last in range(n):
+            c = cost[mask, last]
+            if c == inf or not (mask >> last) & 1:
+                continue
+            for nxt in range(n):
+                if (mask >> nxt) & 1:
+                    continue
+                m2 = mask | (1 << nxt)
+                c2 = c + dist[last, nxt]
+                if c2 < cost[m2, nxt]:
+                    cost[m2, nxt] = c2
+                    prev[m2, nxt] = last
+    best = 0
+    for a in range(1, n):
+        if cost[full, a] < cost[full, best]:
+            best = a
+    order = np.empty(n, np.int64)
+    mask = full
+    cur = best
+    for k in range(n - 1, -1, -1):
+        order[k] = cur
+        p = prev[mask, cur]
+        mask ^= 1 << cur
+        cur = p
+    return order
+
+
+@njit(cache=True)
+def _grid(xy, idx):
+    """Bucket the points ``xy[idx]`` in a uniform grid of about 2 points per cell.
+
+    Returns ``(x0, y0, cell, gx, gy, cell_start, items)``: the points of cell ``(cx, cy)`` are
+    ``items[cell_start[cy * gx + cx]:cell_start[cy * gx + cx + 1]]``.
+    """
+    m = idx.shape[0]
+    x0 = np.inf
+    y0 = np.inf
+    x1 = -np.inf
+    y1 = -np.inf
+    for t in range(m):
+        p = idx[t]
+        x0 = min(x0, xy[p, 0])
+        y0 = min(y0, xy[p, 1])
+        x1 = max(x1, xy[p, 0])
+        y1 = max(y1, xy[p, 1])
+    w = x1 - x0
+    h = y1 - y0
+    cell = math.sqrt(w * h * 2.0 / m)
+    if not cell > 0:
+        cell = max(w, h) * 2.0 / m
+    if not cell > 0:
+        cell = 1.0
+    gx = int(w / cell) + 1
+    gy = int(h / cell) + 1
+    while gx * gy > 4 * m + 16:  # very elongated sets: fewer, larger cells
+        cell *= 2.0
+        gx = int(w / cell) + 1
+        gy = int(h / cell) + 1
+    count = np.zeros(gx * gy + 1, np.int64)
+    cell_of = np.empty(m, np.int64)
+    for t in range(m):
+        p = idx[t]
+        cx = min(int((xy[p, 0] - x0) / cell), gx - 1)
+        cy = min(int((xy[p, 1] - y0) / cell), gy - 1)
+        cell_of[t] = cy * gx + cx
+        count[cy * gx + cx + 1] += 1
+    cell_start = np.cumsum(count)
+    fill = cell_start[:-1].copy()
+    items = np.empty(m, np.int64)
+    for t in range(m):  # in index order within each cell
+        c = cell_of[t]
+        items[fill[c]] = idx[t]
+        fill[c] += 1
+    return x0, y0, cell, gx, gy, cell_start, items
+
+
+@njit(cache=True)
+def _nn_path(pts, start):
+    """Exact nearest-neighbour path from ``start`` (ties: lowest index), on a grid with removal."""
+    n = pts.shape[0]
+    x0, y0, cell, gx, gy, cell_start, items = _grid(pts, np.arange(n))
+    alive = cell_start[1:] - cell_start[:-1]  # points left per cell, kept at the front of each cell
+    where = np.empty(n, np.int64)
+    for t in range(n):
+        where[items[t]] = t
+    order = np.empty(n, np.int64)
+    cx_ = start[0]
+    cy_ = start[1]
+    rmax = max(gx, gy) + 1
+    for step in range(n):
+        ccx = int(math.floor((cx_ - x0) / cell))
+        ccy = int(math.floor((cy_ - y0) / cell))
+        best = -1
+        best_d2 = np.inf
+        r = 0
+        if step == 0:  # the start may lie far outside the grid: scan every hole once
+            for p in range(n):
+                dx = pts[p, 0] - cx_
+                dy = pts[p, 1] - cy_
+                d2 = dx * dx + dy * dy
+                if d2 < best_d2:
+                    best_d2 = d2
+                    best = p
+        while step > 0:
+            for yy in range(ccy - r, ccy + r + 1):
+                if yy < 0 or yy >= gy:
+                    continue
+                edge_row = yy == ccy - r or yy == ccy + r
+                xstep = 1 if edge_row else 2 * r
+                if r == 0:
+                    xstep = 1
+                xx = ccx - r
+                while xx <= ccx + r:
+                    if 0 <= xx < gx:
+                        c = yy * gx + xx
+                        s = cell_start[c]
+                        for t in range(s, s + alive[c]):
+                            p = items[t]
+                            dx = pts[p, 0] - cx_
+                            dy = pts[p, 1] - cy_
+                            d2 = dx * dx + dy * dy
+                            if d2 < best_d2 or (d2 == best_d2 and p < best):
+                                best_d2 = d2
+                                best = p
+                    xx += xstep
+            # every point not yet scanned lies at least this far away
+            reach = _ring_reach(cx_, cy_, x0, y0, cell, ccx, ccy, r)
+            if best >= 0 and best_d2 < reach * reach:
+                break
+            if r > rmax:
+                break
+            r += 1
+        order[step] = best
+        # remove `best` from its cell: swap with the last alive point of the cell
+        c = min(max(int((pts[best, 1] - y0) / cell), 0), gy - 1) * gx + min(max(int((pts[best, 0] - x0) / cell), 0), gx - 1)
+        t = where[best]
+        last = cell_start[c] + alive[c] - 1
+        q = items[last]
+        items[t] = q
+        where[q] = t
+        items[last] = best
+        where[best] = last
+        alive[c] -= 1
+        cx_ = pts[best, 0]
+        cy_ = pts[best, 1]
+    return order
+
+
+@njit(cache=True)
+def _ring_reach(px, py, x0, y0, cell, ccx, ccy, r):
+    """Distance from (px, py) to the outside of the box of cells within Chebyshev ring ``r`` of (ccx, ccy)."""
+    lo_x = x0 + (ccx - r) * cell
+    hi_x = x0 + (ccx + r + 1) * cell
+    lo_y = y0 + (ccy - r) * cell
+    hi_y = y0 + (ccy + r + 1) * cell
+    return max(0.0, min(min(px - lo_x, hi_x - px), min(py - lo_y, hi_y - py)))
+
+
+@njit(cache=True)
+def _knn(xy, k):
+    """``(M, k)`` int64: the ``k`` nearest other points of each point, nearest first (ties: lowest index)."""
+    m = xy.shape[0]
+    x0, y0, cell, gx, gy, cell_start, items = _grid(xy, np.arange(m))
+    out = np.empty((m, k), np.int64)
+    bd = np.empty(k)
+    bi = np.empty(k, np.int64)
+    for p in range(m):
+        px = xy[p, 0]
+        py = xy[p, 1]
+        ccx = min(int((px - x0) / cell), gx - 1)
+        ccy = min(int((py - y0) / cell), gy - 1)
+        nb = 0
+        r = 0
+        while True:
+            for yy in range(ccy - r, ccy + r + 1):
+                if yy < 0 or yy >= gy:
+                    continue
+                edge_row = yy == ccy - r or yy == ccy + r
+                xstep = 1 if (edge_row or r == 0) else 2 * r
+                xx = ccx - r
+                while xx <= ccx + r:
+                    if 0 <= xx < gx:
+                        c = yy * gx + xx
+                        for t in range(cell_start[c], cell_start[c + 1]):
+                            q = items[t]
+                            if q == p:
+                                continue
+                            dx = xy[q, 0] - px
+                            dy = xy[q, 1] - py
+                            d2 = dx * dx + dy * dy
+                            if nb == k and (d2 > bd[k - 1] or (d2 == bd[k - 1] and q > bi[k - 1])):
+                                continue
+                            j = nb if nb < k else k - 1
+                            while j > 0 and (bd[j - 1] > d2 or (bd[j - 1] == d2 and bi[j - 1] > q)):
+                                bd[j] = bd[j - 1]
+                                bi[j] = bi[j - 1]
+                                j -= 1
+                            bd[j] = d2
+                            bi[j] = q
+                            if nb < k:
+                                nb += 1
+                    xx += xstep
+            reach = _ring_reach(px, py, x0, y0, cell, ccx, ccy, r)
+            if nb == k and bd[k - 1] < reach * reach:
+                break
+            if r > gx + gy:
+                break
+            r += 1
+        for j in range(k):
+            out[p, j] = bi[j]
+    return out
+
+
+@njit(cache=True, inline="always")
+def _d(xy, a, b, end):
+    if a == end or b == end:
+        return 0.0
+    dx = xy[a, 0] - xy[b, 0]
+    dy = xy[a, 1] - xy[b, 1]
+    return math.sqrt(dx * dx + dy * dy)
+
+
+@njit(cache=True)
+def _reverse(tour, pos, i, j):
+    while i < j:
+        a = tour[i]
+        b = tour[j]
+        tour[i] = b
+        pos[b] = i
+        tour[j] = a
+        pos[a] = j
+        i += 1
+        j -= 1
+
+
+@njit(cache=True)
+def _push(queue, inq, head_tail, city, end):
+    if city == end or inq[city]:
+        return
+    inq[city] = True
+    cap = queue.shape[0]
+    queue[head_tail[1] % cap] = city
+    head_tail[1] += 1
+
+
+@njit(cache=True)
+def _two_opt(xy, tour, pos, neigh, a, end, span, queue, inq, ht):
+    """Best-first 2-opt move around ``a`` (both of its path edges); applies it and returns the gain (0: none)."""
+    eps = 1e-12
+    k = neigh.shape[1]
+    pa = pos[a]
+    # a -> b (successor) replaced by a -> c, b -> d where d = successor of c
+    b = tour[pa + 1]
+    dab = _d(xy, a, b, end)
+    for t in range(k):
+        c = neigh[a, t]
+        dac = _d(xy, a, c, end)
+        if dac >= dab - eps:
+            break
+        pc = pos[c]
+        dd = tour[pc + 1]
+        if c == b or dd == a:
+            continue
+        gain = dab + _d(xy, c, dd, end) - dac - _d(xy, b, dd, end)
+        if gain > eps:
+            lo, hi = (pa + 1, pc) if pa < pc else (pc + 1, pa)
+            _reverse(tour, pos, lo, hi)
+            span[0] = min(span[0], lo)
+            span[1] = max(span[1], hi)
+            for city in (a, b, c, dd):
+                _push(queue, inq, ht, city, end)
+            return gain
+    if pa >= 1:
+        # b -> a (predecessor) replaced by c -> a, d -> b where d = predecessor of c
+        b = tour[pa - 1]
+        dab = _d(xy, a, b, end)
+        for t in range(k):
+            c = neigh[a, t]
+            dac = _d(xy, a, c, end)
+            if dac >= dab - eps:
+                break
+            pc = pos[c]
+            if pc == 0:
+                continue
+            dd = tour[pc - 1]
+            if c == b or dd == a:
+                continue
+            gain = dab + _d(xy, c, dd, end) - dac - _d(xy, b, dd, end)
+            if gain > eps:
+                lo, hi = (pa, pc - 1) if pa < pc else (pc, pa - 1)
+                _reverse(tour, pos, lo, hi)
+                span[0] = min(span[0], lo)
+                span[1] = max(span[1], hi)
+                for city in (a, b, c, dd):
+                    _push(queue, inq, ht, city, end)
+                return gain
+    return 0.0
+
+
+@njit(cache=True)
+def _or_opt(xy, tour, pos, neigh, a, end, span, queue, inq, ht):
+    """Or-opt around ``a``: move a run of 1-3 holes that ends at ``a`` between two other neighbours."""
+    eps = 1e-12
+    n_last = end - 1
+    k = neigh.shape[1]
+    pa = pos[a]
+    if pa == 0:
+        return 0.0
+    for length in range(1, 4):
+        for side in range(2 if length > 1 else 1):
+            i = pa if side == 0 else pa - length + 1
+            j = i + length - 1
+            if i < 1 or j > n_last:
+                continue
+            s1 = tour[i]
+            s2 = tour[j]
+            p = tour[i - 1]
+            nx = tour[j + 1]
+            removed = _d(xy, p, s1, end) + _d(xy, s2, nx, end) - _d(xy, p, nx, end)
+            if removed <= eps:
+                continue
+            for e_ in range(2):
+                x = s1 if e_ == 0 else s2
+                other = s2 if e_ == 0 else s1
+                for t in range(k):
+                    c = neigh[x, t]
+                    dxc = _d(xy, x, c, end)
+                    if dxc >= removed - eps:
+                        break
+                    pc = pos[c]
+                    if i <= pc <= j:
+                        continue
+                    for gap in range(2):
+                        if gap == 0:  # between c and its successor, x next to c
+                            u = c
+                            v = tour[pc + 1]
+                            pu = pc
+                            first = x
+                            last = other
+                        else:  # between c's predecessor and c, x next to c
+                            if pc == 0:
+                                continue
+                            u = tour[pc - 1]
+                            v = c
+                            pu = pc - 1
+                            first = other
+                            last = x
+                        if i - 1 <= pu <= j:
+                            continue
+                        added = _d(xy, u, first, end) + _d(xy, last, v, end) - _d(xy, u, v, end)
+                        gain = removed - added
+                        if gain > eps:
+                            if first != s1:
+                                _reverse(tour, pos, i, j)
+                            seg0 = tour[i]
+                            seg1 = tour[i + 1] if length > 1 else 0
+                            seg2 = tour[i + 2] if length > 2 else 0
+                            if pu > j:
+                                for q in range(j + 1, pu + 1):
+                                    city = tour[q]
+                                    tour[q - length] = city
+                                    pos[city] = q - length
+                                base = pu - length + 1
+                                span[0] = min(span[0], i)
+                                span[1] = max(span[1], pu)
+                            else:
+                                for q in range(i - 1, pu, -1):
+                                    city = tour[q]
+                                    tour[q + length] = city
+                                    pos[city] = q + length
+                                base = pu + 1
+                                span[0] = min(span[0], pu + 1)
+                                span[1] = max(span[1], j)
+                            tour[base] = seg0
+                            pos[seg0] = base
+                            if length > 1:
+                                tour[base + 1] = seg1
+                                pos[seg1] = base + 1
+                            if length > 2:
+                                tour[base + 2] = seg2
+                                pos[seg2] = base + 2
+                            for city in (p, nx, s1, s2, u, v):
+                                _push(queue, inq, ht, city, end)
+                            return gain
+    return 0.0
+
+
+@njit(cache=True)
+def _local_search(xy, tour, pos, neigh, end, span, queue, inq, ht):
+    """Run 2-opt and Or-opt until no queued hole has an improving move; returns the total gain (mm)."""
+    total = 0.0
+    cap = queue.shape[0]
+    while ht[0] < ht[1]:
+        a = queue[ht[0] % cap]
+        ht[0] += 1
+        inq[a] = False
+        g = _two_opt(xy, tour, pos, neigh, a, end, span, queue, inq, ht)
+        if g == 0.0:
+            g = _or_opt(xy, tour, pos, neigh, a, end, span, queue, inq, ht)
+        total += g
+    return total
+
+
+@njit(cache=True)
+def _improve(xy, tour, neigh, kicks, max_segment, seed):
+    """Improve the path ``tour`` = ``[start, holes..., end]`` in place (see the module docstring).
+
+    ``xy`` is ``(N + 1, 2)`` with the start last (index N); the virtual end is index N + 1.
+    """
+    np.random.seed(seed)
+    m = tour.shape[0]  # N + 2
+    end = m - 1
+    n = m - 2
+    pos = np.empty(m, np.int64)
+    for i in range(m):
+        pos[tour[i]] = i
+    queue = np.empty(m + 1, np.int64)
+    inq = np.zeros(m, np.bool_)
+    ht = np.zeros(2, np.int64)
+    span = np.zeros(2, np.int64)
+    for i in range(m - 1):
+        _push(queue, inq, ht, tour[i], end)
+    _local_search(xy, tour, pos, neigh, end, span, queue, inq, ht)
+    if n < 8:
+        return
+    saved = tour.copy()
+    buf = np.empty(2 * max_segment + 2, np.int64)
+    for _ in range(kicks):
+        # double bridge on a short stretch: A B C D -> A C B D, B = [i, j), C = [j, k)
+        lb = 1 + np.random.randint(0, min(max_segment, n // 3))
+        lc = 1 + np.random.randint(0, min(max_segment, n // 3))
+        i = 1 + np.random.randint(0, n - lb - lc + 1)
+        j = i + lb
+        kk = j + lc
+        a0 = tour[i - 1]
+        b0 = tour[i]
+        b1 = tour[j - 1]
+        c0 = tour[j]
+        c1 = tour[kk - 1]
+        d0 = tour[kk]
+        delta = (_d(xy, a0, c0, end) + _d(xy, c1, b0, end) + _d(xy, b1, d0, end)
+                 - _d(xy, a0, b0, end) - _d(xy, b1, c0, end) - _d(xy, c1, d0, end))
+        t = 0
+        for q in range(j, kk):
+            buf[t] = tour[q]
+            t += 1
+        for q in range(i, j):
+            buf[t] = tour[q]
+            t += 1
+        for q in range(t):
+            city = buf[q]
+            tour[i + q] = city
+            pos[city] = i + q
+        span[0] = i
+        span[1] = kk - 1
+        for city in (a0, b0, b1, c0, c1, d0):
+            _push(queue, inq, ht, city, end)
+        gain = _local_search(xy, tour, pos, neigh, end, span, queue, inq, ht)
+        lo = span[0]
+        hi = span[1]
+        if delta - gain < -1e-9:
+            for q in range(lo, hi + 1):
+                saved[q] = tour[q]
+        else:
+            for q in range(lo, hi + 1):
+                city = saved[q]
+                tour[q] = city
+                pos[city] = q
