@@ -6,7 +6,9 @@ ended).  Frame: machine (x, y) in mm, any origin; only distances matter.
 
 Method (all compiled with numba, ``cache=True``):
 
-1. Up to :data:`EXACT_MAX` holes: the exact shortest open path (Held-Karp
+0. Holes at the same place are drilled one after another: the path is
+   planned through the distinct places.
+1. Up to :data:`EXACT_MAX` places: the exact shortest open path (Held-Karp
    dynamic programme over subsets).
 2. Otherwise, a nearest-neighbour path from the start (exact nearest
    neighbour, found on a uniform grid), then local search with neighbour
@@ -125,6 +127,11 @@ def drill_order(points_mm: np.ndarray, start_mm: tuple[float, float] = (0.0, 0.0
         return np.zeros(0, np.int64)
     if n == 1:
         return np.zeros(1, np.int64)
+    uniq, inverse = np.unique(pts, axis=0, return_inverse=True)
+    if len(uniq) < n:  # duplicates: solve on distinct points, drill each point's copies one after another
+        groups = np.argsort(inverse.reshape(-1), kind="stable")
+        first = np.searchsorted(inverse.reshape(-1)[groups], np.arange(len(uniq) + 1))
+        return np.concatenate([groups[first[u]:first[u + 1]] for u in drill_order(uniq, start)]).astype(np.int64)
     if n <= EXACT_MAX:
         return _exact_path(pts, start)
     nn = _nn_path(pts, start)

@@ -204,3 +204,11 @@ def test_plan_drill_tour_moves_less_than_file_order():
     tour, file_order = plan_drill(holes), plan_drill(holes, order="file")
     assert file_order.hole_index.tolist() == list(range(200))
     assert xy_travel_steps(tour) < 0.5 * xy_travel_steps(file_order)
+
+
+def test_copies_of_a_hole_are_drilled_one_after_another():
+    pts, start = SETS["duplicates 300"]
+    order = drill_order(pts, start)
+    seq = [tuple(p) for p in pts[order]]
+    runs = [k for i, k in enumerate(seq) if i == 0 or seq[i - 1] != k]
+    assert len(runs) == len(set(seq))  # each distinct place appears in one run
