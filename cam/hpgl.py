@@ -1,0 +1,1053 @@
+"""HPGL in: pen-plotter files (``.plt``, ``.hpgl``, ``.hpg``) cut on the step/dir machine.
+
+The seed's subset (``shared/seeds/004``, section 3.6.2): ``SPn`` selects
+pen/tool n, ``PU`` lifts the tool, ``PD`` lowers it, ``PAx,y`` moves in
+absolute plotter units; one plotter unit is 0.025 mm (40 units per mm).
+Beyond the seed, so that files from Inkscape, vpype and CAD programs work:
+
+* ``IN`` (initialise: pen up, absolute moves), ``DF`` (defaults: absolute
+  moves), ``PR`` (relative moves);
+* ``PU``/``PD``/``PA``/``PR`` with any number of coordinate pairs
+  (``PD10,10,20,10,20,20;``), signed and decimal numbers;
+* commands separated by ``;``, by a newline, or by nothing (the next
+  two-letter mnemonic starts a command); whitespace anywhere; numbers
+  separated by ``,`` or whitespace;
+* anything else is an unknown command: skipped with a warning naming its
+  byte offset and line (``LT``, ``VS``, ``CO "comment"``; ``LB`` label text
+  runs to the label terminator, ETX ``\\x03`` or the character set by ``DT``;
+  ``PE`` runs to ``;``).  Drawing commands outside the subset (arcs ``AA``,
+  circles ``CI``, encoded polylines ``PE``, ...) are therefore not cut.
+
+Malformed input is a :class:`~cam.errors.ParseError` ``file:line:column:``:
+a malformed number (``1.2.3``, ``12x``, ``--4``), an empty parameter
+(``PA,5``), an odd number of coordinates, an unterminated command at the end
+of the file (``PA100,`` or a dangling mnemonic).
+
+Streaming: the file is read in chunks (:data:`CHUNK_BYTES`) by a compiled
+tokenizer and a compiled interpreter, so :func:`scan_hpgl` keeps memory flat
+however large the file is; :func:`load_hpgl` keeps only the pen-down points.
+
+Interpretation: the pen starts up at plotter (0, 0) in absolute mode.  A pen
+change (``SP``) lifts the pen; ``SP0``/``SP`` (no pen) keeps the tool that is
+in the machine.  Each pen-down stroke starts where the pen goes down (a
+``PD`` with no coordinates and then ``PU`` is a dot: plunge and lift).  Pen-up
+moves only say where the next stroke starts: the machine goes there directly
+at the safe height.
+
+Frames and units (as :mod:`cam.drilljob`): HPGL X right, Y up, plotter units.
+Machine x = X, machine y = -Y (toward the operator), in steps of
+``settings.mm_per_step_xy``, rounded to the nearest step (the seed truncates:
+``xsteps = xcoord * 250 / 254`` in integer arithmetic, 004 section 3.6.2).  By
+default the drawing's top-left corner (smallest X, largest Y of its pen-down
+points) is placed at the home (0, 0); ``offset_mm=(X, Y)`` instead puts
+plotter (0, 0) at machine (X, Y) mm from the home.
+
+>>> d = parse_hpgl(b"IN;SP1;PU0,0;PD400,0,400,-400;PU;", source="sq.plt")
+>>> d.points_pu.tolist(), d.stroke_pen.tolist()
+([[0.0, 0.0], [400.0, 0.0], [400.0, -400.0]], [1])
+>>> job = plan_hpgl(d, depth_mm=0.5, safe_height_mm=1.0)
+>>> job.points_px[job.kind == CUT][:, :2].tolist()     # 10 mm = 346 steps of 0.0289 mm
+[[0, 0], [346, 0], [346, 346]]
+>>> job.pause_notes
+['tool change: pen 1']
+"""
+from __future__ import annotations
+
+import io
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import BinaryIO, Callable, Iterator, Optional, TextIO, Union
+
+import numpy as np
+from numba import njit
+
+from .errors import ParseError, PlanError, TravelError
+from .settings import DEFAULT_SETTINGS, MachineSettings
+from .toolpath import CUT, RETRACT, TRAVEL, Toolpath, check_travel
+
+__all__ = [
+    "HPGL_SUFFIXES", "PLOTTER_UNIT_MM", "CHUNK_BYTES", "DEFAULT_CUT_DEPTH_MM", "DEFAULT_SAFE_HEIGHT_MM",
+    "HpglCommand", "HpglScan", "HpglDrawing",
+    "iter_hpgl", "scan_hpgl", "load_hpgl", "parse_hpgl", "plan_hpgl", "hpgl_steps",
+]
+
+HPGL_SUFFIXES = (".plt", ".hpgl", ".hpg")
+PLOTTER_UNIT_MM = 0.025
+"""One plotter unit: 0.025 mm, 40 units per mm (004 section 3.6.2)."""
+CHUNK_BYTES = 1 << 19
+"""Bytes read per chunk while streaming a file."""
+DEFAULT_CUT_DEPTH_MM = 0.5
+DEFAULT_SAFE_HEIGHT_MM = 1.0
+
+Progress = Callable[[int, Optional[int]], None]
+Source = Union[str, os.PathLike, BinaryIO, TextIO]
+
+
+def _code(mnemonic: str) -> int:
+    return (ord(mnemonic[0]) << 8) | ord(mnemonic[1])
+
+
+def _name(code: int) -> str:
+    return chr((code >> 8) & 0xFF) + chr(code & 0xFF)
+
+
+C_IN, C_DF, C_SP, C_PU, C_PD, C_PA, C_PR = (_code(m) for m in ("IN", "DF", "SP", "PU", "PD", "PA", "PR"))
+C_LB, C_DT, C_PE = _code("LB"), _code("DT"), _code("PE")
+KNOWN = ("IN", "DF", "SP", "PU", "PD", "PA", "PR")
+
+# tokenizer modes
+M_IDLE, M_MN1, M_PARAMS, M_SKIP, M_QUOTE, M_LABEL, M_DT, M_PE = range(8)
+# error codes
+(E_NONE, E_CHAR, E_MNEMONIC, E_NUMBER, E_EMPTY, E_TRAIL, E_EOF_COMMA, E_EOF_MNEMONIC, E_EOF_LABEL,
+ E_EOF_STRING, E_ODD, E_SP) = range(12)
+# tokenizer state slots (int64)
+(S_LINE, S_LSTART, S_BASE, S_TERM, S_RESUME, S_COFF, S_CLINE, S_CCOL, S_CONSUMED, S_NCMD, S_NPAR,
+ S_ERR, S_ERRPOS, S_ERRLINE, S_ERRCOL, S_ERRAUX) = range(16)
+
+
+@njit(cache=True)
+def _letter(c):
+    return (65 <= c <= 90) or (97 <= c <= 122)
+
+
+@njit(cache=True)
+def _space(c):
+    # space, tab, LF, VT, FF, CR; NUL, ETX and SUB (^Z) padding outside labels
+    return c == 32 or (9 <= c <= 13) or c == 0 or c == 3 or c == 26
+
+
+@njit(cache=True)
+def _upper(c):
+    return c - 32 if 97 <= c <= 122 else c
+
+
+@njit(cache=True)
+def _coord_cmd(code):
+    return code == 0x5055 or code == 0x5044 or code == 0x5041 or code == 0x5052  # PU PD PA PR
+
+
+@njit(cache=True)
+def _known(code):
+    return _coord_cmd(code) or code == 0x494E or code == 0x4446 or code == 0x5350  # IN DF SP
+
+
+@njit(cache=True)
+def _tokenize(buf, final, st, c_code, c_off, c_line, c_col, c_p0, c_np, p_val, p_line, p_col):
+    """Commands and numeric parameters of one chunk (see :func:`_chunks` for the contract)."""
+    n = buf.shape[0]
+    base = st[S_BASE]
+    line = st[S_LINE]
+    lstart = st[S_LSTART]
+    term = st[S_TERM]
+    nc = 0
+    npar = 0
+    err = E_NONE
+    err_pos = 0
+    mode = M_IDLE
+    code = 0
+    coff = 0
+    cline = 0
+    ccol = 0
+    cstart = 0
+    p0 = 0
+    expect = 0  # in M_PARAMS: 0 after the mnemonic, 1 after a number, 2 after ','
+    safe = 0
+    safe_line = line
+    safe_lstart = lstart
+    pair_pos = -1
+    pair_np = 0
+    pair_line = line
+    pair_lstart = lstart
+    num_end = -1  # index just after the last number
+    num_start = -1
+    incomplete = False
+    if st[S_RESUME] != 0:
+        mode = M_PARAMS
+        code = st[S_RESUME]
+        coff = st[S_COFF]
+        cline = st[S_CLINE]
+        ccol = st[S_CCOL]
+        expect = 1
+    i = 0
+    while i < n:
+        c = buf[i]
+        if mode == M_IDLE:
+            if _letter(c):
+                mode = M_MN1
+                cstart = i
+                safe = i
+                safe_line = line
+                safe_lstart = lstart
+            elif c == 10:
+                line += 1
+                lstart = base + i + 1
+            elif not (c == 59 or _space(c)):
+                err = E_CHAR
+                err_pos = i
+                break
+            i += 1
+        elif mode == M_MN1:
+            if not _letter(c):
+                if num_end == cstart and num_start >= 0:
+                    err = E_NUMBER
+                    err_pos = num_start
+                else:
+                    err = E_MNEMONIC
+                    err_pos = cstart
+                break
+            code = (_upper(buf[cstart]) << 8) | _upper(c)
+            coff = base + cstart
+            cline = line
+            ccol = base + cstart - lstart + 1
+            p0 = npar
+            pair_pos = -1
+            expect = 0
+            if code == C_LB:
+                mode = M_LABEL
+            elif code == C_DT:
+                mode = M_DT
+            elif code == C_PE:
+                mode = M_PE
+            elif _known(code):
+                mode = M_PARAMS
+            else:
+                mode = M_SKIP
+            i += 1
+        elif mode == M_PARAMS:
+            if c == 44:  # ','
+                if expect != 1:
+                    err = E_EMPTY
+                    err_pos = i
+                    break
+                expect = 2
+                i += 1
+            elif c == 59 or _letter(c):  # ';' or the next mnemonic
+                if expect == 2:
+                    err = E_TRAIL
+                    err_pos = i
+                    break
+                c_code[nc] = code
+                c_off[nc] = coff
+                c_line[nc] = cline
+                c_col[nc] = ccol
+                c_p0[nc] = p0
+                c_np[nc] = npar - p0
+                nc += 1
+                mode = M_IDLE
+                if c == 59:
+                    i += 1
+            elif c == 43 or c == 45 or c == 46 or (48 <= c <= 57):
+                j = i
+                sign = 1.0
+                if c == 43 or c == 45:
+                    if c == 45:
+                        sign = -1.0
+                    j += 1
+                ival = 0.0
+                nd = 0
+                while j < n and 48 <= buf[j] <= 57:
+                    ival = ival * 10.0 + (buf[j] - 48)
+                    nd += 1
+                    j += 1
+                frac = 0.0
+                nf = 0
+                if j < n and buf[j] == 46:
+                    j += 1
+                    while j < n and 48 <= buf[j] <= 57:
+                        frac = frac * 10.0 + (buf[j] - 48)
+                        nf += 1
+                        j += 1
+                if j >= n and not final:
+                    incomplete = True
+                    break
+                if nd + nf == 0:
+                    err = E_NUMBER
+                    err_pos = i
+                    break
+                if j < n:
+                    e = buf[j]
+                    if _letter(e):
+                        if j + 1 < n:
+                            if not _letter(buf[j + 1]):
+                                err = E_NUMBER
+                                err_pos = i
+                                break
+                        elif not final:
+                            incomplete = True
+                            break
+                    elif not (e == 44 or e == 59 or _space(e)):
+                        err = E_NUMBER
+                        err_pos = i
+                        break
+                value = ival
+                if nf:
+                    value += frac / 10.0 ** nf
+                p_val[npar] = sign * value
+                p_line[npar] = line
+                p_col[npar] = base + i - lstart + 1
+                npar += 1
+                expect = 1
+                num_start = i
+                num_end = j
+                if _coord_cmd(code) and (npar - p0) % 2 == 0:
+                    pair_pos = j
+                    pair_np = npar
+                    pair_line = line
+                    pair_lstart = lstart
+                i = j
+            elif _space(c):
+                if c == 10:
+                    line += 1
+                    lstart = base + i + 1
+                i += 1
+            else:
+                err = E_CHAR
+                err_pos = i
+                break
+        elif mode == M_SKIP or mode == M_PE or mode == M_DT:
+            if mode == M_DT:
+                mode = M_SKIP
+                if c != 59:
+                    term = c
+                    if c == 10:
+                        line += 1
+                        lstart = base + i + 1
+                    i += 1
+                    continue
+                term = 3
+            if c == 59 or (mode == M_SKIP and _letter(c)):
+                c_code[nc] = code
+                c_off[nc] = coff
+                c_line[nc] = cline
+                c_col[nc] = ccol
+                c_p0[nc] = npar
+                c_np[nc] = 0
+                nc += 1
+                mode = M_IDLE
+                if c == 59:
+                    i += 1
+                continue
+            if c == 34 and mode == M_SKIP:  # '"' opens a quoted string
+                mode = M_QUOTE
+            elif c == 10:
+                line += 1
+                lstart = base + i + 1
+            i += 1
+        else:  # M_QUOTE, M_LABEL
+            if mode == M_QUOTE and c == 34:
+                mode = M_SKIP
+            elif mode == M_LABEL and c == term:
+                c_code[nc] = code
+                c_off[nc] = coff
+                c_line[nc] = cline
+                c_col[nc] = ccol
+                c_p0[nc] = npar
+                c_np[nc] = 0
+                nc += 1
+                mode = M_IDLE
+            if c == 10:
+                line += 1
+                lstart = base + i + 1
+            i += 1
+    consumed = n
+    resume = 0
+    if err == E_NONE and (incomplete or not final):
+        if mode == M_IDLE:
+            consumed = n
+        elif mode == M_PARAMS and _coord_cmd(code) and pair_pos >= 0:
+            # a long coordinate command: hand over its complete pairs, resume after them
+            c_code[nc] = code
+            c_off[nc] = coff
+            c_line[nc] = cline
+            c_col[nc] = ccol
+            c_p0[nc] = p0
+            c_np[nc] = pair_np - p0
+            nc += 1
+            npar = pair_np
+            consumed = pair_pos
+            line = pair_line
+            lstart = pair_lstart
+            resume = code
+        else:
+            npar = p0 if mode != M_MN1 else npar
+            consumed = safe
+            line = safe_line
+            lstart = safe_lstart
+            if st[S_RESUME] != 0 and safe == 0 and mode == M_PARAMS:
+                resume = st[S_RESUME]  # the resumed command is still without a complete pair: read more
+    elif err == E_NONE:  # the end of the file
+        if mode == M_MN1:
+            err = E_EOF_MNEMONIC
+            err_pos = cstart
+        elif mode == M_PARAMS:
+            if expect == 2:
+                err = E_EOF_COMMA
+                err_pos = n
+            else:
+                c_code[nc] = code
+                c_off[nc] = coff
+                c_line[nc] = cline
+                c_col[nc] = ccol
+                c_p0[nc] = p0
+                c_np[nc] = npar - p0
+                nc += 1
+        elif mode == M_LABEL:
+            err = E_EOF_LABEL
+            err_pos = n
+        elif mode == M_QUOTE:
+            err = E_EOF_STRING
+            err_pos = n
+        elif mode != M_IDLE:
+            c_code[nc] = code
+            c_off[nc] = coff
+            c_line[nc] = cline
+            c_col[nc] = ccol
+            c_p0[nc] = npar
+            c_np[nc] = 0
+            nc += 1
+    if err != E_NONE:
+        # position of the error: line and column of err_pos (recount from the last known line start)
+        el = line
+        els = lstart
+        if base + err_pos < lstart:  # the error lies before the current line (at a command start)
+            el = safe_line
+            els = safe_lstart
+        st[S_ERRLINE] = el
+        st[S_ERRCOL] = base + err_pos - els + 1
+        st[S_ERRPOS] = base + err_pos
+        st[S_ERRAUX] = code
+        if err == E_EOF_COMMA or err == E_EOF_LABEL or err == E_EOF_STRING or err == E_TRAIL:
+            st[S_ERRLINE] = cline
+            st[S_ERRCOL] = ccol
+    st[S_ERR] = err
+    st[S_CONSUMED] = consumed
+    st[S_NCMD] = nc
+    st[S_NPAR] = npar
+    st[S_LINE] = line
+    st[S_LSTART] = lstart
+    st[S_BASE] = base + consumed
+    st[S_TERM] = term
+    st[S_RESUME] = resume
+    if resume != 0:
+        st[S_COFF] = coff
+        st[S_CLINE] = cline
+        st[S_CCOL] = ccol
+    return nc
+
+
+@njit(cache=True)
+def _interpret(n_cmd, c_code, c_line, c_col, c_p0, c_np, p_val, p_line, p_col, ist,
+               o_x, o_y, o_line, o_col, o_start, o_pen, err):
+    """Pen-down points of one chunk's commands; ``ist`` carries the plotter state between chunks."""
+    pen_down = ist[0] != 0
+    rel = ist[1] != 0
+    cx = ist[2]
+    cy = ist[3]
+    pen = int(ist[4])
+    cl = int(ist[5])
+    cc = int(ist[6])
+    k = 0
+    for ci in range(n_cmd):
+        code = c_code[ci]
+        p0 = c_p0[ci]
+        m = c_np[ci]
+        if code == C_IN:
+            pen_down = False
+            rel = False
+        elif code == C_DF:
+            rel = False
+        elif code == C_SP:
+            v = p_val[p0] if m else 0.0
+            if m > 1 or v < 0 or v != np.floor(v) or v > 1e9:
+                err[0] = E_SP
+                err[1] = c_line[ci]
+                err[2] = c_col[ci]
+                return k
+            pen = int(v)
+            pen_down = False
+        elif _coord_cmd(code):
+            if m % 2:
+                err[0] = E_ODD
+                err[1] = p_line[p0 + m - 1]
+                err[2] = p_col[p0 + m - 1]
+                err[3] = m
+                return k
+            if code == C_PU:
+                pen_down = False
+            elif code == C_PD:
+                if not pen_down:
+                    o_x[k] = cx
+                    o_y[k] = cy
+                    o_line[k] = cl if cl > 0 else c_line[ci]
+                    o_col[k] = cc if cl > 0 else c_col[ci]
+                    o_start[k] = True
+                    o_pen[k] = pen
+                    k += 1
+                    pen_down = True
+            elif code == C_PA:
+                rel = False
+            else:
+                rel = True
+            for q in range(p0, p0 + m, 2):
+                if rel:
+                    cx += p_val[q]
+                    cy += p_val[q + 1]
+                else:
+                    cx = p_val[q]
+                    cy = p_val[q + 1]
+                cl = p_line[q]
+                cc = p_col[q]
+                if pen_down:
+                    o_x[k] = cx
+                    o_y[k] = cy
+                    o_line[k] = cl
+                    o_col[k] = cc
+                    o_start[k] = False
+                    o_pen[k] = pen
+                    k += 1
+    ist[0] = 1.0 if pen_down else 0.0
+    ist[1] = 1.0 if rel else 0.0
+    ist[2] = cx
+    ist[3] = cy
+    ist[4] = pen
+    ist[5] = cl
+    ist[6] = cc
+    return k
+
+
+@dataclass(frozen=True)
+class HpglCommand:
+    """One HPGL command as read from the file.
+
+    Attributes:
+        name: two-letter mnemonic in upper case (``"PA"``).
+        params: numeric parameters, in order (``()`` for unknown commands, whose parameters are skipped).
+        offset: byte offset of the mnemonic from the start of the file.
+        line, column: where the mnemonic stands (1-based; columns count bytes).
+        known: True for the commands `cam` interprets (IN, DF, SP, PU, PD, PA, PR).
+
+    A coordinate command longer than a chunk comes as several commands with the same position.
+    """
+
+    name: str
+    params: tuple[float, ...]
+    offset: int
+    line: int
+    column: int
+    known: bool
+
+
+@dataclass
+class _Block:
+    n_cmd: int
+    code: np.ndarray
+    off: np.ndarray
+    line: np.ndarray
+    col: np.ndarray
+    p0: np.ndarray
+    np_: np.ndarray
+    val: np.ndarray
+    vline: np.ndarray
+    vcol: np.ndarray
+
+
+def _open(src: Source) -> tuple[BinaryIO, str, bool, Optional[int]]:
+    """(binary-ish stream, source name, opened here, size in bytes or None)."""
+    if isinstance(src, (str, os.PathLike)):
+        p = Path(src)
+        try:
+            f = open(p, "rb")
+        except FileNotFoundError:
+            raise ParseError(f"{p}: file not found") from None
+        except OSError as exc:
+            raise ParseError(f"{p}: cannot read ({exc.strerror or exc})") from None
+        try:
+            size: Optional[int] = os.fstat(f.fileno()).st_size
+        except OSError:
+            size = None
+        return f, str(p), True, size
+    return src, str(getattr(src, "name", "<hpgl>")), False, None  # type: ignore[return-value]
+
+
+def _token_text(buf: bytes, pos: int) -> str:
+    end = pos
+    while end < len(buf) and end - pos < 24 and buf[end] not in b",; \t\r\n":
+        end += 1
+    return buf[pos:max(end, pos + 1)].decode("latin-1")
+
+
+def _chunks(src: Source, *, source: Optional[str] = None, progress: Optional[Progress] = None,
+            chunk_bytes: int = CHUNK_BYTES) -> Iterator[_Block]:
+    """Tokenized chunks of a file: each yields views into arrays reused by the next one.
+
+    The tokenizer stops before a command that may continue in the next chunk and hands back
+    where to resume; a coordinate command longer than a chunk is handed over pair by pair.
+    """
+    stream, name, opened, size = _open(src)
+    name = source or name
+    try:
+        st = np.zeros(16, np.int64)
+        st[S_LINE] = 1
+        st[S_TERM] = 3
+        cap = 0
+        carry = b""
+        done = 0
+        while True:
+            data = stream.read(chunk_bytes)
+            if isinstance(data, str):
+                data = data.encode("latin-1", "replace")
+            final = not data
+            done += len(data)
+            buf = carry + data if carry else data
+            if not buf:
+                break
+            need = len(buf) // 2 + 2
+            if need > cap:
+                cap = max(need, chunk_bytes // 2 + 2)
+                c_code = np.empty(cap, np.int64)
+                c_off = np.empty(cap, np.int64)
+                c_line = np.empty(cap, np.int32)
+                c_col = np.empty(cap, np.int32)
+                c_p0 = np.empty(cap, np.int32)
+                c_np = np.empty(cap, np.int32)
+                p_val = np.empty(cap, np.float64)
+                p_line = np.empty(cap, np.int32)
+                p_col = np.empty(cap, np.int32)
+            base = int(st[S_BASE])
+            arr = np.frombuffer(buf, np.uint8)
+            nc = _tokenize(arr, final, st, c_code, c_off, c_line, c_col, c_p0, c_np, p_val, p_line, p_col)
+            if st[S_ERR]:
+                raise ParseError(_tokenize_message(st, buf, base, name))
+            yield _Block(int(nc), c_code, c_off, c_line, c_col, c_p0, c_np, p_val, p_line, p_col)
+            if progress is not None:
+                progress(done, size)
+            carry = buf[int(st[S_CONSUMED]):]
+            if final:
+                break
+    finally:
+        if opened:
+            stream.close()
+
+
+def _tokenize_message(st: np.ndarray, buf: bytes, base: int, name: str) -> str:
+    err = int(st[S_ERR])
+    pos = int(st[S_ERRPOS]) - base
+    where = f"{name}:{int(st[S_ERRLINE])}:{int(st[S_ERRCOL])}"
+    mnemonic = _name(int(st[S_ERRAUX]))
+    if err == E_CHAR:
+        return f"{where}: unexpected character {buf[pos:pos + 1]!r}"[:200]
+    if err == E_MNEMONIC:
+        return f"{where}: '{_token_text(buf, pos)}' is not an HPGL command (two letters expected)"
+    if err == E_NUMBER:
+        return f"{where}: malformed number '{_token_text(buf, pos)}'"
+    if err == E_EMPTY:
+        return f"{where}: empty parameter (a ',' with no number before it)"
+    if err == E_TRAIL:
+        return f"{where}: '{mnemonic}': a number must follow ','"
+    if err == E_EOF_COMMA:
+        return f"{where}: unterminated command '{mnemonic}' at the end of the file (a number must follow ',')"
+    if err == E_EOF_MNEMONIC:
+        return f"{where}: unterminated command '{_token_text(buf, pos)}' at the end of the file"
+    if err == E_EOF_LABEL:
+        return f"{where}: unterminated label 'LB' at the end of the file (no label terminator)"
+    return f"{where}: unterminated quoted string in '{mnemonic}' at the end of the file"
+
+
+def iter_hpgl(src: Source, *, source: Optional[str] = None, progress: Optional[Progress] = None) -> Iterator[HpglCommand]:
+    """The commands of an HPGL file, streamed (memory stays flat as the file grows).
+
+    Args:
+        src: a path, or an open binary (or text) file.
+        source: the name used in messages (default: the path or the stream's name).
+        progress: called as ``progress(bytes_read, total_bytes_or_None)`` after each chunk.
+
+    Raises:
+        ParseError: ``file:line:column: ...`` for malformed input (see the module docstring).
+
+    >>> [(c.name, c.params, c.line) for c in iter_hpgl(io.BytesIO(b"IN;PU 10,-2.5\\nPD;LT;"))]
+    [('IN', (), 1), ('PU', (10.0, -2.5), 1), ('PD', (), 2), ('LT', (), 2)]
+    """
+    for b in _chunks(src, source=source, progress=progress):
+        for i in range(b.n_cmd):
+            p0, m = int(b.p0[i]), int(b.np_[i])
+            code = int(b.code[i])
+            name = _name(code)
+            yield HpglCommand(name, tuple(float(v) for v in b.val[p0:p0 + m]), int(b.off[i]), int(b.line[i]),
+                              int(b.col[i]), name in KNOWN)
+
+
+@dataclass
+class _PointBlock:
+    x: np.ndarray
+    y: np.ndarray
+    line: np.ndarray
+    col: np.ndarray
+    start: np.ndarray
+    pen: np.ndarray
+
+
+class _Unknown:
+    """First occurrence and count of each unknown mnemonic (bounded memory)."""
+
+    def __init__(self) -> None:
+        self.first: dict[int, tuple[int, int, int]] = {}
+        self.count: dict[int, int] = {}
+
+    def add(self, b: _Block) -> None:
+        codes = b.code[:b.n_cmd]
+        unknown = ~np.isin(codes, np.array([_code(m) for m in KNOWN]))
+        if not unknown.any():
+            return
+        idx = np.flatnonzero(unknown)
+        uniq, first, counts = np.unique(codes[idx], return_index=True, return_counts=True)
+        for u, f, n in zip(uniq.tolist(), first.tolist(), counts.tolist()):
+            if u not in self.first:
+                j = idx[f]
+                self.first[u] = (int(b.off[j]), int(b.line[j]), int(b.col[j]))
+            self.count[u] = self.count.get(u, 0) + n
+
+    def warnings(self, source: str) -> list[str]:
+        out = []
+        hints = {"LB": "label text is not cut", "CO": "comment", "PE": "encoded polyline is not cut",
+                 "DT": "label terminator"}
+        for code, (off, line, _col) in sorted(self.first.items(), key=lambda kv: kv[1][0]):
+            name = _name(code)
+            more = self.count[code] - 1
+            hint = f"; {hints[name]}" if name in hints else ""
+            out.append(f"{source}:{line}: unknown command '{name}' at byte {off} ignored{hint}"
+                       + (f" ({more} more like it)" if more else ""))
+        return out
+
+
+def _points(src: Source, *, source: Optional[str], progress: Optional[Progress], unknown: _Unknown,
+            counts: dict[int, int], chunk_bytes: int = CHUNK_BYTES) -> Iterator[_PointBlock]:
+    """Pen-down points per chunk (views into reused arrays)."""
+    ist = np.zeros(7, np.float64)
+    err = np.zeros(4, np.int64)
+    cap = 0
+    name = source
+    for b in _chunks(src, source=source, progress=progress, chunk_bytes=chunk_bytes):
+        if name is None:
+            name = source or (str(src) if isinstance(src, (str, os.PathLike)) else str(getattr(src, "name", "<hpgl>")))
+        need = b.n_cmd + int(b.np_[:b.n_cmd].sum()) // 2 + 1
+        if need > cap:
+            cap = max(need, chunk_bytes // 4)
+            o_x = np.empty(cap, np.float64)
+            o_y = np.empty(cap, np.float64)
+            o_line = np.empty(cap, np.int32)
+            o_col = np.empty(cap, np.int32)
+            o_start = np.empty(cap, np.bool_)
+            o_pen = np.empty(cap, np.int32)
+        k = _interpret(b.n_cmd, b.code, b.line, b.col, b.p0, b.np_, b.val, b.vline, b.vcol, ist,
+                       o_x, o_y, o_line, o_col, o_start, o_pen, err)
+        if err[0]:
+            where = f"{name}:{int(err[1])}:{int(err[2])}"
+            if err[0] == E_SP:
+                raise ParseError(f"{where}: 'SP' takes one pen number (a whole number >= 0)")
+            raise ParseError(f"{where}: odd number of coordinates ({int(err[3])}): an x without its y")
+        unknown.add(b)
+        uniq, cnt = np.unique(b.code[:b.n_cmd], return_counts=True)
+        for u, n in zip(uniq.tolist(), cnt.tolist()):
+            counts[u] = counts.get(u, 0) + n
+        yield _PointBlock(o_x[:k], o_y[:k], o_line[:k], o_col[:k], o_start[:k], o_pen[:k])
+
+
+def _source_name(src: Source, source: Optional[str]) -> str:
+    if source:
+        return source
+    if isinstance(src, (str, os.PathLike)):
+        return str(src)
+    return str(getattr(src, "name", "<hpgl>"))
+
+
+@dataclass
+class HpglScan:
+    """What a streamed pass over an HPGL file found (nothing per point is kept).
+
+    Attributes:
+        source: the file name.
+        n_bytes: bytes read.
+        command_counts: number of each command, by mnemonic.
+        n_strokes, n_points: pen-down strokes and their points (each stroke's start included).
+        pens: pen numbers that draw, in order of first use.
+        extent_pu: ``(x_min, y_min, x_max, y_max)`` of the pen-down points in plotter units (HPGL frame,
+            Y up), or None when nothing is drawn.
+        warnings: unknown commands (byte offset and line).
+    """
+
+    source: str
+    n_bytes: int
+    command_counts: dict[str, int]
+    n_strokes: int
+    n_points: int
+    pens: list[int]
+    extent_pu: Optional[tuple[float, float, float, float]]
+    warnings: list[str] = field(default_factory=list)
+
+    def size_mm(self) -> tuple[float, float]:
+        """(width, height) of the drawn extent in mm."""
+        if self.extent_pu is None:
+            return (0.0, 0.0)
+        x0, y0, x1, y1 = self.extent_pu
+        return ((x1 - x0) * PLOTTER_UNIT_MM, (y1 - y0) * PLOTTER_UNIT_MM)
+
+
+def scan_hpgl(src: Source, *, source: Optional[str] = None, progress: Optional[Progress] = None,
+              chunk_bytes: int = CHUNK_BYTES) -> HpglScan:
+    """Stream an HPGL file once: counts, drawn extent, pens and warnings, in flat memory.
+
+    Raises:
+        ParseError: malformed input, ``file:line:column: ...``.
+
+    >>> s = scan_hpgl(io.BytesIO(b"SP2;PU40,40;PD80,40;VS10;"), source="s.plt")
+    >>> s.extent_pu, s.pens, s.n_points
+    ((40.0, 40.0, 80.0, 40.0), [2], 2)
+    """
+    name = _source_name(src, source)
+    unknown = _Unknown()
+    counts: dict[int, int] = {}
+    lo = np.array([np.inf, np.inf])
+    hi = np.array([-np.inf, -np.inf])
+    n_points = n_strokes = 0
+    pens: list[int] = []
+    n_bytes = [0]
+
+    def track(done: int, total: Optional[int]) -> None:
+        n_bytes[0] = done
+        if progress is not None:
+            progress(done, total)
+
+    for pb in _points(src, source=name, progress=track, unknown=unknown, counts=counts, chunk_bytes=chunk_bytes):
+        if len(pb.x) == 0:
+            continue
+        n_points += len(pb.x)
+        n_strokes += int(np.count_nonzero(pb.start))
+        lo = np.minimum(lo, [pb.x.min(), pb.y.min()])
+        hi = np.maximum(hi, [pb.x.max(), pb.y.max()])
+        if len(pens) < 256:
+            used, first_use = np.unique(pb.pen[pb.start], return_index=True)
+            for p in used[np.argsort(first_use)].tolist():
+                if p not in pens:
+                    pens.append(p)
+    extent = None if n_points == 0 else (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]))
+    return HpglScan(name, n_bytes[0], {_name(c): n for c, n in sorted(counts.items())}, n_strokes, n_points,
+                    pens, extent, unknown.warnings(name))
+
+
+@dataclass
+class HpglDrawing:
+    """The pen-down strokes of an HPGL file, in plotter units.
+
+    Attributes:
+        points_pu: ``(N, 2)`` float64 ``(X, Y)`` plotter units, HPGL frame (X right, Y up), every stroke's
+            points one after the other.
+        stroke_start: ``(S,)`` int64 index in ``points_pu`` of each stroke's first point (where the pen went
+            down); stroke k runs to ``stroke_start[k + 1]`` (or N).
+        stroke_pen: ``(S,)`` int64 pen selected (``SP``) when each stroke began; 0 = none selected.
+        point_line, point_col: ``(N,)`` int32 where in the file each point's coordinates stand.
+        source: the file name; warnings: unknown commands; command_counts: commands by mnemonic.
+    """
+
+    points_pu: np.ndarray
+    stroke_start: np.ndarray
+    stroke_pen: np.ndarray
+    point_line: np.ndarray
+    point_col: np.ndarray
+    source: str = "<hpgl>"
+    warnings: list[str] = field(default_factory=list)
+    command_counts: dict[str, int] = field(default_factory=dict)
+
+    @property
+    def n_strokes(self) -> int:
+        return len(self.stroke_start)
+
+    def strokes(self) -> Iterator[tuple[int, np.ndarray]]:
+        """``(pen, (M, 2) points_pu)`` of each stroke, in file order."""
+        ends = np.append(self.stroke_start[1:], len(self.points_pu))
+        for pen, a, b in zip(self.stroke_pen.tolist(), self.stroke_start.tolist(), ends.tolist()):
+            yield pen, self.points_pu[a:b]
+
+    def extent_pu(self) -> Optional[tuple[float, float, float, float]]:
+        """``(x_min, y_min, x_max, y_max)`` of the points (plotter units), None when empty."""
+        if len(self.points_pu) == 0:
+            return None
+        lo, hi = self.points_pu.min(axis=0), self.points_pu.max(axis=0)
+        return (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]))
+
+
+def load_hpgl(src: Source, *, source: Optional[str] = None, progress: Optional[Progress] = None,
+              chunk_bytes: int = CHUNK_BYTES) -> HpglDrawing:
+    """Read an HPGL file (streamed) into its pen-down strokes; see the module docstring for the dialect.
+
+    Raises:
+        ParseError: malformed input, ``file:line:column: ...``; a missing file.
+    """
+    name = _source_name(src, source)
+    unknown = _Unknown()
+    counts: dict[int, int] = {}
+    parts: list[tuple[np.ndarray, ...]] = []
+    for pb in _points(src, source=name, progress=progress, unknown=unknown, counts=counts, chunk_bytes=chunk_bytes):
+        if len(pb.x):
+            parts.append((np.column_stack([pb.x, pb.y]), pb.line.copy(), pb.col.copy(), pb.start.copy(), pb.pen.copy()))
+    if parts:
+        pts = np.concatenate([p[0] for p in parts])
+        line = np.concatenate([p[1] for p in parts])
+        col = np.concatenate([p[2] for p in parts])
+        start = np.concatenate([p[3] for p in parts])
+        pen = np.concatenate([p[4] for p in parts])
+    else:
+        pts = np.zeros((0, 2))
+        line = col = pen = np.zeros(0, np.int32)
+        start = np.zeros(0, bool)
+    starts = np.flatnonzero(start).astype(np.int64)
+    return HpglDrawing(pts, starts, pen[starts].astype(np.int64), line, col, name, unknown.warnings(name),
+                       {_name(c): n for c, n in sorted(counts.items())})
+
+
+def parse_hpgl(text: Union[str, bytes], *, source: str = "<hpgl>") -> HpglDrawing:
+    """:func:`load_hpgl` of HPGL text held in memory."""
+    data = text.encode("latin-1", "replace") if isinstance(text, str) else bytes(text)
+    return load_hpgl(io.BytesIO(data), source=source)
+
+
+def hpgl_steps(drawing: HpglDrawing, *, settings: MachineSettings = DEFAULT_SETTINGS,
+               offset_mm: Optional[tuple[float, float]] = None) -> np.ndarray:
+    """``(N, 2)`` int64 machine ``(x, y)`` steps of every point of ``drawing`` (see the module docstring).
+
+    Nearest step: ``floor(v + 0.5)`` of the exact position in steps.
+    """
+    pu = drawing.points_pu
+    k = PLOTTER_UNIT_MM / settings.mm_per_step_xy
+    if len(pu) == 0:
+        return np.zeros((0, 2), np.int64)
+    if offset_mm is None:
+        x_steps = (pu[:, 0] - pu[:, 0].min()) * k
+        y_steps = (pu[:, 1].max() - pu[:, 1]) * k
+    else:
+        ox, oy = offset_mm
+        x_steps = (ox + pu[:, 0] * PLOTTER_UNIT_MM) / settings.mm_per_step_xy
+        y_steps = (oy - pu[:, 1] * PLOTTER_UNIT_MM) / settings.mm_per_step_xy
+    return np.floor(np.column_stack([x_steps, y_steps]) + 0.5).astype(np.int64)
+
+
+def plan_hpgl(
+    drawing: HpglDrawing,
+    *,
+    settings: MachineSettings = DEFAULT_SETTINGS,
+    depth_mm: float = DEFAULT_CUT_DEPTH_MM,
+    safe_height_mm: float = DEFAULT_SAFE_HEIGHT_MM,
+    offset_mm: Optional[tuple[float, float]] = None,
+) -> Toolpath:
+    """Plan the cutting of an HPGL drawing, in machine steps.
+
+    Each stroke: travel at the safe height to its first point, plunge to the cutting depth, cut
+    through its points (one straight move per pen-down segment), lift.  A stroke that starts within
+    one step of where the previous one ended, with the same tool, is cut on without lifting.  When the
+    pen changes (the first ``SP`` too), the job pauses at the safe height with the note
+    ``"tool change: pen N"`` (004 section 3.6.2: ``SPn`` means the drill bit is changed).  The job
+    starts and ends at (0, 0, 0).
+
+    Args:
+        drawing: the strokes (:func:`load_hpgl`).
+        settings: machine settings (mm per step, delays, travel).
+        depth_mm: cutting depth below the surface (> 0); safe_height_mm: travel height above it (>= 0).
+        offset_mm: machine position (mm from the home) of plotter (0, 0); None = the drawing's top-left at the home.
+
+    Returns:
+        A :class:`Toolpath` in machine steps (its settings have 1 step per "pixel"): CUT points at the
+        cutting depth (``target`` marks them), TRAVEL at the safe height, RETRACT straight up.
+
+    Raises:
+        PlanError: bad options, nothing drawn; TravelError: a point outside the travel, ``file:line:column``.
+    """
+    if not (depth_mm > 0) or not (safe_height_mm >= 0):
+        raise PlanError("the cutting depth must be > 0 mm and the safe height >= 0 mm")
+    n = len(drawing.points_pu)
+    if n == 0:
+        raise PlanError(f"{drawing.source}: nothing to cut (no pen-down moves)")
+    xy = hpgl_steps(drawing, settings=settings, offset_mm=offset_mm)
+    (x_lo, x_hi), (y_lo, y_hi), (z_lo, z_hi) = settings.travel.bounds_steps()
+    bad = np.flatnonzero((xy[:, 0] < x_lo) | (xy[:, 0] > x_hi) | (xy[:, 1] < y_lo) | (xy[:, 1] > y_hi))
+    if len(bad):
+        i = int(bad[0])
+        mm = settings.mm_per_step_xy
+        raise TravelError(
+            f"{drawing.source}:{int(drawing.point_line[i])}:{int(drawing.point_col[i])}: point "
+            f"X{drawing.points_pu[i, 0]:g} Y{drawing.points_pu[i, 1]:g} (plotter units) lies outside the machine "
+            f"travel (machine {xy[i, 0] * mm:.2f}, {xy[i, 1] * mm:.2f} mm; travel X {x_lo * mm:g}..{x_hi * mm:g} mm, "
+            f"Y {y_lo * mm:g}..{y_hi * mm:g} mm)"
+        )
+    depth_steps = int(round(depth_mm / settings.mm_per_step_z))
+    safe_steps = -int(round(safe_height_mm / settings.mm_per_step_z))
+    if depth_steps < 1:
+        raise PlanError(f"cutting depth {depth_mm:g} mm is less than one Z step ({settings.mm_per_step_z:g} mm)")
+    if depth_steps > z_hi or safe_steps < z_lo:
+        raise TravelError(f"cutting depth {depth_mm:g} mm and safe height {safe_height_mm:g} mm need Z "
+                          f"{safe_steps}..{depth_steps} steps; the Z travel is {z_lo}..{z_hi} steps")
+
+    is_start = np.zeros(n, bool)
+    is_start[drawing.stroke_start] = True
+    stroke_of = np.cumsum(is_start) - 1
+    # a point at the same step as the one before it in its stroke adds nothing
+    dup = np.zeros(n, bool)
+    dup[1:] = np.all(xy[1:] == xy[:-1], axis=1) & ~is_start[1:]
+    keep = ~dup
+    xy, is_start, stroke_of = xy[keep], is_start[keep], stroke_of[keep]
+    n = len(xy)
+    # the tool in the machine for each stroke: pen 0 (none selected) keeps the tool that is in
+    pens = drawing.stroke_pen.astype(np.int64)
+    have = np.where(pens != 0, np.arange(len(pens)), -1)
+    last = np.maximum.accumulate(have) if len(pens) else have
+    tool = np.where(last >= 0, pens[np.maximum(last, 0)], 0)
+    prev_tool = np.concatenate([[0], tool[:-1]])
+    change = (tool != 0) & (tool != prev_tool)
+    # strokes that begin within one step of the previous stroke's end continue without a lift
+    starts = np.flatnonzero(is_start)
+    joined = np.zeros(len(starts), bool)
+    if len(starts) > 1:
+        gap = np.abs(xy[starts[1:]] - xy[starts[1:] - 1]).max(axis=1)
+        joined[1:] = (gap <= 1) & ~change[1:]
+    group = np.zeros(n, bool)
+    group[starts[~joined]] = True
+    pause_group = np.zeros(n, bool)
+    pause_group[starts] = change
+
+    rows = np.where(group, 3, 1)
+    first = np.cumsum(rows) - rows
+    total = int(rows.sum()) + 3
+    pts = np.empty((total, 3), np.int64)
+    kind = np.full(total, CUT, np.uint8)
+    pause = np.zeros(total, bool)
+    gi = np.flatnonzero(group)
+    prev = np.zeros((len(gi), 2), np.int64)
+    prev[gi > 0] = xy[gi[gi > 0] - 1]
+    r0 = first[gi]
+    pts[r0, :2], pts[r0, 2], kind[r0] = prev, safe_steps, RETRACT  # lift where the tool is
+    pts[r0 + 1, :2], pts[r0 + 1, 2], kind[r0 + 1] = xy[gi], safe_steps, TRAVEL  # travel above the stroke
+    pts[r0 + 2, :2], pts[r0 + 2, 2] = xy[gi], depth_steps  # plunge
+    pause[r0] = pause_group[gi]
+    ci = np.flatnonzero(~group)
+    pts[first[ci], :2], pts[first[ci], 2] = xy[ci], depth_steps
+    end = xy[-1]
+    pts[-3] = (end[0], end[1], safe_steps)
+    kind[-3] = RETRACT
+    pts[-2] = (0, 0, safe_steps)
+    pts[-1] = (0, 0, 0)
+    kind[-2:] = TRAVEL
+    # drop moves of length 0 (row 0 stays: a pause at the start needs a point); a pause moves to the kept point
+    same = np.zeros(total, bool)
+    same[1:] = np.all(pts[1:] == pts[:-1], axis=1)
+    keep_row = ~same
+    if pause[same].any():
+        idx = np.maximum.accumulate(np.where(keep_row, np.arange(total), 0))
+        pause[idx[pause & same]] = True
+    pts, kind, pause = pts[keep_row], kind[keep_row], pause[keep_row]
+    unit = settings.replace(steps_per_px_xy=1, steps_per_px_z=1)
+    check_travel(pts, unit)
+    notes = [f"tool change: pen {int(t)}" for t in tool[change]]
+    return Toolpath(
+        points_px=pts, kind=kind, target=(kind == CUT) & (pts[:, 2] == depth_steps), pause=pause, settings=unit,
+        width_px=int(pts[:, 0].max()) + 1, height_px=int(pts[:, 1].max()) + 1,
+        warnings=list(drawing.warnings), pause_notes=notes,
+    )
