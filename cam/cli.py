@@ -316,6 +316,28 @@ def build_parser() -> argparse.ArgumentParser:
     gt.add_argument("--pin-log", metavar="FILE.csv", help="write the mock's pin log")
     gt.add_argument("--no-progress", action="store_true", help="no progress bar")
     gt.set_defaults(func=cmd_goto)
+
+    sv = sub.add_parser(
+        "serve", help="control the machine from a web page (phone or desktop)",
+        description="Start the web server: upload a drawing, G-code, Excellon or HPGL file, see its preview, "
+        "size and time, start / pause / resume / stop it, jog, answer tool changes and watch it live. Listens "
+        "on 127.0.0.1:8000; any other --host needs a token (one is made and printed in the URL). The machine "
+        "port is the logging mock unless --machine-port names a real one.",
+    )
+    sv.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1; 0.0.0.0 = every network, needs a token)")
+    sv.add_argument("--port", type=int, default=8000, help="TCP port of the web page (default 8000)")
+    sv.add_argument("--token", help="token every request must carry (default: none on localhost, a new random one otherwise)")
+    sv.add_argument("--jobs-dir", metavar="DIR", help="folder for uploaded files (default: a new temporary folder)")
+    sv.add_argument("--max-upload-mb", type=float, default=50.0, metavar="MB", help="larger uploads are refused (default 50)")
+    sv.add_argument("--machine-port", default="mock", metavar="PORT",
+                    help="'mock' (default: logs, moves nothing) or a device like /dev/parport0")
+    _add_machine_options(sv)
+    clock = sv.add_mutually_exclusive_group()
+    clock.add_argument("--realtime", dest="realtime", action="store_true", default=True,
+                       help="run the mock in real time, so the page shows live progress (default)")
+    clock.add_argument("--simulated", dest="realtime", action="store_false",
+                       help="run the mock on the simulated clock (jobs end at once); real ports are always real time")
+    sv.set_defaults(func=cmd_serve)
     return parser
 
 
@@ -629,6 +651,19 @@ def cmd_jog(args: argparse.Namespace) -> int:
         return EXIT_INTERRUPTED
     print(f"jogged {axis[0]} by {n} steps")
     return 0
+
+
+def cmd_serve(args: argparse.Namespace) -> int:
+    from .web.server import ServerConfig, serve
+
+    if not (0 <= args.port <= 65535):
+        raise CamError(f"--port must be 0..65535, got {args.port}")
+    if not (args.max_upload_mb > 0):
+        raise CamError(f"--max-upload-mb must be > 0, got {args.max_upload_mb}")
+    config = ServerConfig(host=args.host, port=args.port, token=args.token, jobs_dir=args.jobs_dir,
+                          max_upload_bytes=int(args.max_upload_mb * 1024 * 1024), settings=_settings(args),
+                          machine_port=args.machine_port, realtime=args.realtime)
+    return serve(config, announce=lambda line: print(line, flush=True))
 
 
 def cmd_emulate(args: argparse.Namespace) -> int:

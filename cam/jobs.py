@@ -93,8 +93,8 @@ class JobOptions:
         ("inch"/"metric"), excellon_digits ``(integer, fraction)``, excellon_zeros ("LZ"/"TZ") for
         files that do not say.
     G-code and HPGL:
-        flip_y: G-code machine Y = +Y mm instead of -Y mm; depth_mm / travel_height_mm: HPGL pen-down
-        depth and pen-up height.
+        flip_y: G-code machine Y = +Y mm instead of -Y mm; depth_mm / travel_height_mm / offset_mm: HPGL
+        pen-down depth, pen-up height and machine position of plotter (0, 0) (None = top-left at the home).
     """
 
     depth: tuple[int, ...] = (10,)
@@ -514,16 +514,23 @@ def _prepare_excellon(path: Path, options: JobOptions, settings: MachineSettings
 
 
 def _prepare_hpgl(path: Path, options: JobOptions, settings: MachineSettings) -> PreparedJob:
-    from . import hpgl  # lazy: only HPGL jobs need it
+    from .drive.steps import plan_steps
+    from .hpgl import load_hpgl, plan_hpgl  # lazy: only HPGL jobs need it
 
-    steps = hpgl.plan_hpgl_steps(hpgl.load_hpgl(path), settings, depth_mm=options.depth_mm,
-                                 safe_height_mm=options.travel_height_mm)
-    return PreparedJob(source=str(path), kind="hpgl", steps=steps, settings=settings,
-                       summary=f"{path.name}: HPGL drawing")
+    drawing = load_hpgl(path)
+    toolpath = plan_hpgl(drawing, settings=settings, depth_mm=options.depth_mm,
+                         safe_height_mm=options.travel_height_mm, offset_mm=options.offset_mm)
+    steps = plan_steps(toolpath)
+    return PreparedJob(
+        source=str(path), kind="hpgl", steps=steps, settings=settings, toolpath=toolpath,
+        warnings=list(drawing.warnings), summary=f"{path.name}: {drawing.n_strokes} pen-down strokes",
+        report={"strokes": drawing.n_strokes},
+    )
 
 
 def prepare_job(
-    path: str | os.PathLike, options: Optional[JobOptions] = None, settings: MachineSettings = DEFAULT_SETTINGS
+    path: str | os.PathLike, options: Optional[JobOptions] = None, settings: MachineSettings = DEFAULT_SETTINGS,
+    *, name: Optional[str] = None,
 ) -> PreparedJob:
     """Read a job file and plan it into steps.
 
@@ -531,6 +538,7 @@ def prepare_job(
         path: a drawing, a digitized matrix, a G-code, Excellon or HPGL file (kind by suffix).
         options: how to cut it (:class:`JobOptions`); None = the defaults.
         settings: the machine settings.
+        name: the name the summary gives the file (default: its file name).
 
     Returns:
         The :class:`PreparedJob`, planned relative to where the tool stands when it starts.
@@ -551,4 +559,6 @@ def prepare_job(
         job = _prepare_excellon(p, opts, settings)
     else:
         job = _prepare_hpgl(p, opts, settings)
+    if name:
+        job.summary = name + job.summary[len(p.name):]
     return _finish(job)

@@ -1,0 +1,241 @@
+// cam machine page: talks to /api (JSON) and listens to /api/events (server-sent events).
+"use strict";
+
+(function () {
+  const $ = (id) => document.getElementById(id);
+  const token = new URLSearchParams(location.search).get("token") || "";
+  const page = { job: null, kind: null, planned: null, profile: null, state: null, promptShown: null,
+                 logSeq: 0, estopAt: 0 };
+
+  function withToken(url) {
+    if (!token) return url;
+    return url + (url.includes("?") ? "&" : "?") + "token=" + encodeURIComponent(token);
+  }
+
+  function showError(text) {
+    $("error-text").textContent = text;
+    $("error").hidden = false;
+  }
+  function clearError() { $("error").hidden = true; $("error-text").textContent = ""; }
+
+  async function api(path, { json, form, method } = {}) {
+    const opts = { method: method || (json || form ? "POST" : "GET"), headers: {} };
+    if (token) opts.headers["X-Cam-Token"] = token;
+    if (json !== undefined) { opts.headers["Content-Type"] = "application/json"; opts.body = JSON.stringify(json); }
+    if (form !== undefined) opts.body = form;
+    let resp;
+    try {
+      resp = await fetch(path, opts);
+    } catch (e) {
+      showError("the server cannot be reached (" + e.message + ")");
+      throw e;
+    }
+    let data = null;
+    try { data = await resp.json(); } catch (e) { data = null; }
+    if (!resp.ok) {
+      const msg = (data && data.error) ? data.error : ("HTTP " + resp.status);
+      showError(msg + " (HTTP " + resp.status + ")");
+      const err = new Error(msg); err.status = resp.status; throw err;
+    }
+    return data;
+  }
+
+  function hms(s) {
+    s = Math.max(0, Math.round(s || 0));
+    const h = Math.floor(s / 3600), m = Math.floor((s % 3600) / 60), sec = s % 60;
+    return h + ":" + String(m).padStart(2, "0") + ":" + String(sec).padStart(2, "0");
+  }
+
+  // -- job: upload, options, plan ------------------------------------------------
+  function showKind(kind) {
+    document.querySelectorAll("fieldset[data-kinds]").forEach((fs) => {
+      fs.hidden = kind ? !fs.dataset.kinds.split(" ").includes(kind) : false;
+    });
+  }
+
+  function collectOptions() {
+    const kind = page.kind;
+    const o = {};
+    const val = (id) => $(id).value.trim();
+    if (kind === "drawing" || kind === "digitized") {
+      o.depth = val("opt-depth");
+      o.passes = val("opt-passes");
+      o.start = val("opt-start");
+      o.start_at = val("opt-start-at");
+      if (val("opt-pause-at")) o.pause_at = val("opt-pause-at");
+      if (page.profile) o.profile = page.profile;
+      else if (val("opt-profile-expr")) o.profile_expr = val("opt-profile-expr");
+    } else if (kind === "excellon") {
+      o.drill_depth_mm = val("opt-drill-depth");
+      o.travel_height_mm = val("opt-travel-height");
+      o.drill_order = val("opt-drill-order");
+      o.mirror_x = $("opt-mirror-x").checked;
+    } else if (kind === "hpgl") {
+      o.depth_mm = val("opt-depth-mm");
+      o.travel_height_mm = val("opt-travel-height");
+    } else if (kind === "gcode") {
+      o.flip_y = $("opt-flip-y").checked;
+    }
+    return o;
+  }
+
+  async function upload(file, role) {
+    const fd = new FormData();
+    fd.append("role", role);
+    fd.append("file", file, file.name);
+    return api("/api/upload", { form: fd });
+  }
+
+  async function planJob() {
+    if (!page.job) return;
+    clearError();
+    $("plan").disabled = true;
+    $("job-summary").textContent = "planning…";
+    try {
+      const r = await api("/api/plan", { json: { job: page.job, options: collectOptions() } });
+      page.planned = r;
+      $("job-size").textContent = r.size_mm[0].toFixed(2) + " × " + r.size_mm[1].toFixed(2) + " mm, depth " +
+        r.depth_mm.toFixed(2) + " mm";
+      $("job-time").textContent = hms(r.estimated_time_s) + " (" + r.estimated_time_s.toFixed(1) + " s)";
+      $("job-summary").textContent = r.summary;
+      $("job-tools").textContent = r.tool_changes.length ? r.tool_changes.join("; ") : "none";
+      const img = $("preview");
+      img.src = withToken(r.preview);
+      img.hidden = false;
+    } catch (e) {
+      page.planned = null;
+      $("job-summary").textContent = "not planned";
+    } finally {
+      $("plan").disabled = !page.job;
+      render(page.state);
+    }
+  }
+
+  $("file").addEventListener("change", async (ev) => {
+    const file = ev.target.files[0];
+    if (!file) return;
+    clearError();
+    page.job = null; page.planned = null; page.kind = null;
+    $("preview").hidden = true;
+    $("job-name").textContent = file.name + " – uploading…";
+    try {
+      const r = await upload(file, "job");
+      page.job = r.job; page.kind = r.kind;
+      $("job-name").textContent = r.name + " (" + r.kind + ", " + r.bytes + " bytes)";
+      showKind(r.kind);
+      await planJob();
+    } catch (e) {
+      $("job-name").textContent = file.name + " – refused";
+    } finally {
+      ev.target.value = "";
+      render(page.state);
+    }
+  });
+
+  $("profile-file").addEventListener("change", async (ev) => {
+    const file = ev.target.files[0];
+    if (!file) return;
+    clearError();
+    try {
+      const r = await upload(file, "profile");
+      page.profile = r.job;
+      $("profile-name").textContent = "profile: " + r.name;
+      if (page.job) await planJob();
+    } catch (e) {
+      page.profile = null;
+      $("profile-name").textContent = "";
+    } finally {
+      ev.target.value = "";
+    }
+  });
+
+  $("options-form").addEventListener("submit", (ev) => { ev.preventDefault(); planJob(); });
+
+  // -- run controls ----------------------------------------------------------------
+  function post(path, body) { clearError(); return api(path, { json: body || {} }).then(render, () => {}); }
+  $("start").addEventListener("click", () => page.planned && post("/api/start", { job: page.planned.job }));
+  $("pause").addEventListener("click", () => post("/api/pause"));
+  $("resume").addEventListener("click", () => post("/api/resume"));
+  $("stop").addEventListener("click", () => post("/api/stop"));
+  $("origin").addEventListener("click", () => post("/api/origin"));
+  document.querySelectorAll("button.jog").forEach((b) => b.addEventListener("click", () => {
+    const n = parseInt($("jog-steps").value, 10) * parseInt(b.dataset.dir, 10);
+    post("/api/jog", { axis: b.dataset.axis, steps: n });
+  }));
+
+  function estop() {
+    const now = Date.now();
+    if (now - page.estopAt < 300) return;  // pointerdown and the click after it
+    page.estopAt = now;
+    api("/api/estop", { json: {} }).catch(() => {});
+  }
+  $("estop").addEventListener("pointerdown", estop);
+  $("estop").addEventListener("click", estop);
+  document.addEventListener("keydown", (ev) => { if (ev.key === "Escape") estop(); });
+
+  function answer(action) {
+    const p = page.state && page.state.prompt;
+    $("prompt-dialog").close();
+    post("/api/answer", { prompt: p ? p.id : null, action: action });
+  }
+  $("prompt-continue").addEventListener("click", () => answer("continue"));
+  $("prompt-stop").addEventListener("click", () => answer("stop"));
+  $("error-close").addEventListener("click", clearError);
+
+  // -- live state ------------------------------------------------------------------
+  function render(s) {
+    if (!s || !s.state) return;
+    page.state = s;
+    const st = s.state;
+    const badge = $("state");
+    badge.textContent = st + (s.label && st !== "idle" ? ": " + s.label : "");
+    badge.dataset.state = st;
+    $("port").textContent = "port " + s.port + (s.realtime ? "" : " (simulated)");
+    const idle = st === "idle", job = s.activity === "job";
+    $("start").disabled = !(idle && page.planned);
+    $("pause").disabled = !(st === "running" || st === "moving");
+    $("resume").disabled = st !== "paused";
+    $("stop").disabled = idle;
+    document.querySelectorAll("button.jog, #origin").forEach((b) => { b.disabled = !idle; });
+    const shown = job || (idle && s.last && s.last.activity === "job");
+    const pct = shown ? s.progress : 0;
+    $("progress-bar").value = pct;
+    $("percent").textContent = (Math.round(pct * 10) / 10).toString();
+    $("elapsed").textContent = hms(shown ? s.elapsed_s : 0);
+    $("remaining").textContent = hms(shown ? s.remaining_s : 0);
+    $("pos-steps").textContent = s.position_steps.join(", ");
+    $("pos-mm").textContent = s.position_mm.map((v) => v.toFixed(3)).join(", ");
+    const dlg = $("prompt-dialog");
+    if (s.prompt) {
+      if (page.promptShown !== s.prompt.id) {
+        page.promptShown = s.prompt.id;
+        $("prompt-text").textContent = s.prompt.note + " — tool at " + s.prompt.position_steps.join(", ") + " steps";
+        if (!dlg.open) dlg.show();
+      }
+    } else if (dlg.open) {
+      dlg.close();
+    }
+    const log = $("log");
+    for (const e of s.log || []) {
+      if (e.seq <= page.logSeq) continue;
+      page.logSeq = e.seq;
+      const li = document.createElement("li");
+      li.className = e.level;
+      li.textContent = new Date(e.t * 1000).toLocaleTimeString() + "  " + e.text;
+      log.prepend(li);
+    }
+    while (log.children.length > 200) log.removeChild(log.lastChild);
+  }
+
+  function listen() {
+    const es = new EventSource(withToken("/api/events"));
+    es.onmessage = (ev) => { try { render(JSON.parse(ev.data)); } catch (e) { /* ignore a torn message */ } };
+    es.onerror = () => {
+      $("state").textContent = "offline";
+      $("state").dataset.state = "offline";
+    };
+  }
+
+  showKind(null);
+  api("/api/state").then((s) => { render(s); listen(); }, () => {});
+})();
