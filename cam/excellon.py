@@ -1,0 +1,662 @@
+"""Excellon drill files (``.drl``, ``.xln``, ``.exc``, ``.drd``) in, a :class:`HoleList` out.
+
+The reader takes the drill files that PCB programs really write (KiCad, Altium,
+Eagle, OrCAD, Fritzing, EasyEDA, ...), one statement per line:
+
+* header ``M48`` ... ``%`` (or ``M95``); a file that starts with ``%`` and no
+  ``M48`` has no header (the OrCAD 9 file of seed 000 §8.1, Table 8-1);
+* units ``METRIC`` / ``INCH`` (also ``M71`` / ``M72``) with optional ``,LZ`` /
+  ``,TZ`` and a ``,000.000`` style digit format, in any order;
+* ``FMAT,1`` / ``FMAT,2`` (in format 1 ``G81`` is the drill mode and ``M02``
+  ends the program); ``ICI,ON|OFF``, ``G90`` / ``G91`` (absolute /
+  incremental), ``G93X..Y..`` (zero set), ``G05`` / ``G81`` (drill mode);
+* format hints in comments: KiCad ``; FORMAT={3:3/ absolute / metric / suppress
+  leading zeros}`` (also ``decimal``, ``suppress trailing zeros``, ``keep
+  zeros``), Altium / EasyEDA ``;FILE_FORMAT=2:5``, Siemens ``; Format : 3.3 /
+  Absolute / MM / Leading``; other comments (``;TYPE=PLATED``, ...) are ignored;
+* tool definitions ``T1C0.8`` with optional ``F``, ``S``, ``B``, ``H``, ``Z``
+  parameters in any order (``T1F00S00C0.03150``).  A definition in the body
+  (after the header) is allowed and also selects the tool, as a ``T`` word in
+  the body does on the machine;
+* tool selection ``T01`` (= ``T1``); ``T0`` unloads the tool;
+* holes ``X..Y..``: with a decimal point, or implied decimals with leading
+  (``TZ``) or trailing (``LZ``) zero suppression; signs; modal coordinates (a
+  line with only ``X`` keeps the last ``Y``); ``R<n>X..Y..`` repeats a hole
+  ``n`` times at that step;
+* ``M30`` / ``M00`` end the program (later statements are ignored with a warning).
+
+Left out, each with a warning naming the line: slots (``X..Y..G85X..Y..``),
+routing (``G00`` ... ``M15`` / ``G01`` / ``G02`` / ``G03`` ... ``M16``, until
+``G05``), routed circles (``G32`` / ``G33``) and canned text (``M97`` / ``M98``).
+Their tool still appears in :meth:`HoleList.tool_table` (with the holes it drills,
+possibly 0).  Repeated patterns (``M25`` ... ``M01`` / ``M02X..Y..``, ``M08``)
+are refused with a :class:`~cam.errors.ParseError`: leaving them out would drop
+holes without a trace.
+
+**Zeros.** Excellon names the zeros a number *keeps*: ``LZ`` keeps leading zeros
+(trailing ones may be dropped, so ``X0125`` in 3:3 is 12.5), ``TZ`` keeps
+trailing zeros (leading ones may be dropped, so ``X12500`` in 3:3 is 12.5).  The
+``zeros`` argument uses the same names.
+
+**Defaults** when the file does not state them (each settable by the keyword
+arguments, which in turn give way to what the file says):
+
+* units: ``"inch"`` -- Excellon's own default, and the unit of the OrCAD file in
+  seed 000 §8.1, Table 8-1 (``X003000`` = 300 mil);
+* digits: inch 2:4 (Table 8-1: six digits for 0.0001 in; also what gerbonara
+  assumes for a bare ``INCH``), metric 3:3 (the KiCad and Eagle metric format);
+* zeros: ``"TZ"`` (leading zeros suppressed) -- what old Eagle, gEDA, Fritzing
+  and DipTrace files do and what gerbonara assumes.  Full-width numbers such as
+  Table 8-1's read the same either way.
+
+When a coordinate is read with a built-in default (not stated in the file nor
+given by an argument), the hole list carries a warning that says so.
+
+Frame: the board frame of the file, X right, Y up, in mm (inch values times 25.4).
+
+Errors raise :class:`~cam.errors.ParseError` with ``file:line: what: 'line
+text'`` (``file:line:column`` for a bad number); recoverable oddities become
+warnings with the same context.
+
+>>> h = parse_excellon("M48\\nMETRIC,TZ,000.000\\nT1C0.8\\n%\\nT1\\nX12500Y-3000\\nY-5\\nM30\\n")
+>>> h.holes_mm.tolist(), h.tool_table()
+([[12.5, -3.0], [12.5, -0.005]], [(1, 0.8, 2)])
+"""
+from __future__ import annotations
+
+import math
+import os
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .errors import CamError, ParseError
+
+__all__ = [
+    "HoleList",
+    "parse_excellon",
+    "load_excellon",
+    "DEFAULT_UNITS",
+    "DEFAULT_DIGITS",
+    "DEFAULT_ZEROS",
+]
+
+DEFAULT_UNITS = "inch"
+"""Units of a file that does not say (seed 000 §8.1, Table 8-1 is in inches)."""
+DEFAULT_DIGITS = {"inch": (2, 4), "metric": (3, 3)}
+"""Integer:fraction digits of implied-decimal numbers when the file does not say, per unit."""
+DEFAULT_ZEROS = "TZ"
+"""Trailing zeros kept, leading zeros suppressed, when the file does not say."""
+
+MM_PER_INCH = 25.4
+_UNIT_MM = {"inch": MM_PER_INCH, "metric": 1.0}
+
+_WORD = re.compile(r"([A-Z])([+-]?[0-9.]*)")
+_NUMBER = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)")
+_KICAD_FORMAT = re.compile(
+    r"FORMAT\s*=\s*\{\s*([-0-9]+)\s*:\s*([-0-9]+)\s*/\s*(absolute|incremental)\s*/\s*(metric|inch)\s*/\s*([^}]*)\}",
+    re.IGNORECASE,
+)
+_FILE_FORMAT = re.compile(r"FILE_FORMAT\s*=\s*([0-9])\s*:\s*([0-9])", re.IGNORECASE)
+_SIEMENS_FORMAT = re.compile(
+    r"Format\s*:\s*([0-9])\.([0-9])\s*/\s*(Absolute|Incremental)\s*/\s*(Inch|MM)\s*/\s*(Leading|Trailing)", re.IGNORECASE
+)
+# Header commands of the Excellon machines that say nothing about hole positions.
+_QUIET_COMMANDS = {
+    "VER", "DETECT", "ATC", "AFS", "BLKD", "CCW", "CP", "DN", "DTMDIST", "EXDA", "FSB", "HBCK", "NCSL", "OM48",
+    "OSTOP", "OTCLMP", "PCKPARAM", "PF", "PPR", "PVS", "SBK", "SG", "SIXM", "TCST", "UP", "RSB", "ZA", "ZC", "ZS",
+}
+_TOOL_PARAMS = set("CFSBHZN")
+_HARMLESS_M = {6, 9, 45, 47, 50, 51, 52, 60, 61, 62, 63}  # tool change, messages, ...
+_HARMLESS_G = {40, 41, 42, 4}  # cutter compensation, dwell
+
+
+@dataclass
+class HoleList:
+    """The holes of a drill file, in the file's board frame.
+
+    Attributes:
+        holes_mm: ``(N, 2)`` float64 hole centres (X right, Y up, mm), in file order.
+        tool_of_hole: ``(N,)`` int64 tool number of each hole.
+        tools: tool number -> diameter in mm, every tool the file defines.
+        line_of_hole: ``(N,)`` int64 source line (1-based) of each hole.
+        warnings: ``"file:line: message: 'line text'"`` for each recoverable oddity.
+        source: the file name used in messages.
+    """
+
+    holes_mm: np.ndarray
+    tool_of_hole: np.ndarray
+    tools: dict[int, float]
+    line_of_hole: np.ndarray
+    warnings: list[str] = field(default_factory=list)
+    source: str = "<excellon>"
+
+    def extent_mm(self) -> tuple[float, float, float, float]:
+        """``(x0, y0, x1, y1)``: the smallest and largest hole centre coordinates (mm); all 0.0 without holes."""
+        if len(self.holes_mm) == 0:
+            return (0.0, 0.0, 0.0, 0.0)
+        lo = self.holes_mm.min(axis=0)
+        hi = self.holes_mm.max(axis=0)
+        return (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]))
+
+    def tool_table(self) -> list[tuple[int, float, int]]:
+        """``[(tool, diameter_mm, hole_count)]`` for every *defined* tool, by tool number.
+
+        Tools that drill no hole (e.g. only slots, left out) are listed with a count of 0.
+        """
+        tools, counts = np.unique(self.tool_of_hole, return_counts=True)
+        count = dict(zip(tools.tolist(), counts.tolist()))
+        return [(t, float(d), int(count.get(t, 0))) for t, d in sorted(self.tools.items())]
+
+
+class _Reader:
+    """State of one pass over a drill file (internal)."""
+
+    def __init__(self, source: str, units, digits, zeros) -> None:
+        self.source = source
+        # what the caller gave for "when the file does not say"
+        self.opt_units, self.opt_digits, self.opt_zeros = units, digits, zeros
+        # what the file said (None = not stated)
+        self.units: str | None = None
+        self.digits: tuple[int, int] | None = None
+        self.zeros: str | None = None
+        self.fmat = 2
+        self.state = "start"  # start, header, body, route, end
+        self.seen_excellon = False
+        self.incremental = False
+        self.zero_mm = (0.0, 0.0)
+        self.pos_mm = [0.0, 0.0]
+        self.tool: int | None = None
+        self.tools: dict[int, float] = {}
+        self.holes: list[tuple[float, float]] = []
+        self.hole_tool: list[int] = []
+        self.hole_line: list[int] = []
+        self.warnings: list[str] = []
+        self.defaults_warned: set[str] = set()
+        self.after_end: list[int] = []
+        self.lineno = 0
+        self.text = ""
+
+    # -- messages ---------------------------------------------------------------------------
+    def where(self, col: int | None = None) -> str:
+        return f"{self.source}:{self.lineno}" + (f":{col}" if col is not None else "")
+
+    def error(self, message: str, col: int | None = None) -> ParseError:
+        return ParseError(f"{self.where(col)}: {message}: '{self.text}'")
+
+    def warn(self, message: str) -> None:
+        self.warnings.append(f"{self.where()}: {message}: '{self.text}'")
+
+    # -- number format ----------------------------------------------------------------------
+    def _setting(self, name: str):
+        stated = getattr(self, name)
+        if stated is not None:
+            return stated, "file"
+        given = getattr(self, "opt_" + name)
+        if given is not None:
+            return given, "option"
+        return None, "default"
+
+    def current_units(self) -> tuple[str, bool]:
+        units, src = self._setting("units")
+        return (units or DEFAULT_UNITS), src == "default"
+
+    def current_format(self, units: str) -> tuple[tuple[int, int], str, list[str]]:
+        digits, dsrc = self._setting("digits")
+        zeros, zsrc = self._setting("zeros")
+        assumed = []
+        if digits is None:
+            digits = DEFAULT_DIGITS[units]
+            assumed.append("digits")
+        if zeros is None:
+            zeros = DEFAULT_ZEROS
+            assumed.append("zeros")
+        return digits, zeros, assumed
+
+    def _warn_defaults(self, what: list[str], units: str, digits, zeros) -> None:
+        what = [w for w in what if w not in self.defaults_warned]
+        if not what:
+            return
+        self.defaults_warned.update(what)
+        parts = []
+        if "units" in what:
+            parts.append(f"units ({units})")
+        if "digits" in what:
+            parts.append(f"digits ({digits[0]}:{digits[1]})")
+        if "zeros" in what:
+            parts.append(f"zeros ({zeros}: {'leading' if zeros == 'TZ' else 'trailing'} zeros suppressed)")
+        self.warn("the file does not state its " + ", ".join(parts) + "; read with these defaults "
+                  "(set --excellon-units / --excellon-format / --excellon-zeros if the holes look wrong)")
+
+    def value_mm(self, text: str, letter: str, col: int) -> float:
+        """Read one number word (without its letter) as mm, with the current units and format."""
+        if not _NUMBER.fullmatch(text):
+            raise self.error(f"{letter} needs a number, got '{text}'" if text else f"{letter} without a number", col)
+        units, units_assumed = self.current_units()
+        scale = _UNIT_MM[units]
+        if "." in text:
+            if units_assumed:
+                self._warn_defaults(["units"], units, None, None)
+            return float(text) * scale
+        digits, zeros, assumed = self.current_format(units)
+        if units_assumed:
+            assumed.insert(0, "units")
+        sign = -1 if text.startswith("-") else 1
+        body = text.lstrip("+-")
+        n_int, n_frac = digits
+        if len(body) > n_int + n_frac:
+            raise self.error(
+                f"{letter}{text} has {len(body)} digits, more than the {n_int}:{n_frac} format allows "
+                f"({units}, {zeros})", col)
+        if len(body) == n_int + n_frac and "zeros" in assumed:
+            assumed.remove("zeros")  # a full-width number reads the same with LZ and TZ
+        self._warn_defaults(assumed, units, digits, zeros)
+        if zeros == "LZ":  # leading zeros kept: the digits are read from the left
+            body = body.ljust(n_int + n_frac, "0")
+        return sign * (int(body) * scale) / 10 ** n_frac
+
+    # -- statements -----------------------------------------------------------------------------
+    def comment(self, text: str) -> None:
+        m = _KICAD_FORMAT.search(text)
+        if m:
+            a, b, notation, units, zeros = m.groups()
+            self.units = units.lower()
+            self.incremental = notation.lower() == "incremental"
+            if a != "-" and b != "-":
+                self.digits = self._digits(a, b)
+            z = zeros.strip().lower()
+            if z.startswith("suppress leading") or z.startswith("keep"):
+                self.zeros = "TZ"
+            elif z.startswith("suppress trailing"):
+                self.zeros = "LZ"
+            return
+        m = _FILE_FORMAT.search(text)
+        if m:
+            self.digits = self._digits(*m.groups())
+            return
+        m = _SIEMENS_FORMAT.search(text)
+        if m:
+            a, b, notation, units, zeros = m.groups()
+            self.digits = self._digits(a, b)
+            self.incremental = notation.lower() == "incremental"
+            self.units = "inch" if units.lower() == "inch" else "metric"
+            self.zeros = "LZ" if zeros.lower() == "leading" else "TZ"
+
+    def _digits(self, a: str, b: str) -> tuple[int, int]:
+        try:
+            digits = int(a), int(b)
+        except ValueError:
+            raise self.error(f"bad digit format {a}:{b}") from None
+        if not (0 <= digits[0] <= 8 and 0 <= digits[1] <= 8 and sum(digits) > 0):
+            raise self.error(f"bad digit format {a}:{b}")
+        return digits
+
+    def command(self, line: str) -> bool:
+        """Header style commands (``METRIC,TZ``, ``FMAT,2``, ``VER,1``, ...); False if ``line`` is not one."""
+        head, comma, rest = line.partition(",")
+        args = rest.split(",") if comma else []
+        if re.fullmatch(r"M[0-9]+", head):  # M47,message / M97,text
+            self.m_word([("M", head[1:], 1)])
+            return True
+        if head in ("METRIC", "INCH"):
+            self.units = "metric" if head == "METRIC" else "inch"
+            for a in args:
+                if a in ("LZ", "TZ"):
+                    self.zeros = a
+                elif re.fullmatch(r"0*\.0*", a) and a != ".":
+                    i, _, f = a.partition(".")
+                    self.digits = self._digits(str(len(i)), str(len(f)))
+                elif a:
+                    raise self.error(f"unknown {head} option '{a}'")
+        elif head == "FMAT":
+            if args not in (["1"], ["2"]):
+                raise self.error("FMAT takes 1 or 2")
+            self.fmat = int(args[0])
+        elif head == "ICI":
+            self.incremental = not args or args[0] != "OFF"
+        elif head in _QUIET_COMMANDS:
+            pass
+        elif not self.seen_excellon or not re.fullmatch(r"[A-Z][A-Z0-9]*", head):
+            return False
+        else:
+            self.warn(f"unknown header command {head} ignored")
+        self.seen_excellon = True
+        return True
+
+    def not_excellon(self) -> ParseError:
+        return ParseError(f"{self.where()}: not an Excellon drill file (this line is not an Excellon "
+                          f"statement): '{self.text[:60]}'")
+
+    def statement(self, line: str) -> None:
+        if line == "%":
+            if self.state == "header":
+                self.state = "body"
+            elif self.state == "start":
+                self.state = "body"  # no header (seed 000 §8.1, Table 8-1)
+            self.seen_excellon = True
+            return
+        if "," in line or line.isalpha() or line == "OM48" or re.fullmatch(r"M[0-9]+,.*", line):
+            if self.command(line):
+                return
+            if not self.seen_excellon:
+                raise self.not_excellon()
+            raise self.error("unknown statement")
+        words = []
+        pos = 0
+        for m in _WORD.finditer(line):
+            if m.start() != pos:
+                break
+            words.append((m.group(1), m.group(2), m.start() + 1))
+            pos = m.end()
+        if pos != len(line) or not words:
+            if not self.seen_excellon:
+                raise self.not_excellon()
+            raise self.error("unknown statement", pos + 1 if pos < len(line) else None)
+        letter = words[0][0]
+        if letter in "XY":
+            self.coordinates(words)
+        elif letter == "T":
+            self.tool_word(words)
+        elif letter == "G":
+            self.g_word(words)
+        elif letter == "M":
+            self.m_word(words)
+        elif letter == "R":
+            self.repeat(words)
+        elif letter in "FS" and all(w[0] in "FS" for w in words):
+            self.integer(words[0])  # feed / spindle speed: nothing to drill
+        else:
+            if not self.seen_excellon:
+                raise self.not_excellon()
+            raise self.error("unknown statement")
+
+    def integer(self, word) -> int:
+        letter, text, col = word
+        if not re.fullmatch(r"[+]?[0-9]+", text):
+            raise self.error(f"{letter} needs a whole number, got '{text}'", col)
+        return int(text)
+
+    def _xy(self, words) -> tuple[float | None, float | None]:
+        x = y = None
+        for letter, text, col in words:
+            if letter == "X" and x is None:
+                x = self.value_mm(text, letter, col)
+            elif letter == "Y" and y is None:
+                y = self.value_mm(text, letter, col)
+            else:
+                raise self.error(f"unexpected {letter}{text}", col)
+        return x, y
+
+    def move(self, words) -> tuple[float, float]:
+        x, y = self._xy(words)
+        if self.incremental:
+            self.pos_mm[0] += x or 0.0
+            self.pos_mm[1] += y or 0.0
+        else:
+            if x is not None:
+                self.pos_mm[0] = self.zero_mm[0] + x
+            if y is not None:
+                self.pos_mm[1] = self.zero_mm[1] + y
+        return self.pos_mm[0], self.pos_mm[1]
+
+    def hole(self) -> None:
+        if self.tool is None:
+            raise self.error("a hole before any tool is selected")
+        self.holes.append((self.pos_mm[0], self.pos_mm[1]))
+        self.hole_tool.append(self.tool)
+        self.hole_line.append(self.lineno)
+
+    def coordinates(self, words) -> None:
+        self.seen_excellon = True
+        if self.state in ("start", "header"):
+            self.state = "body"  # holes inside the header: many files do it
+        g = [i for i, w in enumerate(words) if w[0] == "G"]
+        if g:
+            i = g[0]
+            code = self.integer(words[i])
+            if code != 85:
+                raise self.error(f"unexpected G{words[i][1]} after coordinates", words[i][2])
+            self.move(words[:i])
+            start = tuple(self.pos_mm)
+            self.move(words[i + 1:])
+            self.warn(f"slot (G85) from X{start[0]:.3f} Y{start[1]:.3f} to X{self.pos_mm[0]:.3f} "
+                      f"Y{self.pos_mm[1]:.3f} mm is not drilled: left out")
+            return
+        self.move(words)
+        if self.state == "route":
+            return
+        self.hole()
+
+    def tool_word(self, words) -> None:
+        self.seen_excellon = True
+        number = self.integer(words[0])
+        params = {}
+        for letter, text, col in words[1:]:
+            if letter not in _TOOL_PARAMS or letter in params:
+                raise self.error(f"unexpected {letter}{text} in a tool definition", col)
+            params[letter] = (text, col)
+        if not params:  # selection
+            if number == 0:
+                self.tool = None
+                return
+            if number not in self.tools:
+                raise self.error(f"tool T{number} is selected but never defined")
+            self.tool = number
+            return
+        if "C" not in params:
+            if number in self.tools:  # T1F200S100 in the body: feeds and speeds of a known tool
+                if self.state != "header":
+                    self.tool = number
+                return
+            raise self.error(f"tool T{number} is defined without a diameter (C)")
+        text, col = params["C"]
+        if not _NUMBER.fullmatch(text):
+            raise self.error(f"tool T{number} has a bad diameter '{text}'", col)
+        dia_mm = self.value_mm(text, "C", col)
+        if not math.isfinite(dia_mm) or dia_mm <= 0:
+            raise self.error(f"tool T{number} has a bad diameter {text} (must be > 0)", col)
+        if number == 0:
+            raise self.error("tool T0 cannot be defined (T0 unloads the tool)")
+        if number in self.tools and abs(self.tools[number] - dia_mm) > 1e-9:
+            self.warn(f"tool T{number} redefined: {self.tools[number]:.4f} mm -> {dia_mm:.4f} mm")
+        self.tools[number] = dia_mm
+        if self.state in ("body", "route"):
+            self.tool = number  # a T word in the body selects the tool (seed 000 §8.1, Table 8-1)
+        if self.state == "start":
+            self.state = "header"
+
+    def g_word(self, words) -> None:
+        code = self.integer(words[0])
+        rest = words[1:]
+        if code in (0, 1, 2, 3):
+            if self.state != "route":
+                self.warn("routing (G00/G01/G02/G03 with M15/M16) is not drilled: left out up to the next G05")
+            self.state = "route"
+            if rest:
+                self._route_move(rest)
+        elif code in (5, 81):
+            if self.state in ("start", "header", "route"):
+                self.state = "body"
+            if rest:
+                self.coordinates(rest)
+        elif code in (90, 91):
+            if rest:
+                raise self.error(f"G{code} takes no coordinates", rest[0][2])
+            self.incremental = code == 91
+        elif code == 93:
+            x, y = self._xy(rest)
+            self.zero_mm = (x or 0.0, y or 0.0)
+        elif code in (32, 33):
+            self.warn(f"routed circle (G{code}) is not drilled: left out")
+        elif code == 85:
+            raise self.error("G85 slot without a start point")
+        elif code in _HARMLESS_G and not rest:
+            pass
+        elif not self.seen_excellon:
+            raise self.not_excellon()
+        elif rest:
+            raise self.error(f"unsupported G{code} with coordinates")
+        else:
+            self.warn(f"G{code} ignored")
+        self.seen_excellon = True
+
+    def _route_move(self, words) -> None:
+        allowed = [w for w in words if w[0] in "XY"]
+        others = [w for w in words if w[0] not in "XYAIJ"]
+        if others:
+            raise self.error(f"unexpected {others[0][0]}{others[0][1]} in a routing move", others[0][2])
+        self.move(allowed)
+
+    def m_word(self, words) -> None:
+        code = self.integer(words[0])
+        rest = words[1:]
+        if code == 48:
+            if self.holes or self.tool is not None:
+                self.warn("M48 (header start) after holes: ignored")
+            else:
+                self.state = "header"
+        elif code == 95:
+            self.state = "body"
+        elif code in (30, 0) or (code == 2 and self.fmat == 1 and not rest):
+            self.state = "end"
+        elif code == 2 and not rest:
+            self.warn("M02 (end of pattern in FMAT,2) without a pattern: read as the end of the program")
+            self.state = "end"
+        elif code in (71, 72):
+            self.units = "metric" if code == 71 else "inch"
+        elif code in (15, 16, 17):
+            pass  # plunge / retract in routing: the route itself is left out
+        elif code in (25, 1, 8) or code == 2:
+            raise self.error(f"repeated patterns (M25/M01/M02/M08) are not supported (M{words[0][1]})")
+        elif code in (97, 98):
+            self.warn(f"canned text (M{code}) is not drilled: left out")
+        elif code in _HARMLESS_M:
+            pass
+        elif not self.seen_excellon:
+            raise self.not_excellon()
+        else:
+            self.warn(f"M{code} ignored")
+        if rest:
+            raise self.error(f"M{code} takes no coordinates", rest[0][2])
+        self.seen_excellon = True
+
+    def repeat(self, words) -> None:
+        count = self.integer(words[0])
+        if self.state == "route":
+            raise self.error("a repeated hole (R) while routing")
+        x, y = self._xy(words[1:])
+        for _ in range(count):
+            self.pos_mm[0] += x or 0.0
+            self.pos_mm[1] += y or 0.0
+            self.hole()
+        self.seen_excellon = True
+
+    # -- one line -----------------------------------------------------------------------------------
+    def line(self, lineno: int, raw: str) -> None:
+        self.lineno = lineno
+        self.text = raw.strip()
+        code, semi, note = self.text.partition(";")
+        if semi:
+            self.comment(note)
+        code = "".join(code.split()).upper()
+        if code.startswith("/"):
+            code = code[1:]  # block delete mark: the machine runs the line anyway unless told
+        if not code:
+            return
+        if self.state == "end":
+            self.after_end.append(lineno)
+            return
+        self.statement(code)
+
+
+def _check_options(units, digits, zeros) -> None:
+    if units not in (None, "inch", "metric"):
+        raise CamError(f"Excellon units must be 'inch' or 'metric', got {units!r}")
+    if zeros not in (None, "LZ", "TZ"):
+        raise CamError(f"Excellon zeros must be 'LZ' or 'TZ', got {zeros!r}")
+    if digits is not None:
+        ok = (isinstance(digits, (tuple, list)) and len(digits) == 2
+              and all(isinstance(d, (int, np.integer)) and 0 <= d <= 8 for d in digits) and sum(digits) > 0)
+        if not ok:
+            raise CamError(f"Excellon digits must be (integer, fraction) digit counts such as (2, 4), got {digits!r}")
+
+
+def parse_excellon(
+    text: str,
+    *,
+    source: str = "<excellon>",
+    units: str | None = None,
+    digits: tuple[int, int] | None = None,
+    zeros: str | None = None,
+) -> HoleList:
+    """Read the holes of an Excellon drill program (pure: no I/O).
+
+    Args:
+        text: the whole file.
+        source: file name used in messages.
+        units: "inch" or "metric" when the file does not say (default :data:`DEFAULT_UNITS`).
+        digits: (integer, fraction) digits of implied-decimal numbers when the file does not say
+            (default :data:`DEFAULT_DIGITS` for the units).
+        zeros: "LZ" (leading zeros kept) or "TZ" (trailing zeros kept) when the file does not say
+            (default :data:`DEFAULT_ZEROS`).
+
+    Returns:
+        The holes (board frame, mm) with their tools, lines and warnings.
+
+    Raises:
+        ParseError: not an Excellon file, a number the format cannot read, a hole without a tool,
+            a tool selected but never defined, a bad diameter, ... (``file:line: what: 'line text'``).
+        CamError: a bad keyword argument.
+    """
+    _check_options(units, digits, zeros)
+    r = _Reader(source, units, tuple(digits) if digits is not None else None, zeros)
+    for lineno, raw in enumerate(text.splitlines(), start=1):
+        r.line(lineno, raw)
+    if not r.seen_excellon:
+        raise ParseError(f"{source}: not an Excellon drill file (no header, tool or hole)")
+    if r.after_end:
+        r.lineno = r.after_end[0]
+        r.text = text.splitlines()[r.lineno - 1].strip()
+        r.warn(f"{len(r.after_end)} statement(s) after the end of the program (M30/M00) ignored")
+    if not r.holes:
+        r.lineno, r.text = len(text.splitlines()), ""
+        r.warnings.append(f"{source}: no holes to drill")
+    holes = np.array(r.holes, np.float64).reshape(-1, 2)
+    return HoleList(
+        holes_mm=holes,
+        tool_of_hole=np.array(r.hole_tool, np.int64),
+        tools=dict(r.tools),
+        line_of_hole=np.array(r.hole_line, np.int64),
+        warnings=r.warnings,
+        source=source,
+    )
+
+
+def load_excellon(
+    path: str | os.PathLike,
+    *,
+    units: str | None = None,
+    digits: tuple[int, int] | None = None,
+    zeros: str | None = None,
+) -> HoleList:
+    """Read an Excellon drill file; see :func:`parse_excellon` for the arguments and the result.
+
+    Raises:
+        ParseError: the file is binary, not Excellon, or has a bad statement (naming file and line).
+        CamError: the file cannot be read.
+    """
+    p = Path(path)
+    try:
+        data = p.read_bytes()
+    except OSError as exc:
+        raise CamError(f"{p}: cannot read ({exc.strerror or exc})") from exc
+    head = data[:8192]
+    if b"\x00" in head or head.startswith(b"\x89PNG"):
+        raise ParseError(f"{p}: not an Excellon drill file (binary data)")
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError:
+        text = data.decode("latin-1")
+    return parse_excellon(text, source=str(p), units=units, digits=digits, zeros=zeros)
