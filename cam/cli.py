@@ -239,6 +239,8 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--flip-y", action="store_true", help="G-code input: machine Y = +Y mm instead of -Y mm")
     g.add_argument("--yes", action="store_true", help="answer every prompt (tool changes, pauses) with Enter")
     _add_drill_file_options(d)
+    h = d.add_argument_group("HPGL (.plt .hpgl .hpg; --travel-height and --offset apply too)")
+    h.add_argument("--cut-depth", type=float, default=0.5, metavar="MM", help="pen-down cutting depth below the surface (0.5)")
     g.add_argument("--no-progress", action="store_true", help="no progress bar")
     d.set_defaults(func=cmd_drill)
 
@@ -530,7 +532,47 @@ def _drill_gcode(args: argparse.Namespace) -> int:
     return _finish(args, result, report, f"{len(program.moves)} moves from {args.image}")
 
 
+def _read_hpgl(args: argparse.Namespace, read: Callable[..., Any]) -> Any:
+    """Stream an HPGL file through ``read(path, progress=...)`` with a progress bar by bytes read."""
+    if args.no_progress:
+        return read(args.image)
+    from tqdm import tqdm
+
+    with tqdm(total=Path(args.image).stat().st_size if Path(args.image).is_file() else None, unit="B",
+              unit_scale=True, desc="reading", file=sys.stderr, mininterval=0.2) as bar:
+        return read(args.image, progress=lambda done, total: bar.update(done - bar.n))
+
+
+def _drill_hpgl(args: argparse.Namespace) -> int:
+    from .hpgl import load_hpgl, plan_hpgl
+    from .picture import save_picture, toolpath_picture, toolpath_svg
+
+    settings = _settings(args)
+    drawing = _read_hpgl(args, load_hpgl)
+    job = plan_hpgl(drawing, settings=settings, depth_mm=args.cut_depth, safe_height_mm=args.travel_height,
+                    offset_mm=tuple(args.offset) if args.offset else None)
+    for w in drawing.warnings:
+        print(f"warning: {w}", file=sys.stderr)
+    steps = plan_steps(job)
+    if args.preview:
+        if Path(args.preview).suffix.lower() not in (".png", ".svg"):
+            raise CamError(f"{args.preview}: pictures are written as .png or .svg")
+        draw = toolpath_svg if Path(args.preview).suffix.lower() == ".svg" else toolpath_picture
+        save_picture(draw(job, estimated_time_s=steps.estimated_time_s), args.preview)
+    report = {"source": args.image, "strokes": drawing.n_strokes, "points": len(drawing.points_pu),
+              "pens": sorted(set(int(p) for p in drawing.stroke_pen)), "warnings": list(drawing.warnings),
+              "tool_changes": list(job.pause_notes or []),
+              "steps": {a: int(v) for a, v in zip("xyz", steps.steps_total)},
+              "estimated_time_s": round(steps.estimated_time_s, 6)}
+    result = _execute(steps, args, prompt_at_pause=True)
+    return _finish(args, result, report, f"{drawing.n_strokes} pen-down strokes from {args.image}")
+
+
 def cmd_drill(args: argparse.Namespace) -> int:
+    from .hpgl import HPGL_SUFFIXES
+
+    if args.image and Path(args.image).suffix.lower() in HPGL_SUFFIXES:
+        return _drill_hpgl(args)
     if args.image and Path(args.image).suffix.lower() in GCODE_SUFFIXES:
         return _drill_gcode(args)
     if args.image and Path(args.image).suffix.lower() in DRILL_SUFFIXES:
@@ -588,7 +630,32 @@ def _info_excellon(args: argparse.Namespace) -> int:
     return 0
 
 
+def _info_hpgl(args: argparse.Namespace) -> int:
+    from .hpgl import PLOTTER_UNIT_MM, scan_hpgl
+
+    args.no_progress = getattr(args, "no_progress", True)
+    scan = _read_hpgl(args, scan_hpgl)
+    if args.json:
+        print(json.dumps({**scan.__dict__, "size_mm": scan.size_mm()}, indent=2))
+        return 0
+    lines = [f"{args.image}: {scan.n_strokes} pen-down strokes, {scan.n_points} points, pens "
+             f"{', '.join(map(str, scan.pens)) or 'none selected'}"]
+    if scan.extent_pu is not None:
+        x0, y0, x1, y1 = scan.extent_pu
+        w, h = scan.size_mm()
+        lines.append(f"  extent X {x0:g}..{x1:g}, Y {y0:g}..{y1:g} plotter units ({w:.2f} x {h:.2f} mm at "
+                     f"{PLOTTER_UNIT_MM} mm per unit)")
+    lines.append("  commands: " + ", ".join(f"{k} {n}" for k, n in scan.command_counts.items()))
+    lines += [f"warning: {w}" for w in scan.warnings]
+    print("\n".join(lines))
+    return 0
+
+
 def cmd_info(args: argparse.Namespace) -> int:
+    from .hpgl import HPGL_SUFFIXES
+
+    if Path(args.image).suffix.lower() in HPGL_SUFFIXES:
+        return _info_hpgl(args)
     if Path(args.image).suffix.lower() in DRILL_SUFFIXES:
         return _info_excellon(args)
     settings = _settings(args)
