@@ -61,7 +61,9 @@ _SEED = 20030
 
 def _check_points(points_mm: np.ndarray, start_mm) -> tuple[np.ndarray, np.ndarray]:
     pts = np.ascontiguousarray(np.asarray(points_mm, dtype=np.float64))
-    if pts.ndim != 2 or (pts.shape[0] and pts.shape[1] != 2):
+    if pts.size == 0:
+        pts = pts.reshape(0, 2)
+    if pts.ndim != 2 or pts.shape[1] != 2:
         raise PlanError(f"drill points must be an (N, 2) array, got shape {pts.shape}")
     pts = pts.reshape(-1, 2)
     start = np.asarray(start_mm, dtype=np.float64).reshape(-1)
