@@ -21,6 +21,18 @@ and then keeps its built-in value.  An unknown key or a bad value is a
     mm_per_step_z = 0.0157
     half_step = false
 
+    # speed ramps (cam.drive.motion): "lookahead" (default), "linear40" or "constant"
+    ramp = "lookahead"
+    start_speed_x_mm_s = 1.445    # pull-in: the axis starts and stops at once at this speed
+    start_speed_y_mm_s = 1.445
+    start_speed_z_mm_s = 0.785
+    max_speed_x_mm_s = 5.78       # = 0.0289 mm / 5 ms: the thesis's constant-delay speed
+    max_speed_y_mm_s = 5.78
+    max_speed_z_mm_s = 3.14       # = 0.0157 mm / 5 ms
+    accel_x_mm_s2 = 50.0
+    accel_y_mm_s2 = 50.0
+    accel_z_mm_s2 = 50.0
+
     [travel]            # machine travel in steps, from the home (0, 0, 0)
     x_min_steps = 0
     x_max_steps = 10000
@@ -53,7 +65,10 @@ else:  # pragma: no cover
 
 from .errors import SettingsError
 
-__all__ = ["Travel", "Pins", "MachineSettings", "load_settings", "DEFAULT_SETTINGS"]
+__all__ = ["Travel", "Pins", "MachineSettings", "load_settings", "DEFAULT_SETTINGS", "RAMP_MODES"]
+
+RAMP_MODES = ("lookahead", "linear40", "constant")
+"""Speed ramp modes (see :mod:`cam.drive.motion`)."""
 
 
 @dataclass(frozen=True)
@@ -108,6 +123,16 @@ class MachineSettings:
     mm_per_step_xy: float = 0.0289
     mm_per_step_z: float = 0.0157
     half_step: bool = False
+    ramp: str = "lookahead"
+    start_speed_x_mm_s: float = 1.445
+    start_speed_y_mm_s: float = 1.445
+    start_speed_z_mm_s: float = 0.785
+    max_speed_x_mm_s: float = 5.78
+    max_speed_y_mm_s: float = 5.78
+    max_speed_z_mm_s: float = 3.14
+    accel_x_mm_s2: float = 50.0
+    accel_y_mm_s2: float = 50.0
+    accel_z_mm_s2: float = 50.0
     travel: Travel = field(default_factory=Travel)
     pins: Pins = field(default_factory=Pins)
 
@@ -126,6 +151,15 @@ class MachineSettings:
     def delay_z_ns(self) -> int:
         """Step period of the Z motor in nanoseconds."""
         return int(round(self.delay_z_ms * 1_000_000))
+
+    def axis_limits(self) -> "tuple[tuple[float, float, float], ...]":
+        """Per-axis (X, Y, Z) motion limits: (mm_per_step, start_speed_mm_s, max_speed_mm_s, accel_mm_s2)."""
+        return (
+            (self.mm_per_step_xy, self.mm_per_step_xy, self.mm_per_step_z),
+            (self.start_speed_x_mm_s, self.start_speed_y_mm_s, self.start_speed_z_mm_s),
+            (self.max_speed_x_mm_s, self.max_speed_y_mm_s, self.max_speed_z_mm_s),
+            (self.accel_x_mm_s2, self.accel_y_mm_s2, self.accel_z_mm_s2),
+        )
 
     def px_to_mm_xy(self, n_px: float) -> float:
         """Eq. 4.1: mm = pixels x steps/pixel (X/Y) x mm/step (X/Y)."""
@@ -148,6 +182,8 @@ def _type_ok(value: Any, kind: type) -> bool:
         return isinstance(value, int) and not isinstance(value, bool)
     if kind is float:
         return isinstance(value, (int, float)) and not isinstance(value, bool)
+    if kind is str:
+        return isinstance(value, str)
     return False
 
 
@@ -165,7 +201,7 @@ def _build(cls: type, table: Mapping[str, Any], prefix: str, source: str) -> Any
                 raise SettingsError(f"{source}: '{name}' must be a table [{name}]")
             values[key] = _build(_SECTIONS[key], value, f"{key}.", source)
             continue
-        kind = {"int": int, "float": float, "bool": bool}[f.type if isinstance(f.type, str) else f.type.__name__]
+        kind = {"int": int, "float": float, "bool": bool, "str": str}[f.type if isinstance(f.type, str) else f.type.__name__]
         if not _type_ok(value, kind):
             raise SettingsError(f"{source}: '{name}' must be {kind.__name__}, got {value!r}")
         values[key] = kind(value)
@@ -185,6 +221,17 @@ def _validate(s: MachineSettings, source: str) -> None:
     for key in ("mm_per_step_xy", "mm_per_step_z"):
         if not (0 < getattr(s, key) <= 100):
             raise bad(key, f"must be > 0 and <= 100 mm, got {getattr(s, key)}")
+    if s.ramp not in RAMP_MODES:
+        raise bad("ramp", f"must be one of {', '.join(RAMP_MODES)}, got {s.ramp!r}")
+    for axis in "xyz":
+        start, top, acc = (getattr(s, f"{k}_{axis}_{u}") for k, u in
+                           (("start_speed", "mm_s"), ("max_speed", "mm_s"), ("accel", "mm_s2")))
+        if not (0 < top <= 10000):
+            raise bad(f"max_speed_{axis}_mm_s", f"must be > 0 and <= 10000 mm/s, got {top}")
+        if not (0 < start <= top):
+            raise bad(f"start_speed_{axis}_mm_s", f"must be > 0 and <= max_speed_{axis}_mm_s ({top}), got {start}")
+        if not (0 < acc <= 1e6):
+            raise bad(f"accel_{axis}_mm_s2", f"must be > 0 and <= 1e6 mm/s^2, got {acc}")
     for axis, (lo, hi) in zip("xyz", s.travel.bounds_steps()):
         if lo > 0 or hi < 0:
             raise bad(f"travel.{axis}_min_steps", f"and travel.{axis}_max_steps must contain the home 0, got {lo}..{hi}")

@@ -4,8 +4,11 @@ import cam
 from cam.drive.steps import plan_steps
 from cam.settings import DEFAULT_SETTINGS
 
+# the thesis's timing (Eq. 4.4): constant delays, no speed ramps (ramps: tests/test_ramps.py)
+CONSTANT = DEFAULT_SETTINGS.replace(ramp="constant")
 
-def one_move(x, y, z=0, settings=DEFAULT_SETTINGS):
+
+def one_move(x, y, z=0, settings=CONSTANT):
     job = cam.Toolpath(
         points_px=np.array([[x, y, z]]), kind=np.zeros(1, np.uint8), target=np.zeros(1, bool),
         pause=np.zeros(1, bool), settings=settings,
@@ -35,7 +38,7 @@ def test_eq_4_4_time_is_max_of_axes():
 
 
 def test_z_only_move_uses_z_delay_and_direction():
-    s = DEFAULT_SETTINGS.replace(delay_z_ms=2.0)
+    s = CONSTANT.replace(delay_z_ms=2.0)
     p = one_move(0, 0, 3, settings=s)
     assert p.t_ns[-1] == 3 * 2_000_000
     # Z clock pin 2 -> bit 0, Z dir pin 3 -> bit 1 (+Z = deeper = set)

@@ -13,7 +13,9 @@ the job time is the sum of its periods.  X and Y step together in diagonal
 moves (Eq. 4.4): a move of (dx, dy, dz) steps takes max(|dx|, |dy|, |dz|)
 periods, the shorter axes spread evenly over them (a DDA).  The period is the
 X/Y delay when X or Y moves, the Z delay for Z-only moves, and the larger of
-the two when both move.
+the two when both move.  Those are the *nominal* periods (the thesis's constant
+delay); :func:`cam.drive.motion.ramp_periods` then lengthens them with the
+speed ramps of ``settings.ramp`` (look-ahead, the seed's 40-step ramp, or none).
 
 Pin 1 (strobe) carries Half/Full* and is held low for full steps.
 """
@@ -26,6 +28,7 @@ import numpy as np
 from ..settings import MachineSettings
 from ..toolpath import Toolpath, check_travel
 from ._kernels import periods_kernel
+from .motion import ramp_periods
 
 __all__ = ["StepPlan", "plan_steps", "axis_bits"]
 
@@ -71,20 +74,32 @@ class StepPlan:
         return len(self.t_ns)
 
     @property
+    def ramp(self) -> str:
+        """Speed ramp mode the plan was timed with (``settings.ramp``)."""
+        return self.settings.ramp
+
+    @property
     def estimated_time_s(self) -> float:
         """Machine time of the job in seconds (pauses excluded)."""
         return float(self.t_ns[-1]) / 1e9 if len(self.t_ns) else 0.0
 
 
 def port_writes(
-    step_signed: np.ndarray, period_ns: np.ndarray, settings: MachineSettings
+    step_signed: np.ndarray,
+    period_ns: np.ndarray,
+    settings: MachineSettings,
+    *,
+    move_first: np.ndarray | None = None,
+    stops: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The port writes of a sequence of step periods.
+    """The port writes of a sequence of step periods, with the speed ramps of ``settings.ramp``.
 
     Args:
         step_signed: ``(P, 3)`` int, the step each axis (X, Y, Z) makes in each period: -1, 0 or +1.
-        period_ns: ``(P,)`` int64 length of each period.
-        settings: pin map and Half/Full*.
+        period_ns: ``(P,)`` int64 nominal length of each period (lengthened by the ramps, never shortened).
+        settings: pin map, Half/Full*, ramp mode and axis limits.
+        move_first: ``(M,)`` first period of each move; stops: period indices before which the machine
+            rests (pauses); see :func:`cam.drive.motion.ramp_periods`.
 
     Returns:
         ``(t_ns, data, strobe)``, each ``(1 + 2P,)``: an initial write at t = 0 that sets the first
@@ -104,7 +119,9 @@ def port_writes(
         positive = np.where(last >= 0, step_signed[np.maximum(last, 0), a] > 0, False)
         dir_data |= positive.astype(np.int64) * int(dirbit[a])
         clock_data |= moving.astype(np.int64) * int(clock[a])
-    return _writes((dir_data | clock_data).astype(np.uint8), dir_data.astype(np.uint8), per, settings)
+    high, dirs = (dir_data | clock_data).astype(np.uint8), dir_data.astype(np.uint8)
+    per = ramp_periods(high, dirs, per, settings, move_first=move_first, stops=stops)
+    return _writes(high, dirs, per, settings)
 
 
 def _writes(
@@ -138,9 +155,11 @@ def plan_steps(toolpath: Toolpath) -> StepPlan:
     high, dirs, per, n_per_move = periods_kernel(
         pts, s.delay_xy_ns, s.delay_z_ns, clock.astype(np.int64), dirbit.astype(np.int64)
     )
+    point_period = np.cumsum(n_per_move)
+    per = ramp_periods(high, dirs, per, s, move_first=point_period - n_per_move, stops=point_period[toolpath.pause])
     t_ns, data, strobe = _writes(high, dirs, per, s)
 
-    point_write = 2 * np.cumsum(n_per_move)
+    point_write = 2 * point_period
     pause_writes = point_write[toolpath.pause]
     end = tuple(int(v) for v in pts[-1])
     return StepPlan(

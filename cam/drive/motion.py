@@ -1,0 +1,326 @@
+"""Speed planning: the length of every step period, with acceleration ramps.
+
+Every job kind (drawings, drill files, G-code) becomes a sequence of step
+periods (:mod:`cam.drive.steps`): in each period some axes step once (a DDA
+spreads the minor axes of a move over its periods) and the period has a
+*nominal* length -- the thesis's constant step delay, or a G-code feed.  This
+module only lengthens periods; the path, and so the carve, never changes.
+
+Modes (``MachineSettings.ramp``):
+
+``constant``
+    The thesis (``shared/seeds/001``): every period is the constant delay.
+``linear40``
+    The standalone controller's ramp (``shared/seeds/004``, section 3.5.2,
+    "Speed up and slow down"): within each move the delay falls linearly
+    over the first 40 steps and rises linearly over the last 40.  Here it
+    falls from the delay at which every moving axis is at its start speed to
+    the nominal delay; a move shorter than 80 steps peaks in its middle.
+``lookahead``
+    A planner over the whole job that keeps speed through junctions: the
+    speed profile is judged per axis on the step level, so a contour of
+    thousands of one-pixel moves keeps its speed wherever each axis steps
+    regularly, and slows only where an axis really starts, stops, reverses
+    or changes speed.  It satisfies the pin-log rules of
+    :mod:`cam.drive.ramps_check` (checked, not assumed: see below).
+
+The look-ahead planner, with the period index ``k`` as the path parameter and
+``u_k`` = 1 / period length (periods per second) as the path speed:
+
+1. Per axis, each interval between two consecutive steps of a run (runs
+   split at reversals and at rests: start, end, pauses, dwells) spanning
+   ``m`` periods runs at ``s * u / m`` mm/s; so every period of the interval
+   gets the caps ``u <= v_max * m / s`` (R1) and, for the first and last
+   interval of a run, ``u <= v_s * m / s`` (R3); the pull-in rate
+   ``u_pull = min(v_s * m / s)`` (all axes at or below their start speed)
+   and the path acceleration ``alpha = min(A * m / s)`` are taken over the
+   axes stepping around ``k``.  The nominal period is a cap too.
+2. A forward pass ``u_k = min(cap_k, max(sqrt(u_{k-1}^2 + 2 alpha), u_pull))``
+   (accelerate; 0 at a rest) and the same backward (decelerate); the
+   pointwise minimum of a 1-D path-parametrised problem.
+3. The result is checked with the pin-log rules on its own step times; the
+   caps of every period under a broken rule drop by 15 % and steps 2-3
+   repeat.  After 25 rounds (not seen on the samples) every period is capped
+   at ``u_pull``: then every axis is at or below its start speed everywhere,
+   which meets every rule, so the planner always returns a plan that passes.
+
+Everything per period runs compiled (numba) over flat arrays.
+"""
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from ..settings import RAMP_MODES, MachineSettings
+
+__all__ = ["RAMP_MODES", "ramp_periods", "RAMP_STEPS_LINEAR40"]
+
+RAMP_STEPS_LINEAR40 = 40
+"""Steps of the seed's linear delay ramp at each end of a move (004, section 3.5.2)."""
+
+_ROUNDS = 25
+_DROP = 0.85
+_ALPHA_MARGIN = 0.9
+
+
+@njit(cache=True)
+def _steps_of_axis(high, dirs, clk, dbit):
+    n = 0
+    for k in range(high.shape[0]):
+        if high[k] & clk:
+            n += 1
+    per = np.empty(n, np.int64)
+    up = np.empty(n, np.bool_)
+    j = 0
+    for k in range(high.shape[0]):
+        if high[k] & clk:
+            per[j] = k
+            up[j] = (dirs[k] & dbit) != 0
+            j += 1
+    return per, up
+
+
+@njit(cache=True)
+def _breaks(per, up, stop_cum):
+    """Rest before step j: reversal, or a stop between the periods of steps j-1 and j."""
+    n = per.shape[0]
+    brk = np.zeros(n, np.bool_)
+    for j in range(1, n):
+        if up[j] != up[j - 1] or stop_cum[per[j]] != stop_cum[per[j - 1]]:
+            brk[j] = True
+    return brk
+
+
+@njit(cache=True)
+def _axis_caps(per, brk, s, v_start, v_max, acc, cap, alpha, upull):
+    """Step 1 of the planner (module docstring) for one axis: lower ``cap``, ``alpha``, ``upull`` in place."""
+    n = per.shape[0]
+    for j in range(n - 1):
+        if brk[j + 1]:
+            continue
+        k1 = per[j]
+        k2 = per[j + 1]
+        m = k2 - k1
+        first = j == 0 or brk[j]
+        last = j + 2 >= n or brk[j + 2]
+        c = v_max * m / s
+        if first or last:
+            c = min(c, v_start * m / s)
+        a = acc * m / s
+        p = v_start * m / s
+        for k in range(k1, k2 + 1):
+            if c < cap[k]:
+                cap[k] = c
+            if a < alpha[k]:
+                alpha[k] = a
+            if p < upull[k]:
+                upull[k] = p
+
+
+@njit(cache=True)
+def _passes(cap, alpha, upull, stop_before, idle, u):
+    """Step 2: forward (accelerate) then backward (decelerate) passes; ``u`` out."""
+    n = cap.shape[0]
+    prev = 0.0
+    for k in range(n):
+        if stop_before[k] or idle[k]:
+            prev = 0.0
+        a = alpha[k]
+        if k > 0 and alpha[k - 1] < a:
+            a = alpha[k - 1]
+        v = np.sqrt(prev * prev + 2.0 * a) if a < np.inf else np.inf
+        if upull[k] > v:
+            v = upull[k]
+        if cap[k] < v:
+            v = cap[k]
+        u[k] = v
+        prev = 0.0 if idle[k] else v
+    nxt = 0.0
+    for k in range(n - 1, -1, -1):
+        if stop_before[k + 1] or idle[k]:
+            nxt = 0.0
+        a = alpha[k]
+        if k + 1 < n and alpha[k + 1] < a:
+            a = alpha[k + 1]
+        v = np.sqrt(nxt * nxt + 2.0 * a) if a < np.inf else np.inf
+        if upull[k] > v:
+            v = upull[k]
+        if v < u[k]:
+            u[k] = v
+        nxt = 0.0 if idle[k] else u[k]
+
+
+@njit(cache=True)
+def _periods_from_rates(u, floor_ns, idle, out):
+    for k in range(u.shape[0]):
+        if idle[k]:
+            out[k] = floor_ns[k]
+            continue
+        t = np.ceil(1e9 / u[k]) if u[k] > 0 else floor_ns[k]
+        out[k] = max(floor_ns[k], np.int64(t))
+
+
+@njit(cache=True)
+def _mid_times(per_ns):
+    """Rising-edge time of each period: start + T // 2 (as :func:`cam.drive.steps._writes`)."""
+    n = per_ns.shape[0]
+    mid = np.empty(n, np.int64)
+    t = 0
+    for k in range(n):
+        mid[k] = t + per_ns[k] // 2
+        t += per_ns[k]
+    return mid
+
+
+@njit(cache=True)
+def _slots(idle):
+    """Slot index of each period (periods with a step, in order), -1 for idle periods; slot -> period."""
+    n = idle.shape[0]
+    slot_of = np.empty(n, np.int64)
+    cnt = 0
+    for k in range(n):
+        if idle[k]:
+            slot_of[k] = -1
+        else:
+            slot_of[k] = cnt
+            cnt += 1
+    period_of = np.empty(cnt, np.int64)
+    for k in range(n):
+        if slot_of[k] >= 0:
+            period_of[slot_of[k]] = k
+    return slot_of, period_of
+
+
+@njit(cache=True)
+def _drop_caps(per, r1, r2, r3, u, cap, factor):
+    """Lower the caps of the periods under every broken rule to ``factor`` x their slowest rate there."""
+    n = per.shape[0]
+    hits = 0
+    for j in range(n):
+        lo = -1
+        hi = -1
+        if j + 1 < n and (r1[j] > 0 or r3[j] > 0):
+            lo = per[j]
+            hi = per[j + 1]
+        if r2[j] > 0 and 0 < j < n - 1:
+            lo = per[j - 1]
+            hi = per[j + 1]
+        if lo < 0:
+            continue
+        hits += 1
+        slow = np.inf
+        for k in range(lo, hi + 1):
+            if u[k] < slow:
+                slow = u[k]
+        for k in range(lo, hi + 1):
+            if factor * slow < cap[k]:
+                cap[k] = factor * slow
+    return hits
+
+
+def _linear40(high: np.ndarray, period_ns: np.ndarray, move_first: np.ndarray, clock, s, v_start) -> np.ndarray:
+    """The seed's per-move linear delay ramp (004, section 3.5.2)."""
+    n = len(period_ns)
+    out = period_ns.copy()
+    bounds = np.append(np.asarray(move_first, np.int64), n)
+    for i in range(len(bounds) - 1):
+        a, b = int(bounds[i]), int(bounds[i + 1])
+        if b <= a:
+            continue
+        h = high[a:b]
+        steps = np.array([np.count_nonzero(h & int(clock[x])) for x in range(3)], np.float64)
+        if not steps.any():
+            continue  # a dwell
+        nominal = period_ns[a:b]
+        # the delay at which each moving axis is at its start speed: s / v_s per step, steps/period of the move
+        start_ns = float(np.max(np.asarray(s) / np.asarray(v_start) * 1e9 * steps / (b - a)))
+        k = np.arange(b - a)
+        r = np.minimum(np.minimum(k, (b - a - 1) - k), RAMP_STEPS_LINEAR40)
+        ramp = np.maximum(start_ns - nominal, 0) * (RAMP_STEPS_LINEAR40 - r) / RAMP_STEPS_LINEAR40
+        out[a:b] = nominal + np.ceil(ramp).astype(np.int64)
+    return out
+
+
+def ramp_periods(
+    high: np.ndarray,
+    dirs: np.ndarray,
+    period_ns: np.ndarray,
+    settings: MachineSettings,
+    *,
+    move_first: np.ndarray | None = None,
+    stops: np.ndarray | None = None,
+    mode: str | None = None,
+) -> np.ndarray:
+    """Period lengths with the speed ramps of ``mode`` (default ``settings.ramp``).
+
+    Args:
+        high: ``(P,)`` uint8 data byte at each period's rising edge (direction bits | stepping clocks).
+        dirs: ``(P,)`` uint8 direction bits in force during each period.
+        period_ns: ``(P,)`` int64 nominal period lengths (the constant delay or a feed): never shortened.
+        settings: pin map and per-axis limits (:meth:`MachineSettings.axis_limits`).
+        move_first: ``(M,)`` int64 first period of each move (``linear40`` ramps per move).
+        stops: period indices ``i`` in ``0..P`` before which the machine rests (pauses, tool changes);
+            the start and the end of the job and periods without steps (dwells) are rests anyway.
+        mode: one of :data:`RAMP_MODES`.
+
+    Returns:
+        ``(P,)`` int64 period lengths in ns, each >= the nominal one.
+    """
+    mode = settings.ramp if mode is None else mode
+    if mode not in RAMP_MODES:
+        raise ValueError(f"ramp mode must be one of {RAMP_MODES}, got {mode!r}")
+    per_ns = np.asarray(period_ns, np.int64)
+    n = len(per_ns)
+    if mode == "constant" or n == 0:
+        return per_ns.copy()
+    from .ramps_check import check_axis_steps, free_slot_shifts  # imports pinlog, which imports steps
+    from .steps import axis_bits
+
+    high = np.asarray(high, np.uint8)
+    dirs = np.asarray(dirs, np.uint8)
+    clock, dirbit = axis_bits(settings)
+    s_mm, v_start, v_max, acc = settings.axis_limits()
+    if mode == "linear40":
+        mf = np.zeros(1, np.int64) if move_first is None else np.asarray(move_first, np.int64)
+        return _linear40(high, per_ns, mf, clock, s_mm, v_start)
+
+    stop_before = np.zeros(n + 1, bool)
+    stop_before[0] = stop_before[n] = True
+    if stops is not None and len(stops):
+        stop_before[np.asarray(stops, np.int64)] = True
+    idle = (high & int(clock.sum())) == 0
+    stop_cum = np.cumsum(stop_before | np.append(idle, False) | np.insert(idle, 0, False))
+    cap = 1e9 / per_ns.astype(np.float64)
+    alpha = np.full(n, np.inf)
+    upull = np.full(n, np.inf)
+    axes = []
+    for a in range(3):
+        per, up = _steps_of_axis(high, dirs, int(clock[a]), int(dirbit[a]))
+        brk = _breaks(per, up, stop_cum)
+        _axis_caps(per, brk, s_mm[a], v_start[a], v_max[a], acc[a] * _ALPHA_MARGIN, cap, alpha, upull)
+        axes.append((per, brk))
+    upull = np.minimum(upull, cap)
+    stop_fb = stop_before.copy()
+    u = np.empty(n)
+    out = np.empty(n, np.int64)
+    slot_of, _ = _slots(idle)
+    for rnd in range(_ROUNDS + 1):
+        if rnd == _ROUNDS:
+            cap = np.minimum(cap, upull)  # every axis at or below its start speed: meets every rule
+        _passes(cap, alpha, upull, stop_fb, idle, u)
+        _periods_from_rates(u, per_ns, idle, out)
+        if rnd == _ROUNDS:
+            break
+        mid = _mid_times(out)
+        slot_t = mid[~idle]
+        hits = 0
+        for a, (per, brk) in enumerate(axes):
+            if len(per) < 2:
+                continue
+            q_lo, q_hi = free_slot_shifts(slot_of[per], slot_t)
+            r1, r2, r3 = np.zeros(len(per)), np.zeros(len(per)), np.zeros(len(per))
+            check_axis_steps(mid[per], brk, q_lo, q_hi, s_mm[a], v_start[a], v_max[a], acc[a], r1, r2, r3)
+            hits += _drop_caps(per, r1, r2, r3, u, cap, _DROP)
+        if hits == 0:
+            break
+    return out
