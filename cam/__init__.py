@@ -38,6 +38,7 @@ from .drive import (
     write_pin_log,
 )
 from .gcode import save_gcode, to_gcode
+from .hpgl import HpglDrawing, HpglScan, iter_hpgl, load_hpgl, parse_hpgl, plan_hpgl, scan_hpgl
 from .errors import CamError, DrawingError, ParseError, PlanError, PortError, SettingsError, TravelError
 from .profile import Profile, load_profile, profile_from_expr
 from .report import image_report, job_report
@@ -53,6 +54,7 @@ __all__ = [
     "plan_steps", "StepPlan",
     "run", "Controller", "RunResult", "open_port", "MockPort",
     "simulate_surface", "to_gcode", "save_gcode",
+    "load_hpgl", "parse_hpgl", "scan_hpgl", "iter_hpgl", "plan_hpgl", "HpglDrawing", "HpglScan",
     "decode_pin_log", "read_pin_log", "write_pin_log", "PinLog", "Motion", "carve",
     "Profile", "load_profile", "profile_from_expr",
     "image_report", "job_report",
