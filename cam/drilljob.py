@@ -102,8 +102,10 @@ def plan_drill(
     bad = np.flatnonzero(np.any((steps_xy < lo[:2]) | (steps_xy > hi[:2]), axis=1))
     if len(bad):
         i = int(bad[0])
+        lines = getattr(holes, "line_of_hole", None)
+        where = f"{holes.source}:{int(lines[i])}" if lines is not None and len(lines) > i else holes.source
         raise TravelError(
-            f"{holes.source}: hole {i + 1} at X{holes.holes_mm[i, 0]:.3f} Y{holes.holes_mm[i, 1]:.3f} mm lies "
+            f"{where}: hole {i + 1} at X{holes.holes_mm[i, 0]:.3f} Y{holes.holes_mm[i, 1]:.3f} mm lies "
             f"outside the machine travel (machine {machine_mm[i, 0]:.2f}, {machine_mm[i, 1]:.2f} mm)"
         )
     tools = sorted(set(int(t) for t in holes.tool_of_hole), key=lambda t: (holes.tools[t], t))

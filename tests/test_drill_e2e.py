@@ -170,3 +170,14 @@ def test_drill_file_exported_as_gcode_runs_in_rs274_to_the_same_holes(board_file
     d = np.abs(bottoms[:, None, :2] - expected[None, :, :]).max(axis=2)
     assert d.min(axis=1).max() <= settings.mm_per_step_xy  # within one step
     assert sorted(d.argmin(axis=1).tolist()) == list(range(len(holes_mm)))
+
+
+def test_hole_outside_the_travel_is_a_one_line_error_naming_the_line(tmp_path, capsys):
+    path = tmp_path / "far.drl"
+    path.write_text("M48\nMETRIC,TZ\nFMAT,2\nT1C0.800\n%\nG90\nG05\nT1\nX1.0Y1.0\nX900.0Y1.0\nM30\n")
+    log = tmp_path / "pins.csv"
+    log.write_text("earlier output\n")
+    assert main(["drill", str(path), "--yes", "--no-progress", "--pin-log", str(log)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and f"{path}:10: hole 2" in err and "outside the machine travel" in err
+    assert log.read_text() == "earlier output\n"  # nothing ran, nothing overwritten
