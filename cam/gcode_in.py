@@ -294,7 +294,8 @@ def plan_gcode_steps(
 ):
     """Step plan of a G-code program (see the module docstring for frames and accuracy).
 
-    Rapids run at the configured step delays; feed moves at their F, never faster than the delays allow.
+    Rapids run at the configured step delays; feed moves at their F, never faster than the delays allow;
+    then the speed ramps of ``settings.ramp`` lengthen periods (:mod:`cam.drive.motion`), stopping at pauses.
 
     Raises:
         TravelError: a move leaves the machine travel (naming the line).
@@ -314,16 +315,20 @@ def plan_gcode_steps(
     period_chunks: list[np.ndarray] = []
     pause_at_period: list[int] = []
     pause_notes: list[str] = []
+    move_first: list[int] = []  # first period of each move (the 40-step ramp is per move)
+    rest_at_period: list[int] = []  # the machine rests before these periods (pauses, dwells)
     n_periods = 0
     cur = np.zeros(3)  # mm, G-code frame
     cur_steps_ideal = np.zeros(3)
     for mv in program.moves:
         if mv.kind == "pause":
             pause_at_period.append(n_periods)
+            rest_at_period.append(n_periods)
             pause_notes.append(mv.note)
             continue
         if mv.kind == "dwell":
             if mv.seconds > 0:
+                rest_at_period += [n_periods, n_periods + 1]  # at rest during the dwell
                 ideal_chunks.append(cur_steps_ideal[None, :].copy())
                 period_chunks.append(np.array([int(round(mv.seconds * 1e9))], np.int64))
                 n_periods += 1
@@ -360,6 +365,7 @@ def plan_gcode_steps(
         k = np.arange(total_periods) - np.repeat(first, n_sub) + 1
         ideal = starts[seg] + d[seg] * (k / n_sub[seg])[:, None]
         ideal_chunks.append(ideal)
+        move_first.append(n_periods)
         period_chunks.append(np.full(total_periods, per_ns, np.int64))
         n_periods += total_periods
         cur = end
@@ -373,7 +379,8 @@ def plan_gcode_steps(
     positions = np.floor(ideal_all + 0.5).astype(np.int64)  # nearest step to the exact path point
     signed = np.diff(np.vstack([np.zeros((1, 3), np.int64), positions]), axis=0)
     assert signed.size == 0 or np.abs(signed).max() <= 1, "a period moved an axis by more than one step"
-    t_ns, data, strobe = port_writes(signed, periods, s)
+    t_ns, data, strobe = port_writes(signed, periods, s, move_first=np.array(move_first, np.int64),
+                                     stops=np.array(rest_at_period, np.int64))
     end_steps = tuple(int(v) for v in positions[-1]) if len(positions) else (0, 0, 0)
     return StepPlan(
         t_ns=t_ns,

@@ -118,12 +118,12 @@ def _axis_caps(per, brk, s, v_start, v_max, acc, cap, alpha, upull):
 
 
 @njit(cache=True)
-def _passes(cap, alpha, upull, stop_before, idle, u):
+def _passes(cap, alpha, upull, stop_before, u):
     """Step 2: forward (accelerate) then backward (decelerate) passes; ``u`` out."""
     n = cap.shape[0]
     prev = 0.0
     for k in range(n):
-        if stop_before[k] or idle[k]:
+        if stop_before[k]:
             prev = 0.0
         a = alpha[k]
         if k > 0 and alpha[k - 1] < a:
@@ -134,10 +134,10 @@ def _passes(cap, alpha, upull, stop_before, idle, u):
         if cap[k] < v:
             v = cap[k]
         u[k] = v
-        prev = 0.0 if idle[k] else v
+        prev = v
     nxt = 0.0
     for k in range(n - 1, -1, -1):
-        if stop_before[k + 1] or idle[k]:
+        if stop_before[k + 1]:
             nxt = 0.0
         a = alpha[k]
         if k + 1 < n and alpha[k + 1] < a:
@@ -147,15 +147,12 @@ def _passes(cap, alpha, upull, stop_before, idle, u):
             v = upull[k]
         if v < u[k]:
             u[k] = v
-        nxt = 0.0 if idle[k] else u[k]
+        nxt = u[k]
 
 
 @njit(cache=True)
-def _periods_from_rates(u, floor_ns, idle, out):
+def _periods_from_rates(u, floor_ns, out):
     for k in range(u.shape[0]):
-        if idle[k]:
-            out[k] = floor_ns[k]
-            continue
         t = np.ceil(1e9 / u[k]) if u[k] > 0 else floor_ns[k]
         out[k] = max(floor_ns[k], np.int64(t))
 
@@ -170,25 +167,6 @@ def _mid_times(per_ns):
         mid[k] = t + per_ns[k] // 2
         t += per_ns[k]
     return mid
-
-
-@njit(cache=True)
-def _slots(idle):
-    """Slot index of each period (periods with a step, in order), -1 for idle periods; slot -> period."""
-    n = idle.shape[0]
-    slot_of = np.empty(n, np.int64)
-    cnt = 0
-    for k in range(n):
-        if idle[k]:
-            slot_of[k] = -1
-        else:
-            slot_of[k] = cnt
-            cnt += 1
-    period_of = np.empty(cnt, np.int64)
-    for k in range(n):
-        if slot_of[k] >= 0:
-            period_of[slot_of[k]] = k
-    return slot_of, period_of
 
 
 @njit(cache=True)
@@ -259,8 +237,10 @@ def ramp_periods(
         period_ns: ``(P,)`` int64 nominal period lengths (the constant delay or a feed): never shortened.
         settings: pin map and per-axis limits (:meth:`MachineSettings.axis_limits`).
         move_first: ``(M,)`` int64 first period of each move (``linear40`` ramps per move).
-        stops: period indices ``i`` in ``0..P`` before which the machine rests (pauses, tool changes);
-            the start and the end of the job and periods without steps (dwells) are rests anyway.
+        stops: period indices ``i`` in ``0..P`` before which the machine rests (pauses, tool changes,
+            both sides of a dwell); the start and the end of the job are rests anyway.  A period in
+            which no axis steps is not a rest by itself (a move a fraction of a step longer than its
+            steps has one): the axes stepping around it keep their speed through it.
         mode: one of :data:`RAMP_MODES`.
 
     Returns:
@@ -288,8 +268,7 @@ def ramp_periods(
     stop_before[0] = stop_before[n] = True
     if stops is not None and len(stops):
         stop_before[np.asarray(stops, np.int64)] = True
-    idle = (high & int(clock.sum())) == 0
-    stop_cum = np.cumsum(stop_before | np.append(idle, False) | np.insert(idle, 0, False))
+    stop_cum = np.cumsum(stop_before)
     cap = 1e9 / per_ns.astype(np.float64)
     alpha = np.full(n, np.inf)
     upull = np.full(n, np.inf)
@@ -300,24 +279,21 @@ def ramp_periods(
         _axis_caps(per, brk, s_mm[a], v_start[a], v_max[a], acc[a] * _ALPHA_MARGIN, cap, alpha, upull)
         axes.append((per, brk))
     upull = np.minimum(upull, cap)
-    stop_fb = stop_before.copy()
     u = np.empty(n)
     out = np.empty(n, np.int64)
-    slot_of, _ = _slots(idle)
     for rnd in range(_ROUNDS + 1):
         if rnd == _ROUNDS:
             cap = np.minimum(cap, upull)  # every axis at or below its start speed: meets every rule
-        _passes(cap, alpha, upull, stop_fb, idle, u)
-        _periods_from_rates(u, per_ns, idle, out)
+        _passes(cap, alpha, upull, stop_before, u)
+        _periods_from_rates(u, per_ns, out)
         if rnd == _ROUNDS:
             break
         mid = _mid_times(out)
-        slot_t = mid[~idle]
         hits = 0
         for a, (per, brk) in enumerate(axes):
             if len(per) < 2:
                 continue
-            q_lo, q_hi = free_slot_shifts(slot_of[per], slot_t)
+            q_lo, q_hi = free_slot_shifts(per, mid)
             r1, r2, r3 = np.zeros(len(per)), np.zeros(len(per)), np.zeros(len(per))
             check_axis_steps(mid[per], brk, q_lo, q_hi, s_mm[a], v_start[a], v_max[a], acc[a], r1, r2, r3)
             hits += _drop_caps(per, r1, r2, r3, u, cap, _DROP)

@@ -34,14 +34,19 @@ speeds and a constant-acceleration motion meets the rule exactly; an interval
 longer than ``D_s`` (an axis slower than its pull-in speed) counts only ``D_s``.
 
 Quantisation tolerance, ``e``.  Every axis steps on a shared grid of step
-slots (a DDA): in each period the major axis steps and the minor axes step
-when their exact position has crossed the next step, so a minor-axis step is
-up to one slot late or early against a smooth motion.  So the middle step
-may be moved (``e``) up to the nearest *free slot* on either side, a slot
-being a time at which some axis stepped; a free slot is one strictly between
-the axis's own neighbouring steps at which it did not step.  An axis that
-steps in consecutive slots (the major axis) has no free slot and so no
-tolerance.  ``e`` is tried at 0, at both limits and at the value that makes
+slots, one per period (a DDA): in each period the major axis steps and the
+minor axes step when their exact position has crossed the next step, so a
+minor-axis step is up to one slot late or early against a smooth motion (and
+a move a fraction of a step longer than its steps has a slot in which no
+axis steps).  So the middle step may be moved (``e``) by up to one period
+toward a *free slot*: a slot strictly between the axis's own neighbouring
+steps at which it did not step, next to the step's own slot.  One period is
+the smaller of the two slot gaps around the step's slot (so a long dwell
+next to a step does not widen it).  An axis that steps in consecutive slots
+(the major axis of a move) has no free slot and so no tolerance.  Slots are
+the middle-of-period writes: a pin log of a step plan is one write that sets
+the first directions, then two writes per period (middle: rising clocks;
+end: clocks low), so the slots are the writes at odd indices.  ``e`` is tried at 0, at both limits and at the value that makes
 ``d1' = d2'`` when that is inside the limits; the pair passes if one of them
 passes.  Each pair is judged with its own ``e`` (a relaxation: the middle
 step is not held to the same ``e`` in the neighbouring pairs).  A DDA pattern
@@ -146,24 +151,35 @@ def check_axis_steps(t_ns, brk, q_lo_ns, q_hi_ns, s_mm, v_start, v_max, acc, r1,
 
 @njit(cache=True)
 def free_slot_shifts(slot_of_step, slot_t_ns):
-    """How far each step of one axis may move to a free slot (see "Quantisation tolerance").
+    """How far each step of one axis may move toward a free slot (see "Quantisation tolerance").
 
     Args:
         slot_of_step: ``(n,)`` int64 index into ``slot_t_ns`` of each step of the axis, increasing.
-        slot_t_ns: ``(S,)`` int64 times of all step slots (any axis), increasing.
+        slot_t_ns: ``(S,)`` int64 times of all step slots (period middles), non-decreasing.
 
     Returns:
-        ``(q_lo_ns, q_hi_ns)``, ``(n,)`` int64 each.
+        ``(q_lo_ns, q_hi_ns)``, ``(n,)`` int64 each: one period (the smaller slot gap around the
+        step's slot) on a side with a free slot, else 0.
     """
     n = slot_of_step.shape[0]
+    n_slots = slot_t_ns.shape[0]
     q_lo = np.zeros(n, np.int64)
     q_hi = np.zeros(n, np.int64)
     for j in range(n):
         i = slot_of_step[j]
+        quantum = np.int64(-1)
+        if i > 0:
+            quantum = slot_t_ns[i] - slot_t_ns[i - 1]
+        if i + 1 < n_slots:
+            g = slot_t_ns[i + 1] - slot_t_ns[i]
+            if quantum < 0 or g < quantum:
+                quantum = g
+        if quantum < 0:
+            continue
         if j > 0 and i - 1 > slot_of_step[j - 1]:
-            q_lo[j] = slot_t_ns[i] - slot_t_ns[i - 1]
+            q_lo[j] = quantum
         if j + 1 < n and i + 1 < slot_of_step[j + 1]:
-            q_hi[j] = slot_t_ns[i + 1] - slot_t_ns[i]
+            q_hi[j] = quantum
     return q_lo, q_hi
 
 
@@ -242,8 +258,7 @@ def check_ramps(
     clock, dirbit = axis_bits(settings)
     s_mm, v_start, v_max, acc = settings.axis_limits()
     rising = [_rising(data, int(clock[a])) for a in range(3)]
-    any_rising = rising[0] | rising[1] | rising[2]
-    slot_t = np.unique(t[any_rising])
+    slot_t = t[1::2]  # period middles (module docstring)
     pause_t = np.sort(t[np.asarray(pause_writes, np.int64)]) if len(pause_writes) else np.zeros(0, np.int64)
     counts = {"R1 top speed": 0, "R2 acceleration": 0, "R3 stop": 0}
     found: list[RampViolation] = []
@@ -260,7 +275,7 @@ def check_ramps(
             if len(pause_t):
                 # a pause at time p lies between steps j-1 and j when t[j-1] <= p < t[j]
                 brk[1:] |= np.searchsorted(pause_t, ts[:-1], "left") != np.searchsorted(pause_t, ts[1:], "left")
-        q_lo, q_hi = free_slot_shifts(np.searchsorted(slot_t, ts).astype(np.int64), slot_t)
+        q_lo, q_hi = free_slot_shifts((idx - 1) // 2, slot_t)
         r1, r2, r3 = (np.zeros(n) for _ in range(3))
         check_axis_steps(ts, brk, q_lo, q_hi, s_mm[a], v_start[a], v_max[a], acc[a], r1, r2, r3)
         inner = np.ones(max(n - 2, 0), bool)
