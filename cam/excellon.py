@@ -109,6 +109,7 @@ _QUIET_COMMANDS = {
     "OSTOP", "OTCLMP", "PCKPARAM", "PF", "PPR", "PVS", "SBK", "SG", "SIXM", "TCST", "UP", "RSB", "ZA", "ZC", "ZS",
 }
 _TOOL_PARAMS = set("CFSBHZN")
+_LETTERS = set("XYTGMRFSCBHZNAIJ")  # the address letters of Excellon statements
 _HARMLESS_M = {6, 9, 45, 47, 50, 51, 52, 60, 61, 62, 63}  # tool change, messages, ...
 _HARMLESS_G = {40, 41, 42, 4}  # cutter compensation, dwell
 
@@ -204,8 +205,9 @@ class _Reader:
         return (units or DEFAULT_UNITS), src == "default"
 
     def current_format(self, units: str) -> tuple[tuple[int, int], str, list[str]]:
-        digits, dsrc = self._setting("digits")
-        zeros, zsrc = self._setting("zeros")
+        """Digits and zeros for implied decimals, and which of them come from the built-in defaults."""
+        digits, _ = self._setting("digits")
+        zeros, _ = self._setting("zeros")
         assumed = []
         if digits is None:
             digits = DEFAULT_DIGITS[units]
@@ -354,6 +356,8 @@ class _Reader:
             if not self.seen_excellon:
                 raise self.not_excellon()
             raise self.error("unknown statement", pos + 1 if pos < len(line) else None)
+        if not self.seen_excellon and any(w[0] not in _LETTERS for w in words):
+            raise self.not_excellon()
         letter = words[0][0]
         if letter in "XY":
             self.coordinates(words)

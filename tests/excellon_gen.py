@@ -9,9 +9,9 @@ board frame, after the file's rounding), so a reader must reproduce them
 exactly, and the text gerbonara needs to read the same holes where it lacks a
 feature (``gerbonara_text``, ``gerbonara_settings``).
 
-Run as a script to (re)write ``samples/board.drl``::
+Run as a script to (re)write ``samples/board.drl`` and the files in ``samples/drill/``::
 
-    python tests/excellon_gen.py samples/board.drl
+    python tests/excellon_gen.py samples/board.drl samples/drill
 """
 from __future__ import annotations
 
@@ -334,9 +334,28 @@ def sample_board() -> Generated:
 SAMPLE_SEED = 11
 
 
+DRILL_SAMPLE_STYLES = ("kicad_inch_suppress_leading", "altium_inch_2_5", "eagle_inch_2_4", "eagle9_metric",
+                       "orcad_table_8_1", "fmat1_inch")
+"""The styles shipped as ``samples/drill/<style>.drl`` (one small board each)."""
+
+
+def drill_samples() -> dict[str, Generated]:
+    """File name -> :class:`Generated` for ``samples/drill/``: a small five-tool board in several styles."""
+    board = realistic_board(seed=2, size_mm=(60.0, 45.0), n_ics=1, n_headers=1, n_vias=10)
+    return {f"{name}.drl": STYLES[name](board) for name in DRILL_SAMPLE_STYLES}
+
+
+def _save(path: str, text: str) -> None:
+    with open(path, "w", encoding="ascii", newline="\n") as fh:
+        fh.write(text)
+
+
 if __name__ == "__main__":
     out = sys.argv[1] if len(sys.argv) > 1 else "samples/board.drl"
     g = sample_board()
-    with open(out, "w", encoding="ascii", newline="\n") as fh:
-        fh.write(g.text)
+    _save(out, g.text)
     print(f"{out}: {len(g.holes_mm)} holes, tools {g.tools}")
+    if len(sys.argv) > 2:  # python tests/excellon_gen.py samples/board.drl samples/drill
+        for name, g in drill_samples().items():
+            _save(f"{sys.argv[2]}/{name}", g.text)
+            print(f"{sys.argv[2]}/{name}: {len(g.holes_mm)} holes")

@@ -296,3 +296,14 @@ def test_drill_the_sample_on_the_mock_port():
                        cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stderr
     assert "T1 0.800 mm" in r.stderr + r.stdout and "T3 3.200 mm" in r.stderr + r.stdout
+
+
+@pytest.mark.parametrize("name", sorted(gen.drill_samples()))
+def test_shipped_drill_samples_are_what_the_generator_writes_and_info_reads_them(name, capsys):
+    g = gen.drill_samples()[name]
+    path = ROOT / "samples" / "drill" / name
+    assert path.read_text() == g.text
+    assert main(["info", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith(f"{path}: {len(g.holes_mm)} holes, board extent")
+    assert len(re.findall(r"^  T\d+: \d+\.\d{3} mm, \d+ holes$", out, re.M)) == 5
