@@ -25,7 +25,7 @@ from .gcode import save_gcode
 from .gcode_in import GCODE_SUFFIXES, load_gcode, plan_gcode_steps
 from .profile import Profile, load_profile, profile_from_expr
 from .report import format_report, image_report, job_report
-from .settings import MachineSettings, load_settings
+from .settings import RAMP_MODES, MachineSettings, load_settings
 from .toolpath import goto, plan
 
 __all__ = ["main", "build_parser"]
@@ -79,6 +79,11 @@ def _add_machine_options(p: argparse.ArgumentParser) -> None:
     g.add_argument(
         "--delay", metavar="XY_MS,Z_MS", type=_float_pair("--delay"),
         help="step period of the X/Y and of the Z motors in ms (default 5,5)",
+    )
+    g.add_argument(
+        "--ramp", choices=RAMP_MODES,
+        help="speed ramps: lookahead (default: accelerate and keep speed through the path), linear40 "
+        "(the standalone controller's 40-step delay ramp per move) or constant (the thesis: no ramp)",
     )
 
 
@@ -350,6 +355,8 @@ def _settings(args: argparse.Namespace) -> MachineSettings:
         changes["steps_per_px_xy"], changes["steps_per_px_z"] = args.steps_per_pixel
     if args.delay:
         changes["delay_xy_ms"], changes["delay_z_ms"] = args.delay
+    if getattr(args, "ramp", None):
+        changes["ramp"] = args.ramp
     return s.replace(**changes) if changes else s
 
 
@@ -505,6 +512,7 @@ def cmd_preview(args: argparse.Namespace) -> int:
 
 def _finish(args: argparse.Namespace, result: RunResult, report: dict, summary: str) -> int:
     report["status"] = result.status
+    ramp = report.setdefault("ramp", _settings(args).ramp)
     if args.report:
         atomic_write_text(args.report, json.dumps(report, indent=2) + "\n")
     if result.status != FINISHED:
@@ -513,7 +521,8 @@ def _finish(args: argparse.Namespace, result: RunResult, report: dict, summary: 
         return EXIT_INTERRUPTED
     print(
         f"job finished: {summary}; total time {_format_duration(result.machine_time_s)} "
-        f"({result.machine_time_s:.1f} s machine time{'' if args.realtime or args.port != 'mock' else ', simulated'})"
+        f"({result.machine_time_s:.1f} s machine time, {ramp} ramps"
+        f"{'' if args.realtime or args.port != 'mock' else ', simulated'})"
     )
     return 0
 

@@ -45,7 +45,7 @@ def image_report(digitized: Digitized, settings: MachineSettings = DEFAULT_SETTI
 def job_report(
     digitized: Optional[Digitized], toolpath: Toolpath, plan: Any
 ) -> dict[str, Any]:
-    """The JSON job report: image report plus depth, points, retracts, steps and time.
+    """The JSON job report: image report plus depth, points, retracts, steps, time and the speed ramp mode.
 
     ``plan`` is the :class:`~cam.drive.StepPlan` of ``toolpath``.
     """
@@ -60,6 +60,7 @@ def job_report(
             "retracts": toolpath.n_retracts,
             "steps": {axis: int(v) for axis, v in zip("xyz", plan.steps_total)},
             "estimated_time_s": round(plan.estimated_time_s, 6),
+            "ramp": plan.settings.ramp,
         }
     )
     rep["warnings"] = list(rep.get("warnings", [])) + [w for w in toolpath.warnings if w not in rep["warnings"]]
@@ -80,7 +81,8 @@ def format_report(rep: dict[str, Any]) -> str:
         lines.append(f"retracts:   {rep['retracts']}")
         st = rep["steps"]
         lines.append(f"steps:      X {st['x']}  Y {st['y']}  Z {st['z']}")
-        lines.append(f"time:       {rep['estimated_time_s']:.1f} s")
+        ramp = f"  ({rep['ramp']} ramps)" if "ramp" in rep else ""
+        lines.append(f"time:       {rep['estimated_time_s']:.1f} s{ramp}")
     for w in rep["warnings"]:
         lines.append(f"warning:    {w}")
     return "\n".join(lines)
