@@ -570,7 +570,8 @@ class _Reader:
         if not code:
             return
         if self.state == "end":
-            self.after_end.append(lineno)
+            if code != "%":  # a tape end mark after M30 is common and harmless
+                self.after_end.append(lineno)
             return
         self.statement(code)
 

@@ -170,6 +170,7 @@ def test_errors_name_file_line_and_text(text, line, what):
     ("; only a comment\n\n", "t.drl:"),
     ("", "t.drl:"),
     ("Hello, world\n", "t.drl:1:"),
+    ("T1 is great\nX1 marks the spot\n", "t.drl:1:"),
 ])
 def test_text_that_is_not_excellon_is_named_so(text, where):
     msg = _error(text)
@@ -226,7 +227,7 @@ def test_slots_routing_and_other_oddities_are_warnings_with_the_line():
 def test_headers_from_other_programs_are_accepted():
     # Fritzing-like '%' before M48, header machine commands, FMAT 1 ends with M02, CRLF line ends, lower case
     text = "%\r\nM48\r\nVER,1\r\nDETECT,ON\r\nATC,ON\r\nFMAT,1\r\nINCH,TZ\r\nt1c0.04\r\n%\r\nG81\r\nT01\r\nx10000y2500\r\nM02\r\n"
-    h = _one(text)
+    h = _one(text + "%\n")  # a tape end mark after the end is no oddity
     assert np.round(h.holes_mm, 9).tolist() == [[25.4, 6.35]]
     assert len(h.warnings) == 1 and "t.drl:12: the file does not state its digits (2:4)" in h.warnings[0]
     # holes inside the header, and M95 as the end of the header
