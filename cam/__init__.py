@@ -37,6 +37,9 @@ from .drive import (
     simulate_surface,
     write_pin_log,
 )
+from .drilljob import DrillPlan, plan_drill
+from .drilltour import drill_order
+from .excellon import HoleList, load_excellon, parse_excellon
 from .gcode import save_gcode, to_gcode
 from .hpgl import HpglDrawing, HpglScan, iter_hpgl, load_hpgl, parse_hpgl, plan_hpgl, scan_hpgl
 from .errors import CamError, DrawingError, ParseError, PlanError, PortError, SettingsError, TravelError
@@ -54,6 +57,7 @@ __all__ = [
     "plan_steps", "StepPlan",
     "run", "Controller", "RunResult", "open_port", "MockPort",
     "simulate_surface", "to_gcode", "save_gcode",
+    "load_excellon", "parse_excellon", "HoleList", "plan_drill", "DrillPlan", "drill_order",
     "load_hpgl", "parse_hpgl", "scan_hpgl", "iter_hpgl", "plan_hpgl", "HpglDrawing", "HpglScan",
     "decode_pin_log", "read_pin_log", "write_pin_log", "PinLog", "Motion", "carve",
     "Profile", "load_profile", "profile_from_expr",

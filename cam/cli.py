@@ -548,7 +548,8 @@ def _read_hpgl(args: argparse.Namespace, read: Callable[..., Any]) -> Any:
     from tqdm import tqdm
 
     with tqdm(total=Path(args.image).stat().st_size if Path(args.image).is_file() else None, unit="B",
-              unit_scale=True, desc="reading", file=sys.stderr, mininterval=0.2) as bar:
+              unit_scale=True, desc="reading", file=sys.stderr, mininterval=0.2, leave=False,
+              disable=None) as bar:  # None: only on a terminal, so an error stays one line in logs
         return read(args.image, progress=lambda done, total: bar.update(done - bar.n))
 
 
@@ -763,3 +764,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     except KeyboardInterrupt:
         print("cam: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
+    except BrokenPipeError:  # e.g. `cam info board.drl | head`: the reader left; that is not an error
+        import os
+
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
