@@ -355,8 +355,8 @@ def _tokenize(buf, final, st, c_code, c_off, c_line, c_col, c_p0, c_np, p_val, p
     if err == E_NONE and (incomplete or not final):
         if mode == M_IDLE:
             consumed = n
-        elif mode == M_PARAMS and _coord_cmd(code) and pair_pos >= 0:
-            # a long coordinate command: hand over its complete pairs, resume after them
+        elif mode == M_PARAMS and _coord_cmd(code) and pair_pos >= 0 and safe == 0:
+            # a coordinate command that fills the buffer: hand over its complete pairs, resume after them
             c_code[nc] = code
             c_off[nc] = coff
             c_line[nc] = cline
@@ -582,7 +582,7 @@ def _chunks(src: Source, *, source: Optional[str] = None, progress: Optional[Pro
     """Tokenized chunks of a file: each yields views into arrays reused by the next one.
 
     The tokenizer stops before a command that may continue in the next chunk and hands back
-    where to resume; a coordinate command longer than a chunk is handed over pair by pair.
+    where to resume; a coordinate command that fills a whole buffer is handed over pair by pair.
     """
     stream, name, opened, size = _open(src)
     name = source or name
@@ -593,11 +593,13 @@ def _chunks(src: Source, *, source: Optional[str] = None, progress: Optional[Pro
         cap = 0
         carry = b""
         done = 0
+        ahead = stream.read(chunk_bytes)  # read one chunk ahead: the last one is parsed knowing it is the last
         while True:
-            data = stream.read(chunk_bytes)
+            data = ahead
             if isinstance(data, str):
                 data = data.encode("latin-1", "replace")
-            final = not data
+            ahead = stream.read(chunk_bytes) if data else b""
+            final = not ahead
             done += len(data)
             buf = carry + data if carry else data
             if not buf:
@@ -727,6 +729,7 @@ def _points(src: Source, *, source: Optional[str], progress: Optional[Progress],
     err = np.zeros(4, np.int64)
     cap = 0
     name = source
+    last_off = -1
     for b in _chunks(src, source=source, progress=progress, chunk_bytes=chunk_bytes):
         if name is None:
             name = source or (str(src) if isinstance(src, (str, os.PathLike)) else str(getattr(src, "name", "<hpgl>")))
@@ -747,7 +750,11 @@ def _points(src: Source, *, source: Optional[str], progress: Optional[Progress],
                 raise ParseError(f"{where}: 'SP' takes one pen number (a whole number >= 0)")
             raise ParseError(f"{where}: odd number of coordinates ({int(err[3])}): an x without its y")
         unknown.add(b)
-        uniq, cnt = np.unique(b.code[:b.n_cmd], return_counts=True)
+        offs = b.off[:b.n_cmd]
+        fresh = offs != np.concatenate([[last_off], offs[:-1]])  # pieces of one long command share its offset
+        if b.n_cmd:
+            last_off = int(offs[-1])
+        uniq, cnt = np.unique(b.code[:b.n_cmd][fresh], return_counts=True)
         for u, n in zip(uniq.tolist(), cnt.tolist()):
             counts[u] = counts.get(u, 0) + n
         yield _PointBlock(o_x[:k], o_y[:k], o_line[:k], o_col[:k], o_start[:k], o_pen[:k])
