@@ -17,8 +17,8 @@ ROWS = ["." * 42] + ["." + "#" * 40 + "."] + ["." * 42]
 
 @pytest.fixture
 def rt_settings():
-    """8 steps/pixel at 1 ms periods: the test job takes about 0.7 s."""
-    return cam.MachineSettings().replace(delay_xy_ms=1.0, delay_z_ms=1.0)
+    """8 steps/pixel at 1 ms periods: the test job takes about 0.7 s (constant delay: these test the runner)."""
+    return cam.MachineSettings().replace(delay_xy_ms=1.0, delay_z_ms=1.0, ramp="constant")
 
 
 def _job(settings, **kw):
