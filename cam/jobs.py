@@ -288,7 +288,7 @@ class PreparedJob:
     """A job ready to run.
 
     Attributes:
-        source: the file it came from; kind: one of :data:`KINDS`.
+        source: the file it came from; name: what to call it; kind: one of :data:`KINDS`.
         steps: the :class:`~cam.drive.StepPlan` (machine frame, steps from the job home).
         settings: the machine settings of ``steps``.
         toolpath: the :class:`~cam.toolpath.Toolpath` when the kind has one (not G-code).
@@ -307,6 +307,7 @@ class PreparedJob:
     steps: Any
     settings: MachineSettings
     toolpath: Any = None
+    name: str = ""
     size_mm: tuple[float, float] = (0.0, 0.0)
     depth_mm: float = 0.0
     extent_steps: np.ndarray = field(default_factory=lambda: np.zeros((3, 2), np.int64))
@@ -559,6 +560,6 @@ def prepare_job(
         job = _prepare_excellon(p, opts, settings)
     else:
         job = _prepare_hpgl(p, opts, settings)
-    if name:
-        job.summary = name + job.summary[len(p.name):]
+    job.name = name or p.name
+    job.summary = job.name + job.summary[len(p.name):]
     return _finish(job)

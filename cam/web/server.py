@@ -244,7 +244,7 @@ class MachineSession:
                 raise HttpError(409, "the job was planned for other machine settings; plan it again")
             self._check_reach(job.extent_steps, "the job")
             self.last_job = job
-            self._launch("job", job.steps, job.positions_steps(), f"job {Path(job.source).name}",
+            self._launch("job", job.steps, job.positions_steps(), f"job {job.name or Path(job.source).name}",
                          job.estimated_time_s)
 
     def jog(self, axis: str, steps: int) -> None:
