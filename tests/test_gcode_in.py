@@ -119,8 +119,12 @@ def test_feed_rate_sets_step_periods():
     plan = plan_gcode_steps(parse_gcode("G21 G90\nG1 X10 F60\nM2\n"))
     # 10 mm at 1 mm/s = 10 s; never faster than the 5 ms step delay allows
     assert plan.estimated_time_s == pytest.approx(10.0, rel=1e-3)
-    fast = plan_gcode_steps(parse_gcode("G21 G90\nG1 X10 F100000\nM2\n"))
+    constant = cam.MachineSettings().replace(ramp="constant")  # the thesis's timing, no speed ramps
+    fast = plan_gcode_steps(parse_gcode("G21 G90\nG1 X10 F100000\nM2\n"), constant)
     assert fast.estimated_time_s == pytest.approx(np.ceil(10 / 0.0289) * 0.005, rel=1e-6)
+    # with the default look-ahead ramps: plus one speed-up from and one slow-down to the start speed
+    ramped = plan_gcode_steps(parse_gcode("G21 G90\nG1 X10 F100000\nM2\n")).estimated_time_s
+    assert fast.estimated_time_s + 0.05 < ramped < fast.estimated_time_s + 0.3
 
 
 @pytest.mark.parametrize(
