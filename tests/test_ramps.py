@@ -68,10 +68,10 @@ def assert_stops_at_start_speed(log, settings, pause_writes=()):
 def check_times(t_ns, axis_settings=(0.0289, 1.445, 5.78, 50.0), slots=None, brk=None):
     t = np.asarray(t_ns, np.int64)
     slot_t = t if slots is None else np.asarray(slots, np.int64)
-    q_lo, q_hi = free_slot_shifts(np.searchsorted(slot_t, t).astype(np.int64), slot_t)
+    slot_of = np.searchsorted(slot_t, t).astype(np.int64)
     r1, r2, r3 = (np.zeros(len(t)) for _ in range(3))
     b = np.zeros(len(t), bool) if brk is None else np.asarray(brk, bool)
-    check_axis_steps(t, b, q_lo, q_hi, *axis_settings, r1, r2, r3)
+    check_axis_steps(t, slot_of, slot_t, b, *axis_settings, r1, r2, r3)
     return r1, r2, r3
 
 

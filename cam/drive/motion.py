@@ -253,7 +253,7 @@ def ramp_periods(
     n = len(per_ns)
     if mode == "constant" or n == 0:
         return per_ns.copy()
-    from .ramps_check import check_axis_steps, free_slot_shifts  # imports pinlog, which imports steps
+    from .ramps_check import check_axis_steps  # imports pinlog, which imports steps
     from .steps import axis_bits
 
     high = np.asarray(high, np.uint8)
@@ -277,7 +277,7 @@ def ramp_periods(
         per, up = _steps_of_axis(high, dirs, int(clock[a]), int(dirbit[a]))
         brk = _breaks(per, up, stop_cum)
         _axis_caps(per, brk, s_mm[a], v_start[a], v_max[a], acc[a] * _ALPHA_MARGIN, cap, alpha, upull)
-        axes.append((per, brk))
+        axes.append((per, brk, np.zeros(len(per)), np.zeros(len(per)), np.zeros(len(per))))
     upull = np.minimum(upull, cap)
     u = np.empty(n)
     out = np.empty(n, np.int64)
@@ -290,12 +290,10 @@ def ramp_periods(
             break
         mid = _mid_times(out)
         hits = 0
-        for a, (per, brk) in enumerate(axes):
+        for a, (per, brk, r1, r2, r3) in enumerate(axes):
             if len(per) < 2:
                 continue
-            q_lo, q_hi = free_slot_shifts(per, mid)
-            r1, r2, r3 = np.zeros(len(per)), np.zeros(len(per)), np.zeros(len(per))
-            check_axis_steps(mid[per], brk, q_lo, q_hi, s_mm[a], v_start[a], v_max[a], acc[a], r1, r2, r3)
+            check_axis_steps(mid[per], per, mid, brk, s_mm[a], v_start[a], v_max[a], acc[a], r1, r2, r3)
             hits += _drop_caps(per, r1, r2, r3, u, cap, _DROP)
         if hits == 0:
             break

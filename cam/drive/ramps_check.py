@@ -106,13 +106,13 @@ def _pair_excess(d1, d2, e_lo, e_hi, s_ns, vs, acc, ds_ns):
 
 
 @njit(cache=True)
-def check_axis_steps(t_ns, brk, q_lo_ns, q_hi_ns, s_mm, v_start, v_max, acc, r1, r2, r3):
+def check_axis_steps(t_ns, slot_of_step, slot_t_ns, brk, s_mm, v_start, v_max, acc, r1, r2, r3):
     """Rules R1..R3 (module docstring) for the steps of one axis.
 
     Args:
         t_ns: ``(n,)`` int64 step times, increasing.
+        slot_of_step, slot_t_ns: the slot of each step and the slot times (see :func:`free_slot_shifts`).
         brk: ``(n,)`` bool, a rest (reversal or pause) right before step j.
-        q_lo_ns, q_hi_ns: ``(n,)`` how far step j may move earlier / later (free slots; 0 = none).
         s_mm, v_start, v_max, acc: mm per step, start and top speed (mm/s), acceleration (mm/s^2).
         r1, r3: ``(n,)`` float64 out: speed excess (mm/s) of the interval from step j to j + 1 (0 = ok).
         r2: ``(n,)`` float64 out: acceleration excess (mm/s) of the pair around step j (0 = ok).
@@ -144,7 +144,14 @@ def check_axis_steps(t_ns, brk, q_lo_ns, q_hi_ns, s_mm, v_start, v_max, acc, r1,
             continue
         d1 = float(t_ns[j] - t_ns[j - 1])
         d2 = float(t_ns[j + 1] - t_ns[j])
-        ex = _pair_excess(d1, d2, float(q_lo_ns[j]), float(q_hi_ns[j]), s_ns, v_start, acc, ds)
+        if d1 == d2:
+            continue  # same speed
+        w1 = max(s_ns / d1, v_start)
+        w2 = max(s_ns / d2, v_start)
+        if abs(w2 - w1) <= acc * (min(d1, ds) + min(d2, ds)) * 0.5e-9 + _TOL_MM_S:
+            continue  # passes unshifted (the common case)
+        q_lo, q_hi = _shift_limits(slot_of_step, slot_t_ns, j)
+        ex = _pair_excess(d1, d2, float(q_lo), float(q_hi), s_ns, v_start, acc, ds)
         if ex > _TOL_MM_S:
             r2[j] = ex
 
@@ -162,24 +169,31 @@ def free_slot_shifts(slot_of_step, slot_t_ns):
         step's slot) on a side with a free slot, else 0.
     """
     n = slot_of_step.shape[0]
-    n_slots = slot_t_ns.shape[0]
     q_lo = np.zeros(n, np.int64)
     q_hi = np.zeros(n, np.int64)
     for j in range(n):
-        i = slot_of_step[j]
-        quantum = np.int64(-1)
-        if i > 0:
-            quantum = slot_t_ns[i] - slot_t_ns[i - 1]
-        if i + 1 < n_slots:
-            g = slot_t_ns[i + 1] - slot_t_ns[i]
-            if quantum < 0 or g < quantum:
-                quantum = g
-        if quantum < 0:
-            continue
+        q_lo[j], q_hi[j] = _shift_limits(slot_of_step, slot_t_ns, j)
+    return q_lo, q_hi
+
+
+@njit(cache=True)
+def _shift_limits(slot_of_step, slot_t_ns, j):
+    n = slot_of_step.shape[0]
+    i = slot_of_step[j]
+    quantum = np.int64(-1)
+    if i > 0:
+        quantum = slot_t_ns[i] - slot_t_ns[i - 1]
+    if i + 1 < slot_t_ns.shape[0]:
+        g = slot_t_ns[i + 1] - slot_t_ns[i]
+        if quantum < 0 or g < quantum:
+            quantum = g
+    q_lo = np.int64(0)
+    q_hi = np.int64(0)
+    if quantum >= 0:
         if j > 0 and i - 1 > slot_of_step[j - 1]:
-            q_lo[j] = quantum
+            q_lo = quantum
         if j + 1 < n and i + 1 < slot_of_step[j + 1]:
-            q_hi[j] = quantum
+            q_hi = quantum
     return q_lo, q_hi
 
 
@@ -275,9 +289,8 @@ def check_ramps(
             if len(pause_t):
                 # a pause at time p lies between steps j-1 and j when t[j-1] <= p < t[j]
                 brk[1:] |= np.searchsorted(pause_t, ts[:-1], "left") != np.searchsorted(pause_t, ts[1:], "left")
-        q_lo, q_hi = free_slot_shifts((idx - 1) // 2, slot_t)
         r1, r2, r3 = (np.zeros(n) for _ in range(3))
-        check_axis_steps(ts, brk, q_lo, q_hi, s_mm[a], v_start[a], v_max[a], acc[a], r1, r2, r3)
+        check_axis_steps(ts, (idx - 1) // 2, slot_t, brk, s_mm[a], v_start[a], v_max[a], acc[a], r1, r2, r3)
         inner = np.ones(max(n - 2, 0), bool)
         if n > 2:
             inner &= ~brk[1:-1] & ~brk[2:]
