@@ -271,7 +271,7 @@ def bench_drill_tour(quick: bool) -> dict:
 
 def bench_realtime(quick: bool) -> dict:
     seconds = 2.0 if quick else 10.0
-    s = cam.MachineSettings().replace(steps_per_px_xy=1, delay_xy_ms=1.0, delay_z_ms=1.0)
+    s = cam.MachineSettings().replace(steps_per_px_xy=1, delay_xy_ms=1.0, delay_z_ms=1.0, ramp="constant")
     n = int(seconds * 1000)
     job = cam.Toolpath(points_px=np.array([[n, 0, 0]]), kind=np.zeros(1, np.uint8), target=np.zeros(1, bool),
                        pause=np.zeros(1, bool), settings=s.replace(travel=cam.settings.Travel(x_max_steps=n)))
@@ -289,16 +289,23 @@ def bench_realtime(quick: bool) -> dict:
                f"p50 {p50:.0f} us, p99 {p99:.0f} us, max {mx:.0f} us", "p99 <= 100 us", p99 <= 100)
 
 
+def bench_ramps(quick: bool) -> dict:
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    import ramps  # type: ignore
+
+    return ramps.bench_row(quick)
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="small workloads (under a minute)")
-    ap.add_argument("--only", help="comma-separated row numbers to run (1..8)")
+    ap.add_argument("--only", help="comma-separated row numbers to run (1..9)")
     args = ap.parse_args(argv)
     benches = {
         1: bench_trace_2d, 2: bench_peel_3d, 3: bench_planning, 4: None, 5: bench_memory, 7: bench_drill_tour,
-        8: bench_realtime,
+        8: bench_realtime, 9: bench_ramps,
     }
-    only = {int(v) for v in args.only.split(",")} if args.only else set(range(1, 9))
+    only = {int(v) for v in args.only.split(",")} if args.only else set(range(1, 10))
     rows: list[dict] = []
     for k in sorted(only):
         if k in (4, 6):

@@ -13,6 +13,6 @@ def test_quick_benchmarks_print_the_table():
     header, body = rows[0], rows[1:]
     assert "reference" in header and "target" in header
     names = " ".join(r.split("|")[1] for r in body)
-    for workload in ("2D trace", "3D peel", "planning", "relief", "memory", "drill tour", "real-time"):
+    for workload in ("2D trace", "3D peel", "planning", "relief", "memory", "drill tour", "real-time", "ramps"):
         assert workload in names, workload
-    assert len(body) == 8
+    assert len(body) == 9
