@@ -328,3 +328,16 @@ def test_report_and_cli_name_the_ramp(tmp_path, capsys):
         assert rep["ramp"] == mode
         times[mode] = rep["estimated_time_s"]
     assert times["constant"] < times["lookahead"] < times["linear40"]
+
+
+@pytest.mark.parametrize("name", ["seed_tools.plt", "extended.plt", "inkscape_star.plt"])
+def test_lookahead_passes_the_checker_on_hpgl_drawings(name):
+    from cam.hpgl import load_hpgl, plan_hpgl
+
+    job = plan_hpgl(load_hpgl(SAMPLES / name))
+    plan = plan_steps(job)
+    assert len(plan.pause_writes) >= 1  # pen selections: tool-change pauses, judged as rests
+    report, motion, log = run_and_check(plan, job.settings)
+    report.raise_if_broken()
+    assert_stops_at_start_speed(log, job.settings, plan.pause_writes)
+    assert motion.final_steps == tuple(int(v) for v in job.points_px[-1])
