@@ -341,3 +341,26 @@ def test_lookahead_passes_the_checker_on_hpgl_drawings(name):
     report.raise_if_broken()
     assert_stops_at_start_speed(log, job.settings, plan.pause_writes)
     assert motion.final_steps == tuple(int(v) for v in job.points_px[-1])
+
+
+def test_a_stop_lifts_z_no_faster_than_its_start_speed():
+    """Controller.stop halts within one period (the safety rule) and lifts Z from rest at its start speed."""
+    from cam.drive.runner import STOPPED, Controller
+
+    job = toolpath([(0, 0, 20), (1000, 0, 20), (1000, 1000, 20), (0, 0, 20)])
+    plan = plan_steps(job)
+    ctl = Controller()
+    half = len(plan) // 2
+
+    def progress(done, total, t_ns):
+        if done >= half:
+            ctl.stop()
+
+    result = cam.run(plan, controller=ctl, progress=progress)
+    assert result.status == STOPPED
+    log = result.pin_log()
+    t, up = axis_steps(log, S, 2)
+    lift = t[~up]  # steps up (-Z): the lift after the stop
+    assert len(lift) == 20
+    assert np.diff(lift).min() >= STEP_MM[2] / V_START[2] * 1e9 - 1
+    assert cam.decode_pin_log(log, S).position_steps[-1][2] == 0
