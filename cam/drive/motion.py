@@ -63,7 +63,7 @@ _DROP = 0.85
 _ALPHA_MARGIN = 0.9
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _steps_of_axis(high, dirs, clk, dbit):
     n = 0
     for k in range(high.shape[0]):
@@ -80,7 +80,7 @@ def _steps_of_axis(high, dirs, clk, dbit):
     return per, up
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _breaks(per, up, stop_cum):
     """Rest before step j: reversal, or a stop between the periods of steps j-1 and j."""
     n = per.shape[0]
@@ -91,10 +91,53 @@ def _breaks(per, up, stop_cum):
     return brk
 
 
+_POOL: "concurrent.futures.ThreadPoolExecutor | None" = None
+
+
+def _pool():
+    """Three threads for the per-axis kernels (compiled with ``nogil``, so they run in parallel)."""
+    global _POOL
+    if _POOL is None:
+        import concurrent.futures
+
+        _POOL = concurrent.futures.ThreadPoolExecutor(3, thread_name_prefix="cam-axes")
+    return _POOL
+
+
+def _axis_steps_and_breaks(high, dirs, clk, dbit, stop_cum):
+    per, up = _steps_of_axis(high, dirs, clk, dbit)
+    return per, _breaks(per, up, stop_cum)
+
+
+@njit(cache=True)
+def _pair_cap(m1, m2, s, v_start, acc, u_hi):
+    """Largest steady path rate (<= ``u_hi``) at which intervals of ``m1`` then ``m2`` periods pass R2.
+
+    With the rule's clamps: speeds below the start speed count as the start speed and intervals
+    longer than a start-speed step count as one (bisection; ``v_start * m1 / s`` always passes).
+    """
+    ds = s / v_start
+    lo = v_start * m1 / s
+    hi = u_hi
+    if hi <= lo:
+        return hi
+    for _ in range(24):
+        u = 0.5 * (lo + hi)
+        w1 = max(s * u / m1, v_start)
+        w2 = max(s * u / m2, v_start)
+        dt = 0.5 * (min(m1 / u, ds) + min(m2 / u, ds))
+        if abs(w1 - w2) <= acc * dt:
+            lo = u
+        else:
+            hi = u
+    return lo
+
+
 @njit(cache=True)
 def _axis_caps(per, brk, s, v_start, v_max, acc, cap, alpha, upull):
     """Step 1 of the planner (module docstring) for one axis: lower ``cap``, ``alpha``, ``upull`` in place."""
     n = per.shape[0]
+    memo = np.full((64, 64), -1.0)  # _pair_cap by (shorter, longer) interval: the pass set is u <= u*
     for j in range(n - 1):
         if brk[j + 1]:
             continue
@@ -108,6 +151,24 @@ def _axis_caps(per, brk, s, v_start, v_max, acc, cap, alpha, upull):
             c = min(c, v_start * m / s)
         a = acc * m / s
         p = v_start * m / s
+        if j + 2 < n and not brk[j + 2]:
+            # R2 at the step between this interval (m periods) and the next (m2): at a steady path
+            # speed u the axis jumps from s u / m to s u / m2.  One step may move a period toward a
+            # free slot (the checker's quantisation tolerance), so judge the pair one period closer;
+            # the cap is an estimate that saves re-planning rounds, the check still decides.
+            m2 = per[j + 2] - k2
+            lo_m = min(m, m2)
+            hi_m = max(m, m2)
+            if hi_m - lo_m > 2:
+                if hi_m < memo.shape[0]:
+                    if memo[lo_m, hi_m] < 0:
+                        memo[lo_m, hi_m] = _pair_cap(lo_m + 1, hi_m - 1, s, v_start, acc, v_max * hi_m / s)
+                    c2 = min(memo[lo_m, hi_m], c)
+                else:
+                    c2 = _pair_cap(lo_m + 1, hi_m - 1, s, v_start, acc, c)
+                for k in range(k1, per[j + 2] + 1):
+                    if c2 < cap[k]:
+                        cap[k] = c2
         for k in range(k1, k2 + 1):
             if c < cap[k]:
                 cap[k] = c
@@ -125,6 +186,10 @@ def _passes(cap, alpha, upull, stop_before, u):
     for k in range(n):
         if stop_before[k]:
             prev = 0.0
+        if prev >= cap[k]:  # cruising at the cap (upull <= cap): no need to accelerate
+            u[k] = cap[k]
+            prev = cap[k]
+            continue
         a = alpha[k]
         if k > 0 and alpha[k - 1] < a:
             a = alpha[k - 1]
@@ -139,6 +204,9 @@ def _passes(cap, alpha, upull, stop_before, u):
     for k in range(n - 1, -1, -1):
         if stop_before[k + 1]:
             nxt = 0.0
+        if nxt >= u[k]:  # the forward speed here is reachable from what follows
+            nxt = u[k]
+            continue
         a = alpha[k]
         if k + 1 < n and alpha[k + 1] < a:
             a = alpha[k + 1]
@@ -273,9 +341,10 @@ def ramp_periods(
     alpha = np.full(n, np.inf)
     upull = np.full(n, np.inf)
     axes = []
+    found = list(_pool().map(lambda a: _axis_steps_and_breaks(high, dirs, int(clock[a]), int(dirbit[a]), stop_cum),
+                             range(3)))
     for a in range(3):
-        per, up = _steps_of_axis(high, dirs, int(clock[a]), int(dirbit[a]))
-        brk = _breaks(per, up, stop_cum)
+        per, brk = found[a]
         _axis_caps(per, brk, s_mm[a], v_start[a], v_max[a], acc[a] * _ALPHA_MARGIN, cap, alpha, upull)
         axes.append((per, brk, np.zeros(len(per)), np.zeros(len(per)), np.zeros(len(per))))
     upull = np.minimum(upull, cap)
@@ -289,12 +358,17 @@ def ramp_periods(
         if rnd == _ROUNDS:
             break
         mid = _mid_times(out)
+
+        def check(a: int) -> None:
+            per, brk, r1, r2, r3 = axes[a]
+            if len(per) >= 2:  # compiled without the GIL: the axes are checked in parallel
+                check_axis_steps(mid[per], per, mid, brk, s_mm[a], v_start[a], v_max[a], acc[a], r1, r2, r3)
+
+        list(_pool().map(check, range(3)))
         hits = 0
-        for a, (per, brk, r1, r2, r3) in enumerate(axes):
-            if len(per) < 2:
-                continue
-            check_axis_steps(mid[per], per, mid, brk, s_mm[a], v_start[a], v_max[a], acc[a], r1, r2, r3)
-            hits += _drop_caps(per, r1, r2, r3, u, cap, _DROP)
+        for per, brk, r1, r2, r3 in axes:
+            if len(per) >= 2:
+                hits += _drop_caps(per, r1, r2, r3, u, cap, _DROP)
         if hits == 0:
             break
     return out

@@ -105,7 +105,7 @@ def _pair_excess(d1, d2, e_lo, e_hi, s_ns, vs, acc, ds_ns):
     return best
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def check_axis_steps(t_ns, slot_of_step, slot_t_ns, brk, s_mm, v_start, v_max, acc, r1, r2, r3):
     """Rules R1..R3 (module docstring) for the steps of one axis.
 
@@ -138,6 +138,11 @@ def check_axis_steps(t_ns, slot_of_step, slot_t_ns, brk, s_mm, v_start, v_max, a
         r3[n - 1] = 0.0
         r2[0] = 0.0
         r2[n - 1] = 0.0
+    last_d1 = -1.0
+    last_d2 = -1.0
+    last_lo = np.int64(-1)
+    last_hi = np.int64(-1)
+    last_ex = 0.0
     for j in range(1, n - 1):
         r2[j] = 0.0
         if brk[j] or brk[j + 1]:
@@ -151,9 +156,12 @@ def check_axis_steps(t_ns, slot_of_step, slot_t_ns, brk, s_mm, v_start, v_max, a
         if abs(w2 - w1) <= acc * (min(d1, ds) + min(d2, ds)) * 0.5e-9 + _TOL_MM_S:
             continue  # passes unshifted (the common case)
         q_lo, q_hi = _shift_limits(slot_of_step, slot_t_ns, j)
-        ex = _pair_excess(d1, d2, float(q_lo), float(q_hi), s_ns, v_start, acc, ds)
-        if ex > _TOL_MM_S:
-            r2[j] = ex
+        if d1 != last_d1 or d2 != last_d2 or q_lo != last_lo or q_hi != last_hi:
+            # a DDA pattern repeats the same pair over and over: judge each new one once
+            last_d1, last_d2, last_lo, last_hi = d1, d2, q_lo, q_hi
+            last_ex = _pair_excess(d1, d2, float(q_lo), float(q_hi), s_ns, v_start, acc, ds)
+        if last_ex > _TOL_MM_S:
+            r2[j] = last_ex
 
 
 @njit(cache=True)
