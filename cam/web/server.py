@@ -842,8 +842,12 @@ def serve(config: ServerConfig, announce: Callable[[str], None] = print) -> int:
 
     if config.host not in LOCAL_HOSTS and not config.token:
         config.token = secrets.token_urlsafe(24)
-    app = create_app(config)
     sock = bind_socket(config.host, config.port)
+    try:
+        app = create_app(config)
+    except BaseException:
+        sock.close()
+        raise
     port = sock.getsockname()[1]
     ucfg = uvicorn.Config(app, host=config.host, port=port, log_level="warning", access_log=False,
                           timeout_graceful_shutdown=2, lifespan="on")
