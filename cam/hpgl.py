@@ -133,6 +133,18 @@ def _known(code):
 
 
 @njit(cache=True)
+def _emit(c_code, c_off, c_line, c_col, c_p0, c_np, nc, code, off, line, col, p0, n_params):
+    """Record command ``nc`` (mnemonic code, byte offset, line, column, its parameters); return nc + 1."""
+    c_code[nc] = code
+    c_off[nc] = off
+    c_line[nc] = line
+    c_col[nc] = col
+    c_p0[nc] = p0
+    c_np[nc] = n_params
+    return nc + 1
+
+
+@njit(cache=True)
 def _tokenize(buf, final, st, c_code, c_off, c_line, c_col, c_p0, c_np, p_val, p_line, p_col):
     """Commands and numeric parameters of one chunk (see :func:`_chunks` for the contract)."""
     n = buf.shape[0]
@@ -227,13 +239,7 @@ def _tokenize(buf, final, st, c_code, c_off, c_line, c_col, c_p0, c_np, p_val, p
                     err = E_TRAIL
                     err_pos = i
                     break
-                c_code[nc] = code
-                c_off[nc] = coff
-                c_line[nc] = cline
-                c_col[nc] = ccol
-                c_p0[nc] = p0
-                c_np[nc] = npar - p0
-                nc += 1
+                nc = _emit(c_code, c_off, c_line, c_col, c_p0, c_np, nc, code, coff, cline, ccol, p0, npar - p0)
                 mode = M_IDLE
                 if c == 59:
                     i += 1
@@ -317,13 +323,7 @@ def _tokenize(buf, final, st, c_code, c_off, c_line, c_col, c_p0, c_np, p_val, p
                     continue
                 term = 3
             if c == 59 or (mode == M_SKIP and _letter(c)):
-                c_code[nc] = code
-                c_off[nc] = coff
-                c_line[nc] = cline
-                c_col[nc] = ccol
-                c_p0[nc] = npar
-                c_np[nc] = 0
-                nc += 1
+                nc = _emit(c_code, c_off, c_line, c_col, c_p0, c_np, nc, code, coff, cline, ccol, npar, 0)
                 mode = M_IDLE
                 if c == 59:
                     i += 1
@@ -338,13 +338,7 @@ def _tokenize(buf, final, st, c_code, c_off, c_line, c_col, c_p0, c_np, p_val, p
             if mode == M_QUOTE and c == 34:
                 mode = M_SKIP
             elif mode == M_LABEL and c == term:
-                c_code[nc] = code
-                c_off[nc] = coff
-                c_line[nc] = cline
-                c_col[nc] = ccol
-                c_p0[nc] = npar
-                c_np[nc] = 0
-                nc += 1
+                nc = _emit(c_code, c_off, c_line, c_col, c_p0, c_np, nc, code, coff, cline, ccol, npar, 0)
                 mode = M_IDLE
             if c == 10:
                 line += 1
@@ -357,13 +351,7 @@ def _tokenize(buf, final, st, c_code, c_off, c_line, c_col, c_p0, c_np, p_val, p
             consumed = n
         elif mode == M_PARAMS and _coord_cmd(code) and pair_pos >= 0 and safe == 0:
             # a coordinate command that fills the buffer: hand over its complete pairs, resume after them
-            c_code[nc] = code
-            c_off[nc] = coff
-            c_line[nc] = cline
-            c_col[nc] = ccol
-            c_p0[nc] = p0
-            c_np[nc] = pair_np - p0
-            nc += 1
+            nc = _emit(c_code, c_off, c_line, c_col, c_p0, c_np, nc, code, coff, cline, ccol, p0, pair_np - p0)
             npar = pair_np
             consumed = pair_pos
             line = pair_line
@@ -385,13 +373,7 @@ def _tokenize(buf, final, st, c_code, c_off, c_line, c_col, c_p0, c_np, p_val, p
                 err = E_EOF_COMMA
                 err_pos = n
             else:
-                c_code[nc] = code
-                c_off[nc] = coff
-                c_line[nc] = cline
-                c_col[nc] = ccol
-                c_p0[nc] = p0
-                c_np[nc] = npar - p0
-                nc += 1
+                nc = _emit(c_code, c_off, c_line, c_col, c_p0, c_np, nc, code, coff, cline, ccol, p0, npar - p0)
         elif mode == M_LABEL:
             err = E_EOF_LABEL
             err_pos = n
@@ -399,13 +381,7 @@ def _tokenize(buf, final, st, c_code, c_off, c_line, c_col, c_p0, c_np, p_val, p
             err = E_EOF_STRING
             err_pos = n
         elif mode != M_IDLE:
-            c_code[nc] = code
-            c_off[nc] = coff
-            c_line[nc] = cline
-            c_col[nc] = ccol
-            c_p0[nc] = npar
-            c_np[nc] = 0
-            nc += 1
+            nc = _emit(c_code, c_off, c_line, c_col, c_p0, c_np, nc, code, coff, cline, ccol, npar, 0)
     if err != E_NONE:
         # position of the error: line and column of err_pos (recount from the last known line start)
         el = line
