@@ -409,10 +409,11 @@ class MachineSession:
 
     def stop(self) -> None:
         """Stop and lift the tool to the safe plane (nothing happens when idle)."""
+        ctl = self._controller  # stop first, book-keeping after (see emergency_stop)
+        if ctl is not None:
+            ctl.stop()
         with self._lock:
-            ctl = self._controller
             if ctl is not None:
-                ctl.stop()
                 self._answer_action = "stop"
                 self._answer.set()
                 self.version += 1
@@ -421,10 +422,11 @@ class MachineSession:
     def emergency_stop(self, request_ns: Optional[int] = None) -> None:
         """Send nothing more at all.  ``request_ns``: ``time.monotonic_ns()`` when the request arrived."""
         now = request_ns if request_ns is not None else time.monotonic_ns()
+        ctl = self._controller  # no lock before the stop: the runner may hold it for a progress update
+        if ctl is not None:
+            ctl.emergency_stop()
         with self._lock:
-            ctl = self._controller
             if ctl is not None:
-                ctl.emergency_stop()
                 if self._estop_request_ns is None:
                     self._estop_request_ns = now
                 self._answer.set()
