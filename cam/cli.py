@@ -597,7 +597,7 @@ def cmd_drill(args: argparse.Namespace) -> int:
     report = job_report(digitized, job, steps)
     for w in report["warnings"]:
         print(f"warning: {w}", file=sys.stderr)
-    result = _execute(job, args, prompt_at_pause=bool(args.pause_at))
+    result = _execute(steps, args, prompt_at_pause=bool(args.pause_at))  # planned once, above
     return _finish(args, result, report,
                    f"{report['objects']} object(s), {report['points']} points, {report['retracts']} retracts")
 
