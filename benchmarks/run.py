@@ -246,10 +246,15 @@ def bench_memory(quick: bool) -> dict:
         cam.digitize(Drawing(classes=disc_classes(64, 20)))  # imports and compiled kernels loaded
         classes = disc_classes({size}, {radius})
         drawing = Drawing(classes=classes)
-        rss_kb = int([l for l in open("/proc/self/status") if l.startswith("VmRSS")][0].split()[1])
-        peak0 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+        def status_kb(key):
+            return int([l for l in open("/proc/self/status") if l.startswith(key)][0].split()[1])
+        # reset the peak-RSS mark: a child's ru_maxrss starts at its parent's RSS at fork time
+        with open("/proc/self/clear_refs", "w") as f:
+            f.write("5")
+        rss_kb = status_kb("VmRSS")
+        peak0 = status_kb("VmHWM")
         d = cam.digitize(drawing)
-        peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+        peak = status_kb("VmHWM")
         print(rss_kb, peak0, peak)
     ''')
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=1800)
