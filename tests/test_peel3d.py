@@ -178,3 +178,18 @@ def test_compiled_peel_falls_back_to_the_named_errors():
     classes[r, c] = WHITE  # a gap in the rim: red now touches white
     with pytest.raises(cam.DrawingError, match=r"open: red pixel"):
         peel_layers_padded(classes)
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_compiled_ring_tracer_equals_reference_on_random_reliefs(seed):
+    """Overlapping ellipses with holes: layers that split into several rings and walks that stop early."""
+    from cam.digitize.peel3d import peel_layers_padded, trace_layers_reference, trace_padded
+
+    classes = _blobs(seed)
+    layer = peel_layers(classes)
+    padded = peel_layers_padded(classes)
+    a, la = trace_padded(padded)
+    assert np.array_equal(padded[1:-1, 1:-1], layer)  # not in place: the caller's array is untouched
+    b, lb = trace_layers_reference(layer)
+    assert np.array_equal(la, lb) and len(a) == len(b)
+    assert all(np.array_equal(x, y) for x, y in zip(a, b))

@@ -55,7 +55,7 @@ def digitize(drawing: Drawing | np.ndarray | str, *, start: str = "top") -> Digi
     if kind == "profile":
         raise DrawingError(f"{drawing.source}: this is a profile drawing (blue curve); use it with --profile")
     if kind == "3d":
-        objects, levels = trace_padded(peel_layers_padded(drawing.classes, source=drawing.source))
+        objects, levels = trace_padded(peel_layers_padded(drawing.classes, source=drawing.source), in_place=True)
         warnings = list(drawing.warnings)
         return Digitized("3d", drawing.width_px, drawing.height_px, objects, levels, warnings)
     objects = trace_curves(drawing.classes, start=start, value=BLACK)

@@ -134,8 +134,11 @@ def pad_mask_kernel(classes, value):
 
 
 @njit(cache=True)
-def _flood_ring(layer_flat, untraced, ring_of, start, k, ring, wp, stack):
-    """Mark the 8-connected piece of layer ``k`` holding ``start`` as ``ring``; return its untraced count."""
+def _flood_ring(lay, ring_of, start, k, ring, wp, stack):
+    """Mark the 8-connected piece of layer ``k`` (traced pixels hold -k) holding ``start`` as ``ring``.
+
+    Returns how many of its pixels are still untraced.
+    """
     n = 0
     left = 0
     stack[0] = start
@@ -144,12 +147,12 @@ def _flood_ring(layer_flat, untraced, ring_of, start, k, ring, wp, stack):
     while n > 0:
         n -= 1
         p = stack[n]
-        if untraced[p] != 0:
+        if lay[p] > 0:
             left += 1
         for dr in (-wp, 0, wp):
             for dc in (-1, 0, 1):
                 q = p + dr + dc
-                if layer_flat[q] == k and ring_of[q] != ring:
+                if abs(lay[q]) == k and ring_of[q] != ring:
                     ring_of[q] = ring
                     stack[n] = q
                     n += 1
@@ -157,40 +160,53 @@ def _flood_ring(layer_flat, untraced, ring_of, start, k, ring, wp, stack):
 
 
 @njit(cache=True)
+def _layer_order(lay, n_layers, bounds):
+    """Pixels of layers 1.. grouped by layer, scan order within a layer (a counting sort)."""
+    fill = bounds.copy()
+    order = np.empty(bounds[n_layers + 1], np.int32)
+    for i in range(lay.shape[0]):
+        k = abs(lay[i])
+        if k > 0:
+            order[fill[k]] = i
+            fill[k] += 1
+    return order
+
+
+@njit(cache=True)
 def trace_layers_kernel(layer_flat, wp, offsets, drow, dcol):
     """Trace every layer of a padded, flattened layer map into rings (see :mod:`.peel3d`).
 
-    A ring's extent (its 8-connected piece of the layer) is found by a flood fill only when a
-    walk stops with pixels of its layer left over; most rings are traced in one walk.
+    Traced pixels are marked in place by negating their layer number (pass a copy).  A walk
+    that stops with pixels of its layer left is the only case that needs more: then the ring's
+    extent (its 8-connected piece of the layer) is flood-filled once, and the pixels of every
+    layer in scan order (a counting sort) are built once, to find the nearest untraced pixel.
 
     Returns ``(xy, ring_starts, ring_levels)``: ``xy`` the ``(n, 2)`` int32 (x, y) image pixels
     (unpadded) in path order; ``offsets``/``drow``/``dcol`` give each neighbour as a flat offset
     and as (row, column) steps, so a pixel's row and column are carried along the walk.
     """
-    size = layer_flat.shape[0]
+    lay = layer_flat
+    size = lay.shape[0]
     n_layers = 0
     for i in range(size):
-        if layer_flat[i] > n_layers:
-            n_layers = layer_flat[i]
-    # pixels grouped by layer, scan order within a layer (counting sort)
+        if lay[i] > n_layers:
+            n_layers = lay[i]
     counts = np.zeros(n_layers + 2, np.int64)
+    first = np.full(n_layers + 2, -1, np.int64)  # each layer's first pixel in scan order
     for i in range(size):
-        counts[layer_flat[i]] += 1
-    bounds = np.zeros(n_layers + 2, np.int64)
-    for k in range(1, n_layers + 2):
-        bounds[k] = bounds[k - 1] + counts[k - 1]
-    fill = bounds.copy()
-    n_px = size - counts[0]
-    order = np.empty(n_px, np.int32)  # pixels of layers 1.. only
-    untraced = np.zeros(size, np.uint8)
-    for i in range(size):
-        k = layer_flat[i]
+        k = lay[i]
         if k > 0:
-            order[fill[k] - counts[0]] = i
-            fill[k] += 1
-            untraced[i] = 1
-    ring_of = np.zeros(size, np.int32)  # flood-fill marks, by ring number (from 1)
-    stack = np.empty(n_px + 1, np.int32)
+            if counts[k] == 0:
+                first[k] = i
+            counts[k] += 1
+    bounds = np.zeros(n_layers + 2, np.int64)  # layer k's pixels are order[bounds[k]:bounds[k + 1]]
+    for k in range(2, n_layers + 2):
+        bounds[k] = bounds[k - 1] + counts[k - 1]
+    n_px = bounds[n_layers + 1]
+    order = np.empty(0, np.int32)
+    have_order = False
+    ring_of = np.empty(0, np.int32)  # flood-fill marks by ring number (from 1), made on first need
+    stack = np.empty(0, np.int32)
     xy = np.empty((n_px, 2), np.int32)
     cap = 1024
     ring_starts = np.empty(cap + 1, np.int64)  # grown as needed: rings are few next to pixels
@@ -199,25 +215,28 @@ def trace_layers_kernel(layer_flat, wp, offsets, drow, dcol):
     n_rings = 0
     tool = -1
     for k in range(1, n_layers + 1):
-        lo = bounds[k] - counts[0]
-        hi = bounds[k + 1] - counts[0]
+        lo = bounds[k]
+        hi = bounds[k + 1]
         if lo == hi:
             continue
         first_ring = True
         remaining = hi - lo
         while remaining > 0:
             if first_ring:
-                s = order[lo]
+                s = first[k]
                 first_ring = False
             else:
                 # the ring of the untraced pixel nearest the tool (ties: first in scan order)
+                if not have_order:
+                    order = _layer_order(lay, n_layers, bounds)
+                    have_order = True
                 best = np.int64(1) << 62
                 s = -1
                 tr = tool // wp
                 tc = tool % wp
                 for t in range(lo, hi):
                     p = order[t]
-                    if untraced[p] != 0:
+                    if lay[p] > 0:
                         dr = p // wp - tr
                         dc = p % wp - tc
                         d2 = dr * dr + dc * dc
@@ -241,7 +260,7 @@ def trace_layers_kernel(layer_flat, wp, offsets, drow, dcol):
             cr = cur // wp
             cc = cur % wp
             while True:
-                untraced[cur] = 0
+                lay[cur] = -k
                 xy[n_path, 0] = cc - 1
                 xy[n_path, 1] = cr - 1
                 n_path += 1
@@ -252,8 +271,8 @@ def trace_layers_kernel(layer_flat, wp, offsets, drow, dcol):
                     moved = False
                     for j in range(offsets.shape[0]):
                         q = cur + offsets[j]
-                        if untraced[q] != 0 and layer_flat[q] == k:
-                            untraced[q] = 0
+                        if lay[q] == k:
+                            lay[q] = -k
                             cr += drow[j]
                             cc += dcol[j]
                             xy[n_path, 0] = cc - 1
@@ -269,16 +288,22 @@ def trace_layers_kernel(layer_flat, wp, offsets, drow, dcol):
                 if remaining == 0:
                     break
                 if not flooded:
-                    ring_left = _flood_ring(layer_flat, untraced, ring_of, s, k, ring, wp, stack)
+                    if ring_of.shape[0] == 0:
+                        ring_of = np.zeros(size, np.int32)
+                        stack = np.empty(n_px + 1, np.int32)
+                    ring_left = _flood_ring(lay, ring_of, s, k, ring, wp, stack)
                     flooded = True
                 if ring_left == 0:
                     break
                 # pixels of this ring left behind: go on from the one nearest the tool
+                if not have_order:
+                    order = _layer_order(lay, n_layers, bounds)
+                    have_order = True
                 best = np.int64(1) << 62
                 nxt = -1
                 for t in range(lo, hi):
                     p = order[t]
-                    if untraced[p] != 0 and ring_of[p] == ring:
+                    if lay[p] > 0 and ring_of[p] == ring:
                         dr = p // wp - cr
                         dc = p % wp - cc
                         d2 = dr * dr + dc * dc

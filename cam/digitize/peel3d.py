@@ -133,13 +133,18 @@ def trace_layers(layer: np.ndarray) -> tuple[list[np.ndarray], np.ndarray]:
     h, w = layer.shape
     padded = np.zeros((h + 2, w + 2), np.int32)
     padded[1:-1, 1:-1] = layer
-    return trace_padded(padded)
+    return trace_padded(padded, in_place=True)
 
 
-def trace_padded(padded: np.ndarray) -> tuple[list[np.ndarray], np.ndarray]:
-    """:func:`trace_layers` of a layer map already padded by one pixel of zeros (``(H + 2, W + 2)``)."""
+def trace_padded(padded: np.ndarray, *, in_place: bool = False) -> tuple[list[np.ndarray], np.ndarray]:
+    """:func:`trace_layers` of a layer map already padded by one pixel of zeros (``(H + 2, W + 2)``).
+
+    ``in_place=True`` lets the tracer mark traced pixels in ``padded`` itself (it is left with
+    negated layer numbers) instead of working on a copy.
+    """
     from ._kernels import trace_layers_kernel
 
+    padded = np.ascontiguousarray(padded, np.int32) if in_place else np.array(padded, np.int32, order="C")
     wp = padded.shape[1]
     offsets = np.array([dr * wp + dc for dr, dc in NEIGHBOURS_3D], np.int64)
     drow = np.array([dr for dr, _ in NEIGHBOURS_3D], np.int64)
