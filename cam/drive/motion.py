@@ -359,15 +359,16 @@ def ramp_periods(
             break
         mid = _mid_times(out)
 
-        def check(a: int) -> None:
+        def check(a: int) -> int:
             per, brk, r1, r2, r3 = axes[a]
-            if len(per) >= 2:  # compiled without the GIL: the axes are checked in parallel
-                check_axis_steps(mid[per], per, mid, brk, s_mm[a], v_start[a], v_max[a], acc[a], r1, r2, r3)
+            if len(per) < 2:  # compiled without the GIL: the axes are checked in parallel
+                return 0
+            return check_axis_steps(mid[per], per, mid, brk, s_mm[a], v_start[a], v_max[a], acc[a], r1, r2, r3)
 
-        list(_pool().map(check, range(3)))
+        broken = list(_pool().map(check, range(3)))
         hits = 0
-        for per, brk, r1, r2, r3 in axes:
-            if len(per) >= 2:
+        for (per, brk, r1, r2, r3), n_broken in zip(axes, broken):
+            if n_broken:
                 hits += _drop_caps(per, r1, r2, r3, u, cap, _DROP)
         if hits == 0:
             break

@@ -116,8 +116,12 @@ def check_axis_steps(t_ns, slot_of_step, slot_t_ns, brk, s_mm, v_start, v_max, a
         s_mm, v_start, v_max, acc: mm per step, start and top speed (mm/s), acceleration (mm/s^2).
         r1, r3: ``(n,)`` float64 out: speed excess (mm/s) of the interval from step j to j + 1 (0 = ok).
         r2: ``(n,)`` float64 out: acceleration excess (mm/s) of the pair around step j (0 = ok).
+
+    Returns:
+        How many rule breaks were found (0 = the axis passes).
     """
     n = t_ns.shape[0]
+    n_bad = 0
     s_ns = s_mm * 1e9
     dmin = s_ns / v_max
     ds = s_ns / v_start
@@ -129,10 +133,12 @@ def check_axis_steps(t_ns, slot_of_step, slot_t_ns, brk, s_mm, v_start, v_max, a
         d = float(t_ns[j + 1] - t_ns[j])
         if d + _TOL_NS < dmin:
             r1[j] = s_ns / max(d, 1.0) - v_max
+            n_bad += 1
         first = j == 0 or brk[j]
         last = j + 2 >= n or brk[j + 2]
         if (first or last) and d + _TOL_NS < ds:
             r3[j] = s_ns / max(d, 1.0) - v_start
+            n_bad += 1
     if n > 0:
         r1[n - 1] = 0.0
         r3[n - 1] = 0.0
@@ -162,6 +168,8 @@ def check_axis_steps(t_ns, slot_of_step, slot_t_ns, brk, s_mm, v_start, v_max, a
             last_ex = _pair_excess(d1, d2, float(q_lo), float(q_hi), s_ns, v_start, acc, ds)
         if last_ex > _TOL_MM_S:
             r2[j] = last_ex
+            n_bad += 1
+    return n_bad
 
 
 @njit(cache=True)
