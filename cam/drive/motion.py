@@ -346,7 +346,7 @@ def ramp_periods(
     for a in range(3):
         per, brk = found[a]
         _axis_caps(per, brk, s_mm[a], v_start[a], v_max[a], acc[a] * _ALPHA_MARGIN, cap, alpha, upull)
-        axes.append((per, brk, np.zeros(len(per)), np.zeros(len(per)), np.zeros(len(per))))
+        axes.append((per, brk))
     upull = np.minimum(upull, cap)
     u = np.empty(n)
     out = np.empty(n, np.int64)
@@ -359,17 +359,21 @@ def ramp_periods(
             break
         mid = _mid_times(out)
 
-        def check(a: int) -> int:
-            per, brk, r1, r2, r3 = axes[a]
+        def check(a: int, record: bool = False) -> tuple[int, np.ndarray, np.ndarray, np.ndarray]:
+            per, brk = axes[a]
+            r1, r2, r3 = (np.zeros(len(per) if record else 0) for _ in range(3))
             if len(per) < 2:  # compiled without the GIL: the axes are checked in parallel
-                return 0
-            return check_axis_steps(mid[per], per, mid, brk, s_mm[a], v_start[a], v_max[a], acc[a], r1, r2, r3)
+                return 0, r1, r2, r3
+            t = mid[per]
+            n_broken = check_axis_steps(t, per, mid, brk, s_mm[a], v_start[a], v_max[a], acc[a], r1, r2, r3)
+            return n_broken, r1, r2, r3
 
-        broken = list(_pool().map(check, range(3)))
+        broken = [n_broken for n_broken, *_ in _pool().map(check, range(3))]
         hits = 0
-        for (per, brk, r1, r2, r3), n_broken in zip(axes, broken):
-            if n_broken:
-                hits += _drop_caps(per, r1, r2, r3, u, cap, _DROP)
+        for a, n_broken in enumerate(broken):
+            if n_broken:  # check again, recording where, and lower the caps there
+                _, r1, r2, r3 = check(a, record=True)
+                hits += _drop_caps(axes[a][0], r1, r2, r3, u, cap, _DROP)
         if hits == 0:
             break
     return out

@@ -116,30 +116,35 @@ def check_axis_steps(t_ns, slot_of_step, slot_t_ns, brk, s_mm, v_start, v_max, a
         s_mm, v_start, v_max, acc: mm per step, start and top speed (mm/s), acceleration (mm/s^2).
         r1, r3: ``(n,)`` float64 out: speed excess (mm/s) of the interval from step j to j + 1 (0 = ok).
         r2: ``(n,)`` float64 out: acceleration excess (mm/s) of the pair around step j (0 = ok).
+            Pass three empty arrays to only count (the planner's check: nothing to record when it passes).
 
     Returns:
         How many rule breaks were found (0 = the axis passes).
     """
     n = t_ns.shape[0]
     n_bad = 0
+    record = r1.shape[0] > 0
     s_ns = s_mm * 1e9
     dmin = s_ns / v_max
     ds = s_ns / v_start
     for j in range(n - 1):
-        r1[j] = 0.0
-        r3[j] = 0.0
+        if record:
+            r1[j] = 0.0
+            r3[j] = 0.0
         if brk[j + 1]:
             continue
         d = float(t_ns[j + 1] - t_ns[j])
         if d + _TOL_NS < dmin:
-            r1[j] = s_ns / max(d, 1.0) - v_max
+            if record:
+                r1[j] = s_ns / max(d, 1.0) - v_max
             n_bad += 1
         first = j == 0 or brk[j]
         last = j + 2 >= n or brk[j + 2]
         if (first or last) and d + _TOL_NS < ds:
-            r3[j] = s_ns / max(d, 1.0) - v_start
+            if record:
+                r3[j] = s_ns / max(d, 1.0) - v_start
             n_bad += 1
-    if n > 0:
+    if n > 0 and record:
         r1[n - 1] = 0.0
         r3[n - 1] = 0.0
         r2[0] = 0.0
@@ -150,7 +155,8 @@ def check_axis_steps(t_ns, slot_of_step, slot_t_ns, brk, s_mm, v_start, v_max, a
     last_hi = np.int64(-1)
     last_ex = 0.0
     for j in range(1, n - 1):
-        r2[j] = 0.0
+        if record:
+            r2[j] = 0.0
         if brk[j] or brk[j + 1]:
             continue
         d1 = float(t_ns[j] - t_ns[j - 1])
@@ -167,7 +173,8 @@ def check_axis_steps(t_ns, slot_of_step, slot_t_ns, brk, s_mm, v_start, v_max, a
             last_d1, last_d2, last_lo, last_hi = d1, d2, q_lo, q_hi
             last_ex = _pair_excess(d1, d2, float(q_lo), float(q_hi), s_ns, v_start, acc, ds)
         if last_ex > _TOL_MM_S:
-            r2[j] = last_ex
+            if record:
+                r2[j] = last_ex
             n_bad += 1
     return n_bad
 
