@@ -69,3 +69,26 @@ def periods_kernel(pts, delay_xy_ns, delay_z_ns, clock, dirbit):
             period[p] = per
             p += 1
     return high, dirs, period, n_per_move
+
+
+@njit(cache=True)
+def writes_kernel(high, dirs, per):
+    """Times and data of the writes of periods (see :mod:`cam.drive.steps`): ``(1 + 2P,)`` each.
+
+    An initial write at t = 0 sets the first directions; each period of length T starting at t
+    writes its rising edges at t + T // 2 and, at t + T, the next period's directions.
+    """
+    n = per.shape[0]
+    m = 1 + 2 * n
+    t_ns = np.empty(m, np.int64)
+    data = np.empty(m, np.uint8)
+    t_ns[0] = 0
+    data[0] = dirs[0] if n else 0
+    t = 0
+    for k in range(n):
+        t_ns[2 * k + 1] = t + per[k] // 2
+        data[2 * k + 1] = high[k]
+        t += per[k]
+        t_ns[2 * k + 2] = t
+        data[2 * k + 2] = dirs[k + 1] if k + 1 < n else dirs[k]
+    return t_ns, data

@@ -219,22 +219,16 @@ def _passes(cap, alpha, upull, stop_before, u):
 
 
 @njit(cache=True)
-def _periods_from_rates(u, floor_ns, out):
+def _periods_from_rates(u, floor_ns, out, mid):
+    """Period lengths from the rates (never below the nominal), and each period's rising-edge time
+    (start + T // 2, as :func:`cam.drive.steps._writes` places it)."""
+    t_ns = 0
     for k in range(u.shape[0]):
         t = np.ceil(1e9 / u[k]) if u[k] > 0 else floor_ns[k]
-        out[k] = max(floor_ns[k], np.int64(t))
-
-
-@njit(cache=True)
-def _mid_times(per_ns):
-    """Rising-edge time of each period: start + T // 2 (as :func:`cam.drive.steps._writes`)."""
-    n = per_ns.shape[0]
-    mid = np.empty(n, np.int64)
-    t = 0
-    for k in range(n):
-        mid[k] = t + per_ns[k] // 2
-        t += per_ns[k]
-    return mid
+        per = max(floor_ns[k], np.int64(t))
+        out[k] = per
+        mid[k] = t_ns + per // 2
+        t_ns += per
 
 
 @njit(cache=True)
@@ -337,7 +331,7 @@ def ramp_periods(
     if stops is not None and len(stops):
         stop_before[np.asarray(stops, np.int64)] = True
     stop_cum = np.cumsum(stop_before)
-    cap = 1e9 / per_ns.astype(np.float64)
+    cap = np.divide(1e9, per_ns, dtype=np.float64)
     alpha = np.full(n, np.inf)
     upull = np.full(n, np.inf)
     axes = []
@@ -347,17 +341,17 @@ def ramp_periods(
         per, brk = found[a]
         _axis_caps(per, brk, s_mm[a], v_start[a], v_max[a], acc[a] * _ALPHA_MARGIN, cap, alpha, upull)
         axes.append((per, brk))
-    upull = np.minimum(upull, cap)
+    np.minimum(upull, cap, out=upull)
     u = np.empty(n)
     out = np.empty(n, np.int64)
+    mid = np.empty(n, np.int64)
     for rnd in range(_ROUNDS + 1):
         if rnd == _ROUNDS:
             cap = np.minimum(cap, upull)  # every axis at or below its start speed: meets every rule
         _passes(cap, alpha, upull, stop_before, u)
-        _periods_from_rates(u, per_ns, out)
+        _periods_from_rates(u, per_ns, out, mid)
         if rnd == _ROUNDS:
             break
-        mid = _mid_times(out)
 
         def check(a: int, record: bool = False) -> tuple[int, np.ndarray, np.ndarray, np.ndarray]:
             per, brk = axes[a]

@@ -27,7 +27,7 @@ import numpy as np
 
 from ..settings import MachineSettings
 from ..toolpath import Toolpath, check_travel
-from ._kernels import periods_kernel
+from ._kernels import periods_kernel, writes_kernel
 from .motion import ramp_periods
 
 __all__ = ["StepPlan", "plan_steps", "axis_bits"]
@@ -128,19 +128,8 @@ def _writes(
     high: np.ndarray, dirs: np.ndarray, per: np.ndarray, settings: MachineSettings
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Writes of periods given their rising-edge data, direction data and lengths (see the module docstring)."""
-    n_periods = len(per)
-    end_t = np.cumsum(per)
-    m = 1 + 2 * n_periods
-    t_ns = np.empty(m, np.int64)
-    data = np.empty(m, np.uint8)
-    t_ns[0] = 0
-    data[0] = dirs[0] if n_periods else 0
-    t_ns[1::2] = end_t - per + per // 2
-    data[1::2] = high
-    t_ns[2::2] = end_t
-    if n_periods:
-        data[2::2][:-1] = dirs[1:]
-        data[-1] = dirs[-1]
+    t_ns, data = writes_kernel(np.asarray(high, np.uint8), np.asarray(dirs, np.uint8), np.asarray(per, np.int64))
+    m = len(t_ns)
     strobe = np.full(m, 1 if settings.half_step else 0, np.uint8)
     return t_ns, data, strobe
 
