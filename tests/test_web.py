@@ -37,7 +37,7 @@ ROOT = Path(__file__).resolve().parent.parent
 # fast machines so jobs take a fraction of a second in real time
 # (constant step delay, no speed ramp: the step period is the delay)
 FAST = cam.MachineSettings().replace(delay_xy_ms=0.02, delay_z_ms=0.02, ramp="constant")
-SLOW = cam.MachineSettings().replace(delay_xy_ms=1.0, delay_z_ms=1.0, ramp="constant")  # e-stop timing
+SLOW = cam.MachineSettings().replace(ramp="constant")  # e-stop timing: the thesis's own 5 ms step period
 MEDIUM = cam.MachineSettings().replace(delay_xy_ms=0.2, delay_z_ms=0.2, ramp="constant")  # ~1.5 s jobs
 
 TOKEN = "s3cret-token"
