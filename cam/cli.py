@@ -229,13 +229,16 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
 
     d = sub.add_parser(
-        "drill", help="digitize a drawing and cut it (mock port by default)",
+        "drill", help="cut a drawing, G-code, drill (Excellon) or HPGL file (mock port by default)",
         description="Digitize a drawing (or reuse a saved digitized matrix), plan the depth-sorted toolpath "
-        "and send it to a port. A G-code file (.ngc, .nc, .gcode, .tap) runs as programmed. The default port is the logging mock, so nothing moves unless you name a real port.",
+        "and send it to a port. A G-code file (.ngc, .nc, .gcode, .tap) runs as programmed; an Excellon drill "
+        "file (.drl, .xln, .exc, .drd) is drilled tool by tool in a short order, also on the MAXIMUS board "
+        "(--port maximus:/dev/ttyUSB0); an HPGL file (.plt, .hpgl, .hpg) is cut pen-down at --cut-depth. "
+        "The default port is the logging mock, so nothing moves unless you name a real port.",
     )
     _add_job_options(d)
     g = d.add_argument_group("port and outputs")
-    g.add_argument("--port", default="mock", help="'mock' (default: logs, moves nothing) or a device like /dev/parport0")
+    g.add_argument("--port", default="mock", help="'mock' (default: logs, moves nothing), a device like /dev/parport0, or maximus:/dev/ttyUSB0 (drill files)")
     g.add_argument("--realtime", action="store_true", help="run the mock in real time, sleeping like the real port")
     g.add_argument("--pin-log", metavar="FILE.csv", help="write the mock's pin log (t_ns,data,strobe)")
     g.add_argument("--save-digitized", metavar="FILE", help="save the digitized matrix")
@@ -280,8 +283,10 @@ def build_parser() -> argparse.ArgumentParser:
     _add_digitize_options(z)
     z.set_defaults(func=cmd_digitize)
 
-    i = sub.add_parser("info", help="print the image property report of a drawing",
-                       description="Digitize a drawing and print its size in pixels and mm, its object count and warnings.")
+    i = sub.add_parser("info", help="print the report of a drawing, drill file or HPGL file",
+                       description="Digitize a drawing and print its size in pixels and mm, its object count and "
+                       "warnings; for a drill file its tools (diameter, hole count), extent and warnings; for an "
+                       "HPGL file its strokes, pens, extent and unknown commands.")
     i.add_argument("image", metavar="IMAGE")
     _add_digitize_options(i)
     _add_machine_options(i)
