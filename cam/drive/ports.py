@@ -124,4 +124,6 @@ def open_port(name: str | Port = "mock") -> Port:
         return MockPort()
     if name.startswith("/dev/"):
         return ParallelPort(name)
+    if name.startswith("maximus:"):
+        raise PortError(f"'{name}': the MAXIMUS board takes drill files (Excellon) and jogs only, not step/dir jobs")
     raise PortError(f"unknown port '{name}' (use 'mock' or a device path such as /dev/parport0)")
