@@ -52,15 +52,26 @@ def periods_kernel(pts, delay_xy_ns, delay_z_ns, clock, dirbit):
         else:
             per = delay_z_ns
         ad0, ad1, ad2 = abs(d0), abs(d1), abs(d2)
+        # an axis steps in period k when floor(k * ad / n) grows: carried as the remainder of k * ad
+        # modulo n (ad <= n, so at most one step a period), without a division per period
+        r0 = 0
+        r1 = 0
+        r2 = 0
         for k in range(1, n + 1):
             clk = 0
-            if (k * ad0) // n - ((k - 1) * ad0) // n:
+            r0 += ad0
+            if r0 >= n:
+                r0 -= n
                 clk |= clock[0]
                 dir_state[0] = 1 if d0 > 0 else 0
-            if (k * ad1) // n - ((k - 1) * ad1) // n:
+            r1 += ad1
+            if r1 >= n:
+                r1 -= n
                 clk |= clock[1]
                 dir_state[1] = 1 if d1 > 0 else 0
-            if (k * ad2) // n - ((k - 1) * ad2) // n:
+            r2 += ad2
+            if r2 >= n:
+                r2 -= n
                 clk |= clock[2]
                 dir_state[2] = 1 if d2 > 0 else 0
             dd = dir_state[0] * dirbit[0] + dir_state[1] * dirbit[1] + dir_state[2] * dirbit[2]
