@@ -81,12 +81,19 @@ def _steps_of_axis(high, dirs, clk, dbit):
 
 
 @njit(cache=True, nogil=True)
-def _breaks(per, up, stop_cum):
-    """Rest before step j: reversal, or a stop between the periods of steps j-1 and j."""
+def _breaks(per, up, stop_idx):
+    """Rest before step j: reversal, or a stop between the periods of steps j-1 and j.
+
+    ``stop_idx``: increasing period indices k with a rest before period k; a rest lies between
+    steps in periods p0 < p1 when p0 < k <= p1 for one of them.
+    """
     n = per.shape[0]
     brk = np.zeros(n, np.bool_)
+    i = 0
     for j in range(1, n):
-        if up[j] != up[j - 1] or stop_cum[per[j]] != stop_cum[per[j - 1]]:
+        while i < stop_idx.shape[0] and stop_idx[i] <= per[j - 1]:
+            i += 1
+        if up[j] != up[j - 1] or (i < stop_idx.shape[0] and stop_idx[i] <= per[j]):
             brk[j] = True
     return brk
 
@@ -104,9 +111,9 @@ def _pool():
     return _POOL
 
 
-def _axis_steps_and_breaks(high, dirs, clk, dbit, stop_cum):
+def _axis_steps_and_breaks(high, dirs, clk, dbit, stop_idx):
     per, up = _steps_of_axis(high, dirs, clk, dbit)
-    return per, _breaks(per, up, stop_cum)
+    return per, _breaks(per, up, stop_idx)
 
 
 @njit(cache=True)
@@ -330,12 +337,12 @@ def ramp_periods(
     stop_before[0] = stop_before[n] = True
     if stops is not None and len(stops):
         stop_before[np.asarray(stops, np.int64)] = True
-    stop_cum = np.cumsum(stop_before)
+    stop_idx = np.flatnonzero(stop_before)
     cap = np.divide(1e9, per_ns, dtype=np.float64)
     alpha = np.full(n, np.inf)
     upull = np.full(n, np.inf)
     axes = []
-    found = list(_pool().map(lambda a: _axis_steps_and_breaks(high, dirs, int(clock[a]), int(dirbit[a]), stop_cum),
+    found = list(_pool().map(lambda a: _axis_steps_and_breaks(high, dirs, int(clock[a]), int(dirbit[a]), stop_idx),
                              range(3)))
     for a in range(3):
         per, brk = found[a]
