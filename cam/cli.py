@@ -742,8 +742,13 @@ def cmd_serve(args: argparse.Namespace) -> int:
         raise CamError(f"--port must be 0..65535, got {args.port}")
     if not (args.max_upload_mb > 0):
         raise CamError(f"--max-upload-mb must be > 0, got {args.max_upload_mb}")
+    settings = _settings(args)
+    if args.machine_port.startswith("maximus:") and not args.machine:
+        from .drive.maximus import MAXIMUS_SETTINGS
+
+        settings = MAXIMUS_SETTINGS  # the board's own resolution and 16-bit travel, unless --machine says else
     config = ServerConfig(host=args.host, port=args.port, token=args.token, jobs_dir=args.jobs_dir,
-                          max_upload_bytes=int(args.max_upload_mb * 1024 * 1024), settings=_settings(args),
+                          max_upload_bytes=int(args.max_upload_mb * 1024 * 1024), settings=settings,
                           machine_port=args.machine_port, realtime=args.realtime)
     return serve(config, announce=lambda line: print(line, flush=True))
 

@@ -300,6 +300,8 @@ class PreparedJob:
         warnings: planning and parsing warnings; tool_changes: what each pause of the job is for.
         summary: one line saying what the job is.
         report: JSON-able job report.
+        drill_plan: the :class:`~cam.drilljob.DrillPlan` of a drill file (holes in drilling order, tools),
+            which a MAXIMUS board drills by itself.
     """
 
     source: str
@@ -317,6 +319,7 @@ class PreparedJob:
     summary: str = ""
     report: dict[str, Any] = field(default_factory=dict)
     drawing_rgb: Optional[np.ndarray] = None
+    drill_plan: Any = None
 
     def positions_steps(self) -> np.ndarray:
         """``(M, 3)`` int64 machine position (x, y, z) in steps after each write of the plan."""
@@ -510,7 +513,7 @@ def _prepare_excellon(path: Path, options: JobOptions, settings: MachineSettings
         size_mm=(round(float(span[0]) * settings.mm_per_step_xy, 3), round(float(span[1]) * settings.mm_per_step_xy, 3)),
         depth_mm=round(options.drill_depth_mm, 4),
         warnings=list(holes.warnings), summary=f"{path.name}: {len(hole_xy)} holes ({tools})",
-        report={"holes": len(hole_xy), "tools": [list(t) for t in dp.tool_sequence]},
+        report={"holes": len(hole_xy), "tools": [list(t) for t in dp.tool_sequence]}, drill_plan=dp,
     )
 
 

@@ -510,3 +510,92 @@ def test_phone_screenshot(page, servers, tmp_path):
     assert out.stat().st_size > 10_000
     if os.environ.get("CAM_WRITE_SCREENSHOT"):
         shutil.copy(out, ROOT / "docs" / "web-phone.png")
+
+
+# ------------------------------------------------------------------------------------
+# the MAXIMUS board behind the server (emulated on a pty)
+# ------------------------------------------------------------------------------------
+
+
+def test_api_drives_the_maximus_board(tmp_path):
+    """A drill file on the emulated MAXIMUS board from the web API: prompts answered from the page's
+    endpoint, every hole drilled once, no pause; jog and origin move the board; a drawing is refused."""
+    from cam.drive.maximus import MAXIMUS_SETTINGS
+    from cam.drive.maximus_emulator import decode_port_log, hole_strokes, start_emulator
+
+    emu = start_emulator(speed=None)
+    s = Server(tmp_path, settings=MAXIMUS_SETTINGS, machine_port=f"maximus:{emu.device_path}", realtime=True)
+    try:
+        status, r = s.upload("ellipse.png", (SAMPLES / "ellipse.png").read_bytes())
+        status, plan = s.call("POST", "/api/plan", {"job": r["job"], "options": {"depth": 2}})
+        assert status == 200
+        status, r = s.call("POST", "/api/start", {"job": plan["job"]})
+        assert status == 400 and "Excellon" in r["error"]  # the board drills drill files only
+
+        status, r = s.upload("board.drl", (SAMPLES / "board.drl").read_bytes())
+        status, plan = s.call("POST", "/api/plan", {"job": r["job"], "options": {"drill_depth_mm": 1.0}})
+        assert status == 200, plan
+        assert s.call("POST", "/api/start", {"job": plan["job"]})[0] == 200
+        answered = []
+        deadline = time.monotonic() + 60
+        while s.session.busy:
+            assert time.monotonic() < deadline, "the drill job did not end"
+            st = s.session.state()
+            if st["prompt"]:
+                if not answered:
+                    assert s.call("POST", "/api/pause", {})[0] == 409  # the firmware cannot pause
+                answered.append(st["prompt"]["note"])
+                assert s.call("POST", "/api/answer", {"prompt": st["prompt"]["id"], "action": "continue"})[0] == 200
+            time.sleep(0.01)
+        st = s.session.state()
+        assert st["last"]["status"] == "finished", st["last"]
+        assert [n.split(":")[1].split()[0] for n in answered] == ["T1", "T2", "T3"]  # 0.8, 1.0, 3.2 mm
+        log = emu.port_log()
+        strokes = hole_strokes(log)
+        assert len(strokes) == 44 and len({(int(x), int(y)) for x, y, *_ in strokes}) == 44
+        depth = round(1.0 / MAXIMUS_SETTINGS.mm_per_step_z)
+        assert (strokes[:, 2] - strokes[:, 3] == depth).all()
+        start = decode_port_log(log)[0]
+        assert decode_port_log(log)[-1].tolist() == start.tolist()  # back where it started
+
+        assert s.call("POST", "/api/jog", {"axis": "x", "steps": 120})[0] == 200
+        s.wait_idle(20)
+        assert decode_port_log(emu.port_log())[-1][0] == start[0] + 120
+        assert s.session.state()["position_steps"][0] == 120
+        assert s.call("POST", "/api/origin", {})[0] == 200
+        s.wait_idle(20)
+        assert decode_port_log(emu.port_log())[-1].tolist() == start.tolist()
+        assert s.session.state()["position_steps"] == [0, 0, 0]
+    finally:
+        s.close()
+        emu.stop()
+    assert emu.error is None
+
+
+def test_api_emergency_stop_on_the_maximus_board(tmp_path):
+    """The page's emergency stop during a move reaches the firmware's stop byte; the job ends naming the hole."""
+    from cam.drive.maximus import MAXIMUS_SETTINGS
+    from cam.drive.maximus_emulator import start_emulator
+
+    emu = start_emulator(speed=1.0)  # the firmware's own timing: a move between holes takes seconds
+    s = Server(tmp_path, settings=MAXIMUS_SETTINGS, machine_port=f"maximus:{emu.device_path}", realtime=True)
+    try:
+        status, r = s.upload("board.drl", (SAMPLES / "board.drl").read_bytes())
+        status, plan = s.call("POST", "/api/plan", {"job": r["job"]})
+        assert s.call("POST", "/api/start", {"job": plan["job"]})[0] == 200
+        deadline = time.monotonic() + 30
+        while not s.session.state()["prompt"]:
+            assert time.monotonic() < deadline
+            time.sleep(0.01)
+        st = s.session.state()
+        assert s.call("POST", "/api/answer", {"prompt": st["prompt"]["id"], "action": "continue"})[0] == 200
+        time.sleep(0.5)  # the offset and first hole moves are under way
+        assert s.call("POST", "/api/estop", {})[0] == 200
+        st = s.wait_idle(20)
+        assert st["last"]["status"] == "emergency-stopped", st["last"]
+        assert "hole" in st["last"]["messages"][0] and "stop" in st["last"]["messages"][0].lower(), st["last"]
+        assert any("EMERGENCY STOP" in e["text"] for e in st["log"])
+    finally:
+        s.close()
+        emu.stop()
+    assert emu.error is None

@@ -600,6 +600,7 @@ class MaximusBoard:
         delay_z_up: int | None = None,
         half_step: bool = False,
         return_to_start: bool = True,
+        on_hole: Callable[[int], None] | None = None,
     ) -> int:
         """Drill every hole in Drill mode, to the same depth, and bring the head back to the start.
 
@@ -633,6 +634,7 @@ class MaximusBoard:
             delay_z_down, delay_z_up: Z delays if different from ``delay``.
             half_step: set every axis's L297 to half steps.
             return_to_start: jog X and Y back to the start after the last hole.
+            on_hole: called with the number of holes drilled so far after each one (progress).
 
         Returns:
             The number of holes drilled.
@@ -681,6 +683,8 @@ class MaximusBoard:
                 self._check_stop(f"hole index {i}")
                 self._exchange(packet, _Exchange(f"hole index {i}", ONEHOLEDRILLED, True, "drill", _DRILL))
                 drilled += 1
+                if on_hole is not None:
+                    on_hole(drilled)
             self._exchange(close_drill_packet(),
                            _Exchange("the closing drill packet", DRILLMODE1DONE, False, "drill", _MODE))
             if return_to_start and np.any(back):

@@ -43,7 +43,7 @@ from urllib.parse import urlsplit
 
 import numpy as np
 
-from ..errors import CamError
+from ..errors import CamError, PortError
 from ..fileio import atomic_write_bytes
 from ..jobs import PROFILE_SUFFIXES, JobOptions, PreparedJob, accepted_suffixes, job_kind, prepare_job
 from ..settings import DEFAULT_SETTINGS, MachineSettings, Travel
@@ -124,6 +124,46 @@ def _unit_job(moves_steps: list[tuple[int, int, int]], settings: MachineSettings
                     pause=np.zeros(n, bool), settings=unit)
 
 
+class _BoardControl:
+    """Pause / stop controls of a job on a MAXIMUS board (the runner's :class:`Controller` for step/dir ports).
+
+    The firmware has no pause.  Stop and emergency stop both go to
+    :meth:`cam.drive.maximus.MaximusBoard.emergency_stop`: during a move it sends the firmware's stop
+    byte, between moves it sends nothing more and the job ends before the next packet.
+    """
+
+    paused = False
+
+    def __init__(self) -> None:
+        self.halted = False
+        self._board: Any = None
+        self._lock = threading.Lock()
+
+    def attach(self, board: Any) -> None:
+        """The board is open; a stop asked for before this point ends the job now."""
+        with self._lock:
+            self._board = board
+            halted = self.halted
+        if halted:
+            board.emergency_stop()
+            raise PortError("stopped before the board started")
+
+    def stop(self) -> None:
+        with self._lock:
+            self.halted = True
+            board = self._board
+        if board is not None:
+            board.emergency_stop()
+
+    emergency_stop = stop
+
+    def pause(self) -> None:
+        raise HttpError(409, "the MAXIMUS firmware cannot pause a job: stop it, or wait for a tool change")
+
+    def resume(self) -> None:
+        raise HttpError(409, "nothing is paused")
+
+
 class MachineSession:
     """The machine as the server sees it: where the tool is, what runs, the last run's pin log.
 
@@ -135,6 +175,7 @@ class MachineSession:
                  realtime: bool = True) -> None:
         self.settings = settings
         self.machine_port = machine_port
+        self.maximus = machine_port.startswith("maximus:")  # the PIC board: drill files and jogs only
         self.realtime = realtime
         self._lock = threading.RLock()
         self._position = np.zeros(3, np.int64)  # steps from the home, when nothing runs
@@ -243,6 +284,9 @@ class MachineSession:
             if job.settings.travel != self.settings.travel or job.settings.pins != self.settings.pins:
                 raise HttpError(409, "the job was planned for other machine settings; plan it again")
             self._check_reach(job.extent_steps, "the job")
+            if self.maximus:
+                self._launch_maximus_job(job)
+                return
             self.last_job = job
             self._launch("job", job.steps, job.positions_steps(), f"job {job.name or Path(job.source).name}",
                          job.estimated_time_s)
@@ -264,6 +308,9 @@ class MachineSession:
                                 f"travel {lo}..{hi} steps from the home")
             move = [0, 0, 0]
             move[i] = steps
+            if self.maximus:
+                self._launch_maximus_moves("jog", [tuple(move)], f"jog {a.upper()} {steps:+d} steps")
+                return
             self._start_moves("jog", [tuple(move)], f"jog {a.upper()} {steps:+d} steps")  # type: ignore[list-item]
 
     def go_to_origin(self) -> None:
@@ -280,6 +327,9 @@ class MachineSession:
                     rel.append(r)
             if not rel:
                 self.log("already at the origin")
+                return
+            if self.maximus:
+                self._launch_maximus_moves("origin", rel, "go to origin")
                 return
             self._start_moves("origin", rel, "go to origin")
 
@@ -309,6 +359,100 @@ class MachineSession:
                              daemon=True)
         self._thread = t
         t.start()
+
+    # -- the MAXIMUS board ----------------------------------------------------------
+    def _launch_maximus_job(self, job: PreparedJob) -> None:
+        from ..drive.maximus import maximus_holes
+
+        dp = job.drill_plan
+        if job.kind != "excellon" or dp is None:
+            raise HttpError(400, f"the MAXIMUS board ({self.machine_port}) drills drill files (Excellon) only; "
+                                 f"this job is {job.kind}")
+        holes = maximus_holes(dp.holes_steps)
+        depth_steps = int(round(job.depth_mm / self.settings.mm_per_step_z))
+        changes, first = [], 0
+        for tool, dia, n in dp.tool_sequence:
+            changes.append((first, f"tool change: T{tool} {dia:.3f} mm ({n} holes)"))
+            first += n
+        self.last_job = job
+
+        def work(board: Any) -> None:
+            def on_hole(drilled: int) -> None:
+                with self._lock:
+                    self._done = drilled
+                    self._machine_ns = int(job.estimated_time_s * 1e9 * drilled / max(1, len(holes)))
+                    self.version += 1
+
+            board.drill(holes, depth_steps=depth_steps, tool_changes=changes,
+                        on_tool_change=lambda index, note: self._on_pause((0, 0, 0), note),
+                        on_hole=on_hole)
+
+        self._launch_board("job", work, len(holes), f"job {job.name or Path(job.source).name}",
+                           job.estimated_time_s, np.zeros(3, np.int64))
+
+    def _launch_maximus_moves(self, activity: str, moves: list[tuple[int, int, int]], label: str) -> None:
+        def work(board: Any) -> None:
+            for move in moves:
+                for a, n in zip("xyz", move):
+                    if n:
+                        board.jog(a, int(n))
+
+        self._launch_board(activity, work, 1, label, 0.0, np.sum(np.array(moves, np.int64), axis=0))
+
+    def _launch_board(self, activity: str, work: Callable[[Any], None], total: int, label: str,
+                      estimated_s: float, moved_steps: np.ndarray) -> None:
+        ctl = _BoardControl()
+        self._activity, self._label, self._controller = activity, label, ctl
+        self._positions = None  # the board reports no position while it moves
+        self._done, self._total, self._machine_ns = 0, total, 0
+        self._estimated_s = estimated_s
+        self._started_wall = time.monotonic()
+        self._estop_request_ns = None
+        self._prompt = None
+        self.version += 1
+        self.log(f"{label}: started on {self.machine_port}")
+        t = threading.Thread(target=self._board_worker, args=(activity, work, ctl, label, moved_steps),
+                             name=f"cam-maximus-{activity}", daemon=True)
+        self._thread = t
+        t.start()
+
+    def _board_worker(self, activity: str, work: Callable[[Any], None], ctl: _BoardControl, label: str,
+                      moved_steps: np.ndarray) -> None:
+        from ..drive.maximus import MaximusBoard
+
+        error = None
+        board = None
+        try:
+            board = MaximusBoard(self.machine_port)
+            ctl.attach(board)
+            work(board)
+        except CamError as exc:
+            error = str(exc)
+        except Exception as exc:  # noqa: BLE001 - reported on the page; the host sent nothing more
+            error = f"internal error: {type(exc).__name__}: {exc}"
+        finally:
+            if board is not None:
+                board.close()
+        with self._lock:
+            if error is None:
+                status = "finished"
+                self._position = self._position + moved_steps  # a drill job ends where it started
+                self._done = self._total
+            else:
+                status = "emergency-stopped" if ctl.halted else "error"
+            self.last_run = {"activity": activity, "label": label, "status": status,
+                             "messages": [error] if error else []}
+            self._activity = None
+            self._controller = None
+            self._prompt = None
+            self._finished_wall = time.monotonic()
+            self.version += 1
+        if error is None:
+            self.log(f"{label}: finished")
+        else:
+            self.log(f"{label}: {error}" + ("" if status == "emergency-stopped" else
+                                             " (the board's position is now unknown: jog it home)"),
+                     "error")
 
     # -- the worker thread ---------------------------------------------------------
     def _progress(self, done: int, total: int, machine_ns: int) -> None:
