@@ -342,7 +342,7 @@ def build_parser() -> argparse.ArgumentParser:
     sv.add_argument("--jobs-dir", metavar="DIR", help="folder for uploaded files (default: a new temporary folder)")
     sv.add_argument("--max-upload-mb", type=float, default=50.0, metavar="MB", help="larger uploads are refused (default 50)")
     sv.add_argument("--machine-port", default="mock", metavar="PORT",
-                    help="'mock' (default: logs, moves nothing) or a device like /dev/parport0")
+                    help="'mock' (default: logs, moves nothing), a device like /dev/parport0, or maximus:/dev/ttyUSB0")
     _add_machine_options(sv)
     clock = sv.add_mutually_exclusive_group()
     clock.add_argument("--realtime", dest="realtime", action="store_true", default=True,
