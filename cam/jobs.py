@@ -406,30 +406,23 @@ def motion_picture(
     return img
 
 
-def _cut_extent(positions_steps: np.ndarray, settings: MachineSettings) -> tuple[tuple[float, float], float]:
-    """((width_mm, height_mm), depth_mm) of the positions below the surface (all positions if none)."""
-    p = positions_steps
-    if len(p) == 0:
-        return (0.0, 0.0), 0.0
-    cut = p[p[:, 2] > 0]
-    use = cut if len(cut) else p
-    span = use[:, :2].max(axis=0) - use[:, :2].min(axis=0)
-    depth = max(0, int(p[:, 2].max()))
+def _cut_extent(extent: np.ndarray, cut: np.ndarray, settings: MachineSettings) -> tuple[tuple[float, float], float]:
+    """((width_mm, height_mm), depth_mm) of what is cut: the XY extent below the surface (the whole
+    extent when nothing is), and the deepest Z."""
+    use = cut if cut[2, 1] > 0 else extent
+    span = use[:2, 1] - use[:2, 0]
+    depth = max(0, int(extent[2, 1]))
     return ((round(float(span[0]) * settings.mm_per_step_xy, 3), round(float(span[1]) * settings.mm_per_step_xy, 3)),
             round(depth * settings.mm_per_step_z, 4))
 
 
-def _extent(positions_steps: np.ndarray) -> np.ndarray:
-    p = np.vstack([np.zeros((1, 3), np.int64), positions_steps])
-    return np.column_stack([p.min(axis=0), p.max(axis=0)]).astype(np.int64)
-
-
 def _finish(job: PreparedJob) -> PreparedJob:
     """Fill the fields every kind computes the same way from the step plan."""
-    positions = job.positions_steps()
-    job.extent_steps = _extent(positions)
+    from .drive.pinlog import motion_extent
+
+    job.extent_steps, cut = motion_extent(job.steps.data, job.settings)  # decoded in bounded chunks
     if job.size_mm == (0.0, 0.0):
-        job.size_mm, job.depth_mm = _cut_extent(positions, job.settings)
+        job.size_mm, job.depth_mm = _cut_extent(job.extent_steps, cut, job.settings)
     job.estimated_time_s = job.steps.estimated_time_s
     job.tool_changes = list(job.steps.pause_notes or [])
     for w in job.steps.warnings:

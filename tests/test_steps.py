@@ -4,6 +4,8 @@ import cam
 from cam.drive.steps import plan_steps
 from cam.settings import DEFAULT_SETTINGS
 
+from conftest import SAMPLES
+
 # the thesis's timing (Eq. 4.4): constant delays, no speed ramps (ramps: tests/test_ramps.py)
 CONSTANT = DEFAULT_SETTINGS.replace(ramp="constant")
 
@@ -90,3 +92,24 @@ def test_compiled_step_kernel_equals_the_vectorised_reference():
         periods.append(np.full(n, per))
     t, data, strobe = port_writes(np.vstack(signed), np.concatenate(periods), s)
     assert np.array_equal(t, plan.t_ns) and np.array_equal(data, plan.data)
+
+
+def test_position_tracker_and_chunked_extent_equal_the_full_decode(monkeypatch):
+    """The web page's live position and a job's extent come from bounded-memory decoders: same answers."""
+    import cam.drive.pinlog as pinlog
+    from cam.drive.pinlog import PinLog, PositionTracker, decode_pin_log, motion_extent
+
+    d = cam.digitize(cam.load_image(SAMPLES / "gear.png"))
+    job = cam.plan(d, depth=[12, 4])
+    plan = cam.plan_steps(job)
+    full = decode_pin_log(PinLog(plan.t_ns, plan.data, plan.strobe), job.settings).position_steps
+    monkeypatch.setattr(pinlog, "_CHUNK", 1000)  # many chunk borders
+    tracker = PositionTracker(plan.data, job.settings)
+    for n in (0, 1, 5, 999, 1000, 1001, 5000, len(plan)):
+        assert tracker.advance(n) == (tuple(int(v) for v in full[n - 1]) if n else (0, 0, 0))
+    extent, cut = motion_extent(plan.data, job.settings)
+    with_start = np.vstack([np.zeros((1, 3), np.int64), full])
+    assert extent[:, 0].tolist() == with_start.min(axis=0).tolist()
+    assert extent[:, 1].tolist() == with_start.max(axis=0).tolist()
+    below = full[full[:, 2] > 0]
+    assert cut[:, 0].tolist() == below.min(axis=0).tolist() and cut[:, 1].tolist() == below.max(axis=0).tolist()

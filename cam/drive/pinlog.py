@@ -27,7 +27,8 @@ from ..fileio import atomic_write_text
 from ..settings import DEFAULT_SETTINGS, MachineSettings
 from .steps import axis_bits
 
-__all__ = ["Surface", "PinLog", "Motion", "decode_pin_log", "read_pin_log", "write_pin_log", "carve"]
+__all__ = ["Surface", "PinLog", "Motion", "decode_pin_log", "read_pin_log", "write_pin_log", "carve",
+           "PositionTracker", "motion_extent"]
 
 HEADER = "t_ns,data,strobe"
 
@@ -104,6 +105,27 @@ def read_pin_log(path: str | os.PathLike) -> PinLog:
     return PinLog(rows[:, 0], rows[:, 1].astype(np.uint8), rows[:, 2].astype(np.uint8))
 
 
+def _decode(data: np.ndarray, prev_byte: int, start_steps: np.ndarray, clock: np.ndarray,
+            dirbit: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Positions ``(len(data), 3)`` after each write of a stretch of writes, and its steps per axis.
+
+    ``prev_byte`` is the register before the stretch, ``start_steps`` the ``(3,)`` position there.
+    """
+    data = np.asarray(data, np.uint8)
+    prev = np.empty(len(data), np.uint8)
+    if len(data):
+        prev[0] = prev_byte
+        prev[1:] = data[:-1]
+    pos = np.empty((len(data), 3), np.int64)
+    counts = np.zeros(3, np.int64)
+    for a in range(3):
+        rising = ((data & clock[a]) != 0) & ((prev & clock[a]) == 0)
+        step = np.where(rising, np.where((data & dirbit[a]) != 0, 1, -1), 0)
+        pos[:, a] = np.cumsum(step) + int(start_steps[a])
+        counts[a] = int(rising.sum())
+    return pos, counts
+
+
 def decode_pin_log(
     log: PinLog | str | os.PathLike, settings: MachineSettings = DEFAULT_SETTINGS
 ) -> Motion:
@@ -114,17 +136,62 @@ def decode_pin_log(
     if not isinstance(log, PinLog):
         log = read_pin_log(log)
     clock, dirbit = axis_bits(settings)
-    data = log.data.astype(np.uint8)
-    prev = np.concatenate([[0], data[:-1]]).astype(np.uint8)
-    pos = np.zeros((len(data), 3), np.int64)
-    counts = np.zeros(3, np.int64)
-    for a in range(3):
-        rising = ((data & clock[a]) != 0) & ((prev & clock[a]) == 0)
-        sign = np.where((data & dirbit[a]) != 0, 1, -1)
-        step = np.where(rising, sign, 0)
-        pos[:, a] = np.cumsum(step)
-        counts[a] = int(rising.sum())
+    pos, counts = _decode(log.data, 0, np.zeros(3, np.int64), clock, dirbit)
     return Motion(t_ns=np.asarray(log.t_ns, np.int64), position_steps=pos, step_counts=counts)
+
+
+class PositionTracker:
+    """Follows the tool through a sequence of port writes without keeping a position per write.
+
+    ``advance(n)`` decodes the writes up to write ``n`` (never backwards) and returns the position
+    after it; memory stays proportional to the stretch decoded, not to the whole job.
+    """
+
+    def __init__(self, data: np.ndarray, settings: MachineSettings = DEFAULT_SETTINGS) -> None:
+        self._data = np.asarray(data, np.uint8)
+        self._clock, self._dirbit = axis_bits(settings)
+        self._done = 0
+        self._pos = np.zeros(3, np.int64)
+
+    def advance(self, n_writes: int) -> tuple[int, int, int]:
+        """Position (x, y, z) in steps after the first ``n_writes`` writes."""
+        n = max(self._done, min(int(n_writes), len(self._data)))
+        while self._done < n:
+            end = min(n, self._done + _CHUNK)
+            prev = int(self._data[self._done - 1]) if self._done else 0
+            pos, _ = _decode(self._data[self._done:end], prev, self._pos, self._clock, self._dirbit)
+            self._pos = pos[-1].copy()
+            self._done = end
+        return tuple(int(v) for v in self._pos)  # type: ignore[return-value]
+
+
+_CHUNK = 1 << 21
+
+
+def motion_extent(data: np.ndarray, settings: MachineSettings = DEFAULT_SETTINGS) -> tuple[np.ndarray, np.ndarray]:
+    """Where a sequence of port writes takes the tool, decoded in bounded chunks.
+
+    Returns:
+        ``(extent, cut)``: ``(3, 2)`` int64 min and max position (x, y, z) in steps, the start
+        (0, 0, 0) included; and ``(3, 2)`` the same over the positions below the surface (z > 0),
+        all zeros when nothing is below it.
+    """
+    data = np.asarray(data, np.uint8)
+    clock, dirbit = axis_bits(settings)
+    extent = np.zeros((3, 2), np.int64)
+    cut = None
+    pos0 = np.zeros(3, np.int64)
+    for i in range(0, len(data), _CHUNK):
+        pos, _ = _decode(data[i:i + _CHUNK], int(data[i - 1]) if i else 0, pos0, clock, dirbit)
+        extent[:, 0] = np.minimum(extent[:, 0], pos.min(axis=0))
+        extent[:, 1] = np.maximum(extent[:, 1], pos.max(axis=0))
+        below = pos[pos[:, 2] > 0]
+        if len(below):
+            lo, hi = below.min(axis=0), below.max(axis=0)
+            cut = np.column_stack([lo, hi]) if cut is None else np.column_stack(
+                [np.minimum(cut[:, 0], lo), np.maximum(cut[:, 1], hi)])
+        pos0 = pos[-1].copy()
+    return extent, (cut if cut is not None else np.zeros((3, 2), np.int64)).astype(np.int64)
 
 
 def _pixel_under(v_steps: np.ndarray, spp: int) -> np.ndarray:

@@ -43,6 +43,7 @@ from urllib.parse import urlsplit
 
 import numpy as np
 
+from ..drive.pinlog import PositionTracker
 from ..errors import CamError, PortError
 from ..fileio import atomic_write_bytes
 from ..jobs import PROFILE_SUFFIXES, JobOptions, PreparedJob, accepted_suffixes, job_kind, prepare_job
@@ -183,7 +184,7 @@ class MachineSession:
         self._label = ""
         self._thread: Optional[threading.Thread] = None
         self._controller = None
-        self._positions: Optional[np.ndarray] = None  # (M, 3) positions after each write of the running plan
+        self._positions: Any = None  # a PositionTracker over the running plan's writes (None: not known)
         self._done = 0
         self._total = 0
         self._machine_ns = 0
@@ -220,7 +221,7 @@ class MachineSession:
         with self._lock:
             pos = self._position.copy()
             if self._activity is not None and self._positions is not None and self._done > 0:
-                pos = pos + self._positions[min(self._done, len(self._positions)) - 1]
+                pos = pos + np.array(self._positions.advance(self._done), np.int64)
             return tuple(int(v) for v in pos)  # type: ignore[return-value]
 
     def state(self, log_after: int = 0) -> dict[str, Any]:
@@ -288,7 +289,7 @@ class MachineSession:
                 self._launch_maximus_job(job)
                 return
             self.last_job = job
-            self._launch("job", job.steps, job.positions_steps(), f"job {job.name or Path(job.source).name}",
+            self._launch("job", job.steps, f"job {job.name or Path(job.source).name}",
                          job.estimated_time_s)
 
     def jog(self, axis: str, steps: int) -> None:
@@ -337,17 +338,14 @@ class MachineSession:
         from ..drive.steps import plan_steps
 
         plan = plan_steps(_unit_job(moves, self.settings))
-        from ..drive.pinlog import PinLog, decode_pin_log
+        self._launch(activity, plan, label, plan.estimated_time_s)
 
-        positions = decode_pin_log(PinLog(plan.t_ns, plan.data, plan.strobe), plan.settings).position_steps
-        self._launch(activity, plan, positions, label, plan.estimated_time_s)
-
-    def _launch(self, activity: str, plan: Any, positions: np.ndarray, label: str, estimated_s: float) -> None:
+    def _launch(self, activity: str, plan: Any, label: str, estimated_s: float) -> None:
         from ..drive.runner import Controller
 
         ctl = Controller()
         self._activity, self._label, self._controller = activity, label, ctl
-        self._positions = positions
+        self._positions = PositionTracker(plan.data, plan.settings)  # live position, decoded as it goes
         self._done, self._total, self._machine_ns = 0, len(plan), 0
         self._estimated_s = estimated_s
         self._started_wall = time.monotonic()
