@@ -22,7 +22,7 @@ from .drive.runner import FINISHED, RunResult
 from .errors import CamError
 from .fileio import atomic_write_text
 from .gcode import save_gcode
-from .gcode_in import GCODE_SUFFIXES, load_gcode, plan_gcode_steps
+from .gcode_in import GCODE_SUFFIXES
 from .profile import Profile, load_profile, profile_from_expr
 from .report import format_report, image_report, job_report
 from .settings import RAMP_MODES, MachineSettings, load_settings
@@ -133,43 +133,21 @@ def _add_drill_file_options(d: argparse.ArgumentParser) -> None:
     g.add_argument("--excellon-zeros", choices=("LZ", "TZ"), help="zero suppression when the file does not say")
 
 
+def _excellon_digits(args: argparse.Namespace) -> Optional[tuple[int, int]]:
+    if not args.excellon_format:
+        return None
+    try:
+        a, b = (int(v) for v in args.excellon_format.split(":"))
+    except ValueError:
+        raise CamError(f"--excellon-format takes I:F such as 2:4, got '{args.excellon_format}'") from None
+    return (a, b)
+
+
 def _load_drill_file(args: argparse.Namespace):
     from .excellon import load_excellon
 
-    digits = None
-    if args.excellon_format:
-        try:
-            a, b = (int(v) for v in args.excellon_format.split(":"))
-        except ValueError:
-            raise CamError(f"--excellon-format takes I:F such as 2:4, got '{args.excellon_format}'") from None
-        digits = (a, b)
-    return load_excellon(args.image, units=args.excellon_units, digits=digits, zeros=args.excellon_zeros)
-
-
-def _drill_excellon(args: argparse.Namespace) -> int:
-    from .drilljob import plan_drill
-
-    holes = _load_drill_file(args)
-    settings = _settings(args)
-    if args.port.startswith("maximus:") and not args.machine:
-        from .drive.maximus import MAXIMUS_SETTINGS
-
-        settings = MAXIMUS_SETTINGS  # the board's own resolution and 16-bit travel, unless --machine says else
-    dp = plan_drill(holes, settings=settings, depth_mm=args.drill_depth, safe_height_mm=args.travel_height,
-                    offset_mm=tuple(args.offset) if args.offset else None, mirror_x=args.mirror_x,
-                    order=args.drill_order)
-    for w in holes.warnings:
-        print(f"warning: {w}", file=sys.stderr)
-    tools = ", ".join(f"T{t} {dia:.3f} mm x{n}" for t, dia, n in dp.tool_sequence)
-    summary = f"{len(dp.holes_steps)} holes ({tools})"
-    if args.port.startswith("maximus:"):
-        return _drill_maximus(args, dp, settings, summary)
-    steps = plan_steps(dp.toolpath)
-    report = {"source": args.image, "holes": len(dp.holes_steps), "tools": [list(t) for t in dp.tool_sequence],
-              "warnings": list(holes.warnings), "steps": {a: int(v) for a, v in zip("xyz", steps.steps_total)},
-              "estimated_time_s": round(steps.estimated_time_s, 6)}
-    result = _execute(steps, args, prompt_at_pause=True)
-    return _finish(args, result, report, summary)
+    return load_excellon(args.image, units=args.excellon_units, digits=_excellon_digits(args),
+                         zeros=args.excellon_zeros)
 
 
 def _drill_maximus(args: argparse.Namespace, dp, settings: MachineSettings, summary: str) -> int:
@@ -532,66 +510,76 @@ def _finish(args: argparse.Namespace, result: RunResult, report: dict, summary: 
     return 0
 
 
-def _drill_gcode(args: argparse.Namespace) -> int:
-    program = load_gcode(args.image)
-    steps = plan_gcode_steps(program, _settings(args), flip_y=args.flip_y)
-    for w in program.warnings:
-        print(f"warning: {w}", file=sys.stderr)
-    report = {
-        "source": args.image, "moves": len(program.moves), "warnings": list(program.warnings),
-        "steps": {axis: int(v) for axis, v in zip("xyz", steps.steps_total)},
-        "estimated_time_s": round(steps.estimated_time_s, 6), "tool_changes": len(steps.pause_writes),
-    }
-    result = _execute(steps, args, prompt_at_pause=True)
-    return _finish(args, result, report, f"{len(program.moves)} moves from {args.image}")
+def _job_options(args: argparse.Namespace):
+    """The drill command's options for files that are not drawings, as :class:`cam.jobs.JobOptions`."""
+    from .jobs import JobOptions
+
+    return JobOptions(
+        drill_depth_mm=args.drill_depth, travel_height_mm=args.travel_height,
+        offset_mm=tuple(args.offset) if args.offset else None, mirror_x=args.mirror_x,
+        drill_order=args.drill_order, excellon_units=args.excellon_units,
+        excellon_digits=_excellon_digits(args), excellon_zeros=args.excellon_zeros,
+        flip_y=args.flip_y, depth_mm=args.cut_depth,
+    )
 
 
-def _read_hpgl(args: argparse.Namespace, read: Callable[..., Any]) -> Any:
-    """Stream an HPGL file through ``read(path, progress=...)`` with a progress bar by bytes read."""
+def _reading_bar(args: argparse.Namespace):
+    """A progress bar by bytes read (large HPGL files), on a terminal only; yields its callback or None."""
+    import contextlib
+
     if args.no_progress:
-        return read(args.image)
+        return contextlib.nullcontext(None)
     from tqdm import tqdm
 
-    with tqdm(total=Path(args.image).stat().st_size if Path(args.image).is_file() else None, unit="B",
-              unit_scale=True, desc="reading", file=sys.stderr, mininterval=0.2, leave=False,
-              disable=None) as bar:  # None: only on a terminal, so an error stays one line in logs
-        return read(args.image, progress=lambda done, total: bar.update(done - bar.n))
+    @contextlib.contextmanager
+    def bar_callback():
+        total = Path(args.image).stat().st_size if Path(args.image).is_file() else None
+        with tqdm(total=total, unit="B", unit_scale=True, desc="reading", file=sys.stderr, mininterval=0.2,
+                  leave=False, disable=None) as bar:  # None: only on a terminal, so an error stays one line in logs
+            yield lambda done, total_bytes: bar.update(done - bar.n)
+
+    return bar_callback()
 
 
-def _drill_hpgl(args: argparse.Namespace) -> int:
-    from .hpgl import load_hpgl, plan_hpgl
-    from .picture import save_picture, toolpath_picture, toolpath_svg
+def _drill_file(args: argparse.Namespace) -> int:
+    """G-code, Excellon and HPGL files: planned by :func:`cam.jobs.prepare_job`, then run."""
+    from .jobs import prepare_job
 
     settings = _settings(args)
-    drawing = _read_hpgl(args, load_hpgl)
-    job = plan_hpgl(drawing, settings=settings, depth_mm=args.cut_depth, safe_height_mm=args.travel_height,
-                    offset_mm=tuple(args.offset) if args.offset else None)
-    for w in drawing.warnings:
+    maximus = args.port.startswith("maximus:")
+    if maximus and not args.machine:
+        from .drive.maximus import MAXIMUS_SETTINGS
+
+        settings = MAXIMUS_SETTINGS  # the board's own resolution and 16-bit travel, unless --machine says else
+    with _reading_bar(args) as progress:
+        job = prepare_job(args.image, _job_options(args), settings, name=args.image, progress=progress)
+    for w in job.warnings:
         print(f"warning: {w}", file=sys.stderr)
-    steps = plan_steps(job)
+    summary = job.summary[len(args.image) + 2:] if job.summary.startswith(f"{args.image}: ") else job.summary
+    if maximus:
+        if job.kind != "excellon":
+            raise CamError(f"{args.port}: the MAXIMUS board drills drill files (Excellon) only")
+        return _drill_maximus(args, job.drill_plan, settings, summary)
     if args.preview:
-        if Path(args.preview).suffix.lower() not in (".png", ".svg"):
-            raise CamError(f"{args.preview}: pictures are written as .png or .svg")
-        draw = toolpath_svg if Path(args.preview).suffix.lower() == ".svg" else toolpath_picture
-        save_picture(draw(job, estimated_time_s=steps.estimated_time_s), args.preview)
-    report = {"source": args.image, "strokes": drawing.n_strokes, "points": len(drawing.points_pu),
-              "pens": sorted(set(int(p) for p in drawing.stroke_pen)), "warnings": list(drawing.warnings),
-              "tool_changes": list(job.pause_notes or []),
-              "steps": {a: int(v) for a, v in zip("xyz", steps.steps_total)},
-              "estimated_time_s": round(steps.estimated_time_s, 6)}
-    result = _execute(steps, args, prompt_at_pause=True)
-    return _finish(args, result, report, f"{drawing.n_strokes} pen-down strokes from {args.image}")
+        from .picture import save_picture, toolpath_picture, toolpath_svg
+
+        suffix = Path(args.preview).suffix.lower()
+        if suffix not in (".png", ".svg") or (suffix == ".svg" and job.toolpath is None):
+            raise CamError(f"{args.preview}: pictures are written as .png" + (" or .svg" if job.toolpath else ""))
+        if job.toolpath is None:  # G-code: the top view of its decoded motion
+            save_picture(job.preview_picture(), args.preview)
+        else:
+            draw = toolpath_svg if suffix == ".svg" else toolpath_picture
+            save_picture(draw(job.toolpath, estimated_time_s=job.estimated_time_s), args.preview)
+    result = _execute(job.steps, args, prompt_at_pause=True)
+    return _finish(args, result, job.report, f"{summary} from {args.image}" if job.kind == "hpgl" else summary)
 
 
 def cmd_drill(args: argparse.Namespace) -> int:
     from .hpgl import HPGL_SUFFIXES
 
-    if args.image and Path(args.image).suffix.lower() in HPGL_SUFFIXES:
-        return _drill_hpgl(args)
-    if args.image and Path(args.image).suffix.lower() in GCODE_SUFFIXES:
-        return _drill_gcode(args)
-    if args.image and Path(args.image).suffix.lower() in DRILL_SUFFIXES:
-        return _drill_excellon(args)
+    if args.image and Path(args.image).suffix.lower() in HPGL_SUFFIXES + GCODE_SUFFIXES + DRILL_SUFFIXES:
+        return _drill_file(args)
     digitized, job = _plan_job(args)
     if args.preview:
         args.scale = None
@@ -649,7 +637,8 @@ def _info_hpgl(args: argparse.Namespace) -> int:
     from .hpgl import PLOTTER_UNIT_MM, scan_hpgl
 
     args.no_progress = getattr(args, "no_progress", True)
-    scan = _read_hpgl(args, scan_hpgl)
+    with _reading_bar(args) as progress:
+        scan = scan_hpgl(args.image, progress=progress)
     if args.json:
         print(json.dumps({**scan.__dict__, "size_mm": scan.size_mm()}, indent=2))
         return 0

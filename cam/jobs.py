@@ -510,24 +510,25 @@ def _prepare_excellon(path: Path, options: JobOptions, settings: MachineSettings
     )
 
 
-def _prepare_hpgl(path: Path, options: JobOptions, settings: MachineSettings) -> PreparedJob:
+def _prepare_hpgl(path: Path, options: JobOptions, settings: MachineSettings, progress=None) -> PreparedJob:
     from .drive.steps import plan_steps
     from .hpgl import load_hpgl, plan_hpgl  # lazy: only HPGL jobs need it
 
-    drawing = load_hpgl(path)
+    drawing = load_hpgl(path, progress=progress)
     toolpath = plan_hpgl(drawing, settings=settings, depth_mm=options.depth_mm,
                          safe_height_mm=options.travel_height_mm, offset_mm=options.offset_mm)
     steps = plan_steps(toolpath)
     return PreparedJob(
         source=str(path), kind="hpgl", steps=steps, settings=settings, toolpath=toolpath,
         warnings=list(drawing.warnings), summary=f"{path.name}: {drawing.n_strokes} pen-down strokes",
-        report={"strokes": drawing.n_strokes},
+        report={"strokes": drawing.n_strokes, "points": len(drawing.points_pu),
+                "pens": sorted(set(int(p) for p in drawing.stroke_pen))},
     )
 
 
 def prepare_job(
     path: str | os.PathLike, options: Optional[JobOptions] = None, settings: MachineSettings = DEFAULT_SETTINGS,
-    *, name: Optional[str] = None,
+    *, name: Optional[str] = None, progress: Optional[Any] = None,
 ) -> PreparedJob:
     """Read a job file and plan it into steps.
 
@@ -536,6 +537,7 @@ def prepare_job(
         options: how to cut it (:class:`JobOptions`); None = the defaults.
         settings: the machine settings.
         name: the name the summary gives the file (default: its file name).
+        progress: ``progress(bytes_read, total_bytes)`` while an HPGL file streams in (large files).
 
     Returns:
         The :class:`PreparedJob`, planned relative to where the tool stands when it starts.
@@ -555,7 +557,7 @@ def prepare_job(
     elif kind == "excellon":
         job = _prepare_excellon(p, opts, settings)
     else:
-        job = _prepare_hpgl(p, opts, settings)
+        job = _prepare_hpgl(p, opts, settings, progress)
     job.name = name or p.name
     job.summary = job.name + job.summary[len(p.name):]
     return _finish(job)

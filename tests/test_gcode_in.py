@@ -164,3 +164,17 @@ def test_cli_runs_gcode_and_rejects_bad(tmp_path):
     far = tmp_path / "far.ngc"
     far.write_text("G21\nG0 X900\n")
     assert_one_line_error(cli("drill", far), "far.ngc:2:", "travel")
+
+
+def test_cli_preview_of_a_gcode_program(tmp_path):
+    import cv2
+
+    good = tmp_path / "e.ngc"
+    good.write_text(ENGRAVING)
+    pic = tmp_path / "e.png"
+    proc = cli("drill", good, "--preview", pic, "--no-progress")
+    assert proc.returncode == 0, proc.stderr
+    img = cv2.imread(str(pic))
+    assert img is not None and img.shape[0] > 100 and (img < 128).any()  # a picture with the cut drawn
+    assert_one_line_error(cli("drill", good, "--preview", tmp_path / "e.svg", "--no-progress"), "e.svg", ".png")
+    assert not (tmp_path / "e.svg").exists()

@@ -29,14 +29,13 @@ from __future__ import annotations
 import asyncio
 import collections
 import json
-import os
 import re
 import secrets
 import socket
 import tempfile
 import threading
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Awaitable, Callable, Optional
 from urllib.parse import urlsplit
