@@ -143,6 +143,28 @@ def _excellon_digits(args: argparse.Namespace) -> Optional[tuple[int, int]]:
     return (a, b)
 
 
+def _add_hpgl_options(p: argparse.ArgumentParser) -> None:
+    h = p.add_argument_group("HPGL (.plt .hpgl .hpg; --travel-height and --offset apply too)")
+    h.add_argument("--cut-depth", type=float, default=0.5, metavar="MM", help="pen-down cutting depth below the surface (0.5)")
+
+
+FILE_JOB_SUFFIXES = DRILL_SUFFIXES + GCODE_SUFFIXES + (".plt", ".hpgl", ".hpg")
+"""Files that are jobs already (not drawings): planned by :func:`cam.jobs.prepare_job`."""
+
+
+def _is_file_job(args: argparse.Namespace) -> bool:
+    return bool(getattr(args, "image", None)) and Path(args.image).suffix.lower() in FILE_JOB_SUFFIXES
+
+
+def _prepare_file_job(args: argparse.Namespace, settings: Optional[MachineSettings] = None):
+    """A G-code, drill or HPGL file planned with the command's options (progress bar by bytes read)."""
+    from .jobs import prepare_job
+
+    with _reading_bar(args) as progress:
+        return prepare_job(args.image, _job_options(args), settings or _settings(args), name=args.image,
+                           progress=progress)
+
+
 def _load_drill_file(args: argparse.Namespace):
     from .excellon import load_excellon
 
@@ -225,8 +247,7 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--flip-y", action="store_true", help="G-code input: machine Y = +Y mm instead of -Y mm")
     g.add_argument("--yes", action="store_true", help="answer every prompt (tool changes, pauses) with Enter")
     _add_drill_file_options(d)
-    h = d.add_argument_group("HPGL (.plt .hpgl .hpg; --travel-height and --offset apply too)")
-    h.add_argument("--cut-depth", type=float, default=0.5, metavar="MM", help="pen-down cutting depth below the surface (0.5)")
+    _add_hpgl_options(d)
     g.add_argument("--no-progress", action="store_true", help="no progress bar")
     d.set_defaults(func=cmd_drill)
 
@@ -237,6 +258,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     _add_job_options(e)
     _add_drill_file_options(e)
+    _add_hpgl_options(e)
     e.add_argument("-o", "--output", required=True, metavar="FILE.ngc", help="where to write the G-code")
     e.add_argument("--flip-y", action="store_true", help="write Y = +row (mirrored) instead of Y = -row")
     e.add_argument("--safe-height", type=float, default=1.0, metavar="MM", help="travel height above the surface (mm)")
@@ -249,6 +271,9 @@ def build_parser() -> argparse.ArgumentParser:
         "the job would cut (run on the mock, decoded, carved with a point tool) as a shaded depth map.",
     )
     _add_job_options(pv)
+    _add_drill_file_options(pv)
+    _add_hpgl_options(pv)
+    pv.add_argument("--flip-y", action="store_true", help="G-code input: machine Y = +Y mm instead of -Y mm")
     pv.add_argument("-o", "--output", required=True, metavar="OUT.png|OUT.svg", help="picture to write")
     pv.add_argument("--surface", action="store_true", help="draw the cut surface instead of the toolpath")
     pv.add_argument("--scale", type=int, metavar="N", help="picture pixels per drawing pixel (default: automatic)")
@@ -431,27 +456,28 @@ def _plan_job(args: argparse.Namespace) -> tuple[Digitized, Any]:
     return digitized, job
 
 
-def _export_drill_file(args: argparse.Namespace) -> int:
+def _export_file_job(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from .drilljob import plan_drill
-
-    holes = _load_drill_file(args)
-    dp = plan_drill(holes, settings=_settings(args), depth_mm=args.drill_depth, safe_height_mm=args.travel_height,
-                    offset_mm=tuple(args.offset) if args.offset else None, mirror_x=args.mirror_x,
-                    order=args.drill_order)
-    job = dp.toolpath
-    at = np.flatnonzero(job.pause) + 1  # the tool change comes before the point after each pause
-    changes = {int(i): (tool, f"T{tool} {dia:.3f} mm, {n} holes") for i, (tool, dia, n) in zip(at, dp.tool_sequence)}
-    save_gcode(job, args.output, flip_y=args.flip_y, safe_height_mm=args.travel_height,
+    if Path(args.image).suffix.lower() in GCODE_SUFFIXES:
+        raise CamError(f"{args.image} is G-code already; run it with 'cam drill', or preview it")
+    job = _prepare_file_job(args)
+    at = np.flatnonzero(job.toolpath.pause) + 1  # a tool change comes before the point after its pause
+    if job.drill_plan is not None:
+        changes = {int(i): (tool, f"T{tool} {dia:.3f} mm, {n} holes")
+                   for i, (tool, dia, n) in zip(at, job.drill_plan.tool_sequence)}
+    else:  # HPGL: "tool change: pen N"
+        changes = {int(i): (int(note.split()[-1]), note) for i, note in zip(at, job.toolpath.pause_notes or [])
+                   if note.split()[-1].isdigit()}
+    save_gcode(job.toolpath, args.output, flip_y=args.flip_y, safe_height_mm=args.travel_height,
                title=f"cam: {args.image}", tool_changes=changes)
-    print(f"{args.output}: {len(dp.holes_steps)} holes, {len(dp.tool_sequence)} tools")
+    print(f"{args.output}: {job.summary}, {len(changes)} tool change(s)")
     return 0
 
 
 def cmd_export(args: argparse.Namespace) -> int:
-    if args.image and Path(args.image).suffix.lower() in DRILL_SUFFIXES:
-        return _export_drill_file(args)
+    if _is_file_job(args):
+        return _export_file_job(args)
     digitized, job = _plan_job(args)
     if args.safe_height <= 0:
         raise CamError(f"--safe-height must be > 0 mm, got {args.safe_height}")
@@ -487,6 +513,14 @@ def _write_preview(args: argparse.Namespace, job: Any, path: str, surface: bool 
 
 
 def cmd_preview(args: argparse.Namespace) -> int:
+    if _is_file_job(args):
+        if args.surface:
+            raise CamError("--surface draws the surface a drawing's job cuts; for this file draw its toolpath")
+        if args.scale is not None and not (1 <= args.scale <= 64):
+            raise CamError(f"--scale must be 1..64, got {args.scale}")
+        _write_file_job_preview(_prepare_file_job(args), args.output, scale=args.scale)
+        print(f"{args.output}: toolpath picture")
+        return 0
     _, job = _plan_job(args)
     _write_preview(args, job, args.output, surface=args.surface)
     print(f"{args.output}: {'cut surface' if args.surface else 'toolpath'} picture")
@@ -519,7 +553,7 @@ def _job_options(args: argparse.Namespace):
         offset_mm=tuple(args.offset) if args.offset else None, mirror_x=args.mirror_x,
         drill_order=args.drill_order, excellon_units=args.excellon_units,
         excellon_digits=_excellon_digits(args), excellon_zeros=args.excellon_zeros,
-        flip_y=args.flip_y, depth_mm=args.cut_depth,
+        flip_y=getattr(args, "flip_y", False), depth_mm=getattr(args, "cut_depth", 0.5),
     )
 
 
@@ -527,7 +561,7 @@ def _reading_bar(args: argparse.Namespace):
     """A progress bar by bytes read (large HPGL files), on a terminal only; yields its callback or None."""
     import contextlib
 
-    if args.no_progress:
+    if getattr(args, "no_progress", False):
         return contextlib.nullcontext(None)
     from tqdm import tqdm
 
@@ -541,18 +575,29 @@ def _reading_bar(args: argparse.Namespace):
     return bar_callback()
 
 
+def _write_file_job_preview(job: Any, path: str, scale: Optional[int] = None) -> None:
+    """The toolpath picture of a drill or HPGL job (.png or .svg), or the top view of a G-code job's motion."""
+    from .picture import save_picture, toolpath_picture, toolpath_svg
+
+    suffix = Path(path).suffix.lower()
+    if suffix not in (".png", ".svg") or (suffix == ".svg" and job.toolpath is None):
+        raise CamError(f"{path}: pictures are written as .png" + (" or .svg" if job.toolpath is not None else ""))
+    if job.toolpath is None:  # G-code: the top view of its decoded motion
+        save_picture(job.preview_picture(), path)
+    else:
+        draw = toolpath_svg if suffix == ".svg" else toolpath_picture
+        save_picture(draw(job.toolpath, scale=scale, estimated_time_s=job.estimated_time_s), path)
+
+
 def _drill_file(args: argparse.Namespace) -> int:
     """G-code, Excellon and HPGL files: planned by :func:`cam.jobs.prepare_job`, then run."""
-    from .jobs import prepare_job
-
     settings = _settings(args)
     maximus = args.port.startswith("maximus:")
     if maximus and not args.machine:
         from .drive.maximus import MAXIMUS_SETTINGS
 
         settings = MAXIMUS_SETTINGS  # the board's own resolution and 16-bit travel, unless --machine says else
-    with _reading_bar(args) as progress:
-        job = prepare_job(args.image, _job_options(args), settings, name=args.image, progress=progress)
+    job = _prepare_file_job(args, settings)
     for w in job.warnings:
         print(f"warning: {w}", file=sys.stderr)
     summary = job.summary[len(args.image) + 2:] if job.summary.startswith(f"{args.image}: ") else job.summary
@@ -561,16 +606,7 @@ def _drill_file(args: argparse.Namespace) -> int:
             raise CamError(f"{args.port}: the MAXIMUS board drills drill files (Excellon) only")
         return _drill_maximus(args, job.drill_plan, settings, summary)
     if args.preview:
-        from .picture import save_picture, toolpath_picture, toolpath_svg
-
-        suffix = Path(args.preview).suffix.lower()
-        if suffix not in (".png", ".svg") or (suffix == ".svg" and job.toolpath is None):
-            raise CamError(f"{args.preview}: pictures are written as .png" + (" or .svg" if job.toolpath else ""))
-        if job.toolpath is None:  # G-code: the top view of its decoded motion
-            save_picture(job.preview_picture(), args.preview)
-        else:
-            draw = toolpath_svg if suffix == ".svg" else toolpath_picture
-            save_picture(draw(job.toolpath, estimated_time_s=job.estimated_time_s), args.preview)
+        _write_file_job_preview(job, args.preview)
     result = _execute(job.steps, args, prompt_at_pause=True)
     return _finish(args, result, job.report, f"{summary} from {args.image}" if job.kind == "hpgl" else summary)
 
@@ -655,6 +691,21 @@ def _info_hpgl(args: argparse.Namespace) -> int:
     return 0
 
 
+def _info_gcode(args: argparse.Namespace) -> int:
+    args.flip_y = getattr(args, "flip_y", False)
+    job = _prepare_file_job(args)
+    if args.json:
+        print(json.dumps(job.report, indent=2))
+        return 0
+    w, h = job.size_mm
+    lines = [f"{args.image}: {job.report.get('moves', 0)} moves, cut area {w:.2f} x {h:.2f} mm, depth "
+             f"{job.depth_mm:.3f} mm, machine time {_format_duration(job.estimated_time_s)}"]
+    lines += [f"  {note}" for note in job.tool_changes]
+    lines += [f"warning: {w}" for w in job.warnings]
+    print("\n".join(lines))
+    return 0
+
+
 def cmd_info(args: argparse.Namespace) -> int:
     from .hpgl import HPGL_SUFFIXES
 
@@ -662,6 +713,8 @@ def cmd_info(args: argparse.Namespace) -> int:
         return _info_hpgl(args)
     if Path(args.image).suffix.lower() in DRILL_SUFFIXES:
         return _info_excellon(args)
+    if Path(args.image).suffix.lower() in GCODE_SUFFIXES:
+        return _info_gcode(args)
     settings = _settings(args)
     d = digitize(load_image(args.image), start=args.start)
     rep = image_report(d, settings)

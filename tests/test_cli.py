@@ -170,3 +170,36 @@ def test_missing_parallel_port_is_one_line_with_hint(drawing):
     assert_one_line_error(proc, "/dev/parport-does-not-exist")
     assert "modprobe ppdev" in proc.stderr or "permission" in proc.stderr
     assert_one_line_error(cli("drill", drawing, "--port", "lpt1"), "unknown port 'lpt1'")
+
+
+GCODE_JOB = "G21 G90\nG0 Z1\nG0 X1 Y-1\nG1 Z-0.5 F100\nG1 X5 Y-1\nG1 X5 Y-5\nG0 Z1\nM6 T2\nG1 Z-0.2\nG0 Z1\nM2\n"
+
+
+def test_preview_export_and_info_take_every_file_kind(tmp_path):
+    """Drill, HPGL and G-code files are jobs already: preview, export and info plan them like drill does."""
+    import cv2
+
+    root = ROOT
+    ngc = tmp_path / "job.ngc"
+    ngc.write_text(GCODE_JOB)
+    for src, out in ((root / "samples" / "board.drl", "b.png"), (root / "samples" / "seed_tools.plt", "h.svg"),
+                     (ngc, "g.png")):
+        proc = cli("preview", src, "-o", tmp_path / out)
+        assert proc.returncode == 0, proc.stderr
+        if out.endswith(".png"):
+            img = cv2.imread(str(tmp_path / out))
+            assert img is not None and (img < 128).any()
+        else:
+            assert (tmp_path / out).read_text().lstrip().startswith("<svg")
+    proc = cli("export", root / "samples" / "seed_tools.plt", "-o", tmp_path / "h.ngc")
+    assert proc.returncode == 0, proc.stderr
+    assert [ln.split()[0] for ln in (tmp_path / "h.ngc").read_text().splitlines() if " M6" in ln] == ["T1", "T2"]
+    proc = cli("info", ngc)
+    assert proc.returncode == 0, proc.stderr
+    assert "moves" in proc.stdout and "depth 0.502 mm" in proc.stdout  # 0.5 mm to the nearest Z step
+    assert "tool change" in proc.stdout
+    assert_one_line_error(cli("export", ngc, "-o", tmp_path / "x.ngc"), "G-code already")
+    assert_one_line_error(cli("preview", root / "samples" / "board.drl", "--surface", "-o", tmp_path / "s.png"),
+                          "--surface")
+    assert_one_line_error(cli("preview", ngc, "-o", tmp_path / "g.svg"), "g.svg", ".png")
+    assert not (tmp_path / "x.ngc").exists() and not (tmp_path / "s.png").exists()
