@@ -315,20 +315,20 @@ def plan_gcode_steps(
     period_chunks: list[np.ndarray] = []
     pause_at_period: list[int] = []
     pause_notes: list[str] = []
-    move_first: list[int] = []  # first period of each move (the 40-step ramp is per move)
-    rest_at_period: list[int] = []  # the machine rests before these periods (pauses, dwells)
+    move_first: list[int] = []  # first period of each move and dwell (the 40-step ramp is per move)
+    dwell_rests: list[int] = []  # the machine rests before these periods (both sides of a dwell)
     n_periods = 0
     cur = np.zeros(3)  # mm, G-code frame
     cur_steps_ideal = np.zeros(3)
     for mv in program.moves:
         if mv.kind == "pause":
             pause_at_period.append(n_periods)
-            rest_at_period.append(n_periods)
             pause_notes.append(mv.note)
             continue
         if mv.kind == "dwell":
             if mv.seconds > 0:
-                rest_at_period += [n_periods, n_periods + 1]  # at rest during the dwell
+                dwell_rests += [n_periods, n_periods + 1]  # at rest during the dwell
+                move_first.append(n_periods)
                 ideal_chunks.append(cur_steps_ideal[None, :].copy())
                 period_chunks.append(np.array([int(round(mv.seconds * 1e9))], np.int64))
                 n_periods += 1
@@ -380,7 +380,7 @@ def plan_gcode_steps(
     signed = np.diff(np.vstack([np.zeros((1, 3), np.int64), positions]), axis=0)
     assert signed.size == 0 or np.abs(signed).max() <= 1, "a period moved an axis by more than one step"
     t_ns, data, strobe = port_writes(signed, periods, s, move_first=np.array(move_first, np.int64),
-                                     stops=np.array(rest_at_period, np.int64))
+                                     stops=np.array(pause_at_period + dwell_rests, np.int64))
     end_steps = tuple(int(v) for v in positions[-1]) if len(positions) else (0, 0, 0)
     return StepPlan(
         t_ns=t_ns,
