@@ -6,7 +6,7 @@ import pytest
 
 import cam
 from cam.drive.motion import RAMP_STEPS_LINEAR40, ramp_periods
-from cam.drive.ramps_check import check_axis_steps, check_ramps, free_slot_shifts
+from cam.drive.ramps_check import check_axis_steps, check_ramps
 from cam.drive.steps import axis_bits, plan_steps
 from cam.errors import SettingsError
 from cam.settings import DEFAULT_SETTINGS, settings_from_mapping
@@ -290,8 +290,7 @@ def test_constant_mode_is_the_thesis_timing_and_ramps_only_lengthen_periods():
         p = plan_steps(toolpath(pts, S.replace(ramp=mode)))
         assert np.array_equal(p.data, const.data)  # same writes, same path
         assert np.all(np.diff(p.t_ns[0::2]) >= per_c)
-    high, dirs = const.data[1::2], const.data[2::2]
-    assert np.array_equal(ramp_periods(high, dirs, per_c, S, mode="constant"), per_c)
+    assert np.array_equal(ramp_periods(const.data[1::2], per_c, CONSTANT), per_c)
 
 
 # ------------------------------------------------------------------ settings, report, CLI
@@ -364,3 +363,19 @@ def test_a_stop_lifts_z_no_faster_than_its_start_speed():
     assert len(lift) == 20
     assert np.diff(lift).min() >= STEP_MM[2] / V_START[2] * 1e9 - 1
     assert cam.decode_pin_log(log, S).position_steps[-1][2] == 0
+
+
+def test_linear40_reaches_the_start_speed_before_a_dwell():
+    """The seed's ramp ends a G-code move at its start speed when a dwell (G4) follows: the dwell is a
+    segment of its own, not the tail of the move."""
+    from cam.gcode_in import parse_gcode, plan_gcode_steps
+
+    program = parse_gcode("G21 G90\nG1 X5 F600\nG4 P0.5\nG1 X10\nM2\n", source="dwell.ngc")
+    plan = plan_gcode_steps(program, LINEAR40)
+    per = np.diff(plan.t_ns[0::2])
+    dwell = int(np.argmax(per))
+    assert per[dwell] == 500_000_000
+    # the move ends on the slowest period of its ramp (as it starts), at about the start speed
+    assert per[dwell - 1] == per[:dwell].max() == per[0]
+    assert per[dwell - 1] >= 0.99 * STEP_MM[0] / V_START[0] * 1e9
+    assert per[dwell + 1] == per[dwell + 1:].max()  # and the next move starts from it

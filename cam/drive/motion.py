@@ -64,7 +64,7 @@ _ALPHA_MARGIN = 0.9
 
 
 @njit(cache=True, nogil=True)
-def _steps_of_axis(high, dirs, clk, dbit):
+def _steps_of_axis(high, clk, dbit):
     n = 0
     for k in range(high.shape[0]):
         if high[k] & clk:
@@ -75,7 +75,7 @@ def _steps_of_axis(high, dirs, clk, dbit):
     for k in range(high.shape[0]):
         if high[k] & clk:
             per[j] = k
-            up[j] = (dirs[k] & dbit) != 0
+            up[j] = (high[k] & dbit) != 0  # high holds the directions in force with the clocks
             j += 1
     return per, up
 
@@ -98,7 +98,7 @@ def _breaks(per, up, stop_idx):
     return brk
 
 
-_POOL: "concurrent.futures.ThreadPoolExecutor | None" = None
+_POOL = None  # a concurrent.futures.ThreadPoolExecutor, made on first use
 
 
 def _pool():
@@ -111,8 +111,8 @@ def _pool():
     return _POOL
 
 
-def _axis_steps_and_breaks(high, dirs, clk, dbit, stop_idx):
-    per, up = _steps_of_axis(high, dirs, clk, dbit)
+def _axis_steps_and_breaks(high, clk, dbit, stop_idx):
+    per, up = _steps_of_axis(high, clk, dbit)
     return per, _breaks(per, up, stop_idx)
 
 
@@ -269,6 +269,7 @@ def _linear40(high: np.ndarray, period_ns: np.ndarray, move_first: np.ndarray, c
     """The seed's per-move linear delay ramp (004, section 3.5.2)."""
     n = len(period_ns)
     out = period_ns.copy()
+    start_step_ns = np.asarray(s) / np.asarray(v_start) * 1e9  # (3,) one step at the start speed
     bounds = np.append(np.asarray(move_first, np.int64), n)
     for i in range(len(bounds) - 1):
         a, b = int(bounds[i]), int(bounds[i + 1])
@@ -280,7 +281,7 @@ def _linear40(high: np.ndarray, period_ns: np.ndarray, move_first: np.ndarray, c
             continue  # a dwell
         nominal = period_ns[a:b]
         # the delay at which each moving axis is at its start speed: s / v_s per step, steps/period of the move
-        start_ns = float(np.max(np.asarray(s) / np.asarray(v_start) * 1e9 * steps / (b - a)))
+        start_ns = float(np.max(start_step_ns * steps / (b - a)))
         k = np.arange(b - a)
         r = np.minimum(np.minimum(k, (b - a - 1) - k), RAMP_STEPS_LINEAR40)
         ramp = np.maximum(start_ns - nominal, 0) * (RAMP_STEPS_LINEAR40 - r) / RAMP_STEPS_LINEAR40
@@ -290,19 +291,17 @@ def _linear40(high: np.ndarray, period_ns: np.ndarray, move_first: np.ndarray, c
 
 def ramp_periods(
     high: np.ndarray,
-    dirs: np.ndarray,
     period_ns: np.ndarray,
     settings: MachineSettings,
     *,
     move_first: np.ndarray | None = None,
     stops: np.ndarray | None = None,
-    mode: str | None = None,
 ) -> np.ndarray:
-    """Period lengths with the speed ramps of ``mode`` (default ``settings.ramp``).
+    """Period lengths with the speed ramps of ``settings.ramp``.
 
     Args:
-        high: ``(P,)`` uint8 data byte at each period's rising edge (direction bits | stepping clocks).
-        dirs: ``(P,)`` uint8 direction bits in force during each period.
+        high: ``(P,)`` uint8 data byte at each period's rising edge (the direction bits in force
+            during the period | the clocks of the axes that step in it).
         period_ns: ``(P,)`` int64 nominal period lengths (the constant delay or a feed): never shortened.
         settings: pin map and per-axis limits (:meth:`MachineSettings.axis_limits`).
         move_first: ``(M,)`` int64 first period of each move (``linear40`` ramps per move).
@@ -310,23 +309,20 @@ def ramp_periods(
             both sides of a dwell); the start and the end of the job are rests anyway.  A period in
             which no axis steps is not a rest by itself (a move a fraction of a step longer than its
             steps has one): the axes stepping around it keep their speed through it.
-        mode: one of :data:`RAMP_MODES`.
 
     Returns:
-        ``(P,)`` int64 period lengths in ns, each >= the nominal one.
+        ``(P,)`` int64 period lengths in ns, each >= the nominal one (``constant``: the nominal
+        array itself).
     """
-    mode = settings.ramp if mode is None else mode
-    if mode not in RAMP_MODES:
-        raise ValueError(f"ramp mode must be one of {RAMP_MODES}, got {mode!r}")
+    mode = settings.ramp
     per_ns = np.asarray(period_ns, np.int64)
     n = len(per_ns)
     if mode == "constant" or n == 0:
-        return per_ns.copy()
+        return per_ns
     from .ramps_check import check_axis_steps  # imports pinlog, which imports steps
     from .steps import axis_bits
 
     high = np.asarray(high, np.uint8)
-    dirs = np.asarray(dirs, np.uint8)
     clock, dirbit = axis_bits(settings)
     s_mm, v_start, v_max, acc = settings.axis_limits()
     if mode == "linear40":
@@ -342,7 +338,7 @@ def ramp_periods(
     alpha = np.full(n, np.inf)
     upull = np.full(n, np.inf)
     axes = []
-    found = list(_pool().map(lambda a: _axis_steps_and_breaks(high, dirs, int(clock[a]), int(dirbit[a]), stop_idx),
+    found = list(_pool().map(lambda a: _axis_steps_and_breaks(high, int(clock[a]), int(dirbit[a]), stop_idx),
                              range(3)))
     for a in range(3):
         per, brk = found[a]

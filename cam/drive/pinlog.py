@@ -28,7 +28,7 @@ from ..settings import DEFAULT_SETTINGS, MachineSettings
 from .steps import axis_bits
 
 __all__ = ["Surface", "PinLog", "Motion", "decode_pin_log", "read_pin_log", "write_pin_log", "carve",
-           "PositionTracker", "motion_extent"]
+           "PositionTracker", "motion_extent", "rising_edges"]
 
 HEADER = "t_ns,data,strobe"
 
@@ -105,6 +105,19 @@ def read_pin_log(path: str | os.PathLike) -> PinLog:
     return PinLog(rows[:, 0], rows[:, 1].astype(np.uint8), rows[:, 2].astype(np.uint8))
 
 
+def rising_edges(data: np.ndarray, mask: int, prev_byte: int = 0) -> np.ndarray:
+    """``(M,)`` bool: the writes at which a bit of ``mask`` goes from 0 to 1 (a step of that clock).
+
+    ``prev_byte`` is the register before the first write (0 at the start of a job).
+    """
+    data = np.asarray(data, np.uint8)
+    prev = np.empty(len(data), np.uint8)
+    if len(data):
+        prev[0] = prev_byte
+        prev[1:] = data[:-1]
+    return ((data & mask) != 0) & ((prev & mask) == 0)
+
+
 def _decode(data: np.ndarray, prev_byte: int, start_steps: np.ndarray, clock: np.ndarray,
             dirbit: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Positions ``(len(data), 3)`` after each write of a stretch of writes, and its steps per axis.
@@ -112,14 +125,10 @@ def _decode(data: np.ndarray, prev_byte: int, start_steps: np.ndarray, clock: np
     ``prev_byte`` is the register before the stretch, ``start_steps`` the ``(3,)`` position there.
     """
     data = np.asarray(data, np.uint8)
-    prev = np.empty(len(data), np.uint8)
-    if len(data):
-        prev[0] = prev_byte
-        prev[1:] = data[:-1]
     pos = np.empty((len(data), 3), np.int64)
     counts = np.zeros(3, np.int64)
     for a in range(3):
-        rising = ((data & clock[a]) != 0) & ((prev & clock[a]) == 0)
+        rising = rising_edges(data, int(clock[a]), prev_byte)
         step = np.where(rising, np.where((data & dirbit[a]) != 0, 1, -1), 0)
         pos[:, a] = np.cumsum(step) + int(start_steps[a])
         counts[a] = int(rising.sum())

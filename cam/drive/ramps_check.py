@@ -67,10 +67,10 @@ import numpy as np
 from numba import njit
 
 from ..settings import DEFAULT_SETTINGS, MachineSettings
-from .pinlog import PinLog, read_pin_log
+from .pinlog import PinLog, read_pin_log, rising_edges
 from .steps import axis_bits
 
-__all__ = ["RampViolation", "RampReport", "check_ramps", "check_axis_steps", "free_slot_shifts"]
+__all__ = ["RampViolation", "RampReport", "check_ramps", "check_axis_steps"]
 
 _TOL_NS = 1.0
 _TOL_MM_S = 1e-6
@@ -111,7 +111,7 @@ def check_axis_steps(t_ns, slot_of_step, slot_t_ns, brk, s_mm, v_start, v_max, a
 
     Args:
         t_ns: ``(n,)`` int64 step times, increasing.
-        slot_of_step, slot_t_ns: the slot of each step and the slot times (see :func:`free_slot_shifts`).
+        slot_of_step, slot_t_ns: the slot of each step and the slot times (see "Quantisation tolerance" above).
         brk: ``(n,)`` bool, a rest (reversal or pause) right before step j.
         s_mm, v_start, v_max, acc: mm per step, start and top speed (mm/s), acceleration (mm/s^2).
         r1, r3: ``(n,)`` float64 out: speed excess (mm/s) of the interval from step j to j + 1 (0 = ok).
@@ -180,27 +180,9 @@ def check_axis_steps(t_ns, slot_of_step, slot_t_ns, brk, s_mm, v_start, v_max, a
 
 
 @njit(cache=True)
-def free_slot_shifts(slot_of_step, slot_t_ns):
-    """How far each step of one axis may move toward a free slot (see "Quantisation tolerance").
-
-    Args:
-        slot_of_step: ``(n,)`` int64 index into ``slot_t_ns`` of each step of the axis, increasing.
-        slot_t_ns: ``(S,)`` int64 times of all step slots (period middles), non-decreasing.
-
-    Returns:
-        ``(q_lo_ns, q_hi_ns)``, ``(n,)`` int64 each: one period (the smaller slot gap around the
-        step's slot) on a side with a free slot, else 0.
-    """
-    n = slot_of_step.shape[0]
-    q_lo = np.zeros(n, np.int64)
-    q_hi = np.zeros(n, np.int64)
-    for j in range(n):
-        q_lo[j], q_hi[j] = _shift_limits(slot_of_step, slot_t_ns, j)
-    return q_lo, q_hi
-
-
-@njit(cache=True)
 def _shift_limits(slot_of_step, slot_t_ns, j):
+    """How far step ``j`` of one axis may move toward a free slot: ``(q_lo_ns, q_hi_ns)``, one period
+    (the smaller slot gap around its slot) on a side where the axis left a slot free, else 0."""
     n = slot_of_step.shape[0]
     i = slot_of_step[j]
     quantum = np.int64(-1)
@@ -267,11 +249,6 @@ class RampReport:
             raise AssertionError(self.summary() + "\n" + "\n".join(str(v) for v in self.worst))
 
 
-def _rising(data: np.ndarray, mask: int) -> np.ndarray:
-    prev = np.concatenate([[0], data[:-1]]).astype(np.uint8)
-    return ((data & mask) != 0) & ((prev & mask) == 0)
-
-
 def check_ramps(
     log: PinLog | str | os.PathLike,
     settings: MachineSettings = DEFAULT_SETTINGS,
@@ -294,7 +271,7 @@ def check_ramps(
     data = np.asarray(log.data, np.uint8)
     clock, dirbit = axis_bits(settings)
     s_mm, v_start, v_max, acc = settings.axis_limits()
-    rising = [_rising(data, int(clock[a])) for a in range(3)]
+    rising = [rising_edges(data, int(clock[a])) for a in range(3)]
     slot_t = t[1::2]  # period middles (module docstring)
     pause_t = np.sort(t[np.asarray(pause_writes, np.int64)]) if len(pause_writes) else np.zeros(0, np.int64)
     counts = {"R1 top speed": 0, "R2 acceleration": 0, "R3 stop": 0}

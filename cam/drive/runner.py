@@ -119,9 +119,10 @@ def _lift_writes(plan: StepPlan, data_now: int, z_now: int) -> tuple[np.ndarray,
     base = int(data_now) & ~int(clock.sum()) & ~int(dirbit[2]) & 0xFF  # clocks low, Z direction up (-)
     n = max(0, z_now - plan.safe_z_steps)
     per = s.delay_z_ns
-    if getattr(s, "ramp", "constant") != "constant":
+    if s.ramp != "constant":
         # Z starts from rest: lift at its start speed, which it can start and stop at without a ramp
-        per = max(per, int(round(s.mm_per_step_z / s.start_speed_z_mm_s * 1e9)))
+        step_mm, v_start, _, _ = s.axis_limits()
+        per = max(per, int(round(step_mm[2] / v_start[2] * 1e9)))
     t = np.empty(1 + 2 * n, np.int64)
     d = np.empty(1 + 2 * n, np.uint8)
     t[0] = 0

@@ -74,11 +74,6 @@ class StepPlan:
         return len(self.t_ns)
 
     @property
-    def ramp(self) -> str:
-        """Speed ramp mode the plan was timed with (``settings.ramp``)."""
-        return self.settings.ramp
-
-    @property
     def estimated_time_s(self) -> float:
         """Machine time of the job in seconds (pauses excluded)."""
         return float(self.t_ns[-1]) / 1e9 if len(self.t_ns) else 0.0
@@ -120,7 +115,7 @@ def port_writes(
         dir_data |= positive.astype(np.int64) * int(dirbit[a])
         clock_data |= moving.astype(np.int64) * int(clock[a])
     high, dirs = (dir_data | clock_data).astype(np.uint8), dir_data.astype(np.uint8)
-    per = ramp_periods(high, dirs, per, settings, move_first=move_first, stops=stops)
+    per = ramp_periods(high, per, settings, move_first=move_first, stops=stops)
     return _writes(high, dirs, per, settings)
 
 
@@ -145,7 +140,7 @@ def plan_steps(toolpath: Toolpath) -> StepPlan:
         pts, s.delay_xy_ns, s.delay_z_ns, clock.astype(np.int64), dirbit.astype(np.int64)
     )
     point_period = np.cumsum(n_per_move)
-    per = ramp_periods(high, dirs, per, s, move_first=point_period - n_per_move, stops=point_period[toolpath.pause])
+    per = ramp_periods(high, per, s, move_first=point_period - n_per_move, stops=point_period[toolpath.pause])
     t_ns, data, strobe = _writes(high, dirs, per, s)
 
     point_write = 2 * point_period
