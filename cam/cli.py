@@ -172,14 +172,19 @@ def _load_drill_file(args: argparse.Namespace):
                          zeros=args.excellon_zeros)
 
 
-def _drill_maximus(args: argparse.Namespace, dp, settings: MachineSettings, summary: str) -> int:
-    from .drive.maximus import MaximusBoard, maximus_holes
+def _port_settings(args: argparse.Namespace, port: str) -> MachineSettings:
+    """The machine settings for ``port``: a MAXIMUS board has its own resolution, step mode and 16-bit travel
+    unless --machine says else."""
+    if port.startswith("maximus:") and not args.machine:
+        from .drive.maximus import MAXIMUS_SETTINGS
 
-    depth_steps = int(round(args.drill_depth / settings.mm_per_step_z))
-    changes, start = [], 0
-    for tool, dia, n in dp.tool_sequence:
-        changes.append((start, f"tool change: T{tool} {dia:.3f} mm ({n} holes)"))
-        start += n
+        return MAXIMUS_SETTINGS
+    return _settings(args)
+
+
+def _drill_maximus(args: argparse.Namespace, dp, settings: MachineSettings, summary: str) -> int:
+    from .drive.maximus import MaximusBoard, drill_arguments
+
     board = MaximusBoard(args.port)
     previous = signal.getsignal(signal.SIGINT)
 
@@ -192,7 +197,7 @@ def _drill_maximus(args: argparse.Namespace, dp, settings: MachineSettings, summ
     signal.signal(signal.SIGINT, lambda *a: board.emergency_stop())
     t0 = time.monotonic()
     try:
-        board.drill(maximus_holes(dp.holes_steps), depth_steps=depth_steps, tool_changes=changes, on_tool_change=on_tool_change)
+        board.drill(**drill_arguments(dp, settings), on_tool_change=on_tool_change)
     finally:
         signal.signal(signal.SIGINT, previous)
         board.close()
@@ -591,12 +596,8 @@ def _write_file_job_preview(job: Any, path: str, scale: Optional[int] = None) ->
 
 def _drill_file(args: argparse.Namespace) -> int:
     """G-code, Excellon and HPGL files: planned by :func:`cam.jobs.prepare_job`, then run."""
-    settings = _settings(args)
+    settings = _port_settings(args, args.port)
     maximus = args.port.startswith("maximus:")
-    if maximus and not args.machine:
-        from .drive.maximus import MAXIMUS_SETTINGS
-
-        settings = MAXIMUS_SETTINGS  # the board's own resolution and 16-bit travel, unless --machine says else
     job = _prepare_file_job(args, settings)
     for w in job.warnings:
         print(f"warning: {w}", file=sys.stderr)
@@ -751,7 +752,7 @@ def cmd_jog(args: argparse.Namespace) -> int:
         from .drive.maximus import MaximusBoard
 
         with MaximusBoard(args.port) as board:
-            board.jog(axis[0].lower(), n)
+            board.jog(axis[0].lower(), n, half_step=_port_settings(args, args.port).half_step)
         print(f"jogged {axis[0]} by {n} steps")
         return 0
     import numpy as np
@@ -784,11 +785,7 @@ def cmd_serve(args: argparse.Namespace) -> int:
         raise CamError(f"--port must be 0..65535, got {args.port}")
     if not (args.max_upload_mb > 0):
         raise CamError(f"--max-upload-mb must be > 0, got {args.max_upload_mb}")
-    settings = _settings(args)
-    if args.machine_port.startswith("maximus:") and not args.machine:
-        from .drive.maximus import MAXIMUS_SETTINGS
-
-        settings = MAXIMUS_SETTINGS  # the board's own resolution and 16-bit travel, unless --machine says else
+    settings = _port_settings(args, args.machine_port)
     config = ServerConfig(host=args.host, port=args.port, token=args.token, jobs_dir=args.jobs_dir,
                           max_upload_bytes=int(args.max_upload_mb * 1024 * 1024), settings=settings,
                           machine_port=args.machine_port, realtime=args.realtime)

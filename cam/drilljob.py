@@ -42,12 +42,20 @@ class DrillPlan:
         holes_steps: ``(N, 2)`` int64 machine (x, y) steps of each hole, in drilling order.
         hole_index: ``(N,)`` index of each drilled hole in the source hole list.
         tool_sequence: ``[(tool, diameter_mm, n_holes)]`` in drilling order.
+        depth_steps: the drill depth below the surface in Z steps.
     """
 
     toolpath: Toolpath
     holes_steps: np.ndarray
     hole_index: np.ndarray
     tool_sequence: list[tuple[int, float, int]]
+    depth_steps: int = 0
+
+    @property
+    def tool_changes(self) -> list[tuple[int, str]]:
+        """``[(index of the first hole of a tool in drilling order, its prompt)]``, one per tool."""
+        firsts = np.cumsum([0] + [n for _, _, n in self.tool_sequence])[:-1]
+        return [(int(i), note) for i, note in zip(firsts, self.toolpath.pause_notes or [])]
 
 
 def _machine_mm(holes_mm: np.ndarray, offset_mm, mirror_x: bool) -> np.ndarray:
@@ -148,4 +156,4 @@ def plan_drill(
         warnings=list(holes.warnings), pause_notes=notes,
     )
     order_arr = np.array(order_all, np.int64)
-    return DrillPlan(tp, steps_xy[order_arr], order_arr, sequence)
+    return DrillPlan(tp, steps_xy[order_arr], order_arr, sequence, depth_steps)

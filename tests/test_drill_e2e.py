@@ -134,6 +134,14 @@ def test_three_tool_board_on_the_emulated_maximus_board(board_file, capsys):
     assert err.index("T2 0.800 mm") < err.index("T1 1.000 mm") < err.index("T3 3.200 mm")
     strokes = hole_strokes(log)
     start = decode_port_log(log)[0]
+    # every pulse is a half step (MODE high on the L297s), the unit the board's mm per pulse assumes
+    d_values = [v for _, port, v in log if port in ("D", ord("D"))]
+    prev = 0xFF
+    for v in d_values:
+        if (v & ~prev) & 0b0010_0010:  # a rising STEP_X or STEP_Y
+            assert v & 0b0001_0001 == 0b0001_0001, f"a full step on port D: {v:#04x}"
+        prev = v
+    assert MAXIMUS_SETTINGS.half_step
     mm = MAXIMUS_SETTINGS.mm_per_step_xy
     # the board as the firmware counts it: X right, Y up, relative to where the head stood
     expected = np.column_stack([(holes_mm[:, 0] - holes_mm[:, 0].min()) / mm,

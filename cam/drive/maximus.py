@@ -31,12 +31,12 @@ from __future__ import annotations
 import threading
 import time
 from dataclasses import dataclass
-from typing import Callable, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 
 from ..errors import PlanError, PortError
-from ..settings import DEFAULT_SETTINGS, Travel
+from ..settings import DEFAULT_SETTINGS, MachineSettings, Travel
 from .maximus_emulator import (
     ATOFFSETPOS, BANNER, BAUD_RATE, BYTE_NAMES, DRILLMODE1DONE, DRILLMODE1INITIALIZED, DRILLMODE1ON,
     EMERGENCYSTOP, ISMACHINEREADY, JOGMODEDONE, JOGMODEOFF, JOGMODEON, MACHINEREADY, MACHINESTOPPED,
@@ -44,13 +44,13 @@ from .maximus_emulator import (
 )
 
 __all__ = [
-    "MaximusBoard", "open_maximus", "URL_PREFIX", "MAXIMUS_SETTINGS", "maximus_holes",
+    "MaximusBoard", "open_maximus", "URL_PREFIX", "MAXIMUS_SETTINGS", "maximus_holes", "drill_arguments",
     "jog_packet", "jog_exit_packet", "offset_packet", "init_packet", "start_drill_packet",
     "drill_packet", "close_drill_packet", "drill_moves",
 ]
 
 URL_PREFIX = "maximus:"
-MAX_FIELD_PULSES = 0xFFFF
+MAX_FIELD = 0xFFFF  # 16-bit step fields (seed 000, Appendix 1: make16(high, low))
 
 MAXIMUS_SETTINGS = DEFAULT_SETTINGS.replace(
     steps_per_px_xy=1,
@@ -61,10 +61,17 @@ MAXIMUS_SETTINGS = DEFAULT_SETTINGS.replace(
     mm_per_step_z=0.004375,
     half_step=True,
     # the protocol's step fields are 16 bits (seed 000 Appendix 1, make16): no move beyond 65535 pulses
-    travel=Travel(x_min_steps=0, x_max_steps=MAX_FIELD_PULSES, y_min_steps=0, y_max_steps=MAX_FIELD_PULSES,
-                  z_min_steps=-MAX_FIELD_PULSES, z_max_steps=MAX_FIELD_PULSES),
+    travel=Travel(x_min_steps=0, x_max_steps=MAX_FIELD, y_min_steps=0, y_max_steps=MAX_FIELD,
+                  z_min_steps=-MAX_FIELD, z_max_steps=MAX_FIELD),
 )
 """The MAXIMUS machine: one "step" is one L297 clock pulse (a half step)."""
+
+
+def drill_arguments(drill_plan: Any, settings: MachineSettings = MAXIMUS_SETTINGS) -> dict[str, Any]:
+    """The :meth:`MaximusBoard.drill` arguments of a :class:`~cam.drilljob.DrillPlan` planned with ``settings``:
+    holes in the board's pulses (:func:`maximus_holes`), depth, tool-change prompts and the step mode."""
+    return {"holes_steps": maximus_holes(drill_plan.holes_steps), "depth_steps": drill_plan.depth_steps,
+            "tool_changes": drill_plan.tool_changes, "half_step": settings.half_step}
 
 
 def maximus_holes(holes_steps: np.ndarray) -> np.ndarray:
@@ -77,7 +84,6 @@ def maximus_holes(holes_steps: np.ndarray) -> np.ndarray:
     xy = np.asarray(holes_steps, np.int64).copy()
     xy[:, 1] = -xy[:, 1]
     return xy
-MAX_FIELD = 0xFFFF  # 16-bit step fields (seed 000, Appendix 1: make16(high, low))
 DEFAULT_DELAY = 10  # 10 * 100 us half period: 500 pulses/s
 _AXES = {"x": 1, "y": 2, "z": 3}  # Jog configuration bits 7-6: 01 = X, 10 = Y, 11 = Z (Appendix 1 JOG_DATA_INPUT)
 

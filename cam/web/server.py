@@ -199,7 +199,6 @@ class MachineSession:
         self._log_seq = 0
         self.last_run: dict[str, Any] = {}
         self.last_job_pin_log = None
-        self.last_job: Optional[PreparedJob] = None
         self.version = 0
 
     # -- log and state -------------------------------------------------------------
@@ -287,7 +286,6 @@ class MachineSession:
             if self.maximus:
                 self._launch_maximus_job(job)
                 return
-            self.last_job = job
             self._launch("job", job.steps, f"job {job.name or Path(job.source).name}",
                          job.estimated_time_s)
 
@@ -359,32 +357,26 @@ class MachineSession:
 
     # -- the MAXIMUS board ----------------------------------------------------------
     def _launch_maximus_job(self, job: PreparedJob) -> None:
-        from ..drive.maximus import maximus_holes
+        from ..drive.maximus import drill_arguments
 
         dp = job.drill_plan
         if job.kind != "excellon" or dp is None:
             raise HttpError(400, f"the MAXIMUS board ({self.machine_port}) drills drill files (Excellon) only; "
                                  f"this job is {job.kind}")
-        holes = maximus_holes(dp.holes_steps)
-        depth_steps = int(round(job.depth_mm / self.settings.mm_per_step_z))
-        changes, first = [], 0
-        for tool, dia, n in dp.tool_sequence:
-            changes.append((first, f"tool change: T{tool} {dia:.3f} mm ({n} holes)"))
-            first += n
-        self.last_job = job
+        arguments = drill_arguments(dp, self.settings)
+        n_holes = len(arguments["holes_steps"])
 
         def work(board: Any) -> None:
             def on_hole(drilled: int) -> None:
                 with self._lock:
                     self._done = drilled
-                    self._machine_ns = int(job.estimated_time_s * 1e9 * drilled / max(1, len(holes)))
+                    self._machine_ns = int(job.estimated_time_s * 1e9 * drilled / max(1, n_holes))
                     self.version += 1
 
-            board.drill(holes, depth_steps=depth_steps, tool_changes=changes,
-                        on_tool_change=lambda index, note: self._on_pause((0, 0, 0), note),
+            board.drill(**arguments, on_tool_change=lambda index, note: self._on_pause((0, 0, 0), note),
                         on_hole=on_hole)
 
-        self._launch_board("job", work, len(holes), f"job {job.name or Path(job.source).name}",
+        self._launch_board("job", work, n_holes, f"job {job.name or Path(job.source).name}",
                            job.estimated_time_s, np.zeros(3, np.int64))
 
     def _launch_maximus_moves(self, activity: str, moves: list[tuple[int, int, int]], label: str) -> None:
@@ -392,7 +384,7 @@ class MachineSession:
             for move in moves:
                 for a, n in zip("xyz", move):
                     if n:
-                        board.jog(a, int(n))
+                        board.jog(a, int(n), half_step=self.settings.half_step)
 
         self._launch_board(activity, work, 1, label, 0.0, np.sum(np.array(moves, np.int64), axis=0))
 
