@@ -23,6 +23,7 @@ from .errors import CamError
 from .fileio import atomic_write_text
 from .gcode import save_gcode
 from .gcode_in import GCODE_SUFFIXES
+from .jobs import EXCELLON_SUFFIXES, HPGL_SUFFIXES
 from .profile import Profile, load_profile, profile_from_expr
 from .report import format_report, image_report, job_report
 from .settings import RAMP_MODES, MachineSettings, load_settings
@@ -103,7 +104,7 @@ def _add_profile_options(p: argparse.ArgumentParser) -> None:
                    help="depth of layer k as arithmetic in k and n (layers), e.g. '30*sqrt(1-((n-k)/n)**2)'")
 
 
-DRILL_SUFFIXES = (".drl", ".xln", ".exc", ".drd")
+DRILL_SUFFIXES = EXCELLON_SUFFIXES
 
 
 def _float_list(n: int, name: str) -> Callable[[str], list[float]]:
@@ -148,7 +149,7 @@ def _add_hpgl_options(p: argparse.ArgumentParser) -> None:
     h.add_argument("--cut-depth", type=float, default=0.5, metavar="MM", help="pen-down cutting depth below the surface (0.5)")
 
 
-FILE_JOB_SUFFIXES = DRILL_SUFFIXES + GCODE_SUFFIXES + (".plt", ".hpgl", ".hpg")
+FILE_JOB_SUFFIXES = DRILL_SUFFIXES + GCODE_SUFFIXES + HPGL_SUFFIXES
 """Files that are jobs already (not drawings): planned by :func:`cam.jobs.prepare_job`."""
 
 
@@ -534,7 +535,7 @@ def cmd_preview(args: argparse.Namespace) -> int:
 
 def _finish(args: argparse.Namespace, result: RunResult, report: dict, summary: str) -> int:
     report["status"] = result.status
-    ramp = report.setdefault("ramp", _settings(args).ramp)
+    ramp = report["ramp"]
     if args.report:
         atomic_write_text(args.report, json.dumps(report, indent=2) + "\n")
     if result.status != FINISHED:
@@ -613,9 +614,7 @@ def _drill_file(args: argparse.Namespace) -> int:
 
 
 def cmd_drill(args: argparse.Namespace) -> int:
-    from .hpgl import HPGL_SUFFIXES
-
-    if args.image and Path(args.image).suffix.lower() in HPGL_SUFFIXES + GCODE_SUFFIXES + DRILL_SUFFIXES:
+    if _is_file_job(args):
         return _drill_file(args)
     digitized, job = _plan_job(args)
     if args.preview:
@@ -708,8 +707,6 @@ def _info_gcode(args: argparse.Namespace) -> int:
 
 
 def cmd_info(args: argparse.Namespace) -> int:
-    from .hpgl import HPGL_SUFFIXES
-
     if Path(args.image).suffix.lower() in HPGL_SUFFIXES:
         return _info_hpgl(args)
     if Path(args.image).suffix.lower() in DRILL_SUFFIXES:

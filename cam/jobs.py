@@ -26,6 +26,7 @@ from typing import Any, Mapping, Optional
 import numpy as np
 
 from .errors import CamError
+from .hpgl import HPGL_SUFFIXES
 from .settings import DEFAULT_SETTINGS, MachineSettings
 
 __all__ = [
@@ -37,7 +38,6 @@ KINDS = ("drawing", "digitized", "gcode", "excellon", "hpgl")
 DRAWING_SUFFIXES = (".png", ".bmp", ".jpg", ".jpeg", ".tif", ".tiff")
 DIGITIZED_SUFFIXES = (".txt", ".dig")
 EXCELLON_SUFFIXES = (".drl", ".xln", ".exc", ".drd")
-HPGL_SUFFIXES = (".plt", ".hpgl", ".hpg")
 PROFILE_SUFFIXES = DRAWING_SUFFIXES + (".csv", ".txt")
 """Files a depth profile may come from (a profile drawing or a CSV of depths)."""
 
@@ -435,6 +435,7 @@ def _finish(job: PreparedJob) -> PreparedJob:
         "depth_mm": job.depth_mm,
         "steps": {a: int(v) for a, v in zip("xyz", job.steps.steps_total)},
         "estimated_time_s": round(job.estimated_time_s, 6),
+        "ramp": job.steps.settings.ramp,
         "tool_changes": list(job.tool_changes),
         "warnings": list(job.warnings),
     })

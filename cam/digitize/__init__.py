@@ -9,7 +9,7 @@ import numpy as np
 from ..digitized import Digitized
 from ..drawing import BLACK, Drawing, load_image
 from ..errors import DrawingError
-from .peel3d import peel_layers, peel_layers_padded, trace_layers, trace_padded
+from .peel3d import peel_layers_padded, trace_padded
 from .trace2d import START_RULES, trace_curves
 
 __all__ = ["digitize", "START_RULES"]

@@ -139,7 +139,6 @@ def _flood_ring(lay, ring_of, start, k, ring, wp, stack):
 
     Returns how many of its pixels are still untraced.
     """
-    n = 0
     left = 0
     stack[0] = start
     n = 1

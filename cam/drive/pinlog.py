@@ -149,6 +149,18 @@ def decode_pin_log(
     return Motion(t_ns=np.asarray(log.t_ns, np.int64), position_steps=pos, step_counts=counts)
 
 
+def _decoded_chunks(data: np.ndarray, start: int, stop: int, pos0: np.ndarray, clock: np.ndarray,
+                    dirbit: np.ndarray):
+    """Positions after writes ``start..stop`` of ``data``, ``(k, 3)`` a chunk at a time (bounded memory),
+    starting from ``pos0`` (the position after write ``start - 1``)."""
+    pos = np.asarray(pos0, np.int64)
+    for i in range(start, stop, _CHUNK):
+        end = min(stop, i + _CHUNK)
+        chunk, _ = _decode(data[i:end], int(data[i - 1]) if i else 0, pos, clock, dirbit)
+        pos = chunk[-1]
+        yield chunk
+
+
 class PositionTracker:
     """Follows the tool through a sequence of port writes without keeping a position per write.
 
@@ -165,12 +177,9 @@ class PositionTracker:
     def advance(self, n_writes: int) -> tuple[int, int, int]:
         """Position (x, y, z) in steps after the first ``n_writes`` writes."""
         n = max(self._done, min(int(n_writes), len(self._data)))
-        while self._done < n:
-            end = min(n, self._done + _CHUNK)
-            prev = int(self._data[self._done - 1]) if self._done else 0
-            pos, _ = _decode(self._data[self._done:end], prev, self._pos, self._clock, self._dirbit)
-            self._pos = pos[-1].copy()
-            self._done = end
+        for chunk in _decoded_chunks(self._data, self._done, n, self._pos, self._clock, self._dirbit):
+            self._pos = chunk[-1].copy()
+        self._done = n
         return tuple(int(v) for v in self._pos)  # type: ignore[return-value]
 
 
@@ -188,19 +197,16 @@ def motion_extent(data: np.ndarray, settings: MachineSettings = DEFAULT_SETTINGS
     data = np.asarray(data, np.uint8)
     clock, dirbit = axis_bits(settings)
     extent = np.zeros((3, 2), np.int64)
-    cut = None
-    pos0 = np.zeros(3, np.int64)
-    for i in range(0, len(data), _CHUNK):
-        pos, _ = _decode(data[i:i + _CHUNK], int(data[i - 1]) if i else 0, pos0, clock, dirbit)
+    big = np.iinfo(np.int64).max
+    cut = np.array([[big, -big]] * 3, np.int64)
+    for pos in _decoded_chunks(data, 0, len(data), np.zeros(3, np.int64), clock, dirbit):
         extent[:, 0] = np.minimum(extent[:, 0], pos.min(axis=0))
         extent[:, 1] = np.maximum(extent[:, 1], pos.max(axis=0))
         below = pos[pos[:, 2] > 0]
         if len(below):
-            lo, hi = below.min(axis=0), below.max(axis=0)
-            cut = np.column_stack([lo, hi]) if cut is None else np.column_stack(
-                [np.minimum(cut[:, 0], lo), np.maximum(cut[:, 1], hi)])
-        pos0 = pos[-1].copy()
-    return extent, (cut if cut is not None else np.zeros((3, 2), np.int64)).astype(np.int64)
+            cut[:, 0] = np.minimum(cut[:, 0], below.min(axis=0))
+            cut[:, 1] = np.maximum(cut[:, 1], below.max(axis=0))
+    return extent, (cut if cut[0, 0] != big else np.zeros((3, 2), np.int64))
 
 
 def _pixel_under(v_steps: np.ndarray, spp: int) -> np.ndarray:

@@ -769,17 +769,18 @@ def create_app(config: ServerConfig, session: Optional[MachineSession] = None):
             raise HttpError(400, "options must be a JSON object")
         raw = dict(raw)
         profile_id = raw.pop("profile", None)
-        options = JobOptions.from_mapping(raw)
         if profile_id not in (None, ""):
             ref = uploads.get(str(profile_id))
             if ref is None or ref["role"] != "profile":
                 raise HttpError(400, f"no uploaded profile {profile_id!r}")
-            options = JobOptions.from_mapping({**raw, "profile": ref["path"]})
+            raw["profile"] = ref["path"]
+        options = JobOptions.from_mapping(raw)
         if session.busy and session.realtime:
             raise HttpError(409, "a job is running: planning now would disturb its step timing; wait for it to end")
         job = await run_in_threadpool(lambda: prepare_job(uploads[job_id]["path"], options, config.settings,
                                                              name=uploads[job_id]["name"]))
         counter["n"] += 1
+        prepared.pop(job_id, None)  # re-planned: the newest again, so the last eight planned stay
         prepared[job_id] = job
         previews.pop(job_id, None)
         for old in list(prepared)[:-8]:
