@@ -136,6 +136,18 @@ class Server:
         return self.session.state()
 
 
+@pytest.fixture(scope="module", autouse=True)
+def compiled_kernels(tmp_path_factory):
+    """Plan one job of each kind first: numba compiles its kernels on first use (seconds on a fresh
+    clone), which must not eat into the browser tests' waiting times."""
+    tmp = tmp_path_factory.mktemp("warm")
+    (tmp / "w.drl").write_text(EXCELLON)
+    (tmp / "w.ngc").write_text(GCODE)
+    for path in (SAMPLES / "ellipse.png", tmp / "w.drl", tmp / "w.ngc", ROOT / "samples" / "seed_tools.plt"):
+        for settings in (FAST, SLOW, cam.MachineSettings()):
+            prepare_job(path, JobOptions(), settings)
+
+
 @pytest.fixture(scope="module")
 def servers(tmp_path_factory):
     made: dict[str, Server] = {}
