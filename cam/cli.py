@@ -582,17 +582,17 @@ def _reading_bar(args: argparse.Namespace):
 
 
 def _write_file_job_preview(job: Any, path: str, scale: Optional[int] = None) -> None:
-    """The toolpath picture of a drill or HPGL job (.png or .svg), or the top view of a G-code job's motion."""
-    from .picture import save_picture, toolpath_picture, toolpath_svg
+    """The job's preview (.png, the picture the web page shows: bounded in size at any resolution), or
+    the toolpath of a drill or HPGL job as .svg."""
+    from .picture import save_picture, toolpath_svg
 
     suffix = Path(path).suffix.lower()
     if suffix not in (".png", ".svg") or (suffix == ".svg" and job.toolpath is None):
         raise CamError(f"{path}: pictures are written as .png" + (" or .svg" if job.toolpath is not None else ""))
-    if job.toolpath is None:  # G-code: the top view of its decoded motion
+    if suffix == ".png":
         save_picture(job.preview_picture(), path)
     else:
-        draw = toolpath_svg if suffix == ".svg" else toolpath_picture
-        save_picture(draw(job.toolpath, scale=scale, estimated_time_s=job.estimated_time_s), path)
+        save_picture(toolpath_svg(job.toolpath, scale=scale, estimated_time_s=job.estimated_time_s), path)
 
 
 def _drill_file(args: argparse.Namespace) -> int:
