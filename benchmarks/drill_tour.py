@@ -28,7 +28,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from cam.drilltour import drill_order, nearest_neighbour_order, tour_length_mm  # noqa: E402
+from cam.job.drill_order import drill_order, nearest_neighbour_order, tour_length_mm  # noqa: E402
 
 BOARD_MM = (100.0, 80.0)
 START_MM = (0.0, 0.0)

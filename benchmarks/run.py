@@ -29,9 +29,10 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "tests"))  # tests/support: the LinuxCNC reference
 
 import cam  # noqa: E402
-from cam.drawing import BLACK, RED, WHITE, Drawing  # noqa: E402
+from cam.digitize.drawing import BLACK, RED, WHITE, Drawing  # noqa: E402
 
 
 def median_time(fn, repeats: int) -> tuple[float, object]:
@@ -201,7 +202,7 @@ def bench_relief(quick: bool) -> tuple[dict, dict]:
     r4 = row(f"relief {size}^2 dome: conversion vs image-to-gcode", t_cam, t_ref, f"{t_ref / t_cam:.0f}x faster",
              ">= 50x faster", t_ref / t_cam >= 50)
     # row 6: path length (cutting + travel) and surface error of both, in pixels
-    from cam.lcnc import canonical_polyline_mm, parse_canonical, run_rs274
+    from support.lcnc import canonical_polyline_mm, parse_canonical, run_rs274
 
     pts = np.vstack([[0, 0, 0], job.points_px]).astype(np.float64)
     cam_len = float(np.abs(np.diff(pts[:, :2], axis=0)).max(axis=1).sum())  # X/Y pixels moved (diagonal = 1)
@@ -242,7 +243,7 @@ def bench_memory(quick: bool) -> dict:
         sys.path.insert(0, {str(ROOT / "benchmarks")!r})
         import numpy as np, cam
         from run import disc_classes
-        from cam.drawing import Drawing
+        from cam.digitize.drawing import Drawing
         cam.digitize(Drawing(classes=disc_classes(64, 20)))  # imports and compiled kernels loaded
         classes = disc_classes({size}, {radius})
         drawing = Drawing(classes=classes)

@@ -18,50 +18,92 @@ One data model flows one way::
 """
 from __future__ import annotations
 
-from .digitize import digitize
-from .digitized import Digitized, load_digitized, save_digitized
-from .drawing import Drawing, load_image
-from .drive import (
-    Controller,
-    MockPort,
-    Motion,
-    PinLog,
-    RunResult,
-    StepPlan,
-    carve,
-    decode_pin_log,
-    open_port,
-    plan_steps,
-    read_pin_log,
-    run,
-    simulate_surface,
-    write_pin_log,
-)
-from .drilljob import DrillPlan, plan_drill
-from .drilltour import drill_order
-from .excellon import HoleList, load_excellon, parse_excellon
-from .gcode import save_gcode, to_gcode
-from .hpgl import HpglDrawing, HpglScan, iter_hpgl, load_hpgl, parse_hpgl, plan_hpgl, scan_hpgl
-from .errors import CamError, DrawingError, ParseError, PlanError, PortError, SettingsError, TravelError
-from .profile import Profile, load_profile, profile_from_expr
-from .report import image_report, job_report
-from .settings import MachineSettings, load_settings
-from .toolpath import Toolpath, goto, plan
+import importlib
+import sys
+import types
+from typing import TYPE_CHECKING, Any
 
 __version__ = "0.1.0"
 
-__all__ = [
-    "load_image", "Drawing",
-    "digitize", "Digitized", "load_digitized", "save_digitized",
-    "plan", "goto", "Toolpath",
-    "plan_steps", "StepPlan",
-    "run", "Controller", "RunResult", "open_port", "MockPort",
-    "simulate_surface", "to_gcode", "save_gcode",
-    "load_excellon", "parse_excellon", "HoleList", "plan_drill", "DrillPlan", "drill_order",
-    "load_hpgl", "parse_hpgl", "scan_hpgl", "iter_hpgl", "plan_hpgl", "HpglDrawing", "HpglScan",
-    "decode_pin_log", "read_pin_log", "write_pin_log", "PinLog", "Motion", "carve",
-    "Profile", "load_profile", "profile_from_expr",
-    "image_report", "job_report",
-    "MachineSettings", "load_settings",
-    "CamError", "DrawingError", "ParseError", "PlanError", "PortError", "SettingsError", "TravelError",
-]
+# public name -> module that defines it; loaded on first use, so ``import cam`` stays cheap
+# (no numba, OpenCV or web stack until a name that needs them is used)
+_LAZY = {
+    "load_image": "cam.digitize.drawing", "Drawing": "cam.digitize.drawing",
+    "digitize": "cam.digitize",
+    "Digitized": "cam.digitize.digitized", "load_digitized": "cam.digitize.digitized",
+    "save_digitized": "cam.digitize.digitized",
+    "Profile": "cam.digitize.profile", "load_profile": "cam.digitize.profile",
+    "profile_from_expr": "cam.digitize.profile",
+    "plan": "cam.job.toolpath", "goto": "cam.job.toolpath", "Toolpath": "cam.job.toolpath",
+    "plan_drill": "cam.job.drill", "DrillPlan": "cam.job.drill", "drill_order": "cam.job.drill_order",
+    "plan_hpgl": "cam.formats.hpgl",
+    "load_excellon": "cam.formats.excellon", "parse_excellon": "cam.formats.excellon",
+    "HoleList": "cam.formats.excellon",
+    "load_hpgl": "cam.formats.hpgl", "parse_hpgl": "cam.formats.hpgl", "scan_hpgl": "cam.formats.hpgl",
+    "iter_hpgl": "cam.formats.hpgl", "HpglDrawing": "cam.formats.hpgl", "HpglScan": "cam.formats.hpgl",
+    "to_gcode": "cam.formats.gcode_export", "save_gcode": "cam.formats.gcode_export",
+    "plan_steps": "cam.drive.steps", "StepPlan": "cam.drive.steps",
+    "run": "cam.drive.runner", "Controller": "cam.drive.runner", "RunResult": "cam.drive.runner",
+    "simulate_surface": "cam.drive.runner",
+    "open_port": "cam.drive.ports", "MockPort": "cam.drive.ports",
+    "decode_pin_log": "cam.verify.pinlog", "read_pin_log": "cam.verify.pinlog",
+    "write_pin_log": "cam.verify.pinlog", "PinLog": "cam.verify.pinlog", "Motion": "cam.verify.pinlog",
+    "carve": "cam.verify.pinlog",
+    "image_report": "cam.render.report", "job_report": "cam.render.report",
+    "MachineSettings": "cam.settings", "load_settings": "cam.settings",
+    "CamError": "cam.errors", "DrawingError": "cam.errors", "ParseError": "cam.errors",
+    "PlanError": "cam.errors", "PortError": "cam.errors", "SettingsError": "cam.errors",
+    "TravelError": "cam.errors",
+}
+
+__all__ = list(_LAZY)
+
+
+def __getattr__(name: str) -> Any:
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module 'cam' has no attribute {name!r}")
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_LAZY))
+
+
+class _CamModule(types.ModuleType):
+    """``cam.digitize`` is the function, though ``cam/digitize/`` is also a package.
+
+    Importing a submodule binds it on its parent package; this keeps the
+    package ``cam.digitize`` (always in ``sys.modules``) from replacing the
+    public function of the same name.
+    """
+
+    def __setattr__(self, name: str, value: Any) -> None:
+        if name == "digitize" and isinstance(value, types.ModuleType):
+            return
+        super().__setattr__(name, value)
+
+
+sys.modules[__name__].__class__ = _CamModule
+
+
+if TYPE_CHECKING:  # pragma: no cover - for type checkers and editors only
+    from .digitize import digitize
+    from .digitize.digitized import Digitized, load_digitized, save_digitized
+    from .digitize.drawing import Drawing, load_image
+    from .digitize.profile import Profile, load_profile, profile_from_expr
+    from .drive.ports import MockPort, open_port
+    from .drive.runner import Controller, RunResult, run, simulate_surface
+    from .drive.steps import StepPlan, plan_steps
+    from .errors import CamError, DrawingError, ParseError, PlanError, PortError, SettingsError, TravelError
+    from .formats.excellon import HoleList, load_excellon, parse_excellon
+    from .formats.gcode_export import save_gcode, to_gcode
+    from .formats.hpgl import HpglDrawing, HpglScan, iter_hpgl, load_hpgl, parse_hpgl, plan_hpgl, scan_hpgl
+    from .job.drill import DrillPlan, plan_drill
+    from .job.drill_order import drill_order
+    from .job.toolpath import Toolpath, goto, plan
+    from .render.report import image_report, job_report
+    from .settings import MachineSettings, load_settings
+    from .verify.pinlog import Motion, PinLog, carve, decode_pin_log, read_pin_log, write_pin_log

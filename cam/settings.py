@@ -21,7 +21,7 @@ and then keeps its built-in value.  An unknown key or a bad value is a
     mm_per_step_z = 0.0157
     half_step = false
 
-    # speed ramps (cam.drive.motion): "lookahead" (default), "linear40" or "constant"
+    # speed ramps (cam.drive.ramps): "lookahead" (default), "linear40" or "constant"
     ramp = "lookahead"
     start_speed_x_mm_s = 1.445    # pull-in: the axis starts and stops at once at this speed
     start_speed_y_mm_s = 1.445
@@ -68,7 +68,7 @@ from .errors import SettingsError
 __all__ = ["Travel", "Pins", "MachineSettings", "load_settings", "DEFAULT_SETTINGS", "RAMP_MODES"]
 
 RAMP_MODES = ("lookahead", "linear40", "constant")
-"""Speed ramp modes (see :mod:`cam.drive.motion`)."""
+"""Speed ramp modes (see :mod:`cam.drive.ramps`)."""
 
 
 @dataclass(frozen=True)

@@ -1,4 +1,4 @@
-"""Drill files for a known hole set, in the styles of several PCB programs (test data for cam.excellon).
+"""Drill files for a known hole set, in the styles of several PCB programs (test data for cam.formats.excellon).
 
 Each style writes the same kind of board (ICs, headers, connectors, vias and
 mounting holes from a seeded RNG) the way one PCB program does: its header

@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 import cam
-from cam.drawing import BLACK, BLUE, RED, WHITE, classify
+from cam.digitize.drawing import BLACK, BLUE, RED, WHITE, classify
 
 from conftest import drawing_from_rows
 

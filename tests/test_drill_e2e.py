@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 import cam
-from cam.cli import main
-from cam.drilljob import plan_drill
-from cam.drive.pinlog import decode_pin_log, read_pin_log
+from cam.cli.commands import main
+from cam.job.drill import plan_drill
+from cam.verify.pinlog import decode_pin_log, read_pin_log
 from cam.drive.runner import run
 
 pytest.importorskip("serial")
@@ -37,7 +37,7 @@ def _write_kicad_style(path, holes_mm, tools) -> None:
 
 
 def _expected_steps(holes_mm: np.ndarray, mm_per_step: float) -> np.ndarray:
-    """Machine (x, y) steps with the board's top-left hole at the start and y = -Y (see cam.drilljob)."""
+    """Machine (x, y) steps with the board's top-left hole at the start and y = -Y (see cam.job.drill)."""
     x = (holes_mm[:, 0] - holes_mm[:, 0].min()) / mm_per_step
     y = (holes_mm[:, 1].max() - holes_mm[:, 1]) / mm_per_step
     return np.column_stack([x, y])
@@ -80,7 +80,7 @@ def _match(got: np.ndarray, expected: np.ndarray) -> np.ndarray:
 def test_three_tool_board_on_the_mock_port(board_file):
     path, holes_mm, tools = board_file
     holes = cam.load_excellon(path) if hasattr(cam, "load_excellon") else __import__(
-        "cam.excellon", fromlist=["load_excellon"]).load_excellon(path)
+        "cam.formats.excellon", fromlist=["load_excellon"]).load_excellon(path)
     settings = cam.MachineSettings()
     dp = plan_drill(holes, settings=settings, depth_mm=2.0, safe_height_mm=1.0)
     pauses = []
@@ -118,8 +118,9 @@ def test_three_tool_board_from_the_command_line(board_file, tmp_path, capsys):
 
 
 def test_three_tool_board_on_the_emulated_maximus_board(board_file, capsys):
-    from cam.drive.maximus import MAXIMUS_SETTINGS
-    from cam.drive.maximus_emulator import decode_port_log, hole_strokes, start_emulator
+    from cam.drive.maximus.board import MAXIMUS_SETTINGS
+    from cam.sim.maximus import start_emulator
+    from support.maximus_log import decode_port_log, hole_strokes
 
     path, holes_mm, tools = board_file
     emu = start_emulator(speed=None)
@@ -160,7 +161,7 @@ def test_three_tool_board_on_the_emulated_maximus_board(board_file, capsys):
 def test_drill_file_exported_as_gcode_runs_in_rs274_to_the_same_holes(board_file, tmp_path):
     import shutil
 
-    from cam.lcnc import parse_canonical, run_rs274
+    from support.lcnc import parse_canonical, run_rs274
 
     if shutil.which("rs274") is None:
         pytest.fail("LinuxCNC's rs274 is missing (apt-get install linuxcnc-uspace)")

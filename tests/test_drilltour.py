@@ -7,8 +7,8 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from cam.drilljob import _machine_mm, plan_drill
-from cam.drilltour import EXACT_MAX, drill_order, nearest_neighbour_order, tour_length_mm
+from cam.job.drill import _machine_mm, plan_drill
+from cam.job.drill_order import EXACT_MAX, drill_order, nearest_neighbour_order, tour_length_mm
 from cam.errors import CamError, PlanError
 
 

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import cam
-from cam.drawing import BLACK
+from cam.digitize.drawing import BLACK
 
 from conftest import ROOT, SAMPLES, assert_surface_equal, carve_job, expected_surface_2d
 
@@ -77,7 +77,7 @@ PROFILES = ["dome.png", "cone.png", "pyramid.png", "flat.png"]
 @pytest.mark.parametrize("profile_name", PROFILES)
 def test_3d_sample_carves_exactly(name, profile_name):
     from cam.digitize.peel3d import peel_layers
-    from cam.drawing import WHITE
+    from cam.digitize.drawing import WHITE
 
     drawing = cam.load_image(SAMPLES / name)
     assert drawing.kind == "3d" and drawing.warnings == []

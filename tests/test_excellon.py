@@ -11,9 +11,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cam.cli import main
+from cam.cli.commands import main
 from cam.errors import CamError, ParseError
-from cam.excellon import HoleList, load_excellon, parse_excellon
+from cam.formats.excellon import HoleList, load_excellon, parse_excellon
 
 from conftest import ROOT
 
@@ -292,7 +292,7 @@ def test_the_shipped_sample_is_what_the_generator_writes():
 
 
 def test_drill_the_sample_on_the_mock_port():
-    pytest.importorskip("cam.drilltour")
+    pytest.importorskip("cam.job.drill_order")
     r = subprocess.run([sys.executable, "-m", "cam", "drill", "samples/board.drl", "--yes", "--no-progress"],
                        cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stderr

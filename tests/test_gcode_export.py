@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 import cam
-from cam.gcode import feeds_mm_per_min, to_gcode
-from cam.lcnc import carve_canonical, parse_canonical, run_rs274
+from cam.formats.gcode_export import feeds_mm_per_min, to_gcode
+from support.lcnc import carve_canonical, parse_canonical, run_rs274
 
 from conftest import ROOT, SAMPLES, carve_job, assert_surface_equal, drawing_from_rows
 
@@ -43,7 +43,7 @@ def test_rs274_accepts_export_and_carves_the_same(tmp_path, name, options):
         options = {**options, "profile": cam.load_profile(options["profile"])}
     job = cam.plan(d, **options)
     path = tmp_path / "job.ngc"
-    cam.gcode.save_gcode(job, path)
+    cam.save_gcode(job, path)
     moves = parse_canonical(run_rs274(str(path)))
     assert any(m.kind == "feed" for m in moves)
     theirs = carve_canonical(moves, (d.height_px, d.width_px), job.settings)

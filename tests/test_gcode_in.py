@@ -7,8 +7,8 @@ import pytest
 from scipy.spatial import cKDTree
 
 import cam
-from cam.gcode_in import load_gcode, parse_gcode, plan_gcode_steps
-from cam.lcnc import canonical_polyline_mm, parse_canonical, run_rs274
+from cam.formats.gcode import load_gcode, parse_gcode, plan_gcode_steps
+from support.lcnc import canonical_polyline_mm, parse_canonical, run_rs274
 
 from test_cli import assert_one_line_error, cli
 

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import cam
-from cam.hpgl import (
+from cam.formats.hpgl import (
     HpglCommand,
     hpgl_steps,
     iter_hpgl,
@@ -19,7 +19,7 @@ from cam.hpgl import (
     plan_hpgl,
     scan_hpgl,
 )
-from cam.toolpath import CUT, RETRACT, TRAVEL
+from cam.job.toolpath import CUT, RETRACT, TRAVEL
 
 from conftest import ROOT, SAMPLES
 
@@ -220,7 +220,7 @@ def test_tool_changes_pause_in_order_at_the_safe_height():
     seen = []
     result = cam.run(job, on_pause=lambda pos, note: seen.append((note, pos)))
     assert result.status == "finished"
-    safe = -round(cam.hpgl.DEFAULT_SAFE_HEIGHT_MM / S.mm_per_step_z)
+    safe = -round(cam.formats.hpgl.DEFAULT_SAFE_HEIGHT_MM / S.mm_per_step_z)
     assert [n for n, _ in seen] == ["tool change: pen 1", "tool change: pen 2"]
     assert all(pos[2] == safe for _, pos in seen)
     # pen 2 is paused for after every pen-1 stroke and before any pen-2 cut
@@ -389,7 +389,7 @@ def test_cli_bad_hpgl_is_one_line_and_nothing_moves(tmp_path, text, fragments):
 _CHILD = """
 import json, sys
 import io
-import cam.hpgl as h
+import cam.formats.hpgl as h
 h.scan_hpgl(io.BytesIO(b"IN;SP1;PU0,0;PD1,1;LT;"))  # load the compiled kernels first
 def status(key):
     for line in open("/proc/self/status"):

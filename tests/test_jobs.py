@@ -1,4 +1,4 @@
-"""cam.jobs: a file and its options to a ready job, for every kind."""
+"""cam.job.jobs: a file and its options to a ready job, for every kind."""
 from __future__ import annotations
 
 import numpy as np
@@ -6,7 +6,7 @@ import pytest
 
 import cam
 from cam.errors import CamError
-from cam.jobs import JobOptions, job_kind, prepare_job
+from cam.job.jobs import JobOptions, job_kind, prepare_job
 
 from conftest import ROOT, SAMPLES, assert_surface_equal
 
@@ -83,7 +83,7 @@ def test_digitized_matrix_and_3d_profile_jobs(tmp_path):
 
 
 def test_gcode_job_with_tool_change(tmp_path):
-    from cam.gcode_in import load_gcode, plan_gcode_steps
+    from cam.formats.gcode import load_gcode, plan_gcode_steps
 
     path = tmp_path / "p.ngc"
     path.write_text(GCODE)
@@ -100,7 +100,7 @@ def test_gcode_job_with_tool_change(tmp_path):
 
 
 def test_excellon_job(tmp_path):
-    pytest.importorskip("cam.excellon")
+    pytest.importorskip("cam.formats.excellon")
     path = tmp_path / "b.drl"
     path.write_text("M48\nMETRIC,LZ\nT1C0.8\nT2C1.0\n%\nT1\nX5.0Y5.0\nX10.0Y5.0\nT2\nX10.0Y10.0\nM30\n")
     job = prepare_job(path, JobOptions(drill_depth_mm=1.0), FAST)
@@ -113,7 +113,7 @@ def test_excellon_job(tmp_path):
 
 
 def test_hpgl_job(tmp_path):
-    pytest.importorskip("cam.hpgl")
+    pytest.importorskip("cam.formats.hpgl")
     path = tmp_path / "d.plt"
     path.write_text("IN;SP1;PU0,0;PD400,0,400,400,0,400,0,0;PU;SP2;PA800,800;PD;PA1200,800;PU;\n")
     job = prepare_job(path, JobOptions(depth_mm=0.3), FAST)

@@ -11,14 +11,17 @@ import pytest
 serial = pytest.importorskip("serial")
 
 from cam.errors import PlanError, PortError  # noqa: E402
-from cam.drive.maximus import (  # noqa: E402
+from cam.drive.maximus.board import (  # noqa: E402
     MaximusBoard, close_drill_packet, drill_moves, drill_packet, init_packet, jog_exit_packet, jog_packet,
     offset_packet, open_maximus, start_drill_packet,
 )
-from cam.drive.maximus_emulator import (  # noqa: E402
-    BANNER, DRILL_MODE1_INPUT, HOME_SWITCH_Y, JOG_DATA_INPUT, MODE_SELECTION, ONEHOLEDRILLED, PORT_B, PORT_D,
-    POWER_UP, STEPSBACKATLIMIT, PortLog, decode_port_log, drilled_holes, hole_strokes, start_emulator,
+from cam.drive.maximus.protocol import (  # noqa: E402
+    BANNER, HOME_SWITCH_Y, ONEHOLEDRILLED, PORT_B, PORT_D, STEPSBACKATLIMIT,
 )
+from cam.sim.maximus import (  # noqa: E402
+    DRILL_MODE1_INPUT, JOG_DATA_INPUT, MODE_SELECTION, POWER_UP, PortLog, start_emulator,
+)
+from support.maximus_log import decode_port_log, drilled_holes, hole_strokes  # noqa: E402
 
 TIMEOUT_S = 0.5
 HOLES = np.array([[10, 5], [40, 5], [40, 30], [100, -20], [0, 50], [-30, -10]])

@@ -3,7 +3,7 @@ import pytest
 
 import cam
 from cam.digitize.peel3d import peel_layers, trace_layers
-from cam.drawing import BLACK, RED, WHITE
+from cam.digitize.drawing import BLACK, RED, WHITE
 
 from conftest import assert_surface_equal, carve_job
 
@@ -125,7 +125,7 @@ def test_digitized_3d_round_trip(tmp_path):
 
 def test_compiled_ring_tracer_equals_reference():
     import cv2
-    from cam.digitize.peel3d import trace_layers_reference
+    from support.references import trace_layers_reference
 
     mask = np.zeros((90, 120), np.uint8)
     cv2.ellipse(mask, (45, 45), (35, 25), 20, 0, 360, 1, -1)
@@ -183,7 +183,8 @@ def test_compiled_peel_falls_back_to_the_named_errors():
 @pytest.mark.parametrize("seed", range(8))
 def test_compiled_ring_tracer_equals_reference_on_random_reliefs(seed):
     """Overlapping ellipses with holes: layers that split into several rings and walks that stop early."""
-    from cam.digitize.peel3d import peel_layers_padded, trace_layers_reference, trace_padded
+    from cam.digitize.peel3d import peel_layers_padded, trace_padded
+    from support.references import trace_layers_reference
 
     classes = _blobs(seed)
     layer = peel_layers(classes)

@@ -4,7 +4,7 @@ import cv2
 import numpy as np
 
 import cam
-from cam.picture import depth_colours, surface_picture, toolpath_picture, toolpath_svg
+from cam.render.picture import depth_colours, surface_picture, toolpath_picture, toolpath_svg
 
 from conftest import drawing_from_rows
 from test_cli import cli

@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 import cam
-from cam.profile import Profile, as_profile, load_profile, profile_from_csv, profile_from_expr
+from cam.digitize.profile import Profile, as_profile, load_profile, profile_from_csv, profile_from_expr
 
 
 def profile_image(depths, below=True, h=12):

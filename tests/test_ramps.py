@@ -5,9 +5,10 @@ import numpy as np
 import pytest
 
 import cam
-from cam.drive.motion import RAMP_STEPS_LINEAR40, ramp_periods
-from cam.drive.ramps_check import check_axis_steps, check_ramps
-from cam.drive.steps import axis_bits, plan_steps
+from cam.drive.ramps import RAMP_STEPS_LINEAR40, ramp_periods
+from cam.verify.ramps import check_axis_steps, check_ramps
+from cam.drive.pins import axis_bits
+from cam.drive.steps import plan_steps
 from cam.errors import SettingsError
 from cam.settings import DEFAULT_SETTINGS, settings_from_mapping
 
@@ -174,7 +175,7 @@ def test_the_checker_fails_the_thesis_constant_delay():
 
 
 def test_gcode_job_with_dwell_and_tool_changes_passes_and_decelerates_at_each():
-    from cam.gcode_in import parse_gcode, plan_gcode_steps
+    from cam.formats.gcode import parse_gcode, plan_gcode_steps
 
     from test_gcode_in import DRILLING, ENGRAVING
 
@@ -198,8 +199,8 @@ def test_gcode_job_with_dwell_and_tool_changes_passes_and_decelerates_at_each():
 
 
 def test_drill_job_with_a_tool_change_passes():
-    from cam.drilljob import plan_drill
-    from cam.excellon import HoleList
+    from cam.job.drill import plan_drill
+    from cam.formats.excellon import HoleList
 
     holes = HoleList(holes_mm=np.array([[0.0, 0.0], [12.0, -3.0], [4.0, -20.0], [30.0, -8.0]]),
                      tool_of_hole=np.array([1, 1, 2, 2]), tools={1: 0.8, 2: 1.0},
@@ -308,12 +309,12 @@ def test_settings_keys_and_errors():
 
 
 def test_report_and_cli_name_the_ramp(tmp_path, capsys):
-    from cam.cli import main
+    from cam.cli.commands import main
 
     d = cam.digitize(cam.load_image(SAMPLES / "ellipse.png"))
     job = cam.plan(d, depth=1)
     rep = cam.job_report(d, job, plan_steps(job))
-    from cam.report import format_report
+    from cam.render.report import format_report
 
     assert rep["ramp"] == "lookahead" and "(lookahead ramps)" in format_report(rep)
     times = {}
@@ -331,7 +332,7 @@ def test_report_and_cli_name_the_ramp(tmp_path, capsys):
 
 @pytest.mark.parametrize("name", ["seed_tools.plt", "extended.plt", "inkscape_star.plt"])
 def test_lookahead_passes_the_checker_on_hpgl_drawings(name):
-    from cam.hpgl import load_hpgl, plan_hpgl
+    from cam.formats.hpgl import load_hpgl, plan_hpgl
 
     job = plan_hpgl(load_hpgl(SAMPLES / name))
     plan = plan_steps(job)
@@ -368,7 +369,7 @@ def test_a_stop_lifts_z_no_faster_than_its_start_speed():
 def test_linear40_reaches_the_start_speed_before_a_dwell():
     """The seed's ramp ends a G-code move at its start speed when a dwell (G4) follows: the dwell is a
     segment of its own, not the tail of the move."""
-    from cam.gcode_in import parse_gcode, plan_gcode_steps
+    from cam.formats.gcode import parse_gcode, plan_gcode_steps
 
     program = parse_gcode("G21 G90\nG1 X5 F600\nG4 P0.5\nG1 X10\nM2\n", source="dwell.ngc")
     plan = plan_gcode_steps(program, LINEAR40)

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 import cam
-from cam.drive import EMERGENCY_STOPPED, FINISHED, STOPPED
-from cam.drive.steps import axis_bits
+from cam.drive.runner import EMERGENCY_STOPPED, FINISHED, STOPPED
+from cam.drive.pins import axis_bits
 
 from conftest import assert_surface_equal, carve_job, drawing_from_rows, expected_surface_2d
 

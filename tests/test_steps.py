@@ -96,8 +96,8 @@ def test_compiled_step_kernel_equals_the_vectorised_reference():
 
 def test_position_tracker_and_chunked_extent_equal_the_full_decode(monkeypatch):
     """The web page's live position and a job's extent come from bounded-memory decoders: same answers."""
-    import cam.drive.pinlog as pinlog
-    from cam.drive.pinlog import PinLog, PositionTracker, decode_pin_log, motion_extent
+    import cam.verify.pinlog as pinlog
+    from cam.verify.pinlog import PinLog, PositionTracker, decode_pin_log, motion_extent
 
     d = cam.digitize(cam.load_image(SAMPLES / "gear.png"))
     job = cam.plan(d, depth=[12, 4])

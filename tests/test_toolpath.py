@@ -2,7 +2,8 @@ import numpy as np
 import pytest
 
 import cam
-from cam.toolpath import CUT, RETRACT, TRAVEL
+from cam.job.toolpath import CUT, RETRACT, TRAVEL
+from cam.digitize.profile import as_profile
 
 from conftest import drawing_from_rows
 
@@ -94,7 +95,8 @@ def test_goto_moves_xy_first_then_z():
 
 @pytest.mark.parametrize("name", ["gear.png", "word.png", "heart.png", "dumbbell.png", "ring.png"])
 def test_fast_assembly_equals_the_reference_loop(name):
-    from cam.toolpath import _assemble, _assemble_reference
+    from cam.job.toolpath import _assemble
+    from support.references import assemble_reference as _assemble_reference
     from conftest import SAMPLES
 
     d = cam.digitize(cam.load_image(SAMPLES / name))
@@ -107,8 +109,8 @@ def test_fast_assembly_equals_the_reference_loop(name):
     pause_px = np.zeros(asked.shape, bool)
     pause_px[job.points_px[job.pause][:, 1], job.points_px[job.pause][:, 0]] = True
     # rebuild the depth-sorted target list the planner used (with duplicates) from the digitized matrix
-    from cam.toolpath import _pass_targets
-    depth = cam.profile.as_profile(kw["profile"], d.n_layers).depth_of(d.levels) if d.mode == "3d" else np.array(kw["depth"])
+    from cam.job.toolpath import _pass_targets
+    depth = as_profile(kw["profile"], d.n_layers).depth_of(d.levels) if d.mode == "3d" else np.array(kw["depth"])
     t, _ = _pass_targets(d, np.asarray(depth, np.int64), 2)
     t = t + [2, 3, 1]
     a = _assemble(t, pause_px, asked, job.settings, 1, 0, 1)

@@ -126,7 +126,7 @@ def test_to_array_rows_object_x_y_level():
 
 def test_compiled_tracer_equals_reference_on_random_curves():
     import cv2
-    from cam.digitize.trace2d import trace_curves_reference
+    from support.references import trace_curves_reference
 
     rng = np.random.default_rng(7)
     m = np.zeros((120, 160), np.uint8)

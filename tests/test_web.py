@@ -21,8 +21,8 @@ import numpy as np
 import pytest
 
 import cam
-from cam.drive import EMERGENCY_STOPPED, FINISHED
-from cam.jobs import JobOptions, prepare_job
+from cam.drive.runner import EMERGENCY_STOPPED, FINISHED
+from cam.job.jobs import JobOptions, prepare_job
 
 from conftest import SAMPLES, assert_surface_equal
 
@@ -438,7 +438,7 @@ def test_page_runs_gcode_with_a_tool_change_prompt(page, fast, tmp_path):
     page.click("#prompt-continue")
     st = _wait_done(page, fast)
     assert st["last"]["status"] == FINISHED
-    from cam.gcode_in import load_gcode, plan_gcode_steps
+    from cam.formats.gcode import load_gcode, plan_gcode_steps
 
     want = plan_gcode_steps(load_gcode(path), FAST)
     log = fast.session.last_job_pin_log
@@ -446,7 +446,7 @@ def test_page_runs_gcode_with_a_tool_change_prompt(page, fast, tmp_path):
 
 
 def test_page_runs_an_excellon_file(page, fast, tmp_path):
-    pytest.importorskip("cam.excellon")
+    pytest.importorskip("cam.formats.excellon")
     path = tmp_path / "board.drl"
     path.write_text(EXCELLON)
     _open(page, fast)
@@ -532,8 +532,9 @@ def test_phone_screenshot(page, servers, tmp_path):
 def test_api_drives_the_maximus_board(tmp_path):
     """A drill file on the emulated MAXIMUS board from the web API: prompts answered from the page's
     endpoint, every hole drilled once, no pause; jog and origin move the board; a drawing is refused."""
-    from cam.drive.maximus import MAXIMUS_SETTINGS
-    from cam.drive.maximus_emulator import decode_port_log, hole_strokes, start_emulator
+    from cam.drive.maximus.board import MAXIMUS_SETTINGS
+    from cam.sim.maximus import start_emulator
+    from support.maximus_log import decode_port_log, hole_strokes
 
     emu = start_emulator(speed=None)
     s = Server(tmp_path, settings=MAXIMUS_SETTINGS, machine_port=f"maximus:{emu.device_path}", realtime=True)
@@ -586,8 +587,8 @@ def test_api_drives_the_maximus_board(tmp_path):
 
 def test_api_emergency_stop_on_the_maximus_board(tmp_path):
     """The page's emergency stop during a move reaches the firmware's stop byte; the job ends naming the hole."""
-    from cam.drive.maximus import MAXIMUS_SETTINGS
-    from cam.drive.maximus_emulator import start_emulator
+    from cam.drive.maximus.board import MAXIMUS_SETTINGS
+    from cam.sim.maximus import start_emulator
 
     emu = start_emulator(speed=1.0)  # the firmware's own timing: a move between holes takes seconds
     s = Server(tmp_path, settings=MAXIMUS_SETTINGS, machine_port=f"maximus:{emu.device_path}", realtime=True)

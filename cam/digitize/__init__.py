@@ -1,4 +1,4 @@
-"""Digitizing: a classified :class:`~cam.drawing.Drawing` to a :class:`~cam.digitized.Digitized` matrix.
+"""Digitizing: a classified :class:`~cam.digitize.drawing.Drawing` to a :class:`~cam.digitize.digitized.Digitized` matrix.
 
 Pure computation on arrays: nothing here reads files or touches ports.
 """
@@ -6,8 +6,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..digitized import Digitized
-from ..drawing import BLACK, Drawing, load_image
+from .digitized import Digitized
+from .drawing import BLACK, Drawing, load_image
 from ..errors import DrawingError
 from .peel3d import peel_layers_padded, trace_padded
 from .trace2d import START_RULES, trace_curves

@@ -26,10 +26,10 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from ..drawing import BLACK, RED, WHITE
+from .drawing import BLACK, RED, WHITE
 from ..errors import DrawingError
 
-__all__ = ["peel_layers", "peel_layers_padded", "trace_layers", "trace_padded", "trace_layers_reference", "NEIGHBOURS_3D"]
+__all__ = ["peel_layers", "peel_layers_padded", "trace_layers", "trace_padded", "NEIGHBOURS_3D"]
 
 NEIGHBOURS_3D = ((-1, 0), (0, 1), (1, 0), (0, -1), (1, 1), (-1, 1), (-1, -1), (1, -1))
 """(drow, dcol) in the scan order of Figure 4.15: N, E, S, W, SE, NE, NW, SW."""
@@ -97,39 +97,8 @@ def peel_layers_padded(classes: np.ndarray, *, source: str = "<array>") -> np.nd
     return padded
 
 
-def _trace_ring(
-    flat: bytearray, ring_idx: np.ndarray, start: int, offsets: tuple[int, ...], wp: int
-) -> tuple[list[int], int]:
-    """Trace all pixels of one ring; returns (path, number of greedy segments)."""
-    path: list[int] = []
-    segments = 0
-    cur = start
-    remaining = ring_idx
-    while True:
-        flat[cur] = 0
-        path.append(cur)
-        segments += 1
-        while True:
-            for off in offsets:
-                q = cur + off
-                if flat[q]:
-                    flat[q] = 0
-                    path.append(q)
-                    cur = q
-                    break
-            else:
-                break
-        view = np.frombuffer(flat, np.uint8)
-        remaining = remaining[view[remaining] != 0]
-        if len(remaining) == 0:
-            return path, segments
-        rr, cc = remaining // wp, remaining % wp
-        d2 = (rr - cur // wp) ** 2 + (cc - cur % wp) ** 2
-        cur = int(remaining[int(np.argmin(d2))])
-
-
 def trace_layers(layer: np.ndarray) -> tuple[list[np.ndarray], np.ndarray]:
-    """Trace every layer into rings (compiled; the same result as :func:`trace_layers_reference`)."""
+    """Trace every layer into rings (compiled; tests compare it with a plain-Python reference)."""
     h, w = layer.shape
     padded = np.zeros((h + 2, w + 2), np.int32)
     padded[1:-1, 1:-1] = layer
@@ -153,60 +122,3 @@ def trace_padded(padded: np.ndarray, *, in_place: bool = False) -> tuple[list[np
     return [xy[a:b] for a, b in zip(starts[:-1], starts[1:])], levels.astype(np.int32)
 
 
-def trace_layers_reference(layer: np.ndarray) -> tuple[list[np.ndarray], np.ndarray]:
-    """Trace every layer into rings.
-
-    Args:
-        layer: ``(H, W)`` int32 layer numbers from :func:`peel_layers` (0 = not drawn).
-
-    Returns:
-        ``(objects, levels)``: one ``(n, 2)`` int32 ``(x, y)`` array per ring in
-        cutting order (layer by layer), and ``(n_rings,)`` int32 layer of each ring.
-    """
-    h, w = layer.shape
-    wp = w + 2
-    padded = np.zeros((h + 2, wp), np.int32)
-    padded[1:-1, 1:-1] = layer
-    offsets = tuple(dr * wp + dc for dr, dc in NEIGHBOURS_3D)
-    n_layers = int(layer.max())
-    objects: list[np.ndarray] = []
-    levels: list[int] = []
-    if n_layers == 0:
-        return objects, np.zeros(0, np.int32)
-    flat_all = padded.ravel()
-    order = np.argsort(flat_all, kind="stable")  # pixels grouped by layer, scan order within
-    counts = np.bincount(flat_all, minlength=n_layers + 1)
-    bounds = np.concatenate([[0], np.cumsum(counts)])
-    tool = None  # (row, col) in padded coordinates
-    for k in range(1, n_layers + 1):
-        idx = order[bounds[k] : bounds[k + 1]]  # scan order
-        if len(idx) == 0:
-            continue
-        mask = np.zeros((h + 2) * wp, np.uint8)
-        mask[idx] = 1
-        n_rings, labels = cv2.connectedComponents(mask.reshape(h + 2, wp), connectivity=8)
-        lab = labels.ravel()[idx]
-        flat = bytearray(mask.tobytes())
-        rings = {r: idx[lab == r] for r in range(1, n_rings)}
-        first = True
-        while rings:
-            if first:
-                r_id = int(lab[0])  # the ring of the layer's first pixel in scan order
-                start = int(rings[r_id][0])
-                first = False
-            else:
-                # the ring of the untraced pixel nearest the tool (ties: first in scan order)
-                left = np.concatenate(list(rings.values()))
-                left.sort()
-                d2 = (left // wp - tool[0]) ** 2 + (left % wp - tool[1]) ** 2
-                start = int(left[int(np.argmin(d2))])
-                r_id = int(labels.ravel()[start])
-            path, _ = _trace_ring(flat, rings.pop(r_id), start, offsets, wp)
-            p = np.asarray(path, np.int64)
-            obj = np.empty((len(p), 2), np.int32)
-            obj[:, 0] = p % wp - 1
-            obj[:, 1] = p // wp - 1
-            objects.append(obj)
-            levels.append(k)
-            tool = (int(p[-1] // wp), int(p[-1] % wp))
-    return objects, np.array(levels, np.int32)

@@ -1,15 +1,8 @@
-"""Driving the machine: step plans, ports, the runner and the pin-log decoder.
+"""Driving the machine: step plans, speed ramps, pin maps, ports, the runner, the MAXIMUS host.
 
-This is the only part of `cam` that sleeps or writes to hardware.
+This is the only part of `cam` that sleeps or writes to hardware.  Import
+from the modules: :mod:`cam.drive.steps` (the step plan),
+:mod:`cam.drive.ramps` (speed ramps), :mod:`cam.drive.pins`,
+:mod:`cam.drive.ports` (ports opened by name), :mod:`cam.drive.runner`,
+:mod:`cam.drive.maximus`.
 """
-from .pinlog import Motion, PinLog, carve, decode_pin_log, read_pin_log, write_pin_log
-from .ports import MockPort, ParallelPort, Port, open_port
-from .runner import EMERGENCY_STOPPED, FINISHED, STOPPED, Controller, RunResult, run, simulate_surface
-from .steps import StepPlan, axis_bits, plan_steps
-
-__all__ = [
-    "Motion", "PinLog", "carve", "decode_pin_log", "read_pin_log", "write_pin_log",
-    "MockPort", "ParallelPort", "Port", "open_port",
-    "Controller", "RunResult", "run", "simulate_surface", "FINISHED", "STOPPED", "EMERGENCY_STOPPED",
-    "StepPlan", "axis_bits", "plan_steps",
-]

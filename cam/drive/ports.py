@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import PortError
-from .pinlog import PinLog
+from ..verify.pinlog import PinLog
 
 __all__ = ["Port", "MockPort", "ParallelPort", "open_port"]
 

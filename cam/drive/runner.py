@@ -23,10 +23,11 @@ from typing import Callable, Optional
 import numpy as np
 
 from ..errors import CamError
-from ..toolpath import Toolpath
-from .pinlog import PinLog, decode_pin_log
+from ..job.toolpath import Toolpath
+from ..verify.pinlog import PinLog, decode_pin_log
 from .ports import MockPort, Port, open_port
-from .steps import StepPlan, axis_bits, plan_steps
+from .pins import axis_bits
+from .steps import StepPlan, plan_steps
 
 __all__ = ["Controller", "RunResult", "run", "simulate_surface", "FINISHED", "STOPPED", "EMERGENCY_STOPPED"]
 
@@ -147,7 +148,7 @@ def run(
     """Run a job on a port.
 
     Args:
-        job: a :class:`~cam.toolpath.Toolpath` (planned into steps here) or a :class:`StepPlan`.
+        job: a :class:`~cam.job.toolpath.Toolpath` (planned into steps here) or a :class:`StepPlan`.
         port: a port name (``"mock"``, ``"/dev/parport0"``) or an open :class:`Port`.
         realtime: wait for each write's time.  Forced on for real ports.
         controller: pause / resume / stop / emergency stop from elsewhere.
@@ -297,9 +298,9 @@ def simulate_surface(job: Toolpath) -> "np.ndarray":
     """The surface ``job`` would cut: run it on the mock, decode the pin log, carve with a point tool.
 
     Returns:
-        ``(height_px, width_px)`` :class:`~cam.drive.pinlog.Surface`, depth in Z steps, drawing frame.
+        ``(height_px, width_px)`` :class:`~cam.verify.pinlog.Surface`, depth in Z steps, drawing frame.
     """
-    from .pinlog import carve
+    from ..verify.pinlog import carve
 
     result = run(job, MockPort())
     motion = decode_pin_log(result.pin_log(), job.settings)

@@ -14,7 +14,7 @@ moves (Eq. 4.4): a move of (dx, dy, dz) steps takes max(|dx|, |dy|, |dz|)
 periods, the shorter axes spread evenly over them (a DDA).  The period is the
 X/Y delay when X or Y moves, the Z delay for Z-only moves, and the larger of
 the two when both move.  Those are the *nominal* periods (the thesis's constant
-delay); :func:`cam.drive.motion.ramp_periods` then lengthens them with the
+delay); :func:`cam.drive.ramps.ramp_periods` then lengthens them with the
 speed ramps of ``settings.ramp`` (look-ahead, the seed's 40-step ramp, or none).
 
 Pin 1 (strobe) carries Half/Full* and is held low for full steps.
@@ -26,19 +26,13 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..settings import MachineSettings
-from ..toolpath import Toolpath, check_travel
+from ..job.toolpath import Toolpath, check_travel
 from ._kernels import periods_kernel, writes_kernel
-from .motion import ramp_periods
+from .pins import axis_bits
+from .ramps import ramp_periods
 
-__all__ = ["StepPlan", "plan_steps", "axis_bits"]
+__all__ = ["StepPlan", "plan_steps", "port_writes"]
 
-
-def axis_bits(settings: MachineSettings) -> tuple[np.ndarray, np.ndarray]:
-    """(clock_bit_values, dir_bit_values): ``(3,)`` uint8 data-register masks for X, Y, Z."""
-    p = settings.pins
-    clock = np.array([1 << p.bit("clock_x"), 1 << p.bit("clock_y"), 1 << p.bit("clock_z")], np.uint8)
-    direction = np.array([1 << p.bit("dir_x"), 1 << p.bit("dir_y"), 1 << p.bit("dir_z")], np.uint8)
-    return clock, direction
 
 
 @dataclass
@@ -94,7 +88,7 @@ def port_writes(
         period_ns: ``(P,)`` int64 nominal length of each period (lengthened by the ramps, never shortened).
         settings: pin map, Half/Full*, ramp mode and axis limits.
         move_first: ``(M,)`` first period of each move; stops: period indices before which the machine
-            rests (pauses); see :func:`cam.drive.motion.ramp_periods`.
+            rests (pauses); see :func:`cam.drive.ramps.ramp_periods`.
 
     Returns:
         ``(t_ns, data, strobe)``, each ``(1 + 2P,)``: an initial write at t = 0 that sets the first

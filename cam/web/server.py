@@ -2,7 +2,7 @@
 
 The page (``static/``) talks to a small JSON API under ``/api``; live status
 comes as server-sent events (``GET /api/events``).  The server is a thin
-adapter: jobs are prepared by :func:`cam.jobs.prepare_job` and run by
+adapter: jobs are prepared by :func:`cam.job.jobs.prepare_job` and run by
 :func:`cam.drive.runner.run` on the same ports as the CLI, in one background
 thread.
 
@@ -42,10 +42,10 @@ from urllib.parse import urlsplit
 
 import numpy as np
 
-from ..drive.pinlog import PositionTracker
+from ..verify.pinlog import PositionTracker
 from ..errors import CamError, PortError
 from ..fileio import atomic_write_bytes
-from ..jobs import PROFILE_SUFFIXES, JobOptions, PreparedJob, accepted_suffixes, job_kind, prepare_job
+from ..job.jobs import PROFILE_SUFFIXES, JobOptions, PreparedJob, accepted_suffixes, job_kind, prepare_job
 from ..settings import DEFAULT_SETTINGS, MachineSettings, Travel
 
 __all__ = ["ServerConfig", "MachineSession", "HttpError", "create_app", "serve", "LOCAL_HOSTS"]
@@ -113,7 +113,7 @@ def safe_name(filename: str) -> str:
 
 def _unit_job(moves_steps: list[tuple[int, int, int]], settings: MachineSettings):
     """A travel-only toolpath through points given in steps from where the tool stands."""
-    from ..toolpath import TRAVEL, Toolpath
+    from ..job.toolpath import TRAVEL, Toolpath
 
     spans = [hi - lo for lo, hi in settings.travel.bounds_steps()]
     unit = settings.replace(steps_per_px_xy=1, steps_per_px_z=1,
@@ -357,7 +357,7 @@ class MachineSession:
 
     # -- the MAXIMUS board ----------------------------------------------------------
     def _launch_maximus_job(self, job: PreparedJob) -> None:
-        from ..drive.maximus import drill_arguments
+        from ..drive.maximus.board import drill_arguments
 
         dp = job.drill_plan
         if job.kind != "excellon" or dp is None:
@@ -407,7 +407,7 @@ class MachineSession:
 
     def _board_worker(self, activity: str, work: Callable[[Any], None], ctl: _BoardControl, label: str,
                       moved_steps: np.ndarray) -> None:
-        from ..drive.maximus import MaximusBoard
+        from ..drive.maximus.board import MaximusBoard
 
         error = None
         board = None

@@ -24,10 +24,10 @@ from typing import Sequence
 
 import numpy as np
 
-from .digitized import Digitized
-from .errors import PlanError, TravelError
-from .profile import ProfileLike, as_profile
-from .settings import DEFAULT_SETTINGS, MachineSettings
+from ..digitize.digitized import Digitized
+from ..errors import PlanError, TravelError
+from ..digitize.profile import ProfileLike, as_profile
+from ..settings import DEFAULT_SETTINGS, MachineSettings
 
 __all__ = ["Toolpath", "plan", "goto", "CUT", "RETRACT", "TRAVEL", "check_travel"]
 
@@ -86,8 +86,8 @@ class Toolpath:
         return self.points_px * np.array([s.steps_per_px_xy, s.steps_per_px_xy, s.steps_per_px_z], np.int64)
 
     def _repr_png_(self) -> bytes:
-        """Notebook picture: see :func:`cam.picture.toolpath_picture`."""
-        from .picture import encode_png, toolpath_picture
+        """Notebook picture: see :func:`cam.render.picture.toolpath_picture`."""
+        from ..render.picture import encode_png, toolpath_picture
 
         return encode_png(toolpath_picture(self))
 
@@ -184,7 +184,7 @@ def plan(
         pause_at: Pause At drawing points ``(x, y)``; the job pauses each time
             the tool reaches one at its cutting depth.
         profile: for 3D drawings (required there, refused for 2D): depth per
-            layer -- a :class:`~cam.profile.Profile`, a profile drawing or CSV
+            layer -- a :class:`~cam.digitize.profile.Profile`, a profile drawing or CSV
             path, a sequence of depths (layer 1 first) or a function of the
             layer number.  A ring of layer k is cut at profile(k).
 
@@ -245,50 +245,6 @@ def plan(
     )
 
 
-def _assemble_reference(
-    targets: np.ndarray, pause_px: np.ndarray, asked: np.ndarray, settings: MachineSettings,
-    surface: int, safe: int, oz: int,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The planner's rules as a plain loop over the targets; :func:`_assemble` does the same faster."""
-    pts: list[tuple[int, int, int]] = []
-    kinds: list[int] = []
-    tgt: list[bool] = []
-    pause: list[bool] = []
-
-    def emit(x: int, y: int, z: int, kind: int, is_target: bool = False) -> None:
-        if pts and pts[-1] == (x, y, z):
-            if is_target:
-                tgt[-1] = True
-                kinds[-1] = CUT
-                pause[-1] = pause[-1] or bool(pause_px[y, x])
-            return
-        pts.append((x, y, z))
-        kinds.append(kind)
-        tgt.append(is_target)
-        pause.append(is_target and bool(pause_px[y, x]))
-
-    cx, cy, cz = 0, 0, 0
-    on_drawing = False  # is the tool at a drawing pixel at or above its asked depth
-    for x, y, d in targets.tolist():
-        if on_drawing and max(abs(x - cx), abs(y - cy)) <= 1:
-            if d < cz:  # shallower: lift first, then move
-                emit(cx, cy, d, CUT)
-                cz = d
-            emit(x, y, cz, CUT)  # move at the current depth ...
-        else:
-            for p in _gap_block((cx, cy, cz), (x, y, d), on_drawing, asked, settings, surface, safe, oz):
-                emit(*p)
-        emit(x, y, d, CUT, is_target=True)  # ... then plunge
-        cx, cy, cz = x, y, d
-        on_drawing = True
-    # end of job: lift, travel home, back to Z = 0
-    emit(cx, cy, safe, RETRACT)
-    emit(0, 0, safe, TRAVEL)
-    emit(0, 0, 0, TRAVEL)
-    return (np.array(pts, np.int64).reshape(-1, 3), np.array(kinds, np.uint8), np.array(tgt, bool),
-            np.array(pause, bool))
-
-
 def _gap_block(
     cur: tuple[int, int, int], nxt: tuple[int, int, int], on_drawing: bool, asked: np.ndarray,
     settings: MachineSettings, surface: int, safe: int, oz: int,
@@ -328,7 +284,7 @@ def _assemble(
     targets: np.ndarray, pause_px: np.ndarray, asked: np.ndarray, settings: MachineSettings,
     surface: int, safe: int, oz: int,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Vectorised :func:`_assemble_reference`: adjacent moves in bulk, only gaps in Python.
+    """The planner's rules, vectorised: adjacent moves in bulk, only gaps in Python (tests compare it with a plain loop).
 
     Returns ``(points (N, 3), kind (N,), target (N,), pause (N,))``.
     """

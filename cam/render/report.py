@@ -5,9 +5,9 @@ from typing import Any, Optional
 
 import numpy as np
 
-from .digitized import Digitized
-from .settings import DEFAULT_SETTINGS, MachineSettings
-from .toolpath import Toolpath
+from ..digitize.digitized import Digitized
+from ..settings import DEFAULT_SETTINGS, MachineSettings
+from ..job.toolpath import Toolpath
 
 __all__ = ["image_report", "job_report", "format_report"]
 
@@ -47,7 +47,7 @@ def job_report(
 ) -> dict[str, Any]:
     """The JSON job report: image report plus depth, points, retracts, steps, time and the speed ramp mode.
 
-    ``plan`` is the :class:`~cam.drive.StepPlan` of ``toolpath``.
+    ``plan`` is the :class:`~cam.drive.steps.StepPlan` of ``toolpath``.
     """
     s = toolpath.settings
     rep: dict[str, Any] = image_report(digitized, s) if digitized is not None else {"warnings": []}

@@ -22,7 +22,7 @@ Modes (``MachineSettings.ramp``):
     thousands of one-pixel moves keeps its speed wherever each axis steps
     regularly, and slows only where an axis really starts, stops, reverses
     or changes speed.  It satisfies the pin-log rules of
-    :mod:`cam.drive.ramps_check` (checked, not assumed: see below).
+    :mod:`cam.verify.ramps` (checked, not assumed: see below).
 
 The look-ahead planner, with the period index ``k`` as the path parameter and
 ``u_k`` = 1 / period length (periods per second) as the path speed:
@@ -52,6 +52,8 @@ import numpy as np
 from numba import njit
 
 from ..settings import RAMP_MODES, MachineSettings
+from ..verify.ramps import check_axis_steps
+from .pins import axis_bits
 
 __all__ = ["RAMP_MODES", "ramp_periods", "RAMP_STEPS_LINEAR40"]
 
@@ -319,8 +321,6 @@ def ramp_periods(
     n = len(per_ns)
     if mode == "constant" or n == 0:
         return per_ns
-    from .ramps_check import check_axis_steps  # imports pinlog, which imports steps
-    from .steps import axis_bits
 
     high = np.asarray(high, np.uint8)
     clock, dirbit = axis_bits(settings)

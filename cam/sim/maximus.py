@@ -139,86 +139,10 @@ import numpy as np
 
 from ..errors import CamError, PortError
 
-__all__ = [
-    "MaximusEmulator", "PortLog", "start_emulator", "decode_port_log", "hole_strokes",
-    "drilled_holes", "main",
-    "ISMACHINEREADY", "MACHINEREADY", "OPENJOGMODE", "JOGMODEON", "JOGMODEOFF", "JOGMODEDONE",
-    "OPENDRILLMODE1", "DRILLMODE1ON", "ONEHOLEDRILLED", "DRILLMODE1INITIALIZED", "DRILLMODE1DONE",
-    "OPENDRILLMODE2", "DRILLMODE2ON", "DRILLMODE2OFF", "DRILLMODE2DONE", "ATOFFSETPOS",
-    "EMERGENCYSTOP", "MACHINESTOPPED", "ERRORLIMITSWITCH",
-    "HOME_SWITCH_X", "LIMIT_SWITCH_X", "HOME_SWITCH_Y", "LIMIT_SWITCH_Y", "HOME_SWITCH_Z",
-    "LIMIT_SWITCH_Z", "SWITCH_NAMES", "BYTE_NAMES", "STEPSBACKATLIMIT", "BANNER", "BAUD_RATE",
-    "PORT_B", "PORT_D", "DELAY_UNIT_NS",
-]
+__all__ = ["MaximusEmulator", "PortLog", "start_emulator", "main"]
 
-# --- Protocol bytes: seed 000, Appendix 1, "#define ISMACHINEREADY 0x61 // Byte definitions" block.
-ISMACHINEREADY = 0x61
-MACHINEREADY = 0x62
-OPENJOGMODE = 0x63
-JOGMODEON = 0x64
-JOGMODEOFF = 0x65
-JOGMODEDONE = 0x66
-OPENDRILLMODE1 = 0x67
-DRILLMODE1ON = 0x68
-ONEHOLEDRILLED = 0x69
-DRILLMODE1INITIALIZED = 0x6A
-DRILLMODE1DONE = 0x70
-OPENDRILLMODE2 = 0x71
-DRILLMODE2ON = 0x72
-DRILLMODE2OFF = 0x73
-DRILLMODE2DONE = 0x74
-ATOFFSETPOS = 0x75
-EMERGENCYSTOP = 0x80
-MACHINESTOPPED = 0x81
-ERRORLIMITSWITCH = 0x90
-
-# --- Switch bytes: seed 000, Appendix 1, "#define HOME_SWITCH_X 0x01 // Define outgoing bytes for" block.
-# Switch byte 1 << k is the switch on port A bit k (isr_ext: "case 0x3E: // RA0=0" ... "case 0x1F: // RA5=0").
-HOME_SWITCH_X = 0x01
-LIMIT_SWITCH_X = 0x02
-HOME_SWITCH_Y = 0x04
-LIMIT_SWITCH_Y = 0x08
-HOME_SWITCH_Z = 0x10
-LIMIT_SWITCH_Z = 0x20
-
-STEPSBACKATLIMIT = 700  # seed 000, Appendix 1: "#define STEPSBACKATLIMIT 700 // Move 700 steps in limit switch interrupt"
-BANNER = b"MAXIMUS_V1.0"  # seed 000, Appendix 1, main(): printf("MAXIMUS_V1.0");
-BAUD_RATE = 115200  # seed 000, Appendix 1: "#use rs232(baud=115200, xmit=PIN_C6, rcv=PIN_C7)"
-DELAY_UNIT_NS = 100_000  # seed 000, Appendix 1, dly_100us(): "Delay for n * 100us"; constspeed(): "Frequency = 1/(2*delay*100us)"
-DEBOUNCE_NS = 300_000_000  # seed 000, Appendix 1, isr_ext(): "delay_ms(300); // debounce button"
-
-SWITCH_NAMES = {
-    HOME_SWITCH_X: "HOME_SWITCH_X", LIMIT_SWITCH_X: "LIMIT_SWITCH_X",
-    HOME_SWITCH_Y: "HOME_SWITCH_Y", LIMIT_SWITCH_Y: "LIMIT_SWITCH_Y",
-    HOME_SWITCH_Z: "HOME_SWITCH_Z", LIMIT_SWITCH_Z: "LIMIT_SWITCH_Z",
-}
-BYTE_NAMES = {
-    ISMACHINEREADY: "ISMACHINEREADY", MACHINEREADY: "MACHINEREADY", OPENJOGMODE: "OPENJOGMODE",
-    JOGMODEON: "JOGMODEON", JOGMODEOFF: "JOGMODEOFF", JOGMODEDONE: "JOGMODEDONE",
-    OPENDRILLMODE1: "OPENDRILLMODE1", DRILLMODE1ON: "DRILLMODE1ON", ONEHOLEDRILLED: "ONEHOLEDRILLED",
-    DRILLMODE1INITIALIZED: "DRILLMODE1INITIALIZED", DRILLMODE1DONE: "DRILLMODE1DONE",
-    OPENDRILLMODE2: "OPENDRILLMODE2", DRILLMODE2ON: "DRILLMODE2ON", DRILLMODE2OFF: "DRILLMODE2OFF",
-    DRILLMODE2DONE: "DRILLMODE2DONE", ATOFFSETPOS: "ATOFFSETPOS", EMERGENCYSTOP: "EMERGENCYSTOP",
-    MACHINESTOPPED: "MACHINESTOPPED", ERRORLIMITSWITCH: "ERRORLIMITSWITCH", **SWITCH_NAMES,
-}
-
-# --- Pins: seed 000, Appendix 1, "#define MODE_X PIN_D0 // PIC pin definitions" ... "#define SPINDLE_BIT PIN_B2".
-PORT_B = ord("B")
-PORT_D = ord("D")
-MODE_X, STEP_X, DIR_X, ENABLE_X = (PORT_D, 0), (PORT_D, 1), (PORT_D, 2), (PORT_D, 3)
-MODE_Y, STEP_Y, DIR_Y, ENABLE_Y = (PORT_D, 4), (PORT_D, 5), (PORT_D, 6), (PORT_D, 7)
-MODE_Z, STEP_Z, DIR_Z, ENABLE_Z = (PORT_B, 4), (PORT_B, 5), (PORT_B, 6), (PORT_B, 7)
-SPINDLE_BIT = (PORT_B, 2)
-POWER_UP_B = 0xF0  # seed 000, Appendix 1, main(): output_b(0xF0); // Set all Driver Pins
-POWER_UP_D = 0xFF  # seed 000, Appendix 1, main(): output_d(0xFF);
-
-# (port, step bit, dir bit, enable bit, sign of a step when DIR is 1) per axis x, y, z.
-_AXIS_PINS = (
-    (PORT_D, 1, 2, 3, +1),
-    (PORT_D, 5, 6, 7, +1),
-    (PORT_B, 5, 6, 7, -1),  # DIR_Z = 1 is "Z down" (Appendix 1, DRILL_MODE1_INPUT)
-)
-_STEP_PIN = {1: STEP_X, 2: STEP_Y, 3: STEP_Z}  # constspeed(..., pin): 1 = X, 2 = Y, 3 = Z
+from ..drive.maximus.protocol import *  # noqa: F401,F403  (the protocol, declared once)
+from ..drive.maximus.protocol import AXIS_PINS, STEP_PIN
 
 # Where the firmware waits for a byte (its labels; the 9-byte Init read has no label of its own).
 POWER_UP = "POWER_UP"
@@ -287,95 +211,6 @@ class PortLog:
         if np.any((p != PORT_B) & (p != PORT_D)):
             raise CamError("port log rows must name port 'B' or 'D'")
         return cls(t, p, v)
-
-
-def _as_port_log(log: PortLog | Iterable[tuple[int, str | int, int]]) -> PortLog:
-    return log if isinstance(log, PortLog) else PortLog.from_rows(log)
-
-
-def decode_port_log(log: PortLog | Iterable[tuple[int, str | int, int]]) -> np.ndarray:
-    """Read the axis positions back out of the port B/D writes.
-
-    A step is a rising edge of an axis's STEP bit while its ENABLE bit is
-    high; X and Y count +1 when DIR is 1, Z counts -1 when DIR_Z is 1 (down),
-    so z is height.  The first write to each port sets its level without
-    counting a step.
-
-    Args:
-        log: a :class:`PortLog` or ``(t_ns, port, value)`` rows.
-
-    Returns:
-        ``(M, 3)`` int64: x, y, z in L297 clock pulses after each write,
-        relative to the position at the first write (the emulator's power-up).
-
-    >>> rows = [(0, "D", 0xFF), (0, "D", 0xFD), (100000, "D", 0xFF), (200000, "D", 0xFB), (200000, "D", 0xF9), (300000, "D", 0xFB)]
-    >>> decode_port_log(rows)[:, 0].tolist()
-    [0, 0, 1, 1, 1, 0]
-    """
-    log = _as_port_log(log)
-    m = len(log)
-    deltas = np.zeros((m, 3), np.int64)
-    if m == 0:
-        return deltas
-    for port in (PORT_B, PORT_D):
-        idx = np.flatnonzero(log.port == port)
-        if len(idx) == 0:
-            continue
-        cur = log.value[idx].astype(np.int64)
-        prev = np.concatenate([cur[:1], cur[:-1]])
-        for axis, (p, step_b, dir_b, en_b, sign) in enumerate(_AXIS_PINS):
-            if p != port:
-                continue
-            rise = ((cur >> step_b) & 1 == 1) & ((prev >> step_b) & 1 == 0) & ((cur >> en_b) & 1 == 1)
-            d = np.where((cur >> dir_b) & 1 == 1, sign, -sign)
-            deltas[idx, axis] = np.where(rise, d, 0)
-    return np.cumsum(deltas, axis=0)
-
-
-def hole_strokes(log: PortLog | Iterable[tuple[int, str | int, int]]) -> np.ndarray:
-    """Every Z stroke that went down and came back up with X and Y standing still.
-
-    Returns:
-        ``(N, 5)`` int64 rows ``(x, y, z_top, z_bottom, z_end)`` in pulses:
-        the XY position, the height where the descent began, the lowest
-        height, and the height where the following ascent ended.
-    """
-    pos = decode_port_log(log)
-    out: list[tuple[int, int, int, int, int]] = []
-    if len(pos) == 0:
-        return np.zeros((0, 5), np.int64)
-    prev = np.vstack([pos[:1] * 0, pos[:-1]])
-    changed = np.flatnonzero(np.any(pos != prev, axis=1))
-    phase = None  # None, "down" or "up"
-    top = bottom = 0
-    last = np.zeros(3, np.int64)
-    for i in changed.tolist():
-        before = prev[i]
-        now = pos[i]
-        if now[0] != before[0] or now[1] != before[1]:
-            if phase == "up":
-                out.append((int(before[0]), int(before[1]), top, bottom, int(before[2])))
-            phase = None
-            last = now
-            continue
-        dz = int(now[2] - before[2])
-        if dz < 0:
-            if phase == "up":
-                out.append((int(before[0]), int(before[1]), top, bottom, int(before[2])))
-                phase = None
-            if phase is None:
-                phase, top = "down", int(before[2])
-        elif dz > 0 and phase == "down":
-            phase, bottom = "up", int(before[2])
-        last = now
-    if phase == "up":
-        out.append((int(last[0]), int(last[1]), top, bottom, int(last[2])))
-    return np.array(out, np.int64).reshape(-1, 5)
-
-
-def drilled_holes(log: PortLog | Iterable[tuple[int, str | int, int]]) -> list[tuple[int, int]]:
-    """The ``(x_pulses, y_pulses)`` of every place where Z went down and came back, in drilling order."""
-    return [(int(r[0]), int(r[1])) for r in hole_strokes(log)]
 
 
 class MaximusEmulator:
@@ -748,7 +583,7 @@ class MaximusEmulator:
     # ------------------------------------------------------------------ motion
     def _constspeed(self, n: int, delay: int, pin: int) -> None:
         """``constspeed()`` / ``constspeed2()``: n pulses of period 2 * delay * 100 us on one axis."""
-        step = _STEP_PIN[pin]
+        step = STEP_PIN[pin]
         for _ in range(n):
             self._output_bit(step, 1)
             self._dly_100us(delay)
@@ -809,7 +644,7 @@ class MaximusEmulator:
         self._ports[port] = value
         with self._lock:
             self._port_rows.append((self._t_ns, port, value))
-        for axis, (p, step_b, dir_b, en_b, sign) in enumerate(_AXIS_PINS):
+        for axis, (p, step_b, dir_b, en_b, sign) in enumerate(AXIS_PINS):
             if p != port:
                 continue
             if (value >> step_b) & 1 and not (old >> step_b) & 1 and (value >> en_b) & 1:
@@ -1026,7 +861,7 @@ def _travel_arg(values: Sequence[int] | None) -> tuple[int, int] | None:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Serve an emulated MAXIMUS board until Ctrl-C; prints the device path to open."""
-    parser = argparse.ArgumentParser(prog="python -m cam.drive.maximus_emulator", description=main.__doc__)
+    parser = argparse.ArgumentParser(prog="python -m cam.sim.maximus", description=main.__doc__)
     parser.add_argument("--speed", type=float, default=1.0,
                         help="simulated seconds per real second (0 = never sleep); default 1")
     for axis in "xyz":

@@ -27,8 +27,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import ParseError
-from .fileio import atomic_write_text
+from ..errors import ParseError
+from ..fileio import atomic_write_text
 
 __all__ = ["Digitized", "save_digitized", "load_digitized", "format_digitized", "parse_digitized"]
 
@@ -100,7 +100,7 @@ class Digitized:
 
     def _repr_png_(self) -> bytes:
         """Notebook picture: traced pixels coloured by level (shallow/first yellow, last purple)."""
-        from .picture import depth_colours, encode_png
+        from ..render.picture import depth_colours, encode_png
 
         rgb = np.full((self.height_px, self.width_px, 3), 255, np.uint8)
         for obj, level in zip(self.objects, self.levels):

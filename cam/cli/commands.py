@@ -13,21 +13,24 @@ import time
 from pathlib import Path
 from typing import Any, Callable, Optional, Sequence
 
-from . import __version__
-from .digitize import START_RULES, digitize
-from .digitized import Digitized, load_digitized, save_digitized
-from .drawing import load_image
-from .drive import Controller, MockPort, StepPlan, open_port, plan_steps, run, write_pin_log
-from .drive.runner import FINISHED, RunResult
-from .errors import CamError
-from .fileio import atomic_write_text
-from .gcode import save_gcode
-from .gcode_in import GCODE_SUFFIXES
-from .jobs import EXCELLON_SUFFIXES, HPGL_SUFFIXES
-from .profile import Profile, load_profile, profile_from_expr
-from .report import format_report, image_report, job_report
-from .settings import RAMP_MODES, MachineSettings, load_settings
-from .toolpath import goto, plan
+from .. import __version__
+from ..digitize import START_RULES, digitize
+from ..digitize.digitized import Digitized, load_digitized, save_digitized
+from ..digitize.drawing import load_image
+from ..drive.ports import MockPort, open_port
+from ..drive.runner import Controller, run
+from ..drive.steps import StepPlan, plan_steps
+from ..verify.pinlog import write_pin_log
+from ..drive.runner import FINISHED, RunResult
+from ..errors import CamError
+from ..fileio import atomic_write_text
+from ..formats.gcode_export import save_gcode
+from ..formats.gcode import GCODE_SUFFIXES
+from ..job.jobs import EXCELLON_SUFFIXES, HPGL_SUFFIXES
+from ..digitize.profile import Profile, load_profile, profile_from_expr
+from ..render.report import format_report, image_report, job_report
+from ..settings import RAMP_MODES, MachineSettings, load_settings
+from ..job.toolpath import goto, plan
 
 __all__ = ["main", "build_parser"]
 
@@ -150,7 +153,7 @@ def _add_hpgl_options(p: argparse.ArgumentParser) -> None:
 
 
 FILE_JOB_SUFFIXES = DRILL_SUFFIXES + GCODE_SUFFIXES + HPGL_SUFFIXES
-"""Files that are jobs already (not drawings): planned by :func:`cam.jobs.prepare_job`."""
+"""Files that are jobs already (not drawings): planned by :func:`cam.job.jobs.prepare_job`."""
 
 
 def _is_file_job(args: argparse.Namespace) -> bool:
@@ -159,7 +162,7 @@ def _is_file_job(args: argparse.Namespace) -> bool:
 
 def _prepare_file_job(args: argparse.Namespace, settings: Optional[MachineSettings] = None):
     """A G-code, drill or HPGL file planned with the command's options (progress bar by bytes read)."""
-    from .jobs import prepare_job
+    from ..job.jobs import prepare_job
 
     with _reading_bar(args) as progress:
         return prepare_job(args.image, _job_options(args), settings or _settings(args), name=args.image,
@@ -167,7 +170,7 @@ def _prepare_file_job(args: argparse.Namespace, settings: Optional[MachineSettin
 
 
 def _load_drill_file(args: argparse.Namespace):
-    from .excellon import load_excellon
+    from ..formats.excellon import load_excellon
 
     return load_excellon(args.image, units=args.excellon_units, digits=_excellon_digits(args),
                          zeros=args.excellon_zeros)
@@ -177,14 +180,14 @@ def _port_settings(args: argparse.Namespace, port: str) -> MachineSettings:
     """The machine settings for ``port``: a MAXIMUS board has its own resolution, step mode and 16-bit travel
     unless --machine says else."""
     if port.startswith("maximus:") and not args.machine:
-        from .drive.maximus import MAXIMUS_SETTINGS
+        from ..drive.maximus.board import MAXIMUS_SETTINGS
 
         return MAXIMUS_SETTINGS
     return _settings(args)
 
 
 def _drill_maximus(args: argparse.Namespace, dp, settings: MachineSettings, summary: str) -> int:
-    from .drive.maximus import MaximusBoard, drill_arguments
+    from ..drive.maximus.board import MaximusBoard, drill_arguments
 
     board = MaximusBoard(args.port)
     previous = signal.getsignal(signal.SIGINT)
@@ -494,8 +497,8 @@ def cmd_export(args: argparse.Namespace) -> int:
 
 
 def _write_preview(args: argparse.Namespace, job: Any, path: str, surface: bool = False) -> None:
-    from .drive import simulate_surface
-    from .picture import save_picture, surface_picture, toolpath_picture, toolpath_svg
+    from ..drive.runner import simulate_surface
+    from ..render.picture import save_picture, surface_picture, toolpath_picture, toolpath_svg
 
     if args.scale is not None and not (1 <= args.scale <= 64):
         raise CamError(f"--scale must be 1..64, got {args.scale}")
@@ -551,8 +554,8 @@ def _finish(args: argparse.Namespace, result: RunResult, report: dict, summary: 
 
 
 def _job_options(args: argparse.Namespace):
-    """The drill command's options for files that are not drawings, as :class:`cam.jobs.JobOptions`."""
-    from .jobs import JobOptions
+    """The drill command's options for files that are not drawings, as :class:`cam.job.jobs.JobOptions`."""
+    from ..job.jobs import JobOptions
 
     return JobOptions(
         drill_depth_mm=args.drill_depth, travel_height_mm=args.travel_height,
@@ -584,7 +587,7 @@ def _reading_bar(args: argparse.Namespace):
 def _write_file_job_preview(job: Any, path: str, scale: Optional[int] = None) -> None:
     """The job's preview (.png, the picture the web page shows: bounded in size at any resolution), or
     the toolpath of a drill or HPGL job as .svg."""
-    from .picture import save_picture, toolpath_svg
+    from ..render.picture import save_picture, toolpath_svg
 
     suffix = Path(path).suffix.lower()
     if suffix not in (".png", ".svg") or (suffix == ".svg" and job.toolpath is None):
@@ -596,7 +599,7 @@ def _write_file_job_preview(job: Any, path: str, scale: Optional[int] = None) ->
 
 
 def _drill_file(args: argparse.Namespace) -> int:
-    """G-code, Excellon and HPGL files: planned by :func:`cam.jobs.prepare_job`, then run."""
+    """G-code, Excellon and HPGL files: planned by :func:`cam.job.jobs.prepare_job`, then run."""
     settings = _port_settings(args, args.port)
     maximus = args.port.startswith("maximus:")
     job = _prepare_file_job(args, settings)
@@ -670,7 +673,7 @@ def _info_excellon(args: argparse.Namespace) -> int:
 
 
 def _info_hpgl(args: argparse.Namespace) -> int:
-    from .hpgl import PLOTTER_UNIT_MM, scan_hpgl
+    from ..formats.hpgl import PLOTTER_UNIT_MM, scan_hpgl
 
     args.no_progress = getattr(args, "no_progress", True)
     with _reading_bar(args) as progress:
@@ -746,7 +749,7 @@ def cmd_jog(args: argparse.Namespace) -> int:
         raise CamError(f"steps must be > 0, got {args.steps}")
     n = args.steps if axis[1] == "+" else -args.steps
     if args.port.startswith("maximus:"):
-        from .drive.maximus import MaximusBoard
+        from ..drive.maximus.board import MaximusBoard
 
         with MaximusBoard(args.port) as board:
             board.jog(axis[0].lower(), n, half_step=_port_settings(args, args.port).half_step)
@@ -754,8 +757,8 @@ def cmd_jog(args: argparse.Namespace) -> int:
         return 0
     import numpy as np
 
-    from .settings import Travel
-    from .toolpath import TRAVEL, Toolpath
+    from ..settings import Travel
+    from ..job.toolpath import TRAVEL, Toolpath
 
     settings = _settings(args)
     lo, hi = settings.travel.bounds_steps()["XYZ".index(axis[0])]
@@ -776,7 +779,7 @@ def cmd_jog(args: argparse.Namespace) -> int:
 
 
 def cmd_serve(args: argparse.Namespace) -> int:
-    from .web.server import ServerConfig, serve
+    from ..web.server import ServerConfig, serve
 
     if not (0 <= args.port <= 65535):
         raise CamError(f"--port must be 0..65535, got {args.port}")
@@ -790,7 +793,7 @@ def cmd_serve(args: argparse.Namespace) -> int:
 
 
 def cmd_emulate(args: argparse.Namespace) -> int:
-    from .drive import maximus_emulator
+    from ..sim import maximus as maximus_emulator
 
     return int(maximus_emulator.main(["--speed", str(args.speed)]) or 0)
 

@@ -23,7 +23,7 @@ from typing import Callable, Sequence, Union
 import numpy as np
 
 from .drawing import BLACK, BLUE, RED, Drawing, load_image
-from .errors import DrawingError, ParseError, PlanError
+from ..errors import DrawingError, ParseError, PlanError
 
 __all__ = ["Profile", "load_profile", "profile_from_expr", "profile_from_csv", "as_profile"]
 

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import CamError
+from cam.errors import CamError
 
 __all__ = ["CanonMove", "run_rs274", "parse_canonical", "canonical_polyline_mm", "carve_canonical"]
 
@@ -136,7 +136,7 @@ def carve_canonical(
 ) -> np.ndarray:
     """Surface cut by a point tool following rs274's feed moves below Z = 0, on the drawing's pixel grid.
 
-    Frames as in :mod:`cam.gcode`: column = X / (steps/px x mm/step), row = -Y / (...) (or +Y with
+    Frames as in :mod:`cam.formats.gcode_export`: column = X / (steps/px x mm/step), row = -Y / (...) (or +Y with
     ``flip_y``), depth in Z steps = -Z / mm/step Z.  Each feed segment is sampled at the midpoints of
     an even number (about ``samples_per_px x length_px``) of equal parts plus its end, so a
     move between pixel centres is never sampled exactly on a pixel border.

@@ -14,7 +14,7 @@ safe height to above the hole, plunge to the drill depth, retract to the
 safe height.  Holes are grouped by tool, smallest diameter first; before
 each tool the job pauses with a prompt naming the tool and its diameter.
 Within a tool the holes are drilled in a short tour from the current
-position (:func:`cam.drilltour.drill_order`).
+position (:func:`cam.job.drill_order.drill_order`).
 """
 from __future__ import annotations
 
@@ -22,8 +22,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import PlanError, TravelError
-from .settings import DEFAULT_SETTINGS, MachineSettings
+from ..errors import PlanError, TravelError
+from ..settings import DEFAULT_SETTINGS, MachineSettings
 from .toolpath import CUT, RETRACT, TRAVEL, Toolpath, check_travel
 
 __all__ = ["DrillPlan", "plan_drill", "DEFAULT_DEPTH_MM", "DEFAULT_SAFE_HEIGHT_MM"]
@@ -79,7 +79,7 @@ def plan_drill(
     mirror_x: bool = False,
     order: str = "tour",
 ) -> DrillPlan:
-    """Plan the drilling of a :class:`~cam.excellon.HoleList`.
+    """Plan the drilling of a :class:`~cam.formats.excellon.HoleList`.
 
     Args:
         holes: the hole list (board frame, mm).
@@ -92,7 +92,7 @@ def plan_drill(
     Raises:
         PlanError: bad options; TravelError: a hole outside the travel (naming the hole and its line).
     """
-    from .drilltour import drill_order
+    from .drill_order import drill_order
 
     if depth_mm <= 0 or safe_height_mm < 0:
         raise PlanError("drill depth must be > 0 mm and the safe height >= 0 mm")

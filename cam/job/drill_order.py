@@ -43,7 +43,7 @@ import math
 import numpy as np
 from numba import njit
 
-from .errors import PlanError
+from ..errors import PlanError
 
 __all__ = ["drill_order", "nearest_neighbour_order", "tour_length_mm", "EXACT_MAX", "K_NEIGHBOURS"]
 

@@ -19,10 +19,9 @@ import io
 import os
 from pathlib import Path
 
-import numpy as np
 
-from .fileio import atomic_write_text
-from .toolpath import CUT, RETRACT, TRAVEL, Toolpath
+from ..fileio import atomic_write_text
+from ..job.toolpath import RETRACT, TRAVEL, Toolpath
 
 __all__ = ["to_gcode", "save_gcode", "feeds_mm_per_min"]
 

@@ -32,7 +32,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from .errors import DrawingError
+from ..errors import DrawingError
 
 __all__ = [
     "WHITE",
@@ -107,7 +107,7 @@ class Drawing:
 
     def _repr_png_(self) -> bytes:
         """Notebook picture: the classified drawing, scaled up so single pixels show."""
-        from .picture import auto_scale, encode_png
+        from ..render.picture import auto_scale, encode_png
 
         k = auto_scale(self.width_px, self.height_px, 600)
         return encode_png(np.repeat(np.repeat(self.to_rgb(), k, axis=0), k, axis=1))

@@ -13,7 +13,7 @@ Supported (what grbl- and LinuxCNC-oriented CAM programs emit):
 
 Anything else is a :class:`~cam.errors.ParseError` naming the line and the word.
 
-Frames, as for G-code out (:mod:`cam.gcode`): machine X steps = X mm / mm per step;
+Frames, as for G-code out (:mod:`cam.formats.gcode_export`): machine X steps = X mm / mm per step;
 machine Y steps = -Y mm / mm per step (machine Y grows upward, the drawing
 frame's rows downward; ``flip_y`` uses +Y); machine Z steps = -Z mm / mm per
 step Z (+Z up in G-code, deeper is + in `cam`).  G-code (0, 0, 0) is the home.
@@ -33,8 +33,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import ParseError, TravelError
-from .settings import DEFAULT_SETTINGS, MachineSettings
+from ..errors import ParseError, TravelError
+from ..settings import DEFAULT_SETTINGS, MachineSettings
 
 __all__ = ["GcodeMove", "GcodeProgram", "parse_gcode", "load_gcode", "plan_gcode_steps", "GCODE_SUFFIXES"]
 
@@ -295,12 +295,12 @@ def plan_gcode_steps(
     """Step plan of a G-code program (see the module docstring for frames and accuracy).
 
     Rapids run at the configured step delays; feed moves at their F, never faster than the delays allow;
-    then the speed ramps of ``settings.ramp`` lengthen periods (:mod:`cam.drive.motion`), stopping at pauses.
+    then the speed ramps of ``settings.ramp`` lengthen periods (:mod:`cam.drive.ramps`), stopping at pauses.
 
     Raises:
         TravelError: a move leaves the machine travel (naming the line).
     """
-    from .drive.steps import StepPlan, port_writes
+    from ..drive.steps import StepPlan, port_writes
 
     s = settings
     # mm -> machine steps: X, -Y (or +Y), -Z

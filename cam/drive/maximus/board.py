@@ -1,7 +1,7 @@
 """The host side of the MAXIMUS drilling machine's RS-232 protocol.
 
 :class:`MaximusBoard` talks to the PIC firmware listed in seed 000 Appendix 1
-(or to :mod:`cam.drive.maximus_emulator`, which behaves byte for byte like
+(or to :mod:`cam.sim.maximus`, which behaves byte for byte like
 it) at 115200 baud, 8N1.  Packets are built by pure functions
 (:func:`jog_packet`, :func:`offset_packet`, :func:`init_packet`,
 :func:`drill_packet`, ...); the board object only sends them and checks the
@@ -35,9 +35,9 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from ..errors import PlanError, PortError
-from ..settings import DEFAULT_SETTINGS, MachineSettings, Travel
-from .maximus_emulator import (
+from ...errors import PlanError, PortError
+from ...settings import DEFAULT_SETTINGS, MachineSettings, Travel
+from .protocol import (
     ATOFFSETPOS, BANNER, BAUD_RATE, BYTE_NAMES, DRILLMODE1DONE, DRILLMODE1INITIALIZED, DRILLMODE1ON,
     EMERGENCYSTOP, ISMACHINEREADY, JOGMODEDONE, JOGMODEOFF, JOGMODEON, MACHINEREADY, MACHINESTOPPED,
     ONEHOLEDRILLED, OPENDRILLMODE1, OPENJOGMODE, SWITCH_NAMES,
@@ -68,7 +68,7 @@ MAXIMUS_SETTINGS = DEFAULT_SETTINGS.replace(
 
 
 def drill_arguments(drill_plan: Any, settings: MachineSettings = MAXIMUS_SETTINGS) -> dict[str, Any]:
-    """The :meth:`MaximusBoard.drill` arguments of a :class:`~cam.drilljob.DrillPlan` planned with ``settings``:
+    """The :meth:`MaximusBoard.drill` arguments of a :class:`~cam.job.drill.DrillPlan` planned with ``settings``:
     holes in the board's pulses (:func:`maximus_holes`), depth, tool-change prompts and the step mode."""
     return {"holes_steps": maximus_holes(drill_plan.holes_steps), "depth_steps": drill_plan.depth_steps,
             "tool_changes": drill_plan.tool_changes, "half_step": settings.half_step}
@@ -77,7 +77,7 @@ def drill_arguments(drill_plan: Any, settings: MachineSettings = MAXIMUS_SETTING
 def maximus_holes(holes_steps: np.ndarray) -> np.ndarray:
     """Holes of a drill plan in the board's own pulses: ``(N, 2)`` int64 (x, y) with y up.
 
-    :func:`cam.drilljob.plan_drill` gives machine (x, y) with y toward the operator (image rows,
+    :func:`cam.job.drill.plan_drill` gives machine (x, y) with y toward the operator (image rows,
     y = -Y of the drill file); the firmware counts Y up (DIR_Y = 1 is "Y up" in the PC program of
     seed 000 Appendix 2), so y changes sign and the board keeps its handedness.
     """

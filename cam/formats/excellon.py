@@ -72,7 +72,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import CamError, ParseError
+from ..errors import CamError, ParseError
 
 __all__ = [
     "HoleList",

@@ -25,9 +25,9 @@ from typing import Any, Mapping, Optional
 
 import numpy as np
 
-from .errors import CamError
-from .hpgl import HPGL_SUFFIXES
-from .settings import DEFAULT_SETTINGS, MachineSettings
+from ..errors import CamError
+from ..formats.hpgl import HPGL_SUFFIXES
+from ..settings import DEFAULT_SETTINGS, MachineSettings
 
 __all__ = [
     "JobOptions", "PreparedJob", "prepare_job", "job_kind", "accepted_suffixes", "KINDS",
@@ -43,7 +43,7 @@ PROFILE_SUFFIXES = DRAWING_SUFFIXES + (".csv", ".txt")
 
 
 def _gcode_suffixes() -> tuple[str, ...]:
-    from .gcode_in import GCODE_SUFFIXES
+    from ..formats.gcode import GCODE_SUFFIXES
 
     return tuple(GCODE_SUFFIXES)
 
@@ -289,9 +289,9 @@ class PreparedJob:
 
     Attributes:
         source: the file it came from; name: what to call it; kind: one of :data:`KINDS`.
-        steps: the :class:`~cam.drive.StepPlan` (machine frame, steps from the job home).
+        steps: the :class:`~cam.drive.steps.StepPlan` (machine frame, steps from the job home).
         settings: the machine settings of ``steps``.
-        toolpath: the :class:`~cam.toolpath.Toolpath` when the kind has one (not G-code).
+        toolpath: the :class:`~cam.job.toolpath.Toolpath` when the kind has one (not G-code).
         size_mm: ``(width, height)`` of what is cut (XY extent of the tool below the surface), mm.
         depth_mm: deepest cut below the surface, mm.
         extent_steps: ``(3, 2)`` int64 min and max machine position (x, y, z) in steps the job
@@ -300,7 +300,7 @@ class PreparedJob:
         warnings: planning and parsing warnings; tool_changes: what each pause of the job is for.
         summary: one line saying what the job is.
         report: JSON-able job report.
-        drill_plan: the :class:`~cam.drilljob.DrillPlan` of a drill file (holes in drilling order, tools),
+        drill_plan: the :class:`~cam.job.drill.DrillPlan` of a drill file (holes in drilling order, tools),
             which a MAXIMUS board drills by itself.
     """
 
@@ -323,15 +323,15 @@ class PreparedJob:
 
     def positions_steps(self) -> np.ndarray:
         """``(M, 3)`` int64 machine position (x, y, z) in steps after each write of the plan."""
-        from .drive.pinlog import PinLog, decode_pin_log
+        from ..verify.pinlog import PinLog, decode_pin_log
 
         plan = self.steps
         return decode_pin_log(PinLog(plan.t_ns, plan.data, plan.strobe), self.settings).position_steps
 
     def preview_picture(self) -> np.ndarray:
-        """The preview as an ``(H, W, 3)`` uint8 RGB array (see :mod:`cam.picture`)."""
+        """The preview as an ``(H, W, 3)`` uint8 RGB array (see :mod:`cam.render.picture`)."""
         if self.kind in ("drawing", "digitized"):
-            from .picture import toolpath_picture
+            from ..render.picture import toolpath_picture
 
             return toolpath_picture(self.toolpath, drawing_rgb=self.drawing_rgb,
                                     estimated_time_s=self.estimated_time_s)
@@ -340,7 +340,7 @@ class PreparedJob:
 
     def preview_png(self) -> bytes:
         """PNG bytes of :meth:`preview_picture`."""
-        from .picture import encode_png
+        from ..render.picture import encode_png
 
         return encode_png(self.preview_picture())
 
@@ -367,7 +367,7 @@ def motion_picture(
     """
     import cv2
 
-    from .picture import LEGEND_PX, depth_colours
+    from ..render.picture import LEGEND_PX, depth_colours
 
     p = np.vstack([np.zeros((1, 3), np.int64), np.asarray(positions_steps, np.int64).reshape(-1, 3)])
     lo = p[:, :2].min(axis=0)
@@ -418,7 +418,7 @@ def _cut_extent(extent: np.ndarray, cut: np.ndarray, settings: MachineSettings) 
 
 def _finish(job: PreparedJob) -> PreparedJob:
     """Fill the fields every kind computes the same way from the step plan."""
-    from .drive.pinlog import motion_extent
+    from ..verify.pinlog import motion_extent
 
     job.extent_steps, cut = motion_extent(job.steps.data, job.settings)  # decoded in bounded chunks
     if job.size_mm == (0.0, 0.0):
@@ -443,12 +443,12 @@ def _finish(job: PreparedJob) -> PreparedJob:
 
 
 def _prepare_pixels(path: Path, kind: str, options: JobOptions, settings: MachineSettings) -> PreparedJob:
-    from .digitize import digitize
-    from .digitized import load_digitized
-    from .drawing import load_image
-    from .drive.steps import plan_steps
-    from .profile import load_profile, profile_from_expr
-    from .report import job_report
+    from ..digitize import digitize
+    from ..digitize.digitized import load_digitized
+    from ..digitize.drawing import load_image
+    from ..drive.steps import plan_steps
+    from ..digitize.profile import load_profile, profile_from_expr
+    from ..render.report import job_report
     from .toolpath import plan
 
     rgb = None
@@ -478,7 +478,7 @@ def _prepare_pixels(path: Path, kind: str, options: JobOptions, settings: Machin
 
 
 def _prepare_gcode(path: Path, options: JobOptions, settings: MachineSettings) -> PreparedJob:
-    from .gcode_in import load_gcode, plan_gcode_steps
+    from ..formats.gcode import load_gcode, plan_gcode_steps
 
     program = load_gcode(path)
     steps = plan_gcode_steps(program, settings, flip_y=options.flip_y)
@@ -489,9 +489,9 @@ def _prepare_gcode(path: Path, options: JobOptions, settings: MachineSettings) -
 
 
 def _prepare_excellon(path: Path, options: JobOptions, settings: MachineSettings) -> PreparedJob:
-    from .drilljob import plan_drill
-    from .drive.steps import plan_steps
-    from .excellon import load_excellon  # lazy: only drill jobs need it
+    from .drill import plan_drill
+    from ..drive.steps import plan_steps
+    from ..formats.excellon import load_excellon  # lazy: only drill jobs need it
 
     holes = load_excellon(path, units=options.excellon_units, digits=options.excellon_digits,
                           zeros=options.excellon_zeros)
@@ -512,8 +512,8 @@ def _prepare_excellon(path: Path, options: JobOptions, settings: MachineSettings
 
 
 def _prepare_hpgl(path: Path, options: JobOptions, settings: MachineSettings, progress=None) -> PreparedJob:
-    from .drive.steps import plan_steps
-    from .hpgl import load_hpgl, plan_hpgl  # lazy: only HPGL jobs need it
+    from ..drive.steps import plan_steps
+    from ..formats.hpgl import load_hpgl, plan_hpgl  # lazy: only HPGL jobs need it
 
     drawing = load_hpgl(path, progress=progress)
     toolpath = plan_hpgl(drawing, settings=settings, depth_mm=options.depth_mm,

@@ -34,7 +34,7 @@ in the machine.  Each pen-down stroke starts where the pen goes down (a
 moves only say where the next stroke starts: the machine goes there directly
 at the safe height.
 
-Frames and units (as :mod:`cam.drilljob`): HPGL X right, Y up, plotter units.
+Frames and units (as :mod:`cam.job.drill`): HPGL X right, Y up, plotter units.
 Machine x = X, machine y = -Y (toward the operator), in steps of
 ``settings.mm_per_step_xy``, rounded to the nearest step (the seed truncates:
 ``xsteps = xcoord * 250 / 254`` in integer arithmetic, 004 section 3.6.2).  By
@@ -62,9 +62,9 @@ from typing import BinaryIO, Callable, Iterator, Optional, TextIO, Union
 import numpy as np
 from numba import njit
 
-from .errors import ParseError, PlanError, TravelError
-from .settings import DEFAULT_SETTINGS, MachineSettings
-from .toolpath import CUT, RETRACT, TRAVEL, Toolpath, check_travel
+from ..errors import ParseError, PlanError, TravelError
+from ..settings import DEFAULT_SETTINGS, MachineSettings
+from ..job.toolpath import CUT, RETRACT, TRAVEL, Toolpath, check_travel
 
 __all__ = [
     "HPGL_SUFFIXES", "PLOTTER_UNIT_MM", "CHUNK_BYTES", "DEFAULT_CUT_DEPTH_MM", "DEFAULT_SAFE_HEIGHT_MM",

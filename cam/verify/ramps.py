@@ -68,7 +68,7 @@ from numba import njit
 
 from ..settings import DEFAULT_SETTINGS, MachineSettings
 from .pinlog import PinLog, read_pin_log, rising_edges
-from .steps import axis_bits
+from ..drive.pins import axis_bits
 
 __all__ = ["RampViolation", "RampReport", "check_ramps", "check_axis_steps"]
 

@@ -18,8 +18,8 @@ from xml.sax.saxutils import escape
 import cv2
 import numpy as np
 
-from .errors import CamError
-from .fileio import atomic_write_bytes, atomic_write_text
+from ..errors import CamError
+from ..fileio import atomic_write_bytes, atomic_write_text
 
 __all__ = ["depth_colours", "toolpath_picture", "toolpath_svg", "surface_picture", "save_picture", "auto_scale",
            "encode_png"]

@@ -25,7 +25,7 @@ import numpy as np
 from ..errors import CamError, ParseError
 from ..fileio import atomic_write_text
 from ..settings import DEFAULT_SETTINGS, MachineSettings
-from .steps import axis_bits
+from ..drive.pins import axis_bits
 
 __all__ = ["Surface", "PinLog", "Motion", "decode_pin_log", "read_pin_log", "write_pin_log", "carve",
            "PositionTracker", "motion_extent", "rising_edges"]
@@ -37,7 +37,7 @@ class Surface(np.ndarray):
     """A cut surface: ``(H, W)`` int64 depth in Z steps per drawing pixel; shows itself as a picture in notebooks."""
 
     def _repr_png_(self) -> bytes:
-        from ..picture import encode_png, surface_picture
+        from ..render.picture import encode_png, surface_picture
 
         return encode_png(surface_picture(np.asarray(self)))
 

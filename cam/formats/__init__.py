@@ -1,0 +1,1 @@
+"""File formats, text <-> model only: Excellon, HPGL, G-code."""

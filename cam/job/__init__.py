@@ -1,0 +1,1 @@
+"""Planning: every job source to one job model in machine steps."""

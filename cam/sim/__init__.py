@@ -1,0 +1,1 @@
+"""Emulators of the machines cam drives (never imported by the host side)."""

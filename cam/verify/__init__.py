@@ -1,0 +1,1 @@
+"""The user-facing proofs: pin-log decoder, carve, ramp checker."""

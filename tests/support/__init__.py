@@ -1,0 +1,1 @@
+"""Test-only oracles and helpers (never shipped in the library)."""

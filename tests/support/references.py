@@ -1,0 +1,245 @@
+"""Plain-Python references of compiled or vectorised library code: the tests check the fast versions equal them."""
+from __future__ import annotations
+
+import cv2
+
+import numpy as np
+
+from cam.settings import MachineSettings
+from cam.digitize.trace2d import NEIGHBOURS_2D, START_RULES
+from cam.digitize.peel3d import NEIGHBOURS_3D
+from cam.job.toolpath import CUT, RETRACT, TRAVEL, _gap_block
+
+__all__ = ["trace_curves_reference", "trace_layers_reference", "assemble_reference"]
+
+
+def _walk(flat: bytearray, start: int, offsets: tuple[int, ...]) -> list[int]:
+    """Greedy trace from ``start`` (already marked traced); marks and returns the pixels it visits."""
+    path: list[int] = []
+    cur = start
+    while True:
+        for off in offsets:
+            q = cur + off
+            if flat[q]:
+                flat[q] = 0
+                path.append(q)
+                cur = q
+                break
+        else:
+            return path
+
+
+def _trace_ring(
+    flat: bytearray, ring_idx: np.ndarray, start: int, offsets: tuple[int, ...], wp: int
+) -> tuple[list[int], int]:
+    """Trace all pixels of one ring; returns (path, number of greedy segments)."""
+    path: list[int] = []
+    segments = 0
+    cur = start
+    remaining = ring_idx
+    while True:
+        flat[cur] = 0
+        path.append(cur)
+        segments += 1
+        while True:
+            for off in offsets:
+                q = cur + off
+                if flat[q]:
+                    flat[q] = 0
+                    path.append(q)
+                    cur = q
+                    break
+            else:
+                break
+        view = np.frombuffer(flat, np.uint8)
+        remaining = remaining[view[remaining] != 0]
+        if len(remaining) == 0:
+            return path, segments
+        rr, cc = remaining // wp, remaining % wp
+        d2 = (rr - cur // wp) ** 2 + (cc - cur % wp) ** 2
+        cur = int(remaining[int(np.argmin(d2))])
+
+def trace_curves_reference(
+    black: np.ndarray,
+    *,
+    start: str = "top",
+    tool_xy_px: tuple[int, int] = (0, 0),
+) -> list[np.ndarray]:
+    """Trace every black pixel of ``black`` into ordered curves.
+
+    Args:
+        black: ``(H, W)`` bool mask, indexed ``[row, col]``.
+        start: ``"top"`` -- each object starts at the first untraced black
+            pixel in scan order; ``"min-distance"`` -- at the untraced black
+            pixel nearest (Euclidean) the tool's current position, which is
+            the end of the previous object, ties going to scan order.
+        tool_xy_px: tool position (x, y) before the first object.
+
+    Returns:
+        One ``(n, 2)`` int32 array of ``(x, y)`` pixels per object, in cutting
+        order.  Every black pixel appears exactly once.  An open curve runs
+        end to end: in ``top`` mode from its end first in scan order, in
+        ``min-distance`` mode from its end nearest the tool.
+
+    >>> import numpy as np
+    >>> m = np.zeros((4, 5), bool); m[1, 1:4] = True   # a 3-pixel dash
+    >>> [o.tolist() for o in trace_curves(m, start="min-distance", tool_xy_px=(4, 1))]
+    [[[3, 1], [2, 1], [1, 1]]]
+    """
+    if start not in START_RULES:
+        raise ValueError(f"start must be one of {START_RULES}, got {start!r}")
+    black = np.asarray(black, bool)
+    h, w = black.shape
+    wp = w + 2
+    padded = np.zeros((h + 2, wp), np.uint8)
+    padded[1:-1, 1:-1] = black
+    flat = bytearray(padded.tobytes())
+    offsets = tuple(dr * wp + dc for dr, dc in NEIGHBOURS_2D)
+
+    scan = np.flatnonzero(padded)  # scan order: row-major
+    scan_rows = scan // wp - 1
+    scan_cols = scan % wp - 1
+    flat_view = np.frombuffer(flat, np.uint8)  # live view: 0 once traced
+    objects: list[np.ndarray] = []
+    tool_x, tool_y = tool_xy_px
+    cursor = 0  # next candidate in scan order (top mode)
+    alive_idx = np.arange(len(scan))  # candidates not yet known traced (min-distance mode)
+
+    while True:
+        if start == "top":
+            while cursor < len(scan) and not flat[scan[cursor]]:
+                cursor += 1
+            if cursor == len(scan):
+                break
+            s = int(scan[cursor])
+        else:
+            alive_idx = alive_idx[flat_view[scan[alive_idx]] != 0]
+            if len(alive_idx) == 0:
+                break
+            d2 = (scan_cols[alive_idx] - tool_x) ** 2 + (scan_rows[alive_idx] - tool_y) ** 2
+            s = int(scan[alive_idx[int(np.argmin(d2))]])
+        flat[s] = 0
+        arm1 = _walk(flat, s, offsets)
+        arm2 = _walk(flat, s, offsets)  # non-empty only when s was mid-curve
+        path = arm2[::-1] + [s] + arm1
+        if arm2:
+            first, last = path[0], path[-1]
+            if start == "top":
+                flip = last < first  # begin at the end first in scan order
+            else:
+                def d2_of(p: int) -> int:
+                    return (p % wp - 1 - tool_x) ** 2 + (p // wp - 1 - tool_y) ** 2
+
+                flip = d2_of(last) < d2_of(first)
+            if flip:
+                path.reverse()
+        idx = np.asarray(path, np.int64)
+        obj = np.empty((len(idx), 2), np.int32)
+        obj[:, 0] = idx % wp - 1
+        obj[:, 1] = idx // wp - 1
+        objects.append(obj)
+        tool_x, tool_y = int(obj[-1, 0]), int(obj[-1, 1])
+    return objects
+
+
+def trace_layers_reference(layer: np.ndarray) -> tuple[list[np.ndarray], np.ndarray]:
+    """Trace every layer into rings.
+
+    Args:
+        layer: ``(H, W)`` int32 layer numbers from :func:`peel_layers` (0 = not drawn).
+
+    Returns:
+        ``(objects, levels)``: one ``(n, 2)`` int32 ``(x, y)`` array per ring in
+        cutting order (layer by layer), and ``(n_rings,)`` int32 layer of each ring.
+    """
+    h, w = layer.shape
+    wp = w + 2
+    padded = np.zeros((h + 2, wp), np.int32)
+    padded[1:-1, 1:-1] = layer
+    offsets = tuple(dr * wp + dc for dr, dc in NEIGHBOURS_3D)
+    n_layers = int(layer.max())
+    objects: list[np.ndarray] = []
+    levels: list[int] = []
+    if n_layers == 0:
+        return objects, np.zeros(0, np.int32)
+    flat_all = padded.ravel()
+    order = np.argsort(flat_all, kind="stable")  # pixels grouped by layer, scan order within
+    counts = np.bincount(flat_all, minlength=n_layers + 1)
+    bounds = np.concatenate([[0], np.cumsum(counts)])
+    tool = None  # (row, col) in padded coordinates
+    for k in range(1, n_layers + 1):
+        idx = order[bounds[k] : bounds[k + 1]]  # scan order
+        if len(idx) == 0:
+            continue
+        mask = np.zeros((h + 2) * wp, np.uint8)
+        mask[idx] = 1
+        n_rings, labels = cv2.connectedComponents(mask.reshape(h + 2, wp), connectivity=8)
+        lab = labels.ravel()[idx]
+        flat = bytearray(mask.tobytes())
+        rings = {r: idx[lab == r] for r in range(1, n_rings)}
+        first = True
+        while rings:
+            if first:
+                r_id = int(lab[0])  # the ring of the layer's first pixel in scan order
+                start = int(rings[r_id][0])
+                first = False
+            else:
+                # the ring of the untraced pixel nearest the tool (ties: first in scan order)
+                left = np.concatenate(list(rings.values()))
+                left.sort()
+                d2 = (left // wp - tool[0]) ** 2 + (left % wp - tool[1]) ** 2
+                start = int(left[int(np.argmin(d2))])
+                r_id = int(labels.ravel()[start])
+            path, _ = _trace_ring(flat, rings.pop(r_id), start, offsets, wp)
+            p = np.asarray(path, np.int64)
+            obj = np.empty((len(p), 2), np.int32)
+            obj[:, 0] = p % wp - 1
+            obj[:, 1] = p // wp - 1
+            objects.append(obj)
+            levels.append(k)
+            tool = (int(p[-1] // wp), int(p[-1] % wp))
+    return objects, np.array(levels, np.int32)
+
+
+def assemble_reference(
+    targets: np.ndarray, pause_px: np.ndarray, asked: np.ndarray, settings: MachineSettings,
+    surface: int, safe: int, oz: int,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The planner's rules as a plain loop over the targets; :func:`_assemble` does the same faster."""
+    pts: list[tuple[int, int, int]] = []
+    kinds: list[int] = []
+    tgt: list[bool] = []
+    pause: list[bool] = []
+
+    def emit(x: int, y: int, z: int, kind: int, is_target: bool = False) -> None:
+        if pts and pts[-1] == (x, y, z):
+            if is_target:
+                tgt[-1] = True
+                kinds[-1] = CUT
+                pause[-1] = pause[-1] or bool(pause_px[y, x])
+            return
+        pts.append((x, y, z))
+        kinds.append(kind)
+        tgt.append(is_target)
+        pause.append(is_target and bool(pause_px[y, x]))
+
+    cx, cy, cz = 0, 0, 0
+    on_drawing = False  # is the tool at a drawing pixel at or above its asked depth
+    for x, y, d in targets.tolist():
+        if on_drawing and max(abs(x - cx), abs(y - cy)) <= 1:
+            if d < cz:  # shallower: lift first, then move
+                emit(cx, cy, d, CUT)
+                cz = d
+            emit(x, y, cz, CUT)  # move at the current depth ...
+        else:
+            for p in _gap_block((cx, cy, cz), (x, y, d), on_drawing, asked, settings, surface, safe, oz):
+                emit(*p)
+        emit(x, y, d, CUT, is_target=True)  # ... then plunge
+        cx, cy, cz = x, y, d
+        on_drawing = True
+    # end of job: lift, travel home, back to Z = 0
+    emit(cx, cy, safe, RETRACT)
+    emit(0, 0, safe, TRAVEL)
+    emit(0, 0, 0, TRAVEL)
+    return (np.array(pts, np.int64).reshape(-1, 3), np.array(kinds, np.uint8), np.array(tgt, bool),
+            np.array(pause, bool))
