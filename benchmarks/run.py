@@ -204,7 +204,7 @@ def bench_relief(quick: bool) -> tuple[dict, dict]:
     # row 6: path length (cutting + travel) and surface error of both, in pixels
     from support.lcnc import canonical_polyline_mm, parse_canonical, run_rs274
 
-    pts = np.vstack([[0, 0, 0], job.points_px]).astype(np.float64)
+    pts = np.vstack([[0, 0, 0], job.points_px()]).astype(np.float64)
     cam_len = float(np.abs(np.diff(pts[:, :2], axis=0)).max(axis=1).sum())  # X/Y pixels moved (diagonal = 1)
     cam_len_euclid = float(np.linalg.norm(np.diff(pts[:, :2], axis=0), axis=1).sum())
     ours = cam.simulate_surface(job)
@@ -277,10 +277,10 @@ def bench_drill_tour(quick: bool) -> dict:
 
 def bench_realtime(quick: bool) -> dict:
     seconds = 2.0 if quick else 10.0
-    s = cam.MachineSettings().replace(steps_per_px_xy=1, delay_xy_ms=1.0, delay_z_ms=1.0, ramp="constant")
+    s = cam.MachineSettings().replace(delay_xy_ms=1.0, delay_z_ms=1.0, ramp="constant")
     n = int(seconds * 1000)
-    job = cam.Toolpath(points_px=np.array([[n, 0, 0]]), kind=np.zeros(1, np.uint8), target=np.zeros(1, bool),
-                       pause=np.zeros(1, bool), settings=s.replace(travel=cam.settings.Travel(x_max_steps=n)))
+    job = cam.Job(points_steps=np.array([[n, 0, 0]]), kind=np.zeros(1, np.uint8), target=np.zeros(1, bool),
+                  pause=np.zeros(1, bool), settings=s.replace(travel=cam.settings.Travel(x_max_steps=n)))
     plan = cam.plan_steps(job)
     # the other core is kept busy by a separate process (a thread here would only fight for the GIL)
     procs = [subprocess.Popen([sys.executable, "-c", "import time\nt=time.time()\nwhile time.time()-t<%f: pass" % (seconds + 2)])]

@@ -4,7 +4,7 @@ One data model flows one way::
 
     load_image(path)   -> Drawing     classified pixels + rule warnings
     digitize(drawing)  -> Digitized   ordered pixel paths (the digitized matrix)
-    plan(digitized)    -> Toolpath    ordered 3D points in pixels, retracts marked
+    plan(digitized)    -> Job         moves in machine steps, retracts marked (every planner returns one)
     plan_steps(path)   -> StepPlan    timed port writes
     run(job, port)     -> RunResult   writes sent to a port ("mock" by default)
 
@@ -34,9 +34,10 @@ _LAZY = {
     "save_digitized": "cam.digitize.digitized",
     "Profile": "cam.digitize.profile", "load_profile": "cam.digitize.profile",
     "profile_from_expr": "cam.digitize.profile",
-    "plan": "cam.job.toolpath", "goto": "cam.job.toolpath", "Toolpath": "cam.job.toolpath",
+    "plan": "cam.job.drawing", "goto": "cam.job.moves", "jog": "cam.job.moves", "Job": "cam.job.model",
+    "PixelFrame": "cam.job.model",
     "plan_drill": "cam.job.drill", "DrillPlan": "cam.job.drill", "drill_order": "cam.job.drill_order",
-    "plan_hpgl": "cam.formats.hpgl",
+    "plan_hpgl": "cam.job.hpgl",
     "load_excellon": "cam.formats.excellon", "parse_excellon": "cam.formats.excellon",
     "HoleList": "cam.formats.excellon",
     "load_hpgl": "cam.formats.hpgl", "parse_hpgl": "cam.formats.hpgl", "scan_hpgl": "cam.formats.hpgl",
@@ -100,10 +101,13 @@ if TYPE_CHECKING:  # pragma: no cover - for type checkers and editors only
     from .errors import CamError, DrawingError, ParseError, PlanError, PortError, SettingsError, TravelError
     from .formats.excellon import HoleList, load_excellon, parse_excellon
     from .formats.gcode_export import save_gcode, to_gcode
-    from .formats.hpgl import HpglDrawing, HpglScan, iter_hpgl, load_hpgl, parse_hpgl, plan_hpgl, scan_hpgl
+    from .formats.hpgl import HpglDrawing, HpglScan, iter_hpgl, load_hpgl, parse_hpgl, scan_hpgl
+    from .job.hpgl import plan_hpgl
     from .job.drill import DrillPlan, plan_drill
     from .job.drill_order import drill_order
-    from .job.toolpath import Toolpath, goto, plan
+    from .job.drawing import plan
+    from .job.model import Job, PixelFrame
+    from .job.moves import goto, jog
     from .render.report import image_report, job_report
     from .settings import MachineSettings, load_settings
     from .verify.pinlog import Motion, PinLog, carve, decode_pin_log, read_pin_log, write_pin_log

@@ -31,7 +31,7 @@ def expected_surface_2d(digitized: cam.Digitized, depths_px: list[int], settings
     return out
 
 
-def carve_job(job: cam.Toolpath, **run_kwargs) -> tuple[np.ndarray, cam.RunResult, cam.Motion]:
+def carve_job(job: cam.Job, **run_kwargs) -> tuple[np.ndarray, cam.RunResult, cam.Motion]:
     """Run a toolpath on the mock, decode the pin log, carve with a point tool."""
     result = cam.run(job, **run_kwargs)
     motion = cam.decode_pin_log(result.pin_log(), job.settings)

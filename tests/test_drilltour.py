@@ -198,7 +198,7 @@ def test_plan_drill_tour_moves_less_than_file_order():
     holes = fake_holes(pts, np.ones(200, np.int64), {1: 0.8})
 
     def xy_travel_steps(plan):
-        xy = plan.toolpath.points_px[:, :2].astype(float)
+        xy = plan.toolpath.points_steps[:, :2].astype(float)
         return np.hypot(*np.diff(xy, axis=0).T).sum()
 
     tour, file_order = plan_drill(holes), plan_drill(holes, order="file")

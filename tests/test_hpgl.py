@@ -12,14 +12,13 @@ import pytest
 import cam
 from cam.formats.hpgl import (
     HpglCommand,
-    hpgl_steps,
     iter_hpgl,
     load_hpgl,
     parse_hpgl,
-    plan_hpgl,
     scan_hpgl,
 )
-from cam.job.toolpath import CUT, RETRACT, TRAVEL
+from cam.job.hpgl import DEFAULT_SAFE_HEIGHT_MM, hpgl_steps, plan_hpgl
+from cam.job.model import CUT, RETRACT, TRAVEL
 
 from conftest import ROOT, SAMPLES
 
@@ -200,7 +199,7 @@ def test_plan_moves_pen_up_at_the_safe_height_and_cuts_at_depth():
     d = parse_hpgl(b"PU0,0;PD400,0;PU;PA800,0;PD800,400;PU;PA801,400;PD0,400;")
     job = plan_hpgl(d, depth_mm=0.5, safe_height_mm=1.0)
     depth, safe = round(0.5 / S.mm_per_step_z), -round(1.0 / S.mm_per_step_z)
-    p, kind = job.points_px, job.kind
+    p, kind = job.points_steps, job.kind
     prev = np.vstack([[0, 0, 0], p[:-1]])
     xy_move = np.any(p[:, :2] != prev[:, :2], axis=1)
     assert np.all((p[:, 2] == depth) == (kind == CUT))
@@ -220,7 +219,7 @@ def test_tool_changes_pause_in_order_at_the_safe_height():
     seen = []
     result = cam.run(job, on_pause=lambda pos, note: seen.append((note, pos)))
     assert result.status == "finished"
-    safe = -round(cam.formats.hpgl.DEFAULT_SAFE_HEIGHT_MM / S.mm_per_step_z)
+    safe = -round(DEFAULT_SAFE_HEIGHT_MM / S.mm_per_step_z)
     assert [n for n, _ in seen] == ["tool change: pen 1", "tool change: pen 2"]
     assert all(pos[2] == safe for _, pos in seen)
     # pen 2 is paused for after every pen-1 stroke and before any pen-2 cut
@@ -262,7 +261,7 @@ def assert_carves_the_drawing(drawing, job, settings=S):
     result = cam.run(job)
     motion = cam.decode_pin_log(result.pin_log(), job.settings)
     pos = motion.position_steps
-    depth = int(job.points_px[job.target][:, 2].max())
+    depth = int(job.points_steps[job.target][:, 2].max())
     below = pos[:, 2] > 0
     assert np.all(pos[below, 2] <= depth)
     cut = np.unique(_keys(pos[below, :2]))
@@ -318,19 +317,18 @@ def test_random_drawings_cut_exactly():
 def test_the_carve_check_sees_a_wrong_cut():
     d = parse_hpgl(b"PU0,0;PD400,0;PU;PA0,400;PD400,400,400,800;")
     job = plan_hpgl(d)
-    depth = int(job.points_px[:, 2].max())
+    depth = int(job.points_steps[:, 2].max())
 
     def mutated(points, keep):
-        return cam.Toolpath(points_px=points[keep], kind=job.kind[keep], target=job.target[keep],
-                            pause=job.pause[keep], settings=job.settings, width_px=job.width_px,
-                            height_px=job.height_px)
+        return cam.Job(points_steps=points[keep], kind=job.kind[keep], target=job.target[keep],
+                       pause=job.pause[keep], settings=job.settings)
 
     every = np.ones(len(job), bool)
-    low = job.points_px.copy()
+    low = job.points_steps.copy()
     low[:-1][job.kind[:-1] != CUT, 2] = depth  # travel without lifting the tool
     with pytest.raises(AssertionError, match="does not ask for"):
         assert_carves_the_drawing(d, mutated(low, every))
-    short = job.points_px.copy()
+    short = job.points_steps.copy()
     last = np.flatnonzero(job.kind == CUT)[-1]
     short[last:last + 2, :2] = short[last - 1, :2]  # the last segment left out, the lift from where it stops
     with pytest.raises(AssertionError, match="not cut"):

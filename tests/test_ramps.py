@@ -1,4 +1,5 @@
 """Speed ramps: the look-ahead planner, the seed's 40-step ramp, and the pin-log checker that proves them."""
+import dataclasses
 import json
 
 import numpy as np
@@ -22,8 +23,9 @@ STEP_MM, V_START, V_MAX, ACC = S.axis_limits()
 
 def toolpath(points, settings=S, pause=None):
     pts = np.asarray(points, np.int64)
-    return cam.Toolpath(points_px=pts, kind=np.zeros(len(pts), np.uint8), target=np.zeros(len(pts), bool),
-                        pause=np.zeros(len(pts), bool) if pause is None else np.asarray(pause, bool), settings=settings)
+    scale = np.array([settings.steps_per_px_xy, settings.steps_per_px_xy, settings.steps_per_px_z])
+    return cam.Job(points_steps=pts * scale, kind=np.zeros(len(pts), np.uint8), target=np.zeros(len(pts), bool),
+                   pause=np.zeros(len(pts), bool) if pause is None else np.asarray(pause, bool), settings=settings)
 
 
 def run_and_check(plan, settings):
@@ -138,7 +140,7 @@ def test_lookahead_passes_the_checker_and_carves_every_2d_sample(name):
     surface = cam.carve(motion, (job.height_px, job.width_px), job.settings, origin_px=job.origin_px)
     assert_surface_equal(surface, expected_surface_2d(d, depths, job.settings))
     # never faster than the thesis's constant delay, and much faster than the seed's per-move ramp
-    t_const = plan_steps(toolpath(job.points_px, CONSTANT)).estimated_time_s
+    t_const = plan_steps(dataclasses.replace(job, settings=CONSTANT)).estimated_time_s
     t_lin = plan_steps(cam.plan(d, depth=depths, settings=LINEAR40)).estimated_time_s
     assert t_const <= plan.estimated_time_s < t_lin
 
@@ -212,7 +214,7 @@ def test_drill_job_with_a_tool_change_passes():
     report.raise_if_broken()
     assert_stops_at_start_speed(log, dp.toolpath.settings, plan.pause_writes)
     assert motion.final_steps == (0, 0, 0)
-    const = plan_steps(toolpath(dp.toolpath.points_px, dp.toolpath.settings.replace(ramp="constant")))
+    const = plan_steps(dataclasses.replace(dp.toolpath, settings=dp.toolpath.settings.replace(ramp="constant")))
     assert plan.estimated_time_s > const.estimated_time_s
 
 
@@ -332,7 +334,8 @@ def test_report_and_cli_name_the_ramp(tmp_path, capsys):
 
 @pytest.mark.parametrize("name", ["seed_tools.plt", "extended.plt", "inkscape_star.plt"])
 def test_lookahead_passes_the_checker_on_hpgl_drawings(name):
-    from cam.formats.hpgl import load_hpgl, plan_hpgl
+    from cam.formats.hpgl import load_hpgl
+    from cam.job.hpgl import plan_hpgl
 
     job = plan_hpgl(load_hpgl(SAMPLES / name))
     plan = plan_steps(job)
@@ -340,7 +343,7 @@ def test_lookahead_passes_the_checker_on_hpgl_drawings(name):
     report, motion, log = run_and_check(plan, job.settings)
     report.raise_if_broken()
     assert_stops_at_start_speed(log, job.settings, plan.pause_writes)
-    assert motion.final_steps == tuple(int(v) for v in job.points_px[-1])
+    assert motion.final_steps == tuple(int(v) for v in job.points_steps[-1])
 
 
 def test_a_stop_lifts_z_no_faster_than_its_start_speed():

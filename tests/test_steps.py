@@ -10,12 +10,17 @@ from conftest import SAMPLES
 CONSTANT = DEFAULT_SETTINGS.replace(ramp="constant")
 
 
+def job_px(points_px, settings=DEFAULT_SETTINGS):
+    """A job through drawing-pixel points (scaled to machine steps by the settings)."""
+    pts = np.asarray(points_px, np.int64).reshape(-1, 3)
+    scale = np.array([settings.steps_per_px_xy, settings.steps_per_px_xy, settings.steps_per_px_z])
+    n = len(pts)
+    return cam.Job(points_steps=pts * scale, kind=np.zeros(n, np.uint8), target=np.zeros(n, bool),
+                   pause=np.zeros(n, bool), settings=settings)
+
+
 def one_move(x, y, z=0, settings=CONSTANT):
-    job = cam.Toolpath(
-        points_px=np.array([[x, y, z]]), kind=np.zeros(1, np.uint8), target=np.zeros(1, bool),
-        pause=np.zeros(1, bool), settings=settings,
-    )
-    return plan_steps(job)
+    return plan_steps(job_px([[x, y, z]], settings))
 
 
 def test_diagonal_pixel_move_steps_x_and_y_together():
@@ -48,10 +53,7 @@ def test_z_only_move_uses_z_delay_and_direction():
 
 
 def test_negative_direction_clears_dir_bit():
-    job = cam.Toolpath(
-        points_px=np.array([[2, 0, 0], [1, 0, 0]]), kind=np.zeros(2, np.uint8), target=np.zeros(2, bool),
-        pause=np.zeros(2, bool),
-    )
+    job = job_px([[2, 0, 0], [1, 0, 0]])
     p = plan_steps(job)
     motion = cam.decode_pin_log(cam.PinLog(p.t_ns, p.data, p.strobe))
     assert motion.final_steps == (8, 0, 0)
@@ -72,12 +74,11 @@ def test_compiled_step_kernel_equals_the_vectorised_reference():
 
     rng = np.random.default_rng(3)
     pts = np.abs(np.cumsum(rng.integers(-3, 4, size=(300, 3)), axis=0)) + 5
-    job = cam.Toolpath(points_px=pts, kind=np.zeros(len(pts), np.uint8), target=np.zeros(len(pts), bool),
-                       pause=np.zeros(len(pts), bool))
+    job = job_px(pts)
     plan = plan_steps(job)
     # reference: DDA per move in numpy, then port_writes
     s = job.settings
-    steps = np.vstack([[0, 0, 0], job.points_steps()])
+    steps = np.vstack([[0, 0, 0], job.points_steps])
     signed, periods = [], []
     for a, b in zip(steps[:-1], steps[1:]):
         d = b - a

@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 import cam
-from cam.job.toolpath import CUT, RETRACT, TRAVEL
+from cam.job.model import CUT, RETRACT, TRAVEL
 from cam.digitize.profile import as_profile
 
 from conftest import drawing_from_rows
@@ -13,7 +13,7 @@ TWO = drawing_from_rows(["......", ".##...", "......", "...##.", "......"])
 def test_literal_path_depth_sorted_with_retracts():
     d = cam.digitize(TWO)
     job = cam.plan(d, depth=[2, 1])
-    assert job.points_px.tolist() == [
+    assert job.points_px().tolist() == [
         [3, 3, 0], [3, 3, 1], [4, 3, 1], [4, 3, 0], [1, 1, 0], [1, 1, 2], [2, 1, 2], [2, 1, 0], [0, 0, 0],
     ]
     assert job.kind.tolist() == [TRAVEL, CUT, CUT, RETRACT, TRAVEL, CUT, CUT, RETRACT, TRAVEL]
@@ -24,7 +24,7 @@ def test_literal_path_depth_sorted_with_retracts():
 def test_every_move_is_xy_or_z_and_non_adjacent_moves_happen_at_the_surface():
     d = cam.digitize(TWO)
     job = cam.plan(d, depth=3, passes=3)
-    pts = np.vstack([[0, 0, 0], job.points_px])
+    pts = np.vstack([[0, 0, 0], job.points_px()])
     delta = np.diff(pts, axis=0)
     assert not np.any(np.any(delta[:, :2] != 0, axis=1) & (delta[:, 2] != 0))
     far = np.abs(delta[:, :2]).max(axis=1) > 1
@@ -41,7 +41,7 @@ def test_depth_sort_is_stable_and_shallowest_first():
     img = drawing_from_rows(["........", ".##.##..", "........", ".##.....", "........"])
     d = cam.digitize(img)
     job = cam.plan(d, depth=[5, 2, 5])
-    cuts = job.points_px[job.target]
+    cuts = job.points_px()[job.target]
     assert cuts[:, 2].tolist() == [2, 2, 5, 5, 5, 5]
     assert cuts[:, :2].tolist() == [[4, 1], [5, 1], [1, 1], [2, 1], [1, 3], [2, 3]]
 
@@ -49,7 +49,7 @@ def test_depth_sort_is_stable_and_shallowest_first():
 def test_repeat_drill_passes_go_deeper():
     d = cam.digitize(drawing_from_rows([".....", ".###.", "....."]))
     job = cam.plan(d, depth=5, passes=3)
-    cuts = job.points_px[job.target]
+    cuts = job.points_px()[job.target]
     assert cuts[:, 2].tolist() == [2] * 3 + [4] * 3 + [5] * 3
 
 
@@ -66,14 +66,14 @@ def test_start_at_offsets_everything():
     d = cam.digitize(TWO)
     base = cam.plan(d, depth=2)
     moved = cam.plan(d, depth=2, start_at=(10, 20, 3))
-    assert np.array_equal(moved.points_px[moved.target], base.points_px[base.target] + [10, 20, 3])
-    assert moved.points_px[-1].tolist() == [0, 0, 0]
+    assert np.array_equal(moved.points_px()[moved.target], base.points_px()[base.target] + [10, 20, 3])
+    assert moved.points_px()[-1].tolist() == [0, 0, 0]
 
 
 def test_pause_at_marks_the_point_and_warns_for_unknown():
     d = cam.digitize(TWO)
     job = cam.plan(d, depth=2, pause_at=[(2, 1), (5, 4)])
-    assert job.points_px[job.pause].tolist() == [[2, 1, 2]]
+    assert job.points_px()[job.pause].tolist() == [[2, 1, 2]]
     assert any("(5, 4)" in w for w in job.warnings)
 
 
@@ -88,28 +88,28 @@ def test_travel_limit_refused_naming_first_point():
 
 def test_goto_moves_xy_first_then_z():
     job = cam.goto((4, 5, 2))
-    assert job.points_px.tolist() == [[4, 5, 0], [4, 5, 2]]
+    assert job.points_steps.tolist() == [[32, 40, 0], [32, 40, 2]]  # pixels x 8 steps X/Y, x 1 step Z
     result = cam.run(job)
     assert result.position_steps == (32, 40, 2)
 
 
 @pytest.mark.parametrize("name", ["gear.png", "word.png", "heart.png", "dumbbell.png", "ring.png"])
 def test_fast_assembly_equals_the_reference_loop(name):
-    from cam.job.toolpath import _assemble
+    from cam.job.drawing import _assemble
     from support.references import assemble_reference as _assemble_reference
     from conftest import SAMPLES
 
     d = cam.digitize(cam.load_image(SAMPLES / name))
     kw = dict(profile=lambda k: 1 + k % 7) if d.mode == "3d" else dict(depth=[3 + i for i in range(len(d.objects))])
     job = cam.plan(d, passes=2, start_at=(2, 3, 1), pause_at=[tuple(d.objects[0][3])], **kw)
-    targets = job.points_px[job.target]
+    targets = job.points_px()[job.target]
     assert job.pause.sum() >= 1
     asked = np.zeros((d.height_px + 5, d.width_px + 4), np.int64)
     np.maximum.at(asked, (targets[:, 1], targets[:, 0]), targets[:, 2] - 1)
     pause_px = np.zeros(asked.shape, bool)
-    pause_px[job.points_px[job.pause][:, 1], job.points_px[job.pause][:, 0]] = True
+    pause_px[job.points_px()[job.pause][:, 1], job.points_px()[job.pause][:, 0]] = True
     # rebuild the depth-sorted target list the planner used (with duplicates) from the digitized matrix
-    from cam.job.toolpath import _pass_targets
+    from cam.job.drawing import _pass_targets
     depth = as_profile(kw["profile"], d.n_layers).depth_of(d.levels) if d.mode == "3d" else np.array(kw["depth"])
     t, _ = _pass_targets(d, np.asarray(depth, np.int64), 2)
     t = t + [2, 3, 1]

@@ -30,7 +30,8 @@ from ..job.jobs import EXCELLON_SUFFIXES, HPGL_SUFFIXES
 from ..digitize.profile import Profile, load_profile, profile_from_expr
 from ..render.report import format_report, image_report, job_report
 from ..settings import RAMP_MODES, MachineSettings, load_settings
-from ..job.toolpath import goto, plan
+from ..job.drawing import plan
+from ..job.moves import goto, jog
 
 __all__ = ["main", "build_parser"]
 
@@ -755,23 +756,17 @@ def cmd_jog(args: argparse.Namespace) -> int:
             board.jog(axis[0].lower(), n, half_step=_port_settings(args, args.port).half_step)
         print(f"jogged {axis[0]} by {n} steps")
         return 0
-    import numpy as np
-
-    from ..settings import Travel
-    from ..job.toolpath import TRAVEL, Toolpath
-
     settings = _settings(args)
-    lo, hi = settings.travel.bounds_steps()["XYZ".index(axis[0])]
+    bounds = settings.travel.bounds_steps()
+    lo, hi = bounds["XYZ".index(axis[0])]
     if abs(n) > hi - lo:
         raise CamError(f"a jog of {n} steps is longer than the {axis[0]} travel ({hi - lo} steps)")
-    span = hi - lo
-    unit = settings.replace(steps_per_px_xy=1, steps_per_px_z=1,
-                            travel=Travel(-span, span, -span, span, -span, span))  # from wherever it stands
-    point = [0, 0, 0]
-    point["XYZ".index(axis[0])] = n
-    job = Toolpath(points_px=np.array([point]), kind=np.array([TRAVEL], np.uint8), target=np.zeros(1, bool),
-                   pause=np.zeros(1, bool), settings=unit)
-    result = _execute(job, args)
+    # the CLI does not know where the tool stands: a jog fits when it fits from one end of the travel
+    start = [b_lo for b_lo, _ in bounds]
+    if n < 0:
+        start["XYZ".index(axis[0])] = hi
+    plan = plan_steps(jog(axis[0], n, settings=settings), start_steps=tuple(start))
+    result = _execute(plan, args)
     if result.status != FINISHED:
         return EXIT_INTERRUPTED
     print(f"jogged {axis[0]} by {n} steps")

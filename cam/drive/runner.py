@@ -23,8 +23,8 @@ from typing import Callable, Optional
 import numpy as np
 
 from ..errors import CamError
-from ..job.toolpath import Toolpath
-from ..verify.pinlog import PinLog, decode_pin_log
+from ..job.model import Job
+from ..verify.pinlog import PinLog, carve, decode_pin_log
 from .ports import MockPort, Port, open_port
 from .pins import axis_bits
 from .steps import StepPlan, plan_steps
@@ -137,7 +137,7 @@ def _lift_writes(plan: StepPlan, data_now: int, z_now: int) -> tuple[np.ndarray,
 
 
 def run(
-    job: Toolpath | StepPlan,
+    job: Job | StepPlan,
     port: str | Port = "mock",
     *,
     realtime: bool = False,
@@ -148,7 +148,7 @@ def run(
     """Run a job on a port.
 
     Args:
-        job: a :class:`~cam.job.toolpath.Toolpath` (planned into steps here) or a :class:`StepPlan`.
+        job: a :class:`~cam.job.model.Job` (planned into steps here) or a :class:`StepPlan`.
         port: a port name (``"mock"``, ``"/dev/parport0"``) or an open :class:`Port`.
         realtime: wait for each write's time.  Forced on for real ports.
         controller: pause / resume / stop / emergency stop from elsewhere.
@@ -294,14 +294,12 @@ def _position_after(plan: StepPlan, n_writes: int) -> tuple[int, int, int]:
     return decode_pin_log(log, plan.settings).final_steps
 
 
-def simulate_surface(job: Toolpath) -> "np.ndarray":
+def simulate_surface(job: Job) -> "np.ndarray":
     """The surface ``job`` would cut: run it on the mock, decode the pin log, carve with a point tool.
 
     Returns:
         ``(height_px, width_px)`` :class:`~cam.verify.pinlog.Surface`, depth in Z steps, drawing frame.
     """
-    from ..verify.pinlog import carve
-
     result = run(job, MockPort())
     motion = decode_pin_log(result.pin_log(), job.settings)
     return carve(motion, (job.height_px, job.width_px), job.settings, origin_px=job.origin_px)

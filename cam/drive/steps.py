@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..settings import MachineSettings
-from ..job.toolpath import Toolpath, check_travel
+from ..job.model import Job, check_travel
 from ._kernels import periods_kernel, writes_kernel
 from .pins import axis_bits
 from .ramps import ramp_periods
@@ -123,22 +123,31 @@ def _writes(
     return t_ns, data, strobe
 
 
-def plan_steps(toolpath: Toolpath) -> StepPlan:
-    """Turn a toolpath into the timed port writes that make it (vectorised, no Python loop per step)."""
-    s = toolpath.settings
-    check_travel(toolpath.points_px, s)
-    pts = np.vstack([np.zeros((1, 3), np.int64), toolpath.points_steps()])
+def plan_steps(job: Job, *, start_steps: tuple[int, int, int] = (0, 0, 0)) -> StepPlan:
+    """Turn a job into the timed port writes that make it (vectorised, no Python loop per step).
+
+    Args:
+        job: the moves, in steps relative to where the tool stands when it starts.
+        start_steps: where the tool stands in the machine frame: the job is checked against the
+            travel from there.
+
+    Raises:
+        TravelError: a point of the job is outside the machine travel (nothing is planned).
+    """
+    s = job.settings
+    check_travel(np.asarray(job.points_steps, np.int64) + np.asarray(start_steps, np.int64), s, job.pixels)
+    pts = np.vstack([np.zeros((1, 3), np.int64), np.asarray(job.points_steps, np.int64).reshape(-1, 3)])
     delta = np.diff(pts, axis=0)  # (N, 3) per move
     clock, dirbit = axis_bits(s)
     high, dirs, per, n_per_move = periods_kernel(
         pts, s.delay_xy_ns, s.delay_z_ns, clock.astype(np.int64), dirbit.astype(np.int64)
     )
     point_period = np.cumsum(n_per_move)
-    per = ramp_periods(high, per, s, move_first=point_period - n_per_move, stops=point_period[toolpath.pause])
+    per = ramp_periods(high, per, s, move_first=point_period - n_per_move, stops=point_period[job.pause])
     t_ns, data, strobe = _writes(high, dirs, per, s)
 
     point_write = 2 * point_period
-    pause_writes = point_write[toolpath.pause]
+    pause_writes = point_write[job.pause]
     end = tuple(int(v) for v in pts[-1])
     return StepPlan(
         t_ns=t_ns,
@@ -149,7 +158,7 @@ def plan_steps(toolpath: Toolpath) -> StepPlan:
         steps_total=np.abs(delta).sum(axis=0),
         settings=s,
         end_steps=end,  # type: ignore[arg-type]
-        safe_z_steps=min(0, int(toolpath.origin_px[2])) * s.steps_per_px_z,
-        pause_notes=list(toolpath.pause_notes) if toolpath.pause_notes is not None else ["Pause At"] * len(pause_writes),
-        warnings=list(toolpath.warnings),
+        safe_z_steps=int(job.safe_z_steps),
+        pause_notes=list(job.pause_notes) if job.pause_notes is not None else ["Pause At"] * len(pause_writes),
+        warnings=list(job.warnings),
     )

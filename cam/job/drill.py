@@ -1,4 +1,4 @@
-"""PCB drilling jobs: a hole list to a toolpath for the step/dir machine.
+"""PCB drilling jobs: a hole list to a job in machine steps for the step/dir machine.
 
 Frames: drill files use the board frame (X right, Y up, mm).  The machine
 frame is `cam`'s (+X right, +Y toward the operator = image rows, +Z deeper),
@@ -24,7 +24,7 @@ import numpy as np
 
 from ..errors import PlanError, TravelError
 from ..settings import DEFAULT_SETTINGS, MachineSettings
-from .toolpath import CUT, RETRACT, TRAVEL, Toolpath, check_travel
+from .model import CUT, RETRACT, TRAVEL, Job, check_travel
 
 __all__ = ["DrillPlan", "plan_drill", "DEFAULT_DEPTH_MM", "DEFAULT_SAFE_HEIGHT_MM"]
 
@@ -38,14 +38,14 @@ class DrillPlan:
     """A planned drilling job.
 
     Attributes:
-        toolpath: the motion, in machine steps (its settings have 1 step per "pixel").
+        toolpath: the :class:`~cam.job.model.Job` (machine steps).
         holes_steps: ``(N, 2)`` int64 machine (x, y) steps of each hole, in drilling order.
         hole_index: ``(N,)`` index of each drilled hole in the source hole list.
         tool_sequence: ``[(tool, diameter_mm, n_holes)]`` in drilling order.
         depth_steps: the drill depth below the surface in Z steps.
     """
 
-    toolpath: Toolpath
+    toolpath: Job
     holes_steps: np.ndarray
     hole_index: np.ndarray
     tool_sequence: list[tuple[int, float, int]]
@@ -147,13 +147,9 @@ def plan_drill(
     if safe_steps != 0:
         pts.append((0, 0, 0)); kinds.append(TRAVEL); pause.append(False)
     points = np.array(pts, np.int64)
-    unit = settings.replace(steps_per_px_xy=1, steps_per_px_z=1)
-    check_travel(points, unit)
+    check_travel(points, settings)
     kinds_arr = np.array(kinds, np.uint8)
-    tp = Toolpath(
-        points_px=points, kind=kinds_arr, target=kinds_arr == CUT, pause=np.array(pause, bool),
-        settings=unit, width_px=int(points[:, 0].max()) + 1, height_px=int(points[:, 1].max()) + 1,
-        warnings=list(holes.warnings), pause_notes=notes,
-    )
+    tp = Job(points_steps=points, kind=kinds_arr, target=kinds_arr == CUT, pause=np.array(pause, bool),
+             settings=settings, warnings=list(holes.warnings), pause_notes=notes, source=str(holes.source))
     order_arr = np.array(order_all, np.int64)
     return DrillPlan(tp, steps_xy[order_arr], order_arr, sequence, depth_steps)

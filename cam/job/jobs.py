@@ -291,7 +291,7 @@ class PreparedJob:
         source: the file it came from; name: what to call it; kind: one of :data:`KINDS`.
         steps: the :class:`~cam.drive.steps.StepPlan` (machine frame, steps from the job home).
         settings: the machine settings of ``steps``.
-        toolpath: the :class:`~cam.job.toolpath.Toolpath` when the kind has one (not G-code).
+        toolpath: the :class:`~cam.job.model.Job` when the kind has one (not G-code).
         size_mm: ``(width, height)`` of what is cut (XY extent of the tool below the surface), mm.
         depth_mm: deepest cut below the surface, mm.
         extent_steps: ``(3, 2)`` int64 min and max machine position (x, y, z) in steps the job
@@ -449,7 +449,7 @@ def _prepare_pixels(path: Path, kind: str, options: JobOptions, settings: Machin
     from ..drive.steps import plan_steps
     from ..digitize.profile import load_profile, profile_from_expr
     from ..render.report import job_report
-    from .toolpath import plan
+    from .drawing import plan
 
     rgb = None
     if kind == "drawing":
@@ -513,7 +513,8 @@ def _prepare_excellon(path: Path, options: JobOptions, settings: MachineSettings
 
 def _prepare_hpgl(path: Path, options: JobOptions, settings: MachineSettings, progress=None) -> PreparedJob:
     from ..drive.steps import plan_steps
-    from ..formats.hpgl import load_hpgl, plan_hpgl  # lazy: only HPGL jobs need it
+    from ..formats.hpgl import load_hpgl
+    from .hpgl import plan_hpgl
 
     drawing = load_hpgl(path, progress=progress)
     toolpath = plan_hpgl(drawing, settings=settings, depth_mm=options.depth_mm,

@@ -50,25 +50,37 @@ def encode_png(rgb: np.ndarray) -> bytes:
     return buf.tobytes()
 
 
-def _legend_text(toolpath, estimated_time_s: Optional[float]) -> str:
-    s = toolpath.settings
-    cut = toolpath.points_px[toolpath.target] if toolpath.n_targets else np.zeros((1, 3), np.int64)
-    w_px = int(cut[:, 0].max() - cut[:, 0].min() + 1)
-    h_px = int(cut[:, 1].max() - cut[:, 1].min() + 1)
-    oz = toolpath.origin_px[2]
+def _grid(job) -> tuple[np.ndarray, tuple[int, int, int], tuple[int, int], tuple[float, float]]:
+    """A job's points on the picture grid: drawing pixels for a drawing job, machine steps otherwise.
+
+    Returns ``(points (N, 3), origin (x, y, z), drawing size (w, h), mm per grid unit (xy, z))``.
+    """
+    s = job.settings
+    if job.pixels is not None:
+        return (job.points_px(), job.origin_px, (job.width_px, job.height_px),
+                (s.px_to_mm_xy(1), s.px_to_mm_z(1)))
+    return np.asarray(job.points_steps, np.int64), (0, 0, 0), (0, 0), (s.mm_per_step_xy, s.mm_per_step_z)
+
+
+def _legend_text(job, estimated_time_s: Optional[float]) -> str:
+    pts, origin, _, (mm_xy, mm_z) = _grid(job)
+    cut = pts[job.target] if job.n_targets else np.zeros((1, 3), np.int64)
+    w_units = int(cut[:, 0].max() - cut[:, 0].min() + 1)
+    h_units = int(cut[:, 1].max() - cut[:, 1].min() + 1)
+    oz = origin[2]
     d_lo, d_hi = int(cut[:, 2].min() - oz), int(cut[:, 2].max() - oz)
-    text = (f"{s.px_to_mm_xy(w_px):.1f} x {s.px_to_mm_xy(h_px):.1f} mm   depth {s.px_to_mm_z(d_lo):.2f}"
-            f"..{s.px_to_mm_z(d_hi):.2f} mm")
+    text = (f"{w_units * mm_xy:.1f} x {h_units * mm_xy:.1f} mm   depth {d_lo * mm_z:.2f}"
+            f"..{d_hi * mm_z:.2f} mm")
     if estimated_time_s is not None:
         m, sec = divmod(int(round(estimated_time_s)), 60)
         text += f"   time {m // 60}:{m % 60:02d}:{sec:02d}"
     return text
 
 
-def _canvas_size(toolpath) -> tuple[int, int]:
-    pts = toolpath.points_px
-    w = max(toolpath.width_px + toolpath.origin_px[0], int(pts[:, 0].max()) + 1)
-    h = max(toolpath.height_px + toolpath.origin_px[1], int(pts[:, 1].max()) + 1)
+def _canvas_size(job) -> tuple[int, int]:
+    pts, origin, (w_draw, h_draw), _ = _grid(job)
+    w = max(w_draw + origin[0], int(pts[:, 0].max()) + 1)
+    h = max(h_draw + origin[1], int(pts[:, 1].max()) + 1)
     return w, h
 
 
@@ -91,20 +103,21 @@ def toolpath_picture(
     """The job over its drawing as an ``(H x scale + legend, W x scale, 3)`` RGB array.
 
     Drawing pixel (x, y) maps to the picture square whose centre is
-    ``((x + 0.5) x scale, (y + 0.5) x scale)``.
+    ``((x + 0.5) x scale, (y + 0.5) x scale)``; a job without a drawing is drawn on its machine-step grid.
     """
+    grid_pts, origin, _, _ = _grid(toolpath)
     w, h = _canvas_size(toolpath)
     k = scale or auto_scale(w, h)
     img = np.full((h * k + LEGEND_PX, max(w * k, 420), 3), 255, np.uint8)
     if drawing_rgb is not None:
         faded = (255 - (255 - drawing_rgb.astype(np.int32)) * 0.25).astype(np.uint8)
         big = np.repeat(np.repeat(faded, k, axis=0), k, axis=1)
-        ox, oy = toolpath.origin_px[0] * k, toolpath.origin_px[1] * k
+        ox, oy = origin[0] * k, origin[1] * k
         hh, ww = min(big.shape[0], h * k - oy), min(big.shape[1], img.shape[1] - ox)
         img[oy:oy + hh, ox:ox + ww] = big[:hh, :ww]
-    pts = np.vstack([[0, 0, 0], toolpath.points_px])
+    pts = np.vstack([[0, 0, 0], grid_pts])
     centre = pts[:, :2] * k + k // 2
-    surface = toolpath.origin_px[2]
+    surface = origin[2]
     d_max = max(1, int(pts[:, 2].max()) - surface)
     cols = depth_colours(pts[:, 2] - surface, d_max)
     cutting = (pts[:-1, 2] > surface) & (pts[1:, 2] > surface)
@@ -117,7 +130,7 @@ def toolpath_picture(
         if a != b:
             cv2.line(img, a, b, tuple(int(v) for v in cols[i]), max(1, k // 2), cv2.LINE_8)
     if toolpath.n_targets:
-        first = toolpath.points_px[np.flatnonzero(toolpath.target)[0]]
+        first = grid_pts[np.flatnonzero(toolpath.target)[0]]
         cv2.circle(img, (int(first[0] * k + k // 2), int(first[1] * k + k // 2)), max(4, k), _START, 2)
     end = centre[-1]
     r = max(4, k)
@@ -140,10 +153,11 @@ def toolpath_picture(
 
 def toolpath_svg(toolpath, *, scale: Optional[int] = None, estimated_time_s: Optional[float] = None) -> str:
     """The same picture as :func:`toolpath_picture`, as SVG text (vector; no drawing underneath)."""
+    grid_pts, origin, _, _ = _grid(toolpath)
     w, h = _canvas_size(toolpath)
     k = scale or auto_scale(w, h)
-    pts = np.vstack([[0, 0, 0], toolpath.points_px])
-    surface = toolpath.origin_px[2]
+    pts = np.vstack([[0, 0, 0], grid_pts])
+    surface = origin[2]
     cols = depth_colours(pts[:, 2] - surface, max(1, int(pts[:, 2].max()) - surface))
     W, H = max(w * k, 420), h * k + LEGEND_PX
     out = [f'<svg xmlns="http://www.w3.org/2000/svg" width="{W}" height="{H}" viewBox="0 0 {W} {H}">',
@@ -157,7 +171,7 @@ def toolpath_svg(toolpath, *, scale: Optional[int] = None, estimated_time_s: Opt
                  else 'stroke="rgb(150,150,150)" stroke-width="1" stroke-dasharray="4 4"')
         out.append(f'<line x1="{c[i-1][0]:g}" y1="{c[i-1][1]:g}" x2="{c[i][0]:g}" y2="{c[i][1]:g}" {style}/>')
     if toolpath.n_targets:
-        f = toolpath.points_px[np.flatnonzero(toolpath.target)[0]] * k + k / 2
+        f = grid_pts[np.flatnonzero(toolpath.target)[0]] * k + k / 2
         out.append(f'<circle cx="{f[0]:g}" cy="{f[1]:g}" r="{max(4, k)}" fill="none" stroke="rgb{_START}" stroke-width="2"/>')
     r = max(4, k)
     out.append(f'<rect x="{c[-1][0] - r:g}" y="{c[-1][1] - r:g}" width="{2 * r}" height="{2 * r}" fill="none" '

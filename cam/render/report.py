@@ -7,7 +7,7 @@ import numpy as np
 
 from ..digitize.digitized import Digitized
 from ..settings import DEFAULT_SETTINGS, MachineSettings
-from ..job.toolpath import Toolpath
+from ..job.model import Job
 
 __all__ = ["image_report", "job_report", "format_report"]
 
@@ -43,7 +43,7 @@ def image_report(digitized: Digitized, settings: MachineSettings = DEFAULT_SETTI
 
 
 def job_report(
-    digitized: Optional[Digitized], toolpath: Toolpath, plan: Any
+    digitized: Optional[Digitized], toolpath: Job, plan: Any
 ) -> dict[str, Any]:
     """The JSON job report: image report plus depth, points, retracts, steps, time and the speed ramp mode.
 

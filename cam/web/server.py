@@ -111,19 +111,6 @@ def safe_name(filename: str) -> str:
     return base or "upload"
 
 
-def _unit_job(moves_steps: list[tuple[int, int, int]], settings: MachineSettings):
-    """A travel-only toolpath through points given in steps from where the tool stands."""
-    from ..job.toolpath import TRAVEL, Toolpath
-
-    spans = [hi - lo for lo, hi in settings.travel.bounds_steps()]
-    unit = settings.replace(steps_per_px_xy=1, steps_per_px_z=1,
-                            travel=Travel(-spans[0], spans[0], -spans[1], spans[1], -spans[2], spans[2]))
-    pts = np.array(moves_steps, np.int64).reshape(-1, 3)
-    n = len(pts)
-    return Toolpath(points_px=pts, kind=np.full(n, TRAVEL, np.uint8), target=np.zeros(n, bool),
-                    pause=np.zeros(n, bool), settings=unit)
-
-
 class _BoardControl:
     """Pause / stop controls of a job on a MAXIMUS board (the runner's :class:`Controller` for step/dir ports).
 
@@ -333,8 +320,9 @@ class MachineSession:
 
     def _start_moves(self, activity: str, moves: list[tuple[int, int, int]], label: str) -> None:
         from ..drive.steps import plan_steps
+        from ..job.model import travel_job
 
-        plan = plan_steps(_unit_job(moves, self.settings))
+        plan = plan_steps(travel_job(moves, self.settings), start_steps=tuple(int(v) for v in self._position))
         self._launch(activity, plan, label, plan.estimated_time_s)
 
     def _launch(self, activity: str, plan: Any, label: str, estimated_s: float) -> None:

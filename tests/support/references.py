@@ -8,7 +8,8 @@ import numpy as np
 from cam.settings import MachineSettings
 from cam.digitize.trace2d import NEIGHBOURS_2D, START_RULES
 from cam.digitize.peel3d import NEIGHBOURS_3D
-from cam.job.toolpath import CUT, RETRACT, TRAVEL, _gap_block
+from cam.job.drawing import _gap_block
+from cam.job.model import CUT, RETRACT, TRAVEL
 
 __all__ = ["trace_curves_reference", "trace_layers_reference", "assemble_reference"]
 

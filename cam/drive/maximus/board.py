@@ -53,8 +53,6 @@ URL_PREFIX = "maximus:"
 MAX_FIELD = 0xFFFF  # 16-bit step fields (seed 000, Appendix 1: make16(high, low))
 
 MAXIMUS_SETTINGS = DEFAULT_SETTINGS.replace(
-    steps_per_px_xy=1,
-    steps_per_px_z=1,
     # one L297 clock pulse moves an axis by the "theoretical resolution of 4.375 microns" of seed 000
     # section 9 (12 mm lead screws, section 3; half steps, as the MODE bits select)
     mm_per_step_xy=0.004375,

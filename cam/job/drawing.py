@@ -1,10 +1,12 @@
-"""Stage 3: the toolpath -- ordered 3D points in pixel units (thesis 4.1.4.5, 4.2.3, B.2).
+"""Stage 3, the drawing planner: a digitized matrix to a job (thesis 4.1.4.5, 4.2.3, B.2).
 
-Frame: ``x`` = image column and ``y`` = image row, in pixels, plus the Start
-At offset; ``z`` = depth below the home plane in Z pixels (+Z is deeper into
-the material, 0 is the surface when Start At Z is 0).  The tool starts at
-(0, 0, 0).  Consecutive points are straight moves; every move changes either
-X/Y or Z, never both, so a point tool's cut can be read off exactly.
+The planner works in drawing pixels: ``x`` = image column and ``y`` = image
+row, plus the Start At offset; ``z`` = depth below the home plane in Z pixels
+(+Z is deeper into the material, 0 is the surface when Start At Z is 0).  The
+tool starts at (0, 0, 0).  Every move changes either X/Y or Z, never both, so a
+point tool's cut can be read off exactly.  The result is a
+:class:`~cam.job.model.Job` in machine steps, whose
+:class:`~cam.job.model.PixelFrame` says where the pixels lie.
 
 Rules the planner keeps (and tests check):
 
@@ -19,87 +21,17 @@ Rules the planner keeps (and tests check):
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 from typing import Sequence
 
 import numpy as np
 
 from ..digitize.digitized import Digitized
-from ..errors import PlanError, TravelError
+from ..errors import PlanError
 from ..digitize.profile import ProfileLike, as_profile
 from ..settings import DEFAULT_SETTINGS, MachineSettings
+from .model import CUT, RETRACT, TRAVEL, Job, PixelFrame, check_travel
 
-__all__ = ["Toolpath", "plan", "goto", "CUT", "RETRACT", "TRAVEL", "check_travel"]
-
-CUT = 0
-"""Point at or above the asked depth of a drawing pixel (the tool is in the material or at the surface over it)."""
-RETRACT = 1
-"""Tool lifted straight up to the surface (or the safe plane) before a travel."""
-TRAVEL = 2
-"""Move at the surface / safe plane to above the next point."""
-
-
-@dataclass
-class Toolpath:
-    """Ordered tool positions in pixel units.
-
-    Attributes:
-        points_px: ``(N, 3)`` int64 ``(x, y, z)``: x = column, y = row (Start
-            At offset included), z = depth in Z pixels, +Z deeper.  The tool
-            starts at (0, 0, 0) before point 0.
-        kind: ``(N,)`` uint8 :data:`CUT`, :data:`RETRACT` or :data:`TRAVEL`.
-        target: ``(N,)`` bool, True where the point is a digitized point at its
-            full (pass) depth -- what the drawing asks for.
-        pause: ``(N,)`` bool, pause when the tool reaches this point (Pause At).
-        settings: the machine settings the path was planned for.
-        width_px, height_px: size of the source drawing.
-        origin_px: Start At offset ``(x, y, z)`` in pixels.
-        warnings: planning warnings.
-        pause_notes: what each pause is for, in order (default "Pause At").
-    """
-
-    points_px: np.ndarray
-    kind: np.ndarray
-    target: np.ndarray
-    pause: np.ndarray
-    settings: MachineSettings = DEFAULT_SETTINGS
-    width_px: int = 0
-    height_px: int = 0
-    origin_px: tuple[int, int, int] = (0, 0, 0)
-    warnings: list[str] = field(default_factory=list)
-    pause_notes: list[str] | None = None
-
-    def __len__(self) -> int:
-        return len(self.points_px)
-
-    @property
-    def n_retracts(self) -> int:
-        return int(np.count_nonzero(self.kind == RETRACT))
-
-    @property
-    def n_targets(self) -> int:
-        return int(np.count_nonzero(self.target))
-
-    def points_steps(self) -> np.ndarray:
-        """``(N, 3)`` int64 points in machine steps (pixel x steps/pixel, per axis)."""
-        s = self.settings
-        return self.points_px * np.array([s.steps_per_px_xy, s.steps_per_px_xy, s.steps_per_px_z], np.int64)
-
-    def _repr_png_(self) -> bytes:
-        """Notebook picture: see :func:`cam.render.picture.toolpath_picture`."""
-        from ..render.picture import encode_png, toolpath_picture
-
-        return encode_png(toolpath_picture(self))
-
-    def asked_depth_px(self) -> np.ndarray:
-        """``(height_px, width_px)`` int64: deepest z asked at each drawing pixel (0 where nothing is asked).
-
-        Frame: drawing pixels (the Start At offset removed); depth relative to the surface.
-        """
-        out = np.zeros((self.height_px, self.width_px), np.int64)
-        p = self.points_px[self.target] - np.asarray(self.origin_px, np.int64)
-        np.maximum.at(out, (p[:, 1], p[:, 0]), p[:, 2])
-        return out
+__all__ = ["plan"]
 
 
 def _depths_per_object(depth: int | Sequence[int], n_objects: int) -> tuple[np.ndarray, list[str]]:
@@ -142,25 +74,6 @@ def _pass_targets(
     return targets[order], order
 
 
-def check_travel(points_px: np.ndarray, settings: MachineSettings) -> None:
-    """Raise :class:`TravelError` naming the first point of ``(N, 3)`` pixel points outside the travel."""
-    s = settings
-    steps = np.asarray(points_px, np.int64) * np.array([s.steps_per_px_xy, s.steps_per_px_xy, s.steps_per_px_z])
-    lo = np.array([b[0] for b in s.travel.bounds_steps()])
-    hi = np.array([b[1] for b in s.travel.bounds_steps()])
-    bad = np.flatnonzero(np.any((steps < lo) | (steps > hi), axis=1))
-    if len(bad):
-        i = int(bad[0])
-        x, y, z = (int(v) for v in points_px[i])
-        xs, ys, zs = (int(v) for v in steps[i])
-        axis = "XYZ"[int(np.flatnonzero((steps[i] < lo) | (steps[i] > hi))[0])]
-        a = "XYZ".index(axis)
-        raise TravelError(
-            f"job leaves the machine travel at point {i} (x={x}, y={y}, z={z} px = "
-            f"{xs}, {ys}, {zs} steps): {axis} travel is {lo[a]}..{hi[a]} steps"
-        )
-
-
 def plan(
     digitized: Digitized,
     *,
@@ -170,8 +83,8 @@ def plan(
     start_at: tuple[int, int, int] = (0, 0, 0),
     pause_at: Sequence[tuple[int, int]] = (),
     profile: ProfileLike | None = None,
-) -> Toolpath:
-    """Plan the toolpath of a digitized drawing.
+) -> Job:
+    """Plan the job of a digitized drawing (the drawing planner: pixels in, machine steps out).
 
     Args:
         digitized: the traced objects.
@@ -189,7 +102,8 @@ def plan(
             layer number.  A ring of layer k is cut at profile(k).
 
     Returns:
-        The :class:`Toolpath`, ending at (0, 0, 0).
+        The :class:`~cam.job.model.Job` in machine steps, with its :class:`~cam.job.model.PixelFrame`,
+        ending at (0, 0, 0).
 
     Raises:
         PlanError: fewer depths than objects, bad options; TravelError: the job leaves the travel.
@@ -230,19 +144,13 @@ def plan(
     for x, y in pause_set:
         if 0 <= y < pause_px.shape[0] and 0 <= x < pause_px.shape[1]:
             pause_px[y, x] = True
-    points, kinds, tgt, pause = _assemble(targets, pause_px, asked, settings, surface, safe, oz)
-    check_travel(points, settings)
-    return Toolpath(
-        points_px=points,
-        kind=kinds,
-        target=tgt,
-        pause=pause,
-        settings=settings,
-        width_px=digitized.width_px,
-        height_px=digitized.height_px,
-        origin_px=(ox, oy, oz),
-        warnings=warnings,
-    )
+    points_px, kinds, tgt, pause = _assemble(targets, pause_px, asked, settings, surface, safe, oz)
+    frame = PixelFrame(digitized.width_px, digitized.height_px, (ox, oy, oz), settings.steps_per_px_xy,
+                       settings.steps_per_px_z)
+    points_steps = frame.to_steps(points_px)
+    check_travel(points_steps, settings, frame)
+    return Job(points_steps=points_steps, kind=kinds, target=tgt, pause=pause, settings=settings,
+               warnings=warnings, safe_z_steps=safe * settings.steps_per_px_z, pixels=frame)
 
 
 def _gap_block(
@@ -406,24 +314,3 @@ def _unwind(parent: dict[int, int], goal: int) -> list[int]:
         path.append(j)
         j = parent[j]
     return path[::-1]
-
-
-def goto(position_px: tuple[int, int, int], *, settings: MachineSettings = DEFAULT_SETTINGS) -> Toolpath:
-    """Go To (thesis 4.1.2): from (0, 0, 0) travel at Z = 0 to ``(x, y)``, then move Z, and stop there.
-
-    Raises:
-        TravelError: the point is outside the machine travel.
-    """
-    x, y, z = (int(v) for v in position_px)
-    pts = [p for p in ((x, y, 0), (x, y, z)) if p != (0, 0, 0)]
-    pts = list(dict.fromkeys(pts))
-    points = np.array(pts, np.int64).reshape(-1, 3)
-    check_travel(points, settings)
-    n = len(points)
-    return Toolpath(
-        points_px=points,
-        kind=np.full(n, TRAVEL, np.uint8),
-        target=np.zeros(n, bool),
-        pause=np.zeros(n, bool),
-        settings=settings,
-    )

@@ -1,0 +1,187 @@
+"""The one job model: a sequence of straight moves in machine steps, whatever the job's source.
+
+Every planner returns a :class:`Job`: the drawing planner (:func:`cam.plan`,
+a digitized matrix), drill files (:func:`cam.plan_drill`), HPGL
+(:func:`cam.plan_hpgl`), jogs and go-tos (:mod:`cam.job.moves`).  Steps
+are planned from it (:func:`cam.drive.steps.plan_steps`), it is checked
+against the travel before a step is sent, pictured, exported as G-code and
+run by the machine session.
+
+Frame (machine steps, relative to where the tool stands when the job
+starts, the job's home (0, 0, 0)): ``x`` grows to the right, ``y`` grows
+toward the operator (the drawing's row direction), ``z`` grows *deeper*
+into the material (0 is the home plane).  Consecutive points are straight
+moves; the tool starts at (0, 0, 0) before point 0.
+
+Pixels appear only as the optional :class:`PixelFrame` of a drawing job:
+where the drawing's pixels lie in this frame, which the carve check and the
+drawing pictures need.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Optional
+
+import numpy as np
+
+from ..errors import TravelError
+from ..settings import DEFAULT_SETTINGS, MachineSettings
+
+__all__ = ["Job", "PixelFrame", "CUT", "RETRACT", "TRAVEL", "check_travel", "travel_job"]
+
+CUT = 0
+"""A point at or above the asked depth of what is cut (the tool is in the material or at the surface over it)."""
+RETRACT = 1
+"""The tool lifted straight up to the surface (or the safe plane) before a travel."""
+TRAVEL = 2
+"""A move at the surface or the safe plane to above the next point."""
+
+
+@dataclass(frozen=True)
+class PixelFrame:
+    """Where a drawing job's pixels lie in machine steps.
+
+    Pixel ``(col, row)`` of the drawing is centred on machine
+    ``((col + origin_px[0]) * steps_per_px_xy, (row + origin_px[1]) * steps_per_px_xy)``;
+    the drawing's surface is at machine z = ``origin_px[2] * steps_per_px_z``.
+
+    Attributes:
+        width_px, height_px: size of the source drawing.
+        origin_px: Start At offset ``(x, y, z)`` in pixels.
+        steps_per_px_xy, steps_per_px_z: the machine's steps per drawing pixel.
+    """
+
+    width_px: int
+    height_px: int
+    origin_px: tuple[int, int, int] = (0, 0, 0)
+    steps_per_px_xy: int = 1
+    steps_per_px_z: int = 1
+
+    def to_steps(self, points_px: np.ndarray) -> np.ndarray:
+        """``(N, 3)`` int64 pixel points (Start At included) in machine steps."""
+        scale = np.array([self.steps_per_px_xy, self.steps_per_px_xy, self.steps_per_px_z], np.int64)
+        return np.asarray(points_px, np.int64).reshape(-1, 3) * scale
+
+    def to_px(self, points_steps: np.ndarray) -> np.ndarray:
+        """``(N, 3)`` int64 machine points back in pixels (exact for points :meth:`to_steps` made)."""
+        scale = np.array([self.steps_per_px_xy, self.steps_per_px_xy, self.steps_per_px_z], np.int64)
+        return np.asarray(points_steps, np.int64).reshape(-1, 3) // scale
+
+
+@dataclass
+class Job:
+    """Ordered tool positions in machine steps: what every planner returns.
+
+    Attributes:
+        points_steps: ``(N, 3)`` int64 ``(x, y, z)`` machine position after each move, steps from the
+            job's home (see the module docstring for the frame).
+        kind: ``(N,)`` uint8 :data:`CUT`, :data:`RETRACT` or :data:`TRAVEL`.
+        target: ``(N,)`` bool, True where the point is at a depth the input asks for.
+        pause: ``(N,)`` bool, pause when the tool reaches this point (Pause At, tool changes).
+        settings: the machine settings the job was planned for.
+        pause_notes: what each pause is for, in order (None: every pause is a "Pause At").
+        warnings: planning warnings.
+        safe_z_steps: the Z a stop lifts the tool to (the surface or above it).
+        pixels: for drawing jobs, where the drawing's pixels lie (see :class:`PixelFrame`).
+        source: what the job was planned from (a file name, "jog", ...).
+    """
+
+    points_steps: np.ndarray
+    kind: np.ndarray
+    target: np.ndarray
+    pause: np.ndarray
+    settings: MachineSettings = DEFAULT_SETTINGS
+    pause_notes: Optional[list[str]] = None
+    warnings: list[str] = field(default_factory=list)
+    safe_z_steps: int = 0
+    pixels: Optional[PixelFrame] = None
+    source: str = ""
+
+    def __len__(self) -> int:
+        return len(self.points_steps)
+
+    @property
+    def n_retracts(self) -> int:
+        return int(np.count_nonzero(self.kind == RETRACT))
+
+    @property
+    def n_targets(self) -> int:
+        return int(np.count_nonzero(self.target))
+
+    @property
+    def width_px(self) -> int:
+        """Drawing width (0 for a job that has no drawing)."""
+        return self.pixels.width_px if self.pixels else 0
+
+    @property
+    def height_px(self) -> int:
+        """Drawing height (0 for a job that has no drawing)."""
+        return self.pixels.height_px if self.pixels else 0
+
+    @property
+    def origin_px(self) -> tuple[int, int, int]:
+        """Start At offset of a drawing job in pixels ((0, 0, 0) for a job that has no drawing)."""
+        return self.pixels.origin_px if self.pixels else (0, 0, 0)
+
+    def points_px(self) -> np.ndarray:
+        """``(N, 3)`` int64 points in drawing pixels (Start At included); drawing jobs only."""
+        if self.pixels is None:
+            raise ValueError("this job has no drawing: its points are in machine steps only")
+        return self.pixels.to_px(self.points_steps)
+
+    def asked_depth_px(self) -> np.ndarray:
+        """``(height_px, width_px)`` int64: deepest z in Z pixels asked at each drawing pixel (0: none).
+
+        Frame: drawing pixels (the Start At offset removed); depth relative to the surface.  Drawing jobs only.
+        """
+        out = np.zeros((self.height_px, self.width_px), np.int64)
+        p = self.points_px()[self.target] - np.asarray(self.origin_px, np.int64)
+        np.maximum.at(out, (p[:, 1], p[:, 0]), p[:, 2])
+        return out
+
+    def _repr_png_(self) -> bytes:
+        """Notebook picture: see :func:`cam.render.picture.toolpath_picture`."""
+        from ..render.picture import encode_png, toolpath_picture  # render imports this module
+
+        return encode_png(toolpath_picture(self))
+
+
+def _mm(settings: MachineSettings, steps: np.ndarray) -> str:
+    return (f"{steps[0] * settings.mm_per_step_xy:.3f}, {steps[1] * settings.mm_per_step_xy:.3f}, "
+            f"{steps[2] * settings.mm_per_step_z:.3f} mm")
+
+
+def check_travel(points_steps: np.ndarray, settings: MachineSettings, pixels: Optional[PixelFrame] = None) -> None:
+    """Raise :class:`TravelError` naming the first of ``(N, 3)`` machine points outside the travel.
+
+    ``pixels``: name the point in drawing pixels too (drawing jobs).
+    """
+    steps = np.asarray(points_steps, np.int64).reshape(-1, 3)
+    bounds = settings.travel.bounds_steps()
+    lo = np.array([b[0] for b in bounds], np.int64)
+    hi = np.array([b[1] for b in bounds], np.int64)
+    bad = np.flatnonzero(np.any((steps < lo) | (steps > hi), axis=1))
+    if not len(bad):
+        return
+    i = int(bad[0])
+    a = int(np.flatnonzero((steps[i] < lo) | (steps[i] > hi))[0])
+    xs, ys, zs = (int(v) for v in steps[i])
+    if pixels is not None:
+        x, y, z = (int(v) for v in pixels.to_px(steps[i])[0])
+        where = f"x={x}, y={y}, z={z} px = {xs}, {ys}, {zs} steps"
+    else:
+        where = f"{xs}, {ys}, {zs} steps = {_mm(settings, steps[i])}"
+    raise TravelError(
+        f"job leaves the machine travel at point {i} ({where}): {'XYZ'[a]} travel is {lo[a]}..{hi[a]} steps"
+    )
+
+
+def travel_job(points_steps: np.ndarray, settings: MachineSettings, *, source: str = "") -> Job:
+    """A travel-only job through ``(N, 3)`` machine points (jogs, go-tos, back to the origin).
+
+    No travel check: the caller knows where the tool stands (see :mod:`cam.job.moves`).
+    """
+    pts = np.asarray(points_steps, np.int64).reshape(-1, 3)
+    n = len(pts)
+    return Job(points_steps=pts, kind=np.full(n, TRAVEL, np.uint8), target=np.zeros(n, bool),
+               pause=np.zeros(n, bool), settings=settings, source=source)

@@ -1,0 +1,84 @@
+"""Jogs, Go To and back to the origin: travel-only jobs in machine steps.
+
+Every position here is relative to the job's home, where the tool stands
+when the job starts (see :mod:`cam.job.model`).
+"""
+from __future__ import annotations
+
+from typing import Optional
+
+import numpy as np
+
+from ..errors import PlanError, TravelError
+from ..settings import DEFAULT_SETTINGS, MachineSettings
+from .model import Job, PixelFrame, check_travel, travel_job
+
+__all__ = ["goto", "jog", "to_origin", "AXES"]
+
+AXES = ("x", "y", "z")
+
+
+def goto(position_px: tuple[int, int, int], *, settings: MachineSettings = DEFAULT_SETTINGS) -> Job:
+    """Go To (thesis 4.1.2): from (0, 0, 0) travel at Z = 0 to drawing pixel ``(x, y)``, then move Z, and stop.
+
+    ``position_px`` is in drawing pixels (the thesis's unit); the job is in machine steps.
+
+    Raises:
+        TravelError: the point is outside the machine travel.
+    """
+    frame = PixelFrame(0, 0, (0, 0, 0), settings.steps_per_px_xy, settings.steps_per_px_z)
+    x, y, z = (int(v) for v in position_px)
+    pts_px = list(dict.fromkeys(p for p in ((x, y, 0), (x, y, z)) if p != (0, 0, 0)))
+    points_steps = frame.to_steps(np.array(pts_px, np.int64).reshape(-1, 3))
+    check_travel(points_steps, settings, frame)
+    return travel_job(points_steps, settings, source="go to")
+
+
+def jog(axis: str, steps: int, *, settings: MachineSettings = DEFAULT_SETTINGS,
+        position_steps: Optional[tuple[int, int, int]] = None) -> Job:
+    """Move one axis by ``steps`` machine steps.
+
+    Args:
+        axis: "x", "y" or "z" (any case).
+        steps: signed step count, not 0.
+        position_steps: where the tool stands in the machine frame, if known: the jog is then refused
+            when it would leave the travel.
+
+    Raises:
+        PlanError: a bad axis or count; TravelError: the jog leaves the travel.
+    """
+    a = str(axis).lower()
+    if a not in AXES:
+        raise PlanError(f"axis must be x, y or z, got {axis!r}")
+    if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps == 0:
+        raise PlanError(f"a jog needs a whole, non-zero number of steps, got {steps!r}")
+    move = np.zeros(3, np.int64)
+    move[AXES.index(a)] = int(steps)
+    if position_steps is not None:
+        _check_from(np.asarray(position_steps, np.int64), move[None, :], settings, f"a jog of {a.upper()} {steps:+d} steps")
+    return travel_job(move[None, :], settings, source=f"jog {a.upper()} {int(steps):+d} steps")
+
+
+def to_origin(position_steps: tuple[int, int, int], *, settings: MachineSettings = DEFAULT_SETTINGS) -> Job:
+    """Back to the home from ``position_steps``: lift out of the material first (to Z = 0 when below it),
+    travel at that height, then move Z to the home.  The job is relative to where the tool stands.
+
+    Returns an empty job when the tool is at the home already.
+    """
+    x, y, z = (int(v) for v in position_steps)
+    safe = min(z, 0)
+    rel: list[tuple[int, int, int]] = []
+    for p in ((x, y, safe), (0, 0, safe), (0, 0, 0)):
+        r = (p[0] - x, p[1] - y, p[2] - z)
+        if r != (0, 0, 0) and (not rel or rel[-1] != r):
+            rel.append(r)
+    return travel_job(np.array(rel, np.int64).reshape(-1, 3), settings, source="go to origin")
+
+
+def _check_from(position_steps: np.ndarray, moves_steps: np.ndarray, settings: MachineSettings, what: str) -> None:
+    """Refuse relative moves that leave the travel from ``position_steps``."""
+    for a, (lo, hi) in enumerate(settings.travel.bounds_steps()):
+        reach = position_steps[a] + moves_steps[:, a]
+        if reach.min() < lo or reach.max() > hi:
+            raise TravelError(f"{what} would take {'XYZ'[a]} to {int(reach.min() if reach.min() < lo else reach.max())}, "
+                              f"outside its travel {lo}..{hi} steps from the home")
