@@ -44,7 +44,8 @@ _LAZY = {
     "iter_hpgl": "cam.formats.hpgl", "HpglDrawing": "cam.formats.hpgl", "HpglScan": "cam.formats.hpgl",
     "to_gcode": "cam.formats.gcode_export", "save_gcode": "cam.formats.gcode_export",
     "plan_steps": "cam.drive.steps", "StepPlan": "cam.drive.steps",
-    "run": "cam.drive.runner", "Controller": "cam.drive.runner", "RunResult": "cam.drive.runner",
+    "run": "cam.drive.session", "MachineSession": "cam.drive.session",
+    "Controller": "cam.drive.runner", "RunResult": "cam.drive.runner",
     "simulate_surface": "cam.drive.runner",
     "open_port": "cam.drive.ports", "MockPort": "cam.drive.ports",
     "decode_pin_log": "cam.verify.pinlog", "read_pin_log": "cam.verify.pinlog",
@@ -96,7 +97,8 @@ if TYPE_CHECKING:  # pragma: no cover - for type checkers and editors only
     from .digitize.drawing import Drawing, load_image
     from .digitize.profile import Profile, load_profile, profile_from_expr
     from .drive.ports import MockPort, open_port
-    from .drive.runner import Controller, RunResult, run, simulate_surface
+    from .drive.runner import Controller, RunResult, simulate_surface
+    from .drive.session import MachineSession, run
     from .drive.steps import StepPlan, plan_steps
     from .errors import CamError, DrawingError, ParseError, PlanError, PortError, SettingsError, TravelError
     from .formats.excellon import HoleList, load_excellon, parse_excellon

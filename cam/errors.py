@@ -15,6 +15,8 @@ __all__ = [
     "PlanError",
     "TravelError",
     "PortError",
+    "CapabilityError",
+    "BusyError",
 ]
 
 
@@ -44,3 +46,11 @@ class TravelError(PlanError):
 
 class PortError(CamError):
     """A port cannot be opened or written."""
+
+
+class CapabilityError(PortError):
+    """The port cannot do what was asked (the MAXIMUS board has no pause, a real port keeps no pin log)."""
+
+
+class BusyError(CamError):
+    """The machine is busy with something else (or idle when something running was expected)."""

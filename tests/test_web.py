@@ -543,7 +543,7 @@ def test_api_drives_the_maximus_board(tmp_path):
         status, plan = s.call("POST", "/api/plan", {"job": r["job"], "options": {"depth": 2}})
         assert status == 200
         status, r = s.call("POST", "/api/start", {"job": plan["job"]})
-        assert status == 400 and "Excellon" in r["error"]  # the board drills drill files only
+        assert status == 409 and "Excellon" in r["error"]  # the board drills drill files only
 
         status, r = s.upload("board.drl", (SAMPLES / "board.drl").read_bytes())
         status, plan = s.call("POST", "/api/plan", {"job": r["job"], "options": {"drill_depth_mm": 1.0}})

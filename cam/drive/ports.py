@@ -1,21 +1,44 @@
-"""Ports opened by name: the logging mock (default) and the real PC parallel port.
+"""Ports opened by name, as pyserial opens URLs: the one place that reads a port name.
 
 * ``"mock"`` -- the thesis's Debug Mode: nothing leaves the PC; every write is
   logged as ``(t_ns, data, strobe)``.  It ships in the library so that every
   job can run, and be checked, with no hardware.
 * a device path such as ``"/dev/parport0"`` -- the real port through
   pyparallel, imported only when such a port is opened.
+* ``"maximus:DEVICE"`` -- the MAXIMUS PCB driller's PIC board on RS-232
+  (:mod:`cam.drive.maximus`): it takes drill files and jogs, not step/dir writes.
 
-The port only writes; *when* to write is the runner's business.
+What each kind can do is :data:`CAPABILITIES`; :func:`require` refuses the rest
+with one message that every front end shows.  A step/dir port only writes;
+*when* to write is the runner's business.
 """
 from __future__ import annotations
 
 import numpy as np
 
-from ..errors import PortError
+from ..errors import CapabilityError, PortError
 from ..verify.pinlog import PinLog
 
-__all__ = ["Port", "MockPort", "ParallelPort", "open_port"]
+__all__ = ["Port", "MockPort", "ParallelPort", "open_port", "port_kind", "CAPABILITIES", "require", "MAXIMUS_PREFIX"]
+
+MAXIMUS_PREFIX = "maximus:"
+
+CAPABILITIES = {
+    "mock": frozenset({"step_dir", "pause", "pin_log", "drill_files"}),
+    "parport": frozenset({"step_dir", "pause", "drill_files"}),
+    "maximus": frozenset({"drill_files", "jog", "delay"}),
+}
+"""What each kind of port can do."""
+
+_CANNOT = {
+    "pause": "{port} cannot pause a job (the MAXIMUS firmware has no pause): stop it, or wait for a tool change",
+    "pin_log": "{port} keeps no pin log: a pin log records the mock port's writes (--port mock)",
+    "step_dir": "{port} (the MAXIMUS board) drills drill files (Excellon) and jogs only; {what} needs a "
+                "step/dir port (mock or /dev/parportN)",
+    "drill_files": "{port} cannot drill {what}",
+    "jog": "{port} cannot jog",
+    "delay": "{port} takes its step delays from the machine settings; {what} applies to the MAXIMUS board only",
+}
 
 
 class Port:
@@ -116,14 +139,47 @@ class ParallelPort(Port):
                 del self._port
 
 
+def port_kind(name: str | Port) -> str:
+    """``"mock"``, ``"parport"`` or ``"maximus"``: the kind of port a name opens.
+
+    >>> port_kind("mock"), port_kind("/dev/parport0"), port_kind("maximus:/dev/ttyUSB0")
+    ('mock', 'parport', 'maximus')
+
+    Raises:
+        PortError: an unknown name.
+    """
+    if isinstance(name, MockPort) or name == "mock":
+        return "mock"
+    if isinstance(name, Port):
+        return "parport"
+    if name.startswith(MAXIMUS_PREFIX) and len(name) > len(MAXIMUS_PREFIX):
+        return "maximus"
+    if name.startswith("/dev/"):
+        return "parport"
+    raise PortError(f"unknown port '{name}' (use 'mock', a device path such as /dev/parport0, "
+                    f"or maximus:/dev/ttyUSB0)")
+
+
+def require(name: str | Port, capability: str, *, what: str = "this job") -> None:
+    """Refuse what the port ``name`` cannot do, with the one message every front end shows.
+
+    Raises:
+        CapabilityError: the port's kind lacks ``capability`` (see :data:`CAPABILITIES`).
+    """
+    if capability not in CAPABILITIES[port_kind(name)]:
+        raise CapabilityError(_CANNOT[capability].format(port=str(name), what=what))
+
+
 def open_port(name: str | Port = "mock") -> Port:
-    """Open a port by name: ``"mock"`` or a device path (``/dev/parport0``).  A Port passes through."""
+    """Open a step/dir port by name: ``"mock"`` or a device path (``/dev/parport0``).  A Port passes through.
+
+    Raises:
+        CapabilityError: a MAXIMUS board (it takes drill files and jogs, see :mod:`cam.drive.session`);
+        PortError: an unknown name or a port that cannot be opened.
+    """
     if isinstance(name, Port):
         return name
-    if name == "mock":
+    require(name, "step_dir", what="a step/dir job")
+    if port_kind(name) == "mock":
         return MockPort()
-    if name.startswith("/dev/"):
-        return ParallelPort(name)
-    if name.startswith("maximus:"):
-        raise PortError(f"'{name}': the MAXIMUS board takes drill files (Excellon) and jogs only, not step/dir jobs")
-    raise PortError(f"unknown port '{name}' (use 'mock' or a device path such as /dev/parport0)")
+    return ParallelPort(name)

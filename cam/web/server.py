@@ -3,8 +3,8 @@
 The page (``static/``) talks to a small JSON API under ``/api``; live status
 comes as server-sent events (``GET /api/events``).  The server is a thin
 adapter: jobs are prepared by :func:`cam.job.jobs.prepare_job` and run by
-:func:`cam.drive.runner.run` on the same ports as the CLI, in one background
-thread.
+the :class:`~cam.drive.session.MachineSession` that the CLI and the Python API
+use too, on the same ports.
 
 Frames: positions are machine steps ``(x, y, z)`` from the *home*, where the
 tool stood when the server started (+Z deeper); a job starts where the tool
@@ -27,7 +27,6 @@ Security:
 from __future__ import annotations
 
 import asyncio
-import collections
 import json
 import re
 import secrets
@@ -40,19 +39,16 @@ from pathlib import Path
 from typing import Any, Awaitable, Callable, Optional
 from urllib.parse import urlsplit
 
-import numpy as np
-
-from ..verify.pinlog import PositionTracker
-from ..errors import CamError, PortError
+from ..drive.session import MachineSession
+from ..errors import BusyError, CamError, CapabilityError
 from ..fileio import atomic_write_bytes
 from ..job.jobs import PROFILE_SUFFIXES, JobOptions, PreparedJob, accepted_suffixes, job_kind, prepare_job
-from ..settings import DEFAULT_SETTINGS, MachineSettings, Travel
+from ..settings import DEFAULT_SETTINGS, MachineSettings
 
-__all__ = ["ServerConfig", "MachineSession", "HttpError", "create_app", "serve", "LOCAL_HOSTS"]
+__all__ = ["ServerConfig", "HttpError", "create_app", "serve", "LOCAL_HOSTS"]
 
 STATIC_DIR = Path(__file__).resolve().parent / "static"
 LOCAL_HOSTS = ("127.0.0.1", "localhost", "::1")
-MAX_JOG_STEPS = 100_000
 _DRAIN_LIMIT_BYTES = 64 * 1024 * 1024  # read and drop at most this much of a refused upload
 _MULTIPART_SLACK_BYTES = 64 * 1024  # form boundaries and headers around the file
 
@@ -111,479 +107,6 @@ def safe_name(filename: str) -> str:
     return base or "upload"
 
 
-class _BoardControl:
-    """Pause / stop controls of a job on a MAXIMUS board (the runner's :class:`Controller` for step/dir ports).
-
-    The firmware has no pause.  Stop and emergency stop both go to
-    :meth:`cam.drive.maximus.MaximusBoard.emergency_stop`: during a move it sends the firmware's stop
-    byte, between moves it sends nothing more and the job ends before the next packet.
-    """
-
-    paused = False
-
-    def __init__(self) -> None:
-        self.halted = False
-        self._board: Any = None
-        self._lock = threading.Lock()
-
-    def attach(self, board: Any) -> None:
-        """The board is open; a stop asked for before this point ends the job now."""
-        with self._lock:
-            self._board = board
-            halted = self.halted
-        if halted:
-            board.emergency_stop()
-            raise PortError("stopped before the board started")
-
-    def stop(self) -> None:
-        with self._lock:
-            self.halted = True
-            board = self._board
-        if board is not None:
-            board.emergency_stop()
-
-    emergency_stop = stop
-
-    def pause(self) -> None:
-        raise HttpError(409, "the MAXIMUS firmware cannot pause a job: stop it, or wait for a tool change")
-
-    def resume(self) -> None:
-        raise HttpError(409, "nothing is paused")
-
-
-class MachineSession:
-    """The machine as the server sees it: where the tool is, what runs, the last run's pin log.
-
-    Thread-safe.  One activity at a time (a job, a jog or a move to the
-    origin) runs in a background thread through :func:`cam.drive.runner.run`.
-    """
-
-    def __init__(self, settings: MachineSettings = DEFAULT_SETTINGS, machine_port: str = "mock",
-                 realtime: bool = True) -> None:
-        self.settings = settings
-        self.machine_port = machine_port
-        self.maximus = machine_port.startswith("maximus:")  # the PIC board: drill files and jogs only
-        self.realtime = realtime
-        self._lock = threading.RLock()
-        self._position = np.zeros(3, np.int64)  # steps from the home, when nothing runs
-        self._activity: Optional[str] = None  # "job", "jog", "origin" while one runs
-        self._label = ""
-        self._thread: Optional[threading.Thread] = None
-        self._controller = None
-        self._positions: Any = None  # a PositionTracker over the running plan's writes (None: not known)
-        self._done = 0
-        self._total = 0
-        self._machine_ns = 0
-        self._estimated_s = 0.0
-        self._started_wall = 0.0
-        self._finished_wall = 0.0
-        self._prompt: Optional[dict[str, Any]] = None
-        self._prompt_seq = 0
-        self._answer = threading.Event()
-        self._answer_action = "continue"
-        self._estop_request_ns: Optional[int] = None
-        self._log: collections.deque = collections.deque(maxlen=500)
-        self._log_seq = 0
-        self.last_run: dict[str, Any] = {}
-        self.last_job_pin_log = None
-        self.version = 0
-
-    # -- log and state -------------------------------------------------------------
-    def log(self, text: str, level: str = "info") -> None:
-        """Add a line to the log the page shows."""
-        with self._lock:
-            self._log_seq += 1
-            self._log.append({"seq": self._log_seq, "level": level, "text": text, "t": time.time()})
-            self.version += 1
-
-    @property
-    def busy(self) -> bool:
-        with self._lock:
-            return self._activity is not None
-
-    def position_steps(self) -> tuple[int, int, int]:
-        """Where the tool is now, in steps from the home (live while something runs)."""
-        with self._lock:
-            pos = self._position.copy()
-            if self._activity is not None and self._positions is not None and self._done > 0:
-                pos = pos + np.array(self._positions.advance(self._done), np.int64)
-            return tuple(int(v) for v in pos)  # type: ignore[return-value]
-
-    def state(self, log_after: int = 0) -> dict[str, Any]:
-        """JSON-able snapshot: state, position, progress, times, prompt, log lines after ``log_after``."""
-        s = self.settings
-        with self._lock:
-            ctl = self._controller
-            if self._activity is None:
-                name = "idle"
-            elif self._prompt is not None:
-                name = "prompt"
-            elif ctl is not None and ctl.halted:
-                name = "stopping"
-            elif ctl is not None and ctl.paused:
-                name = "paused"
-            else:
-                name = "running" if self._activity == "job" else "moving"
-            pos = self.position_steps()
-            end = time.monotonic() if self._activity is not None else self._finished_wall
-            elapsed = max(0.0, end - self._started_wall) if self._started_wall else 0.0
-            remaining = max(0.0, self._estimated_s - self._machine_ns / 1e9) if self._activity else 0.0
-            return {
-                "state": name,
-                "activity": self._activity,
-                "label": self._label,
-                "position_steps": list(pos),
-                "position_mm": [round(pos[0] * s.mm_per_step_xy, 4), round(pos[1] * s.mm_per_step_xy, 4),
-                                round(pos[2] * s.mm_per_step_z, 4)],
-                "progress": round(100.0 * self._done / self._total, 2) if self._total else 0.0,
-                "writes_done": self._done,
-                "writes_total": self._total,
-                "elapsed_s": round(elapsed, 2),
-                "remaining_s": round(remaining, 2),
-                "prompt": dict(self._prompt) if self._prompt else None,
-                "last": dict(self.last_run),
-                "log": [dict(e) for e in self._log if e["seq"] > log_after][-100:],
-                "port": self.machine_port,
-                "realtime": self.realtime or self.machine_port != "mock",
-                "version": self.version,
-            }
-
-    # -- starting things ---------------------------------------------------------
-    def _check_free(self) -> None:
-        if self._activity is not None:
-            raise HttpError(409, f"the machine is busy ({self._label}); wait for it to end or stop it")
-
-    def _check_reach(self, extent_steps: np.ndarray, what: str) -> None:
-        """Refuse a move whose extent (relative to the tool) leaves the travel from here."""
-        for a, (lo, hi) in enumerate(self.settings.travel.bounds_steps()):
-            p = int(self._position[a])
-            if p + int(extent_steps[a, 0]) < lo or p + int(extent_steps[a, 1]) > hi:
-                raise HttpError(
-                    409, f"{what} would leave the {'XYZ'[a]} travel ({lo}..{hi} steps from the home): the tool "
-                    f"is at {'XYZ'[a]}={p} and the move reaches {p + int(extent_steps[a, 0])}.."
-                    f"{p + int(extent_steps[a, 1])}")
-
-    def start_job(self, job: PreparedJob) -> None:
-        """Run a prepared job from where the tool stands (409 if something runs or it leaves the travel)."""
-        with self._lock:
-            self._check_free()
-            if job.settings.travel != self.settings.travel or job.settings.pins != self.settings.pins:
-                raise HttpError(409, "the job was planned for other machine settings; plan it again")
-            self._check_reach(job.extent_steps, "the job")
-            if self.maximus:
-                self._launch_maximus_job(job)
-                return
-            self._launch("job", job.steps, f"job {job.name or Path(job.source).name}",
-                         job.estimated_time_s)
-
-    def jog(self, axis: str, steps: int) -> None:
-        """Move one axis by ``steps`` (409 while something runs; 400 for a bad axis, count or travel)."""
-        a = str(axis).lower()
-        if a not in ("x", "y", "z"):
-            raise HttpError(400, f"axis must be x, y or z, got {axis!r}")
-        if isinstance(steps, bool) or not isinstance(steps, int) or steps == 0 or abs(steps) > MAX_JOG_STEPS:
-            raise HttpError(400, f"steps must be a whole number, not 0, at most {MAX_JOG_STEPS} either way, got {steps!r}")
-        i = "xyz".index(a)
-        with self._lock:
-            self._check_free()
-            lo, hi = self.settings.travel.bounds_steps()[i]
-            target = int(self._position[i]) + steps
-            if not lo <= target <= hi:
-                raise HttpError(400, f"a jog of {steps} steps would take {a.upper()} to {target}, outside its "
-                                f"travel {lo}..{hi} steps from the home")
-            move = [0, 0, 0]
-            move[i] = steps
-            if self.maximus:
-                self._launch_maximus_moves("jog", [tuple(move)], f"jog {a.upper()} {steps:+d} steps")
-                return
-            self._start_moves("jog", [tuple(move)], f"jog {a.upper()} {steps:+d} steps")  # type: ignore[list-item]
-
-    def go_to_origin(self) -> None:
-        """Back to the home: lift out of the material first, travel at that height, then Z to the home."""
-        with self._lock:
-            self._check_free()
-            x, y, z = (int(v) for v in self._position)
-            safe = min(z, 0)
-            absolute = [(x, y, safe), (0, 0, safe), (0, 0, 0)]
-            rel: list[tuple[int, int, int]] = []
-            for p in absolute:
-                r = (p[0] - x, p[1] - y, p[2] - z)
-                if r != (0, 0, 0) and (not rel or rel[-1] != r):
-                    rel.append(r)
-            if not rel:
-                self.log("already at the origin")
-                return
-            if self.maximus:
-                self._launch_maximus_moves("origin", rel, "go to origin")
-                return
-            self._start_moves("origin", rel, "go to origin")
-
-    def _start_moves(self, activity: str, moves: list[tuple[int, int, int]], label: str) -> None:
-        from ..drive.steps import plan_steps
-        from ..job.model import travel_job
-
-        plan = plan_steps(travel_job(moves, self.settings), start_steps=tuple(int(v) for v in self._position))
-        self._launch(activity, plan, label, plan.estimated_time_s)
-
-    def _launch(self, activity: str, plan: Any, label: str, estimated_s: float) -> None:
-        from ..drive.runner import Controller
-
-        ctl = Controller()
-        self._activity, self._label, self._controller = activity, label, ctl
-        self._positions = PositionTracker(plan.data, plan.settings)  # live position, decoded as it goes
-        self._done, self._total, self._machine_ns = 0, len(plan), 0
-        self._estimated_s = estimated_s
-        self._started_wall = time.monotonic()
-        self._estop_request_ns = None
-        self._prompt = None
-        self.version += 1
-        self.log(f"{label}: started")
-        t = threading.Thread(target=self._worker, args=(activity, plan, ctl, label), name=f"cam-{activity}",
-                             daemon=True)
-        self._thread = t
-        t.start()
-
-    # -- the MAXIMUS board ----------------------------------------------------------
-    def _launch_maximus_job(self, job: PreparedJob) -> None:
-        from ..drive.maximus.board import drill_arguments
-
-        dp = job.drill_plan
-        if job.kind != "excellon" or dp is None:
-            raise HttpError(400, f"the MAXIMUS board ({self.machine_port}) drills drill files (Excellon) only; "
-                                 f"this job is {job.kind}")
-        arguments = drill_arguments(dp, self.settings)
-        n_holes = len(arguments["holes_steps"])
-
-        def work(board: Any) -> None:
-            def on_hole(drilled: int) -> None:
-                with self._lock:
-                    self._done = drilled
-                    self._machine_ns = int(job.estimated_time_s * 1e9 * drilled / max(1, n_holes))
-                    self.version += 1
-
-            board.drill(**arguments, on_tool_change=lambda index, note: self._on_pause((0, 0, 0), note),
-                        on_hole=on_hole)
-
-        self._launch_board("job", work, n_holes, f"job {job.name or Path(job.source).name}",
-                           job.estimated_time_s, np.zeros(3, np.int64))
-
-    def _launch_maximus_moves(self, activity: str, moves: list[tuple[int, int, int]], label: str) -> None:
-        def work(board: Any) -> None:
-            for move in moves:
-                for a, n in zip("xyz", move):
-                    if n:
-                        board.jog(a, int(n), half_step=self.settings.half_step)
-
-        self._launch_board(activity, work, 1, label, 0.0, np.sum(np.array(moves, np.int64), axis=0))
-
-    def _launch_board(self, activity: str, work: Callable[[Any], None], total: int, label: str,
-                      estimated_s: float, moved_steps: np.ndarray) -> None:
-        ctl = _BoardControl()
-        self._activity, self._label, self._controller = activity, label, ctl
-        self._positions = None  # the board reports no position while it moves
-        self._done, self._total, self._machine_ns = 0, total, 0
-        self._estimated_s = estimated_s
-        self._started_wall = time.monotonic()
-        self._estop_request_ns = None
-        self._prompt = None
-        self.version += 1
-        self.log(f"{label}: started on {self.machine_port}")
-        t = threading.Thread(target=self._board_worker, args=(activity, work, ctl, label, moved_steps),
-                             name=f"cam-maximus-{activity}", daemon=True)
-        self._thread = t
-        t.start()
-
-    def _board_worker(self, activity: str, work: Callable[[Any], None], ctl: _BoardControl, label: str,
-                      moved_steps: np.ndarray) -> None:
-        from ..drive.maximus.board import MaximusBoard
-
-        error = None
-        board = None
-        try:
-            board = MaximusBoard(self.machine_port)
-            ctl.attach(board)
-            work(board)
-        except CamError as exc:
-            error = str(exc)
-        except Exception as exc:  # noqa: BLE001 - reported on the page; the host sent nothing more
-            error = f"internal error: {type(exc).__name__}: {exc}"
-        finally:
-            if board is not None:
-                board.close()
-        with self._lock:
-            if error is None:
-                status = "finished"
-                self._position = self._position + moved_steps  # a drill job ends where it started
-                self._done = self._total
-            else:
-                status = "emergency-stopped" if ctl.halted else "error"
-            self.last_run = {"activity": activity, "label": label, "status": status,
-                             "messages": [error] if error else []}
-            self._activity = None
-            self._controller = None
-            self._prompt = None
-            self._finished_wall = time.monotonic()
-            self.version += 1
-        if error is None:
-            self.log(f"{label}: finished")
-        else:
-            self.log(f"{label}: {error}" + ("" if status == "emergency-stopped" else
-                                             " (the board's position is now unknown: jog it home)"),
-                     "error")
-
-    # -- the worker thread ---------------------------------------------------------
-    def _progress(self, done: int, total: int, machine_ns: int) -> None:
-        with self._lock:
-            self._done, self._machine_ns = done, machine_ns
-            self.version += 1
-
-    def _on_pause(self, position_steps: tuple[int, int, int], note: str) -> None:
-        ctl = self._controller
-        with self._lock:
-            self._prompt_seq += 1
-            self._prompt = {"id": self._prompt_seq, "note": note,
-                            "position_steps": [int(v) + int(p) for v, p in zip(self._position, position_steps)]}
-            self._answer.clear()
-            self._answer_action = "continue"
-        self.log(f"{note}: waiting for an answer", "prompt")
-        while not self._answer.wait(0.05):
-            if ctl is None or ctl.halted:
-                break
-        with self._lock:
-            self._prompt = None
-            action = self._answer_action
-            self.version += 1
-        if action == "stop" and ctl is not None:
-            ctl.stop()
-
-    def _worker(self, activity: str, plan: Any, ctl: Any, label: str) -> None:
-        from ..drive.ports import MockPort, open_port
-        from ..drive.runner import run
-
-        result = None
-        error = None
-        port = None
-        try:
-            port = open_port(self.machine_port)
-            result = run(plan, port, realtime=self.realtime, controller=ctl, progress=self._progress,
-                         on_pause=self._on_pause)
-        except CamError as exc:
-            error = str(exc)
-        except Exception as exc:  # noqa: BLE001 - reported on the page; the runner sent nothing more
-            error = f"internal error: {type(exc).__name__}: {exc}"
-        finally:
-            if port is not None and not isinstance(port, MockPort):
-                try:
-                    port.close()
-                except CamError as exc:
-                    error = error or str(exc)
-        with self._lock:
-            info: dict[str, Any] = {"activity": activity, "label": label}
-            if result is not None:
-                self._position = self._position + np.array(result.position_steps, np.int64)
-                info.update(status=result.status, writes=result.writes, messages=list(result.messages),
-                            machine_time_s=round(result.machine_time_s, 4), wall_time_s=round(result.wall_time_s, 4),
-                            started_ns=result.started_ns, step_period_ns=int(max(plan.settings.delay_xy_ns,
-                                                                                 plan.settings.delay_z_ns)))
-                if self._estop_request_ns is not None:
-                    info["estop_request_job_ns"] = int(self._estop_request_ns - result.started_ns)
-                if isinstance(result.port, MockPort):
-                    log = result.pin_log()
-                    info["last_write_job_ns"] = int(log.t_ns[-1]) if len(log) else None
-                    if activity == "job":
-                        self.last_job_pin_log = log
-                self._done = result.writes if result.status != "finished" else self._total
-            else:
-                info.update(status="error", messages=[error or "failed"])
-                self._positions = None  # position unknown beyond what was confirmed
-            self.last_run = info
-            self._activity = None
-            self._controller = None
-            self._prompt = None
-            self._finished_wall = time.monotonic()
-            self.version += 1
-        if error:
-            self.log(f"{label}: {error}", "error")
-        else:
-            assert result is not None
-            text = f"{label}: {result.status}"
-            if result.messages:
-                text += " (" + "; ".join(result.messages) + ")"
-            self.log(text, "info" if result.status == "finished" else "warning")
-
-    # -- control -------------------------------------------------------------------
-    def pause(self) -> None:
-        with self._lock:
-            if self._controller is None:
-                raise HttpError(409, "nothing is running")
-            self._controller.pause()
-            self.version += 1
-        self.log("paused")
-
-    def resume(self) -> None:
-        with self._lock:
-            if self._controller is None:
-                raise HttpError(409, "nothing is running")
-            self._controller.resume()
-            self.version += 1
-        self.log("resumed")
-
-    def stop(self) -> None:
-        """Stop and lift the tool to the safe plane (nothing happens when idle)."""
-        ctl = self._controller  # stop first, book-keeping after (see emergency_stop)
-        if ctl is not None:
-            ctl.stop()
-        with self._lock:
-            if ctl is not None:
-                self._answer_action = "stop"
-                self._answer.set()
-                self.version += 1
-        self.log("stop requested" if ctl is not None else "stop: nothing was running")
-
-    def emergency_stop(self, request_ns: Optional[int] = None) -> None:
-        """Send nothing more at all.  ``request_ns``: ``time.monotonic_ns()`` when the request arrived."""
-        now = request_ns if request_ns is not None else time.monotonic_ns()
-        ctl = self._controller  # no lock before the stop: the runner may hold it for a progress update
-        if ctl is not None:
-            ctl.emergency_stop()
-        with self._lock:
-            if ctl is not None:
-                if self._estop_request_ns is None:
-                    self._estop_request_ns = now
-                self._answer.set()
-                self.version += 1
-        self.log("EMERGENCY STOP" if ctl is not None else "emergency stop: nothing was moving", "error")
-
-    def answer(self, prompt_id: Any, action: str) -> None:
-        """Answer the pending prompt: ``action`` "continue" or "stop"."""
-        if action not in ("continue", "stop"):
-            raise HttpError(400, f"action must be 'continue' or 'stop', got {action!r}")
-        with self._lock:
-            if self._prompt is None:
-                raise HttpError(409, "no prompt is waiting for an answer")
-            if prompt_id is not None and prompt_id != self._prompt["id"]:
-                raise HttpError(409, f"prompt {prompt_id!r} is no longer waiting (the current one is {self._prompt['id']})")
-            self._answer_action = action
-            note = self._prompt["note"]
-            self._answer.set()
-        self.log(f"{note}: {action}")
-
-    def wait_idle(self, timeout_s: float = 10.0) -> bool:
-        """Wait for the running activity to end; True when idle."""
-        t = self._thread
-        if t is not None:
-            t.join(timeout_s)
-        return not self.busy
-
-    def shutdown(self) -> None:
-        """Stop whatever runs (tool lifted) and wait for it."""
-        if self.busy:
-            self.stop()
-            if not self.wait_idle(30):
-                self.emergency_stop()
-                self.wait_idle(5)
-
-
 # ----------------------------------------------------------------------------------
 # HTTP
 # ----------------------------------------------------------------------------------
@@ -609,7 +132,7 @@ def create_app(config: ServerConfig, session: Optional[MachineSession] = None):
     jobs_dir = Path(config.jobs_dir or tempfile.mkdtemp(prefix="cam-jobs-")).resolve()
     jobs_dir.mkdir(parents=True, exist_ok=True)
     config.jobs_dir = str(jobs_dir)
-    session = session or MachineSession(config.settings, config.machine_port, config.realtime)
+    session = session or MachineSession(config.machine_port, config.settings, realtime=config.realtime)
     uploads: dict[str, dict[str, Any]] = {}
     prepared: dict[str, PreparedJob] = {}
     previews: dict[str, bytes] = {}
@@ -639,6 +162,8 @@ def create_app(config: ServerConfig, session: Optional[MachineSession] = None):
                 out = await handler(request)
             except HttpError as exc:
                 return _json_error(exc.status, exc.message)
+            except (BusyError, CapabilityError) as exc:  # the machine cannot do it now, or at all
+                return _json_error(409, str(exc))
             except CamError as exc:
                 return _json_error(400, str(exc))
             if isinstance(out, Response):
@@ -795,7 +320,7 @@ def create_app(config: ServerConfig, session: Optional[MachineSession] = None):
         if job is None:
             raise HttpError(404 if job_id not in uploads else 409,
                             f"job {job_id!r} is not planned; upload it and set its options first")
-        session.start_job(job)
+        session.start(job, label=f"job {job.name or Path(job.source).name}")
         return session.state()
 
     def control(fn: Callable[[], None]):

@@ -1,0 +1,157 @@
+"""What a machine session's worker thread does: run a step plan on a step/dir port, or work a MAXIMUS board.
+
+Each function reports to the session through its worker hooks
+(:meth:`~cam.drive.session.MachineSession.progress`, ``prompt``, ``finish``,
+``log``) and never raises: an error ends the activity with a log line.
+"""
+from __future__ import annotations
+
+import threading
+from typing import Any, Callable
+
+import numpy as np
+
+from ..errors import CamError, PortError
+from ..settings import MachineSettings
+from .maximus.board import MaximusBoard, drill_arguments
+from .ports import MockPort, open_port, require
+from .runner import Controller, run
+from .steps import StepPlan
+
+__all__ = ["run_steps", "run_on_board", "BoardControl", "drill_work", "jog_work"]
+
+BoardWork = Callable[[MaximusBoard, Any], None]
+"""work(board, session): what to do with an open board."""
+
+
+def run_steps(session: Any, name: str, plan: StepPlan, ctl: Controller, label: str) -> None:
+    """Run ``plan`` on the session's step/dir port (the worker thread of a job, jog or move)."""
+    result = None
+    error = None
+    port = None
+    try:
+        port = open_port(session.port)
+        result = run(plan, port, realtime=session.realtime, controller=ctl, progress=session.progress,
+                     on_pause=session.prompt)
+    except CamError as exc:
+        error = str(exc)
+    except Exception as exc:  # noqa: BLE001 - reported in the log; the runner sent nothing more
+        error = f"internal error: {type(exc).__name__}: {exc}"
+    finally:
+        if port is not None and not isinstance(port, MockPort):
+            try:
+                port.close()
+            except CamError as exc:
+                error = error or str(exc)
+    info: dict[str, Any] = {"activity": name, "label": label}
+    if result is None:
+        info.update(status="error", messages=[error or "failed"])
+        session.finish(info, None)
+        session.log(f"{label}: {error}", "error")
+        return
+    info.update(status=result.status, writes=result.writes, messages=list(result.messages),
+                machine_time_s=round(result.machine_time_s, 4), wall_time_s=round(result.wall_time_s, 4),
+                started_ns=result.started_ns,
+                step_period_ns=int(max(plan.settings.delay_xy_ns, plan.settings.delay_z_ns)))
+    log = None
+    if isinstance(result.port, MockPort):
+        log = result.pin_log()
+        info["last_write_job_ns"] = int(log.t_ns[-1]) if len(log) else None
+    session.finish(info, np.array(result.position_steps, np.int64), result=result,
+                   pin_log=log if name == "job" else None)
+    text = f"{label}: {result.status}"
+    if result.messages:
+        text += " (" + "; ".join(result.messages) + ")"
+    session.log(text, "info" if result.status == "finished" else "warning")
+
+
+class BoardControl:
+    """Pause / stop controls of an activity on a MAXIMUS board (the :class:`Controller` of step/dir ports).
+
+    The firmware has no pause.  Stop and emergency stop both go to
+    :meth:`MaximusBoard.emergency_stop`: during a move it sends the firmware's stop byte, between moves it
+    sends nothing more and the job ends before the next packet.
+    """
+
+    paused = False
+
+    def __init__(self, port: str) -> None:
+        self.port = port
+        self.halted = False
+        self._board: Any = None
+        self._lock = threading.Lock()
+
+    def attach(self, board: MaximusBoard) -> None:
+        """The board is open; a stop asked for before this point ends the job now."""
+        with self._lock:
+            self._board = board
+            halted = self.halted
+        if halted:
+            board.emergency_stop()
+            raise PortError("stopped before the board started")
+
+    def stop(self) -> None:
+        with self._lock:
+            self.halted = True
+            board = self._board
+        if board is not None:
+            board.emergency_stop()
+
+    emergency_stop = stop
+
+    def pause(self) -> None:
+        require(self.port, "pause")
+
+    def resume(self) -> None:
+        require(self.port, "pause")
+
+
+def drill_work(job: Any, settings: MachineSettings) -> BoardWork:
+    """The board work of a prepared drill job: every hole, with its tool-change prompts and progress."""
+    arguments = drill_arguments(job.drill_plan, settings)
+    n_holes = len(arguments["holes_steps"])
+
+    def work(board: MaximusBoard, session: Any) -> None:
+        def on_hole(drilled: int) -> None:
+            session.progress(drilled, n_holes, int(job.estimated_time_s * 1e9 * drilled / max(1, n_holes)))
+
+        board.drill(**arguments, on_tool_change=lambda index, note: session.prompt((0, 0, 0), note), on_hole=on_hole)
+
+    return work
+
+
+def jog_work(moves_steps: np.ndarray, settings: MachineSettings) -> BoardWork:
+    """The board work of relative moves ``(N, 3)``: one jog packet per axis that moves."""
+    def work(board: MaximusBoard, session: Any) -> None:
+        for move in np.asarray(moves_steps, np.int64).reshape(-1, 3).tolist():
+            for axis, n in zip("xyz", move):
+                if n:
+                    board.jog(axis, int(n), half_step=settings.half_step)
+
+    return work
+
+
+def run_on_board(session: Any, name: str, work: BoardWork, ctl: BoardControl, label: str,
+                 moved_steps: np.ndarray) -> None:
+    """Open the session's MAXIMUS board and do ``work`` on it (the worker thread)."""
+    error = None
+    board = None
+    try:
+        board = MaximusBoard(session.port)
+        ctl.attach(board)
+        work(board, session)
+    except CamError as exc:
+        error = str(exc)
+    except Exception as exc:  # noqa: BLE001 - reported in the log; the host sent nothing more
+        error = f"internal error: {type(exc).__name__}: {exc}"
+    finally:
+        if board is not None:
+            board.close()
+    if error is None:
+        session.finish({"activity": name, "label": label, "status": "finished", "messages": []}, moved_steps)
+        session.log(f"{label}: finished")
+        return
+    status = "emergency-stopped" if ctl.halted else "error"
+    session.finish({"activity": name, "label": label, "status": status, "messages": [error]}, None)
+    session.log(f"{label}: {error}" + ("" if status == "emergency-stopped" else
+                                      " (the board's position is now unknown: jog it home)"), "error")

@@ -1,0 +1,501 @@
+"""The machine session: one port, where the tool stands, one activity at a time.
+
+Every front end drives the machine through a :class:`MachineSession`: the
+CLI, the web page and the Python API (:func:`cam.run`).  A session owns a
+port opened by name (``"mock"``, ``"/dev/parport0"``, ``"maximus:/dev/ttyUSB0"``:
+see :mod:`cam.drive.ports`) and runs jobs, jogs, go-tos and moves back to the
+origin on it, one at a time, in a background thread::
+
+    session = MachineSession("mock")
+    session.start(job)             # a Job, a PreparedJob or a StepPlan
+    session.pause(); session.resume(); session.stop(); session.emergency_stop()
+    session.wait_idle()
+    session.state()                # position, progress, prompt, log: JSON-able
+    session.last_result            # the runner's RunResult (step/dir ports: the mock's pin log)
+
+Frames: positions are machine steps ``(x, y, z)`` from the *home*, where the
+tool stood when the session opened (+Z deeper).  A job starts where the tool
+stands and is checked against the machine travel from there before anything
+is sent.
+
+What a port cannot do (the MAXIMUS firmware has no pause and takes drill
+files only) is refused through one check, :func:`cam.drive.ports.require`,
+with the same message in every front end.
+"""
+from __future__ import annotations
+
+import collections
+import threading
+import time
+from dataclasses import dataclass, field
+from typing import Any, Callable, Optional
+
+import numpy as np
+
+from ..errors import BusyError, CamError, PlanError, PortError, TravelError
+from ..job.model import Job, travel_job
+from ..job.moves import jog as jog_job
+from ..job.moves import to_origin
+from ..settings import DEFAULT_SETTINGS, MachineSettings
+from ..verify.pinlog import PositionTracker
+from .activities import BoardControl, drill_work, jog_work, run_on_board, run_steps
+from .ports import port_kind, require
+from .runner import Controller, RunResult
+from .steps import StepPlan, plan_steps
+
+__all__ = ["MachineSession", "Prompt", "PromptFn", "MAX_JOG_STEPS", "run"]
+
+MAX_JOG_STEPS = 100_000
+"""The longest jog one request may ask for, either way."""
+
+
+@dataclass
+class Prompt:
+    """A question the machine waits on (a tool change, a Pause At point)."""
+
+    id: int
+    note: str
+    position_steps: tuple[int, int, int]
+
+
+PromptFn = Callable[[Prompt], str]
+"""on_prompt(prompt) -> "continue" or "stop": answers a prompt from the worker thread (it may block)."""
+
+
+@dataclass
+class _Activity:
+    """What runs now: its name, label, controller and progress."""
+
+    name: str  # "job", "jog" or "origin"
+    label: str
+    controller: Any
+    total: int
+    estimated_s: float
+    positions: Optional[PositionTracker] = None
+    done: int = 0
+    machine_ns: int = 0
+    started_wall: float = field(default_factory=time.monotonic)
+
+
+class MachineSession:
+    """The machine as every front end sees it (thread-safe).
+
+    Args:
+        port: the port name (see :mod:`cam.drive.ports`); it is opened for each activity.
+        settings: the machine settings every job must be planned with.
+        realtime: run the mock on the real clock (real ports always are).
+        on_prompt: answers prompts in the worker thread (the CLI asks on the terminal); None: a prompt
+            waits for :meth:`answer` (the web page).
+    """
+
+    def __init__(self, port: str = "mock", settings: MachineSettings = DEFAULT_SETTINGS, *,
+                 realtime: bool = False, on_prompt: Optional[PromptFn] = None) -> None:
+        self.port = port
+        self.kind = port_kind(port)
+        self.settings = settings
+        self.realtime = realtime or self.kind != "mock"
+        self.on_prompt = on_prompt
+        self.on_progress: Optional[Callable[[int, int, int], None]] = None
+        self._lock = threading.RLock()
+        self._changed = threading.Condition(self._lock)
+        self._position = np.zeros(3, np.int64)
+        self._activity: Optional[_Activity] = None
+        self._last_activity: Optional[_Activity] = None  # the one that ended last: its progress stays shown
+        self._thread: Optional[threading.Thread] = None
+        self._finished_wall = 0.0
+        self._prompt: Optional[Prompt] = None
+        self._prompt_seq = 0
+        self._answer = threading.Event()
+        self._answer_action = "continue"
+        self._estop_request_ns: Optional[int] = None
+        self._log: collections.deque = collections.deque(maxlen=500)
+        self._log_seq = 0
+        self.last_run: dict[str, Any] = {}
+        self.last_result: Optional[RunResult] = None
+        self.last_job_pin_log = None
+        self.version = 0
+
+    # -- state ------------------------------------------------------------------------
+    def _bump(self) -> None:
+        self.version += 1
+        self._changed.notify_all()
+
+    def log(self, text: str, level: str = "info") -> None:
+        """Add a line to the session's log."""
+        with self._lock:
+            self._log_seq += 1
+            self._log.append({"seq": self._log_seq, "level": level, "text": text, "t": time.time()})
+            self._bump()
+
+    @property
+    def busy(self) -> bool:
+        with self._lock:
+            return self._activity is not None
+
+    def position_steps(self) -> tuple[int, int, int]:
+        """Where the tool is now, in steps from the home (live while something runs)."""
+        with self._lock:
+            pos = self._position.copy()
+            a = self._activity
+            if a is not None and a.positions is not None and a.done > 0:
+                pos = pos + np.array(a.positions.advance(a.done), np.int64)
+            return tuple(int(v) for v in pos)  # type: ignore[return-value]
+
+    def set_position(self, position_steps: tuple[int, int, int]) -> None:
+        """Tell the session where the tool stands (e.g. after homing by hand); refused while busy."""
+        with self._lock:
+            self._check_free()
+            self._position = np.asarray(position_steps, np.int64).reshape(3).copy()
+            self._bump()
+
+    def _state_name(self) -> str:
+        a = self._activity
+        if a is None:
+            return "idle"
+        if self._prompt is not None:
+            return "prompt"
+        if a.controller.halted:
+            return "stopping"
+        if a.controller.paused:
+            return "paused"
+        return "running" if a.name == "job" else "moving"
+
+    def state(self, log_after: int = 0) -> dict[str, Any]:
+        """JSON-able snapshot: state, position, progress, times, prompt, log lines after ``log_after``."""
+        s = self.settings
+        with self._lock:
+            a = self._activity
+            shown = a or self._last_activity
+            pos = self.position_steps()
+            end = time.monotonic() if a is not None else self._finished_wall
+            return {
+                "state": self._state_name(),
+                "activity": a.name if a else None,
+                "label": a.label if a else "",
+                "position_steps": list(pos),
+                "position_mm": [round(pos[0] * s.mm_per_step_xy, 4), round(pos[1] * s.mm_per_step_xy, 4),
+                                round(pos[2] * s.mm_per_step_z, 4)],
+                "progress": round(100.0 * shown.done / shown.total, 2) if shown and shown.total else 0.0,
+                "writes_done": shown.done if shown else 0,
+                "writes_total": shown.total if shown else 0,
+                "elapsed_s": round(max(0.0, end - shown.started_wall), 2) if shown else 0.0,
+                "remaining_s": round(max(0.0, a.estimated_s - a.machine_ns / 1e9), 2) if a else 0.0,
+                "prompt": dict(vars(self._prompt), position_steps=list(self._prompt.position_steps))
+                if self._prompt else None,
+                "last": dict(self.last_run),
+                "log": [dict(e) for e in self._log if e["seq"] > log_after][-100:],
+                "port": self.port,
+                "realtime": self.realtime,
+                "version": self.version,
+            }
+
+    def wait_change(self, version: int, timeout_s: float) -> int:
+        """Block until the state's version differs from ``version`` (or the timeout); returns the version."""
+        with self._changed:
+            if self.version == version:
+                self._changed.wait(timeout_s)
+            return self.version
+
+    # -- starting things ------------------------------------------------------------------
+    def _check_free(self) -> None:
+        if self._activity is not None:
+            raise BusyError(f"the machine is busy ({self._activity.label}); wait for it to end or stop it")
+
+    def check_reach(self, extent_steps: np.ndarray, what: str) -> None:
+        """Refuse a move whose ``(3, 2)`` extent (relative to the tool) leaves the travel from here."""
+        for a, (lo, hi) in enumerate(self.settings.travel.bounds_steps()):
+            p = int(self._position[a])
+            if p + int(extent_steps[a, 0]) < lo or p + int(extent_steps[a, 1]) > hi:
+                raise TravelError(
+                    f"{what} would leave the {'XYZ'[a]} travel ({lo}..{hi} steps from the home): the tool "
+                    f"is at {'XYZ'[a]}={p} and the move reaches {p + int(extent_steps[a, 0])}.."
+                    f"{p + int(extent_steps[a, 1])}")
+
+    def check_job(self, job: Any) -> None:
+        """Everything :meth:`start` checks before anything moves, without starting (raises CamError)."""
+        with self._lock:
+            self._check_job(job)
+
+    def _check_job(self, job: Any) -> None:
+        settings = getattr(job, "settings", None)
+        if settings is not None and (settings.travel != self.settings.travel or settings.pins != self.settings.pins):
+            raise CamError("the job was planned for other machine settings; plan it again")
+        if self.kind == "maximus":
+            require(self.port, "drill_files", what=f"a {getattr(job, 'kind', 'step')} job")
+            if getattr(job, "drill_plan", None) is None:
+                require(self.port, "step_dir", what=f"a {getattr(job, 'kind', 'step')} job")
+        extent = getattr(job, "extent_steps", None)
+        if extent is not None:
+            self.check_reach(extent, "the job")
+
+    def start(self, job: Any, *, label: Optional[str] = None, controller: Optional[Controller] = None) -> None:
+        """Run a job from where the tool stands, in the background.
+
+        Args:
+            job: a :class:`~cam.job.model.Job` (planned into steps here, checked against the travel from
+                where the tool stands), a :class:`~cam.job.jobs.PreparedJob` or a :class:`StepPlan`.
+            label: what the log calls it.
+            controller: a :class:`~cam.drive.runner.Controller` of the caller's (step/dir ports), else a new one;
+                :meth:`pause` and the other controls work either way.
+
+        Raises:
+            BusyError: something runs; CapabilityError: the port cannot run this job; TravelError:
+            the job leaves the travel from here (nothing is sent in every case).
+        """
+        with self._lock:
+            self._check_free()
+            self._check_job(job)
+            name = label or f"job {getattr(job, 'name', '') or getattr(job, 'source', '') or 'job'}"
+            if self.kind == "maximus":
+                self._launch_board("job", drill_work(job, self.settings), job, name)
+                return
+            plan = self._plan(job)
+            self._launch_steps("job", plan, name, getattr(job, "estimated_time_s", plan.estimated_time_s), controller)
+
+    def _plan(self, job: Any) -> StepPlan:
+        if isinstance(job, StepPlan):
+            return job
+        if isinstance(job, Job):
+            return plan_steps(job, start_steps=tuple(int(v) for v in self._position))
+        return job.steps  # a PreparedJob: planned from its home, checked by its extent
+
+    def run(self, job: Any, *, label: Optional[str] = None) -> dict[str, Any]:
+        """:meth:`start` and wait for the end; returns :attr:`last_run`."""
+        self.start(job, label=label)
+        self.wait_idle(None)
+        return dict(self.last_run)
+
+    def jog(self, axis: str, steps: int) -> None:
+        """Move one axis by ``steps`` (BusyError while something runs; PlanError/TravelError for a bad jog)."""
+        if isinstance(steps, (int, np.integer)) and not isinstance(steps, bool) and abs(int(steps)) > MAX_JOG_STEPS:
+            raise PlanError(f"steps must be at most {MAX_JOG_STEPS} either way, got {steps!r}")
+        with self._lock:
+            self._check_free()
+            job = jog_job(axis, steps, settings=self.settings, position_steps=self.position_steps())
+            self._start_moves("jog", job, job.source)
+
+    def go_to_origin(self) -> None:
+        """Back to the home: lift out of the material first, travel at that height, then Z to the home."""
+        with self._lock:
+            self._check_free()
+            job = to_origin(self.position_steps(), settings=self.settings)
+            if len(job) == 0:
+                self.log("already at the origin")
+                return
+            self._start_moves("origin", job, job.source)
+
+    def move_to(self, points_steps: np.ndarray, label: str) -> None:
+        """Travel through ``(N, 3)`` points given relative to where the tool stands."""
+        with self._lock:
+            self._check_free()
+            self._start_moves("jog", travel_job(points_steps, self.settings), label)
+
+    def _start_moves(self, activity: str, job: Job, label: str) -> None:
+        if self.kind == "maximus":
+            moves = np.diff(np.vstack([np.zeros((1, 3), np.int64), job.points_steps]), axis=0)
+            self._launch_board(activity, jog_work(moves, self.settings), None, label,
+                               moved_steps=job.points_steps[-1])
+            return
+        plan = plan_steps(job, start_steps=tuple(int(v) for v in self._position))
+        self._launch_steps(activity, plan, label, plan.estimated_time_s)
+
+    def _begin(self, activity: _Activity) -> None:
+        self._activity = activity
+        self._estop_request_ns = None
+        self._prompt = None
+        self._bump()
+
+    def _launch_steps(self, name: str, plan: StepPlan, label: str, estimated_s: float,
+                      controller: Optional[Controller] = None) -> None:
+        ctl = controller or Controller()
+        self._begin(_Activity(name, label, ctl, len(plan), estimated_s, PositionTracker(plan.data, plan.settings)))
+        self.log(f"{label}: started")
+        self._spawn(run_steps, (self, name, plan, ctl, label), name)
+
+    def _launch_board(self, name: str, work: Callable[[Any, Any], None], job: Any, label: str,
+                      moved_steps: Any = (0, 0, 0)) -> None:
+        ctl = BoardControl(self.port)
+        total = len(job.drill_plan.holes_steps) if job is not None else 1
+        self._begin(_Activity(name, label, ctl, total, getattr(job, "estimated_time_s", 0.0)))
+        self.log(f"{label}: started on {self.port}")
+        self._spawn(run_on_board, (self, name, work, ctl, label, np.asarray(moved_steps, np.int64)), name)
+
+    def _spawn(self, target: Callable[..., None], args: tuple, name: str) -> None:
+        t = threading.Thread(target=target, args=args, name=f"cam-{name}", daemon=True)
+        self._thread = t
+        t.start()
+
+    # -- called by the worker threads -----------------------------------------------
+    def progress(self, done: int, total: int, machine_ns: int) -> None:
+        """Progress of the running activity (writes or holes done, machine time done)."""
+        with self._lock:
+            if self._activity is not None:
+                self._activity.done, self._activity.machine_ns = done, machine_ns
+                self._bump()
+        if self.on_progress is not None:
+            self.on_progress(done, total, machine_ns)
+
+    def prompt(self, position_steps: tuple[int, int, int], note: str) -> None:
+        """The job waits at a pause: ask :attr:`on_prompt`, or wait for :meth:`answer`; stop on "stop"."""
+        with self._lock:
+            a = self._activity
+            ctl = a.controller if a else None
+            self._prompt_seq += 1
+            self._prompt = Prompt(self._prompt_seq, note,
+                                  tuple(int(v) + int(p) for v, p in zip(self._position, position_steps)))
+            prompt = self._prompt
+            self._answer.clear()
+            self._answer_action = "continue"
+            self._bump()
+        self.log(f"{note}: waiting for an answer", "prompt")
+        if self.on_prompt is not None:
+            self._answer_action = self.on_prompt(prompt)
+        else:
+            while not self._answer.wait(0.05):
+                if ctl is None or ctl.halted:
+                    break
+        with self._lock:
+            self._prompt = None
+            action = self._answer_action
+            self._bump()
+        if action == "stop" and ctl is not None:
+            ctl.stop()
+
+    def finish(self, info: dict[str, Any], moved_steps: Optional[np.ndarray], *, result: Optional[RunResult] = None,
+               pin_log: Any = None) -> None:
+        """The activity ended: book where the tool is and what happened."""
+        with self._lock:
+            a = self._activity
+            if moved_steps is not None:
+                self._position = self._position + np.asarray(moved_steps, np.int64)
+            if self._estop_request_ns is not None and result is not None:
+                info["estop_request_job_ns"] = int(self._estop_request_ns - result.started_ns)
+            if a is not None and info.get("status") == "finished":
+                a.done = a.total
+            elif a is not None and result is not None:
+                a.done = result.writes
+            self.last_run = info
+            self._last_activity = a
+            self.last_result = result
+            if pin_log is not None:
+                self.last_job_pin_log = pin_log
+            self._activity = None
+            self._prompt = None
+            self._finished_wall = time.monotonic()
+            self._bump()
+
+    # -- control -----------------------------------------------------------------------
+    def _controller(self) -> Any:
+        a = self._activity  # no lock: the runner may hold it for a progress update
+        return a.controller if a is not None else None
+
+    def pause(self) -> None:
+        """Hold the running job where it is (CapabilityError on a port that cannot pause)."""
+        require(self.port, "pause")
+        with self._lock:
+            ctl = self._controller()
+            if ctl is None:
+                raise BusyError("nothing is running")
+            ctl.pause()
+            self._bump()
+        self.log("paused")
+
+    def resume(self) -> None:
+        with self._lock:
+            ctl = self._controller()
+            if ctl is None or not ctl.paused:
+                raise BusyError("nothing is paused")
+            ctl.resume()
+            self._bump()
+        self.log("resumed")
+
+    def stop(self) -> None:
+        """Stop and lift the tool to the safe plane (nothing happens when idle)."""
+        ctl = self._controller()
+        if ctl is not None:
+            ctl.stop()
+            with self._lock:
+                self._answer_action = "stop"
+                self._answer.set()
+                self._bump()
+        self.log("stop requested" if ctl is not None else "stop: nothing was running")
+
+    def emergency_stop(self, request_ns: Optional[int] = None) -> None:
+        """Send nothing more at all.  ``request_ns``: ``time.monotonic_ns()`` when the request arrived."""
+        now = request_ns if request_ns is not None else time.monotonic_ns()
+        ctl = self._controller()
+        if ctl is not None:
+            ctl.emergency_stop()
+            with self._lock:
+                if self._estop_request_ns is None:
+                    self._estop_request_ns = now
+                self._answer.set()
+                self._bump()
+        self.log("EMERGENCY STOP" if ctl is not None else "emergency stop: nothing was moving", "error")
+
+    def answer(self, prompt_id: Any, action: str) -> None:
+        """Answer the pending prompt: ``action`` "continue" or "stop"."""
+        if action not in ("continue", "stop"):
+            raise PlanError(f"action must be 'continue' or 'stop', got {action!r}")
+        with self._lock:
+            if self._prompt is None:
+                raise BusyError("no prompt is waiting for an answer")
+            if prompt_id is not None and prompt_id != self._prompt.id:
+                raise BusyError(f"prompt {prompt_id!r} is no longer waiting (the current one is {self._prompt.id})")
+            self._answer_action = action
+            note = self._prompt.note
+            self._answer.set()
+        self.log(f"{note}: {action}")
+
+    def wait_idle(self, timeout_s: Optional[float] = 10.0) -> bool:
+        """Wait for the running activity to end; True when idle."""
+        t = self._thread
+        if t is not None:
+            t.join(timeout_s)
+        return not self.busy
+
+    def shutdown(self) -> None:
+        """Stop whatever runs (tool lifted) and wait for it."""
+        if self.busy:
+            self.stop()
+            if not self.wait_idle(30):
+                self.emergency_stop()
+                self.wait_idle(5)
+
+
+def run(job: Any, port: Any = "mock", *, realtime: bool = False, controller: Optional[Controller] = None,
+        progress: Optional[Callable[[int, int, int], None]] = None,
+        on_pause: Optional[Callable[[tuple[int, int, int], str], None]] = None) -> RunResult:
+    """Run a job on a step/dir port and wait for the end: a one-job :class:`MachineSession`.
+
+    Args:
+        job: a :class:`~cam.job.model.Job`, a :class:`~cam.drive.steps.StepPlan` or a prepared job.
+        port: a port name (``"mock"``, ``"/dev/parport0"``) or an open step/dir port.
+        realtime: wait for each write's time (forced on for real ports).
+        controller: pause / resume / stop / emergency stop from another thread.
+        progress: called now and then with (writes done, writes total, machine ns done).
+        on_pause: called at each pause (Pause At, tool change) with (position_steps, note); the job goes on
+            when it returns.  Without it a pause holds the ``controller`` until it is resumed, or is passed
+            at once when there is no controller.
+
+    Returns:
+        The :class:`~cam.drive.runner.RunResult`; the mock's pin log is ``result.pin_log()``.
+
+    Raises:
+        CamError: the job does not fit the travel, the port cannot be opened or cannot run it.
+    """
+    def on_prompt(prompt: Prompt) -> str:
+        if on_pause is not None:
+            on_pause(prompt.position_steps, prompt.note)
+        elif controller is not None:
+            controller.pause()  # held until the caller resumes it
+        return "continue"
+
+    settings = getattr(job, "settings", DEFAULT_SETTINGS)
+    session = MachineSession(port, settings, realtime=realtime, on_prompt=on_prompt)
+    session.on_progress = progress
+    session.start(job, controller=controller)
+    session.wait_idle(None)
+    if session.last_result is None:
+        raise PortError("; ".join(session.last_run.get("messages") or ["the run failed"]))
+    return session.last_result
