@@ -201,5 +201,7 @@ def test_preview_export_and_info_take_every_file_kind(tmp_path):
     assert_one_line_error(cli("export", ngc, "-o", tmp_path / "x.ngc"), "G-code already")
     assert_one_line_error(cli("preview", root / "samples" / "board.drl", "--surface", "-o", tmp_path / "s.png"),
                           "--surface")
-    assert_one_line_error(cli("preview", ngc, "-o", tmp_path / "g.svg"), "g.svg", ".png")
+    # a G-code job is a job in steps like any other: its toolpath is drawn as SVG too
+    assert cli("preview", ngc, "-o", tmp_path / "g.svg").returncode == 0
+    assert (tmp_path / "g.svg").read_text().startswith("<svg") and "<line" in (tmp_path / "g.svg").read_text()
     assert not (tmp_path / "x.ngc").exists() and not (tmp_path / "s.png").exists()

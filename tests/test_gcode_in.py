@@ -7,7 +7,9 @@ import pytest
 from scipy.spatial import cKDTree
 
 import cam
-from cam.formats.gcode import load_gcode, parse_gcode, plan_gcode_steps
+from cam.drive.steps import plan_steps
+from cam.formats.gcode import load_gcode, parse_gcode
+from cam.job.gcode import plan_gcode
 from support.lcnc import canonical_polyline_mm, parse_canonical, run_rs274
 
 from test_cli import assert_one_line_error, cli
@@ -96,7 +98,7 @@ def test_motion_follows_rs274_within_half_a_step(tmp_path, name):
         n = max(1, int(np.ceil(np.abs(b - a).max() / 0.02)))
         dense.append(a + (b - a) * (np.arange(1, n + 1) / n)[:, None])
     tree = cKDTree(np.vstack(dense))
-    plan = plan_gcode_steps(load_gcode(path), s)
+    plan = plan_steps(plan_gcode(load_gcode(path), s))
     decoded_mm, result = _decoded_mm(plan)
     dist, _ = tree.query(decoded_mm / step, p=np.inf)
     assert dist.max() <= 0.5 + 0.03, f"decoded motion strays {dist.max():.3f} steps from the path"
@@ -108,7 +110,7 @@ def test_motion_follows_rs274_within_half_a_step(tmp_path, name):
 
 
 def test_tool_changes_pause_in_order():
-    plan = plan_gcode_steps(parse_gcode(DRILLING, source="drill.ngc"))
+    plan = plan_steps(plan_gcode(parse_gcode(DRILLING, source="drill.ngc")))
     seen = []
     result = cam.run(plan, on_pause=lambda pos, note: seen.append(note))
     assert seen == ["tool change: T1 (line 4)", "tool change: T2 (line 12)"]
@@ -116,14 +118,14 @@ def test_tool_changes_pause_in_order():
 
 
 def test_feed_rate_sets_step_periods():
-    plan = plan_gcode_steps(parse_gcode("G21 G90\nG1 X10 F60\nM2\n"))
+    plan = plan_steps(plan_gcode(parse_gcode("G21 G90\nG1 X10 F60\nM2\n")))
     # 10 mm at 1 mm/s = 10 s; never faster than the 5 ms step delay allows
     assert plan.estimated_time_s == pytest.approx(10.0, rel=1e-3)
     constant = cam.MachineSettings().replace(ramp="constant")  # the thesis's timing, no speed ramps
-    fast = plan_gcode_steps(parse_gcode("G21 G90\nG1 X10 F100000\nM2\n"), constant)
+    fast = plan_steps(plan_gcode(parse_gcode("G21 G90\nG1 X10 F100000\nM2\n"), constant))
     assert fast.estimated_time_s == pytest.approx(np.ceil(10 / 0.0289) * 0.005, rel=1e-6)
     # with the default look-ahead ramps: plus one speed-up from and one slow-down to the start speed
-    ramped = plan_gcode_steps(parse_gcode("G21 G90\nG1 X10 F100000\nM2\n")).estimated_time_s
+    ramped = plan_steps(plan_gcode(parse_gcode("G21 G90\nG1 X10 F100000\nM2\n"))).estimated_time_s
     assert fast.estimated_time_s + 0.05 < ramped < fast.estimated_time_s + 0.3
 
 
@@ -176,5 +178,8 @@ def test_cli_preview_of_a_gcode_program(tmp_path):
     assert proc.returncode == 0, proc.stderr
     img = cv2.imread(str(pic))
     assert img is not None and img.shape[0] > 100 and (img < 128).any()  # a picture with the cut drawn
-    assert_one_line_error(cli("drill", good, "--preview", tmp_path / "e.svg", "--no-progress"), "e.svg", ".png")
-    assert not (tmp_path / "e.svg").exists()
+    # the G-code job is a job in steps: its toolpath is drawn as SVG too
+    assert cli("drill", good, "--preview", tmp_path / "e.svg", "--no-progress").returncode == 0
+    assert "<line" in (tmp_path / "e.svg").read_text()
+    assert_one_line_error(cli("drill", good, "--preview", tmp_path / "e.gif", "--no-progress"), "e.gif", ".png")
+    assert not (tmp_path / "e.gif").exists()

@@ -83,12 +83,14 @@ def test_digitized_matrix_and_3d_profile_jobs(tmp_path):
 
 
 def test_gcode_job_with_tool_change(tmp_path):
-    from cam.formats.gcode import load_gcode, plan_gcode_steps
+    from cam.drive.steps import plan_steps
+    from cam.formats.gcode import load_gcode
+    from cam.job.gcode import plan_gcode
 
     path = tmp_path / "p.ngc"
     path.write_text(GCODE)
     job = prepare_job(path, JobOptions(), FAST)
-    want = plan_gcode_steps(load_gcode(path), FAST)
+    want = plan_steps(plan_gcode(load_gcode(path), FAST))
     assert job.kind == "gcode" and np.array_equal(job.steps.data, want.data)
     assert len(job.tool_changes) == 1 and "tool change" in job.tool_changes[0]
     assert job.size_mm == pytest.approx((2.0, 2.0), abs=FAST.mm_per_step_xy)

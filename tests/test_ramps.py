@@ -177,16 +177,17 @@ def test_the_checker_fails_the_thesis_constant_delay():
 
 
 def test_gcode_job_with_dwell_and_tool_changes_passes_and_decelerates_at_each():
-    from cam.formats.gcode import parse_gcode, plan_gcode_steps
+    from cam.formats.gcode import parse_gcode
+    from cam.job.gcode import plan_gcode
 
     from test_gcode_in import DRILLING, ENGRAVING
 
     for text in (DRILLING, ENGRAVING):
-        plan = plan_gcode_steps(parse_gcode(text))
+        plan = plan_steps(plan_gcode(parse_gcode(text)))
         report, _, log = run_and_check(plan, S)
         report.raise_if_broken()
         assert_stops_at_start_speed(log, S, plan.pause_writes)
-    plan = plan_gcode_steps(parse_gcode(DRILLING))
+    plan = plan_steps(plan_gcode(parse_gcode(DRILLING)))
     assert len(plan.pause_writes) == 2
     per = np.diff(plan.t_ns[0::2])
     for w in plan.pause_writes:  # each tool change comes after "G0 Z3": Z arrives at its start speed
@@ -372,10 +373,11 @@ def test_a_stop_lifts_z_no_faster_than_its_start_speed():
 def test_linear40_reaches_the_start_speed_before_a_dwell():
     """The seed's ramp ends a G-code move at its start speed when a dwell (G4) follows: the dwell is a
     segment of its own, not the tail of the move."""
-    from cam.formats.gcode import parse_gcode, plan_gcode_steps
+    from cam.formats.gcode import parse_gcode
+    from cam.job.gcode import plan_gcode
 
     program = parse_gcode("G21 G90\nG1 X5 F600\nG4 P0.5\nG1 X10\nM2\n", source="dwell.ngc")
-    plan = plan_gcode_steps(program, LINEAR40)
+    plan = plan_steps(plan_gcode(program, LINEAR40))
     per = np.diff(plan.t_ns[0::2])
     dwell = int(np.argmax(per))
     assert per[dwell] == 500_000_000

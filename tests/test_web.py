@@ -438,9 +438,11 @@ def test_page_runs_gcode_with_a_tool_change_prompt(page, fast, tmp_path):
     page.click("#prompt-continue")
     st = _wait_done(page, fast)
     assert st["last"]["status"] == FINISHED
-    from cam.formats.gcode import load_gcode, plan_gcode_steps
+    from cam.drive.steps import plan_steps
+    from cam.formats.gcode import load_gcode
+    from cam.job.gcode import plan_gcode
 
-    want = plan_gcode_steps(load_gcode(path), FAST)
+    want = plan_steps(plan_gcode(load_gcode(path), FAST))
     log = fast.session.last_job_pin_log
     assert np.array_equal(log.data, want.data) and np.array_equal(log.strobe, want.strobe)
 

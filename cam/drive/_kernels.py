@@ -10,12 +10,14 @@ from numba import njit
 
 
 @njit(cache=True)
-def periods_kernel(pts, delay_xy_ns, delay_z_ns, clock, dirbit):
+def periods_kernel(pts, delay_xy_ns, delay_z_ns, clock, dirbit, n_min):
     """Per-period port data of the straight moves between consecutive rows of ``pts``.
 
     Args:
         pts: ``(N + 1, 3)`` int64 positions in steps, the start first.
         clock, dirbit: ``(3,)`` int64 data-register bits of X, Y, Z.
+        n_min: ``(N,)`` int64 least number of periods of each move (0: its Chebyshev length); a move
+            given more periods than steps spreads its steps over them (a zero-length move waits).
 
     Returns:
         ``(high, dirs, period_ns, n_per_move)``: for each period the data with rising clocks, the
@@ -25,7 +27,7 @@ def periods_kernel(pts, delay_xy_ns, delay_z_ns, clock, dirbit):
     n_per_move = np.empty(n_moves, np.int64)
     total = 0
     for i in range(n_moves):
-        m = 0
+        m = n_min[i]
         for a in range(3):
             d = abs(pts[i + 1, a] - pts[i, a])
             if d > m:

@@ -139,11 +139,19 @@ def plan_steps(job: Job, *, start_steps: tuple[int, int, int] = (0, 0, 0)) -> St
     pts = np.vstack([np.zeros((1, 3), np.int64), np.asarray(job.points_steps, np.int64).reshape(-1, 3)])
     delta = np.diff(pts, axis=0)  # (N, 3) per move
     clock, dirbit = axis_bits(s)
+    n_min = np.zeros(len(job), np.int64) if job.periods is None else np.asarray(job.periods, np.int64)
     high, dirs, per, n_per_move = periods_kernel(
-        pts, s.delay_xy_ns, s.delay_z_ns, clock.astype(np.int64), dirbit.astype(np.int64)
+        pts, s.delay_xy_ns, s.delay_z_ns, clock.astype(np.int64), dirbit.astype(np.int64), n_min
     )
+    if job.period_ns is not None:
+        per = np.repeat(np.asarray(job.period_ns, np.int64), n_per_move)
     point_period = np.cumsum(n_per_move)
-    per = ramp_periods(high, per, s, move_first=point_period - n_per_move, stops=point_period[job.pause])
+    first = point_period - n_per_move
+    stops = point_period[job.pause]
+    if job.rest is not None:
+        stops = np.sort(np.concatenate([stops, first[job.rest], point_period[job.rest]]))
+    move_first = first if job.move_start is None else first[job.move_start]
+    per = ramp_periods(high, per, s, move_first=move_first, stops=stops)
     t_ns, data, strobe = _writes(high, dirs, per, s)
 
     point_write = 2 * point_period

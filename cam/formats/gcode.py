@@ -13,15 +13,7 @@ Supported (what grbl- and LinuxCNC-oriented CAM programs emit):
 
 Anything else is a :class:`~cam.errors.ParseError` naming the line and the word.
 
-Frames, as for G-code out (:mod:`cam.formats.gcode_export`): machine X steps = X mm / mm per step;
-machine Y steps = -Y mm / mm per step (machine Y grows upward, the drawing
-frame's rows downward; ``flip_y`` uses +Y); machine Z steps = -Z mm / mm per
-step Z (+Z up in G-code, deeper is + in `cam`).  G-code (0, 0, 0) is the home.
-
-Motion is generated so that every position the motors take is the nearest
-step to a point on the programmed path: each period moves every axis by at
-most one step, and each position is the rounding of the exact path point, so
-the decoded motion stays within half a step (per axis) of the program.
+Planning the motion (frames, arcs, feeds, the half-step accuracy) is :mod:`cam.job.gcode`.
 """
 from __future__ import annotations
 
@@ -31,12 +23,9 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import numpy as np
+from ..errors import ParseError
 
-from ..errors import ParseError, TravelError
-from ..settings import DEFAULT_SETTINGS, MachineSettings
-
-__all__ = ["GcodeMove", "GcodeProgram", "parse_gcode", "load_gcode", "plan_gcode_steps", "GCODE_SUFFIXES"]
+__all__ = ["GcodeMove", "GcodeProgram", "parse_gcode", "load_gcode", "GCODE_SUFFIXES"]
 
 GCODE_SUFFIXES = (".ngc", ".nc", ".gcode", ".gc", ".g", ".tap", ".cnc")
 
@@ -262,136 +251,3 @@ def load_gcode(path: str | os.PathLike) -> GcodeProgram:
     except OSError as exc:
         raise ParseError(f"{p}: cannot read ({exc.strerror or exc})") from None
     return parse_gcode(text, source=str(p))
-
-
-def _arc_points(p0: np.ndarray, mv: GcodeMove, step_mm: np.ndarray) -> np.ndarray:
-    """Points along an arc (mm), close enough that no axis moves more than 0.9 step between them."""
-    cx, cy = mv.center
-    x1, y1, z1 = mv.end
-    a0 = math.atan2(p0[1] - cy, p0[0] - cx)
-    a1 = math.atan2(y1 - cy, x1 - cx)
-    r = math.hypot(p0[0] - cx, p0[1] - cy)
-    if mv.clockwise:
-        sweep = -((a0 - a1) % (2 * math.pi))
-        if abs(sweep) < 1e-12:
-            sweep = -2 * math.pi
-    else:
-        sweep = (a1 - a0) % (2 * math.pi)
-        if abs(sweep) < 1e-12:
-            sweep = 2 * math.pi
-    arc_len_steps = abs(sweep) * r / min(step_mm[0], step_mm[1])
-    dz_steps = abs(z1 - p0[2]) / step_mm[2]
-    n = max(1, int(math.ceil(max(arc_len_steps, dz_steps) / 0.9)))
-    t = np.arange(1, n + 1) / n
-    a = a0 + sweep * t
-    pts = np.column_stack([cx + r * np.cos(a), cy + r * np.sin(a), p0[2] + (z1 - p0[2]) * t])
-    pts[-1] = (x1, y1, z1)
-    return pts
-
-
-def plan_gcode_steps(
-    program: GcodeProgram, settings: MachineSettings = DEFAULT_SETTINGS, *, flip_y: bool = False
-):
-    """Step plan of a G-code program (see the module docstring for frames and accuracy).
-
-    Rapids run at the configured step delays; feed moves at their F, never faster than the delays allow;
-    then the speed ramps of ``settings.ramp`` lengthen periods (:mod:`cam.drive.ramps`), stopping at pauses.
-
-    Raises:
-        TravelError: a move leaves the machine travel (naming the line).
-    """
-    from ..drive.steps import StepPlan, port_writes
-
-    s = settings
-    # mm -> machine steps: X, -Y (or +Y), -Z
-    to_steps = np.array([1 / s.mm_per_step_xy, (1 if flip_y else -1) / s.mm_per_step_xy, -1 / s.mm_per_step_z])
-    step_mm = np.array([s.mm_per_step_xy, s.mm_per_step_xy, s.mm_per_step_z])
-    to_mm_y = s.mm_per_step_xy * (1 if flip_y else -1)
-    lo = np.array([b[0] for b in s.travel.bounds_steps()], np.float64)
-    hi = np.array([b[1] for b in s.travel.bounds_steps()], np.float64)
-    min_period = {True: max(s.delay_xy_ns, s.delay_z_ns), False: s.delay_xy_ns}
-
-    ideal_chunks: list[np.ndarray] = []  # ideal positions (steps, float) at the end of each period
-    period_chunks: list[np.ndarray] = []
-    pause_at_period: list[int] = []
-    pause_notes: list[str] = []
-    move_first: list[int] = []  # first period of each move and dwell (the 40-step ramp is per move)
-    dwell_rests: list[int] = []  # the machine rests before these periods (both sides of a dwell)
-    n_periods = 0
-    cur = np.zeros(3)  # mm, G-code frame
-    cur_steps_ideal = np.zeros(3)
-    for mv in program.moves:
-        if mv.kind == "pause":
-            pause_at_period.append(n_periods)
-            pause_notes.append(mv.note)
-            continue
-        if mv.kind == "dwell":
-            if mv.seconds > 0:
-                dwell_rests += [n_periods, n_periods + 1]  # at rest during the dwell
-                move_first.append(n_periods)
-                ideal_chunks.append(cur_steps_ideal[None, :].copy())
-                period_chunks.append(np.array([int(round(mv.seconds * 1e9))], np.int64))
-                n_periods += 1
-            continue
-        end = np.array(mv.end, np.float64)
-        if mv.kind == "arc":
-            way = _arc_points(cur, mv, step_mm)
-        else:
-            way = end[None, :]
-        way_steps = way * to_steps
-        outside = np.any((np.rint(way_steps) < lo) | (np.rint(way_steps) > hi), axis=1)
-        if np.any(outside):
-            q = way[int(np.flatnonzero(outside)[0])]
-            x_mm = sorted(v * step_mm[0] + 0.0 for v in (lo[0], hi[0]))
-            y_mm = sorted(to_mm_y * v + 0.0 for v in (lo[1], hi[1]))
-            z_mm = sorted(-v * step_mm[2] + 0.0 for v in (lo[2], hi[2]))
-            raise TravelError(
-                f"{program.source}:{mv.line}: move to X{q[0]:.3f} Y{q[1]:.3f} Z{q[2]:.3f} mm leaves the machine "
-                f"travel (X {x_mm[0]:g}..{x_mm[1]:g} mm, Y {y_mm[0]:g}..{y_mm[1]:g} mm, Z {z_mm[0]:g}..{z_mm[1]:g} mm)"
-            )
-        starts = np.vstack([cur_steps_ideal[None, :], way_steps[:-1]])
-        d = way_steps - starts  # (W, 3) per sub-segment
-        n_sub = np.maximum(1, np.ceil(np.abs(d).max(axis=1) - 1e-9).astype(np.int64))
-        length_mm = float(np.sum(np.linalg.norm((way - np.vstack([cur[None, :], way[:-1]])), axis=1)))
-        total_periods = int(n_sub.sum())
-        uses_z = bool(np.any(d[:, 2] != 0))
-        floor_ns = min_period[uses_z] if bool(np.any(d[:, :2] != 0)) else s.delay_z_ns
-        if mv.kind == "rapid" or mv.feed_mm_min <= 0:
-            per_ns = floor_ns
-        else:
-            per_ns = max(floor_ns, int(round(length_mm / (mv.feed_mm_min / 60.0) * 1e9 / total_periods)))
-        seg = np.repeat(np.arange(len(d)), n_sub)
-        first = np.cumsum(n_sub) - n_sub
-        k = np.arange(total_periods) - np.repeat(first, n_sub) + 1
-        ideal = starts[seg] + d[seg] * (k / n_sub[seg])[:, None]
-        ideal_chunks.append(ideal)
-        move_first.append(n_periods)
-        period_chunks.append(np.full(total_periods, per_ns, np.int64))
-        n_periods += total_periods
-        cur = end
-        cur_steps_ideal = way_steps[-1]
-    if ideal_chunks:
-        ideal_all = np.vstack(ideal_chunks)
-        periods = np.concatenate(period_chunks)
-    else:
-        ideal_all = np.zeros((0, 3))
-        periods = np.zeros(0, np.int64)
-    positions = np.floor(ideal_all + 0.5).astype(np.int64)  # nearest step to the exact path point
-    signed = np.diff(np.vstack([np.zeros((1, 3), np.int64), positions]), axis=0)
-    assert signed.size == 0 or np.abs(signed).max() <= 1, "a period moved an axis by more than one step"
-    t_ns, data, strobe = port_writes(signed, periods, s, move_first=np.array(move_first, np.int64),
-                                     stops=np.array(pause_at_period + dwell_rests, np.int64))
-    end_steps = tuple(int(v) for v in positions[-1]) if len(positions) else (0, 0, 0)
-    return StepPlan(
-        t_ns=t_ns,
-        data=data,
-        strobe=strobe,
-        point_write=np.zeros(0, np.int64),
-        pause_writes=2 * np.asarray(pause_at_period, np.int64),
-        steps_total=np.abs(signed).sum(axis=0),
-        settings=s,
-        end_steps=end_steps,  # type: ignore[arg-type]
-        safe_z_steps=0,
-        warnings=list(program.warnings),
-        pause_notes=pause_notes,
-    )

@@ -478,12 +478,15 @@ def _prepare_pixels(path: Path, kind: str, options: JobOptions, settings: Machin
 
 
 def _prepare_gcode(path: Path, options: JobOptions, settings: MachineSettings) -> PreparedJob:
-    from ..formats.gcode import load_gcode, plan_gcode_steps
+    from ..drive.steps import plan_steps
+    from ..formats.gcode import load_gcode
+    from .gcode import plan_gcode
 
     program = load_gcode(path)
-    steps = plan_gcode_steps(program, settings, flip_y=options.flip_y)
+    job = plan_gcode(program, settings, flip_y=options.flip_y)
+    steps = plan_steps(job)
     return PreparedJob(
-        source=str(path), kind="gcode", steps=steps, settings=settings, warnings=list(program.warnings),
+        source=str(path), kind="gcode", steps=steps, settings=settings, toolpath=job, warnings=list(program.warnings),
         summary=f"{path.name}: {len(program.moves)} moves", report={"moves": len(program.moves)},
     )
 

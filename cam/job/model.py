@@ -84,6 +84,13 @@ class Job:
         safe_z_steps: the Z a stop lifts the tool to (the surface or above it).
         pixels: for drawing jobs, where the drawing's pixels lie (see :class:`PixelFrame`).
         source: what the job was planned from (a file name, "jog", ...).
+        period_ns: ``(N,)`` int64 nominal step period of each move (a feed), or None: the settings'
+            step delays (X/Y, Z, the larger of the two when both move).
+        periods: ``(N,)`` int64 step periods each move takes, at least its longest axis's steps (the
+            steps are spread over them; a move of length 0 waits), or None: the longest axis's steps.
+        move_start: ``(N,)`` bool, where a move of the source begins (a speed ramp segment of the
+            ``linear40`` mode), or None: every move.
+        rest: ``(N,)`` bool, the machine is at rest before and after this move (a dwell), or None.
     """
 
     points_steps: np.ndarray
@@ -96,6 +103,10 @@ class Job:
     safe_z_steps: int = 0
     pixels: Optional[PixelFrame] = None
     source: str = ""
+    period_ns: Optional[np.ndarray] = None
+    periods: Optional[np.ndarray] = None
+    move_start: Optional[np.ndarray] = None
+    rest: Optional[np.ndarray] = None
 
     def __len__(self) -> int:
         return len(self.points_steps)
