@@ -33,12 +33,13 @@ from pathlib import Path
 
 import numpy as np
 
+from ..choices import GCODE_SUFFIXES
+from ..drive.steps import StepPlan, port_writes
 from ..errors import ParseError, TravelError
 from ..settings import DEFAULT_SETTINGS, MachineSettings
 
 __all__ = ["GcodeMove", "GcodeProgram", "parse_gcode", "load_gcode", "plan_gcode_steps", "GCODE_SUFFIXES"]
 
-GCODE_SUFFIXES = (".ngc", ".nc", ".gcode", ".gc", ".g", ".tap", ".cnc")
 
 _WORD = re.compile(r"([A-Za-z])\s*([-+]?(?:\d+\.?\d*|\.\d+))")
 _NOOP_G = {40, 49, 54, 61, 64, 80, 94}
@@ -300,8 +301,6 @@ def plan_gcode_steps(
     Raises:
         TravelError: a move leaves the machine travel (naming the line).
     """
-    from ..drive.steps import StepPlan, port_writes
-
     s = settings
     # mm -> machine steps: X, -Y (or +Y), -Z
     to_steps = np.array([1 / s.mm_per_step_xy, (1 if flip_y else -1) / s.mm_per_step_xy, -1 / s.mm_per_step_z])

@@ -62,6 +62,7 @@ from typing import BinaryIO, Callable, Iterator, Optional, TextIO, Union
 import numpy as np
 from numba import njit
 
+from ..choices import HPGL_SUFFIXES
 from ..errors import ParseError, PlanError, TravelError
 from ..settings import DEFAULT_SETTINGS, MachineSettings
 from ..job.toolpath import CUT, RETRACT, TRAVEL, Toolpath, check_travel
@@ -72,7 +73,6 @@ __all__ = [
     "iter_hpgl", "scan_hpgl", "load_hpgl", "parse_hpgl", "plan_hpgl", "hpgl_steps",
 ]
 
-HPGL_SUFFIXES = (".plt", ".hpgl", ".hpg")
 PLOTTER_UNIT_MM = 0.025
 """One plotter unit: 0.025 mm, 40 units per mm (004 section 3.6.2)."""
 CHUNK_BYTES = 1 << 19
