@@ -1,6 +1,8 @@
 """The command line, run as a user would run it."""
+import argparse
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -11,6 +13,8 @@ import numpy as np
 import pytest
 
 import cam
+from cam import choices
+from cam.cli.parser import build_parser
 
 from conftest import ROOT
 
@@ -79,6 +83,25 @@ def test_progress_bar_shows_remaining_time(drawing):
     proc = cli("drill", drawing)
     assert proc.returncode == 0
     assert "100%" in proc.stderr and "<" in proc.stderr  # tqdm: [elapsed<remaining]
+
+
+def _suffix_named(suffix: str, text: str) -> bool:
+    return re.search(rf"(?<![\w.]){re.escape(suffix)}(?!\w)", text) is not None
+
+
+def test_help_names_every_file_kind():
+    info = cli("info", "--help")
+    assert info.returncode == 0
+    for kind, suffixes in choices.SUFFIXES.items():
+        for suffix in suffixes:
+            assert _suffix_named(suffix, info.stdout), (kind, suffix)
+    sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
+    for command in ("drill", "export", "preview", "info"):
+        image = next(a for a in sub.choices[command]._actions if a.dest == "image")
+        for words in ("drawing", "digitized matrix", "Excellon", "HPGL", "G-code"):
+            assert words in image.help, (command, words)
+        for suffix in sum(choices.SUFFIXES.values(), ()):
+            assert _suffix_named(suffix, image.help), (command, suffix)
 
 
 def test_info_and_digitize(tmp_path, drawing):
