@@ -1,11 +1,16 @@
 """The command line, run as a user would run it."""
 import argparse
+import fcntl
 import json
 import os
+import pty
 import re
+import select
 import signal
+import struct
 import subprocess
 import sys
+import termios
 import time
 
 import cv2
@@ -79,10 +84,47 @@ def test_drill_writes_report_pin_log_and_matrix(tmp_path, drawing):
     assert rep2["steps"] == rep["steps"] and rep2["estimated_time_s"] == rep["estimated_time_s"]
 
 
-def test_progress_bar_shows_remaining_time(drawing):
-    proc = cli("drill", drawing)
-    assert proc.returncode == 0
-    assert "100%" in proc.stderr and "<" in proc.stderr  # tqdm: [elapsed<remaining]
+def test_progress_bar_only_on_a_terminal_unless_asked(drawing):
+    quiet = cli("drill", drawing)  # stderr is a pipe here: no bar, so a log stays readable
+    assert quiet.returncode == 0, quiet.stderr
+    assert "cutting" not in quiet.stderr and "%" not in quiet.stderr
+    forced = cli("drill", drawing, "--progress")
+    assert forced.returncode == 0, forced.stderr
+    assert "cutting: 100%" in forced.stderr and "<" in forced.stderr  # tqdm: [elapsed<remaining]
+    assert_one_line_error(cli("drill", drawing, "--progress", "--no-progress"), "--no-progress")
+
+
+def _run_with_terminal_stderr(*args) -> tuple[int, str]:
+    """Run ``python -m cam ARGS`` with stderr on a pseudo-terminal: (exit code, what it wrote there)."""
+    master, slave = pty.openpty()
+    fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 24, 120, 0, 0))  # 120 columns: room for the bar
+    try:
+        proc = subprocess.Popen([sys.executable, "-m", "cam", *map(str, args)], stdout=subprocess.DEVNULL,
+                                stderr=slave, stdin=subprocess.DEVNULL, env=ENV)
+        os.close(slave)
+        out = b""
+        while True:
+            ready, _, _ = select.select([master], [], [], 0.1)
+            if ready:
+                try:
+                    chunk = os.read(master, 65536)
+                except OSError:  # EIO: the child closed its end
+                    chunk = b""
+                out += chunk
+                if not chunk and proc.poll() is not None:
+                    break
+            elif proc.poll() is not None:
+                break
+        return proc.wait(timeout=120), out.decode(errors="replace")
+    finally:
+        os.close(master)
+
+
+def test_progress_bar_on_a_terminal_and_no_progress_turns_it_off(drawing):
+    code, shown = _run_with_terminal_stderr("drill", drawing)
+    assert code == 0 and "cutting: 100%" in shown
+    code, hidden = _run_with_terminal_stderr("drill", drawing, "--no-progress")
+    assert code == 0 and "cutting" not in hidden and "%" not in hidden
 
 
 def _suffix_named(suffix: str, text: str) -> bool:

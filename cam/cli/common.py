@@ -12,7 +12,7 @@ from tqdm import tqdm
 from ..drive.maximus.board import MAXIMUS_SETTINGS
 from ..settings import MachineSettings, load_settings
 
-__all__ = ["machine_settings", "port_settings", "format_duration", "reading_bar"]
+__all__ = ["machine_settings", "port_settings", "format_duration", "progress_wanted", "reading_bar"]
 
 
 def machine_settings(args: argparse.Namespace) -> MachineSettings:
@@ -42,16 +42,26 @@ def format_duration(seconds: float) -> str:
     return f"{s // 3600}:{s % 3600 // 60:02d}:{s % 60:02d}"
 
 
-def reading_bar(args: argparse.Namespace):
-    """A progress bar by bytes read (large HPGL files), on a terminal only; yields its callback or None."""
+def progress_wanted(args: argparse.Namespace) -> bool:
+    """Whether to draw a progress bar: --progress forces it, --no-progress forbids it, and otherwise only
+    when stderr is a terminal (so a log or a pipe gets no bar, and an error stays one line)."""
+    if getattr(args, "progress", False):
+        return True
     if getattr(args, "no_progress", False):
+        return False
+    return sys.stderr is not None and sys.stderr.isatty()
+
+
+def reading_bar(args: argparse.Namespace):
+    """A progress bar by bytes read (large HPGL files), as :func:`progress_wanted` says; yields its callback or None."""
+    if not progress_wanted(args):
         return contextlib.nullcontext(None)
 
     @contextlib.contextmanager
     def bar_callback():
         total = Path(args.image).stat().st_size if Path(args.image).is_file() else None
         with tqdm(total=total, unit="B", unit_scale=True, desc="reading", file=sys.stderr, mininterval=0.2,
-                  leave=False, disable=None) as bar:  # None: only on a terminal, so an error stays one line in logs
+                  leave=False) as bar:
             yield lambda done, total_bytes: bar.update(done - bar.n)
 
     return bar_callback()

@@ -13,6 +13,7 @@ from ..drive.runner import Controller, RunResult, run
 from ..drive.steps import StepPlan, plan_steps
 from ..errors import CamError
 from ..verify.pinlog import write_pin_log
+from .common import progress_wanted
 
 __all__ = ["execute"]
 
@@ -38,7 +39,7 @@ def execute(job: Any, args: argparse.Namespace, prompt_at_pause: bool = False) -
 
     bar = None
     progress = None
-    if not args.no_progress:
+    if progress_wanted(args):
         total_s = steps.estimated_time_s
         bar = tqdm(
             total=round(total_s, 3), unit="s", unit_scale=False, desc="cutting", file=sys.stderr,

@@ -141,6 +141,13 @@ def _add_hpgl_options(p: argparse.ArgumentParser) -> None:
     h.add_argument("--cut-depth", type=float, default=0.5, metavar="MM", help="pen-down cutting depth below the surface (0.5)")
 
 
+def _add_progress_options(g: argparse._ActionsContainer) -> None:
+    bar = g.add_mutually_exclusive_group()
+    bar.add_argument("--progress", action="store_true",
+                     help="show the progress bar even when stderr is not a terminal (default: on a terminal only)")
+    bar.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
 def _add_job_options(d: argparse.ArgumentParser) -> None:
     """Options that say what to cut and how deep (shared by drill, export and preview)."""
     d.add_argument("image", nargs="?", metavar="IMAGE",
@@ -186,7 +193,7 @@ def _add_drill(sub: argparse._SubParsersAction) -> None:
     g.add_argument("--yes", action="store_true", help="answer every prompt (tool changes, pauses) with Enter")
     _add_drill_file_options(d)
     _add_hpgl_options(d)
-    g.add_argument("--no-progress", action="store_true", help="no progress bar")
+    _add_progress_options(g)
 
 
 def _add_export(sub: argparse._SubParsersAction) -> None:
@@ -264,7 +271,7 @@ def _add_jog(sub: argparse._SubParsersAction) -> None:
     _add_machine_options(jg)
     jg.add_argument("--realtime", action="store_true", help="run the mock in real time")
     jg.add_argument("--pin-log", metavar="FILE.csv", help="write the mock's pin log")
-    jg.add_argument("--no-progress", action="store_true", help="no progress bar")
+    _add_progress_options(jg)
 
 
 def _add_emulate_maximus(sub: argparse._SubParsersAction) -> None:
@@ -282,7 +289,7 @@ def _add_goto(sub: argparse._SubParsersAction) -> None:
     gt.add_argument("--port", default="mock", help="'mock' (default) or a device like /dev/parport0")
     gt.add_argument("--realtime", action="store_true", help="run the mock in real time")
     gt.add_argument("--pin-log", metavar="FILE.csv", help="write the mock's pin log")
-    gt.add_argument("--no-progress", action="store_true", help="no progress bar")
+    _add_progress_options(gt)
 
 
 def _add_serve(sub: argparse._SubParsersAction) -> None:
