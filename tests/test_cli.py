@@ -127,6 +127,13 @@ def test_progress_bar_on_a_terminal_and_no_progress_turns_it_off(drawing):
     assert code == 0 and "cutting" not in hidden and "%" not in hidden
 
 
+def test_no_command_is_one_usage_line_exit_2():
+    proc = cli()
+    assert proc.returncode == 2 and proc.stdout == ""
+    lines = proc.stderr.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("usage: cam "), proc.stderr
+
+
 def _suffix_named(suffix: str, text: str) -> bool:
     return re.search(rf"(?<![\w.]){re.escape(suffix)}(?!\w)", text) is not None
 

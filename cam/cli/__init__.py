@@ -38,7 +38,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     if not args.command:
-        parser.print_help()
+        sys.stderr.write(parser.format_usage())
         return EXIT_BAD_INPUT
     module_name, function_name = COMMANDS[args.command]
     try:
