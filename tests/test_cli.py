@@ -237,6 +237,22 @@ def test_ctrl_c_stops_cleanly_with_position(tmp_path):
     assert motion.final_steps[2] == 0 and motion.final_steps[0] > 0
 
 
+def cli_without(module: str, *args):
+    """``cam ARGS`` in an interpreter where ``import MODULE`` fails, as if its package were not installed."""
+    code = f"import sys; sys.modules[{module!r}] = None\nfrom cam.cli import main\nsys.exit(main(sys.argv[1:]))"
+    return subprocess.run([sys.executable, "-c", code, *map(str, args)], capture_output=True, text=True, env=ENV,
+                          timeout=120)
+
+
+def test_missing_extras_are_one_line_naming_the_extra(drawing):
+    proc = cli_without("parallel", "drill", drawing, "--port", "/dev/parport0", "--no-progress")
+    assert_one_line_error(proc, "/dev/parport0", "pyparallel", "cam[parport]")
+    proc = cli_without("uvicorn", "serve", "--port", "0")
+    assert_one_line_error(proc, "uvicorn", "cam[web]")
+    proc = cli_without("starlette", "serve", "--port", "0")
+    assert_one_line_error(proc, "starlette", "cam[web]")
+
+
 def test_missing_parallel_port_is_one_line_with_hint(drawing):
     proc = cli("drill", drawing, "--port", "/dev/parport-does-not-exist", "--no-progress")
     assert_one_line_error(proc, "/dev/parport-does-not-exist")

@@ -298,7 +298,8 @@ def _add_serve(sub: argparse._SubParsersAction) -> None:
         description="Start the web server: upload a drawing, G-code, Excellon or HPGL file, see its preview, "
         "size and time, start / pause / resume / stop it, jog, answer tool changes and watch it live. Listens "
         "on 127.0.0.1:8000; any other --host needs a token (one is made and printed in the URL). The machine "
-        "port is the logging mock unless --machine-port names a real one.",
+        "port is the logging mock unless --machine-port names a real one. Needs the web extra: "
+        "pip install 'cam[web]'.",
     )
     sv.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1; 0.0.0.0 = every network, needs a token)")
     sv.add_argument("--port", type=int, default=8000, help="TCP port of the web page (default 8000)")
