@@ -1,7 +1,7 @@
 """``python -m cam``: see :mod:`cam.cli`."""
 import sys
 
-from .cli.commands import main
+from .cli import main
 
 if __name__ == "__main__":
     sys.exit(main())

@@ -2,24 +2,47 @@
 from __future__ import annotations
 
 import os
-import tempfile
+import secrets
 from pathlib import Path
 
 from .errors import CamError
 
 __all__ = ["atomic_write_bytes", "atomic_write_text"]
 
+_NEW_FILE_MODE = 0o666
+"""Mode asked for a new output; the process umask takes its bits away (0o644 under umask 022), as for open()."""
+
+
+def _create_temporary(folder: Path, name: str) -> tuple[int, str]:
+    """A new, empty file next to the target: (descriptor, path).
+
+    Made like :func:`tempfile.mkstemp` (exclusive create, random name), but with the normal mode of a new
+    file instead of mkstemp's owner-only 0o600, so the renamed output is readable as any other file.
+    """
+    flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0)
+    for _ in range(100):
+        tmp_name = str(folder / f".{name}.{secrets.token_hex(4)}.tmp")
+        try:
+            return os.open(tmp_name, flags, _NEW_FILE_MODE), tmp_name
+        except FileExistsError:
+            continue
+    raise FileExistsError(f"no free temporary name for {name} in {folder}")
+
 
 def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> Path:
     """Write ``data`` to ``path`` through a temporary file in the same folder and a rename.
 
-    Either the old file stays as it was or the new one is complete.
+    Either the old file stays as it was or the new one is complete.  The file gets the mode
+    ``0o666 & ~umask``, as a file made by :func:`open` would.
     """
     target = Path(path)
     folder = target.parent if str(target.parent) else Path(".")
     if not folder.is_dir():
         raise CamError(f"{target}: folder {folder} does not exist")
-    fd, tmp_name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=folder)
+    try:
+        fd, tmp_name = _create_temporary(folder, target.name)
+    except OSError as exc:
+        raise CamError(f"{target}: cannot write ({exc.strerror or exc})") from exc
     try:
         with os.fdopen(fd, "wb") as handle:
             handle.write(data)

@@ -1,9 +1,16 @@
 """The command line, run as a user would run it."""
+import argparse
+import fcntl
 import json
 import os
+import pty
+import re
+import select
 import signal
+import struct
 import subprocess
 import sys
+import termios
 import time
 
 import cv2
@@ -11,6 +18,8 @@ import numpy as np
 import pytest
 
 import cam
+from cam import choices
+from cam.cli.parser import build_parser
 
 from conftest import ROOT
 
@@ -75,10 +84,73 @@ def test_drill_writes_report_pin_log_and_matrix(tmp_path, drawing):
     assert rep2["steps"] == rep["steps"] and rep2["estimated_time_s"] == rep["estimated_time_s"]
 
 
-def test_progress_bar_shows_remaining_time(drawing):
-    proc = cli("drill", drawing)
-    assert proc.returncode == 0
-    assert "100%" in proc.stderr and "<" in proc.stderr  # tqdm: [elapsed<remaining]
+def test_progress_bar_only_on_a_terminal_unless_asked(drawing):
+    quiet = cli("drill", drawing)  # stderr is a pipe here: no bar, so a log stays readable
+    assert quiet.returncode == 0, quiet.stderr
+    assert "cutting" not in quiet.stderr and "%" not in quiet.stderr
+    forced = cli("drill", drawing, "--progress")
+    assert forced.returncode == 0, forced.stderr
+    assert "cutting: 100%" in forced.stderr and "<" in forced.stderr  # tqdm: [elapsed<remaining]
+    assert_one_line_error(cli("drill", drawing, "--progress", "--no-progress"), "--no-progress")
+
+
+def _run_with_terminal_stderr(*args) -> tuple[int, str]:
+    """Run ``python -m cam ARGS`` with stderr on a pseudo-terminal: (exit code, what it wrote there)."""
+    master, slave = pty.openpty()
+    fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 24, 120, 0, 0))  # 120 columns: room for the bar
+    try:
+        proc = subprocess.Popen([sys.executable, "-m", "cam", *map(str, args)], stdout=subprocess.DEVNULL,
+                                stderr=slave, stdin=subprocess.DEVNULL, env=ENV)
+        os.close(slave)
+        out = b""
+        while True:
+            ready, _, _ = select.select([master], [], [], 0.1)
+            if ready:
+                try:
+                    chunk = os.read(master, 65536)
+                except OSError:  # EIO: the child closed its end
+                    chunk = b""
+                out += chunk
+                if not chunk and proc.poll() is not None:
+                    break
+            elif proc.poll() is not None:
+                break
+        return proc.wait(timeout=120), out.decode(errors="replace")
+    finally:
+        os.close(master)
+
+
+def test_progress_bar_on_a_terminal_and_no_progress_turns_it_off(drawing):
+    code, shown = _run_with_terminal_stderr("drill", drawing)
+    assert code == 0 and "cutting: 100%" in shown
+    code, hidden = _run_with_terminal_stderr("drill", drawing, "--no-progress")
+    assert code == 0 and "cutting" not in hidden and "%" not in hidden
+
+
+def test_no_command_is_one_usage_line_exit_2():
+    proc = cli()
+    assert proc.returncode == 2 and proc.stdout == ""
+    lines = proc.stderr.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("usage: cam "), proc.stderr
+
+
+def _suffix_named(suffix: str, text: str) -> bool:
+    return re.search(rf"(?<![\w.]){re.escape(suffix)}(?!\w)", text) is not None
+
+
+def test_help_names_every_file_kind():
+    info = cli("info", "--help")
+    assert info.returncode == 0
+    for kind, suffixes in choices.SUFFIXES.items():
+        for suffix in suffixes:
+            assert _suffix_named(suffix, info.stdout), (kind, suffix)
+    sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
+    for command in ("drill", "export", "preview", "info"):
+        image = next(a for a in sub.choices[command]._actions if a.dest == "image")
+        for words in ("drawing", "digitized matrix", "Excellon", "HPGL", "G-code"):
+            assert words in image.help, (command, words)
+        for suffix in sum(choices.SUFFIXES.values(), ()):
+            assert _suffix_named(suffix, image.help), (command, suffix)
 
 
 def test_info_and_digitize(tmp_path, drawing):
@@ -163,6 +235,22 @@ def test_ctrl_c_stops_cleanly_with_position(tmp_path):
     assert "stopped at X=" in err and "Traceback" not in err
     motion = cam.decode_pin_log(tmp_path / "p.csv")
     assert motion.final_steps[2] == 0 and motion.final_steps[0] > 0
+
+
+def cli_without(module: str, *args):
+    """``cam ARGS`` in an interpreter where ``import MODULE`` fails, as if its package were not installed."""
+    code = f"import sys; sys.modules[{module!r}] = None\nfrom cam.cli import main\nsys.exit(main(sys.argv[1:]))"
+    return subprocess.run([sys.executable, "-c", code, *map(str, args)], capture_output=True, text=True, env=ENV,
+                          timeout=120)
+
+
+def test_missing_extras_are_one_line_naming_the_extra(drawing):
+    proc = cli_without("parallel", "drill", drawing, "--port", "/dev/parport0", "--no-progress")
+    assert_one_line_error(proc, "/dev/parport0", "pyparallel", "cam[parport]")
+    proc = cli_without("uvicorn", "serve", "--port", "0")
+    assert_one_line_error(proc, "uvicorn", "cam[web]")
+    proc = cli_without("starlette", "serve", "--port", "0")
+    assert_one_line_error(proc, "starlette", "cam[web]")
 
 
 def test_missing_parallel_port_is_one_line_with_hint(drawing):

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import cam
-from cam.cli.commands import main
+from cam.cli import main
 from cam.job.drill import plan_drill
 from cam.verify.pinlog import decode_pin_log, read_pin_log
 from cam.drive.runner import run

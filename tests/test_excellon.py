@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cam.cli.commands import main
+from cam.cli import main
 from cam.errors import CamError, ParseError
 from cam.formats.excellon import HoleList, load_excellon, parse_excellon
 

@@ -1,3 +1,6 @@
+import os
+import subprocess
+import sys
 import xml.etree.ElementTree as ET
 
 import cv2
@@ -6,7 +9,7 @@ import numpy as np
 import cam
 from cam.render.picture import depth_colours, surface_picture, toolpath_picture, toolpath_svg
 
-from conftest import drawing_from_rows
+from conftest import ROOT, drawing_from_rows
 from test_cli import cli
 
 ROWS = ["..........", ".####.....", "..........", "......###.", ".........."]
@@ -72,3 +75,19 @@ def test_cli_preview_png_svg_and_surface(tmp_path):
     assert bad.returncode == 2 and "png or .svg" in bad.stderr
     assert cli("drill", path, "--preview", tmp_path / "pre.png", "--no-progress").returncode == 0
     assert (tmp_path / "pre.png").exists()
+
+
+def test_readme_pictures_script_writes_the_previews(tmp_path):
+    """docs/make_pictures.py without the browser: the two previews, into a temporary folder (docs/ untouched)."""
+    proc = subprocess.run([sys.executable, str(ROOT / "docs" / "make_pictures.py"), "--out", str(tmp_path),
+                           "--no-browser"], capture_output=True, text=True, cwd=tmp_path, timeout=300,
+                          env={**os.environ, "PYTHONPATH": ""})  # the script finds its own checkout
+    assert proc.returncode == 0, proc.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["gear-preview.png", "heart-surface.png"]
+    for name in ("gear-preview.png", "heart-surface.png"):
+        img = cv2.imread(str(tmp_path / name))
+        assert img is not None and img.shape[0] > 300 and img.shape[1] > 300, name
+        colours = np.unique(img.reshape(-1, 3), axis=0)
+        assert len(colours) > 20, name  # a picture, not a blank page
+        assert 0.01 < (img < 200).any(axis=2).mean() < 0.99, name
+        assert str(tmp_path / name) in proc.stdout

@@ -312,7 +312,7 @@ def test_settings_keys_and_errors():
 
 
 def test_report_and_cli_name_the_ramp(tmp_path, capsys):
-    from cam.cli.commands import main
+    from cam.cli import main
 
     d = cam.digitize(cam.load_image(SAMPLES / "ellipse.png"))
     job = cam.plan(d, depth=1)

@@ -1,4 +1,55 @@
-"""The command line: a thin adapter over the library (``python -m cam``)."""
-from .commands import main
+"""The command line (``python -m cam``, the ``cam`` script): a thin adapter over the library.
 
-__all__ = ["main"]
+:func:`main` parses the arguments first (:mod:`cam.cli.parser` imports no
+numpy, numba, OpenCV or web stack, so ``cam --help`` starts at once), then
+loads only the module of the chosen command, which imports the library it
+needs.  Any :class:`~cam.errors.CamError` becomes one line on stderr and exit
+code 2.
+"""
+from __future__ import annotations
+
+import importlib
+import os
+import sys
+from typing import Optional, Sequence
+
+from ..errors import CamError
+from .parser import EXIT_BAD_INPUT, EXIT_INTERRUPTED, build_parser
+
+__all__ = ["main", "build_parser", "COMMANDS"]
+
+COMMANDS = {
+    "drill": ("cam.cli.drill", "cmd_drill"),
+    "export": ("cam.cli.files", "cmd_export"),
+    "preview": ("cam.cli.files", "cmd_preview"),
+    "digitize": ("cam.cli.files", "cmd_digitize"),
+    "info": ("cam.cli.files", "cmd_info"),
+    "profile": ("cam.cli.files", "cmd_profile"),
+    "jog": ("cam.cli.machine", "cmd_jog"),
+    "goto": ("cam.cli.machine", "cmd_goto"),
+    "serve": ("cam.cli.serve", "cmd_serve"),
+    "emulate-maximus": ("cam.cli.emulate", "cmd_emulate"),
+}
+"""Command name -> (module, function).  The module is imported only when its command runs: lazy by design."""
+
+
+def main(argv: Optional[Sequence[str]] = None) -> int:
+    """Entry point of ``python -m cam``; returns the exit code."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not args.command:
+        sys.stderr.write(parser.format_usage())
+        return EXIT_BAD_INPUT
+    module_name, function_name = COMMANDS[args.command]
+    try:
+        command = getattr(importlib.import_module(module_name), function_name)
+        return int(command(args))
+    except CamError as exc:
+        print(f"cam: error: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except KeyboardInterrupt:
+        print("cam: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    except BrokenPipeError:  # e.g. `cam info board.drl | head`: the reader left; that is not an error
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0

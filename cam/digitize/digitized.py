@@ -29,6 +29,7 @@ import numpy as np
 
 from ..errors import ParseError
 from ..fileio import atomic_write_text
+from ..render.picture import depth_colours, encode_png
 
 __all__ = ["Digitized", "save_digitized", "load_digitized", "format_digitized", "parse_digitized"]
 
@@ -100,8 +101,6 @@ class Digitized:
 
     def _repr_png_(self) -> bytes:
         """Notebook picture: traced pixels coloured by level (shallow/first yellow, last purple)."""
-        from ..render.picture import depth_colours, encode_png
-
         rgb = np.full((self.height_px, self.width_px, 3), 255, np.uint8)
         for obj, level in zip(self.objects, self.levels):
             rgb[obj[:, 1], obj[:, 0]] = depth_colours([level], max(1, self.n_layers or len(self.objects)))[0]

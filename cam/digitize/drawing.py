@@ -33,6 +33,7 @@ import cv2
 import numpy as np
 
 from ..errors import DrawingError
+from ..render.picture import auto_scale, encode_png
 
 __all__ = [
     "WHITE",
@@ -107,8 +108,6 @@ class Drawing:
 
     def _repr_png_(self) -> bytes:
         """Notebook picture: the classified drawing, scaled up so single pixels show."""
-        from ..render.picture import auto_scale, encode_png
-
         k = auto_scale(self.width_px, self.height_px, 600)
         return encode_png(np.repeat(np.repeat(self.to_rgb(), k, axis=0), k, axis=1))
 

@@ -26,6 +26,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from ._kernels import peel_padded_kernel, trace_layers_kernel
 from .drawing import BLACK, RED, WHITE
 from ..errors import DrawingError
 
@@ -88,8 +89,6 @@ def peel_layers_padded(classes: np.ndarray, *, source: str = "<array>") -> np.nd
     One compiled pass (two chamfer sweeps) when every red pixel lies inside the image and touches
     only black or red; otherwise the checks of :func:`peel_layers` run and name the bad pixel.
     """
-    from ._kernels import peel_padded_kernel
-
     padded, suspect = peel_padded_kernel(np.ascontiguousarray(classes, np.uint8), BLACK, RED, WHITE)
     if suspect:
         padded = np.zeros((classes.shape[0] + 2, classes.shape[1] + 2), np.int32)
@@ -111,8 +110,6 @@ def trace_padded(padded: np.ndarray, *, in_place: bool = False) -> tuple[list[np
     ``in_place=True`` lets the tracer mark traced pixels in ``padded`` itself (it is left with
     negated layer numbers) instead of working on a copy.
     """
-    from ._kernels import trace_layers_kernel
-
     padded = np.ascontiguousarray(padded, np.int32) if in_place else np.array(padded, np.int32, order="C")
     wp = padded.shape[1]
     offsets = np.array([dr * wp + dc for dr, dc in NEIGHBOURS_3D], np.int64)

@@ -18,9 +18,10 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["trace_curves", "START_RULES", "NEIGHBOURS_2D"]
+from ..choices import START_RULES
+from ._kernels import pad_mask_kernel, trace2d_kernel
 
-START_RULES = ("top", "min-distance")
+__all__ = ["trace_curves", "START_RULES", "NEIGHBOURS_2D"]
 
 NEIGHBOURS_2D = ((-1, -1), (-1, 0), (-1, 1), (0, -1), (0, 1), (1, -1), (1, 0), (1, 1))
 """(drow, dcol) in the scan order of Figure 4.13: NW, N, NE, W, E, SW, S, SE."""
@@ -57,8 +58,6 @@ def trace_curves(
     >>> [o.tolist() for o in trace_curves(m, start="min-distance", tool_xy_px=(4, 1))]
     [[[3, 1], [2, 1], [1, 1]]]
     """
-    from ._kernels import pad_mask_kernel, trace2d_kernel
-
     if start not in START_RULES:
         raise ValueError(f"start must be one of {START_RULES}, got {start!r}")
     image = np.ascontiguousarray(black)

@@ -4,7 +4,8 @@
   logged as ``(t_ns, data, strobe)``.  It ships in the library so that every
   job can run, and be checked, with no hardware.
 * a device path such as ``"/dev/parport0"`` -- the real port through
-  pyparallel, imported only when such a port is opened.
+  pyparallel (the optional ``cam[parport]`` extra), imported only when such
+  a port is opened.
 * ``"maximus:DEVICE"`` -- the MAXIMUS PCB driller's PIC board on RS-232
   (:mod:`cam.drive.maximus`): it takes drill files and jogs, not step/dir writes.
 
@@ -107,9 +108,9 @@ class ParallelPort(Port):
     def __init__(self, device: str) -> None:
         self.name = device
         try:
-            import parallel  # pyparallel: imported only when a real port is opened
-        except ImportError as exc:  # pragma: no cover - depends on the machine
-            raise PortError(f"{device}: pyparallel is not installed (pip install pyparallel)") from exc
+            import parallel  # pyparallel, the optional [parport] extra: imported only when a real port is opened
+        except ImportError:
+            raise PortError(f"{device}: the parallel port needs pyparallel: pip install 'cam[parport]'") from None
         try:
             self._port = parallel.Parallel(port=device)
         except FileNotFoundError:

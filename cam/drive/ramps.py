@@ -48,6 +48,8 @@ Everything per period runs compiled (numba) over flat arrays.
 """
 from __future__ import annotations
 
+import concurrent.futures
+
 import numpy as np
 from numba import njit
 
@@ -107,8 +109,6 @@ def _pool():
     """Three threads for the per-axis kernels (compiled with ``nogil``, so they run in parallel)."""
     global _POOL
     if _POOL is None:
-        import concurrent.futures
-
         _POOL = concurrent.futures.ThreadPoolExecutor(3, thread_name_prefix="cam-axes")
     return _POOL
 

@@ -33,7 +33,7 @@ from typing import Any, Callable, Optional
 import numpy as np
 
 from ..errors import BusyError, CamError, PlanError, PortError, TravelError
-from ..job.model import Job, travel_job
+from ..job.model import TRAVEL, Job, check_travel, travel_job
 from ..job.moves import jog as jog_job
 from ..job.moves import to_origin
 from ..settings import DEFAULT_SETTINGS, MachineSettings
@@ -220,13 +220,17 @@ class MachineSession:
         settings = getattr(job, "settings", None)
         if settings is not None and (settings.travel != self.settings.travel or settings.pins != self.settings.pins):
             raise CamError("the job was planned for other machine settings; plan it again")
-        if self.kind == "maximus":
+        if isinstance(job, Job) and len(job) and np.all(job.kind == TRAVEL):
+            require(self.port, "jog" if self.kind == "maximus" else "step_dir", what="a move")
+        elif self.kind == "maximus":
             require(self.port, "drill_files", what=f"a {getattr(job, 'kind', 'step')} job")
             if getattr(job, "drill_plan", None) is None:
                 require(self.port, "step_dir", what=f"a {getattr(job, 'kind', 'step')} job")
         extent = getattr(job, "extent_steps", None)
         if extent is not None:
             self.check_reach(extent, "the job")
+        if isinstance(job, Job):
+            check_travel(np.asarray(job.points_steps, np.int64) + self._position, self.settings, job.pixels)
 
     def start(self, job: Any, *, label: Optional[str] = None, controller: Optional[Controller] = None) -> None:
         """Run a job from where the tool stands, in the background.
@@ -246,6 +250,9 @@ class MachineSession:
             self._check_free()
             self._check_job(job)
             name = label or f"job {getattr(job, 'name', '') or getattr(job, 'source', '') or 'job'}"
+            if isinstance(job, Job) and len(job) and np.all(job.kind == TRAVEL):  # only travel: a jog or a go-to
+                self._start_moves("jog", job, label or job.source or "move")
+                return
             if self.kind == "maximus":
                 self._launch_board("job", drill_work(job, self.settings), job, name)
                 return

@@ -23,11 +23,11 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from ..choices import GCODE_SUFFIXES
 from ..errors import ParseError
 
 __all__ = ["GcodeMove", "GcodeProgram", "parse_gcode", "load_gcode", "GCODE_SUFFIXES"]
 
-GCODE_SUFFIXES = (".ngc", ".nc", ".gcode", ".gc", ".g", ".tap", ".cnc")
 
 _WORD = re.compile(r"([A-Za-z])\s*([-+]?(?:\d+\.?\d*|\.\d+))")
 _NOOP_G = {40, 49, 54, 61, 64, 80, 94}

@@ -51,6 +51,7 @@ from typing import BinaryIO, Callable, Iterator, Optional, TextIO, Union
 import numpy as np
 from numba import njit
 
+from ..choices import HPGL_SUFFIXES
 from ..errors import ParseError
 
 __all__ = [
@@ -59,7 +60,6 @@ __all__ = [
     "iter_hpgl", "scan_hpgl", "load_hpgl", "parse_hpgl",
 ]
 
-HPGL_SUFFIXES = (".plt", ".hpgl", ".hpg")
 PLOTTER_UNIT_MM = 0.025
 """One plotter unit: 0.025 mm, 40 units per mm (004 section 3.6.2)."""
 CHUNK_BYTES = 1 << 19

@@ -25,6 +25,7 @@ import numpy as np
 from ..errors import PlanError, TravelError
 from ..settings import DEFAULT_SETTINGS, MachineSettings
 from .model import CUT, RETRACT, TRAVEL, Job, check_travel
+from .drill_order import drill_order
 
 __all__ = ["DrillPlan", "plan_drill", "DEFAULT_DEPTH_MM", "DEFAULT_SAFE_HEIGHT_MM"]
 
@@ -92,7 +93,6 @@ def plan_drill(
     Raises:
         PlanError: bad options; TravelError: a hole outside the travel (naming the hole and its line).
     """
-    from .drill_order import drill_order
 
     if depth_mm <= 0 or safe_height_mm < 0:
         raise PlanError("drill depth must be > 0 mm and the safe height >= 0 mm")

@@ -23,11 +23,29 @@ from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any, Mapping, Optional
 
+import cv2
 import numpy as np
 
+from ..choices import (
+    DIGITIZED_SUFFIXES, DRAWING_SUFFIXES, EXCELLON_SUFFIXES, HPGL_SUFFIXES, PROFILE_SUFFIXES, SUFFIXES,
+)
+from ..digitize import digitize
+from ..digitize.digitized import load_digitized
+from ..digitize.drawing import load_image
+from ..digitize.profile import load_profile, profile_from_expr
+from ..drive.steps import plan_steps
 from ..errors import CamError
-from ..formats.hpgl import HPGL_SUFFIXES
+from ..formats.excellon import load_excellon
+from ..formats.gcode import load_gcode
+from ..formats.hpgl import load_hpgl
+from ..render.picture import LEGEND_PX, depth_colours, encode_png, toolpath_picture
+from ..render.report import job_report
 from ..settings import DEFAULT_SETTINGS, MachineSettings
+from ..verify.pinlog import PinLog, decode_pin_log, motion_extent
+from .drawing import plan
+from .drill import plan_drill
+from .gcode import plan_gcode
+from .hpgl import plan_hpgl
 
 __all__ = [
     "JobOptions", "PreparedJob", "prepare_job", "job_kind", "accepted_suffixes", "KINDS",
@@ -35,28 +53,11 @@ __all__ = [
 ]
 
 KINDS = ("drawing", "digitized", "gcode", "excellon", "hpgl")
-DRAWING_SUFFIXES = (".png", ".bmp", ".jpg", ".jpeg", ".tif", ".tiff")
-DIGITIZED_SUFFIXES = (".txt", ".dig")
-EXCELLON_SUFFIXES = (".drl", ".xln", ".exc", ".drd")
-PROFILE_SUFFIXES = DRAWING_SUFFIXES + (".csv", ".txt")
-"""Files a depth profile may come from (a profile drawing or a CSV of depths)."""
-
-
-def _gcode_suffixes() -> tuple[str, ...]:
-    from ..formats.gcode import GCODE_SUFFIXES
-
-    return tuple(GCODE_SUFFIXES)
 
 
 def accepted_suffixes() -> dict[str, tuple[str, ...]]:
     """File name suffixes of each job kind (lower case, with the dot)."""
-    return {
-        "drawing": DRAWING_SUFFIXES,
-        "digitized": DIGITIZED_SUFFIXES,
-        "gcode": _gcode_suffixes(),
-        "excellon": EXCELLON_SUFFIXES,
-        "hpgl": HPGL_SUFFIXES,
-    }
+    return dict(SUFFIXES)
 
 
 def job_kind(path: str | os.PathLike) -> str:
@@ -323,7 +324,6 @@ class PreparedJob:
 
     def positions_steps(self) -> np.ndarray:
         """``(M, 3)`` int64 machine position (x, y, z) in steps after each write of the plan."""
-        from ..verify.pinlog import PinLog, decode_pin_log
 
         plan = self.steps
         return decode_pin_log(PinLog(plan.t_ns, plan.data, plan.strobe), self.settings).position_steps
@@ -331,7 +331,6 @@ class PreparedJob:
     def preview_picture(self) -> np.ndarray:
         """The preview as an ``(H, W, 3)`` uint8 RGB array (see :mod:`cam.render.picture`)."""
         if self.kind in ("drawing", "digitized"):
-            from ..render.picture import toolpath_picture
 
             return toolpath_picture(self.toolpath, drawing_rgb=self.drawing_rgb,
                                     estimated_time_s=self.estimated_time_s)
@@ -340,7 +339,6 @@ class PreparedJob:
 
     def preview_png(self) -> bytes:
         """PNG bytes of :meth:`preview_picture`."""
-        from ..render.picture import encode_png
 
         return encode_png(self.preview_picture())
 
@@ -365,9 +363,7 @@ def motion_picture(
     Moves with the tool below the surface (z > 0) are drawn coloured by depth
     (shallow yellow to deep purple), moves above it in thin grey.
     """
-    import cv2
 
-    from ..render.picture import LEGEND_PX, depth_colours
 
     p = np.vstack([np.zeros((1, 3), np.int64), np.asarray(positions_steps, np.int64).reshape(-1, 3)])
     lo = p[:, :2].min(axis=0)
@@ -418,7 +414,6 @@ def _cut_extent(extent: np.ndarray, cut: np.ndarray, settings: MachineSettings) 
 
 def _finish(job: PreparedJob) -> PreparedJob:
     """Fill the fields every kind computes the same way from the step plan."""
-    from ..verify.pinlog import motion_extent
 
     job.extent_steps, cut = motion_extent(job.steps.data, job.settings)  # decoded in bounded chunks
     if job.size_mm == (0.0, 0.0):
@@ -443,13 +438,6 @@ def _finish(job: PreparedJob) -> PreparedJob:
 
 
 def _prepare_pixels(path: Path, kind: str, options: JobOptions, settings: MachineSettings) -> PreparedJob:
-    from ..digitize import digitize
-    from ..digitize.digitized import load_digitized
-    from ..digitize.drawing import load_image
-    from ..drive.steps import plan_steps
-    from ..digitize.profile import load_profile, profile_from_expr
-    from ..render.report import job_report
-    from .drawing import plan
 
     rgb = None
     if kind == "drawing":
@@ -478,9 +466,6 @@ def _prepare_pixels(path: Path, kind: str, options: JobOptions, settings: Machin
 
 
 def _prepare_gcode(path: Path, options: JobOptions, settings: MachineSettings) -> PreparedJob:
-    from ..drive.steps import plan_steps
-    from ..formats.gcode import load_gcode
-    from .gcode import plan_gcode
 
     program = load_gcode(path)
     job = plan_gcode(program, settings, flip_y=options.flip_y)
@@ -492,9 +477,6 @@ def _prepare_gcode(path: Path, options: JobOptions, settings: MachineSettings) -
 
 
 def _prepare_excellon(path: Path, options: JobOptions, settings: MachineSettings) -> PreparedJob:
-    from .drill import plan_drill
-    from ..drive.steps import plan_steps
-    from ..formats.excellon import load_excellon  # lazy: only drill jobs need it
 
     holes = load_excellon(path, units=options.excellon_units, digits=options.excellon_digits,
                           zeros=options.excellon_zeros)
@@ -515,9 +497,6 @@ def _prepare_excellon(path: Path, options: JobOptions, settings: MachineSettings
 
 
 def _prepare_hpgl(path: Path, options: JobOptions, settings: MachineSettings, progress=None) -> PreparedJob:
-    from ..drive.steps import plan_steps
-    from ..formats.hpgl import load_hpgl
-    from .hpgl import plan_hpgl
 
     drawing = load_hpgl(path, progress=progress)
     toolpath = plan_hpgl(drawing, settings=settings, depth_mm=options.depth_mm,

@@ -26,6 +26,7 @@ import numpy as np
 
 from ..errors import TravelError
 from ..settings import DEFAULT_SETTINGS, MachineSettings
+from ..render.picture import encode_png, toolpath_picture
 
 __all__ = ["Job", "PixelFrame", "CUT", "RETRACT", "TRAVEL", "check_travel", "travel_job"]
 
@@ -152,7 +153,6 @@ class Job:
 
     def _repr_png_(self) -> bytes:
         """Notebook picture: see :func:`cam.render.picture.toolpath_picture`."""
-        from ..render.picture import encode_png, toolpath_picture  # render imports this module
 
         return encode_png(toolpath_picture(self))
 

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 from typing import Any, Optional
 
+import cv2
 import numpy as np
 
 from ..digitize.digitized import Digitized
@@ -33,8 +34,6 @@ def image_report(digitized: Digitized, settings: MachineSettings = DEFAULT_SETTI
         "warnings": list(digitized.warnings),
     }
     if digitized.mode == "3d":
-        import cv2
-
         drawn = (digitized.label_image() > 0).astype(np.uint8)
         rep["objects"] = int(cv2.connectedComponents(drawn, connectivity=8)[0] - 1)
         rep["rings"] = len(digitized.objects)

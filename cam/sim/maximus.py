@@ -129,8 +129,10 @@ import argparse
 import os
 import select
 import sys
+import termios
 import threading
 import time
+import tty
 from collections import deque
 from dataclasses import dataclass
 from typing import Iterable, Iterator, Sequence
@@ -288,9 +290,6 @@ class MaximusEmulator:
     # ------------------------------------------------------------------ control
     def start(self) -> "MaximusEmulator":
         """Open the pseudo-terminal pair and power the board up."""
-        import termios
-        import tty
-
         self._master, self._slave = os.openpty()
         tty.setraw(self._slave, termios.TCSANOW)  # no echo, no line editing, 8 bit clean
         self.device_path = os.ttyname(self._slave)

@@ -24,6 +24,7 @@ import numpy as np
 
 from ..errors import CamError, ParseError
 from ..fileio import atomic_write_text
+from ..render.picture import encode_png, surface_picture
 from ..settings import DEFAULT_SETTINGS, MachineSettings
 from ..drive.pins import axis_bits
 
@@ -37,8 +38,6 @@ class Surface(np.ndarray):
     """A cut surface: ``(H, W)`` int64 depth in Z steps per drawing pixel; shows itself as a picture in notebooks."""
 
     def _repr_png_(self) -> bytes:
-        from ..render.picture import encode_png, surface_picture
-
         return encode_png(surface_picture(np.asarray(self)))
 
 

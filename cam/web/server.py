@@ -44,6 +44,7 @@ from ..errors import BusyError, CamError, CapabilityError
 from ..fileio import atomic_write_bytes
 from ..job.jobs import PROFILE_SUFFIXES, JobOptions, PreparedJob, accepted_suffixes, job_kind, prepare_job
 from ..settings import DEFAULT_SETTINGS, MachineSettings
+from contextlib import asynccontextmanager
 
 __all__ = ["ServerConfig", "HttpError", "create_app", "serve", "LOCAL_HOSTS"]
 
@@ -427,7 +428,6 @@ def create_app(config: ServerConfig, session: Optional[MachineSession] = None):
 
         await inner(scope, receive, send_wrapped)
 
-    from contextlib import asynccontextmanager
 
     @asynccontextmanager
     async def lifespan(app):

@@ -34,6 +34,7 @@ from dataclasses import dataclass
 from typing import Any, Callable, Sequence
 
 import numpy as np
+import serial
 
 from ...errors import PlanError, PortError
 from ...settings import DEFAULT_SETTINGS, MachineSettings, Travel
@@ -266,11 +267,6 @@ class MaximusBoard:
             raise PortError(f"no device in {url_or_device!r}; use maximus:/dev/ttyUSB0")
         if not timeout_s > 0:
             raise PortError(f"timeout_s must be > 0, got {timeout_s!r}")
-        try:
-            import serial
-        except ImportError as exc:  # pragma: no cover - pyserial is a dependency
-            raise PortError("the MAXIMUS board needs pyserial: pip install pyserial") from exc
-        self._serial_mod = serial
         self.device = device
         self.timeout_s = float(timeout_s)
         self.banner: str | None = None
@@ -316,7 +312,7 @@ class MaximusBoard:
         try:
             self._ser.write(data)
             self._ser.flush()
-        except (self._serial_mod.SerialException, OSError) as exc:
+        except (serial.SerialException, OSError) as exc:
             self._state = _UNKNOWN
             raise PortError(f"cannot write to MAXIMUS port {self.device}: {exc}") from exc
 
@@ -325,7 +321,7 @@ class MaximusBoard:
             if timeout_s is not None:
                 self._ser.timeout = timeout_s
             data = self._ser.read(1)
-        except (self._serial_mod.SerialException, OSError) as exc:
+        except (serial.SerialException, OSError) as exc:
             self._state = _UNKNOWN
             raise PortError(f"cannot read from MAXIMUS port {self.device}: {exc}") from exc
         finally:
@@ -357,7 +353,7 @@ class MaximusBoard:
                 waiting = self._ser.in_waiting
                 if waiting:
                     seen += self._ser.read(waiting)
-            except (self._serial_mod.SerialException, OSError) as exc:
+            except (serial.SerialException, OSError) as exc:
                 raise PortError(f"cannot read from MAXIMUS port {self.device}: {exc}") from exc
             self._write(bytes([ISMACHINEREADY]))
             deadline = time.monotonic() + self.timeout_s

@@ -1,0 +1,67 @@
+"""Helpers every command shares: machine settings from the options, durations, progress bars."""
+from __future__ import annotations
+
+import argparse
+import contextlib
+import sys
+from pathlib import Path
+from typing import Any
+
+from tqdm import tqdm
+
+from ..drive.maximus.board import MAXIMUS_SETTINGS
+from ..settings import MachineSettings, load_settings
+
+__all__ = ["machine_settings", "port_settings", "format_duration", "progress_wanted", "reading_bar"]
+
+
+def machine_settings(args: argparse.Namespace) -> MachineSettings:
+    """The settings of --machine (or the built-in ones) with --steps-per-pixel, --delay and --ramp applied."""
+    s = load_settings(args.machine)
+    changes: dict[str, Any] = {}
+    if args.steps_per_pixel:
+        changes["steps_per_px_xy"], changes["steps_per_px_z"] = args.steps_per_pixel
+    if args.delay:
+        changes["delay_xy_ms"], changes["delay_z_ms"] = args.delay
+    if getattr(args, "ramp", None):
+        changes["ramp"] = args.ramp
+    return s.replace(**changes) if changes else s
+
+
+def port_settings(args: argparse.Namespace, port: str) -> MachineSettings:
+    """The machine settings for ``port``: a MAXIMUS board has its own resolution, step mode and 16-bit travel
+    unless --machine says else."""
+    if port.startswith("maximus:") and not args.machine:
+        return MAXIMUS_SETTINGS
+    return machine_settings(args)
+
+
+def format_duration(seconds: float) -> str:
+    """``H:MM:SS``, rounded to the second."""
+    s = int(round(seconds))
+    return f"{s // 3600}:{s % 3600 // 60:02d}:{s % 60:02d}"
+
+
+def progress_wanted(args: argparse.Namespace) -> bool:
+    """Whether to draw a progress bar: --progress forces it, --no-progress forbids it, and otherwise only
+    when stderr is a terminal (so a log or a pipe gets no bar, and an error stays one line)."""
+    if getattr(args, "progress", False):
+        return True
+    if getattr(args, "no_progress", False):
+        return False
+    return sys.stderr is not None and sys.stderr.isatty()
+
+
+def reading_bar(args: argparse.Namespace):
+    """A progress bar by bytes read (large HPGL files), as :func:`progress_wanted` says; yields its callback or None."""
+    if not progress_wanted(args):
+        return contextlib.nullcontext(None)
+
+    @contextlib.contextmanager
+    def bar_callback():
+        total = Path(args.image).stat().st_size if Path(args.image).is_file() else None
+        with tqdm(total=total, unit="B", unit_scale=True, desc="reading", file=sys.stderr, mininterval=0.2,
+                  leave=False) as bar:
+            yield lambda done, total_bytes: bar.update(done - bar.n)
+
+    return bar_callback()

@@ -1,0 +1,12 @@
+"""``cam emulate-maximus``: the MAXIMUS firmware emulator on a pseudo-terminal (a test bench, not host code)."""
+from __future__ import annotations
+
+import argparse
+
+from ..sim import maximus as maximus_emulator
+
+__all__ = ["cmd_emulate"]
+
+
+def cmd_emulate(args: argparse.Namespace) -> int:
+    return int(maximus_emulator.main(["--speed", str(args.speed)]) or 0)

@@ -1,0 +1,115 @@
+"""Running a job from the command line: a thin adapter over the machine session.
+
+The session (:class:`cam.drive.session.MachineSession`) does the work on every
+port; here are only the terminal's parts: the progress bar, the prompts at
+tool changes and Pause At points (Enter, or ``--yes``), Ctrl-C (stop: the tool
+is lifted), and the pin log file.
+"""
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+from dataclasses import dataclass, field
+from typing import Any, Optional
+
+from tqdm import tqdm
+
+from ..drive.ports import require
+from ..drive.runner import FINISHED
+from ..drive.session import MachineSession, Prompt
+from ..errors import PortError
+from ..settings import MachineSettings
+from ..verify.pinlog import write_pin_log
+from .common import progress_wanted
+
+__all__ = ["execute", "Outcome", "check_port_options"]
+
+
+@dataclass
+class Outcome:
+    """How a run ended, whatever the port."""
+
+    status: str
+    messages: list[str] = field(default_factory=list)
+    machine_time_s: float = 0.0
+    position_steps: tuple[int, int, int] = (0, 0, 0)
+
+    @property
+    def finished(self) -> bool:
+        return self.status == FINISHED
+
+
+def check_port_options(args: argparse.Namespace) -> None:
+    """Options that need a port's capability, checked before anything is planned or sent."""
+    if getattr(args, "pin_log", None):
+        require(args.port, "pin_log")
+
+
+def _ask(args: argparse.Namespace):
+    def on_prompt(prompt: Prompt) -> str:
+        x, y, z = prompt.position_steps
+        print(f"{prompt.note}: paused at X={x} Y={y} Z={z} steps; press Enter to resume", file=sys.stderr)
+        if getattr(args, "yes", False):
+            return "continue"
+        if sys.stdin.readline() == "":  # nobody can answer: stop rather than carry on blindly
+            print("no answer at the pause (stdin closed): stopping", file=sys.stderr)
+            return "stop"
+        return "continue"
+
+    return on_prompt
+
+
+def _bar(args: argparse.Namespace, estimated_s: float) -> Optional[Any]:
+    if not progress_wanted(args):
+        return None
+    return tqdm(
+        total=round(estimated_s, 3), unit="s", unit_scale=False, desc="cutting", file=sys.stderr,
+        bar_format="{desc}: {percentage:3.0f}%|{bar}| {n:.1f}/{total:.1f} machine s [{elapsed}<{remaining}]",
+        mininterval=0.2,
+    )
+
+
+def execute(job: Any, args: argparse.Namespace, settings: MachineSettings, *,
+            start_steps: Optional[tuple[int, int, int]] = None) -> Outcome:
+    """Run a job (a Job, a PreparedJob or a StepPlan) on ``args.port`` through a machine session.
+
+    ``start_steps``: where the tool stands, when the caller knows better than the home.  Ctrl-C stops the
+    job cleanly (tool lifted, position reported).  Writes ``args.pin_log`` after a run on the mock.
+
+    Raises:
+        CamError: the job does not fit the port or the travel (nothing is sent), or the port failed.
+    """
+    session = MachineSession(args.port, settings, realtime=getattr(args, "realtime", False), on_prompt=_ask(args))
+    if start_steps is not None:
+        session.set_position(start_steps)
+    session.check_job(job)  # before the progress bar: a bad job is one clean line
+    estimated_s = float(getattr(job, "estimated_time_s", 0.0))
+    bar = _bar(args, estimated_s)
+    if bar is not None:
+        session.on_progress = lambda done, total, t_ns: bar.update(round(t_ns / 1e9, 3) - bar.n)
+    previous = signal.getsignal(signal.SIGINT)
+    signal.signal(signal.SIGINT, lambda signum, frame: session.stop())
+    try:
+        session.start(job)
+        version = session.version
+        while session.busy:
+            version = session.wait_change(version, 0.2)
+    finally:
+        signal.signal(signal.SIGINT, previous)
+        if bar is not None:
+            bar.close()
+    return _outcome(session, args)
+
+
+def _outcome(session: MachineSession, args: argparse.Namespace) -> Outcome:
+    info = session.last_run
+    result = session.last_result
+    if info.get("status") == "error":
+        raise PortError("; ".join(info.get("messages") or ["the run failed"]))
+    if getattr(args, "pin_log", None) and result is not None:
+        write_pin_log(result.pin_log(), args.pin_log)
+    if result is None:  # a MAXIMUS board: it reports no position or time
+        return Outcome(info.get("status", "error"), list(info.get("messages", [])),
+                       position_steps=session.position_steps())
+    return Outcome(result.status, list(result.messages), result.machine_time_s, result.position_steps)

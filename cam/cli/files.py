@@ -1,0 +1,159 @@
+"""Commands that read or write files and move nothing: export, preview, info, digitize, profile."""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from ..choices import EXCELLON_SUFFIXES, GCODE_SUFFIXES, HPGL_SUFFIXES
+from ..digitize import digitize
+from ..digitize.digitized import save_digitized
+from ..digitize.drawing import load_image
+from ..digitize.profile import load_profile
+from ..errors import CamError
+from ..formats.excellon import HoleList, load_excellon
+from ..formats.gcode_export import save_gcode
+from ..formats.hpgl import PLOTTER_UNIT_MM, scan_hpgl
+from ..render.report import format_report, image_report
+from .common import format_duration, machine_settings, reading_bar
+from .planning import (
+    excellon_digits, is_file_job, plan_job, prepare_file_job, profile_of, write_file_job_preview, write_preview,
+)
+
+__all__ = ["cmd_export", "cmd_preview", "cmd_info", "cmd_digitize", "cmd_profile"]
+
+
+def _export_file_job(args: argparse.Namespace) -> int:
+    if Path(args.image).suffix.lower() in GCODE_SUFFIXES:
+        raise CamError(f"{args.image} is G-code already; run it with 'cam drill', or preview it")
+    job = prepare_file_job(args)
+    at = np.flatnonzero(job.toolpath.pause) + 1  # a tool change comes before the point after its pause
+    if job.drill_plan is not None:
+        changes = {int(i): (tool, f"T{tool} {dia:.3f} mm, {n} holes")
+                   for i, (tool, dia, n) in zip(at, job.drill_plan.tool_sequence)}
+    else:  # HPGL: "tool change: pen N"
+        changes = {int(i): (int(note.split()[-1]), note) for i, note in zip(at, job.toolpath.pause_notes or [])
+                   if note.split()[-1].isdigit()}
+    save_gcode(job.toolpath, args.output, flip_y=args.flip_y, safe_height_mm=args.travel_height,
+               title=f"cam: {args.image}", tool_changes=changes)
+    print(f"{args.output}: {job.summary}, {len(changes)} tool change(s)")
+    return 0
+
+
+def cmd_export(args: argparse.Namespace) -> int:
+    if is_file_job(args):
+        return _export_file_job(args)
+    digitized, job = plan_job(args)
+    if args.safe_height <= 0:
+        raise CamError(f"--safe-height must be > 0 mm, got {args.safe_height}")
+    save_gcode(job, args.output, flip_y=args.flip_y, safe_height_mm=args.safe_height,
+               title=f"cam: {args.image or args.load_digitized}")
+    print(f"{args.output}: {job.n_targets} points, {job.n_retracts} retracts")
+    return 0
+
+
+def cmd_preview(args: argparse.Namespace) -> int:
+    if is_file_job(args):
+        if args.surface:
+            raise CamError("--surface draws the surface a drawing's job cuts; for this file draw its toolpath")
+        if args.scale is not None and not (1 <= args.scale <= 64):
+            raise CamError(f"--scale must be 1..64, got {args.scale}")
+        write_file_job_preview(prepare_file_job(args), args.output, scale=args.scale)
+        print(f"{args.output}: toolpath picture")
+        return 0
+    _, job = plan_job(args)
+    write_preview(args, job, args.output, surface=args.surface)
+    print(f"{args.output}: {'cut surface' if args.surface else 'toolpath'} picture")
+    return 0
+
+
+def cmd_profile(args: argparse.Namespace) -> int:
+    settings = machine_settings(args)
+    prof = load_profile(args.profile)
+    lo, hi = int(prof.depth_px.min()), int(prof.depth_px.max())
+    print(f"{args.profile}: {prof.n_layers} layers, depth {lo}..{hi} Z px = "
+          f"{settings.px_to_mm_z(lo):.3f}..{settings.px_to_mm_z(hi):.3f} mm")
+    return 0
+
+
+def cmd_digitize(args: argparse.Namespace) -> int:
+    d = digitize(load_image(args.image), start=args.start)
+    for w in d.warnings:
+        print(f"warning: {w}", file=sys.stderr)
+    save_digitized(d, args.output)
+    print(f"{args.output}: {len(d.objects)} object(s), {d.n_points} points")
+    return 0
+
+
+def _load_drill_file(args: argparse.Namespace) -> HoleList:
+    return load_excellon(args.image, units=args.excellon_units, digits=excellon_digits(args),
+                         zeros=args.excellon_zeros)
+
+
+def _info_excellon(args: argparse.Namespace) -> int:
+    holes = _load_drill_file(args)
+    x0, y0, x1, y1 = holes.extent_mm()
+    lines = [f"{args.image}: {len(holes.holes_mm)} holes, board extent X {x0:.3f}..{x1:.3f} mm, "
+             f"Y {y0:.3f}..{y1:.3f} mm ({x1 - x0:.2f} x {y1 - y0:.2f} mm)"]
+    for tool, dia, count in holes.tool_table():
+        lines.append(f"  T{tool}: {dia:.3f} mm, {count} holes")
+    lines += [f"warning: {w}" for w in holes.warnings]
+    print("\n".join(lines))
+    return 0
+
+
+def _info_hpgl(args: argparse.Namespace) -> int:
+    args.no_progress = getattr(args, "no_progress", True)
+    with reading_bar(args) as progress:
+        scan = scan_hpgl(args.image, progress=progress)
+    if args.json:
+        print(json.dumps({**scan.__dict__, "size_mm": scan.size_mm()}, indent=2))
+        return 0
+    lines = [f"{args.image}: {scan.n_strokes} pen-down strokes, {scan.n_points} points, pens "
+             f"{', '.join(map(str, scan.pens)) or 'none selected'}"]
+    if scan.extent_pu is not None:
+        x0, y0, x1, y1 = scan.extent_pu
+        w, h = scan.size_mm()
+        lines.append(f"  extent X {x0:g}..{x1:g}, Y {y0:g}..{y1:g} plotter units ({w:.2f} x {h:.2f} mm at "
+                     f"{PLOTTER_UNIT_MM} mm per unit)")
+    lines.append("  commands: " + ", ".join(f"{k} {n}" for k, n in scan.command_counts.items()))
+    lines += [f"warning: {w}" for w in scan.warnings]
+    print("\n".join(lines))
+    return 0
+
+
+def _info_gcode(args: argparse.Namespace) -> int:
+    args.flip_y = getattr(args, "flip_y", False)
+    job = prepare_file_job(args)
+    if args.json:
+        print(json.dumps(job.report, indent=2))
+        return 0
+    w, h = job.size_mm
+    lines = [f"{args.image}: {job.report.get('moves', 0)} moves, cut area {w:.2f} x {h:.2f} mm, depth "
+             f"{job.depth_mm:.3f} mm, machine time {format_duration(job.estimated_time_s)}"]
+    lines += [f"  {note}" for note in job.tool_changes]
+    lines += [f"warning: {w}" for w in job.warnings]
+    print("\n".join(lines))
+    return 0
+
+
+def cmd_info(args: argparse.Namespace) -> int:
+    if Path(args.image).suffix.lower() in HPGL_SUFFIXES:
+        return _info_hpgl(args)
+    if Path(args.image).suffix.lower() in EXCELLON_SUFFIXES:
+        return _info_excellon(args)
+    if Path(args.image).suffix.lower() in GCODE_SUFFIXES:
+        return _info_gcode(args)
+    settings = machine_settings(args)
+    d = digitize(load_image(args.image), start=args.start)
+    rep = image_report(d, settings)
+    prof = profile_of(args, d)
+    if prof is not None and d.mode == "3d":
+        depth_px = int(prof.depth_of(d.levels).max())
+        rep["depth_px"] = depth_px
+        rep["depth_mm"] = round(settings.px_to_mm_z(depth_px), 4)
+    print(json.dumps(rep, indent=2) if args.json else format_report(rep))
+    return 0

@@ -1,0 +1,338 @@
+"""The argument parser of every command: argparse and light constants only.
+
+``cam --help`` and ``cam COMMAND --help`` finish here, so this module imports
+nothing heavier than the standard library, :mod:`cam.settings` (for the ramp
+modes) and :mod:`cam.choices` (file suffixes, start rules): no numpy, numba,
+OpenCV or web stack.  The commands themselves live in the modules that
+:data:`cam.cli.COMMANDS` names.
+"""
+from __future__ import annotations
+
+import argparse
+from typing import Callable, Optional, Sequence
+
+from .. import __version__
+from ..choices import (
+    DIGITIZED_SUFFIXES, DRAWING_SUFFIXES, EXCELLON_SUFFIXES, GCODE_SUFFIXES, HPGL_SUFFIXES, PROFILE_SUFFIXES,
+    START_RULES,
+)
+from ..settings import RAMP_MODES
+
+__all__ = ["build_parser", "EXIT_BAD_INPUT", "EXIT_INTERRUPTED"]
+
+EXIT_BAD_INPUT = 2
+"""Exit code of bad input (options, files, ports): one line on stderr, never a traceback."""
+EXIT_INTERRUPTED = 130
+"""Exit code of a job stopped before its end (Ctrl-C, a stop at a prompt)."""
+
+
+def _listed(suffixes: Sequence[str]) -> str:
+    return " ".join(suffixes)
+
+
+FILE_KINDS_HELP = (
+    f"a drawing ({_listed(DRAWING_SUFFIXES)}), an Excellon drill file ({_listed(EXCELLON_SUFFIXES)}), "
+    f"an HPGL file ({_listed(HPGL_SUFFIXES)}) or a G-code file ({_listed(GCODE_SUFFIXES)})"
+)
+"""The files a job command or info takes as its positional argument, by kind."""
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line errors (exit code 2)."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        self.exit(EXIT_BAD_INPUT, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+def _int_list(n: Optional[int], name: str, minimum: Optional[int] = None) -> Callable[[str], list[int]]:
+    def parse(text: str) -> list[int]:
+        try:
+            values = [int(v) for v in text.split(",")]
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} takes whole numbers separated by commas, got '{text}'") from None
+        if n is not None and len(values) != n:
+            raise argparse.ArgumentTypeError(f"{name} takes {n} comma-separated numbers, got '{text}'")
+        if minimum is not None and any(v < minimum for v in values):
+            raise argparse.ArgumentTypeError(f"{name} values must be >= {minimum}, got '{text}'")
+        return values
+
+    return parse
+
+
+def _float_pair(name: str) -> Callable[[str], list[float]]:
+    def parse(text: str) -> list[float]:
+        try:
+            values = [float(v) for v in text.split(",")]
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} takes two numbers separated by a comma, got '{text}'") from None
+        if len(values) != 2 or any(not (v > 0) for v in values):
+            raise argparse.ArgumentTypeError(f"{name} takes two positive numbers XY,Z, got '{text}'")
+        return values
+
+    return parse
+
+
+def _float_list(n: int, name: str) -> Callable[[str], list[float]]:
+    def parse(text: str) -> list[float]:
+        try:
+            values = [float(v) for v in text.split(",")]
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} takes {n} numbers separated by commas, got '{text}'") from None
+        if len(values) != n:
+            raise argparse.ArgumentTypeError(f"{name} takes {n} comma-separated numbers, got '{text}'")
+        return values
+
+    return parse
+
+
+# -- option groups shared by several commands -----------------------------------------------------
+
+
+def _add_machine_options(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group("machine")
+    g.add_argument("--machine", metavar="FILE.toml", help="machine settings file (default: the thesis machine)")
+    g.add_argument(
+        "--steps-per-pixel", metavar="XY,Z", type=_int_list(2, "--steps-per-pixel", 1),
+        help="motor steps per drawing pixel for X/Y and for Z (default 8,1)",
+    )
+    g.add_argument(
+        "--delay", metavar="XY_MS,Z_MS", type=_float_pair("--delay"),
+        help="step period of the X/Y and of the Z motors in ms (default 5,5)",
+    )
+    g.add_argument(
+        "--ramp", choices=RAMP_MODES,
+        help="speed ramps: lookahead (default: accelerate and keep speed through the path), linear40 "
+        "(the standalone controller's 40-step delay ramp per move) or constant (the thesis: no ramp)",
+    )
+
+
+def _add_digitize_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--start", choices=START_RULES, default="top",
+        help="2D: where each object starts: first pixel in scan order (top) or nearest the tool (min-distance)",
+    )
+
+
+def _add_profile_options(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group("3D depth profile (for drawings with a red interior)")
+    x = g.add_mutually_exclusive_group()
+    x.add_argument("--profile", metavar="PROFILE",
+                   help="profile drawing (blue curve over black axes, red origin) or CSV of depths per layer")
+    x.add_argument("--profile-expr", metavar="EXPR",
+                   help="depth of layer k as arithmetic in k and n (layers), e.g. '30*sqrt(1-((n-k)/n)**2)'")
+
+
+def _add_drill_file_options(d: argparse.ArgumentParser) -> None:
+    g = d.add_argument_group(f"drill files (Excellon: {_listed(EXCELLON_SUFFIXES)})")
+    g.add_argument("--drill-depth", type=float, default=2.0, metavar="MM", help="drill depth below the surface (2.0)")
+    g.add_argument("--travel-height", type=float, default=1.0, metavar="MM", help="height above the surface between holes (1.0)")
+    g.add_argument("--offset", type=_float_list(2, "--offset"), metavar="X,Y",
+                   help="machine position (mm from where the tool stands) of the board origin; "
+                   "default: the board's top-left hole extent at the start position")
+    g.add_argument("--mirror-x", action="store_true", help="mirror the board for drilling from the back side")
+    g.add_argument("--drill-order", choices=("tour", "file"), default="tour", help="short tour per tool (default) or file order")
+    g.add_argument("--excellon-units", choices=("inch", "metric"), help="units when the file does not say")
+    g.add_argument("--excellon-format", metavar="I:F", help="integer:fraction digits when the file does not say (e.g. 2:4)")
+    g.add_argument("--excellon-zeros", choices=("LZ", "TZ"), help="zero suppression when the file does not say")
+
+
+def _add_hpgl_options(p: argparse.ArgumentParser) -> None:
+    h = p.add_argument_group(f"HPGL ({_listed(HPGL_SUFFIXES)}; --travel-height and --offset apply too)")
+    h.add_argument("--cut-depth", type=float, default=0.5, metavar="MM", help="pen-down cutting depth below the surface (0.5)")
+
+
+def _add_progress_options(g: argparse._ActionsContainer) -> None:
+    bar = g.add_mutually_exclusive_group()
+    bar.add_argument("--progress", action="store_true",
+                     help="show the progress bar even when stderr is not a terminal (default: on a terminal only)")
+    bar.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def _add_job_options(d: argparse.ArgumentParser) -> None:
+    """Options that say what to cut and how deep (shared by drill, export and preview)."""
+    d.add_argument("image", nargs="?", metavar="IMAGE",
+                   help=f"the file: {FILE_KINDS_HELP}; a digitized matrix ({_listed(DIGITIZED_SUFFIXES)}) "
+                   "goes with --load-digitized")
+    d.add_argument("--load-digitized", metavar="FILE",
+                   help=f"reuse a saved digitized matrix ({_listed(DIGITIZED_SUFFIXES)}) instead of digitizing")
+    _add_digitize_options(d)
+    d.add_argument(
+        "--depth", metavar="N|N1,N2,...", type=_int_list(None, "--depth", 0), default=[10],
+        help="2D cutting depth in Z pixels: one value for all objects, or one per object (0 skips one); default 10",
+    )
+    _add_profile_options(d)
+    d.add_argument("--passes", type=int, default=1, metavar="N", help="Repeat Drill: cut in N passes of increasing depth")
+    d.add_argument("--start-at", metavar="X,Y,Z", type=_int_list(3, "--start-at"), default=[0, 0, 0],
+                   help="offset the whole job by this many pixels")
+    d.add_argument("--pause-at", metavar="X,Y", type=_int_list(2, "--pause-at"), action="append", default=[],
+                   help="pause when the tool reaches this drawing point (repeatable); Enter resumes")
+    _add_machine_options(d)
+
+
+# -- one function per command ------------------------------------------------------------------------
+
+
+def _add_drill(sub: argparse._SubParsersAction) -> None:
+    d = sub.add_parser(
+        "drill", help="cut a drawing, G-code, drill (Excellon) or HPGL file (mock port by default)",
+        description="Digitize a drawing (or reuse a saved digitized matrix), plan the depth-sorted toolpath "
+        f"and send it to a port. A G-code file ({_listed(GCODE_SUFFIXES)}) runs as programmed; an Excellon drill "
+        f"file ({_listed(EXCELLON_SUFFIXES)}) is drilled tool by tool in a short order, also on the MAXIMUS board "
+        f"(--port maximus:/dev/ttyUSB0); an HPGL file ({_listed(HPGL_SUFFIXES)}) is cut pen-down at --cut-depth. "
+        "The default port is the logging mock, so nothing moves unless you name a real port.",
+    )
+    _add_job_options(d)
+    g = d.add_argument_group("port and outputs")
+    g.add_argument("--port", default="mock", help="'mock' (default: logs, moves nothing), a device like /dev/parport0, or maximus:/dev/ttyUSB0 (drill files)")
+    g.add_argument("--realtime", action="store_true", help="run the mock in real time, sleeping like the real port")
+    g.add_argument("--pin-log", metavar="FILE.csv", help="write the mock's pin log (t_ns,data,strobe)")
+    g.add_argument("--save-digitized", metavar="FILE", help="save the digitized matrix")
+    g.add_argument("--report", metavar="FILE.json", help="write the job report as JSON")
+    g.add_argument("--preview", metavar="OUT.png", help="write the toolpath picture before cutting")
+    g.add_argument("--flip-y", action="store_true", help="G-code input: machine Y = +Y mm instead of -Y mm")
+    g.add_argument("--yes", action="store_true", help="answer every prompt (tool changes, pauses) with Enter")
+    _add_drill_file_options(d)
+    _add_hpgl_options(d)
+    _add_progress_options(g)
+
+
+def _add_export(sub: argparse._SubParsersAction) -> None:
+    e = sub.add_parser(
+        "export", help="write the job as RS-274/NGC G-code (grbl, LinuxCNC)",
+        description="Plan a job exactly as 'drill' would and write it as G-code in mm. Machine Y grows upward, "
+        "image rows downward: by default Y = -row (the drawing stays upright); --flip-y writes Y = +row.",
+    )
+    _add_job_options(e)
+    _add_drill_file_options(e)
+    _add_hpgl_options(e)
+    e.add_argument("-o", "--output", required=True, metavar="FILE.ngc", help="where to write the G-code")
+    e.add_argument("--flip-y", action="store_true", help="write Y = +row (mirrored) instead of Y = -row")
+    e.add_argument("--safe-height", type=float, default=1.0, metavar="MM", help="travel height above the surface (mm)")
+
+
+def _add_preview(sub: argparse._SubParsersAction) -> None:
+    pv = sub.add_parser(
+        "preview", help="draw the job (or the surface it would cut) as PNG or SVG",
+        description="Draw the job over its drawing: cutting moves coloured by depth, moves above the surface "
+        "dashed, start and end marked, size, depth range and time in a legend. --surface draws the surface "
+        "the job would cut (run on the mock, decoded, carved with a point tool) as a shaded depth map.",
+    )
+    _add_job_options(pv)
+    _add_drill_file_options(pv)
+    _add_hpgl_options(pv)
+    pv.add_argument("--flip-y", action="store_true", help="G-code input: machine Y = +Y mm instead of -Y mm")
+    pv.add_argument("-o", "--output", required=True, metavar="OUT.png|OUT.svg", help="picture to write")
+    pv.add_argument("--surface", action="store_true", help="draw the cut surface instead of the toolpath")
+    pv.add_argument("--scale", type=int, metavar="N", help="picture pixels per drawing pixel (default: automatic)")
+
+
+def _add_digitize(sub: argparse._SubParsersAction) -> None:
+    z = sub.add_parser("digitize", help="digitize a drawing and save the digitized matrix",
+                       description="Digitize a drawing and save its digitized matrix for later jobs (--load-digitized).")
+    z.add_argument("image", metavar="IMAGE", help=f"the drawing ({_listed(DRAWING_SUFFIXES)})")
+    z.add_argument("-o", "--output", required=True, metavar="FILE",
+                   help=f"where to write the matrix ({_listed(DIGITIZED_SUFFIXES)})")
+    _add_digitize_options(z)
+
+
+def _add_info(sub: argparse._SubParsersAction) -> None:
+    i = sub.add_parser("info", help="print the report of a drawing, drill file, HPGL or G-code file",
+                       description=f"Digitize a drawing ({_listed(DRAWING_SUFFIXES)}) and print its size in pixels "
+                       "and mm, its object count and warnings; for an Excellon drill file "
+                       f"({_listed(EXCELLON_SUFFIXES)}) its tools (diameter, hole count), extent and warnings; for "
+                       f"an HPGL file ({_listed(HPGL_SUFFIXES)}) its strokes, pens, extent and unknown commands; for "
+                       f"a G-code file ({_listed(GCODE_SUFFIXES)}) its moves, cut area, depth and machine time. "
+                       f"A saved digitized matrix ({_listed(DIGITIZED_SUFFIXES)}) is not read here: cut it with "
+                       "'cam drill --load-digitized FILE'.")
+    i.add_argument("image", metavar="IMAGE",
+                   help=f"{FILE_KINDS_HELP}; not a digitized matrix ({_listed(DIGITIZED_SUFFIXES)})")
+    _add_digitize_options(i)
+    _add_machine_options(i)
+    _add_profile_options(i)
+    i.add_argument("--json", action="store_true", help="print the report as JSON")
+    _add_drill_file_options(i)
+
+
+def _add_profile(sub: argparse._SubParsersAction) -> None:
+    pr = sub.add_parser("profile", help="print a Z profile's layer count and depth range",
+                        description="Read a profile drawing or CSV and print its layer count and depth range.")
+    pr.add_argument("profile", metavar="PROFILE",
+                    help=f"a profile drawing or a CSV of depths ({_listed(PROFILE_SUFFIXES)})")
+    _add_machine_options(pr)
+
+
+def _add_jog(sub: argparse._SubParsersAction) -> None:
+    jg = sub.add_parser("jog", help="move one axis by a number of steps (to set the board origin)",
+                        description="Jog one axis, as the MAXIMUS jog screen does: 'cam jog X+ 100' moves X by "
+                        "+100 steps. On a MAXIMUS board (--port maximus:/dev/ttyUSB0) this is its Jog mode.")
+    jg.add_argument("axis", metavar="AXIS", help="X+, X-, Y+, Y-, Z+ or Z-")
+    jg.add_argument("steps", type=int, metavar="STEPS", help="how many steps (> 0)")
+    jg.add_argument("--port", default="mock", help="'mock' (default), /dev/parport0 or maximus:/dev/ttyUSB0")
+    _add_machine_options(jg)
+    jg.add_argument("--realtime", action="store_true", help="run the mock in real time")
+    jg.add_argument("--pin-log", metavar="FILE.csv", help="write the mock's pin log")
+    _add_progress_options(jg)
+
+
+def _add_emulate_maximus(sub: argparse._SubParsersAction) -> None:
+    em = sub.add_parser("emulate-maximus", help="run the MAXIMUS firmware emulator on a pseudo-terminal",
+                        description="Serve the MAXIMUS PIC firmware emulator on a pty and print its device path; "
+                        "point --port maximus:PATH at it. Ctrl-C ends it.")
+    em.add_argument("--speed", type=float, default=1.0, help="firmware time per real time (1 = real time)")
+
+
+def _add_goto(sub: argparse._SubParsersAction) -> None:
+    gt = sub.add_parser("goto", help="move the tool to X,Y,Z pixels and stop there",
+                        description="Go To: travel at Z=0 to X,Y, then move Z, and stop (thesis 4.1.2).")
+    gt.add_argument("position", metavar="X,Y,Z", type=_int_list(3, "X,Y,Z"))
+    _add_machine_options(gt)
+    gt.add_argument("--port", default="mock", help="'mock' (default) or a device like /dev/parport0")
+    gt.add_argument("--realtime", action="store_true", help="run the mock in real time")
+    gt.add_argument("--pin-log", metavar="FILE.csv", help="write the mock's pin log")
+    _add_progress_options(gt)
+
+
+def _add_serve(sub: argparse._SubParsersAction) -> None:
+    sv = sub.add_parser(
+        "serve", help="control the machine from a web page (phone or desktop)",
+        description="Start the web server: upload a drawing, G-code, Excellon or HPGL file, see its preview, "
+        "size and time, start / pause / resume / stop it, jog, answer tool changes and watch it live. Listens "
+        "on 127.0.0.1:8000; any other --host needs a token (one is made and printed in the URL). The machine "
+        "port is the logging mock unless --machine-port names a real one. Needs the web extra: "
+        "pip install 'cam[web]'.",
+    )
+    sv.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1; 0.0.0.0 = every network, needs a token)")
+    sv.add_argument("--port", type=int, default=8000, help="TCP port of the web page (default 8000)")
+    sv.add_argument("--token", help="token every request must carry (default: none on localhost, a new random one otherwise)")
+    sv.add_argument("--jobs-dir", metavar="DIR", help="folder for uploaded files (default: a new temporary folder)")
+    sv.add_argument("--max-upload-mb", type=float, default=50.0, metavar="MB", help="larger uploads are refused (default 50)")
+    sv.add_argument("--machine-port", default="mock", metavar="PORT",
+                    help="'mock' (default: logs, moves nothing), a device like /dev/parport0, or maximus:/dev/ttyUSB0")
+    _add_machine_options(sv)
+    clock = sv.add_mutually_exclusive_group()
+    clock.add_argument("--realtime", dest="realtime", action="store_true", default=True,
+                       help="run the mock in real time, so the page shows live progress (default)")
+    clock.add_argument("--simulated", dest="realtime", action="store_false",
+                       help="run the mock on the simulated clock (jobs end at once); real ports are always real time")
+
+
+_COMMAND_PARSERS = (_add_drill, _add_export, _add_preview, _add_digitize, _add_info, _add_profile, _add_jog,
+                    _add_emulate_maximus, _add_goto, _add_serve)
+"""Each adds one command's subparser, in the order ``cam --help`` lists them."""
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of every command (used by :func:`cam.cli.main` and the docs).
+
+    The chosen command's name is ``args.command`` (None when none is given).
+    """
+    parser = _Parser(
+        prog="cam",
+        description="Turn drawings into exact, safe step/dir motion for a small 3-axis stepper machine.",
+        epilog="Run 'cam COMMAND --help' for the options of a command. Errors exit with code 2.",
+    )
+    parser.add_argument("--version", action="version", version=f"cam {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    for add_command in _COMMAND_PARSERS:
+        add_command(sub)
+    return parser

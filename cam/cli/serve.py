@@ -1,0 +1,36 @@
+"""``cam serve``: the web page that controls the machine (needs the ``cam[web]`` extra)."""
+from __future__ import annotations
+
+import argparse
+import importlib.util
+
+from ..errors import CamError
+from ..web.server import ServerConfig, serve
+from .common import port_settings
+
+__all__ = ["cmd_serve", "missing_web_packages"]
+
+_WEB_PACKAGES = {"starlette": ("starlette",), "uvicorn": ("uvicorn",),
+                 "python-multipart": ("python_multipart", "multipart")}
+"""Distribution of the web extra -> the module names it may install (python-multipart renamed its module)."""
+
+
+def missing_web_packages() -> list[str]:
+    """The distributions of the ``cam[web]`` extra that cannot be imported (found without importing them)."""
+    return [dist for dist, modules in _WEB_PACKAGES.items()
+            if not any(importlib.util.find_spec(m) is not None for m in modules)]
+
+
+def cmd_serve(args: argparse.Namespace) -> int:
+    missing = missing_web_packages()
+    if missing:
+        raise CamError(f"the web page needs {', '.join(missing)}: pip install 'cam[web]'")
+    if not (0 <= args.port <= 65535):
+        raise CamError(f"--port must be 0..65535, got {args.port}")
+    if not (args.max_upload_mb > 0):
+        raise CamError(f"--max-upload-mb must be > 0, got {args.max_upload_mb}")
+    settings = port_settings(args, args.machine_port)
+    config = ServerConfig(host=args.host, port=args.port, token=args.token, jobs_dir=args.jobs_dir,
+                          max_upload_bytes=int(args.max_upload_mb * 1024 * 1024), settings=settings,
+                          machine_port=args.machine_port, realtime=args.realtime)
+    return serve(config, announce=lambda line: print(line, flush=True))

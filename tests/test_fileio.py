@@ -1,0 +1,53 @@
+"""Outputs are written atomically and get the normal mode of a new file (0o666 less the umask)."""
+import os
+import stat
+import subprocess
+import sys
+
+import cv2
+import numpy as np
+import pytest
+
+from cam.fileio import atomic_write_bytes
+
+from conftest import ROOT
+
+ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
+
+
+@pytest.fixture
+def umask():
+    """Set the process umask for one test; the old one comes back after it."""
+    previous = os.umask(0o022)
+    yield os.umask
+    os.umask(previous)
+
+
+def _mode(path) -> int:
+    return stat.S_IMODE(os.stat(path).st_mode)
+
+
+@pytest.mark.parametrize("mask, mode", [(0o022, 0o644), (0o077, 0o600), (0o002, 0o664)])
+def test_new_and_replaced_outputs_get_the_umask_mode(tmp_path, umask, mask, mode):
+    umask(mask)
+    target = tmp_path / "out.txt"
+    atomic_write_bytes(target, b"one\n")
+    assert _mode(target) == mode
+    atomic_write_bytes(target, b"two\n")  # replaced through a new temporary file: same mode
+    assert _mode(target) == mode and target.read_bytes() == b"two\n"
+    assert [p.name for p in tmp_path.iterdir()] == ["out.txt"]  # no temporary file left behind
+
+
+@pytest.mark.parametrize("mask, mode", [(0o022, 0o644), (0o077, 0o600)])
+def test_command_line_outputs_get_the_umask_mode(tmp_path, umask, mask, mode):
+    src = tmp_path / "line.png"
+    img = np.full((12, 16), 255, np.uint8)
+    img[5, 3:12] = 0
+    cv2.imwrite(str(src), img)
+    umask(mask)  # inherited by the command
+    matrix, picture = tmp_path / "m.txt", tmp_path / "p.png"
+    for args in (["digitize", src, "-o", matrix], ["preview", src, "-o", picture, "--depth", "2"]):
+        proc = subprocess.run([sys.executable, "-m", "cam", *map(str, args)], capture_output=True, text=True,
+                              env=ENV, timeout=120)
+        assert proc.returncode == 0, proc.stderr
+    assert _mode(matrix) == mode and _mode(picture) == mode
