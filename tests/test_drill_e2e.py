@@ -125,7 +125,7 @@ def test_three_tool_board_on_the_emulated_maximus_board(board_file, capsys):
     path, holes_mm, tools = board_file
     emu = start_emulator(speed=None)
     try:
-        code = main(["drill", str(path), "--yes", "--port", f"maximus:{emu.device_path}", "--drill-depth", "1.5"])
+        code = main(["drill", str(path), "--yes", "--port", f"maximus:{emu.device_path}", "--cut-depth", "1.5"])
         assert code == 0
         log = emu.port_log()
     finally:

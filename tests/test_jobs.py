@@ -36,7 +36,7 @@ def test_options_from_mapping_parse_and_refuse_bad_values():
     assert o.depth == (3, 4) and o.passes == 2 and o.start_at == (1, 2, 0)
     assert o.pause_at == ((5, 6), (7, 8)) and o.mirror_x and o.offset_mm == (1.5, 2.0) and o.excellon_zeros == "LZ"
     for bad, word in [({"depth": "x"}, "depth"), ({"depth": -1}, "depth"), ({"passes": 0}, "passes"),
-                      ({"start_at": "1,2"}, "start_at"), ({"drill_depth_mm": "nan"}, "drill_depth_mm"),
+                      ({"start_at": "1,2"}, "start_at"), ({"cut_depth_mm": "nan"}, "cut_depth_mm"),
                       ({"mirror_x": "maybe"}, "mirror_x"), ({"start": "left"}, "start"), ({"bogus": 1}, "bogus"),
                       ({"passes": True}, "passes")]:
         with pytest.raises(CamError, match=word):
@@ -105,7 +105,7 @@ def test_excellon_job(tmp_path):
     pytest.importorskip("cam.formats.excellon")
     path = tmp_path / "b.drl"
     path.write_text("M48\nMETRIC,LZ\nT1C0.8\nT2C1.0\n%\nT1\nX5.0Y5.0\nX10.0Y5.0\nT2\nX10.0Y10.0\nM30\n")
-    job = prepare_job(path, JobOptions(drill_depth_mm=1.0), FAST)
+    job = prepare_job(path, JobOptions(cut_depth_mm=1.0), FAST)
     assert job.kind == "excellon" and job.summary.startswith("b.drl: 3 holes")
     assert len(job.tool_changes) == 2
     assert job.size_mm == pytest.approx((5.0, 5.0), abs=FAST.mm_per_step_xy)
@@ -118,7 +118,7 @@ def test_hpgl_job(tmp_path):
     pytest.importorskip("cam.formats.hpgl")
     path = tmp_path / "d.plt"
     path.write_text("IN;SP1;PU0,0;PD400,0,400,400,0,400,0,0;PU;SP2;PA800,800;PD;PA1200,800;PU;\n")
-    job = prepare_job(path, JobOptions(depth_mm=0.3), FAST)
+    job = prepare_job(path, JobOptions(cut_depth_mm=0.3), FAST)
     assert job.kind == "hpgl" and len(job.tool_changes) == 2
     assert job.size_mm == pytest.approx((30.0, 20.0), abs=FAST.mm_per_step_xy)  # 1200 x 800 plotter units
     assert job.depth_mm == pytest.approx(0.3, abs=FAST.mm_per_step_z)

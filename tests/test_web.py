@@ -454,7 +454,7 @@ def test_page_runs_an_excellon_file(page, fast, tmp_path):
     page.set_input_files("#file", str(path))
     page.wait_for_function("!document.getElementById('start').disabled")
     assert "3 holes" in page.text_content("#job-summary")
-    page.fill("#opt-drill-depth", "1.5")
+    page.fill("#opt-cut-depth", "1.5")
     page.click("#plan")
     page.wait_for_function("document.getElementById('job-size').textContent.includes('depth 1.50')")
     page.click("#start")
@@ -464,7 +464,7 @@ def test_page_runs_an_excellon_file(page, fast, tmp_path):
         page.click("#prompt-continue")
     st = _wait_done(page, fast)
     assert st["last"]["status"] == FINISHED
-    want = prepare_job(path, JobOptions(drill_depth_mm=1.5), FAST).steps
+    want = prepare_job(path, JobOptions(cut_depth_mm=1.5), FAST).steps
     log = fast.session.last_job_pin_log
     assert np.array_equal(log.data, want.data)
     # every hole drilled to 1.5 mm: decoded plunges
@@ -545,7 +545,7 @@ def test_api_drives_the_maximus_board(tmp_path):
         assert status == 409 and "Excellon" in r["error"]  # the board drills drill files only
 
         status, r = s.upload("board.drl", (SAMPLES / "board.drl").read_bytes())
-        status, plan = s.call("POST", "/api/plan", {"job": r["job"], "options": {"drill_depth_mm": 1.0}})
+        status, plan = s.call("POST", "/api/plan", {"job": r["job"], "options": {"cut_depth_mm": 1.0}})
         assert status == 200, plan
         assert s.call("POST", "/api/start", {"job": plan["job"]})[0] == 200
         answered = []

@@ -14,6 +14,7 @@ import sys
 from typing import Optional, Sequence
 
 from ..errors import CamError
+from .checks import check_args
 from .parser import EXIT_BAD_INPUT, EXIT_INTERRUPTED, build_parser
 
 __all__ = ["main", "build_parser", "COMMANDS"]
@@ -42,6 +43,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         return EXIT_BAD_INPUT
     module_name, function_name = COMMANDS[args.command]
     try:
+        check_args(args)  # every output path and flag, before anything is planned, written or sent
         command = getattr(importlib.import_module(module_name), function_name)
         return int(command(args))
     except CamError as exc:

@@ -15,12 +15,13 @@ from typing import Any, Optional
 
 from tqdm import tqdm
 
-from ..drive.ports import require
+from ..drive.ports import port_kind, require
 from ..drive.runner import FINISHED
 from ..drive.session import MachineSession, Prompt
 from ..errors import PortError
 from ..settings import MachineSettings
 from ..verify.pinlog import write_pin_log
+from .checks import job_kind_of
 from .common import progress_wanted
 
 __all__ = ["execute", "Outcome", "check_port_options"]
@@ -41,9 +42,14 @@ class Outcome:
 
 
 def check_port_options(args: argparse.Namespace) -> None:
-    """Options that need a port's capability, checked before anything is planned or sent."""
+    """Options and files that need a port's capability, checked before anything is planned or sent."""
+    kind = job_kind_of(args)
+    if kind is not None and kind != "excellon" and port_kind(args.port) == "maximus":
+        require(args.port, "step_dir", what=f"a {kind} job")
     if getattr(args, "pin_log", None):
         require(args.port, "pin_log")
+    if getattr(args, "delay", None):
+        require(args.port, "step_dir", what="--delay (the step period of step/dir ports)")
 
 
 def _ask(args: argparse.Namespace):

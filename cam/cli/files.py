@@ -19,53 +19,37 @@ from ..formats.gcode_export import save_gcode
 from ..formats.hpgl import PLOTTER_UNIT_MM, scan_hpgl
 from ..render.report import format_report, image_report
 from .common import format_duration, machine_settings, reading_bar
-from .planning import (
-    excellon_digits, is_file_job, plan_job, prepare_file_job, profile_of, write_file_job_preview, write_preview,
-)
+from .planning import excellon_digits, is_file_job, prepare, profile_of, write_job_preview
 
 __all__ = ["cmd_export", "cmd_preview", "cmd_info", "cmd_digitize", "cmd_profile"]
 
 
-def _export_file_job(args: argparse.Namespace) -> int:
-    if Path(args.image).suffix.lower() in GCODE_SUFFIXES:
+def cmd_export(args: argparse.Namespace) -> int:
+    if is_file_job(args) and Path(args.image).suffix.lower() in GCODE_SUFFIXES:
         raise CamError(f"{args.image} is G-code already; run it with 'cam drill', or preview it")
-    job = prepare_file_job(args)
+    travel_height_mm = 1.0 if args.travel_height is None else args.travel_height
+    if not travel_height_mm > 0:
+        raise CamError(f"--travel-height must be > 0 mm for G-code out, got {args.travel_height}")
+    job = prepare(args)
     at = np.flatnonzero(job.toolpath.pause) + 1  # a tool change comes before the point after its pause
     if job.drill_plan is not None:
         changes = {int(i): (tool, f"T{tool} {dia:.3f} mm, {n} holes")
                    for i, (tool, dia, n) in zip(at, job.drill_plan.tool_sequence)}
-    else:  # HPGL: "tool change: pen N"
+    else:  # HPGL: "tool change: pen N"; a drawing's pauses are Pause At points, no tool
         changes = {int(i): (int(note.split()[-1]), note) for i, note in zip(at, job.toolpath.pause_notes or [])
                    if note.split()[-1].isdigit()}
-    save_gcode(job.toolpath, args.output, flip_y=args.flip_y, safe_height_mm=args.travel_height,
-               title=f"cam: {args.image}", tool_changes=changes)
-    print(f"{args.output}: {job.summary}, {len(changes)} tool change(s)")
-    return 0
-
-
-def cmd_export(args: argparse.Namespace) -> int:
-    if is_file_job(args):
-        return _export_file_job(args)
-    digitized, job = plan_job(args)
-    if args.safe_height <= 0:
-        raise CamError(f"--safe-height must be > 0 mm, got {args.safe_height}")
-    save_gcode(job, args.output, flip_y=args.flip_y, safe_height_mm=args.safe_height,
-               title=f"cam: {args.image or args.load_digitized}")
-    print(f"{args.output}: {job.n_targets} points, {job.n_retracts} retracts")
+    save_gcode(job.toolpath, args.output, flip_y=args.flip_y, safe_height_mm=travel_height_mm,
+               title=f"cam: {args.image or args.load_digitized}", tool_changes=changes)
+    if job.kind in ("drawing", "digitized"):
+        print(f"{args.output}: {job.toolpath.n_targets} points, {job.toolpath.n_retracts} retracts")
+    else:
+        print(f"{args.output}: {job.summary}, {len(changes)} tool change(s)")
     return 0
 
 
 def cmd_preview(args: argparse.Namespace) -> int:
-    if is_file_job(args):
-        if args.surface:
-            raise CamError("--surface draws the surface a drawing's job cuts; for this file draw its toolpath")
-        if args.scale is not None and not (1 <= args.scale <= 64):
-            raise CamError(f"--scale must be 1..64, got {args.scale}")
-        write_file_job_preview(prepare_file_job(args), args.output, scale=args.scale)
-        print(f"{args.output}: toolpath picture")
-        return 0
-    _, job = plan_job(args)
-    write_preview(args, job, args.output, surface=args.surface)
+    job = prepare(args)
+    write_job_preview(args, job, args.output, surface=args.surface)
     print(f"{args.output}: {'cut surface' if args.surface else 'toolpath'} picture")
     return 0
 
@@ -96,6 +80,15 @@ def _load_drill_file(args: argparse.Namespace) -> HoleList:
 def _info_excellon(args: argparse.Namespace) -> int:
     holes = _load_drill_file(args)
     x0, y0, x1, y1 = holes.extent_mm()
+    if args.json:
+        print(json.dumps({
+            "source": args.image, "kind": "excellon", "holes": len(holes.holes_mm),
+            "extent_mm": [x0, y0, x1, y1], "size_mm": [round(x1 - x0, 4), round(y1 - y0, 4)],
+            "tools": [{"tool": int(tool), "diameter_mm": float(dia), "holes": int(count)}
+                      for tool, dia, count in holes.tool_table()],
+            "warnings": list(holes.warnings),
+        }, indent=2))
+        return 0
     lines = [f"{args.image}: {len(holes.holes_mm)} holes, board extent X {x0:.3f}..{x1:.3f} mm, "
              f"Y {y0:.3f}..{y1:.3f} mm ({x1 - x0:.2f} x {y1 - y0:.2f} mm)"]
     for tool, dia, count in holes.tool_table():
@@ -110,7 +103,7 @@ def _info_hpgl(args: argparse.Namespace) -> int:
     with reading_bar(args) as progress:
         scan = scan_hpgl(args.image, progress=progress)
     if args.json:
-        print(json.dumps({**scan.__dict__, "size_mm": scan.size_mm()}, indent=2))
+        print(json.dumps({"source": args.image, "kind": "hpgl", **scan.__dict__, "size_mm": scan.size_mm()}, indent=2))
         return 0
     lines = [f"{args.image}: {scan.n_strokes} pen-down strokes, {scan.n_points} points, pens "
              f"{', '.join(map(str, scan.pens)) or 'none selected'}"]
@@ -126,8 +119,7 @@ def _info_hpgl(args: argparse.Namespace) -> int:
 
 
 def _info_gcode(args: argparse.Namespace) -> int:
-    args.flip_y = getattr(args, "flip_y", False)
-    job = prepare_file_job(args)
+    job = prepare(args)
     if args.json:
         print(json.dumps(job.report, indent=2))
         return 0

@@ -108,7 +108,7 @@ def _add_machine_options(p: argparse.ArgumentParser) -> None:
 
 def _add_digitize_options(p: argparse.ArgumentParser) -> None:
     p.add_argument(
-        "--start", choices=START_RULES, default="top",
+        "--start", choices=START_RULES,
         help="2D: where each object starts: first pixel in scan order (top) or nearest the tool (min-distance)",
     )
 
@@ -122,23 +122,29 @@ def _add_profile_options(p: argparse.ArgumentParser) -> None:
                    help="depth of layer k as arithmetic in k and n (layers), e.g. '30*sqrt(1-((n-k)/n)**2)'")
 
 
-def _add_drill_file_options(d: argparse.ArgumentParser) -> None:
-    g = d.add_argument_group(f"drill files (Excellon: {_listed(EXCELLON_SUFFIXES)})")
-    g.add_argument("--drill-depth", type=float, default=2.0, metavar="MM", help="drill depth below the surface (2.0)")
-    g.add_argument("--travel-height", type=float, default=1.0, metavar="MM", help="height above the surface between holes (1.0)")
-    g.add_argument("--offset", type=_float_list(2, "--offset"), metavar="X,Y",
-                   help="machine position (mm from where the tool stands) of the board origin; "
-                   "default: the board's top-left hole extent at the start position")
-    g.add_argument("--mirror-x", action="store_true", help="mirror the board for drilling from the back side")
-    g.add_argument("--drill-order", choices=("tour", "file"), default="tour", help="short tour per tool (default) or file order")
+def _add_excellon_options(d: argparse.ArgumentParser) -> None:
+    g = d.add_argument_group(f"drill files that do not say their number format (Excellon: {_listed(EXCELLON_SUFFIXES)})")
     g.add_argument("--excellon-units", choices=("inch", "metric"), help="units when the file does not say")
     g.add_argument("--excellon-format", metavar="I:F", help="integer:fraction digits when the file does not say (e.g. 2:4)")
     g.add_argument("--excellon-zeros", choices=("LZ", "TZ"), help="zero suppression when the file does not say")
 
 
-def _add_hpgl_options(p: argparse.ArgumentParser) -> None:
-    h = p.add_argument_group(f"HPGL ({_listed(HPGL_SUFFIXES)}; --travel-height and --offset apply too)")
-    h.add_argument("--cut-depth", type=float, default=0.5, metavar="MM", help="pen-down cutting depth below the surface (0.5)")
+def _add_cut_options(d: argparse.ArgumentParser) -> None:
+    g = d.add_argument_group("depths and heights in mm (one name on every file kind and on the web page)")
+    g.add_argument("--cut-depth", type=float, metavar="MM",
+                   help="cutting depth below the surface: drill files (default 2.0: through a 1.6 mm board), HPGL "
+                   "pen-down depth (default 0.5), or a drawing's depth for every object instead of --depth")
+    g.add_argument("--travel-height", type=float, metavar="MM",
+                   help="height above the surface between cuts (default 1.0): drill files, HPGL, and every "
+                   "file 'cam export' writes")
+    f = d.add_argument_group(f"drill and HPGL files ({_listed(EXCELLON_SUFFIXES)} {_listed(HPGL_SUFFIXES)})")
+    f.add_argument("--offset", type=_float_list(2, "--offset"), metavar="X,Y",
+                   help="machine position (mm from where the tool stands) of the board or plotter origin; "
+                   "default: the top-left of what is cut at the start position")
+    f.add_argument("--mirror-x", action="store_true", help="drill files: mirror the board for drilling from the back")
+    f.add_argument("--drill-order", choices=("tour", "file"),
+                   help="drill files: short tour per tool (default) or the file's order")
+    _add_excellon_options(d)
 
 
 def _add_progress_options(g: argparse._ActionsContainer) -> None:
@@ -157,14 +163,14 @@ def _add_job_options(d: argparse.ArgumentParser) -> None:
                    help=f"reuse a saved digitized matrix ({_listed(DIGITIZED_SUFFIXES)}) instead of digitizing")
     _add_digitize_options(d)
     d.add_argument(
-        "--depth", metavar="N|N1,N2,...", type=_int_list(None, "--depth", 0), default=[10],
+        "--depth", metavar="N|N1,N2,...", type=_int_list(None, "--depth", 0),
         help="2D cutting depth in Z pixels: one value for all objects, or one per object (0 skips one); default 10",
     )
     _add_profile_options(d)
-    d.add_argument("--passes", type=int, default=1, metavar="N", help="Repeat Drill: cut in N passes of increasing depth")
-    d.add_argument("--start-at", metavar="X,Y,Z", type=_int_list(3, "--start-at"), default=[0, 0, 0],
+    d.add_argument("--passes", type=int, metavar="N", help="Repeat Drill: cut in N passes of increasing depth (default 1)")
+    d.add_argument("--start-at", metavar="X,Y,Z", type=_int_list(3, "--start-at"),
                    help="offset the whole job by this many pixels")
-    d.add_argument("--pause-at", metavar="X,Y", type=_int_list(2, "--pause-at"), action="append", default=[],
+    d.add_argument("--pause-at", metavar="X,Y", type=_int_list(2, "--pause-at"), action="append",
                    help="pause when the tool reaches this drawing point (repeatable); Enter resumes")
     _add_machine_options(d)
 
@@ -191,8 +197,7 @@ def _add_drill(sub: argparse._SubParsersAction) -> None:
     g.add_argument("--preview", metavar="OUT.png", help="write the toolpath picture before cutting")
     g.add_argument("--flip-y", action="store_true", help="G-code input: machine Y = +Y mm instead of -Y mm")
     g.add_argument("--yes", action="store_true", help="answer every prompt (tool changes, pauses) with Enter")
-    _add_drill_file_options(d)
-    _add_hpgl_options(d)
+    _add_cut_options(d)
     _add_progress_options(g)
 
 
@@ -203,11 +208,9 @@ def _add_export(sub: argparse._SubParsersAction) -> None:
         "image rows downward: by default Y = -row (the drawing stays upright); --flip-y writes Y = +row.",
     )
     _add_job_options(e)
-    _add_drill_file_options(e)
-    _add_hpgl_options(e)
+    _add_cut_options(e)
     e.add_argument("-o", "--output", required=True, metavar="FILE.ngc", help="where to write the G-code")
     e.add_argument("--flip-y", action="store_true", help="write Y = +row (mirrored) instead of Y = -row")
-    e.add_argument("--safe-height", type=float, default=1.0, metavar="MM", help="travel height above the surface (mm)")
 
 
 def _add_preview(sub: argparse._SubParsersAction) -> None:
@@ -218,8 +221,7 @@ def _add_preview(sub: argparse._SubParsersAction) -> None:
         "the job would cut (run on the mock, decoded, carved with a point tool) as a shaded depth map.",
     )
     _add_job_options(pv)
-    _add_drill_file_options(pv)
-    _add_hpgl_options(pv)
+    _add_cut_options(pv)
     pv.add_argument("--flip-y", action="store_true", help="G-code input: machine Y = +Y mm instead of -Y mm")
     pv.add_argument("-o", "--output", required=True, metavar="OUT.png|OUT.svg", help="picture to write")
     pv.add_argument("--surface", action="store_true", help="draw the cut surface instead of the toolpath")
@@ -249,8 +251,8 @@ def _add_info(sub: argparse._SubParsersAction) -> None:
     _add_digitize_options(i)
     _add_machine_options(i)
     _add_profile_options(i)
-    i.add_argument("--json", action="store_true", help="print the report as JSON")
-    _add_drill_file_options(i)
+    i.add_argument("--json", action="store_true", help="print the report as JSON (every file kind)")
+    _add_excellon_options(i)
 
 
 def _add_profile(sub: argparse._SubParsersAction) -> None:
@@ -298,15 +300,15 @@ def _add_serve(sub: argparse._SubParsersAction) -> None:
         description="Start the web server: upload a drawing, G-code, Excellon or HPGL file, see its preview, "
         "size and time, start / pause / resume / stop it, jog, answer tool changes and watch it live. Listens "
         "on 127.0.0.1:8000; any other --host needs a token (one is made and printed in the URL). The machine "
-        "port is the logging mock unless --machine-port names a real one. Needs the web extra: "
+        "port is the logging mock unless --port names a real one. Needs the web extra: "
         "pip install 'cam[web]'.",
     )
     sv.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1; 0.0.0.0 = every network, needs a token)")
-    sv.add_argument("--port", type=int, default=8000, help="TCP port of the web page (default 8000)")
+    sv.add_argument("--http-port", type=int, default=8000, metavar="N", help="TCP port of the web page (default 8000)")
     sv.add_argument("--token", help="token every request must carry (default: none on localhost, a new random one otherwise)")
     sv.add_argument("--jobs-dir", metavar="DIR", help="folder for uploaded files (default: a new temporary folder)")
     sv.add_argument("--max-upload-mb", type=float, default=50.0, metavar="MB", help="larger uploads are refused (default 50)")
-    sv.add_argument("--machine-port", default="mock", metavar="PORT",
+    sv.add_argument("--port", default="mock", metavar="PORT",
                     help="'mock' (default: logs, moves nothing), a device like /dev/parport0, or maximus:/dev/ttyUSB0")
     _add_machine_options(sv)
     clock = sv.add_mutually_exclusive_group()

@@ -6,22 +6,21 @@ from pathlib import Path
 from typing import Any, Optional
 
 from ..choices import FILE_JOB_SUFFIXES
-from ..digitize import digitize
-from ..digitize.digitized import Digitized, load_digitized
+from ..digitize.digitized import Digitized
 from ..digitize.drawing import load_image
 from ..digitize.profile import Profile, load_profile, profile_from_expr
 from ..drive.runner import simulate_surface
 from ..drive.steps import plan_steps
 from ..errors import CamError
-from ..job.jobs import JobOptions, prepare_job
-from ..job.drawing import plan
+from ..job.jobs import JobOptions, PreparedJob, prepare_job
 from ..render.picture import save_picture, surface_picture, toolpath_picture, toolpath_svg
 from ..settings import MachineSettings
+from .checks import job_kind_of
 from .common import machine_settings, reading_bar
 
 __all__ = [
-    "is_file_job", "prepare_file_job", "job_options", "excellon_digits", "profile_of", "plan_job",
-    "write_preview", "write_file_job_preview",
+    "is_file_job", "prepare", "summary_of", "job_options", "excellon_digits", "profile_of",
+    "write_preview", "write_job_preview", "write_file_job_preview",
 ]
 
 
@@ -30,16 +29,32 @@ def is_file_job(args: argparse.Namespace) -> bool:
     return bool(getattr(args, "image", None)) and Path(args.image).suffix.lower() in FILE_JOB_SUFFIXES
 
 
-def prepare_file_job(args: argparse.Namespace, settings: Optional[MachineSettings] = None):
-    """A G-code, drill or HPGL file planned with the command's options (progress bar by bytes read)."""
+def prepare(args: argparse.Namespace, settings: Optional[MachineSettings] = None) -> PreparedJob:
+    """The command's file (a drawing, --load-digitized matrix, G-code, drill or HPGL file) planned with its
+    options by :func:`cam.job.jobs.prepare_job`, the call the web page makes too (progress bar by bytes read)."""
+    path = getattr(args, "load_digitized", None) or args.image
+    if not path:
+        raise CamError(f"{args.command} needs an IMAGE or --load-digitized FILE")
     with reading_bar(args) as progress:
-        return prepare_job(args.image, job_options(args), settings or machine_settings(args), name=args.image,
-                           progress=progress)
+        job = prepare_job(path, job_options(args), settings or machine_settings(args), name=path, progress=progress)
+    if getattr(args, "load_digitized", None) and args.image:
+        drawing = load_image(args.image)
+        d = job.digitized
+        if (drawing.width_px, drawing.height_px) != (d.width_px, d.height_px):
+            raise CamError(f"{args.load_digitized}: matrix is for a {d.width_px}x{d.height_px} image, "
+                           f"{args.image} is {drawing.width_px}x{drawing.height_px}")
+        job.drawing_rgb = drawing.to_rgb()
+    return job
+
+
+def summary_of(job: PreparedJob) -> str:
+    """The job's one-line summary without its file name."""
+    return job.summary[len(job.name) + 2:] if job.summary.startswith(f"{job.name}: ") else job.summary
 
 
 def excellon_digits(args: argparse.Namespace) -> Optional[tuple[int, int]]:
     """--excellon-format I:F as (I, F), or None."""
-    if not args.excellon_format:
+    if not getattr(args, "excellon_format", None):
         return None
     try:
         a, b = (int(v) for v in args.excellon_format.split(":"))
@@ -49,14 +64,25 @@ def excellon_digits(args: argparse.Namespace) -> Optional[tuple[int, int]]:
 
 
 def job_options(args: argparse.Namespace) -> JobOptions:
-    """The drill command's options for files that are not drawings, as :class:`cam.job.jobs.JobOptions`."""
+    """The command's job options as :class:`cam.job.jobs.JobOptions` (the flags were checked against the file's
+    kind by :func:`cam.cli.checks.check_args`; export-only meanings of --travel-height and --flip-y stay here)."""
+    kind = job_kind_of(args)
+    d = JobOptions()
+
+    def opt(name: str, default: Any) -> Any:
+        value = getattr(args, name, None)
+        return default if value is None else value
+
     return JobOptions(
-        drill_depth_mm=args.drill_depth, travel_height_mm=args.travel_height,
-        offset_mm=tuple(args.offset) if args.offset else None, mirror_x=args.mirror_x,
-        drill_order=args.drill_order, excellon_units=args.excellon_units,
-        excellon_digits=excellon_digits(args), excellon_zeros=args.excellon_zeros,
-        flip_y=getattr(args, "flip_y", False), depth_mm=getattr(args, "cut_depth", 0.5),
-    )
+        depth=tuple(opt("depth", d.depth)), passes=opt("passes", d.passes), start=opt("start", d.start),
+        start_at=tuple(opt("start_at", d.start_at)), pause_at=tuple(tuple(p) for p in opt("pause_at", ())),
+        profile=opt("profile", None), profile_expr=opt("profile_expr", None), cut_depth_mm=opt("cut_depth", None),
+        travel_height_mm=opt("travel_height", None) if kind in ("excellon", "hpgl") else None,
+        offset_mm=tuple(args.offset) if opt("offset", None) else None, mirror_x=opt("mirror_x", False),
+        drill_order=opt("drill_order", d.drill_order), excellon_units=opt("excellon_units", None),
+        excellon_digits=excellon_digits(args), excellon_zeros=opt("excellon_zeros", None),
+        flip_y=opt("flip_y", False) if kind == "gcode" else False,
+    ).checked("options")
 
 
 def profile_of(args: argparse.Namespace, digitized: Digitized) -> Optional[Profile]:
@@ -68,38 +94,18 @@ def profile_of(args: argparse.Namespace, digitized: Digitized) -> Optional[Profi
     return None
 
 
-def _load_job_input(args: argparse.Namespace) -> Digitized:
-    if args.load_digitized:
-        d = load_digitized(args.load_digitized)
-        if args.image:
-            drawing = load_image(args.image)
-            if (drawing.width_px, drawing.height_px) != (d.width_px, d.height_px):
-                raise CamError(
-                    f"{args.load_digitized}: matrix is for a {d.width_px}x{d.height_px} image, "
-                    f"{args.image} is {drawing.width_px}x{drawing.height_px}"
-                )
-        return d
-    if not args.image:
-        raise CamError("drill needs an IMAGE or --load-digitized FILE")
-    return digitize(load_image(args.image), start=args.start)
+def write_job_preview(args: argparse.Namespace, job: PreparedJob, path: str, surface: bool = False) -> None:
+    """A prepared job's picture: a drawing's toolpath over it or its cut surface, a file job's preview."""
+    if job.kind in ("drawing", "digitized"):
+        write_preview(args, job.toolpath, path, surface=surface, drawing_rgb=job.drawing_rgb)
+    else:
+        if args.scale is not None and not (1 <= args.scale <= 64):
+            raise CamError(f"--scale must be 1..64, got {args.scale}")
+        write_file_job_preview(job, path, scale=args.scale)
 
 
-def plan_job(args: argparse.Namespace) -> tuple[Digitized, Any]:
-    """The drawing (or saved matrix) digitized and planned with the command's options: (digitized, toolpath)."""
-    settings = machine_settings(args)
-    if args.passes < 1:
-        raise CamError(f"--passes must be >= 1, got {args.passes}")
-    digitized = _load_job_input(args)
-    depth = args.depth[0] if len(args.depth) == 1 else args.depth
-    job = plan(
-        digitized, depth=depth, settings=settings, passes=args.passes,
-        start_at=tuple(args.start_at), pause_at=[tuple(p) for p in args.pause_at],
-        profile=profile_of(args, digitized),
-    )
-    return digitized, job
-
-
-def write_preview(args: argparse.Namespace, job: Any, path: str, surface: bool = False) -> None:
+def write_preview(args: argparse.Namespace, job: Any, path: str, surface: bool = False,
+                  drawing_rgb: Any = None) -> None:
     """The toolpath picture (.png over the drawing, or .svg) of a drawing's job, or its cut surface (.png)."""
     if args.scale is not None and not (1 <= args.scale <= 64):
         raise CamError(f"--scale must be 1..64, got {args.scale}")
@@ -118,8 +124,7 @@ def write_preview(args: argparse.Namespace, job: Any, path: str, surface: bool =
     elif suffix == ".svg":
         save_picture(toolpath_svg(job, scale=args.scale, estimated_time_s=time_s), path)
     else:
-        rgb = load_image(args.image).to_rgb() if args.image else None
-        save_picture(toolpath_picture(job, drawing_rgb=rgb, scale=args.scale, estimated_time_s=time_s), path)
+        save_picture(toolpath_picture(job, drawing_rgb=drawing_rgb, scale=args.scale, estimated_time_s=time_s), path)
 
 
 def write_file_job_preview(job: Any, path: str, scale: Optional[int] = None) -> None:

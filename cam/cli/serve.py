@@ -25,12 +25,12 @@ def cmd_serve(args: argparse.Namespace) -> int:
     missing = missing_web_packages()
     if missing:
         raise CamError(f"the web page needs {', '.join(missing)}: pip install 'cam[web]'")
-    if not (0 <= args.port <= 65535):
-        raise CamError(f"--port must be 0..65535, got {args.port}")
+    if not (0 <= args.http_port <= 65535):
+        raise CamError(f"--http-port must be 0..65535, got {args.http_port}")
     if not (args.max_upload_mb > 0):
         raise CamError(f"--max-upload-mb must be > 0, got {args.max_upload_mb}")
-    settings = port_settings(args, args.machine_port)
-    config = ServerConfig(host=args.host, port=args.port, token=args.token, jobs_dir=args.jobs_dir,
+    settings = port_settings(args, args.port)
+    config = ServerConfig(host=args.host, port=args.http_port, token=args.token, jobs_dir=args.jobs_dir,
                           max_upload_bytes=int(args.max_upload_mb * 1024 * 1024), settings=settings,
-                          machine_port=args.machine_port, realtime=args.realtime)
+                          machine_port=args.port, realtime=args.realtime)
     return serve(config, announce=lambda line: print(line, flush=True))

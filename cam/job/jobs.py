@@ -43,8 +43,12 @@ from ..render.report import job_report
 from ..settings import DEFAULT_SETTINGS, MachineSettings
 from ..verify.pinlog import PinLog, decode_pin_log, motion_extent
 from .drawing import plan
+from .drill import DEFAULT_DEPTH_MM as DRILL_DEPTH_MM
+from .drill import DEFAULT_SAFE_HEIGHT_MM as DRILL_SAFE_HEIGHT_MM
 from .drill import plan_drill
 from .gcode import plan_gcode
+from .hpgl import DEFAULT_CUT_DEPTH_MM as HPGL_CUT_DEPTH_MM
+from .hpgl import DEFAULT_SAFE_HEIGHT_MM as HPGL_SAFE_HEIGHT_MM
 from .hpgl import plan_hpgl
 
 __all__ = [
@@ -79,7 +83,7 @@ def job_kind(path: str | os.PathLike) -> str:
 
 @dataclass(frozen=True)
 class JobOptions:
-    """How to cut a file.  Each kind uses the options that apply to it and ignores the rest.
+    """How to cut a file.  An option given for a kind it does not apply to is an error (:meth:`check_kind`).
 
     Drawings and digitized matrices (pixel units):
         depth: Z pixels below the surface, one value for every object or one per object.
@@ -88,14 +92,17 @@ class JobOptions:
         start_at: ``(x, y, z)`` pixel offset of the whole job (Start At).
         pause_at: drawing points ``(x, y)`` where the job pauses (Pause At).
         profile: path of a profile drawing or CSV (3D drawings); profile_expr: or an expression in k and n.
-    Excellon drill files (mm):
-        drill_depth_mm, travel_height_mm, offset_mm (board origin from the job home; None = top-left
-        hole extent at the home), mirror_x, drill_order ("tour" or "file"), excellon_units
+    Depths and heights in mm, one name for every kind:
+        cut_depth_mm: drill depth of drill files (default 2.0), pen-down depth of HPGL (default 0.5), or a
+            drawing's depth for every object instead of ``depth`` (converted to whole Z pixels).
+        travel_height_mm: height above the surface between cuts, drill files and HPGL (default 1.0).
+    Excellon drill files and HPGL:
+        offset_mm (board or plotter origin from the job home; None = the top-left of what is cut at the
+        home); drill files only: mirror_x, drill_order ("tour" or "file"), excellon_units
         ("inch"/"metric"), excellon_digits ``(integer, fraction)``, excellon_zeros ("LZ"/"TZ") for
         files that do not say.
-    G-code and HPGL:
-        flip_y: G-code machine Y = +Y mm instead of -Y mm; depth_mm / travel_height_mm / offset_mm: HPGL
-        pen-down depth, pen-up height and machine position of plotter (0, 0) (None = top-left at the home).
+    G-code:
+        flip_y: machine Y = +Y mm instead of -Y mm.
     """
 
     depth: tuple[int, ...] = (10,)
@@ -105,8 +112,8 @@ class JobOptions:
     pause_at: tuple[tuple[int, int], ...] = ()
     profile: Optional[str] = None
     profile_expr: Optional[str] = None
-    drill_depth_mm: float = 2.0
-    travel_height_mm: float = 1.0
+    cut_depth_mm: Optional[float] = None
+    travel_height_mm: Optional[float] = None
     offset_mm: Optional[tuple[float, float]] = None
     mirror_x: bool = False
     drill_order: str = "tour"
@@ -114,7 +121,6 @@ class JobOptions:
     excellon_digits: Optional[tuple[int, int]] = None
     excellon_zeros: Optional[str] = None
     flip_y: bool = False
-    depth_mm: float = 0.5
 
     @classmethod
     def from_mapping(cls, values: Mapping[str, Any], source: str = "options") -> "JobOptions":
@@ -155,12 +161,10 @@ class JobOptions:
             raise bad("start", "must be 'top' or 'min-distance'")
         if self.drill_order not in ("tour", "file"):
             raise bad("drill_order", "must be 'tour' or 'file'")
-        if not (self.drill_depth_mm > 0):
-            raise bad("drill_depth_mm", "must be > 0 mm")
-        if not (self.travel_height_mm >= 0):
+        if self.cut_depth_mm is not None and not (self.cut_depth_mm > 0):
+            raise bad("cut_depth_mm", "must be > 0 mm")
+        if self.travel_height_mm is not None and not (self.travel_height_mm >= 0):
             raise bad("travel_height_mm", "must be >= 0 mm")
-        if not (self.depth_mm >= 0):
-            raise bad("depth_mm", "must be >= 0 mm")
         if self.excellon_units not in (None, "inch", "metric"):
             raise bad("excellon_units", "must be 'inch' or 'metric'")
         if self.excellon_zeros not in (None, "LZ", "TZ"):
@@ -169,6 +173,16 @@ class JobOptions:
             raise bad("excellon_digits", "must be two digit counts 0..8")
         if self.profile is not None and self.profile_expr is not None:
             raise bad("profile_expr", "cannot be given together with a profile file")
+        if self.cut_depth_mm is not None and self.depth != JobOptions.depth:
+            raise bad("cut_depth_mm", "cannot be given together with depth (Z pixels per object)")
+        return self
+
+    def check_kind(self, kind: str, source: str = "options") -> "JobOptions":
+        """Refuse an option given for a job kind it does not apply to (see :data:`OPTION_KINDS`); returns self."""
+        for f in fields(self):
+            if getattr(self, f.name) != f.default and kind not in OPTION_KINDS[f.name]:
+                raise CamError(f"{source}: option '{f.name}' does not apply to a {kind} file; it applies to "
+                               f"{' and '.join(sorted(OPTION_KINDS[f.name]))} files")
         return self
 
 
@@ -271,8 +285,8 @@ _PARSERS = {
     "pause_at": _points,
     "profile": _optional(_text),
     "profile_expr": _optional(_text),
-    "drill_depth_mm": _float,
-    "travel_height_mm": _float,
+    "cut_depth_mm": _optional(_float),
+    "travel_height_mm": _optional(_float),
     "offset_mm": _optional(_floats(2)),
     "mirror_x": _bool,
     "drill_order": _text,
@@ -280,8 +294,19 @@ _PARSERS = {
     "excellon_digits": _optional(_ints(2)),
     "excellon_zeros": _optional(lambda v: _text(v).upper()),
     "flip_y": _bool,
-    "depth_mm": _float,
 }
+
+_DRAWINGS = frozenset({"drawing", "digitized"})
+OPTION_KINDS = {
+    "depth": _DRAWINGS, "passes": _DRAWINGS, "start": frozenset({"drawing"}), "start_at": _DRAWINGS,
+    "pause_at": _DRAWINGS, "profile": _DRAWINGS, "profile_expr": _DRAWINGS,
+    "cut_depth_mm": _DRAWINGS | {"excellon", "hpgl"}, "travel_height_mm": frozenset({"excellon", "hpgl"}),
+    "offset_mm": frozenset({"excellon", "hpgl"}), "mirror_x": frozenset({"excellon"}),
+    "drill_order": frozenset({"excellon"}), "excellon_units": frozenset({"excellon"}),
+    "excellon_digits": frozenset({"excellon"}), "excellon_zeros": frozenset({"excellon"}),
+    "flip_y": frozenset({"gcode"}),
+}
+"""The job kinds each option applies to."""
 
 
 @dataclass
@@ -301,6 +326,7 @@ class PreparedJob:
         warnings: planning and parsing warnings; tool_changes: what each pause of the job is for.
         summary: one line saying what the job is.
         report: JSON-able job report.
+        digitized: the :class:`~cam.digitize.digitized.Digitized` matrix of a drawing job.
         drill_plan: the :class:`~cam.job.drill.DrillPlan` of a drill file (holes in drilling order, tools),
             which a MAXIMUS board drills by itself.
     """
@@ -321,6 +347,7 @@ class PreparedJob:
     report: dict[str, Any] = field(default_factory=dict)
     drawing_rgb: Optional[np.ndarray] = None
     drill_plan: Any = None
+    digitized: Any = None
 
     def positions_steps(self) -> np.ndarray:
         """``(M, 3)`` int64 machine position (x, y, z) in steps after each write of the plan."""
@@ -437,6 +464,17 @@ def _finish(job: PreparedJob) -> PreparedJob:
     return job
 
 
+def _drawing_depth(options: JobOptions, settings: MachineSettings) -> Any:
+    """The drawing's depth in Z pixels: ``depth`` (one for all or one per object), or ``cut_depth_mm`` for all."""
+    if options.cut_depth_mm is None:
+        return options.depth[0] if len(options.depth) == 1 else list(options.depth)
+    depth_px = int(round(options.cut_depth_mm / settings.px_to_mm_z(1)))
+    if depth_px < 1:
+        raise CamError(f"a cut depth of {options.cut_depth_mm:g} mm is less than one Z pixel "
+                       f"({settings.px_to_mm_z(1):g} mm)")
+    return depth_px
+
+
 def _prepare_pixels(path: Path, kind: str, options: JobOptions, settings: MachineSettings) -> PreparedJob:
 
     rgb = None
@@ -451,7 +489,7 @@ def _prepare_pixels(path: Path, kind: str, options: JobOptions, settings: Machin
         profile = load_profile(options.profile)
     elif options.profile_expr:
         profile = profile_from_expr(options.profile_expr, max(1, digitized.n_layers))
-    depth = options.depth[0] if len(options.depth) == 1 else list(options.depth)
+    depth = _drawing_depth(options, settings)
     toolpath = plan(digitized, depth=depth, settings=settings, passes=options.passes,
                     start_at=options.start_at, pause_at=list(options.pause_at), profile=profile)
     steps = plan_steps(toolpath)
@@ -461,7 +499,7 @@ def _prepare_pixels(path: Path, kind: str, options: JobOptions, settings: Machin
     return PreparedJob(
         source=str(path), kind=kind, steps=steps, settings=settings, toolpath=toolpath,
         size_mm=(report["width_mm"], report["height_mm"]), depth_mm=report["depth_mm"],
-        warnings=list(report["warnings"]), summary=summary, report=report, drawing_rgb=rgb,
+        warnings=list(report["warnings"]), summary=summary, report=report, drawing_rgb=rgb, digitized=digitized,
     )
 
 
@@ -476,12 +514,16 @@ def _prepare_gcode(path: Path, options: JobOptions, settings: MachineSettings) -
     )
 
 
-def _prepare_excellon(path: Path, options: JobOptions, settings: MachineSettings) -> PreparedJob:
+def _or(value: Optional[float], default: float) -> float:
+    return default if value is None else value
 
+
+def _prepare_excellon(path: Path, options: JobOptions, settings: MachineSettings) -> PreparedJob:
     holes = load_excellon(path, units=options.excellon_units, digits=options.excellon_digits,
                           zeros=options.excellon_zeros)
-    dp = plan_drill(holes, settings=settings, depth_mm=options.drill_depth_mm,
-                    safe_height_mm=options.travel_height_mm, offset_mm=options.offset_mm,
+    depth_mm = _or(options.cut_depth_mm, DRILL_DEPTH_MM)
+    dp = plan_drill(holes, settings=settings, depth_mm=depth_mm,
+                    safe_height_mm=_or(options.travel_height_mm, DRILL_SAFE_HEIGHT_MM), offset_mm=options.offset_mm,
                     mirror_x=options.mirror_x, order=options.drill_order)
     steps = plan_steps(dp.toolpath)
     tools = ", ".join(f"T{t} {dia:.3f} mm x{n}" for t, dia, n in dp.tool_sequence)
@@ -490,17 +532,17 @@ def _prepare_excellon(path: Path, options: JobOptions, settings: MachineSettings
     return PreparedJob(
         source=str(path), kind="excellon", steps=steps, settings=settings, toolpath=dp.toolpath,
         size_mm=(round(float(span[0]) * settings.mm_per_step_xy, 3), round(float(span[1]) * settings.mm_per_step_xy, 3)),
-        depth_mm=round(options.drill_depth_mm, 4),
+        depth_mm=round(depth_mm, 4),
         warnings=list(holes.warnings), summary=f"{path.name}: {len(hole_xy)} holes ({tools})",
         report={"holes": len(hole_xy), "tools": [list(t) for t in dp.tool_sequence]}, drill_plan=dp,
     )
 
 
 def _prepare_hpgl(path: Path, options: JobOptions, settings: MachineSettings, progress=None) -> PreparedJob:
-
     drawing = load_hpgl(path, progress=progress)
-    toolpath = plan_hpgl(drawing, settings=settings, depth_mm=options.depth_mm,
-                         safe_height_mm=options.travel_height_mm, offset_mm=options.offset_mm)
+    toolpath = plan_hpgl(drawing, settings=settings, depth_mm=_or(options.cut_depth_mm, HPGL_CUT_DEPTH_MM),
+                         safe_height_mm=_or(options.travel_height_mm, HPGL_SAFE_HEIGHT_MM),
+                         offset_mm=options.offset_mm)
     steps = plan_steps(toolpath)
     return PreparedJob(
         source=str(path), kind="hpgl", steps=steps, settings=settings, toolpath=toolpath,
@@ -531,7 +573,7 @@ def prepare_job(
     """
     p = Path(path)
     kind = job_kind(p)
-    opts = (options or JobOptions()).checked()
+    opts = (options or JobOptions()).checked().check_kind(kind, p.name)
     if not p.is_file():
         raise CamError(f"{p}: file not found")
     if kind in ("drawing", "digitized"):

@@ -1,0 +1,133 @@
+"""Every option checked before anything is planned, written or sent.
+
+:func:`check_args` runs in :func:`cam.cli.main` right after parsing, for
+every command: each output path must be writable where it points, and each
+flag must apply to the file's kind (a flag that does not apply is an error,
+never ignored).  A bad one is one line on stderr and exit code 2, and nothing
+has moved.  It then fills in the defaults of options left out.  (Options that
+need a port's capability are checked by the commands that open a port, before
+they plan: :func:`cam.cli.execute.check_port_options`.)
+
+Standard library and light modules only (it runs before the command's module
+loads the library).
+"""
+from __future__ import annotations
+
+import argparse
+import os
+from pathlib import Path
+from typing import Optional
+
+from ..choices import DIGITIZED_SUFFIXES, SUFFIXES
+from ..errors import CamError
+
+__all__ = ["check_args", "job_kind_of", "OUTPUTS", "APPLIES_TO", "check_output_path"]
+
+DRAWINGS = frozenset({"drawing", "digitized"})
+EVERY_KIND = frozenset(SUFFIXES)
+
+APPLIES_TO = {
+    # option dest: the file kinds it applies to (drill, export, preview and info)
+    "load_digitized": DRAWINGS, "start": frozenset({"drawing"}), "depth": DRAWINGS, "profile": DRAWINGS,
+    "profile_expr": DRAWINGS, "passes": DRAWINGS, "start_at": DRAWINGS, "pause_at": DRAWINGS,
+    "steps_per_pixel": DRAWINGS, "save_digitized": frozenset({"drawing"}), "surface": DRAWINGS,
+    "cut_depth": DRAWINGS | {"excellon", "hpgl"}, "travel_height": frozenset({"excellon", "hpgl"}),
+    "offset": frozenset({"excellon", "hpgl"}), "mirror_x": frozenset({"excellon"}),
+    "drill_order": frozenset({"excellon"}), "excellon_units": frozenset({"excellon"}),
+    "excellon_format": frozenset({"excellon"}), "excellon_zeros": frozenset({"excellon"}),
+    "flip_y": frozenset({"gcode"}),
+}
+"""Which file kinds each job option applies to; ``cam export`` widens some (see :data:`_EXPORT_APPLIES_TO`)."""
+
+_EXPORT_APPLIES_TO = {"travel_height": EVERY_KIND, "flip_y": EVERY_KIND}
+"""export writes every kind's travel at --travel-height, and --flip-y mirrors Y of every kind."""
+
+OUTPUTS = {
+    # option dest: (flag, accepted suffixes or None for any)
+    "pin_log": ("--pin-log", (".csv",)),
+    "report": ("--report", (".json",)),
+    "preview": ("--preview", (".png", ".svg")),
+    "save_digitized": ("--save-digitized", DIGITIZED_SUFFIXES),
+    "output": ("--output", None),
+}
+"""Files a command writes, checked before it starts."""
+
+_OUTPUT_SUFFIXES = {"preview": (".png", ".svg"), "digitize": DIGITIZED_SUFFIXES, "export": None}
+"""What ``-o`` of each command writes."""
+
+_DEFAULTS = {"start": "top", "depth": [10], "passes": 1, "start_at": [0, 0, 0], "pause_at": [], "drill_order": "tour"}
+"""Defaults of options that are None when not given (so that a given one can be told apart)."""
+
+
+def job_kind_of(args: argparse.Namespace) -> Optional[str]:
+    """The kind of the command's input file by its suffix ("drawing", "excellon", ...), or None."""
+    image = getattr(args, "image", None)
+    if image:
+        suffix = Path(image).suffix.lower()
+        for kind, suffixes in SUFFIXES.items():
+            if suffix in suffixes:
+                return kind
+        listed = "; ".join(f"{k} {' '.join(v)}" for k, v in SUFFIXES.items())
+        raise CamError(f"{Path(image).name}: unknown file type '{suffix or '(none)'}' (accepted: {listed})")
+    if getattr(args, "load_digitized", None):
+        return "digitized"
+    return None
+
+
+def check_output_path(path: str, flag: str, suffixes: Optional[tuple[str, ...]] = None) -> None:
+    """Refuse an output path that cannot be written: a missing folder, a folder, a read-only place, a wrong suffix."""
+    p = Path(path)
+    folder = p.parent if str(p.parent) else Path(".")
+    if suffixes is not None and p.suffix.lower() not in suffixes:
+        raise CamError(f"{flag} {path}: the file must end in {' or '.join(suffixes)}")
+    if not folder.is_dir():
+        raise CamError(f"{flag} {path}: folder {folder} does not exist")
+    if p.is_dir():
+        raise CamError(f"{flag} {path}: is a folder, not a file")
+    if not os.access(folder, os.W_OK | os.X_OK) or (p.exists() and not os.access(p, os.W_OK)):
+        raise CamError(f"{flag} {path}: cannot write there (permission denied)")
+
+
+def _given(args: argparse.Namespace, dest: str) -> bool:
+    value = getattr(args, dest, None)
+    return value is not None and value is not False and value != []
+
+
+def _check_applies(args: argparse.Namespace, kind: str) -> None:
+    table = dict(APPLIES_TO)
+    if args.command == "export":
+        table.update(_EXPORT_APPLIES_TO)
+    for dest, kinds in table.items():
+        if hasattr(args, dest) and _given(args, dest) and kind not in kinds:
+            flag = "--" + dest.replace("_", "-")
+            applies = " and ".join(sorted(kinds))
+            raise CamError(f"{flag} does not apply to {getattr(args, 'image', None) or 'this job'} "
+                           f"(a {kind} file); it applies to {applies} files")
+    if kind in DRAWINGS and _given(args, "cut_depth") and _given(args, "depth"):
+        raise CamError("give the depth once: --depth in Z pixels per object, or --cut-depth in mm for every object")
+
+
+def _check_outputs(args: argparse.Namespace) -> None:
+    for dest, (flag, suffixes) in OUTPUTS.items():
+        path = getattr(args, dest, None)
+        if not path:
+            continue
+        if dest == "output":
+            suffixes = _OUTPUT_SUFFIXES.get(args.command)
+        check_output_path(path, flag, suffixes)
+
+
+def check_args(args: argparse.Namespace) -> None:
+    """Check every option of ``args`` before the command runs, then fill kind-dependent defaults.
+
+    Raises:
+        CamError: an unwritable output or a flag that does not apply to the file's kind (the message names
+        the flag).  Options against the port are checked by :func:`cam.cli.execute.check_port_options`.
+    """
+    _check_outputs(args)
+    kind = job_kind_of(args) if args.command in ("drill", "export", "preview", "info") else None
+    if kind is not None:
+        _check_applies(args, kind)
+    for dest, value in _DEFAULTS.items():
+        if hasattr(args, dest) and getattr(args, dest) is None:
+            setattr(args, dest, value)
