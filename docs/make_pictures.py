@@ -52,7 +52,7 @@ def make_previews(out: Path) -> list[Path]:
 def _start_server(jobs_dir: str) -> tuple[subprocess.Popen, str]:
     """``cam serve`` on a free localhost port: (process, page URL)."""
     server = subprocess.Popen(
-        [sys.executable, "-m", "cam", "serve", "--port", "0", "--jobs-dir", jobs_dir],
+        [sys.executable, "-m", "cam", "serve", "--http-port", "0", "--jobs-dir", jobs_dir],
         stdout=subprocess.PIPE, text=True, env={**os.environ, "PYTHONPATH": str(ROOT)},
     )
     deadline = time.monotonic() + 60

@@ -247,9 +247,9 @@ def cli_without(module: str, *args):
 def test_missing_extras_are_one_line_naming_the_extra(drawing):
     proc = cli_without("parallel", "drill", drawing, "--port", "/dev/parport0", "--no-progress")
     assert_one_line_error(proc, "/dev/parport0", "pyparallel", "cam[parport]")
-    proc = cli_without("uvicorn", "serve", "--port", "0")
+    proc = cli_without("uvicorn", "serve", "--http-port", "0")
     assert_one_line_error(proc, "uvicorn", "cam[web]")
-    proc = cli_without("starlette", "serve", "--port", "0")
+    proc = cli_without("starlette", "serve", "--http-port", "0")
     assert_one_line_error(proc, "starlette", "cam[web]")
 
 
