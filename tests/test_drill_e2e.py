@@ -111,7 +111,7 @@ def test_three_tool_board_from_the_command_line(board_file, tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.index("T2 0.800 mm") < err.index("T1 1.000 mm") < err.index("T3 3.200 mm")
     settings = cam.MachineSettings()
-    motion = decode_pin_log(read_pin_log(log), settings.replace(steps_per_px_xy=1, steps_per_px_z=1))
+    motion = decode_pin_log(read_pin_log(log), settings)
     got = _plunges(motion.position_steps, round(2.0 / settings.mm_per_step_z))
     idx = _match(got.astype(float), _expected_steps(holes_mm, settings.mm_per_step_xy))
     assert sorted(idx.tolist()) == list(range(len(holes_mm)))

@@ -290,3 +290,17 @@ def test_suffix_lists_agree_with_the_job_model():
     assert jobs.accepted_suffixes() == choices.SUFFIXES
     assert jobs.PROFILE_SUFFIXES == choices.PROFILE_SUFFIXES
     assert tuple(jobs.KINDS) == tuple(choices.SUFFIXES)
+
+
+def test_no_steps_per_pixel_trick_in_the_library():
+    """Jobs are in machine steps: no planner fakes pixels by setting one step per pixel."""
+    for path in (ROOT / "cam").rglob("*.py"):
+        text = path.read_text()
+        assert "steps_per_px_xy=1" not in text and "steps_per_px_z=1" not in text, path
+
+
+def test_port_names_are_read_in_one_place():
+    """Only cam.drive.ports (and the MAXIMUS board's own URL parser) look at a "maximus:" prefix."""
+    readers = {p.relative_to(ROOT).as_posix() for p in (ROOT / "cam").rglob("*.py")
+               if 'startswith("maximus:")' in p.read_text() or "startswith('maximus:')" in p.read_text()}
+    assert readers == set(), readers

@@ -10,6 +10,7 @@ from typing import Any
 from tqdm import tqdm
 
 from ..drive.maximus.board import MAXIMUS_SETTINGS
+from ..drive.ports import port_kind
 from ..settings import MachineSettings, load_settings
 
 __all__ = ["machine_settings", "port_settings", "format_duration", "progress_wanted", "reading_bar"]
@@ -31,7 +32,7 @@ def machine_settings(args: argparse.Namespace) -> MachineSettings:
 def port_settings(args: argparse.Namespace, port: str) -> MachineSettings:
     """The machine settings for ``port``: a MAXIMUS board has its own resolution, step mode and 16-bit travel
     unless --machine says else."""
-    if port.startswith("maximus:") and not args.machine:
+    if port_kind(port) == "maximus" and not args.machine:
         return MAXIMUS_SETTINGS
     return machine_settings(args)
 
