@@ -1,8 +1,10 @@
 """Atomic file writes: a failed run never leaves a half-written output behind."""
 from __future__ import annotations
 
+import glob
 import os
 import secrets
+import time
 from pathlib import Path
 
 from .errors import CamError
@@ -29,20 +31,35 @@ def _create_temporary(folder: Path, name: str) -> tuple[int, str]:
     raise FileExistsError(f"no free temporary name for {name} in {folder}")
 
 
+def _remove_stale_temporaries(folder: Path, name: str, max_age_s: float = 60.0) -> None:
+    """Temporary files a killed run left for ``name`` (older than ``max_age_s``: not another run's, writing now)."""
+    now = time.time()
+    for leftover in folder.glob(f".{glob.escape(name)}.*.tmp"):
+        try:
+            if now - leftover.stat().st_mtime > max_age_s:
+                leftover.unlink()
+        except OSError:
+            pass
+
+
 def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> Path:
     """Write ``data`` to ``path`` through a temporary file in the same folder and a rename.
 
     Either the old file stays as it was or the new one is complete.  The file gets the mode
-    ``0o666 & ~umask``, as a file made by :func:`open` would.
+    ``0o666 & ~umask``, as a file made by :func:`open` would.  A path that is a symbolic link writes the
+    file it points to (the link stays a link).  Temporary files a killed earlier run left for the same
+    output are removed.
     """
-    target = Path(path)
+    given = Path(path)
+    target = Path(os.path.realpath(given)) if given.is_symlink() else given
     folder = target.parent if str(target.parent) else Path(".")
     if not folder.is_dir():
-        raise CamError(f"{target}: folder {folder} does not exist")
+        raise CamError(f"{given}: folder {folder} does not exist")
+    _remove_stale_temporaries(folder, target.name)
     try:
         fd, tmp_name = _create_temporary(folder, target.name)
     except OSError as exc:
-        raise CamError(f"{target}: cannot write ({exc.strerror or exc})") from exc
+        raise CamError(f"{given}: cannot write ({exc.strerror or exc})") from exc
     try:
         with os.fdopen(fd, "wb") as handle:
             handle.write(data)
@@ -61,7 +78,7 @@ def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> Path:
         except OSError:
             pass
         raise
-    return target
+    return given
 
 
 def atomic_write_text(path: str | os.PathLike, text: str) -> Path:

@@ -218,23 +218,46 @@ def test_failed_run_keeps_earlier_outputs(tmp_path, drawing):
     assert report.read_bytes() == before
 
 
-def test_ctrl_c_stops_cleanly_with_position(tmp_path):
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM, signal.SIGHUP])
+def test_ctrl_c_and_termination_signals_stop_cleanly_with_position(sig, tmp_path):
     img = np.full((20, 120, 3), 255, np.uint8)
     img[10, 5:115] = 0
     path = tmp_path / "line.png"
     cv2.imwrite(str(path), img)
     proc = subprocess.Popen(
         [sys.executable, "-m", "cam", "drill", str(path), "--realtime", "--delay", "5,5", "--no-progress",
-         "--pin-log", str(tmp_path / "p.csv")],
+         "--pin-log", str(tmp_path / "p.csv"), "--report", str(tmp_path / "r.json")],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV,
     )
     time.sleep(3.0)  # the job takes about 4.5 s; start-up (imports) takes about 1 s
-    proc.send_signal(signal.SIGINT)
+    proc.send_signal(sig)
     out, err = proc.communicate(timeout=60)
     assert proc.returncode == 130, err
     assert "stopped at X=" in err and "Traceback" not in err
     motion = cam.decode_pin_log(tmp_path / "p.csv")
-    assert motion.final_steps[2] == 0 and motion.final_steps[0] > 0
+    assert motion.final_steps[2] == 0 and motion.final_steps[0] > 0  # lifted, and it had moved
+    assert json.loads((tmp_path / "r.json").read_text())["status"] == "stopped"
+
+
+def test_ctrl_c_at_a_prompt_stops_at_once(tmp_path):
+    img = np.full((10, 30, 3), 255, np.uint8)
+    img[5, 5:25] = 0
+    path = tmp_path / "line.png"
+    cv2.imwrite(str(path), img)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "cam", "drill", str(path), "--pause-at", "10,5", "--no-progress"],
+        stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV,
+    )
+    deadline = time.monotonic() + 60
+    seen = ""
+    while "press Enter" not in seen:  # stdin stays open: the prompt waits for an answer
+        assert time.monotonic() < deadline, seen
+        seen += os.read(proc.stderr.fileno(), 4096).decode()
+    proc.send_signal(signal.SIGINT)
+    t0 = time.monotonic()
+    out, err = proc.communicate(timeout=30)
+    assert proc.returncode == 130 and time.monotonic() - t0 < 5, (proc.returncode, seen + err)
+    assert "Traceback" not in seen + err
 
 
 def cli_without(module: str, *args):
@@ -293,3 +316,14 @@ def test_preview_export_and_info_take_every_file_kind(tmp_path):
     assert cli("preview", ngc, "-o", tmp_path / "g.svg").returncode == 0
     assert (tmp_path / "g.svg").read_text().startswith("<svg") and "<line" in (tmp_path / "g.svg").read_text()
     assert not (tmp_path / "x.ngc").exists() and not (tmp_path / "s.png").exists()
+
+
+def test_an_interrupted_jog_says_how_far_it_moved():
+    proc = subprocess.Popen([sys.executable, "-m", "cam", "jog", "X+", "2000", "--realtime", "--no-progress"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV)
+    time.sleep(2.5)  # 2000 steps at 5 ms take 10 s
+    proc.send_signal(signal.SIGINT)
+    out, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, err
+    moved = int(re.search(r"jog stopped: moved X=(\d+) Y=0 Z=0 steps", err).group(1))
+    assert 0 < moved < 2000

@@ -51,3 +51,26 @@ def test_command_line_outputs_get_the_umask_mode(tmp_path, umask, mask, mode):
                               env=ENV, timeout=120)
         assert proc.returncode == 0, proc.stderr
     assert _mode(matrix) == mode and _mode(picture) == mode
+
+
+def test_a_symbolic_link_writes_the_file_it_points_to(tmp_path):
+    real = tmp_path / "real.json"
+    real.write_text("old\n")
+    link = tmp_path / "link.json"
+    link.symlink_to(real)
+    atomic_write_bytes(link, b"new\n")
+    assert link.is_symlink() and real.read_text() == "new\n"
+
+
+def test_temporaries_of_a_killed_run_are_removed_on_the_next_write(tmp_path):
+    import os
+    import time
+
+    stale = tmp_path / ".out.png.deadbeef.tmp"
+    stale.write_bytes(b"x" * 1000)
+    old = time.time() - 3600
+    os.utime(stale, (old, old))
+    fresh = tmp_path / ".out.png.0123abcd.tmp"  # another run may be writing right now: left alone
+    fresh.write_bytes(b"y")
+    atomic_write_bytes(tmp_path / "out.png", b"png")
+    assert not stale.exists() and fresh.exists() and (tmp_path / "out.png").read_bytes() == b"png"

@@ -8,8 +8,10 @@ is lifted), and the pin log file.
 from __future__ import annotations
 
 import argparse
+import select
 import signal
 import sys
+import threading
 from dataclasses import dataclass, field
 from typing import Any, Optional
 
@@ -35,6 +37,8 @@ class Outcome:
     messages: list[str] = field(default_factory=list)
     machine_time_s: float = 0.0
     position_steps: tuple[int, int, int] = (0, 0, 0)
+    """Where the tool stands at the end, in the session's frame (steps from where it stood at the start, plus
+    ``start_steps``)."""
 
     @property
     def finished(self) -> bool:
@@ -52,14 +56,35 @@ def check_port_options(args: argparse.Namespace) -> None:
         require(args.port, "step_dir", what="--delay (the step period of step/dir ports)")
 
 
-def _ask(args: argparse.Namespace):
+_STOP_SIGNALS = tuple(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, name))
+"""Signals that stop a job as Ctrl-C does: the tool is lifted, the position printed, the pin log and report written."""
+
+
+def _read_answer(stopping: threading.Event) -> str:
+    """A line from stdin, or "" when it is closed; gives up (returns "") as soon as a stop is asked for."""
+    try:
+        fd = sys.stdin.fileno()
+    except (AttributeError, OSError, ValueError):
+        return ""
+    while not stopping.is_set():
+        try:
+            ready, _, _ = select.select([fd], [], [], 0.1)
+        except (OSError, ValueError):
+            return sys.stdin.readline()
+        if ready:
+            return sys.stdin.readline()
+    return ""
+
+
+def _ask(args: argparse.Namespace, stopping: threading.Event):
     def on_prompt(prompt: Prompt) -> str:
         x, y, z = prompt.position_steps
         print(f"{prompt.note}: paused at X={x} Y={y} Z={z} steps; press Enter to resume", file=sys.stderr)
         if getattr(args, "yes", False):
             return "continue"
-        if sys.stdin.readline() == "":  # nobody can answer: stop rather than carry on blindly
-            print("no answer at the pause (stdin closed): stopping", file=sys.stderr)
+        if _read_answer(stopping) == "":  # stopped meanwhile, or nobody can answer: stop, never carry on blindly
+            if not stopping.is_set():
+                print("no answer at the pause (stdin closed): stopping", file=sys.stderr)
             return "stop"
         return "continue"
 
@@ -86,7 +111,9 @@ def execute(job: Any, args: argparse.Namespace, settings: MachineSettings, *,
     Raises:
         CamError: the job does not fit the port or the travel (nothing is sent), or the port failed.
     """
-    session = MachineSession(args.port, settings, realtime=getattr(args, "realtime", False), on_prompt=_ask(args))
+    stopping = threading.Event()
+    session = MachineSession(args.port, settings, realtime=getattr(args, "realtime", False),
+                             on_prompt=_ask(args, stopping))
     if start_steps is not None:
         session.set_position(start_steps)
     session.check_job(job)  # before the progress bar: a bad job is one clean line
@@ -94,15 +121,19 @@ def execute(job: Any, args: argparse.Namespace, settings: MachineSettings, *,
     bar = _bar(args, estimated_s)
     if bar is not None:
         session.on_progress = lambda done, total, t_ns: bar.update(round(t_ns / 1e9, 3) - bar.n)
-    previous = signal.getsignal(signal.SIGINT)
-    signal.signal(signal.SIGINT, lambda signum, frame: session.stop())
+    def stop(signum: int, frame: Any) -> None:
+        stopping.set()
+        session.stop()
+
+    previous = {s: signal.signal(s, stop) for s in _STOP_SIGNALS}
     try:
         session.start(job)
         version = session.version
         while session.busy:
             version = session.wait_change(version, 0.2)
     finally:
-        signal.signal(signal.SIGINT, previous)
+        for s, handler in previous.items():
+            signal.signal(s, handler)
         if bar is not None:
             bar.close()
     return _outcome(session, args)
@@ -115,7 +146,7 @@ def _outcome(session: MachineSession, args: argparse.Namespace) -> Outcome:
         raise PortError("; ".join(info.get("messages") or ["the run failed"]))
     if getattr(args, "pin_log", None) and result is not None:
         write_pin_log(result.pin_log(), args.pin_log)
-    if result is None:  # a MAXIMUS board: it reports no position or time
+    if result is None:  # a MAXIMUS board: it reports no time
         return Outcome(info.get("status", "error"), list(info.get("messages", [])),
                        position_steps=session.position_steps())
-    return Outcome(result.status, list(result.messages), result.machine_time_s, result.position_steps)
+    return Outcome(result.status, list(result.messages), result.machine_time_s, session.position_steps())

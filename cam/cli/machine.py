@@ -47,6 +47,8 @@ def cmd_jog(args: argparse.Namespace) -> int:
     if not outcome.finished:
         for m in outcome.messages:
             print(m, file=sys.stderr)
+        moved = [int(p) - int(s) for p, s in zip(outcome.position_steps, start)]
+        print(f"jog stopped: moved X={moved[0]} Y={moved[1]} Z={moved[2]} steps", file=sys.stderr)
         return EXIT_INTERRUPTED
     print(f"jogged {axis[0]} by {n} steps")
     return 0
