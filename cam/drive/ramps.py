@@ -66,6 +66,10 @@ _ROUNDS = 25
 _DROP = 0.85
 _ALPHA_MARGIN = 0.9
 
+_Limits = tuple[tuple[float, float, float], ...]
+"""(mm per step, start speed mm/s, max speed mm/s, acceleration mm/s^2), each per axis (X, Y, Z):
+:meth:`MachineSettings.axis_limits`."""
+
 
 @njit(cache=True, nogil=True)
 def _steps_of_axis(high, clk, dbit):
@@ -291,14 +295,8 @@ def _linear40(high: np.ndarray, period_ns: np.ndarray, move_first: np.ndarray, c
     return out
 
 
-def ramp_periods(
-    high: np.ndarray,
-    period_ns: np.ndarray,
-    settings: MachineSettings,
-    *,
-    move_first: np.ndarray | None = None,
-    stops: np.ndarray | None = None,
-) -> np.ndarray:
+def ramp_periods(high: np.ndarray, period_ns: np.ndarray, settings: MachineSettings, *,
+                 move_first: np.ndarray | None = None, stops: np.ndarray | None = None) -> np.ndarray:
     """Period lengths with the speed ramps of ``settings.ramp``.
 
     Args:
@@ -323,28 +321,28 @@ def ramp_periods(
         return per_ns
 
     high = np.asarray(high, np.uint8)
-    clock, dirbit = axis_bits(settings)
-    s_mm, v_start, v_max, acc = settings.axis_limits()
     if mode == "linear40":
+        clock, _ = axis_bits(settings)
+        s_mm, v_start, _, _ = settings.axis_limits()
         mf = np.zeros(1, np.int64) if move_first is None else np.asarray(move_first, np.int64)
         return _linear40(high, per_ns, mf, clock, s_mm, v_start)
+    return _lookahead(high, per_ns, settings, stops)
 
+
+def _lookahead(high: np.ndarray, per_ns: np.ndarray, settings: MachineSettings,
+               stops: np.ndarray | None) -> np.ndarray:
+    """The look-ahead planner (module docstring): ``(P,)`` int64 period lengths in ns.
+
+    ``high``: ``(P,)`` uint8, ``per_ns``: ``(P,)`` int64 nominal lengths (P > 0), ``stops`` as
+    :func:`ramp_periods`.
+    """
+    n = len(per_ns)
     stop_before = np.zeros(n + 1, bool)
     stop_before[0] = stop_before[n] = True
     if stops is not None and len(stops):
         stop_before[np.asarray(stops, np.int64)] = True
-    stop_idx = np.flatnonzero(stop_before)
-    cap = np.divide(1e9, per_ns, dtype=np.float64)
-    alpha = np.full(n, np.inf)
-    upull = np.full(n, np.inf)
-    axes = []
-    found = list(_pool().map(lambda a: _axis_steps_and_breaks(high, int(clock[a]), int(dirbit[a]), stop_idx),
-                             range(3)))
-    for a in range(3):
-        per, brk = found[a]
-        _axis_caps(per, brk, s_mm[a], v_start[a], v_max[a], acc[a] * _ALPHA_MARGIN, cap, alpha, upull)
-        axes.append((per, brk))
-    np.minimum(upull, cap, out=upull)
+    limits = settings.axis_limits()
+    axes, cap, alpha, upull = _caps(high, per_ns, settings, np.flatnonzero(stop_before), limits)
     u = np.empty(n)
     out = np.empty(n, np.int64)
     mid = np.empty(n, np.int64)
@@ -355,22 +353,56 @@ def ramp_periods(
         _periods_from_rates(u, per_ns, out, mid)
         if rnd == _ROUNDS:
             break
-
-        def check(a: int, record: bool = False) -> tuple[int, np.ndarray, np.ndarray, np.ndarray]:
-            per, brk = axes[a]
-            r1, r2, r3 = (np.zeros(len(per) if record else 0) for _ in range(3))
-            if len(per) < 2:  # compiled without the GIL: the axes are checked in parallel
-                return 0, r1, r2, r3
-            t = mid[per]
-            n_broken = check_axis_steps(t, per, mid, brk, s_mm[a], v_start[a], v_max[a], acc[a], r1, r2, r3)
-            return n_broken, r1, r2, r3
-
-        broken = [n_broken for n_broken, *_ in _pool().map(check, range(3))]
+        # compiled without the GIL: the axes are checked in parallel
+        broken = [r[0] for r in _pool().map(lambda a: _check_axis(axes[a], mid, limits, a, False), range(3))]
         hits = 0
         for a, n_broken in enumerate(broken):
             if n_broken:  # check again, recording where, and lower the caps there
-                _, r1, r2, r3 = check(a, record=True)
+                _, r1, r2, r3 = _check_axis(axes[a], mid, limits, a, True)
                 hits += _drop_caps(axes[a][0], r1, r2, r3, u, cap, _DROP)
         if hits == 0:
             break
     return out
+
+
+def _caps(high: np.ndarray, per_ns: np.ndarray, settings: MachineSettings, stop_idx: np.ndarray,
+          limits: _Limits) -> tuple[list, np.ndarray, np.ndarray, np.ndarray]:
+    """Step 1 of the planner over the three axes.
+
+    ``stop_idx``: increasing period indices ``k`` in ``0..P`` with a rest before period ``k``.
+
+    Returns:
+        ``axes``: per axis (X, Y, Z) the ``(S,)`` periods of its steps and ``(S,)`` rests before them;
+        ``cap``, ``alpha``, ``upull``: ``(P,)`` float64 rate caps, path accelerations and pull-in rates
+        (periods per second; ``upull`` <= ``cap``).
+    """
+    clock, dirbit = axis_bits(settings)
+    s_mm, v_start, v_max, acc = limits
+    n = len(per_ns)
+    cap = np.divide(1e9, per_ns, dtype=np.float64)
+    alpha = np.full(n, np.inf)
+    upull = np.full(n, np.inf)
+    axes = list(_pool().map(lambda a: _axis_steps_and_breaks(high, int(clock[a]), int(dirbit[a]), stop_idx),
+                            range(3)))
+    for a in range(3):
+        per, brk = axes[a]
+        _axis_caps(per, brk, s_mm[a], v_start[a], v_max[a], acc[a] * _ALPHA_MARGIN, cap, alpha, upull)
+    np.minimum(upull, cap, out=upull)
+    return axes, cap, alpha, upull
+
+
+def _check_axis(axis: tuple[np.ndarray, np.ndarray], mid: np.ndarray, limits: _Limits, a: int,
+                record: bool) -> tuple[int, np.ndarray, np.ndarray, np.ndarray]:
+    """Step 3 for axis ``a``: the pin-log rules on the rising edges ``mid`` (``(P,)`` ns).
+
+    Returns:
+        The number of broken rules and, when ``record``, ``(S,)`` marks of where R1, R2, R3 broke.
+    """
+    per, brk = axis
+    s_mm, v_start, v_max, acc = limits
+    r1, r2, r3 = (np.zeros(len(per) if record else 0) for _ in range(3))
+    if len(per) < 2:
+        return 0, r1, r2, r3
+    t = mid[per]
+    n_broken = check_axis_steps(t, per, mid, brk, s_mm[a], v_start[a], v_max[a], acc[a], r1, r2, r3)
+    return n_broken, r1, r2, r3

@@ -60,12 +60,16 @@ class Controller:
         self._wake.set()
 
     def stop(self) -> None:
-        """Stop before the next step and lift the tool to the safe plane."""
+        """Stop before the next step and lift the tool to the safe plane.
+
+        The lift goes straight up at the Z step delay; with speed ramps on, no faster than Z's start
+        speed, since it starts from rest.
+        """
         self.stop_requested = True
         self._wake.set()
 
     def emergency_stop(self) -> None:
-        """Stop before the next step and send nothing more."""
+        """Stop before the next step and send nothing more (during a stop's lift too)."""
         self.estop_requested = True
         self._wake.set()
 
@@ -136,6 +140,29 @@ def _lift_writes(plan: StepPlan, data_now: int, z_now: int) -> tuple[np.ndarray,
     return t, d
 
 
+class _Pauses:
+    """The Pause At points of a plan, and what happens at one (shared by both clocks)."""
+
+    def __init__(self, plan: StepPlan, ctl: Controller, on_pause: Optional[PauseFn], external: bool) -> None:
+        self.plan = plan
+        self.ctl = ctl
+        self.on_pause = on_pause
+        self.external = external  # the caller gave the controller: pause it and wait for its resume
+        self.at = set(int(i) for i in plan.pause_writes)
+        self.notes = dict(zip((int(i) for i in plan.pause_writes), plan.pause_notes or []))
+        self.count = 0
+
+    def honour(self, sent: int) -> bool:
+        """Pause after write ``sent - 1``; False if the job was stopped meanwhile."""
+        self.count += 1
+        pos = _position_after(self.plan, sent)
+        if self.on_pause is not None:
+            self.on_pause(pos, self.notes.get(sent - 1, "pause"))
+        elif self.external:
+            self.ctl.pause()
+        return _wait_while_paused(self.ctl)
+
+
 def run(
     job: Job | StepPlan,
     port: str | Port = "mock",
@@ -164,118 +191,132 @@ def run(
     p = open_port(port)
     if not isinstance(p, MockPort):
         realtime = True
-    external_controller = controller is not None
     ctl = controller or Controller()
-    total = len(plan)
-    pause_set = set(int(i) for i in plan.pause_writes)
-    notes = dict(zip((int(i) for i in plan.pause_writes), plan.pause_notes or []))
+    pauses = _Pauses(plan, ctl, on_pause, controller is not None)
     wall0 = time.monotonic_ns()
-    sent = 0
-    pauses = 0
+    if realtime:
+        sent = _send_realtime(plan, p, ctl, pauses, progress, wall0)
+    else:
+        sent = _send_simulated(plan, p, ctl, pauses, progress)
+    position = _position_after(plan, sent)
     status = FINISHED
     messages: list[str] = []
-    t_ns, data, strobe = plan.t_ns, plan.data, plan.strobe
-
-    def do_pause() -> bool:
-        """Honour a Pause At point; False if the job was stopped meanwhile."""
-        nonlocal pauses
-        pauses += 1
-        pos = _position_after(plan, sent)
-        if on_pause is not None:
-            on_pause(pos, notes.get(sent - 1, "pause"))
-        elif external_controller:
-            ctl.pause()
-        return _wait_while_paused(ctl)
-
-    if not realtime:
-        pause_points = sorted(pause_set)
-        while sent < total:
-            if ctl.halted or (ctl.paused and not _wait_while_paused(ctl)):
-                break
-            end = min(total, sent + _BATCH)
-            for pp in pause_points:
-                if sent <= pp < end:
-                    end = pp + 1
-                    break
-            p.write_many(t_ns[sent:end], data[sent:end], strobe[sent:end])
-            sent = end
-            if progress:
-                progress(sent, total, int(t_ns[sent - 1]))
-            if (sent - 1) in pause_set and sent < total and not do_pause():
-                break
-        clock_now = lambda: int(t_ns[sent - 1]) if sent else 0  # noqa: E731
-    else:
-        t0 = wall0
-        offset = 0
-        last_progress = 0
-        wake = ctl._wake
-        while sent < total:
-            target = t0 + offset + int(t_ns[sent])
-            halted = False
-            while True:
-                if ctl.halted:
-                    halted = True
-                    break
-                if ctl.paused:
-                    began = time.monotonic_ns()
-                    if not _wait_while_paused(ctl):
-                        halted = True
-                        break
-                    paused_ns = time.monotonic_ns() - began
-                    offset += paused_ns
-                    target += paused_ns
-                    continue
-                remaining = target - time.monotonic_ns()
-                if remaining <= 0:
-                    break
-                if remaining > _SPIN_NS:
-                    wake.wait((remaining - _SPIN_NS) / 1e9)
-                    wake.clear()
-            if halted:
-                break
-            p.write(int(data[sent]), int(strobe[sent]), time.monotonic_ns() - t0)
-            sent += 1
-            if progress and (target - last_progress > _PROGRESS_EVERY_NS or sent == total):
-                last_progress = target
-                progress(sent, total, int(t_ns[sent - 1]))
-            if (sent - 1) in pause_set and sent < total:
-                began = time.monotonic_ns()
-                if not do_pause():
-                    break
-                offset += time.monotonic_ns() - began
-        clock_now = lambda: time.monotonic_ns() - t0  # noqa: E731
-
-    position = _position_after(plan, sent)
-    if sent < total:
+    if sent < len(plan):
         if ctl.estop_requested:
             status = EMERGENCY_STOPPED
             messages.append(f"emergency stop at {position} steps; nothing more was sent")
         else:
-            status = STOPPED
-            lift_t, lift_d = _lift_writes(plan, int(data[sent - 1]) if sent else 0, position[2])
-            start = clock_now()
-            if realtime:
-                t_lift0 = time.monotonic_ns()
-                for t_rel, d in zip(lift_t.tolist(), lift_d.tolist()):
-                    while time.monotonic_ns() - t_lift0 < t_rel:
-                        if ctl.estop_requested:
-                            break
-                        time.sleep(min(0.001, max(0.0, (t_rel - (time.monotonic_ns() - t_lift0)) / 1e9)))
-                    if ctl.estop_requested:
-                        status = EMERGENCY_STOPPED
-                        break
-                    p.write(d, int(strobe[0]), start + (time.monotonic_ns() - t_lift0))
-                    if d & int(axis_bits(plan.settings)[0][2]):
-                        position = (position[0], position[1], position[2] - 1)
-            else:
-                p.write_many(start + lift_t, lift_d, np.full(len(lift_t), strobe[0], np.uint8))
-                position = (position[0], position[1], min(position[2], plan.safe_z_steps))
+            status, position = _stop(plan, p, ctl, sent, position, wall0 if realtime else None)
             messages.append(f"stopped at X={position[0]} Y={position[1]} steps; tool lifted to Z={position[2]}")
     if isinstance(p, MockPort):
         p._flush()
     wall = (time.monotonic_ns() - wall0) / 1e9
-    machine = float(t_ns[sent - 1]) / 1e9 if sent else 0.0
-    return RunResult(status, position, sent, machine, wall, pauses, p, messages, wall0)
+    machine = float(plan.t_ns[sent - 1]) / 1e9 if sent else 0.0
+    return RunResult(status, position, sent, machine, wall, pauses.count, p, messages, wall0)
+
+
+def _send_simulated(plan: StepPlan, p: Port, ctl: Controller, pauses: _Pauses,
+                    progress: Optional[ProgressFn]) -> int:
+    """Send the plan in batches at once, stamped with their scheduled times; returns the writes sent."""
+    t_ns, data, strobe = plan.t_ns, plan.data, plan.strobe
+    total = len(plan)
+    pause_set = pauses.at
+    pause_points = sorted(pause_set)
+    sent = 0
+    while sent < total:
+        if ctl.halted or (ctl.paused and not _wait_while_paused(ctl)):
+            break
+        end = min(total, sent + _BATCH)
+        for pp in pause_points:
+            if sent <= pp < end:
+                end = pp + 1
+                break
+        p.write_many(t_ns[sent:end], data[sent:end], strobe[sent:end])
+        sent = end
+        if progress:
+            progress(sent, total, int(t_ns[sent - 1]))
+        if (sent - 1) in pause_set and sent < total and not pauses.honour(sent):
+            break
+    return sent
+
+
+def _send_realtime(plan: StepPlan, p: Port, ctl: Controller, pauses: _Pauses,
+                   progress: Optional[ProgressFn], t0: int) -> int:
+    """Send each write at its time after ``t0`` (monotonic ns), pauses added; returns the writes sent.
+
+    Sleeps on the controller's wake event until :data:`_SPIN_NS` before a write, then spins.
+    """
+    t_ns, data, strobe = plan.t_ns, plan.data, plan.strobe
+    total = len(plan)
+    pause_set = pauses.at
+    sent = 0
+    offset = 0
+    last_progress = 0
+    wake = ctl._wake
+    while sent < total:
+        target = t0 + offset + int(t_ns[sent])
+        halted = False
+        while True:
+            if ctl.halted:
+                halted = True
+                break
+            if ctl.paused:
+                began = time.monotonic_ns()
+                if not _wait_while_paused(ctl):
+                    halted = True
+                    break
+                paused_ns = time.monotonic_ns() - began
+                offset += paused_ns
+                target += paused_ns
+                continue
+            remaining = target - time.monotonic_ns()
+            if remaining <= 0:
+                break
+            if remaining > _SPIN_NS:
+                wake.wait((remaining - _SPIN_NS) / 1e9)
+                wake.clear()
+        if halted:
+            break
+        p.write(int(data[sent]), int(strobe[sent]), time.monotonic_ns() - t0)
+        sent += 1
+        if progress and (target - last_progress > _PROGRESS_EVERY_NS or sent == total):
+            last_progress = target
+            progress(sent, total, int(t_ns[sent - 1]))
+        if (sent - 1) in pause_set and sent < total:
+            began = time.monotonic_ns()
+            if not pauses.honour(sent):
+                break
+            offset += time.monotonic_ns() - began
+    return sent
+
+
+def _stop(plan: StepPlan, p: Port, ctl: Controller, sent: int, position: tuple[int, int, int],
+          t0: Optional[int]) -> tuple[str, tuple[int, int, int]]:
+    """Lift the tool straight up to the safe plane after ``sent`` writes; returns (status, position_steps).
+
+    ``t0``: the real-time job start (monotonic ns), None on the simulated clock.  An emergency stop
+    during a real-time lift ends it (status :data:`EMERGENCY_STOPPED`).
+    """
+    lift_t, lift_d = _lift_writes(plan, int(plan.data[sent - 1]) if sent else 0, position[2])
+    strobe = plan.strobe[0]
+    if t0 is None:
+        start = int(plan.t_ns[sent - 1]) if sent else 0
+        p.write_many(start + lift_t, lift_d, np.full(len(lift_t), strobe, np.uint8))
+        return STOPPED, (position[0], position[1], min(position[2], plan.safe_z_steps))
+    start = time.monotonic_ns() - t0
+    z_clock = int(axis_bits(plan.settings)[0][2])
+    t_lift0 = time.monotonic_ns()
+    for t_rel, d in zip(lift_t.tolist(), lift_d.tolist()):
+        while time.monotonic_ns() - t_lift0 < t_rel:
+            if ctl.estop_requested:
+                break
+            time.sleep(min(0.001, max(0.0, (t_rel - (time.monotonic_ns() - t_lift0)) / 1e9)))
+        if ctl.estop_requested:
+            return EMERGENCY_STOPPED, position
+        p.write(d, int(strobe), start + (time.monotonic_ns() - t_lift0))
+        if d & z_clock:
+            position = (position[0], position[1], position[2] - 1)
+    return STOPPED, position
 
 
 def _wait_while_paused(ctl: Controller) -> bool:

@@ -21,13 +21,15 @@ is sent.
 What a port cannot do (the MAXIMUS firmware has no pause and takes drill
 files only) is refused through one check, :func:`cam.drive.ports.require`,
 with the same message in every front end.
+
+This module starts activities and books their ends; the state snapshot, the
+controls and the prompts are the session's parts in :mod:`cam.drive._session_parts`.
 """
 from __future__ import annotations
 
 import collections
 import threading
 import time
-from dataclasses import dataclass, field
 from typing import Any, Callable, Optional
 
 import numpy as np
@@ -38,6 +40,7 @@ from ..job.moves import jog as jog_job
 from ..job.moves import to_origin
 from ..settings import DEFAULT_SETTINGS, MachineSettings
 from ..verify.pinlog import PositionTracker
+from ._session_parts import Activity, Prompt, PromptFn, SessionControls
 from .activities import BoardControl, drill_work, jog_work, run_on_board, run_steps
 from .ports import port_kind, require
 from .runner import Controller, RunResult
@@ -49,35 +52,7 @@ MAX_JOG_STEPS = 100_000
 """The longest jog one request may ask for, either way."""
 
 
-@dataclass
-class Prompt:
-    """A question the machine waits on (a tool change, a Pause At point)."""
-
-    id: int
-    note: str
-    position_steps: tuple[int, int, int]
-
-
-PromptFn = Callable[[Prompt], str]
-"""on_prompt(prompt) -> "continue" or "stop": answers a prompt from the worker thread (it may block)."""
-
-
-@dataclass
-class _Activity:
-    """What runs now: its name, label, controller and progress."""
-
-    name: str  # "job", "jog" or "origin"
-    label: str
-    controller: Any
-    total: int
-    estimated_s: float
-    positions: Optional[PositionTracker] = None
-    done: int = 0
-    machine_ns: int = 0
-    started_wall: float = field(default_factory=time.monotonic)
-
-
-class MachineSession:
+class MachineSession(SessionControls):
     """The machine as every front end sees it (thread-safe).
 
     Args:
@@ -99,8 +74,8 @@ class MachineSession:
         self._lock = threading.RLock()
         self._changed = threading.Condition(self._lock)
         self._position = np.zeros(3, np.int64)
-        self._activity: Optional[_Activity] = None
-        self._last_activity: Optional[_Activity] = None  # the one that ended last: its progress stays shown
+        self._activity: Optional[Activity] = None
+        self._last_activity: Optional[Activity] = None  # the one that ended last: its progress stays shown
         self._thread: Optional[threading.Thread] = None
         self._finished_wall = 0.0
         self._prompt: Optional[Prompt] = None
@@ -115,86 +90,12 @@ class MachineSession:
         self.last_job_pin_log = None
         self.version = 0
 
-    # -- state ------------------------------------------------------------------------
-    def _bump(self) -> None:
-        self.version += 1
-        self._changed.notify_all()
-
-    def log(self, text: str, level: str = "info") -> None:
-        """Add a line to the session's log."""
-        with self._lock:
-            self._log_seq += 1
-            self._log.append({"seq": self._log_seq, "level": level, "text": text, "t": time.time()})
-            self._bump()
-
-    @property
-    def busy(self) -> bool:
-        with self._lock:
-            return self._activity is not None
-
-    def position_steps(self) -> tuple[int, int, int]:
-        """Where the tool is now, in steps from the home (live while something runs)."""
-        with self._lock:
-            pos = self._position.copy()
-            a = self._activity
-            if a is not None and a.positions is not None and a.done > 0:
-                pos = pos + np.array(a.positions.advance(a.done), np.int64)
-            return tuple(int(v) for v in pos)  # type: ignore[return-value]
-
     def set_position(self, position_steps: tuple[int, int, int]) -> None:
         """Tell the session where the tool stands (e.g. after homing by hand); refused while busy."""
         with self._lock:
             self._check_free()
             self._position = np.asarray(position_steps, np.int64).reshape(3).copy()
             self._bump()
-
-    def _state_name(self) -> str:
-        a = self._activity
-        if a is None:
-            return "idle"
-        if self._prompt is not None:
-            return "prompt"
-        if a.controller.halted:
-            return "stopping"
-        if a.controller.paused:
-            return "paused"
-        return "running" if a.name == "job" else "moving"
-
-    def state(self, log_after: int = 0) -> dict[str, Any]:
-        """JSON-able snapshot: state, position, progress, times, prompt, log lines after ``log_after``."""
-        s = self.settings
-        with self._lock:
-            a = self._activity
-            shown = a or self._last_activity
-            pos = self.position_steps()
-            end = time.monotonic() if a is not None else self._finished_wall
-            return {
-                "state": self._state_name(),
-                "activity": a.name if a else None,
-                "label": a.label if a else "",
-                "position_steps": list(pos),
-                "position_mm": [round(pos[0] * s.mm_per_step_xy, 4), round(pos[1] * s.mm_per_step_xy, 4),
-                                round(pos[2] * s.mm_per_step_z, 4)],
-                "progress": round(100.0 * shown.done / shown.total, 2) if shown and shown.total else 0.0,
-                "writes_done": shown.done if shown else 0,
-                "writes_total": shown.total if shown else 0,
-                "elapsed_s": round(max(0.0, end - shown.started_wall), 2) if shown else 0.0,
-                "remaining_s": round(max(0.0, a.estimated_s - a.machine_ns / 1e9), 2) if a else 0.0,
-                "prompt": dict(vars(self._prompt), position_steps=list(self._prompt.position_steps))
-                if self._prompt else None,
-                "last": dict(self.last_run),
-                "log": [dict(e) for e in self._log if e["seq"] > log_after][-100:],
-                "port": self.port,
-                "realtime": self.realtime,
-                "version": self.version,
-            }
-
-    def wait_change(self, version: int, timeout_s: float) -> int:
-        """Block until the state's version differs from ``version`` (or the timeout); returns the version."""
-        with self._changed:
-            if self.version == version:
-                self._changed.wait(timeout_s)
-            return self.version
 
     # -- starting things ------------------------------------------------------------------
     def _check_free(self) -> None:
@@ -306,7 +207,7 @@ class MachineSession:
         plan = plan_steps(job, start_steps=tuple(int(v) for v in self._position))
         self._launch_steps(activity, plan, label, plan.estimated_time_s)
 
-    def _begin(self, activity: _Activity) -> None:
+    def _begin(self, activity: Activity) -> None:
         self._activity = activity
         self._estop_request_ns = None
         self._prompt = None
@@ -315,7 +216,7 @@ class MachineSession:
     def _launch_steps(self, name: str, plan: StepPlan, label: str, estimated_s: float,
                       controller: Optional[Controller] = None) -> None:
         ctl = controller or Controller()
-        self._begin(_Activity(name, label, ctl, len(plan), estimated_s, PositionTracker(plan.data, plan.settings)))
+        self._begin(Activity(name, label, ctl, len(plan), estimated_s, PositionTracker(plan.data, plan.settings)))
         self.log(f"{label}: started")
         self._spawn(run_steps, (self, name, plan, ctl, label), name)
 
@@ -323,7 +224,7 @@ class MachineSession:
                       moved_steps: Any = (0, 0, 0)) -> None:
         ctl = BoardControl(self.port)
         total = len(job.drill_plan.holes_steps) if job is not None else 1
-        self._begin(_Activity(name, label, ctl, total, getattr(job, "estimated_time_s", 0.0)))
+        self._begin(Activity(name, label, ctl, total, getattr(job, "estimated_time_s", 0.0)))
         self.log(f"{label}: started on {self.port}")
         self._spawn(run_on_board, (self, name, work, ctl, label, np.asarray(moved_steps, np.int64)), name)
 
@@ -341,32 +242,6 @@ class MachineSession:
                 self._bump()
         if self.on_progress is not None:
             self.on_progress(done, total, machine_ns)
-
-    def prompt(self, position_steps: tuple[int, int, int], note: str) -> None:
-        """The job waits at a pause: ask :attr:`on_prompt`, or wait for :meth:`answer`; stop on "stop"."""
-        with self._lock:
-            a = self._activity
-            ctl = a.controller if a else None
-            self._prompt_seq += 1
-            self._prompt = Prompt(self._prompt_seq, note,
-                                  tuple(int(v) + int(p) for v, p in zip(self._position, position_steps)))
-            prompt = self._prompt
-            self._answer.clear()
-            self._answer_action = "continue"
-            self._bump()
-        self.log(f"{note}: waiting for an answer", "prompt")
-        if self.on_prompt is not None:
-            self._answer_action = self.on_prompt(prompt)
-        else:
-            while not self._answer.wait(0.05):
-                if ctl is None or ctl.halted:
-                    break
-        with self._lock:
-            self._prompt = None
-            action = self._answer_action
-            self._bump()
-        if action == "stop" and ctl is not None:
-            ctl.stop()
 
     def finish(self, info: dict[str, Any], moved_steps: Optional[np.ndarray], *, result: Optional[RunResult] = None,
                pin_log: Any = None) -> None:
@@ -391,83 +266,6 @@ class MachineSession:
             self._finished_wall = time.monotonic()
             self._bump()
 
-    # -- control -----------------------------------------------------------------------
-    def _controller(self) -> Any:
-        a = self._activity  # no lock: the runner may hold it for a progress update
-        return a.controller if a is not None else None
-
-    def pause(self) -> None:
-        """Hold the running job where it is (CapabilityError on a port that cannot pause)."""
-        require(self.port, "pause")
-        with self._lock:
-            ctl = self._controller()
-            if ctl is None:
-                raise BusyError("nothing is running")
-            ctl.pause()
-            self._bump()
-        self.log("paused")
-
-    def resume(self) -> None:
-        with self._lock:
-            ctl = self._controller()
-            if ctl is None or not ctl.paused:
-                raise BusyError("nothing is paused")
-            ctl.resume()
-            self._bump()
-        self.log("resumed")
-
-    def stop(self) -> None:
-        """Stop and lift the tool to the safe plane (nothing happens when idle)."""
-        ctl = self._controller()
-        if ctl is not None:
-            ctl.stop()
-            with self._lock:
-                self._answer_action = "stop"
-                self._answer.set()
-                self._bump()
-        self.log("stop requested" if ctl is not None else "stop: nothing was running")
-
-    def emergency_stop(self, request_ns: Optional[int] = None) -> None:
-        """Send nothing more at all.  ``request_ns``: ``time.monotonic_ns()`` when the request arrived."""
-        now = request_ns if request_ns is not None else time.monotonic_ns()
-        ctl = self._controller()
-        if ctl is not None:
-            ctl.emergency_stop()
-            with self._lock:
-                if self._estop_request_ns is None:
-                    self._estop_request_ns = now
-                self._answer.set()
-                self._bump()
-        self.log("EMERGENCY STOP" if ctl is not None else "emergency stop: nothing was moving", "error")
-
-    def answer(self, prompt_id: Any, action: str) -> None:
-        """Answer the pending prompt: ``action`` "continue" or "stop"."""
-        if action not in ("continue", "stop"):
-            raise PlanError(f"action must be 'continue' or 'stop', got {action!r}")
-        with self._lock:
-            if self._prompt is None:
-                raise BusyError("no prompt is waiting for an answer")
-            if prompt_id is not None and prompt_id != self._prompt.id:
-                raise BusyError(f"prompt {prompt_id!r} is no longer waiting (the current one is {self._prompt.id})")
-            self._answer_action = action
-            note = self._prompt.note
-            self._answer.set()
-        self.log(f"{note}: {action}")
-
-    def wait_idle(self, timeout_s: Optional[float] = 10.0) -> bool:
-        """Wait for the running activity to end; True when idle."""
-        t = self._thread
-        if t is not None:
-            t.join(timeout_s)
-        return not self.busy
-
-    def shutdown(self) -> None:
-        """Stop whatever runs (tool lifted) and wait for it."""
-        if self.busy:
-            self.stop()
-            if not self.wait_idle(30):
-                self.emergency_stop()
-                self.wait_idle(5)
 
 
 def run(job: Any, port: Any = "mock", *, realtime: bool = False, controller: Optional[Controller] = None,

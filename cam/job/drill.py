@@ -98,13 +98,36 @@ def plan_drill(
         raise PlanError("drill depth must be > 0 mm and the safe height >= 0 mm")
     if order not in ("tour", "file"):
         raise PlanError(f"order must be 'tour' or 'file', got {order!r}")
-    n = len(holes.holes_mm)
-    if n == 0:
+    if len(holes.holes_mm) == 0:
         raise PlanError(f"{holes.source}: no holes to drill")
     machine_mm = _machine_mm(holes.holes_mm, offset_mm, mirror_x)
     steps_xy = np.rint(machine_mm / settings.mm_per_step_xy).astype(np.int64)
+    _check_holes(holes, machine_mm, steps_xy, settings)
     depth_steps = int(round(depth_mm / settings.mm_per_step_z))
     safe_steps = -int(round(safe_height_mm / settings.mm_per_step_z))
+    path = _DrillPath(safe_steps)
+    tools = sorted(set(int(t) for t in holes.tool_of_hole), key=lambda t: (holes.tools[t], t))
+    cur = np.array([0.0, 0.0])
+    for tool in tools:
+        idx = np.flatnonzero(holes.tool_of_hole == tool)
+        if order == "tour":
+            idx = idx[drill_order(machine_mm[idx], start_mm=tuple(cur))]
+        path.tool_change(tool, float(holes.tools[tool]), len(idx))
+        for i in idx.tolist():
+            path.hole(i, *(int(v) for v in steps_xy[i]), depth_steps)
+        cur = machine_mm[idx[-1]]
+    path.home()
+    points = np.array(path.points, np.int64)
+    check_travel(points, settings)
+    kinds_arr = np.array(path.kinds, np.uint8)
+    tp = Job(points_steps=points, kind=kinds_arr, target=kinds_arr == CUT, pause=np.array(path.pause, bool),
+             settings=settings, warnings=list(holes.warnings), pause_notes=path.notes, source=str(holes.source))
+    order_arr = np.array(path.order, np.int64)
+    return DrillPlan(tp, steps_xy[order_arr], order_arr, path.sequence, depth_steps)
+
+
+def _check_holes(holes, machine_mm: np.ndarray, steps_xy: np.ndarray, settings: MachineSettings) -> None:
+    """TravelError naming the first hole (``file:line``) whose ``(N, 2)`` machine (x, y) steps leave the travel."""
     lo = np.array([b[0] for b in settings.travel.bounds_steps()])
     hi = np.array([b[1] for b in settings.travel.bounds_steps()])
     bad = np.flatnonzero(np.any((steps_xy < lo[:2]) | (steps_xy > hi[:2]), axis=1))
@@ -116,40 +139,48 @@ def plan_drill(
             f"{where}: hole {i + 1} at X{holes.holes_mm[i, 0]:.3f} Y{holes.holes_mm[i, 1]:.3f} mm lies "
             f"outside the machine travel (machine {machine_mm[i, 0]:.2f}, {machine_mm[i, 1]:.2f} mm)"
         )
-    tools = sorted(set(int(t) for t in holes.tool_of_hole), key=lambda t: (holes.tools[t], t))
-    pts: list[tuple[int, int, int]] = []
-    kinds: list[int] = []
-    pause: list[bool] = []
-    notes: list[str] = []
-    order_all: list[int] = []
-    sequence: list[tuple[int, float, int]] = []
-    cur = np.array([0.0, 0.0])
-    if safe_steps != 0:
-        pts.append((0, 0, safe_steps)); kinds.append(RETRACT); pause.append(False)
-    for tool in tools:
-        idx = np.flatnonzero(holes.tool_of_hole == tool)
-        if order == "tour":
-            idx = idx[drill_order(machine_mm[idx], start_mm=tuple(cur))]
-        # tool change: pause at the safe height before the first hole of this tool
-        if not pts:
-            pts.append((0, 0, safe_steps)); kinds.append(TRAVEL); pause.append(False)
-        pause[-1] = True
-        notes.append(f"tool change: T{tool} {holes.tools[tool]:.3f} mm ({len(idx)} holes)")
-        sequence.append((tool, float(holes.tools[tool]), len(idx)))
-        for i in idx.tolist():
-            x, y = (int(v) for v in steps_xy[i])
-            pts.append((x, y, safe_steps)); kinds.append(TRAVEL); pause.append(False)
-            pts.append((x, y, depth_steps)); kinds.append(CUT); pause.append(False)
-            pts.append((x, y, safe_steps)); kinds.append(RETRACT); pause.append(False)
-            order_all.append(i)
-        cur = machine_mm[idx[-1]]
-    pts.append((0, 0, safe_steps)); kinds.append(TRAVEL); pause.append(False)
-    if safe_steps != 0:
-        pts.append((0, 0, 0)); kinds.append(TRAVEL); pause.append(False)
-    points = np.array(pts, np.int64)
-    check_travel(points, settings)
-    kinds_arr = np.array(kinds, np.uint8)
-    tp = Job(points_steps=points, kind=kinds_arr, target=kinds_arr == CUT, pause=np.array(pause, bool),
-             settings=settings, warnings=list(holes.warnings), pause_notes=notes, source=str(holes.source))
-    order_arr = np.array(order_all, np.int64)
-    return DrillPlan(tp, steps_xy[order_arr], order_arr, sequence, depth_steps)
+
+
+class _DrillPath:
+    """The drilling job's points as they are planned: machine (x, y, z) steps, kinds, pauses, notes.
+
+    It starts with a lift to the safe height ``safe_steps`` (< 0: above the surface) when that is
+    not 0, and :meth:`home` ends it at the home.
+    """
+
+    def __init__(self, safe_steps: int) -> None:
+        self.safe_steps = safe_steps
+        self.points: list[tuple[int, int, int]] = []
+        self.kinds: list[int] = []
+        self.pause: list[bool] = []
+        self.notes: list[str] = []
+        self.order: list[int] = []  # source index of each drilled hole
+        self.sequence: list[tuple[int, float, int]] = []  # (tool, diameter_mm, n_holes)
+        if safe_steps != 0:
+            self._add(0, 0, safe_steps, RETRACT)
+
+    def _add(self, x: int, y: int, z: int, kind: int) -> None:
+        self.points.append((x, y, z))
+        self.kinds.append(kind)
+        self.pause.append(False)
+
+    def tool_change(self, tool: int, diameter_mm: float, n_holes: int) -> None:
+        """Pause at the safe height before the first hole of ``tool``, with a note naming it."""
+        if not self.points:
+            self._add(0, 0, self.safe_steps, TRAVEL)
+        self.pause[-1] = True
+        self.notes.append(f"tool change: T{tool} {diameter_mm:.3f} mm ({n_holes} holes)")
+        self.sequence.append((tool, diameter_mm, n_holes))
+
+    def hole(self, index: int, x: int, y: int, depth_steps: int) -> None:
+        """The drill cycle of hole ``index`` at ``(x, y)`` steps: above it, down to the depth, back up."""
+        self._add(x, y, self.safe_steps, TRAVEL)
+        self._add(x, y, depth_steps, CUT)
+        self._add(x, y, self.safe_steps, RETRACT)
+        self.order.append(index)
+
+    def home(self) -> None:
+        """Back above the home at the safe height, then down to the home."""
+        self._add(0, 0, self.safe_steps, TRAVEL)
+        if self.safe_steps != 0:
+            self._add(0, 0, 0, TRAVEL)

@@ -85,11 +85,22 @@ def plan_hpgl(
     """
     if not (depth_mm > 0) or not (safe_height_mm >= 0):
         raise PlanError("the cutting depth must be > 0 mm and the safe height >= 0 mm")
-    n = len(drawing.points_pu)
-    if n == 0:
+    if len(drawing.points_pu) == 0:
         raise PlanError(f"{drawing.source}: nothing to cut (no pen-down moves)")
     xy = hpgl_steps(drawing, settings=settings, offset_mm=offset_mm)
-    (x_lo, x_hi), (y_lo, y_hi), (z_lo, z_hi) = settings.travel.bounds_steps()
+    _check_xy(drawing, xy, settings)
+    depth_steps, safe_steps = _z_steps(depth_mm, safe_height_mm, settings)
+    xy, group, pause_group, tool, change = _strokes(drawing, xy)
+    pts, kind, pause = _rows(xy, group, pause_group, depth_steps, safe_steps)
+    check_travel(pts, settings)
+    notes = [f"tool change: pen {int(t)}" for t in tool[change]]
+    return Job(points_steps=pts, kind=kind, target=(kind == CUT) & (pts[:, 2] == depth_steps), pause=pause,
+               settings=settings, warnings=list(drawing.warnings), pause_notes=notes, source=drawing.source)
+
+
+def _check_xy(drawing: HpglDrawing, xy: np.ndarray, settings: MachineSettings) -> None:
+    """TravelError naming the first point (``file:line:column``) whose ``(N, 2)`` machine steps leave the travel."""
+    (x_lo, x_hi), (y_lo, y_hi), _ = settings.travel.bounds_steps()
     bad = np.flatnonzero((xy[:, 0] < x_lo) | (xy[:, 0] > x_hi) | (xy[:, 1] < y_lo) | (xy[:, 1] > y_hi))
     if len(bad):
         i = int(bad[0])
@@ -100,6 +111,11 @@ def plan_hpgl(
             f"travel (machine {xy[i, 0] * mm:.2f}, {xy[i, 1] * mm:.2f} mm; travel X {x_lo * mm:g}..{x_hi * mm:g} mm, "
             f"Y {y_lo * mm:g}..{y_hi * mm:g} mm)"
         )
+
+
+def _z_steps(depth_mm: float, safe_height_mm: float, settings: MachineSettings) -> tuple[int, int]:
+    """(cutting depth, safe height) in Z steps (+Z deeper: the safe height is <= 0), checked against the Z travel."""
+    _, _, (z_lo, z_hi) = settings.travel.bounds_steps()
     depth_steps = int(round(depth_mm / settings.mm_per_step_z))
     safe_steps = -int(round(safe_height_mm / settings.mm_per_step_z))
     if depth_steps < 1:
@@ -107,15 +123,30 @@ def plan_hpgl(
     if depth_steps > z_hi or safe_steps < z_lo:
         raise TravelError(f"cutting depth {depth_mm:g} mm and safe height {safe_height_mm:g} mm need Z "
                           f"{safe_steps}..{depth_steps} steps; the Z travel is {z_lo}..{z_hi} steps")
+    return depth_steps, safe_steps
 
+
+def _strokes(drawing: HpglDrawing, xy: np.ndarray) -> tuple[np.ndarray, ...]:
+    """The points to cut and where the tool lifts or changes.
+
+    Args:
+        xy: ``(N, 2)`` int64 machine steps of every point of ``drawing``.
+
+    Returns:
+        ``xy`` ``(K, 2)`` without the points at the same step as the one before in their stroke;
+        ``group`` ``(K,)`` bool, a lift and a plunge before the point (a stroke that does not join
+        the previous one); ``pause_group`` ``(K,)`` bool, a tool change before the point;
+        ``tool`` ``(S,)`` the pen in the machine for each stroke; ``change`` ``(S,)`` bool, the
+        stroke starts with a tool change.
+    """
+    n = len(xy)
     is_start = np.zeros(n, bool)
     is_start[drawing.stroke_start] = True
-    stroke_of = np.cumsum(is_start) - 1
     # a point at the same step as the one before it in its stroke adds nothing
     dup = np.zeros(n, bool)
     dup[1:] = np.all(xy[1:] == xy[:-1], axis=1) & ~is_start[1:]
     keep = ~dup
-    xy, is_start, stroke_of = xy[keep], is_start[keep], stroke_of[keep]
+    xy, is_start = xy[keep], is_start[keep]
     n = len(xy)
     # the tool in the machine for each stroke: pen 0 (none selected) keeps the tool that is in
     pens = drawing.stroke_pen.astype(np.int64)
@@ -134,7 +165,16 @@ def plan_hpgl(
     group[starts[~joined]] = True
     pause_group = np.zeros(n, bool)
     pause_group[starts] = change
+    return xy, group, pause_group, tool, change
 
+
+def _rows(xy: np.ndarray, group: np.ndarray, pause_group: np.ndarray, depth_steps: int,
+          safe_steps: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The job's ``(R, 3)`` int64 points, ``(R,)`` kinds and ``(R,)`` pauses from the points of :func:`_strokes`.
+
+    Before each group: lift where the tool is, travel above the point, plunge; at the end: lift, travel
+    to above the home, down to the home.  Moves of length 0 are dropped.
+    """
     rows = np.where(group, 3, 1)
     first = np.cumsum(rows) - rows
     total = int(rows.sum()) + 3
@@ -164,8 +204,4 @@ def plan_hpgl(
     if pause[same].any():
         idx = np.maximum.accumulate(np.where(keep_row, np.arange(total), 0))
         pause[idx[pause & same]] = True
-    pts, kind, pause = pts[keep_row], kind[keep_row], pause[keep_row]
-    check_travel(pts, settings)
-    notes = [f"tool change: pen {int(t)}" for t in tool[change]]
-    return Job(points_steps=pts, kind=kind, target=(kind == CUT) & (pts[:, 2] == depth_steps), pause=pause,
-               settings=settings, warnings=list(drawing.warnings), pause_notes=notes, source=drawing.source)
+    return pts[keep_row], kind[keep_row], pause[keep_row]

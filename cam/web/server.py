@@ -34,9 +34,11 @@ import socket
 import tempfile
 import threading
 import time
-from dataclasses import dataclass
+from contextlib import asynccontextmanager
+from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
-from typing import Any, Awaitable, Callable, Optional
+from typing import TYPE_CHECKING, Any, Awaitable, Callable, Optional
 from urllib.parse import urlsplit
 
 from ..drive.session import MachineSession
@@ -44,7 +46,9 @@ from ..errors import BusyError, CamError, CapabilityError
 from ..fileio import atomic_write_bytes
 from ..job.jobs import PROFILE_SUFFIXES, JobOptions, PreparedJob, accepted_suffixes, job_kind, prepare_job
 from ..settings import DEFAULT_SETTINGS, MachineSettings
-from contextlib import asynccontextmanager
+
+if TYPE_CHECKING:
+    from starlette.requests import Request
 
 __all__ = ["ServerConfig", "HttpError", "create_app", "serve", "LOCAL_HOSTS"]
 
@@ -109,8 +113,45 @@ def safe_name(filename: str) -> str:
 
 
 # ----------------------------------------------------------------------------------
-# HTTP
+# HTTP: the routes are module-level functions over one _AppState
 # ----------------------------------------------------------------------------------
+
+
+@dataclass
+class _AppState:
+    """What the routes share: the configuration, the machine session, and the uploaded and planned jobs.
+
+    Job ids are the upload counter's values as strings; the counter also moves on at every planning,
+    so a preview URL changes when its job is planned again.
+    """
+
+    config: ServerConfig
+    session: MachineSession
+    jobs_dir: Path
+    uploads: dict[str, dict[str, Any]] = field(default_factory=dict)  # id -> path, name, kind, role
+    prepared: dict[str, PreparedJob] = field(default_factory=dict)  # the last eight planned, oldest first
+    previews: dict[str, bytes] = field(default_factory=dict)  # id -> PNG
+    counter: int = 0
+    closing: threading.Event = field(default_factory=threading.Event)
+
+    def shut_down(self) -> None:
+        """End the event streams, stop whatever runs (tool lifted) and wait for it."""
+        self.closing.set()
+        self.session.shutdown()
+
+
+Handler = Callable[[_AppState, "Request"], Awaitable[Any]]
+"""A route: (app state, request) -> a JSON-able value or a Starlette response."""
+
+_SECURITY_HEADERS = [
+    (b"x-content-type-options", b"nosniff"),
+    (b"x-frame-options", b"DENY"),
+    (b"referrer-policy", b"no-referrer"),
+    (b"content-security-policy",
+     b"default-src 'self'; img-src 'self' data:; style-src 'self'; script-src 'self'; "
+     b"connect-src 'self'; frame-ancestors 'none'"),
+]
+"""Added to every HTTP response."""
 
 
 def _json_error(status: int, message: str):
@@ -119,14 +160,374 @@ def _json_error(status: int, message: str):
     return JSONResponse({"error": message}, status_code=status, headers={"Cache-Control": "no-store"})
 
 
+def _too_large(limit_bytes: int, headers: Optional[dict[str, str]] = None):
+    from starlette.responses import JSONResponse
+
+    return JSONResponse({"error": f"upload too large: the limit is {limit_bytes / 1048576:g} MB"}, status_code=413,
+                        headers=headers)
+
+
+def _authorise(config: ServerConfig, request: Request) -> None:
+    """The token when the server has one; else a localhost ``Host`` and no cross-site ``Origin`` (HttpError)."""
+    if config.token:
+        given = (request.headers.get("x-cam-token") or request.query_params.get("token") or "")
+        auth = request.headers.get("authorization", "")
+        if auth.lower().startswith("bearer "):
+            given = given or auth[7:].strip()
+        if not secrets.compare_digest(given.encode(), config.token.encode()):
+            raise HttpError(401, "this server needs its token: open the URL it printed (with ?token=...)")
+        return
+    host = (request.headers.get("host") or "").rsplit(":", 1)[0].strip("[]").lower()
+    if host not in LOCAL_HOSTS:
+        raise HttpError(403, f"requests must be addressed to localhost, not {host!r}")
+    origin = request.headers.get("origin")
+    if origin and origin != "null" and urlsplit(origin).netloc.lower() != (request.headers.get("host") or "").lower():
+        raise HttpError(403, f"cross-site request from {origin} refused")
+
+
+def _api(st: _AppState, handler: Handler) -> Callable[[Request], Awaitable[Any]]:
+    """A Starlette endpoint: authorise, run ``handler``, turn errors into JSON (401/403/4xx, 409 busy)."""
+    from starlette.responses import JSONResponse, Response
+
+    async def endpoint(request: Request):
+        try:
+            _authorise(st.config, request)
+            out = await handler(st, request)
+        except HttpError as exc:
+            return _json_error(exc.status, exc.message)
+        except (BusyError, CapabilityError) as exc:  # the machine cannot do it now, or at all
+            return _json_error(409, str(exc))
+        except CamError as exc:
+            return _json_error(400, str(exc))
+        if isinstance(out, Response):
+            return out
+        return JSONResponse(out, headers={"Cache-Control": "no-store"})
+
+    return endpoint
+
+
+async def _body_json(request: Request) -> dict[str, Any]:
+    """The request's JSON object ({} for an empty body); HttpError 400 otherwise."""
+    raw = await request.body()
+    if not raw.strip():
+        return {}
+    try:
+        value = json.loads(raw)
+    except (ValueError, UnicodeDecodeError) as exc:
+        raise HttpError(400, f"malformed JSON: {exc}") from None
+    if not isinstance(value, dict):
+        raise HttpError(400, "the request body must be a JSON object")
+    return value
+
+
+def _job_summary(st: _AppState, job_id: str, job: PreparedJob) -> dict[str, Any]:
+    return {
+        "job": job_id, "name": st.uploads[job_id]["name"], "kind": job.kind, "summary": job.summary,
+        "size_mm": list(job.size_mm), "depth_mm": job.depth_mm,
+        "estimated_time_s": round(job.estimated_time_s, 3), "warnings": list(job.warnings),
+        "tool_changes": list(job.tool_changes), "writes": len(job.steps),
+        "preview": f"/api/preview/{job_id}.png?v={st.counter}",
+    }
+
+
+# -- routes ------------------------------------------------------------------------
+
+
+async def _index(request: Request):
+    from starlette.responses import FileResponse
+
+    return FileResponse(STATIC_DIR / "index.html", headers={"Cache-Control": "no-store"})
+
+
+async def _get_config(st: _AppState, request: Request) -> dict[str, Any]:
+    config = st.config
+    s = config.settings
+    return {
+        "port": config.machine_port, "realtime": st.session.realtime or config.machine_port != "mock",
+        "max_upload_bytes": config.max_upload_bytes,
+        "accepted": {k: list(v) for k, v in accepted_suffixes().items()},
+        "profile_suffixes": list(PROFILE_SUFFIXES),
+        "mm_per_step": [s.mm_per_step_xy, s.mm_per_step_xy, s.mm_per_step_z],
+        "travel_steps": [list(b) for b in s.travel.bounds_steps()],
+        "options": JobOptions().__dict__,
+    }
+
+
+async def _read_capped(request: Request, cap_bytes: int) -> Optional[bytes]:
+    """The request body, or None when it is longer than ``cap_bytes``.
+
+    A body announced or found too long is read on (up to :data:`_DRAIN_LIMIT_BYTES` past the cap) and
+    dropped, so the client gets to read the answer.
+    """
+    length = request.headers.get("content-length")
+    too_big = False
+    if length is not None:
+        try:
+            too_big = int(length) > cap_bytes
+        except ValueError:
+            raise HttpError(400, "bad Content-Length") from None
+    body = bytearray()
+    seen = 0
+    async for chunk in request.stream():
+        seen += len(chunk)
+        if too_big or seen > cap_bytes:
+            too_big = True
+            if seen > cap_bytes + _DRAIN_LIMIT_BYTES:
+                break
+            continue
+        body += chunk
+    return None if too_big else bytes(body)
+
+
+async def _parse_upload(request: Request, body: bytes) -> tuple[Any, str]:
+    """The uploaded file of a multipart ``body`` and its role ("job" or "profile"); HttpError 400 otherwise."""
+    from starlette.formparsers import MultiPartException, MultiPartParser
+
+    ctype = request.headers.get("content-type", "")
+    if not ctype.startswith("multipart/form-data"):
+        raise HttpError(400, "upload the file as multipart/form-data (field 'file')")
+
+    async def stream():
+        yield body
+
+    try:
+        form = await MultiPartParser(request.headers, stream(), max_files=1, max_fields=8,
+                                     max_part_size=64 * 1024).parse()
+    except MultiPartException as exc:
+        raise HttpError(400, f"malformed upload: {exc.message}") from None
+    item = form.get("file")
+    if item is None or isinstance(item, str):
+        raise HttpError(400, "no file in the upload (field 'file')")
+    role = str(form.get("role") or "job")
+    if role not in ("job", "profile"):
+        raise HttpError(400, f"role must be 'job' or 'profile', got {role!r}")
+    return item, role
+
+
+def _upload_kind(name: str, role: str) -> str:
+    """The job kind of an uploaded file name, or "profile"; HttpError 400 for a profile of another suffix."""
+    if role == "job":
+        return job_kind(name)
+    if Path(name).suffix.lower() not in PROFILE_SUFFIXES:
+        raise HttpError(400, f"{name}: a profile is a drawing or a CSV ({' '.join(PROFILE_SUFFIXES)})")
+    return "profile"
+
+
+async def _upload(st: _AppState, request: Request):
+    from starlette.concurrency import run_in_threadpool
+
+    limit = st.config.max_upload_bytes
+    body = await _read_capped(request, limit + _MULTIPART_SLACK_BYTES)
+    if body is None:
+        return _too_large(limit, {"Connection": "close"})
+    item, role = await _parse_upload(request, body)
+    data = await item.read()
+    if len(data) > limit:
+        return _too_large(limit)
+    name = safe_name(item.filename or "")
+    kind = _upload_kind(name, role)
+    if not data:
+        raise HttpError(400, f"{name}: the file is empty")
+    st.counter += 1
+    job_id = str(st.counter)
+    path = (st.jobs_dir / f"{int(job_id):04d}-{name}").resolve()
+    if path.parent != st.jobs_dir:  # pragma: no cover - safe_name makes this impossible
+        raise HttpError(400, "bad file name")
+    await run_in_threadpool(atomic_write_bytes, path, data)
+    st.uploads[job_id] = {"path": str(path), "name": name, "kind": kind, "role": role}
+    st.session.log(f"uploaded {name} ({kind}, {len(data)} bytes)")
+    return {"job": job_id, "name": name, "kind": kind, "bytes": len(data)}
+
+
+def _job_options(st: _AppState, raw: Any) -> JobOptions:
+    """The planning options of a request (a profile named by its upload id becomes its path)."""
+    if not isinstance(raw, dict):
+        raise HttpError(400, "options must be a JSON object")
+    raw = dict(raw)
+    profile_id = raw.pop("profile", None)
+    if profile_id not in (None, ""):
+        ref = st.uploads.get(str(profile_id))
+        if ref is None or ref["role"] != "profile":
+            raise HttpError(400, f"no uploaded profile {profile_id!r}")
+        raw["profile"] = ref["path"]
+    return JobOptions.from_mapping(raw)
+
+
+async def _plan_job(st: _AppState, request: Request) -> dict[str, Any]:
+    from starlette.concurrency import run_in_threadpool
+
+    body = await _body_json(request)
+    job_id = str(body.get("job", ""))
+    if job_id not in st.uploads or st.uploads[job_id]["role"] != "job":
+        raise HttpError(404, f"no uploaded job {job_id!r}; upload a file first")
+    options = _job_options(st, body.get("options") or {})
+    session = st.session
+    if session.busy and session.realtime:
+        raise HttpError(409, "a job is running: planning now would disturb its step timing; wait for it to end")
+    upload = st.uploads[job_id]
+    job = await run_in_threadpool(lambda: prepare_job(upload["path"], options, st.config.settings,
+                                                         name=upload["name"]))
+    st.counter += 1
+    st.prepared.pop(job_id, None)  # re-planned: the newest again, so the last eight planned stay
+    st.prepared[job_id] = job
+    st.previews.pop(job_id, None)
+    for old in list(st.prepared)[:-8]:
+        st.prepared.pop(old, None)
+        st.previews.pop(old, None)
+    for w in job.warnings:
+        session.log(f"{upload['name']}: {w}", "warning")
+    session.log(f"planned {job.summary}; {job.estimated_time_s:.1f} s")
+    return _job_summary(st, job_id, job)
+
+
+async def _preview(st: _AppState, request: Request):
+    from starlette.concurrency import run_in_threadpool
+    from starlette.responses import Response
+
+    job_id = request.path_params["job"]
+    job = st.prepared.get(job_id)
+    if job is None:
+        raise HttpError(404, f"job {job_id!r} is not planned")
+    if job_id not in st.previews:
+        st.previews[job_id] = await run_in_threadpool(job.preview_png)
+    return Response(st.previews[job_id], media_type="image/png", headers={"Cache-Control": "no-store"})
+
+
+async def _start(st: _AppState, request: Request) -> dict[str, Any]:
+    body = await _body_json(request)
+    job_id = str(body.get("job", ""))
+    job = st.prepared.get(job_id)
+    if job is None:
+        raise HttpError(404 if job_id not in st.uploads else 409,
+                        f"job {job_id!r} is not planned; upload it and set its options first")
+    st.session.start(job, label=f"job {job.name or Path(job.source).name}")
+    return st.session.state()
+
+
+async def _control(st: _AppState, request: Request, *, action: Callable[[], None]) -> dict[str, Any]:
+    """Pause, resume, stop or go to the origin (``action``, a session method); the new state."""
+    await _body_json(request)
+    action()
+    return st.session.state()
+
+
+async def _emergency_stop(st: _AppState, request: Request) -> dict[str, Any]:
+    t = time.monotonic_ns()
+    st.session.emergency_stop(t)
+    return {"ok": True}
+
+
+async def _jog(st: _AppState, request: Request) -> dict[str, Any]:
+    body = await _body_json(request)
+    st.session.jog(body.get("axis", ""), body.get("steps", 0))
+    return st.session.state()
+
+
+async def _answer(st: _AppState, request: Request) -> dict[str, Any]:
+    body = await _body_json(request)
+    st.session.answer(body.get("prompt"), body.get("action", "continue"))
+    return st.session.state()
+
+
+async def _state(st: _AppState, request: Request) -> dict[str, Any]:
+    try:
+        after = int(request.query_params.get("log_after", "0"))
+    except ValueError:
+        raise HttpError(400, "log_after must be a whole number") from None
+    return st.session.state(after)
+
+
+async def _events(st: _AppState, request: Request):
+    """Server-sent events: the state at each change (at least every second), new log lines only."""
+    from starlette.responses import StreamingResponse
+
+    session = st.session
+
+    async def stream():
+        last_version = -1
+        last_sent = 0.0
+        log_after = 0
+        while not st.closing.is_set():
+            v = session.version
+            now = time.monotonic()
+            if v != last_version or now - last_sent > 1.0:
+                snap = session.state(log_after)
+                if snap["log"]:
+                    log_after = snap["log"][-1]["seq"]
+                last_version, last_sent = v, now
+                yield f"data: {json.dumps(snap)}\n\n"
+            if await request.is_disconnected():
+                break
+            await asyncio.sleep(0.1)
+
+    return StreamingResponse(stream(), media_type="text/event-stream",
+                             headers={"Cache-Control": "no-store", "X-Accel-Buffering": "no"})
+
+
+async def _pinlog(st: _AppState, request: Request):
+    from starlette.responses import Response
+
+    log = st.session.last_job_pin_log
+    if log is None:
+        raise HttpError(404, "no job has run on the mock port yet")
+    lines = ["t_ns,data,strobe"]
+    lines += [f"{t},{d},{s}" for t, d, s in zip(log.t_ns.tolist(), log.data.tolist(), log.strobe.tolist())]
+    return Response("\n".join(lines) + "\n", media_type="text/csv")
+
+
+async def _not_found(st: _AppState, request: Request):
+    raise HttpError(404, f"no such API endpoint: {request.method} {request.url.path}")
+
+
+def _routes(st: _AppState) -> list:
+    """Every URL of the server (all of ``/api`` behind :func:`_api`)."""
+    from starlette.routing import Mount, Route
+    from starlette.staticfiles import StaticFiles
+
+    session = st.session
+    post = ["POST"]
+    return [
+        Route("/", _index),
+        Route("/api/config", _api(st, _get_config)),
+        Route("/api/upload", _api(st, _upload), methods=post),
+        Route("/api/plan", _api(st, _plan_job), methods=post),
+        Route("/api/preview/{job}.png", _api(st, _preview)),
+        Route("/api/start", _api(st, _start), methods=post),
+        Route("/api/pause", _api(st, partial(_control, action=session.pause)), methods=post),
+        Route("/api/resume", _api(st, partial(_control, action=session.resume)), methods=post),
+        Route("/api/stop", _api(st, partial(_control, action=session.stop)), methods=post),
+        Route("/api/estop", _api(st, _emergency_stop), methods=post),
+        Route("/api/jog", _api(st, _jog), methods=post),
+        Route("/api/origin", _api(st, partial(_control, action=session.go_to_origin)), methods=post),
+        Route("/api/answer", _api(st, _answer), methods=post),
+        Route("/api/state", _api(st, _state)),
+        Route("/api/events", _api(st, _events)),
+        Route("/api/pinlog", _api(st, _pinlog)),
+        Route("/api/{rest:path}", _api(st, _not_found), methods=["GET", "POST", "PUT", "DELETE", "PATCH"]),
+        Mount("/static", StaticFiles(directory=STATIC_DIR), name="static"),
+    ]
+
+
+def _with_security_headers(inner: Callable[..., Awaitable[None]]) -> Callable[..., Awaitable[None]]:
+    """The ASGI app ``inner`` with :data:`_SECURITY_HEADERS` added to every HTTP response."""
+    async def app(scope, receive, send):
+        if scope["type"] != "http":
+            await inner(scope, receive, send)
+            return
+
+        async def send_wrapped(message):
+            if message["type"] == "http.response.start":
+                message = {**message, "headers": list(message.get("headers", [])) + _SECURITY_HEADERS}
+            await send(message)
+
+        await inner(scope, receive, send_wrapped)
+
+    return app
+
+
 def create_app(config: ServerConfig, session: Optional[MachineSession] = None):
     """The Starlette application.  ``app.state.session`` is the :class:`MachineSession`."""
     from starlette.applications import Starlette
-    from starlette.formparsers import MultiPartException, MultiPartParser
-    from starlette.requests import Request
-    from starlette.responses import FileResponse, JSONResponse, Response, StreamingResponse
-    from starlette.routing import Mount, Route
-    from starlette.staticfiles import StaticFiles
     from starlette.concurrency import run_in_threadpool
 
     config.checked()
@@ -134,317 +535,18 @@ def create_app(config: ServerConfig, session: Optional[MachineSession] = None):
     jobs_dir.mkdir(parents=True, exist_ok=True)
     config.jobs_dir = str(jobs_dir)
     session = session or MachineSession(config.machine_port, config.settings, realtime=config.realtime)
-    uploads: dict[str, dict[str, Any]] = {}
-    prepared: dict[str, PreparedJob] = {}
-    previews: dict[str, bytes] = {}
-    counter = {"n": 0}
-    closing = threading.Event()
-
-    def authorised(request: Request) -> None:
-        if config.token:
-            given = (request.headers.get("x-cam-token") or request.query_params.get("token") or "")
-            auth = request.headers.get("authorization", "")
-            if auth.lower().startswith("bearer "):
-                given = given or auth[7:].strip()
-            if not secrets.compare_digest(given.encode(), config.token.encode()):
-                raise HttpError(401, "this server needs its token: open the URL it printed (with ?token=...)")
-            return
-        host = (request.headers.get("host") or "").rsplit(":", 1)[0].strip("[]").lower()
-        if host not in LOCAL_HOSTS:
-            raise HttpError(403, f"requests must be addressed to localhost, not {host!r}")
-        origin = request.headers.get("origin")
-        if origin and origin != "null" and urlsplit(origin).netloc.lower() != (request.headers.get("host") or "").lower():
-            raise HttpError(403, f"cross-site request from {origin} refused")
-
-    def api(handler: Callable[[Request], Awaitable[Any]]):
-        async def endpoint(request: Request):
-            try:
-                authorised(request)
-                out = await handler(request)
-            except HttpError as exc:
-                return _json_error(exc.status, exc.message)
-            except (BusyError, CapabilityError) as exc:  # the machine cannot do it now, or at all
-                return _json_error(409, str(exc))
-            except CamError as exc:
-                return _json_error(400, str(exc))
-            if isinstance(out, Response):
-                return out
-            return JSONResponse(out, headers={"Cache-Control": "no-store"})
-
-        return endpoint
-
-    async def body_json(request: Request) -> dict[str, Any]:
-        raw = await request.body()
-        if not raw.strip():
-            return {}
-        try:
-            value = json.loads(raw)
-        except (ValueError, UnicodeDecodeError) as exc:
-            raise HttpError(400, f"malformed JSON: {exc}") from None
-        if not isinstance(value, dict):
-            raise HttpError(400, "the request body must be a JSON object")
-        return value
-
-    def job_summary(job_id: str, job: PreparedJob) -> dict[str, Any]:
-        return {
-            "job": job_id, "name": uploads[job_id]["name"], "kind": job.kind, "summary": job.summary,
-            "size_mm": list(job.size_mm), "depth_mm": job.depth_mm,
-            "estimated_time_s": round(job.estimated_time_s, 3), "warnings": list(job.warnings),
-            "tool_changes": list(job.tool_changes), "writes": len(job.steps),
-            "preview": f"/api/preview/{job_id}.png?v={counter['n']}",
-        }
-
-    # -- routes ----------------------------------------------------------------
-    async def index(request: Request):
-        return FileResponse(STATIC_DIR / "index.html", headers={"Cache-Control": "no-store"})
-
-    async def get_config(request: Request):
-        s = config.settings
-        return {
-            "port": config.machine_port, "realtime": session.realtime or config.machine_port != "mock",
-            "max_upload_bytes": config.max_upload_bytes,
-            "accepted": {k: list(v) for k, v in accepted_suffixes().items()},
-            "profile_suffixes": list(PROFILE_SUFFIXES),
-            "mm_per_step": [s.mm_per_step_xy, s.mm_per_step_xy, s.mm_per_step_z],
-            "travel_steps": [list(b) for b in s.travel.bounds_steps()],
-            "options": JobOptions().__dict__,
-        }
-
-    async def upload(request: Request):
-        limit = config.max_upload_bytes
-        cap = limit + _MULTIPART_SLACK_BYTES
-        length = request.headers.get("content-length")
-        too_big = False
-        if length is not None:
-            try:
-                too_big = int(length) > cap
-            except ValueError:
-                raise HttpError(400, "bad Content-Length") from None
-        body = bytearray()
-        seen = 0
-        async for chunk in request.stream():
-            seen += len(chunk)
-            if too_big or seen > cap:
-                too_big = True
-                if seen > cap + _DRAIN_LIMIT_BYTES:
-                    break
-                continue
-            body += chunk
-        if too_big:
-            return JSONResponse({"error": f"upload too large: the limit is {limit / 1048576:g} MB"}, status_code=413,
-                                headers={"Connection": "close"})
-        ctype = request.headers.get("content-type", "")
-        if not ctype.startswith("multipart/form-data"):
-            raise HttpError(400, "upload the file as multipart/form-data (field 'file')")
-
-        async def stream():
-            yield bytes(body)
-
-        try:
-            form = await MultiPartParser(request.headers, stream(), max_files=1, max_fields=8,
-                                         max_part_size=64 * 1024).parse()
-        except MultiPartException as exc:
-            raise HttpError(400, f"malformed upload: {exc.message}") from None
-        item = form.get("file")
-        if item is None or isinstance(item, str):
-            raise HttpError(400, "no file in the upload (field 'file')")
-        role = str(form.get("role") or "job")
-        if role not in ("job", "profile"):
-            raise HttpError(400, f"role must be 'job' or 'profile', got {role!r}")
-        data = await item.read()
-        if len(data) > limit:
-            return JSONResponse({"error": f"upload too large: the limit is {limit / 1048576:g} MB"}, status_code=413)
-        name = safe_name(item.filename or "")
-        if role == "job":
-            kind = job_kind(name)
-        else:
-            kind = "profile"
-            if Path(name).suffix.lower() not in PROFILE_SUFFIXES:
-                raise HttpError(400, f"{name}: a profile is a drawing or a CSV ({' '.join(PROFILE_SUFFIXES)})")
-        if not data:
-            raise HttpError(400, f"{name}: the file is empty")
-        counter["n"] += 1
-        job_id = str(counter["n"])
-        path = (jobs_dir / f"{int(job_id):04d}-{name}").resolve()
-        if path.parent != jobs_dir:  # pragma: no cover - safe_name makes this impossible
-            raise HttpError(400, "bad file name")
-        await run_in_threadpool(atomic_write_bytes, path, data)
-        uploads[job_id] = {"path": str(path), "name": name, "kind": kind, "role": role}
-        session.log(f"uploaded {name} ({kind}, {len(data)} bytes)")
-        return {"job": job_id, "name": name, "kind": kind, "bytes": len(data)}
-
-    async def plan_job(request: Request):
-        body = await body_json(request)
-        job_id = str(body.get("job", ""))
-        if job_id not in uploads or uploads[job_id]["role"] != "job":
-            raise HttpError(404, f"no uploaded job {job_id!r}; upload a file first")
-        raw = body.get("options") or {}
-        if not isinstance(raw, dict):
-            raise HttpError(400, "options must be a JSON object")
-        raw = dict(raw)
-        profile_id = raw.pop("profile", None)
-        if profile_id not in (None, ""):
-            ref = uploads.get(str(profile_id))
-            if ref is None or ref["role"] != "profile":
-                raise HttpError(400, f"no uploaded profile {profile_id!r}")
-            raw["profile"] = ref["path"]
-        options = JobOptions.from_mapping(raw)
-        if session.busy and session.realtime:
-            raise HttpError(409, "a job is running: planning now would disturb its step timing; wait for it to end")
-        job = await run_in_threadpool(lambda: prepare_job(uploads[job_id]["path"], options, config.settings,
-                                                             name=uploads[job_id]["name"]))
-        counter["n"] += 1
-        prepared.pop(job_id, None)  # re-planned: the newest again, so the last eight planned stay
-        prepared[job_id] = job
-        previews.pop(job_id, None)
-        for old in list(prepared)[:-8]:
-            prepared.pop(old, None)
-            previews.pop(old, None)
-        for w in job.warnings:
-            session.log(f"{uploads[job_id]['name']}: {w}", "warning")
-        session.log(f"planned {job.summary}; {job.estimated_time_s:.1f} s")
-        return job_summary(job_id, job)
-
-    async def preview(request: Request):
-        job_id = request.path_params["job"]
-        job = prepared.get(job_id)
-        if job is None:
-            raise HttpError(404, f"job {job_id!r} is not planned")
-        if job_id not in previews:
-            previews[job_id] = await run_in_threadpool(job.preview_png)
-        return Response(previews[job_id], media_type="image/png", headers={"Cache-Control": "no-store"})
-
-    async def start(request: Request):
-        body = await body_json(request)
-        job_id = str(body.get("job", ""))
-        job = prepared.get(job_id)
-        if job is None:
-            raise HttpError(404 if job_id not in uploads else 409,
-                            f"job {job_id!r} is not planned; upload it and set its options first")
-        session.start(job, label=f"job {job.name or Path(job.source).name}")
-        return session.state()
-
-    def control(fn: Callable[[], None]):
-        async def handler(request: Request):
-            await body_json(request)
-            fn()
-            return session.state()
-
-        return handler
-
-    async def emergency_stop(request: Request):
-        t = time.monotonic_ns()
-        session.emergency_stop(t)
-        return {"ok": True}
-
-    async def jog(request: Request):
-        body = await body_json(request)
-        session.jog(body.get("axis", ""), body.get("steps", 0))
-        return session.state()
-
-    async def answer(request: Request):
-        body = await body_json(request)
-        session.answer(body.get("prompt"), body.get("action", "continue"))
-        return session.state()
-
-    async def state(request: Request):
-        try:
-            after = int(request.query_params.get("log_after", "0"))
-        except ValueError:
-            raise HttpError(400, "log_after must be a whole number") from None
-        return session.state(after)
-
-    async def events(request: Request):
-        async def stream():
-            last_version = -1
-            last_sent = 0.0
-            log_after = 0
-            while not closing.is_set():
-                v = session.version
-                now = time.monotonic()
-                if v != last_version or now - last_sent > 1.0:
-                    snap = session.state(log_after)
-                    if snap["log"]:
-                        log_after = snap["log"][-1]["seq"]
-                    last_version, last_sent = v, now
-                    yield f"data: {json.dumps(snap)}\n\n"
-                if await request.is_disconnected():
-                    break
-                await asyncio.sleep(0.1)
-
-        return StreamingResponse(stream(), media_type="text/event-stream",
-                                 headers={"Cache-Control": "no-store", "X-Accel-Buffering": "no"})
-
-    async def pinlog(request: Request):
-        log = session.last_job_pin_log
-        if log is None:
-            raise HttpError(404, "no job has run on the mock port yet")
-        lines = ["t_ns,data,strobe"]
-        lines += [f"{t},{d},{s}" for t, d, s in zip(log.t_ns.tolist(), log.data.tolist(), log.strobe.tolist())]
-        return Response("\n".join(lines) + "\n", media_type="text/csv")
-
-    async def not_found(request: Request):
-        raise HttpError(404, f"no such API endpoint: {request.method} {request.url.path}")
-
-    def on_shutdown() -> None:
-        closing.set()
-        session.shutdown()
-
-    routes = [
-        Route("/", index),
-        Route("/api/config", api(get_config)),
-        Route("/api/upload", api(upload), methods=["POST"]),
-        Route("/api/plan", api(plan_job), methods=["POST"]),
-        Route("/api/preview/{job}.png", api(preview)),
-        Route("/api/start", api(start), methods=["POST"]),
-        Route("/api/pause", api(control(session.pause)), methods=["POST"]),
-        Route("/api/resume", api(control(session.resume)), methods=["POST"]),
-        Route("/api/stop", api(control(session.stop)), methods=["POST"]),
-        Route("/api/estop", api(emergency_stop), methods=["POST"]),
-        Route("/api/jog", api(jog), methods=["POST"]),
-        Route("/api/origin", api(control(session.go_to_origin)), methods=["POST"]),
-        Route("/api/answer", api(answer), methods=["POST"]),
-        Route("/api/state", api(state)),
-        Route("/api/events", api(events)),
-        Route("/api/pinlog", api(pinlog)),
-        Route("/api/{rest:path}", api(not_found), methods=["GET", "POST", "PUT", "DELETE", "PATCH"]),
-        Mount("/static", StaticFiles(directory=STATIC_DIR), name="static"),
-    ]
-
-    async def security_headers(scope, receive, send):
-        async def send_wrapped(message):
-            if message["type"] == "http.response.start":
-                headers = list(message.get("headers", []))
-                headers += [
-                    (b"x-content-type-options", b"nosniff"),
-                    (b"x-frame-options", b"DENY"),
-                    (b"referrer-policy", b"no-referrer"),
-                    (b"content-security-policy",
-                     b"default-src 'self'; img-src 'self' data:; style-src 'self'; script-src 'self'; "
-                     b"connect-src 'self'; frame-ancestors 'none'"),
-                ]
-                message = {**message, "headers": headers}
-            await send(message)
-
-        await inner(scope, receive, send_wrapped)
-
+    st = _AppState(config, session, jobs_dir)
 
     @asynccontextmanager
     async def lifespan(app):
         yield
-        await run_in_threadpool(on_shutdown)
+        await run_in_threadpool(st.shut_down)
 
-    inner = Starlette(routes=routes, lifespan=lifespan)
+    inner = Starlette(routes=_routes(st), lifespan=lifespan)
     inner.state.session = session
     inner.state.config = config
-    inner.state.closing = closing
-
-    async def app(scope, receive, send):
-        if scope["type"] == "http":
-            await security_headers(scope, receive, send)
-        else:
-            await inner(scope, receive, send)
-
+    inner.state.closing = st.closing
+    app = _with_security_headers(inner)
     app.state = inner.state  # type: ignore[attr-defined]
     return app
 

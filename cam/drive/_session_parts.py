@@ -1,0 +1,264 @@
+"""Two parts of :class:`~cam.drive.session.MachineSession`: what it shows, and how it is controlled.
+
+:class:`SessionView` is the JSON-able state snapshot, the live position and
+the log; :class:`SessionControls` (built on the view) holds pause / resume /
+stop / emergency stop, the prompts a job waits on, and waiting for the end.
+``MachineSession`` derives from :class:`SessionControls`.  Neither part keeps
+state of its own: they work on the attributes that ``MachineSession.__init__``
+sets (declared below for readers and type checkers), under the session's lock.
+
+Frames: positions are machine steps ``(x, y, z)`` from the session's home (+Z deeper).
+"""
+from __future__ import annotations
+
+import collections
+import threading
+import time
+from dataclasses import dataclass, field
+from typing import Any, Callable, Optional
+
+import numpy as np
+
+from ..errors import BusyError, PlanError
+from ..settings import MachineSettings
+from ..verify.pinlog import PositionTracker
+from .ports import require
+
+__all__ = ["Activity", "Prompt", "PromptFn", "SessionControls", "SessionView"]
+
+
+@dataclass
+class Prompt:
+    """A question the machine waits on (a tool change, a Pause At point)."""
+
+    id: int
+    note: str
+    position_steps: tuple[int, int, int]
+
+
+PromptFn = Callable[[Prompt], str]
+"""on_prompt(prompt) -> "continue" or "stop": answers a prompt from the worker thread (it may block)."""
+
+
+@dataclass
+class Activity:
+    """What runs now: its name, label, controller and progress."""
+
+    name: str  # "job", "jog" or "origin"
+    label: str
+    controller: Any
+    total: int
+    estimated_s: float
+    positions: Optional[PositionTracker] = None
+    done: int = 0
+    machine_ns: int = 0
+    started_wall: float = field(default_factory=time.monotonic)
+
+
+class SessionView:
+    """The session as a snapshot: state, live position, progress, prompt and log (a mixin)."""
+
+    port: str
+    settings: MachineSettings
+    realtime: bool
+    version: int
+    last_run: dict[str, Any]
+    _lock: threading.RLock
+    _changed: threading.Condition
+    _position: np.ndarray  # (3,) int64 steps from the home, booked at the end of each activity
+    _activity: Optional[Activity]
+    _last_activity: Optional[Activity]
+    _finished_wall: float
+    _prompt: Optional[Prompt]
+    _log: collections.deque
+    _log_seq: int
+
+    def _bump(self) -> None:
+        self.version += 1
+        self._changed.notify_all()
+
+    def log(self, text: str, level: str = "info") -> None:
+        """Add a line to the session's log."""
+        with self._lock:
+            self._log_seq += 1
+            self._log.append({"seq": self._log_seq, "level": level, "text": text, "t": time.time()})
+            self._bump()
+
+    @property
+    def busy(self) -> bool:
+        with self._lock:
+            return self._activity is not None
+
+    def position_steps(self) -> tuple[int, int, int]:
+        """Where the tool is now, in steps from the home (live while something runs)."""
+        with self._lock:
+            pos = self._position.copy()
+            a = self._activity
+            if a is not None and a.positions is not None and a.done > 0:
+                pos = pos + np.array(a.positions.advance(a.done), np.int64)
+            return tuple(int(v) for v in pos)  # type: ignore[return-value]
+
+    def _state_name(self) -> str:
+        a = self._activity
+        if a is None:
+            return "idle"
+        if self._prompt is not None:
+            return "prompt"
+        if a.controller.halted:
+            return "stopping"
+        if a.controller.paused:
+            return "paused"
+        return "running" if a.name == "job" else "moving"
+
+    def state(self, log_after: int = 0) -> dict[str, Any]:
+        """JSON-able snapshot: state, position, progress, times, prompt, log lines after ``log_after``."""
+        s = self.settings
+        with self._lock:
+            a = self._activity
+            shown = a or self._last_activity
+            pos = self.position_steps()
+            end = time.monotonic() if a is not None else self._finished_wall
+            return {
+                "state": self._state_name(),
+                "activity": a.name if a else None,
+                "label": a.label if a else "",
+                "position_steps": list(pos),
+                "position_mm": [round(pos[0] * s.mm_per_step_xy, 4), round(pos[1] * s.mm_per_step_xy, 4),
+                                round(pos[2] * s.mm_per_step_z, 4)],
+                "progress": round(100.0 * shown.done / shown.total, 2) if shown and shown.total else 0.0,
+                "writes_done": shown.done if shown else 0,
+                "writes_total": shown.total if shown else 0,
+                "elapsed_s": round(max(0.0, end - shown.started_wall), 2) if shown else 0.0,
+                "remaining_s": round(max(0.0, a.estimated_s - a.machine_ns / 1e9), 2) if a else 0.0,
+                "prompt": dict(vars(self._prompt), position_steps=list(self._prompt.position_steps))
+                if self._prompt else None,
+                "last": dict(self.last_run),
+                "log": [dict(e) for e in self._log if e["seq"] > log_after][-100:],
+                "port": self.port,
+                "realtime": self.realtime,
+                "version": self.version,
+            }
+
+    def wait_change(self, version: int, timeout_s: float) -> int:
+        """Block until the state's version differs from ``version`` (or the timeout); returns the version."""
+        with self._changed:
+            if self.version == version:
+                self._changed.wait(timeout_s)
+            return self.version
+
+
+class SessionControls(SessionView):
+    """Pause, resume, stop, emergency stop, prompts and waiting for the end (a mixin, on the view)."""
+
+    on_prompt: Optional[PromptFn]
+    _thread: Optional[threading.Thread]
+    _prompt_seq: int
+    _answer: threading.Event
+    _answer_action: str
+    _estop_request_ns: Optional[int]
+
+    def _controller(self) -> Any:
+        a = self._activity  # no lock: the runner may hold it for a progress update
+        return a.controller if a is not None else None
+
+    def pause(self) -> None:
+        """Hold the running job where it is (CapabilityError on a port that cannot pause)."""
+        require(self.port, "pause")
+        with self._lock:
+            ctl = self._controller()
+            if ctl is None:
+                raise BusyError("nothing is running")
+            ctl.pause()
+            self._bump()
+        self.log("paused")
+
+    def resume(self) -> None:
+        with self._lock:
+            ctl = self._controller()
+            if ctl is None or not ctl.paused:
+                raise BusyError("nothing is paused")
+            ctl.resume()
+            self._bump()
+        self.log("resumed")
+
+    def stop(self) -> None:
+        """Stop and lift the tool to the safe plane (nothing happens when idle)."""
+        ctl = self._controller()
+        if ctl is not None:
+            ctl.stop()
+            with self._lock:
+                self._answer_action = "stop"
+                self._answer.set()
+                self._bump()
+        self.log("stop requested" if ctl is not None else "stop: nothing was running")
+
+    def emergency_stop(self, request_ns: Optional[int] = None) -> None:
+        """Send nothing more at all.  ``request_ns``: ``time.monotonic_ns()`` when the request arrived."""
+        now = request_ns if request_ns is not None else time.monotonic_ns()
+        ctl = self._controller()
+        if ctl is not None:
+            ctl.emergency_stop()
+            with self._lock:
+                if self._estop_request_ns is None:
+                    self._estop_request_ns = now
+                self._answer.set()
+                self._bump()
+        self.log("EMERGENCY STOP" if ctl is not None else "emergency stop: nothing was moving", "error")
+
+    def prompt(self, position_steps: tuple[int, int, int], note: str) -> None:
+        """The job waits at a pause: ask :attr:`on_prompt`, or wait for :meth:`answer`; stop on "stop".
+
+        Called by the worker thread; ``position_steps`` is relative to where the activity started.
+        """
+        with self._lock:
+            a = self._activity
+            ctl = a.controller if a else None
+            self._prompt_seq += 1
+            self._prompt = Prompt(self._prompt_seq, note,
+                                  tuple(int(v) + int(p) for v, p in zip(self._position, position_steps)))
+            prompt = self._prompt
+            self._answer.clear()
+            self._answer_action = "continue"
+            self._bump()
+        self.log(f"{note}: waiting for an answer", "prompt")
+        if self.on_prompt is not None:
+            self._answer_action = self.on_prompt(prompt)
+        else:
+            while not self._answer.wait(0.05):
+                if ctl is None or ctl.halted:
+                    break
+        with self._lock:
+            self._prompt = None
+            action = self._answer_action
+            self._bump()
+        if action == "stop" and ctl is not None:
+            ctl.stop()
+
+    def answer(self, prompt_id: Any, action: str) -> None:
+        """Answer the pending prompt: ``action`` "continue" or "stop"."""
+        if action not in ("continue", "stop"):
+            raise PlanError(f"action must be 'continue' or 'stop', got {action!r}")
+        with self._lock:
+            if self._prompt is None:
+                raise BusyError("no prompt is waiting for an answer")
+            if prompt_id is not None and prompt_id != self._prompt.id:
+                raise BusyError(f"prompt {prompt_id!r} is no longer waiting (the current one is {self._prompt.id})")
+            self._answer_action = action
+            note = self._prompt.note
+            self._answer.set()
+        self.log(f"{note}: {action}")
+
+    def wait_idle(self, timeout_s: Optional[float] = 10.0) -> bool:
+        """Wait for the running activity to end; True when idle."""
+        t = self._thread
+        if t is not None:
+            t.join(timeout_s)
+        return not self.busy
+
+    def shutdown(self) -> None:
+        """Stop whatever runs (tool lifted) and wait for it."""
+        if self.busy:
+            self.stop()
+            if not self.wait_idle(30):
+                self.emergency_stop()
+                self.wait_idle(5)
