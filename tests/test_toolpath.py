@@ -117,3 +117,23 @@ def test_fast_assembly_equals_the_reference_loop(name):
     b = _assemble_reference(t, pause_px, asked, job.settings, 1, 0, 1)
     for u, v in zip(a, b):
         assert np.array_equal(u, v)
+
+
+@pytest.mark.parametrize("start_at", [(-67, -6, 0), (-200, -100, 0), (0, 0, 0), (37, 5, 0), (500, 300, 2)])
+def test_every_start_at_inside_the_travel_cuts_exactly_the_moved_drawing(start_at):
+    """Start At works in machine coordinates: negative, zero and large offsets cut the drawing moved by them."""
+    from conftest import SAMPLES, assert_surface_equal, carve_job, expected_surface_2d
+
+    s = cam.MachineSettings().replace(
+        travel=cam.settings.Travel(x_min_steps=-20000, x_max_steps=20000, y_min_steps=-20000, y_max_steps=20000))
+    d = cam.digitize(cam.load_image(SAMPLES / "two_curves.png"))
+    job = cam.plan(d, depth=3, settings=s, start_at=start_at)
+    surface, _, _ = carve_job(job)
+    assert_surface_equal(surface, expected_surface_2d(d, [3] * len(d.objects), s))
+
+
+@pytest.mark.parametrize("start_at", [(0, -1000, 0), (100_000_000, 0, 0), (-5, 0, 0)])
+def test_a_start_at_outside_the_travel_is_refused(start_at):
+    d = cam.digitize(drawing_from_rows(["....", ".##.", "...."]))
+    with pytest.raises(cam.TravelError, match="travel"):
+        cam.plan(d, depth=2, start_at=start_at)

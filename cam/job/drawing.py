@@ -126,25 +126,27 @@ def plan(
     if len(targets) == 0:
         raise PlanError("nothing to cut: every depth is 0")
     ox, oy, oz = (int(v) for v in start_at)
-    targets = targets + np.array([ox, oy, oz], np.int64)
+    # the moves are assembled in the drawing's own pixel frame (every target at a pixel >= 0, whatever the
+    # Start At offset), starting and ending at the job's home, then moved by the offset
+    targets = targets + np.array([0, 0, oz], np.int64)
     surface = oz
     safe = min(0, oz)
 
-    pause_set = {(int(x) + ox, int(y) + oy) for x, y in pause_at}
-    drawn = {(int(x) + ox, int(y) + oy) for obj in digitized.objects for x, y in obj} if pause_set else set()
+    pause_set = {(int(x), int(y)) for x, y in pause_at}
+    drawn = {(int(x), int(y)) for obj in digitized.objects for x, y in obj} if pause_set else set()
     for x, y in pause_at:
-        if (int(x) + ox, int(y) + oy) not in drawn:
+        if (int(x), int(y)) not in drawn:
             warnings.append(f"Pause At ({x}, {y}) is not a point of the drawing; it has no effect")
 
-    # deepest depth asked at each pixel (job frame, relative to the surface): moving through a
+    # deepest depth asked at each pixel (drawing frame, relative to the surface): moving through a
     # pixel at or above that depth never cuts what the drawing does not ask for
-    asked = np.zeros((digitized.height_px + oy + 2, digitized.width_px + ox + 2), np.int64)
+    asked = np.zeros((digitized.height_px + 2, digitized.width_px + 2), np.int64)
     np.maximum.at(asked, (targets[:, 1], targets[:, 0]), targets[:, 2] - oz)
     pause_px = np.zeros(asked.shape, bool)
-    for x, y in pause_set:
-        if 0 <= y < pause_px.shape[0] and 0 <= x < pause_px.shape[1]:
-            pause_px[y, x] = True
-    points_px, kinds, tgt, pause = _assemble(targets, pause_px, asked, settings, surface, safe, oz)
+    for x, y in pause_set & drawn:
+        pause_px[y, x] = True
+    points_px, kinds, tgt, pause = _assemble(targets, pause_px, asked, settings, surface, safe, oz, home=(-ox, -oy))
+    points_px[:, :2] += np.array([ox, oy], np.int64)
     frame = PixelFrame(digitized.width_px, digitized.height_px, (ox, oy, oz), settings.steps_per_px_xy,
                        settings.steps_per_px_z)
     points_steps = frame.to_steps(points_px)
@@ -190,12 +192,14 @@ def _gap_block(
 
 def _assemble(
     targets: np.ndarray, pause_px: np.ndarray, asked: np.ndarray, settings: MachineSettings,
-    surface: int, safe: int, oz: int,
+    surface: int, safe: int, oz: int, home: tuple[int, int] = (0, 0),
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The planner's rules, vectorised: adjacent moves in bulk, only gaps in Python (tests compare it with a plain loop).
 
-    Returns ``(points (N, 3), kind (N,), target (N,), pause (N,))``.
+    ``targets``, ``pause_px`` and ``asked`` share one pixel frame; ``home`` is where the job starts and ends
+    in that frame.  Returns ``(points (N, 3), kind (N,), target (N,), pause (N,))``.
     """
+    hx, hy = home
     m = len(targets)
     x, y, d = targets[:, 0], targets[:, 1], targets[:, 2]
     cheb = np.zeros(m, np.int64)
@@ -211,7 +215,7 @@ def _assemble(
     blocks = {}
     extra = np.zeros(m, np.int64)
     for i in gaps.tolist():
-        prev = (int(x[i - 1]), int(y[i - 1]), int(d[i - 1])) if i else (0, 0, 0)
+        prev = (int(x[i - 1]), int(y[i - 1]), int(d[i - 1])) if i else (hx, hy, 0)
         here = (int(x[i]), int(y[i]), int(d[i]))
         blk = _gap_block(prev, here, i > 0, asked, settings, surface, safe, oz)
         if blk and blk[-1][:3] == here:
@@ -221,10 +225,10 @@ def _assemble(
     counts = a_valid.astype(np.int64) + b_valid + extra
     cx, cy, cz = int(x[-1]), int(y[-1]), int(d[-1])
     tail = [(cx, cy, safe, RETRACT)]
-    if (0, 0) != (cx, cy):
-        tail.append((0, 0, safe, TRAVEL))
+    if (hx, hy) != (cx, cy):
+        tail.append((hx, hy, safe, TRAVEL))
     if safe != 0:
-        tail.append((0, 0, 0, TRAVEL))
+        tail.append((hx, hy, 0, TRAVEL))
     start = np.concatenate([[0], np.cumsum(counts)])
     n = int(start[-1]) + len(tail)
     pts = np.empty((n, 3), np.int64)
