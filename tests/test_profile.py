@@ -1,8 +1,11 @@
+import re
+
 import numpy as np
 import pytest
 
 import cam
 from cam.digitize.profile import Profile, as_profile, load_profile, profile_from_csv, profile_from_expr
+from cam.errors import PlanError
 
 
 def profile_image(depths, below=True, h=12):
@@ -69,3 +72,19 @@ def test_expression_csv_sequence_and_function(tmp_path):
     assert as_profile(lambda k: 3 * k, 3).depth_px.tolist() == [3, 6, 9]
     with pytest.raises(cam.PlanError, match="layer 2"):
         as_profile([1, -2], 2)
+
+
+@pytest.mark.parametrize("expr, fragment", [
+    ("9**9**9", "out of range"), ("'a'*10**10", "not allowed"), ("__import__('os').getcwd()", "not allowed"),
+    ("k.real", "not allowed"), ("(lambda: 1)()", "not allowed"), ("9" * 400, "out of range"),
+    ("1e300*1e300", "out of range"), ("k" + "+k" * 300, "at most"), ("1/(k-1)", "k=1"),
+])
+def test_profile_expressions_are_evaluated_safely_and_bounded(expr, fragment):
+    """A small evaluator, never eval: no names but k, n, pi, e and the math functions; bounded numbers."""
+    with pytest.raises(PlanError, match=re.escape(fragment)):
+        profile_from_expr(expr, 5)
+
+
+def test_profile_depths_are_bounded():
+    with pytest.raises(PlanError, match="layer 2"):
+        profile_from_expr("k * 600000", 3)

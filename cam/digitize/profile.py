@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import ast
 import math
+import operator
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -56,9 +57,10 @@ def _from_values(values: Sequence[float], source: str) -> Profile:
     arr = np.asarray(values, np.float64)
     if arr.ndim != 1 or len(arr) == 0:
         raise PlanError(f"{source}: a profile needs at least one depth")
-    if not np.all(np.isfinite(arr)) or np.any(arr < 0):
-        bad = int(np.flatnonzero(~np.isfinite(arr) | (arr < 0))[0])
-        raise PlanError(f"{source}: depth of layer {bad + 1} must be a number >= 0, got {arr[bad]}")
+    if not np.all(np.isfinite(arr)) or np.any(arr < 0) or np.any(arr > _MAX_DEPTH_PX):
+        bad = int(np.flatnonzero(~np.isfinite(arr) | (arr < 0) | (arr > _MAX_DEPTH_PX))[0])
+        raise PlanError(f"{source}: depth of layer {bad + 1} must be a number 0..{_MAX_DEPTH_PX} Z pixels, "
+                        f"got {arr[bad]}")
     return Profile(np.rint(arr).astype(np.int64), source)
 
 
@@ -136,39 +138,93 @@ def profile_from_csv(path: str | os.PathLike) -> Profile:
 _FUNCS = {name: getattr(math, name) for name in ("sqrt", "sin", "cos", "tan", "exp", "log", "floor", "ceil", "fabs")}
 _FUNCS.update({"abs": abs, "min": min, "max": max, "round": round})
 _CONSTS = {"pi": math.pi, "e": math.e}
-_NODES = (
-    ast.Expression, ast.BinOp, ast.UnaryOp, ast.Call, ast.Name, ast.Load, ast.Constant,
-    ast.Add, ast.Sub, ast.Mult, ast.Div, ast.FloorDiv, ast.Mod, ast.Pow, ast.USub, ast.UAdd,
-)
+_BINARY = {
+    ast.Add: operator.add, ast.Sub: operator.sub, ast.Mult: operator.mul, ast.Div: operator.truediv,
+    ast.FloorDiv: operator.floordiv, ast.Mod: operator.mod, ast.Pow: operator.pow,
+}
+_MAX_EXPR_CHARS = 500
+_MAX_NODES = 200
+_MAX_MAGNITUDE = 1e12
+"""No number in a profile expression, given or computed, may be larger: depths are pixels, not astronomy."""
+_MAX_EXPONENT = 64.0
+_MAX_DEPTH_PX = 1_000_000
+"""The deepest layer depth any profile may ask for (far beyond any machine's Z travel)."""
+MAX_LAYERS = 1_000_000
+
+
+class _Evaluator:
+    """Evaluates a parsed profile expression in floats, node by node: no ``eval``, every value bounded."""
+
+    def __init__(self, expr: str, names: dict[str, float]) -> None:
+        self.expr = expr
+        self.names = names
+
+    def _bounded(self, value: float) -> float:
+        if not isinstance(value, (int, float)) or abs(value) > _MAX_MAGNITUDE or not math.isfinite(value):
+            raise PlanError(f"profile expression '{self.expr}': a value is out of range ({value!r}; at most "
+                            f"{_MAX_MAGNITUDE:g} either way)")
+        return float(value)
+
+    def value(self, node: ast.AST) -> float:
+        if isinstance(node, ast.Expression):
+            return self.value(node.body)
+        if isinstance(node, ast.Constant) and type(node.value) in (int, float):
+            return self._bounded(node.value)
+        if isinstance(node, ast.Name) and node.id in self.names:
+            return self.names[node.id]
+        if isinstance(node, ast.UnaryOp) and isinstance(node.op, (ast.USub, ast.UAdd)):
+            v = self.value(node.operand)
+            return -v if isinstance(node.op, ast.USub) else v
+        if isinstance(node, ast.BinOp) and type(node.op) in _BINARY:
+            a, b = self.value(node.left), self.value(node.right)
+            if isinstance(node.op, ast.Pow) and (abs(b) > _MAX_EXPONENT or (a == 0 and b < 0)):
+                raise PlanError(f"profile expression '{self.expr}': the power {a:g} ** {b:g} is out of range "
+                                f"(exponents at most {_MAX_EXPONENT:g} either way)")
+            try:
+                return self._bounded(_BINARY[type(node.op)](a, b))
+            except (ArithmeticError, ValueError, TypeError) as exc:
+                raise PlanError(f"profile expression '{self.expr}': {exc}") from None
+        if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id in _FUNCS \
+                and not node.keywords and 1 <= len(node.args) <= 8:
+            args = [self.value(a) for a in node.args]
+            try:
+                return self._bounded(_FUNCS[node.func.id](*args))
+            except (ArithmeticError, ValueError, TypeError) as exc:
+                raise PlanError(f"profile expression '{self.expr}': {node.func.id}: {exc}") from None
+        if isinstance(node, ast.Name):
+            raise PlanError(f"profile expression '{self.expr}': unknown name '{node.id}' (use k, n, pi, e, sqrt, ...)")
+        raise PlanError(f"profile expression '{self.expr}': '{type(node).__name__}' is not allowed "
+                        f"(numbers, k, n, pi, e, + - * / // % **, sqrt, sin, ...)")
 
 
 def profile_from_expr(expr: str, n_layers: int) -> Profile:
     """Depths ``f(k)`` for k = 1..n_layers from an arithmetic expression in ``k`` and ``n``.
 
     Only numbers, + - * / // % **, ``k``, ``n``, ``pi``, ``e`` and the functions
-    sqrt sin cos tan exp log floor ceil fabs abs min max round are allowed.
+    sqrt sin cos tan exp log floor ceil fabs abs min max round are allowed.  The expression is
+    evaluated by a small evaluator (never ``eval``) in floats: every number, given or computed, is at
+    most 1e12 either way, exponents at most 64, and the expression at most 500 characters.
 
     >>> profile_from_expr("2*k", 3).depth_px.tolist()
     [2, 4, 6]
     """
+    if len(expr) > _MAX_EXPR_CHARS:
+        raise PlanError(f"profile expression is {len(expr)} characters long; at most {_MAX_EXPR_CHARS}")
+    if not (1 <= n_layers <= MAX_LAYERS):
+        raise PlanError(f"a profile has 1..{MAX_LAYERS} layers, got {n_layers}")
     try:
         tree = ast.parse(expr, mode="eval")
-    except SyntaxError:
+    except (SyntaxError, ValueError):
         raise PlanError(f"profile expression '{expr}' is not valid arithmetic") from None
-    for node in ast.walk(tree):
-        if not isinstance(node, _NODES):
-            raise PlanError(f"profile expression '{expr}': '{type(node).__name__}' is not allowed")
-        if isinstance(node, ast.Name) and node.id not in _FUNCS and node.id not in _CONSTS and node.id not in ("k", "n"):
-            raise PlanError(f"profile expression '{expr}': unknown name '{node.id}' (use k, n, pi, e, sqrt, ...)")
-        if isinstance(node, ast.Call) and not (isinstance(node.func, ast.Name) and node.func.id in _FUNCS):
-            raise PlanError(f"profile expression '{expr}': only sqrt, sin, cos, ... may be called")
-    code = compile(tree, "<profile>", "eval")
+    if sum(1 for _ in ast.walk(tree)) > _MAX_NODES:
+        raise PlanError(f"profile expression '{expr}' is too long (at most {_MAX_NODES} parts)")
     values = []
     for k in range(1, n_layers + 1):
+        names = {**_CONSTS, "k": float(k), "n": float(n_layers)}
         try:
-            values.append(float(eval(code, {"__builtins__": {}}, {**_FUNCS, **_CONSTS, "k": k, "n": n_layers})))
-        except (ArithmeticError, ValueError, TypeError) as exc:
-            raise PlanError(f"profile expression '{expr}' fails at layer k={k}: {exc}") from None
+            values.append(_Evaluator(expr, names).value(tree))
+        except PlanError as exc:
+            raise PlanError(f"{exc} (at layer k={k})") from None
     return _from_values(values, f"expr:{expr}")
 
 
