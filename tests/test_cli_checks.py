@@ -177,3 +177,25 @@ def test_checks_run_in_process_too(tmp_path, capsys):
     """The Python entry point (the console script) checks the same way."""
     assert main(["drill", str(SAMPLES / "ellipse.png"), "--report", str(tmp_path / "no" / "r.json")]) == 2
     assert "--report" in capsys.readouterr().err
+
+
+# -- every number is finite and in range before it is used (part of the safety issue) ------------------------
+
+@pytest.mark.parametrize("argv, fragment", [
+    (["drill", SAMPLES / "board.drl", "--cut-depth", "inf"], "--cut-depth"),
+    (["drill", SAMPLES / "board.drl", "--travel-height", "inf"], "--travel-height"),
+    (["export", SAMPLES / "gear.png", "-o", "g.ngc", "--travel-height", "nan"], "--travel-height"),
+    (["drill", SAMPLES / "ellipse.png", "--depth", "99999999999999999999"], "--depth"),
+    (["drill", SAMPLES / "ellipse.png", "--depth", "999999999"], "depth"),
+    (["drill", SAMPLES / "ellipse.png", "--depth", "4611686018427387905", "--steps-per-pixel", "8,4"], "--depth"),
+    (["goto", "99999999999999999999,0,0"], "X,Y,Z"),
+    (["drill", SAMPLES / "ellipse.png", "--passes", "100000000"], "--passes"),
+    (["drill", SAMPLES / "board.drl", "--offset", "inf,0"], "--offset"),
+    (["drill", SAMPLES / "ellipse.png", "--delay", "nan,5"], "--delay"),
+    (["drill", SAMPLES / "disc.png", "--profile-expr", "9**9**9"], "out of range"),
+    (["drill", SAMPLES / "disc.png", "--profile-expr", "'a'*10**10"], "not allowed"),
+])
+def test_numbers_out_of_range_are_one_line_errors(argv, fragment):
+    proc = cli(*argv, timeout=60)
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
+    assert len(proc.stderr.strip().splitlines()) == 1 and fragment in proc.stderr, proc.stderr

@@ -9,6 +9,7 @@ OpenCV or web stack.  The commands themselves live in the modules that
 from __future__ import annotations
 
 import argparse
+import math
 from typing import Callable, Optional, Sequence
 
 from .. import __version__
@@ -44,6 +45,39 @@ class _Parser(argparse.ArgumentParser):
         self.exit(EXIT_BAD_INPUT, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
+MAX_WHOLE = 10**9
+"""The largest whole number any option takes (pixels, steps, passes): beyond it no machine has travel."""
+MAX_MM = 10_000.0
+"""The largest length in mm any option takes (10 m)."""
+
+
+def _whole(name: str, lo: int, hi: int = MAX_WHOLE) -> Callable[[str], int]:
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} takes a whole number, got '{text}'") from None
+        if not lo <= value <= hi:
+            raise argparse.ArgumentTypeError(f"{name} must be {lo}..{hi}, got {value}")
+        return value
+
+    return parse
+
+
+def _number(name: str, lo: float, hi: float) -> Callable[[str], float]:
+    """A finite number in ``lo..hi`` (no inf or nan reaches a plan, a file or a report)."""
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} takes a number, got '{text}'") from None
+        if not math.isfinite(value) or not lo <= value <= hi:
+            raise argparse.ArgumentTypeError(f"{name} must be a number {lo:g}..{hi:g}, got '{text}'")
+        return value
+
+    return parse
+
+
 def _int_list(n: Optional[int], name: str, minimum: Optional[int] = None) -> Callable[[str], list[int]]:
     def parse(text: str) -> list[int]:
         try:
@@ -54,6 +88,8 @@ def _int_list(n: Optional[int], name: str, minimum: Optional[int] = None) -> Cal
             raise argparse.ArgumentTypeError(f"{name} takes {n} comma-separated numbers, got '{text}'")
         if minimum is not None and any(v < minimum for v in values):
             raise argparse.ArgumentTypeError(f"{name} values must be >= {minimum}, got '{text}'")
+        if any(abs(v) > MAX_WHOLE for v in values):
+            raise argparse.ArgumentTypeError(f"{name} values must be at most {MAX_WHOLE} either way, got '{text}'")
         return values
 
     return parse
@@ -65,7 +101,7 @@ def _float_pair(name: str) -> Callable[[str], list[float]]:
             values = [float(v) for v in text.split(",")]
         except ValueError:
             raise argparse.ArgumentTypeError(f"{name} takes two numbers separated by a comma, got '{text}'") from None
-        if len(values) != 2 or any(not (v > 0) for v in values):
+        if len(values) != 2 or any(not (0 < v <= 60_000) for v in values):
             raise argparse.ArgumentTypeError(f"{name} takes two positive numbers XY,Z, got '{text}'")
         return values
 
@@ -80,6 +116,8 @@ def _float_list(n: int, name: str) -> Callable[[str], list[float]]:
             raise argparse.ArgumentTypeError(f"{name} takes {n} numbers separated by commas, got '{text}'") from None
         if len(values) != n:
             raise argparse.ArgumentTypeError(f"{name} takes {n} comma-separated numbers, got '{text}'")
+        if not all(math.isfinite(v) and abs(v) <= MAX_MM for v in values):
+            raise argparse.ArgumentTypeError(f"{name} takes finite numbers of at most {MAX_MM:g} either way, got '{text}'")
         return values
 
     return parse
@@ -131,10 +169,10 @@ def _add_excellon_options(d: argparse.ArgumentParser) -> None:
 
 def _add_cut_options(d: argparse.ArgumentParser) -> None:
     g = d.add_argument_group("depths and heights in mm (one name on every file kind and on the web page)")
-    g.add_argument("--cut-depth", type=float, metavar="MM",
+    g.add_argument("--cut-depth", type=_number("--cut-depth", 0.0, MAX_MM), metavar="MM",
                    help="cutting depth below the surface: drill files (default 2.0: through a 1.6 mm board), HPGL "
                    "pen-down depth (default 0.5), or a drawing's depth for every object instead of --depth")
-    g.add_argument("--travel-height", type=float, metavar="MM",
+    g.add_argument("--travel-height", type=_number("--travel-height", 0.0, MAX_MM), metavar="MM",
                    help="height above the surface between cuts (default 1.0): drill files, HPGL, and every "
                    "file 'cam export' writes")
     f = d.add_argument_group(f"drill and HPGL files ({_listed(EXCELLON_SUFFIXES)} {_listed(HPGL_SUFFIXES)})")
@@ -167,7 +205,7 @@ def _add_job_options(d: argparse.ArgumentParser) -> None:
         help="2D cutting depth in Z pixels: one value for all objects, or one per object (0 skips one); default 10",
     )
     _add_profile_options(d)
-    d.add_argument("--passes", type=int, metavar="N", help="Repeat Drill: cut in N passes of increasing depth (default 1)")
+    d.add_argument("--passes", type=_whole("--passes", 1, 1000), metavar="N", help="Repeat Drill: cut in N passes of increasing depth (default 1)")
     d.add_argument("--start-at", metavar="X,Y,Z", type=_int_list(3, "--start-at"),
                    help="offset the whole job by this many pixels")
     d.add_argument("--pause-at", metavar="X,Y", type=_int_list(2, "--pause-at"), action="append",
@@ -225,7 +263,7 @@ def _add_preview(sub: argparse._SubParsersAction) -> None:
     pv.add_argument("--flip-y", action="store_true", help="G-code input: machine Y = +Y mm instead of -Y mm")
     pv.add_argument("-o", "--output", required=True, metavar="OUT.png|OUT.svg", help="picture to write")
     pv.add_argument("--surface", action="store_true", help="draw the cut surface instead of the toolpath")
-    pv.add_argument("--scale", type=int, metavar="N", help="picture pixels per drawing pixel (default: automatic)")
+    pv.add_argument("--scale", type=_whole("--scale", 1, 64), metavar="N", help="picture pixels per drawing pixel (default: automatic)")
 
 
 def _add_digitize(sub: argparse._SubParsersAction) -> None:
@@ -268,7 +306,7 @@ def _add_jog(sub: argparse._SubParsersAction) -> None:
                         description="Jog one axis, as the MAXIMUS jog screen does: 'cam jog X+ 100' moves X by "
                         "+100 steps. On a MAXIMUS board (--port maximus:/dev/ttyUSB0) this is its Jog mode.")
     jg.add_argument("axis", metavar="AXIS", help="X+, X-, Y+, Y-, Z+ or Z-")
-    jg.add_argument("steps", type=int, metavar="STEPS", help="how many steps (> 0)")
+    jg.add_argument("steps", type=_whole("STEPS", 1), metavar="STEPS", help="how many steps (> 0)")
     jg.add_argument("--port", default="mock", help="'mock' (default), /dev/parport0 or maximus:/dev/ttyUSB0")
     _add_machine_options(jg)
     jg.add_argument("--realtime", action="store_true", help="run the mock in real time")
@@ -280,7 +318,7 @@ def _add_emulate_maximus(sub: argparse._SubParsersAction) -> None:
     em = sub.add_parser("emulate-maximus", help="run the MAXIMUS firmware emulator on a pseudo-terminal",
                         description="Serve the MAXIMUS PIC firmware emulator on a pty and print its device path; "
                         "point --port maximus:PATH at it. Ctrl-C ends it.")
-    em.add_argument("--speed", type=float, default=1.0, help="firmware time per real time (1 = real time)")
+    em.add_argument("--speed", type=_number("--speed", 1e-3, 1e6), default=1.0, help="firmware time per real time (1 = real time)")
 
 
 def _add_goto(sub: argparse._SubParsersAction) -> None:
@@ -304,10 +342,10 @@ def _add_serve(sub: argparse._SubParsersAction) -> None:
         "pip install 'cam[web]'.",
     )
     sv.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1; 0.0.0.0 = every network, needs a token)")
-    sv.add_argument("--http-port", type=int, default=8000, metavar="N", help="TCP port of the web page (default 8000)")
+    sv.add_argument("--http-port", type=_whole("--http-port", 0, 65535), default=8000, metavar="N", help="TCP port of the web page (default 8000)")
     sv.add_argument("--token", help="token every request must carry (default: none on localhost, a new random one otherwise)")
     sv.add_argument("--jobs-dir", metavar="DIR", help="folder for uploaded files (default: a new temporary folder)")
-    sv.add_argument("--max-upload-mb", type=float, default=50.0, metavar="MB", help="larger uploads are refused (default 50)")
+    sv.add_argument("--max-upload-mb", type=_number("--max-upload-mb", 0.001, 100_000), default=50.0, metavar="MB", help="larger uploads are refused (default 50)")
     sv.add_argument("--port", default="mock", metavar="PORT",
                     help="'mock' (default: logs, moves nothing), a device like /dev/parport0, or maximus:/dev/ttyUSB0")
     _add_machine_options(sv)

@@ -57,6 +57,12 @@ __all__ = [
 ]
 
 KINDS = ("drawing", "digitized", "gcode", "excellon", "hpgl")
+MAX_DEPTH_PX = 1_000_000
+"""The deepest depth in Z pixels an option may ask for (the travel refuses far less)."""
+MAX_PX = 10**9
+"""The largest pixel offset an option may give, either way."""
+MAX_MM = 10_000.0
+"""The largest length in mm an option may give (10 m)."""
 
 
 def accepted_suffixes() -> dict[str, tuple[str, ...]]:
@@ -153,8 +159,16 @@ class JobOptions:
         def bad(key: str, why: str) -> CamError:
             return CamError(f"{source}: option '{key}' {why}, got {getattr(self, key)!r}")
 
-        if not self.depth or any(d < 0 for d in self.depth):
-            raise bad("depth", "must be Z pixels >= 0")
+        if not self.depth or any(not 0 <= d <= MAX_DEPTH_PX for d in self.depth):
+            raise bad("depth", f"must be Z pixels 0..{MAX_DEPTH_PX}")
+        if any(abs(v) > MAX_PX for v in self.start_at) or any(abs(v) > MAX_PX for p in self.pause_at for v in p):
+            raise bad("start_at" if any(abs(v) > MAX_PX for v in self.start_at) else "pause_at",
+                      f"must be pixels of at most {MAX_PX} either way")
+        for key in ("cut_depth_mm", "travel_height_mm"):
+            if getattr(self, key) is not None and getattr(self, key) > MAX_MM:
+                raise bad(key, f"must be at most {MAX_MM:g} mm")
+        if self.offset_mm is not None and any(abs(v) > MAX_MM for v in self.offset_mm):
+            raise bad("offset_mm", f"must be at most {MAX_MM:g} mm either way")
         if not (1 <= self.passes <= 1000):
             raise bad("passes", "must be 1..1000")
         if self.start not in ("top", "min-distance"):
