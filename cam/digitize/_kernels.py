@@ -350,13 +350,9 @@ def peel_padded_kernel(classes, black, red, white):
                             suspect = True
                 d = big
                 if r > 0:
-                    u = padded[r, c + 1] + 1
-                    if u < d:
-                        d = u
+                    d = min(d, padded[r, c + 1] + 1)
                 if c > 0:
-                    u = padded[r + 1, c] + 1
-                    if u < d:
-                        d = u
+                    d = min(d, padded[r + 1, c] + 1)
                 padded[r + 1, c + 1] = d
             else:
                 padded[r + 1, c + 1] = big
@@ -367,13 +363,9 @@ def peel_padded_kernel(classes, black, red, white):
             v = classes[r, c]
             if v == red:
                 if r < h - 1:
-                    u = padded[r + 2, c + 1] + 1
-                    if u < d:
-                        d = u
+                    d = min(d, padded[r + 2, c + 1] + 1)
                 if c < w - 1:
-                    u = padded[r + 1, c + 2] + 1
-                    if u < d:
-                        d = u
+                    d = min(d, padded[r + 1, c + 2] + 1)
                 padded[r + 1, c + 1] = d
     for r in range(h):
         for c in range(w):
