@@ -339,9 +339,7 @@ def peel_padded_kernel(classes, black, red, white):
     for r in range(h):
         for c in range(w):
             v = classes[r, c]
-            if v == black:
-                padded[r + 1, c + 1] = 0
-            elif v == red:
+            if v == red:
                 if r == 0 or c == 0 or r == h - 1 or c == w - 1:
                     suspect = True
                 else:
@@ -354,7 +352,7 @@ def peel_padded_kernel(classes, black, red, white):
                 if c > 0:
                     d = min(d, padded[r + 1, c] + 1)
                 padded[r + 1, c + 1] = d
-            else:
+            elif v != black:  # black stays at distance 0
                 padded[r + 1, c + 1] = big
     # backward pass, then layer numbers: black 1, red distance + 1, others 0
     for r in range(h - 1, -1, -1):
