@@ -131,6 +131,7 @@ import sys
 import threading
 import time
 from collections import deque
+from contextlib import AbstractContextManager
 from dataclasses import dataclass
 from typing import Any, Iterable, Iterator, Sequence
 
@@ -185,7 +186,7 @@ class PortLog:
         return cls(t, p, v)
 
 
-class MaximusEmulator(_Program, _Hardware, _Uart):
+class MaximusEmulator(_Program, _Hardware, _Uart, AbstractContextManager):
     """The PIC firmware of seed 000 Appendix 1, served on a pseudo-terminal.
 
     Use :func:`start_emulator` to create and start one.  The firmware's program, the board it drives and
@@ -291,9 +292,6 @@ class MaximusEmulator(_Program, _Hardware, _Uart):
         """Press the reset button: the firmware starts again at ``main()`` and prints its banner."""
         self._reset_event.set()
         self._wake.set()
-
-    def __enter__(self) -> "MaximusEmulator":
-        return self
 
     def __exit__(self, *exc: object) -> None:
         self.stop()
