@@ -1,4 +1,5 @@
-"""Atomic file writes: a failed run never leaves a half-written output behind."""
+"""File helpers: atomic writes (a failed run never leaves a half-written output behind) and text reads
+whose failures are one-line parse errors."""
 from __future__ import annotations
 
 import glob
@@ -7,9 +8,9 @@ import secrets
 import time
 from pathlib import Path
 
-from .errors import CamError
+from .errors import CamError, ParseError
 
-__all__ = ["atomic_write_bytes", "atomic_write_text"]
+__all__ = ["atomic_write_bytes", "atomic_write_text", "read_text"]
 
 _NEW_FILE_MODE = 0o666
 """Mode asked for a new output; the process umask takes its bits away (0o644 under umask 022), as for open()."""
@@ -84,3 +85,21 @@ def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> Path:
 def atomic_write_text(path: str | os.PathLike, text: str) -> Path:
     """Write ``text`` (UTF-8) to ``path`` atomically; see :func:`atomic_write_bytes`."""
     return atomic_write_bytes(path, text.encode("utf-8"))
+
+
+def read_text(path: str | os.PathLike, *, not_text: str) -> tuple[Path, str]:
+    """``(path, text)`` of a UTF-8 text file.
+
+    Raises:
+        ParseError: ``"{path}: file not found"``, ``"{path}: cannot read (...)"``, or
+            ``"{path}:1: {not_text}"`` when the bytes are not UTF-8.
+    """
+    p = Path(path)
+    try:
+        return p, p.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise ParseError(f"{p}: file not found") from None
+    except UnicodeDecodeError:
+        raise ParseError(f"{p}:1: {not_text}") from None
+    except OSError as exc:
+        raise ParseError(f"{p}: cannot read ({exc.strerror or exc})") from None

@@ -172,6 +172,84 @@ def _layer_order(lay, n_layers, bounds):
 
 
 @njit(cache=True)
+def _layer_bounds(lay):
+    """``(n_layers, first, bounds)`` of a layer map: layer k's first pixel in scan order is ``first[k]``
+    and its pixels are ``bounds[k]:bounds[k + 1]`` of :func:`_layer_order`."""
+    size = lay.shape[0]
+    n_layers = 0
+    for i in range(size):
+        if lay[i] > n_layers:
+            n_layers = lay[i]
+    counts = np.zeros(n_layers + 2, np.int64)
+    first = np.full(n_layers + 2, -1, np.int64)
+    for i in range(size):
+        k = lay[i]
+        if k > 0:
+            if counts[k] == 0:
+                first[k] = i
+            counts[k] += 1
+    bounds = np.zeros(n_layers + 2, np.int64)
+    for k in range(2, n_layers + 2):
+        bounds[k] = bounds[k - 1] + counts[k - 1]
+    return n_layers, first, bounds
+
+
+@njit(cache=True)
+def _nearest(lay, order, lo, hi, wp, row, col, ring_of, ring):
+    """The untraced pixel of ``order[lo:hi]`` nearest to (``row``, ``col``) of the padded image (ties: the
+    first in scan order); only pixels flood-filled as ``ring`` when ``ring > 0``.  -1 if there is none."""
+    best = np.int64(1) << 62
+    s = -1
+    for t in range(lo, hi):
+        p = order[t]
+        if lay[p] > 0 and (ring == 0 or ring_of[p] == ring):
+            dr = p // wp - row
+            dc = p % wp - col
+            d2 = dr * dr + dc * dc
+            if d2 < best:
+                best = d2
+                s = p
+    return s
+
+
+@njit(cache=True)
+def _walk_layer(lay, k, cur, cr, cc, offsets, drow, dcol, xy, n_path):
+    """Trace from the untraced pixel ``cur`` (row ``cr``, column ``cc`` of the padded image) of layer ``k``:
+    mark it, append it to ``xy`` at ``n_path``, and go on greedily in the Figure 4.15 order within the layer.
+
+    Returns ``(cur, cr, cc, n_path)``: the pixel where the walk stopped and the new path length.
+    """
+    m = offsets.shape[0]
+    moved = True
+    while moved:
+        lay[cur] = -k
+        xy[n_path, 0] = cc - 1
+        xy[n_path, 1] = cr - 1
+        n_path += 1
+        moved = False
+        j = 0
+        while j < m and not moved:
+            q = cur + offsets[j]
+            if lay[q] == k:
+                cr += drow[j]
+                cc += dcol[j]
+                cur = q
+                moved = True
+            j += 1
+    return cur, cr, cc, n_path
+
+
+@njit(cache=True)
+def _grown(ring_starts, ring_levels, n_rings):
+    """The ring arrays with twice the room, holding their first ``n_rings`` entries."""
+    grown_s = np.empty(2 * ring_levels.shape[0] + 1, np.int64)
+    grown_s[:n_rings] = ring_starts[:n_rings]
+    grown_l = np.empty(2 * ring_levels.shape[0], np.int64)
+    grown_l[:n_rings] = ring_levels[:n_rings]
+    return grown_s, grown_l
+
+
+@njit(cache=True)
 def trace_layers_kernel(layer_flat, wp, offsets, drow, dcol):
     """Trace every layer of a padded, flattened layer map into rings (see :mod:`.peel3d`).
 
@@ -185,134 +263,59 @@ def trace_layers_kernel(layer_flat, wp, offsets, drow, dcol):
     and as (row, column) steps, so a pixel's row and column are carried along the walk.
     """
     lay = layer_flat
-    size = lay.shape[0]
-    n_layers = 0
-    for i in range(size):
-        if lay[i] > n_layers:
-            n_layers = lay[i]
-    counts = np.zeros(n_layers + 2, np.int64)
-    first = np.full(n_layers + 2, -1, np.int64)  # each layer's first pixel in scan order
-    for i in range(size):
-        k = lay[i]
-        if k > 0:
-            if counts[k] == 0:
-                first[k] = i
-            counts[k] += 1
-    bounds = np.zeros(n_layers + 2, np.int64)  # layer k's pixels are order[bounds[k]:bounds[k + 1]]
-    for k in range(2, n_layers + 2):
-        bounds[k] = bounds[k - 1] + counts[k - 1]
+    n_layers, first, bounds = _layer_bounds(lay)
     n_px = bounds[n_layers + 1]
-    order = np.empty(0, np.int32)
-    have_order = False
+    order = np.empty(0, np.int32)  # _layer_order, made on first need
     ring_of = np.empty(0, np.int32)  # flood-fill marks by ring number (from 1), made on first need
     stack = np.empty(0, np.int32)
     xy = np.empty((n_px, 2), np.int32)
-    cap = 1024
-    ring_starts = np.empty(cap + 1, np.int64)  # grown as needed: rings are few next to pixels
-    ring_levels = np.empty(cap, np.int64)
+    ring_starts = np.empty(1024 + 1, np.int64)  # grown as needed: rings are few next to pixels
+    ring_levels = np.empty(1024, np.int64)
     n_path = 0
     n_rings = 0
     tool = -1
     for k in range(1, n_layers + 1):
         lo = bounds[k]
         hi = bounds[k + 1]
-        if lo == hi:
-            continue
-        first_ring = True
         remaining = hi - lo
+        s = first[k]  # a layer's first ring starts at its first pixel in scan order
         while remaining > 0:
-            if first_ring:
-                s = first[k]
-                first_ring = False
-            else:
-                # the ring of the untraced pixel nearest the tool (ties: first in scan order)
-                if not have_order:
-                    order = _layer_order(lay, n_layers, bounds)
-                    have_order = True
-                best = np.int64(1) << 62
-                s = -1
-                tr = tool // wp
-                tc = tool % wp
-                for t in range(lo, hi):
-                    p = order[t]
-                    if lay[p] > 0:
-                        dr = p // wp - tr
-                        dc = p % wp - tc
-                        d2 = dr * dr + dc * dc
-                        if d2 < best:
-                            best = d2
-                            s = p
-            if n_rings == cap:
-                cap *= 2
-                grown_s = np.empty(cap + 1, np.int64)
-                grown_s[:n_rings] = ring_starts[:n_rings]
-                grown_l = np.empty(cap, np.int64)
-                grown_l[:n_rings] = ring_levels[:n_rings]
-                ring_starts, ring_levels = grown_s, grown_l
+            if n_rings == ring_levels.shape[0]:
+                ring_starts, ring_levels = _grown(ring_starts, ring_levels, n_rings)
             ring_starts[n_rings] = n_path
             ring_levels[n_rings] = k
             n_rings += 1
-            ring = n_rings
             flooded = False
             ring_left = 0
             cur = s
             cr = cur // wp
             cc = cur % wp
             while True:
-                lay[cur] = -k
-                xy[n_path, 0] = cc - 1
-                xy[n_path, 1] = cr - 1
-                n_path += 1
-                remaining -= 1
-                ring_left -= 1
-                # greedy walk in the Figure 4.15 order, within this layer
-                while True:
-                    moved = False
-                    for j in range(offsets.shape[0]):
-                        q = cur + offsets[j]
-                        if lay[q] == k:
-                            lay[q] = -k
-                            cr += drow[j]
-                            cc += dcol[j]
-                            xy[n_path, 0] = cc - 1
-                            xy[n_path, 1] = cr - 1
-                            n_path += 1
-                            remaining -= 1
-                            ring_left -= 1
-                            cur = q
-                            moved = True
-                            break
-                    if not moved:
-                        break
+                n_before = n_path
+                cur, cr, cc, n_path = _walk_layer(lay, k, cur, cr, cc, offsets, drow, dcol, xy, n_path)
+                remaining -= n_path - n_before
+                ring_left -= n_path - n_before
                 if remaining == 0:
                     break
                 if not flooded:
                     if ring_of.shape[0] == 0:
-                        ring_of = np.zeros(size, np.int32)
+                        ring_of = np.zeros(lay.shape[0], np.int32)
                         stack = np.empty(n_px + 1, np.int32)
-                    ring_left = _flood_ring(lay, ring_of, s, k, ring, wp, stack)
+                    ring_left = _flood_ring(lay, ring_of, s, k, n_rings, wp, stack)
                     flooded = True
                 if ring_left == 0:
                     break
                 # pixels of this ring left behind: go on from the one nearest the tool
-                if not have_order:
+                if order.shape[0] == 0:
                     order = _layer_order(lay, n_layers, bounds)
-                    have_order = True
-                best = np.int64(1) << 62
-                nxt = -1
-                for t in range(lo, hi):
-                    p = order[t]
-                    if lay[p] > 0 and ring_of[p] == ring:
-                        dr = p // wp - cr
-                        dc = p % wp - cc
-                        d2 = dr * dr + dc * dc
-                        if d2 < best:
-                            best = d2
-                            nxt = p
-                cur = nxt
+                cur = _nearest(lay, order, lo, hi, wp, cr, cc, ring_of, n_rings)
                 cr = cur // wp
                 cc = cur % wp
             tool = cur
+            if remaining > 0:  # the next ring: the one of the untraced pixel nearest the tool
+                if order.shape[0] == 0:
+                    order = _layer_order(lay, n_layers, bounds)
+                s = _nearest(lay, order, lo, hi, wp, tool // wp, tool % wp, ring_of, 0)
     ring_starts[n_rings] = n_path
     return xy, ring_starts[: n_rings + 1].copy(), ring_levels[:n_rings].copy()
 
@@ -336,9 +339,7 @@ def peel_padded_kernel(classes, black, red, white):
     for r in range(h):
         for c in range(w):
             v = classes[r, c]
-            if v == black:
-                padded[r + 1, c + 1] = 0
-            elif v == red:
+            if v == red:
                 if r == 0 or c == 0 or r == h - 1 or c == w - 1:
                     suspect = True
                 else:
@@ -347,15 +348,11 @@ def peel_padded_kernel(classes, black, red, white):
                             suspect = True
                 d = big
                 if r > 0:
-                    u = padded[r, c + 1] + 1
-                    if u < d:
-                        d = u
+                    d = min(d, padded[r, c + 1] + 1)
                 if c > 0:
-                    u = padded[r + 1, c] + 1
-                    if u < d:
-                        d = u
+                    d = min(d, padded[r + 1, c] + 1)
                 padded[r + 1, c + 1] = d
-            else:
+            elif v != black:  # black stays at distance 0
                 padded[r + 1, c + 1] = big
     # backward pass, then layer numbers: black 1, red distance + 1, others 0
     for r in range(h - 1, -1, -1):
@@ -364,13 +361,9 @@ def peel_padded_kernel(classes, black, red, white):
             v = classes[r, c]
             if v == red:
                 if r < h - 1:
-                    u = padded[r + 2, c + 1] + 1
-                    if u < d:
-                        d = u
+                    d = min(d, padded[r + 2, c + 1] + 1)
                 if c < w - 1:
-                    u = padded[r + 1, c + 2] + 1
-                    if u < d:
-                        d = u
+                    d = min(d, padded[r + 1, c + 2] + 1)
                 padded[r + 1, c + 1] = d
     for r in range(h):
         for c in range(w):

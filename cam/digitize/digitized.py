@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ParseError
-from ..fileio import atomic_write_text
+from ..fileio import atomic_write_text, read_text
 from ..render.picture import depth_colours, encode_png
 
 __all__ = ["Digitized", "save_digitized", "load_digitized", "format_digitized", "parse_digitized"]
@@ -209,13 +209,5 @@ def parse_digitized(text: str, *, source: str = "<text>") -> Digitized:
 
 def load_digitized(path: str | os.PathLike) -> Digitized:
     """Load a digitized matrix written by :func:`save_digitized` (validated; errors name file:line)."""
-    p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise ParseError(f"{p}: file not found") from None
-    except UnicodeDecodeError:
-        raise ParseError(f"{p}:1: not a cam digitized matrix (not UTF-8 text)") from None
-    except OSError as exc:
-        raise ParseError(f"{p}: cannot read ({exc.strerror or exc})") from None
+    p, text = read_text(path, not_text="not a cam digitized matrix (not UTF-8 text)")
     return parse_digitized(text, source=str(p))

@@ -153,7 +153,11 @@ class HoleList:
 
 
 class _Reader:
-    """State of one pass over a drill file (internal)."""
+    """State of one pass over a drill file (internal): what the file said so far, and the holes read.
+
+    Statements go to the handlers of :data:`_WORD_HANDLERS` (by their first letter), header
+    commands to :func:`_command` and comments to :func:`_comment`.
+    """
 
     def __init__(self, source: str, units, digits, zeros) -> None:
         self.source = source
@@ -189,6 +193,10 @@ class _Reader:
 
     def warn(self, message: str) -> None:
         self.warnings.append(f"{self.where()}: {message}: '{self.text}'")
+
+    def not_excellon(self) -> ParseError:
+        return ParseError(f"{self.where()}: not an Excellon drill file (this line is not an Excellon "
+                          f"statement): '{self.text[:60]}'")
 
     # -- number format ----------------------------------------------------------------------
     def _setting(self, name: str):
@@ -259,34 +267,8 @@ class _Reader:
             body = body.ljust(n_int + n_frac, "0")
         return sign * (int(body) * scale) / 10 ** n_frac
 
-    # -- statements -----------------------------------------------------------------------------
-    def comment(self, text: str) -> None:
-        m = _KICAD_FORMAT.search(text)
-        if m:
-            a, b, notation, units, zeros = m.groups()
-            self.units = units.lower()
-            self.incremental = notation.lower() == "incremental"
-            if a != "-" and b != "-":
-                self.digits = self._digits(a, b)
-            z = zeros.strip().lower()
-            if z.startswith("suppress leading") or z.startswith("keep"):
-                self.zeros = "TZ"
-            elif z.startswith("suppress trailing"):
-                self.zeros = "LZ"
-            return
-        m = _FILE_FORMAT.search(text)
-        if m:
-            self.digits = self._digits(*m.groups())
-            return
-        m = _SIEMENS_FORMAT.search(text)
-        if m:
-            a, b, notation, units, zeros = m.groups()
-            self.digits = self._digits(a, b)
-            self.incremental = notation.lower() == "incremental"
-            self.units = "inch" if units.lower() == "inch" else "metric"
-            self.zeros = "LZ" if zeros.lower() == "leading" else "TZ"
-
-    def _digits(self, a: str, b: str) -> tuple[int, int]:
+    def digits_of(self, a: str, b: str) -> tuple[int, int]:
+        """``(integer, fraction)`` digit counts from their text; a ParseError if out of range."""
         try:
             digits = int(a), int(b)
         except ValueError:
@@ -295,41 +277,60 @@ class _Reader:
             raise self.error(f"bad digit format {a}:{b}")
         return digits
 
-    def command(self, line: str) -> bool:
-        """Header style commands (``METRIC,TZ``, ``FMAT,2``, ``VER,1``, ...); False if ``line`` is not one."""
-        head, comma, rest = line.partition(",")
-        args = rest.split(",") if comma else []
-        if re.fullmatch(r"M[0-9]+", head):  # M47,message / M97,text
-            self.m_word([("M", head[1:], 1)])
-            return True
-        if head in ("METRIC", "INCH"):
-            self.units = "metric" if head == "METRIC" else "inch"
-            for a in args:
-                if a in ("LZ", "TZ"):
-                    self.zeros = a
-                elif re.fullmatch(r"0*\.0*", a) and a != ".":
-                    i, _, f = a.partition(".")
-                    self.digits = self._digits(str(len(i)), str(len(f)))
-                elif a:
-                    raise self.error(f"unknown {head} option '{a}'")
-        elif head == "FMAT":
-            if args not in (["1"], ["2"]):
-                raise self.error("FMAT takes 1 or 2")
-            self.fmat = int(args[0])
-        elif head == "ICI":
-            self.incremental = not args or args[0] != "OFF"
-        elif head in _QUIET_COMMANDS:
-            pass
-        elif not self.seen_excellon or not re.fullmatch(r"[A-Z][A-Z0-9]*", head):
-            return False
-        else:
-            self.warn(f"unknown header command {head} ignored")
-        self.seen_excellon = True
-        return True
+    # -- words and positions ----------------------------------------------------------------
+    def integer(self, word) -> int:
+        letter, text, col = word
+        if not re.fullmatch(r"[+]?[0-9]+", text):
+            raise self.error(f"{letter} needs a whole number, got '{text}'", col)
+        return int(text)
 
-    def not_excellon(self) -> ParseError:
-        return ParseError(f"{self.where()}: not an Excellon drill file (this line is not an Excellon "
-                          f"statement): '{self.text[:60]}'")
+    def xy(self, words) -> tuple[float | None, float | None]:
+        x = y = None
+        for letter, text, col in words:
+            if letter == "X" and x is None:
+                x = self.value_mm(text, letter, col)
+            elif letter == "Y" and y is None:
+                y = self.value_mm(text, letter, col)
+            else:
+                raise self.error(f"unexpected {letter}{text}", col)
+        return x, y
+
+    def move(self, words) -> tuple[float, float]:
+        x, y = self.xy(words)
+        if self.incremental:
+            self.pos_mm[0] += x or 0.0
+            self.pos_mm[1] += y or 0.0
+        else:
+            if x is not None:
+                self.pos_mm[0] = self.zero_mm[0] + x
+            if y is not None:
+                self.pos_mm[1] = self.zero_mm[1] + y
+        return self.pos_mm[0], self.pos_mm[1]
+
+    def hole(self) -> None:
+        if self.tool is None:
+            raise self.error("a hole before any tool is selected")
+        self.holes.append((self.pos_mm[0], self.pos_mm[1]))
+        self.hole_tool.append(self.tool)
+        self.hole_line.append(self.lineno)
+
+    # -- one line -----------------------------------------------------------------------------------
+    def line(self, lineno: int, raw: str) -> None:
+        self.lineno = lineno
+        self.text = raw.strip()
+        code, semi, note = self.text.partition(";")
+        if semi:
+            _comment(self, note)
+        code = "".join(code.split()).upper()
+        if code.startswith("/"):
+            code = code[1:]  # block delete mark: the machine runs the line anyway unless told
+        if not code:
+            return
+        if self.state == "end":
+            if code != "%":  # a tape end mark after M30 is common and harmless
+                self.after_end.append(lineno)
+            return
+        self.statement(code)
 
     def statement(self, line: str) -> None:
         if line == "%":
@@ -340,7 +341,7 @@ class _Reader:
             self.seen_excellon = True
             return
         if "," in line or line.isalpha() or line == "OM48" or re.fullmatch(r"M[0-9]+,.*", line):
-            if self.command(line):
+            if _command(self, line):
                 return
             if not self.seen_excellon:
                 raise self.not_excellon()
@@ -359,16 +360,9 @@ class _Reader:
         if not self.seen_excellon and any(w[0] not in _LETTERS for w in words):
             raise self.not_excellon()
         letter = words[0][0]
-        if letter in "XY":
-            self.coordinates(words)
-        elif letter == "T":
-            self.tool_word(words)
-        elif letter == "G":
-            self.g_word(words)
-        elif letter == "M":
-            self.m_word(words)
-        elif letter == "R":
-            self.repeat(words)
+        handler = _WORD_HANDLERS.get(letter)
+        if handler is not None:
+            handler(self, words)
         elif letter in "FS" and all(w[0] in "FS" for w in words):
             self.integer(words[0])  # feed / spindle speed: nothing to drill
         else:
@@ -376,204 +370,241 @@ class _Reader:
                 raise self.not_excellon()
             raise self.error("unknown statement")
 
-    def integer(self, word) -> int:
-        letter, text, col = word
-        if not re.fullmatch(r"[+]?[0-9]+", text):
-            raise self.error(f"{letter} needs a whole number, got '{text}'", col)
-        return int(text)
 
-    def _xy(self, words) -> tuple[float | None, float | None]:
-        x = y = None
-        for letter, text, col in words:
-            if letter == "X" and x is None:
-                x = self.value_mm(text, letter, col)
-            elif letter == "Y" and y is None:
-                y = self.value_mm(text, letter, col)
-            else:
-                raise self.error(f"unexpected {letter}{text}", col)
-        return x, y
+# ---------------------------------------------------------------------- format hints in comments
+def _kicad_format(r: _Reader, m: re.Match) -> None:
+    a, b, notation, units, zeros = m.groups()
+    r.units = units.lower()
+    r.incremental = notation.lower() == "incremental"
+    if a != "-" and b != "-":
+        r.digits = r.digits_of(a, b)
+    z = zeros.strip().lower()
+    if z.startswith("suppress leading") or z.startswith("keep"):
+        r.zeros = "TZ"
+    elif z.startswith("suppress trailing"):
+        r.zeros = "LZ"
 
-    def move(self, words) -> tuple[float, float]:
-        x, y = self._xy(words)
-        if self.incremental:
-            self.pos_mm[0] += x or 0.0
-            self.pos_mm[1] += y or 0.0
-        else:
-            if x is not None:
-                self.pos_mm[0] = self.zero_mm[0] + x
-            if y is not None:
-                self.pos_mm[1] = self.zero_mm[1] + y
-        return self.pos_mm[0], self.pos_mm[1]
 
-    def hole(self) -> None:
-        if self.tool is None:
-            raise self.error("a hole before any tool is selected")
-        self.holes.append((self.pos_mm[0], self.pos_mm[1]))
-        self.hole_tool.append(self.tool)
-        self.hole_line.append(self.lineno)
+def _file_format(r: _Reader, m: re.Match) -> None:
+    r.digits = r.digits_of(*m.groups())
 
-    def coordinates(self, words) -> None:
-        self.seen_excellon = True
-        if self.state in ("start", "header"):
-            self.state = "body"  # holes inside the header: many files do it
-        g = [i for i, w in enumerate(words) if w[0] == "G"]
-        if g:
-            i = g[0]
-            code = self.integer(words[i])
-            if code != 85:
-                raise self.error(f"unexpected G{words[i][1]} after coordinates", words[i][2])
-            self.move(words[:i])
-            start = tuple(self.pos_mm)
-            self.move(words[i + 1:])
-            self.warn(f"slot (G85) from X{start[0]:.3f} Y{start[1]:.3f} to X{self.pos_mm[0]:.3f} "
-                      f"Y{self.pos_mm[1]:.3f} mm is not drilled: left out")
+
+def _siemens_format(r: _Reader, m: re.Match) -> None:
+    a, b, notation, units, zeros = m.groups()
+    r.digits = r.digits_of(a, b)
+    r.incremental = notation.lower() == "incremental"
+    r.units = "inch" if units.lower() == "inch" else "metric"
+    r.zeros = "LZ" if zeros.lower() == "leading" else "TZ"
+
+
+_COMMENT_HANDLERS = ((_KICAD_FORMAT, _kicad_format), (_FILE_FORMAT, _file_format), (_SIEMENS_FORMAT, _siemens_format))
+"""Format hints that CAD programs write in comments, tried in order; the first that matches is read."""
+
+
+def _comment(r: _Reader, text: str) -> None:
+    for pattern, handler in _COMMENT_HANDLERS:
+        m = pattern.search(text)
+        if m:
+            handler(r, m)
             return
-        self.move(words)
-        if self.state == "route":
-            return
-        self.hole()
 
-    def tool_word(self, words) -> None:
-        self.seen_excellon = True
-        number = self.integer(words[0])
-        params = {}
-        for letter, text, col in words[1:]:
-            if letter not in _TOOL_PARAMS or letter in params:
-                raise self.error(f"unexpected {letter}{text} in a tool definition", col)
-            params[letter] = (text, col)
-        if not params:  # selection
-            if number == 0:
-                self.tool = None
-                return
-            if number not in self.tools:
-                raise self.error(f"tool T{number} is selected but never defined")
-            self.tool = number
-            return
-        if "C" not in params:
-            if number in self.tools:  # T1F200S100 in the body: feeds and speeds of a known tool
-                if self.state != "header":
-                    self.tool = number
-                return
-            raise self.error(f"tool T{number} is defined without a diameter (C)")
-        text, col = params["C"]
-        if not _NUMBER.fullmatch(text):
-            raise self.error(f"tool T{number} has a bad diameter '{text}'", col)
-        dia_mm = self.value_mm(text, "C", col)
-        if not math.isfinite(dia_mm) or dia_mm <= 0:
-            raise self.error(f"tool T{number} has a bad diameter {text} (must be > 0)", col)
+
+# ---------------------------------------------------------------------- statements
+def _command(r: _Reader, line: str) -> bool:
+    """Header style commands (``METRIC,TZ``, ``FMAT,2``, ``VER,1``, ...); False if ``line`` is not one."""
+    head, comma, rest = line.partition(",")
+    args = rest.split(",") if comma else []
+    if re.fullmatch(r"M[0-9]+", head):  # M47,message / M97,text
+        _m_word(r, [("M", head[1:], 1)])
+        return True
+    if head in ("METRIC", "INCH"):
+        _units_command(r, head, args)
+    elif head == "FMAT":
+        if args not in (["1"], ["2"]):
+            raise r.error("FMAT takes 1 or 2")
+        r.fmat = int(args[0])
+    elif head == "ICI":
+        r.incremental = not args or args[0] != "OFF"
+    elif head in _QUIET_COMMANDS:
+        pass
+    elif not r.seen_excellon or not re.fullmatch(r"[A-Z][A-Z0-9]*", head):
+        return False
+    else:
+        r.warn(f"unknown header command {head} ignored")
+    r.seen_excellon = True
+    return True
+
+
+def _units_command(r: _Reader, head: str, args: list[str]) -> None:
+    """``METRIC`` / ``INCH`` with ``LZ`` / ``TZ`` and a ``000.000`` digit format, in any order."""
+    r.units = "metric" if head == "METRIC" else "inch"
+    for a in args:
+        if a in ("LZ", "TZ"):
+            r.zeros = a
+        elif re.fullmatch(r"0*\.0*", a) and a != ".":
+            i, _, f = a.partition(".")
+            r.digits = r.digits_of(str(len(i)), str(len(f)))
+        elif a:
+            raise r.error(f"unknown {head} option '{a}'")
+
+
+def _coordinates(r: _Reader, words) -> None:
+    r.seen_excellon = True
+    if r.state in ("start", "header"):
+        r.state = "body"  # holes inside the header: many files do it
+    g = [i for i, w in enumerate(words) if w[0] == "G"]
+    if g:
+        i = g[0]
+        code = r.integer(words[i])
+        if code != 85:
+            raise r.error(f"unexpected G{words[i][1]} after coordinates", words[i][2])
+        r.move(words[:i])
+        start = tuple(r.pos_mm)
+        r.move(words[i + 1:])
+        r.warn(f"slot (G85) from X{start[0]:.3f} Y{start[1]:.3f} to X{r.pos_mm[0]:.3f} "
+               f"Y{r.pos_mm[1]:.3f} mm is not drilled: left out")
+        return
+    r.move(words)
+    if r.state == "route":
+        return
+    r.hole()
+
+
+def _tool_word(r: _Reader, words) -> None:
+    r.seen_excellon = True
+    number = r.integer(words[0])
+    params = {}
+    for letter, text, col in words[1:]:
+        if letter not in _TOOL_PARAMS or letter in params:
+            raise r.error(f"unexpected {letter}{text} in a tool definition", col)
+        params[letter] = (text, col)
+    if not params:  # selection
         if number == 0:
-            raise self.error("tool T0 cannot be defined (T0 unloads the tool)")
-        if number in self.tools and abs(self.tools[number] - dia_mm) > 1e-9:
-            self.warn(f"tool T{number} redefined: {self.tools[number]:.4f} mm -> {dia_mm:.4f} mm")
-        self.tools[number] = dia_mm
-        if self.state in ("body", "route"):
-            self.tool = number  # a T word in the body selects the tool (seed 000 §8.1, Table 8-1)
-        if self.state == "start":
-            self.state = "header"
+            r.tool = None
+            return
+        if number not in r.tools:
+            raise r.error(f"tool T{number} is selected but never defined")
+        r.tool = number
+        return
+    if "C" not in params:
+        if number in r.tools:  # T1F200S100 in the body: feeds and speeds of a known tool
+            if r.state != "header":
+                r.tool = number
+            return
+        raise r.error(f"tool T{number} is defined without a diameter (C)")
+    _define_tool(r, number, *params["C"])
 
-    def g_word(self, words) -> None:
-        code = self.integer(words[0])
-        rest = words[1:]
-        if code in (0, 1, 2, 3):
-            if self.state != "route":
-                self.warn("routing (G00/G01/G02/G03 with M15/M16) is not drilled: left out up to the next G05")
-            self.state = "route"
-            if rest:
-                self._route_move(rest)
-        elif code in (5, 81):
-            if self.state in ("start", "header", "route"):
-                self.state = "body"
-            if rest:
-                self.coordinates(rest)
-        elif code in (90, 91):
-            if rest:
-                raise self.error(f"G{code} takes no coordinates", rest[0][2])
-            self.incremental = code == 91
-        elif code == 93:
-            x, y = self._xy(rest)
-            self.zero_mm = (x or 0.0, y or 0.0)
-        elif code in (32, 33):
-            self.warn(f"routed circle (G{code}) is not drilled: left out")
-        elif code == 85:
-            raise self.error("G85 slot without a start point")
-        elif code in _HARMLESS_G and not rest:
-            pass
-        elif not self.seen_excellon:
-            raise self.not_excellon()
-        elif rest:
-            raise self.error(f"unsupported G{code} with coordinates")
-        else:
-            self.warn(f"G{code} ignored")
-        self.seen_excellon = True
 
-    def _route_move(self, words) -> None:
-        allowed = [w for w in words if w[0] in "XY"]
-        others = [w for w in words if w[0] not in "XYAIJ"]
-        if others:
-            raise self.error(f"unexpected {others[0][0]}{others[0][1]} in a routing move", others[0][2])
-        self.move(allowed)
+def _define_tool(r: _Reader, number: int, text: str, col: int) -> None:
+    """``T<number>C<text>``: a tool's diameter; in the body the definition also selects the tool."""
+    if not _NUMBER.fullmatch(text):
+        raise r.error(f"tool T{number} has a bad diameter '{text}'", col)
+    dia_mm = r.value_mm(text, "C", col)
+    if not math.isfinite(dia_mm) or dia_mm <= 0:
+        raise r.error(f"tool T{number} has a bad diameter {text} (must be > 0)", col)
+    if number == 0:
+        raise r.error("tool T0 cannot be defined (T0 unloads the tool)")
+    if number in r.tools and abs(r.tools[number] - dia_mm) > 1e-9:
+        r.warn(f"tool T{number} redefined: {r.tools[number]:.4f} mm -> {dia_mm:.4f} mm")
+    r.tools[number] = dia_mm
+    if r.state in ("body", "route"):
+        r.tool = number  # a T word in the body selects the tool (seed 000 §8.1, Table 8-1)
+    if r.state == "start":
+        r.state = "header"
 
-    def m_word(self, words) -> None:
-        code = self.integer(words[0])
-        rest = words[1:]
-        if code == 48:
-            if self.holes or self.tool is not None:
-                self.warn("M48 (header start) after holes: ignored")
-            else:
-                self.state = "header"
-        elif code == 95:
-            self.state = "body"
-        elif code in (30, 0) or (code == 2 and self.fmat == 1 and not rest):
-            self.state = "end"
-        elif code == 2 and not rest:
-            self.warn("M02 (end of pattern in FMAT,2) without a pattern: read as the end of the program")
-            self.state = "end"
-        elif code in (71, 72):
-            self.units = "metric" if code == 71 else "inch"
-        elif code in (15, 16, 17):
-            pass  # plunge / retract in routing: the route itself is left out
-        elif code in (25, 1, 8) or code == 2:
-            raise self.error(f"repeated patterns (M25/M01/M02/M08) are not supported (M{words[0][1]})")
-        elif code in (97, 98):
-            self.warn(f"canned text (M{code}) is not drilled: left out")
-        elif code in _HARMLESS_M:
-            pass
-        elif not self.seen_excellon:
-            raise self.not_excellon()
-        else:
-            self.warn(f"M{code} ignored")
+
+def _g_word(r: _Reader, words) -> None:
+    code = r.integer(words[0])
+    rest = words[1:]
+    if code in (0, 1, 2, 3):
+        if r.state != "route":
+            r.warn("routing (G00/G01/G02/G03 with M15/M16) is not drilled: left out up to the next G05")
+        r.state = "route"
         if rest:
-            raise self.error(f"M{code} takes no coordinates", rest[0][2])
-        self.seen_excellon = True
+            _route_move(r, rest)
+    elif code in (5, 81):
+        if r.state in ("start", "header", "route"):
+            r.state = "body"
+        if rest:
+            _coordinates(r, rest)
+    elif code in (90, 91):
+        if rest:
+            raise r.error(f"G{code} takes no coordinates", rest[0][2])
+        r.incremental = code == 91
+    elif code == 93:
+        x, y = r.xy(rest)
+        r.zero_mm = (x or 0.0, y or 0.0)
+    elif code in (32, 33):
+        r.warn(f"routed circle (G{code}) is not drilled: left out")
+    elif code == 85:
+        raise r.error("G85 slot without a start point")
+    elif code in _HARMLESS_G and not rest:
+        pass
+    elif not r.seen_excellon:
+        raise r.not_excellon()
+    elif rest:
+        raise r.error(f"unsupported G{code} with coordinates")
+    else:
+        r.warn(f"G{code} ignored")
+    r.seen_excellon = True
 
-    def repeat(self, words) -> None:
-        count = self.integer(words[0])
-        if self.state == "route":
-            raise self.error("a repeated hole (R) while routing")
-        x, y = self._xy(words[1:])
-        for _ in range(count):
-            self.pos_mm[0] += x or 0.0
-            self.pos_mm[1] += y or 0.0
-            self.hole()
-        self.seen_excellon = True
 
-    # -- one line -----------------------------------------------------------------------------------
-    def line(self, lineno: int, raw: str) -> None:
-        self.lineno = lineno
-        self.text = raw.strip()
-        code, semi, note = self.text.partition(";")
-        if semi:
-            self.comment(note)
-        code = "".join(code.split()).upper()
-        if code.startswith("/"):
-            code = code[1:]  # block delete mark: the machine runs the line anyway unless told
-        if not code:
-            return
-        if self.state == "end":
-            if code != "%":  # a tape end mark after M30 is common and harmless
-                self.after_end.append(lineno)
-            return
-        self.statement(code)
+def _route_move(r: _Reader, words) -> None:
+    allowed = [w for w in words if w[0] in "XY"]
+    others = [w for w in words if w[0] not in "XYAIJ"]
+    if others:
+        raise r.error(f"unexpected {others[0][0]}{others[0][1]} in a routing move", others[0][2])
+    r.move(allowed)
+
+
+def _m_word(r: _Reader, words) -> None:
+    code = r.integer(words[0])
+    rest = words[1:]
+    if code == 48:
+        if r.holes or r.tool is not None:
+            r.warn("M48 (header start) after holes: ignored")
+        else:
+            r.state = "header"
+    elif code == 95:
+        r.state = "body"
+    elif code in (30, 0) or (code == 2 and r.fmat == 1 and not rest):
+        r.state = "end"
+    elif code == 2 and not rest:
+        r.warn("M02 (end of pattern in FMAT,2) without a pattern: read as the end of the program")
+        r.state = "end"
+    elif code in (71, 72):
+        r.units = "metric" if code == 71 else "inch"
+    elif code in (15, 16, 17):
+        pass  # plunge / retract in routing: the route itself is left out
+    elif code in (25, 1, 8) or code == 2:
+        raise r.error(f"repeated patterns (M25/M01/M02/M08) are not supported (M{words[0][1]})")
+    elif code in (97, 98):
+        r.warn(f"canned text (M{code}) is not drilled: left out")
+    elif code in _HARMLESS_M:
+        pass
+    elif not r.seen_excellon:
+        raise r.not_excellon()
+    else:
+        r.warn(f"M{code} ignored")
+    if rest:
+        raise r.error(f"M{code} takes no coordinates", rest[0][2])
+    r.seen_excellon = True
+
+
+def _repeat(r: _Reader, words) -> None:
+    count = r.integer(words[0])
+    if r.state == "route":
+        raise r.error("a repeated hole (R) while routing")
+    x, y = r.xy(words[1:])
+    for _ in range(count):
+        r.pos_mm[0] += x or 0.0
+        r.pos_mm[1] += y or 0.0
+        r.hole()
+    r.seen_excellon = True
+
+
+_WORD_HANDLERS = {"X": _coordinates, "Y": _coordinates, "T": _tool_word, "G": _g_word, "M": _m_word, "R": _repeat}
+"""Statements by their first letter (``F`` / ``S`` feeds and speeds are read and dropped)."""
 
 
 def _check_options(units, digits, zeros) -> None:

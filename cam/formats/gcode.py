@@ -21,10 +21,10 @@ import math
 import os
 import re
 from dataclasses import dataclass, field
-from pathlib import Path
 
 from ..choices import GCODE_SUFFIXES
 from ..errors import ParseError
+from ..fileio import read_text
 
 __all__ = ["GcodeMove", "GcodeProgram", "parse_gcode", "load_gcode", "GCODE_SUFFIXES"]
 
@@ -83,171 +83,207 @@ def _strip_comments(line: str, err) -> str:
     return "".join(out)
 
 
+@dataclass
+class _Modal:
+    """What a G-code program carries from one line to the next (mm, program frame)."""
+
+    pos: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])  # absolute program position
+    offset: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])  # G92: machine = program + offset
+    scale: float = 1.0  # 25.4 in G20
+    absolute: bool = True
+    motion: int | None = None  # modal motion: 0, 1, 2, 3
+    feed: float = 0.0
+    tool: int = 0
+
+
+def _line_words(body: str, err) -> tuple[list[float], list[float], dict[str, float]]:
+    """The G codes, the M codes and the other words (letter -> value) of one line without comments."""
+    leftover = _WORD.sub("", body).strip()
+    if leftover:
+        bad = leftover.split()[0]
+        if bad[:1].isalpha():
+            raise err(f"word '{bad}' has no number")
+        raise err(f"cannot read '{bad}'")
+    gs: list[float] = []
+    ms: list[float] = []
+    vals: dict[str, float] = {}
+    for m in _WORD.finditer(body):
+        k = m.group(1).upper()
+        v = float(m.group(2))
+        if k == "G":
+            gs.append(v)
+        elif k == "M":
+            ms.append(v)
+        elif k not in "XYZIJRFSTPN":
+            raise err(f"unsupported word '{m.group(0).replace(' ', '')}'")
+        elif k in vals:
+            raise err(f"word '{k}' appears twice")
+        else:
+            vals[k] = v
+    return gs, ms, vals
+
+
+def _g_codes(gs: list[float], st: _Modal, err) -> tuple[bool, bool]:
+    """Apply the modal G codes of one line; returns (dwell on this line, G92 on this line)."""
+    dwell = False
+    set_pos = False
+    for g in gs:
+        if g in (0, 1, 2, 3):
+            st.motion = int(g)
+        elif g == 4:
+            dwell = True
+        elif g == 17:
+            pass
+        elif g in (18, 19):
+            raise err(f"unsupported plane 'G{g:g}' (only G17, the XY plane)")
+        elif g == 20:
+            st.scale = 25.4
+        elif g == 21:
+            st.scale = 1.0
+        elif g == 90:
+            st.absolute = True
+        elif g == 91:
+            st.absolute = False
+        elif g == 92:
+            set_pos = True
+        elif g in _NOOP_G:
+            pass
+        else:
+            raise err(f"unsupported word 'G{g:g}'")
+    return dwell, set_pos
+
+
+def _m_codes(ms: list[float], st: _Modal, line_no: int, moves: list[GcodeMove], err) -> bool:
+    """Apply the M codes of one line (pauses join ``moves``); True at the end of the program."""
+    end_program = False
+    for mcode in ms:
+        if mcode in (3, 4, 5):
+            continue
+        if mcode == 6:
+            moves.append(GcodeMove("pause", line_no, tuple(st.pos), note=f"tool change: T{st.tool} (line {line_no})"))
+        elif mcode in (0, 1):
+            moves.append(GcodeMove("pause", line_no, tuple(st.pos),
+                                   note=f"program pause M{mcode:g} (line {line_no})"))
+        elif mcode in (2, 30):
+            end_program = True
+        else:
+            raise err(f"unsupported word 'M{mcode:g}'")
+    return end_program
+
+
+def _set_position(vals: dict[str, float], st: _Modal, err) -> None:
+    """G92: the named axes take the given program coordinates; the machine does not move."""
+    if not any(a in vals for a in "XYZ"):
+        raise err("G92 needs at least one of X, Y, Z")
+    for i, a in enumerate("XYZ"):
+        if a in vals:
+            machine = st.pos[i] + st.offset[i]
+            st.pos[i] = vals[a] * st.scale
+            st.offset[i] = machine - st.pos[i]
+
+
+def _arc_center(vals: dict[str, float], st: _Modal, target: list[float], err) -> tuple[float, float]:
+    """Centre (program frame, mm) of the G2/G3 arc from ``st.pos`` to ``target``, by R or by I/J."""
+    motion, scale = st.motion, st.scale
+    x0, y0 = st.pos[0], st.pos[1]
+    x1, y1 = target[0], target[1]
+    if "R" in vals:
+        if "I" in vals or "J" in vals:
+            raise err("give either R or I/J for an arc, not both")
+        r = vals["R"] * scale
+        chord = math.hypot(x1 - x0, y1 - y0)
+        if chord == 0:
+            raise err("an R arc needs an end point different from its start")
+        if abs(r) < chord / 2 - 1e-6 * max(1.0, chord):
+            raise err(f"arc radius {abs(r) / scale:g} is too small to reach the end point")
+        h = math.sqrt(max(0.0, r * r - chord * chord / 4))
+        mx, my = (x0 + x1) / 2, (y0 + y1) / 2
+        ux, uy = (x1 - x0) / chord, (y1 - y0) / chord
+        # the centre lies right of the travel direction for G2 with R > 0 (and G3 with R < 0),
+        # left of it otherwise; R > 0 picks the short arc, R < 0 the long one
+        if (motion == 2) == (r > 0):
+            return mx + h * uy, my - h * ux
+        return mx - h * uy, my + h * ux
+    if "I" not in vals and "J" not in vals:
+        raise err(f"G{motion} arc needs I/J or R")
+    cx, cy = x0 + vals.get("I", 0.0) * scale, y0 + vals.get("J", 0.0) * scale
+    r0, r1 = math.hypot(x0 - cx, y0 - cy), math.hypot(x1 - cx, y1 - cy)
+    if r0 == 0 or abs(r0 - r1) > max(0.002 * scale, 1e-3 * r0):
+        raise err(f"arc end point is not on the circle (radius {r0 / scale:g} at the start, "
+                  f"{r1 / scale:g} at the end)")
+    return cx, cy
+
+
+def _motion(vals: dict[str, float], axes: list[str], st: _Modal, line_no: int, err) -> GcodeMove | None:
+    """The move of one line in the modal motion mode (None if the line names no axis or arc word)."""
+    has_arc_words = any(k in vals for k in "IJR")
+    if not axes and not has_arc_words:
+        return None
+    if st.motion is None:
+        raise err("coordinates without a motion mode (G0, G1, G2 or G3)")
+    target = list(st.pos)
+    for i, a in enumerate("XYZ"):
+        if a in vals:
+            target[i] = vals[a] * st.scale if st.absolute else st.pos[i] + vals[a] * st.scale
+    machine_end = tuple(t + o for t, o in zip(target, st.offset))
+    if st.motion in (0, 1):
+        if has_arc_words:
+            raise err("I, J or R given without G2/G3")
+        if st.motion == 1 and st.feed <= 0:
+            raise err("G1 without a feed rate 'F'")
+        move = GcodeMove("rapid" if st.motion == 0 else "feed", line_no, machine_end, feed_mm_min=st.feed)
+    else:
+        if st.feed <= 0:
+            raise err(f"G{st.motion} without a feed rate 'F'")
+        cx, cy = _arc_center(vals, st, target, err)
+        move = GcodeMove("arc", line_no, machine_end, feed_mm_min=st.feed,
+                         center=(cx + st.offset[0], cy + st.offset[1]), clockwise=(st.motion == 2))
+    st.pos = target
+    return move
+
+
 def parse_gcode(text: str, *, source: str = "<gcode>") -> GcodeProgram:
     """Interpret G-code text into absolute moves in mm.
 
     Raises:
         ParseError: ``source:line: message "line text"`` for any unsupported or malformed word.
     """
-    lines = text.splitlines()
     moves: list[GcodeMove] = []
-    pos = [0.0, 0.0, 0.0]  # absolute program position, mm
-    offset = [0.0, 0.0, 0.0]  # G92: machine = program + offset
-    scale = 1.0  # 25.4 in G20
-    absolute = True
-    motion = None  # modal motion: 0, 1, 2, 3
-    feed = 0.0
-    tool = 0
+    st = _Modal()
     warnings: list[str] = []
-    for line_no, raw in enumerate(lines, start=1):
+    for line_no, raw in enumerate(text.splitlines(), start=1):
         def err(msg: str, line_no: int = line_no, raw: str = raw) -> ParseError:
             return ParseError(f'{source}:{line_no}: {msg} "{raw.strip()[:60]}"')
 
         body = _strip_comments(raw, err).strip()
         if not body or body == "%" or body.startswith("/"):
             continue
-        words: list[tuple[str, float, str]] = []
-        rest = body
-        for m in _WORD.finditer(body):
-            words.append((m.group(1).upper(), float(m.group(2)), m.group(0).replace(" ", "")))
-        leftover = _WORD.sub("", rest).strip()
-        if leftover:
-            bad = leftover.split()[0]
-            if bad[:1].isalpha():
-                raise err(f"word '{bad}' has no number")
-            raise err(f"cannot read '{bad}'")
-        gs = [v for k, v, _ in words if k == "G"]
-        ms = [v for k, v, _ in words if k == "M"]
-        vals: dict[str, float] = {}
-        for k, v, text_word in words:
-            if k in "GM":
-                continue
-            if k not in "XYZIJRFSTPN":
-                raise err(f"unsupported word '{text_word}'")
-            if k in vals:
-                raise err(f"word '{k}' appears twice")
-            vals[k] = v
-        dwell = False
-        set_pos = False
-        for g in gs:
-            if g in (0, 1, 2, 3):
-                motion = int(g)
-            elif g == 4:
-                dwell = True
-            elif g == 17:
-                pass
-            elif g in (18, 19):
-                raise err(f"unsupported plane 'G{g:g}' (only G17, the XY plane)")
-            elif g == 20:
-                scale = 25.4
-            elif g == 21:
-                scale = 1.0
-            elif g == 90:
-                absolute = True
-            elif g == 91:
-                absolute = False
-            elif g == 92:
-                set_pos = True
-            elif g in _NOOP_G:
-                pass
-            else:
-                raise err(f"unsupported word 'G{g:g}'")
+        gs, ms, vals = _line_words(body, err)
+        dwell, set_pos = _g_codes(gs, st, err)
         if "F" in vals:
             if vals["F"] <= 0:
                 raise err("feed 'F' must be > 0")
-            feed = vals["F"] * scale
+            st.feed = vals["F"] * st.scale
         if "T" in vals:
-            tool = int(vals["T"])
-        end_program = False
-        for mcode in ms:
-            if mcode in (3, 4, 5):
-                continue
-            if mcode == 6:
-                moves.append(GcodeMove("pause", line_no, tuple(pos), note=f"tool change: T{tool} (line {line_no})"))
-            elif mcode in (0, 1):
-                moves.append(GcodeMove("pause", line_no, tuple(pos), note=f"program pause M{mcode:g} (line {line_no})"))
-            elif mcode in (2, 30):
-                end_program = True
-            else:
-                raise err(f"unsupported word 'M{mcode:g}'")
+            st.tool = int(vals["T"])
+        end_program = _m_codes(ms, st, line_no, moves, err)
         if dwell:
             if "P" not in vals or vals["P"] < 0:
                 raise err("G4 needs a dwell time 'P' in seconds")
-            moves.append(GcodeMove("dwell", line_no, tuple(pos), seconds=vals["P"]))
+            moves.append(GcodeMove("dwell", line_no, tuple(st.pos), seconds=vals["P"]))
         axes = [a for a in "XYZ" if a in vals]
         if set_pos:
-            if not axes:
-                raise err("G92 needs at least one of X, Y, Z")
-            for i, a in enumerate("XYZ"):
-                if a in vals:
-                    machine = pos[i] + offset[i]
-                    pos[i] = vals[a] * scale
-                    offset[i] = machine - pos[i]
+            _set_position(vals, st, err)
             axes = []
         if end_program:
             break
-        has_arc_words = any(k in vals for k in "IJR")
-        if not axes and not has_arc_words:
-            continue
-        if motion is None:
-            raise err("coordinates without a motion mode (G0, G1, G2 or G3)")
-        target = list(pos)
-        for i, a in enumerate("XYZ"):
-            if a in vals:
-                target[i] = vals[a] * scale if absolute else pos[i] + vals[a] * scale
-        machine_end = tuple(t + o for t, o in zip(target, offset))
-        if motion in (0, 1):
-            if has_arc_words:
-                raise err("I, J or R given without G2/G3")
-            if motion == 1 and feed <= 0:
-                raise err("G1 without a feed rate 'F'")
-            moves.append(GcodeMove("rapid" if motion == 0 else "feed", line_no, machine_end, feed_mm_min=feed))
-        else:
-            if feed <= 0:
-                raise err(f"G{motion} without a feed rate 'F'")
-            x0, y0 = pos[0], pos[1]
-            x1, y1 = target[0], target[1]
-            if "R" in vals:
-                if "I" in vals or "J" in vals:
-                    raise err("give either R or I/J for an arc, not both")
-                r = vals["R"] * scale
-                chord = math.hypot(x1 - x0, y1 - y0)
-                if chord == 0:
-                    raise err("an R arc needs an end point different from its start")
-                if abs(r) < chord / 2 - 1e-6 * max(1.0, chord):
-                    raise err(f"arc radius {abs(r) / scale:g} is too small to reach the end point")
-                h = math.sqrt(max(0.0, r * r - chord * chord / 4))
-                mx, my = (x0 + x1) / 2, (y0 + y1) / 2
-                ux, uy = (x1 - x0) / chord, (y1 - y0) / chord
-                # the centre lies right of the travel direction for G2 with R > 0 (and G3 with R < 0),
-                # left of it otherwise; R > 0 picks the short arc, R < 0 the long one
-                if (motion == 2) == (r > 0):
-                    cx, cy = mx + h * uy, my - h * ux
-                else:
-                    cx, cy = mx - h * uy, my + h * ux
-            else:
-                if "I" not in vals and "J" not in vals:
-                    raise err(f"G{motion} arc needs I/J or R")
-                cx, cy = x0 + vals.get("I", 0.0) * scale, y0 + vals.get("J", 0.0) * scale
-                r0, r1 = math.hypot(x0 - cx, y0 - cy), math.hypot(x1 - cx, y1 - cy)
-                if r0 == 0 or abs(r0 - r1) > max(0.002 * scale, 1e-3 * r0):
-                    raise err(f"arc end point is not on the circle (radius {r0 / scale:g} at the start, "
-                              f"{r1 / scale:g} at the end)")
-            moves.append(GcodeMove("arc", line_no, machine_end, feed_mm_min=feed,
-                                   center=(cx + offset[0], cy + offset[1]), clockwise=(motion == 2)))
-        pos = target
+        move = _motion(vals, axes, st, line_no, err)
+        if move is not None:
+            moves.append(move)
     return GcodeProgram(moves, source, warnings)
 
 
 def load_gcode(path: str | os.PathLike) -> GcodeProgram:
     """Read and interpret a G-code file (errors name file:line)."""
-    p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8", errors="strict")
-    except FileNotFoundError:
-        raise ParseError(f"{p}: file not found") from None
-    except UnicodeDecodeError:
-        raise ParseError(f"{p}:1: not a G-code text file") from None
-    except OSError as exc:
-        raise ParseError(f"{p}: cannot read ({exc.strerror or exc})") from None
+    p, text = read_text(path, not_text="not a G-code text file")
     return parse_gcode(text, source=str(p))

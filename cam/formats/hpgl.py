@@ -43,6 +43,7 @@ Planning the cut (frames, depths, tool changes) is :mod:`cam.job.hpgl`.
 from __future__ import annotations
 
 import io
+import math
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -86,9 +87,26 @@ M_IDLE, M_MN1, M_PARAMS, M_SKIP, M_QUOTE, M_LABEL, M_DT, M_PE = range(8)
 # error codes
 (E_NONE, E_CHAR, E_MNEMONIC, E_NUMBER, E_EMPTY, E_TRAIL, E_EOF_COMMA, E_EOF_MNEMONIC, E_EOF_LABEL,
  E_EOF_STRING, E_ODD, E_SP) = range(12)
-# tokenizer state slots (int64)
+# tokenizer state slots (int64): kept from one chunk to the next ...
 (S_LINE, S_LSTART, S_BASE, S_TERM, S_RESUME, S_COFF, S_CLINE, S_CCOL, S_CONSUMED, S_NCMD, S_NPAR,
  S_ERR, S_ERRPOS, S_ERRLINE, S_ERRCOL, S_ERRAUX) = range(16)
+# ... and the current command's, used within one chunk (indices into the chunk)
+(S_CODE, S_CSTART, S_P0, S_EXPECT, S_SAFE, S_SAFE_LINE, S_SAFE_LSTART, S_PAIR_POS, S_PAIR_NP, S_PAIR_LINE,
+ S_PAIR_LSTART, S_NUM_START, S_NUM_END) = range(16, 29)
+N_SLOTS = 29
+# what _number found
+NUM_OK, NUM_MORE, NUM_BAD = range(3)
+
+_COMMAND_DTYPES = (np.int64, np.int64, np.int32, np.int32, np.int32, np.int32)
+"""Per command: mnemonic code, byte offset, line, column, first parameter, parameter count."""
+_PARAM_DTYPES = (np.float64, np.int32, np.int32)
+"""Per numeric parameter: value, line, column."""
+_POINT_DTYPES = (np.float64, np.float64, np.int32, np.int32, np.bool_, np.int32)
+"""Per pen-down point: x, y, line, column, stroke start, pen."""
+
+
+def _arrays(n: int, dtypes) -> tuple[np.ndarray, ...]:
+    return tuple(np.empty(n, t) for t in dtypes)
 
 
 @njit(cache=True)
@@ -118,269 +136,369 @@ def _known(code):
 
 
 @njit(cache=True)
-def _emit(c_code, c_off, c_line, c_col, c_p0, c_np, nc, code, off, line, col, p0, n_params):
-    """Record command ``nc`` (mnemonic code, byte offset, line, column, its parameters); return nc + 1."""
-    c_code[nc] = code
-    c_off[nc] = off
-    c_line[nc] = line
-    c_col[nc] = col
-    c_p0[nc] = p0
-    c_np[nc] = n_params
-    return nc + 1
+def _mode_of(code):
+    """The tokenizer mode after the mnemonic ``code``."""
+    if code == C_LB:
+        return M_LABEL
+    if code == C_DT:
+        return M_DT
+    if code == C_PE:
+        return M_PE
+    if _known(code):
+        return M_PARAMS
+    return M_SKIP
 
 
 @njit(cache=True)
-def _tokenize(buf, final, st, c_code, c_off, c_line, c_col, c_p0, c_np, p_val, p_line, p_col):
-    """Commands and numeric parameters of one chunk (see :func:`_chunks` for the contract)."""
+def _emit(c_code, c_off, c_line, c_col, c_p0, c_np, nc, st, npar):
+    """Record the current command (mnemonic code, byte offset, line, column in ``st``) with its parameters
+    ``st[S_P0]`` to ``npar`` as command ``nc``; return nc + 1."""
+    c_code[nc] = st[S_CODE]
+    c_off[nc] = st[S_COFF]
+    c_line[nc] = st[S_CLINE]
+    c_col[nc] = st[S_CCOL]
+    c_p0[nc] = st[S_P0]
+    c_np[nc] = npar - st[S_P0]
+    return nc + 1
+
+
+# The helpers that take arrays and run per command or per number are written so that numba can drop
+# the reference counting of those arrays (otherwise two atomic operations per array and call, which
+# more than doubled the tokenizer's time): their loops end by their condition (no return or break
+# inside), each array is last used in one place, and nothing on the way can raise -- hence _pow10 and
+# np.true_divide in _number, where ``10.0 ** n`` and ``/`` would each bring an error exit.  _number and
+# _params are inlined into the kernel (numba IR), so their calls cost nothing either.
+
+
+@njit(cache=True)
+def _pow10(exp):
+    """``10.0 ** exp`` for ``exp >= 0``, computed exactly as numba computes a float to an integer power."""
+    if exp > 0x10000:
+        return math.pow(10.0, float(exp))
+    r = 1.0
+    a = 10.0
+    while exp != 0:
+        if exp & 1:
+            r *= a
+        exp >>= 1
+        a *= a
+    return r
+
+
+@njit(cache=True, inline="always")
+def _number(buf, i, final):
+    """Read the number at ``buf[i]``: a sign, digits, a point, digits.
+
+    Returns ``(status, value, j)``: NUM_OK with ``j`` just after the number; NUM_MORE when the chunk
+    ends where the number might go on; NUM_BAD when there are no digits or the number is followed
+    by something that cannot follow a number.
+    """
     n = buf.shape[0]
-    base = st[S_BASE]
+    c = buf[i]
+    j = i
+    sign = 1.0
+    if c == 43 or c == 45:
+        if c == 45:
+            sign = -1.0
+        j += 1
+    ival = 0.0
+    nd = 0
+    while j < n and 48 <= buf[j] <= 57:
+        ival = ival * 10.0 + (buf[j] - 48)
+        nd += 1
+        j += 1
+    point = j < n and buf[j] == 46
+    if point:
+        j += 1
+    frac = 0.0
+    nf = 0
+    while point and j < n and 48 <= buf[j] <= 57:
+        frac = frac * 10.0 + (buf[j] - 48)
+        nf += 1
+        j += 1
+    after = buf[min(j, n - 1)]  # the two bytes after the number (where there are such bytes)
+    after2 = buf[min(j + 1, n - 1)]
+    status = NUM_OK
+    if j >= n and not final:
+        status = NUM_MORE
+    elif nd + nf == 0:
+        status = NUM_BAD
+    elif j < n:
+        if _letter(after):
+            if j + 1 < n:
+                if not _letter(after2):
+                    status = NUM_BAD
+            elif not final:
+                status = NUM_MORE
+        elif not (after == 44 or after == 59 or _space(after)):
+            status = NUM_BAD
+    value = ival
+    if nf:
+        value += np.true_divide(frac, _pow10(nf))
+    return status, sign * value, j
+
+
+@njit(cache=True)
+def _begin_chunk(st):
+    """Set the current command's slots for a new chunk; returns the mode to start in."""
     line = st[S_LINE]
     lstart = st[S_LSTART]
-    term = st[S_TERM]
-    nc = 0
-    npar = 0
-    err = E_NONE
-    err_pos = 0
+    st[S_CSTART] = 0
+    st[S_P0] = 0
+    st[S_SAFE] = 0  # where the command being read began: a chunk that ends inside it hands over from here
+    st[S_SAFE_LINE] = line
+    st[S_SAFE_LSTART] = lstart
+    st[S_PAIR_POS] = -1  # just after the last complete coordinate pair of the command being read
+    st[S_PAIR_NP] = 0
+    st[S_PAIR_LINE] = line
+    st[S_PAIR_LSTART] = lstart
+    st[S_NUM_START] = -1
+    st[S_NUM_END] = -1  # index just after the last number
+    if st[S_RESUME] != 0:  # a coordinate command goes on from the last chunk (its position is in st)
+        st[S_CODE] = st[S_RESUME]
+        st[S_EXPECT] = 1
+        return M_PARAMS
+    st[S_CODE] = st[S_COFF] = st[S_CLINE] = st[S_CCOL] = 0
+    st[S_EXPECT] = 0
+    return M_IDLE
+
+
+@njit(cache=True)
+def _between(buf, i, st, base, line, lstart):
+    """M_IDLE: blanks and ';' up to the next mnemonic.  Returns ``(i, mode, line, lstart, err)``."""
+    n = buf.shape[0]
     mode = M_IDLE
-    code = 0
-    coff = 0
-    cline = 0
-    ccol = 0
-    cstart = 0
-    p0 = 0
-    expect = 0  # in M_PARAMS: 0 after the mnemonic, 1 after a number, 2 after ','
-    safe = 0
-    safe_line = line
-    safe_lstart = lstart
-    pair_pos = -1
-    pair_np = 0
-    pair_line = line
-    pair_lstart = lstart
-    num_end = -1  # index just after the last number
-    num_start = -1
-    incomplete = False
-    if st[S_RESUME] != 0:
-        mode = M_PARAMS
-        code = st[S_RESUME]
-        coff = st[S_COFF]
-        cline = st[S_CLINE]
-        ccol = st[S_CCOL]
-        expect = 1
-    i = 0
-    while i < n:
+    err = E_NONE
+    while i < n and mode == M_IDLE and err == E_NONE:
         c = buf[i]
-        if mode == M_IDLE:
-            if _letter(c):
-                mode = M_MN1
-                cstart = i
-                safe = i
-                safe_line = line
-                safe_lstart = lstart
-            elif c == 10:
-                line += 1
-                lstart = base + i + 1
-            elif not (c == 59 or _space(c)):
-                err = E_CHAR
-                err_pos = i
-                break
-            i += 1
-        elif mode == M_MN1:
-            if not _letter(c):
-                if num_end == cstart and num_start >= 0:
-                    err = E_NUMBER
-                    err_pos = num_start
-                else:
-                    err = E_MNEMONIC
-                    err_pos = cstart
-                break
-            code = (_upper(buf[cstart]) << 8) | _upper(c)
-            coff = base + cstart
-            cline = line
-            ccol = base + cstart - lstart + 1
-            p0 = npar
-            pair_pos = -1
-            expect = 0
-            if code == C_LB:
-                mode = M_LABEL
-            elif code == C_DT:
-                mode = M_DT
-            elif code == C_PE:
-                mode = M_PE
-            elif _known(code):
-                mode = M_PARAMS
+        if _letter(c):
+            st[S_CSTART] = i
+            st[S_SAFE] = i
+            st[S_SAFE_LINE] = line
+            st[S_SAFE_LSTART] = lstart
+            mode = M_MN1
+        elif not (c == 59 or _space(c)):
+            st[S_ERRPOS] = base + i
+            err = E_CHAR
+        elif c == 10:
+            line += 1
+            lstart = base + i + 1
+        i += 1
+    return i, mode, line, lstart, err
+
+
+@njit(cache=True)
+def _mnemonic(buf, i, st, base, line, lstart, npar):
+    """M_MN1: ``buf[i]`` ends the mnemonic begun at ``st[S_CSTART]``; records the command.
+
+    Returns ``(mode, err)``.
+    """
+    c = buf[i]
+    cstart = st[S_CSTART]
+    if not _letter(c):
+        if st[S_NUM_END] == cstart and st[S_NUM_START] >= 0:  # it began right after a number: a bad number
+            st[S_ERRPOS] = base + st[S_NUM_START]
+            return M_MN1, E_NUMBER
+        st[S_ERRPOS] = base + cstart
+        return M_MN1, E_MNEMONIC
+    code = (_upper(buf[cstart]) << 8) | _upper(c)
+    st[S_CODE] = code
+    st[S_COFF] = base + cstart
+    st[S_CLINE] = line
+    st[S_CCOL] = base + cstart - lstart + 1
+    st[S_P0] = npar
+    st[S_PAIR_POS] = -1
+    st[S_EXPECT] = 0  # in M_PARAMS: 0 after the mnemonic, 1 after a number, 2 after ','
+    return _mode_of(code), E_NONE
+
+
+@njit(cache=True, inline="always")
+def _params(buf, i, final, st, base, line, lstart, npar, p_val, p_line, p_col):
+    """M_PARAMS: the numbers of a known command, up to ';' or the next mnemonic.
+
+    Returns ``(i, ended, npar, line, lstart, err, incomplete)``: ``ended`` when the command ended,
+    ``incomplete`` when the chunk ends inside a number.
+    """
+    n = buf.shape[0]
+    coord = _coord_cmd(st[S_CODE])
+    p0 = st[S_P0]
+    expect = st[S_EXPECT]
+    err = E_NONE
+    ended = False
+    incomplete = False
+    while i < n and not ended and not incomplete and err == E_NONE:
+        c = buf[i]
+        step = 1
+        if c == 44:  # ','
+            if expect != 1:
+                err = E_EMPTY
+            expect = 2
+        elif c == 59 or _letter(c):  # ';' or the next mnemonic
+            if expect == 2:
+                err = E_TRAIL
             else:
-                mode = M_SKIP
-            i += 1
-        elif mode == M_PARAMS:
-            if c == 44:  # ','
-                if expect != 1:
-                    err = E_EMPTY
-                    err_pos = i
-                    break
-                expect = 2
-                i += 1
-            elif c == 59 or _letter(c):  # ';' or the next mnemonic
-                if expect == 2:
-                    err = E_TRAIL
-                    err_pos = i
-                    break
-                nc = _emit(c_code, c_off, c_line, c_col, c_p0, c_np, nc, code, coff, cline, ccol, p0, npar - p0)
-                mode = M_IDLE
-                if c == 59:
-                    i += 1
-            elif c == 43 or c == 45 or c == 46 or (48 <= c <= 57):
-                j = i
-                sign = 1.0
-                if c == 43 or c == 45:
-                    if c == 45:
-                        sign = -1.0
-                    j += 1
-                ival = 0.0
-                nd = 0
-                while j < n and 48 <= buf[j] <= 57:
-                    ival = ival * 10.0 + (buf[j] - 48)
-                    nd += 1
-                    j += 1
-                frac = 0.0
-                nf = 0
-                if j < n and buf[j] == 46:
-                    j += 1
-                    while j < n and 48 <= buf[j] <= 57:
-                        frac = frac * 10.0 + (buf[j] - 48)
-                        nf += 1
-                        j += 1
-                if j >= n and not final:
-                    incomplete = True
-                    break
-                if nd + nf == 0:
-                    err = E_NUMBER
-                    err_pos = i
-                    break
-                if j < n:
-                    e = buf[j]
-                    if _letter(e):
-                        if j + 1 < n:
-                            if not _letter(buf[j + 1]):
-                                err = E_NUMBER
-                                err_pos = i
-                                break
-                        elif not final:
-                            incomplete = True
-                            break
-                    elif not (e == 44 or e == 59 or _space(e)):
-                        err = E_NUMBER
-                        err_pos = i
-                        break
-                value = ival
-                if nf:
-                    value += frac / 10.0 ** nf
-                p_val[npar] = sign * value
+                ended = True
+                step = 1 if c == 59 else 0
+        elif c == 43 or c == 45 or c == 46 or (48 <= c <= 57):
+            status, value, j = _number(buf, i, final)
+            incomplete = status == NUM_MORE
+            if status == NUM_BAD:
+                err = E_NUMBER
+            elif status == NUM_OK:
+                p_val[npar] = value
                 p_line[npar] = line
                 p_col[npar] = base + i - lstart + 1
                 npar += 1
                 expect = 1
-                num_start = i
-                num_end = j
-                if _coord_cmd(code) and (npar - p0) % 2 == 0:
-                    pair_pos = j
-                    pair_np = npar
-                    pair_line = line
-                    pair_lstart = lstart
-                i = j
-            elif _space(c):
-                if c == 10:
-                    line += 1
-                    lstart = base + i + 1
-                i += 1
-            else:
-                err = E_CHAR
-                err_pos = i
-                break
-        elif mode == M_SKIP or mode == M_PE or mode == M_DT:
+                st[S_NUM_START] = i
+                st[S_NUM_END] = j
+                if coord and (npar - p0) % 2 == 0:
+                    st[S_PAIR_POS] = j
+                    st[S_PAIR_NP] = npar
+                    st[S_PAIR_LINE] = line
+                    st[S_PAIR_LSTART] = lstart
+                step = j - i
+        elif c == 10:
+            line += 1
+            lstart = base + i + 1
+        elif not _space(c):
+            err = E_CHAR
+        if err == E_NONE and not incomplete:
+            i += step
+    st[S_ERRPOS] = base + i  # read only after an error
+    st[S_EXPECT] = expect
+    return i, ended, npar, line, lstart, err, incomplete
+
+
+@njit(cache=True)
+def _skip(buf, i, mode, st, base, line, lstart):
+    """An unknown command (M_SKIP, with its quoted strings M_QUOTE), PE, DT or a label (M_LABEL), up to its end.
+
+    Returns ``(i, mode, line, lstart, ended)``; ``ended`` when the command ended (not at the chunk's end).
+    """
+    n = buf.shape[0]
+    ended = False
+    while i < n and not ended:
+        c = buf[i]
+        step = 1
+        if mode == M_DT and c != 59:  # the byte after DT is the label terminator
+            st[S_TERM] = c
+            mode = M_SKIP
+        elif mode == M_QUOTE:
+            if c == 34:
+                mode = M_SKIP
+        elif mode == M_LABEL:
+            ended = c == st[S_TERM]
+        else:  # M_SKIP, M_PE, or DT followed by ';' (the default terminator, ETX)
             if mode == M_DT:
+                st[S_TERM] = 3
                 mode = M_SKIP
-                if c != 59:
-                    term = c
-                    if c == 10:
-                        line += 1
-                        lstart = base + i + 1
-                    i += 1
-                    continue
-                term = 3
             if c == 59 or (mode == M_SKIP and _letter(c)):
-                nc = _emit(c_code, c_off, c_line, c_col, c_p0, c_np, nc, code, coff, cline, ccol, npar, 0)
-                mode = M_IDLE
-                if c == 59:
-                    i += 1
-                continue
-            if c == 34 and mode == M_SKIP:  # '"' opens a quoted string
+                ended = True
+                step = 1 if c == 59 else 0
+            elif c == 34 and mode == M_SKIP:  # '"' opens a quoted string
                 mode = M_QUOTE
-            elif c == 10:
-                line += 1
-                lstart = base + i + 1
+        if c == 10 and step:
+            line += 1
+            lstart = base + i + 1
+        i += step
+    return i, mode, line, lstart, ended
+
+
+@njit(cache=True)
+def _hand_over(st, mode, n, npar, line, lstart):
+    """The chunk ends (not the file): what is consumed, and where the next chunk starts.
+
+    Returns ``(npar, consumed, line, lstart, resume, emit)``; ``emit``: record the current command.
+    """
+    if mode == M_IDLE:
+        return npar, n, line, lstart, 0, False
+    code = st[S_CODE]
+    safe = st[S_SAFE]
+    if mode == M_PARAMS and _coord_cmd(code) and st[S_PAIR_POS] >= 0 and safe == 0:
+        # a coordinate command that fills the buffer: hand over its complete pairs, resume after them
+        return st[S_PAIR_NP], st[S_PAIR_POS], st[S_PAIR_LINE], st[S_PAIR_LSTART], code, True
+    resume = 0
+    if st[S_RESUME] != 0 and safe == 0 and mode == M_PARAMS:
+        resume = st[S_RESUME]  # the resumed command is still without a complete pair: read more
+    return (st[S_P0] if mode != M_MN1 else npar), safe, st[S_SAFE_LINE], st[S_SAFE_LSTART], resume, False
+
+
+@njit(cache=True)
+def _end_of_file(st, mode, n, base):
+    """The file ends in ``mode``.  Returns ``(err, emit)``; ``emit``: record the current command."""
+    if mode == M_MN1:
+        st[S_ERRPOS] = base + st[S_CSTART]
+        return E_EOF_MNEMONIC, False
+    if mode == M_PARAMS and st[S_EXPECT] == 2:
+        st[S_ERRPOS] = base + n
+        return E_EOF_COMMA, False
+    if mode == M_LABEL or mode == M_QUOTE:
+        st[S_ERRPOS] = base + n
+        return (E_EOF_LABEL if mode == M_LABEL else E_EOF_STRING), False
+    return E_NONE, mode != M_IDLE
+
+
+@njit(cache=True)
+def _error_at(st, err, line, lstart):
+    """Line and column of the error at file offset ``st[S_ERRPOS]`` (from the last known line start)."""
+    at = st[S_ERRPOS]
+    el = line
+    els = lstart
+    if at < lstart:  # the error lies before the current line (at a command start)
+        el = st[S_SAFE_LINE]
+        els = st[S_SAFE_LSTART]
+    st[S_ERRLINE] = el
+    st[S_ERRCOL] = at - els + 1
+    st[S_ERRAUX] = st[S_CODE]
+    if err == E_EOF_COMMA or err == E_EOF_LABEL or err == E_EOF_STRING or err == E_TRAIL:
+        st[S_ERRLINE] = st[S_CLINE]
+        st[S_ERRCOL] = st[S_CCOL]
+
+
+@njit(cache=True)
+def _tokenize(buf, final, st, c_code, c_off, c_line, c_col, c_p0, c_np, p_val, p_line, p_col):
+    """Commands and numeric parameters of one chunk (see :func:`_chunks` for the contract).
+
+    Returns the number of commands.  Each mode's helper reads bytes as long as the tokenizer stays in
+    its mode; ``st`` carries the state from one chunk to the next and the current command's.
+    """
+    n = buf.shape[0]
+    base = st[S_BASE]
+    line = st[S_LINE]
+    lstart = st[S_LSTART]
+    mode = _begin_chunk(st)
+    nc = 0
+    npar = 0
+    err = E_NONE
+    incomplete = False
+    i = 0
+    while i < n and err == E_NONE and not incomplete:
+        ended = False
+        if mode == M_IDLE:
+            i, mode, line, lstart, err = _between(buf, i, st, base, line, lstart)
+        elif mode == M_MN1:
+            mode, err = _mnemonic(buf, i, st, base, line, lstart, npar)
             i += 1
-        else:  # M_QUOTE, M_LABEL
-            if mode == M_QUOTE and c == 34:
-                mode = M_SKIP
-            elif mode == M_LABEL and c == term:
-                nc = _emit(c_code, c_off, c_line, c_col, c_p0, c_np, nc, code, coff, cline, ccol, npar, 0)
-                mode = M_IDLE
-            if c == 10:
-                line += 1
-                lstart = base + i + 1
-            i += 1
+        elif mode == M_PARAMS:
+            i, ended, npar, line, lstart, err, incomplete = _params(buf, i, final, st, base, line, lstart, npar,
+                                                                    p_val, p_line, p_col)
+        else:
+            i, mode, line, lstart, ended = _skip(buf, i, mode, st, base, line, lstart)
+        if ended:
+            nc = _emit(c_code, c_off, c_line, c_col, c_p0, c_np, nc, st, npar)
+            mode = M_IDLE
     consumed = n
     resume = 0
+    emit = False
     if err == E_NONE and (incomplete or not final):
-        if mode == M_IDLE:
-            consumed = n
-        elif mode == M_PARAMS and _coord_cmd(code) and pair_pos >= 0 and safe == 0:
-            # a coordinate command that fills the buffer: hand over its complete pairs, resume after them
-            nc = _emit(c_code, c_off, c_line, c_col, c_p0, c_np, nc, code, coff, cline, ccol, p0, pair_np - p0)
-            npar = pair_np
-            consumed = pair_pos
-            line = pair_line
-            lstart = pair_lstart
-            resume = code
-        else:
-            npar = p0 if mode != M_MN1 else npar
-            consumed = safe
-            line = safe_line
-            lstart = safe_lstart
-            if st[S_RESUME] != 0 and safe == 0 and mode == M_PARAMS:
-                resume = st[S_RESUME]  # the resumed command is still without a complete pair: read more
+        npar, consumed, line, lstart, resume, emit = _hand_over(st, mode, n, npar, line, lstart)
     elif err == E_NONE:  # the end of the file
-        if mode == M_MN1:
-            err = E_EOF_MNEMONIC
-            err_pos = cstart
-        elif mode == M_PARAMS:
-            if expect == 2:
-                err = E_EOF_COMMA
-                err_pos = n
-            else:
-                nc = _emit(c_code, c_off, c_line, c_col, c_p0, c_np, nc, code, coff, cline, ccol, p0, npar - p0)
-        elif mode == M_LABEL:
-            err = E_EOF_LABEL
-            err_pos = n
-        elif mode == M_QUOTE:
-            err = E_EOF_STRING
-            err_pos = n
-        elif mode != M_IDLE:
-            nc = _emit(c_code, c_off, c_line, c_col, c_p0, c_np, nc, code, coff, cline, ccol, npar, 0)
+        err, emit = _end_of_file(st, mode, n, base)
+    if emit:
+        nc = _emit(c_code, c_off, c_line, c_col, c_p0, c_np, nc, st, npar)
     if err != E_NONE:
-        # position of the error: line and column of err_pos (recount from the last known line start)
-        el = line
-        els = lstart
-        if base + err_pos < lstart:  # the error lies before the current line (at a command start)
-            el = safe_line
-            els = safe_lstart
-        st[S_ERRLINE] = el
-        st[S_ERRCOL] = base + err_pos - els + 1
-        st[S_ERRPOS] = base + err_pos
-        st[S_ERRAUX] = code
-        if err == E_EOF_COMMA or err == E_EOF_LABEL or err == E_EOF_STRING or err == E_TRAIL:
-            st[S_ERRLINE] = cline
-            st[S_ERRCOL] = ccol
+        _error_at(st, err, line, lstart)
     st[S_ERR] = err
     st[S_CONSUMED] = consumed
     st[S_NCMD] = nc
@@ -388,19 +506,26 @@ def _tokenize(buf, final, st, c_code, c_off, c_line, c_col, c_p0, c_np, p_val, p
     st[S_LINE] = line
     st[S_LSTART] = lstart
     st[S_BASE] = base + consumed
-    st[S_TERM] = term
     st[S_RESUME] = resume
-    if resume != 0:
-        st[S_COFF] = coff
-        st[S_CLINE] = cline
-        st[S_CCOL] = ccol
     return nc
+
+
+@njit(cache=True)
+def _point(o_x, o_y, o_line, o_col, o_start, o_pen, k, x, y, line, col, start, pen):
+    """Record pen-down point ``k`` (:data:`_POINT_DTYPES`); return k + 1."""
+    o_x[k], o_y[k] = x, y
+    o_line[k], o_col[k] = line, col
+    o_start[k], o_pen[k] = start, pen
+    return k + 1
 
 
 @njit(cache=True)
 def _interpret(n_cmd, c_code, c_line, c_col, c_p0, c_np, p_val, p_line, p_col, ist,
                o_x, o_y, o_line, o_col, o_start, o_pen, err):
-    """Pen-down points of one chunk's commands; ``ist`` carries the plotter state between chunks."""
+    """Pen-down points of one chunk's commands; ``ist`` carries the plotter state between chunks.
+
+    Returns the number of points written to the ``o_`` arrays (:data:`_POINT_DTYPES`).
+    """
     pen_down = ist[0] != 0
     rel = ist[1] != 0
     cx = ist[2]
@@ -438,13 +563,8 @@ def _interpret(n_cmd, c_code, c_line, c_col, c_p0, c_np, p_val, p_line, p_col, i
                 pen_down = False
             elif code == C_PD:
                 if not pen_down:
-                    o_x[k] = cx
-                    o_y[k] = cy
-                    o_line[k] = cl if cl > 0 else c_line[ci]
-                    o_col[k] = cc if cl > 0 else c_col[ci]
-                    o_start[k] = True
-                    o_pen[k] = pen
-                    k += 1
+                    k = _point(o_x, o_y, o_line, o_col, o_start, o_pen, k, cx, cy, cl if cl > 0 else c_line[ci],
+                               cc if cl > 0 else c_col[ci], True, pen)
                     pen_down = True
             elif code == C_PA:
                 rel = False
@@ -460,13 +580,7 @@ def _interpret(n_cmd, c_code, c_line, c_col, c_p0, c_np, p_val, p_line, p_col, i
                 cl = p_line[q]
                 cc = p_col[q]
                 if pen_down:
-                    o_x[k] = cx
-                    o_y[k] = cy
-                    o_line[k] = cl
-                    o_col[k] = cc
-                    o_start[k] = False
-                    o_pen[k] = pen
-                    k += 1
+                    k = _point(o_x, o_y, o_line, o_col, o_start, o_pen, k, cx, cy, cl, cc, False, pen)
     ist[0] = 1.0 if pen_down else 0.0
     ist[1] = 1.0 if rel else 0.0
     ist[2] = cx
@@ -548,7 +662,7 @@ def _chunks(src: Source, *, source: Optional[str] = None, progress: Optional[Pro
     stream, name, opened, size = _open(src)
     name = source or name
     try:
-        st = np.zeros(16, np.int64)
+        st = np.zeros(N_SLOTS, np.int64)
         st[S_LINE] = 1
         st[S_TERM] = 3
         cap = 0
@@ -568,21 +682,14 @@ def _chunks(src: Source, *, source: Optional[str] = None, progress: Optional[Pro
             need = len(buf) // 2 + 2
             if need > cap:
                 cap = max(need, chunk_bytes // 2 + 2)
-                c_code = np.empty(cap, np.int64)
-                c_off = np.empty(cap, np.int64)
-                c_line = np.empty(cap, np.int32)
-                c_col = np.empty(cap, np.int32)
-                c_p0 = np.empty(cap, np.int32)
-                c_np = np.empty(cap, np.int32)
-                p_val = np.empty(cap, np.float64)
-                p_line = np.empty(cap, np.int32)
-                p_col = np.empty(cap, np.int32)
+                cmds = _arrays(cap, _COMMAND_DTYPES)
+                pars = _arrays(cap, _PARAM_DTYPES)
             base = int(st[S_BASE])
             arr = np.frombuffer(buf, np.uint8)
-            nc = _tokenize(arr, final, st, c_code, c_off, c_line, c_col, c_p0, c_np, p_val, p_line, p_col)
+            nc = _tokenize(arr, final, st, *cmds, *pars)
             if st[S_ERR]:
                 raise ParseError(_tokenize_message(st, buf, base, name))
-            yield _Block(int(nc), c_code, c_off, c_line, c_col, c_p0, c_np, p_val, p_line, p_col)
+            yield _Block(int(nc), *cmds, *pars)
             if progress is not None:
                 progress(done, size)
             carry = buf[int(st[S_CONSUMED]):]
@@ -593,28 +700,26 @@ def _chunks(src: Source, *, source: Optional[str] = None, progress: Optional[Pro
             stream.close()
 
 
+_TOKENIZE_ERRORS = {
+    E_CHAR: "unexpected character {char}",
+    E_MNEMONIC: "'{token}' is not an HPGL command (two letters expected)",
+    E_NUMBER: "malformed number '{token}'",
+    E_EMPTY: "empty parameter (a ',' with no number before it)",
+    E_TRAIL: "'{mnemonic}': a number must follow ','",
+    E_EOF_COMMA: "unterminated command '{mnemonic}' at the end of the file (a number must follow ',')",
+    E_EOF_MNEMONIC: "unterminated command '{token}' at the end of the file",
+    E_EOF_LABEL: "unterminated label 'LB' at the end of the file (no label terminator)",
+    E_EOF_STRING: "unterminated quoted string in '{mnemonic}' at the end of the file",
+}
+
+
 def _tokenize_message(st: np.ndarray, buf: bytes, base: int, name: str) -> str:
     err = int(st[S_ERR])
     pos = int(st[S_ERRPOS]) - base
-    where = f"{name}:{int(st[S_ERRLINE])}:{int(st[S_ERRCOL])}"
-    mnemonic = _name(int(st[S_ERRAUX]))
-    if err == E_CHAR:
-        return f"{where}: unexpected character {buf[pos:pos + 1]!r}"[:200]
-    if err == E_MNEMONIC:
-        return f"{where}: '{_token_text(buf, pos)}' is not an HPGL command (two letters expected)"
-    if err == E_NUMBER:
-        return f"{where}: malformed number '{_token_text(buf, pos)}'"
-    if err == E_EMPTY:
-        return f"{where}: empty parameter (a ',' with no number before it)"
-    if err == E_TRAIL:
-        return f"{where}: '{mnemonic}': a number must follow ','"
-    if err == E_EOF_COMMA:
-        return f"{where}: unterminated command '{mnemonic}' at the end of the file (a number must follow ',')"
-    if err == E_EOF_MNEMONIC:
-        return f"{where}: unterminated command '{_token_text(buf, pos)}' at the end of the file"
-    if err == E_EOF_LABEL:
-        return f"{where}: unterminated label 'LB' at the end of the file (no label terminator)"
-    return f"{where}: unterminated quoted string in '{mnemonic}' at the end of the file"
+    text = _TOKENIZE_ERRORS[err].format(char=repr(buf[pos:pos + 1]), token=_token_text(buf, pos),
+                                        mnemonic=_name(int(st[S_ERRAUX])))
+    message = f"{name}:{int(st[S_ERRLINE])}:{int(st[S_ERRCOL])}: {text}"
+    return message[:200] if err == E_CHAR else message
 
 
 def iter_hpgl(src: Source, *, source: Optional[str] = None, progress: Optional[Progress] = None) -> Iterator[HpglCommand]:
@@ -697,14 +802,8 @@ def _points(src: Source, *, source: Optional[str], progress: Optional[Progress],
         need = b.n_cmd + int(b.np_[:b.n_cmd].sum()) // 2 + 1
         if need > cap:
             cap = max(need, chunk_bytes // 4)
-            o_x = np.empty(cap, np.float64)
-            o_y = np.empty(cap, np.float64)
-            o_line = np.empty(cap, np.int32)
-            o_col = np.empty(cap, np.int32)
-            o_start = np.empty(cap, np.bool_)
-            o_pen = np.empty(cap, np.int32)
-        k = _interpret(b.n_cmd, b.code, b.line, b.col, b.p0, b.np_, b.val, b.vline, b.vcol, ist,
-                       o_x, o_y, o_line, o_col, o_start, o_pen, err)
+            out = _arrays(cap, _POINT_DTYPES)
+        k = _interpret(b.n_cmd, b.code, b.line, b.col, b.p0, b.np_, b.val, b.vline, b.vcol, ist, *out, err)
         if err[0]:
             where = f"{name}:{int(err[1])}:{int(err[2])}"
             if err[0] == E_SP:
@@ -718,7 +817,7 @@ def _points(src: Source, *, source: Optional[str], progress: Optional[Progress],
         uniq, cnt = np.unique(b.code[:b.n_cmd][fresh], return_counts=True)
         for u, n in zip(uniq.tolist(), cnt.tolist()):
             counts[u] = counts.get(u, 0) + n
-        yield _PointBlock(o_x[:k], o_y[:k], o_line[:k], o_col[:k], o_start[:k], o_pen[:k])
+        yield _PointBlock(*[a[:k] for a in out])
 
 
 def _source_name(src: Source, source: Optional[str]) -> str:

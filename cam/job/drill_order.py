@@ -415,35 +415,29 @@ def _push(queue, inq, head_tail, city, end):
 
 
 @njit(cache=True)
+def _n_nearer(xy, neigh, x, limit, end):
+    """How many of ``x``'s neighbours (nearest first) lie nearer to it than ``limit``."""
+    k = neigh.shape[1]
+    t = 0
+    while t < k and _d(xy, x, neigh[x, t], end) < limit:
+        t += 1
+    return t
+
+
+@njit(cache=True)
 def _two_opt(xy, tour, pos, neigh, a, end, span, queue, inq, ht):
-    """Best-first 2-opt move around ``a`` (both of its path edges); applies it and returns the gain (0: none)."""
+    """Best-first 2-opt move around ``a``; applies it and returns the gain (0: none).
+
+    On the side of ``a``'s successor and then of its predecessor: the path edges ``a - b`` and ``c - d``
+    (``d`` next to ``c`` on the same side) become ``a - c`` and ``b - d``.
+    """
     eps = 1e-12
     k = neigh.shape[1]
     pa = pos[a]
-    # a -> b (successor) replaced by a -> c, b -> d where d = successor of c
-    b = tour[pa + 1]
-    dab = _d(xy, a, b, end)
-    for t in range(k):
-        c = neigh[a, t]
-        dac = _d(xy, a, c, end)
-        if dac >= dab - eps:
+    for side in (1, -1):
+        if pa + side < 0:
             break
-        pc = pos[c]
-        dd = tour[pc + 1]
-        if c == b or dd == a:
-            continue
-        gain = dab + _d(xy, c, dd, end) - dac - _d(xy, b, dd, end)
-        if gain > eps:
-            lo, hi = (pa + 1, pc) if pa < pc else (pc + 1, pa)
-            _reverse(tour, pos, lo, hi)
-            span[0] = min(span[0], lo)
-            span[1] = max(span[1], hi)
-            for city in (a, b, c, dd):
-                _push(queue, inq, ht, city, end)
-            return gain
-    if pa >= 1:
-        # b -> a (predecessor) replaced by c -> a, d -> b where d = predecessor of c
-        b = tour[pa - 1]
+        b = tour[pa + side]
         dab = _d(xy, a, b, end)
         for t in range(k):
             c = neigh[a, t]
@@ -451,14 +445,16 @@ def _two_opt(xy, tour, pos, neigh, a, end, span, queue, inq, ht):
             if dac >= dab - eps:
                 break
             pc = pos[c]
-            if pc == 0:
+            if pc + side < 0:
                 continue
-            dd = tour[pc - 1]
+            dd = tour[pc + side]
             if c == b or dd == a:
                 continue
             gain = dab + _d(xy, c, dd, end) - dac - _d(xy, b, dd, end)
             if gain > eps:
-                lo, hi = (pa, pc - 1) if pa < pc else (pc, pa - 1)
+                lo, hi = (pa + 1, pc) if pa < pc else (pc + 1, pa)
+                if side < 0:
+                    lo, hi = lo - 1, hi - 1
                 _reverse(tour, pos, lo, hi)
                 span[0] = min(span[0], lo)
                 span[1] = max(span[1], hi)
@@ -469,11 +465,44 @@ def _two_opt(xy, tour, pos, neigh, a, end, span, queue, inq, ht):
 
 
 @njit(cache=True)
+def _move_run(tour, pos, i, j, pu, span):
+    """Move the run ``tour[i..j]`` (1 to 3 holes, already turned the way it goes in) to just after position
+    ``pu`` (outside the run), shifting the holes in between; widens ``span`` to what changed."""
+    length = j - i + 1
+    seg0 = tour[i]
+    seg1 = tour[i + 1] if length > 1 else 0
+    seg2 = tour[i + 2] if length > 2 else 0
+    if pu > j:
+        for q in range(j + 1, pu + 1):
+            city = tour[q]
+            tour[q - length] = city
+            pos[city] = q - length
+        base = pu - length + 1
+        span[0] = min(span[0], i)
+        span[1] = max(span[1], pu)
+    else:
+        for q in range(i - 1, pu, -1):
+            city = tour[q]
+            tour[q + length] = city
+            pos[city] = q + length
+        base = pu + 1
+        span[0] = min(span[0], pu + 1)
+        span[1] = max(span[1], j)
+    tour[base] = seg0
+    pos[seg0] = base
+    if length > 1:
+        tour[base + 1] = seg1
+        pos[seg1] = base + 1
+    if length > 2:
+        tour[base + 2] = seg2
+        pos[seg2] = base + 2
+
+
+@njit(cache=True)
 def _or_opt(xy, tour, pos, neigh, a, end, span, queue, inq, ht):
     """Or-opt around ``a``: move a run of 1-3 holes that ends at ``a`` between two other neighbours."""
     eps = 1e-12
     n_last = end - 1
-    k = neigh.shape[1]
     pa = pos[a]
     if pa == 0:
         return 0.0
@@ -493,11 +522,8 @@ def _or_opt(xy, tour, pos, neigh, a, end, span, queue, inq, ht):
             for e_ in range(2):
                 x = s1 if e_ == 0 else s2
                 other = s2 if e_ == 0 else s1
-                for t in range(k):
+                for t in range(_n_nearer(xy, neigh, x, removed - eps, end)):
                     c = neigh[x, t]
-                    dxc = _d(xy, x, c, end)
-                    if dxc >= removed - eps:
-                        break
                     pc = pos[c]
                     if i <= pc <= j:
                         continue
@@ -523,33 +549,7 @@ def _or_opt(xy, tour, pos, neigh, a, end, span, queue, inq, ht):
                         if gain > eps:
                             if first != s1:
                                 _reverse(tour, pos, i, j)
-                            seg0 = tour[i]
-                            seg1 = tour[i + 1] if length > 1 else 0
-                            seg2 = tour[i + 2] if length > 2 else 0
-                            if pu > j:
-                                for q in range(j + 1, pu + 1):
-                                    city = tour[q]
-                                    tour[q - length] = city
-                                    pos[city] = q - length
-                                base = pu - length + 1
-                                span[0] = min(span[0], i)
-                                span[1] = max(span[1], pu)
-                            else:
-                                for q in range(i - 1, pu, -1):
-                                    city = tour[q]
-                                    tour[q + length] = city
-                                    pos[city] = q + length
-                                base = pu + 1
-                                span[0] = min(span[0], pu + 1)
-                                span[1] = max(span[1], j)
-                            tour[base] = seg0
-                            pos[seg0] = base
-                            if length > 1:
-                                tour[base + 1] = seg1
-                                pos[seg1] = base + 1
-                            if length > 2:
-                                tour[base + 2] = seg2
-                                pos[seg2] = base + 2
+                            _move_run(tour, pos, i, j, pu, span)
                             for city in (p, nx, s1, s2, u, v):
                                 _push(queue, inq, ht, city, end)
                             return gain

@@ -127,57 +127,34 @@ from __future__ import annotations
 
 import argparse
 import os
-import select
 import sys
 import termios
 import threading
 import time
 import tty
 from collections import deque
+from contextlib import AbstractContextManager
 from dataclasses import dataclass
-from typing import Iterable, Iterator, Sequence
+from typing import Any, Iterable, Iterator, Sequence
 
 import numpy as np
 
+from ..drive.maximus.protocol import LIMIT_SWITCH_X, PORT_B, PORT_D, POWER_UP_B, POWER_UP_D, SWITCH_NAMES
+from ._maximus_base import (  # noqa: F401  (the labels are part of this module's names)
+    BUSY, DRILL_MODE1_INITIALIZE, DRILL_MODE1_INPUT, INITIALIZE_DRILL_MODE, JOG_DATA_INPUT, MODE_SELECTION, POWER_UP,
+    _Halt, _PowerOn, _ReplyFault,
+)
+from ._maximus_hardware import _Hardware
+from ._maximus_program import _Program
+from ._maximus_uart import _Uart
 from ..errors import CamError, PortError
 
-__all__ = ["MaximusEmulator", "PortLog", "start_emulator", "main"]
-
-from ..drive.maximus.protocol import *  # noqa: F401,F403  (the protocol, declared once)
-from ..drive.maximus.protocol import AXIS_PINS, STEP_PIN
-
-# Where the firmware waits for a byte (its labels; the 9-byte Init read has no label of its own).
-POWER_UP = "POWER_UP"
-MODE_SELECTION = "MODE_SELECTION"
-JOG_DATA_INPUT = "JOG_DATA_INPUT"
-DRILL_MODE1_INITIALIZE = "DRILL_MODE1_INITIALIZE"
-INITIALIZE_DRILL_MODE = "INITIALIZE_DRILL_MODE"
-DRILL_MODE1_INPUT = "DRILL_MODE1_INPUT"
-BUSY = "BUSY"
-
-
-class _Goto(Exception):
-    """``goto_address(...)`` out of an interrupt service routine."""
-
-    def __init__(self, label: str) -> None:
-        super().__init__(label)
-        self.label = label
-
-
-class _PowerOn(Exception):
-    """The board is reset: start again at ``main()``."""
-
-
-class _Halt(Exception):
-    """The emulator is stopped."""
-
-
-@dataclass
-class _ReplyFault:
-    kind: str  # "drop", "corrupt" or "late"
-    match: int | None
-    skip: int
-    value: float
+__all__ = [
+    "MaximusEmulator", "PortLog", "start_emulator", "main",
+    # where the firmware waits (the listing's labels), for tests and tools that watch it
+    "POWER_UP", "MODE_SELECTION", "JOG_DATA_INPUT", "DRILL_MODE1_INITIALIZE", "INITIALIZE_DRILL_MODE",
+    "DRILL_MODE1_INPUT", "BUSY",
+]
 
 
 @dataclass(frozen=True)
@@ -215,10 +192,12 @@ class PortLog:
         return cls(t, p, v)
 
 
-class MaximusEmulator:
+class MaximusEmulator(_Program, _Hardware, _Uart, AbstractContextManager):
     """The PIC firmware of seed 000 Appendix 1, served on a pseudo-terminal.
 
-    Use :func:`start_emulator` to create and start one.
+    Use :func:`start_emulator` to create and start one.  The firmware's program, the board it drives and
+    its UART are the parts ``_Program``, ``_Hardware`` and ``_Uart`` (``cam/sim/_maximus_*.py``); this class
+    holds their state, starts and stops them, injects faults and keeps the logs.
 
     Args:
         speed: simulated seconds per real second (1.0 = the firmware's own
@@ -317,9 +296,6 @@ class MaximusEmulator:
         self._reset_event.set()
         self._wake.set()
 
-    def __enter__(self) -> "MaximusEmulator":
-        return self
-
     def __exit__(self, *exc: object) -> None:
         self.stop()
 
@@ -417,439 +393,25 @@ class MaximusEmulator:
             self.error = exc
             self._state = "CRASHED"
 
-    def _drain_master(self) -> None:
-        while self._master >= 0:
-            r, _, _ = select.select([self._master], [], [], 0)
-            if not r:
-                return
-            try:
-                if not os.read(self._master, 4096):
-                    return
-            except OSError:
-                return
-
     def _check_halt(self) -> None:
         if self._stop_event.is_set():
             raise _Halt()
         if self._reset_event.is_set():
             raise _PowerOn()
 
-    # ------------------------------------------------------------------ main()
-    def _main(self) -> None:
-        """``main()`` of Appendix 1, with its labels as a state machine."""
-        self._gie = self._int_ext = self._int_rda = self._intf = False
-        self._output_port(PORT_B, POWER_UP_B)
-        self._output_port(PORT_D, POWER_UP_D)
-        self._write_master(BANNER)
-        self.power_ups += 1
-        self._gie = False  # disable_interrupts(GLOBAL)
-        while self._getc(POWER_UP) != ISMACHINEREADY:
-            pass
-        self._putc(MACHINEREADY)
-        label = MODE_SELECTION
-        steps = {
-            MODE_SELECTION: self._mode_selection,
-            JOG_DATA_INPUT: self._jog_data_input,
-            DRILL_MODE1_INITIALIZE: self._drill_mode1_initialize,
-            DRILL_MODE1_INPUT: self._drill_mode1_input,
-        }
-        while True:
-            try:
-                label = steps[label]()
-            except _Goto as jump:
-                label = jump.label
-
-    def _mode_selection(self) -> str:
-        b = self._getc(MODE_SELECTION)
-        self._log_packet("mode", bytes([b]))
-        if b == ISMACHINEREADY:
-            self._putc(MACHINEREADY)
-            return MODE_SELECTION
-        if b == OPENJOGMODE:
-            self._putc(JOGMODEON)
-            return JOG_DATA_INPUT
-        if b == OPENDRILLMODE1:
-            self._putc(DRILLMODE1ON)
-            return DRILL_MODE1_INITIALIZE
-        if b == OPENDRILLMODE2:  # "!Not Completed!"
-            self._putc(DRILLMODE2ON)
-            return JOG_DATA_INPUT
-        return JOG_DATA_INPUT  # no case matched: execution falls through to the JOG_DATA_INPUT label
-
-    def _jog_data_input(self) -> str:
-        self._machine_mode = 0
-        data = self._read_packet(4, JOG_DATA_INPUT, "jog")
-        self._intf = False  # bit_clear(*0x0B,1)
-        if (data[0] >> 6) == 0:
-            self._putc(JOGMODEOFF)
-            self._gie = False
-            return MODE_SELECTION
-        axis_step = data[1] | (data[2] << 8)
-        self._axis_delay = data[3]
-        config = data[0]
-        axis_select = (config & 0xC0) >> 6
-        axis_mode = int(bool(config & 0x20))
-        axis_dir = int(bool(config & 0x10))
-        spindle = config & 0x01
-        self._begin_move()
-        self._enable_interrupts()
-        self._output_bit(ENABLE_X, 1)
-        self._output_bit(ENABLE_Y, 1)
-        self._output_bit(ENABLE_Z, 1)
-        self._output_bit(SPINDLE_BIT, spindle)
-        pins = {1: (MODE_X, DIR_X), 2: (MODE_Y, DIR_Y), 3: (MODE_Z, DIR_Z)}
-        mode_pin, dir_pin = pins[axis_select]
-        self._output_bit(mode_pin, axis_mode)
-        self._output_bit(dir_pin, axis_dir)
-        self._constspeed(axis_step, self._axis_delay, axis_select)
-        self._reply_after_move(JOGMODEDONE)
-        return JOG_DATA_INPUT
-
-    def _drill_mode1_initialize(self) -> str:
-        self._machine_mode = 1
-        d = self._read_packet(10, DRILL_MODE1_INITIALIZE, "offset")
-        self._intf = False  # bit_clear(*0x0B,1)
-        config = d[0]
-        step_x = d[1] | (d[2] << 8)
-        step_y = d[3] | (d[4] << 8)
-        step_z = d[5] | (d[6] << 8)
-        self._delay_x, self._delay_y, self._delay_z_up = d[7], d[8], d[9]
-        self._begin_move()
-        self._enable_interrupts()
-        self._output_bit(ENABLE_X, 1)
-        self._output_bit(ENABLE_Y, 1)
-        self._output_bit(ENABLE_Z, 1)
-        self._output_bit(MODE_X, int(bool(config & 0x08)))
-        self._output_bit(MODE_Y, int(bool(config & 0x10)))
-        self._output_bit(MODE_Z, int(bool(config & 0x20)))
-        self._output_bit(DIR_X, int(bool(config & 0x01)))
-        self._output_bit(DIR_Y, int(bool(config & 0x02)))
-        self._output_bit(DIR_Z, int(bool(config & 0x04)))
-        self._constspeed(step_z, self._delay_z_up, 3)
-        self._constspeed(step_x, self._delay_x, 1)
-        self._constspeed(step_y, self._delay_y, 2)
-        self._reply_after_move(ATOFFSETPOS)
-        # Initialize Drill Mode: read and run with interrupts disabled
-        d = self._read_packet(9, INITIALIZE_DRILL_MODE, "init")
-        config = d[0]
-        self._drill_step_z_up = d[1] | (d[2] << 8)
-        self._drill_step_z_down = d[3] | (d[4] << 8)
-        self._delay_x, self._delay_y, self._delay_z_up, self._delay_z_down = d[5], d[6], d[7], d[8]
-        self._output_bit(MODE_X, int(bool(config & 0x01)))
-        self._output_bit(MODE_Y, int(bool(config & 0x02)))
-        self._output_bit(MODE_Z, int(bool(config & 0x04)))
-        self._output_bit(DIR_Z, 1)  # Z down
-        self._constspeed(self._drill_step_z_up, self._delay_z_up, 3)
-        self._putc(DRILLMODE1INITIALIZED)
-        return DRILL_MODE1_INPUT
-
-    def _drill_mode1_input(self) -> str:
-        d = self._read_packet(5, DRILL_MODE1_INPUT, "drill")
-        if not (d[0] >> 7):  # Continue Drilling Flag reset: leave Drill mode
-            self._putc(DRILLMODE1DONE)
-            self._gie = False
-            return MODE_SELECTION
-        if (d[0] & 0x40) >> 6:  # Start Drilling Flag set: answer without moving
-            self._putc(ONEHOLEDRILLED)
-            self._gie = False
-            return DRILL_MODE1_INPUT
-        config = d[0]
-        step_x = d[1] | (d[2] << 8)
-        step_y = d[3] | (d[4] << 8)
-        self._output_bit(DIR_X, int(bool(config & 0x01)))
-        self._output_bit(DIR_Y, int(bool(config & 0x02)))
-        self._begin_move()
-        self._enable_interrupts()
-        self._constspeed_xy(step_x, step_y, self._delay_x, self._delay_y)
-        self._output_bit(DIR_Z, 1)  # Z down
-        self._constspeed(self._drill_step_z_down, self._delay_z_down, 3)
-        self._output_bit(DIR_Z, 0)  # Z up
-        self._constspeed(self._drill_step_z_up, self._delay_z_up, 3)
-        self._reply_after_move(ONEHOLEDRILLED)
-        return DRILL_MODE1_INPUT
-
-    def _reply_after_move(self, reply: int) -> None:
-        """The end of a move: reply with interrupts still enabled, then disable them."""
-        if self._inject_now is not None:  # a move with no pulse: the injected switch trips now
-            self._press_injected()
-        self._poll_interrupts()
-        self._putc(reply)
-        # putc() returns as the byte starts out (87 us on the line); disable_interrupts follows a few
-        # instructions later, long before a host can answer: only bytes already received count here.
-        self._poll_interrupts(fetch=False)
-        self._gie = False  # disable_interrupts(GLOBAL)
-
-    # ------------------------------------------------------------------ motion
-    def _constspeed(self, n: int, delay: int, pin: int) -> None:
-        """``constspeed()`` / ``constspeed2()``: n pulses of period 2 * delay * 100 us on one axis."""
-        step = STEP_PIN[pin]
-        for _ in range(n):
-            self._output_bit(step, 1)
-            self._dly_100us(delay)
-            self._output_bit(step, 0)
-            self._dly_100us(delay)
-        self._output_bit(step, 1)  # "Add last step": back to the idle level
-
-    def _constspeed_xy(self, step_x: int, step_y: int, delay_x: int, delay_y: int) -> None:
-        """``constspeed_xy()``: the dog-leg XY move."""
-        delay_xy = delay_y if delay_x < delay_y else delay_x
-        if step_x > step_y:
-            step_xy, axis, step_more = step_y, 0, step_x - step_y
-        else:
-            step_xy, axis, step_more = step_x, 1, step_y - step_x
-        for _ in range(step_xy):
-            self._output_bit(STEP_X, 1)
-            self._output_bit(STEP_Y, 1)
-            self._dly_100us(delay_xy)
-            self._output_bit(STEP_X, 0)
-            self._output_bit(STEP_Y, 0)
-            self._dly_100us(delay_xy)
-        self._output_bit(STEP_X, 1)
-        self._output_bit(STEP_Y, 1)
-        pin, delay = (STEP_X, delay_x) if axis == 0 else (STEP_Y, delay_y)
-        for _ in range(step_more):
-            self._output_bit(pin, 1)
-            self._dly_100us(delay)
-            self._output_bit(pin, 0)
-            self._dly_100us(delay)
-        self._output_bit(pin, 1)
-
-    def _dly_100us(self, n: int) -> None:
-        self._advance(n * DELAY_UNIT_NS)
-
-    def _advance(self, ns: int) -> None:
-        self._t_ns += ns
-        self._check_halt()
-        if self._speed is None or ns == 0:
-            return
-        target = self._anchor_real + (self._t_ns - self._anchor_sim_ns) / 1e9 / self._speed
-        ahead = target - time.monotonic()
-        if ahead > 0.001:
-            self._wake.wait(ahead)
-            self._check_halt()
-
-    def _anchor(self) -> None:
-        self._anchor_real = time.monotonic()
-        self._anchor_sim_ns = self._t_ns
-
-    # ------------------------------------------------------------------ pins
-    def _output_bit(self, pin: tuple[int, int], value: int) -> None:
-        port, bit = pin
-        old = self._ports[port]
-        self._output_port(port, (old & ~(1 << bit)) | ((1 if value else 0) << bit))
-
-    def _output_port(self, port: int, value: int) -> None:
-        old = self._ports[port]
-        self._ports[port] = value
-        with self._lock:
-            self._port_rows.append((self._t_ns, port, value))
-        for axis, (p, step_b, dir_b, en_b, sign) in enumerate(AXIS_PINS):
-            if p != port:
-                continue
-            if (value >> step_b) & 1 and not (old >> step_b) & 1 and (value >> en_b) & 1:
-                self._pos[axis] += sign if (value >> dir_b) & 1 else -sign
-                self._after_step()
-        if self._gie:
-            self._poll_interrupts()
-
-    def _after_step(self) -> None:
-        if self._inject_now is not None:
-            self._press_injected()
-        else:
-            self._update_switches()
-
-    def _press_injected(self) -> None:
-        self._injected |= self._inject_now or 0
-        self._inject_now = None
-        self._update_switches()
-
-    def _update_switches(self) -> None:
-        bits = self._injected
-        x, y, z = self._pos
-        tx, ty, tz = self._travel
-        if tx is not None:
-            bits |= HOME_SWITCH_X if x < tx[0] else 0
-            bits |= LIMIT_SWITCH_X if x > tx[1] else 0
-        if ty is not None:
-            bits |= HOME_SWITCH_Y if y < ty[0] else 0
-            bits |= LIMIT_SWITCH_Y if y > ty[1] else 0
-        if tz is not None:
-            bits |= HOME_SWITCH_Z if z > tz[1] else 0
-            bits |= LIMIT_SWITCH_Z if z < tz[0] else 0
-        if self._pressed == 0 and bits != 0:
-            self._intf = True  # the AND gate's output falls: RB0 H_TO_L edge
-        self._pressed = bits
-
-    def _input_a(self) -> int:
-        return 0x3F & ~self._pressed  # RA0..RA5, switches active low
-
-    # ------------------------------------------------------------------ interrupts
-    def _begin_move(self) -> None:
-        self.moves_started += 1
-        with self._lock:
-            for trip in self._trips:
-                if trip[1] > 0:
-                    trip[1] -= 1
-                    continue
-                self._inject_now = trip[0]
-                self._trips.remove(trip)
-                break
-
-    def _enable_interrupts(self) -> None:
-        self._int_ext = self._int_rda = True
-        self._gie = True
-        self._poll_interrupts()
-
-    def _poll_interrupts(self, fetch: bool = True) -> None:
-        while self._gie:
-            if self._int_ext and self._intf:
-                self._isr_ext()
-                continue
-            if self._int_rda:
-                if fetch:
-                    self._fill_rx(0.0)
-                if self._rx:
-                    self._isr_rda()
-                    continue
-            return
-
-    def _isr_ext(self) -> None:
-        """``isr_ext()``: a limit switch was pressed."""
-        self._gie = False
-        self._advance(DEBOUNCE_NS)
-        conditions = self._input_a()
-        self._injected = 0
-        self._update_switches()
-        if conditions == 0x3E:  # RA0 = 0
-            self._output_bit(DIR_X, 1)
-            self._constspeed(STEPSBACKATLIMIT, self._axis_delay, 1)
-            self._putc(HOME_SWITCH_X)
-        elif conditions == 0x3D:  # RA1 = 0
-            self._output_bit(DIR_X, 0)
-            self._constspeed(STEPSBACKATLIMIT, self._axis_delay, 1)
-            self._putc(LIMIT_SWITCH_X)
-        elif conditions == 0x3B:  # RA2 = 0
-            self._output_bit(DIR_Y, 1)
-            self._constspeed(STEPSBACKATLIMIT, self._axis_delay, 2)
-            self._putc(HOME_SWITCH_Y)
-        elif conditions == 0x37:  # RA3 = 0
-            self._output_bit(DIR_Y, 0)
-            self._constspeed(STEPSBACKATLIMIT, self._axis_delay, 2)
-            self._putc(LIMIT_SWITCH_Y)
-        elif conditions == 0x2F:  # RA4 = 0
-            self._putc(HOME_SWITCH_Z)
-        elif conditions == 0x1F:  # RA5 = 0
-            self._putc(LIMIT_SWITCH_Z)
-        else:  # 0x3F (released) or several switches: return from the ISR
-            self._intf = False
-            self._gie = True
-            return
-        raise _Goto(JOG_DATA_INPUT if self._machine_mode == 0 else MODE_SELECTION)
-
-    def _isr_rda(self) -> None:
-        """``serial_isr()``: a byte arrived during a move."""
-        self._gie = False
-        b = self._rx.popleft()
-        with self._lock:
-            self._rx_rows.append((self._t_ns, b, "isr"))
-        if b == EMERGENCYSTOP:
-            self._output_bit(ENABLE_X, 0)
-            self._output_bit(ENABLE_Y, 0)
-            self._output_bit(ENABLE_Z, 0)
-            self._putc(MACHINESTOPPED)
-            raise _Goto(JOG_DATA_INPUT if self._machine_mode == 0 else MODE_SELECTION)
-        self._gie = True  # any other byte: read and forgotten
-
-    # ------------------------------------------------------------------ UART
-    def _fill_rx(self, timeout_s: float) -> None:
-        if self._master < 0:
-            raise _Halt()
-        try:
-            r, _, _ = select.select([self._master], [], [], timeout_s)
-            if r:
-                data = os.read(self._master, 4096)
-                self._rx.extend(data)
-        except OSError:
-            self._wake.wait(max(timeout_s, 0.01))
-
-    def _getc(self, where: str) -> int:
-        self._state = where
-        while not self._rx:
-            self._check_halt()
-            self._fill_rx(0.05)
-        b = self._rx.popleft()
-        with self._lock:
-            self._rx_rows.append((self._t_ns, b, where))
-        self._state = BUSY
-        self._anchor()
-        return b
-
-    def _read_packet(self, n: int, where: str, kind: str) -> bytes:
-        data = bytes(self._getc(where) for _ in range(n))
-        self._log_packet(kind, data)
-        return data
-
-    def _log_packet(self, kind: str, data: bytes) -> None:
-        with self._lock:
-            self._packets.append((kind, data))
-
-    def _putc(self, byte: int) -> None:
-        sent: int | None = byte
-        delay_s = self.late_reply_s
-        with self._lock:
-            for fault in list(self._faults):
-                if fault.match is not None and fault.match != byte:
-                    continue
-                if fault.skip > 0:
-                    fault.skip -= 1
-                    continue
-                self._faults.remove(fault)
-                if fault.kind == "drop":
-                    sent = None
-                elif fault.kind == "corrupt" and sent is not None:
-                    sent = sent ^ int(fault.value)
-                elif fault.kind == "late":
-                    delay_s += fault.value
-        if delay_s > 0:
-            self._wake.wait(delay_s)
-            self._check_halt()
-            self._anchor()
-        with self._lock:
-            self._tx_rows.append((self._t_ns, byte, sent))
-        if sent is not None:
-            self._write_master(bytes([sent]))
-
-    def _write_master(self, data: bytes) -> None:
-        if self._master < 0:
-            raise _Halt()
-        try:
-            os.write(self._master, data)
-        except OSError:
-            pass  # nobody listening: the bytes are lost, as on a real line
 
 
-def start_emulator(
-    *,
-    speed: float | None = 1.0,
-    travel_x_pulses: tuple[int, int] | None = None,
-    travel_y_pulses: tuple[int, int] | None = None,
-    travel_z_pulses: tuple[int, int] | None = None,
-    late_reply_s: float = 0.0,
-    axis_delay: int = 0,
-) -> MaximusEmulator:
+def start_emulator(**options: Any) -> MaximusEmulator:
     """Start a MAXIMUS firmware emulator on a new pseudo-terminal (Unix only).
 
     Returns the running :class:`MaximusEmulator`; open its ``device_path``
     with pyserial (or ``MaximusBoard``), call ``stop()`` when done.  The
-    arguments are those of :class:`MaximusEmulator`.
+    keyword arguments are those of :class:`MaximusEmulator`.
     """
     if not hasattr(os, "openpty"):
         raise PortError("the MAXIMUS emulator needs pseudo-terminals (Linux, macOS)")
     try:
-        return MaximusEmulator(
-            speed=speed, travel_x_pulses=travel_x_pulses, travel_y_pulses=travel_y_pulses,
-            travel_z_pulses=travel_z_pulses, late_reply_s=late_reply_s, axis_delay=axis_delay,
-        ).start()
+        return MaximusEmulator(**options).start()
     except OSError as exc:
         raise PortError(f"cannot open a pseudo-terminal for the MAXIMUS emulator: {exc}") from exc
 

@@ -1,0 +1,266 @@
+"""One packet and its reply, the emergency stop, and closing a mode: the part of
+:class:`~cam.drive.maximus.board.MaximusBoard` that keeps host and firmware in step.
+
+The board object tracks where the firmware waits (``_MODE``, ``_JOG``, ``_OFFSET``, ``_INIT``,
+``_DRILL``, or ``_UNKNOWN`` after an error); see the safety rules in :mod:`cam.drive.maximus.board`.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable, TypeVar
+
+from ...errors import PortError
+from .packets import close_drill_packet, init_packet, jog_exit_packet, offset_packet
+from .protocol import (
+    ATOFFSETPOS, BYTE_NAMES, DRILLMODE1DONE, DRILLMODE1INITIALIZED, EMERGENCYSTOP, JOGMODEOFF, MACHINESTOPPED,
+    SWITCH_NAMES,
+)
+
+T = TypeVar("T")
+
+# Host-side model of where the firmware is waiting.
+_MODE = "mode selection"
+_JOG = "jog data input"
+_OFFSET = "offset packet"
+_INIT = "init packet"
+_DRILL = "drill data input"
+_UNKNOWN = "unknown"
+
+
+@dataclass
+class _Exchange:
+    """A packet sent whose reply is still due."""
+
+    what: str  # e.g. "hole index 3"
+    expected: int
+    moving: bool  # the firmware has interrupts enabled: an emergency stop is honoured
+    mode: str  # "jog" or "drill"
+    next_state: str
+
+
+def _name(byte: int) -> str:
+    return f"{BYTE_NAMES.get(byte, 'unknown byte')} ({byte:#04x})"
+
+
+_CLOSE_DRILL = _Exchange("the closing drill packet", DRILLMODE1DONE, False, "drill", _MODE)
+
+
+class _Link:
+    """Exchanges, the emergency stop and job bookkeeping; the board supplies ``_write``, ``_read_byte``,
+    ``_require``, ``timeout_s`` and the state attributes set in its ``__init__``."""
+
+    def _exchange(self, packet: bytes, ex: _Exchange) -> None:
+        """Send ``packet`` and check its reply; raises PortError on anything but ``ex.expected``."""
+        with self._lock:
+            self._pending = ex
+            self._estop_sent = False
+            self._stop_done.clear()
+            self._reader_active = True
+            try:
+                self._write(packet)
+            except BaseException:
+                self._pending = None
+                self._reader_active = False
+                raise
+        try:
+            reply = self._read_byte()
+        except BaseException:
+            with self._lock:
+                self._reader_active = False  # the exchange stays pending: emergency_stop() reads its answer
+            raise
+        self._settle(reply)
+
+    def _take_pending(self) -> tuple[_Exchange, bool]:
+        with self._lock:
+            ex, estop = self._pending, self._estop_sent
+            self._pending = None
+            self._reader_active = False
+            assert ex is not None
+            return ex, estop
+
+    def _settle(self, reply: int | None) -> None:
+        """Judge the reply to the pending exchange (called by whichever thread read it)."""
+        ex, estop = self._take_pending()
+        if estop:
+            try:
+                error = self._resolve_stop(ex, reply)
+            except PortError as exc:
+                self._stop_error = error = exc
+            finally:
+                self._stop_done.set()
+            raise error
+        if reply is None:
+            self._state = _UNKNOWN
+            raise PortError(f"MAXIMUS board did not answer within {self.timeout_s:g} s after {ex.what} "
+                            f"(expected {_name(ex.expected)}); nothing more sent")
+        if reply == ex.expected:
+            self._state = ex.next_state
+            return
+        if reply in SWITCH_NAMES:
+            self._after_stop(ex.mode)
+            raise PortError(f"limit switch {SWITCH_NAMES[reply]} ({reply:#04x}) tripped during {ex.what}; "
+                            f"the board backed off and ended the job")
+        if reply == MACHINESTOPPED:
+            self._after_stop(ex.mode)
+            raise PortError(f"MAXIMUS board reported an emergency stop during {ex.what}; drivers disabled")
+        self._state = _UNKNOWN
+        raise PortError(f"MAXIMUS board answered {_name(reply)} instead of {_name(ex.expected)} after "
+                        f"{ex.what}; nothing more sent")
+
+    def _after_stop(self, mode: str) -> None:
+        """After MACHINESTOPPED or a switch byte: Drill mode is at mode selection, Jog mode still in Jog."""
+        if mode == "jog":
+            self._state = _JOG
+            self._leave_jog()
+        else:
+            self._state = _MODE
+
+    def _leave_jog(self) -> None:
+        """Send the Jog exit packet and expect JOGMODEOFF (no motion)."""
+        self._exchange(jog_exit_packet(), _Exchange("the Jog exit packet", JOGMODEOFF, False, "jog", _MODE))
+
+    def _resolve_stop(self, ex: _Exchange, reply: int | None) -> PortError:
+        """The reply to a move during which EMERGENCYSTOP was sent: the error the job ends with."""
+        if reply == MACHINESTOPPED:
+            self._after_stop(ex.mode)
+            return PortError(f"emergency stop during {ex.what}: the board answered MACHINESTOPPED, "
+                             f"drivers disabled")
+        if reply is None:
+            self._state = _UNKNOWN
+            self._stop_error = PortError(f"emergency stop sent during {ex.what} but the board did not "
+                                         f"answer within {self.timeout_s:g} s")
+            return self._stop_error
+        if reply == ex.expected or reply in SWITCH_NAMES:
+            # The move ended as the stop byte arrived.  If the UART ISR still caught it,
+            # MACHINESTOPPED follows; if not, the firmware took 0x80 as packet data.
+            second = self._read_byte(min(0.3, self.timeout_s))
+            if second == MACHINESTOPPED:
+                self._after_stop(ex.mode)
+                return PortError(f"emergency stop at the end of {ex.what}: the board answered "
+                                 f"MACHINESTOPPED, drivers disabled")
+            self._state = _UNKNOWN
+            self._stop_error = PortError(f"emergency stop reached the board after {ex.what} had ended; it "
+                                         f"read the stop byte as packet data and is out of step: reset it")
+            return self._stop_error
+        self._state = _UNKNOWN
+        self._stop_error = PortError(f"emergency stop during {ex.what}: the board answered {_name(reply)}")
+        return self._stop_error
+
+    # ------------------------------------------------------------------ emergency stop
+    def emergency_stop(self) -> bool:
+        """Stop the machine now; safe to call from any thread (e.g. on Ctrl-C).
+
+        During a move (the firmware has interrupts enabled) this sends
+        EMERGENCYSTOP (0x80) and waits for MACHINESTOPPED: the firmware cuts
+        the drivers and returns to mode selection (Drill) or Jog data input
+        (Jog; the exit packet follows).  Between moves the firmware would
+        read 0x80 as packet data, so nothing is sent: the running job stops
+        before its next packet and closes Drill mode with the CDF-clear
+        packet, which moves nothing.  (A stop between the offset move and the
+        Init move leaves Z ``depth_steps`` above the start; the Init move
+        itself cannot be stopped -- the listing runs it with interrupts off.)
+
+        Returns:
+            True if a move was stopped (MACHINESTOPPED received), False if no
+            move was running.
+
+        Raises:
+            PortError: the stop byte was sent but not answered, or arrived
+                as the move ended and was taken as packet data.
+        """
+        with self._lock:
+            ex = self._pending
+            between_moves = ex is None or not ex.moving
+            if between_moves:
+                self._stop_requested = True
+                # no job left to act on the request (e.g. it was interrupted by Ctrl-C): finish here
+                orphan_reply = ex is not None and not self._reader_active
+                finish_here = not self._job_active and (ex is None or orphan_reply)
+            elif not self._estop_sent:
+                self._estop_sent = True
+                self._stop_error = None
+                self._write(bytes([EMERGENCYSTOP]))
+            reader = self._reader_active
+        if between_moves:
+            if finish_here:
+                if ex is not None:
+                    try:
+                        self._settle(self._read_byte())  # the answer to a packet that moves nothing stoppable
+                    except PortError:
+                        pass
+                if self._state in (_OFFSET, _INIT, _DRILL, _JOG):
+                    self._unwind()
+            return False
+        if reader:
+            if not self._stop_done.wait(self.timeout_s + 1.0):
+                raise PortError("emergency stop sent; no answer was read within "
+                                f"{self.timeout_s + 1.0:g} s")
+        else:
+            # nobody is reading (the job was interrupted): read the answer here
+            try:
+                self._settle(self._read_byte())
+            except PortError:
+                pass
+        if self._stop_error is not None:
+            raise self._stop_error
+        return True
+
+    def _unwind(self) -> None:
+        """From a waiting firmware state, get back to mode selection without moving anything."""
+        if self._state == _OFFSET:
+            self._exchange(offset_packet(0, 0, 0),
+                           _Exchange("the closing offset packet", ATOFFSETPOS, True, "drill", _INIT))
+        if self._state == _INIT:
+            self._exchange(init_packet(0, 0),
+                           _Exchange("the closing init packet", DRILLMODE1INITIALIZED, False, "drill", _DRILL))
+        if self._state == _DRILL:
+            self._exchange(close_drill_packet(), _CLOSE_DRILL)
+        if self._state == _JOG:
+            self._leave_jog()
+
+    def _check_stop(self, before: str) -> None:
+        """Between moves: if a stop was asked for, close the mode cleanly and end the job."""
+        with self._lock:
+            if not self._stop_requested:
+                return
+        self._unwind()
+        raise PortError(f"emergency stop before {before}: no move was running; job closed, nothing more sent")
+
+    # ------------------------------------------------------------------ job bookkeeping
+    def _begin_job(self) -> None:
+        with self._lock:
+            if self._job_active:
+                raise PortError("a MAXIMUS job is already running on this board")
+            self._job_active = True
+            self._stop_requested = False
+
+    def _end_job(self) -> None:
+        with self._lock:
+            self._job_active = False
+
+    def _clean_up_after(self) -> None:
+        """An exception left a job: if the firmware waits between moves, close its mode quietly.
+
+        During a move (e.g. Ctrl-C while waiting for a reply) nothing is sent:
+        :meth:`emergency_stop` deals with the move.
+        """
+        with self._lock:
+            if self._pending is not None or self._state not in (_OFFSET, _INIT, _DRILL, _JOG):
+                return
+        try:
+            self._unwind()
+        except PortError:
+            pass
+
+    def _run_job(self, session: Callable[[], T]) -> T:
+        """Run ``session`` as the board's one job, from mode selection; if it fails between moves, close the
+        firmware's mode quietly (:meth:`_clean_up_after`)."""
+        self._begin_job()
+        try:
+            self._require(_MODE)
+            return session()
+        except BaseException:
+            self._clean_up_after()
+            raise
+        finally:
+            self._end_job()
