@@ -77,10 +77,13 @@ class Travel:
 
     x_min_steps: int = 0
     x_max_steps: int = 10000
+    """X: the home at 0, 10000 steps (289 mm) to the right."""
     y_min_steps: int = 0
     y_max_steps: int = 10000
+    """Y: the home at 0, 10000 steps toward the operator."""
     z_min_steps: int = -640
     z_max_steps: int = 2000
+    """Z: up to 640 steps (10 mm) above the home plane, 2000 steps (31.4 mm) below it (+Z is deeper)."""
 
     def bounds_steps(self) -> tuple[tuple[int, int], tuple[int, int], tuple[int, int]]:
         """((x_min, x_max), (y_min, y_max), (z_min, z_max)) in steps."""
@@ -102,10 +105,13 @@ class Pins:
 
     clock_x: int = 6
     dir_x: int = 7
+    """X motor: clock on pin 6 (D4), direction on pin 7 (D5)."""
     clock_y: int = 4
     dir_y: int = 5
+    """Y motor: clock on pin 4 (D2), direction on pin 5 (D3)."""
     clock_z: int = 2
     dir_z: int = 3
+    """Z motor: clock on pin 2 (D0), direction on pin 3 (D1)."""
 
     def bit(self, name: str) -> int:
         """Data-register bit (0..7) of the signal ``name`` (e.g. ``"clock_x"``)."""
@@ -118,21 +124,29 @@ class MachineSettings:
 
     steps_per_px_xy: int = 8
     steps_per_px_z: int = 1
+    """Motor steps per drawing pixel (the thesis: 8 X/Y, 1 Z); used only by the drawing planner."""
     delay_xy_ms: float = 5.0
     delay_z_ms: float = 5.0
+    """The thesis's constant step period of each motor (5 ms)."""
     mm_per_step_xy: float = 0.0289
     mm_per_step_z: float = 0.0157
+    """Travel per step of the thesis machine's lead screws."""
     half_step: bool = False
+    """Half/Full* on pin 1 (strobe): low = full steps."""
     ramp: str = "lookahead"
+    """Speed ramp mode, one of :data:`RAMP_MODES`."""
     start_speed_x_mm_s: float = 1.445
     start_speed_y_mm_s: float = 1.445
     start_speed_z_mm_s: float = 0.785
+    """Speeds each axis may start and stop at without a ramp."""
     max_speed_x_mm_s: float = 5.78
     max_speed_y_mm_s: float = 5.78
     max_speed_z_mm_s: float = 3.14
+    """Top speed of each axis."""
     accel_x_mm_s2: float = 50.0
     accel_y_mm_s2: float = 50.0
     accel_z_mm_s2: float = 50.0
+    """Acceleration of each axis."""
     travel: Travel = field(default_factory=Travel)
     pins: Pins = field(default_factory=Pins)
 
