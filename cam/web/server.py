@@ -17,8 +17,20 @@ Security:
   carry it (header ``X-Cam-Token``, ``Authorization: Bearer``, or ``?token=``
   for the event stream and pictures), else 401;
 * without a token, requests must name a localhost ``Host`` (no DNS
-  rebinding) and a cross-site ``Origin`` is refused (403), so another web
-  site open in the same browser cannot drive the machine;
+  rebinding);
+* only the page itself may ask (with or without a token): an ``Origin`` header
+  must be the server's own origin, ``scheme://host:port`` as the page was
+  served (``null``, another port, another site: 403), and so must a browser's
+  ``Sec-Fetch-Site`` (``cross-site`` / ``same-site``: 403); a request that
+  changes anything (every non-GET under ``/api``) with no ``Origin`` must carry
+  a header a cross-site page cannot send without a CORS preflight
+  (``X-Requested-With``, ``X-Cam-Token`` or ``Authorization``), else 403; and
+  JSON requests must say ``Content-Type: application/json``, uploads
+  ``multipart/form-data`` (else 415).  The server never answers a preflight
+  (``OPTIONS`` gets 405 and no ``Access-Control-Allow-*``), so another web page
+  in the same browser, a sandboxed frame included, cannot drive the machine.
+  The emergency stop follows the same rules: a cross-site page could otherwise
+  spoil a running job, and the page's own button always qualifies;
 * uploads over the size limit get 413; stored names are reduced to safe
   characters and always land inside the jobs folder;
 * a job or jog while another runs gets 409; bad requests get 4xx JSON
@@ -39,7 +51,6 @@ from dataclasses import dataclass, field
 from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Awaitable, Callable, Optional
-from urllib.parse import urlsplit
 
 from ..drive.session import MachineSession
 from ..errors import BusyError, CamError, CapabilityError
@@ -146,7 +157,7 @@ Handler = Callable[[_AppState, "Request"], Awaitable[Any]]
 _SECURITY_HEADERS = [
     (b"x-content-type-options", b"nosniff"),
     (b"x-frame-options", b"DENY"),
-    (b"referrer-policy", b"no-referrer"),
+    (b"referrer-policy", b"same-origin"),  # the page's own POSTs carry its Origin, never null
     (b"content-security-policy",
      b"default-src 'self'; img-src 'self' data:; style-src 'self'; script-src 'self'; "
      b"connect-src 'self'; frame-ancestors 'none'"),
@@ -167,31 +178,64 @@ def _too_large(limit_bytes: int, headers: Optional[dict[str, str]] = None):
                         headers=headers)
 
 
+_SAFE_METHODS = ("GET", "HEAD")
+"""Methods that change nothing; every other method under ``/api`` changes the machine or the jobs."""
+_CUSTOM_HEADERS = ("x-requested-with", "x-cam-token", "authorization")
+"""A request with one of these was not sent by a cross-site page: the browser would ask first (preflight)."""
+
+
+def _own_origin(request: Request) -> str:
+    """``scheme://host[:port]`` of the page, as the browser addressed it (its ``Host`` header)."""
+    return f"{request.url.scheme}://{(request.headers.get('host') or '').lower()}"
+
+
 def _authorise(config: ServerConfig, request: Request) -> None:
-    """The token when the server has one; else a localhost ``Host`` and no cross-site ``Origin`` (HttpError)."""
+    """The token when the server has one, else a localhost ``Host``; then only the page itself (HttpError).
+
+    The page itself: an ``Origin`` equal to :func:`_own_origin`, no ``Sec-Fetch-Site`` naming another
+    site, and for a request that changes anything with no ``Origin``, one of :data:`_CUSTOM_HEADERS`.
+    """
+    headers = request.headers
     if config.token:
-        given = (request.headers.get("x-cam-token") or request.query_params.get("token") or "")
-        auth = request.headers.get("authorization", "")
+        given = (headers.get("x-cam-token") or request.query_params.get("token") or "")
+        auth = headers.get("authorization", "")
         if auth.lower().startswith("bearer "):
             given = given or auth[7:].strip()
         if not secrets.compare_digest(given.encode(), config.token.encode()):
             raise HttpError(401, "this server needs its token: open the URL it printed (with ?token=...)")
-        return
-    host = (request.headers.get("host") or "").rsplit(":", 1)[0].strip("[]").lower()
-    if host not in LOCAL_HOSTS:
-        raise HttpError(403, f"requests must be addressed to localhost, not {host!r}")
-    origin = request.headers.get("origin")
-    if origin and origin != "null" and urlsplit(origin).netloc.lower() != (request.headers.get("host") or "").lower():
-        raise HttpError(403, f"cross-site request from {origin} refused")
+    else:
+        host = (headers.get("host") or "").rsplit(":", 1)[0].strip("[]").lower()
+        if host not in LOCAL_HOSTS:
+            raise HttpError(403, f"requests must be addressed to localhost, not {host!r}")
+    origin = headers.get("origin")
+    if origin is not None and origin.lower() != _own_origin(request):
+        raise HttpError(403, f"cross-site request from {origin} refused: only the page at "
+                             f"{_own_origin(request)}/ may use this server")
+    site = headers.get("sec-fetch-site", "").lower()
+    if site in ("cross-site", "same-site"):
+        raise HttpError(403, f"{site} request refused: only the page at {_own_origin(request)}/ may use this server")
+    if request.method not in _SAFE_METHODS and origin is None and not any(h in headers for h in _CUSTOM_HEADERS):
+        raise HttpError(403, "a request that changes anything needs the page's Origin or the header "
+                             "X-Requested-With (e.g. curl -H 'X-Requested-With: cam')")
 
 
-def _api(st: _AppState, handler: Handler) -> Callable[[Request], Awaitable[Any]]:
-    """A Starlette endpoint: authorise, run ``handler``, turn errors into JSON (401/403/4xx, 409 busy)."""
+def _check_content_type(request: Request, wanted: str) -> None:
+    """HttpError 415 unless the request's media type is ``wanted`` (parameters such as charset allowed)."""
+    given = request.headers.get("content-type", "").split(";", 1)[0].strip().lower()
+    if given != wanted:
+        raise HttpError(415, f"send {wanted} (Content-Type: {wanted}), not {given or 'no content type'}")
+
+
+def _api(st: _AppState, handler: Handler, *, body: Optional[str] = None) -> Callable[[Request], Awaitable[Any]]:
+    """A Starlette endpoint: authorise, check the body's content type (``body``, e.g. "application/json";
+    None: no body expected), run ``handler``, turn errors into JSON (401/403/415/4xx, 409 busy)."""
     from starlette.responses import JSONResponse, Response
 
     async def endpoint(request: Request):
         try:
             _authorise(st.config, request)
+            if body is not None:
+                _check_content_type(request, body)
             out = await handler(st, request)
         except HttpError as exc:
             return _json_error(exc.status, exc.message)
@@ -282,10 +326,6 @@ async def _read_capped(request: Request, cap_bytes: int) -> Optional[bytes]:
 async def _parse_upload(request: Request, body: bytes) -> tuple[Any, str]:
     """The uploaded file of a multipart ``body`` and its role ("job" or "profile"); HttpError 400 otherwise."""
     from starlette.formparsers import MultiPartException, MultiPartParser
-
-    ctype = request.headers.get("content-type", "")
-    if not ctype.startswith("multipart/form-data"):
-        raise HttpError(400, "upload the file as multipart/form-data (field 'file')")
 
     async def stream():
         yield body
@@ -486,20 +526,24 @@ def _routes(st: _AppState) -> list:
 
     session = st.session
     post = ["POST"]
+
+    def json_api(handler: Handler):
+        return _api(st, handler, body="application/json")
+
     return [
         Route("/", _index),
         Route("/api/config", _api(st, _get_config)),
-        Route("/api/upload", _api(st, _upload), methods=post),
-        Route("/api/plan", _api(st, _plan_job), methods=post),
+        Route("/api/upload", _api(st, _upload, body="multipart/form-data"), methods=post),
+        Route("/api/plan", json_api(_plan_job), methods=post),
         Route("/api/preview/{job}.png", _api(st, _preview)),
-        Route("/api/start", _api(st, _start), methods=post),
-        Route("/api/pause", _api(st, partial(_control, action=session.pause)), methods=post),
-        Route("/api/resume", _api(st, partial(_control, action=session.resume)), methods=post),
-        Route("/api/stop", _api(st, partial(_control, action=session.stop)), methods=post),
-        Route("/api/estop", _api(st, _emergency_stop), methods=post),
-        Route("/api/jog", _api(st, _jog), methods=post),
-        Route("/api/origin", _api(st, partial(_control, action=session.go_to_origin)), methods=post),
-        Route("/api/answer", _api(st, _answer), methods=post),
+        Route("/api/start", json_api(_start), methods=post),
+        Route("/api/pause", json_api(partial(_control, action=session.pause)), methods=post),
+        Route("/api/resume", json_api(partial(_control, action=session.resume)), methods=post),
+        Route("/api/stop", json_api(partial(_control, action=session.stop)), methods=post),
+        Route("/api/estop", json_api(_emergency_stop), methods=post),
+        Route("/api/jog", json_api(_jog), methods=post),
+        Route("/api/origin", json_api(partial(_control, action=session.go_to_origin)), methods=post),
+        Route("/api/answer", json_api(_answer), methods=post),
         Route("/api/state", _api(st, _state)),
         Route("/api/events", _api(st, _events)),
         Route("/api/pinlog", _api(st, _pinlog)),
