@@ -186,6 +186,39 @@ def test_token_mode_keeps_the_same_rules(servers):
 
 
 # ------------------------------------------------------------------------------------
+# JSON bodies: size and depth
+# ------------------------------------------------------------------------------------
+
+
+def test_json_bodies_are_limited_in_size_and_depth(fast):
+    before = _snapshot(fast)
+    jog = {"axis": "y", "steps": 77}
+    for pad_bytes in (9_000, 500_000):  # over the 8 kB limit; the larger one is read on and dropped
+        body = json.dumps({**jog, "pad": "x" * pad_bytes}).encode()
+        status, r = fast.call("POST", "/api/jog", raw=body, headers={"Content-Type": "application/json"})
+        assert status == 413 and "8 kB" in r["error"], r
+    # sent in chunks with no Content-Length: counted as it comes
+    conn = http.client.HTTPConnection("127.0.0.1", int(fast.url.rsplit(":", 1)[1]), timeout=30)
+    chunks = [b'{"axis": "y", "steps": 77, "pad": "'] + [b"x" * 1000] * 20 + [b'"}']
+    conn.request("POST", "/api/jog", body=iter(chunks), encode_chunked=True,
+                 headers={**fast.page_headers("POST"), "Content-Type": "application/json"})
+    resp = conn.getresponse()
+    assert resp.status == 413 and "8 kB" in json.loads(resp.read())["error"]
+    conn.close()
+    # finding (2): 100,000 levels deep is over the size limit; 4,000 levels fit in it and are refused as too deep
+    for depth in (100_000, 4_000, 17):
+        body = b'{"axis": "y", "steps": 77, "deep": ' + b"[" * depth + b"]" * depth + b"}"
+        status, r = fast.call("POST", "/api/jog", raw=body, headers={"Content-Type": "application/json"})
+        if len(body) > 8 * 1024:
+            assert status == 413, (depth, r)
+        else:
+            assert status == 400 and "nested too deep" in r["error"] and "16 levels" in r["error"], (depth, r)
+    status, r = fast.call("POST", "/api/plan", {"job": "1", "options": {"deep": [[[[[[[[[[[[[[1]]]]]]]]]]]]]]}})
+    assert status in (400, 404) and "nested" not in r["error"]  # 16 levels pass to the planner's own checks
+    _nothing_happened_since(fast, before)
+
+
+# ------------------------------------------------------------------------------------
 # other pages in the same browser (Chromium)
 # ------------------------------------------------------------------------------------
 

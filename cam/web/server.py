@@ -66,6 +66,8 @@ __all__ = ["ServerConfig", "HttpError", "create_app", "serve", "LOCAL_HOSTS"]
 STATIC_DIR = Path(__file__).resolve().parent / "static"
 LOCAL_HOSTS = ("127.0.0.1", "localhost", "::1")
 _DRAIN_LIMIT_BYTES = 64 * 1024 * 1024  # read and drop at most this much of a refused upload
+_MAX_JSON_BYTES = 8 * 1024  # a JSON request body (the largest, planning options, is well under 1 kB)
+_MAX_JSON_DEPTH = 16  # arrays and objects inside each other (the requests use 3)
 _MULTIPART_SLACK_BYTES = 64 * 1024  # form boundaries and headers around the file
 
 
@@ -101,12 +103,13 @@ class ServerConfig:
 
 
 class HttpError(Exception):
-    """A request that cannot be served: HTTP ``status`` and a one-line message for the page."""
+    """A request that cannot be served: HTTP ``status``, a one-line message for the page, extra headers."""
 
-    def __init__(self, status: int, message: str) -> None:
+    def __init__(self, status: int, message: str, headers: Optional[dict[str, str]] = None) -> None:
         super().__init__(message)
         self.status = status
         self.message = message
+        self.headers = headers
 
 
 def safe_name(filename: str) -> str:
@@ -165,10 +168,11 @@ _SECURITY_HEADERS = [
 """Added to every HTTP response."""
 
 
-def _json_error(status: int, message: str):
+def _json_error(status: int, message: str, headers: Optional[dict[str, str]] = None):
     from starlette.responses import JSONResponse
 
-    return JSONResponse({"error": message}, status_code=status, headers={"Cache-Control": "no-store"})
+    return JSONResponse({"error": message}, status_code=status,
+                        headers={"Cache-Control": "no-store", **(headers or {})})
 
 
 def _too_large(limit_bytes: int, headers: Optional[dict[str, str]] = None):
@@ -238,7 +242,7 @@ def _api(st: _AppState, handler: Handler, *, body: Optional[str] = None) -> Call
                 _check_content_type(request, body)
             out = await handler(st, request)
         except HttpError as exc:
-            return _json_error(exc.status, exc.message)
+            return _json_error(exc.status, exc.message, exc.headers)
         except (BusyError, CapabilityError) as exc:  # the machine cannot do it now, or at all
             return _json_error(409, str(exc))
         except CamError as exc:
@@ -250,14 +254,37 @@ def _api(st: _AppState, handler: Handler, *, body: Optional[str] = None) -> Call
     return endpoint
 
 
+def _json_depth(text: str) -> int:
+    """How deep arrays and objects nest in the JSON ``text`` (brackets inside strings do not count).
+
+    >>> _json_depth('{"a": [1, {"b": "[[["}]}'), _json_depth('3'), _json_depth('[[[]]]')
+    (3, 0, 3)
+    """
+    depth = deepest = 0
+    for bracket in re.findall(r"[\[\]{}]", re.sub(r'"(?:[^"\\]|\\.)*"', '""', text)):
+        depth += 1 if bracket in "[{" else -1
+        deepest = max(deepest, depth)
+    return deepest
+
+
 async def _body_json(request: Request) -> dict[str, Any]:
-    """The request's JSON object ({} for an empty body); HttpError 400 otherwise."""
-    raw = await request.body()
+    """The request's JSON object ({} for an empty body); HttpError 413 when over :data:`_MAX_JSON_BYTES`,
+    400 when nested deeper than :data:`_MAX_JSON_DEPTH` or not a JSON object."""
+    raw = await _read_capped(request, _MAX_JSON_BYTES, drain_bytes=1024 * 1024)
+    if raw is None:
+        raise HttpError(413, f"request body too large: JSON requests are limited to {_MAX_JSON_BYTES // 1024} kB",
+                        {"Connection": "close"})
     if not raw.strip():
         return {}
     try:
-        value = json.loads(raw)
-    except (ValueError, UnicodeDecodeError) as exc:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise HttpError(400, f"malformed JSON: not UTF-8 ({exc.reason} at byte {exc.start})") from None
+    if _json_depth(text) > _MAX_JSON_DEPTH:
+        raise HttpError(400, f"JSON nested too deep: at most {_MAX_JSON_DEPTH} levels of arrays and objects")
+    try:
+        value = json.loads(text)
+    except ValueError as exc:
         raise HttpError(400, f"malformed JSON: {exc}") from None
     if not isinstance(value, dict):
         raise HttpError(400, "the request body must be a JSON object")
@@ -297,11 +324,11 @@ async def _get_config(st: _AppState, request: Request) -> dict[str, Any]:
     }
 
 
-async def _read_capped(request: Request, cap_bytes: int) -> Optional[bytes]:
+async def _read_capped(request: Request, cap_bytes: int, *, drain_bytes: int = _DRAIN_LIMIT_BYTES) -> Optional[bytes]:
     """The request body, or None when it is longer than ``cap_bytes``.
 
-    A body announced or found too long is read on (up to :data:`_DRAIN_LIMIT_BYTES` past the cap) and
-    dropped, so the client gets to read the answer.
+    A body announced or found too long is read on (up to ``drain_bytes`` past the cap) and dropped, so the
+    client gets to read the answer.
     """
     length = request.headers.get("content-length")
     too_big = False
@@ -316,7 +343,7 @@ async def _read_capped(request: Request, cap_bytes: int) -> Optional[bytes]:
         seen += len(chunk)
         if too_big or seen > cap_bytes:
             too_big = True
-            if seen > cap_bytes + _DRAIN_LIMIT_BYTES:
+            if seen > cap_bytes + drain_bytes:
                 break
             continue
         body += chunk
