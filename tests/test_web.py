@@ -28,7 +28,7 @@ from conftest import SAMPLES, assert_surface_equal
 uvicorn = pytest.importorskip("uvicorn")
 pytest.importorskip("starlette")
 
-from cam.web.server import ServerConfig, bind_socket, create_app, safe_name  # noqa: E402
+from cam.web.server import ServerConfig, bind_socket, create_app, safe_name, uvicorn_config  # noqa: E402
 
 CHROMIUM = "/usr/bin/chromium"
 ROOT = Path(__file__).resolve().parent.parent
@@ -86,8 +86,7 @@ class Server:
         self.seen: list[tuple[str, str, int]] = []
         sock = bind_socket("127.0.0.1", 0)
         self.url = f"http://127.0.0.1:{sock.getsockname()[1]}"
-        ucfg = uvicorn.Config(self._recording(self.app), log_level="warning", lifespan="on",
-                              timeout_graceful_shutdown=1)
+        ucfg = uvicorn_config(self._recording(self.app), log_level="warning", timeout_graceful_shutdown=1)
         self.server = uvicorn.Server(ucfg)
         self.thread = threading.Thread(target=self.server.run, kwargs={"sockets": [sock]}, daemon=True)
         self.thread.start()
@@ -105,6 +104,7 @@ class Server:
 
             await app(scope, receive, send_seen if scope["type"] == "http" else send)
 
+        recorder.state = app.state
         return recorder
 
     def close(self) -> None:

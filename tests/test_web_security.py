@@ -9,12 +9,20 @@ from __future__ import annotations
 import http.client
 import http.server
 import json
+import os
+import re
+import resource
+import select
+import socket
+import subprocess
+import sys
 import threading
+import time
 
 import pytest
 
-from conftest import SAMPLES
-from test_web import FAST, MEDIUM, TOKEN, browser, compiled_kernels, servers  # noqa: F401 (fixtures)
+from conftest import ROOT, SAMPLES
+from test_web import FAST, MEDIUM, TOKEN, Server, browser, compiled_kernels, servers  # noqa: F401 (fixtures)
 
 PNG = (SAMPLES / "ellipse.png").read_bytes()
 
@@ -313,3 +321,185 @@ def test_pages_on_other_origins_cannot_move_the_machine(browser, servers):  # no
         assert ("POST", path, 403) in s.seen, (path, s.seen)
     assert ("OPTIONS", "/api/jog", 405) in s.seen
     assert not [x for x in s.seen if x[0] == "POST" and x[2] < 400], s.seen
+
+
+# ------------------------------------------------------------------------------------
+# slow clients, floods of connections, live views
+# ------------------------------------------------------------------------------------
+
+
+def _closed_within(sock: socket.socket, timeout_s: float) -> tuple[bool, bytes]:
+    """(whether the server closed ``sock`` within ``timeout_s``, what it wrote before)."""
+    sock.settimeout(0.05)
+    got = b""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        try:
+            chunk = sock.recv(4096)
+        except socket.timeout:
+            continue
+        except OSError:  # reset
+            return True, got
+        if not chunk:
+            return True, got
+        got += chunk
+    return False, got
+
+
+def _port(url: str) -> int:
+    return int(url.rsplit(":", 1)[1])
+
+
+def test_slow_or_half_sent_requests_time_out(tmp_path):
+    """A head must come whole within header_timeout_s (more bytes do not extend it); a body may not pause
+    longer than body_timeout_s; an idle connection is closed.  Nothing moves."""
+    s = Server(tmp_path, settings=FAST, header_timeout_s=1.0, body_timeout_s=1.0)
+    socks = []
+    try:
+        before = _snapshot(s)
+        port = _port(s.url)
+        half_line, silent, half_body, dribble = (socket.create_connection(("127.0.0.1", port)) for _ in range(4))
+        socks += [half_line, silent, half_body, dribble]
+        half_line.sendall(b"POST /api/jo")
+        head = (f"POST /api/jog HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\nOrigin: {s.url}\r\n"
+                "Content-Type: application/json\r\nContent-Length: 26\r\n\r\n")
+        half_body.sendall(head.encode() + b'{"axis": "y", ')
+        t0 = time.monotonic()
+        for byte in head.encode()[:15]:  # one byte every 0.15 s: the head's deadline stands
+            try:
+                dribble.sendall(bytes([byte]))
+            except OSError:  # closed by the server
+                break
+            time.sleep(0.15)
+        for name, sock in [("half a request line", half_line), ("nothing sent", silent),
+                           ("half a body", half_body), ("a head sent byte by byte", dribble)]:
+            closed, got = _closed_within(sock, 3.0 - (time.monotonic() - t0))
+            assert closed, f"{name}: still open after 3 s"
+            if sock is not half_body:  # no request yet: 408, or silence for a connection that sent nothing
+                assert (got == b"") if sock is silent else got.startswith(b"HTTP/1.1 408"), (name, got)
+        assert time.monotonic() - t0 > 0.9  # not before the deadline
+        assert s.call("GET", "/api/state")[0] == 200
+        _nothing_happened_since(s, before)
+    finally:
+        for sock in socks:
+            sock.close()
+        s.close()
+
+
+def test_connections_and_live_views_are_capped_with_503(tmp_path):
+    s = Server(tmp_path, settings=FAST, max_connections=3, max_event_streams=2)
+    port = _port(s.url)
+    streams, socks = [], []
+    try:
+        before = _snapshot(s)
+        for _ in range(2):
+            conn = http.client.HTTPConnection("127.0.0.1", port, timeout=10)
+            conn.request("GET", "/api/events")
+            resp = conn.getresponse()
+            assert resp.status == 200 and resp.headers["content-type"].startswith("text/event-stream")
+            streams.append(conn)
+        status, _, payload = _raw(s.url, "GET", "/api/events")
+        assert status == 503 and "too many live views" in json.loads(payload)["error"]
+        # a third request in progress (its body on the way): every connection is busy
+        guard = s.app.state.guard
+
+        def wait_for_requests(n: int) -> None:
+            deadline = time.monotonic() + 5
+            while guard.requests != n:
+                assert time.monotonic() < deadline, guard.requests
+                time.sleep(0.01)
+
+        wait_for_requests(2)  # the two streams
+        slow = socket.create_connection(("127.0.0.1", port))
+        socks.append(slow)
+        slow.sendall((f"POST /api/jog HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\nOrigin: {s.url}\r\n"
+                      "Content-Type: application/json\r\nContent-Length: 26\r\n\r\n").encode() + b'{"axis": "y", ')
+        wait_for_requests(3)  # its head read: the jog waits for the rest of its body
+        status, headers, payload = _raw(s.url, "GET", "/api/state")
+        assert status == 503 and "busy" in json.loads(payload)["error"] and headers["connection"] == "close"
+        assert _raw(s.url, "POST", "/api/estop", b"{}", {**s.page_headers("POST"),
+                                                          "Content-Type": "application/json"})[0] == 200
+        slow.sendall(b'"steps": 0}\r\n'[:12])  # the rest: a jog of no steps, refused (400)
+        closed, got = _closed_within(slow, 0.5)
+        assert got.startswith(b"HTTP/1.1 400"), got
+        streams.pop().close()  # one view closed: another may open
+        deadline = time.monotonic() + 5
+        while True:
+            conn = http.client.HTTPConnection("127.0.0.1", port, timeout=10)
+            streams.append(conn)
+            conn.request("GET", "/api/events")
+            if conn.getresponse().status == 200:
+                break
+            assert time.monotonic() < deadline, "the closed stream was not let go"
+            time.sleep(0.1)
+        for conn in streams:
+            conn.close()
+        streams.clear()
+        wait_for_requests(0)
+        # half-sent heads beyond the limit: the oldest idle ones are closed at once, with a 503
+        flood = []
+        for _ in range(12):
+            flood.append(socket.create_connection(("127.0.0.1", port)))
+            socks.append(flood[-1])
+            flood[-1].sendall(b"GET /api/sta")
+            time.sleep(0.02)
+        results = [_closed_within(sock, 0.5) for sock in flood[:9]]
+        assert all(closed for closed, _ in results), results
+        answers = {got for _, got in results}  # b"" for one closed before its bytes were read
+        assert answers - {b""} and all(b"503" in got and b"too many connections" in got for got in answers - {b""})
+        assert s.call("GET", "/api/state")[0] == 200
+        assert s.session.position_steps() == before[1] and s.session.last_run is before[2]
+    finally:
+        for conn in streams:
+            conn.close()
+        for sock in socks:
+            sock.close()
+        s.close()
+
+
+def test_a_thousand_half_open_connections_do_not_delay_the_emergency_stop(tmp_path):
+    """Finding (3): ``cam serve`` in a process that may open only 512 files; 1,000 connections to it each
+    send half a request line and stop.  The e-stop still answers within 50 ms, and the server closes them
+    (the oldest at once, the rest when their head's deadline passes)."""
+    def small_file_limit():
+        resource.setrlimit(resource.RLIMIT_NOFILE, (512, resource.getrlimit(resource.RLIMIT_NOFILE)[1]))
+
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    err = open(tmp_path / "serve.err", "w")
+    proc = subprocess.Popen([sys.executable, "-m", "cam", "serve", "--http-port", "0", "--simulated",
+                             "--jobs-dir", str(tmp_path / "jobs")], cwd=ROOT, env=env, stdout=subprocess.PIPE,
+                            stderr=err, text=True, preexec_fn=small_file_limit)
+    socks: list[socket.socket] = []
+    try:
+        ready, _, _ = select.select([proc.stdout], [], [], 60)
+        assert ready, "cam serve did not start"
+        url = re.search(r"http://127\.0\.0\.1:\d+", proc.stdout.readline()).group(0)
+        estop = ("POST", "/api/estop", b"{}", {"Origin": url, "Content-Type": "application/json"})
+
+        def estop_ms() -> float:
+            t = time.perf_counter()
+            assert _raw(url, *estop)[0] == 200
+            return (time.perf_counter() - t) * 1000
+
+        idle_ms = sorted(estop_ms() for _ in range(5))
+        for _ in range(1000):
+            sock = socket.create_connection(("127.0.0.1", _port(url)), timeout=5)
+            socks.append(sock)
+            sock.sendall(b"GET /api/sta")
+        time.sleep(0.5)
+        loaded_ms = sorted(estop_ms() for _ in range(5))
+        print(f"e-stop round trip: idle {idle_ms} ms, with 1,000 half-open connections {loaded_ms} ms")
+        assert loaded_ms[2] < 50 and loaded_ms[-1] < 1000, loaded_ms  # the median, and no stall
+        closed_at_once = sum(_closed_within(sock, 0.001)[0] for sock in socks)
+        assert closed_at_once >= 1000 - 100, closed_at_once  # only max_connections are kept
+        t0 = time.monotonic()
+        still_open = [sock for sock in socks if not _closed_within(sock, max(0.001, 7 - (time.monotonic() - t0)))[0]]
+        assert not still_open, f"{len(still_open)} half-open connections held over 7 s"
+        assert proc.poll() is None
+    finally:
+        for sock in socks:
+            sock.close()
+        proc.terminate()
+        proc.wait(15)
+        err.close()
+    assert "Too many open files" not in (tmp_path / "serve.err").read_text()
