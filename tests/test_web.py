@@ -28,7 +28,7 @@ from conftest import SAMPLES, assert_surface_equal
 uvicorn = pytest.importorskip("uvicorn")
 pytest.importorskip("starlette")
 
-from cam.web.server import ServerConfig, bind_socket, create_app, safe_name  # noqa: E402
+from cam.web.server import ServerConfig, bind_socket, create_app, safe_name, uvicorn_config  # noqa: E402
 
 CHROMIUM = "/usr/bin/chromium"
 ROOT = Path(__file__).resolve().parent.parent
@@ -74,15 +74,19 @@ M30
 
 
 class Server:
-    """A real server on a free localhost port, in a thread."""
+    """A real server on a free localhost port, in a thread.
+
+    ``seen`` records (method, path, status) of every HTTP request it answered.
+    """
 
     def __init__(self, tmp: Path, **config) -> None:
         self.config = ServerConfig(jobs_dir=str(tmp / f"jobs-{uuid.uuid4().hex[:6]}"), port=0, **config)
         self.app = create_app(self.config)
         self.session = self.app.state.session
+        self.seen: list[tuple[str, str, int]] = []
         sock = bind_socket("127.0.0.1", 0)
         self.url = f"http://127.0.0.1:{sock.getsockname()[1]}"
-        ucfg = uvicorn.Config(self.app, log_level="warning", lifespan="on", timeout_graceful_shutdown=1)
+        ucfg = uvicorn_config(self._recording(self.app), log_level="warning", timeout_graceful_shutdown=1)
         self.server = uvicorn.Server(ucfg)
         self.thread = threading.Thread(target=self.server.run, kwargs={"sockets": [sock]}, daemon=True)
         self.thread.start()
@@ -91,21 +95,40 @@ class Server:
             assert time.monotonic() < deadline, "server did not start"
             time.sleep(0.02)
 
+    def _recording(self, app):
+        async def recorder(scope, receive, send):
+            async def send_seen(message):
+                if message["type"] == "http.response.start":
+                    self.seen.append((scope["method"], scope["path"], message["status"]))
+                await send(message)
+
+            await app(scope, receive, send_seen if scope["type"] == "http" else send)
+
+        recorder.state = app.state
+        return recorder
+
     def close(self) -> None:
         self.session.shutdown()
         self.server.should_exit = True
         self.thread.join(10)
 
+    def page_headers(self, method: str) -> dict[str, str]:
+        """What the page's own fetch() adds: the browser its Origin to a POST, app.js X-Requested-With."""
+        return {} if method in ("GET", "HEAD") else {"Origin": self.url, "X-Requested-With": "cam"}
+
     # -- plain HTTP (urllib) -----------------------------------------------------
     def call(self, method: str, path: str, body=None, *, token=None, headers=None, raw: bytes | None = None):
-        """(status, decoded JSON or text) of one request."""
-        h = dict(headers or {})
+        """(status, decoded JSON or text) of one request, sent as the page sends it; a header given as None
+        in ``headers`` is left out."""
+        h = self.page_headers(method)
         data = raw
         if body is not None:
             data = json.dumps(body).encode()
             h["Content-Type"] = "application/json"
         if token:
             h["X-Cam-Token"] = token
+        h.update(headers or {})
+        h = {k: v for k, v in h.items() if v is not None}
         req = urllib.request.Request(self.url + path, data=data, method=method, headers=h)
         try:
             with urllib.request.urlopen(req, timeout=30) as resp:
@@ -116,7 +139,7 @@ class Server:
             return status, json.loads(payload)
         return status, payload
 
-    def upload(self, name: str, data: bytes, role: str = "job", token=None):
+    def upload(self, name: str, data: bytes, role: str = "job", token=None, headers=None):
         boundary = uuid.uuid4().hex
         parts = [
             f"--{boundary}\r\nContent-Disposition: form-data; name=\"role\"\r\n\r\n{role}\r\n".encode(),
@@ -125,7 +148,7 @@ class Server:
             f"--{boundary}--\r\n".encode(),
         ]
         return self.call("POST", "/api/upload", raw=b"".join(parts), token=token,
-                         headers={"Content-Type": f"multipart/form-data; boundary={boundary}"})
+                         headers={"Content-Type": f"multipart/form-data; boundary={boundary}", **(headers or {})})
 
     def wait_idle(self, timeout_s: float = 20.0) -> dict:
         deadline = time.monotonic() + timeout_s

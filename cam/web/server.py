@@ -17,12 +17,34 @@ Security:
   carry it (header ``X-Cam-Token``, ``Authorization: Bearer``, or ``?token=``
   for the event stream and pictures), else 401;
 * without a token, requests must name a localhost ``Host`` (no DNS
-  rebinding) and a cross-site ``Origin`` is refused (403), so another web
-  site open in the same browser cannot drive the machine;
+  rebinding);
+* only the page itself may ask (with or without a token): an ``Origin`` header
+  must be the server's own origin, ``scheme://host:port`` as the page was
+  served (``null``, another port, another site: 403), and so must a browser's
+  ``Sec-Fetch-Site`` (``cross-site`` / ``same-site``: 403); a request that
+  changes anything (every non-GET under ``/api``) with no ``Origin`` must carry
+  a header a cross-site page cannot send without a CORS preflight
+  (``X-Requested-With``, ``X-Cam-Token`` or ``Authorization``), else 403; and
+  JSON requests must say ``Content-Type: application/json``, uploads
+  ``multipart/form-data`` (else 415).  The server never answers a preflight
+  (``OPTIONS`` gets 405 and no ``Access-Control-Allow-*``), so another web page
+  in the same browser, a sandboxed frame included, cannot drive the machine.
+  The emergency stop follows the same rules: a cross-site page could otherwise
+  spoil a running job, and the page's own button always qualifies;
 * uploads over the size limit get 413; stored names are reduced to safe
   characters and always land inside the jobs folder;
 * a job or jog while another runs gets 409; bad requests get 4xx JSON
-  ``{"error": "..."}`` before anything moves.
+  ``{"error": "..."}`` before anything moves;
+* JSON bodies are limited to 8 kB (413) and 16 levels of nesting (400);
+* slow clients cannot hold the server (run through :func:`uvicorn_config`,
+  as ``serve`` does): a request head must arrive whole within
+  ``header_timeout_s`` (5 s; else 408 and closed), a body may pause at most
+  ``body_timeout_s`` (10 s), and an idle connection is closed after 5 s; at
+  most ``max_connections`` (100) connections are kept: beyond that the oldest
+  one without a request in progress (a half-sent head, an idle keep-alive) is
+  closed, and when every one is busy a new request gets 503 JSON -- except
+  the emergency stop, which is always served; at most ``max_event_streams``
+  (16) live event streams at once, more get 503.
 """
 from __future__ import annotations
 
@@ -36,10 +58,14 @@ import threading
 import time
 from contextlib import asynccontextmanager
 from dataclasses import dataclass, field
-from functools import partial
+from functools import lru_cache, partial
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Awaitable, Callable, Optional
-from urllib.parse import urlsplit
+
+try:
+    import resource
+except ImportError:  # pragma: no cover - not Unix: no file limit to raise
+    resource = None  # type: ignore[assignment]
 
 from ..drive.session import MachineSession
 from ..errors import BusyError, CamError, CapabilityError
@@ -50,11 +76,13 @@ from ..settings import DEFAULT_SETTINGS, MachineSettings
 if TYPE_CHECKING:
     from starlette.requests import Request
 
-__all__ = ["ServerConfig", "HttpError", "create_app", "serve", "LOCAL_HOSTS"]
+__all__ = ["ServerConfig", "HttpError", "create_app", "uvicorn_config", "serve", "LOCAL_HOSTS"]
 
 STATIC_DIR = Path(__file__).resolve().parent / "static"
 LOCAL_HOSTS = ("127.0.0.1", "localhost", "::1")
 _DRAIN_LIMIT_BYTES = 64 * 1024 * 1024  # read and drop at most this much of a refused upload
+_MAX_JSON_BYTES = 8 * 1024  # a JSON request body (the largest, planning options, is well under 1 kB)
+_MAX_JSON_DEPTH = 16  # arrays and objects inside each other (the requests use 3)
 _MULTIPART_SLACK_BYTES = 64 * 1024  # form boundaries and headers around the file
 
 
@@ -69,6 +97,10 @@ class ServerConfig:
         max_upload_bytes: larger uploads get 413.
         settings: the machine settings; machine_port: "mock" or a device such as /dev/parport0.
         realtime: run the mock on the real clock (real ports always are).
+        max_connections: connections kept at once (see :class:`_ConnectionGuard`); max_event_streams:
+            live event streams at once (more get 503).
+        header_timeout_s: a request head must arrive whole within this time of the connection opening or
+            the previous answer (else 408, closed); body_timeout_s: the longest pause inside a request body.
     """
 
     host: str = "127.0.0.1"
@@ -79,6 +111,10 @@ class ServerConfig:
     settings: MachineSettings = DEFAULT_SETTINGS
     machine_port: str = "mock"
     realtime: bool = True
+    max_connections: int = 100
+    max_event_streams: int = 16
+    header_timeout_s: float = 5.0
+    body_timeout_s: float = 10.0
 
     def checked(self) -> "ServerConfig":
         """Refuse a non-local address without a token; returns self."""
@@ -86,16 +122,23 @@ class ServerConfig:
             raise CamError(f"listening on {self.host} needs a token (--token, or let 'cam serve' make one)")
         if self.max_upload_bytes < 1:
             raise CamError(f"the upload limit must be > 0 bytes, got {self.max_upload_bytes}")
+        for name in ("max_connections", "max_event_streams", "header_timeout_s", "body_timeout_s"):
+            if not getattr(self, name) > 0:
+                raise CamError(f"{name} must be > 0, got {getattr(self, name)}")
+        if self.max_event_streams >= self.max_connections:
+            raise CamError(f"max_event_streams ({self.max_event_streams}) must be below max_connections "
+                           f"({self.max_connections}), or the live views could take every connection")
         return self
 
 
 class HttpError(Exception):
-    """A request that cannot be served: HTTP ``status`` and a one-line message for the page."""
+    """A request that cannot be served: HTTP ``status``, a one-line message for the page, extra headers."""
 
-    def __init__(self, status: int, message: str) -> None:
+    def __init__(self, status: int, message: str, headers: Optional[dict[str, str]] = None) -> None:
         super().__init__(message)
         self.status = status
         self.message = message
+        self.headers = headers
 
 
 def safe_name(filename: str) -> str:
@@ -132,6 +175,7 @@ class _AppState:
     prepared: dict[str, PreparedJob] = field(default_factory=dict)  # the last eight planned, oldest first
     previews: dict[str, bytes] = field(default_factory=dict)  # id -> PNG
     counter: int = 0
+    streams: int = 0  # live event streams now
     closing: threading.Event = field(default_factory=threading.Event)
 
     def shut_down(self) -> None:
@@ -146,7 +190,7 @@ Handler = Callable[[_AppState, "Request"], Awaitable[Any]]
 _SECURITY_HEADERS = [
     (b"x-content-type-options", b"nosniff"),
     (b"x-frame-options", b"DENY"),
-    (b"referrer-policy", b"no-referrer"),
+    (b"referrer-policy", b"same-origin"),  # the page's own POSTs carry its Origin, never null
     (b"content-security-policy",
      b"default-src 'self'; img-src 'self' data:; style-src 'self'; script-src 'self'; "
      b"connect-src 'self'; frame-ancestors 'none'"),
@@ -154,10 +198,11 @@ _SECURITY_HEADERS = [
 """Added to every HTTP response."""
 
 
-def _json_error(status: int, message: str):
+def _json_error(status: int, message: str, headers: Optional[dict[str, str]] = None):
     from starlette.responses import JSONResponse
 
-    return JSONResponse({"error": message}, status_code=status, headers={"Cache-Control": "no-store"})
+    return JSONResponse({"error": message}, status_code=status,
+                        headers={"Cache-Control": "no-store", **(headers or {})})
 
 
 def _too_large(limit_bytes: int, headers: Optional[dict[str, str]] = None):
@@ -167,38 +212,74 @@ def _too_large(limit_bytes: int, headers: Optional[dict[str, str]] = None):
                         headers=headers)
 
 
+_SAFE_METHODS = ("GET", "HEAD")
+"""Methods that change nothing; every other method under ``/api`` changes the machine or the jobs."""
+_CUSTOM_HEADERS = ("x-requested-with", "x-cam-token", "authorization")
+"""A request with one of these was not sent by a cross-site page: the browser would ask first (preflight)."""
+
+
+def _own_origin(request: Request) -> str:
+    """``scheme://host[:port]`` of the page, as the browser addressed it (its ``Host`` header)."""
+    return f"{request.url.scheme}://{(request.headers.get('host') or '').lower()}"
+
+
 def _authorise(config: ServerConfig, request: Request) -> None:
-    """The token when the server has one; else a localhost ``Host`` and no cross-site ``Origin`` (HttpError)."""
+    """The token when the server has one, else a localhost ``Host``; then only the page itself (HttpError).
+
+    The page itself: an ``Origin`` equal to :func:`_own_origin`, no ``Sec-Fetch-Site`` naming another
+    site, and for a request that changes anything with no ``Origin``, one of :data:`_CUSTOM_HEADERS`.
+    """
+    headers = request.headers
     if config.token:
-        given = (request.headers.get("x-cam-token") or request.query_params.get("token") or "")
-        auth = request.headers.get("authorization", "")
+        given = (headers.get("x-cam-token") or request.query_params.get("token") or "")
+        auth = headers.get("authorization", "")
         if auth.lower().startswith("bearer "):
             given = given or auth[7:].strip()
         if not secrets.compare_digest(given.encode(), config.token.encode()):
             raise HttpError(401, "this server needs its token: open the URL it printed (with ?token=...)")
-        return
-    host = (request.headers.get("host") or "").rsplit(":", 1)[0].strip("[]").lower()
-    if host not in LOCAL_HOSTS:
-        raise HttpError(403, f"requests must be addressed to localhost, not {host!r}")
-    origin = request.headers.get("origin")
-    if origin and origin != "null" and urlsplit(origin).netloc.lower() != (request.headers.get("host") or "").lower():
-        raise HttpError(403, f"cross-site request from {origin} refused")
+    else:
+        host = (headers.get("host") or "").rsplit(":", 1)[0].strip("[]").lower()
+        if host not in LOCAL_HOSTS:
+            raise HttpError(403, f"requests must be addressed to localhost, not {host!r}")
+    origin = headers.get("origin")
+    if origin is not None and origin.lower() != _own_origin(request):
+        raise HttpError(403, f"cross-site request from {origin} refused: only the page at "
+                             f"{_own_origin(request)}/ may use this server")
+    site = headers.get("sec-fetch-site", "").lower()
+    if site in ("cross-site", "same-site"):
+        raise HttpError(403, f"{site} request refused: only the page at {_own_origin(request)}/ may use this server")
+    if request.method not in _SAFE_METHODS and origin is None and not any(h in headers for h in _CUSTOM_HEADERS):
+        raise HttpError(403, "a request that changes anything needs the page's Origin or the header "
+                             "X-Requested-With (e.g. curl -H 'X-Requested-With: cam')")
 
 
-def _api(st: _AppState, handler: Handler) -> Callable[[Request], Awaitable[Any]]:
-    """A Starlette endpoint: authorise, run ``handler``, turn errors into JSON (401/403/4xx, 409 busy)."""
+def _check_content_type(request: Request, wanted: str) -> None:
+    """HttpError 415 unless the request's media type is ``wanted`` (parameters such as charset allowed)."""
+    given = request.headers.get("content-type", "").split(";", 1)[0].strip().lower()
+    if given != wanted:
+        raise HttpError(415, f"send {wanted} (Content-Type: {wanted}), not {given or 'no content type'}")
+
+
+def _api(st: _AppState, handler: Handler, *, body: Optional[str] = None) -> Callable[[Request], Awaitable[Any]]:
+    """A Starlette endpoint: authorise, check the body's content type (``body``, e.g. "application/json";
+    None: no body expected), run ``handler``, turn errors into JSON (401/403/415/4xx, 409 busy)."""
+    from starlette.requests import ClientDisconnect
     from starlette.responses import JSONResponse, Response
 
     async def endpoint(request: Request):
         try:
             _authorise(st.config, request)
+            if body is not None:
+                _check_content_type(request, body)
             out = await handler(st, request)
         except HttpError as exc:
-            return _json_error(exc.status, exc.message)
+            return _json_error(exc.status, exc.message, exc.headers)
         except (BusyError, CapabilityError) as exc:  # the machine cannot do it now, or at all
             return _json_error(409, str(exc))
         except CamError as exc:
             return _json_error(400, str(exc))
+        except ClientDisconnect:  # gone (or cut off by a deadline) before its body came whole: no one to answer
+            return Response(status_code=400)
         if isinstance(out, Response):
             return out
         return JSONResponse(out, headers={"Cache-Control": "no-store"})
@@ -206,14 +287,37 @@ def _api(st: _AppState, handler: Handler) -> Callable[[Request], Awaitable[Any]]
     return endpoint
 
 
+def _json_depth(text: str) -> int:
+    """How deep arrays and objects nest in the JSON ``text`` (brackets inside strings do not count).
+
+    >>> _json_depth('{"a": [1, {"b": "[[["}]}'), _json_depth('3'), _json_depth('[[[]]]')
+    (3, 0, 3)
+    """
+    depth = deepest = 0
+    for bracket in re.findall(r"[\[\]{}]", re.sub(r'"(?:[^"\\]|\\.)*"', '""', text)):
+        depth += 1 if bracket in "[{" else -1
+        deepest = max(deepest, depth)
+    return deepest
+
+
 async def _body_json(request: Request) -> dict[str, Any]:
-    """The request's JSON object ({} for an empty body); HttpError 400 otherwise."""
-    raw = await request.body()
+    """The request's JSON object ({} for an empty body); HttpError 413 when over :data:`_MAX_JSON_BYTES`,
+    400 when nested deeper than :data:`_MAX_JSON_DEPTH` or not a JSON object."""
+    raw = await _read_capped(request, _MAX_JSON_BYTES, drain_bytes=1024 * 1024)
+    if raw is None:
+        raise HttpError(413, f"request body too large: JSON requests are limited to {_MAX_JSON_BYTES // 1024} kB",
+                        {"Connection": "close"})
     if not raw.strip():
         return {}
     try:
-        value = json.loads(raw)
-    except (ValueError, UnicodeDecodeError) as exc:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise HttpError(400, f"malformed JSON: not UTF-8 ({exc.reason} at byte {exc.start})") from None
+    if _json_depth(text) > _MAX_JSON_DEPTH:
+        raise HttpError(400, f"JSON nested too deep: at most {_MAX_JSON_DEPTH} levels of arrays and objects")
+    try:
+        value = json.loads(text)
+    except ValueError as exc:
         raise HttpError(400, f"malformed JSON: {exc}") from None
     if not isinstance(value, dict):
         raise HttpError(400, "the request body must be a JSON object")
@@ -253,11 +357,11 @@ async def _get_config(st: _AppState, request: Request) -> dict[str, Any]:
     }
 
 
-async def _read_capped(request: Request, cap_bytes: int) -> Optional[bytes]:
+async def _read_capped(request: Request, cap_bytes: int, *, drain_bytes: int = _DRAIN_LIMIT_BYTES) -> Optional[bytes]:
     """The request body, or None when it is longer than ``cap_bytes``.
 
-    A body announced or found too long is read on (up to :data:`_DRAIN_LIMIT_BYTES` past the cap) and
-    dropped, so the client gets to read the answer.
+    A body announced or found too long is read on (up to ``drain_bytes`` past the cap) and dropped, so the
+    client gets to read the answer.
     """
     length = request.headers.get("content-length")
     too_big = False
@@ -272,7 +376,7 @@ async def _read_capped(request: Request, cap_bytes: int) -> Optional[bytes]:
         seen += len(chunk)
         if too_big or seen > cap_bytes:
             too_big = True
-            if seen > cap_bytes + _DRAIN_LIMIT_BYTES:
+            if seen > cap_bytes + drain_bytes:
                 break
             continue
         body += chunk
@@ -282,10 +386,6 @@ async def _read_capped(request: Request, cap_bytes: int) -> Optional[bytes]:
 async def _parse_upload(request: Request, body: bytes) -> tuple[Any, str]:
     """The uploaded file of a multipart ``body`` and its role ("job" or "profile"); HttpError 400 otherwise."""
     from starlette.formparsers import MultiPartException, MultiPartParser
-
-    ctype = request.headers.get("content-type", "")
-    if not ctype.startswith("multipart/form-data"):
-        raise HttpError(400, "upload the file as multipart/form-data (field 'file')")
 
     async def stream():
         yield body
@@ -441,6 +541,17 @@ async def _events(st: _AppState, request: Request):
     """Server-sent events: the state at each change (at least every second), new log lines only."""
     from starlette.responses import StreamingResponse
 
+    class CountedStream(StreamingResponse):
+        async def __call__(self, scope, receive, send) -> None:
+            try:
+                await super().__call__(scope, receive, send)
+            finally:
+                st.streams -= 1
+
+    limit = st.config.max_event_streams
+    if st.streams >= limit:
+        raise HttpError(503, f"too many live views: {limit} pages already follow this machine; close one and "
+                             "reload", {"Retry-After": "5"})
     session = st.session
 
     async def stream():
@@ -460,8 +571,9 @@ async def _events(st: _AppState, request: Request):
                 break
             await asyncio.sleep(0.1)
 
-    return StreamingResponse(stream(), media_type="text/event-stream",
-                             headers={"Cache-Control": "no-store", "X-Accel-Buffering": "no"})
+    st.streams += 1  # until CountedStream ends
+    return CountedStream(stream(), media_type="text/event-stream",
+                         headers={"Cache-Control": "no-store", "X-Accel-Buffering": "no"})
 
 
 async def _pinlog(st: _AppState, request: Request):
@@ -486,20 +598,24 @@ def _routes(st: _AppState) -> list:
 
     session = st.session
     post = ["POST"]
+
+    def json_api(handler: Handler):
+        return _api(st, handler, body="application/json")
+
     return [
         Route("/", _index),
         Route("/api/config", _api(st, _get_config)),
-        Route("/api/upload", _api(st, _upload), methods=post),
-        Route("/api/plan", _api(st, _plan_job), methods=post),
+        Route("/api/upload", _api(st, _upload, body="multipart/form-data"), methods=post),
+        Route("/api/plan", json_api(_plan_job), methods=post),
         Route("/api/preview/{job}.png", _api(st, _preview)),
-        Route("/api/start", _api(st, _start), methods=post),
-        Route("/api/pause", _api(st, partial(_control, action=session.pause)), methods=post),
-        Route("/api/resume", _api(st, partial(_control, action=session.resume)), methods=post),
-        Route("/api/stop", _api(st, partial(_control, action=session.stop)), methods=post),
-        Route("/api/estop", _api(st, _emergency_stop), methods=post),
-        Route("/api/jog", _api(st, _jog), methods=post),
-        Route("/api/origin", _api(st, partial(_control, action=session.go_to_origin)), methods=post),
-        Route("/api/answer", _api(st, _answer), methods=post),
+        Route("/api/start", json_api(_start), methods=post),
+        Route("/api/pause", json_api(partial(_control, action=session.pause)), methods=post),
+        Route("/api/resume", json_api(partial(_control, action=session.resume)), methods=post),
+        Route("/api/stop", json_api(partial(_control, action=session.stop)), methods=post),
+        Route("/api/estop", json_api(_emergency_stop), methods=post),
+        Route("/api/jog", json_api(_jog), methods=post),
+        Route("/api/origin", json_api(partial(_control, action=session.go_to_origin)), methods=post),
+        Route("/api/answer", json_api(_answer), methods=post),
         Route("/api/state", _api(st, _state)),
         Route("/api/events", _api(st, _events)),
         Route("/api/pinlog", _api(st, _pinlog)),
@@ -508,8 +624,134 @@ def _routes(st: _AppState) -> list:
     ]
 
 
-def _with_security_headers(inner: Callable[..., Awaitable[None]]) -> Callable[..., Awaitable[None]]:
-    """The ASGI app ``inner`` with :data:`_SECURITY_HEADERS` added to every HTTP response."""
+class _ConnectionGuard:
+    """The server's open connections, oldest first, and the requests inside the application now.
+
+    Shared by the HTTP protocol (:func:`_guarded_h11`), which registers connections and closes the oldest
+    idle one when there are more than ``max_connections``, and by :func:`_front_door`, which counts the
+    requests and answers 503 when ``max_connections`` of them are already in progress.
+    """
+
+    def __init__(self, config: ServerConfig) -> None:
+        self.config = config
+        self.connections: dict[Any, None] = {}  # protocol -> None, in the order they connected
+        self.requests = 0
+
+    def make_room(self, newcomer: Any) -> None:
+        """Over the limit: close the oldest connection (not ``newcomer``) with no request in the application."""
+        if len(self.connections) <= self.config.max_connections:
+            return
+        for conn in self.connections:
+            if conn is not newcomer and conn.idle():
+                conn.evict()
+                return
+
+
+def _plain_response(status: int, reason: str, text: str) -> bytes:
+    """A whole HTTP/1.1 response that closes the connection (written where no request has been read)."""
+    body = (text + "\n").encode()
+    return (f"HTTP/1.1 {status} {reason}\r\ncontent-type: text/plain; charset=utf-8\r\nconnection: close\r\n"
+            f"content-length: {len(body)}\r\n\r\n").encode() + body
+
+
+@lru_cache(maxsize=None)
+def _guarded_h11() -> type:
+    """uvicorn's h11 protocol with deadlines on the client and the connection limit of a :class:`_ConnectionGuard`.
+
+    The client must keep up whenever the server waits for it: the request head whole within
+    ``header_timeout_s`` of the connection opening or the previous answer (more bytes do not extend it),
+    and no pause longer than ``body_timeout_s`` inside a body; else the connection is closed (a half-sent
+    head gets 408 first).  While the application is the one that is slow (an answer being made, a body
+    not read yet) there is no deadline.
+    """
+    from uvicorn.protocols.http.h11_impl import H11Protocol, h11  # h11 as uvicorn's protocol uses it
+
+    class GuardedH11Protocol(H11Protocol):
+        def __init__(self, *args: Any, guard: _ConnectionGuard, **kwargs: Any) -> None:
+            super().__init__(*args, **kwargs)
+            self.guard = guard
+            self.deadline: Optional[asyncio.TimerHandle] = None
+            self.head_begun = False  # bytes of the awaited request head have come
+
+        def connection_made(self, transport: Any) -> None:  # type: ignore[override]
+            super().connection_made(transport)
+            self.guard.connections[self] = None
+            self.await_head()
+            self.guard.make_room(self)
+
+        def connection_lost(self, exc: Optional[Exception]) -> None:
+            self.guard.connections.pop(self, None)
+            self.set_deadline(None)
+            super().connection_lost(exc)
+
+        def data_received(self, data: bytes) -> None:
+            super().data_received(data)
+            state = self.conn.their_state
+            if state is h11.IDLE:
+                self.head_begun = True  # the head's deadline stands
+            elif state is h11.SEND_BODY:
+                self.set_deadline(self.guard.config.body_timeout_s)
+            else:
+                self.set_deadline(None)  # the whole request is in: the application's turn
+
+        def on_response_complete(self) -> None:
+            super().on_response_complete()
+            if self.transport.is_closing():
+                return
+            state = self.conn.their_state
+            if state is h11.IDLE:
+                self.await_head()
+            elif state is h11.SEND_BODY:  # answered before the body came whole: the rest must come on time
+                self.set_deadline(self.guard.config.body_timeout_s)
+
+        def idle(self) -> bool:
+            """No request of this connection is in the application (waiting for a head, or for the rest of
+            a body already answered)."""
+            return self.cycle is None or self.cycle.response_complete
+
+        def evict(self) -> None:
+            self.guard.connections.pop(self, None)  # closing: no longer counted, never chosen again
+            if self.head_begun and self.conn.their_state is h11.IDLE:
+                limit = self.guard.config.max_connections
+                self.transport.write(_plain_response(503, "Service Unavailable",
+                                                     f"too many connections (the limit is {limit}); try again"))
+            self.transport.close()
+
+        def await_head(self) -> None:
+            self.head_begun = False
+            self.set_deadline(self.guard.config.header_timeout_s)
+
+        def set_deadline(self, delay_s: Optional[float]) -> None:
+            if self.deadline is not None:
+                self.deadline.cancel()
+            self.deadline = None if delay_s is None else self.loop.call_later(delay_s, self.expire)
+
+        def expire(self) -> None:
+            self.deadline = None
+            if self.transport.is_closing():
+                return
+            state = self.conn.their_state
+            if state is h11.SEND_BODY and self.flow.read_paused:  # the application has not read on yet
+                self.set_deadline(self.guard.config.body_timeout_s)
+                return
+            if state is h11.IDLE and self.head_begun:
+                timeout = self.guard.config.header_timeout_s
+                self.transport.write(_plain_response(408, "Request Timeout",
+                                                     f"the request head did not come whole within {timeout:g} s"))
+            if state in (h11.IDLE, h11.SEND_BODY):
+                self.transport.close()
+
+    return GuardedH11Protocol
+
+
+def _front_door(inner: Callable[..., Awaitable[None]], guard: _ConnectionGuard) -> Callable[..., Awaitable[None]]:
+    """The ASGI app ``inner`` behind the request limit, with :data:`_SECURITY_HEADERS` on every HTTP response.
+
+    When ``max_connections`` requests are in progress a new one gets 503 (and the connection is closed),
+    except ``POST /api/estop``: stopping the machine is never refused for being busy.
+    """
+    limit = guard.config.max_connections
+
     async def app(scope, receive, send):
         if scope["type"] != "http":
             await inner(scope, receive, send)
@@ -520,7 +762,16 @@ def _with_security_headers(inner: Callable[..., Awaitable[None]]) -> Callable[..
                 message = {**message, "headers": list(message.get("headers", [])) + _SECURITY_HEADERS}
             await send(message)
 
-        await inner(scope, receive, send_wrapped)
+        if guard.requests >= limit and (scope["method"], scope["path"]) != ("POST", "/api/estop"):
+            busy = _json_error(503, f"the server is busy: {limit} requests at once is its limit; close a page "
+                                    "or try again", {"Connection": "close", "Retry-After": "1"})
+            await busy(scope, receive, send_wrapped)
+            return
+        guard.requests += 1
+        try:
+            await inner(scope, receive, send_wrapped)
+        finally:
+            guard.requests -= 1
 
     return app
 
@@ -546,9 +797,24 @@ def create_app(config: ServerConfig, session: Optional[MachineSession] = None):
     inner.state.session = session
     inner.state.config = config
     inner.state.closing = st.closing
-    app = _with_security_headers(inner)
+    inner.state.guard = _ConnectionGuard(config)
+    app = _front_door(inner, inner.state.guard)
     app.state = inner.state  # type: ignore[attr-defined]
     return app
+
+
+def uvicorn_config(app: Any, **options: Any) -> Any:
+    """The ``uvicorn.Config`` that runs ``app`` (from :func:`create_app`) with its connection limits.
+
+    The HTTP protocol is h11 with the deadlines and the connection limit of ``app.state.config`` (see
+    :func:`_guarded_h11`); proxy headers are ignored (nothing proxies this server) and there are no
+    websockets.  uvicorn's own ``limit_concurrency`` is not used: it counts half-sent connections too, so
+    a flood of them would get the emergency stop refused.  ``options`` go to ``uvicorn.Config``.
+    """
+    import uvicorn
+
+    http = partial(_guarded_h11(), guard=app.state.guard)
+    return uvicorn.Config(app, http=http, ws="none", proxy_headers=False, lifespan="on", **options)
 
 
 def lan_address() -> str:
@@ -587,6 +853,24 @@ def bind_socket(host: str, port: int) -> socket.socket:
     return sock
 
 
+def _raise_file_limit(wanted: int = 8192) -> None:
+    """Let this process have up to ``wanted`` open files (sockets), as far as its hard limit allows.
+
+    A burst of connections is accepted before any is trimmed to ``max_connections``; with the usual
+    limit of 1024, about a thousand at once would run out of descriptors, and asyncio then stops
+    accepting anyone (the emergency stop too) for a second.  Nothing happens where there is no such limit.
+    """
+    if resource is None:  # pragma: no cover - not Unix
+        return
+    soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
+    target = wanted if hard == resource.RLIM_INFINITY else min(wanted, hard)
+    if soft != resource.RLIM_INFINITY and soft < target:
+        try:
+            resource.setrlimit(resource.RLIMIT_NOFILE, (target, hard))
+        except (ValueError, OSError):  # pragma: no cover - a sandbox that forbids it: keep the limit
+            pass
+
+
 def serve(config: ServerConfig, announce: Callable[[str], None] = print) -> int:
     """Run the server until Ctrl-C; a running job is stopped (tool lifted) on the way out.  Returns 0."""
     import uvicorn
@@ -600,8 +884,9 @@ def serve(config: ServerConfig, announce: Callable[[str], None] = print) -> int:
         sock.close()
         raise
     port = sock.getsockname()[1]
-    ucfg = uvicorn.Config(app, host=config.host, port=port, log_level="warning", access_log=False,
-                          timeout_graceful_shutdown=2, lifespan="on")
+    _raise_file_limit()
+    ucfg = uvicorn_config(app, host=config.host, port=port, log_level="warning", access_log=False,
+                          timeout_graceful_shutdown=2)
     server = uvicorn.Server(ucfg)
     mode = "real time" if (config.realtime or config.machine_port != "mock") else "simulated clock"
     announce(f"cam: web page at {page_url(config, port)}")

@@ -19,7 +19,8 @@
   function clearError() { $("error").hidden = true; $("error-text").textContent = ""; }
 
   async function api(path, { json, form, method } = {}) {
-    const opts = { method: method || (json || form ? "POST" : "GET"), headers: {} };
+    // the browser adds this page's Origin to a POST; X-Requested-With tells the server it is no cross-site form
+    const opts = { method: method || (json || form ? "POST" : "GET"), headers: { "X-Requested-With": "cam" } };
     if (token) opts.headers["X-Cam-Token"] = token;
     if (json !== undefined) { opts.headers["Content-Type"] = "application/json"; opts.body = JSON.stringify(json); }
     if (form !== undefined) opts.body = form;
