@@ -654,6 +654,57 @@ def _plain_response(status: int, reason: str, text: str) -> bytes:
             f"content-length: {len(body)}\r\n\r\n").encode() + body
 
 
+class _Deadlines:
+    """The deadline and eviction half of the guarded h11 protocol (:func:`_guarded_h11`).
+
+    Mixed into uvicorn's ``H11Protocol``, whose ``conn``, ``cycle``, ``flow``, ``loop`` and ``transport`` it
+    uses; ``_h11`` is the h11 module uvicorn's protocol runs on (set by :func:`_guarded_h11`, so this module
+    imports without the web stack).
+    """
+
+    _h11: Any = None
+    guard: _ConnectionGuard
+    deadline: Optional[asyncio.TimerHandle]
+    head_begun: bool
+
+    def idle(self) -> bool:
+        """No request of this connection is in the application (waiting for a head, or for the rest of
+        a body already answered)."""
+        return self.cycle is None or self.cycle.response_complete
+
+    def evict(self) -> None:
+        self.guard.connections.pop(self, None)  # closing: no longer counted, never chosen again
+        if self.head_begun and self.conn.their_state is self._h11.IDLE:
+            limit = self.guard.config.max_connections
+            self.transport.write(_plain_response(503, "Service Unavailable",
+                                                 f"too many connections (the limit is {limit}); try again"))
+        self.transport.close()
+
+    def await_head(self) -> None:
+        self.head_begun = False
+        self.set_deadline(self.guard.config.header_timeout_s)
+
+    def set_deadline(self, delay_s: Optional[float]) -> None:
+        if self.deadline is not None:
+            self.deadline.cancel()
+        self.deadline = None if delay_s is None else self.loop.call_later(delay_s, self.expire)
+
+    def expire(self) -> None:
+        self.deadline = None
+        if self.transport.is_closing():
+            return
+        state = self.conn.their_state
+        if state is self._h11.SEND_BODY and self.flow.read_paused:  # the application has not read on yet
+            self.set_deadline(self.guard.config.body_timeout_s)
+            return
+        if state is self._h11.IDLE and self.head_begun:
+            timeout = self.guard.config.header_timeout_s
+            self.transport.write(_plain_response(408, "Request Timeout",
+                                                 f"the request head did not come whole within {timeout:g} s"))
+        if state in (self._h11.IDLE, self._h11.SEND_BODY):
+            self.transport.close()
+
+
 @lru_cache(maxsize=None)
 def _guarded_h11() -> type:
     """uvicorn's h11 protocol with deadlines on the client and the connection limit of a :class:`_ConnectionGuard`.
@@ -666,7 +717,9 @@ def _guarded_h11() -> type:
     """
     from uvicorn.protocols.http.h11_impl import H11Protocol, h11  # h11 as uvicorn's protocol uses it
 
-    class GuardedH11Protocol(H11Protocol):
+    class GuardedH11Protocol(_Deadlines, H11Protocol):
+        _h11 = h11
+
         def __init__(self, *args: Any, guard: _ConnectionGuard, **kwargs: Any) -> None:
             super().__init__(*args, **kwargs)
             self.guard = guard
@@ -703,43 +756,6 @@ def _guarded_h11() -> type:
                 self.await_head()
             elif state is h11.SEND_BODY:  # answered before the body came whole: the rest must come on time
                 self.set_deadline(self.guard.config.body_timeout_s)
-
-        def idle(self) -> bool:
-            """No request of this connection is in the application (waiting for a head, or for the rest of
-            a body already answered)."""
-            return self.cycle is None or self.cycle.response_complete
-
-        def evict(self) -> None:
-            self.guard.connections.pop(self, None)  # closing: no longer counted, never chosen again
-            if self.head_begun and self.conn.their_state is h11.IDLE:
-                limit = self.guard.config.max_connections
-                self.transport.write(_plain_response(503, "Service Unavailable",
-                                                     f"too many connections (the limit is {limit}); try again"))
-            self.transport.close()
-
-        def await_head(self) -> None:
-            self.head_begun = False
-            self.set_deadline(self.guard.config.header_timeout_s)
-
-        def set_deadline(self, delay_s: Optional[float]) -> None:
-            if self.deadline is not None:
-                self.deadline.cancel()
-            self.deadline = None if delay_s is None else self.loop.call_later(delay_s, self.expire)
-
-        def expire(self) -> None:
-            self.deadline = None
-            if self.transport.is_closing():
-                return
-            state = self.conn.their_state
-            if state is h11.SEND_BODY and self.flow.read_paused:  # the application has not read on yet
-                self.set_deadline(self.guard.config.body_timeout_s)
-                return
-            if state is h11.IDLE and self.head_begun:
-                timeout = self.guard.config.header_timeout_s
-                self.transport.write(_plain_response(408, "Request Timeout",
-                                                     f"the request head did not come whole within {timeout:g} s"))
-            if state in (h11.IDLE, h11.SEND_BODY):
-                self.transport.close()
 
     return GuardedH11Protocol
 
