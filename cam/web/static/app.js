@@ -185,6 +185,9 @@
   // -- live state ------------------------------------------------------------------
   function render(s) {
     if (!s || !s.state) return;
+    // a reply to a request can arrive after a newer state from the event stream: never show the older one
+    // (it would bring back a prompt already answered over the one now waiting)
+    if (page.state && typeof s.version === "number" && s.version < page.state.version) return;
     page.state = s;
     const st = s.state;
     const badge = $("state");
