@@ -34,8 +34,8 @@ from typing import Any, Callable, Optional
 
 import numpy as np
 
-from ..errors import BusyError, CamError, PlanError, PortError, TravelError
-from ..job.model import TRAVEL, Job, check_travel, travel_job
+from ..errors import BusyError, CamError, PlanError, PortError
+from ..job.model import TRAVEL, Job, check_reach, check_travel, travel_job
 from ..job.moves import jog as jog_job
 from ..job.moves import to_origin
 from ..settings import DEFAULT_SETTINGS, MachineSettings
@@ -102,16 +102,6 @@ class MachineSession(SessionControls):
         if self._activity is not None:
             raise BusyError(f"the machine is busy ({self._activity.label}); wait for it to end or stop it")
 
-    def check_reach(self, extent_steps: np.ndarray, what: str) -> None:
-        """Refuse a move whose ``(3, 2)`` extent (relative to the tool) leaves the travel from here."""
-        for a, (lo, hi) in enumerate(self.settings.travel.bounds_steps()):
-            p = int(self._position[a])
-            if p + int(extent_steps[a, 0]) < lo or p + int(extent_steps[a, 1]) > hi:
-                raise TravelError(
-                    f"{what} would leave the {'XYZ'[a]} travel ({lo}..{hi} steps from the home): the tool "
-                    f"is at {'XYZ'[a]}={p} and the move reaches {p + int(extent_steps[a, 0])}.."
-                    f"{p + int(extent_steps[a, 1])}")
-
     def check_job(self, job: Any) -> None:
         """Everything :meth:`start` checks before anything moves, without starting (raises CamError)."""
         with self._lock:
@@ -129,7 +119,7 @@ class MachineSession(SessionControls):
                 require(self.port, "step_dir", what=f"a {getattr(job, 'kind', 'step')} job")
         extent = getattr(job, "extent_steps", None)
         if extent is not None:
-            self.check_reach(extent, "the job")
+            check_reach(self._position, extent, self.settings, "the job")
         if isinstance(job, Job):
             check_travel(np.asarray(job.points_steps, np.int64) + self._position, self.settings, job.pixels)
 

@@ -28,7 +28,7 @@ from ..errors import TravelError
 from ..settings import DEFAULT_SETTINGS, MachineSettings
 from ..render.picture import encode_png, toolpath_picture
 
-__all__ = ["Job", "PixelFrame", "CUT", "RETRACT", "TRAVEL", "check_travel", "travel_job"]
+__all__ = ["Job", "PixelFrame", "CUT", "RETRACT", "TRAVEL", "check_travel", "check_reach", "travel_job"]
 
 CUT = 0
 """A point at or above the asked depth of what is cut (the tool is in the material or at the surface over it)."""
@@ -185,6 +185,20 @@ def check_travel(points_steps: np.ndarray, settings: MachineSettings, pixels: Op
     raise TravelError(
         f"job leaves the machine travel at point {i} ({where}): {'XYZ'[a]} travel is {lo[a]}..{hi[a]} steps"
     )
+
+
+def check_reach(position_steps: np.ndarray, extent_steps: np.ndarray, settings: MachineSettings, what: str) -> None:
+    """Refuse a move whose ``(3, 2)`` min/max extent (relative to the tool) leaves the travel from ``position_steps``.
+
+    Raises:
+        TravelError: naming the axis, where the tool is and how far the move reaches.
+    """
+    for a, (lo, hi) in enumerate(settings.travel.bounds_steps()):
+        p = int(position_steps[a])
+        reach_lo, reach_hi = p + int(extent_steps[a, 0]), p + int(extent_steps[a, 1])
+        if reach_lo < lo or reach_hi > hi:
+            raise TravelError(f"{what} would leave the {'XYZ'[a]} travel ({lo}..{hi} steps from the home): the tool "
+                              f"is at {'XYZ'[a]}={p} and the move reaches {reach_lo}..{reach_hi}")
 
 
 def travel_job(points_steps: np.ndarray, settings: MachineSettings, *, source: str = "") -> Job:

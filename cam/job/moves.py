@@ -9,9 +9,9 @@ from typing import Optional
 
 import numpy as np
 
-from ..errors import PlanError, TravelError
+from ..errors import PlanError
 from ..settings import DEFAULT_SETTINGS, MachineSettings
-from .model import Job, PixelFrame, check_travel, travel_job
+from .model import Job, PixelFrame, check_reach, check_travel, travel_job
 
 __all__ = ["goto", "jog", "to_origin", "AXES"]
 
@@ -55,7 +55,8 @@ def jog(axis: str, steps: int, *, settings: MachineSettings = DEFAULT_SETTINGS,
     move = np.zeros(3, np.int64)
     move[AXES.index(a)] = int(steps)
     if position_steps is not None:
-        _check_from(np.asarray(position_steps, np.int64), move[None, :], settings, f"a jog of {a.upper()} {steps:+d} steps")
+        extent = np.column_stack([np.minimum(move, 0), np.maximum(move, 0)])
+        check_reach(np.asarray(position_steps, np.int64), extent, settings, f"a jog of {a.upper()} {steps:+d} steps")
     return travel_job(move[None, :], settings, source=f"jog {a.upper()} {int(steps):+d} steps")
 
 
@@ -73,12 +74,3 @@ def to_origin(position_steps: tuple[int, int, int], *, settings: MachineSettings
         if r != (0, 0, 0) and (not rel or rel[-1] != r):
             rel.append(r)
     return travel_job(np.array(rel, np.int64).reshape(-1, 3), settings, source="go to origin")
-
-
-def _check_from(position_steps: np.ndarray, moves_steps: np.ndarray, settings: MachineSettings, what: str) -> None:
-    """Refuse relative moves that leave the travel from ``position_steps``."""
-    for a, (lo, hi) in enumerate(settings.travel.bounds_steps()):
-        reach = position_steps[a] + moves_steps[:, a]
-        if reach.min() < lo or reach.max() > hi:
-            raise TravelError(f"{what} would take {'XYZ'[a]} to {int(reach.min() if reach.min() < lo else reach.max())}, "
-                              f"outside its travel {lo}..{hi} steps from the home")
