@@ -19,10 +19,8 @@ import sys
 import threading
 import time
 
-import pytest
-
 from conftest import ROOT, SAMPLES
-from test_web import FAST, MEDIUM, TOKEN, Server, browser, compiled_kernels, servers  # noqa: F401 (fixtures)
+from test_web import FAST, MEDIUM, TOKEN, Server, browser, compiled_kernels, fast, servers  # noqa: F401 (fixtures)
 
 PNG = (SAMPLES / "ellipse.png").read_bytes()
 
@@ -42,13 +40,6 @@ def _raw(url: str, method: str, path: str, body: bytes = b"", headers=None):
         return resp.status, {k.lower(): v for k, v in resp.getheaders()}, resp.read()
     finally:
         conn.close()
-
-
-@pytest.fixture
-def fast(servers):
-    s = servers("fast", settings=FAST, realtime=True)
-    s.session.wait_idle()
-    return s
 
 
 def _nothing_happened_since(s, before) -> None:

@@ -42,16 +42,9 @@ def _trace_ring(
         flat[cur] = 0
         path.append(cur)
         segments += 1
-        while True:
-            for off in offsets:
-                q = cur + off
-                if flat[q]:
-                    flat[q] = 0
-                    path.append(q)
-                    cur = q
-                    break
-            else:
-                break
+        walked = _walk(flat, cur, offsets)
+        path.extend(walked)
+        cur = walked[-1] if walked else cur
         view = np.frombuffer(flat, np.uint8)
         remaining = remaining[view[remaining] != 0]
         if len(remaining) == 0:
@@ -66,26 +59,9 @@ def trace_curves_reference(
     start: str = "top",
     tool_xy_px: tuple[int, int] = (0, 0),
 ) -> list[np.ndarray]:
-    """Trace every black pixel of ``black`` into ordered curves.
+    """:func:`cam.digitize.trace2d.trace_curves` as a plain loop (its docstring states the rules).
 
-    Args:
-        black: ``(H, W)`` bool mask, indexed ``[row, col]``.
-        start: ``"top"`` -- each object starts at the first untraced black
-            pixel in scan order; ``"min-distance"`` -- at the untraced black
-            pixel nearest (Euclidean) the tool's current position, which is
-            the end of the previous object, ties going to scan order.
-        tool_xy_px: tool position (x, y) before the first object.
-
-    Returns:
-        One ``(n, 2)`` int32 array of ``(x, y)`` pixels per object, in cutting
-        order.  Every black pixel appears exactly once.  An open curve runs
-        end to end: in ``top`` mode from its end first in scan order, in
-        ``min-distance`` mode from its end nearest the tool.
-
-    >>> import numpy as np
-    >>> m = np.zeros((4, 5), bool); m[1, 1:4] = True   # a 3-pixel dash
-    >>> [o.tolist() for o in trace_curves(m, start="min-distance", tool_xy_px=(4, 1))]
-    [[[3, 1], [2, 1], [1, 1]]]
+    ``black`` is an ``(H, W)`` bool mask, indexed ``[row, col]``.
     """
     if start not in START_RULES:
         raise ValueError(f"start must be one of {START_RULES}, got {start!r}")
