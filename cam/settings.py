@@ -68,6 +68,11 @@ from .errors import SettingsError
 __all__ = ["Travel", "Pins", "MachineSettings", "load_settings", "DEFAULT_SETTINGS", "RAMP_MODES"]
 
 RAMP_MODES = ("lookahead", "linear40", "constant")
+MIN_SPEED_MM_S = 0.01
+"""The slowest start speed, top speed and acceleration (mm/s, mm/s^2) a setting may give: slower ones made
+step periods of hours and machine times that overflow."""
+MAX_TRAVEL_STEPS = 10**9
+"""The farthest a travel limit may lie from the home, in steps."""
 """Speed ramp modes (see :mod:`cam.drive.ramps`)."""
 
 
@@ -240,13 +245,17 @@ def _validate(s: MachineSettings, source: str) -> None:
     for axis in "xyz":
         start, top, acc = (getattr(s, f"{k}_{axis}_{u}") for k, u in
                            (("start_speed", "mm_s"), ("max_speed", "mm_s"), ("accel", "mm_s2")))
-        if not (0 < top <= 10000):
-            raise bad(f"max_speed_{axis}_mm_s", f"must be > 0 and <= 10000 mm/s, got {top}")
-        if not (0 < start <= top):
-            raise bad(f"start_speed_{axis}_mm_s", f"must be > 0 and <= max_speed_{axis}_mm_s ({top}), got {start}")
-        if not (0 < acc <= 1e6):
-            raise bad(f"accel_{axis}_mm_s2", f"must be > 0 and <= 1e6 mm/s^2, got {acc}")
+        if not (MIN_SPEED_MM_S <= top <= 10000):
+            raise bad(f"max_speed_{axis}_mm_s", f"must be {MIN_SPEED_MM_S:g}..10000 mm/s, got {top}")
+        if not (MIN_SPEED_MM_S <= start <= top):
+            raise bad(f"start_speed_{axis}_mm_s",
+                      f"must be {MIN_SPEED_MM_S:g} mm/s..max_speed_{axis}_mm_s ({top}), got {start}")
+        if not (MIN_SPEED_MM_S <= acc <= 1e6):
+            raise bad(f"accel_{axis}_mm_s2", f"must be {MIN_SPEED_MM_S:g}..1e6 mm/s^2, got {acc}")
     for axis, (lo, hi) in zip("xyz", s.travel.bounds_steps()):
+        if abs(lo) > MAX_TRAVEL_STEPS or abs(hi) > MAX_TRAVEL_STEPS:
+            raise bad(f"travel.{axis}_min_steps", f"and travel.{axis}_max_steps must be within "
+                      f"{MAX_TRAVEL_STEPS} steps of the home, got {lo}..{hi}")
         if lo > 0 or hi < 0:
             raise bad(f"travel.{axis}_min_steps", f"and travel.{axis}_max_steps must contain the home 0, got {lo}..{hi}")
     pins = {f.name: getattr(s.pins, f.name) for f in dataclasses.fields(Pins)}

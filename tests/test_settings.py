@@ -60,3 +60,23 @@ def test_bad_toml_and_missing_file(tmp_path):
 def test_shipped_thesis_machine_file_equals_builtin_defaults():
     from conftest import ROOT
     assert cam.load_settings(ROOT / "profiles" / "thesis-machine.toml") == DEFAULT_SETTINGS
+
+
+@pytest.mark.parametrize("changes, key", [
+    ({"start_speed_x_mm_s": 4e-10}, "start_speed_x_mm_s"), ({"max_speed_z_mm_s": 1e-12}, "max_speed_z_mm_s"),
+    ({"accel_y_mm_s2": float("nan")}, "accel_y_mm_s2"), ({"max_speed_x_mm_s": float("inf")}, "max_speed_x_mm_s"),
+])
+def test_speeds_are_bounded_and_finite(changes, key):
+    with pytest.raises(cam.SettingsError, match=key):
+        cam.MachineSettings().replace(**changes)
+
+
+def test_travel_is_bounded():
+    with pytest.raises(cam.SettingsError, match="travel.x_min_steps"):
+        cam.MachineSettings().replace(travel=cam.settings.Travel(x_max_steps=10**12))
+
+
+def test_a_drill_depth_that_rounds_to_no_step_is_an_error():
+    holes = cam.parse_excellon("M48\nMETRIC,LZ\nT1C1.0\n%\nT1\nX1.0Y1.0\nM30\n", source="one.drl")
+    with pytest.raises(cam.PlanError, match="mm_per_step_z"):
+        cam.plan_drill(holes, settings=cam.MachineSettings().replace(mm_per_step_z=100), depth_mm=2.0)

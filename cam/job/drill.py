@@ -104,6 +104,9 @@ def plan_drill(
     steps_xy = np.rint(machine_mm / settings.mm_per_step_xy).astype(np.int64)
     _check_holes(holes, machine_mm, steps_xy, settings)
     depth_steps = int(round(depth_mm / settings.mm_per_step_z))
+    if depth_steps < 1:
+        raise PlanError(f"drill depth {depth_mm:g} mm is less than one Z step (mm_per_step_z = "
+                        f"{settings.mm_per_step_z:g} mm): nothing would be drilled")
     safe_steps = -int(round(safe_height_mm / settings.mm_per_step_z))
     path = _DrillPath(safe_steps)
     tools = sorted(set(int(t) for t in holes.tool_of_hole), key=lambda t: (holes.tools[t], t))
