@@ -68,12 +68,12 @@ from .errors import SettingsError
 __all__ = ["Travel", "Pins", "MachineSettings", "load_settings", "DEFAULT_SETTINGS", "RAMP_MODES"]
 
 RAMP_MODES = ("lookahead", "linear40", "constant")
+"""Speed ramp modes (see :mod:`cam.drive.ramps`)."""
 MIN_SPEED_MM_S = 0.01
 """The slowest start speed, top speed and acceleration (mm/s, mm/s^2) a setting may give: slower ones made
 step periods of hours and machine times that overflow."""
 MAX_TRAVEL_STEPS = 10**9
 """The farthest a travel limit may lie from the home, in steps."""
-"""Speed ramp modes (see :mod:`cam.drive.ramps`)."""
 
 
 @dataclass(frozen=True)
