@@ -18,7 +18,7 @@ import os
 from pathlib import Path
 from typing import Optional
 
-from ..choices import DIGITIZED_SUFFIXES, SUFFIXES
+from ..choices import DIGITIZED_SUFFIXES, OPTION_KINDS, SUFFIXES, job_kind
 from ..errors import CamError
 
 __all__ = ["check_args", "job_kind_of", "OUTPUTS", "APPLIES_TO", "check_output_path"]
@@ -26,18 +26,21 @@ __all__ = ["check_args", "job_kind_of", "OUTPUTS", "APPLIES_TO", "check_output_p
 DRAWINGS = frozenset({"drawing", "digitized"})
 EVERY_KIND = frozenset(SUFFIXES)
 
-APPLIES_TO = {
-    # option dest: the file kinds it applies to (drill, export, preview and info)
-    "load_digitized": DRAWINGS, "start": frozenset({"drawing"}), "depth": DRAWINGS, "profile": DRAWINGS,
-    "profile_expr": DRAWINGS, "passes": DRAWINGS, "start_at": DRAWINGS, "pause_at": DRAWINGS,
-    "steps_per_pixel": DRAWINGS, "save_digitized": frozenset({"drawing"}), "surface": DRAWINGS,
-    "cut_depth": DRAWINGS | {"excellon", "hpgl"}, "travel_height": frozenset({"excellon", "hpgl"}),
-    "offset": frozenset({"excellon", "hpgl"}), "mirror_x": frozenset({"excellon"}),
-    "drill_order": frozenset({"excellon"}), "excellon_units": frozenset({"excellon"}),
-    "excellon_format": frozenset({"excellon"}), "excellon_zeros": frozenset({"excellon"}),
-    "flip_y": frozenset({"gcode"}),
+_OPTION_OF_FLAG = {
+    # CLI option dest: the job option it sets (its kinds come from cam.choices.OPTION_KINDS)
+    "depth": "depth", "passes": "passes", "start": "start", "start_at": "start_at", "pause_at": "pause_at",
+    "profile": "profile", "profile_expr": "profile_expr", "cut_depth": "cut_depth_mm",
+    "travel_height": "travel_height_mm", "offset": "offset_mm", "mirror_x": "mirror_x",
+    "drill_order": "drill_order", "excellon_units": "excellon_units", "excellon_format": "excellon_digits",
+    "excellon_zeros": "excellon_zeros", "flip_y": "flip_y",
 }
-"""Which file kinds each job option applies to; ``cam export`` widens some (see :data:`_EXPORT_APPLIES_TO`)."""
+APPLIES_TO = {
+    **{dest: OPTION_KINDS[option] for dest, option in _OPTION_OF_FLAG.items()},
+    # flags of the command line only
+    "load_digitized": DRAWINGS, "steps_per_pixel": DRAWINGS, "save_digitized": frozenset({"drawing"}),
+    "surface": DRAWINGS,
+}
+"""Which file kinds each option applies to (drill, export, preview and info); ``cam export`` widens some."""
 
 _EXPORT_APPLIES_TO = {"travel_height": EVERY_KIND, "flip_y": EVERY_KIND}
 """export writes every kind's travel at --travel-height, and --flip-y mirrors Y of every kind."""
@@ -63,12 +66,7 @@ def job_kind_of(args: argparse.Namespace) -> Optional[str]:
     """The kind of the command's input file by its suffix ("drawing", "excellon", ...), or None."""
     image = getattr(args, "image", None)
     if image:
-        suffix = Path(image).suffix.lower()
-        for kind, suffixes in SUFFIXES.items():
-            if suffix in suffixes:
-                return kind
-        listed = "; ".join(f"{k} {' '.join(v)}" for k, v in SUFFIXES.items())
-        raise CamError(f"{Path(image).name}: unknown file type '{suffix or '(none)'}' (accepted: {listed})")
+        return job_kind(image)
     if getattr(args, "load_digitized", None):
         return "digitized"
     return None

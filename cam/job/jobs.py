@@ -27,7 +27,8 @@ import cv2
 import numpy as np
 
 from ..choices import (
-    DIGITIZED_SUFFIXES, DRAWING_SUFFIXES, EXCELLON_SUFFIXES, HPGL_SUFFIXES, PROFILE_SUFFIXES, SUFFIXES,
+    DIGITIZED_SUFFIXES, DRAWING_SUFFIXES, EXCELLON_SUFFIXES, HPGL_SUFFIXES, OPTION_KINDS, PROFILE_SUFFIXES, SUFFIXES,
+    job_kind,
 )
 from ..digitize import digitize
 from ..digitize.digitized import load_digitized
@@ -68,23 +69,6 @@ MAX_MM = 10_000.0
 def accepted_suffixes() -> dict[str, tuple[str, ...]]:
     """File name suffixes of each job kind (lower case, with the dot)."""
     return dict(SUFFIXES)
-
-
-def job_kind(path: str | os.PathLike) -> str:
-    """The job kind of a file, from its suffix.
-
-    >>> job_kind("board.DRL"), job_kind("part.ngc"), job_kind("gear.png")
-    ('excellon', 'gcode', 'drawing')
-
-    Raises:
-        CamError: unknown suffix (the message names the file and the accepted types).
-    """
-    suffix = Path(path).suffix.lower()
-    for kind, suffixes in accepted_suffixes().items():
-        if suffix in suffixes:
-            return kind
-    listed = "; ".join(f"{k} {' '.join(v)}" for k, v in accepted_suffixes().items())
-    raise CamError(f"{Path(path).name}: unknown file type '{suffix or '(none)'}' (accepted: {listed})")
 
 
 @dataclass(frozen=True)
@@ -310,17 +294,6 @@ _PARSERS = {
     "flip_y": _bool,
 }
 
-_DRAWINGS = frozenset({"drawing", "digitized"})
-OPTION_KINDS = {
-    "depth": _DRAWINGS, "passes": _DRAWINGS, "start": frozenset({"drawing"}), "start_at": _DRAWINGS,
-    "pause_at": _DRAWINGS, "profile": _DRAWINGS, "profile_expr": _DRAWINGS,
-    "cut_depth_mm": _DRAWINGS | {"excellon", "hpgl"}, "travel_height_mm": frozenset({"excellon", "hpgl"}),
-    "offset_mm": frozenset({"excellon", "hpgl"}), "mirror_x": frozenset({"excellon"}),
-    "drill_order": frozenset({"excellon"}), "excellon_units": frozenset({"excellon"}),
-    "excellon_digits": frozenset({"excellon"}), "excellon_zeros": frozenset({"excellon"}),
-    "flip_y": frozenset({"gcode"}),
-}
-"""The job kinds each option applies to."""
 
 
 @dataclass
