@@ -19,6 +19,7 @@ __all__ = ["cmd_drill"]
 
 def _finish(args: argparse.Namespace, outcome: Outcome, report: dict, summary: str, wall_s: float) -> int:
     report["status"] = outcome.status
+    report.update(outcome.timing)
     ramp = report["ramp"]
     if args.report:
         atomic_write_text(args.report, json.dumps(report, indent=2) + "\n")

@@ -39,6 +39,9 @@ class Outcome:
     position_steps: tuple[int, int, int] = (0, 0, 0)
     """Where the tool stands at the end, in the session's frame (steps from where it stood at the start, plus
     ``start_steps``)."""
+    timing: dict = field(default_factory=dict)
+    """Real-time runs: ``max_late_s`` (the latest write), ``stalls`` (writes over 1 ms late) and ``late_total_s``
+    (how much later the run ended than planned); every delay moved the rest of the run later."""
 
     @property
     def finished(self) -> bool:
@@ -149,4 +152,5 @@ def _outcome(session: MachineSession, args: argparse.Namespace) -> Outcome:
     if result is None:  # a MAXIMUS board: it reports no time
         return Outcome(info.get("status", "error"), list(info.get("messages", [])),
                        position_steps=session.position_steps())
-    return Outcome(result.status, list(result.messages), result.machine_time_s, session.position_steps())
+    timing = {k: info[k] for k in ("max_late_s", "stalls", "late_total_s") if k in info}
+    return Outcome(result.status, list(result.messages), result.machine_time_s, session.position_steps(), timing)

@@ -53,6 +53,9 @@ def run_steps(session: Any, name: str, plan: StepPlan, ctl: Controller, label: s
                 machine_time_s=round(result.machine_time_s, 4), wall_time_s=round(result.wall_time_s, 4),
                 started_ns=result.started_ns,
                 step_period_ns=int(max(plan.settings.delay_xy_ns, plan.settings.delay_z_ns)))
+    if session.realtime:
+        info.update(max_late_s=round(result.lateness.max_ns / 1e9, 6), stalls=result.lateness.stalls,
+                    late_total_s=round(result.lateness.total_ns / 1e9, 6))
     log = None
     if isinstance(result.port, MockPort):
         log = result.pin_log()

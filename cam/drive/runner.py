@@ -29,7 +29,7 @@ from .ports import MockPort, Port, open_port
 from .pins import axis_bits
 from .steps import StepPlan, plan_steps
 
-__all__ = ["Controller", "RunResult", "run", "simulate_surface", "FINISHED", "STOPPED", "EMERGENCY_STOPPED"]
+__all__ = ["Controller", "RunResult", "Lateness", "STALL_NS", "run", "simulate_surface", "FINISHED", "STOPPED", "EMERGENCY_STOPPED"]
 
 FINISHED = "finished"
 STOPPED = "stopped"
@@ -78,6 +78,36 @@ class Controller:
         return self.stop_requested or self.estop_requested
 
 
+STALL_NS = 1_000_000
+"""A real-time write later than its (shifted) time by more than this counts as a stall in the report."""
+
+
+@dataclass
+class Lateness:
+    """How late the real-time writes went out, each against its time on the shifted schedule.
+
+    Attributes:
+        max_ns: the largest delay of one write.
+        total_ns: the sum of the delays: how much later than planned the run ended (pauses not counted).
+        late_writes: writes sent after their time at all.
+        stalls: writes late by more than :data:`STALL_NS`.
+    """
+
+    max_ns: int = 0
+    total_ns: int = 0
+    late_writes: int = 0
+    stalls: int = 0
+
+    def add(self, late_ns: int) -> None:
+        """Book one write sent ``late_ns`` (> 0) after its time."""
+        self.late_writes += 1
+        self.total_ns += late_ns
+        if late_ns > self.max_ns:
+            self.max_ns = late_ns
+        if late_ns > STALL_NS:
+            self.stalls += 1
+
+
 @dataclass
 class RunResult:
     """What a run did.
@@ -92,6 +122,7 @@ class RunResult:
         port: the port written to (a :class:`MockPort` holds the pin log).
         started_ns: ``time.monotonic_ns()`` at the job start; the real-time
             mock logs write times relative to it.
+        lateness: how late real-time writes went out (each delay moved the rest of the run later).
     """
 
     status: str
@@ -103,6 +134,7 @@ class RunResult:
     port: Port
     messages: list[str] = field(default_factory=list)
     started_ns: int = 0
+    lateness: Lateness = field(default_factory=Lateness)
 
     def pin_log(self) -> PinLog:
         """The mock port's pin log (only for the mock)."""
@@ -194,8 +226,9 @@ def run(
     ctl = controller or Controller()
     pauses = _Pauses(plan, ctl, on_pause, controller is not None)
     wall0 = time.monotonic_ns()
+    lateness = Lateness()
     if realtime:
-        sent = _send_realtime(plan, p, ctl, pauses, progress, wall0)
+        sent = _send_realtime(plan, p, ctl, pauses, progress, wall0, lateness)
     else:
         sent = _send_simulated(plan, p, ctl, pauses, progress)
     position = _position_after(plan, sent)
@@ -206,13 +239,13 @@ def run(
             status = EMERGENCY_STOPPED
             messages.append(f"emergency stop at {position} steps; nothing more was sent")
         else:
-            status, position = _stop(plan, p, ctl, sent, position, wall0 if realtime else None)
+            status, position = _stop(plan, p, ctl, sent, position, wall0 if realtime else None, lateness)
             messages.append(f"stopped at X={position[0]} Y={position[1]} steps; tool lifted to Z={position[2]}")
     if isinstance(p, MockPort):
         p._flush()
     wall = (time.monotonic_ns() - wall0) / 1e9
     machine = float(plan.t_ns[sent - 1]) / 1e9 if sent else 0.0
-    return RunResult(status, position, sent, machine, wall, pauses.count, p, messages, wall0)
+    return RunResult(status, position, sent, machine, wall, pauses.count, p, messages, wall0, lateness)
 
 
 def _send_simulated(plan: StepPlan, p: Port, ctl: Controller, pauses: _Pauses,
@@ -241,10 +274,13 @@ def _send_simulated(plan: StepPlan, p: Port, ctl: Controller, pauses: _Pauses,
 
 
 def _send_realtime(plan: StepPlan, p: Port, ctl: Controller, pauses: _Pauses,
-                   progress: Optional[ProgressFn], t0: int) -> int:
+                   progress: Optional[ProgressFn], t0: int, lateness: "Lateness") -> int:
     """Send each write at its time after ``t0`` (monotonic ns), pauses added; returns the writes sent.
 
-    Sleeps on the controller's wake event until :data:`_SPIN_NS` before a write, then spins.
+    Sleeps on the controller's wake event until :data:`_SPIN_NS` before a write, then spins.  A write
+    sent late (a stall, a busy machine, a stopped process) shifts every later write by its lateness:
+    the runner never catches up, so each interval between writes is at least the planned one (ramps
+    included) and a stepper never gets steps faster than its plan.  ``lateness`` books each delay.
     """
     t_ns, data, strobe = plan.t_ns, plan.data, plan.strobe
     total = len(plan)
@@ -277,7 +313,12 @@ def _send_realtime(plan: StepPlan, p: Port, ctl: Controller, pauses: _Pauses,
                 wake.clear()
         if halted:
             break
-        p.write(int(data[sent]), int(strobe[sent]), time.monotonic_ns() - t0)
+        now = time.monotonic_ns()
+        late_ns = now - target
+        if late_ns > 0:  # behind: the rest of the schedule moves later, so no interval is shorter than planned
+            offset += late_ns
+            lateness.add(late_ns)
+        p.write(int(data[sent]), int(strobe[sent]), now - t0)
         sent += 1
         if progress and (target - last_progress > _PROGRESS_EVERY_NS or sent == total):
             last_progress = target
@@ -291,11 +332,12 @@ def _send_realtime(plan: StepPlan, p: Port, ctl: Controller, pauses: _Pauses,
 
 
 def _stop(plan: StepPlan, p: Port, ctl: Controller, sent: int, position: tuple[int, int, int],
-          t0: Optional[int]) -> tuple[str, tuple[int, int, int]]:
+          t0: Optional[int], lateness: Optional[Lateness] = None) -> tuple[str, tuple[int, int, int]]:
     """Lift the tool straight up to the safe plane after ``sent`` writes; returns (status, position_steps).
 
     ``t0``: the real-time job start (monotonic ns), None on the simulated clock.  An emergency stop
-    during a real-time lift ends it (status :data:`EMERGENCY_STOPPED`).
+    during a real-time lift ends it (status :data:`EMERGENCY_STOPPED`).  A late lift write moves the
+    rest of the lift later, as in a job.
     """
     lift_t, lift_d = _lift_writes(plan, int(plan.data[sent - 1]) if sent else 0, position[2])
     strobe = plan.strobe[0]
@@ -305,7 +347,7 @@ def _stop(plan: StepPlan, p: Port, ctl: Controller, sent: int, position: tuple[i
         return STOPPED, (position[0], position[1], min(position[2], plan.safe_z_steps))
     start = time.monotonic_ns() - t0
     z_clock = int(axis_bits(plan.settings)[0][2])
-    t_lift0 = time.monotonic_ns()
+    lift_began = t_lift0 = time.monotonic_ns()  # t_lift0 moves later with each late write
     for t_rel, d in zip(lift_t.tolist(), lift_d.tolist()):
         while time.monotonic_ns() - t_lift0 < t_rel:
             if ctl.estop_requested:
@@ -313,7 +355,13 @@ def _stop(plan: StepPlan, p: Port, ctl: Controller, sent: int, position: tuple[i
             time.sleep(min(0.001, max(0.0, (t_rel - (time.monotonic_ns() - t_lift0)) / 1e9)))
         if ctl.estop_requested:
             return EMERGENCY_STOPPED, position
-        p.write(d, int(strobe), start + (time.monotonic_ns() - t_lift0))
+        now = time.monotonic_ns()
+        late_ns = now - t_lift0 - t_rel
+        if late_ns > 0:
+            t_lift0 += late_ns
+            if lateness is not None:
+                lateness.add(late_ns)
+        p.write(d, int(strobe), start + (now - lift_began))
         if d & z_clock:
             position = (position[0], position[1], position[2] - 1)
     return STOPPED, position
