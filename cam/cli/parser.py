@@ -354,6 +354,20 @@ def _add_serve(sub: argparse._SubParsersAction) -> None:
                        help="run the mock in real time, so the page shows live progress (default)")
     clock.add_argument("--simulated", dest="realtime", action="store_false",
                        help="run the mock on the simulated clock (jobs end at once); real ports are always real time")
+    lim = sv.add_argument_group("limits (the machine comes first: nothing a client asks may hold it up)")
+    lim.add_argument("--max-connections", type=_whole("--max-connections", 2, 100_000), metavar="N",
+                     help="connections kept at once; the oldest idle one is closed for a newcomer (default 100)")
+    lim.add_argument("--max-event-streams", type=_whole("--max-event-streams", 1, 100_000), metavar="N",
+                     help="pages following the machine live at once, below --max-connections (default 16)")
+    lim.add_argument("--header-timeout", type=_number("--header-timeout", 0.1, 3600), metavar="S",
+                     help="a request's head must arrive whole within S seconds (default 5)")
+    lim.add_argument("--body-timeout", type=_number("--body-timeout", 0.1, 3600), metavar="S",
+                     help="the longest pause inside a request body (default 10)")
+    lim.add_argument("--work-time-limit", type=_number("--work-time-limit", 0.001, 86_400), metavar="S",
+                     help="the longest one planning, preview or pin-log export may take, in its worker process "
+                          "(default 120)")
+    lim.add_argument("--work-memory-limit", type=_number("--work-memory-limit", 256, 1 << 30), metavar="MB",
+                     help="the memory that worker process may use (default: half the machine's, at most 8192)")
 
 
 _COMMAND_PARSERS = (_add_drill, _add_export, _add_preview, _add_digitize, _add_info, _add_profile, _add_jog,

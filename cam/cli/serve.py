@@ -30,7 +30,14 @@ def cmd_serve(args: argparse.Namespace) -> int:
     if not (args.max_upload_mb > 0):
         raise CamError(f"--max-upload-mb must be > 0, got {args.max_upload_mb}")
     settings = port_settings(args, args.port)
+    limits = {name: value for name, value in (
+        ("max_connections", args.max_connections), ("max_event_streams", args.max_event_streams),
+        ("header_timeout_s", args.header_timeout), ("body_timeout_s", args.body_timeout),
+        ("work_time_limit_s", args.work_time_limit),
+        ("work_memory_limit_bytes", None if args.work_memory_limit is None else int(args.work_memory_limit * 2**20)),
+    ) if value is not None}  # the rest: ServerConfig's defaults
     config = ServerConfig(host=args.host, port=args.http_port, token=args.token, jobs_dir=args.jobs_dir,
                           max_upload_bytes=int(args.max_upload_mb * 1024 * 1024), settings=settings,
-                          machine_port=args.port, realtime=args.realtime)
+                          machine_port=args.port, realtime=args.realtime, **limits)
+    config.checked()
     return serve(config, announce=lambda line: print(line, flush=True))

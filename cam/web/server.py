@@ -6,6 +6,12 @@ adapter: jobs are prepared by :func:`cam.job.jobs.prepare_job` and run by
 the :class:`~cam.drive.session.MachineSession` that the CLI and the Python API
 use too, on the same ports.
 
+The machine comes first: the session's step runner has a thread of its own,
+and planning, previews and pin-log exports run in a :class:`~cam.worker.Worker`
+process with a time and a memory limit (``--work-time-limit``,
+``--work-memory-limit``), so no request and no number of clients holds up a
+step write or the emergency stop.  Planning while a job runs is allowed.
+
 Frames: positions are machine steps ``(x, y, z)`` from the *home*, where the
 tool stood when the server started (+Z deeper); a job starts where the tool
 stands and is checked against the machine travel from there.
@@ -70,8 +76,10 @@ except ImportError:  # pragma: no cover - not Unix: no file limit to raise
 from ..drive.session import MachineSession
 from ..errors import BusyError, CamError, CapabilityError
 from ..fileio import atomic_write_bytes
-from ..job.jobs import PROFILE_SUFFIXES, JobOptions, PreparedJob, accepted_suffixes, job_kind, prepare_job
+from ..job.jobs import PROFILE_SUFFIXES, JobOptions, PreparedJob, accepted_suffixes, job_kind
 from ..settings import DEFAULT_SETTINGS, MachineSettings
+from ..worker import DEFAULT_TIME_LIMIT_S, Worker, default_memory_limit_bytes
+from .work import WARM_UP, pin_log_csv, plan_with_preview, preview_of, save_pin_log_raw
 
 if TYPE_CHECKING:
     from starlette.requests import Request
@@ -101,6 +109,8 @@ class ServerConfig:
             live event streams at once (more get 503).
         header_timeout_s: a request head must arrive whole within this time of the connection opening or
             the previous answer (else 408, closed); body_timeout_s: the longest pause inside a request body.
+        work_time_limit_s, work_memory_limit_bytes: the limits of one planning, preview or pin-log export,
+            which run in a worker process apart from the machine (None: half the memory, at most 8 GiB).
     """
 
     host: str = "127.0.0.1"
@@ -115,6 +125,8 @@ class ServerConfig:
     max_event_streams: int = 16
     header_timeout_s: float = 5.0
     body_timeout_s: float = 10.0
+    work_time_limit_s: float = DEFAULT_TIME_LIMIT_S
+    work_memory_limit_bytes: Optional[int] = None
 
     def checked(self) -> "ServerConfig":
         """Refuse a non-local address without a token; returns self."""
@@ -122,7 +134,8 @@ class ServerConfig:
             raise CamError(f"listening on {self.host} needs a token (--token, or let 'cam serve' make one)")
         if self.max_upload_bytes < 1:
             raise CamError(f"the upload limit must be > 0 bytes, got {self.max_upload_bytes}")
-        for name in ("max_connections", "max_event_streams", "header_timeout_s", "body_timeout_s"):
+        for name in ("max_connections", "max_event_streams", "header_timeout_s", "body_timeout_s",
+                     "work_time_limit_s"):
             if not getattr(self, name) > 0:
                 raise CamError(f"{name} must be > 0, got {getattr(self, name)}")
         if self.max_event_streams >= self.max_connections:
@@ -171,16 +184,19 @@ class _AppState:
     config: ServerConfig
     session: MachineSession
     jobs_dir: Path
+    worker: Worker  # planning, previews and pin-log exports: never in the machine's process
     uploads: dict[str, dict[str, Any]] = field(default_factory=dict)  # id -> path, name, kind, role
     prepared: dict[str, PreparedJob] = field(default_factory=dict)  # the last eight planned, oldest first
     previews: dict[str, bytes] = field(default_factory=dict)  # id -> PNG
     counter: int = 0
     streams: int = 0  # live event streams now
+    pin_log_csv: Optional[tuple[Any, Path]] = None  # (the pin log, its exported CSV)
     closing: threading.Event = field(default_factory=threading.Event)
 
     def shut_down(self) -> None:
-        """End the event streams, stop whatever runs (tool lifted) and wait for it."""
+        """End the event streams and the worker, stop whatever runs (tool lifted) and wait for it."""
         self.closing.set()
+        self.worker.close()
         self.session.shutdown()
 
 
@@ -462,15 +478,13 @@ async def _plan_job(st: _AppState, request: Request) -> dict[str, Any]:
         raise HttpError(404, f"no uploaded job {job_id!r}; upload a file first")
     options = _job_options(st, body.get("options") or {})
     session = st.session
-    if session.busy and session.realtime:
-        raise HttpError(409, "a job is running: planning now would disturb its step timing; wait for it to end")
     upload = st.uploads[job_id]
-    job = await run_in_threadpool(lambda: prepare_job(upload["path"], options, st.config.settings,
-                                                         name=upload["name"]))
+    job, png = await run_in_threadpool(st.worker.call, plan_with_preview, upload["path"], options,
+                                       st.config.settings, upload["name"], what=f"planning {upload['name']}")
     st.counter += 1
     st.prepared.pop(job_id, None)  # re-planned: the newest again, so the last eight planned stay
     st.prepared[job_id] = job
-    st.previews.pop(job_id, None)
+    st.previews[job_id] = png
     for old in list(st.prepared)[:-8]:
         st.prepared.pop(old, None)
         st.previews.pop(old, None)
@@ -489,7 +503,8 @@ async def _preview(st: _AppState, request: Request):
     if job is None:
         raise HttpError(404, f"job {job_id!r} is not planned")
     if job_id not in st.previews:
-        st.previews[job_id] = await run_in_threadpool(job.preview_png)
+        st.previews[job_id] = await run_in_threadpool(st.worker.call, preview_of, job,
+                                                      what=f"the preview of {job.name or job_id}")
     return Response(st.previews[job_id], media_type="image/png", headers={"Cache-Control": "no-store"})
 
 
@@ -577,14 +592,27 @@ async def _events(st: _AppState, request: Request):
 
 
 async def _pinlog(st: _AppState, request: Request):
-    from starlette.responses import Response
+    """The last job's pin log as CSV, exported once per job by the worker and sent from its file."""
+    from starlette.concurrency import run_in_threadpool
+    from starlette.responses import FileResponse
 
     log = st.session.last_job_pin_log
     if log is None:
         raise HttpError(404, "no job has run on the mock port yet")
-    lines = ["t_ns,data,strobe"]
-    lines += [f"{t},{d},{s}" for t, d, s in zip(log.t_ns.tolist(), log.data.tolist(), log.strobe.tolist())]
-    return Response("\n".join(lines) + "\n", media_type="text/csv")
+    if st.pin_log_csv is None or st.pin_log_csv[0] is not log:
+        st.counter += 1
+        raw = st.jobs_dir / f".pinlog-{st.counter}.npy"
+        csv = st.jobs_dir / f"pinlog-{st.counter}.csv"
+        await run_in_threadpool(save_pin_log_raw, log, raw)
+        try:
+            await run_in_threadpool(st.worker.call, pin_log_csv, str(raw), str(csv), what="the pin-log export")
+        finally:
+            raw.unlink(missing_ok=True)
+        if st.pin_log_csv is not None:
+            st.pin_log_csv[1].unlink(missing_ok=True)
+        st.pin_log_csv = (log, csv)
+    return FileResponse(st.pin_log_csv[1], media_type="text/csv", filename="pinlog.csv",
+                        headers={"Cache-Control": "no-store"})
 
 
 async def _not_found(st: _AppState, request: Request):
@@ -802,10 +830,14 @@ def create_app(config: ServerConfig, session: Optional[MachineSession] = None):
     jobs_dir.mkdir(parents=True, exist_ok=True)
     config.jobs_dir = str(jobs_dir)
     session = session or MachineSession(config.machine_port, config.settings, realtime=config.realtime)
-    st = _AppState(config, session, jobs_dir)
+    worker = Worker(time_limit_s=config.work_time_limit_s,
+                    memory_limit_bytes=config.work_memory_limit_bytes or default_memory_limit_bytes(),
+                    warm_up=WARM_UP)
+    st = _AppState(config, session, jobs_dir, worker)
 
     @asynccontextmanager
     async def lifespan(app):
+        await run_in_threadpool(worker.start)
         yield
         await run_in_threadpool(st.shut_down)
 

@@ -1,0 +1,54 @@
+"""The web server's heavy work, as functions its :class:`~cam.worker.Worker` process runs.
+
+Nothing here imports the web packages: the worker process imports this module
+and the planners, never Starlette.  The pin log crosses between the processes
+as a raw file (:func:`save_pin_log_raw`, written with the interpreter lock
+released) rather than through a pipe.
+"""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from ..job.jobs import JobOptions, PreparedJob, prepare_job
+from ..settings import MachineSettings
+from ..verify.pinlog import PinLog, write_pin_log
+
+__all__ = ["plan_with_preview", "preview_of", "save_pin_log_raw", "pin_log_csv", "WARM_UP"]
+
+WARM_UP = ("cam.job.jobs", "cam.web.work", "cam.digitize._kernels", "cam.drive.ramps", "cv2")
+"""What the worker imports as it starts: the first planning does not wait for it."""
+
+
+def plan_with_preview(path: str, options: JobOptions, settings: MachineSettings,
+                      name: str) -> tuple[PreparedJob, bytes]:
+    """Plan an uploaded file and draw its preview: ``(job, PNG bytes)`` (in the worker)."""
+    job = prepare_job(path, options, settings, name=name)
+    return job, job.preview_png()
+
+
+def preview_of(job: PreparedJob) -> bytes:
+    """The PNG preview of a planned job (in the worker)."""
+    return job.preview_png()
+
+
+def save_pin_log_raw(log: PinLog, path: str | os.PathLike) -> None:
+    """Write a pin log's three arrays, one after the other, as ``.npy`` records (the server's side).
+
+    ``numpy`` writes each array's bytes with the interpreter lock released, so the step runner's
+    thread is not held up however long the log.
+    """
+    with open(path, "wb") as handle:
+        for values in (log.t_ns, log.data, log.strobe):
+            np.save(handle, np.ascontiguousarray(values), allow_pickle=False)
+
+
+def pin_log_csv(raw_path: str, csv_path: str) -> str:
+    """Read a raw pin log of :func:`save_pin_log_raw` and write its CSV (in the worker); returns ``csv_path``."""
+    with open(raw_path, "rb") as handle:
+        t_ns, data, strobe = (np.load(handle, allow_pickle=False) for _ in range(3))
+    write_pin_log(PinLog(t_ns, data, strobe), csv_path)
+    Path(raw_path).unlink(missing_ok=True)
+    return csv_path
