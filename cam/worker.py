@@ -42,6 +42,7 @@ DEFAULT_TIME_LIMIT_S = 120.0
 """How long one call may take by default (a large drawing plans in well under a minute)."""
 
 _END_GRACE_S = 1.0  # after SIGTERM, wait this long before SIGKILL
+_NICE = 10  # the worker's niceness step: heavy work yields the CPU to the machine
 
 
 class WorkerLimitError(CamError):
@@ -78,6 +79,7 @@ def _out_of_memory(exc: BaseException) -> bool:
 def _serve(fd: int, memory_limit_bytes: int, warm_up: tuple[str, ...]) -> None:
     """The child: set the memory limit, import what calls need, then answer calls until the socket closes."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle
+    os.nice(_NICE)  # the machine's runner and the server come first
     conn = Connection(fd)
     _limit_memory(memory_limit_bytes)
     for name in warm_up:

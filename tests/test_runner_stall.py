@@ -52,7 +52,11 @@ def test_a_stall_moves_the_rest_of_the_run_later():
 
 
 def test_sigstop_of_a_realtime_drill_keeps_every_interval(tmp_path):
-    """The issue's case: ``kill -STOP`` a real-time ``cam drill`` for a while, then ``kill -CONT``."""
+    """The issue's case: stop a real-time ``cam drill`` for a while, then continue it.
+
+    The signals go to its process group (as Ctrl-Z in a terminal does), which holds the step runner's own
+    process too: stopping only the command's process would not stall the runner.
+    """
     rows = ["." * 62] + ["." + "#" * 60 + "."] + ["." * 62]
     image = tmp_path / "line.png"
     import cv2
@@ -62,11 +66,11 @@ def test_sigstop_of_a_realtime_drill_keeps_every_interval(tmp_path):
     proc = subprocess.Popen(
         [sys.executable, "-m", "cam", "drill", str(image), "--depth", "4", "--realtime", "--ramp", "constant",
          "--delay", "2,2", "--pin-log", str(pins), "--report", str(report), "--no-progress"],
-        cwd=tmp_path, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        cwd=tmp_path, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
     time.sleep(1.5)  # start-up, then into the job
-    proc.send_signal(signal.SIGSTOP)
+    os.killpg(proc.pid, signal.SIGSTOP)
     time.sleep(0.6)
-    proc.send_signal(signal.SIGCONT)
+    os.killpg(proc.pid, signal.SIGCONT)
     out, err = proc.communicate(timeout=60)
     assert proc.returncode == 0, err
     settings = cam.MachineSettings().replace(delay_xy_ms=2.0, delay_z_ms=2.0, ramp="constant")

@@ -256,9 +256,11 @@ class SessionControls(SessionView):
         return not self.busy
 
     def shutdown(self) -> None:
-        """Stop whatever runs (tool lifted) and wait for it."""
+        """Stop whatever runs (tool lifted) and wait for it; end the runner process."""
         if self.busy:
             self.stop()
             if not self.wait_idle(30):
                 self.emergency_stop()
                 self.wait_idle(5)
+        if getattr(self, "_runner_process", None) is not None:
+            self._runner_process.close()

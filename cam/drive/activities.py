@@ -14,7 +14,7 @@ import numpy as np
 from ..errors import CamError, PortError
 from ..settings import MachineSettings
 from .maximus.board import MaximusBoard, drill_arguments
-from .ports import MockPort, open_port, require
+from .ports import MockPort, open_port, port_kind, require
 from .runner import Controller, run
 from .steps import StepPlan
 
@@ -30,9 +30,15 @@ def run_steps(session: Any, name: str, plan: StepPlan, ctl: Controller, label: s
     error = None
     port = None
     try:
-        port = open_port(session.port)
-        result = run(plan, port, realtime=session.realtime, controller=ctl, progress=session.progress,
-                     on_pause=session.prompt)
+        if session.realtime and isinstance(session.port, str):  # a process of its own: nothing holds it up
+            if port_kind(session.port) != "mock":
+                open_port(session.port).close()  # a port that cannot be opened: its own message, from here
+            result = session.runner_process().run(plan, session.port, ctl, progress=session.progress,
+                                                  on_pause=session.prompt)
+        else:  # the simulated clock, or a port object the caller opened
+            port = open_port(session.port)
+            result = run(plan, port, realtime=session.realtime, controller=ctl, progress=session.progress,
+                         on_pause=session.prompt)
     except CamError as exc:
         error = str(exc)
     except Exception as exc:  # noqa: BLE001 - reported in the log; the runner sent nothing more

@@ -48,16 +48,23 @@ class Controller:
         self.paused = False
         self.stop_requested = False
         self.estop_requested = False
+        self.listeners: list[Callable[[], None]] = []
+        """Called (from the requesting thread) after every request: e.g. to pass it to a runner process."""
+
+    def _changed(self) -> None:
+        self._wake.set()
+        for listener in list(self.listeners):
+            listener()
 
     def pause(self) -> None:
         """Hold before the next write; the tool stays where it is."""
         self.paused = True
-        self._wake.set()
+        self._changed()
 
     def resume(self) -> None:
         """Continue a paused job."""
         self.paused = False
-        self._wake.set()
+        self._changed()
 
     def stop(self) -> None:
         """Stop before the next step and lift the tool to the safe plane.
@@ -66,12 +73,12 @@ class Controller:
         speed, since it starts from rest.
         """
         self.stop_requested = True
-        self._wake.set()
+        self._changed()
 
     def emergency_stop(self) -> None:
         """Stop before the next step and send nothing more (during a stop's lift too)."""
         self.estop_requested = True
-        self._wake.set()
+        self._changed()
 
     @property
     def halted(self) -> bool:

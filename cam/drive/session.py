@@ -30,6 +30,7 @@ from __future__ import annotations
 import collections
 import threading
 import time
+import weakref
 from typing import Any, Callable, Optional
 
 import numpy as np
@@ -40,6 +41,7 @@ from ..job.moves import jog as jog_job
 from ..job.moves import to_origin
 from ..settings import DEFAULT_SETTINGS, MachineSettings
 from ..verify.pinlog import PositionTracker
+from .apart import RunnerProcess
 from ._session_parts import Activity, Prompt, PromptFn, SessionControls
 from .activities import BoardControl, drill_work, jog_work, run_on_board, run_steps
 from .ports import port_kind, require
@@ -89,6 +91,14 @@ class MachineSession(SessionControls):
         self.last_result: Optional[RunResult] = None
         self.last_job_pin_log = None
         self.version = 0
+        self._runner_process: Optional[RunnerProcess] = None
+
+    def runner_process(self) -> RunnerProcess:
+        """The process real-time step plans run in (started at the first; ended with the session)."""
+        if self._runner_process is None:
+            self._runner_process = RunnerProcess()
+            weakref.finalize(self, self._runner_process.close)
+        return self._runner_process
 
     def set_position(self, position_steps: tuple[int, int, int]) -> None:
         """Tell the session where the tool stands (e.g. after homing by hand); refused while busy."""

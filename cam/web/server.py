@@ -191,6 +191,10 @@ class _AppState:
     counter: int = 0
     streams: int = 0  # live event streams now
     pin_log_csv: Optional[tuple[Any, Path]] = None  # (the pin log, its exported CSV)
+    broadcast: Any = None  # the _Broadcast of the live views (made with the state)
+
+    def __post_init__(self) -> None:
+        self.broadcast = _Broadcast(self.session, self.closing)
     closing: threading.Event = field(default_factory=threading.Event)
 
     def shut_down(self) -> None:
@@ -552,8 +556,53 @@ async def _state(st: _AppState, request: Request) -> dict[str, Any]:
     return st.session.state(after)
 
 
+class _Broadcast:
+    """One snapshot of the machine for every live view: made once per change (at most every 0.1 s, at least
+    every second) and sent to all, so the cost of a snapshot does not grow with the number of pages."""
+
+    def __init__(self, session: MachineSession, closing: threading.Event) -> None:
+        self.session, self.closing = session, closing
+        self.seq = 0
+        self.message = ""
+        self._log_after = 0
+        self._changed: Optional[asyncio.Event] = None
+        self._task: Optional[asyncio.Task] = None
+
+    def ensure_running(self) -> None:
+        """Start the snapshot task in the running event loop (once)."""
+        if self._task is None or self._task.done():
+            self._changed = asyncio.Event()
+            self._task = asyncio.get_running_loop().create_task(self._run())
+
+    async def _run(self) -> None:
+        last_version, last_sent = -1, 0.0
+        while not self.closing.is_set():
+            version, now = self.session.version, time.monotonic()
+            if version != last_version or now - last_sent > 1.0:
+                snap = self.session.state(self._log_after)
+                if snap["log"]:
+                    self._log_after = snap["log"][-1]["seq"]
+                self.message = f"data: {json.dumps(snap)}\n\n"
+                self.seq += 1
+                last_version, last_sent = version, now
+                changed, self._changed = self._changed, asyncio.Event()
+                changed.set()
+            await asyncio.sleep(0.1)
+
+    async def after(self, seq: int) -> tuple[int, str]:
+        """The next snapshot after number ``seq`` (waits up to a second; the same one again if none came)."""
+        changed = self._changed
+        if self.seq == seq and changed is not None:
+            try:
+                await asyncio.wait_for(changed.wait(), 1.0)
+            except asyncio.TimeoutError:
+                pass
+        return self.seq, self.message
+
+
 async def _events(st: _AppState, request: Request):
-    """Server-sent events: the state at each change (at least every second), new log lines only."""
+    """Server-sent events: the whole state first, then the shared snapshot at each change (new log lines only;
+    the page skips lines it has)."""
     from starlette.responses import StreamingResponse
 
     class CountedStream(StreamingResponse):
@@ -567,24 +616,18 @@ async def _events(st: _AppState, request: Request):
     if st.streams >= limit:
         raise HttpError(503, f"too many live views: {limit} pages already follow this machine; close one and "
                              "reload", {"Retry-After": "5"})
-    session = st.session
+    broadcast = st.broadcast
+    broadcast.ensure_running()
 
     async def stream():
-        last_version = -1
-        last_sent = 0.0
-        log_after = 0
+        seq = broadcast.seq
+        yield f"data: {json.dumps(st.session.state(0))}\n\n"
         while not st.closing.is_set():
-            v = session.version
-            now = time.monotonic()
-            if v != last_version or now - last_sent > 1.0:
-                snap = session.state(log_after)
-                if snap["log"]:
-                    log_after = snap["log"][-1]["seq"]
-                last_version, last_sent = v, now
-                yield f"data: {json.dumps(snap)}\n\n"
-            if await request.is_disconnected():
-                break
-            await asyncio.sleep(0.1)
+            new_seq, message = await broadcast.after(seq)
+            if new_seq != seq:
+                seq = new_seq
+                yield message
+            # a page that went away is noticed when a write to it fails (or by Starlette's disconnect watch)
 
     st.streams += 1  # until CountedStream ends
     return CountedStream(stream(), media_type="text/event-stream",
