@@ -18,6 +18,11 @@ from test_cli_checks import ENV, cli, refused
 DIGITS_400 = "9" * 400
 
 
+def short(value):
+    """A test id that does not spell out 400 digits."""
+    return str(value).replace(DIGITS_400, "9x400")[:40]
+
+
 # -- G-code words -----------------------------------------------------------------------------------------------
 
 @pytest.mark.parametrize("text, line, fragment", [
@@ -37,7 +42,7 @@ DIGITS_400 = "9" * 400
     (f"N{DIGITS_400} G21\n", 1, "line number 'N9999"),
     (f"G{DIGITS_400}\n", 1, "unsupported word 'G9999"),
     (f"M{DIGITS_400}\n", 1, "unsupported word 'M9999"),
-])
+], ids=short)
 def test_gcode_words_out_of_range_name_the_line_and_the_word(text, line, fragment):
     with pytest.raises(cam.ParseError) as info:
         parse_gcode(text, source="bad.ngc")
@@ -58,7 +63,7 @@ def test_gcode_words_at_their_limits_are_read():
     (f"G21\nG4 P{DIGITS_400}\n", ("bad.ngc:2:", "dwell 'P9999", "0..3600 s")),
     ("G21\nG1 X1 F0.0000000001\n", ("bad.ngc:2:", "feed 'F0.0000000001'")),
     ("G21\nG1 X1 F10\nG3 X2 Y0 R99999999999999999999\n", ("bad.ngc:3:", "'R99999999999999999999'")),
-])
+], ids=short)
 def test_cli_refuses_gcode_numbers_in_one_line(tmp_path, text, fragments):
     path = tmp_path / "bad.ngc"
     path.write_text(text)
@@ -146,3 +151,35 @@ def test_the_arc_check_names_the_point_sampling_would_name():
         compared += 1
         refused_n += bool(got)
     assert compared == 300 and 50 < refused_n < 250  # both kinds were seen
+
+
+# -- HPGL coordinates and pens ----------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("data, where, fragment", [
+    (f"IN;SP1;PU0,0;\nPD{DIGITS_400},0;PU;", "2:3", "the coordinate of more than 300 digits is out of range"),
+    (f"IN;SP1;PU0,0;\nPD10,-{DIGITS_400};PU;", "2:6", "the coordinate of more than 300 digits"),
+    (f"IN;SP1;PU0,0;\nPD1.{DIGITS_400},0;PU;", "2:3", "more than 300 digits"),  # a NaN in the tokenizer
+    ("IN;SP1;PU0,0;\nPD99999999999999999999,0;PU;", "2:3", "the coordinate 1e+20 is out of range"),
+    ("IN;SP1;PU0,0;\nPD40000001,0;PU;", "2:3", "the coordinate 4e+07 is out of range"),
+    ("IN;SP1;PU0,0;PD10,0;\nPR30000000,0,30000000,0;PU;", "2:14", "after the relative move 3e+07 lies"),
+    (f"IN;SP1;PU0,0;PD10,0;\nPR{DIGITS_400},0,-{DIGITS_400},0;PU;", "2:3", "out of range"),
+    (f"IN;\nSP{DIGITS_400};PU0,0;PD10,0;PU;", "2:1", "'SP' takes one pen number (a whole number 0..999999)"),
+], ids=short)
+def test_hpgl_numbers_out_of_range_name_file_line_and_column(data, where, fragment):
+    for read in (cam.parse_hpgl, lambda d, source: cam.scan_hpgl(__import__("io").BytesIO(d.encode()), source=source)):
+        with pytest.raises(cam.ParseError) as info:
+            read(data, source="big.plt")
+        assert str(info.value).startswith(f"big.plt:{where}: ") and fragment in str(info.value), str(info.value)
+
+
+def test_hpgl_coordinates_at_the_limit_are_read():
+    d = cam.parse_hpgl("IN;SP1;PU0,0;PD40000000,-40000000;PU;PR-40000000,40000000;PD;")
+    assert d.extent_pu() == (0.0, -40000000.0, 40000000.0, 0.0)
+
+
+def test_cli_refuses_hpgl_numbers_in_one_line(tmp_path):
+    path = tmp_path / "big.plt"
+    path.write_text(f"IN;SP1;PU0,0;PD{DIGITS_400},0;PU;")
+    for command in (["info", path], ["drill", path, "--yes", "--no-progress"], ["export", path, "-o", tmp_path / "o.ngc"]):
+        refused(cli(*command), "big.plt:1:16:", "out of range")
+    assert not (tmp_path / "o.ngc").exists()
