@@ -183,3 +183,49 @@ def test_cli_refuses_hpgl_numbers_in_one_line(tmp_path):
     for command in (["info", path], ["drill", path, "--yes", "--no-progress"], ["export", path, "-o", tmp_path / "o.ngc"]):
         refused(cli(*command), "big.plt:1:16:", "out of range")
     assert not (tmp_path / "o.ngc").exists()
+
+
+# -- Excellon coordinates, tools and repeats ----------------------------------------------------------------------
+
+def drill_file(*body: str, header: str = "T1C0.8") -> str:
+    return "\n".join(["M48", "METRIC", header, "%", "T1", *body, "M30"]) + "\n"
+
+
+@pytest.mark.parametrize("text, where, fragment", [
+    (drill_file(f"X{DIGITS_400}.0Y1.0"), "6:1", "X999999999999999999999... is out of range"),
+    (drill_file(f"X1.0Y-{DIGITS_400}.5"), "6:5", "Y-99999999999999999999... is out of range"),
+    (drill_file("X1000000.1Y0"), "6:1", "X1000000.1 is out of range (at most 1e+06 mm either way)"),
+    (drill_file("G91", "X900000.0Y0", "X900000.0Y0"), "8", "the position X1.8e+06 mm lies beyond 1e+06 mm"),
+    (drill_file("G93X900000.0Y0", "X900000.0Y0"), "7", "the position X1.8e+06 mm lies beyond"),
+    (drill_file("X0Y0", "R9000X200.0"), "7", "the position X1.0002e+06 mm lies beyond"),
+    (drill_file("X1.0Y1.0", header=f"T1C{DIGITS_400}.0"), "3:3", "C999999999999999999999... is out of range"),
+    (drill_file("X1.0Y1.0", header="T1C100.1"), "3:3", "bad diameter 100.1 (must be > 0 and at most 100 mm)"),
+    (drill_file("X1.0Y1.0", header="T1C0"), "3:3", "bad diameter 0"),
+    (drill_file("X1.0Y1.0", header="T1000000C0.8"), "3:1", "T1000000 is out of range (a whole number 0..999999)"),
+    (drill_file("X1.0Y1.0", header=f"T{'9' * 5000}C0.8"), "3:1", "is out of range (a whole number 0..999999)"),
+    (drill_file("X1.0Y1.0", f"G{'9' * 5000}"), "7:1", "is out of range (a whole number 0..999999999)"),
+    (drill_file("X1.0Y1.0", "R999999999X0.1"), "7:1", "R999999999 is out of range (a whole number 0..10000)"),
+], ids=short)
+def test_excellon_numbers_out_of_range_name_the_line(text, where, fragment):
+    with pytest.raises(cam.ParseError) as info:
+        cam.parse_excellon(text, source="big.drl")
+    message = str(info.value)
+    assert message.startswith(f"big.drl:{where}:") and fragment in message, message
+    assert len(message) < 260
+
+
+def test_excellon_repeats_are_bounded_in_all():
+    """A repeat makes at most 10,000 holes and a file at most a million: 101 'R10000' lines, not billions."""
+    text = drill_file("X0Y0", *["R10000X0.0001Y0"] * 101)
+    with pytest.raises(cam.ParseError, match=r"big\.drl:\d+: more than 1000000 holes"):
+        cam.parse_excellon(text, source="big.drl")
+    assert len(cam.parse_excellon(drill_file("X0Y0", "R10000X0.001Y0")).holes_mm) == 10001
+
+
+def test_cli_refuses_excellon_numbers_in_one_line(tmp_path):
+    path = tmp_path / "big.drl"
+    path.write_text(drill_file(f"X{DIGITS_400}.0Y1.0"))
+    for command in (["info", path], ["drill", path, "--yes", "--no-progress"]):
+        refused(cli(*command), "big.drl:6:1:", "out of range")
+    path.write_text(drill_file("X1.0Y1.0", header=f"T{'9' * 5000}C0.8"))  # was a ValueError traceback
+    refused(cli("info", path), "big.drl:3:1:", "out of range")
