@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 import cam
+from cam.digitize.digitized import parse_digitized
 from cam.formats.gcode import parse_gcode
 from cam.job.gcode import _Arc, _arc_points, _Frame, plan_gcode
 from cam.limits import MAX_COORD_MM, MAX_MOVE_S
@@ -229,3 +230,56 @@ def test_cli_refuses_excellon_numbers_in_one_line(tmp_path):
         refused(cli(*command), "big.drl:6:1:", "out of range")
     path.write_text(drill_file("X1.0Y1.0", header=f"T{'9' * 5000}C0.8"))  # was a ValueError traceback
     refused(cli("info", path), "big.drl:3:1:", "out of range")
+
+
+# -- profile CSVs and digitized matrices --------------------------------------------------------------------------
+
+@pytest.mark.parametrize("text, where, fragment", [
+    (f"{DIGITS_400}\n", "1", "depth '999999999999999999999...' is out of range: 0..1000000 Z pixels"),
+    (f"3\n{DIGITS_400},4\n", "2", "expected layer 2, got '999999999999999999999...'"),  # an OverflowError before
+    ("1\ninf\n", "2", "depth 'inf' is out of range"),
+    ("1\n2,nan\n", "2", "depth 'nan' is out of range"),
+    ("layer,depth\n1,3\n2,-1\n", "3", "depth '-1' is out of range"),
+    ("1\n1e308,4\n", "2", "expected layer 2, got '1e308'"),
+], ids=short)
+def test_profile_csv_values_out_of_range_name_the_line(tmp_path, text, where, fragment):
+    path = tmp_path / "p.csv"
+    path.write_text(text)
+    with pytest.raises(cam.ParseError) as info:
+        cam.load_profile(path)
+    assert str(info.value).startswith(f"{path}:{where}: ") and fragment in str(info.value), str(info.value)
+
+
+def test_cli_refuses_profile_csv_values_in_one_line(tmp_path):
+    from conftest import SAMPLES
+
+    path = tmp_path / "p.csv"
+    path.write_text(f"3\n{DIGITS_400},4\n")
+    refused(cli("profile", path), "p.csv:2:", "expected layer 2")
+    refused(cli("drill", SAMPLES / "disc.png", "--profile", path, "--no-progress"), "p.csv:2:", "expected layer 2")
+
+
+def matrix(width, height, *rows, mode="2d"):
+    return (f"# cam digitized matrix v1\n# mode={mode} width_px={width} height_px={height} objects=1 "
+            f"points={len(rows)}\nobject,x,y,level\n" + "".join(f"{r}\n" for r in rows))
+
+
+@pytest.mark.parametrize("text, where, fragment", [
+    (matrix(DIGITS_400, 3, "1,1,1,1"), "2", "image size 999999999999...x3 px is out of range"),
+    (matrix(100000, 100000, "1,1,1,1"), "2", "image size 100000x100000 px is out of range: at most 32768 px on a side"),
+    (matrix(8000, 8000, "1,1,1,1"), "2", "and 16777216 px in all"),
+    (matrix(3, 3, f"1,1,1,{DIGITS_400}"), "4", "level must be 1..9 (the image's pixel count), got 999999999999..."),
+    (matrix(3, 3, "1,1,1,10", mode="3d"), "4", "level must be 1..9"),
+], ids=short)
+def test_digitized_matrix_sizes_and_levels_in_range(text, where, fragment):
+    with pytest.raises(cam.ParseError) as info:
+        parse_digitized(text, source="m.txt")
+    assert str(info.value).startswith(f"m.txt:{where}: ") and fragment in str(info.value), str(info.value)
+
+
+def test_cli_refuses_a_huge_digitized_matrix_in_one_line(tmp_path):
+    path = tmp_path / "m.txt"
+    path.write_text(matrix(100000, 100000, "1,1,1,1"))  # tried to allocate 74.5 GiB
+    refused(cli("drill", path, "--no-progress"), "m.txt:2:", "out of range")
+    path.write_text(matrix(3, 3, f"1,1,1,{DIGITS_400}"))  # an OverflowError traceback
+    refused(cli("drill", path, "--no-progress"), "m.txt:4:", "level must be")
