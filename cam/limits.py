@@ -65,6 +65,7 @@ MAX_HOLES = 1_000_000
 MAX_IMAGE_SIDE_PX = 32_768
 MAX_IMAGE_PIXELS = 16_777_216
 """A drawing (an image, or the image a digitized matrix is for) is at most 32,768 pixels on a side and
-16,777,216 pixels (4096 x 4096) in all, read from the file's header before it is decoded; digitizing a
-drawing takes about 40 bytes a pixel.  A drawing to plan must also fit the machine's travel at its steps per
+16,777,216 pixels (4096 x 4096) in all, read from the file's header before it is decoded
+(:mod:`cam.digitize.image_size`); loading and classifying a drawing takes about 26 bytes a pixel, 430 MB at
+the limit.  A drawing to plan must also fit the machine's travel at its steps per
 pixel (:func:`cam.job.drawing.check_drawing_size`), which refuses far smaller ones."""
