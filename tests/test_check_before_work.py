@@ -13,8 +13,12 @@ import pytest
 import cam
 from cam.digitize import drawing as drawing_module
 from cam.digitize.image_size import image_size_px
+from cam.job import drawing as planner
+from cam.job import jobs
+from cam.job.drawing import check_drawing_size, max_drawing_size_px
+from cam.job.jobs import JobOptions, prepare_job
 
-from conftest import SAMPLES
+from conftest import SAMPLES, drawing_from_rows
 from test_cli_checks import ENV, cli, refused
 
 
@@ -97,3 +101,89 @@ def test_an_image_whose_size_cannot_be_read_is_refused(tmp_path):
     path.write_bytes(b"GIF89a" + bytes(100))
     with pytest.raises(cam.DrawingError, match=r"anim\.png: not a readable image .*PNG, JPEG, BMP, TIFF"):
         cam.load_image(path)
+
+
+# -- drawings too large for the travel: refused before tracing ----------------------------------------------------
+
+def test_the_largest_drawing_follows_the_travel_and_the_steps_per_pixel():
+    s = cam.MachineSettings()
+    assert max_drawing_size_px(s) == (1251, 1251)  # 10000 steps at 8 steps per pixel: pixels 0..1250
+    wide = s.replace(steps_per_px_xy=1, travel=cam.settings.Travel(-500, 2000, 0, 99))
+    assert max_drawing_size_px(wide) == (2501, 100)
+    check_drawing_size(1251, 1251, s)
+    with pytest.raises(cam.TravelError, match=r"d\.png: the drawing is 1252x10 px; at 8 steps per pixel the machine "
+                                              r"travel \(X 0\.\.10000, Y 0\.\.10000 steps\) holds at most 1251x1251 px"):
+        check_drawing_size(1252, 10, s, "d.png")
+
+
+def test_a_drawing_too_large_for_the_travel_is_refused_before_it_is_decoded_or_traced(tmp_path, monkeypatch):
+    """The 1500 x 1500 checkerboard: routing ran over 600 s before the travel error."""
+    path = tmp_path / "board.png"
+    cv2.imwrite(str(path), checkerboard(1500))
+    for name in ("load_image", "digitize", "plan"):
+        monkeypatch.setattr(jobs, name, lambda *a, _name=name, **k: pytest.fail(f"{_name} ran"))
+    with pytest.raises(cam.TravelError, match=r"board\.png: the drawing is 1500x1500 px; .* holds at most 1251x1251"):
+        prepare_job(path, JobOptions(depth=(3,)))
+    # a machine with 2 steps per pixel holds it: then it is decoded (and traced)
+    monkeypatch.setattr(jobs, "load_image", lambda *a, **k: pytest.fail("decoded, as it should be"))
+    with pytest.raises(pytest.fail.Exception, match="decoded, as it should be"):
+        prepare_job(path, JobOptions(depth=(3,)), cam.MachineSettings().replace(steps_per_px_xy=2))
+
+
+def test_cli_refuses_a_drawing_too_large_for_the_travel_in_one_line(tmp_path):
+    path = tmp_path / "board.png"
+    cv2.imwrite(str(path), checkerboard(1500))
+    for command in (["drill", path, "--depth", "3", "--no-progress"], ["export", path, "-o", tmp_path / "o.ngc"],
+                    ["preview", path, "-o", tmp_path / "p.png"]):
+        refused(cli(*command), "board.png: the drawing is 1500x1500 px", "at most 1251x1251 px")
+    # a digitized matrix for an image too large: refused before it is planned
+    matrix = tmp_path / "m.txt"
+    matrix.write_text("# cam digitized matrix v1\n# mode=2d width_px=2000 height_px=3 objects=1 points=1\n"
+                      "object,x,y,level\n1,1,1,1\n")
+    refused(cli("drill", "--load-digitized", matrix, "--no-progress"), "m.txt: the drawing is 2000x3 px")
+
+
+def _refuse_routing(monkeypatch):
+    monkeypatch.setattr(planner, "_route", lambda *a, **k: pytest.fail("a job outside the travel was routed"))
+
+
+def test_a_job_outside_the_travel_is_refused_before_it_is_routed(monkeypatch):
+    """word.png bridges two gaps inside the material (the router runs); moved off the travel by Start At, or on a
+    machine too small for it, it is refused naming its first point outside, and the router never runs."""
+    d = cam.digitize(cam.load_image(SAMPLES / "word.png"))
+    assert cam.plan(d, depth=3).n_targets  # fits: routed as usual
+    _refuse_routing(monkeypatch)
+    first = r"job leaves the machine travel at point 0 \(x=1259, y=24, z=0 px = 10072, 192, 0 steps\): X travel"
+    with pytest.raises(cam.TravelError, match=first):
+        cam.plan(d, depth=3, start_at=(1200, 0, 0))
+    with pytest.raises(cam.TravelError, match=r"X travel is 0\.\.800 steps"):
+        cam.plan(d, depth=3, settings=cam.MachineSettings().replace(travel=cam.settings.Travel(x_max_steps=800)))
+    with pytest.raises(cam.TravelError, match=r"Z travel is -640\.\.2000 steps"):
+        cam.plan(d, depth=2001)
+    with pytest.raises(cam.TravelError, match=r"point 0 \(x=0, y=0, z=-641 px"):  # the safe plane above the Z travel
+        cam.plan(d, depth=3, start_at=(0, -3, -641),
+                 settings=cam.MachineSettings().replace(travel=cam.settings.Travel(y_min_steps=-100)))
+
+
+def test_the_extent_check_agrees_with_the_travel_check():
+    """Over Start At offsets around a small travel's edges: every job the extent check lets through is inside the
+    travel (the planner asserts it), and every refusal names a point outside it."""
+    d = cam.digitize(drawing_from_rows(["..........", ".###...##.", "....#.#...", ".....#....", ".#######.."]))
+    settings = cam.MachineSettings().replace(
+        steps_per_px_xy=2, travel=cam.settings.Travel(-30, 30, -20, 24, -6, 9))
+    lo = np.array([b[0] for b in settings.travel.bounds_steps()])
+    hi = np.array([b[1] for b in settings.travel.bounds_steps()])
+    planned = refusals = 0
+    for ox in range(-18, 12, 3):
+        for oy in range(-13, 10, 2):
+            for oz in (-7, -1, 0, 3):
+                try:
+                    job = cam.plan(d, depth=[3, 5, 2], start_at=(ox, oy, oz), settings=settings)
+                except cam.TravelError as exc:
+                    steps = [int(v) for v in str(exc).split(" px = ")[1].split(" steps")[0].split(", ")]
+                    assert np.any((steps < lo) | (steps > hi)), str(exc)
+                    refusals += 1
+                else:
+                    assert np.all((job.points_steps >= lo) & (job.points_steps <= hi))
+                    planned += 1
+    assert planned > 20 and refusals > 100
