@@ -187,3 +187,25 @@ def test_the_extent_check_agrees_with_the_travel_check():
                     assert np.all((job.points_steps >= lo) & (job.points_steps <= hi))
                     planned += 1
     assert planned > 20 and refusals > 100
+
+
+# -- bridges inside the material: the compiled search finds the plain-Python search's path ------------------------
+
+def test_the_compiled_route_equals_the_reference():
+    from support.references import route_reference
+
+    rng = np.random.default_rng(3)
+    found = 0
+    for _ in range(400):
+        h, w = rng.integers(3, 40, 2)
+        asked = np.where(rng.random((h, w)) < rng.uniform(0.3, 0.9), rng.integers(1, 4, (h, w)), 0)
+        start = (int(rng.integers(0, w)), int(rng.integers(0, h)))
+        goal = (int(rng.integers(0, w)), int(rng.integers(0, h)))
+        z, max_len = int(rng.integers(1, 4)), int(rng.integers(0, 60))
+        got = planner._route(asked, start, goal, z, max_len)
+        assert got == route_reference(asked, start, goal, z, max_len), (asked.tolist(), start, goal, z, max_len)
+        found += got is not None
+    assert 50 < found < 350  # both outcomes seen
+    # a checkerboard is one connected material: the path runs along diagonals, the same in both
+    board = (checkerboard(61) == 0).astype(np.int64)
+    assert planner._route(board, (0, 0), (60, 58), 1, 200) == route_reference(board, (0, 0), (60, 58), 1, 200)

@@ -29,6 +29,7 @@ from ..digitize.digitized import Digitized
 from ..errors import PlanError, TravelError
 from ..digitize.profile import ProfileLike, as_profile
 from ..settings import DEFAULT_SETTINGS, MachineSettings
+from ._route import bfs_kernel
 from .model import CUT, RETRACT, TRAVEL, Job, PixelFrame, check_travel
 
 __all__ = ["plan", "check_drawing_size", "max_drawing_size_px"]
@@ -317,7 +318,8 @@ def _route(
     """Shortest 8-connected path from ``start`` to ``goal`` over pixels with ``asked >= z``.
 
     Returns the pixels after ``start`` up to and including ``goal``, or None
-    when there is no such path of at most ``max_len`` moves.
+    when there is no such path of at most ``max_len`` moves.  The search is breadth-first in a fixed
+    neighbour order (:func:`cam.job._route.bfs_kernel`), within ``max_len`` of the two points.
     """
     if max_len < 2:
         return None
@@ -328,37 +330,13 @@ def _route(
     y0, y1 = max(0, min(sy, gy) - max_len), min(h - 1, max(sy, gy) + max_len)
     ok = asked[y0 : y1 + 1, x0 : x1 + 1] >= z
     ww = x1 - x0 + 1
-    parent = {(sy - y0) * ww + (sx - x0): -1}
-    frontier = [(sy - y0) * ww + (sx - x0)]
+    parent = np.full(ok.size, -2, np.int32)
     goal_i = (gy - y0) * ww + (gx - x0)
-    hh = y1 - y0 + 1
-    for _ in range(max_len):
-        nxt = []
-        for i in frontier:
-            r, c = divmod(i, ww)
-            for dr in (-1, 0, 1):
-                rr = r + dr
-                if rr < 0 or rr >= hh:
-                    continue
-                for dc in (-1, 0, 1):
-                    cc = c + dc
-                    if (dr or dc) and 0 <= cc < ww and ok[rr, cc]:
-                        j = rr * ww + cc
-                        if j not in parent:
-                            parent[j] = i
-                            if j == goal_i:
-                                return [(x0 + k % ww, y0 + k // ww) for k in _unwind(parent, goal_i)]
-                            nxt.append(j)
-        if not nxt:
-            return None
-        frontier = nxt
-    return None
-
-
-def _unwind(parent: dict[int, int], goal: int) -> list[int]:
+    if not bfs_kernel(ok, (sy - y0) * ww + (sx - x0), goal_i, max_len, parent):
+        return None
     path = []
-    j = goal
+    j = goal_i
     while parent[j] != -1:
-        path.append(j)
+        path.append(int(j))
         j = parent[j]
-    return path[::-1]
+    return [(x0 + k % ww, y0 + k // ww) for k in reversed(path)]
