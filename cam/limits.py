@@ -17,7 +17,7 @@ Standard library only: the readers, the planners and the command line import it 
 from __future__ import annotations
 
 __all__ = [
-    "MAX_COORD_MM", "MIN_FEED_MM_MIN", "MAX_FEED_MM_MIN", "MAX_DWELL_S", "MAX_MOVE_S", "MAX_TOOL_NUMBER",
+    "MAX_COORD_MM", "MIN_FEED_MM_MIN", "MAX_FEED_MM_MIN", "MAX_DWELL_S", "MAX_MOVE_S", "MAX_PROGRAM_S", "MAX_TOOL_NUMBER",
     "MAX_SPINDLE_RPM", "MAX_LINE_NUMBER", "MAX_MOVE_PERIODS", "MAX_TOOL_DIAMETER_MM", "MAX_REPEAT", "MAX_HOLES",
     "MAX_IMAGE_SIDE_PX", "MAX_IMAGE_PIXELS",
 ]
@@ -38,6 +38,10 @@ MAX_DWELL_S = 3600.0
 MAX_MOVE_S = 86_400.0
 """One G-code move (a line or an arc) may take at most a day at its feed; a slower one is an error naming
 the line instead of a plan of absurd, overflowing times."""
+
+MAX_PROGRAM_S = 365 * 86_400.0
+"""A G-code program may take at most a year at its feeds and dwells (three million one-hour dwells would
+overflow the plan's clock of 292 years in nanoseconds); the line where it passes a year is named."""
 
 MAX_TOOL_NUMBER = 999_999
 """Tool numbers 0..999999: G-code ``T``, Excellon ``T``, HPGL pens ``SP``."""

@@ -283,3 +283,11 @@ def test_cli_refuses_a_huge_digitized_matrix_in_one_line(tmp_path):
     refused(cli("drill", path, "--no-progress"), "m.txt:2:", "out of range")
     path.write_text(matrix(3, 3, f"1,1,1,{DIGITS_400}"))  # an OverflowError traceback
     refused(cli("drill", path, "--no-progress"), "m.txt:4:", "level must be")
+
+
+def test_a_program_longer_than_a_year_is_refused_naming_the_line():
+    """Each dwell is at most an hour, so 8761 of them pass a year (3 million would overflow the plan's clock)."""
+    text = "G21\n" + "G4 P3600\n" * 8761
+    with pytest.raises(cam.PlanError, match=r"long\.ngc:8762: the program takes more than 365 days up to this line"):
+        plan_gcode(parse_gcode(text, source="long.ngc"))
+    assert len(plan_gcode(parse_gcode("G21\n" + "G4 P3600\n" * 8760)).points_steps) == 8760

@@ -25,7 +25,7 @@ import numpy as np
 
 from ..errors import PlanError, TravelError
 from ..formats.gcode import GcodeMove, GcodeProgram
-from ..limits import MAX_MOVE_PERIODS, MAX_MOVE_S
+from ..limits import MAX_MOVE_PERIODS, MAX_MOVE_S, MAX_PROGRAM_S
 from ..settings import DEFAULT_SETTINGS, MachineSettings
 from .model import CUT, TRAVEL, Job
 
@@ -281,26 +281,29 @@ def plan_gcode(program: GcodeProgram, settings: MachineSettings = DEFAULT_SETTIN
 
     Every move is checked before its points are made: an arc's bounding box against the travel (a huge
     arc is refused at once, naming its first point outside), the number of its step periods against
-    :data:`~cam.limits.MAX_MOVE_PERIODS`, and its duration at its feed against :data:`~cam.limits.MAX_MOVE_S`.
+    :data:`~cam.limits.MAX_MOVE_PERIODS`, its duration at its feed against :data:`~cam.limits.MAX_MOVE_S`,
+    and the program's time so far against :data:`~cam.limits.MAX_PROGRAM_S`.
 
     Raises:
         TravelError: a move leaves the machine travel (naming the line and the first point outside).
-        PlanError: a move too long or too slow (naming the line).
+        PlanError: a move too long or too slow, a program too long (naming the line).
     """
     frame = _Frame(settings, flip_y)
     moves = _Moves()
     cur_mm = np.zeros(3)  # G-code frame
     cur_steps = np.zeros(3)  # the exact path point, in steps
+    program_ns = 0  # the program's time so far at its feeds and dwells
     for mv in program.moves:
+        where = f"{program.source}:{mv.line}"
         if mv.kind == "pause":
             moves.pause_here(mv.note)
             continue
         if mv.kind == "dwell":
             if mv.seconds > 0:
                 moves.dwell(mv.seconds)
+                program_ns = _add_time(program_ns, int(round(mv.seconds * 1e9)), where)
             continue
         end = np.array(mv.end, np.float64)
-        where = f"{program.source}:{mv.line}"
         if mv.kind == "arc":
             arc = _Arc.of(cur_mm, mv)
             n = arc.n_points(frame.step_mm)
@@ -315,5 +318,14 @@ def plan_gcode(program: GcodeProgram, settings: MachineSettings = DEFAULT_SETTIN
         frame.check(way, way_steps, where)
         positions, per_ns = _periods(frame, mv, cur_mm, cur_steps, way, way_steps, where)
         moves.motion(positions, per_ns, TRAVEL if mv.kind == "rapid" else CUT)
+        program_ns = _add_time(program_ns, per_ns * len(positions), where)
         cur_mm, cur_steps = end, way_steps[-1]
     return moves.job(settings, program)
+
+
+def _add_time(program_ns: int, move_ns: int, where: str) -> int:
+    """The program's time after one more move or dwell; more than :data:`~cam.limits.MAX_PROGRAM_S` is refused."""
+    total_ns = program_ns + move_ns
+    if total_ns > MAX_PROGRAM_S * 1e9:
+        raise PlanError(f"{where}: the program takes more than {MAX_PROGRAM_S / 86400:g} days up to this line")
+    return total_ns
