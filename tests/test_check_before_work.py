@@ -209,3 +209,15 @@ def test_the_compiled_route_equals_the_reference():
     # a checkerboard is one connected material: the path runs along diagonals, the same in both
     board = (checkerboard(61) == 0).astype(np.int64)
     assert planner._route(board, (0, 0), (60, 58), 1, 200) == route_reference(board, (0, 0), (60, 58), 1, 200)
+
+
+def test_a_drill_depth_outside_the_z_travel_is_refused_before_the_tour(monkeypatch):
+    from cam.job import drill
+
+    holes = cam.parse_excellon("M48\nMETRIC\nT1C0.8\n%\nT1\nX1.0Y-1.0\nX5.0Y-2.0\nX3.0Y-4.0\nM30\n")
+    monkeypatch.setattr(drill, "drill_order", lambda *a, **k: pytest.fail("the holes were ordered"))
+    with pytest.raises(cam.TravelError, match=r"drill depth 40 mm and safe height 1 mm need Z -64\.\.2548 steps; "
+                                              r"the Z travel is -640\.\.2000 steps"):
+        cam.plan_drill(holes, depth_mm=40.0)
+    with pytest.raises(cam.TravelError, match=r"need Z -764\.\.127 steps"):
+        cam.plan_drill(holes, safe_height_mm=12.0)
