@@ -17,6 +17,10 @@ File format (UTF-8 text, written atomically)::
 ``object`` counts from 1 and never decreases; ``x`` is the column and ``y``
 the row of the pixel (origin top-left); ``level`` is constant within an
 object.  Lines starting with ``#`` after the header are comments.
+
+The image is at most :data:`~cam.limits.MAX_IMAGE_SIDE_PX` on a side and
+:data:`~cam.limits.MAX_IMAGE_PIXELS` in all (as a drawing), and a level at most
+its pixel count (every object, every layer has a pixel of its own).
 """
 from __future__ import annotations
 
@@ -29,6 +33,7 @@ import numpy as np
 
 from ..errors import ParseError
 from ..fileio import atomic_write_text, read_text
+from ..limits import MAX_IMAGE_PIXELS, MAX_IMAGE_SIDE_PX
 from ..render.picture import depth_colours, encode_png
 
 __all__ = ["Digitized", "save_digitized", "load_digitized", "format_digitized", "parse_digitized"]
@@ -135,6 +140,12 @@ def save_digitized(d: Digitized, path: str | os.PathLike) -> Path:
     return atomic_write_text(path, format_digitized(d))
 
 
+def _short(n: int) -> str:
+    """A whole number as a message shows it: at most 15 characters."""
+    text = str(n)
+    return text if len(text) <= 15 else text[:12] + "..."
+
+
 def parse_digitized(text: str, *, source: str = "<text>") -> Digitized:
     """Parse and validate digitized-matrix text; errors name ``source:line``."""
     lines = text.splitlines()
@@ -171,6 +182,10 @@ def parse_digitized(text: str, *, source: str = "<text>") -> Digitized:
         raise err(2, "width_px, height_px, objects and points must be whole numbers") from None
     if width_px < 1 or height_px < 1:
         raise err(2, "image size must be at least 1x1")
+    if max(width_px, height_px) > MAX_IMAGE_SIDE_PX or width_px * height_px > MAX_IMAGE_PIXELS:
+        raise err(2, f"image size {_short(width_px)}x{_short(height_px)} px is out of range: at most {MAX_IMAGE_SIDE_PX} px on a "
+                  f"side and {MAX_IMAGE_PIXELS} px in all")
+    max_level = width_px * height_px
     if lines[2].strip().replace(" ", "") != COLUMNS_LINE:
         raise err(3, f"expected the column line '{COLUMNS_LINE}'")
 
@@ -189,15 +204,15 @@ def parse_digitized(text: str, *, source: str = "<text>") -> Digitized:
             raise err(line_no, "expected 4 integers 'object,x,y,level'") from None
         if not (0 <= x < width_px and 0 <= y < height_px):
             raise err(line_no, f"point ({x}, {y}) lies outside the {width_px}x{height_px} image")
-        if level < 1:
-            raise err(line_no, f"level must be >= 1, got {level}")
+        if not 1 <= level <= max_level:
+            raise err(line_no, f"level must be 1..{max_level} (the image's pixel count), got {_short(level)}")
         if obj == prev_obj:
             if level != prev_level:
                 raise err(line_no, f"level changes within object {obj} ({prev_level} -> {level})")
         elif obj == prev_obj + 1:
             prev_obj, prev_level = obj, level
         else:
-            raise err(line_no, f"object numbers must count up from 1 without gaps, got {obj} after {prev_obj}")
+            raise err(line_no, f"object numbers must count up from 1 without gaps, got {_short(obj)} after {prev_obj}")
         values.append((obj, x, y, level))
     if prev_obj != n_objects:
         raise err(len(lines), f"header says {n_objects} objects, the file has {prev_obj}")

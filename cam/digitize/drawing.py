@@ -33,7 +33,9 @@ import cv2
 import numpy as np
 
 from ..errors import DrawingError
+from ..limits import MAX_IMAGE_PIXELS, MAX_IMAGE_SIDE_PX
 from ..render.picture import auto_scale, encode_png
+from .image_size import HEADER_FORMATS, image_size_px
 
 __all__ = [
     "WHITE",
@@ -42,6 +44,8 @@ __all__ = [
     "BLUE",
     "Drawing",
     "load_image",
+    "drawing_size_px",
+    "check_image_size",
     "classify",
     "neighbour_count",
     "CHROMA_MIN",
@@ -192,15 +196,65 @@ def check_rules(classes: np.ndarray) -> list[str]:
     return warnings
 
 
-def _read_rgb(path: Path) -> np.ndarray:
+_HEADER_BYTES = 1 << 20
+"""Bytes read for an image's size; a JPEG whose metadata runs longer is read whole."""
+
+
+def _check_file(path: Path) -> None:
     if not path.exists():
         raise DrawingError(f"{path}: file not found")
     if path.is_dir():
         raise DrawingError(f"{path}: is a folder, not an image")
+
+
+def _size_of(header: bytes, source: str) -> tuple[int, int]:
+    size = image_size_px(header)
+    if size is None:
+        raise DrawingError(f"{source}: not a readable image (its size cannot be read from its header: "
+                           f"{', '.join(HEADER_FORMATS)} images only)")
+    return size
+
+
+def check_image_size(width_px: int, height_px: int, source: str) -> None:
+    """Refuse an image larger than :data:`~cam.limits.MAX_IMAGE_SIDE_PX` on a side or
+    :data:`~cam.limits.MAX_IMAGE_PIXELS` in all (the memory of digitizing it), or empty.
+
+    Raises:
+        DrawingError: naming the image, its size and the limit.
+    """
+    if width_px < 1 or height_px < 1:
+        raise DrawingError(f"{source}: image is empty ({width_px}x{height_px} px)")
+    if max(width_px, height_px) > MAX_IMAGE_SIDE_PX or width_px * height_px > MAX_IMAGE_PIXELS:
+        raise DrawingError(f"{source}: the image is {width_px}x{height_px} px; a drawing may have at most "
+                           f"{MAX_IMAGE_SIDE_PX} px on a side and {MAX_IMAGE_PIXELS} px in all")
+
+
+def drawing_size_px(path: str | os.PathLike) -> tuple[int, int]:
+    """``(width, height)`` of an image file from its header, without decoding it (see :mod:`.image_size`).
+
+    Raises:
+        DrawingError: a missing file, or one whose header is not a PNG, JPEG, BMP or TIFF image's.
+    """
+    p = Path(path)
+    _check_file(p)
+    with open(p, "rb") as f:
+        header = f.read(_HEADER_BYTES)
+        if image_size_px(header) is None and len(header) == _HEADER_BYTES:
+            header += f.read()
+    return _size_of(header, str(p))
+
+
+def _read_rgb(path: Path) -> np.ndarray:
+    _check_file(path)
     data = np.fromfile(str(path), dtype=np.uint8)
+    header = data[:_HEADER_BYTES].tobytes()
+    if image_size_px(header) is None and data.size > _HEADER_BYTES:
+        header = data.tobytes()
+    check_image_size(*_size_of(header, str(path)), str(path))  # before decoding: a small file may hold a huge image
     img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None
     if img is None:
         raise DrawingError(f"{path}: not a readable image (PNG, BMP, JPEG, GIF-free formats OpenCV reads)")
+    check_image_size(img.shape[1], img.shape[0], str(path))
     return _to_rgb(img, bgr=True, source=str(path))
 
 
@@ -229,15 +283,18 @@ def load_image(path_or_array: str | os.PathLike | np.ndarray) -> Drawing:
     """Load and classify a drawing.
 
     Args:
-        path_or_array: an image file (anything OpenCV reads: PNG, BMP, JPEG,
-            TIFF, ...) or an array: ``(H, W)`` grey, ``(H, W, 3)`` RGB or
-            ``(H, W, 4)`` RGBA uint8; a bool array means True = black ink.
+        path_or_array: an image file (PNG, BMP, JPEG or TIFF; its size is read
+            from its header before it is decoded and may be at most
+            :data:`~cam.limits.MAX_IMAGE_SIDE_PX` on a side and
+            :data:`~cam.limits.MAX_IMAGE_PIXELS` in all) or an array: ``(H, W)`` grey,
+            ``(H, W, 3)`` RGB or ``(H, W, 4)`` RGBA uint8; a bool array means True = black ink.
 
     Returns:
         A :class:`Drawing` with rule warnings.
 
     Raises:
-        DrawingError: unreadable file, out-of-palette pixels, or a drawing with nothing drawn.
+        DrawingError: unreadable file, an image too large (naming its size and the limit, before it is
+            decoded), out-of-palette pixels, or a drawing with nothing drawn.
 
     >>> import numpy as np
     >>> img = np.full((5, 6), 255, np.uint8); img[2, 1:5] = 0

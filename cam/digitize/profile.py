@@ -103,8 +103,18 @@ def profile_from_drawing(drawing: Drawing) -> Profile:
     return _from_values(np.abs(rows - r0), src)
 
 
+def _quoted(text: str) -> str:
+    """A number as a message quotes it: at most 24 characters."""
+    return f"'{text}'" if len(text) <= 24 else f"'{text[:21]}...'"
+
+
 def profile_from_csv(path: str | os.PathLike) -> Profile:
-    """Depths from a CSV/text file: one depth per line, or ``layer,depth`` lines (a header line is allowed)."""
+    """Depths from a CSV/text file: one depth per line, or ``layer,depth`` lines (a header line is allowed).
+
+    Raises:
+        ParseError: naming ``file:line`` for a line that is not a depth, a layer out of order, a depth that is
+            not a number 0..1e6 Z pixels (inf, nan and hundreds of digits included), more than 1e6 layers.
+    """
     p = Path(path)
     try:
         lines = p.read_text(encoding="utf-8").splitlines()
@@ -122,14 +132,15 @@ def profile_from_csv(path: str | os.PathLike) -> Profile:
             if i == 1 and not depths:
                 continue  # header
             raise ParseError(f'{p}:{i}: expected a depth or layer,depth, got "{raw[:40]}"') from None
-        if len(values) == 1:
-            depths.append(values[0])
-        elif len(values) == 2:
-            if int(values[0]) != len(depths) + 1:
-                raise ParseError(f"{p}:{i}: expected layer {len(depths) + 1}, got {values[0]:g}")
-            depths.append(values[1])
-        else:
+        if len(values) not in (1, 2):
             raise ParseError(f'{p}:{i}: expected a depth or layer,depth, got "{raw[:40]}"')
+        if len(values) == 2 and values[0] != len(depths) + 1:
+            raise ParseError(f"{p}:{i}: expected layer {len(depths) + 1}, got {_quoted(parts[0])}")
+        if not 0 <= values[-1] <= _MAX_DEPTH_PX:  # NaN too
+            raise ParseError(f"{p}:{i}: depth {_quoted(parts[-1])} is out of range: 0..{_MAX_DEPTH_PX} Z pixels")
+        if len(depths) == MAX_LAYERS:
+            raise ParseError(f"{p}:{i}: more than {MAX_LAYERS} layers")
+        depths.append(values[-1])
     if not depths:
         raise ParseError(f"{p}: no depths in the profile file")
     return _from_values(depths, str(p))

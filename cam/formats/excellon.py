@@ -54,6 +54,12 @@ given by an argument), the hole list carries a warning that says so.
 
 Frame: the board frame of the file, X right, Y up, in mm (inch values times 25.4).
 
+Numbers are checked before use (:mod:`cam.limits`): coordinates and the positions they lead to
+(incremental sums, ``G93`` zeros) at most :data:`~cam.limits.MAX_COORD_MM` either way, tool diameters
+more than 0 and at most :data:`~cam.limits.MAX_TOOL_DIAMETER_MM`, tool numbers at most
+:data:`~cam.limits.MAX_TOOL_NUMBER`, ``R`` repeats at most :data:`~cam.limits.MAX_REPEAT`, at most
+:data:`~cam.limits.MAX_HOLES` holes; whole numbers (``G``, ``M``, ``T``, ``R``) have at most nine digits.
+
 Errors raise :class:`~cam.errors.ParseError` with ``file:line: what: 'line
 text'`` (``file:line:column`` for a bad number); recoverable oddities become
 warnings with the same context.
@@ -64,7 +70,6 @@ warnings with the same context.
 """
 from __future__ import annotations
 
-import math
 import os
 import re
 from dataclasses import dataclass, field
@@ -73,6 +78,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import CamError, ParseError
+from ..limits import MAX_COORD_MM, MAX_HOLES, MAX_REPEAT, MAX_TOOL_DIAMETER_MM, MAX_TOOL_NUMBER
 
 __all__ = [
     "HoleList",
@@ -152,6 +158,11 @@ class HoleList:
         return [(t, float(d), int(count.get(t, 0))) for t, d in sorted(self.tools.items())]
 
 
+def _shown(text: str, most: int = 24) -> str:
+    """Text as a message quotes it: at most ``most`` characters."""
+    return text if len(text) <= most else text[:most - 3] + "..."
+
+
 class _Reader:
     """State of one pass over a drill file (internal): what the file said so far, and the holes read.
 
@@ -189,7 +200,7 @@ class _Reader:
         return f"{self.source}:{self.lineno}" + (f":{col}" if col is not None else "")
 
     def error(self, message: str, col: int | None = None) -> ParseError:
-        return ParseError(f"{self.where(col)}: {message}: '{self.text}'")
+        return ParseError(f"{self.where(col)}: {message}: '{_shown(self.text, 80)}'")
 
     def warn(self, message: str) -> None:
         self.warnings.append(f"{self.where()}: {message}: '{self.text}'")
@@ -241,9 +252,17 @@ class _Reader:
                   "(set --excellon-units / --excellon-format / --excellon-zeros if the holes look wrong)")
 
     def value_mm(self, text: str, letter: str, col: int) -> float:
-        """Read one number word (without its letter) as mm, with the current units and format."""
+        """Read one number word (without its letter) as mm, with the current units and format; at most
+        :data:`~cam.limits.MAX_COORD_MM` either way."""
+        value_mm = self._value_mm(text, letter, col)
+        if not abs(value_mm) <= MAX_COORD_MM:
+            raise self.error(f"{letter}{_shown(text)} is out of range (at most {MAX_COORD_MM:g} mm either way)", col)
+        return value_mm
+
+    def _value_mm(self, text: str, letter: str, col: int) -> float:
         if not _NUMBER.fullmatch(text):
-            raise self.error(f"{letter} needs a number, got '{text}'" if text else f"{letter} without a number", col)
+            raise self.error(f"{letter} needs a number, got '{_shown(text)}'" if text else f"{letter} without a number",
+                             col)
         units, units_assumed = self.current_units()
         scale = _UNIT_MM[units]
         if "." in text:
@@ -258,7 +277,7 @@ class _Reader:
         n_int, n_frac = digits
         if len(body) > n_int + n_frac:
             raise self.error(
-                f"{letter}{text} has {len(body)} digits, more than the {n_int}:{n_frac} format allows "
+                f"{letter}{_shown(text)} has {len(body)} digits, more than the {n_int}:{n_frac} format allows "
                 f"({units}, {zeros})", col)
         if len(body) == n_int + n_frac and "zeros" in assumed:
             assumed.remove("zeros")  # a full-width number reads the same with LZ and TZ
@@ -278,11 +297,15 @@ class _Reader:
         return digits
 
     # -- words and positions ----------------------------------------------------------------
-    def integer(self, word) -> int:
+    def integer(self, word, most: int = 999_999_999) -> int:
+        """A whole-number word 0..``most`` (at most nine digits, leading zeros aside)."""
         letter, text, col = word
         if not re.fullmatch(r"[+]?[0-9]+", text):
-            raise self.error(f"{letter} needs a whole number, got '{text}'", col)
-        return int(text)
+            raise self.error(f"{letter} needs a whole number, got '{_shown(text)}'", col)
+        digits = text.lstrip("+").lstrip("0")
+        if len(digits) > 9 or int(digits or "0") > most:
+            raise self.error(f"{letter}{_shown(text)} is out of range (a whole number 0..{most})", col)
+        return int(digits or "0")
 
     def xy(self, words) -> tuple[float | None, float | None]:
         x = y = None
@@ -305,11 +328,20 @@ class _Reader:
                 self.pos_mm[0] = self.zero_mm[0] + x
             if y is not None:
                 self.pos_mm[1] = self.zero_mm[1] + y
+        self.check_position()
         return self.pos_mm[0], self.pos_mm[1]
+
+    def check_position(self) -> None:
+        """Refuse a position (incremental sums, ``G93`` zeros) beyond :data:`~cam.limits.MAX_COORD_MM`."""
+        for axis, v in zip("XY", self.pos_mm):
+            if not abs(v) <= MAX_COORD_MM:
+                raise self.error(f"the position {axis}{v:.6g} mm lies beyond {MAX_COORD_MM:g} mm from the origin")
 
     def hole(self) -> None:
         if self.tool is None:
             raise self.error("a hole before any tool is selected")
+        if len(self.holes) >= MAX_HOLES:
+            raise self.error(f"more than {MAX_HOLES} holes")
         self.holes.append((self.pos_mm[0], self.pos_mm[1]))
         self.hole_tool.append(self.tool)
         self.hole_line.append(self.lineno)
@@ -472,7 +504,7 @@ def _coordinates(r: _Reader, words) -> None:
 
 def _tool_word(r: _Reader, words) -> None:
     r.seen_excellon = True
-    number = r.integer(words[0])
+    number = r.integer(words[0], MAX_TOOL_NUMBER)
     params = {}
     for letter, text, col in words[1:]:
         if letter not in _TOOL_PARAMS or letter in params:
@@ -500,8 +532,9 @@ def _define_tool(r: _Reader, number: int, text: str, col: int) -> None:
     if not _NUMBER.fullmatch(text):
         raise r.error(f"tool T{number} has a bad diameter '{text}'", col)
     dia_mm = r.value_mm(text, "C", col)
-    if not math.isfinite(dia_mm) or dia_mm <= 0:
-        raise r.error(f"tool T{number} has a bad diameter {text} (must be > 0)", col)
+    if not 0 < dia_mm <= MAX_TOOL_DIAMETER_MM:
+        raise r.error(f"tool T{number} has a bad diameter {_shown(text)} (must be > 0 and at most "
+                      f"{MAX_TOOL_DIAMETER_MM:g} mm)", col)
     if number == 0:
         raise r.error("tool T0 cannot be defined (T0 unloads the tool)")
     if number in r.tools and abs(r.tools[number] - dia_mm) > 1e-9:
@@ -592,13 +625,14 @@ def _m_word(r: _Reader, words) -> None:
 
 
 def _repeat(r: _Reader, words) -> None:
-    count = r.integer(words[0])
+    count = r.integer(words[0], MAX_REPEAT)
     if r.state == "route":
         raise r.error("a repeated hole (R) while routing")
     x, y = r.xy(words[1:])
     for _ in range(count):
         r.pos_mm[0] += x or 0.0
         r.pos_mm[1] += y or 0.0
+        r.check_position()
         r.hole()
     r.seen_excellon = True
 

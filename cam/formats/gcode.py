@@ -13,6 +13,13 @@ Supported (what grbl- and LinuxCNC-oriented CAM programs emit):
 
 Anything else is a :class:`~cam.errors.ParseError` naming the line and the word.
 
+Every number is checked before it is used (the ranges are :mod:`cam.limits`): coordinates X Y Z I J R
+and every position they lead to (G91 sums, G92 offsets) at most :data:`~cam.limits.MAX_COORD_MM`
+either way, F :data:`~cam.limits.MIN_FEED_MM_MIN`..:data:`~cam.limits.MAX_FEED_MM_MIN` mm/min,
+G4 P 0..:data:`~cam.limits.MAX_DWELL_S` s, T a whole number 0..:data:`~cam.limits.MAX_TOOL_NUMBER`,
+S 0..:data:`~cam.limits.MAX_SPINDLE_RPM`, N 0..:data:`~cam.limits.MAX_LINE_NUMBER`; a word out of
+range is a ParseError naming the line and the word.
+
 Planning the motion (frames, arcs, feeds, the half-step accuracy) is :mod:`cam.job.gcode`.
 """
 from __future__ import annotations
@@ -25,6 +32,9 @@ from dataclasses import dataclass, field
 from ..choices import GCODE_SUFFIXES
 from ..errors import ParseError
 from ..fileio import read_text
+from ..limits import (
+    MAX_COORD_MM, MAX_DWELL_S, MAX_FEED_MM_MIN, MAX_LINE_NUMBER, MAX_SPINDLE_RPM, MAX_TOOL_NUMBER, MIN_FEED_MM_MIN,
+)
 
 __all__ = ["GcodeMove", "GcodeProgram", "parse_gcode", "load_gcode", "GCODE_SUFFIXES"]
 
@@ -96,31 +106,66 @@ class _Modal:
     tool: int = 0
 
 
-def _line_words(body: str, err) -> tuple[list[float], list[float], dict[str, float]]:
-    """The G codes, the M codes and the other words (letter -> value) of one line without comments."""
+def _shown(word: str) -> str:
+    """A word as a message quotes it: at most 24 characters."""
+    return word if len(word) <= 24 else word[:20] + "..."
+
+
+def _line_words(body: str, err) -> tuple[list[float], list[float], dict[str, float], dict[str, str]]:
+    """The G codes, the M codes and the other words (letter -> value, and letter -> the word as written)
+    of one line without comments."""
     leftover = _WORD.sub("", body).strip()
     if leftover:
         bad = leftover.split()[0]
         if bad[:1].isalpha():
-            raise err(f"word '{bad}' has no number")
-        raise err(f"cannot read '{bad}'")
+            raise err(f"word '{_shown(bad)}' has no number")
+        raise err(f"cannot read '{_shown(bad)}'")
     gs: list[float] = []
     ms: list[float] = []
     vals: dict[str, float] = {}
+    texts: dict[str, str] = {}
     for m in _WORD.finditer(body):
         k = m.group(1).upper()
         v = float(m.group(2))
+        word = _shown(k + m.group(2))
+        if k in "GM" and not math.isfinite(v):
+            raise err(f"unsupported word '{word}'")
         if k == "G":
             gs.append(v)
         elif k == "M":
             ms.append(v)
         elif k not in "XYZIJRFSTPN":
-            raise err(f"unsupported word '{m.group(0).replace(' ', '')}'")
+            raise err(f"unsupported word '{_shown(m.group(0).replace(' ', ''))}'")
         elif k in vals:
             raise err(f"word '{k}' appears twice")
         else:
             vals[k] = v
-    return gs, ms, vals
+            texts[k] = word
+    return gs, ms, vals, texts
+
+
+def _check_words(vals: dict[str, float], texts: dict[str, str], scale: float, err) -> None:
+    """Every word of one line finite and in its range (:mod:`cam.limits`); ``scale`` is 25.4 in G20."""
+    for k, v in vals.items():
+        word = texts[k]
+        if k in "XYZIJR":
+            if not abs(v * scale) <= MAX_COORD_MM:
+                raise err(f"word '{word}' is out of range: coordinates are at most {MAX_COORD_MM:g} mm either way")
+        elif k == "F":
+            if not MIN_FEED_MM_MIN <= v * scale <= MAX_FEED_MM_MIN:
+                raise err(f"feed '{word}' is out of range: {MIN_FEED_MM_MIN:g}..{MAX_FEED_MM_MIN:g} mm/min")
+        elif k == "P":
+            if not 0 <= v <= MAX_DWELL_S:
+                raise err(f"dwell '{word}' is out of range: 0..{MAX_DWELL_S:g} s")
+        elif k == "T":
+            if not (0 <= v <= MAX_TOOL_NUMBER and v == int(v)):
+                raise err(f"tool '{word}' is out of range: a whole number 0..{MAX_TOOL_NUMBER}")
+        elif k == "S":
+            if not 0 <= v <= MAX_SPINDLE_RPM:
+                raise err(f"spindle speed '{word}' is out of range: 0..{MAX_SPINDLE_RPM:g} rpm")
+        elif k == "N":
+            if not 0 <= v <= MAX_LINE_NUMBER:
+                raise err(f"line number '{word}' is out of range: 0..{MAX_LINE_NUMBER}")
 
 
 def _g_codes(gs: list[float], st: _Modal, err) -> tuple[bool, bool]:
@@ -214,6 +259,13 @@ def _arc_center(vals: dict[str, float], st: _Modal, target: list[float], err) ->
     return cx, cy
 
 
+def _check_position(target: list[float], machine_end: tuple[float, ...], err) -> None:
+    """Refuse a move to a position beyond :data:`~cam.limits.MAX_COORD_MM` (G91 sums, G92 offsets)."""
+    for a, p, q in zip("XYZ", target, machine_end):
+        if not (abs(p) <= MAX_COORD_MM and abs(q) <= MAX_COORD_MM):
+            raise err(f"the move reaches {a}{q:.6g} mm, beyond {MAX_COORD_MM:g} mm from the origin")
+
+
 def _motion(vals: dict[str, float], axes: list[str], st: _Modal, line_no: int, err) -> GcodeMove | None:
     """The move of one line in the modal motion mode (None if the line names no axis or arc word)."""
     has_arc_words = any(k in vals for k in "IJR")
@@ -226,6 +278,7 @@ def _motion(vals: dict[str, float], axes: list[str], st: _Modal, line_no: int, e
         if a in vals:
             target[i] = vals[a] * st.scale if st.absolute else st.pos[i] + vals[a] * st.scale
     machine_end = tuple(t + o for t, o in zip(target, st.offset))
+    _check_position(target, machine_end, err)
     if st.motion in (0, 1):
         if has_arc_words:
             raise err("I, J or R given without G2/G3")
@@ -258,11 +311,10 @@ def parse_gcode(text: str, *, source: str = "<gcode>") -> GcodeProgram:
         body = _strip_comments(raw, err).strip()
         if not body or body == "%" or body.startswith("/"):
             continue
-        gs, ms, vals = _line_words(body, err)
+        gs, ms, vals, texts = _line_words(body, err)
         dwell, set_pos = _g_codes(gs, st, err)
+        _check_words(vals, texts, st.scale, err)
         if "F" in vals:
-            if vals["F"] <= 0:
-                raise err("feed 'F' must be > 0")
             st.feed = vals["F"] * st.scale
         if "T" in vals:
             st.tool = int(vals["T"])

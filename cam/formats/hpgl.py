@@ -21,7 +21,9 @@ Beyond the seed, so that files from Inkscape, vpype and CAD programs work:
 Malformed input is a :class:`~cam.errors.ParseError` ``file:line:column:``:
 a malformed number (``1.2.3``, ``12x``, ``--4``), an empty parameter
 (``PA,5``), an odd number of coordinates, an unterminated command at the end
-of the file (``PA100,`` or a dangling mnemonic).
+of the file (``PA100,`` or a dangling mnemonic), a coordinate or a pen position beyond
+:data:`MAX_COORD_PU` either way (a number of hundreds of digits included), a pen beyond
+:data:`cam.limits.MAX_TOOL_NUMBER`.
 
 Streaming: the file is read in chunks (:data:`CHUNK_BYTES`) by a compiled
 tokenizer and a compiled interpreter, so :func:`scan_hpgl` keeps memory flat
@@ -54,9 +56,10 @@ from numba import njit
 
 from ..choices import HPGL_SUFFIXES
 from ..errors import ParseError
+from ..limits import MAX_COORD_MM, MAX_TOOL_NUMBER
 
 __all__ = [
-    "HPGL_SUFFIXES", "PLOTTER_UNIT_MM", "CHUNK_BYTES",
+    "HPGL_SUFFIXES", "PLOTTER_UNIT_MM", "CHUNK_BYTES", "MAX_COORD_PU",
     "HpglCommand", "HpglScan", "HpglDrawing",
     "iter_hpgl", "scan_hpgl", "load_hpgl", "parse_hpgl",
 ]
@@ -65,6 +68,9 @@ PLOTTER_UNIT_MM = 0.025
 """One plotter unit: 0.025 mm, 40 units per mm (004 section 3.6.2)."""
 CHUNK_BYTES = 1 << 19
 """Bytes read per chunk while streaming a file."""
+MAX_COORD_PU = MAX_COORD_MM / PLOTTER_UNIT_MM
+"""Every coordinate, and every pen position relative moves lead to, at most 4e7 plotter units (1e6 mm,
+:data:`cam.limits.MAX_COORD_MM`) either way; pens ``SP`` 0..:data:`cam.limits.MAX_TOOL_NUMBER`."""
 
 Progress = Callable[[int, Optional[int]], None]
 Source = Union[str, os.PathLike, BinaryIO, TextIO]
@@ -86,7 +92,7 @@ KNOWN = ("IN", "DF", "SP", "PU", "PD", "PA", "PR")
 M_IDLE, M_MN1, M_PARAMS, M_SKIP, M_QUOTE, M_LABEL, M_DT, M_PE = range(8)
 # error codes
 (E_NONE, E_CHAR, E_MNEMONIC, E_NUMBER, E_EMPTY, E_TRAIL, E_EOF_COMMA, E_EOF_MNEMONIC, E_EOF_LABEL,
- E_EOF_STRING, E_ODD, E_SP) = range(12)
+ E_EOF_STRING, E_ODD, E_SP, E_RANGE) = range(13)
 # tokenizer state slots (int64): kept from one chunk to the next ...
 (S_LINE, S_LSTART, S_BASE, S_TERM, S_RESUME, S_COFF, S_CLINE, S_CCOL, S_CONSUMED, S_NCMD, S_NPAR,
  S_ERR, S_ERRPOS, S_ERRLINE, S_ERRCOL, S_ERRAUX) = range(16)
@@ -545,7 +551,7 @@ def _interpret(n_cmd, c_code, c_line, c_col, c_p0, c_np, p_val, p_line, p_col, i
             rel = False
         elif code == C_SP:
             v = p_val[p0] if m else 0.0
-            if m > 1 or v < 0 or v != np.floor(v) or v > 1e9:
+            if m > 1 or v < 0 or v != np.floor(v) or v > MAX_TOOL_NUMBER:
                 err[0] = E_SP
                 err[1] = c_line[ci]
                 err[2] = c_col[ci]
@@ -579,6 +585,14 @@ def _interpret(n_cmd, c_code, c_line, c_col, c_p0, c_np, p_val, p_line, p_col, i
                     cy = p_val[q + 1]
                 cl = p_line[q]
                 cc = p_col[q]
+                if not (abs(cx) <= MAX_COORD_PU and abs(cy) <= MAX_COORD_PU):  # NaN too
+                    bad = q if not abs(cx) <= MAX_COORD_PU else q + 1
+                    err[0] = E_RANGE
+                    err[1] = p_line[bad]
+                    err[2] = p_col[bad]
+                    err[3] = bad
+                    err[4] = 1 if rel else 0
+                    return k
                 if pen_down:
                     k = _point(o_x, o_y, o_line, o_col, o_start, o_pen, k, cx, cy, cl, cc, False, pen)
     ist[0] = 1.0 if pen_down else 0.0
@@ -792,7 +806,7 @@ def _points(src: Source, *, source: Optional[str], progress: Optional[Progress],
             counts: dict[int, int], chunk_bytes: int = CHUNK_BYTES) -> Iterator[_PointBlock]:
     """Pen-down points per chunk (views into reused arrays)."""
     ist = np.zeros(7, np.float64)
-    err = np.zeros(4, np.int64)
+    err = np.zeros(5, np.int64)
     cap = 0
     name = source
     last_off = -1
@@ -807,7 +821,14 @@ def _points(src: Source, *, source: Optional[str], progress: Optional[Progress],
         if err[0]:
             where = f"{name}:{int(err[1])}:{int(err[2])}"
             if err[0] == E_SP:
-                raise ParseError(f"{where}: 'SP' takes one pen number (a whole number >= 0)")
+                raise ParseError(f"{where}: 'SP' takes one pen number (a whole number 0..{MAX_TOOL_NUMBER})")
+            if err[0] == E_RANGE:
+                value = float(b.val[int(err[3])])
+                number = f"{value:g}" if math.isfinite(value) else "of more than 300 digits"
+                what = f"the pen position after the relative move {number} lies" if err[4] else \
+                    f"the coordinate {number} is"
+                raise ParseError(f"{where}: {what} out of range (at most {MAX_COORD_PU:.0f} plotter units = "
+                                 f"{MAX_COORD_MM:g} mm either way)")
             raise ParseError(f"{where}: odd number of coordinates ({int(err[3])}): an x without its y")
         unknown.add(b)
         offs = b.off[:b.n_cmd]

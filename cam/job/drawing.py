@@ -26,12 +26,37 @@ from typing import Sequence
 import numpy as np
 
 from ..digitize.digitized import Digitized
-from ..errors import PlanError
+from ..errors import PlanError, TravelError
 from ..digitize.profile import ProfileLike, as_profile
 from ..settings import DEFAULT_SETTINGS, MachineSettings
+from ._route import bfs_kernel
 from .model import CUT, RETRACT, TRAVEL, Job, PixelFrame, check_travel
 
-__all__ = ["plan"]
+__all__ = ["plan", "check_drawing_size", "max_drawing_size_px"]
+
+
+def max_drawing_size_px(settings: MachineSettings) -> tuple[int, int]:
+    """``(width, height)`` of the largest drawing whose pixels fit the machine's X and Y travel at
+    ``settings.steps_per_px_xy`` (pixel k lies k x steps per pixel from pixel 0): 1251 x 1251 for the thesis
+    machine (10000 steps of travel, 8 steps per pixel)."""
+    (x_lo, x_hi), (y_lo, y_hi), _ = settings.travel.bounds_steps()
+    spp = settings.steps_per_px_xy
+    return (x_hi - x_lo) // spp + 1, (y_hi - y_lo) // spp + 1
+
+
+def check_drawing_size(width_px: int, height_px: int, settings: MachineSettings, source: str = "<drawing>") -> None:
+    """Refuse a drawing larger than the machine's travel holds (:func:`max_drawing_size_px`), wherever it is
+    placed; :func:`cam.job.jobs.prepare_job` checks it from the file's header, before decoding and tracing.
+
+    Raises:
+        TravelError: naming the drawing, its size, the steps per pixel, the travel and the largest size.
+    """
+    max_w, max_h = max_drawing_size_px(settings)
+    if width_px > max_w or height_px > max_h:
+        (x_lo, x_hi), (y_lo, y_hi), _ = settings.travel.bounds_steps()
+        raise TravelError(f"{source}: the drawing is {width_px}x{height_px} px; at {settings.steps_per_px_xy} steps "
+                          f"per pixel the machine travel (X {x_lo}..{x_hi}, Y {y_lo}..{y_hi} steps) holds at most "
+                          f"{max_w}x{max_h} px")
 
 
 def _depths_per_object(depth: int | Sequence[int], n_objects: int) -> tuple[np.ndarray, list[str]]:
@@ -145,30 +170,49 @@ def plan(
     pause_px = np.zeros(asked.shape, bool)
     for x, y in pause_set & drawn:
         pause_px[y, x] = True
-    points_px, kinds, tgt, pause = _assemble(targets, pause_px, asked, settings, surface, safe, oz, home=(-ox, -oy))
+    # the job's extent is known before it is assembled (targets, the home, the safe plane): one that leaves the
+    # travel is assembled without bridges, only to name its first point outside, and refused
+    fits = _fits_travel(targets, (ox, oy), safe, settings)
+    points_px, kinds, tgt, pause = _assemble(targets, pause_px, asked, settings, surface, safe, oz, home=(-ox, -oy),
+                                             route=fits)
     points_px[:, :2] += np.array([ox, oy], np.int64)
     frame = PixelFrame(digitized.width_px, digitized.height_px, (ox, oy, oz), settings.steps_per_px_xy,
                        settings.steps_per_px_z)
     points_steps = frame.to_steps(points_px)
     check_travel(points_steps, settings, frame)
+    assert fits, "a job whose extent leaves the travel passed the travel check"
     return Job(points_steps=points_steps, kind=kinds, target=tgt, pause=pause, settings=settings,
                warnings=warnings, safe_z_steps=safe * settings.steps_per_px_z, pixels=frame)
 
 
+def _fits_travel(targets: np.ndarray, offset_px: tuple[int, int], safe: int, settings: MachineSettings) -> bool:
+    """Whether every point of the job lies in the travel, from its extent alone: the targets ``(M, 3)`` (drawing
+    frame, Start At Z included) moved by ``offset_px``, the home (0, 0, 0) and the safe plane ``safe`` (Z pixels).
+
+    Bridges run through targets' pixels, lifts and travels at the surface or the safe plane, so no point of
+    the job lies outside this box, and its corners' coordinates are all taken by points of the job.
+    """
+    lo_px = np.minimum(targets.min(axis=0) + np.array([*offset_px, 0]), [0, 0, safe])
+    hi_px = np.maximum(targets.max(axis=0) + np.array([*offset_px, 0]), 0)
+    scale = np.array([settings.steps_per_px_xy, settings.steps_per_px_xy, settings.steps_per_px_z], np.int64)
+    bounds = np.array(settings.travel.bounds_steps(), np.int64)
+    return bool(np.all(lo_px * scale >= bounds[:, 0]) and np.all(hi_px * scale <= bounds[:, 1]))
+
+
 def _gap_block(
     cur: tuple[int, int, int], nxt: tuple[int, int, int], on_drawing: bool, asked: np.ndarray,
-    settings: MachineSettings, surface: int, safe: int, oz: int,
+    settings: MachineSettings, surface: int, safe: int, oz: int, route: bool = True,
 ) -> list[tuple[int, int, int, int]]:
     """Points (x, y, z, kind) from ``cur`` to just before target ``nxt`` across a gap (non-adjacent pixels).
 
     Inside the material, a route through pixels asked at least this deep is taken when it is quicker
-    than lifting, travelling and plunging; otherwise the tool lifts to the surface (the safe plane
-    before the first target), travels, and the caller plunges.
+    than lifting, travelling and plunging (and ``route`` allows it); otherwise the tool lifts to the surface
+    (the safe plane before the first target), travels, and the caller plunges.
     """
     cx, cy, cz = cur
     x, y, d = nxt
     out: list[tuple[int, int, int, int]] = []
-    if on_drawing:
+    if on_drawing and route:
         cheb = max(abs(x - cx), abs(y - cy))
         xy_period = settings.steps_per_px_xy * settings.delay_xy_ns
         z_period = settings.steps_per_px_z * settings.delay_z_ns
@@ -192,12 +236,13 @@ def _gap_block(
 
 def _assemble(
     targets: np.ndarray, pause_px: np.ndarray, asked: np.ndarray, settings: MachineSettings,
-    surface: int, safe: int, oz: int, home: tuple[int, int] = (0, 0),
+    surface: int, safe: int, oz: int, home: tuple[int, int] = (0, 0), route: bool = True,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The planner's rules, vectorised: adjacent moves in bulk, only gaps in Python (tests compare it with a plain loop).
 
     ``targets``, ``pause_px`` and ``asked`` share one pixel frame; ``home`` is where the job starts and ends
-    in that frame.  Returns ``(points (N, 3), kind (N,), target (N,), pause (N,))``.
+    in that frame; ``route``: bridge gaps inside the material (False: every gap lifts).
+    Returns ``(points (N, 3), kind (N,), target (N,), pause (N,))``.
     """
     hx, hy = home
     m = len(targets)
@@ -217,7 +262,7 @@ def _assemble(
     for i in gaps.tolist():
         prev = (int(x[i - 1]), int(y[i - 1]), int(d[i - 1])) if i else (hx, hy, 0)
         here = (int(x[i]), int(y[i]), int(d[i]))
-        blk = _gap_block(prev, here, i > 0, asked, settings, surface, safe, oz)
+        blk = _gap_block(prev, here, i > 0, asked, settings, surface, safe, oz, route)
         if blk and blk[-1][:3] == here:
             blk.pop()  # a route that ends at the target's depth: the target is that point
         blocks[i] = blk
@@ -273,7 +318,8 @@ def _route(
     """Shortest 8-connected path from ``start`` to ``goal`` over pixels with ``asked >= z``.
 
     Returns the pixels after ``start`` up to and including ``goal``, or None
-    when there is no such path of at most ``max_len`` moves.
+    when there is no such path of at most ``max_len`` moves.  The search is breadth-first in a fixed
+    neighbour order (:func:`cam.job._route.bfs_kernel`), within ``max_len`` of the two points.
     """
     if max_len < 2:
         return None
@@ -284,37 +330,13 @@ def _route(
     y0, y1 = max(0, min(sy, gy) - max_len), min(h - 1, max(sy, gy) + max_len)
     ok = asked[y0 : y1 + 1, x0 : x1 + 1] >= z
     ww = x1 - x0 + 1
-    parent = {(sy - y0) * ww + (sx - x0): -1}
-    frontier = [(sy - y0) * ww + (sx - x0)]
+    parent = np.full(ok.size, -2, np.int32)
     goal_i = (gy - y0) * ww + (gx - x0)
-    hh = y1 - y0 + 1
-    for _ in range(max_len):
-        nxt = []
-        for i in frontier:
-            r, c = divmod(i, ww)
-            for dr in (-1, 0, 1):
-                rr = r + dr
-                if rr < 0 or rr >= hh:
-                    continue
-                for dc in (-1, 0, 1):
-                    cc = c + dc
-                    if (dr or dc) and 0 <= cc < ww and ok[rr, cc]:
-                        j = rr * ww + cc
-                        if j not in parent:
-                            parent[j] = i
-                            if j == goal_i:
-                                return [(x0 + k % ww, y0 + k // ww) for k in _unwind(parent, goal_i)]
-                            nxt.append(j)
-        if not nxt:
-            return None
-        frontier = nxt
-    return None
-
-
-def _unwind(parent: dict[int, int], goal: int) -> list[int]:
+    if not bfs_kernel(ok, (sy - y0) * ww + (sx - x0), goal_i, max_len, parent):
+        return None
     path = []
-    j = goal
+    j = goal_i
     while parent[j] != -1:
-        path.append(j)
+        path.append(int(j))
         j = parent[j]
-    return path[::-1]
+    return [(x0 + k % ww, y0 + k // ww) for k in reversed(path)]

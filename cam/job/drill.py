@@ -108,6 +108,10 @@ def plan_drill(
         raise PlanError(f"drill depth {depth_mm:g} mm is less than one Z step (mm_per_step_z = "
                         f"{settings.mm_per_step_z:g} mm): nothing would be drilled")
     safe_steps = -int(round(safe_height_mm / settings.mm_per_step_z))
+    _, _, (z_lo, z_hi) = settings.travel.bounds_steps()
+    if depth_steps > z_hi or safe_steps < z_lo:  # before the tour: a million holes take a while to order
+        raise TravelError(f"drill depth {depth_mm:g} mm and safe height {safe_height_mm:g} mm need Z "
+                          f"{safe_steps}..{depth_steps} steps; the Z travel is {z_lo}..{z_hi} steps")
     path = _DrillPath(safe_steps)
     tools = sorted(set(int(t) for t in holes.tool_of_hole), key=lambda t: (holes.tools[t], t))
     cur = np.array([0.0, 0.0])

@@ -19,39 +19,95 @@ these periods again), with the move's feed as its nominal period.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import TravelError
+from ..errors import PlanError, TravelError
 from ..formats.gcode import GcodeMove, GcodeProgram
+from ..limits import MAX_MOVE_PERIODS, MAX_MOVE_S, MAX_PROGRAM_S
 from ..settings import DEFAULT_SETTINGS, MachineSettings
 from .model import CUT, TRAVEL, Job
 
 __all__ = ["plan_gcode"]
 
 
-def _arc_points(p0: np.ndarray, mv: GcodeMove, step_mm: np.ndarray) -> np.ndarray:
-    """Points along an arc (mm), close enough that no axis moves more than 0.9 step between them."""
-    cx, cy = mv.center
-    x1, y1, z1 = mv.end
-    a0 = math.atan2(p0[1] - cy, p0[0] - cx)
-    a1 = math.atan2(y1 - cy, x1 - cx)
-    r = math.hypot(p0[0] - cx, p0[1] - cy)
-    if mv.clockwise:
-        sweep = -((a0 - a1) % (2 * math.pi))
-        if abs(sweep) < 1e-12:
-            sweep = -2 * math.pi
-    else:
-        sweep = (a1 - a0) % (2 * math.pi)
-        if abs(sweep) < 1e-12:
-            sweep = 2 * math.pi
-    arc_len_steps = abs(sweep) * r / min(step_mm[0], step_mm[1])
-    dz_steps = abs(z1 - p0[2]) / step_mm[2]
-    n = max(1, int(math.ceil(max(arc_len_steps, dz_steps) / 0.9)))
-    t = np.arange(1, n + 1) / n
-    a = a0 + sweep * t
-    pts = np.column_stack([cx + r * np.cos(a), cy + r * np.sin(a), p0[2] + (z1 - p0[2]) * t])
-    pts[-1] = (x1, y1, z1)
+@dataclass(frozen=True)
+class _Arc:
+    """An arc of one G-code move in machine-frame mm: centre, radius, start angle and signed sweep (rad),
+    and Z from ``z0_mm`` to ``z1_mm`` along it (helical)."""
+
+    cx_mm: float
+    cy_mm: float
+    r_mm: float
+    a0_rad: float
+    sweep_rad: float
+    z0_mm: float
+    z1_mm: float
+
+    @classmethod
+    def of(cls, p0: np.ndarray, mv: GcodeMove) -> "_Arc":
+        """The arc of ``mv`` from ``p0`` (mm); G2 sweeps clockwise, a zero sweep is a full circle."""
+        cx, cy = mv.center
+        x1, y1, z1 = mv.end
+        a0 = math.atan2(p0[1] - cy, p0[0] - cx)
+        a1 = math.atan2(y1 - cy, x1 - cx)
+        if mv.clockwise:
+            sweep = -((a0 - a1) % (2 * math.pi))
+            if abs(sweep) < 1e-12:
+                sweep = -2 * math.pi
+        else:
+            sweep = (a1 - a0) % (2 * math.pi)
+            if abs(sweep) < 1e-12:
+                sweep = 2 * math.pi
+        return cls(cx, cy, math.hypot(p0[0] - cx, p0[1] - cy), a0, sweep, float(p0[2]), float(z1))
+
+    def at(self, t: np.ndarray) -> np.ndarray:
+        """``(len(t), 3)`` points (mm) at fractions ``t`` (0..1) of the arc."""
+        a = self.a0_rad + self.sweep_rad * t
+        return np.column_stack([self.cx_mm + self.r_mm * np.cos(a), self.cy_mm + self.r_mm * np.sin(a),
+                                self.z0_mm + (self.z1_mm - self.z0_mm) * t])
+
+    def n_points(self, step_mm: np.ndarray) -> int:
+        """How many points :func:`_arc_points` takes: no axis moves more than 0.9 step between two."""
+        arc_len_steps = abs(self.sweep_rad) * self.r_mm / min(step_mm[0], step_mm[1])
+        dz_steps = abs(self.z1_mm - self.z0_mm) / step_mm[2]
+        return max(1, int(math.ceil(max(arc_len_steps, dz_steps) / 0.9)))
+
+    def crossings(self, axis: int, value_mm: float) -> list[float]:
+        """The fractions t in 0..1 where the arc's coordinate ``axis`` (0 X, 1 Y, 2 Z) equals ``value_mm``."""
+        if axis == 2:
+            dz = self.z1_mm - self.z0_mm
+            t = (value_mm - self.z0_mm) / dz if dz else -1.0
+            return [t] if 0 <= t <= 1 else []
+        c = (value_mm - (self.cx_mm if axis == 0 else self.cy_mm)) / self.r_mm
+        if not -1 <= c <= 1:
+            return []
+        bases = (math.acos(c), -math.acos(c)) if axis == 0 else (math.asin(c), math.pi - math.asin(c))
+        out = []
+        for base in bases:
+            for k in range(-3, 4):
+                t = (base + 2 * math.pi * k - self.a0_rad) / self.sweep_rad
+                if 0 <= t <= 1:
+                    out.append(t)
+        return out
+
+    def box_mm(self) -> tuple[np.ndarray, np.ndarray]:
+        """The arc's bounding box ``(lo, hi)``, ``(3,)`` mm each, computed from its ends and the axis
+        extremes it sweeps over (nothing sampled)."""
+        ts = [0.0, 1.0]
+        for k in range(-8, 9):  # the angles k * pi/2 the sweep passes: the circle's extremes in X and Y
+            t = (k * math.pi / 2 - self.a0_rad) / self.sweep_rad
+            if 0 <= t <= 1:
+                ts.append(t)
+        pts = self.at(np.array(ts))
+        return pts.min(axis=0), pts.max(axis=0)
+
+
+def _arc_points(arc: _Arc, n: int, end_mm: np.ndarray) -> np.ndarray:
+    """``(n, 3)`` points along an arc (mm), the last one exactly the move's end (see :meth:`_Arc.n_points`)."""
+    pts = arc.at(np.arange(1, n + 1) / n)
+    pts[-1] = end_mm
     return pts
 
 
@@ -132,35 +188,83 @@ class _Frame:
         self.min_period = {True: max(s.delay_xy_ns, s.delay_z_ns), False: s.delay_xy_ns}
         self.delay_z_ns = s.delay_z_ns
 
+    def outside(self, way_steps: np.ndarray) -> np.ndarray:
+        """``(W,)`` bool: which of ``(W, 3)`` exact path points (steps) round to a step outside the travel."""
+        return np.any((np.rint(way_steps) < self.lo) | (np.rint(way_steps) > self.hi), axis=1)
+
     def check(self, way_mm: np.ndarray, way_steps: np.ndarray, where: str) -> None:
         """Refuse a move whose points leave the travel, naming ``where`` (file:line)."""
-        outside = np.any((np.rint(way_steps) < self.lo) | (np.rint(way_steps) > self.hi), axis=1)
-        if not np.any(outside):
-            return
-        q = way_mm[int(np.flatnonzero(outside)[0])]
+        outside = self.outside(way_steps)
+        if np.any(outside):
+            self.refuse(way_mm[int(np.flatnonzero(outside)[0])], where)
+
+    def refuse(self, q_mm: np.ndarray, where: str) -> None:
+        """Raise the TravelError of a move that leaves the travel at ``q_mm`` (the first point outside)."""
         x_mm = sorted(v * self.step_mm[0] + 0.0 for v in (self.lo[0], self.hi[0]))
         y_mm = sorted(self.to_mm_y * v + 0.0 for v in (self.lo[1], self.hi[1]))
         z_mm = sorted(-v * self.step_mm[2] + 0.0 for v in (self.lo[2], self.hi[2]))
         raise TravelError(
-            f"{where}: move to X{q[0]:.3f} Y{q[1]:.3f} Z{q[2]:.3f} mm leaves the machine "
+            f"{where}: move to X{q_mm[0]:.3f} Y{q_mm[1]:.3f} Z{q_mm[2]:.3f} mm leaves the machine "
             f"travel (X {x_mm[0]:g}..{x_mm[1]:g} mm, Y {y_mm[0]:g}..{y_mm[1]:g} mm, Z {z_mm[0]:g}..{z_mm[1]:g} mm)"
         )
 
+    def box_mm(self) -> tuple[np.ndarray, np.ndarray]:
+        """The travel in G-code mm, ``(lo, hi)`` ``(3,)`` each: every point that rounds to a step inside it
+        (half a step beyond the last steps)."""
+        a = (self.lo - 0.5) / self.to_steps
+        b = (self.hi + 0.5) / self.to_steps
+        return np.minimum(a, b), np.maximum(a, b)
+
+    def check_arc(self, arc: _Arc, n: int, end_mm: np.ndarray, where: str) -> None:
+        """Refuse an arc that leaves the travel before it is sampled, naming the first of its ``n`` points
+        outside (:func:`_arc_points`); its bounding box and the points where it crosses the travel's
+        bounds are computed, not sampled, so a huge arc costs nothing."""
+        lo, hi = self.box_mm()
+        a_lo, a_hi = arc.box_mm()
+        if np.all(a_lo >= lo) and np.all(a_hi <= hi):
+            return
+        ts = sorted({0.0, 1.0, *(t for axis in range(3) for bound in (lo[axis], hi[axis])
+                                 for t in arc.crossings(axis, float(bound)))})
+        for t0, t1 in zip(ts[:-1], ts[1:]):
+            mid = arc.at(np.array([(t0 + t1) / 2]))
+            if not np.any(self.outside(mid * self.to_steps)):
+                continue
+            k0 = min(n, int(math.floor(t0 * n)) + 1)  # the first point after the crossing, and a few more
+            ks = np.arange(k0, min(n, k0 + 64) + 1)
+            pts = arc.at(ks / n)
+            if ks[-1] == n:
+                pts[-1] = end_mm
+            out = np.flatnonzero(self.outside(pts * self.to_steps))
+            self.refuse(pts[int(out[0])] if len(out) else mid[0], where)
+        # only grazing the travel's edge (rounding): the sampled points decide, as for a line
+
 
 def _periods(frame: _Frame, mv: GcodeMove, start_mm: np.ndarray, start_steps: np.ndarray, way: np.ndarray,
-             way_steps: np.ndarray) -> tuple[np.ndarray, int]:
-    """The rounded position after each period of one move (``(P, 3)`` int64) and its period length."""
+             way_steps: np.ndarray, where: str) -> tuple[np.ndarray, int]:
+    """The rounded position after each period of one move (``(P, 3)`` int64) and its period length.
+
+    Raises:
+        PlanError: the move takes more than :data:`~cam.limits.MAX_MOVE_PERIODS` periods or, at its feed, more
+            than :data:`~cam.limits.MAX_MOVE_S` (naming ``where``), checked before the periods are made.
+    """
     starts = np.vstack([start_steps[None, :], way_steps[:-1]])
     d = way_steps - starts  # (W, 3) per sub-segment
     n_sub = np.maximum(1, np.ceil(np.abs(d).max(axis=1) - 1e-9).astype(np.int64))
     length_mm = float(np.sum(np.linalg.norm((way - np.vstack([start_mm[None, :], way[:-1]])), axis=1)))
     total_periods = int(n_sub.sum())
+    if total_periods > MAX_MOVE_PERIODS:
+        raise PlanError(f"{where}: the move takes {total_periods} step periods; one move may take at most "
+                        f"{MAX_MOVE_PERIODS}")
     uses_z = bool(np.any(d[:, 2] != 0))
     floor_ns = frame.min_period[uses_z] if bool(np.any(d[:, :2] != 0)) else frame.delay_z_ns
     if mv.kind == "rapid" or mv.feed_mm_min <= 0:
         per_ns = floor_ns
     else:
-        per_ns = max(floor_ns, int(round(length_mm / (mv.feed_mm_min / 60.0) * 1e9 / total_periods)))
+        duration_s = length_mm / (mv.feed_mm_min / 60.0)
+        if duration_s > MAX_MOVE_S:
+            raise PlanError(f"{where}: at F{mv.feed_mm_min:g} mm/min this {length_mm:g} mm move takes "
+                            f"{duration_s / 3600:.4g} h; one move may take at most {MAX_MOVE_S / 3600:g} h")
+        per_ns = max(floor_ns, int(round(duration_s * 1e9 / total_periods)))
     seg = np.repeat(np.arange(len(d)), n_sub)
     first = np.cumsum(n_sub) - n_sub
     k = np.arange(total_periods) - np.repeat(first, n_sub) + 1
@@ -175,26 +279,53 @@ def plan_gcode(program: GcodeProgram, settings: MachineSettings = DEFAULT_SETTIN
     :func:`cam.drive.steps.plan_steps` then lengthens periods with the speed ramps of ``settings.ramp``,
     stopping at pauses and dwells.
 
+    Every move is checked before its points are made: an arc's bounding box against the travel (a huge
+    arc is refused at once, naming its first point outside), the number of its step periods against
+    :data:`~cam.limits.MAX_MOVE_PERIODS`, its duration at its feed against :data:`~cam.limits.MAX_MOVE_S`,
+    and the program's time so far against :data:`~cam.limits.MAX_PROGRAM_S`.
+
     Raises:
-        TravelError: a move leaves the machine travel (naming the line).
+        TravelError: a move leaves the machine travel (naming the line and the first point outside).
+        PlanError: a move too long or too slow, a program too long (naming the line).
     """
     frame = _Frame(settings, flip_y)
     moves = _Moves()
     cur_mm = np.zeros(3)  # G-code frame
     cur_steps = np.zeros(3)  # the exact path point, in steps
+    program_ns = 0  # the program's time so far at its feeds and dwells
     for mv in program.moves:
+        where = f"{program.source}:{mv.line}"
         if mv.kind == "pause":
             moves.pause_here(mv.note)
             continue
         if mv.kind == "dwell":
             if mv.seconds > 0:
                 moves.dwell(mv.seconds)
+                program_ns = _add_time(program_ns, int(round(mv.seconds * 1e9)), where)
             continue
         end = np.array(mv.end, np.float64)
-        way = _arc_points(cur_mm, mv, frame.step_mm) if mv.kind == "arc" else end[None, :]
+        if mv.kind == "arc":
+            arc = _Arc.of(cur_mm, mv)
+            n = arc.n_points(frame.step_mm)
+            frame.check_arc(arc, n, end, where)  # before anything is sampled
+            if n > MAX_MOVE_PERIODS:
+                raise PlanError(f"{where}: the arc takes at least {n} step periods; one move may take at most "
+                                f"{MAX_MOVE_PERIODS}")
+            way = _arc_points(arc, n, end)
+        else:
+            way = end[None, :]
         way_steps = way * frame.to_steps
-        frame.check(way, way_steps, f"{program.source}:{mv.line}")
-        positions, per_ns = _periods(frame, mv, cur_mm, cur_steps, way, way_steps)
+        frame.check(way, way_steps, where)
+        positions, per_ns = _periods(frame, mv, cur_mm, cur_steps, way, way_steps, where)
         moves.motion(positions, per_ns, TRAVEL if mv.kind == "rapid" else CUT)
+        program_ns = _add_time(program_ns, per_ns * len(positions), where)
         cur_mm, cur_steps = end, way_steps[-1]
     return moves.job(settings, program)
+
+
+def _add_time(program_ns: int, move_ns: int, where: str) -> int:
+    """The program's time after one more move or dwell; more than :data:`~cam.limits.MAX_PROGRAM_S` is refused."""
+    total_ns = program_ns + move_ns
+    if total_ns > MAX_PROGRAM_S * 1e9:
+        raise PlanError(f"{where}: the program takes more than {MAX_PROGRAM_S / 86400:g} days up to this line")
+    return total_ns

@@ -32,7 +32,7 @@ from ..choices import (
 )
 from ..digitize import digitize
 from ..digitize.digitized import load_digitized
-from ..digitize.drawing import load_image
+from ..digitize.drawing import drawing_size_px, load_image
 from ..digitize.profile import load_profile, profile_from_expr
 from ..drive.steps import plan_steps
 from ..errors import CamError
@@ -43,7 +43,7 @@ from ..render.picture import LEGEND_PX, depth_colours, encode_png, toolpath_pict
 from ..render.report import job_report
 from ..settings import DEFAULT_SETTINGS, MachineSettings
 from ..verify.pinlog import PinLog, decode_pin_log, motion_extent
-from .drawing import plan
+from .drawing import check_drawing_size, plan
 from .drill import DEFAULT_DEPTH_MM as DRILL_DEPTH_MM
 from .drill import DEFAULT_SAFE_HEIGHT_MM as DRILL_SAFE_HEIGHT_MM
 from .drill import plan_drill
@@ -466,11 +466,13 @@ def _prepare_pixels(path: Path, kind: str, options: JobOptions, settings: Machin
 
     rgb = None
     if kind == "drawing":
+        check_drawing_size(*drawing_size_px(path), settings, str(path))  # from the header: before decoding
         drawing = load_image(path)
         rgb = drawing.to_rgb()
         digitized = digitize(drawing, start=options.start)
     else:
         digitized = load_digitized(path)
+        check_drawing_size(digitized.width_px, digitized.height_px, settings, str(path))
     profile = None
     if options.profile:
         profile = load_profile(options.profile)
@@ -554,6 +556,10 @@ def prepare_job(
 
     Returns:
         The :class:`PreparedJob`, planned relative to where the tool stands when it starts.
+
+    A drawing larger than the machine's travel holds at its steps per pixel
+    (:func:`cam.job.drawing.check_drawing_size`) is refused from its file's header, before it is decoded and
+    traced.
 
     Raises:
         CamError: unknown file type, unreadable or bad file (file:line), bad options, travel exceeded.

@@ -11,7 +11,7 @@ from cam.digitize.peel3d import NEIGHBOURS_3D
 from cam.job.drawing import _gap_block
 from cam.job.model import CUT, RETRACT, TRAVEL
 
-__all__ = ["trace_curves_reference", "trace_layers_reference", "assemble_reference"]
+__all__ = ["trace_curves_reference", "trace_layers_reference", "assemble_reference", "route_reference"]
 
 
 def _walk(flat: bytearray, start: int, offsets: tuple[int, ...]) -> list[int]:
@@ -220,3 +220,44 @@ def assemble_reference(
     emit(0, 0, 0, TRAVEL)
     return (np.array(pts, np.int64).reshape(-1, 3), np.array(kinds, np.uint8), np.array(tgt, bool),
             np.array(pause, bool))
+
+
+def route_reference(
+    asked: np.ndarray, start: tuple[int, int], goal: tuple[int, int], z: int, max_len: int
+) -> list[tuple[int, int]] | None:
+    """The drawing planner's bridge search in plain Python (see :func:`cam.job.drawing._route`): breadth-first,
+    level by level, each pixel's neighbours from the row above to the row below, left to right."""
+    if max_len < 2:
+        return None
+    h, w = asked.shape
+    sx, sy = start
+    gx, gy = goal
+    x0, x1 = max(0, min(sx, gx) - max_len), min(w - 1, max(sx, gx) + max_len)
+    y0, y1 = max(0, min(sy, gy) - max_len), min(h - 1, max(sy, gy) + max_len)
+    ok = asked[y0 : y1 + 1, x0 : x1 + 1] >= z
+    ww = x1 - x0 + 1
+    hh = y1 - y0 + 1
+    parent = {(sy - y0) * ww + (sx - x0): -1}
+    frontier = [(sy - y0) * ww + (sx - x0)]
+    goal_i = (gy - y0) * ww + (gx - x0)
+    for _ in range(max_len):
+        nxt = []
+        for i in frontier:
+            r, c = divmod(i, ww)
+            for dr in (-1, 0, 1):
+                for dc in (-1, 0, 1):
+                    rr, cc = r + dr, c + dc
+                    if (dr or dc) and 0 <= rr < hh and 0 <= cc < ww and ok[rr, cc] and rr * ww + cc not in parent:
+                        j = rr * ww + cc
+                        parent[j] = i
+                        if j == goal_i:
+                            path = []
+                            while parent[j] != -1:
+                                path.append(j)
+                                j = parent[j]
+                            return [(x0 + k % ww, y0 + k // ww) for k in reversed(path)]
+                        nxt.append(j)
+        if not nxt:
+            return None
+        frontier = nxt
+    return None
