@@ -128,6 +128,7 @@ def test_three_tool_board_on_the_emulated_maximus_board(board_file, capsys):
         code = main(["drill", str(path), "--yes", "--port", f"maximus:{emu.device_path}", "--cut-depth", "1.5"])
         assert code == 0
         log = emu.port_log()
+        holes_drilled = emu.hole_log()
     finally:
         emu.stop()
     assert emu.error is None
@@ -150,9 +151,11 @@ def test_three_tool_board_on_the_emulated_maximus_board(board_file, capsys):
     got = (strokes[:, :2] - start[:2]).astype(float)
     idx = _match(got, expected)
     assert sorted(idx.tolist()) == list(range(len(holes_mm))), "every hole drilled exactly once"
-    depth = round(1.5 / MAXIMUS_SETTINGS.mm_per_step_z)
-    assert (strokes[:, 2] - strokes[:, 3] == depth).all(), "every hole to the same depth"
-    assert (strokes[:, 4] == strokes[:, 2]).all()
+    # the head starts at the travel height (1.0 mm, the default) above the board: each hole goes down that and
+    # the cut depth below the start, and comes back to it
+    depth = round(1.0 / MAXIMUS_SETTINGS.mm_per_step_z) + round(1.5 / MAXIMUS_SETTINGS.mm_per_step_z)
+    assert (strokes[:, 2] == start[2]).all() and (strokes[:, 3] == start[2] - depth).all(), "every hole as deep"
+    assert [row[4] for row in holes_drilled] == [1] * len(holes_mm), "the spindle runs in every hole"
     drilled_tools = tools[idx]
     assert drilled_tools[0] == 2 and drilled_tools[-1] == 3 and len(np.flatnonzero(np.diff(drilled_tools))) == 2
     assert decode_port_log(log)[-1].tolist() == start.tolist(), "the head ends where it started"

@@ -38,8 +38,9 @@ def _finish(args: argparse.Namespace, outcome: Outcome, report: dict, summary: s
 
 
 def cmd_drill(args: argparse.Namespace) -> int:
-    settings = port_settings(args, args.port)
     check_port_options(args)
+    settings = port_settings(args, args.port)
+    check_port_options(args, settings)
     job = prepare(args, settings)
     for w in job.warnings:
         print(f"warning: {w}", file=sys.stderr)
