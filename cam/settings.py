@@ -60,8 +60,8 @@ and then keeps its built-in value.  An unknown key or a bad value is a
     invert_x = false    # flip the DIR bit of an axis wired the other way round
     invert_y = false
     invert_z = false
-    drill_z_up_steps = 0     # Z Drill Up / Down: pulses below the board origin; 0, 0 = from --travel-height
-    drill_z_down_steps = 0   # and --cut-depth (the origin is the travel height above the board)
+    drill_z_up_steps = 0     # Z Drill Up / Down: pulses below the board origin; down 0 = from --travel-height
+    drill_z_down_steps = 0   # and --cut-depth (the origin is then the travel height above the board)
     spindle = true      # the spindle (RB2) runs while the board drills
     serial_port = ""    # the device of --port maximus (no device named)
     baud = 115200
@@ -172,7 +172,8 @@ class Maximus:
     drill_z_up_steps: int = 0
     drill_z_down_steps: int = 0
     """Z Drill Up (where the head travels between holes) and Z Drill Down (the bottom of a hole), pulses below
-    the board origin.  Both 0: from the job's travel height and cut depth, the origin being the travel height."""
+    the board origin.  Down 0: both from the job's travel height and cut depth, the origin being the travel
+    height."""
     spindle: bool = True
     """Run the spindle (RB2) while the board drills."""
     serial_port: str = ""
@@ -343,9 +344,10 @@ def _validate_maximus(m: Maximus, bad: Any) -> None:
         if not 1 <= getattr(m, key) <= 255:  # one byte; 0 would make no delay at all (seed 000 App. 1 dly_100us)
             raise bad(f"maximus.{key}", f"must be a Delay byte 1..255 (pulses at 5000/Delay Hz), got {getattr(m, key)}")
     up, down = m.drill_z_up_steps, m.drill_z_down_steps
-    if (up, down) != (0, 0) and not 0 <= up < down <= 0xFFFF:  # 16-bit fields (seed 000 App. 1 make16)
-        raise bad("maximus.drill_z_down_steps", f"must be below maximus.drill_z_up_steps and both 0..65535 pulses "
-                  f"below the origin (0, 0: from the job), got up {up}, down {down}")
+    if not (0 <= up <= 0xFFFF and (down == 0 or up < down <= 0xFFFF)):  # 16-bit fields (seed 000 App. 1 make16)
+        raise bad("maximus.drill_z_down_steps", f"must be deeper (more pulses below the origin) than "
+                  f"maximus.drill_z_up_steps, both 0..65535 (down 0: the stroke from the job), got up {up}, "
+                  f"down {down}")
     if not 1 <= m.baud <= 4_000_000:
         raise bad("maximus.baud", f"must be 1..4000000, got {m.baud}")
     if not (0.05 <= m.reply_margin_s <= 60):
