@@ -275,3 +275,21 @@ def test_emulator_log_file_from_the_command_line(tmp_path):
     lines = log.read_text().splitlines()
     assert lines[0] == "hole,x_halfsteps,y_halfsteps,z_bottom_halfsteps,spindle"
     assert lines[1:] == ["1,229,229,-69,1", "2,343,229,-69,1"]
+
+
+def test_goto_and_jog_from_the_command_line(emu, tmp_path, capsys):
+    """Go To travels at Z = 0 with X and Y in one move, then moves Z; jog takes the Jog screen's units; --port
+    maximus opens the machine file's serial port."""
+    port = f"maximus:{emu.device_path}"
+    assert main(["goto", "40,25,3", "--port", port]) == 0, capsys.readouterr().err  # pixels: 8 steps XY, 1 Z
+    pos, moved = xy_moves_at(emu, 0)
+    assert pos[-1].tolist() == [320, -200, -3]  # Y toward the operator is the board's -Y; Z +3 is down
+    assert (pos[moved, 2] == 0).all() and pos[moved[-1]:, 2].min() == -3
+    ys = pos[moved[0] - 1:moved[-1] + 1, 1]
+    assert pos[moved[0] - 1 + int(np.flatnonzero(ys == -200)[0]), 0] == 200  # together, then X alone
+    machine = tmp_path / "m.toml"
+    machine.write_text(f'[maximus]\nserial_port = "{emu.device_path}"\n')
+    assert main(["jog", "--port", "maximus", "--machine", str(machine), "Y-", "0.5", "--unit", "mm"]) == 0
+    assert head(emu) == [320, -200 + 114, -3]
+    assert main(["jog", "--port", "maximus", "Y-", "1"]) == 2
+    assert "serial_port" in capsys.readouterr().err
