@@ -194,3 +194,18 @@ def test_hole_outside_the_travel_is_a_one_line_error_naming_the_line(tmp_path, c
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and f"{path}:10: hole 2" in err and "outside the machine travel" in err
     assert log.read_text() == "earlier output\n"  # nothing ran, nothing overwritten
+
+
+def test_file_order_keeps_the_files_order_of_tools_and_holes(tmp_path):
+    """--drill-order file: T2 before T1 when the file says so, a tool that comes back gets its own prompt."""
+    from cam.formats.excellon import load_excellon
+
+    path = tmp_path / "order.drl"
+    path.write_text("M48\nMETRIC\nT1C1.000\nT2C0.800\n%\nT2\nX3.0Y1.0\nX1.0Y1.0\nT1\nX2.0Y1.0\nT2\nX4.0Y1.0\nM30\n")
+    holes = load_excellon(path)
+    dp = plan_drill(holes, order="file")
+    assert dp.hole_index.tolist() == [0, 1, 2, 3]
+    assert [(t, n) for t, _, n in dp.tool_sequence] == [(2, 2), (1, 1), (2, 1)]
+    assert [i for i, _ in dp.tool_changes] == [0, 2, 3]
+    tour = plan_drill(holes)  # the default: tools smallest first, each a short tour
+    assert [(t, n) for t, _, n in tour.tool_sequence] == [(2, 3), (1, 1)]
