@@ -124,6 +124,9 @@ def drill_work(job: Any, settings: MachineSettings) -> BoardWork:
             x, y = (int(v) for v in holes_steps[index - 1]) if index > 0 else (0, 0)
             session.prompt((x, y, 0), note)  # spindle off, head at the start height
 
+        if settings.maximus.drill_stroke_set:
+            session.log(f"Z drill up {arguments['z_up_steps']}, down {arguments['z_down_steps']} steps below the "
+                        f"origin, from the machine settings (the job's travel height and cut depth do not apply)")
         board.drill(**arguments, on_tool_change=on_tool_change, on_hole=on_hole,
                     before_hole=lambda i: session.detail(f"drilling hole {i + 1} of {n_holes}"))
 

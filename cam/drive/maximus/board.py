@@ -101,8 +101,9 @@ def with_delays(settings: MachineSettings, xy_ms: float, z_ms: float) -> Machine
     """``--delay XY_MS,Z_MS`` on the board: the step periods set its Delay bytes (Delay = period / 0.2 ms,
     seed 003 "Step frekansı = 1 / (2 * Delay * 100 us)"): X and Y from ``xy_ms``, Z up and down from ``z_ms``.
 
-    >>> with_delays(MAXIMUS_SETTINGS, 1.0, 4.0).maximus.delay_x, with_delays(MAXIMUS_SETTINGS, 1.0, 4.0).maximus.delay_z_up
-    (5, 20)
+    >>> m = with_delays(MAXIMUS_SETTINGS, 1.0, 4.0).maximus
+    >>> m.delay_x, m.delay_y, m.delay_z_up, m.delay_z_down
+    (5, 5, 20, 20)
 
     Raises:
         SettingsError: a period that no Delay byte 1..255 gives (0.2 .. 51 ms).
@@ -196,14 +197,14 @@ class _DrillJob:
 
     offset: bytes  # Offset Positioning Packet: Z to where the Init descent ends at Z up
     init: bytes  # Initialize Drill Mode Packet: both fields Z down - Z up
-    descent: int  # pulses the Init packet lowers Z
-    offset_height: int  # board-frame height move of the offset packet
-    z_up: int
+    descent_steps: int  # pulses the Init packet lowers Z
+    offset_height_steps: int  # board-frame height move of the offset packet (+ up)
+    z_up_steps: int
     groups: list[_Group]
     back_steps: np.ndarray  # (2,) int64 x, y back to the start after the last hole
 
 
-def drill_job(holes_steps: np.ndarray, z_up: int, z_down: int, tool_changes: Sequence[tuple[int, str]] = (),
+def drill_job(holes_steps: np.ndarray, z_up_steps: int, z_down_steps: int, tool_changes: Sequence[tuple[int, str]] = (),
               settings: Optional[Maximus] = None) -> _DrillJob:
     """The packets of a drill job (see :meth:`MaximusBoard.drill`), checked: nothing is sent.
 
@@ -215,22 +216,22 @@ def drill_job(holes_steps: np.ndarray, z_up: int, z_down: int, tool_changes: Seq
         raise PlanError("invert_z cannot apply in Drill mode: the firmware lowers Z with DIR_Z = 1 "
                         "(seed 000 Appendix 1); wire the Z motor the other way round instead")
     moves = drill_moves(holes_steps)
-    if not 0 <= z_up < z_down <= MAX_FIELD:
-        raise PlanError(f"Z drill up {z_up} and down {z_down} pulses below the start: need 0 <= up < down "
-                        f"<= {MAX_FIELD}")
-    stroke = z_down - z_up
-    offset_height = stroke - z_up  # the Init descent (stroke) then ends at -z_up
-    if abs(offset_height) > MAX_FIELD:
-        raise PlanError(f"Z drill up {z_up} pulses is too far below the start for Z down {z_down}")
+    if not 0 <= z_up_steps < z_down_steps <= MAX_FIELD:
+        raise PlanError(f"Z drill up {z_up_steps} and down {z_down_steps} pulses below the start: need "
+                        f"0 <= up < down <= {MAX_FIELD}")
+    stroke_steps = z_down_steps - z_up_steps
+    offset_height_steps = stroke_steps - z_up_steps  # the Init descent (the stroke) then ends at -z_up_steps
+    if abs(offset_height_steps) > MAX_FIELD:
+        raise PlanError(f"Z drill up {z_up_steps} pulses is too far below the start for Z down {z_down_steps}")
     changes: dict[int, list[str]] = {}
     for index, message in tool_changes:
         if not 0 <= int(index) < len(moves):
             raise PlanError(f"tool change before hole {index}: there are {len(moves)} holes")
         changes.setdefault(int(index), []).append(str(message))
     modes = (m.half_step_x, m.half_step_y, m.half_step_z)
-    offset = offset_packet(0, 0, offset_height, delay_x=m.delay_x, delay_y=m.delay_y, delay_z=m.delay_z_up,
+    offset = offset_packet(0, 0, offset_height_steps, delay_x=m.delay_x, delay_y=m.delay_y, delay_z=m.delay_z_up,
                            half_step=modes, invert=(m.invert_x, m.invert_y, m.invert_z))
-    init = init_packet(stroke, stroke, delay_x=m.delay_x, delay_y=m.delay_y, delay_z_up=m.delay_z_up,
+    init = init_packet(stroke_steps, stroke_steps, delay_x=m.delay_x, delay_y=m.delay_y, delay_z_up=m.delay_z_up,
                        delay_z_down=m.delay_z_down, half_step=modes)
     starts = sorted({0, *changes})
     groups = []
@@ -239,7 +240,7 @@ def drill_job(holes_steps: np.ndarray, z_up: int, z_down: int, tool_changes: Seq
         groups.append(_Group(a, changes.get(a, []), [drill_packet(int(dx), int(dy), invert_x=m.invert_x,
                                                                   invert_y=m.invert_y) for dx, dy in part], part))
     back = -moves.sum(axis=0) if len(moves) else np.zeros(2, np.int64)
-    return _DrillJob(offset, init, stroke, offset_height, z_up, groups, back)
+    return _DrillJob(offset, init, stroke_steps, offset_height_steps, z_up_steps, groups, back)
 
 
 class MaximusBoard(_Link, AbstractContextManager):
@@ -432,16 +433,15 @@ class MaximusBoard(_Link, AbstractContextManager):
         configuration "Bit0-Spindle: ... [0-Matkap OFF | 1-Matkap ON]")."""
         self._run_job(lambda: self._jog_session([("z", 0)], spindle=bool(on)))
 
-    def move(self, dx: int, dy: int, dz: int) -> None:
-        """Travel by ``(dx, dy, dz)`` board-frame pulses (z: height), spindle off: up first, then X and Y in
-        one move, then down.
+    def move(self, dx_steps: int, dy_steps: int, dz_steps: int) -> None:
+        """Travel by ``(dx_steps, dy_steps, dz_steps)`` board-frame pulses (z: height), spindle off: up first,
+        then X and Y in one move, then down.
 
         A move of one axis is a Jog packet.  X and Y together are one Drill Data Packet: the only packet that
         steps both at once (seed 000 Appendix 1, constspeed_xy); it runs in a Drill mode pass whose Offset
         and Init packets move nothing (Init fields 0, so the hole stroke is 0 pulses).
         """
-        dx, dy, dz = int(dx), int(dy), int(dz)
-        self._run_job(lambda: self._move_session(dx, dy, dz))
+        self._run_job(lambda: self._move_session(int(dx_steps), int(dy_steps), int(dz_steps)))
 
     def travel(self, moves: np.ndarray) -> None:
         """Several :meth:`move` s one after the other, as one job: ``(N, 3)`` board-frame pulses (z: height)."""
@@ -458,12 +458,13 @@ class MaximusBoard(_Link, AbstractContextManager):
 
         self._run_job(session)
 
-    def _move_session(self, dx: int, dy: int, dz: int) -> None:
-        both = dx != 0 and dy != 0
-        first = [("z", dz)] if dz > 0 else []
-        last = [("z", dz)] if dz < 0 else []
+    def _move_session(self, dx_steps: int, dy_steps: int, dz_steps: int) -> None:
+        """One move (board frame, z height): Z up first, X and Y together, Z down last."""
+        both = dx_steps != 0 and dy_steps != 0
+        first = [("z", dz_steps)] if dz_steps > 0 else []
+        last = [("z", dz_steps)] if dz_steps < 0 else []
         if not both:
-            middle = [("x", dx)] if dx else [("y", dy)] if dy else []
+            middle = [("x", dx_steps)] if dx_steps else [("y", dy_steps)] if dy_steps else []
             jogs = first + middle + last
             if jogs:
                 self._jog_session(jogs)
@@ -471,16 +472,16 @@ class MaximusBoard(_Link, AbstractContextManager):
         if first or self._spindle_on is not False:
             self._jog_session(first or [("z", 0)])  # spindle off (a Jog packet sets it), the head up
         self._check_stop("the XY move")
-        self._xy_pass(dx, dy)
+        self._xy_pass(dx_steps, dy_steps)
         if last:
             self._check_stop("lowering the head")
             self._jog_session(last)
 
-    def _xy_pass(self, dx: int, dy: int) -> None:
+    def _xy_pass(self, dx_steps: int, dy_steps: int) -> None:
         """One Drill mode pass whose only motion is the XY move of one Drill Data Packet."""
         m = self.maximus
-        if max(abs(dx), abs(dy)) > MAX_FIELD:
-            raise PlanError(f"an XY move of {dx}, {dy} pulses is longer than {MAX_FIELD} pulses")
+        if max(abs(dx_steps), abs(dy_steps)) > MAX_FIELD:
+            raise PlanError(f"an XY move of {dx_steps}, {dy_steps} pulses is longer than {MAX_FIELD} pulses")
         offset = offset_packet(0, 0, 0, delay_x=m.delay_x, delay_y=m.delay_y, delay_z=m.delay_z_up,
                                half_step=(m.half_step_x, m.half_step_y, m.half_step_z))
         init = init_packet(0, 0, delay_x=m.delay_x, delay_y=m.delay_y, delay_z_up=m.delay_z_up,
@@ -491,9 +492,9 @@ class MaximusBoard(_Link, AbstractContextManager):
                                        _DRILL))
         self._exchange(start_drill_packet(), _Exchange("the start (SDF) packet", ONEHOLEDRILLED, False, "drill",
                                                        _DRILL))
-        packet = drill_packet(dx, dy, invert_x=m.invert_x, invert_y=m.invert_y)
-        self._exchange(packet, _Exchange(f"the XY move {dx}, {dy}", ONEHOLEDRILLED, True, "drill", _DRILL,
-                                         drill_time_ns(packet, init), (dx, dy, 0)))
+        packet = drill_packet(dx_steps, dy_steps, invert_x=m.invert_x, invert_y=m.invert_y)
+        self._exchange(packet, _Exchange(f"the XY move {dx_steps}, {dy_steps}", ONEHOLEDRILLED, True, "drill",
+                                         _DRILL, drill_time_ns(packet, init), (dx_steps, dy_steps, 0)))
         self._exchange(close_drill_packet(), _CLOSE_DRILL)
 
     # ------------------------------------------------------------------ drill
@@ -568,7 +569,7 @@ class MaximusBoard(_Link, AbstractContextManager):
                 self._jog_session([("z", 0)], spindle=True)
             drilled = self._drill_group(job, group, drilled, on_hole, before_hole)
             self._check_stop(f"raising the head after hole index {drilled - 1}")
-            self._jog_session([("z", job.z_up)])  # spindle bit clear: off as the head rises
+            self._jog_session([("z", job.z_up_steps)])  # spindle bit clear: off as the head rises
         if return_to_start and np.any(job.back_steps):
             self._check_stop("the move back to the start")
             self._move_session(int(job.back_steps[0]), int(job.back_steps[1]), 0)
@@ -582,10 +583,10 @@ class MaximusBoard(_Link, AbstractContextManager):
                                                           _OFFSET))
         self._check_stop(f"the offset move {before}")
         self._exchange(job.offset, _Exchange(f"the offset move (Z) {before}", ATOFFSETPOS, True, "drill", _INIT,
-                                             offset_time_ns(job.offset), (0, 0, job.offset_height)))
+                                             offset_time_ns(job.offset), (0, 0, job.offset_height_steps)))
         self._check_stop(f"the Init move {before}")
         self._exchange(job.init, _Exchange(f"the Init move (Z down, not stoppable) {before}", DRILLMODE1INITIALIZED,
-                                           False, "drill", _DRILL, init_time_ns(job.init), (0, 0, -job.descent)))
+                                           False, "drill", _DRILL, init_time_ns(job.init), (0, 0, -job.descent_steps)))
         self._exchange(start_drill_packet(),
                        _Exchange(f"the start (SDF) packet {before}", ONEHOLEDRILLED, False, "drill", _DRILL))
         for k, packet in enumerate(group.packets):
