@@ -162,3 +162,22 @@ def test_ctrl_c_during_a_drill_move_exits_130_at_once_with_the_spindle_off(emu, 
     assert 1 in spindle and spindle[-1] == 0
     assert emu.wait_for_state(MODE_SELECTION) and emu.hole_log() == []
     assert main(["jog", "--port", f"maximus:{emu.device_path}", "Z-", "10"]) == 0, capsys.readouterr().err
+
+
+def test_the_web_pages_stop_during_a_jog_stops_the_board_and_the_next_jog_works(emu, tmp_path):
+    from test_web import Server
+
+    s = Server(tmp_path, settings=MAXIMUS_SETTINGS, machine_port=f"maximus:{emu.device_path}", realtime=True)
+    try:
+        assert s.call("POST", "/api/jog", {"axis": "x", "steps": 2000})[0] == 200  # 4 s at Delay 10
+        wait_for(lambda: emu.position_pulses[0] > 50)
+        assert s.call("POST", "/api/stop", {})[0] == 200
+        st = s.wait_idle(20)
+        assert "MACHINESTOPPED" in st["last"]["messages"][0], st["last"]
+        x = emu.position_pulses[0]
+        assert 50 < x < 2000 and emu.wait_for_state(MODE_SELECTION)
+        assert s.call("POST", "/api/jog", {"axis": "z", "steps": -5})[0] == 200  # the board is ready
+        st = s.wait_idle(20)
+        assert st["last"]["status"] == "finished" and emu.position_pulses == (x, 0, 5)
+    finally:
+        s.close()
