@@ -147,7 +147,9 @@ def test_ctrl_c_during_a_jog_stops_the_board_and_the_next_jog_works(emu, capsys)
     assert 100 < x < 3000 and emu.wait_for_state(MODE_SELECTION)
     assert 0x80 in [b for _, b, where in emu.rx_log() if where == "isr"]  # the firmware's stop byte
     assert main(["jog", "--port", f"maximus:{emu.device_path}", "X-", "50"]) == 0, capsys.readouterr().err
-    assert emu.position_pulses[0] == x - 50
+    # a stop between a pulse's falling and rising edge leaves STEP_X low: the listing's next X move then makes
+    # one rising edge more than it asks (see cam.sim.maximus, point 14)
+    assert emu.position_pulses[0] in (x - 50, x - 51)
 
 
 def test_ctrl_c_during_a_drill_move_exits_130_at_once_with_the_spindle_off(emu, tmp_path, capsys):

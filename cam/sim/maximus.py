@@ -92,7 +92,10 @@ the emulator follows the listing:
     by the UART ISR and lost.  Outside a move 0x80 is ordinary packet data.
     After MACHINESTOPPED (0x81) the firmware returns to JOG_DATA_INPUT in Jog
     mode (still in Jog mode) and to MODE_SELECTION in Drill mode, with all
-    drivers disabled until the next Jog or Offset packet enables them.
+    drivers disabled until the next Jog or Offset packet enables them.  A stop
+    that lands between a pulse's falling and rising edge leaves that STEP pin
+    low, so the next move of that axis makes one rising edge more than it asks
+    (its first ``output_bit(STEP, 1)`` is a rise; see point 11).
 15. Limit switches (section 7.4.3: "any state change ... will interrupt") only
     interrupt on a falling edge of the AND gate (``ext_int_edge(H_TO_L)``),
     i.e. when a switch is pressed, and only during a move.  The ISR waits
