@@ -48,6 +48,24 @@ and then keeps its built-in value.  An unknown key or a bad value is a
     dir_y = 5
     clock_z = 2
     dir_z = 3
+
+    [maximus]           # the MAXIMUS PIC board (--port maximus:DEV): its PC program's Machine Settings form
+    delay_x = 10        # the Delay byte of each axis: pulses at 5000 / Delay Hz
+    delay_y = 10
+    delay_z_up = 10
+    delay_z_down = 10
+    half_step_x = true  # the MODE bit of each axis's L297 (mm_per_step_* are mm per clock pulse in this mode)
+    half_step_y = true
+    half_step_z = true
+    invert_x = false    # flip the DIR bit of an axis wired the other way round
+    invert_y = false
+    invert_z = false
+    drill_z_up_steps = 0     # Z Drill Up / Down: pulses below the board origin; down 0 = from --travel-height
+    drill_z_down_steps = 0   # and --cut-depth (the origin is then the travel height above the board)
+    spindle = true      # the spindle (RB2) runs while the board drills
+    serial_port = ""    # the device of --port maximus (no device named)
+    baud = 115200
+    reply_margin_s = 1.0     # a reply is due this long after the move it answers should have ended
 """
 from __future__ import annotations
 
@@ -65,7 +83,7 @@ else:  # pragma: no cover
 
 from .errors import SettingsError
 
-__all__ = ["Travel", "Pins", "MachineSettings", "load_settings", "DEFAULT_SETTINGS", "RAMP_MODES"]
+__all__ = ["Travel", "Pins", "Maximus", "MachineSettings", "load_settings", "DEFAULT_SETTINGS", "RAMP_MODES"]
 
 RAMP_MODES = ("lookahead", "linear40", "constant")
 """Speed ramp modes (see :mod:`cam.drive.ramps`)."""
@@ -124,6 +142,54 @@ class Pins:
 
 
 @dataclass(frozen=True)
+class Maximus:
+    """The MAXIMUS PCB driller's settings, as its PC program's Machine Settings form keeps them.
+
+    Seed 000, Appendix 2, ``settingsform.cpp`` (the form's INI sections and defaults): "Axis Speeds"
+    (``TrackBarDelayX`` ... ``TrackBarDelayZup``, default 10), "Driving Modes" (``RadioXMode`` ...,
+    default 1 = half step), "Invert Direction" (``CheckXInvert`` ..., default off) and "Head Movement"
+    (``EditDrillStepZup`` / ``EditDrillStepZdown``); the serial port and baud rate are its Com Port
+    settings (the firmware listens at 115200 baud, seed 000 Appendix 1 ``#use rs232``).
+
+    Units: a Delay byte is the half period of a step pulse in 100 us (seed 003, "Step frekansı =
+    1 / (2 * Delay * 100 us)": 5000 / Delay pulses per second); Z Drill Up / Down are L297 clock pulses
+    below the board origin (+ down, as the PC program's ``positionZ`` counts).
+    """
+
+    delay_x: int = 10
+    delay_y: int = 10
+    delay_z_up: int = 10
+    delay_z_down: int = 10
+    """The Delay bytes of X, Y, Z going up and Z going down (1..255)."""
+    half_step_x: bool = True
+    half_step_y: bool = True
+    half_step_z: bool = True
+    """The MODE bit of each axis: True = half steps (one clock pulse = half a motor step)."""
+    invert_x: bool = False
+    invert_y: bool = False
+    invert_z: bool = False
+    """Flip the DIR bit of an axis (a motor wired the other way round)."""
+    drill_z_up_steps: int = 0
+    drill_z_down_steps: int = 0
+    """Z Drill Up (where the head travels between holes) and Z Drill Down (the bottom of a hole), pulses below
+    the board origin.  Down 0: both from the job's travel height and cut depth, the origin being the travel
+    height."""
+    spindle: bool = True
+    """Run the spindle (RB2) while the board drills."""
+    serial_port: str = ""
+    """The device ``--port maximus`` opens."""
+    baud: int = 115200
+    """Serial speed (the firmware's ``#use rs232(baud=115200, ...)``)."""
+    reply_margin_s: float = 1.0
+    """How long after its move should have ended a reply may still come before the board counts as lost."""
+
+    @property
+    def drill_stroke_set(self) -> bool:
+        """Whether Z Drill Up / Down are set here (else they come from the job)."""
+        return self.drill_z_down_steps > 0
+
+
+@dataclass(frozen=True)
 class MachineSettings:
     """Everything `cam` knows about the machine.  Frozen: make changed copies with :meth:`replace`."""
 
@@ -154,6 +220,7 @@ class MachineSettings:
     """Acceleration of each axis."""
     travel: Travel = field(default_factory=Travel)
     pins: Pins = field(default_factory=Pins)
+    maximus: Maximus = field(default_factory=Maximus)
 
     def replace(self, **changes: Any) -> "MachineSettings":
         """A copy with some fields changed; values are validated."""
@@ -191,7 +258,7 @@ class MachineSettings:
 
 DEFAULT_SETTINGS = MachineSettings()
 
-_SECTIONS = {"travel": Travel, "pins": Pins}
+_SECTIONS = {"travel": Travel, "pins": Pins, "maximus": Maximus}
 
 
 def _type_ok(value: Any, kind: type) -> bool:
@@ -206,7 +273,8 @@ def _type_ok(value: Any, kind: type) -> bool:
     return False
 
 
-def _build(cls: type, table: Mapping[str, Any], prefix: str, source: str) -> Any:
+def _build(cls: type, table: Mapping[str, Any], prefix: str, source: str, base: Any = None) -> Any:
+    """``cls`` from a TOML table: the keys given, the others from ``base`` (or the built-in values)."""
     fields = {f.name: f for f in dataclasses.fields(cls)}
     values: dict[str, Any] = {}
     for key, value in table.items():
@@ -218,13 +286,14 @@ def _build(cls: type, table: Mapping[str, Any], prefix: str, source: str) -> Any
         if key in _SECTIONS and prefix == "":
             if not isinstance(value, dict):
                 raise SettingsError(f"{source}: '{name}' must be a table [{name}]")
-            values[key] = _build(_SECTIONS[key], value, f"{key}.", source)
+            values[key] = _build(_SECTIONS[key], value, f"{key}.", source,
+                                 None if base is None else getattr(base, key))
             continue
         kind = {"int": int, "float": float, "bool": bool, "str": str}[f.type if isinstance(f.type, str) else f.type.__name__]
         if not _type_ok(value, kind):
             raise SettingsError(f"{source}: '{name}' must be {kind.__name__}, got {value!r}")
         values[key] = kind(value)
-    return cls(**values)
+    return cls(**values) if base is None else dataclasses.replace(base, **values)
 
 
 def _validate(s: MachineSettings, source: str) -> None:
@@ -267,23 +336,43 @@ def _validate(s: MachineSettings, source: str) -> None:
         if pin in seen:
             raise bad(f"pins.{name}", f"uses pin {pin}, already used by 'pins.{seen[pin]}'")
         seen[pin] = name
+    _validate_maximus(s.maximus, bad)
 
 
-def settings_from_mapping(table: Mapping[str, Any], source: str = "settings") -> MachineSettings:
-    """Build validated settings from a parsed TOML table (keys as in the module docstring)."""
-    settings = _build(MachineSettings, table, "", source)
+def _validate_maximus(m: Maximus, bad: Any) -> None:
+    for key in ("delay_x", "delay_y", "delay_z_up", "delay_z_down"):
+        if not 1 <= getattr(m, key) <= 255:  # one byte; 0 would make no delay at all (seed 000 App. 1 dly_100us)
+            raise bad(f"maximus.{key}", f"must be a Delay byte 1..255 (pulses at 5000/Delay Hz), got {getattr(m, key)}")
+    up, down = m.drill_z_up_steps, m.drill_z_down_steps
+    if not (0 <= up <= 0xFFFF and (down == 0 or up < down <= 0xFFFF)):  # 16-bit fields (seed 000 App. 1 make16)
+        raise bad("maximus.drill_z_down_steps", f"must be deeper (more pulses below the origin) than "
+                  f"maximus.drill_z_up_steps, both 0..65535 (down 0: the stroke from the job), got up {up}, "
+                  f"down {down}")
+    if not 1 <= m.baud <= 4_000_000:
+        raise bad("maximus.baud", f"must be 1..4000000, got {m.baud}")
+    if not (0.05 <= m.reply_margin_s <= 60):
+        raise bad("maximus.reply_margin_s", f"must be 0.05..60 s, got {m.reply_margin_s}")
+
+
+def settings_from_mapping(table: Mapping[str, Any], source: str = "settings",
+                          base: MachineSettings | None = None) -> MachineSettings:
+    """Build validated settings from a parsed TOML table (keys as in the module docstring); keys left out keep
+    their values in ``base`` (default: the built-in settings)."""
+    settings = _build(MachineSettings, table, "", source, base)
     _validate(settings, source)
     return settings
 
 
-def load_settings(path: str | os.PathLike | None = None) -> MachineSettings:
-    """Load machine settings from a TOML file; ``None`` gives the thesis defaults.
+def load_settings(path: str | os.PathLike | None = None, base: MachineSettings | None = None) -> MachineSettings:
+    """Load machine settings from a TOML file; ``None`` gives ``base`` (default: the thesis defaults).
+
+    Keys the file leaves out keep their values in ``base``.
 
     Raises :class:`SettingsError` for a missing file, bad TOML, an unknown key
     or a bad value, always naming the file and the key.
     """
     if path is None:
-        return DEFAULT_SETTINGS
+        return base or DEFAULT_SETTINGS
     p = Path(path)
     try:
         text = p.read_text(encoding="utf-8")
@@ -295,4 +384,4 @@ def load_settings(path: str | os.PathLike | None = None) -> MachineSettings:
         table = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise SettingsError(f"{p}: not valid TOML ({exc})") from None
-    return settings_from_mapping(table, source=str(p))
+    return settings_from_mapping(table, source=str(p), base=base)

@@ -166,11 +166,21 @@ def test_a_pin_log_needs_the_mock(port, tmp_path):
         assert not pins.exists()
 
 
-def test_the_maximus_board_takes_drill_files_and_no_delay(ngc):
+def test_the_maximus_board_takes_drill_files_and_a_delay_its_delay_bytes_can_make(ngc, tmp_path):
     port = "maximus:/dev/ttyS77"  # no such device: the checks come first
     for path in (SAMPLES / "ellipse.png", SAMPLES / "inkscape_star.plt", ngc):
         refused(cli("drill", path, "--port", port), port, "Excellon")
-    refused(cli("drill", SAMPLES / "board.drl", "--port", port, "--delay", "2,2"), "--delay")
+    # --delay sets the board's Delay bytes (2 x Delay x 0.1 ms per pulse): 0.2..51 ms, else one line
+    for delay in ("0.05,2", "2,60"):
+        refused(cli("drill", SAMPLES / "board.drl", "--port", port, "--delay", delay), "--delay", "Delay 1..255")
+    refused(cli("drill", SAMPLES / "board.drl", "--port", port, "--delay", "2,2"), "cannot open MAXIMUS port")
+    # flags that mean nothing to the board are refused, never ignored
+    refused(cli("drill", SAMPLES / "board.drl", "--port", port, "--ramp", "linear40"), "--ramp", "constant speed")
+    refused(cli("drill", SAMPLES / "board.drl", "--spindle", "on"), "--spindle", "MAXIMUS")
+    machine = tmp_path / "maximus.toml"
+    machine.write_text("[maximus]\ndrill_z_up_steps = 100\ndrill_z_down_steps = 600\n")
+    refused(cli("drill", SAMPLES / "board.drl", "--port", port, "--machine", machine, "--cut-depth", "1"),
+            "--cut-depth", "drill_z_down_steps")
 
 
 def test_checks_run_in_process_too(tmp_path, capsys):

@@ -128,6 +128,7 @@ def test_three_tool_board_on_the_emulated_maximus_board(board_file, capsys):
         code = main(["drill", str(path), "--yes", "--port", f"maximus:{emu.device_path}", "--cut-depth", "1.5"])
         assert code == 0
         log = emu.port_log()
+        holes_drilled = emu.hole_log()
     finally:
         emu.stop()
     assert emu.error is None
@@ -150,9 +151,11 @@ def test_three_tool_board_on_the_emulated_maximus_board(board_file, capsys):
     got = (strokes[:, :2] - start[:2]).astype(float)
     idx = _match(got, expected)
     assert sorted(idx.tolist()) == list(range(len(holes_mm))), "every hole drilled exactly once"
-    depth = round(1.5 / MAXIMUS_SETTINGS.mm_per_step_z)
-    assert (strokes[:, 2] - strokes[:, 3] == depth).all(), "every hole to the same depth"
-    assert (strokes[:, 4] == strokes[:, 2]).all()
+    # the head starts at the travel height (1.0 mm, the default) above the board: each hole goes down that and
+    # the cut depth below the start, and comes back to it
+    depth = round(1.0 / MAXIMUS_SETTINGS.mm_per_step_z) + round(1.5 / MAXIMUS_SETTINGS.mm_per_step_z)
+    assert (strokes[:, 2] == start[2]).all() and (strokes[:, 3] == start[2] - depth).all(), "every hole as deep"
+    assert [row[4] for row in holes_drilled] == [1] * len(holes_mm), "the spindle runs in every hole"
     drilled_tools = tools[idx]
     assert drilled_tools[0] == 2 and drilled_tools[-1] == 3 and len(np.flatnonzero(np.diff(drilled_tools))) == 2
     assert decode_port_log(log)[-1].tolist() == start.tolist(), "the head ends where it started"
@@ -191,3 +194,18 @@ def test_hole_outside_the_travel_is_a_one_line_error_naming_the_line(tmp_path, c
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and f"{path}:10: hole 2" in err and "outside the machine travel" in err
     assert log.read_text() == "earlier output\n"  # nothing ran, nothing overwritten
+
+
+def test_file_order_keeps_the_files_order_of_tools_and_holes(tmp_path):
+    """--drill-order file: T2 before T1 when the file says so, a tool that comes back gets its own prompt."""
+    from cam.formats.excellon import load_excellon
+
+    path = tmp_path / "order.drl"
+    path.write_text("M48\nMETRIC\nT1C1.000\nT2C0.800\n%\nT2\nX3.0Y1.0\nX1.0Y1.0\nT1\nX2.0Y1.0\nT2\nX4.0Y1.0\nM30\n")
+    holes = load_excellon(path)
+    dp = plan_drill(holes, order="file")
+    assert dp.hole_index.tolist() == [0, 1, 2, 3]
+    assert [(t, n) for t, _, n in dp.tool_sequence] == [(2, 2), (1, 1), (2, 1)]
+    assert [i for i, _ in dp.tool_changes] == [0, 2, 3]
+    tour = plan_drill(holes)  # the default: tools smallest first, each a short tour
+    assert [(t, n) for t, _, n in tour.tool_sequence] == [(2, 3), (1, 1)]

@@ -80,3 +80,21 @@ def test_a_drill_depth_that_rounds_to_no_step_is_an_error():
     holes = cam.parse_excellon("M48\nMETRIC,LZ\nT1C1.0\n%\nT1\nX1.0Y1.0\nM30\n", source="one.drl")
     with pytest.raises(cam.PlanError, match="mm_per_step_z"):
         cam.plan_drill(holes, settings=cam.MachineSettings().replace(mm_per_step_z=100), depth_mm=2.0)
+
+
+def test_the_maximus_table_loads_and_is_checked(tmp_path):
+    from cam.drive.maximus.board import MAXIMUS_SETTINGS
+    from conftest import ROOT
+
+    assert cam.load_settings(ROOT / "profiles" / "maximus-machine.toml", base=MAXIMUS_SETTINGS) == MAXIMUS_SETTINGS
+    f = tmp_path / "m.toml"
+    f.write_text("[maximus]\ndelay_x = 3\ninvert_y = true\ndrill_z_up_steps = 40\ndrill_z_down_steps = 90\n")
+    m = cam.load_settings(f, base=MAXIMUS_SETTINGS).maximus
+    assert (m.delay_x, m.delay_y, m.invert_y, m.drill_z_up_steps, m.drill_z_down_steps) == (3, 10, True, 40, 90)
+    assert m.drill_stroke_set and cam.load_settings(f, base=MAXIMUS_SETTINGS).mm_per_step_xy == 0.004375
+    for text, key in (("delay_z_up = 0", "maximus.delay_z_up"), ("delay_y = 256", "maximus.delay_y"),
+                      ("drill_z_up_steps = 50\ndrill_z_down_steps = 50", "maximus.drill_z_down_steps"),
+                      ("baud = 'fast'", "maximus.baud"), ("spindel = true", "maximus.spindel")):
+        f.write_text(f"[maximus]\n{text}\n")
+        with pytest.raises(cam.SettingsError, match=key):
+            cam.load_settings(f)

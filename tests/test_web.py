@@ -588,7 +588,8 @@ def test_api_drives_the_maximus_board(tmp_path):
         log = emu.port_log()
         strokes = hole_strokes(log)
         assert len(strokes) == 44 and len({(int(x), int(y)) for x, y, *_ in strokes}) == 44
-        depth = round(1.0 / MAXIMUS_SETTINGS.mm_per_step_z)
+        # from the start height (the travel height, 1.0 mm above the board) down 1.0 mm more into it
+        depth = 2 * round(1.0 / MAXIMUS_SETTINGS.mm_per_step_z)
         assert (strokes[:, 2] - strokes[:, 3] == depth).all()
         start = decode_port_log(log)[0]
         assert decode_port_log(log)[-1].tolist() == start.tolist()  # back where it started

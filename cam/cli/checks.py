@@ -52,6 +52,7 @@ OUTPUTS = {
     "preview": ("--preview", (".png", ".svg")),
     "save_digitized": ("--save-digitized", DIGITIZED_SUFFIXES),
     "output": ("--output", None),
+    "log": ("--log", (".csv",)),
 }
 """Files a command writes, checked before it starts."""
 

@@ -3,13 +3,14 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import dataclasses
 import sys
 from pathlib import Path
 from typing import Any
 
 from tqdm import tqdm
 
-from ..drive.maximus.board import MAXIMUS_SETTINGS
+from ..drive.maximus.board import MAXIMUS_SETTINGS, board_settings, with_delays
 from ..drive.ports import port_kind
 from ..settings import MachineSettings, load_settings
 
@@ -30,11 +31,20 @@ def machine_settings(args: argparse.Namespace) -> MachineSettings:
 
 
 def port_settings(args: argparse.Namespace, port: str) -> MachineSettings:
-    """The machine settings for ``port``: a MAXIMUS board has its own resolution, step mode and 16-bit travel
-    unless --machine says else."""
-    if port_kind(port) == "maximus" and not args.machine:
-        return MAXIMUS_SETTINGS
-    return machine_settings(args)
+    """The machine settings for ``port``.
+
+    A MAXIMUS board starts from its own settings (resolution, step modes, 16-bit travel, the PC program's
+    Machine Settings form); --machine changes the keys it gives, --delay sets its Delay bytes and --spindle
+    whether the spindle runs while it drills.
+    """
+    if port_kind(port) != "maximus":
+        return machine_settings(args)
+    s = board_settings(load_settings(args.machine, base=MAXIMUS_SETTINGS))
+    if getattr(args, "delay", None):
+        s = with_delays(s, *args.delay)
+    if getattr(args, "spindle", None):
+        s = s.replace(maximus=dataclasses.replace(s.maximus, spindle=args.spindle == "on"))
+    return s
 
 
 def format_duration(seconds: float) -> str:

@@ -7,6 +7,7 @@ import sys
 import time
 
 from ..digitize.digitized import save_digitized
+from ..drive.maximus.board import drill_stroke
 from ..drive.ports import port_kind
 from ..fileio import atomic_write_text
 from .common import format_duration, port_settings
@@ -38,9 +39,19 @@ def _finish(args: argparse.Namespace, outcome: Outcome, report: dict, summary: s
     return 0
 
 
+def board_report(job, settings) -> dict:
+    """What a MAXIMUS board is sent besides the holes: its Delay bytes, the Z stroke, the spindle."""
+    m = settings.maximus
+    z_up, z_down = drill_stroke(job.drill_plan, settings)
+    return {"delays": {"x": m.delay_x, "y": m.delay_y, "z_up": m.delay_z_up, "z_down": m.delay_z_down},
+            "z_up_steps": z_up, "z_down_steps": z_down, "spindle": m.spindle,
+            "half_step": {"x": m.half_step_x, "y": m.half_step_y, "z": m.half_step_z}}
+
+
 def cmd_drill(args: argparse.Namespace) -> int:
-    settings = port_settings(args, args.port)
     check_port_options(args)
+    settings = port_settings(args, args.port)
+    check_port_options(args, settings)
     job = prepare(args, settings)
     for w in job.warnings:
         print(f"warning: {w}", file=sys.stderr)
@@ -49,6 +60,8 @@ def cmd_drill(args: argparse.Namespace) -> int:
         write_job_preview(args, job, args.preview)
     if args.save_digitized:
         save_digitized(job.digitized, args.save_digitized)
+    if port_kind(args.port) == "maximus":
+        job.report["board"] = board_report(job, settings)
     t0 = time.monotonic()
     outcome = execute(job, args, settings)
     summary = summary_of(job)

@@ -9,4 +9,5 @@ __all__ = ["cmd_emulate"]
 
 
 def cmd_emulate(args: argparse.Namespace) -> int:
-    return int(maximus_emulator.main(["--speed", str(args.speed)]) or 0)
+    argv = ["--speed", str(args.speed)] + (["--log", args.log] if args.log else [])
+    return int(maximus_emulator.main(argv) or 0)

@@ -20,7 +20,7 @@ from tqdm import tqdm
 from ..drive.ports import port_kind, require
 from ..drive.runner import FINISHED
 from ..drive.session import MachineSession, Prompt
-from ..errors import PortError
+from ..errors import CapabilityError, PortError
 from ..settings import MachineSettings
 from ..verify.pinlog import write_pin_log
 from .checks import job_kind_of
@@ -48,15 +48,29 @@ class Outcome:
         return self.status == FINISHED
 
 
-def check_port_options(args: argparse.Namespace) -> None:
-    """Options and files that need a port's capability, checked before anything is planned or sent."""
+def check_port_options(args: argparse.Namespace, settings: Optional[MachineSettings] = None) -> None:
+    """Options and files that need a port's capability, checked before anything is planned or sent.
+
+    ``settings``: the machine settings of the port (a MAXIMUS board's Z Drill Up / Down there make
+    --cut-depth and --travel-height an error: they would say the same thing twice).
+    """
     kind = job_kind_of(args)
-    if kind is not None and kind != "excellon" and port_kind(args.port) == "maximus":
+    maximus = port_kind(args.port) == "maximus"
+    if kind is not None and kind != "excellon" and maximus:
         require(args.port, "step_dir", what=f"a {kind} job")
     if getattr(args, "pin_log", None):
         require(args.port, "pin_log")
-    if getattr(args, "delay", None):
-        require(args.port, "step_dir", what="--delay (the step period of step/dir ports)")
+    if getattr(args, "spindle", None):
+        require(args.port, "spindle", what="--spindle")
+    if maximus and getattr(args, "ramp", None):
+        raise CapabilityError(f"{args.port} moves at the constant speed of its Delay bytes: --ramp applies to "
+                              f"step/dir ports (set the speed with --delay)")
+    if maximus and settings is not None and settings.maximus.drill_stroke_set:
+        for flag in ("cut_depth", "travel_height"):
+            if getattr(args, flag, None) is not None:
+                raise CapabilityError(
+                    f"--{flag.replace('_', '-')}: the machine file sets the drill stroke of {args.port} "
+                    f"([maximus] drill_z_up_steps, drill_z_down_steps); leave the flag out or those keys")
 
 
 _STOP_SIGNALS = tuple(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, name))
@@ -124,6 +138,9 @@ def execute(job: Any, args: argparse.Namespace, settings: MachineSettings, *,
     bar = _bar(args, estimated_s)
     if bar is not None:
         session.on_progress = lambda done, total, t_ns: bar.update(round(t_ns / 1e9, 3) - bar.n)
+    # each hole on a board that drills by itself, as the MAXIMUS PC program shows it ("Drilling hole n of N")
+    session.on_detail = (lambda text: bar.write(text, file=sys.stderr)) if bar is not None else \
+        (lambda text: print(text, file=sys.stderr, flush=True))
     def stop(signum: int, frame: Any) -> None:
         stopping.set()
         session.stop()

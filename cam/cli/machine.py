@@ -5,17 +5,18 @@ import argparse
 import sys
 
 from ..errors import CamError
-from ..job.moves import goto, jog
-from .common import machine_settings, port_settings
+from ..job.moves import goto, jog, jog_steps
+from .common import port_settings
 from .execute import check_port_options, execute
 from .parser import EXIT_INTERRUPTED
+from ..drive.ports import port_kind
 
 __all__ = ["cmd_goto", "cmd_jog"]
 
 
 def cmd_goto(args: argparse.Namespace) -> int:
-    settings = machine_settings(args)
     check_port_options(args)
+    settings = port_settings(args, args.port)
     outcome = execute(goto(tuple(args.position), settings=settings), args, settings)
     if not outcome.finished:
         for m in outcome.messages:
@@ -31,10 +32,15 @@ def cmd_jog(args: argparse.Namespace) -> int:
     if len(axis) != 2 or axis[0] not in "XYZ" or axis[1] not in "+-":
         raise CamError(f"axis must be X+, X-, Y+, Y-, Z+ or Z-, got '{args.axis}'")
     if args.steps <= 0:
-        raise CamError(f"steps must be > 0, got {args.steps}")
+        raise CamError(f"steps must be > 0, got {args.steps:g}")
     check_port_options(args)
-    n = args.steps if axis[1] == "+" else -args.steps
     settings = port_settings(args, args.port)
+    half = getattr(settings.maximus, f"half_step_{axis[0].lower()}") if port_kind(args.port) == "maximus" \
+        else settings.half_step
+    n = jog_steps(axis[0], args.steps, args.unit, settings=settings, half_step=half)
+    if n == 0:
+        raise CamError(f"a jog of {args.steps:g} {args.unit} is less than one step")
+    n = n if axis[1] == "+" else -n
     bounds = settings.travel.bounds_steps()
     lo, hi = bounds["XYZ".index(axis[0])]
     if abs(n) > hi - lo:

@@ -19,6 +19,9 @@ from ..choices import (
 )
 from ..settings import RAMP_MODES
 
+JOG_UNIT_NAMES = ("steps", "full-steps", "0.1mm", "mm", "0.1in")
+"""The jog units (the same as :data:`cam.job.moves.JOG_UNITS`, kept here so that --help loads no numpy)."""
+
 __all__ = ["build_parser", "EXIT_BAD_INPUT", "EXIT_INTERRUPTED"]
 
 EXIT_BAD_INPUT = 2
@@ -235,6 +238,8 @@ def _add_drill(sub: argparse._SubParsersAction) -> None:
     g.add_argument("--preview", metavar="OUT.png", help="write the toolpath picture before cutting")
     g.add_argument("--flip-y", action="store_true", help="G-code input: machine Y = +Y mm instead of -Y mm")
     g.add_argument("--yes", action="store_true", help="answer every prompt (tool changes, pauses) with Enter")
+    g.add_argument("--spindle", choices=("on", "off"),
+                   help="MAXIMUS board: run the spindle while drilling (default on; off for a dry run)")
     _add_cut_options(d)
     _add_progress_options(g)
 
@@ -305,8 +310,12 @@ def _add_jog(sub: argparse._SubParsersAction) -> None:
     jg = sub.add_parser("jog", help="move one axis by a number of steps (to set the board origin)",
                         description="Jog one axis, as the MAXIMUS jog screen does: 'cam jog X+ 100' moves X by "
                         "+100 steps. On a MAXIMUS board (--port maximus:/dev/ttyUSB0) this is its Jog mode.")
-    jg.add_argument("axis", metavar="AXIS", help="X+, X-, Y+, Y-, Z+ or Z-")
-    jg.add_argument("steps", type=_whole("STEPS", 1), metavar="STEPS", help="how many steps (> 0)")
+    jg.add_argument("axis", metavar="AXIS", help="X+, X-, Y+, Y-, Z+ (down) or Z- (up)")
+    jg.add_argument("steps", type=_number("STEPS", 0.0, float(MAX_WHOLE)), metavar="STEPS",
+                    help="how far (> 0), in --unit")
+    jg.add_argument("--unit", choices=JOG_UNIT_NAMES, default="steps",
+                    help="steps (default: machine steps, a MAXIMUS clock pulse), full-steps (motor steps), "
+                    "0.1mm, mm or 0.1in (2.54 mm): the MAXIMUS Jog screen's units")
     jg.add_argument("--port", default="mock", help="'mock' (default), /dev/parport0 or maximus:/dev/ttyUSB0")
     _add_machine_options(jg)
     jg.add_argument("--realtime", action="store_true", help="run the mock in real time")
@@ -319,6 +328,9 @@ def _add_emulate_maximus(sub: argparse._SubParsersAction) -> None:
                         description="Serve the MAXIMUS PIC firmware emulator on a pty and print its device path; "
                         "point --port maximus:PATH at it. Ctrl-C ends it.")
     em.add_argument("--speed", type=_number("--speed", 1e-3, 1e6), default=1.0, help="firmware time per real time (1 = real time)")
+    em.add_argument("--log", metavar="FILE.csv",
+                    help="write one row per drilled hole: hole,x_halfsteps,y_halfsteps,z_bottom_halfsteps,spindle "
+                    "(half steps from the emulator's power-up position, Y up, Z height)")
 
 
 def _add_goto(sub: argparse._SubParsersAction) -> None:

@@ -52,6 +52,7 @@ class Activity:
     positions: Optional[PositionTracker] = None
     done: int = 0
     machine_ns: int = 0
+    detail: str = ""
     started_wall: float = field(default_factory=time.monotonic)
 
 
@@ -122,6 +123,7 @@ class SessionView:
                 "state": self._state_name(),
                 "activity": a.name if a else None,
                 "label": a.label if a else "",
+                "detail": a.detail if a else "",
                 "position_steps": list(pos),
                 "position_mm": [round(pos[0] * s.mm_per_step_xy, 4), round(pos[1] * s.mm_per_step_xy, 4),
                                 round(pos[2] * s.mm_per_step_z, 4)],

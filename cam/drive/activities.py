@@ -13,12 +13,12 @@ import numpy as np
 
 from ..errors import CamError, PortError
 from ..settings import MachineSettings
-from .maximus.board import MaximusBoard, drill_arguments
+from .maximus.board import MaximusBoard, drill_arguments, from_board, to_board
 from .ports import MockPort, open_port, port_kind, require
 from .runner import Controller, run
 from .steps import StepPlan
 
-__all__ = ["run_steps", "run_on_board", "BoardControl", "drill_work", "jog_work"]
+__all__ = ["run_steps", "run_on_board", "BoardControl", "drill_work", "move_work"]
 
 BoardWork = Callable[[MaximusBoard, Any], None]
 """work(board, session): what to do with an open board."""
@@ -116,28 +116,50 @@ class BoardControl:
 
 
 def drill_work(job: Any, settings: MachineSettings) -> BoardWork:
-    """The board work of a prepared drill job: every hole, with its tool-change prompts and progress."""
+    """The board work of a prepared drill job: every hole, with its tool-change prompts and progress.
+
+    Each hole is announced as the PC program does ("Drilling hole n of N", seed 000 Appendix 2,
+    ``ComPort1RxChar``) through the session's :meth:`~cam.drive.session.MachineSession.detail`.
+    """
     arguments = drill_arguments(job.drill_plan, settings)
-    n_holes = len(arguments["holes_steps"])
+    holes_steps = np.asarray(job.drill_plan.holes_steps, np.int64).reshape(-1, 2)
+    n_holes = len(holes_steps)
 
     def work(board: MaximusBoard, session: Any) -> None:
         def on_hole(drilled: int) -> None:
             session.progress(drilled, n_holes, int(job.estimated_time_s * 1e9 * drilled / max(1, n_holes)))
 
-        board.drill(**arguments, on_tool_change=lambda index, note: session.prompt((0, 0, 0), note), on_hole=on_hole)
+        def on_tool_change(index: int, note: str) -> None:
+            x, y = (int(v) for v in holes_steps[index - 1]) if index > 0 else (0, 0)
+            session.prompt((x, y, 0), note)  # spindle off, head at the start height
+
+        if settings.maximus.drill_stroke_set:
+            session.log(f"Z drill up {arguments['z_up_steps']}, down {arguments['z_down_steps']} steps below the "
+                        f"origin, from the machine settings (the job's travel height and cut depth do not apply)")
+        board.drill(**arguments, on_tool_change=on_tool_change, on_hole=on_hole,
+                    before_hole=lambda i: session.detail(f"drilling hole {i + 1} of {n_holes}"))
 
     return work
 
 
-def jog_work(moves_steps: np.ndarray, settings: MachineSettings) -> BoardWork:
-    """The board work of relative moves ``(N, 3)``: one jog packet per axis that moves."""
+def move_work(points_steps: np.ndarray) -> BoardWork:
+    """The board work of a travel job through ``(N, 3)`` points (`cam`'s frame, relative to where the head
+    stands): each move in the board's frame, up first, X and Y together, down last
+    (:meth:`MaximusBoard.travel`)."""
+    pts = np.asarray(points_steps, np.int64).reshape(-1, 3)
+    moves = to_board(np.diff(np.vstack([np.zeros((1, 3), np.int64), pts]), axis=0))
+
     def work(board: MaximusBoard, session: Any) -> None:
-        for move in np.asarray(moves_steps, np.int64).reshape(-1, 3).tolist():
-            for axis, n in zip("xyz", move):
-                if n:
-                    board.jog(axis, int(n), half_step=settings.half_step)
+        board.travel(moves)
 
     return work
+
+
+def _board_moved(board: MaximusBoard | None) -> np.ndarray | None:
+    """Where the board's confirmed replies put the head, in `cam`'s frame from where it started."""
+    if board is None:
+        return None
+    return from_board(np.array([board.position_pulses], np.int64))[0]
 
 
 def run_on_board(session: Any, name: str, work: BoardWork, ctl: BoardControl, label: str,
@@ -146,7 +168,7 @@ def run_on_board(session: Any, name: str, work: BoardWork, ctl: BoardControl, la
     error = None
     board = None
     try:
-        board = MaximusBoard(session.port)
+        board = MaximusBoard(session.port, session.settings.maximus)
         ctl.attach(board)
         work(board, session)
     except CamError as exc:
@@ -161,6 +183,8 @@ def run_on_board(session: Any, name: str, work: BoardWork, ctl: BoardControl, la
         session.log(f"{label}: finished")
         return
     status = "emergency-stopped" if ctl.halted else "error"
-    session.finish({"activity": name, "label": label, "status": status, "messages": [error]}, None)
-    session.log(f"{label}: {error}" + ("" if status == "emergency-stopped" else
-                                      " (the board's position is now unknown: jog it home)"), "error")
+    # a stopped move has moved part of the way: where the head is, is not known exactly any more (the PC
+    # program says "Offset Coordinates lost!", seed 000 Appendix 2, GoEStopExecute)
+    session.finish({"activity": name, "label": label, "status": status, "messages": [error]}, _board_moved(board))
+    session.log(f"{label}: {error} (the head's position is not known exactly any more: jog it to the board "
+                f"origin and set the offset there)", "error")

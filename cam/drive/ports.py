@@ -27,7 +27,7 @@ MAXIMUS_PREFIX = "maximus:"
 CAPABILITIES = {
     "mock": frozenset({"step_dir", "pause", "pin_log", "drill_files"}),
     "parport": frozenset({"step_dir", "pause", "drill_files"}),
-    "maximus": frozenset({"drill_files", "jog", "delay"}),
+    "maximus": frozenset({"drill_files", "jog", "delay", "spindle", "drill_stroke"}),
 }
 """What each kind of port can do."""
 
@@ -39,6 +39,8 @@ _CANNOT = {
     "drill_files": "{port} cannot drill {what}",
     "jog": "{port} cannot jog",
     "delay": "{port} takes its step delays from the machine settings; {what} applies to the MAXIMUS board only",
+    "spindle": "{port} has no spindle switch; {what} applies to the MAXIMUS board only",
+    "drill_stroke": "{port} takes its drill depth from each job; {what} applies to the MAXIMUS board only",
 }
 
 
@@ -153,12 +155,12 @@ def port_kind(name: str | Port) -> str:
         return "mock"
     if isinstance(name, Port):
         return "parport"
-    if name.startswith(MAXIMUS_PREFIX) and len(name) > len(MAXIMUS_PREFIX):
-        return "maximus"
+    if (name.startswith(MAXIMUS_PREFIX) and len(name) > len(MAXIMUS_PREFIX)) or name == MAXIMUS_PREFIX[:-1]:
+        return "maximus"  # "maximus" alone: the machine settings' serial port
     if name.startswith("/dev/"):
         return "parport"
     raise PortError(f"unknown port '{name}' (use 'mock', a device path such as /dev/parport0, "
-                    f"or maximus:/dev/ttyUSB0)")
+                    f"maximus:/dev/ttyUSB0, or maximus for the machine file's serial_port)")
 
 
 def require(name: str | Port, capability: str, *, what: str = "this job") -> None:

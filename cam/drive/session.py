@@ -22,6 +22,14 @@ What a port cannot do (the MAXIMUS firmware has no pause and takes drill
 files only) is refused through one check, :func:`cam.drive.ports.require`,
 with the same message in every front end.
 
+On a MAXIMUS board the session's frame is the same (+y toward the operator,
++z deeper): a jog of Z -100 lifts the head, whatever the firmware's own
+directions (:func:`cam.drive.maximus.board.to_board` converts).  The home is
+the board origin: :meth:`MachineSession.set_offset` makes where the head
+stands the origin (the PC program's Set Offset), and
+:meth:`MachineSession.set_drill_z` takes Z Drill Up / Down from where it
+stands.
+
 This module starts activities and books their ends; the state snapshot, the
 controls and the prompts are the session's parts in :mod:`cam.drive._session_parts`.
 """
@@ -31,6 +39,7 @@ import collections
 import threading
 import time
 import weakref
+from dataclasses import replace
 from typing import Any, Callable, Optional
 
 import numpy as np
@@ -38,12 +47,13 @@ import numpy as np
 from ..errors import BusyError, CamError, PlanError, PortError
 from ..job.model import TRAVEL, Job, check_reach, check_travel, travel_job
 from ..job.moves import jog as jog_job
-from ..job.moves import to_origin
+from ..job.moves import jog_steps, to_origin
 from ..settings import DEFAULT_SETTINGS, MachineSettings
 from ..verify.pinlog import PositionTracker
 from .apart import RunnerProcess
 from ._session_parts import Activity, Prompt, PromptFn, SessionControls
-from .activities import BoardControl, drill_work, jog_work, run_on_board, run_steps
+from .activities import BoardControl, drill_work, move_work, run_on_board, run_steps
+from .maximus.board import drill_arguments, drill_job, maximus_port
 from .ports import port_kind, require
 from .runner import Controller, RunResult
 from .steps import StepPlan, plan_steps
@@ -67,12 +77,13 @@ class MachineSession(SessionControls):
 
     def __init__(self, port: str = "mock", settings: MachineSettings = DEFAULT_SETTINGS, *,
                  realtime: bool = False, on_prompt: Optional[PromptFn] = None) -> None:
-        self.port = port
         self.kind = port_kind(port)
+        self.port = maximus_port(port, settings) if self.kind == "maximus" else port
         self.settings = settings
         self.realtime = realtime or self.kind != "mock"
         self.on_prompt = on_prompt
         self.on_progress: Optional[Callable[[int, int, int], None]] = None
+        self.on_detail: Optional[Callable[[str], None]] = None
         self._lock = threading.RLock()
         self._changed = threading.Condition(self._lock)
         self._position = np.zeros(3, np.int64)
@@ -127,6 +138,9 @@ class MachineSession(SessionControls):
             require(self.port, "drill_files", what=f"a {getattr(job, 'kind', 'step')} job")
             if getattr(job, "drill_plan", None) is None:
                 require(self.port, "step_dir", what=f"a {getattr(job, 'kind', 'step')} job")
+            arguments = drill_arguments(job.drill_plan, self.settings)  # the board's packets fit (nothing sent)
+            drill_job(arguments["holes_steps"], arguments["z_up_steps"], arguments["z_down_steps"],
+                      arguments["tool_changes"], self.settings.maximus)
         extent = getattr(job, "extent_steps", None)
         if extent is not None:
             check_reach(self._position, extent, self.settings, "the job")
@@ -173,14 +187,60 @@ class MachineSession(SessionControls):
         self.wait_idle(None)
         return dict(self.last_run)
 
-    def jog(self, axis: str, steps: int) -> None:
-        """Move one axis by ``steps`` (BusyError while something runs; PlanError/TravelError for a bad jog)."""
-        if isinstance(steps, (int, np.integer)) and not isinstance(steps, bool) and abs(int(steps)) > MAX_JOG_STEPS:
-            raise PlanError(f"steps must be at most {MAX_JOG_STEPS} either way, got {steps!r}")
+    def jog(self, axis: str, steps: float, unit: str = "steps") -> None:
+        """Move one axis by ``steps`` in ``unit`` (see :data:`cam.job.moves.JOG_UNITS`: machine steps, full
+        steps, 0.1 mm, mm, 0.1 inch).  BusyError while something runs; PlanError/TravelError for a bad jog."""
+        a = str(axis).lower()
+        half = getattr(self.settings.maximus, f"half_step_{a}", False) if self.kind == "maximus" \
+            else self.settings.half_step
+        n = jog_steps(axis, steps, unit, settings=self.settings, half_step=bool(half))
+        if abs(n) > MAX_JOG_STEPS:
+            raise PlanError(f"steps must be at most {MAX_JOG_STEPS} either way, got {n} ({steps!r} {unit})")
         with self._lock:
             self._check_free()
-            job = jog_job(axis, steps, settings=self.settings, position_steps=self.position_steps())
+            job = jog_job(axis, n, settings=self.settings, position_steps=self.position_steps())
             self._start_moves("jog", job, job.source)
+
+    def set_offset(self) -> None:
+        """Make where the head stands the origin (the PC program's Set Offset: "positionX = 0; positionY = 0;
+        positionZ = 0", seed 000 Appendix 2, ``BtnSetOffsetPositionClick``); refused while busy."""
+        self.set_position((0, 0, 0))
+        self.log("this position is the origin now")
+
+    def set_drill_z(self, which: str) -> None:
+        """Z Drill Up (``"up"``) or Down (``"down"``) of the MAXIMUS drill stroke from where the head stands:
+        its depth below the origin in steps (seed 000 Appendix 2, ``BtnSetZDrillUpPositionClick``: up must be
+        below the origin, down below up).  Drill jobs of this session use them from now on.
+
+        Raises:
+            CapabilityError: not a MAXIMUS board; PlanError: a position the stroke cannot have; BusyError.
+        """
+        require(self.port, "drill_stroke", what="Z Drill Up / Down")
+        if which not in ("up", "down"):
+            raise PlanError(f"which must be 'up' or 'down', got {which!r}")
+        with self._lock:
+            self._check_free()
+            z = int(self._position[2])
+            m = self.settings.maximus
+            up, down = (z, m.drill_z_down_steps) if which == "up" else (m.drill_z_up_steps, z)
+            if which == "up" and z < 0:
+                raise PlanError(f"Z Drill Up must not be above the origin; the head is {-z} steps above it")
+            if which == "down" and not z > up:
+                raise PlanError(f"Z Drill Down must be below Z Drill Up ({up} steps); the head is at {z}")
+            if which == "up" and down and not down > z:
+                down = 0  # the old Z down lies above the new Z up: set it again
+            self.settings = self.settings.replace(maximus=replace(m, drill_z_up_steps=up, drill_z_down_steps=down))
+        self.log(f"Z Drill {which.capitalize()} = {z} steps below the origin"
+                 + ("" if down else "; now set Z Drill Down"))
+
+    def detail(self, text: str) -> None:
+        """What the running activity does now (e.g. "drilling hole 3 of 44"): shown in the state and logged."""
+        with self._lock:
+            if self._activity is not None:
+                self._activity.detail = text
+        self.log(text)
+        if self.on_detail is not None:
+            self.on_detail(text)
 
     def go_to_origin(self) -> None:
         """Back to the home: lift out of the material first, travel at that height, then Z to the home."""
@@ -200,8 +260,7 @@ class MachineSession(SessionControls):
 
     def _start_moves(self, activity: str, job: Job, label: str) -> None:
         if self.kind == "maximus":
-            moves = np.diff(np.vstack([np.zeros((1, 3), np.int64), job.points_steps]), axis=0)
-            self._launch_board(activity, jog_work(moves, self.settings), None, label,
+            self._launch_board(activity, move_work(job.points_steps), None, label,
                                moved_steps=job.points_steps[-1])
             return
         plan = plan_steps(job, start_steps=tuple(int(v) for v in self._position))

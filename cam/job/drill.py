@@ -11,10 +11,12 @@ the board about its vertical axis for drilling from the back side.
 
 The drill cycle for each hole (thesis-machine step/dir port): rapid at the
 safe height to above the hole, plunge to the drill depth, retract to the
-safe height.  Holes are grouped by tool, smallest diameter first; before
-each tool the job pauses with a prompt naming the tool and its diameter.
-Within a tool the holes are drilled in a short tour from the current
-position (:func:`cam.job.drill_order.drill_order`).
+safe height.  With ``order="tour"`` (the default) holes are grouped by tool,
+smallest diameter first, and within a tool drilled in a short tour from the
+current position (:func:`cam.job.drill_order.drill_order`); with
+``order="file"`` they are drilled exactly in the file's order, tools
+included.  Before each tool (each change of tool, in file order) the job
+pauses with a prompt naming the tool and its diameter.
 """
 from __future__ import annotations
 
@@ -42,8 +44,10 @@ class DrillPlan:
         toolpath: the :class:`~cam.job.model.Job` (machine steps).
         holes_steps: ``(N, 2)`` int64 machine (x, y) steps of each hole, in drilling order.
         hole_index: ``(N,)`` index of each drilled hole in the source hole list.
-        tool_sequence: ``[(tool, diameter_mm, n_holes)]`` in drilling order.
+        tool_sequence: ``[(tool, diameter_mm, n_holes)]`` in drilling order, one entry per tool change
+            (a tool may come back in file order).
         depth_steps: the drill depth below the surface in Z steps.
+        safe_steps: the travel height above the surface in Z steps (>= 0).
     """
 
     toolpath: Job
@@ -51,6 +55,7 @@ class DrillPlan:
     hole_index: np.ndarray
     tool_sequence: list[tuple[int, float, int]]
     depth_steps: int = 0
+    safe_steps: int = 0
 
     @property
     def tool_changes(self) -> list[tuple[int, str]]:
@@ -88,7 +93,8 @@ def plan_drill(
         depth_mm: drill depth below the surface; safe_height_mm: travel height above it.
         offset_mm: machine position (mm from the home) of the board origin; None = board top-left at the home.
         mirror_x: mirror for drilling from the back side.
-        order: "tour" (short tour per tool) or "file" (file order).
+        order: "tour" (tools smallest first, a short tour per tool) or "file" (the file's order of holes and
+            tools: a prompt at each change of tool).
 
     Raises:
         PlanError: bad options; TravelError: a hole outside the travel (naming the hole and its line).
@@ -113,16 +119,10 @@ def plan_drill(
         raise TravelError(f"drill depth {depth_mm:g} mm and safe height {safe_height_mm:g} mm need Z "
                           f"{safe_steps}..{depth_steps} steps; the Z travel is {z_lo}..{z_hi} steps")
     path = _DrillPath(safe_steps)
-    tools = sorted(set(int(t) for t in holes.tool_of_hole), key=lambda t: (holes.tools[t], t))
-    cur = np.array([0.0, 0.0])
-    for tool in tools:
-        idx = np.flatnonzero(holes.tool_of_hole == tool)
-        if order == "tour":
-            idx = idx[drill_order(machine_mm[idx], start_mm=tuple(cur))]
+    for tool, idx in _tool_runs(holes, machine_mm, order):
         path.tool_change(tool, float(holes.tools[tool]), len(idx))
         for i in idx.tolist():
             path.hole(i, *(int(v) for v in steps_xy[i]), depth_steps)
-        cur = machine_mm[idx[-1]]
     path.home()
     points = np.array(path.points, np.int64)
     check_travel(points, settings)
@@ -130,7 +130,29 @@ def plan_drill(
     tp = Job(points_steps=points, kind=kinds_arr, target=kinds_arr == CUT, pause=np.array(path.pause, bool),
              settings=settings, warnings=list(holes.warnings), pause_notes=path.notes, source=str(holes.source))
     order_arr = np.array(path.order, np.int64)
-    return DrillPlan(tp, steps_xy[order_arr], order_arr, path.sequence, depth_steps)
+    return DrillPlan(tp, steps_xy[order_arr], order_arr, path.sequence, depth_steps, -safe_steps)
+
+
+def _tool_runs(holes, machine_mm: np.ndarray, order: str) -> list[tuple[int, np.ndarray]]:
+    """``[(tool, hole indices)]`` in drilling order.
+
+    "file": the file's order, one run per change of tool (T2 before T1 stays so, and a tool that comes
+    back gets a run of its own).  "tour": one run per tool, smallest diameter first, each a short tour
+    from where the previous one ended.
+    """
+    tools_of = np.asarray(holes.tool_of_hole, np.int64)
+    if order == "file":
+        starts = np.flatnonzero(np.r_[True, tools_of[1:] != tools_of[:-1]])
+        ends = np.r_[starts[1:], len(tools_of)]
+        return [(int(tools_of[a]), np.arange(a, b)) for a, b in zip(starts, ends)]
+    runs = []
+    cur = np.array([0.0, 0.0])
+    for tool in sorted(set(tools_of.tolist()), key=lambda t: (holes.tools[t], t)):
+        idx = np.flatnonzero(tools_of == tool)
+        idx = idx[drill_order(machine_mm[idx], start_mm=tuple(cur))]
+        runs.append((tool, idx))
+        cur = machine_mm[idx[-1]]
+    return runs
 
 
 def _check_holes(holes, machine_mm: np.ndarray, steps_xy: np.ndarray, settings: MachineSettings) -> None:

@@ -13,9 +13,44 @@ from ..errors import PlanError
 from ..settings import DEFAULT_SETTINGS, MachineSettings
 from .model import Job, PixelFrame, check_reach, check_travel, travel_job
 
-__all__ = ["goto", "jog", "to_origin", "AXES"]
+__all__ = ["goto", "jog", "to_origin", "jog_steps", "AXES", "JOG_UNITS"]
 
 AXES = ("x", "y", "z")
+
+JOG_UNITS = {"steps": None, "full-steps": None, "0.1mm": 0.1, "mm": 1.0, "0.1in": 2.54}
+"""Jog units: machine steps, full motor steps, and the MAXIMUS PC program's Jog form units in mm (seed 000
+Appendix 2, ``TFormJog::ToolBtnXrightClick``: "100 um", "1 mm", "2.54 mm" and "Full Steps")."""
+
+
+def jog_steps(axis: str, amount: float, unit: str = "steps", *, settings: MachineSettings = DEFAULT_SETTINGS,
+              half_step: bool = False) -> int:
+    """A jog of ``amount`` in ``unit`` as a whole number of machine steps (rounded to the nearest).
+
+    ``"full-steps"`` are motor steps: two machine steps when the axis runs in half steps (``half_step``), as
+    the PC program's ``(machineMode + 1) * N``.
+
+    >>> jog_steps("x", 1, "mm", settings=DEFAULT_SETTINGS.replace(mm_per_step_xy=0.004375))
+    229
+    >>> jog_steps("z", 3, "full-steps", half_step=True)
+    6
+
+    Raises:
+        PlanError: an unknown unit or a count that is not whole in a step unit.
+    """
+    a = str(axis).lower()
+    if a not in AXES:
+        raise PlanError(f"axis must be x, y or z, got {axis!r}")
+    if unit not in JOG_UNITS:
+        raise PlanError(f"jog unit must be one of {', '.join(JOG_UNITS)}, got {unit!r}")
+    if isinstance(amount, bool) or not isinstance(amount, (int, float, np.integer, np.floating)) \
+            or not np.isfinite(amount):
+        raise PlanError(f"a jog needs a number, got {amount!r}")
+    if unit in ("steps", "full-steps"):
+        if float(amount) != int(amount):
+            raise PlanError(f"a jog in {unit} needs a whole number, got {amount!r}")
+        return int(amount) * (2 if unit == "full-steps" and half_step else 1)
+    mm_per_step = settings.mm_per_step_z if a == "z" else settings.mm_per_step_xy
+    return int(round(float(amount) * JOG_UNITS[unit] / mm_per_step))
 
 
 def goto(position_px: tuple[int, int, int], *, settings: MachineSettings = DEFAULT_SETTINGS) -> Job:

@@ -9,8 +9,8 @@ import time
 
 from ..drive.maximus.protocol import (
     AXIS_PINS, DEBOUNCE_NS, DELAY_UNIT_NS, DIR_X, DIR_Y, EMERGENCYSTOP, ENABLE_X, ENABLE_Y, ENABLE_Z, HOME_SWITCH_X,
-    HOME_SWITCH_Y, HOME_SWITCH_Z, LIMIT_SWITCH_X, LIMIT_SWITCH_Y, LIMIT_SWITCH_Z, MACHINESTOPPED, STEP_PIN, STEP_X,
-    STEP_Y, STEPSBACKATLIMIT,
+    HOME_SWITCH_Y, HOME_SWITCH_Z, LIMIT_SWITCH_X, LIMIT_SWITCH_Y, LIMIT_SWITCH_Z, MACHINESTOPPED, MODE_X, MODE_Y,
+    MODE_Z, STEP_PIN, STEP_X, STEP_Y, STEPSBACKATLIMIT,
 )
 from ._maximus_base import JOG_DATA_INPUT, MODE_SELECTION, _Goto
 
@@ -24,6 +24,9 @@ _SWITCH_ACTIONS = {
     0x2F: (HOME_SWITCH_Z, None, 0, 0),  # RA4 = 0
     0x1F: (LIMIT_SWITCH_Z, None, 0, 0),  # RA5 = 0
 }
+
+
+_MODE_PINS = (MODE_X, MODE_Y, MODE_Z)
 
 
 class _Hardware:
@@ -97,7 +100,11 @@ class _Hardware:
             if p != port:
                 continue
             if (value >> step_b) & 1 and not (old >> step_b) & 1 and (value >> en_b) & 1:
-                self._pos[axis] += sign if (value >> dir_b) & 1 else -sign
+                step = sign if (value >> dir_b) & 1 else -sign
+                self._pos[axis] += step
+                mode_port, mode_bit = _MODE_PINS[axis]
+                # a clock pulse is half a motor step with MODE high, a whole one (two halves) with MODE low
+                self._half_steps[axis] += step * (1 if (self._ports[mode_port] >> mode_bit) & 1 else 2)
                 self._after_step()
         if self._gie:
             self._poll_interrupts()

@@ -152,6 +152,8 @@ class _Program:
         self._constspeed_xy(step_x, step_y, self._delay_x, self._delay_y)
         self._output_bit(DIR_Z, 1)  # Z down
         self._constspeed(self._drill_step_z_down, self._delay_z_down, 3)
+        if self._drill_step_z_down:
+            self._log_hole()  # at the bottom of the stroke
         self._output_bit(DIR_Z, 0)  # Z up
         self._constspeed(self._drill_step_z_up, self._delay_z_up, 3)
         self._reply_after_move(ONEHOLEDRILLED)

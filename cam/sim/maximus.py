@@ -92,7 +92,10 @@ the emulator follows the listing:
     by the UART ISR and lost.  Outside a move 0x80 is ordinary packet data.
     After MACHINESTOPPED (0x81) the firmware returns to JOG_DATA_INPUT in Jog
     mode (still in Jog mode) and to MODE_SELECTION in Drill mode, with all
-    drivers disabled until the next Jog or Offset packet enables them.
+    drivers disabled until the next Jog or Offset packet enables them.  A stop
+    that lands between a pulse's falling and rising edge leaves that STEP pin
+    low, so the next move of that axis makes one rising edge more than it asks
+    (its first ``output_bit(STEP, 1)`` is a rise; see point 11).
 15. Limit switches (section 7.4.3: "any state change ... will interrupt") only
     interrupt on a falling edge of the AND gate (``ext_int_edge(H_TO_L)``),
     i.e. when a switch is pressed, and only during a move.  The ISR waits
@@ -139,7 +142,9 @@ from typing import Any, Iterable, Iterator, Sequence
 
 import numpy as np
 
-from ..drive.maximus.protocol import LIMIT_SWITCH_X, PORT_B, PORT_D, POWER_UP_B, POWER_UP_D, SWITCH_NAMES
+from ..drive.maximus.protocol import (
+    LIMIT_SWITCH_X, PORT_B, PORT_D, POWER_UP_B, POWER_UP_D, SPINDLE_BIT, SWITCH_NAMES,
+)
 from ._maximus_base import (  # noqa: F401  (the labels are part of this module's names)
     BUSY, DRILL_MODE1_INITIALIZE, DRILL_MODE1_INPUT, INITIALIZE_DRILL_MODE, JOG_DATA_INPUT, MODE_SELECTION, POWER_UP,
     _Halt, _PowerOn, _ReplyFault,
@@ -150,11 +155,15 @@ from ._maximus_uart import _Uart
 from ..errors import CamError, PortError
 
 __all__ = [
-    "MaximusEmulator", "PortLog", "start_emulator", "main",
+    "MaximusEmulator", "PortLog", "start_emulator", "main", "HOLE_LOG_HEADER",
     # where the firmware waits (the listing's labels), for tests and tools that watch it
     "POWER_UP", "MODE_SELECTION", "JOG_DATA_INPUT", "DRILL_MODE1_INITIALIZE", "INITIALIZE_DRILL_MODE",
     "DRILL_MODE1_INPUT", "BUSY",
 ]
+
+
+HOLE_LOG_HEADER = "hole,x_halfsteps,y_halfsteps,z_bottom_halfsteps,spindle"
+"""The header of ``--log FILE.csv`` (see :meth:`MaximusEmulator.hole_log`)."""
 
 
 @dataclass(frozen=True)
@@ -210,6 +219,8 @@ class MaximusEmulator(_Program, _Hardware, _Uart, AbstractContextManager):
         late_reply_s: real seconds added before every reply byte.
         axis_delay: initial value of the firmware's global ``axisDelay`` (the
             limit-switch back-off delay until a Jog packet sets it).
+        log_path: a CSV file to write one row per drilled hole to, as it is
+            drilled (see :meth:`hole_log`), or None.
     """
 
     def __init__(
@@ -221,6 +232,7 @@ class MaximusEmulator(_Program, _Hardware, _Uart, AbstractContextManager):
         travel_z_pulses: tuple[int, int] | None = None,
         late_reply_s: float = 0.0,
         axis_delay: int = 0,
+        log_path: str | os.PathLike | None = None,
     ) -> None:
         if speed is not None and not speed > 0:
             raise CamError(f"emulator speed must be > 0 or None, got {speed!r}")
@@ -245,6 +257,16 @@ class MaximusEmulator(_Program, _Hardware, _Uart, AbstractContextManager):
         # machine state
         self._ports = {PORT_B: POWER_UP_B, PORT_D: POWER_UP_D}  # first power-up writes set the idle levels
         self._pos = [0, 0, 0]
+        self._half_steps = [0, 0, 0]
+        self._holes: list[tuple[int, int, int, int, int]] = []
+        self._log_file = None
+        if log_path is not None:
+            try:
+                self._log_file = open(log_path, "w", encoding="ascii", newline="")
+            except OSError as exc:
+                raise CamError(f"--log {log_path}: cannot write there ({exc.strerror or exc})") from None
+            self._log_file.write(HOLE_LOG_HEADER + "\n")
+            self._log_file.flush()
         self._pressed = 0
         self._injected = 0
         self._inject_now: int | None = None
@@ -290,6 +312,9 @@ class MaximusEmulator(_Program, _Hardware, _Uart, AbstractContextManager):
                 except OSError:
                     pass
         self._master = self._slave = -1
+        if self._log_file is not None:
+            self._log_file.close()
+            self._log_file = None
 
     def reset(self) -> None:
         """Press the reset button: the firmware starts again at ``main()`` and prints its banner."""
@@ -369,6 +394,23 @@ class MaximusEmulator(_Program, _Hardware, _Uart, AbstractContextManager):
         with self._lock:
             return list(self._tx_rows)
 
+    def hole_log(self) -> list[tuple[int, int, int, int, int]]:
+        """One row per drilled hole, at the bottom of its stroke: ``(hole, x_halfsteps, y_halfsteps,
+        z_bottom_halfsteps, spindle)``.  Positions are motor half steps from the power-up position (a clock
+        pulse counts 1 with the axis's MODE high, 2 with it low), X right, Y up, Z height (negative below the
+        power-up height); ``spindle`` is RB2 (1: running).  ``hole`` counts from 1 since power-up."""
+        with self._lock:
+            return list(self._holes)
+
+    def _log_hole(self) -> None:
+        spindle_port, spindle_bit = SPINDLE_BIT
+        row = (len(self._holes) + 1, *self._half_steps, (self._ports[spindle_port] >> spindle_bit) & 1)
+        with self._lock:
+            self._holes.append(row)  # type: ignore[arg-type]
+        if self._log_file is not None:
+            self._log_file.write(",".join(str(v) for v in row) + "\n")
+            self._log_file.flush()
+
     def packet_log(self) -> list[tuple[str, bytes]]:
         """Every complete packet read: kind ``"mode"``, ``"jog"``, ``"offset"``, ``"init"`` or ``"drill"``."""
         with self._lock:
@@ -425,6 +467,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m cam.sim.maximus", description=main.__doc__)
     parser.add_argument("--speed", type=float, default=1.0,
                         help="simulated seconds per real second (0 = never sleep); default 1")
+    parser.add_argument("--log", metavar="FILE.csv", help=f"write one row per drilled hole: {HOLE_LOG_HEADER}")
     for axis in "xyz":
         parser.add_argument(f"--travel-{axis}", type=int, nargs=2, metavar=("LOW", "HIGH"),
                             help=f"{axis.upper()} travel ends in pulses from power-up (limit switches)")
@@ -434,6 +477,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         travel_x_pulses=_travel_arg(args.travel_x),
         travel_y_pulses=_travel_arg(args.travel_y),
         travel_z_pulses=_travel_arg(args.travel_z),
+        log_path=args.log,
     )
     print(emulator.device_path, flush=True)
     try:

@@ -538,7 +538,14 @@ async def _emergency_stop(st: _AppState, request: Request) -> dict[str, Any]:
 
 async def _jog(st: _AppState, request: Request) -> dict[str, Any]:
     body = await _body_json(request)
-    st.session.jog(body.get("axis", ""), body.get("steps", 0))
+    st.session.jog(body.get("axis", ""), body.get("steps", 0), body.get("unit", "steps"))
+    return st.session.state()
+
+
+async def _drill_z(st: _AppState, request: Request) -> dict[str, Any]:
+    """Z Drill Up / Down (``which``) of a MAXIMUS board from where the head stands."""
+    body = await _body_json(request)
+    st.session.set_drill_z(body.get("which", ""))
     return st.session.state()
 
 
@@ -686,6 +693,8 @@ def _routes(st: _AppState) -> list:
         Route("/api/estop", json_api(_emergency_stop), methods=post),
         Route("/api/jog", json_api(_jog), methods=post),
         Route("/api/origin", json_api(partial(_control, action=session.go_to_origin)), methods=post),
+        Route("/api/offset", json_api(partial(_control, action=session.set_offset)), methods=post),
+        Route("/api/drill-z", json_api(_drill_z), methods=post),
         Route("/api/answer", json_api(_answer), methods=post),
         Route("/api/state", _api(st, _state)),
         Route("/api/events", _api(st, _events)),

@@ -3,17 +3,22 @@
 
 The board object tracks where the firmware waits (``_MODE``, ``_JOG``, ``_OFFSET``, ``_INIT``,
 ``_DRILL``, or ``_UNKNOWN`` after an error); see the safety rules in :mod:`cam.drive.maximus.board`.
+
+Every reply is awaited for as long as the firmware needs to make the move it answers (computed from the
+packet by :mod:`.packets`), plus the time a limit switch would add, plus the margin ``timeout_s``: a long
+move never times out and a dead board is found soon after its move should have ended.
 """
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
-from typing import Callable, TypeVar
+from typing import Callable, Optional, TypeVar
 
 from ...errors import PortError
-from .packets import close_drill_packet, init_packet, jog_exit_packet, offset_packet
+from .packets import close_drill_packet, init_packet, jog_exit_packet, jog_packet, offset_packet, switch_time_ns
 from .protocol import (
-    ATOFFSETPOS, BYTE_NAMES, DRILLMODE1DONE, DRILLMODE1INITIALIZED, EMERGENCYSTOP, JOGMODEOFF, MACHINESTOPPED,
-    SWITCH_NAMES,
+    ATOFFSETPOS, BYTE_NAMES, DRILLMODE1DONE, DRILLMODE1INITIALIZED, EMERGENCYSTOP, JOGMODEDONE, JOGMODEOFF, JOGMODEON,
+    MACHINESTOPPED, OPENJOGMODE, SWITCH_NAMES,
 )
 
 T = TypeVar("T")
@@ -26,6 +31,10 @@ _INIT = "init packet"
 _DRILL = "drill data input"
 _UNKNOWN = "unknown"
 
+SLOWER_FACTOR = 1.1
+"""A real PIC is a little slower than its delays (each dly_100us call adds ~3 us, each pulse a few
+instructions: seed 000 Appendix 1, ``dly_100us``: "3us+(1.2us+d)*n"); a deadline allows 10 % more."""
+
 
 @dataclass
 class _Exchange:
@@ -36,6 +45,8 @@ class _Exchange:
     moving: bool  # the firmware has interrupts enabled: an emergency stop is honoured
     mode: str  # "jog" or "drill"
     next_state: str
+    move_ns: int = 0  # how long the firmware moves before it answers
+    moved: tuple[int, int, int] = (0, 0, 0)  # board-frame pulses (x, y, height) the move makes
 
 
 def _name(byte: int) -> str:
@@ -47,8 +58,26 @@ _CLOSE_DRILL = _Exchange("the closing drill packet", DRILLMODE1DONE, False, "dri
 
 class _Link:
     """Exchanges, the emergency stop and job bookkeeping; the board supplies ``_write``, ``_read_byte``,
-    ``_require``, ``timeout_s`` and the state attributes set in its ``__init__``."""
+    ``_require``, ``timeout_s``, ``maximus`` and the state attributes set in its ``__init__``."""
 
+    # -------------------------------------------------------------- deadlines and where the head is
+    def _deadline_s(self, ex: _Exchange) -> float:
+        """How long to wait for the reply to ``ex``: its move, a limit switch's debounce and back-off (when
+        interrupts are on during the move), the margin."""
+        switch_ns = switch_time_ns(self._back_off_delay()) if ex.moving else 0
+        return (ex.move_ns * SLOWER_FACTOR + switch_ns) / 1e9 + self.timeout_s
+
+    def _back_off_delay(self) -> int:
+        """The Delay of a limit switch's back-off: the firmware's ``axisDelay``, the last Jog packet's delay
+        (at least every delay this machine uses, since an earlier program may have jogged the board)."""
+        m = self.maximus
+        return max(self._last_jog_delay or 0, m.delay_x, m.delay_y, m.delay_z_up, m.delay_z_down)
+
+    def _where(self) -> str:
+        x, y, z = self.position_pulses
+        return f"last known position X={x} Y={y} Z={z} pulses (Y up, Z height) from where the board was opened"
+
+    # -------------------------------------------------------------- one packet and its reply
     def _exchange(self, packet: bytes, ex: _Exchange) -> None:
         """Send ``packet`` and check its reply; raises PortError on anything but ``ex.expected``."""
         with self._lock:
@@ -62,8 +91,11 @@ class _Link:
                 self._pending = None
                 self._reader_active = False
                 raise
+            self._sent_s = time.monotonic()
+            if ex.mode == "jog" and len(packet) == 4 and packet[0] >> 6:
+                self._last_jog_delay = packet[3]  # the firmware's axisDelay from now on
         try:
-            reply = self._read_byte()
+            reply = self._read_byte(self._deadline_s(ex))
         except BaseException:
             with self._lock:
                 self._reader_active = False  # the exchange stays pending: emergency_stop() reads its answer
@@ -78,7 +110,7 @@ class _Link:
             assert ex is not None
             return ex, estop
 
-    def _settle(self, reply: int | None) -> None:
+    def _settle(self, reply: Optional[int]) -> None:
         """Judge the reply to the pending exchange (called by whichever thread read it)."""
         ex, estop = self._take_pending()
         if estop:
@@ -90,45 +122,95 @@ class _Link:
                 self._stop_done.set()
             raise error
         if reply is None:
-            self._state = _UNKNOWN
-            raise PortError(f"MAXIMUS board did not answer within {self.timeout_s:g} s after {ex.what} "
-                            f"(expected {_name(ex.expected)}); nothing more sent")
+            raise self._lost(ex)
         if reply == ex.expected:
             self._state = ex.next_state
+            self.position_pulses = tuple(p + d for p, d in zip(self.position_pulses, ex.moved))  # type: ignore
             return
         if reply in SWITCH_NAMES:
+            where = self._where()
             self._after_stop(ex.mode)
             raise PortError(f"limit switch {SWITCH_NAMES[reply]} ({reply:#04x}) tripped during {ex.what}; "
-                            f"the board backed off and ended the job")
+                            f"the board backed off and ended the job ({where})")
         if reply == MACHINESTOPPED:
+            where = self._where()
             self._after_stop(ex.mode)
-            raise PortError(f"MAXIMUS board reported an emergency stop during {ex.what}; drivers disabled")
+            raise PortError(f"MAXIMUS board reported an emergency stop during {ex.what}; drivers disabled ({where})")
         self._state = _UNKNOWN
         raise PortError(f"MAXIMUS board answered {_name(reply)} instead of {_name(ex.expected)} after "
-                        f"{ex.what}; nothing more sent")
+                        f"{ex.what}; nothing more sent ({self._where()})")
 
+    def _lost(self, ex: _Exchange) -> PortError:
+        """No reply in time.  During a move the firmware honours the stop byte: send it, and if the board
+        answers it is stopped (spindle off, ready); otherwise nothing more is sent."""
+        waited = (f"MAXIMUS board did not answer within {self._deadline_s(ex):.1f} s after {ex.what} "
+                  f"(expected {_name(ex.expected)}")
+        waited += f"; its move takes {ex.move_ns / 1e9:.1f} s)" if ex.move_ns else ")"
+        where = self._where()
+        self._state = _UNKNOWN
+        if not ex.moving:
+            return PortError(f"{waited}; nothing more sent ({where}); reset the board")
+        try:
+            self._write(bytes([EMERGENCYSTOP]))
+            reply = self._read_byte(self.timeout_s)
+            if reply == ex.expected or reply in SWITCH_NAMES:  # late: the stop byte may have been read as data
+                reply = self._read_byte(min(0.3, self.timeout_s))
+        except PortError:
+            reply = None
+        if reply != MACHINESTOPPED:
+            return PortError(f"{waited}; sent the stop byte, no answer: switch the machine off and reset the "
+                             f"board ({where})")
+        try:
+            self._after_stop(ex.mode)
+        except PortError as exc:
+            return PortError(f"{waited}; the stop byte stopped it, then: {exc}")
+        return PortError(f"{waited}; stopped it with the stop byte (MACHINESTOPPED), spindle off ({where})")
+
+    # -------------------------------------------------------------- after a stop: spindle off, mode closed
     def _after_stop(self, mode: str) -> None:
-        """After MACHINESTOPPED or a switch byte: Drill mode is at mode selection, Jog mode still in Jog."""
-        if mode == "jog":
-            self._state = _JOG
+        """After MACHINESTOPPED or a switch byte: Drill mode is at mode selection, Jog mode still in Jog.
+
+        The firmware leaves the spindle pin (RB2) as it was (seed 000 Appendix 1: only a Jog packet sets
+        it), so a Jog packet of no pulses with the spindle bit clear switches it off; then Jog mode is left.
+        """
+        self._state = _JOG if mode == "jog" else _MODE
+        self._spindle_off_now()
+
+    def _spindle_off_now(self) -> None:
+        """From mode selection or Jog data input: the spindle off, back at mode selection."""
+        if self._spindle_on is not False:
+            if self._state == _MODE:
+                self._exchange(bytes([OPENJOGMODE]), _Exchange("OPENJOGMODE", JOGMODEON, False, "jog", _JOG))
+            m = self.maximus
+            self._exchange(jog_packet("z", 0, delay=m.delay_z_up, half_step=m.half_step_z, spindle=False),
+                           _Exchange("the spindle-off packet (no pulses)", JOGMODEDONE, True, "jog", _JOG))
+            self._spindle_on = False
+        if self._state == _JOG:
             self._leave_jog()
-        else:
-            self._state = _MODE
 
     def _leave_jog(self) -> None:
         """Send the Jog exit packet and expect JOGMODEOFF (no motion)."""
         self._exchange(jog_exit_packet(), _Exchange("the Jog exit packet", JOGMODEOFF, False, "jog", _MODE))
 
-    def _resolve_stop(self, ex: _Exchange, reply: int | None) -> PortError:
+    def _book_stopped_move(self, ex: _Exchange) -> None:
+        """A move of one axis stopped part of the way: book the pulses its time allowed (an estimate: the
+        firmware does not say how far it went)."""
+        if not ex.move_ns or sum(1 for d in ex.moved if d) != 1:
+            return
+        share = min(1.0, (time.monotonic() - self._sent_s) * 1e9 / ex.move_ns)
+        self.position_pulses = tuple(p + int(round(d * share)) for p, d in zip(self.position_pulses, ex.moved))  # type: ignore
+
+    def _resolve_stop(self, ex: _Exchange, reply: Optional[int]) -> PortError:
         """The reply to a move during which EMERGENCYSTOP was sent: the error the job ends with."""
         if reply == MACHINESTOPPED:
+            self._book_stopped_move(ex)
             self._after_stop(ex.mode)
-            return PortError(f"emergency stop during {ex.what}: the board answered MACHINESTOPPED, "
-                             f"drivers disabled")
+            return PortError(f"emergency stop during {ex.what}: the board answered MACHINESTOPPED, drivers "
+                             f"disabled, spindle off")
         if reply is None:
             self._state = _UNKNOWN
             self._stop_error = PortError(f"emergency stop sent during {ex.what} but the board did not "
-                                         f"answer within {self.timeout_s:g} s")
+                                         f"answer within {self._deadline_s(ex):.1f} s")
             return self._stop_error
         if reply == ex.expected or reply in SWITCH_NAMES:
             # The move ended as the stop byte arrived.  If the UART ISR still caught it,
@@ -137,7 +219,7 @@ class _Link:
             if second == MACHINESTOPPED:
                 self._after_stop(ex.mode)
                 return PortError(f"emergency stop at the end of {ex.what}: the board answered "
-                                 f"MACHINESTOPPED, drivers disabled")
+                                 f"MACHINESTOPPED, drivers disabled, spindle off")
             self._state = _UNKNOWN
             self._stop_error = PortError(f"emergency stop reached the board after {ex.what} had ended; it "
                                          f"read the stop byte as packet data and is out of step: reset it")
@@ -153,12 +235,12 @@ class _Link:
         During a move (the firmware has interrupts enabled) this sends
         EMERGENCYSTOP (0x80) and waits for MACHINESTOPPED: the firmware cuts
         the drivers and returns to mode selection (Drill) or Jog data input
-        (Jog; the exit packet follows).  Between moves the firmware would
+        (Jog); the spindle is then switched off and Jog mode left, so the board
+        is ready for the next command.  Between moves the firmware would
         read 0x80 as packet data, so nothing is sent: the running job stops
-        before its next packet and closes Drill mode with the CDF-clear
-        packet, which moves nothing.  (A stop between the offset move and the
-        Init move leaves Z ``depth_steps`` above the start; the Init move
-        itself cannot be stopped -- the listing runs it with interrupts off.)
+        before its next packet, closes its mode with packets that move nothing
+        and switches the spindle off.  (The Init move cannot be stopped: the
+        listing runs it with interrupts off.)
 
         Returns:
             True if a move was stopped (MACHINESTOPPED received), False if no
@@ -188,13 +270,13 @@ class _Link:
                         self._settle(self._read_byte())  # the answer to a packet that moves nothing stoppable
                     except PortError:
                         pass
-                if self._state in (_OFFSET, _INIT, _DRILL, _JOG):
+                if self._state in (_OFFSET, _INIT, _DRILL, _JOG, _MODE):
                     self._unwind()
             return False
         if reader:
-            if not self._stop_done.wait(self.timeout_s + 1.0):
-                raise PortError("emergency stop sent; no answer was read within "
-                                f"{self.timeout_s + 1.0:g} s")
+            wait_s = 4 * self.timeout_s + 1.0  # the answer, then the spindle-off and exit packets
+            if not self._stop_done.wait(wait_s):
+                raise PortError(f"emergency stop sent; no answer was read within {wait_s:g} s")
         else:
             # nobody is reading (the job was interrupted): read the answer here
             try:
@@ -206,7 +288,7 @@ class _Link:
         return True
 
     def _unwind(self) -> None:
-        """From a waiting firmware state, get back to mode selection without moving anything."""
+        """From a waiting firmware state, get back to mode selection without moving anything; spindle off."""
         if self._state == _OFFSET:
             self._exchange(offset_packet(0, 0, 0),
                            _Exchange("the closing offset packet", ATOFFSETPOS, True, "drill", _INIT))
@@ -215,8 +297,8 @@ class _Link:
                            _Exchange("the closing init packet", DRILLMODE1INITIALIZED, False, "drill", _DRILL))
         if self._state == _DRILL:
             self._exchange(close_drill_packet(), _CLOSE_DRILL)
-        if self._state == _JOG:
-            self._leave_jog()
+        if self._state in (_JOG, _MODE):
+            self._spindle_off_now()
 
     def _check_stop(self, before: str) -> None:
         """Between moves: if a stop was asked for, close the mode cleanly and end the job."""
@@ -224,7 +306,8 @@ class _Link:
             if not self._stop_requested:
                 return
         self._unwind()
-        raise PortError(f"emergency stop before {before}: no move was running; job closed, nothing more sent")
+        raise PortError(f"emergency stop before {before}: no move was running; job closed, spindle off, "
+                        f"nothing more sent")
 
     # ------------------------------------------------------------------ job bookkeeping
     def _begin_job(self) -> None:
@@ -239,13 +322,13 @@ class _Link:
             self._job_active = False
 
     def _clean_up_after(self) -> None:
-        """An exception left a job: if the firmware waits between moves, close its mode quietly.
+        """An exception left a job: if the firmware waits between moves, close its mode quietly (spindle off).
 
         During a move (e.g. Ctrl-C while waiting for a reply) nothing is sent:
         :meth:`emergency_stop` deals with the move.
         """
         with self._lock:
-            if self._pending is not None or self._state not in (_OFFSET, _INIT, _DRILL, _JOG):
+            if self._pending is not None or self._state not in (_OFFSET, _INIT, _DRILL, _JOG, _MODE):
                 return
         try:
             self._unwind()

@@ -6,50 +6,61 @@ it) at 115200 baud, 8N1.  Packets are built by pure functions
 (:func:`jog_packet`, :func:`offset_packet`, :func:`init_packet`,
 :func:`drill_packet`, ... in :mod:`.packets`, also importable from here); the board object only sends them and checks the
 one-byte replies.  All step fields are L297 clock pulses (half steps when a
-mode bit is set), 16-bit, low byte first.
+mode bit is set), 16-bit, low byte first.  The machine's settings (Delay bytes,
+step modes, inverted axes, the reply margin) are a :class:`~cam.settings.Maximus`.
 
-Directions: X and Y steps are positive when the firmware's DIR bit is 1
-(away from the HOME switch); Z is height, positive up (DIR_Z = 1 is "Z
-down" in the listing).
+Directions (the board's frame): X and Y steps are positive when the
+firmware's DIR bit is 1 (the PC program's "X right" and "Y up", away from the
+HOME switches); Z is height, positive up (DIR_Z = 1 is "Z down" in the
+listing).  `cam`'s machine frame has y toward the operator and z deeper:
+:func:`to_board` and :func:`from_board` convert.
 
 Open with a device path or a URL: ``MaximusBoard("/dev/ttyUSB0")`` or
 :func:`open_maximus` ``("maximus:/dev/ttyUSB0")``.
 
 Safety rules kept by every method:
 
-* every read has a timeout (``timeout_s``); a missing reply is a
-  :class:`~cam.errors.PortError`;
-* after a missing or unexpected reply nothing more is sent: the firmware's
-  state is unknown, the board is marked out of step and every later call
-  fails until :meth:`MaximusBoard.handshake` succeeds again (after a reset);
+* every reply is awaited for as long as the move it answers takes at the
+  board's Delay settings, plus what a limit switch would add, plus a margin
+  (``timeout_s``): a long move never times out, a dead board is found soon;
+* a missing reply during a move is answered with the stop byte: if the board
+  stops (MACHINESTOPPED) the spindle is switched off and it is ready again;
+  after any other missing or unexpected reply nothing more is sent: the
+  firmware's state is unknown, the board is marked out of step and every
+  later call fails until :meth:`MaximusBoard.handshake` succeeds again (after
+  a reset);
 * a limit switch or an emergency stop ends the job with a one-line
-  ``PortError`` naming the hole index; the firmware is then back at mode
-  selection (Drill mode) or is taken out of Jog mode with the exit packet.
+  ``PortError`` naming the hole index and the last known position; the
+  spindle is switched off and the firmware is back at mode selection;
+* the spindle (RB2) runs only while Drill mode drills; it is off for tool
+  changes, jogs, travel, at the end and after every stop.
 """
 from __future__ import annotations
 
 import threading
 import time
 from contextlib import AbstractContextManager
-from typing import Any, Callable, Sequence
+from dataclasses import dataclass, replace
+from typing import Any, Callable, Optional, Sequence
 
 import numpy as np
 import serial
 
-from ...errors import PortError
-from ...settings import DEFAULT_SETTINGS, MachineSettings, Travel
+from ...errors import PlanError, PortError, SettingsError
+from ...settings import DEFAULT_SETTINGS, MachineSettings, Maximus, Travel
 from ._link import _CLOSE_DRILL, _DRILL, _INIT, _JOG, _MODE, _OFFSET, _UNKNOWN, _Exchange, _Link
 from .packets import (
-    DEFAULT_DELAY, MAX_FIELD, _DrillJob, _drill_job, close_drill_packet, drill_moves, drill_packet, init_packet,
-    jog_exit_packet, jog_packet, offset_packet, start_drill_packet,
+    DEFAULT_DELAY, MAX_FIELD, close_drill_packet, drill_moves, drill_packet, drill_time_ns, init_packet,
+    init_time_ns, jog_exit_packet, jog_packet, jog_time_ns, offset_packet, offset_time_ns, start_drill_packet,
 )
 from .protocol import (
-    ATOFFSETPOS, BANNER, BAUD_RATE, DRILLMODE1INITIALIZED, DRILLMODE1ON, ISMACHINEREADY,
+    ATOFFSETPOS, BANNER, DELAY_UNIT_NS, DRILLMODE1INITIALIZED, DRILLMODE1ON, ISMACHINEREADY,
     JOGMODEDONE, JOGMODEON, MACHINEREADY, ONEHOLEDRILLED, OPENDRILLMODE1, OPENJOGMODE,
 )
 
 __all__ = [
     "MaximusBoard", "open_maximus", "URL_PREFIX", "MAXIMUS_SETTINGS", "maximus_holes", "drill_arguments",
+    "board_settings", "with_delays", "maximus_port", "to_board", "from_board", "drill_stroke", "drill_job",
     "jog_packet", "jog_exit_packet", "offset_packet", "init_packet", "start_drill_packet",
     "drill_packet", "close_drill_packet", "drill_moves",
 ]
@@ -62,18 +73,76 @@ MAXIMUS_SETTINGS = DEFAULT_SETTINGS.replace(
     mm_per_step_xy=0.004375,
     mm_per_step_z=0.004375,
     half_step=True,
-    # the protocol's step fields are 16 bits (seed 000 Appendix 1, make16): no move beyond 65535 pulses
-    travel=Travel(x_min_steps=0, x_max_steps=MAX_FIELD, y_min_steps=0, y_max_steps=MAX_FIELD,
+    # the board moves at constant speed, a pulse every 2 * Delay * 100 us (seed 003): Delay 10 = 2 ms
+    ramp="constant",
+    delay_xy_ms=2.0,
+    delay_z_ms=2.0,
+    # the protocol's step fields are 16 bits (seed 000 Appendix 1, make16): no move beyond 65535 pulses; the
+    # board has no travel of its own but its limit switches, so a job may reach that far from the origin either
+    # way (holes measured from the board origin, as the PC program measures them, lie at y <= 0: Y up)
+    travel=Travel(x_min_steps=-MAX_FIELD, x_max_steps=MAX_FIELD, y_min_steps=-MAX_FIELD, y_max_steps=MAX_FIELD,
                   z_min_steps=-MAX_FIELD, z_max_steps=MAX_FIELD),
 )
 """The MAXIMUS machine: one "step" is one L297 clock pulse (a half step)."""
 
+_DELAY_MS = 2 * DELAY_UNIT_NS / 1e6
+"""The step period of one Delay unit in ms: a pulse lasts 2 * Delay * 100 us (seed 003)."""
 
-def drill_arguments(drill_plan: Any, settings: MachineSettings = MAXIMUS_SETTINGS) -> dict[str, Any]:
-    """The :meth:`MaximusBoard.drill` arguments of a :class:`~cam.job.drill.DrillPlan` planned with ``settings``:
-    holes in the board's pulses (:func:`maximus_holes`), depth, tool-change prompts and the step mode."""
-    return {"holes_steps": maximus_holes(drill_plan.holes_steps), "depth_steps": drill_plan.depth_steps,
-            "tool_changes": drill_plan.tool_changes, "half_step": settings.half_step}
+
+def board_settings(settings: MachineSettings) -> MachineSettings:
+    """``settings`` with the step periods and ramp that the board's Delay bytes give, so that planned times
+    (progress, reports) are the board's: constant speed, ``2 * Delay * 0.1 ms`` per pulse."""
+    m = settings.maximus
+    return settings.replace(ramp="constant", delay_xy_ms=round(_DELAY_MS * max(m.delay_x, m.delay_y), 6),
+                            delay_z_ms=round(_DELAY_MS * max(m.delay_z_up, m.delay_z_down), 6))
+
+
+def with_delays(settings: MachineSettings, xy_ms: float, z_ms: float) -> MachineSettings:
+    """``--delay XY_MS,Z_MS`` on the board: the step periods set its Delay bytes (Delay = period / 0.2 ms,
+    seed 003 "Step frekansı = 1 / (2 * Delay * 100 us)"): X and Y from ``xy_ms``, Z up and down from ``z_ms``.
+
+    >>> m = with_delays(MAXIMUS_SETTINGS, 1.0, 4.0).maximus
+    >>> m.delay_x, m.delay_y, m.delay_z_up, m.delay_z_down
+    (5, 5, 20, 20)
+
+    Raises:
+        SettingsError: a period that no Delay byte 1..255 gives (0.2 .. 51 ms).
+    """
+    delays = []
+    for what, ms in (("XY", xy_ms), ("Z", z_ms)):
+        d = int(round(ms / _DELAY_MS))
+        if not 1 <= d <= 255:
+            raise SettingsError(f"--delay {what} {ms:g} ms: the MAXIMUS board's step period is 2 x Delay x 0.1 ms "
+                                f"with Delay 1..255, so {_DELAY_MS:g}..{255 * _DELAY_MS:g} ms")
+        delays.append(d)
+    m = replace(settings.maximus, delay_x=delays[0], delay_y=delays[0], delay_z_up=delays[1], delay_z_down=delays[1])
+    return board_settings(settings.replace(maximus=m))
+
+
+def maximus_port(name: str, settings: MachineSettings) -> str:
+    """The port name to open: ``"maximus"`` alone names the machine settings' serial port."""
+    if name != URL_PREFIX.rstrip(":"):
+        return name
+    if not settings.maximus.serial_port:
+        raise PortError("--port maximus needs a device: maximus:/dev/ttyUSB0, or serial_port in the [maximus] "
+                        "table of the machine file")
+    return URL_PREFIX + settings.maximus.serial_port
+
+
+def to_board(moves_steps: np.ndarray) -> np.ndarray:
+    """``(N, 3)`` moves in `cam`'s machine frame (y toward the operator, z deeper) in the board's
+    (y up, z height): y and z change sign.
+
+    >>> to_board(np.array([[1, 2, 3]])).tolist()
+    [[1, -2, -3]]
+    """
+    out = np.asarray(moves_steps, np.int64).reshape(-1, 3).copy()
+    out[:, 1:] = -out[:, 1:]
+    return out
+
+
+from_board = to_board
+"""The board's frame back to `cam`'s (the same sign change)."""
 
 
 def maximus_holes(holes_steps: np.ndarray) -> np.ndarray:
@@ -88,9 +157,90 @@ def maximus_holes(holes_steps: np.ndarray) -> np.ndarray:
     return xy
 
 
-def open_maximus(url: str, timeout_s: float = 2.0) -> "MaximusBoard":
+def drill_stroke(drill_plan: Any, settings: MachineSettings) -> tuple[int, int]:
+    """(Z Drill Up, Z Drill Down) in pulses below the board origin for a drill plan: the machine settings'
+    when they set them, else the origin is the travel height (Z up 0) and a hole goes down the travel height
+    and the cut depth."""
+    m = settings.maximus
+    if m.drill_stroke_set:
+        return m.drill_z_up_steps, m.drill_z_down_steps
+    return 0, int(drill_plan.safe_steps) + int(drill_plan.depth_steps)
+
+
+def drill_arguments(drill_plan: Any, settings: MachineSettings = MAXIMUS_SETTINGS) -> dict[str, Any]:
+    """The :meth:`MaximusBoard.drill` arguments of a :class:`~cam.job.drill.DrillPlan` planned with ``settings``:
+    holes in the board's pulses (:func:`maximus_holes`), the Z stroke (:func:`drill_stroke`), tool-change
+    prompts and the spindle."""
+    z_up, z_down = drill_stroke(drill_plan, settings)
+    return {"holes_steps": maximus_holes(drill_plan.holes_steps), "z_up_steps": z_up, "z_down_steps": z_down,
+            "tool_changes": drill_plan.tool_changes, "spindle": settings.maximus.spindle}
+
+
+def open_maximus(url: str, settings: Optional[Maximus] = None, timeout_s: Optional[float] = None) -> "MaximusBoard":
     """Open ``maximus:/dev/ttyUSB0`` (or a bare device path) as a :class:`MaximusBoard`."""
-    return MaximusBoard(url, timeout_s=timeout_s)
+    return MaximusBoard(url, settings, timeout_s=timeout_s)
+
+
+@dataclass(frozen=True)
+class _Group:
+    """The holes of one tool (or one run of a tool in file order), drilled in one Drill mode session."""
+
+    first: int  # index of its first hole
+    notes: list[str]  # tool-change prompts before it
+    packets: list[bytes]  # one Drill Data Packet per hole
+    moves: np.ndarray  # (n, 2) int64 board-frame dx, dy of each
+
+
+@dataclass(frozen=True)
+class _DrillJob:
+    """The packets of one drill job (see :meth:`MaximusBoard.drill`), checked before anything is sent."""
+
+    offset: bytes  # Offset Positioning Packet: Z to where the Init descent ends at Z up
+    init: bytes  # Initialize Drill Mode Packet: both fields Z down - Z up
+    descent_steps: int  # pulses the Init packet lowers Z
+    offset_height_steps: int  # board-frame height move of the offset packet (+ up)
+    z_up_steps: int
+    groups: list[_Group]
+    back_steps: np.ndarray  # (2,) int64 x, y back to the start after the last hole
+
+
+def drill_job(holes_steps: np.ndarray, z_up_steps: int, z_down_steps: int, tool_changes: Sequence[tuple[int, str]] = (),
+              settings: Optional[Maximus] = None) -> _DrillJob:
+    """The packets of a drill job (see :meth:`MaximusBoard.drill`), checked: nothing is sent.
+
+    Raises:
+        PlanError: a move longer than the 16-bit fields, a bad Z stroke or tool change, an inverted Z.
+    """
+    m = settings or Maximus()
+    if m.invert_z:
+        raise PlanError("invert_z cannot apply in Drill mode: the firmware lowers Z with DIR_Z = 1 "
+                        "(seed 000 Appendix 1); wire the Z motor the other way round instead")
+    moves = drill_moves(holes_steps)
+    if not 0 <= z_up_steps < z_down_steps <= MAX_FIELD:
+        raise PlanError(f"Z drill up {z_up_steps} and down {z_down_steps} pulses below the start: need "
+                        f"0 <= up < down <= {MAX_FIELD}")
+    stroke_steps = z_down_steps - z_up_steps
+    offset_height_steps = stroke_steps - z_up_steps  # the Init descent (the stroke) then ends at -z_up_steps
+    if abs(offset_height_steps) > MAX_FIELD:
+        raise PlanError(f"Z drill up {z_up_steps} pulses is too far below the start for Z down {z_down_steps}")
+    changes: dict[int, list[str]] = {}
+    for index, message in tool_changes:
+        if not 0 <= int(index) < len(moves):
+            raise PlanError(f"tool change before hole {index}: there are {len(moves)} holes")
+        changes.setdefault(int(index), []).append(str(message))
+    modes = (m.half_step_x, m.half_step_y, m.half_step_z)
+    offset = offset_packet(0, 0, offset_height_steps, delay_x=m.delay_x, delay_y=m.delay_y, delay_z=m.delay_z_up,
+                           half_step=modes, invert=(m.invert_x, m.invert_y, m.invert_z))
+    init = init_packet(stroke_steps, stroke_steps, delay_x=m.delay_x, delay_y=m.delay_y, delay_z_up=m.delay_z_up,
+                       delay_z_down=m.delay_z_down, half_step=modes)
+    starts = sorted({0, *changes})
+    groups = []
+    for a, b in zip(starts, starts[1:] + [len(moves)]):
+        part = moves[a:b]
+        groups.append(_Group(a, changes.get(a, []), [drill_packet(int(dx), int(dy), invert_x=m.invert_x,
+                                                                  invert_y=m.invert_y) for dx, dy in part], part))
+    back = -moves.sum(axis=0) if len(moves) else np.zeros(2, np.int64)
+    return _DrillJob(offset, init, stroke_steps, offset_height_steps, z_up_steps, groups, back)
 
 
 class MaximusBoard(_Link, AbstractContextManager):
@@ -98,22 +248,30 @@ class MaximusBoard(_Link, AbstractContextManager):
 
     Args:
         url_or_device: ``"maximus:/dev/ttyUSB0"`` or ``"/dev/ttyUSB0"``.
-        timeout_s: the longest wait for any reply; a move must finish within it.
+        settings: the machine's :class:`~cam.settings.Maximus` settings (default: the PC program's defaults).
+        timeout_s: the margin: how long after its move should have ended a reply may come (default
+            ``settings.reply_margin_s``); also the wait for replies that end no move.
         handshake: do the ISMACHINEREADY / MACHINEREADY handshake now.
 
     Attributes:
         banner: ``"MAXIMUS_V1.0"`` if the power-up banner was seen, else None.
+        position_pulses: ``(x, y, z)`` board-frame pulses (y up, z height) from where the board was opened, as
+            far as confirmed replies tell.
     """
 
-    def __init__(self, url_or_device: str, timeout_s: float = 2.0, *, handshake: bool = True) -> None:
+    def __init__(self, url_or_device: str, settings: Optional[Maximus] = None, *, timeout_s: Optional[float] = None,
+                 handshake: bool = True) -> None:
         device = url_or_device[len(URL_PREFIX):] if url_or_device.startswith(URL_PREFIX) else url_or_device
         if not device:
             raise PortError(f"no device in {url_or_device!r}; use maximus:/dev/ttyUSB0")
+        self.maximus = settings or Maximus()
+        timeout_s = self.maximus.reply_margin_s if timeout_s is None else timeout_s
         if not timeout_s > 0:
             raise PortError(f"timeout_s must be > 0, got {timeout_s!r}")
         self.device = device
         self.timeout_s = float(timeout_s)
         self.banner: str | None = None
+        self.position_pulses: tuple[int, int, int] = (0, 0, 0)
         self._lock = threading.RLock()
         self._state = _UNKNOWN
         self._pending: _Exchange | None = None
@@ -123,9 +281,12 @@ class MaximusBoard(_Link, AbstractContextManager):
         self._estop_sent = False
         self._stop_done = threading.Event()
         self._stop_error: PortError | None = None
+        self._spindle_on: Optional[bool] = None  # unknown until a Jog packet sets it
+        self._last_jog_delay: Optional[int] = None
+        self._sent_s = time.monotonic()
         try:
             # seed 000 Appendix 1: "#use rs232(baud=115200, xmit=PIN_C6, rcv=PIN_C7)"; CCS default 8N1
-            self._ser = serial.Serial(device, baudrate=BAUD_RATE, bytesize=8, parity="N", stopbits=1,
+            self._ser = serial.Serial(device, baudrate=self.maximus.baud, bytesize=8, parity="N", stopbits=1,
                                       timeout=self.timeout_s, write_timeout=self.timeout_s)
         except (serial.SerialException, OSError, ValueError) as exc:
             raise PortError(f"cannot open MAXIMUS port {device}: {exc}") from exc
@@ -148,6 +309,11 @@ class MaximusBoard(_Link, AbstractContextManager):
     def in_step(self) -> bool:
         """False after an error that left the firmware in an unknown state."""
         return self._state != _UNKNOWN
+
+    @property
+    def spindle_on(self) -> Optional[bool]:
+        """Whether the spindle runs, as the host last set it (None: not known yet)."""
+        return self._spindle_on
 
     def _write(self, data: bytes) -> None:
         try:
@@ -216,79 +382,165 @@ class MaximusBoard(_Link, AbstractContextManager):
             self._state = _MODE
             self._stop_requested = False
 
-    # ------------------------------------------------------------------ jog
-    def jog(self, axis: str, steps: int, *, delay: int = DEFAULT_DELAY, half_step: bool = False,
-            spindle: bool = False) -> None:
-        """Move one axis by ``steps`` pulses in Jog mode (x, y: + away from HOME; z: + up).
+    # ------------------------------------------------------------------ packets of this machine
+    def _jog(self, axis: str, pulses: int, *, spindle: bool = False, delay: Optional[int] = None) -> tuple[str, bytes]:
+        """A Jog Data Packet of this machine (board frame; Z at the Z-up delay, as the PC program's Jog form)."""
+        m = self.maximus
+        i = "xyz".index(axis)
+        if delay is None:
+            # seed 000 Appendix 2, FormJog::FormActivate: "Initial Jog Delays are Machine Delays", Z at machineDelayZup
+            delay = (m.delay_x, m.delay_y, m.delay_z_up)[i]
+        packet = jog_packet(axis, pulses, delay=delay, half_step=(m.half_step_x, m.half_step_y, m.half_step_z)[i],
+                            spindle=spindle, invert=(m.invert_x, m.invert_y, m.invert_z)[i])
+        return f"jog {axis} {int(pulses)}", packet
+
+    def _jog_exchange(self, what: str, packet: bytes, axis: str, pulses: int) -> None:
+        moved = [0, 0, 0]
+        moved["xyz".index(axis)] = int(pulses)
+        self._exchange(packet, _Exchange(what, JOGMODEDONE, True, "jog", _JOG, jog_time_ns(packet),
+                                         tuple(moved)))  # type: ignore[arg-type]
+        self._spindle_on = bool(packet[0] & 1)
+
+    def _jog_session(self, jogs: Sequence[tuple[str, int]], *, spindle: bool = False,
+                     delay: Optional[int] = None) -> None:
+        """OPENJOGMODE, one Jog Data Packet per (axis, pulses) (longer ones in 16-bit pieces), the exit packet."""
+        self._exchange(bytes([OPENJOGMODE]), _Exchange("OPENJOGMODE", JOGMODEON, False, "jog", _JOG))
+        for axis, pulses in jogs:
+            pieces = [pulses] if abs(pulses) <= MAX_FIELD else _pieces(pulses)
+            for piece in pieces:
+                what, packet = self._jog(axis, piece, spindle=spindle, delay=delay)
+                self._check_stop(what)
+                self._jog_exchange(what, packet, axis, piece)
+        self._leave_jog()
+
+    # ------------------------------------------------------------------ jog, spindle, travel
+    def jog(self, axis: str, steps: int, *, delay: Optional[int] = None, spindle: bool = False) -> None:
+        """Move one axis by ``steps`` pulses in Jog mode (board frame: x, y + away from HOME; z + up).
 
         Opens Jog mode (OPENJOGMODE / JOGMODEON), sends one Jog Data Packet,
         waits for JOGMODEDONE and leaves Jog mode (four zero bytes /
-        JOGMODEOFF).  ``delay`` is the half period in units of 100 us.
+        JOGMODEOFF).  ``delay``: the Delay byte, default the axis's (Z: the Z-up delay).
         """
-        self._run_jogs([(axis, steps)], delay=delay, half_step=half_step, spindle=spindle)
+        key = str(axis).lower()
+        if key not in ("x", "y", "z"):
+            raise PlanError(f"axis must be 'x', 'y' or 'z', got {axis!r}")
+        for piece in _pieces(int(steps)) if abs(int(steps)) > MAX_FIELD else [int(steps)]:
+            self._jog(key, piece, delay=delay, spindle=spindle)  # a bad delay: nothing sent
+        self._run_job(lambda: self._jog_session([(key, int(steps))], spindle=spindle, delay=delay))
 
-    def _run_jogs(self, moves: Sequence[tuple[str, int]], *, delay: int, half_step: bool = False,
-                  spindle: bool = False) -> None:
-        packets = [(f"jog {a} {int(s)}", jog_packet(a, s, delay=delay, half_step=half_step, spindle=spindle))
-                   for a, s in moves]
-        self._run_job(lambda: self._jog_session(packets))
+    def set_spindle(self, on: bool) -> None:
+        """Switch the spindle (RB2) on or off: a Jog packet of no pulses with the spindle bit (seed 003, Jog
+        configuration "Bit0-Spindle: ... [0-Matkap OFF | 1-Matkap ON]")."""
+        self._run_job(lambda: self._jog_session([("z", 0)], spindle=bool(on)))
 
-    def _jog_session(self, packets: Sequence[tuple[str, bytes]]) -> None:
-        """OPENJOGMODE, the Jog Data Packets one by one, then the exit packet (job already begun)."""
-        self._exchange(bytes([OPENJOGMODE]), _Exchange("OPENJOGMODE", JOGMODEON, False, "jog", _JOG))
-        for what, packet in packets:
-            self._check_stop(what)
-            self._exchange(packet, _Exchange(what, JOGMODEDONE, True, "jog", _JOG))
-        self._leave_jog()
+    def move(self, dx_steps: int, dy_steps: int, dz_steps: int) -> None:
+        """Travel by ``(dx_steps, dy_steps, dz_steps)`` board-frame pulses (z: height), spindle off: up first,
+        then X and Y in one move, then down.
+
+        A move of one axis is a Jog packet.  X and Y together are one Drill Data Packet: the only packet that
+        steps both at once (seed 000 Appendix 1, constspeed_xy); it runs in a Drill mode pass whose Offset
+        and Init packets move nothing (Init fields 0, so the hole stroke is 0 pulses).
+        """
+        self._run_job(lambda: self._move_session(int(dx_steps), int(dy_steps), int(dz_steps)))
+
+    def travel(self, moves: np.ndarray) -> None:
+        """Several :meth:`move` s one after the other, as one job: ``(N, 3)`` board-frame pulses (z: height)."""
+        rows = [tuple(int(v) for v in row) for row in np.asarray(moves, np.int64).reshape(-1, 3)]
+        for dx, dy, _ in rows:
+            if max(abs(dx), abs(dy)) > MAX_FIELD and dx and dy:
+                raise PlanError(f"an XY move of {dx}, {dy} pulses is longer than {MAX_FIELD} pulses")
+
+        def session() -> None:
+            for i, (dx, dy, dz) in enumerate(rows):
+                if i:
+                    self._check_stop(f"move {i + 1} of {len(rows)}")
+                self._move_session(dx, dy, dz)
+
+        self._run_job(session)
+
+    def _move_session(self, dx_steps: int, dy_steps: int, dz_steps: int) -> None:
+        """One move (board frame, z height): Z up first, X and Y together, Z down last."""
+        both = dx_steps != 0 and dy_steps != 0
+        first = [("z", dz_steps)] if dz_steps > 0 else []
+        last = [("z", dz_steps)] if dz_steps < 0 else []
+        if not both:
+            middle = [("x", dx_steps)] if dx_steps else [("y", dy_steps)] if dy_steps else []
+            jogs = first + middle + last
+            if jogs:
+                self._jog_session(jogs)
+            return
+        if first or self._spindle_on is not False:
+            self._jog_session(first or [("z", 0)])  # spindle off (a Jog packet sets it), the head up
+        self._check_stop("the XY move")
+        self._xy_pass(dx_steps, dy_steps)
+        if last:
+            self._check_stop("lowering the head")
+            self._jog_session(last)
+
+    def _xy_pass(self, dx_steps: int, dy_steps: int) -> None:
+        """One Drill mode pass whose only motion is the XY move of one Drill Data Packet."""
+        m = self.maximus
+        if max(abs(dx_steps), abs(dy_steps)) > MAX_FIELD:
+            raise PlanError(f"an XY move of {dx_steps}, {dy_steps} pulses is longer than {MAX_FIELD} pulses")
+        offset = offset_packet(0, 0, 0, delay_x=m.delay_x, delay_y=m.delay_y, delay_z=m.delay_z_up,
+                               half_step=(m.half_step_x, m.half_step_y, m.half_step_z))
+        init = init_packet(0, 0, delay_x=m.delay_x, delay_y=m.delay_y, delay_z_up=m.delay_z_up,
+                           delay_z_down=m.delay_z_down, half_step=(m.half_step_x, m.half_step_y, m.half_step_z))
+        self._exchange(bytes([OPENDRILLMODE1]), _Exchange("OPENDRILLMODE1", DRILLMODE1ON, False, "drill", _OFFSET))
+        self._exchange(offset, _Exchange("the offset packet of the XY move", ATOFFSETPOS, True, "drill", _INIT))
+        self._exchange(init, _Exchange("the init packet of the XY move", DRILLMODE1INITIALIZED, False, "drill",
+                                       _DRILL))
+        self._exchange(start_drill_packet(), _Exchange("the start (SDF) packet", ONEHOLEDRILLED, False, "drill",
+                                                       _DRILL))
+        packet = drill_packet(dx_steps, dy_steps, invert_x=m.invert_x, invert_y=m.invert_y)
+        self._exchange(packet, _Exchange(f"the XY move {dx_steps}, {dy_steps}", ONEHOLEDRILLED, True, "drill",
+                                         _DRILL, drill_time_ns(packet, init), (dx_steps, dy_steps, 0)))
+        self._exchange(close_drill_packet(), _CLOSE_DRILL)
 
     # ------------------------------------------------------------------ drill
     def drill(
         self,
         holes_steps: np.ndarray,
         *,
-        depth_steps: int,
+        z_down_steps: int,
+        z_up_steps: int = 0,
         tool_changes: Sequence[tuple[int, str]] = (),
         on_tool_change: Callable[[int, str], None] | None = None,
-        delay: int = DEFAULT_DELAY,
-        delay_z_down: int | None = None,
-        delay_z_up: int | None = None,
-        half_step: bool = False,
+        spindle: bool = True,
         return_to_start: bool = True,
         on_hole: Callable[[int], None] | None = None,
+        before_hole: Callable[[int], None] | None = None,
     ) -> int:
-        """Drill every hole in Drill mode, to the same depth, and bring the head back to the start.
+        """Drill every hole in Drill mode, Z Drill Up / Down as the PC program's settings, and come back.
 
-        The firmware, as listed, lowers Z by the Init packet's first field
-        once when the packet arrives, and then for every hole lowers Z by the
-        second field and raises it by the first.  The PC program of
-        Appendix 2 sends (Zup, Zdown - Zup), which drifts by Zdown - 2 Zup per
-        hole.  This host sends both fields equal to ``depth_steps`` so every
-        hole nets zero Z, and first raises Z by ``depth_steps`` in the Offset
-        Positioning Packet, so the Init packet's descent brings the tip back to
-        the start height instead of plunging at the start.  Every hole then
-        goes from the start height down ``depth_steps`` and back: the start
-        height is the travel height (put the tip just above the board).
+        Z up and Z down are pulses below the start height (the board origin).  The firmware, as listed,
+        lowers Z by the Init packet's first field once when the packet arrives, and then for every hole
+        lowers Z by the second field and raises it by the first; the PC program of Appendix 2 sends (Zup,
+        Zdown - Zup), which drifts by Zdown - 2 Zup per hole.  This host sends both fields equal to
+        ``Zdown - Zup`` so every hole goes from Z up to Z down and back, and moves Z by ``Zdown - 2 Zup``
+        (up when negative) in the Offset Positioning Packet first, so that the Init packet's descent ends
+        at Z up.
 
-        Sequence: OPENDRILLMODE1 -> DRILLMODE1ON; Offset packet (Z up
-        ``depth_steps``) -> ATOFFSETPOS; Init packet (``depth_steps``,
-        ``depth_steps``) -> DRILLMODE1INITIALIZED; the SDF packet (CDF + SDF,
-        no motion) -> ONEHOLEDRILLED; one Drill Data Packet per hole (CDF,
-        relative XY move) -> ONEHOLEDRILLED; the CDF-clear packet ->
-        DRILLMODE1DONE; then, if ``return_to_start``, Jog moves back to the
-        start XY.
+        Each tool (each run of one tool) is one Drill mode session: before it the tool-change prompt, with
+        the spindle off and the head at the start height; then the spindle on (a Jog packet of no pulses
+        with the spindle bit); OPENDRILLMODE1 -> DRILLMODE1ON; the Offset packet -> ATOFFSETPOS; the Init
+        packet -> DRILLMODE1INITIALIZED; the SDF packet (no motion) -> ONEHOLEDRILLED; one Drill Data Packet
+        per hole (relative XY move, then the stroke) -> ONEHOLEDRILLED; the CDF-clear packet ->
+        DRILLMODE1DONE; then a Jog packet raises the head by Z up to the start height with the spindle bit
+        clear.  At the end, if ``return_to_start``, X and Y go back to the start in one move.
 
         Args:
-            holes_steps: ``(N, 2)`` integer (x, y) pulses relative to the start position.
-            depth_steps: plunge depth in Z pulses, 1..65535.
-            tool_changes: ``(index_before_which, message)`` pairs; ``on_tool_change(index,
-                message)`` is called, with the head at the start height, before that hole's packet.
-            on_tool_change: the callback; it may block (e.g. prompt) and may call
-                :meth:`emergency_stop`, which then ends the job before the next hole.
-            delay: half period of every axis in units of 100 us (1..255).
-            delay_z_down, delay_z_up: Z delays if different from ``delay``.
-            half_step: set every axis's L297 to half steps.
-            return_to_start: jog X and Y back to the start after the last hole.
+            holes_steps: ``(N, 2)`` integer board-frame (x, y up) pulses relative to the start position.
+            z_down_steps: the bottom of a hole, pulses below the start height (1..65535).
+            z_up_steps: where the head travels between holes, pulses below the start height (0..z_down - 1).
+            tool_changes: ``(index_before_which, message)`` pairs; ``on_tool_change(index, message)`` is called,
+                spindle off and head at the start height, before that hole.
+            on_tool_change: the callback; it may block (e.g. prompt) and may call :meth:`emergency_stop`,
+                which then ends the job before the next hole.
+            spindle: run the spindle while drilling.
+            return_to_start: move X and Y back to the start after the last hole.
             on_hole: called with the number of holes drilled so far after each one (progress).
+            before_hole: called with the index of each hole as its packet goes out.
 
         Returns:
             The number of holes drilled.
@@ -298,38 +550,62 @@ class MaximusBoard(_Link, AbstractContextManager):
             PortError: a timeout, an unexpected reply, a limit switch or an emergency stop;
                 the message names the hole index.
         """
-        job = _drill_job(holes_steps, depth_steps, tool_changes, delay, delay_z_down, delay_z_up, half_step)
-        return self._run_job(lambda: self._drill_session(job, on_tool_change, on_hole,
-                                                         delay if return_to_start else None, half_step))
+        job = drill_job(holes_steps, int(z_up_steps), int(z_down_steps), tool_changes, self.maximus)
+        return self._run_job(lambda: self._drill_session(job, on_tool_change, on_hole, before_hole, bool(spindle),
+                                                         return_to_start))
 
     def _drill_session(self, job: _DrillJob, on_tool_change: Callable[[int, str], None] | None,
-                       on_hole: Callable[[int], None] | None, return_delay: int | None, half_step: bool) -> int:
-        """Drill mode from OPENDRILLMODE1 to the closing packet, then the jog back (unless ``return_delay``
-        is None); returns the number of holes drilled."""
-        self._check_stop("Drill mode")
-        self._exchange(bytes([OPENDRILLMODE1]), _Exchange("OPENDRILLMODE1", DRILLMODE1ON, False, "drill", _OFFSET))
-        self._check_stop("the offset move")
-        self._exchange(job.offset, _Exchange("the offset move (Z up)", ATOFFSETPOS, True, "drill", _INIT))
-        self._check_stop("the Init move")
-        self._exchange(job.init, _Exchange("the Init move (Z down, not stoppable)", DRILLMODE1INITIALIZED,
-                                           False, "drill", _DRILL))
-        self._exchange(start_drill_packet(),
-                       _Exchange("the start (SDF) packet", ONEHOLEDRILLED, False, "drill", _DRILL))
+                       on_hole: Callable[[int], None] | None, before_hole: Callable[[int], None] | None,
+                       spindle: bool, return_to_start: bool) -> int:
+        """Every tool's Drill mode session, then the move back; returns the number of holes drilled."""
         drilled = 0
-        for i, packet in enumerate(job.holes):
-            for message in job.changes.get(i, []):
-                self._check_stop(f"hole index {i}")
+        for group in job.groups:
+            for message in group.notes:
+                self._check_stop(f"hole index {group.first}")
                 if on_tool_change is not None:
-                    on_tool_change(i, message)
+                    on_tool_change(group.first, message)
+            self._check_stop(f"hole index {group.first}")
+            if spindle:
+                self._jog_session([("z", 0)], spindle=True)
+            drilled = self._drill_group(job, group, drilled, on_hole, before_hole)
+            self._check_stop(f"raising the head after hole index {drilled - 1}")
+            self._jog_session([("z", job.z_up_steps)])  # spindle bit clear: off as the head rises
+        if return_to_start and np.any(job.back_steps):
+            self._check_stop("the move back to the start")
+            self._move_session(int(job.back_steps[0]), int(job.back_steps[1]), 0)
+        return drilled
+
+    def _drill_group(self, job: _DrillJob, group: _Group, drilled: int, on_hole: Callable[[int], None] | None,
+                     before_hole: Callable[[int], None] | None) -> int:
+        before = f"before hole index {group.first}"
+        self._check_stop(f"Drill mode {before}")
+        self._exchange(bytes([OPENDRILLMODE1]), _Exchange(f"OPENDRILLMODE1 {before}", DRILLMODE1ON, False, "drill",
+                                                          _OFFSET))
+        self._check_stop(f"the offset move {before}")
+        self._exchange(job.offset, _Exchange(f"the offset move (Z) {before}", ATOFFSETPOS, True, "drill", _INIT,
+                                             offset_time_ns(job.offset), (0, 0, job.offset_height_steps)))
+        self._check_stop(f"the Init move {before}")
+        self._exchange(job.init, _Exchange(f"the Init move (Z down, not stoppable) {before}", DRILLMODE1INITIALIZED,
+                                           False, "drill", _DRILL, init_time_ns(job.init), (0, 0, -job.descent_steps)))
+        self._exchange(start_drill_packet(),
+                       _Exchange(f"the start (SDF) packet {before}", ONEHOLEDRILLED, False, "drill", _DRILL))
+        for k, packet in enumerate(group.packets):
+            i = group.first + k
             self._check_stop(f"hole index {i}")
-            self._exchange(packet, _Exchange(f"hole index {i}", ONEHOLEDRILLED, True, "drill", _DRILL))
+            if before_hole is not None:
+                before_hole(i)
+            dx, dy = (int(v) for v in group.moves[k])
+            self._exchange(packet, _Exchange(f"hole index {i}", ONEHOLEDRILLED, True, "drill", _DRILL,
+                                             drill_time_ns(packet, job.init), (dx, dy, 0)))
             drilled += 1
             if on_hole is not None:
                 on_hole(drilled)
         self._exchange(close_drill_packet(), _CLOSE_DRILL)
-        if return_delay is not None and np.any(job.back_steps):
-            self._check_stop("the return to the start")
-            self._jog_session([(f"the return jog {a} {int(s)}", jog_packet(a, int(s), delay=return_delay,
-                                                                           half_step=half_step))
-                               for a, s in zip("xy", job.back_steps) if s])
         return drilled
+
+
+def _pieces(pulses: int) -> list[int]:
+    """A long jog as pieces of at most MAX_FIELD pulses (the 16-bit step field)."""
+    sign = 1 if pulses > 0 else -1
+    n = abs(int(pulses))
+    return [sign * min(MAX_FIELD, n - k) for k in range(0, n, MAX_FIELD)]

@@ -1,20 +1,26 @@
-"""The MAXIMUS protocol's packets, built by pure functions (seed 000 Appendix 1; seed 003).
+"""The MAXIMUS protocol's packets, built by pure functions, and the time the firmware takes to answer them
+(seed 000 Appendix 1; seed 003).
 
 All step fields are L297 clock pulses (half steps when a mode bit is set), 16-bit, low byte first;
 delays are half periods in units of 100 us.  :class:`~cam.drive.maximus.board.MaximusBoard` sends them.
+
+Directions are the board's own: x and y grow when their DIR bit is 1 (the PC program's "X right" and
+"Y up", seed 000 Appendix 2 ``drillOneHole``), z is height (DIR_Z = 1 is "Z down", Appendix 1).  An
+``invert`` flag flips an axis's DIR bit (the PC program's ``machineInvertDir``).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
 from typing import Sequence
 
 import numpy as np
 
 from ...errors import PlanError
+from .protocol import DEBOUNCE_NS, DELAY_UNIT_NS, STEPSBACKATLIMIT
 
 __all__ = [
     "MAX_FIELD", "DEFAULT_DELAY", "jog_packet", "jog_exit_packet", "offset_packet", "init_packet",
-    "start_drill_packet", "drill_packet", "close_drill_packet", "drill_moves",
+    "start_drill_packet", "drill_packet", "close_drill_packet", "drill_moves", "pulses_ns", "jog_time_ns",
+    "offset_time_ns", "init_time_ns", "drill_time_ns", "switch_time_ns",
 ]
 
 MAX_FIELD = 0xFFFF  # 16-bit step fields (seed 000, Appendix 1: make16(high, low))
@@ -28,6 +34,14 @@ def _u16(value: int, what: str) -> bytes:
     return bytes((value & 0xFF, value >> 8))
 
 
+def _modes(half_step: bool | Sequence[bool]) -> tuple[int, int, int]:
+    """The MODE bits (x, y, z) from one flag for every axis or one per axis."""
+    if isinstance(half_step, (bool, int, np.bool_)):
+        return (int(bool(half_step)),) * 3  # type: ignore[return-value]
+    mx, my, mz = (int(bool(v)) for v in half_step)
+    return mx, my, mz
+
+
 def _delay(value: int, what: str = "delay") -> int:
     if not 1 <= int(value) <= 255:
         raise PlanError(f"{what} = {value} must be 1..255 (units of 100 us; pulse rate 5000/{what} Hz)")
@@ -35,7 +49,7 @@ def _delay(value: int, what: str = "delay") -> int:
 
 
 def jog_packet(axis: str, steps: int, *, delay: int = DEFAULT_DELAY, half_step: bool = False,
-               spindle: bool = False) -> bytes:
+               spindle: bool = False, invert: bool = False) -> bytes:
     """The 4-byte Jog Data Packet for a signed move of one axis.
 
     Byte 0 (seed 000 Appendix 1 JOG_DATA_INPUT; seed 003 "JOG Data Packet"):
@@ -52,7 +66,7 @@ def jog_packet(axis: str, steps: int, *, delay: int = DEFAULT_DELAY, half_step: 
         raise PlanError(f"axis must be 'x', 'y' or 'z', got {axis!r}")
     steps = int(steps)
     positive_dir = 0 if key == "z" else 1  # DIR bit for a positive move
-    direction = positive_dir if steps >= 0 else 1 - positive_dir
+    direction = (positive_dir if steps >= 0 else 1 - positive_dir) ^ int(bool(invert))
     config = (_AXES[key] << 6) | (int(bool(half_step)) << 5) | (direction << 4) | int(bool(spindle))
     return bytes([config]) + _u16(abs(steps), f"{key} jog") + bytes([_delay(delay)])
 
@@ -63,7 +77,8 @@ def jog_exit_packet() -> bytes:
 
 
 def offset_packet(x_steps: int, y_steps: int, z_steps: int, *, delay_x: int = DEFAULT_DELAY,
-                  delay_y: int = DEFAULT_DELAY, delay_z: int = DEFAULT_DELAY, half_step: bool = False) -> bytes:
+                  delay_y: int = DEFAULT_DELAY, delay_z: int = DEFAULT_DELAY, half_step: bool | Sequence[bool] = False,
+                  invert: Sequence[bool] = (False, False, False)) -> bytes:
     """The 10-byte Offset Positioning Packet for signed moves (Z first, then X, then Y).
 
     Byte 0: bits 5-3 mode Z, Y, X; bits 2-0 DIR Z, Y, X (seed 000 Appendix 1
@@ -73,18 +88,20 @@ def offset_packet(x_steps: int, y_steps: int, z_steps: int, *, delay_x: int = DE
     >>> offset_packet(0, 0, 40).hex()   # Z up 40 pulses
     '000000000028000a0a0a'
     """
-    m = int(bool(half_step))
-    dir_x = 1 if x_steps > 0 else 0
-    dir_y = 1 if y_steps > 0 else 0
-    dir_z = 1 if z_steps < 0 else 0  # DIR_Z = 1 is down
-    config = (m << 5) | (m << 4) | (m << 3) | (dir_z << 2) | (dir_y << 1) | dir_x
+    mx, my, mz = _modes(half_step)
+    ix, iy, iz = (int(bool(v)) for v in invert)
+    dir_x = (1 if x_steps > 0 else 0) ^ ix
+    dir_y = (1 if y_steps > 0 else 0) ^ iy
+    dir_z = (1 if z_steps < 0 else 0) ^ iz  # DIR_Z = 1 is down
+    config = (mz << 5) | (my << 4) | (mx << 3) | (dir_z << 2) | (dir_y << 1) | dir_x
     return (bytes([config]) + _u16(abs(int(x_steps)), "offset x") + _u16(abs(int(y_steps)), "offset y")
             + _u16(abs(int(z_steps)), "offset z")
             + bytes([_delay(delay_x, "delay_x"), _delay(delay_y, "delay_y"), _delay(delay_z, "delay_z")]))
 
 
 def init_packet(first_steps: int, second_steps: int, *, delay_x: int = DEFAULT_DELAY, delay_y: int = DEFAULT_DELAY,
-                delay_z_up: int = DEFAULT_DELAY, delay_z_down: int = DEFAULT_DELAY, half_step: bool = False) -> bytes:
+                delay_z_up: int = DEFAULT_DELAY, delay_z_down: int = DEFAULT_DELAY,
+                half_step: bool | Sequence[bool] = False) -> bytes:
     """The 9-byte Initialize Drill Mode Packet.
 
     Byte 0: bits 2-0 mode Z, Y, X; bytes 1-2 the first field
@@ -97,8 +114,8 @@ def init_packet(first_steps: int, second_steps: int, *, delay_x: int = DEFAULT_D
     >>> init_packet(40, 40, delay_z_down=20).hex()
     '00280028000a0a0a14'
     """
-    m = int(bool(half_step))
-    return (bytes([(m << 2) | (m << 1) | m]) + _u16(int(first_steps), "init first field")
+    mx, my, mz = _modes(half_step)
+    return (bytes([(mz << 2) | (my << 1) | mx]) + _u16(int(first_steps), "init first field")
             + _u16(int(second_steps), "init second field")
             + bytes([_delay(delay_x, "delay_x"), _delay(delay_y, "delay_y"),
                      _delay(delay_z_up, "delay_z_up"), _delay(delay_z_down, "delay_z_down")]))
@@ -109,7 +126,7 @@ def start_drill_packet() -> bytes:
     return bytes([0xC0, 0, 0, 0, 0])
 
 
-def drill_packet(dx_steps: int, dy_steps: int) -> bytes:
+def drill_packet(dx_steps: int, dy_steps: int, *, invert_x: bool = False, invert_y: bool = False) -> bytes:
     """The 5-byte Drill Data Packet for one hole, a relative XY move.
 
     Byte 0: bit 7 CDF (continue drilling) set, bit 6 SDF clear, bit 1 DIR Y,
@@ -119,7 +136,9 @@ def drill_packet(dx_steps: int, dy_steps: int) -> bytes:
     >>> drill_packet(300, -2).hex()
     '812c010200'
     """
-    config = 0x80 | ((1 if dy_steps > 0 else 0) << 1) | (1 if dx_steps > 0 else 0)
+    dir_x = (1 if dx_steps > 0 else 0) ^ int(bool(invert_x))
+    dir_y = (1 if dy_steps > 0 else 0) ^ int(bool(invert_y))
+    config = 0x80 | (dir_y << 1) | dir_x
     return bytes([config]) + _u16(abs(int(dx_steps)), "hole dx") + _u16(abs(int(dy_steps)), "hole dy")
 
 
@@ -154,33 +173,69 @@ def drill_moves(holes_steps: np.ndarray) -> np.ndarray:
     return moves
 
 
-@dataclass(frozen=True)
-class _DrillJob:
-    """The packets of one Drill mode job (see :meth:`MaximusBoard.drill`), checked before anything is sent."""
-
-    offset: bytes  # Offset Positioning Packet: Z up by the depth
-    init: bytes  # Initialize Drill Mode Packet: both fields the depth
-    holes: list[bytes]  # one Drill Data Packet per hole
-    changes: dict[int, list[str]]  # hole index -> tool-change messages before it
-    back_steps: np.ndarray  # (2,) int64 x, y jog back to the start after the last hole
 
 
-def _drill_job(holes_steps: np.ndarray, depth_steps: int, tool_changes: Sequence[tuple[int, str]], delay: int,
-               delay_z_down: int | None, delay_z_up: int | None, half_step: bool) -> _DrillJob:
-    moves = drill_moves(holes_steps)
-    depth = int(depth_steps)
-    if not 1 <= depth <= MAX_FIELD:
-        raise PlanError(f"depth_steps = {depth_steps} must be 1..{MAX_FIELD}")
-    dz_down = _delay(delay if delay_z_down is None else delay_z_down, "delay_z_down")
-    dz_up = _delay(delay if delay_z_up is None else delay_z_up, "delay_z_up")
-    changes: dict[int, list[str]] = {}
-    for index, message in tool_changes:
-        if not 0 <= int(index) < len(moves):
-            raise PlanError(f"tool change before hole {index}: there are {len(moves)} holes")
-        changes.setdefault(int(index), []).append(str(message))
-    offset = offset_packet(0, 0, depth, delay_x=delay, delay_y=delay, delay_z=dz_up, half_step=half_step)
-    init = init_packet(depth, depth, delay_x=delay, delay_y=delay, delay_z_up=dz_up,
-                       delay_z_down=dz_down, half_step=half_step)
-    holes = [drill_packet(int(dx), int(dy)) for dx, dy in moves]
-    back = -moves.sum(axis=0) if len(moves) else np.zeros(2, np.int64)
-    return _DrillJob(offset, init, holes, changes, back)
+# --- How long the firmware takes: seed 000, Appendix 1, constspeed(): "Build conststep number of step pulses //
+# Frequency = 1/(2*delay*100us)", each pulse dly_100us(delay) high and dly_100us(delay) low.
+
+def pulses_ns(n_pulses: int, delay: int) -> int:
+    """``n_pulses`` pulses at Delay ``delay``: ``n * 2 * delay * 100 us``.
+
+    >>> pulses_ns(500, 10) / 1e9   # Delay 10: 500 pulses per second
+    1.0
+    """
+    return int(n_pulses) * 2 * int(delay) * DELAY_UNIT_NS
+
+
+def switch_time_ns(back_off_delay: int) -> int:
+    """The most a limit switch adds to a move: the debounce and the X/Y back-off at the last Jog delay
+    (isr_ext: ``constspeed2(STEPSBACKATLIMIT, axisDelay, ...)``)."""
+    return DEBOUNCE_NS + pulses_ns(STEPSBACKATLIMIT, back_off_delay)
+
+
+def _field(packet: bytes, i: int) -> int:
+    return packet[i] | (packet[i + 1] << 8)
+
+
+def jog_time_ns(packet: bytes) -> int:
+    """The move of a Jog Data Packet: its pulses at its delay (JOG_DATA_INPUT: ``constspeed(axisStep,
+    axisDelay, ...)``).  The exit packet moves nothing.
+
+    >>> jog_time_ns(jog_packet("x", 1000, delay=10)) / 1e9
+    2.0
+    """
+    if packet[0] >> 6 == 0:
+        return 0
+    return pulses_ns(_field(packet, 1), packet[3])
+
+
+def offset_time_ns(packet: bytes) -> int:
+    """The Offset Positioning Packet's moves, one axis after the other (DRILL_MODE1_INITIALIZE: Z at
+    ``DelayZup`` = byte 9, then X at byte 7, then Y at byte 8)."""
+    return (pulses_ns(_field(packet, 5), packet[9]) + pulses_ns(_field(packet, 1), packet[7])
+            + pulses_ns(_field(packet, 3), packet[8]))
+
+
+def init_time_ns(packet: bytes) -> int:
+    """The Initialize Drill Mode Packet's descent: its first field at ``DelayZup`` (byte 7), as listed."""
+    return pulses_ns(_field(packet, 1), packet[7])
+
+
+def drill_time_ns(packet: bytes, init: bytes) -> int:
+    """One Drill Data Packet after the Init packet ``init``: the dog-leg XY move (constspeed_xy: both axes
+    together for the shorter count at the slower delay, then the longer axis alone at its own), Z down by
+    the Init packet's second field at DelayZdown, Z up by its first at DelayZup.  The closing packet (CDF
+    clear) and the start packet (SDF set) move nothing.
+
+    >>> init = init_packet(100, 100, delay_x=2, delay_y=5, delay_z_up=1, delay_z_down=4)
+    >>> drill_time_ns(drill_packet(30, 4), init) / 1e6   # 4 at Delay 5, 26 X at 2, 100 down at 4, 100 up at 1
+    114.4
+    """
+    if not packet[0] >> 7 or packet[0] & 0x40:
+        return 0
+    nx, ny = _field(packet, 1), _field(packet, 3)
+    delay_x, delay_y, delay_z_up, delay_z_down = init[5], init[6], init[7], init[8]
+    both = min(nx, ny)
+    alone_ns = pulses_ns(nx - both, delay_x) if nx > ny else pulses_ns(ny - both, delay_y)
+    return (pulses_ns(both, max(delay_x, delay_y)) + alone_ns + pulses_ns(_field(init, 3), delay_z_down)
+            + pulses_ns(_field(init, 1), delay_z_up))

@@ -160,7 +160,11 @@
   $("origin").addEventListener("click", () => post("/api/origin"));
   document.querySelectorAll("button.jog").forEach((b) => b.addEventListener("click", () => {
     const n = parseInt($("jog-steps").value, 10) * parseInt(b.dataset.dir, 10);
-    post("/api/jog", { axis: b.dataset.axis, steps: n });
+    post("/api/jog", { axis: b.dataset.axis, steps: n, unit: $("jog-unit").value });
+  }));
+  $("set-offset").addEventListener("click", () => post("/api/offset"));
+  document.querySelectorAll("button.drill-z").forEach((b) => b.addEventListener("click", () => {
+    post("/api/drill-z", { which: b.dataset.which });
   }));
 
   function estop() {
@@ -191,7 +195,7 @@
     page.state = s;
     const st = s.state;
     const badge = $("state");
-    badge.textContent = st + (s.label && st !== "idle" ? ": " + s.label : "");
+    badge.textContent = st + (s.label && st !== "idle" ? ": " + s.label : "") + (s.detail ? " – " + s.detail : "");
     badge.dataset.state = st;
     $("port").textContent = "port " + s.port + (s.realtime ? "" : " (simulated)");
     const idle = st === "idle", job = s.activity === "job";
@@ -199,7 +203,8 @@
     $("pause").disabled = !(st === "running" || st === "moving");
     $("resume").disabled = st !== "paused";
     $("stop").disabled = idle;
-    document.querySelectorAll("button.jog, #origin").forEach((b) => { b.disabled = !idle; });
+    document.querySelectorAll("button.jog, #origin, #set-offset, button.drill-z").forEach((b) => { b.disabled = !idle; });
+    document.querySelectorAll("button.drill-z").forEach((b) => { b.hidden = !s.port.startsWith("maximus"); });
     const shown = job || (idle && s.last && s.last.activity === "job");
     const pct = shown ? s.progress : 0;
     $("progress-bar").value = pct;
