@@ -187,7 +187,10 @@ class Worker:
                 ready = self._conn.poll(self.time_limit_s)
                 kind, value = self._conn.recv() if ready else ("time", None)
             except (EOFError, OSError, BrokenPipeError):
-                code = self._process.poll() if self._process is not None else None
+                try:
+                    code = self._process.wait(_END_GRACE_S) if self._process is not None else None
+                except subprocess.TimeoutExpired:
+                    code = None
                 self._restart()
                 raise WorkerLimitError(f"{what} ended the worker process (exit code {code}); "
                                        "it was too large for this machine") from None
