@@ -6,6 +6,7 @@ The servers are the real ones (see ``test_web.Server``).
 from __future__ import annotations
 
 import os
+import time
 import urllib.error
 
 import numpy as np
@@ -128,3 +129,35 @@ def test_serve_limits_options_reach_the_server_and_bad_ones_are_one_line(tmp_pat
     finally:
         proc.terminate()
         proc.wait(20)
+
+
+def test_a_planning_that_takes_minutes_leaves_the_machine_answering(tmp_path):
+    """The issue's case: a 1000^2 noise drawing with min-distance starts took the server for about a minute."""
+    import threading
+
+    import cv2
+    rng = np.random.default_rng(1)
+    image = np.full((1000, 1000, 3), 255, np.uint8)
+    noise = rng.random((1000, 1000)) < 0.3
+    noise[0, :] = noise[-1, :] = noise[:, 0] = noise[:, -1] = False
+    image[noise] = 0
+    ok, data = cv2.imencode(".png", image)
+    s = Server(tmp_path, settings=MEDIUM, realtime=True, work_time_limit_s=5)
+    try:
+        status, up = s.upload("noise.png", data.tobytes())
+        assert status == 200, up
+        box = {}
+        planning = threading.Thread(target=lambda: box.update(
+            r=s.call("POST", "/api/plan", {"job": up["job"], "options": {"depth": 1, "start": "min-distance"}})))
+        planning.start()
+        time.sleep(1.0)
+        assert s.call("POST", "/api/jog", {"axis": "x", "steps": 200})[0] == 200
+        assert s.wait_idle(10)["last"]["status"] == "finished"  # the machine moved while the planning ran
+        assert s.call("POST", "/api/estop", {})[0] == 200
+        assert s.call("GET", "/api/state")[0] == 200
+        assert planning.is_alive(), "the planning ended first: the test proves nothing"
+        planning.join(60)
+        status, r = box["r"]
+        assert status == 400 and "planning noise.png took over 5 s and was stopped" in r["error"], r
+    finally:
+        s.close()
