@@ -52,3 +52,14 @@ def assert_surface_equal(got: np.ndarray, want: np.ndarray) -> None:
 def tiny_settings() -> cam.MachineSettings:
     """Fast settings for real-time tests: 2 steps/pixel, 1 ms periods."""
     return cam.MachineSettings().replace(steps_per_px_xy=2, delay_xy_ms=1.0, delay_z_ms=1.0)
+
+
+@pytest.fixture
+def emu():
+    """A MAXIMUS emulator on a pseudo-terminal, sped up (no waiting for the firmware's delays)."""
+    from cam.sim.maximus import start_emulator
+
+    e = start_emulator(speed=None)
+    yield e
+    e.stop()
+    assert e.error is None, repr(e.error)

@@ -30,14 +30,6 @@ FAST = Maximus(delay_x=1, delay_y=1, delay_z_up=1, delay_z_down=1)  # 5000 pulse
 
 
 @pytest.fixture
-def emu():
-    e = start_emulator(speed=None)
-    yield e
-    e.stop()
-    assert e.error is None, repr(e.error)
-
-
-@pytest.fixture
 def board(emu):
     b = MaximusBoard(emu.device_path, FAST, timeout_s=TIMEOUT_S)
     yield b

@@ -23,14 +23,6 @@ from conftest import SAMPLES  # noqa: E402
 MM = MAXIMUS_SETTINGS.mm_per_step_xy  # 0.004375 mm per pulse (a half step)
 
 
-@pytest.fixture
-def emu():
-    e = start_emulator(speed=None)
-    yield e
-    e.stop()
-    assert e.error is None, repr(e.error)
-
-
 def session_on(emu, settings=MAXIMUS_SETTINGS) -> MachineSession:
     return MachineSession(f"maximus:{emu.device_path}", settings)
 

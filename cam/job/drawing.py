@@ -312,6 +312,17 @@ def _assemble(
     return pts, kind, tgt, pause
 
 
+def route_window(asked: np.ndarray, start: tuple[int, int], goal: tuple[int, int], z: int,
+                 max_len: int) -> tuple[int, int, np.ndarray]:
+    """Where a bridge of at most ``max_len`` moves from ``start`` to ``goal`` (x, y pixels) can run:
+    ``(x0, y0, ok)``, the window's top-left pixel and its ``(h, w)`` bool mask of pixels asked at least ``z`` deep."""
+    h, w = asked.shape
+    (sx, sy), (gx, gy) = start, goal
+    x0, x1 = max(0, min(sx, gx) - max_len), min(w - 1, max(sx, gx) + max_len)
+    y0, y1 = max(0, min(sy, gy) - max_len), min(h - 1, max(sy, gy) + max_len)
+    return x0, y0, asked[y0 : y1 + 1, x0 : x1 + 1] >= z
+
+
 def _route(
     asked: np.ndarray, start: tuple[int, int], goal: tuple[int, int], z: int, max_len: int
 ) -> list[tuple[int, int]] | None:
@@ -323,13 +334,10 @@ def _route(
     """
     if max_len < 2:
         return None
-    h, w = asked.shape
+    x0, y0, ok = route_window(asked, start, goal, z, max_len)
+    ww = ok.shape[1]
     sx, sy = start
     gx, gy = goal
-    x0, x1 = max(0, min(sx, gx) - max_len), min(w - 1, max(sx, gx) + max_len)
-    y0, y1 = max(0, min(sy, gy) - max_len), min(h - 1, max(sy, gy) + max_len)
-    ok = asked[y0 : y1 + 1, x0 : x1 + 1] >= z
-    ww = x1 - x0 + 1
     parent = np.full(ok.size, -2, np.int32)
     goal_i = (gy - y0) * ww + (gx - x0)
     if not bfs_kernel(ok, (sy - y0) * ww + (sx - x0), goal_i, max_len, parent):

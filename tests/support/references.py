@@ -227,16 +227,14 @@ def route_reference(
 ) -> list[tuple[int, int]] | None:
     """The drawing planner's bridge search in plain Python (see :func:`cam.job.drawing._route`): breadth-first,
     level by level, each pixel's neighbours from the row above to the row below, left to right."""
+    from cam.job.drawing import route_window  # the same window; the search here is the plain one
+
     if max_len < 2:
         return None
-    h, w = asked.shape
     sx, sy = start
     gx, gy = goal
-    x0, x1 = max(0, min(sx, gx) - max_len), min(w - 1, max(sx, gx) + max_len)
-    y0, y1 = max(0, min(sy, gy) - max_len), min(h - 1, max(sy, gy) + max_len)
-    ok = asked[y0 : y1 + 1, x0 : x1 + 1] >= z
-    ww = x1 - x0 + 1
-    hh = y1 - y0 + 1
+    x0, y0, ok = route_window(asked, start, goal, z, max_len)
+    hh, ww = ok.shape
     parent = {(sy - y0) * ww + (sx - x0): -1}
     frontier = [(sy - y0) * ww + (sx - x0)]
     goal_i = (gy - y0) * ww + (gx - x0)
