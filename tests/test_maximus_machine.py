@@ -15,7 +15,7 @@ from cam.drive.maximus.board import MAXIMUS_SETTINGS  # noqa: E402
 from cam.drive.maximus.packets import drill_packet, drill_time_ns, init_packet, jog_packet, jog_time_ns  # noqa: E402
 from cam.drive.session import MachineSession  # noqa: E402
 from cam.errors import CapabilityError, PlanError  # noqa: E402
-from cam.sim.maximus import MODE_SELECTION, start_emulator  # noqa: E402
+from cam.sim.maximus import MODE_SELECTION  # noqa: E402
 from support.maximus_log import decode_port_log, hole_strokes  # noqa: E402
 
 from conftest import SAMPLES  # noqa: E402

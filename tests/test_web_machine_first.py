@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import os
 import time
-import urllib.error
 
 import numpy as np
 

@@ -268,7 +268,7 @@ def _assemble(
         blocks[i] = blk
         extra[i] = len(blk)
     counts = a_valid.astype(np.int64) + b_valid + extra
-    cx, cy, cz = int(x[-1]), int(y[-1]), int(d[-1])
+    cx, cy = int(x[-1]), int(y[-1])
     tail = [(cx, cy, safe, RETRACT)]
     if (hx, hy) != (cx, cy):
         tail.append((hx, hy, safe, TRAVEL))

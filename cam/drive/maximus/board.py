@@ -50,7 +50,7 @@ from ...errors import PlanError, PortError, SettingsError
 from ...settings import DEFAULT_SETTINGS, MachineSettings, Maximus, Travel
 from ._link import _CLOSE_DRILL, _DRILL, _INIT, _JOG, _MODE, _OFFSET, _UNKNOWN, _Exchange, _Link
 from .packets import (
-    DEFAULT_DELAY, MAX_FIELD, close_drill_packet, drill_moves, drill_packet, drill_time_ns, init_packet,
+    MAX_FIELD, close_drill_packet, drill_moves, drill_packet, drill_time_ns, init_packet,
     init_time_ns, jog_exit_packet, jog_packet, jog_time_ns, offset_packet, offset_time_ns, start_drill_packet,
 )
 from .protocol import (
