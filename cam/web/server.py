@@ -92,6 +92,7 @@ _DRAIN_LIMIT_BYTES = 64 * 1024 * 1024  # read and drop at most this much of a re
 _MAX_JSON_BYTES = 8 * 1024  # a JSON request body (the largest, planning options, is well under 1 kB)
 _MAX_JSON_DEPTH = 16  # arrays and objects inside each other (the requests use 3)
 _MULTIPART_SLACK_BYTES = 64 * 1024  # form boundaries and headers around the file
+_EVENT_PERIOD_S = 0.25  # live views get at most four snapshots a second (a running job changes all the time)
 
 
 @dataclass
@@ -564,8 +565,9 @@ async def _state(st: _AppState, request: Request) -> dict[str, Any]:
 
 
 class _Broadcast:
-    """One snapshot of the machine for every live view: made once per change (at most every 0.1 s, at least
-    every second) and sent to all, so the cost of a snapshot does not grow with the number of pages."""
+    """One snapshot of the machine for every live view: made once per change (at most every
+    :data:`_EVENT_PERIOD_S`, at least every second) and sent to all, so the cost of a snapshot does not grow
+    with the number of pages."""
 
     def __init__(self, session: MachineSession, closing: threading.Event) -> None:
         self.session, self.closing = session, closing
@@ -594,16 +596,16 @@ class _Broadcast:
                 last_version, last_sent = version, now
                 changed, self._changed = self._changed, asyncio.Event()
                 changed.set()
-            await asyncio.sleep(0.1)
+            await asyncio.sleep(_EVENT_PERIOD_S)
+        self.seq += 1  # the end: every stream wakes and sees the server closing
+        if self._changed is not None:
+            self._changed.set()
 
     async def after(self, seq: int) -> tuple[int, str]:
-        """The next snapshot after number ``seq`` (waits up to a second; the same one again if none came)."""
+        """The next snapshot after number ``seq`` (there is one at least every second, and at the end)."""
         changed = self._changed
         if self.seq == seq and changed is not None:
-            try:
-                await asyncio.wait_for(changed.wait(), 1.0)
-            except asyncio.TimeoutError:
-                pass
+            await changed.wait()
         return self.seq, self.message
 
 
