@@ -59,8 +59,9 @@ OUTPUTS = {
 _OUTPUT_SUFFIXES = {"preview": (".png", ".svg"), "digitize": DIGITIZED_SUFFIXES, "export": None}
 """What ``-o`` of each command writes."""
 
-_DEFAULTS = {"start": "top", "depth": [10], "passes": 1, "start_at": [0, 0, 0], "pause_at": [], "drill_order": "tour"}
-"""Defaults of options that are None when not given (so that a given one can be told apart)."""
+_DEFAULTS = {"start": "top", "passes": 1, "start_at": [0, 0, 0], "pause_at": [], "drill_order": "tour"}
+"""Defaults of options that are None when not given (so that a given one can be told apart).  --depth stays
+None when left out: 10 Z pixels on a 2D drawing, and a 3D drawing then needs a profile."""
 
 
 def job_kind_of(args: argparse.Namespace) -> Optional[str]:

@@ -143,8 +143,9 @@ def cmd_info(args: argparse.Namespace) -> int:
     d = digitize(load_image(args.image), start=args.start)
     rep = image_report(d, settings)
     prof = profile_of(args, d)
-    if prof is not None and d.mode == "3d":
-        depth_px = int(prof.depth_of(d.levels).max())
+    uniform_px = getattr(args, "depth", None)
+    if d.mode == "3d" and (prof is not None or uniform_px):
+        depth_px = int(prof.depth_of(d.levels).max()) if prof is not None else int(max(uniform_px))
         rep["depth_px"] = depth_px
         rep["depth_mm"] = round(settings.px_to_mm_z(depth_px), 4)
     print(json.dumps(rep, indent=2) if args.json else format_report(rep))

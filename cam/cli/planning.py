@@ -74,7 +74,8 @@ def job_options(args: argparse.Namespace) -> JobOptions:
         return default if value is None else value
 
     return JobOptions(
-        depth=tuple(opt("depth", d.depth)), passes=opt("passes", d.passes), start=opt("start", d.start),
+        depth=tuple(args.depth) if getattr(args, "depth", None) is not None else None,
+        passes=opt("passes", d.passes), start=opt("start", d.start),
         start_at=tuple(opt("start_at", d.start_at)), pause_at=tuple(tuple(p) for p in opt("pause_at", ())),
         profile=opt("profile", None), profile_expr=opt("profile_expr", None), cut_depth_mm=opt("cut_depth", None),
         travel_height_mm=opt("travel_height", None) if kind in ("excellon", "hpgl") else None,

@@ -76,7 +76,9 @@ class JobOptions:
     """How to cut a file.  An option given for a kind it does not apply to is an error (:meth:`check_kind`).
 
     Drawings and digitized matrices (pixel units):
-        depth: Z pixels below the surface, one value for every object or one per object.
+        depth: Z pixels below the surface, one value for every object or one per object (None: 10 on a 2D
+            drawing; on a 3D drawing one value cuts every layer at it, a flat-bottomed pocket, instead of a
+            profile).
         passes: cut in this many passes of increasing depth (Repeat Drill).
         start: where each 2D object starts, "top" or "min-distance".
         start_at: ``(x, y, z)`` pixel offset of the whole job (Start At).
@@ -95,7 +97,7 @@ class JobOptions:
         flip_y: machine Y = +Y mm instead of -Y mm.
     """
 
-    depth: tuple[int, ...] = (10,)
+    depth: Optional[tuple[int, ...]] = None
     passes: int = 1
     start: str = "top"
     start_at: tuple[int, int, int] = (0, 0, 0)
@@ -143,7 +145,7 @@ class JobOptions:
         def bad(key: str, why: str) -> CamError:
             return CamError(f"{source}: option '{key}' {why}, got {getattr(self, key)!r}")
 
-        if not self.depth or any(not 0 <= d <= MAX_DEPTH_PX for d in self.depth):
+        if self.depth is not None and (not self.depth or any(not 0 <= d <= MAX_DEPTH_PX for d in self.depth)):
             raise bad("depth", f"must be Z pixels 0..{MAX_DEPTH_PX}")
         if any(abs(v) > MAX_PX for v in self.start_at) or any(abs(v) > MAX_PX for p in self.pause_at for v in p):
             raise bad("start_at" if any(abs(v) > MAX_PX for v in self.start_at) else "pause_at",
@@ -171,7 +173,7 @@ class JobOptions:
             raise bad("excellon_digits", "must be two digit counts 0..8")
         if self.profile is not None and self.profile_expr is not None:
             raise bad("profile_expr", "cannot be given together with a profile file")
-        if self.cut_depth_mm is not None and self.depth != JobOptions.depth:
+        if self.cut_depth_mm is not None and self.depth is not None:
             raise bad("cut_depth_mm", "cannot be given together with depth (Z pixels per object)")
         return self
 
@@ -276,7 +278,7 @@ def _points(value: Any) -> tuple[tuple[int, int], ...]:
 
 
 _PARSERS = {
-    "depth": _ints(None),
+    "depth": _optional(_ints(None)),
     "passes": _int,
     "start": _text,
     "start_at": _ints(3),
@@ -454,6 +456,8 @@ def _finish(job: PreparedJob) -> PreparedJob:
 def _drawing_depth(options: JobOptions, settings: MachineSettings) -> Any:
     """The drawing's depth in Z pixels: ``depth`` (one for all or one per object), or ``cut_depth_mm`` for all."""
     if options.cut_depth_mm is None:
+        if options.depth is None:
+            return None
         return options.depth[0] if len(options.depth) == 1 else list(options.depth)
     depth_px = int(round(options.cut_depth_mm / settings.px_to_mm_z(1)))
     if depth_px < 1:
