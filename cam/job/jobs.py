@@ -8,9 +8,11 @@ The CLI and the web server are thin adapters over :func:`prepare_job`::
     job.size_mm, job.estimated_time_s, job.warnings, job.tool_changes
     job.preview_png()      # PNG bytes of the toolpath picture
 
-The kind comes from the file name's suffix (:func:`job_kind`); an unknown
-suffix is a :class:`~cam.errors.CamError` naming the file and the accepted
-types.  Every job is planned relative to where the tool stands when it
+The kind comes from the file name's suffix and, when the suffix is generic
+(none, ``.txt``, ``.nc``, ``.cnc``), unknown or contradicted by the content,
+from the file's first few kB (:func:`job_kind`, :mod:`cam.sniff`); a suffix
+the content contradicts is a warning of the job.  A file neither tells is a
+:class:`~cam.errors.CamError` naming the file and the accepted types.  Every job is planned relative to where the tool stands when it
 starts (the job's home, (0, 0, 0) in machine steps); :attr:`PreparedJob.extent_steps`
 says how far it reaches from there, so a caller that knows where the tool
 stands can check the job against the machine travel before it starts.
@@ -41,6 +43,7 @@ from ..formats.gcode import load_gcode
 from ..formats.hpgl import load_hpgl
 from ..render.picture import LEGEND_PX, depth_colours, encode_png, toolpath_picture
 from ..render.report import job_report
+from ..sniff import KIND_NAMES
 from ..settings import DEFAULT_SETTINGS, MachineSettings
 from ..verify.pinlog import PinLog, decode_pin_log, motion_extent
 from .drawing import check_drawing_size, plan
@@ -569,7 +572,12 @@ def prepare_job(
         CamError: unknown file type, unreadable or bad file (file:line), bad options, travel exceeded.
     """
     p = Path(path)
-    kind = job_kind(p)
+    if not p.is_file() and p.suffix == "":
+        raise CamError(f"{p}: file not found")
+    kind_warnings: list[str] = []
+    kind = job_kind(p, kind_warnings)
+    if kind not in KINDS:
+        raise CamError(f"{p.name}: {KIND_NAMES.get(kind, kind)} cannot be cut by this version of cam")
     opts = (options or JobOptions()).checked().check_kind(kind, p.name)
     if not p.is_file():
         raise CamError(f"{p}: file not found")
@@ -581,6 +589,7 @@ def prepare_job(
         job = _prepare_excellon(p, opts, settings)
     else:
         job = _prepare_hpgl(p, opts, settings, progress)
+    job.warnings[:0] = kind_warnings
     job.name = name or p.name
     job.summary = job.name + job.summary[len(p.name):]
     return _finish(job)
