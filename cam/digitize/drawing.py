@@ -77,8 +77,9 @@ DARK_MAX = 128
 HUE_TOLERANCE_DEG = 30
 """Coloured pixels within this many degrees of red (0) or blue (240) count as red or blue."""
 
-CONTOUR_Y_MAX = 140
-"""A red-looking pixel 4-adjacent to white and darker than this (luminance) is the contour (pure red: 76)."""
+CONTOUR_Y_MAX = 56
+"""A red-looking pixel 4-adjacent to white and darker than this (luminance) is the contour: pure red (76) is
+not, so a contour left open in pure red is still an error, never healed."""
 CORE_Y_MAX = 40
 """A red-looking pixel darker than this that is a thin dark line (see :data:`VALLEY_MIN`) is black."""
 VALLEY_MIN = 12
