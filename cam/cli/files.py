@@ -57,6 +57,8 @@ def cmd_preview(args: argparse.Namespace) -> int:
 def cmd_profile(args: argparse.Namespace) -> int:
     settings = machine_settings(args)
     prof = load_profile(args.profile)
+    for w in prof.warnings:
+        print(f"warning: {w}", file=sys.stderr)
     lo, hi = int(prof.depth_px.min()), int(prof.depth_px.max())
     print(f"{args.profile}: {prof.n_layers} layers, depth {lo}..{hi} Z px = "
           f"{settings.px_to_mm_z(lo):.3f}..{settings.px_to_mm_z(hi):.3f} mm")

@@ -157,7 +157,7 @@ def plan(
             depth_px, warnings = np.full(len(digitized.levels), int(uniform[0]), np.int64), []
         else:
             prof = as_profile(profile, digitized.n_layers)
-            depth_px, warnings = prof.depth_of(digitized.levels).astype(np.int64), []
+            depth_px, warnings = prof.depth_of(digitized.levels).astype(np.int64), list(prof.warnings)
     else:
         if profile is not None:
             raise PlanError("a profile applies to 3D drawings only; this drawing is 2D (use --depth)")
