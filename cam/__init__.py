@@ -56,6 +56,7 @@ _LAZY = {
     "CamError": "cam.errors", "DrawingError": "cam.errors", "ParseError": "cam.errors",
     "PlanError": "cam.errors", "PortError": "cam.errors", "SettingsError": "cam.errors",
     "TravelError": "cam.errors",
+    "job_kind": "cam.choices", "sniff_kind": "cam.sniff",
 }
 
 __all__ = list(_LAZY)
@@ -100,6 +101,8 @@ if TYPE_CHECKING:  # pragma: no cover - for type checkers and editors only
     from .drive.runner import Controller, RunResult, simulate_surface
     from .drive.session import MachineSession, run
     from .drive.steps import StepPlan, plan_steps
+    from .choices import job_kind
+    from .sniff import sniff_kind
     from .errors import CamError, DrawingError, ParseError, PlanError, PortError, SettingsError, TravelError
     from .formats.excellon import HoleList, load_excellon, parse_excellon
     from .formats.gcode_export import save_gcode, to_gcode

@@ -12,8 +12,10 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+from typing import Optional
 
 from .errors import CamError
+from .sniff import decide_kind, read_head
 
 __all__ = [
     "job_kind", "OPTION_KINDS",
@@ -50,19 +52,29 @@ START_RULES = ("top", "min-distance")
 """Where each 2D object starts: first pixel in scan order, or nearest the tool (:func:`cam.digitize.digitize`)."""
 
 
-def job_kind(path: str | os.PathLike) -> str:
-    """The job kind of a file, from its suffix.
+def job_kind(path: str | os.PathLike, warnings: Optional[list[str]] = None, *, head: Optional[bytes] = None) -> str:
+    """The job kind of a file, from its suffix and, when the suffix is generic, unknown or contradicted, its content.
+
+    A readable file's first few kB decide when its suffix is generic (none, .txt, .nc, .cnc) or unknown, and
+    when they plainly show another kind than its suffix says (then a warning naming both is appended to
+    ``warnings``): see :mod:`cam.sniff`.  ``head``: the file's first bytes when they are at hand (an upload);
+    default: read from ``path`` if it is a file.  The kind may be "svg" (an SVG drawing).
 
     >>> job_kind("board.DRL"), job_kind("part.ngc"), job_kind("gear.png")
     ('excellon', 'gcode', 'drawing')
 
     Raises:
-        CamError: unknown suffix (the message names the file and the accepted types).
+        CamError: neither the suffix nor the content says (the message names the file and the accepted types).
     """
     suffix = Path(path).suffix.lower()
-    for kind, suffixes in SUFFIXES.items():
-        if suffix in suffixes:
-            return kind
+    by_suffix = next((kind for kind, suffixes in SUFFIXES.items() if suffix in suffixes), None)
+    if head is None and (by_suffix is None or Path(path).is_file()):
+        head = read_head(path)
+    kind, warning = decide_kind(Path(path).name, by_suffix, head)
+    if warning and warnings is not None:
+        warnings.append(warning)
+    if kind is not None:
+        return kind
     listed = "; ".join(f"{k} {' '.join(v)}" for k, v in SUFFIXES.items())
     raise CamError(f"{Path(path).name}: unknown file type '{suffix or '(none)'}' (accepted: {listed})")
 

@@ -57,7 +57,7 @@ def test_profile_command():
 
 
 def test_3d_errors(tmp_path):
-    assert_one_line_error(cli("drill", SAMPLES / "heart.png"), "profile is needed")
+    assert_one_line_error(cli("drill", SAMPLES / "heart.png"), "give --depth N for a flat-bottomed pocket")
     short = tmp_path / "short.csv"
     short.write_text("1\n2\n3\n")
     assert_one_line_error(cli("drill", SAMPLES / "disc.png", "--profile", short), "profile has 3 layers, the object has")

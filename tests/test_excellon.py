@@ -261,9 +261,9 @@ def test_info_and_drill_on_a_bad_file_give_one_line_and_code_2(tmp_path, capsys)
         assert len(err.splitlines()) == 1 and f"{bad}:7:1:" in err and "'X123456789Y0'" in err
     png = tmp_path / "picture.drl"
     png.write_bytes((ROOT / "samples" / "disc.png").read_bytes())
-    assert main(["info", str(png)]) == 2
+    assert main(["info", str(png)]) == 0  # the content wins, with a warning (issue #16): never a silent misread
     err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1 and "not an Excellon drill file" in err and str(png) in err
+    assert len(err.splitlines()) == 1 and "says an Excellon drill file but the content is an image" in err
 
 
 def test_info_uses_the_excellon_format_options(tmp_path, capsys):

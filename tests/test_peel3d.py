@@ -98,7 +98,7 @@ def test_red_without_contour():
 
 def test_3d_needs_a_profile_and_profile_must_be_long_enough():
     dg = cam.digitize(drawing3d(SMALL))
-    with pytest.raises(cam.PlanError, match="profile is needed"):
+    with pytest.raises(cam.PlanError, match="give --depth N for a flat-bottomed pocket"):
         cam.plan(dg)
     with pytest.raises(cam.PlanError, match="profile has 2 layers, the object has 3"):
         cam.plan(dg, profile=[1, 2])

@@ -30,11 +30,12 @@ def test_profile_drawing_depth_per_layer(below):
     assert prof.depth_px.tolist() == [1, 2, 4, 4, 7] and prof.n_layers == 5
 
 
-def test_two_blue_pixels_in_a_column_names_the_columns():
+def test_two_blue_pixels_in_a_column_warn_and_take_the_farthest():
     img = profile_image([1, 2, 4])
-    img[5, 4] = (0, 0, 255)  # second blue pixel in column 4 (layer 2)
-    with pytest.raises(cam.DrawingError, match="only one z depth value for a given layer: columns 4"):
-        load_profile(img)
+    img[5, 4] = (0, 0, 255)  # second blue pixel in column 4 (layer 2), farther from the axis
+    prof = load_profile(img)
+    assert "layers 2 have more than one blue pixel" in prof.warnings[0]
+    assert prof.depth_px[1] > 2
 
 
 def test_missing_origin_or_axes():

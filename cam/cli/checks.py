@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import sys
 from pathlib import Path
 from typing import Optional
 
@@ -59,15 +60,17 @@ OUTPUTS = {
 _OUTPUT_SUFFIXES = {"preview": (".png", ".svg"), "digitize": DIGITIZED_SUFFIXES, "export": None}
 """What ``-o`` of each command writes."""
 
-_DEFAULTS = {"start": "top", "depth": [10], "passes": 1, "start_at": [0, 0, 0], "pause_at": [], "drill_order": "tour"}
-"""Defaults of options that are None when not given (so that a given one can be told apart)."""
+_DEFAULTS = {"start": "top", "passes": 1, "start_at": [0, 0, 0], "pause_at": [], "drill_order": "tour"}
+"""Defaults of options that are None when not given (so that a given one can be told apart).  --depth stays
+None when left out: 10 Z pixels on a 2D drawing, and a 3D drawing then needs a profile."""
 
 
-def job_kind_of(args: argparse.Namespace) -> Optional[str]:
-    """The kind of the command's input file by its suffix ("drawing", "excellon", ...), or None."""
+def job_kind_of(args: argparse.Namespace, warnings: Optional[list[str]] = None) -> Optional[str]:
+    """The kind of the command's input file ("drawing", "excellon", ...) by its suffix and, where the suffix is
+    generic, unknown or contradicted, its first few kB (:func:`cam.choices.job_kind`), or None."""
     image = getattr(args, "image", None)
     if image:
-        return job_kind(image)
+        return job_kind(image, warnings)
     if getattr(args, "load_digitized", None):
         return "digitized"
     return None
@@ -124,7 +127,11 @@ def check_args(args: argparse.Namespace) -> None:
         the flag).  Options against the port are checked by :func:`cam.cli.execute.check_port_options`.
     """
     _check_outputs(args)
-    kind = job_kind_of(args) if args.command in ("drill", "export", "preview", "info") else None
+    warnings: list[str] = []
+    kind = job_kind_of(args, warnings) if args.command in ("drill", "export", "preview", "info") else None
+    args.kind_warnings = warnings
+    for w in warnings:  # a suffix the content contradicts: said before anything is read
+        print(f"warning: {w}", file=sys.stderr)
     if kind is not None:
         _check_applies(args, kind)
     for dest, value in _DEFAULTS.items():

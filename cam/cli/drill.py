@@ -54,7 +54,8 @@ def cmd_drill(args: argparse.Namespace) -> int:
     check_port_options(args, settings)
     job = prepare(args, settings)
     for w in job.warnings:
-        print(f"warning: {w}", file=sys.stderr)
+        if w not in getattr(args, "kind_warnings", ()):  # check_args said it already
+            print(f"warning: {w}", file=sys.stderr)
     if args.preview:
         args.scale = None
         write_job_preview(args, job, args.preview)

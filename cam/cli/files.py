@@ -4,11 +4,10 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from pathlib import Path
 
 import numpy as np
 
-from ..choices import EXCELLON_SUFFIXES, GCODE_SUFFIXES, HPGL_SUFFIXES
+from ..sniff import KIND_NAMES
 from ..digitize import digitize
 from ..digitize.digitized import save_digitized
 from ..digitize.drawing import load_image
@@ -19,13 +18,14 @@ from ..formats.gcode_export import save_gcode
 from ..formats.hpgl import PLOTTER_UNIT_MM, scan_hpgl
 from ..render.report import format_report, image_report
 from .common import format_duration, machine_settings, reading_bar
-from .planning import excellon_digits, is_file_job, prepare, profile_of, write_job_preview
+from .checks import job_kind_of
+from .planning import excellon_digits, prepare, profile_of, write_job_preview
 
 __all__ = ["cmd_export", "cmd_preview", "cmd_info", "cmd_digitize", "cmd_profile"]
 
 
 def cmd_export(args: argparse.Namespace) -> int:
-    if is_file_job(args) and Path(args.image).suffix.lower() in GCODE_SUFFIXES:
+    if args.image and job_kind_of(args) == "gcode":
         raise CamError(f"{args.image} is G-code already; run it with 'cam drill', or preview it")
     travel_height_mm = 1.0 if args.travel_height is None else args.travel_height
     if not travel_height_mm > 0:
@@ -57,6 +57,8 @@ def cmd_preview(args: argparse.Namespace) -> int:
 def cmd_profile(args: argparse.Namespace) -> int:
     settings = machine_settings(args)
     prof = load_profile(args.profile)
+    for w in prof.warnings:
+        print(f"warning: {w}", file=sys.stderr)
     lo, hi = int(prof.depth_px.min()), int(prof.depth_px.max())
     print(f"{args.profile}: {prof.n_layers} layers, depth {lo}..{hi} Z px = "
           f"{settings.px_to_mm_z(lo):.3f}..{settings.px_to_mm_z(hi):.3f} mm")
@@ -133,18 +135,22 @@ def _info_gcode(args: argparse.Namespace) -> int:
 
 
 def cmd_info(args: argparse.Namespace) -> int:
-    if Path(args.image).suffix.lower() in HPGL_SUFFIXES:
+    kind = job_kind_of(args)
+    if kind == "hpgl":
         return _info_hpgl(args)
-    if Path(args.image).suffix.lower() in EXCELLON_SUFFIXES:
+    if kind == "excellon":
         return _info_excellon(args)
-    if Path(args.image).suffix.lower() in GCODE_SUFFIXES:
+    if kind == "gcode":
         return _info_gcode(args)
+    if kind != "drawing":
+        raise CamError(f"{args.image}: info reads drawings, drill, HPGL and G-code files, not {KIND_NAMES[kind]}")
     settings = machine_settings(args)
     d = digitize(load_image(args.image), start=args.start)
     rep = image_report(d, settings)
     prof = profile_of(args, d)
-    if prof is not None and d.mode == "3d":
-        depth_px = int(prof.depth_of(d.levels).max())
+    uniform_px = getattr(args, "depth", None)
+    if d.mode == "3d" and (prof is not None or uniform_px):
+        depth_px = int(prof.depth_of(d.levels).max()) if prof is not None else int(max(uniform_px))
         rep["depth_px"] = depth_px
         rep["depth_mm"] = round(settings.px_to_mm_z(depth_px), 4)
     print(json.dumps(rep, indent=2) if args.json else format_report(rep))

@@ -205,7 +205,8 @@ def _add_job_options(d: argparse.ArgumentParser) -> None:
     _add_digitize_options(d)
     d.add_argument(
         "--depth", metavar="N|N1,N2,...", type=_int_list(None, "--depth", 0),
-        help="2D cutting depth in Z pixels: one value for all objects, or one per object (0 skips one); default 10",
+        help="cutting depth in Z pixels: one value for all objects, or one per object (0 skips one); default 10; "
+        "on a 3D drawing one value cuts every layer at N (a flat-bottomed pocket) instead of a profile",
     )
     _add_profile_options(d)
     d.add_argument("--passes", type=_whole("--passes", 1, 1000), metavar="N", help="Repeat Drill: cut in N passes of increasing depth (default 1)")

@@ -5,7 +5,6 @@ import argparse
 from pathlib import Path
 from typing import Any, Optional
 
-from ..choices import FILE_JOB_SUFFIXES
 from ..digitize.digitized import Digitized
 from ..digitize.drawing import load_image
 from ..digitize.profile import Profile, load_profile, profile_from_expr
@@ -18,6 +17,9 @@ from ..settings import MachineSettings
 from .checks import job_kind_of
 from .common import machine_settings, reading_bar
 
+FILE_JOB_KINDS = ("excellon", "gcode", "hpgl")
+"""Kinds of file that are jobs already (not drawings)."""
+
 __all__ = [
     "is_file_job", "prepare", "summary_of", "job_options", "excellon_digits", "profile_of",
     "write_preview", "write_job_preview", "write_file_job_preview",
@@ -25,8 +27,9 @@ __all__ = [
 
 
 def is_file_job(args: argparse.Namespace) -> bool:
-    """Whether the IMAGE argument is a G-code, drill or HPGL file (a job already), not a drawing."""
-    return bool(getattr(args, "image", None)) and Path(args.image).suffix.lower() in FILE_JOB_SUFFIXES
+    """Whether the IMAGE argument is a G-code, drill or HPGL file (a job already), not a drawing (kind by suffix
+    and content, :func:`cam.cli.checks.job_kind_of`)."""
+    return bool(getattr(args, "image", None)) and job_kind_of(args) in FILE_JOB_KINDS
 
 
 def prepare(args: argparse.Namespace, settings: Optional[MachineSettings] = None) -> PreparedJob:
@@ -74,7 +77,8 @@ def job_options(args: argparse.Namespace) -> JobOptions:
         return default if value is None else value
 
     return JobOptions(
-        depth=tuple(opt("depth", d.depth)), passes=opt("passes", d.passes), start=opt("start", d.start),
+        depth=tuple(args.depth) if getattr(args, "depth", None) is not None else None,
+        passes=opt("passes", d.passes), start=opt("start", d.start),
         start_at=tuple(opt("start_at", d.start_at)), pause_at=tuple(tuple(p) for p in opt("pause_at", ())),
         profile=opt("profile", None), profile_expr=opt("profile_expr", None), cut_depth_mm=opt("cut_depth", None),
         travel_height_mm=opt("travel_height", None) if kind in ("excellon", "hpgl") else None,

@@ -19,6 +19,16 @@ min(R,G,B)``:
   (green, yellow, cyan, magenta, ...) fits no class: that is an error naming
   how many such pixels there are and where one is.
 
+Then the neighbourhood (JPEG and anti-aliasing): a red pixel whose luminance
+``Y = 0.299 R + 0.587 G + 0.114 B`` is below :data:`CONTOUR_Y_MAX` and that is
+4-adjacent to a white pixel, or below :data:`CORE_Y_MAX` and darker by at least
+:data:`VALLEY_MIN` than both its neighbours along some direction (a thin dark
+line), is **black**: the 1-pixel contour of a 3D drawing (a red pixel with no red
+neighbour, a profile's origin, stays red).  JPEG's 4:2:0 chroma
+subsampling gives the contour the red of the interior around it (dark red,
+which pixel by pixel reads as red), but keeps its luminance; and no red pixel
+of a closed contour's interior touches white.
+
 Rule checks (thesis 4.1.1) give warnings with coordinates, never errors: a
 black pixel with more than two black 8-neighbours, a black pixel on the
 image border, an isolated black pixel.
@@ -51,6 +61,9 @@ __all__ = [
     "CHROMA_MIN",
     "DARK_MAX",
     "HUE_TOLERANCE_DEG",
+    "CONTOUR_Y_MAX",
+    "CORE_Y_MAX",
+    "VALLEY_MIN",
 ]
 
 WHITE, BLACK, RED, BLUE = 0, 1, 2, 3
@@ -63,6 +76,14 @@ DARK_MAX = 128
 """Neutral pixels with mean(R,G,B) below this are black."""
 HUE_TOLERANCE_DEG = 30
 """Coloured pixels within this many degrees of red (0) or blue (240) count as red or blue."""
+
+CONTOUR_Y_MAX = 56
+"""A red-looking pixel 4-adjacent to white and darker than this (luminance) is the contour: pure red (76) is
+not, so a contour left open in pure red is still an error, never healed."""
+CORE_Y_MAX = 40
+"""A red-looking pixel darker than this that is a thin dark line (see :data:`VALLEY_MIN`) is black."""
+VALLEY_MIN = 12
+"""How much darker than both its neighbours along a direction a thin dark line's pixel is (luminance)."""
 
 _MAX_LISTED = 5
 
@@ -147,6 +168,7 @@ def classify(rgb: np.ndarray, *, source: str = "<array>") -> np.ndarray:
         dist_blue = np.abs(hue_deg - 240.0)
         out[coloured & (dist_red <= HUE_TOLERANCE_DEG)] = RED
         out[coloured & (dist_blue <= HUE_TOLERANCE_DEG)] = BLUE
+    _contour_in_red(rgb, out)
     unknown = out == _UNKNOWN
     n_bad = int(unknown.sum())
     if n_bad:
@@ -157,6 +179,26 @@ def classify(rgb: np.ndarray, *, source: str = "<array>") -> np.ndarray:
             f"e.g. pixel (x={col}, y={row}) has RGB ({r}, {g}, {b})"
         )
     return out
+
+
+def _contour_in_red(rgb: np.ndarray, classes: np.ndarray) -> None:
+    """Reclassify (in place) red-looking pixels that are a 3D drawing's dark contour as black (module docstring)."""
+    red = classes == RED
+    if not red.any():
+        return
+    c = rgb.astype(np.float32)
+    luma = 0.299 * c[..., 0] + 0.587 * c[..., 1] + 0.114 * c[..., 2]
+    white = np.pad(classes == WHITE, 1, constant_values=True)
+    white4 = white[:-2, 1:-1] | white[2:, 1:-1] | white[1:-1, :-2] | white[1:-1, 2:]
+    padded = np.pad(luma, 1, mode="edge")
+    h, w = luma.shape
+    valley = np.full(luma.shape, -np.inf, np.float32)
+    for dr, dc in ((0, 1), (1, 0), (1, 1), (1, -1)):
+        before = padded[1 - dr:1 - dr + h, 1 - dc:1 - dc + w]
+        after = padded[1 + dr:1 + dr + h, 1 + dc:1 + dc + w]
+        valley = np.maximum(valley, np.minimum(before, after) - luma)
+    dark = ((luma < CONTOUR_Y_MAX) & white4) | ((luma < CORE_Y_MAX) & (valley >= VALLEY_MIN))
+    classes[red & dark & (neighbour_count(red) > 0)] = BLACK  # a lone red pixel (a profile's origin) stays red
 
 
 def neighbour_count(mask: np.ndarray) -> np.ndarray:

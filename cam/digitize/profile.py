@@ -24,7 +24,14 @@ from typing import Callable, Sequence, Union
 import numpy as np
 
 from .drawing import BLACK, BLUE, RED, Drawing, load_image
+from .drawing import _read_rgb as read_rgb
+from .drawing import _to_rgb
 from ..errors import DrawingError, ParseError, PlanError
+
+def to_rgb(array: np.ndarray) -> np.ndarray:
+    """An image array as ``(H, W, 3)`` RGB (see :func:`cam.digitize.drawing.load_image`)."""
+    return _to_rgb(array, bgr=False, source="<array>")
+
 
 __all__ = ["Profile", "load_profile", "profile_from_expr", "profile_from_csv", "as_profile"]
 
@@ -40,6 +47,8 @@ class Profile:
 
     depth_px: np.ndarray
     source: str = "<profile>"
+    warnings: tuple[str, ...] = ()
+    """Thesis rules the drawing breaks (several blue pixels in a column, ...), read anyway."""
 
     @property
     def n_layers(self) -> int:
@@ -64,43 +73,62 @@ def _from_values(values: Sequence[float], source: str) -> Profile:
     return Profile(np.rint(arr).astype(np.int64), source)
 
 
-def profile_from_drawing(drawing: Drawing) -> Profile:
-    """Read a profile drawing (see the module docstring)."""
+def profile_from_drawing(drawing: Drawing, rgb: np.ndarray | None = None) -> Profile:
+    """Read a profile drawing (see the module docstring), as people draw and save them.
+
+    The blue curve may touch or run along either axis (a blue pixel on the layer axis is depth 0), and a
+    column may hold several blue pixels (a thick, anti-aliased or JPEG-saved curve): each layer's depth is
+    the blue pixel farthest from the layer axis in its column.  Breaking the thesis rules (one blue pixel per
+    column) is a warning of the profile.  ``rgb``: the drawing's ``(H, W, 3)`` pixels when at hand (a file):
+    a dark bluish pixel is then blue too.
+    """
     c = drawing.classes
     src = drawing.source
+    black = c == BLACK
+    blue = c == BLUE
+    if rgb is not None:
+        px = np.asarray(rgb).astype(np.int16)
+        luma = (299 * px[..., 0] + 587 * px[..., 1] + 114 * px[..., 2]) // 1000
+        blue |= (luma < 128) & (px[..., 2] - np.maximum(px[..., 0], px[..., 1]) > _BLUISH_MIN)
+        black &= ~blue
     reds = np.argwhere(c == RED)
-    if len(reds) == 0:
-        raise DrawingError(f"{src}: profile has no red origin pixel")
     if len(reds) > 1:
         r, col = reds[1]
         raise DrawingError(f"{src}: profile must have one red origin pixel, found {len(reds)} (another at x={col}, y={r})")
-    r0, c0 = (int(v) for v in reds[0])
-    black = c == BLACK
-    if not (c0 + 1 < c.shape[1] and black[r0, c0 + 1]):
+    if len(reds) == 1:
+        r0, c0 = (int(v) for v in reds[0])
+    else:
+        raise DrawingError(f"{src}: profile has no red origin pixel")
+    axis = black | blue  # a blue curve on an axis covers it
+    if not (c0 + 1 < c.shape[1] and axis[r0, c0 + 1]):
         raise DrawingError(f"{src}: no black horizontal (layer) axis to the right of the origin (x={c0}, y={r0})")
-    if not ((r0 > 0 and black[r0 - 1, c0]) or (r0 + 1 < c.shape[0] and black[r0 + 1, c0])):
+    if not ((r0 > 0 and axis[r0 - 1, c0]) or (r0 + 1 < c.shape[0] and axis[r0 + 1, c0])):
         raise DrawingError(f"{src}: no black vertical (depth) axis at the origin (x={c0}, y={r0})")
-    blue = c == BLUE
+    blue[:, : c0 + 1] = False  # the depth axis's column and what lies left of it are no layers
     if not blue.any():
-        raise DrawingError(f"{src}: profile has no blue curve")
+        raise DrawingError(f"{src}: profile has no blue curve right of the origin (x={c0}, y={r0})")
     per_col = blue.sum(axis=0)
-    crowded = np.flatnonzero(per_col > 1)
-    if len(crowded):
-        cols = ", ".join(str(int(v)) for v in crowded[:8]) + (" ..." if len(crowded) > 8 else "")
-        raise DrawingError(
-            f"{src}: only one z depth value for a given layer: columns {cols} have more than one blue pixel"
-        )
-    cols = np.flatnonzero(per_col == 1)
-    if cols.min() <= c0:
-        raise DrawingError(f"{src}: blue pixel at column {int(cols.min())} lies left of the origin column {c0}")
+    cols = np.flatnonzero(per_col)
     last = int(cols.max())
     missing = [k for k in range(c0 + 1, last + 1) if per_col[k] == 0]
     if missing:
         raise DrawingError(
             f"{src}: layer {missing[0] - c0} (column {missing[0]}) has no blue depth pixel; the curve must be continuous"
         )
-    rows = np.argmax(blue[:, c0 + 1 : last + 1], axis=0)
-    return _from_values(np.abs(rows - r0), src)
+    rows = np.arange(c.shape[0])[:, None]
+    distance = np.where(blue[:, c0 + 1 : last + 1], np.abs(rows - r0), -1)
+    warnings = []
+    crowded = np.flatnonzero((c == BLUE).sum(axis=0)[c0 + 1 : last + 1] > 1)
+    if len(crowded):
+        listed = ", ".join(str(int(k) + 1) for k in crowded[:8]) + (" ..." if len(crowded) > 8 else "")
+        warnings.append(f"{src}: layers {listed} have more than one blue pixel (thesis: one depth per layer); "
+                        f"each takes the one farthest from the layer axis")
+    prof = _from_values(distance.max(axis=0), src)
+    return Profile(prof.depth_px, src, tuple(warnings))
+
+
+_BLUISH_MIN = 40
+"""A dark pixel whose blue exceeds its red and green by more than this is the blue curve (JPEG, anti-aliasing)."""
 
 
 def _quoted(text: str) -> str:
@@ -248,7 +276,9 @@ def load_profile(source: str | os.PathLike | np.ndarray | Drawing) -> Profile:
         return profile_from_drawing(source)
     if isinstance(source, (str, os.PathLike)) and Path(source).suffix.lower() in (".csv", ".txt"):
         return profile_from_csv(source)
-    return profile_from_drawing(load_image(source))
+    if isinstance(source, np.ndarray):
+        return profile_from_drawing(load_image(source), rgb=to_rgb(source))
+    return profile_from_drawing(load_image(source), rgb=read_rgb(Path(source)))
 
 
 def as_profile(profile: ProfileLike, n_layers: int) -> Profile:

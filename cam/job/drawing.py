@@ -102,7 +102,7 @@ def _pass_targets(
 def plan(
     digitized: Digitized,
     *,
-    depth: int | Sequence[int] = 10,
+    depth: int | Sequence[int] | None = None,
     settings: MachineSettings = DEFAULT_SETTINGS,
     passes: int = 1,
     start_at: tuple[int, int, int] = (0, 0, 0),
@@ -115,13 +115,15 @@ def plan(
         digitized: the traced objects.
         depth: Z pixels below the surface -- one number for every object
             (Delta Z Uniform) or one per object (Delta Z1..Zn).  0 skips an object.
+            None = 10 for a 2D drawing.  On a 3D drawing one number cuts every
+            layer at that depth (a flat-bottomed pocket), instead of a profile.
         settings: machine settings (steps per pixel, travel).
         passes: Repeat Drill -- cut the whole path ``passes`` times, each
             pass deeper (pass k cuts ceil(depth x k / passes)).
         start_at: Start At ``(x, y, z)`` offset in pixels for the whole job.
         pause_at: Pause At drawing points ``(x, y)``; the job pauses each time
             the tool reaches one at its cutting depth.
-        profile: for 3D drawings (required there, refused for 2D): depth per
+        profile: for 3D drawings (or a uniform ``depth``; refused for 2D): depth per
             layer -- a :class:`~cam.digitize.profile.Profile`, a profile drawing or CSV
             path, a sequence of depths (layer 1 first) or a function of the
             layer number.  A ring of layer k is cut at profile(k).
@@ -139,14 +141,27 @@ def plan(
     if n_obj == 0:
         raise PlanError("nothing to cut: the digitized drawing has no objects")
     if digitized.mode == "3d":
+        if profile is not None and depth is not None:
+            raise PlanError("give a 3D drawing's depth once: --depth N (every layer at N Z pixels, a flat-bottomed "
+                            "pocket) or a profile (--profile, --profile-expr) for a shaped relief")
+        if profile is None and depth is None:
+            raise PlanError("this is a 3D drawing (red interior): give --depth N for a flat-bottomed pocket N Z "
+                            "pixels deep, or a profile for its layer depths (--profile FILE, --profile-expr EXPR)")
         if profile is None:
-            raise PlanError("this is a 3D drawing (red interior): a profile is needed for its depths (--profile)")
-        prof = as_profile(profile, digitized.n_layers)
-        depth_px, warnings = prof.depth_of(digitized.levels).astype(np.int64), []
+            uniform = np.atleast_1d(np.asarray(depth, np.int64))
+            if uniform.size != 1:
+                raise PlanError(f"a 3D drawing takes one --depth for every layer (a flat-bottomed pocket), got "
+                                f"{uniform.size} values; use a profile for a depth per layer")
+            if int(uniform[0]) < 0:
+                raise PlanError(f"depths must be >= 0 Z pixels, got {int(uniform[0])}")
+            depth_px, warnings = np.full(len(digitized.levels), int(uniform[0]), np.int64), []
+        else:
+            prof = as_profile(profile, digitized.n_layers)
+            depth_px, warnings = prof.depth_of(digitized.levels).astype(np.int64), list(prof.warnings)
     else:
         if profile is not None:
             raise PlanError("a profile applies to 3D drawings only; this drawing is 2D (use --depth)")
-        depth_px, warnings = _depths_per_object(depth, n_obj)
+        depth_px, warnings = _depths_per_object(10 if depth is None else depth, n_obj)
     targets, _ = _pass_targets(digitized, depth_px, passes)
     if len(targets) == 0:
         raise PlanError("nothing to cut: every depth is 0")

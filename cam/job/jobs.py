@@ -8,9 +8,11 @@ The CLI and the web server are thin adapters over :func:`prepare_job`::
     job.size_mm, job.estimated_time_s, job.warnings, job.tool_changes
     job.preview_png()      # PNG bytes of the toolpath picture
 
-The kind comes from the file name's suffix (:func:`job_kind`); an unknown
-suffix is a :class:`~cam.errors.CamError` naming the file and the accepted
-types.  Every job is planned relative to where the tool stands when it
+The kind comes from the file name's suffix and, when the suffix is generic
+(none, ``.txt``, ``.nc``, ``.cnc``), unknown or contradicted by the content,
+from the file's first few kB (:func:`job_kind`, :mod:`cam.sniff`); a suffix
+the content contradicts is a warning of the job.  A file neither tells is a
+:class:`~cam.errors.CamError` naming the file and the accepted types.  Every job is planned relative to where the tool stands when it
 starts (the job's home, (0, 0, 0) in machine steps); :attr:`PreparedJob.extent_steps`
 says how far it reaches from there, so a caller that knows where the tool
 stands can check the job against the machine travel before it starts.
@@ -41,6 +43,7 @@ from ..formats.gcode import load_gcode
 from ..formats.hpgl import load_hpgl
 from ..render.picture import LEGEND_PX, depth_colours, encode_png, toolpath_picture
 from ..render.report import job_report
+from ..sniff import KIND_NAMES
 from ..settings import DEFAULT_SETTINGS, MachineSettings
 from ..verify.pinlog import PinLog, decode_pin_log, motion_extent
 from .drawing import check_drawing_size, plan
@@ -76,7 +79,9 @@ class JobOptions:
     """How to cut a file.  An option given for a kind it does not apply to is an error (:meth:`check_kind`).
 
     Drawings and digitized matrices (pixel units):
-        depth: Z pixels below the surface, one value for every object or one per object.
+        depth: Z pixels below the surface, one value for every object or one per object (None: 10 on a 2D
+            drawing; on a 3D drawing one value cuts every layer at it, a flat-bottomed pocket, instead of a
+            profile).
         passes: cut in this many passes of increasing depth (Repeat Drill).
         start: where each 2D object starts, "top" or "min-distance".
         start_at: ``(x, y, z)`` pixel offset of the whole job (Start At).
@@ -95,7 +100,7 @@ class JobOptions:
         flip_y: machine Y = +Y mm instead of -Y mm.
     """
 
-    depth: tuple[int, ...] = (10,)
+    depth: Optional[tuple[int, ...]] = None
     passes: int = 1
     start: str = "top"
     start_at: tuple[int, int, int] = (0, 0, 0)
@@ -143,7 +148,7 @@ class JobOptions:
         def bad(key: str, why: str) -> CamError:
             return CamError(f"{source}: option '{key}' {why}, got {getattr(self, key)!r}")
 
-        if not self.depth or any(not 0 <= d <= MAX_DEPTH_PX for d in self.depth):
+        if self.depth is not None and (not self.depth or any(not 0 <= d <= MAX_DEPTH_PX for d in self.depth)):
             raise bad("depth", f"must be Z pixels 0..{MAX_DEPTH_PX}")
         if any(abs(v) > MAX_PX for v in self.start_at) or any(abs(v) > MAX_PX for p in self.pause_at for v in p):
             raise bad("start_at" if any(abs(v) > MAX_PX for v in self.start_at) else "pause_at",
@@ -171,7 +176,7 @@ class JobOptions:
             raise bad("excellon_digits", "must be two digit counts 0..8")
         if self.profile is not None and self.profile_expr is not None:
             raise bad("profile_expr", "cannot be given together with a profile file")
-        if self.cut_depth_mm is not None and self.depth != JobOptions.depth:
+        if self.cut_depth_mm is not None and self.depth is not None:
             raise bad("cut_depth_mm", "cannot be given together with depth (Z pixels per object)")
         return self
 
@@ -276,7 +281,7 @@ def _points(value: Any) -> tuple[tuple[int, int], ...]:
 
 
 _PARSERS = {
-    "depth": _ints(None),
+    "depth": _optional(_ints(None)),
     "passes": _int,
     "start": _text,
     "start_at": _ints(3),
@@ -456,6 +461,8 @@ def _finish(job: PreparedJob) -> PreparedJob:
 def _drawing_depth(options: JobOptions, settings: MachineSettings) -> Any:
     """The drawing's depth in Z pixels: ``depth`` (one for all or one per object), or ``cut_depth_mm`` for all."""
     if options.cut_depth_mm is None:
+        if options.depth is None:
+            return None
         return options.depth[0] if len(options.depth) == 1 else list(options.depth)
     depth_px = int(round(options.cut_depth_mm / settings.px_to_mm_z(1)))
     if depth_px < 1:
@@ -567,7 +574,12 @@ def prepare_job(
         CamError: unknown file type, unreadable or bad file (file:line), bad options, travel exceeded.
     """
     p = Path(path)
-    kind = job_kind(p)
+    if not p.is_file() and p.suffix == "":
+        raise CamError(f"{p}: file not found")
+    kind_warnings: list[str] = []
+    kind = job_kind(p, kind_warnings)
+    if kind not in KINDS:
+        raise CamError(f"{p.name}: {KIND_NAMES.get(kind, kind)} cannot be cut by this version of cam")
     opts = (options or JobOptions()).checked().check_kind(kind, p.name)
     if not p.is_file():
         raise CamError(f"{p}: file not found")
@@ -579,6 +591,7 @@ def prepare_job(
         job = _prepare_excellon(p, opts, settings)
     else:
         job = _prepare_hpgl(p, opts, settings, progress)
+    job.warnings[:0] = kind_warnings
     job.name = name or p.name
     job.summary = job.name + job.summary[len(p.name):]
     return _finish(job)

@@ -76,6 +76,7 @@ except ImportError:  # pragma: no cover - not Unix: no file limit to raise
 from ..drive.session import MachineSession
 from ..errors import BusyError, CamError, CapabilityError
 from ..fileio import atomic_write_bytes
+from ..sniff import HEAD_BYTES
 from ..job.jobs import PROFILE_SUFFIXES, JobOptions, PreparedJob, accepted_suffixes, job_kind
 from ..settings import DEFAULT_SETTINGS, MachineSettings
 from ..worker import DEFAULT_TIME_LIMIT_S, Worker, default_memory_limit_bytes
@@ -425,10 +426,11 @@ async def _parse_upload(request: Request, body: bytes) -> tuple[Any, str]:
     return item, role
 
 
-def _upload_kind(name: str, role: str) -> str:
-    """The job kind of an uploaded file name, or "profile"; HttpError 400 for a profile of another suffix."""
+def _upload_kind(name: str, role: str, data: bytes = b"", warnings: Optional[list[str]] = None) -> str:
+    """The job kind of an uploaded file by its name and first bytes (a drill file named ``.TXT`` too), or
+    "profile"; HttpError 400 for a profile of another suffix."""
     if role == "job":
-        return job_kind(name)
+        return job_kind(name, warnings, head=data[:HEAD_BYTES])
     if Path(name).suffix.lower() not in PROFILE_SUFFIXES:
         raise HttpError(400, f"{name}: a profile is a drawing or a CSV ({' '.join(PROFILE_SUFFIXES)})")
     return "profile"
@@ -446,9 +448,11 @@ async def _upload(st: _AppState, request: Request):
     if len(data) > limit:
         return _too_large(limit)
     name = safe_name(item.filename or "")
-    kind = _upload_kind(name, role)
     if not data:
+        _upload_kind(name, role)  # a bad name first
         raise HttpError(400, f"{name}: the file is empty")
+    kind_warnings: list[str] = []
+    kind = _upload_kind(name, role, data, kind_warnings)
     st.counter += 1
     job_id = str(st.counter)
     path = (st.jobs_dir / f"{int(job_id):04d}-{name}").resolve()
@@ -457,6 +461,8 @@ async def _upload(st: _AppState, request: Request):
     await run_in_threadpool(atomic_write_bytes, path, data)
     st.uploads[job_id] = {"path": str(path), "name": name, "kind": kind, "role": role}
     st.session.log(f"uploaded {name} ({kind}, {len(data)} bytes)")
+    for w in kind_warnings:
+        st.session.log(w, "warning")
     return {"job": job_id, "name": name, "kind": kind, "bytes": len(data)}
 
 

@@ -59,13 +59,14 @@
     const o = {};
     const val = (id) => $(id).value.trim();
     if (kind === "drawing" || kind === "digitized") {
-      o.depth = val("opt-depth");
       o.passes = val("opt-passes");
       o.start = val("opt-start");
       o.start_at = val("opt-start-at");
       if (val("opt-pause-at")) o.pause_at = val("opt-pause-at");
+      // a 3D drawing takes a profile (a shaped relief) or one depth (a flat-bottomed pocket)
       if (page.profile) o.profile = page.profile;
       else if (val("opt-profile-expr")) o.profile_expr = val("opt-profile-expr");
+      else o.depth = val("opt-depth");
     } else if (kind === "excellon" || kind === "hpgl") {
       if (val("opt-cut-depth")) o.cut_depth_mm = val("opt-cut-depth");  // empty: the kind's default
       o.travel_height_mm = val("opt-travel-height");

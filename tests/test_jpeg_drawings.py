@@ -1,0 +1,77 @@
+"""JPEG and anti-aliased drawings digitize like their clean originals (issue #16 point 3).
+
+Every 2D and 3D sample is saved as JPEG at quality 75 and 90 with 4:2:0 chroma (OpenCV), and anti-aliased
+(a soft 3x3 blur, the grey fringe a paint program's smooth line leaves); each must give the clean drawing's
+digitized matrix, and its job must carve, decoded from the mock's pin log, exactly the clean job's surface.
+"""
+import cv2
+import numpy as np
+import pytest
+
+import cam
+from cam.digitize.drawing import BLACK, RED, WHITE
+
+from conftest import SAMPLES, assert_surface_equal, carve_job
+
+SAMPLES_2D_3D = sorted(p.name for p in SAMPLES.glob("*.png"))
+VARIANTS = ("jpeg75", "jpeg90", "antialiased")
+
+
+def _jpeg(bgr: np.ndarray, quality: int) -> np.ndarray:
+    params = [cv2.IMWRITE_JPEG_QUALITY, quality]
+    if hasattr(cv2, "IMWRITE_JPEG_SAMPLING_FACTOR"):
+        params += [cv2.IMWRITE_JPEG_SAMPLING_FACTOR, cv2.IMWRITE_JPEG_SAMPLING_FACTOR_420]
+    ok, buf = cv2.imencode(".jpg", bgr, params)
+    assert ok
+    return buf
+
+
+def _variant(tmp_path, name: str, variant: str):
+    bgr = cv2.imread(str(SAMPLES / name))
+    if variant.startswith("jpeg"):
+        path = tmp_path / f"{name[:-4]}_{variant}.jpg"
+        _jpeg(bgr, int(variant[4:])).tofile(str(path))
+        return path
+    kernel = np.array([[1, 2, 1], [2, 12, 2], [1, 2, 1]], np.float32)
+    soft = cv2.filter2D(bgr.astype(np.float32), -1, kernel / kernel.sum(), borderType=cv2.BORDER_REPLICATE)
+    path = tmp_path / f"{name[:-4]}_aa.png"
+    cv2.imwrite(str(path), np.clip(np.rint(soft), 0, 255).astype(np.uint8))
+    return path
+
+
+
+
+@pytest.mark.parametrize("variant", VARIANTS)
+@pytest.mark.parametrize("name", SAMPLES_2D_3D)
+def test_variant_digitizes_and_carves_like_the_clean_drawing(tmp_path, name, variant):
+    clean = cam.digitize(cam.load_image(SAMPLES / name))
+    drawing = cam.load_image(_variant(tmp_path, name, variant))
+    assert np.array_equal(drawing.classes, cam.load_image(SAMPLES / name).classes)
+    got = cam.digitize(drawing)
+    assert got.mode == clean.mode and np.array_equal(got.to_array(), clean.to_array())
+    kwargs = {"profile": lambda k: 1 + k // 2} if clean.mode == "3d" else {"depth": 4}
+    want, _, _ = carve_job(cam.plan(clean, **kwargs))
+    surface, _, _ = carve_job(cam.plan(got, **kwargs))
+    assert_surface_equal(surface, want)
+
+
+def test_pil_jpeg_of_the_heart_is_the_heart(tmp_path):
+    """The issue's example: PIL's save('h.jpg', quality=85), 4:2:0 by default."""
+    image = pytest.importorskip("PIL.Image")
+    path = tmp_path / "h.jpg"
+    image.open(SAMPLES / "heart.png").convert("RGB").save(path, quality=85, subsampling=2)
+    assert np.array_equal(cam.load_image(path).classes, cam.load_image(SAMPLES / "heart.png").classes)
+
+
+def test_dark_red_contour_pixel_is_black_and_a_lone_red_pixel_stays_red():
+    """A tiny 3D drawing whose contour took the interior's red, as 4:2:0 chroma leaves it."""
+    img = np.full((7, 7, 3), 255, np.uint8)
+    img[1:6, 1:6] = (120, 0, 0)   # the contour, dark red (luminance 36)
+    img[2:5, 2:5] = (255, 0, 0)   # the interior
+    classes = cam.load_image(img).classes
+    assert (classes[1:6, 1:6][[0, -1]] == BLACK).all() and (classes[2:5, 2:5] == RED).all()
+    assert classes[0, 0] == WHITE
+    lone = np.full((5, 5, 3), 255, np.uint8)
+    lone[2, 1:4] = 0
+    lone[2, 2] = (255, 0, 0)      # a profile's origin on its axis
+    assert cam.load_image(lone).classes[2, 2] == RED

@@ -1,0 +1,44 @@
+"""Profiles as people draw them (issue #16 point 2): the curve may touch or run along an axis."""
+import numpy as np
+import pytest
+
+import cam
+
+W, K, R, B = (255, 255, 255), (0, 0, 0), (255, 0, 0), (0, 0, 255)
+
+
+def _profile(depths, *, thick_at=None):
+    """Origin at (x=1, y=1), layer axis to the right on row 1, depth axis down column 1; depth k = row 1 + k."""
+    h, w = max(depths) + 4, len(depths) + 4
+    img = np.full((h, w, 3), 255, np.uint8)
+    img[1, 1:w - 1] = K
+    img[1:h - 1, 1] = K
+    img[1, 1] = R
+    for k, d in enumerate(depths):
+        img[1 + d, 2 + k] = B
+        if thick_at == k:
+            img[d, 2 + k] = B  # a second, nearer pixel in the column
+    return img
+
+
+def test_curve_starting_on_the_layer_axis_is_depth_zero():
+    prof = cam.load_profile(_profile([0, 0, 1, 2, 3]))
+    assert prof.depth_px.tolist() == [0, 0, 1, 2, 3] and prof.warnings == ()
+
+
+def test_curve_running_along_the_axis_then_dropping():
+    prof = cam.load_profile(_profile([0, 0, 0, 4, 4, 0]))
+    assert prof.depth_px.tolist() == [0, 0, 0, 4, 4, 0]
+
+
+def test_several_blue_pixels_in_a_column_take_the_farthest_with_a_warning():
+    prof = cam.load_profile(_profile([2, 3, 3], thick_at=1))
+    assert prof.depth_px.tolist() == [2, 3, 3]
+    assert len(prof.warnings) == 1 and "layers 2 have more than one blue pixel" in prof.warnings[0]
+
+
+def test_a_gap_in_the_curve_is_still_an_error():
+    img = _profile([1, 1, 1])
+    img[2, 3] = W
+    with pytest.raises(cam.DrawingError, match=r"layer 2 \(column 3\) has no blue depth pixel"):
+        cam.load_profile(img)
