@@ -63,3 +63,23 @@ def emu():
     yield e
     e.stop()
     assert e.error is None, repr(e.error)
+
+
+def wait_for_progress(proc, percent: int, timeout_s: float = 60.0) -> list:
+    """Read a command's stderr (its ``--progress`` bar) until it shows ``percent`` %; returns the chunks read so
+    far, which a thread keeps filling (join ``chunks.reader`` after the process ends)."""
+    import os
+    import re
+    import threading
+    import time
+
+    chunks: list = []
+    reader = threading.Thread(target=lambda: chunks.extend(iter(lambda: os.read(proc.stderr.fileno(), 4096), b"")),
+                              daemon=True)
+    reader.start()
+    deadline = time.monotonic() + timeout_s
+    while max([int(v) for v in re.findall(rb"(\d+)%", b"".join(chunks))] or [0]) < percent:
+        assert time.monotonic() < deadline and proc.poll() is None, b"".join(chunks)
+        time.sleep(0.02)
+    wait_for_progress.reader = reader
+    return chunks

@@ -21,7 +21,7 @@ import cam
 from cam import choices
 from cam.cli.parser import build_parser
 
-from conftest import ROOT
+from conftest import wait_for_progress, ROOT
 
 ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
 
@@ -319,11 +319,13 @@ def test_preview_export_and_info_take_every_file_kind(tmp_path):
 
 
 def test_an_interrupted_jog_says_how_far_it_moved():
-    proc = subprocess.Popen([sys.executable, "-m", "cam", "jog", "X+", "2000", "--realtime", "--no-progress"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV)
-    time.sleep(2.5)  # 2000 steps at 5 ms take 10 s
+    proc = subprocess.Popen([sys.executable, "-m", "cam", "jog", "X+", "2000", "--realtime", "--progress"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=ENV)
+    chunks = wait_for_progress(proc, 5)  # 2000 steps at 5 ms take 10 s: stop it once it moves
     proc.send_signal(signal.SIGINT)
-    out, err = proc.communicate(timeout=60)
+    proc.wait(60)
+    wait_for_progress.reader.join(10)
+    err = b"".join(chunks).decode(errors="replace")
     assert proc.returncode == 130, err
     moved = int(re.search(r"jog stopped: moved X=(\d+) Y=0 Z=0 steps", err).group(1))
     assert 0 < moved < 2000

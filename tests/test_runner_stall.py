@@ -1,11 +1,9 @@
 """A stalled real-time runner never catches up: every step interval stays at or above the planned one."""
 import json
 import os
-import re
 import signal
 import subprocess
 import sys
-import threading
 import time
 from pathlib import Path
 
@@ -15,7 +13,7 @@ import cam
 from cam.drive.runner import FINISHED, STALL_NS
 from cam.verify.pinlog import read_pin_log
 
-from conftest import drawing_from_rows
+from conftest import drawing_from_rows, wait_for_progress
 
 ROOT = Path(__file__).resolve().parents[1]
 ROWS = ["." * 42] + ["." + "#" * 40 + "."] + ["." * 42]
@@ -69,18 +67,12 @@ def test_sigstop_of_a_realtime_drill_keeps_every_interval(tmp_path):
         [sys.executable, "-m", "cam", "drill", str(image), "--depth", "4", "--realtime", "--ramp", "constant",
          "--delay", "2,2", "--pin-log", str(pins), "--report", str(report), "--progress"],
         cwd=tmp_path, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True)
-    seen = []
-    reader = threading.Thread(target=lambda: seen.extend(iter(lambda: os.read(proc.stderr.fileno(), 4096), b"")))
-    reader.start()
-    deadline = time.monotonic() + 60
-    while max([int(v) for v in re.findall(rb"(\d+)%", b"".join(seen))] or [0]) < 10:  # into the job
-        assert time.monotonic() < deadline and proc.poll() is None, b"".join(seen)
-        time.sleep(0.02)
+    seen = wait_for_progress(proc, 10)  # into the job
     os.killpg(proc.pid, signal.SIGSTOP)
     time.sleep(0.6)
     os.killpg(proc.pid, signal.SIGCONT)
     proc.wait(60)
-    reader.join(10)
+    wait_for_progress.reader.join(10)
     err = b"".join(seen).decode(errors="replace")
     assert proc.returncode == 0, err
     settings = cam.MachineSettings().replace(delay_xy_ms=2.0, delay_z_ms=2.0, ramp="constant")

@@ -148,6 +148,9 @@ def execute(job: Any, args: argparse.Namespace, settings: MachineSettings, *,
     previous = {s: signal.signal(s, stop) for s in _STOP_SIGNALS}
     try:
         session.start(job)
+        if bar is not None and not bar.total:  # a jog or a go-to: its time is known once the session planned it
+            bar.total = round(session.state()["remaining_s"], 3)
+            bar.refresh()
         version = session.version
         while session.busy:
             version = session.wait_change(version, 0.2)
