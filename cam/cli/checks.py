@@ -33,6 +33,7 @@ _OPTION_OF_FLAG = {
     "travel_height": "travel_height_mm", "offset": "offset_mm", "mirror_x": "mirror_x",
     "drill_order": "drill_order", "excellon_units": "excellon_units", "excellon_format": "excellon_digits",
     "excellon_zeros": "excellon_zeros", "flip_y": "flip_y",
+    "scale": "scale", "fit": "fit_mm",
 }
 APPLIES_TO = {
     **{dest: OPTION_KINDS[option] for dest, option in _OPTION_OF_FLAG.items()},
@@ -96,6 +97,8 @@ def _check_applies(args: argparse.Namespace, kind: str) -> None:
     table = dict(APPLIES_TO)
     if args.command == "export":
         table.update(_EXPORT_APPLIES_TO)
+    if args.command == "preview":
+        table["scale"] = EVERY_KIND  # picture pixels per drawing pixel, or an SVG's scale
     for dest, kinds in table.items():
         if hasattr(args, dest) and _given(args, dest) and kind not in kinds:
             flag = "--" + dest.replace("_", "-")

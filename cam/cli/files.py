@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..choices import EXCELLON_SUFFIXES, GCODE_SUFFIXES, HPGL_SUFFIXES
+from ..choices import EXCELLON_SUFFIXES, GCODE_SUFFIXES, HPGL_SUFFIXES, SVG_SUFFIXES
 from ..digitize import digitize
 from ..digitize.digitized import save_digitized
 from ..digitize.drawing import load_image
@@ -132,7 +132,28 @@ def _info_gcode(args: argparse.Namespace) -> int:
     return 0
 
 
+def _info_svg(args: argparse.Namespace) -> int:
+    job = prepare(args)  # at the defaults: its own size, 0.5 mm deep
+    rep = job.report
+    w, h = job.size_mm
+    if args.json:
+        print(json.dumps(rep, indent=2))
+        return 0
+    elements = ", ".join(f"{n} {name}" for name, n in sorted(rep["elements"].items())) or "none"
+    segments = ", ".join(f"{n} {name}" for name, n in rep["segments"].items())
+    dw, dh = rep["document_mm"]
+    lines = [f"{args.image}: {rep['strokes']} strokes from {elements}",
+             f"  segments: {segments} (arcs as cubic Béziers)",
+             f"  page {dw:.2f} x {dh:.2f} mm; cut area {w:.2f} x {h:.2f} mm at scale 1, machine time "
+             f"{format_duration(job.estimated_time_s)} at 0.5 mm deep"]
+    lines += [f"warning: {w}" for w in job.warnings]
+    print("\n".join(lines))
+    return 0
+
+
 def cmd_info(args: argparse.Namespace) -> int:
+    if Path(args.image).suffix.lower() in SVG_SUFFIXES:
+        return _info_svg(args)
     if Path(args.image).suffix.lower() in HPGL_SUFFIXES:
         return _info_hpgl(args)
     if Path(args.image).suffix.lower() in EXCELLON_SUFFIXES:
