@@ -36,10 +36,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Optional, Union
 
+import cv2
 import numpy as np
+import svgelements as se
 
 from ..choices import SVG_SUFFIXES
 from ..errors import ParseError
+from ..render.picture import encode_png
 
 __all__ = ["SvgDrawing", "parse_svg", "load_svg", "SVG_SUFFIXES", "MM_PER_PX", "MAX_SVG_BYTES"]
 
@@ -118,10 +121,6 @@ class SvgDrawing:
 
     def _repr_png_(self) -> bytes:
         """Notebook picture: the strokes, black on white, about 600 px on the longer side."""
-        import cv2  # the picture only: the reader itself needs no OpenCV
-
-        from ..render.picture import encode_png
-
         x0, y0, x1, y1 = self.extent_mm()
         k = 580.0 / max(x1 - x0, y1 - y0, 1e-9)
         w, h = int((x1 - x0) * k) + 21, int((y1 - y0) * k) + 21
@@ -168,8 +167,6 @@ def _point(p, k: float) -> tuple[float, float]:
 
 def _subpaths(path, k: float, close_open: bool) -> list[tuple[list[np.ndarray], bool]]:
     """The subpaths of a reified :class:`svgelements.Path` as segment lists in mm (``k`` mm per px)."""
-    import svgelements as se
-
     out: list[tuple[list[np.ndarray], bool]] = []
     segs: list[np.ndarray] = []
     start = None
@@ -219,8 +216,6 @@ def parse_svg(data: Union[bytes, str], *, source: str = "<svg>") -> SvgDrawing:
         ParseError: not an SVG document, a ``<text>`` element (convert text to paths), a coordinate that is
         not a finite number.
     """
-    import svgelements as se
-
     raw = data.encode("utf-8") if isinstance(data, str) else bytes(data)
     try:
         svg = se.SVG.parse(io.BytesIO(raw), reify=True, ppi=96.0)

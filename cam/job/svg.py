@@ -7,13 +7,15 @@ The drawing is scaled by ``scale`` (or to fit ``fit_mm``), then placed: by
 default the top-left of what is cut at the home (0, 0); ``offset_mm=(X, Y)``
 instead puts the page's origin (0, 0), scaled, at machine (X, Y) mm.
 
-How a curve becomes steps, so that every cut position lies within one step of the exact curve:
+How a curve becomes steps, so that every cut position lies within one step of the exact curve (0.71 + 0.15)
+and every point of the curve within one step of a cut position (0.15 + 0.125 + 0.71):
 
-1. Each stroke is flattened to a polyline within a quarter step of the curve (:meth:`SvgDrawing.polylines`).
-2. The polyline is sampled every half step or closer and each sample rounded to the nearest step; repeated
-   positions are dropped, so consecutive positions are 8-neighbours, each within half a step (per axis) of
-   the polyline.  A position between two 8-neighbours (a staircase corner) is dropped, so the path moves
-   diagonally, unless it is where the polyline turns by more than :data:`CORNER_DEG`; runs of the same unit move are joined into one straight move (which visits the same positions).
+1. Each stroke is flattened to a polyline within 0.15 step of the curve (:meth:`SvgDrawing.polylines`).
+2. The polyline is sampled every quarter step or closer and each sample rounded to the nearest step;
+   repeated positions are dropped, so consecutive positions are 8-neighbours, each within 0.71 step of the
+   polyline.  A position between two 8-neighbours (a staircase corner) is dropped, so the path moves
+   diagonally, unless it is where the polyline turns by more than :data:`CORNER_DEG` or a sample that
+   rounds to it would be left more than 0.7 step from any cut position; runs of the same unit move are joined into one straight move (which visits the same positions).
 3. Strokes are ordered for short travel: from where the tool is, the stroke whose nearer end is nearest
    comes next, cut from that end (a stroke is reversed only when its end is strictly nearer than its
    start).
@@ -46,10 +48,12 @@ __all__ = ["plan_svg", "svg_strokes_steps", "svg_scale", "DEFAULT_CUT_DEPTH_MM",
 DEFAULT_CUT_DEPTH_MM = 0.5
 """As HPGL's pen-down depth: a vector drawing engraved."""
 DEFAULT_SAFE_HEIGHT_MM = 1.0
-FLATTEN_STEPS = 0.25
+FLATTEN_STEPS = 0.15
 """Curves are flattened to within this many steps (the rounding to whole steps takes at most half a step more)."""
-SAMPLE_STEPS = 0.5
+SAMPLE_STEPS = 0.25
 """The polylines are sampled at most this many steps apart before rounding."""
+CORNER_REACH_STEPS = 0.7
+"""A staircase corner is dropped only when each of its samples lies this near a neighbouring kept position."""
 
 
 def svg_scale(drawing: SvgDrawing, *, scale: Optional[float] = None,
@@ -107,7 +111,7 @@ def _cells(poly_steps: np.ndarray) -> np.ndarray:
     run = np.cumsum(new) - 1  # the kept position each sample rounds to
     fixed_kept = np.zeros(int(run[-1]) + 1, bool)
     np.logical_or.at(fixed_kept, run, fixed)
-    cells = _drop_corners(cells[new], fixed_kept)
+    cells = _drop_corners(cells[new], fixed_kept, pts, run)
     if len(cells) < 3:
         return cells
     step = np.diff(cells, axis=0)
@@ -116,13 +120,24 @@ def _cells(poly_steps: np.ndarray) -> np.ndarray:
     return cells[~same]
 
 
-def _drop_corners(cells: np.ndarray, fixed: np.ndarray) -> np.ndarray:
-    """Drop each position (not ``fixed``) whose neighbours are 8-neighbours of each other (the corner of a
-    staircase: one diagonal move visits the kept positions), never two in a row."""
+def _drop_corners(cells: np.ndarray, fixed: np.ndarray, samples: np.ndarray, run: np.ndarray) -> np.ndarray:
+    """Drop the corners of staircases so that the path moves diagonally.
+
+    A position (not ``fixed``) whose two neighbours are 8-neighbours of each other is dropped when every
+    sample that rounds to it (``samples[run == i]``) lies within :data:`CORNER_REACH_STEPS` of one of those
+    neighbours, never two in a row: so every sample stays within that distance of a kept position.
+    """
     if len(cells) < 3:
         return cells
     corner = np.zeros(len(cells), bool)
     corner[1:-1] = (np.abs(cells[2:] - cells[:-2]).max(axis=1) <= 1) & ~fixed[1:-1]
+    inner = (run > 0) & (run < len(cells) - 1)
+    r = run[inner]
+    s = samples[inner]
+    reach = np.minimum(np.hypot(*(s - cells[r - 1]).T), np.hypot(*(s - cells[r + 1]).T))
+    worst = np.zeros(len(cells))
+    np.maximum.at(worst, r, reach)
+    corner &= worst <= CORNER_REACH_STEPS
     for i in np.flatnonzero(corner):
         if corner[i - 1]:
             corner[i] = False
