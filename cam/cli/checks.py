@@ -57,7 +57,8 @@ OUTPUTS = {
 }
 """Files a command writes, checked before it starts."""
 
-_OUTPUT_SUFFIXES = {"preview": (".png", ".svg"), "digitize": DIGITIZED_SUFFIXES, "export": None}
+_OUTPUT_SUFFIXES = {"preview": (".png", ".svg"), "digitize": DIGITIZED_SUFFIXES, "export": None,
+                    "trace": (".png", ".bmp", ".tif", ".tiff")}
 """What ``-o`` of each command writes."""
 
 _DEFAULTS = {"start": "top", "depth": [10], "passes": 1, "start_at": [0, 0, 0], "pause_at": [], "drill_order": "tour"}

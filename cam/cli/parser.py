@@ -327,6 +327,25 @@ def _add_info(sub: argparse._SubParsersAction) -> None:
     _add_excellon_options(i)
 
 
+def _add_trace(sub: argparse._SubParsersAction) -> None:
+    t = sub.add_parser(
+        "trace", help="turn a scanned sketch or a photo of a drawing into a drawing (1-pixel black curves)",
+        description="Trace a pencil or ink sketch (a scan or a phone photo: dark lines on light paper) into a "
+        "drawing that follows the thesis rules: the paper's uneven light is flattened, the lines are found by an "
+        "adaptive threshold and thinned to 1-pixel centre lines, specks and spurs shorter than --min-length are "
+        "removed, junctions are split so that no pixel has more than two black neighbours, and nothing touches "
+        "the border. --fill makes every closed region red (a 3D drawing). The result is ready for 'cam drill'.",
+    )
+    t.add_argument("image", metavar="PHOTO", help=f"the sketch ({_listed(DRAWING_SUFFIXES)})")
+    t.add_argument("-o", "--output", required=True, metavar="DRAWING.png",
+                   help="where to write the drawing (.png, .bmp or .tif: never JPEG, which blurs 1-pixel lines)")
+    t.add_argument("--min-length", type=_whole("--min-length", 2, 100_000), default=10, metavar="PX",
+                   help="remove specks and spurs shorter than this many pixels (default 10)")
+    t.add_argument("--fill", action="store_true", help="make the regions enclosed by curves red (3D drawing)")
+    t.add_argument("--max-side", type=_whole("--max-side", 16, 32768), default=1000, metavar="PX",
+                   help="shrink a larger photo to this many pixels on its longer side first (default 1000)")
+
+
 def _add_profile(sub: argparse._SubParsersAction) -> None:
     pr = sub.add_parser("profile", help="print a Z profile's layer count and depth range",
                         description="Read a profile drawing or CSV and print its layer count and depth range.")
@@ -411,7 +430,7 @@ def _add_serve(sub: argparse._SubParsersAction) -> None:
                      help="the memory that worker process may use (default: half the machine's, at most 8192)")
 
 
-_COMMAND_PARSERS = (_add_drill, _add_export, _add_preview, _add_digitize, _add_info, _add_profile, _add_jog,
+_COMMAND_PARSERS = (_add_drill, _add_export, _add_preview, _add_digitize, _add_trace, _add_info, _add_profile, _add_jog,
                     _add_emulate_maximus, _add_goto, _add_serve)
 """Each adds one command's subparser, in the order ``cam --help`` lists them."""
 
