@@ -38,6 +38,9 @@ _LAZY = {
     "PixelFrame": "cam.job.model",
     "plan_drill": "cam.job.drill", "DrillPlan": "cam.job.drill", "drill_order": "cam.job.drill_order",
     "plan_hpgl": "cam.job.hpgl",
+    "load_svg": "cam.formats.svg", "parse_svg": "cam.formats.svg", "SvgDrawing": "cam.formats.svg",
+    "plan_svg": "cam.job.svg",
+    "trace": "cam.digitize.sketch", "TracedDrawing": "cam.digitize.sketch", "load_sketch": "cam.digitize.sketch",
     "load_excellon": "cam.formats.excellon", "parse_excellon": "cam.formats.excellon",
     "HoleList": "cam.formats.excellon",
     "load_hpgl": "cam.formats.hpgl", "parse_hpgl": "cam.formats.hpgl", "scan_hpgl": "cam.formats.hpgl",
@@ -107,7 +110,10 @@ if TYPE_CHECKING:  # pragma: no cover - for type checkers and editors only
     from .formats.excellon import HoleList, load_excellon, parse_excellon
     from .formats.gcode_export import save_gcode, to_gcode
     from .formats.hpgl import HpglDrawing, HpglScan, iter_hpgl, load_hpgl, parse_hpgl, scan_hpgl
+    from .digitize.sketch import TracedDrawing, load_sketch, trace
+    from .formats.svg import SvgDrawing, load_svg, parse_svg
     from .job.hpgl import plan_hpgl
+    from .job.svg import plan_svg
     from .job.drill import DrillPlan, plan_drill
     from .job.drill_order import drill_order
     from .job.drawing import plan

@@ -20,7 +20,7 @@ from .sniff import decide_kind, read_head
 __all__ = [
     "job_kind", "OPTION_KINDS",
     "DRAWING_SUFFIXES", "DIGITIZED_SUFFIXES", "EXCELLON_SUFFIXES", "HPGL_SUFFIXES", "GCODE_SUFFIXES",
-    "PROFILE_SUFFIXES", "SUFFIXES", "FILE_JOB_SUFFIXES", "START_RULES",
+    "PROFILE_SUFFIXES", "SVG_SUFFIXES", "SUFFIXES", "FILE_JOB_SUFFIXES", "START_RULES",
 ]
 
 DRAWING_SUFFIXES = (".png", ".bmp", ".jpg", ".jpeg", ".tif", ".tiff")
@@ -33,6 +33,8 @@ HPGL_SUFFIXES = (".plt", ".hpgl", ".hpg")
 """Pen-plotter files (HPGL)."""
 GCODE_SUFFIXES = (".ngc", ".nc", ".gcode", ".gc", ".g", ".tap", ".cnc")
 """RS-274/NGC G-code programs."""
+SVG_SUFFIXES = (".svg",)
+"""Vector drawings (SVG: Inkscape, Illustrator, logo tools): every visible stroke and outline is cut."""
 PROFILE_SUFFIXES = DRAWING_SUFFIXES + (".csv", ".txt")
 """Files a depth profile may come from (a profile drawing or a CSV of depths)."""
 
@@ -42,10 +44,11 @@ SUFFIXES = {
     "gcode": GCODE_SUFFIXES,
     "excellon": EXCELLON_SUFFIXES,
     "hpgl": HPGL_SUFFIXES,
+    "svg": SVG_SUFFIXES,
 }
 """Suffixes of each job kind, in the order :func:`job_kind` tries them."""
 
-FILE_JOB_SUFFIXES = EXCELLON_SUFFIXES + GCODE_SUFFIXES + HPGL_SUFFIXES
+FILE_JOB_SUFFIXES = EXCELLON_SUFFIXES + GCODE_SUFFIXES + HPGL_SUFFIXES + SVG_SUFFIXES
 """Files that are jobs already (not drawings): the job is in the file, not traced from a picture."""
 
 START_RULES = ("top", "min-distance")
@@ -90,3 +93,7 @@ OPTION_KINDS = {
     "flip_y": frozenset({"gcode"}),
 }
 """The job kinds each job option (:class:`cam.job.jobs.JobOptions`) applies to; the CLI's checks use it too."""
+# SVG (issue 16, point 5): the mm options of the vector kinds, and its own scale and fit
+for _option in ("cut_depth_mm", "travel_height_mm", "offset_mm"):
+    OPTION_KINDS[_option] = OPTION_KINDS[_option] | {"svg"}
+OPTION_KINDS.update({"scale": frozenset({"svg"}), "fit_mm": frozenset({"svg"})})

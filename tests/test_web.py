@@ -635,3 +635,19 @@ def test_api_emergency_stop_on_the_maximus_board(tmp_path):
         s.close()
         emu.stop()
     assert emu.error is None
+
+
+def test_the_page_takes_svg_with_its_options(fast):
+    """Issue 16: an SVG upload is an "svg" job; scale and fit come from the page's form fields."""
+    svg = (b'<svg xmlns="http://www.w3.org/2000/svg" width="40mm" height="20mm" viewBox="0 0 40 20">'
+           b'<circle cx="10" cy="10" r="8" stroke="black" fill="none"/></svg>')
+    status, up = fast.upload("logo.svg", svg)
+    assert status == 200 and up["kind"] == "svg"
+    status, planned = fast.call("POST", "/api/plan", {"job": up["job"], "options": {"fit_mm": "32x32",
+                                                                                      "cut_depth_mm": "0.3"}})
+    assert status == 200 and planned["kind"] == "svg", planned
+    assert abs(planned["size_mm"][0] - 32) < 0.1 and abs(planned["size_mm"][1] - 32) < 0.1
+    status, bad = fast.call("POST", "/api/plan", {"job": up["job"], "options": {"depth": "3"}})
+    assert status == 400 and "does not apply" in str(bad)
+    status, info = fast.call("GET", "/api/config")
+    assert status == 200 and ".svg" in info["accepted"]["svg"]

@@ -26,6 +26,7 @@ COMMANDS = {
     "digitize": ("cam.cli.files", "cmd_digitize"),
     "info": ("cam.cli.files", "cmd_info"),
     "profile": ("cam.cli.files", "cmd_profile"),
+    "trace": ("cam.cli.trace", "cmd_trace"),
     "jog": ("cam.cli.machine", "cmd_jog"),
     "goto": ("cam.cli.machine", "cmd_goto"),
     "serve": ("cam.cli.serve", "cmd_serve"),

@@ -34,6 +34,7 @@ _OPTION_OF_FLAG = {
     "travel_height": "travel_height_mm", "offset": "offset_mm", "mirror_x": "mirror_x",
     "drill_order": "drill_order", "excellon_units": "excellon_units", "excellon_format": "excellon_digits",
     "excellon_zeros": "excellon_zeros", "flip_y": "flip_y",
+    "scale": "scale", "fit": "fit_mm",
 }
 APPLIES_TO = {
     **{dest: OPTION_KINDS[option] for dest, option in _OPTION_OF_FLAG.items()},
@@ -57,7 +58,8 @@ OUTPUTS = {
 }
 """Files a command writes, checked before it starts."""
 
-_OUTPUT_SUFFIXES = {"preview": (".png", ".svg"), "digitize": DIGITIZED_SUFFIXES, "export": None}
+_OUTPUT_SUFFIXES = {"preview": (".png", ".svg"), "digitize": DIGITIZED_SUFFIXES, "export": None,
+                    "trace": (".png", ".bmp", ".tif", ".tiff")}
 """What ``-o`` of each command writes."""
 
 _DEFAULTS = {"start": "top", "passes": 1, "start_at": [0, 0, 0], "pause_at": [], "drill_order": "tour"}
@@ -99,6 +101,8 @@ def _check_applies(args: argparse.Namespace, kind: str) -> None:
     table = dict(APPLIES_TO)
     if args.command == "export":
         table.update(_EXPORT_APPLIES_TO)
+    if args.command == "preview":
+        table["scale"] = EVERY_KIND  # picture pixels per drawing pixel, or an SVG's scale
     for dest, kinds in table.items():
         if hasattr(args, dest) and _given(args, dest) and kind not in kinds:
             flag = "--" + dest.replace("_", "-")

@@ -134,8 +134,29 @@ def _info_gcode(args: argparse.Namespace) -> int:
     return 0
 
 
+def _info_svg(args: argparse.Namespace) -> int:
+    job = prepare(args)  # at the defaults: its own size, 0.5 mm deep
+    rep = job.report
+    w, h = job.size_mm
+    if args.json:
+        print(json.dumps(rep, indent=2))
+        return 0
+    elements = ", ".join(f"{n} {name}" for name, n in sorted(rep["elements"].items())) or "none"
+    segments = ", ".join(f"{n} {name}" for name, n in rep["segments"].items())
+    dw, dh = rep["document_mm"]
+    lines = [f"{args.image}: {rep['strokes']} strokes from {elements}",
+             f"  segments: {segments} (arcs as cubic Béziers)",
+             f"  page {dw:.2f} x {dh:.2f} mm; cut area {w:.2f} x {h:.2f} mm at scale 1, machine time "
+             f"{format_duration(job.estimated_time_s)} at 0.5 mm deep"]
+    lines += [f"warning: {w}" for w in job.warnings]
+    print("\n".join(lines))
+    return 0
+
+
 def cmd_info(args: argparse.Namespace) -> int:
     kind = job_kind_of(args)
+    if kind == "svg":
+        return _info_svg(args)
     if kind == "hpgl":
         return _info_hpgl(args)
     if kind == "excellon":

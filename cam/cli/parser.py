@@ -15,7 +15,7 @@ from typing import Callable, Optional, Sequence
 from .. import __version__
 from ..choices import (
     DIGITIZED_SUFFIXES, DRAWING_SUFFIXES, EXCELLON_SUFFIXES, GCODE_SUFFIXES, HPGL_SUFFIXES, PROFILE_SUFFIXES,
-    START_RULES,
+    START_RULES, SVG_SUFFIXES,
 )
 from ..settings import RAMP_MODES
 
@@ -36,7 +36,8 @@ def _listed(suffixes: Sequence[str]) -> str:
 
 FILE_KINDS_HELP = (
     f"a drawing ({_listed(DRAWING_SUFFIXES)}), an Excellon drill file ({_listed(EXCELLON_SUFFIXES)}), "
-    f"an HPGL file ({_listed(HPGL_SUFFIXES)}) or a G-code file ({_listed(GCODE_SUFFIXES)})"
+    f"an HPGL file ({_listed(HPGL_SUFFIXES)}), an SVG file ({_listed(SVG_SUFFIXES)}) or a G-code file "
+    f"({_listed(GCODE_SUFFIXES)})"
 )
 """The files a job command or info takes as its positional argument, by kind."""
 
@@ -170,17 +171,39 @@ def _add_excellon_options(d: argparse.ArgumentParser) -> None:
     g.add_argument("--excellon-zeros", choices=("LZ", "TZ"), help="zero suppression when the file does not say")
 
 
+def _fit(text: str) -> list[float]:
+    """--fit WIDTHxHEIGHT in mm."""
+    parts = text.lower().replace(",", "x").split("x")
+    try:
+        values = [float(v) for v in parts]
+    except ValueError:
+        values = []
+    if len(values) != 2 or not all(math.isfinite(v) and 0 < v <= MAX_MM for v in values):
+        raise argparse.ArgumentTypeError(f"--fit takes WIDTHxHEIGHT in mm, two numbers > 0 such as 80x40, got '{text}'")
+    return values
+
+
+def _add_svg_options(d: argparse.ArgumentParser, scale: bool = True) -> None:
+    g = d.add_argument_group(f"SVG files ({_listed(SVG_SUFFIXES)}; --cut-depth default 0.5, --offset places the page origin)")
+    if scale:
+        g.add_argument("--scale", type=_number("--scale", 1e-6, MAX_MM), metavar="FACTOR",
+                       help="SVG: mm cut per mm of the drawing (default 1: its own size)")
+    g.add_argument("--fit", type=_fit, metavar="WxH",
+                   help="SVG: scale the drawing to fit WIDTHxHEIGHT mm, keeping its proportions (e.g. 80x40)")
+
+
 def _add_cut_options(d: argparse.ArgumentParser) -> None:
     g = d.add_argument_group("depths and heights in mm (one name on every file kind and on the web page)")
     g.add_argument("--cut-depth", type=_number("--cut-depth", 0.0, MAX_MM), metavar="MM",
                    help="cutting depth below the surface: drill files (default 2.0: through a 1.6 mm board), HPGL "
-                   "pen-down depth (default 0.5), or a drawing's depth for every object instead of --depth")
+                   "and SVG pen-down depth (default 0.5), or a drawing's depth for every object instead of --depth")
     g.add_argument("--travel-height", type=_number("--travel-height", 0.0, MAX_MM), metavar="MM",
-                   help="height above the surface between cuts (default 1.0): drill files, HPGL, and every "
+                   help="height above the surface between cuts (default 1.0): drill files, HPGL, SVG, and every "
                    "file 'cam export' writes")
-    f = d.add_argument_group(f"drill and HPGL files ({_listed(EXCELLON_SUFFIXES)} {_listed(HPGL_SUFFIXES)})")
+    f = d.add_argument_group(f"drill, HPGL and SVG files ({_listed(EXCELLON_SUFFIXES)} {_listed(HPGL_SUFFIXES)} "
+                             f"{_listed(SVG_SUFFIXES)})")
     f.add_argument("--offset", type=_float_list(2, "--offset"), metavar="X,Y",
-                   help="machine position (mm from where the tool stands) of the board or plotter origin; "
+                   help="machine position (mm from where the tool stands) of the board, plotter or SVG page origin; "
                    "default: the top-left of what is cut at the start position")
     f.add_argument("--mirror-x", action="store_true", help="drill files: mirror the board for drilling from the back")
     f.add_argument("--drill-order", choices=("tour", "file"),
@@ -222,11 +245,12 @@ def _add_job_options(d: argparse.ArgumentParser) -> None:
 
 def _add_drill(sub: argparse._SubParsersAction) -> None:
     d = sub.add_parser(
-        "drill", help="cut a drawing, G-code, drill (Excellon) or HPGL file (mock port by default)",
+        "drill", help="cut a drawing, G-code, drill (Excellon), HPGL or SVG file (mock port by default)",
         description="Digitize a drawing (or reuse a saved digitized matrix), plan the depth-sorted toolpath "
         f"and send it to a port. A G-code file ({_listed(GCODE_SUFFIXES)}) runs as programmed; an Excellon drill "
         f"file ({_listed(EXCELLON_SUFFIXES)}) is drilled tool by tool in a short order, also on the MAXIMUS board "
-        f"(--port maximus:/dev/ttyUSB0); an HPGL file ({_listed(HPGL_SUFFIXES)}) is cut pen-down at --cut-depth. "
+        f"(--port maximus:/dev/ttyUSB0); an HPGL file ({_listed(HPGL_SUFFIXES)}) is cut pen-down at --cut-depth, "
+        f"and so is every visible stroke and outline of an SVG file ({_listed(SVG_SUFFIXES)}). "
         "The default port is the logging mock, so nothing moves unless you name a real port.",
     )
     _add_job_options(d)
@@ -242,6 +266,7 @@ def _add_drill(sub: argparse._SubParsersAction) -> None:
     g.add_argument("--spindle", choices=("on", "off"),
                    help="MAXIMUS board: run the spindle while drilling (default on; off for a dry run)")
     _add_cut_options(d)
+    _add_svg_options(d)
     _add_progress_options(g)
 
 
@@ -253,6 +278,7 @@ def _add_export(sub: argparse._SubParsersAction) -> None:
     )
     _add_job_options(e)
     _add_cut_options(e)
+    _add_svg_options(e)
     e.add_argument("-o", "--output", required=True, metavar="FILE.ngc", help="where to write the G-code")
     e.add_argument("--flip-y", action="store_true", help="write Y = +row (mirrored) instead of Y = -row")
 
@@ -269,7 +295,10 @@ def _add_preview(sub: argparse._SubParsersAction) -> None:
     pv.add_argument("--flip-y", action="store_true", help="G-code input: machine Y = +Y mm instead of -Y mm")
     pv.add_argument("-o", "--output", required=True, metavar="OUT.png|OUT.svg", help="picture to write")
     pv.add_argument("--surface", action="store_true", help="draw the cut surface instead of the toolpath")
-    pv.add_argument("--scale", type=_whole("--scale", 1, 64), metavar="N", help="picture pixels per drawing pixel (default: automatic)")
+    pv.add_argument("--scale", type=_number("--scale", 1e-6, MAX_MM), metavar="N",
+                    help="picture pixels per drawing pixel, 1..64 (default: automatic); for an SVG file, its scale "
+                    "as in drill")
+    _add_svg_options(pv, scale=False)
 
 
 def _add_digitize(sub: argparse._SubParsersAction) -> None:
@@ -297,6 +326,25 @@ def _add_info(sub: argparse._SubParsersAction) -> None:
     _add_profile_options(i)
     i.add_argument("--json", action="store_true", help="print the report as JSON (every file kind)")
     _add_excellon_options(i)
+
+
+def _add_trace(sub: argparse._SubParsersAction) -> None:
+    t = sub.add_parser(
+        "trace", help="turn a scanned sketch or a photo of a drawing into a drawing (1-pixel black curves)",
+        description="Trace a pencil or ink sketch (a scan or a phone photo: dark lines on light paper) into a "
+        "drawing that follows the thesis rules: the paper's uneven light is flattened, the lines are found by an "
+        "adaptive threshold and thinned to 1-pixel centre lines, specks and spurs shorter than --min-length are "
+        "removed, junctions are split so that no pixel has more than two black neighbours, and nothing touches "
+        "the border. --fill makes every closed region red (a 3D drawing). The result is ready for 'cam drill'.",
+    )
+    t.add_argument("image", metavar="PHOTO", help=f"the sketch ({_listed(DRAWING_SUFFIXES)})")
+    t.add_argument("-o", "--output", required=True, metavar="DRAWING.png",
+                   help="where to write the drawing (.png, .bmp or .tif: never JPEG, which blurs 1-pixel lines)")
+    t.add_argument("--min-length", type=_whole("--min-length", 2, 100_000), default=10, metavar="PX",
+                   help="remove specks and spurs shorter than this many pixels (default 10)")
+    t.add_argument("--fill", action="store_true", help="make the regions enclosed by curves red (3D drawing)")
+    t.add_argument("--max-side", type=_whole("--max-side", 16, 32768), default=1000, metavar="PX",
+                   help="shrink a larger photo to this many pixels on its longer side first (default 1000)")
 
 
 def _add_profile(sub: argparse._SubParsersAction) -> None:
@@ -383,7 +431,7 @@ def _add_serve(sub: argparse._SubParsersAction) -> None:
                      help="the memory that worker process may use (default: half the machine's, at most 8192)")
 
 
-_COMMAND_PARSERS = (_add_drill, _add_export, _add_preview, _add_digitize, _add_info, _add_profile, _add_jog,
+_COMMAND_PARSERS = (_add_drill, _add_export, _add_preview, _add_digitize, _add_trace, _add_info, _add_profile, _add_jog,
                     _add_emulate_maximus, _add_goto, _add_serve)
 """Each adds one command's subparser, in the order ``cam --help`` lists them."""
 

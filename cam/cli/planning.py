@@ -81,11 +81,12 @@ def job_options(args: argparse.Namespace) -> JobOptions:
         passes=opt("passes", d.passes), start=opt("start", d.start),
         start_at=tuple(opt("start_at", d.start_at)), pause_at=tuple(tuple(p) for p in opt("pause_at", ())),
         profile=opt("profile", None), profile_expr=opt("profile_expr", None), cut_depth_mm=opt("cut_depth", None),
-        travel_height_mm=opt("travel_height", None) if kind in ("excellon", "hpgl") else None,
+        travel_height_mm=opt("travel_height", None) if kind in ("excellon", "hpgl", "svg") else None,
         offset_mm=tuple(args.offset) if opt("offset", None) else None, mirror_x=opt("mirror_x", False),
         drill_order=opt("drill_order", d.drill_order), excellon_units=opt("excellon_units", None),
         excellon_digits=excellon_digits(args), excellon_zeros=opt("excellon_zeros", None),
         flip_y=opt("flip_y", False) if kind == "gcode" else False,
+        scale=opt("scale", None) if kind == "svg" else None, fit_mm=tuple(args.fit) if opt("fit", None) else None,
     ).checked("options")
 
 
@@ -102,17 +103,16 @@ def write_job_preview(args: argparse.Namespace, job: PreparedJob, path: str, sur
     """A prepared job's picture: a drawing's toolpath over it or its cut surface, a file job's preview."""
     if job.kind in ("drawing", "digitized"):
         write_preview(args, job.toolpath, path, surface=surface, drawing_rgb=job.drawing_rgb)
+    elif job.kind == "svg":  # --scale scaled the drawing, as in drill
+        write_file_job_preview(job, path)
     else:
-        if args.scale is not None and not (1 <= args.scale <= 64):
-            raise CamError(f"--scale must be 1..64, got {args.scale}")
-        write_file_job_preview(job, path, scale=args.scale)
+        write_file_job_preview(job, path, scale=_picture_scale(args))
 
 
 def write_preview(args: argparse.Namespace, job: Any, path: str, surface: bool = False,
                   drawing_rgb: Any = None) -> None:
     """The toolpath picture (.png over the drawing, or .svg) of a drawing's job, or its cut surface (.png)."""
-    if args.scale is not None and not (1 <= args.scale <= 64):
-        raise CamError(f"--scale must be 1..64, got {args.scale}")
+    scale = _picture_scale(args)
     suffix = Path(path).suffix.lower()
     if suffix not in (".png", ".svg"):
         raise CamError(f"{path}: pictures are written as .png or .svg")
@@ -124,11 +124,21 @@ def write_preview(args: argparse.Namespace, job: Any, path: str, surface: bool =
         st = job.settings
         legend = (f"cut surface, decoded from the mock pin log: depth 0..{st.px_to_mm_z(int(s.max()) / st.steps_per_px_z):.2f} mm"
                   f" ({int(s.max())} Z steps)")
-        save_picture(surface_picture(s, scale=args.scale, legend=legend), path)
+        save_picture(surface_picture(s, scale=scale, legend=legend), path)
     elif suffix == ".svg":
-        save_picture(toolpath_svg(job, scale=args.scale, estimated_time_s=time_s), path)
+        save_picture(toolpath_svg(job, scale=scale, estimated_time_s=time_s), path)
     else:
-        save_picture(toolpath_picture(job, drawing_rgb=drawing_rgb, scale=args.scale, estimated_time_s=time_s), path)
+        save_picture(toolpath_picture(job, drawing_rgb=drawing_rgb, scale=scale, estimated_time_s=time_s), path)
+
+
+def _picture_scale(args: argparse.Namespace) -> Optional[int]:
+    """preview's --scale as picture pixels per drawing pixel: a whole number 1..64, or None."""
+    scale = getattr(args, "scale", None)
+    if scale is None:
+        return None
+    if not (1 <= scale <= 64 and float(scale).is_integer()):
+        raise CamError(f"--scale must be a whole number 1..64 (picture pixels per drawing pixel), got {scale:g}")
+    return int(scale)
 
 
 def write_file_job_preview(job: Any, path: str, scale: Optional[int] = None) -> None:

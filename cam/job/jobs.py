@@ -4,7 +4,7 @@ The CLI and the web server are thin adapters over :func:`prepare_job`::
 
     job = prepare_job("gear.png", JobOptions(depth=(4,)))
     job.steps              # the StepPlan: every port write, timed
-    job.kind               # "drawing", "digitized", "gcode", "excellon" or "hpgl"
+    job.kind               # "drawing", "digitized", "gcode", "excellon", "hpgl" or "svg"
     job.size_mm, job.estimated_time_s, job.warnings, job.tool_changes
     job.preview_png()      # PNG bytes of the toolpath picture
 
@@ -41,6 +41,7 @@ from ..errors import CamError
 from ..formats.excellon import load_excellon
 from ..formats.gcode import load_gcode
 from ..formats.hpgl import load_hpgl
+from ..formats.svg import load_svg
 from ..render.picture import LEGEND_PX, depth_colours, encode_png, toolpath_picture
 from ..render.report import job_report
 from ..sniff import KIND_NAMES
@@ -54,13 +55,16 @@ from .gcode import plan_gcode
 from .hpgl import DEFAULT_CUT_DEPTH_MM as HPGL_CUT_DEPTH_MM
 from .hpgl import DEFAULT_SAFE_HEIGHT_MM as HPGL_SAFE_HEIGHT_MM
 from .hpgl import plan_hpgl
+from .svg import DEFAULT_CUT_DEPTH_MM as SVG_CUT_DEPTH_MM
+from .svg import DEFAULT_SAFE_HEIGHT_MM as SVG_SAFE_HEIGHT_MM
+from .svg import plan_svg
 
 __all__ = [
     "JobOptions", "PreparedJob", "prepare_job", "job_kind", "accepted_suffixes", "KINDS",
     "DRAWING_SUFFIXES", "DIGITIZED_SUFFIXES", "EXCELLON_SUFFIXES", "HPGL_SUFFIXES", "PROFILE_SUFFIXES",
 ]
 
-KINDS = ("drawing", "digitized", "gcode", "excellon", "hpgl")
+KINDS = ("drawing", "digitized", "gcode", "excellon", "hpgl", "svg")
 MAX_DEPTH_PX = 1_000_000
 """The deepest depth in Z pixels an option may ask for (the travel refuses far less)."""
 MAX_PX = 10**9
@@ -98,6 +102,8 @@ class JobOptions:
         files that do not say.
     G-code:
         flip_y: machine Y = +Y mm instead of -Y mm.
+    SVG (also cut_depth_mm, default 0.5, travel_height_mm and offset_mm, the page's origin):
+        scale: mm cut per mm of the drawing; fit_mm: or ``(width, height)`` mm to scale the drawing to fit.
     """
 
     depth: Optional[tuple[int, ...]] = None
@@ -116,6 +122,8 @@ class JobOptions:
     excellon_digits: Optional[tuple[int, int]] = None
     excellon_zeros: Optional[str] = None
     flip_y: bool = False
+    scale: Optional[float] = None
+    fit_mm: Optional[tuple[float, float]] = None
 
     @classmethod
     def from_mapping(cls, values: Mapping[str, Any], source: str = "options") -> "JobOptions":
@@ -158,6 +166,12 @@ class JobOptions:
                 raise bad(key, f"must be at most {MAX_MM:g} mm")
         if self.offset_mm is not None and any(abs(v) > MAX_MM for v in self.offset_mm):
             raise bad("offset_mm", f"must be at most {MAX_MM:g} mm either way")
+        if self.scale is not None and not (0 < self.scale <= MAX_MM):
+            raise bad("scale", f"must be a number > 0 and at most {MAX_MM:g}")
+        if self.fit_mm is not None and not all(0 < v <= MAX_MM for v in self.fit_mm):
+            raise bad("fit_mm", f"must be a width and a height > 0 and at most {MAX_MM:g} mm")
+        if self.scale is not None and self.fit_mm is not None:
+            raise bad("fit_mm", "cannot be given together with scale")
         if not (1 <= self.passes <= 1000):
             raise bad("passes", "must be 1..1000")
         if self.start not in ("top", "min-distance"):
@@ -297,6 +311,8 @@ _PARSERS = {
     "excellon_digits": _optional(_ints(2)),
     "excellon_zeros": _optional(lambda v: _text(v).upper()),
     "flip_y": _bool,
+    "scale": _optional(_float),
+    "fit_mm": _optional(lambda v: _floats(2)(v.lower().replace("x", ",") if isinstance(v, str) else v)),
 }
 
 
@@ -550,6 +566,21 @@ def _prepare_hpgl(path: Path, options: JobOptions, settings: MachineSettings, pr
     )
 
 
+def _prepare_svg(path: Path, options: JobOptions, settings: MachineSettings) -> PreparedJob:
+    drawing = load_svg(path)
+    toolpath = plan_svg(drawing, settings=settings, depth_mm=_or(options.cut_depth_mm, SVG_CUT_DEPTH_MM),
+                        safe_height_mm=_or(options.travel_height_mm, SVG_SAFE_HEIGHT_MM),
+                        scale=options.scale, fit_mm=options.fit_mm, offset_mm=options.offset_mm)
+    steps = plan_steps(toolpath)
+    counts = ", ".join(f"{n} {name}" for name, n in sorted(drawing.element_counts.items()))
+    return PreparedJob(
+        source=str(path), kind="svg", steps=steps, settings=settings, toolpath=toolpath,
+        warnings=list(drawing.warnings), summary=f"{path.name}: {drawing.n_strokes} strokes ({counts})",
+        report={"strokes": drawing.n_strokes, "elements": dict(drawing.element_counts),
+                "segments": drawing.segment_counts, "document_mm": [round(v, 3) for v in drawing.size_mm]},
+    )
+
+
 def prepare_job(
     path: str | os.PathLike, options: Optional[JobOptions] = None, settings: MachineSettings = DEFAULT_SETTINGS,
     *, name: Optional[str] = None, progress: Optional[Any] = None,
@@ -557,7 +588,7 @@ def prepare_job(
     """Read a job file and plan it into steps.
 
     Args:
-        path: a drawing, a digitized matrix, a G-code, Excellon or HPGL file (kind by suffix).
+        path: a drawing, a digitized matrix, a G-code, Excellon, HPGL or SVG file (kind by suffix).
         options: how to cut it (:class:`JobOptions`); None = the defaults.
         settings: the machine settings.
         name: the name the summary gives the file (default: its file name).
@@ -589,6 +620,8 @@ def prepare_job(
         job = _prepare_gcode(p, opts, settings)
     elif kind == "excellon":
         job = _prepare_excellon(p, opts, settings)
+    elif kind == "svg":
+        job = _prepare_svg(p, opts, settings)
     else:
         job = _prepare_hpgl(p, opts, settings, progress)
     job.warnings[:0] = kind_warnings

@@ -21,7 +21,6 @@ which the test suite replays.
 from __future__ import annotations
 
 import dataclasses
-import io
 import os
 import signal
 import struct
@@ -212,24 +211,11 @@ def mutate(rng: np.random.Generator, data: bytes) -> bytes:
 
 
 def _job(path: Path) -> None:
+    """What ``cam drill FILE`` plans (a drawing or matrix at depth 3: a 3D one as a flat pocket)."""
     from cam.job.jobs import JobOptions, prepare_job
 
     prepare_job(path, JobOptions(depth=(3,)) if path.suffix in (".png", ".jpg", ".bmp", ".dig") else JobOptions(),
                 SETTINGS)
-
-
-def _drawing(path: Path) -> None:
-    d = cam.digitize(str(path))
-    if d.n_layers if hasattr(d, "n_layers") else False:
-        cam.plan(d, profile=cam.profile_from_expr("2"), settings=SETTINGS)
-    else:
-        _job(path)
-
-
-def _digitized(path: Path) -> None:
-    d = cam.load_digitized(path)
-    cam.plan(d, depth=2, settings=SETTINGS) if not getattr(d, "n_layers", 0) else \
-        cam.plan(d, profile=cam.profile_from_expr("2"), settings=SETTINGS)
 
 
 def _settings(path: Path) -> None:
@@ -245,7 +231,7 @@ def _pinlog(path: Path) -> None:
 
 
 TARGETS: dict[str, Callable[[Path], None]] = {
-    "drawing": _drawing, "digitized": _digitized, "settings": _settings, "profile": _profile_target,
+    "drawing": _job, "digitized": _job, "settings": _settings, "profile": _profile_target,
     "pinlog": _pinlog, "excellon": _job, "hpgl": _job, "gcode": _job,
 }
 
@@ -333,4 +319,3 @@ def regression_inputs() -> list[tuple[str, Path]]:
 
 
 __all__ = ["campaign", "table", "run_one", "seeds", "mutate", "regression_inputs", "TARGETS", "Outcome"]
-_ = io  # the module is also run as a script through __main__

@@ -67,12 +67,16 @@
       if (page.profile) o.profile = page.profile;
       else if (val("opt-profile-expr")) o.profile_expr = val("opt-profile-expr");
       else o.depth = val("opt-depth");
-    } else if (kind === "excellon" || kind === "hpgl") {
+    } else if (kind === "excellon" || kind === "hpgl" || kind === "svg") {
       if (val("opt-cut-depth")) o.cut_depth_mm = val("opt-cut-depth");  // empty: the kind's default
       o.travel_height_mm = val("opt-travel-height");
       if (kind === "excellon") {
         o.drill_order = val("opt-drill-order");
         o.mirror_x = $("opt-mirror-x").checked;
+      }
+      if (kind === "svg") {
+        if (val("opt-scale")) o.scale = val("opt-scale");
+        if (val("opt-fit")) o.fit_mm = val("opt-fit");
       }
     } else if (kind === "gcode") {
       o.flip_y = $("opt-flip-y").checked;

@@ -1,0 +1,246 @@
+"""The SVG planner: the strokes of an SVG file to a job in machine steps.
+
+Frames and units: the drawing's strokes are in mm, x right, y down the page
+(:mod:`cam.formats.svg`); machine x = x, machine y = y (y grows toward the
+operator, as a drawing's rows do), in steps of ``settings.mm_per_step_xy``.
+The drawing is scaled by ``scale`` (or to fit ``fit_mm``), then placed: by
+default the top-left of what is cut at the home (0, 0); ``offset_mm=(X, Y)``
+instead puts the page's origin (0, 0), scaled, at machine (X, Y) mm.
+
+How a curve becomes steps, so that every cut position lies within one step of the exact curve (0.71 + 0.15)
+and every point of the curve within one step of a cut position (0.15 + 0.125 + 0.71):
+
+1. Each stroke is flattened to a polyline within 0.15 step of the curve (:meth:`SvgDrawing.polylines`).
+2. The polyline is sampled every quarter step or closer and each sample rounded to the nearest step;
+   repeated positions are dropped, so consecutive positions are 8-neighbours, each within 0.71 step of the
+   polyline.  A position between two 8-neighbours (a staircase corner) is dropped, so the path moves
+   diagonally, unless it is where the polyline turns by more than :data:`CORNER_DEG` or a sample that
+   rounds to it would be left more than 0.7 step from any cut position; runs of the same unit move are joined into one straight move (which visits the same positions).
+3. Strokes are ordered for short travel: from where the tool is, the stroke whose nearer end is nearest
+   comes next, cut from that end (a stroke is reversed only when its end is strictly nearer than its
+   start).
+4. Each stroke: lift, travel at the safe height above its start, plunge to the cutting depth, cut, lift; a
+   stroke that starts within one step of where the last one ended is cut on without lifting.  The job starts
+   and ends at (0, 0, 0).
+
+>>> from cam.formats.svg import parse_svg
+>>> d = parse_svg('<svg xmlns="http://www.w3.org/2000/svg" width="10mm" height="10mm" viewBox="0 0 10 10">'
+...               '<path d="M0,0 H1 V1" stroke="black"/></svg>')
+>>> job = plan_svg(d, depth_mm=0.3)
+>>> job.points_steps[job.target][:, :2].tolist()   # 1 mm = 34.6 steps of 0.0289 mm
+[[0, 0], [35, 0], [35, 35]]
+"""
+from __future__ import annotations
+
+import math
+from typing import Optional
+
+import numpy as np
+
+from ..errors import PlanError, TravelError
+from ..formats.svg import SvgDrawing
+from ..settings import DEFAULT_SETTINGS, MachineSettings
+from .hpgl import _rows, _z_steps
+from .model import CUT, Job, check_travel
+
+__all__ = ["plan_svg", "svg_strokes_steps", "svg_scale", "DEFAULT_CUT_DEPTH_MM", "DEFAULT_SAFE_HEIGHT_MM"]
+
+DEFAULT_CUT_DEPTH_MM = 0.5
+"""As HPGL's pen-down depth: a vector drawing engraved."""
+DEFAULT_SAFE_HEIGHT_MM = 1.0
+FLATTEN_STEPS = 0.15
+"""Curves are flattened to within this many steps (the rounding to whole steps takes at most half a step more)."""
+SAMPLE_STEPS = 0.25
+"""The polylines are sampled at most this many steps apart before rounding."""
+CORNER_REACH_STEPS = 0.7
+"""A staircase corner is dropped only when each of its samples lies this near a neighbouring kept position."""
+
+
+def svg_scale(drawing: SvgDrawing, *, scale: Optional[float] = None,
+              fit_mm: Optional[tuple[float, float]] = None) -> float:
+    """The factor from the drawing's mm to the job's mm: ``scale``, or the largest that fits ``fit_mm``
+    ``(width, height)`` (the drawing keeps its proportions), or 1.
+
+    Raises:
+        PlanError: both given, a factor that is not > 0, nothing to fit.
+    """
+    if scale is not None and fit_mm is not None:
+        raise PlanError("give --scale or --fit, not both")
+    if scale is not None:
+        if not (math.isfinite(scale) and scale > 0):
+            raise PlanError(f"the scale must be a number > 0, got {scale:g}")
+        return float(scale)
+    if fit_mm is None:
+        return 1.0
+    fw, fh = (float(v) for v in fit_mm)
+    if not (fw > 0 and fh > 0 and math.isfinite(fw) and math.isfinite(fh)):
+        raise PlanError(f"--fit takes a width and a height > 0 mm, got {fw:g}x{fh:g}")
+    x0, y0, x1, y1 = drawing.extent_mm()
+    w, h = x1 - x0, y1 - y0
+    if w <= 0 and h <= 0:
+        raise PlanError(f"{drawing.source}: nothing to fit (the drawing has no extent)")
+    return min(fw / w if w > 0 else math.inf, fh / h if h > 0 else math.inf)
+
+
+CORNER_DEG = 20.0
+"""A polyline vertex where the direction turns by more than this is a corner: its position is always cut."""
+
+
+def _cells(poly_steps: np.ndarray) -> np.ndarray:
+    """``(M, 2)`` int64 positions of one polyline (float steps): samples at most half a step apart, rounded,
+    repeats dropped, staircase corners dropped, runs of one unit move joined (module docstring, step 2)."""
+    d = np.diff(poly_steps, axis=0)
+    if not len(d):
+        return np.floor(poly_steps + 0.5).astype(np.int64)
+    n = np.maximum(1, np.ceil(np.abs(d).max(axis=1) / SAMPLE_STEPS)).astype(np.int64)
+    seg = np.repeat(np.arange(len(d)), n)
+    i_in_seg = np.arange(len(seg)) - np.repeat(np.cumsum(n) - n, n)
+    t = i_in_seg / np.repeat(n, n)
+    pts = np.vstack([poly_steps[seg] + d[seg] * t[:, None], poly_steps[-1:]])
+    # corners: vertices where the polyline turns sharply (and both ends) keep their position
+    length = np.hypot(d[:, 0], d[:, 1])
+    turn = np.zeros(len(poly_steps), bool)
+    turn[[0, -1]] = True
+    ok = (length[:-1] > 0) & (length[1:] > 0)
+    cos = np.einsum("ij,ij->i", d[:-1], d[1:]) / np.where(ok, length[:-1] * length[1:], 1.0)
+    turn[1:-1] = ok & (cos < math.cos(math.radians(CORNER_DEG)))
+    fixed = np.append(turn[seg] & (i_in_seg == 0), True)
+    cells = np.floor(pts + 0.5).astype(np.int64)
+    new = np.ones(len(cells), bool)
+    new[1:] = np.any(cells[1:] != cells[:-1], axis=1)
+    run = np.cumsum(new) - 1  # the kept position each sample rounds to
+    fixed_kept = np.zeros(int(run[-1]) + 1, bool)
+    np.logical_or.at(fixed_kept, run, fixed)
+    cells = _drop_corners(cells[new], fixed_kept, pts, run)
+    if len(cells) < 3:
+        return cells
+    step = np.diff(cells, axis=0)
+    same = np.zeros(len(cells), bool)
+    same[1:-1] = np.all(step[1:] == step[:-1], axis=1)  # a point inside a run of one unit move
+    return cells[~same]
+
+
+def _drop_corners(cells: np.ndarray, fixed: np.ndarray, samples: np.ndarray, run: np.ndarray) -> np.ndarray:
+    """Drop the corners of staircases so that the path moves diagonally.
+
+    A position (not ``fixed``) whose two neighbours are 8-neighbours of each other is dropped when every
+    sample that rounds to it (``samples[run == i]``) lies within :data:`CORNER_REACH_STEPS` of one of those
+    neighbours, never two in a row: so every sample stays within that distance of a kept position.
+    """
+    if len(cells) < 3:
+        return cells
+    corner = np.zeros(len(cells), bool)
+    corner[1:-1] = (np.abs(cells[2:] - cells[:-2]).max(axis=1) <= 1) & ~fixed[1:-1]
+    inner = (run > 0) & (run < len(cells) - 1)
+    r = run[inner]
+    s = samples[inner]
+    reach = np.minimum(np.hypot(*(s - cells[r - 1]).T), np.hypot(*(s - cells[r + 1]).T))
+    worst = np.zeros(len(cells))
+    np.maximum.at(worst, r, reach)
+    corner &= worst <= CORNER_REACH_STEPS
+    for i in np.flatnonzero(corner):
+        if corner[i - 1]:
+            corner[i] = False
+    return cells[~corner]
+
+
+def svg_strokes_steps(drawing: SvgDrawing, *, settings: MachineSettings = DEFAULT_SETTINGS,
+                      scale: Optional[float] = None, fit_mm: Optional[tuple[float, float]] = None,
+                      offset_mm: Optional[tuple[float, float]] = None) -> list[np.ndarray]:
+    """Each stroke as ``(M, 2)`` int64 machine ``(x, y)`` steps, in file order and direction (steps 1 and 2
+    of the module docstring)."""
+    k = svg_scale(drawing, scale=scale, fit_mm=fit_mm)
+    mm_per_step = settings.mm_per_step_xy
+    polys = drawing.polylines(FLATTEN_STEPS * mm_per_step / k)
+    if not polys:
+        return []
+    if offset_mm is None:
+        lo = np.concatenate(polys).min(axis=0) * k
+        origin = -lo
+    else:
+        origin = np.asarray(offset_mm, float)
+    return [_cells((origin + p * k) / mm_per_step) for p in polys]
+
+
+def _order(strokes: list[np.ndarray]) -> list[np.ndarray]:
+    """The strokes in cutting order, each forwards or reversed (step 3 of the module docstring)."""
+    if not strokes:
+        return []
+    starts = np.array([s[0] for s in strokes], float)
+    ends = np.array([s[-1] for s in strokes], float)
+    left = np.ones(len(strokes), bool)
+    at = np.zeros(2)
+    out = []
+    for _ in range(len(strokes)):
+        ds = np.hypot(*(starts - at).T)
+        de = np.hypot(*(ends - at).T)
+        ds[~left] = np.inf
+        de[~left] = np.inf
+        near = np.minimum(ds, de)
+        i = int(np.argmin(near))
+        left[i] = False
+        stroke = strokes[i][::-1] if de[i] < ds[i] else strokes[i]
+        out.append(stroke)
+        at = stroke[-1].astype(float)
+    return out
+
+
+def plan_svg(
+    drawing: SvgDrawing,
+    *,
+    settings: MachineSettings = DEFAULT_SETTINGS,
+    depth_mm: float = DEFAULT_CUT_DEPTH_MM,
+    safe_height_mm: float = DEFAULT_SAFE_HEIGHT_MM,
+    scale: Optional[float] = None,
+    fit_mm: Optional[tuple[float, float]] = None,
+    offset_mm: Optional[tuple[float, float]] = None,
+) -> Job:
+    """Plan the engraving of every stroke of an SVG drawing, in machine steps (see the module docstring).
+
+    Args:
+        drawing: the strokes (:func:`cam.formats.svg.load_svg`).
+        settings: machine settings (mm per step, delays, travel).
+        depth_mm: cutting depth below the surface (> 0); safe_height_mm: travel height above it (>= 0).
+        scale: mm of the job per mm of the drawing; fit_mm: or ``(width, height)`` mm the drawing is scaled to fit.
+        offset_mm: machine position (mm from the home) of the page's origin; None = the top-left of what is
+            cut at the home.
+
+    Returns:
+        A :class:`~cam.job.model.Job`: CUT points at the cutting depth (``target`` marks them), TRAVEL at the
+        safe height, RETRACT straight up.
+
+    Raises:
+        PlanError: bad options, nothing to cut; TravelError: the drawing does not fit the travel (checked
+        before the job is built, with its extent in mm).
+    """
+    if not (depth_mm > 0) or not (safe_height_mm >= 0):
+        raise PlanError("the cutting depth must be > 0 mm and the safe height >= 0 mm")
+    strokes = svg_strokes_steps(drawing, settings=settings, scale=scale, fit_mm=fit_mm, offset_mm=offset_mm)
+    if not strokes:
+        raise PlanError(f"{drawing.source}: nothing to cut (no visible stroke or outline)")
+    _check_extent(drawing, strokes, settings)
+    depth_steps, safe_steps = _z_steps(depth_mm, safe_height_mm, settings)
+    ordered = _order(strokes)
+    xy = np.concatenate(ordered)
+    group = np.zeros(len(xy), bool)
+    first = np.cumsum([0] + [len(s) for s in ordered[:-1]])
+    gap = np.array([np.abs(ordered[i][0] - ordered[i - 1][-1]).max() if i else 2 for i in range(len(ordered))])
+    group[first[gap > 1]] = True
+    pts, kind, pause = _rows(xy, group, np.zeros(len(xy), bool), depth_steps, safe_steps)
+    check_travel(pts, settings)
+    return Job(points_steps=pts, kind=kind, target=(kind == CUT) & (pts[:, 2] == depth_steps), pause=pause,
+               settings=settings, warnings=list(drawing.warnings), pause_notes=[], source=drawing.source)
+
+
+def _check_extent(drawing: SvgDrawing, strokes: list[np.ndarray], settings: MachineSettings) -> None:
+    """TravelError giving the drawing's extent in mm when it leaves the X/Y travel."""
+    xy = np.concatenate(strokes)
+    lo, hi = xy.min(axis=0), xy.max(axis=0)
+    (x_lo, x_hi), (y_lo, y_hi), _ = settings.travel.bounds_steps()
+    if lo[0] < x_lo or hi[0] > x_hi or lo[1] < y_lo or hi[1] > y_hi:
+        mm = settings.mm_per_step_xy
+        raise TravelError(
+            f"{drawing.source}: the drawing spans X {lo[0] * mm:.2f}..{hi[0] * mm:.2f} mm, Y {lo[1] * mm:.2f}.."
+            f"{hi[1] * mm:.2f} mm from the home; the travel is X {x_lo * mm:g}..{x_hi * mm:g} mm, "
+            f"Y {y_lo * mm:g}..{y_hi * mm:g} mm (make it smaller with --fit or --scale)"
+        )
