@@ -292,7 +292,10 @@ def _build(cls: type, table: Mapping[str, Any], prefix: str, source: str, base: 
         kind = {"int": int, "float": float, "bool": bool, "str": str}[f.type if isinstance(f.type, str) else f.type.__name__]
         if not _type_ok(value, kind):
             raise SettingsError(f"{source}: '{name}' must be {kind.__name__}, got {value!r}")
-        values[key] = kind(value)
+        try:
+            values[key] = kind(value)
+        except OverflowError:  # a whole number too large for a float (TOML integers have no bound here)
+            raise SettingsError(f"{source}: '{name}' is out of range: {str(value)[:40]}") from None
     return cls(**values) if base is None else dataclasses.replace(base, **values)
 
 
