@@ -42,3 +42,34 @@ def test_a_gap_in_the_curve_is_still_an_error():
     img[2, 3] = W
     with pytest.raises(cam.DrawingError, match=r"layer 2 \(column 3\) has no blue depth pixel"):
         cam.load_profile(img)
+
+
+def _shapes():
+    for n in (20, 40, 80):
+        k = np.arange(1, n + 1)
+        yield n, "dome", (np.rint(20 * np.sqrt(1 - ((n - k) / n) ** 2)) + 2).astype(int).tolist()
+        yield n, "cone", (np.rint(k * 20 / n) + 2).astype(int).tolist()
+        yield n, "steps", (3 + 5 * (k > n // 2)).astype(int).tolist()
+
+
+@pytest.mark.parametrize("n,shape,depths", list(_shapes()), ids=lambda v: str(v)[:8])
+def test_anti_aliased_profiles_read_as_their_clean_originals(n, shape, depths):
+    import cv2
+
+    clean = np.pad(_profile(depths), ((6, 6), (6, 6), (0, 0)), constant_values=255)
+    assert cam.load_profile(clean).depth_px.tolist() == depths
+    soft = cv2.GaussianBlur(clean, (3, 3), 0.6)  # every pixel off the palette: no clean red origin left
+    prof = cam.load_profile(soft)
+    assert prof.depth_px.tolist() == depths
+    assert "read as a photo-like drawing" in prof.warnings[0]
+
+
+def test_a_jpeg_saved_profile_reads_as_its_clean_original():
+    """A 40-layer cone saved at quality 90 (4:2:0 colour): the red origin is gone, the axes still cross there."""
+    import cv2
+
+    depths = (np.rint(np.arange(1, 41) * 20 / 40) + 2).astype(int).tolist()
+    clean = np.pad(_profile(depths), ((6, 6), (6, 6), (0, 0)), constant_values=255)
+    ok, buf = cv2.imencode(".jpg", clean[:, :, ::-1], [cv2.IMWRITE_JPEG_QUALITY, 90])
+    jpeg = cv2.imdecode(buf, cv2.IMREAD_COLOR)[:, :, ::-1].copy()
+    assert cam.load_profile(jpeg).depth_px.tolist() == depths

@@ -33,7 +33,7 @@ def to_rgb(array: np.ndarray) -> np.ndarray:
     return _to_rgb(array, bgr=False, source="<array>")
 
 
-__all__ = ["Profile", "load_profile", "profile_from_expr", "profile_from_csv", "as_profile"]
+__all__ = ["Profile", "load_profile", "profile_from_expr", "profile_from_csv", "profile_from_rgb", "as_profile"]
 
 
 @dataclass(frozen=True)
@@ -87,7 +87,7 @@ def profile_from_drawing(drawing: Drawing, rgb: np.ndarray | None = None) -> Pro
     black = c == BLACK
     blue = c == BLUE
     if rgb is not None:
-        px = np.asarray(rgb).astype(np.int16)
+        px = np.asarray(rgb).astype(np.int32)
         luma = (299 * px[..., 0] + 587 * px[..., 1] + 114 * px[..., 2]) // 1000
         blue |= (luma < 128) & (px[..., 2] - np.maximum(px[..., 0], px[..., 1]) > _BLUISH_MIN)
         black &= ~blue
@@ -129,6 +129,59 @@ def profile_from_drawing(drawing: Drawing, rgb: np.ndarray | None = None) -> Pro
 
 _BLUISH_MIN = 40
 """A dark pixel whose blue exceeds its red and green by more than this is the blue curve (JPEG, anti-aliasing)."""
+_BLUE_MIN = 30
+"""In a photo-like profile (JPEG, anti-aliased), a pixel whose blue exceeds its red and green by at least this
+may belong to the curve ..."""
+_BLUE_CORE = 0.5
+"""... if it is at least this share as blue as the bluest pixel of its column (the fringe of a soft line is not)."""
+_AXIS_DARK = 110
+"""Luma below which a pixel that is not bluish may be an axis."""
+_PURE = 24
+"""A channel within this of 0 or 255 is clean; a drawing with other pixels is read as photo-like."""
+
+
+def is_clean_rgb(rgb: np.ndarray) -> bool:
+    """Whether ``(H, W, 3)`` RGB pixels are all clean palette colours (each channel near 0 or 255)."""
+    px = np.asarray(rgb)
+    return bool(np.all((px <= _PURE) | (px >= 255 - _PURE)))
+
+
+def profile_from_rgb(rgb: np.ndarray, source: str = "<profile>") -> Profile:
+    """Read a photo-like profile drawing (JPEG-saved, anti-aliased): ``(H, W, 3)`` RGB, image frame.
+
+    The axes are found where they are (the darkest long row and column, not a single red pixel, which
+    JPEG's colour subsampling wipes out); the origin is where they cross.  The curve is every pixel clearly
+    bluer than it is red or green, and each layer's depth is the farthest from the layer axis of the pixels
+    in its column at least half as blue as the column's bluest (so a soft line's faint fringe does not count).
+    """
+    px = np.asarray(rgb).astype(np.int32)
+    if px.ndim != 3 or px.shape[2] != 3 or min(px.shape[:2]) < 3:
+        raise DrawingError(f"{source}: a profile drawing must be an RGB image of at least 3x3 pixels")
+    luma = (299 * px[..., 0] + 587 * px[..., 1] + 114 * px[..., 2]) // 1000
+    blueness = px[..., 2] - np.maximum(px[..., 0], px[..., 1])
+    dark = (luma < _AXIS_DARK) & (blueness < _BLUE_MIN)
+    r0 = int(np.argmax(dark.sum(axis=1)))
+    c0 = int(np.argmax(dark.sum(axis=0)))
+    if dark[r0].sum() < 3 or dark[:, c0].sum() < 3:
+        raise DrawingError(f"{source}: no black axes (a horizontal layer axis and a vertical depth axis)")
+    blue = blueness >= _BLUE_MIN
+    blue[:, : c0 + 1] = False
+    if not blue.any():
+        raise DrawingError(f"{source}: profile has no blue curve right of the origin (x={c0}, y={r0})")
+    peak = np.where(blue, blueness, 0).max(axis=0)
+    core = blue & (blueness >= _BLUE_CORE * peak[None, :])
+    cols = np.flatnonzero(core.any(axis=0))
+    last = int(cols.max())
+    missing = [k for k in range(c0 + 1, last + 1) if not core[:, k].any()]
+    if missing:
+        raise DrawingError(f"{source}: layer {missing[0] - c0} (column {missing[0]}) has no blue depth pixel; "
+                           "the curve must be continuous")
+    rows = np.arange(px.shape[0])[:, None]
+    distance = np.where(core[:, c0 + 1 : last + 1], np.abs(rows - r0), -1)
+    prof = _from_values(distance.max(axis=0), source)
+    note = (f"{source}: read as a photo-like drawing (JPEG or anti-aliased): the origin is where the axes "
+            f"cross (x={c0}, y={r0})")
+    return Profile(prof.depth_px, source, (note,))
 
 
 def _quoted(text: str) -> str:
@@ -276,9 +329,11 @@ def load_profile(source: str | os.PathLike | np.ndarray | Drawing) -> Profile:
         return profile_from_drawing(source)
     if isinstance(source, (str, os.PathLike)) and Path(source).suffix.lower() in (".csv", ".txt"):
         return profile_from_csv(source)
-    if isinstance(source, np.ndarray):
-        return profile_from_drawing(load_image(source), rgb=to_rgb(source))
-    return profile_from_drawing(load_image(source), rgb=read_rgb(Path(source)))
+    rgb = to_rgb(source) if isinstance(source, np.ndarray) else read_rgb(Path(source))
+    name = "<array>" if isinstance(source, np.ndarray) else str(source)
+    if not is_clean_rgb(rgb):  # JPEG-saved or anti-aliased: read from the colours themselves
+        return profile_from_rgb(rgb, name)
+    return profile_from_drawing(load_image(source), rgb=rgb)
 
 
 def as_profile(profile: ProfileLike, n_layers: int) -> Profile:
