@@ -52,24 +52,39 @@ def _shapes():
         yield n, "steps", (3 + 5 * (k > n // 2)).astype(int).tolist()
 
 
-@pytest.mark.parametrize("n,shape,depths", list(_shapes()), ids=lambda v: str(v)[:8])
-def test_anti_aliased_profiles_read_as_their_clean_originals(n, shape, depths):
+def _saved(img, variant):
     import cv2
 
+    if variant == "blur":  # anti-aliased: every pixel off the palette, no clean red origin left
+        return cv2.GaussianBlur(img, (3, 3), 0.6)
+    ok, buf = cv2.imencode(".jpg", img[:, :, ::-1], [cv2.IMWRITE_JPEG_QUALITY, int(variant[1:])])  # 4:2:0 colour
+    return cv2.imdecode(buf, cv2.IMREAD_COLOR)[:, :, ::-1].copy()
+
+
+@pytest.mark.parametrize("variant", ["q75", "q90", "blur"])
+@pytest.mark.parametrize("n,shape,depths", list(_shapes()), ids=lambda v: str(v)[:8])
+def test_jpeg_and_anti_aliased_profiles_read_as_their_clean_originals(n, shape, depths, variant):
     clean = np.pad(_profile(depths), ((6, 6), (6, 6), (0, 0)), constant_values=255)
     assert cam.load_profile(clean).depth_px.tolist() == depths
-    soft = cv2.GaussianBlur(clean, (3, 3), 0.6)  # every pixel off the palette: no clean red origin left
-    prof = cam.load_profile(soft)
+    prof = cam.load_profile(_saved(clean, variant))
     assert prof.depth_px.tolist() == depths
     assert "read as a photo-like drawing" in prof.warnings[0]
 
 
-def test_a_jpeg_saved_profile_reads_as_its_clean_original():
-    """A 40-layer cone saved at quality 90 (4:2:0 colour): the red origin is gone, the axes still cross there."""
+@pytest.mark.parametrize("variant", ["q75", "q90", "blur"])
+def test_a_jpeg_cone_drawn_from_the_surface_starts_at_depth_0(variant):
+    """The issue's case: a cone drawn from the surface, its curve starting on the layer axis."""
+    depths = [0, 0, 1, 1, 2, 3, 3, 4, 5, 5, 6, 7, 7, 8, 9, 9, 10, 11, 11, 12]
+    clean = np.pad(_profile(depths), ((6, 6), (6, 6), (0, 0)), constant_values=255)
+    got = cam.load_profile(_saved(clean, variant)).depth_px.tolist()
+    assert got == depths
+
+
+def test_a_jpeg_profile_file_plans_the_same_relief_as_the_clean_one(tmp_path):
     import cv2
 
     depths = (np.rint(np.arange(1, 41) * 20 / 40) + 2).astype(int).tolist()
     clean = np.pad(_profile(depths), ((6, 6), (6, 6), (0, 0)), constant_values=255)
-    ok, buf = cv2.imencode(".jpg", clean[:, :, ::-1], [cv2.IMWRITE_JPEG_QUALITY, 90])
-    jpeg = cv2.imdecode(buf, cv2.IMREAD_COLOR)[:, :, ::-1].copy()
-    assert cam.load_profile(jpeg).depth_px.tolist() == depths
+    cv2.imwrite(str(tmp_path / "p.png"), clean[:, :, ::-1])
+    cv2.imwrite(str(tmp_path / "p.jpg"), clean[:, :, ::-1], [cv2.IMWRITE_JPEG_QUALITY, 80])
+    assert cam.load_profile(tmp_path / "p.jpg").depth_px.tolist() == cam.load_profile(tmp_path / "p.png").depth_px.tolist()

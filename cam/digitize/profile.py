@@ -130,10 +130,11 @@ def profile_from_drawing(drawing: Drawing, rgb: np.ndarray | None = None) -> Pro
 _BLUISH_MIN = 40
 """A dark pixel whose blue exceeds its red and green by more than this is the blue curve (JPEG, anti-aliasing)."""
 _BLUE_MIN = 30
-"""In a photo-like profile (JPEG, anti-aliased), a pixel whose blue exceeds its red and green by at least this
-may belong to the curve ..."""
-_BLUE_CORE = 0.5
-"""... if it is at least this share as blue as the bluest pixel of its column (the fringe of a soft line is not)."""
+"""A pixel of the layer axis whose blue exceeds its red and green by this much is the curve running along it."""
+_INK_MIN = 60
+"""Darkness (255 - luma) from which a pixel off the axes may be the curve (pure blue has 226)."""
+_INK_CORE = 0.85
+"""A column's curve pixels are those at least this share as dark as its darkest (a soft line's fringe is not)."""
 _AXIS_DARK = 110
 """Luma below which a pixel that is not bluish may be an axis."""
 _PURE = 24
@@ -149,36 +150,41 @@ def is_clean_rgb(rgb: np.ndarray) -> bool:
 def profile_from_rgb(rgb: np.ndarray, source: str = "<profile>") -> Profile:
     """Read a photo-like profile drawing (JPEG-saved, anti-aliased): ``(H, W, 3)`` RGB, image frame.
 
-    The axes are found where they are (the darkest long row and column, not a single red pixel, which
-    JPEG's colour subsampling wipes out); the origin is where they cross.  The curve is every pixel clearly
-    bluer than it is red or green, and each layer's depth is the farthest from the layer axis of the pixels
-    in its column at least half as blue as the column's bluest (so a soft line's faint fringe does not count).
+    Colours do not survive JPEG at one pixel's width (4:2:0 subsampling shares colour between 2 x 2 pixels:
+    a blue pixel next to the black axis comes out dark grey, the red origin disappears), darkness does.  So:
+    the axes are the darkest long row and column and the origin is where they cross; the curve is the ink
+    off the layer axis right of the depth axis; each layer's depth is the farthest from the layer axis of the
+    pixels in its column at least :data:`_INK_CORE` as dark as its darkest (so a soft line's fringe does not
+    count), and a column with no ink off the axis is a curve running along the axis (depth 0), as long as
+    the curve goes on further right.  The blue of the curve decides where it ends on the axis row.
     """
     px = np.asarray(rgb).astype(np.int32)
     if px.ndim != 3 or px.shape[2] != 3 or min(px.shape[:2]) < 3:
         raise DrawingError(f"{source}: a profile drawing must be an RGB image of at least 3x3 pixels")
-    luma = (299 * px[..., 0] + 587 * px[..., 1] + 114 * px[..., 2]) // 1000
+    ink = 255 - (299 * px[..., 0] + 587 * px[..., 1] + 114 * px[..., 2]) // 1000
     blueness = px[..., 2] - np.maximum(px[..., 0], px[..., 1])
-    dark = (luma < _AXIS_DARK) & (blueness < _BLUE_MIN)
+    dark = ink > 255 - _AXIS_DARK
     r0 = int(np.argmax(dark.sum(axis=1)))
     c0 = int(np.argmax(dark.sum(axis=0)))
     if dark[r0].sum() < 3 or dark[:, c0].sum() < 3:
         raise DrawingError(f"{source}: no black axes (a horizontal layer axis and a vertical depth axis)")
-    blue = blueness >= _BLUE_MIN
-    blue[:, : c0 + 1] = False
-    if not blue.any():
+    # darkness above what each row has anyway (the rows beside a soft axis are all a little dark)
+    ink = ink - np.median(ink[:, c0 + 1 :], axis=1).astype(np.int32)[:, None] if c0 + 1 < ink.shape[1] else ink
+    curve = ink >= _INK_MIN
+    curve[r0] = False  # the layer axis itself
+    curve[:, : c0 + 1] = False
+    on_axis = blueness[r0] >= _BLUE_MIN
+    on_axis[: c0 + 1] = False
+    cols = np.flatnonzero(curve.any(axis=0) | on_axis)
+    if not len(cols):
         raise DrawingError(f"{source}: profile has no blue curve right of the origin (x={c0}, y={r0})")
-    peak = np.where(blue, blueness, 0).max(axis=0)
-    core = blue & (blueness >= _BLUE_CORE * peak[None, :])
-    cols = np.flatnonzero(core.any(axis=0))
     last = int(cols.max())
-    missing = [k for k in range(c0 + 1, last + 1) if not core[:, k].any()]
-    if missing:
-        raise DrawingError(f"{source}: layer {missing[0] - c0} (column {missing[0]}) has no blue depth pixel; "
-                           "the curve must be continuous")
+    span = slice(c0 + 1, last + 1)
+    peak = np.where(curve, ink, 0).max(axis=0)
+    core = curve & (ink >= _INK_CORE * peak[None, :])
     rows = np.arange(px.shape[0])[:, None]
-    distance = np.where(core[:, c0 + 1 : last + 1], np.abs(rows - r0), -1)
-    prof = _from_values(distance.max(axis=0), source)
+    distance = np.where(core[:, span], np.abs(rows - r0), 0).max(axis=0)  # no ink off the axis: depth 0
+    prof = _from_values(distance, source)
     note = (f"{source}: read as a photo-like drawing (JPEG or anti-aliased): the origin is where the axes "
             f"cross (x={c0}, y={r0})")
     return Profile(prof.depth_px, source, (note,))
