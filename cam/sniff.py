@@ -49,8 +49,10 @@ _EXC_TOOL = re.compile(r"T\d+")
 _EXC_COMMENT = re.compile(r";\s*(?:FILE_FORMAT|TYPE=|LAYER_COLOR|HEADER:|DRILL FILE|HOLESIZE|#@!)", re.I)
 
 # -- G-code -----------------------------------------------------------------------------------------------
-_GC_WORD = re.compile(r"([A-Z])\s*([-+]?(?:\d+\.?\d*|\.\d+))")
-_GC_LINE = re.compile(r"(?:[A-Z]\s*[-+]?(?:\d+\.?\d*|\.\d+)\s*)+")
+_GC_WORD = re.compile(r"([A-Z])\s*([-+]?(?:\d+(?:\.\d*)?|\.\d+))")
+# each number reads one way only (digits, then an optional fraction): a long line that fails to match
+# cannot start a backtracking storm (a 7 kB drill file hung the sniffer for minutes)
+_GC_LINE = re.compile(r"(?:[A-Z]\s*[-+]?(?:\d+(?:\.\d*)?|\.\d+)\s*)+")
 _GC_COMMENT = re.compile(r"\([^)]*\)|;.*")
 
 # -- HPGL -------------------------------------------------------------------------------------------------
