@@ -114,6 +114,86 @@ def bench_peel_3d(quick: bool) -> dict:
                "<= 3x scipy cdt", r <= 3)
 
 
+def _rgb_2d(size_px: int, n_curves: int) -> np.ndarray:
+    return np.where(drawing_2d(size_px, n_curves)[..., None] > 0, 0, 255).astype(np.uint8).repeat(3, axis=2)
+
+
+def _rgb_3d(size_px: int) -> np.ndarray:
+    palette = np.array([[255, 255, 255], [0, 0, 0], [255, 0, 0]], np.uint8)
+    return palette[disc_classes(size_px, size_px // 2 - 24)]
+
+
+def _black_mask(rgb: np.ndarray) -> np.ndarray:
+    return cv2.inRange(rgb, (0, 0, 0), (127, 127, 127))
+
+
+def bench_whole_path(quick: bool) -> list[dict]:
+    """Rows 11-14 (#17): an RGB array or a PNG file to a digitized matrix (loading, classifying, rule checks,
+    tracing or peeling) against cv2.inRange (the black mask) + cv2.findContours or scipy's cdt."""
+    from scipy.ndimage import distance_transform_cdt
+
+    size, n = (512, 40) if quick else (2048, 300)
+    reps = 5 if quick else 9
+    tmp = Path(tempfile.mkdtemp())
+    rows = []
+    for kind, rgb in (("2D", _rgb_2d(size, n)), ("3D", _rgb_3d(size))):
+        if kind == "2D":
+            def ref_of(img):
+                return cv2.findContours(_black_mask(img), cv2.RETR_LIST, cv2.CHAIN_APPROX_NONE)
+            ref_name = "cv2.inRange + cv2.findContours"
+            what = f"{n} thin curves"
+        else:
+            def ref_of(img):
+                return distance_transform_cdt(cv2.inRange(img, (0, 0, 0), (255, 127, 127)), metric="taxicab")
+            ref_name = "cv2.inRange + scipy cdt"
+            what = "red disc, black contour"
+        path = tmp / f"{kind}.png"
+        cv2.imwrite(str(path), rgb[:, :, ::-1])
+        for source in ("array", "PNG file"):
+            if source == "array":
+                t_cam, d = median_time(lambda: cam.digitize(cam.load_image(rgb)), reps)
+                t_ref, _ = median_time(lambda: ref_of(rgb), reps)
+                ref_text = ref_name
+            else:
+                t_cam, d = median_time(lambda: cam.digitize(cam.load_image(path)), reps)
+                t_ref, _ = median_time(lambda: ref_of(cv2.imread(str(path))), reps)
+                ref_text = "cv2.imread + " + ref_name
+            r = t_cam / t_ref
+            rows.append(row(f"{kind} RGB {source} -> digitized matrix {size}^2, {what}, {len(d.objects)} objects",
+                            t_cam, t_ref, f"{r:.2f}x", f"<= 3x {ref_text}", r <= 3))
+    shutil.rmtree(tmp, ignore_errors=True)
+    return rows
+
+
+def bench_cold_start(quick: bool) -> list[dict]:
+    """Row 15 (#17 point 2): whole processes, first run with an empty NUMBA_CACHE_DIR against warm runs."""
+    commands = [["drill", "samples/ellipse.png", "--depth", "5"], ["drill", "samples/board.drl"]]
+    rows = []
+    for args in commands:
+        cache = tempfile.mkdtemp()
+        env = dict(os.environ, NUMBA_CACHE_DIR=cache, PYTHONPATH=str(ROOT))
+        pins = Path(cache) / "pins.csv"
+
+        def run_once():
+            t0 = time.perf_counter()
+            out = subprocess.run([sys.executable, "-m", "cam", *args, "--pin-log", str(pins)], cwd=ROOT, env=env,
+                                 capture_output=True, text=True, timeout=600, input="\n" * 50)  # Enter at each tool change
+            if out.returncode != 0:
+                raise RuntimeError(out.stderr[-500:])
+            return time.perf_counter() - t0, out.stderr
+
+        cold_s, cold_err = run_once()
+        warm = [run_once()[0] for _ in range(3)]
+        warm_s = statistics.median(warm)
+        noted = "preparing compiled kernels, first run only" in cold_err
+        r = cold_s / warm_s
+        rows.append(row(f"cold start: cam {' '.join(args)}, first run (empty NUMBA_CACHE_DIR) vs warm", cold_s,
+                        warm_s, f"{r:.1f}x warm", "<= 2x warm, a note on stderr while compiling", r <= 2 and noted,
+                        "note shown" if noted else "no note"))
+        shutil.rmtree(cache, ignore_errors=True)
+    return rows
+
+
 def bench_planning(quick: bool) -> dict:
     size, radius = (512, 250) if quick else (2048, 1000)
     d = cam.digitize(Drawing(classes=disc_classes(size, radius)))
@@ -275,6 +355,13 @@ def bench_drill_tour(quick: bool) -> dict:
     return drill_tour.bench_row(quick)
 
 
+def bench_tsplib(quick: bool) -> list[dict]:
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    import drill_tour  # type: ignore
+
+    return drill_tour.tsplib_rows(quick)
+
+
 def bench_realtime(quick: bool) -> dict:
     seconds = 2.0 if quick else 10.0
     s = cam.MachineSettings().replace(delay_xy_ms=1.0, delay_z_ms=1.0, ramp="constant")
@@ -327,14 +414,19 @@ def _cell(value) -> str:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="small workloads (under a minute)")
-    ap.add_argument("--only", help="comma-separated row numbers to run (1..10; 10: the machine first, 4 rows, "
-                                   "left out of --quick unless named)")
+    ap.add_argument("--only", help="comma-separated row groups to run (1..14; 10: the machine first, 4 rows, "
+                                   "and 14: cold start, whole processes, are left out of --quick unless named; "
+                                   "11: the RGB array or PNG file to a digitized matrix, 4 rows; "
+                                   "12: closed tours on TSPLIB instances)")
     args = ap.parse_args(argv)
     benches = {
         1: bench_trace_2d, 2: bench_peel_3d, 3: bench_planning, 4: None, 5: bench_memory, 7: bench_drill_tour,
-        8: bench_realtime, 9: bench_ramps, 10: bench_machine_first,
+        8: bench_realtime, 9: bench_ramps, 10: bench_machine_first, 11: bench_whole_path, 12: bench_tsplib,
+        14: bench_cold_start,
     }
-    only = {int(v) for v in args.only.split(",")} if args.only else set(range(1, 10 if args.quick else 11))
+    everything = set(benches) | {6}
+    only = ({int(v) for v in args.only.split(",")} if args.only
+            else (everything - {10, 14} if args.quick else everything))
     rows: list[dict] = []
     for k in sorted(only):
         if k in (4, 6):

@@ -13,6 +13,7 @@ def test_quick_benchmarks_print_the_table():
     header, body = rows[0], rows[1:]
     assert "reference" in header and "target" in header
     names = " ".join(r.split("|")[1] for r in body)
-    for workload in ("2D trace", "3D peel", "planning", "relief", "memory", "drill tour", "real-time", "ramps"):
+    for workload in ("2D trace", "3D peel", "planning", "relief", "memory", "drill tour", "real-time", "ramps",
+                     "2D RGB array -> digitized", "3D RGB PNG file -> digitized", "TSPLIB d198"):
         assert workload in names, workload
-    assert len(body) == 9
+    assert len(body) == 14

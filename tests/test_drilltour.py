@@ -179,15 +179,16 @@ def test_plan_drill_drills_each_tool_in_tour_order():
     assert sorted(plan.hole_index.tolist()) == list(range(600))
     cur = (0.0, 0.0)
     at = 0
-    for tool, _dia, count in plan.tool_sequence:
+    for k, (tool, _dia, count) in enumerate(plan.tool_sequence):
         idx = np.flatnonzero(tool_of_hole == tool)
         assert count == len(idx)
         got = plan.hole_index[at:at + count]
-        assert got.tolist() == idx[drill_order(machine_mm[idx], start_mm=cur)].tolist()
+        end = (0.0, 0.0) if k == len(plan.tool_sequence) - 1 else None  # the last tool: back home after it
+        assert got.tolist() == idx[drill_order(machine_mm[idx], start_mm=cur, end_mm=end)].tolist()
         # the tour is shorter than drilling in file order or in nearest-neighbour order from the same place
-        tour = tour_length_mm(machine_mm, got, cur)
-        assert tour < tour_length_mm(machine_mm, idx, cur)
-        assert tour <= tour_length_mm(machine_mm, idx[nearest_neighbour_order(machine_mm[idx], cur)], cur)
+        tour = tour_length_mm(machine_mm, got, cur, end)
+        assert tour < tour_length_mm(machine_mm, idx, cur, end)
+        assert tour <= tour_length_mm(machine_mm, idx[nearest_neighbour_order(machine_mm[idx], cur)], cur, end)
         cur = tuple(machine_mm[got[-1]])
         at += count
 
@@ -212,3 +213,61 @@ def test_copies_of_a_hole_are_drilled_one_after_another():
     seq = [tuple(p) for p in pts[order]]
     runs = [k for i, k in enumerate(seq) if i == 0 or seq[i - 1] != k]
     assert len(runs) == len(set(seq))  # each distinct place appears in one run
+
+
+# ---------------------------------------------------------------- closed tours (back to the start)
+
+
+def brute_force_closed(pts: np.ndarray, start) -> float:
+    return min(tour_length_mm(pts, np.array(p), start, start) for p in itertools.permutations(range(len(pts))))
+
+
+@pytest.mark.parametrize("name", list(SETS))
+def test_closed_tour_no_longer_than_open_path_plus_return_nor_nearest_neighbour(name):
+    pts, start = SETS[name]
+    closed = drill_order(pts, start_mm=start, end_mm=start)
+    assert is_permutation(closed, len(pts))
+    length = tour_length_mm(pts, closed, start, start)
+    open_path = drill_order(pts, start_mm=start)
+    nn = nearest_neighbour_order(pts, start_mm=start)
+    assert length <= tour_length_mm(pts, open_path, start, start) + 1e-9
+    assert length <= tour_length_mm(pts, nn, start, start) + 1e-9
+
+
+@pytest.mark.parametrize("n", [2, 3, 5, 8])
+def test_small_closed_tours_are_optimal(n):
+    rng = np.random.default_rng(40 + n)
+    pts = rng.uniform(0, 50, (n, 2))
+    start = (3.0, 47.0)
+    order = drill_order(pts, start_mm=start, end_mm=start)
+    assert tour_length_mm(pts, order, start, start) == pytest.approx(brute_force_closed(pts, start))
+
+
+def test_path_to_another_end_point():
+    pts = np.array([[1.0, 0.0], [2.0, 0.0], [3.0, 0.0]] + [[x, 5.0] for x in range(20)])
+    end = (0.0, 5.0)
+    order = drill_order(pts, start_mm=(0.0, 0.0), end_mm=end)
+    assert is_permutation(order, len(pts))
+    assert tour_length_mm(pts, order, (0.0, 0.0), end) <= tour_length_mm(
+        pts, drill_order(pts, start_mm=(0.0, 0.0)), (0.0, 0.0), end) + 1e-9
+
+
+def test_closed_tour_length_literal():
+    pts = np.array([[3.0, 4.0]])
+    assert tour_length_mm(pts, np.array([0]), (0.0, 0.0), (0.0, 0.0)) == 10.0
+
+
+def test_plan_drill_last_tool_tour_returns_home():
+    """The job's whole travel (home, every tool, home) is no longer than with an open last path."""
+    rng = np.random.default_rng(11)
+    holes_mm = rng.uniform((0, 0), (60, 40), (300, 2))
+    tool_of = (np.arange(300) % 2).astype(np.int64)
+    holes = fake_holes(holes_mm, tool_of, {0: 0.8, 1: 1.0})
+    plan = plan_drill(holes)
+    xy = _machine_mm(holes_mm, None, False)
+    order = plan.hole_index
+    second = order[150:]
+    assert set(tool_of[second].tolist()) == {1}
+    open_second = second[drill_order(xy[second], start_mm=tuple(xy[order[149]]))]
+    closed_len = tour_length_mm(xy[second], np.arange(150), tuple(xy[order[149]]), (0.0, 0.0))
+    assert closed_len <= tour_length_mm(xy[open_second], np.arange(150), tuple(xy[order[149]]), (0.0, 0.0)) + 1e-9

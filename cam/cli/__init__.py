@@ -11,6 +11,7 @@ from __future__ import annotations
 import importlib
 import os
 import sys
+from pathlib import Path
 from typing import Optional, Sequence
 
 from ..errors import CamError
@@ -35,6 +36,29 @@ COMMANDS = {
 """Command name -> (module, function).  The module is imported only when its command runs: lazy by design."""
 
 
+def _note_first_compile() -> None:
+    """Say once on stderr when a compiled kernel is not in numba's cache (the first run after installing, or
+    with an empty ``NUMBA_CACHE_DIR``): compiling takes seconds, and the run should not sit silent.  numba
+    reports each real compilation (not a load from its cache) as a ``numba:compile`` event."""
+    try:
+        from numba.core import event
+    except ImportError:  # pragma: no cover - another numba layout: say nothing
+        return
+
+    class _Note(event.Listener):
+        said = False
+
+        def on_start(self, ev) -> None:
+            if not _Note.said:
+                _Note.said = True
+                print("cam: preparing compiled kernels, first run only", file=sys.stderr, flush=True)
+
+        def on_end(self, ev) -> None:
+            pass
+
+    event.register("numba:compile", _Note())
+
+
 def main(argv: Optional[Sequence[str]] = None) -> int:
     """Entry point of ``python -m cam``; returns the exit code."""
     parser = build_parser()
@@ -44,7 +68,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         return EXIT_BAD_INPUT
     module_name, function_name = COMMANDS[args.command]
     try:
-        check_args(args)  # every output path and flag, before anything is planned, written or sent
+        check_args(args)
+        _note_first_compile()  # every output path and flag, before anything is planned, written or sent
         command = getattr(importlib.import_module(module_name), function_name)
         return int(command(args))
     except CamError as exc:

@@ -45,6 +45,7 @@ import numpy as np
 from ..errors import DrawingError
 from ..limits import MAX_IMAGE_PIXELS, MAX_IMAGE_SIDE_PX
 from ..render.picture import auto_scale, encode_png
+from ._classify import black_rules_kernel, classify_kernel, hue_division_table
 from .image_size import HEADER_FORMATS, image_size_px
 
 __all__ = [
@@ -137,8 +138,52 @@ class Drawing:
         return encode_png(np.repeat(np.repeat(self.to_rgb(), k, axis=0), k, axis=1))
 
 
+def _hue_classes() -> np.ndarray:
+    """Class of each 8-bit OpenCV hue (``COLOR_RGB2HSV_FULL``: 256 steps to the circle) of a coloured pixel."""
+    hue_deg = np.arange(256, dtype=np.float32) * np.float32(360.0 / 256.0)
+    dist_red = np.minimum(hue_deg, np.float32(360.0) - hue_deg)
+    dist_blue = np.abs(hue_deg - np.float32(240.0))
+    table = np.full(256, _UNKNOWN, np.uint8)
+    table[dist_red <= HUE_TOLERANCE_DEG] = RED
+    table[dist_blue <= HUE_TOLERANCE_DEG] = BLUE
+    return table
+
+
+_HUE_CLASSES = _hue_classes()
+_HUE_DIVISION = hue_division_table()
+
+
+def _classify_pixels(img: np.ndarray, *, bgr: bool = False) -> tuple[np.ndarray, int, int, int]:
+    """``(classes, n_unknown, first_unknown_flat, n_black)`` of an ``(H, W, 3)`` uint8 image; unknown
+    pixels are 255.  One compiled pass (:mod:`._classify`); ``bgr``: the channels are OpenCV's order."""
+    img = np.asarray(img)
+    if img.dtype != np.uint8 or img.ndim != 3 or img.shape[2] != 3:
+        raise DrawingError(f"colour classification needs an (H, W, 3) uint8 image, got {img.dtype} {img.shape}")
+    img = np.ascontiguousarray(img)  # one compiled layout
+    out = np.empty(img.shape[:2], np.uint8)
+    n_unknown, first, n_black = classify_kernel(img.reshape(-1), 2 if bgr else 0, 0 if bgr else 2,
+                                                CHROMA_MIN, 3 * DARK_MAX, _HUE_CLASSES, _HUE_DIVISION,
+                                                CONTOUR_Y_MAX, CORE_Y_MAX, VALLEY_MIN, out.reshape(-1),
+                                                max(img.shape[1], 1))
+    return out, int(n_unknown), int(first), int(n_black)
+
+
+def _unknown_error(img: np.ndarray, n_bad: int, first: int, source: str, bgr: bool) -> DrawingError:
+    row, col = divmod(first, img.shape[1])
+    r, g, b = (int(v) for v in img[row, col, :3])
+    if bgr:
+        r, b = b, r
+    return DrawingError(
+        f"{source}: {n_bad} pixel(s) are not white, black, red or blue, "
+        f"e.g. pixel (x={col}, y={row}) has RGB ({r}, {g}, {b})"
+    )
+
+
 def classify(rgb: np.ndarray, *, source: str = "<array>") -> np.ndarray:
-    """Classify each pixel of an RGB image as WHITE, BLACK, RED or BLUE.
+    """Classify each pixel of an RGB image as WHITE, BLACK, RED or BLUE (the rules of the module docstring).
+
+    One compiled pass over the image (and one more over the red pixels when there are any), at about the
+    speed of reading it.
 
     Args:
         rgb: ``(H, W, 3)`` uint8 RGB image.
@@ -151,54 +196,10 @@ def classify(rgb: np.ndarray, *, source: str = "<array>") -> np.ndarray:
         DrawingError: if a pixel fits no class; gives the count and one (x, y).
     """
     rgb = np.asarray(rgb)
-    c = rgb.astype(np.int16)
-    hi = c.max(axis=2)
-    lo = c.min(axis=2)
-    chroma = hi - lo
-    neutral = chroma < CHROMA_MIN
-    out = np.full(rgb.shape[:2], _UNKNOWN, np.uint8)
-    dark = c.sum(axis=2) < 3 * DARK_MAX
-    out[neutral & dark] = BLACK
-    out[neutral & ~dark] = WHITE
-    coloured = ~neutral
-    if np.any(coloured):
-        hsv = cv2.cvtColor(np.ascontiguousarray(rgb.astype(np.uint8)), cv2.COLOR_RGB2HSV_FULL)
-        hue_deg = hsv[..., 0].astype(np.float32) * (360.0 / 256.0)
-        dist_red = np.minimum(hue_deg, 360.0 - hue_deg)
-        dist_blue = np.abs(hue_deg - 240.0)
-        out[coloured & (dist_red <= HUE_TOLERANCE_DEG)] = RED
-        out[coloured & (dist_blue <= HUE_TOLERANCE_DEG)] = BLUE
-    _contour_in_red(rgb, out)
-    unknown = out == _UNKNOWN
-    n_bad = int(unknown.sum())
+    out, n_bad, first, _ = _classify_pixels(rgb)
     if n_bad:
-        row, col = np.argwhere(unknown)[0]
-        r, g, b = (int(v) for v in rgb[row, col])
-        raise DrawingError(
-            f"{source}: {n_bad} pixel(s) are not white, black, red or blue, "
-            f"e.g. pixel (x={col}, y={row}) has RGB ({r}, {g}, {b})"
-        )
+        raise _unknown_error(rgb, n_bad, first, source, bgr=False)
     return out
-
-
-def _contour_in_red(rgb: np.ndarray, classes: np.ndarray) -> None:
-    """Reclassify (in place) red-looking pixels that are a 3D drawing's dark contour as black (module docstring)."""
-    red = classes == RED
-    if not red.any():
-        return
-    c = rgb.astype(np.float32)
-    luma = 0.299 * c[..., 0] + 0.587 * c[..., 1] + 0.114 * c[..., 2]
-    white = np.pad(classes == WHITE, 1, constant_values=True)
-    white4 = white[:-2, 1:-1] | white[2:, 1:-1] | white[1:-1, :-2] | white[1:-1, 2:]
-    padded = np.pad(luma, 1, mode="edge")
-    h, w = luma.shape
-    valley = np.full(luma.shape, -np.inf, np.float32)
-    for dr, dc in ((0, 1), (1, 0), (1, 1), (1, -1)):
-        before = padded[1 - dr:1 - dr + h, 1 - dc:1 - dc + w]
-        after = padded[1 + dr:1 + dr + h, 1 + dc:1 + dc + w]
-        valley = np.maximum(valley, np.minimum(before, after) - luma)
-    dark = ((luma < CONTOUR_Y_MAX) & white4) | ((luma < CORE_Y_MAX) & (valley >= VALLEY_MIN))
-    classes[red & dark & (neighbour_count(red) > 0)] = BLACK  # a lone red pixel (a profile's origin) stays red
 
 
 def neighbour_count(mask: np.ndarray) -> np.ndarray:
@@ -209,32 +210,20 @@ def neighbour_count(mask: np.ndarray) -> np.ndarray:
     return cv2.filter2D(m, cv2.CV_16S, kernel, borderType=cv2.BORDER_CONSTANT).astype(np.int16)
 
 
-def _listing(points_rc: np.ndarray) -> str:
-    pts = ", ".join(f"({c}, {r})" for r, c in points_rc[:_MAX_LISTED])
-    more = len(points_rc) - _MAX_LISTED
-    return pts + (f" and {more} more" if more > 0 else "")
-
-
 def check_rules(classes: np.ndarray) -> list[str]:
-    """Thesis 4.1.1 rule violations of black pixels as warning strings with (x, y) coordinates."""
-    black = classes == BLACK
+    """Thesis 4.1.1 rule violations of black pixels as warning strings with (x, y) coordinates (one pass)."""
+    classes = np.ascontiguousarray(classes, dtype=np.uint8)
+    counts, first_rc = black_rules_kernel(classes.reshape(-1), max(classes.shape[-1], 1), _MAX_LISTED)
     warnings: list[str] = []
-    n = neighbour_count(black)
-    crowded = np.argwhere(black & (n > 2))
-    if len(crowded):
-        warnings.append(
-            f"{len(crowded)} black pixel(s) have more than two black neighbours (lines must be 1 pixel wide): "
-            + _listing(crowded)
-        )
-    border = np.zeros_like(black)
-    border[0, :] = border[-1, :] = True
-    border[:, 0] = border[:, -1] = True
-    on_border = np.argwhere(black & border)
-    if len(on_border):
-        warnings.append(f"{len(on_border)} black pixel(s) lie on the image border: " + _listing(on_border))
-    isolated = np.argwhere(black & (n == 0))
-    if len(isolated):
-        warnings.append(f"{len(isolated)} stray isolated black pixel(s): " + _listing(isolated))
+    texts = ("black pixel(s) have more than two black neighbours (lines must be 1 pixel wide): ",
+             "black pixel(s) lie on the image border: ", "stray isolated black pixel(s): ")
+    for k, text in enumerate(texts):
+        n = int(counts[k])
+        if n:
+            listed = first_rc[k, :min(n, _MAX_LISTED)]
+            more = n - _MAX_LISTED
+            pts = ", ".join(f"({int(c)}, {int(r)})" for r, c in listed)
+            warnings.append(f"{n} {text}" + pts + (f" and {more} more" if more > 0 else ""))
     return warnings
 
 
@@ -287,6 +276,12 @@ def drawing_size_px(path: str | os.PathLike) -> tuple[int, int]:
 
 
 def _read_rgb(path: Path) -> np.ndarray:
+    img, bgr = _read_image(path)
+    return _to_rgb(img, bgr=bgr, source=str(path))
+
+
+def _read_image(path: Path) -> tuple[np.ndarray, bool]:
+    """The decoded image as OpenCV gives it (size checked before decoding), and whether its channels are BGR."""
     _check_file(path)
     data = np.fromfile(str(path), dtype=np.uint8)
     header = data[:_HEADER_BYTES].tobytes()
@@ -297,7 +292,7 @@ def _read_rgb(path: Path) -> np.ndarray:
     if img is None:
         raise DrawingError(f"{path}: not a readable image (PNG, BMP, JPEG, GIF-free formats OpenCV reads)")
     check_image_size(img.shape[1], img.shape[0], str(path))
-    return _to_rgb(img, bgr=True, source=str(path))
+    return img, True
 
 
 def _to_rgb(img: np.ndarray, *, bgr: bool, source: str) -> np.ndarray:
@@ -345,16 +340,19 @@ def load_image(path_or_array: str | os.PathLike | np.ndarray) -> Drawing:
     (6, 5, 4, [])
     """
     if isinstance(path_or_array, np.ndarray):
-        source = "<array>"
-        rgb = _to_rgb(path_or_array, bgr=False, source=source)
+        source, img, bgr = "<array>", path_or_array, False
     else:
         source = str(path_or_array)
-        rgb = _read_rgb(Path(path_or_array))
-    if rgb.shape[0] < 1 or rgb.shape[1] < 1:
-        raise DrawingError(f"{source}: image is empty (shape {rgb.shape})")
-    classes = classify(rgb, source=source)
-    if not np.any(classes != WHITE):
-        raise DrawingError(f"{source}: the drawing is empty (no black pixels)")
-    if not np.any(classes == BLACK):
+        img, bgr = _read_image(Path(path_or_array))
+    if not (img.dtype == np.uint8 and img.ndim == 3 and img.shape[2] == 3):  # grey, alpha, 16-bit: to RGB first
+        img, bgr = _to_rgb(img, bgr=bgr, source=source), False
+    if img.shape[0] < 1 or img.shape[1] < 1:
+        raise DrawingError(f"{source}: image is empty (shape {img.shape})")
+    classes, n_bad, first, n_black = _classify_pixels(img, bgr=bgr)
+    if n_bad:
+        raise _unknown_error(img, n_bad, first, source, bgr)
+    if n_black == 0:
+        if not np.any(classes != WHITE):
+            raise DrawingError(f"{source}: the drawing is empty (no black pixels)")
         raise DrawingError(f"{source}: the drawing has no black pixels (curves and contours must be black)")
     return Drawing(classes=classes, warnings=check_rules(classes), source=source)

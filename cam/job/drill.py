@@ -137,8 +137,9 @@ def _tool_runs(holes, machine_mm: np.ndarray, order: str) -> list[tuple[int, np.
     """``[(tool, hole indices)]`` in drilling order.
 
     "file": the file's order, one run per change of tool (T2 before T1 stays so, and a tool that comes
-    back gets a run of its own).  "tour": one run per tool, smallest diameter first, each a short tour
-    from where the previous one ended.
+    back gets a run of its own).  "tour": one run per tool, smallest diameter first, each a short path
+    from where the previous one ended; the last tool's path is planned with the way back to the home
+    (the job ends there), so the whole job travels a short closed tour.
     """
     tools_of = np.asarray(holes.tool_of_hole, np.int64)
     if order == "file":
@@ -146,10 +147,12 @@ def _tool_runs(holes, machine_mm: np.ndarray, order: str) -> list[tuple[int, np.
         ends = np.r_[starts[1:], len(tools_of)]
         return [(int(tools_of[a]), np.arange(a, b)) for a, b in zip(starts, ends)]
     runs = []
-    cur = np.array([0.0, 0.0])
-    for tool in sorted(set(tools_of.tolist()), key=lambda t: (holes.tools[t], t)):
+    home = (0.0, 0.0)
+    cur = np.array(home)
+    tools = sorted(set(tools_of.tolist()), key=lambda t: (holes.tools[t], t))
+    for k, tool in enumerate(tools):
         idx = np.flatnonzero(tools_of == tool)
-        idx = idx[drill_order(machine_mm[idx], start_mm=tuple(cur))]
+        idx = idx[drill_order(machine_mm[idx], start_mm=tuple(cur), end_mm=home if k == len(tools) - 1 else None)]
         runs.append((tool, idx))
         cur = machine_mm[idx[-1]]
     return runs

