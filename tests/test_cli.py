@@ -225,13 +225,15 @@ def test_ctrl_c_and_termination_signals_stop_cleanly_with_position(sig, tmp_path
     path = tmp_path / "line.png"
     cv2.imwrite(str(path), img)
     proc = subprocess.Popen(
-        [sys.executable, "-m", "cam", "drill", str(path), "--realtime", "--delay", "5,5", "--no-progress",
+        [sys.executable, "-m", "cam", "drill", str(path), "--realtime", "--delay", "5,5", "--progress",
          "--pin-log", str(tmp_path / "p.csv"), "--report", str(tmp_path / "r.json")],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV,
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=ENV,
     )
-    time.sleep(3.0)  # the job takes about 4.5 s; start-up (imports) takes about 1 s
+    chunks = wait_for_progress(proc, 20)  # the job takes about 4.5 s: well into it
     proc.send_signal(sig)
-    out, err = proc.communicate(timeout=60)
+    proc.wait(60)
+    wait_for_progress.reader.join(10)
+    err = b"".join(chunks).decode(errors="replace")
     assert proc.returncode == 130, err
     assert "stopped at X=" in err and "Traceback" not in err
     motion = cam.decode_pin_log(tmp_path / "p.csv")
