@@ -387,4 +387,6 @@ def load_settings(path: str | os.PathLike | None = None, base: MachineSettings |
         table = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise SettingsError(f"{p}: not valid TOML ({exc})") from None
+    except ValueError as exc:  # a number the TOML reader refuses to convert (an integer of thousands of digits)
+        raise SettingsError(f"{p}: a number is out of range ({str(exc).split(';')[0]})") from None
     return settings_from_mapping(table, source=str(p), base=base)
