@@ -74,3 +74,33 @@ def test_temporaries_of_a_killed_run_are_removed_on_the_next_write(tmp_path):
     fresh.write_bytes(b"y")
     atomic_write_bytes(tmp_path / "out.png", b"png")
     assert not stale.exists() and fresh.exists() and (tmp_path / "out.png").read_bytes() == b"png"
+
+
+def test_a_killed_or_failed_run_leaves_the_earlier_pin_log_and_report_intact(tmp_path):
+    """Nothing lost: the outputs of the last good run survive a run that is killed mid-job or that fails."""
+    import signal
+
+    from conftest import SAMPLES, wait_for_progress
+
+    env = ENV
+    pins, report = tmp_path / "pins.csv", tmp_path / "report.json"
+    ok = subprocess.run([sys.executable, "-m", "cam", "drill", str(SAMPLES / "ellipse.png"), "--depth", "2",
+                         "--pin-log", str(pins), "--report", str(report), "--no-progress"],
+                        capture_output=True, text=True, env=env, timeout=120)
+    assert ok.returncode == 0, ok.stderr
+    before = pins.read_bytes(), report.read_bytes()
+    # killed in the middle of a real-time run
+    proc = subprocess.Popen([sys.executable, "-m", "cam", "drill", str(SAMPLES / "ellipse.png"), "--depth", "2",
+                             "--realtime", "--pin-log", str(pins), "--report", str(report), "--progress"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env, start_new_session=True)
+    wait_for_progress(proc, 2)
+    os.killpg(proc.pid, signal.SIGKILL)
+    proc.wait(30)
+    assert (pins.read_bytes(), report.read_bytes()) == before
+    # a run that fails on its input
+    bad = subprocess.run([sys.executable, "-m", "cam", "drill", str(SAMPLES / "ellipse.png"), "--depth", "2",
+                          "--start-at", "99999,0,0", "--pin-log", str(pins), "--report", str(report)],
+                         capture_output=True, text=True, env=env, timeout=120)
+    assert bad.returncode == 2
+    assert (pins.read_bytes(), report.read_bytes()) == before
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")], "no temporary file left behind"
