@@ -82,6 +82,8 @@ def job_options(args: argparse.Namespace) -> JobOptions:
         drill_order=opt("drill_order", d.drill_order), excellon_units=opt("excellon_units", None),
         excellon_digits=excellon_digits(args), excellon_zeros=opt("excellon_zeros", None),
         flip_y=opt("flip_y", False) if kind == "gcode" else False,
+        tool_table=opt("tool_table", None), subroutine_path=tuple(opt("subroutine_path", ())),
+        max_lines=opt("max_lines", d.max_lines),
     ).checked("options")
 
 

@@ -73,6 +73,7 @@ class GcodeMove:
     note: str = ""
     plane: str = "XY"
     minutes: float = 0.0
+    file: str = ""  # the file of ``line`` when it is not the program's own (a subroutine file)
 
 
 @dataclass
@@ -430,9 +431,15 @@ class _Interp:
             raise self.err(f"no matching {what}")
         return found
 
-    def _is_do_tail(self, src: _Source, label: str, idx: int) -> bool:
+    def _do_of(self, src: _Source, label: str, idx: int) -> int | None:
+        """The ``do`` line whose loop the ``while`` at ``idx`` ends (its own break/continue skipped), or None."""
         prev = src.prev_o(label, idx)
-        return prev is not None and prev[1] == "do"
+        while prev is not None and prev[1] in ("break", "continue"):
+            prev = src.prev_o(label, prev[0])
+        return prev[0] if prev is not None and prev[1] == "do" else None
+
+    def _is_do_tail(self, src: _Source, label: str, idx: int) -> bool:
+        return self._do_of(src, label, idx) is not None
 
     def o_word(self, src: _Source, idx: int, o: tuple) -> tuple[_Source, int]:
         label, kw, args = o
@@ -487,7 +494,7 @@ class _Interp:
             return src, idx + 1
         if kw == "while":
             if self._is_do_tail(src, label, idx):
-                return (src, src.prev_o(label, idx)[0] + 1) if cond() else (src, idx + 1)
+                return (src, self._do_of(src, label, idx) + 1) if cond() else (src, idx + 1)
             if cond():
                 return src, idx + 1
             return src, self._need(src.next_o(label, idx, ("endwhile",)), f"'o{label} endwhile'") + 1
@@ -877,6 +884,8 @@ class _Interp:
             first, second, _ = PLANE_AXES[kw.get("plane", "XY")]
             c = kw["center"]
             kw["center"] = (c[0] + off[first], c[1] + off[second])
+        if self.source is not self.main:
+            kw["file"] = self.source.name
         self.moves.append(GcodeMove(kind, self.line_no, tuple(mach), **kw))
         self.mach = mach
 
@@ -920,6 +929,9 @@ class _Interp:
         self.arc(vals, t)
 
     def arc(self, vals: dict[str, float], t: list[float]) -> None:
+        def texts_of(letter: str) -> str:
+            return f"{letter.upper()}{vals[letter]:g}"
+
         feed = self.feed_kw(vals)
         first, second, _ = PLANE_AXES[self.plane]
         names = "ijk"
@@ -942,6 +954,9 @@ class _Interp:
             else:
                 cu, cv = mu - h * ev, mv + h * eu
         else:
+            third_word = names[PLANE_AXES[self.plane][2]]
+            if third_word in vals:
+                raise self.err(f"'{texts_of(third_word)}' is not a centre word of an arc in the {self.plane} plane")
             if not any(names[i] in vals for i in (first, second)):
                 raise self.err(f"G{self.motion} arc needs {names[first].upper()}/{names[second].upper()} or R")
             if self.arc_absolute:
@@ -991,8 +1006,8 @@ class _Interp:
             raise self.err(f"canned cycle G{code} needs a peck depth 'Q' above 0")
         repeats = int(vals.get("l", 1))
         pos = self.pos()
-        if self.cycle_il is None:
-            self.cycle_il = pos[2]
+        if self.cycle_il is None or self.retract_r:
+            self.cycle_il = pos[2]  # G99: each block starts from where the tool stands (as rs274)
         old = self.cycle_il
         if self.absolute:
             r, cc = sticky["r"], sticky["z"]

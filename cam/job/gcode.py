@@ -310,7 +310,7 @@ def plan_gcode(program: GcodeProgram, settings: MachineSettings = DEFAULT_SETTIN
     cur_steps = np.zeros(3)  # the exact path point, in steps
     program_ns = 0  # the program's time so far at its feeds and dwells
     for mv in program.moves:
-        where = f"{program.source}:{mv.line}"
+        where = f"{mv.file or program.source}:{mv.line}"
         if mv.kind == "pause":
             moves.pause_here(mv.note)
             continue

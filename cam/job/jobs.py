@@ -37,7 +37,8 @@ from ..digitize.profile import load_profile, profile_from_expr
 from ..drive.steps import plan_steps
 from ..errors import CamError
 from ..formats.excellon import load_excellon
-from ..formats.gcode import load_gcode
+from ..formats.gcode import load_gcode, load_tool_table
+from ..limits import DEFAULT_GCODE_LINES, MAX_GCODE_LINES
 from ..formats.hpgl import load_hpgl
 from ..render.picture import LEGEND_PX, depth_colours, encode_png, toolpath_picture
 from ..render.report import job_report
@@ -93,6 +94,10 @@ class JobOptions:
         files that do not say.
     G-code:
         flip_y: machine Y = +Y mm instead of -Y mm.
+        tool_table: a LinuxCNC tool table for G43 (lengths in mm); subroutine_path: folders where
+        ``O<name> call`` finds ``name.ngc``; max_lines: the most lines a program may run (loops count each
+        pass).  The first two name files on the machine that runs `cam`, so they are command-line options
+        only: :meth:`from_mapping` (the web page's form) refuses them.
     """
 
     depth: tuple[int, ...] = (10,)
@@ -111,6 +116,9 @@ class JobOptions:
     excellon_digits: Optional[tuple[int, int]] = None
     excellon_zeros: Optional[str] = None
     flip_y: bool = False
+    tool_table: Optional[str] = None
+    subroutine_path: tuple[str, ...] = ()
+    max_lines: int = DEFAULT_GCODE_LINES
 
     @classmethod
     def from_mapping(cls, values: Mapping[str, Any], source: str = "options") -> "JobOptions":
@@ -131,7 +139,9 @@ class JobOptions:
         for key, value in values.items():
             if key not in known:
                 raise CamError(f"{source}: unknown option '{key}' (known: {', '.join(sorted(known))})")
-            parse = _PARSERS[key]
+            parse = _PARSERS.get(key)
+            if parse is None:
+                raise CamError(f"{source}: option '{key}' names files on the machine: give it on the command line")
             try:
                 out[key] = parse(value)
             except (TypeError, ValueError) as exc:
@@ -153,6 +163,8 @@ class JobOptions:
                 raise bad(key, f"must be at most {MAX_MM:g} mm")
         if self.offset_mm is not None and any(abs(v) > MAX_MM for v in self.offset_mm):
             raise bad("offset_mm", f"must be at most {MAX_MM:g} mm either way")
+        if not (1 <= self.max_lines <= MAX_GCODE_LINES):
+            raise bad("max_lines", f"must be 1..{MAX_GCODE_LINES}")
         if not (1 <= self.passes <= 1000):
             raise bad("passes", "must be 1..1000")
         if self.start not in ("top", "min-distance"):
@@ -292,6 +304,7 @@ _PARSERS = {
     "excellon_digits": _optional(_ints(2)),
     "excellon_zeros": _optional(lambda v: _text(v).upper()),
     "flip_y": _bool,
+    "max_lines": _int,
 }
 
 
@@ -494,7 +507,11 @@ def _prepare_pixels(path: Path, kind: str, options: JobOptions, settings: Machin
 
 def _prepare_gcode(path: Path, options: JobOptions, settings: MachineSettings) -> PreparedJob:
 
-    program = load_gcode(path)
+    s = settings
+    program = load_gcode(
+        path, home_g28_mm=(s.g28_x_mm, s.g28_y_mm, s.g28_z_mm), home_g30_mm=(s.g30_x_mm, s.g30_y_mm, s.g30_z_mm),
+        tool_table=load_tool_table(options.tool_table) if options.tool_table else None,
+        subroutine_path=options.subroutine_path, max_lines=options.max_lines)
     job = plan_gcode(program, settings, flip_y=options.flip_y)
     steps = plan_steps(job)
     return PreparedJob(
