@@ -614,3 +614,17 @@ def test_subroutine_files_and_tool_tables_from_the_command_line(tmp_path):
     help_text = cli("drill", "--help").stdout
     for flag in ("--tool-table", "--subroutine-path", "--max-lines"):
         assert flag in help_text
+
+
+@needs_rs274
+def test_the_shipped_sample_follows_rs274_and_runs():
+    from conftest import SAMPLES
+    from test_cli import cli
+
+    path = SAMPLES / "bolt_plate.ngc"
+    program = load_gcode(path)
+    program._rs_args = {}
+    assert_follows_rs274(path, program, settings=cam.MachineSettings())  # inside the thesis machine's travel
+    proc = cli("drill", path, "--yes", "--no-progress")
+    assert proc.returncode == 0, proc.stderr
+    assert "coolant" in proc.stdout + proc.stderr
