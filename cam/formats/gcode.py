@@ -9,7 +9,7 @@ A small interpreter for the LinuxCNC language (tested against LinuxCNC's own ``r
   offsets with G10 L2/L20, G92, G92.1, G92.2, G92.3, G43 H / G43.1 / G49 tool length offsets
   (a tool table in LinuxCNC's format), G28/G30 (and G28.1/G30.1) to the homes the caller gives;
 * accepted without motion: G61, G61.1, G64 (P Q), G93/G94 feed modes (G93 gives each move its time),
-  G40, G8, G97, G96 words' S, M3/M4/M5, M48..M53, M61 Q; M7/M8/M9 (no coolant output: one warning);
+  G40, G8, G96/G97, M3/M4/M5, M48..M53, M61 Q; M7/M8/M9 (no coolant output: one warning);
 * pauses: M6 with T (tool change), M0, M1, M60; M2/M30 (and a second ``%``) end the program;
 * the language: numbered and named parameters (local ``#<name>``, global ``#<_name>``), expressions
   (:mod:`cam.formats.ngc`), O words (sub/endsub/call/return, if/elseif/else/endif, while/endwhile,
