@@ -90,7 +90,8 @@ OPTION_KINDS = {
     "offset_mm": frozenset({"excellon", "hpgl"}), "mirror_x": frozenset({"excellon"}),
     "drill_order": frozenset({"excellon"}), "excellon_units": frozenset({"excellon"}),
     "excellon_digits": frozenset({"excellon"}), "excellon_zeros": frozenset({"excellon"}),
-    "flip_y": frozenset({"gcode"}),
+    "flip_y": frozenset({"gcode"}), "tool_table": frozenset({"gcode"}), "subroutine_path": frozenset({"gcode"}),
+    "max_lines": frozenset({"gcode"}),
 }
 """The job kinds each job option (:class:`cam.job.jobs.JobOptions`) applies to; the CLI's checks use it too."""
 # SVG (issue 16, point 5): the mm options of the vector kinds, and its own scale and fit

@@ -19,7 +19,7 @@ from __future__ import annotations
 __all__ = [
     "MAX_COORD_MM", "MIN_FEED_MM_MIN", "MAX_FEED_MM_MIN", "MAX_DWELL_S", "MAX_MOVE_S", "MAX_PROGRAM_S", "MAX_TOOL_NUMBER",
     "MAX_SPINDLE_RPM", "MAX_LINE_NUMBER", "MAX_MOVE_PERIODS", "MAX_TOOL_DIAMETER_MM", "MAX_REPEAT", "MAX_HOLES",
-    "MAX_IMAGE_SIDE_PX", "MAX_IMAGE_PIXELS",
+    "MAX_IMAGE_SIDE_PX", "MAX_IMAGE_PIXELS", "DEFAULT_GCODE_LINES", "MAX_GCODE_LINES", "MAX_GCODE_CALL_DEPTH",
 ]
 
 MAX_COORD_MM = 1_000_000.0
@@ -28,8 +28,9 @@ either way: G-code X Y Z I J R (after G20's inch scale, G91 sums and G92 offsets
 (4e7 plotter units) and pen positions after relative moves, Excellon hole positions and offsets."""
 
 MIN_FEED_MM_MIN = 1e-3
-MAX_FEED_MM_MIN = 1e6
-"""A G-code feed ``F`` is 0.001..1e6 mm/min (after G20's inch scale).  A feed within the range that makes
+MAX_FEED_MM_MIN = 1e8
+"""A G-code feed ``F`` is 0.001..1e8 mm/min (after G20's inch scale; LinuxCNC's own 3D_Chips.ngc asks for
+4.5e6 mm/min: nothing moves faster than the step delays allow anyway).  A feed within the range that makes
 one move longer than :data:`MAX_MOVE_S` is refused by the planner, naming the line."""
 
 MAX_DWELL_S = 3600.0
@@ -56,6 +57,15 @@ MAX_MOVE_PERIODS = 1 << 22
 """The most step periods one G-code move (a line, or an arc with its chords) may take: 4,194,304, 121 m of
 path at 0.0289 mm per step.  Bounds the memory of planning one move (about 150 bytes a period); checked
 before an arc is sampled, after its bounding box is checked against the travel."""
+
+DEFAULT_GCODE_LINES = 1_000_000
+MAX_GCODE_LINES = 1_000_000_000
+"""A G-code program may run at most this many lines, each pass of a loop and each line of a subroutine
+counted (``--max-lines``, default a million, about half a minute of interpreting): a loop that never ends
+is an error naming the line it reached, not a hang.  The option itself is 1..1e9."""
+
+MAX_GCODE_CALL_DEPTH = 100
+"""G-code subroutines may call each other at most 100 deep (endless recursion is an error)."""
 
 MAX_TOOL_DIAMETER_MM = 100.0
 """An Excellon tool diameter ``C`` is more than 0 and at most 100 mm."""

@@ -33,6 +33,14 @@ and then keeps its built-in value.  An unknown key or a bad value is a
     accel_y_mm_s2 = 50.0
     accel_z_mm_s2 = 50.0
 
+    # where G-code's G28 and G30 go, machine mm in G-code's axes (+Y up, +Z up) from the home
+    g28_x_mm = 0.0
+    g28_y_mm = 0.0
+    g28_z_mm = 0.0
+    g30_x_mm = 0.0
+    g30_y_mm = 0.0
+    g30_z_mm = 0.0
+
     [travel]            # machine travel in steps, from the home (0, 0, 0)
     x_min_steps = 0
     x_max_steps = 10000
@@ -218,6 +226,15 @@ class MachineSettings:
     accel_y_mm_s2: float = 50.0
     accel_z_mm_s2: float = 50.0
     """Acceleration of each axis."""
+    g28_x_mm: float = 0.0
+    g28_y_mm: float = 0.0
+    g28_z_mm: float = 0.0
+    """Where G-code's G28 goes (LinuxCNC's parameters 5161..5163): machine mm in G-code's axes (+Y up, +Z up),
+    from the home; the default is the home itself."""
+    g30_x_mm: float = 0.0
+    g30_y_mm: float = 0.0
+    g30_z_mm: float = 0.0
+    """Where G-code's G30 goes (parameters 5181..5183), as for G28."""
     travel: Travel = field(default_factory=Travel)
     pins: Pins = field(default_factory=Pins)
     maximus: Maximus = field(default_factory=Maximus)
@@ -324,6 +341,9 @@ def _validate(s: MachineSettings, source: str) -> None:
                       f"must be {MIN_SPEED_MM_S:g} mm/s..max_speed_{axis}_mm_s ({top}), got {start}")
         if not (MIN_SPEED_MM_S <= acc <= 1e6):
             raise bad(f"accel_{axis}_mm_s2", f"must be {MIN_SPEED_MM_S:g}..1e6 mm/s^2, got {acc}")
+    for key in ("g28_x_mm", "g28_y_mm", "g28_z_mm", "g30_x_mm", "g30_y_mm", "g30_z_mm"):
+        if not abs(getattr(s, key)) <= 1e6:
+            raise bad(key, f"must be within 1e6 mm of the home, got {getattr(s, key)}")
     for axis, (lo, hi) in zip("xyz", s.travel.bounds_steps()):
         if abs(lo) > MAX_TRAVEL_STEPS or abs(hi) > MAX_TRAVEL_STEPS:
             raise bad(f"travel.{axis}_min_steps", f"and travel.{axis}_max_steps must be within "

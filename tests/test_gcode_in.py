@@ -135,10 +135,20 @@ def test_feed_rate_sets_step_periods():
         ("G21\nG1 X1 F100 Q3\n", 2, "unsupported word 'Q3'"),
         ("G21\nG1 X F100\n", 2, "word 'X' has no number"),
         ("G21\nG1 X1 F100\nG2 X5 Y0 R1\n", 3, "radius 1 is too small"),
-        ("G21\nG18\n", 2, "unsupported plane 'G18'"),
+        ("G21\nG38.2 Z-5 F10\n", 2, "'G38.2': probing is not supported"),
+        ("G21\nG0 X1 A90\n", 2, "rotary axis word 'A90' is not supported"),
+        ("G21\nG41 D1\n", 2, "'G41': cutter radius compensation is not supported"),
+        ("G21\nG71 P1 Q2\n", 2, "'G71': lathe cycles are not supported"),
+        ("G21\nG76 P1 Z-5\n", 2, "'G76': lathe cycles are not supported"),
+        ("G21\nM101\n", 2, "user M code 'M101' is not supported"),
+        ("G21\nM199 P1\n", 2, "user M code 'M199' is not supported"),
         ("G21\nG2 X5 Y0\n", 2, "without a feed rate"),
         ("G21\nG1 X1 F10\nG2 X5 Y0\n", 3, "needs I/J or R"),
-        ("G21\nM8\n", 2, "unsupported word 'M8'"),
+        ("G21\nM200\n", 2, "unsupported word 'M200'"),
+        ("G21\no<nowhere> call\n", 2, "subroutine 'o<nowhere>' is not defined"),
+        ("G21\nG0 X[1/0]\n", 2, "division by zero"),
+        ("G21\nG0 X#<undefined>\n", 2, "'#<undefined>' is not defined"),
+        ("G21\nG0 X[1+\n", 2, "expected"),
         ("G21 (open comment\n", 1, "not closed"),
         ("G21\nG1 X1 F10\nG2 X3 Y0 I0.5 J0\n", 3, "not on the circle"),
     ],
@@ -147,6 +157,18 @@ def test_bad_gcode_names_line_and_word(text, line, fragment):
     with pytest.raises(cam.ParseError) as info:
         parse_gcode(text, source="bad.ngc")
     assert str(info.value).startswith(f"bad.ngc:{line}:") and fragment in str(info.value)
+    assert "\n" not in str(info.value) and len(str(info.value)) < 300
+
+
+def test_a_program_that_never_ends_is_stopped_at_the_line_limit():
+    endless = "G21 G90\nG1 F100\no100 while [1]\nG1 X1\nG1 X0\no100 endwhile\nM2\n"
+    with pytest.raises(cam.ParseError, match=r"loop\.ngc:\d: the program has run 5000 lines and does not end"):
+        parse_gcode(endless, source="loop.ngc", max_lines=5000)
+    quiet = "#1=0\no1 do\n#1=[#1+1]\no1 while [1]\n"  # no motion at all
+    with pytest.raises(cam.ParseError, match="does not end"):
+        parse_gcode(quiet, source="quiet.ngc", max_lines=5000)
+    with pytest.raises(cam.ParseError, match="more than 100 deep"):
+        parse_gcode("o<r> sub\no<r> call\no<r> endsub\no<r> call\nM2\n", source="r.ngc")
 
 
 def test_cli_runs_gcode_and_rejects_bad(tmp_path):
@@ -160,7 +182,8 @@ def test_cli_runs_gcode_and_rejects_bad(tmp_path):
     bad = tmp_path / "b.ngc"
     bad.write_text("G21\nG1 X1 F100\nG2 X5 Y0 R1\n")
     assert_one_line_error(cli("drill", bad), "b.ngc:3:", "too small")
-    for text, fragment in (("G21\nG1 X1 F100 Q3\n", "'Q3'"), ("G21\nG19\n", "'G19'"), ("G21\nG1 Y F9\n", "'Y'")):
+    for text, fragment in (("G21\nG1 X1 F100 Q3\n", "'Q3'"), ("G21\nG38.3 Z1\n", "'G38.3'"),
+                           ("G21\nG1 Y F9\n", "'Y'")):
         bad.write_text(text)
         assert_one_line_error(cli("drill", bad), "b.ngc:2:", fragment)
     far = tmp_path / "far.ngc"

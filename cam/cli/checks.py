@@ -33,8 +33,8 @@ _OPTION_OF_FLAG = {
     "profile": "profile", "profile_expr": "profile_expr", "cut_depth": "cut_depth_mm",
     "travel_height": "travel_height_mm", "offset": "offset_mm", "mirror_x": "mirror_x",
     "drill_order": "drill_order", "excellon_units": "excellon_units", "excellon_format": "excellon_digits",
-    "excellon_zeros": "excellon_zeros", "flip_y": "flip_y",
-    "scale": "scale", "fit": "fit_mm",
+    "excellon_zeros": "excellon_zeros", "flip_y": "flip_y", "scale": "scale", "fit": "fit_mm",
+    "tool_table": "tool_table", "subroutine_path": "subroutine_path", "max_lines": "max_lines",
 }
 APPLIES_TO = {
     **{dest: OPTION_KINDS[option] for dest, option in _OPTION_OF_FLAG.items()},

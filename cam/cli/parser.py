@@ -17,6 +17,7 @@ from ..choices import (
     DIGITIZED_SUFFIXES, DRAWING_SUFFIXES, EXCELLON_SUFFIXES, GCODE_SUFFIXES, HPGL_SUFFIXES, PROFILE_SUFFIXES,
     START_RULES, SVG_SUFFIXES,
 )
+from ..limits import DEFAULT_GCODE_LINES, MAX_GCODE_LINES
 from ..settings import RAMP_MODES
 
 JOG_UNIT_NAMES = ("steps", "full-steps", "0.1mm", "mm", "0.1in")
@@ -238,6 +239,19 @@ def _add_job_options(d: argparse.ArgumentParser) -> None:
     d.add_argument("--pause-at", metavar="X,Y", type=_int_list(2, "--pause-at"), action="append",
                    help="pause when the tool reaches this drawing point (repeatable); Enter resumes")
     _add_machine_options(d)
+    _add_gcode_options(d)
+
+
+def _add_gcode_options(d: argparse.ArgumentParser) -> None:
+    """Options of G-code programs (LinuxCNC's tool table, subroutine files, the line limit)."""
+    g = d.add_argument_group("G-code programs")
+    g.add_argument("--tool-table", metavar="FILE.tbl",
+                   help="LinuxCNC tool table (T1 P1 Z12.5 ...; lengths in mm) for G43 H tool length offsets")
+    g.add_argument("--subroutine-path", metavar="DIR", action="append",
+                   help="folder where 'O<name> call' finds name.ngc (repeatable, searched in order)")
+    g.add_argument("--max-lines", type=_whole("--max-lines", 1, MAX_GCODE_LINES), metavar="N",
+                   help=f"stop a program that runs more than N lines, loops counted each pass "
+                   f"(default {DEFAULT_GCODE_LINES:,}): a loop that never ends is an error, not a hang")
 
 
 # -- one function per command ------------------------------------------------------------------------
@@ -324,6 +338,7 @@ def _add_info(sub: argparse._SubParsersAction) -> None:
     _add_digitize_options(i)
     _add_machine_options(i)
     _add_profile_options(i)
+    _add_gcode_options(i)
     i.add_argument("--json", action="store_true", help="print the report as JSON (every file kind)")
     _add_excellon_options(i)
 

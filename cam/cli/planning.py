@@ -87,6 +87,8 @@ def job_options(args: argparse.Namespace) -> JobOptions:
         excellon_digits=excellon_digits(args), excellon_zeros=opt("excellon_zeros", None),
         flip_y=opt("flip_y", False) if kind == "gcode" else False,
         scale=opt("scale", None) if kind == "svg" else None, fit_mm=tuple(args.fit) if opt("fit", None) else None,
+        tool_table=opt("tool_table", None), subroutine_path=tuple(opt("subroutine_path", ())),
+        max_lines=opt("max_lines", d.max_lines),
     ).checked("options")
 
 

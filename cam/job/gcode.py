@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import PlanError, TravelError
-from ..formats.gcode import GcodeMove, GcodeProgram
+from ..formats.gcode import PLANE_AXES, GcodeMove, GcodeProgram
 from ..limits import MAX_MOVE_PERIODS, MAX_MOVE_S, MAX_PROGRAM_S
 from ..settings import DEFAULT_SETTINGS, MachineSettings
 from .model import CUT, TRAVEL, Job
@@ -34,8 +34,10 @@ __all__ = ["plan_gcode"]
 
 @dataclass(frozen=True)
 class _Arc:
-    """An arc of one G-code move in machine-frame mm: centre, radius, start angle and signed sweep (rad),
-    and Z from ``z0_mm`` to ``z1_mm`` along it (helical)."""
+    """An arc of one G-code move in machine-frame mm, in its plane's axes ``axes`` = (first, second, third)
+    (:data:`cam.formats.gcode.PLANE_AXES`: (0, 1, 2) for XY, (2, 0, 1) for XZ, (1, 2, 0) for YZ): the centre
+    ``(cx_mm, cy_mm)`` in the first and second axes, radius, start angle and signed sweep (rad) in that
+    frame, and the third axis from ``z0_mm`` to ``z1_mm`` along it (helical)."""
 
     cx_mm: float
     cy_mm: float
@@ -44,49 +46,62 @@ class _Arc:
     sweep_rad: float
     z0_mm: float
     z1_mm: float
+    axes: tuple[int, int, int] = (0, 1, 2)
 
     @classmethod
     def of(cls, p0: np.ndarray, mv: GcodeMove) -> "_Arc":
-        """The arc of ``mv`` from ``p0`` (mm); G2 sweeps clockwise, a zero sweep is a full circle."""
+        """The arc of ``mv`` from ``p0`` (mm); G2 sweeps clockwise, a zero sweep is a full circle, and
+        ``mv.turns`` - 1 more full turns are added."""
+        axes = PLANE_AXES[mv.plane]
+        first, second, third = axes
         cx, cy = mv.center
-        x1, y1, z1 = mv.end
-        a0 = math.atan2(p0[1] - cy, p0[0] - cx)
+        x1, y1, z1 = mv.end[first], mv.end[second], mv.end[third]
+        a0 = math.atan2(p0[second] - cy, p0[first] - cx)
         a1 = math.atan2(y1 - cy, x1 - cx)
         if mv.clockwise:
             sweep = -((a0 - a1) % (2 * math.pi))
             if abs(sweep) < 1e-12:
                 sweep = -2 * math.pi
+            sweep -= 2 * math.pi * (mv.turns - 1)
         else:
             sweep = (a1 - a0) % (2 * math.pi)
             if abs(sweep) < 1e-12:
                 sweep = 2 * math.pi
-        return cls(cx, cy, math.hypot(p0[0] - cx, p0[1] - cy), a0, sweep, float(p0[2]), float(z1))
+            sweep += 2 * math.pi * (mv.turns - 1)
+        return cls(cx, cy, math.hypot(p0[first] - cx, p0[second] - cy), a0, sweep, float(p0[third]), float(z1), axes)
 
     def at(self, t: np.ndarray) -> np.ndarray:
-        """``(len(t), 3)`` points (mm) at fractions ``t`` (0..1) of the arc."""
+        """``(len(t), 3)`` points (mm, X Y Z) at fractions ``t`` (0..1) of the arc."""
         a = self.a0_rad + self.sweep_rad * t
-        return np.column_stack([self.cx_mm + self.r_mm * np.cos(a), self.cy_mm + self.r_mm * np.sin(a),
-                                self.z0_mm + (self.z1_mm - self.z0_mm) * t])
+        out = np.empty((len(t), 3))
+        first, second, third = self.axes
+        out[:, first] = self.cx_mm + self.r_mm * np.cos(a)
+        out[:, second] = self.cy_mm + self.r_mm * np.sin(a)
+        out[:, third] = self.z0_mm + (self.z1_mm - self.z0_mm) * t
+        return out
 
     def n_points(self, step_mm: np.ndarray) -> int:
         """How many points :func:`_arc_points` takes: no axis moves more than 0.9 step between two."""
-        arc_len_steps = abs(self.sweep_rad) * self.r_mm / min(step_mm[0], step_mm[1])
-        dz_steps = abs(self.z1_mm - self.z0_mm) / step_mm[2]
+        first, second, third = self.axes
+        arc_len_steps = abs(self.sweep_rad) * self.r_mm / min(step_mm[first], step_mm[second])
+        dz_steps = abs(self.z1_mm - self.z0_mm) / step_mm[third]
         return max(1, int(math.ceil(max(arc_len_steps, dz_steps) / 0.9)))
 
     def crossings(self, axis: int, value_mm: float) -> list[float]:
         """The fractions t in 0..1 where the arc's coordinate ``axis`` (0 X, 1 Y, 2 Z) equals ``value_mm``."""
-        if axis == 2:
+        first, second, third = self.axes
+        if axis == third:
             dz = self.z1_mm - self.z0_mm
             t = (value_mm - self.z0_mm) / dz if dz else -1.0
             return [t] if 0 <= t <= 1 else []
-        c = (value_mm - (self.cx_mm if axis == 0 else self.cy_mm)) / self.r_mm
+        c = (value_mm - (self.cx_mm if axis == first else self.cy_mm)) / self.r_mm
         if not -1 <= c <= 1:
             return []
-        bases = (math.acos(c), -math.acos(c)) if axis == 0 else (math.asin(c), math.pi - math.asin(c))
+        bases = (math.acos(c), -math.acos(c)) if axis == first else (math.asin(c), math.pi - math.asin(c))
         out = []
+        turns = int(abs(self.sweep_rad) // (2 * math.pi)) + 3
         for base in bases:
-            for k in range(-3, 4):
+            for k in range(-turns, turns + 1):
                 t = (base + 2 * math.pi * k - self.a0_rad) / self.sweep_rad
                 if 0 <= t <= 1:
                     out.append(t)
@@ -96,7 +111,8 @@ class _Arc:
         """The arc's bounding box ``(lo, hi)``, ``(3,)`` mm each, computed from its ends and the axis
         extremes it sweeps over (nothing sampled)."""
         ts = [0.0, 1.0]
-        for k in range(-8, 9):  # the angles k * pi/2 the sweep passes: the circle's extremes in X and Y
+        reach = int(abs(self.sweep_rad) // (math.pi / 2)) + 8
+        for k in range(-reach, reach + 1):  # the angles k * pi/2 the sweep passes: the circle's extremes
             t = (k * math.pi / 2 - self.a0_rad) / self.sweep_rad
             if 0 <= t <= 1:
                 ts.append(t)
@@ -257,10 +273,10 @@ def _periods(frame: _Frame, mv: GcodeMove, start_mm: np.ndarray, start_steps: np
                         f"{MAX_MOVE_PERIODS}")
     uses_z = bool(np.any(d[:, 2] != 0))
     floor_ns = frame.min_period[uses_z] if bool(np.any(d[:, :2] != 0)) else frame.delay_z_ns
-    if mv.kind == "rapid" or mv.feed_mm_min <= 0:
+    if mv.kind == "rapid" or (mv.feed_mm_min <= 0 and mv.minutes <= 0):
         per_ns = floor_ns
     else:
-        duration_s = length_mm / (mv.feed_mm_min / 60.0)
+        duration_s = mv.minutes * 60.0 if mv.minutes > 0 else length_mm / (mv.feed_mm_min / 60.0)
         if duration_s > MAX_MOVE_S:
             raise PlanError(f"{where}: at F{mv.feed_mm_min:g} mm/min this {length_mm:g} mm move takes "
                             f"{duration_s / 3600:.4g} h; one move may take at most {MAX_MOVE_S / 3600:g} h")
@@ -294,7 +310,7 @@ def plan_gcode(program: GcodeProgram, settings: MachineSettings = DEFAULT_SETTIN
     cur_steps = np.zeros(3)  # the exact path point, in steps
     program_ns = 0  # the program's time so far at its feeds and dwells
     for mv in program.moves:
-        where = f"{program.source}:{mv.line}"
+        where = f"{mv.file or program.source}:{mv.line}"
         if mv.kind == "pause":
             moves.pause_here(mv.note)
             continue

@@ -39,7 +39,8 @@ from ..digitize.profile import load_profile, profile_from_expr
 from ..drive.steps import plan_steps
 from ..errors import CamError
 from ..formats.excellon import load_excellon
-from ..formats.gcode import load_gcode
+from ..formats.gcode import load_gcode, load_tool_table
+from ..limits import DEFAULT_GCODE_LINES, MAX_GCODE_LINES
 from ..formats.hpgl import load_hpgl
 from ..formats.svg import load_svg
 from ..render.picture import LEGEND_PX, depth_colours, encode_png, toolpath_picture
@@ -102,6 +103,10 @@ class JobOptions:
         files that do not say.
     G-code:
         flip_y: machine Y = +Y mm instead of -Y mm.
+        tool_table: a LinuxCNC tool table for G43 (lengths in mm); subroutine_path: folders where
+        ``O<name> call`` finds ``name.ngc``; max_lines: the most lines a program may run (loops count each
+        pass).  The first two name files on the machine that runs `cam`, so they are command-line options
+        only: :meth:`from_mapping` (the web page's form) refuses them.
     SVG (also cut_depth_mm, default 0.5, travel_height_mm and offset_mm, the page's origin):
         scale: mm cut per mm of the drawing; fit_mm: or ``(width, height)`` mm to scale the drawing to fit.
     """
@@ -124,6 +129,9 @@ class JobOptions:
     flip_y: bool = False
     scale: Optional[float] = None
     fit_mm: Optional[tuple[float, float]] = None
+    tool_table: Optional[str] = None
+    subroutine_path: tuple[str, ...] = ()
+    max_lines: int = DEFAULT_GCODE_LINES
 
     @classmethod
     def from_mapping(cls, values: Mapping[str, Any], source: str = "options") -> "JobOptions":
@@ -144,7 +152,9 @@ class JobOptions:
         for key, value in values.items():
             if key not in known:
                 raise CamError(f"{source}: unknown option '{key}' (known: {', '.join(sorted(known))})")
-            parse = _PARSERS[key]
+            parse = _PARSERS.get(key)
+            if parse is None:
+                raise CamError(f"{source}: option '{key}' names files on the machine: give it on the command line")
             try:
                 out[key] = parse(value)
             except (TypeError, ValueError) as exc:
@@ -172,6 +182,8 @@ class JobOptions:
             raise bad("fit_mm", f"must be a width and a height > 0 and at most {MAX_MM:g} mm")
         if self.scale is not None and self.fit_mm is not None:
             raise bad("fit_mm", "cannot be given together with scale")
+        if not (1 <= self.max_lines <= MAX_GCODE_LINES):
+            raise bad("max_lines", f"must be 1..{MAX_GCODE_LINES}")
         if not (1 <= self.passes <= 1000):
             raise bad("passes", "must be 1..1000")
         if self.start not in ("top", "min-distance"):
@@ -313,6 +325,7 @@ _PARSERS = {
     "flip_y": _bool,
     "scale": _optional(_float),
     "fit_mm": _optional(lambda v: _floats(2)(v.lower().replace("x", ",") if isinstance(v, str) else v)),
+    "max_lines": _int,
 }
 
 
@@ -519,7 +532,11 @@ def _prepare_pixels(path: Path, kind: str, options: JobOptions, settings: Machin
 
 def _prepare_gcode(path: Path, options: JobOptions, settings: MachineSettings) -> PreparedJob:
 
-    program = load_gcode(path)
+    s = settings
+    program = load_gcode(
+        path, home_g28_mm=(s.g28_x_mm, s.g28_y_mm, s.g28_z_mm), home_g30_mm=(s.g30_x_mm, s.g30_y_mm, s.g30_z_mm),
+        tool_table=load_tool_table(options.tool_table) if options.tool_table else None,
+        subroutine_path=options.subroutine_path, max_lines=options.max_lines)
     job = plan_gcode(program, settings, flip_y=options.flip_y)
     steps = plan_steps(job)
     return PreparedJob(

@@ -33,12 +33,23 @@ class CanonMove:
     plane: str = "XY"  # ARC_FEED: the arc's plane; ``center`` is in its (first, second) axes
 
 
-def run_rs274(path: str, *, units_mm: bool = True) -> str:
-    """Canonical output of LinuxCNC's interpreter for a G-code file (raises CamError on an interpreter error)."""
+def run_rs274(path: str, *, units_mm: bool = True, tool_table: str | None = None, var_file: str | None = None,
+              ini: str | None = None, timeout_s: float = 600) -> str:
+    """Canonical output of LinuxCNC's interpreter for a G-code file (raises CamError on an interpreter error).
+
+    ``tool_table``, ``var_file`` (parameters; rs274 writes it back) and ``ini`` (for ``[RS274NGC]
+    SUBROUTINE_PATH``) are rs274's ``-t``, ``-v`` and ``-i``.  rs274's machine units are inches: the tool
+    table's lengths and the var file's positions are in inches.
+    """
     exe = shutil.which("rs274")
     if exe is None:
         raise CamError("rs274 not found: install Debian's linuxcnc-uspace")
-    proc = subprocess.run([exe, "-g", str(path)], capture_output=True, text=True, timeout=600)
+    args = [exe]
+    for flag, value in (("-t", tool_table), ("-v", var_file), ("-i", ini)):
+        if value is not None:
+            args += [flag, str(value)]
+    proc = subprocess.run([*args, "-g", str(path)], capture_output=True, text=True, timeout=timeout_s,
+                          stdin=subprocess.DEVNULL)
     if proc.returncode != 0:
         msg = [ln for ln in proc.stderr.splitlines() if ln.strip() and ln.strip() != "executing"]
         raise CamError(f"{path}: rs274 reports: {' / '.join(msg[:2]) or 'error'}")
@@ -55,17 +66,22 @@ def parse_canonical(text: str) -> list[CanonMove]:
     scale = 1.0
     g5x = [0.0, 0.0, 0.0]
     g92 = [0.0, 0.0, 0.0]
+    tlo = [0.0, 0.0, 0.0]
     plane = "XY"
     for line in text.splitlines():
         m = _CALL.match(line)
         if not m:
             continue
         name, args = m.group(1), [a.strip() for a in m.group(2).split(",")]
-        off = [a + b for a, b in zip(g5x, g92)]
+        off = [a + b + c for a, b, c in zip(g5x, g92, tlo)]
         if name == "USE_LENGTH_UNITS":
             scale = 25.4 if "INCH" in args[0] else 1.0
         elif name == "SET_G5X_OFFSET":
             g5x = [float(a) * scale for a in args[1:4]]
+        elif name == "USE_TOOL_LENGTH_OFFSET":
+            tlo = [float(a) * scale for a in args[0].split()[:3]]
+        elif name == "SET_XY_ROTATION" and float(args[0]) != 0:
+            raise CamError(f"rs274 rotates the XY plane ({args[0]} degrees): not compared")
         elif name == "SET_G92_OFFSET":
             g92 = [float(a) * scale for a in args[0:3]]
         elif name in ("STRAIGHT_TRAVERSE", "STRAIGHT_FEED"):
