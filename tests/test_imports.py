@@ -36,6 +36,8 @@ FUNCTION_LEVEL_IMPORTS = {
         "optional dependency: the web stack (cam[web]); cam.web.server imports without it, so 'cam serve' "
         "can name the extra in one line",
     ("cam.web.server", "uvicorn"): "optional dependency: the web stack (cam[web]), as starlette",
+    ("cam.cli", "numba"): "heavy (about half a second): the first-compile note is registered only when a "
+                          "command runs, so --help and bad options stay quick",
 }
 """The only import statements allowed inside functions (the project rule: none, except to keep an optional
 dependency optional)."""
