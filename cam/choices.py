@@ -98,3 +98,6 @@ OPTION_KINDS = {
 for _option in ("cut_depth_mm", "travel_height_mm", "offset_mm"):
     OPTION_KINDS[_option] = OPTION_KINDS[_option] | {"svg"}
 OPTION_KINDS.update({"scale": frozenset({"svg"}), "fit_mm": frozenset({"svg"})})
+# sketches and photos traced into drawings (issue 16, point 6)
+OPTION_KINDS.update({"trace": frozenset({"drawing"}), "trace_min_length_px": frozenset({"drawing"}),
+                     "trace_fill": frozenset({"drawing"})})

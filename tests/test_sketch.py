@@ -200,3 +200,23 @@ def test_cli_bad_input_is_one_line(tmp_path, args, fragment):
     args = [a.format(photo=photo) if "{" in a else (str(tmp_path / a) if a.startswith("d.") else a) for a in args]
     out = cli("trace", *args)
     assert out.returncode == 2 and fragment in out.stderr and len(out.stderr.strip().splitlines()) == 1
+
+
+def test_drill_trace_option_plans_what_trace_then_drill_plans(tmp_path):
+    """``cam drill PHOTO --trace`` (and JobOptions.trace) is ``cam trace`` then ``cam drill`` in one step."""
+    from cam.digitize.sketch import load_sketch, trace
+    from cam.job.jobs import JobOptions, prepare_job
+
+    sketch = ROOT / "samples" / "sketch.jpg"
+    job = prepare_job(sketch, JobOptions(depth=(2,), trace=True, trace_min_length_px=12), cam.MachineSettings())
+    drawing = trace(load_sketch(sketch), min_length_px=12, source=str(sketch))
+    expected = cam.plan_steps(cam.plan(cam.digitize(drawing), depth=2, settings=cam.MachineSettings()))
+    assert np.array_equal(job.steps.data, expected.data)
+    assert any("traced:" in w for w in job.warnings)
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    ok = subprocess.run([sys.executable, "-m", "cam", "drill", str(sketch), "--trace", "--depth", "2",
+                         "--no-progress"], capture_output=True, text=True, env=env, timeout=120)
+    assert ok.returncode == 0, ok.stderr
+    bad = subprocess.run([sys.executable, "-m", "cam", "drill", str(ROOT / "samples" / "board.drl"), "--trace"],
+                         capture_output=True, text=True, env=env, timeout=120)
+    assert bad.returncode == 2 and "--trace does not apply" in bad.stderr

@@ -651,3 +651,21 @@ def test_the_page_takes_svg_with_its_options(fast):
     assert status == 400 and "does not apply" in str(bad)
     status, info = fast.call("GET", "/api/config")
     assert status == 200 and ".svg" in info["accepted"]["svg"]
+
+
+def test_the_page_traces_a_sketch_and_cuts_what_the_library_traces(page, fast, tmp_path):
+    """Issue 16 point 7: a photo of a sketch, traced on the server from the page's "Sketch or photo" box,
+    plans the very job the library makes from ``cam.trace``."""
+    from cam.digitize.sketch import load_sketch, trace
+
+    sketch = ROOT / "samples" / "sketch.jpg"
+    _open(page, fast)
+    page.fill("#opt-depth", "2")
+    page.check("#opt-trace")
+    _load(page, sketch)
+    assert "traced:" in page.text_content("#log")
+    drawing = trace(load_sketch(sketch), source=str(sketch))
+    expected = cam.plan_steps(cam.plan(cam.digitize(drawing), depth=2, settings=FAST))
+    page.click("#start")
+    _wait_done(page, fast)
+    assert np.array_equal(fast.session.last_job_pin_log.data, expected.data)  # every write, in order

@@ -35,6 +35,7 @@ _OPTION_OF_FLAG = {
     "drill_order": "drill_order", "excellon_units": "excellon_units", "excellon_format": "excellon_digits",
     "excellon_zeros": "excellon_zeros", "flip_y": "flip_y", "scale": "scale", "fit": "fit_mm",
     "tool_table": "tool_table", "subroutine_path": "subroutine_path", "max_lines": "max_lines",
+    "trace": "trace", "trace_min_length": "trace_min_length_px", "trace_fill": "trace_fill",
 }
 APPLIES_TO = {
     **{dest: OPTION_KINDS[option] for dest, option in _OPTION_OF_FLAG.items()},

@@ -238,6 +238,14 @@ def _add_job_options(d: argparse.ArgumentParser) -> None:
                    help="offset the whole job by this many pixels")
     d.add_argument("--pause-at", metavar="X,Y", type=_int_list(2, "--pause-at"), action="append",
                    help="pause when the tool reaches this drawing point (repeatable); Enter resumes")
+    sk = d.add_argument_group("sketches and photos (drawings)")
+    sk.add_argument("--trace", action="store_true", default=None,
+                    help="the image is a scanned sketch or a photo of one: trace it into 1-pixel curves first "
+                         "(as 'cam trace' does)")
+    sk.add_argument("--trace-min-length", type=_whole("--trace-min-length", 2, 10_000), metavar="PX",
+                    help="with --trace: specks and spurs shorter than this many pixels go (default 10)")
+    sk.add_argument("--trace-fill", action="store_true", default=None,
+                    help="with --trace: the regions the curves enclose become red (a 3D drawing)")
     _add_machine_options(d)
     _add_gcode_options(d)
 

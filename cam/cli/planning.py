@@ -89,6 +89,8 @@ def job_options(args: argparse.Namespace) -> JobOptions:
         scale=opt("scale", None) if kind == "svg" else None, fit_mm=tuple(args.fit) if opt("fit", None) else None,
         tool_table=opt("tool_table", None), subroutine_path=tuple(opt("subroutine_path", ())),
         max_lines=opt("max_lines", d.max_lines),
+        trace=bool(opt("trace", False)), trace_min_length_px=opt("trace_min_length", d.trace_min_length_px),
+        trace_fill=bool(opt("trace_fill", False)),
     ).checked("options")
 
 

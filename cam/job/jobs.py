@@ -43,6 +43,7 @@ from ..formats.gcode import load_gcode, load_tool_table
 from ..limits import DEFAULT_GCODE_LINES, MAX_GCODE_LINES
 from ..formats.hpgl import load_hpgl
 from ..formats.svg import load_svg
+from ..digitize.sketch import DEFAULT_MIN_LENGTH_PX, load_sketch, trace
 from ..render.picture import LEGEND_PX, depth_colours, encode_png, toolpath_picture
 from ..render.report import job_report
 from ..sniff import KIND_NAMES
@@ -109,6 +110,10 @@ class JobOptions:
         only: :meth:`from_mapping` (the web page's form) refuses them.
     SVG (also cut_depth_mm, default 0.5, travel_height_mm and offset_mm, the page's origin):
         scale: mm cut per mm of the drawing; fit_mm: or ``(width, height)`` mm to scale the drawing to fit.
+    Drawings that are sketches or photos:
+        trace: trace the image into a drawing first (see :func:`cam.digitize.sketch.trace`: dark lines on
+        light paper to 1-pixel curves); trace_min_length_px: specks and spurs shorter than this go;
+        trace_fill: the regions the curves enclose become red (a 3D drawing).
     """
 
     depth: Optional[tuple[int, ...]] = None
@@ -132,6 +137,9 @@ class JobOptions:
     tool_table: Optional[str] = None
     subroutine_path: tuple[str, ...] = ()
     max_lines: int = DEFAULT_GCODE_LINES
+    trace: bool = False
+    trace_min_length_px: int = DEFAULT_MIN_LENGTH_PX
+    trace_fill: bool = False
 
     @classmethod
     def from_mapping(cls, values: Mapping[str, Any], source: str = "options") -> "JobOptions":
@@ -184,6 +192,8 @@ class JobOptions:
             raise bad("fit_mm", "cannot be given together with scale")
         if not (1 <= self.max_lines <= MAX_GCODE_LINES):
             raise bad("max_lines", f"must be 1..{MAX_GCODE_LINES}")
+        if not (2 <= self.trace_min_length_px <= 10_000):
+            raise bad("trace_min_length_px", "must be 2..10000 pixels")
         if not (1 <= self.passes <= 1000):
             raise bad("passes", "must be 1..1000")
         if self.start not in ("top", "min-distance"):
@@ -323,6 +333,9 @@ _PARSERS = {
     "excellon_digits": _optional(_ints(2)),
     "excellon_zeros": _optional(lambda v: _text(v).upper()),
     "flip_y": _bool,
+    "trace": _bool,
+    "trace_min_length_px": _int,
+    "trace_fill": _bool,
     "scale": _optional(_float),
     "fit_mm": _optional(lambda v: _floats(2)(v.lower().replace("x", ",") if isinstance(v, str) else v)),
     "max_lines": _int,
@@ -503,7 +516,15 @@ def _drawing_depth(options: JobOptions, settings: MachineSettings) -> Any:
 def _prepare_pixels(path: Path, kind: str, options: JobOptions, settings: MachineSettings) -> PreparedJob:
 
     rgb = None
-    if kind == "drawing":
+    traced: list[str] = []
+    if kind == "drawing" and options.trace:  # a sketch or a photo: its size is checked once traced (shrunk)
+        drawing = trace(load_sketch(path), min_length_px=options.trace_min_length_px, fill=options.trace_fill,
+                        source=str(path))
+        check_drawing_size(drawing.width_px, drawing.height_px, settings, str(path))
+        traced.append(f"{path.name}: traced: {drawing.summary()}")
+        rgb = drawing.to_rgb()
+        digitized = digitize(drawing, start=options.start)
+    elif kind == "drawing":
         check_drawing_size(*drawing_size_px(path), settings, str(path))  # from the header: before decoding
         drawing = load_image(path)
         rgb = drawing.to_rgb()
@@ -526,7 +547,8 @@ def _prepare_pixels(path: Path, kind: str, options: JobOptions, settings: Machin
     return PreparedJob(
         source=str(path), kind=kind, steps=steps, settings=settings, toolpath=toolpath,
         size_mm=(report["width_mm"], report["height_mm"]), depth_mm=report["depth_mm"],
-        warnings=list(report["warnings"]), summary=summary, report=report, drawing_rgb=rgb, digitized=digitized,
+        warnings=traced + list(report["warnings"]), summary=summary, report=report, drawing_rgb=rgb,
+        digitized=digitized,
     )
 
 

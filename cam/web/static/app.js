@@ -67,6 +67,11 @@
       if (page.profile) o.profile = page.profile;
       else if (val("opt-profile-expr")) o.profile_expr = val("opt-profile-expr");
       else o.depth = val("opt-depth");
+      if (kind === "drawing" && $("opt-trace").checked) {  // a sketch or a photo: traced on the server first
+        o.trace = true;
+        o.trace_min_length_px = val("opt-trace-min-length");
+        o.trace_fill = $("opt-trace-fill").checked;
+      }
     } else if (kind === "excellon" || kind === "hpgl" || kind === "svg") {
       if (val("opt-cut-depth")) o.cut_depth_mm = val("opt-cut-depth");  // empty: the kind's default
       o.travel_height_mm = val("opt-travel-height");
