@@ -551,7 +551,7 @@ so there is no reference path to follow)."""
 @pytest.mark.skipif(not NCFILES.is_dir(), reason="LinuxCNC's example programs (linuxcnc-uspace) not installed")
 def test_linuxcnc_example_programs_match_rs274_or_are_refused_naming_the_feature(tmp_path):
     matched, refused = [], []
-    for path in sorted(NCFILES.glob("*.ngc")):
+    for path in sorted(NCFILES.rglob("*.ngc")):  # the subfolders (macros, probe, gladevcp, ...) too
         try:
             canon_text = run_rs274(str(path), timeout_s=120)
         except cam.CamError:
