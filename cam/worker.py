@@ -50,12 +50,13 @@ class WorkerLimitError(CamError):
 
 
 def default_memory_limit_bytes() -> int:
-    """Half the machine's memory, at most 8 GiB and at least 1 GiB: room for the machine and the page."""
+    """Half the machine's memory, at most 8 GiB and at least 2 GiB (an address-space limit: the worker's
+    libraries take about 650 MB of it, and compiling a kernel the first time a few hundred MB more)."""
     try:
         total = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
     except (ValueError, OSError, AttributeError):  # pragma: no cover - not Unix
         total = 4 << 30
-    return int(min(8 << 30, max(1 << 30, total // 2)))
+    return int(min(8 << 30, max(2 << 30, total // 2)))
 
 
 def _limit_memory(limit_bytes: int) -> None:

@@ -451,7 +451,7 @@ def _add_serve(sub: argparse._SubParsersAction) -> None:
                      help="the longest one planning, preview or pin-log export may take, in its worker process "
                           "(default 120)")
     lim.add_argument("--work-memory-limit", type=_number("--work-memory-limit", 256, 1 << 30), metavar="MB",
-                     help="the memory that worker process may use (default: half the machine's, at most 8192)")
+                     help="the memory that worker process may use (default: half the machine's, 2048 to 8192)")
 
 
 _COMMAND_PARSERS = (_add_drill, _add_export, _add_preview, _add_digitize, _add_trace, _add_info, _add_profile, _add_jog,
