@@ -438,6 +438,13 @@ class _Interp:
             prev = src.prev_o(label, prev[0])
         return prev[0] if prev is not None and prev[1] == "do" else None
 
+    def _loop_head(self, src: _Source, label: str, idx: int, opener: str) -> int:
+        """The line of the ``o<label> opener`` (``while``/``repeat``) that the loop end at ``idx`` closes."""
+        head = src.prev_o(label, idx)
+        while head is not None and head[1] != opener:
+            head = src.prev_o(label, head[0])
+        return self._need(head and head[0], f"'o{label} {opener}'")
+
     def _is_do_tail(self, src: _Source, label: str, idx: int) -> bool:
         return self._do_of(src, label, idx) is not None
 
@@ -499,10 +506,7 @@ class _Interp:
                 return src, idx + 1
             return src, self._need(src.next_o(label, idx, ("endwhile",)), f"'o{label} endwhile'") + 1
         if kw == "endwhile":
-            head = src.prev_o(label, idx)
-            while head is not None and head[1] != "while":
-                head = src.prev_o(label, head[0])
-            return src, self._need(head and head[0], f"'o{label} while'")
+            return src, self._loop_head(src, label, idx, "while")
         if kw == "repeat":
             key = (id(src), idx)
             if key not in frame.repeats:
@@ -516,10 +520,7 @@ class _Interp:
             del frame.repeats[key]
             return src, self._need(src.next_o(label, idx, ("endrepeat",)), f"'o{label} endrepeat'") + 1
         if kw == "endrepeat":
-            head = src.prev_o(label, idx)
-            while head is not None and head[1] != "repeat":
-                head = src.prev_o(label, head[0])
-            return src, self._need(head and head[0], f"'o{label} repeat'")
+            return src, self._loop_head(src, label, idx, "repeat")
         # break / continue: the loop with this label that encloses the line
         j = idx
         while True:
