@@ -14,6 +14,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from .._compiled import entry
+
 WHITE, BLACK, RED, BLUE = 0, 1, 2, 3
 UNKNOWN = 255
 _RED_TO_BLACK = 4  # a red pixel that the contour rule makes black (still red for its neighbours' rule)
@@ -29,6 +31,7 @@ def hue_division_table() -> np.ndarray:
     return t.astype(np.int64)
 
 
+@entry
 @njit(cache=True, nogil=True)
 def classify_kernel(img, ch_r, ch_b, chroma_min, dark_sum_max, hue_class, hdiv, contour_y_max, core_y_max,
                     valley_min, out, w):
@@ -161,6 +164,7 @@ def _contour_in_red(img, ch_r, ch_b, contour_y_max, core_y_max, valley_min, out,
                 out[k] = BLACK
 
 
+@entry
 @njit(cache=True, nogil=True)
 def black_rules_kernel(classes, w, n_listed):
     """Thesis 4.1.1 checks of the black pixels of the flattened ``(H, W)`` ``classes`` in one pass.

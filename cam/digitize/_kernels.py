@@ -15,6 +15,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from .._compiled import entry
+
 
 @njit(cache=True)
 def _walk(flat, cur, offsets, out, n_out):
@@ -34,6 +36,7 @@ def _walk(flat, cur, offsets, out, n_out):
             return n_out
 
 
+@entry
 @njit(cache=True)
 def trace2d_kernel(flat, scan, wp, offsets, min_distance, tool_x, tool_y):
     """2D trace of every set pixel of ``flat`` (modified in place).
@@ -108,6 +111,7 @@ def trace2d_kernel(flat, scan, wp, offsets, min_distance, tool_x, tool_y):
     return path[:n_path], starts[: n_obj + 1]
 
 
+@entry
 @njit(cache=True)
 def pad_mask_kernel(classes, value):
     """``(flat, scan)``: the pixels equal to ``value`` as a padded, flattened uint8 mask, and their flat
@@ -249,6 +253,7 @@ def _grown(ring_starts, ring_levels, n_rings):
     return grown_s, grown_l
 
 
+@entry
 @njit(cache=True)
 def trace_layers_kernel(layer_flat, wp, offsets, drow, dcol):
     """Trace every layer of a padded, flattened layer map into rings (see :mod:`.peel3d`).
@@ -320,6 +325,7 @@ def trace_layers_kernel(layer_flat, wp, offsets, drow, dcol):
     return xy, ring_starts[: n_rings + 1].copy(), ring_levels[:n_rings].copy()
 
 
+@entry
 @njit(cache=True)
 def peel_padded_kernel(classes, black, red, white):
     """Layer numbers of a 3D drawing, padded by one pixel, in two chamfer passes (see :mod:`.peel3d`).

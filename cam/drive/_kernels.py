@@ -8,7 +8,10 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from .._compiled import entry
 
+
+@entry
 @njit(cache=True)
 def periods_kernel(pts, delay_xy_ns, delay_z_ns, clock, dirbit, n_min):
     """Per-period port data of the straight moves between consecutive rows of ``pts``.
@@ -84,6 +87,7 @@ def periods_kernel(pts, delay_xy_ns, delay_z_ns, clock, dirbit, n_min):
     return high, dirs, period, n_per_move
 
 
+@entry
 @njit(cache=True)
 def writes_kernel(high, dirs, per):
     """Times and data of the writes of periods (see :mod:`cam.drive.steps`): ``(1 + 2P,)`` each.

@@ -53,6 +53,8 @@ import concurrent.futures
 import numpy as np
 from numba import njit
 
+from .._compiled import entry
+
 from ..settings import RAMP_MODES, MachineSettings
 from ..verify.ramps import check_axis_steps
 from .pins import axis_bits
@@ -71,6 +73,7 @@ _Limits = tuple[tuple[float, float, float], ...]
 :meth:`MachineSettings.axis_limits`."""
 
 
+@entry
 @njit(cache=True, nogil=True)
 def _steps_of_axis(high, clk, dbit):
     n = 0
@@ -88,6 +91,7 @@ def _steps_of_axis(high, clk, dbit):
     return per, up
 
 
+@entry
 @njit(cache=True, nogil=True)
 def _breaks(per, up, stop_idx):
     """Rest before step j: reversal, or a stop between the periods of steps j-1 and j.
@@ -146,6 +150,7 @@ def _pair_cap(m1, m2, s, v_start, acc, u_hi):
     return lo
 
 
+@entry
 @njit(cache=True)
 def _axis_caps(per, brk, s, v_start, v_max, acc, cap, alpha, upull):
     """Step 1 of the planner (module docstring) for one axis: lower ``cap``, ``alpha``, ``upull`` in place."""
@@ -191,6 +196,7 @@ def _axis_caps(per, brk, s, v_start, v_max, acc, cap, alpha, upull):
                 upull[k] = p
 
 
+@entry
 @njit(cache=True)
 def _passes(cap, alpha, upull, stop_before, u):
     """Step 2: forward (accelerate) then backward (decelerate) passes; ``u`` out."""
@@ -231,6 +237,7 @@ def _passes(cap, alpha, upull, stop_before, u):
         nxt = u[k]
 
 
+@entry
 @njit(cache=True)
 def _periods_from_rates(u, floor_ns, out, mid):
     """Period lengths from the rates (never below the nominal), and each period's rising-edge time
@@ -244,6 +251,7 @@ def _periods_from_rates(u, floor_ns, out, mid):
         t_ns += per
 
 
+@entry
 @njit(cache=True)
 def _drop_caps(per, r1, r2, r3, u, cap, factor):
     """Lower the caps of the periods under every broken rule to ``factor`` x their slowest rate there."""

@@ -54,6 +54,8 @@ from typing import BinaryIO, Callable, Iterator, Optional, TextIO, Union
 import numpy as np
 from numba import njit
 
+from .._compiled import entry
+
 from ..choices import HPGL_SUFFIXES
 from ..errors import ParseError
 from ..limits import MAX_COORD_MM, MAX_TOOL_NUMBER
@@ -462,6 +464,7 @@ def _error_at(st, err, line, lstart):
         st[S_ERRCOL] = st[S_CCOL]
 
 
+@entry
 @njit(cache=True)
 def _tokenize(buf, final, st, c_code, c_off, c_line, c_col, c_p0, c_np, p_val, p_line, p_col):
     """Commands and numeric parameters of one chunk (see :func:`_chunks` for the contract).
@@ -525,6 +528,7 @@ def _point(o_x, o_y, o_line, o_col, o_start, o_pen, k, x, y, line, col, start, p
     return k + 1
 
 
+@entry
 @njit(cache=True)
 def _interpret(n_cmd, c_code, c_line, c_col, c_p0, c_np, p_val, p_line, p_col, ist,
                o_x, o_y, o_line, o_col, o_start, o_pen, err):

@@ -14,9 +14,12 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from .._compiled import entry
+
 __all__ = ["bfs_kernel"]
 
 
+@entry
 @njit(cache=True)
 def bfs_kernel(ok, start, goal, max_len, parent):
     """Breadth-first search over the set pixels of ``ok`` from ``start`` to ``goal`` (flat row-major indices).

@@ -48,6 +48,8 @@ import math
 import numpy as np
 from numba import njit
 
+from .._compiled import entry
+
 from ..errors import PlanError
 
 __all__ = ["drill_order", "nearest_neighbour_order", "tour_length_mm", "EXACT_MAX", "K_NEIGHBOURS"]
@@ -171,6 +173,7 @@ def drill_order(points_mm: np.ndarray, start_mm: tuple[float, float] = (0.0, 0.0
 # ---------------------------------------------------------------- compiled kernels
 
 
+@entry
 @njit(cache=True)
 def _exact_path(pts, start, end, to_end):
     """Held-Karp over subsets: the shortest path from ``start`` through all ``pts`` (N <= ~15), open or, with
@@ -268,6 +271,7 @@ def _grid(xy, idx):
     return x0, y0, cell, gx, gy, cell_start, items
 
 
+@entry
 @njit(cache=True)
 def _nn_path(pts, start):
     """Exact nearest-neighbour path from ``start`` (ties: lowest index), on a grid with removal."""
@@ -350,6 +354,7 @@ def _ring_reach(px, py, x0, y0, cell, ccx, ccy, r):
     return max(0.0, min(min(px - lo_x, hi_x - px), min(py - lo_y, hi_y - py)))
 
 
+@entry
 @njit(cache=True)
 def _knn(xy, k):
     """``(M, k)`` int64: the ``k`` nearest other points of each point, nearest first (ties: lowest index)."""
@@ -597,6 +602,7 @@ def _local_search(xy, tour, pos, neigh, end, free, span, queue, inq, ht):
     return total
 
 
+@entry
 @njit(cache=True)
 def _improve(xy, tour, neigh, kicks, max_segment, seed, closed):
     """Improve the path ``tour`` = ``[start, holes..., end]`` in place (see the module docstring).

@@ -66,6 +66,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from numba import njit
 
+from .._compiled import entry
+
 from ..settings import DEFAULT_SETTINGS, MachineSettings
 from .pinlog import PinLog, read_pin_log, rising_edges
 from ..drive.pins import axis_bits
@@ -105,6 +107,7 @@ def _pair_excess(d1, d2, e_lo, e_hi, s_ns, vs, acc, ds_ns):
     return best
 
 
+@entry
 @njit(cache=True, nogil=True)
 def check_axis_steps(t_ns, slot_of_step, slot_t_ns, brk, s_mm, v_start, v_max, acc, r1, r2, r3):
     """Rules R1..R3 (module docstring) for the steps of one axis.
