@@ -166,31 +166,46 @@ def bench_whole_path(quick: bool) -> list[dict]:
 
 
 def bench_cold_start(quick: bool) -> list[dict]:
-    """Row 15 (#17 point 2): whole processes, first run with an empty NUMBA_CACHE_DIR against warm runs."""
+    """Row 15 (#17 point 2): whole processes, the first run after installing (empty NUMBA_CACHE_DIR) against
+    warm runs.  The install compiled the kernels ahead of time (cam/_compiled.py), so a first run compiles
+    nothing; the last rows show numba's JIT fallback (CAM_NO_AOT=1: an install that could not compile), which
+    must at least say on stderr that it is compiling."""
+    from cam._compiled import aot_status
+
     commands = [["drill", "samples/ellipse.png", "--depth", "5"], ["drill", "samples/board.drl"]]
     rows = []
-    for args in commands:
-        cache = tempfile.mkdtemp()
-        env = dict(os.environ, NUMBA_CACHE_DIR=cache, PYTHONPATH=str(ROOT))
-        pins = Path(cache) / "pins.csv"
+    for fallback in (False, True):
+        for args in commands:
+            cache = tempfile.mkdtemp()
+            env = dict(os.environ, NUMBA_CACHE_DIR=cache, PYTHONPATH=str(ROOT))
+            if fallback:
+                env["CAM_NO_AOT"] = "1"
+            pins = Path(cache) / "pins.csv"
 
-        def run_once():
-            t0 = time.perf_counter()
-            out = subprocess.run([sys.executable, "-m", "cam", *args, "--pin-log", str(pins)], cwd=ROOT, env=env,
-                                 capture_output=True, text=True, timeout=600, input="\n" * 50)  # Enter at each tool change
-            if out.returncode != 0:
-                raise RuntimeError(out.stderr[-500:])
-            return time.perf_counter() - t0, out.stderr
+            def run_once():
+                t0 = time.perf_counter()
+                out = subprocess.run([sys.executable, "-m", "cam", *args, "--pin-log", str(pins)], cwd=ROOT,
+                                     env=env, capture_output=True, text=True, timeout=600,
+                                     input="\n" * 50)  # Enter at each tool change
+                if out.returncode != 0:
+                    raise RuntimeError(out.stderr[-500:])
+                return time.perf_counter() - t0, out.stderr
 
-        cold_s, cold_err = run_once()
-        warm = [run_once()[0] for _ in range(3)]
-        warm_s = statistics.median(warm)
-        noted = "preparing compiled kernels, first run only" in cold_err
-        r = cold_s / warm_s
-        rows.append(row(f"cold start: cam {' '.join(args)}, first run (empty NUMBA_CACHE_DIR) vs warm", cold_s,
-                        warm_s, f"{r:.1f}x warm", "<= 2x warm, a note on stderr while compiling", r <= 2 and noted,
-                        "note shown" if noted else "no note"))
-        shutil.rmtree(cache, ignore_errors=True)
+            cold_s, cold_err = run_once()
+            warm = [run_once()[0] for _ in range(3)]
+            warm_s = statistics.median(warm)
+            noted = "preparing compiled kernels, first run only" in cold_err
+            r = cold_s / warm_s
+            if fallback:
+                rows.append(row(f"cold start, JIT fallback (CAM_NO_AOT=1): cam {' '.join(args)}, first run vs warm",
+                                cold_s, warm_s, f"{r:.1f}x warm", "a note on stderr while compiling", noted,
+                                "note shown" if noted else "no note"))
+            else:
+                rows.append(row(f"cold start: cam {' '.join(args)}, first run after install (empty "
+                                f"NUMBA_CACHE_DIR) vs warm", cold_s, warm_s, f"{r:.1f}x warm",
+                                "<= 2x warm, never silent while compiling", r <= 2,
+                                "note shown" if noted else f"nothing compiled; kernels {aot_status()}"))
+            shutil.rmtree(cache, ignore_errors=True)
     return rows
 
 
