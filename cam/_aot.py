@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from . import _compiled
-from ._compiled import ENTRIES, EXTENSION, KERNEL_MODULES, MANIFEST, source_digest, symbol_of
+from ._compiled import ENTRIES, EXTENSION, KERNEL_MODULES, MANIFEST, host_cpu, source_digest, symbol_of
 
 ROOT = Path(__file__).resolve().parent
 SAMPLES = ROOT.parent / "samples"
@@ -144,7 +144,10 @@ def build(out_dir: Path) -> Path:
     cc = CC(EXTENSION.rsplit(".", 1)[1])
     cc.output_dir = str(out_dir)
     cc.verbose = False
-    manifest: dict[str, Any] = {"digest": source_digest(), "kernels": {}}
+    # this machine's instruction set, as numba's JIT compiles (a generic x86-64 build ran the colour
+    # classification 2x slower); the manifest names the CPU, and another CPU does not load the module
+    cc.target_cpu = "host"
+    manifest: dict[str, Any] = {"digest": source_digest(), "cpu": host_cpu(), "kernels": {}}
     for qualname, sigs in SIGNATURES.items():
         dispatcher = ENTRIES.get(qualname)
         if dispatcher is None:

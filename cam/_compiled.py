@@ -63,6 +63,13 @@ def source_digest() -> str:
     return h.hexdigest()
 
 
+def host_cpu() -> str:
+    """This machine's CPU model and instruction-set features, as LLVM names them (numba has loaded LLVM)."""
+    import llvmlite.binding as llvm
+
+    return f"{llvm.get_host_cpu_name()} {llvm.get_host_cpu_features().flatten()}"
+
+
 def symbol_of(qualname: str, index: int) -> str:
     """Name of the ahead-of-time function for signature ``index`` of kernel ``qualname``."""
     return qualname.replace(".", "__") + f"__{index}"
@@ -85,6 +92,9 @@ def _load() -> dict[str, dict[tuple[str, ...], Callable]]:
         return _TABLE
     if manifest.get("digest") != source_digest():
         _STATUS = "stale: built from other kernel sources (numba compiles on first use)"
+        return _TABLE
+    if manifest.get("cpu") != host_cpu():
+        _STATUS = "built for another CPU (numba compiles on first use)"
         return _TABLE
     try:
         module = importlib.import_module(EXTENSION)

@@ -97,6 +97,17 @@ def test_a_build_from_other_sources_is_not_used(tmp_path, monkeypatch):
     assert _compiled.aot_status().startswith("stale")
 
 
+def test_a_build_for_another_cpu_is_not_used(tmp_path, monkeypatch):
+    """The module is compiled for the installing machine's instruction set: another CPU must not load it."""
+    manifest = tmp_path / _compiled.MANIFEST
+    manifest.write_text('{"digest": "1111", "cpu": "pentium4 +sse2", "kernels": {}}')
+    monkeypatch.setattr(_compiled, "_ROOT", tmp_path)
+    monkeypatch.setattr(_compiled, "_TABLE", None)
+    monkeypatch.setattr(_compiled, "source_digest", lambda: "1111")
+    assert _compiled._load() == {}
+    assert _compiled.aot_status().startswith("built for another CPU")
+
+
 def test_no_build_means_the_jit(tmp_path, monkeypatch):
     monkeypatch.setattr(_compiled, "_ROOT", tmp_path)
     monkeypatch.setattr(_compiled, "_TABLE", None)
