@@ -83,7 +83,7 @@ def journal_spec(job: Any, path: str | os.PathLike, *, home_steps: tuple[int, in
 
 def write_journal(journal: Journal, path: str | os.PathLike) -> None:
     """Write a journal file atomically."""
-    atomic_write_text(path, json.dumps(journal.to_dict(), indent=1) + "\n")
+    atomic_write_text(path, json.dumps(journal.to_dict()) + "\n")
 
 
 def read_journal(path: str | os.PathLike) -> Journal:
