@@ -323,3 +323,49 @@ def test_resume_starts_at_the_interrupted_move_and_skips_what_does_not_cut():
     job.pause_notes = ["tool change: T2"]
     r, index, j = resume_toolpath(job, 3, (30, 0, 3))
     assert r.pause.tolist() == [False, True, False] and r.pause_notes == ["tool change: T2"]
+
+
+def test_the_page_resumes_a_stopped_job_from_where_the_tool_stands(tmp_path):
+    """The web page's Resume job button (POST /api/resume-job) calls the same library function as the CLI."""
+    from test_web import MEDIUM, Server
+
+    s = Server(tmp_path, settings=MEDIUM, realtime=True)
+    try:
+        status, r = s.call("POST", "/api/resume-job", {})
+        assert status == 409 and "no stopped job" in r["error"]
+        status, r = s.upload("ellipse.png", (SAMPLES / "ellipse.png").read_bytes())
+        status, plan = s.call("POST", "/api/plan", {"job": r["job"], "options": {"depth": 2}})
+        assert status == 200, plan
+        s.call("POST", "/api/jog", {"axis": "x", "steps": 40})  # the job's home is not the session's
+        home = np.array(s.wait_idle()["position_steps"], np.int64)
+        s.session.on_progress = lambda done, total, t_ns: s.session.stop() if done >= total // 3 else None
+        assert s.call("POST", "/api/start", {"job": plan["job"]})[0] == 200
+        st = s.wait_idle()
+        s.session.on_progress = None
+        assert st["last"]["status"] == "stopped" and st["last"]["journal"]
+        first, stopped_at = s.session.last_job_pin_log, np.array(st["position_steps"], np.int64)
+        status, r = s.call("POST", "/api/resume-job", {})
+        assert status == 200, r
+        st = s.wait_idle()
+        assert st["last"]["status"] == "finished" and "resumed at move" in st["last"]["label"]
+        second = s.session.last_job_pin_log
+        job = prepare_job_like_the_page(SAMPLES / "ellipse.png")
+    finally:
+        s.close()
+    settings = job.settings
+    m1, m2 = decode_pin_log(first, settings), decode_pin_log(second, settings)
+    both = Motion(np.r_[m1.t_ns, m2.t_ns], np.vstack([m1.position_steps, m2.position_steps + (stopped_at - home)]),
+                  m1.step_counts + m2.step_counts)
+    whole = decode_pin_log(cam.run(job.steps).pin_log(), settings)
+    tp = job.toolpath
+    shape_px = (tp.height_px, tp.width_px)
+    assert np.array_equal(carve(both, shape_px, settings, origin_px=tp.origin_px),
+                          carve(whole, shape_px, settings, origin_px=tp.origin_px))
+
+
+def prepare_job_like_the_page(path: Path):
+    from test_web import MEDIUM
+
+    from cam.job.jobs import JobOptions, prepare_job
+
+    return prepare_job(path, JobOptions(depth=(2,)), MEDIUM)

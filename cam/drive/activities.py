@@ -71,6 +71,8 @@ def run_steps(session: Any, name: str, plan: StepPlan, ctl: Controller, label: s
             except CamError as exc:
                 error = error or str(exc)
     info: dict[str, Any] = {"activity": name, "label": label}
+    if journal is not None:
+        info["journal"] = journal.path
     if result is None:
         info.update(status="error", messages=[error or "failed"])
         session.finish(info, None)
