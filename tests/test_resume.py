@@ -369,3 +369,27 @@ def prepare_job_like_the_page(path: Path):
     from cam.job.jobs import JobOptions, prepare_job
 
     return prepare_job(path, JobOptions(depth=(2,)), MEDIUM)
+
+
+def test_the_journal_is_never_ahead_of_the_machine(tmp_path):
+    """Every journal written while a job runs names a move and a position the writes already sent reached."""
+    job, _ = _prepared(_drill_args("hpgl", tmp_path))
+    journal = tmp_path / "j.journal.json"
+    seen = []
+    session = MachineSession("mock", job.settings, realtime=True, on_prompt=lambda prompt: "continue")
+    try:
+        session.start(job, journal=str(journal))
+        while session.busy:
+            if journal.exists():
+                seen.append(read_journal(journal))
+            time.sleep(0.05)
+    finally:
+        session.shutdown()
+    running = [j for j in seen if j.state == "running" and j.writes_done > 0]
+    assert len({j.writes_done for j in running}) >= 3  # updated as it ran
+    positions = decode_pin_log(cam.PinLog(job.steps.t_ns, job.steps.data, job.steps.strobe), job.settings)
+    for j in running:
+        assert tuple(positions.position_steps[j.writes_done - 1]) == j.position_steps
+        assert job.steps.point_write[j.last_move] < j.writes_done
+        assert j.last_move + 1 == len(job.toolpath) or job.steps.point_write[j.last_move + 1] >= j.writes_done
+    assert read_journal(journal).state == "finished"
