@@ -60,6 +60,8 @@ _LAZY = {
     "PlanError": "cam.errors", "PortError": "cam.errors", "SettingsError": "cam.errors",
     "TravelError": "cam.errors",
     "job_kind": "cam.choices", "sniff_kind": "cam.sniff",
+    "prepare_job": "cam.job.jobs", "resume_job": "cam.job.jobs", "JobOptions": "cam.job.jobs",
+    "PreparedJob": "cam.job.jobs", "Journal": "cam.job.resume", "read_journal": "cam.drive.journal",
 }
 
 __all__ = list(_LAZY)
@@ -118,6 +120,9 @@ if TYPE_CHECKING:  # pragma: no cover - for type checkers and editors only
     from .job.drill_order import drill_order
     from .job.drawing import plan
     from .job.model import Job, PixelFrame
+    from .job.jobs import JobOptions, PreparedJob, prepare_job, resume_job
+    from .job.resume import Journal
+    from .drive.journal import read_journal
     from .job.moves import goto, jog
     from .render.report import image_report, job_report
     from .settings import MachineSettings, load_settings

@@ -52,6 +52,7 @@ OUTPUTS = {
     # option dest: (flag, accepted suffixes or None for any)
     "pin_log": ("--pin-log", (".csv",)),
     "report": ("--report", (".json",)),
+    "journal": ("--journal", (".json",)),
     "preview": ("--preview", (".png", ".svg")),
     "save_digitized": ("--save-digitized", DIGITIZED_SUFFIXES),
     "output": ("--output", None),

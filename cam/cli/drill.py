@@ -5,17 +5,23 @@ import argparse
 import json
 import sys
 import time
+from pathlib import Path
+from typing import Optional
 
 from ..digitize.digitized import save_digitized
 from ..drive.maximus.board import drill_stroke
+from ..drive.journal import read_journal
 from ..drive.ports import port_kind
+from ..errors import CapabilityError
+from ..job.jobs import resume_job
+from .checks import check_output_path
 from ..fileio import atomic_write_text
 from .common import format_duration, port_settings
 from .execute import Outcome, check_port_options, execute
 from .parser import EXIT_INTERRUPTED
 from .planning import prepare, summary_of, write_job_preview
 
-__all__ = ["cmd_drill"]
+__all__ = ["cmd_drill", "journal_path"]
 
 
 def _finish(args: argparse.Namespace, outcome: Outcome, report: dict, summary: str, wall_s: float) -> int:
@@ -48,11 +54,49 @@ def board_report(job, settings) -> dict:
             "half_step": {"x": m.half_step_x, "y": m.half_step_y, "z": m.half_step_z}}
 
 
+def journal_path(args: argparse.Namespace) -> Optional[str]:
+    """Where ``cam drill`` keeps the job's journal: --journal; else the journal it resumes; else next to
+    --report or --pin-log (``NAME.journal.json``); else, on a real port, ``IMAGE.journal.json`` in the current
+    folder; else (the mock without outputs) nowhere."""
+    if getattr(args, "journal", None):
+        return args.journal
+    if getattr(args, "resume", None):
+        return args.resume
+    for output in (getattr(args, "report", None), getattr(args, "pin_log", None)):
+        if output:
+            p = Path(output)
+            return str(p.with_name(p.stem + ".journal.json"))
+    if args.port != "mock":
+        return Path(getattr(args, "load_digitized", None) or args.image).name + ".journal.json"
+    return None
+
+
+def _resumed(args: argparse.Namespace, job):
+    """The prepared job resumed after the stop its journal (--resume) records; says so on stderr."""
+    journal = read_journal(args.resume)
+    resumed = resume_job(job, journal, where=args.resume)
+    if journal.state == "running":
+        print(f"warning: journal {args.resume} was not closed (its run ended without a word): where it says the "
+              f"tool stands, {list(journal.position_steps)} steps, may be a little behind; check the tool",
+              file=sys.stderr)
+    print(f"resuming at move {resumed.report['resumed_at_move']} of {len(job.toolpath)} from "
+          f"{list(journal.position_steps)} steps ({journal.state})", file=sys.stderr)
+    return resumed, journal.position_steps
+
+
 def cmd_drill(args: argparse.Namespace) -> int:
     check_port_options(args)
+    if getattr(args, "resume", None):
+        if port_kind(args.port) == "maximus":
+            raise CapabilityError(f"{args.port} drills by itself: --resume runs on step/dir ports")
+        check_output_path(args.resume, "--resume")
+        read_journal(args.resume)  # a bad journal: one line, before anything is planned
     settings = port_settings(args, args.port)
     check_port_options(args, settings)
     job = prepare(args, settings)
+    start_steps = None
+    if getattr(args, "resume", None):
+        job, start_steps = _resumed(args, job)
     for w in job.warnings:
         if w not in getattr(args, "kind_warnings", ()):  # check_args said it already
             print(f"warning: {w}", file=sys.stderr)
@@ -63,8 +107,11 @@ def cmd_drill(args: argparse.Namespace) -> int:
         save_digitized(job.digitized, args.save_digitized)
     if port_kind(args.port) == "maximus":
         job.report["board"] = board_report(job, settings)
+    journal = journal_path(args)
+    if journal is not None:
+        job.report["journal"] = journal
     t0 = time.monotonic()
-    outcome = execute(job, args, settings)
+    outcome = execute(job, args, settings, start_steps=start_steps, journal=journal)
     summary = summary_of(job)
     return _finish(args, outcome, job.report, f"{summary} from {args.image}" if job.kind == "hpgl" else summary,
                    time.monotonic() - t0)

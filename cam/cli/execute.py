@@ -17,6 +17,7 @@ from typing import Any, Optional
 
 from tqdm import tqdm
 
+from ..drive.journal import journal_spec
 from ..drive.ports import port_kind, require
 from ..drive.runner import FINISHED
 from ..drive.session import MachineSession, Prompt
@@ -119,11 +120,13 @@ def _bar(args: argparse.Namespace, estimated_s: float) -> Optional[Any]:
 
 
 def execute(job: Any, args: argparse.Namespace, settings: MachineSettings, *,
-            start_steps: Optional[tuple[int, int, int]] = None) -> Outcome:
+            start_steps: Optional[tuple[int, int, int]] = None, journal: Optional[str] = None) -> Outcome:
     """Run a job (a Job, a PreparedJob or a StepPlan) on ``args.port`` through a machine session.
 
     ``start_steps``: where the tool stands, when the caller knows better than the home.  Ctrl-C stops the
     job cleanly (tool lifted, position reported).  Writes ``args.pin_log`` after a run on the mock.
+    ``journal``: keep the job's journal in this file (:mod:`cam.drive.journal`); should this process die,
+    the real-time runner process writes the journal and the pin log itself.
 
     Raises:
         CamError: the job does not fit the port or the travel (nothing is sent), or the port failed.
@@ -145,9 +148,13 @@ def execute(job: Any, args: argparse.Namespace, settings: MachineSettings, *,
         stopping.set()
         session.stop()
 
+    spec = None
+    if journal is not None:
+        spec = journal_spec(job, journal, home_steps=session.position_steps(),
+                            pin_log_path=getattr(args, "pin_log", None))
     previous = {s: signal.signal(s, stop) for s in _STOP_SIGNALS}
     try:
-        session.start(job)
+        session.start(job, journal=spec)
         if bar is not None and not bar.total:  # a jog or a go-to: its time is known once the session planned it
             bar.total = round(session.state()["remaining_s"], 3)
             bar.refresh()

@@ -282,6 +282,13 @@ def _add_drill(sub: argparse._SubParsersAction) -> None:
     g.add_argument("--pin-log", metavar="FILE.csv", help="write the mock's pin log (t_ns,data,strobe)")
     g.add_argument("--save-digitized", metavar="FILE", help="save the digitized matrix")
     g.add_argument("--report", metavar="FILE.json", help="write the job report as JSON")
+    g.add_argument("--journal", metavar="FILE.json",
+                   help="keep the job's journal here (how far it got, where the tool stands), updated as it runs, "
+                   "for --resume; default: next to --report or --pin-log (NAME.journal.json), on a real port "
+                   "IMAGE.journal.json in the current folder, on the mock without outputs none")
+    g.add_argument("--resume", metavar="JOURNAL",
+                   help="go on with a job that was stopped: give the same file and options; the tool lifts, travels "
+                   "to the first uncut point and plunges there (the journal keeps being updated)")
     g.add_argument("--preview", metavar="OUT.png", help="write the toolpath picture before cutting")
     g.add_argument("--flip-y", action="store_true", help="G-code input: machine Y = +Y mm instead of -Y mm")
     g.add_argument("--yes", action="store_true", help="answer every prompt (tool changes, pauses) with Enter")

@@ -7,13 +7,14 @@ Each function reports to the session through its worker hooks
 from __future__ import annotations
 
 import threading
-from typing import Any, Callable
+from typing import Any, Callable, Optional
 
 import numpy as np
 
 from ..errors import CamError, PortError
 from ..settings import MachineSettings
 from .maximus.board import MaximusBoard, drill_arguments, from_board, to_board
+from .journal import JournalSpec, JournalWriter, journal_state_of
 from .ports import MockPort, open_port, port_kind, require
 from .runner import Controller, run
 from .steps import StepPlan
@@ -24,32 +25,54 @@ BoardWork = Callable[[MaximusBoard, Any], None]
 """work(board, session): what to do with an open board."""
 
 
-def run_steps(session: Any, name: str, plan: StepPlan, ctl: Controller, label: str) -> None:
-    """Run ``plan`` on the session's step/dir port (the worker thread of a job, jog or move)."""
+def run_steps(session: Any, name: str, plan: StepPlan, ctl: Controller, label: str,
+              journal: Optional[JournalSpec] = None) -> None:
+    """Run ``plan`` on the session's step/dir port (the worker thread of a job, jog or move).
+
+    ``journal``: keep the job's journal (in the runner process for a real-time run, else here).
+    """
     result = None
     error = None
     port = None
+    writer: Optional[JournalWriter] = None
     try:
         if session.realtime and isinstance(session.port, str):  # a process of its own: nothing holds it up
             if port_kind(session.port) != "mock":
                 open_port(session.port).close()  # a port that cannot be opened: its own message, from here
             result = session.runner_process().run(plan, session.port, ctl, progress=session.progress,
-                                                  on_pause=session.prompt)
+                                                  on_pause=session.prompt, journal=journal)
         else:  # the simulated clock, or a port object the caller opened
             port = open_port(session.port)
-            result = run(plan, port, realtime=session.realtime, controller=ctl, progress=session.progress,
+            progress = session.progress
+            if journal is not None:
+                writer = JournalWriter(journal, plan)
+
+                def progress(done: int, total: int, machine_ns: int) -> None:
+                    writer.progress(done)
+                    session.progress(done, total, machine_ns)
+
+            result = run(plan, port, realtime=session.realtime, controller=ctl, progress=progress,
                          on_pause=session.prompt)
+            if writer is not None:
+                journal_error = writer.close(journal_state_of(result.status), result.writes, result.position_steps)
+                writer = None
+                if journal_error:
+                    result.messages.append(journal_error)
     except CamError as exc:
         error = str(exc)
     except Exception as exc:  # noqa: BLE001 - reported in the log; the runner sent nothing more
         error = f"internal error: {type(exc).__name__}: {exc}"
     finally:
+        if writer is not None:  # the run failed: the journal says where it got to
+            writer.close("failed")
         if port is not None and not isinstance(port, MockPort):
             try:
                 port.close()
             except CamError as exc:
                 error = error or str(exc)
     info: dict[str, Any] = {"activity": name, "label": label}
+    if journal is not None:
+        info["journal"] = journal.path
     if result is None:
         info.update(status="error", messages=[error or "failed"])
         session.finish(info, None)

@@ -41,6 +41,8 @@ from typing import Optional
 import numpy as np
 
 from ..errors import CamError, PortError
+from ..verify.pinlog import PinLog, write_pin_log
+from .journal import JournalSpec, JournalWriter, journal_state_of
 from .ports import MockPort, Port, open_port
 from .runner import Controller, PauseFn, ProgressFn, RunResult, run
 from .steps import StepPlan
@@ -72,6 +74,7 @@ class _SharedWake:
     def __init__(self, slots: np.ndarray, parent_pid: int) -> None:
         self.slots, self.parent_pid = slots, parent_pid
         self._next_parent_check = 0.0
+        self.orphaned = False
 
     def wait(self, timeout_s: Optional[float] = None) -> bool:
         flags = int(self.slots[_FLAGS])
@@ -97,6 +100,7 @@ class _SharedWake:
         if now >= self._next_parent_check:
             self._next_parent_check = now + 0.05
             if os.getppid() != self.parent_pid:
+                self.orphaned = True
                 self.slots[_FLAGS] = int(self.slots[_FLAGS]) | _STOP
 
 
@@ -138,11 +142,14 @@ def _child(sock_fd: int, page_fd: int, parent_pid: int) -> None:
             message = conn.recv()
         except (EOFError, OSError):
             return
-        _, plan, port_name = message
+        _, plan, port_name, journal = message
         ctl = _SharedController(slots, parent_pid)
+        writer = JournalWriter(journal, plan) if journal is not None else None
 
         def progress(done: int, total: int, machine_ns: int) -> None:
             slots[_DONE], slots[_MACHINE_NS] = done, machine_ns
+            if writer is not None:
+                writer.progress(done)
             ctl._wake.check_parent()
 
         def on_pause(position_steps: tuple[int, int, int], note: str) -> None:
@@ -158,6 +165,13 @@ def _child(sock_fd: int, page_fd: int, parent_pid: int) -> None:
             port = open_port(port_name)
             result = run(plan, port, realtime=True, controller=ctl, progress=progress, on_pause=on_pause)
             log = result.pin_log() if isinstance(port, MockPort) else None
+            if ctl._wake.orphaned:  # nobody will take the result: this process keeps the outputs it can
+                _orphan_outputs(journal, log)
+            if writer is not None:
+                journal_error = writer.close(journal_state_of(result.status), result.writes, result.position_steps)
+                writer = None
+                if journal_error:
+                    result.messages.append(journal_error)
             fields = {k: v for k, v in vars(result).items() if k != "port"}
             reply: tuple = ("result", fields, None if log is None else (log.t_ns, log.data, log.strobe))
         except CamError as exc:
@@ -165,12 +179,28 @@ def _child(sock_fd: int, page_fd: int, parent_pid: int) -> None:
         except Exception as exc:  # noqa: BLE001 - reported to the parent, which books the activity as failed
             reply = ("error", f"internal error in the step runner: {type(exc).__name__}: {exc}")
         finally:
+            if writer is not None:  # the run failed: the journal says where it got to
+                writer.close("failed")
             if port is not None and not isinstance(port, MockPort):
                 try:
                     port.close()
                 except CamError:
                     pass
-        conn.send(reply)
+        try:
+            conn.send(reply)
+        except OSError:  # the parent is gone
+            return
+
+
+def _orphan_outputs(journal: Optional[JournalSpec], log: Optional[PinLog]) -> None:
+    """The parent died during the run: write the mock's pin log where the job asked for it (the journal comes
+    next), so the run can be resumed and checked."""
+    if journal is None or log is None or not journal.pin_log_path:
+        return
+    try:
+        write_pin_log(log, journal.pin_log_path)
+    except CamError:
+        pass
 
 
 # ---------------------------------------------------------------------------------------- the parent's side
@@ -232,8 +262,13 @@ class RunnerProcess:
         self._conn = Connection(ours.detach())
 
     def run(self, plan: StepPlan, port_name: str, controller: Controller,
-            progress: Optional[ProgressFn] = None, on_pause: Optional[PauseFn] = None) -> RunResult:
+            progress: Optional[ProgressFn] = None, on_pause: Optional[PauseFn] = None,
+            journal: Optional[JournalSpec] = None) -> RunResult:
         """Run ``plan`` in real time on the port ``port_name``, in the child; as :func:`cam.drive.runner.run`.
+
+        ``journal``: the child keeps the job's journal (:class:`~cam.drive.journal.JournalWriter`); if this
+        process dies during the run, the child stops the job, writes the journal's last record and the mock's
+        pin log (``journal.pin_log_path``) itself.
 
         ``controller``'s requests reach the child the moment they are made; ``progress`` is called from this
         thread every few milliseconds while the job runs; ``on_pause`` is called here at each pause and the
@@ -256,7 +291,7 @@ class RunnerProcess:
             mirror()
             controller.listeners.append(mirror)
             try:
-                conn.send(("run", plan, port_name))
+                conn.send(("run", plan, port_name, journal))
                 return self._follow(plan, controller, progress, on_pause)
             finally:
                 controller.listeners.remove(mirror)

@@ -51,6 +51,7 @@ from ..job.moves import jog_steps, to_origin
 from ..settings import DEFAULT_SETTINGS, MachineSettings
 from ..verify.pinlog import PositionTracker
 from .apart import RunnerProcess
+from .journal import JournalSpec, journal_spec
 from ._session_parts import Activity, Prompt, PromptFn, SessionControls
 from .activities import BoardControl, drill_work, move_work, run_on_board, run_steps
 from .maximus.board import drill_arguments, drill_job, maximus_port
@@ -147,7 +148,8 @@ class MachineSession(SessionControls):
         if isinstance(job, Job):
             check_travel(np.asarray(job.points_steps, np.int64) + self._position, self.settings, job.pixels)
 
-    def start(self, job: Any, *, label: Optional[str] = None, controller: Optional[Controller] = None) -> None:
+    def start(self, job: Any, *, label: Optional[str] = None, controller: Optional[Controller] = None,
+              journal: Any = None) -> None:
         """Run a job from where the tool stands, in the background.
 
         Args:
@@ -156,6 +158,9 @@ class MachineSession(SessionControls):
             label: what the log calls it.
             controller: a :class:`~cam.drive.runner.Controller` of the caller's (step/dir ports), else a new one;
                 :meth:`pause` and the other controls work either way.
+            journal: keep the job's journal (:mod:`cam.drive.journal`) in this file (a path), or as a
+                :class:`~cam.drive.journal.JournalSpec` says; None: no journal.  A resumed job
+                (:func:`cam.job.jobs.resume_job`) starts where its journal says the tool stands.
 
         Raises:
             BusyError: something runs; CapabilityError: the port cannot run this job; TravelError:
@@ -171,8 +176,17 @@ class MachineSession(SessionControls):
             if self.kind == "maximus":
                 self._launch_board("job", drill_work(job, self.settings), job, name)
                 return
+            spec = self._journal_spec(job, journal)
             plan = self._plan(job)
-            self._launch_steps("job", plan, name, getattr(job, "estimated_time_s", plan.estimated_time_s), controller)
+            self._launch_steps("job", plan, name, getattr(job, "estimated_time_s", plan.estimated_time_s), controller,
+                               spec)
+
+    def _journal_spec(self, job: Any, journal: Any) -> Optional[JournalSpec]:
+        if journal is None or isinstance(journal, JournalSpec):
+            return journal
+        if isinstance(job, StepPlan):
+            raise CamError("a step plan has no moves to keep a journal of: start the job or the prepared job")
+        return journal_spec(job, journal, home_steps=tuple(int(v) for v in self._position))
 
     def _plan(self, job: Any) -> StepPlan:
         if isinstance(job, StepPlan):
@@ -273,11 +287,11 @@ class MachineSession(SessionControls):
         self._bump()
 
     def _launch_steps(self, name: str, plan: StepPlan, label: str, estimated_s: float,
-                      controller: Optional[Controller] = None) -> None:
+                      controller: Optional[Controller] = None, journal: Optional[JournalSpec] = None) -> None:
         ctl = controller or Controller()
         self._begin(Activity(name, label, ctl, len(plan), estimated_s, PositionTracker(plan.data, plan.settings)))
         self.log(f"{label}: started")
-        self._spawn(run_steps, (self, name, plan, ctl, label), name)
+        self._spawn(run_steps, (self, name, plan, ctl, label, journal), name)
 
     def _launch_board(self, name: str, work: Callable[[Any, Any], None], job: Any, label: str,
                       moved_steps: Any = (0, 0, 0)) -> None:

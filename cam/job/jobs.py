@@ -19,9 +19,10 @@ stands can check the job against the machine travel before it starts.
 """
 from __future__ import annotations
 
+import hashlib
 import math
 import os
-from dataclasses import dataclass, field, fields
+from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Any, Mapping, Optional
 
@@ -57,12 +58,13 @@ from .gcode import plan_gcode
 from .hpgl import DEFAULT_CUT_DEPTH_MM as HPGL_CUT_DEPTH_MM
 from .hpgl import DEFAULT_SAFE_HEIGHT_MM as HPGL_SAFE_HEIGHT_MM
 from .hpgl import plan_hpgl
+from .resume import Journal, JournalBase, check_journal, job_identity, plan_fingerprint, resume_toolpath
 from .svg import DEFAULT_CUT_DEPTH_MM as SVG_CUT_DEPTH_MM
 from .svg import DEFAULT_SAFE_HEIGHT_MM as SVG_SAFE_HEIGHT_MM
 from .svg import plan_svg
 
 __all__ = [
-    "JobOptions", "PreparedJob", "prepare_job", "job_kind", "accepted_suffixes", "KINDS",
+    "JobOptions", "PreparedJob", "prepare_job", "resume_job", "job_kind", "accepted_suffixes", "KINDS",
     "DRAWING_SUFFIXES", "DIGITIZED_SUFFIXES", "EXCELLON_SUFFIXES", "HPGL_SUFFIXES", "PROFILE_SUFFIXES",
 ]
 
@@ -363,6 +365,9 @@ class PreparedJob:
         digitized: the :class:`~cam.digitize.digitized.Digitized` matrix of a drawing job.
         drill_plan: the :class:`~cam.job.drill.DrillPlan` of a drill file (holes in drilling order, tools),
             which a MAXIMUS board drills by itself.
+        identity: sha256 of the input's bytes, the options and the settings (:func:`cam.job.resume.job_identity`).
+        plan_sha256: the toolpath's :func:`cam.job.resume.plan_fingerprint`.
+        resumed: a resumed run's :class:`cam.job.resume.JournalBase` (None: a run from the start).
     """
 
     source: str
@@ -382,6 +387,9 @@ class PreparedJob:
     drawing_rgb: Optional[np.ndarray] = None
     drill_plan: Any = None
     digitized: Any = None
+    identity: str = ""
+    plan_sha256: str = ""
+    resumed: Any = None
 
     def positions_steps(self) -> np.ndarray:
         """``(M, 3)`` int64 machine position (x, y, z) in steps after each write of the plan."""
@@ -666,4 +674,68 @@ def prepare_job(
     job.warnings[:0] = kind_warnings
     job.name = name or p.name
     job.summary = job.name + job.summary[len(p.name):]
+    job.identity = identity_of(p, opts, settings)
+    job.plan_sha256 = plan_fingerprint(job.toolpath)
     return _finish(job)
+
+
+def file_sha256(path: str | os.PathLike) -> str:
+    """sha256 (hex) of a file's bytes, read in chunks (bounded memory)."""
+    h = hashlib.sha256()
+    try:
+        with open(path, "rb") as handle:
+            for chunk in iter(lambda: handle.read(1 << 20), b""):
+                h.update(chunk)
+    except OSError as exc:
+        raise CamError(f"{path}: cannot read ({exc.strerror or exc})") from None
+    return h.hexdigest()
+
+
+def identity_of(path: str | os.PathLike, options: JobOptions, settings: MachineSettings) -> str:
+    """The identity of a job file planned with ``options`` and ``settings`` (:func:`cam.job.resume.job_identity`):
+    the files an option names (a profile, a tool table) count by their bytes, not their paths."""
+    values = asdict(options)
+    files = {}
+    for key in ("profile", "tool_table"):
+        if values.get(key):
+            files[key] = file_sha256(values.pop(key))
+    return job_identity(file_sha256(path), values, settings, files)
+
+
+def resume_job(job: PreparedJob, journal: Journal, *, position_steps: Optional[tuple[int, int, int]] = None,
+               where: str = "journal") -> PreparedJob:
+    """The resumed run of a prepared job after the stop ``journal`` records (see :mod:`cam.job.resume`).
+
+    Args:
+        job: the same file planned again with the same options and settings (:func:`prepare_job`).
+        journal: what the interrupted run's journal says (:func:`cam.drive.journal.read_journal`).
+        position_steps: where the tool stands, steps from the job's home (default: the journal's position).
+        where: what messages call the journal (its file name).
+
+    Returns:
+        A :class:`PreparedJob` planned relative to where the tool stands; its ``resumed`` says how its points
+        map onto the job's moves, and its report gives ``resumed_at_move`` and ``start_position_steps``.
+
+    Raises:
+        CamError: the journal was written for another input, options, settings or plan, or its job finished.
+    """
+    check_journal(journal, job.identity, job.plan_sha256, where)
+    if job.toolpath is None:
+        raise CamError(f"{job.name}: a {job.kind} job has no moves to resume")
+    start = tuple(int(v) for v in (journal.position_steps if position_steps is None else position_steps))
+    toolpath, move_index, j = resume_toolpath(job.toolpath, journal.last_move, start,  # type: ignore[arg-type]
+                                              pause_pending=journal.pause_pending)
+    steps = plan_steps(toolpath, start_steps=start)  # type: ignore[arg-type]
+    base = JournalBase(identity=job.identity, plan_sha256=job.plan_sha256, source=job.source,
+                       moves=len(job.toolpath), pause=np.asarray(toolpath.pause, bool), move_index=move_index,
+                       last_move=journal.last_move, pause_pending=journal.pause_pending, resumed_at_move=j,
+                       start_position_steps=start)  # type: ignore[arg-type]
+    report = dict(job.report)
+    report.update(resumed_at_move=j, start_position_steps=list(start), resumed_from_state=journal.state)
+    out = PreparedJob(
+        source=job.source, kind=job.kind, steps=steps, settings=job.settings, toolpath=toolpath, name=job.name,
+        size_mm=job.size_mm, depth_mm=job.depth_mm, warnings=list(job.warnings),
+        summary=f"{job.summary}, resumed at move {j} of {len(job.toolpath)}", report=report,
+        drawing_rgb=job.drawing_rgb, identity=job.identity, plan_sha256=job.plan_sha256, resumed=base,
+    )
+    return _finish(out)

@@ -73,6 +73,7 @@ try:
 except ImportError:  # pragma: no cover - not Unix: no file limit to raise
     resource = None  # type: ignore[assignment]
 
+from ..drive.journal import read_journal
 from ..drive.session import MachineSession
 from ..errors import BusyError, CamError, CapabilityError
 from ..fileio import atomic_write_bytes
@@ -80,7 +81,7 @@ from ..sniff import HEAD_BYTES
 from ..job.jobs import PROFILE_SUFFIXES, JobOptions, PreparedJob, accepted_suffixes, job_kind
 from ..settings import DEFAULT_SETTINGS, MachineSettings
 from ..worker import DEFAULT_TIME_LIMIT_S, Worker, default_memory_limit_bytes
-from .work import WARM_UP, pin_log_csv, plan_with_preview, preview_of, save_pin_log_raw
+from .work import WARM_UP, pin_log_csv, plan_with_preview, preview_of, resumed_from_journal, save_pin_log_raw
 
 if TYPE_CHECKING:
     from starlette.requests import Request
@@ -191,6 +192,7 @@ class _AppState:
     prepared: dict[str, PreparedJob] = field(default_factory=dict)  # the last eight planned, oldest first
     previews: dict[str, bytes] = field(default_factory=dict)  # id -> PNG
     counter: int = 0
+    last_job: Optional[str] = None  # the id of the job started last (the Resume job button resumes it)
     streams: int = 0  # live event streams now
     pin_log_csv: Optional[tuple[Any, Path]] = None  # (the pin log, its exported CSV)
     broadcast: Any = None  # the _Broadcast of the live views (made with the state)
@@ -526,7 +528,33 @@ async def _start(st: _AppState, request: Request) -> dict[str, Any]:
     if job is None:
         raise HttpError(404 if job_id not in st.uploads else 409,
                         f"job {job_id!r} is not planned; upload it and set its options first")
-    st.session.start(job, label=f"job {job.name or Path(job.source).name}")
+    st.session.start(job, label=f"job {job.name or Path(job.source).name}", journal=str(_journal_path(st, job_id)))
+    st.last_job = job_id
+    return st.session.state()
+
+
+def _journal_path(st: _AppState, job_id: str) -> Path:
+    """Where the page's runs of a planned job keep their journal (with the uploads)."""
+    return st.jobs_dir / f"job-{job_id}.journal.json"
+
+
+async def _resume_job(st: _AppState, request: Request) -> dict[str, Any]:
+    """Resume the last job started after its stop (the page's Resume job button), from where the tool stands:
+    the same library call as ``cam drill --resume`` (:func:`cam.job.jobs.resume_job`), in the worker."""
+    from starlette.concurrency import run_in_threadpool
+
+    body = await _body_json(request)
+    job_id = str(body.get("job") or st.last_job or "")
+    job = st.prepared.get(job_id)
+    path = _journal_path(st, job_id)
+    if job is None or not path.is_file():
+        raise HttpError(409, "no stopped job to resume: start a job first")
+    journal = read_journal(path)
+    where = tuple(int(v) - int(h) for v, h in zip(st.session.position_steps(), journal.home_steps))
+    resumed = await run_in_threadpool(st.worker.call, resumed_from_journal, job, str(path), where,
+                                      what=f"resuming {job.name or job_id}")
+    st.session.start(resumed, label=f"job {job.name or Path(job.source).name} (resumed at move "
+                     f"{resumed.report['resumed_at_move']})", journal=str(path))
     return st.session.state()
 
 
@@ -698,6 +726,7 @@ def _routes(st: _AppState) -> list:
         Route("/api/pause", json_api(partial(_control, action=session.pause)), methods=post),
         Route("/api/resume", json_api(partial(_control, action=session.resume)), methods=post),
         Route("/api/stop", json_api(partial(_control, action=session.stop)), methods=post),
+        Route("/api/resume-job", json_api(_resume_job), methods=post),
         Route("/api/estop", json_api(_emergency_stop), methods=post),
         Route("/api/jog", json_api(_jog), methods=post),
         Route("/api/origin", json_api(partial(_control, action=session.go_to_origin)), methods=post),

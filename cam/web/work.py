@@ -12,11 +12,12 @@ from pathlib import Path
 
 import numpy as np
 
-from ..job.jobs import JobOptions, PreparedJob, prepare_job
+from ..drive.journal import read_journal
+from ..job.jobs import JobOptions, PreparedJob, prepare_job, resume_job
 from ..settings import MachineSettings
 from ..verify.pinlog import PinLog, write_pin_log
 
-__all__ = ["plan_with_preview", "preview_of", "save_pin_log_raw", "pin_log_csv", "WARM_UP"]
+__all__ = ["plan_with_preview", "preview_of", "resumed_from_journal", "save_pin_log_raw", "pin_log_csv", "WARM_UP"]
 
 WARM_UP = ("cam.job.jobs", "cam.web.work", "cam.digitize._kernels", "cam.drive.ramps", "cv2")
 """What the worker imports as it starts: the first planning does not wait for it."""
@@ -27,6 +28,12 @@ def plan_with_preview(path: str, options: JobOptions, settings: MachineSettings,
     """Plan an uploaded file and draw its preview: ``(job, PNG bytes)`` (in the worker)."""
     job = prepare_job(path, options, settings, name=name)
     return job, job.preview_png()
+
+
+def resumed_from_journal(job: PreparedJob, journal_path: str, position_steps: tuple[int, int, int]) -> PreparedJob:
+    """The page's job resumed after the stop its journal records, from where the tool stands (in the worker):
+    :func:`cam.job.jobs.resume_job`, the function ``cam drill --resume`` calls."""
+    return resume_job(job, read_journal(journal_path), position_steps=position_steps, where=Path(journal_path).name)
 
 
 def preview_of(job: PreparedJob) -> bytes:

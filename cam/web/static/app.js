@@ -167,6 +167,7 @@
   $("pause").addEventListener("click", () => post("/api/pause"));
   $("resume").addEventListener("click", () => post("/api/resume"));
   $("stop").addEventListener("click", () => post("/api/stop"));
+  $("resume-job").addEventListener("click", () => post("/api/resume-job"));
   $("origin").addEventListener("click", () => post("/api/origin"));
   document.querySelectorAll("button.jog").forEach((b) => b.addEventListener("click", () => {
     const n = parseInt($("jog-steps").value, 10) * parseInt(b.dataset.dir, 10);
@@ -213,6 +214,9 @@
     $("pause").disabled = !(st === "running" || st === "moving");
     $("resume").disabled = st !== "paused";
     $("stop").disabled = idle;
+    // after a stop, an emergency stop or a failed run, the job's journal says how far it got
+    $("resume-job").disabled = !(idle && s.last && s.last.activity === "job" && s.last.journal &&
+                                 ["stopped", "emergency-stopped", "error"].includes(s.last.status));
     document.querySelectorAll("button.jog, #origin, #set-offset, button.drill-z").forEach((b) => { b.disabled = !idle; });
     document.querySelectorAll("button.drill-z").forEach((b) => { b.hidden = !s.port.startsWith("maximus"); });
     const shown = job || (idle && s.last && s.last.activity === "job");

@@ -1,0 +1,165 @@
+"""The job journal on disk: written atomically as a job runs, read back to resume it.
+
+A journal is a small JSON file (see :class:`cam.job.resume.Journal` for its
+keys)::
+
+    {"cam_journal": 1, "identity": "9f2c...", "plan_sha256": "51ab...", "source": "gear.png",
+     "moves": 640, "last_move": 212, "position_steps": [1080, 56, 0], "state": "stopped", ...}
+
+:class:`JournalWriter` writes it from the process that sends the steps (for
+a real-time run that is the runner process, :mod:`cam.drive.apart`, so a
+killed parent still leaves a closed journal): once when the run starts, at
+most every :data:`JOURNAL_PERIOD_S` while it runs (from a thread of its own:
+the runner never waits for the disk), and once at the end with the exact
+position.  Every write goes through :func:`cam.fileio.atomic_write_text`:
+the old journal or the new one, never half of one.  A journal is never
+ahead of the machine: its move and position come from the writes already
+sent, so a journal left behind by a process that died (state ``running``)
+is at most a moment behind, and resuming from it cuts a little again,
+never skips.
+"""
+from __future__ import annotations
+
+import json
+import os
+import threading
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Optional
+
+import numpy as np
+
+from ..errors import CamError
+from ..fileio import atomic_write_text, read_text
+from ..job.resume import Journal, JournalBase, journal_record, plan_fingerprint
+from ..verify.pinlog import PositionTracker
+from .steps import StepPlan
+
+__all__ = ["JOURNAL_PERIOD_S", "JournalSpec", "JournalWriter", "journal_spec", "read_journal", "write_journal",
+           "journal_state_of"]
+
+JOURNAL_PERIOD_S = 0.25
+"""The shortest time between two journal writes while a job runs."""
+
+_MAX_JOURNAL_BYTES = 1 << 20
+
+
+@dataclass
+class JournalSpec:
+    """Where and what a run's journal writes (picklable: it travels to the runner process with the plan).
+
+    Attributes:
+        path: the journal file.
+        base: the job, and where the run starts in it (:class:`cam.job.resume.JournalBase`).
+        home_steps: the job's home in the machine session's frame.
+        pin_log_path: where the runner process writes the mock's pin log itself when its parent died
+            (None: nowhere).
+    """
+
+    path: str
+    base: JournalBase
+    home_steps: tuple[int, int, int] = (0, 0, 0)
+    pin_log_path: Optional[str] = None
+
+
+def journal_spec(job: Any, path: str | os.PathLike, *, home_steps: tuple[int, int, int] = (0, 0, 0),
+                 pin_log_path: Optional[str] = None) -> JournalSpec:
+    """The journal spec of a run of ``job`` (a :class:`~cam.job.jobs.PreparedJob` or a :class:`~cam.job.model.Job`).
+
+    ``home_steps``: where the tool stands when the run starts, in the session's frame; a resumed job's home
+    is where its journal says (``home_steps`` minus where the run starts in the job).
+    """
+    base = getattr(job, "resumed", None)
+    if base is None:
+        toolpath = getattr(job, "toolpath", job)
+        if toolpath is None or not hasattr(toolpath, "points_steps"):
+            raise CamError("this job has no moves to keep a journal of")
+        base = JournalBase(identity=getattr(job, "identity", "") or "", source=str(getattr(job, "source", "")),
+                           plan_sha256=getattr(job, "plan_sha256", "") or plan_fingerprint(toolpath),
+                           moves=len(toolpath), pause=np.asarray(toolpath.pause, bool))
+    home = np.asarray(home_steps, np.int64) - np.asarray(base.start_position_steps, np.int64)
+    return JournalSpec(str(path), base, tuple(int(v) for v in home), pin_log_path)  # type: ignore[arg-type]
+
+
+def write_journal(journal: Journal, path: str | os.PathLike) -> None:
+    """Write a journal file atomically."""
+    atomic_write_text(path, json.dumps(journal.to_dict()) + "\n")
+
+
+def read_journal(path: str | os.PathLike) -> Journal:
+    """Read a journal file.
+
+    Raises:
+        CamError: the file is missing, not JSON or not a `cam` journal (one line naming the file).
+    """
+    p = Path(path)
+    if p.is_file() and p.stat().st_size > _MAX_JOURNAL_BYTES:
+        raise CamError(f"{p}: not a cam journal (over {_MAX_JOURNAL_BYTES} bytes)")
+    _, text = read_text(p, not_text="not a cam journal (not UTF-8 text)")
+    try:
+        values = json.loads(text)
+    except (ValueError, RecursionError):
+        raise CamError(f"{p}: not a cam journal (not JSON)") from None
+    return Journal.from_dict(values, str(p))
+
+
+def journal_state_of(status: str) -> str:
+    """A run's status (:data:`cam.drive.runner.FINISHED`, ...) as a journal state."""
+    return status if status in ("finished", "stopped", "emergency-stopped") else "failed"
+
+
+class JournalWriter:
+    """Keeps a run's journal: :meth:`progress` from the runner (cheap), a thread that writes, :meth:`close`.
+
+    The first write (state ``running``) happens here, before the run sends anything.
+    """
+
+    def __init__(self, spec: JournalSpec, plan: StepPlan) -> None:
+        self.spec = spec
+        self.plan = plan
+        self.error: Optional[str] = None
+        self._pause_writes = set(int(i) for i in plan.pause_writes)
+        self._tracker = PositionTracker(plan.data, plan.settings)
+        self._sent = 0
+        self._written = -1
+        self._lock = threading.Lock()
+        self._closing = threading.Event()
+        self._write(0, (0, 0, 0), "running")
+        self._thread = threading.Thread(target=self._loop, name="cam-journal", daemon=True)
+        self._thread.start()
+
+    def progress(self, writes_done: int) -> None:
+        """The run has sent ``writes_done`` writes (called by the runner: stores a number, nothing more)."""
+        self._sent = int(writes_done)
+
+    def _loop(self) -> None:
+        while not self._closing.wait(JOURNAL_PERIOD_S):
+            sent = self._sent
+            if sent != self._written:
+                self._write(sent, self._tracker.advance(sent), "running")
+
+    def _write(self, sent: int, position_steps: tuple[int, int, int], state: str) -> None:
+        record = journal_record(self.spec.base, self.plan.point_write, self._pause_writes, sent, len(self.plan),
+                                position_steps, state, self.spec.home_steps)
+        with self._lock:
+            try:
+                write_journal(record, self.spec.path)
+                self._written = sent
+            except CamError as exc:
+                self.error = str(exc)
+
+    def close(self, state: str, writes_done: Optional[int] = None,
+              position_steps: Optional[tuple[int, int, int]] = None) -> Optional[str]:
+        """The run ended: the last write, with the exact position (steps from the run's start).
+
+        Without ``writes_done`` and ``position_steps`` (the run failed, its end is not known): the last
+        progress and the position it reached.  Returns the message of a write that failed (the journal then
+        is the last good one), or None.
+        """
+        self._closing.set()
+        self._thread.join()
+        if writes_done is None or position_steps is None:
+            writes_done = self._sent
+            position_steps = self._tracker.advance(writes_done)
+        self._write(int(writes_done), tuple(int(v) for v in position_steps), state)  # type: ignore[arg-type]
+        return self.error

@@ -1,0 +1,386 @@
+"""Resuming an interrupted job: the journal record, a job's identity, and the resumed job (computation only).
+
+A running job keeps a small *journal* (written atomically by
+:mod:`cam.drive.journal`, read back with :func:`cam.drive.journal.read_journal`):
+which job it is, how far it got and where the tool stands.  After a stop, an
+emergency stop, a crash or a power cut, :func:`resume_job` plans the same job
+again and builds the *resumed job* from the journal.
+
+Frames: every position here is in machine steps from the *job's home* (where
+the tool stood when the original job started; +z deeper, see
+:mod:`cam.job.model`), unless a name says otherwise.  Move ``i`` of a job goes
+from point ``i - 1`` (the home for ``i = 0``) to point ``i``; "the last
+completed move" ``k`` is the last point the tool reached.
+
+The resumed job, from where the tool stands (``P``, the journal's position)::
+
+    1. lift straight up to the travel height z_t = min(P.z, the job's safe Z, the highest Z of every
+       move of the job that does not cut)
+    2. a tool change or Pause At the stop skipped: travel at z_t above its point and pause there
+    3. travel at z_t above the entry point e = point j - 1, the start of move j: the first move after
+       the last completed one (k) that cuts (moves that do not cut -- travels, retracts -- are skipped)
+    4. plunge straight down to e (a depth the job itself reached there)
+    5. the moves j, j + 1, ... of the job, unchanged
+
+So nothing uncut is skipped (the interrupted move is cut again from its start), nothing goes deeper than
+the job asked for, and a hole the stop found drilled is not drilled again.  A move *cuts* unless both its
+ends are at or above the surface, or it goes straight up (or stays put).
+"""
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+from dataclasses import asdict, dataclass, fields, replace
+from typing import Any, Mapping, Optional
+
+import numpy as np
+
+from ..errors import CamError
+from ..settings import MachineSettings
+from .model import CUT, RETRACT, TRAVEL, Job
+
+__all__ = [
+    "JOURNAL_FORMAT", "JOURNAL_STATES", "Journal", "JournalBase", "Resumed", "job_identity", "plan_fingerprint",
+    "check_journal", "resume_toolpath", "last_completed", "journal_record", "cutting_moves",
+]
+
+JOURNAL_FORMAT = 1
+"""The journal file's format number (its ``cam_journal`` key)."""
+
+JOURNAL_STATES = ("running", "stopped", "emergency-stopped", "failed", "finished")
+"""What a journal says of its run: still running (or its process died), or how it ended."""
+
+
+@dataclass(frozen=True)
+class Journal:
+    """What a journal file says (see :mod:`cam.drive.journal` for the file).
+
+    Attributes:
+        identity: sha256 of the input file's bytes and every option and setting that changes the plan
+            (:func:`job_identity`).
+        plan_sha256: sha256 of the planned job's points, kinds and pauses (:func:`plan_fingerprint`):
+            the same input planned differently (another version of `cam`) is refused too.
+        source: the input file as the run named it (for messages only).
+        moves: number of moves (points) of the job.
+        last_move: index of the last completed move (the last point the tool reached; -1: none).
+        pause_pending: a pause (tool change, Pause At) at ``last_move`` was reached but not answered.
+        position_steps: ``(x, y, z)`` where the tool stood when this was written, steps from the job's home.
+        state: one of :data:`JOURNAL_STATES`.
+        writes_done, writes_total: port writes sent of the run's plan, and all of them.
+        home_steps: where the job's home is in the machine session's frame (the web page's session).
+        resumed_at_move: the run was itself a resumed one, from this move (None: from the start).
+        start_position_steps: where the run began, steps from the job's home.
+    """
+
+    identity: str
+    plan_sha256: str
+    source: str
+    moves: int
+    last_move: int
+    position_steps: tuple[int, int, int]
+    state: str
+    pause_pending: bool = False
+    writes_done: int = 0
+    writes_total: int = 0
+    home_steps: tuple[int, int, int] = (0, 0, 0)
+    resumed_at_move: Optional[int] = None
+    start_position_steps: tuple[int, int, int] = (0, 0, 0)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON object of the journal file."""
+        out: dict[str, Any] = {"cam_journal": JOURNAL_FORMAT}
+        for f in fields(self):
+            value = getattr(self, f.name)
+            out[f.name] = list(value) if isinstance(value, tuple) else value
+        return out
+
+    @classmethod
+    def from_dict(cls, values: Any, source: str = "journal") -> "Journal":
+        """Read a journal's JSON object back, checked.
+
+        Raises:
+            CamError: not a `cam` journal, a key missing or a value of the wrong type (one line, naming ``source``).
+        """
+        if not isinstance(values, dict) or values.get("cam_journal") != JOURNAL_FORMAT:
+            raise CamError(f"{source}: not a cam journal (format {JOURNAL_FORMAT})")
+        out: dict[str, Any] = {}
+        for f in fields(cls):
+            if f.name not in values:
+                if f.default is not dataclasses.MISSING:
+                    continue
+                raise CamError(f"{source}: the journal has no '{f.name}'")
+            out[f.name] = _checked(f.name, values[f.name], source)
+        journal = cls(**out)
+        if journal.state not in JOURNAL_STATES:
+            raise CamError(f"{source}: unknown journal state {journal.state!r}")
+        if not (-1 <= journal.last_move < max(journal.moves, 0)) or journal.moves < 0:
+            raise CamError(f"{source}: last_move {journal.last_move} is outside the job's {journal.moves} moves")
+        return journal
+
+
+_INTS = ("moves", "last_move", "writes_done", "writes_total")
+_TRIPLES = ("position_steps", "home_steps", "start_position_steps")
+
+
+def _checked(name: str, value: Any, source: str) -> Any:
+    def bad(why: str) -> CamError:
+        return CamError(f"{source}: journal key '{name}' {why}, got {value!r}"[:300])
+
+    if name in _INTS or name == "resumed_at_move":
+        if value is None and name == "resumed_at_move":
+            return None
+        if isinstance(value, bool) or not isinstance(value, int) or abs(value) > 1 << 62:
+            raise bad("must be a whole number")
+        return value
+    if name in _TRIPLES:
+        if not isinstance(value, list) or len(value) != 3 or \
+                not all(isinstance(v, int) and not isinstance(v, bool) and abs(v) < 1 << 62 for v in value):
+            raise bad("must be three whole numbers of steps")
+        return tuple(value)
+    if name == "pause_pending":
+        if not isinstance(value, bool):
+            raise bad("must be true or false")
+        return value
+    if not isinstance(value, str) or len(value) > 4096:
+        raise bad("must be text")
+    return value
+
+
+@dataclass
+class JournalBase:
+    """What a run's journal says besides its progress: the job, and where the run starts in it.
+
+    Attributes:
+        identity, plan_sha256, source, moves: as in :class:`Journal`.
+        move_index: ``(M,)`` int64, the job's move each point of the *run* completes (a resumed run's
+            first points, before its entry point, complete nothing new: they keep ``last_move``); None:
+            point i completes move i (a run from the start).
+        pause: ``(M,)`` bool, the pauses of the run's points.
+        last_move, pause_pending: where the job stood when the run began (-1, False: at the start).
+        resumed_at_move: the run's first move of the job (None: from the start).
+        start_position_steps: where the run begins, steps from the job's home.
+    """
+
+    identity: str
+    plan_sha256: str
+    source: str
+    moves: int
+    pause: np.ndarray
+    move_index: Optional[np.ndarray] = None
+    last_move: int = -1
+    pause_pending: bool = False
+    resumed_at_move: Optional[int] = None
+    start_position_steps: tuple[int, int, int] = (0, 0, 0)
+
+
+@dataclass
+class Resumed:
+    """A resumed job and how it maps onto the job it resumes.
+
+    Attributes:
+        job: the moves of the resumed run, steps relative to where it starts (``start_position_steps``).
+        base: what its journal says besides its progress (:class:`JournalBase`).
+        resumed_at_move: the first move of the original job the run makes in full (``j``).
+        start_position_steps: where the run starts, steps from the original job's home.
+    """
+
+    job: Job
+    base: JournalBase
+    resumed_at_move: int
+    start_position_steps: tuple[int, int, int]
+
+
+def _sha_update_json(h: "hashlib._Hash", value: Any) -> None:
+    h.update(json.dumps(value, sort_keys=True, default=str, separators=(",", ":")).encode("utf-8"))
+    h.update(b"\0")
+
+
+def job_identity(input_sha256: str, options: Mapping[str, Any], settings: MachineSettings,
+                 files_sha256: Optional[Mapping[str, str]] = None) -> str:
+    """The identity of a job: sha256 over its input, its options and its machine settings.
+
+    Args:
+        input_sha256: sha256 (hex) of the input file's bytes.
+        options: every option that changes the plan (e.g. ``dataclasses.asdict(JobOptions)``); options that
+            name files should be given as ``files_sha256`` instead (a path changes, the bytes matter).
+        settings: the machine settings (all of them: steps, delays, ramps, travel, pins).
+        files_sha256: option name -> sha256 of the bytes of the file it names (a profile, a tool table).
+
+    >>> a = job_identity("00", {"depth": [3]}, MachineSettings())
+    >>> a == job_identity("00", {"depth": [3]}, MachineSettings()), a == job_identity("00", {"depth": [4]}, MachineSettings())
+    (True, False)
+    """
+    h = hashlib.sha256()
+    _sha_update_json(h, {"input": input_sha256, "options": dict(options), "settings": asdict(settings),
+                         "files": dict(files_sha256 or {})})
+    return h.hexdigest()
+
+
+def plan_fingerprint(job: Job) -> str:
+    """sha256 (hex) of a job's points, kinds and pauses: two plans with the same fingerprint have the same moves."""
+    h = hashlib.sha256()
+    for arr, dtype in ((job.points_steps, np.int64), (job.kind, np.uint8), (job.pause, np.bool_)):
+        h.update(np.ascontiguousarray(np.asarray(arr, dtype)).tobytes())
+        h.update(b"\0")
+    return h.hexdigest()
+
+
+def check_journal(journal: Journal, identity: str, plan_sha256: str, where: str = "journal") -> None:
+    """Refuse a journal written for another job, or one whose job finished.
+
+    Raises:
+        CamError: one line naming ``where`` (the journal file).
+    """
+    if journal.identity != identity:
+        raise CamError(f"journal {where} was written for another input or options; run the same file with the "
+                       f"same options and machine settings, or start the job again without --resume")
+    if journal.plan_sha256 != plan_sha256:
+        raise CamError(f"journal {where} was written for another plan of the same input (another version of "
+                       f"cam?); start the job again without --resume")
+    if journal.state == "finished":
+        raise CamError(f"journal {where}: the job finished; there is nothing to resume")
+
+
+def cutting_moves(job: Job) -> np.ndarray:
+    """``(N,)`` bool: which moves of ``job`` may cut (see the module docstring; frame of ``job``)."""
+    pts = np.asarray(job.points_steps, np.int64).reshape(-1, 3)
+    prev = np.vstack([np.zeros((1, 3), np.int64), pts[:-1]]) if len(pts) else pts
+    surface = job.pixels.origin_px[2] * job.pixels.steps_per_px_z if job.pixels is not None else 0
+    above = np.maximum(prev[:, 2], pts[:, 2]) <= surface
+    up = np.all(prev[:, :2] == pts[:, :2], axis=1) & (pts[:, 2] <= prev[:, 2])
+    return ~(above | up)
+
+
+def resume_toolpath(job: Job, last_move: int, position_steps: tuple[int, int, int], *,
+                    pause_pending: bool = False) -> tuple[Job, np.ndarray, int]:
+    """The resumed run of ``job`` after its move ``last_move``, from ``position_steps`` (see the module docstring).
+
+    Args:
+        job: the job as planned from the start (its frame: steps from the job's home).
+        last_move: index of the last completed move (-1: none).
+        position_steps: where the tool stands, steps from the job's home.
+        pause_pending: the pause at ``last_move`` (if any) was not answered: it is made again.
+
+    Returns:
+        ``(resumed, move_index, j)``: the resumed :class:`Job` (steps relative to ``position_steps``), the
+        ``(M,)`` move of ``job`` each of its points completes, and ``j``, the first move of ``job`` it runs in full.
+
+    >>> from cam.job.model import travel_job
+    >>> import numpy as np
+    >>> pts = np.array([[0, 0, -5], [10, 0, -5], [10, 0, 3], [20, 0, 3], [20, 0, -5]])
+    >>> job = travel_job(pts, MachineSettings()); job.kind[2:4] = CUT
+    >>> r, index, j = resume_toolpath(job, 2, (14, 0, 0))      # stopped (lifted) during move 3
+    >>> j, (r.points_steps + (14, 0, 0)).tolist(), index.tolist()
+    (3, [[14, 0, -5], [10, 0, -5], [10, 0, 3], [20, 0, 3], [20, 0, -5]], [2, 2, 2, 3, 4])
+    """
+    pts = np.asarray(job.points_steps, np.int64).reshape(-1, 3)
+    n = len(pts)
+    k = int(last_move)
+    if not -1 <= k < n:
+        raise CamError(f"the last completed move {k} is outside the job's {n} moves")
+    p0 = np.asarray(position_steps, np.int64).reshape(3)
+    cuts = cutting_moves(job)
+    later = np.flatnonzero(cuts[k + 1:])
+    j = k + 1 + int(later[0]) if len(later) else n
+    home = np.zeros(3, np.int64)
+    entry = pts[j - 1] if j >= 1 else home
+    travel_z = min(0, int(pts[~cuts, 2].min()) if np.any(~cuts) else 0)
+    z_t = min(int(p0[2]), int(job.safe_z_steps), travel_z)
+    # a pause the stop left unanswered, or one on a skipped move: made again, above its point
+    pause = np.asarray(job.pause, bool)
+    skipped = np.flatnonzero(pause[k + 1:j]) + k + 1
+    pending = [k] if (pause_pending and k >= 0 and pause[k]) else []
+    carried = [int(i) for i in pending] + [int(i) for i in skipped]
+    notes = list(job.pause_notes) if job.pause_notes is not None else ["Pause At"] * int(pause.sum())
+    note_of = dict(zip((int(i) for i in np.flatnonzero(pause)), notes))
+
+    prefix: list[tuple[np.ndarray, int, bool, int]] = []  # (point, kind, pause, move index)
+    if p0[2] > z_t:
+        prefix.append((np.array([p0[0], p0[1], z_t]), RETRACT, False, k))
+    carried_note: list[str] = []
+    if carried:
+        q = pts[carried[-1]]
+        prefix.append((np.array([q[0], q[1], z_t]), TRAVEL, True, k))
+        carried_note.append(note_of.get(carried[-1], "Pause At"))
+    if entry[2] == z_t:
+        prefix.append((entry.copy(), TRAVEL, False, j - 1))
+    else:
+        prefix.append((np.array([entry[0], entry[1], z_t]), TRAVEL, False, k))
+        surface = job.pixels.origin_px[2] * job.pixels.steps_per_px_z if job.pixels is not None else 0
+        prefix.append((entry.copy(), CUT if entry[2] > surface else TRAVEL, False, j - 1))
+    # drop moves of length 0 (but keep a pause's point, and at least the entry)
+    kept: list[tuple[np.ndarray, int, bool, int]] = []
+    at = p0
+    for item in prefix:
+        if item[2] or not np.array_equal(item[0], at) or item is prefix[-1]:
+            kept.append(item)
+            at = item[0]
+    m = len(kept)
+    s = job.settings
+    new_pts = np.vstack([np.array([it[0] for it in kept], np.int64), pts[j:]]) - p0
+    kind = np.concatenate([np.array([it[1] for it in kept], np.uint8), np.asarray(job.kind, np.uint8)[j:]])
+    target = np.concatenate([np.zeros(m, bool), np.asarray(job.target, bool)[j:]])
+    new_pause = np.concatenate([np.array([it[2] for it in kept], bool), pause[j:]])
+    move_index = np.concatenate([np.array([it[3] for it in kept], np.int64), np.arange(j, n, dtype=np.int64)])
+    later_notes = notes[int(pause[:j].sum()):]
+    period_ns = periods = move_start = rest = None
+    if job.period_ns is not None:
+        feed = int(np.asarray(job.period_ns, np.int64)[j]) if j < n else 0
+        pre = [s.delay_z_ns if it[1] == RETRACT else (max(s.delay_z_ns, feed) if it[1] == CUT else s.delay_xy_ns)
+               for it in kept]
+        period_ns = np.concatenate([np.array(pre, np.int64), np.asarray(job.period_ns, np.int64)[j:]])
+    if job.periods is not None:
+        periods = np.concatenate([np.zeros(m, np.int64), np.asarray(job.periods, np.int64)[j:]])
+    if job.move_start is not None:
+        move_start = np.concatenate([np.ones(m, bool), np.asarray(job.move_start, bool)[j:]])
+    if job.rest is not None:
+        rest = np.concatenate([np.zeros(m, bool), np.asarray(job.rest, bool)[j:]])
+    resumed = replace(
+        job, points_steps=new_pts, kind=kind, target=target, pause=new_pause,
+        pause_notes=carried_note + later_notes, warnings=[], safe_z_steps=int(job.safe_z_steps) - int(p0[2]),
+        pixels=None, source=f"{job.source} (resumed at move {j})" if job.source else f"resumed at move {j}",
+        period_ns=period_ns, periods=periods, move_start=move_start, rest=rest,
+    )
+    return resumed, move_index, j
+
+
+def last_completed(point_write: np.ndarray, writes_done: int) -> int:
+    """Index of the last point reached after ``writes_done`` port writes (-1: none), from a plan's ``point_write``.
+
+    Never ahead of the machine: a point counts once the write that reaches it was sent.
+
+    >>> last_completed(np.array([2, 4, 4, 8]), 5), last_completed(np.array([2, 4]), 2)
+    (2, -1)
+    """
+    return int(np.searchsorted(np.asarray(point_write, np.int64), int(writes_done), side="left")) - 1
+
+
+def journal_record(base: JournalBase, point_write: np.ndarray, pause_writes: set[int], writes_done: int,
+                   writes_total: int, position_steps: tuple[int, int, int], state: str,
+                   home_steps: tuple[int, int, int] = (0, 0, 0)) -> Journal:
+    """The journal of a run after ``writes_done`` of its ``writes_total`` writes.
+
+    Args:
+        base: the job and where the run started in it.
+        point_write: ``(M,)`` the run's plan's write index at which each of its points is reached.
+        pause_writes: the writes after which the run pauses.
+        position_steps: where the tool stands now, steps from the *run's* start (added to
+            ``base.start_position_steps``).
+        state: one of :data:`JOURNAL_STATES`.
+    """
+    i = last_completed(point_write, writes_done)
+    if i < 0:
+        last, pending = base.last_move, base.pause_pending
+    else:
+        last = int(base.move_index[i]) if base.move_index is not None else i
+        pending = (writes_done - 1) in pause_writes and writes_done < writes_total
+    if state == "finished":
+        last, pending = base.moves - 1, False
+    start = np.asarray(base.start_position_steps, np.int64)
+    pos = tuple(int(v) for v in start + np.asarray(position_steps, np.int64))
+    return Journal(identity=base.identity, plan_sha256=base.plan_sha256, source=base.source, moves=base.moves,
+                   last_move=int(last), position_steps=pos, state=state, pause_pending=bool(pending),  # type: ignore[arg-type]
+                   writes_done=int(writes_done), writes_total=int(writes_total),
+                   home_steps=tuple(int(v) for v in home_steps),  # type: ignore[arg-type]
+                   resumed_at_move=base.resumed_at_move, start_position_steps=tuple(int(v) for v in start))  # type: ignore[arg-type]
