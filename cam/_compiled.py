@@ -29,6 +29,9 @@ import os
 from pathlib import Path
 from typing import Any, Callable, Optional
 
+import llvmlite.binding as llvm
+from numba import typeof
+
 __all__ = ["entry", "KERNEL_MODULES", "source_digest", "aot_status", "ENTRIES"]
 
 KERNEL_MODULES = (
@@ -64,9 +67,7 @@ def source_digest() -> str:
 
 
 def host_cpu() -> str:
-    """This machine's CPU model and instruction-set features, as LLVM names them (numba has loaded LLVM)."""
-    import llvmlite.binding as llvm
-
+    """This machine's CPU model and instruction-set features, as LLVM names them."""
     return f"{llvm.get_host_cpu_name()} {llvm.get_host_cpu_features().flatten()}"
 
 
@@ -122,8 +123,6 @@ class _Kernel:
     for, and numba's dispatcher otherwise."""
 
     def __init__(self, dispatcher: Any, table: dict[tuple[str, ...], Callable]) -> None:
-        from numba import typeof
-
         self.dispatcher = dispatcher
         self.py_func = dispatcher.py_func
         self.__name__ = dispatcher.__name__

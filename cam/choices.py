@@ -101,3 +101,6 @@ OPTION_KINDS.update({"scale": frozenset({"svg"}), "fit_mm": frozenset({"svg"})})
 # sketches and photos traced into drawings (issue 16, point 6)
 OPTION_KINDS.update({"trace": frozenset({"drawing"}), "trace_min_length_px": frozenset({"drawing"}),
                      "trace_fill": frozenset({"drawing"})})
+# real cutters (issue 19): the drawing planner limits 3D depths by the tool's shape; a V bit's line width sets
+# the depth of 2D drawings
+OPTION_KINDS.update({"tool": _DRAWINGS, "line_width_mm": _DRAWINGS})

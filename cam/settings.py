@@ -74,6 +74,12 @@ and then keeps its built-in value.  An unknown key or a bad value is a
     serial_port = ""    # the device of --port maximus (no device named)
     baud = 115200
     reply_margin_s = 1.0     # a reply is due this long after the move it answers should have ended
+
+    [tool]              # the cutter drawings are planned for (--tool overrides it)
+    shape = "point"     # "point" (the thesis's model), "flat", "ball" or "v"
+    diameter_mm = 0.0   # flat and ball: the cutting diameter; V: where the cone ends (0: 1/8 inch)
+    angle_deg = 0.0     # V: the included angle
+    tip_mm = 0.0        # V: the flat tip's diameter (0: sharp)
 """
 from __future__ import annotations
 
@@ -89,7 +95,7 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover
     import tomli as tomllib
 
-from .errors import SettingsError
+from .errors import CamError, SettingsError
 
 __all__ = ["Travel", "Pins", "Maximus", "MachineSettings", "load_settings", "DEFAULT_SETTINGS", "RAMP_MODES"]
 
@@ -147,6 +153,20 @@ class Pins:
     def bit(self, name: str) -> int:
         """Data-register bit (0..7) of the signal ``name`` (e.g. ``"clock_x"``)."""
         return getattr(self, name) - 2
+
+
+@dataclass(frozen=True)
+class ToolShape:
+    """The cutter in the spindle (``[tool]``; see :class:`cam.tool.Tool`): drawings are planned for it."""
+
+    shape: str = "point"
+    """"point" (the thesis's model), "flat", "ball" or "v"."""
+    diameter_mm: float = 0.0
+    """Cutting diameter of a flat or ball end mill; where a V bit's cone ends (0: 1/8 inch)."""
+    angle_deg: float = 0.0
+    """A V bit's included angle."""
+    tip_mm: float = 0.0
+    """A V bit's flat tip diameter (0: sharp)."""
 
 
 @dataclass(frozen=True)
@@ -238,6 +258,7 @@ class MachineSettings:
     travel: Travel = field(default_factory=Travel)
     pins: Pins = field(default_factory=Pins)
     maximus: Maximus = field(default_factory=Maximus)
+    tool: ToolShape = field(default_factory=ToolShape)
 
     def replace(self, **changes: Any) -> "MachineSettings":
         """A copy with some fields changed; values are validated."""
@@ -275,7 +296,7 @@ class MachineSettings:
 
 DEFAULT_SETTINGS = MachineSettings()
 
-_SECTIONS = {"travel": Travel, "pins": Pins, "maximus": Maximus}
+_SECTIONS = {"travel": Travel, "pins": Pins, "maximus": Maximus, "tool": ToolShape}
 
 
 def _type_ok(value: Any, kind: type) -> bool:
@@ -360,6 +381,16 @@ def _validate(s: MachineSettings, source: str) -> None:
             raise bad(f"pins.{name}", f"uses pin {pin}, already used by 'pins.{seen[pin]}'")
         seen[pin] = name
     _validate_maximus(s.maximus, bad)
+    _validate_tool(s.tool, bad)
+
+
+def _validate_tool(t: ToolShape, bad: Any) -> None:
+    from .tool import tool_of_settings
+
+    try:
+        tool_of_settings(t)
+    except CamError as exc:
+        raise bad("tool.shape", str(exc).removeprefix("tool: ")) from None
 
 
 def _validate_maximus(m: Maximus, bad: Any) -> None:

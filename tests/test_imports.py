@@ -29,6 +29,13 @@ HEAVY = ("numba", "cv2", "scipy", "starlette", "uvicorn", "skimage")
 """Packages that make start-up slow (numba alone takes most of a second) or are optional extras."""
 
 FUNCTION_LEVEL_IMPORTS = {
+    ("cam.settings", "cam.tool"): "cam.tool needs numpy; the settings module stays light for --help",
+    ("cam.cli.parser", "cam.errors"): "--tool is checked by cam.tool (numpy) only when given: --help stays light",
+    ("cam.cli.parser", "cam.tool"): "cam.tool needs numpy; the parser stays light for --help",
+    ("cam.verify.toolcarve", "cv2"): "only a notebook's picture of a comparison needs OpenCV's PNG encoder",
+    ("cam._aot", "cam._aot_signatures"): "the build tool: the table is read only when building",
+    ("cam._aot", "cam.cli"): "the build tool: the sample jobs run only when collecting argument types",
+    ("cam._aot", "numba"): "the build tool: numba's ahead-of-time compiler, only when building",
     # (importing module, imported module): why it may not be imported at the importing module's top
     ("cam.drive.ports", "parallel"):
         "optional dependency: pyparallel (cam[parport]), needed only when a /dev/parport* port is opened",

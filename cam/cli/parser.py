@@ -165,6 +165,27 @@ def _add_profile_options(p: argparse.ArgumentParser) -> None:
                    help="depth of layer k as arithmetic in k and n (layers), e.g. '30*sqrt(1-((n-k)/n)**2)'")
 
 
+def _tool_text(text: str) -> str:
+    """--tool: checked here so a bad one is a usage error naming the option."""
+    from ..errors import CamError
+    from ..tool import parse_tool
+
+    try:
+        parse_tool(text, "--tool")
+    except CamError as exc:
+        raise argparse.ArgumentTypeError(str(exc).removeprefix("--tool: ")) from None
+    return text
+
+
+def _add_tool_options(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group("the cutter (drawings)")
+    g.add_argument("--tool", type=_tool_text, metavar="SHAPE",
+                   help="point (default, or the machine file's [tool]), flat:D, ball:D or v:ANGLE:TIP[:D] (mm, "
+                   "degrees): 3D reliefs are cut so the tool never goes below them anywhere")
+    g.add_argument("--line-width", type=_float_list(1, "--line-width"), metavar="MM",
+                   help="2D drawings with a V bit: the engraved lines' width, which sets their depth")
+
+
 def _add_excellon_options(d: argparse.ArgumentParser) -> None:
     g = d.add_argument_group(f"drill files that do not say their number format (Excellon: {_listed(EXCELLON_SUFFIXES)})")
     g.add_argument("--excellon-units", choices=("inch", "metric"), help="units when the file does not say")
@@ -233,6 +254,7 @@ def _add_job_options(d: argparse.ArgumentParser) -> None:
         "on a 3D drawing one value cuts every layer at N (a flat-bottomed pocket) instead of a profile",
     )
     _add_profile_options(d)
+    _add_tool_options(d)
     d.add_argument("--passes", type=_whole("--passes", 1, 1000), metavar="N", help="Repeat Drill: cut in N passes of increasing depth (default 1)")
     d.add_argument("--start-at", metavar="X,Y,Z", type=_int_list(3, "--start-at"),
                    help="offset the whole job by this many pixels")

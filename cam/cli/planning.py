@@ -91,6 +91,7 @@ def job_options(args: argparse.Namespace) -> JobOptions:
         max_lines=opt("max_lines", d.max_lines),
         trace=bool(opt("trace", False)), trace_min_length_px=opt("trace_min_length", d.trace_min_length_px),
         trace_fill=bool(opt("trace_fill", False)),
+        tool=opt("tool", None), line_width_mm=args.line_width[0] if opt("line_width", None) else None,
     ).checked("options")
 
 

@@ -30,6 +30,7 @@ from ..errors import PlanError, TravelError
 from ..digitize.profile import ProfileLike, as_profile
 from ..settings import DEFAULT_SETTINGS, MachineSettings
 from ._route import bfs_kernel
+from ..tool import Tool, corner_depth_px, drop_depth_px, parse_tool, reach_depth_px
 from .model import CUT, RETRACT, TRAVEL, Job, PixelFrame, check_travel
 
 __all__ = ["plan", "check_drawing_size", "max_drawing_size_px"]
@@ -108,6 +109,7 @@ def plan(
     start_at: tuple[int, int, int] = (0, 0, 0),
     pause_at: Sequence[tuple[int, int]] = (),
     profile: ProfileLike | None = None,
+    tool: Tool | str | None = None,
 ) -> Job:
     """Plan the job of a digitized drawing (the drawing planner: pixels in, machine steps out).
 
@@ -127,6 +129,11 @@ def plan(
             layer -- a :class:`~cam.digitize.profile.Profile`, a profile drawing or CSV
             path, a sequence of depths (layer 1 first) or a function of the
             layer number.  A ring of layer k is cut at profile(k).
+        tool: the cutter (:class:`~cam.tool.Tool` or text such as ``"ball:1"``; None: the point tool).  On
+            a 3D drawing each point's depth is limited by the drop-cutter rule (:func:`cam.tool.drop_depth_px`)
+            so the tool never cuts below the asked depth at any pixel under it; points the tool cannot
+            lower into at all are left out, and a warning says how much material it leaves.  On a 2D
+            drawing the curves are the tool's centre line and the depth sets the groove's width.
 
     Returns:
         The :class:`~cam.job.model.Job` in machine steps, with its :class:`~cam.job.model.PixelFrame`,
@@ -165,6 +172,13 @@ def plan(
     targets, _ = _pass_targets(digitized, depth_px, passes)
     if len(targets) == 0:
         raise PlanError("nothing to cut: every depth is 0")
+    cutter = parse_tool(tool, "tool")
+    corners = None
+    if digitized.mode == "3d" and not cutter.is_point:
+        targets, corners, note = _drop_targets(targets, cutter, digitized.height_px, digitized.width_px, settings)
+        warnings += note
+        if len(targets) == 0:
+            raise PlanError(f"nothing to cut: the {cutter.describe()} tool does not fit into any part of the relief")
     ox, oy, oz = (int(v) for v in start_at)
     # the moves are assembled in the drawing's own pixel frame (every target at a pixel >= 0, whatever the
     # Start At offset), starting and ending at the job's home, then moved by the offset
@@ -190,6 +204,8 @@ def plan(
     fits = _fits_travel(targets, (ox, oy), safe, settings)
     points_px, kinds, tgt, pause = _assemble(targets, pause_px, asked, settings, surface, safe, oz, home=(-ox, -oy),
                                              route=fits)
+    if corners is not None:
+        points_px, kinds, tgt, pause = _guard_diagonals(points_px, kinds, tgt, pause, corners, oz)
     points_px[:, :2] += np.array([ox, oy], np.int64)
     frame = PixelFrame(digitized.width_px, digitized.height_px, (ox, oy, oz), settings.steps_per_px_xy,
                        settings.steps_per_px_z)
@@ -197,7 +213,58 @@ def plan(
     check_travel(points_steps, settings, frame)
     assert fits, "a job whose extent leaves the travel passed the travel check"
     return Job(points_steps=points_steps, kind=kinds, target=tgt, pause=pause, settings=settings,
-               warnings=warnings, safe_z_steps=safe * settings.steps_per_px_z, pixels=frame)
+               warnings=warnings, safe_z_steps=safe * settings.steps_per_px_z, pixels=frame,
+               tool=None if cutter.is_point else cutter)
+
+
+def _drop_targets(targets: np.ndarray, cutter: Tool, height_px: int, width_px: int,
+                  settings: MachineSettings) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    """Targets ``(M, 3)`` (x, y, depth in Z pixels, cutting order) with each depth limited by the drop-cutter
+    rule for ``cutter`` over the deepest depth asked at each pixel; targets left at depth 0 are dropped.
+    Returns the targets, the drop-cutter depth at each pixel corner (:func:`cam.tool.corner_depth_px`) and a
+    warning about the material the tool cannot reach (none if it reaches all)."""
+    asked = np.zeros((height_px, width_px), np.int64)
+    np.maximum.at(asked, (targets[:, 1], targets[:, 0]), targets[:, 2])
+    px_mm, zpx_mm = settings.px_to_mm_xy(1), settings.px_to_mm_z(1)
+    allowed = drop_depth_px(asked, cutter, px_mm, zpx_mm)
+    out = targets.copy()
+    out[:, 2] = np.minimum(out[:, 2], allowed[out[:, 1], out[:, 0]])
+    out = out[out[:, 2] > 0]
+    rest = asked - reach_depth_px(allowed, cutter, px_mm, zpx_mm)
+    short = np.count_nonzero(rest >= 1)
+    note = []
+    if short:
+        note.append(f"the {cutter.describe()} tool cannot reach the full depth of {short} of "
+                    f"{np.count_nonzero(asked)} pixels (up to {settings.px_to_mm_z(float(rest.max())):.3f} mm left; "
+                    f"a smaller tool reaches more)")
+    return out, corner_depth_px(asked, cutter, px_mm, zpx_mm), note
+
+
+def _guard_diagonals(pts: np.ndarray, kind: np.ndarray, tgt: np.ndarray, pause: np.ndarray, corners: np.ndarray,
+                     oz: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Lift every diagonal move inside the material that is deeper than its midpoint allows (``corners``,
+    :func:`cam.tool.corner_depth_px`, drawing frame) to that depth: rise at its start, move, sink at its end."""
+    if len(pts) < 2:
+        return pts, kind, tgt, pause
+    step = np.diff(pts, axis=0)
+    depth = pts[1:, 2] - oz
+    cy = np.clip(np.maximum(pts[:-1, 1], pts[1:, 1]), 0, corners.shape[0] - 1)
+    cx = np.clip(np.maximum(pts[:-1, 0], pts[1:, 0]), 0, corners.shape[1] - 1)
+    allowed = corners[cy, cx]
+    bad = np.flatnonzero((np.abs(step[:, 0]) == 1) & (np.abs(step[:, 1]) == 1) & (step[:, 2] == 0)
+                         & (depth > 0) & (depth > allowed))
+    if len(bad) == 0:
+        return pts, kind, tgt, pause
+    lifted = np.maximum(allowed[bad], 0) + oz
+    rise = pts[bad].copy()
+    rise[:, 2] = lifted
+    over = pts[bad + 1].copy()
+    over[:, 2] = lifted
+    at = np.repeat(bad + 1, 2)
+    new = np.empty((2 * len(bad), 3), pts.dtype)
+    new[0::2], new[1::2] = rise, over
+    return (np.insert(pts, at, new, axis=0), np.insert(kind, at, CUT), np.insert(tgt, at, False),
+            np.insert(pause, at, False))
 
 
 def _fits_travel(targets: np.ndarray, offset_px: tuple[int, int], safe: int, settings: MachineSettings) -> bool:

@@ -45,6 +45,7 @@ from ..limits import DEFAULT_GCODE_LINES, MAX_GCODE_LINES
 from ..formats.hpgl import load_hpgl
 from ..formats.svg import load_svg
 from ..digitize.sketch import DEFAULT_MIN_LENGTH_PX, load_sketch, trace
+from ..tool import parse_tool, tool_of_settings
 from ..render.picture import LEGEND_PX, depth_colours, encode_png, toolpath_picture
 from ..render.report import job_report
 from ..sniff import KIND_NAMES
@@ -116,6 +117,10 @@ class JobOptions:
         trace: trace the image into a drawing first (see :func:`cam.digitize.sketch.trace`: dark lines on
         light paper to 1-pixel curves); trace_min_length_px: specks and spurs shorter than this go;
         trace_fill: the regions the curves enclose become red (a 3D drawing).
+    Real cutters (drawings and digitized matrices):
+        tool: ``point``, ``flat:D``, ``ball:D`` or ``v:ANGLE:TIP`` (mm, degrees; None: the machine's ``[tool]``,
+            a point by default): 3D depths are limited so the tool never cuts below the relief.
+        line_width_mm: a 2D drawing's engraved line width with a V bit: sets the depth (instead of ``depth``).
     """
 
     depth: Optional[tuple[int, ...]] = None
@@ -142,6 +147,8 @@ class JobOptions:
     trace: bool = False
     trace_min_length_px: int = DEFAULT_MIN_LENGTH_PX
     trace_fill: bool = False
+    tool: Optional[str] = None
+    line_width_mm: Optional[float] = None
 
     @classmethod
     def from_mapping(cls, values: Mapping[str, Any], source: str = "options") -> "JobOptions":
@@ -214,6 +221,12 @@ class JobOptions:
             raise bad("excellon_digits", "must be two digit counts 0..8")
         if self.profile is not None and self.profile_expr is not None:
             raise bad("profile_expr", "cannot be given together with a profile file")
+        if self.tool is not None:
+            parse_tool(self.tool, f"{source}: option 'tool'")
+        if self.line_width_mm is not None and not (0 < self.line_width_mm <= MAX_MM):
+            raise bad("line_width_mm", f"must be > 0 and at most {MAX_MM:g} mm")
+        if self.line_width_mm is not None and (self.depth is not None or self.cut_depth_mm is not None):
+            raise bad("line_width_mm", "cannot be given together with a depth (the width sets it)")
         if self.cut_depth_mm is not None and self.depth is not None:
             raise bad("cut_depth_mm", "cannot be given together with depth (Z pixels per object)")
         return self
@@ -338,6 +351,8 @@ _PARSERS = {
     "trace": _bool,
     "trace_min_length_px": _int,
     "trace_fill": _bool,
+    "tool": _optional(_text),
+    "line_width_mm": _optional(_float),
     "scale": _optional(_float),
     "fit_mm": _optional(lambda v: _floats(2)(v.lower().replace("x", ",") if isinstance(v, str) else v)),
     "max_lines": _int,
@@ -545,9 +560,14 @@ def _prepare_pixels(path: Path, kind: str, options: JobOptions, settings: Machin
         profile = load_profile(options.profile)
     elif options.profile_expr:
         profile = profile_from_expr(options.profile_expr, max(1, digitized.n_layers))
+    cutter = parse_tool(options.tool, "--tool") if options.tool else tool_of_settings(settings.tool)
     depth = _drawing_depth(options, settings)
+    if options.line_width_mm is not None:
+        if digitized.mode == "3d":
+            raise CamError("--line-width sets the depth of a 2D drawing's engraved lines; this drawing is 3D")
+        depth = max(1, int(round(cutter.depth_for_width_mm(options.line_width_mm) / settings.px_to_mm_z(1))))
     toolpath = plan(digitized, depth=depth, settings=settings, passes=options.passes,
-                    start_at=options.start_at, pause_at=list(options.pause_at), profile=profile)
+                    start_at=options.start_at, pause_at=list(options.pause_at), profile=profile, tool=cutter)
     steps = plan_steps(toolpath)
     report = job_report(digitized, toolpath, steps)
     summary = (f"{path.name}: {report['objects']} object(s), {report['points']} points, "

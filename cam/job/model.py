@@ -20,7 +20,7 @@ drawing pictures need.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Optional
+from typing import Any, Optional
 
 import numpy as np
 
@@ -92,6 +92,7 @@ class Job:
         move_start: ``(N,)`` bool, where a move of the source begins (a speed ramp segment of the
             ``linear40`` mode), or None: every move.
         rest: ``(N,)`` bool, the machine is at rest before and after this move (a dwell), or None.
+        tool: the cutter the job was planned for (:class:`cam.tool.Tool`; None: the point tool).
     """
 
     points_steps: np.ndarray
@@ -108,6 +109,7 @@ class Job:
     periods: Optional[np.ndarray] = None
     move_start: Optional[np.ndarray] = None
     rest: Optional[np.ndarray] = None
+    tool: Any = None
 
     def __len__(self) -> int:
         return len(self.points_steps)

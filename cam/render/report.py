@@ -62,6 +62,11 @@ def job_report(
             "ramp": plan.settings.ramp,
         }
     )
+    tool = getattr(toolpath, "tool", None)
+    if tool is not None:
+        rep["tool"] = tool.describe()
+        if digitized is not None and digitized.mode != "3d":  # an engraved line's width follows its depth
+            rep["line_width_mm"] = round(tool.width_at_depth_mm(s.px_to_mm_z(depth_px)), 4)
     rep["warnings"] = list(rep.get("warnings", [])) + [w for w in toolpath.warnings if w not in rep["warnings"]]
     return rep
 
@@ -76,6 +81,9 @@ def format_report(rep: dict[str, Any]) -> str:
     ]
     if "depth_mm" in rep:
         lines.append(f"depth:      {rep['depth_px']} Z px = {rep['depth_mm']:.3f} mm")
+    if "tool" in rep:
+        width = f", lines {rep['line_width_mm']:.3f} mm wide" if "line_width_mm" in rep else ""
+        lines.append(f"tool:       {rep['tool']}{width}")
     if "steps" in rep:
         lines.append(f"retracts:   {rep['retracts']}")
         st = rep["steps"]
