@@ -16,6 +16,7 @@ from ..settings import MachineSettings
 from .maximus.board import MaximusBoard, drill_arguments, from_board, to_board
 from .ports import MockPort, open_port, port_kind, require
 from .runner import Controller, run
+from .chunks import ChunkedPlan
 from .steps import StepPlan
 
 __all__ = ["run_steps", "run_on_board", "BoardControl", "drill_work", "move_work"]
@@ -24,7 +25,7 @@ BoardWork = Callable[[MaximusBoard, Any], None]
 """work(board, session): what to do with an open board."""
 
 
-def run_steps(session: Any, name: str, plan: StepPlan, ctl: Controller, label: str) -> None:
+def run_steps(session: Any, name: str, plan: "StepPlan | ChunkedPlan", ctl: Controller, label: str) -> None:
     """Run ``plan`` on the session's step/dir port (the worker thread of a job, jog or move)."""
     result = None
     error = None
@@ -33,7 +34,8 @@ def run_steps(session: Any, name: str, plan: StepPlan, ctl: Controller, label: s
         if session.realtime and isinstance(session.port, str):  # a process of its own: nothing holds it up
             if port_kind(session.port) != "mock":
                 open_port(session.port).close()  # a port that cannot be opened: its own message, from here
-            result = session.runner_process().run(plan, session.port, ctl, progress=session.progress,
+            whole = plan.to_plan() if isinstance(plan, ChunkedPlan) else plan  # the child takes every write
+            result = session.runner_process().run(whole, session.port, ctl, progress=session.progress,
                                                   on_pause=session.prompt)
         else:  # the simulated clock, or a port object the caller opened
             port = open_port(session.port)
@@ -63,7 +65,9 @@ def run_steps(session: Any, name: str, plan: StepPlan, ctl: Controller, label: s
         info.update(max_late_s=round(result.lateness.max_ns / 1e9, 6), stalls=result.lateness.stalls,
                     late_total_s=round(result.lateness.total_ns / 1e9, 6))
     log = None
-    if isinstance(result.port, MockPort):
+    if isinstance(result.port, MockPort) and result.port.pin_log_path is not None:  # streamed to its file
+        info["last_write_job_ns"] = result.port.last_t_ns
+    elif isinstance(result.port, MockPort):
         log = result.pin_log()
         info["last_write_job_ns"] = int(log.t_ns[-1]) if len(log) else None
     session.finish(info, np.array(result.position_steps, np.int64), result=result,

@@ -32,6 +32,7 @@ import numpy as np
 
 from ..job.model import Job, check_travel
 from ..settings import MachineSettings
+from ..verify.pinlog import _decode
 from ._kernels import chunk_writes_kernel, stretch_kernel
 from .pins import axis_bits
 from .ramps import RAMP_STEPS_LINEAR40, _lookahead
@@ -43,6 +44,7 @@ DEFAULT_CHUNK_PERIODS = 1 << 20
 """Step periods per chunk (about 100 MB of look-ahead arrays at most)."""
 
 _MOVE_BLOCK = 1 << 16  # moves turned into periods per kernel call
+_DECODE = 1 << 20  # writes decoded into positions at a time
 
 
 @dataclass
@@ -63,6 +65,19 @@ class StepChunk:
 
     def __len__(self) -> int:
         return len(self.t_ns)
+
+
+class LivePosition:
+    """The live position of a running :class:`ChunkedPlan`, as :class:`cam.verify.pinlog.PositionTracker`
+    gives it for a whole plan: ``advance(n)`` is the position after the last batch the runner sent
+    (at most ``n`` writes), without holding any write."""
+
+    def __init__(self, plan: "ChunkedPlan") -> None:
+        self.plan = plan
+
+    def advance(self, n_writes: int) -> tuple[int, int, int]:
+        """Position (x, y, z) in steps after the writes sent so far."""
+        return self.plan.live[1]
 
 
 def lookahead_margin(settings: MachineSettings, min_period_ns: int) -> int:
@@ -110,6 +125,13 @@ class ChunkedPlan:
     _stops: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64), repr=False)
     _segments: Optional[tuple[np.ndarray, np.ndarray, np.ndarray]] = field(default=None, repr=False)
     _time_ns: Optional[int] = field(default=None, repr=False)
+    _extent: Optional[tuple[np.ndarray, np.ndarray]] = field(default=None, repr=False)
+    live: tuple[int, tuple[int, int, int]] = (0, (0, 0, 0))
+    """``(writes sent, position_steps after them)``: set by the runner as it sends (the live position)."""
+
+    def positions(self) -> "LivePosition":
+        """A tracker of the position while the runner sends this plan (see :class:`LivePosition`)."""
+        return LivePosition(self)
 
     def __len__(self) -> int:
         return 1 + 2 * self.n_periods
@@ -118,11 +140,38 @@ class ChunkedPlan:
     def estimated_time_s(self) -> float:
         """Machine time of the job in seconds (pauses excluded): one pass over the chunks, then kept."""
         if self._time_ns is None:
+            self.motion_extent()
+        return self._time_ns / 1e9  # type: ignore[operator]
+
+    def motion_extent(self) -> tuple[np.ndarray, np.ndarray]:
+        """Where the writes take the tool, as :func:`cam.verify.pinlog.motion_extent`: ``(extent, cut)``, each
+        ``(3, 2)`` int64 min/max position in steps (the start included; ``cut``: below the surface, z > 0).
+
+        One pass over the chunks (decoded in bounded pieces), which also gives :attr:`estimated_time_s`; kept.
+        """
+        if self._extent is None:
+            clock, dirbit = axis_bits(self.settings)
+            extent = np.zeros((3, 2), np.int64)
+            big = np.iinfo(np.int64).max
+            cut = np.array([[big, -big]] * 3, np.int64)
+            pos = np.zeros(3, np.int64)
+            prev = 0
             t = 0
             for chunk in self.chunks():
+                for i in range(0, len(chunk.data), _DECODE):
+                    data = chunk.data[i:i + _DECODE]
+                    p, _ = _decode(data, prev, pos, clock, dirbit)
+                    prev, pos = int(data[-1]), p[-1]
+                    extent[:, 0] = np.minimum(extent[:, 0], p.min(axis=0))
+                    extent[:, 1] = np.maximum(extent[:, 1], p.max(axis=0))
+                    below = p[p[:, 2] > 0]
+                    if len(below):
+                        cut[:, 0] = np.minimum(cut[:, 0], below.min(axis=0))
+                        cut[:, 1] = np.maximum(cut[:, 1], below.max(axis=0))
                 t = int(chunk.t_ns[-1])
             self._time_ns = t
-        return self._time_ns / 1e9
+            self._extent = (extent, cut if cut[0, 0] != big else np.zeros((3, 2), np.int64))
+        return self._extent
 
     # -- the stream ------------------------------------------------------------------------------------
     def _stretches(self) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray]]:
