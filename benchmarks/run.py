@@ -416,6 +416,14 @@ def bench_ramps(quick: bool) -> dict:
     return ramps.bench_row(quick)
 
 
+def bench_bounded_memory(quick: bool) -> list[dict]:
+    """Row group 16 (#15 point 2): peak RSS of whole `cam drill` processes on the mock against the import floor."""
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    import bounded_memory  # type: ignore
+
+    return bounded_memory.bench_rows(quick)
+
+
 def _cell(value) -> str:
     """A time or count for the table: milliseconds-scale times keep their digits, counts none."""
     if value is None:
@@ -429,18 +437,19 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="small workloads (under a minute)")
     ap.add_argument("--only", help="comma-separated row groups to run (1..14; 10: the machine first, 4 rows, "
-                                   "and 14: cold start, whole processes, are left out of --quick unless named; "
+                                   "14: cold start, and 16: bounded memory, whole processes, are left out of --quick unless "
+                                   "named; "
                                    "11: the RGB array or PNG file to a digitized matrix, 4 rows; "
                                    "12: closed tours on TSPLIB instances)")
     args = ap.parse_args(argv)
     benches = {
         1: bench_trace_2d, 2: bench_peel_3d, 3: bench_planning, 4: None, 5: bench_memory, 7: bench_drill_tour,
         8: bench_realtime, 9: bench_ramps, 10: bench_machine_first, 11: bench_whole_path, 12: bench_tsplib,
-        14: bench_cold_start,
+        14: bench_cold_start, 16: bench_bounded_memory,
     }
     everything = set(benches) | {6}
     only = ({int(v) for v in args.only.split(",")} if args.only
-            else (everything - {10, 14} if args.quick else everything))
+            else (everything - {10, 14, 16} if args.quick else everything))
     rows: list[dict] = []
     for k in sorted(only):
         if k in (4, 6):

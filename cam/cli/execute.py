@@ -18,7 +18,7 @@ from typing import Any, Optional
 from tqdm import tqdm
 
 from ..drive.journal import journal_spec
-from ..drive.ports import port_kind, require
+from ..drive.ports import MockPort, port_kind, require
 from ..drive.runner import FINISHED
 from ..drive.session import MachineSession, Prompt
 from ..errors import CapabilityError, PortError
@@ -132,8 +132,11 @@ def execute(job: Any, args: argparse.Namespace, settings: MachineSettings, *,
         CamError: the job does not fit the port or the travel (nothing is sent), or the port failed.
     """
     stopping = threading.Event()
-    session = MachineSession(args.port, settings, realtime=getattr(args, "realtime", False),
-                             on_prompt=_ask(args, stopping))
+    realtime = getattr(args, "realtime", False)
+    port: Any = args.port
+    if getattr(args, "pin_log", None) and port_kind(args.port) == "mock" and not realtime:
+        port = MockPort(pin_log_path=args.pin_log)  # the pin log streams to its file: nothing held
+    session = MachineSession(port, settings, realtime=realtime, on_prompt=_ask(args, stopping))
     if start_steps is not None:
         session.set_position(start_steps)
     session.check_job(job)  # before the progress bar: a bad job is one clean line
@@ -175,7 +178,10 @@ def _outcome(session: MachineSession, args: argparse.Namespace) -> Outcome:
     if info.get("status") == "error":
         raise PortError("; ".join(info.get("messages") or ["the run failed"]))
     if getattr(args, "pin_log", None) and result is not None:
-        write_pin_log(result.pin_log(), args.pin_log)
+        if isinstance(result.port, MockPort) and result.port.pin_log_path is not None:
+            result.port.finish_pin_log()
+        else:
+            write_pin_log(result.pin_log(), args.pin_log)
     if result is None:  # a MAXIMUS board: it reports no time
         return Outcome(info.get("status", "error"), list(info.get("messages", [])),
                        position_steps=session.position_steps())

@@ -109,3 +109,99 @@ def writes_kernel(high, dirs, per):
         t_ns[2 * k + 2] = t
         data[2 * k + 2] = dirs[k + 1] if k + 1 < n else dirs[k]
     return t_ns, data
+
+
+@entry
+@njit(cache=True)
+def stretch_kernel(pts, delay_xy_ns, delay_z_ns, clock, dirbit, n_per_move, nominal, dir_state, i0, k0, max_periods):
+    """Up to ``max_periods`` periods of the moves between rows of ``pts``, from period ``k0`` of move ``i0`` on.
+
+    What :func:`periods_kernel` makes for the same moves, a stretch at a time (bounded memory).
+
+    Args:
+        pts: ``(N + 1, 3)`` int64 positions in steps, the start first.
+        n_per_move: ``(N,)`` int64 periods of each move; nominal: ``(N,)`` int64 nominal period of each move
+            (0: the delays by the axes that move).
+        dir_state: ``(3,)`` int64 direction bit in force per axis, updated in place (carried between stretches).
+
+    Returns:
+        ``(high, dirs, period_ns, i_end, k_end)``: the periods and where the next stretch starts.
+    """
+    n_moves = pts.shape[0] - 1
+    high = np.empty(max_periods, np.uint8)
+    dirs = np.empty(max_periods, np.uint8)
+    period = np.empty(max_periods, np.int64)
+    p = 0
+    i = i0
+    k_start = k0
+    while i < n_moves and p < max_periods:
+        n = n_per_move[i]
+        if k_start >= n:
+            i += 1
+            k_start = 0
+            continue
+        d0 = pts[i + 1, 0] - pts[i, 0]
+        d1 = pts[i + 1, 1] - pts[i, 1]
+        d2 = pts[i + 1, 2] - pts[i, 2]
+        xy = d0 != 0 or d1 != 0
+        if nominal[i] > 0:
+            per = nominal[i]
+        elif xy and d2 != 0:
+            per = max(delay_xy_ns, delay_z_ns)
+        elif xy:
+            per = delay_xy_ns
+        else:
+            per = delay_z_ns
+        ad0, ad1, ad2 = abs(d0), abs(d1), abs(d2)
+        # the DDA remainders after k_start periods: k * ad modulo n
+        r0 = (k_start * ad0) % n
+        r1 = (k_start * ad1) % n
+        r2 = (k_start * ad2) % n
+        k = k_start
+        while k < n and p < max_periods:
+            clk = 0
+            r0 += ad0
+            if r0 >= n:
+                r0 -= n
+                clk |= clock[0]
+                dir_state[0] = 1 if d0 > 0 else 0
+            r1 += ad1
+            if r1 >= n:
+                r1 -= n
+                clk |= clock[1]
+                dir_state[1] = 1 if d1 > 0 else 0
+            r2 += ad2
+            if r2 >= n:
+                r2 -= n
+                clk |= clock[2]
+                dir_state[2] = 1 if d2 > 0 else 0
+            dd = dir_state[0] * dirbit[0] + dir_state[1] * dirbit[1] + dir_state[2] * dirbit[2]
+            high[p] = dd | clk
+            dirs[p] = dd
+            period[p] = per
+            p += 1
+            k += 1
+        if k >= n:
+            i += 1
+            k_start = 0
+        else:
+            k_start = k
+    return high[:p], dirs[:p], period[:p], i, k_start
+
+
+@entry
+@njit(cache=True)
+def chunk_writes_kernel(high, dirs, per, next_dirs, t0):
+    """Writes of consecutive periods inside a job: ``(2P,)`` times and data, the first period starting at
+    ``t0`` ns; the last period's falling edge writes ``next_dirs`` (the next period's directions)."""
+    n = per.shape[0]
+    t_ns = np.empty(2 * n, np.int64)
+    data = np.empty(2 * n, np.uint8)
+    t = t0
+    for k in range(n):
+        t_ns[2 * k] = t + per[k] // 2
+        data[2 * k] = high[k]
+        t += per[k]
+        t_ns[2 * k + 1] = t
+        data[2 * k + 1] = dirs[k + 1] if k + 1 < n else next_dirs
+    return t_ns, data

@@ -17,6 +17,7 @@ from .maximus.board import MaximusBoard, drill_arguments, from_board, to_board
 from .journal import JournalSpec, JournalWriter, journal_state_of
 from .ports import MockPort, open_port, port_kind, require
 from .runner import Controller, run
+from .chunks import ChunkedPlan
 from .steps import StepPlan
 
 __all__ = ["run_steps", "run_on_board", "BoardControl", "drill_work", "move_work"]
@@ -25,7 +26,7 @@ BoardWork = Callable[[MaximusBoard, Any], None]
 """work(board, session): what to do with an open board."""
 
 
-def run_steps(session: Any, name: str, plan: StepPlan, ctl: Controller, label: str,
+def run_steps(session: Any, name: str, plan: "StepPlan | ChunkedPlan", ctl: Controller, label: str,
               journal: Optional[JournalSpec] = None) -> None:
     """Run ``plan`` on the session's step/dir port (the worker thread of a job, jog or move).
 
@@ -39,7 +40,8 @@ def run_steps(session: Any, name: str, plan: StepPlan, ctl: Controller, label: s
         if session.realtime and isinstance(session.port, str):  # a process of its own: nothing holds it up
             if port_kind(session.port) != "mock":
                 open_port(session.port).close()  # a port that cannot be opened: its own message, from here
-            result = session.runner_process().run(plan, session.port, ctl, progress=session.progress,
+            whole = plan.to_plan() if isinstance(plan, ChunkedPlan) else plan  # the child takes every write
+            result = session.runner_process().run(whole, session.port, ctl, progress=session.progress,
                                                   on_pause=session.prompt, journal=journal)
         else:  # the simulated clock, or a port object the caller opened
             port = open_port(session.port)
@@ -86,7 +88,9 @@ def run_steps(session: Any, name: str, plan: StepPlan, ctl: Controller, label: s
         info.update(max_late_s=round(result.lateness.max_ns / 1e9, 6), stalls=result.lateness.stalls,
                     late_total_s=round(result.lateness.total_ns / 1e9, 6))
     log = None
-    if isinstance(result.port, MockPort):
+    if isinstance(result.port, MockPort) and result.port.pin_log_path is not None:  # streamed to its file
+        info["last_write_job_ns"] = result.port.last_t_ns
+    elif isinstance(result.port, MockPort):
         log = result.pin_log()
         info["last_write_job_ns"] = int(log.t_ns[-1]) if len(log) else None
     session.finish(info, np.array(result.position_steps, np.int64), result=result,

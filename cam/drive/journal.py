@@ -114,12 +114,15 @@ class JournalWriter:
     The first write (state ``running``) happens here, before the run sends anything.
     """
 
-    def __init__(self, spec: JournalSpec, plan: StepPlan) -> None:
+    def __init__(self, spec: JournalSpec, plan: Any) -> None:
         self.spec = spec
         self.plan = plan
         self.error: Optional[str] = None
         self._pause_writes = set(int(i) for i in plan.pause_writes)
-        self._tracker = PositionTracker(plan.data, plan.settings)
+        # a chunked plan holds no writes: its runner publishes (writes sent, position) together in plan.live
+        self._chunked = hasattr(plan, "to_plan")
+        self._point_write = plan.point_write
+        self._tracker = None if self._chunked else PositionTracker(plan.data, plan.settings)
         self._sent = 0
         self._written = -1
         self._lock = threading.Lock()
@@ -132,14 +135,22 @@ class JournalWriter:
         """The run has sent ``writes_done`` writes (called by the runner: stores a number, nothing more)."""
         self._sent = int(writes_done)
 
+    def _sent_and_position(self) -> tuple[int, tuple[int, int, int]]:
+        """Writes sent and the position after them, never the one ahead of the other."""
+        if self._chunked:
+            sent, position = self.plan.live  # one tuple, replaced whole by the runner
+            return int(sent), position
+        sent = self._sent
+        return sent, self._tracker.advance(sent)
+
     def _loop(self) -> None:
         while not self._closing.wait(JOURNAL_PERIOD_S):
-            sent = self._sent
+            sent, position = self._sent_and_position()
             if sent != self._written:
-                self._write(sent, self._tracker.advance(sent), "running")
+                self._write(sent, position, "running")
 
     def _write(self, sent: int, position_steps: tuple[int, int, int], state: str) -> None:
-        record = journal_record(self.spec.base, self.plan.point_write, self._pause_writes, sent, len(self.plan),
+        record = journal_record(self.spec.base, self._point_write, self._pause_writes, sent, len(self.plan),
                                 position_steps, state, self.spec.home_steps)
         with self._lock:
             try:
@@ -159,7 +170,6 @@ class JournalWriter:
         self._closing.set()
         self._thread.join()
         if writes_done is None or position_steps is None:
-            writes_done = self._sent
-            position_steps = self._tracker.advance(writes_done)
+            writes_done, position_steps = self._sent_and_position()
         self._write(int(writes_done), tuple(int(v) for v in position_steps), state)  # type: ignore[arg-type]
         return self.error

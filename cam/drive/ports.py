@@ -15,10 +15,15 @@ with one message that every front end shows.  A step/dir port only writes;
 """
 from __future__ import annotations
 
+import os
+from pathlib import Path
+from typing import IO, Optional
+
 import numpy as np
 
 from ..errors import CapabilityError, PortError
-from ..verify.pinlog import PinLog
+from ..verify.pinlog import HEADER as PIN_LOG_HEADER
+from ..verify.pinlog import PinLog, read_pin_log
 
 __all__ = ["Port", "MockPort", "ParallelPort", "open_port", "port_kind", "CAPABILITIES", "require", "MAXIMUS_PREFIX"]
 
@@ -69,36 +74,82 @@ class Port:
 
 
 class MockPort(Port):
-    """The logging mock port.  :meth:`pin_log` returns everything written so far."""
+    """The logging mock port.  :meth:`pin_log` returns everything written so far.
+
+    ``pin_log_path``: stream the pin log to this CSV file as the writes come (nothing is held: a job of any
+    length); the file appears, whole, at :meth:`finish_pin_log` (written beside it, then renamed).
+    """
 
     name = "mock"
 
-    def __init__(self) -> None:
+    def __init__(self, pin_log_path: "str | os.PathLike | None" = None) -> None:
         self._t: list[np.ndarray] = []
         self._d: list[np.ndarray] = []
         self._s: list[np.ndarray] = []
         self._pending: list[tuple[int, int, int]] = []
+        self.pin_log_path = Path(pin_log_path) if pin_log_path is not None else None
+        self._file: Optional[IO[str]] = None
+        self.n_writes = 0
+        self.last_t_ns: Optional[int] = None
 
     def write(self, data: int, strobe: int, t_ns: int) -> None:
         self._pending.append((int(t_ns), int(data), int(strobe)))
 
     def write_many(self, t_ns: np.ndarray, data: np.ndarray, strobe: np.ndarray) -> None:
         self._flush()
-        self._t.append(np.asarray(t_ns, np.int64).copy())
-        self._d.append(np.asarray(data, np.uint8).copy())
-        self._s.append(np.asarray(strobe, np.uint8).copy())
+        self._keep(np.asarray(t_ns, np.int64).copy(), np.asarray(data, np.uint8).copy(),
+                   np.asarray(strobe, np.uint8).copy())
+
+    def _keep(self, t_ns: np.ndarray, data: np.ndarray, strobe: np.ndarray) -> None:
+        if not len(t_ns):
+            return
+        self.n_writes += len(t_ns)
+        self.last_t_ns = int(t_ns[-1])
+        if self.pin_log_path is None:
+            self._t.append(t_ns)
+            self._d.append(data)
+            self._s.append(strobe)
+            return
+        if self._file is None:
+            self._file = open(self._part(), "w", encoding="utf-8")
+            self._file.write(PIN_LOG_HEADER + "\n")
+        for i in range(0, len(t_ns), 1 << 18):
+            rows = np.column_stack([t_ns[i:i + (1 << 18)], data[i:i + (1 << 18)].astype(np.int64),
+                                    strobe[i:i + (1 << 18)].astype(np.int64)])
+            np.savetxt(self._file, rows, fmt="%d", delimiter=",")
+
+    def _part(self) -> Path:
+        assert self.pin_log_path is not None
+        return self.pin_log_path.with_name(self.pin_log_path.name + ".part")
 
     def _flush(self) -> None:
         if self._pending:
             arr = np.array(self._pending, np.int64)
             self._pending = []
-            self._t.append(arr[:, 0])
-            self._d.append(arr[:, 1].astype(np.uint8))
-            self._s.append(arr[:, 2].astype(np.uint8))
+            self._keep(arr[:, 0], arr[:, 1].astype(np.uint8), arr[:, 2].astype(np.uint8))
+
+    def finish_pin_log(self) -> Optional[Path]:
+        """Close the streamed pin log and put it in place (atomically); None when nothing streams."""
+        if self.pin_log_path is None:
+            return None
+        self._flush()
+        if self._file is None:
+            self._file = open(self._part(), "w", encoding="utf-8")
+            self._file.write(PIN_LOG_HEADER + "\n")
+        self._file.flush()
+        os.fsync(self._file.fileno())
+        self._file.close()
+        self._file = None
+        os.replace(self._part(), self.pin_log_path)
+        return self.pin_log_path
 
     def pin_log(self) -> PinLog:
-        """Every write so far, in order."""
+        """Every write so far, in order (read back from the file when it streams to one)."""
         self._flush()
+        if self.pin_log_path is not None:
+            if self._file is not None:
+                self.finish_pin_log()
+            return read_pin_log(self.pin_log_path)
         if not self._t:
             return PinLog(np.zeros(0, np.int64), np.zeros(0, np.uint8), np.zeros(0, np.uint8))
         return PinLog(np.concatenate(self._t), np.concatenate(self._d), np.concatenate(self._s))

@@ -24,9 +24,10 @@ import numpy as np
 
 from ..errors import CamError
 from ..job.model import Job
-from ..verify.pinlog import PinLog, carve, decode_pin_log
+from ..verify.pinlog import PinLog, _decode, carve, decode_pin_log
 from .ports import MockPort, Port, open_port
 from .pins import axis_bits
+from .chunks import ChunkedPlan
 from .steps import StepPlan, plan_steps
 
 __all__ = ["Controller", "RunResult", "Lateness", "STALL_NS", "run", "simulate_surface", "FINISHED", "STOPPED", "EMERGENCY_STOPPED"]
@@ -226,10 +227,12 @@ def run(
     Returns:
         A :class:`RunResult`; the mock's pin log is ``result.pin_log()``.
     """
-    plan = job if isinstance(job, StepPlan) else plan_steps(job)
     p = open_port(port)
     if not isinstance(p, MockPort):
         realtime = True
+    if isinstance(job, ChunkedPlan) and not realtime:
+        return _run_chunks(job, p, controller, progress, on_pause)
+    plan = job.to_plan() if isinstance(job, ChunkedPlan) else job if isinstance(job, StepPlan) else plan_steps(job)
     ctl = controller or Controller()
     pauses = _Pauses(plan, ctl, on_pause, controller is not None)
     wall0 = time.monotonic_ns()
@@ -372,6 +375,92 @@ def _stop(plan: StepPlan, p: Port, ctl: Controller, sent: int, position: tuple[i
         if d & z_clock:
             position = (position[0], position[1], position[2] - 1)
     return STOPPED, position
+
+
+class _LastWrite:
+    """Stands for a plan's arrays where only the last write sent is read (a stop after a chunked run)."""
+
+    def __init__(self, value: int) -> None:
+        self.value = value
+
+    def __getitem__(self, index: int) -> int:
+        return self.value
+
+
+class _Tail:
+    """What :func:`_stop` reads of a plan, for a :class:`ChunkedPlan` whose writes are no longer held."""
+
+    def __init__(self, plan: ChunkedPlan, last_t_ns: int, last_data: int) -> None:
+        self.settings = plan.settings
+        self.safe_z_steps = plan.safe_z_steps
+        self.t_ns = _LastWrite(last_t_ns)
+        self.data = _LastWrite(last_data)
+        self.strobe = np.full(1, 1 if plan.settings.half_step else 0, np.uint8)
+
+
+def _run_chunks(plan: ChunkedPlan, p: Port, controller: Optional[Controller], progress: Optional[ProgressFn],
+                on_pause: Optional[PauseFn]) -> RunResult:
+    """:func:`run` of a :class:`ChunkedPlan` on the simulated clock: a chunk at a time, in bounded memory.
+
+    The writes and pauses are those of the whole plan; the position is decoded as the writes go out
+    (and published as ``plan.live``: ``(writes sent, position_steps)``, for the session's live position).
+    """
+    ctl = controller or Controller()
+    clock, dirbit = axis_bits(plan.settings)
+    pause_at = set(int(i) for i in plan.pause_writes)
+    notes = dict(zip((int(i) for i in plan.pause_writes), plan.pause_notes or []))
+    total = len(plan)
+    wall0 = time.monotonic_ns()
+    sent, pauses, last_t, last_d = 0, 0, 0, 0
+    pos = np.zeros(3, np.int64)
+    halted = False
+    for chunk in plan.chunks():
+        i = 0
+        while i < len(chunk):
+            if ctl.halted or (ctl.paused and not _wait_while_paused(ctl)):
+                halted = True
+                break
+            g = chunk.first_write + i
+            end = min(len(chunk), i + _BATCH)
+            nxt = [w for w in pause_at if g <= w < chunk.first_write + end]
+            if nxt:
+                end = min(nxt) - chunk.first_write + 1
+            data = chunk.data[i:end]
+            p.write_many(chunk.t_ns[i:end], data, chunk.strobe[i:end])
+            decoded, _ = _decode(data, last_d, pos, clock, dirbit)
+            pos = decoded[-1].copy()
+            last_t, last_d = int(chunk.t_ns[end - 1]), int(data[-1])
+            sent += end - i
+            i = end
+            plan.live = (sent, tuple(int(v) for v in pos))
+            if progress:
+                progress(sent, total, last_t)
+            if (sent - 1) in pause_at and sent < total:
+                pauses += 1
+                here = tuple(int(v) for v in pos)
+                if on_pause is not None:
+                    on_pause(here, notes.get(sent - 1, "pause"))  # type: ignore[arg-type]
+                elif controller is not None:
+                    ctl.pause()
+                if not _wait_while_paused(ctl):
+                    halted = True
+                    break
+        if halted:
+            break
+    position = tuple(int(v) for v in pos)
+    status = FINISHED
+    messages: list[str] = []
+    if sent < total:
+        if ctl.estop_requested:
+            status = EMERGENCY_STOPPED
+            messages.append(f"emergency stop at {position} steps; nothing more was sent")
+        else:
+            status, position = _stop(_Tail(plan, last_t, last_d), p, ctl, sent, position, None)  # type: ignore[arg-type]
+            messages.append(f"stopped at X={position[0]} Y={position[1]} steps; tool lifted to Z={position[2]}")
+    if isinstance(p, MockPort):
+        p._flush()
+    wall = (time.monotonic_ns() - wall0) / 1e9
+    return RunResult(status, position, sent, last_t / 1e9, wall, pauses, p, messages, wall0)  # type: ignore[arg-type]
 
 
 def _wait_while_paused(ctl: Controller) -> bool:

@@ -57,6 +57,7 @@ from .activities import BoardControl, drill_work, move_work, run_on_board, run_s
 from .maximus.board import drill_arguments, drill_job, maximus_port
 from .ports import port_kind, require
 from .runner import Controller, RunResult
+from .chunks import ChunkedPlan
 from .steps import StepPlan, plan_steps
 
 __all__ = ["MachineSession", "Prompt", "PromptFn", "MAX_JOG_STEPS", "run"]
@@ -189,11 +190,11 @@ class MachineSession(SessionControls):
         return journal_spec(job, journal, home_steps=tuple(int(v) for v in self._position))
 
     def _plan(self, job: Any) -> StepPlan:
-        if isinstance(job, StepPlan):
+        if isinstance(job, (StepPlan, ChunkedPlan)):
             return job
         if isinstance(job, Job):
             return plan_steps(job, start_steps=tuple(int(v) for v in self._position))
-        return job.steps  # a PreparedJob: planned from its home, checked by its extent
+        return getattr(job, "plan", None) or job.steps  # a PreparedJob: planned from its home, checked by its extent
 
     def run(self, job: Any, *, label: Optional[str] = None) -> dict[str, Any]:
         """:meth:`start` and wait for the end; returns :attr:`last_run`."""
@@ -286,10 +287,11 @@ class MachineSession(SessionControls):
         self._prompt = None
         self._bump()
 
-    def _launch_steps(self, name: str, plan: StepPlan, label: str, estimated_s: float,
+    def _launch_steps(self, name: str, plan: "StepPlan | ChunkedPlan", label: str, estimated_s: float,
                       controller: Optional[Controller] = None, journal: Optional[JournalSpec] = None) -> None:
         ctl = controller or Controller()
-        self._begin(Activity(name, label, ctl, len(plan), estimated_s, PositionTracker(plan.data, plan.settings)))
+        tracker = plan.positions() if isinstance(plan, ChunkedPlan) else PositionTracker(plan.data, plan.settings)
+        self._begin(Activity(name, label, ctl, len(plan), estimated_s, tracker))
         self.log(f"{label}: started")
         self._spawn(run_steps, (self, name, plan, ctl, label, journal), name)
 

@@ -37,7 +37,7 @@ from ..digitize import digitize
 from ..digitize.digitized import load_digitized
 from ..digitize.drawing import drawing_size_px, load_image
 from ..digitize.profile import load_profile, profile_from_expr
-from ..drive.steps import plan_steps
+from ..drive.chunks import plan_chunks
 from ..errors import CamError
 from ..formats.excellon import load_excellon
 from ..formats.gcode import load_gcode, load_tool_table
@@ -366,8 +366,11 @@ class PreparedJob:
 
     Attributes:
         source: the file it came from; name: what to call it; kind: one of :data:`KINDS`.
-        steps: the :class:`~cam.drive.steps.StepPlan` (machine frame, steps from the job home).
-        settings: the machine settings of ``steps``.
+        plan: the step plan as a :class:`~cam.drive.chunks.ChunkedPlan` (machine frame, steps from the job
+            home): made a chunk at a time, so a job of any length runs in bounded memory.
+        steps: the same plan with every write at once, a :class:`~cam.drive.steps.StepPlan` (made on first
+            use and kept: small jobs, pictures of every write, tests).
+        settings: the machine settings of ``plan``.
         toolpath: the :class:`~cam.job.model.Job` when the kind has one (not G-code).
         size_mm: ``(width, height)`` of what is cut (XY extent of the tool below the surface), mm.
         depth_mm: deepest cut below the surface, mm.
@@ -387,7 +390,7 @@ class PreparedJob:
 
     source: str
     kind: str
-    steps: Any
+    plan: Any
     settings: MachineSettings
     toolpath: Any = None
     name: str = ""
@@ -405,6 +408,14 @@ class PreparedJob:
     identity: str = ""
     plan_sha256: str = ""
     resumed: Any = None
+    _steps: Any = field(default=None, repr=False)
+
+    @property
+    def steps(self) -> Any:
+        """Every write of :attr:`plan` at once (a :class:`~cam.drive.steps.StepPlan`, made on first use)."""
+        if self._steps is None:
+            self._steps = self.plan.to_plan() if hasattr(self.plan, "to_plan") else self.plan
+        return self._steps
 
     def positions_steps(self) -> np.ndarray:
         """``(M, 3)`` int64 machine position (x, y, z) in steps after each write of the plan."""
@@ -501,12 +512,12 @@ def _cut_extent(extent: np.ndarray, cut: np.ndarray, settings: MachineSettings) 
 def _finish(job: PreparedJob) -> PreparedJob:
     """Fill the fields every kind computes the same way from the step plan."""
 
-    job.extent_steps, cut = motion_extent(job.steps.data, job.settings)  # decoded in bounded chunks
+    job.extent_steps, cut = job.plan.motion_extent()  # one pass over the chunks
     if job.size_mm == (0.0, 0.0):
         job.size_mm, job.depth_mm = _cut_extent(job.extent_steps, cut, job.settings)
-    job.estimated_time_s = job.steps.estimated_time_s
-    job.tool_changes = list(job.steps.pause_notes or [])
-    for w in job.steps.warnings:
+    job.estimated_time_s = job.plan.estimated_time_s
+    job.tool_changes = list(job.plan.pause_notes or [])
+    for w in job.plan.warnings:
         if w not in job.warnings:
             job.warnings.append(w)
     job.report.setdefault("source", job.source)
@@ -514,9 +525,9 @@ def _finish(job: PreparedJob) -> PreparedJob:
         "kind": job.kind,
         "size_mm": list(job.size_mm),
         "depth_mm": job.depth_mm,
-        "steps": {a: int(v) for a, v in zip("xyz", job.steps.steps_total)},
+        "steps": {a: int(v) for a, v in zip("xyz", job.plan.steps_total)},
         "estimated_time_s": round(job.estimated_time_s, 6),
-        "ramp": job.steps.settings.ramp,
+        "ramp": job.plan.settings.ramp,
         "tool_changes": list(job.tool_changes),
         "warnings": list(job.warnings),
     })
@@ -568,12 +579,12 @@ def _prepare_pixels(path: Path, kind: str, options: JobOptions, settings: Machin
         depth = max(1, int(round(cutter.depth_for_width_mm(options.line_width_mm) / settings.px_to_mm_z(1))))
     toolpath = plan(digitized, depth=depth, settings=settings, passes=options.passes,
                     start_at=options.start_at, pause_at=list(options.pause_at), profile=profile, tool=cutter)
-    steps = plan_steps(toolpath)
+    steps = plan_chunks(toolpath)
     report = job_report(digitized, toolpath, steps)
     summary = (f"{path.name}: {report['objects']} object(s), {report['points']} points, "
                f"{report['retracts']} retracts")
     return PreparedJob(
-        source=str(path), kind=kind, steps=steps, settings=settings, toolpath=toolpath,
+        source=str(path), kind=kind, plan=steps, settings=settings, toolpath=toolpath,
         size_mm=(report["width_mm"], report["height_mm"]), depth_mm=report["depth_mm"],
         warnings=traced + list(report["warnings"]), summary=summary, report=report, drawing_rgb=rgb,
         digitized=digitized,
@@ -588,9 +599,9 @@ def _prepare_gcode(path: Path, options: JobOptions, settings: MachineSettings) -
         tool_table=load_tool_table(options.tool_table) if options.tool_table else None,
         subroutine_path=options.subroutine_path, max_lines=options.max_lines)
     job = plan_gcode(program, settings, flip_y=options.flip_y)
-    steps = plan_steps(job)
+    steps = plan_chunks(job)
     return PreparedJob(
-        source=str(path), kind="gcode", steps=steps, settings=settings, toolpath=job, warnings=list(program.warnings),
+        source=str(path), kind="gcode", plan=steps, settings=settings, toolpath=job, warnings=list(program.warnings),
         summary=f"{path.name}: {len(program.moves)} moves", report={"moves": len(program.moves)},
     )
 
@@ -606,12 +617,12 @@ def _prepare_excellon(path: Path, options: JobOptions, settings: MachineSettings
     dp = plan_drill(holes, settings=settings, depth_mm=depth_mm,
                     safe_height_mm=_or(options.travel_height_mm, DRILL_SAFE_HEIGHT_MM), offset_mm=options.offset_mm,
                     mirror_x=options.mirror_x, order=options.drill_order)
-    steps = plan_steps(dp.toolpath)
+    steps = plan_chunks(dp.toolpath)
     tools = ", ".join(f"T{t} {dia:.3f} mm x{n}" for t, dia, n in dp.tool_sequence)
     hole_xy = np.asarray(dp.holes_steps, np.int64).reshape(-1, 2)
     span = hole_xy.max(axis=0) - hole_xy.min(axis=0)
     return PreparedJob(
-        source=str(path), kind="excellon", steps=steps, settings=settings, toolpath=dp.toolpath,
+        source=str(path), kind="excellon", plan=steps, settings=settings, toolpath=dp.toolpath,
         size_mm=(round(float(span[0]) * settings.mm_per_step_xy, 3), round(float(span[1]) * settings.mm_per_step_xy, 3)),
         depth_mm=round(depth_mm, 4),
         warnings=list(holes.warnings), summary=f"{path.name}: {len(hole_xy)} holes ({tools})",
@@ -624,9 +635,9 @@ def _prepare_hpgl(path: Path, options: JobOptions, settings: MachineSettings, pr
     toolpath = plan_hpgl(drawing, settings=settings, depth_mm=_or(options.cut_depth_mm, HPGL_CUT_DEPTH_MM),
                          safe_height_mm=_or(options.travel_height_mm, HPGL_SAFE_HEIGHT_MM),
                          offset_mm=options.offset_mm)
-    steps = plan_steps(toolpath)
+    steps = plan_chunks(toolpath)
     return PreparedJob(
-        source=str(path), kind="hpgl", steps=steps, settings=settings, toolpath=toolpath,
+        source=str(path), kind="hpgl", plan=steps, settings=settings, toolpath=toolpath,
         warnings=list(drawing.warnings), summary=f"{path.name}: {drawing.n_strokes} pen-down strokes",
         report={"strokes": drawing.n_strokes, "points": len(drawing.points_pu),
                 "pens": sorted(set(int(p) for p in drawing.stroke_pen))},
@@ -638,10 +649,10 @@ def _prepare_svg(path: Path, options: JobOptions, settings: MachineSettings) -> 
     toolpath = plan_svg(drawing, settings=settings, depth_mm=_or(options.cut_depth_mm, SVG_CUT_DEPTH_MM),
                         safe_height_mm=_or(options.travel_height_mm, SVG_SAFE_HEIGHT_MM),
                         scale=options.scale, fit_mm=options.fit_mm, offset_mm=options.offset_mm)
-    steps = plan_steps(toolpath)
+    steps = plan_chunks(toolpath)
     counts = ", ".join(f"{n} {name}" for name, n in sorted(drawing.element_counts.items()))
     return PreparedJob(
-        source=str(path), kind="svg", steps=steps, settings=settings, toolpath=toolpath,
+        source=str(path), kind="svg", plan=steps, settings=settings, toolpath=toolpath,
         warnings=list(drawing.warnings), summary=f"{path.name}: {drawing.n_strokes} strokes ({counts})",
         report={"strokes": drawing.n_strokes, "elements": dict(drawing.element_counts),
                 "segments": drawing.segment_counts, "document_mm": [round(v, 3) for v in drawing.size_mm]},

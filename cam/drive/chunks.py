@@ -1,0 +1,406 @@
+"""The step plan as a stream of chunks: every port write of a job, in bounded memory.
+
+:func:`cam.drive.steps.plan_steps` holds every write of a job at once (about
+100 bytes per step period with the look-ahead ramps): a large job does not fit.
+A :class:`ChunkedPlan` makes the same writes a chunk at a time:
+
+1. the moves are turned into step periods a stretch of at most
+   ``chunk_periods`` at a time (:func:`cam.drive._kernels.stretch_kernel`,
+   the DDA of :mod:`cam.drive.steps` resumed inside a move);
+2. the speed ramps lengthen them: ``constant`` keeps the nominal periods,
+   ``linear40`` ramps each source move from its length and step counts (known
+   from the moves, so a move may span chunks), ``lookahead`` plans a *window*:
+   the chunk and ``margin_periods`` periods on each side, and keeps the
+   chunk.  The margin is many times the longest ramp (the periods a stop
+   from full speed takes, :func:`lookahead_margin`), so the chunk's periods
+   are those of the whole-job planner: a ramp that must slow down before a
+   stop in the next chunk starts in this one.  Tests check the identity on
+   jobs whose chunk boundaries fall inside ramps;
+3. the writes follow (:func:`cam.drive._kernels.chunk_writes_kernel`) with
+   absolute times and write indices.
+
+Memory: the job's points and a few per-move integers (``n_per_move``), plus
+one window of periods; it does not grow with the number of step periods.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Iterator, Optional
+
+import numpy as np
+
+from ..job.model import Job, check_travel
+from ..settings import MachineSettings
+from ..verify.pinlog import _decode
+from ._kernels import chunk_writes_kernel, stretch_kernel
+from .pins import axis_bits
+from .ramps import RAMP_STEPS_LINEAR40, _lookahead
+from .steps import StepPlan
+
+__all__ = ["StepChunk", "ChunkedPlan", "plan_chunks", "lookahead_margin", "DEFAULT_CHUNK_PERIODS"]
+
+DEFAULT_CHUNK_PERIODS = 1 << 20
+"""Step periods per chunk (about 100 MB of look-ahead arrays at most)."""
+
+_MOVE_BLOCK = 1 << 16  # moves turned into periods per kernel call
+_DECODE = 1 << 20  # writes decoded into positions at a time
+
+
+@dataclass
+class StepChunk:
+    """Consecutive port writes of a job.
+
+    Attributes:
+        first_write: index of ``t_ns[0]`` among all the job's writes.
+        t_ns: ``(M,)`` int64 scheduled times, ns from the job start.
+        data: ``(M,)`` uint8 data register after each write.
+        strobe: ``(M,)`` uint8 level of pin 1 after each write.
+    """
+
+    first_write: int
+    t_ns: np.ndarray
+    data: np.ndarray
+    strobe: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.t_ns)
+
+
+class LivePosition:
+    """The live position of a running :class:`ChunkedPlan`, as :class:`cam.verify.pinlog.PositionTracker`
+    gives it for a whole plan: ``advance(n)`` is the position after the last batch the runner sent
+    (at most ``n`` writes), without holding any write."""
+
+    def __init__(self, plan: "ChunkedPlan") -> None:
+        self.plan = plan
+
+    def advance(self, n_writes: int) -> tuple[int, int, int]:
+        """Position (x, y, z) in steps after the writes sent so far."""
+        return self.plan.live[1]
+
+
+def lookahead_margin(settings: MachineSettings, min_period_ns: int) -> int:
+    """Periods of look-ahead a chunk needs on each side: eight times the longest ramp plus the longest
+    interval at which an axis still runs above its start speed (the ramp planner's reach), at least 4096.
+
+    The longest ramp: from rest to the fastest rate ``u = 1e9 / min_period_ns`` periods/s at the smallest
+    path acceleration ``0.9 A / s`` (periods/s^2) takes ``u^2 / (2 alpha)`` periods.
+    """
+    s_mm, v_start, _, acc = settings.axis_limits()
+    u_max = 1e9 / max(1, int(min_period_ns))
+    alpha = min(0.9 * a / s for a, s in zip(acc, s_mm))
+    ramp = u_max * u_max / (2.0 * alpha)
+    reach = max(s * u_max / v for s, v in zip(s_mm, v_start))
+    return int(max(4096, 8 * math.ceil(ramp + reach + 2)))
+
+
+@dataclass
+class ChunkedPlan:
+    """A job's step plan made a chunk at a time (see the module docstring); the writes equal
+    :func:`cam.drive.steps.plan_steps` of the same job.
+
+    Attributes:
+        job: the job (points in steps from where the tool stands at the start).
+        settings: the machine settings.
+        n_periods: step periods of the job; its writes number ``1 + 2 n_periods``.
+        pause_writes: ``(P,)`` int64 write indices after which the job pauses.
+        pause_notes, warnings, safe_z_steps, end_steps, steps_total: as :class:`~cam.drive.steps.StepPlan`.
+        chunk_periods: step periods per chunk; margin_periods: look-ahead periods on each side of a chunk.
+    """
+
+    job: Job
+    settings: MachineSettings
+    n_periods: int
+    pause_writes: np.ndarray
+    steps_total: np.ndarray
+    end_steps: tuple[int, int, int]
+    safe_z_steps: int
+    chunk_periods: int
+    margin_periods: int
+    pause_notes: list[str] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+    _n_per_move: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64), repr=False)
+    _nominal: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64), repr=False)
+    _stops: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64), repr=False)
+    _segments: Optional[tuple[np.ndarray, np.ndarray, np.ndarray]] = field(default=None, repr=False)
+    _time_ns: Optional[int] = field(default=None, repr=False)
+    _extent: Optional[tuple[np.ndarray, np.ndarray]] = field(default=None, repr=False)
+    live: tuple[int, tuple[int, int, int]] = (0, (0, 0, 0))
+    """``(writes sent, position_steps after them)``: set by the runner as it sends (the live position)."""
+
+    @property
+    def point_write(self) -> np.ndarray:
+        """``(N,)`` int64 index of the write at which toolpath point i is reached (as :class:`StepPlan`'s)."""
+        return 2 * np.cumsum(self._n_per_move)
+
+    def positions(self) -> "LivePosition":
+        """A tracker of the position while the runner sends this plan (see :class:`LivePosition`)."""
+        return LivePosition(self)
+
+    def __len__(self) -> int:
+        return 1 + 2 * self.n_periods
+
+    @property
+    def estimated_time_s(self) -> float:
+        """Machine time of the job in seconds (pauses excluded): one pass over the chunks, then kept."""
+        if self._time_ns is None:
+            self.motion_extent()
+        return self._time_ns / 1e9  # type: ignore[operator]
+
+    def motion_extent(self) -> tuple[np.ndarray, np.ndarray]:
+        """Where the writes take the tool, as :func:`cam.verify.pinlog.motion_extent`: ``(extent, cut)``, each
+        ``(3, 2)`` int64 min/max position in steps (the start included; ``cut``: below the surface, z > 0).
+
+        One pass over the chunks (decoded in bounded pieces), which also gives :attr:`estimated_time_s`; kept.
+        """
+        if self._extent is None:
+            clock, dirbit = axis_bits(self.settings)
+            extent = np.zeros((3, 2), np.int64)
+            big = np.iinfo(np.int64).max
+            cut = np.array([[big, -big]] * 3, np.int64)
+            pos = np.zeros(3, np.int64)
+            prev = 0
+            t = 0
+            for chunk in self.chunks():
+                for i in range(0, len(chunk.data), _DECODE):
+                    data = chunk.data[i:i + _DECODE]
+                    p, _ = _decode(data, prev, pos, clock, dirbit)
+                    prev, pos = int(data[-1]), p[-1]
+                    extent[:, 0] = np.minimum(extent[:, 0], p.min(axis=0))
+                    extent[:, 1] = np.maximum(extent[:, 1], p.max(axis=0))
+                    below = p[p[:, 2] > 0]
+                    if len(below):
+                        cut[:, 0] = np.minimum(cut[:, 0], below.min(axis=0))
+                        cut[:, 1] = np.maximum(cut[:, 1], below.max(axis=0))
+                t = int(chunk.t_ns[-1])
+            self._time_ns = t
+            self._extent = (extent, cut if cut[0, 0] != big else np.zeros((3, 2), np.int64))
+        return self._extent
+
+    # -- the stream ------------------------------------------------------------------------------------
+    def _stretches(self) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+        """``(high, dirs, nominal_ns)`` of consecutive periods, at most ``chunk_periods`` each."""
+        s = self.settings
+        clock, dirbit = axis_bits(s)
+        clock, dirbit = clock.astype(np.int64), dirbit.astype(np.int64)
+        pts_all = np.asarray(self.job.points_steps, np.int64).reshape(-1, 3)
+        dir_state = np.zeros(3, np.int64)
+        n = len(pts_all)
+        for b0 in range(0, n, _MOVE_BLOCK):
+            b1 = min(n, b0 + _MOVE_BLOCK)
+            start = pts_all[b0 - 1:b0] if b0 else np.zeros((1, 3), np.int64)
+            pts = np.vstack([start, pts_all[b0:b1]])
+            npm = self._n_per_move[b0:b1]
+            nom = self._nominal[b0:b1]
+            i, k = 0, 0
+            while i < b1 - b0:
+                high, dirs, per, i, k = stretch_kernel(pts, s.delay_xy_ns, s.delay_z_ns, clock, dirbit, npm, nom,
+                                                       dir_state, i, k, self.chunk_periods)
+                if len(per):
+                    yield high, dirs, per
+
+    def _rebatched(self) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+        """:meth:`_stretches` joined into stretches of exactly ``chunk_periods`` (the last one shorter)."""
+        parts: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+        have = 0
+        for part in self._stretches():
+            parts.append(part)
+            have += len(part[2])
+            while have >= self.chunk_periods:
+                joined = [np.concatenate([p[j] for p in parts]) for j in range(3)]
+                c = self.chunk_periods
+                yield joined[0][:c], joined[1][:c], joined[2][:c]
+                parts = [(joined[0][c:], joined[1][c:], joined[2][c:])]
+                have -= c
+        if have:
+            yield tuple(np.concatenate([p[j] for p in parts]) for j in range(3))  # type: ignore[misc]
+
+    def _ramped(self) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+        """``(high, dirs, period_ns)`` of consecutive periods with the speed ramps, a chunk at a time."""
+        mode = self.settings.ramp
+        if mode == "constant":
+            yield from self._rebatched()
+        elif mode == "linear40":
+            p0 = 0
+            for high, dirs, nom in self._rebatched():
+                yield high, dirs, self._linear40(p0, nom)
+                p0 += len(nom)
+        else:
+            yield from self._windows()
+
+    def _linear40(self, p0: int, nominal: np.ndarray) -> np.ndarray:
+        """The seed's per-move ramp (:func:`cam.drive.ramps._linear40`) of periods ``p0..`` from the moves."""
+        seg_first, seg_len, seg_start_ns = self._segments  # type: ignore[misc]
+        k = p0 + np.arange(len(nominal), dtype=np.int64)
+        seg = np.searchsorted(seg_first, k, side="right") - 1
+        out = nominal.copy()
+        ok = seg >= 0
+        seg_c = np.maximum(seg, 0)
+        start_ns = seg_start_ns[seg_c]
+        ok &= ~np.isnan(start_ns)
+        k_in = k - seg_first[seg_c]
+        r = np.minimum(np.minimum(k_in, (seg_len[seg_c] - 1) - k_in), RAMP_STEPS_LINEAR40)
+        ramp = np.maximum(start_ns - nominal, 0) * (RAMP_STEPS_LINEAR40 - r) / RAMP_STEPS_LINEAR40
+        out[ok] = nominal[ok] + np.ceil(ramp[ok]).astype(np.int64)
+        return out
+
+    def _windows(self) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+        """Look-ahead ramps a chunk at a time, each planned in a window with ``margin_periods`` on each side."""
+        c, m = self.chunk_periods, self.margin_periods
+        buf: list[np.ndarray] = [np.zeros(0, np.uint8), np.zeros(0, np.uint8), np.zeros(0, np.int64)]
+        buf_start = 0  # global period index of buf[.][0]
+        done = 0  # periods handed out
+        stretches = self._rebatched()
+        finished = False
+        while True:
+            while not finished and buf_start + len(buf[2]) < done + c + m:
+                nxt = next(stretches, None)
+                if nxt is None:
+                    finished = True
+                    break
+                buf = [np.concatenate([buf[j], nxt[j]]) for j in range(3)]
+            buf_end = buf_start + len(buf[2])
+            if done >= buf_end:
+                return
+            kept_end = min(done + c, buf_end)
+            w0, w1 = max(buf_start, done - m), min(buf_end, kept_end + m)
+            a, b = w0 - buf_start, w1 - buf_start
+            inner = self._stops[(self._stops > w0) & (self._stops < w1)] - w0
+            per = _lookahead(buf[0][a:b], buf[2][a:b], self.settings, inner)
+            ka, kb = done - buf_start, kept_end - buf_start
+            yield buf[0][ka:kb], buf[1][ka:kb], per[done - w0:kept_end - w0]
+            done = kept_end
+            drop = max(0, done - m - buf_start)
+            if drop:
+                buf = [v[drop:] for v in buf]
+                buf_start += drop
+
+    def chunks(self) -> Iterator[StepChunk]:
+        """The job's writes in order, a chunk at a time (the first holds the initial write at t = 0)."""
+        strobe_level = 1 if self.settings.half_step else 0
+        t = 0
+        first_write = 0
+        pending = None
+        for high, dirs, per in self._ramped():
+            if pending is None:
+                t_ns = np.zeros(1, np.int64)
+                data = np.array([dirs[0]], np.uint8)
+                yield StepChunk(0, t_ns, data, np.full(1, strobe_level, np.uint8))
+                first_write = 1
+            else:
+                yield_chunk, t = self._writes(*pending, int(dirs[0]), t, first_write, strobe_level)
+                first_write += len(yield_chunk)
+                yield yield_chunk
+            pending = (high, dirs, per)
+        if pending is None:
+            yield StepChunk(0, np.zeros(1, np.int64), np.zeros(1, np.uint8), np.full(1, strobe_level, np.uint8))
+            return
+        last, t = self._writes(*pending, int(pending[1][-1]), t, first_write, strobe_level)
+        yield last
+
+    @staticmethod
+    def _writes(high: np.ndarray, dirs: np.ndarray, per: np.ndarray, next_dirs: int, t0: int, first_write: int,
+                strobe_level: int) -> tuple[StepChunk, int]:
+        t_ns, data = chunk_writes_kernel(np.asarray(high, np.uint8), np.asarray(dirs, np.uint8),
+                                         np.asarray(per, np.int64), np.uint8(next_dirs), np.int64(t0))
+        return StepChunk(first_write, t_ns, data, np.full(len(t_ns), strobe_level, np.uint8)), int(t0 + per.sum())
+
+    def to_plan(self) -> StepPlan:
+        """Every write at once, as :func:`cam.drive.steps.plan_steps` makes it (small jobs, tests)."""
+        parts = list(self.chunks())
+        pts = np.asarray(self.job.points_steps, np.int64).reshape(-1, 3)
+        point_write = 2 * np.cumsum(self._n_per_move)
+        return StepPlan(
+            t_ns=np.concatenate([p.t_ns for p in parts]), data=np.concatenate([p.data for p in parts]),
+            strobe=np.concatenate([p.strobe for p in parts]), point_write=point_write,
+            pause_writes=self.pause_writes, steps_total=self.steps_total, settings=self.settings,
+            end_steps=self.end_steps, safe_z_steps=self.safe_z_steps, pause_notes=list(self.pause_notes),
+            warnings=list(self.warnings)) if len(pts) else StepPlan(
+            t_ns=np.zeros(1, np.int64), data=np.zeros(1, np.uint8), strobe=parts[0].strobe[:1],
+            point_write=np.zeros(0, np.int64), pause_writes=self.pause_writes, steps_total=self.steps_total,
+            settings=self.settings, safe_z_steps=self.safe_z_steps)
+
+
+def plan_chunks(job: Job, *, start_steps: tuple[int, int, int] = (0, 0, 0),
+                chunk_periods: int = DEFAULT_CHUNK_PERIODS, margin_periods: Optional[int] = None) -> ChunkedPlan:
+    """The step plan of ``job`` as a :class:`ChunkedPlan` (nothing per period is made until it is read).
+
+    Args:
+        job: the moves, in steps relative to where the tool stands when it starts.
+        start_steps: where the tool stands in the machine frame (the job is checked against the travel).
+        chunk_periods: step periods per chunk.
+        margin_periods: look-ahead periods on each side of a chunk (None: :func:`lookahead_margin`).
+
+    Raises:
+        TravelError: a point of the job is outside the machine travel (nothing is planned).
+    """
+    s = job.settings
+    pts = np.asarray(job.points_steps, np.int64).reshape(-1, 3)
+    origin = np.asarray(start_steps, np.int64)
+    for b0 in range(0, len(pts), _MOVE_BLOCK * 16):
+        check_travel(pts[b0:b0 + _MOVE_BLOCK * 16] + origin, s, job.pixels)
+    n = len(pts)
+    n_per_move = np.zeros(n, np.int64)
+    steps_total = np.zeros(3, np.int64)
+    for b0 in range(0, n, _MOVE_BLOCK * 16):
+        b1 = min(n, b0 + _MOVE_BLOCK * 16)
+        prev = pts[b0 - 1:b1 - 1] if b0 else np.vstack([np.zeros((1, 3), np.int64), pts[:b1 - 1]])
+        d = np.abs(pts[b0:b1] - prev)
+        steps_total += d.sum(axis=0)
+        n_per_move[b0:b1] = d.max(axis=1)
+    if job.periods is not None:
+        np.maximum(n_per_move, np.asarray(job.periods, np.int64), out=n_per_move)
+    nominal = np.zeros(n, np.int64) if job.period_ns is None else np.asarray(job.period_ns, np.int64)
+    point_period = np.cumsum(n_per_move)
+    pause_idx = np.flatnonzero(np.asarray(job.pause, bool))
+    stops = point_period[pause_idx]
+    if job.rest is not None:
+        rest = np.flatnonzero(np.asarray(job.rest, bool))
+        stops = np.concatenate([stops, point_period[rest] - n_per_move[rest], point_period[rest]])
+    stops = np.unique(stops)
+    n_periods = int(point_period[-1]) if n else 0
+    segments = None
+    if s.ramp == "linear40":
+        segments = _linear40_segments(job, pts, n_per_move, point_period)
+    min_period = min([s.delay_xy_ns, s.delay_z_ns] + ([int(nominal[nominal > 0].min())] if (nominal > 0).any() else []))
+    margin = lookahead_margin(s, min_period) if margin_periods is None else int(margin_periods)
+    pause_writes = 2 * point_period[pause_idx]
+    del point_period
+    return ChunkedPlan(
+        job=job, settings=s, n_periods=n_periods, pause_writes=pause_writes, steps_total=steps_total,
+        end_steps=tuple(int(v) for v in pts[-1]) if n else (0, 0, 0),  # type: ignore[arg-type]
+        safe_z_steps=int(job.safe_z_steps), chunk_periods=int(chunk_periods), margin_periods=margin,
+        pause_notes=list(job.pause_notes) if job.pause_notes is not None else ["Pause At"] * len(pause_writes),
+        warnings=list(job.warnings), _n_per_move=n_per_move, _nominal=nominal, _stops=stops, _segments=segments)
+
+
+def _linear40_segments(job: Job, pts: np.ndarray, n_per_move: np.ndarray,
+                       point_period: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per ramp segment (a source move): ``(S,)`` first period, length in periods, and the start delay in ns
+    (NaN: a dwell, no ramp), computed as :func:`cam.drive.ramps._linear40` does from its periods."""
+    s = job.settings
+    s_mm, v_start, _, _ = s.axis_limits()
+    start_step_ns = np.asarray(s_mm) / np.asarray(v_start) * 1e9
+    first = point_period - n_per_move
+    seg_moves = np.arange(len(pts)) if job.move_start is None else np.flatnonzero(np.asarray(job.move_start, bool))
+    if len(seg_moves) == 0:
+        seg_moves = np.zeros(1, np.int64)
+    bounds_moves = np.append(seg_moves, len(pts))
+    seg_first = first[seg_moves] if len(pts) else np.zeros(len(seg_moves), np.int64)
+    if len(pts) and job.move_start is not None:
+        seg_first = np.asarray(seg_first)
+    seg_first = np.asarray(seg_first, np.int64)
+    if job.move_start is not None and len(seg_moves) and seg_moves[0] != 0:
+        # periods before the first segment are not ramped: _linear40 only ramps from move_first on
+        pass
+    prev = np.vstack([np.zeros((1, 3), np.int64), pts[:-1]])
+    d = np.abs(pts - prev)
+    cum = np.vstack([np.zeros((1, 3), np.int64), np.cumsum(d, axis=0)])
+    steps = (cum[bounds_moves[1:]] - cum[bounds_moves[:-1]]).astype(np.float64)
+    seg_end = np.append(seg_first[1:], int(point_period[-1]) if len(pts) else 0)
+    seg_len = seg_end - seg_first
+    with np.errstate(divide="ignore", invalid="ignore"):
+        start_ns = np.max(start_step_ns * steps / seg_len[:, None], axis=1)
+    start_ns[~steps.any(axis=1) | (seg_len <= 0)] = np.nan
+    return seg_first, seg_len, start_ns
