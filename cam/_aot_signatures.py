@@ -20,8 +20,14 @@ SIGNATURES = {
     'cam.digitize._kernels.trace_layers_kernel': [
         "(Array(int32, 1, 'C'), int64, Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), )",
     ],
+    'cam.drive._kernels.chunk_writes_kernel': [
+        "(Array(uint8, 1, 'C'), Array(uint8, 1, 'C'), Array(int64, 1, 'C'), uint8, int64, )",
+    ],
     'cam.drive._kernels.periods_kernel': [
         "(Array(int64, 2, 'C'), int64, int64, Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), )",
+    ],
+    'cam.drive._kernels.stretch_kernel': [
+        "(Array(int64, 2, 'C'), int64, int64, Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), int64, int64, int64, )",
     ],
     'cam.drive._kernels.writes_kernel': [
         "(Array(uint8, 1, 'C'), Array(uint8, 1, 'C'), Array(int64, 1, 'C'), )",
