@@ -756,7 +756,7 @@ def resume_job(job: PreparedJob, journal: Journal, *, position_steps: Optional[t
     start = tuple(int(v) for v in (journal.position_steps if position_steps is None else position_steps))
     toolpath, move_index, j = resume_toolpath(job.toolpath, journal.last_move, start,  # type: ignore[arg-type]
                                               pause_pending=journal.pause_pending)
-    steps = plan_steps(toolpath, start_steps=start)  # type: ignore[arg-type]
+    steps = plan_chunks(toolpath, start_steps=start)  # type: ignore[arg-type]
     base = JournalBase(identity=job.identity, plan_sha256=job.plan_sha256, source=job.source,
                        moves=len(job.toolpath), pause=np.asarray(toolpath.pause, bool), move_index=move_index,
                        last_move=journal.last_move, pause_pending=journal.pause_pending, resumed_at_move=j,
@@ -764,7 +764,7 @@ def resume_job(job: PreparedJob, journal: Journal, *, position_steps: Optional[t
     report = dict(job.report)
     report.update(resumed_at_move=j, start_position_steps=list(start), resumed_from_state=journal.state)
     out = PreparedJob(
-        source=job.source, kind=job.kind, steps=steps, settings=job.settings, toolpath=toolpath, name=job.name,
+        source=job.source, kind=job.kind, plan=steps, settings=job.settings, toolpath=toolpath, name=job.name,
         size_mm=job.size_mm, depth_mm=job.depth_mm, warnings=list(job.warnings),
         summary=f"{job.summary}, resumed at move {j} of {len(job.toolpath)}", report=report,
         drawing_rgb=job.drawing_rgb, identity=job.identity, plan_sha256=job.plan_sha256, resumed=base,

@@ -353,7 +353,7 @@ def _job_summary(st: _AppState, job_id: str, job: PreparedJob) -> dict[str, Any]
         "job": job_id, "name": st.uploads[job_id]["name"], "kind": job.kind, "summary": job.summary,
         "size_mm": list(job.size_mm), "depth_mm": job.depth_mm,
         "estimated_time_s": round(job.estimated_time_s, 3), "warnings": list(job.warnings),
-        "tool_changes": list(job.tool_changes), "writes": len(job.steps),
+        "tool_changes": list(job.tool_changes), "writes": len(job.plan),
         "preview": f"/api/preview/{job_id}.png?v={st.counter}",
     }
 
