@@ -24,8 +24,9 @@ __all__ = [
 
 MAX_COORD_MM = 1_000_000.0
 """Every coordinate in a file, and every position it leads to, at most 1 km (1e6 mm) from its origin
-either way: G-code X Y Z I J R (after G20's inch scale, G91 sums and G92 offsets), HPGL coordinates
-(4e7 plotter units) and pen positions after relative moves, Excellon hole positions and offsets."""
+either way: G-code X Y Z I J R, G5's P Q and the control points of splines (after G20's inch scale,
+G91 sums and G92 offsets), HPGL coordinates (4e7 plotter units) and pen positions after relative
+moves, Excellon hole positions and offsets."""
 
 MIN_FEED_MM_MIN = 1e-3
 MAX_FEED_MM_MIN = 1e8
@@ -48,7 +49,8 @@ MAX_TOOL_NUMBER = 999_999
 """Tool numbers 0..999999: G-code ``T``, Excellon ``T``, HPGL pens ``SP``."""
 
 MAX_SPINDLE_RPM = 1_000_000.0
-"""A G-code spindle speed ``S`` is 0..1e6 rpm (read and ignored: the machine has no spindle output)."""
+"""A G-code spindle speed ``S`` is 0..1e6 rpm (the machine has no spindle output: S only sets G33's feed, K x S,
+which must lie within the feed range)."""
 
 MAX_LINE_NUMBER = 1_000_000_000
 """A G-code line number ``N`` is 0..1e9 (read and ignored)."""

@@ -1,8 +1,10 @@
 """G-code as LinuxCNC runs it (#18): every construct, programs in the style of seven CAM post-processors and
 LinuxCNC's own example programs, each run by ``rs274`` (the reference) and by `cam`, whose motion must stay
 within half a step of rs274's canonical path; refused features are one line naming what and why."""
+import math
 import os
 import shutil
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -13,7 +15,7 @@ import cam
 from cam.formats.gcode import load_gcode, load_tool_table, parse_gcode
 from cam.job.gcode import plan_gcode
 from cam.settings import MachineSettings, Travel
-from support.lcnc import canonical_polyline_mm, parse_canonical, run_rs274
+from support.lcnc import CanonMove, bezier_mm, canonical_polyline_mm, parse_canonical, mark_spline_ends, run_rs274
 
 needs_rs274 = pytest.mark.skipif(
     shutil.which("rs274") is None and not os.environ.get("CI"), reason="rs274 (linuxcnc-uspace) not installed"
@@ -59,12 +61,45 @@ def _positions_mm(job):
                             -steps[:, 2] * s.mm_per_step_z])
 
 
+def with_splines(path, canon, program, rs_args):
+    """rs274's moves with each ``NURBS_FEED`` (printed without its points) made the exact Bezier curve.
+
+    Its start is where rs274's move before it ends and its end is where rs274 says it is (its ``#<_x>``
+    ``#<_y>`` ``#<_z>`` after the spline's line, :func:`~support.lcnc.mark_spline_ends`; every move of that run
+    must be the same as in the first); only the inner control points, the start plus the line's I J (and the
+    end plus P Q), are taken from cam's program, whose spline ends must be rs274's.
+    """
+    splines = [m for m in program.moves if m.kind == "spline"]
+    assert sum(m.kind == "nurbs" for m in canon) == len(splines), f"{path}: not as many splines as rs274's"
+    with tempfile.TemporaryDirectory() as tmp:
+        copy = Path(tmp) / Path(path).name
+        copy.write_text(mark_spline_ends(Path(path).read_text()))
+        marked = parse_canonical(run_rs274(str(copy), **rs_args))
+    assert len(marked) == len(canon), f"{path}: the copy with spline ends marked moves differently"
+    out, k = [], 0
+    for mv, mark in zip(canon, marked):
+        assert (mv.kind, mv.center, mv.rotation, mv.order) == (mark.kind, mark.center, mark.rotation, mark.order)
+        if mv.kind != "nurbs":
+            assert np.allclose(mv.end, mark.end, atol=1e-9), f"{path}: the marked copy moves differently"
+            out.append(mv)
+            continue
+        spline = splines[k]
+        k += 1
+        assert mv.order == len(spline.controls) + 2
+        assert np.allclose(spline.end, mark.end, atol=1e-4), f"{path}:{spline.line}: cam's spline ends elsewhere"
+        out.append(CanonMove("spline", mark.end, controls=spline.controls))
+    return out
+
+
 def assert_follows_rs274(path, program, settings=WIDE):
     """cam's motion for ``program`` stays within half a step of rs274's canonical path for ``path``, and
-    reaches every end point rs274 names within half a step."""
+    reaches every end point rs274 names within half a step; a spline's path is its exact curve
+    (:func:`with_splines`)."""
     rs_args = {k: v for k, v in program.__dict__.get("_rs_args", {}).items()}
     canon_text = run_rs274(str(path), **rs_args)
     canon = parse_canonical(canon_text)
+    if any(m.kind == "nurbs" for m in canon):
+        canon = with_splines(path, canon, program, rs_args)
     step = np.array([settings.mm_per_step_xy, settings.mm_per_step_xy, settings.mm_per_step_z])
     job = plan_gcode(program, settings)
     got = _positions_mm(job) / step
@@ -537,14 +572,151 @@ def test_a_post_processor_program_runs_on_the_mock_within_half_a_step(tmp_path):
     assert dist.max() <= 0.5 + 0.03
 
 
+# -- splines (G5, G5.1) and G33 ------------------------------------------------------------------------------------
+
+SPLINES = """G21 G90 G17 G94 F300
+G10 L2 P1 X5 Y-3
+G54
+G0 X0 Y0 Z1
+G1 Z-0.5
+G5.1 X20 Y10 I5 J15
+G92 X0 Y0
+G5.1 X-10 Y5 I-2 J8
+G91 G5.1 X-5 Y-5 I0 J-4
+G90 G1 X0 Y0
+G5 X10 Y10 I3 J0 P0 Q-4
+G5 X20 Y0 P2 Q3
+G1 X30
+G92.1
+G0 Z5
+M2
+"""
+SPLINES_MM = [  # (start, inner control points, end): machine mm, worked out by hand from the text above
+    ((5, -3, -0.5), ((10, 12, -0.5),), (25, 7, -0.5)),  # G54 (5, -3); the control point is the start + I J
+    ((25, 7, -0.5), ((23, 15, -0.5),), (15, 12, -0.5)),  # G92 puts the program origin at (25, 7), not I J
+    ((15, 12, -0.5), ((15, 8, -0.5),), (10, 7, -0.5)),  # G91: the end is incremental too
+    ((25, 7, -0.5), ((28, 7, -0.5), (35, 13, -0.5)), (35, 17, -0.5)),  # G5: the second one is the end + P Q
+    ((35, 17, -0.5), ((35, 21, -0.5), (47, 10, -0.5)), (45, 7, -0.5)),  # no I J after a G5: start - its P Q
+]
+
+
+def _spline_points(program):
+    return [(m.controls, m.end) for m in program.moves if m.kind == "spline"]
+
+
+@needs_rs274
+@pytest.mark.parametrize("units, scale", [("G21", 1.0), ("G20", 25.4)])
+def test_splines_follow_the_exact_curve_and_rs274_after_offsets(tmp_path, units, scale):
+    """G5.1 and G5 after G54, G92 and G91, in mm and in inches: the control points as worked out by hand; the
+    motion within half a step of the exact curves (de Casteljau, densely) and of rs274's other moves."""
+    program = run_both(tmp_path, f"splines_{units}", SPLINES.replace("G21", units))
+    got = _spline_points(program)
+    assert len(got) == len(SPLINES_MM)
+    for (controls, end), (_, want_controls, want_end) in zip(got, SPLINES_MM):
+        assert np.allclose(controls, np.array(want_controls) * scale, atol=1e-9)
+        assert np.allclose(end, np.array(want_end) * scale, atol=1e-9)
+    # run_both: every motor position within half a step of the path; and the motion goes all along each curve
+    # as worked out by hand: every point of it is within a step of a motor position (samples 0.9 step apart)
+    step = np.array([WIDE.mm_per_step_xy, WIDE.mm_per_step_xy, WIDE.mm_per_step_z])
+    positions = cKDTree(_positions_mm(plan_gcode(program, WIDE)) / step)
+    for start, controls, end in SPLINES_MM:
+        ctrl = np.vstack([start, *controls, end]) * scale
+        gap, _ = positions.query(bezier_mm(ctrl, np.linspace(0, 1, 20_001)) / step, p=np.inf)
+        assert gap.max() <= 1.0
+    # the tangent goes on smoothly from the first G5 to the second
+    (_, c2), e = got[3]
+    (c3, _), _ = got[4]
+    assert np.allclose(np.array(e) - np.array(c2), np.array(c3) - np.array(e))
+
+
+@needs_rs274
+def test_splines_keep_the_motion_mode_as_rs274(tmp_path):
+    """G5.1 is not modal (rs274): a canned cycle or G1 before it goes on after it."""
+    run_both(tmp_path, "spline_modes", """G21 G90 G17 F100 G98
+G0 Z5
+G81 Z-1 R1 X1
+G5.1 X10 Y5 I3 J1
+X20 Y0
+G80
+G1 X2 Y2
+G5.1 X4 Y2 I1 J1
+X6
+G0 Z5
+M2
+""")
+
+
+def test_spline_samples_lie_on_the_exact_curve_and_its_box_and_crossings_are_exact():
+    from cam.job.gcode import _Bezier, _curve_points
+
+    s = cam.MachineSettings()
+    step = np.array([s.mm_per_step_xy, s.mm_per_step_xy, s.mm_per_step_z])
+    for pts in ([[0, 0, -1], [3, 40, -1], [10, -2, -1]], [[0, 0, 0], [3, 4, 0], [10, -20, 0], [8, 8, 0]],
+                [[1, 1, 0], [1, 1, 0], [1, 1, 0]]):
+        pts = np.array(pts, np.float64)
+        curve = _Bezier(pts)
+        n = curve.n_points(step)
+        way = _curve_points(curve, n, pts[-1])
+        assert np.abs(way - bezier_mm(pts, np.arange(1, n + 1) / n)).max() < 1e-9  # each sample on the curve
+        assert (np.abs(np.diff(np.vstack([pts[:1], way]), axis=0)) / step).max() <= 0.9 + 1e-9
+        dense = bezier_mm(pts, np.linspace(0, 1, 100_001))
+        lo, hi = curve.box_mm()
+        assert np.allclose(lo, dense.min(axis=0), atol=1e-6) and np.allclose(hi, dense.max(axis=0), atol=1e-6)
+        for axis in np.flatnonzero(np.ptp(pts, axis=0)):  # a constant coordinate has no crossings
+            value = float(dense[len(dense) // 3, axis])
+            ts = curve.crossings(axis, value)
+            assert ts and np.allclose(bezier_mm(pts, np.array(ts))[:, axis], value, atol=1e-9)
+            assert all(0 <= t <= 1 for t in ts)
+    assert _Bezier(np.array([[0, 0, 0], [3, 4, 0], [10, -20, 0], [8, 8, 0.0]])).crossings(0, 11.0) == []
+
+
+def test_a_spline_that_bulges_out_of_the_travel_is_refused_naming_its_line():
+    # both ends inside the thesis machine's travel (X 0..289 mm, Y -289..0 mm); the curve reaches Y +10
+    program = parse_gcode("G21 G90 F100\nG0 X10 Y-10\nG5.1 X50 Y-10 I20 J40\nM2\n", source="bulge.ngc")
+    with pytest.raises(cam.TravelError, match=r"^bulge\.ngc:3: move to .* leaves the machine travel"):
+        plan_gcode(program, cam.MachineSettings())
+    plan_gcode(parse_gcode("G21 G90 F100\nG0 X10 Y-50\nG5.1 X50 Y-50 I20 J40\nM2\n"), cam.MachineSettings())
+
+
+THREAD = """G20 G90 G18 G64
+S400 M3
+G92 X-0.1 Z0.2
+G0 X0.3 Z0.8
+G1 X0.2 F10
+G33 Z0.1 K0.05
+G33 X0.3 Z0 K[SQRT[2]*0.05]
+G0 X0.5
+G21 G92.1
+S1000
+G0 X5 Z10
+G33 Z2 K1.5
+M5
+M2
+"""
+
+
+@needs_rs274
+def test_g33_is_a_straight_feed_at_k_times_s_with_one_warning(tmp_path):
+    """rs274 prints G33 as START_SPEED_FEED_SYNC and a STRAIGHT_FEED: cam follows that line, at K x S, and says
+    once that nothing is synchronised to the spindle."""
+    program = run_both(tmp_path, "thread", THREAD)
+    feeds = [m.feed_mm_min for m in program.moves if m.line in (6, 7, 12)]
+    assert feeds == pytest.approx([0.05 * 25.4 * 400, math.sqrt(2) * 0.05 * 25.4 * 400, 1.5 * 1000])
+    assert len(program.warnings) == 1
+    assert program.warnings[0].startswith(f"{tmp_path / 'thread.ngc'}:6: G33") and "not synchronised" in \
+        program.warnings[0]
+    job = plan_gcode(program, WIDE)
+    assert job.warnings == program.warnings
+
+
 # -- LinuxCNC's own example programs ---------------------------------------------------------------------------------
 
 NCFILES = Path("/usr/share/linuxcnc/ncfiles")
 REFUSED_FEATURES = ("probing", "rotary axis", "cutter radius compensation", "cutter compensation", "lathe cycles",
-                    "lathe diameter mode", "user M code", "threading", "splines")
-"""What point 3 of #18 refuses, plus two LinuxCNC features `cam` refuses as well: G33 threading (a spindle
-encoder, like the lathe cycle G76) and G5.x splines (rs274 prints ``NURBS_FEED(3, ...)`` without its points,
-so there is no reference path to follow)."""
+                    "lathe diameter mode", "user M code")
+"""What point 3 of #18 refuses (probing, rotary axes, cutter compensation, lathe cycles, user M codes): no example
+program may be refused for anything else.  Splines (systems.ngc) and G33 (threading.ngc) run: their path is
+compared as :func:`assert_follows_rs274` says."""
 
 
 @needs_rs274
@@ -569,6 +741,7 @@ def test_linuxcnc_example_programs_match_rs274_or_are_refused_naming_the_feature
         matched.append(path.name)
     assert len(matched) + len(refused) >= 20, (matched, refused)
     assert len(matched) > len(refused)
+    assert {"systems.ngc", "threading.ngc"} <= set(matched), (matched, refused)
 
 
 def test_refused_features_say_why_in_one_line():
@@ -584,6 +757,9 @@ def test_refused_features_say_why_in_one_line():
         "G76 P0.05 Z-1": "'G76': lathe cycles are not supported",
         "M100": "user M code 'M100' is not supported",
         "M150 P1": "user M code 'M150' is not supported",
+        "G33.1 Z-5 K1": "'G33.1': rigid tapping is not supported: the machine has no spindle encoder",
+        "G5.2 X1 Y1 P1 L3": "'G5.2': NURBS blocks (G5.2 .. G5.3) are not supported",
+        "G5.3": "'G5.3': NURBS blocks (G5.2 .. G5.3) are not supported",
     }
     for words, fragment in cases.items():
         with pytest.raises(cam.ParseError) as info:

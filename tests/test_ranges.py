@@ -11,7 +11,7 @@ import pytest
 import cam
 from cam.digitize.digitized import parse_digitized
 from cam.formats.gcode import parse_gcode
-from cam.job.gcode import _Arc, _arc_points, _Frame, plan_gcode
+from cam.job.gcode import _Arc, _curve_points, _Frame, plan_gcode
 from cam.limits import MAX_COORD_MM, MAX_MOVE_S
 
 from test_cli_checks import ENV, cli, refused
@@ -117,7 +117,7 @@ def _sampled_refusal(program_text: str, settings: cam.MachineSettings) -> str:
     cur = np.array(before[-1].end if before else (0.0, 0.0, 0.0))
     frame = _Frame(settings, False)
     arc = _Arc.of(cur, mv)
-    way = _arc_points(arc, arc.n_points(frame.step_mm), np.array(mv.end))
+    way = _curve_points(arc, arc.n_points(frame.step_mm), np.array(mv.end))
     try:
         frame.check(way, way * frame.to_steps, f"arc.ngc:{mv.line}")
     except cam.TravelError as exc:

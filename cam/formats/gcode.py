@@ -4,6 +4,10 @@ A small interpreter for the LinuxCNC language (tested against LinuxCNC's own ``r
 
 * motion: G0, G1, G2/G3 in the G17 (XY), G18 (XZ) and G19 (YZ) planes by I/J/K or R, full circles,
   helical moves, ``P`` turns, G90.1/G91.1 arc centres; polar ``@`` ``^`` words (G17); G4 dwell;
+  G5 (cubic) and G5.1 (quadratic) Bezier splines in G17, each on its own line as in rs274 (I J, P Q
+  offset the control points from the start and the end; a G5 without I J right after a G5 goes on
+  along its tangent); G33 as a straight feed at K x S, with one warning (no spindle encoder: nothing
+  synchronised, a multi-pass thread does not line up);
 * canned cycles G73, G81, G82, G83, G85, G89 (G17) with G98/G99, R, Q, P, L repeats and G80;
 * frames: G20/G21 anywhere, G90/G91, G53 (one line in machine coordinates), G54..G59.3 work
   offsets with G10 L2/L20, G92, G92.1, G92.2, G92.3, G43 H / G43.1 / G49 tool length offsets
@@ -17,8 +21,8 @@ A small interpreter for the LinuxCNC language (tested against LinuxCNC's own ``r
   ``name.ngc`` found in the subroutine path.
 
 Refused, each with a message saying why: probing (G38.x), rotary axes (A B C) and U V W, cutter
-radius compensation (G41/G42), lathe cycles and modes (G7, G7x, G76), threading (G33), splines
-(G5.x), spindle cycles (G84, G86..G88), user M codes (M100..M199) and I/O (M62..M68).
+radius compensation (G41/G42), lathe cycles and modes (G7, G7x, G76), rigid tapping (G33.1), NURBS blocks
+(G5.2/G5.3), spindle cycles (G84, G86..G88), user M codes (M100..M199) and I/O (M62..M68).
 
 Every error is a :class:`~cam.errors.ParseError` naming ``file:line``, the word and the line.
 Every number a word takes is checked against :mod:`cam.limits` before it is used.  A program runs
@@ -56,10 +60,12 @@ PLANE_AXES = {"XY": (0, 1, 2), "XZ": (2, 0, 1), "YZ": (1, 2, 0)}
 class GcodeMove:
     """One programmed move in mm (machine frame, G-code axes: +Y up, +Z up).
 
-    ``kind``: "rapid", "feed", "arc", "dwell" or "pause".  ``end`` is absolute mm; arcs carry
+    ``kind``: "rapid", "feed", "arc", "spline", "dwell" or "pause".  ``end`` is absolute mm; arcs carry
     ``center`` (mm, in the (first, second) axes of ``plane``, see :data:`PLANE_AXES`), ``clockwise``
-    and ``turns``; dwell carries ``seconds``; pause carries ``note``; ``feed_mm_min`` applies to
-    feed and arc moves, or ``minutes`` (G93 inverse time) when it is more than 0.
+    and ``turns``; a spline (G5, G5.1) is the Bezier curve from where the last move ended through its inner
+    ``controls`` (absolute mm: one for G5.1, two for G5; Z as at the start) to ``end``; dwell carries
+    ``seconds``; pause carries ``note``; ``feed_mm_min`` applies to feed, arc and spline moves, or
+    ``minutes`` (G93 inverse time) when it is more than 0.
     """
 
     kind: str
@@ -73,6 +79,7 @@ class GcodeMove:
     note: str = ""
     plane: str = "XY"
     minutes: float = 0.0
+    controls: tuple[tuple[float, float, float], ...] = ()
     file: str = ""  # the file of ``line`` when it is not the program's own (a subroutine file)
 
 
@@ -119,21 +126,21 @@ _REFUSED_G = {
        for c in (410, 411, 420, 421)},
     **{c: "lathe cycles are not supported: the machine is a 3-axis mill" for c in (700, 710, 711, 720, 721, 760)},
     70: "lathe diameter mode is not supported: the machine is a 3-axis mill",
-    330: "spindle-synchronized motion (threading, as the lathe cycle G76) is not supported: the machine has "
-         "no spindle encoder",
     331: "rigid tapping is not supported: the machine has no spindle encoder",
-    **{c: "splines are not supported: give lines and arcs" for c in (50, 51, 52)},
+    **{c: "NURBS blocks (G5.2 .. G5.3) are not supported: give G5 or G5.1 splines, lines or arcs"
+       for c in (52, 53)},
     **{c: "this canned cycle needs spindle control, which the machine does not have" for c in (840, 860, 870, 880)},
     950: "feed per revolution is not supported: the machine has no spindle encoder",
     432: "G43.2 (added tool length offsets) is not supported",
     171: "user-defined planes are not supported", 181: "user-defined planes are not supported",
     191: "user-defined planes are not supported",
 }
-_SUPPORTED_G = {0, 10, 20, 30, 40, 80, 100, 170, 180, 190, 200, 210, 280, 281, 300, 301, 400, 430, 431, 490, 530,
+_SUPPORTED_G = {0, 10, 20, 30, 40, 50, 51, 330, 80, 100, 170, 180, 190, 200, 210, 280, 281, 300, 301, 400, 430, 431, 490, 530,
                 540, 550, 560, 570, 580, 590, 591, 592, 593, 610, 611, 640, 730, 800, 810, 820, 830, 850, 890,
                 900, 901, 910, 911, 920, 921, 922, 923, 930, 940, 960, 970, 980, 990}
 _CYCLES = {730, 810, 820, 830, 850, 890}
-_MOTION = {0, 10, 20, 30, 800} | _CYCLES
+_MOTION = {0, 10, 20, 30, 330, 800} | _CYCLES
+_SPLINES = {50, 51}  # G5, G5.1: motion on their own line only (rs274 keeps the modal motion mode)
 _CS = {540: 1, 550: 2, 560: 3, 570: 4, 580: 5, 590: 6, 591: 7, 592: 8, 593: 9}
 _IGNORED_M = {3, 4, 5, 48, 49, 50, 51, 52, 53}
 _IO_M = {62, 63, 64, 65, 66, 67, 68}
@@ -240,6 +247,9 @@ class _Interp:
         self.moves: list[GcodeMove] = []
         self.warnings: list[str] = []
         self.coolant_warned = False
+        self.sync_warned = False
+        self.spindle_rpm = 0.0  # S: the machine has no spindle output; G33's feed is K x S
+        self.spindle_on = False  # M3/M4 (on) or M5 (off): rs274 refuses G33 with the spindle stopped
         self.params: dict[int, float] = {}
         for i, a in enumerate(home_g28_mm):
             self.params[5161 + i] = float(a)
@@ -257,6 +267,7 @@ class _Interp:
         self.arc_absolute = False
         self.plane = "XY"
         self.motion: int | None = None
+        self.g5_reflect: tuple[float, float] | None = None  # mm: the I J a G5 without them takes after a G5
         self.feed = 0.0  # mm/min (G94) or 1/min (G93)
         self.inverse_time = False
         self.retract_r = False  # G99
@@ -326,9 +337,9 @@ class _Interp:
             "_selected_tool": float(self.selected_tool), "_line": float(self.line_no),
             "_coord_system": float({1: 540, 2: 550, 3: 560, 4: 570, 5: 580, 6: 590, 7: 591, 8: 592, 9: 593}[self.cs]),
             "_plane": float({"XY": 170, "XZ": 180, "YZ": 190}[self.plane]),
-            "_motion_mode": float(self.motion if self.motion is not None else 800),
+            "_motion_mode": float(self.motion * 10 if self.motion is not None else 800),
             "_retract_r_plane": float(self.retract_r), "_retract_old_z": float(not self.retract_r),
-            "_task": 0.0, "_rpm": 0.0,
+            "_task": 0.0, "_rpm": self.spindle_rpm,
         }
         return table.get(name)
 
@@ -618,7 +629,8 @@ class _Interp:
             if m not in (0, 1, 2, 6, 7, 8, 9, 30, 60, 61, 70, 71, 72, 73) and m not in _IGNORED_M:
                 raise self.err(f"unsupported word '{text}'")
         motions = codes & _MOTION
-        if len(motions) > 1:
+        splines = codes & _SPLINES
+        if len(motions | splines) > 1:
             raise self.err("two motion codes on one line")
         if 930 in codes:
             self.inverse_time = True
@@ -629,9 +641,15 @@ class _Interp:
             self.scale = 25.4
         if 210 in codes:
             self.scale = 1.0
-        self.check_words(vals, texts)
+        self.check_words(vals, texts, pq_offsets=50 in codes)
         if "f" in vals:
             self.feed = vals["f"] if self.inverse_time else vals["f"] * self.scale
+        if "s" in vals:
+            self.spindle_rpm = vals["s"]
+        if mcodes & {3, 4}:
+            self.spindle_on = True
+        if 5 in mcodes:
+            self.spindle_on = False
         if "t" in vals:
             t = int(vals["t"])
             if self.tool_table is not None and t and t not in self.tool_table:
@@ -712,10 +730,14 @@ class _Interp:
             self.motion = None if m == 800 else m // 10
             if m == 800:
                 self.cycle_il = None
-        if "q" in vals and not (codes & {640} or 61 in mcodes or self.motion in (73, 83)):
+        if "q" in vals and not (codes & {640, 50} or 61 in mcodes or self.motion in (73, 83)):
             raise self.err(f"unsupported word '{texts['q']}' (no G or M code on the line uses it)")
         has_axes = any(a in vals for a in "xyz@^")
-        if has_axes and not axes_used:
+        if splines:
+            if axes_used:
+                raise self.err("a spline cannot share its line with G10, G28, G30 or G92 (they use the axis words)")
+            self.spline(splines.pop(), vals)
+        elif has_axes and not axes_used:
             self.move(vals, texts, 530 in codes)
         elif any(k in vals for k in "ijk") and not axes_used and self.motion in (2, 3):
             self.move(vals, texts, 530 in codes)  # a full circle names only its centre
@@ -731,12 +753,13 @@ class _Interp:
         if mcodes & {2, 30}:
             raise _End
 
-    def check_words(self, vals: dict[str, float], texts: dict[str, str]) -> None:
-        """Every word of one line finite and in its range (:mod:`cam.limits`)."""
+    def check_words(self, vals: dict[str, float], texts: dict[str, str], *, pq_offsets: bool = False) -> None:
+        """Every word of one line finite and in its range (:mod:`cam.limits`); ``pq_offsets``: P is a
+        coordinate offset (G5), not a time."""
         scale = self.scale
         for k, v in vals.items():
             word = texts[k]
-            if k in "xyzijkrq@":
+            if k in "xyzijkrq@" or (k == "p" and pq_offsets):
                 if not abs(v * scale) <= MAX_COORD_MM:
                     raise self.err(f"word '{word}' is out of range: coordinates are at most {MAX_COORD_MM:g} mm "
                                    "either way")
@@ -768,7 +791,7 @@ class _Interp:
     def modal_state(self) -> dict:
         return {"scale": self.scale, "absolute": self.absolute, "arc_absolute": self.arc_absolute,
                 "plane": self.plane, "feed": self.feed, "inverse_time": self.inverse_time, "cs": self.cs,
-                "retract_r": self.retract_r}
+                "retract_r": self.retract_r, "spindle_rpm": self.spindle_rpm, "spindle_on": self.spindle_on}
 
     def restore_modal(self, state: dict) -> None:
         for k, v in state.items():
@@ -875,8 +898,10 @@ class _Interp:
         return t
 
     def go(self, kind: str, prog: Sequence[float], **kw) -> None:
-        """One move to the program position ``prog`` (mm); checks every position it leads to."""
+        """One move to the program position ``prog`` (mm); checks every position it leads to (a spline's
+        control points too)."""
         off = self.offsets()
+        controls_prog = kw.get("controls", ())
         mach = [p + o for p, o in zip(prog, off)]
         for a, p, q in zip("XYZ", prog, mach):
             if not (abs(p) <= MAX_COORD_MM and abs(q) <= MAX_COORD_MM):
@@ -885,18 +910,27 @@ class _Interp:
             first, second, _ = PLANE_AXES[kw.get("plane", "XY")]
             c = kw["center"]
             kw["center"] = (c[0] + off[first], c[1] + off[second])
+        if "controls" in kw:
+            kw["controls"] = tuple(tuple(p + o for p, o in zip(c, off)) for c in kw["controls"])
+            for c_prog, c_mach in zip(controls_prog, kw["controls"]):
+                for a, p, q in zip("XY", c_prog, c_mach):
+                    if not (abs(p) <= MAX_COORD_MM and abs(q) <= MAX_COORD_MM):
+                        raise self.err(f"the spline's control point reaches {a}{q:.6g} mm, beyond "
+                                       f"{MAX_COORD_MM:g} mm from the origin")
+        self.g5_reflect = None
         if self.source is not self.main:
             kw["file"] = self.source.name
         self.moves.append(GcodeMove(kind, self.line_no, tuple(mach), **kw))
         self.mach = mach
 
-    def feed_kw(self, vals: dict[str, float]) -> dict:
+    def feed_kw(self, vals: dict[str, float], what: str = "") -> dict:
+        """The feed of one feed move (``what`` names it in the message, default the motion mode)."""
         if self.inverse_time:
             if "f" not in vals:
                 raise self.err("in inverse time mode (G93) every feed move needs 'F'")
             return {"minutes": 1.0 / vals["f"], "feed_mm_min": 0.0}
         if self.feed <= 0:
-            raise self.err(f"G{self.motion} without a feed rate 'F'")
+            raise self.err(f"{what or f'G{self.motion}'} without a feed rate 'F'")
         return {"feed_mm_min": self.feed}
 
     def move(self, vals: dict[str, float], texts: dict[str, str], machine: bool) -> None:
@@ -914,7 +948,7 @@ class _Interp:
             for i, a in enumerate("xyz"):
                 if a in vals:
                     t[i] = vals[a] * self.scale - off[i]
-        elif self.motion in (0, 1, 2, 3):
+        elif self.motion in (0, 1, 2, 3, 33):
             t = self.target(vals)
         else:
             self.canned_cycle(vals)
@@ -927,7 +961,75 @@ class _Interp:
             else:
                 self.go("feed", t, **self.feed_kw(vals))
             return
+        if self.motion == 33:
+            self.thread_feed(vals, t)
+            return
         self.arc(vals, t)
+
+    def spline(self, code: int, vals: dict[str, float]) -> None:
+        """G5 (cubic) or G5.1 (quadratic) Bezier spline in the XY plane, as LinuxCNC's documentation and rs274
+        define them: I J offset the first control point from the start, P Q (G5) the second one from the end;
+        the offsets are incremental, in the program's units, whatever G90/G91, G90.1/G91.1 and the offsets."""
+        name = "G5" if code == 50 else "G5.1"
+        if self.plane != "XY":
+            raise self.err(f"{name} splines need the XY plane (G17)")
+        if "z" in vals:
+            raise self.err(f"{name} splines move X and Y only, not Z")
+        for k in "kr":
+            if k in vals:
+                raise self.err(f"'{k.upper()}' is not a word of {name} (it takes X Y I J"
+                               + (" P Q)" if code == 50 else ")"))
+        if not any(a in vals for a in "xy@^"):
+            raise self.err(f"{name} needs an end point X and/or Y")
+        feed = self.feed_kw(vals, name)
+        s = self.scale
+        p0, t = self.pos(), self.target(vals)
+        has_ij = ("i" in vals, "j" in vals)
+        if code == 51:
+            if "p" in vals or "q" in vals:
+                raise self.err("'P' and 'Q' are words of G5, not of G5.1")
+            if not all(has_ij):
+                raise self.err("G5.1 needs both I and J, the control point's offset from the start")
+            controls = [(p0[0] + vals["i"] * s, p0[1] + vals["j"] * s, p0[2])]
+        else:
+            if any(has_ij) and not all(has_ij):
+                raise self.err("G5 needs both I and J, or neither (right after a G5: its end tangent goes on)")
+            if "p" not in vals or "q" not in vals:
+                raise self.err("G5 needs both P and Q, the second control point's offset from the end")
+            if all(has_ij):
+                di, dj = vals["i"] * s, vals["j"] * s
+            elif self.g5_reflect is None:
+                raise self.err("G5 needs I and J unless the move before it is a G5 (the first of a series)")
+            else:
+                di, dj = self.g5_reflect
+            controls = [(p0[0] + di, p0[1] + dj, p0[2]), (t[0] + vals["p"] * s, t[1] + vals["q"] * s, p0[2])]
+        self.go("spline", t, controls=tuple(controls), **feed)
+        if code == 50:
+            self.g5_reflect = (-vals["p"] * s, -vals["q"] * s)
+
+    def thread_feed(self, vals: dict[str, float], t: list[float]) -> None:
+        """G33 as a straight feed move at K x S (the machine cannot follow a spindle it has no encoder on)."""
+        if any(k in vals for k in "ijr"):
+            raise self.err("I, J or R given with G33 (it takes X Y Z and K)")
+        if "k" not in vals:
+            raise self.err("G33 needs 'K', the distance per spindle revolution, on every line")
+        k = vals["k"]
+        if k <= 0:
+            raise self.err(f"G33 needs a distance per revolution 'K' above 0, not K{k:g}")
+        if not self.spindle_on:
+            raise self.err("G33 needs the spindle turning (M3 or M4)")
+        if self.spindle_rpm <= 0:
+            raise self.err("G33 needs a spindle speed 'S' above 0: its feed is K x S")
+        feed = k * self.scale * self.spindle_rpm
+        if not MIN_FEED_MM_MIN <= feed <= MAX_FEED_MM_MIN:
+            raise self.err(f"G33's feed K x S = {feed:g} mm/min is out of range: "
+                           f"{MIN_FEED_MM_MIN:g}..{MAX_FEED_MM_MIN:g} mm/min")
+        if not self.sync_warned:
+            self.sync_warned = True
+            self.warnings.append(f"{self.source.name}:{self.line_no}: G33 runs as a straight feed at K x S, not "
+                                 "synchronised to the spindle (the machine has no spindle encoder): the passes of a "
+                                 "multi-pass thread will not line up")
+        self.go("feed", t, feed_mm_min=feed)
 
     def arc(self, vals: dict[str, float], t: list[float]) -> None:
         def texts_of(letter: str) -> str:

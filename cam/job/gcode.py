@@ -10,9 +10,10 @@ step to a point on the programmed path: each period moves every axis by at
 most one step, and each position is the rounding of the exact path point, so
 the decoded motion stays within half a step (per axis) of the program.
 
-The job is the motion itself: per move (a G-code line, an arc's chords) the
-planner computes the exact path point at the end of every step period and
-rounds it; consecutive periods that step the same axes the same way are one
+The job is the motion itself: per move (a G-code line, the points of an arc
+or of a G5/G5.1 spline, no axis more than 0.9 step apart) the planner
+computes the exact path point at the end of every step period and rounds
+it; consecutive periods that step the same axes the same way are one
 straight move of the job (so :func:`cam.drive.steps.plan_steps` makes exactly
 these periods again), with the move's feed as its nominal period.
 """
@@ -81,7 +82,7 @@ class _Arc:
         return out
 
     def n_points(self, step_mm: np.ndarray) -> int:
-        """How many points :func:`_arc_points` takes: no axis moves more than 0.9 step between two."""
+        """How many points :func:`_curve_points` takes: no axis moves more than 0.9 step between two."""
         first, second, third = self.axes
         arc_len_steps = abs(self.sweep_rad) * self.r_mm / min(step_mm[first], step_mm[second])
         dz_steps = abs(self.z1_mm - self.z0_mm) / step_mm[third]
@@ -120,9 +121,79 @@ class _Arc:
         return pts.min(axis=0), pts.max(axis=0)
 
 
-def _arc_points(arc: _Arc, n: int, end_mm: np.ndarray) -> np.ndarray:
-    """``(n, 3)`` points along an arc (mm), the last one exactly the move's end (see :meth:`_Arc.n_points`)."""
-    pts = arc.at(np.arange(1, n + 1) / n)
+@dataclass(frozen=True, eq=False)
+class _Bezier:
+    """The Bezier curve of one G5 (cubic) or G5.1 (quadratic) move: ``points_mm``, ``(degree + 1, 3)`` machine-frame
+    mm, the start (where the last move ended), the move's inner control points and its end.  It has the
+    interface of :class:`_Arc` (``at``, ``n_points``, ``crossings``, ``box_mm``) so that it is checked against
+    the travel and sampled the same way."""
+
+    points_mm: np.ndarray
+
+    @classmethod
+    def of(cls, p0: np.ndarray, mv: GcodeMove) -> "_Bezier":
+        """The curve of the spline move ``mv`` from ``p0`` (mm)."""
+        return cls(np.vstack([np.asarray(p0, np.float64)[None, :], np.array(mv.controls, np.float64).reshape(-1, 3),
+                              np.array(mv.end, np.float64)[None, :]]))
+
+    @property
+    def degree(self) -> int:
+        return len(self.points_mm) - 1
+
+    def _power(self) -> np.ndarray:
+        """``(degree + 1, 3)`` coefficients of the curve as a polynomial in t, lowest power first:
+        C(n, k) times the k-th forward difference of the control points."""
+        n = self.degree
+        return np.array([math.comb(n, k) * np.diff(self.points_mm, k, axis=0)[0] for k in range(n + 1)])
+
+    def at(self, t: np.ndarray) -> np.ndarray:
+        """``(len(t), 3)`` points (mm, X Y Z) at parameters ``t`` (0..1), in the Bernstein form."""
+        t = np.asarray(t, np.float64)[:, None]
+        n = self.degree
+        return sum(math.comb(n, k) * (1 - t) ** (n - k) * t ** k * self.points_mm[k][None, :] for k in range(n + 1))
+
+    def n_points(self, step_mm: np.ndarray) -> int:
+        """How many points :func:`_curve_points` takes: no axis moves more than 0.9 step between two.  The
+        derivative of the curve is a Bezier curve through ``degree`` times the control points' differences,
+        so no coordinate changes faster than ``degree x`` the largest of them over t = 0..1."""
+        speed_steps = self.degree * np.abs(np.diff(self.points_mm, axis=0) / step_mm).max()
+        return max(1, int(math.ceil(speed_steps / 0.9)))
+
+    def _roots(self, coeffs: np.ndarray) -> list[float]:
+        """The real roots in 0..1 of the polynomial ``coeffs`` (lowest power first)."""
+        c = np.trim_zeros(np.asarray(coeffs, np.float64), "b")
+        if len(c) < 2:
+            return []
+        r = np.roots(c[::-1])
+        scale = max(1.0, float(np.abs(c).max()))
+        real = r[np.abs(r.imag) <= 1e-9 * scale].real
+        return [min(1.0, max(0.0, float(t))) for t in real if -1e-12 <= t <= 1 + 1e-12]
+
+    def crossings(self, axis: int, value_mm: float) -> list[float]:
+        """The parameters t in 0..1 where the curve's coordinate ``axis`` (0 X, 1 Y, 2 Z) equals ``value_mm``."""
+        c = self._power()[:, axis].copy()
+        c[0] -= value_mm
+        return self._roots(c)
+
+    def box_mm(self) -> tuple[np.ndarray, np.ndarray]:
+        """The curve's bounding box ``(lo, hi)``, ``(3,)`` mm each: its ends and the extremes where a
+        coordinate's derivative is zero (nothing sampled)."""
+        c = self._power()
+        ts = [0.0, 1.0]
+        for axis in range(3):
+            ts += self._roots(c[1:, axis] * np.arange(1, len(c)))
+        pts = self.at(np.array(ts))
+        return pts.min(axis=0), pts.max(axis=0)
+
+
+_Curve = _Arc | _Bezier
+"""A move sampled into points: an arc (G2/G3) or a spline (G5/G5.1)."""
+
+
+def _curve_points(curve: _Curve, n: int, end_mm: np.ndarray) -> np.ndarray:
+    """``(n, 3)`` points along an arc or a spline (mm), the last one exactly the move's end (see
+    :meth:`_Arc.n_points`): each is a point of the exact curve."""
+    pts = curve.at(np.arange(1, n + 1) / n)
     pts[-1] = end_mm
     return pts
 
@@ -231,10 +302,10 @@ class _Frame:
         b = (self.hi + 0.5) / self.to_steps
         return np.minimum(a, b), np.maximum(a, b)
 
-    def check_arc(self, arc: _Arc, n: int, end_mm: np.ndarray, where: str) -> None:
-        """Refuse an arc that leaves the travel before it is sampled, naming the first of its ``n`` points
-        outside (:func:`_arc_points`); its bounding box and the points where it crosses the travel's
-        bounds are computed, not sampled, so a huge arc costs nothing."""
+    def check_curve(self, arc: _Curve, n: int, end_mm: np.ndarray, where: str) -> None:
+        """Refuse an arc or a spline that leaves the travel before it is sampled, naming the first of its ``n``
+        points outside (:func:`_curve_points`); its bounding box and the points where it crosses the travel's
+        bounds are computed, not sampled, so a huge curve costs nothing."""
         lo, hi = self.box_mm()
         a_lo, a_hi = arc.box_mm()
         if np.all(a_lo >= lo) and np.all(a_hi <= hi):
@@ -320,14 +391,14 @@ def plan_gcode(program: GcodeProgram, settings: MachineSettings = DEFAULT_SETTIN
                 program_ns = _add_time(program_ns, int(round(mv.seconds * 1e9)), where)
             continue
         end = np.array(mv.end, np.float64)
-        if mv.kind == "arc":
-            arc = _Arc.of(cur_mm, mv)
-            n = arc.n_points(frame.step_mm)
-            frame.check_arc(arc, n, end, where)  # before anything is sampled
+        if mv.kind in ("arc", "spline"):
+            curve = _Arc.of(cur_mm, mv) if mv.kind == "arc" else _Bezier.of(cur_mm, mv)
+            n = curve.n_points(frame.step_mm)
+            frame.check_curve(curve, n, end, where)  # before anything is sampled
             if n > MAX_MOVE_PERIODS:
-                raise PlanError(f"{where}: the arc takes at least {n} step periods; one move may take at most "
-                                f"{MAX_MOVE_PERIODS}")
-            way = _arc_points(arc, n, end)
+                raise PlanError(f"{where}: the {mv.kind} takes at least {n} step periods; one move may take at "
+                                f"most {MAX_MOVE_PERIODS}")
+            way = _curve_points(curve, n, end)
         else:
             way = end[None, :]
         way_steps = way * frame.to_steps

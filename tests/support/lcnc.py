@@ -17,20 +17,29 @@ import numpy as np
 
 from cam.errors import CamError
 
-__all__ = ["CanonMove", "run_rs274", "parse_canonical", "canonical_polyline_mm", "carve_canonical"]
+__all__ = ["CanonMove", "run_rs274", "parse_canonical", "canonical_polyline_mm", "carve_canonical", "bezier_mm",
+           "mark_spline_ends"]
 
 _CALL = re.compile(r"^\s*\d+\s+N[.\d]*\s*(\w+)\((.*)\)\s*$")
 
 
 @dataclass
 class CanonMove:
-    """One canonical move: ``kind`` is "traverse", "feed" or "arc"; positions in the program's units."""
+    """One canonical move: ``kind`` is "traverse", "feed", "arc", "nurbs" or "spline"; positions in mm.
+
+    rs274 prints a G5/G5.1 spline as ``NURBS_FEED(n, ...)``, without its points: a "nurbs" move knows only
+    ``order`` (n control points, start and end included) and its end only in a program marked by
+    :func:`mark_spline_ends` (else NaN).  A test that knows the inner control points makes it a "spline" move
+    (the Bezier curve from the previous end through ``controls`` to ``end``).
+    """
 
     kind: str
     end: tuple[float, float, float]
     center: tuple[float, float] | None = None
     rotation: int = 0  # ARC_FEED: >0 counter-clockwise turns, <0 clockwise
     plane: str = "XY"  # ARC_FEED: the arc's plane; ``center`` is in its (first, second) axes
+    order: int = 0  # NURBS_FEED: its number of control points
+    controls: tuple[tuple[float, float, float], ...] = ()  # a spline's inner control points, mm
 
 
 def run_rs274(path: str, *, units_mm: bool = True, tool_table: str | None = None, var_file: str | None = None,
@@ -60,7 +69,8 @@ def parse_canonical(text: str) -> list[CanonMove]:
     """Moves of rs274's canonical output in machine mm.
 
     Canonical coordinates are in the program frame; the G5x and G92 offsets
-    that rs274 reports are added, and inches are converted to mm.
+    that rs274 reports are added, and inches are converted to mm.  A "nurbs" move
+    (``NURBS_FEED``) ends where a :func:`mark_spline_ends` message says.
     """
     moves: list[CanonMove] = []
     scale = 1.0
@@ -100,18 +110,60 @@ def parse_canonical(text: str) -> list[CanonMove]:
             end[first], end[second], end[third] = e1, e2, e3
             end = [v + o for v, o in zip(end, off)]
             moves.append(CanonMove("arc", tuple(end), (c1 + off[first], c2 + off[second]), rot, plane))
+        elif name == "NURBS_FEED":
+            moves.append(CanonMove("nurbs", (math.nan,) * 3, order=int(args[0])))
+        elif name == "MESSAGE" and args[0].strip('"').split()[:1] == [SPLINE_END]:
+            if not moves or moves[-1].kind != "nurbs":
+                raise CamError(f"rs274 printed a spline end after no spline: {line}")
+            moves[-1].end = tuple(float(a) * scale + o for a, o in zip(args[0].strip('"').split()[1:4], off))
     return moves
+
+
+def bezier_mm(points_mm: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """``(len(t), 3)`` points of the Bezier curve with control points ``points_mm`` (``(k, 3)``, start first,
+    end last) at parameters ``t``, by de Casteljau's repeated linear interpolation (not cam's formula)."""
+    t = np.asarray(t, np.float64)[:, None, None]
+    pts = np.broadcast_to(np.asarray(points_mm, np.float64)[None], (t.shape[0], *np.shape(points_mm)))
+    while pts.shape[1] > 1:
+        pts = pts[:, :-1] * (1 - t) + pts[:, 1:] * t
+    return pts[:, 0]
+
+
+_SPLINE_WORD = re.compile(r"g\s*0*5\s*(\.\s*1)?(?![\d.])", re.I)
+SPLINE_END = "spline_end"
+
+
+def mark_spline_ends(text: str) -> str:
+    """The program with a ``(debug, spline_end #<_x> #<_y> #<_z>)`` line after each G5/G5.1 line, so that rs274
+    prints where each spline ends (its ``NURBS_FEED`` has no points): :func:`parse_canonical` gives that
+    ``nurbs`` move its end.  The comments change no motion."""
+    out = []
+    for line in text.splitlines():
+        out.append(line)
+        code = re.match(r"[^(;]*", line).group(0)
+        if _SPLINE_WORD.search(code):
+            out.append(f"(debug,{SPLINE_END} #<_x> #<_y> #<_z>)")
+    return "\n".join(out) + "\n"
 
 
 def canonical_polyline_mm(moves: list[CanonMove], *, max_chord_mm: float = 0.005) -> tuple[np.ndarray, np.ndarray]:
     """The path as a dense polyline: ``(K, 3)`` mm points and ``(K,)`` bool "reached by a feed move".
 
-    Arcs are split into chords no longer than ``max_chord_mm``.  The start is (0, 0, 0).
+    Arcs and splines are split into chords no longer than ``max_chord_mm``.  The start is (0, 0, 0).
     """
     pts = [(0.0, 0.0, 0.0)]
     feed = [False]
     for mv in moves:
         x0, y0, z0 = pts[-1]
+        if mv.kind == "nurbs":
+            raise CamError("rs274 prints NURBS_FEED without its points: make it a 'spline' move first")
+        if mv.kind == "spline":
+            ctrl = np.array([pts[-1], *mv.controls, mv.end], np.float64)
+            n = max(1, int(math.ceil(np.linalg.norm(np.diff(ctrl, axis=0), axis=1).sum() / max_chord_mm)))
+            pts.extend(map(tuple, bezier_mm(ctrl, np.arange(1, n + 1) / n)))
+            feed.extend([True] * n)
+            pts[-1] = mv.end
+            continue
         if mv.kind != "arc":
             pts.append(mv.end)
             feed.append(mv.kind == "feed")
