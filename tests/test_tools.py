@@ -246,3 +246,52 @@ def test_parse_tool_round_trips():
         assert parse_tool(tool.spec()) == tool
     v = parse_tool("v:60:0.1")
     assert v.width_at_depth_mm(v.depth_for_width_mm(0.7)) == pytest.approx(0.7)
+
+
+# -- roughing and finishing ---------------------------------------------------------------------------------
+
+
+def test_roughing_with_a_larger_tool_then_finishing_never_gouges_and_changes_tools_at_home():
+    """--stepdown with --rough-tool: levels cut by a 2 mm flat end mill, a tool change at the home, then the
+    1 mm ball's finishing pass; each part carved with its own tool, together they cut nothing below the
+    relief, and the finish leaves no more than finishing alone would."""
+    drawing, expr = RELIEFS["hemisphere"]
+    d = cam.digitize(drawing())
+    profile = cam.profile_from_expr(expr, d.n_layers)
+    want, _, _ = carve_job(cam.plan(d, profile=profile))
+    stepdown = 30
+    job = cam.plan(d, profile=profile, tool="ball:1", stepdown_px=stepdown, rough_tool="flat:2")
+    assert job.pause_notes and job.pause_notes[0].startswith("tool change")
+    plan = cam.plan_steps(job)
+    change = int(plan.pause_writes[0])
+    motion = cam.decode_pin_log(cam.run(job, on_pause=lambda *a: True).pin_log(), job.settings)
+    assert tuple(motion.position_steps[change]) == (0, 0, 0)  # the tool is changed at the home, above the work
+    rough = cam.Motion(motion.t_ns[:change + 1], motion.position_steps[:change + 1], motion.step_counts)
+    finish = cam.Motion(motion.t_ns[change:], motion.position_steps[change:], motion.step_counts)
+    cut_rough = carve_tool(rough, want.shape, parse_tool("flat:2"), SETTINGS).depth_steps
+    cut_finish = carve_tool(finish, want.shape, parse_tool("ball:1"), SETTINGS).depth_steps
+    both = compare_surface(np.maximum(cut_rough, cut_finish), want, SETTINGS)
+    assert both.max_gouge_mm == 0.0
+    # roughing goes down level by level: its tip depths are multiples of the step-down or the tool's limit,
+    # never below the deepest level the relief needs roughing to
+    rough_tips = rough.position_steps[:, 2]
+    levels = sorted({int(z) for z in rough_tips[rough_tips > 0]})
+    assert max(levels) < want.max() and len(levels) > 2
+    _, _, _, alone = _cut("hemisphere", "ball:1")
+    assert np.all(both.rest_mm <= alone.rest_mm + 1e-9)
+
+
+def test_a_wider_stepover_makes_fewer_roughing_moves():
+    drawing, expr = RELIEFS["stepped pyramid"]
+    d = cam.digitize(drawing())
+    profile = cam.profile_from_expr(expr, d.n_layers)
+    dense = cam.plan(d, profile=profile, tool="flat:1", stepdown_px=20, stepover=0.25)
+    sparse = cam.plan(d, profile=profile, tool="flat:1", stepdown_px=20, stepover=1.0)
+    assert len(sparse) < len(dense)
+    assert dense.pause_notes is None  # one tool: no change
+
+
+def test_roughing_refuses_a_2d_drawing():
+    d = cam.digitize(cam.load_image(ROOT / "samples" / "ellipse.png"))
+    with pytest.raises(CamError, match="3D reliefs"):
+        cam.plan(d, depth=5, stepdown_px=3)

@@ -36,7 +36,8 @@ _OPTION_OF_FLAG = {
     "excellon_zeros": "excellon_zeros", "flip_y": "flip_y", "scale": "scale", "fit": "fit_mm",
     "tool_table": "tool_table", "subroutine_path": "subroutine_path", "max_lines": "max_lines",
     "trace": "trace", "trace_min_length": "trace_min_length_px", "trace_fill": "trace_fill",
-    "tool": "tool", "line_width": "line_width_mm",
+    "tool": "tool", "line_width": "line_width_mm", "stepdown": "stepdown_mm", "stepover": "stepover",
+    "rough_tool": "rough_tool",
 }
 APPLIES_TO = {
     **{dest: OPTION_KINDS[option] for dest, option in _OPTION_OF_FLAG.items()},

@@ -184,6 +184,12 @@ def _add_tool_options(p: argparse.ArgumentParser) -> None:
                    "degrees): 3D reliefs are cut so the tool never goes below them anywhere")
     g.add_argument("--line-width", type=_float_list(1, "--line-width"), metavar="MM",
                    help="2D drawings with a V bit: the engraved lines' width, which sets their depth")
+    g.add_argument("--stepdown", type=_float_list(1, "--stepdown"), metavar="MM",
+                   help="3D reliefs: rough in levels this far apart before the finishing pass")
+    g.add_argument("--stepover", type=_float_list(1, "--stepover"), metavar="FRACTION",
+                   help="roughing rings' spacing as a fraction of the roughing tool's diameter (default 0.5)")
+    g.add_argument("--rough-tool", type=_tool_text, metavar="SHAPE",
+                   help="a larger roughing tool (as --tool); the job pauses at the home to change to --tool")
 
 
 def _add_excellon_options(d: argparse.ArgumentParser) -> None:

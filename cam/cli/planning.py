@@ -92,6 +92,8 @@ def job_options(args: argparse.Namespace) -> JobOptions:
         trace=bool(opt("trace", False)), trace_min_length_px=opt("trace_min_length", d.trace_min_length_px),
         trace_fill=bool(opt("trace_fill", False)),
         tool=opt("tool", None), line_width_mm=args.line_width[0] if opt("line_width", None) else None,
+        stepdown_mm=args.stepdown[0] if opt("stepdown", None) else None,
+        stepover=args.stepover[0] if opt("stepover", None) else d.stepover, rough_tool=opt("rough_tool", None),
     ).checked("options")
 
 

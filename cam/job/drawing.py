@@ -23,6 +23,7 @@ from __future__ import annotations
 
 from typing import Sequence
 
+import cv2
 import numpy as np
 
 from ..digitize.digitized import Digitized
@@ -30,6 +31,7 @@ from ..errors import PlanError, TravelError
 from ..digitize.profile import ProfileLike, as_profile
 from ..settings import DEFAULT_SETTINGS, MachineSettings
 from ._route import bfs_kernel
+from ..digitize.trace2d import trace_curves
 from ..tool import Tool, corner_depth_px, drop_depth_px, parse_tool, reach_depth_px
 from .model import CUT, RETRACT, TRAVEL, Job, PixelFrame, check_travel
 
@@ -110,6 +112,9 @@ def plan(
     pause_at: Sequence[tuple[int, int]] = (),
     profile: ProfileLike | None = None,
     tool: Tool | str | None = None,
+    stepdown_px: int | None = None,
+    stepover: float = 0.5,
+    rough_tool: Tool | str | None = None,
 ) -> Job:
     """Plan the job of a digitized drawing (the drawing planner: pixels in, machine steps out).
 
@@ -134,6 +139,12 @@ def plan(
             so the tool never cuts below the asked depth at any pixel under it; points the tool cannot
             lower into at all are left out, and a warning says how much material it leaves.  On a 2D
             drawing the curves are the tool's centre line and the depth sets the groove's width.
+        stepdown_px: 3D only: rough the relief first in levels this many Z pixels apart (each level clears
+            what the roughing tool can reach down to it, in rings ``stepover`` x its diameter apart), then
+            finish it with ``tool`` (None: no roughing).
+        stepover: the roughing rings' spacing as a fraction of the roughing tool's diameter (0 < s <= 1).
+        rough_tool: the roughing tool (None: ``tool``); a different one adds a tool-change pause at the
+            home between roughing and finishing.
 
     Returns:
         The :class:`~cam.job.model.Job` in machine steps, with its :class:`~cam.job.model.PixelFrame`,
@@ -174,6 +185,16 @@ def plan(
         raise PlanError("nothing to cut: every depth is 0")
     cutter = parse_tool(tool, "tool")
     corners = None
+    roughing = None
+    if stepdown_px is not None:
+        if digitized.mode != "3d":
+            raise PlanError("roughing (a step-down) applies to 3D reliefs; a 2D drawing's lines are cut at once")
+        if not 1 <= int(stepdown_px) <= 1_000_000 or not 0 < float(stepover) <= 1:
+            raise PlanError(f"the step-down must be at least one Z pixel and the step-over a fraction of the tool "
+                            f"0 < s <= 1, got {stepdown_px} Z px and {stepover}")
+        roughing = _roughing_targets(targets, parse_tool(rough_tool, "rough tool") if rough_tool else cutter,
+                                     int(stepdown_px), float(stepover), digitized.height_px, digitized.width_px,
+                                     settings)
     if digitized.mode == "3d" and not cutter.is_point:
         targets, corners, note = _drop_targets(targets, cutter, digitized.height_px, digitized.width_px, settings)
         warnings += note
@@ -206,6 +227,23 @@ def plan(
                                              route=fits)
     if corners is not None:
         points_px, kinds, tgt, pause = _guard_diagonals(points_px, kinds, tgt, pause, corners, oz)
+    pause_notes = None
+    if roughing is not None:
+        r_targets, r_allowed, r_corners, r_tool = roughing
+        r_targets = r_targets + np.array([0, 0, oz], np.int64)
+        r_asked = np.zeros(asked.shape, np.int64)
+        r_asked[:digitized.height_px, :digitized.width_px] = r_allowed
+        r_points, r_kinds, r_tgt, r_pause = _assemble(r_targets, np.zeros(asked.shape, bool), r_asked, settings,
+                                                      surface, safe, oz, home=(-ox, -oy), route=fits)
+        if not r_tool.is_point:
+            r_points, r_kinds, r_tgt, r_pause = _guard_diagonals(r_points, r_kinds, r_tgt, r_pause, r_corners, oz)
+        if r_tool != cutter:  # the roughing part ends at the home: change the tool there
+            r_pause[-1] = True
+            pause_notes = ([f"tool change: put in the finishing tool ({cutter.describe()}; roughing used "
+                            f"{r_tool.describe()})"] + ["Pause At"] * int(pause.sum()))
+        points_px = np.concatenate([r_points, points_px])
+        kinds, tgt, pause = (np.concatenate([r_kinds, kinds]), np.concatenate([r_tgt, tgt]),
+                             np.concatenate([r_pause, pause]))
     points_px[:, :2] += np.array([ox, oy], np.int64)
     frame = PixelFrame(digitized.width_px, digitized.height_px, (ox, oy, oz), settings.steps_per_px_xy,
                        settings.steps_per_px_z)
@@ -214,7 +252,44 @@ def plan(
     assert fits, "a job whose extent leaves the travel passed the travel check"
     return Job(points_steps=points_steps, kind=kinds, target=tgt, pause=pause, settings=settings,
                warnings=warnings, safe_z_steps=safe * settings.steps_per_px_z, pixels=frame,
-               tool=None if cutter.is_point else cutter)
+               tool=None if cutter.is_point else cutter, pause_notes=pause_notes)
+
+
+def _roughing_targets(targets: np.ndarray, rough: Tool, stepdown_px: int, stepover: float, height_px: int,
+                      width_px: int, settings: MachineSettings
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, Tool]:
+    """The roughing levels before the finishing pass: ``(targets (M, 3) in cutting order, allowed (H, W),
+    corners (H + 1, W + 1), tool)``.
+
+    Level i clears, down to ``i x stepdown_px``, every pixel where the roughing tool may go deeper than the
+    level above (:func:`cam.tool.drop_depth_px` over the deepest depth asked at each pixel): its tool centres
+    run on rings ``stepover x diameter`` apart inward from the edge of that region, plus any pixel no ring
+    comes within the tool's radius of; each ring is traced into curves (the 2D tracer), shallowest level first.
+    """
+    asked = np.zeros((height_px, width_px), np.int64)
+    np.maximum.at(asked, (targets[:, 1], targets[:, 0]), targets[:, 2])
+    px_mm, zpx_mm = settings.px_to_mm_xy(1), settings.px_to_mm_z(1)
+    allowed = drop_depth_px(asked, rough, px_mm, zpx_mm)
+    corners = corner_depth_px(asked, rough, px_mm, zpx_mm) if not rough.is_point else allowed
+    spacing_px = max(1, int(stepover * rough.diameter_mm / px_mm))
+    radius_px = max(0, int(rough.radius_mm / px_mm))
+    disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius_px + 1, 2 * radius_px + 1))
+    chunks = []
+    top = int(allowed.max(initial=0))
+    for level in range(stepdown_px, top, stepdown_px):  # the finishing pass takes the last level
+        region = allowed > level - stepdown_px
+        dist = cv2.distanceTransform(np.pad(region, 1).astype(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+        dist = dist[1:-1, 1:-1]
+        centres = region & (np.mod(np.rint(dist).astype(np.int64) - 1, spacing_px) == 0)
+        covered = cv2.dilate(centres.astype(np.uint8), disc).astype(bool)
+        centres |= region & ~covered
+        for curve in trace_curves(centres):
+            block = np.empty((len(curve), 3), np.int64)
+            block[:, :2] = curve
+            block[:, 2] = np.minimum(allowed[curve[:, 1], curve[:, 0]], level)
+            chunks.append(block)
+    empty = np.zeros((0, 3), np.int64)
+    return (np.concatenate(chunks) if chunks else empty), allowed, corners, rough
 
 
 def _drop_targets(targets: np.ndarray, cutter: Tool, height_px: int, width_px: int,

@@ -121,6 +121,9 @@ class JobOptions:
         tool: ``point``, ``flat:D``, ``ball:D`` or ``v:ANGLE:TIP`` (mm, degrees; None: the machine's ``[tool]``,
             a point by default): 3D depths are limited so the tool never cuts below the relief.
         line_width_mm: a 2D drawing's engraved line width with a V bit: sets the depth (instead of ``depth``).
+        stepdown_mm: rough a 3D relief in levels this far apart first (None: finish at once); stepover: the
+            roughing rings' spacing, a fraction of the roughing tool's diameter; rough_tool: a larger
+            roughing tool (a tool-change pause before finishing), None: the finishing tool.
     """
 
     depth: Optional[tuple[int, ...]] = None
@@ -149,6 +152,9 @@ class JobOptions:
     trace_fill: bool = False
     tool: Optional[str] = None
     line_width_mm: Optional[float] = None
+    stepdown_mm: Optional[float] = None
+    stepover: float = 0.5
+    rough_tool: Optional[str] = None
 
     @classmethod
     def from_mapping(cls, values: Mapping[str, Any], source: str = "options") -> "JobOptions":
@@ -223,6 +229,12 @@ class JobOptions:
             raise bad("profile_expr", "cannot be given together with a profile file")
         if self.tool is not None:
             parse_tool(self.tool, f"{source}: option 'tool'")
+        if self.rough_tool is not None:
+            parse_tool(self.rough_tool, f"{source}: option 'rough_tool'")
+        if self.stepdown_mm is not None and not (0 < self.stepdown_mm <= MAX_MM):
+            raise bad("stepdown_mm", f"must be > 0 and at most {MAX_MM:g} mm")
+        if not (0 < self.stepover <= 1):
+            raise bad("stepover", "must be a fraction of the tool's diameter, 0 < s <= 1")
         if self.line_width_mm is not None and not (0 < self.line_width_mm <= MAX_MM):
             raise bad("line_width_mm", f"must be > 0 and at most {MAX_MM:g} mm")
         if self.line_width_mm is not None and (self.depth is not None or self.cut_depth_mm is not None):
@@ -353,6 +365,9 @@ _PARSERS = {
     "trace_fill": _bool,
     "tool": _optional(_text),
     "line_width_mm": _optional(_float),
+    "stepdown_mm": _optional(_float),
+    "stepover": _float,
+    "rough_tool": _optional(_text),
     "scale": _optional(_float),
     "fit_mm": _optional(lambda v: _floats(2)(v.lower().replace("x", ",") if isinstance(v, str) else v)),
     "max_lines": _int,
@@ -577,8 +592,12 @@ def _prepare_pixels(path: Path, kind: str, options: JobOptions, settings: Machin
         if digitized.mode == "3d":
             raise CamError("--line-width sets the depth of a 2D drawing's engraved lines; this drawing is 3D")
         depth = max(1, int(round(cutter.depth_for_width_mm(options.line_width_mm) / settings.px_to_mm_z(1))))
+    stepdown_px = None
+    if options.stepdown_mm is not None:
+        stepdown_px = max(1, int(options.stepdown_mm / settings.px_to_mm_z(1)))
     toolpath = plan(digitized, depth=depth, settings=settings, passes=options.passes,
-                    start_at=options.start_at, pause_at=list(options.pause_at), profile=profile, tool=cutter)
+                    start_at=options.start_at, pause_at=list(options.pause_at), profile=profile, tool=cutter,
+                    stepdown_px=stepdown_px, stepover=options.stepover, rough_tool=options.rough_tool)
     steps = plan_chunks(toolpath)
     report = job_report(digitized, toolpath, steps)
     summary = (f"{path.name}: {report['objects']} object(s), {report['points']} points, "
