@@ -103,5 +103,7 @@ OPTION_KINDS.update({"trace": frozenset({"drawing"}), "trace_min_length_px": fro
                      "trace_fill": frozenset({"drawing"})})
 # real cutters (issue 19): the drawing planner limits 3D depths by the tool's shape; a V bit's line width sets
 # the depth of 2D drawings
-OPTION_KINDS.update({"tool": _DRAWINGS, "line_width_mm": _DRAWINGS, "stepdown_mm": _DRAWINGS, "stepover": _DRAWINGS,
+# and the width of the lines of vector files (SVG, HPGL), engraved along their strokes
+OPTION_KINDS.update({"tool": _DRAWINGS | {"svg", "hpgl"}, "line_width_mm": _DRAWINGS | {"svg", "hpgl"},
+                     "stepdown_mm": _DRAWINGS, "stepover": _DRAWINGS,
                      "rough_tool": _DRAWINGS})

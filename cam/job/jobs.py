@@ -649,9 +649,23 @@ def _prepare_excellon(path: Path, options: JobOptions, settings: MachineSettings
     )
 
 
+def _engraving(options: JobOptions, settings: MachineSettings, default_depth_mm: float
+               ) -> tuple[float, dict[str, Any]]:
+    """A vector file's cut depth (mm) and the report's tool and line width: ``--line-width`` with a V bit sets
+    the depth; a tool's groove at the depth is the line width."""
+    cutter = parse_tool(options.tool, "--tool") if options.tool else tool_of_settings(settings.tool)
+    depth_mm = _or(options.cut_depth_mm, default_depth_mm)
+    if options.line_width_mm is not None:
+        depth_mm = cutter.depth_for_width_mm(options.line_width_mm)
+    if cutter.is_point:
+        return depth_mm, {}
+    return depth_mm, {"tool": cutter.describe(), "line_width_mm": round(cutter.width_at_depth_mm(depth_mm), 4)}
+
+
 def _prepare_hpgl(path: Path, options: JobOptions, settings: MachineSettings, progress=None) -> PreparedJob:
     drawing = load_hpgl(path, progress=progress)
-    toolpath = plan_hpgl(drawing, settings=settings, depth_mm=_or(options.cut_depth_mm, HPGL_CUT_DEPTH_MM),
+    depth_mm, engraving = _engraving(options, settings, HPGL_CUT_DEPTH_MM)
+    toolpath = plan_hpgl(drawing, settings=settings, depth_mm=depth_mm,
                          safe_height_mm=_or(options.travel_height_mm, HPGL_SAFE_HEIGHT_MM),
                          offset_mm=options.offset_mm)
     steps = plan_chunks(toolpath)
@@ -659,13 +673,14 @@ def _prepare_hpgl(path: Path, options: JobOptions, settings: MachineSettings, pr
         source=str(path), kind="hpgl", plan=steps, settings=settings, toolpath=toolpath,
         warnings=list(drawing.warnings), summary=f"{path.name}: {drawing.n_strokes} pen-down strokes",
         report={"strokes": drawing.n_strokes, "points": len(drawing.points_pu),
-                "pens": sorted(set(int(p) for p in drawing.stroke_pen))},
+                "pens": sorted(set(int(p) for p in drawing.stroke_pen)), **engraving},
     )
 
 
 def _prepare_svg(path: Path, options: JobOptions, settings: MachineSettings) -> PreparedJob:
     drawing = load_svg(path)
-    toolpath = plan_svg(drawing, settings=settings, depth_mm=_or(options.cut_depth_mm, SVG_CUT_DEPTH_MM),
+    depth_mm, engraving = _engraving(options, settings, SVG_CUT_DEPTH_MM)
+    toolpath = plan_svg(drawing, settings=settings, depth_mm=depth_mm,
                         safe_height_mm=_or(options.travel_height_mm, SVG_SAFE_HEIGHT_MM),
                         scale=options.scale, fit_mm=options.fit_mm, offset_mm=options.offset_mm)
     steps = plan_chunks(toolpath)
@@ -674,7 +689,8 @@ def _prepare_svg(path: Path, options: JobOptions, settings: MachineSettings) -> 
         source=str(path), kind="svg", plan=steps, settings=settings, toolpath=toolpath,
         warnings=list(drawing.warnings), summary=f"{path.name}: {drawing.n_strokes} strokes ({counts})",
         report={"strokes": drawing.n_strokes, "elements": dict(drawing.element_counts),
-                "segments": drawing.segment_counts, "document_mm": [round(v, 3) for v in drawing.size_mm]},
+                "segments": drawing.segment_counts, "document_mm": [round(v, 3) for v in drawing.size_mm],
+                **engraving},
     )
 
 
