@@ -11,6 +11,17 @@ from numba import njit
 from .._compiled import entry
 
 
+@njit(cache=True, inline="always")
+def _dda_axis(r, ad, n, d, dir_state, axis, clock_bit):
+    """One period of one axis's DDA (``ad`` steps over ``n`` periods, remainder ``r``): the remainder after it
+    and the axis's clock bit if it steps in it (its direction, ``d``'s sign, then goes into ``dir_state``)."""
+    r += ad
+    if r >= n:
+        dir_state[axis] = 1 if d > 0 else 0
+        return r - n, clock_bit
+    return r, 0
+
+
 @entry
 @njit(cache=True)
 def periods_kernel(pts, delay_xy_ns, delay_z_ns, clock, dirbit, n_min):
@@ -63,22 +74,10 @@ def periods_kernel(pts, delay_xy_ns, delay_z_ns, clock, dirbit, n_min):
         r1 = 0
         r2 = 0
         for k in range(1, n + 1):
-            clk = 0
-            r0 += ad0
-            if r0 >= n:
-                r0 -= n
-                clk |= clock[0]
-                dir_state[0] = 1 if d0 > 0 else 0
-            r1 += ad1
-            if r1 >= n:
-                r1 -= n
-                clk |= clock[1]
-                dir_state[1] = 1 if d1 > 0 else 0
-            r2 += ad2
-            if r2 >= n:
-                r2 -= n
-                clk |= clock[2]
-                dir_state[2] = 1 if d2 > 0 else 0
+            r0, c0 = _dda_axis(r0, ad0, n, d0, dir_state, 0, clock[0])
+            r1, c1 = _dda_axis(r1, ad1, n, d1, dir_state, 1, clock[1])
+            r2, c2 = _dda_axis(r2, ad2, n, d2, dir_state, 2, clock[2])
+            clk = c0 | c1 | c2
             dd = dir_state[0] * dirbit[0] + dir_state[1] * dirbit[1] + dir_state[2] * dirbit[2]
             high[p] = dd | clk
             dirs[p] = dd
@@ -159,22 +158,10 @@ def stretch_kernel(pts, delay_xy_ns, delay_z_ns, clock, dirbit, n_per_move, nomi
         r2 = (k_start * ad2) % n
         k = k_start
         while k < n and p < max_periods:
-            clk = 0
-            r0 += ad0
-            if r0 >= n:
-                r0 -= n
-                clk |= clock[0]
-                dir_state[0] = 1 if d0 > 0 else 0
-            r1 += ad1
-            if r1 >= n:
-                r1 -= n
-                clk |= clock[1]
-                dir_state[1] = 1 if d1 > 0 else 0
-            r2 += ad2
-            if r2 >= n:
-                r2 -= n
-                clk |= clock[2]
-                dir_state[2] = 1 if d2 > 0 else 0
+            r0, c0 = _dda_axis(r0, ad0, n, d0, dir_state, 0, clock[0])
+            r1, c1 = _dda_axis(r1, ad1, n, d1, dir_state, 1, clock[1])
+            r2, c2 = _dda_axis(r2, ad2, n, d2, dir_state, 2, clock[2])
+            clk = c0 | c1 | c2
             dd = dir_state[0] * dirbit[0] + dir_state[1] * dirbit[1] + dir_state[2] * dirbit[2]
             high[p] = dd | clk
             dirs[p] = dd
