@@ -178,12 +178,12 @@ def _tool_text(text: str) -> str:
 
 
 def _add_tool_options(p: argparse.ArgumentParser) -> None:
-    g = p.add_argument_group("the cutter (drawings)")
+    g = p.add_argument_group("the cutter (drawings; --tool and --line-width also SVG and HPGL)")
     g.add_argument("--tool", type=_tool_text, metavar="SHAPE",
                    help="point (default, or the machine file's [tool]), flat:D, ball:D or v:ANGLE:TIP[:D] (mm, "
                    "degrees): 3D reliefs are cut so the tool never goes below them anywhere")
     g.add_argument("--line-width", type=_float_list(1, "--line-width"), metavar="MM",
-                   help="2D drawings with a V bit: the engraved lines' width, which sets their depth")
+                   help="2D drawings, SVG and HPGL with a V bit: the engraved lines' width, which sets their depth")
     g.add_argument("--stepdown", type=_float_list(1, "--stepdown"), metavar="MM",
                    help="3D reliefs: rough in levels this far apart before the finishing pass")
     g.add_argument("--stepover", type=_float_list(1, "--stepover"), metavar="FRACTION",
