@@ -295,3 +295,19 @@ def test_roughing_refuses_a_2d_drawing():
     d = cam.digitize(cam.load_image(ROOT / "samples" / "ellipse.png"))
     with pytest.raises(CamError, match="3D reliefs"):
         cam.plan(d, depth=5, stepdown_px=3)
+
+
+@pytest.mark.parametrize("name", ["logo.svg", "seed_tools.plt"])
+def test_vector_files_engrave_at_the_v_bits_line_width(tmp_path, name):
+    """SVG and HPGL strokes with a V bit: --line-width sets the pen-down depth, which the pin log reaches."""
+    report, pins = tmp_path / "r.json", tmp_path / "p.csv"
+    done = _cam("drill", str(ROOT / "samples" / name), "--yes", "--tool", "v:60:0.1", "--line-width", "0.5",
+                "--report", str(report), "--pin-log", str(pins), cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    rep = json.loads(report.read_text())
+    tool = parse_tool("v:60:0.1")
+    assert rep["tool"] == tool.describe()
+    assert rep["line_width_mm"] == pytest.approx(0.5, abs=2 * math.tan(math.radians(30)) * STEP_MM)
+    motion = cam.decode_pin_log(cam.read_pin_log(pins), SETTINGS)
+    deepest_mm = int(motion.position_steps[:, 2].max()) * STEP_MM  # machine +Z is into the material
+    assert deepest_mm == pytest.approx(tool.depth_for_width_mm(0.5), abs=STEP_MM)
