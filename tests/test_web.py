@@ -669,3 +669,37 @@ def test_the_page_traces_a_sketch_and_cuts_what_the_library_traces(page, fast, t
     page.click("#start")
     _wait_done(page, fast)
     assert np.array_equal(fast.session.last_job_pin_log.data, expected.data)  # every write, in order
+
+
+def test_page_resume_job_button_finishes_a_stopped_job_exactly(page, servers):
+    """Stop a job from the page, then press Resume job: the two pin logs together carve the drawing exactly
+    (issue #15: the page's Resume button after a stop)."""
+    s = servers("medium", settings=MEDIUM, realtime=True)
+    s.session.wait_idle()
+    if s.session.position_steps() != (0, 0, 0):
+        s.session.go_to_origin()
+        s.wait_idle()
+    _open(page, s)
+    _load(page, SAMPLES / "two_curves.png", depth="2")
+    assert page.is_disabled("#resume-job")
+    page.click("#start")
+    page.wait_for_function("parseFloat(document.getElementById('percent').textContent) > 20")
+    page.click("#stop")
+    st = s.wait_idle(10)
+    assert st["last"]["status"] == "stopped"
+    first, stopped_at = s.session.last_job_pin_log, np.array(st["position_steps"], np.int64)
+    page.wait_for_function("!document.getElementById('resume-job').disabled")
+    page.click("#resume-job")
+    page.wait_for_function("document.getElementById('log').textContent.includes('resumed at move')")
+    st = s.wait_idle(30)
+    assert st["last"]["status"] == FINISHED
+    second = s.session.last_job_pin_log
+    m1, m2 = cam.decode_pin_log(first, MEDIUM), cam.decode_pin_log(second, MEDIUM)
+    both = cam.Motion(np.r_[m1.t_ns, m2.t_ns], np.vstack([m1.position_steps, m2.position_steps + stopped_at]),
+                      m1.step_counts + m2.step_counts)
+    d = cam.digitize(cam.load_image(SAMPLES / "two_curves.png"))
+    surface = cam.carve(both, (d.height_px, d.width_px), MEDIUM)
+    want = np.zeros_like(surface)
+    for obj in d.objects:
+        want[obj[:, 1], obj[:, 0]] = 2 * MEDIUM.steps_per_px_z
+    assert np.array_equal(surface, want)
