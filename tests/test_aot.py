@@ -39,6 +39,15 @@ def _run(argv: list[str], tmp_path: Path, **env_extra: str) -> subprocess.Comple
                           text=True, timeout=600, input="\n" * 50)
 
 
+def test_the_install_built_the_kernels_for_these_sources():
+    """pip install builds them (setup.py); without them every first run compiles for 10-30 s. After editing a
+    kernel module, rebuild with: python -m cam._aot build (a machine without a C compiler fails here on
+    purpose: cam still runs, on numba's JIT)."""
+    if os.environ.get("CAM_NO_AOT"):
+        pytest.skip("CAM_NO_AOT is set")
+    assert _built(), _compiled.aot_status()
+
+
 @needs_build
 def test_first_run_of_every_sample_kind_compiles_nothing(tmp_path):
     """Every sample command with an empty numba cache: no compile (numba reports each one, and the CLI then
