@@ -42,7 +42,7 @@ from ..errors import CamError
 from ..formats.excellon import load_excellon
 from ..formats.gcode import load_gcode, load_tool_table
 from ..limits import DEFAULT_GCODE_LINES, MAX_GCODE_LINES
-from ..formats.hpgl import load_hpgl
+from ..formats.hpgl import load_hpgl, scan_hpgl
 from ..formats.svg import load_svg
 from ..digitize.sketch import DEFAULT_MIN_LENGTH_PX, load_sketch, trace
 from ..tool import parse_tool, tool_of_settings
@@ -59,6 +59,7 @@ from .gcode import plan_gcode
 from .hpgl import DEFAULT_CUT_DEPTH_MM as HPGL_CUT_DEPTH_MM
 from .hpgl import DEFAULT_SAFE_HEIGHT_MM as HPGL_SAFE_HEIGHT_MM
 from .hpgl import plan_hpgl
+from .hpgl_stream import STREAM_POINTS, stream_hpgl
 from .resume import Journal, JournalBase, check_journal, job_identity, plan_fingerprint, resume_toolpath
 from .svg import DEFAULT_CUT_DEPTH_MM as SVG_CUT_DEPTH_MM
 from .svg import DEFAULT_SAFE_HEIGHT_MM as SVG_SAFE_HEIGHT_MM
@@ -631,7 +632,16 @@ def _prepare_excellon(path: Path, options: JobOptions, settings: MachineSettings
 
 
 def _prepare_hpgl(path: Path, options: JobOptions, settings: MachineSettings, progress=None) -> PreparedJob:
-    drawing = load_hpgl(path, progress=progress)
+    scan = scan_hpgl(path, progress=progress)
+    if scan.n_points > STREAM_POINTS:  # read from the file a piece at a time on every pass: bounded memory
+        toolpath = stream_hpgl(path, settings=settings, depth_mm=_or(options.cut_depth_mm, HPGL_CUT_DEPTH_MM),
+                               safe_height_mm=_or(options.travel_height_mm, HPGL_SAFE_HEIGHT_MM),
+                               offset_mm=options.offset_mm, scan=scan)
+        return PreparedJob(
+            source=str(path), kind="hpgl", plan=plan_chunks(toolpath), settings=settings, toolpath=toolpath,
+            warnings=list(scan.warnings), summary=f"{path.name}: {scan.n_strokes} pen-down strokes",
+            report={"strokes": scan.n_strokes, "points": scan.n_points, "pens": sorted(set(scan.pens))})
+    drawing = load_hpgl(path)
     toolpath = plan_hpgl(drawing, settings=settings, depth_mm=_or(options.cut_depth_mm, HPGL_CUT_DEPTH_MM),
                          safe_height_mm=_or(options.travel_height_mm, HPGL_SAFE_HEIGHT_MM),
                          offset_mm=options.offset_mm)
@@ -753,6 +763,9 @@ def resume_job(job: PreparedJob, journal: Journal, *, position_steps: Optional[t
     check_journal(journal, job.identity, job.plan_sha256, where)
     if job.toolpath is None:
         raise CamError(f"{job.name}: a {job.kind} job has no moves to resume")
+    if not hasattr(job.toolpath, "points_steps"):
+        raise CamError(f"{job.name}: a job of {len(job.toolpath)} moves is planned from its file a piece at a time, "
+                       f"and resuming one is not supported yet; start it again, or cut the file in parts")
     start = tuple(int(v) for v in (journal.position_steps if position_steps is None else position_steps))
     toolpath, move_index, j = resume_toolpath(job.toolpath, journal.last_move, start,  # type: ignore[arg-type]
                                               pause_pending=journal.pause_pending)
