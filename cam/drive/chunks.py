@@ -41,11 +41,11 @@ from .steps import StepPlan
 
 __all__ = ["StepChunk", "ChunkedPlan", "plan_chunks", "lookahead_margin", "DEFAULT_CHUNK_PERIODS"]
 
-DEFAULT_CHUNK_PERIODS = 1 << 20
-"""Step periods per chunk (about 100 MB of look-ahead arrays at most)."""
+DEFAULT_CHUNK_PERIODS = 1 << 18
+"""Step periods per chunk (a few tens of MB of writes, look-ahead and decoding arrays at most)."""
 
 _MOVE_BLOCK = 1 << 16  # moves turned into periods per kernel call
-_DECODE = 1 << 20  # writes decoded into positions at a time
+_DECODE = 1 << 18  # writes decoded into positions at a time
 
 
 @dataclass
