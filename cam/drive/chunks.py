@@ -94,7 +94,11 @@ class _RecentMoves:
         if not len(point_write):
             return
         sent = int(self.plan.live[0])
-        while len(self.blocks) > 1 and int(self.blocks[1][1][-1]) < sent:
+        # a run is never further behind the pass than its look-ahead (each move takes a period at least): no
+        # run (the extent pass) or a run that moved on keeps nothing older
+        lag_moves = 4 * self.plan.chunk_periods + 2 * self.plan.margin_periods
+        while len(self.blocks) > 1 and (int(self.blocks[1][1][-1]) < sent
+                                        or sum(len(b[1]) for b in self.blocks[1:]) > lag_moves):
             del self.blocks[0]
         self.blocks.append((int(first_move), np.asarray(point_write, np.int64)))
 
