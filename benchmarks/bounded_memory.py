@@ -6,7 +6,10 @@
 Each job is generated in a temporary folder and run as a whole process; its
 peak RSS (``ru_maxrss`` of the child) is compared with the floor measured in
 the same run: a process that only imports `cam`, numpy and OpenCV.  The
-goal: under 500 MB for each job.  ``bench_rows`` gives the rows for
+goal: under 500 MB for each job.  The HPGL job runs with constant ramps (its
+pin log is about 37 GB at full size: the look-ahead ramps would take far longer);
+a file of over a million points is planned from the file a piece at a time
+(:mod:`cam.job.hpgl_stream`).  ``bench_rows`` gives the rows for
 ``benchmarks/run.py`` (row group 16).
 """
 from __future__ import annotations
@@ -90,7 +93,7 @@ def bench_rows(quick: bool, repeats: int = 1) -> list[dict]:
         py = sys.executable
         floor = statistics.median(peak_rss_mb([py, "-c", "import cam, numpy, cv2"], tmp) for _ in range(repeats))
         jobs = [
-            (f"HPGL {hpgl_bytes / 2**20:.0f} MB, {n_points / 1e6:.1f}M points",
+            (f"HPGL {hpgl_bytes / 2**20:.0f} MB, {n_points / 1e6:.1f}M points (streamed, constant ramps)",
              [py, "-m", "cam", "drill", "big.plt", "--machine", "machine.toml", "--yes", "--no-progress",
               "--ramp", "constant", "--pin-log", "big.csv"]),
             (f"relief {relief_px}^2 dome",

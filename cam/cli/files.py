@@ -31,6 +31,9 @@ def cmd_export(args: argparse.Namespace) -> int:
     if not travel_height_mm > 0:
         raise CamError(f"--travel-height must be > 0 mm for G-code out, got {args.travel_height}")
     job = prepare(args)
+    if job.toolpath is not None and not hasattr(job.toolpath, "points_steps"):
+        raise CamError(f"{args.image}: a job of {len(job.toolpath)} moves is planned from its file a piece at a "
+                       f"time; G-code out of it is not supported yet (cut the file in parts)")
     at = np.flatnonzero(job.toolpath.pause) + 1  # a tool change comes before the point after its pause
     if job.drill_plan is not None:
         changes = {int(i): (tool, f"T{tool} {dia:.3f} mm, {n} holes")

@@ -156,5 +156,8 @@ def write_file_job_preview(job: Any, path: str, scale: Optional[int] = None) -> 
         raise CamError(f"{path}: pictures are written as .png" + (" or .svg" if job.toolpath is not None else ""))
     if suffix == ".png":
         save_picture(job.preview_picture(), path)
+    elif not hasattr(job.toolpath, "points_steps"):
+        raise CamError(f"{path}: a job of {len(job.toolpath)} moves is pictured as .png only (it is planned from "
+                       f"its file a piece at a time; an .svg would hold every move)")
     else:
         save_picture(toolpath_svg(job.toolpath, scale=scale, estimated_time_s=job.estimated_time_s), path)

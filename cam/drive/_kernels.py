@@ -192,3 +192,44 @@ def chunk_writes_kernel(high, dirs, per, next_dirs, t0):
         t_ns[2 * k + 1] = t
         data[2 * k + 1] = dirs[k + 1] if k + 1 < n else next_dirs
     return t_ns, data
+
+
+@entry
+@njit(cache=True)
+def pin_rows_kernel(t_ns, data, strobe):
+    """The pin log CSV rows ``t_ns,data,strobe\\n`` of writes, as ``np.savetxt(fmt="%d", delimiter=",")``
+    writes them, in ASCII bytes.
+
+    Args:
+        t_ns: ``(M,)`` int64 times (>= 0); data, strobe: ``(M,)`` int64 register and strobe values (>= 0).
+
+    Returns:
+        ``(K,)`` uint8 the text of the M rows.
+    """
+    n = t_ns.shape[0]
+    out = np.empty(n * 30 + 1, np.uint8)
+    digits = np.empty(20, np.uint8)
+    k = 0
+    for i in range(n):
+        for col in range(3):
+            v = t_ns[i] if col == 0 else (data[i] if col == 1 else strobe[i])
+            neg = v < 0
+            if neg:
+                v = -v
+            m = 0
+            while True:
+                digits[m] = 48 + v % 10
+                v //= 10
+                m += 1
+                if v == 0:
+                    break
+            if neg:
+                out[k] = 45
+                k += 1
+            while m > 0:
+                m -= 1
+                out[k] = digits[m]
+                k += 1
+            out[k] = 44 if col < 2 else 10
+            k += 1
+    return out[:k]

@@ -26,10 +26,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Iterator, Optional
+from typing import Any, Iterator, Optional
 
 import numpy as np
 
+from ..errors import PlanError
 from ..job.model import Job, check_travel
 from ..settings import MachineSettings
 from ..verify.pinlog import _decode
@@ -40,11 +41,11 @@ from .steps import StepPlan
 
 __all__ = ["StepChunk", "ChunkedPlan", "plan_chunks", "lookahead_margin", "DEFAULT_CHUNK_PERIODS"]
 
-DEFAULT_CHUNK_PERIODS = 1 << 20
-"""Step periods per chunk (about 100 MB of look-ahead arrays at most)."""
+DEFAULT_CHUNK_PERIODS = 1 << 18
+"""Step periods per chunk (a few tens of MB of writes, look-ahead and decoding arrays at most)."""
 
 _MOVE_BLOCK = 1 << 16  # moves turned into periods per kernel call
-_DECODE = 1 << 20  # writes decoded into positions at a time
+_DECODE = 1 << 18  # writes decoded into positions at a time
 
 
 @dataclass
@@ -78,6 +79,49 @@ class LivePosition:
     def advance(self, n_writes: int) -> tuple[int, int, int]:
         """Position (x, y, z) in steps after the writes sent so far."""
         return self.plan.live[1]
+
+
+class _RecentMoves:
+    """The ``point_write`` of the move blocks a pass over a :class:`ChunkedPlan` made lately: enough to say which
+    move a run's writes completed (its journal) without an array per move.  Blocks the run has passed
+    (``plan.live``) are dropped as new ones come, so it holds about the look-ahead's moves."""
+
+    def __init__(self, plan: "ChunkedPlan") -> None:
+        self.plan = plan
+        self.blocks: list[tuple[int, np.ndarray]] = []  # (first move, (B,) point_write)
+
+    def add(self, first_move: int, point_write: np.ndarray) -> None:
+        if not len(point_write):
+            return
+        sent = int(self.plan.live[0])
+        # a run is never further behind the pass than its look-ahead (each move takes a period at least): no
+        # run (the extent pass) or a run that moved on keeps nothing older
+        lag_moves = 4 * self.plan.chunk_periods + 2 * self.plan.margin_periods
+        while len(self.blocks) > 1 and (int(self.blocks[1][1][-1]) < sent
+                                        or sum(len(b[1]) for b in self.blocks[1:]) > lag_moves):
+            del self.blocks[0]
+        self.blocks.append((int(first_move), np.asarray(point_write, np.int64)))
+
+    def last_completed(self, writes_done: int) -> int:
+        """Index of the last move reached after ``writes_done`` writes (-1: none), as
+        :func:`cam.job.resume.last_completed`; never ahead (a move before the blocks kept counts as the last
+        one before them)."""
+        blocks = list(self.blocks)
+        for first, pw in reversed(blocks):
+            if int(pw[0]) < writes_done:
+                return first + int(np.searchsorted(pw, int(writes_done), side="left")) - 1
+        return blocks[0][0] - 1 if blocks else -1
+
+
+def _per_move(job: Any, pts: np.ndarray, prev: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(n_per_move, nominal_ns, steps)`` of the moves to ``(B, 3)`` points ``pts`` from ``(1, 3)`` ``prev``:
+    ``(B,)`` int64 periods each takes and its nominal period (0: the settings' delays), ``(3,)`` steps per axis."""
+    d = np.abs(pts - np.vstack([prev, pts[:-1]])) if len(pts) else np.zeros((0, 3), np.int64)
+    npm = d.max(axis=1) if len(pts) else np.zeros(0, np.int64)
+    if job.periods is not None:
+        npm = np.maximum(npm, np.asarray(job.periods, np.int64))
+    nom = np.zeros(len(pts), np.int64) if job.period_ns is None else np.asarray(job.period_ns, np.int64)
+    return npm, nom, d.sum(axis=0)
 
 
 def lookahead_margin(settings: MachineSettings, min_period_ns: int) -> int:
@@ -128,11 +172,39 @@ class ChunkedPlan:
     _extent: Optional[tuple[np.ndarray, np.ndarray]] = field(default=None, repr=False)
     live: tuple[int, tuple[int, int, int]] = (0, (0, 0, 0))
     """``(writes sent, position_steps after them)``: set by the runner as it sends (the live position)."""
+    recent: Any = field(default=None, repr=False)
+    """The moves of the blocks the latest pass over :meth:`chunks` made lately (:class:`_RecentMoves`, one per plan)."""
 
     @property
-    def point_write(self) -> np.ndarray:
-        """``(N,)`` int64 index of the write at which toolpath point i is reached (as :class:`StepPlan`'s)."""
+    def streamed(self) -> bool:
+        """True when the job is a stream of pieces (``job.pieces()``, e.g. :class:`cam.job.hpgl_stream.HpglJobStream`):
+        nothing per move is held, each pass reads the pieces again."""
+        return not hasattr(self.job, "points_steps")
+
+    @property
+    def point_write(self) -> Any:
+        """``(N,)`` int64 index of the write at which toolpath point i is reached (as :class:`StepPlan`'s).
+
+        A streamed job holds no such array: its journal asks :attr:`recent` (``last_completed``) instead.
+        """
+        if self.streamed:
+            return self._recent_moves()
         return 2 * np.cumsum(self._n_per_move)
+
+    def _recent_moves(self) -> "_RecentMoves":
+        if self.recent is None:
+            self.recent = _RecentMoves(self)
+        return self.recent
+
+    def full_point_write(self) -> np.ndarray:
+        """``(N,)`` int64 :attr:`point_write` of every move, a streamed job's too (one pass; small jobs, tests)."""
+        if not self.streamed:
+            return self.point_write
+        parts, period0 = [], 0
+        for _, npm, _, _ in self._move_blocks():
+            parts.append(2 * (period0 + np.cumsum(npm)))
+            period0 += int(npm.sum())
+        return np.concatenate(parts) if parts else np.zeros(0, np.int64)
 
     def positions(self) -> "LivePosition":
         """A tracker of the position while the runner sends this plan (see :class:`LivePosition`)."""
@@ -179,22 +251,47 @@ class ChunkedPlan:
         return self._extent
 
     # -- the stream ------------------------------------------------------------------------------------
-    def _stretches(self) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray]]:
-        """``(high, dirs, nominal_ns)`` of consecutive periods, at most ``chunk_periods`` each."""
-        s = self.settings
-        clock, dirbit = axis_bits(s)
-        clock, dirbit = clock.astype(np.int64), dirbit.astype(np.int64)
+    def _move_blocks(self) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray, int]]:
+        """``(pts, n_per_move, nominal_ns, first_move)`` of consecutive blocks of at most ``_MOVE_BLOCK`` moves:
+        ``pts`` ``(B + 1, 3)`` int64, the point before the block then its points; ``(B,)`` int64 periods and
+        nominal period of each move.  A streamed job (``pieces()``) is read a piece at a time."""
+        if self.streamed:
+            prev = np.zeros((1, 3), np.int64)
+            first = 0
+            for piece in self.job.pieces():
+                p = np.asarray(piece.points_steps, np.int64).reshape(-1, 3)
+                npm, nom, _ = _per_move(piece, p, prev)
+                for b0 in range(0, len(p), _MOVE_BLOCK):
+                    b1 = min(len(p), b0 + _MOVE_BLOCK)
+                    yield np.vstack([p[b0 - 1:b0] if b0 else prev, p[b0:b1]]), npm[b0:b1], nom[b0:b1], first + b0
+                if len(p):
+                    prev = p[-1:]
+                first += len(p)
+            return
         pts_all = np.asarray(self.job.points_steps, np.int64).reshape(-1, 3)
-        dir_state = np.zeros(3, np.int64)
         n = len(pts_all)
         for b0 in range(0, n, _MOVE_BLOCK):
             b1 = min(n, b0 + _MOVE_BLOCK)
             start = pts_all[b0 - 1:b0] if b0 else np.zeros((1, 3), np.int64)
-            pts = np.vstack([start, pts_all[b0:b1]])
-            npm = self._n_per_move[b0:b1]
-            nom = self._nominal[b0:b1]
+            yield np.vstack([start, pts_all[b0:b1]]), self._n_per_move[b0:b1], self._nominal[b0:b1], b0
+
+    def _stretches(self) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+        """``(high, dirs, nominal_ns)`` of consecutive periods, at most ``chunk_periods`` each.
+
+        Notes each block's ``point_write`` in :attr:`recent` as it goes (the journal of a streamed job)."""
+        s = self.settings
+        clock, dirbit = axis_bits(s)
+        clock, dirbit = clock.astype(np.int64), dirbit.astype(np.int64)
+        dir_state = np.zeros(3, np.int64)
+        recent = self._recent_moves()
+        recent.blocks = []
+        period0 = 0
+        for pts, npm, nom, first in self._move_blocks():
+            point_period = period0 + np.cumsum(npm)
+            recent.add(first, 2 * point_period)
+            period0 = int(point_period[-1]) if len(npm) else period0
             i, k = 0, 0
-            while i < b1 - b0:
+            while i < len(npm):
                 high, dirs, per, i, k = stretch_kernel(pts, s.delay_xy_ns, s.delay_z_ns, clock, dirbit, npm, nom,
                                                        dir_state, i, k, self.chunk_periods)
                 if len(per):
@@ -309,14 +406,13 @@ class ChunkedPlan:
     def to_plan(self) -> StepPlan:
         """Every write at once, as :func:`cam.drive.steps.plan_steps` makes it (small jobs, tests)."""
         parts = list(self.chunks())
-        pts = np.asarray(self.job.points_steps, np.int64).reshape(-1, 3)
-        point_write = 2 * np.cumsum(self._n_per_move)
+        point_write = self.full_point_write()
         return StepPlan(
             t_ns=np.concatenate([p.t_ns for p in parts]), data=np.concatenate([p.data for p in parts]),
             strobe=np.concatenate([p.strobe for p in parts]), point_write=point_write,
             pause_writes=self.pause_writes, steps_total=self.steps_total, settings=self.settings,
             end_steps=self.end_steps, safe_z_steps=self.safe_z_steps, pause_notes=list(self.pause_notes),
-            warnings=list(self.warnings)) if len(pts) else StepPlan(
+            warnings=list(self.warnings)) if len(point_write) else StepPlan(
             t_ns=np.zeros(1, np.int64), data=np.zeros(1, np.uint8), strobe=parts[0].strobe[:1],
             point_write=np.zeros(0, np.int64), pause_writes=self.pause_writes, steps_total=self.steps_total,
             settings=self.settings, safe_z_steps=self.safe_z_steps)
@@ -335,6 +431,8 @@ def plan_chunks(job: Job, *, start_steps: tuple[int, int, int] = (0, 0, 0),
     Raises:
         TravelError: a point of the job is outside the machine travel (nothing is planned).
     """
+    if not hasattr(job, "points_steps"):
+        return _plan_stream(job, start_steps, chunk_periods, margin_periods)
     s = job.settings
     pts = np.asarray(job.points_steps, np.int64).reshape(-1, 3)
     origin = np.asarray(start_steps, np.int64)
@@ -373,6 +471,58 @@ def plan_chunks(job: Job, *, start_steps: tuple[int, int, int] = (0, 0, 0),
         safe_z_steps=int(job.safe_z_steps), chunk_periods=int(chunk_periods), margin_periods=margin,
         pause_notes=list(job.pause_notes) if job.pause_notes is not None else ["Pause At"] * len(pause_writes),
         warnings=list(job.warnings), _n_per_move=n_per_move, _nominal=nominal, _stops=stops, _segments=segments)
+
+
+def _plan_stream(job: Any, start_steps: tuple[int, int, int], chunk_periods: int,
+                 margin_periods: Optional[int]) -> ChunkedPlan:
+    """:func:`plan_chunks` of a job given as pieces (``job.pieces()``): one pass over them, nothing per move kept.
+
+    Raises:
+        PlanError: ``linear40`` ramps (they need every move's steps at once); TravelError: as plan_chunks.
+    """
+    s = job.settings
+    if s.ramp == "linear40":
+        raise PlanError(f"{job.source}: the linear40 ramps plan every move of the job at once, and this job is "
+                        f"too large to hold; use --ramp lookahead or constant")
+    origin = np.asarray(start_steps, np.int64)
+    prev = np.zeros((1, 3), np.int64)
+    steps_total = np.zeros(3, np.int64)
+    period0 = 0
+    stops: list[np.ndarray] = []
+    pause_writes: list[np.ndarray] = []
+    notes: list[str] = []
+    warnings: list[str] = list(job.warnings)
+    min_nominal = None
+    last = (0, 0, 0)
+    for piece in job.pieces():
+        pts = np.asarray(piece.points_steps, np.int64).reshape(-1, 3)
+        if not len(pts):
+            continue
+        check_travel(pts + origin, s, piece.pixels)
+        npm, nom, d = _per_move(piece, pts, prev)
+        steps_total += d
+        point_period = period0 + np.cumsum(npm)
+        pause_idx = np.flatnonzero(np.asarray(piece.pause, bool))
+        stops.append(point_period[pause_idx])
+        pause_writes.append(2 * point_period[pause_idx])
+        notes += list(piece.pause_notes) if piece.pause_notes is not None else ["Pause At"] * len(pause_idx)
+        if piece.rest is not None:
+            rest = np.flatnonzero(np.asarray(piece.rest, bool))
+            stops += [point_period[rest] - npm[rest], point_period[rest]]
+        if (nom > 0).any():
+            m = int(nom[nom > 0].min())
+            min_nominal = m if min_nominal is None else min(min_nominal, m)
+        warnings += [w for w in piece.warnings if w not in warnings]
+        period0 = int(point_period[-1])
+        prev = pts[-1:]
+        last = tuple(int(v) for v in pts[-1])
+    min_period = min([s.delay_xy_ns, s.delay_z_ns] + ([min_nominal] if min_nominal is not None else []))
+    margin = lookahead_margin(s, min_period) if margin_periods is None else int(margin_periods)
+    return ChunkedPlan(
+        job=job, settings=s, n_periods=period0, pause_writes=np.concatenate(pause_writes or [np.zeros(0, np.int64)]),
+        steps_total=steps_total, end_steps=last, safe_z_steps=int(job.safe_z_steps),  # type: ignore[arg-type]
+        chunk_periods=int(chunk_periods), margin_periods=margin, pause_notes=notes, warnings=warnings,
+        _stops=np.unique(np.concatenate(stops or [np.zeros(0, np.int64)])))
 
 
 def _linear40_segments(job: Job, pts: np.ndarray, n_per_move: np.ndarray,

@@ -72,11 +72,13 @@ def journal_spec(job: Any, path: str | os.PathLike, *, home_steps: tuple[int, in
     base = getattr(job, "resumed", None)
     if base is None:
         toolpath = getattr(job, "toolpath", job)
-        if toolpath is None or not hasattr(toolpath, "points_steps"):
+        streamed = toolpath is not None and hasattr(toolpath, "pieces")  # a job read a piece at a time
+        if toolpath is None or not (hasattr(toolpath, "points_steps") or streamed):
             raise CamError("this job has no moves to keep a journal of")
         base = JournalBase(identity=getattr(job, "identity", "") or "", source=str(getattr(job, "source", "")),
                            plan_sha256=getattr(job, "plan_sha256", "") or plan_fingerprint(toolpath),
-                           moves=len(toolpath), pause=np.asarray(toolpath.pause, bool))
+                           moves=len(toolpath),
+                           pause=np.zeros(0, bool) if streamed else np.asarray(toolpath.pause, bool))
     home = np.asarray(home_steps, np.int64) - np.asarray(base.start_position_steps, np.int64)
     return JournalSpec(str(path), base, tuple(int(v) for v in home), pin_log_path)  # type: ignore[arg-type]
 

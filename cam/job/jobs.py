@@ -42,7 +42,7 @@ from ..errors import CamError
 from ..formats.excellon import load_excellon
 from ..formats.gcode import load_gcode, load_tool_table
 from ..limits import DEFAULT_GCODE_LINES, MAX_GCODE_LINES
-from ..formats.hpgl import load_hpgl
+from ..formats.hpgl import load_hpgl, scan_hpgl
 from ..formats.svg import load_svg
 from ..digitize.sketch import DEFAULT_MIN_LENGTH_PX, load_sketch, trace
 from ..tool import parse_tool, tool_of_settings
@@ -59,6 +59,7 @@ from .gcode import plan_gcode
 from .hpgl import DEFAULT_CUT_DEPTH_MM as HPGL_CUT_DEPTH_MM
 from .hpgl import DEFAULT_SAFE_HEIGHT_MM as HPGL_SAFE_HEIGHT_MM
 from .hpgl import plan_hpgl
+from .hpgl_stream import STREAM_POINTS, stream_hpgl
 from .resume import Journal, JournalBase, check_journal, job_identity, plan_fingerprint, resume_toolpath
 from .svg import DEFAULT_CUT_DEPTH_MM as SVG_CUT_DEPTH_MM
 from .svg import DEFAULT_SAFE_HEIGHT_MM as SVG_SAFE_HEIGHT_MM
@@ -446,6 +447,9 @@ class PreparedJob:
                                     estimated_time_s=self.estimated_time_s)
         # the job's points: the step plan moves in straight lines between them (its DDA spreads the shorter
         # axes evenly), so they draw the same picture as every write would, at a fraction of the cost
+        if self.toolpath is not None and not hasattr(self.toolpath, "points_steps"):  # a job read a piece at a time
+            return motion_picture(lambda: (p.points_steps for p in self.toolpath.pieces()), self.settings,
+                                  legend=self._legend(), extent_steps=self.extent_steps)
         points = self.toolpath.points_steps if self.toolpath is not None else self.positions_steps()
         return motion_picture(points, self.settings, legend=self._legend(), holes=self.kind == "excellon")
 
@@ -461,57 +465,92 @@ class PreparedJob:
 
 
 def motion_picture(
-    positions_steps: np.ndarray, settings: MachineSettings, *, legend: str = "", holes: bool = False,
-    target_px: int = 800,
+    positions_steps: Any, settings: MachineSettings, *, legend: str = "", holes: bool = False,
+    target_px: int = 800, extent_steps: Optional[np.ndarray] = None,
 ) -> np.ndarray:
     """Picture of decoded motion, seen from above, as an ``(H, W, 3)`` uint8 RGB array.
 
     Args:
-        positions_steps: ``(M, 3)`` machine positions in steps (x right, y down the picture, +z deeper).
+        positions_steps: ``(M, 3)`` machine positions in steps (x right, y down the picture, +z deeper), or
+            an iterable of such arrays, consecutive pieces of the motion (a job too large to hold at once:
+            then ``extent_steps`` is needed).
         settings: for mm per step (X and Y are drawn to the same mm scale).
         legend: text under the picture; holes: mark each plunge with a ring (drill jobs).
         target_px: the longer side of the drawing area in picture pixels.
+        extent_steps: ``(3, 2)`` min/max position of the motion (the start included); None: from the points.
 
     Moves with the tool below the surface (z > 0) are drawn coloured by depth
-    (shallow yellow to deep purple), moves above it in thin grey.
+    (shallow yellow to deep purple), moves above it in thin grey.  Pieces are drawn one at a time: the
+    memory is that of a piece.
     """
-
-
-    p = np.vstack([np.zeros((1, 3), np.int64), np.asarray(positions_steps, np.int64).reshape(-1, 3)])
-    lo = p[:, :2].min(axis=0)
-    span = np.maximum(1, p[:, :2].max(axis=0) - lo)
+    if isinstance(positions_steps, np.ndarray) or not callable(positions_steps):
+        held = [np.asarray(p, np.int64).reshape(-1, 3) for p in
+                ([positions_steps] if isinstance(positions_steps, np.ndarray) else positions_steps)]
+        pieces = lambda: iter(held)  # noqa: E731
+    else:
+        pieces = positions_steps
+    if extent_steps is None:
+        allp = np.vstack([np.zeros((1, 3), np.int64)] + list(pieces()))
+        extent_steps = np.column_stack([allp.min(axis=0), allp.max(axis=0)])
+    extent_steps = np.asarray(extent_steps, np.int64)
+    lo = extent_steps[:2, 0]
+    span = np.maximum(1, extent_steps[:2, 1] - lo)
     margin = 12
     k = (target_px - 2 * margin) / float(span.max())
-    xy = np.rint((p[:, :2] - lo) * k).astype(np.int64) + margin
-    z = p[:, 2]
-    keep = np.ones(len(p), bool)
-    keep[1:] = np.any(xy[1:] != xy[:-1], axis=1) | (z[1:] != z[:-1])
-    keep[-1] = True
-    xy, z = xy[keep], z[keep]
-    w = int(xy[:, 0].max()) + margin + 1
-    h = int(xy[:, 1].max()) + margin + 1
+    w = int(np.rint(span[0] * k)) + 2 * margin + 1
+    h = int(np.rint(span[1] * k)) + 2 * margin + 1
     img = np.full((h + LEGEND_PX, max(w, 420), 3), 255, np.uint8)
-    zmax = max(1, int(z.max()))
-    cols = depth_colours(np.maximum(z, 0), zmax)
-    below = (z[1:] > 0) & (z[:-1] > 0)
-    for i in np.flatnonzero(~below):
-        a, b = tuple(int(v) for v in xy[i]), tuple(int(v) for v in xy[i + 1])
-        if a != b:
-            cv2.line(img, a, b, (170, 170, 170), 1, cv2.LINE_AA)
-    for i in np.flatnonzero(below):
-        a, b = tuple(int(v) for v in xy[i]), tuple(int(v) for v in xy[i + 1])
-        cv2.line(img, a, b, tuple(int(v) for v in cols[i + 1]), 2, cv2.LINE_8)
-    if holes:
-        deepest = np.flatnonzero((z > 0) & (np.r_[z[1:], 0] < z) & (np.r_[0, z[:-1]] <= z))
-        for i in deepest:
-            cv2.circle(img, (int(xy[i, 0]), int(xy[i, 1])), 5, tuple(int(v) for v in cols[i]), 2, cv2.LINE_AA)
-    cv2.circle(img, (int(xy[0, 0]), int(xy[0, 1])), 6, (0, 170, 0), 2)
+    zmax = max(1, int(extent_steps[2, 1]))
+    start_xy = np.rint((np.zeros(2) - lo) * k).astype(np.int64) + margin
+    for layer in ("above", "below", "holes"):  # every grey line under every coloured one, the rings on top
+        if layer == "holes" and not holes:
+            break
+        prev_xy, prev_z = start_xy.copy(), 0
+        for q, last in _with_last(np.asarray(p, np.int64).reshape(-1, 3) for p in pieces()):
+            full_xy = np.vstack([prev_xy[None, :], np.rint((q[:, :2] - lo) * k).astype(np.int64) + margin])
+            full_z = np.concatenate([[prev_z], q[:, 2]])
+            keep = np.ones(len(full_xy), bool)
+            keep[1:] = np.any(full_xy[1:] != full_xy[:-1], axis=1) | (full_z[1:] != full_z[:-1])
+            keep[-1] |= last  # the motion's end is drawn even where it adds nothing
+            xy, z = full_xy[keep], full_z[keep]
+            below = (z[1:] > 0) & (z[:-1] > 0)
+            if layer == "above":
+                for i in np.flatnonzero(~below):
+                    a, b = tuple(int(v) for v in xy[i]), tuple(int(v) for v in xy[i + 1])
+                    if a != b:
+                        cv2.line(img, a, b, (170, 170, 170), 1, cv2.LINE_AA)
+            elif layer == "below":
+                cols = depth_colours(np.maximum(z, 0), zmax)
+                for i in np.flatnonzero(below):
+                    a, b = tuple(int(v) for v in xy[i]), tuple(int(v) for v in xy[i + 1])
+                    cv2.line(img, a, b, tuple(int(v) for v in cols[i + 1]), 2, cv2.LINE_8)
+            else:  # a plunge's deepest point, among the points drawn (the next one may be in the next piece)
+                cols = depth_colours(np.maximum(z, 0), zmax)
+                nxt = np.r_[z[1:], 0]
+                deepest = np.flatnonzero((z > 0) & (nxt < z) & (np.r_[0, z[:-1]] <= z))
+                deepest = deepest[(deepest > 0) & ((deepest < len(z) - 1) | last)]
+                for i in deepest:
+                    cv2.circle(img, (int(xy[i, 0]), int(xy[i, 1])), 5, tuple(int(v) for v in cols[i]), 2, cv2.LINE_AA)
+            prev_xy, prev_z = xy[-1].copy(), int(z[-1])
+    cv2.circle(img, (int(start_xy[0]), int(start_xy[1])), 6, (0, 170, 0), 2)
     img[h:] = 245
     cv2.putText(img, legend, (6, h + 18), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (0, 0, 0), 1, cv2.LINE_AA)
     cv2.putText(img, "start/home", (6, h + 36), cv2.FONT_HERSHEY_SIMPLEX, 0.4, (0, 170, 0), 1, cv2.LINE_AA)
     cv2.putText(img, "grey: above the surface", (100, h + 36), cv2.FONT_HERSHEY_SIMPLEX, 0.4, (120, 120, 120), 1,
                 cv2.LINE_AA)
     return img
+
+
+def _with_last(arrays: Any) -> Any:
+    """``(array, is_last)`` of the non-empty arrays of an iterable, one behind it (to know the last)."""
+    held = None
+    for a in arrays:
+        if len(a):
+            if held is not None:
+                yield held, False
+            held = a
+    if held is not None:
+        yield held, True
 
 
 def _cut_extent(extent: np.ndarray, cut: np.ndarray, settings: MachineSettings) -> tuple[tuple[float, float], float]:
@@ -663,8 +702,18 @@ def _engraving(options: JobOptions, settings: MachineSettings, default_depth_mm:
 
 
 def _prepare_hpgl(path: Path, options: JobOptions, settings: MachineSettings, progress=None) -> PreparedJob:
-    drawing = load_hpgl(path, progress=progress)
     depth_mm, engraving = _engraving(options, settings, HPGL_CUT_DEPTH_MM)
+    scan = scan_hpgl(path, progress=progress)
+    if scan.n_points > STREAM_POINTS:  # read from the file a piece at a time on every pass: bounded memory
+        toolpath = stream_hpgl(path, settings=settings, depth_mm=depth_mm,
+                               safe_height_mm=_or(options.travel_height_mm, HPGL_SAFE_HEIGHT_MM),
+                               offset_mm=options.offset_mm, scan=scan)
+        return PreparedJob(
+            source=str(path), kind="hpgl", plan=plan_chunks(toolpath), settings=settings, toolpath=toolpath,
+            warnings=list(scan.warnings), summary=f"{path.name}: {scan.n_strokes} pen-down strokes",
+            report={"strokes": scan.n_strokes, "points": scan.n_points, "pens": sorted(set(scan.pens)),
+                    **engraving})
+    drawing = load_hpgl(path)
     toolpath = plan_hpgl(drawing, settings=settings, depth_mm=depth_mm,
                          safe_height_mm=_or(options.travel_height_mm, HPGL_SAFE_HEIGHT_MM),
                          offset_mm=options.offset_mm)
@@ -788,6 +837,9 @@ def resume_job(job: PreparedJob, journal: Journal, *, position_steps: Optional[t
     check_journal(journal, job.identity, job.plan_sha256, where)
     if job.toolpath is None:
         raise CamError(f"{job.name}: a {job.kind} job has no moves to resume")
+    if not hasattr(job.toolpath, "points_steps"):
+        raise CamError(f"{job.name}: a job of {len(job.toolpath)} moves is planned from its file a piece at a time, "
+                       f"and resuming one is not supported yet; start it again, or cut the file in parts")
     start = tuple(int(v) for v in (journal.position_steps if position_steps is None else position_steps))
     toolpath, move_index, j = resume_toolpath(job.toolpath, journal.last_move, start,  # type: ignore[arg-type]
                                               pause_pending=journal.pause_pending)

@@ -218,7 +218,14 @@ def job_identity(input_sha256: str, options: Mapping[str, Any], settings: Machin
 
 
 def plan_fingerprint(job: Job) -> str:
-    """sha256 (hex) of a job's points, kinds and pauses: two plans with the same fingerprint have the same moves."""
+    """sha256 (hex) of a job's points, kinds and pauses: two plans with the same fingerprint have the same moves.
+
+    A job streamed in pieces (:class:`cam.job.hpgl_stream.HpglJobStream`) hashes its pieces one after the other.
+    """
+    if not hasattr(job, "points_steps"):
+        if not getattr(job, "fingerprint", ""):
+            len(job)  # one pass over the pieces
+        return job.fingerprint  # type: ignore[attr-defined]
     h = hashlib.sha256()
     for arr, dtype in ((job.points_steps, np.int64), (job.kind, np.uint8), (job.pause, np.bool_)):
         h.update(np.ascontiguousarray(np.asarray(arr, dtype)).tobytes())
@@ -363,13 +370,15 @@ def journal_record(base: JournalBase, point_write: np.ndarray, pause_writes: set
 
     Args:
         base: the job and where the run started in it.
-        point_write: ``(M,)`` the run's plan's write index at which each of its points is reached.
+        point_write: ``(M,)`` the run's plan's write index at which each of its points is reached, or what
+            stands for it in a streamed plan (an object with ``last_completed(writes_done)``).
         pause_writes: the writes after which the run pauses.
         position_steps: where the tool stands now, steps from the *run's* start (added to
             ``base.start_position_steps``).
         state: one of :data:`JOURNAL_STATES`.
     """
-    i = last_completed(point_write, writes_done)
+    i = point_write.last_completed(writes_done) if hasattr(point_write, "last_completed") else \
+        last_completed(point_write, writes_done)
     if i < 0:
         last, pending = base.last_move, base.pause_pending
     else:
