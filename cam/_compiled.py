@@ -30,9 +30,9 @@ from pathlib import Path
 from typing import Any, Callable, Optional
 
 import llvmlite.binding as llvm
-from numba import typeof
+import numpy as np
 
-__all__ = ["entry", "KERNEL_MODULES", "source_digest", "aot_status", "ENTRIES"]
+__all__ = ["entry", "KERNEL_MODULES", "source_digest", "aot_status", "ENTRIES", "type_key"]
 
 KERNEL_MODULES = (
     "cam.digitize._classify",
@@ -118,6 +118,27 @@ def aot_status() -> str:
     return _STATUS
 
 
+_SCALARS = {bool: "bool", int: "int64", float: "float64"}
+
+
+def type_key(value: Any) -> Optional[str]:
+    """The name numba gives ``value``'s type (``str(numba.typeof(value))``) for the kinds of values the
+    kernels take: arrays, Python and numpy scalars; None for anything else.  Computed here without numba's
+    ``typeof``, which interns a type object on every call."""
+    if isinstance(value, np.ndarray):
+        if not value.flags.aligned:
+            return None
+        layout = "C" if value.flags.c_contiguous else "F" if value.flags.f_contiguous else "A"
+        readonly = "" if value.flags.writeable else "readonly "
+        return f"{readonly}array({value.dtype.name}, {value.ndim}d, {layout})"
+    kind = _SCALARS.get(type(value))
+    if kind is not None:
+        return kind
+    if isinstance(value, (np.integer, np.floating, np.bool_)):
+        return value.dtype.name
+    return None
+
+
 class _Kernel:
     """A kernel marked with :func:`entry`: calls its ahead-of-time build for the argument types it was built
     for, and numba's dispatcher otherwise."""
@@ -129,14 +150,9 @@ class _Kernel:
         self.__doc__ = dispatcher.__doc__
         self.__wrapped__ = dispatcher.py_func
         self._table = table
-        self._typeof = typeof
 
     def __call__(self, *args: Any) -> Any:
-        typeof = self._typeof
-        try:
-            key = tuple(str(typeof(a)) for a in args)
-        except ValueError:  # a type numba cannot name: the dispatcher says what is wrong
-            return self.dispatcher(*args)
+        key = tuple(type_key(a) for a in args)
         function = self._table.get(key)
         if function is None:
             return self.dispatcher(*args)

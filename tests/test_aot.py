@@ -142,3 +142,18 @@ def test_signature_table_covers_every_kernel_and_round_trips():
         for expr in sigs:
             types = eval(expr, dict(vars(nbtypes)))  # noqa: S307 - the generated table
             assert "(" + "".join(type_expr(t) + ", " for t in types) + ")" == expr
+
+
+def test_type_keys_are_numbas_names():
+    """The guard names argument types itself (numba's typeof interns a type on every call); its names must be
+    exactly numba's, which the build wrote into the manifest."""
+    from numba import typeof
+
+    a = np.arange(12, dtype=np.int64).reshape(3, 4)
+    ro = np.zeros(5, np.uint8)
+    ro.flags.writeable = False
+    values = [a, a.T, a[:, ::2], a[0], np.zeros(3, bool), np.zeros((2, 2), np.float64), ro, np.zeros(1, np.int32),
+              True, 3, 2.5, np.int64(4), np.uint8(1), np.float64(1.5), np.bool_(True), np.int32(2)]
+    for v in values:
+        assert _compiled.type_key(v) == str(typeof(v)), v
+    assert _compiled.type_key("text") is None
