@@ -111,3 +111,44 @@ def test_canonical_time_is_the_longest_axis_at_its_speed():
     moves = [CanonMove("feed", (5.78, 0.0, 0.0)), CanonMove("traverse", (5.78, 5.78, -3.14)),
              CanonMove("feed", (0.0, 0.0, 0.0))]
     assert canonical_time_s(moves, s) == pytest.approx(1.0 + 1.0 + 1.0)
+
+
+needs_itg = pytest.mark.skipif(not (os.path.exists("/usr/bin/image-to-gcode") and shutil.which("rs274")),
+                               reason="image-to-gcode or rs274 (linuxcnc-uspace) not installed")
+
+
+@needs_itg
+def test_image_to_gcode_frame_meets_cams(tmp_path):
+    """The benchmark's image-to-gcode frame: its cut of a dome with a ball 1 mm lies on the target (gouge and rest
+    within a couple of Z steps), and the same path moved by one pixel either way cuts far more wrongly -- so the
+    comparison is not off by a pixel."""
+    import sys
+
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    import tools_vs_i2g as bench
+
+    s = cam.MachineSettings()
+    d, prof = _relief("disc.png", "dome.png")
+    target = bench.target_steps(d, prof, s)
+    assert np.array_equal(target, _target_steps(d, prof))
+    tool = parse_tool("ball:1")
+    on = bench.cut_by_itg(target, tool, 0, 1.0, s, tmp_path)
+    assert on.max_gouge_mm <= 2 * s.mm_per_step_z and on.rest_mean_mm < 0.1 * s.mm_per_step_z
+    for shift in ((1, 0), (-1, 0), (0, 1), (0, -1)):
+        off = bench.cut_by_itg(target, tool, 0, 1.0, s, tmp_path, shift_px=shift)
+        assert off.max_gouge_mm > 2 * on.max_gouge_mm and off.rest_mean_mm > 5 * on.rest_mean_mm, shift
+    ours = bench.cut_by_cam(d, prof, tool, target, s)
+    assert ours.max_gouge_mm == 0 and ours.time_s < on.time_s
+
+
+@needs_itg
+def test_benchmark_rows_print(tmp_path):
+    import subprocess
+    import sys
+
+    proc = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "run.py"), "--quick", "--only", "17"],
+                          capture_output=True, text=True, timeout=900)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    rows = [ln for ln in proc.stdout.splitlines() if ln.startswith("| tool ")]
+    assert len(rows) == 6  # the quick reliefs (the 128^2 dome, disc + dome) x ball, flat, V
+    assert all("max gouge 0.0 vs" in r for r in rows)  # cam never gouges
