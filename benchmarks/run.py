@@ -424,6 +424,15 @@ def bench_bounded_memory(quick: bool) -> list[dict]:
     return bounded_memory.bench_rows(quick)
 
 
+def bench_tools_vs_i2g(quick: bool) -> list[dict]:
+    """Row group 17 (#19 point 6): reliefs cut with ball 1 mm, flat 1 mm and V 60 degree tools, cam against
+    image-to-gcode with the same tool: gouge, rest material and machine time (benchmarks/tools_vs_i2g.py)."""
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    import tools_vs_i2g  # type: ignore
+
+    return tools_vs_i2g.bench_rows(quick)
+
+
 def _cell(value) -> str:
     """A time or count for the table: milliseconds-scale times keep their digits, counts none."""
     if value is None:
@@ -436,20 +445,21 @@ def _cell(value) -> str:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="small workloads (under a minute)")
-    ap.add_argument("--only", help="comma-separated row groups to run (1..14; 10: the machine first, 4 rows, "
-                                   "14: cold start, and 16: bounded memory, whole processes, are left out of --quick unless "
-                                   "named; "
+    ap.add_argument("--only", help="comma-separated row groups to run (1..17; 10: the machine first, 4 rows, "
+                                   "14: cold start, and 16: bounded memory, whole processes, and 17: tools against "
+                                   "image-to-gcode are left out of --quick unless named; "
                                    "11: the RGB array or PNG file to a digitized matrix, 4 rows; "
-                                   "12: closed tours on TSPLIB instances)")
+                                   "12: closed tours on TSPLIB instances; "
+                                   "17: reliefs cut with real tools against image-to-gcode, machine times)")
     args = ap.parse_args(argv)
     benches = {
         1: bench_trace_2d, 2: bench_peel_3d, 3: bench_planning, 4: None, 5: bench_memory, 7: bench_drill_tour,
         8: bench_realtime, 9: bench_ramps, 10: bench_machine_first, 11: bench_whole_path, 12: bench_tsplib,
-        14: bench_cold_start, 16: bench_bounded_memory,
+        14: bench_cold_start, 16: bench_bounded_memory, 17: bench_tools_vs_i2g,
     }
     everything = set(benches) | {6}
     only = ({int(v) for v in args.only.split(",")} if args.only
-            else (everything - {10, 14, 16} if args.quick else everything))
+            else (everything - {10, 14, 16, 17} if args.quick else everything))
     rows: list[dict] = []
     for k in sorted(only):
         if k in (4, 6):

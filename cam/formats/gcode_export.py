@@ -12,6 +12,12 @@ Frames and units (also written into every file's header):
 
 Cutting moves are G1 with the feed the configured delays give (mm/step /
 delay); X/Y moves use the X/Y rate, Z moves the Z rate.
+
+A job planned for a real cutter (``job.tool``: flat, ball or V, issue #19)
+names it: a ``(tool: ball 1 mm, spec ball:1)`` comment in the header and
+``T1 M6`` before the first move.  Z is then the tool's tip (the planner's
+depths are the tip's), so the program is run with the tool's length offset
+measured to its tip.  A point-tool job writes neither.
 """
 from __future__ import annotations
 
@@ -38,6 +44,11 @@ def _fmt(v: float) -> str:
     return "0" if s in ("-0", "") else s
 
 
+def _comment(text: str) -> str:
+    """``text`` safe inside a G-code comment (no parentheses)."""
+    return text.replace("(", "[").replace(")", "]")
+
+
 def to_gcode(
     toolpath: Job,
     *,
@@ -54,7 +65,8 @@ def to_gcode(
         safe_height_mm: height above the surface for moves between cuts.
         title: first comment line.
         tool_changes: ``{point index: (tool number, comment)}`` -- a ``T<n> M6``
-            is written before that point.
+            is written before that point.  Without it, a job planned for a real cutter
+            (``toolpath.tool``) gets ``T1 M6`` with the tool's shape and size before its first move.
 
     Returns:
         The program text, ending with M2.
@@ -77,7 +89,12 @@ def to_gcode(
       f"{' [flipped]' if flip_y else ' [rows grow down, machine Y grows up]'})\n")
     w(f"(Z = -{unit_z} x {k_z * mm_z:.4f} mm; Z = 0 is the material surface; safe height {_fmt(safe_z)} mm)\n")
     w(f"(feeds: X/Y {_fmt(feed_xy)} mm/min, Z {_fmt(feed_z)} mm/min, from the step delays)\n")
+    cutter = getattr(toolpath, "tool", None)
+    if cutter is not None and not cutter.is_point:
+        w(f"(tool: {_comment(cutter.describe())}, spec {cutter.spec()}; Z is its tip)\n")
     w("G21 G90 G17 G94\n")
+    if cutter is not None and not cutter.is_point and not tool_changes:
+        w(f"T1 M6 ({_comment(cutter.describe())})\n")
     w(f"G0 Z{_fmt(safe_z)}\n")
     x_mm, y_mm, z_mm = 0.0, 0.0, safe_z
     above = True  # at the safe plane

@@ -354,6 +354,7 @@ def _job_summary(st: _AppState, job_id: str, job: PreparedJob) -> dict[str, Any]
         "size_mm": list(job.size_mm), "depth_mm": job.depth_mm,
         "estimated_time_s": round(job.estimated_time_s, 3), "warnings": list(job.warnings),
         "tool_changes": list(job.tool_changes), "writes": len(job.plan),
+        "tool": job.report.get("tool"), "line_width_mm": job.report.get("line_width_mm"),
         "preview": f"/api/preview/{job_id}.png?v={st.counter}",
     }
 

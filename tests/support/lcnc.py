@@ -18,7 +18,7 @@ import numpy as np
 from cam.errors import CamError
 
 __all__ = ["CanonMove", "run_rs274", "parse_canonical", "canonical_polyline_mm", "carve_canonical", "bezier_mm",
-           "mark_spline_ends"]
+           "mark_spline_ends", "canonical_motion", "canonical_time_s"]
 
 _CALL = re.compile(r"^\s*\d+\s+N[.\d]*\s*(\w+)\((.*)\)\s*$")
 
@@ -235,3 +235,52 @@ def carve_canonical(
             raise CamError(f"G-code cuts below the surface outside the drawing at pixel ({col[j]}, {row[j]})")
         np.maximum.at(out, (row, col), depth)
     return out
+
+
+def canonical_motion(moves: list[CanonMove], settings, *, flip_y: bool = False,
+                     offset_steps: tuple[float, float, float] = (0.0, 0.0, 0.0), max_chord_mm: float = 0.005,
+                     exact: bool = False):
+    """rs274's moves (feeds and traverses: a traverse through the material cuts too) as the step positions a stepper machine passes through: a
+    :class:`cam.verify.pinlog.Motion` for :func:`cam.verify.toolcarve.carve_tool` (only ``position_steps`` is
+    meaningful; times are 0).
+
+    Frames as in :mod:`cam.formats.gcode_export`: x steps = X / mm/step, y steps = -Y / mm/step (+Y with
+    ``flip_y``), z steps = -Z / mm/step Z, plus ``offset_steps``.  Each feed segment is split into as many
+    equal parts as its longest axis has steps, every part's end rounded to the nearest step: for a move along an
+    axis or at 45 degrees (the only cutting moves `cam` makes) these are exactly the positions of the DDA that
+    `cam`'s step plan uses.
+
+    Args:
+        exact: raise CamError if a move's end at or below the surface (Z <= 0) is not on a step (within 1e-6
+            step): `cam`'s own programs' are (its safe height need not be).
+    """
+    from cam.verify.pinlog import Motion
+
+    pts, _ = canonical_polyline_mm(moves, max_chord_mm=max_chord_mm)
+    scale = np.array([settings.mm_per_step_xy, (1.0 if flip_y else -1.0) * settings.mm_per_step_xy,
+                      -settings.mm_per_step_z])
+    f = pts / scale + np.asarray(offset_steps, np.float64)
+    if exact:
+        off = np.abs(f - np.rint(f)) * (pts[:, 2:3] <= 1e-9)
+        if off.size and off.max() > 1e-6:
+            k = int(np.argmax(off.max(axis=1)))
+            raise CamError(f"canonical point {k} {pts[k].tolist()} mm is not on a step ({f[k].tolist()} steps)")
+    out = [np.rint(f[:1]).astype(np.int64)]
+    for i in range(1, len(f)):
+        a, b = f[i - 1], f[i]
+        n = max(1, int(math.ceil(np.abs(b - a).max() - 1e-9)))
+        t = np.arange(1, n + 1, dtype=np.float64)[:, None] / n
+        out.append(np.rint(a + (b - a) * t).astype(np.int64))
+    p = np.vstack(out) if out else np.zeros((0, 3), np.int64)
+    counts = np.abs(np.diff(p, axis=0)).sum(axis=0) if len(p) > 1 else np.zeros(3, np.int64)
+    return Motion(t_ns=np.zeros(len(p), np.int64), position_steps=p, step_counts=counts.astype(np.int64))
+
+
+def canonical_time_s(moves: list[CanonMove], settings, *, max_chord_mm: float = 0.05) -> float:
+    """Machine time of rs274's path (feeds and traverses alike) on `cam`'s stepper machine at its top speeds: each
+    segment takes ``max(|dx| / v_x, |dy| / v_y, |dz| / v_z)`` (the axes step together, as in `cam`'s step plan),
+    no acceleration (which only favours the program measured)."""
+    pts, _ = canonical_polyline_mm(moves, max_chord_mm=max_chord_mm)
+    d = np.abs(np.diff(pts, axis=0))
+    v = np.array([settings.max_speed_x_mm_s, settings.max_speed_y_mm_s, settings.max_speed_z_mm_s])
+    return float((d / v).max(axis=1).sum()) if len(d) else 0.0

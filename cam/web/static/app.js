@@ -54,6 +54,34 @@
     });
   }
 
+  // the cutter: a spec typed in wins; else the select and its inputs ("" = the machine's [tool])
+  function toolSpec() {
+    const val = (id) => $(id).value.trim();
+    if (val("opt-tool-spec")) return val("opt-tool-spec");
+    const shape = val("opt-tool-shape");
+    if (shape === "flat" || shape === "ball") return shape + ":" + val("opt-tool-diameter");
+    if (shape === "v") {
+      const d = val("opt-tool-diameter");
+      return "v:" + val("opt-tool-angle") + ":" + (val("opt-tool-tip") || "0") + (d ? ":" + d : "");
+    }
+    return shape;  // "point" or ""
+  }
+
+  // a line width is a V bit's (the width sets its depth); "" when none is given or the tool is no V bit
+  function lineWidth() {
+    const width = $("opt-line-width").value.trim();
+    return width && toolSpec().toLowerCase().startsWith("v") ? width : "";
+  }
+
+  function showToolInputs() {
+    const shape = $("opt-tool-shape").value;
+    document.querySelectorAll("#tool-options label[data-shapes]").forEach((l) => {
+      l.hidden = !l.dataset.shapes.split(" ").includes(shape);
+    });
+  }
+  $("opt-tool-shape").addEventListener("change", showToolInputs);
+  showToolInputs();
+
   function collectOptions() {
     const kind = page.kind;
     const o = {};
@@ -66,7 +94,9 @@
       // a 3D drawing takes a profile (a shaped relief) or one depth (a flat-bottomed pocket)
       if (page.profile) o.profile = page.profile;
       else if (val("opt-profile-expr")) o.profile_expr = val("opt-profile-expr");
+      else if (lineWidth()) o.line_width_mm = lineWidth();  // a V bit's line width sets a 2D depth
       else o.depth = val("opt-depth");
+      if (toolSpec()) o.tool = toolSpec();
       if (kind === "drawing" && $("opt-trace").checked) {  // a sketch or a photo: traced on the server first
         o.trace = true;
         o.trace_min_length_px = val("opt-trace-min-length");
@@ -109,6 +139,8 @@
       $("job-time").textContent = hms(r.estimated_time_s) + " (" + r.estimated_time_s.toFixed(1) + " s)";
       $("job-summary").textContent = r.summary;
       $("job-tools").textContent = r.tool_changes.length ? r.tool_changes.join("; ") : "none";
+      $("job-cutter").textContent = (r.tool || "point") +
+        (r.line_width_mm ? ", lines " + r.line_width_mm.toFixed(3) + " mm wide" : "");
       const img = $("preview");
       img.src = withToken(r.preview);
       img.hidden = false;
