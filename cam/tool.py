@@ -195,9 +195,8 @@ def footprint_px(tool: Tool, px_mm: float, zpx_mm: float, centre: tuple[float, f
     """The pixel centres a tool touches with its axis at ``centre`` (pixels, relative to pixel (0, 0)):
     ``(dy (K,), dx (K,), rise_zpx (K,))``.
 
-    ``rise_zpx`` is how many whole Z pixels above the tip the tool's surface stays over that pixel centre
-    (rounded down: a depth allowed with it never cuts below the target).  The point tool touches its own
-    pixel only.
+    ``rise_zpx`` (float) is how far, in Z pixels, the tool's surface stays above its tip over that pixel
+    centre.  The point tool touches its own pixel only.
     """
     if tool.is_point:
         z = np.zeros(1, np.int64)
@@ -207,26 +206,28 @@ def footprint_px(tool: Tool, px_mm: float, zpx_mm: float, centre: tuple[float, f
     dy, dx = dy.ravel(), dx.ravel()
     h_mm = tool.profile_mm(np.hypot(dx - centre[0], dy - centre[1]) * px_mm)
     keep = np.isfinite(h_mm)
-    rise = np.floor(h_mm[keep] / zpx_mm - 1e-9).astype(np.int64)
-    return dy[keep].astype(np.int64), dx[keep].astype(np.int64), np.maximum(rise, 0)
+    return dy[keep].astype(np.int64), dx[keep].astype(np.int64), h_mm[keep] / zpx_mm
 
 
 def _lowest(d: np.ndarray, dy: np.ndarray, dx: np.ndarray, rise: np.ndarray, out_hw: tuple[int, int],
             shift: int) -> np.ndarray:
-    """``min over k of d[i + dy_k - shift, j + dx_k - shift] + rise_k`` for each ``(i, j)`` of ``out_hw``; outside
+    """``floor(min over k of d[i + dy_k - shift, j + dx_k - shift] + rise_k)`` for each ``(i, j)`` of
+    ``out_hw`` (whole Z pixels, rounded down once, after the least is taken: never below any target); outside
     ``d`` is the surface (0)."""
     cap = int(d.max(initial=0))
     h, w = out_hw
     reach = int(max(np.abs(dy).max(initial=0), np.abs(dx).max(initial=0))) + shift + 1
-    padded = np.zeros((d.shape[0] + 2 * reach, d.shape[1] + 2 * reach), np.int64)
+    padded = np.zeros((d.shape[0] + 2 * reach, d.shape[1] + 2 * reach), np.float64)
     padded[reach:reach + d.shape[0], reach:reach + d.shape[1]] = d
-    out = np.full(out_hw, cap, np.int64)
+    out = np.full(out_hw, float(cap), np.float64)
     for oy, ox, r in zip(dy.tolist(), dx.tolist(), rise.tolist()):
         if r >= cap:
             continue  # the tool's surface is above every target there: it cannot limit anything
         y0, x0 = reach + oy - shift, reach + ox - shift
         np.minimum(out, padded[y0:y0 + h, x0:x0 + w] + r, out=out)
-    return out
+    # a least that is a whole number in exact arithmetic may come out a hair under it in floats: such a hair
+    # (under 1e-7 Z pixel, far below any machine's resolution) is not taken as a whole pixel less
+    return np.floor(out + 1e-7).astype(np.int64)
 
 
 def drop_depth_px(depth_px: np.ndarray, tool: Tool, px_mm: float, zpx_mm: float) -> np.ndarray:
@@ -246,7 +247,7 @@ def drop_depth_px(depth_px: np.ndarray, tool: Tool, px_mm: float, zpx_mm: float)
     if tool.is_point:
         return d.copy()
     dy, dx, rise = footprint_px(tool, px_mm, zpx_mm)
-    return np.minimum(_lowest(d, dy, dx, rise, d.shape, 0), d)
+    return np.maximum(np.minimum(_lowest(d, dy, dx, rise, d.shape, 0), d), 0)
 
 
 def corner_depth_px(depth_px: np.ndarray, tool: Tool, px_mm: float, zpx_mm: float) -> np.ndarray:
@@ -259,7 +260,7 @@ def corner_depth_px(depth_px: np.ndarray, tool: Tool, px_mm: float, zpx_mm: floa
     """
     d = np.asarray(depth_px, np.int64)
     dy, dx, rise = footprint_px(tool, px_mm, zpx_mm, centre=(-0.5, -0.5))
-    return _lowest(d, dy, dx, rise, (d.shape[0] + 1, d.shape[1] + 1), 0)
+    return np.maximum(_lowest(d, dy, dx, rise, (d.shape[0] + 1, d.shape[1] + 1), 0), 0)
 
 
 def reach_depth_px(allowed_px: np.ndarray, tool: Tool, px_mm: float, zpx_mm: float) -> np.ndarray:
