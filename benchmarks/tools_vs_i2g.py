@@ -223,7 +223,11 @@ def bench_rows(quick: bool) -> list[dict]:
 
 
 def main(argv=None) -> int:
-    quick = "--quick" in (argv if argv is not None else sys.argv[1:])
+    import argparse
+
+    ap = argparse.ArgumentParser(description=(__doc__ or "").strip().splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="small reliefs only (under a minute)")
+    quick = ap.parse_args(argv).quick
     print("| workload | cam (machine s) | image-to-gcode (machine s) | result | target | met |")
     print("| --- | ---: | ---: | --- | --- | --- |")
     for r in bench_rows(quick):
