@@ -398,11 +398,11 @@ def test_ctrl_c_during_a_move_then_emergency_stop_like_the_cli():
 
         presser = threading.Thread(target=press_ctrl_c)
         presser.start()
-        with pytest.raises(KeyboardInterrupt):
-            board.drill(np.array([[3000, 0]]), z_down_steps=5)
+        with pytest.raises(KeyboardInterrupt):  # a 3 s move: Ctrl-C comes at 300 pulses, long before its end
+            board.drill(np.array([[15000, 0]]), z_down_steps=5)
         presser.join()
         assert board.emergency_stop() is True
-        assert emu.position_pulses[0] < 3000
+        assert emu.position_pulses[0] < 15000
         assert emu.wait_for_state(MODE_SELECTION) and board.in_step
         board.close()
     finally:
