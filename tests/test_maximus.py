@@ -387,6 +387,8 @@ def test_emergency_stop_during_a_move():
 def test_ctrl_c_during_a_move_then_emergency_stop_like_the_cli():
     emu = start_emulator(speed=1.0)
     main_ident = threading.get_ident()
+    # Ctrl-C as a terminal delivers it: Python's own SIGINT handler, whatever earlier tests in this process left
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
     try:
         board = MaximusBoard(emu.device_path, FAST, timeout_s=2.0)
 
@@ -406,6 +408,7 @@ def test_ctrl_c_during_a_move_then_emergency_stop_like_the_cli():
         assert emu.wait_for_state(MODE_SELECTION) and board.in_step
         board.close()
     finally:
+        signal.signal(signal.SIGINT, previous)
         emu.stop()
 
 
