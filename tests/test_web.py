@@ -425,12 +425,18 @@ def test_page_emergency_stop_halts_within_one_step_period(page, servers):
     s.wait_idle()
 
 
-def test_page_pause_resume_keeps_the_carve_exact(page, servers):
+def _medium_at_origin(servers) -> "Server":
+    """The medium-speed real-time server, idle, its tool back at the origin (an earlier test may have left it)."""
     s = servers("medium", settings=MEDIUM, realtime=True)
     s.session.wait_idle()
     if s.session.position_steps() != (0, 0, 0):
         s.session.go_to_origin()
         s.wait_idle()
+    return s
+
+
+def test_page_pause_resume_keeps_the_carve_exact(page, servers):
+    s = _medium_at_origin(servers)
     _open(page, s)
     _load(page, SAMPLES / "two_curves.png", depth="2")
     page.click("#start")
@@ -674,11 +680,7 @@ def test_the_page_traces_a_sketch_and_cuts_what_the_library_traces(page, fast, t
 def test_page_resume_job_button_finishes_a_stopped_job_exactly(page, servers):
     """Stop a job from the page, then press Resume job: the two pin logs together carve the drawing exactly
     (issue #15: the page's Resume button after a stop)."""
-    s = servers("medium", settings=MEDIUM, realtime=True)
-    s.session.wait_idle()
-    if s.session.position_steps() != (0, 0, 0):
-        s.session.go_to_origin()
-        s.wait_idle()
+    s = _medium_at_origin(servers)
     _open(page, s)
     _load(page, SAMPLES / "two_curves.png", depth="2")
     assert page.is_disabled("#resume-job")
