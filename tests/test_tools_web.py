@@ -2,8 +2,6 @@
 the page names the cutter.  Browser tests drive Debian's Chromium through Playwright, as tests/test_web.py does."""
 from __future__ import annotations
 
-import os
-
 import pytest
 
 import cam
@@ -15,7 +13,8 @@ from conftest import ROOT, SAMPLES
 pytest.importorskip("uvicorn")
 pytest.importorskip("starlette")
 
-from test_web import CHROMIUM, FAST, Server  # noqa: E402  (the real server on a free port, in a thread)
+from test_web import FAST, Server, browser  # noqa: E402,F401  (the real server on a free port, in a thread;
+# the browser fixture: Debian chromium through Playwright)
 
 DOME = ROOT / "profiles" / "dome.png"
 
@@ -50,17 +49,6 @@ def test_api_plan_names_the_tool(server):
     status, r = server.call("POST", "/api/plan", {"job": up["job"], "options": {"profile": prof["job"],
                                                                                 "tool": "ball:-1"}})
     assert status == 400 and "tool" in r["error"]
-
-
-@pytest.fixture(scope="module")
-def browser():
-    sync_api = pytest.importorskip("playwright.sync_api")
-    if not os.path.exists(CHROMIUM) and not os.environ.get("CI"):
-        pytest.skip("Debian chromium not installed")
-    with sync_api.sync_playwright() as pw:
-        b = pw.chromium.launch(executable_path=CHROMIUM, headless=True, args=["--headless", "--no-sandbox"])
-        yield b
-        b.close()
 
 
 @pytest.fixture
