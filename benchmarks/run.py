@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import datetime
 import gc
+import json
 import os
 import resource
 import shutil
@@ -228,28 +229,12 @@ def bench_planning(quick: bool) -> dict:
                f"{rate / 1e6:.1f}M steps/s", ">= 10M steps/s", rate >= 10e6)
 
 
-IMAGE_TO_GCODE_RUNNER = textwrap.dedent('''
-    import importlib.machinery, importlib.util, sys, io, time
-    loader = importlib.machinery.SourceFileLoader("itg", "/usr/bin/image-to-gcode")
-    spec = importlib.util.spec_from_loader("itg", loader)
-    itg = importlib.util.module_from_spec(spec)
-    sys.argv = ["image-to-gcode", sys.argv[1], sys.argv[2]]
-    loader.exec_module(itg)
-    options = dict(invert=False, normalize=False, expand=0, pixel_size=.006, depth=float(sys.argv[2]),
-                   pixelstep=1, tool_diameter=.006, safety_height=.012, tool_type=0, tolerance=.001,
-                   feed_rate=12, plunge_feed_rate=12, units=0, pattern=0, converter=0, bounded=0,
-                   contact_angle=45, spindle_speed=1000, roughing_offset=.1, roughing_depth=.25)
-    itg.ui = lambda im, nim, name: options
-    real_stdout = sys.stdout
-    sys.stdout = io.StringIO()
-    t0 = time.perf_counter()
-    itg.main()
-    elapsed = time.perf_counter() - t0
-    gcode = sys.stdout.getvalue()
-    sys.stdout = real_stdout
-    open(sys.argv[1] + ".ngc", "w").write(gcode)
-    print(elapsed)
-''')
+def image_to_gcode_options(depth_in: float) -> dict:
+    """image-to-gcode's dialog for the relief rows: a point-like ball (one pixel wide), every row, inches."""
+    return dict(invert=False, normalize=False, expand=0, pixel_size=.006, depth=depth_in, pixelstep=1,
+                tool_diameter=.006, safety_height=.012, tool_type=0, tolerance=.001, feed_rate=12,
+                plunge_feed_rate=12, units=0, pattern=0, converter=0, bounded=0, contact_angle=45,
+                spindle_speed=1000, roughing_offset=.1, roughing_depth=.25)
 
 
 def _relief_job(size_px: int):
@@ -283,11 +268,14 @@ def bench_relief(quick: bool) -> tuple[dict, dict]:
     grey = np.rint(255 * (1 - target / dmax)).astype(np.uint8)
     cv2.imwrite(str(tmp / "relief.png"), grey)
     depth_in = dmax * 0.006  # one Z pixel = one pixel size, in inches (image-to-gcode's default units)
+    from tools_vs_i2g import RUNNER  # image-to-gcode's own main() with its dialog's answers, timed
+
     script = tmp / "itg.py"
-    script.write_text(IMAGE_TO_GCODE_RUNNER)
+    script.write_text(RUNNER)
     times = []
     for _ in range(1 if not quick else 1):
-        out = subprocess.run(["/usr/bin/python3", str(script), str(tmp / "relief.png"), f"{depth_in}"],
+        out = subprocess.run(["/usr/bin/python3", str(script), str(tmp / "relief.png"),
+                              str(tmp / "relief.png.ngc"), json.dumps(image_to_gcode_options(depth_in))],
                              capture_output=True, text=True, timeout=3600)
         if out.returncode != 0:
             return (row("relief conversion", t_cam, None, "error", ">= 50x faster", None, out.stderr[-200:]),
