@@ -111,12 +111,18 @@ def test_fast_assembly_equals_the_reference_loop(name):
     # rebuild the depth-sorted target list the planner used (with duplicates) from the digitized matrix
     from cam.job.drawing import _pass_targets
     depth = as_profile(kw["profile"], d.n_layers).depth_of(d.levels) if d.mode == "3d" else np.array(kw["depth"])
-    t, _ = _pass_targets(d, np.asarray(depth, np.int64), 2)
+    t = _pass_targets(d, np.asarray(depth, np.int64), 2)
     t = t + [2, 3, 1]
     a = _assemble(t, pause_px, asked, job.settings, 1, 0, 1)
     b = _assemble_reference(t, pause_px, asked, job.settings, 1, 0, 1)
     for u, v in zip(a, b):
         assert np.array_equal(u, v)
+    # the same targets assembled in pieces (each going on after the one before) give the same rows
+    cuts = [0, 1, 2, 57, 58, len(t) // 2, len(t) - 1, len(t)]
+    parts = [_assemble(t[i:j], pause_px, asked, job.settings, 1, 0, 1, after=t[i - 1] if i else None,
+                       last=j == len(t)) for i, j in zip(cuts, cuts[1:])]
+    for k, whole in enumerate(a):
+        assert np.array_equal(np.concatenate([part[k] for part in parts]), whole)
 
 
 @pytest.mark.parametrize("start_at", [(-67, -6, 0), (-200, -100, 0), (0, 0, 0), (37, 5, 0), (500, 300, 2)])

@@ -108,7 +108,11 @@ def profile_of(args: argparse.Namespace, digitized: Digitized) -> Optional[Profi
 
 def write_job_preview(args: argparse.Namespace, job: PreparedJob, path: str, surface: bool = False) -> None:
     """A prepared job's picture: a drawing's toolpath over it or its cut surface, a file job's preview."""
-    if job.kind in ("drawing", "digitized"):
+    streamed = job.toolpath is not None and not hasattr(job.toolpath, "points_steps")
+    if streamed and surface:
+        raise CamError(f"{path}: the cut surface of a job of {len(job.toolpath)} moves, planned a piece at a time, "
+                       f"is not pictured; its preview shows its moves")
+    if job.kind in ("drawing", "digitized") and not streamed:
         write_preview(args, job.toolpath, path, surface=surface, drawing_rgb=job.drawing_rgb)
     elif job.kind == "svg":  # --scale scaled the drawing, as in drill
         write_file_job_preview(job, path)

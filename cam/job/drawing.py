@@ -80,26 +80,70 @@ def _depths_per_object(depth: int | Sequence[int], n_objects: int) -> tuple[np.n
     return values, warnings
 
 
-def _pass_targets(
-    digitized: Digitized, depth_px: np.ndarray, passes: int
-) -> tuple[np.ndarray, np.ndarray]:
-    """All (x, y, z) cut targets in cutting order, with per-target drawing coordinates."""
-    chunks = []
+def _pass_order(depth_px: np.ndarray, passes: int) -> list[tuple[int, int]]:
+    """``(object index, depth in Z pixels)`` of every block of cut targets, in cutting order.
+
+    Pass k of an object cuts at ceil(d x k / passes) (a pass that goes no deeper, or depth 0, is skipped);
+    blocks are sorted by depth, shallowest first, stably, so within a depth pass and object order are kept.
+    """
+    blocks = []
     for k in range(1, passes + 1):
-        for obj, d in zip(digitized.objects, depth_px):
+        for i, d in enumerate(depth_px.tolist()):
             d_k = (int(d) * k + passes - 1) // passes  # ceil(d * k / passes)
             d_prev = (int(d) * (k - 1) + passes - 1) // passes
             if d_k == 0 or (k > 1 and d_k == d_prev):
                 continue  # depth 0 skips the object; a pass that goes no deeper is skipped
-            block = np.empty((len(obj), 3), np.int64)
-            block[:, :2] = obj
-            block[:, 2] = d_k
-            chunks.append(block)
-    if not chunks:
-        return np.zeros((0, 3), np.int64), np.zeros(0, np.int64)
-    targets = np.concatenate(chunks)
-    order = np.argsort(targets[:, 2], kind="stable")
-    return targets[order], order
+            blocks.append((i, d_k))
+    blocks.sort(key=lambda b: b[1])  # stable
+    return blocks
+
+
+def _pass_targets(digitized: Digitized, depth_px: np.ndarray, passes: int) -> np.ndarray:
+    """All ``(M, 3)`` (x, y, z) cut targets in cutting order (see :func:`_pass_order`)."""
+    chunks = []
+    for i, d in _pass_order(depth_px, passes):
+        block = np.empty((len(digitized.objects[i]), 3), np.int64)
+        block[:, :2] = digitized.objects[i]
+        block[:, 2] = d
+        chunks.append(block)
+    return np.concatenate(chunks) if chunks else np.zeros((0, 3), np.int64)
+
+
+def _object_depths(digitized: Digitized, depth: int | Sequence[int] | None, profile: ProfileLike | None,
+                   passes: int) -> tuple[np.ndarray, list[str]]:
+    """``(depth per object (n_objects,) in Z pixels, warnings)`` from :func:`plan`'s ``depth``/``profile`` options.
+
+    Raises:
+        PlanError: bad options (see :func:`plan`).
+    """
+    if passes < 1:
+        raise PlanError(f"passes must be >= 1, got {passes}")
+    n_obj = len(digitized.objects)
+    if n_obj == 0:
+        raise PlanError("nothing to cut: the digitized drawing has no objects")
+    if digitized.mode == "3d":
+        if profile is not None and depth is not None:
+            raise PlanError("give a 3D drawing's depth once: --depth N (every layer at N Z pixels, a flat-bottomed "
+                            "pocket) or a profile (--profile, --profile-expr) for a shaped relief")
+        if profile is None and depth is None:
+            raise PlanError("this is a 3D drawing (red interior): give --depth N for a flat-bottomed pocket N Z "
+                            "pixels deep, or a profile for its layer depths (--profile FILE, --profile-expr EXPR)")
+        if profile is None:
+            uniform = np.atleast_1d(np.asarray(depth, np.int64))
+            if uniform.size != 1:
+                raise PlanError(f"a 3D drawing takes one --depth for every layer (a flat-bottomed pocket), got "
+                                f"{uniform.size} values; use a profile for a depth per layer")
+            if int(uniform[0]) < 0:
+                raise PlanError(f"depths must be >= 0 Z pixels, got {int(uniform[0])}")
+            depth_px, warnings = np.full(len(digitized.levels), int(uniform[0]), np.int64), []
+        else:
+            prof = as_profile(profile, digitized.n_layers)
+            depth_px, warnings = prof.depth_of(digitized.levels).astype(np.int64), list(prof.warnings)
+    else:
+        if profile is not None:
+            raise PlanError("a profile applies to 3D drawings only; this drawing is 2D (use --depth)")
+        depth_px, warnings = _depths_per_object(10 if depth is None else depth, n_obj)
+    return depth_px, warnings
 
 
 def plan(
@@ -153,34 +197,8 @@ def plan(
     Raises:
         PlanError: fewer depths than objects, bad options; TravelError: the job leaves the travel.
     """
-    if passes < 1:
-        raise PlanError(f"passes must be >= 1, got {passes}")
-    n_obj = len(digitized.objects)
-    if n_obj == 0:
-        raise PlanError("nothing to cut: the digitized drawing has no objects")
-    if digitized.mode == "3d":
-        if profile is not None and depth is not None:
-            raise PlanError("give a 3D drawing's depth once: --depth N (every layer at N Z pixels, a flat-bottomed "
-                            "pocket) or a profile (--profile, --profile-expr) for a shaped relief")
-        if profile is None and depth is None:
-            raise PlanError("this is a 3D drawing (red interior): give --depth N for a flat-bottomed pocket N Z "
-                            "pixels deep, or a profile for its layer depths (--profile FILE, --profile-expr EXPR)")
-        if profile is None:
-            uniform = np.atleast_1d(np.asarray(depth, np.int64))
-            if uniform.size != 1:
-                raise PlanError(f"a 3D drawing takes one --depth for every layer (a flat-bottomed pocket), got "
-                                f"{uniform.size} values; use a profile for a depth per layer")
-            if int(uniform[0]) < 0:
-                raise PlanError(f"depths must be >= 0 Z pixels, got {int(uniform[0])}")
-            depth_px, warnings = np.full(len(digitized.levels), int(uniform[0]), np.int64), []
-        else:
-            prof = as_profile(profile, digitized.n_layers)
-            depth_px, warnings = prof.depth_of(digitized.levels).astype(np.int64), list(prof.warnings)
-    else:
-        if profile is not None:
-            raise PlanError("a profile applies to 3D drawings only; this drawing is 2D (use --depth)")
-        depth_px, warnings = _depths_per_object(10 if depth is None else depth, n_obj)
-    targets, _ = _pass_targets(digitized, depth_px, passes)
+    depth_px, warnings = _object_depths(digitized, depth, profile, passes)
+    targets = _pass_targets(digitized, depth_px, passes)
     if len(targets) == 0:
         raise PlanError("nothing to cut: every depth is 0")
     cutter = parse_tool(tool, "tool")
@@ -207,19 +225,12 @@ def plan(
     surface = oz
     safe = min(0, oz)
 
-    pause_set = {(int(x), int(y)) for x, y in pause_at}
-    drawn = {(int(x), int(y)) for obj in digitized.objects for x, y in obj} if pause_set else set()
-    for x, y in pause_at:
-        if (int(x), int(y)) not in drawn:
-            warnings.append(f"Pause At ({x}, {y}) is not a point of the drawing; it has no effect")
-
     # deepest depth asked at each pixel (drawing frame, relative to the surface): moving through a
     # pixel at or above that depth never cuts what the drawing does not ask for
     asked = np.zeros((digitized.height_px + 2, digitized.width_px + 2), np.int64)
     np.maximum.at(asked, (targets[:, 1], targets[:, 0]), targets[:, 2] - oz)
-    pause_px = np.zeros(asked.shape, bool)
-    for x, y in pause_set & drawn:
-        pause_px[y, x] = True
+    pause_px, notes = _pause_map(digitized, pause_at, asked.shape)
+    warnings += notes
     # the job's extent is known before it is assembled (targets, the home, the safe plane): one that leaves the
     # travel is assembled without bridges, only to name its first point outside, and refused
     fits = _fits_travel(targets, (ox, oy), safe, settings)
@@ -292,19 +303,32 @@ def _roughing_targets(targets: np.ndarray, rough: Tool, stepdown_px: int, stepov
     return (np.concatenate(chunks) if chunks else empty), allowed, corners, rough
 
 
-def _drop_targets(targets: np.ndarray, cutter: Tool, height_px: int, width_px: int,
-                  settings: MachineSettings) -> tuple[np.ndarray, np.ndarray, list[str]]:
-    """Targets ``(M, 3)`` (x, y, depth in Z pixels, cutting order) with each depth limited by the drop-cutter
-    rule for ``cutter`` over the deepest depth asked at each pixel; targets left at depth 0 are dropped.
-    Returns the targets, the drop-cutter depth at each pixel corner (:func:`cam.tool.corner_depth_px`) and a
-    warning about the material the tool cannot reach (none if it reaches all)."""
-    asked = np.zeros((height_px, width_px), np.int64)
-    np.maximum.at(asked, (targets[:, 1], targets[:, 0]), targets[:, 2])
+def _pause_map(digitized: Digitized, pause_at: Sequence[tuple[int, int]], shape: tuple[int, int]
+               ) -> tuple[np.ndarray, list[str]]:
+    """``(pause_px (shape) bool, warnings)``: the Pause At points that are points of the drawing (drawing
+    frame), and a warning for each that is not."""
+    pause_px = np.zeros(shape, bool)
+    notes = []
+    if len(pause_at):
+        drawn = np.zeros(shape, bool)
+        for obj in digitized.objects:
+            drawn[obj[:, 1], obj[:, 0]] = True
+        for x, y in pause_at:
+            if 0 <= int(y) < shape[0] and 0 <= int(x) < shape[1] and drawn[int(y), int(x)]:
+                pause_px[int(y), int(x)] = True
+            else:
+                notes.append(f"Pause At ({x}, {y}) is not a point of the drawing; it has no effect")
+    return pause_px, notes
+
+
+def _drop_maps(asked: np.ndarray, cutter: Tool, settings: MachineSettings
+               ) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    """For the deepest depth asked at each pixel ``asked`` (H, W) (Z pixels, drawing frame): the drop-cutter
+    depth of ``cutter`` at each pixel (H, W) (:func:`cam.tool.drop_depth_px`), at each pixel corner
+    (H + 1, W + 1) (:func:`cam.tool.corner_depth_px`) and a warning about the material the tool cannot reach
+    (none if it reaches all)."""
     px_mm, zpx_mm = settings.px_to_mm_xy(1), settings.px_to_mm_z(1)
     allowed = drop_depth_px(asked, cutter, px_mm, zpx_mm)
-    out = targets.copy()
-    out[:, 2] = np.minimum(out[:, 2], allowed[out[:, 1], out[:, 0]])
-    out = out[out[:, 2] > 0]
     rest = asked - reach_depth_px(allowed, cutter, px_mm, zpx_mm)
     short = np.count_nonzero(rest >= 1)
     note = []
@@ -312,7 +336,20 @@ def _drop_targets(targets: np.ndarray, cutter: Tool, height_px: int, width_px: i
         note.append(f"the {cutter.describe()} tool cannot reach the full depth of {short} of "
                     f"{np.count_nonzero(asked)} pixels (up to {settings.px_to_mm_z(float(rest.max())):.3f} mm left; "
                     f"a smaller tool reaches more)")
-    return out, corner_depth_px(asked, cutter, px_mm, zpx_mm), note
+    return allowed, corner_depth_px(asked, cutter, px_mm, zpx_mm), note
+
+
+def _drop_targets(targets: np.ndarray, cutter: Tool, height_px: int, width_px: int,
+                  settings: MachineSettings) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    """Targets ``(M, 3)`` (x, y, depth in Z pixels, cutting order) with each depth limited by the drop-cutter
+    rule for ``cutter`` over the deepest depth asked at each pixel; targets left at depth 0 are dropped.
+    Returns the targets, the drop-cutter depth at each pixel corner and the warning of :func:`_drop_maps`."""
+    asked = np.zeros((height_px, width_px), np.int64)
+    np.maximum.at(asked, (targets[:, 1], targets[:, 0]), targets[:, 2])
+    allowed, corners, note = _drop_maps(asked, cutter, settings)
+    out = targets.copy()
+    out[:, 2] = np.minimum(out[:, 2], allowed[out[:, 1], out[:, 0]])
+    return out[out[:, 2] > 0], corners, note
 
 
 def _guard_diagonals(pts: np.ndarray, kind: np.ndarray, tgt: np.ndarray, pause: np.ndarray, corners: np.ndarray,
@@ -394,13 +431,18 @@ def _gap_block(
 def _assemble(
     targets: np.ndarray, pause_px: np.ndarray, asked: np.ndarray, settings: MachineSettings,
     surface: int, safe: int, oz: int, home: tuple[int, int] = (0, 0), route: bool = True,
+    after: np.ndarray | None = None, last: bool = True,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The planner's rules, vectorised: adjacent moves in bulk, only gaps in Python (tests compare it with a plain loop).
 
     ``targets``, ``pause_px`` and ``asked`` share one pixel frame; ``home`` is where the job starts and ends
-    in that frame; ``route``: bridge gaps inside the material (False: every gap lifts).
+    in that frame; ``route``: bridge gaps inside the material (False: every gap lifts).  A piece of a longer
+    job: ``after`` is the target ``(3,)`` cut just before ``targets[0]`` (the moves go on from it), and
+    ``last=False`` leaves out the way home; pieces made so, one after the other, equal the whole job.
     Returns ``(points (N, 3), kind (N,), target (N,), pause (N,))``.
     """
+    if after is not None:  # every move depends on its two targets only: plan from the one before, drop its rows
+        targets = np.vstack([np.asarray(after, np.int64).reshape(1, 3), targets])
     hx, hy = home
     m = len(targets)
     x, y, d = targets[:, 0], targets[:, 1], targets[:, 2]
@@ -426,10 +468,10 @@ def _assemble(
         extra[i] = len(blk)
     counts = a_valid.astype(np.int64) + b_valid + extra
     cx, cy = int(x[-1]), int(y[-1])
-    tail = [(cx, cy, safe, RETRACT)]
-    if (hx, hy) != (cx, cy):
+    tail = [(cx, cy, safe, RETRACT)] if last else []
+    if last and (hx, hy) != (cx, cy):
         tail.append((hx, hy, safe, TRAVEL))
-    if safe != 0:
+    if last and safe != 0:
         tail.append((hx, hy, 0, TRAVEL))
     start = np.concatenate([[0], np.cumsum(counts)])
     n = int(start[-1]) + len(tail)
@@ -466,6 +508,9 @@ def _assemble(
     for j, (px, py, pz, k) in enumerate(tail):
         pts[start[-1] + j] = (px, py, pz)
         kind[start[-1] + j] = k
+    if after is not None:
+        first = int(start[1])
+        return pts[first:], kind[first:], tgt[first:], pause[first:]
     return pts, kind, tgt, pause
 
 

@@ -59,6 +59,7 @@ from .gcode import plan_gcode
 from .hpgl import DEFAULT_CUT_DEPTH_MM as HPGL_CUT_DEPTH_MM
 from .hpgl import DEFAULT_SAFE_HEIGHT_MM as HPGL_SAFE_HEIGHT_MM
 from .hpgl import plan_hpgl
+from .drawing_stream import STREAM_TARGETS, stream_drawing
 from .hpgl_stream import STREAM_POINTS, stream_hpgl
 from .resume import Journal, JournalBase, check_journal, job_identity, plan_fingerprint, resume_toolpath
 from .svg import DEFAULT_CUT_DEPTH_MM as SVG_CUT_DEPTH_MM
@@ -441,7 +442,7 @@ class PreparedJob:
 
     def preview_picture(self) -> np.ndarray:
         """The preview as an ``(H, W, 3)`` uint8 RGB array (see :mod:`cam.render.picture`)."""
-        if self.kind in ("drawing", "digitized"):
+        if self.kind in ("drawing", "digitized") and hasattr(self.toolpath, "points_steps"):
 
             return toolpath_picture(self.toolpath, drawing_rgb=self.drawing_rgb,
                                     estimated_time_s=self.estimated_time_s)
@@ -634,9 +635,14 @@ def _prepare_pixels(path: Path, kind: str, options: JobOptions, settings: Machin
     stepdown_px = None
     if options.stepdown_mm is not None:
         stepdown_px = max(1, int(options.stepdown_mm / settings.px_to_mm_z(1)))
-    toolpath = plan(digitized, depth=depth, settings=settings, passes=options.passes,
-                    start_at=options.start_at, pause_at=list(options.pause_at), profile=profile, tool=cutter,
-                    stepdown_px=stepdown_px, stepover=options.stepover, rough_tool=options.rough_tool)
+    common = dict(depth=depth, settings=settings, passes=options.passes, start_at=options.start_at,
+                  pause_at=list(options.pause_at), profile=profile, tool=cutter)
+    if stepdown_px is None and digitized.n_points * options.passes > STREAM_TARGETS:  # made a piece at a time
+        toolpath = stream_drawing(digitized, **common)
+        rgb = None  # pictured from its moves, as any streamed job (the picture over the drawing holds every move)
+    else:
+        toolpath = plan(digitized, stepdown_px=stepdown_px, stepover=options.stepover, rough_tool=options.rough_tool,
+                        **common)
     steps = plan_chunks(toolpath)
     report = job_report(digitized, toolpath, steps)
     summary = (f"{path.name}: {report['objects']} object(s), {report['points']} points, "

@@ -34,7 +34,9 @@ def image_report(digitized: Digitized, settings: MachineSettings = DEFAULT_SETTI
         "warnings": list(digitized.warnings),
     }
     if digitized.mode == "3d":
-        drawn = (digitized.label_image() > 0).astype(np.uint8)
+        drawn = np.zeros((digitized.height_px, digitized.width_px), np.uint8)
+        for obj in digitized.objects:
+            drawn[obj[:, 1], obj[:, 0]] = 1
         rep["objects"] = int(cv2.connectedComponents(drawn, connectivity=8)[0] - 1)
         rep["rings"] = len(digitized.objects)
         rep["layers"] = digitized.n_layers
@@ -50,7 +52,10 @@ def job_report(
     """
     s = toolpath.settings
     rep: dict[str, Any] = image_report(digitized, s) if digitized is not None else {"warnings": []}
-    depth_px = int(toolpath.asked_depth_px().max()) if toolpath.height_px and toolpath.n_targets else 0
+    depth_px = 0
+    if toolpath.height_px and toolpath.n_targets:
+        deepest = getattr(toolpath, "deepest_px", None)  # a streamed job knows it without a map of its own
+        depth_px = int(deepest if deepest is not None else toolpath.asked_depth_px().max())
     rep.update(
         {
             "depth_px": depth_px,
