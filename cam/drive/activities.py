@@ -40,8 +40,8 @@ def run_steps(session: Any, name: str, plan: "StepPlan | ChunkedPlan", ctl: Cont
         if session.realtime and isinstance(session.port, str):  # a process of its own: nothing holds it up
             if port_kind(session.port) != "mock":
                 open_port(session.port).close()  # a port that cannot be opened: its own message, from here
-            whole = plan.to_plan() if isinstance(plan, ChunkedPlan) else plan  # the child takes every write
-            result = session.runner_process().run(whole, session.port, ctl, progress=session.progress,
+            # the child makes a chunked plan's writes itself, a chunk at a time (bounded memory)
+            result = session.runner_process().run(plan, session.port, ctl, progress=session.progress,
                                                   on_pause=session.prompt, journal=journal)
         else:  # the simulated clock, or a port object the caller opened
             port = open_port(session.port)

@@ -45,6 +45,7 @@ from ..verify.pinlog import PinLog, write_pin_log
 from .journal import JournalSpec, JournalWriter, journal_state_of
 from .ports import MockPort, Port, open_port
 from .runner import Controller, PauseFn, ProgressFn, RunResult, run
+from .chunks import ChunkedPlan
 from .steps import StepPlan
 
 __all__ = ["RunnerProcess"]
@@ -261,10 +262,13 @@ class RunnerProcess:
         self._slots = np.frombuffer(self._page, np.int64)
         self._conn = Connection(ours.detach())
 
-    def run(self, plan: StepPlan, port_name: str, controller: Controller,
+    def run(self, plan: "StepPlan | ChunkedPlan", port_name: str, controller: Controller,
             progress: Optional[ProgressFn] = None, on_pause: Optional[PauseFn] = None,
             journal: Optional[JournalSpec] = None) -> RunResult:
         """Run ``plan`` in real time on the port ``port_name``, in the child; as :func:`cam.drive.runner.run`.
+
+        A :class:`~cam.drive.chunks.ChunkedPlan` goes to the child as its job and settings; the child makes its
+        writes a chunk at a time, so neither process holds every write.
 
         ``journal``: the child keeps the job's journal (:class:`~cam.drive.journal.JournalWriter`); if this
         process dies during the run, the child stops the job, writes the journal's last record and the mock's
@@ -297,7 +301,7 @@ class RunnerProcess:
                 controller.listeners.remove(mirror)
                 slots[_FLAGS] = 0
 
-    def _follow(self, plan: StepPlan, ctl: Controller, progress: Optional[ProgressFn],
+    def _follow(self, plan: "StepPlan | ChunkedPlan", ctl: Controller, progress: Optional[ProgressFn],
                 on_pause: Optional[PauseFn]) -> RunResult:
         assert self._slots is not None and self._conn is not None and self._process is not None
         slots, conn, total = self._slots, self._conn, len(plan)
@@ -331,8 +335,7 @@ class RunnerProcess:
                     port = MockPort()
                     port.write_many(*log)
                 if progress is not None:
-                    progress(int(fields["writes"]), total, int(plan.t_ns[fields["writes"] - 1])
-                             if fields["writes"] else 0)
+                    progress(int(fields["writes"]), total, int(round(float(fields["machine_time_s"]) * 1e9)))
                 return RunResult(port=port, **fields)
 
     def close(self) -> None:

@@ -15,10 +15,12 @@ at the Z step rate; an emergency stop sends nothing more at all.
 """
 from __future__ import annotations
 
+import queue
+import sys
 import threading
 import time
 from dataclasses import dataclass, field
-from typing import Callable, Optional
+from typing import Any, Callable, Iterable, Iterator, Optional
 
 import numpy as np
 
@@ -27,7 +29,7 @@ from ..job.model import Job
 from ..verify.pinlog import PinLog, _decode, carve, decode_pin_log
 from .ports import MockPort, Port, open_port
 from .pins import axis_bits
-from .chunks import ChunkedPlan
+from .chunks import ChunkedPlan, StepChunk
 from .steps import StepPlan, plan_steps
 
 __all__ = ["Controller", "RunResult", "Lateness", "STALL_NS", "run", "simulate_surface", "FINISHED", "STOPPED", "EMERGENCY_STOPPED"]
@@ -39,6 +41,9 @@ EMERGENCY_STOPPED = "emergency-stopped"
 _BATCH = 16384
 _SPIN_NS = 2_000_000  # busy-wait the last 2 ms before a write: sleeps here overshoot by up to ~1.5 ms (p99)
 _PROGRESS_EVERY_NS = 50_000_000
+_SWITCH_S = 0.0002
+"""The interpreter's switch interval during a chunked real-time run (Python's default is 5 ms): how long the
+thread making the next chunk may hold the interpreter while a write is due."""
 
 
 class Controller:
@@ -183,8 +188,9 @@ def _lift_writes(plan: StepPlan, data_now: int, z_now: int) -> tuple[np.ndarray,
 class _Pauses:
     """The Pause At points of a plan, and what happens at one (shared by both clocks)."""
 
-    def __init__(self, plan: StepPlan, ctl: Controller, on_pause: Optional[PauseFn], external: bool) -> None:
-        self.plan = plan
+    def __init__(self, plan: "StepPlan | ChunkedPlan", ctl: Controller, on_pause: Optional[PauseFn], external: bool,
+                 position_of: Optional[Callable[[int], tuple[int, int, int]]] = None) -> None:
+        self.position_of = position_of or (lambda sent: _position_after(plan, sent))  # type: ignore[arg-type]
         self.ctl = ctl
         self.on_pause = on_pause
         self.external = external  # the caller gave the controller: pause it and wait for its resume
@@ -195,7 +201,7 @@ class _Pauses:
     def honour(self, sent: int) -> bool:
         """Pause after write ``sent - 1``; False if the job was stopped meanwhile."""
         self.count += 1
-        pos = _position_after(self.plan, sent)
+        pos = self.position_of(sent)
         if self.on_pause is not None:
             self.on_pause(pos, self.notes.get(sent - 1, "pause"))
         elif self.external:
@@ -230,15 +236,18 @@ def run(
     p = open_port(port)
     if not isinstance(p, MockPort):
         realtime = True
-    if isinstance(job, ChunkedPlan) and not realtime:
+    if isinstance(job, ChunkedPlan):
+        if realtime:
+            return _run_chunks_realtime(job, p, controller, progress, on_pause)
         return _run_chunks(job, p, controller, progress, on_pause)
-    plan = job.to_plan() if isinstance(job, ChunkedPlan) else job if isinstance(job, StepPlan) else plan_steps(job)
+    plan = job if isinstance(job, StepPlan) else plan_steps(job)
     ctl = controller or Controller()
     pauses = _Pauses(plan, ctl, on_pause, controller is not None)
     wall0 = time.monotonic_ns()
     lateness = Lateness()
     if realtime:
-        sent = _send_realtime(plan, p, ctl, pauses, progress, wall0, lateness)
+        sent = _send_realtime([(plan.t_ns, plan.data, plan.strobe)], len(plan), p, ctl, pauses, progress, wall0,
+                              lateness)
     else:
         sent = _send_simulated(plan, p, ctl, pauses, progress)
     position = _position_after(plan, sent)
@@ -283,61 +292,73 @@ def _send_simulated(plan: StepPlan, p: Port, ctl: Controller, pauses: _Pauses,
     return sent
 
 
-def _send_realtime(plan: StepPlan, p: Port, ctl: Controller, pauses: _Pauses,
-                   progress: Optional[ProgressFn], t0: int, lateness: "Lateness") -> int:
+def _send_realtime(chunks: Iterable[tuple[np.ndarray, np.ndarray, np.ndarray]], total: int, p: Port,
+                   ctl: Controller, pauses: _Pauses, progress: Optional[ProgressFn], t0: int, lateness: "Lateness",
+                   on_progress: Optional[Callable[[int], None]] = None) -> int:
     """Send each write at its time after ``t0`` (monotonic ns), pauses added; returns the writes sent.
+
+    ``chunks``: consecutive ``(t_ns, data, strobe)`` arrays of the plan's ``total`` writes (a whole plan is one).
+    ``on_progress(sent)`` runs with each progress report (before ``progress``).
 
     Sleeps on the controller's wake event until :data:`_SPIN_NS` before a write, then spins.  A write
     sent late (a stall, a busy machine, a stopped process) shifts every later write by its lateness:
     the runner never catches up, so each interval between writes is at least the planned one (ramps
     included) and a stepper never gets steps faster than its plan.  ``lateness`` books each delay.
     """
-    t_ns, data, strobe = plan.t_ns, plan.data, plan.strobe
-    total = len(plan)
     pause_set = pauses.at
     sent = 0
     offset = 0
     last_progress = 0
     wake = ctl._wake
-    while sent < total:
-        target = t0 + offset + int(t_ns[sent])
+    for t_ns, data, strobe in chunks:
+        n = len(t_ns)
+        j = 0
         halted = False
-        while True:
-            if ctl.halted:
-                halted = True
-                break
-            if ctl.paused:
-                began = time.monotonic_ns()
-                if not _wait_while_paused(ctl):
+        while j < n:
+            target = t0 + offset + int(t_ns[j])
+            while True:
+                if ctl.halted:
                     halted = True
                     break
-                paused_ns = time.monotonic_ns() - began
-                offset += paused_ns
-                target += paused_ns
-                continue
-            remaining = target - time.monotonic_ns()
-            if remaining <= 0:
+                if ctl.paused:
+                    began = time.monotonic_ns()
+                    if not _wait_while_paused(ctl):
+                        halted = True
+                        break
+                    paused_ns = time.monotonic_ns() - began
+                    offset += paused_ns
+                    target += paused_ns
+                    continue
+                remaining = target - time.monotonic_ns()
+                if remaining <= 0:
+                    break
+                if remaining > _SPIN_NS:
+                    wake.wait((remaining - _SPIN_NS) / 1e9)
+                    wake.clear()
+            if halted:
                 break
-            if remaining > _SPIN_NS:
-                wake.wait((remaining - _SPIN_NS) / 1e9)
-                wake.clear()
+            now = time.monotonic_ns()
+            late_ns = now - target
+            if late_ns > 0:  # behind: the rest of the schedule moves later, so no interval is shorter than planned
+                offset += late_ns
+                lateness.add(late_ns)
+            p.write(int(data[j]), int(strobe[j]), now - t0)
+            j += 1
+            sent += 1
+            if (progress or on_progress) and (target - last_progress > _PROGRESS_EVERY_NS or sent == total):
+                last_progress = target
+                if on_progress is not None:
+                    on_progress(sent)
+                if progress:
+                    progress(sent, total, int(t_ns[j - 1]))
+            if (sent - 1) in pause_set and sent < total:
+                began = time.monotonic_ns()
+                if not pauses.honour(sent):
+                    halted = True
+                    break
+                offset += time.monotonic_ns() - began
         if halted:
             break
-        now = time.monotonic_ns()
-        late_ns = now - target
-        if late_ns > 0:  # behind: the rest of the schedule moves later, so no interval is shorter than planned
-            offset += late_ns
-            lateness.add(late_ns)
-        p.write(int(data[sent]), int(strobe[sent]), now - t0)
-        sent += 1
-        if progress and (target - last_progress > _PROGRESS_EVERY_NS or sent == total):
-            last_progress = target
-            progress(sent, total, int(t_ns[sent - 1]))
-        if (sent - 1) in pause_set and sent < total:
-            began = time.monotonic_ns()
-            if not pauses.honour(sent):
-                break
-            offset += time.monotonic_ns() - began
     return sent
 
 
@@ -461,6 +482,118 @@ def _run_chunks(plan: ChunkedPlan, p: Port, controller: Optional[Controller], pr
         p._flush()
     wall = (time.monotonic_ns() - wall0) / 1e9
     return RunResult(status, position, sent, last_t / 1e9, wall, pauses, p, messages, wall0)  # type: ignore[arg-type]
+
+
+class _Cursor:
+    """The position of a real-time run of a :class:`ChunkedPlan` as its writes go out, decoded a few at a time
+    (at each progress report, pause and stop: never a whole chunk between two writes)."""
+
+    def __init__(self, plan: ChunkedPlan) -> None:
+        self.plan = plan
+        self.clock, self.dirbit = axis_bits(plan.settings)
+        self.pos = np.zeros(3, np.int64)
+        self.last_data = 0
+        self.last_t_ns = 0
+        self.done = 0  # writes decoded into pos
+        self.chunk: Optional[StepChunk] = None
+
+    def chunks(self) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+        """The plan's chunks, made ahead in a thread (:func:`_made_ahead`), noted as they start."""
+        for chunk in _made_ahead(self.plan.chunks()):
+            if self.chunk is not None:
+                self.advance(self.chunk.first_write + len(self.chunk))
+            self.chunk = chunk
+            yield chunk.t_ns, chunk.data, chunk.strobe
+
+    def advance(self, sent: int) -> tuple[int, int, int]:
+        """Position (x, y, z) in steps after ``sent`` writes (of the current chunk; never behind ``done``)."""
+        c = self.chunk
+        if c is not None and sent > self.done:
+            data = c.data[self.done - c.first_write: sent - c.first_write]
+            decoded, _ = _decode(data, self.last_data, self.pos, self.clock, self.dirbit)
+            self.pos = decoded[-1].copy()
+            self.last_data = int(data[-1])
+            self.last_t_ns = int(c.t_ns[sent - 1 - c.first_write])
+            self.done = sent
+            self.plan.live = (sent, tuple(int(v) for v in self.pos))
+        return tuple(int(v) for v in self.pos)  # type: ignore[return-value]
+
+
+def _made_ahead(chunks: Iterator[StepChunk], ahead: int = 2) -> Iterator[StepChunk]:
+    """``chunks``, made by a thread up to ``ahead`` chunks before they are taken (the real-time runner sends
+    one while the next is planned).  An error making them is raised where the chunk would have come."""
+    q: "queue.Queue[Any]" = queue.Queue(maxsize=ahead)
+    done = threading.Event()
+    end = object()
+
+    def make() -> None:
+        try:
+            for chunk in chunks:
+                while not done.is_set():
+                    try:
+                        q.put(chunk, timeout=0.05)
+                        break
+                    except queue.Full:
+                        continue
+                if done.is_set():
+                    return
+            q.put(end)
+        except BaseException as exc:  # noqa: BLE001 - raised in the runner's thread
+            q.put(exc)
+
+    maker = threading.Thread(target=make, name="cam-chunk-maker", daemon=True)
+    maker.start()
+    try:
+        while True:
+            item = q.get()
+            if item is end:
+                return
+            if isinstance(item, BaseException):
+                raise item
+            yield item
+    finally:
+        done.set()
+
+
+def _run_chunks_realtime(plan: ChunkedPlan, p: Port, controller: Optional[Controller],
+                         progress: Optional[ProgressFn], on_pause: Optional[PauseFn]) -> RunResult:
+    """:func:`run` of a :class:`ChunkedPlan` in real time: each write at its time, a chunk at a time (the next
+    made by a thread meanwhile), in bounded memory; the same writes, pauses, lateness rule and stops as a
+    whole plan's."""
+    ctl = controller or Controller()
+    switch_s = sys.getswitchinterval()
+    sys.setswitchinterval(min(switch_s, _SWITCH_S))  # the thread making chunks yields the interpreter soon
+    try:
+        return _send_chunks_realtime(plan, p, ctl, controller is not None, progress, on_pause)
+    finally:
+        sys.setswitchinterval(switch_s)
+
+
+def _send_chunks_realtime(plan: ChunkedPlan, p: Port, ctl: Controller, external: bool,
+                          progress: Optional[ProgressFn], on_pause: Optional[PauseFn]) -> RunResult:
+    cursor = _Cursor(plan)
+    pauses = _Pauses(plan, ctl, on_pause, external, position_of=cursor.advance)
+    wall0 = time.monotonic_ns()
+    lateness = Lateness()
+    total = len(plan)
+    sent = _send_realtime(cursor.chunks(), total, p, ctl, pauses, progress, wall0, lateness,
+                          on_progress=cursor.advance)
+    position = cursor.advance(sent)
+    status = FINISHED
+    messages: list[str] = []
+    if sent < total:
+        if ctl.estop_requested:
+            status = EMERGENCY_STOPPED
+            messages.append(f"emergency stop at {position} steps; nothing more was sent")
+        else:
+            status, position = _stop(_Tail(plan, cursor.last_t_ns, cursor.last_data), p, ctl, sent, position,  # type: ignore[arg-type]
+                                     wall0, lateness)
+            messages.append(f"stopped at X={position[0]} Y={position[1]} steps; tool lifted to Z={position[2]}")
+    if isinstance(p, MockPort):
+        p._flush()
+    wall = (time.monotonic_ns() - wall0) / 1e9
+    return RunResult(status, position, sent, cursor.last_t_ns / 1e9, wall, pauses.count, p, messages, wall0,
+                     lateness)
 
 
 def _wait_while_paused(ctl: Controller) -> bool:
