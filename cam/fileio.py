@@ -7,6 +7,7 @@ import os
 import secrets
 import time
 from pathlib import Path
+from typing import Iterable
 
 from .errors import CamError, ParseError
 
@@ -43,8 +44,9 @@ def _remove_stale_temporaries(folder: Path, name: str, max_age_s: float = 60.0) 
             pass
 
 
-def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> Path:
-    """Write ``data`` to ``path`` through a temporary file in the same folder and a rename.
+def atomic_write_bytes(path: str | os.PathLike, data: bytes | Iterable[bytes]) -> Path:
+    """Write ``data`` (bytes, or consecutive pieces of them: a file too large to hold) to ``path`` through a
+    temporary file in the same folder and a rename.
 
     Either the old file stays as it was or the new one is complete.  The file gets the mode
     ``0o666 & ~umask``, as a file made by :func:`open` would.  A path that is a symbolic link writes the
@@ -63,7 +65,8 @@ def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> Path:
         raise CamError(f"{given}: cannot write ({exc.strerror or exc})") from exc
     try:
         with os.fdopen(fd, "wb") as handle:
-            handle.write(data)
+            for piece in ([data] if isinstance(data, (bytes, bytearray, memoryview)) else data):
+                handle.write(piece)
             handle.flush()
             os.fsync(handle.fileno())
         os.replace(tmp_name, target)
@@ -82,9 +85,11 @@ def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> Path:
     return given
 
 
-def atomic_write_text(path: str | os.PathLike, text: str) -> Path:
-    """Write ``text`` (UTF-8) to ``path`` atomically; see :func:`atomic_write_bytes`."""
-    return atomic_write_bytes(path, text.encode("utf-8"))
+def atomic_write_text(path: str | os.PathLike, text: str | Iterable[str]) -> Path:
+    """Write ``text`` (UTF-8; or consecutive pieces of it) to ``path`` atomically; see :func:`atomic_write_bytes`."""
+    if isinstance(text, str):
+        return atomic_write_bytes(path, text.encode("utf-8"))
+    return atomic_write_bytes(path, (piece.encode("utf-8") for piece in text))
 
 
 def read_text(path: str | os.PathLike, *, not_text: str) -> tuple[Path, str]:

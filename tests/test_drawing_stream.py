@@ -9,15 +9,14 @@ import numpy as np
 import pytest
 
 import cam
+import cam.job.drawing_stream
 import cam.job.jobs as jobs
 from cam.cli import main
 from cam.drive.chunks import plan_chunks
 from cam.drive.ports import MockPort
 from cam.drive.runner import run
-from cam.errors import CamError
 from cam.job.drawing_stream import stream_drawing
 from cam.job.jobs import JobOptions, prepare_job, resume_job
-from cam.job.resume import Journal
 from cam.verify.pinlog import read_pin_log
 from conftest import SAMPLES, assert_surface_equal
 
@@ -107,30 +106,68 @@ def test_prepared_stream_runs_as_the_in_memory_job(tmp_path, monkeypatch):
     motion = cam.decode_pin_log(b, s)
     surface = cam.carve(motion, (whole.toolpath.height_px, whole.toolpath.width_px), s)
     assert_surface_equal(surface, whole.toolpath.asked_depth_px() * s.steps_per_px_z)
-    journal = Journal(identity=streamed.identity, plan_sha256=streamed.plan_sha256, source=str(src),
-                      moves=len(streamed.toolpath), last_move=3, position_steps=(0, 0, 0), state="stopped")
-    with pytest.raises(CamError, match="a piece at a time"):
-        resume_job(streamed, journal)
+
+
+
+def stop_and_resume(job, tmp_path: Path, stop_at: float, prepare_again) -> None:
+    """Run ``job`` in real time on the mock, emergency-stop it at ``stop_at`` of its writes, resume it from its
+    journal (the job planned again by ``prepare_again()``): the two pin logs carve as an uninterrupted run."""
+    from cam.drive.journal import read_journal
+    from cam.drive.session import MachineSession
+    from cam.verify.pinlog import write_pin_log
+    from test_resume import _check_union
+    journal, first, second = tmp_path / "run.journal.json", tmp_path / "run1.csv", tmp_path / "run2.csv"
+    session = MachineSession("mock", job.settings, realtime=True, on_prompt=lambda prompt: "continue")
+    session.on_progress = lambda done, total, t_ns: session.emergency_stop() if done >= stop_at * total else None
+    try:
+        session.start(job, journal=str(journal))
+        session.wait_idle(None)
+    finally:
+        session.shutdown()
+    assert session.last_run["status"] == "emergency-stopped", session.last_run
+    write_pin_log(session.last_result.pin_log(), first)
+    record = read_journal(journal)
+    again = prepare_again()
+    assert not hasattr(again.toolpath, "points_steps")
+    resumed = resume_job(again, record)
+    assert resumed.report["resumed_at_move"] > record.last_move
+    session = MachineSession("mock", job.settings, on_prompt=lambda prompt: "continue")
+    session.set_position(record.position_steps)
+    session.run(resumed)
+    write_pin_log(session.last_job_pin_log, second)
+    _check_union("stream", tmp_path, again, first, second, record.position_steps)
+
+
+@pytest.mark.parametrize("stop_at", [0.2, 0.55, 0.9])
+def test_a_stopped_streamed_drawing_resumes_and_carves_as_an_uninterrupted_run(tmp_path, monkeypatch, stop_at):
+    src = _big_relief(tmp_path)
+    opts = JobOptions(profile_expr="1 + k // 3")
+    s = cam.MachineSettings().replace(ramp="constant", delay_xy_ms=0.05, delay_z_ms=0.05)
+    monkeypatch.setattr(jobs, "STREAM_TARGETS", 100)
+    stop_and_resume(prepare_job(src, opts, s), tmp_path, stop_at, lambda: prepare_job(src, opts, s))
 
 
 def test_cli_streams_a_large_drawing(tmp_path, monkeypatch, capsys):
-    """cam drill on a streamed relief: the same pin log as in memory, a .png preview of its moves; a surface
-    picture and G-code out are refused with one line and exit code 2."""
+    """cam drill and cam export on a streamed relief: the same pin log and G-code as in memory, a .png preview
+    of its moves; a surface picture is refused with one line and exit code 2."""
     src = _big_relief(tmp_path)
-    args = [str(src), "--profile-expr", "1 + k // 3", "--yes", "--no-progress"]
-    assert main(["drill", *args, "--pin-log", str(tmp_path / "w.csv")]) == 0
+    args = [str(src), "--profile-expr", "1 + k // 3"]
+    assert main(["drill", *args, "--yes", "--no-progress", "--pin-log", str(tmp_path / "w.csv")]) == 0
+    assert main(["export", *args, "-o", str(tmp_path / "w.ngc")]) == 0
     monkeypatch.setattr(jobs, "STREAM_TARGETS", 100)
-    assert main(["drill", *args, "--pin-log", str(tmp_path / "s.csv"), "--preview", str(tmp_path / "p.png")]) == 0
+    monkeypatch.setattr(cam.job.drawing_stream, "PIECE_TARGETS", 50)
+    assert main(["drill", *args, "--yes", "--no-progress", "--pin-log", str(tmp_path / "s.csv"),
+                 "--preview", str(tmp_path / "p.png")]) == 0
     assert (tmp_path / "w.csv").read_bytes() == (tmp_path / "s.csv").read_bytes()
+    assert main(["export", *args, "-o", str(tmp_path / "s.ngc")]) == 0
+    assert (tmp_path / "w.ngc").read_text() == (tmp_path / "s.ngc").read_text()
     picture = cv2.imread(str(tmp_path / "p.png"))
     assert picture is not None and picture.shape[0] > 100
     capsys.readouterr()
-    for extra in (["preview", str(src), "--profile-expr", "1 + k // 3", "--surface", "-o", str(tmp_path / "c.png")],
-                  ["export", str(src), "--profile-expr", "1 + k // 3", "-o", str(tmp_path / "c.ngc")]):
-        assert main(extra) == 2
-        err = capsys.readouterr().err.strip()
-        assert "a piece at a time" in err and "\n" not in err and "Traceback" not in err
-    assert not (tmp_path / "c.png").exists() and not (tmp_path / "c.ngc").exists()
+    assert main(["preview", *args, "--surface", "-o", str(tmp_path / "c.png")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "a piece at a time" in err and "\n" not in err and "Traceback" not in err
+    assert not (tmp_path / "c.png").exists()
 
 
 def _peak_of_streamed_run(d: cam.Digitized, s: cam.MachineSettings, log: Path) -> int:
@@ -162,3 +199,41 @@ def test_streamed_memory_grows_with_the_drawing_not_the_job():
     small, large = peaks[1], peaks[2]
     # the maps of the drawing (asked depths, drop-cutter none, pixels 4x) and a fixed piece/chunk working set
     assert large < small + 4 * (320 * 320 * 8), (small, large)
+
+
+def _streams():
+    from cam.job.hpgl_stream import stream_hpgl
+    d = cam.digitize(cam.load_image(SAMPLES / "ring.png"))
+    drawing = stream_drawing(d, profile=lambda k: 1 + k % 5, start_at=(2, 1, 1), piece_targets=90,
+                             pause_at=[tuple(int(v) for v in d.objects[1][4]), tuple(int(v) for v in d.objects[-1][2])])
+    hpgl = stream_hpgl(SAMPLES / "extended.plt", piece_points=5, chunk_bytes=64)
+    return {"drawing": drawing, "hpgl": hpgl}
+
+
+@pytest.mark.parametrize("kind", ["drawing", "hpgl"])
+def test_a_resumed_stream_equals_the_resumed_whole_job(kind):
+    """resume_stream, joined, is resume_toolpath of the whole job at any stop: points, kinds, pauses and their
+    notes, and the move each point completes."""
+    from cam.job.resume import resume_toolpath
+    from cam.job.resume_stream import resume_stream
+    stream = _streams()[kind]
+    whole = stream.to_job()
+    n = len(whole.points_steps)
+    assert whole.pause.sum() >= 2
+    rng = np.random.default_rng(5)
+    pauses = np.flatnonzero(whole.pause)
+    stops = [-1, 0, n - 1, n - 2, *pauses.tolist(), *(pauses - 1).tolist(), *rng.integers(0, n, 12).tolist()]
+    for k in stops:
+        for pending in (False, True):
+            pos = tuple(int(v) for v in np.maximum(whole.points_steps[max(k, 0)] + rng.integers(-3, 4, 3), 0))
+            want, index, j = resume_toolpath(whole, k, pos, pause_pending=pending)
+            got, move_index, j2 = resume_stream(stream, k, pos, pause_pending=pending)
+            joined = list(got.pieces())
+            for attr in ("points_steps", "kind", "target", "pause"):
+                np.testing.assert_array_equal(np.concatenate([getattr(p, attr) for p in joined]), getattr(want, attr),
+                                              err_msg=f"{attr} k={k}")
+            assert j2 == j and len(got) == len(want.points_steps) and got.safe_z_steps == want.safe_z_steps
+            assert [move_index[i] for i in range(len(index))] == index.tolist()
+            plan_a, plan_b = plan_chunks(want, start_steps=pos), plan_chunks(got, start_steps=pos)
+            assert plan_b.pause_notes == plan_a.pause_notes, k
+            np.testing.assert_array_equal(plan_b.pause_writes, plan_a.pause_writes)

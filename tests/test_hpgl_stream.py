@@ -17,8 +17,7 @@ from cam.errors import CamError, PlanError
 from cam.formats.hpgl import load_hpgl
 from cam.job.hpgl import plan_hpgl
 from cam.job.hpgl_stream import stream_hpgl
-from cam.job.jobs import JobOptions, prepare_job, resume_job
-from cam.job.resume import Journal
+from cam.job.jobs import JobOptions, prepare_job
 from cam.verify.pinlog import read_pin_log
 
 SAMPLES = Path(__file__).resolve().parent.parent / "samples"
@@ -102,7 +101,7 @@ def test_streamed_plan_refuses_linear40(tmp_path):
 
 
 def test_prepared_stream_runs_as_the_in_memory_job(tmp_path, monkeypatch):
-    """Above STREAM_POINTS the file is streamed: the same pin log, report, journal, and resume is refused."""
+    """Above STREAM_POINTS the file is streamed: the same pin log and report."""
     src = SAMPLES / "extended.plt"
     opts = JobOptions()
     s = cam.MachineSettings().replace(ramp="lookahead")
@@ -124,10 +123,16 @@ def test_prepared_stream_runs_as_the_in_memory_job(tmp_path, monkeypatch):
         logs.append(read_pin_log(tmp_path / name))
     np.testing.assert_array_equal(logs[0].t_ns, logs[1].t_ns)
     np.testing.assert_array_equal(logs[0].data, logs[1].data)
-    journal = Journal(identity=streamed.identity, plan_sha256=streamed.plan_sha256, source=str(src),
-                      moves=len(streamed.toolpath), last_move=3, position_steps=(0, 0, 0), state="stopped")
-    with pytest.raises(CamError, match="a piece at a time"):
-        resume_job(streamed, journal)
+
+
+@pytest.mark.parametrize("stop_at", [0.3, 0.8])
+def test_a_stopped_streamed_hpgl_job_resumes_and_carves_as_an_uninterrupted_run(tmp_path, monkeypatch, stop_at):
+    """A streamed HPGL job with pen changes (tool-change pauses), stopped anywhere, resumes from its journal."""
+    from test_drawing_stream import stop_and_resume
+    src = SAMPLES / "extended.plt"
+    s = cam.MachineSettings().replace(ramp="constant", delay_xy_ms=0.02, delay_z_ms=0.02)
+    monkeypatch.setattr(jobs, "STREAM_POINTS", 2)
+    stop_and_resume(prepare_job(src, JobOptions(), s), tmp_path, stop_at, lambda: prepare_job(src, JobOptions(), s))
 
 
 def test_streamed_journal_counts_moves_as_the_whole_plan(monkeypatch):
@@ -185,3 +190,14 @@ def test_streamed_preview_equals_the_in_memory_one(monkeypatch):
     streamed.toolpath.piece_points, streamed.toolpath.chunk_bytes = 3, 64
     assert sum(1 for _ in streamed.toolpath.pieces()) > 5
     np.testing.assert_array_equal(streamed.preview_picture(), whole.preview_picture())
+
+
+def test_streamed_gcode_out_equals_the_in_memory_one(tmp_path, monkeypatch):
+    """cam export of a streamed HPGL file (pen changes and all) writes the in-memory job's G-code."""
+    from cam.cli import main
+    src = SAMPLES / "extended.plt"
+    assert main(["export", str(src), "-o", str(tmp_path / "w.ngc")]) == 0
+    monkeypatch.setattr(jobs, "STREAM_POINTS", 2)
+    assert main(["export", str(src), "-o", str(tmp_path / "s.ngc")]) == 0
+    text = (tmp_path / "s.ngc").read_text()
+    assert text == (tmp_path / "w.ngc").read_text() and "M6" in text

@@ -11,7 +11,7 @@ from cam.drive.chunks import ChunkedPlan, plan_chunks
 from cam.drive.runner import FINISHED, STOPPED, Controller, run
 from cam.drive.session import MachineSession
 from cam.job.jobs import JobOptions, prepare_job
-from conftest import SAMPLES, drawing_from_rows
+from conftest import drawing_from_rows
 from test_runner_stall import StallingPort
 
 FAST = cam.MachineSettings().replace(delay_xy_ms=0.3, delay_z_ms=0.3, ramp="lookahead")

@@ -5,7 +5,6 @@ import argparse
 import json
 import sys
 
-import numpy as np
 
 from ..sniff import KIND_NAMES
 from ..digitize import digitize
@@ -16,6 +15,7 @@ from ..errors import CamError
 from ..formats.excellon import HoleList, load_excellon
 from ..formats.gcode_export import save_gcode
 from ..formats.hpgl import PLOTTER_UNIT_MM, scan_hpgl
+from ..job.model import pause_points
 from ..render.report import format_report, image_report
 from .common import format_duration, machine_settings, reading_bar
 from .checks import job_kind_of
@@ -31,10 +31,7 @@ def cmd_export(args: argparse.Namespace) -> int:
     if not travel_height_mm > 0:
         raise CamError(f"--travel-height must be > 0 mm for G-code out, got {args.travel_height}")
     job = prepare(args)
-    if job.toolpath is not None and not hasattr(job.toolpath, "points_steps"):
-        raise CamError(f"{args.image}: a job of {len(job.toolpath)} moves is planned from its file a piece at a "
-                       f"time; G-code out of it is not supported yet (cut the file in parts)")
-    at = np.flatnonzero(job.toolpath.pause) + 1  # a tool change comes before the point after its pause
+    at = pause_points(job.toolpath) + 1  # a tool change comes before the point after its pause
     if job.drill_plan is not None:
         changes = {int(i): (tool, f"T{tool} {dia:.3f} mm, {n} holes")
                    for i, (tool, dia, n) in zip(at, job.drill_plan.tool_sequence)}

@@ -24,12 +24,14 @@ from __future__ import annotations
 import io
 import os
 from pathlib import Path
+from typing import Any, Iterator
 
+import numpy as np
 
 from ..fileio import atomic_write_text
 from ..job.model import RETRACT, TRAVEL, Job
 
-__all__ = ["to_gcode", "save_gcode", "feeds_mm_per_min"]
+__all__ = ["to_gcode", "gcode_pieces", "save_gcode", "feeds_mm_per_min"]
 
 
 def feeds_mm_per_min(settings) -> tuple[float, float]:
@@ -71,6 +73,26 @@ def to_gcode(
     Returns:
         The program text, ending with M2.
     """
+    return "".join(gcode_pieces(toolpath, flip_y=flip_y, safe_height_mm=safe_height_mm, title=title,
+                                tool_changes=tool_changes))
+
+
+def _point_pieces(toolpath: Any) -> Iterator[tuple[list, list]]:
+    """``(points, kinds)`` lists of consecutive pieces of a job (one for a Job; a stream's pieces, one at a time)."""
+    for piece in (toolpath.pieces() if not hasattr(toolpath, "points_steps") else [toolpath]):
+        yield np.asarray(piece.points_steps).tolist(), np.asarray(piece.kind).tolist()
+
+
+def gcode_pieces(
+    toolpath: Any,
+    *,
+    flip_y: bool = False,
+    safe_height_mm: float = 1.0,
+    title: str = "cam job",
+    tool_changes: dict[int, tuple[int, str]] | None = None,
+) -> Iterator[str]:
+    """:func:`to_gcode`'s text in consecutive pieces, made a piece of the job at a time (a job planned a piece
+    at a time, :mod:`cam.job.drawing_stream`, :mod:`cam.job.hpgl_stream`, is never held whole)."""
     s = toolpath.settings
     mm_xy = s.mm_per_step_xy
     mm_z = s.mm_per_step_z
@@ -99,41 +121,47 @@ def to_gcode(
     x_mm, y_mm, z_mm = 0.0, 0.0, safe_z
     above = True  # at the safe plane
     tool_changes = tool_changes or {}
-    for i, ((xp, yp, zp), kind) in enumerate(zip(toolpath.points_steps.tolist(), toolpath.kind.tolist())):
-        if i in tool_changes:
-            n, comment = tool_changes[i]
-            if not above:
-                w(f"G0 Z{_fmt(safe_z)}\n")
-                above, z_mm = True, safe_z
-            w(f"T{n} M6 ({comment})\n")
-        nx, ny, nz = xp * mm_xy, y_sign * yp * mm_xy, -zp * mm_z
-        if kind in (RETRACT, TRAVEL) and nz >= -oz_mm - 1e-9:
-            # at or above the surface: go up to the safe plane, travel there
-            if not above:
-                w(f"G0 Z{_fmt(safe_z)}\n")
-                above, z_mm = True, safe_z
+    i = -1
+    for points, kinds in _point_pieces(toolpath):
+        yield out.getvalue()  # what the piece before wrote
+        out.seek(0)
+        out.truncate()
+        for (xp, yp, zp), kind in zip(points, kinds):
+            i += 1
+            if i in tool_changes:
+                n, comment = tool_changes[i]
+                if not above:
+                    w(f"G0 Z{_fmt(safe_z)}\n")
+                    above, z_mm = True, safe_z
+                w(f"T{n} M6 ({comment})\n")
+            nx, ny, nz = xp * mm_xy, y_sign * yp * mm_xy, -zp * mm_z
+            if kind in (RETRACT, TRAVEL) and nz >= -oz_mm - 1e-9:
+                # at or above the surface: go up to the safe plane, travel there
+                if not above:
+                    w(f"G0 Z{_fmt(safe_z)}\n")
+                    above, z_mm = True, safe_z
+                if (nx, ny) != (x_mm, y_mm):
+                    w(f"G0 X{_fmt(nx)} Y{_fmt(ny)}\n")
+                    x_mm, y_mm = nx, ny
+                continue
             if (nx, ny) != (x_mm, y_mm):
-                w(f"G0 X{_fmt(nx)} Y{_fmt(ny)}\n")
+                if above:  # cutting move starting from the safe plane: come down to the surface first
+                    w(f"G1 Z{_fmt(-oz_mm)} F{_fmt(feed_z)}\n")
+                    above, z_mm = False, -oz_mm
+                w(f"G1 X{_fmt(nx)} Y{_fmt(ny)} F{_fmt(feed_xy)}\n")
                 x_mm, y_mm = nx, ny
-            continue
-        if (nx, ny) != (x_mm, y_mm):
-            if above:  # cutting move starting from the safe plane: come down to the surface first
-                w(f"G1 Z{_fmt(-oz_mm)} F{_fmt(feed_z)}\n")
-                above, z_mm = False, -oz_mm
-            w(f"G1 X{_fmt(nx)} Y{_fmt(ny)} F{_fmt(feed_xy)}\n")
-            x_mm, y_mm = nx, ny
-        if nz != z_mm:
-            w(f"G1 Z{_fmt(nz)} F{_fmt(feed_z)}\n")
-            z_mm = nz
-            above = False
+            if nz != z_mm:
+                w(f"G1 Z{_fmt(nz)} F{_fmt(feed_z)}\n")
+                z_mm = nz
+                above = False
     if not above:
         w(f"G0 Z{_fmt(safe_z)}\n")
     if (x_mm, y_mm) != (0.0, 0.0):
         w("G0 X0 Y0\n")
     w("M2\n")
-    return out.getvalue()
+    yield out.getvalue()
 
 
 def save_gcode(toolpath: Job, path: str | os.PathLike, **options) -> Path:
-    """Write :func:`to_gcode` output atomically."""
-    return atomic_write_text(path, to_gcode(toolpath, **options))
+    """Write :func:`to_gcode` output atomically (a piece at a time: :func:`gcode_pieces`)."""
+    return atomic_write_text(path, gcode_pieces(toolpath, **options))

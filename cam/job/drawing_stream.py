@@ -224,14 +224,14 @@ def stream_drawing(
     pause_at: Sequence[tuple[int, int]] = (),
     profile: ProfileLike | None = None,
     tool: Tool | str | None = None,
-    piece_targets: int = PIECE_TARGETS,
+    piece_targets: Optional[int] = None,
 ) -> DrawingJobStream:
     """:func:`cam.job.drawing.plan` of a digitized drawing as a :class:`DrawingJobStream` (bounded memory).
 
     Args:
         digitized, depth, settings, passes, start_at, pause_at, profile, tool: as :func:`~cam.job.drawing.plan`
             (no roughing).
-        piece_targets: cut points per piece (at most).
+        piece_targets: cut points per piece (at most; None: :data:`PIECE_TARGETS`).
 
     Raises:
         PlanError: bad options, nothing to cut; TravelError: the job leaves the travel (its extent is checked
@@ -270,7 +270,7 @@ def stream_drawing(
     fits = _fits_travel(extent, (ox, oy), min(0, oz), settings)
     job = DrawingJobStream(digitized, order, asked, pause_px, allowed, corners, settings, frame, fits,
                            tool=None if cutter.is_point else cutter, warnings=warnings,
-                           piece_targets=max(1, int(piece_targets)))
+                           piece_targets=max(1, int(PIECE_TARGETS if piece_targets is None else piece_targets)))
     if not fits:  # assembled without bridges up to its first point outside the travel, which is named
         for _ in job.pieces():
             pass

@@ -61,6 +61,7 @@ from .hpgl import DEFAULT_SAFE_HEIGHT_MM as HPGL_SAFE_HEIGHT_MM
 from .hpgl import plan_hpgl
 from .drawing_stream import STREAM_TARGETS, stream_drawing
 from .hpgl_stream import STREAM_POINTS, stream_hpgl
+from .resume_stream import resume_stream
 from .resume import Journal, JournalBase, check_journal, job_identity, plan_fingerprint, resume_toolpath
 from .svg import DEFAULT_CUT_DEPTH_MM as SVG_CUT_DEPTH_MM
 from .svg import DEFAULT_SAFE_HEIGHT_MM as SVG_SAFE_HEIGHT_MM
@@ -843,15 +844,18 @@ def resume_job(job: PreparedJob, journal: Journal, *, position_steps: Optional[t
     check_journal(journal, job.identity, job.plan_sha256, where)
     if job.toolpath is None:
         raise CamError(f"{job.name}: a {job.kind} job has no moves to resume")
-    if not hasattr(job.toolpath, "points_steps"):
-        raise CamError(f"{job.name}: a job of {len(job.toolpath)} moves is planned from its file a piece at a time, "
-                       f"and resuming one is not supported yet; start it again, or cut the file in parts")
     start = tuple(int(v) for v in (journal.position_steps if position_steps is None else position_steps))
-    toolpath, move_index, j = resume_toolpath(job.toolpath, journal.last_move, start,  # type: ignore[arg-type]
-                                              pause_pending=journal.pause_pending)
+    if hasattr(job.toolpath, "points_steps"):
+        toolpath, move_index, j = resume_toolpath(job.toolpath, journal.last_move, start,  # type: ignore[arg-type]
+                                                  pause_pending=journal.pause_pending)
+        pause = np.asarray(toolpath.pause, bool)
+    else:  # a job planned a piece at a time: resumed a piece at a time
+        toolpath, move_index, j = resume_stream(job.toolpath, journal.last_move, start,  # type: ignore[assignment]
+                                                pause_pending=journal.pause_pending)
+        pause = np.zeros(0, bool)
     steps = plan_chunks(toolpath, start_steps=start)  # type: ignore[arg-type]
     base = JournalBase(identity=job.identity, plan_sha256=job.plan_sha256, source=job.source,
-                       moves=len(job.toolpath), pause=np.asarray(toolpath.pause, bool), move_index=move_index,
+                       moves=len(job.toolpath), pause=pause, move_index=move_index,  # type: ignore[arg-type]
                        last_move=journal.last_move, pause_pending=journal.pause_pending, resumed_at_move=j,
                        start_position_steps=start)  # type: ignore[arg-type]
     report = dict(job.report)

@@ -28,7 +28,7 @@ from ..errors import TravelError
 from ..settings import DEFAULT_SETTINGS, MachineSettings
 from ..render.picture import encode_png, toolpath_picture
 
-__all__ = ["Job", "PixelFrame", "CUT", "RETRACT", "TRAVEL", "check_travel", "check_reach", "travel_job"]
+__all__ = ["Job", "PixelFrame", "CUT", "RETRACT", "TRAVEL", "check_travel", "check_reach", "travel_job", "pause_points"]
 
 CUT = 0
 """A point at or above the asked depth of what is cut (the tool is in the material or at the surface over it)."""
@@ -212,3 +212,14 @@ def travel_job(points_steps: np.ndarray, settings: MachineSettings, *, source: s
     n = len(pts)
     return Job(points_steps=pts, kind=np.full(n, TRAVEL, np.uint8), target=np.zeros(n, bool),
                pause=np.zeros(n, bool), settings=settings, source=source)
+
+
+def pause_points(toolpath: Any) -> np.ndarray:
+    """``(P,)`` int64 indices of a job's points that pause (a job planned a piece at a time: one pass)."""
+    if hasattr(toolpath, "points_steps"):
+        return np.flatnonzero(toolpath.pause)
+    found, first = [], 0
+    for piece in toolpath.pieces():
+        found.append(np.flatnonzero(piece.pause) + first)
+        first += len(piece.points_steps)
+    return np.concatenate(found) if found else np.zeros(0, np.int64)

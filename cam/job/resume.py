@@ -251,12 +251,7 @@ def check_journal(journal: Journal, identity: str, plan_sha256: str, where: str 
 
 def cutting_moves(job: Job) -> np.ndarray:
     """``(N,)`` bool: which moves of ``job`` may cut (see the module docstring; frame of ``job``)."""
-    pts = np.asarray(job.points_steps, np.int64).reshape(-1, 3)
-    prev = np.vstack([np.zeros((1, 3), np.int64), pts[:-1]]) if len(pts) else pts
-    surface = job.pixels.origin_px[2] * job.pixels.steps_per_px_z if job.pixels is not None else 0
-    above = np.maximum(prev[:, 2], pts[:, 2]) <= surface
-    up = np.all(prev[:, :2] == pts[:, :2], axis=1) & (pts[:, 2] <= prev[:, 2])
-    return ~(above | up)
+    return _cuts(np.asarray(job.points_steps, np.int64).reshape(-1, 3), np.zeros(3, np.int64), _surface_steps(job))
 
 
 def resume_toolpath(job: Job, last_move: int, position_steps: tuple[int, int, int], *,
@@ -302,27 +297,8 @@ def resume_toolpath(job: Job, last_move: int, position_steps: tuple[int, int, in
     notes = list(job.pause_notes) if job.pause_notes is not None else ["Pause At"] * int(pause.sum())
     note_of = dict(zip((int(i) for i in np.flatnonzero(pause)), notes))
 
-    prefix: list[tuple[np.ndarray, int, bool, int]] = []  # (point, kind, pause, move index)
-    if p0[2] > z_t:
-        prefix.append((np.array([p0[0], p0[1], z_t]), RETRACT, False, k))
-    carried_note: list[str] = []
-    if carried:
-        q = pts[carried[-1]]
-        prefix.append((np.array([q[0], q[1], z_t]), TRAVEL, True, k))
-        carried_note.append(note_of.get(carried[-1], "Pause At"))
-    if entry[2] == z_t:
-        prefix.append((entry.copy(), TRAVEL, False, j - 1))
-    else:
-        prefix.append((np.array([entry[0], entry[1], z_t]), TRAVEL, False, k))
-        surface = job.pixels.origin_px[2] * job.pixels.steps_per_px_z if job.pixels is not None else 0
-        prefix.append((entry.copy(), CUT if entry[2] > surface else TRAVEL, False, j - 1))
-    # drop moves of length 0 (but keep a pause's point, and at least the entry)
-    kept: list[tuple[np.ndarray, int, bool, int]] = []
-    at = p0
-    for item in prefix:
-        if item[2] or not np.array_equal(item[0], at) or item is prefix[-1]:
-            kept.append(item)
-            at = item[0]
+    carried_note = [note_of.get(carried[-1], "Pause At")] if carried else []
+    kept = _way_in(p0, k, j, entry, z_t, pts[carried[-1]] if carried else None, _surface_steps(job))
     m = len(kept)
     s = job.settings
     new_pts = np.vstack([np.array([it[0] for it in kept], np.int64), pts[j:]]) - p0
@@ -350,6 +326,44 @@ def resume_toolpath(job: Job, last_move: int, position_steps: tuple[int, int, in
         period_ns=period_ns, periods=periods, move_start=move_start, rest=rest,
     )
     return resumed, move_index, j
+
+
+def _surface_steps(job: Any) -> int:
+    """The machine z of a job's surface (a drawing's Start At Z; 0 for other jobs)."""
+    return job.pixels.origin_px[2] * job.pixels.steps_per_px_z if job.pixels is not None else 0
+
+
+def _way_in(p0: np.ndarray, k: int, j: int, entry: np.ndarray, z_t: int, pause_q: Optional[np.ndarray],
+            surface: int) -> list[tuple[np.ndarray, int, bool, int]]:
+    """Steps 1-4 of the module docstring: ``(point, kind, pause, move index)`` from where the tool stands ``p0``
+    to the entry point ``entry`` of move ``j`` (the last completed move ``k``), at the travel height ``z_t``,
+    pausing above ``pause_q`` (a pause the stop left or skipped; None: none).  Moves of length 0 are left out
+    (but a pause's point, and the entry, are kept)."""
+    prefix: list[tuple[np.ndarray, int, bool, int]] = []
+    if p0[2] > z_t:
+        prefix.append((np.array([p0[0], p0[1], z_t]), RETRACT, False, k))
+    if pause_q is not None:
+        prefix.append((np.array([pause_q[0], pause_q[1], z_t]), TRAVEL, True, k))
+    if entry[2] == z_t:
+        prefix.append((entry.copy(), TRAVEL, False, j - 1))
+    else:
+        prefix.append((np.array([entry[0], entry[1], z_t]), TRAVEL, False, k))
+        prefix.append((entry.copy(), CUT if entry[2] > surface else TRAVEL, False, j - 1))
+    kept: list[tuple[np.ndarray, int, bool, int]] = []
+    at = p0
+    for item in prefix:
+        if item[2] or not np.array_equal(item[0], at) or item is prefix[-1]:
+            kept.append(item)
+            at = item[0]
+    return kept
+
+
+def _cuts(pts: np.ndarray, prev: np.ndarray, surface: int) -> np.ndarray:
+    """``(N,)`` bool: which moves to ``pts`` (N, 3) from ``prev`` (3,) and on may cut (module docstring)."""
+    before = np.vstack([prev.reshape(1, 3), pts[:-1]]) if len(pts) else pts
+    above = np.maximum(before[:, 2], pts[:, 2]) <= surface
+    up = np.all(before[:, :2] == pts[:, :2], axis=1) & (pts[:, 2] <= before[:, 2])
+    return ~(above | up)
 
 
 def last_completed(point_write: np.ndarray, writes_done: int) -> int:
