@@ -19,6 +19,7 @@ import io
 import os
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Iterator
 
 import numpy as np
 
@@ -28,7 +29,7 @@ from ..render.picture import encode_png, surface_picture
 from ..settings import DEFAULT_SETTINGS, MachineSettings
 from ..drive.pins import axis_bits
 
-__all__ = ["Surface", "PinLog", "Motion", "decode_pin_log", "read_pin_log", "write_pin_log", "carve",
+__all__ = ["Surface", "PinLog", "Motion", "decode_pin_log", "read_pin_log", "iter_pin_log", "write_pin_log", "carve",
            "PositionTracker", "motion_extent", "rising_edges"]
 
 HEADER = "t_ns,data,strobe"
@@ -97,11 +98,40 @@ def read_pin_log(path: str | os.PathLike) -> PinLog:
         raise ParseError(f"{p}: file not found") from None
     except ValueError as exc:
         raise ParseError(f"{p}: bad pin log row ({exc})") from None
+    return _rows_log(rows, p, 2)
+
+
+def _rows_log(rows: np.ndarray, p: Path, line: int) -> PinLog:
+    """The PinLog of ``(M, 3)`` rows read from ``p`` (its first row on ``line``)."""
     if rows.size == 0:
         rows = np.zeros((0, 3), np.int64)
     if rows.shape[1] != 3:
-        raise ParseError(f"{p}:2: expected 3 columns t_ns,data,strobe")
+        raise ParseError(f"{p}:{line}: expected 3 columns t_ns,data,strobe")
     return PinLog(rows[:, 0], rows[:, 1].astype(np.uint8), rows[:, 2].astype(np.uint8))
+
+
+def iter_pin_log(path: str | os.PathLike, rows: int = 1 << 20) -> Iterator[PinLog]:
+    """Read a pin log CSV ``rows`` writes at a time (a log of any length, in bounded memory); errors as
+    :func:`read_pin_log`'s, naming the first line of the piece."""
+    p = Path(path)
+    try:
+        with open(p, encoding="utf-8") as handle:
+            if handle.readline().strip() != HEADER:
+                raise ParseError(f"{p}:1: not a pin log (expected header '{HEADER}')")
+            line = 2
+            while True:
+                try:
+                    block = np.loadtxt(handle, delimiter=",", dtype=np.int64, ndmin=2, max_rows=rows)
+                except ValueError as exc:
+                    raise ParseError(f"{p}:{line}: bad pin log row in the {rows} from here ({exc})") from None
+                if block.size == 0:
+                    return
+                yield _rows_log(block, p, line)
+                line += len(block)
+                if len(block) < rows:
+                    return
+    except FileNotFoundError:
+        raise ParseError(f"{p}: file not found") from None
 
 
 def rising_edges(data: np.ndarray, mask: int, prev_byte: int = 0) -> np.ndarray:

@@ -62,6 +62,7 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass, field
+from typing import Iterable
 
 import numpy as np
 from numba import njit
@@ -69,7 +70,7 @@ from numba import njit
 from .._compiled import entry
 
 from ..settings import DEFAULT_SETTINGS, MachineSettings
-from .pinlog import PinLog, read_pin_log, rising_edges
+from .pinlog import PinLog, iter_pin_log, rising_edges
 from ..drive.pins import axis_bits
 
 __all__ = ["RampViolation", "RampReport", "check_ramps", "check_axis_steps"]
@@ -253,7 +254,7 @@ class RampReport:
 
 
 def check_ramps(
-    log: PinLog | str | os.PathLike,
+    log: PinLog | str | os.PathLike | Iterable[PinLog],
     settings: MachineSettings = DEFAULT_SETTINGS,
     *,
     pause_writes: np.ndarray | list[int] = (),
@@ -261,51 +262,151 @@ def check_ramps(
     """Check rules R1..R3 (module docstring) on a pin log.
 
     Args:
-        log: the pin log (or a CSV path).
+        log: the pin log, a CSV path (read a piece at a time: a log of any length), or consecutive pieces of
+            one (e.g. a :class:`~cam.drive.chunks.ChunkedPlan`'s chunks as pin logs); pieces give the report
+            the whole log gives.
         settings: mm per step, start / top speed and acceleration per axis; pin map.
         pause_writes: write indices after which the job paused (``StepPlan.pause_writes``): rests.
 
     Returns:
         A :class:`RampReport`; ``report.ok`` is the verdict.
     """
-    if not isinstance(log, PinLog):
-        log = read_pin_log(log)
-    t = np.asarray(log.t_ns, np.int64)
-    data = np.asarray(log.data, np.uint8)
-    clock, dirbit = axis_bits(settings)
-    s_mm, v_start, v_max, acc = settings.axis_limits()
-    rising = [rising_edges(data, int(clock[a])) for a in range(3)]
-    slot_t = t[1::2]  # period middles (module docstring)
-    pause_t = np.sort(t[np.asarray(pause_writes, np.int64)]) if len(pause_writes) else np.zeros(0, np.int64)
-    counts = {"R1 top speed": 0, "R2 acceleration": 0, "R3 stop": 0}
-    found: list[RampViolation] = []
-    steps, pairs, vtop = [], [], []
-    for a, name in enumerate("xyz"):
-        idx = np.flatnonzero(rising[a])
-        ts = t[idx]
+    if isinstance(log, PinLog):
+        pieces: Iterable[PinLog] = [log]
+    elif isinstance(log, (str, os.PathLike)):
+        pieces = iter_pin_log(log)
+    else:
+        pieces = log
+    checker = _Checker(settings, np.asarray(pause_writes, np.int64))
+    for piece in pieces:
+        checker.add(piece)
+    return checker.report()
+
+
+_RULES = ("R1 top speed", "R2 acceleration", "R3 stop")
+
+
+class _Checker:
+    """:func:`check_ramps` a piece of the log at a time.
+
+    Each axis keeps its last three steps (time, direction, global slot) from one piece to the next, so every
+    interval and pair is judged once, in the first piece that holds all it needs: an interval ``g -> g + 1``
+    needs steps ``g - 1 .. g + 2`` (whether it starts or ends a run), a pair around ``g`` steps ``g - 1 .. g + 1``
+    and the slots next to ``g``'s.  The slots a piece's steps need are passed to the kernel as a short array of
+    their own (each step's slot and its two neighbours, in order): the kernel only compares slot indices and
+    reads neighbouring slots, which that array keeps.
+    """
+
+    def __init__(self, settings: MachineSettings, pause_writes: np.ndarray) -> None:
+        self.settings = settings
+        self.clock, self.dirbit = axis_bits(settings)
+        self.limits = settings.axis_limits()
+        self.pause_writes = np.sort(pause_writes)
+        self.pause_t: list[int] = []
+        self.written = 0  # writes read so far
+        self.prev_byte = 0
+        self.slot_t: dict[int, int] = {}  # times of the slots the carried steps need
+        self.tail_slots: dict[int, int] = {}  # the last two slots read (the neighbours of the next piece's first)
+        self.last_slot = -1  # the last slot read
+        empty = np.zeros(0, np.int64)
+        self.carry = [(empty, np.zeros(0, bool), empty) for _ in range(3)]  # (t, up, slot) of the last steps
+        self.first_step = [0, 0, 0]  # global index of carry[a]'s first step
+        self.judged = [[0, 1] for _ in range(3)]  # next interval, next pair to judge, per axis
+        self.counts = {rule: 0 for rule in _RULES}
+        self.found: dict[tuple[str, str], list[RampViolation]] = {}
+        self.steps = [0, 0, 0]
+        self.pairs = [0, 0, 0]
+        self.vtop = [0.0, 0.0, 0.0]
+
+    def add(self, piece: PinLog) -> None:
+        t = np.asarray(piece.t_ns, np.int64)
+        data = np.asarray(piece.data, np.uint8)
+        w0, n = self.written, len(t)
+        at = self.pause_writes[(self.pause_writes >= w0) & (self.pause_writes < w0 + n)]
+        self.pause_t += t[at - w0].tolist()
+        odd = w0 + (1 - w0 % 2)  # the first slot write (odd global index) of the piece
+        chunk_slot0, chunk_slot_t = (odd - 1) // 2, t[odd - w0::2]
+        self.last_slot = max(self.last_slot, chunk_slot0 + len(chunk_slot_t) - 1)
+        for a in range(3):
+            idx = np.flatnonzero(rising_edges(data, int(self.clock[a]), self.prev_byte))
+            self.steps[a] += len(idx)
+            ct, cu, cs = self.carry[a]
+            self._judge(a, np.concatenate([ct, t[idx]]), np.concatenate([cu, (data[idx] & self.dirbit[a]) != 0]),
+                        np.concatenate([cs, (idx + w0 - 1) // 2]), chunk_slot0, chunk_slot_t, final=False)
+        if n:
+            self.prev_byte = int(data[-1])
+        self.written += n
+        self.tail_slots.update({chunk_slot0 + k: int(chunk_slot_t[k]) for k in range(max(0, len(chunk_slot_t) - 2),
+                                                                                  len(chunk_slot_t))})
+        self.tail_slots = {i: v for i, v in self.tail_slots.items() if i >= self.last_slot - 1}
+
+    def report(self) -> RampReport:
+        for a in range(3):
+            ct, cu, cs = self.carry[a]
+            self._judge(a, ct, cu, cs, 0, np.zeros(0, np.int64), final=True)
+        found = sorted((v for vs in self.found.values() for v in vs), key=lambda v: -v.excess_mm_s)
+        ok = not any(self.counts.values())
+        return RampReport(ok, dict(self.counts), found[:10], tuple(self.steps), tuple(self.pairs),  # type: ignore[arg-type]
+                          tuple(self.vtop))  # type: ignore[arg-type]
+
+    def _slot_times(self, needed: np.ndarray, chunk_slot0: int, chunk_slot_t: np.ndarray) -> np.ndarray:
+        out = np.zeros(len(needed), np.int64)
+        inside = (needed >= chunk_slot0) & (needed < chunk_slot0 + len(chunk_slot_t))
+        out[inside] = chunk_slot_t[needed[inside] - chunk_slot0]
+        for k in np.flatnonzero(~inside).tolist():
+            i = int(needed[k])
+            out[k] = self.slot_t[i] if i in self.slot_t else self.tail_slots[i]
+        return out
+
+    def _judge(self, a: int, ts: np.ndarray, up: np.ndarray, slot: np.ndarray, chunk_slot0: int,
+               chunk_slot_t: np.ndarray, final: bool) -> None:
         n = len(ts)
-        steps.append(n)
-        up = (data[idx] & dirbit[a]) != 0
+        g0 = self.first_step[a]
+        needed = np.unique(np.concatenate([slot - 1, slot, slot + 1])) if n else np.zeros(0, np.int64)
+        needed = needed[(needed >= 0) & (needed <= self.last_slot)]  # a later slot: only for steps not judged here
+        slot_t = self._slot_times(needed, chunk_slot0, chunk_slot_t)
         brk = np.zeros(n, bool)
         if n > 1:
             brk[1:] = up[1:] != up[:-1]
-            if len(pause_t):
-                # a pause at time p lies between steps j-1 and j when t[j-1] <= p < t[j]
+            if self.pause_t:
+                pause_t = np.sort(np.asarray(self.pause_t, np.int64))
                 brk[1:] |= np.searchsorted(pause_t, ts[:-1], "left") != np.searchsorted(pause_t, ts[1:], "left")
+        s_mm, v_start, v_max, acc = self.limits
         r1, r2, r3 = (np.zeros(n) for _ in range(3))
-        check_axis_steps(ts, (idx - 1) // 2, slot_t, brk, s_mm[a], v_start[a], v_max[a], acc[a], r1, r2, r3)
-        inner = np.ones(max(n - 2, 0), bool)
-        if n > 2:
-            inner &= ~brk[1:-1] & ~brk[2:]
-        pairs.append(int(inner.sum()))
-        d = np.diff(ts)
-        ok_d = d[~brk[1:]] if n > 1 else d
-        vtop.append(float(s_mm[a] * 1e9 / ok_d.min()) if len(ok_d) else 0.0)
-        for rule, r in (("R1 top speed", r1), ("R2 acceleration", r2), ("R3 stop", r3)):
-            bad = np.flatnonzero(r > 0)
-            counts[rule] += len(bad)
-            for j in bad[np.argsort(-r[bad])][:10]:
-                found.append(RampViolation(rule, name, float(ts[j]) / 1e9, float(r[j])))
-    found.sort(key=lambda v: -v.excess_mm_s)
-    ok = not any(counts.values())
-    return RampReport(ok, counts, found[:10], tuple(steps), tuple(pairs), tuple(vtop))  # type: ignore[arg-type]
+        if n:
+            check_axis_steps(ts, np.searchsorted(needed, slot), slot_t, brk, s_mm[a], v_start[a], v_max[a], acc[a],
+                             r1, r2, r3)
+        # what this piece judges, in local step indices: intervals j -> j + 1, pairs around j
+        i_lo, i_hi = self.judged[a][0] - g0, (n - 1 if final else n - 2)
+        p_lo, p_hi = max(self.judged[a][1] - g0, 1), n - 1
+        i_hi, p_hi = max(i_hi, i_lo), max(p_hi, p_lo)
+        self.judged[a] = [g0 + i_hi, g0 + p_hi]
+        ji = np.arange(i_lo, i_hi)
+        if len(ji):
+            ok_d = np.diff(ts)[ji][~brk[ji + 1]]
+            if len(ok_d):
+                self.vtop[a] = max(self.vtop[a], float(s_mm[a] * 1e9 / ok_d.min()))
+        jp = np.arange(p_lo, p_hi)
+        self.pairs[a] += int(np.count_nonzero(~brk[jp] & ~brk[jp + 1])) if len(jp) else 0
+        name = "xyz"[a]
+        for rule, r, js in ((_RULES[0], r1, ji), (_RULES[1], r2, jp), (_RULES[2], r3, ji)):
+            bad = js[r[js] > 0]
+            if not len(bad):
+                continue
+            self.counts[rule] += len(bad)
+            new = [RampViolation(rule, name, float(ts[j]) / 1e9, float(r[j]))
+                   for j in bad[np.argsort(-r[bad], kind="stable")][:10]]
+            kept = self.found.setdefault((name, rule), [])
+            kept[:] = sorted(kept + new, key=lambda v: -v.excess_mm_s)[:10]
+        keep = max(0, n - 3)  # the last three steps go on to the next piece, with the slots they need
+        self.carry[a] = (ts[keep:], up[keep:], slot[keep:])
+        self.first_step[a] = g0 + keep
+        self._keep_slots(needed, slot_t)
+
+    def _keep_slots(self, needed: np.ndarray, slot_t: np.ndarray) -> None:
+        have = dict(zip(needed.tolist(), slot_t.tolist()))
+        wanted = set()
+        for _, _, cs in self.carry:
+            for i in cs.tolist():
+                wanted.update((i - 1, i, i + 1))
+        self.slot_t = {i: self.slot_t.get(i, have.get(i)) for i in wanted if i in have or i in self.slot_t}
