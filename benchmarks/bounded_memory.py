@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import resource
 import shutil
 import statistics
 import subprocess
@@ -68,17 +67,26 @@ def write_relief(path: Path, size_px: int) -> None:
     cv2.imwrite(str(path), img)
 
 
+LAUNCHER = (
+    "import os, subprocess, sys\n"
+    "p = subprocess.Popen(sys.argv[1:], stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL)\n"
+    "_, status, usage = os.wait4(p.pid, 0)\n"
+    "print(os.waitstatus_to_exitcode(status), usage.ru_maxrss)\n"
+)
+"""Starts the measured process from a small interpreter of its own: a child's ``ru_maxrss`` starts at its
+parent's RSS at the fork, and ``benchmarks/run.py`` has grown to gigabytes by the time it gets here."""
+
+
 def peak_rss_mb(argv: list[str], cwd: Path) -> float:
-    """Peak RSS in MB of one whole process (``wait4``'s ``ru_maxrss``); raises on a failed run."""
+    """Peak RSS in MB of one whole process (``wait4``'s ``ru_maxrss``, from a small launcher); raises on a
+    failed run."""
     env = dict(os.environ, PYTHONPATH=str(ROOT))
-    proc = subprocess.Popen(argv, cwd=cwd, env=env, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE)
-    _, status, usage = os.wait4(proc.pid, 0)
-    err = proc.stderr.read().decode(errors="replace") if proc.stderr else ""
-    proc.returncode = os.waitstatus_to_exitcode(status)
-    if proc.returncode != 0:
-        raise RuntimeError(f"{' '.join(argv)}: exit {proc.returncode}: {err[-400:]}")
-    return usage.ru_maxrss / 1024.0
+    out = subprocess.run([sys.executable, "-c", LAUNCHER, *argv], cwd=cwd, env=env, stdin=subprocess.DEVNULL,
+                         capture_output=True, text=True)
+    code, maxrss_kb = (int(v) for v in out.stdout.split()[-2:])
+    if code != 0:
+        raise RuntimeError(f"{' '.join(argv)}: exit {code}: {out.stderr[-400:]}")
+    return maxrss_kb / 1024.0
 
 
 def bench_rows(quick: bool, repeats: int = 1) -> list[dict]:

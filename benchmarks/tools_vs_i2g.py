@@ -171,7 +171,7 @@ def cut_by_itg(target: np.ndarray, tool: Tool, tool_type: int, diameter_mm: floa
 
 
 def _um(v_mm: float) -> str:
-    return f"{v_mm * 1000:.1f}"
+    return f"{v_mm * 1000:.2f}"
 
 
 def _times(a: float, b: float) -> str:

@@ -40,7 +40,7 @@ def test_stream_equals_plan(name, kw, piece_targets):
         kw.pop("profile", None)
     if "pause_at" in kw:
         kw["pause_at"] = [tuple(int(v) for v in d.objects[0][3])] + kw["pause_at"][1:]
-    whole = cam.plan(d, **kw)
+    whole = cam.plan(d, subpixel=False, **kw)
     stream = stream_drawing(d, piece_targets=piece_targets, **kw)
     joined = stream.to_job()
     for attr in ("points_steps", "kind", "target", "pause"):
@@ -48,7 +48,9 @@ def test_stream_equals_plan(name, kw, piece_targets):
     assert (len(stream), stream.n_targets, stream.n_retracts) == (len(whole), whole.n_targets, whole.n_retracts)
     np.testing.assert_array_equal(stream.asked_depth_px(), whole.asked_depth_px())
     assert stream.deepest_px == int(whole.asked_depth_px().max())
-    assert stream.warnings == whole.warnings and stream.safe_z_steps == whole.safe_z_steps
+    finer = ["the finer finishing pass between pixel centres (cam.job.subpixel) is left out of a drawing this "
+             "large (planned a piece at a time): the tool leaves a little more"] if "tool" in kw else []
+    assert stream.warnings == whole.warnings + finer and stream.safe_z_steps == whole.safe_z_steps
     assert stream.tool == whole.tool and stream.pixels == whole.pixels
     if piece_targets == 7:
         assert sum(1 for _ in stream.pieces()) > 10

@@ -21,7 +21,7 @@ Rules the planner keeps (and tests check):
 """
 from __future__ import annotations
 
-from typing import Sequence
+from typing import Optional, Sequence
 
 import cv2
 import numpy as np
@@ -33,6 +33,7 @@ from ..settings import DEFAULT_SETTINGS, MachineSettings
 from ._route import bfs_kernel
 from ..digitize.trace2d import trace_curves
 from ..tool import Tool, corner_depth_px, drop_depth_px, parse_tool, reach_depth_px
+from .subpixel import finer_grid, rest_positions
 from .model import CUT, RETRACT, TRAVEL, Job, PixelFrame, check_travel
 
 __all__ = ["plan", "check_drawing_size", "max_drawing_size_px"]
@@ -159,6 +160,7 @@ def plan(
     stepdown_px: int | None = None,
     stepover: float = 0.5,
     rough_tool: Tool | str | None = None,
+    subpixel: bool = True,
 ) -> Job:
     """Plan the job of a digitized drawing (the drawing planner: pixels in, machine steps out).
 
@@ -189,6 +191,9 @@ def plan(
         stepover: the roughing rings' spacing as a fraction of the roughing tool's diameter (0 < s <= 1).
         rough_tool: the roughing tool (None: ``tool``); a different one adds a tool-change pause at the
             home between roughing and finishing.
+        subpixel: 3D with a real tool: after the pixel centres, finish at the positions between them (on the
+            finest grid the machine's steps reach, up to a quarter pixel) that leave less material
+            (:mod:`cam.job.subpixel`).  Its points are not targets (``target`` False).
 
     Returns:
         The :class:`~cam.job.model.Job` in machine steps, with its :class:`~cam.job.model.PixelFrame`,
@@ -213,8 +218,12 @@ def plan(
         roughing = _roughing_targets(targets, parse_tool(rough_tool, "rough tool") if rough_tool else cutter,
                                      int(stepdown_px), float(stepover), digitized.height_px, digitized.width_px,
                                      settings)
+    finer = None
     if digitized.mode == "3d" and not cutter.is_point:
-        targets, corners, note = _drop_targets(targets, cutter, digitized.height_px, digitized.width_px, settings)
+        k = finer_grid(settings)
+        finer_at = subpixel and k > 1
+        targets, corners, note, finer = _drop_targets(targets, cutter, digitized.height_px, digitized.width_px,
+                                                      settings, finer_k=k if finer_at else 0)
         warnings += note
         if len(targets) == 0:
             raise PlanError(f"nothing to cut: the {cutter.describe()} tool does not fit into any part of the relief")
@@ -234,10 +243,16 @@ def plan(
     # the job's extent is known before it is assembled (targets, the home, the safe plane): one that leaves the
     # travel is assembled without bridges, only to name its first point outside, and refused
     fits = _fits_travel(targets, (ox, oy), safe, settings)
+    more = finer is not None and len(finer[0]) > 0
     points_px, kinds, tgt, pause = _assemble(targets, pause_px, asked, settings, surface, safe, oz, home=(-ox, -oy),
-                                             route=fits)
+                                             route=fits, last=not more)
     if corners is not None:
         points_px, kinds, tgt, pause = _guard_diagonals(points_px, kinds, tgt, pause, corners, oz)
+    frame = PixelFrame(digitized.width_px, digitized.height_px, (ox, oy, oz), settings.steps_per_px_xy,
+                       settings.steps_per_px_z)
+    finer_steps = None
+    if more:
+        finer_steps = _finer_part(finer, targets[-1], (ox, oy, oz), settings, surface, safe, fits, frame)
     pause_notes = None
     if roughing is not None:
         r_targets, r_allowed, r_corners, r_tool = roughing
@@ -256,9 +271,12 @@ def plan(
         kinds, tgt, pause = (np.concatenate([r_kinds, kinds]), np.concatenate([r_tgt, tgt]),
                              np.concatenate([r_pause, pause]))
     points_px[:, :2] += np.array([ox, oy], np.int64)
-    frame = PixelFrame(digitized.width_px, digitized.height_px, (ox, oy, oz), settings.steps_per_px_xy,
-                       settings.steps_per_px_z)
     points_steps = frame.to_steps(points_px)
+    if finer_steps is not None:
+        f_pts, f_kind = finer_steps
+        points_steps = np.concatenate([points_steps, f_pts])
+        kinds, tgt, pause = (np.concatenate([kinds, f_kind]), np.concatenate([tgt, np.zeros(len(f_pts), bool)]),
+                             np.concatenate([pause, np.zeros(len(f_pts), bool)]))
     check_travel(points_steps, settings, frame)
     assert fits, "a job whose extent leaves the travel passed the travel check"
     return Job(points_steps=points_steps, kind=kinds, target=tgt, pause=pause, settings=settings,
@@ -340,16 +358,49 @@ def _drop_maps(asked: np.ndarray, cutter: Tool, settings: MachineSettings
 
 
 def _drop_targets(targets: np.ndarray, cutter: Tool, height_px: int, width_px: int,
-                  settings: MachineSettings) -> tuple[np.ndarray, np.ndarray, list[str]]:
+                  settings: MachineSettings, finer_k: int = 0
+                  ) -> tuple[np.ndarray, np.ndarray, list[str], Optional[tuple[np.ndarray, ...]]]:
     """Targets ``(M, 3)`` (x, y, depth in Z pixels, cutting order) with each depth limited by the drop-cutter
     rule for ``cutter`` over the deepest depth asked at each pixel; targets left at depth 0 are dropped.
-    Returns the targets, the drop-cutter depth at each pixel corner and the warning of :func:`_drop_maps`."""
+    Returns the targets, the drop-cutter depth at each pixel corner, the warning of :func:`_drop_maps`, and
+    with ``finer_k`` > 1 the finer pass (:func:`cam.job.subpixel.rest_positions`, plus ``finer_k``; else None)."""
     asked = np.zeros((height_px, width_px), np.int64)
     np.maximum.at(asked, (targets[:, 1], targets[:, 0]), targets[:, 2])
     allowed, corners, note = _drop_maps(asked, cutter, settings)
     out = targets.copy()
     out[:, 2] = np.minimum(out[:, 2], allowed[out[:, 1], out[:, 0]])
-    return out[out[:, 2] > 0], corners, note
+    out = out[out[:, 2] > 0]
+    finer = None
+    if finer_k > 1 and len(out):
+        reach = reach_depth_px(allowed, cutter, settings.px_to_mm_xy(1), settings.px_to_mm_z(1))
+        last = (int(out[-1, 0]) * finer_k, int(out[-1, 1]) * finer_k)
+        finer = (*rest_positions(asked, reach, cutter, settings, finer_k, start_xy=last), finer_k)
+    return out, corners, note, finer
+
+
+def _finer_part(finer: tuple[np.ndarray, ...], after_px: np.ndarray, origin_px: tuple[int, int, int],
+                settings: MachineSettings, surface: int, safe: int, route: bool, frame: PixelFrame
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """The finer finishing pass (:mod:`cam.job.subpixel`) after the pixel-centre pass, whose last target is
+    ``after_px`` (drawing frame, Start At Z included), to the job's end: ``(points (N, 3) machine steps,
+    kind (N,))``.  Assembled with the planner's rules on the finer grid, as if its positions were pixels."""
+    f_targets, f_allowed, f_corners, k = finer
+    ox, oy, oz = origin_px
+    fine = settings.replace(steps_per_px_xy=settings.steps_per_px_xy // int(k))
+    asked = np.zeros((f_allowed.shape[0] + 2, f_allowed.shape[1] + 2), np.int64)
+    asked[:f_allowed.shape[0], :f_allowed.shape[1]] = f_allowed
+    after = np.array([after_px[0] * k, after_px[1] * k, after_px[2]], np.int64)
+    pts, kind, tgt, pause = _assemble(f_targets + np.array([0, 0, oz], np.int64), np.zeros(asked.shape, bool),
+                                      asked, fine, surface, safe, oz, home=(-ox * k, -oy * k), route=route,
+                                      after=after, last=True, partial_lift=True)
+    pts, kind, tgt, pause = _guard_diagonals(np.vstack([after, pts]), np.concatenate([kind[:1] * 0, kind]),
+                                             np.concatenate([[False], tgt]), np.concatenate([[False], pause]),
+                                             f_corners, oz)
+    pts, kind = pts[1:], kind[1:]
+    pts[:, :2] += np.array([ox * k, oy * k], np.int64)
+    fine_frame = PixelFrame(frame.width_px * k, frame.height_px * k, (ox * k, oy * k, oz), fine.steps_per_px_xy,
+                            settings.steps_per_px_z)
+    return fine_frame.to_steps(pts), kind
 
 
 def _guard_diagonals(pts: np.ndarray, kind: np.ndarray, tgt: np.ndarray, pause: np.ndarray, corners: np.ndarray,
@@ -395,18 +446,22 @@ def _fits_travel(targets: np.ndarray, offset_px: tuple[int, int], safe: int, set
 
 def _gap_block(
     cur: tuple[int, int, int], nxt: tuple[int, int, int], on_drawing: bool, asked: np.ndarray,
-    settings: MachineSettings, surface: int, safe: int, oz: int, route: bool = True,
+    settings: MachineSettings, surface: int, safe: int, oz: int, route: bool = True, partial_lift: bool = False,
 ) -> list[tuple[int, int, int, int]]:
     """Points (x, y, z, kind) from ``cur`` to just before target ``nxt`` across a gap (non-adjacent pixels).
 
     Inside the material, a route through pixels asked at least this deep is taken when it is quicker
     than lifting, travelling and plunging (and ``route`` allows it); otherwise the tool lifts to the surface
-    (the safe plane before the first target), travels, and the caller plunges.
+    (the safe plane before the first target), travels, and the caller plunges.  With ``partial_lift`` (the
+    finer pass of a real tool, whose material is all but cut) it lifts only as far as the straight staircase
+    of pixels side by side between the two needs (the shallowest depth asked along it), if that is below the
+    surface, moves along it and the caller plunges.
     """
     cx, cy, cz = cur
     x, y, d = nxt
     out: list[tuple[int, int, int, int]] = []
-    if on_drawing and route:
+    bridge = on_drawing and route  # may go through the material
+    if bridge:
         cheb = max(abs(x - cx), abs(y - cy))
         xy_period = settings.steps_per_px_xy * settings.delay_xy_ns
         z_period = settings.steps_per_px_z * settings.delay_z_ns
@@ -420,6 +475,17 @@ def _gap_block(
                 cz = d
             out.extend((rx, ry, cz, CUT) for rx, ry in route)
             return out
+    if bridge and partial_lift:
+        cheb = max(abs(x - cx), abs(y - cy))
+        steps = np.arange(1, cheb + 1)
+        line_x = cx + np.rint(steps * (x - cx) / cheb).astype(np.int64)
+        line_y = cy + np.rint(steps * (y - cy) / cheb).astype(np.int64)
+        z = min(cz, d, int(asked[line_y, line_x].min()) + oz, int(asked[cy, cx]) + oz)
+        if z > surface:
+            if z != cz:
+                out.append((cx, cy, z, CUT))
+            out.extend((int(rx), int(ry), z, CUT) for rx, ry in zip(line_x.tolist(), line_y.tolist()))
+            return out
     lift_z = surface if on_drawing else min(cz, safe)
     if cz != lift_z:
         out.append((cx, cy, lift_z, RETRACT))
@@ -431,7 +497,7 @@ def _gap_block(
 def _assemble(
     targets: np.ndarray, pause_px: np.ndarray, asked: np.ndarray, settings: MachineSettings,
     surface: int, safe: int, oz: int, home: tuple[int, int] = (0, 0), route: bool = True,
-    after: np.ndarray | None = None, last: bool = True,
+    after: np.ndarray | None = None, last: bool = True, partial_lift: bool = False,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The planner's rules, vectorised: adjacent moves in bulk, only gaps in Python (tests compare it with a plain loop).
 
@@ -461,7 +527,7 @@ def _assemble(
     for i in gaps.tolist():
         prev = (int(x[i - 1]), int(y[i - 1]), int(d[i - 1])) if i else (hx, hy, 0)
         here = (int(x[i]), int(y[i]), int(d[i]))
-        blk = _gap_block(prev, here, i > 0, asked, settings, surface, safe, oz, route)
+        blk = _gap_block(prev, here, i > 0, asked, settings, surface, safe, oz, route, partial_lift)
         if blk and blk[-1][:3] == here:
             blk.pop()  # a route that ends at the target's depth: the target is that point
         blocks[i] = blk

@@ -16,7 +16,9 @@ A :class:`~cam.drive.chunks.ChunkedPlan` plans a stream a block of moves at a
 time, so a large relief is planned, checked, run and pictured in bounded
 memory (:func:`cam.job.jobs.prepare_job` streams drawings of over
 :data:`STREAM_TARGETS` cut points).  Roughing (``stepdown_px``) is planned in
-memory by :func:`~cam.job.drawing.plan`.
+memory by :func:`~cam.job.drawing.plan`, and a real tool's finer finishing pass
+(:mod:`cam.job.subpixel`, whose maps are 16 times the drawing's) is left out, with a warning: the stream
+equals ``plan(..., subpixel=False)``.
 """
 from __future__ import annotations
 
@@ -30,6 +32,7 @@ from ..digitize.profile import ProfileLike
 from ..errors import PlanError
 from ..settings import DEFAULT_SETTINGS, MachineSettings
 from ..tool import Tool, parse_tool
+from .subpixel import finer_grid
 from .drawing import _assemble, _drop_maps, _fits_travel, _guard_diagonals, _object_depths, _pass_order, _pause_map
 from .hpgl_stream import _Hashes
 from .model import RETRACT, Job, PixelFrame, check_travel
@@ -252,6 +255,9 @@ def stream_drawing(
     if digitized.mode == "3d" and not cutter.is_point:
         allowed, corners, note = _drop_maps(asked[:h, :w].astype(np.int64), cutter, settings)
         warnings += note
+        if finer_grid(settings) > 1:
+            warnings.append("the finer finishing pass between pixel centres (cam.job.subpixel) is left out of a "
+                            "drawing this large (planned a piece at a time): the tool leaves a little more")
         asked[:h, :w] = np.maximum(np.minimum(asked[:h, :w], allowed), 0)
         if not asked.any():
             raise PlanError(f"nothing to cut: the {cutter.describe()} tool does not fit into any part of the relief")

@@ -1,0 +1,116 @@
+"""The finer finishing pass of a relief cut with a real tool: tool positions between pixel centres.
+
+With its axis over pixel centres only, a ball or V cutter on a slope leaves
+material that a position a fraction of a pixel away would take: the drop-cutter
+depth changes between centres, and the machine's Z steps round every depth up
+(shallower) by up to one Z pixel, differently at different positions.  This
+pass looks at every position of a grid ``k`` times finer than the pixels
+(``k`` divides the machine's steps per pixel, at most :data:`MAX_K`), finds
+those whose drop-cutter depth (:func:`sub_depth_px`: the same rule, with the
+axis there) cuts some pixel centre at least :data:`MIN_GAIN_ZPX` deeper than
+the pixel-centre pass does, and cuts them: level by level, shallowest first,
+each level traced into curves, with the planner's rules (a move between
+positions side by side at a depth both ends allow, a diagonal lifted to its
+midpoint's depth, anything else retracts or follows a route through positions
+allowed at least that deep).
+
+The rules stay safe on the finer grid: every pixel centre is a point of it, so
+a move between two positions side by side is nearest every pixel centre at
+one of its ends, and a diagonal one at its midpoint (as for pixels,
+:func:`cam.tool.corner_depth_px`).
+
+Frames: the finer grid's position ``(a, b)`` (row, column) has its axis at
+pixel coordinates ``(a / k, b / k)`` (pixel centres at whole numbers); depths
+in Z pixels below the surface.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..digitize.trace2d import trace_curves
+from ..settings import MachineSettings
+from ..tool import Tool, _lowest, footprint_px
+
+__all__ = ["MAX_K", "MIN_GAIN_ZPX", "finer_grid", "sub_depth_px", "rest_positions"]
+
+MAX_K = 4
+"""The finest grid used: a quarter pixel (on the thesis machine, 2 of its 8 steps per pixel)."""
+MIN_GAIN_ZPX = 0.25
+"""A position is cut when it takes at least this much more (Z pixels) off some pixel centre."""
+
+
+def finer_grid(settings: MachineSettings) -> int:
+    """``k``: the finest grid of positions the machine reaches exactly, at most :data:`MAX_K` per pixel (1: none)."""
+    spp = int(settings.steps_per_px_xy)
+    return max((k for k in range(1, MAX_K + 1) if spp % k == 0), default=1)
+
+
+def sub_depth_px(depth_px: np.ndarray, tool: Tool, px_mm: float, zpx_mm: float, k: int,
+                 offset: float = 0.0) -> np.ndarray:
+    """The drop-cutter depth (as :func:`cam.tool.drop_depth_px`, whole Z pixels rounded down once, >= 0) with
+    the axis at every position ``((a + offset) / k, (b + offset) / k)`` pixels.
+
+    Args:
+        depth_px: ``(H, W)`` int target depth of each pixel centre (Z pixels; outside: the surface).
+        offset: 0 for the finer grid's positions ``(H k, W k)``; -0.5 for the midpoints of its diagonal moves,
+            ``(H k + 1, W k + 1)``, entry ``(a, b)`` between positions ``(a - 1, b - 1)`` and ``(a, b)``.
+    """
+    d = np.asarray(depth_px, np.int64)
+    h, w = d.shape
+    extra = 1 if offset else 0
+    out = np.zeros((h * k + extra, w * k + extra), np.int64)
+    for sy in range(k):
+        for sx in range(k):
+            dy, dx, rise = footprint_px(tool, px_mm, zpx_mm, centre=((sx + offset) / k, (sy + offset) / k))
+            rows, cols = len(range(sy, h * k + extra, k)), len(range(sx, w * k + extra, k))
+            out[sy::k, sx::k] = _lowest(d, dy, dx, rise, (h + extra, w + extra), 0)[:rows, :cols]
+    return np.maximum(out, 0)
+
+
+def rest_positions(depth_px: np.ndarray, reach_px: np.ndarray, tool: Tool, settings: MachineSettings, k: int,
+                   start_xy: tuple[int, int] = (0, 0)) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The finer pass: ``(targets (M, 3), allowed (H k, W k), corners (H k + 1, W k + 1))``.
+
+    Args:
+        depth_px: ``(H, W)`` target depth of each pixel centre (Z pixels).
+        reach_px: ``(H, W)`` float: how deep the pixel-centre pass cuts each pixel centre
+            (:func:`cam.tool.reach_depth_px`).
+        k: the finer grid (:func:`finer_grid`), > 1.
+        start_xy: where the tool comes from (the pixel-centre pass's last position, on the finer grid).
+
+    Returns:
+        ``targets``: finer-grid positions ``(b, a, depth)`` (column, row, Z pixels) in cutting order: traced
+        into curves, each starting nearest where the one before ended (the material left is thinner than a
+        few Z pixels, so no order by depth is needed: each position is cut at its own drop-cutter depth);
+        ``allowed``: the drop-cutter depth at
+        every position (where routes may run); ``corners``: at the midpoints of its diagonal moves.
+    """
+    d = np.asarray(depth_px, np.int64)
+    h, w = d.shape
+    px_mm, zpx_mm = settings.px_to_mm_xy(1), settings.px_to_mm_z(1)
+    allowed = sub_depth_px(d, tool, px_mm, zpx_mm, k)
+    reach = np.asarray(reach_px, np.float64)
+    useful = np.zeros(allowed.shape, bool)
+    for sy in range(k):
+        for sx in range(k):
+            if sy == 0 and sx == 0:
+                continue  # the pixel centres: cut already
+            a = allowed[sy::k, sx::k].astype(np.float64)  # (H, W): the position (i + sy/k, j + sx/k)
+            dy, dx, rise = footprint_px(tool, px_mm, zpx_mm, centre=(sx / k, sy / k))
+            gain = np.full((h, w), -np.inf)
+            for oy, ox, r in zip(dy.tolist(), dx.tolist(), rise.tolist()):
+                # the position over pixel (i, j) cuts pixel (i + oy, j + ox) down to a - r
+                y0, y1, x0, x1 = max(0, -oy), min(h, h - oy), max(0, -ox), min(w, w - ox)
+                if y0 >= y1 or x0 >= x1:
+                    continue
+                g = a[y0:y1, x0:x1] - r - reach[y0 + oy:y1 + oy, x0 + ox:x1 + ox]
+                np.maximum(gain[y0:y1, x0:x1], g, out=gain[y0:y1, x0:x1])
+            useful[sy::k, sx::k] = (gain >= MIN_GAIN_ZPX) & (a > 0)
+    chunks = []
+    for curve in trace_curves(useful, start="min-distance", tool_xy_px=start_xy):
+        block = np.empty((len(curve), 3), np.int64)
+        block[:, :2] = curve
+        block[:, 2] = allowed[curve[:, 1], curve[:, 0]]
+        chunks.append(block)
+    targets = np.concatenate(chunks) if chunks else np.zeros((0, 3), np.int64)
+    return targets, allowed, sub_depth_px(d, tool, px_mm, zpx_mm, k, offset=-0.5)
