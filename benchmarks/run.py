@@ -14,14 +14,12 @@ import datetime
 import gc
 import json
 import os
-import resource
 import shutil
 import statistics
 import subprocess
 import sys
 import tempfile
 import textwrap
-import threading
 import time
 from pathlib import Path
 
@@ -288,7 +286,6 @@ def bench_relief(quick: bool) -> tuple[dict, dict]:
     from support.lcnc import canonical_polyline_mm, parse_canonical, run_rs274
 
     pts = np.vstack([[0, 0, 0], job.points_px()]).astype(np.float64)
-    cam_len = float(np.abs(np.diff(pts[:, :2], axis=0)).max(axis=1).sum())  # X/Y pixels moved (diagonal = 1)
     cam_len_euclid = float(np.linalg.norm(np.diff(pts[:, :2], axis=0), axis=1).sum())
     ours = cam.simulate_surface(job)
     cam_err = int(np.abs(ours - target * job.settings.steps_per_px_z).max())

@@ -52,7 +52,7 @@ sys.path.insert(0, str(ROOT / "tests"))  # tests/support: the LinuxCNC reference
 
 import cam  # noqa: E402
 from cam.tool import Tool, parse_tool  # noqa: E402
-from cam.verify.toolcarve import carve_tool, compare_surface  # noqa: E402
+from cam.verify.toolcarve import carve_tool, compare_surface, least_rest_steps  # noqa: E402
 
 ITG = Path("/usr/bin/image-to-gcode")
 SYSTEM_PYTHON = Path("/usr/bin/python3")
@@ -206,6 +206,13 @@ def bench_rows(quick: bool) -> list[dict]:
                     if a > b:
                         missed.append(f"{what} {_times(a, b)} image-to-gcode's" if b > 0 else
                                       f"{what} {_um(a)} um against none")
+                if not rest_ok:  # is less rest possible at all without a gouge, on this machine?
+                    floor = least_rest_steps(target, tool, settings)[target > 0] * settings.mm_per_step_z
+                    f_mean, f_p95 = float(floor.mean()), float(np.percentile(floor, 95))
+                    only_by_gouging = f_mean > theirs.rest_mean_mm or f_p95 > theirs.rest_p95_mm
+                    missed.append(f"no cut without a gouge leaves less than {_um(f_mean)} um mean, {_um(f_p95)} um "
+                                  f"p95 on this machine (every step position, brute force)"
+                                  + ("; image-to-gcode's is less only by its gouge" if only_by_gouging else ""))
                 if not time_ok:
                     missed.append(f"time {ratio:.2f}x")
                 text = (f"time {ratio:.2f}x; rest mean {_um(ours.rest_mean_mm)} vs {_um(theirs.rest_mean_mm)} um, "

@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 import cam
-from cam.digitize.digitized import format_digitized, parse_digitized
+from cam.digitize.digitized import format_digitized
 
 from conftest import drawing_from_rows
 

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 import cam
-from cam.digitize.profile import Profile, as_profile, load_profile, profile_from_csv, profile_from_expr
+from cam.digitize.profile import as_profile, load_profile, profile_from_csv, profile_from_expr
 from cam.errors import PlanError
 
 

@@ -13,7 +13,7 @@ from cam.drive.steps import plan_steps
 from cam.errors import SettingsError
 from cam.settings import DEFAULT_SETTINGS, settings_from_mapping
 
-from conftest import ROOT, SAMPLES, assert_surface_equal, carve_job, drawing_from_rows, expected_surface_2d
+from conftest import ROOT, SAMPLES, assert_surface_equal, drawing_from_rows, expected_surface_2d
 
 S = DEFAULT_SETTINGS  # lookahead
 CONSTANT = S.replace(ramp="constant")

@@ -12,7 +12,7 @@ import cam
 from cam.digitize.digitized import parse_digitized
 from cam.formats.gcode import parse_gcode
 from cam.job.gcode import _Arc, _curve_points, _Frame, plan_gcode
-from cam.limits import MAX_COORD_MM, MAX_MOVE_S
+from cam.limits import MAX_MOVE_S
 
 from test_cli_checks import ENV, cli, refused
 

@@ -9,7 +9,7 @@ import cam
 from cam.drive.runner import EMERGENCY_STOPPED, FINISHED, STOPPED
 from cam.drive.pins import axis_bits
 
-from conftest import assert_surface_equal, carve_job, drawing_from_rows, expected_surface_2d
+from conftest import assert_surface_equal, drawing_from_rows, expected_surface_2d
 
 # a 1-pixel-wide zig-zag long enough to take ~0.5 s at 1 ms periods
 ROWS = ["." * 42] + ["." + "#" * 40 + "."] + ["." * 42]

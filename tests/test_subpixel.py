@@ -2,20 +2,18 @@
 pixel-centre pass leaves, never gouge, and never leave more than the best positions on that grid must."""
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import pytest
 
 import cam
 from cam.job.subpixel import MIN_GAIN_ZPX, finer_grid
-from cam.tool import Tool, parse_tool
-from cam.verify.toolcarve import carve_tool, compare_surface
+from cam.tool import parse_tool
+from cam.verify.toolcarve import carve_tool, compare_surface, least_rest_steps
 from conftest import carve_job
 from test_tools import RELIEFS
 
 SETTINGS = cam.MachineSettings()  # 8 steps per pixel: a quarter-pixel grid
-PX_MM, STEP_MM = SETTINGS.px_to_mm_xy(1), SETTINGS.mm_per_step_z
+STEP_MM = SETTINGS.mm_per_step_z
 
 
 def _cut(name: str, spec: str, subpixel: bool, settings=SETTINGS):
@@ -29,34 +27,6 @@ def _cut(name: str, spec: str, subpixel: bool, settings=SETTINGS):
     return want, job, compare_surface(cut.depth_steps, want, settings)
 
 
-def grid_bound_rest_steps(want: np.ndarray, tool: Tool, k: int) -> np.ndarray:
-    """What the best cut with the axis anywhere on the k-times finer grid must leave, by brute force here: at
-    every position the lowest tip over the target rounded up to a whole Z step (the machine's), then the
-    envelope of the tool over all of them."""
-    h, w = want.shape
-    reach = int(math.ceil(tool.radius_mm / PX_MM)) + 1
-    pad = np.zeros((h + 2 * reach, w + 2 * reach))
-    pad[reach:reach + h, reach:reach + w] = want
-    best = np.zeros((h, w))
-    offs = range(-reach, reach + 1)
-    for sy in range(k):
-        for sx in range(k):
-            rise = {(oy, ox): tool.profile_mm(np.array([math.hypot(oy - sy / k, ox - sx / k) * PX_MM]))[0] / STEP_MM
-                    for oy in offs for ox in offs}
-            tip = np.full((h, w), np.inf)  # the position (i + sy/k, j + sx/k)
-            for (oy, ox), r in rise.items():
-                if np.isfinite(r):
-                    tip = np.minimum(tip, pad[reach + oy:reach + oy + h, reach + ox:reach + ox + w] + r)
-            tip = np.maximum(np.floor(tip + 1e-7), 0)
-            for (oy, ox), r in rise.items():
-                if not np.isfinite(r):
-                    continue
-                y0, y1, x0, x1 = max(0, -oy), min(h, h - oy), max(0, -ox), min(w, w - ox)
-                np.maximum(best[y0 + oy:y1 + oy, x0 + ox:x1 + ox], tip[y0:y1, x0:x1] - r,
-                           out=best[y0 + oy:y1 + oy, x0 + ox:x1 + ox])
-    return np.maximum(want - best, 0.0)
-
-
 @pytest.mark.parametrize("spec", ["ball:1", "flat:1", "v:60:0"])
 @pytest.mark.parametrize("name", list(RELIEFS))
 def test_the_finer_pass_takes_what_the_grid_allows_and_never_gouges(name, spec):
@@ -66,7 +36,7 @@ def test_the_finer_pass_takes_what_the_grid_allows_and_never_gouges(name, spec):
     # it only adds cuts: never more material left anywhere than without it
     assert np.all(fine.rest_mm <= coarse.rest_mm + 1e-12)
     # and no more than the best positions of its grid must leave, but for what it skips on purpose
-    bound = grid_bound_rest_steps(want.astype(np.float64), parse_tool(spec), finer_grid(SETTINGS))
+    bound = least_rest_steps(want, parse_tool(spec), SETTINGS, k=finer_grid(SETTINGS))
     excess = fine.rest_mm / STEP_MM - bound
     assert excess.max() <= MIN_GAIN_ZPX + 1e-6, (name, spec, excess.max())
     # its points are not targets: the report's points are the pixel-centre pass's
@@ -104,3 +74,19 @@ def test_a_machine_without_finer_steps_plans_as_before():
     a = cam.plan(d, profile=profile, tool="ball:1", settings=s)
     b = cam.plan(d, profile=profile, tool="ball:1", settings=s, subpixel=False)
     np.testing.assert_array_equal(a.points_steps, b.points_steps)
+
+
+def test_no_cut_leaves_less_than_the_least_rest():
+    """least_rest_steps is a floor: the point tool reaches every centre (0 left), a 1 mm flat end mill cannot
+    enter a trench one pixel wide (all of it left), and cam's cuts never leave less than it, step grid and all."""
+    from cam.tool import POINT
+    want = np.zeros((15, 15))
+    want[7, 2:13] = 10.0  # a trench one pixel wide, ten Z steps deep
+    assert np.all(least_rest_steps(want, POINT, SETTINGS) == 0)
+    flat = least_rest_steps(want, parse_tool("flat:1"), SETTINGS)
+    assert np.array_equal(flat, want)
+    for name in RELIEFS:
+        for spec in ("ball:1", "v:60:0"):
+            target, _, fine = _cut(name, spec, True)
+            floor = least_rest_steps(target, parse_tool(spec), SETTINGS)
+            assert np.all(fine.rest_mm / STEP_MM >= floor - 1e-6), (name, spec)

@@ -33,7 +33,6 @@ from ..errors import CamError
 from ..fileio import atomic_write_text, read_text
 from ..job.resume import Journal, JournalBase, journal_record, plan_fingerprint
 from ..verify.pinlog import PositionTracker
-from .steps import StepPlan
 
 __all__ = ["JOURNAL_PERIOD_S", "JournalSpec", "JournalWriter", "journal_spec", "read_journal", "write_journal",
            "journal_state_of"]

@@ -50,7 +50,7 @@ from ..render.picture import LEGEND_PX, depth_colours, encode_png, toolpath_pict
 from ..render.report import job_report
 from ..sniff import KIND_NAMES
 from ..settings import DEFAULT_SETTINGS, MachineSettings
-from ..verify.pinlog import PinLog, decode_pin_log, motion_extent
+from ..verify.pinlog import PinLog, decode_pin_log
 from .drawing import check_drawing_size, plan
 from .drill import DEFAULT_DEPTH_MM as DRILL_DEPTH_MM
 from .drill import DEFAULT_SAFE_HEIGHT_MM as DRILL_SAFE_HEIGHT_MM

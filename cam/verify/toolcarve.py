@@ -19,7 +19,7 @@ from ..settings import DEFAULT_SETTINGS, MachineSettings
 from ..tool import Tool
 from .pinlog import Motion
 
-__all__ = ["carve_tool", "ToolCarve", "Comparison", "compare_surface", "gouge_rest_picture"]
+__all__ = ["carve_tool", "ToolCarve", "Comparison", "compare_surface", "gouge_rest_picture", "least_rest_steps"]
 
 _CHUNK = 1 << 20  # tool-sample pairs per chunk: memory stays bounded whatever the job's length
 
@@ -109,6 +109,48 @@ class Comparison:
         import cv2
 
         return cv2.imencode(".png", gouge_rest_picture(self)[:, :, ::-1])[1].tobytes()
+
+
+def least_rest_steps(target_steps: np.ndarray, tool: Tool, settings: MachineSettings = DEFAULT_SETTINGS,
+                     k: int | None = None) -> np.ndarray:
+    """The least material any cut without a gouge can leave, with the tool's axis on a grid ``k`` times finer
+    than the pixels (None: every step position, ``k = steps_per_px_xy``) and its tip on whole Z steps.
+
+    By brute force: at every position of the grid the deepest tip that cuts no pixel centre below the target
+    (rounded up to a whole Z step), then the deepest any of them reaches at each pixel centre.  No program
+    can cut a pixel deeper without cutting some pixel centre below its target.
+
+    Args:
+        target_steps: ``(H, W)`` target depth at each pixel centre, Z steps below the surface.
+
+    Returns:
+        ``(H, W)`` float64 Z steps of material left, at least.
+    """
+    s = settings
+    k = int(s.steps_per_px_xy if k is None else k)
+    want = np.asarray(target_steps, np.float64)
+    h, w = want.shape
+    px_mm = s.px_to_mm_xy(1)
+    reach = int(np.ceil(max(tool.radius_mm, 0.0) / px_mm)) + 1
+    pad = np.zeros((h + 2 * reach, w + 2 * reach))
+    pad[reach:reach + h, reach:reach + w] = want
+    best = np.zeros((h, w))
+    oy_, ox_ = np.mgrid[-reach:reach + 1, -reach:reach + 1]
+    for sy in range(k):
+        for sx in range(k):  # the positions (i + sy / k, j + sx / k)
+            rise = tool.profile_mm(np.hypot(oy_ - sy / k, ox_ - sx / k) * px_mm) / s.mm_per_step_z
+            offsets = [(int(a), int(b), float(r)) for a, b, r in zip(oy_.ravel(), ox_.ravel(), rise.ravel())
+                       if np.isfinite(r)]
+            tip = np.full((h, w), np.inf)
+            for oy, ox, r in offsets:
+                np.minimum(tip, pad[reach + oy:reach + oy + h, reach + ox:reach + ox + w] + r, out=tip)
+            tip = np.maximum(np.floor(tip + 1e-7), 0.0)
+            for oy, ox, r in offsets:
+                y0, y1, x0, x1 = max(0, -oy), min(h, h - oy), max(0, -ox), min(w, w - ox)
+                if y0 < y1 and x0 < x1:
+                    np.maximum(best[y0 + oy:y1 + oy, x0 + ox:x1 + ox], tip[y0:y1, x0:x1] - r,
+                               out=best[y0 + oy:y1 + oy, x0 + ox:x1 + ox])
+    return np.maximum(want - best, 0.0)
 
 
 def compare_surface(cut_steps: np.ndarray, target_steps: np.ndarray,
