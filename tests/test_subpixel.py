@@ -6,13 +6,13 @@ import numpy as np
 import pytest
 
 import cam
-from cam.job.subpixel import MIN_GAIN_ZPX, finer_grid
+from cam.job.subpixel import MIN_GAIN_ZPX, finer_grid, finer_grids
 from cam.tool import parse_tool
 from cam.verify.toolcarve import carve_tool, compare_surface, least_rest_steps
 from conftest import carve_job
 from test_tools import RELIEFS
 
-SETTINGS = cam.MachineSettings()  # 8 steps per pixel: a quarter-pixel grid
+SETTINGS = cam.MachineSettings()  # 8 steps per pixel: grids of an eighth, a quarter and half a pixel
 STEP_MM = SETTINGS.mm_per_step_z
 
 
@@ -36,7 +36,7 @@ def test_the_finer_pass_takes_what_the_grid_allows_and_never_gouges(name, spec):
     # it only adds cuts: never more material left anywhere than without it
     assert np.all(fine.rest_mm <= coarse.rest_mm + 1e-12)
     # and no more than the best positions of its grid must leave, but for what it skips on purpose
-    bound = least_rest_steps(want, parse_tool(spec), SETTINGS, k=finer_grid(SETTINGS))
+    bound = least_rest_steps(want, parse_tool(spec), SETTINGS, k=4)  # it looks at a quarter pixel at least
     excess = fine.rest_mm / STEP_MM - bound
     assert excess.max() <= MIN_GAIN_ZPX + 1e-6, (name, spec, excess.max())
     # its points are not targets: the report's points are the pixel-centre pass's
@@ -67,7 +67,8 @@ def test_a_ball_on_slopes_leaves_far_less():
 def test_a_machine_without_finer_steps_plans_as_before():
     """One step per pixel: no position between pixel centres can be reached, and the plan is the same."""
     s = SETTINGS.replace(steps_per_px_xy=1)
-    assert finer_grid(s) == 1 and finer_grid(SETTINGS) == 4 and finer_grid(SETTINGS.replace(steps_per_px_xy=6)) == 3
+    assert finer_grid(s) == 1 and finer_grids(SETTINGS) == [8, 4, 2]
+    assert finer_grids(SETTINGS.replace(steps_per_px_xy=6)) == [6, 3, 2]
     drawing, expr = RELIEFS["hemisphere"]
     d = cam.digitize(drawing())
     profile = cam.profile_from_expr(expr, d.n_layers)

@@ -21,7 +21,7 @@ Rules the planner keeps (and tests check):
 """
 from __future__ import annotations
 
-from typing import Optional, Sequence
+from typing import Any, Optional, Sequence
 
 import cv2
 import numpy as np
@@ -33,7 +33,7 @@ from ..settings import DEFAULT_SETTINGS, MachineSettings
 from ._route import bfs_kernel
 from ..digitize.trace2d import trace_curves
 from ..tool import Tool, corner_depth_px, drop_depth_px, parse_tool, reach_depth_px
-from .subpixel import finer_grid, rest_positions
+from .subpixel import rest_positions
 from .model import CUT, RETRACT, TRAVEL, Job, PixelFrame, check_travel
 
 __all__ = ["plan", "check_drawing_size", "max_drawing_size_px"]
@@ -220,10 +220,8 @@ def plan(
                                      settings)
     finer = None
     if digitized.mode == "3d" and not cutter.is_point:
-        k = finer_grid(settings)
-        finer_at = subpixel and k > 1
         targets, corners, note, finer = _drop_targets(targets, cutter, digitized.height_px, digitized.width_px,
-                                                      settings, finer_k=k if finer_at else 0)
+                                                      settings, finer=subpixel)
         warnings += note
         if len(targets) == 0:
             raise PlanError(f"nothing to cut: the {cutter.describe()} tool does not fit into any part of the relief")
@@ -358,24 +356,23 @@ def _drop_maps(asked: np.ndarray, cutter: Tool, settings: MachineSettings
 
 
 def _drop_targets(targets: np.ndarray, cutter: Tool, height_px: int, width_px: int,
-                  settings: MachineSettings, finer_k: int = 0
-                  ) -> tuple[np.ndarray, np.ndarray, list[str], Optional[tuple[np.ndarray, ...]]]:
+                  settings: MachineSettings, finer: bool = False
+                  ) -> tuple[np.ndarray, np.ndarray, list[str], Optional[tuple[Any, ...]]]:
     """Targets ``(M, 3)`` (x, y, depth in Z pixels, cutting order) with each depth limited by the drop-cutter
     rule for ``cutter`` over the deepest depth asked at each pixel; targets left at depth 0 are dropped.
     Returns the targets, the drop-cutter depth at each pixel corner, the warning of :func:`_drop_maps`, and
-    with ``finer_k`` > 1 the finer pass (:func:`cam.job.subpixel.rest_positions`, plus ``finer_k``; else None)."""
+    with ``finer`` the finer pass (:func:`cam.job.subpixel.rest_positions`; None: none)."""
     asked = np.zeros((height_px, width_px), np.int64)
     np.maximum.at(asked, (targets[:, 1], targets[:, 0]), targets[:, 2])
     allowed, corners, note = _drop_maps(asked, cutter, settings)
     out = targets.copy()
     out[:, 2] = np.minimum(out[:, 2], allowed[out[:, 1], out[:, 0]])
     out = out[out[:, 2] > 0]
-    finer = None
-    if finer_k > 1 and len(out):
+    fine = None
+    if finer and len(out):
         reach = reach_depth_px(allowed, cutter, settings.px_to_mm_xy(1), settings.px_to_mm_z(1))
-        last = (int(out[-1, 0]) * finer_k, int(out[-1, 1]) * finer_k)
-        finer = (*rest_positions(asked, reach, cutter, settings, finer_k, start_xy=last), finer_k)
-    return out, corners, note, finer
+        fine = rest_positions(asked, reach, cutter, settings, start_xy_px=(int(out[-1, 0]), int(out[-1, 1])))
+    return out, corners, note, fine
 
 
 def _finer_part(finer: tuple[np.ndarray, ...], after_px: np.ndarray, origin_px: tuple[int, int, int],

@@ -5,7 +5,8 @@ material that a position a fraction of a pixel away would take: the drop-cutter
 depth changes between centres, and the machine's Z steps round every depth up
 (shallower) by up to one Z pixel, differently at different positions.  This
 pass looks at every position of a grid ``k`` times finer than the pixels
-(``k`` divides the machine's steps per pixel, at most :data:`MAX_K`), finds
+(``k`` divides the machine's steps per pixel, at most :data:`MAX_K`; the finest whose useful positions
+are no more than the pixels cut, see :func:`rest_positions`), finds
 those whose drop-cutter depth (:func:`sub_depth_px`: the same rule, with the
 axis there) cuts some pixel centre at least :data:`MIN_GAIN_ZPX` deeper than
 the pixel-centre pass does, and cuts them: level by level, shallowest first,
@@ -25,24 +26,34 @@ in Z pixels below the surface.
 """
 from __future__ import annotations
 
+from typing import Optional
+
 import numpy as np
 
 from ..digitize.trace2d import trace_curves
 from ..settings import MachineSettings
 from ..tool import Tool, _lowest, footprint_px
 
-__all__ = ["MAX_K", "MIN_GAIN_ZPX", "finer_grid", "sub_depth_px", "rest_positions"]
+__all__ = ["MAX_K", "MIN_GAIN_ZPX", "finer_grid", "finer_grids", "sub_depth_px", "rest_positions"]
 
-MAX_K = 4
-"""The finest grid used: a quarter pixel (on the thesis machine, 2 of its 8 steps per pixel)."""
+MAX_K = 8
+"""The finest grid looked at: an eighth of a pixel (every step of the thesis machine's 8 per pixel)."""
+BUDGET_BELOW_K = 4
+"""Grids up to this fine (a quarter pixel) are used whatever they find; finer ones only within the budget."""
 MIN_GAIN_ZPX = 0.25
 """A position is cut when it takes at least this much more (Z pixels) off some pixel centre."""
 
 
-def finer_grid(settings: MachineSettings) -> int:
-    """``k``: the finest grid of positions the machine reaches exactly, at most :data:`MAX_K` per pixel (1: none)."""
+def finer_grids(settings: MachineSettings) -> list[int]:
+    """The grids the machine reaches exactly, finest first: every ``k`` > 1 that divides its steps per pixel,
+    at most :data:`MAX_K` (none: no finer pass)."""
     spp = int(settings.steps_per_px_xy)
-    return max((k for k in range(1, MAX_K + 1) if spp % k == 0), default=1)
+    return [k for k in range(min(MAX_K, spp), 1, -1) if spp % k == 0]
+
+
+def finer_grid(settings: MachineSettings) -> int:
+    """``k``: the finest grid of :func:`finer_grids` (1: none)."""
+    return max(finer_grids(settings), default=1)
 
 
 def sub_depth_px(depth_px: np.ndarray, tool: Tool, px_mm: float, zpx_mm: float, k: int,
@@ -67,16 +78,31 @@ def sub_depth_px(depth_px: np.ndarray, tool: Tool, px_mm: float, zpx_mm: float, 
     return np.maximum(out, 0)
 
 
-def rest_positions(depth_px: np.ndarray, reach_px: np.ndarray, tool: Tool, settings: MachineSettings, k: int,
-                   start_xy: tuple[int, int] = (0, 0)) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The finer pass: ``(targets (M, 3), allowed (H k, W k), corners (H k + 1, W k + 1))``.
+def rest_positions(depth_px: np.ndarray, reach_px: np.ndarray, tool: Tool, settings: MachineSettings,
+                   start_xy_px: tuple[int, int] = (0, 0)) -> Optional[tuple[np.ndarray, np.ndarray, np.ndarray, int]]:
+    """The finer pass on the finest grid whose useful positions are no more than the pixels cut (a machine-time
+    budget: a ball on a curved relief finds many on an eighth-pixel grid, a flat end mill few), and on a
+    quarter-pixel grid (:data:`BUDGET_BELOW_K`) whatever it finds:
+    ``(targets (M, 3), allowed (H k, W k), corners (H k + 1, W k + 1), k)``, or None (no finer grid).
 
     Args:
         depth_px: ``(H, W)`` target depth of each pixel centre (Z pixels).
         reach_px: ``(H, W)`` float: how deep the pixel-centre pass cuts each pixel centre
             (:func:`cam.tool.reach_depth_px`).
-        k: the finer grid (:func:`finer_grid`), > 1.
-        start_xy: where the tool comes from (the pixel-centre pass's last position, on the finer grid).
+        start_xy_px: where the tool comes from (the pixel-centre pass's last pixel).
+    """
+    grids = finer_grids(settings)
+    budget = int(np.count_nonzero(np.asarray(depth_px) > 0))
+    for n, k in enumerate(grids):
+        found = _rest_on_grid(depth_px, reach_px, tool, settings, k, (start_xy_px[0] * k, start_xy_px[1] * k))
+        if len(found[0]) <= budget or k <= BUDGET_BELOW_K or n == len(grids) - 1:
+            return (*found, k)
+    return None
+
+
+def _rest_on_grid(depth_px: np.ndarray, reach_px: np.ndarray, tool: Tool, settings: MachineSettings, k: int,
+                  start_xy: tuple[int, int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The finer pass on the grid ``k`` (see :func:`rest_positions`); ``start_xy`` on that grid.
 
     Returns:
         ``targets``: finer-grid positions ``(b, a, depth)`` (column, row, Z pixels) in cutting order: traced
