@@ -77,3 +77,16 @@ def test_a_chunked_plans_chunks_pass_the_checker():
                          pause_writes=chunked.pause_writes)
     assert report.ok, report.summary()
     assert sum(report.steps) == int(np.sum(chunked.steps_total))
+
+
+def test_broken_logs_are_reported_or_refused_in_one_line():
+    """Two steps of one axis at one time break R1 (not a division by zero); time going back is refused."""
+    from cam.errors import CamError
+    clock = int(cam.drive.pins.axis_bits(S)[0][0])
+    t = np.array([0, 10_000_000, 10_000_000, 10_000_000, 20_000_000, 30_000_000, 40_000_000], np.int64)
+    data = np.array([0, clock, 0, clock, 0, clock, 0], np.uint8)
+    report = check_ramps(PinLog(t, data, np.zeros(len(t), np.uint8)), S)
+    assert not report.ok and report.counts["R1 top speed"] >= 1
+    back = PinLog(np.array([0, 5, 3], np.int64), np.zeros(3, np.uint8), np.zeros(3, np.uint8))
+    with pytest.raises(CamError, match="write 2 at 3 ns is earlier"):
+        check_ramps(_pieces(back, [1]), S)

@@ -62,12 +62,13 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass, field
-from typing import Iterable
+from typing import Iterable, Optional
 
 import numpy as np
 from numba import njit
 
 from .._compiled import entry
+from ..errors import CamError
 
 from ..settings import DEFAULT_SETTINGS, MachineSettings
 from .pinlog import PinLog, iter_pin_log, rising_edges
@@ -163,8 +164,8 @@ def check_axis_steps(t_ns, slot_of_step, slot_t_ns, brk, s_mm, v_start, v_max, a
             r2[j] = 0.0
         if brk[j] or brk[j + 1]:
             continue
-        d1 = float(t_ns[j] - t_ns[j - 1])
-        d2 = float(t_ns[j + 1] - t_ns[j])
+        d1 = max(float(t_ns[j] - t_ns[j - 1]), 1.0)  # two steps at one time (a broken log): R1 has it already
+        d2 = max(float(t_ns[j + 1] - t_ns[j]), 1.0)
         if d1 == d2:
             continue  # same speed
         w1 = max(s_ns / d1, v_start)
@@ -304,6 +305,7 @@ class _Checker:
         self.pause_writes = np.sort(pause_writes)
         self.pause_t: list[int] = []
         self.written = 0  # writes read so far
+        self.last_t: Optional[int] = None  # the time of the last write read
         self.prev_byte = 0
         self.slot_t: dict[int, int] = {}  # times of the slots the carried steps need
         self.tail_slots: dict[int, int] = {}  # the last two slots read (the neighbours of the next piece's first)
@@ -322,6 +324,14 @@ class _Checker:
         t = np.asarray(piece.t_ns, np.int64)
         data = np.asarray(piece.data, np.uint8)
         w0, n = self.written, len(t)
+        before = t[:1] if self.last_t is None else np.array([self.last_t], np.int64)
+        back = np.flatnonzero(np.diff(np.concatenate([before, t])) < 0)
+        if len(back):
+            i = int(back[0])
+            raise CamError(f"pin log: write {w0 + i} at {int(t[i])} ns is earlier than the write before it; "
+                           f"not a log of one run")
+        if n:
+            self.last_t = int(t[-1])
         at = self.pause_writes[(self.pause_writes >= w0) & (self.pause_writes < w0 + n)]
         self.pause_t += t[at - w0].tolist()
         odd = w0 + (1 - w0 % 2)  # the first slot write (odd global index) of the piece
@@ -385,7 +395,7 @@ class _Checker:
         if len(ji):
             ok_d = np.diff(ts)[ji][~brk[ji + 1]]
             if len(ok_d):
-                self.vtop[a] = max(self.vtop[a], float(s_mm[a] * 1e9 / ok_d.min()))
+                self.vtop[a] = max(self.vtop[a], float(s_mm[a] * 1e9 / max(int(ok_d.min()), 1)))
         jp = np.arange(p_lo, p_hi)
         self.pairs[a] += int(np.count_nonzero(~brk[jp] & ~brk[jp + 1])) if len(jp) else 0
         name = "xyz"[a]

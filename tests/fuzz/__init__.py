@@ -228,6 +228,11 @@ def _profile_target(path: Path) -> None:
 
 def _pinlog(path: Path) -> None:
     cam.decode_pin_log(cam.read_pin_log(path), SETTINGS)
+    from cam.verify.pinlog import iter_pin_log
+    from cam.verify.ramps import check_ramps
+    check_ramps(path, SETTINGS)  # the file read a piece at a time
+    for _ in iter_pin_log(path, 7):  # in small pieces: every piece boundary
+        pass
 
 
 TARGETS: dict[str, Callable[[Path], None]] = {
