@@ -117,17 +117,9 @@ def stop_and_resume(job, tmp_path: Path, stop_at: float, prepare_again) -> None:
     from cam.drive.journal import read_journal
     from cam.drive.session import MachineSession
     from cam.verify.pinlog import write_pin_log
-    from test_resume import _check_union
+    from test_resume import _check_union, estop_run
     journal, first, second = tmp_path / "run.journal.json", tmp_path / "run1.csv", tmp_path / "run2.csv"
-    session = MachineSession("mock", job.settings, realtime=True, on_prompt=lambda prompt: "continue")
-    session.on_progress = lambda done, total, t_ns: session.emergency_stop() if done >= stop_at * total else None
-    try:
-        session.start(job, journal=str(journal))
-        session.wait_idle(None)
-    finally:
-        session.shutdown()
-    assert session.last_run["status"] == "emergency-stopped", session.last_run
-    write_pin_log(session.last_result.pin_log(), first)
+    estop_run(job, journal, first, stop_at)
     record = read_journal(journal)
     again = prepare_again()
     assert not hasattr(again.toolpath, "points_steps")

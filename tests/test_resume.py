@@ -130,17 +130,7 @@ def _interrupt(kind: str, how: str, seed: int, tmp_path: Path) -> tuple[Path, Pa
     pins, report, journal = tmp_path / "run1.csv", tmp_path / "run1.json", tmp_path / "run1.journal.json"
     if how == "estop":  # through the API, in this process: a machine session, as the web page uses it
         job, ns = _prepared(_drill_args(kind, tmp_path))
-        session = MachineSession("mock", job.settings, realtime=True, on_prompt=lambda prompt: "continue")
-        stop_at = rng.uniform(0.1, 0.9)
-        session.on_progress = lambda done, total, t_ns: session.emergency_stop() if done >= stop_at * total else None
-        try:
-            session.start(job, journal=str(journal))
-            session.wait_idle(None)
-        finally:
-            session.shutdown()
-        assert session.last_run["status"] == "emergency-stopped", session.last_run
-        write_pin_log(session.last_result.pin_log(), pins)
-        assert read_journal(journal).state == "emergency-stopped"
+        estop_run(job, journal, pins, rng.uniform(0.1, 0.9))
         return journal, pins
     proc = subprocess.Popen([sys.executable, "-m", "cam", *_drill_args(kind, tmp_path), "--realtime", "--progress",
                              "--pin-log", str(pins), "--report", str(report)],
@@ -162,6 +152,21 @@ def _interrupt(kind: str, how: str, seed: int, tmp_path: Path) -> tuple[Path, Pa
     assert values["state"] == "stopped", values
     assert pins.exists()
     return journal, pins
+
+
+def estop_run(job, journal: Path, pins: Path, stop_at: float) -> None:
+    """Run a prepared job in real time on the mock through a machine session, emergency-stop it after ``stop_at``
+    of its writes, and keep its journal and pin log."""
+    session = MachineSession("mock", job.settings, realtime=True, on_prompt=lambda prompt: "continue")
+    session.on_progress = lambda done, total, t_ns: session.emergency_stop() if done >= stop_at * total else None
+    try:
+        session.start(job, journal=str(journal))
+        session.wait_idle(None)
+    finally:
+        session.shutdown()
+    assert session.last_run["status"] == "emergency-stopped", session.last_run
+    write_pin_log(session.last_result.pin_log(), pins)
+    assert read_journal(journal).state == "emergency-stopped"
 
 
 def _motion(log_path: Path, settings: cam.MachineSettings, start_steps=(0, 0, 0)) -> Motion:

@@ -250,18 +250,8 @@ def run(
                               lateness)
     else:
         sent = _send_simulated(plan, p, ctl, pauses, progress)
-    position = _position_after(plan, sent)
-    status = FINISHED
-    messages: list[str] = []
-    if sent < len(plan):
-        if ctl.estop_requested:
-            status = EMERGENCY_STOPPED
-            messages.append(f"emergency stop at {position} steps; nothing more was sent")
-        else:
-            status, position = _stop(plan, p, ctl, sent, position, wall0 if realtime else None, lateness)
-            messages.append(f"stopped at X={position[0]} Y={position[1]} steps; tool lifted to Z={position[2]}")
-    if isinstance(p, MockPort):
-        p._flush()
+    status, position, messages = _ending(plan, p, ctl, sent, len(plan), _position_after(plan, sent),
+                                         wall0 if realtime else None, lateness)
     wall = (time.monotonic_ns() - wall0) / 1e9
     machine = float(plan.t_ns[sent - 1]) / 1e9 if sent else 0.0
     return RunResult(status, position, sent, machine, wall, pauses.count, p, messages, wall0, lateness)
@@ -360,6 +350,25 @@ def _send_realtime(chunks: Iterable[tuple[np.ndarray, np.ndarray, np.ndarray]], 
         if halted:
             break
     return sent
+
+
+def _ending(plan: "StepPlan | _Tail", p: Port, ctl: Controller, sent: int, total: int,
+            position: tuple[int, int, int], t0: Optional[int], lateness: Optional["Lateness"]
+            ) -> tuple[str, tuple[int, int, int], list[str]]:
+    """How a run that sent ``sent`` of its ``total`` writes ends: ``(status, position_steps, messages)``.  A stop
+    lifts the tool (:func:`_stop`); an emergency stop sends nothing more.  The mock's log is flushed."""
+    status = FINISHED
+    messages: list[str] = []
+    if sent < total:
+        if ctl.estop_requested:
+            status = EMERGENCY_STOPPED
+            messages.append(f"emergency stop at {position} steps; nothing more was sent")
+        else:
+            status, position = _stop(plan, p, ctl, sent, position, t0, lateness)  # type: ignore[arg-type]
+            messages.append(f"stopped at X={position[0]} Y={position[1]} steps; tool lifted to Z={position[2]}")
+    if isinstance(p, MockPort):
+        p._flush()
+    return status, position, messages
 
 
 def _stop(plan: StepPlan, p: Port, ctl: Controller, sent: int, position: tuple[int, int, int],
@@ -468,18 +477,8 @@ def _run_chunks(plan: ChunkedPlan, p: Port, controller: Optional[Controller], pr
                     break
         if halted:
             break
-    position = tuple(int(v) for v in pos)
-    status = FINISHED
-    messages: list[str] = []
-    if sent < total:
-        if ctl.estop_requested:
-            status = EMERGENCY_STOPPED
-            messages.append(f"emergency stop at {position} steps; nothing more was sent")
-        else:
-            status, position = _stop(_Tail(plan, last_t, last_d), p, ctl, sent, position, None)  # type: ignore[arg-type]
-            messages.append(f"stopped at X={position[0]} Y={position[1]} steps; tool lifted to Z={position[2]}")
-    if isinstance(p, MockPort):
-        p._flush()
+    status, position, messages = _ending(_Tail(plan, last_t, last_d), p, ctl, sent, total,
+                                         tuple(int(v) for v in pos), None, None)
     wall = (time.monotonic_ns() - wall0) / 1e9
     return RunResult(status, position, sent, last_t / 1e9, wall, pauses, p, messages, wall0)  # type: ignore[arg-type]
 
@@ -579,18 +578,8 @@ def _send_chunks_realtime(plan: ChunkedPlan, p: Port, ctl: Controller, external:
     sent = _send_realtime(cursor.chunks(), total, p, ctl, pauses, progress, wall0, lateness,
                           on_progress=cursor.advance)
     position = cursor.advance(sent)
-    status = FINISHED
-    messages: list[str] = []
-    if sent < total:
-        if ctl.estop_requested:
-            status = EMERGENCY_STOPPED
-            messages.append(f"emergency stop at {position} steps; nothing more was sent")
-        else:
-            status, position = _stop(_Tail(plan, cursor.last_t_ns, cursor.last_data), p, ctl, sent, position,  # type: ignore[arg-type]
-                                     wall0, lateness)
-            messages.append(f"stopped at X={position[0]} Y={position[1]} steps; tool lifted to Z={position[2]}")
-    if isinstance(p, MockPort):
-        p._flush()
+    status, position, messages = _ending(_Tail(plan, cursor.last_t_ns, cursor.last_data), p, ctl, sent, total,
+                                         position, wall0, lateness)
     wall = (time.monotonic_ns() - wall0) / 1e9
     return RunResult(status, position, sent, cursor.last_t_ns / 1e9, wall, pauses.count, p, messages, wall0,
                      lateness)
