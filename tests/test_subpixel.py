@@ -91,3 +91,40 @@ def test_no_cut_leaves_less_than_the_least_rest():
             target, _, fine = _cut(name, spec, True)
             floor = least_rest_steps(target, parse_tool(spec), SETTINGS)
             assert np.all(fine.rest_mm / STEP_MM >= floor - 1e-6), (name, spec)
+
+
+def test_a_relief_too_large_for_the_finer_maps_gets_a_coarser_grid_or_a_warning(monkeypatch):
+    """The finer grid's maps are bounded (MAX_CELLS): a relief too large for every grid is planned without the
+    pass, with a warning, exactly as subpixel=False plans it."""
+    import cam.job.subpixel as sp
+    drawing, expr = RELIEFS["hemisphere"]
+    d = cam.digitize(drawing())
+    profile = cam.profile_from_expr(expr, d.n_layers)
+    monkeypatch.setattr(sp, "MAX_CELLS", d.height_px * d.width_px * 3)  # under the half-pixel grid's 4x
+    job = cam.plan(d, profile=profile, tool="ball:1")
+    plain = cam.plan(d, profile=profile, tool="ball:1", subpixel=False)
+    np.testing.assert_array_equal(job.points_steps, plain.points_steps)
+    assert any("left out of a relief this large" in w for w in job.warnings)
+    monkeypatch.setattr(sp, "MAX_CELLS", d.height_px * d.width_px * 4)  # the half-pixel grid fits
+    assert len(cam.plan(d, profile=profile, tool="ball:1").points_steps) > len(plain.points_steps)
+
+
+def test_nearest_first_keeps_every_curve_and_runs_each_from_its_nearer_end():
+    """Every curve once, whole, each run from the end nearer where the one before ended; far shorter travel
+    between curves than their traced order."""
+    from cam.job.subpixel import nearest_first
+    rng = np.random.default_rng(1)
+    curves = [rng.integers(0, 2000, 2) + np.cumsum(rng.integers(-1, 2, (int(rng.integers(1, 6)), 2)), axis=0)
+              for _ in range(3000)]
+    got = nearest_first(curves, (0, 0))
+    key = lambda c: tuple(map(tuple, c.tolist()))  # noqa: E731
+    assert len(got) == len(curves)
+    assert sorted(min(key(c), key(c[::-1])) for c in got) == sorted(min(key(c), key(c[::-1])) for c in curves)
+    x, y, jumps = 0, 0, 0
+    for c in got:
+        first, last = max(abs(c[0] - (x, y))), max(abs(c[-1] - (x, y)))
+        assert first <= last
+        jumps += first
+        x, y = c[-1]
+    traced = sum(max(abs(b[0] - a[-1])) for a, b in zip(curves, curves[1:]))
+    assert jumps < 0.1 * traced

@@ -151,4 +151,4 @@ def test_benchmark_rows_print(tmp_path):
     assert proc.returncode == 0, proc.stderr[-2000:]
     rows = [ln for ln in proc.stdout.splitlines() if ln.startswith("| tool ")]
     assert len(rows) == 6  # the quick reliefs (the 128^2 dome, disc + dome) x ball, flat, V
-    assert all("max gouge 0.0 vs" in r for r in rows)  # cam never gouges
+    assert all("max gouge 0.00 vs" in r for r in rows)  # cam never gouges

@@ -33,7 +33,7 @@ from ..settings import DEFAULT_SETTINGS, MachineSettings
 from ._route import bfs_kernel
 from ..digitize.trace2d import trace_curves
 from ..tool import Tool, corner_depth_px, drop_depth_px, parse_tool, reach_depth_px
-from .subpixel import rest_positions
+from .subpixel import finer_grids, rest_positions
 from .model import CUT, RETRACT, TRAVEL, Job, PixelFrame, check_travel
 
 __all__ = ["plan", "check_drawing_size", "max_drawing_size_px"]
@@ -372,6 +372,9 @@ def _drop_targets(targets: np.ndarray, cutter: Tool, height_px: int, width_px: i
     if finer and len(out):
         reach = reach_depth_px(allowed, cutter, settings.px_to_mm_xy(1), settings.px_to_mm_z(1))
         fine = rest_positions(asked, reach, cutter, settings, start_xy_px=(int(out[-1, 0]), int(out[-1, 1])))
+        if fine is None and finer_grids(settings):
+            note.append(f"the finer finishing pass between pixel centres (cam.job.subpixel) is left out of a "
+                        f"relief this large ({height_px} x {width_px} pixels): the tool leaves a little more")
     return out, corners, note, fine
 
 
@@ -384,7 +387,7 @@ def _finer_part(finer: tuple[np.ndarray, ...], after_px: np.ndarray, origin_px: 
     f_targets, f_allowed, f_corners, k = finer
     ox, oy, oz = origin_px
     fine = settings.replace(steps_per_px_xy=settings.steps_per_px_xy // int(k))
-    asked = np.zeros((f_allowed.shape[0] + 2, f_allowed.shape[1] + 2), np.int64)
+    asked = np.zeros((f_allowed.shape[0] + 2, f_allowed.shape[1] + 2), np.int32)
     asked[:f_allowed.shape[0], :f_allowed.shape[1]] = f_allowed
     after = np.array([after_px[0] * k, after_px[1] * k, after_px[2]], np.int64)
     pts, kind, tgt, pause = _assemble(f_targets + np.array([0, 0, oz], np.int64), np.zeros(asked.shape, bool),

@@ -33,13 +33,17 @@ import numpy as np
 from ..digitize.trace2d import trace_curves
 from ..settings import MachineSettings
 from ..tool import Tool, _lowest, footprint_px
+from .drill_order import nearest_neighbour_order
 
-__all__ = ["MAX_K", "MIN_GAIN_ZPX", "finer_grid", "finer_grids", "sub_depth_px", "rest_positions"]
+__all__ = ["MAX_K", "MIN_GAIN_ZPX", "finer_grid", "finer_grids", "sub_depth_px", "rest_positions", "nearest_first"]
 
 MAX_K = 8
 """The finest grid looked at: an eighth of a pixel (every step of the thesis machine's 8 per pixel)."""
 BUDGET_BELOW_K = 4
 """Grids up to this fine (a quarter pixel) are used whatever they find; finer ones only within the budget."""
+MAX_CELLS = 1 << 24
+"""The most positions of a finer grid looked at (its maps are int32: 64 MB each); a larger relief gets a
+coarser grid, and none beyond it at half a pixel."""
 MIN_GAIN_ZPX = 0.25
 """A position is cut when it takes at least this much more (Z pixels) off some pixel centre."""
 
@@ -58,7 +62,7 @@ def finer_grid(settings: MachineSettings) -> int:
 
 def sub_depth_px(depth_px: np.ndarray, tool: Tool, px_mm: float, zpx_mm: float, k: int,
                  offset: float = 0.0) -> np.ndarray:
-    """The drop-cutter depth (as :func:`cam.tool.drop_depth_px`, whole Z pixels rounded down once, >= 0) with
+    """The drop-cutter depth (as :func:`cam.tool.drop_depth_px`, whole Z pixels rounded down once, >= 0; int32) with
     the axis at every position ``((a + offset) / k, (b + offset) / k)`` pixels.
 
     Args:
@@ -69,13 +73,14 @@ def sub_depth_px(depth_px: np.ndarray, tool: Tool, px_mm: float, zpx_mm: float, 
     d = np.asarray(depth_px, np.int64)
     h, w = d.shape
     extra = 1 if offset else 0
-    out = np.zeros((h * k + extra, w * k + extra), np.int64)
+    out = np.zeros((h * k + extra, w * k + extra), np.int32)
     for sy in range(k):
         for sx in range(k):
             dy, dx, rise = footprint_px(tool, px_mm, zpx_mm, centre=((sx + offset) / k, (sy + offset) / k))
             rows, cols = len(range(sy, h * k + extra, k)), len(range(sx, w * k + extra, k))
-            out[sy::k, sx::k] = _lowest(d, dy, dx, rise, (h + extra, w + extra), 0)[:rows, :cols]
-    return np.maximum(out, 0)
+            out[sy::k, sx::k] = np.clip(_lowest(d, dy, dx, rise, (h + extra, w + extra), 0)[:rows, :cols], 0,
+                                        np.iinfo(np.int32).max)
+    return out
 
 
 def rest_positions(depth_px: np.ndarray, reach_px: np.ndarray, tool: Tool, settings: MachineSettings,
@@ -83,39 +88,48 @@ def rest_positions(depth_px: np.ndarray, reach_px: np.ndarray, tool: Tool, setti
     """The finer pass on the finest grid whose useful positions are no more than the pixels cut (a machine-time
     budget: a ball on a curved relief finds many on an eighth-pixel grid, a flat end mill few), and on a
     quarter-pixel grid (:data:`BUDGET_BELOW_K`) whatever it finds:
-    ``(targets (M, 3), allowed (H k, W k), corners (H k + 1, W k + 1), k)``, or None (no finer grid).
+    ``(targets (M, 3), allowed (H k, W k), corners (H k + 1, W k + 1), k)``, or None (no grid fits
+    :data:`MAX_CELLS`, or the machine has none).
 
     Args:
         depth_px: ``(H, W)`` target depth of each pixel centre (Z pixels).
         reach_px: ``(H, W)`` float: how deep the pixel-centre pass cuts each pixel centre
             (:func:`cam.tool.reach_depth_px`).
         start_xy_px: where the tool comes from (the pixel-centre pass's last pixel).
-    """
-    grids = finer_grids(settings)
-    budget = int(np.count_nonzero(np.asarray(depth_px) > 0))
-    for n, k in enumerate(grids):
-        found = _rest_on_grid(depth_px, reach_px, tool, settings, k, (start_xy_px[0] * k, start_xy_px[1] * k))
-        if len(found[0]) <= budget or k <= BUDGET_BELOW_K or n == len(grids) - 1:
-            return (*found, k)
-    return None
-
-
-def _rest_on_grid(depth_px: np.ndarray, reach_px: np.ndarray, tool: Tool, settings: MachineSettings, k: int,
-                  start_xy: tuple[int, int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The finer pass on the grid ``k`` (see :func:`rest_positions`); ``start_xy`` on that grid.
 
     Returns:
         ``targets``: finer-grid positions ``(b, a, depth)`` (column, row, Z pixels) in cutting order: traced
-        into curves, each starting nearest where the one before ended (the material left is thinner than a
-        few Z pixels, so no order by depth is needed: each position is cut at its own drop-cutter depth);
-        ``allowed``: the drop-cutter depth at
-        every position (where routes may run); ``corners``: at the midpoints of its diagonal moves.
+        into curves, each starting at the end nearest where the one before ended (the material left is
+        thinner than a few Z pixels, so no order by depth is needed: each position is cut at its own
+        drop-cutter depth); ``allowed``: the drop-cutter depth at every position (where routes may run);
+        ``corners``: at the midpoints of its diagonal moves.
     """
     d = np.asarray(depth_px, np.int64)
     h, w = d.shape
+    grids = [k for k in finer_grids(settings) if h * w * k * k <= MAX_CELLS]
+    budget = int(np.count_nonzero(d > 0))
+    px_mm, zpx_mm = settings.px_to_mm_xy(1), settings.px_to_mm_z(1)
+    for n, k in enumerate(grids):
+        allowed, useful = _useful(d, np.asarray(reach_px, np.float64), tool, settings, k)
+        if np.count_nonzero(useful) <= budget or k <= BUDGET_BELOW_K or n == len(grids) - 1:
+            chunks = []
+            for curve in nearest_first(trace_curves(useful), (start_xy_px[0] * k, start_xy_px[1] * k)):
+                block = np.empty((len(curve), 3), np.int64)
+                block[:, :2] = curve
+                block[:, 2] = allowed[curve[:, 1], curve[:, 0]]
+                chunks.append(block)
+            targets = np.concatenate(chunks) if chunks else np.zeros((0, 3), np.int64)
+            return targets, allowed, sub_depth_px(d, tool, px_mm, zpx_mm, k, offset=-0.5), k
+    return None
+
+
+def _useful(d: np.ndarray, reach: np.ndarray, tool: Tool, settings: MachineSettings, k: int
+            ) -> tuple[np.ndarray, np.ndarray]:
+    """``(allowed (H k, W k), useful (H k, W k) bool)``: the drop-cutter depth at every position of the grid
+    ``k`` and whether it takes at least :data:`MIN_GAIN_ZPX` more off some pixel centre than ``reach``."""
+    h, w = d.shape
     px_mm, zpx_mm = settings.px_to_mm_xy(1), settings.px_to_mm_z(1)
     allowed = sub_depth_px(d, tool, px_mm, zpx_mm, k)
-    reach = np.asarray(reach_px, np.float64)
     useful = np.zeros(allowed.shape, bool)
     for sy in range(k):
         for sx in range(k):
@@ -132,11 +146,31 @@ def _rest_on_grid(depth_px: np.ndarray, reach_px: np.ndarray, tool: Tool, settin
                 g = a[y0:y1, x0:x1] - r - reach[y0 + oy:y1 + oy, x0 + ox:x1 + ox]
                 np.maximum(gain[y0:y1, x0:x1], g, out=gain[y0:y1, x0:x1])
             useful[sy::k, sx::k] = (gain >= MIN_GAIN_ZPX) & (a > 0)
-    chunks = []
-    for curve in trace_curves(useful, start="min-distance", tool_xy_px=start_xy):
-        block = np.empty((len(curve), 3), np.int64)
-        block[:, :2] = curve
-        block[:, 2] = allowed[curve[:, 1], curve[:, 0]]
-        chunks.append(block)
-    targets = np.concatenate(chunks) if chunks else np.zeros((0, 3), np.int64)
-    return targets, allowed, sub_depth_px(d, tool, px_mm, zpx_mm, k, offset=-0.5)
+    return allowed, useful
+
+
+def nearest_first(curves: list[np.ndarray], start_xy: tuple[int, int]) -> list[np.ndarray]:
+    """``curves`` (each ``(n, 2)`` (x, y)) in a short order: the drill planner's nearest-neighbour path
+    (:func:`cam.job.drill_order.nearest_neighbour_order`, compiled) through the middles of their ends from
+    ``start_xy``, each curve run from its end nearer where the one before ended.
+
+    >>> c = [np.array([[9, 0], [8, 0]]), np.array([[0, 0], [1, 0]]), np.array([[5, 0], [4, 0]])]
+    >>> [x.tolist() for x in nearest_first(c, (0, 0))]
+    [[[0, 0], [1, 0]], [[4, 0], [5, 0]], [[8, 0], [9, 0]]]
+    """
+    if not curves:
+        return []
+    ends = np.array([[c[0][0], c[0][1], c[-1][0], c[-1][1]] for c in curves], np.float64)
+    order = nearest_neighbour_order((ends[:, :2] + ends[:, 2:]) / 2, (float(start_xy[0]), float(start_xy[1])))
+    out: list[np.ndarray] = []
+    x, y = start_xy
+    for i in order.tolist():
+        c = curves[i]
+        first = max(abs(int(c[0][0]) - x), abs(int(c[0][1]) - y))
+        last = max(abs(int(c[-1][0]) - x), abs(int(c[-1][1]) - y))
+        c = c if first <= last else c[::-1]
+        out.append(c)
+        x, y = int(c[-1][0]), int(c[-1][1])
+    return out
+
+
