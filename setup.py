@@ -23,7 +23,10 @@ class BuildWithKernels(build_py):
         super().run()
         editable = getattr(self, "editable_mode", False)
         out_dir = ROOT / "cam" if editable else Path(self.build_lib) / "cam"
-        env = dict(os.environ, PYTHONPATH=str(ROOT))
+        # ROOT first, then pip's own PYTHONPATH: in an isolated build that is what makes the build's
+        # requirements (numba, numpy, and what cam imports) visible to the child process
+        env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in (str(ROOT), os.environ.get("PYTHONPATH"))
+                                                          if p))
         print(f"cam: compiling kernels ahead of time into {out_dir} (about a minute)", file=sys.stderr)
         done = subprocess.run([sys.executable, "-m", "cam._aot", "build", "--out", str(out_dir)], cwd=ROOT,
                               env=env, check=False)
