@@ -51,38 +51,8 @@ def periods_kernel(pts, delay_xy_ns, delay_z_ns, clock, dirbit, n_min):
     high = np.empty(total, np.uint8)
     dirs = np.empty(total, np.uint8)
     period = np.empty(total, np.int64)
-    dir_state = np.zeros(3, np.int64)
-    p = 0
-    for i in range(n_moves):
-        n = n_per_move[i]
-        if n == 0:
-            continue
-        d0 = pts[i + 1, 0] - pts[i, 0]
-        d1 = pts[i + 1, 1] - pts[i, 1]
-        d2 = pts[i + 1, 2] - pts[i, 2]
-        xy = d0 != 0 or d1 != 0
-        if xy and d2 != 0:
-            per = max(delay_xy_ns, delay_z_ns)
-        elif xy:
-            per = delay_xy_ns
-        else:
-            per = delay_z_ns
-        ad0, ad1, ad2 = abs(d0), abs(d1), abs(d2)
-        # an axis steps in period k when floor(k * ad / n) grows: carried as the remainder of k * ad
-        # modulo n (ad <= n, so at most one step a period), without a division per period
-        r0 = 0
-        r1 = 0
-        r2 = 0
-        for k in range(1, n + 1):
-            r0, c0 = _dda_axis(r0, ad0, n, d0, dir_state, 0, clock[0])
-            r1, c1 = _dda_axis(r1, ad1, n, d1, dir_state, 1, clock[1])
-            r2, c2 = _dda_axis(r2, ad2, n, d2, dir_state, 2, clock[2])
-            clk = c0 | c1 | c2
-            dd = dir_state[0] * dirbit[0] + dir_state[1] * dirbit[1] + dir_state[2] * dirbit[2]
-            high[p] = dd | clk
-            dirs[p] = dd
-            period[p] = per
-            p += 1
+    _fill_periods(pts, delay_xy_ns, delay_z_ns, clock, dirbit, n_per_move, np.zeros(n_moves, np.int64),
+                  np.zeros(3, np.int64), 0, 0, high, dirs, period)
     return high, dirs, period, n_per_move
 
 
@@ -110,26 +80,16 @@ def writes_kernel(high, dirs, per):
     return t_ns, data
 
 
-@entry
 @njit(cache=True)
-def stretch_kernel(pts, delay_xy_ns, delay_z_ns, clock, dirbit, n_per_move, nominal, dir_state, i0, k0, max_periods):
-    """Up to ``max_periods`` periods of the moves between rows of ``pts``, from period ``k0`` of move ``i0`` on.
+def _fill_periods(pts, delay_xy_ns, delay_z_ns, clock, dirbit, n_per_move, nominal, dir_state, i0, k0,
+                  high, dirs, period):
+    """The step loop of both kernels: fill ``high``, ``dirs`` and ``period`` (each ``(P,)``) with the periods
+    of the moves from period ``k0`` of move ``i0`` on, until they are full or the moves end.
 
-    What :func:`periods_kernel` makes for the same moves, a stretch at a time (bounded memory).
-
-    Args:
-        pts: ``(N + 1, 3)`` int64 positions in steps, the start first.
-        n_per_move: ``(N,)`` int64 periods of each move; nominal: ``(N,)`` int64 nominal period of each move
-            (0: the delays by the axes that move).
-        dir_state: ``(3,)`` int64 direction bit in force per axis, updated in place (carried between stretches).
-
-    Returns:
-        ``(high, dirs, period_ns, i_end, k_end)``: the periods and where the next stretch starts.
+    Returns ``(p, i_end, k_end)``: the periods filled and where the next stretch starts.
     """
     n_moves = pts.shape[0] - 1
-    high = np.empty(max_periods, np.uint8)
-    dirs = np.empty(max_periods, np.uint8)
-    period = np.empty(max_periods, np.int64)
+    max_periods = high.shape[0]
     p = 0
     i = i0
     k_start = k0
@@ -152,12 +112,14 @@ def stretch_kernel(pts, delay_xy_ns, delay_z_ns, clock, dirbit, n_per_move, nomi
         else:
             per = delay_z_ns
         ad0, ad1, ad2 = abs(d0), abs(d1), abs(d2)
-        # the DDA remainders after k_start periods: k * ad modulo n
+        # an axis steps in period k when floor(k * ad / n) grows: carried as the remainder of k * ad
+        # modulo n (ad <= n, so at most one step a period), without a division per period; a stretch
+        # that starts inside a move takes the remainders after k_start periods
         r0 = (k_start * ad0) % n
         r1 = (k_start * ad1) % n
         r2 = (k_start * ad2) % n
-        k = k_start
-        while k < n and p < max_periods:
+        k_stop = min(n, k_start + (max_periods - p))
+        for _k in range(k_start, k_stop):
             r0, c0 = _dda_axis(r0, ad0, n, d0, dir_state, 0, clock[0])
             r1, c1 = _dda_axis(r1, ad1, n, d1, dir_state, 1, clock[1])
             r2, c2 = _dda_axis(r2, ad2, n, d2, dir_state, 2, clock[2])
@@ -167,13 +129,36 @@ def stretch_kernel(pts, delay_xy_ns, delay_z_ns, clock, dirbit, n_per_move, nomi
             dirs[p] = dd
             period[p] = per
             p += 1
-            k += 1
-        if k >= n:
+        if k_stop >= n:
             i += 1
             k_start = 0
         else:
-            k_start = k
-    return high[:p], dirs[:p], period[:p], i, k_start
+            k_start = k_stop
+    return p, i, k_start
+
+
+@entry
+@njit(cache=True)
+def stretch_kernel(pts, delay_xy_ns, delay_z_ns, clock, dirbit, n_per_move, nominal, dir_state, i0, k0, max_periods):
+    """Up to ``max_periods`` periods of the moves between rows of ``pts``, from period ``k0`` of move ``i0`` on.
+
+    What :func:`periods_kernel` makes for the same moves, a stretch at a time (bounded memory).
+
+    Args:
+        pts: ``(N + 1, 3)`` int64 positions in steps, the start first.
+        n_per_move: ``(N,)`` int64 periods of each move; nominal: ``(N,)`` int64 nominal period of each move
+            (0: the delays by the axes that move).
+        dir_state: ``(3,)`` int64 direction bit in force per axis, updated in place (carried between stretches).
+
+    Returns:
+        ``(high, dirs, period_ns, i_end, k_end)``: the periods and where the next stretch starts.
+    """
+    high = np.empty(max_periods, np.uint8)
+    dirs = np.empty(max_periods, np.uint8)
+    period = np.empty(max_periods, np.int64)
+    p, i, k = _fill_periods(pts, delay_xy_ns, delay_z_ns, clock, dirbit, n_per_move, nominal, dir_state, i0, k0,
+                            high, dirs, period)
+    return high[:p], dirs[:p], period[:p], i, k
 
 
 @entry
