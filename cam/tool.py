@@ -209,22 +209,30 @@ def footprint_px(tool: Tool, px_mm: float, zpx_mm: float, centre: tuple[float, f
     return dy[keep].astype(np.int64), dx[keep].astype(np.int64), h_mm[keep] / zpx_mm
 
 
+def _over_footprint(a: np.ndarray, dy: np.ndarray, dx: np.ndarray, add: np.ndarray, out: np.ndarray,
+                    reduce: np.ufunc, fill: float, shift: int = 0) -> np.ndarray:
+    """Fold ``a[i + dy_k - shift, j + dx_k - shift] + add_k`` over every offset ``k`` into ``out`` (shape
+    ``(h, w)``, updated in place with ``reduce``, ``np.minimum`` or ``np.maximum``); outside ``a`` is ``fill``."""
+    h, w = out.shape
+    reach = int(max(np.abs(dy).max(initial=0), np.abs(dx).max(initial=0))) + shift + 1
+    padded = np.full((a.shape[0] + 2 * reach, a.shape[1] + 2 * reach), fill, np.float64)
+    padded[reach:reach + a.shape[0], reach:reach + a.shape[1]] = a
+    for oy, ox, r in zip(dy.tolist(), dx.tolist(), add.tolist()):
+        y0, x0 = reach + oy - shift, reach + ox - shift
+        reduce(out, padded[y0:y0 + h, x0:x0 + w] + r, out=out)
+    return out
+
+
 def _lowest(d: np.ndarray, dy: np.ndarray, dx: np.ndarray, rise: np.ndarray, out_hw: tuple[int, int],
             shift: int) -> np.ndarray:
     """``floor(min over k of d[i + dy_k - shift, j + dx_k - shift] + rise_k)`` for each ``(i, j)`` of
     ``out_hw`` (whole Z pixels, rounded down once, after the least is taken: never below any target); outside
     ``d`` is the surface (0)."""
     cap = int(d.max(initial=0))
-    h, w = out_hw
-    reach = int(max(np.abs(dy).max(initial=0), np.abs(dx).max(initial=0))) + shift + 1
-    padded = np.zeros((d.shape[0] + 2 * reach, d.shape[1] + 2 * reach), np.float64)
-    padded[reach:reach + d.shape[0], reach:reach + d.shape[1]] = d
-    out = np.full(out_hw, float(cap), np.float64)
-    for oy, ox, r in zip(dy.tolist(), dx.tolist(), rise.tolist()):
-        if r >= cap:
-            continue  # the tool's surface is above every target there: it cannot limit anything
-        y0, x0 = reach + oy - shift, reach + ox - shift
-        np.minimum(out, padded[y0:y0 + h, x0:x0 + w] + r, out=out)
+    # where the tool's surface is above every target it cannot limit anything
+    keep = rise < cap
+    out = _over_footprint(d, dy[keep], dx[keep], rise[keep], np.full(out_hw, float(cap), np.float64),
+                          np.minimum, 0.0, shift)
     # a least that is a whole number in exact arithmetic may come out a hair under it in floats: such a hair
     # (under 1e-7 Z pixel, far below any machine's resolution) is not taken as a whole pixel less
     return np.floor(out + 1e-7).astype(np.int64)
@@ -272,12 +280,7 @@ def reach_depth_px(allowed_px: np.ndarray, tool: Tool, px_mm: float, zpx_mm: flo
         return a.copy()
     reach = int(math.ceil(tool.radius_mm / px_mm))
     dy, dx = np.mgrid[-reach:reach + 1, -reach:reach + 1]
-    rise = tool.profile_mm(np.hypot(dy, dx) * px_mm) / zpx_mm
-    h, w = a.shape
-    padded = np.full((h + 2 * reach, w + 2 * reach), -np.inf)
-    padded[reach:reach + h, reach:reach + w] = a
-    out = a.copy()
-    for oy, ox, r in zip(dy.ravel().tolist(), dx.ravel().tolist(), rise.ravel().tolist()):
-        if math.isfinite(r):
-            np.maximum(out, padded[reach + oy:reach + oy + h, reach + ox:reach + ox + w] - r, out=out)
+    rise = tool.profile_mm(np.hypot(dy, dx) * px_mm).ravel() / zpx_mm
+    keep = np.isfinite(rise)
+    out = _over_footprint(a, dy.ravel()[keep], dx.ravel()[keep], -rise[keep], a.copy(), np.maximum, -np.inf)
     return np.maximum(out, 0.0)
