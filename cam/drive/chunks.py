@@ -33,7 +33,7 @@ import numpy as np
 from ..errors import PlanError
 from ..job.model import Job, check_travel
 from ..settings import MachineSettings
-from ..verify.pinlog import _decode
+from ..verify.pinlog import _decode, fold_extent
 from ._kernels import chunk_writes_kernel, stretch_kernel
 from .pins import axis_bits
 from .ramps import RAMP_STEPS_LINEAR40, _lookahead
@@ -239,12 +239,7 @@ class ChunkedPlan:
                     data = chunk.data[i:i + _DECODE]
                     p, _ = _decode(data, prev, pos, clock, dirbit)
                     prev, pos = int(data[-1]), p[-1]
-                    extent[:, 0] = np.minimum(extent[:, 0], p.min(axis=0))
-                    extent[:, 1] = np.maximum(extent[:, 1], p.max(axis=0))
-                    below = p[p[:, 2] > 0]
-                    if len(below):
-                        cut[:, 0] = np.minimum(cut[:, 0], below.min(axis=0))
-                        cut[:, 1] = np.maximum(cut[:, 1], below.max(axis=0))
+                    fold_extent(extent, cut, p)
                 t = int(chunk.t_ns[-1])
             self._time_ns = t
             self._extent = (extent, cut if cut[0, 0] != big else np.zeros((3, 2), np.int64))

@@ -26,6 +26,7 @@ from typing import Any, Optional, Sequence
 import cv2
 import numpy as np
 
+from ..arrays import column_range, max_at_pixels
 from ..digitize.digitized import Digitized
 from ..errors import PlanError, TravelError
 from ..digitize.profile import ProfileLike, as_profile
@@ -228,14 +229,15 @@ def plan(
     ox, oy, oz = (int(v) for v in start_at)
     # the moves are assembled in the drawing's own pixel frame (every target at a pixel >= 0, whatever the
     # Start At offset), starting and ending at the job's home, then moved by the offset
-    targets = targets + np.array([0, 0, oz], np.int64)
+    if oz:
+        targets = targets + np.array([0, 0, oz], np.int64)
     surface = oz
     safe = min(0, oz)
 
     # deepest depth asked at each pixel (drawing frame, relative to the surface): moving through a
     # pixel at or above that depth never cuts what the drawing does not ask for
     asked = np.zeros((digitized.height_px + 2, digitized.width_px + 2), np.int64)
-    np.maximum.at(asked, (targets[:, 1], targets[:, 0]), targets[:, 2] - oz)
+    max_at_pixels(asked, targets[:, 0], targets[:, 1], targets[:, 2] - oz)
     pause_px, notes = _pause_map(digitized, pause_at, asked.shape)
     warnings += notes
     # the job's extent is known before it is assembled (targets, the home, the safe plane): one that leaves the
@@ -268,7 +270,8 @@ def plan(
         points_px = np.concatenate([r_points, points_px])
         kinds, tgt, pause = (np.concatenate([r_kinds, kinds]), np.concatenate([r_tgt, tgt]),
                              np.concatenate([r_pause, pause]))
-    points_px[:, :2] += np.array([ox, oy], np.int64)
+    if ox or oy:
+        points_px[:, :2] += np.array([ox, oy], np.int64)
     points_steps = frame.to_steps(points_px)
     if finer_steps is not None:
         f_pts, f_kind = finer_steps
@@ -294,7 +297,7 @@ def _roughing_targets(targets: np.ndarray, rough: Tool, stepdown_px: int, stepov
     comes within the tool's radius of; each ring is traced into curves (the 2D tracer), shallowest level first.
     """
     asked = np.zeros((height_px, width_px), np.int64)
-    np.maximum.at(asked, (targets[:, 1], targets[:, 0]), targets[:, 2])
+    max_at_pixels(asked, targets[:, 0], targets[:, 1], targets[:, 2])
     px_mm, zpx_mm = settings.px_to_mm_xy(1), settings.px_to_mm_z(1)
     allowed = drop_depth_px(asked, rough, px_mm, zpx_mm)
     corners = corner_depth_px(asked, rough, px_mm, zpx_mm) if not rough.is_point else allowed
@@ -363,7 +366,7 @@ def _drop_targets(targets: np.ndarray, cutter: Tool, height_px: int, width_px: i
     Returns the targets, the drop-cutter depth at each pixel corner, the warning of :func:`_drop_maps`, and
     with ``finer`` the finer pass (:func:`cam.job.subpixel.rest_positions`; None: none)."""
     asked = np.zeros((height_px, width_px), np.int64)
-    np.maximum.at(asked, (targets[:, 1], targets[:, 0]), targets[:, 2])
+    max_at_pixels(asked, targets[:, 0], targets[:, 1], targets[:, 2])
     allowed, corners, note = _drop_maps(asked, cutter, settings)
     out = targets.copy()
     out[:, 2] = np.minimum(out[:, 2], allowed[out[:, 1], out[:, 0]])
@@ -437,8 +440,9 @@ def _fits_travel(targets: np.ndarray, offset_px: tuple[int, int], safe: int, set
     Bridges run through targets' pixels, lifts and travels at the surface or the safe plane, so no point of
     the job lies outside this box, and its corners' coordinates are all taken by points of the job.
     """
-    lo_px = np.minimum(targets.min(axis=0) + np.array([*offset_px, 0]), [0, 0, safe])
-    hi_px = np.maximum(targets.max(axis=0) + np.array([*offset_px, 0]), 0)
+    least, most = column_range(targets)
+    lo_px = np.minimum(least + np.array([*offset_px, 0]), [0, 0, safe])
+    hi_px = np.maximum(most + np.array([*offset_px, 0]), 0)
     scale = np.array([settings.steps_per_px_xy, settings.steps_per_px_xy, settings.steps_per_px_z], np.int64)
     bounds = np.array(settings.travel.bounds_steps(), np.int64)
     return bool(np.all(lo_px * scale >= bounds[:, 0]) and np.all(hi_px * scale <= bounds[:, 1]))
@@ -553,7 +557,8 @@ def _assemble(
     pts[pos_a, 2] = np.where(deeper[ia], d_prev[ia], d[ia])
     ib = np.flatnonzero(b_valid)
     pos_b = start[ib] + a_valid[ib] + extra[ib]
-    pts[pos_b] = targets[ib]
+    for k in range(3):  # a column at a time: a gather of whole (3,) rows runs about 1.6x slower
+        pts[pos_b, k] = targets[ib, k]
     tgt[pos_b] = True
     # gap blocks
     for i, blk in blocks.items():

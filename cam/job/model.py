@@ -24,6 +24,7 @@ from typing import Any, Optional
 
 import numpy as np
 
+from ..arrays import column_range, max_at_pixels
 from ..errors import TravelError
 from ..settings import DEFAULT_SETTINGS, MachineSettings
 from ..render.picture import encode_png, toolpath_picture
@@ -150,8 +151,7 @@ class Job:
         """
         out = np.zeros((self.height_px, self.width_px), np.int64)
         p = self.points_px()[self.target] - np.asarray(self.origin_px, np.int64)
-        np.maximum.at(out, (p[:, 1], p[:, 0]), p[:, 2])
-        return out
+        return max_at_pixels(out, p[:, 0], p[:, 1], p[:, 2])
 
     def _repr_png_(self) -> bytes:
         """Notebook picture: see :func:`cam.render.picture.toolpath_picture`."""
@@ -173,6 +173,11 @@ def check_travel(points_steps: np.ndarray, settings: MachineSettings, pixels: Op
     bounds = settings.travel.bounds_steps()
     lo = np.array([b[0] for b in bounds], np.int64)
     hi = np.array([b[1] for b in bounds], np.int64)
+    if not len(steps):
+        return
+    least, most = column_range(steps)
+    if np.all(least >= lo) and np.all(most <= hi):
+        return  # the extent is inside: no point to name (one strided pass per column)
     bad = np.flatnonzero(np.any((steps < lo) | (steps > hi), axis=1))
     if not len(bad):
         return

@@ -23,6 +23,7 @@ from typing import Iterator
 
 import numpy as np
 
+from ..arrays import column_range
 from ..errors import CamError, ParseError
 from ..fileio import atomic_write_text
 from ..render.picture import encode_png, surface_picture
@@ -215,6 +216,19 @@ class PositionTracker:
 _CHUNK = 1 << 21
 
 
+def fold_extent(extent: np.ndarray, cut: np.ndarray, pos: np.ndarray) -> None:
+    """Widen ``extent`` and ``cut`` (each ``(3, 2)`` int64 min/max in steps, in place) by the ``(N, 3)`` positions
+    ``pos`` (N > 0); ``cut`` only by those below the surface (z > 0)."""
+    lo, hi = column_range(pos)
+    np.minimum(extent[:, 0], lo, out=extent[:, 0])
+    np.maximum(extent[:, 1], hi, out=extent[:, 1])
+    below = pos[pos[:, 2] > 0]
+    if len(below):
+        lo, hi = column_range(below)
+        np.minimum(cut[:, 0], lo, out=cut[:, 0])
+        np.maximum(cut[:, 1], hi, out=cut[:, 1])
+
+
 def motion_extent(data: np.ndarray, settings: MachineSettings = DEFAULT_SETTINGS) -> tuple[np.ndarray, np.ndarray]:
     """Where a sequence of port writes takes the tool, decoded in bounded chunks.
 
@@ -229,12 +243,7 @@ def motion_extent(data: np.ndarray, settings: MachineSettings = DEFAULT_SETTINGS
     big = np.iinfo(np.int64).max
     cut = np.array([[big, -big]] * 3, np.int64)
     for pos in _decoded_chunks(data, 0, len(data), np.zeros(3, np.int64), clock, dirbit):
-        extent[:, 0] = np.minimum(extent[:, 0], pos.min(axis=0))
-        extent[:, 1] = np.maximum(extent[:, 1], pos.max(axis=0))
-        below = pos[pos[:, 2] > 0]
-        if len(below):
-            cut[:, 0] = np.minimum(cut[:, 0], below.min(axis=0))
-            cut[:, 1] = np.maximum(cut[:, 1], below.max(axis=0))
+        fold_extent(extent, cut, pos)
     return extent, (cut if cut[0, 0] != big else np.zeros((3, 2), np.int64))
 
 
