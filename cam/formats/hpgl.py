@@ -55,7 +55,7 @@ import numpy as np
 from numba import njit
 
 from .._compiled import entry
-
+from ..arrays import column_range
 from ..choices import HPGL_SUFFIXES
 from ..errors import ParseError
 from ..limits import MAX_COORD_MM, MAX_TOOL_NUMBER
@@ -964,7 +964,7 @@ class HpglDrawing:
         """``(x_min, y_min, x_max, y_max)`` of the points (plotter units), None when empty."""
         if len(self.points_pu) == 0:
             return None
-        lo, hi = self.points_pu.min(axis=0), self.points_pu.max(axis=0)
+        lo, hi = column_range(self.points_pu)
         return (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]))
 
 

@@ -29,6 +29,7 @@ from typing import Any, Mapping, Optional
 import cv2
 import numpy as np
 
+from ..arrays import column_range
 from ..choices import (
     DIGITIZED_SUFFIXES, DRAWING_SUFFIXES, EXCELLON_SUFFIXES, HPGL_SUFFIXES, OPTION_KINDS, PROFILE_SUFFIXES, SUFFIXES,
     job_kind,
@@ -493,7 +494,7 @@ def motion_picture(
         pieces = positions_steps
     if extent_steps is None:
         allp = np.vstack([np.zeros((1, 3), np.int64)] + list(pieces()))
-        extent_steps = np.column_stack([allp.min(axis=0), allp.max(axis=0)])
+        extent_steps = np.column_stack(column_range(allp))
     extent_steps = np.asarray(extent_steps, np.int64)
     lo = extent_steps[:2, 0]
     span = np.maximum(1, extent_steps[:2, 1] - lo)

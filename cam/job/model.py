@@ -178,10 +178,7 @@ def check_travel(points_steps: np.ndarray, settings: MachineSettings, pixels: Op
     least, most = column_range(steps)
     if np.all(least >= lo) and np.all(most <= hi):
         return  # the extent is inside: no point to name (one strided pass per column)
-    bad = np.flatnonzero(np.any((steps < lo) | (steps > hi), axis=1))
-    if not len(bad):
-        return
-    i = int(bad[0])
+    i = int(np.flatnonzero(np.any((steps < lo) | (steps > hi), axis=1))[0])  # some point is outside
     a = int(np.flatnonzero((steps[i] < lo) | (steps[i] > hi))[0])
     xs, ys, zs = (int(v) for v in steps[i])
     if pixels is not None:
