@@ -35,7 +35,7 @@ from ..tool import Tool, parse_tool
 from .subpixel import finer_grid
 from .drawing import _assemble, _drop_maps, _fits_travel, _guard_diagonals, _object_depths, _pass_order, _pause_map
 from .hpgl_stream import _Hashes
-from .model import RETRACT, Job, PixelFrame, check_travel
+from .model import RETRACT, Job, PixelFrame, check_travel, join_pieces
 
 __all__ = ["DrawingJobStream", "stream_drawing", "STREAM_TARGETS", "PIECE_TARGETS"]
 
@@ -160,6 +160,10 @@ class DrawingJobStream:
             pending = np.concatenate(held)
         if pending is not None:
             yield pending, True
+
+    def joined(self) -> Job:
+        """Every move in one :class:`~cam.job.model.Job` (:func:`~cam.job.model.join_pieces` of :meth:`pieces`)."""
+        return join_pieces(self.pieces(), self)
 
     def pieces(self) -> Iterator[Job]:
         """The job's moves as consecutive :class:`~cam.job.model.Job` pieces.

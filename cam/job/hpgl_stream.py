@@ -29,7 +29,7 @@ from ..errors import PlanError
 from ..formats.hpgl import CHUNK_BYTES, PLOTTER_UNIT_MM, HpglScan, _points, _Unknown, scan_hpgl
 from ..settings import DEFAULT_SETTINGS, MachineSettings
 from .hpgl import DEFAULT_CUT_DEPTH_MM, DEFAULT_SAFE_HEIGHT_MM, _check_xy, _z_steps
-from .model import CUT, RETRACT, TRAVEL, Job, check_travel
+from .model import CUT, RETRACT, TRAVEL, Job, check_travel, join_pieces
 
 __all__ = ["HpglJobStream", "stream_hpgl", "STREAM_POINTS", "PIECE_POINTS"]
 
@@ -114,6 +114,10 @@ class HpglJobStream:
             for _ in self.pieces():
                 pass
         return self.n_moves
+
+    def joined(self) -> Job:
+        """Every move in one :class:`~cam.job.model.Job` (:func:`~cam.job.model.join_pieces` of :meth:`pieces`)."""
+        return join_pieces(self.pieces(), self)
 
     def pieces(self) -> Iterator[Job]:
         """The job's moves as consecutive :class:`~cam.job.model.Job` pieces (each of at least

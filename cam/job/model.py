@@ -19,8 +19,8 @@ drawing pictures need.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-from typing import Any, Optional
+from dataclasses import dataclass, field, fields
+from typing import Any, Iterable, Iterator, Optional, Protocol, runtime_checkable
 
 import numpy as np
 
@@ -29,7 +29,8 @@ from ..errors import TravelError
 from ..settings import DEFAULT_SETTINGS, MachineSettings
 from ..render.picture import encode_png, toolpath_picture
 
-__all__ = ["Job", "PixelFrame", "CUT", "RETRACT", "TRAVEL", "check_travel", "check_reach", "travel_job", "pause_points"]
+__all__ = ["Job", "JobLike", "PixelFrame", "CUT", "RETRACT", "TRAVEL", "check_travel", "check_reach", "travel_job",
+           "pause_points", "join_pieces"]
 
 CUT = 0
 """A point at or above the asked depth of what is cut (the tool is in the material or at the surface over it)."""
@@ -153,10 +154,105 @@ class Job:
         p = self.points_px()[self.target] - np.asarray(self.origin_px, np.int64)
         return max_at_pixels(out, p[:, 0], p[:, 1], p[:, 2])
 
+    def pieces(self) -> Iterator["Job"]:
+        """The job as consecutive pieces (see :class:`JobLike`): a job held in memory is one piece."""
+        yield self
+
+    def joined(self) -> "Job":
+        """The whole job in memory (see :class:`JobLike`): itself."""
+        return self
+
     def _repr_png_(self) -> bytes:
         """Notebook picture: see :func:`cam.render.picture.toolpath_picture`."""
 
         return encode_png(toolpath_picture(self))
+
+
+_PER_MOVE = ("points_steps", "kind", "target", "pause", "period_ns", "periods", "move_start", "rest")
+"""The :class:`Job` fields that hold one row per move (joined by :func:`join_pieces`)."""
+
+
+@runtime_checkable
+class JobLike(Protocol):
+    """What every planner gives and the machine session, the step planner, the pictures, the journal and
+    G-code export take: a job's moves as consecutive :class:`Job` pieces.
+
+    A :class:`Job` held in memory is one piece (:meth:`Job.pieces` yields itself).  A job made a piece at a
+    time (a large HPGL file or drawing, a resumed run of one: :mod:`cam.job.hpgl_stream`,
+    :mod:`cam.job.drawing_stream`, :mod:`cam.job.resume_stream`) makes its pieces on demand, each pass anew,
+    so nothing per move is held; :meth:`joined` is :func:`join_pieces` of them.  Every piece's points are in
+    steps from the job's home (the frame of :class:`Job`); the whole job's attributes are here:
+
+    Attributes:
+        settings: the machine settings; safe_z_steps: the Z a stop lifts to (<= 0, +Z deeper).
+        source: what the job was planned from; warnings: planning warnings (a first pass may add some).
+        pixels: a drawing job's :class:`PixelFrame` (None otherwise); tool: its cutter (None: a point).
+    """
+
+    settings: MachineSettings
+    safe_z_steps: int
+    source: str
+    warnings: list[str]
+    pixels: Optional[PixelFrame]
+    tool: Any
+
+    def pieces(self) -> Iterator[Job]:
+        """The moves as consecutive :class:`Job` pieces (each pass makes them anew)."""
+        ...
+
+    def joined(self) -> Job:
+        """Every move in one :class:`Job` (memory grows with the job)."""
+        ...
+
+
+def join_pieces(pieces: Iterable[Job], like: Any) -> Job:
+    """One :class:`Job` of consecutive ``pieces``, with the whole-job attributes of ``like`` (a :class:`JobLike`).
+
+    A per-move field that some pieces leave None (e.g. ``periods``) gets each such piece's default: the
+    nominal period 0 for ``period_ns``, the longest axis's steps for ``periods``, every move a ``move_start``,
+    no ``rest``.
+    """
+    parts = list(pieces)
+    cols: dict[str, Any] = {}
+    for name in _PER_MOVE:
+        values = [getattr(p, name) for p in parts]
+        if name in ("points_steps", "kind", "target", "pause"):
+            dtype = {"points_steps": np.int64, "kind": np.uint8}.get(name, np.bool_)
+            shape = (0, 3) if name == "points_steps" else (0,)
+            cols[name] = np.concatenate([np.asarray(v, dtype).reshape((-1, 3) if name == "points_steps" else -1)
+                                         for v in values]) if values else np.zeros(shape, dtype)
+        elif all(v is None for v in values):
+            cols[name] = None
+        else:
+            cols[name] = np.concatenate([_default_column(name, p) if v is None else np.asarray(v)
+                                         for p, v in zip(parts, values)])
+    notes: list[str] = []
+    any_notes = False
+    for p in parts:
+        n_pauses = int(np.count_nonzero(p.pause))
+        if p.pause_notes is not None:
+            any_notes = True
+            notes += list(p.pause_notes)
+        else:
+            notes += ["Pause At"] * n_pauses
+    warnings = list(getattr(like, "warnings", []) or [])
+    for p in parts:
+        warnings += [w for w in p.warnings if w not in warnings]
+    meta = {f.name: getattr(like, f.name) for f in fields(Job)
+            if f.name not in _PER_MOVE and f.name not in ("pause_notes", "warnings") and hasattr(like, f.name)}
+    return Job(**cols, **meta, pause_notes=notes if any_notes else getattr(like, "pause_notes", None) or None,
+               warnings=warnings)
+
+
+def _default_column(name: str, piece: Job) -> np.ndarray:
+    n = len(piece.points_steps)
+    if name == "period_ns":
+        return np.zeros(n, np.int64)
+    if name == "periods":
+        return np.zeros(n, np.int64)  # at least the longest axis's steps: 0 asks for nothing more
+    if name == "move_start":
+        return np.ones(n, bool)
+    return np.zeros(n, bool)  # rest
 
 
 def _mm(settings: MachineSettings, steps: np.ndarray) -> str:
@@ -216,10 +312,8 @@ def travel_job(points_steps: np.ndarray, settings: MachineSettings, *, source: s
                pause=np.zeros(n, bool), settings=settings, source=source)
 
 
-def pause_points(toolpath: Any) -> np.ndarray:
-    """``(P,)`` int64 indices of a job's points that pause (a job planned a piece at a time: one pass)."""
-    if hasattr(toolpath, "points_steps"):
-        return np.flatnonzero(toolpath.pause)
+def pause_points(toolpath: JobLike) -> np.ndarray:
+    """``(P,)`` int64 indices of a job's points that pause (one pass over its pieces)."""
     found, first = [], 0
     for piece in toolpath.pieces():
         found.append(np.flatnonzero(piece.pause) + first)

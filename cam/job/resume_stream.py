@@ -16,7 +16,7 @@ import numpy as np
 
 from ..errors import CamError
 from .hpgl_stream import _Hashes
-from .model import Job
+from .model import Job, join_pieces
 from .resume import _cuts, _surface_steps, _way_in
 
 __all__ = ["ResumedStream", "MoveIndex", "resume_stream"]
@@ -69,6 +69,10 @@ class ResumedStream:
 
     def __len__(self) -> int:
         return self.n_moves
+
+    def joined(self) -> Job:
+        """Every move in one :class:`~cam.job.model.Job` (:func:`~cam.job.model.join_pieces` of :meth:`pieces`)."""
+        return join_pieces(self.pieces(), self)
 
     def pieces(self) -> Iterator[Job]:
         """The way in, then the stream's moves from ``j`` on (relative to ``start_steps``)."""
