@@ -1,7 +1,44 @@
-"""Shared test helpers: tiny drawings and the carve check."""
+"""Shared test helpers: tiny drawings, the carve check, the command line in this process, and the test tiers.
+
+Test tiers (markers, declared in pyproject.toml; ``--strict-markers`` refuses any other):
+
+``browser``
+    drives the web page in Chromium through Playwright.
+``realtime``
+    runs an emulator, a machine session or ``cam drill --realtime`` at real speed (waits on the clock).
+``packaging``
+    ``pip install``, a virtual environment, the ahead-of-time kernel build, or a check of what an install
+    ships.
+``slow``
+    anything else that would make the fast tier too slow (large inputs, many planned jobs, fuzzing, memory
+    bounds on 200 MB files, benchmarks, real ``python -m cam`` processes kept for what only a process shows).
+
+A test marked ``browser``, ``realtime`` or ``packaging`` is marked ``slow`` too: this file adds the ``slow``
+marker to it (``pytest_collection_modifyitems``), so mark it with its kind only.
+
+``python -m pytest tests`` runs every test (nothing is deselected by default; the README's and .ci/run's
+command).  ``python -m pytest -m "not slow"`` is the fast tier, for every commit: it still runs every module's
+behaviour, with at least one end-to-end test per input kind (2D and 3D drawings, profiles, digitized matrices,
+Excellon, HPGL, SVG, G-code) and the mock port's pin-log carve check.  ``-m slow`` runs the rest.
+
+Measured: (filled in below)
+
+The command line is tested in this process (:func:`run_cli`: ``cam.cli.main`` with its own stdout, stderr and
+stdin, exit code from its return value or ``SystemExit``), which saves the 2.6 s of imports every
+``python -m cam`` process pays; a few tests still start a real process: ``python -m cam --help``, a bad input's
+exit code, one real run, and what needs a process (signals, a terminal, a killed run, a missing package).
+"""
 from __future__ import annotations
 
+import io
+import os
+import signal
+import sys
+import traceback
+import warnings
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Optional, Sequence
 
 import numpy as np
 import pytest
@@ -83,3 +120,120 @@ def wait_for_progress(proc, percent: int, timeout_s: float = 60.0) -> list:
         time.sleep(0.02)
     wait_for_progress.reader = reader
     return chunks
+
+
+# -- test tiers ---------------------------------------------------------------------------------------------
+
+_SLOW_KINDS = ("browser", "realtime", "packaging")
+
+
+def pytest_collection_modifyitems(config, items):
+    """Every browser, realtime and packaging test is slow too (see the module docstring)."""
+    for item in items:
+        if any(item.get_closest_marker(kind) is not None for kind in _SLOW_KINDS) \
+                and item.get_closest_marker("slow") is None:
+            item.add_marker(pytest.mark.slow)
+
+
+# -- the command line in this process -----------------------------------------------------------------------
+
+@dataclass
+class CliRun:
+    """What ``python -m cam ARGS`` gives back, as :class:`subprocess.CompletedProcess` names it."""
+    args: list
+    returncode: int
+    stdout: str
+    stderr: str
+
+
+_STOP_SIGNALS = tuple(getattr(signal, n) for n in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, n))
+
+# Python's default warning filters (python -W default is not given): what a ``python -m cam`` process shows
+_DEFAULT_FILTERS = (("ignore", DeprecationWarning), ("ignore", PendingDeprecationWarning),
+                    ("ignore", ImportWarning), ("ignore", ResourceWarning))
+
+
+def _numba_listeners() -> tuple:
+    try:
+        from numba.core import event
+    except ImportError:  # pragma: no cover
+        return None, []
+    return event, list(event._registered.get("numba:compile", []))
+
+
+def run_cli(*args, cwd: Optional[os.PathLike] = None, env: Optional[dict] = None, stdin: str = "",
+            timeout: Optional[float] = None) -> CliRun:
+    """``python -m cam ARGS`` in this process: ``cam.cli.main`` with its own stdout and stderr (pipes to it:
+    not terminals, so no progress bar unless asked), an empty stdin that cannot be selected on (a prompt
+    reads no answer, as with ``stdin=DEVNULL``), ``cwd`` and ``env`` (entries set for the call) applied and
+    restored.  The exit code comes from main's return value or a ``SystemExit`` (``--help``, argparse's
+    errors); any other exception is a traceback on stderr and exit code 1, as the interpreter would make it.
+    Warnings go to stderr as a process shows them (Python's default filters).  Signal handlers and numba's
+    compile listeners that main installs are removed afterwards.  ``timeout`` is accepted for the
+    subprocess-shaped call sites and not enforced."""
+    from cam.cli import main
+
+    argv = [str(a) for a in args]
+    out_buf, err_buf = io.BytesIO(), io.BytesIO()
+    out = io.TextIOWrapper(out_buf, encoding="utf-8", errors="replace", write_through=True)
+    err = io.TextIOWrapper(err_buf, encoding="utf-8", errors="replace", write_through=True)
+    inp = io.TextIOWrapper(io.BytesIO(stdin.encode()), encoding="utf-8")
+    saved_streams = sys.stdin, sys.stdout, sys.stderr
+    saved_handlers = {s: signal.getsignal(s) for s in _STOP_SIGNALS}
+    saved_cwd = os.getcwd()
+    saved_env = {k: os.environ.get(k) for k in (env or {})}
+    event, listeners = _numba_listeners()
+    code = 0
+    try:
+        if cwd is not None:
+            os.chdir(cwd)
+        for k, v in (env or {}).items():
+            os.environ[k] = str(v)
+        sys.stdin, sys.stdout, sys.stderr = inp, out, err
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.resetwarnings()
+            warnings.simplefilter("default")
+            for action, category in _DEFAULT_FILTERS:
+                warnings.filterwarnings(action, category=category)
+            try:
+                code = main(argv)
+            except SystemExit as exc:
+                if exc.code is None:
+                    code = 0
+                elif isinstance(exc.code, int):
+                    code = exc.code
+                else:
+                    print(exc.code, file=err)
+                    code = 1
+            except Exception:  # noqa: BLE001 - as the interpreter: the traceback, exit code 1
+                err.write(traceback.format_exc())
+                code = 1
+        for w in caught:
+            err.write(warnings.formatwarning(w.message, w.category, w.filename, w.lineno, w.line))
+    finally:
+        sys.stdin, sys.stdout, sys.stderr = saved_streams
+        for s, handler in saved_handlers.items():
+            if signal.getsignal(s) is not handler and handler is not None:
+                signal.signal(s, handler)
+        os.chdir(saved_cwd)
+        for k, v in saved_env.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+        if event is not None:
+            for listener in event._registered.get("numba:compile", [])[len(listeners):]:
+                event.unregister("numba:compile", listener)
+        for stream in (out, err, inp):
+            stream.flush()
+
+    def text(buf: io.BytesIO) -> str:  # as subprocess.run(text=True) reads a pipe: universal newlines
+        return buf.getvalue().decode("utf-8", errors="replace").replace("\r\n", "\n").replace("\r", "\n")
+
+    return CliRun(argv, int(code), text(out_buf), text(err_buf))
+
+
+@pytest.fixture
+def cli_run():
+    """:func:`run_cli`, as a fixture."""
+    return run_cli
