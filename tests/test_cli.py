@@ -1,4 +1,6 @@
-"""The command line, run as a user would run it."""
+"""The command line, run as a user would run it: in this process (``run_cli``: ``cam.cli.main`` with its own
+stdout and stderr), and as a real ``python -m cam`` process where only a process shows it (its start, a
+terminal, signals, a missing package)."""
 import argparse
 import fcntl
 import json
@@ -21,16 +23,38 @@ import cam
 from cam import choices
 from cam.cli.parser import build_parser
 
-from conftest import wait_for_progress, ROOT
+from conftest import wait_for_progress, ROOT, SAMPLES, run_cli
 
 ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
 
 
 def cli(*args, cwd=None, timeout=120):
+    """``cam ARGS`` in this process (see conftest.run_cli)."""
+    return run_cli(*args, cwd=cwd, timeout=timeout)
+
+
+def cli_process(*args, cwd=None, timeout=120):
+    """``python -m cam ARGS`` as a process of its own."""
     return subprocess.run(
         [sys.executable, "-m", "cam", *map(str, args)], capture_output=True, text=True, env=ENV, cwd=cwd,
-        timeout=timeout,
+        timeout=timeout, stdin=subprocess.DEVNULL,
     )
+
+
+def test_python_m_cam_help_starts_a_process():
+    """The entry point as a user starts it: ``python -m cam --help`` (the parser alone: no numpy, quick)."""
+    proc = cli_process("--help")
+    assert proc.returncode == 0 and "usage: cam" in proc.stdout and proc.stderr == ""
+
+
+@pytest.mark.slow
+def test_python_m_cam_exit_codes_and_a_real_run(tmp_path):
+    """A process's exit codes: 2 and one line for a bad input, 0 and the report for a job on the mock."""
+    proc = cli_process("drill", tmp_path / "nope.png")
+    assert_one_line_error(proc, "nope.png", "not found")
+    proc = cli_process("drill", SAMPLES / "ellipse.png", "--depth", "2", "--report", tmp_path / "r.json")
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.startswith("job finished:") and json.loads((tmp_path / "r.json").read_text())["points"] > 0
 
 
 @pytest.fixture(scope="module")
@@ -120,6 +144,7 @@ def _run_with_terminal_stderr(*args) -> tuple[int, str]:
         os.close(master)
 
 
+@pytest.mark.slow
 def test_progress_bar_on_a_terminal_and_no_progress_turns_it_off(drawing):
     code, shown = _run_with_terminal_stderr("drill", drawing)
     assert code == 0 and "cutting: 100%" in shown
@@ -218,6 +243,7 @@ def test_failed_run_keeps_earlier_outputs(tmp_path, drawing):
     assert report.read_bytes() == before
 
 
+@pytest.mark.realtime
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM, signal.SIGHUP])
 def test_ctrl_c_and_termination_signals_stop_cleanly_with_position(sig, tmp_path):
     img = np.full((20, 120, 3), 255, np.uint8)
@@ -241,6 +267,7 @@ def test_ctrl_c_and_termination_signals_stop_cleanly_with_position(sig, tmp_path
     assert json.loads((tmp_path / "r.json").read_text())["status"] == "stopped"
 
 
+@pytest.mark.slow
 def test_ctrl_c_at_a_prompt_stops_at_once(tmp_path):
     img = np.full((10, 30, 3), 255, np.uint8)
     img[5, 5:25] = 0
@@ -269,6 +296,7 @@ def cli_without(module: str, *args):
                           timeout=120)
 
 
+@pytest.mark.slow
 def test_missing_extras_are_one_line_naming_the_extra(drawing):
     proc = cli_without("parallel", "drill", drawing, "--port", "/dev/parport0", "--no-progress")
     assert_one_line_error(proc, "/dev/parport0", "pyparallel", "cam[parport]")
@@ -320,6 +348,7 @@ def test_preview_export_and_info_take_every_file_kind(tmp_path):
     assert not (tmp_path / "x.ngc").exists() and not (tmp_path / "s.png").exists()
 
 
+@pytest.mark.realtime
 def test_an_interrupted_jog_says_how_far_it_moved():
     proc = subprocess.Popen([sys.executable, "-m", "cam", "jog", "X+", "2000", "--realtime", "--progress"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=ENV)
