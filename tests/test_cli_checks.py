@@ -3,22 +3,20 @@ the port.  A bad one is one line on stderr, exit code 2, and nothing was planned
 import json
 import os
 import re
-import subprocess
-import sys
 
 import pytest
 
 from cam.cli import main
 
-from conftest import ROOT, SAMPLES
+from conftest import ROOT, SAMPLES, run_cli
 
 ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
 NGC = "G21 G90\nG0 X1 Y-1\nG1 Z-0.2 F100\nG1 X5 Y-3 F300\nG0 Z2\nM2\n"
 
 
 def cli(*args, timeout=120):
-    return subprocess.run([sys.executable, "-m", "cam", *map(str, args)], capture_output=True, text=True, env=ENV,
-                          timeout=timeout, stdin=subprocess.DEVNULL)
+    """``cam ARGS`` in this process (conftest.run_cli): exit code, stdout, stderr, stdin empty."""
+    return run_cli(*args, timeout=timeout)
 
 
 def refused(proc, *fragments):
