@@ -23,17 +23,11 @@ SIGNATURES = {
     'cam.drive._kernels.chunk_writes_kernel': [
         "(Array(uint8, 1, 'C'), Array(uint8, 1, 'C'), Array(int64, 1, 'C'), uint8, int64, )",
     ],
-    'cam.drive._kernels.periods_kernel': [
-        "(Array(int64, 2, 'C'), int64, int64, Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), )",
-    ],
     'cam.drive._kernels.pin_rows_kernel': [
         "(Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), )",
     ],
     'cam.drive._kernels.stretch_kernel': [
         "(Array(int64, 2, 'C'), int64, int64, Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), int64, int64, int64, )",
-    ],
-    'cam.drive._kernels.writes_kernel': [
-        "(Array(uint8, 1, 'C'), Array(uint8, 1, 'C'), Array(int64, 1, 'C'), )",
     ],
     'cam.drive.ramps._axis_caps': [
         "(Array(int64, 1, 'C'), Array(boolean, 1, 'C'), float64, float64, float64, float64, Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), )",

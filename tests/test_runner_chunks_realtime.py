@@ -8,7 +8,7 @@ import pytest
 import cam
 import cam.job.jobs as jobs
 from cam.drive.chunks import ChunkedPlan, plan_chunks
-from cam.drive.runner import FINISHED, STOPPED, Controller, run
+from cam.drive.runner import FINISHED, STOPPED, Controller, Cursor, run
 from cam.drive.session import MachineSession
 from cam.job.jobs import JobOptions, prepare_job
 from conftest import drawing_from_rows
@@ -16,6 +16,14 @@ from test_runner_stall import StallingPort
 
 FAST = cam.MachineSettings().replace(delay_xy_ms=0.3, delay_z_ms=0.3, ramp="lookahead")
 ROWS = ["." * 30] + ["." + "#" * 28 + "."] + ["." * 30] + ["...." + "#" * 20 + "......"] + ["." * 30]
+
+
+_TO_PLAN = ChunkedPlan.to_plan
+
+
+def _whole(job):
+    """The job's writes held whole (the chunks joined), made before the runner may not join any."""
+    return _TO_PLAN(plan_chunks(job))
 
 
 @pytest.fixture
@@ -32,19 +40,20 @@ def _job(**kw):
 
 def test_chunks_in_real_time_equal_the_whole_plan_through_a_stall(no_whole_plan):
     job = _job()
-    whole = cam.plan_steps(job)
+    whole = _whole(job)
     chunked = plan_chunks(job, chunk_periods=50)
     assert len(chunked) == len(whole) and len(whole) > 8 * 50
     port = StallingPort(at_write=len(whole) // 3, stall_s=0.1)
-    result = run(chunked, port, realtime=True)
+    cursor = Cursor(FAST)
+    result = run(chunked, port, realtime=True, cursor=cursor)
     assert result.status == FINISHED and result.writes == len(whole)
+    assert cursor.live == (len(whole), (0, 0, 0))  # the runner's cursor: every write, back at the start
     log = port.pin_log()
     np.testing.assert_array_equal(log.data, whole.data)
     assert np.all(np.diff(log.t_ns) >= np.diff(whole.t_ns)), "a write went out sooner than planned"
     assert result.lateness.stalls >= 1 and result.lateness.max_ns >= 0.08e9
     assert result.position_steps == (0, 0, 0)
     assert result.machine_time_s == pytest.approx(whole.t_ns[-1] / 1e9)
-    assert chunked.live == (len(whole), (0, 0, 0))
 
 
 def test_chunked_pauses_and_stop_in_real_time_are_the_whole_plans(no_whole_plan):
@@ -52,12 +61,12 @@ def test_chunked_pauses_and_stop_in_real_time_are_the_whole_plans(no_whole_plan)
     d = cam.digitize(drawing_from_rows(ROWS))
     job = cam.plan(d, depth=3, settings=FAST, pause_at=[tuple(d.objects[0][5]), tuple(d.objects[-1][7])])
     seen = {"whole": [], "chunked": []}
-    run(cam.plan_steps(job), cam.MockPort(), on_pause=lambda pos, note: seen["whole"].append(pos))
+    run(_whole(job), cam.MockPort(), on_pause=lambda pos, note: seen["whole"].append(pos))
     run(plan_chunks(job, chunk_periods=40), cam.MockPort(), realtime=True,
         on_pause=lambda pos, note: seen["chunked"].append(pos))
     assert len(seen["whole"]) == 2 and seen["chunked"] == seen["whole"]
 
-    whole = cam.plan_steps(job)
+    whole = _whole(job)
     ctl = Controller()
     stop_at = len(whole) // 2
     port = cam.MockPort()

@@ -70,7 +70,7 @@ def test_custom_pin_map_is_used_by_plan_and_decoder():
 
 
 def test_compiled_step_kernel_equals_the_vectorised_reference():
-    from cam.drive.steps import port_writes
+    from support.references import port_writes
 
     rng = np.random.default_rng(3)
     pts = np.abs(np.cumsum(rng.integers(-3, 4, size=(300, 3)), axis=0)) + 5

@@ -1,4 +1,4 @@
-"""Compiled step-plan kernel (numba): the per-period loop of :func:`cam.drive.steps.plan_steps`.
+"""Compiled step-plan kernels (numba): the per-period loop of :mod:`cam.drive.chunks`, a stretch at a time.
 
 It makes exactly what the vectorised reference makes (tests compare them) without the
 ``(periods, 3)`` temporaries, so planning tens of millions of steps stays fast and small.
@@ -22,68 +22,10 @@ def _dda_axis(r, ad, n, d, dir_state, axis, clock_bit):
     return r, 0
 
 
-@entry
-@njit(cache=True)
-def periods_kernel(pts, delay_xy_ns, delay_z_ns, clock, dirbit, n_min):
-    """Per-period port data of the straight moves between consecutive rows of ``pts``.
-
-    Args:
-        pts: ``(N + 1, 3)`` int64 positions in steps, the start first.
-        clock, dirbit: ``(3,)`` int64 data-register bits of X, Y, Z.
-        n_min: ``(N,)`` int64 least number of periods of each move (0: its Chebyshev length); a move
-            given more periods than steps spreads its steps over them (a zero-length move waits).
-
-    Returns:
-        ``(high, dirs, period_ns, n_per_move)``: for each period the data with rising clocks, the
-        direction bits in force during it, its length; and the periods of each move.
-    """
-    n_moves = pts.shape[0] - 1
-    n_per_move = np.empty(n_moves, np.int64)
-    total = 0
-    for i in range(n_moves):
-        m = n_min[i]
-        for a in range(3):
-            d = abs(pts[i + 1, a] - pts[i, a])
-            if d > m:
-                m = d
-        n_per_move[i] = m
-        total += m
-    high = np.empty(total, np.uint8)
-    dirs = np.empty(total, np.uint8)
-    period = np.empty(total, np.int64)
-    _fill_periods(pts, delay_xy_ns, delay_z_ns, clock, dirbit, n_per_move, np.zeros(n_moves, np.int64),
-                  np.zeros(3, np.int64), 0, 0, high, dirs, period)
-    return high, dirs, period, n_per_move
-
-
-@entry
-@njit(cache=True)
-def writes_kernel(high, dirs, per):
-    """Times and data of the writes of periods (see :mod:`cam.drive.steps`): ``(1 + 2P,)`` each.
-
-    An initial write at t = 0 sets the first directions; each period of length T starting at t
-    writes its rising edges at t + T // 2 and, at t + T, the next period's directions.
-    """
-    n = per.shape[0]
-    m = 1 + 2 * n
-    t_ns = np.empty(m, np.int64)
-    data = np.empty(m, np.uint8)
-    t_ns[0] = 0
-    data[0] = dirs[0] if n else 0
-    t = 0
-    for k in range(n):
-        t_ns[2 * k + 1] = t + per[k] // 2
-        data[2 * k + 1] = high[k]
-        t += per[k]
-        t_ns[2 * k + 2] = t
-        data[2 * k + 2] = dirs[k + 1] if k + 1 < n else dirs[k]
-    return t_ns, data
-
-
 @njit(cache=True)
 def _fill_periods(pts, delay_xy_ns, delay_z_ns, clock, dirbit, n_per_move, nominal, dir_state, i0, k0,
                   high, dirs, period):
-    """The step loop of both kernels: fill ``high``, ``dirs`` and ``period`` (each ``(P,)``) with the periods
+    """The step loop of :func:`stretch_kernel`: fill ``high``, ``dirs`` and ``period`` (each ``(P,)``) with the periods
     of the moves from period ``k0`` of move ``i0`` on, until they are full or the moves end.
 
     Returns ``(p, i_end, k_end)``: the periods filled and where the next stretch starts.

@@ -21,7 +21,6 @@ import numpy as np
 
 from ..errors import BusyError, PlanError
 from ..settings import MachineSettings
-from ..verify.pinlog import PositionTracker
 from .ports import require
 
 __all__ = ["Activity", "Prompt", "PromptFn", "SessionControls", "SessionView"]
@@ -49,7 +48,7 @@ class Activity:
     controller: Any
     total: int
     estimated_s: float
-    positions: Optional[PositionTracker] = None
+    positions: Any = None  # the run's Cursor (cam.drive.runner): advance(writes) -> position_steps
     done: int = 0
     machine_ns: int = 0
     detail: str = ""

@@ -16,7 +16,7 @@ from ..settings import MachineSettings
 from .maximus.board import MaximusBoard, drill_arguments, from_board, to_board
 from .journal import JournalSpec, JournalWriter, journal_state_of
 from .ports import MockPort, open_port, port_kind, require
-from .runner import Controller, run
+from .runner import Controller, Cursor, run
 from .chunks import ChunkedPlan
 from .steps import StepPlan
 
@@ -27,7 +27,7 @@ BoardWork = Callable[[MaximusBoard, Any], None]
 
 
 def run_steps(session: Any, name: str, plan: "StepPlan | ChunkedPlan", ctl: Controller, label: str,
-              journal: Optional[JournalSpec] = None) -> None:
+              journal: Optional[JournalSpec] = None, cursor: Optional[Cursor] = None) -> None:
     """Run ``plan`` on the session's step/dir port (the worker thread of a job, jog or move).
 
     ``journal``: keep the job's journal (in the runner process for a real-time run, else here).
@@ -42,19 +42,14 @@ def run_steps(session: Any, name: str, plan: "StepPlan | ChunkedPlan", ctl: Cont
                 open_port(session.port).close()  # a port that cannot be opened: its own message, from here
             # the child makes a chunked plan's writes itself, a chunk at a time (bounded memory)
             result = session.runner_process().run(plan, session.port, ctl, progress=session.progress,
-                                                  on_pause=session.prompt, journal=journal)
+                                                  on_pause=session.prompt, journal=journal, cursor=cursor)
         else:  # the simulated clock, or a port object the caller opened
             port = open_port(session.port)
-            progress = session.progress
+            cursor = cursor or Cursor(plan.settings)
             if journal is not None:
-                writer = JournalWriter(journal, plan)
-
-                def progress(done: int, total: int, machine_ns: int) -> None:
-                    writer.progress(done)
-                    session.progress(done, total, machine_ns)
-
-            result = run(plan, port, realtime=session.realtime, controller=ctl, progress=progress,
-                         on_pause=session.prompt)
+                writer = JournalWriter(journal, plan, cursor)
+            result = run(plan, port, realtime=session.realtime, controller=ctl, progress=session.progress,
+                         on_pause=session.prompt, cursor=cursor)
             if writer is not None:
                 journal_error = writer.close(journal_state_of(result.status), result.writes, result.position_steps)
                 writer = None

@@ -44,14 +44,16 @@ from ..errors import CamError, PortError
 from ..verify.pinlog import PinLog, write_pin_log
 from .journal import JournalSpec, JournalWriter, journal_state_of
 from .ports import MockPort, Port, open_port
-from .runner import Controller, PauseFn, ProgressFn, RunResult, run
+from .runner import Controller, Cursor, PauseFn, ProgressFn, RunResult, run
 from .chunks import ChunkedPlan
 from .steps import StepPlan
 
 __all__ = ["RunnerProcess"]
 
 # slots of the shared page (int64 each)
-_FLAGS, _DONE, _MACHINE_NS, _ALIVE = 0, 1, 2, 3
+_FLAGS, _DONE, _MACHINE_NS, _ALIVE, _SEQ, _X, _Y, _Z = 0, 1, 2, 3, 4, 5, 6, 7
+"""Slots of the shared page; _SEQ is odd while the child writes (_DONE, _X, _Y, _Z): the parent reads an even,
+unchanged _SEQ around them, so the live position and the writes sent are never torn."""
 _PAUSE, _STOP, _ESTOP = 1, 2, 4
 _PAGE_BYTES = 4096
 _POLL_S = 0.0005  # the child's longest sleep between looks at the controls
@@ -145,12 +147,15 @@ def _child(sock_fd: int, page_fd: int, parent_pid: int) -> None:
             return
         _, plan, port_name, journal = message
         ctl = _SharedController(slots, parent_pid)
-        writer = JournalWriter(journal, plan) if journal is not None else None
+        cursor = Cursor(plan.settings)
+        writer = JournalWriter(journal, plan, cursor) if journal is not None else None
 
         def progress(done: int, total: int, machine_ns: int) -> None:
-            slots[_DONE], slots[_MACHINE_NS] = done, machine_ns
-            if writer is not None:
-                writer.progress(done)
+            sent, position = cursor.live
+            slots[_SEQ] += 1
+            slots[_DONE], slots[_X], slots[_Y], slots[_Z] = sent, *position
+            slots[_SEQ] += 1
+            slots[_MACHINE_NS] = machine_ns
             ctl._wake.check_parent()
 
         def on_pause(position_steps: tuple[int, int, int], note: str) -> None:
@@ -164,7 +169,8 @@ def _child(sock_fd: int, page_fd: int, parent_pid: int) -> None:
         port: Optional[Port] = None
         try:
             port = open_port(port_name)
-            result = run(plan, port, realtime=True, controller=ctl, progress=progress, on_pause=on_pause)
+            result = run(plan, port, realtime=True, controller=ctl, progress=progress, on_pause=on_pause,
+                         cursor=cursor)
             log = result.pin_log() if isinstance(port, MockPort) else None
             if ctl._wake.orphaned:  # nobody will take the result: this process keeps the outputs it can
                 _orphan_outputs(journal, log)
@@ -264,7 +270,7 @@ class RunnerProcess:
 
     def run(self, plan: "StepPlan | ChunkedPlan", port_name: str, controller: Controller,
             progress: Optional[ProgressFn] = None, on_pause: Optional[PauseFn] = None,
-            journal: Optional[JournalSpec] = None) -> RunResult:
+            journal: Optional[JournalSpec] = None, cursor: Optional[Cursor] = None) -> RunResult:
         """Run ``plan`` in real time on the port ``port_name``, in the child; as :func:`cam.drive.runner.run`.
 
         A :class:`~cam.drive.chunks.ChunkedPlan` goes to the child as its job and settings; the child makes its
@@ -276,7 +282,7 @@ class RunnerProcess:
 
         ``controller``'s requests reach the child the moment they are made; ``progress`` is called from this
         thread every few milliseconds while the job runs; ``on_pause`` is called here at each pause and the
-        job goes on when it returns.
+        job goes on when it returns.  ``cursor`` follows the child's: the writes sent and the live position.
 
         Raises:
             PortError: the runner process could not start or ended during the job (the machine stopped
@@ -287,7 +293,7 @@ class RunnerProcess:
             self.start()
             assert self._slots is not None and self._conn is not None
             slots, conn = self._slots, self._conn
-            slots[_DONE] = slots[_MACHINE_NS] = 0
+            slots[_DONE] = slots[_MACHINE_NS] = slots[_X] = slots[_Y] = slots[_Z] = slots[_SEQ] = 0
 
             def mirror() -> None:
                 slots[_FLAGS] = _flags_of(controller)
@@ -296,13 +302,13 @@ class RunnerProcess:
             controller.listeners.append(mirror)
             try:
                 conn.send(("run", plan, port_name, journal))
-                return self._follow(plan, controller, progress, on_pause)
+                return self._follow(plan, controller, progress, on_pause, cursor or Cursor(plan.settings))
             finally:
                 controller.listeners.remove(mirror)
                 slots[_FLAGS] = 0
 
     def _follow(self, plan: "StepPlan | ChunkedPlan", ctl: Controller, progress: Optional[ProgressFn],
-                on_pause: Optional[PauseFn]) -> RunResult:
+                on_pause: Optional[PauseFn], cursor: Cursor) -> RunResult:
         assert self._slots is not None and self._conn is not None and self._process is not None
         slots, conn, total = self._slots, self._conn, len(plan)
         last_done = -1
@@ -315,7 +321,10 @@ class RunnerProcess:
                 self.close()
                 raise PortError(f"the step runner process ended during the job (exit code {code}); the machine "
                                 "stopped where it was") from None
-            done = int(slots[_DONE])
+            seq = int(slots[_SEQ])
+            done, x, y, z = int(slots[_DONE]), int(slots[_X]), int(slots[_Y]), int(slots[_Z])
+            if seq % 2 == 0 and seq == int(slots[_SEQ]):
+                cursor.set(done, (x, y, z))
             if progress is not None and done != last_done:
                 last_done = done
                 progress(done, total, int(slots[_MACHINE_NS]))

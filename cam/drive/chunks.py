@@ -26,17 +26,16 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any, Iterator, Optional
+from typing import Iterator, Optional
 
 import numpy as np
 
-from ..errors import PlanError
-from ..job.model import Job, check_travel
+from ..job.model import Job, JobLike, check_travel
 from ..settings import MachineSettings
 from ..verify.pinlog import _decode, fold_extent
 from ._kernels import chunk_writes_kernel, stretch_kernel
 from .pins import axis_bits
-from .ramps import RAMP_STEPS_LINEAR40, _lookahead
+from .ramps import _lookahead, linear40_periods
 from .steps import StepPlan
 
 __all__ = ["StepChunk", "ChunkedPlan", "plan_chunks", "lookahead_margin", "DEFAULT_CHUNK_PERIODS"]
@@ -68,23 +67,11 @@ class StepChunk:
         return len(self.t_ns)
 
 
-class LivePosition:
-    """The live position of a running :class:`ChunkedPlan`, as :class:`cam.verify.pinlog.PositionTracker`
-    gives it for a whole plan: ``advance(n)`` is the position after the last batch the runner sent
-    (at most ``n`` writes), without holding any write."""
-
-    def __init__(self, plan: "ChunkedPlan") -> None:
-        self.plan = plan
-
-    def advance(self, n_writes: int) -> tuple[int, int, int]:
-        """Position (x, y, z) in steps after the writes sent so far."""
-        return self.plan.live[1]
-
-
 class _RecentMoves:
     """The ``point_write`` of the move blocks a pass over a :class:`ChunkedPlan` made lately: enough to say which
-    move a run's writes completed (its journal) without an array per move.  Blocks the run has passed
-    (``plan.live``) are dropped as new ones come, so it holds about the look-ahead's moves."""
+    move a run's writes completed (its journal) without an array per move.  Older blocks are dropped as new
+    ones come, keeping at least the moves of the look-ahead and the chunks made ahead of the writes sent
+    (a run is never further behind the pass than that: each move takes a period at least)."""
 
     def __init__(self, plan: "ChunkedPlan") -> None:
         self.plan = plan
@@ -93,12 +80,8 @@ class _RecentMoves:
     def add(self, first_move: int, point_write: np.ndarray) -> None:
         if not len(point_write):
             return
-        sent = int(self.plan.live[0])
-        # a run is never further behind the pass than its look-ahead (each move takes a period at least): no
-        # run (the extent pass) or a run that moved on keeps nothing older
         lag_moves = 4 * self.plan.chunk_periods + 2 * self.plan.margin_periods
-        while len(self.blocks) > 1 and (int(self.blocks[1][1][-1]) < sent
-                                        or sum(len(b[1]) for b in self.blocks[1:]) > lag_moves):
+        while len(self.blocks) > 1 and sum(len(b[1]) for b in self.blocks[1:]) > lag_moves:
             del self.blocks[0]
         self.blocks.append((int(first_move), np.asarray(point_write, np.int64)))
 
@@ -113,14 +96,14 @@ class _RecentMoves:
         return blocks[0][0] - 1 if blocks else -1
 
 
-def _per_move(job: Any, pts: np.ndarray, prev: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _per_move(piece: Job, pts: np.ndarray, prev: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(n_per_move, nominal_ns, steps)`` of the moves to ``(B, 3)`` points ``pts`` from ``(1, 3)`` ``prev``:
     ``(B,)`` int64 periods each takes and its nominal period (0: the settings' delays), ``(3,)`` steps per axis."""
     d = np.abs(pts - np.vstack([prev, pts[:-1]])) if len(pts) else np.zeros((0, 3), np.int64)
     npm = d.max(axis=1) if len(pts) else np.zeros(0, np.int64)
-    if job.periods is not None:
-        npm = np.maximum(npm, np.asarray(job.periods, np.int64))
-    nom = np.zeros(len(pts), np.int64) if job.period_ns is None else np.asarray(job.period_ns, np.int64)
+    if piece.periods is not None:
+        npm = np.maximum(npm, np.asarray(piece.periods, np.int64))
+    nom = np.zeros(len(pts), np.int64) if piece.period_ns is None else np.asarray(piece.period_ns, np.int64)
     return npm, nom, d.sum(axis=0)
 
 
@@ -141,19 +124,22 @@ def lookahead_margin(settings: MachineSettings, min_period_ns: int) -> int:
 
 @dataclass
 class ChunkedPlan:
-    """A job's step plan made a chunk at a time (see the module docstring); the writes equal
-    :func:`cam.drive.steps.plan_steps` of the same job.
+    """A job's step plan made a chunk at a time (see the module docstring); every step plan is one
+    (:func:`cam.drive.steps.plan_steps` is its chunks joined).
 
     Attributes:
-        job: the job (points in steps from where the tool stands at the start).
+        job: the job (a :class:`~cam.job.model.JobLike`: points in steps from where the tool stands at the
+            start), read a piece at a time on each pass.
         settings: the machine settings.
         n_periods: step periods of the job; its writes number ``1 + 2 n_periods``.
         pause_writes: ``(P,)`` int64 write indices after which the job pauses.
         pause_notes, warnings, safe_z_steps, end_steps, steps_total: as :class:`~cam.drive.steps.StepPlan`.
         chunk_periods: step periods per chunk; margin_periods: look-ahead periods on each side of a chunk.
+        any_move_start: whether some piece marks where source moves begin (``linear40`` ramps); if none
+            does, the job is one ramp segment from its first move, as the whole-job ramp planner takes it.
     """
 
-    job: Job
+    job: JobLike
     settings: MachineSettings
     n_periods: int
     pause_writes: np.ndarray
@@ -164,51 +150,31 @@ class ChunkedPlan:
     margin_periods: int
     pause_notes: list[str] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
-    _n_per_move: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64), repr=False)
-    _nominal: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64), repr=False)
+    any_move_start: bool = True
     _stops: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64), repr=False)
-    _segments: Optional[tuple[np.ndarray, np.ndarray, np.ndarray]] = field(default=None, repr=False)
     _time_ns: Optional[int] = field(default=None, repr=False)
     _extent: Optional[tuple[np.ndarray, np.ndarray]] = field(default=None, repr=False)
-    live: tuple[int, tuple[int, int, int]] = (0, (0, 0, 0))
-    """``(writes sent, position_steps after them)``: set by the runner as it sends (the live position)."""
-    recent: Any = field(default=None, repr=False)
-    """The moves of the blocks the latest pass over :meth:`chunks` made lately (:class:`_RecentMoves`, one per plan)."""
+    recent: Optional[_RecentMoves] = field(default=None, repr=False)
+    """The moves of the blocks the latest pass over :meth:`chunks` made lately (one per plan)."""
 
     @property
-    def streamed(self) -> bool:
-        """True when the job is a stream of pieces (``job.pieces()``, e.g. :class:`cam.job.hpgl_stream.HpglJobStream`):
-        nothing per move is held, each pass reads the pieces again."""
-        return not hasattr(self.job, "points_steps")
+    def point_write(self) -> _RecentMoves:
+        """Which move a run's writes completed (``last_completed(writes_done)``), from the blocks of the latest
+        pass over :meth:`chunks`: nothing per move is held.  :meth:`full_point_write` has every move's."""
+        return self._recent_moves()
 
-    @property
-    def point_write(self) -> Any:
-        """``(N,)`` int64 index of the write at which toolpath point i is reached (as :class:`StepPlan`'s).
-
-        A streamed job holds no such array: its journal asks :attr:`recent` (``last_completed``) instead.
-        """
-        if self.streamed:
-            return self._recent_moves()
-        return 2 * np.cumsum(self._n_per_move)
-
-    def _recent_moves(self) -> "_RecentMoves":
+    def _recent_moves(self) -> _RecentMoves:
         if self.recent is None:
             self.recent = _RecentMoves(self)
         return self.recent
 
     def full_point_write(self) -> np.ndarray:
-        """``(N,)`` int64 :attr:`point_write` of every move, a streamed job's too (one pass; small jobs, tests)."""
-        if not self.streamed:
-            return self.point_write
+        """``(N,)`` int64 index of the write at which toolpath point i is reached (one pass over the moves)."""
         parts, period0 = [], 0
-        for _, npm, _, _ in self._move_blocks():
+        for _, npm, _, _, _ in self._move_blocks():
             parts.append(2 * (period0 + np.cumsum(npm)))
             period0 += int(npm.sum())
         return np.concatenate(parts) if parts else np.zeros(0, np.int64)
-
-    def positions(self) -> "LivePosition":
-        """A tracker of the position while the runner sends this plan (see :class:`LivePosition`)."""
-        return LivePosition(self)
 
     def __len__(self) -> int:
         return 1 + 2 * self.n_periods
@@ -246,34 +212,37 @@ class ChunkedPlan:
         return self._extent
 
     # -- the stream ------------------------------------------------------------------------------------
-    def _move_blocks(self) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray, int]]:
-        """``(pts, n_per_move, nominal_ns, first_move)`` of consecutive blocks of at most ``_MOVE_BLOCK`` moves:
-        ``pts`` ``(B + 1, 3)`` int64, the point before the block then its points; ``(B,)`` int64 periods and
-        nominal period of each move.  A streamed job (``pieces()``) is read a piece at a time."""
-        if self.streamed:
-            prev = np.zeros((1, 3), np.int64)
-            first = 0
-            for piece in self.job.pieces():
-                p = np.asarray(piece.points_steps, np.int64).reshape(-1, 3)
-                npm, nom, _ = _per_move(piece, p, prev)
-                for b0 in range(0, len(p), _MOVE_BLOCK):
-                    b1 = min(len(p), b0 + _MOVE_BLOCK)
-                    yield np.vstack([p[b0 - 1:b0] if b0 else prev, p[b0:b1]]), npm[b0:b1], nom[b0:b1], first + b0
-                if len(p):
-                    prev = p[-1:]
-                first += len(p)
-            return
-        pts_all = np.asarray(self.job.points_steps, np.int64).reshape(-1, 3)
-        n = len(pts_all)
-        for b0 in range(0, n, _MOVE_BLOCK):
-            b1 = min(n, b0 + _MOVE_BLOCK)
-            start = pts_all[b0 - 1:b0] if b0 else np.zeros((1, 3), np.int64)
-            yield np.vstack([start, pts_all[b0:b1]]), self._n_per_move[b0:b1], self._nominal[b0:b1], b0
+    def _move_blocks(self) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray, int, np.ndarray]]:
+        """``(pts, n_per_move, nominal_ns, first_move, move_start)`` of consecutive blocks of at most
+        ``_MOVE_BLOCK`` moves, read from the job's pieces: ``pts`` ``(B + 1, 3)`` int64, the point before the
+        block then its points; ``(B,)`` int64 periods and nominal period of each move; ``(B,)`` bool, where a
+        ramp segment of the ``linear40`` mode begins."""
+        prev = np.zeros((1, 3), np.int64)
+        first = 0
+        for piece in self.job.pieces():
+            p = np.asarray(piece.points_steps, np.int64).reshape(-1, 3)
+            npm, nom, _ = _per_move(piece, p, prev)
+            if not self.any_move_start:
+                starts = np.zeros(len(p), bool)
+                starts[:1] = first == 0
+            elif piece.move_start is None:
+                starts = np.ones(len(p), bool)
+            else:
+                starts = np.asarray(piece.move_start, bool)
+            for b0 in range(0, len(p), _MOVE_BLOCK):
+                b1 = min(len(p), b0 + _MOVE_BLOCK)
+                yield (np.vstack([p[b0 - 1:b0] if b0 else prev, p[b0:b1]]), npm[b0:b1], nom[b0:b1], first + b0,
+                       starts[b0:b1])
+            if len(p):
+                prev = p[-1:]
+            first += len(p)
 
-    def _stretches(self) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    def _stretches(self, segment_starts: Optional[list[int]] = None
+                   ) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray]]:
         """``(high, dirs, nominal_ns)`` of consecutive periods, at most ``chunk_periods`` each.
 
-        Notes each block's ``point_write`` in :attr:`recent` as it goes (the journal of a streamed job)."""
+        Notes each block's ``point_write`` in :attr:`recent` as it goes (the run's journal), and appends the
+        first period of each ``linear40`` ramp segment to ``segment_starts`` before that block's periods come."""
         s = self.settings
         clock, dirbit = axis_bits(s)
         clock, dirbit = clock.astype(np.int64), dirbit.astype(np.int64)
@@ -281,9 +250,11 @@ class ChunkedPlan:
         recent = self._recent_moves()
         recent.blocks = []
         period0 = 0
-        for pts, npm, nom, first in self._move_blocks():
+        for pts, npm, nom, first, starts in self._move_blocks():
             point_period = period0 + np.cumsum(npm)
             recent.add(first, 2 * point_period)
+            if segment_starts is not None:
+                segment_starts.extend(int(v) for v in (point_period - npm)[starts])
             period0 = int(point_period[-1]) if len(npm) else period0
             i, k = 0, 0
             while i < len(npm):
@@ -292,11 +263,12 @@ class ChunkedPlan:
                 if len(per):
                     yield high, dirs, per
 
-    def _rebatched(self) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    def _rebatched(self, segment_starts: Optional[list[int]] = None
+                   ) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray]]:
         """:meth:`_stretches` joined into stretches of exactly ``chunk_periods`` (the last one shorter)."""
         parts: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
         have = 0
-        for part in self._stretches():
+        for part in self._stretches(segment_starts):
             parts.append(part)
             have += len(part[2])
             while have >= self.chunk_periods:
@@ -314,28 +286,37 @@ class ChunkedPlan:
         if mode == "constant":
             yield from self._rebatched()
         elif mode == "linear40":
-            p0 = 0
-            for high, dirs, nom in self._rebatched():
-                yield high, dirs, self._linear40(p0, nom)
-                p0 += len(nom)
+            yield from self._linear40()
         else:
             yield from self._windows()
 
-    def _linear40(self, p0: int, nominal: np.ndarray) -> np.ndarray:
-        """The seed's per-move ramp (:func:`cam.drive.ramps._linear40`) of periods ``p0..`` from the moves."""
-        seg_first, seg_len, seg_start_ns = self._segments  # type: ignore[misc]
-        k = p0 + np.arange(len(nominal), dtype=np.int64)
-        seg = np.searchsorted(seg_first, k, side="right") - 1
-        out = nominal.copy()
-        ok = seg >= 0
-        seg_c = np.maximum(seg, 0)
-        start_ns = seg_start_ns[seg_c]
-        ok &= ~np.isnan(start_ns)
-        k_in = k - seg_first[seg_c]
-        r = np.minimum(np.minimum(k_in, (seg_len[seg_c] - 1) - k_in), RAMP_STEPS_LINEAR40)
-        ramp = np.maximum(start_ns - nominal, 0) * (RAMP_STEPS_LINEAR40 - r) / RAMP_STEPS_LINEAR40
-        out[ok] = nominal[ok] + np.ceil(ramp[ok]).astype(np.int64)
-        return out
+    def _linear40(self) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+        """The seed's per-move ramp (:func:`cam.drive.ramps.linear40_periods`), a closed ramp segment at a time:
+        the periods of a segment are held until the next one begins (a source move's periods at most)."""
+        starts: list[int] = []
+        s_mm, v_start, _, _ = self.settings.axis_limits()
+        clock, _ = axis_bits(self.settings)
+        buf: list[np.ndarray] = [np.zeros(0, np.uint8), np.zeros(0, np.uint8), np.zeros(0, np.int64)]
+        buf_start = 0  # global period index of buf[.][0]
+        used = 0  # segment starts before this index in ``starts`` lie before buf_start
+        stretches = self._rebatched(starts)
+        while True:
+            nxt = next(stretches, None)
+            if nxt is not None:
+                buf = [np.concatenate([buf[j], nxt[j]]) for j in range(3)]
+            buf_end = buf_start + len(buf[2])
+            known = [b for b in starts[used:] if b <= buf_end]
+            end = buf_end if nxt is None else (known[-1] if known else buf_start)
+            if end > buf_start:
+                firsts = np.array([b - buf_start for b in known if b < end], np.int64)
+                n = end - buf_start
+                per = linear40_periods(buf[0][:n], buf[2][:n], firsts, clock, s_mm, v_start)
+                yield buf[0][:n], buf[1][:n], per
+                buf = [v[n:] for v in buf]
+                buf_start = end
+                used += int(np.count_nonzero(firsts >= 0))
+            if nxt is None:
+                return
 
     def _windows(self) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray]]:
         """Look-ahead ramps a chunk at a time, each planned in a window with ``margin_periods`` on each side."""
@@ -399,26 +380,26 @@ class ChunkedPlan:
         return StepChunk(first_write, t_ns, data, np.full(len(t_ns), strobe_level, np.uint8)), int(t0 + per.sum())
 
     def to_plan(self) -> StepPlan:
-        """Every write at once, as :func:`cam.drive.steps.plan_steps` makes it (small jobs, tests)."""
+        """Every write at once: the chunks joined (:func:`cam.drive.steps.plan_steps`; small jobs, tests)."""
         parts = list(self.chunks())
-        point_write = self.full_point_write()
         return StepPlan(
             t_ns=np.concatenate([p.t_ns for p in parts]), data=np.concatenate([p.data for p in parts]),
-            strobe=np.concatenate([p.strobe for p in parts]), point_write=point_write,
+            strobe=np.concatenate([p.strobe for p in parts]), point_write=self.full_point_write(),
             pause_writes=self.pause_writes, steps_total=self.steps_total, settings=self.settings,
             end_steps=self.end_steps, safe_z_steps=self.safe_z_steps, pause_notes=list(self.pause_notes),
-            warnings=list(self.warnings)) if len(point_write) else StepPlan(
-            t_ns=np.zeros(1, np.int64), data=np.zeros(1, np.uint8), strobe=parts[0].strobe[:1],
-            point_write=np.zeros(0, np.int64), pause_writes=self.pause_writes, steps_total=self.steps_total,
-            settings=self.settings, safe_z_steps=self.safe_z_steps)
+            warnings=list(self.warnings))
 
 
-def plan_chunks(job: Job, *, start_steps: tuple[int, int, int] = (0, 0, 0),
+def plan_chunks(job: JobLike, *, start_steps: tuple[int, int, int] = (0, 0, 0),
                 chunk_periods: int = DEFAULT_CHUNK_PERIODS, margin_periods: Optional[int] = None) -> ChunkedPlan:
-    """The step plan of ``job`` as a :class:`ChunkedPlan` (nothing per period is made until it is read).
+    """The step plan of a job of any size, made a chunk at a time (:class:`ChunkedPlan`).
+
+    One pass over the job's pieces checks every point against the travel and counts what the plan needs
+    (periods, pauses, rests, steps); nothing per move or per period is kept.
 
     Args:
-        job: the moves, in steps relative to where the tool stands when it starts.
+        job: the moves, in steps relative to where the tool stands when it starts (any
+            :class:`~cam.job.model.JobLike`: a :class:`~cam.job.model.Job` is one piece).
         start_steps: where the tool stands in the machine frame (the job is checked against the travel).
         chunk_periods: step periods per chunk.
         margin_periods: look-ahead periods on each side of a chunk (None: :func:`lookahead_margin`).
@@ -426,59 +407,7 @@ def plan_chunks(job: Job, *, start_steps: tuple[int, int, int] = (0, 0, 0),
     Raises:
         TravelError: a point of the job is outside the machine travel (nothing is planned).
     """
-    if not hasattr(job, "points_steps"):
-        return _plan_stream(job, start_steps, chunk_periods, margin_periods)
     s = job.settings
-    pts = np.asarray(job.points_steps, np.int64).reshape(-1, 3)
-    origin = np.asarray(start_steps, np.int64)
-    for b0 in range(0, len(pts), _MOVE_BLOCK * 16):
-        check_travel(pts[b0:b0 + _MOVE_BLOCK * 16] + origin, s, job.pixels)
-    n = len(pts)
-    n_per_move = np.zeros(n, np.int64)
-    steps_total = np.zeros(3, np.int64)
-    for b0 in range(0, n, _MOVE_BLOCK * 16):
-        b1 = min(n, b0 + _MOVE_BLOCK * 16)
-        prev = pts[b0 - 1:b1 - 1] if b0 else np.vstack([np.zeros((1, 3), np.int64), pts[:b1 - 1]])
-        d = np.abs(pts[b0:b1] - prev)
-        steps_total += d.sum(axis=0)
-        n_per_move[b0:b1] = d.max(axis=1)
-    if job.periods is not None:
-        np.maximum(n_per_move, np.asarray(job.periods, np.int64), out=n_per_move)
-    nominal = np.zeros(n, np.int64) if job.period_ns is None else np.asarray(job.period_ns, np.int64)
-    point_period = np.cumsum(n_per_move)
-    pause_idx = np.flatnonzero(np.asarray(job.pause, bool))
-    stops = point_period[pause_idx]
-    if job.rest is not None:
-        rest = np.flatnonzero(np.asarray(job.rest, bool))
-        stops = np.concatenate([stops, point_period[rest] - n_per_move[rest], point_period[rest]])
-    stops = np.unique(stops)
-    n_periods = int(point_period[-1]) if n else 0
-    segments = None
-    if s.ramp == "linear40":
-        segments = _linear40_segments(job, pts, n_per_move, point_period)
-    min_period = min([s.delay_xy_ns, s.delay_z_ns] + ([int(nominal[nominal > 0].min())] if (nominal > 0).any() else []))
-    margin = lookahead_margin(s, min_period) if margin_periods is None else int(margin_periods)
-    pause_writes = 2 * point_period[pause_idx]
-    del point_period
-    return ChunkedPlan(
-        job=job, settings=s, n_periods=n_periods, pause_writes=pause_writes, steps_total=steps_total,
-        end_steps=tuple(int(v) for v in pts[-1]) if n else (0, 0, 0),  # type: ignore[arg-type]
-        safe_z_steps=int(job.safe_z_steps), chunk_periods=int(chunk_periods), margin_periods=margin,
-        pause_notes=list(job.pause_notes) if job.pause_notes is not None else ["Pause At"] * len(pause_writes),
-        warnings=list(job.warnings), _n_per_move=n_per_move, _nominal=nominal, _stops=stops, _segments=segments)
-
-
-def _plan_stream(job: Any, start_steps: tuple[int, int, int], chunk_periods: int,
-                 margin_periods: Optional[int]) -> ChunkedPlan:
-    """:func:`plan_chunks` of a job given as pieces (``job.pieces()``): one pass over them, nothing per move kept.
-
-    Raises:
-        PlanError: ``linear40`` ramps (they need every move's steps at once); TravelError: as plan_chunks.
-    """
-    s = job.settings
-    if s.ramp == "linear40":
-        raise PlanError(f"{job.source}: the linear40 ramps plan every move of the job at once, and this job is "
-                        f"too large to hold; use --ramp lookahead or constant")
     origin = np.asarray(start_steps, np.int64)
     prev = np.zeros((1, 3), np.int64)
     steps_total = np.zeros(3, np.int64)
@@ -487,13 +416,15 @@ def _plan_stream(job: Any, start_steps: tuple[int, int, int], chunk_periods: int
     pause_writes: list[np.ndarray] = []
     notes: list[str] = []
     warnings: list[str] = list(job.warnings)
-    min_nominal = None
+    min_nominal: Optional[int] = None
+    any_move_start = False
     last = (0, 0, 0)
     for piece in job.pieces():
         pts = np.asarray(piece.points_steps, np.int64).reshape(-1, 3)
         if not len(pts):
             continue
-        check_travel(pts + origin, s, piece.pixels)
+        for b0 in range(0, len(pts), _MOVE_BLOCK * 16):
+            check_travel(pts[b0:b0 + _MOVE_BLOCK * 16] + origin, s, piece.pixels)
         npm, nom, d = _per_move(piece, pts, prev)
         steps_total += d
         point_period = period0 + np.cumsum(npm)
@@ -504,48 +435,18 @@ def _plan_stream(job: Any, start_steps: tuple[int, int, int], chunk_periods: int
         if piece.rest is not None:
             rest = np.flatnonzero(np.asarray(piece.rest, bool))
             stops += [point_period[rest] - npm[rest], point_period[rest]]
+        any_move_start |= piece.move_start is None or bool(np.any(piece.move_start))
         if (nom > 0).any():
             m = int(nom[nom > 0].min())
             min_nominal = m if min_nominal is None else min(min_nominal, m)
         warnings += [w for w in piece.warnings if w not in warnings]
         period0 = int(point_period[-1])
         prev = pts[-1:]
-        last = tuple(int(v) for v in pts[-1])
+        last = tuple(int(v) for v in pts[-1])  # type: ignore[assignment]
     min_period = min([s.delay_xy_ns, s.delay_z_ns] + ([min_nominal] if min_nominal is not None else []))
     margin = lookahead_margin(s, min_period) if margin_periods is None else int(margin_periods)
     return ChunkedPlan(
         job=job, settings=s, n_periods=period0, pause_writes=np.concatenate(pause_writes or [np.zeros(0, np.int64)]),
-        steps_total=steps_total, end_steps=last, safe_z_steps=int(job.safe_z_steps),  # type: ignore[arg-type]
+        steps_total=steps_total, end_steps=last, safe_z_steps=int(job.safe_z_steps),
         chunk_periods=int(chunk_periods), margin_periods=margin, pause_notes=notes, warnings=warnings,
-        _stops=np.unique(np.concatenate(stops or [np.zeros(0, np.int64)])))
-
-
-def _linear40_segments(job: Job, pts: np.ndarray, n_per_move: np.ndarray,
-                       point_period: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per ramp segment (a source move): ``(S,)`` first period, length in periods, and the start delay in ns
-    (NaN: a dwell, no ramp), computed as :func:`cam.drive.ramps._linear40` does from its periods."""
-    s = job.settings
-    s_mm, v_start, _, _ = s.axis_limits()
-    start_step_ns = np.asarray(s_mm) / np.asarray(v_start) * 1e9
-    first = point_period - n_per_move
-    seg_moves = np.arange(len(pts)) if job.move_start is None else np.flatnonzero(np.asarray(job.move_start, bool))
-    if len(seg_moves) == 0:
-        seg_moves = np.zeros(1, np.int64)
-    bounds_moves = np.append(seg_moves, len(pts))
-    seg_first = first[seg_moves] if len(pts) else np.zeros(len(seg_moves), np.int64)
-    if len(pts) and job.move_start is not None:
-        seg_first = np.asarray(seg_first)
-    seg_first = np.asarray(seg_first, np.int64)
-    if job.move_start is not None and len(seg_moves) and seg_moves[0] != 0:
-        # periods before the first segment are not ramped: _linear40 only ramps from move_first on
-        pass
-    prev = np.vstack([np.zeros((1, 3), np.int64), pts[:-1]])
-    d = np.abs(pts - prev)
-    cum = np.vstack([np.zeros((1, 3), np.int64), np.cumsum(d, axis=0)])
-    steps = (cum[bounds_moves[1:]] - cum[bounds_moves[:-1]]).astype(np.float64)
-    seg_end = np.append(seg_first[1:], int(point_period[-1]) if len(pts) else 0)
-    seg_len = seg_end - seg_first
-    with np.errstate(divide="ignore", invalid="ignore"):
-        start_ns = np.max(start_step_ns * steps / seg_len[:, None], axis=1)
-    start_ns[~steps.any(axis=1) | (seg_len <= 0)] = np.nan
-    return seg_first, seg_len, start_ns
+        any_move_start=any_move_start, _stops=np.unique(np.concatenate(stops or [np.zeros(0, np.int64)])))

@@ -31,8 +31,9 @@ import numpy as np
 
 from ..errors import CamError
 from ..fileio import atomic_write_text, read_text
+from ..job.model import JobLike
 from ..job.resume import Journal, JournalBase, journal_record, plan_fingerprint
-from ..verify.pinlog import PositionTracker
+from .runner import Cursor
 
 __all__ = ["JOURNAL_PERIOD_S", "JournalSpec", "JournalWriter", "journal_spec", "read_journal", "write_journal",
            "journal_state_of"]
@@ -71,13 +72,11 @@ def journal_spec(job: Any, path: str | os.PathLike, *, home_steps: tuple[int, in
     base = getattr(job, "resumed", None)
     if base is None:
         toolpath = getattr(job, "toolpath", job)
-        streamed = toolpath is not None and hasattr(toolpath, "pieces")  # a job read a piece at a time
-        if toolpath is None or not (hasattr(toolpath, "points_steps") or streamed):
+        if not isinstance(toolpath, JobLike):
             raise CamError("this job has no moves to keep a journal of")
         base = JournalBase(identity=getattr(job, "identity", "") or "", source=str(getattr(job, "source", "")),
                            plan_sha256=getattr(job, "plan_sha256", "") or plan_fingerprint(toolpath),
-                           moves=len(toolpath),
-                           pause=np.zeros(0, bool) if streamed else np.asarray(toolpath.pause, bool))
+                           moves=len(toolpath), pause=np.zeros(0, bool))
     home = np.asarray(home_steps, np.int64) - np.asarray(base.start_position_steps, np.int64)
     return JournalSpec(str(path), base, tuple(int(v) for v in home), pin_log_path)  # type: ignore[arg-type]
 
@@ -115,16 +114,13 @@ class JournalWriter:
     The first write (state ``running``) happens here, before the run sends anything.
     """
 
-    def __init__(self, spec: JournalSpec, plan: Any) -> None:
+    def __init__(self, spec: JournalSpec, plan: Any, cursor: Cursor) -> None:
         self.spec = spec
         self.plan = plan
+        self.cursor = cursor  # the run's: (writes sent, position after them), replaced whole by the runner
         self.error: Optional[str] = None
         self._pause_writes = set(int(i) for i in plan.pause_writes)
-        # a chunked plan holds no writes: its runner publishes (writes sent, position) together in plan.live
-        self._chunked = hasattr(plan, "to_plan")
         self._point_write = plan.point_write
-        self._tracker = None if self._chunked else PositionTracker(plan.data, plan.settings)
-        self._sent = 0
         self._written = -1
         self._lock = threading.Lock()
         self._closing = threading.Event()
@@ -132,17 +128,10 @@ class JournalWriter:
         self._thread = threading.Thread(target=self._loop, name="cam-journal", daemon=True)
         self._thread.start()
 
-    def progress(self, writes_done: int) -> None:
-        """The run has sent ``writes_done`` writes (called by the runner: stores a number, nothing more)."""
-        self._sent = int(writes_done)
-
     def _sent_and_position(self) -> tuple[int, tuple[int, int, int]]:
         """Writes sent and the position after them, never the one ahead of the other."""
-        if self._chunked:
-            sent, position = self.plan.live  # one tuple, replaced whole by the runner
-            return int(sent), position
-        sent = self._sent
-        return sent, self._tracker.advance(sent)
+        sent, position = self.cursor.live
+        return int(sent), position
 
     def _loop(self) -> None:
         while not self._closing.wait(JOURNAL_PERIOD_S):

@@ -59,7 +59,7 @@ from ..settings import RAMP_MODES, MachineSettings
 from ..verify.ramps import check_axis_steps
 from .pins import axis_bits
 
-__all__ = ["RAMP_MODES", "ramp_periods", "RAMP_STEPS_LINEAR40"]
+__all__ = ["RAMP_MODES", "ramp_periods", "linear40_periods", "RAMP_STEPS_LINEAR40"]
 
 RAMP_STEPS_LINEAR40 = 40
 """Steps of the seed's linear delay ramp at each end of a move (004, section 3.5.2)."""
@@ -279,8 +279,13 @@ def _drop_caps(per, r1, r2, r3, u, cap, factor):
     return hits
 
 
-def _linear40(high: np.ndarray, period_ns: np.ndarray, move_first: np.ndarray, clock, s, v_start) -> np.ndarray:
-    """The seed's per-move linear delay ramp (004, section 3.5.2)."""
+def linear40_periods(high: np.ndarray, period_ns: np.ndarray, move_first: np.ndarray, clock, s, v_start) -> np.ndarray:
+    """The seed's per-move linear delay ramp (004, section 3.5.2): ``(P,)`` int64 period lengths in ns.
+
+    ``move_first``: ``(M,)`` first period of each ramp segment (a source move), sorted; periods before the first
+    are not ramped, the last segment ends with the periods.  ``clock``: the axes' clock bits; ``s``, ``v_start``:
+    per-axis mm per step and start speed (:meth:`MachineSettings.axis_limits`).
+    """
     n = len(period_ns)
     out = period_ns.copy()
     start_step_ns = np.asarray(s) / np.asarray(v_start) * 1e9  # (3,) one step at the start speed
@@ -333,7 +338,7 @@ def ramp_periods(high: np.ndarray, period_ns: np.ndarray, settings: MachineSetti
         clock, _ = axis_bits(settings)
         s_mm, v_start, _, _ = settings.axis_limits()
         mf = np.zeros(1, np.int64) if move_first is None else np.asarray(move_first, np.int64)
-        return _linear40(high, per_ns, mf, clock, s_mm, v_start)
+        return linear40_periods(high, per_ns, mf, clock, s_mm, v_start)
     return _lookahead(high, per_ns, settings, stops)
 
 

@@ -20,19 +20,24 @@ import sys
 import threading
 import time
 from dataclasses import dataclass, field
-from typing import Any, Callable, Iterable, Iterator, Optional
+from typing import Any, Callable, Iterator, Optional, Union
 
 import numpy as np
 
 from ..errors import CamError
-from ..job.model import Job
+from ..job.model import Job, JobLike
+from ..settings import MachineSettings
 from ..verify.pinlog import PinLog, _decode, carve, decode_pin_log
 from .ports import MockPort, Port, open_port
 from .pins import axis_bits
-from .chunks import ChunkedPlan, StepChunk
-from .steps import StepPlan, plan_steps
+from .chunks import ChunkedPlan, StepChunk, plan_chunks
+from .steps import StepPlan
 
-__all__ = ["Controller", "RunResult", "Lateness", "STALL_NS", "run", "simulate_surface", "FINISHED", "STOPPED", "EMERGENCY_STOPPED"]
+__all__ = ["Controller", "Cursor", "RunResult", "Lateness", "STALL_NS", "run", "simulate_surface", "FINISHED",
+           "STOPPED", "EMERGENCY_STOPPED"]
+
+Plan = Union[StepPlan, ChunkedPlan]
+"""What the runner sends: a step plan, made a chunk at a time or held whole (both have ``chunks()``)."""
 
 FINISHED = "finished"
 STOPPED = "stopped"
@@ -162,12 +167,60 @@ PauseFn = Callable[[tuple[int, int, int], str], None]
 """on_pause(position_steps, note): called at a pause (Pause At, tool change); the job continues when it returns."""
 
 
-def _lift_writes(plan: StepPlan, data_now: int, z_now: int) -> tuple[np.ndarray, np.ndarray]:
-    """Writes (relative times, data) that lift Z from ``z_now`` to the safe plane, clocks low first."""
-    s = plan.settings
+class Cursor:
+    """Where a run is: the writes sent and the position after them, decoded from the writes as they go out.
+
+    The runner owns it and moves it on after each batch of writes; any thread may read it (the session's
+    live position, the journal): :attr:`live` is one tuple, replaced whole.  Frame: steps from where the tool
+    stood when the run started (+Z deeper).
+
+    Args:
+        settings: the pin map the writes use.
+    """
+
+    def __init__(self, settings: MachineSettings) -> None:
+        self.clock, self.dirbit = axis_bits(settings)
+        self.live: tuple[int, tuple[int, int, int]] = (0, (0, 0, 0))
+        """``(writes sent, position_steps after them)``."""
+        self.last_data = 0
+        self.last_t_ns = 0
+        self._pos = np.zeros(3, np.int64)
+
+    @property
+    def sent(self) -> int:
+        """Writes sent so far."""
+        return self.live[0]
+
+    @property
+    def position_steps(self) -> tuple[int, int, int]:
+        """Position (x, y, z) in steps after the writes sent so far."""
+        return self.live[1]
+
+    def advance(self, n_writes: int = 0) -> tuple[int, int, int]:
+        """The position after the writes sent so far (at most ``n_writes``: the session's live-position reader)."""
+        return self.live[1]
+
+    def note(self, t_ns: np.ndarray, data: np.ndarray) -> None:
+        """The writes ``(K,)`` times and data just went out, in order."""
+        if not len(data):
+            return
+        decoded, _ = _decode(np.asarray(data, np.uint8), self.last_data, self._pos, self.clock, self.dirbit)
+        self._pos = decoded[-1].copy()
+        self.last_data, self.last_t_ns = int(data[-1]), int(t_ns[-1])
+        self.live = (self.live[0] + len(data), tuple(int(v) for v in self._pos))  # type: ignore[assignment]
+
+    def set(self, sent: int, position_steps: tuple[int, int, int]) -> None:
+        """Mirror another process's run (the real-time runner's): ``sent`` writes, then ``position_steps``."""
+        self.live = (int(sent), tuple(int(v) for v in position_steps))  # type: ignore[assignment]
+
+
+def _lift_writes(settings: MachineSettings, safe_z_steps: int, data_now: int, z_now: int
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """Writes (relative times, data) that lift Z from ``z_now`` to ``safe_z_steps``, clocks low first."""
+    s = settings
     clock, dirbit = axis_bits(s)
     base = int(data_now) & ~int(clock.sum()) & ~int(dirbit[2]) & 0xFF  # clocks low, Z direction up (-)
-    n = max(0, z_now - plan.safe_z_steps)
+    n = max(0, z_now - safe_z_steps)
     per = s.delay_z_ns
     if s.ramp != "constant":
         # Z starts from rest: lift at its start speed, which it can start and stop at without a ramp
@@ -186,137 +239,95 @@ def _lift_writes(plan: StepPlan, data_now: int, z_now: int) -> tuple[np.ndarray,
 
 
 class _Pauses:
-    """The Pause At points of a plan, and what happens at one (shared by both clocks)."""
+    """The pauses of a plan (Pause At points, tool changes), and what happens at one."""
 
-    def __init__(self, plan: "StepPlan | ChunkedPlan", ctl: Controller, on_pause: Optional[PauseFn], external: bool,
-                 position_of: Optional[Callable[[int], tuple[int, int, int]]] = None) -> None:
-        self.position_of = position_of or (lambda sent: _position_after(plan, sent))  # type: ignore[arg-type]
+    def __init__(self, plan: Plan, ctl: Controller, on_pause: Optional[PauseFn], external: bool) -> None:
         self.ctl = ctl
         self.on_pause = on_pause
         self.external = external  # the caller gave the controller: pause it and wait for its resume
-        self.at = set(int(i) for i in plan.pause_writes)
+        self.writes = np.unique(np.asarray(plan.pause_writes, np.int64))
         self.notes = dict(zip((int(i) for i in plan.pause_writes), plan.pause_notes or []))
         self.count = 0
 
-    def honour(self, sent: int) -> bool:
+    def next_after(self, write: int) -> int:
+        """The first pause write at or after ``write`` (a huge number: none)."""
+        k = int(np.searchsorted(self.writes, write))
+        return int(self.writes[k]) if k < len(self.writes) else 1 << 62
+
+    def honour(self, sent: int, position_steps: tuple[int, int, int]) -> bool:
         """Pause after write ``sent - 1``; False if the job was stopped meanwhile."""
         self.count += 1
-        pos = self.position_of(sent)
         if self.on_pause is not None:
-            self.on_pause(pos, self.notes.get(sent - 1, "pause"))
+            self.on_pause(position_steps, self.notes.get(sent - 1, "pause"))
         elif self.external:
             self.ctl.pause()
         return _wait_while_paused(self.ctl)
 
 
-def run(
-    job: Job | StepPlan,
-    port: str | Port = "mock",
-    *,
-    realtime: bool = False,
-    controller: Optional[Controller] = None,
-    progress: Optional[ProgressFn] = None,
-    on_pause: Optional[PauseFn] = None,
-) -> RunResult:
-    """Run a job on a port.
+class _SimulatedClock:
+    """Writes go out in batches at once, stamped with their scheduled times (the mock's default)."""
 
-    Args:
-        job: a :class:`~cam.job.model.Job` (planned into steps here) or a :class:`StepPlan`.
-        port: a port name (``"mock"``, ``"/dev/parport0"``) or an open :class:`Port`.
-        realtime: wait for each write's time.  Forced on for real ports.
-        controller: pause / resume / stop / emergency stop from elsewhere.
-        progress: called now and then with (writes done, writes total, machine ns done).
-        on_pause: called at each Pause At point; if None, the runner pauses its
-            controller and waits for :meth:`Controller.resume` (or continues
-            at once when no controller was given).
+    batch = _BATCH
 
-    Returns:
-        A :class:`RunResult`; the mock's pin log is ``result.pin_log()``.
+    def chunks(self, plan: Plan) -> Iterator[StepChunk]:
+        return plan.chunks()
+
+    def may_go(self, ctl: Controller) -> bool:
+        """Before a batch: False if the run is halted (a pause waits here for its end)."""
+        return not (ctl.halted or (ctl.paused and not _wait_while_paused(ctl)))
+
+    def send(self, p: Port, chunk: StepChunk, i: int, end: int, ctl: Controller) -> int:
+        p.write_many(chunk.t_ns[i:end], chunk.data[i:end], chunk.strobe[i:end])
+        return end
+
+    def paused_for(self, ns: int) -> None:
+        pass
+
+
+class _RealClock:
+    """Each write at its time after ``t0`` (monotonic ns), pauses added.
+
+    Sleeps on the controller's wake event until :data:`_SPIN_NS` before a write, then spins.  A write sent
+    late (a stall, a busy machine, a stopped process) shifts every later write by its lateness: the runner
+    never catches up, so each interval between writes is at least the planned one (ramps included) and a
+    stepper never gets steps faster than its plan.  ``lateness`` books each delay.  The plan's chunks are made
+    ahead by a thread (:func:`_made_ahead`) while the writes go out.
     """
-    p = open_port(port)
-    if not isinstance(p, MockPort):
-        realtime = True
-    if isinstance(job, ChunkedPlan):
-        if realtime:
-            return _run_chunks_realtime(job, p, controller, progress, on_pause)
-        return _run_chunks(job, p, controller, progress, on_pause)
-    plan = job if isinstance(job, StepPlan) else plan_steps(job)
-    ctl = controller or Controller()
-    pauses = _Pauses(plan, ctl, on_pause, controller is not None)
-    wall0 = time.monotonic_ns()
-    lateness = Lateness()
-    if realtime:
-        sent = _send_realtime([(plan.t_ns, plan.data, plan.strobe)], len(plan), p, ctl, pauses, progress, wall0,
-                              lateness)
-    else:
-        sent = _send_simulated(plan, p, ctl, pauses, progress)
-    status, position, messages = _ending(plan, p, ctl, sent, len(plan), _position_after(plan, sent),
-                                         wall0 if realtime else None, lateness)
-    wall = (time.monotonic_ns() - wall0) / 1e9
-    machine = float(plan.t_ns[sent - 1]) / 1e9 if sent else 0.0
-    return RunResult(status, position, sent, machine, wall, pauses.count, p, messages, wall0, lateness)
 
+    batch = 1 << 62  # a batch ends at a progress report, a pause, or the chunk's end
 
-def _send_simulated(plan: StepPlan, p: Port, ctl: Controller, pauses: _Pauses,
-                    progress: Optional[ProgressFn]) -> int:
-    """Send the plan in batches at once, stamped with their scheduled times; returns the writes sent."""
-    t_ns, data, strobe = plan.t_ns, plan.data, plan.strobe
-    total = len(plan)
-    pause_set = pauses.at
-    pause_points = sorted(pause_set)
-    sent = 0
-    while sent < total:
-        if ctl.halted or (ctl.paused and not _wait_while_paused(ctl)):
-            break
-        end = min(total, sent + _BATCH)
-        for pp in pause_points:
-            if sent <= pp < end:
-                end = pp + 1
-                break
-        p.write_many(t_ns[sent:end], data[sent:end], strobe[sent:end])
-        sent = end
-        if progress:
-            progress(sent, total, int(t_ns[sent - 1]))
-        if (sent - 1) in pause_set and sent < total and not pauses.honour(sent):
-            break
-    return sent
+    def __init__(self, t0: int) -> None:
+        self.t0 = t0
+        self.offset = 0
+        self.lateness = Lateness()
+        self.last_progress = -_PROGRESS_EVERY_NS
 
+    def chunks(self, plan: Plan) -> Iterator[StepChunk]:
+        return _made_ahead(plan.chunks())
 
-def _send_realtime(chunks: Iterable[tuple[np.ndarray, np.ndarray, np.ndarray]], total: int, p: Port,
-                   ctl: Controller, pauses: _Pauses, progress: Optional[ProgressFn], t0: int, lateness: "Lateness",
-                   on_progress: Optional[Callable[[int], None]] = None) -> int:
-    """Send each write at its time after ``t0`` (monotonic ns), pauses added; returns the writes sent.
+    def may_go(self, ctl: Controller) -> bool:
+        return not ctl.halted
 
-    ``chunks``: consecutive ``(t_ns, data, strobe)`` arrays of the plan's ``total`` writes (a whole plan is one).
-    ``on_progress(sent)`` runs with each progress report (before ``progress``).
+    def paused_for(self, ns: int) -> None:
+        self.offset += ns
 
-    Sleeps on the controller's wake event until :data:`_SPIN_NS` before a write, then spins.  A write
-    sent late (a stall, a busy machine, a stopped process) shifts every later write by its lateness:
-    the runner never catches up, so each interval between writes is at least the planned one (ramps
-    included) and a stepper never gets steps faster than its plan.  ``lateness`` books each delay.
-    """
-    pause_set = pauses.at
-    sent = 0
-    offset = 0
-    last_progress = 0
-    wake = ctl._wake
-    for t_ns, data, strobe in chunks:
-        n = len(t_ns)
-        j = 0
-        halted = False
-        while j < n:
-            target = t0 + offset + int(t_ns[j])
+    def send(self, p: Port, chunk: StepChunk, i: int, end: int, ctl: Controller) -> int:
+        """Send writes ``i..end`` of ``chunk`` each at its time; returns where it stopped (a halt, or a progress
+        report is due)."""
+        wake = ctl._wake
+        t_ns, data, strobe = chunk.t_ns, chunk.data, chunk.strobe
+        j = i
+        while j < end:
+            target = self.t0 + self.offset + int(t_ns[j])
             while True:
                 if ctl.halted:
-                    halted = True
-                    break
+                    return j
                 if ctl.paused:
                     began = time.monotonic_ns()
                     if not _wait_while_paused(ctl):
-                        halted = True
-                        break
+                        return j
                     paused_ns = time.monotonic_ns() - began
-                    offset += paused_ns
+                    self.offset += paused_ns
                     target += paused_ns
                     continue
                 remaining = target - time.monotonic_ns()
@@ -325,65 +336,129 @@ def _send_realtime(chunks: Iterable[tuple[np.ndarray, np.ndarray, np.ndarray]], 
                 if remaining > _SPIN_NS:
                     wake.wait((remaining - _SPIN_NS) / 1e9)
                     wake.clear()
-            if halted:
-                break
             now = time.monotonic_ns()
             late_ns = now - target
             if late_ns > 0:  # behind: the rest of the schedule moves later, so no interval is shorter than planned
-                offset += late_ns
-                lateness.add(late_ns)
-            p.write(int(data[j]), int(strobe[j]), now - t0)
+                self.offset += late_ns
+                self.lateness.add(late_ns)
+            p.write(int(data[j]), int(strobe[j]), now - self.t0)
             j += 1
-            sent += 1
-            if (progress or on_progress) and (target - last_progress > _PROGRESS_EVERY_NS or sent == total):
-                last_progress = target
-                if on_progress is not None:
-                    on_progress(sent)
-                if progress:
-                    progress(sent, total, int(t_ns[j - 1]))
-            if (sent - 1) in pause_set and sent < total:
+            if int(t_ns[j - 1]) - self.last_progress > _PROGRESS_EVERY_NS:
+                self.last_progress = int(t_ns[j - 1])
+                return j
+        return j
+
+
+def run(
+    job: "JobLike | Plan",
+    port: str | Port = "mock",
+    *,
+    realtime: bool = False,
+    controller: Optional[Controller] = None,
+    progress: Optional[ProgressFn] = None,
+    on_pause: Optional[PauseFn] = None,
+    cursor: Optional[Cursor] = None,
+) -> RunResult:
+    """Run a job on a port: its step plan a chunk at a time, through one send loop.
+
+    Args:
+        job: a job (any :class:`~cam.job.model.JobLike`: planned here with :func:`cam.drive.chunks.plan_chunks`)
+            or a step plan (:class:`~cam.drive.chunks.ChunkedPlan`, or a :class:`StepPlan` held whole).
+        port: a port name (``"mock"``, ``"/dev/parport0"``) or an open :class:`Port`.
+        realtime: wait for each write's time.  Forced on for real ports.
+        controller: pause / resume / stop / emergency stop from elsewhere.
+        progress: called now and then with (writes done, writes total, machine ns done).
+        on_pause: called at each Pause At point; if None, the runner pauses its
+            controller and waits for :meth:`Controller.resume` (or continues
+            at once when no controller was given).
+        cursor: where the run is, moved on as the writes go out (a new one if None): the live position.
+
+    Returns:
+        A :class:`RunResult`; the mock's pin log is ``result.pin_log()``.
+    """
+    p = open_port(port)
+    if not isinstance(p, MockPort):
+        realtime = True
+    plan: Plan = job if isinstance(job, (StepPlan, ChunkedPlan)) else plan_chunks(job)  # type: ignore[assignment]
+    ctl = controller or Controller()
+    cursor = cursor or Cursor(plan.settings)
+    pauses = _Pauses(plan, ctl, on_pause, controller is not None)
+    wall0 = time.monotonic_ns()
+    clock: "_SimulatedClock | _RealClock" = _RealClock(wall0) if realtime else _SimulatedClock()
+    if realtime:
+        switch_s = sys.getswitchinterval()
+        sys.setswitchinterval(min(switch_s, _SWITCH_S))  # the thread making chunks yields the interpreter soon
+    try:
+        _send(plan, p, ctl, clock, cursor, pauses, progress)
+    finally:
+        if realtime:
+            sys.setswitchinterval(switch_s)
+    lateness = clock.lateness if isinstance(clock, _RealClock) else Lateness()
+    status, position, messages = _ending(plan, p, ctl, cursor, wall0 if realtime else None, lateness)
+    wall = (time.monotonic_ns() - wall0) / 1e9
+    return RunResult(status, position, cursor.sent, cursor.last_t_ns / 1e9, wall, pauses.count, p, messages, wall0,
+                     lateness)
+
+
+def _send(plan: Plan, p: Port, ctl: Controller, clock: "_SimulatedClock | _RealClock", cursor: Cursor,
+          pauses: _Pauses, progress: Optional[ProgressFn]) -> None:
+    """The send loop: the plan's chunks in batches (up to a pause, a progress report or :data:`_BATCH`), the
+    cursor moved on after each, each pause honoured; returns when the writes end or the run is halted."""
+    total = len(plan)
+    for chunk in clock.chunks(plan):
+        i, n = 0, len(chunk)
+        while i < n:
+            if not clock.may_go(ctl):
+                return
+            pause = pauses.next_after(chunk.first_write + i)
+            end = min(n, i + clock.batch, pause - chunk.first_write + 1)
+            j = clock.send(p, chunk, i, end, ctl)
+            cursor.note(chunk.t_ns[i:j], chunk.data[i:j])
+            i = j
+            sent = cursor.sent
+            if progress and j > 0:
+                progress(sent, total, int(chunk.t_ns[j - 1]))
+            if sent - 1 == pause and sent < total:
                 began = time.monotonic_ns()
-                if not pauses.honour(sent):
-                    halted = True
-                    break
-                offset += time.monotonic_ns() - began
-        if halted:
-            break
-    return sent
+                if not pauses.honour(sent, cursor.position_steps):
+                    return
+                clock.paused_for(time.monotonic_ns() - began)
+            elif j < end and ctl.halted:
+                return
 
 
-def _ending(plan: "StepPlan | _Tail", p: Port, ctl: Controller, sent: int, total: int,
-            position: tuple[int, int, int], t0: Optional[int], lateness: Optional["Lateness"]
+def _ending(plan: Plan, p: Port, ctl: Controller, cursor: Cursor, t0: Optional[int], lateness: Lateness
             ) -> tuple[str, tuple[int, int, int], list[str]]:
-    """How a run that sent ``sent`` of its ``total`` writes ends: ``(status, position_steps, messages)``.  A stop
-    lifts the tool (:func:`_stop`); an emergency stop sends nothing more.  The mock's log is flushed."""
+    """How a run ends: ``(status, position_steps, messages)``.  A run halted before its last write lifts the tool
+    (:func:`_stop`); an emergency stop sends nothing more.  The mock's log is flushed."""
     status = FINISHED
     messages: list[str] = []
-    if sent < total:
+    position = cursor.position_steps
+    if cursor.sent < len(plan):
         if ctl.estop_requested:
             status = EMERGENCY_STOPPED
             messages.append(f"emergency stop at {position} steps; nothing more was sent")
         else:
-            status, position = _stop(plan, p, ctl, sent, position, t0, lateness)  # type: ignore[arg-type]
+            status, position = _stop(plan, p, ctl, cursor, t0, lateness)
             messages.append(f"stopped at X={position[0]} Y={position[1]} steps; tool lifted to Z={position[2]}")
     if isinstance(p, MockPort):
         p._flush()
     return status, position, messages
 
 
-def _stop(plan: StepPlan, p: Port, ctl: Controller, sent: int, position: tuple[int, int, int],
-          t0: Optional[int], lateness: Optional[Lateness] = None) -> tuple[str, tuple[int, int, int]]:
-    """Lift the tool straight up to the safe plane after ``sent`` writes; returns (status, position_steps).
+def _stop(plan: Plan, p: Port, ctl: Controller, cursor: Cursor, t0: Optional[int], lateness: Lateness
+          ) -> tuple[str, tuple[int, int, int]]:
+    """Lift the tool straight up to the safe plane where the cursor is; returns (status, position_steps).
 
     ``t0``: the real-time job start (monotonic ns), None on the simulated clock.  An emergency stop
     during a real-time lift ends it (status :data:`EMERGENCY_STOPPED`).  A late lift write moves the
     rest of the lift later, as in a job.
     """
-    lift_t, lift_d = _lift_writes(plan, int(plan.data[sent - 1]) if sent else 0, position[2])
-    strobe = plan.strobe[0]
+    position = cursor.position_steps
+    lift_t, lift_d = _lift_writes(plan.settings, plan.safe_z_steps, cursor.last_data, position[2])
+    strobe = 1 if plan.settings.half_step else 0
     if t0 is None:
-        start = int(plan.t_ns[sent - 1]) if sent else 0
-        p.write_many(start + lift_t, lift_d, np.full(len(lift_t), strobe, np.uint8))
+        p.write_many(cursor.last_t_ns + lift_t, lift_d, np.full(len(lift_t), strobe, np.uint8))
         return STOPPED, (position[0], position[1], min(position[2], plan.safe_z_steps))
     start = time.monotonic_ns() - t0
     z_clock = int(axis_bits(plan.settings)[0][2])
@@ -399,123 +474,11 @@ def _stop(plan: StepPlan, p: Port, ctl: Controller, sent: int, position: tuple[i
         late_ns = now - t_lift0 - t_rel
         if late_ns > 0:
             t_lift0 += late_ns
-            if lateness is not None:
-                lateness.add(late_ns)
-        p.write(d, int(strobe), start + (now - lift_began))
+            lateness.add(late_ns)
+        p.write(d, strobe, start + (now - lift_began))
         if d & z_clock:
             position = (position[0], position[1], position[2] - 1)
     return STOPPED, position
-
-
-class _LastWrite:
-    """Stands for a plan's arrays where only the last write sent is read (a stop after a chunked run)."""
-
-    def __init__(self, value: int) -> None:
-        self.value = value
-
-    def __getitem__(self, index: int) -> int:
-        return self.value
-
-
-class _Tail:
-    """What :func:`_stop` reads of a plan, for a :class:`ChunkedPlan` whose writes are no longer held."""
-
-    def __init__(self, plan: ChunkedPlan, last_t_ns: int, last_data: int) -> None:
-        self.settings = plan.settings
-        self.safe_z_steps = plan.safe_z_steps
-        self.t_ns = _LastWrite(last_t_ns)
-        self.data = _LastWrite(last_data)
-        self.strobe = np.full(1, 1 if plan.settings.half_step else 0, np.uint8)
-
-
-def _run_chunks(plan: ChunkedPlan, p: Port, controller: Optional[Controller], progress: Optional[ProgressFn],
-                on_pause: Optional[PauseFn]) -> RunResult:
-    """:func:`run` of a :class:`ChunkedPlan` on the simulated clock: a chunk at a time, in bounded memory.
-
-    The writes and pauses are those of the whole plan; the position is decoded as the writes go out
-    (and published as ``plan.live``: ``(writes sent, position_steps)``, for the session's live position).
-    """
-    ctl = controller or Controller()
-    clock, dirbit = axis_bits(plan.settings)
-    pause_at = set(int(i) for i in plan.pause_writes)
-    notes = dict(zip((int(i) for i in plan.pause_writes), plan.pause_notes or []))
-    total = len(plan)
-    wall0 = time.monotonic_ns()
-    sent, pauses, last_t, last_d = 0, 0, 0, 0
-    pos = np.zeros(3, np.int64)
-    halted = False
-    for chunk in plan.chunks():
-        i = 0
-        while i < len(chunk):
-            if ctl.halted or (ctl.paused and not _wait_while_paused(ctl)):
-                halted = True
-                break
-            g = chunk.first_write + i
-            end = min(len(chunk), i + _BATCH)
-            nxt = [w for w in pause_at if g <= w < chunk.first_write + end]
-            if nxt:
-                end = min(nxt) - chunk.first_write + 1
-            data = chunk.data[i:end]
-            p.write_many(chunk.t_ns[i:end], data, chunk.strobe[i:end])
-            decoded, _ = _decode(data, last_d, pos, clock, dirbit)
-            pos = decoded[-1].copy()
-            last_t, last_d = int(chunk.t_ns[end - 1]), int(data[-1])
-            sent += end - i
-            i = end
-            plan.live = (sent, tuple(int(v) for v in pos))
-            if progress:
-                progress(sent, total, last_t)
-            if (sent - 1) in pause_at and sent < total:
-                pauses += 1
-                here = tuple(int(v) for v in pos)
-                if on_pause is not None:
-                    on_pause(here, notes.get(sent - 1, "pause"))  # type: ignore[arg-type]
-                elif controller is not None:
-                    ctl.pause()
-                if not _wait_while_paused(ctl):
-                    halted = True
-                    break
-        if halted:
-            break
-    status, position, messages = _ending(_Tail(plan, last_t, last_d), p, ctl, sent, total,
-                                         tuple(int(v) for v in pos), None, None)
-    wall = (time.monotonic_ns() - wall0) / 1e9
-    return RunResult(status, position, sent, last_t / 1e9, wall, pauses, p, messages, wall0)  # type: ignore[arg-type]
-
-
-class _Cursor:
-    """The position of a real-time run of a :class:`ChunkedPlan` as its writes go out, decoded a few at a time
-    (at each progress report, pause and stop: never a whole chunk between two writes)."""
-
-    def __init__(self, plan: ChunkedPlan) -> None:
-        self.plan = plan
-        self.clock, self.dirbit = axis_bits(plan.settings)
-        self.pos = np.zeros(3, np.int64)
-        self.last_data = 0
-        self.last_t_ns = 0
-        self.done = 0  # writes decoded into pos
-        self.chunk: Optional[StepChunk] = None
-
-    def chunks(self) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray]]:
-        """The plan's chunks, made ahead in a thread (:func:`_made_ahead`), noted as they start."""
-        for chunk in _made_ahead(self.plan.chunks()):
-            if self.chunk is not None:
-                self.advance(self.chunk.first_write + len(self.chunk))
-            self.chunk = chunk
-            yield chunk.t_ns, chunk.data, chunk.strobe
-
-    def advance(self, sent: int) -> tuple[int, int, int]:
-        """Position (x, y, z) in steps after ``sent`` writes (of the current chunk; never behind ``done``)."""
-        c = self.chunk
-        if c is not None and sent > self.done:
-            data = c.data[self.done - c.first_write: sent - c.first_write]
-            decoded, _ = _decode(data, self.last_data, self.pos, self.clock, self.dirbit)
-            self.pos = decoded[-1].copy()
-            self.last_data = int(data[-1])
-            self.last_t_ns = int(c.t_ns[sent - 1 - c.first_write])
-            self.done = sent
-            self.plan.live = (sent, tuple(int(v) for v in self.pos))
-        return tuple(int(v) for v in self.pos)  # type: ignore[return-value]
 
 
 def _made_ahead(chunks: Iterator[StepChunk], ahead: int = 2) -> Iterator[StepChunk]:
@@ -554,51 +517,12 @@ def _made_ahead(chunks: Iterator[StepChunk], ahead: int = 2) -> Iterator[StepChu
         done.set()
 
 
-def _run_chunks_realtime(plan: ChunkedPlan, p: Port, controller: Optional[Controller],
-                         progress: Optional[ProgressFn], on_pause: Optional[PauseFn]) -> RunResult:
-    """:func:`run` of a :class:`ChunkedPlan` in real time: each write at its time, a chunk at a time (the next
-    made by a thread meanwhile), in bounded memory; the same writes, pauses, lateness rule and stops as a
-    whole plan's."""
-    ctl = controller or Controller()
-    switch_s = sys.getswitchinterval()
-    sys.setswitchinterval(min(switch_s, _SWITCH_S))  # the thread making chunks yields the interpreter soon
-    try:
-        return _send_chunks_realtime(plan, p, ctl, controller is not None, progress, on_pause)
-    finally:
-        sys.setswitchinterval(switch_s)
-
-
-def _send_chunks_realtime(plan: ChunkedPlan, p: Port, ctl: Controller, external: bool,
-                          progress: Optional[ProgressFn], on_pause: Optional[PauseFn]) -> RunResult:
-    cursor = _Cursor(plan)
-    pauses = _Pauses(plan, ctl, on_pause, external, position_of=cursor.advance)
-    wall0 = time.monotonic_ns()
-    lateness = Lateness()
-    total = len(plan)
-    sent = _send_realtime(cursor.chunks(), total, p, ctl, pauses, progress, wall0, lateness,
-                          on_progress=cursor.advance)
-    position = cursor.advance(sent)
-    status, position, messages = _ending(_Tail(plan, cursor.last_t_ns, cursor.last_data), p, ctl, sent, total,
-                                         position, wall0, lateness)
-    wall = (time.monotonic_ns() - wall0) / 1e9
-    return RunResult(status, position, sent, cursor.last_t_ns / 1e9, wall, pauses.count, p, messages, wall0,
-                     lateness)
-
-
 def _wait_while_paused(ctl: Controller) -> bool:
     """Block while paused; False if a stop came meanwhile."""
     while ctl.paused and not ctl.halted:
         ctl._wake.wait(0.05)
         ctl._wake.clear()
     return not ctl.halted
-
-
-def _position_after(plan: StepPlan, n_writes: int) -> tuple[int, int, int]:
-    """Machine position in steps after the first ``n_writes`` writes of ``plan``."""
-    if n_writes == 0:
-        return (0, 0, 0)
-    log = PinLog(plan.t_ns[:n_writes], plan.data[:n_writes], plan.strobe[:n_writes])
-    return decode_pin_log(log, plan.settings).final_steps
 
 
 def simulate_surface(job: Job) -> "np.ndarray":

@@ -45,20 +45,19 @@ from typing import Any, Callable, Optional
 import numpy as np
 
 from ..errors import BusyError, CamError, PlanError, PortError
-from ..job.model import TRAVEL, Job, check_reach, check_travel, travel_job
+from ..job.model import TRAVEL, Job, JobLike, check_reach, check_travel, travel_job
 from ..job.moves import jog as jog_job
 from ..job.moves import jog_steps, to_origin
 from ..settings import DEFAULT_SETTINGS, MachineSettings
-from ..verify.pinlog import PositionTracker
 from .apart import RunnerProcess
 from .journal import JournalSpec, journal_spec
 from ._session_parts import Activity, Prompt, PromptFn, SessionControls
 from .activities import BoardControl, drill_work, move_work, run_on_board, run_steps
 from .maximus.board import drill_arguments, drill_job, maximus_port
 from .ports import port_kind, require
-from .runner import Controller, RunResult
-from .chunks import ChunkedPlan
-from .steps import StepPlan, plan_steps
+from .runner import Controller, Cursor, RunResult
+from .chunks import ChunkedPlan, plan_chunks
+from .steps import StepPlan
 
 __all__ = ["MachineSession", "Prompt", "PromptFn", "MAX_JOG_STEPS", "run"]
 
@@ -189,12 +188,12 @@ class MachineSession(SessionControls):
             raise CamError("a step plan has no moves to keep a journal of: start the job or the prepared job")
         return journal_spec(job, journal, home_steps=tuple(int(v) for v in self._position))
 
-    def _plan(self, job: Any) -> StepPlan:
+    def _plan(self, job: Any) -> "StepPlan | ChunkedPlan":
         if isinstance(job, (StepPlan, ChunkedPlan)):
             return job
-        if isinstance(job, Job):
-            return plan_steps(job, start_steps=tuple(int(v) for v in self._position))
-        return getattr(job, "plan", None) or job.steps  # a PreparedJob: planned from its home, checked by its extent
+        if isinstance(job, JobLike):
+            return plan_chunks(job, start_steps=tuple(int(v) for v in self._position))
+        return job.plan  # a PreparedJob: planned from its home, checked by its extent
 
     def run(self, job: Any, *, label: Optional[str] = None) -> dict[str, Any]:
         """:meth:`start` and wait for the end; returns :attr:`last_run`."""
@@ -278,7 +277,7 @@ class MachineSession(SessionControls):
             self._launch_board(activity, move_work(job.points_steps), None, label,
                                moved_steps=job.points_steps[-1])
             return
-        plan = plan_steps(job, start_steps=tuple(int(v) for v in self._position))
+        plan = plan_chunks(job, start_steps=tuple(int(v) for v in self._position))
         self._launch_steps(activity, plan, label, plan.estimated_time_s)
 
     def _begin(self, activity: Activity) -> None:
@@ -290,10 +289,10 @@ class MachineSession(SessionControls):
     def _launch_steps(self, name: str, plan: "StepPlan | ChunkedPlan", label: str, estimated_s: float,
                       controller: Optional[Controller] = None, journal: Optional[JournalSpec] = None) -> None:
         ctl = controller or Controller()
-        tracker = plan.positions() if isinstance(plan, ChunkedPlan) else PositionTracker(plan.data, plan.settings)
-        self._begin(Activity(name, label, ctl, len(plan), estimated_s, tracker))
+        cursor = Cursor(plan.settings)  # the runner moves it on; the live position reads it
+        self._begin(Activity(name, label, ctl, len(plan), estimated_s, cursor))
         self.log(f"{label}: started")
-        self._spawn(run_steps, (self, name, plan, ctl, label, journal), name)
+        self._spawn(run_steps, (self, name, plan, ctl, label, journal, cursor), name)
 
     def _launch_board(self, name: str, work: Callable[[Any, Any], None], job: Any, label: str,
                       moved_steps: Any = (0, 0, 0)) -> None:

@@ -331,3 +331,43 @@ def check_rules_reference(classes: np.ndarray) -> list[str]:
     if len(isolated):
         warnings.append(f"{len(isolated)} stray isolated black pixel(s): " + listing(isolated))
     return warnings
+
+
+def port_writes(step_signed, period_ns, settings):
+    """The port writes of step periods (plain numpy): the step plan's writes made without its kernels.
+
+    ``step_signed``: ``(P, 3)`` the step each axis makes in each period (-1, 0, +1); ``period_ns``: ``(P,)``
+    nominal lengths, lengthened by ``settings.ramp`` as :func:`cam.drive.ramps.ramp_periods` does.
+    Returns ``(t_ns, data, strobe)``, each ``(1 + 2P,)``: a first write at t = 0 with the first directions,
+    then per period the rising edges at mid-period and the next directions at its end.
+    """
+    import numpy as np
+
+    from cam.drive.pins import axis_bits
+    from cam.drive.ramps import ramp_periods
+
+    step_signed = np.asarray(step_signed)
+    per = np.asarray(period_ns, np.int64)
+    n = len(per)
+    clock, dirbit = axis_bits(settings)
+    dir_data = np.zeros(n, np.int64)
+    clock_data = np.zeros(n, np.int64)
+    rows = np.arange(n)
+    for a in range(3):
+        moving = step_signed[:, a] != 0
+        last = np.maximum.accumulate(np.where(moving, rows, -1))
+        positive = np.where(last >= 0, step_signed[np.maximum(last, 0), a] > 0, False)
+        dir_data |= positive.astype(np.int64) * int(dirbit[a])
+        clock_data |= moving.astype(np.int64) * int(clock[a])
+    high, dirs = (dir_data | clock_data).astype(np.uint8), dir_data.astype(np.uint8)
+    per = ramp_periods(high, per, settings)
+    ends = np.cumsum(per)
+    t_ns = np.zeros(1 + 2 * n, np.int64)
+    data = np.zeros(1 + 2 * n, np.uint8)
+    data[0] = dirs[0] if n else 0
+    t_ns[1::2] = ends - per + per // 2
+    data[1::2] = high
+    t_ns[2::2] = ends
+    data[2::2] = np.append(dirs[1:], dirs[-1:]) if n else dirs
+    strobe = np.full(1 + 2 * n, 1 if settings.half_step else 0, np.uint8)
+    return t_ns, data, strobe
