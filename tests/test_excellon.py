@@ -3,7 +3,6 @@ holes as written; literal files for every feature, error and warning; the CLI's 
 from __future__ import annotations
 
 import re
-import subprocess
 import sys
 import warnings
 from pathlib import Path
@@ -15,7 +14,7 @@ from cam.cli import main
 from cam.errors import CamError, ParseError
 from cam.formats.excellon import HoleList, load_excellon, parse_excellon
 
-from conftest import ROOT
+from conftest import ROOT, run_cli
 
 sys.path.insert(0, str(Path(__file__).parent))
 import excellon_gen as gen  # noqa: E402
@@ -292,9 +291,7 @@ def test_the_shipped_sample_is_what_the_generator_writes():
 
 
 def test_drill_the_sample_on_the_mock_port():
-    pytest.importorskip("cam.job.drill_order")
-    r = subprocess.run([sys.executable, "-m", "cam", "drill", "samples/board.drl", "--yes", "--no-progress"],
-                       cwd=ROOT, capture_output=True, text=True, timeout=120)
+    r = run_cli("drill", "samples/board.drl", "--yes", "--no-progress", cwd=ROOT)
     assert r.returncode == 0, r.stderr
     assert "T1 0.800 mm" in r.stderr + r.stdout and "T3 3.200 mm" in r.stderr + r.stdout
 

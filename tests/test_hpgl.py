@@ -20,7 +20,7 @@ from cam.formats.hpgl import (
 from cam.job.hpgl import DEFAULT_SAFE_HEIGHT_MM, hpgl_steps, plan_hpgl
 from cam.job.model import CUT, RETRACT, TRAVEL
 
-from conftest import ROOT, SAMPLES
+from conftest import ROOT, SAMPLES, run_cli
 
 ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
 S = cam.MachineSettings()
@@ -339,8 +339,8 @@ def test_the_carve_check_sees_a_wrong_cut():
 
 
 def cli(*args):
-    return subprocess.run([sys.executable, "-m", "cam", *map(str, args)], capture_output=True, text=True, env=ENV,
-                          timeout=120)
+    """``cam ARGS`` in this process (conftest.run_cli)."""
+    return run_cli(*args)
 
 
 def assert_one_line_error(proc, *fragments):

@@ -5,9 +5,6 @@ as JPEG and read back.  The traced curves must lie within 1.5 pixels of the true
 and keep the thesis rules (no pixel with more than two black neighbours, nothing on the border, no stray
 pixel); the result must digitize and cut on the mock port.
 """
-import os
-import subprocess
-import sys
 
 import cv2
 import numpy as np
@@ -18,9 +15,8 @@ import cam
 from cam.digitize.drawing import BLACK, RED, Drawing, check_rules, neighbour_count
 from cam.digitize.sketch import TracedDrawing, trace
 
-from conftest import ROOT
+from conftest import ROOT, run_cli
 
-ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
 SUB = 16  # cv2's sub-pixel shift: 4 bits
 
 
@@ -174,7 +170,8 @@ def test_notebook_api():
 
 
 def cli(*args):
-    return subprocess.run([sys.executable, "-m", "cam", *args], capture_output=True, text=True, env=ENV)
+    """``cam ARGS`` in this process (conftest.run_cli)."""
+    return run_cli(*args)
 
 
 def test_cli_trace_then_drill(tmp_path):
@@ -213,10 +210,7 @@ def test_drill_trace_option_plans_what_trace_then_drill_plans(tmp_path):
     expected = cam.plan_steps(cam.plan(cam.digitize(drawing), depth=2, settings=cam.MachineSettings()))
     assert np.array_equal(job.steps.data, expected.data)
     assert any("traced:" in w for w in job.warnings)
-    env = dict(os.environ, PYTHONPATH=str(ROOT))
-    ok = subprocess.run([sys.executable, "-m", "cam", "drill", str(sketch), "--trace", "--depth", "2",
-                         "--no-progress"], capture_output=True, text=True, env=env, timeout=120)
+    ok = cli("drill", str(sketch), "--trace", "--depth", "2", "--no-progress")
     assert ok.returncode == 0, ok.stderr
-    bad = subprocess.run([sys.executable, "-m", "cam", "drill", str(ROOT / "samples" / "board.drl"), "--trace"],
-                         capture_output=True, text=True, env=env, timeout=120)
+    bad = cli("drill", str(ROOT / "samples" / "board.drl"), "--trace")
     assert bad.returncode == 2 and "--trace does not apply" in bad.stderr

@@ -7,9 +7,6 @@ step of a cut position.
 """
 import json
 import math
-import os
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -20,9 +17,8 @@ from cam.errors import CamError, ParseError, TravelError
 from cam.formats.svg import parse_svg
 from cam.job.svg import plan_svg, svg_strokes_steps
 
-from conftest import ROOT
+from conftest import ROOT, run_cli
 
-ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
 S = cam.MachineSettings()
 MM = S.mm_per_step_xy
 
@@ -237,7 +233,8 @@ def test_strokes_keep_their_direction_unless_reversing_shortens_travel():
 
 
 def cli(*args, cwd=None):
-    return subprocess.run([sys.executable, "-m", "cam", *args], capture_output=True, text=True, env=ENV, cwd=cwd)
+    """``cam ARGS`` in this process (conftest.run_cli)."""
+    return run_cli(*args, cwd=cwd)
 
 
 def write(tmp_path, name, text):

@@ -10,8 +10,6 @@ from __future__ import annotations
 
 import json
 import math
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -23,7 +21,7 @@ from cam.errors import CamError
 from cam.tool import Tool, parse_tool
 from cam.verify.toolcarve import carve_tool, compare_surface, gouge_rest_picture
 
-from conftest import carve_job
+from conftest import carve_job, run_cli
 
 ROOT = Path(__file__).resolve().parents[1]
 SETTINGS = cam.MachineSettings()
@@ -170,9 +168,9 @@ def test_comparison_picture_marks_rest_blue_and_gouge_red():
 # -- the tool on the command line, in the machine file and in the API ----------------------------------------
 
 
-def _cam(*args: str, cwd: Path) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "cam", *args], cwd=cwd, capture_output=True, text=True,
-                          timeout=300, env={**__import__("os").environ, "PYTHONPATH": str(ROOT)})
+def _cam(*args: str, cwd: Path):
+    """``cam ARGS`` in this process, in folder ``cwd`` (conftest.run_cli)."""
+    return run_cli(*args, cwd=cwd)
 
 
 def test_v_bit_line_width_sets_the_depth_and_the_groove_has_that_width(tmp_path):
