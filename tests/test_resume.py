@@ -34,7 +34,7 @@ from cam.drive.session import MachineSession
 from cam.job.model import CUT, RETRACT, TRAVEL, travel_job
 from cam.job.resume import resume_toolpath
 from cam.verify.pinlog import Motion, carve, decode_pin_log, read_pin_log, write_pin_log
-from conftest import ROOT, SAMPLES
+from conftest import ROOT, SAMPLES, run_cli
 
 ENV = dict(os.environ, PYTHONPATH=str(ROOT))
 
@@ -80,9 +80,9 @@ def _drill_args(kind: str, tmp_path: Path, *more: str) -> list[str]:
     return ["drill", str(_input(kind, tmp_path)), *JOBS[kind][1], *more]
 
 
-def _cam(args: list[str], timeout_s: float = 120) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "cam", *args], capture_output=True, text=True, env=ENV,
-                          timeout=timeout_s)
+def _cam(args: list[str], timeout_s: float = 120):
+    """``cam ARGS`` in this process (conftest.run_cli)."""
+    return run_cli(*args)
 
 
 def _one_line(stderr: str) -> bool:
@@ -212,6 +212,7 @@ def _check_union(kind: str, tmp_path: Path, job, first: Path, second: Path, star
         assert drilled == holes
 
 
+@pytest.mark.realtime
 @pytest.mark.parametrize("kind", list(JOBS))
 @pytest.mark.parametrize("how", ["sigint", "estop", "sigkill"])
 def test_a_stopped_job_resumes_and_carves_as_an_uninterrupted_run(kind, how, tmp_path):
@@ -231,6 +232,7 @@ def test_a_stopped_job_resumes_and_carves_as_an_uninterrupted_run(kind, how, tmp
     _check_union(kind, tmp_path, job, first, second, rep["start_position_steps"])
 
 
+@pytest.mark.realtime
 def test_a_resumed_run_can_be_stopped_and_resumed_again(tmp_path):
     """A journal of a resumed run resumes too: three runs carve as one."""
     kind = "3d"
@@ -264,6 +266,7 @@ def test_a_resumed_run_can_be_stopped_and_resumed_again(tmp_path):
     assert np.array_equal(carve(both, shape_px, s, origin_px=tp.origin_px), carve(whole, shape_px, s, origin_px=tp.origin_px))
 
 
+@pytest.mark.realtime
 def test_a_journal_of_another_input_or_options_is_refused_and_nothing_is_lost(tmp_path):
     journal, first = _interrupt("2d", "estop", 3, tmp_path)
     before = journal.read_bytes(), first.read_bytes()
@@ -278,6 +281,7 @@ def test_a_journal_of_another_input_or_options_is_refused_and_nothing_is_lost(tm
     assert (journal.read_bytes(), first.read_bytes()) == before
 
 
+@pytest.mark.realtime
 def test_a_resumed_run_that_fails_leaves_the_journal_and_earlier_outputs_intact(tmp_path):
     journal, first = _interrupt("2d", "estop", 4, tmp_path)
     report = tmp_path / "run1.json"
@@ -330,6 +334,7 @@ def test_resume_starts_at_the_interrupted_move_and_skips_what_does_not_cut():
     assert r.pause.tolist() == [False, True, False] and r.pause_notes == ["tool change: T2"]
 
 
+@pytest.mark.realtime
 def test_the_page_resumes_a_stopped_job_from_where_the_tool_stands(tmp_path):
     """The web page's Resume job button (POST /api/resume-job) calls the same library function as the CLI."""
     from test_web import MEDIUM, Server
@@ -376,6 +381,7 @@ def prepare_job_like_the_page(path: Path):
     return prepare_job(path, JobOptions(depth=(2,)), MEDIUM)
 
 
+@pytest.mark.realtime
 def test_the_journal_is_never_ahead_of_the_machine(tmp_path):
     """Every journal written while a job runs names a move and a position the writes already sent reached."""
     job, _ = _prepared(_drill_args("hpgl", tmp_path))
