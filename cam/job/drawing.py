@@ -1,5 +1,9 @@
 """Stage 3, the drawing planner: a digitized matrix to a job (thesis 4.1.4.5, 4.2.3, B.2).
 
+This module holds the planner's options, maps and rules of the moves; the planner itself makes the job a
+piece at a time (:func:`cam.job.drawing_stream.stream_drawing`), and :func:`plan` is its pieces joined: one
+path for every size of job.
+
 The planner works in drawing pixels: ``x`` = image column and ``y`` = image
 row, plus the Start At offset; ``z`` = depth below the home plane in Z pixels
 (+Z is deeper into the material, 0 is the surface when Start At Z is 0).  The
@@ -21,21 +25,20 @@ Rules the planner keeps (and tests check):
 """
 from __future__ import annotations
 
-from typing import Any, Optional, Sequence
+from typing import Sequence
 
 import cv2
 import numpy as np
 
-from ..arrays import column_range, max_at_pixels
+from ..arrays import column_range
 from ..digitize.digitized import Digitized
 from ..errors import PlanError, TravelError
 from ..digitize.profile import ProfileLike, as_profile
 from ..settings import DEFAULT_SETTINGS, MachineSettings
 from ._route import bfs_kernel
 from ..digitize.trace2d import trace_curves
-from ..tool import Tool, corner_depth_px, drop_depth_px, parse_tool, reach_depth_px
-from .subpixel import finer_grids, rest_positions
-from .model import CUT, RETRACT, TRAVEL, Job, PixelFrame, check_travel
+from ..tool import Tool, corner_depth_px, drop_depth_px, reach_depth_px
+from .model import CUT, RETRACT, TRAVEL, Job
 
 __all__ = ["plan", "check_drawing_size", "max_drawing_size_px"]
 
@@ -203,90 +206,14 @@ def plan(
     Raises:
         PlanError: fewer depths than objects, bad options; TravelError: the job leaves the travel.
     """
-    depth_px, warnings = _object_depths(digitized, depth, profile, passes)
-    targets = _pass_targets(digitized, depth_px, passes)
-    if len(targets) == 0:
-        raise PlanError("nothing to cut: every depth is 0")
-    cutter = parse_tool(tool, "tool")
-    corners = None
-    roughing = None
-    if stepdown_px is not None:
-        if digitized.mode != "3d":
-            raise PlanError("roughing (a step-down) applies to 3D reliefs; a 2D drawing's lines are cut at once")
-        if not 1 <= int(stepdown_px) <= 1_000_000 or not 0 < float(stepover) <= 1:
-            raise PlanError(f"the step-down must be at least one Z pixel and the step-over a fraction of the tool "
-                            f"0 < s <= 1, got {stepdown_px} Z px and {stepover}")
-        roughing = _roughing_targets(targets, parse_tool(rough_tool, "rough tool") if rough_tool else cutter,
-                                     int(stepdown_px), float(stepover), digitized.height_px, digitized.width_px,
-                                     settings)
-    finer = None
-    if digitized.mode == "3d" and not cutter.is_point:
-        targets, corners, note, finer = _drop_targets(targets, cutter, digitized.height_px, digitized.width_px,
-                                                      settings, finer=subpixel)
-        warnings += note
-        if len(targets) == 0:
-            raise PlanError(f"nothing to cut: the {cutter.describe()} tool does not fit into any part of the relief")
-    ox, oy, oz = (int(v) for v in start_at)
-    # the moves are assembled in the drawing's own pixel frame (every target at a pixel >= 0, whatever the
-    # Start At offset), starting and ending at the job's home, then moved by the offset
-    if oz:
-        targets = targets + np.array([0, 0, oz], np.int64)
-    surface = oz
-    safe = min(0, oz)
+    from .drawing_stream import stream_drawing  # the planner: it builds on this module's rules
 
-    # deepest depth asked at each pixel (drawing frame, relative to the surface): moving through a
-    # pixel at or above that depth never cuts what the drawing does not ask for
-    asked = np.zeros((digitized.height_px + 2, digitized.width_px + 2), np.int64)
-    max_at_pixels(asked, targets[:, 0], targets[:, 1], targets[:, 2] - oz)
-    pause_px, notes = _pause_map(digitized, pause_at, asked.shape)
-    warnings += notes
-    # the job's extent is known before it is assembled (targets, the home, the safe plane): one that leaves the
-    # travel is assembled without bridges, only to name its first point outside, and refused
-    fits = _fits_travel(targets, (ox, oy), safe, settings)
-    more = finer is not None and len(finer[0]) > 0
-    points_px, kinds, tgt, pause = _assemble(targets, pause_px, asked, settings, surface, safe, oz, home=(-ox, -oy),
-                                             route=fits, last=not more)
-    if corners is not None:
-        points_px, kinds, tgt, pause = _guard_diagonals(points_px, kinds, tgt, pause, corners, oz)
-    frame = PixelFrame(digitized.width_px, digitized.height_px, (ox, oy, oz), settings.steps_per_px_xy,
-                       settings.steps_per_px_z)
-    finer_steps = None
-    if more:
-        finer_steps = _finer_part(finer, targets[-1], (ox, oy, oz), settings, surface, safe, fits, frame)
-    pause_notes = None
-    if roughing is not None:
-        r_targets, r_allowed, r_corners, r_tool = roughing
-        r_targets = r_targets + np.array([0, 0, oz], np.int64)
-        r_asked = np.zeros(asked.shape, np.int64)
-        r_asked[:digitized.height_px, :digitized.width_px] = r_allowed
-        r_points, r_kinds, r_tgt, r_pause = _assemble(r_targets, np.zeros(asked.shape, bool), r_asked, settings,
-                                                      surface, safe, oz, home=(-ox, -oy), route=fits)
-        if not r_tool.is_point:
-            r_points, r_kinds, r_tgt, r_pause = _guard_diagonals(r_points, r_kinds, r_tgt, r_pause, r_corners, oz)
-        if r_tool != cutter:  # the roughing part ends at the home: change the tool there
-            r_pause[-1] = True
-            pause_notes = ([f"tool change: put in the finishing tool ({cutter.describe()}; roughing used "
-                            f"{r_tool.describe()})"] + ["Pause At"] * int(pause.sum()))
-        points_px = np.concatenate([r_points, points_px])
-        kinds, tgt, pause = (np.concatenate([r_kinds, kinds]), np.concatenate([r_tgt, tgt]),
-                             np.concatenate([r_pause, pause]))
-    if ox or oy:
-        points_px[:, :2] += np.array([ox, oy], np.int64)
-    points_steps = frame.to_steps(points_px)
-    if finer_steps is not None:
-        f_pts, f_kind = finer_steps
-        points_steps = np.concatenate([points_steps, f_pts])
-        kinds, tgt, pause = (np.concatenate([kinds, f_kind]), np.concatenate([tgt, np.zeros(len(f_pts), bool)]),
-                             np.concatenate([pause, np.zeros(len(f_pts), bool)]))
-    check_travel(points_steps, settings, frame)
-    assert fits, "a job whose extent leaves the travel passed the travel check"
-    return Job(points_steps=points_steps, kind=kinds, target=tgt, pause=pause, settings=settings,
-               warnings=warnings, safe_z_steps=safe * settings.steps_per_px_z, pixels=frame,
-               tool=None if cutter.is_point else cutter, pause_notes=pause_notes)
+    return stream_drawing(digitized, depth=depth, settings=settings, passes=passes, start_at=start_at,
+                          pause_at=pause_at, profile=profile, tool=tool, stepdown_px=stepdown_px, stepover=stepover,
+                          rough_tool=rough_tool, subpixel=subpixel).joined()
 
 
-def _roughing_targets(targets: np.ndarray, rough: Tool, stepdown_px: int, stepover: float, height_px: int,
-                      width_px: int, settings: MachineSettings
+def _roughing_targets(asked: np.ndarray, rough: Tool, stepdown_px: int, stepover: float, settings: MachineSettings
                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray, Tool]:
     """The roughing levels before the finishing pass: ``(targets (M, 3) in cutting order, allowed (H, W),
     corners (H + 1, W + 1), tool)``.
@@ -295,9 +222,8 @@ def _roughing_targets(targets: np.ndarray, rough: Tool, stepdown_px: int, stepov
     level above (:func:`cam.tool.drop_depth_px` over the deepest depth asked at each pixel): its tool centres
     run on rings ``stepover x diameter`` apart inward from the edge of that region, plus any pixel no ring
     comes within the tool's radius of; each ring is traced into curves (the 2D tracer), shallowest level first.
+    ``asked``: ``(H, W)`` int64 deepest depth asked at each pixel (Z pixels, drawing frame).
     """
-    asked = np.zeros((height_px, width_px), np.int64)
-    max_at_pixels(asked, targets[:, 0], targets[:, 1], targets[:, 2])
     px_mm, zpx_mm = settings.px_to_mm_xy(1), settings.px_to_mm_z(1)
     allowed = drop_depth_px(asked, rough, px_mm, zpx_mm)
     corners = corner_depth_px(asked, rough, px_mm, zpx_mm) if not rough.is_point else allowed
@@ -356,54 +282,6 @@ def _drop_maps(asked: np.ndarray, cutter: Tool, settings: MachineSettings
                     f"{np.count_nonzero(asked)} pixels (up to {settings.px_to_mm_z(float(rest.max())):.3f} mm left; "
                     f"a smaller tool reaches more)")
     return allowed, corner_depth_px(asked, cutter, px_mm, zpx_mm), note
-
-
-def _drop_targets(targets: np.ndarray, cutter: Tool, height_px: int, width_px: int,
-                  settings: MachineSettings, finer: bool = False
-                  ) -> tuple[np.ndarray, np.ndarray, list[str], Optional[tuple[Any, ...]]]:
-    """Targets ``(M, 3)`` (x, y, depth in Z pixels, cutting order) with each depth limited by the drop-cutter
-    rule for ``cutter`` over the deepest depth asked at each pixel; targets left at depth 0 are dropped.
-    Returns the targets, the drop-cutter depth at each pixel corner, the warning of :func:`_drop_maps`, and
-    with ``finer`` the finer pass (:func:`cam.job.subpixel.rest_positions`; None: none)."""
-    asked = np.zeros((height_px, width_px), np.int64)
-    max_at_pixels(asked, targets[:, 0], targets[:, 1], targets[:, 2])
-    allowed, corners, note = _drop_maps(asked, cutter, settings)
-    out = targets.copy()
-    out[:, 2] = np.minimum(out[:, 2], allowed[out[:, 1], out[:, 0]])
-    out = out[out[:, 2] > 0]
-    fine = None
-    if finer and len(out):
-        reach = reach_depth_px(allowed, cutter, settings.px_to_mm_xy(1), settings.px_to_mm_z(1))
-        fine = rest_positions(asked, reach, cutter, settings, start_xy_px=(int(out[-1, 0]), int(out[-1, 1])))
-        if fine is None and finer_grids(settings):
-            note.append(f"the finer finishing pass between pixel centres (cam.job.subpixel) is left out of a "
-                        f"relief this large ({height_px} x {width_px} pixels): the tool leaves a little more")
-    return out, corners, note, fine
-
-
-def _finer_part(finer: tuple[np.ndarray, ...], after_px: np.ndarray, origin_px: tuple[int, int, int],
-                settings: MachineSettings, surface: int, safe: int, route: bool, frame: PixelFrame
-                ) -> tuple[np.ndarray, np.ndarray]:
-    """The finer finishing pass (:mod:`cam.job.subpixel`) after the pixel-centre pass, whose last target is
-    ``after_px`` (drawing frame, Start At Z included), to the job's end: ``(points (N, 3) machine steps,
-    kind (N,))``.  Assembled with the planner's rules on the finer grid, as if its positions were pixels."""
-    f_targets, f_allowed, f_corners, k = finer
-    ox, oy, oz = origin_px
-    fine = settings.replace(steps_per_px_xy=settings.steps_per_px_xy // int(k))
-    asked = np.zeros((f_allowed.shape[0] + 2, f_allowed.shape[1] + 2), np.int32)
-    asked[:f_allowed.shape[0], :f_allowed.shape[1]] = f_allowed
-    after = np.array([after_px[0] * k, after_px[1] * k, after_px[2]], np.int64)
-    pts, kind, tgt, pause = _assemble(f_targets + np.array([0, 0, oz], np.int64), np.zeros(asked.shape, bool),
-                                      asked, fine, surface, safe, oz, home=(-ox * k, -oy * k), route=route,
-                                      after=after, last=True, partial_lift=True)
-    pts, kind, tgt, pause = _guard_diagonals(np.vstack([after, pts]), np.concatenate([kind[:1] * 0, kind]),
-                                             np.concatenate([[False], tgt]), np.concatenate([[False], pause]),
-                                             f_corners, oz)
-    pts, kind = pts[1:], kind[1:]
-    pts[:, :2] += np.array([ox * k, oy * k], np.int64)
-    fine_frame = PixelFrame(frame.width_px * k, frame.height_px * k, (ox * k, oy * k, oz), fine.steps_per_px_xy,
-                            settings.steps_per_px_z)
-    return fine_frame.to_steps(pts), kind
 
 
 def _guard_diagonals(pts: np.ndarray, kind: np.ndarray, tgt: np.ndarray, pause: np.ndarray, corners: np.ndarray,

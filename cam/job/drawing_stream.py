@@ -1,59 +1,92 @@
-"""A drawing job of any size: :func:`cam.job.drawing.plan`'s moves, made a piece at a time.
+"""The drawing planner: a digitized matrix to a job made a piece at a time, whatever its size.
 
-:func:`~cam.job.drawing.plan` holds every target and every move of the job
-at once (about 100 bytes per pixel cut between its arrays): a 4096^2 relief
-of 13 million pixels takes over 1 GB.  :class:`DrawingJobStream` gives the
-same moves as a sequence of small :class:`~cam.job.model.Job` pieces, made
-from the digitized matrix each time they are asked for
-(:meth:`DrawingJobStream.pieces`).  What the planner needs of the whole job
-is a few maps of the drawing (the deepest depth asked at each pixel, for the
-routes through the material; Pause At points; a tool's drop-cutter depths),
-made once; every move depends only on its two targets, so a piece goes on
-from the last target of the piece before.  Concatenated, the pieces equal
-``plan`` of the same drawing and options, row for row (tested).
+:func:`stream_drawing` is the one drawing planner; :func:`cam.plan` (:func:`cam.job.drawing.plan`) is its
+pieces joined (:meth:`DrawingJobStream.joined`).  The rules of the moves are those of
+:mod:`cam.job.drawing` (:func:`~cam.job.drawing._assemble`, :func:`~cam.job.drawing._guard_diagonals`).
 
-A :class:`~cam.drive.chunks.ChunkedPlan` plans a stream a block of moves at a
-time, so a large relief is planned, checked, run and pictured in bounded
-memory (:func:`cam.job.jobs.prepare_job` streams drawings of over
-:data:`STREAM_TARGETS` cut points).  Roughing (``stepdown_px``) is planned in
-memory by :func:`~cam.job.drawing.plan`, and a real tool's finer finishing pass
-(:mod:`cam.job.subpixel`, whose maps are 16 times the drawing's) is left out, with a warning: the stream
-equals ``plan(..., subpixel=False)``.
+A :class:`DrawingJobStream` gives the job's moves as a sequence of small :class:`~cam.job.model.Job`
+pieces, made each time they are asked for (:meth:`DrawingJobStream.pieces`).  What the planner needs of the
+whole job is made once, when it is planned: a few maps of the drawing (the deepest depth asked at each
+pixel, for the routes through the material; Pause At points; a tool's drop-cutter depths), the roughing
+levels' targets and the finer pass's positions.  Every move depends only on its two targets, so a piece
+goes on from the last target of the piece before: the pieces, joined, are the same job row for row
+whatever their size (tested from one target a piece up).
+
+The job has up to three parts, each starting where the one before ended:
+
+1. roughing (``stepdown_px``, 3D): levels cut by the roughing tool from the home back to the home, a
+   tool-change pause there when the finishing tool is another;
+2. the pixel-centre pass: the drawing's targets of every pass, each no deeper than the tool's drop-cutter
+   rule allows;
+3. a real tool's finer finishing pass between pixel centres (:mod:`cam.job.subpixel`), on its finer grid,
+   to the home.  Its positions are bounded (:data:`cam.job.subpixel.MAX_CELLS`, a coarser grid or none with
+   a warning beyond), alike for every job.
+
+Memory: the maps (a few bytes per pixel, the finer pass's per finer position) and the roughing and finer
+targets are held; nothing per move of the pixel-centre pass.  A :class:`~cam.drive.chunks.ChunkedPlan`
+plans the stream a block of moves at a time (:func:`cam.job.jobs.prepare_job` keeps a drawing of over
+:data:`STREAM_TARGETS` cut points as a stream, a smaller one joined: the same moves).
 """
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Iterator, Optional, Sequence
+from typing import Iterator, Optional, Sequence
 
 import numpy as np
 
 from ..digitize.digitized import Digitized
 from ..digitize.profile import ProfileLike
-from ..errors import PlanError
+from ..errors import PlanError, TravelError
 from ..settings import DEFAULT_SETTINGS, MachineSettings
-from ..tool import Tool, parse_tool
-from .subpixel import finer_grid
-from .drawing import _assemble, _drop_maps, _fits_travel, _guard_diagonals, _object_depths, _pass_order, _pause_map
-from .hpgl_stream import _Hashes
+from ..tool import Tool, parse_tool, reach_depth_px
+from .drawing import (_assemble, _drop_maps, _fits_travel, _guard_diagonals, _object_depths, _pass_order,
+                      _pause_map, _roughing_targets)
 from .model import RETRACT, Job, PixelFrame, check_travel, join_pieces
+from .subpixel import finer_grids, rest_positions
 
 __all__ = ["DrawingJobStream", "stream_drawing", "STREAM_TARGETS", "PIECE_TARGETS"]
 
 STREAM_TARGETS = 4_000_000
-"""Drawings with more cut points than this (targets of every pass) are planned as a stream."""
+"""Drawings with more cut points than this (targets of every pass) are kept as a stream by
+:func:`cam.job.jobs.prepare_job` (smaller ones are joined into one Job: the same moves)."""
 PIECE_TARGETS = 1 << 16
 """Cut points planned into one piece (at most)."""
 
 
+@dataclass(frozen=True)
+class _Part:
+    """A part of a drawing job (roughing, the pixel-centre pass, the finer pass), planned a piece at a time.
+
+    Attributes:
+        targets: ``(M, 3)`` int64 ``(x, y, depth)`` in cutting order: positions of the part's grid (drawing
+            frame, ``k`` per pixel), depth in Z pixels below the surface (None: the pixel-centre pass, whose
+            targets are made from the drawing, :meth:`DrawingJobStream._targets`).
+        asked: ``(h + 2, w + 2)`` deepest depth the routes may run at, at each position (the grid's h x w).
+        corners: ``(h + 1, w + 1)`` drop-cutter depth at the midpoints of diagonal moves (None: a point tool).
+        k: positions per pixel of the grid (1: pixels).
+        change_note: a tool change at the part's last point (at the home), or None.
+        finer: the finer pass: goes on from the last target before, lifts partly (see
+            :func:`cam.job.drawing._gap_block`), its points are not targets.
+        reached: ``(H, W)`` deepest target at each drawing pixel (roughing; None: the finer pass).
+    """
+
+    targets: Optional[np.ndarray]
+    asked: np.ndarray
+    corners: Optional[np.ndarray]
+    k: int = 1
+    change_note: Optional[str] = None
+    finer: bool = False
+    reached: Optional[np.ndarray] = None
+
+
 @dataclass
 class DrawingJobStream:
-    """The moves of :func:`cam.job.drawing.plan` of a digitized drawing, as pieces made on demand.
+    """A drawing job (:func:`stream_drawing`) as pieces made on demand: a :class:`~cam.job.model.JobLike`.
 
-    It stands for a :class:`~cam.job.model.Job` where a whole job does not fit: :meth:`pieces` gives
-    consecutive Jobs (their points in steps from the job's home, as the whole job's), and the attributes
-    a drawing job has (``settings``, ``safe_z_steps``, ``pixels``, ``tool``, ``warnings``, ...) are here.
-    ``len()``, :attr:`n_targets` and :attr:`n_retracts` are known after a first pass (:meth:`pieces` run to
-    its end; they make one if none was made).
+    :meth:`pieces` gives consecutive Jobs (their points in steps from the job's home), :meth:`joined` the
+    whole :class:`~cam.job.model.Job`; the attributes a drawing job has (``settings``, ``safe_z_steps``,
+    ``pixels``, ``tool``, ``warnings``, ...) are here.  ``len()``, :attr:`n_targets`, :attr:`n_retracts` and
+    :attr:`pause_notes` are known after a first pass (:meth:`pieces` run to its end; they make one if none was).
 
     Attributes:
         digitized: the traced drawing; order: ``(object index, depth in Z pixels)`` of each block of
@@ -63,6 +96,7 @@ class DrawingJobStream:
         allowed, corners: a tool's drop-cutter depth at each pixel ``(H, W)`` and pixel corner
             ``(H + 1, W + 1)`` (None for the point tool).
         pixels: where the drawing's pixels lie; route: whether gaps may be bridged through the material.
+        roughing, finer: the roughing part before the pixel-centre pass and the finer pass after it (None: none).
         piece_targets: cut points per piece (at most).
     """
 
@@ -77,17 +111,11 @@ class DrawingJobStream:
     route: bool
     tool: Optional[Tool] = None
     warnings: list[str] = field(default_factory=list)
+    roughing: Optional[_Part] = None
+    finer: Optional[_Part] = None
     piece_targets: int = PIECE_TARGETS
-    n_moves: int = -1
-    fingerprint: str = ""
-    counts: dict[str, int] = field(default_factory=dict)
-    # a Job's other attributes, for the code that reads them off any job
     source: str = ""
-    pause_notes: Any = None
-    period_ns: Any = None
-    periods: Any = None
-    move_start: Any = None
-    rest: Any = None
+    counts: dict[str, int] = field(default_factory=dict)
 
     @property
     def safe_z_steps(self) -> int:
@@ -105,120 +133,182 @@ class DrawingJobStream:
     def origin_px(self) -> tuple[int, int, int]:
         return self.pixels.origin_px
 
-    def __len__(self) -> int:
-        if self.n_moves < 0:
+    def _count(self, key: str) -> int:
+        if not self.counts:
             for _ in self.pieces():
                 pass
-        return self.n_moves
+        return self.counts[key]
+
+    def __len__(self) -> int:
+        return self._count("moves")
 
     @property
     def n_targets(self) -> int:
         """Points of the job that are cut targets (as :attr:`cam.job.model.Job.n_targets`)."""
-        len(self)
-        return self.counts["targets"]
+        return self._count("targets")
 
     @property
     def n_retracts(self) -> int:
         """Lifts of the job (as :attr:`cam.job.model.Job.n_retracts`)."""
-        len(self)
-        return self.counts["retracts"]
+        return self._count("retracts")
+
+    @property
+    def pause_notes(self) -> Optional[list[str]]:
+        """What each pause is for, as :attr:`cam.job.model.Job.pause_notes` (None: every pause is a Pause At)."""
+        if self.roughing is None or self.roughing.change_note is None:
+            return None
+        return [self.roughing.change_note] + ["Pause At"] * (self._count("pauses") - 1)
+
+    def asked_depth_px(self) -> np.ndarray:
+        """``(height_px, width_px)`` int64: deepest target depth in Z pixels at each drawing pixel (0: none)."""
+        out = self.asked[: self.height_px, : self.width_px].astype(np.int64)
+        if self.roughing is not None:
+            np.maximum(out, self.roughing.reached, out=out)
+        return out
 
     @property
     def deepest_px(self) -> int:
-        """The deepest depth asked anywhere, Z pixels below the surface."""
-        return int(self.asked.max())
-
-    def asked_depth_px(self) -> np.ndarray:
-        """``(height_px, width_px)`` int64: deepest z in Z pixels asked at each drawing pixel (0: none)."""
-        return self.asked[: self.height_px, : self.width_px].astype(np.int64)
+        """The deepest target depth anywhere, Z pixels below the surface."""
+        return int(self.asked_depth_px().max())
 
     def _targets(self) -> Iterator[tuple[np.ndarray, bool]]:
-        """``((M, 3) int64 targets, last)``: the job's cut targets (x, y, depth below the surface; drawing frame,
-        before a tool's limit) in cutting order, at most :attr:`piece_targets` at a time."""
+        """``((M, 3) int64 targets, last)``: the pixel-centre pass's cut targets (x, y, depth below the surface;
+        drawing frame, a tool's drop-cutter rule applied) in cutting order, at most :attr:`piece_targets` at a
+        time before the drop-cutter rule leaves some out."""
+        n_max = self.piece_targets
         held: list[np.ndarray] = []
         n = 0
         pending: Optional[np.ndarray] = None
         for i, d in self.order:
             obj = self.digitized.objects[i]
-            for s in range(0, len(obj), self.piece_targets):
-                part = obj[s : s + self.piece_targets]
+            for s in range(0, len(obj), n_max):
+                part = obj[s : s + n_max]
                 block = np.empty((len(part), 3), np.int64)
                 block[:, :2] = part
                 block[:, 2] = d
                 held.append(block)
                 n += len(block)
-                while n >= self.piece_targets:
+                while n >= n_max:
                     joined = np.concatenate(held)
                     if pending is not None:
-                        yield pending, False
-                    pending = joined[: self.piece_targets]
-                    rest = joined[self.piece_targets:]
+                        yield self._dropped(pending), False
+                    pending, rest = joined[:n_max], joined[n_max:]
                     held, n = ([rest] if len(rest) else []), len(rest)
         if held:
             if pending is not None:
-                yield pending, False
+                yield self._dropped(pending), False
             pending = np.concatenate(held)
         if pending is not None:
-            yield pending, True
+            yield self._dropped(pending), True
+
+    def _dropped(self, targets: np.ndarray) -> np.ndarray:
+        """``targets`` (M, 3) no deeper than the tool may go at each pixel; those left at depth 0 left out."""
+        if self.allowed is None:
+            return targets
+        targets[:, 2] = np.minimum(targets[:, 2], self.allowed[targets[:, 1], targets[:, 0]])
+        return targets[targets[:, 2] > 0]
+
+    def _held(self, targets: np.ndarray) -> Iterator[tuple[np.ndarray, bool]]:
+        """``((m, 3) targets, last)``: held targets, at most :attr:`piece_targets` at a time (copies)."""
+        n_max = self.piece_targets
+        for s in range(0, len(targets), n_max):
+            yield targets[s : s + n_max].copy(), s + n_max >= len(targets)
 
     def joined(self) -> Job:
         """Every move in one :class:`~cam.job.model.Job` (:func:`~cam.job.model.join_pieces` of :meth:`pieces`)."""
         return join_pieces(self.pieces(), self)
 
     def pieces(self) -> Iterator[Job]:
-        """The job's moves as consecutive :class:`~cam.job.model.Job` pieces.
+        """The job's moves as consecutive :class:`~cam.job.model.Job` pieces: roughing, the pixel-centre pass,
+        the finer pass (see the module docstring).
 
         Raises:
             TravelError: a point lies outside the machine travel (found as the pieces are made).
         """
+        counts = {"moves": 0, "targets": 0, "retracts": 0, "pauses": 0}
+        if self.roughing is not None:
+            yield from self._part(self._held(self.roughing.targets), self.roughing, None, True, counts)
+        centres = _Part(None, self.asked, self.corners)
+        after = yield from self._part(self._targets(), centres, None, self.finer is None, counts,
+                                      pause_px=self.pause_px)
+        if self.finer is not None:
+            yield from self._part(self._held(self.finer.targets), self.finer, after, True, counts)
+        self.counts = counts
+
+    def _part(self, chunks: Iterator[tuple[np.ndarray, bool]], part: _Part, after_px: Optional[np.ndarray],
+              home: bool, counts: dict[str, int], pause_px: Optional[np.ndarray] = None
+              ) -> Iterator[Job]:
+        """The pieces of one part of the job from its targets ``chunks`` (see :meth:`_targets`): planned on the
+        part's grid (drawing frame, ``part.k`` positions per pixel, Start At Z added here), from ``after_px``
+        (the last target before, drawing pixels; None: from the home) to the home if ``home``.  Returns the
+        part's last target (drawing frame, Start At Z included) once its pieces are made."""
         ox, oy, oz = self.pixels.origin_px
-        s = self.settings
-        safe = min(0, oz)
-        hashes = _Hashes()
-        n_moves = n_targets = n_retracts = 0
-        after: Optional[np.ndarray] = None  # the last target planned (drawing frame, Start At Z included)
-        last_pt: Optional[np.ndarray] = None  # the last point of the job so far (drawing frame)
-        for targets, last in self._targets():
-            if self.allowed is not None:  # the drop-cutter rule: no deeper than the tool may go at the pixel
-                targets[:, 2] = np.minimum(targets[:, 2], self.allowed[targets[:, 1], targets[:, 0]])
-                targets = targets[targets[:, 2] > 0]
-                if not len(targets) and not last:
-                    continue
+        k = part.k
+        s = self.settings if k == 1 else self.settings.replace(steps_per_px_xy=self.settings.steps_per_px_xy // k)
+        frame = self.pixels if k == 1 else PixelFrame(self.width_px * k, self.height_px * k, (ox * k, oy * k, oz),
+                                                      s.steps_per_px_xy, s.steps_per_px_z)
+        if pause_px is None:  # read only: no pause anywhere, in no memory
+            pause_px = np.broadcast_to(np.zeros(1, bool), part.asked.shape)
+        after = None if after_px is None else np.array([after_px[0] * k, after_px[1] * k, after_px[2]], np.int64)
+        last_pt = after  # the last point so far: a diagonal from it into the next piece is guarded too
+        for targets, last in chunks:
+            if not len(targets) and not last:
+                continue
             targets[:, 2] += oz
-            pts, kind, tgt, pause = _assemble(targets, self.pause_px, self.asked, s, oz, safe, oz, home=(-ox, -oy),
-                                              route=self.route, after=after, last=last)
-            if self.corners is not None:
-                if last_pt is not None:  # a diagonal from the last point of the piece before is guarded too
-                    pts, kind, tgt, pause = (np.vstack([last_pt, pts]), np.concatenate([kind[:1] * 0, kind]),
-                                             np.concatenate([[False], tgt]), np.concatenate([[False], pause]))
-                pts, kind, tgt, pause = _guard_diagonals(pts, kind, tgt, pause, self.corners, oz)
-                if last_pt is not None:
-                    pts, kind, tgt, pause = pts[1:], kind[1:], tgt[1:], pause[1:]
+            pts, kind, tgt, pause = _assemble(targets, pause_px, part.asked, s, oz, min(0, oz), oz,
+                                              home=(-ox * k, -oy * k), route=self.route, after=after,
+                                              last=last and home, partial_lift=part.finer)
+            if part.corners is not None:
+                pts, kind, tgt, pause = _guard_after(last_pt, pts, kind, tgt, pause, part.corners, oz)
             if len(targets):
                 after = targets[-1].copy()
             if len(pts):
                 last_pt = pts[-1].copy()
-            pts[:, :2] += np.array([ox, oy], np.int64)
-            points_steps = self.pixels.to_steps(pts)
-            check_travel(points_steps, s, self.pixels)
-            piece = Job(points_steps=points_steps, kind=kind, target=tgt, pause=pause, settings=s, warnings=[],
-                        safe_z_steps=self.safe_z_steps, pixels=self.pixels, tool=self.tool)
-            hashes.add(piece)
-            n_moves += len(pts)
-            n_targets += int(np.count_nonzero(tgt))
-            n_retracts += int(np.count_nonzero(kind == RETRACT))
-            yield piece
-        self.n_moves, self.fingerprint = n_moves, hashes.h.hexdigest()
-        self.counts = {"targets": n_targets, "retracts": n_retracts}
+            pts[:, :2] += np.array([ox * k, oy * k], np.int64)
+            notes = None
+            if last and part.change_note is not None:
+                pause[-1] = True
+                notes = [part.change_note]
+            if part.finer:
+                tgt, pause = np.zeros(len(pts), bool), np.zeros(len(pts), bool)
+            yield self._piece(frame.to_steps(pts), kind, tgt, pause, notes, counts)
+        return after
 
-    def to_job(self) -> Job:
-        """Every piece joined into one :class:`~cam.job.model.Job` (tests: it holds every point)."""
-        parts = list(self.pieces())
-        return Job(points_steps=np.concatenate([p.points_steps for p in parts]),
-                   kind=np.concatenate([p.kind for p in parts]), target=np.concatenate([p.target for p in parts]),
-                   pause=np.concatenate([p.pause for p in parts]), settings=self.settings,
-                   warnings=list(self.warnings), safe_z_steps=self.safe_z_steps, pixels=self.pixels,
-                   tool=self.tool, pause_notes=self.pause_notes)
+    def _piece(self, points_steps: np.ndarray, kind: np.ndarray, tgt: np.ndarray, pause: np.ndarray,
+               notes: Optional[list[str]], counts: dict[str, int]) -> Job:
+        """One piece of the job, checked against the travel (its points named by their index in the job)."""
+        _check_piece_travel(points_steps, counts["moves"], self.settings, self.pixels)
+        counts["moves"] += len(points_steps)
+        counts["targets"] += int(np.count_nonzero(tgt))
+        counts["retracts"] += int(np.count_nonzero(kind == RETRACT))
+        counts["pauses"] += int(np.count_nonzero(pause))
+        return Job(points_steps=points_steps, kind=kind, target=tgt, pause=pause, settings=self.settings,
+                   warnings=[], safe_z_steps=self.safe_z_steps, pixels=self.pixels, tool=self.tool,
+                   pause_notes=notes)
+
+
+def _guard_after(last_pt: Optional[np.ndarray], pts: np.ndarray, kind: np.ndarray, tgt: np.ndarray,
+                 pause: np.ndarray, corners: np.ndarray, oz: int
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`cam.job.drawing._guard_diagonals` of a piece whose moves go on from ``last_pt`` (the last point
+    before it, the piece's frame; None: the first piece)."""
+    if last_pt is None:
+        return _guard_diagonals(pts, kind, tgt, pause, corners, oz)
+    pts, kind, tgt, pause = _guard_diagonals(np.vstack([last_pt, pts]), np.concatenate([kind[:1] * 0, kind]),
+                                             np.concatenate([[False], tgt]), np.concatenate([[False], pause]),
+                                             corners, oz)
+    return pts[1:], kind[1:], tgt[1:], pause[1:]
+
+
+def _check_piece_travel(points_steps: np.ndarray, first: int, settings: MachineSettings, pixels: PixelFrame) -> None:
+    """:func:`cam.job.model.check_travel` of a piece whose first point is point ``first`` of the job: the error
+    names the point by its index in the job, as the check of the whole job does."""
+    try:
+        check_travel(points_steps, settings, pixels)
+    except TravelError as e:
+        bounds = np.array(settings.travel.bounds_steps(), np.int64)
+        i = int(np.flatnonzero(np.any((points_steps < bounds[:, 0]) | (points_steps > bounds[:, 1]), axis=1))[0])
+        raise TravelError(str(e).replace(f"at point {i} (", f"at point {first + i} (", 1)) from None
 
 
 def stream_drawing(
@@ -231,18 +321,21 @@ def stream_drawing(
     pause_at: Sequence[tuple[int, int]] = (),
     profile: ProfileLike | None = None,
     tool: Tool | str | None = None,
+    stepdown_px: int | None = None,
+    stepover: float = 0.5,
+    rough_tool: Tool | str | None = None,
+    subpixel: bool = True,
     piece_targets: Optional[int] = None,
 ) -> DrawingJobStream:
-    """:func:`cam.job.drawing.plan` of a digitized drawing as a :class:`DrawingJobStream` (bounded memory).
+    """Plan the job of a digitized drawing as a :class:`DrawingJobStream` (see :func:`cam.job.drawing.plan`,
+    which is this joined, for the options).
 
     Args:
-        digitized, depth, settings, passes, start_at, pause_at, profile, tool: as :func:`~cam.job.drawing.plan`
-            (no roughing).
         piece_targets: cut points per piece (at most; None: :data:`PIECE_TARGETS`).
 
     Raises:
         PlanError: bad options, nothing to cut; TravelError: the job leaves the travel (its extent is checked
-        here, before a piece is made).
+        here, before a piece is made; the first point outside is named).
     """
     depth_px, warnings = _object_depths(digitized, depth, profile, passes)
     order = _pass_order(depth_px, passes)
@@ -255,16 +348,11 @@ def stream_drawing(
         ys, xs = digitized.objects[i][:, 1], digitized.objects[i][:, 0]
         asked[ys, xs] = np.maximum(asked[ys, xs], d)
     cutter = parse_tool(tool, "tool")
-    allowed = corners = None
+    roughing = _roughing_part(asked[:h, :w], digitized.mode, cutter, rough_tool, stepdown_px, stepover, settings,
+                              warnings)
+    allowed = corners = finer = None
     if digitized.mode == "3d" and not cutter.is_point:
-        allowed, corners, note = _drop_maps(asked[:h, :w].astype(np.int64), cutter, settings)
-        warnings += note
-        if finer_grid(settings) > 1:
-            warnings.append("the finer finishing pass between pixel centres (cam.job.subpixel) is left out of a "
-                            "drawing this large (planned a piece at a time): the tool leaves a little more")
-        asked[:h, :w] = np.maximum(np.minimum(asked[:h, :w], allowed), 0)
-        if not asked.any():
-            raise PlanError(f"nothing to cut: the {cutter.describe()} tool does not fit into any part of the relief")
+        allowed, corners, finer = _tool_maps(digitized, order, asked, cutter, settings, subpixel, warnings)
     if len(pause_at):
         pause_px, notes = _pause_map(digitized, pause_at, asked.shape)
         warnings += notes
@@ -279,10 +367,87 @@ def stream_drawing(
     frame = PixelFrame(w, h, (ox, oy, oz), settings.steps_per_px_xy, settings.steps_per_px_z)
     fits = _fits_travel(extent, (ox, oy), min(0, oz), settings)
     job = DrawingJobStream(digitized, order, asked, pause_px, allowed, corners, settings, frame, fits,
-                           tool=None if cutter.is_point else cutter, warnings=warnings,
+                           tool=None if cutter.is_point else cutter, warnings=warnings, roughing=roughing,
+                           finer=finer,
                            piece_targets=max(1, int(PIECE_TARGETS if piece_targets is None else piece_targets)))
     if not fits:  # assembled without bridges up to its first point outside the travel, which is named
         for _ in job.pieces():
             pass
         raise AssertionError("a job whose extent leaves the travel passed the travel check")
     return job
+
+
+def _tool_maps(digitized: Digitized, order: list[tuple[int, int]], asked: np.ndarray, cutter: Tool,
+               settings: MachineSettings, subpixel: bool, warnings: list[str]
+               ) -> tuple[np.ndarray, np.ndarray, Optional[_Part]]:
+    """A real tool on a 3D drawing: ``(allowed (H, W), corners (H + 1, W + 1), finer pass or None)``, the
+    drop-cutter depths (:func:`cam.job.drawing._drop_maps`) of the deepest depth asked at each pixel,
+    ``asked`` ``(H + 2, W + 2)``, which is then limited to them in place; warnings are added to ``warnings``.
+
+    Raises:
+        PlanError: the tool fits into no part of the relief.
+    """
+    h, w = digitized.height_px, digitized.width_px
+    depth_px = asked[:h, :w].astype(np.int64)
+    allowed, corners, note = _drop_maps(depth_px, cutter, settings)
+    warnings += note
+    asked[:h, :w] = np.maximum(np.minimum(asked[:h, :w], allowed), 0)
+    if not asked.any():
+        raise PlanError(f"nothing to cut: the {cutter.describe()} tool does not fit into any part of the relief")
+    if not subpixel:
+        return allowed, corners, None
+    last_xy = (0, 0)  # the pixel-centre pass's last target: the finer pass starts near it
+    for i, d in reversed(order):
+        obj = digitized.objects[i]
+        left = np.flatnonzero(np.minimum(d, allowed[obj[:, 1], obj[:, 0]]) > 0)
+        if len(left):
+            last_xy = (int(obj[left[-1], 0]), int(obj[left[-1], 1]))
+            break
+    reach = reach_depth_px(allowed, cutter, settings.px_to_mm_xy(1), settings.px_to_mm_z(1))
+    fine = rest_positions(depth_px, reach, cutter, settings, start_xy_px=last_xy)
+    if fine is None:
+        if finer_grids(settings):
+            warnings.append(f"the finer finishing pass between pixel centres (cam.job.subpixel) is left out of a "
+                            f"relief this large ({h} x {w} pixels): the tool leaves a little more")
+        return allowed, corners, None
+    f_targets, f_allowed, f_corners, k = fine
+    if not len(f_targets):
+        return allowed, corners, None
+    f_asked = np.zeros((f_allowed.shape[0] + 2, f_allowed.shape[1] + 2), np.int32)
+    f_asked[: f_allowed.shape[0], : f_allowed.shape[1]] = f_allowed
+    return allowed, corners, _Part(f_targets, f_asked, f_corners, k=int(k), finer=True)
+
+
+def _roughing_part(depth_px: np.ndarray, mode: str, cutter: Tool, rough_tool: Tool | str | None,
+                   stepdown_px: Optional[int], stepover: float, settings: MachineSettings, warnings: list[str]
+                   ) -> Optional[_Part]:
+    """The roughing part of a 3D relief whose deepest depth asked at each pixel is ``depth_px`` ``(H, W)`` (Z pixels)
+    (:func:`cam.job.drawing._roughing_targets`), or None (no ``stepdown_px``, or nothing to rough: a warning).
+
+    Raises:
+        PlanError: roughing asked for a 2D drawing, or a bad step-down, step-over or tool.
+    """
+    if stepdown_px is None:
+        return None
+    if mode != "3d":
+        raise PlanError("roughing (a step-down) applies to 3D reliefs; a 2D drawing's lines are cut at once")
+    if not 1 <= int(stepdown_px) <= 1_000_000 or not 0 < float(stepover) <= 1:
+        raise PlanError(f"the step-down must be at least one Z pixel and the step-over a fraction of the tool "
+                        f"0 < s <= 1, got {stepdown_px} Z px and {stepover}")
+    rough = parse_tool(rough_tool, "rough tool") if rough_tool else cutter
+    depth_px = np.asarray(depth_px, np.int64)
+    targets, allowed, corners, rough = _roughing_targets(depth_px, rough, int(stepdown_px), float(stepover),
+                                                         settings)
+    if not len(targets):
+        warnings.append(f"nothing to rough: the {rough.describe()} tool goes no deeper than one step-down "
+                        f"({int(stepdown_px)} Z pixels) anywhere; the relief is finished at once")
+        return None
+    h, w = depth_px.shape
+    asked = np.zeros((h + 2, w + 2), np.int64)
+    asked[:h, :w] = allowed
+    reached = np.zeros((h, w), np.int64)
+    np.maximum.at(reached, (targets[:, 1], targets[:, 0]), targets[:, 2])
+    note = None
+    if rough != cutter:  # the roughing part ends at the home: change the tool there
+        note = f"tool change: put in the finishing tool ({cutter.describe()}; roughing used {rough.describe()})"
+    return _Part(targets, asked, None if rough.is_point else corners, change_note=note, reached=reached)

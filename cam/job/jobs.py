@@ -52,7 +52,7 @@ from ..render.report import job_report
 from ..sniff import KIND_NAMES
 from ..settings import DEFAULT_SETTINGS, MachineSettings
 from ..verify.pinlog import PinLog, decode_pin_log
-from .drawing import check_drawing_size, plan
+from .drawing import check_drawing_size
 from .drill import DEFAULT_DEPTH_MM as DRILL_DEPTH_MM
 from .drill import DEFAULT_SAFE_HEIGHT_MM as DRILL_SAFE_HEIGHT_MM
 from .drill import plan_drill
@@ -637,14 +637,13 @@ def _prepare_pixels(path: Path, kind: str, options: JobOptions, settings: Machin
     stepdown_px = None
     if options.stepdown_mm is not None:
         stepdown_px = max(1, int(options.stepdown_mm / settings.px_to_mm_z(1)))
-    common = dict(depth=depth, settings=settings, passes=options.passes, start_at=options.start_at,
-                  pause_at=list(options.pause_at), profile=profile, tool=cutter)
-    if stepdown_px is None and digitized.n_points * options.passes > STREAM_TARGETS:  # made a piece at a time
-        toolpath = stream_drawing(digitized, **common)
-        rgb = None  # pictured from its moves, as any streamed job (the picture over the drawing holds every move)
-    else:
-        toolpath = plan(digitized, stepdown_px=stepdown_px, stepover=options.stepover, rough_tool=options.rough_tool,
-                        **common)
+    # one planner at every size (made a piece at a time); a large job stays in pieces, a smaller one is joined
+    toolpath: Any = stream_drawing(digitized, depth=depth, settings=settings, passes=options.passes,
+                                   start_at=options.start_at, pause_at=list(options.pause_at), profile=profile,
+                                   tool=cutter, stepdown_px=stepdown_px, stepover=options.stepover,
+                                   rough_tool=options.rough_tool)
+    if digitized.n_points * options.passes <= STREAM_TARGETS:  # held in memory: the same moves
+        toolpath = toolpath.joined()
     steps = plan_chunks(toolpath)
     report = job_report(digitized, toolpath, steps)
     summary = (f"{path.name}: {report['objects']} object(s), {report['points']} points, "
