@@ -10,7 +10,7 @@ import pytest
 
 from cam.fileio import atomic_write_bytes
 
-from conftest import ROOT
+from conftest import ROOT, run_cli
 
 ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
 
@@ -44,11 +44,10 @@ def test_command_line_outputs_get_the_umask_mode(tmp_path, umask, mask, mode):
     img = np.full((12, 16), 255, np.uint8)
     img[5, 3:12] = 0
     cv2.imwrite(str(src), img)
-    umask(mask)  # inherited by the command
+    umask(mask)  # the command runs in this process (run_cli): under this umask
     matrix, picture = tmp_path / "m.txt", tmp_path / "p.png"
     for args in (["digitize", src, "-o", matrix], ["preview", src, "-o", picture, "--depth", "2"]):
-        proc = subprocess.run([sys.executable, "-m", "cam", *map(str, args)], capture_output=True, text=True,
-                              env=ENV, timeout=120)
+        proc = run_cli(*args)
         assert proc.returncode == 0, proc.stderr
     assert _mode(matrix) == mode and _mode(picture) == mode
 
@@ -76,6 +75,7 @@ def test_temporaries_of_a_killed_run_are_removed_on_the_next_write(tmp_path):
     assert not stale.exists() and fresh.exists() and (tmp_path / "out.png").read_bytes() == b"png"
 
 
+@pytest.mark.realtime
 def test_a_killed_or_failed_run_leaves_the_earlier_pin_log_and_report_intact(tmp_path):
     """Nothing lost: the outputs of the last good run survive a run that is killed mid-job or that fails."""
     import signal
@@ -84,9 +84,8 @@ def test_a_killed_or_failed_run_leaves_the_earlier_pin_log_and_report_intact(tmp
 
     env = ENV
     pins, report = tmp_path / "pins.csv", tmp_path / "report.json"
-    ok = subprocess.run([sys.executable, "-m", "cam", "drill", str(SAMPLES / "ellipse.png"), "--depth", "2",
-                         "--pin-log", str(pins), "--report", str(report), "--no-progress"],
-                        capture_output=True, text=True, env=env, timeout=120)
+    ok = run_cli("drill", SAMPLES / "ellipse.png", "--depth", "2", "--pin-log", pins, "--report", report,
+                 "--no-progress")
     assert ok.returncode == 0, ok.stderr
     before = pins.read_bytes(), report.read_bytes()
     # killed in the middle of a real-time run
@@ -98,9 +97,8 @@ def test_a_killed_or_failed_run_leaves_the_earlier_pin_log_and_report_intact(tmp
     proc.wait(30)
     assert (pins.read_bytes(), report.read_bytes()) == before
     # a run that fails on its input
-    bad = subprocess.run([sys.executable, "-m", "cam", "drill", str(SAMPLES / "ellipse.png"), "--depth", "2",
-                          "--start-at", "99999,0,0", "--pin-log", str(pins), "--report", str(report)],
-                         capture_output=True, text=True, env=env, timeout=120)
+    bad = run_cli("drill", SAMPLES / "ellipse.png", "--depth", "2", "--start-at", "99999,0,0", "--pin-log", pins,
+                  "--report", report)
     assert bad.returncode == 2
     assert (pins.read_bytes(), report.read_bytes()) == before
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")], "no temporary file left behind"
