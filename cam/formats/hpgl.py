@@ -62,8 +62,8 @@ from ..limits import MAX_COORD_MM, MAX_TOOL_NUMBER
 
 __all__ = [
     "HPGL_SUFFIXES", "PLOTTER_UNIT_MM", "CHUNK_BYTES", "MAX_COORD_PU",
-    "HpglCommand", "HpglScan", "HpglDrawing",
-    "iter_hpgl", "scan_hpgl", "load_hpgl", "parse_hpgl",
+    "HpglCommand", "HpglScan", "HpglDrawing", "PointBatch",
+    "iter_hpgl", "scan_hpgl", "load_hpgl", "parse_hpgl", "point_batches",
 ]
 
 PLOTTER_UNIT_MM = 0.025
@@ -764,7 +764,17 @@ def iter_hpgl(src: Source, *, source: Optional[str] = None, progress: Optional[P
 
 
 @dataclass
-class _PointBlock:
+class PointBatch:
+    """Consecutive pen-down points of a drawing, in file order: what the planner reads a batch at a time
+    (:func:`point_batches` of a file, :meth:`HpglDrawing.point_batches` of a drawing held in memory).
+
+    Attributes:
+        x, y: ``(n,)`` float64 plotter units, HPGL frame (X right, Y up).
+        line, col: ``(n,)`` int32 where in the file each point's coordinates stand.
+        start: ``(n,)`` bool, the point starts a stroke (the pen went down there).
+        pen: ``(n,)`` int32 the pen selected (``SP``) at each point; 0 = none selected.
+    """
+
     x: np.ndarray
     y: np.ndarray
     line: np.ndarray
@@ -807,7 +817,7 @@ class _Unknown:
 
 
 def _points(src: Source, *, source: Optional[str], progress: Optional[Progress], unknown: _Unknown,
-            counts: dict[int, int], chunk_bytes: int = CHUNK_BYTES) -> Iterator[_PointBlock]:
+            counts: dict[int, int], chunk_bytes: int = CHUNK_BYTES) -> Iterator[PointBatch]:
     """Pen-down points per chunk (views into reused arrays)."""
     ist = np.zeros(7, np.float64)
     err = np.zeros(5, np.int64)
@@ -842,7 +852,21 @@ def _points(src: Source, *, source: Optional[str], progress: Optional[Progress],
         uniq, cnt = np.unique(b.code[:b.n_cmd][fresh], return_counts=True)
         for u, n in zip(uniq.tolist(), cnt.tolist()):
             counts[u] = counts.get(u, 0) + n
-        yield _PointBlock(*[a[:k] for a in out])
+        yield PointBatch(*[a[:k] for a in out])
+
+
+def point_batches(src: Source, *, source: Optional[str] = None,
+                  chunk_bytes: int = CHUNK_BYTES) -> Iterator[PointBatch]:
+    """The pen-down points of an HPGL file, a chunk of the file at a time (each batch its own arrays; chunks
+    that draw nothing give none).  Memory stays flat as the file grows.
+
+    Raises:
+        ParseError: malformed input, ``file:line:column: ...``.
+    """
+    for pb in _points(src, source=_source_name(src, source), progress=None, unknown=_Unknown(), counts={},
+                      chunk_bytes=chunk_bytes):
+        if len(pb.x):
+            yield PointBatch(*(a.copy() for a in (pb.x, pb.y, pb.line, pb.col, pb.start, pb.pen)))
 
 
 def _source_name(src: Source, source: Optional[str]) -> str:
@@ -966,6 +990,27 @@ class HpglDrawing:
             return None
         lo, hi = column_range(self.points_pu)
         return (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]))
+
+    def point_batches(self, batch_points: int) -> Iterator[PointBatch]:
+        """The drawing's points as :class:`PointBatch` es of ``batch_points`` (the last: the rest), as
+        :func:`point_batches` reads them from a file: views of the drawing's arrays."""
+        n = len(self.points_pu)
+        size = max(1, int(batch_points))
+        start = np.zeros(n, bool)
+        start[self.stroke_start] = True
+        stroke = np.cumsum(start) - 1  # the stroke of each point
+        pens = np.asarray(self.stroke_pen, np.int32)
+        pen = np.where(stroke >= 0, pens[np.maximum(stroke, 0)] if len(pens) else 0, 0).astype(np.int32)
+        for a in range(0, n, size):
+            b = min(n, a + size)
+            yield PointBatch(self.points_pu[a:b, 0], self.points_pu[a:b, 1], self.point_line[a:b],
+                             self.point_col[a:b], start[a:b], pen[a:b])
+
+    def summary(self) -> HpglScan:
+        """What :func:`scan_hpgl` finds in the file the drawing was read from (``n_bytes`` 0: not known)."""
+        pens = list(dict.fromkeys(int(p) for p in self.stroke_pen))
+        return HpglScan(self.source, 0, dict(self.command_counts), self.n_strokes, len(self.points_pu), pens,
+                        self.extent_pu(), list(self.warnings))
 
 
 def load_hpgl(src: Source, *, source: Optional[str] = None, progress: Optional[Progress] = None,

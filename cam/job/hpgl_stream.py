@@ -1,19 +1,24 @@
-"""An HPGL job of any size: :func:`cam.job.hpgl.plan_hpgl`'s moves, read from the file a piece at a time.
+"""The HPGL planner: a plotter drawing to a job in machine steps, made a piece at a time (seed 004, section 3.6.2).
 
-:func:`~cam.job.hpgl.plan_hpgl` holds every point of the drawing and of the
-job (about 60 bytes per point between the reader's arrays and the job's): a
-200 MB file of 40 million points does not fit.  :class:`HpglJobStream` gives
-the same moves as a sequence of small :class:`~cam.job.model.Job` pieces,
-made from the file each time they are asked for (:meth:`HpglJobStream.pieces`):
-the reader streams a chunk of the file, its pen-down points become the
-piece's rows, and what joins one piece to the next (the last point, the pen
-in the machine, the last row) is carried over.  Concatenated, the pieces
-equal ``plan_hpgl`` of the whole drawing, row for row (tested).
+One planner for every size of drawing.  The pen-down points come as
+:class:`~cam.formats.hpgl.PointBatch` es from a source: an HPGL file read a
+chunk at a time on every pass (:func:`cam.formats.hpgl.point_batches`), or a
+drawing held in memory, its arrays sliced
+(:meth:`cam.formats.hpgl.HpglDrawing.point_batches`).  Each piece's points
+become the piece's rows (:func:`_strokes`, :func:`_rows`), and what joins one
+piece to the next (the last point, the pen in the machine, the last row) is
+carried over (:class:`_Carry`), so the pieces joined are the same job however
+the points were batched (tested).  :class:`HpglJobStream` is the job as pieces
+(a :class:`~cam.job.model.JobLike`); :func:`cam.job.hpgl.plan_hpgl` is its
+pieces joined (:meth:`HpglJobStream.joined`).
 
-A :class:`~cam.drive.chunks.ChunkedPlan` plans a stream a block of moves at a
-time (:func:`cam.drive.chunks.plan_chunks`), so a job of any length is
-planned, checked, run and pictured in bounded memory.  Nothing per point is
-kept between passes: each pass reads the file again.
+A file's job is made from the file each time it is asked for: nothing per
+point is kept between passes, so a 200 MB file of 40 million points is
+planned, checked, run and pictured in bounded memory
+(:func:`cam.drive.chunks.plan_chunks` plans a stream a block of moves at a time).
+
+Frames and units: see :mod:`cam.job.hpgl` (HPGL X right, Y up, plotter
+units; machine x = X, y = -Y, nearest step; +Z deeper).
 """
 from __future__ import annotations
 
@@ -21,34 +26,183 @@ import hashlib
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterator, Optional
+from typing import Any, Iterator, Optional, Union
 
 import numpy as np
 
-from ..errors import PlanError
-from ..formats.hpgl import CHUNK_BYTES, PLOTTER_UNIT_MM, HpglScan, _points, _Unknown, scan_hpgl
+from ..errors import PlanError, TravelError
+from ..formats.hpgl import (CHUNK_BYTES, PLOTTER_UNIT_MM, HpglDrawing, HpglScan, PointBatch, point_batches,
+                            scan_hpgl)
 from ..settings import DEFAULT_SETTINGS, MachineSettings
-from .hpgl import DEFAULT_CUT_DEPTH_MM, DEFAULT_SAFE_HEIGHT_MM, _check_xy, _z_steps
-from .model import CUT, RETRACT, TRAVEL, Job, check_travel, join_pieces
+from .model import CUT, RETRACT, TRAVEL, Job, PixelFrame, check_travel, join_pieces
 
-__all__ = ["HpglJobStream", "stream_hpgl", "STREAM_POINTS", "PIECE_POINTS"]
+__all__ = ["HpglJobStream", "stream_hpgl", "xy_steps", "STREAM_POINTS", "PIECE_POINTS", "DEFAULT_CUT_DEPTH_MM",
+           "DEFAULT_SAFE_HEIGHT_MM"]
 
+DEFAULT_CUT_DEPTH_MM = 0.5
+DEFAULT_SAFE_HEIGHT_MM = 1.0
 STREAM_POINTS = 1_000_000
-"""HPGL files with more pen-down points than this are planned as a stream (:func:`cam.job.jobs.prepare_job`)."""
+"""HPGL files with more pen-down points than this are read from the file on every pass rather than held
+(:func:`cam.job.jobs.prepare_job`); either way their job is this planner's pieces."""
 PIECE_POINTS = 1 << 17
-"""Pen-down points read into one piece (at least; a piece ends with a chunk of the file)."""
+"""Pen-down points planned into one piece (at least; a piece of a file ends with a chunk of the file)."""
+
+
+def xy_steps(x_pu: np.ndarray, y_pu: np.ndarray, extent_pu: Optional[tuple[float, float, float, float]],
+             settings: MachineSettings, offset_mm: Optional[tuple[float, float]]) -> np.ndarray:
+    """``(N, 2)`` int64 machine ``(x, y)`` steps of ``(N,)`` plotter points (HPGL frame, Y up).
+
+    ``offset_mm`` None: the drawing's top-left (``x_min``, ``y_max`` of ``extent_pu``, the whole drawing's
+    ``(x_min, y_min, x_max, y_max)`` plotter units) at the home; else plotter (0, 0) at machine ``offset_mm``.
+    Nearest step: ``floor(v + 0.5)`` of the exact position in steps.
+    """
+    if offset_mm is None:
+        x0, _, _, y1 = extent_pu if extent_pu is not None else (0.0, 0.0, 0.0, 0.0)
+        k = PLOTTER_UNIT_MM / settings.mm_per_step_xy
+        x_steps, y_steps = (x_pu - x0) * k, (y1 - y_pu) * k
+    else:
+        ox, oy = offset_mm
+        x_steps = (ox + x_pu * PLOTTER_UNIT_MM) / settings.mm_per_step_xy
+        y_steps = (oy - y_pu * PLOTTER_UNIT_MM) / settings.mm_per_step_xy
+    return np.floor(np.column_stack([x_steps, y_steps]) + 0.5).astype(np.int64)
+
+
+def _z_steps(depth_mm: float, safe_height_mm: float, settings: MachineSettings) -> tuple[int, int]:
+    """(cutting depth, safe height) in Z steps (+Z deeper: the safe height is <= 0), checked against the Z travel."""
+    _, _, (z_lo, z_hi) = settings.travel.bounds_steps()
+    depth_steps = int(round(depth_mm / settings.mm_per_step_z))
+    safe_steps = -int(round(safe_height_mm / settings.mm_per_step_z))
+    if depth_steps < 1:
+        raise PlanError(f"cutting depth {depth_mm:g} mm is less than one Z step ({settings.mm_per_step_z:g} mm)")
+    if depth_steps > z_hi or safe_steps < z_lo:
+        raise TravelError(f"cutting depth {depth_mm:g} mm and safe height {safe_height_mm:g} mm need Z "
+                          f"{safe_steps}..{depth_steps} steps; the Z travel is {z_lo}..{z_hi} steps")
+    return depth_steps, safe_steps
+
+
+def _check_xy(source: str, batch: PointBatch, xy: np.ndarray, settings: MachineSettings) -> None:
+    """TravelError naming the first point (``file:line:column``) of ``batch`` whose ``(n, 2)`` machine steps
+    ``xy`` leave the travel."""
+    (x_lo, x_hi), (y_lo, y_hi), _ = settings.travel.bounds_steps()
+    bad = np.flatnonzero((xy[:, 0] < x_lo) | (xy[:, 0] > x_hi) | (xy[:, 1] < y_lo) | (xy[:, 1] > y_hi))
+    if len(bad):
+        i = int(bad[0])
+        mm = settings.mm_per_step_xy
+        raise TravelError(
+            f"{source}:{int(batch.line[i])}:{int(batch.col[i])}: point "
+            f"X{batch.x[i]:g} Y{batch.y[i]:g} (plotter units) lies outside the machine "
+            f"travel (machine {xy[i, 0] * mm:.2f}, {xy[i, 1] * mm:.2f} mm; travel X {x_lo * mm:g}..{x_hi * mm:g} mm, "
+            f"Y {y_lo * mm:g}..{y_hi * mm:g} mm)"
+        )
 
 
 @dataclass
 class _Carry:
-    """What joins one piece of the job to the next (see :meth:`HpglJobStream.pieces`)."""
+    """What joins one piece of the job to the next (see :meth:`HpglJobStream.pieces`); machine steps."""
 
     last_raw: Optional[np.ndarray] = None  # (2,) the last point read (before duplicates were dropped)
     last_kept: Optional[np.ndarray] = None  # (2,) the last point cut (None: none yet)
-    last_pen: int = 0  # the last pen selected (0: none yet): the tool in the machine
-    prev_tool: int = 0  # the tool of the previous stroke
+    tool: int = 0  # the tool in the machine: the last pen selected (0: none yet)
     last_row: Optional[np.ndarray] = None  # (3,) the last row of the job (None: no row yet)
     n_strokes: int = 0
+
+
+def _strokes(xy: np.ndarray, start: np.ndarray, pen: np.ndarray,
+             carry: _Carry) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, list[str]]:
+    """A piece's points to cut, and where the tool lifts or changes (``carry`` is read and moved on).
+
+    Args:
+        xy: ``(n, 2)`` int64 machine steps of the piece's points; start: ``(n,)`` bool, a stroke starts
+            there; pen: ``(n,)`` the pen selected at each point (0: none: keep the tool that is in).
+
+    Returns:
+        ``xy`` ``(K, 2)`` without the points at the same step as the one before in their stroke;
+        ``group`` ``(K,)`` bool, a lift and a plunge before the point (a stroke that does not begin within
+        one step of where the last one ended, with the same tool; the job's first always plunges);
+        ``pause_group`` ``(K,)`` bool, a tool change before the point; ``before`` ``(K, 2)`` int64 the point
+        cut before each (the home before the job's first); the pause notes (``"tool change: pen N"``).
+    """
+    prev_raw = np.vstack([carry.last_raw[None, :] if carry.last_raw is not None else xy[:1] + 1, xy[:-1]]) \
+        if len(xy) else xy
+    dup = np.all(xy == prev_raw, axis=1) & ~start
+    if len(xy):
+        carry.last_raw = xy[-1].copy()
+    xy, start = xy[~dup], start[~dup]
+    pens = pen[~dup][start].astype(np.int64)
+    # the tool of each stroke: pen 0 keeps the one in the machine
+    have = np.where(pens != 0, np.arange(len(pens)), -1)
+    last_i = np.maximum.accumulate(have) if len(pens) else have
+    tool = np.where(last_i >= 0, pens[np.maximum(last_i, 0)], carry.tool)
+    prev_tool = np.concatenate([[carry.tool], tool[:-1]]).astype(np.int64)
+    change = (tool != 0) & (tool != prev_tool)
+    if len(tool):
+        carry.tool = int(tool[-1])
+    starts = np.flatnonzero(start)
+    before = np.vstack([carry.last_kept[None, :] if carry.last_kept is not None else np.zeros((1, 2), np.int64),
+                        xy[:-1]]) if len(xy) else np.zeros((0, 2), np.int64)
+    joined = np.zeros(len(starts), bool)
+    if len(starts):
+        gap = np.abs(xy[starts] - before[starts]).max(axis=1)
+        joined = (gap <= 1) & ~change
+        if carry.n_strokes == 0:
+            joined[0] = False  # the first stroke of the job always plunges
+    carry.n_strokes += len(starts)
+    if len(xy):
+        carry.last_kept = xy[-1].copy()
+    group = np.zeros(len(xy), bool)
+    group[starts[~joined]] = True
+    pause_group = np.zeros(len(xy), bool)
+    pause_group[starts] = change
+    return xy, group, pause_group, before, [f"tool change: pen {int(t)}" for t in tool[change]]
+
+
+def _rows(xy: np.ndarray, group: np.ndarray, pause_group: np.ndarray, depth_steps: int, safe_steps: int, *,
+          before: Optional[np.ndarray] = None, finish: bool = True, end_xy: Optional[np.ndarray] = None,
+          last_row: Optional[np.ndarray] = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The ``(R, 3)`` int64 points (machine steps), ``(R,)`` uint8 kinds and ``(R,)`` bool pauses of the
+    ``(K, 2)`` points ``xy`` to cut (:func:`_strokes`; :func:`cam.job.svg.plan_svg` plans the whole job with it).
+
+    Before each ``group`` point: lift where the tool is, travel above the point, plunge (a ``pause_group``
+    point pauses at the lift).  ``before``: ``(K, 2)`` where the tool is before each point (default: the point
+    before it, the home before the first).  ``finish``: the job ends here: lift at ``end_xy`` (default the
+    last point), travel to above the home, down to it.  ``last_row``: ``(3,)`` the row before these (the
+    previous piece's last; None: the job's row 0 is here, it stays).  Moves of length 0 are dropped.
+    """
+    if before is None:
+        before = np.vstack([np.zeros((1, 2), np.int64), xy[:-1]]) if len(xy) else np.zeros((0, 2), np.int64)
+    rows = np.where(group, 3, 1)
+    first = np.cumsum(rows) - rows
+    total = int(rows.sum()) + (3 if finish else 0)
+    pts = np.empty((total, 3), np.int64)
+    kind = np.full(total, CUT, np.uint8)
+    pause = np.zeros(total, bool)
+    gi = np.flatnonzero(group)
+    r0 = first[gi]
+    pts[r0, :2], pts[r0, 2], kind[r0] = before[gi], safe_steps, RETRACT  # lift where the tool is
+    pts[r0 + 1, :2], pts[r0 + 1, 2], kind[r0 + 1] = xy[gi], safe_steps, TRAVEL  # travel above the stroke
+    pts[r0 + 2, :2], pts[r0 + 2, 2] = xy[gi], depth_steps  # plunge
+    pause[r0] = pause_group[gi]
+    ci = np.flatnonzero(~group)
+    pts[first[ci], :2], pts[first[ci], 2] = xy[ci], depth_steps
+    if finish:
+        end = end_xy if end_xy is not None else (xy[-1] if len(xy) else np.zeros(2, np.int64))
+        pts[-3] = (end[0], end[1], safe_steps)
+        kind[-3] = RETRACT
+        pts[-2] = (0, 0, safe_steps)
+        pts[-1] = (0, 0, 0)
+        kind[-2:] = TRAVEL
+    # drop moves of length 0 (the job's row 0 stays: a pause at the start needs a point); a pause moves to the
+    # kept point.  A lift, where the pauses are, never repeats the row before it (that one is at the cutting
+    # depth), so a pause never moves to another piece.
+    same = np.zeros(total, bool)
+    if total:
+        same[1:] = np.all(pts[1:] == pts[:-1], axis=1)
+        same[0] = last_row is not None and bool(np.all(pts[0] == last_row))
+    if pause[same].any():
+        idx = np.maximum.accumulate(np.where(~same, np.arange(total), 0))
+        pause[idx[pause & same]] = True
+    keep = ~same
+    return pts[keep], kind[keep], pause[keep]
 
 
 class _Hashes:
@@ -63,26 +217,39 @@ class _Hashes:
             self.h.update(b"\0")
 
 
+def _batch_of(held: list[PointBatch]) -> PointBatch:
+    """One :class:`~cam.formats.hpgl.PointBatch` of consecutive batches (none: no points)."""
+    if len(held) == 1:
+        return held[0]
+    if not held:
+        return PointBatch(np.zeros(0), np.zeros(0), np.zeros(0, np.int32), np.zeros(0, np.int32), np.zeros(0, bool),
+                          np.zeros(0, np.int32))
+    return PointBatch(*(np.concatenate([getattr(b, name) for b in held])
+                        for name in ("x", "y", "line", "col", "start", "pen")))
+
+
 @dataclass
 class HpglJobStream:
-    """The moves of :func:`cam.job.hpgl.plan_hpgl` of an HPGL file, as pieces read from the file on demand.
+    """The HPGL job as consecutive :class:`~cam.job.model.Job` pieces (a :class:`~cam.job.model.JobLike`):
+    :func:`cam.job.hpgl.plan_hpgl` is :meth:`joined`.
 
-    It stands for a :class:`~cam.job.model.Job` where a whole job does not fit: :meth:`pieces` gives
-    consecutive Jobs (their points in steps from the job's home, as the whole job's), and the attributes
-    every job has (``settings``, ``safe_z_steps``, ``source``, ...) are here.  ``len()`` is the number of
-    moves, known after a first pass (:meth:`pieces` run to its end; :func:`stream_hpgl` makes one).
+    :meth:`pieces` plans them anew on each pass from the points of ``src``: an HPGL file (read a chunk at
+    a time: nothing per point is held) or a drawing held in memory.  Their points are in steps from the
+    job's home (the frame of :class:`~cam.job.model.Job`); the attributes of the whole job are here.
+    ``len()`` is the number of moves, known after a first pass (:meth:`pieces` run to its end).
 
     Attributes:
-        path: the HPGL file; scan: what a first streamed pass over it found (extent, counts, pens).
+        src: the HPGL file, or the drawing; scan: what a first pass over it found (extent, counts, pens).
         settings, depth_steps, safe_z_steps: the machine settings, the cutting depth and the travel height
             (Z steps, +Z deeper: the travel height is <= 0).
         offset_mm: as :func:`~cam.job.hpgl.plan_hpgl`'s.
-        piece_points: pen-down points read into a piece (at least).
-        n_moves: moves of the job (-1 until a pass ended); fingerprint: the stream's plan fingerprint
-            (after a pass).
+        piece_points: pen-down points planned into a piece (at least); chunk_bytes: bytes of a file read at once.
+        n_moves: moves of the job (-1 until a pass ended); fingerprint: the job's plan fingerprint and
+            pause_notes: its pauses' notes (after a pass).
+        pixels, tool: None (no drawing frame; the point tool).
     """
 
-    path: Path
+    src: Union[Path, HpglDrawing]
     scan: HpglScan
     settings: MachineSettings
     depth_steps: int
@@ -93,12 +260,7 @@ class HpglJobStream:
     n_moves: int = -1
     fingerprint: str = ""
     pause_notes: list[str] = field(default_factory=list)
-    # a Job's other attributes, for the code that reads them off any job
-    pixels: Any = None
-    period_ns: Any = None
-    periods: Any = None
-    move_start: Any = None
-    rest: Any = None
+    pixels: Optional[PixelFrame] = None
     tool: Any = None
 
     @property
@@ -119,184 +281,88 @@ class HpglJobStream:
         """Every move in one :class:`~cam.job.model.Job` (:func:`~cam.job.model.join_pieces` of :meth:`pieces`)."""
         return join_pieces(self.pieces(), self)
 
+    to_job = joined
+
+    def _batches(self) -> Iterator[PointBatch]:
+        """The pen-down points, in order: the file's a chunk at a time, or the drawing's sliced."""
+        if isinstance(self.src, HpglDrawing):
+            return self.src.point_batches(self.piece_points)
+        return point_batches(self.src, source=self.scan.source, chunk_bytes=self.chunk_bytes)
+
     def pieces(self) -> Iterator[Job]:
         """The job's moves as consecutive :class:`~cam.job.model.Job` pieces (each of at least
-        ``piece_points`` pen-down points but the last), read from the file.
+        ``piece_points`` pen-down points but the last).
 
         Raises:
             ParseError: the file changed into something malformed since it was scanned;
             TravelError: a point lies outside the machine travel (``file:line:column``).
         """
-        carry = _Carry()
-        hashes = _Hashes()
+        carry, hashes = _Carry(), _Hashes()
         notes: list[str] = []
-        n_moves = 0
-        unknown, counts = _Unknown(), {}
-        held: list[tuple[np.ndarray, ...]] = []
-        have = 0
-        for pb in _points(self.path, source=self.scan.source, progress=None, unknown=unknown, counts=counts,
-                          chunk_bytes=self.chunk_bytes):
-            if not len(pb.x):
-                continue
-            held.append((pb.x.copy(), pb.y.copy(), pb.line.copy(), pb.col.copy(), pb.start.copy(), pb.pen.copy()))
-            have += len(pb.x)
-            if have >= self.piece_points:
-                piece = self._piece(held, carry, last=False)
-                held, have = [], 0
-                if piece is not None:
-                    hashes.add(piece)
-                    notes += piece.pause_notes or []
-                    n_moves += len(piece)
-                    yield piece
-        piece = self._piece(held, carry, last=True)
-        if piece is not None:
-            hashes.add(piece)
-            notes += piece.pause_notes or []
-            n_moves += len(piece)
-            yield piece
+        n_moves = have = 0
+        held: list[PointBatch] = []
+        batches = self._batches()
+        while True:
+            batch = next(batches, None)
+            if batch is not None:
+                held.append(batch)
+                have += len(batch.x)
+                if have < max(1, self.piece_points):
+                    continue
+            piece = self._piece(_batch_of(held), carry, last=batch is None)
+            held, have = [], 0
+            if piece is not None:
+                hashes.add(piece)
+                notes += piece.pause_notes or []
+                n_moves += len(piece)
+                yield piece
+            if batch is None:
+                break
         self.n_moves, self.fingerprint, self.pause_notes = n_moves, hashes.h.hexdigest(), notes
 
-    def _xy(self, x_pu: np.ndarray, y_pu: np.ndarray) -> np.ndarray:
-        """``(N, 2)`` int64 machine steps of plotter points, as :func:`cam.job.hpgl.hpgl_steps` of the whole drawing."""
-        s = self.settings
-        if self.offset_mm is None:
-            x0, _, _, y1 = self.scan.extent_pu  # type: ignore[misc]
-            k = PLOTTER_UNIT_MM / s.mm_per_step_xy
-            x_steps, y_steps = (x_pu - x0) * k, (y1 - y_pu) * k
-        else:
-            ox, oy = self.offset_mm
-            x_steps = (ox + x_pu * PLOTTER_UNIT_MM) / s.mm_per_step_xy
-            y_steps = (oy - y_pu * PLOTTER_UNIT_MM) / s.mm_per_step_xy
-        return np.floor(np.column_stack([x_steps, y_steps]) + 0.5).astype(np.int64)
-
-    def _piece(self, held: list[tuple[np.ndarray, ...]], carry: _Carry, *, last: bool) -> Optional[Job]:
-        """The rows of the points in ``held`` (``plan_hpgl``'s ``_strokes`` and ``_rows`` with ``carry``);
-        ``last``: the job's end (lift, back above the home, down to it) follows."""
-        if held:
-            x, y, line, col, start, pen = (np.concatenate([h[j] for h in held]) for j in range(6))
-        else:
-            x = y = np.zeros(0)
-            line = col = pen = np.zeros(0, np.int32)
-            start = np.zeros(0, bool)
-        xy = self._xy(x, y)
-        if len(xy):
-            _check_xy(_PointsView(self.scan.source, np.column_stack([x, y]), line, col), xy, self.settings)
-        depth, safe = self.depth_steps, self.safe_z_steps
-        # _strokes: drop a point at the same step as the one before in its stroke
-        prev_raw = np.vstack([carry.last_raw[None, :] if carry.last_raw is not None else xy[:1] + 1, xy[:-1]]) \
-            if len(xy) else xy
-        dup = np.all(xy == prev_raw, axis=1) & ~start
-        if len(xy):
-            carry.last_raw = xy[-1].copy()
-        xy, start = xy[~dup], start[~dup]
-        pens = pen[~dup][start].astype(np.int64)
-        # the tool of each stroke: pen 0 keeps the one in the machine
-        have = np.where(pens != 0, np.arange(len(pens)), -1)
-        last_i = np.maximum.accumulate(have) if len(pens) else have
-        tool = np.where(last_i >= 0, pens[np.maximum(last_i, 0)], carry.last_pen)
-        prev_tool = np.concatenate([[carry.prev_tool], tool[:-1]]).astype(np.int64)
-        change = (tool != 0) & (tool != prev_tool)
-        if len(tool):
-            carry.last_pen, carry.prev_tool = int(tool[-1]), int(tool[-1])
-        starts = np.flatnonzero(start)
-        kept_prev = np.vstack([carry.last_kept[None, :] if carry.last_kept is not None else np.zeros((1, 2), np.int64),
-                               xy[:-1]]) if len(xy) else np.zeros((0, 2), np.int64)
-        joined = np.zeros(len(starts), bool)
-        if len(starts):
-            gap = np.abs(xy[starts] - kept_prev[starts]).max(axis=1)
-            joined = (gap <= 1) & ~change
-            if carry.n_strokes == 0:
-                joined[0] = False  # the first stroke of the job always plunges
-        carry.n_strokes += len(starts)
-        group = np.zeros(len(xy), bool)
-        group[starts[~joined]] = True
-        pause_group = np.zeros(len(xy), bool)
-        pause_group[starts] = change
-        # _rows
-        rows = np.where(group, 3, 1)
-        first = np.cumsum(rows) - rows
-        total = int(rows.sum()) + (3 if last else 0)
-        pts = np.empty((total, 3), np.int64)
-        kind = np.full(total, CUT, np.uint8)
-        pause = np.zeros(total, bool)
-        gi = np.flatnonzero(group)
-        r0 = first[gi]
-        pts[r0, :2], pts[r0, 2], kind[r0] = kept_prev[gi], safe, RETRACT
-        pts[r0 + 1, :2], pts[r0 + 1, 2], kind[r0 + 1] = xy[gi], safe, TRAVEL
-        pts[r0 + 2, :2], pts[r0 + 2, 2] = xy[gi], depth
-        pause[r0] = pause_group[gi]
-        ci = np.flatnonzero(~group)
-        pts[first[ci], :2], pts[first[ci], 2] = xy[ci], depth
-        if len(xy):
-            carry.last_kept = xy[-1].copy()
-        if last:
-            end = carry.last_kept if carry.last_kept is not None else np.zeros(2, np.int64)
-            pts[-3] = (end[0], end[1], safe)
-            kind[-3] = RETRACT
-            pts[-2] = (0, 0, safe)
-            pts[-1] = (0, 0, 0)
-            kind[-2:] = TRAVEL
-        # drop moves of length 0 (the job's row 0 stays); a lift, where the pauses are, never repeats the row
-        # before it (that one is at the cutting depth), so a pause never moves to another piece
-        same = np.zeros(total, bool)
-        if total:
-            same[1:] = np.all(pts[1:] == pts[:-1], axis=1)
-            same[0] = carry.last_row is not None and bool(np.all(pts[0] == carry.last_row))
-        if pause[same].any():
-            idx = np.maximum.accumulate(np.where(~same, np.arange(total), 0))
-            pause[idx[pause & same]] = True
-        keep = ~same
-        pts, kind, pause = pts[keep], kind[keep], pause[keep]
+    def _piece(self, batch: PointBatch, carry: _Carry, *, last: bool) -> Optional[Job]:
+        """The rows of the points of ``batch`` (None: none are left); ``last``: the job's end follows."""
+        xy = xy_steps(batch.x, batch.y, self.scan.extent_pu, self.settings, self.offset_mm)
+        _check_xy(self.source, batch, xy, self.settings)
+        xy, group, pause_group, before, notes = _strokes(xy, batch.start, batch.pen, carry)
+        pts, kind, pause = _rows(xy, group, pause_group, self.depth_steps, self.safe_z_steps, before=before,
+                                 finish=last, end_xy=carry.last_kept, last_row=carry.last_row)
         if not len(pts):
             return None
         carry.last_row = pts[-1].copy()
         check_travel(pts, self.settings)
-        notes = [f"tool change: pen {int(t)}" for t in tool[change]]
-        return Job(points_steps=pts, kind=kind, target=(kind == CUT) & (pts[:, 2] == depth), pause=pause,
-                   settings=self.settings, warnings=[], pause_notes=notes, source=self.scan.source,
-                   safe_z_steps=self.safe_z_steps)
-
-    def to_job(self) -> Job:
-        """Every piece joined into one :class:`~cam.job.model.Job` (small files and tests: it holds every point)."""
-        parts = list(self.pieces())
-        return Job(points_steps=np.concatenate([p.points_steps for p in parts]),
-                   kind=np.concatenate([p.kind for p in parts]), target=np.concatenate([p.target for p in parts]),
-                   pause=np.concatenate([p.pause for p in parts]), settings=self.settings,
-                   warnings=self.warnings, pause_notes=list(self.pause_notes), source=self.source,
+        return Job(points_steps=pts, kind=kind, target=(kind == CUT) & (pts[:, 2] == self.depth_steps), pause=pause,
+                   settings=self.settings, warnings=[], pause_notes=notes, source=self.source,
                    safe_z_steps=self.safe_z_steps)
 
 
-@dataclass
-class _PointsView:
-    """What :func:`cam.job.hpgl._check_xy` reads off a drawing, for one piece's points."""
-
-    source: str
-    points_pu: np.ndarray
-    point_line: np.ndarray
-    point_col: np.ndarray
-
-
-def stream_hpgl(path: str | os.PathLike, *, settings: MachineSettings = DEFAULT_SETTINGS,
+def stream_hpgl(src: Union[str, os.PathLike, HpglDrawing], *, settings: MachineSettings = DEFAULT_SETTINGS,
                 depth_mm: float = DEFAULT_CUT_DEPTH_MM, safe_height_mm: float = DEFAULT_SAFE_HEIGHT_MM,
                 offset_mm: Optional[tuple[float, float]] = None, scan: Optional[HpglScan] = None,
                 piece_points: int = PIECE_POINTS, chunk_bytes: int = CHUNK_BYTES) -> HpglJobStream:
-    """:func:`cam.job.hpgl.plan_hpgl` of an HPGL file as a :class:`HpglJobStream` (bounded memory).
+    """The HPGL job of a file or a drawing as a :class:`HpglJobStream` (a file's: bounded memory).
 
     Args:
-        path: the HPGL file (read once to scan it unless ``scan`` is given, then on every pass).
+        src: the HPGL file (read once to scan it unless ``scan`` is given, then on every pass), or a drawing
+            held in memory (:func:`cam.formats.hpgl.load_hpgl`).
         settings, depth_mm, safe_height_mm, offset_mm: as :func:`~cam.job.hpgl.plan_hpgl`.
         scan: the file's :func:`~cam.formats.hpgl.scan_hpgl`, if made already.
         piece_points, chunk_bytes: pen-down points per piece (at least), bytes read at a time.
 
     Raises:
-        PlanError: bad options, nothing drawn; ParseError: a malformed file; TravelError: a point outside
-        the travel (found as the pieces are made).
+        PlanError: bad options, nothing drawn; ParseError: a malformed file; TravelError: the depths outside
+        the Z travel, a point outside the travel (found as the pieces are made).
     """
     if not (depth_mm > 0) or not (safe_height_mm >= 0):
         raise PlanError("the cutting depth must be > 0 mm and the safe height >= 0 mm")
-    scan = scan if scan is not None else scan_hpgl(path, chunk_bytes=chunk_bytes)
+    if isinstance(src, HpglDrawing):
+        points: Union[Path, HpglDrawing] = src
+        scan = src.summary()
+    else:
+        points = Path(src)
+        scan = scan if scan is not None else scan_hpgl(src, chunk_bytes=chunk_bytes)
     if scan.n_points == 0:
         raise PlanError(f"{scan.source}: nothing to cut (no pen-down moves)")
     depth_steps, safe_steps = _z_steps(depth_mm, safe_height_mm, settings)
-    return HpglJobStream(Path(path), scan, settings, depth_steps, safe_steps, offset_mm, int(piece_points),
+    return HpglJobStream(points, scan, settings, depth_steps, safe_steps, offset_mm, max(1, int(piece_points)),
                          int(chunk_bytes))

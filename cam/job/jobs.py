@@ -43,7 +43,7 @@ from ..errors import CamError
 from ..formats.excellon import load_excellon
 from ..formats.gcode import load_gcode, load_tool_table
 from ..limits import DEFAULT_GCODE_LINES, MAX_GCODE_LINES
-from ..formats.hpgl import load_hpgl, scan_hpgl
+from ..formats.hpgl import scan_hpgl
 from ..formats.svg import load_svg
 from ..digitize.sketch import DEFAULT_MIN_LENGTH_PX, load_sketch, trace
 from ..tool import parse_tool, tool_of_settings
@@ -59,7 +59,6 @@ from .drill import plan_drill
 from .gcode import plan_gcode
 from .hpgl import DEFAULT_CUT_DEPTH_MM as HPGL_CUT_DEPTH_MM
 from .hpgl import DEFAULT_SAFE_HEIGHT_MM as HPGL_SAFE_HEIGHT_MM
-from .hpgl import plan_hpgl
 from .drawing_stream import STREAM_TARGETS, stream_drawing
 from .hpgl_stream import STREAM_POINTS, stream_hpgl
 from .resume_stream import resume_stream
@@ -711,25 +710,16 @@ def _engraving(options: JobOptions, settings: MachineSettings, default_depth_mm:
 def _prepare_hpgl(path: Path, options: JobOptions, settings: MachineSettings, progress=None) -> PreparedJob:
     depth_mm, engraving = _engraving(options, settings, HPGL_CUT_DEPTH_MM)
     scan = scan_hpgl(path, progress=progress)
-    if scan.n_points > STREAM_POINTS:  # read from the file a piece at a time on every pass: bounded memory
-        toolpath = stream_hpgl(path, settings=settings, depth_mm=depth_mm,
-                               safe_height_mm=_or(options.travel_height_mm, HPGL_SAFE_HEIGHT_MM),
-                               offset_mm=options.offset_mm, scan=scan)
-        return PreparedJob(
-            source=str(path), kind="hpgl", plan=plan_chunks(toolpath), settings=settings, toolpath=toolpath,
-            warnings=list(scan.warnings), summary=f"{path.name}: {scan.n_strokes} pen-down strokes",
-            report={"strokes": scan.n_strokes, "points": scan.n_points, "pens": sorted(set(scan.pens)),
-                    **engraving})
-    drawing = load_hpgl(path)
-    toolpath = plan_hpgl(drawing, settings=settings, depth_mm=depth_mm,
+    stream = stream_hpgl(path, settings=settings, depth_mm=depth_mm,
                          safe_height_mm=_or(options.travel_height_mm, HPGL_SAFE_HEIGHT_MM),
-                         offset_mm=options.offset_mm)
-    steps = plan_chunks(toolpath)
+                         offset_mm=options.offset_mm, scan=scan)
+    # one planner whatever the size: above STREAM_POINTS its pieces are read from the file on every pass (bounded
+    # memory), below they are joined and held (the step planner then sees every move: linear40 ramps)
+    toolpath = stream if scan.n_points > STREAM_POINTS else stream.joined()
     return PreparedJob(
-        source=str(path), kind="hpgl", plan=steps, settings=settings, toolpath=toolpath,
-        warnings=list(drawing.warnings), summary=f"{path.name}: {drawing.n_strokes} pen-down strokes",
-        report={"strokes": drawing.n_strokes, "points": len(drawing.points_pu),
-                "pens": sorted(set(int(p) for p in drawing.stroke_pen)), **engraving},
+        source=str(path), kind="hpgl", plan=plan_chunks(toolpath), settings=settings, toolpath=toolpath,
+        warnings=list(scan.warnings), summary=f"{path.name}: {scan.n_strokes} pen-down strokes",
+        report={"strokes": scan.n_strokes, "points": scan.n_points, "pens": sorted(set(scan.pens)), **engraving},
     )
 
 
