@@ -4,14 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import serial  # noqa: F401  (pyserial: a core dependency, the MAXIMUS port)
 
 import cam
 from cam.cli import main
 from cam.job.drill import plan_drill
 from cam.verify.pinlog import decode_pin_log, read_pin_log
 from cam.drive.runner import run
-
-pytest.importorskip("serial")
 
 TOOLS_MM = {1: 1.0, 2: 0.8, 3: 3.2}  # T2 is the smallest: it is drilled first
 

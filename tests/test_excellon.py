@@ -44,7 +44,6 @@ def _gerbonara(text: str, settings, name: str):
 
 @pytest.mark.parametrize("style", sorted(gen.STYLES))
 def test_generated_styles_match_gerbonara_and_the_written_holes(style):
-    pytest.importorskip("gerbonara")
     g = gen.STYLES[style](BOARD)
     holes = parse_excellon(g.text, source=f"{style}.drl")
     assert len(holes.holes_mm) == len(BOARD.holes_mm) > 200

@@ -102,7 +102,6 @@ def test_gcode_job_with_tool_change(tmp_path):
 
 
 def test_excellon_job(tmp_path):
-    pytest.importorskip("cam.formats.excellon")
     path = tmp_path / "b.drl"
     path.write_text("M48\nMETRIC,LZ\nT1C0.8\nT2C1.0\n%\nT1\nX5.0Y5.0\nX10.0Y5.0\nT2\nX10.0Y10.0\nM30\n")
     job = prepare_job(path, JobOptions(cut_depth_mm=1.0), FAST)
@@ -115,7 +114,6 @@ def test_excellon_job(tmp_path):
 
 
 def test_hpgl_job(tmp_path):
-    pytest.importorskip("cam.formats.hpgl")
     path = tmp_path / "d.plt"
     path.write_text("IN;SP1;PU0,0;PD400,0,400,400,0,400,0,0;PU;SP2;PA800,800;PD;PA1200,800;PU;\n")
     job = prepare_job(path, JobOptions(cut_depth_mm=0.3), FAST)

@@ -7,8 +7,7 @@ import time
 
 import numpy as np
 import pytest
-
-serial = pytest.importorskip("serial")
+import serial
 
 from cam.errors import PlanError, PortError  # noqa: E402
 from cam.settings import Maximus  # noqa: E402

@@ -8,8 +8,6 @@ import json
 import numpy as np
 import pytest
 
-pytest.importorskip("serial")
-
 from cam.cli import main  # noqa: E402
 from cam.drive.maximus.board import MAXIMUS_SETTINGS  # noqa: E402
 from cam.drive.maximus.packets import drill_packet, drill_time_ns, init_packet, jog_packet, jog_time_ns  # noqa: E402

@@ -14,8 +14,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-pytest.importorskip("serial")
-
 from cam.cli import main  # noqa: E402
 from cam.drive.maximus.board import MAXIMUS_SETTINGS  # noqa: E402
 from cam.sim.maximus import MODE_SELECTION, start_emulator  # noqa: E402

@@ -10,9 +10,6 @@ from cam.job.jobs import JobOptions, prepare_job
 
 from conftest import ROOT, SAMPLES
 
-pytest.importorskip("uvicorn")
-pytest.importorskip("starlette")
-
 from test_web import FAST, Server, browser  # noqa: E402,F401  (the real server on a free port, in a thread;
 # the browser fixture: Debian chromium through Playwright)
 

@@ -18,15 +18,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import uvicorn
 
 import cam
 from cam.drive.runner import EMERGENCY_STOPPED, FINISHED
 from cam.job.jobs import JobOptions, prepare_job
 
 from conftest import SAMPLES, assert_surface_equal
-
-uvicorn = pytest.importorskip("uvicorn")
-pytest.importorskip("starlette")
 
 from cam.web.server import ServerConfig, bind_socket, create_app, safe_name, uvicorn_config  # noqa: E402
 
@@ -340,7 +338,8 @@ def test_jog_travel_limits_and_origin(fast):
 
 @pytest.fixture(scope="module")
 def browser():
-    sync_api = pytest.importorskip("playwright.sync_api")
+    from playwright import sync_api
+
     if not os.path.exists(CHROMIUM) and not os.environ.get("CI"):
         pytest.skip("Debian chromium not installed")
     with sync_api.sync_playwright() as pw:
@@ -476,7 +475,6 @@ def test_page_runs_gcode_with_a_tool_change_prompt(page, fast, tmp_path):
 
 
 def test_page_runs_an_excellon_file(page, fast, tmp_path):
-    pytest.importorskip("cam.formats.excellon")
     path = tmp_path / "board.drl"
     path.write_text(EXCELLON)
     _open(page, fast)
