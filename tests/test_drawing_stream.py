@@ -206,10 +206,10 @@ def _streams():
 
 @pytest.mark.parametrize("kind", ["drawing", "hpgl"])
 def test_a_resumed_stream_equals_the_resumed_whole_job(kind):
-    """resume_stream, joined, is resume_toolpath of the whole job at any stop: points, kinds, pauses and their
+    """resume_pieces of the stream, joined, is resume_toolpath of the whole job at any stop: points, kinds, pauses and their
     notes, and the move each point completes."""
     from cam.job.resume import resume_toolpath
-    from cam.job.resume_stream import resume_stream
+    from cam.job.resume import resume_pieces
     stream = _streams()[kind]
     whole = stream.to_job()
     n = len(whole.points_steps)
@@ -221,7 +221,7 @@ def test_a_resumed_stream_equals_the_resumed_whole_job(kind):
         for pending in (False, True):
             pos = tuple(int(v) for v in np.maximum(whole.points_steps[max(k, 0)] + rng.integers(-3, 4, 3), 0))
             want, index, j = resume_toolpath(whole, k, pos, pause_pending=pending)
-            got, move_index, j2 = resume_stream(stream, k, pos, pause_pending=pending)
+            got, move_index, j2 = resume_pieces(stream, k, pos, pause_pending=pending)
             joined = list(got.pieces())
             for attr in ("points_steps", "kind", "target", "pause"):
                 np.testing.assert_array_equal(np.concatenate([getattr(p, attr) for p in joined]), getattr(want, attr),

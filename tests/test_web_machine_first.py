@@ -9,6 +9,7 @@ import os
 import time
 
 import numpy as np
+import pytest
 
 import cam
 from conftest import SAMPLES
@@ -88,7 +89,19 @@ def test_planning_over_the_work_memory_limit_is_a_clean_error(tmp_path):
         s.close()
 
 
-def test_serve_limits_options_reach_the_server_and_bad_ones_are_one_line(tmp_path):
+def test_serve_bad_limits_are_one_line():
+    from conftest import run_cli
+
+    bad = run_cli("serve", "--max-connections", "5", "--max-event-streams", "9")
+    assert bad.returncode == 2 and len(bad.stderr.strip().splitlines()) == 1
+    assert "max_event_streams (9) must be below max_connections (5)" in bad.stderr
+    bad = run_cli("serve", "--work-time-limit", "0")
+    assert bad.returncode == 2 and "--work-time-limit" in bad.stderr
+
+
+@pytest.mark.slow
+def test_serve_limits_options_reach_the_server(tmp_path):
+    """``cam serve`` as a process: its work time limit reaches the page's planning."""
     import json
     import re
     import subprocess
@@ -99,13 +112,6 @@ def test_serve_limits_options_reach_the_server_and_bad_ones_are_one_line(tmp_pat
     from conftest import ROOT
 
     env = dict(os.environ, PYTHONPATH=str(ROOT))
-    bad = subprocess.run([sys.executable, "-m", "cam", "serve", "--max-connections", "5", "--max-event-streams", "9"],
-                         capture_output=True, text=True, env=env, timeout=60)
-    assert bad.returncode == 2 and len(bad.stderr.strip().splitlines()) == 1
-    assert "max_event_streams (9) must be below max_connections (5)" in bad.stderr
-    bad = subprocess.run([sys.executable, "-m", "cam", "serve", "--work-time-limit", "0"],
-                         capture_output=True, text=True, env=env, timeout=60)
-    assert bad.returncode == 2 and "--work-time-limit" in bad.stderr
     proc = subprocess.Popen([sys.executable, "-m", "cam", "serve", "--http-port", "0", "--simulated",
                              "--jobs-dir", str(tmp_path / "jobs"), "--work-time-limit", "0.001"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)

@@ -61,8 +61,8 @@ from .hpgl import DEFAULT_CUT_DEPTH_MM as HPGL_CUT_DEPTH_MM
 from .hpgl import DEFAULT_SAFE_HEIGHT_MM as HPGL_SAFE_HEIGHT_MM
 from .drawing_stream import STREAM_TARGETS, stream_drawing
 from .hpgl_stream import STREAM_POINTS, stream_hpgl
-from .resume_stream import resume_stream
-from .resume import Journal, JournalBase, check_journal, job_identity, plan_fingerprint, resume_toolpath
+from .model import Job
+from .resume import Journal, JournalBase, check_journal, job_identity, plan_fingerprint, resume_pieces
 from .svg import DEFAULT_CUT_DEPTH_MM as SVG_CUT_DEPTH_MM
 from .svg import DEFAULT_SAFE_HEIGHT_MM as SVG_SAFE_HEIGHT_MM
 from .svg import plan_svg
@@ -835,25 +835,22 @@ def resume_job(job: PreparedJob, journal: Journal, *, position_steps: Optional[t
     if job.toolpath is None:
         raise CamError(f"{job.name}: a {job.kind} job has no moves to resume")
     start = tuple(int(v) for v in (journal.position_steps if position_steps is None else position_steps))
-    if hasattr(job.toolpath, "points_steps"):
-        toolpath, move_index, j = resume_toolpath(job.toolpath, journal.last_move, start,  # type: ignore[arg-type]
-                                                  pause_pending=journal.pause_pending)
-        pause = np.asarray(toolpath.pause, bool)
-    else:  # a job planned a piece at a time: resumed a piece at a time
-        toolpath, move_index, j = resume_stream(job.toolpath, journal.last_move, start,  # type: ignore[assignment]
-                                                pause_pending=journal.pause_pending)
-        pause = np.zeros(0, bool)
+    resumed, move_index, j = resume_pieces(job.toolpath, journal.last_move, start,  # type: ignore[arg-type]
+                                           pause_pending=journal.pause_pending)
+    # a job held in memory is resumed in memory (its run reads every move at once: linear40 ramps, the
+    # pictures); a job made a piece at a time is resumed a piece at a time
+    toolpath = resumed.joined() if isinstance(job.toolpath, Job) else resumed
     steps = plan_chunks(toolpath, start_steps=start)  # type: ignore[arg-type]
     base = JournalBase(identity=job.identity, plan_sha256=job.plan_sha256, source=job.source,
-                       moves=len(job.toolpath), pause=pause, move_index=move_index,  # type: ignore[arg-type]
-                       last_move=journal.last_move, pause_pending=journal.pause_pending, resumed_at_move=j,
+                       moves=resumed.job_moves, move_index=move_index, last_move=journal.last_move,
+                       pause_pending=journal.pause_pending, resumed_at_move=j,
                        start_position_steps=start)  # type: ignore[arg-type]
     report = dict(job.report)
     report.update(resumed_at_move=j, start_position_steps=list(start), resumed_from_state=journal.state)
     out = PreparedJob(
         source=job.source, kind=job.kind, plan=steps, settings=job.settings, toolpath=toolpath, name=job.name,
         size_mm=job.size_mm, depth_mm=job.depth_mm, warnings=list(job.warnings),
-        summary=f"{job.summary}, resumed at move {j} of {len(job.toolpath)}", report=report,
+        summary=f"{job.summary}, resumed at move {j} of {resumed.job_moves}", report=report,
         drawing_rgb=job.drawing_rgb, identity=job.identity, plan_sha256=job.plan_sha256, resumed=base,
     )
     return _finish(out)

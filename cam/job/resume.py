@@ -31,18 +31,20 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
-from dataclasses import asdict, dataclass, fields, replace
-from typing import Any, Mapping, Optional
+import tempfile
+from dataclasses import asdict, dataclass, field, fields
+from typing import Any, Iterator, Mapping, Optional
 
 import numpy as np
 
 from ..errors import CamError
 from ..settings import MachineSettings
-from .model import CUT, RETRACT, TRAVEL, Job
+from .model import CUT, RETRACT, TRAVEL, Job, JobLike, PixelFrame, join_pieces
 
 __all__ = [
     "JOURNAL_FORMAT", "JOURNAL_STATES", "Journal", "JournalBase", "Resumed", "job_identity", "plan_fingerprint",
-    "check_journal", "resume_toolpath", "last_completed", "journal_record", "cutting_moves",
+    "PlanFingerprint", "check_journal", "resume_pieces", "resume_toolpath", "ResumedJob", "MoveIndex",
+    "last_completed", "journal_record", "cutting_moves",
 ]
 
 JOURNAL_FORMAT = 1
@@ -153,10 +155,10 @@ class JournalBase:
 
     Attributes:
         identity, plan_sha256, source, moves: as in :class:`Journal`.
-        move_index: ``(M,)`` int64, the job's move each point of the *run* completes (a resumed run's
-            first points, before its entry point, complete nothing new: they keep ``last_move``); None:
-            point i completes move i (a run from the start).
-        pause: ``(M,)`` bool, the pauses of the run's points.
+        move_index: the job's move each point of the *run* completes (a :class:`MoveIndex`, or an ``(M,)``
+            int64 array; a resumed run's first points, before its entry point, complete nothing new: they
+            keep ``last_move``); None: point i completes move i (a run from the start).
+        pause: ``(M,)`` bool, the pauses of the run's points, or None (not kept: a run's plan has its pauses).
         last_move, pause_pending: where the job stood when the run began (-1, False: at the start).
         resumed_at_move: the run's first move of the job (None: from the start).
         start_position_steps: where the run begins, steps from the job's home.
@@ -166,8 +168,8 @@ class JournalBase:
     plan_sha256: str
     source: str
     moves: int
-    pause: np.ndarray
-    move_index: Optional[np.ndarray] = None
+    pause: Optional[np.ndarray] = None
+    move_index: Optional[MoveIndex | np.ndarray] = None
     last_move: int = -1
     pause_pending: bool = False
     resumed_at_move: Optional[int] = None
@@ -217,19 +219,51 @@ def job_identity(input_sha256: str, options: Mapping[str, Any], settings: Machin
     return h.hexdigest()
 
 
-def plan_fingerprint(job: Job) -> str:
+class PlanFingerprint:
+    """sha256 of a job's moves fed a piece at a time (see :func:`plan_fingerprint`), in bounded memory.
+
+    The bytes hashed are those of the whole job's arrays, whatever the pieces: its ``(N, 3)`` int64 points,
+    ``0``, its ``(N,)`` uint8 kinds, ``0``, its ``(N,)`` bool pauses, ``0``.  The points go to the hash as
+    they come; the kinds and the pauses (two bytes a move) wait in spooled temporary files (on disk past a
+    few MiB) until :meth:`hexdigest`.
+    """
+
+    SPOOL_BYTES = 8 << 20
+
+    def __init__(self) -> None:
+        self._h = hashlib.sha256()
+        self._kinds = tempfile.SpooledTemporaryFile(max_size=self.SPOOL_BYTES)
+        self._pauses = tempfile.SpooledTemporaryFile(max_size=self.SPOOL_BYTES)
+
+    def add(self, piece: Job) -> None:
+        """Hash the moves of ``piece``, the next piece of the job."""
+        self._h.update(np.ascontiguousarray(np.asarray(piece.points_steps, np.int64)).tobytes())
+        self._kinds.write(np.ascontiguousarray(np.asarray(piece.kind, np.uint8)).tobytes())
+        self._pauses.write(np.ascontiguousarray(np.asarray(piece.pause, np.bool_)).tobytes())
+
+    def hexdigest(self) -> str:
+        """The fingerprint of the moves added so far (sha256, hex); more may be added after."""
+        h = self._h.copy()
+        h.update(b"\0")
+        for spool in (self._kinds, self._pauses):
+            spool.seek(0)
+            for chunk in iter(lambda: spool.read(1 << 20), b""):
+                h.update(chunk)
+            spool.seek(0, 2)  # back to the end: later pieces are appended
+            h.update(b"\0")
+        return h.hexdigest()
+
+
+def plan_fingerprint(job: JobLike) -> str:
     """sha256 (hex) of a job's points, kinds and pauses: two plans with the same fingerprint have the same moves.
 
-    A job streamed in pieces (:class:`cam.job.hpgl_stream.HpglJobStream`) hashes its pieces one after the other.
+    One pass over ``job.pieces()`` (:class:`PlanFingerprint`): a job gives the same fingerprint held in
+    memory (one piece) or given in pieces of any size.  For a job in memory it is the fingerprint journals
+    have always kept (sha256 of the points, kinds and pauses arrays, each followed by a zero byte).
     """
-    if not hasattr(job, "points_steps"):
-        if not getattr(job, "fingerprint", ""):
-            len(job)  # one pass over the pieces
-        return job.fingerprint  # type: ignore[attr-defined]
-    h = hashlib.sha256()
-    for arr, dtype in ((job.points_steps, np.int64), (job.kind, np.uint8), (job.pause, np.bool_)):
-        h.update(np.ascontiguousarray(np.asarray(arr, dtype)).tobytes())
-        h.update(b"\0")
+    h = PlanFingerprint()
+    for piece in job.pieces():
+        h.add(piece)
     return h.hexdigest()
 
 
@@ -249,17 +283,248 @@ def check_journal(journal: Journal, identity: str, plan_sha256: str, where: str 
         raise CamError(f"journal {where}: the job finished; there is nothing to resume")
 
 
-def cutting_moves(job: Job) -> np.ndarray:
-    """``(N,)`` bool: which moves of ``job`` may cut (see the module docstring; frame of ``job``)."""
-    return _cuts(np.asarray(job.points_steps, np.int64).reshape(-1, 3), np.zeros(3, np.int64), _surface_steps(job))
+def cutting_moves(job: JobLike) -> np.ndarray:
+    """``(N,)`` bool: which moves of ``job`` may cut (see the module docstring; one pass over its pieces)."""
+    surface = _surface_steps(job)
+    prev = np.zeros(3, np.int64)
+    out = []
+    for piece in job.pieces():
+        pts = np.asarray(piece.points_steps, np.int64).reshape(-1, 3)
+        out.append(_cuts(pts, prev, surface))
+        if len(pts):
+            prev = pts[-1]
+    return np.concatenate(out) if out else np.zeros(0, bool)
 
 
-def resume_toolpath(job: Job, last_move: int, position_steps: tuple[int, int, int], *,
-                    pause_pending: bool = False) -> tuple[Job, np.ndarray, int]:
-    """The resumed run of ``job`` after its move ``last_move``, from ``position_steps`` (see the module docstring).
+@dataclass(frozen=True)
+class MoveIndex:
+    """The job's move each point of a resumed run completes (see :attr:`JournalBase.move_index`), without an
+    array per move: the way in's ``(m,)`` int64 ``head``, then moves ``j, j + 1, ...`` (``n_points`` in all).
+
+    >>> index = MoveIndex(np.array([2, 2]), 3, 4)
+    >>> index[1], index[3], len(index), index.tolist()
+    (2, 4, 4, [2, 2, 3, 4])
+    """
+
+    head: np.ndarray
+    j: int
+    n_points: int
+
+    def __getitem__(self, i: int) -> int:
+        m = len(self.head)
+        return int(self.head[i]) if i < m else self.j + int(i) - m
+
+    def __len__(self) -> int:
+        return self.n_points
+
+    def __array__(self, dtype: Any = None, copy: Any = None) -> np.ndarray:
+        m = len(self.head)
+        out = np.concatenate([np.asarray(self.head, np.int64), np.arange(self.j, self.j + self.n_points - m,
+                                                                         dtype=np.int64)])
+        return out if dtype is None else out.astype(dtype)
+
+    def tolist(self) -> list[int]:
+        return np.asarray(self).tolist()
+
+
+_COLUMNS = ("period_ns", "periods", "move_start", "rest")
+"""The per-move columns a :class:`~cam.job.model.Job` may leave None."""
+
+
+@dataclass
+class _Stop:
+    """What one pass over a job's pieces finds for resuming after move ``k`` (see :func:`_find_stop`).
+
+    Attributes:
+        n: moves of the job; j: the first move after ``k`` that cuts (``n``: none); entry: ``(3,)`` its start
+            (point ``j - 1``, the home for ``j = 0``); travel_z: the highest Z (<= 0) of the moves that do
+            not cut; carried: ``(3,)`` the point of the last pause the stop left pending or skipped (None:
+            none), and its note; notes: the notes of the pauses of moves ``j`` on; feed_ns: move ``j``'s
+            nominal period (0: none, or the job has no ``period_ns``); columns: the optional per-move columns
+            (``period_ns``, ``periods``, ``move_start``, ``rest``) some piece of the job has.
+    """
+
+    n: int
+    j: int
+    entry: np.ndarray
+    travel_z: int
+    carried: Optional[np.ndarray]
+    carried_note: str
+    notes: list[str]
+    feed_ns: int
+    columns: frozenset[str]
+
+
+def _find_stop(job: JobLike, k: int, pause_pending: bool) -> _Stop:
+    """One pass over ``job.pieces()``: where the resumed run after move ``k`` enters the job (frame: the job's).
+
+    Raises:
+        CamError: ``k`` lies outside the job.
+    """
+    surface = _surface_steps(job)
+    prev = np.zeros(3, np.int64)
+    n, j, travel_z, feed_ns = 0, -1, 0, 0
+    columns: set[str] = set()
+    entry = np.zeros(3, np.int64)
+    carried: Optional[np.ndarray] = None
+    carried_note = "Pause At"
+    notes: list[str] = []  # the notes of the pauses of moves j on (once j is found)
+    for piece in job.pieces():
+        pts = np.asarray(piece.points_steps, np.int64).reshape(-1, 3)
+        cuts = _cuts(pts, prev, surface)
+        if np.any(~cuts):
+            travel_z = min(travel_z, int(pts[~cuts, 2].min()))
+        pause = np.asarray(piece.pause, bool)
+        at = np.flatnonzero(pause)
+        piece_notes = list(piece.pause_notes) if piece.pause_notes is not None else []
+        piece_notes += ["Pause At"] * (len(at) - len(piece_notes))
+        columns.update(name for name in _COLUMNS if getattr(piece, name) is not None)
+        end = 0 if j >= 0 else len(pts)  # this piece's moves before j
+        if j < 0:
+            first = max(0, k + 1 - n)
+            later = np.flatnonzero(cuts[first:]) + first
+            if len(later):
+                end = int(later[0])
+                j = n + end
+                entry = pts[end - 1].copy() if end >= 1 else prev.copy()
+                feed_ns = int(np.asarray(piece.period_ns, np.int64)[end]) if piece.period_ns is not None else 0
+        for i_note, i in enumerate(at.tolist()):
+            if i >= end:  # a pause of move j on: kept where it is
+                notes.append(piece_notes[i_note])
+            elif n + i > k or (pause_pending and n + i == k):  # skipped, or left pending: made again
+                carried, carried_note = pts[i].copy(), piece_notes[i_note]
+        if len(pts):
+            prev = pts[-1]
+        n += len(pts)
+    if not -1 <= k < n:
+        raise CamError(f"the last completed move {k} is outside the job's {n} moves")
+    if j < 0:  # nothing after the stop cuts: the job's way home
+        j, entry = n, prev.copy()
+    return _Stop(n, j, entry, travel_z, carried, carried_note, notes, feed_ns, frozenset(columns))
+
+
+@dataclass
+class ResumedJob:
+    """The resumed run of a job (a :class:`~cam.job.model.JobLike`): :meth:`pieces` gives the way in, then the
+    job's pieces from move ``j`` on, every point relative to where the tool stands (``start_steps``, steps
+    from the job's home).  A job in memory gives two pieces; :meth:`joined` is :func:`resume_toolpath`.
+
+    Attributes:
+        job: the job resumed (as planned from the start); way_in: steps 1-4 of the module docstring, ``(m,)``
+            rows; j: the first move of ``job`` run in full; start_steps: ``(x, y, z)`` where the run starts.
+        pause_notes: the notes of the run's pauses; n_moves: its moves; job_moves: the moves of ``job``.
+    """
+
+    job: JobLike
+    way_in: Job
+    j: int
+    start_steps: tuple[int, int, int]
+    pause_notes: list[str]
+    n_moves: int
+    job_moves: int
+    source: str = ""
+    warnings: list[str] = field(default_factory=list)
+    pixels: Optional[PixelFrame] = None
+
+    @property
+    def settings(self) -> MachineSettings:
+        return self.job.settings
+
+    @property
+    def safe_z_steps(self) -> int:
+        """The Z a stop lifts to, steps from where the run starts (+Z deeper)."""
+        return int(self.job.safe_z_steps) - int(self.start_steps[2])
+
+    @property
+    def tool(self) -> Any:
+        return self.job.tool
+
+    def __len__(self) -> int:
+        return self.n_moves
+
+    def joined(self) -> Job:
+        """Every move in one :class:`~cam.job.model.Job` (:func:`~cam.job.model.join_pieces` of :meth:`pieces`)."""
+        return join_pieces(self.pieces(), self)
+
+    def pieces(self) -> Iterator[Job]:
+        """The way in, then the job's moves from ``j`` on (relative to ``start_steps``), each piece's per-move
+        columns (feeds, periods, ramp segments, rests) kept."""
+        yield self.way_in
+        p0 = np.asarray(self.start_steps, np.int64)
+        first = 0
+        for piece in self.job.pieces():
+            n = len(piece.points_steps)
+            cut = max(0, self.j - first)
+            first += n
+            if cut >= n:
+                continue
+            pause = np.asarray(piece.pause, bool)
+            notes = piece.pause_notes
+            if notes is not None:  # the notes of the pauses left out go with them
+                notes = list(notes)[int(np.count_nonzero(pause[:cut])):]
+            columns = {name: None if getattr(piece, name) is None else np.asarray(getattr(piece, name))[cut:]
+                       for name in _COLUMNS}
+            yield Job(points_steps=np.asarray(piece.points_steps, np.int64).reshape(-1, 3)[cut:] - p0,
+                      kind=np.asarray(piece.kind, np.uint8)[cut:], target=np.asarray(piece.target, bool)[cut:],
+                      pause=pause[cut:], settings=self.settings, warnings=[], safe_z_steps=self.safe_z_steps,
+                      pause_notes=notes, tool=self.tool, **columns)
+
+
+def resume_pieces(job: JobLike, last_move: int, position_steps: tuple[int, int, int], *,
+                  pause_pending: bool = False) -> tuple[ResumedJob, MoveIndex, int]:
+    """The resumed run of ``job`` after its move ``last_move``, from ``position_steps`` (module docstring), as
+    pieces: one pass over ``job.pieces()`` finds where the run enters the job; the run's pieces are made anew
+    on each pass (:class:`ResumedJob`), nothing per move is held.
 
     Args:
-        job: the job as planned from the start (its frame: steps from the job's home).
+        job: the job as planned from the start (its frame: steps from the job's home); a
+            :class:`~cam.job.model.Job` in memory is one piece.
+        last_move: index of the last completed move (-1: none).
+        position_steps: where the tool stands, steps from the job's home.
+        pause_pending: the pause at ``last_move`` (if any) was not answered: it is made again.
+
+    Returns:
+        ``(resumed, move_index, j)``: the resumed run (steps relative to ``position_steps``), the move of
+        ``job`` each of its points completes, and ``j``, the first move of ``job`` it runs in full.
+
+    Raises:
+        CamError: ``last_move`` lies outside the job.
+    """
+    k = int(last_move)
+    p0 = np.asarray(position_steps, np.int64).reshape(3)
+    stop = _find_stop(job, k, pause_pending)
+    j, s = stop.j, job.settings
+    z_t = min(int(p0[2]), int(job.safe_z_steps), stop.travel_z)
+    kept = _way_in(p0, k, j, stop.entry, z_t, stop.carried, _surface_steps(job))
+    kinds = np.array([it[1] for it in kept], np.uint8)
+    m = len(kept)
+    columns: dict[str, Optional[np.ndarray]] = dict.fromkeys(_COLUMNS)  # None where the job has none
+    if "period_ns" in stop.columns:  # the way in at the machine's speeds; a plunge no faster than move j's feed
+        columns["period_ns"] = np.where(kinds == RETRACT, s.delay_z_ns, np.where(
+            kinds == CUT, max(s.delay_z_ns, stop.feed_ns), s.delay_xy_ns)).astype(np.int64)
+    if "periods" in stop.columns:  # the way in's moves take their longest axis's steps
+        columns["periods"] = np.zeros(m, np.int64)
+    if "move_start" in stop.columns:  # each move of the way in is its own ramp segment
+        columns["move_start"] = np.ones(m, bool)
+    if "rest" in stop.columns:
+        columns["rest"] = np.zeros(m, bool)
+    carried_note = [stop.carried_note] if stop.carried is not None else []
+    way_in = Job(points_steps=np.array([it[0] for it in kept], np.int64).reshape(-1, 3) - p0, kind=kinds,
+                 target=np.zeros(m, bool), pause=np.array([it[2] for it in kept], bool), settings=s, warnings=[],
+                 safe_z_steps=int(job.safe_z_steps) - int(p0[2]), pause_notes=carried_note, tool=job.tool, **columns)
+    source = f"{job.source} (resumed at move {j})" if job.source else f"resumed at move {j}"
+    n_moves = m + stop.n - j
+    resumed = ResumedJob(job, way_in, j, tuple(int(v) for v in p0), carried_note + stop.notes,  # type: ignore[arg-type]
+                         n_moves, stop.n, source=source)
+    return resumed, MoveIndex(np.array([it[3] for it in kept], np.int64), j, n_moves), j
+
+
+def resume_toolpath(job: JobLike, last_move: int, position_steps: tuple[int, int, int], *,
+                    pause_pending: bool = False) -> tuple[Job, np.ndarray, int]:
+    """The resumed run of ``job`` in memory: :func:`resume_pieces`, joined (see the module docstring).
+
+    Args:
+        job: the job as planned from the start (its frame: steps from the job's home), in memory or in pieces.
         last_move: index of the last completed move (-1: none).
         position_steps: where the tool stands, steps from the job's home.
         pause_pending: the pause at ``last_move`` (if any) was not answered: it is made again.
@@ -276,56 +541,8 @@ def resume_toolpath(job: Job, last_move: int, position_steps: tuple[int, int, in
     >>> j, (r.points_steps + (14, 0, 0)).tolist(), index.tolist()
     (3, [[14, 0, -5], [10, 0, -5], [10, 0, 3], [20, 0, 3], [20, 0, -5]], [2, 2, 2, 3, 4])
     """
-    pts = np.asarray(job.points_steps, np.int64).reshape(-1, 3)
-    n = len(pts)
-    k = int(last_move)
-    if not -1 <= k < n:
-        raise CamError(f"the last completed move {k} is outside the job's {n} moves")
-    p0 = np.asarray(position_steps, np.int64).reshape(3)
-    cuts = cutting_moves(job)
-    later = np.flatnonzero(cuts[k + 1:])
-    j = k + 1 + int(later[0]) if len(later) else n
-    home = np.zeros(3, np.int64)
-    entry = pts[j - 1] if j >= 1 else home
-    travel_z = min(0, int(pts[~cuts, 2].min()) if np.any(~cuts) else 0)
-    z_t = min(int(p0[2]), int(job.safe_z_steps), travel_z)
-    # a pause the stop left unanswered, or one on a skipped move: made again, above its point
-    pause = np.asarray(job.pause, bool)
-    skipped = np.flatnonzero(pause[k + 1:j]) + k + 1
-    pending = [k] if (pause_pending and k >= 0 and pause[k]) else []
-    carried = [int(i) for i in pending] + [int(i) for i in skipped]
-    notes = list(job.pause_notes) if job.pause_notes is not None else ["Pause At"] * int(pause.sum())
-    note_of = dict(zip((int(i) for i in np.flatnonzero(pause)), notes))
-
-    carried_note = [note_of.get(carried[-1], "Pause At")] if carried else []
-    kept = _way_in(p0, k, j, entry, z_t, pts[carried[-1]] if carried else None, _surface_steps(job))
-    m = len(kept)
-    s = job.settings
-    new_pts = np.vstack([np.array([it[0] for it in kept], np.int64), pts[j:]]) - p0
-    kind = np.concatenate([np.array([it[1] for it in kept], np.uint8), np.asarray(job.kind, np.uint8)[j:]])
-    target = np.concatenate([np.zeros(m, bool), np.asarray(job.target, bool)[j:]])
-    new_pause = np.concatenate([np.array([it[2] for it in kept], bool), pause[j:]])
-    move_index = np.concatenate([np.array([it[3] for it in kept], np.int64), np.arange(j, n, dtype=np.int64)])
-    later_notes = notes[int(pause[:j].sum()):]
-    period_ns = periods = move_start = rest = None
-    if job.period_ns is not None:
-        feed = int(np.asarray(job.period_ns, np.int64)[j]) if j < n else 0
-        pre = [s.delay_z_ns if it[1] == RETRACT else (max(s.delay_z_ns, feed) if it[1] == CUT else s.delay_xy_ns)
-               for it in kept]
-        period_ns = np.concatenate([np.array(pre, np.int64), np.asarray(job.period_ns, np.int64)[j:]])
-    if job.periods is not None:
-        periods = np.concatenate([np.zeros(m, np.int64), np.asarray(job.periods, np.int64)[j:]])
-    if job.move_start is not None:
-        move_start = np.concatenate([np.ones(m, bool), np.asarray(job.move_start, bool)[j:]])
-    if job.rest is not None:
-        rest = np.concatenate([np.zeros(m, bool), np.asarray(job.rest, bool)[j:]])
-    resumed = replace(
-        job, points_steps=new_pts, kind=kind, target=target, pause=new_pause,
-        pause_notes=carried_note + later_notes, warnings=[], safe_z_steps=int(job.safe_z_steps) - int(p0[2]),
-        pixels=None, source=f"{job.source} (resumed at move {j})" if job.source else f"resumed at move {j}",
-        period_ns=period_ns, periods=periods, move_start=move_start, rest=rest,
-    )
-    return resumed, move_index, j
+    resumed, move_index, j = resume_pieces(job, last_move, position_steps, pause_pending=pause_pending)
+    return resumed.joined(), np.asarray(move_index), j
 
 
 def _surface_steps(job: Any) -> int:
