@@ -40,7 +40,7 @@ from __future__ import annotations
 import threading
 import time
 from contextlib import AbstractContextManager
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from typing import Any, Callable, Optional, Sequence
 
 import numpy as np
@@ -48,10 +48,11 @@ import serial
 
 from ...errors import PlanError, PortError, SettingsError
 from ...settings import DEFAULT_SETTINGS, MachineSettings, Maximus, Travel
+from ._drill import _Drilling, drill_job
 from ._link import _CLOSE_DRILL, _DRILL, _INIT, _JOG, _MODE, _OFFSET, _UNKNOWN, _Exchange, _Link
 from .packets import (
-    MAX_FIELD, close_drill_packet, drill_moves, drill_packet, drill_time_ns, init_packet,
-    init_time_ns, jog_exit_packet, jog_packet, jog_time_ns, offset_packet, offset_time_ns, start_drill_packet,
+    MAX_FIELD, close_drill_packet, drill_moves, drill_packet, drill_time_ns, init_packet, jog_exit_packet,
+    jog_packet, jog_time_ns, offset_packet, start_drill_packet,
 )
 from .protocol import (
     ATOFFSETPOS, BANNER, DELAY_UNIT_NS, DRILLMODE1INITIALIZED, DRILLMODE1ON, ISMACHINEREADY,
@@ -181,69 +182,7 @@ def open_maximus(url: str, settings: Optional[Maximus] = None, timeout_s: Option
     return MaximusBoard(url, settings, timeout_s=timeout_s)
 
 
-@dataclass(frozen=True)
-class _Group:
-    """The holes of one tool (or one run of a tool in file order), drilled in one Drill mode session."""
-
-    first: int  # index of its first hole
-    notes: list[str]  # tool-change prompts before it
-    packets: list[bytes]  # one Drill Data Packet per hole
-    moves: np.ndarray  # (n, 2) int64 board-frame dx, dy of each
-
-
-@dataclass(frozen=True)
-class _DrillJob:
-    """The packets of one drill job (see :meth:`MaximusBoard.drill`), checked before anything is sent."""
-
-    offset: bytes  # Offset Positioning Packet: Z to where the Init descent ends at Z up
-    init: bytes  # Initialize Drill Mode Packet: both fields Z down - Z up
-    descent_steps: int  # pulses the Init packet lowers Z
-    offset_height_steps: int  # board-frame height move of the offset packet (+ up)
-    z_up_steps: int
-    groups: list[_Group]
-    back_steps: np.ndarray  # (2,) int64 x, y back to the start after the last hole
-
-
-def drill_job(holes_steps: np.ndarray, z_up_steps: int, z_down_steps: int, tool_changes: Sequence[tuple[int, str]] = (),
-              settings: Optional[Maximus] = None) -> _DrillJob:
-    """The packets of a drill job (see :meth:`MaximusBoard.drill`), checked: nothing is sent.
-
-    Raises:
-        PlanError: a move longer than the 16-bit fields, a bad Z stroke or tool change, an inverted Z.
-    """
-    m = settings or Maximus()
-    if m.invert_z:
-        raise PlanError("invert_z cannot apply in Drill mode: the firmware lowers Z with DIR_Z = 1 "
-                        "(seed 000 Appendix 1); wire the Z motor the other way round instead")
-    moves = drill_moves(holes_steps)
-    if not 0 <= z_up_steps < z_down_steps <= MAX_FIELD:
-        raise PlanError(f"Z drill up {z_up_steps} and down {z_down_steps} pulses below the start: need "
-                        f"0 <= up < down <= {MAX_FIELD}")
-    stroke_steps = z_down_steps - z_up_steps
-    offset_height_steps = stroke_steps - z_up_steps  # the Init descent (the stroke) then ends at -z_up_steps
-    if abs(offset_height_steps) > MAX_FIELD:
-        raise PlanError(f"Z drill up {z_up_steps} pulses is too far below the start for Z down {z_down_steps}")
-    changes: dict[int, list[str]] = {}
-    for index, message in tool_changes:
-        if not 0 <= int(index) < len(moves):
-            raise PlanError(f"tool change before hole {index}: there are {len(moves)} holes")
-        changes.setdefault(int(index), []).append(str(message))
-    modes = (m.half_step_x, m.half_step_y, m.half_step_z)
-    offset = offset_packet(0, 0, offset_height_steps, delay_x=m.delay_x, delay_y=m.delay_y, delay_z=m.delay_z_up,
-                           half_step=modes, invert=(m.invert_x, m.invert_y, m.invert_z))
-    init = init_packet(stroke_steps, stroke_steps, delay_x=m.delay_x, delay_y=m.delay_y, delay_z_up=m.delay_z_up,
-                       delay_z_down=m.delay_z_down, half_step=modes)
-    starts = sorted({0, *changes})
-    groups = []
-    for a, b in zip(starts, starts[1:] + [len(moves)]):
-        part = moves[a:b]
-        groups.append(_Group(a, changes.get(a, []), [drill_packet(int(dx), int(dy), invert_x=m.invert_x,
-                                                                  invert_y=m.invert_y) for dx, dy in part], part))
-    back = -moves.sum(axis=0) if len(moves) else np.zeros(2, np.int64)
-    return _DrillJob(offset, init, stroke_steps, offset_height_steps, z_up_steps, groups, back)
-
-
-class MaximusBoard(_Link, AbstractContextManager):
+class MaximusBoard(_Drilling, _Link, AbstractContextManager):
     """A MAXIMUS control board on a serial port.
 
     Args:
@@ -553,55 +492,6 @@ class MaximusBoard(_Link, AbstractContextManager):
         job = drill_job(holes_steps, int(z_up_steps), int(z_down_steps), tool_changes, self.maximus)
         return self._run_job(lambda: self._drill_session(job, on_tool_change, on_hole, before_hole, bool(spindle),
                                                          return_to_start))
-
-    def _drill_session(self, job: _DrillJob, on_tool_change: Callable[[int, str], None] | None,
-                       on_hole: Callable[[int], None] | None, before_hole: Callable[[int], None] | None,
-                       spindle: bool, return_to_start: bool) -> int:
-        """Every tool's Drill mode session, then the move back; returns the number of holes drilled."""
-        drilled = 0
-        for group in job.groups:
-            for message in group.notes:
-                self._check_stop(f"hole index {group.first}")
-                if on_tool_change is not None:
-                    on_tool_change(group.first, message)
-            self._check_stop(f"hole index {group.first}")
-            if spindle:
-                self._jog_session([("z", 0)], spindle=True)
-            drilled = self._drill_group(job, group, drilled, on_hole, before_hole)
-            self._check_stop(f"raising the head after hole index {drilled - 1}")
-            self._jog_session([("z", job.z_up_steps)])  # spindle bit clear: off as the head rises
-        if return_to_start and np.any(job.back_steps):
-            self._check_stop("the move back to the start")
-            self._move_session(int(job.back_steps[0]), int(job.back_steps[1]), 0)
-        return drilled
-
-    def _drill_group(self, job: _DrillJob, group: _Group, drilled: int, on_hole: Callable[[int], None] | None,
-                     before_hole: Callable[[int], None] | None) -> int:
-        before = f"before hole index {group.first}"
-        self._check_stop(f"Drill mode {before}")
-        self._exchange(bytes([OPENDRILLMODE1]), _Exchange(f"OPENDRILLMODE1 {before}", DRILLMODE1ON, False, "drill",
-                                                          _OFFSET))
-        self._check_stop(f"the offset move {before}")
-        self._exchange(job.offset, _Exchange(f"the offset move (Z) {before}", ATOFFSETPOS, True, "drill", _INIT,
-                                             offset_time_ns(job.offset), (0, 0, job.offset_height_steps)))
-        self._check_stop(f"the Init move {before}")
-        self._exchange(job.init, _Exchange(f"the Init move (Z down, not stoppable) {before}", DRILLMODE1INITIALIZED,
-                                           False, "drill", _DRILL, init_time_ns(job.init), (0, 0, -job.descent_steps)))
-        self._exchange(start_drill_packet(),
-                       _Exchange(f"the start (SDF) packet {before}", ONEHOLEDRILLED, False, "drill", _DRILL))
-        for k, packet in enumerate(group.packets):
-            i = group.first + k
-            self._check_stop(f"hole index {i}")
-            if before_hole is not None:
-                before_hole(i)
-            dx, dy = (int(v) for v in group.moves[k])
-            self._exchange(packet, _Exchange(f"hole index {i}", ONEHOLEDRILLED, True, "drill", _DRILL,
-                                             drill_time_ns(packet, job.init), (dx, dy, 0)))
-            drilled += 1
-            if on_hole is not None:
-                on_hole(drilled)
-        self._exchange(close_drill_packet(), _CLOSE_DRILL)
-        return drilled
 
 
 def _pieces(pulses: int) -> list[int]:
