@@ -13,7 +13,7 @@ from cam.drive.chunks import plan_chunks
 from cam.drive.ports import MockPort
 from cam.drive.runner import run
 from cam.drive.steps import plan_steps
-from cam.errors import CamError, PlanError
+from cam.errors import CamError
 from cam.formats.hpgl import load_hpgl
 from cam.job.hpgl import plan_hpgl
 from cam.job.hpgl_stream import stream_hpgl
@@ -70,17 +70,17 @@ def test_stream_equals_plan_hpgl(tmp_path, piece_points, chunk_bytes):
                 whole = plan_hpgl(load_hpgl(path), settings=s, offset_mm=offset)
             except CamError as exc:  # outside the travel: the same message, naming the same point
                 with pytest.raises(type(exc)) as got:
-                    stream.to_job()
+                    stream.joined()
                 assert str(got.value) == str(exc)
                 continue
-            job = stream.to_job()
+            job = stream.joined()
             for name in ("points_steps", "kind", "target", "pause"):
                 np.testing.assert_array_equal(getattr(job, name), getattr(whole, name), err_msg=f"{path} {name}")
             assert job.pause_notes == whole.pause_notes
             assert len(stream) == len(whole)
 
 
-@pytest.mark.parametrize("ramp", ["lookahead", "constant"])
+@pytest.mark.parametrize("ramp", ["lookahead", "constant", "linear40"])
 def test_streamed_plan_equals_whole_plan(tmp_path, ramp):
     s = cam.MachineSettings().replace(ramp=ramp)
     for path in _files(tmp_path)[:5]:
@@ -92,12 +92,6 @@ def test_streamed_plan_equals_whole_plan(tmp_path, ramp):
         assert chunked.pause_notes == whole.pause_notes
         np.testing.assert_array_equal(chunked.steps_total, whole.steps_total)
         assert chunked.end_steps == whole.end_steps
-
-
-def test_streamed_plan_refuses_linear40(tmp_path):
-    s = cam.MachineSettings().replace(ramp="linear40")
-    with pytest.raises(PlanError, match="linear40"):
-        plan_chunks(stream_hpgl(SAMPLES / "inkscape_star.plt", settings=s))
 
 
 def test_prepared_stream_runs_as_the_in_memory_job(tmp_path, monkeypatch):

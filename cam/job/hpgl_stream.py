@@ -22,7 +22,6 @@ units; machine x = X, y = -Y, nearest step; +Z deeper).
 """
 from __future__ import annotations
 
-import hashlib
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -205,18 +204,6 @@ def _rows(xy: np.ndarray, group: np.ndarray, pause_group: np.ndarray, depth_step
     return pts[keep], kind[keep], pause[keep]
 
 
-class _Hashes:
-    """The stream's fingerprint: sha256 of the pieces' points, kinds and pauses (see :func:`plan_fingerprint`)."""
-
-    def __init__(self) -> None:
-        self.h = hashlib.sha256()
-
-    def add(self, job: Job) -> None:
-        for arr, dtype in ((job.points_steps, np.int64), (job.kind, np.uint8), (job.pause, np.bool_)):
-            self.h.update(np.ascontiguousarray(np.asarray(arr, dtype)).tobytes())
-            self.h.update(b"\0")
-
-
 def _batch_of(held: list[PointBatch]) -> PointBatch:
     """One :class:`~cam.formats.hpgl.PointBatch` of consecutive batches (none: no points)."""
     if len(held) == 1:
@@ -244,8 +231,7 @@ class HpglJobStream:
             (Z steps, +Z deeper: the travel height is <= 0).
         offset_mm: as :func:`~cam.job.hpgl.plan_hpgl`'s.
         piece_points: pen-down points planned into a piece (at least); chunk_bytes: bytes of a file read at once.
-        n_moves: moves of the job (-1 until a pass ended); fingerprint: the job's plan fingerprint and
-            pause_notes: its pauses' notes (after a pass).
+        n_moves: moves of the job (-1 until a pass ended); pause_notes: its pauses' notes (after a pass).
         pixels, tool: None (no drawing frame; the point tool).
     """
 
@@ -258,7 +244,6 @@ class HpglJobStream:
     piece_points: int = PIECE_POINTS
     chunk_bytes: int = CHUNK_BYTES
     n_moves: int = -1
-    fingerprint: str = ""
     pause_notes: list[str] = field(default_factory=list)
     pixels: Optional[PixelFrame] = None
     tool: Any = None
@@ -281,7 +266,7 @@ class HpglJobStream:
         """Every move in one :class:`~cam.job.model.Job` (:func:`~cam.job.model.join_pieces` of :meth:`pieces`)."""
         return join_pieces(self.pieces(), self)
 
-    to_job = joined
+    to_job = joined  # the older name (tests/test_drawing_stream.py at HEAD)
 
     def _batches(self) -> Iterator[PointBatch]:
         """The pen-down points, in order: the file's a chunk at a time, or the drawing's sliced."""
@@ -297,7 +282,7 @@ class HpglJobStream:
             ParseError: the file changed into something malformed since it was scanned;
             TravelError: a point lies outside the machine travel (``file:line:column``).
         """
-        carry, hashes = _Carry(), _Hashes()
+        carry = _Carry()
         notes: list[str] = []
         n_moves = have = 0
         held: list[PointBatch] = []
@@ -312,13 +297,12 @@ class HpglJobStream:
             piece = self._piece(_batch_of(held), carry, last=batch is None)
             held, have = [], 0
             if piece is not None:
-                hashes.add(piece)
                 notes += piece.pause_notes or []
                 n_moves += len(piece)
                 yield piece
             if batch is None:
                 break
-        self.n_moves, self.fingerprint, self.pause_notes = n_moves, hashes.h.hexdigest(), notes
+        self.n_moves, self.pause_notes = n_moves, notes
 
     def _piece(self, batch: PointBatch, carry: _Carry, *, last: bool) -> Optional[Job]:
         """The rows of the points of ``batch`` (None: none are left); ``last``: the job's end follows."""
