@@ -9,9 +9,10 @@ from ..digitize.digitized import Digitized
 from ..digitize.drawing import load_image
 from ..digitize.profile import Profile, load_profile, profile_from_expr
 from ..drive.runner import simulate_surface
-from ..drive.steps import plan_steps
+from ..drive.chunks import plan_chunks
 from ..errors import CamError
 from ..job.jobs import JobOptions, PreparedJob, prepare_job
+from ..job.model import JobLike
 from ..render.picture import save_picture, surface_picture, toolpath_picture, toolpath_svg
 from ..settings import MachineSettings
 from .checks import job_kind_of
@@ -107,12 +108,9 @@ def profile_of(args: argparse.Namespace, digitized: Digitized) -> Optional[Profi
 
 
 def write_job_preview(args: argparse.Namespace, job: PreparedJob, path: str, surface: bool = False) -> None:
-    """A prepared job's picture: a drawing's toolpath over it or its cut surface, a file job's preview."""
-    streamed = job.toolpath is not None and not hasattr(job.toolpath, "points_steps")
-    if streamed and surface:
-        raise CamError(f"{path}: the cut surface of a job of {len(job.toolpath)} moves, planned a piece at a time, "
-                       f"is not pictured; its preview shows its moves")
-    if job.kind in ("drawing", "digitized") and not streamed:
+    """A prepared job's picture: a drawing's toolpath over it or its cut surface, a file job's preview (a job
+    held in memory or made a piece at a time alike, see :func:`write_preview`)."""
+    if job.kind in ("drawing", "digitized"):
         write_preview(args, job.toolpath, path, surface=surface, drawing_rgb=job.drawing_rgb)
     elif job.kind == "svg":  # --scale scaled the drawing, as in drill
         write_file_job_preview(job, path)
@@ -120,26 +118,34 @@ def write_job_preview(args: argparse.Namespace, job: PreparedJob, path: str, sur
         write_file_job_preview(job, path, scale=_picture_scale(args))
 
 
-def write_preview(args: argparse.Namespace, job: Any, path: str, surface: bool = False,
+def write_preview(args: argparse.Namespace, job: JobLike, path: str, surface: bool = False,
                   drawing_rgb: Any = None) -> None:
-    """The toolpath picture (.png over the drawing, or .svg) of a drawing's job, or its cut surface (.png)."""
+    """The toolpath picture (.png over the drawing, or .svg) of a drawing's job, or its cut surface (.png).
+
+    ``job`` is any :class:`~cam.job.model.JobLike`: the time in the legend is planned from its pieces
+    (:func:`cam.drive.chunks.plan_chunks`, bounded memory); the pictures are drawn from the whole job,
+    ``job.joined()`` (memory grows with the job's moves: the .svg and the picture's lines hold every move), and
+    the cut surface is simulated from it on the mock (:func:`cam.drive.runner.simulate_surface`: the whole
+    pin log in memory).  A job gives the same picture whatever its pieces.
+    """
     scale = _picture_scale(args)
     suffix = Path(path).suffix.lower()
     if suffix not in (".png", ".svg"):
         raise CamError(f"{path}: pictures are written as .png or .svg")
-    time_s = plan_steps(job).estimated_time_s
+    if surface and suffix != ".png":
+        raise CamError(f"{path}: the surface picture is written as .png")
+    time_s = plan_chunks(job).estimated_time_s
+    whole = job.joined()
     if surface:
-        if suffix != ".png":
-            raise CamError(f"{path}: the surface picture is written as .png")
-        s = simulate_surface(job)
-        st = job.settings
+        s = simulate_surface(whole)
+        st = whole.settings
         legend = (f"cut surface, decoded from the mock pin log: depth 0..{st.px_to_mm_z(int(s.max()) / st.steps_per_px_z):.2f} mm"
                   f" ({int(s.max())} Z steps)")
         save_picture(surface_picture(s, scale=scale, legend=legend), path)
     elif suffix == ".svg":
-        save_picture(toolpath_svg(job, scale=scale, estimated_time_s=time_s), path)
+        save_picture(toolpath_svg(whole, scale=scale, estimated_time_s=time_s), path)
     else:
-        save_picture(toolpath_picture(job, drawing_rgb=drawing_rgb, scale=scale, estimated_time_s=time_s), path)
+        save_picture(toolpath_picture(whole, drawing_rgb=drawing_rgb, scale=scale, estimated_time_s=time_s), path)
 
 
 def _picture_scale(args: argparse.Namespace) -> Optional[int]:
@@ -154,14 +160,11 @@ def _picture_scale(args: argparse.Namespace) -> Optional[int]:
 
 def write_file_job_preview(job: Any, path: str, scale: Optional[int] = None) -> None:
     """The job's preview (.png, the picture the web page shows: bounded in size at any resolution), or
-    the toolpath of a drill or HPGL job as .svg."""
+    the toolpath of a drill or HPGL job as .svg (from its pieces joined: memory grows with its moves)."""
     suffix = Path(path).suffix.lower()
     if suffix not in (".png", ".svg") or (suffix == ".svg" and job.toolpath is None):
         raise CamError(f"{path}: pictures are written as .png" + (" or .svg" if job.toolpath is not None else ""))
     if suffix == ".png":
         save_picture(job.preview_picture(), path)
-    elif not hasattr(job.toolpath, "points_steps"):
-        raise CamError(f"{path}: a job of {len(job.toolpath)} moves is pictured as .png only (it is planned from "
-                       f"its file a piece at a time; an .svg would hold every move)")
-    else:
-        save_picture(toolpath_svg(job.toolpath, scale=scale, estimated_time_s=job.estimated_time_s), path)
+    else:  # every move of the job, held in memory or made a piece at a time, joined (the .svg holds each)
+        save_picture(toolpath_svg(job.toolpath.joined(), scale=scale, estimated_time_s=job.estimated_time_s), path)
