@@ -25,6 +25,12 @@ The resumed job, from where the tool stands (``P``, the journal's position)::
 So nothing uncut is skipped (the interrupted move is cut again from its start), nothing goes deeper than
 the job asked for, and a hole the stop found drilled is not drilled again.  A move *cuts* unless both its
 ends are at or above the surface, or it goes straight up (or stays put).
+
+One implementation for every job size: :func:`resume_pieces` reads any :class:`~cam.job.model.JobLike`
+(a :class:`~cam.job.model.Job` in memory is one piece) in one pass and gives the resumed run as pieces
+(:class:`ResumedJob`: the way in, then the job's own pieces from move ``j`` on) and the move each of its
+points completes (:class:`MoveIndex`); :func:`resume_toolpath` is those pieces joined.  The plan's
+fingerprint (:func:`plan_fingerprint`) is likewise one pass over the pieces, whatever their size.
 """
 from __future__ import annotations
 
@@ -253,6 +259,11 @@ class PlanFingerprint:
             h.update(b"\0")
         return h.hexdigest()
 
+    def close(self) -> None:
+        """Let the spooled files go (nothing more may be added)."""
+        self._kinds.close()
+        self._pauses.close()
+
 
 def plan_fingerprint(job: JobLike) -> str:
     """sha256 (hex) of a job's points, kinds and pauses: two plans with the same fingerprint have the same moves.
@@ -262,9 +273,12 @@ def plan_fingerprint(job: JobLike) -> str:
     have always kept (sha256 of the points, kinds and pauses arrays, each followed by a zero byte).
     """
     h = PlanFingerprint()
-    for piece in job.pieces():
-        h.add(piece)
-    return h.hexdigest()
+    try:
+        for piece in job.pieces():
+            h.add(piece)
+        return h.hexdigest()
+    finally:
+        h.close()
 
 
 def check_journal(journal: Journal, identity: str, plan_sha256: str, where: str = "journal") -> None:
