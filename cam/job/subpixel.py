@@ -43,7 +43,9 @@ BUDGET_BELOW_K = 4
 """Grids up to this fine (a quarter pixel) are used whatever they find; finer ones only within the budget."""
 MAX_CELLS = 1 << 24
 """The most positions of a finer grid looked at (its maps are int32: 64 MB each); a larger relief gets a
-coarser grid, and none beyond it at half a pixel."""
+coarser grid, and none beyond it at half a pixel (with a warning).  The bound is on the relief's positions
+alone: a job held in memory and one made a piece at a time (:mod:`cam.job.drawing_stream`, which plans both)
+get the same pass."""
 MIN_GAIN_ZPX = 0.25
 """A position is cut when it takes at least this much more (Z pixels) off some pixel centre."""
 
