@@ -30,7 +30,7 @@ plans the stream a block of moves at a time (:func:`cam.job.jobs.prepare_job` ke
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Iterator, Optional, Sequence
+from typing import Generator, Iterator, Optional, Sequence
 
 import numpy as np
 
@@ -237,7 +237,7 @@ class DrawingJobStream:
 
     def _part(self, chunks: Iterator[tuple[np.ndarray, bool]], part: _Part, after_px: Optional[np.ndarray],
               home: bool, counts: dict[str, int], pause_px: Optional[np.ndarray] = None
-              ) -> Iterator[Job]:
+              ) -> Generator[Job, None, Optional[np.ndarray]]:
         """The pieces of one part of the job from its targets ``chunks`` (see :meth:`_targets`): planned on the
         part's grid (drawing frame, ``part.k`` positions per pixel, Start At Z added here), from ``after_px``
         (the last target before, drawing pixels; None: from the home) to the home if ``home``.  Returns the

@@ -52,7 +52,7 @@ from ..render.report import job_report
 from ..sniff import KIND_NAMES
 from ..settings import DEFAULT_SETTINGS, MachineSettings
 from ..verify.pinlog import PinLog, decode_pin_log
-from .drawing import check_drawing_size
+from .drawing import check_drawing_size, plan
 from .drill import DEFAULT_DEPTH_MM as DRILL_DEPTH_MM
 from .drill import DEFAULT_SAFE_HEIGHT_MM as DRILL_SAFE_HEIGHT_MM
 from .drill import plan_drill
@@ -636,13 +636,13 @@ def _prepare_pixels(path: Path, kind: str, options: JobOptions, settings: Machin
     stepdown_px = None
     if options.stepdown_mm is not None:
         stepdown_px = max(1, int(options.stepdown_mm / settings.px_to_mm_z(1)))
-    # one planner at every size (made a piece at a time); a large job stays in pieces, a smaller one is joined
-    toolpath: Any = stream_drawing(digitized, depth=depth, settings=settings, passes=options.passes,
-                                   start_at=options.start_at, pause_at=list(options.pause_at), profile=profile,
-                                   tool=cutter, stepdown_px=stepdown_px, stepover=options.stepover,
-                                   rough_tool=options.rough_tool)
-    if digitized.n_points * options.passes <= STREAM_TARGETS:  # held in memory: the same moves
-        toolpath = toolpath.joined()
+    kw: dict[str, Any] = dict(depth=depth, settings=settings, passes=options.passes, start_at=options.start_at,
+                              pause_at=list(options.pause_at), profile=profile, tool=cutter, stepdown_px=stepdown_px,
+                              stepover=options.stepover, rough_tool=options.rough_tool)
+    # one planner at every size: a large job is kept in pieces (bounded memory), a smaller one joined (the
+    # same moves, held in memory)
+    big = digitized.n_points * options.passes > STREAM_TARGETS
+    toolpath = stream_drawing(digitized, **kw) if big else plan(digitized, **kw)
     steps = plan_chunks(toolpath)
     report = job_report(digitized, toolpath, steps)
     summary = (f"{path.name}: {report['objects']} object(s), {report['points']} points, "
