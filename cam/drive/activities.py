@@ -83,11 +83,9 @@ def run_steps(session: Any, name: str, plan: "StepPlan | ChunkedPlan", ctl: Cont
         info.update(max_late_s=round(result.lateness.max_ns / 1e9, 6), stalls=result.lateness.stalls,
                     late_total_s=round(result.lateness.total_ns / 1e9, 6))
     log = None
-    if isinstance(result.port, MockPort) and result.port.pin_log_path is not None:  # streamed to its file
+    if isinstance(result.port, MockPort):  # its log stays with the port (bounded memory), read when asked
         info["last_write_job_ns"] = result.port.last_t_ns
-    elif isinstance(result.port, MockPort):
-        log = result.pin_log()
-        info["last_write_job_ns"] = int(log.t_ns[-1]) if len(log) else None
+        log = result.port if result.port.pin_log_path is None else None
     session.finish(info, np.array(result.position_steps, np.int64), result=result,
                    pin_log=log if name == "job" else None)
     text = f"{label}: {result.status}"

@@ -16,8 +16,9 @@ with one message that every front end shows.  A step/dir port only writes;
 from __future__ import annotations
 
 import os
+import tempfile
 from pathlib import Path
-from typing import IO, Optional
+from typing import IO, Iterator, Optional
 
 import numpy as np
 
@@ -73,11 +74,21 @@ class Port:
         self.close()
 
 
+_HELD_WRITES = 1 << 22
+"""Writes a :class:`MockPort` holds in memory (about 40 MB); past them its log goes to a temporary file."""
+_SPILL_ROW = np.dtype([("t", "<i8"), ("d", "u1"), ("s", "u1")])
+"""One write in a :class:`MockPort`'s temporary file: time (ns), data register, strobe."""
+_PENDING_WRITES = 1 << 14
+"""Single writes (the real-time clock's) gathered before they join the log."""
+
+
 class MockPort(Port):
     """The logging mock port.  :meth:`pin_log` returns everything written so far.
 
-    ``pin_log_path``: stream the pin log to this CSV file as the writes come (nothing is held: a job of any
-    length); the file appears, whole, at :meth:`finish_pin_log` (written beside it, then renamed).
+    Memory is bounded whatever the job's length: ``pin_log_path`` streams the pin log to this CSV file as the
+    writes come (the file appears, whole, at :meth:`finish_pin_log`: written beside it, then renamed);
+    without it, the first :data:`_HELD_WRITES` writes are held in memory and the rest go to an anonymous
+    temporary file (13 bytes a write), read back only when :meth:`pin_log` or :meth:`pin_log_pieces` asks.
     """
 
     name = "mock"
@@ -86,6 +97,8 @@ class MockPort(Port):
         self._t: list[np.ndarray] = []
         self._d: list[np.ndarray] = []
         self._s: list[np.ndarray] = []
+        self._held = 0
+        self._spill: Optional[IO[bytes]] = None
         self._pending: list[tuple[int, int, int]] = []
         self.pin_log_path = Path(pin_log_path) if pin_log_path is not None else None
         self._file: Optional[IO[str]] = None
@@ -94,6 +107,8 @@ class MockPort(Port):
 
     def write(self, data: int, strobe: int, t_ns: int) -> None:
         self._pending.append((int(t_ns), int(data), int(strobe)))
+        if len(self._pending) >= _PENDING_WRITES:
+            self._flush()
 
     def write_many(self, t_ns: np.ndarray, data: np.ndarray, strobe: np.ndarray) -> None:
         self._flush()
@@ -106,9 +121,7 @@ class MockPort(Port):
         self.n_writes += len(t_ns)
         self.last_t_ns = int(t_ns[-1])
         if self.pin_log_path is None:
-            self._t.append(t_ns)
-            self._d.append(data)
-            self._s.append(strobe)
+            self._hold(t_ns, data, strobe)
             return
         if self._file is None:
             self._file = open(self._part(), "w", encoding="utf-8")
@@ -119,6 +132,41 @@ class MockPort(Port):
             rows = pin_rows_kernel(np.ascontiguousarray(t_ns[i:i + (1 << 18)], np.int64),
                                    data[i:i + (1 << 18)].astype(np.int64), strobe[i:i + (1 << 18)].astype(np.int64))
             self._file.write(rows.tobytes().decode("ascii"))
+
+    def _hold(self, t_ns: np.ndarray, data: np.ndarray, strobe: np.ndarray) -> None:
+        room = max(0, _HELD_WRITES - self._held)
+        if room:
+            self._t.append(t_ns[:room])
+            self._d.append(data[:room])
+            self._s.append(strobe[:room])
+            self._held += min(room, len(t_ns))
+        if len(t_ns) > room:
+            if self._spill is None:
+                self._spill = tempfile.TemporaryFile(prefix="cam-pinlog-")
+            rows = np.empty(len(t_ns) - room, _SPILL_ROW)
+            rows["t"], rows["d"], rows["s"] = t_ns[room:], data[room:], strobe[room:]
+            self._spill.write(rows.tobytes())
+
+    def pin_log_pieces(self, writes_per_piece: int = 1 << 20) -> Iterator[PinLog]:
+        """Every write so far as consecutive :class:`PinLog` pieces of at most ``writes_per_piece`` writes (bounded
+        memory: :func:`cam.verify.ramps.check_ramps` takes them)."""
+        self._flush()
+        if self.pin_log_path is not None:
+            yield self.pin_log()
+            return
+        for t, d, st in zip(self._t, self._d, self._s):
+            for i in range(0, len(t), writes_per_piece):
+                yield PinLog(t[i:i + writes_per_piece], d[i:i + writes_per_piece], st[i:i + writes_per_piece])
+        if self._spill is not None:
+            self._spill.flush()
+            self._spill.seek(0)
+            while True:
+                size = writes_per_piece * _SPILL_ROW.itemsize
+                rows = np.frombuffer(self._spill.read(size if size < (1 << 40) else -1), _SPILL_ROW)
+                if not len(rows):
+                    break
+                yield PinLog(rows["t"].copy(), rows["d"].copy(), rows["s"].copy())
+            self._spill.seek(0, os.SEEK_END)
 
     def _part(self) -> Path:
         assert self.pin_log_path is not None
@@ -152,9 +200,12 @@ class MockPort(Port):
             if self._file is not None:
                 self.finish_pin_log()
             return read_pin_log(self.pin_log_path)
-        if not self._t:
+        pieces = list(self.pin_log_pieces(1 << 62))
+        if not pieces:
             return PinLog(np.zeros(0, np.int64), np.zeros(0, np.uint8), np.zeros(0, np.uint8))
-        return PinLog(np.concatenate(self._t), np.concatenate(self._d), np.concatenate(self._s))
+        if len(pieces) == 1:
+            return pieces[0]
+        return PinLog(*(np.concatenate([getattr(p, f) for p in pieces]) for f in ("t_ns", "data", "strobe")))
 
 
 class ParallelPort(Port):

@@ -27,7 +27,7 @@ import numpy as np
 from ..errors import CamError
 from ..job.model import Job, JobLike
 from ..settings import MachineSettings
-from ..verify.pinlog import PinLog, _decode, carve, decode_pin_log
+from ..verify.pinlog import PinLog, carve, decode_pin_log, net_steps
 from .ports import MockPort, Port, open_port
 from .pins import axis_bits
 from .chunks import ChunkedPlan, StepChunk, plan_chunks
@@ -204,8 +204,7 @@ class Cursor:
         """The writes ``(K,)`` times and data just went out, in order."""
         if not len(data):
             return
-        decoded, _ = _decode(np.asarray(data, np.uint8), self.last_data, self._pos, self.clock, self.dirbit)
-        self._pos = decoded[-1].copy()
+        self._pos = self._pos + net_steps(data, self.last_data, self.clock, self.dirbit)
         self.last_data, self.last_t_ns = int(data[-1]), int(t_ns[-1])
         self.live = (self.live[0] + len(data), tuple(int(v) for v in self._pos))  # type: ignore[assignment]
 

@@ -54,7 +54,7 @@ from .journal import JournalSpec, journal_spec
 from ._session_parts import Activity, Prompt, PromptFn, SessionControls
 from .activities import BoardControl, drill_work, move_work, run_on_board, run_steps
 from .maximus.board import drill_arguments, drill_job, maximus_port
-from .ports import port_kind, require
+from .ports import MockPort, port_kind, require
 from .runner import Controller, Cursor, RunResult
 from .chunks import ChunkedPlan, plan_chunks
 from .steps import StepPlan
@@ -101,9 +101,19 @@ class MachineSession(SessionControls):
         self._log_seq = 0
         self.last_run: dict[str, Any] = {}
         self.last_result: Optional[RunResult] = None
-        self.last_job_pin_log = None
+        self._last_job_port: Optional[MockPort] = None  # the mock that ran the last job: it holds its log
+        self._last_job_log: Any = None
         self.version = 0
         self._runner_process: Optional[RunnerProcess] = None
+
+    @property
+    def last_job_pin_log(self) -> Any:
+        """The pin log of the last job run on the mock port (a :class:`~cam.verify.pinlog.PinLog`, read from the
+        port when first asked: the run itself holds no more than the mock's bounded buffer), or None."""
+        with self._lock:
+            if self._last_job_log is None and self._last_job_port is not None:
+                self._last_job_log = self._last_job_port.pin_log()
+            return self._last_job_log
 
     def runner_process(self) -> RunnerProcess:
         """The process real-time step plans run in (started at the first; ended with the session)."""
@@ -334,7 +344,7 @@ class MachineSession(SessionControls):
             self._last_activity = a
             self.last_result = result
             if pin_log is not None:
-                self.last_job_pin_log = pin_log
+                self._last_job_port, self._last_job_log = pin_log, None
             self._activity = None
             self._prompt = None
             self._finished_wall = time.monotonic()

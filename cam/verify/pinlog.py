@@ -15,6 +15,8 @@ direction bit is set in the same write.
 """
 from __future__ import annotations
 
+import functools
+
 import io
 import os
 from dataclasses import dataclass
@@ -146,6 +148,28 @@ def rising_edges(data: np.ndarray, mask: int, prev_byte: int = 0) -> np.ndarray:
         prev[0] = prev_byte
         prev[1:] = data[:-1]
     return ((data & mask) != 0) & ((prev & mask) == 0)
+
+
+def net_steps(data: np.ndarray, prev_byte: int, clock: np.ndarray, dirbit: np.ndarray) -> np.ndarray:
+    """``(3,)`` int64 steps each axis made over a stretch of writes (+ for a step with its direction bit set),
+    ``prev_byte`` the register before the stretch: where :func:`_decode`'s last position lands, without the
+    position after every write (one histogram of the rising clocks and direction bits)."""
+    data = np.asarray(data, np.uint8)
+    if not len(data):
+        return np.zeros(3, np.int64)
+    clocks, dirs = int(np.bitwise_or.reduce(clock)), int(np.bitwise_or.reduce(dirbit))
+    rising = np.empty(len(data), np.uint8)
+    rising[0] = data[0] & ~np.uint8(prev_byte)
+    np.bitwise_and(data[1:], ~data[:-1], out=rising[1:])
+    code = (rising & np.uint8(clocks)) | (data & np.uint8(dirs))
+    return np.bincount(code, minlength=256) @ _step_table(tuple(int(v) for v in clock), tuple(int(v) for v in dirbit))
+
+
+@functools.lru_cache(maxsize=8)
+def _step_table(clock: tuple[int, ...], dirbit: tuple[int, ...]) -> np.ndarray:
+    """``(256, 3)`` int64: the step of each axis for a register byte of rising clocks | direction bits."""
+    v = np.arange(256)
+    return np.stack([np.where(v & c, np.where(v & d, 1, -1), 0) for c, d in zip(clock, dirbit)], axis=1)
 
 
 def _decode(data: np.ndarray, prev_byte: int, start_steps: np.ndarray, clock: np.ndarray,
