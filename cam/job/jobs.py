@@ -582,6 +582,7 @@ def _finish(job: PreparedJob) -> PreparedJob:
         "size_mm": list(job.size_mm),
         "depth_mm": job.depth_mm,
         "steps": {a: int(v) for a, v in zip("xyz", job.plan.steps_total)},
+        "periods": int(job.plan.n_periods),
         "estimated_time_s": round(job.estimated_time_s, 6),
         "ramp": job.plan.settings.ramp,
         "tool_changes": list(job.tool_changes),
