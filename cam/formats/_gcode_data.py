@@ -1,0 +1,168 @@
+"""G-code in, its data: the moves a program gives, the text it is read from, and the words it knows.
+
+:mod:`cam.formats.gcode` is the interpreter's public face; these are the pieces its parts
+(:mod:`._gcode_state`, :mod:`._gcode_flow`, :mod:`._gcode_block`, :mod:`._gcode_motion`,
+:mod:`._gcode_cycles`) share.
+"""
+from __future__ import annotations
+
+import bisect
+import re
+from dataclasses import dataclass, field
+from typing import Sequence
+
+from .ngc import Line
+
+PLANE_AXES = {"XY": (0, 1, 2), "XZ": (2, 0, 1), "YZ": (1, 2, 0)}
+"""The (first, second, third) axes of each arc plane, as LinuxCNC orders them: arcs turn in the
+(first, second) frame (G2 clockwise), the third axis moves linearly (helix)."""
+
+
+@dataclass
+class GcodeMove:
+    """One programmed move in mm (machine frame, G-code axes: +Y up, +Z up).
+
+    ``kind``: "rapid", "feed", "arc", "spline", "dwell" or "pause".  ``end`` is absolute mm; arcs carry
+    ``center`` (mm, in the (first, second) axes of ``plane``, see :data:`PLANE_AXES`), ``clockwise``
+    and ``turns``; a spline (G5, G5.1) is the Bezier curve from where the last move ended through its inner
+    ``controls`` (absolute mm: one for G5.1, two for G5; Z as at the start) to ``end``; dwell carries
+    ``seconds``; pause carries ``note``; ``feed_mm_min`` applies to feed, arc and spline moves, or
+    ``minutes`` (G93 inverse time) when it is more than 0.
+    """
+
+    kind: str
+    line: int
+    end: tuple[float, float, float]
+    feed_mm_min: float = 0.0
+    center: tuple[float, float] | None = None
+    clockwise: bool = False
+    turns: int = 1
+    seconds: float = 0.0
+    note: str = ""
+    plane: str = "XY"
+    minutes: float = 0.0
+    controls: tuple[tuple[float, float, float], ...] = ()
+    file: str = ""  # the file of ``line`` when it is not the program's own (a subroutine file)
+
+
+@dataclass
+class GcodeProgram:
+    """Interpreted program: moves in order, plus warnings; ``source`` names the file."""
+
+    moves: list[GcodeMove]
+    source: str = "<gcode>"
+    warnings: list[str] = field(default_factory=list)
+
+
+def _strip_comments(line: str, err) -> str:
+    out = []
+    depth = 0
+    for ch in line:
+        if ch == "(":
+            if depth:
+                raise err("nested comment '('")
+            depth = 1
+        elif ch == ")":
+            if not depth:
+                raise err("')' without '('")
+            depth = 0
+        elif ch == ";" and not depth:
+            break
+        elif not depth:
+            out.append(ch)
+    if depth:
+        raise err("comment '(' is not closed on its line")
+    return "".join(out)
+
+
+def _shown(word: str) -> str:
+    """A word as a message quotes it: at most 24 characters."""
+    return word if len(word) <= 24 else word[:20] + "..."
+
+
+# -- refused features: one message each ---------------------------------------------------------------------------
+
+_REFUSED_G = {
+    **{c: "probing is not supported: the machine has no probe input" for c in (382, 383, 384, 385)},
+    **{c: "cutter radius compensation is not supported: give the tool centre's path"
+       for c in (410, 411, 420, 421)},
+    **{c: "lathe cycles are not supported: the machine is a 3-axis mill" for c in (700, 710, 711, 720, 721, 760)},
+    70: "lathe diameter mode is not supported: the machine is a 3-axis mill",
+    331: "rigid tapping is not supported: the machine has no spindle encoder",
+    **{c: "NURBS blocks (G5.2 .. G5.3) are not supported: give G5 or G5.1 splines, lines or arcs"
+       for c in (52, 53)},
+    **{c: "this canned cycle needs spindle control, which the machine does not have" for c in (840, 860, 870, 880)},
+    950: "feed per revolution is not supported: the machine has no spindle encoder",
+    432: "G43.2 (added tool length offsets) is not supported",
+    171: "user-defined planes are not supported", 181: "user-defined planes are not supported",
+    191: "user-defined planes are not supported",
+}
+_SUPPORTED_G = {0, 10, 20, 30, 40, 50, 51, 330, 80, 100, 170, 180, 190, 200, 210, 280, 281, 300, 301, 400, 430, 431, 490, 530,
+                540, 550, 560, 570, 580, 590, 591, 592, 593, 610, 611, 640, 730, 800, 810, 820, 830, 850, 890,
+                900, 901, 910, 911, 920, 921, 922, 923, 930, 940, 960, 970, 980, 990}
+_CYCLES = {730, 810, 820, 830, 850, 890}
+_MOTION = {0, 10, 20, 30, 330, 800} | _CYCLES
+_SPLINES = {50, 51}  # G5, G5.1: motion on their own line only (rs274 keeps the modal motion mode)
+_CS = {540: 1, 550: 2, 560: 3, 570: 4, 580: 5, 590: 6, 591: 7, 592: 8, 593: 9}
+_IGNORED_M = {3, 4, 5, 48, 49, 50, 51, 52, 53}
+_IO_M = {62, 63, 64, 65, 66, 67, 68}
+_AXIS_WORDS = "xyz"
+_LETTERS = set("xyzijkrfstpqlhn@^")
+_CYCLE_PECK = 0.254  # mm: LinuxCNC's G73 chip-break retract and G83 rapid stop above the last peck (0.010 in)
+
+
+class _Source:
+    """One file's lines, read on demand, and where its O words are."""
+
+    _O = re.compile(r"^\s*/?\s*[oO]\s*(<[^>]*>|\d+)\s*([a-zA-Z]+)")
+
+    def __init__(self, name: str, text: str) -> None:
+        self.name = name
+        self.raw = text.splitlines()
+        self.bodies: dict[int, str | None] = {}
+        self.lines: dict[int, Line] = {}
+        self.o_at: dict[str, list[tuple[int, str]]] = {}  # label -> [(index, keyword)] in order
+        self.subs: dict[str, int] = {}
+        for i, raw in enumerate(self.raw):
+            m = self._O.match(raw.split("(", 1)[0].split(";", 1)[0])
+            if m:
+                label = re.sub(r"\s", "", m.group(1).lower())
+                if not label.startswith("<"):
+                    label = str(int(label))
+                kw = m.group(2).lower()
+                self.o_at.setdefault(label, []).append((i, kw))
+                if kw == "sub" and label not in self.subs:
+                    self.subs[label] = i
+
+    def next_o(self, label: str, after: int, kws: Sequence[str]) -> int | None:
+        """The first line after ``after`` with O word ``label`` and a keyword in ``kws``."""
+        entries = self.o_at.get(label, [])
+        k = bisect.bisect_right(entries, (after, "\uffff"))
+        for i, kw in entries[k:]:
+            if kw in kws:
+                return i
+        return None
+
+    def prev_o(self, label: str, before: int) -> tuple[int, str] | None:
+        """The last O word ``label`` before line ``before``."""
+        entries = self.o_at.get(label, [])
+        k = bisect.bisect_left(entries, (before, ""))
+        return entries[k - 1] if k else None
+
+
+class _End(Exception):
+    """M2, M30 or the closing ``%``: the program ends."""
+
+
+@dataclass
+class _Frame:
+    """A subroutine call: where to return, the caller's local parameters, and the loops running in it."""
+
+    source: _Source
+    back: int
+    label: str
+    saved_numbered: dict[int, float]
+    named: dict[str, float] = field(default_factory=dict)
+    repeats: dict[tuple[int, int], int] = field(default_factory=dict)
+    modal: dict | None = None  # M73: restored on return
+

@@ -1,0 +1,243 @@
+"""G-code in, the program's flow: lines one after the other, O words (subroutines, branches, loops).
+
+LinuxCNC's rules, as its ``rs274`` runs them: a subroutine call saves and clears the numbered parameters
+#1..#30 and gives it its own named local parameters; ``o<name> call`` finds ``name.ngc`` in the subroutine path;
+a loop's end goes back to its head, ``break`` and ``continue`` find the loop of their label around them.
+"""
+from __future__ import annotations
+
+import bisect
+import re
+
+from ..fileio import read_text
+from ..limits import MAX_GCODE_CALL_DEPTH, MAX_REPEAT
+from ._gcode_data import _End, _Frame, _Source, _strip_comments
+from ._gcode_state import _State
+from .ngc import NgcSyntaxError, read_line
+
+
+class _Flow(_State):
+    """Runs the lines: each block (:meth:`block`, from :class:`~._gcode_block._Block`) or O word in turn."""
+
+    def run(self) -> None:
+        src, idx = self.main, 0
+        executed = 0
+        percent = False
+        ran = False
+        while True:
+            if idx >= len(src.raw):
+                if len(self.frames) > 1:
+                    self.source, self.raw = src, ""
+                    self.line_no = len(src.raw)
+                    raise self.err(f"the file ends inside subroutine 'o{self.frames[-1].label}'")
+                return
+            self.source, self.line_no, self.raw = src, idx + 1, src.raw[idx]
+            executed += 1
+            if executed > self.max_lines:
+                raise self.err(f"the program has run {self.max_lines} lines and does not end (a loop without an "
+                               "exit?); raise the limit with --max-lines")
+            body = src.bodies.get(idx, "")
+            if body == "":
+                body = re.sub(r"\s+", "", _strip_comments(self.raw, self.err)).lower()
+                if body.startswith("/"):
+                    body = body[1:]  # block delete is off, as in rs274: the line runs
+                src.bodies[idx] = body
+            if not body:
+                idx += 1
+                continue
+            if body == "%":
+                if percent or ran:
+                    return  # the closing '%' ends the program
+                percent = True
+                idx += 1
+                continue
+            ran = True
+            line = src.lines.get(idx)
+            if line is None:
+                try:
+                    line = read_line(body)
+                except NgcSyntaxError as exc:
+                    raise self.err(str(exc)) from None
+                src.lines[idx] = line
+            if line.o is not None:
+                src, idx = self.o_word(src, idx, line.o)
+                continue
+            try:
+                self.block(line)
+            except _End:
+                return
+            idx += 1
+
+    # -- O words ----------------------------------------------------------------------------------------------
+
+    def _o_args(self, src: _Source, i: int) -> list:
+        line = src.lines.get(i)
+        if line is None:
+            body = re.sub(r"\s+", "", _strip_comments(src.raw[i], self.err)).lower().lstrip("/")
+            try:
+                line = src.lines[i] = read_line(body)
+            except NgcSyntaxError as exc:
+                raise self.err(str(exc)) from None
+        return line.o[2]
+
+    def _need(self, found: int | None, what: str) -> int:
+        if found is None:
+            raise self.err(f"no matching {what}")
+        return found
+
+    def _do_of(self, src: _Source, label: str, idx: int) -> int | None:
+        """The ``do`` line whose loop the ``while`` at ``idx`` ends (its own break/continue skipped), or None."""
+        prev = src.prev_o(label, idx)
+        while prev is not None and prev[1] in ("break", "continue"):
+            prev = src.prev_o(label, prev[0])
+        return prev[0] if prev is not None and prev[1] == "do" else None
+
+    def _loop_head(self, src: _Source, label: str, idx: int, opener: str) -> int:
+        """The line of the ``o<label> opener`` (``while``/``repeat``) that the loop end at ``idx`` closes."""
+        head = src.prev_o(label, idx)
+        while head is not None and head[1] != opener:
+            head = src.prev_o(label, head[0])
+        return self._need(head and head[0], f"'o{label} {opener}'")
+
+    def _is_do_tail(self, src: _Source, label: str, idx: int) -> bool:
+        return self._do_of(src, label, idx) is not None
+
+    def o_word(self, src: _Source, idx: int, o: tuple) -> tuple[_Source, int]:
+        """Run the O word ``o`` (label, keyword, arguments) of line ``idx``: the source and line to go on at."""
+        label, kw, args = o
+        if kw == "sub":
+            return src, self._need(src.next_o(label, idx, ("endsub",)), f"'o{label} endsub'") + 1
+        if kw in ("endsub", "return"):
+            return self._o_return(label, kw, args)
+        if kw == "call":
+            return self._o_call(src, idx, label, args)
+        if kw == "if":
+            return src, self._o_if(src, idx, label, args)
+        if kw in ("elseif", "else"):
+            return src, self._need(src.next_o(label, idx, ("endif",)), f"'o{label} endif'") + 1
+        if kw in ("endif", "do"):
+            return src, idx + 1
+        if kw == "while":
+            return src, self._o_while(src, idx, label, args)
+        if kw == "endwhile":
+            return src, self._loop_head(src, label, idx, "while")
+        if kw == "repeat":
+            return src, self._o_repeat(src, idx, label, args)
+        if kw == "endrepeat":
+            return src, self._loop_head(src, label, idx, "repeat")
+        return src, self._o_break(src, idx, label, kw)
+
+    def _o_true(self, args: list) -> bool:
+        """The condition of an ``if``, ``elseif`` or ``while``: its first argument not 0 (none: false)."""
+        return self.value_of(args[0]) != 0 if args else False
+
+    def _o_return(self, label: str, kw: str, args: list) -> tuple[_Source, int]:
+        """``endsub`` or ``return``: the caller's numbered parameters and M73 state back, on after its call."""
+        frame = self.frames[-1]
+        if len(self.frames) == 1:
+            raise self.err(f"'o{label} {kw}' outside a subroutine")
+        if args:
+            self.value, self.value_returned = self.value_of(args[0]), 1.0
+        else:
+            self.value_returned = 0.0
+        self.frames.pop()
+        for n in range(1, 31):
+            self.params.pop(n, None)
+        self.params.update(frame.saved_numbered)
+        if frame.modal is not None:
+            self.restore_modal(frame.modal)
+        return frame.source, frame.back
+
+    def _o_call(self, src: _Source, idx: int, label: str, args: list) -> tuple[_Source, int]:
+        """``call``: the arguments become #1..#30 (the caller's are saved), on at the subroutine's first line."""
+        values = [self.value_of(a) for a in args]
+        target, start = self.find_sub(src, label)
+        if len(self.frames) > MAX_GCODE_CALL_DEPTH:
+            raise self.err(f"subroutines call each other more than {MAX_GCODE_CALL_DEPTH} deep")
+        saved = {n: self.params[n] for n in range(1, 31) if n in self.params}
+        for n in range(1, 31):
+            self.params.pop(n, None)
+        for n, v in enumerate(values[:30], start=1):
+            self.params[n] = v
+        self.frames.append(_Frame(src, idx + 1, label, saved))
+        self.value_returned = 0.0
+        return target, start + 1
+
+    def _o_kind(self, src: _Source, label: str, j: int) -> str:
+        """The keyword of the O word ``label`` at line ``j``."""
+        return src.o_at[label][bisect.bisect_left(src.o_at[label], (j, ""))][1]
+
+    def _o_if(self, src: _Source, idx: int, label: str, args: list) -> int:
+        """``if``: the line after the first branch whose condition holds (``elseif``) or after ``else``/``endif``."""
+        if self._o_true(args):
+            return idx + 1
+        j = idx
+        while True:
+            j = self._need(src.next_o(label, j, ("elseif", "else", "endif")), f"'o{label} endif'")
+            if self._o_kind(src, label, j) == "elseif":
+                self.line_no, self.raw = j + 1, src.raw[j]
+                if self._o_true(self._o_args(src, j)):
+                    return j + 1
+                continue
+            return j + 1
+
+    def _o_while(self, src: _Source, idx: int, label: str, args: list) -> int:
+        """``while``: a loop's head, or the tail of a ``do`` loop (back to the ``do`` while its condition holds)."""
+        if self._is_do_tail(src, label, idx):
+            return self._do_of(src, label, idx) + 1 if self._o_true(args) else idx + 1
+        if self._o_true(args):
+            return idx + 1
+        return self._need(src.next_o(label, idx, ("endwhile",)), f"'o{label} endwhile'") + 1
+
+    def _o_repeat(self, src: _Source, idx: int, label: str, args: list) -> int:
+        """``repeat``: the count is taken when the loop starts; past the ``endrepeat`` when it runs out."""
+        repeats = self.frames[-1].repeats
+        key = (id(src), idx)
+        if key not in repeats:
+            n = self.value_of(args[0]) if args else 0.0
+            if not 0 <= n <= MAX_REPEAT * 100:
+                raise self.err(f"repeat count {n:g} is out of range 0..{MAX_REPEAT * 100}")
+            repeats[key] = int(n)
+        if repeats[key] > 0:
+            repeats[key] -= 1
+            return idx + 1
+        del repeats[key]
+        return self._need(src.next_o(label, idx, ("endrepeat",)), f"'o{label} endrepeat'") + 1
+
+    def _o_break(self, src: _Source, idx: int, label: str, kw: str) -> int:
+        """``break`` or ``continue``: past the end of the loop with this label that encloses the line, or to that
+        end (``endwhile`` and ``endrepeat`` jump back, a ``do``'s ``while`` tests its condition)."""
+        j = idx
+        while True:
+            j = self._need(src.next_o(label, j, ("endwhile", "endrepeat", "while")), f"end of loop 'o{label}'")
+            kind = self._o_kind(src, label, j)
+            if kind != "while" or self._is_do_tail(src, label, j):
+                break
+        if kw == "break":
+            if kind == "endrepeat":
+                head = src.prev_o(label, j)
+                while head is not None and head[1] != "repeat":
+                    head = src.prev_o(label, head[0])
+                if head is not None:
+                    self.frames[-1].repeats.pop((id(src), head[0]), None)
+            return j + 1
+        return j
+
+    def find_sub(self, src: _Source, label: str) -> tuple[_Source, int]:
+        for s in (src, self.main, *self.files.values()):
+            if label in s.subs:
+                return s, s.subs[label]
+        if label.startswith("<"):
+            name = label[1:-1]
+            for d in self.path:
+                f = d / f"{name}.ngc"
+                if f.is_file():
+                    _, text = read_text(f, not_text="not a G-code text file")
+                    s = _Source(str(f), text)
+                    self.files[str(f)] = s
+                    if label in s.subs:
+                        return s, s.subs[label]
+                    raise self.err(f"{f} does not define 'o{label} sub'")
+        where = f" (searched {', '.join(str(d) for d in self.path)})" if self.path else " (no --subroutine-path)"
+        raise self.err(f"subroutine 'o{label}' is not defined{where}")
+
