@@ -266,8 +266,6 @@ class HpglJobStream:
         """Every move in one :class:`~cam.job.model.Job` (:func:`~cam.job.model.join_pieces` of :meth:`pieces`)."""
         return join_pieces(self.pieces(), self)
 
-    to_job = joined  # the older name (tests/test_drawing_stream.py at HEAD)
-
     def _batches(self) -> Iterator[PointBatch]:
         """The pen-down points, in order: the file's a chunk at a time, or the drawing's sliced."""
         if isinstance(self.src, HpglDrawing):
