@@ -1,8 +1,9 @@
 """G-code in, the program's flow: lines one after the other, O words (subroutines, branches, loops).
 
 LinuxCNC's rules, as its ``rs274`` runs them: a subroutine call saves and clears the numbered parameters
-#1..#30 and gives it its own named local parameters; ``o<name> call`` finds ``name.ngc`` in the subroutine path;
-a loop's end goes back to its head, ``break`` and ``continue`` find the loop of their label around them.
+#1..#30 and gives the subroutine its own named local parameters; ``o<name> call`` finds ``name.ngc`` in the
+subroutine path; a loop's end goes back to its head, ``break`` and ``continue`` find the loop of their label
+around them.
 """
 from __future__ import annotations
 
