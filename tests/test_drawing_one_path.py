@@ -16,7 +16,8 @@ import pytest
 
 import cam
 import cam.job.jobs as jobs
-from cam.cli.planning import write_job_preview, write_preview
+from cam.cli.planning import carved_surface, write_job_preview, write_preview
+from cam.drive.chunks import plan_chunks
 from cam.digitize.drawing import BLACK, RED, WHITE, Drawing
 from cam.formats.gcode_export import to_gcode
 from cam.job.drawing_stream import DrawingJobStream, stream_drawing
@@ -133,6 +134,19 @@ def test_pin_logs_gcode_and_pictures_are_the_same_at_any_piece_size(case, tmp_pa
         assert _pin_log_bytes(stream.joined(), tmp_path / f"{piece_targets}j.csv") == want_log
         assert to_gcode(stream) == want_gcode
         assert _pictures(stream, tmp_path, str(piece_targets)) == want_pictures
+
+
+@pytest.mark.parametrize("spp", [8, 2, 3])
+def test_the_surface_carved_a_chunk_at_a_time_is_the_simulated_surface(case, spp):
+    """carved_surface (the surface picture's depths, decoded and carved a chunk of writes at a time) equals
+    cam.simulate_surface of the whole job (its whole pin log at once), chunk borders inside moves and on pixel
+    borders (an even number of steps per pixel) included."""
+    _, d, kw, _, _ = case
+    s = cam.MachineSettings().replace(steps_per_px_xy=spp)
+    stream = stream_drawing(d, settings=s, piece_targets=7, **kw)
+    want = cam.simulate_surface(stream.joined())
+    for chunk_periods in (64, 1000):
+        np.testing.assert_array_equal(carved_surface(stream, plan_chunks(stream, chunk_periods=chunk_periods)), want)
 
 
 def _disc_png(tmp_path: Path) -> Path:

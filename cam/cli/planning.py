@@ -5,16 +5,19 @@ import argparse
 from pathlib import Path
 from typing import Any, Optional
 
+import numpy as np
+
 from ..digitize.digitized import Digitized
 from ..digitize.drawing import load_image
 from ..digitize.profile import Profile, load_profile, profile_from_expr
-from ..drive.runner import simulate_surface
-from ..drive.chunks import plan_chunks
+from ..drive.chunks import ChunkedPlan, plan_chunks
+from ..drive.pins import axis_bits
 from ..errors import CamError
 from ..job.jobs import JobOptions, PreparedJob, prepare_job
 from ..job.model import JobLike
 from ..render.picture import save_picture, surface_picture, toolpath_picture, toolpath_svg
 from ..settings import MachineSettings
+from ..verify.pinlog import Motion, _decode, _pixel_under, carve
 from .checks import job_kind_of
 from .common import machine_settings, reading_bar
 
@@ -23,7 +26,7 @@ FILE_JOB_KINDS = ("excellon", "gcode", "hpgl")
 
 __all__ = [
     "is_file_job", "prepare", "summary_of", "job_options", "excellon_digits", "profile_of",
-    "write_preview", "write_job_preview", "write_file_job_preview",
+    "write_preview", "write_job_preview", "write_file_job_preview", "carved_surface",
 ]
 
 
@@ -122,11 +125,10 @@ def write_preview(args: argparse.Namespace, job: JobLike, path: str, surface: bo
                   drawing_rgb: Any = None) -> None:
     """The toolpath picture (.png over the drawing, or .svg) of a drawing's job, or its cut surface (.png).
 
-    ``job`` is any :class:`~cam.job.model.JobLike`: the time in the legend is planned from its pieces
-    (:func:`cam.drive.chunks.plan_chunks`, bounded memory); the pictures are drawn from the whole job,
-    ``job.joined()`` (memory grows with the job's moves: the .svg and the picture's lines hold every move), and
-    the cut surface is simulated from it on the mock (:func:`cam.drive.runner.simulate_surface`: the whole
-    pin log in memory).  A job gives the same picture whatever its pieces.
+    ``job`` is any :class:`~cam.job.model.JobLike` and gives the same picture whatever its pieces.  The time in
+    the legend is planned from its pieces and the cut surface is carved from its writes a chunk at a time
+    (:func:`carved_surface`, bounded memory); the toolpath pictures are drawn from the whole job,
+    ``job.joined()`` (memory grows with its moves: the .svg and the picture's lines hold every move).
     """
     scale = _picture_scale(args)
     suffix = Path(path).suffix.lower()
@@ -134,18 +136,47 @@ def write_preview(args: argparse.Namespace, job: JobLike, path: str, surface: bo
         raise CamError(f"{path}: pictures are written as .png or .svg")
     if surface and suffix != ".png":
         raise CamError(f"{path}: the surface picture is written as .png")
-    time_s = plan_chunks(job).estimated_time_s
-    whole = job.joined()
+    steps = plan_chunks(job)
     if surface:
-        s = simulate_surface(whole)
-        st = whole.settings
+        s = carved_surface(job, steps)
+        st = job.settings
         legend = (f"cut surface, decoded from the mock pin log: depth 0..{st.px_to_mm_z(int(s.max()) / st.steps_per_px_z):.2f} mm"
                   f" ({int(s.max())} Z steps)")
         save_picture(surface_picture(s, scale=scale, legend=legend), path)
     elif suffix == ".svg":
-        save_picture(toolpath_svg(whole, scale=scale, estimated_time_s=time_s), path)
+        save_picture(toolpath_svg(job.joined(), scale=scale, estimated_time_s=steps.estimated_time_s), path)
     else:
-        save_picture(toolpath_picture(whole, drawing_rgb=drawing_rgb, scale=scale, estimated_time_s=time_s), path)
+        save_picture(toolpath_picture(job.joined(), drawing_rgb=drawing_rgb, scale=scale,
+                                      estimated_time_s=steps.estimated_time_s), path)
+
+
+def carved_surface(job: JobLike, steps: Optional[ChunkedPlan] = None) -> np.ndarray:
+    """``(height_px, width_px)`` int64 cut surface of a drawing job, depth in Z steps (drawing frame): its port
+    writes (``steps``, None: :func:`cam.drive.chunks.plan_chunks` of it) decoded and carved by a point tool a
+    chunk at a time, in bounded memory; the same surface as :func:`cam.drive.runner.simulate_surface` of the
+    whole job (tested).
+
+    Each chunk's positions are carved after a row that carries the pixel under the tool before them: a pixel
+    centre (never on a border) at the surface, so a border position at the chunk's start keeps that pixel.
+    """
+    st = job.settings
+    spp = st.steps_per_px_xy
+    h, w = job.pixels.height_px, job.pixels.width_px
+    surface_steps = job.pixels.origin_px[2] * st.steps_per_px_z
+    clock, dirbit = axis_bits(st)
+    out = np.zeros((h, w), np.int64)
+    pos, prev_byte, before = np.zeros(3, np.int64), 0, None
+    for chunk in (steps or plan_chunks(job)).chunks():
+        if not len(chunk.data):
+            continue
+        p, counts = _decode(chunk.data, prev_byte, pos, clock, dirbit)
+        if before is not None:
+            p = np.vstack([before, p])
+        np.maximum(out, carve(Motion(chunk.t_ns, p, counts), (h, w), st, origin_px=job.pixels.origin_px), out=out)
+        under = [int(_pixel_under(p[:, a], spp)[-1]) for a in (0, 1)]
+        before = np.array([[under[0] * spp, under[1] * spp, surface_steps]], np.int64)
+        pos, prev_byte = p[-1].copy(), int(chunk.data[-1])
+    return out
 
 
 def _picture_scale(args: argparse.Namespace) -> Optional[int]:
