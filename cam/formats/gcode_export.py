@@ -79,7 +79,7 @@ def to_gcode(
 
 def _point_pieces(toolpath: Any) -> Iterator[tuple[list, list]]:
     """``(points, kinds)`` lists of consecutive pieces of a job (one for a Job; a stream's pieces, one at a time)."""
-    for piece in (toolpath.pieces() if not hasattr(toolpath, "points_steps") else [toolpath]):
+    for piece in toolpath.pieces():
         yield np.asarray(piece.points_steps).tolist(), np.asarray(piece.kind).tolist()
 
 

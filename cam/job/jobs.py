@@ -430,9 +430,10 @@ class PreparedJob:
 
     @property
     def steps(self) -> Any:
-        """Every write of :attr:`plan` at once (a :class:`~cam.drive.steps.StepPlan`, made on first use)."""
+        """Every write of :attr:`plan` at once (a :class:`~cam.drive.steps.StepPlan`, its chunks joined, made on
+        first use: pictures of every write and tests; a run sends :attr:`plan` a chunk at a time)."""
         if self._steps is None:
-            self._steps = self.plan.to_plan() if hasattr(self.plan, "to_plan") else self.plan
+            self._steps = self.plan.to_plan()
         return self._steps
 
     def positions_steps(self) -> np.ndarray:
@@ -443,17 +444,16 @@ class PreparedJob:
 
     def preview_picture(self) -> np.ndarray:
         """The preview as an ``(H, W, 3)`` uint8 RGB array (see :mod:`cam.render.picture`)."""
-        if self.kind in ("drawing", "digitized") and hasattr(self.toolpath, "points_steps"):
-
+        if self.kind in ("drawing", "digitized") and isinstance(self.toolpath, Job):
             return toolpath_picture(self.toolpath, drawing_rgb=self.drawing_rgb,
                                     estimated_time_s=self.estimated_time_s)
-        # the job's points: the step plan moves in straight lines between them (its DDA spreads the shorter
-        # axes evenly), so they draw the same picture as every write would, at a fraction of the cost
-        if self.toolpath is not None and not hasattr(self.toolpath, "points_steps"):  # a job read a piece at a time
-            return motion_picture(lambda: (p.points_steps for p in self.toolpath.pieces()), self.settings,
-                                  legend=self._legend(), extent_steps=self.extent_steps)
-        points = self.toolpath.points_steps if self.toolpath is not None else self.positions_steps()
-        return motion_picture(points, self.settings, legend=self._legend(), holes=self.kind == "excellon")
+        # the job's points, a piece at a time: the step plan moves in straight lines between them (its DDA
+        # spreads the shorter axes evenly), so they draw the same picture as every write would, at a fraction
+        # of the cost
+        pieces = (lambda: (p.points_steps for p in self.toolpath.pieces())) if self.toolpath is not None else \
+            self.positions_steps()
+        return motion_picture(pieces, self.settings, legend=self._legend(), extent_steps=self.extent_steps,
+                              holes=self.kind == "excellon")
 
     def preview_png(self) -> bytes:
         """PNG bytes of :meth:`preview_picture`."""

@@ -622,7 +622,7 @@ def journal_record(base: JournalBase, point_write: np.ndarray, pause_writes: set
             ``base.start_position_steps``).
         state: one of :data:`JOURNAL_STATES`.
     """
-    i = point_write.last_completed(writes_done) if hasattr(point_write, "last_completed") else \
+    i = point_write.last_completed(writes_done) if not isinstance(point_write, np.ndarray) else \
         last_completed(point_write, writes_done)
     if i < 0:
         last, pending = base.last_move, base.pause_pending
