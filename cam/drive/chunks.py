@@ -1,6 +1,6 @@
 """The step plan as a stream of chunks: every port write of a job, in bounded memory.
 
-:func:`cam.drive.steps.plan_steps` holds every write of a job at once (about
+:func:`plan_steps` holds every write of a job at once (about
 100 bytes per step period with the look-ahead ramps): a large job does not fit.
 A :class:`ChunkedPlan` makes the same writes a chunk at a time:
 
@@ -36,9 +36,9 @@ from ..verify.pinlog import _decode, fold_extent
 from ._kernels import chunk_writes_kernel, stretch_kernel
 from .pins import axis_bits
 from .ramps import _lookahead, linear40_periods
-from .steps import StepPlan
 
-__all__ = ["StepChunk", "ChunkedPlan", "plan_chunks", "lookahead_margin", "DEFAULT_CHUNK_PERIODS"]
+__all__ = ["StepChunk", "StepPlan", "ChunkedPlan", "plan_chunks", "plan_steps", "lookahead_margin",
+           "DEFAULT_CHUNK_PERIODS"]
 
 DEFAULT_CHUNK_PERIODS = 1 << 18
 """Step periods per chunk (a few tens of MB of writes, look-ahead and decoding arrays at most)."""
@@ -65,6 +65,48 @@ class StepChunk:
 
     def __len__(self) -> int:
         return len(self.t_ns)
+
+
+@dataclass
+class StepPlan:
+    """All port writes of a job.
+
+    Attributes:
+        t_ns: ``(M,)`` int64 scheduled time of each write, ns from the job start (non-decreasing).
+        data: ``(M,)`` uint8 data register (pins 2..9) after each write.
+        strobe: ``(M,)`` uint8 level of pin 1 after each write.
+        point_write: ``(N,)`` int64 index of the write at which toolpath point i is reached.
+        pause_writes: ``(P,)`` int64 write indices after which the job pauses (Pause At).
+        steps_total: ``(3,)`` int64 steps made by X, Y, Z (absolute).
+        settings: the machine settings.
+        end_steps: machine position (x, y, z) in steps after the last write.
+        safe_z_steps: Z a stop lifts the tool to (the surface or above it).
+        pause_notes: what each pause is for (same order as ``pause_writes``), e.g. a tool change.
+    """
+
+    t_ns: np.ndarray
+    data: np.ndarray
+    strobe: np.ndarray
+    point_write: np.ndarray
+    pause_writes: np.ndarray
+    steps_total: np.ndarray
+    settings: MachineSettings
+    end_steps: tuple[int, int, int] = (0, 0, 0)
+    safe_z_steps: int = 0
+    pause_notes: list[str] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+
+    def __len__(self) -> int:
+        return len(self.t_ns)
+
+    @property
+    def estimated_time_s(self) -> float:
+        """Machine time of the job in seconds (pauses excluded)."""
+        return float(self.t_ns[-1]) / 1e9 if len(self.t_ns) else 0.0
+
+    def chunks(self) -> Iterator[StepChunk]:
+        """The writes as one chunk (what the runner sends, as :meth:`ChunkedPlan.chunks`)."""
+        yield StepChunk(0, self.t_ns, self.data, self.strobe)
 
 
 class _RecentMoves:
@@ -125,7 +167,7 @@ def lookahead_margin(settings: MachineSettings, min_period_ns: int) -> int:
 @dataclass
 class ChunkedPlan:
     """A job's step plan made a chunk at a time (see the module docstring); every step plan is one
-    (:func:`cam.drive.steps.plan_steps` is its chunks joined).
+    (:func:`plan_steps` is its chunks joined).
 
     Attributes:
         job: the job (a :class:`~cam.job.model.JobLike`: points in steps from where the tool stands at the
@@ -380,7 +422,7 @@ class ChunkedPlan:
         return StepChunk(first_write, t_ns, data, np.full(len(t_ns), strobe_level, np.uint8)), int(t0 + per.sum())
 
     def to_plan(self) -> StepPlan:
-        """Every write at once: the chunks joined (:func:`cam.drive.steps.plan_steps`; small jobs, tests)."""
+        """Every write at once: the chunks joined (:func:`plan_steps`; small jobs, tests)."""
         parts = list(self.chunks())
         return StepPlan(
             t_ns=np.concatenate([p.t_ns for p in parts]), data=np.concatenate([p.data for p in parts]),
@@ -450,3 +492,20 @@ def plan_chunks(job: JobLike, *, start_steps: tuple[int, int, int] = (0, 0, 0),
         steps_total=steps_total, end_steps=last, safe_z_steps=int(job.safe_z_steps),
         chunk_periods=int(chunk_periods), margin_periods=margin, pause_notes=notes, warnings=warnings,
         any_move_start=any_move_start, _stops=np.unique(np.concatenate(stops or [np.zeros(0, np.int64)])))
+
+
+def plan_steps(job: JobLike, *, start_steps: tuple[int, int, int] = (0, 0, 0)) -> StepPlan:
+    """Every timed port write of a job at once: the chunks of :func:`plan_chunks` joined.
+
+    The machine session, :func:`cam.run`, ``cam drill`` and the page all run the chunked plan; this is the
+    same writes held in memory (about 20 bytes per step period), for pictures of every write and tests.
+
+    Args:
+        job: the moves, in steps relative to where the tool stands when it starts.
+        start_steps: where the tool stands in the machine frame: the job is checked against the
+            travel from there.
+
+    Raises:
+        TravelError: a point of the job is outside the machine travel (nothing is planned).
+    """
+    return plan_chunks(job, start_steps=start_steps).to_plan()
