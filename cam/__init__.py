@@ -34,7 +34,7 @@ _LAZY = {
     "save_digitized": "cam.digitize.digitized",
     "Profile": "cam.digitize.profile", "load_profile": "cam.digitize.profile",
     "profile_from_expr": "cam.digitize.profile",
-    "plan": "cam.job.drawing", "goto": "cam.job.moves", "jog": "cam.job.moves", "Job": "cam.job.model",
+    "plan": "cam.job.drawing_stream", "goto": "cam.job.moves", "jog": "cam.job.moves", "Job": "cam.job.model",
     "PixelFrame": "cam.job.model",
     "plan_drill": "cam.job.drill", "DrillPlan": "cam.job.drill", "drill_order": "cam.job.drill_order",
     "plan_hpgl": "cam.job.hpgl",
@@ -118,7 +118,7 @@ if TYPE_CHECKING:  # pragma: no cover - for type checkers and editors only
     from .job.svg import plan_svg
     from .job.drill import DrillPlan, plan_drill
     from .job.drill_order import drill_order
-    from .job.drawing import plan
+    from .job.drawing_stream import plan
     from .job.model import Job, PixelFrame
     from .job.jobs import JobOptions, PreparedJob, prepare_job, resume_job
     from .job.resume import Journal

@@ -1,6 +1,6 @@
 """The drawing planner: a digitized matrix to a job made a piece at a time, whatever its size.
 
-:func:`stream_drawing` is the one drawing planner; :func:`cam.plan` (:func:`cam.job.drawing.plan`) is its
+:func:`stream_drawing` is the one drawing planner; :func:`cam.plan` (:func:`plan`, here) is its
 pieces joined (:meth:`DrawingJobStream.joined`).  The rules of the moves are those of
 :mod:`cam.job.drawing` (:func:`~cam.job.drawing._assemble`, :func:`~cam.job.drawing._guard_diagonals`).
 
@@ -44,7 +44,7 @@ from .drawing import (_assemble, _drop_maps, _fits_travel, _guard_diagonals, _ob
 from .model import RETRACT, Job, PixelFrame, check_travel, join_pieces
 from .subpixel import finer_grids, rest_positions
 
-__all__ = ["DrawingJobStream", "stream_drawing", "STREAM_TARGETS", "PIECE_TARGETS"]
+__all__ = ["plan", "DrawingJobStream", "stream_drawing", "STREAM_TARGETS", "PIECE_TARGETS"]
 
 STREAM_TARGETS = 4_000_000
 """Drawings with more cut points than this (targets of every pass) are kept as a stream by
@@ -327,7 +327,7 @@ def stream_drawing(
     subpixel: bool = True,
     piece_targets: Optional[int] = None,
 ) -> DrawingJobStream:
-    """Plan the job of a digitized drawing as a :class:`DrawingJobStream` (see :func:`cam.job.drawing.plan`,
+    """Plan the job of a digitized drawing as a :class:`DrawingJobStream` (see :func:`plan`,
     which is this joined, for the options).
 
     Args:
@@ -451,3 +451,63 @@ def _roughing_part(depth_px: np.ndarray, mode: str, cutter: Tool, rough_tool: To
     if rough != cutter:  # the roughing part ends at the home: change the tool there
         note = f"tool change: put in the finishing tool ({cutter.describe()}; roughing used {rough.describe()})"
     return _Part(targets, asked, None if rough.is_point else corners, change_note=note, reached=reached)
+
+
+def plan(
+    digitized: Digitized,
+    *,
+    depth: int | Sequence[int] | None = None,
+    settings: MachineSettings = DEFAULT_SETTINGS,
+    passes: int = 1,
+    start_at: tuple[int, int, int] = (0, 0, 0),
+    pause_at: Sequence[tuple[int, int]] = (),
+    profile: ProfileLike | None = None,
+    tool: Tool | str | None = None,
+    stepdown_px: int | None = None,
+    stepover: float = 0.5,
+    rough_tool: Tool | str | None = None,
+    subpixel: bool = True,
+) -> Job:
+    """Plan the job of a digitized drawing (the drawing planner: pixels in, machine steps out).
+
+    Args:
+        digitized: the traced objects.
+        depth: Z pixels below the surface -- one number for every object
+            (Delta Z Uniform) or one per object (Delta Z1..Zn).  0 skips an object.
+            None = 10 for a 2D drawing.  On a 3D drawing one number cuts every
+            layer at that depth (a flat-bottomed pocket), instead of a profile.
+        settings: machine settings (steps per pixel, travel).
+        passes: Repeat Drill -- cut the whole path ``passes`` times, each
+            pass deeper (pass k cuts ceil(depth x k / passes)).
+        start_at: Start At ``(x, y, z)`` offset in pixels for the whole job.
+        pause_at: Pause At drawing points ``(x, y)``; the job pauses each time
+            the tool reaches one at its cutting depth.
+        profile: for 3D drawings (or a uniform ``depth``; refused for 2D): depth per
+            layer -- a :class:`~cam.digitize.profile.Profile`, a profile drawing or CSV
+            path, a sequence of depths (layer 1 first) or a function of the
+            layer number.  A ring of layer k is cut at profile(k).
+        tool: the cutter (:class:`~cam.tool.Tool` or text such as ``"ball:1"``; None: the point tool).  On
+            a 3D drawing each point's depth is limited by the drop-cutter rule (:func:`cam.tool.drop_depth_px`)
+            so the tool never cuts below the asked depth at any pixel under it; points the tool cannot
+            lower into at all are left out, and a warning says how much material it leaves.  On a 2D
+            drawing the curves are the tool's centre line and the depth sets the groove's width.
+        stepdown_px: 3D only: rough the relief first in levels this many Z pixels apart (each level clears
+            what the roughing tool can reach down to it, in rings ``stepover`` x its diameter apart), then
+            finish it with ``tool`` (None: no roughing).
+        stepover: the roughing rings' spacing as a fraction of the roughing tool's diameter (0 < s <= 1).
+        rough_tool: the roughing tool (None: ``tool``); a different one adds a tool-change pause at the
+            home between roughing and finishing.
+        subpixel: 3D with a real tool: after the pixel centres, finish at the positions between them (on the
+            finest grid the machine's steps reach, up to a quarter pixel) that leave less material
+            (:mod:`cam.job.subpixel`).  Its points are not targets (``target`` False).
+
+    Returns:
+        The :class:`~cam.job.model.Job` in machine steps, with its :class:`~cam.job.model.PixelFrame`,
+        ending at (0, 0, 0).
+
+    Raises:
+        PlanError: fewer depths than objects, bad options; TravelError: the job leaves the travel.
+    """
+    return stream_drawing(digitized, depth=depth, settings=settings, passes=passes, start_at=start_at,
+                          pause_at=pause_at, profile=profile, tool=tool, stepdown_px=stepdown_px, stepover=stepover,
+                          rough_tool=rough_tool, subpixel=subpixel).joined()

@@ -52,14 +52,14 @@ from ..render.report import job_report
 from ..sniff import KIND_NAMES
 from ..settings import DEFAULT_SETTINGS, MachineSettings
 from ..verify.pinlog import PinLog, decode_pin_log
-from .drawing import check_drawing_size, plan
+from .drawing import check_drawing_size
 from .drill import DEFAULT_DEPTH_MM as DRILL_DEPTH_MM
 from .drill import DEFAULT_SAFE_HEIGHT_MM as DRILL_SAFE_HEIGHT_MM
 from .drill import plan_drill
 from .gcode import plan_gcode
 from .hpgl import DEFAULT_CUT_DEPTH_MM as HPGL_CUT_DEPTH_MM
 from .hpgl import DEFAULT_SAFE_HEIGHT_MM as HPGL_SAFE_HEIGHT_MM
-from .drawing_stream import STREAM_TARGETS, stream_drawing
+from .drawing_stream import STREAM_TARGETS, plan, stream_drawing
 from .hpgl_stream import STREAM_POINTS, stream_hpgl
 from .model import Job
 from .resume import Journal, JournalBase, check_journal, job_identity, plan_fingerprint, resume_pieces
