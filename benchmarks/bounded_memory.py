@@ -1,7 +1,13 @@
-"""Bounded memory (#15 point 2): peak RSS of whole `cam drill ... --pin-log` processes on the mock.
+"""Bounded memory (#15 point 2, #28 point 4): peak RSS and speed of whole `cam drill` processes on the mock.
 
-    python benchmarks/bounded_memory.py            # the 200 MB HPGL file and the 4096^2 relief
-    python benchmarks/bounded_memory.py --quick    # 1/16 of each
+    python benchmarks/bounded_memory.py            # full size
+    python benchmarks/bounded_memory.py --quick    # 1/16 of each (1/10 of the 10^9-period job)
+
+Jobs: the 200 MB HPGL file and the 4096^2 relief with ``--pin-log``; HPGL files of 40,000 and 80,000 strokes
+alternating two pens (SP1/SP2: a tool-change pause each) inside 40 x 30 mm with the default look-ahead
+ramps, with and without ``--pin-log``; and a job of 10^9 step periods (5,000 HPGL strokes across the travel,
+constant ramps, no pin log: it would be 30 GB).  Besides the peak RSS, each row gives the job's step periods
+per second of the whole process (planning, the extent pass and the simulated run; the report's ``periods``).
 
 Each job is generated in a temporary folder and run as a whole process; its
 peak RSS (``ru_maxrss`` of the child) is compared with the floor measured in
@@ -15,12 +21,14 @@ a file of over a million points is planned from the file a piece at a time
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import shutil
 import statistics
 import subprocess
 import sys
 import tempfile
+import time
 from pathlib import Path
 
 import cv2
@@ -58,6 +66,31 @@ def write_hpgl(path: Path, size_bytes: int) -> int:
     return n
 
 
+def write_pen_changes(path: Path, n_strokes: int, seed: int = 1) -> int:
+    """An HPGL file of ``n_strokes`` short strokes (3 points) alternating pens 1 and 2 inside 40 x 30 mm (1600 x
+    1200 plotter units), as a two-pen plot exports; returns its number of points."""
+    rng = np.random.default_rng(seed)
+    start = rng.integers(0, (1500, 1100), size=(n_strokes, 2))
+    jumps = rng.integers(-60, 61, size=(n_strokes, 2, 2))
+    with open(path, "w") as f:
+        f.write("IN;\n")
+        for i in range(n_strokes):
+            x, y = (int(v) for v in start[i])
+            pts = np.clip(np.array([x, y]) + jumps[i], 0, (1600, 1200))
+            f.write(f"SP{1 + i % 2};PU{x},{y};PD{pts[0, 0]},{pts[0, 1]},{pts[1, 0]},{pts[1, 1]};\n")
+        f.write("PU;SP0;\n")
+    return 3 * n_strokes
+
+
+def write_long_strokes(path: Path, n_strokes: int, length_pu: int) -> None:
+    """An HPGL file of ``n_strokes`` pen-down strokes ``length_pu`` plotter units long, back and forth."""
+    with open(path, "w") as f:
+        f.write("IN;SP1;PU0,0;")
+        for i in range(n_strokes):
+            f.write(f"PD{length_pu if i % 2 == 0 else 0},{i % 2};")
+        f.write("PU0,0;\n")
+
+
 def write_relief(path: Path, size_px: int) -> None:
     """A ``size_px`` square 3D drawing: a red disc with a black rim (a dome with --profile-expr)."""
     img = np.full((size_px, size_px, 3), 255, np.uint8)
@@ -77,50 +110,76 @@ LAUNCHER = (
 parent's RSS at the fork, and ``benchmarks/run.py`` has grown to gigabytes by the time it gets here."""
 
 
-def peak_rss_mb(argv: list[str], cwd: Path) -> float:
-    """Peak RSS in MB of one whole process (``wait4``'s ``ru_maxrss``, from a small launcher); raises on a
-    failed run."""
+def peak_rss_mb(argv: list[str], cwd: Path) -> tuple[float, float]:
+    """``(peak RSS in MB, wall seconds)`` of one whole process (``wait4``'s ``ru_maxrss``, from a small
+    launcher); raises on a failed run."""
     env = dict(os.environ, PYTHONPATH=str(ROOT))
+    t0 = time.perf_counter()
     out = subprocess.run([sys.executable, "-c", LAUNCHER, *argv], cwd=cwd, env=env, stdin=subprocess.DEVNULL,
                          capture_output=True, text=True)
+    wall_s = time.perf_counter() - t0
     code, maxrss_kb = (int(v) for v in out.stdout.split()[-2:])
     if code != 0:
         raise RuntimeError(f"{' '.join(argv)}: exit {code}: {out.stderr[-400:]}")
-    return maxrss_kb / 1024.0
+    return maxrss_kb / 1024.0, wall_s
+
+
+def _jobs(tmp: Path, quick: bool) -> list[tuple[str, list[str]]]:
+    """``(name, cam drill arguments)`` of each measured job, its input written into ``tmp``."""
+    hpgl_bytes = (200 << 20) // (16 if quick else 1)
+    relief_px = 1024 if quick else 4096
+    n_points = write_hpgl(tmp / "big.plt", hpgl_bytes)
+    write_relief(tmp / "relief.png", relief_px)
+    drill = ["-m", "cam", "drill"]
+    common = ["--machine", "machine.toml", "--yes", "--no-progress"]
+    jobs = [
+        (f"HPGL {hpgl_bytes / 2**20:.0f} MB, {n_points / 1e6:.1f}M points (constant ramps, --pin-log)",
+         [*drill, "big.plt", *common, "--ramp", "constant", "--pin-log", "big.csv", "--report", "big.json"]),
+        (f"relief {relief_px}^2 dome (constant ramps, --pin-log)",
+         [*drill, "relief.png", *common, "--profile-expr", "1 + k // 8", "--ramp", "constant",
+          "--pin-log", "relief.csv", "--report", "relief.json"]),
+    ]
+    for n in (40_000, 80_000):
+        n = n // (16 if quick else 1)
+        write_pen_changes(tmp / f"pens{n}.plt", n)
+        name = f"HPGL {n:,} strokes alternating SP1/SP2 in 40 x 30 mm (look-ahead ramps"
+        jobs.append((name + ")", [*drill, f"pens{n}.plt", "--yes", "--no-progress", "--report", f"pens{n}.json"]))
+        jobs.append((name + ", --pin-log)", [*drill, f"pens{n}.plt", "--yes", "--no-progress", "--pin-log",
+                                             f"pens{n}.csv", "--report", f"pens{n}-log.json"]))
+    strokes = 5_026 // (10 if quick else 1)
+    write_long_strokes(tmp / "long.plt", strokes, 230_000)
+    jobs.append((f"10^{8 if quick else 9} step periods: {strokes:,} strokes across the travel (constant ramps)",
+                 [*drill, "long.plt", *common, "--ramp", "constant", "--report", "long.json"]))
+    return jobs
 
 
 def bench_rows(quick: bool, repeats: int = 1) -> list[dict]:
-    """One row per job: peak RSS of the whole process against the import floor (medians of ``repeats``)."""
+    """One row per job: peak RSS of the whole process against the import floor (medians of ``repeats``), and
+    the job's step periods per second of that process."""
     tmp = Path(tempfile.mkdtemp(prefix="cam-mem-"))
     try:
         (tmp / "machine.toml").write_text(MACHINE_TOML)
-        hpgl_bytes = (200 << 20) // (16 if quick else 1)
-        relief_px = 1024 if quick else 4096
-        n_points = write_hpgl(tmp / "big.plt", hpgl_bytes)
-        write_relief(tmp / "relief.png", relief_px)
         py = sys.executable
-        floor = statistics.median(peak_rss_mb([py, "-c", "import cam, numpy, cv2"], tmp) for _ in range(repeats))
-        jobs = [
-            (f"HPGL {hpgl_bytes / 2**20:.0f} MB, {n_points / 1e6:.1f}M points (streamed, constant ramps)",
-             [py, "-m", "cam", "drill", "big.plt", "--machine", "machine.toml", "--yes", "--no-progress",
-              "--ramp", "constant", "--pin-log", "big.csv"]),
-            (f"relief {relief_px}^2 dome",
-             [py, "-m", "cam", "drill", "relief.png", "--machine", "machine.toml", "--yes", "--no-progress",
-              "--profile-expr", "1 + k // 8", "--ramp", "constant", "--pin-log", "relief.csv"]),
-        ]
+        floor = statistics.median(peak_rss_mb([py, "-c", "import cam, numpy, cv2"], tmp)[0] for _ in range(repeats))
         rows = []
-        for name, argv in jobs:
+        for name, argv in _jobs(tmp, quick):
             try:
-                peak = statistics.median(peak_rss_mb(argv, tmp) for _ in range(repeats))
+                runs = [peak_rss_mb([py, *argv], tmp) for _ in range(repeats)]
             except RuntimeError as exc:
                 rows.append(dict(name=f"memory: cam drill {name} on the mock, peak RSS", cam=None, ref=floor,
                                  ratio="failed", target=f"< {GOAL_MB:.0f} MB", met=False, note=str(exc)[-200:]))
                 continue
-            log_mb = (tmp / argv[-1]).stat().st_size / 2**20
+            peak = statistics.median(r[0] for r in runs)
+            wall_s = statistics.median(r[1] for r in runs)
+            periods = json.loads((tmp / argv[argv.index("--report") + 1]).read_text())["periods"]
+            note = f"{periods / 1e6:.1f}M periods, {periods / wall_s / 1e6:.2f}M periods/s"
+            if "--pin-log" in argv:
+                note += f", pin log {(tmp / argv[argv.index('--pin-log') + 1]).stat().st_size / 2**20:.0f} MB"
+                (tmp / argv[argv.index("--pin-log") + 1]).unlink()
             rows.append(dict(name=f"memory: cam drill {name} on the mock, peak RSS (MB) vs import floor",
                              cam=peak, ref=floor, ratio=f"{peak:.0f} MB = {peak / floor:.1f}x floor",
-                             target=f"< {GOAL_MB:.0f} MB", met=peak < GOAL_MB,
-                             note=f"pin log {log_mb:.0f} MB"))
+                             target=f"< {GOAL_MB:.0f} MB", met=peak < GOAL_MB, note=note))
+            print(f"  {rows[-1]['name']}: {rows[-1]['ratio']} ({note})", file=sys.stderr, flush=True)
         return rows
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
