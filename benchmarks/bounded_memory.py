@@ -146,7 +146,7 @@ def _jobs(tmp: Path, quick: bool) -> list[tuple[str, list[str]]]:
         jobs.append((name + ")", [*drill, f"pens{n}.plt", "--yes", "--no-progress", "--report", f"pens{n}.json"]))
         jobs.append((name + ", --pin-log)", [*drill, f"pens{n}.plt", "--yes", "--no-progress", "--pin-log",
                                              f"pens{n}.csv", "--report", f"pens{n}-log.json"]))
-    strokes = 5_026 // (10 if quick else 1)
+    strokes = 5_031 // (10 if quick else 1)
     write_long_strokes(tmp / "long.plt", strokes, 230_000)
     jobs.append((f"10^{8 if quick else 9} step periods: {strokes:,} strokes across the travel (constant ramps)",
                  [*drill, "long.plt", *common, "--ramp", "constant", "--report", "long.json"]))
