@@ -39,6 +39,7 @@ def _run(argv: list[str], tmp_path: Path, **env_extra: str) -> subprocess.Comple
                           text=True, timeout=600, input="\n" * 50)
 
 
+@pytest.mark.packaging
 def test_the_install_built_the_kernels_for_these_sources():
     """pip install builds them (setup.py); without them every first run compiles for 10-30 s. After editing a
     kernel module, rebuild with: python -m cam._aot build (a machine without a C compiler fails here on
@@ -49,6 +50,7 @@ def test_the_install_built_the_kernels_for_these_sources():
 
 
 @needs_build
+@pytest.mark.packaging
 def test_first_run_of_every_sample_kind_compiles_nothing(tmp_path):
     """Every sample command with an empty numba cache: no compile (numba reports each one, and the CLI then
     prints its note). A failure here means a kernel's argument types changed: run python -m cam._aot collect."""
@@ -60,6 +62,7 @@ def test_first_run_of_every_sample_kind_compiles_nothing(tmp_path):
 
 
 @needs_build
+@pytest.mark.packaging
 def test_ahead_of_time_pin_logs_equal_the_jit_ones(tmp_path):
     """The README's job, a drill file and an HPGL file give byte-identical pin logs both ways."""
     samples = ROOT / "samples"

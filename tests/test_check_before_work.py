@@ -71,6 +71,7 @@ def test_a_huge_image_is_refused_from_its_header_before_it_is_decoded(tmp_path, 
     assert drawing_module.drawing_size_px(path) == (40000, 10)
 
 
+@pytest.mark.slow
 def test_a_16000_square_png_is_refused_in_bounded_memory(tmp_path):
     """A 270 KB PNG of 16000 x 16000 zeros ended in MemoryError (and 8000 x 8000 took 1.7 GB): refused from its
     header under a 1 GiB address-space limit, by the library and by every command that reads a drawing."""

@@ -68,6 +68,7 @@ def test_palette_noise_exercises_every_rule(seed):
     _same(np.clip(palette[idx] + noise, 0, 255).astype(np.uint8))
 
 
+@pytest.mark.slow
 def test_every_colour_once():
     """All 2^24 colours in one image (a 4096 x 4096 array): the per-pixel rules agree everywhere."""
     v = np.arange(1 << 24, dtype=np.uint32)

@@ -605,7 +605,7 @@ def _spline_points(program):
 
 
 @needs_rs274
-@pytest.mark.parametrize("units, scale", [("G21", 1.0), ("G20", 25.4)])
+@pytest.mark.parametrize("units, scale", [("G21", 1.0), pytest.param("G20", 25.4, marks=pytest.mark.slow)])
 def test_splines_follow_the_exact_curve_and_rs274_after_offsets(tmp_path, units, scale):
     """G5.1 and G5 after G54, G92 and G91, in mm and in inches: the control points as worked out by hand; the
     motion within half a step of the exact curves (de Casteljau, densely) and of rs274's other moves."""
@@ -721,6 +721,7 @@ compared as :func:`assert_follows_rs274` says."""
 
 @needs_rs274
 @pytest.mark.skipif(not NCFILES.is_dir(), reason="LinuxCNC's example programs (linuxcnc-uspace) not installed")
+@pytest.mark.slow
 def test_linuxcnc_example_programs_match_rs274_or_are_refused_naming_the_feature(tmp_path):
     matched, refused = [], []
     for path in sorted(NCFILES.rglob("*.ngc")):  # the subfolders (macros, probe, gladevcp, ...) too
@@ -793,6 +794,7 @@ def test_subroutine_files_and_tool_tables_from_the_command_line(tmp_path):
 
 
 @needs_rs274
+@pytest.mark.slow
 def test_the_shipped_sample_follows_rs274_and_runs():
     from conftest import SAMPLES
     from test_cli import cli

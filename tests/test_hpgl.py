@@ -402,6 +402,7 @@ print(json.dumps({"before": before, "peak": status("VmHWM"), "points": s.n_point
 """
 
 
+@pytest.mark.slow
 def test_scanning_200_mb_keeps_memory_flat(tmp_path):
     if not os.access("/proc/self/clear_refs", os.W_OK):
         pytest.skip("needs Linux /proc/self/clear_refs to measure the peak memory of the parse alone")

@@ -245,6 +245,7 @@ def test_pin_log_on_the_board_is_refused_before_anything_is_sent(emu, tmp_path, 
     assert len(emu.rx_log()) == before and not (tmp_path / "p.csv").exists()
 
 
+@pytest.mark.slow
 def test_emulator_log_file_from_the_command_line(tmp_path):
     import subprocess
     import sys

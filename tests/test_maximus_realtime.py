@@ -27,6 +27,8 @@ ROOT = Path(__file__).resolve().parents[1]
 HOLES_MM = {1: [(5.0, 0.3), (5.3, 0.3), (5.3, 0.6)], 2: [(5.6, 0.3), (5.6, 0.6)]}
 TOOLS_MM = {1: 1.0, 2: 0.8}
 
+pytestmark = pytest.mark.realtime  # the emulator at the firmware's own speed
+
 
 def write_board(tmp_path: Path) -> Path:
     lines = ["M48", "METRIC", *(f"T{t}C{d:.3f}" for t, d in TOOLS_MM.items()), "%"]

@@ -5,6 +5,7 @@ import xml.etree.ElementTree as ET
 
 import cv2
 import numpy as np
+import pytest
 
 import cam
 from cam.render.picture import depth_colours, surface_picture, toolpath_picture, toolpath_svg
@@ -77,6 +78,7 @@ def test_cli_preview_png_svg_and_surface(tmp_path):
     assert (tmp_path / "pre.png").exists()
 
 
+@pytest.mark.slow
 def test_readme_pictures_script_writes_the_previews(tmp_path):
     """docs/make_pictures.py without the browser: the two previews, into a temporary folder (docs/ untouched)."""
     proc = subprocess.run([sys.executable, str(ROOT / "docs" / "make_pictures.py"), "--out", str(tmp_path),

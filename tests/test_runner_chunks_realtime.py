@@ -17,6 +17,8 @@ from test_runner_stall import StallingPort
 FAST = cam.MachineSettings().replace(delay_xy_ms=0.3, delay_z_ms=0.3, ramp="lookahead")
 ROWS = ["." * 30] + ["." + "#" * 28 + "."] + ["." * 30] + ["...." + "#" * 20 + "......"] + ["." * 30]
 
+pytestmark = pytest.mark.realtime  # every test runs a plan at real speed
+
 
 _TO_PLAN = ChunkedPlan.to_plan
 

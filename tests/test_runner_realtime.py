@@ -46,6 +46,7 @@ def _rising(log, settings):
     return {a: ((data & clock[i]) != 0) & ((prev & clock[i]) == 0) for i, a in enumerate("xyz")}
 
 
+@pytest.mark.realtime
 def test_stop_halts_within_one_period_and_lifts(rt_settings):
     d, job = _job(rt_settings)
     ctl = cam.Controller()
@@ -74,6 +75,7 @@ def test_stop_halts_within_one_period_and_lifts(rt_settings):
     assert 0 < result.writes < len(cam.plan_steps(job))
 
 
+@pytest.mark.realtime
 def test_emergency_stop_sends_nothing_more(rt_settings):
     d, job = _job(rt_settings)
     ctl = cam.Controller()
@@ -91,6 +93,7 @@ def test_emergency_stop_sends_nothing_more(rt_settings):
     assert result.position_steps[2] > 0  # did not move again, not even to lift
 
 
+@pytest.mark.realtime
 def test_pause_and_resume_keep_the_carve_exact(rt_settings):
     d, job = _job(rt_settings)
     ctl = cam.Controller()

@@ -8,6 +8,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 import cam
 from cam.drive.runner import FINISHED, STALL_NS
@@ -33,6 +34,7 @@ class StallingPort(cam.MockPort):
         super().write(data, strobe, t_ns)
 
 
+@pytest.mark.realtime
 def test_a_stall_moves_the_rest_of_the_run_later():
     settings = cam.MachineSettings().replace(delay_xy_ms=1.0, delay_z_ms=1.0, ramp="constant")
     job = cam.plan(cam.digitize(drawing_from_rows(ROWS)), depth=4, settings=settings)
@@ -51,6 +53,7 @@ def test_a_stall_moves_the_rest_of_the_run_later():
     assert log.t_ns[-1] - plan.t_ns[-1] >= 0.25e9 - STALL_NS
 
 
+@pytest.mark.realtime
 def test_sigstop_of_a_realtime_drill_keeps_every_interval(tmp_path):
     """The issue's case: stop a real-time ``cam drill`` for a while, then continue it.
 

@@ -60,6 +60,7 @@ def test_jobs_are_checked_against_the_travel_from_where_the_tool_stands():
     assert session.position_steps() == (0, 0, 0)
 
 
+@pytest.mark.realtime
 def test_one_activity_at_a_time_and_stop_lifts_the_tool():
     d = cam.digitize(cam.load_image(SAMPLES / "ellipse.png"))
     job = cam.plan(d, depth=5, settings=SLOW)

@@ -142,6 +142,7 @@ def test_image_to_gcode_frame_meets_cams(tmp_path):
 
 
 @needs_itg
+@pytest.mark.slow
 def test_benchmark_rows_print(tmp_path):
     import subprocess
     import sys

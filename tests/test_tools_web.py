@@ -62,6 +62,7 @@ def _open(page, server) -> None:
     page.wait_for_function("document.getElementById('state').dataset.state === 'idle'")
 
 
+@pytest.mark.browser
 def test_page_ball_tool_plans_a_3d_job_that_names_it(page, server):
     _open(page, server)
     # only the inputs of the chosen shape show
@@ -87,6 +88,7 @@ def test_page_ball_tool_plans_a_3d_job_that_names_it(page, server):
     assert want.toolpath.points_steps[:, 2].max() <= point.toolpath.points_steps[:, 2].max()
 
 
+@pytest.mark.browser
 def test_page_v_bit_line_width_sets_a_2d_depth(page, server):
     _open(page, server)
     page.select_option("#opt-tool-shape", "v")
@@ -102,6 +104,7 @@ def test_page_v_bit_line_width_sets_a_2d_depth(page, server):
     assert text == f"{want.report['tool']}, lines {want.report['line_width_mm']:.3f} mm wide"
 
 
+@pytest.mark.browser
 def test_page_tool_spec_field_wins_and_bad_spec_is_an_error(page, server):
     _open(page, server)
     page.select_option("#opt-tool-shape", "ball")

@@ -249,6 +249,7 @@ def test_api_bad_requests_are_4xx_json_and_nothing_moves(fast):
     assert fast.session.position_steps() == (0, 0, 0)
 
 
+@pytest.mark.realtime
 def test_second_start_is_409_and_jog_is_refused_while_running(servers):
     s = servers("medium", settings=MEDIUM, realtime=True)
     status, r = s.upload("ellipse.png", (SAMPLES / "ellipse.png").read_bytes())
@@ -377,6 +378,7 @@ def _wait_done(page, server) -> dict:
     return server.wait_idle()
 
 
+@pytest.mark.browser
 def test_page_runs_a_drawing_and_the_pin_log_carves_exactly(page, fast, tmp_path):
     _open(page, fast)
     _load(page, SAMPLES / "ellipse.png", depth="3")
@@ -397,6 +399,7 @@ def test_page_runs_a_drawing_and_the_pin_log_carves_exactly(page, fast, tmp_path
     assert "job ellipse.png: finished" in page.text_content("#log")
 
 
+@pytest.mark.browser
 def test_page_emergency_stop_halts_within_one_step_period(page, servers):
     s = servers("slow", settings=SLOW, realtime=True)
     s.session.wait_idle()
@@ -434,6 +437,7 @@ def _medium_at_origin(servers) -> "Server":
     return s
 
 
+@pytest.mark.browser
 def test_page_pause_resume_keeps_the_carve_exact(page, servers):
     s = _medium_at_origin(servers)
     _open(page, s)
@@ -452,6 +456,7 @@ def test_page_pause_resume_keeps_the_carve_exact(page, servers):
     _carve_check_drawing(s.session.last_job_pin_log, SAMPLES / "two_curves.png", 2, MEDIUM)
 
 
+@pytest.mark.browser
 def test_page_runs_gcode_with_a_tool_change_prompt(page, fast, tmp_path):
     path = tmp_path / "square.ngc"
     path.write_text(GCODE)
@@ -474,6 +479,7 @@ def test_page_runs_gcode_with_a_tool_change_prompt(page, fast, tmp_path):
     assert np.array_equal(log.data, want.data) and np.array_equal(log.strobe, want.strobe)
 
 
+@pytest.mark.browser
 def test_page_runs_an_excellon_file(page, fast, tmp_path):
     path = tmp_path / "board.drl"
     path.write_text(EXCELLON)
@@ -500,6 +506,7 @@ def test_page_runs_an_excellon_file(page, fast, tmp_path):
     assert z.max() == round(1.5 / FAST.mm_per_step_z)
 
 
+@pytest.mark.browser
 def test_page_shows_4xx_errors_and_nothing_moves(page, fast, tmp_path):
     bad = tmp_path / "notes.docx"
     bad.write_bytes(b"PK\x03\x04 not a job")
@@ -517,6 +524,7 @@ def test_page_shows_4xx_errors_and_nothing_moves(page, fast, tmp_path):
     assert not fast.session.busy
 
 
+@pytest.mark.browser
 def test_page_with_a_token(page, servers):
     token = TOKEN
     s = servers("token", settings=FAST, token=token)
@@ -532,6 +540,7 @@ def test_page_with_a_token(page, servers):
     page.wait_for_function("document.getElementById('pos-steps').textContent === '0, 0, 0'")
 
 
+@pytest.mark.browser
 def test_phone_screenshot(page, servers, tmp_path):
     """Phone size: the emergency stop stays on screen, nothing overflows sideways; the README picture."""
     thesis = servers("thesis")  # the thesis machine's settings: the time shown is the real one
@@ -612,6 +621,7 @@ def test_api_drives_the_maximus_board(tmp_path):
     assert emu.error is None
 
 
+@pytest.mark.realtime
 def test_api_emergency_stop_on_the_maximus_board(tmp_path):
     """The page's emergency stop during a move reaches the firmware's stop byte; the job ends naming the hole."""
     from cam.drive.maximus.board import MAXIMUS_SETTINGS
@@ -657,6 +667,7 @@ def test_the_page_takes_svg_with_its_options(fast):
     assert status == 200 and ".svg" in info["accepted"]["svg"]
 
 
+@pytest.mark.browser
 def test_the_page_traces_a_sketch_and_cuts_what_the_library_traces(page, fast, tmp_path):
     """Issue 16 point 7: a photo of a sketch, traced on the server from the page's "Sketch or photo" box,
     plans the very job the library makes from ``cam.trace``."""
@@ -675,6 +686,7 @@ def test_the_page_traces_a_sketch_and_cuts_what_the_library_traces(page, fast, t
     assert np.array_equal(fast.session.last_job_pin_log.data, expected.data)  # every write, in order
 
 
+@pytest.mark.browser
 def test_page_resume_job_button_finishes_a_stopped_job_exactly(page, servers):
     """Stop a job from the page, then press Resume job: the two pin logs together carve the drawing exactly
     (issue #15: the page's Resume button after a stop)."""

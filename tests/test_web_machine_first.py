@@ -27,6 +27,7 @@ def _plan(s, name: str, data: bytes, options: dict):
     return s.call("POST", "/api/plan", {"job": r["job"], "options": options})
 
 
+@pytest.mark.realtime
 def test_planning_and_previews_during_a_job_leave_its_step_timing_alone(servers):
     s = servers("half-ms", settings=HALF_MS, realtime=True)
     status, first = _plan(s, "ellipse.png", PNG, {"depth": 2})
@@ -137,6 +138,7 @@ def test_serve_limits_options_reach_the_server(tmp_path):
         proc.wait(20)
 
 
+@pytest.mark.realtime
 def test_a_planning_that_takes_minutes_leaves_the_machine_answering(tmp_path):
     """The issue's case: a 1000^2 noise drawing with min-distance starts took the server for about a minute."""
     import threading

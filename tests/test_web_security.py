@@ -19,6 +19,8 @@ import sys
 import threading
 import time
 
+import pytest
+
 from conftest import ROOT, SAMPLES
 from test_web import FAST, MEDIUM, TOKEN, Server, browser, compiled_kernels, fast, servers  # noqa: F401 (fixtures)
 
@@ -144,6 +146,7 @@ def test_json_requests_need_the_json_content_type(fast):
     assert status == 200, r  # parameters are fine
 
 
+@pytest.mark.realtime
 def test_a_cross_site_estop_does_not_spoil_a_running_job(servers):
     s = servers("medium", settings=MEDIUM, realtime=True)
     job = _planned_job(s)
@@ -284,6 +287,7 @@ class _AttackSite(http.server.BaseHTTPRequestHandler):
         self.wfile.write(body)
 
 
+@pytest.mark.browser
 def test_pages_on_other_origins_cannot_move_the_machine(browser, servers):  # noqa: F811
     """Finding (1) in Chromium: a sandboxed frame on another localhost port, and a plain page there,
     upload, plan, start and jog with no-cors requests (no preflight), and try a JSON request: nothing moves."""
@@ -448,6 +452,7 @@ def test_connections_and_live_views_are_capped_with_503(tmp_path):
         s.close()
 
 
+@pytest.mark.slow
 def test_a_thousand_half_open_connections_do_not_delay_the_emergency_stop(tmp_path):
     """Finding (3): ``cam serve`` in a process that may open only 512 files; 1,000 connections to it each
     send half a request line and stop.  The e-stop still answers within 50 ms, and the server closes them
