@@ -16,6 +16,7 @@ from cam.formats.hpgl import load_hpgl, parse_hpgl
 from cam.job.hpgl import plan_hpgl
 from cam.job.hpgl_stream import HpglJobStream, stream_hpgl
 from cam.job.model import Job, JobLike, pause_points
+from test_hpgl_stream import _random_hpgl as random_hpgl
 
 SAMPLES = Path(__file__).resolve().parent.parent / "samples"
 PER_MOVE = ("points_steps", "kind", "target", "pause", "period_ns", "periods", "move_start", "rest")
@@ -36,32 +37,9 @@ HANDWRITTEN = {
 }
 
 
-def _random_hpgl(seed: int, n_cmds: int = 150) -> bytes:
-    """Pens that change, SP0, dots, repeated points, strokes that join the last one, relative moves."""
-    rng = np.random.default_rng(seed)
-    out = ["IN;"]
-    x = y = 0
-    for _ in range(n_cmds):
-        r = rng.random()
-        if r < 0.08:
-            out.append(f"SP{int(rng.integers(0, 4))};")
-        elif r < 0.3:
-            x, y = x + int(rng.integers(-2, 3)), y + int(rng.integers(-2, 3))
-            out.append(f"PU{x},{y};")
-        elif r < 0.35:
-            out.append("PD;PU;")
-        elif r < 0.45:
-            out.append(f"PR{int(rng.integers(-50, 51))},{int(rng.integers(-50, 51))};PA;")
-        else:
-            pts = []
-            for _ in range(int(rng.integers(1, 8))):
-                if rng.random() > 0.2:
-                    x = int(np.clip(x + int(rng.integers(-300, 301)), -4000, 4000))
-                    y = int(np.clip(y + int(rng.integers(-300, 301)), -4000, 4000))
-                pts += [str(x), str(y)]
-            out.append("PD" + ",".join(pts) + ";")
-    out.append("PU0,0;")
-    return "".join(out).encode()
+def _random_hpgl(seed: int) -> bytes:
+    """test_hpgl_stream's random files, 150 commands, points within +-4000 plotter units."""
+    return random_hpgl(seed, 150, clip_pu=4000)
 
 
 @pytest.fixture(scope="module")

@@ -1,6 +1,8 @@
 """A large HPGL file planned as a stream (cam.job.hpgl_stream) equals plan_hpgl, and its memory does not grow."""
 from __future__ import annotations
 
+from typing import Optional
+
 import tracemalloc
 from pathlib import Path
 
@@ -23,8 +25,9 @@ from cam.verify.pinlog import read_pin_log
 SAMPLES = Path(__file__).resolve().parent.parent / "samples"
 
 
-def _random_hpgl(seed: int, n_cmds: int = 300) -> bytes:
-    """Pens that change, SP0, dots, repeated points, strokes that join the last one, relative moves."""
+def _random_hpgl(seed: int, n_cmds: int = 300, clip_pu: Optional[int] = None) -> bytes:
+    """Pens that change, SP0, dots, repeated points, strokes that join the last one, relative moves;
+    ``clip_pu``: pen-down points kept within +-clip_pu plotter units (None: wherever the walk goes)."""
     rng = np.random.default_rng(seed)
     out = ["IN;"]
     x = y = 0
@@ -44,6 +47,8 @@ def _random_hpgl(seed: int, n_cmds: int = 300) -> bytes:
             for _ in range(int(rng.integers(1, 8))):
                 if rng.random() > 0.2:
                     x, y = x + int(rng.integers(-300, 301)), y + int(rng.integers(-300, 301))
+                    if clip_pu is not None:
+                        x, y = int(np.clip(x, -clip_pu, clip_pu)), int(np.clip(y, -clip_pu, clip_pu))
                 pts += [str(x), str(y)]
             out.append("PD" + ",".join(pts) + ";")
     out.append("PU0,0;")
