@@ -32,7 +32,7 @@ CASES = [
 
 
 @pytest.mark.parametrize("name,kw", CASES, ids=[f"{n}-{i}" for i, (n, _) in enumerate(CASES)])
-@pytest.mark.parametrize("piece_targets", [1, 7, 500, 10**7])
+@pytest.mark.parametrize("piece_targets", [pytest.param(1, marks=pytest.mark.slow), 7, pytest.param(500, marks=pytest.mark.slow), 10**7])
 def test_stream_equals_plan(name, kw, piece_targets):
     """The pieces, joined, are cam.plan's job row for row (points, kinds, targets, pauses), with its counts; a real
     tool's finer pass is in both (cam.plan is the stream joined)."""
@@ -133,7 +133,7 @@ def stop_and_resume(job, tmp_path: Path, stop_at: float, prepare_again) -> None:
     _check_union("stream", tmp_path, again, first, second, record.position_steps)
 
 
-@pytest.mark.parametrize("stop_at", [0.2, 0.55, 0.9])
+@pytest.mark.parametrize("stop_at", [0.2, pytest.param(0.55, marks=pytest.mark.slow), pytest.param(0.9, marks=pytest.mark.slow)])
 def test_a_stopped_streamed_drawing_resumes_and_carves_as_an_uninterrupted_run(tmp_path, monkeypatch, stop_at):
     src = _big_relief(tmp_path)
     opts = JobOptions(profile_expr="1 + k // 3")
@@ -142,6 +142,7 @@ def test_a_stopped_streamed_drawing_resumes_and_carves_as_an_uninterrupted_run(t
     stop_and_resume(prepare_job(src, opts, s), tmp_path, stop_at, lambda: prepare_job(src, opts, s))
 
 
+@pytest.mark.slow
 def test_cli_streams_a_large_drawing(tmp_path, monkeypatch):
     """cam drill and cam export on a streamed relief: the same pin log and G-code as in memory, a .png preview
     of its moves; its surface picture is the in-memory job's, byte for byte."""
@@ -175,6 +176,7 @@ def _peak_of_streamed_run(d: cam.Digitized, s: cam.MachineSettings, log: Path) -
         tracemalloc.stop()
 
 
+@pytest.mark.slow
 def test_streamed_memory_grows_with_the_drawing_not_the_job():
     """A relief of 4x the pixels takes no more memory than its larger maps of the drawing (8 bytes a pixel) beyond
     the smaller one's: nothing per move is held (the whole job of the larger would take about 6 MB more)."""
@@ -203,7 +205,7 @@ def _streams():
     return {"drawing": drawing, "hpgl": hpgl}
 
 
-@pytest.mark.parametrize("kind", ["drawing", "hpgl"])
+@pytest.mark.parametrize("kind", [pytest.param("drawing", marks=pytest.mark.slow), "hpgl"])
 def test_a_resumed_stream_equals_the_resumed_whole_job(kind):
     """resume_pieces of the stream, joined, is resume_toolpath of the whole job at any stop: points, kinds, pauses and their
     notes, and the move each point completes."""

@@ -234,7 +234,7 @@ def test_closed_tour_no_longer_than_open_path_plus_return_nor_nearest_neighbour(
     assert length <= tour_length_mm(pts, nn, start, start) + 1e-9
 
 
-@pytest.mark.parametrize("n", [2, 3, 5, 8])
+@pytest.mark.parametrize("n", [2, 3, 5, pytest.param(8, marks=pytest.mark.slow)])
 def test_small_closed_tours_are_optimal(n):
     rng = np.random.default_rng(40 + n)
     pts = rng.uniform(0, 50, (n, 2))

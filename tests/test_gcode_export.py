@@ -19,6 +19,7 @@ JOBS = [(name, dict(depth=5, passes=2)) for name in
 JOBS += [(name, dict(profile=ROOT / "profiles" / prof))
          for name in ["disc.png", "pyramid.png", "heart.png", "dumbbell.png", "ring.png"]
          for prof in ["dome.png", "cone.png", "pyramid.png", "flat.png"]]
+FAST_JOBS = 5 + 4  # the 2D samples and each profile on the first relief; the other reliefs in the slow tier
 
 
 def test_header_units_feeds_and_end():
@@ -35,7 +36,8 @@ def test_header_units_feeds_and_end():
 
 
 @needs_rs274
-@pytest.mark.parametrize("name, options", JOBS, ids=[f"{n}-{o.get('profile', '2d')}".replace(str(ROOT), "") for n, o in JOBS])
+@pytest.mark.parametrize("name, options", [j if i < FAST_JOBS else pytest.param(*j, marks=pytest.mark.slow)
+                                           for i, j in enumerate(JOBS)], ids=[f"{n}-{o.get('profile', '2d')}".replace(str(ROOT), "") for n, o in JOBS])
 def test_rs274_accepts_export_and_carves_the_same(tmp_path, name, options):
     d = cam.digitize(cam.load_image(SAMPLES / name))
     if "profile" in options:

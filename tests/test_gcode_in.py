@@ -84,7 +84,7 @@ def _decoded_mm(plan):
 
 
 @needs_rs274
-@pytest.mark.parametrize("name", PROGRAMS)
+@pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.slow) if n == "engraving" else n for n in PROGRAMS])
 def test_motion_follows_rs274_within_half_a_step(tmp_path, name):
     path = tmp_path / f"{name}.ngc"
     path.write_text(PROGRAMS[name])

@@ -322,7 +322,7 @@ M2
 
 
 @needs_rs274
-@pytest.mark.parametrize("name", CONSTRUCTS)
+@pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.slow) if n == "planes_and_arcs" else n for n in CONSTRUCTS])
 def test_each_construct_follows_rs274(tmp_path, name):
     program = run_both(tmp_path, name, CONSTRUCTS[name])
     assert program.moves, "nothing moved"

@@ -77,6 +77,7 @@ def test_a_machine_without_finer_steps_plans_as_before():
     np.testing.assert_array_equal(a.points_steps, b.points_steps)
 
 
+@pytest.mark.slow
 def test_no_cut_leaves_less_than_the_least_rest():
     """least_rest_steps is a floor: the point tool reaches every centre (0 left), a 1 mm flat end mill cannot
     enter a trench one pixel wide (all of it left), and cam's cuts never leave less than it, step grid and all."""

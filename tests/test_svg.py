@@ -152,6 +152,7 @@ def test_physical_units_and_viewbox(size, k_mm):
     assert_cuts_the_curves(job, [segment(want[0], want[1]), segment(want[1], want[2])])
 
 
+@pytest.mark.slow
 def test_random_cubics_cut_within_one_step():
     rng = np.random.default_rng(16)
     for _ in range(3):

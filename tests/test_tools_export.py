@@ -69,8 +69,11 @@ def test_cli_export_writes_the_tool(tmp_path):
 
 
 @needs_rs274
-@pytest.mark.parametrize("spec", TOOLS)
-@pytest.mark.parametrize("drawing, profile", RELIEFS)
+@pytest.mark.parametrize("drawing, profile, spec", [
+    # each tool on one relief in the fast tier; every other pair in the slow one
+    pytest.param(d, p, t, marks=() if i == j else pytest.mark.slow)
+    for i, (d, p) in enumerate(RELIEFS) for j, t in enumerate(TOOLS)
+])
 def test_rs274_path_carved_with_the_tool_equals_cams_carve(tmp_path, drawing, profile, spec):
     """rs274's canonical feed moves become the step positions a stepper passes through (every G-code coordinate
     `cam` writes is a whole number of steps, checked; its cutting moves are along an axis or at 45 degrees, so
@@ -118,6 +121,7 @@ needs_itg = pytest.mark.skipif(not (os.path.exists("/usr/bin/image-to-gcode") an
 
 
 @needs_itg
+@pytest.mark.slow
 def test_image_to_gcode_frame_meets_cams(tmp_path):
     """The benchmark's image-to-gcode frame: its cut of a dome with a ball 1 mm lies on the target (gouge and rest
     within a couple of Z steps), and the same path moved by one pixel either way cuts far more wrongly -- so the

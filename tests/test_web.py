@@ -564,6 +564,7 @@ def test_phone_screenshot(page, servers, tmp_path):
 # ------------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_api_drives_the_maximus_board(tmp_path):
     """A drill file on the emulated MAXIMUS board from the web API: prompts answered from the page's
     endpoint, every hole drilled once, no pause; jog and origin move the board; a drawing is refused."""

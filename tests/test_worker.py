@@ -35,6 +35,7 @@ def test_over_the_memory_limit_is_a_clean_error_and_the_next_call_works(worker):
     assert worker.call(np.add, 2, 3) == 5
 
 
+@pytest.mark.slow
 def test_over_the_time_limit_the_work_is_ended(worker):
     pid = worker.call(os.getpid)
     with pytest.raises(WorkerLimitError, match=r"sleeping took over 3 s and was stopped"):
