@@ -1,6 +1,6 @@
-"""Names the library accepts: file kinds by suffix, which job option applies to which kind, the 2D start rules.
+"""Names the library accepts: file kinds by suffix, the 2D start rules (and :mod:`cam.options`' option kinds).
 
-Standard library and :mod:`cam.errors` only, so the command line can list and
+Standard library, :mod:`cam.errors` and :mod:`cam.options` only, so the command line can list and
 check them in ``--help`` and before a command runs without loading numpy,
 numba or OpenCV.  The modules that use a list
 re-export it under the same name (``cam.formats.gcode.GCODE_SUFFIXES``,
@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Optional
 
 from .errors import CamError
+from .options import OPTION_KINDS, OPTIONS  # which option applies to which kind: declared with the option
 from .sniff import decide_kind, read_head
 
 __all__ = [
@@ -51,7 +52,7 @@ SUFFIXES = {
 FILE_JOB_SUFFIXES = EXCELLON_SUFFIXES + GCODE_SUFFIXES + HPGL_SUFFIXES + SVG_SUFFIXES
 """Files that are jobs already (not drawings): the job is in the file, not traced from a picture."""
 
-START_RULES = ("top", "min-distance")
+START_RULES = OPTIONS["start"].choices
 """Where each 2D object starts: first pixel in scan order, or nearest the tool (:func:`cam.digitize.digitize`)."""
 
 
@@ -81,29 +82,3 @@ def job_kind(path: str | os.PathLike, warnings: Optional[list[str]] = None, *, h
     listed = "; ".join(f"{k} {' '.join(v)}" for k, v in SUFFIXES.items())
     raise CamError(f"{Path(path).name}: unknown file type '{suffix or '(none)'}' (accepted: {listed})")
 
-
-_DRAWINGS = frozenset({"drawing", "digitized"})
-OPTION_KINDS = {
-    "depth": _DRAWINGS, "passes": _DRAWINGS, "start": frozenset({"drawing"}), "start_at": _DRAWINGS,
-    "pause_at": _DRAWINGS, "profile": _DRAWINGS, "profile_expr": _DRAWINGS,
-    "cut_depth_mm": _DRAWINGS | {"excellon", "hpgl"}, "travel_height_mm": frozenset({"excellon", "hpgl"}),
-    "offset_mm": frozenset({"excellon", "hpgl"}), "mirror_x": frozenset({"excellon"}),
-    "drill_order": frozenset({"excellon"}), "excellon_units": frozenset({"excellon"}),
-    "excellon_digits": frozenset({"excellon"}), "excellon_zeros": frozenset({"excellon"}),
-    "flip_y": frozenset({"gcode"}), "tool_table": frozenset({"gcode"}), "subroutine_path": frozenset({"gcode"}),
-    "max_lines": frozenset({"gcode"}),
-}
-"""The job kinds each job option (:class:`cam.job.jobs.JobOptions`) applies to; the CLI's checks use it too."""
-# SVG (issue 16, point 5): the mm options of the vector kinds, and its own scale and fit
-for _option in ("cut_depth_mm", "travel_height_mm", "offset_mm"):
-    OPTION_KINDS[_option] = OPTION_KINDS[_option] | {"svg"}
-OPTION_KINDS.update({"scale": frozenset({"svg"}), "fit_mm": frozenset({"svg"})})
-# sketches and photos traced into drawings (issue 16, point 6)
-OPTION_KINDS.update({"trace": frozenset({"drawing"}), "trace_min_length_px": frozenset({"drawing"}),
-                     "trace_fill": frozenset({"drawing"})})
-# real cutters (issue 19): the drawing planner limits 3D depths by the tool's shape; a V bit's line width sets
-# the depth of 2D drawings
-# and the width of the lines of vector files (SVG, HPGL), engraved along their strokes
-OPTION_KINDS.update({"tool": _DRAWINGS | {"svg", "hpgl"}, "line_width_mm": _DRAWINGS | {"svg", "hpgl"},
-                     "stepdown_mm": _DRAWINGS, "stepover": _DRAWINGS,
-                     "rough_tool": _DRAWINGS})

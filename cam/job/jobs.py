@@ -42,10 +42,10 @@ from ..drive.chunks import plan_chunks
 from ..errors import CamError
 from ..formats.excellon import load_excellon
 from ..formats.gcode import load_gcode, load_tool_table
-from ..limits import DEFAULT_GCODE_LINES, MAX_GCODE_LINES
+from ..options import JOB_OPTIONS, Option, MAX_DEPTH_PX, MAX_MM, MAX_PX, check_range  # noqa: F401 (the limits re-exported)
 from ..formats.hpgl import scan_hpgl
 from ..formats.svg import load_svg
-from ..digitize.sketch import DEFAULT_MIN_LENGTH_PX, load_sketch, trace
+from ..digitize.sketch import load_sketch, trace
 from ..tool import parse_tool, tool_of_settings
 from ..render.picture import LEGEND_PX, depth_colours, encode_png, toolpath_picture
 from ..render.report import job_report
@@ -73,12 +73,6 @@ __all__ = [
 ]
 
 KINDS = ("drawing", "digitized", "gcode", "excellon", "hpgl", "svg")
-MAX_DEPTH_PX = 1_000_000
-"""The deepest depth in Z pixels an option may ask for (the travel refuses far less)."""
-MAX_PX = 10**9
-"""The largest pixel offset an option may give, either way."""
-MAX_MM = 10_000.0
-"""The largest length in mm an option may give (10 m)."""
 
 
 def accepted_suffixes() -> dict[str, tuple[str, ...]]:
@@ -86,7 +80,27 @@ def accepted_suffixes() -> dict[str, tuple[str, ...]]:
     return dict(SUFFIXES)
 
 
+_ANNOTATIONS = {
+    "whole": "int", "number": "float", "wholes": "tuple[int, ...]", "numbers": "tuple[float, ...]", "choice": "str",
+    "flag": "bool", "text": "str", "tool": "str", "points": "tuple[tuple[int, int], ...]",
+    "digits": "tuple[int, int]", "size": "tuple[float, float]", "paths": "tuple[str, ...]",
+}
+"""The Python type of each schema type (:data:`cam.options.TYPES`)."""
+
+
+def _schema_fields(cls: type) -> type:
+    """Give ``cls`` one dataclass field per :data:`cam.options.JOB_OPTIONS` entry: its name, type and default."""
+    annotations = {}
+    for o in JOB_OPTIONS:
+        kind = _ANNOTATIONS[o.type]
+        annotations[o.name] = f"Optional[{kind}]" if o.default is None else kind
+        setattr(cls, o.name, o.default)
+    cls.__annotations__ = annotations
+    return cls
+
+
 @dataclass(frozen=True)
+@_schema_fields
 class JobOptions:
     """How to cut a file.  An option given for a kind it does not apply to is an error (:meth:`check_kind`).
 
@@ -129,35 +143,7 @@ class JobOptions:
             roughing tool (a tool-change pause before finishing), None: the finishing tool.
     """
 
-    depth: Optional[tuple[int, ...]] = None
-    passes: int = 1
-    start: str = "top"
-    start_at: tuple[int, int, int] = (0, 0, 0)
-    pause_at: tuple[tuple[int, int], ...] = ()
-    profile: Optional[str] = None
-    profile_expr: Optional[str] = None
-    cut_depth_mm: Optional[float] = None
-    travel_height_mm: Optional[float] = None
-    offset_mm: Optional[tuple[float, float]] = None
-    mirror_x: bool = False
-    drill_order: str = "tour"
-    excellon_units: Optional[str] = None
-    excellon_digits: Optional[tuple[int, int]] = None
-    excellon_zeros: Optional[str] = None
-    flip_y: bool = False
-    scale: Optional[float] = None
-    fit_mm: Optional[tuple[float, float]] = None
-    tool_table: Optional[str] = None
-    subroutine_path: tuple[str, ...] = ()
-    max_lines: int = DEFAULT_GCODE_LINES
-    trace: bool = False
-    trace_min_length_px: int = DEFAULT_MIN_LENGTH_PX
-    trace_fill: bool = False
-    tool: Optional[str] = None
-    line_width_mm: Optional[float] = None
-    stepdown_mm: Optional[float] = None
-    stepover: float = 0.5
-    rough_tool: Optional[str] = None
+    # the fields (names, defaults) are added from cam.options.JOB_OPTIONS by _schema_fields
 
     @classmethod
     def from_mapping(cls, values: Mapping[str, Any], source: str = "options") -> "JobOptions":
@@ -192,54 +178,27 @@ class JobOptions:
         def bad(key: str, why: str) -> CamError:
             return CamError(f"{source}: option '{key}' {why}, got {getattr(self, key)!r}")
 
-        if self.depth is not None and (not self.depth or any(not 0 <= d <= MAX_DEPTH_PX for d in self.depth)):
-            raise bad("depth", f"must be Z pixels 0..{MAX_DEPTH_PX}")
-        if any(abs(v) > MAX_PX for v in self.start_at) or any(abs(v) > MAX_PX for p in self.pause_at for v in p):
-            raise bad("start_at" if any(abs(v) > MAX_PX for v in self.start_at) else "pause_at",
-                      f"must be pixels of at most {MAX_PX} either way")
-        for key in ("cut_depth_mm", "travel_height_mm"):
-            if getattr(self, key) is not None and getattr(self, key) > MAX_MM:
-                raise bad(key, f"must be at most {MAX_MM:g} mm")
-        if self.offset_mm is not None and any(abs(v) > MAX_MM for v in self.offset_mm):
-            raise bad("offset_mm", f"must be at most {MAX_MM:g} mm either way")
-        if self.scale is not None and not (0 < self.scale <= MAX_MM):
-            raise bad("scale", f"must be a number > 0 and at most {MAX_MM:g}")
-        if self.fit_mm is not None and not all(0 < v <= MAX_MM for v in self.fit_mm):
-            raise bad("fit_mm", f"must be a width and a height > 0 and at most {MAX_MM:g} mm")
+        for o in JOB_OPTIONS:  # the ranges and choices of cam.options, as the command line checks them
+            value = getattr(self, o.name)
+            if value is None:
+                continue
+            why = check_range(o, value)
+            if why is None and o.choices and value not in o.choices:
+                why = "must be " + " or ".join(f"'{c}'" for c in o.choices)
+            if why is None and o.count is not None and o.type != "points" and len(value) != o.count:
+                why = f"takes {o.count} values"
+            if why is None and o.type == "wholes" and not value:
+                why = "takes at least one whole number"
+            if why is not None:
+                raise bad(o.name, why)
         if self.scale is not None and self.fit_mm is not None:
             raise bad("fit_mm", "cannot be given together with scale")
-        if not (1 <= self.max_lines <= MAX_GCODE_LINES):
-            raise bad("max_lines", f"must be 1..{MAX_GCODE_LINES}")
-        if not (2 <= self.trace_min_length_px <= 10_000):
-            raise bad("trace_min_length_px", "must be 2..10000 pixels")
-        if not (1 <= self.passes <= 1000):
-            raise bad("passes", "must be 1..1000")
-        if self.start not in ("top", "min-distance"):
-            raise bad("start", "must be 'top' or 'min-distance'")
-        if self.drill_order not in ("tour", "file"):
-            raise bad("drill_order", "must be 'tour' or 'file'")
-        if self.cut_depth_mm is not None and not (self.cut_depth_mm > 0):
-            raise bad("cut_depth_mm", "must be > 0 mm")
-        if self.travel_height_mm is not None and not (self.travel_height_mm >= 0):
-            raise bad("travel_height_mm", "must be >= 0 mm")
-        if self.excellon_units not in (None, "inch", "metric"):
-            raise bad("excellon_units", "must be 'inch' or 'metric'")
-        if self.excellon_zeros not in (None, "LZ", "TZ"):
-            raise bad("excellon_zeros", "must be 'LZ' or 'TZ'")
-        if self.excellon_digits is not None and not all(0 <= v <= 8 for v in self.excellon_digits):
-            raise bad("excellon_digits", "must be two digit counts 0..8")
         if self.profile is not None and self.profile_expr is not None:
             raise bad("profile_expr", "cannot be given together with a profile file")
         if self.tool is not None:
             parse_tool(self.tool, f"{source}: option 'tool'")
         if self.rough_tool is not None:
             parse_tool(self.rough_tool, f"{source}: option 'rough_tool'")
-        if self.stepdown_mm is not None and not (0 < self.stepdown_mm <= MAX_MM):
-            raise bad("stepdown_mm", f"must be > 0 and at most {MAX_MM:g} mm")
-        if not (0 < self.stepover <= 1):
-            raise bad("stepover", "must be a fraction of the tool's diameter, 0 < s <= 1")
-        if self.line_width_mm is not None and not (0 < self.line_width_mm <= MAX_MM):
-            raise bad("line_width_mm", f"must be > 0 and at most {MAX_MM:g} mm")
         if self.line_width_mm is not None and (self.depth is not None or self.cut_depth_mm is not None):
             raise bad("line_width_mm", "cannot be given together with a depth (the width sets it)")
         if self.cut_depth_mm is not None and self.depth is not None:
@@ -247,7 +206,8 @@ class JobOptions:
         return self
 
     def check_kind(self, kind: str, source: str = "options") -> "JobOptions":
-        """Refuse an option given for a job kind it does not apply to (see :data:`OPTION_KINDS`); returns self."""
+        """Refuse an option given for a job kind it does not apply to (the kinds of :data:`cam.options.JOB_OPTIONS`);
+        returns self."""
         for f in fields(self):
             if getattr(self, f.name) != f.default and kind not in OPTION_KINDS[f.name]:
                 raise CamError(f"{source}: option '{f.name}' does not apply to a {kind} file; it applies to "
@@ -346,35 +306,25 @@ def _points(value: Any) -> tuple[tuple[int, int], ...]:
     raise ValueError("must be a list of x,y points")
 
 
-_PARSERS = {
-    "depth": _optional(_ints(None)),
-    "passes": _int,
-    "start": _text,
-    "start_at": _ints(3),
-    "pause_at": _points,
-    "profile": _optional(_text),
-    "profile_expr": _optional(_text),
-    "cut_depth_mm": _optional(_float),
-    "travel_height_mm": _optional(_float),
-    "offset_mm": _optional(_floats(2)),
-    "mirror_x": _bool,
-    "drill_order": _text,
-    "excellon_units": _optional(_text),
-    "excellon_digits": _optional(_ints(2)),
-    "excellon_zeros": _optional(lambda v: _text(v).upper()),
-    "flip_y": _bool,
-    "trace": _bool,
-    "trace_min_length_px": _int,
-    "trace_fill": _bool,
-    "tool": _optional(_text),
-    "line_width_mm": _optional(_float),
-    "stepdown_mm": _optional(_float),
-    "stepover": _float,
-    "rough_tool": _optional(_text),
-    "scale": _optional(_float),
-    "fit_mm": _optional(lambda v: _floats(2)(v.lower().replace("x", ",") if isinstance(v, str) else v)),
-    "max_lines": _int,
-}
+def _fit(value: Any) -> tuple[float, ...]:
+    return _floats(2)(value.lower().replace("x", ",") if isinstance(value, str) else value)
+
+
+def _parser_of(o: Option) -> Any:
+    """How :meth:`JobOptions.from_mapping` reads option ``o`` from JSON or form text (None: not from the page)."""
+    if not o.web:
+        return None
+    if o.name == "excellon_zeros":
+        base: Any = lambda v: _text(v).upper()  # noqa: E731
+    else:
+        base = {"whole": _int, "number": _float, "wholes": _ints(o.count), "numbers": _floats(o.count or 1),
+                "choice": _text, "flag": _bool, "text": _text, "tool": _text, "points": _points,
+                "digits": _ints(o.count), "size": _fit}[o.type]
+    return _optional(base) if o.default is None else base
+
+
+_PARSERS = {o.name: p for o in JOB_OPTIONS if (p := _parser_of(o)) is not None}
+"""How the page's values of each option are read, from its schema type."""
 
 
 
@@ -507,7 +457,8 @@ def motion_picture(
     for layer in ("above", "below", "holes"):  # every grey line under every coloured one, the rings on top
         if layer == "holes" and not holes:
             break
-        prev_xy, prev_z = start_xy.copy(), 0
+        hole_seen: list[bool] = []  # a piece was judged: its last point is point 0 of the next
+        prev_xy, prev_z, before_z = start_xy.copy(), 0, 0  # before_z: the kept point before prev (holes)
         for q, last in _with_last(np.asarray(p, np.int64).reshape(-1, 3) for p in pieces()):
             full_xy = np.vstack([prev_xy[None, :], np.rint((q[:, :2] - lo) * k).astype(np.int64) + margin])
             full_z = np.concatenate([[prev_z], q[:, 2]])
@@ -526,13 +477,17 @@ def motion_picture(
                 for i in np.flatnonzero(below):
                     a, b = tuple(int(v) for v in xy[i]), tuple(int(v) for v in xy[i + 1])
                     cv2.line(img, a, b, tuple(int(v) for v in cols[i + 1]), 2, cv2.LINE_8)
-            else:  # a plunge's deepest point, among the points drawn (the next one may be in the next piece)
+            else:  # a plunge's deepest point: judged once its next point is known (the last of a piece: in the
+                # next piece, where it is point 0 and the point before it is carried)
                 cols = depth_colours(np.maximum(z, 0), zmax)
                 nxt = np.r_[z[1:], 0]
-                deepest = np.flatnonzero((z > 0) & (nxt < z) & (np.r_[0, z[:-1]] <= z))
-                deepest = deepest[(deepest > 0) & ((deepest < len(z) - 1) | last)]
+                deepest = np.flatnonzero((z > 0) & (nxt < z) & (np.r_[before_z, z[:-1]] <= z))
+                deepest = deepest[(deepest > 0 if not len(hole_seen) else deepest >= 0)
+                                  & ((deepest < len(z) - 1) | last)]
                 for i in deepest:
                     cv2.circle(img, (int(xy[i, 0]), int(xy[i, 1])), 5, tuple(int(v) for v in cols[i]), 2, cv2.LINE_AA)
+                hole_seen.append(True)
+            before_z = int(z[-2]) if len(z) > 1 else before_z
             prev_xy, prev_z = xy[-1].copy(), int(z[-1])
     cv2.circle(img, (int(start_xy[0]), int(start_xy[1])), 6, (0, 170, 0), 2)
     img[h:] = 245

@@ -1,0 +1,240 @@
+"""The job options, declared once: name, command-line flag, type, unit, range, file kinds, default and help.
+
+Issue #28 point 6.  Each :class:`Option` in :data:`JOB_OPTIONS` is the one
+declaration of a setting of a job.  From it come:
+
+* the fields of :class:`cam.job.jobs.JobOptions` (same names, same defaults)
+  and their range checks (:meth:`JobOptions.checked`);
+* the command-line flags of ``cam drill``, ``export``, ``preview`` (and the
+  shared ones of ``info``, ``digitize`` and ``trace``): :mod:`cam.cli.parser`;
+* which option applies to which file kind, for the command line's checks
+  (:mod:`cam.cli.checks`), :meth:`JobOptions.check_kind` and the page;
+* the web page's form: ``GET /api/options`` serves :func:`schema_json`, and
+  ``app.js`` shows, hides and range-checks its fields from it.
+
+One name for one setting: the field is ``cut_depth_mm``, the flag
+``--cut-depth`` (the field without its unit, ``_`` as ``-``; the few flags
+that differ say so in ``flag``), and the planners take the field's name as
+their keyword.
+
+Standard library and :mod:`cam.limits` only: ``cam --help`` loads it.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Optional
+
+from .limits import DEFAULT_GCODE_LINES, MAX_GCODE_LINES
+
+__all__ = [
+    "Option", "JOB_OPTIONS", "OPTIONS", "OPTION_KINDS", "OPTION_OF_DEST", "schema_json", "check_range",
+    "MAX_MM", "MAX_PX", "MAX_DEPTH_PX", "TYPES",
+]
+
+MAX_MM = 10_000.0
+"""The largest length in mm an option takes (10 m)."""
+MAX_PX = 10**9
+"""The largest pixel offset an option takes, either way (no machine has that much travel)."""
+MAX_DEPTH_PX = 1_000_000
+"""The deepest depth in Z pixels an option may ask for (the travel refuses far less)."""
+
+TYPES = ("whole", "number", "wholes", "numbers", "choice", "flag", "text", "tool", "points", "digits", "size",
+         "paths")
+"""What an option's value is: a whole number, a number, a list of them (``count`` long, or any length), one of
+``choices``, on/off, text, a cutter spec (:func:`cam.tool.parse_tool`), x,y points, Excellon ``I:F`` digit
+counts, a ``WxH`` size, folders."""
+
+_DRAWINGS = frozenset({"drawing", "digitized"})
+_VECTORS = frozenset({"excellon", "hpgl", "svg"})
+
+
+@dataclass(frozen=True)
+class Option:
+    """One job option.
+
+    Attributes:
+        name: the :class:`cam.job.jobs.JobOptions` field and the planners' keyword (units in the name).
+        flag: the command-line flag (``--cut-depth``); its argparse dest is :attr:`dest`.
+        type: one of :data:`TYPES`.
+        unit: what the numbers count ("mm", "px", "Z px", "" for none).
+        kinds: the job kinds (:data:`cam.choices.SUFFIXES`) it applies to.
+        default: the JobOptions default (None: the kind's own default, or not given).
+        help: what it does, for ``--help`` and the page.
+        lo, hi: the range of each number (None: no bound); lo_open: ``lo`` itself is refused (> lo).
+        count: how many numbers a list takes (None: one or more).
+        choices: the values a "choice" takes.
+        metavar: the value's name in ``--help``.
+        web: whether the page may set it (False: it names files on the machine that runs `cam`).
+    """
+
+    name: str
+    flag: str
+    type: str
+    unit: str
+    kinds: frozenset[str]
+    default: Any
+    help: str
+    lo: Optional[float] = None
+    hi: Optional[float] = None
+    lo_open: bool = False
+    count: Optional[int] = None
+    choices: tuple[str, ...] = ()
+    metavar: Optional[str] = None
+    web: bool = True
+
+    @property
+    def dest(self) -> str:
+        """The argparse dest of :attr:`flag` (``--cut-depth`` -> ``cut_depth``)."""
+        return self.flag.lstrip("-").replace("-", "_")
+
+    def range_text(self) -> str:
+        """The range in words, the same in the CLI's and JobOptions' errors: ``1..1000``, ``> 0 and at most 10000``."""
+        if self.lo is None or self.hi is None:
+            return ""
+        if self.lo_open:
+            return f"> {self.lo:g} and at most {self.hi:g}"
+        if self.type in ("whole", "wholes", "points", "digits"):
+            return f"{int(self.lo)}..{int(self.hi)}"
+        return f"{self.lo:g}..{self.hi:g}"
+
+    def in_range(self, value: float) -> bool:
+        """Whether one number lies in the range (finite, and within lo..hi)."""
+        if not math.isfinite(value):
+            return False
+        if self.lo is not None and (value <= self.lo if self.lo_open else value < self.lo):
+            return False
+        return self.hi is None or value <= self.hi
+
+
+def check_range(option: Option, value: Any) -> Optional[str]:
+    """Why ``value`` (a number, or a list or list of lists of them) is out of ``option``'s range, or None."""
+    if value is None or option.lo is None or option.type not in ("whole", "number", "wholes", "numbers", "points",
+                                                                  "digits", "size"):
+        return None
+    flat: list[float] = []
+    stack = [value]
+    while stack:
+        v = stack.pop()
+        if isinstance(v, (list, tuple)):
+            stack.extend(v)
+        else:
+            flat.append(v)
+    if all(option.in_range(float(v)) for v in flat):
+        return None
+    unit = f" {option.unit}" if option.unit else ""
+    each = "" if option.type in ("whole", "number") else "each value "
+    return f"{each}must be {option.range_text()}{unit}"
+
+
+def _opt(name: str, flag: str, type: str, unit: str, kinds: frozenset[str] | set[str], default: Any, help: str,
+         **more: Any) -> Option:
+    return Option(name, flag, type, unit, frozenset(kinds), default, help, **more)
+
+
+JOB_OPTIONS: tuple[Option, ...] = (
+    # drawings and digitized matrices, in pixels
+    _opt("depth", "--depth", "wholes", "Z px", _DRAWINGS, None,
+         "cutting depth in Z pixels: one value for all objects, or one per object (0 skips one); default 10; on a "
+         "3D drawing one value cuts every layer at N (a flat-bottomed pocket) instead of a profile",
+         lo=0, hi=MAX_DEPTH_PX, metavar="N|N1,N2,..."),
+    _opt("passes", "--passes", "whole", "", _DRAWINGS, 1,
+         "Repeat Drill: cut in N passes of increasing depth (default 1)", lo=1, hi=1000, metavar="N"),
+    _opt("start", "--start", "choice", "", {"drawing"}, "top",
+         "2D: where each object starts: first pixel in scan order (top) or nearest the tool (min-distance)",
+         choices=("top", "min-distance")),
+    _opt("start_at", "--start-at", "wholes", "px", _DRAWINGS, (0, 0, 0),
+         "offset the whole job by this many pixels", lo=-MAX_PX, hi=MAX_PX, count=3, metavar="X,Y,Z"),
+    _opt("pause_at", "--pause-at", "points", "px", _DRAWINGS, (),
+         "pause when the tool reaches this drawing point (repeatable); Enter resumes",
+         lo=-MAX_PX, hi=MAX_PX, count=2, metavar="X,Y"),
+    _opt("profile", "--profile", "text", "", _DRAWINGS, None,
+         "profile drawing (blue curve over black axes, red origin) or CSV of depths per layer", metavar="PROFILE"),
+    _opt("profile_expr", "--profile-expr", "text", "", _DRAWINGS, None,
+         "depth of layer k as arithmetic in k and n (layers), e.g. '30*sqrt(1-((n-k)/n)**2)'", metavar="EXPR"),
+    # depths and heights in mm, one name on every kind
+    _opt("cut_depth_mm", "--cut-depth", "number", "mm", _DRAWINGS | _VECTORS, None,
+         "cutting depth below the surface: drill files (default 2.0: through a 1.6 mm board), HPGL and SVG "
+         "pen-down depth (default 0.5), or a drawing's depth for every object instead of --depth",
+         lo=0.0, hi=MAX_MM, lo_open=True, metavar="MM"),
+    _opt("travel_height_mm", "--travel-height", "number", "mm", _VECTORS, None,
+         "height above the surface between cuts (default 1.0): drill files, HPGL, SVG, and every file "
+         "'cam export' writes", lo=0.0, hi=MAX_MM, metavar="MM"),
+    # drill files, HPGL and SVG
+    _opt("offset_mm", "--offset", "numbers", "mm", _VECTORS, None,
+         "machine position (mm from where the tool stands) of the board, plotter or SVG page origin; default: the "
+         "top-left of what is cut at the start position", lo=-MAX_MM, hi=MAX_MM, count=2, metavar="X,Y"),
+    _opt("mirror_x", "--mirror-x", "flag", "", {"excellon"}, False,
+         "drill files: mirror the board for drilling from the back"),
+    _opt("drill_order", "--drill-order", "choice", "", {"excellon"}, "tour",
+         "drill files: short tour per tool (default) or the file's order", choices=("tour", "file")),
+    _opt("excellon_units", "--excellon-units", "choice", "", {"excellon"}, None,
+         "units when the file does not say", choices=("inch", "metric")),
+    _opt("excellon_digits", "--excellon-format", "digits", "digits", {"excellon"}, None,
+         "integer:fraction digits when the file does not say (e.g. 2:4)", lo=0, hi=8, count=2, metavar="I:F"),
+    _opt("excellon_zeros", "--excellon-zeros", "choice", "", {"excellon"}, None,
+         "zero suppression when the file does not say", choices=("LZ", "TZ")),
+    # G-code
+    _opt("flip_y", "--flip-y", "flag", "", {"gcode"}, False, "G-code input: machine Y = +Y mm instead of -Y mm"),
+    # SVG
+    _opt("scale", "--scale", "number", "", {"svg"}, None,
+         "SVG: mm cut per mm of the drawing (default 1: its own size)", lo=0.0, hi=MAX_MM, lo_open=True,
+         metavar="FACTOR"),
+    _opt("fit_mm", "--fit", "size", "mm", {"svg"}, None,
+         "SVG: scale the drawing to fit WIDTHxHEIGHT mm, keeping its proportions (e.g. 80x40)",
+         lo=0.0, hi=MAX_MM, lo_open=True, count=2, metavar="WxH"),
+    # G-code programs (the first two name files on the machine that runs cam: command line only)
+    _opt("tool_table", "--tool-table", "text", "", {"gcode"}, None,
+         "LinuxCNC tool table (T1 P1 Z12.5 ...; lengths in mm) for G43 H tool length offsets",
+         metavar="FILE.tbl", web=False),
+    _opt("subroutine_path", "--subroutine-path", "paths", "", {"gcode"}, (),
+         "folder where 'O<name> call' finds name.ngc (repeatable, searched in order)", metavar="DIR", web=False),
+    _opt("max_lines", "--max-lines", "whole", "lines", {"gcode"}, DEFAULT_GCODE_LINES,
+         f"stop a program that runs more than N lines, loops counted each pass (default {DEFAULT_GCODE_LINES:,}): "
+         "a loop that never ends is an error, not a hang", lo=1, hi=MAX_GCODE_LINES, metavar="N"),
+    # sketches and photos traced into drawings
+    _opt("trace", "--trace", "flag", "", {"drawing"}, False,
+         "the image is a scanned sketch or a photo of one: trace it into 1-pixel curves first (as 'cam trace' "
+         "does)"),
+    _opt("trace_min_length_px", "--trace-min-length", "whole", "px", {"drawing"}, 10,
+         "with --trace: specks and spurs shorter than this many pixels go (default 10)", lo=2, hi=10_000,
+         metavar="PX"),
+    _opt("trace_fill", "--trace-fill", "flag", "", {"drawing"}, False,
+         "with --trace: the regions the curves enclose become red (a 3D drawing)"),
+    # real cutters
+    _opt("tool", "--tool", "tool", "", _DRAWINGS | {"svg", "hpgl"}, None,
+         "point (default, or the machine file's [tool]), flat:D, ball:D or v:ANGLE:TIP[:D] (mm, degrees): 3D "
+         "reliefs are cut so the tool never goes below them anywhere", metavar="SHAPE"),
+    _opt("line_width_mm", "--line-width", "number", "mm", _DRAWINGS | {"svg", "hpgl"}, None,
+         "2D drawings, SVG and HPGL with a V bit: the engraved lines' width, which sets their depth",
+         lo=0.0, hi=MAX_MM, lo_open=True, metavar="MM"),
+    _opt("stepdown_mm", "--stepdown", "number", "mm", _DRAWINGS, None,
+         "3D reliefs: rough in levels this far apart before the finishing pass", lo=0.0, hi=MAX_MM, lo_open=True,
+         metavar="MM"),
+    _opt("stepover", "--stepover", "number", "", _DRAWINGS, 0.5,
+         "roughing rings' spacing as a fraction of the roughing tool's diameter (default 0.5)", lo=0.0, hi=1.0,
+         lo_open=True, metavar="FRACTION"),
+    _opt("rough_tool", "--rough-tool", "tool", "", _DRAWINGS, None,
+         "a larger roughing tool (as --tool); the job pauses at the home to change to --tool", metavar="SHAPE"),
+)
+"""Every job option, in the order of :class:`cam.job.jobs.JobOptions`' fields."""
+
+OPTIONS: dict[str, Option] = {o.name: o for o in JOB_OPTIONS}
+"""The options by name."""
+
+OPTION_KINDS: dict[str, frozenset[str]] = {o.name: o.kinds for o in JOB_OPTIONS}
+"""The job kinds each option applies to (re-exported by :mod:`cam.choices`)."""
+
+OPTION_OF_DEST: dict[str, Option] = {o.dest: o for o in JOB_OPTIONS}
+"""The options by their argparse dest (``cut_depth`` -> the ``cut_depth_mm`` option)."""
+
+
+def _json_value(value: Any) -> Any:
+    return [_json_value(v) for v in value] if isinstance(value, (tuple, list)) else value
+
+
+def schema_json() -> list[dict[str, Any]]:
+    """The schema as JSON-able records (``GET /api/options``): every field of each :class:`Option`, kinds sorted."""
+    return [{"name": o.name, "flag": o.flag, "type": o.type, "unit": o.unit, "kinds": sorted(o.kinds),
+             "default": _json_value(o.default), "help": o.help, "min": o.lo, "max": o.hi, "min_open": o.lo_open,
+             "count": o.count, "choices": list(o.choices), "web": o.web} for o in JOB_OPTIONS]
