@@ -2,8 +2,10 @@
 
 ``cam --help`` and ``cam COMMAND --help`` finish here, so this module imports
 nothing heavier than the standard library, :mod:`cam.settings` (for the ramp
-modes) and :mod:`cam.choices` (file suffixes, start rules): no numpy, numba,
-OpenCV or web stack.  The commands themselves live in the modules that
+modes), :mod:`cam.choices` (file suffixes) and :mod:`cam.options` (the job
+options: every job option's flag, type, range and help is made from its one
+declaration there, by :func:`_add_option`): no numpy, numba, OpenCV or web
+stack.  The commands themselves live in the modules that
 :data:`cam.cli.COMMANDS` names.
 """
 from __future__ import annotations
@@ -15,9 +17,9 @@ from typing import Callable, Optional, Sequence
 from .. import __version__
 from ..choices import (
     DIGITIZED_SUFFIXES, DRAWING_SUFFIXES, EXCELLON_SUFFIXES, GCODE_SUFFIXES, HPGL_SUFFIXES, PROFILE_SUFFIXES,
-    START_RULES, SVG_SUFFIXES,
+    SVG_SUFFIXES,
 )
-from ..limits import DEFAULT_GCODE_LINES, MAX_GCODE_LINES
+from ..options import MAX_MM, OPTIONS, Option
 from ..settings import RAMP_MODES
 
 JOG_UNIT_NAMES = ("steps", "full-steps", "0.1mm", "mm", "0.1in")
@@ -52,8 +54,6 @@ class _Parser(argparse.ArgumentParser):
 
 MAX_WHOLE = 10**9
 """The largest whole number any option takes (pixels, steps, passes): beyond it no machine has travel."""
-MAX_MM = 10_000.0
-"""The largest length in mm any option takes (10 m)."""
 
 
 def _whole(name: str, lo: int, hi: int = MAX_WHOLE) -> Callable[[str], int]:
@@ -113,19 +113,75 @@ def _float_pair(name: str) -> Callable[[str], list[float]]:
     return parse
 
 
-def _float_list(n: int, name: str) -> Callable[[str], list[float]]:
-    def parse(text: str) -> list[float]:
+# -- the job options of cam.options, as flags ------------------------------------------------------
+
+
+def _schema_number(o: Option, flag: str) -> Callable[[str], float]:
+    """A number in ``o``'s range (finite: no inf or nan reaches a plan, a file or a report)."""
+    def parse(text: str) -> float:
         try:
-            values = [float(v) for v in text.split(",")]
+            value = float(text)
         except ValueError:
-            raise argparse.ArgumentTypeError(f"{name} takes {n} numbers separated by commas, got '{text}'") from None
-        if len(values) != n:
-            raise argparse.ArgumentTypeError(f"{name} takes {n} comma-separated numbers, got '{text}'")
-        if not all(math.isfinite(v) and abs(v) <= MAX_MM for v in values):
-            raise argparse.ArgumentTypeError(f"{name} takes finite numbers of at most {MAX_MM:g} either way, got '{text}'")
+            raise argparse.ArgumentTypeError(f"{flag} takes a number, got '{text}'") from None
+        if not o.in_range(value):
+            raise argparse.ArgumentTypeError(f"{flag} must be a number {o.range_text()}, got '{text}'")
+        return value
+
+    return parse
+
+
+def _schema_list(o: Option, flag: str, whole: bool, separator: str = ",",
+                 shape: str = "") -> Callable[[str], list]:
+    """``o.count`` (or one or more) numbers separated by ``separator``, each in ``o``'s range."""
+    what = "whole numbers" if whole else "numbers"
+    shape = shape or separator.join("N" * (o.count or 1))
+
+    def parse(text: str) -> list:
+        parts = text.lower().split(separator) if separator != "," else text.split(",")
+        try:
+            values = [int(v) if whole else float(v) for v in parts]
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{flag} takes {what} as {shape}, got '{text}'") from None
+        if o.count is not None and len(values) != o.count:
+            raise argparse.ArgumentTypeError(f"{flag} takes {o.count} {what} as {shape}, got '{text}'")
+        if not all(o.in_range(float(v)) for v in values):
+            raise argparse.ArgumentTypeError(f"{flag} values must be {o.range_text()}, got '{text}'")
         return values
 
     return parse
+
+
+def _add_option(container: argparse._ActionsContainer, name: str, flag: Optional[str] = None,
+                **overrides: object) -> argparse.Action:
+    """Add the job option ``name`` of :data:`cam.options.OPTIONS` as its flag: its type and range, metavar and
+    help come from the schema (``overrides``: argparse keywords that differ on this command, such as its help)."""
+    o = OPTIONS[name]
+    flag = flag or o.flag
+    kw: dict = {"help": o.help}
+    if o.metavar:
+        kw["metavar"] = o.metavar
+    if o.type == "whole":
+        kw["type"] = _whole(flag, int(o.lo), int(o.hi))  # type: ignore[arg-type]
+    elif o.type == "number":
+        kw["type"] = _schema_number(o, flag)
+    elif o.type in ("wholes", "numbers"):
+        kw["type"] = _schema_list(o, flag, o.type == "wholes")
+    elif o.type == "points":
+        kw.update(type=_schema_list(o, flag, True), action="append")
+    elif o.type == "digits":
+        kw["type"] = _schema_list(o, flag, True, ":", "I:F")
+    elif o.type == "size":
+        kw["type"] = _schema_list(o, flag, False, "x", "WIDTHxHEIGHT in mm, such as 80x40")
+    elif o.type == "choice":
+        kw["choices"] = o.choices
+    elif o.type == "flag":
+        kw["action"] = "store_true"
+    elif o.type == "tool":
+        kw["type"] = _tool_text
+    elif o.type == "paths":
+        kw["action"] = "append"
+    kw.update(overrides)
+    return container.add_argument(flag, **kw)
 
 
 # -- option groups shared by several commands -----------------------------------------------------
@@ -150,19 +206,14 @@ def _add_machine_options(p: argparse.ArgumentParser) -> None:
 
 
 def _add_digitize_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument(
-        "--start", choices=START_RULES,
-        help="2D: where each object starts: first pixel in scan order (top) or nearest the tool (min-distance)",
-    )
+    _add_option(p, "start")
 
 
 def _add_profile_options(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("3D depth profile (for drawings with a red interior)")
     x = g.add_mutually_exclusive_group()
-    x.add_argument("--profile", metavar="PROFILE",
-                   help="profile drawing (blue curve over black axes, red origin) or CSV of depths per layer")
-    x.add_argument("--profile-expr", metavar="EXPR",
-                   help="depth of layer k as arithmetic in k and n (layers), e.g. '30*sqrt(1-((n-k)/n)**2)'")
+    _add_option(x, "profile")
+    _add_option(x, "profile_expr")
 
 
 def _tool_text(text: str) -> str:
@@ -179,63 +230,31 @@ def _tool_text(text: str) -> str:
 
 def _add_tool_options(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("the cutter (drawings; --tool and --line-width also SVG and HPGL)")
-    g.add_argument("--tool", type=_tool_text, metavar="SHAPE",
-                   help="point (default, or the machine file's [tool]), flat:D, ball:D or v:ANGLE:TIP[:D] (mm, "
-                   "degrees): 3D reliefs are cut so the tool never goes below them anywhere")
-    g.add_argument("--line-width", type=_float_list(1, "--line-width"), metavar="MM",
-                   help="2D drawings, SVG and HPGL with a V bit: the engraved lines' width, which sets their depth")
-    g.add_argument("--stepdown", type=_float_list(1, "--stepdown"), metavar="MM",
-                   help="3D reliefs: rough in levels this far apart before the finishing pass")
-    g.add_argument("--stepover", type=_float_list(1, "--stepover"), metavar="FRACTION",
-                   help="roughing rings' spacing as a fraction of the roughing tool's diameter (default 0.5)")
-    g.add_argument("--rough-tool", type=_tool_text, metavar="SHAPE",
-                   help="a larger roughing tool (as --tool); the job pauses at the home to change to --tool")
+    for name in ("tool", "line_width_mm", "stepdown_mm", "stepover", "rough_tool"):
+        _add_option(g, name)
 
 
 def _add_excellon_options(d: argparse.ArgumentParser) -> None:
     g = d.add_argument_group(f"drill files that do not say their number format (Excellon: {_listed(EXCELLON_SUFFIXES)})")
-    g.add_argument("--excellon-units", choices=("inch", "metric"), help="units when the file does not say")
-    g.add_argument("--excellon-format", metavar="I:F", help="integer:fraction digits when the file does not say (e.g. 2:4)")
-    g.add_argument("--excellon-zeros", choices=("LZ", "TZ"), help="zero suppression when the file does not say")
-
-
-def _fit(text: str) -> list[float]:
-    """--fit WIDTHxHEIGHT in mm."""
-    parts = text.lower().replace(",", "x").split("x")
-    try:
-        values = [float(v) for v in parts]
-    except ValueError:
-        values = []
-    if len(values) != 2 or not all(math.isfinite(v) and 0 < v <= MAX_MM for v in values):
-        raise argparse.ArgumentTypeError(f"--fit takes WIDTHxHEIGHT in mm, two numbers > 0 such as 80x40, got '{text}'")
-    return values
+    for name in ("excellon_units", "excellon_digits", "excellon_zeros"):
+        _add_option(g, name)
 
 
 def _add_svg_options(d: argparse.ArgumentParser, scale: bool = True) -> None:
     g = d.add_argument_group(f"SVG files ({_listed(SVG_SUFFIXES)}; --cut-depth default 0.5, --offset places the page origin)")
     if scale:
-        g.add_argument("--scale", type=_number("--scale", 1e-6, MAX_MM), metavar="FACTOR",
-                       help="SVG: mm cut per mm of the drawing (default 1: its own size)")
-    g.add_argument("--fit", type=_fit, metavar="WxH",
-                   help="SVG: scale the drawing to fit WIDTHxHEIGHT mm, keeping its proportions (e.g. 80x40)")
+        _add_option(g, "scale")
+    _add_option(g, "fit_mm")
 
 
 def _add_cut_options(d: argparse.ArgumentParser) -> None:
     g = d.add_argument_group("depths and heights in mm (one name on every file kind and on the web page)")
-    g.add_argument("--cut-depth", type=_number("--cut-depth", 0.0, MAX_MM), metavar="MM",
-                   help="cutting depth below the surface: drill files (default 2.0: through a 1.6 mm board), HPGL "
-                   "and SVG pen-down depth (default 0.5), or a drawing's depth for every object instead of --depth")
-    g.add_argument("--travel-height", type=_number("--travel-height", 0.0, MAX_MM), metavar="MM",
-                   help="height above the surface between cuts (default 1.0): drill files, HPGL, SVG, and every "
-                   "file 'cam export' writes")
+    _add_option(g, "cut_depth_mm")
+    _add_option(g, "travel_height_mm")
     f = d.add_argument_group(f"drill, HPGL and SVG files ({_listed(EXCELLON_SUFFIXES)} {_listed(HPGL_SUFFIXES)} "
                              f"{_listed(SVG_SUFFIXES)})")
-    f.add_argument("--offset", type=_float_list(2, "--offset"), metavar="X,Y",
-                   help="machine position (mm from where the tool stands) of the board, plotter or SVG page origin; "
-                   "default: the top-left of what is cut at the start position")
-    f.add_argument("--mirror-x", action="store_true", help="drill files: mirror the board for drilling from the back")
-    f.add_argument("--drill-order", choices=("tour", "file"),
-                   help="drill files: short tour per tool (default) or the file's order")
+    for name in ("offset_mm", "mirror_x", "drill_order"):
+        _add_option(f, name)
     _add_excellon_options(d)
 
 
@@ -254,26 +273,15 @@ def _add_job_options(d: argparse.ArgumentParser) -> None:
     d.add_argument("--load-digitized", metavar="FILE",
                    help=f"reuse a saved digitized matrix ({_listed(DIGITIZED_SUFFIXES)}) instead of digitizing")
     _add_digitize_options(d)
-    d.add_argument(
-        "--depth", metavar="N|N1,N2,...", type=_int_list(None, "--depth", 0),
-        help="cutting depth in Z pixels: one value for all objects, or one per object (0 skips one); default 10; "
-        "on a 3D drawing one value cuts every layer at N (a flat-bottomed pocket) instead of a profile",
-    )
+    _add_option(d, "depth")
     _add_profile_options(d)
     _add_tool_options(d)
-    d.add_argument("--passes", type=_whole("--passes", 1, 1000), metavar="N", help="Repeat Drill: cut in N passes of increasing depth (default 1)")
-    d.add_argument("--start-at", metavar="X,Y,Z", type=_int_list(3, "--start-at"),
-                   help="offset the whole job by this many pixels")
-    d.add_argument("--pause-at", metavar="X,Y", type=_int_list(2, "--pause-at"), action="append",
-                   help="pause when the tool reaches this drawing point (repeatable); Enter resumes")
+    for name in ("passes", "start_at", "pause_at"):
+        _add_option(d, name)
     sk = d.add_argument_group("sketches and photos (drawings)")
-    sk.add_argument("--trace", action="store_true", default=None,
-                    help="the image is a scanned sketch or a photo of one: trace it into 1-pixel curves first "
-                         "(as 'cam trace' does)")
-    sk.add_argument("--trace-min-length", type=_whole("--trace-min-length", 2, 10_000), metavar="PX",
-                    help="with --trace: specks and spurs shorter than this many pixels go (default 10)")
-    sk.add_argument("--trace-fill", action="store_true", default=None,
-                    help="with --trace: the regions the curves enclose become red (a 3D drawing)")
+    _add_option(sk, "trace", default=None)
+    _add_option(sk, "trace_min_length_px")
+    _add_option(sk, "trace_fill", default=None)
     _add_machine_options(d)
     _add_gcode_options(d)
 
@@ -281,13 +289,8 @@ def _add_job_options(d: argparse.ArgumentParser) -> None:
 def _add_gcode_options(d: argparse.ArgumentParser) -> None:
     """Options of G-code programs (LinuxCNC's tool table, subroutine files, the line limit)."""
     g = d.add_argument_group("G-code programs")
-    g.add_argument("--tool-table", metavar="FILE.tbl",
-                   help="LinuxCNC tool table (T1 P1 Z12.5 ...; lengths in mm) for G43 H tool length offsets")
-    g.add_argument("--subroutine-path", metavar="DIR", action="append",
-                   help="folder where 'O<name> call' finds name.ngc (repeatable, searched in order)")
-    g.add_argument("--max-lines", type=_whole("--max-lines", 1, MAX_GCODE_LINES), metavar="N",
-                   help=f"stop a program that runs more than N lines, loops counted each pass "
-                   f"(default {DEFAULT_GCODE_LINES:,}): a loop that never ends is an error, not a hang")
+    for name in ("tool_table", "subroutine_path", "max_lines"):
+        _add_option(g, name)
 
 
 # -- one function per command ------------------------------------------------------------------------
@@ -318,7 +321,7 @@ def _add_drill(sub: argparse._SubParsersAction) -> None:
                    help="go on with a job that was stopped: give the same file and options; the tool lifts, travels "
                    "to the first uncut point and plunges there (the journal keeps being updated)")
     g.add_argument("--preview", metavar="OUT.png", help="write the toolpath picture before cutting")
-    g.add_argument("--flip-y", action="store_true", help="G-code input: machine Y = +Y mm instead of -Y mm")
+    _add_option(g, "flip_y")
     g.add_argument("--yes", action="store_true", help="answer every prompt (tool changes, pauses) with Enter")
     g.add_argument("--spindle", choices=("on", "off"),
                    help="MAXIMUS board: run the spindle while drilling (default on; off for a dry run)")
@@ -337,7 +340,7 @@ def _add_export(sub: argparse._SubParsersAction) -> None:
     _add_cut_options(e)
     _add_svg_options(e)
     e.add_argument("-o", "--output", required=True, metavar="FILE.ngc", help="where to write the G-code")
-    e.add_argument("--flip-y", action="store_true", help="write Y = +row (mirrored) instead of Y = -row")
+    _add_option(e, "flip_y", help="write Y = +row (mirrored) instead of Y = -row (every file kind)")
 
 
 def _add_preview(sub: argparse._SubParsersAction) -> None:
@@ -349,12 +352,12 @@ def _add_preview(sub: argparse._SubParsersAction) -> None:
     )
     _add_job_options(pv)
     _add_cut_options(pv)
-    pv.add_argument("--flip-y", action="store_true", help="G-code input: machine Y = +Y mm instead of -Y mm")
+    _add_option(pv, "flip_y")
     pv.add_argument("-o", "--output", required=True, metavar="OUT.png|OUT.svg", help="picture to write")
     pv.add_argument("--surface", action="store_true", help="draw the cut surface instead of the toolpath")
-    pv.add_argument("--scale", type=_number("--scale", 1e-6, MAX_MM), metavar="N",
-                    help="picture pixels per drawing pixel, 1..64 (default: automatic); for an SVG file, its scale "
-                    "as in drill")
+    _add_option(pv, "scale", metavar="N",
+                help="picture pixels per drawing pixel, 1..64 (default: automatic); for an SVG file, its scale "
+                "as in drill")
     _add_svg_options(pv, scale=False)
 
 
@@ -398,8 +401,8 @@ def _add_trace(sub: argparse._SubParsersAction) -> None:
     t.add_argument("image", metavar="PHOTO", help=f"the sketch ({_listed(DRAWING_SUFFIXES)})")
     t.add_argument("-o", "--output", required=True, metavar="DRAWING.png",
                    help="where to write the drawing (.png, .bmp or .tif: never JPEG, which blurs 1-pixel lines)")
-    t.add_argument("--min-length", type=_whole("--min-length", 2, 100_000), default=10, metavar="PX",
-                   help="remove specks and spurs shorter than this many pixels (default 10)")
+    _add_option(t, "trace_min_length_px", "--min-length", default=OPTIONS["trace_min_length_px"].default,
+                help="remove specks and spurs shorter than this many pixels (default 10; drill's --trace-min-length)")
     t.add_argument("--fill", action="store_true", help="make the regions enclosed by curves red (3D drawing)")
     t.add_argument("--max-side", type=_whole("--max-side", 16, 32768), default=1000, metavar="PX",
                    help="shrink a larger photo to this many pixels on its longer side first (default 1000)")

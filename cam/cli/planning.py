@@ -14,6 +14,7 @@ from ..drive.chunks import ChunkedPlan, plan_chunks
 from ..drive.pins import axis_bits
 from ..errors import CamError
 from ..job.jobs import JobOptions, PreparedJob, prepare_job
+from ..options import JOB_OPTIONS, Option
 from ..job.model import JobLike
 from ..render.picture import save_picture, surface_picture, toolpath_picture, toolpath_svg
 from ..settings import MachineSettings
@@ -60,45 +61,44 @@ def summary_of(job: PreparedJob) -> str:
 
 
 def excellon_digits(args: argparse.Namespace) -> Optional[tuple[int, int]]:
-    """--excellon-format I:F as (I, F), or None."""
-    if not getattr(args, "excellon_format", None):
+    """--excellon-format I:F as (I, F) (checked by the parser, :data:`cam.options.OPTIONS`), or None."""
+    value = getattr(args, "excellon_format", None)
+    if not value:
         return None
-    try:
-        a, b = (int(v) for v in args.excellon_format.split(":"))
-    except ValueError:
-        raise CamError(f"--excellon-format takes I:F such as 2:4, got '{args.excellon_format}'") from None
-    return (a, b)
+    if isinstance(value, str):
+        try:
+            a, b = (int(v) for v in value.split(":"))
+        except ValueError:
+            raise CamError(f"--excellon-format takes I:F such as 2:4, got '{value}'") from None
+        return (a, b)
+    return (int(value[0]), int(value[1]))
+
+
+def _job_value(o: Option, value: Any) -> Any:
+    """A flag's parsed value as its JobOptions field holds it (lists as tuples)."""
+    if o.type == "points":
+        return tuple(tuple(p) for p in value)
+    if isinstance(value, list):
+        return tuple(value)
+    if o.type == "flag":
+        return bool(value)
+    return value
 
 
 def job_options(args: argparse.Namespace) -> JobOptions:
-    """The command's job options as :class:`cam.job.jobs.JobOptions` (the flags were checked against the file's
-    kind by :func:`cam.cli.checks.check_args`; export-only meanings of --travel-height and --flip-y stay here)."""
+    """The command's job options as :class:`cam.job.jobs.JobOptions`, one field per flag of
+    :data:`cam.options.JOB_OPTIONS`.  The flags were checked against the file's kind by
+    :func:`cam.cli.checks.check_args`; a flag given for another kind (``cam export``'s --travel-height and
+    --flip-y of every kind, ``cam preview``'s --scale of pictures) is its export or picture meaning, not the
+    job's, and leaves the field at its default."""
     kind = job_kind_of(args)
-    d = JobOptions()
-
-    def opt(name: str, default: Any) -> Any:
-        value = getattr(args, name, None)
-        return default if value is None else value
-
-    return JobOptions(
-        depth=tuple(args.depth) if getattr(args, "depth", None) is not None else None,
-        passes=opt("passes", d.passes), start=opt("start", d.start),
-        start_at=tuple(opt("start_at", d.start_at)), pause_at=tuple(tuple(p) for p in opt("pause_at", ())),
-        profile=opt("profile", None), profile_expr=opt("profile_expr", None), cut_depth_mm=opt("cut_depth", None),
-        travel_height_mm=opt("travel_height", None) if kind in ("excellon", "hpgl", "svg") else None,
-        offset_mm=tuple(args.offset) if opt("offset", None) else None, mirror_x=opt("mirror_x", False),
-        drill_order=opt("drill_order", d.drill_order), excellon_units=opt("excellon_units", None),
-        excellon_digits=excellon_digits(args), excellon_zeros=opt("excellon_zeros", None),
-        flip_y=opt("flip_y", False) if kind == "gcode" else False,
-        scale=opt("scale", None) if kind == "svg" else None, fit_mm=tuple(args.fit) if opt("fit", None) else None,
-        tool_table=opt("tool_table", None), subroutine_path=tuple(opt("subroutine_path", ())),
-        max_lines=opt("max_lines", d.max_lines),
-        trace=bool(opt("trace", False)), trace_min_length_px=opt("trace_min_length", d.trace_min_length_px),
-        trace_fill=bool(opt("trace_fill", False)),
-        tool=opt("tool", None), line_width_mm=args.line_width[0] if opt("line_width", None) else None,
-        stepdown_mm=args.stepdown[0] if opt("stepdown", None) else None,
-        stepover=args.stepover[0] if opt("stepover", None) else d.stepover, rough_tool=opt("rough_tool", None),
-    ).checked("options")
+    values: dict[str, Any] = {}
+    for o in JOB_OPTIONS:
+        value = getattr(args, o.dest, None)
+        if value is None or value == [] or (kind is not None and kind not in o.kinds):
+            continue
+        values[o.name] = _job_value(o, value)
+    return JobOptions(**values).checked("options")
 
 
 def profile_of(args: argparse.Namespace, digitized: Digitized) -> Optional[Profile]:
