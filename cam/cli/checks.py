@@ -19,28 +19,17 @@ import sys
 from pathlib import Path
 from typing import Optional
 
-from ..choices import DIGITIZED_SUFFIXES, OPTION_KINDS, SUFFIXES, job_kind
+from ..choices import DIGITIZED_SUFFIXES, SUFFIXES, job_kind
 from ..errors import CamError
+from ..options import OPTION_OF_DEST, OPTIONS
 
 __all__ = ["check_args", "job_kind_of", "OUTPUTS", "APPLIES_TO", "check_output_path"]
 
 DRAWINGS = frozenset({"drawing", "digitized"})
 EVERY_KIND = frozenset(SUFFIXES)
 
-_OPTION_OF_FLAG = {
-    # CLI option dest: the job option it sets (its kinds come from cam.choices.OPTION_KINDS)
-    "depth": "depth", "passes": "passes", "start": "start", "start_at": "start_at", "pause_at": "pause_at",
-    "profile": "profile", "profile_expr": "profile_expr", "cut_depth": "cut_depth_mm",
-    "travel_height": "travel_height_mm", "offset": "offset_mm", "mirror_x": "mirror_x",
-    "drill_order": "drill_order", "excellon_units": "excellon_units", "excellon_format": "excellon_digits",
-    "excellon_zeros": "excellon_zeros", "flip_y": "flip_y", "scale": "scale", "fit": "fit_mm",
-    "tool_table": "tool_table", "subroutine_path": "subroutine_path", "max_lines": "max_lines",
-    "trace": "trace", "trace_min_length": "trace_min_length_px", "trace_fill": "trace_fill",
-    "tool": "tool", "line_width": "line_width_mm", "stepdown": "stepdown_mm", "stepover": "stepover",
-    "rough_tool": "rough_tool",
-}
 APPLIES_TO = {
-    **{dest: OPTION_KINDS[option] for dest, option in _OPTION_OF_FLAG.items()},
+    **{dest: option.kinds for dest, option in OPTION_OF_DEST.items()},  # the job options: cam.options' kinds
     # flags of the command line only
     "load_digitized": DRAWINGS, "steps_per_pixel": DRAWINGS, "save_digitized": frozenset({"drawing"}),
     "surface": DRAWINGS,
@@ -66,7 +55,9 @@ _OUTPUT_SUFFIXES = {"preview": (".png", ".svg"), "digitize": DIGITIZED_SUFFIXES,
                     "trace": (".png", ".bmp", ".tif", ".tiff")}
 """What ``-o`` of each command writes."""
 
-_DEFAULTS = {"start": "top", "passes": 1, "start_at": [0, 0, 0], "pause_at": [], "drill_order": "tour"}
+_DEFAULTS = {OPTIONS[name].dest: (list(OPTIONS[name].default) if isinstance(OPTIONS[name].default, tuple)
+                                   else OPTIONS[name].default)
+             for name in ("start", "passes", "start_at", "pause_at", "drill_order")}
 """Defaults of options that are None when not given (so that a given one can be told apart).  --depth stays
 None when left out: 10 Z pixels on a 2D drawing, and a 3D drawing then needs a profile."""
 
@@ -109,7 +100,7 @@ def _check_applies(args: argparse.Namespace, kind: str) -> None:
         table["scale"] = EVERY_KIND  # picture pixels per drawing pixel, or an SVG's scale
     for dest, kinds in table.items():
         if hasattr(args, dest) and _given(args, dest) and kind not in kinds:
-            flag = "--" + dest.replace("_", "-")
+            flag = OPTION_OF_DEST[dest].flag if dest in OPTION_OF_DEST else "--" + dest.replace("_", "-")
             applies = " and ".join(sorted(kinds))
             raise CamError(f"{flag} does not apply to {getattr(args, 'image', None) or 'this job'} "
                            f"(a {kind} file); it applies to {applies} files")
