@@ -634,8 +634,8 @@ def _prepare_excellon(path: Path, options: JobOptions, settings: MachineSettings
     holes = load_excellon(path, units=options.excellon_units, digits=options.excellon_digits,
                           zeros=options.excellon_zeros)
     depth_mm = _or(options.cut_depth_mm, DRILL_DEPTH_MM)
-    dp = plan_drill(holes, settings=settings, depth_mm=depth_mm,
-                    safe_height_mm=_or(options.travel_height_mm, DRILL_SAFE_HEIGHT_MM), offset_mm=options.offset_mm,
+    dp = plan_drill(holes, settings=settings, cut_depth_mm=depth_mm,
+                    travel_height_mm=_or(options.travel_height_mm, DRILL_SAFE_HEIGHT_MM), offset_mm=options.offset_mm,
                     mirror_x=options.mirror_x, order=options.drill_order)
     steps = plan_chunks(dp.toolpath)
     tools = ", ".join(f"T{t} {dia:.3f} mm x{n}" for t, dia, n in dp.tool_sequence)
@@ -666,8 +666,8 @@ def _engraving(options: JobOptions, settings: MachineSettings, default_depth_mm:
 def _prepare_hpgl(path: Path, options: JobOptions, settings: MachineSettings, progress=None) -> PreparedJob:
     depth_mm, engraving = _engraving(options, settings, HPGL_CUT_DEPTH_MM)
     scan = scan_hpgl(path, progress=progress)
-    stream = stream_hpgl(path, settings=settings, depth_mm=depth_mm,
-                         safe_height_mm=_or(options.travel_height_mm, HPGL_SAFE_HEIGHT_MM),
+    stream = stream_hpgl(path, settings=settings, cut_depth_mm=depth_mm,
+                         travel_height_mm=_or(options.travel_height_mm, HPGL_SAFE_HEIGHT_MM),
                          offset_mm=options.offset_mm, scan=scan)
     # one planner whatever the size: above STREAM_POINTS its pieces are read from the file on every pass (bounded
     # memory), below they are joined and held (the step planner then sees every move: linear40 ramps)
@@ -682,8 +682,8 @@ def _prepare_hpgl(path: Path, options: JobOptions, settings: MachineSettings, pr
 def _prepare_svg(path: Path, options: JobOptions, settings: MachineSettings) -> PreparedJob:
     drawing = load_svg(path)
     depth_mm, engraving = _engraving(options, settings, SVG_CUT_DEPTH_MM)
-    toolpath = plan_svg(drawing, settings=settings, depth_mm=depth_mm,
-                        safe_height_mm=_or(options.travel_height_mm, SVG_SAFE_HEIGHT_MM),
+    toolpath = plan_svg(drawing, settings=settings, cut_depth_mm=depth_mm,
+                        travel_height_mm=_or(options.travel_height_mm, SVG_SAFE_HEIGHT_MM),
                         scale=options.scale, fit_mm=options.fit_mm, offset_mm=options.offset_mm)
     steps = plan_chunks(toolpath)
     counts = ", ".join(f"{n} {name}" for name, n in sorted(drawing.element_counts.items()))

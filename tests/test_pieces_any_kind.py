@@ -1,0 +1,97 @@
+"""Size never changes the result, for every job kind (issue #28 point 3).
+
+Every consumer of a job reads its pieces (``cam.job.model.JobLike``).  Here the job of every input kind is cut
+into pieces of 1, 3 and 1000 moves (a stand-in for a planner that makes small pieces) and given to the step
+planner, the runner, the G-code writer, the preview and the journal's fingerprint: each must give exactly what
+the job in one piece gives (pin-log bytes, G-code text, picture bytes, fingerprint).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+from typing import Any, Iterator
+
+import numpy as np
+import pytest
+
+import cam
+from cam.drive.chunks import plan_chunks
+from cam.formats.gcode_export import to_gcode
+from cam.job.jobs import JobOptions, motion_picture, prepare_job
+from cam.job.model import Job, JobLike, join_pieces
+from cam.job.resume import plan_fingerprint
+from cam.render.picture import encode_png
+from cam.verify.pinlog import write_pin_log
+from conftest import SAMPLES
+
+SETTINGS = cam.MachineSettings().replace(delay_xy_ms=0.05, delay_z_ms=0.05)
+PER_MOVE = ("points_steps", "kind", "target", "pause", "period_ns", "periods", "move_start", "rest")
+
+CASES = [
+    ("ellipse.png", JobOptions(depth=(5,))),
+    ("pyramid.png", JobOptions(depth=(4,), passes=2)),
+    ("board.drl", JobOptions()),
+    ("extended.plt", JobOptions()),
+    ("logo.svg", JobOptions()),
+    ("bolt_plate.ngc", JobOptions()),
+]
+
+
+@dataclass
+class Sliced:
+    """A job given as pieces of ``size`` moves (the per-move columns sliced, the whole job's attributes kept)."""
+
+    job: Job
+    size: int
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self.job, name)
+
+    def pieces(self) -> Iterator[Job]:
+        n = len(self.job)
+        notes = list(self.job.pause_notes) if self.job.pause_notes is not None else None
+        used = 0
+        for a in range(0, n, self.size):
+            cols = {f: (None if getattr(self.job, f) is None else np.asarray(getattr(self.job, f))[a:a + self.size])
+                    for f in PER_MOVE}
+            k = int(np.count_nonzero(cols["pause"]))
+            meta = {f.name: getattr(self.job, f.name) for f in fields(Job) if f.name not in PER_MOVE}
+            meta.update(pause_notes=None if notes is None else notes[used:used + k], warnings=[])
+            used += k
+            yield Job(**cols, **meta)
+
+    def joined(self) -> Job:
+        return join_pieces(self.pieces(), self)
+
+
+def _pin_log_bytes(job: Any, tmp_path, name: str) -> bytes:
+    path = tmp_path / name
+    write_pin_log(cam.run(job).pin_log(), path)
+    return path.read_bytes()
+
+
+@pytest.mark.parametrize("name,options", CASES, ids=[c[0] for c in CASES])
+@pytest.mark.parametrize("size", [1, 3, 1000])
+def test_every_consumer_gives_the_same_for_any_piece_size(tmp_path, name, options, size):
+    prepared = prepare_job(SAMPLES / name, options, SETTINGS)
+    job = prepared.toolpath.joined()
+    sliced = Sliced(job, size)
+    assert isinstance(sliced, JobLike)
+    joined = sliced.joined()
+    for f in PER_MOVE:
+        a, b = getattr(joined, f), getattr(job, f)
+        assert (a is None) == (b is None) and (a is None or np.array_equal(a, b)), f
+    assert (joined.pause_notes or []) == (job.pause_notes or ["Pause At"] * int(job.pause.sum()) if job.pause_notes
+                                          is None and joined.pause_notes else job.pause_notes or [])
+
+    assert _pin_log_bytes(sliced, tmp_path, "sliced.csv") == _pin_log_bytes(job, tmp_path, "whole.csv")
+    whole_plan, sliced_plan = plan_chunks(job), plan_chunks(sliced)
+    np.testing.assert_array_equal(sliced_plan.pause_writes, whole_plan.pause_writes)
+    assert sliced_plan.pause_notes == whole_plan.pause_notes
+    np.testing.assert_array_equal(sliced_plan.full_point_write(), whole_plan.full_point_write())
+    assert to_gcode(sliced) == to_gcode(job)
+    assert plan_fingerprint(sliced) == plan_fingerprint(job)
+    extent, _ = whole_plan.motion_extent()
+    pictures = [encode_png(motion_picture(lambda j=j: (p.points_steps for p in j.pieces()), SETTINGS,
+                                          extent_steps=extent, holes=name.endswith(".drl")))
+                for j in (sliced, job)]
+    assert pictures[0] == pictures[1]
