@@ -219,6 +219,6 @@ def test_a_drill_depth_outside_the_z_travel_is_refused_before_the_tour(monkeypat
     monkeypatch.setattr(drill, "drill_order", lambda *a, **k: pytest.fail("the holes were ordered"))
     with pytest.raises(cam.TravelError, match=r"drill depth 40 mm and safe height 1 mm need Z -64\.\.2548 steps; "
                                               r"the Z travel is -640\.\.2000 steps"):
-        cam.plan_drill(holes, depth_mm=40.0)
+        cam.plan_drill(holes, cut_depth_mm=40.0)
     with pytest.raises(cam.TravelError, match=r"need Z -764\.\.127 steps"):
-        cam.plan_drill(holes, safe_height_mm=12.0)
+        cam.plan_drill(holes, travel_height_mm=12.0)

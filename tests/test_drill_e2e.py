@@ -81,7 +81,7 @@ def test_three_tool_board_on_the_mock_port(board_file):
     holes = cam.load_excellon(path) if hasattr(cam, "load_excellon") else __import__(
         "cam.formats.excellon", fromlist=["load_excellon"]).load_excellon(path)
     settings = cam.MachineSettings()
-    dp = plan_drill(holes, settings=settings, depth_mm=2.0, safe_height_mm=1.0)
+    dp = plan_drill(holes, settings=settings, cut_depth_mm=2.0, travel_height_mm=1.0)
     pauses = []
     result = run(dp.toolpath, "mock", on_pause=lambda pos, note: pauses.append((pos, note)))
     motion = decode_pin_log(result.pin_log(), dp.toolpath.settings)

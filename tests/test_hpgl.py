@@ -197,7 +197,7 @@ def test_units_frames_and_placement():
 
 def test_plan_moves_pen_up_at_the_safe_height_and_cuts_at_depth():
     d = parse_hpgl(b"PU0,0;PD400,0;PU;PA800,0;PD800,400;PU;PA801,400;PD0,400;")
-    job = plan_hpgl(d, depth_mm=0.5, safe_height_mm=1.0)
+    job = plan_hpgl(d, cut_depth_mm=0.5, travel_height_mm=1.0)
     depth, safe = round(0.5 / S.mm_per_step_z), -round(1.0 / S.mm_per_step_z)
     p, kind = job.points_steps, job.kind
     prev = np.vstack([[0, 0, 0], p[:-1]])
@@ -292,7 +292,7 @@ def assert_carves_the_drawing(drawing, job, settings=S):
 @pytest.mark.parametrize("name", ["seed_tools", "inkscape_star", "extended"])
 def test_samples_cut_exactly(name):
     d = load_hpgl(SAMPLES / f"{name}.plt")
-    job = plan_hpgl(d, depth_mm=0.3, safe_height_mm=0.5)
+    job = plan_hpgl(d, cut_depth_mm=0.3, travel_height_mm=0.5)
     result = assert_carves_the_drawing(d, job)
     assert result.status == "finished"
 
@@ -311,7 +311,7 @@ def test_random_drawings_cut_exactly():
                 parts.append("PD;" + "".join(f"PA{a},{b}" for a, b in pts.tolist()) + "\n")
         parts.append("PU0,0;")
         d = parse_hpgl("".join(parts))
-        assert_carves_the_drawing(d, plan_hpgl(d, depth_mm=0.2, safe_height_mm=0.3))
+        assert_carves_the_drawing(d, plan_hpgl(d, cut_depth_mm=0.2, travel_height_mm=0.3))
 
 
 def test_the_carve_check_sees_a_wrong_cut():

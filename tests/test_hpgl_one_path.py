@@ -121,8 +121,8 @@ def test_plan_hpgl_is_the_stream_joined(files):
         assert drawing.source == want.source
         _assert_same_job(plan_hpgl(drawing, settings=SETTINGS), want, f"{path.name} plan_hpgl(drawing)")
         for offset in ((150.0, 150.0), (120.0, 160.0)):
-            _assert_same_job(plan_hpgl(drawing, settings=SETTINGS, offset_mm=offset, depth_mm=0.3),
-                             stream_hpgl(path, settings=SETTINGS, offset_mm=offset, depth_mm=0.3, piece_points=5,
+            _assert_same_job(plan_hpgl(drawing, settings=SETTINGS, offset_mm=offset, cut_depth_mm=0.3),
+                             stream_hpgl(path, settings=SETTINGS, offset_mm=offset, cut_depth_mm=0.3, piece_points=5,
                                          chunk_bytes=64).joined(), f"{path.name} offset {offset}")
 
 

@@ -79,7 +79,7 @@ def test_travel_is_bounded():
 def test_a_drill_depth_that_rounds_to_no_step_is_an_error():
     holes = cam.parse_excellon("M48\nMETRIC,LZ\nT1C1.0\n%\nT1\nX1.0Y1.0\nM30\n", source="one.drl")
     with pytest.raises(cam.PlanError, match="mm_per_step_z"):
-        cam.plan_drill(holes, settings=cam.MachineSettings().replace(mm_per_step_z=100), depth_mm=2.0)
+        cam.plan_drill(holes, settings=cam.MachineSettings().replace(mm_per_step_z=100), cut_depth_mm=2.0)
 
 
 def test_the_maximus_table_loads_and_is_checked(tmp_path):

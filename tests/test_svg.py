@@ -81,7 +81,7 @@ def cubic(p0, p1, p2, p3, transform=lambda p: p):
 
 def plan(text, **kw):
     kw.setdefault("offset_mm", (0.0, 0.0))  # the page origin at the home: machine mm = page mm
-    return plan_svg(parse_svg(text, source="t.svg"), depth_mm=0.3, safe_height_mm=0.5, **kw)
+    return plan_svg(parse_svg(text, source="t.svg"), cut_depth_mm=0.3, travel_height_mm=0.5, **kw)
 
 
 # ---------------------------------------------------------------- the carve check on known geometry

@@ -47,7 +47,8 @@ class DrillPlan:
         tool_sequence: ``[(tool, diameter_mm, n_holes)]`` in drilling order, one entry per tool change
             (a tool may come back in file order).
         depth_steps: the drill depth below the surface in Z steps.
-        safe_steps: the travel height above the surface in Z steps (>= 0).
+        safe_steps: the travel height above the surface in Z steps, a height (>= 0); the tool travels at the Z
+            coordinate ``safe_z_steps`` = ``-safe_steps`` (<= 0, as :attr:`cam.job.model.Job.safe_z_steps`).
     """
 
     toolpath: Job
@@ -56,6 +57,11 @@ class DrillPlan:
     tool_sequence: list[tuple[int, float, int]]
     depth_steps: int = 0
     safe_steps: int = 0
+
+    @property
+    def safe_z_steps(self) -> int:
+        """The Z coordinate the tool travels at between holes, in steps (<= 0: above the surface; +Z is deeper)."""
+        return -self.safe_steps
 
     @property
     def tool_changes(self) -> list[tuple[int, str]]:
@@ -79,8 +85,8 @@ def plan_drill(
     holes,
     *,
     settings: MachineSettings = DEFAULT_SETTINGS,
-    depth_mm: float = DEFAULT_DEPTH_MM,
-    safe_height_mm: float = DEFAULT_SAFE_HEIGHT_MM,
+    cut_depth_mm: float = DEFAULT_DEPTH_MM,
+    travel_height_mm: float = DEFAULT_SAFE_HEIGHT_MM,
     offset_mm: tuple[float, float] | None = None,
     mirror_x: bool = False,
     order: str = "tour",
@@ -90,7 +96,7 @@ def plan_drill(
     Args:
         holes: the hole list (board frame, mm).
         settings: machine settings (mm per step, delays, travel).
-        depth_mm: drill depth below the surface; safe_height_mm: travel height above it.
+        cut_depth_mm: drill depth below the surface; travel_height_mm: travel height above it.
         offset_mm: machine position (mm from the home) of the board origin; None = board top-left at the home.
         mirror_x: mirror for drilling from the back side.
         order: "tour" (tools smallest first, a short tour per tool) or "file" (the file's order of holes and
@@ -100,7 +106,7 @@ def plan_drill(
         PlanError: bad options; TravelError: a hole outside the travel (naming the hole and its line).
     """
 
-    if depth_mm <= 0 or safe_height_mm < 0:
+    if cut_depth_mm <= 0 or travel_height_mm < 0:
         raise PlanError("drill depth must be > 0 mm and the safe height >= 0 mm")
     if order not in ("tour", "file"):
         raise PlanError(f"order must be 'tour' or 'file', got {order!r}")
@@ -109,16 +115,16 @@ def plan_drill(
     machine_mm = _machine_mm(holes.holes_mm, offset_mm, mirror_x)
     steps_xy = np.rint(machine_mm / settings.mm_per_step_xy).astype(np.int64)
     _check_holes(holes, machine_mm, steps_xy, settings)
-    depth_steps = int(round(depth_mm / settings.mm_per_step_z))
+    depth_steps = int(round(cut_depth_mm / settings.mm_per_step_z))
     if depth_steps < 1:
-        raise PlanError(f"drill depth {depth_mm:g} mm is less than one Z step (mm_per_step_z = "
+        raise PlanError(f"drill depth {cut_depth_mm:g} mm is less than one Z step (mm_per_step_z = "
                         f"{settings.mm_per_step_z:g} mm): nothing would be drilled")
-    safe_steps = -int(round(safe_height_mm / settings.mm_per_step_z))
+    safe_z_steps = -int(round(travel_height_mm / settings.mm_per_step_z))
     _, _, (z_lo, z_hi) = settings.travel.bounds_steps()
-    if depth_steps > z_hi or safe_steps < z_lo:  # before the tour: a million holes take a while to order
-        raise TravelError(f"drill depth {depth_mm:g} mm and safe height {safe_height_mm:g} mm need Z "
-                          f"{safe_steps}..{depth_steps} steps; the Z travel is {z_lo}..{z_hi} steps")
-    path = _DrillPath(safe_steps)
+    if depth_steps > z_hi or safe_z_steps < z_lo:  # before the tour: a million holes take a while to order
+        raise TravelError(f"drill depth {cut_depth_mm:g} mm and safe height {travel_height_mm:g} mm need Z "
+                          f"{safe_z_steps}..{depth_steps} steps; the Z travel is {z_lo}..{z_hi} steps")
+    path = _DrillPath(safe_z_steps)
     for tool, idx in _tool_runs(holes, machine_mm, order):
         path.tool_change(tool, float(holes.tools[tool]), len(idx))
         for i in idx.tolist():
@@ -130,7 +136,7 @@ def plan_drill(
     tp = Job(points_steps=points, kind=kinds_arr, target=kinds_arr == CUT, pause=np.array(path.pause, bool),
              settings=settings, warnings=list(holes.warnings), pause_notes=path.notes, source=str(holes.source))
     order_arr = np.array(path.order, np.int64)
-    return DrillPlan(tp, steps_xy[order_arr], order_arr, path.sequence, depth_steps, -safe_steps)
+    return DrillPlan(tp, steps_xy[order_arr], order_arr, path.sequence, depth_steps, -safe_z_steps)
 
 
 def _tool_runs(holes, machine_mm: np.ndarray, order: str) -> list[tuple[int, np.ndarray]]:
@@ -176,20 +182,20 @@ def _check_holes(holes, machine_mm: np.ndarray, steps_xy: np.ndarray, settings: 
 class _DrillPath:
     """The drilling job's points as they are planned: machine (x, y, z) steps, kinds, pauses, notes.
 
-    It starts with a lift to the safe height ``safe_steps`` (< 0: above the surface) when that is
+    It starts with a lift to the safe height ``safe_z_steps`` (a Z coordinate <= 0: above the surface) when that is
     not 0, and :meth:`home` ends it at the home.
     """
 
-    def __init__(self, safe_steps: int) -> None:
-        self.safe_steps = safe_steps
+    def __init__(self, safe_z_steps: int) -> None:
+        self.safe_z_steps = safe_z_steps
         self.points: list[tuple[int, int, int]] = []
         self.kinds: list[int] = []
         self.pause: list[bool] = []
         self.notes: list[str] = []
         self.order: list[int] = []  # source index of each drilled hole
         self.sequence: list[tuple[int, float, int]] = []  # (tool, diameter_mm, n_holes)
-        if safe_steps != 0:
-            self._add(0, 0, safe_steps, RETRACT)
+        if safe_z_steps != 0:
+            self._add(0, 0, safe_z_steps, RETRACT)
 
     def _add(self, x: int, y: int, z: int, kind: int) -> None:
         self.points.append((x, y, z))
@@ -199,20 +205,20 @@ class _DrillPath:
     def tool_change(self, tool: int, diameter_mm: float, n_holes: int) -> None:
         """Pause at the safe height before the first hole of ``tool``, with a note naming it."""
         if not self.points:
-            self._add(0, 0, self.safe_steps, TRAVEL)
+            self._add(0, 0, self.safe_z_steps, TRAVEL)
         self.pause[-1] = True
         self.notes.append(f"tool change: T{tool} {diameter_mm:.3f} mm ({n_holes} holes)")
         self.sequence.append((tool, diameter_mm, n_holes))
 
     def hole(self, index: int, x: int, y: int, depth_steps: int) -> None:
         """The drill cycle of hole ``index`` at ``(x, y)`` steps: above it, down to the depth, back up."""
-        self._add(x, y, self.safe_steps, TRAVEL)
+        self._add(x, y, self.safe_z_steps, TRAVEL)
         self._add(x, y, depth_steps, CUT)
-        self._add(x, y, self.safe_steps, RETRACT)
+        self._add(x, y, self.safe_z_steps, RETRACT)
         self.order.append(index)
 
     def home(self) -> None:
         """Back above the home at the safe height, then down to the home."""
-        self._add(0, 0, self.safe_steps, TRAVEL)
-        if self.safe_steps != 0:
+        self._add(0, 0, self.safe_z_steps, TRAVEL)
+        if self.safe_z_steps != 0:
             self._add(0, 0, 0, TRAVEL)

@@ -15,7 +15,7 @@ from its file.
 
 >>> from cam.formats.hpgl import parse_hpgl
 >>> d = parse_hpgl(b"IN;SP1;PU0,0;PD400,0,400,-400;PU;", source="sq.plt")
->>> job = plan_hpgl(d, depth_mm=0.5, safe_height_mm=1.0)
+>>> job = plan_hpgl(d, cut_depth_mm=0.5, travel_height_mm=1.0)
 >>> job.points_steps[job.kind == CUT][:, :2].tolist()     # 10 mm = 346 steps of 0.0289 mm
 [[0, 0], [346, 0], [346, 346]]
 >>> job.pause_notes
@@ -53,8 +53,8 @@ def plan_hpgl(
     drawing: Union[HpglDrawing, str, os.PathLike],
     *,
     settings: MachineSettings = DEFAULT_SETTINGS,
-    depth_mm: float = DEFAULT_CUT_DEPTH_MM,
-    safe_height_mm: float = DEFAULT_SAFE_HEIGHT_MM,
+    cut_depth_mm: float = DEFAULT_CUT_DEPTH_MM,
+    travel_height_mm: float = DEFAULT_SAFE_HEIGHT_MM,
     offset_mm: Optional[tuple[float, float]] = None,
 ) -> Job:
     """Plan the cutting of an HPGL drawing, in machine steps: the pieces of
@@ -70,7 +70,7 @@ def plan_hpgl(
     Args:
         drawing: the strokes (:func:`cam.formats.hpgl.load_hpgl`), or the HPGL file (read a chunk at a time).
         settings: machine settings (mm per step, delays, travel).
-        depth_mm: cutting depth below the surface (> 0); safe_height_mm: travel height above it (>= 0).
+        cut_depth_mm: cutting depth below the surface (> 0); travel_height_mm: travel height above it (>= 0).
         offset_mm: machine position (mm from the home) of plotter (0, 0); None = the drawing's top-left at the home.
 
     Returns:
@@ -81,5 +81,5 @@ def plan_hpgl(
         PlanError: bad options, nothing drawn; TravelError: a point outside the travel, ``file:line:column``;
         ParseError: a malformed file.
     """
-    return stream_hpgl(drawing, settings=settings, depth_mm=depth_mm, safe_height_mm=safe_height_mm,
+    return stream_hpgl(drawing, settings=settings, cut_depth_mm=cut_depth_mm, travel_height_mm=travel_height_mm,
                        offset_mm=offset_mm).joined()

@@ -66,17 +66,17 @@ def xy_steps(x_pu: np.ndarray, y_pu: np.ndarray, extent_pu: Optional[tuple[float
     return np.floor(np.column_stack([x_steps, y_steps]) + 0.5).astype(np.int64)
 
 
-def _z_steps(depth_mm: float, safe_height_mm: float, settings: MachineSettings) -> tuple[int, int]:
+def _z_steps(cut_depth_mm: float, travel_height_mm: float, settings: MachineSettings) -> tuple[int, int]:
     """(cutting depth, safe height) in Z steps (+Z deeper: the safe height is <= 0), checked against the Z travel."""
     _, _, (z_lo, z_hi) = settings.travel.bounds_steps()
-    depth_steps = int(round(depth_mm / settings.mm_per_step_z))
-    safe_steps = -int(round(safe_height_mm / settings.mm_per_step_z))
+    depth_steps = int(round(cut_depth_mm / settings.mm_per_step_z))
+    safe_z_steps = -int(round(travel_height_mm / settings.mm_per_step_z))
     if depth_steps < 1:
-        raise PlanError(f"cutting depth {depth_mm:g} mm is less than one Z step ({settings.mm_per_step_z:g} mm)")
-    if depth_steps > z_hi or safe_steps < z_lo:
-        raise TravelError(f"cutting depth {depth_mm:g} mm and safe height {safe_height_mm:g} mm need Z "
-                          f"{safe_steps}..{depth_steps} steps; the Z travel is {z_lo}..{z_hi} steps")
-    return depth_steps, safe_steps
+        raise PlanError(f"cutting depth {cut_depth_mm:g} mm is less than one Z step ({settings.mm_per_step_z:g} mm)")
+    if depth_steps > z_hi or safe_z_steps < z_lo:
+        raise TravelError(f"cutting depth {cut_depth_mm:g} mm and safe height {travel_height_mm:g} mm need Z "
+                          f"{safe_z_steps}..{depth_steps} steps; the Z travel is {z_lo}..{z_hi} steps")
+    return depth_steps, safe_z_steps
 
 
 def _check_xy(source: str, batch: PointBatch, xy: np.ndarray, settings: MachineSettings) -> None:
@@ -155,7 +155,7 @@ def _strokes(xy: np.ndarray, start: np.ndarray, pen: np.ndarray,
     return xy, group, pause_group, before, [f"tool change: pen {int(t)}" for t in tool[change]]
 
 
-def _rows(xy: np.ndarray, group: np.ndarray, pause_group: np.ndarray, depth_steps: int, safe_steps: int, *,
+def _rows(xy: np.ndarray, group: np.ndarray, pause_group: np.ndarray, depth_steps: int, safe_z_steps: int, *,
           before: Optional[np.ndarray] = None, finish: bool = True, end_xy: Optional[np.ndarray] = None,
           last_row: Optional[np.ndarray] = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The ``(R, 3)`` int64 points (machine steps), ``(R,)`` uint8 kinds and ``(R,)`` bool pauses of the
@@ -177,17 +177,17 @@ def _rows(xy: np.ndarray, group: np.ndarray, pause_group: np.ndarray, depth_step
     pause = np.zeros(total, bool)
     gi = np.flatnonzero(group)
     r0 = first[gi]
-    pts[r0, :2], pts[r0, 2], kind[r0] = before[gi], safe_steps, RETRACT  # lift where the tool is
-    pts[r0 + 1, :2], pts[r0 + 1, 2], kind[r0 + 1] = xy[gi], safe_steps, TRAVEL  # travel above the stroke
+    pts[r0, :2], pts[r0, 2], kind[r0] = before[gi], safe_z_steps, RETRACT  # lift where the tool is
+    pts[r0 + 1, :2], pts[r0 + 1, 2], kind[r0 + 1] = xy[gi], safe_z_steps, TRAVEL  # travel above the stroke
     pts[r0 + 2, :2], pts[r0 + 2, 2] = xy[gi], depth_steps  # plunge
     pause[r0] = pause_group[gi]
     ci = np.flatnonzero(~group)
     pts[first[ci], :2], pts[first[ci], 2] = xy[ci], depth_steps
     if finish:
         end = end_xy if end_xy is not None else (xy[-1] if len(xy) else np.zeros(2, np.int64))
-        pts[-3] = (end[0], end[1], safe_steps)
+        pts[-3] = (end[0], end[1], safe_z_steps)
         kind[-3] = RETRACT
-        pts[-2] = (0, 0, safe_steps)
+        pts[-2] = (0, 0, safe_z_steps)
         pts[-1] = (0, 0, 0)
         kind[-2:] = TRAVEL
     # drop moves of length 0 (the job's row 0 stays: a pause at the start needs a point); a pause moves to the
@@ -319,7 +319,7 @@ class HpglJobStream:
 
 
 def stream_hpgl(src: Union[str, os.PathLike, HpglDrawing], *, settings: MachineSettings = DEFAULT_SETTINGS,
-                depth_mm: float = DEFAULT_CUT_DEPTH_MM, safe_height_mm: float = DEFAULT_SAFE_HEIGHT_MM,
+                cut_depth_mm: float = DEFAULT_CUT_DEPTH_MM, travel_height_mm: float = DEFAULT_SAFE_HEIGHT_MM,
                 offset_mm: Optional[tuple[float, float]] = None, scan: Optional[HpglScan] = None,
                 piece_points: int = PIECE_POINTS, chunk_bytes: int = CHUNK_BYTES) -> HpglJobStream:
     """The HPGL job of a file or a drawing as a :class:`HpglJobStream` (a file's: bounded memory).
@@ -327,7 +327,7 @@ def stream_hpgl(src: Union[str, os.PathLike, HpglDrawing], *, settings: MachineS
     Args:
         src: the HPGL file (read once to scan it unless ``scan`` is given, then on every pass), or a drawing
             held in memory (:func:`cam.formats.hpgl.load_hpgl`).
-        settings, depth_mm, safe_height_mm, offset_mm: as :func:`~cam.job.hpgl.plan_hpgl`.
+        settings, cut_depth_mm, travel_height_mm, offset_mm: as :func:`~cam.job.hpgl.plan_hpgl`.
         scan: the file's :func:`~cam.formats.hpgl.scan_hpgl`, if made already.
         piece_points, chunk_bytes: pen-down points per piece (at least), bytes read at a time.
 
@@ -335,7 +335,7 @@ def stream_hpgl(src: Union[str, os.PathLike, HpglDrawing], *, settings: MachineS
         PlanError: bad options, nothing drawn; ParseError: a malformed file; TravelError: the depths outside
         the Z travel, a point outside the travel (found as the pieces are made).
     """
-    if not (depth_mm > 0) or not (safe_height_mm >= 0):
+    if not (cut_depth_mm > 0) or not (travel_height_mm >= 0):
         raise PlanError("the cutting depth must be > 0 mm and the safe height >= 0 mm")
     if isinstance(src, HpglDrawing):
         points: Union[Path, HpglDrawing] = src
@@ -345,6 +345,6 @@ def stream_hpgl(src: Union[str, os.PathLike, HpglDrawing], *, settings: MachineS
         scan = scan if scan is not None else scan_hpgl(src, chunk_bytes=chunk_bytes)
     if scan.n_points == 0:
         raise PlanError(f"{scan.source}: nothing to cut (no pen-down moves)")
-    depth_steps, safe_steps = _z_steps(depth_mm, safe_height_mm, settings)
-    return HpglJobStream(points, scan, settings, depth_steps, safe_steps, offset_mm, max(1, int(piece_points)),
+    depth_steps, safe_z_steps = _z_steps(cut_depth_mm, travel_height_mm, settings)
+    return HpglJobStream(points, scan, settings, depth_steps, safe_z_steps, offset_mm, max(1, int(piece_points)),
                          int(chunk_bytes))

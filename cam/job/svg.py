@@ -26,7 +26,7 @@ and every point of the curve within one step of a cut position (0.15 + 0.125 + 0
 >>> from cam.formats.svg import parse_svg
 >>> d = parse_svg('<svg xmlns="http://www.w3.org/2000/svg" width="10mm" height="10mm" viewBox="0 0 10 10">'
 ...               '<path d="M0,0 H1 V1" stroke="black"/></svg>')
->>> job = plan_svg(d, depth_mm=0.3)
+>>> job = plan_svg(d, cut_depth_mm=0.3)
 >>> job.points_steps[job.target][:, :2].tolist()   # 1 mm = 34.6 steps of 0.0289 mm
 [[0, 0], [35, 0], [35, 35]]
 """
@@ -189,8 +189,8 @@ def plan_svg(
     drawing: SvgDrawing,
     *,
     settings: MachineSettings = DEFAULT_SETTINGS,
-    depth_mm: float = DEFAULT_CUT_DEPTH_MM,
-    safe_height_mm: float = DEFAULT_SAFE_HEIGHT_MM,
+    cut_depth_mm: float = DEFAULT_CUT_DEPTH_MM,
+    travel_height_mm: float = DEFAULT_SAFE_HEIGHT_MM,
     scale: Optional[float] = None,
     fit_mm: Optional[tuple[float, float]] = None,
     offset_mm: Optional[tuple[float, float]] = None,
@@ -200,7 +200,7 @@ def plan_svg(
     Args:
         drawing: the strokes (:func:`cam.formats.svg.load_svg`).
         settings: machine settings (mm per step, delays, travel).
-        depth_mm: cutting depth below the surface (> 0); safe_height_mm: travel height above it (>= 0).
+        cut_depth_mm: cutting depth below the surface (> 0); travel_height_mm: travel height above it (>= 0).
         scale: mm of the job per mm of the drawing; fit_mm: or ``(width, height)`` mm the drawing is scaled to fit.
         offset_mm: machine position (mm from the home) of the page's origin; None = the top-left of what is
             cut at the home.
@@ -213,20 +213,20 @@ def plan_svg(
         PlanError: bad options, nothing to cut; TravelError: the drawing does not fit the travel (checked
         before the job is built, with its extent in mm).
     """
-    if not (depth_mm > 0) or not (safe_height_mm >= 0):
+    if not (cut_depth_mm > 0) or not (travel_height_mm >= 0):
         raise PlanError("the cutting depth must be > 0 mm and the safe height >= 0 mm")
     strokes = svg_strokes_steps(drawing, settings=settings, scale=scale, fit_mm=fit_mm, offset_mm=offset_mm)
     if not strokes:
         raise PlanError(f"{drawing.source}: nothing to cut (no visible stroke or outline)")
     _check_extent(drawing, strokes, settings)
-    depth_steps, safe_steps = _z_steps(depth_mm, safe_height_mm, settings)
+    depth_steps, safe_z_steps = _z_steps(cut_depth_mm, travel_height_mm, settings)
     ordered = _order(strokes)
     xy = np.concatenate(ordered)
     group = np.zeros(len(xy), bool)
     first = np.cumsum([0] + [len(s) for s in ordered[:-1]])
     gap = np.array([np.abs(ordered[i][0] - ordered[i - 1][-1]).max() if i else 2 for i in range(len(ordered))])
     group[first[gap > 1]] = True
-    pts, kind, pause = _rows(xy, group, np.zeros(len(xy), bool), depth_steps, safe_steps)
+    pts, kind, pause = _rows(xy, group, np.zeros(len(xy), bool), depth_steps, safe_z_steps)
     check_travel(pts, settings)
     return Job(points_steps=pts, kind=kind, target=(kind == CUT) & (pts[:, 2] == depth_steps), pause=pause,
                settings=settings, warnings=list(drawing.warnings), pause_notes=[], source=drawing.source)
