@@ -78,6 +78,7 @@ from ..drive.session import MachineSession
 from ..errors import BusyError, CamError, CapabilityError
 from ..fileio import atomic_write_bytes
 from ..sniff import HEAD_BYTES
+from ..options import schema_json
 from ..job.jobs import PROFILE_SUFFIXES, JobOptions, PreparedJob, accepted_suffixes, job_kind
 from ..settings import DEFAULT_SETTINGS, MachineSettings
 from ..worker import DEFAULT_TIME_LIMIT_S, Worker, default_memory_limit_bytes
@@ -380,6 +381,13 @@ async def _get_config(st: _AppState, request: Request) -> dict[str, Any]:
         "travel_steps": [list(b) for b in s.travel.bounds_steps()],
         "options": JobOptions().__dict__,
     }
+
+
+async def _get_options(st: _AppState, request: Request) -> list[dict[str, Any]]:
+    """``GET /api/options``: the job options' schema (:func:`cam.options.schema_json`): each option's name, flag,
+    type, unit, range, the file kinds it applies to, default and help; the page builds and checks its form
+    fields from it."""
+    return schema_json()
 
 
 async def _read_capped(request: Request, cap_bytes: int, *, drain_bytes: int = _DRAIN_LIMIT_BYTES) -> Optional[bytes]:
@@ -720,6 +728,7 @@ def _routes(st: _AppState) -> list:
     return [
         Route("/", _index),
         Route("/api/config", _api(st, _get_config)),
+        Route("/api/options", _api(st, _get_options)),
         Route("/api/upload", _api(st, _upload, body="multipart/form-data"), methods=post),
         Route("/api/plan", json_api(_plan_job), methods=post),
         Route("/api/preview/{job}.png", _api(st, _preview)),

@@ -48,10 +48,65 @@
   }
 
   // -- job: upload, options, plan ------------------------------------------------
+  // The job options' schema (GET /api/options, cam/options.py): each option's name (the form field's name),
+  // the file kinds it applies to, its range and help.  Which fields a kind shows, what is sent and the ranges
+  // checked before planning all come from it, not from a copy here.
+  const schema = { byName: {} };
+
+  function applies(name, kind) {
+    const o = schema.byName[name];
+    return !kind || !o || o.kinds.includes(kind);
+  }
+
+  // the form fields of the schema's options: [element, option]
+  function schemaFields() {
+    return Array.from($("options-form").querySelectorAll("[name]"))
+      .filter((el) => schema.byName[el.name]).map((el) => [el, schema.byName[el.name]]);
+  }
+
+  function loadSchema() {
+    return api("/api/options").then((options) => {
+      options.forEach((o) => { schema.byName[o.name] = o; });
+      schemaFields().forEach(([el, o]) => {
+        el.title = o.help + (o.unit ? " (" + o.unit + ")" : "");
+        if (el.type === "number") {
+          if (o.min !== null) el.min = o.min_open ? "" : String(o.min);
+          if (o.max !== null) el.max = String(o.max);
+        }
+      });
+      showKind(page.kind);
+    }, () => {});
+  }
+
+  // a fieldset shows when one of its options applies to the kind; an option's label hides when it does not
   function showKind(kind) {
-    document.querySelectorAll("fieldset[data-kinds]").forEach((fs) => {
-      fs.hidden = kind ? !fs.dataset.kinds.split(" ").includes(kind) : false;
+    document.querySelectorAll("#options-form fieldset").forEach((fs) => {
+      const named = Array.from(fs.querySelectorAll("[name]")).filter((el) => schema.byName[el.name]);
+      fs.hidden = kind ? !named.some((el) => applies(el.name, kind)) : false;
+      named.forEach((el) => {
+        const label = el.closest("label");
+        if (label) label.style.display = applies(el.name, kind) ? "" : "none";
+      });
     });
+  }
+
+  // why a value is outside its option's range (the server's words), or null
+  function outOfRange(name, value) {
+    const o = schema.byName[name];
+    if (!o || o.min === null || o.max === null || typeof value === "boolean") return null;
+    if (!["whole", "number", "wholes", "numbers", "points", "size"].includes(o.type)) return null;
+    const parts = String(value).split(/[\s,;xX]+/).filter((v) => v !== "");
+    const whole = ["whole", "wholes", "points"].includes(o.type);
+    for (const part of parts) {
+      const v = Number(part);
+      const bad = !Number.isFinite(v) || (whole && !Number.isInteger(v)) ||
+        (o.min_open ? v <= o.min : v < o.min) || v > o.max;
+      if (bad) {
+        const range = o.min_open ? "> " + o.min + " and at most " + o.max : o.min + ".." + o.max;
+        return "option '" + name + "' must be " + range + (o.unit ? " " + o.unit : "") + ", got '" + value + "'";
+      }
+    }
+    return null;
   }
 
   // the cutter: a spec typed in wins; else the select and its inputs ("" = the machine's [tool])
@@ -95,6 +150,7 @@
       if (page.profile) o.profile = page.profile;
       else if (val("opt-profile-expr")) o.profile_expr = val("opt-profile-expr");
       else if (lineWidth()) o.line_width_mm = lineWidth();  // a V bit's line width sets a 2D depth
+      else if (val("opt-cut-depth")) o.cut_depth_mm = val("opt-cut-depth");  // mm for every object
       else o.depth = val("opt-depth");
       if (toolSpec()) o.tool = toolSpec();
       if (kind === "drawing" && $("opt-trace").checked) {  // a sketch or a photo: traced on the server first
@@ -113,9 +169,12 @@
         if (val("opt-scale")) o.scale = val("opt-scale");
         if (val("opt-fit")) o.fit_mm = val("opt-fit");
       }
+      if (toolSpec()) o.tool = toolSpec();  // SVG and HPGL: the cutter, and a V bit's line width
+      if (lineWidth()) o.line_width_mm = lineWidth();
     } else if (kind === "gcode") {
       o.flip_y = $("opt-flip-y").checked;
     }
+    Object.keys(o).forEach((name) => { if (!applies(name, kind)) delete o[name]; });  // the schema's kinds
     return o;
   }
 
@@ -132,7 +191,10 @@
     $("plan").disabled = true;
     $("job-summary").textContent = "planning…";
     try {
-      const r = await api("/api/plan", { json: { job: page.job, options: collectOptions() } });
+      const options = collectOptions();
+      const bad = Object.keys(options).map((name) => outOfRange(name, options[name])).find((why) => why);
+      if (bad) { showError(bad); throw new Error(bad); }
+      const r = await api("/api/plan", { json: { job: page.job, options } });
       page.planned = r;
       $("job-size").textContent = r.size_mm[0].toFixed(2) + " × " + r.size_mm[1].toFixed(2) + " mm, depth " +
         r.depth_mm.toFixed(2) + " mm";
@@ -291,5 +353,6 @@
   }
 
   showKind(null);
+  loadSchema();
   api("/api/state").then((s) => { render(s); listen(); }, () => {});
 })();
