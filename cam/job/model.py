@@ -13,6 +13,20 @@ toward the operator (the drawing's row direction), ``z`` grows *deeper*
 into the material (0 is the home plane).  Consecutive points are straight
 moves; the tool starts at (0, 0, 0) before point 0.
 
+Sign convention for heights and depths (issue #28 point 6), one for every
+planner:
+
+* In mm, as the options give them (:mod:`cam.options`), a depth and a height
+  are both positive amounts: ``cut_depth_mm`` (> 0) below the surface,
+  ``travel_height_mm`` (>= 0) above it.
+* In steps, a *Z coordinate* has the frame's sign, +Z deeper: a depth is
+  ``depth_steps`` >= 0 and a safe height or travel height is a Z coordinate
+  ``safe_z_steps`` <= 0 (above the surface), as :attr:`Job.safe_z_steps`.
+* A name ending in ``_z_steps`` is such a coordinate.  The one height kept as
+  a positive amount of steps is :attr:`cam.job.drill.DrillPlan.safe_steps`
+  (>= 0, the MAXIMUS board's packets want the height); its coordinate is
+  ``DrillPlan.safe_z_steps`` = ``-safe_steps``.
+
 Pixels appear only as the optional :class:`PixelFrame` of a drawing job:
 where the drawing's pixels lie in this frame, which the carve check and the
 drawing pictures need.
