@@ -1,0 +1,199 @@
+"""The job options' one declaration (``cam/options.py``, issue #28 point 6) is what the CLI, ``JobOptions`` and the
+page use: the same names, flags, kinds and ranges everywhere."""
+from __future__ import annotations
+
+import argparse
+import asyncio
+import contextlib
+import io
+import json
+import re
+from dataclasses import fields
+from pathlib import Path
+from typing import Any, Optional
+
+import pytest
+
+from cam.cli.checks import check_args
+from cam.cli.parser import build_parser
+from cam.errors import CamError
+from cam.job.jobs import JobOptions
+from cam.options import JOB_OPTIONS, Option, schema_json
+
+from conftest import SAMPLES, run_cli
+
+KIND_FILES = {
+    "drawing": SAMPLES / "gear.png", "excellon": SAMPLES / "board.drl", "hpgl": SAMPLES / "extended.plt",
+    "gcode": SAMPLES / "bolt_plate.ngc", "svg": SAMPLES / "logo.svg",
+    "digitized": Path("no-such-matrix.txt"),  # kind by suffix; refused before it would be read
+}
+"""A file of each job kind."""
+
+
+def sample_value(o: Option) -> Optional[str]:
+    """A value in range for the option's flag (None: a flag without a value)."""
+    one = {"whole": str(int(o.lo)) if o.lo is not None else "1", "number": "1", "wholes": ",".join(["1"] * (o.count or 1)),
+           "numbers": ",".join(["1"] * (o.count or 1)), "points": "1,1", "digits": "2:4", "size": "80x40",
+           "text": "k", "tool": "flat:1", "paths": ".", "flag": None}
+    return o.choices[-1] if o.type == "choice" else one[o.type]
+
+
+def argv_of(o: Option, path: Path, value: Optional[str] = None) -> list[str]:
+    """``cam drill PATH FLAG=VALUE`` (with ``=``: a value such as -1,-1,-1 is no flag to argparse)."""
+    value = sample_value(o) if value is None else value
+    return ["drill", str(path), o.flag if o.type == "flag" else f"{o.flag}={value}"]
+
+
+def test_every_joboptions_field_has_exactly_one_schema_entry():
+    names = [o.name for o in JOB_OPTIONS]
+    assert len(names) == len(set(names))
+    assert names == [f.name for f in fields(JobOptions)]
+    assert {f.name: f.default for f in fields(JobOptions)} == {o.name: o.default for o in JOB_OPTIONS}
+    assert len({o.flag for o in JOB_OPTIONS}) == len(JOB_OPTIONS)
+
+
+def test_the_defaults_are_the_libraries():
+    from cam.digitize.sketch import DEFAULT_MIN_LENGTH_PX
+    from cam.limits import DEFAULT_GCODE_LINES
+
+    assert JobOptions().trace_min_length_px == DEFAULT_MIN_LENGTH_PX
+    assert JobOptions().max_lines == DEFAULT_GCODE_LINES
+
+
+def test_every_schema_flag_is_in_drill_help():
+    out = run_cli("drill", "--help")
+    assert out.returncode == 0
+    for o in JOB_OPTIONS:
+        assert re.search(rf"(?<![\w-]){re.escape(o.flag)}(?![\w-])", out.stdout), o.flag
+
+
+@pytest.mark.parametrize("o", JOB_OPTIONS, ids=lambda o: o.name)
+def test_drill_refuses_a_flag_for_the_kinds_the_schema_leaves_out(o):
+    for kind, path in KIND_FILES.items():
+        if kind in o.kinds:
+            args = build_parser().parse_args(argv_of(o, path))
+            check_args(args)  # no error: the flag applies (nothing is planned here)
+        else:
+            out = run_cli(*argv_of(o, path))
+            assert out.returncode == 2, (kind, out.stderr)
+            lines = out.stderr.strip().splitlines()
+            assert len(lines) == 1 and o.flag in lines[0] and "does not apply" in lines[0], (kind, out.stderr)
+
+
+def _asgi_get(app: Any, path: str) -> tuple[int, bytes]:
+    """One GET answered by the ASGI app in this process (no socket)."""
+    sent: list[dict] = []
+
+    async def receive() -> dict:
+        return {"type": "http.request", "body": b"", "more_body": False}
+
+    async def send(message: dict) -> None:
+        sent.append(message)
+
+    scope = {"type": "http", "asgi": {"version": "3.0"}, "http_version": "1.1", "method": "GET", "scheme": "http",
+             "path": path, "raw_path": path.encode(), "query_string": b"", "root_path": "",
+             "headers": [(b"host", b"127.0.0.1:8000")], "client": ("127.0.0.1", 1), "server": ("127.0.0.1", 8000)}
+    asyncio.run(app(scope, receive, send))
+    status = next(m["status"] for m in sent if m["type"] == "http.response.start")
+    return status, b"".join(m.get("body", b"") for m in sent if m["type"] == "http.response.body")
+
+
+def test_the_page_is_served_the_schema(tmp_path):
+    pytest.importorskip("starlette")
+    from cam.web.server import ServerConfig, create_app
+
+    app = create_app(ServerConfig(jobs_dir=str(tmp_path / "jobs"), port=0))
+    try:
+        status, body = _asgi_get(app, "/api/options")
+    finally:
+        app.state.session.shutdown()
+    assert status == 200
+    assert json.loads(body) == json.loads(json.dumps(schema_json()))
+    assert [o["name"] for o in json.loads(body)] == [o.name for o in JOB_OPTIONS]
+
+
+def test_the_page_builds_its_fields_from_the_schema():
+    """app.js keeps no copy of which option applies to which kind: the form has no data-kinds, and each named
+    field of the form is a schema option or one of the cutter's parts."""
+    static = Path(__file__).parent.parent / "cam" / "web" / "static"
+    html = (static / "index.html").read_text()
+    assert "data-kinds" not in html
+    names = set(re.findall(r'<(?:input|select)[^>]* name="(\w+)"', html))
+    assert names - {o.name for o in JOB_OPTIONS} == {"tool_shape", "tool_diameter_mm", "tool_angle_deg", "tool_tip_mm"}
+    assert "/api/options" in (static / "app.js").read_text()
+
+
+def _boundary_values(o: Option) -> list[float]:
+    lo, hi = float(o.lo), float(o.hi)  # type: ignore[arg-type]
+    if o.type in ("whole", "wholes", "points", "digits"):
+        return [lo - 1, lo, lo + 1, hi - 1, hi, hi + 1]
+    return [lo - 1e-3, lo, lo + 1e-3, hi - 1e-3, hi, hi + 1e-3, hi * 1.5 + 1]
+
+
+def _cli_accepts(argv: list[str]) -> bool:
+    with contextlib.redirect_stderr(io.StringIO()):
+        try:
+            build_parser().parse_args(argv)
+        except SystemExit as exc:
+            assert exc.code == 2
+            return False
+    return True
+
+
+def _options_accept(o: Option, value: Any) -> bool:
+    try:
+        JobOptions(**{o.name: value}).checked()
+    except CamError:
+        return False
+    return True
+
+
+@pytest.mark.parametrize("o", [o for o in JOB_OPTIONS if o.lo is not None], ids=lambda o: o.name)
+def test_ranges_are_enforced_alike_by_the_cli_and_joboptions(o):
+    path = next(KIND_FILES[k] for k in KIND_FILES if k in o.kinds)
+    for v in _boundary_values(o):
+        whole = o.type in ("whole", "wholes", "points", "digits")
+        text = str(int(v)) if whole else repr(v)
+        value: Any = int(v) if whole else v
+        n = o.count or 1
+        if o.type in ("wholes", "numbers"):
+            text, value = ",".join([text] * n), tuple([value] * n)
+        elif o.type == "points":
+            text, value = f"{text},{text}", ((value, value),)
+        elif o.type == "digits":
+            text, value = f"{text}:{text}", (value, value)
+        elif o.type == "size":
+            text, value = f"{text}x{text}", (value, value)
+        assert _cli_accepts(argv_of(o, path, text)) == _options_accept(o, value), (o.name, v)
+
+
+def test_trace_min_length_is_one_range_in_trace_and_drill():
+    o = next(o for o in JOB_OPTIONS if o.name == "trace_min_length_px")
+    for v in (o.lo - 1, o.lo, o.hi, o.hi + 1):
+        accepted = o.lo <= v <= o.hi
+        assert _cli_accepts(["trace", "photo.jpg", "-o", "d.png", "--min-length", str(int(v))]) == accepted
+        assert _cli_accepts(["drill", "photo.jpg", "--trace-min-length", str(int(v))]) == accepted
+
+
+def test_one_name_for_the_depth_and_height_in_the_planners():
+    """The planners take JobOptions' names as keywords."""
+    import inspect
+
+    from cam.job.drill import plan_drill
+    from cam.job.hpgl import plan_hpgl
+    from cam.job.hpgl_stream import stream_hpgl
+    from cam.job.svg import plan_svg
+
+    for planner in (plan_drill, plan_hpgl, stream_hpgl, plan_svg):
+        params = inspect.signature(planner).parameters
+        assert {"cut_depth_mm", "travel_height_mm", "offset_mm"} <= set(params), planner.__name__
+        assert not {"depth_mm", "safe_height_mm"} & set(params), planner.__name__
+
+
+def test_the_help_of_each_flag_is_the_schemas():
+    parser = build_parser()
+    drill = next(a for a in parser._subparsers._group_actions[0].choices.items() if a[0] == "drill")[1]  # type: ignore[union-attr]
+    helps = {a.option_strings[0]: a.help for a in drill._actions if a.option_strings}
+    for o in JOB_OPTIONS:
+        assert helps[o.flag] == o.help, o.flag
+    assert isinstance(drill, argparse.ArgumentParser)
