@@ -544,7 +544,8 @@ M30
 
 
 @needs_rs274
-@pytest.mark.parametrize("name", POSTS)
+@pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.slow) if n in ("fusion360_linuxcnc", "estlcam") else n
+                                  for n in POSTS])
 def test_post_processor_programs_follow_rs274(tmp_path, name):
     program = run_both(tmp_path, name, POSTS[name])
     assert any(m.kind in ("feed", "arc") for m in program.moves)

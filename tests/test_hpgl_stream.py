@@ -64,7 +64,7 @@ def _files(tmp_path: Path) -> list[Path]:
     return files
 
 
-@pytest.mark.parametrize("piece_points,chunk_bytes", [(1, 64), (5, 333), (4096, 1 << 19)])
+@pytest.mark.parametrize("piece_points,chunk_bytes", [pytest.param(1, 64, marks=pytest.mark.slow), (5, 333), (4096, 1 << 19)])
 def test_stream_equals_plan_hpgl(tmp_path, piece_points, chunk_bytes):
     s = cam.MachineSettings()
     for path in _files(tmp_path):
@@ -85,7 +85,7 @@ def test_stream_equals_plan_hpgl(tmp_path, piece_points, chunk_bytes):
             assert len(stream) == len(whole)
 
 
-@pytest.mark.parametrize("ramp", ["lookahead", "constant", "linear40"])
+@pytest.mark.parametrize("ramp", ["lookahead", pytest.param("constant", marks=pytest.mark.slow), pytest.param("linear40", marks=pytest.mark.slow)])
 def test_streamed_plan_equals_whole_plan(tmp_path, ramp):
     s = cam.MachineSettings().replace(ramp=ramp)
     for path in _files(tmp_path)[:5]:
@@ -124,7 +124,7 @@ def test_prepared_stream_runs_as_the_in_memory_job(tmp_path, monkeypatch):
     np.testing.assert_array_equal(logs[0].data, logs[1].data)
 
 
-@pytest.mark.parametrize("stop_at", [0.3, 0.8])
+@pytest.mark.parametrize("stop_at", [0.3, pytest.param(0.8, marks=pytest.mark.slow)])
 def test_a_stopped_streamed_hpgl_job_resumes_and_carves_as_an_uninterrupted_run(tmp_path, monkeypatch, stop_at):
     """A streamed HPGL job with pen changes (tool-change pauses), stopped anywhere, resumes from its journal."""
     from test_drawing_stream import stop_and_resume
