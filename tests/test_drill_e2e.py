@@ -202,7 +202,7 @@ def test_file_order_keeps_the_files_order_of_tools_and_holes(tmp_path):
     path = tmp_path / "order.drl"
     path.write_text("M48\nMETRIC\nT1C1.000\nT2C0.800\n%\nT2\nX3.0Y1.0\nX1.0Y1.0\nT1\nX2.0Y1.0\nT2\nX4.0Y1.0\nM30\n")
     holes = load_excellon(path)
-    dp = plan_drill(holes, order="file")
+    dp = plan_drill(holes, drill_order="file")
     assert dp.hole_index.tolist() == [0, 1, 2, 3]
     assert [(t, n) for t, _, n in dp.tool_sequence] == [(2, 2), (1, 1), (2, 1)]
     assert [i for i, _ in dp.tool_changes] == [0, 2, 3]

@@ -202,7 +202,7 @@ def test_plan_drill_tour_moves_less_than_file_order():
         xy = plan.toolpath.points_steps[:, :2].astype(float)
         return np.hypot(*np.diff(xy, axis=0).T).sum()
 
-    tour, file_order = plan_drill(holes), plan_drill(holes, order="file")
+    tour, file_order = plan_drill(holes), plan_drill(holes, drill_order="file")
     assert file_order.hole_index.tolist() == list(range(200))
     assert xy_travel_steps(tour) < 0.5 * xy_travel_steps(file_order)
 

@@ -17,7 +17,7 @@ from cam.formats.hpgl import (
     parse_hpgl,
     scan_hpgl,
 )
-from cam.job.hpgl import DEFAULT_SAFE_HEIGHT_MM, hpgl_steps, plan_hpgl
+from cam.job.hpgl import DEFAULT_TRAVEL_HEIGHT_MM, hpgl_steps, plan_hpgl
 from cam.job.model import CUT, RETRACT, TRAVEL
 
 from conftest import ROOT, SAMPLES, run_cli
@@ -219,7 +219,7 @@ def test_tool_changes_pause_in_order_at_the_safe_height():
     seen = []
     result = cam.run(job, on_pause=lambda pos, note: seen.append((note, pos)))
     assert result.status == "finished"
-    safe = -round(DEFAULT_SAFE_HEIGHT_MM / S.mm_per_step_z)
+    safe = -round(DEFAULT_TRAVEL_HEIGHT_MM / S.mm_per_step_z)
     assert [n for n, _ in seen] == ["tool change: pen 1", "tool change: pen 2"]
     assert all(pos[2] == safe for _, pos in seen)
     # pen 2 is paused for after every pen-1 stroke and before any pen-2 cut

@@ -208,7 +208,7 @@ def test_drill_job_with_a_tool_change_passes():
     holes = HoleList(holes_mm=np.array([[0.0, 0.0], [12.0, -3.0], [4.0, -20.0], [30.0, -8.0]]),
                      tool_of_hole=np.array([1, 1, 2, 2]), tools={1: 0.8, 2: 1.0},
                      line_of_hole=np.arange(1, 5), source="t.drl")
-    dp = plan_drill(holes, order="file")
+    dp = plan_drill(holes, drill_order="file")
     plan = plan_steps(dp.toolpath)
     assert len(plan.pause_writes) == 2
     report, motion, log = run_and_check(plan, dp.toolpath.settings)

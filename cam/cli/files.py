@@ -38,7 +38,7 @@ def cmd_export(args: argparse.Namespace) -> int:
     else:  # HPGL: "tool change: pen N"; a drawing's pauses are Pause At points, no tool
         changes = {int(i): (int(note.split()[-1]), note) for i, note in zip(at, job.toolpath.pause_notes or [])
                    if note.split()[-1].isdigit()}
-    save_gcode(job.toolpath, args.output, flip_y=args.flip_y, safe_height_mm=travel_height_mm,
+    save_gcode(job.toolpath, args.output, flip_y=args.flip_y, travel_height_mm=travel_height_mm,
                title=f"cam: {args.image or args.load_digitized}", tool_changes=changes)
     if job.kind in ("drawing", "digitized"):
         print(f"{args.output}: {job.toolpath.n_targets} points, {job.toolpath.n_retracts} retracts")

@@ -55,7 +55,7 @@ def to_gcode(
     toolpath: Job,
     *,
     flip_y: bool = False,
-    safe_height_mm: float = 1.0,
+    travel_height_mm: float = 1.0,
     title: str = "cam job",
     tool_changes: dict[int, tuple[int, str]] | None = None,
 ) -> str:
@@ -64,7 +64,7 @@ def to_gcode(
     Args:
         toolpath: any planned job.
         flip_y: write Y = +row (mirror) instead of the default Y = -row.
-        safe_height_mm: height above the surface for moves between cuts.
+        travel_height_mm: height above the surface for moves between cuts.
         title: first comment line.
         tool_changes: ``{point index: (tool number, comment)}`` -- a ``T<n> M6``
             is written before that point.  Without it, a job planned for a real cutter
@@ -73,7 +73,7 @@ def to_gcode(
     Returns:
         The program text, ending with M2.
     """
-    return "".join(gcode_pieces(toolpath, flip_y=flip_y, safe_height_mm=safe_height_mm, title=title,
+    return "".join(gcode_pieces(toolpath, flip_y=flip_y, travel_height_mm=travel_height_mm, title=title,
                                 tool_changes=tool_changes))
 
 
@@ -87,7 +87,7 @@ def gcode_pieces(
     toolpath: Any,
     *,
     flip_y: bool = False,
-    safe_height_mm: float = 1.0,
+    travel_height_mm: float = 1.0,
     title: str = "cam job",
     tool_changes: dict[int, tuple[int, str]] | None = None,
 ) -> Iterator[str]:
@@ -99,7 +99,7 @@ def gcode_pieces(
     y_sign = 1.0 if flip_y else -1.0
     feed_xy, feed_z = feeds_mm_per_min(s)
     oz_mm = toolpath.origin_px[2] * s.steps_per_px_z * mm_z if toolpath.pixels else 0.0
-    safe_z = -oz_mm + safe_height_mm
+    safe_z = -oz_mm + travel_height_mm
     out = io.StringIO()
     w = out.write
     w(f"({title.replace('(', '[').replace(')', ']')})\n")

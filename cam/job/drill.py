@@ -11,10 +11,10 @@ the board about its vertical axis for drilling from the back side.
 
 The drill cycle for each hole (thesis-machine step/dir port): rapid at the
 safe height to above the hole, plunge to the drill depth, retract to the
-safe height.  With ``order="tour"`` (the default) holes are grouped by tool,
+safe height.  With ``drill_order="tour"`` (the default) holes are grouped by tool,
 smallest diameter first, and within a tool drilled in a short tour from the
 current position (:func:`cam.job.drill_order.drill_order`); with
-``order="file"`` they are drilled exactly in the file's order, tools
+``drill_order="file"`` they are drilled exactly in the file's order, tools
 included.  Before each tool (each change of tool, in file order) the job
 pauses with a prompt naming the tool and its diameter.
 """
@@ -29,11 +29,11 @@ from ..settings import DEFAULT_SETTINGS, MachineSettings
 from .model import CUT, RETRACT, TRAVEL, Job, check_travel
 from .drill_order import drill_order
 
-__all__ = ["DrillPlan", "plan_drill", "DEFAULT_DEPTH_MM", "DEFAULT_SAFE_HEIGHT_MM"]
+__all__ = ["DrillPlan", "plan_drill", "DEFAULT_CUT_DEPTH_MM", "DEFAULT_TRAVEL_HEIGHT_MM"]
 
-DEFAULT_DEPTH_MM = 2.0
+DEFAULT_CUT_DEPTH_MM = 2.0
 """Through a 1.6 mm board with a little margin into the spoil board."""
-DEFAULT_SAFE_HEIGHT_MM = 1.0
+DEFAULT_TRAVEL_HEIGHT_MM = 1.0
 
 
 @dataclass
@@ -85,11 +85,11 @@ def plan_drill(
     holes,
     *,
     settings: MachineSettings = DEFAULT_SETTINGS,
-    cut_depth_mm: float = DEFAULT_DEPTH_MM,
-    travel_height_mm: float = DEFAULT_SAFE_HEIGHT_MM,
+    cut_depth_mm: float = DEFAULT_CUT_DEPTH_MM,
+    travel_height_mm: float = DEFAULT_TRAVEL_HEIGHT_MM,
     offset_mm: tuple[float, float] | None = None,
     mirror_x: bool = False,
-    order: str = "tour",
+    drill_order: str = "tour",
 ) -> DrillPlan:
     """Plan the drilling of a :class:`~cam.formats.excellon.HoleList`.
 
@@ -99,7 +99,7 @@ def plan_drill(
         cut_depth_mm: drill depth below the surface; travel_height_mm: travel height above it.
         offset_mm: machine position (mm from the home) of the board origin; None = board top-left at the home.
         mirror_x: mirror for drilling from the back side.
-        order: "tour" (tools smallest first, a short tour per tool) or "file" (the file's order of holes and
+        drill_order: "tour" (tools smallest first, a short tour per tool) or "file" (the file's order of holes and
             tools: a prompt at each change of tool).
 
     Raises:
@@ -108,8 +108,8 @@ def plan_drill(
 
     if cut_depth_mm <= 0 or travel_height_mm < 0:
         raise PlanError("drill depth must be > 0 mm and the safe height >= 0 mm")
-    if order not in ("tour", "file"):
-        raise PlanError(f"order must be 'tour' or 'file', got {order!r}")
+    if drill_order not in ("tour", "file"):
+        raise PlanError(f"drill_order must be 'tour' or 'file', got {drill_order!r}")
     if len(holes.holes_mm) == 0:
         raise PlanError(f"{holes.source}: no holes to drill")
     machine_mm = _machine_mm(holes.holes_mm, offset_mm, mirror_x)
@@ -125,7 +125,7 @@ def plan_drill(
         raise TravelError(f"drill depth {cut_depth_mm:g} mm and safe height {travel_height_mm:g} mm need Z "
                           f"{safe_z_steps}..{depth_steps} steps; the Z travel is {z_lo}..{z_hi} steps")
     path = _DrillPath(safe_z_steps)
-    for tool, idx in _tool_runs(holes, machine_mm, order):
+    for tool, idx in _tool_runs(holes, machine_mm, drill_order):
         path.tool_change(tool, float(holes.tools[tool]), len(idx))
         for i in idx.tolist():
             path.hole(i, *(int(v) for v in steps_xy[i]), depth_steps)

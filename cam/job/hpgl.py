@@ -30,11 +30,11 @@ import numpy as np
 
 from ..formats.hpgl import HpglDrawing
 from ..settings import DEFAULT_SETTINGS, MachineSettings
-from .hpgl_stream import DEFAULT_CUT_DEPTH_MM, DEFAULT_SAFE_HEIGHT_MM, stream_hpgl, xy_steps
+from .hpgl_stream import DEFAULT_CUT_DEPTH_MM, DEFAULT_TRAVEL_HEIGHT_MM, stream_hpgl, xy_steps
 from .hpgl_stream import _rows, _z_steps  # noqa: F401  (cam.job.svg plans its strokes with them)
 from .model import CUT, Job  # noqa: F401  (CUT: the doctest)
 
-__all__ = ["plan_hpgl", "hpgl_steps", "DEFAULT_CUT_DEPTH_MM", "DEFAULT_SAFE_HEIGHT_MM"]
+__all__ = ["plan_hpgl", "hpgl_steps", "DEFAULT_CUT_DEPTH_MM", "DEFAULT_TRAVEL_HEIGHT_MM"]
 
 
 def hpgl_steps(drawing: HpglDrawing, *, settings: MachineSettings = DEFAULT_SETTINGS,
@@ -54,7 +54,7 @@ def plan_hpgl(
     *,
     settings: MachineSettings = DEFAULT_SETTINGS,
     cut_depth_mm: float = DEFAULT_CUT_DEPTH_MM,
-    travel_height_mm: float = DEFAULT_SAFE_HEIGHT_MM,
+    travel_height_mm: float = DEFAULT_TRAVEL_HEIGHT_MM,
     offset_mm: Optional[tuple[float, float]] = None,
 ) -> Job:
     """Plan the cutting of an HPGL drawing, in machine steps: the pieces of

@@ -36,10 +36,10 @@ from ..settings import DEFAULT_SETTINGS, MachineSettings
 from .model import CUT, RETRACT, TRAVEL, Job, PixelFrame, check_travel, join_pieces
 
 __all__ = ["HpglJobStream", "stream_hpgl", "xy_steps", "STREAM_POINTS", "PIECE_POINTS", "DEFAULT_CUT_DEPTH_MM",
-           "DEFAULT_SAFE_HEIGHT_MM"]
+           "DEFAULT_TRAVEL_HEIGHT_MM"]
 
 DEFAULT_CUT_DEPTH_MM = 0.5
-DEFAULT_SAFE_HEIGHT_MM = 1.0
+DEFAULT_TRAVEL_HEIGHT_MM = 1.0
 STREAM_POINTS = 1_000_000
 """HPGL files with more pen-down points than this are read from the file on every pass rather than held
 (:func:`cam.job.jobs.prepare_job`); either way their job is this planner's pieces."""
@@ -319,7 +319,7 @@ class HpglJobStream:
 
 
 def stream_hpgl(src: Union[str, os.PathLike, HpglDrawing], *, settings: MachineSettings = DEFAULT_SETTINGS,
-                cut_depth_mm: float = DEFAULT_CUT_DEPTH_MM, travel_height_mm: float = DEFAULT_SAFE_HEIGHT_MM,
+                cut_depth_mm: float = DEFAULT_CUT_DEPTH_MM, travel_height_mm: float = DEFAULT_TRAVEL_HEIGHT_MM,
                 offset_mm: Optional[tuple[float, float]] = None, scan: Optional[HpglScan] = None,
                 piece_points: int = PIECE_POINTS, chunk_bytes: int = CHUNK_BYTES) -> HpglJobStream:
     """The HPGL job of a file or a drawing as a :class:`HpglJobStream` (a file's: bounded memory).

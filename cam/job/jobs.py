@@ -53,18 +53,18 @@ from ..sniff import KIND_NAMES
 from ..settings import DEFAULT_SETTINGS, MachineSettings
 from ..verify.pinlog import PinLog, decode_pin_log
 from .drawing import check_drawing_size
-from .drill import DEFAULT_DEPTH_MM as DRILL_DEPTH_MM
-from .drill import DEFAULT_SAFE_HEIGHT_MM as DRILL_SAFE_HEIGHT_MM
+from .drill import DEFAULT_CUT_DEPTH_MM as DRILL_DEPTH_MM
+from .drill import DEFAULT_TRAVEL_HEIGHT_MM as DRILL_TRAVEL_HEIGHT_MM
 from .drill import plan_drill
 from .gcode import plan_gcode
 from .hpgl import DEFAULT_CUT_DEPTH_MM as HPGL_CUT_DEPTH_MM
-from .hpgl import DEFAULT_SAFE_HEIGHT_MM as HPGL_SAFE_HEIGHT_MM
+from .hpgl import DEFAULT_TRAVEL_HEIGHT_MM as HPGL_TRAVEL_HEIGHT_MM
 from .drawing_stream import STREAM_TARGETS, plan, stream_drawing
 from .hpgl_stream import STREAM_POINTS, stream_hpgl
 from .model import Job
 from .resume import Journal, JournalBase, check_journal, job_identity, plan_fingerprint, resume_pieces
 from .svg import DEFAULT_CUT_DEPTH_MM as SVG_CUT_DEPTH_MM
-from .svg import DEFAULT_SAFE_HEIGHT_MM as SVG_SAFE_HEIGHT_MM
+from .svg import DEFAULT_TRAVEL_HEIGHT_MM as SVG_TRAVEL_HEIGHT_MM
 from .svg import plan_svg
 
 __all__ = [
@@ -635,8 +635,8 @@ def _prepare_excellon(path: Path, options: JobOptions, settings: MachineSettings
                           zeros=options.excellon_zeros)
     depth_mm = _or(options.cut_depth_mm, DRILL_DEPTH_MM)
     dp = plan_drill(holes, settings=settings, cut_depth_mm=depth_mm,
-                    travel_height_mm=_or(options.travel_height_mm, DRILL_SAFE_HEIGHT_MM), offset_mm=options.offset_mm,
-                    mirror_x=options.mirror_x, order=options.drill_order)
+                    travel_height_mm=_or(options.travel_height_mm, DRILL_TRAVEL_HEIGHT_MM), offset_mm=options.offset_mm,
+                    mirror_x=options.mirror_x, drill_order=options.drill_order)
     steps = plan_chunks(dp.toolpath)
     tools = ", ".join(f"T{t} {dia:.3f} mm x{n}" for t, dia, n in dp.tool_sequence)
     hole_xy = np.asarray(dp.holes_steps, np.int64).reshape(-1, 2)
@@ -667,7 +667,7 @@ def _prepare_hpgl(path: Path, options: JobOptions, settings: MachineSettings, pr
     depth_mm, engraving = _engraving(options, settings, HPGL_CUT_DEPTH_MM)
     scan = scan_hpgl(path, progress=progress)
     stream = stream_hpgl(path, settings=settings, cut_depth_mm=depth_mm,
-                         travel_height_mm=_or(options.travel_height_mm, HPGL_SAFE_HEIGHT_MM),
+                         travel_height_mm=_or(options.travel_height_mm, HPGL_TRAVEL_HEIGHT_MM),
                          offset_mm=options.offset_mm, scan=scan)
     # one planner whatever the size: above STREAM_POINTS its pieces are read from the file on every pass (bounded
     # memory), below they are joined and held (the step planner then sees every move: linear40 ramps)
@@ -683,7 +683,7 @@ def _prepare_svg(path: Path, options: JobOptions, settings: MachineSettings) -> 
     drawing = load_svg(path)
     depth_mm, engraving = _engraving(options, settings, SVG_CUT_DEPTH_MM)
     toolpath = plan_svg(drawing, settings=settings, cut_depth_mm=depth_mm,
-                        travel_height_mm=_or(options.travel_height_mm, SVG_SAFE_HEIGHT_MM),
+                        travel_height_mm=_or(options.travel_height_mm, SVG_TRAVEL_HEIGHT_MM),
                         scale=options.scale, fit_mm=options.fit_mm, offset_mm=options.offset_mm)
     steps = plan_chunks(toolpath)
     counts = ", ".join(f"{n} {name}" for name, n in sorted(drawing.element_counts.items()))

@@ -43,11 +43,11 @@ from ..settings import DEFAULT_SETTINGS, MachineSettings
 from .hpgl import _rows, _z_steps
 from .model import CUT, Job, check_travel
 
-__all__ = ["plan_svg", "svg_strokes_steps", "svg_scale", "DEFAULT_CUT_DEPTH_MM", "DEFAULT_SAFE_HEIGHT_MM"]
+__all__ = ["plan_svg", "svg_strokes_steps", "svg_scale", "DEFAULT_CUT_DEPTH_MM", "DEFAULT_TRAVEL_HEIGHT_MM"]
 
 DEFAULT_CUT_DEPTH_MM = 0.5
 """As HPGL's pen-down depth: a vector drawing engraved."""
-DEFAULT_SAFE_HEIGHT_MM = 1.0
+DEFAULT_TRAVEL_HEIGHT_MM = 1.0
 FLATTEN_STEPS = 0.15
 """Curves are flattened to within this many steps (the rounding to whole steps takes at most half a step more)."""
 SAMPLE_STEPS = 0.25
@@ -190,7 +190,7 @@ def plan_svg(
     *,
     settings: MachineSettings = DEFAULT_SETTINGS,
     cut_depth_mm: float = DEFAULT_CUT_DEPTH_MM,
-    travel_height_mm: float = DEFAULT_SAFE_HEIGHT_MM,
+    travel_height_mm: float = DEFAULT_TRAVEL_HEIGHT_MM,
     scale: Optional[float] = None,
     fit_mm: Optional[tuple[float, float]] = None,
     offset_mm: Optional[tuple[float, float]] = None,
