@@ -13,9 +13,9 @@ declaration of a setting of a job.  From it come:
   ``app.js`` shows, hides and range-checks its fields from it.
 
 One name for one setting: the field is ``cut_depth_mm``, the flag
-``--cut-depth`` (the field without its unit, ``_`` as ``-``; the few flags
-that differ say so in ``flag``), and the planners take the field's name as
-their keyword.
+``--cut-depth`` (the field without its unit, ``_`` as ``-``), and the
+planners take the field's name as their keyword.  A flag renamed so keeps its
+old spelling as an alias (``--excellon-format`` of ``--excellon-digits``).
 
 Standard library and :mod:`cam.limits` only: ``cam --help`` loads it.
 """
@@ -66,6 +66,7 @@ class Option:
         choices: the values a "choice" takes.
         metavar: the value's name in ``--help``.
         web: whether the page may set it (False: it names files on the machine that runs `cam`).
+        aliases: older flags still accepted for it (``--excellon-format``).
     """
 
     name: str
@@ -82,6 +83,7 @@ class Option:
     choices: tuple[str, ...] = ()
     metavar: Optional[str] = None
     web: bool = True
+    aliases: tuple[str, ...] = ()
 
     @property
     def dest(self) -> str:
@@ -170,8 +172,9 @@ JOB_OPTIONS: tuple[Option, ...] = (
          "drill files: short tour per tool (default) or the file's order", choices=("tour", "file")),
     _opt("excellon_units", "--excellon-units", "choice", "", {"excellon"}, None,
          "units when the file does not say", choices=("inch", "metric")),
-    _opt("excellon_digits", "--excellon-format", "digits", "digits", {"excellon"}, None,
-         "integer:fraction digits when the file does not say (e.g. 2:4)", lo=0, hi=8, count=2, metavar="I:F"),
+    _opt("excellon_digits", "--excellon-digits", "digits", "digits", {"excellon"}, None,
+         "integer:fraction digits when the file does not say (e.g. 2:4)", lo=0, hi=8,
+         count=2, metavar="I:F", aliases=("--excellon-format",)),
     _opt("excellon_zeros", "--excellon-zeros", "choice", "", {"excellon"}, None,
          "zero suppression when the file does not say", choices=("LZ", "TZ")),
     # G-code
@@ -237,4 +240,4 @@ def schema_json() -> list[dict[str, Any]]:
     """The schema as JSON-able records (``GET /api/options``): every field of each :class:`Option`, kinds sorted."""
     return [{"name": o.name, "flag": o.flag, "type": o.type, "unit": o.unit, "kinds": sorted(o.kinds),
              "default": _json_value(o.default), "help": o.help, "min": o.lo, "max": o.hi, "min_open": o.lo_open,
-             "count": o.count, "choices": list(o.choices), "web": o.web} for o in JOB_OPTIONS]
+             "count": o.count, "choices": list(o.choices), "web": o.web, "aliases": list(o.aliases)} for o in JOB_OPTIONS]

@@ -197,3 +197,11 @@ def test_the_help_of_each_flag_is_the_schemas():
     for o in JOB_OPTIONS:
         assert helps[o.flag] == o.help, o.flag
     assert isinstance(drill, argparse.ArgumentParser)
+
+
+def test_a_renamed_flag_keeps_its_old_spelling():
+    """--excellon-digits is excellon_digits' flag; --excellon-format, its old name, still sets it."""
+    for flag in ("--excellon-digits", "--excellon-format"):
+        args = build_parser().parse_args(["drill", str(KIND_FILES["excellon"]), flag, "3:3"])
+        assert args.excellon_digits == [3, 3]
+    assert run_cli("drill", KIND_FILES["excellon"], "--excellon-format", "9:1").returncode == 2

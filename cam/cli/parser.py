@@ -181,7 +181,8 @@ def _add_option(container: argparse._ActionsContainer, name: str, flag: Optional
     elif o.type == "paths":
         kw["action"] = "append"
     kw.update(overrides)
-    return container.add_argument(flag, **kw)
+    aliases = o.aliases if flag == o.flag else ()
+    return container.add_argument(flag, *aliases, **kw)
 
 
 # -- option groups shared by several commands -----------------------------------------------------

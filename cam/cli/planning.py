@@ -61,15 +61,15 @@ def summary_of(job: PreparedJob) -> str:
 
 
 def excellon_digits(args: argparse.Namespace) -> Optional[tuple[int, int]]:
-    """--excellon-format I:F as (I, F) (checked by the parser, :data:`cam.options.OPTIONS`), or None."""
-    value = getattr(args, "excellon_format", None)
+    """--excellon-digits I:F as (I, F) (checked by the parser, :data:`cam.options.OPTIONS`), or None."""
+    value = getattr(args, "excellon_digits", None)
     if not value:
         return None
     if isinstance(value, str):
         try:
             a, b = (int(v) for v in value.split(":"))
         except ValueError:
-            raise CamError(f"--excellon-format takes I:F such as 2:4, got '{value}'") from None
+            raise CamError(f"--excellon-digits takes I:F such as 2:4, got '{value}'") from None
         return (a, b)
     return (int(value[0]), int(value[1]))
 

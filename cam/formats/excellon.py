@@ -249,7 +249,7 @@ class _Reader:
         if "zeros" in what:
             parts.append(f"zeros ({zeros}: {'leading' if zeros == 'TZ' else 'trailing'} zeros suppressed)")
         self.warn("the file does not state its " + ", ".join(parts) + "; read with these defaults "
-                  "(set --excellon-units / --excellon-format / --excellon-zeros if the holes look wrong)")
+                  "(set --excellon-units / --excellon-digits / --excellon-zeros if the holes look wrong)")
 
     def value_mm(self, text: str, letter: str, col: int) -> float:
         """Read one number word (without its letter) as mm, with the current units and format; at most
