@@ -8,9 +8,10 @@ reaches a plan, a file or a report, and a bad one is a one-line
 ranges are what a small 3-axis machine can mean, far wider than any real
 job; the machine's travel, checked later, refuses far less.
 
-Options and settings have their own bounds where they are parsed
-(:mod:`cam.cli.parser`, :class:`cam.job.jobs.JobOptions`, :mod:`cam.settings`,
-the profile depths of :mod:`cam.digitize.profile`).
+Job options have their bounds in their one declaration, :mod:`cam.options`
+(the command line and :class:`cam.job.jobs.JobOptions` check them alike);
+settings theirs in :mod:`cam.settings`, profile depths in
+:mod:`cam.digitize.profile`.
 
 Standard library only: the readers, the planners and the command line import it cheaply.
 """
