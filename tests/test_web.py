@@ -507,6 +507,24 @@ def test_page_runs_an_excellon_file(page, fast, tmp_path):
 
 
 @pytest.mark.browser
+def test_page_fields_and_ranges_come_from_the_options_schema(page, fast, tmp_path):
+    """GET /api/options decides which fields a kind shows and what range each takes (cam/options.py)."""
+    path = tmp_path / "board.drl"
+    path.write_text(EXCELLON)
+    _open(page, fast)
+    page.set_input_files("#file", str(path))
+    page.wait_for_function("!document.getElementById('start').disabled")
+    assert page.is_visible("#opt-cut-depth") and page.is_visible("#opt-mirror-x")
+    assert not page.is_visible("#opt-depth") and not page.is_visible("#opt-flip-y")  # drawing and G-code only
+    assert not page.is_visible("#opt-tool-spec")  # the cutter applies to drawings, SVG and HPGL, not drill files
+    page.fill("#opt-cut-depth", "0")
+    page.click("#plan")
+    page.wait_for_function("!document.getElementById('error').hidden")
+    assert "option 'cut_depth_mm' must be > 0 and at most 10000 mm" in page.text_content("#error-text")
+    assert ("POST", "/api/plan", 400) not in fast.seen  # refused on the page, from the schema's range
+
+
+@pytest.mark.browser
 def test_page_shows_4xx_errors_and_nothing_moves(page, fast, tmp_path):
     bad = tmp_path / "notes.docx"
     bad.write_bytes(b"PK\x03\x04 not a job")

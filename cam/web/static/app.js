@@ -51,7 +51,7 @@
   // The job options' schema (GET /api/options, cam/options.py): each option's name (the form field's name),
   // the file kinds it applies to, its range and help.  Which fields a kind shows, what is sent and the ranges
   // checked before planning all come from it, not from a copy here.
-  const schema = { byName: {} };
+  const schema = { byName: {}, ready: Promise.resolve() };
 
   function applies(name, kind) {
     const o = schema.byName[name];
@@ -137,45 +137,39 @@
   $("opt-tool-shape").addEventListener("change", showToolInputs);
   showToolInputs();
 
+  // the options of the schema that apply to the kind, each read from the form field of its name; then the few
+  // rules between fields: the cutter's spec is made of several fields, one depth is sent, trace's own options
+  // only when tracing
   function collectOptions() {
     const kind = page.kind;
     const o = {};
-    const val = (id) => $(id).value.trim();
-    if (kind === "drawing" || kind === "digitized") {
-      o.passes = val("opt-passes");
-      o.start = val("opt-start");
-      o.start_at = val("opt-start-at");
-      if (val("opt-pause-at")) o.pause_at = val("opt-pause-at");
-      // a 3D drawing takes a profile (a shaped relief) or one depth (a flat-bottomed pocket)
-      if (page.profile) o.profile = page.profile;
-      else if (val("opt-profile-expr")) o.profile_expr = val("opt-profile-expr");
-      else if (lineWidth()) o.line_width_mm = lineWidth();  // a V bit's line width sets a 2D depth
-      else if (val("opt-cut-depth")) o.cut_depth_mm = val("opt-cut-depth");  // mm for every object
-      else o.depth = val("opt-depth");
-      if (toolSpec()) o.tool = toolSpec();
-      if (kind === "drawing" && $("opt-trace").checked) {  // a sketch or a photo: traced on the server first
-        o.trace = true;
-        o.trace_min_length_px = val("opt-trace-min-length");
-        o.trace_fill = $("opt-trace-fill").checked;
-      }
-    } else if (kind === "excellon" || kind === "hpgl" || kind === "svg") {
-      if (val("opt-cut-depth")) o.cut_depth_mm = val("opt-cut-depth");  // empty: the kind's default
-      o.travel_height_mm = val("opt-travel-height");
-      if (kind === "excellon") {
-        o.drill_order = val("opt-drill-order");
-        o.mirror_x = $("opt-mirror-x").checked;
-      }
-      if (kind === "svg") {
-        if (val("opt-scale")) o.scale = val("opt-scale");
-        if (val("opt-fit")) o.fit_mm = val("opt-fit");
-      }
-      if (toolSpec()) o.tool = toolSpec();  // SVG and HPGL: the cutter, and a V bit's line width
-      if (lineWidth()) o.line_width_mm = lineWidth();
-    } else if (kind === "gcode") {
-      o.flip_y = $("opt-flip-y").checked;
-    }
-    Object.keys(o).forEach((name) => { if (!applies(name, kind)) delete o[name]; });  // the schema's kinds
+    const form = $("options-form");
+    Object.values(schema.byName).forEach((opt) => {
+      if (!opt.web || !applies(opt.name, kind)) return;
+      const el = form.querySelector('[name="' + opt.name + '"]');
+      if (!el) return;
+      if (el.type === "checkbox") { o[opt.name] = el.checked; return; }
+      const v = el.value.trim();
+      if (v !== "") o[opt.name] = v;
+    });
+    if (!Object.keys(schema.byName).length) return collectWithoutSchema(kind);
+    delete o.tool; delete o.line_width_mm;
+    if (applies("tool", kind) && toolSpec()) o.tool = toolSpec();
+    if (applies("line_width_mm", kind) && lineWidth()) o.line_width_mm = lineWidth();  // a V bit's sets the depth
+    if (applies("profile", kind) && page.profile) o.profile = page.profile;
+    // one depth: a profile (a shaped relief), its expression, a V bit's line width, mm for every object, Z pixels
+    const order = ["profile", "profile_expr", "line_width_mm", "cut_depth_mm", "depth"];
+    const first = order.findIndex((name) => o[name] !== undefined);
+    order.slice(first + 1).forEach((name) => { if (first >= 0) delete o[name]; });
+    if (!o.trace) { delete o.trace; delete o.trace_min_length_px; delete o.trace_fill; }
     return o;
+  }
+
+  // before the schema has come: the fields every kind had
+  function collectWithoutSchema(kind) {
+    const val = (id) => $(id).value.trim();
+    if (kind === "drawing" || kind === "digitized") return { depth: val("opt-depth"), passes: val("opt-passes") };
+    return {};
   }
 
   async function upload(file, role) {
@@ -187,6 +181,7 @@
 
   async function planJob() {
     if (!page.job) return;
+    await schema.ready;
     clearError();
     $("plan").disabled = true;
     $("job-summary").textContent = "planning…";
@@ -226,6 +221,7 @@
       const r = await upload(file, "job");
       page.job = r.job; page.kind = r.kind;
       $("job-name").textContent = r.name + " (" + r.kind + ", " + r.bytes + " bytes)";
+      await schema.ready;
       showKind(r.kind);
       await planJob();
     } catch (e) {
@@ -353,6 +349,6 @@
   }
 
   showKind(null);
-  loadSchema();
+  schema.ready = loadSchema();
   api("/api/state").then((s) => { render(s); listen(); }, () => {});
 })();
