@@ -104,6 +104,9 @@ def _schema_fields(cls: type) -> type:
 class JobOptions:
     """How to cut a file.  An option given for a kind it does not apply to is an error (:meth:`check_kind`).
 
+    The fields, their types, defaults, ranges and kinds are those of :data:`cam.options.JOB_OPTIONS` (declared
+    once there; the command-line flags and the page's form are made from the same declaration).
+
     Drawings and digitized matrices (pixel units):
         depth: Z pixels below the surface, one value for every object or one per object (None: 10 on a 2D
             drawing; on a 3D drawing one value cuts every layer at it, a flat-bottomed pocket, instead of a
