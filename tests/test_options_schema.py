@@ -188,6 +188,11 @@ def test_one_name_for_the_depth_and_height_in_the_planners():
         params = inspect.signature(planner).parameters
         assert {"cut_depth_mm", "travel_height_mm", "offset_mm"} <= set(params), planner.__name__
         assert not {"depth_mm", "safe_height_mm"} & set(params), planner.__name__
+    from cam.job.gcode import plan_gcode
+
+    wanted = {plan_drill: {"mirror_x", "drill_order"}, plan_svg: {"scale", "fit_mm"}, plan_gcode: {"flip_y"}}
+    for planner, names in wanted.items():
+        assert names <= set(inspect.signature(planner).parameters), planner.__name__
 
 
 def test_the_help_of_each_flag_is_the_schemas():
