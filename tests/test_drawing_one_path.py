@@ -78,7 +78,13 @@ def _same_job(a: Job, b: Job) -> None:
         assert getattr(a, attr) == getattr(b, attr), attr
 
 
-@pytest.fixture(scope="module", params=list(CASES))
+FAST_CASES = ("2d-depth-list-passes-pause-start", "2d-v-tool-passes", "3d-ball-finer-pause-start")
+"""The cases of the fast tier (one 3D relief with a tool, the finer pass, a pause and a Start At offset); the
+other reliefs run in the slow tier."""
+
+
+@pytest.fixture(scope="module", params=[k if k in FAST_CASES else pytest.param(k, marks=pytest.mark.slow)
+                                        for k in CASES])
 def case(request):
     d, kw = CASES[request.param]()
     whole = stream_drawing(d, piece_targets=ONE_PIECE, **kw)

@@ -82,7 +82,9 @@ def _tool_changes(job: Job) -> dict[int, tuple[int, str]]:
     return {int(i): (int(note.split()[-1]), note) for i, note in zip(at, job.pause_notes or [])}
 
 
-def test_any_piece_size_joins_to_the_same_job(files):
+@pytest.mark.parametrize("sizes", [(1, 4), pytest.param((2, 3, 5, 6, 7), marks=pytest.mark.slow)],
+                         ids=["1-4", "2-3-5-6-7"])
+def test_any_piece_size_joins_to_the_same_job(files, sizes):
     """From the file (its chunks) and from the drawing in memory (its arrays sliced), pieces of 1..7 points join
     to the one-piece job: every per-move array, the pause notes, the warnings."""
     for path in files:
@@ -93,7 +95,7 @@ def test_any_piece_size_joins_to_the_same_job(files):
         drawing = load_hpgl(path)
         assert _stream(drawing, ONE_PIECE).joined().points_steps.shape == want.points_steps.shape
         _assert_same_job(_stream(drawing, ONE_PIECE).joined(), want, f"{path.name} drawing, one piece")
-        for k in range(1, 8):
+        for k in sizes:
             for src, how in ((path, "file"), (drawing, "drawing")):
                 stream = _stream(src, k, chunk_bytes=16 + 9 * k)
                 pieces = list(stream.pieces())

@@ -69,8 +69,13 @@ def _pin_log_bytes(job: Any, tmp_path, name: str) -> bytes:
     return path.read_bytes()
 
 
-@pytest.mark.parametrize("name,options", CASES, ids=[c[0] for c in CASES])
-@pytest.mark.parametrize("size", [1, 3, 1000])
+SLOW = {"pyramid.png", "bolt_plate.ngc", "logo.svg"}  # many moves: pieces of 1 and 3 moves run in the slow tier
+
+
+@pytest.mark.parametrize("name,options,size", [
+    pytest.param(name, options, size, id=f"{size}-{name}",
+                 marks=[pytest.mark.slow] if name in SLOW and size < 1000 else [])
+    for size in (1, 3, 1000) for name, options in CASES])
 def test_every_consumer_gives_the_same_for_any_piece_size(tmp_path, name, options, size):
     prepared = prepare_job(SAMPLES / name, options, SETTINGS)
     job = prepared.toolpath.joined()
