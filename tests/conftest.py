@@ -135,9 +135,12 @@ _SLOW_KINDS = ("browser", "realtime", "packaging")
 
 @pytest.hookimpl(tryfirst=True)  # before -m selects: a realtime test is slow when "not slow" is applied
 def pytest_collection_modifyitems(config, items):
-    """Every browser, realtime and packaging test is slow too (see the module docstring)."""
+    """Every browser, realtime and packaging test is slow too (see the module docstring); so is every test whose
+    name is in its module's ``SLOW_CASES`` (a case of a test parametrized through a fixture, which
+    ``pytest.param`` marks cannot single out)."""
     for item in items:
-        if any(item.get_closest_marker(kind) is not None for kind in _SLOW_KINDS) \
+        slow_cases = getattr(item.module, "SLOW_CASES", ())
+        if (any(item.get_closest_marker(kind) is not None for kind in _SLOW_KINDS) or item.name in slow_cases) \
                 and item.get_closest_marker("slow") is None:
             item.add_marker(pytest.mark.slow)
 

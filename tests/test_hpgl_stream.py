@@ -22,6 +22,10 @@ from cam.job.hpgl_stream import stream_hpgl
 from cam.job.jobs import JobOptions, prepare_job
 from cam.verify.pinlog import read_pin_log
 
+SLOW_CASES = {'test_streamed_plan_equals_whole_plan[lookahead]'}
+"""Cases that run in the slow tier only (tests/conftest.py): the same checks keep faster cases here."""
+
+
 SAMPLES = Path(__file__).resolve().parent.parent / "samples"
 
 

@@ -19,6 +19,10 @@ from cam.job.svg import plan_svg, svg_strokes_steps
 
 from conftest import ROOT, run_cli
 
+SLOW_CASES = {'test_cubic_bezier_cuts_within_one_step'}
+"""Cases that run in the slow tier only (tests/conftest.py): the same checks keep faster cases here."""
+
+
 S = cam.MachineSettings()
 MM = S.mm_per_step_xy
 
