@@ -18,26 +18,17 @@ import cam
 import cam.job.jobs as jobs
 from cam.cli.planning import carved_surface, write_job_preview, write_preview
 from cam.drive.chunks import plan_chunks
-from cam.digitize.drawing import BLACK, RED, WHITE, Drawing
 from cam.formats.gcode_export import to_gcode
 from cam.job.drawing_stream import DrawingJobStream, stream_drawing
 from cam.job.jobs import JobOptions, prepare_job
 from cam.job.model import Job
 from cam.verify.pinlog import write_pin_log
 from conftest import SAMPLES
+from test_tools import disc
 
 ONE_PIECE = 10**9
 HEMISPHERE = "round(sqrt(n*n-(n-k)*(n-k))*4)"
-
-
-def _disc(size: int, radius: int) -> Drawing:
-    """A 3D drawing: a red disc with a black rim, ``size`` x ``size`` pixels."""
-    yy, xx = np.mgrid[:size, :size]
-    rr = np.hypot(yy - size // 2, xx - size // 2)
-    classes = np.full((size, size), WHITE, np.uint8)
-    classes[rr <= radius] = RED
-    classes[(rr <= radius) & (rr > radius - 1)] = BLACK
-    return Drawing(classes=classes)
+_disc = disc  # a 3D drawing: a red disc with a black rim (tests/test_tools.py)
 
 
 def _two_curves() -> tuple[cam.Digitized, dict]:
