@@ -98,7 +98,7 @@ def gcode_pieces(
     mm_z = s.mm_per_step_z
     y_sign = 1.0 if flip_y else -1.0
     feed_xy, feed_z = feeds_mm_per_min(s)
-    oz_mm = toolpath.origin_px[2] * s.steps_per_px_z * mm_z if toolpath.pixels else 0.0
+    oz_mm = toolpath.pixels.origin_px[2] * s.steps_per_px_z * mm_z if toolpath.pixels else 0.0
     safe_z = -oz_mm + travel_height_mm
     out = io.StringIO()
     w = out.write
