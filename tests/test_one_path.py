@@ -105,8 +105,7 @@ def test_linear40_in_chunks_equals_the_whole_job_ramp():
 
     s = SETTINGS.replace(ramp="linear40")
     job = plan_gcode(load_gcode(SAMPLES / "bolt_plate.ngc"), settings=s)
-    nominal = plan_chunks(job.replace_settings(SETTINGS.replace(ramp="constant")) if hasattr(job, "replace_settings")
-                          else _with_settings(job, SETTINGS.replace(ramp="constant")), chunk_periods=64).to_plan()
+    nominal = plan_chunks(_with_settings(job, SETTINGS.replace(ramp="constant")), chunk_periods=64).to_plan()
     ramped = plan_chunks(job, chunk_periods=64).to_plan()
     per_nominal = np.diff(nominal.t_ns[0::2])
     per_ramped = np.diff(ramped.t_ns[0::2])

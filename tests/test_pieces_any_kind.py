@@ -7,9 +7,6 @@ the job in one piece gives (pin-log bytes, G-code text, picture bytes, fingerpri
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
-from typing import Any, Iterator
-
 import numpy as np
 import pytest
 
@@ -17,11 +14,12 @@ import cam
 from cam.drive.chunks import plan_chunks
 from cam.formats.gcode_export import to_gcode
 from cam.job.jobs import JobOptions, motion_picture, prepare_job
-from cam.job.model import Job, JobLike, join_pieces
+from cam.job.model import JobLike
 from cam.job.resume import plan_fingerprint
 from cam.render.picture import encode_png
 from cam.verify.pinlog import write_pin_log
 from conftest import SAMPLES
+from test_resume_one_path import Sliced  # a Job cut into pieces of a given size
 
 SETTINGS = cam.MachineSettings().replace(delay_xy_ms=0.05, delay_z_ms=0.05)
 PER_MOVE = ("points_steps", "kind", "target", "pause", "period_ns", "periods", "move_start", "rest")
@@ -36,34 +34,7 @@ CASES = [
 ]
 
 
-@dataclass
-class Sliced:
-    """A job given as pieces of ``size`` moves (the per-move columns sliced, the whole job's attributes kept)."""
-
-    job: Job
-    size: int
-
-    def __getattr__(self, name: str) -> Any:
-        return getattr(self.job, name)
-
-    def pieces(self) -> Iterator[Job]:
-        n = len(self.job)
-        notes = list(self.job.pause_notes) if self.job.pause_notes is not None else None
-        used = 0
-        for a in range(0, n, self.size):
-            cols = {f: (None if getattr(self.job, f) is None else np.asarray(getattr(self.job, f))[a:a + self.size])
-                    for f in PER_MOVE}
-            k = int(np.count_nonzero(cols["pause"]))
-            meta = {f.name: getattr(self.job, f.name) for f in fields(Job) if f.name not in PER_MOVE}
-            meta.update(pause_notes=None if notes is None else notes[used:used + k], warnings=[])
-            used += k
-            yield Job(**cols, **meta)
-
-    def joined(self) -> Job:
-        return join_pieces(self.pieces(), self)
-
-
-def _pin_log_bytes(job: Any, tmp_path, name: str) -> bytes:
+def _pin_log_bytes(job: object, tmp_path, name: str) -> bytes:
     path = tmp_path / name
     write_pin_log(cam.run(job).pin_log(), path)
     return path.read_bytes()
@@ -85,8 +56,7 @@ def test_every_consumer_gives_the_same_for_any_piece_size(tmp_path, name, option
     for f in PER_MOVE:
         a, b = getattr(joined, f), getattr(job, f)
         assert (a is None) == (b is None) and (a is None or np.array_equal(a, b)), f
-    assert (joined.pause_notes or []) == (job.pause_notes or ["Pause At"] * int(job.pause.sum()) if job.pause_notes
-                                          is None and joined.pause_notes else job.pause_notes or [])
+    assert joined.pause_notes == job.pause_notes
 
     assert _pin_log_bytes(sliced, tmp_path, "sliced.csv") == _pin_log_bytes(job, tmp_path, "whole.csv")
     whole_plan, sliced_plan = plan_chunks(job), plan_chunks(sliced)
