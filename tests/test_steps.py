@@ -95,19 +95,22 @@ def test_compiled_step_kernel_equals_the_vectorised_reference():
     assert np.array_equal(t, plan.t_ns) and np.array_equal(data, plan.data)
 
 
-def test_position_tracker_and_chunked_extent_equal_the_full_decode(monkeypatch):
-    """The web page's live position and a job's extent come from bounded-memory decoders: same answers."""
+def test_run_cursor_and_chunked_extent_equal_the_full_decode(monkeypatch):
+    """The web page's live position (the runner's cursor, moved on batch by batch) and a job's extent come from
+    bounded-memory decoders: same answers."""
     import cam.verify.pinlog as pinlog
-    from cam.verify.pinlog import PinLog, PositionTracker, decode_pin_log, motion_extent
+    from cam.drive.runner import Cursor
+    from cam.verify.pinlog import PinLog, decode_pin_log, motion_extent
 
     d = cam.digitize(cam.load_image(SAMPLES / "gear.png"))
     job = cam.plan(d, depth=[12, 4])
     plan = cam.plan_steps(job)
     full = decode_pin_log(PinLog(plan.t_ns, plan.data, plan.strobe), job.settings).position_steps
     monkeypatch.setattr(pinlog, "_CHUNK", 1000)  # many chunk borders
-    tracker = PositionTracker(plan.data, job.settings)
+    cursor = Cursor(job.settings)
     for n in (0, 1, 5, 999, 1000, 1001, 5000, len(plan)):
-        assert tracker.advance(n) == (tuple(int(v) for v in full[n - 1]) if n else (0, 0, 0))
+        cursor.note(plan.t_ns[cursor.sent:n], plan.data[cursor.sent:n])
+        assert cursor.live == (n, tuple(int(v) for v in full[n - 1]) if n else (0, 0, 0))
     extent, cut = motion_extent(plan.data, job.settings)
     with_start = np.vstack([np.zeros((1, 3), np.int64), full])
     assert extent[:, 0].tolist() == with_start.min(axis=0).tolist()

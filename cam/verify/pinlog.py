@@ -33,7 +33,7 @@ from ..settings import DEFAULT_SETTINGS, MachineSettings
 from ..drive.pins import axis_bits
 
 __all__ = ["Surface", "PinLog", "Motion", "decode_pin_log", "read_pin_log", "iter_pin_log", "write_pin_log", "carve",
-           "PositionTracker", "motion_extent", "rising_edges"]
+           "motion_extent", "rising_edges"]
 
 HEADER = "t_ns,data,strobe"
 
@@ -213,28 +213,6 @@ def _decoded_chunks(data: np.ndarray, start: int, stop: int, pos0: np.ndarray, c
         chunk, _ = _decode(data[i:end], int(data[i - 1]) if i else 0, pos, clock, dirbit)
         pos = chunk[-1]
         yield chunk
-
-
-class PositionTracker:
-    """Follows the tool through a sequence of port writes without keeping a position per write.
-
-    ``advance(n)`` decodes the writes up to write ``n`` (never backwards) and returns the position
-    after it; memory stays proportional to the stretch decoded, not to the whole job.
-    """
-
-    def __init__(self, data: np.ndarray, settings: MachineSettings = DEFAULT_SETTINGS) -> None:
-        self._data = np.asarray(data, np.uint8)
-        self._clock, self._dirbit = axis_bits(settings)
-        self._done = 0
-        self._pos = np.zeros(3, np.int64)
-
-    def advance(self, n_writes: int) -> tuple[int, int, int]:
-        """Position (x, y, z) in steps after the first ``n_writes`` writes."""
-        n = max(self._done, min(int(n_writes), len(self._data)))
-        for chunk in _decoded_chunks(self._data, self._done, n, self._pos, self._clock, self._dirbit):
-            self._pos = chunk[-1].copy()
-        self._done = n
-        return tuple(int(v) for v in self._pos)  # type: ignore[return-value]
 
 
 _CHUNK = 1 << 21
