@@ -48,7 +48,7 @@ class Activity:
     controller: Any
     total: int
     estimated_s: float
-    positions: Any = None  # the run's Cursor (cam.drive.runner): advance(writes) -> position_steps
+    positions: Any = None  # the run's Cursor (cam.drive.runner): the writes sent and the position after them
     done: int = 0
     machine_ns: int = 0
     detail: str = ""
@@ -95,7 +95,7 @@ class SessionView:
             pos = self._position.copy()
             a = self._activity
             if a is not None and a.positions is not None and a.done > 0:
-                pos = pos + np.array(a.positions.advance(a.done), np.int64)
+                pos = pos + np.array(a.positions.position_steps, np.int64)
             return tuple(int(v) for v in pos)  # type: ignore[return-value]
 
     def _state_name(self) -> str:

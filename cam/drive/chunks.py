@@ -356,7 +356,7 @@ class ChunkedPlan:
                 yield buf[0][:n], buf[1][:n], per
                 buf = [v[n:] for v in buf]
                 buf_start = end
-                used += int(np.count_nonzero(firsts >= 0))
+                used += len(firsts)
             if nxt is None:
                 return
 

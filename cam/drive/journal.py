@@ -76,7 +76,7 @@ def journal_spec(job: Any, path: str | os.PathLike, *, home_steps: tuple[int, in
             raise CamError("this job has no moves to keep a journal of")
         base = JournalBase(identity=getattr(job, "identity", "") or "", source=str(getattr(job, "source", "")),
                            plan_sha256=getattr(job, "plan_sha256", "") or plan_fingerprint(toolpath),
-                           moves=len(toolpath), pause=np.zeros(0, bool))
+                           moves=len(toolpath))
     home = np.asarray(home_steps, np.int64) - np.asarray(base.start_position_steps, np.int64)
     return JournalSpec(str(path), base, tuple(int(v) for v in home), pin_log_path)  # type: ignore[arg-type]
 

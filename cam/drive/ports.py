@@ -161,8 +161,7 @@ class MockPort(Port):
             self._spill.flush()
             self._spill.seek(0)
             while True:
-                size = writes_per_piece * _SPILL_ROW.itemsize
-                rows = np.frombuffer(self._spill.read(size if size < (1 << 40) else -1), _SPILL_ROW)
+                rows = np.frombuffer(self._spill.read(writes_per_piece * _SPILL_ROW.itemsize), _SPILL_ROW)
                 if not len(rows):
                     break
                 yield PinLog(rows["t"].copy(), rows["d"].copy(), rows["s"].copy())
@@ -200,7 +199,7 @@ class MockPort(Port):
             if self._file is not None:
                 self.finish_pin_log()
             return read_pin_log(self.pin_log_path)
-        pieces = list(self.pin_log_pieces(1 << 62))
+        pieces = list(self.pin_log_pieces())
         if not pieces:
             return PinLog(np.zeros(0, np.int64), np.zeros(0, np.uint8), np.zeros(0, np.uint8))
         if len(pieces) == 1:

@@ -196,10 +196,6 @@ class Cursor:
         """Position (x, y, z) in steps after the writes sent so far."""
         return self.live[1]
 
-    def advance(self, n_writes: int = 0) -> tuple[int, int, int]:
-        """The position after the writes sent so far (at most ``n_writes``: the session's live-position reader)."""
-        return self.live[1]
-
     def note(self, t_ns: np.ndarray, data: np.ndarray) -> None:
         """The writes ``(K,)`` times and data just went out, in order."""
         if not len(data):
@@ -267,6 +263,9 @@ class _SimulatedClock:
     """Writes go out in batches at once, stamped with their scheduled times (the mock's default)."""
 
     batch = _BATCH
+
+    def __init__(self) -> None:
+        self.lateness = Lateness()  # nothing is late on the simulated clock
 
     def chunks(self, plan: Plan) -> Iterator[StepChunk]:
         return plan.chunks()
@@ -392,11 +391,10 @@ def run(
     finally:
         if realtime:
             sys.setswitchinterval(switch_s)
-    lateness = clock.lateness if isinstance(clock, _RealClock) else Lateness()
-    status, position, messages = _ending(plan, p, ctl, cursor, wall0 if realtime else None, lateness)
+    status, position, messages = _ending(plan, p, ctl, cursor, wall0 if realtime else None, clock.lateness)
     wall = (time.monotonic_ns() - wall0) / 1e9
     return RunResult(status, position, cursor.sent, cursor.last_t_ns / 1e9, wall, pauses.count, p, messages, wall0,
-                     lateness)
+                     clock.lateness)
 
 
 def _send(plan: Plan, p: Port, ctl: Controller, clock: "_SimulatedClock | _RealClock", cursor: Cursor,
