@@ -23,6 +23,7 @@ from typing import Callable, Sequence, Union
 
 import numpy as np
 
+from ..options import MAX_DEPTH_PX  # the deepest depth any option or profile may ask for
 from .drawing import BLACK, BLUE, RED, Drawing, load_image
 from .drawing import _read_rgb as read_rgb
 from .drawing import _to_rgb
@@ -66,9 +67,9 @@ def _from_values(values: Sequence[float], source: str) -> Profile:
     arr = np.asarray(values, np.float64)
     if arr.ndim != 1 or len(arr) == 0:
         raise PlanError(f"{source}: a profile needs at least one depth")
-    if not np.all(np.isfinite(arr)) or np.any(arr < 0) or np.any(arr > _MAX_DEPTH_PX):
-        bad = int(np.flatnonzero(~np.isfinite(arr) | (arr < 0) | (arr > _MAX_DEPTH_PX))[0])
-        raise PlanError(f"{source}: depth of layer {bad + 1} must be a number 0..{_MAX_DEPTH_PX} Z pixels, "
+    if not np.all(np.isfinite(arr)) or np.any(arr < 0) or np.any(arr > MAX_DEPTH_PX):
+        bad = int(np.flatnonzero(~np.isfinite(arr) | (arr < 0) | (arr > MAX_DEPTH_PX))[0])
+        raise PlanError(f"{source}: depth of layer {bad + 1} must be a number 0..{MAX_DEPTH_PX} Z pixels, "
                         f"got {arr[bad]}")
     return Profile(np.rint(arr).astype(np.int64), source)
 
@@ -223,8 +224,8 @@ def profile_from_csv(path: str | os.PathLike) -> Profile:
             raise ParseError(f'{p}:{i}: expected a depth or layer,depth, got "{raw[:40]}"')
         if len(values) == 2 and values[0] != len(depths) + 1:
             raise ParseError(f"{p}:{i}: expected layer {len(depths) + 1}, got {_quoted(parts[0])}")
-        if not 0 <= values[-1] <= _MAX_DEPTH_PX:  # NaN too
-            raise ParseError(f"{p}:{i}: depth {_quoted(parts[-1])} is out of range: 0..{_MAX_DEPTH_PX} Z pixels")
+        if not 0 <= values[-1] <= MAX_DEPTH_PX:  # NaN too
+            raise ParseError(f"{p}:{i}: depth {_quoted(parts[-1])} is out of range: 0..{MAX_DEPTH_PX} Z pixels")
         if len(depths) == MAX_LAYERS:
             raise ParseError(f"{p}:{i}: more than {MAX_LAYERS} layers")
         depths.append(values[-1])
@@ -245,8 +246,6 @@ _MAX_NODES = 200
 _MAX_MAGNITUDE = 1e12
 """No number in a profile expression, given or computed, may be larger: depths are pixels, not astronomy."""
 _MAX_EXPONENT = 64.0
-_MAX_DEPTH_PX = 1_000_000
-"""The deepest layer depth any profile may ask for (far beyond any machine's Z travel)."""
 MAX_LAYERS = 1_000_000
 
 
