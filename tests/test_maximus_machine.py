@@ -246,7 +246,7 @@ def test_pin_log_on_the_board_is_refused_before_anything_is_sent(emu, tmp_path, 
 
 
 @pytest.mark.slow
-def test_emulator_log_file_from_the_command_line(tmp_path):
+def test_emulator_log_file_from_the_command_line(tmp_path, monkeypatch):
     import subprocess
     import sys
     import time
@@ -256,6 +256,8 @@ def test_emulator_log_file_from_the_command_line(tmp_path):
                             stdout=subprocess.PIPE, text=True)
     try:
         device = proc.stdout.readline().strip()
+        # an emulator 1000 times faster than the firmware answers sooner than a board could: the host is told
+        monkeypatch.setenv("CAM_MAXIMUS_EMULATOR_SPEEDS", f"{device}=1000")
         path = small_board(tmp_path, ["T1", "X1.0Y1.0", "X1.5Y1.0"])
         assert main(["drill", str(path), "--yes", "--offset", "0,0", "--port", f"maximus:{device}",
                      "--travel-height", "0.1", "--cut-depth", "0.2"]) == 0

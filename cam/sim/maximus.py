@@ -149,6 +149,7 @@ from ._maximus_base import (  # noqa: F401  (the labels are part of this module'
     BUSY, DRILL_MODE1_INITIALIZE, DRILL_MODE1_INPUT, INITIALIZE_DRILL_MODE, JOG_DATA_INPUT, MODE_SELECTION, POWER_UP,
     _Halt, _PowerOn, _ReplyFault,
 )
+from ..drive.maximus._trust import EMULATOR_SPEEDS_ENV
 from ._maximus_hardware import _Hardware
 from ._maximus_program import _Program
 from ._maximus_uart import _Uart
@@ -294,6 +295,8 @@ class MaximusEmulator(_Program, _Hardware, _Uart, AbstractContextManager):
         self._master, self._slave = os.openpty()
         tty.setraw(self._slave, termios.TCSANOW)  # no echo, no line editing, 8 bit clean
         self.device_path = os.ttyname(self._slave)
+        if self._speed != 1.0:
+            _register_speed(self.device_path, self._speed)
         self._thread = threading.Thread(target=self._serve, name="maximus-firmware", daemon=True)
         self._thread.start()
         return self
@@ -312,6 +315,8 @@ class MaximusEmulator(_Program, _Hardware, _Uart, AbstractContextManager):
                 except OSError:
                     pass
         self._master = self._slave = -1
+        if self.device_path and self._speed != 1.0:
+            _register_speed(self.device_path, 1.0)
         if self._log_file is not None:
             self._log_file.close()
             self._log_file = None
@@ -443,6 +448,20 @@ class MaximusEmulator(_Program, _Hardware, _Uart, AbstractContextManager):
 
 
 
+def _register_speed(device: str, speed: float | None) -> None:
+    """List (or, at speed 1, unlist) ``device`` in the host's ``CAM_MAXIMUS_EMULATOR_SPEEDS``: an emulator that
+    runs faster than the firmware answers sooner than a real board could, which the host refuses unless it
+    knows (:mod:`cam.drive.maximus._trust`).  Hosts in this process and in processes it starts read it."""
+    items = [item for item in os.environ.get(EMULATOR_SPEEDS_ENV, "").split(",")
+             if item and item.rpartition("=")[0] != device]
+    if speed != 1.0:
+        items.append(f"{device}={'inf' if speed is None else repr(float(speed))}")
+    if items:
+        os.environ[EMULATOR_SPEEDS_ENV] = ",".join(items)
+    else:
+        os.environ.pop(EMULATOR_SPEEDS_ENV, None)
+
+
 def start_emulator(**options: Any) -> MaximusEmulator:
     """Start a MAXIMUS firmware emulator on a new pseudo-terminal (Unix only).
 
@@ -480,6 +499,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         log_path=args.log,
     )
     print(emulator.device_path, flush=True)
+    if emulator._speed != 1.0:
+        print(f"faster than the firmware: start hosts with {EMULATOR_SPEEDS_ENV}="
+              f"{os.environ.get(EMULATOR_SPEEDS_ENV, '')} (they refuse replies sooner than a real board's)",
+              file=sys.stderr, flush=True)
     try:
         while emulator.error is None:
             time.sleep(0.2)

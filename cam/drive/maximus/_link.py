@@ -6,7 +6,8 @@ The board object tracks where the firmware waits (``_MODE``, ``_JOG``, ``_OFFSET
 
 Every reply is awaited for as long as the firmware needs to make the move it answers (computed from the
 packet by :mod:`.packets`), plus the time a limit switch would add, plus the margin ``timeout_s``: a long
-move never times out and a dead board is found soon after its move should have ended.
+move never times out and a dead board is found soon after its move should have ended.  A reply that comes
+too soon for its move, any other byte, or none at all is a link fault (:mod:`._trust`): nothing more is sent.
 """
 from __future__ import annotations
 
@@ -16,6 +17,7 @@ from typing import Callable, Optional, TypeVar
 
 from ...errors import PortError
 from .packets import close_drill_packet, init_packet, jog_exit_packet, jog_packet, offset_packet, switch_time_ns
+from ._trust import LinkFault, _Trust
 from .protocol import (
     ATOFFSETPOS, BYTE_NAMES, DRILLMODE1DONE, DRILLMODE1INITIALIZED, EMERGENCYSTOP, JOGMODEDONE, JOGMODEOFF, JOGMODEON,
     MACHINESTOPPED, OPENJOGMODE, SWITCH_NAMES,
@@ -56,7 +58,7 @@ def _name(byte: int) -> str:
 _CLOSE_DRILL = _Exchange("the closing drill packet", DRILLMODE1DONE, False, "drill", _MODE)
 
 
-class _Link:
+class _Link(_Trust):
     """Exchanges, the emergency stop and job bookkeeping; the board supplies ``_write``, ``_read_byte``,
     ``_require``, ``timeout_s``, ``maximus`` and the state attributes set in its ``__init__``."""
 
@@ -81,10 +83,12 @@ class _Link:
     def _exchange(self, packet: bytes, ex: _Exchange) -> None:
         """Send ``packet`` and check its reply; raises PortError on anything but ``ex.expected``."""
         with self._lock:
+            self._require_quiet(ex.what)
             self._pending = ex
             self._estop_sent = False
             self._stop_done.clear()
             self._reader_active = True
+            self._send_start_s = time.monotonic()  # the firmware cannot start the move before this
             try:
                 self._write(packet)
             except BaseException:
@@ -113,6 +117,7 @@ class _Link:
     def _settle(self, reply: Optional[int]) -> None:
         """Judge the reply to the pending exchange (called by whichever thread read it)."""
         ex, estop = self._take_pending()
+        elapsed_s = time.monotonic() - self._send_start_s
         if estop:
             try:
                 error = self._resolve_stop(ex, reply)
@@ -123,6 +128,9 @@ class _Link:
             raise error
         if reply is None:
             raise self._lost(ex)
+        reason = self._unexplained(ex, reply, elapsed_s)
+        if reason is not None:
+            raise self._fault(ex.what, reason)
         if reply == ex.expected:
             self._state = ex.next_state
             self.position_pulses = tuple(p + d for p, d in zip(self.position_pulses, ex.moved))  # type: ignore
@@ -132,39 +140,17 @@ class _Link:
             self._after_stop(ex.mode)
             raise PortError(f"limit switch {SWITCH_NAMES[reply]} ({reply:#04x}) tripped during {ex.what}; "
                             f"the board backed off and ended the job ({where})")
-        if reply == MACHINESTOPPED:
-            where = self._where()
-            self._after_stop(ex.mode)
-            raise PortError(f"MAXIMUS board reported an emergency stop during {ex.what}; drivers disabled ({where})")
-        self._state = _UNKNOWN
-        raise PortError(f"MAXIMUS board answered {_name(reply)} instead of {_name(ex.expected)} after "
-                        f"{ex.what}; nothing more sent ({self._where()})")
+        raise self._fault(ex.what, f"the board answered {_name(reply)} instead of {_name(ex.expected)}")
 
-    def _lost(self, ex: _Exchange) -> PortError:
-        """No reply in time.  During a move the firmware honours the stop byte: send it, and if the board
-        answers it is stopped (spindle off, ready); otherwise nothing more is sent."""
-        waited = (f"MAXIMUS board did not answer within {self._deadline_s(ex):.1f} s after {ex.what} "
-                  f"(expected {_name(ex.expected)}")
-        waited += f"; its move takes {ex.move_ns / 1e9:.1f} s)" if ex.move_ns else ")"
-        where = self._where()
-        self._state = _UNKNOWN
-        if not ex.moving:
-            return PortError(f"{waited}; nothing more sent ({where}); reset the board")
-        try:
-            self._write(bytes([EMERGENCYSTOP]))
-            reply = self._read_byte(self.timeout_s)
-            if reply == ex.expected or reply in SWITCH_NAMES:  # late: the stop byte may have been read as data
-                reply = self._read_byte(min(0.3, self.timeout_s))
-        except PortError:
-            reply = None
-        if reply != MACHINESTOPPED:
-            return PortError(f"{waited}; sent the stop byte, no answer: switch the machine off and reset the "
-                             f"board ({where})")
-        try:
-            self._after_stop(ex.mode)
-        except PortError as exc:
-            return PortError(f"{waited}; the stop byte stopped it, then: {exc}")
-        return PortError(f"{waited}; stopped it with the stop byte (MACHINESTOPPED), spindle off ({where})")
+    def _lost(self, ex: _Exchange) -> LinkFault:
+        """No reply in time.  Nothing is sent, not even the stop byte: the firmware may be waiting for the
+        rest of a packet that lost a byte on the way, and any byte would complete it, as often as not into
+        a move (docs/maximus.md, "When the link fails")."""
+        waited = (f"the MAXIMUS board did not answer within {self._deadline_s(ex):.1f} s (expected "
+                  f"{_name(ex.expected)}")
+        waited += f"; the move takes {ex.move_ns / 1e9:.3f} s)" if ex.move_ns else ")"
+        return self._fault(ex.what, f"{waited}: a byte of the packet or its answer was lost, or the board is "
+                                    f"off or disconnected")
 
     # -------------------------------------------------------------- after a stop: spindle off, mode closed
     def _after_stop(self, mode: str) -> None:
@@ -207,6 +193,7 @@ class _Link:
             self._after_stop(ex.mode)
             return PortError(f"emergency stop during {ex.what}: the board answered MACHINESTOPPED, drivers "
                              f"disabled, spindle off")
+        self.position_known = False  # the stop byte met no move, or the board did not say where it stopped
         if reply is None:
             self._state = _UNKNOWN
             self._stop_error = PortError(f"emergency stop sent during {ex.what} but the board did not "
@@ -341,7 +328,9 @@ class _Link:
         self._begin_job()
         try:
             self._require(_MODE)
-            return session()
+            result = session()
+            self._end_quiet("the end of the job")  # the last reply was the last byte
+            return result
         except BaseException:
             self._clean_up_after()
             raise

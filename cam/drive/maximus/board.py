@@ -23,12 +23,13 @@ Safety rules kept by every method:
 * every reply is awaited for as long as the move it answers takes at the
   board's Delay settings, plus what a limit switch would add, plus a margin
   (``timeout_s``): a long move never times out, a dead board is found soon;
-* a missing reply during a move is answered with the stop byte: if the board
-  stops (MACHINESTOPPED) the spindle is switched off and it is ready again;
-  after any other missing or unexpected reply nothing more is sent: the
-  firmware's state is unknown, the board is marked out of step and every
-  later call fails until :meth:`MaximusBoard.handshake` succeeds again (after
-  a reset);
+* a reply that comes sooner than its move could have ended, any byte the
+  host did not ask for, a wrong reply or none in time is a link fault
+  (:class:`LinkFault`, :mod:`._trust`): nothing more is sent, not even the
+  stop byte (the firmware may hold part of a packet that any byte would
+  complete into a move), the firmware's state and the head's position are
+  unknown, and every later call fails until :meth:`MaximusBoard.handshake`
+  succeeds again (after the board is switched off and on);
 * a limit switch or an emergency stop ends the job with a one-line
   ``PortError`` naming the hole index and the last known position; the
   spindle is switched off and the firmware is back at mode selection;
@@ -49,6 +50,7 @@ import serial
 from ...errors import PlanError, PortError, SettingsError
 from ...settings import DEFAULT_SETTINGS, MachineSettings, Maximus, Travel
 from ._drill import _Drilling, drill_job
+from ._trust import LinkFault, emulator_speed
 from ._link import _CLOSE_DRILL, _DRILL, _INIT, _JOG, _MODE, _OFFSET, _UNKNOWN, _Exchange, _Link
 from .packets import (
     MAX_FIELD, close_drill_packet, drill_moves, drill_packet, drill_time_ns, init_packet, jog_exit_packet,
@@ -60,7 +62,7 @@ from .protocol import (
 )
 
 __all__ = [
-    "MaximusBoard", "open_maximus", "URL_PREFIX", "MAXIMUS_SETTINGS", "maximus_holes", "drill_arguments",
+    "MaximusBoard", "LinkFault", "open_maximus", "URL_PREFIX", "MAXIMUS_SETTINGS", "maximus_holes", "drill_arguments",
     "board_settings", "with_delays", "maximus_port", "to_board", "from_board", "drill_stroke", "drill_job",
     "jog_packet", "jog_exit_packet", "offset_packet", "init_packet", "start_drill_packet",
     "drill_packet", "close_drill_packet", "drill_moves",
@@ -196,6 +198,8 @@ class MaximusBoard(_Drilling, _Link, AbstractContextManager):
         banner: ``"MAXIMUS_V1.0"`` if the power-up banner was seen, else None.
         position_pulses: ``(x, y, z)`` board-frame pulses (y up, z height) from where the board was opened, as
             far as confirmed replies tell.
+        position_known: False after a link fault (:class:`~._trust.LinkFault`) or an unanswered stop: the head
+            may have moved since ``position_pulses``.
     """
 
     def __init__(self, url_or_device: str, settings: Optional[Maximus] = None, *, timeout_s: Optional[float] = None,
@@ -211,6 +215,9 @@ class MaximusBoard(_Drilling, _Link, AbstractContextManager):
         self.timeout_s = float(timeout_s)
         self.banner: str | None = None
         self.position_pulses: tuple[int, int, int] = (0, 0, 0)
+        self.position_known = True
+        self._time_scale = emulator_speed(device)
+        self._send_start_s = time.monotonic()
         self._lock = threading.RLock()
         self._state = _UNKNOWN
         self._pending: _Exchange | None = None
