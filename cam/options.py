@@ -14,8 +14,14 @@ declaration of a setting of a job.  From it come:
 
 One name for one setting: the field is ``cut_depth_mm``, the flag
 ``--cut-depth`` (the field without its unit, ``_`` as ``-``), and the
-planners take the field's name as their keyword.  A flag renamed so keeps its
-old spelling as an alias (``--excellon-format`` of ``--excellon-digits``).
+planners, readers and the tracer take the field's name as their keyword, in
+the field's unit (``plan(stepdown_mm=)``, ``load_excellon(excellon_digits=)``,
+``trace(trace_min_length_px=)``; a planner that works in other units converts
+in one place, e.g. :func:`cam.job.drawing_stream.stepdown_px_of`).  A flag
+renamed so keeps its old spelling as a hidden alias, accepted but not shown in
+``--help`` (``--excellon-format`` of ``--excellon-digits``; ``cam trace``'s
+``--min-length`` and ``--fill``).  ``tests/test_options_schema.py`` fails on a
+planner keyword or a shown flag that is a second name of an option.
 
 Standard library and :mod:`cam.limits` only: ``cam --help`` loads it.
 """
@@ -66,7 +72,7 @@ class Option:
         choices: the values a "choice" takes.
         metavar: the value's name in ``--help``.
         web: whether the page may set it (False: it names files on the machine that runs `cam`).
-        aliases: older flags still accepted for it (``--excellon-format``).
+        aliases: older flags still accepted for it, hidden from ``--help`` (``--excellon-format``).
     """
 
     name: str

@@ -42,6 +42,10 @@ def _word() -> tuple[cam.Digitized, dict]:
                                                                     start_at=(-1, 0, -1))
 
 
+Z_PX_MM = cam.MachineSettings().px_to_mm_z(1)
+"""One Z pixel in mm (the step-down is given in mm, as the job option stepdown_mm)."""
+
+
 def _relief(size: int, radius: int, expr: str, **kw) -> tuple[cam.Digitized, dict]:
     d = cam.digitize(_disc(size, radius))
     kw = dict(kw)
@@ -56,9 +60,10 @@ CASES = {
     "3d-ball-finer-pause-start": lambda: _relief(21, 9, HEMISPHERE, tool="ball:1", start_at=(2, 1, 1), pause=True),
     "3d-flat-finer-start-z": lambda: _relief(21, 9, HEMISPHERE, tool="flat:0.5", start_at=(0, 3, 2)),
     "3d-v-cone-passes": lambda: _relief(21, 9, "k*3", tool="v:60:0", passes=2),
-    "3d-rough-tool-change-then-ball": lambda: _relief(25, 11, HEMISPHERE, tool="ball:1", stepdown_px=8,
+    "3d-rough-tool-change-then-ball": lambda: _relief(25, 11, HEMISPHERE, tool="ball:1", stepdown_mm=8 * Z_PX_MM,
                                                       rough_tool="flat:1", pause=True),
-    "3d-rough-point-stepover": lambda: _relief(21, 9, HEMISPHERE, stepdown_px=5, stepover=0.3, start_at=(1, 1, 0)),
+    "3d-rough-point-stepover": lambda: _relief(21, 9, HEMISPHERE, stepdown_mm=5 * Z_PX_MM, stepover=0.3,
+                                               start_at=(1, 1, 0)),
 }
 
 

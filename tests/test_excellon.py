@@ -67,16 +67,16 @@ def test_generated_styles_match_gerbonara_and_the_written_holes(style):
 
 def test_the_format_given_by_the_caller_is_used_when_the_file_does_not_say():
     g = gen.eagle_inch_2_4(BOARD)
-    holes = parse_excellon(g.text, units="inch", digits=(2, 4), zeros="TZ")
+    holes = parse_excellon(g.text, excellon_units="inch", excellon_digits=(2, 4), excellon_zeros="TZ")
     assert holes.warnings == []
     np.testing.assert_allclose(holes.holes_mm, g.holes_mm, rtol=0, atol=1e-9)
     # another digit split moves the decimal point: 3:3 metric file read as 4:2
     m = gen.metric_tz_implied(BOARD)
-    wide = parse_excellon(m.text, digits=(4, 2))
+    wide = parse_excellon(m.text, excellon_digits=(4, 2))
     np.testing.assert_allclose(wide.holes_mm, m.holes_mm * 10, rtol=0, atol=1e-9)
     # ... but what the file states wins over the caller
     k = gen.kicad_inch_suppress_leading(BOARD)
-    stated = parse_excellon(k.text, units="metric", digits=(3, 3), zeros="LZ")
+    stated = parse_excellon(k.text, excellon_units="metric", excellon_digits=(3, 3), excellon_zeros="LZ")
     np.testing.assert_allclose(stated.holes_mm, k.holes_mm, rtol=0, atol=1e-9)
 
 
@@ -90,8 +90,8 @@ def _xy(text: str, **kw) -> list[list[float]]:
 
 def test_zero_suppression_and_digit_formats():
     # LZ keeps leading zeros: digits read from the left; TZ keeps trailing zeros: read from the right
-    assert _xy("M48\nMETRIC,LZ\nT1C0.8\n%\nT1\nX0125Y-0005\nM30\n", digits=(3, 3)) == [[12.5, -0.5]]
-    assert _xy("M48\nMETRIC,TZ\nT1C0.8\n%\nT1\nX12500Y-500\nM30\n", digits=(3, 3)) == [[12.5, -0.5]]
+    assert _xy("M48\nMETRIC,LZ\nT1C0.8\n%\nT1\nX0125Y-0005\nM30\n", excellon_digits=(3, 3)) == [[12.5, -0.5]]
+    assert _xy("M48\nMETRIC,TZ\nT1C0.8\n%\nT1\nX12500Y-500\nM30\n", excellon_digits=(3, 3)) == [[12.5, -0.5]]
     assert _xy("M48\nINCH,LZ\nT1C0.02\n%\nT1\nX01Y00005\nM30\n") == [[25.4, 0.127]]
     assert _xy("M48\nINCH,TZ\nT1C0.02\n%\nT1\nX10000Y50\nM30\n") == [[25.4, 0.127]]
     # the format in the units line, in a KiCad, Altium or Siemens comment
@@ -183,9 +183,9 @@ def test_binary_and_missing_files(tmp_path):
     with pytest.raises(CamError, match="cannot read"):
         load_excellon(tmp_path / "missing.drl")
     with pytest.raises(CamError, match="zeros"):
-        parse_excellon("M48\n", zeros="leading")
+        parse_excellon("M48\n", excellon_zeros="leading")
     with pytest.raises(CamError, match="digits"):
-        parse_excellon("M48\n", digits=(2, 9))
+        parse_excellon("M48\n", excellon_digits=(2, 9))
 
 
 def _warnings(text: str) -> tuple[HoleList, list[str]]:
@@ -268,13 +268,13 @@ def test_info_uses_the_excellon_format_options(tmp_path, capsys):
     g = gen.eagle_inch_2_4(BOARD)
     path = tmp_path / "eagle.drl"
     path.write_text(g.text)
-    assert main(["info", str(path), "--excellon-units", "inch", "--excellon-format", "2:4",
+    assert main(["info", str(path), "--excellon-units", "inch", "--excellon-digits", "2:4",
                  "--excellon-zeros", "TZ"]) == 0
     out = capsys.readouterr().out
     assert "warning" not in out
-    assert main(["info", str(path), "--excellon-units", "metric", "--excellon-format", "3:3"]) == 0
+    assert main(["info", str(path), "--excellon-units", "metric", "--excellon-digits", "3:3"]) == 0
     out = capsys.readouterr().out
-    metric = parse_excellon(g.text, units="metric", digits=(3, 3))
+    metric = parse_excellon(g.text, excellon_units="metric", excellon_digits=(3, 3))
     x0, _, x1, _ = metric.extent_mm()
     assert f"X {x0:.3f}..{x1:.3f} mm" in out and "warning" in out  # zeros still assumed
 

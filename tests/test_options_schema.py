@@ -171,6 +171,7 @@ def test_trace_min_length_is_one_range_in_trace_and_drill():
     o = next(o for o in JOB_OPTIONS if o.name == "trace_min_length_px")
     for v in (o.lo - 1, o.lo, o.hi, o.hi + 1):
         accepted = o.lo <= v <= o.hi
+        assert _cli_accepts(["trace", "photo.jpg", "-o", "d.png", "--trace-min-length", str(int(v))]) == accepted
         assert _cli_accepts(["trace", "photo.jpg", "-o", "d.png", "--min-length", str(int(v))]) == accepted
         assert _cli_accepts(["drill", "photo.jpg", "--trace-min-length", str(int(v))]) == accepted
 
@@ -195,6 +196,102 @@ def test_one_name_for_the_depth_and_height_in_the_planners():
         assert names <= set(inspect.signature(planner).parameters), planner.__name__
 
 
+def _stem(name: str) -> str:
+    """A setting's name without its unit and kind: ``stepdown_px`` and ``stepdown_mm`` -> ``stepdown``,
+    ``excellon_digits`` and ``digits`` -> ``digits``, ``trace_min_length_px`` -> ``min_length``."""
+    name = re.sub(r"_(mm|px|z_px|deg|steps|in|inch)$", "", name)
+    return re.sub(r"^(excellon|trace|drill|svg|hpgl|gcode)_", "", name)
+
+
+def _planners() -> list:
+    """Every function that takes job options as keywords: the planners, the readers with options, the tracer."""
+    from cam.digitize.sketch import trace
+    from cam.formats.excellon import load_excellon, parse_excellon
+    from cam.job.drawing_stream import plan, stream_drawing
+    from cam.job.drill import plan_drill
+    from cam.job.gcode import plan_gcode
+    from cam.job.hpgl import plan_hpgl
+    from cam.job.hpgl_stream import stream_hpgl
+    from cam.job.svg import plan_svg
+
+    return [plan, stream_drawing, plan_drill, plan_hpgl, stream_hpgl, plan_svg, plan_gcode, parse_excellon,
+            load_excellon, trace]
+
+
+def test_no_planner_keyword_is_a_second_name_of_an_option():
+    """A planner's keyword that is an option's setting (the same name up to its unit or kind prefix) is the
+    option's name: no ``stepdown_px`` beside ``stepdown_mm``, no ``digits`` beside ``excellon_digits``, no
+    ``min_length_px`` beside ``trace_min_length_px``."""
+    import inspect
+
+    by_stem = {_stem(o.name): o.name for o in JOB_OPTIONS}
+    assert len(by_stem) == len(JOB_OPTIONS)
+    for planner in _planners():
+        for param in inspect.signature(planner).parameters:
+            option = by_stem.get(_stem(param))
+            assert option is None or param == option, f"{planner.__name__}({param}=): the option is {option}"
+    wanted = {"stepdown_mm", "stepover", "rough_tool", "tool", "depth", "passes", "start_at", "pause_at", "profile"}
+    for planner in _planners()[:2]:
+        assert wanted <= set(inspect.signature(planner).parameters), planner.__name__
+    for planner in _planners()[-3:-1]:
+        assert {"excellon_units", "excellon_digits", "excellon_zeros"} <= set(inspect.signature(planner).parameters)
+    assert {"trace_min_length_px", "trace_fill"} <= set(inspect.signature(_planners()[-1]).parameters)
+
+
+def _commands() -> dict[str, argparse.ArgumentParser]:
+    return dict(build_parser()._subparsers._group_actions[0].choices)  # type: ignore[union-attr]
+
+
+def test_no_command_shows_a_second_flag_of_an_option():
+    """On every command, a shown flag that is an option's setting (same name up to its unit or kind prefix) is
+    the option's flag, with the option's dest; an older spelling is accepted only hidden (not in --help)."""
+    by_stem = {_stem(o.dest): o for o in JOB_OPTIONS}
+    for command, parser in _commands().items():
+        for action in parser._actions:
+            if not action.option_strings:
+                continue
+            o = by_stem.get(_stem(action.dest))
+            if o is None:
+                continue
+            shown = action.help != argparse.SUPPRESS
+            assert action.dest == o.dest, (command, action.option_strings, o.name)
+            if shown:
+                assert action.option_strings == [o.flag], (command, action.option_strings, o.flag)
+            else:
+                assert o.flag not in action.option_strings, (command, action.option_strings)
+
+
+def test_trace_takes_drill_traces_flags():
+    """``cam trace`` and ``cam drill --trace`` set the tracer's two settings by the same flags."""
+    trace = build_parser().parse_args(["trace", "p.jpg", "-o", "d.png", "--trace-min-length", "12", "--trace-fill"])
+    drill = build_parser().parse_args(["drill", "p.jpg", "--trace", "--trace-min-length", "12", "--trace-fill"])
+    assert (trace.trace_min_length, trace.trace_fill) == (drill.trace_min_length, drill.trace_fill) == (12, True)
+
+
+def test_the_stepdown_is_converted_in_one_place(monkeypatch):
+    """The planner takes stepdown_mm, as JobOptions and --stepdown do: prepare_job gives it the option's value
+    unchanged, and the planner's levels are stepdown_px_of(stepdown_mm) Z pixels apart."""
+    import cam
+    from cam.job import jobs
+    from cam.job.drawing_stream import stepdown_px_of
+
+    s = cam.MachineSettings()
+    one = s.px_to_mm_z(1)
+    assert [stepdown_px_of(k * one, s) for k in (0.01, 1, 2, 30, 30.5)] == [1, 1, 2, 30, 30]
+    seen: dict = {}
+    real = jobs.plan
+
+    def spy(digitized, **kw):
+        seen.update(kw)
+        return real(digitized, **kw)
+
+    monkeypatch.setattr(jobs, "plan", spy)
+    jobs.prepare_job(SAMPLES / "disc.png", JobOptions(profile_expr="k", tool="ball:1", stepdown_mm=0.1), s)
+    assert seen["stepdown_mm"] == 0.1 and "stepdown_px" not in seen
+    with pytest.raises(CamError, match="stepdown_mm must be > 0"):
+        cam.plan(cam.digitize(cam.load_image(SAMPLES / "disc.png")), profile=lambda k: k, stepdown_mm=0.0)
+
+
 def test_the_help_of_each_flag_is_the_schemas():
     parser = build_parser()
     drill = next(a for a in parser._subparsers._group_actions[0].choices.items() if a[0] == "drill")[1]  # type: ignore[union-attr]
@@ -205,8 +302,10 @@ def test_the_help_of_each_flag_is_the_schemas():
 
 
 def test_a_renamed_flag_keeps_its_old_spelling():
-    """--excellon-digits is excellon_digits' flag; --excellon-format, its old name, still sets it."""
+    """--excellon-digits is excellon_digits' flag; --excellon-format, its old name, still sets it, hidden."""
     for flag in ("--excellon-digits", "--excellon-format"):
         args = build_parser().parse_args(["drill", str(KIND_FILES["excellon"]), flag, "3:3"])
         assert args.excellon_digits == [3, 3]
     assert run_cli("drill", KIND_FILES["excellon"], "--excellon-format", "9:1").returncode == 2
+    for command in ("drill", "info"):
+        assert "--excellon-format" not in run_cli(command, "--help").stdout

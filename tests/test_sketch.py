@@ -122,7 +122,7 @@ def test_junctions_are_split_so_no_pixel_has_three_neighbours():
 
 def test_fill_makes_a_3d_drawing_that_digitizes():
     scan = Scan(seed=6).circle(100, 150, 70).polyline([(220, 60), (360, 60), (360, 240), (220, 240)], closed=True)
-    d = trace(scan.image(), fill=True)
+    d = trace(scan.image(), trace_fill=True)
     assert d.regions_filled == 2 and d.kind == "3d"
     assert (d.classes == RED).sum() > 0.8 * (np.pi * 68 ** 2 + 138 * 178)
     digitized = cam.digitize(d)
@@ -157,7 +157,8 @@ def test_large_photos_are_shrunk_first():
 @pytest.mark.parametrize("image, kw, match", [
     (np.zeros((4, 4), np.uint8), {}, "too small"),
     (np.zeros((20, 20, 2), np.uint8), {}, "image array"),
-    (np.zeros((20, 20), np.uint8), {"min_length_px": 1}, "at least 2"),
+    (np.zeros((20, 20), np.uint8), {"trace_min_length_px": 1}, "trace_min_length_px must be 2..10000"),
+    (np.zeros((20, 20), np.uint8), {"trace_min_length_px": 10_001}, "trace_min_length_px must be 2..10000"),
 ])
 def test_bad_input_is_a_drawing_error(image, kw, match):
     with pytest.raises(cam.DrawingError, match=match):
@@ -177,19 +178,35 @@ def cli(*args):
 def test_cli_trace_then_drill(tmp_path):
     photo = tmp_path / "sketch.jpg"
     cv2.imwrite(str(photo), shapes(11).dots(5).image())
-    out = cli("trace", str(photo), "-o", str(tmp_path / "drawing.png"), "--min-length", "8")
+    out = cli("trace", str(photo), "-o", str(tmp_path / "drawing.png"), "--trace-min-length", "8")
     assert out.returncode == 0, out.stderr
     assert "3 curve(s)" in out.stdout and "speck(s)" in out.stdout and "junction(s) split" in out.stdout
     drill = cli("drill", str(tmp_path / "drawing.png"), "--depth", "2")
     assert drill.returncode == 0 and "3 object(s)" in drill.stdout
-    assert cli("trace", str(photo), "-o", str(tmp_path / "d3.png"), "--fill").returncode == 0
+    assert cli("trace", str(photo), "-o", str(tmp_path / "d3.png"), "--trace-fill").returncode == 0
     assert cli("drill", str(tmp_path / "d3.png"), "--profile-expr", "2").returncode == 0
+
+
+def test_cli_trace_keeps_its_old_flags_hidden(tmp_path):
+    """--min-length and --fill, the old spellings of trace's --trace-min-length and --trace-fill, still work but
+    are not in --help (one name per setting there)."""
+    photo = tmp_path / "sketch.png"
+    cv2.imwrite(str(photo), shapes(11).image())
+    new = cli("trace", str(photo), "-o", str(tmp_path / "a.png"), "--trace-min-length", "8", "--trace-fill")
+    old = cli("trace", str(photo), "-o", str(tmp_path / "b.png"), "--min-length", "8", "--fill")
+    assert new.returncode == old.returncode == 0, (new.stderr, old.stderr)
+    assert (tmp_path / "a.png").read_bytes() == (tmp_path / "b.png").read_bytes()
+    help_text = cli("trace", "--help").stdout
+    assert "--trace-min-length" in help_text and "--trace-fill" in help_text
+    assert "--min-length" not in help_text.replace("--trace-min-length", "")
+    assert "--fill" not in help_text.replace("--trace-fill", "")
 
 
 @pytest.mark.parametrize("args, fragment", [
     (["missing.jpg", "-o", "d.png"], "not found"),
     (["{photo}", "-o", "d.jpg"], "must end in"),
-    (["{photo}", "-o", "d.png", "--min-length", "1"], "--min-length"),
+    (["{photo}", "-o", "d.png", "--trace-min-length", "1"], "--trace-min-length must be 2..10000"),
+    (["{photo}", "-o", "d.png", "--min-length", "10001"], "--trace-min-length must be 2..10000"),
 ])
 def test_cli_bad_input_is_one_line(tmp_path, args, fragment):
     photo = tmp_path / "s.png"
@@ -206,7 +223,7 @@ def test_drill_trace_option_plans_what_trace_then_drill_plans(tmp_path):
 
     sketch = ROOT / "samples" / "sketch.jpg"
     job = prepare_job(sketch, JobOptions(depth=(2,), trace=True, trace_min_length_px=12), cam.MachineSettings())
-    drawing = trace(load_sketch(sketch), min_length_px=12, source=str(sketch))
+    drawing = trace(load_sketch(sketch), trace_min_length_px=12, source=str(sketch))
     expected = cam.plan_steps(cam.plan(cam.digitize(drawing), depth=2, settings=cam.MachineSettings()))
     assert np.array_equal(job.steps.data, expected.data)
     assert any("traced:" in w for w in job.warnings)

@@ -257,8 +257,7 @@ def test_roughing_with_a_larger_tool_then_finishing_never_gouges_and_changes_too
     d = cam.digitize(drawing())
     profile = cam.profile_from_expr(expr, d.n_layers)
     want, _, _ = carve_job(cam.plan(d, profile=profile))
-    stepdown = 30
-    job = cam.plan(d, profile=profile, tool="ball:1", stepdown_px=stepdown, rough_tool="flat:2")
+    job = cam.plan(d, profile=profile, tool="ball:1", stepdown_mm=30 * SETTINGS.px_to_mm_z(1), rough_tool="flat:2")
     assert job.pause_notes and job.pause_notes[0].startswith("tool change")
     plan = cam.plan_steps(job)
     change = int(plan.pause_writes[0])
@@ -283,8 +282,8 @@ def test_a_wider_stepover_makes_fewer_roughing_moves():
     drawing, expr = RELIEFS["stepped pyramid"]
     d = cam.digitize(drawing())
     profile = cam.profile_from_expr(expr, d.n_layers)
-    dense = cam.plan(d, profile=profile, tool="flat:1", stepdown_px=20, stepover=0.25)
-    sparse = cam.plan(d, profile=profile, tool="flat:1", stepdown_px=20, stepover=1.0)
+    dense = cam.plan(d, profile=profile, tool="flat:1", stepdown_mm=20 * SETTINGS.px_to_mm_z(1), stepover=0.25)
+    sparse = cam.plan(d, profile=profile, tool="flat:1", stepdown_mm=20 * SETTINGS.px_to_mm_z(1), stepover=1.0)
     assert len(sparse) < len(dense)
     assert dense.pause_notes is None  # one tool: no change
 
@@ -292,7 +291,7 @@ def test_a_wider_stepover_makes_fewer_roughing_moves():
 def test_roughing_refuses_a_2d_drawing():
     d = cam.digitize(cam.load_image(ROOT / "samples" / "ellipse.png"))
     with pytest.raises(CamError, match="3D reliefs"):
-        cam.plan(d, depth=5, stepdown_px=3)
+        cam.plan(d, depth=5, stepdown_mm=0.05)
 
 
 @pytest.mark.parametrize("name", ["logo.svg", "seed_tools.plt"])

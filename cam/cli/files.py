@@ -75,8 +75,8 @@ def cmd_digitize(args: argparse.Namespace) -> int:
 
 
 def _load_drill_file(args: argparse.Namespace) -> HoleList:
-    return load_excellon(args.image, units=args.excellon_units, digits=excellon_digits(args),
-                         zeros=args.excellon_zeros)
+    return load_excellon(args.image, excellon_units=args.excellon_units, excellon_digits=excellon_digits(args),
+                         excellon_zeros=args.excellon_zeros)
 
 
 def _info_excellon(args: argparse.Namespace) -> int:

@@ -152,9 +152,10 @@ def _schema_list(o: Option, flag: str, whole: bool, separator: str = ",",
 
 
 def _add_option(container: argparse._ActionsContainer, name: str, flag: Optional[str] = None,
-                **overrides: object) -> argparse.Action:
+                hidden: Sequence[str] = (), **overrides: object) -> argparse.Action:
     """Add the job option ``name`` of :data:`cam.options.OPTIONS` as its flag: its type and range, metavar and
-    help come from the schema (``overrides``: argparse keywords that differ on this command, such as its help)."""
+    help come from the schema (``overrides``: argparse keywords that differ on this command, such as its help;
+    ``hidden``: old spellings this command still accepts, besides the option's own aliases)."""
     o = OPTIONS[name]
     flag = flag or o.flag
     kw: dict = {"help": o.help}
@@ -181,8 +182,13 @@ def _add_option(container: argparse._ActionsContainer, name: str, flag: Optional
     elif o.type == "paths":
         kw["action"] = "append"
     kw.update(overrides)
-    aliases = o.aliases if flag == o.flag else ()
-    return container.add_argument(flag, *aliases, **kw)
+    action = container.add_argument(flag, **kw)
+    for alias in (*(o.aliases if flag == o.flag else ()), *hidden):
+        # an older spelling: still accepted (same dest, type and range), not shown in --help, so the help and
+        # the docs have one name per setting
+        container.add_argument(alias, **{**kw, "dest": action.dest, "default": action.default,
+                                         "help": argparse.SUPPRESS})
+    return action
 
 
 # -- option groups shared by several commands -----------------------------------------------------
@@ -395,16 +401,18 @@ def _add_trace(sub: argparse._SubParsersAction) -> None:
         "trace", help="turn a scanned sketch or a photo of a drawing into a drawing (1-pixel black curves)",
         description="Trace a pencil or ink sketch (a scan or a phone photo: dark lines on light paper) into a "
         "drawing that follows the thesis rules: the paper's uneven light is flattened, the lines are found by an "
-        "adaptive threshold and thinned to 1-pixel centre lines, specks and spurs shorter than --min-length are "
-        "removed, junctions are split so that no pixel has more than two black neighbours, and nothing touches "
-        "the border. --fill makes every closed region red (a 3D drawing). The result is ready for 'cam drill'.",
+        "adaptive threshold and thinned to 1-pixel centre lines, specks and spurs shorter than --trace-min-length "
+        "are removed, junctions are split so that no pixel has more than two black neighbours, and nothing "
+        "touches the border. --trace-fill makes every closed region red (a 3D drawing). The result is ready for "
+        "'cam drill' (whose --trace does the same in one step, with the same two options).",
     )
     t.add_argument("image", metavar="PHOTO", help=f"the sketch ({_listed(DRAWING_SUFFIXES)})")
     t.add_argument("-o", "--output", required=True, metavar="DRAWING.png",
                    help="where to write the drawing (.png, .bmp or .tif: never JPEG, which blurs 1-pixel lines)")
-    _add_option(t, "trace_min_length_px", "--min-length", default=OPTIONS["trace_min_length_px"].default,
-                help="remove specks and spurs shorter than this many pixels (default 10; drill's --trace-min-length)")
-    t.add_argument("--fill", action="store_true", help="make the regions enclosed by curves red (3D drawing)")
+    # the job options of 'drill --trace', under the same names (--min-length and --fill: their old spellings)
+    _add_option(t, "trace_min_length_px", hidden=("--min-length",), default=OPTIONS["trace_min_length_px"].default,
+                help="remove specks and spurs shorter than this many pixels (default 10)")
+    _add_option(t, "trace_fill", hidden=("--fill",), help="make the regions enclosed by curves red (3D drawing)")
     t.add_argument("--max-side", type=_whole("--max-side", 16, 32768), default=1000, metavar="PX",
                    help="shrink a larger photo to this many pixels on its longer side first (default 1000)")
 

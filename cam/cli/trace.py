@@ -11,7 +11,7 @@ __all__ = ["cmd_trace"]
 
 
 def cmd_trace(args: argparse.Namespace) -> int:
-    drawing = trace(load_sketch(args.image), min_length_px=args.min_length, fill=args.fill,
+    drawing = trace(load_sketch(args.image), trace_min_length_px=args.trace_min_length, trace_fill=args.trace_fill,
                     max_side_px=args.max_side, source=args.image)
     for w in drawing.warnings:
         print(f"warning: {w}", file=sys.stderr)

@@ -17,21 +17,21 @@ The steps of :func:`trace`:
 3. **Thinning** with scikit-image's ``skeletonize`` to 1-pixel centre lines,
    then every pixel that the 8-connected line does not need (the corner of a
    staircase) is removed.
-4. **Specks and spurs.**  A piece with fewer than ``min_length_px`` pixels is
+4. **Specks and spurs.**  A piece with fewer than ``trace_min_length_px`` pixels is
    removed (a speck); so is a branch shorter than that from a free end to a
    junction (a spur), repeatedly.
 5. **Junctions.**  Where three or more branches meet, the two that continue
    each other best (the straightest pair, when they turn by less than 60°)
    stay joined through the junction; the others are cut back until no pixel
    has more than two black neighbours.  What is left of them is kept if it is
-   still ``min_length_px`` long.
+   still ``trace_min_length_px`` long.
 6. **Border.**  Nothing is left on the image border.
-7. ``fill=True``: every white region enclosed by a curve (4-connected, not
+7. ``trace_fill=True``: every white region enclosed by a curve (4-connected, not
    reaching the border) becomes red: a 3D drawing.
 
 >>> import numpy as np
 >>> img = np.full((40, 60), 230, np.uint8); img[18:22, 5:55] = 40   # a thick dark bar on grey paper
->>> d = trace(img, min_length_px=5)
+>>> d = trace(img, trace_min_length_px=5)
 >>> d.curves, d.warnings, int(d.black.sum()) >= 40
 (1, [], True)
 """
@@ -48,12 +48,14 @@ from scipy import ndimage
 from skimage.morphology import skeletonize
 
 from ..errors import DrawingError
+from ..options import OPTIONS
 from .drawing import BLACK, RED, WHITE, Drawing, _read_rgb, check_rules
 
 __all__ = ["trace", "load_sketch", "TracedDrawing", "DEFAULT_MIN_LENGTH_PX", "DEFAULT_MAX_SIDE_PX", "INK_MAX", "LOCAL_CONTRAST"]
 
-DEFAULT_MIN_LENGTH_PX = 10
-"""Specks and spurs shorter than this many pixels are removed."""
+DEFAULT_MIN_LENGTH_PX: int = OPTIONS["trace_min_length_px"].default
+"""Specks and spurs shorter than this many pixels are removed (the job option ``trace_min_length_px``'s default:
+:mod:`cam.options` declares it, with its range, once)."""
 DEFAULT_MAX_SIDE_PX = 1000
 """A larger photo is shrunk to this many pixels on its longer side before tracing (the thesis machine's
 travel holds 1251 pixels a side)."""
@@ -77,7 +79,7 @@ class TracedDrawing(Drawing):
         specks_removed: pieces shorter than ``min_length_px`` removed (ink dots, dirt, noise).
         spurs_removed: short branches from a free end to a junction removed.
         junctions_split: places where three or more branches met, resolved.
-        regions_filled: white regions made red (``fill=True``).
+        regions_filled: white regions made red (``trace_fill=True``).
         shrink: the input was shrunk by this factor first (1.0: not shrunk).
     """
 
@@ -375,8 +377,8 @@ def load_sketch(path: str | os.PathLike) -> np.ndarray:
 def trace(
     image: np.ndarray,
     *,
-    min_length_px: int = DEFAULT_MIN_LENGTH_PX,
-    fill: bool = False,
+    trace_min_length_px: int = DEFAULT_MIN_LENGTH_PX,
+    trace_fill: bool = False,
     max_side_px: Optional[int] = DEFAULT_MAX_SIDE_PX,
     window_px: Optional[int] = None,
     source: str = "<array>",
@@ -385,23 +387,27 @@ def trace(
 
     Args:
         image: ``(H, W)`` grey or ``(H, W, 3)`` RGB uint8 array (dark lines on light paper).
-        min_length_px: specks and spurs shorter than this are removed (>= 2).
-        fill: mark the regions enclosed by curves red (a 3D drawing).
+        trace_min_length_px: specks and spurs shorter than this are removed (the range of the job option of
+            the same name, :data:`cam.options.OPTIONS`: 2..10000).
+        trace_fill: mark the regions enclosed by curves red (a 3D drawing); the job option of the same name.
         max_side_px: shrink a larger image to this many pixels on its longer side first (None: never).
         window_px: the background and threshold window (odd; default: about 1/8 of the shorter side, 15..101),
             wider than the thickest stroke.
         source: the name warnings and errors give.
 
     Returns:
-        A :class:`TracedDrawing` (white, black and, with ``fill``, red pixels), ready for
+        A :class:`TracedDrawing` (white, black and, with ``trace_fill``, red pixels), ready for
         :func:`cam.digitize` or to save as PNG; its ``warnings`` are the thesis rule checks (empty when every
         rule holds) and :meth:`TracedDrawing.summary` says what was done.
 
     Raises:
-        DrawingError: not an image array, smaller than 8 px a side, or ``min_length_px`` < 2.
+        DrawingError: not an image array, smaller than 8 px a side, or ``trace_min_length_px`` out of its range.
     """
-    if min_length_px < 2:
-        raise DrawingError(f"{source}: the minimum length must be at least 2 pixels, got {min_length_px}")
+    length = OPTIONS["trace_min_length_px"]
+    if not length.in_range(trace_min_length_px) or trace_min_length_px != int(trace_min_length_px):
+        raise DrawingError(f"{source}: trace_min_length_px must be {length.range_text()} pixels, "
+                           f"got {trace_min_length_px}")
+    min_length_px = int(trace_min_length_px)
     grey = _grey(image)
     h, w = grey.shape
     if min(h, w) < 8:
@@ -427,7 +433,7 @@ def trace(
     skel = _minimal(skel)
     skel, stubs = _remove_specks(skel, min_length_px)
     classes = np.where(skel, BLACK, WHITE).astype(np.uint8)
-    filled = _fill(classes) if fill else 0
+    filled = _fill(classes) if trace_fill else 0
     _, curves = ndimage.label(skel, structure=_EIGHT)
     return TracedDrawing(classes=classes, warnings=check_rules(classes), source=source, curves=int(curves),
                          specks_removed=specks, spurs_removed=spurs + stubs, junctions_split=junctions,

@@ -36,10 +36,11 @@ holes without a trace.
 **Zeros.** Excellon names the zeros a number *keeps*: ``LZ`` keeps leading zeros
 (trailing ones may be dropped, so ``X0125`` in 3:3 is 12.5), ``TZ`` keeps
 trailing zeros (leading ones may be dropped, so ``X12500`` in 3:3 is 12.5).  The
-``zeros`` argument uses the same names.
+``excellon_zeros`` argument uses the same names.
 
 **Defaults** when the file does not state them (each settable by the keyword
-arguments, which in turn give way to what the file says):
+arguments ``excellon_units``, ``excellon_digits`` and ``excellon_zeros``, the job options of the same names
+(:mod:`cam.options`, flags ``--excellon-units`` ...), which in turn give way to what the file says):
 
 * units: ``"inch"`` -- Excellon's own default, and the unit of the OrCAD file in
   seed 000 §8.1, Table 8-1 (``X003000`` = 300 mil);
@@ -79,6 +80,7 @@ import numpy as np
 
 from ..errors import CamError, ParseError
 from ..limits import MAX_COORD_MM, MAX_HOLES, MAX_REPEAT, MAX_TOOL_DIAMETER_MM, MAX_TOOL_NUMBER
+from ..options import OPTIONS
 
 __all__ = [
     "HoleList",
@@ -292,7 +294,7 @@ class _Reader:
             digits = int(a), int(b)
         except ValueError:
             raise self.error(f"bad digit format {a}:{b}") from None
-        if not (0 <= digits[0] <= 8 and 0 <= digits[1] <= 8 and sum(digits) > 0):
+        if not (all(OPTIONS["excellon_digits"].in_range(d) for d in digits) and sum(digits) > 0):
             raise self.error(f"bad digit format {a}:{b}")
         return digits
 
@@ -641,36 +643,43 @@ _WORD_HANDLERS = {"X": _coordinates, "Y": _coordinates, "T": _tool_word, "G": _g
 """Statements by their first letter (``F`` / ``S`` feeds and speeds are read and dropped)."""
 
 
-def _check_options(units, digits, zeros) -> None:
-    if units not in (None, "inch", "metric"):
-        raise CamError(f"Excellon units must be 'inch' or 'metric', got {units!r}")
-    if zeros not in (None, "LZ", "TZ"):
-        raise CamError(f"Excellon zeros must be 'LZ' or 'TZ', got {zeros!r}")
-    if digits is not None:
-        ok = (isinstance(digits, (tuple, list)) and len(digits) == 2
-              and all(isinstance(d, (int, np.integer)) and 0 <= d <= 8 for d in digits) and sum(digits) > 0)
+def _check_options(excellon_units, excellon_digits, excellon_zeros) -> None:
+    """The keywords against their job options' one declaration (:data:`cam.options.OPTIONS`)."""
+    for name, value in (("excellon_units", excellon_units), ("excellon_zeros", excellon_zeros)):
+        choices = OPTIONS[name].choices
+        if value is not None and value not in choices:
+            raise CamError(f"{name} must be " + " or ".join(repr(c) for c in choices) + f", got {value!r}")
+    if excellon_digits is not None:
+        o = OPTIONS["excellon_digits"]
+        ok = (isinstance(excellon_digits, (tuple, list)) and len(excellon_digits) == 2
+              and all(isinstance(d, (int, np.integer)) and o.in_range(float(d)) for d in excellon_digits)
+              and sum(excellon_digits) > 0)
         if not ok:
-            raise CamError(f"Excellon digits must be (integer, fraction) digit counts such as (2, 4), got {digits!r}")
+            raise CamError(f"excellon_digits must be (integer, fraction) digit counts {o.range_text()} such as "
+                           f"(2, 4), got {excellon_digits!r}")
 
 
 def parse_excellon(
     text: str,
     *,
     source: str = "<excellon>",
-    units: str | None = None,
-    digits: tuple[int, int] | None = None,
-    zeros: str | None = None,
+    excellon_units: str | None = None,
+    excellon_digits: tuple[int, int] | None = None,
+    excellon_zeros: str | None = None,
 ) -> HoleList:
     """Read the holes of an Excellon drill program (pure: no I/O).
 
     Args:
         text: the whole file.
         source: file name used in messages.
-        units: "inch" or "metric" when the file does not say (default :data:`DEFAULT_UNITS`).
-        digits: (integer, fraction) digits of implied-decimal numbers when the file does not say
+        excellon_units: "inch" or "metric" when the file does not say (default :data:`DEFAULT_UNITS`).
+        excellon_digits: (integer, fraction) digits of implied-decimal numbers when the file does not say
             (default :data:`DEFAULT_DIGITS` for the units).
-        zeros: "LZ" (leading zeros kept) or "TZ" (trailing zeros kept) when the file does not say
+        excellon_zeros: "LZ" (leading zeros kept) or "TZ" (trailing zeros kept) when the file does not say
             (default :data:`DEFAULT_ZEROS`).
+
+        The three are the job options of the same names (:data:`cam.options.OPTIONS`, ``--excellon-units``,
+        ``--excellon-digits``, ``--excellon-zeros``).
 
     Returns:
         The holes (board frame, mm) with their tools, lines and warnings.
@@ -680,8 +689,9 @@ def parse_excellon(
             a tool selected but never defined, a bad diameter, ... (``file:line: what: 'line text'``).
         CamError: a bad keyword argument.
     """
-    _check_options(units, digits, zeros)
-    r = _Reader(source, units, tuple(digits) if digits is not None else None, zeros)
+    _check_options(excellon_units, excellon_digits, excellon_zeros)
+    r = _Reader(source, excellon_units, tuple(excellon_digits) if excellon_digits is not None else None,
+                excellon_zeros)
     for lineno, raw in enumerate(text.splitlines(), start=1):
         r.line(lineno, raw)
     if not r.seen_excellon:
@@ -707,9 +717,9 @@ def parse_excellon(
 def load_excellon(
     path: str | os.PathLike,
     *,
-    units: str | None = None,
-    digits: tuple[int, int] | None = None,
-    zeros: str | None = None,
+    excellon_units: str | None = None,
+    excellon_digits: tuple[int, int] | None = None,
+    excellon_zeros: str | None = None,
 ) -> HoleList:
     """Read an Excellon drill file; see :func:`parse_excellon` for the arguments and the result.
 
@@ -729,4 +739,5 @@ def load_excellon(
         text = data.decode("utf-8")
     except UnicodeDecodeError:
         text = data.decode("latin-1")
-    return parse_excellon(text, source=str(p), units=units, digits=digits, zeros=zeros)
+    return parse_excellon(text, source=str(p), excellon_units=excellon_units, excellon_digits=excellon_digits,
+                          excellon_zeros=excellon_zeros)

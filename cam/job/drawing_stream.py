@@ -14,7 +14,7 @@ whatever their size (tested from one target a piece up).
 
 The job has up to three parts, each starting where the one before ended:
 
-1. roughing (``stepdown_px``, 3D): levels cut by the roughing tool from the home back to the home, a
+1. roughing (``stepdown_mm``, 3D): levels cut by the roughing tool from the home back to the home, a
    tool-change pause there when the finishing tool is another;
 2. the pixel-centre pass: the drawing's targets of every pass, each no deeper than the tool's drop-cutter
    rule allows;
@@ -37,6 +37,7 @@ import numpy as np
 from ..digitize.digitized import Digitized
 from ..digitize.profile import ProfileLike
 from ..errors import PlanError, TravelError
+from ..options import OPTIONS
 from ..settings import DEFAULT_SETTINGS, MachineSettings
 from ..tool import Tool, parse_tool, reach_depth_px
 from .drawing import (_assemble, _drop_maps, _fits_travel, _guard_diagonals, _object_depths, _pass_order,
@@ -44,7 +45,7 @@ from .drawing import (_assemble, _drop_maps, _fits_travel, _guard_diagonals, _ob
 from .model import RETRACT, Job, PixelFrame, check_travel, join_pieces
 from .subpixel import finer_grids, rest_positions
 
-__all__ = ["plan", "DrawingJobStream", "stream_drawing", "STREAM_TARGETS", "PIECE_TARGETS"]
+__all__ = ["plan", "DrawingJobStream", "stream_drawing", "stepdown_px_of", "STREAM_TARGETS", "PIECE_TARGETS"]
 
 STREAM_TARGETS = 4_000_000
 """Drawings with more cut points than this (targets of every pass) are kept as a stream by
@@ -321,7 +322,7 @@ def stream_drawing(
     pause_at: Sequence[tuple[int, int]] = (),
     profile: ProfileLike | None = None,
     tool: Tool | str | None = None,
-    stepdown_px: int | None = None,
+    stepdown_mm: float | None = None,
     stepover: float = 0.5,
     rough_tool: Tool | str | None = None,
     subpixel: bool = True,
@@ -348,7 +349,7 @@ def stream_drawing(
         ys, xs = digitized.objects[i][:, 1], digitized.objects[i][:, 0]
         asked[ys, xs] = np.maximum(asked[ys, xs], d)
     cutter = parse_tool(tool, "tool")
-    roughing = _roughing_part(asked[:h, :w], digitized.mode, cutter, rough_tool, stepdown_px, stepover, settings,
+    roughing = _roughing_part(asked[:h, :w], digitized.mode, cutter, rough_tool, stepdown_mm, stepover, settings,
                               warnings)
     allowed = corners = finer = None
     if digitized.mode == "3d" and not cutter.is_point:
@@ -418,29 +419,39 @@ def _tool_maps(digitized: Digitized, order: list[tuple[int, int]], asked: np.nda
     return allowed, corners, _Part(f_targets, f_asked, f_corners, k=int(k), finer=True)
 
 
+def stepdown_px_of(stepdown_mm: float, settings: MachineSettings) -> int:
+    """The roughing levels' spacing in Z pixels: ``stepdown_mm`` over one Z pixel's mm
+    (:meth:`~cam.settings.MachineSettings.px_to_mm_z`), rounded down, at least 1 (a step-down finer than one
+    Z pixel roughs a pixel a level).  The one place the step-down is converted: the planner, the command line
+    and the page all give ``stepdown_mm`` (:data:`cam.options.OPTIONS`)."""
+    return max(1, int(stepdown_mm / settings.px_to_mm_z(1) + 1e-9))
+
+
 def _roughing_part(depth_px: np.ndarray, mode: str, cutter: Tool, rough_tool: Tool | str | None,
-                   stepdown_px: Optional[int], stepover: float, settings: MachineSettings, warnings: list[str]
+                   stepdown_mm: Optional[float], stepover: float, settings: MachineSettings, warnings: list[str]
                    ) -> Optional[_Part]:
     """The roughing part of a 3D relief whose deepest depth asked at each pixel is ``depth_px`` ``(H, W)`` (Z pixels)
-    (:func:`cam.job.drawing._roughing_targets`), or None (no ``stepdown_px``, or nothing to rough: a warning).
+    (:func:`cam.job.drawing._roughing_targets`), or None (no ``stepdown_mm``, or nothing to rough: a warning).
 
     Raises:
         PlanError: roughing asked for a 2D drawing, or a bad step-down, step-over or tool.
     """
-    if stepdown_px is None:
+    if stepdown_mm is None:
         return None
     if mode != "3d":
         raise PlanError("roughing (a step-down) applies to 3D reliefs; a 2D drawing's lines are cut at once")
-    if not 1 <= int(stepdown_px) <= 1_000_000 or not 0 < float(stepover) <= 1:
-        raise PlanError(f"the step-down must be at least one Z pixel and the step-over a fraction of the tool "
-                        f"0 < s <= 1, got {stepdown_px} Z px and {stepover}")
+    for name, value in (("stepdown_mm", stepdown_mm), ("stepover", stepover)):
+        o = OPTIONS[name]
+        if not o.in_range(float(value)):
+            raise PlanError(f"{name} must be {o.range_text()}{' ' + o.unit if o.unit else ''}, got {value}")
+    stepdown_px = stepdown_px_of(float(stepdown_mm), settings)
     rough = parse_tool(rough_tool, "rough tool") if rough_tool else cutter
     depth_px = np.asarray(depth_px, np.int64)
-    targets, allowed, corners, rough = _roughing_targets(depth_px, rough, int(stepdown_px), float(stepover),
-                                                         settings)
+    targets, allowed, corners, rough = _roughing_targets(depth_px, rough, stepdown_px, float(stepover), settings)
     if not len(targets):
         warnings.append(f"nothing to rough: the {rough.describe()} tool goes no deeper than one step-down "
-                        f"({int(stepdown_px)} Z pixels) anywhere; the relief is finished at once")
+                        f"({float(stepdown_mm):g} mm, {stepdown_px} Z pixels) anywhere; the relief is finished "
+                        f"at once")
         return None
     h, w = depth_px.shape
     asked = np.zeros((h + 2, w + 2), np.int64)
@@ -463,7 +474,7 @@ def plan(
     pause_at: Sequence[tuple[int, int]] = (),
     profile: ProfileLike | None = None,
     tool: Tool | str | None = None,
-    stepdown_px: int | None = None,
+    stepdown_mm: float | None = None,
     stepover: float = 0.5,
     rough_tool: Tool | str | None = None,
     subpixel: bool = True,
@@ -491,9 +502,10 @@ def plan(
             so the tool never cuts below the asked depth at any pixel under it; points the tool cannot
             lower into at all are left out, and a warning says how much material it leaves.  On a 2D
             drawing the curves are the tool's centre line and the depth sets the groove's width.
-        stepdown_px: 3D only: rough the relief first in levels this many Z pixels apart (each level clears
+        stepdown_mm: 3D only: rough the relief first in levels this many mm apart (each level clears
             what the roughing tool can reach down to it, in rings ``stepover`` x its diameter apart), then
-            finish it with ``tool`` (None: no roughing).
+            finish it with ``tool`` (None: no roughing).  The job option of the same name (``--stepdown``);
+            the levels are whole Z pixels apart (:func:`stepdown_px_of`).
         stepover: the roughing rings' spacing as a fraction of the roughing tool's diameter (0 < s <= 1).
         rough_tool: the roughing tool (None: ``tool``); a different one adds a tool-change pause at the
             home between roughing and finishing.
@@ -509,5 +521,5 @@ def plan(
         PlanError: fewer depths than objects, bad options; TravelError: the job leaves the travel.
     """
     return stream_drawing(digitized, depth=depth, settings=settings, passes=passes, start_at=start_at,
-                          pause_at=pause_at, profile=profile, tool=tool, stepdown_px=stepdown_px, stepover=stepover,
+                          pause_at=pause_at, profile=profile, tool=tool, stepdown_mm=stepdown_mm, stepover=stepover,
                           rough_tool=rough_tool, subpixel=subpixel).joined()

@@ -567,8 +567,8 @@ def _prepare_pixels(path: Path, kind: str, options: JobOptions, settings: Machin
     rgb = None
     traced: list[str] = []
     if kind == "drawing" and options.trace:  # a sketch or a photo: its size is checked once traced (shrunk)
-        drawing = trace(load_sketch(path), min_length_px=options.trace_min_length_px, fill=options.trace_fill,
-                        source=str(path))
+        drawing = trace(load_sketch(path), trace_min_length_px=options.trace_min_length_px,
+                        trace_fill=options.trace_fill, source=str(path))
         check_drawing_size(drawing.width_px, drawing.height_px, settings, str(path))
         traced.append(f"{path.name}: traced: {drawing.summary()}")
         rgb = drawing.to_rgb()
@@ -592,12 +592,9 @@ def _prepare_pixels(path: Path, kind: str, options: JobOptions, settings: Machin
         if digitized.mode == "3d":
             raise CamError("--line-width sets the depth of a 2D drawing's engraved lines; this drawing is 3D")
         depth = max(1, int(round(cutter.depth_for_width_mm(options.line_width_mm) / settings.px_to_mm_z(1))))
-    stepdown_px = None
-    if options.stepdown_mm is not None:
-        stepdown_px = max(1, int(options.stepdown_mm / settings.px_to_mm_z(1)))
     kw: dict[str, Any] = dict(depth=depth, settings=settings, passes=options.passes, start_at=options.start_at,
-                              pause_at=list(options.pause_at), profile=profile, tool=cutter, stepdown_px=stepdown_px,
-                              stepover=options.stepover, rough_tool=options.rough_tool)
+                              pause_at=list(options.pause_at), profile=profile, tool=cutter,
+                              stepdown_mm=options.stepdown_mm, stepover=options.stepover, rough_tool=options.rough_tool)
     # one planner at every size: a large job is kept in pieces (bounded memory), a smaller one joined (the
     # same moves, held in memory)
     big = digitized.n_points * options.passes > STREAM_TARGETS
@@ -634,8 +631,8 @@ def _or(value: Optional[float], default: float) -> float:
 
 
 def _prepare_excellon(path: Path, options: JobOptions, settings: MachineSettings) -> PreparedJob:
-    holes = load_excellon(path, units=options.excellon_units, digits=options.excellon_digits,
-                          zeros=options.excellon_zeros)
+    holes = load_excellon(path, excellon_units=options.excellon_units, excellon_digits=options.excellon_digits,
+                          excellon_zeros=options.excellon_zeros)
     depth_mm = _or(options.cut_depth_mm, DRILL_DEPTH_MM)
     dp = plan_drill(holes, settings=settings, cut_depth_mm=depth_mm,
                     travel_height_mm=_or(options.travel_height_mm, DRILL_TRAVEL_HEIGHT_MM), offset_mm=options.offset_mm,
