@@ -41,7 +41,10 @@ Interrupts are emulated where they can happen: while the listing has them
 enabled (from just before a Jog, Offset or Drill move until just after its
 reply) the emulator checks the UART and the limit-switch flag after every port
 write and around each reply.  A received byte is then consumed by the UART
-ISR; only EMERGENCYSTOP (0x80) does anything.
+ISR; only EMERGENCYSTOP (0x80) does anything.  Outside a move a packet is
+read byte by byte (``getc()`` with interrupts off, as listed): a packet that
+lost a byte on the line waits, silent and still, and the next byte, whatever
+it is (0x80 included), completes it (docs/maximus.md, "When the link fails").
 
 Listing vs prose
 ----------------
