@@ -51,7 +51,7 @@ def test_api_and_cli_give_the_same_pin_log_and_report(tmp_path, name, flags, opt
 
     report = json.loads(cli_report.read_text())
     assert report.pop("status") == result.status == "finished"
-    ours = json.loads(json.dumps(job.report))
+    ours = json.loads(json.dumps(job.full_report()))
     assert {k: v for k, v in report.items() if k in ours} == ours
 
 

@@ -113,5 +113,5 @@ def cmd_drill(args: argparse.Namespace) -> int:
     t0 = time.monotonic()
     outcome = execute(job, args, settings, start_steps=start_steps, journal=journal)
     summary = summary_of(job)
-    return _finish(args, outcome, job.report, f"{summary} from {args.image}" if job.kind == "hpgl" else summary,
+    return _finish(args, outcome, job.full_report(), f"{summary} from {args.image}" if job.kind == "hpgl" else summary,
                    time.monotonic() - t0)

@@ -3,7 +3,8 @@
 The session (:class:`cam.drive.session.MachineSession`) does the work on every
 port; here are only the terminal's parts: the progress bar, the prompts at
 tool changes and Pause At points (Enter, or ``--yes``), Ctrl-C (stop: the tool
-is lifted), and the pin log file.
+is lifted), the pin log file, and the machine state file (:mod:`cam.drive.state`):
+every run starts where it says the tool stands and records where it ended.
 """
 from __future__ import annotations
 
@@ -12,22 +13,24 @@ import select
 import signal
 import sys
 import threading
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Optional
 
 from tqdm import tqdm
 
-from ..drive.journal import journal_spec
+from ..drive.journal import journal_spec, read_journal
 from ..drive.ports import MockPort, port_kind, require
-from ..drive.runner import FINISHED
+from ..drive.runner import EMERGENCY_STOPPED, FINISHED, STOPPED
 from ..drive.session import MachineSession, Prompt
+from ..drive.state import MachineState, PositionUnknownError, StateHold, check_in_travel
 from ..errors import CapabilityError, PortError
 from ..settings import MachineSettings
 from ..verify.pinlog import write_pin_log
 from .checks import job_kind_of
 from .common import progress_wanted
+from .machine_state import hold_machine
 
-__all__ = ["execute", "Outcome", "check_port_options"]
+__all__ = ["execute", "Outcome", "check_port_options", "ended_state"]
 
 
 @dataclass
@@ -120,28 +123,63 @@ def _bar(args: argparse.Namespace, estimated_s: float) -> Optional[Any]:
 
 
 def execute(job: Any, args: argparse.Namespace, settings: MachineSettings, *,
-            start_steps: Optional[tuple[int, int, int]] = None, journal: Optional[str] = None) -> Outcome:
+            start_steps: Optional[tuple[int, int, int]] = None, journal: Optional[str] = None,
+            hold: Optional[StateHold] = None) -> Outcome:
     """Run a job (a Job, a PreparedJob or a StepPlan) on ``args.port`` through a machine session.
 
-    ``start_steps``: where the tool stands, when the caller knows better than the home.  Ctrl-C stops the
-    job cleanly (tool lifted, position reported).  Writes ``args.pin_log`` after a run on the mock.
+    The job starts where the machine state file (``args.state``, else the machine's default one: see
+    :mod:`cam.drive.state`) says the tool stands, and the file records where it ended, also after Ctrl-C,
+    SIGTERM or a fault.  ``hold``: the caller's hold on that file (a go-to or a jog, planned from its
+    position); None: taken here, for the run.  ``start_steps``: a resumed job's start in its own frame (the
+    journal's ``position_steps``; the journal's home places it in the machine frame).  Ctrl-C stops the job
+    cleanly (tool lifted, position reported).  Writes ``args.pin_log`` after a run on the mock.
     ``journal``: keep the job's journal in this file (:mod:`cam.drive.journal`); should this process die,
     the real-time runner process writes the journal and the pin log itself.
 
     Raises:
-        CamError: the job does not fit the port or the travel (nothing is sent), or the port failed.
+        CamError: the job does not fit the port or the travel (nothing is sent), the position is unknown,
+        another command drives the machine, or the port failed.
     """
+    own = hold is None
+    if hold is None:
+        hold = hold_machine(args, settings, "cam drill")
+    try:
+        start = _start_position(hold, args, start_steps)
+        return _run(job, args, settings, hold, start, journal)
+    finally:
+        if own:
+            hold.close()
+
+
+def _start_position(hold: StateHold, args: argparse.Namespace,
+                    start_steps: Optional[tuple[int, int, int]]) -> tuple[int, int, int]:
+    """Where the run starts, machine frame: the state's position, or a resumed job's journal's."""
+    if start_steps is None:
+        hold.require_known()
+        return hold.state.position_steps
+    home = read_journal(args.resume).home_steps if getattr(args, "resume", None) else (0, 0, 0)
+    start = tuple(int(s) + int(h) for s, h in zip(start_steps, home))
+    check_in_travel(start, hold.settings, f"where journal {getattr(args, 'resume', '')} left the tool")
+    st = hold.state
+    if hold.existed and st.position_known and st.position_steps != start:
+        raise PositionUnknownError(
+            f"the state file {hold.path} has the tool at {list(st.position_steps)} steps, the journal's run left it "
+            f"at {list(start)}: go back there (cam goto X,Y,Z --machine-coords --unit steps) and resume again")
+    return start  # type: ignore[return-value]
+
+
+def _run(job: Any, args: argparse.Namespace, settings: MachineSettings, hold: StateHold,
+         start: tuple[int, int, int], journal: Optional[str]) -> Outcome:
     stopping = threading.Event()
     realtime = getattr(args, "realtime", False)
     port: Any = args.port
     if getattr(args, "pin_log", None) and port_kind(args.port) == "mock" and not realtime:
         port = MockPort(pin_log_path=args.pin_log)  # the pin log streams to its file: nothing held
     session = MachineSession(port, settings, realtime=realtime, on_prompt=_ask(args, stopping))
-    if start_steps is not None:
-        session.set_position(start_steps)
+    session.set_position(start)
     session.check_job(job)  # before the progress bar: a bad job is one clean line
-    estimated_s = float(getattr(job, "estimated_time_s", 0.0))
-    bar = _bar(args, estimated_s)
+    # the machine time takes a pass over the ramps: only worked out before the run for a bar to show it
+    bar = _bar(args, float(getattr(job, "estimated_time_s", 0.0))) if progress_wanted(args) else None
     if bar is not None:
         session.on_progress = lambda done, total, t_ns: bar.update(round(t_ns / 1e9, 3) - bar.n)
     # each hole on a board that drills by itself, as the MAXIMUS PC program shows it ("Drilling hole n of N")
@@ -157,19 +195,55 @@ def execute(job: Any, args: argparse.Namespace, settings: MachineSettings, *,
                             pin_log_path=getattr(args, "pin_log", None))
     previous = {s: signal.signal(s, stop) for s in _STOP_SIGNALS}
     try:
+        hold.mark_running(_command_text(args))
         session.start(job, journal=spec)
         if bar is not None and not bar.total:  # a jog or a go-to: its time is known once the session planned it
             bar.total = round(session.state()["remaining_s"], 3)
             bar.refresh()
-        version = session.version
-        while session.busy:
-            version = session.wait_change(version, 0.2)
+        while not session.wait_idle(0.2):  # wakes for signals (Ctrl-C), not for each change of the session
+            pass
     finally:
+        if hold.state.running is not None:  # recorded before the handlers go: a SIGTERM now still stops cleanly
+            hold.record(ended_state(hold.state, session, start, getattr(args, "tool", None)))
         for s, handler in previous.items():
             signal.signal(s, handler)
         if bar is not None:
             bar.close()
     return _outcome(session, args)
+
+
+def _command_text(args: argparse.Namespace) -> str:
+    """The command as the running marker names it (``drill part.png``)."""
+    what = getattr(args, "image", None) or getattr(args, "load_digitized", None) or ""
+    return f"cam {args.command} {what}".strip()
+
+
+def ended_state(state: MachineState, session: MachineSession, start: tuple[int, int, int],
+                tool: Optional[str] = None) -> MachineState:
+    """The machine state after the session's last activity (positions in the machine frame).
+
+    Finished or stopped: the tool where the session booked it.  An emergency stop, or a fault after writes
+    were sent (or on a MAXIMUS board, which then has lost its offset): where it got to, position unknown.  A
+    fault before anything was sent, or no run at all (refused before it started): where it started.
+    """
+    info = session.last_run
+    status = info.get("status")
+    end = session.position_steps()
+    if status is None:
+        return state.moved_to(start)
+    if status == EMERGENCY_STOPPED:
+        return state.lost(f"an emergency stop ended {info.get('label') or 'the run'} (steps may have been lost)",
+                          end)
+    if status not in (FINISHED, STOPPED):
+        sent, moved = session.last_sent()
+        if sent or session.kind == "maximus":
+            guess = end if session.last_result is not None else tuple(s + m for s, m in zip(end, moved))
+            reason = "; ".join(info.get("messages") or ["the run failed"])
+            return state.lost(f"{info.get('label') or 'the run'} failed while moving ({reason})", guess)
+        return state.moved_to(end)
+    done = state.moved_to(end)
+    return replace(done, tool=tool) if tool and status == FINISHED and session.last_run.get("activity") == "job" \
+        else done
 
 
 def _outcome(session: MachineSession, args: argparse.Namespace) -> Outcome:

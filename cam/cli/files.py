@@ -123,7 +123,7 @@ def _info_hpgl(args: argparse.Namespace) -> int:
 def _info_gcode(args: argparse.Namespace) -> int:
     job = prepare(args)
     if args.json:
-        print(json.dumps(job.report, indent=2))
+        print(json.dumps(job.full_report(), indent=2))
         return 0
     w, h = job.size_mm
     lines = [f"{args.image}: {job.report.get('moves', 0)} moves, cut area {w:.2f} x {h:.2f} mm, depth "
@@ -136,7 +136,7 @@ def _info_gcode(args: argparse.Namespace) -> int:
 
 def _info_svg(args: argparse.Namespace) -> int:
     job = prepare(args)  # at the defaults: its own size, 0.5 mm deep
-    rep = job.report
+    rep = job.full_report()
     w, h = job.size_mm
     if args.json:
         print(json.dumps(rep, indent=2))

@@ -160,3 +160,26 @@ def pin_rows_kernel(t_ns, data, strobe):
             out[k] = 44 if col < 2 else 10
             k += 1
     return out[:k]
+
+
+@entry
+@njit(cache=True)
+def net_steps_kernel(data, prev_byte, clock, dirbit):
+    """``(3,)`` int64 steps each axis made over a stretch of writes, as :func:`cam.verify.pinlog.net_steps`
+    counts them (a step per rising clock, + with its direction bit set), in one pass without temporaries.
+
+    Args:
+        data: ``(M,)`` uint8 data register after each write; prev_byte: the register before the first.
+        clock, dirbit: ``(3,)`` int64 clock and direction bit of X, Y, Z.
+    """
+    out = np.zeros(3, np.int64)
+    prev = np.int64(prev_byte)
+    for i in range(data.shape[0]):
+        d = np.int64(data[i])
+        rising = d & ~prev
+        if rising:
+            for a in range(3):
+                if rising & clock[a]:
+                    out[a] += 1 if d & dirbit[a] else -1
+        prev = d
+    return out

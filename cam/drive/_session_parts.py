@@ -47,12 +47,20 @@ class Activity:
     label: str
     controller: Any
     total: int
-    estimated_s: float
+    estimate: "Callable[[], float] | float"  # machine seconds, or what gives them when first asked
     positions: Any = None  # the run's Cursor (cam.drive.runner): the writes sent and the position after them
     done: int = 0
     machine_ns: int = 0
     detail: str = ""
     started_wall: float = field(default_factory=time.monotonic)
+
+    @property
+    def estimated_s(self) -> float:
+        """The activity's machine time in seconds, worked out when first asked (a plan's machine time takes a
+        pass over its ramps; a command line run with no progress bar never asks)."""
+        if callable(self.estimate):
+            self.estimate = float(self.estimate())
+        return float(self.estimate)
 
 
 class SessionView:

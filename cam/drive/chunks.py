@@ -32,19 +32,17 @@ import numpy as np
 
 from ..job.model import Job, JobLike, check_travel
 from ..settings import MachineSettings
-from ..verify.pinlog import _decode, fold_extent
 from ._kernels import chunk_writes_kernel, stretch_kernel
 from .pins import axis_bits
 from .ramps import _lookahead, linear40_periods
 
-__all__ = ["StepChunk", "StepPlan", "ChunkedPlan", "plan_chunks", "plan_steps", "lookahead_margin",
+__all__ = ["StepChunk", "StepPlan", "ChunkedPlan", "plan_chunks", "plan_steps", "lookahead_margin", "move_extent",
            "DEFAULT_CHUNK_PERIODS"]
 
 DEFAULT_CHUNK_PERIODS = 1 << 18
 """Step periods per chunk (a few tens of MB of writes, look-ahead and decoding arrays at most)."""
 
 _MOVE_BLOCK = 1 << 16  # moves turned into periods per kernel call
-_DECODE = 1 << 18  # writes decoded into positions at a time
 
 
 @dataclass
@@ -149,6 +147,47 @@ def _per_move(piece: Job, pts: np.ndarray, prev: np.ndarray) -> tuple[np.ndarray
     return npm, nom, d.sum(axis=0)
 
 
+def move_extent(pts: np.ndarray, n_per_move: np.ndarray, extent: np.ndarray, cut: np.ndarray) -> None:
+    """Widen ``extent`` and ``cut`` (each ``(3, 2)`` int64 min/max in steps, in place) by the positions the
+    DDA takes the tool through on the moves between rows of ``pts``, as decoding their writes would.
+
+    Args:
+        pts: ``(B + 1, 3)`` int64 positions in steps (+Z deeper), the point before the moves first.
+        n_per_move: ``(B,)`` int64 periods of each move; after period k of n an axis of a move of ``ad``
+            steps has made ``floor(k ad / n)`` of them (:func:`cam.drive._kernels.stretch_kernel`).
+        extent: every position; cut: the positions below the surface (z > 0).
+
+    Every axis moves one way within a move, so the positions' extent is the points'.  A move with both
+    ends below the surface is cut whole; one that crosses it is cut from (or up to) the period at which its
+    Z passes from 0 to 1, and its X and Y there follow from the same floor.
+    """
+    if not len(pts):
+        return
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    np.minimum(extent[:, 0], lo, out=extent[:, 0])
+    np.maximum(extent[:, 1], hi, out=extent[:, 1])
+    a, b, n = pts[:-1], pts[1:], np.asarray(n_per_move, np.int64)
+    below = pts[:, 2] > 0
+    parts = [pts[below]]
+    down = ~below[:-1] & below[1:] & (n > 0)  # enters the work: cut from period k1 on
+    up = below[:-1] & ~below[1:] & (n > 0)  # leaves it: cut up to period k2
+    for sel, entering in ((down, True), (up, False)):
+        if not sel.any():
+            continue
+        a_s, b_s, n_s = a[sel], b[sel], n[sel]
+        ad = np.abs(b_s - a_s)
+        if entering:  # z_k = a_z + floor(k ad_z / n) >= 1  <=>  k >= ceil((1 - a_z) n / ad_z)
+            k = -((-(1 - a_s[:, 2]) * n_s) // ad[:, 2])
+        else:  # z_k = a_z - floor(k ad_z / n) >= 1  <=>  k <= ceil(a_z n / ad_z) - 1
+            k = -((-a_s[:, 2] * n_s) // ad[:, 2]) - 1
+        at = a_s + np.sign(b_s - a_s) * ((k[:, None] * ad) // n_s[:, None])
+        parts.append(at)
+    cut_pts = np.concatenate(parts)
+    if len(cut_pts):
+        np.minimum(cut[:, 0], cut_pts.min(axis=0), out=cut[:, 0])
+        np.maximum(cut[:, 1], cut_pts.max(axis=0), out=cut[:, 1])
+
+
 def lookahead_margin(settings: MachineSettings, min_period_ns: int) -> int:
     """Periods of look-ahead a chunk needs on each side: eight times the longest ramp plus the longest
     interval at which an axis still runs above its start speed (the ramp planner's reach), at least 4096.
@@ -225,33 +264,39 @@ class ChunkedPlan:
     def estimated_time_s(self) -> float:
         """Machine time of the job in seconds (pauses excluded): one pass over the chunks, then kept."""
         if self._time_ns is None:
-            self.motion_extent()
-        return self._time_ns / 1e9  # type: ignore[operator]
+            self._time_ns = self._machine_time_ns()
+        return self._time_ns / 1e9
 
     def motion_extent(self) -> tuple[np.ndarray, np.ndarray]:
         """Where the writes take the tool, as :func:`cam.verify.pinlog.motion_extent`: ``(extent, cut)``, each
         ``(3, 2)`` int64 min/max position in steps (the start included; ``cut``: below the surface, z > 0).
 
-        One pass over the chunks (decoded in bounded pieces), which also gives :attr:`estimated_time_s`; kept.
+        From the moves, not the writes (:func:`move_extent`): within a move each axis moves one way, so the
+        extent is that of the points, and a move that crosses the surface is cut from the period its DDA
+        crosses it.  One pass over the job's pieces; kept.
         """
         if self._extent is None:
-            clock, dirbit = axis_bits(self.settings)
             extent = np.zeros((3, 2), np.int64)
             big = np.iinfo(np.int64).max
             cut = np.array([[big, -big]] * 3, np.int64)
-            pos = np.zeros(3, np.int64)
-            prev = 0
-            t = 0
-            for chunk in self.chunks():
-                for i in range(0, len(chunk.data), _DECODE):
-                    data = chunk.data[i:i + _DECODE]
-                    p, _ = _decode(data, prev, pos, clock, dirbit)
-                    prev, pos = int(data[-1]), p[-1]
-                    fold_extent(extent, cut, p)
-                t = int(chunk.t_ns[-1])
-            self._time_ns = t
+            for pts, npm, _, _, _ in self._move_blocks():
+                move_extent(pts, npm, extent, cut)
             self._extent = (extent, cut if cut[0, 0] != big else np.zeros((3, 2), np.int64))
         return self._extent
+
+    def _machine_time_ns(self) -> int:
+        """The job's machine time: the constant ramps' from the moves, else one pass over the ramped periods
+        (no writes made)."""
+        if self.settings.ramp == "constant":
+            s = self.settings
+            total = 0
+            for pts, npm, nom, _, _ in self._move_blocks():
+                d = pts[1:] - pts[:-1]
+                xy, z = (d[:, 0] != 0) | (d[:, 1] != 0), d[:, 2] != 0
+                per = np.where(xy & z, max(s.delay_xy_ns, s.delay_z_ns), np.where(xy, s.delay_xy_ns, s.delay_z_ns))
+                total += int((npm * np.where(nom > 0, nom, per)).sum())
+            return total
+        return sum(int(per.sum()) for _, _, per in self._ramped())
 
     # -- the stream ------------------------------------------------------------------------------------
     def _move_blocks(self) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray, int, np.ndarray]]:
@@ -412,6 +457,8 @@ class ChunkedPlan:
             yield StepChunk(0, np.zeros(1, np.int64), np.zeros(1, np.uint8), np.full(1, strobe_level, np.uint8))
             return
         last, t = self._writes(*pending, int(pending[1][-1]), t, first_write, strobe_level)
+        if self._time_ns is None:
+            self._time_ns = t  # a whole pass gives the machine time for free
         yield last
 
     @staticmethod

@@ -112,8 +112,7 @@ class MockPort(Port):
 
     def write_many(self, t_ns: np.ndarray, data: np.ndarray, strobe: np.ndarray) -> None:
         self._flush()
-        self._keep(np.asarray(t_ns, np.int64).copy(), np.asarray(data, np.uint8).copy(),
-                   np.asarray(strobe, np.uint8).copy())
+        self._keep(np.asarray(t_ns, np.int64), np.asarray(data, np.uint8), np.asarray(strobe, np.uint8))
 
     def _keep(self, t_ns: np.ndarray, data: np.ndarray, strobe: np.ndarray) -> None:
         if not len(t_ns):
@@ -135,10 +134,10 @@ class MockPort(Port):
 
     def _hold(self, t_ns: np.ndarray, data: np.ndarray, strobe: np.ndarray) -> None:
         room = max(0, _HELD_WRITES - self._held)
-        if room:
-            self._t.append(t_ns[:room])
-            self._d.append(data[:room])
-            self._s.append(strobe[:room])
+        if room:  # copies: the caller's arrays may be reused
+            self._t.append(t_ns[:room].copy())
+            self._d.append(data[:room].copy())
+            self._s.append(strobe[:room].copy())
             self._held += min(room, len(t_ns))
         if len(t_ns) > room:
             if self._spill is None:

@@ -27,7 +27,8 @@ import numpy as np
 from ..errors import CamError
 from ..job.model import Job, JobLike
 from ..settings import MachineSettings
-from ..verify.pinlog import PinLog, carve, decode_pin_log, net_steps
+from ..verify.pinlog import PinLog, carve, decode_pin_log
+from ._kernels import net_steps_kernel
 from .ports import MockPort, Port, open_port
 from .pins import axis_bits
 from .chunks import ChunkedPlan, StepChunk, plan_chunks
@@ -179,7 +180,8 @@ class Cursor:
     """
 
     def __init__(self, settings: MachineSettings) -> None:
-        self.clock, self.dirbit = axis_bits(settings)
+        clock, dirbit = axis_bits(settings)
+        self.clock, self.dirbit = np.asarray(clock, np.int64), np.asarray(dirbit, np.int64)
         self.live: tuple[int, tuple[int, int, int]] = (0, (0, 0, 0))
         """``(writes sent, position_steps after them)``."""
         self.last_data = 0
@@ -200,9 +202,9 @@ class Cursor:
         """The writes ``(K,)`` times and data just went out, in order."""
         if not len(data):
             return
-        self._pos = self._pos + net_steps(data, self.last_data, self.clock, self.dirbit)
+        self._pos = self._pos + net_steps_kernel(data, np.int64(self.last_data), self.clock, self.dirbit)
         self.last_data, self.last_t_ns = int(data[-1]), int(t_ns[-1])
-        self.live = (self.live[0] + len(data), tuple(int(v) for v in self._pos))  # type: ignore[assignment]
+        self.live = (self.live[0] + len(data), tuple(self._pos.tolist()))  # type: ignore[assignment]
 
     def set(self, sent: int, position_steps: tuple[int, int, int]) -> None:
         """Mirror another process's run (the real-time runner's): ``sent`` writes, then ``position_steps``."""
@@ -242,12 +244,15 @@ class _Pauses:
         self.external = external  # the caller gave the controller: pause it and wait for its resume
         self.writes = np.unique(np.asarray(plan.pause_writes, np.int64))
         self.notes = dict(zip((int(i) for i in plan.pause_writes), plan.pause_notes or []))
+        self._writes: list[int] = self.writes.tolist()
+        self._next = 0
         self.count = 0
 
     def next_after(self, write: int) -> int:
-        """The first pause write at or after ``write`` (a huge number: none)."""
-        k = int(np.searchsorted(self.writes, write))
-        return int(self.writes[k]) if k < len(self.writes) else 1 << 62
+        """The first pause write at or after ``write`` (a huge number: none); ``write`` never goes back."""
+        while self._next < len(self._writes) and self._writes[self._next] < write:
+            self._next += 1
+        return self._writes[self._next] if self._next < len(self._writes) else 1 << 62
 
     def honour(self, sent: int, position_steps: tuple[int, int, int]) -> bool:
         """Pause after write ``sent - 1``; False if the job was stopped meanwhile."""
@@ -268,7 +273,7 @@ class _SimulatedClock:
         self.lateness = Lateness()  # nothing is late on the simulated clock
 
     def chunks(self, plan: Plan) -> Iterator[StepChunk]:
-        return plan.chunks()
+        return _made_ahead(plan.chunks())  # the next chunks are planned (compiled, without the GIL) meanwhile
 
     def may_go(self, ctl: Controller) -> bool:
         """Before a batch: False if the run is halted (a pause waits here for its end)."""

@@ -129,6 +129,15 @@ class MachineSession(SessionControls):
             self._position = np.asarray(position_steps, np.int64).reshape(3).copy()
             self._bump()
 
+    def last_sent(self) -> tuple[int, tuple[int, int, int]]:
+        """``(writes sent, position in steps from where it started)`` of the activity that ended last, from its
+        cursor: how far a run that failed got.  ``(0, (0, 0, 0))`` when it had no cursor (a MAXIMUS board)."""
+        with self._lock:
+            a = self._last_activity
+            if a is None or a.positions is None:
+                return 0, (0, 0, 0)
+            return int(a.positions.sent), tuple(int(v) for v in a.positions.position_steps)  # type: ignore
+
     # -- starting things ------------------------------------------------------------------
     def _check_free(self) -> None:
         if self._activity is not None:
@@ -188,8 +197,8 @@ class MachineSession(SessionControls):
                 return
             spec = self._journal_spec(job, journal)
             plan = self._plan(job)
-            self._launch_steps("job", plan, name, getattr(job, "estimated_time_s", plan.estimated_time_s), controller,
-                               spec)
+            self._launch_steps("job", plan, name, lambda: getattr(job, "estimated_time_s", plan.estimated_time_s),
+                               controller, spec)
 
     def _journal_spec(self, job: Any, journal: Any) -> Optional[JournalSpec]:
         if journal is None or isinstance(journal, JournalSpec):
@@ -288,7 +297,7 @@ class MachineSession(SessionControls):
                                moved_steps=job.points_steps[-1])
             return
         plan = plan_chunks(job, start_steps=tuple(int(v) for v in self._position))
-        self._launch_steps(activity, plan, label, plan.estimated_time_s)
+        self._launch_steps(activity, plan, label, lambda: plan.estimated_time_s)
 
     def _begin(self, activity: Activity) -> None:
         self._activity = activity
@@ -296,7 +305,7 @@ class MachineSession(SessionControls):
         self._prompt = None
         self._bump()
 
-    def _launch_steps(self, name: str, plan: "StepPlan | ChunkedPlan", label: str, estimated_s: float,
+    def _launch_steps(self, name: str, plan: "StepPlan | ChunkedPlan", label: str, estimated_s: Callable[[], float],
                       controller: Optional[Controller] = None, journal: Optional[JournalSpec] = None) -> None:
         ctl = controller or Controller()
         cursor = Cursor(plan.settings)  # the runner moves it on; the live position reads it
@@ -308,7 +317,7 @@ class MachineSession(SessionControls):
                       moved_steps: Any = (0, 0, 0)) -> None:
         ctl = BoardControl(self.port)
         total = len(job.drill_plan.holes_steps) if job is not None else 1
-        self._begin(Activity(name, label, ctl, total, getattr(job, "estimated_time_s", 0.0)))
+        self._begin(Activity(name, label, ctl, total, lambda: getattr(job, "estimated_time_s", 0.0)))
         self.log(f"{label}: started on {self.port}")
         self._spawn(run_on_board, (self, name, work, ctl, label, np.asarray(moved_steps, np.int64)), name)
 

@@ -368,7 +368,6 @@ class PreparedJob:
     size_mm: tuple[float, float] = (0.0, 0.0)
     depth_mm: float = 0.0
     extent_steps: np.ndarray = field(default_factory=lambda: np.zeros((3, 2), np.int64))
-    estimated_time_s: float = 0.0
     warnings: list[str] = field(default_factory=list)
     tool_changes: list[str] = field(default_factory=list)
     summary: str = ""
@@ -380,6 +379,17 @@ class PreparedJob:
     plan_sha256: str = ""
     resumed: Any = None
     _steps: Any = field(default=None, repr=False)
+
+    @property
+    def estimated_time_s(self) -> float:
+        """Machine time without pauses: the plan's, worked out on first use (a pass over its ramps, kept; a run
+        of the whole plan gives it for free)."""
+        return float(self.plan.estimated_time_s)
+
+    def full_report(self) -> dict[str, Any]:
+        """:attr:`report` and the machine time (``estimated_time_s``, worked out here: a pass over the ramps unless
+        a run has made one): what ``--report`` and ``cam info --json`` write."""
+        return {**self.report, "estimated_time_s": round(self.estimated_time_s, 6)}
 
     @property
     def steps(self) -> Any:
@@ -529,7 +539,6 @@ def _finish(job: PreparedJob) -> PreparedJob:
     job.extent_steps, cut = job.plan.motion_extent()  # one pass over the chunks
     if job.size_mm == (0.0, 0.0):
         job.size_mm, job.depth_mm = _cut_extent(job.extent_steps, cut, job.settings)
-    job.estimated_time_s = job.plan.estimated_time_s
     job.tool_changes = list(job.plan.pause_notes or [])
     for w in job.plan.warnings:
         if w not in job.warnings:
@@ -541,7 +550,6 @@ def _finish(job: PreparedJob) -> PreparedJob:
         "depth_mm": job.depth_mm,
         "steps": {a: int(v) for a, v in zip("xyz", job.plan.steps_total)},
         "periods": int(job.plan.n_periods),
-        "estimated_time_s": round(job.estimated_time_s, 6),
         "ramp": job.plan.settings.ramp,
         "tool_changes": list(job.tool_changes),
         "warnings": list(job.warnings),
