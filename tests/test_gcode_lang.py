@@ -138,7 +138,7 @@ def run_both(tmp_path, name, text, *, with_tables=True, **cam_options):
         ini = tmp_path / "rs274.ini"
         ini.write_text(f"[RS274NGC]\nSUBROUTINE_PATH = {subs}\n")
         rs_args = {"tool_table": str(tmp_path / "tools.tbl"), "var_file": str(var), "ini": str(ini)}
-        options.setdefault("tool_table", load_tool_table(tmp_path / "tools_mm.tbl"))
+        options.setdefault("tool_lengths_mm", load_tool_table(tmp_path / "tools_mm.tbl"))
         options.setdefault("home_g28_mm", tuple(v * 25.4 for v in HOME_G28_IN))
         options.setdefault("home_g30_mm", tuple(v * 25.4 for v in HOME_G30_IN))
         options.setdefault("subroutine_path", [subs])
@@ -731,7 +731,7 @@ def test_linuxcnc_example_programs_match_rs274_or_are_refused_naming_the_feature
         except cam.CamError:
             continue  # rs274 does not run it on its own (needs a tool table, an INI, a probe, ...)
         try:
-            program = load_gcode(path, tool_table=RS274_DEFAULT_TOOLS_MM, max_lines=2_000_000)
+            program = load_gcode(path, tool_lengths_mm=RS274_DEFAULT_TOOLS_MM, max_lines=2_000_000)
         except cam.ParseError as exc:
             message = str(exc)
             assert "\n" not in message and message.startswith(f"{path}:"), message

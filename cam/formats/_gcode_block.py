@@ -134,7 +134,7 @@ class _Block(_State):
             self.spindle_on = False
         if "t" in vals:
             t = int(vals["t"])
-            if self.tool_table is not None and t and t not in self.tool_table:
+            if self.tool_lengths_mm is not None and t and t not in self.tool_lengths_mm:
                 raise self.err(f"tool 'T{t}' is not in the tool table")
             self.selected_tool = t
         if 6 in mcodes:

@@ -6,12 +6,10 @@
 """
 from __future__ import annotations
 
-import bisect
-import re
 from dataclasses import dataclass, field
-from typing import Sequence
+from typing import Iterator
 
-from .ngc import Line
+from ._gcode_lines import _Source
 
 PLANE_AXES = {"XY": (0, 1, 2), "XZ": (2, 0, 1), "YZ": (1, 2, 0)}
 """The (first, second, third) axes of each arc plane, as LinuxCNC orders them: arcs turn in the
@@ -46,12 +44,32 @@ class GcodeMove:
 
 
 @dataclass
+class MoveBatch:
+    """Consecutive moves of a program, as its interpreter gives them a few at a time: ``moves`` in order, and
+    the ``warnings`` first given while they were made (the warnings of the batches before are not repeated)."""
+
+    moves: list[GcodeMove]
+    warnings: list[str] = field(default_factory=list)
+
+
+@dataclass
 class GcodeProgram:
-    """Interpreted program: moves in order, plus warnings; ``source`` names the file."""
+    """Interpreted program held in memory: moves in order, plus warnings; ``source`` names the file.
+
+    :func:`cam.formats.gcode.parse_gcode` and :func:`~cam.formats.gcode.load_gcode` make it; a file too large to
+    hold is a :class:`cam.formats.gcode.GcodeFile`, interpreted again on each pass.  Both give
+    :meth:`move_batches`, which :func:`cam.job.gcode.stream_gcode` plans a piece at a time."""
 
     moves: list[GcodeMove]
     source: str = "<gcode>"
     warnings: list[str] = field(default_factory=list)
+
+    def move_batches(self, batch_moves: int) -> Iterator[MoveBatch]:
+        """The moves in batches of ``batch_moves`` (the last shorter; one empty batch when there are none); the
+        first batch carries the warnings."""
+        step = max(1, int(batch_moves))
+        for i in range(0, max(1, len(self.moves)), step):
+            yield MoveBatch(self.moves[i:i + step], list(self.warnings) if i == 0 else [])
 
 
 def _strip_comments(line: str, err) -> str:
@@ -109,45 +127,6 @@ _IO_M = {62, 63, 64, 65, 66, 67, 68}
 _AXIS_WORDS = "xyz"
 _LETTERS = set("xyzijkrfstpqlhn@^")
 _CYCLE_PECK = 0.254  # mm: LinuxCNC's G73 chip-break retract and G83 rapid stop above the last peck (0.010 in)
-
-
-class _Source:
-    """One file's lines, read on demand, and where its O words are."""
-
-    _O = re.compile(r"^\s*/?\s*[oO]\s*(<[^>]*>|\d+)\s*([a-zA-Z]+)")
-
-    def __init__(self, name: str, text: str) -> None:
-        self.name = name
-        self.raw = text.splitlines()
-        self.bodies: dict[int, str | None] = {}
-        self.lines: dict[int, Line] = {}
-        self.o_at: dict[str, list[tuple[int, str]]] = {}  # label -> [(index, keyword)] in order
-        self.subs: dict[str, int] = {}
-        for i, raw in enumerate(self.raw):
-            m = self._O.match(raw.split("(", 1)[0].split(";", 1)[0])
-            if m:
-                label = re.sub(r"\s", "", m.group(1).lower())
-                if not label.startswith("<"):
-                    label = str(int(label))
-                kw = m.group(2).lower()
-                self.o_at.setdefault(label, []).append((i, kw))
-                if kw == "sub" and label not in self.subs:
-                    self.subs[label] = i
-
-    def next_o(self, label: str, after: int, kws: Sequence[str]) -> int | None:
-        """The first line after ``after`` with O word ``label`` and a keyword in ``kws``."""
-        entries = self.o_at.get(label, [])
-        k = bisect.bisect_right(entries, (after, "\uffff"))
-        for i, kw in entries[k:]:
-            if kw in kws:
-                return i
-        return None
-
-    def prev_o(self, label: str, before: int) -> tuple[int, str] | None:
-        """The last O word ``label`` before line ``before``."""
-        entries = self.o_at.get(label, [])
-        k = bisect.bisect_left(entries, (before, ""))
-        return entries[k - 1] if k else None
 
 
 class _End(Exception):

@@ -9,57 +9,47 @@ from __future__ import annotations
 
 import bisect
 import re
+from typing import Iterator
 
 from ..fileio import read_text
 from ..limits import MAX_GCODE_CALL_DEPTH, MAX_REPEAT
 from ._gcode_data import _End, _Frame, _Source, _strip_comments
+from ._gcode_lines import CACHE_LINES
 from ._gcode_state import _State
-from .ngc import NgcSyntaxError, read_line
+from .ngc import Line, NgcSyntaxError, read_line
 
 
 class _Flow(_State):
     """Runs the lines: each block (:meth:`block`, from :class:`~._gcode_block._Block`) or O word in turn."""
 
-    def run(self) -> None:
+    def run(self) -> Iterator[None]:
+        """Run the program a line at a time: a generator that yields after each line that made moves (the caller
+        takes :attr:`moves` then; :func:`cam.formats.gcode.interpret`), and ends with the program."""
         src, idx = self.main, 0
         executed = 0
         percent = False
         ran = False
         while True:
-            if idx >= len(src.raw):
+            if idx >= src.n_lines:
                 if len(self.frames) > 1:
                     self.source, self.raw = src, ""
-                    self.line_no = len(src.raw)
+                    self.line_no = src.n_lines
                     raise self.err(f"the file ends inside subroutine 'o{self.frames[-1].label}'")
                 return
-            self.source, self.line_no, self.raw = src, idx + 1, src.raw[idx]
             executed += 1
             if executed > self.max_lines:
+                self.source, self.line_no, self.raw = src, idx + 1, src.line(idx)
                 raise self.err(f"the program has run {self.max_lines} lines and does not end (a loop without an "
                                "exit?); raise the limit with --max-lines")
-            body = src.bodies.get(idx, "")
-            if body == "":
-                body = re.sub(r"\s+", "", _strip_comments(self.raw, self.err)).lower()
-                if body.startswith("/"):
-                    body = body[1:]  # block delete is off, as in rs274: the line runs
-                src.bodies[idx] = body
-            if not body:
-                idx += 1
-                continue
-            if body == "%":
-                if percent or ran:
-                    return  # the closing '%' ends the program
-                percent = True
+            body, line = self._read(src, idx)
+            if line is None:
+                if body == "%":
+                    if percent or ran:
+                        return  # the closing '%' ends the program
+                    percent = True
                 idx += 1
                 continue
             ran = True
-            line = src.lines.get(idx)
-            if line is None:
-                try:
-                    line = read_line(body)
-                except NgcSyntaxError as exc:
-                    raise self.err(str(exc)) from None
-                src.lines[idx] = line
             if line.o is not None:
                 src, idx = self.o_word(src, idx, line.o)
                 continue
@@ -67,19 +57,37 @@ class _Flow(_State):
                 self.block(line)
             except _End:
                 return
+            if self.moves:
+                yield
             idx += 1
+
+    def _read(self, src: _Source, idx: int) -> tuple[str, Line | None]:
+        """Line ``idx`` of ``src`` made current (:attr:`source`, :attr:`line_no`, :attr:`raw`): its body (no
+        comments, no spaces, lower case) and what it says (None: nothing to run, or ``%``); cached."""
+        cached = src.cache.get(idx)
+        if cached is not None:
+            self.source, self.line_no, self.raw = src, idx + 1, cached[0]
+            return cached[1], cached[2]
+        self.source, self.line_no, self.raw = src, idx + 1, src.line(idx)
+        body = re.sub(r"\s+", "", _strip_comments(self.raw, self.err)).lower()
+        if body.startswith("/"):
+            body = body[1:]  # block delete is off, as in rs274: the line runs
+        line = None
+        if body and body != "%":
+            try:
+                line = read_line(body)
+            except NgcSyntaxError as exc:
+                raise self.err(str(exc)) from None
+        if len(src.cache) >= CACHE_LINES:
+            src.cache.clear()
+        src.cache[idx] = (self.raw, body, line)
+        return body, line
 
     # -- O words ----------------------------------------------------------------------------------------------
 
     def _o_args(self, src: _Source, i: int) -> list:
-        line = src.lines.get(i)
-        if line is None:
-            body = re.sub(r"\s+", "", _strip_comments(src.raw[i], self.err)).lower().lstrip("/")
-            try:
-                line = src.lines[i] = read_line(body)
-            except NgcSyntaxError as exc:
-                raise self.err(str(exc)) from None
-        return line.o[2]
+        """The arguments of the O word of line ``i`` (made the current line)."""
+        return self._read(src, i)[1].o[2]  # type: ignore[union-attr]
 
     def _need(self, found: int | None, what: str) -> int:
         if found is None:
@@ -176,7 +184,6 @@ class _Flow(_State):
         while True:
             j = self._need(src.next_o(label, j, ("elseif", "else", "endif")), f"'o{label} endif'")
             if self._o_kind(src, label, j) == "elseif":
-                self.line_no, self.raw = j + 1, src.raw[j]
                 if self._o_true(self._o_args(src, j)):
                     return j + 1
                 continue

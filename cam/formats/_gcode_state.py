@@ -16,9 +16,10 @@ from .ngc import NgcSyntaxError, evaluate
 class _State:
     """Everything one run of a program keeps between its lines, and the words that read or set it."""
 
-    def __init__(self, source: _Source, *, home_g28_mm, home_g30_mm, tool_table, subroutine_path, max_lines) -> None:
+    def __init__(self, source: _Source, *, home_g28_mm, home_g30_mm, tool_lengths_mm, subroutine_path,
+                 max_lines) -> None:
         self.main = source
-        self.tool_table = None if tool_table is None else dict(tool_table)
+        self.tool_lengths_mm = None if tool_lengths_mm is None else dict(tool_lengths_mm)
         self.path = [Path(p) for p in subroutine_path]
         self.max_lines = int(max_lines)
         self.files: dict[str, _Source] = {}
@@ -180,11 +181,11 @@ class _State:
         if tool == 0:
             self.tlo = 0.0
             return
-        if self.tool_table is None:
+        if self.tool_lengths_mm is None:
             raise self.err(f"G43 needs the length of tool {tool}: give a tool table (--tool-table FILE)")
-        if tool not in self.tool_table:
+        if tool not in self.tool_lengths_mm:
             raise self.err(f"tool {tool} is not in the tool table")
-        self.tlo = self.tool_table[tool]
+        self.tlo = self.tool_lengths_mm[tool]
 
     def g10(self, vals: dict[str, float]) -> None:
         lv = vals.get("l")
@@ -196,10 +197,10 @@ class _State:
         if lv == 1:
             if not 1 <= p <= MAX_TOOL_NUMBER:
                 raise self.err("G10 L1 needs a tool number 'P'")
-            if self.tool_table is None:
-                self.tool_table = {}
+            if self.tool_lengths_mm is None:
+                self.tool_lengths_mm = {}
             if "z" in vals:
-                self.tool_table[p] = vals["z"] * self.scale
+                self.tool_lengths_mm[p] = vals["z"] * self.scale
             for a in "xyz":
                 vals.pop(a, None)
             return

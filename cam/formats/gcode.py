@@ -34,7 +34,9 @@ from __future__ import annotations
 
 import math
 import os
-from typing import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Iterator, Mapping, Sequence
 
 from ..choices import GCODE_SUFFIXES
 from ..errors import ParseError
@@ -42,17 +44,20 @@ from ..fileio import read_text
 from ..limits import DEFAULT_GCODE_LINES, MAX_COORD_MM, MAX_TOOL_NUMBER
 from ._gcode_block import _Block
 from ._gcode_cycles import _Cycles
-from ._gcode_data import PLANE_AXES, GcodeMove, GcodeProgram, _shown, _Source
+from ._gcode_data import PLANE_AXES, GcodeMove, GcodeProgram, MoveBatch, _shown
 from ._gcode_flow import _Flow
+from ._gcode_lines import _Source
 from ._gcode_motion import _Motion
 
 __all__ = [
-    "GcodeMove", "GcodeProgram", "PLANE_AXES", "parse_gcode", "load_gcode", "load_tool_table", "GCODE_SUFFIXES",
+    "GcodeMove", "GcodeProgram", "GcodeFile", "MoveBatch", "PLANE_AXES", "parse_gcode", "load_gcode", "open_gcode",
+    "load_tool_table", "GCODE_SUFFIXES", "BATCH_MOVES",
 ]
 
 
 def load_tool_table(path: str | os.PathLike) -> dict[int, float]:
-    """A LinuxCNC tool table (``T1 P1 Z0.511 D0.125 ;comment`` lines): tool number -> Z offset in mm.
+    """A LinuxCNC tool table file (``T1 P1 Z0.511 D0.125 ;comment`` lines, the ``tool_table`` option's path):
+    tool number -> Z length offset in mm, the ``tool_lengths_mm`` of :func:`parse_gcode`.
 
     The table is in the machine's units, millimetres for `cam`.  Errors name ``file:line``.
     """
@@ -89,19 +94,110 @@ class _Interp(_Flow, _Block, _Motion, _Cycles):
     :mod:`._gcode_motion`, canned cycles :mod:`._gcode_cycles`)."""
 
 
+BATCH_MOVES = 1 << 12
+"""Moves a :class:`GcodeFile` gives in one :class:`MoveBatch` (at least: a line's moves are never split)."""
+
+
+def _interpret(src: _Source, batch_moves: int, options: dict) -> Iterator[MoveBatch]:
+    """Run the program of ``src`` (``options`` as :func:`parse_gcode`'s) and give its moves in batches of at least
+    ``batch_moves`` (the last may be shorter, and is given even when empty), each with the warnings first given
+    while its moves were made."""
+    interp = _Interp(src, **options)
+    warned = 0
+
+    def take() -> MoveBatch:
+        nonlocal warned
+        batch = MoveBatch(interp.moves, interp.warnings[warned:])
+        interp.moves, warned = [], len(interp.warnings)
+        return batch
+
+    try:
+        for _ in interp.run():
+            if len(interp.moves) >= batch_moves:
+                yield take()
+        yield take()
+    except RecursionError:  # pragma: no cover - an expression nested thousands deep
+        raise interp.err("expression nested too deep") from None
+    finally:
+        src.close()
+        for sub in interp.files.values():
+            sub.close()
+
+
+@dataclass
+class GcodeFile:
+    """A G-code program file, interpreted again on each pass a line at a time (:meth:`move_batches`): neither
+    its lines nor its moves are ever all held, so a file of any size is planned in bounded memory
+    (:func:`cam.job.gcode.stream_gcode`).  :func:`load_gcode` is its moves held (a :class:`GcodeProgram`).
+
+    Attributes:
+        path: the file; source: its name in messages.
+        home_g28_mm, home_g30_mm, tool_lengths_mm, subroutine_path, max_lines: as :func:`parse_gcode`'s.
+        warnings: the warnings of the last pass that ran to the end (empty before).
+    """
+
+    path: Path
+    source: str
+    home_g28_mm: Sequence[float] = (0.0, 0.0, 0.0)
+    home_g30_mm: Sequence[float] = (0.0, 0.0, 0.0)
+    tool_lengths_mm: Mapping[int, float] | None = None
+    subroutine_path: Sequence[str | os.PathLike] = ()
+    max_lines: int = DEFAULT_GCODE_LINES
+    warnings: list[str] = field(default_factory=list)
+
+    def move_batches(self, batch_moves: int = BATCH_MOVES) -> Iterator[MoveBatch]:
+        """The program's moves in order, in batches of at least ``batch_moves`` (see :class:`MoveBatch`).
+
+        Raises:
+            ParseError: as :func:`parse_gcode` (``file:line``), when the line is reached.
+        """
+        options = dict(home_g28_mm=self.home_g28_mm, home_g30_mm=self.home_g30_mm,
+                       tool_lengths_mm=self.tool_lengths_mm, subroutine_path=self.subroutine_path,
+                       max_lines=self.max_lines)
+        found: list[str] = []
+        for batch in _interpret(_Source(self.source, path=self.path), max(1, int(batch_moves)), options):
+            found += batch.warnings
+            yield batch
+        self.warnings = found
+
+
+def open_gcode(path: str | os.PathLike, *, home_g28_mm: Sequence[float] = (0.0, 0.0, 0.0),
+               home_g30_mm: Sequence[float] = (0.0, 0.0, 0.0), tool_lengths_mm: Mapping[int, float] | None = None,
+               subroutine_path: Sequence[str | os.PathLike] = (), max_lines: int = DEFAULT_GCODE_LINES) -> GcodeFile:
+    """A G-code file to interpret a pass at a time (:class:`GcodeFile`); the options as :func:`parse_gcode`'s.
+
+    Raises:
+        ParseError: the file is missing or cannot be read.
+    """
+    p = Path(path)
+    if not p.is_file():
+        raise ParseError(f"{p}: file not found")
+    return GcodeFile(p, str(p), tuple(home_g28_mm), tuple(home_g30_mm), tool_lengths_mm, tuple(subroutine_path),
+                     int(max_lines))
+
+
+def _program(batches: Iterator[MoveBatch], source: str) -> GcodeProgram:
+    moves: list[GcodeMove] = []
+    warnings: list[str] = []
+    for batch in batches:
+        moves += batch.moves
+        warnings += batch.warnings
+    return GcodeProgram(moves, source, warnings)
+
+
 def parse_gcode(
     text: str, *, source: str = "<gcode>", home_g28_mm: Sequence[float] = (0.0, 0.0, 0.0),
-    home_g30_mm: Sequence[float] = (0.0, 0.0, 0.0), tool_table: Mapping[int, float] | None = None,
+    home_g30_mm: Sequence[float] = (0.0, 0.0, 0.0), tool_lengths_mm: Mapping[int, float] | None = None,
     subroutine_path: Sequence[str | os.PathLike] = (), max_lines: int = DEFAULT_GCODE_LINES,
 ) -> GcodeProgram:
-    """Interpret G-code text into absolute moves in mm (machine frame).
+    """Interpret G-code text into absolute moves in mm (machine frame), held in memory.
 
     Args:
         text: the program.
         source: its name in messages.
         home_g28_mm, home_g30_mm: where G28 and G30 go, machine mm (parameters 5161.. and 5181..).
-        tool_table: tool number -> Z length offset mm, for G43 (see :func:`load_tool_table`); None: G43 with
-            a tool other than 0 is an error.
+        tool_lengths_mm: tool number -> Z length offset mm, for G43 (a tool table file's, see
+            :func:`load_tool_table`); None: G43 with a tool other than 0 is an error.
         subroutine_path: folders where ``O<name> call`` finds ``name.ngc``.
         max_lines: the most lines the program may run (loops count each time).
 
@@ -109,16 +205,13 @@ def parse_gcode(
         ParseError: ``source:line: message "line text"`` for any unsupported, refused or malformed word, and
             for a program that runs more than ``max_lines`` lines.
     """
-    interp = _Interp(_Source(source, text), home_g28_mm=home_g28_mm, home_g30_mm=home_g30_mm, tool_table=tool_table,
-                     subroutine_path=subroutine_path, max_lines=max_lines)
-    try:
-        interp.run()
-    except RecursionError:  # pragma: no cover - an expression nested thousands deep
-        raise interp.err("expression nested too deep") from None
-    return GcodeProgram(interp.moves, source, interp.warnings)
+    options = dict(home_g28_mm=home_g28_mm, home_g30_mm=home_g30_mm, tool_lengths_mm=tool_lengths_mm,
+                   subroutine_path=subroutine_path, max_lines=max_lines)
+    return _program(_interpret(_Source(source, text), 1 << 62, options), source)
 
 
 def load_gcode(path: str | os.PathLike, **options) -> GcodeProgram:
-    """Read and interpret a G-code file (errors name file:line); ``options`` as :func:`parse_gcode`."""
-    p, text = read_text(path, not_text="not a G-code text file")
-    return parse_gcode(text, source=str(p), **options)
+    """Read and interpret a G-code file, its moves held in memory (errors name file:line); ``options`` as
+    :func:`parse_gcode`.  The file is read a line at a time, as :class:`GcodeFile` reads it."""
+    f = open_gcode(path, **options)
+    return _program(f.move_batches(1 << 62), f.source)

@@ -20,17 +20,27 @@ these periods again), with the move's feed as its nominal period.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from itertools import chain
+from typing import Any, Iterator, Optional, Union
 
 import numpy as np
 
 from ..errors import PlanError, TravelError
-from ..formats.gcode import PLANE_AXES, GcodeMove, GcodeProgram
+from ..formats.gcode import PLANE_AXES, GcodeFile, GcodeMove, GcodeProgram
 from ..limits import MAX_MOVE_PERIODS, MAX_MOVE_S, MAX_PROGRAM_S
 from ..settings import DEFAULT_SETTINGS, MachineSettings
-from .model import CUT, TRAVEL, Job
+from .model import CUT, TRAVEL, Job, PixelFrame, join_pieces
 
-__all__ = ["plan_gcode"]
+__all__ = ["plan_gcode", "stream_gcode", "GcodeJobStream", "PIECE_MOVES", "STREAM_MOVES"]
+
+PIECE_MOVES = 1 << 12
+"""Program moves planned into one piece of a :class:`GcodeJobStream` (at most: see :data:`PIECE_ROWS`)."""
+PIECE_ROWS = 1 << 17
+"""A piece ends after the move that makes its rows this many or more."""
+STREAM_MOVES = 1 << 20
+"""A G-code job of more moves (rows) than this is kept as its pieces, made again on each pass, rather than held
+joined (:func:`cam.job.jobs.prepare_job`, :meth:`GcodeJobStream.held`)."""
 
 
 @dataclass(frozen=True)
@@ -211,19 +221,29 @@ class _Moves:
         self.pause: list[np.ndarray] = []
         self.pause_notes: list[str] = []
         self.at = np.zeros(3, np.int64)  # where the last move ends, steps
+        self.n_rows = 0  # rows collected since the last piece
 
     def _add(self, points: np.ndarray, period_ns: int, periods: np.ndarray, kind: int, *,
              rest: bool = False, pause: bool = False) -> None:
         n = len(points)
-        self.points.append(points)
-        self.period_ns.append(np.full(n, period_ns, np.int64))
-        self.periods.append(periods)
-        self.kind.append(np.full(n, kind, np.uint8))
         start = np.zeros(n, bool)
         start[:1] = True
-        self.move_start.append(start)
-        self.rest.append(np.full(n, rest))
-        self.pause.append(np.full(n, pause))
+        self.rows(points, np.full(n, period_ns, np.int64), periods, np.full(n, kind, np.uint8), start)
+        self.rest[-1] = np.full(n, rest)
+        self.pause[-1] = np.full(n, pause)
+
+    def rows(self, points: np.ndarray, period_ns: np.ndarray, periods: np.ndarray, kind: np.ndarray,
+             move_start: np.ndarray) -> None:
+        """Rows of the job, each a column ``(n,)`` (``points`` ``(n, 3)`` int64 steps); no rest, no pause."""
+        n = len(points)
+        self.points.append(points)
+        self.period_ns.append(period_ns)
+        self.periods.append(periods)
+        self.kind.append(kind)
+        self.move_start.append(move_start)
+        self.rest.append(np.zeros(n, bool))
+        self.pause.append(np.zeros(n, bool))
+        self.n_rows += n
         if n:
             self.at = points[-1]
 
@@ -248,7 +268,8 @@ class _Moves:
         self._add(self.at[None, :].copy(), 0, np.zeros(1, np.int64), TRAVEL, pause=True)
         self.pause_notes.append(note)
 
-    def job(self, settings: MachineSettings, program: GcodeProgram) -> Job:
+    def piece(self, settings: MachineSettings, source: str, warnings: list[str]) -> Job:
+        """The rows collected since the last piece, as a :class:`~cam.job.model.Job` piece; then none are."""
         def cat(parts: list[np.ndarray], dtype, width: int = 0) -> np.ndarray:
             if parts:
                 return np.concatenate(parts)
@@ -256,10 +277,14 @@ class _Moves:
 
         pts = cat(self.points, np.int64, 3)
         kind = cat(self.kind, np.uint8)
-        return Job(points_steps=pts, kind=kind, target=(kind == CUT) & (pts[:, 2] > 0), pause=cat(self.pause, bool),
-                   settings=settings, pause_notes=list(self.pause_notes), warnings=list(program.warnings),
-                   source=program.source, period_ns=cat(self.period_ns, np.int64), periods=cat(self.periods, np.int64),
-                   move_start=cat(self.move_start, bool), rest=cat(self.rest, bool))
+        job = Job(points_steps=pts, kind=kind, target=(kind == CUT) & (pts[:, 2] > 0), pause=cat(self.pause, bool),
+                  settings=settings, pause_notes=list(self.pause_notes), warnings=list(warnings), source=source,
+                  period_ns=cat(self.period_ns, np.int64), periods=cat(self.periods, np.int64),
+                  move_start=cat(self.move_start, bool), rest=cat(self.rest, bool))
+        self.points, self.period_ns, self.periods, self.kind = [], [], [], []
+        self.move_start, self.rest, self.pause, self.pause_notes = [], [], [], []
+        self.n_rows = 0
+        return job
 
 
 class _Frame:
@@ -359,8 +384,245 @@ def _periods(frame: _Frame, mv: GcodeMove, start_mm: np.ndarray, start_steps: np
     return np.floor(ideal + 0.5).astype(np.int64), per_ns  # the nearest step to the exact path point
 
 
-def plan_gcode(program: GcodeProgram, settings: MachineSettings = DEFAULT_SETTINGS, *, flip_y: bool = False) -> Job:
-    """The job of a G-code program (see the module docstring for frames and accuracy).
+RUN_PERIODS = 1 << 18
+"""Step periods of straight moves planned at once by :func:`_straight_run` (a longer move is planned alone)."""
+
+
+@dataclass
+class _Run:
+    """Consecutive straight moves (G0, G1 and the like) planned at once: the job's rows of them, and where they
+    leave the planner (see :func:`_straight_run`)."""
+
+    points: np.ndarray  # (R, 3) int64 steps
+    period_ns: np.ndarray  # (R,) int64
+    periods: np.ndarray  # (R,) int64
+    kind: np.ndarray  # (R,) uint8
+    move_start: np.ndarray  # (R,) bool
+    end_mm: np.ndarray  # (3,) the last move's end, G-code frame
+    end_steps: np.ndarray  # (3,) its exact path point in steps
+    program_ns: int
+
+
+def _straight_run(frame: _Frame, mvs: list[GcodeMove], start_mm: np.ndarray, start_steps: np.ndarray,
+                  at: np.ndarray, program_ns: int) -> Optional[_Run]:
+    """The rows of consecutive straight moves ``mvs`` from ``start_mm`` (the exact point ``start_steps``, the
+    rounded position ``at``), computed for all of them at once with the very arithmetic :func:`_periods` and
+    :meth:`_Moves.motion` do for one move, so the rows are the same (tested).  None when a move breaks a rule
+    (the travel, its periods or time, the program's time): the caller then plans them one by one, which names
+    the line."""
+    ends = np.array([mv.end for mv in mvs], np.float64).reshape(-1, 3)
+    way_steps = ends * frame.to_steps
+    if np.any(frame.outside(way_steps)):
+        return None
+    starts = np.vstack([start_steps[None, :], way_steps[:-1]])
+    d = way_steps - starts
+    n = np.maximum(1, np.ceil(np.abs(d).max(axis=1) - 1e-9).astype(np.int64))
+    if int(n.max()) > MAX_MOVE_PERIODS:
+        return None
+    length_mm = np.linalg.norm(ends - np.vstack([start_mm[None, :], ends[:-1]]), axis=1)
+    any_xy, uses_z = np.any(d[:, :2] != 0, axis=1), d[:, 2] != 0
+    floor_ns = np.where(any_xy, np.where(uses_z, frame.min_period[True], frame.min_period[False]), frame.delay_z_ns)
+    feed = np.array([mv.feed_mm_min for mv in mvs], np.float64)
+    minutes = np.array([mv.minutes for mv in mvs], np.float64)
+    rapid = np.array([mv.kind == "rapid" for mv in mvs]) | ((feed <= 0) & (minutes <= 0))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        duration_s = np.where(minutes > 0, minutes * 60.0, length_mm / (feed / 60.0))
+        if np.any(~rapid & (duration_s > MAX_MOVE_S)):
+            return None
+        per_ns = np.where(rapid, floor_ns, np.maximum(floor_ns, np.rint(np.where(rapid, 0.0, duration_s) * 1e9 / n)
+                                                      .astype(np.int64)))
+    times = program_ns + np.cumsum(per_ns * n)
+    if times[-1] > MAX_PROGRAM_S * 1e9:
+        return None
+    first = np.cumsum(n) - n
+    seg = np.repeat(np.arange(len(n)), n)
+    k = np.arange(int(n.sum())) - np.repeat(first, n) + 1
+    positions = np.floor(starts[seg] + d[seg] * (k / n[seg])[:, None] + 0.5).astype(np.int64)
+    signed = np.diff(np.vstack([at[None, :], positions]), axis=0)
+    change = np.ones(len(signed), bool)
+    change[1:] = np.any(signed[1:] != signed[:-1], axis=1)
+    change[first] = True
+    row0 = np.flatnonzero(change)
+    last = np.append(row0[1:], len(signed)) - 1
+    move_of = seg[row0]
+    kind = np.where(np.array([mv.kind == "rapid" for mv in mvs]), TRAVEL, CUT).astype(np.uint8)
+    is_first = np.zeros(len(signed), bool)
+    is_first[first] = True
+    return _Run(positions[last], per_ns[move_of], last - row0 + 1, kind[move_of], is_first[row0], ends[-1],
+                way_steps[-1], int(times[-1]))
+
+
+class _Planner:
+    """Plans a program's moves one after the other, carrying what joins one piece to the next: where the last
+    move ended (mm and the exact path point in steps), the last row and the program's time so far."""
+
+    def __init__(self, settings: MachineSettings, flip_y: bool, source: str) -> None:
+        self.settings, self.source = settings, source
+        self.frame = _Frame(settings, flip_y)
+        self.moves = _Moves()
+        self.cur_mm = np.zeros(3)  # G-code frame
+        self.cur_steps = np.zeros(3)  # the exact path point, in steps
+        self.program_ns = 0  # the program's time so far at its feeds and dwells
+
+    def move(self, mv: GcodeMove) -> None:
+        """Plan one move (see :func:`plan_gcode` for the checks)."""
+        where = f"{mv.file or self.source}:{mv.line}"
+        if mv.kind == "pause":
+            self.moves.pause_here(mv.note)
+            return
+        if mv.kind == "dwell":
+            if mv.seconds > 0:
+                self.moves.dwell(mv.seconds)
+                self.program_ns = _add_time(self.program_ns, int(round(mv.seconds * 1e9)), where)
+            return
+        frame = self.frame
+        end = np.array(mv.end, np.float64)
+        if mv.kind in ("arc", "spline"):
+            curve = _Arc.of(self.cur_mm, mv) if mv.kind == "arc" else _Bezier.of(self.cur_mm, mv)
+            n = curve.n_points(frame.step_mm)
+            frame.check_curve(curve, n, end, where)  # before anything is sampled
+            if n > MAX_MOVE_PERIODS:
+                raise PlanError(f"{where}: the {mv.kind} takes at least {n} step periods; one move may take at "
+                                f"most {MAX_MOVE_PERIODS}")
+            way = _curve_points(curve, n, end)
+        else:
+            way = end[None, :]
+        way_steps = way * frame.to_steps
+        frame.check(way, way_steps, where)
+        positions, per_ns = _periods(frame, mv, self.cur_mm, self.cur_steps, way, way_steps, where)
+        self.moves.motion(positions, per_ns, TRAVEL if mv.kind == "rapid" else CUT)
+        self.program_ns = _add_time(self.program_ns, per_ns * len(positions), where)
+        self.cur_mm, self.cur_steps = end, way_steps[-1]
+
+    def plan(self, mvs: list[GcodeMove], piece_rows: int) -> Iterator[None]:
+        """Plan ``mvs`` in order (consecutive straight moves at once, :func:`_straight_run`); yields whenever
+        ``piece_rows`` rows or more wait for :meth:`piece` (between two moves)."""
+        i = 0
+        while i < len(mvs):
+            j = i
+            periods = 0
+            while j < len(mvs) and mvs[j].kind in ("rapid", "feed") and (j == i or periods < RUN_PERIODS):
+                periods += int(max(abs(a - b) for a, b in zip(mvs[j].end, mvs[j - 1].end if j > i else self.cur_mm))
+                               / float(self.frame.step_mm.min())) + 1
+                j += 1
+            run = _straight_run(self.frame, mvs[i:j], self.cur_mm, self.cur_steps, self.moves.at, self.program_ns) \
+                if j > i + 1 else None
+            if run is None:
+                j = i + 1
+                self.move(mvs[i])
+            else:
+                self.moves.rows(run.points, run.period_ns, run.periods, run.kind, run.move_start)
+                self.cur_mm, self.cur_steps, self.program_ns = run.end_mm, run.end_steps, run.program_ns
+            i = j
+            if self.moves.n_rows >= piece_rows:
+                yield
+
+    def piece(self, warnings: list[str]) -> Job:
+        """The rows planned since the last piece, with the ``warnings`` first given meanwhile."""
+        return self.moves.piece(self.settings, self.source, warnings)
+
+
+@dataclass
+class GcodeJobStream:
+    """The G-code job as consecutive :class:`~cam.job.model.Job` pieces (a :class:`~cam.job.model.JobLike`):
+    :func:`plan_gcode` is :meth:`joined`.
+
+    :meth:`pieces` plans them anew on each pass from the moves of ``src``: a :class:`~cam.formats.gcode.GcodeFile`
+    (interpreted again a line at a time: nothing per line or per move is held) or a
+    :class:`~cam.formats.gcode.GcodeProgram` held in memory.  Each piece is the rows of about ``piece_moves``
+    program moves (a program move is never split, so a piece holds at most one move's
+    :data:`~cam.limits.MAX_MOVE_PERIODS` rows more); what joins it to the next is carried over (:class:`_Planner`),
+    so the pieces joined are the same job whatever the piece size (tested).  Every check of
+    :func:`plan_gcode` (travel, a move's periods and time, the program's time so far) is made as the piece of
+    its move is made, naming the line.
+
+    Attributes:
+        src: the program; settings: the machine settings; flip_y: G-code +Y is machine +Y.
+        piece_moves: program moves planned into one piece.
+        n_moves: the job's moves (rows), -1 until a pass ended; n_program_moves: the program's moves (the same).
+        pause_notes, warnings: the job's (the warnings: a file's, once a pass ended).
+        safe_z_steps: 0 (a stop lifts to the home plane); pixels, tool: None (no drawing frame; the point tool).
+    """
+
+    src: Union[GcodeProgram, GcodeFile]
+    settings: MachineSettings = DEFAULT_SETTINGS
+    flip_y: bool = False
+    piece_moves: int = PIECE_MOVES
+    n_moves: int = -1
+    n_program_moves: int = -1
+    pause_notes: list[str] = field(default_factory=list)
+    safe_z_steps: int = 0
+    pixels: Optional[PixelFrame] = None
+    tool: Any = None
+
+    @property
+    def source(self) -> str:
+        return self.src.source
+
+    @property
+    def warnings(self) -> list[str]:
+        return list(self.src.warnings)
+
+    def __len__(self) -> int:
+        if self.n_moves < 0:
+            for _ in self.pieces():
+                pass
+        return self.n_moves
+
+    def joined(self) -> Job:
+        """Every move in one :class:`~cam.job.model.Job` (:func:`~cam.job.model.join_pieces` of :meth:`pieces`)."""
+        return join_pieces(self.pieces(), self)
+
+    def held(self, max_moves: int) -> Optional[Job]:
+        """:meth:`joined` if the job has at most ``max_moves`` moves, else None (found in one pass that stops
+        once more are planned: the pieces are never all held for a larger job)."""
+        parts, rows = [], 0
+        for piece in self.pieces():
+            rows += len(piece)
+            if rows > max_moves:
+                return None
+            parts.append(piece)
+        return join_pieces(parts, self)
+
+    def pieces(self) -> Iterator[Job]:
+        """The job's moves as consecutive :class:`~cam.job.model.Job` pieces (at least one; each made of
+        ``piece_moves`` program moves or more, but the last).
+
+        Raises:
+            ParseError: the program is malformed (``file:line``, when its line is reached);
+            TravelError, PlanError: as :func:`plan_gcode`.
+        """
+        planner = _Planner(self.settings, self.flip_y, self.source)
+        notes: list[str] = []
+        warnings: list[str] = []
+        n_rows = n_program = 0
+        given = False
+        for batch in self.src.move_batches(self.piece_moves):
+            warnings += batch.warnings
+            for _ in chain(planner.plan(batch.moves, PIECE_ROWS), [None]):
+                if planner.moves.n_rows:
+                    piece = planner.piece(warnings)
+                    warnings, given = [], True
+                    notes += piece.pause_notes or []
+                    n_rows += len(piece)
+                    yield piece
+            n_program += len(batch.moves)
+        if warnings or not given:
+            yield planner.piece(warnings)
+        self.n_moves, self.n_program_moves, self.pause_notes = n_rows, n_program, notes
+
+
+def stream_gcode(src: Union[GcodeProgram, GcodeFile], settings: MachineSettings = DEFAULT_SETTINGS, *,
+                 flip_y: bool = False, piece_moves: int = PIECE_MOVES) -> GcodeJobStream:
+    """The job of a G-code program as a :class:`GcodeJobStream` (a :class:`~cam.formats.gcode.GcodeFile`'s: bounded
+    memory; a :class:`~cam.formats.gcode.GcodeProgram`'s moves are sliced).  See :func:`plan_gcode`."""
+    return GcodeJobStream(src, settings, bool(flip_y), max(1, int(piece_moves)))
+
+
+def plan_gcode(program: Union[GcodeProgram, GcodeFile], settings: MachineSettings = DEFAULT_SETTINGS, *,
+               flip_y: bool = False) -> Job:
+    """The job of a G-code program (see the module docstring for frames and accuracy): the pieces of
+    :func:`stream_gcode` joined.
 
     Rapids run at the configured step delays; feed moves at their F, never faster than the delays allow;
     :func:`cam.drive.steps.plan_steps` then lengthens periods with the speed ramps of ``settings.ramp``,
@@ -375,39 +637,7 @@ def plan_gcode(program: GcodeProgram, settings: MachineSettings = DEFAULT_SETTIN
         TravelError: a move leaves the machine travel (naming the line and the first point outside).
         PlanError: a move too long or too slow, a program too long (naming the line).
     """
-    frame = _Frame(settings, flip_y)
-    moves = _Moves()
-    cur_mm = np.zeros(3)  # G-code frame
-    cur_steps = np.zeros(3)  # the exact path point, in steps
-    program_ns = 0  # the program's time so far at its feeds and dwells
-    for mv in program.moves:
-        where = f"{mv.file or program.source}:{mv.line}"
-        if mv.kind == "pause":
-            moves.pause_here(mv.note)
-            continue
-        if mv.kind == "dwell":
-            if mv.seconds > 0:
-                moves.dwell(mv.seconds)
-                program_ns = _add_time(program_ns, int(round(mv.seconds * 1e9)), where)
-            continue
-        end = np.array(mv.end, np.float64)
-        if mv.kind in ("arc", "spline"):
-            curve = _Arc.of(cur_mm, mv) if mv.kind == "arc" else _Bezier.of(cur_mm, mv)
-            n = curve.n_points(frame.step_mm)
-            frame.check_curve(curve, n, end, where)  # before anything is sampled
-            if n > MAX_MOVE_PERIODS:
-                raise PlanError(f"{where}: the {mv.kind} takes at least {n} step periods; one move may take at "
-                                f"most {MAX_MOVE_PERIODS}")
-            way = _curve_points(curve, n, end)
-        else:
-            way = end[None, :]
-        way_steps = way * frame.to_steps
-        frame.check(way, way_steps, where)
-        positions, per_ns = _periods(frame, mv, cur_mm, cur_steps, way, way_steps, where)
-        moves.motion(positions, per_ns, TRAVEL if mv.kind == "rapid" else CUT)
-        program_ns = _add_time(program_ns, per_ns * len(positions), where)
-        cur_mm, cur_steps = end, way_steps[-1]
-    return moves.job(settings, program)
+    return stream_gcode(program, settings, flip_y=flip_y).joined()
 
 
 def _add_time(program_ns: int, move_ns: int, where: str) -> int:

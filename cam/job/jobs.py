@@ -41,7 +41,7 @@ from ..digitize.profile import load_profile, profile_from_expr
 from ..drive.chunks import plan_chunks
 from ..errors import CamError
 from ..formats.excellon import load_excellon
-from ..formats.gcode import load_gcode, load_tool_table
+from ..formats.gcode import load_tool_table, open_gcode
 from ..options import JOB_OPTIONS, Option, MAX_DEPTH_PX, MAX_MM, MAX_PX, check_range  # noqa: F401 (the limits re-exported)
 from ..formats.hpgl import scan_hpgl
 from ..formats.svg import load_svg
@@ -56,7 +56,8 @@ from .drawing import check_drawing_size
 from .drill import DEFAULT_CUT_DEPTH_MM as DRILL_DEPTH_MM
 from .drill import DEFAULT_TRAVEL_HEIGHT_MM as DRILL_TRAVEL_HEIGHT_MM
 from .drill import plan_drill
-from .gcode import plan_gcode
+from .gcode import STREAM_MOVES as GCODE_STREAM_MOVES
+from .gcode import stream_gcode
 from .hpgl import DEFAULT_CUT_DEPTH_MM as HPGL_CUT_DEPTH_MM
 from .hpgl import DEFAULT_TRAVEL_HEIGHT_MM as HPGL_TRAVEL_HEIGHT_MM
 from .drawing_stream import STREAM_TARGETS, plan, stream_drawing
@@ -622,15 +623,19 @@ def _prepare_pixels(path: Path, kind: str, options: JobOptions, settings: Machin
 def _prepare_gcode(path: Path, options: JobOptions, settings: MachineSettings) -> PreparedJob:
 
     s = settings
-    program = load_gcode(
+    program = open_gcode(
         path, home_g28_mm=(s.g28_x_mm, s.g28_y_mm, s.g28_z_mm), home_g30_mm=(s.g30_x_mm, s.g30_y_mm, s.g30_z_mm),
-        tool_table=load_tool_table(options.tool_table) if options.tool_table else None,
+        tool_lengths_mm=load_tool_table(options.tool_table) if options.tool_table else None,
         subroutine_path=options.subroutine_path, max_lines=options.max_lines)
-    job = plan_gcode(program, settings, flip_y=options.flip_y)
-    steps = plan_chunks(job)
+    stream = stream_gcode(program, settings, flip_y=options.flip_y)
+    # one planner whatever the size: a job of over STREAM_MOVES moves is kept as its pieces, the file interpreted
+    # again on every pass (bounded memory); a smaller one is held joined
+    held = stream.held(GCODE_STREAM_MOVES)
+    toolpath = stream if held is None else held
+    steps = plan_chunks(toolpath)  # after a whole pass (held's or this) the program's moves and warnings are known
     return PreparedJob(
-        source=str(path), kind="gcode", plan=steps, settings=settings, toolpath=job, warnings=list(program.warnings),
-        summary=f"{path.name}: {len(program.moves)} moves", report={"moves": len(program.moves)},
+        source=str(path), kind="gcode", plan=steps, settings=settings, toolpath=toolpath, warnings=stream.warnings,
+        summary=f"{path.name}: {stream.n_program_moves} moves", report={"moves": stream.n_program_moves},
     )
 
 
