@@ -175,6 +175,8 @@ def _run(job: Any, args: argparse.Namespace, settings: MachineSettings, hold: St
     port: Any = args.port
     if getattr(args, "pin_log", None) and port_kind(args.port) == "mock" and not realtime:
         port = MockPort(pin_log_path=args.pin_log)  # the pin log streams to its file: nothing held
+    elif port_kind(args.port) == "mock" and not realtime:
+        port = MockPort(keep_log=False)  # nobody reads this run's pin log: the writes are counted, not kept
     session = MachineSession(port, settings, realtime=realtime, on_prompt=_ask(args, stopping))
     session.set_position(start)
     session.check_job(job)  # before the progress bar: a bad job is one clean line

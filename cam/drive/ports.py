@@ -88,12 +88,15 @@ class MockPort(Port):
     Memory is bounded whatever the job's length: ``pin_log_path`` streams the pin log to this CSV file as the
     writes come (the file appears, whole, at :meth:`finish_pin_log`: written beside it, then renamed);
     without it, the first :data:`_HELD_WRITES` writes are held in memory and the rest go to an anonymous
-    temporary file (13 bytes a write), read back only when :meth:`pin_log` or :meth:`pin_log_pieces` asks.
+    temporary file (13 bytes a write), read back only when :meth:`pin_log` or :meth:`pin_log_pieces` asks;
+    with ``keep_log=False`` nothing is kept (``cam drill`` on the mock without ``--pin-log``).
     """
 
     name = "mock"
 
-    def __init__(self, pin_log_path: "str | os.PathLike | None" = None) -> None:
+    def __init__(self, pin_log_path: "str | os.PathLike | None" = None, *, keep_log: bool = True) -> None:
+        self.keep_log = keep_log or pin_log_path is not None
+        """False: the writes are counted and dropped, as a real port sends them (a run nobody will decode)."""
         self._t: list[np.ndarray] = []
         self._d: list[np.ndarray] = []
         self._s: list[np.ndarray] = []
@@ -119,6 +122,8 @@ class MockPort(Port):
             return
         self.n_writes += len(t_ns)
         self.last_t_ns = int(t_ns[-1])
+        if not self.keep_log:
+            return
         if self.pin_log_path is None:
             self._hold(t_ns, data, strobe)
             return
@@ -150,6 +155,8 @@ class MockPort(Port):
         """Every write so far as consecutive :class:`PinLog` pieces of at most ``writes_per_piece`` writes (bounded
         memory: :func:`cam.verify.ramps.check_ramps` takes them)."""
         self._flush()
+        if not self.keep_log:
+            raise CapabilityError("this mock port keeps no pin log (opened with keep_log=False)")
         if self.pin_log_path is not None:
             yield self.pin_log()
             return
