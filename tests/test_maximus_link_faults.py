@@ -130,6 +130,12 @@ def run_faulty(emu, proxy: PtyProxy) -> BaseException:
     return info.value
 
 
+def cases(values, fast) -> list:
+    """``values`` as parameters; those not in ``fast`` go to the slow tier (each test keeps fast cases)."""
+    return [pytest.param(*(v if isinstance(v, tuple) else (v,)), marks=() if v in fast else pytest.mark.slow)
+            for v in values]
+
+
 # ---------------------------------------------------------------------- a dropped byte: nothing completes it
 _CASES = [(name, k) for name, n in LENGTH.items() for k in range(n)]
 _FAST_CASES = {("hole", 4), ("hole", 0), ("init", 8), ("offset", 9), ("jog", 3), ("OPENDRILLMODE1", 0)}
@@ -152,7 +158,7 @@ def test_a_byte_lost_on_the_way_to_the_board_is_a_fault_and_nothing_moves(clean_
 
 
 # ---------------------------------------------------------------------- bytes the board never sent
-@pytest.mark.parametrize("name", list(REPLY))
+@pytest.mark.parametrize("name", cases(list(REPLY), {"hole", "offset", "jog", "close"}))
 def test_an_early_reply_byte_is_a_fault(clean_run, name):
     """The packet's own reply byte, 10 ms after the packet: too soon for a move, or one byte too many."""
     offset = clean_run["first"][name] + LENGTH[name]
@@ -172,9 +178,12 @@ def test_the_issues_stray_onehole_drilled_names_the_hole_and_its_timing(clean_ru
         assert [tuple(r[1:3]) for r in emu.hole_log()] == [tuple(h) for h in HOLES[:2].tolist()]  # it ends hole 1
 
 
-@pytest.mark.parametrize("where", ["OPENDRILLMODE1", "offset", "init", "hole", "close"])
-@pytest.mark.parametrize("garbage", [b"\x00", b"\x13\x37\xff", b"\x02", b"\x81"], ids=["0x00", "3 bytes",
-                                                                                          "switch", "stopped"])
+_GARBAGE = [(where, garbage) for where in ["OPENDRILLMODE1", "offset", "init", "hole", "close"]
+            for garbage in [b"\x00", b"\x13\x37\xff", b"\x02", b"\x81"]]
+
+
+@pytest.mark.parametrize("where,garbage", cases(_GARBAGE, {("hole", b"\x02"), ("offset", b"\x81"),
+                                                           ("init", b"\x13\x37\xff"), ("OPENDRILLMODE1", b"\x00")}))
 def test_garbage_towards_the_host_is_a_fault(clean_run, where, garbage):
     """A limit-switch byte (0x02) before the debounce or after a packet that moves nothing, MACHINESTOPPED
     (0x81) with no stop byte sent, any other byte: a fault."""
@@ -199,7 +208,8 @@ def test_a_flood_of_the_expected_byte_is_a_fault(clean_run):
         assert_safe(emu, proxy, run_faulty(emu, proxy))
 
 
-@pytest.mark.parametrize("name,k", [("hole", 2), ("hole", 5), ("init", 4), ("offset", 10), ("OPENJOGMODE", 0)])
+@pytest.mark.parametrize("name,k", cases([("hole", 2), ("hole", 5), ("init", 4), ("offset", 10), ("OPENJOGMODE", 0)],
+                                         {("hole", 2), ("init", 4)}))
 def test_a_cut_cable_is_a_fault(clean_run, name, k):
     """The proxy forwards nothing more either way from the k-th byte of the packet (k = its length: right after
     it): the board ends the move it got, if any, and waits."""
@@ -214,8 +224,8 @@ def _reply_offset(to_host: bytes, byte: int, nth: int) -> int:
     return found[nth]
 
 
-@pytest.mark.parametrize("byte,nth", [(ONEHOLEDRILLED, 2), (ATOFFSETPOS, 0), (DRILLMODE1INITIALIZED, 0),
-                                      (JOGMODEDONE, 0)])
+@pytest.mark.parametrize("byte,nth", cases([(ONEHOLEDRILLED, 2), (ATOFFSETPOS, 0), (DRILLMODE1INITIALIZED, 0),
+                                            (JOGMODEDONE, 0)], {(ONEHOLEDRILLED, 2)}))
 def test_a_reply_lost_on_the_way_to_the_host_is_a_fault(clean_run, byte, nth):
     with line(drop_reply_offsets={_reply_offset(clean_run["to_host"], byte, nth)}) as (emu, proxy):
         error = run_faulty(emu, proxy)
