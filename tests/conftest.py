@@ -38,8 +38,10 @@ from __future__ import annotations
 
 import io
 import os
+import shutil
 import signal
 import sys
+import tempfile
 import traceback
 import warnings
 from dataclasses import dataclass
@@ -53,6 +55,23 @@ import cam
 
 ROOT = Path(__file__).resolve().parent.parent
 SAMPLES = ROOT / "samples"
+
+# The machine state files (cam.drive.state) of the commands the tests run, in this process and in the
+# `python -m cam` processes they start (whose environment is copied from this one): a folder of this test
+# session's own, emptied before each test, never the user's ~/.local/state/cam (see state_home below).
+STATE_HOME = Path(tempfile.mkdtemp(prefix="cam-tests-state-"))
+os.environ["XDG_STATE_HOME"] = str(STATE_HOME)
+
+
+@pytest.fixture(autouse=True)
+def state_home():
+    """Each test starts with no machine state: every machine at its home, position known, nothing running."""
+    shutil.rmtree(STATE_HOME / "cam", ignore_errors=True)
+    yield STATE_HOME / "cam"
+
+
+def pytest_sessionfinish(session, exitstatus):
+    shutil.rmtree(STATE_HOME, ignore_errors=True)
 
 
 def drawing_from_rows(rows: list[str]) -> np.ndarray:

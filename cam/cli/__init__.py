@@ -29,6 +29,8 @@ COMMANDS = {
     "trace": ("cam.cli.trace", "cmd_trace"),
     "jog": ("cam.cli.machine", "cmd_jog"),
     "goto": ("cam.cli.machine", "cmd_goto"),
+    "where": ("cam.cli.machine_state", "cmd_where"),
+    "zero": ("cam.cli.machine_state", "cmd_zero"),
     "serve": ("cam.cli.serve", "cmd_serve"),
     "emulate-maximus": ("cam.cli.emulate", "cmd_emulate"),
 }

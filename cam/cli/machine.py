@@ -1,60 +1,128 @@
-"""Commands that move the machine without a job file: goto and jog."""
+"""Commands that move the machine without a job file: goto and jog.
+
+Both start where the machine state file (:mod:`cam.drive.state`) says the tool stands, are checked against
+the travel in the machine frame before anything moves, and record where the tool ended.
+"""
 from __future__ import annotations
 
 import argparse
 import sys
+from typing import Optional
 
+import numpy as np
+
+from ..drive.ports import port_kind
+from ..drive.state import check_in_travel, steps_to_mm
 from ..errors import CamError
-from ..job.moves import goto, jog, jog_steps
+from ..job.model import Job, travel_job
+from ..job.moves import jog, jog_steps
+from ..settings import MachineSettings
 from .common import port_settings
 from .execute import check_port_options, execute
+from .machine_state import hold_machine
 from .parser import EXIT_INTERRUPTED
-from ..drive.ports import port_kind
 
-__all__ = ["cmd_goto", "cmd_jog"]
+__all__ = ["cmd_goto", "cmd_jog", "goto_path", "target_steps"]
+
+Steps3 = tuple[int, int, int]
+
+
+def target_steps(values: list[float], unit: str, settings: MachineSettings) -> Steps3:
+    """X,Y,Z in ``unit`` (``px``: drawing pixels, ``mm``, ``steps``) as steps, in the frame they were given in.
+
+    Raises:
+        CamError: a pixel or step count that is not whole.
+    """
+    if unit in ("px", "steps"):
+        if any(float(v) != int(v) for v in values):
+            raise CamError(f"X,Y,Z in {unit} must be whole numbers, got {','.join(f'{v:g}' for v in values)}")
+        per = (settings.steps_per_px_xy, settings.steps_per_px_xy, settings.steps_per_px_z) if unit == "px" \
+            else (1, 1, 1)
+        return tuple(int(v) * p for v, p in zip(values, per))  # type: ignore[return-value]
+    per_mm = (settings.mm_per_step_xy, settings.mm_per_step_xy, settings.mm_per_step_z)
+    return tuple(int(round(float(v) / p)) for v, p in zip(values, per_mm))  # type: ignore[return-value]
+
+
+def goto_path(start_steps: Steps3, target_steps: Steps3, safe_z_steps: int, settings: MachineSettings
+              ) -> Optional[Job]:
+    """Go To from ``start_steps`` to ``target_steps`` (both machine frame): up to the safe height first (the
+    highest of where the tool is, ``safe_z_steps`` and the target's Z; +Z is deeper), travel at it, then Z
+    to the target.  The job's points are relative to the start; None when the tool is there already."""
+    x0, y0, z0 = (int(v) for v in start_steps)
+    x, y, z = (int(v) for v in target_steps)
+    h = min(z0, int(safe_z_steps), z)
+    rel: list[Steps3] = []
+    for p in ((x0, y0, h), (x, y, h), (x, y, z)):
+        r = (p[0] - x0, p[1] - y0, p[2] - z0)
+        if r != (0, 0, 0) and (not rel or rel[-1] != r):
+            rel.append(r)
+    if not rel:
+        return None
+    return travel_job(np.array(rel, np.int64).reshape(-1, 3), settings, source="go to")
+
+
+def _where_line(machine: Steps3, work: Steps3, offset: str, settings: MachineSettings) -> str:
+    mx, my, mz = steps_to_mm(machine, settings)
+    return (f"at X={work[0]} Y={work[1]} Z={work[2]} steps in {offset} (machine X={machine[0]} Y={machine[1]} "
+            f"Z={machine[2]} steps = {mx:g}, {my:g}, {mz:g} mm)")
 
 
 def cmd_goto(args: argparse.Namespace) -> int:
     check_port_options(args)
     settings = port_settings(args, args.port)
-    outcome = execute(goto(tuple(args.position), settings=settings), args, settings)
+    rel = target_steps(args.position, args.unit, settings)
+    with hold_machine(args, settings, "cam goto") as hold:
+        hold.require_known()
+        state = hold.state
+        zero = (0, 0, 0) if args.machine_coords else state.work_zero_steps()
+        frame = "machine" if args.machine_coords else state.active_offset
+        target = tuple(int(z) + int(r) for z, r in zip(zero, rel))
+        check_in_travel(target, settings, f"X,Y,Z {','.join(f'{v:g}' for v in args.position)} {args.unit} "
+                        f"in {frame} (machine {list(target)} steps)")
+        job = goto_path(state.position_steps, target, zero[2], settings)  # type: ignore[arg-type]
+        if job is None:
+            print(_where_line(state.position_steps, state.to_work(state.position_steps), state.active_offset,
+                              settings) + ": there already")
+            return 0
+        outcome = execute(job, args, settings, hold=hold)
+        state = hold.state
     if not outcome.finished:
         for m in outcome.messages:
             print(m, file=sys.stderr)
         return EXIT_INTERRUPTED
-    x, y, z = outcome.position_steps
-    print(f"at X={x} Y={y} Z={z} steps")
+    print(_where_line(state.position_steps, state.to_work(state.position_steps), state.active_offset, settings))
     return 0
 
 
-def cmd_jog(args: argparse.Namespace) -> int:
+def _jog_steps(args: argparse.Namespace, settings: MachineSettings) -> tuple[str, int]:
     axis = args.axis.upper()
     if len(axis) != 2 or axis[0] not in "XYZ" or axis[1] not in "+-":
         raise CamError(f"axis must be X+, X-, Y+, Y-, Z+ or Z-, got '{args.axis}'")
     if args.steps <= 0:
         raise CamError(f"steps must be > 0, got {args.steps:g}")
-    check_port_options(args)
-    settings = port_settings(args, args.port)
     half = getattr(settings.maximus, f"half_step_{axis[0].lower()}") if port_kind(args.port) == "maximus" \
         else settings.half_step
     n = jog_steps(axis[0], args.steps, args.unit, settings=settings, half_step=half)
     if n == 0:
         raise CamError(f"a jog of {args.steps:g} {args.unit} is less than one step")
-    n = n if axis[1] == "+" else -n
-    bounds = settings.travel.bounds_steps()
-    lo, hi = bounds["XYZ".index(axis[0])]
-    if abs(n) > hi - lo:
-        raise CamError(f"a jog of {n} steps is longer than the {axis[0]} travel ({hi - lo} steps)")
-    # the command line does not know where the tool stands: a jog fits when it fits from one end of the travel
-    start = [b_lo for b_lo, _ in bounds]
-    if n < 0:
-        start["XYZ".index(axis[0])] = hi
-    outcome = execute(jog(axis[0], n, settings=settings), args, settings, start_steps=tuple(start))
+    return axis[0], n if axis[1] == "+" else -n
+
+
+def cmd_jog(args: argparse.Namespace) -> int:
+    check_port_options(args)
+    settings = port_settings(args, args.port)
+    axis, n = _jog_steps(args, settings)
+    with hold_machine(args, settings, "cam jog") as hold:
+        hold.require_known()
+        start = hold.state.position_steps
+        outcome = execute(jog(axis, n, settings=settings, position_steps=start), args, settings, hold=hold)
+        state = hold.state
     if not outcome.finished:
         for m in outcome.messages:
             print(m, file=sys.stderr)
-        moved = [int(p) - int(s) for p, s in zip(outcome.position_steps, start)]
+        moved = [int(p) - int(s) for p, s in zip(state.position_steps, start)]
         print(f"jog stopped: moved X={moved[0]} Y={moved[1]} Z={moved[2]} steps", file=sys.stderr)
         return EXIT_INTERRUPTED
-    print(f"jogged {axis[0]} by {n} steps")
+    print(f"jogged {axis} by {n} steps; "
+          + _where_line(state.position_steps, state.to_work(state.position_steps), state.active_offset, settings))
     return 0

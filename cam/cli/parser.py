@@ -272,6 +272,29 @@ def _add_progress_options(g: argparse._ActionsContainer) -> None:
     bar.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
+def _add_state_option(g: argparse._ActionsContainer) -> None:
+    """--state: the machine state file (every command that moves the machine or reads where it is)."""
+    g.add_argument("--state", metavar="FILE.json",
+                   help="the machine state file: where the machine stands, its work offsets, kept from one command "
+                   "to the next and locked while one drives the machine (default: $XDG_STATE_HOME/cam/ or "
+                   "~/.local/state/cam/, named after --machine and --port, e.g. default-mock.json)")
+
+
+def _float_triple(name: str) -> Callable[[str], list[float]]:
+    """X,Y,Z: three finite numbers, each at most MAX_WHOLE either way."""
+    def parse(text: str) -> list[float]:
+        try:
+            values = [float(v) for v in text.split(",")]
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} takes three numbers separated by commas, got '{text}'") from None
+        if len(values) != 3 or not all(math.isfinite(v) and abs(v) <= MAX_WHOLE for v in values):
+            raise argparse.ArgumentTypeError(f"{name} takes three numbers X,Y,Z (at most {MAX_WHOLE} either way), "
+                                             f"got '{text}'")
+        return values
+
+    return parse
+
+
 def _add_job_options(d: argparse.ArgumentParser) -> None:
     """Options that say what to cut and how deep (shared by drill, export and preview)."""
     d.add_argument("image", nargs="?", metavar="IMAGE",
@@ -317,6 +340,7 @@ def _add_drill(sub: argparse._SubParsersAction) -> None:
     g = d.add_argument_group("port and outputs")
     g.add_argument("--port", default="mock", help="'mock' (default: logs, moves nothing), a device like /dev/parport0, or maximus:/dev/ttyUSB0 (drill files)")
     g.add_argument("--realtime", action="store_true", help="run the mock in real time, sleeping like the real port")
+    _add_state_option(g)
     g.add_argument("--pin-log", metavar="FILE.csv", help="write the mock's pin log (t_ns,data,strobe)")
     g.add_argument("--save-digitized", metavar="FILE", help="save the digitized matrix")
     g.add_argument("--report", metavar="FILE.json", help="write the job report as JSON")
@@ -428,7 +452,9 @@ def _add_profile(sub: argparse._SubParsersAction) -> None:
 def _add_jog(sub: argparse._SubParsersAction) -> None:
     jg = sub.add_parser("jog", help="move one axis by a number of steps (to set the board origin)",
                         description="Jog one axis, as the MAXIMUS jog screen does: 'cam jog X+ 100' moves X by "
-                        "+100 steps. On a MAXIMUS board (--port maximus:/dev/ttyUSB0) this is its Jog mode.")
+                        "+100 steps from where the machine state file says the tool stands (refused when it would "
+                        "leave the travel), and records where it ended. On a MAXIMUS board "
+                        "(--port maximus:/dev/ttyUSB0) this is its Jog mode.")
     jg.add_argument("axis", metavar="AXIS", help="X+, X-, Y+, Y-, Z+ (down) or Z- (up)")
     jg.add_argument("steps", type=_number("STEPS", 0.0, float(MAX_WHOLE)), metavar="STEPS",
                     help="how far (> 0), in --unit")
@@ -436,6 +462,7 @@ def _add_jog(sub: argparse._SubParsersAction) -> None:
                     help="steps (default: machine steps, a MAXIMUS clock pulse), full-steps (motor steps), "
                     "0.1mm, mm or 0.1in (2.54 mm): the MAXIMUS Jog screen's units")
     jg.add_argument("--port", default="mock", help="'mock' (default), /dev/parport0 or maximus:/dev/ttyUSB0")
+    _add_state_option(jg)
     _add_machine_options(jg)
     jg.add_argument("--realtime", action="store_true", help="run the mock in real time")
     jg.add_argument("--pin-log", metavar="FILE.csv", help="write the mock's pin log")
@@ -453,14 +480,60 @@ def _add_emulate_maximus(sub: argparse._SubParsersAction) -> None:
 
 
 def _add_goto(sub: argparse._SubParsersAction) -> None:
-    gt = sub.add_parser("goto", help="move the tool to X,Y,Z pixels and stop there",
-                        description="Go To: travel at Z=0 to X,Y, then move Z, and stop (thesis 4.1.2).")
-    gt.add_argument("position", metavar="X,Y,Z", type=_int_list(3, "X,Y,Z"))
+    gt = sub.add_parser("goto", help="move the tool to X,Y,Z of the active work offset and stop there",
+                        description="Go To (thesis 4.1.2): from where the machine state file says the tool stands, "
+                        "lift to the work zero's Z (or stay higher), travel to X,Y, then move Z, and stop. X,Y,Z are "
+                        "in the active work offset's frame (cam zero, cam where), or the machine's with "
+                        "--machine-coords; +Y toward the operator, +Z deeper. Checked against the machine travel "
+                        "before anything moves.")
+    gt.add_argument("position", metavar="X,Y,Z", type=_float_triple("X,Y,Z"))
+    gt.add_argument("--unit", choices=("px", "mm", "steps"), default="px",
+                    help="unit of X,Y,Z: px (default: drawing pixels, --steps-per-pixel), mm or machine steps")
+    gt.add_argument("--machine-coords", action="store_true",
+                    help="X,Y,Z in the machine frame (from the machine's home) instead of the active work offset's")
     _add_machine_options(gt)
     gt.add_argument("--port", default="mock", help="'mock' (default) or a device like /dev/parport0")
+    _add_state_option(gt)
     gt.add_argument("--realtime", action="store_true", help="run the mock in real time")
     gt.add_argument("--pin-log", metavar="FILE.csv", help="write the mock's pin log")
     _add_progress_options(gt)
+
+
+OFFSET_CHOICES = ("G54", "G55", "G56", "G57", "G58", "G59", "G59.1", "G59.2", "G59.3")
+"""The work offsets (the same as :data:`cam.drive.state.OFFSET_NAMES`, kept here so that --help loads nothing)."""
+
+
+def _add_state_machine(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--port", default="mock", help="'mock' (default), /dev/parport0 or maximus:/dev/ttyUSB0: "
+                   "names the default state file")
+    _add_state_option(p)
+    _add_machine_options(p)
+
+
+def _add_where(sub: argparse._SubParsersAction) -> None:
+    w = sub.add_parser("where", help="where the machine stands: machine and work position, offsets, homed",
+                       description="Print where the machine state file says the tool stands, in the machine frame "
+                       "(from the machine's home) and in the active work offset's, in mm and steps; whether the "
+                       "position is known and the machine homed. --set declares where the tool is.")
+    w.add_argument("--json", action="store_true", help="print it as JSON")
+    w.add_argument("--set", type=_float_triple("--set"), metavar="X,Y,Z",
+                   help="the tool is at X,Y,Z machine mm (+Z deeper): recorded, the position known again (after "
+                   "a killed command, a power cut or an emergency stop)")
+    w.add_argument("--use", choices=OFFSET_CHOICES, metavar="G54..G59.3",
+                   help="make this work offset the active one (nothing moves)")
+    _add_state_machine(w)
+
+
+def _add_zero(sub: argparse._SubParsersAction) -> None:
+    z = sub.add_parser("zero", help="set the work zero where the tool stands (or --at a machine point)",
+                       description="Set the zero of the active work offset (or --offset) on the given axes where "
+                       "the tool stands now: 'cam zero' then 'cam goto 0,0,0' comes back here. Nothing moves.")
+    z.add_argument("axes", nargs="?", default="XYZ", metavar="AXES", help="X, Y, Z, XY or XYZ (default XYZ)")
+    z.add_argument("--offset", choices=OFFSET_CHOICES, metavar="G54..G59.3",
+                   help="the work offset to set (default: the active one; it does not become active: cam where --use)")
+    z.add_argument("--at", type=_float_triple("--at"), metavar="X,Y,Z",
+                   help="set the zero at X,Y,Z machine mm instead of where the tool stands")
+    _add_state_machine(z)
 
 
 def _add_serve(sub: argparse._SubParsersAction) -> None:
@@ -502,7 +575,7 @@ def _add_serve(sub: argparse._SubParsersAction) -> None:
 
 
 _COMMAND_PARSERS = (_add_drill, _add_export, _add_preview, _add_digitize, _add_trace, _add_info, _add_profile, _add_jog,
-                    _add_emulate_maximus, _add_goto, _add_serve)
+                    _add_emulate_maximus, _add_goto, _add_where, _add_zero, _add_serve)
 """Each adds one command's subparser, in the order ``cam --help`` lists them."""
 
 

@@ -1,0 +1,133 @@
+"""``cam where`` and ``cam zero``: the machine state file from the command line (issue #29 point 3).
+
+The state file (:mod:`cam.drive.state`) is ``--state FILE``, else the machine's default one in the user's
+state folder, named after the machine file and the port.  Positions given on the command line are in mm:
+``where --set`` and ``zero --at`` in the machine frame (from the machine's home, +Z deeper).
+"""
+from __future__ import annotations
+
+import argparse
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+from ..drive.state import (
+    MachineLock, MachineState, StateHold, check_in_travel, default_state_path, dump_json, mm_to_steps,
+    read_state, steps_to_mm,
+)
+from ..errors import CamError
+from ..settings import MachineSettings
+from .common import port_settings
+
+__all__ = ["cmd_where", "cmd_zero", "hold_machine", "state_path_of"]
+
+
+def state_path_of(args: argparse.Namespace) -> Path:
+    """The state file of a command: ``--state``, else the default one of ``--machine`` and ``--port``."""
+    given = getattr(args, "state", None)
+    if given:
+        return Path(given)
+    return default_state_path(getattr(args, "machine", None), getattr(args, "port", None) or "mock")
+
+
+def hold_machine(args: argparse.Namespace, settings: MachineSettings, what: str) -> StateHold:
+    """The command's hold on its machine's state file (the lock taken; see :class:`StateHold`)."""
+    return StateHold(state_path_of(args), settings, what)
+
+
+def _triple(text: str) -> str:
+    return " ".join(f"{a}={v}" for a, v in zip("XYZ", text))
+
+
+def where_report(state: MachineState, settings: MachineSettings, path: Path, driving: Any = None) -> dict:
+    """What ``cam where --json`` prints: machine and work position (steps and mm), offsets, flags."""
+    work = state.to_work(state.position_steps)
+    return {
+        "state_file": str(path),
+        "machine_steps": list(state.position_steps), "machine_mm": list(steps_to_mm(state.position_steps, settings)),
+        "work_steps": list(work), "work_mm": list(steps_to_mm(work, settings)),
+        "active_offset": state.active_offset,
+        "offsets_steps": {k: list(v) for k, v in state.offsets_steps.items()},
+        "position_known": state.position_known, "unknown_reason": state.unknown_reason, "homed": state.homed,
+        "tool": state.tool,
+        "running": None if driving is None else vars(driving),
+    }
+
+
+def _print_where(rep: dict) -> None:
+    print(f"machine: {_triple(rep['machine_mm'])} mm ({_triple(rep['machine_steps'])} steps)")
+    print(f"work {rep['active_offset']}: {_triple(rep['work_mm'])} mm ({_triple(rep['work_steps'])} steps)")
+    known = "position known" if rep["position_known"] else f"position UNKNOWN ({rep['unknown_reason']})"
+    print(f"{known}; {'homed' if rep['homed'] else 'not homed'}; tool: {rep['tool'] or 'not said'}")
+    if rep["running"]:
+        r = rep["running"]
+        print(f"driven now by pid {r['pid']} ({r['command']}, since {r['since']}): this is where it started")
+    print(f"state file: {rep['state_file']}")
+
+
+def _read_now(path: Path, settings: MachineSettings) -> tuple[MachineState, Any]:
+    """The state as it stands, without the lock: a running marker whose process holds no lock any more is
+    shown as what it is (the position unknown); one that does names the command driving the machine."""
+    state = read_state(path, settings)
+    r = state.running
+    if r is None:
+        return state, None
+    if MachineLock(path).holder() is None:
+        return replace(state.lost(f"cam (pid {r.pid}: {r.command}) ended without recording where the tool stopped"),
+                       running=None), None
+    return state, r
+
+
+def cmd_where(args: argparse.Namespace) -> int:
+    settings = port_settings(args, args.port)
+    path = state_path_of(args)
+    driving = None
+    if args.set is not None or args.use:
+        with hold_machine(args, settings, "cam where --set/--use") as hold:
+            state = hold.state
+            if args.set is not None:
+                steps = mm_to_steps(args.set, settings)
+                check_in_travel(steps, settings, f"--set {','.join(f'{v:g}' for v in args.set)} mm")
+                state = replace(state.moved_to(steps), homed=False)
+            if args.use:
+                state = replace(state, active_offset=args.use)
+            hold.record(state)
+    else:
+        state, driving = _read_now(path, settings)
+    rep = where_report(state, settings, path, driving)
+    if args.json:
+        print(dump_json(rep), end="")
+    else:
+        _print_where(rep)
+    return 0
+
+
+def _axes(text: str) -> str:
+    axes = text.upper()
+    if not axes or any(a not in "XYZ" for a in axes) or len(set(axes)) != len(axes):
+        raise CamError(f"axes must be X, Y, Z or several of them (XY, XYZ), got '{text}'")
+    return axes
+
+
+def cmd_zero(args: argparse.Namespace) -> int:
+    axes = _axes(args.axes)
+    settings = port_settings(args, args.port)
+    with hold_machine(args, settings, "cam zero") as hold:
+        state = hold.state
+        name = args.offset or state.active_offset
+        if args.at is not None:
+            point = mm_to_steps(args.at, settings)
+            check_in_travel(point, settings, f"--at {','.join(f'{v:g}' for v in args.at)} mm")
+        else:
+            hold.require_known()
+            point = state.position_steps
+        zero = list(state.work_zero_steps(name))
+        for a in axes:
+            zero["XYZ".index(a)] = point["XYZ".index(a)]
+        state = state.with_offset(name, tuple(zero))  # type: ignore[arg-type]
+        hold.record(state)
+    zmm = steps_to_mm(zero, settings)
+    print(f"{name} zero of {axes} set: its zero is at machine {_triple(zmm)} mm ({_triple(zero)} steps)"
+          + ("" if name == state.active_offset else f"; the active offset is still {state.active_offset} "
+             f"(cam where --use {name})"))
+    return 0
