@@ -17,19 +17,28 @@ current position (:func:`cam.job.drill_order.drill_order`); with
 ``drill_order="file"`` they are drilled exactly in the file's order, tools
 included.  Before each tool (each change of tool, in file order) the job
 pauses with a prompt naming the tool and its diameter.
+
+The job is made a piece per tool run (:class:`DrillJobStream`, a
+:class:`~cam.job.model.JobLike`), and :func:`plan_drill`'s toolpath is the
+pieces joined.  The order must be known before the first piece: a tour
+visits all of a tool's holes, and the runs come smallest tool first, so the
+hole list is read whole (it is bounded by :data:`~cam.limits.MAX_HOLES`, and
+a :class:`DrillPlan` keeps every hole in drilling order for a MAXIMUS board
+anyway); each run's rows are made only when its piece is.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import Any, Iterator, Optional
 
 import numpy as np
 
 from ..errors import PlanError, TravelError
 from ..settings import DEFAULT_SETTINGS, MachineSettings
-from .model import CUT, RETRACT, TRAVEL, Job, check_travel
+from .model import CUT, RETRACT, TRAVEL, Job, PixelFrame, check_travel, join_pieces
 from .drill_order import drill_order
 
-__all__ = ["DrillPlan", "plan_drill", "DEFAULT_CUT_DEPTH_MM", "DEFAULT_TRAVEL_HEIGHT_MM"]
+__all__ = ["DrillPlan", "DrillJobStream", "plan_drill", "DEFAULT_CUT_DEPTH_MM", "DEFAULT_TRAVEL_HEIGHT_MM"]
 
 DEFAULT_CUT_DEPTH_MM = 2.0
 """Through a 1.6 mm board with a little margin into the spoil board."""
@@ -124,19 +133,13 @@ def plan_drill(
     if depth_steps > z_hi or safe_z_steps < z_lo:  # before the tour: a million holes take a while to order
         raise TravelError(f"drill depth {cut_depth_mm:g} mm and safe height {travel_height_mm:g} mm need Z "
                           f"{safe_z_steps}..{depth_steps} steps; the Z travel is {z_lo}..{z_hi} steps")
-    path = _DrillPath(safe_z_steps)
-    for tool, idx in _tool_runs(holes, machine_mm, drill_order):
-        path.tool_change(tool, float(holes.tools[tool]), len(idx))
-        for i in idx.tolist():
-            path.hole(i, *(int(v) for v in steps_xy[i]), depth_steps)
-    path.home()
-    points = np.array(path.points, np.int64)
-    check_travel(points, settings)
-    kinds_arr = np.array(path.kinds, np.uint8)
-    tp = Job(points_steps=points, kind=kinds_arr, target=kinds_arr == CUT, pause=np.array(path.pause, bool),
-             settings=settings, warnings=list(holes.warnings), pause_notes=path.notes, source=str(holes.source))
-    order_arr = np.array(path.order, np.int64)
-    return DrillPlan(tp, steps_xy[order_arr], order_arr, path.sequence, depth_steps, -safe_z_steps)
+    runs = _tool_runs(holes, machine_mm, drill_order)
+    stream = DrillJobStream(runs, steps_xy, [float(holes.tools[t]) for t, _ in runs], depth_steps, safe_z_steps,
+                            settings, str(holes.source), list(holes.warnings))
+    toolpath = stream.joined()
+    order_arr = np.concatenate([idx for _, idx in runs]).astype(np.int64)
+    sequence = [(tool, float(holes.tools[tool]), len(idx)) for tool, idx in runs]
+    return DrillPlan(toolpath, steps_xy[order_arr], order_arr, sequence, depth_steps, -safe_z_steps)
 
 
 def _tool_runs(holes, machine_mm: np.ndarray, order: str) -> list[tuple[int, np.ndarray]]:
@@ -179,46 +182,73 @@ def _check_holes(holes, machine_mm: np.ndarray, steps_xy: np.ndarray, settings: 
         )
 
 
-class _DrillPath:
-    """The drilling job's points as they are planned: machine (x, y, z) steps, kinds, pauses, notes.
+@dataclass
+class DrillJobStream:
+    """The drilling job as consecutive :class:`~cam.job.model.Job` pieces, one per tool run (a
+    :class:`~cam.job.model.JobLike`): :func:`plan_drill`'s ``toolpath`` is :meth:`joined`.
 
-    It starts with a lift to the safe height ``safe_z_steps`` (a Z coordinate <= 0: above the surface) when that is
-    not 0, and :meth:`home` ends it at the home.
+    The drilling order must be known first (a tour per tool needs all of the tool's holes), so the runs and the
+    holes' steps are held (a few numbers a hole, as :class:`DrillPlan` keeps them); a run's rows are made when
+    its piece is: the first piece starts with the lift to the safe height, every piece pauses for its tool
+    change before its first hole (at the safe height where the tool stands) and drills its holes (above the
+    hole, down, up), and the last goes home.
+
+    Attributes:
+        runs: ``[(tool, hole indices)]`` in drilling order; steps_xy: ``(N, 2)`` int64 machine (x, y) steps of
+            every hole of the source list; diameters_mm: each run's tool diameter.
+        depth_steps: the drill depth (Z steps, > 0); travel_z_steps: the travel height, a Z coordinate (<= 0).
+        settings, source, warnings: the machine settings, the file, the hole list's warnings.
+        safe_z_steps: the Z a stop lifts to, 0 (the surface, as drilling jobs have always had it).
+        pixels, tool: None (no drawing frame; the point tool).
     """
 
-    def __init__(self, safe_z_steps: int) -> None:
-        self.safe_z_steps = safe_z_steps
-        self.points: list[tuple[int, int, int]] = []
-        self.kinds: list[int] = []
-        self.pause: list[bool] = []
-        self.notes: list[str] = []
-        self.order: list[int] = []  # source index of each drilled hole
-        self.sequence: list[tuple[int, float, int]] = []  # (tool, diameter_mm, n_holes)
-        if safe_z_steps != 0:
-            self._add(0, 0, safe_z_steps, RETRACT)
+    runs: list[tuple[int, np.ndarray]]
+    steps_xy: np.ndarray
+    diameters_mm: list[float]
+    depth_steps: int
+    travel_z_steps: int
+    settings: MachineSettings = DEFAULT_SETTINGS
+    source: str = ""
+    warnings: list[str] = field(default_factory=list)
+    safe_z_steps: int = 0
+    pixels: Optional[PixelFrame] = None
+    tool: Any = None
 
-    def _add(self, x: int, y: int, z: int, kind: int) -> None:
-        self.points.append((x, y, z))
-        self.kinds.append(kind)
-        self.pause.append(False)
+    def joined(self) -> Job:
+        """Every move in one :class:`~cam.job.model.Job` (:func:`~cam.job.model.join_pieces` of :meth:`pieces`)."""
+        return join_pieces(self.pieces(), self)
 
-    def tool_change(self, tool: int, diameter_mm: float, n_holes: int) -> None:
-        """Pause at the safe height before the first hole of ``tool``, with a note naming it."""
-        if not self.points:
-            self._add(0, 0, self.safe_z_steps, TRAVEL)
-        self.pause[-1] = True
-        self.notes.append(f"tool change: T{tool} {diameter_mm:.3f} mm ({n_holes} holes)")
-        self.sequence.append((tool, diameter_mm, n_holes))
+    def pieces(self) -> Iterator[Job]:
+        """One piece per tool run (see the class docstring); each checked against the travel."""
+        for k in range(len(self.runs)):
+            yield self._piece(k)
 
-    def hole(self, index: int, x: int, y: int, depth_steps: int) -> None:
-        """The drill cycle of hole ``index`` at ``(x, y)`` steps: above it, down to the depth, back up."""
-        self._add(x, y, self.safe_z_steps, TRAVEL)
-        self._add(x, y, depth_steps, CUT)
-        self._add(x, y, self.safe_z_steps, RETRACT)
-        self.order.append(index)
+    def _note(self, k: int) -> str:
+        tool, idx = self.runs[k]
+        return f"tool change: T{tool} {self.diameters_mm[k]:.3f} mm ({len(idx)} holes)"
 
-    def home(self) -> None:
-        """Back above the home at the safe height, then down to the home."""
-        self._add(0, 0, self.safe_z_steps, TRAVEL)
-        if self.safe_z_steps != 0:
-            self._add(0, 0, 0, TRAVEL)
+    def _piece(self, k: int) -> Job:
+        """Run ``k``: (the first run) a lift, or a point at the home, where the first tool change pauses; each
+        hole above, down, up; the last row pauses for the next run's tool, or (the last run) home."""
+        safe, last = self.travel_z_steps, k == len(self.runs) - 1
+        idx = self.runs[k][1]
+        head = [(0, 0, safe)] if k == 0 else []
+        holes = np.empty((3 * len(idx), 3), np.int64)
+        holes[:, :2] = np.repeat(self.steps_xy[idx], 3, axis=0)
+        holes[:, 2] = np.tile([safe, self.depth_steps, safe], len(idx))
+        tail = ([(0, 0, safe)] + ([(0, 0, 0)] if safe != 0 else [])) if last else []
+        pts = np.vstack([np.array(head, np.int64).reshape(-1, 3), holes, np.array(tail, np.int64).reshape(-1, 3)])
+        kind = np.concatenate([np.full(len(head), RETRACT if safe != 0 else TRAVEL, np.uint8),
+                               np.tile(np.array([TRAVEL, CUT, RETRACT], np.uint8), len(idx)),
+                               np.full(len(tail), TRAVEL, np.uint8)])
+        pause = np.zeros(len(pts), bool)
+        notes = []
+        if k == 0:
+            pause[0] = True
+            notes.append(self._note(0))
+        if not last:
+            pause[len(head) + len(holes) - 1] = True
+            notes.append(self._note(k + 1))
+        check_travel(pts, self.settings)
+        return Job(points_steps=pts, kind=kind, target=kind == CUT, pause=pause, settings=self.settings,
+                   warnings=list(self.warnings) if k == 0 else [], pause_notes=notes, source=self.source)
