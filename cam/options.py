@@ -29,12 +29,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, Optional
+from typing import Any, Callable, Optional
 
 from .limits import DEFAULT_GCODE_LINES, MAX_GCODE_LINES
 
 __all__ = [
-    "Option", "JOB_OPTIONS", "OPTIONS", "OPTION_KINDS", "OPTION_OF_DEST", "schema_json", "check_range",
+    "Option", "JOB_OPTIONS", "OPTIONS", "OPTION_KINDS", "OPTION_OF_DEST", "schema_json", "check_range", "degenerate",
     "MAX_MM", "MAX_PX", "MAX_DEPTH_PX", "TYPES",
 ]
 
@@ -167,7 +167,10 @@ JOB_OPTIONS: tuple[Option, ...] = (
          lo=0.0, hi=MAX_MM, lo_open=True, metavar="MM"),
     _opt("travel_height_mm", "--travel-height", "number", "mm", _VECTORS, None,
          "height above the surface between cuts (default 1.0): drill files, HPGL, SVG, and every file "
-         "'cam export' writes", lo=0.0, hi=MAX_MM, metavar="MM"),
+         "'cam export' writes; 0 (at the surface) needs --allow-surface-travel", lo=0.0, hi=MAX_MM, metavar="MM"),
+    _opt("allow_surface_travel", "--allow-surface-travel", "flag", "", _VECTORS, False,
+         "accept --travel-height 0: the tool travels between cuts touching the surface (a pen or a drag knife), "
+         "which on a cutter scratches the work"),
     # drill files, HPGL and SVG
     _opt("offset_mm", "--offset", "numbers", "mm", _VECTORS, None,
          "machine position (mm from where the tool stands) of the board, plotter or SVG page origin; default: the "
@@ -227,6 +230,23 @@ JOB_OPTIONS: tuple[Option, ...] = (
          "a larger roughing tool (as --tool); the job pauses at the home to change to --tool", metavar="SHAPE"),
 )
 """Every job option, in the order of :class:`cam.job.jobs.JobOptions`' fields."""
+
+
+def degenerate(value_of: Callable[[str], Any]) -> Optional[tuple[str, str]]:
+    """The first value that is in range but cannot be meant as given, ``(option name, why)``, or None.
+
+    ``value_of(name)`` gives an option's value (None: not given).  Zero is a choice, not an accident (issue #33
+    point 8): a travel height at the surface needs ``allow_surface_travel``.  (A scale or a machine's step size
+    that rounds a whole job to nothing is found once the job is planned: :func:`cam.job.jobs.prepare_job`.)
+    The command line (:func:`cam.cli.checks.check_args`) and :meth:`cam.job.jobs.JobOptions.checked` (the page)
+    both ask it.
+    """
+    height = value_of("travel_height_mm")
+    if height is not None and height <= 0 and not value_of("allow_surface_travel"):
+        return "travel_height_mm", (f"is {height:g} mm: the tool would travel between cuts at the surface, across "
+                                    "the work; give a height above it (default 1.0 mm), or --allow-surface-travel "
+                                    "(the page: allow_surface_travel) if that is meant")
+    return None
 
 OPTIONS: dict[str, Option] = {o.name: o for o in JOB_OPTIONS}
 """The options by name."""

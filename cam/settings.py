@@ -106,6 +106,9 @@ MIN_SPEED_MM_S = 0.01
 step periods of hours and machine times that overflow."""
 MAX_TRAVEL_STEPS = 10**9
 """The farthest a travel limit may lie from the home, in steps."""
+MIN_MM_PER_STEP = 1e-6
+"""The finest step a setting may give (a nanometre): finer ones turned any coordinate of a file into more steps
+than a number holds (issue #33 point 8: ``mm_per_step_xy = 1e-308`` ended in an OverflowError)."""
 
 
 @dataclass(frozen=True)
@@ -348,8 +351,8 @@ def _validate(s: MachineSettings, source: str) -> None:
         if not (0.001 <= getattr(s, key) <= 10000):
             raise bad(key, f"must be 0.001..10000 ms, got {getattr(s, key)}")
     for key in ("mm_per_step_xy", "mm_per_step_z"):
-        if not (0 < getattr(s, key) <= 100):
-            raise bad(key, f"must be > 0 and <= 100 mm, got {getattr(s, key)}")
+        if not (MIN_MM_PER_STEP <= getattr(s, key) <= 100):
+            raise bad(key, f"must be {MIN_MM_PER_STEP:g}..100 mm, got {getattr(s, key)}")
     if s.ramp not in RAMP_MODES:
         raise bad("ramp", f"must be one of {', '.join(RAMP_MODES)}, got {s.ramp!r}")
     for axis in "xyz":

@@ -131,11 +131,15 @@ def _boundary_values(o: Option) -> list[float]:
 
 
 def _cli_accepts(argv: list[str]) -> bool:
+    """Whether the command line takes ``argv``: its parser, then its checks before anything runs (a value in
+    range that cannot be meant, such as a travel height at the surface, is refused there)."""
     with contextlib.redirect_stderr(io.StringIO()):
         try:
-            build_parser().parse_args(argv)
+            check_args(build_parser().parse_args(argv))
         except SystemExit as exc:
             assert exc.code == 2
+            return False
+        except CamError:
             return False
     return True
 

@@ -37,7 +37,7 @@ FAST = cam.MachineSettings().replace(delay_xy_ms=0.02, delay_z_ms=0.02, ramp="co
 SLOW = cam.MachineSettings().replace(ramp="constant")  # e-stop timing: the thesis's own 5 ms step period
 MEDIUM = cam.MachineSettings().replace(delay_xy_ms=0.2, delay_z_ms=0.2, ramp="constant")  # ~1.5 s jobs
 
-TOKEN = "s3cret-token"
+TOKEN = "s3cret-token-of-the-tests"  # at least 16 characters (cam.web.server.TOKEN_MIN_CHARS)
 
 GCODE = """%
 (square with a tool change)

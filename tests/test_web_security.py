@@ -187,6 +187,88 @@ def test_token_mode_keeps_the_same_rules(servers):
     s.wait_idle()
 
 
+def test_token_mode_checks_the_host_too(servers):
+    """With a token the Host must still name this computer (issue #33 point 7): a rebinding page, which names
+    its own site, is refused even with the right token; an IP address, localhost and this computer's own name
+    are served."""
+    import socket as _socket
+
+    s = servers("token", settings=FAST, token=TOKEN)
+    port = s.url.rsplit(":", 1)[1]
+    for host in ("evil.example", "evil.example:80", f"rebind.attacker.test:{port}", "localhost.evil.example"):
+        status, r = s.call("GET", "/api/state", token=TOKEN, headers={"Host": host})
+        assert status == 403 and "addressed to this computer" in r["error"], (host, r)
+    own = _socket.gethostname().split(".")[0].lower()
+    for host in (f"192.168.1.5:{port}", f"[fe80::1]:{port}", f"localhost:{port}", f"{own}:{port}",
+                 f"{own}.local:{port}"):
+        status, r = s.call("GET", "/api/state", token=TOKEN, headers={"Host": host})
+        assert status == 200, (host, r)
+    status, _ = s.call("GET", "/api/state", token="wrong-token-0123456789", headers={"Host": f"10.0.0.2:{port}"})
+    assert status == 401
+
+
+def test_allow_host_names_another_host():
+    from cam.web.server import ServerConfig, _check_host, HttpError
+
+    config = ServerConfig(host="0.0.0.0", token=TOKEN, allowed_hosts=("cnc.example.lan",)).checked()
+    _check_host(config, "CNC.example.lan:8000")
+    with pytest.raises(HttpError):
+        _check_host(config, "other.example.lan:8000")
+    with pytest.raises(HttpError):  # no token: localhost names only
+        _check_host(ServerConfig(), "192.168.1.5:8000")
+
+
+def test_short_tokens_are_refused():
+    from cam.errors import CamError
+    from cam.web.server import ServerConfig, new_token
+
+    for short in ("a", "x" * 15):
+        with pytest.raises(CamError, match="at least 16 characters"):
+            ServerConfig(host="0.0.0.0", token=short).checked()
+    ServerConfig(host="0.0.0.0", token="x" * 16).checked()
+    tokens = {new_token() for _ in range(100)}
+    assert len(tokens) == 100 and all(len(t) == 22 for t in tokens)  # 16 random bytes, URL-safe base64
+
+
+def _serve_once(monkeypatch, *args):
+    """``cam serve ARGS`` in this process, its server's run() replaced by a return: (CliRun, ServerConfig)."""
+    import uvicorn
+
+    from conftest import run_cli
+
+    seen = []
+
+    def run(self, sockets=None):
+        seen.append(self.config.app.state.config)
+        self.config.app.state.session.shutdown()
+        for sock in sockets or ():
+            sock.close()
+
+    monkeypatch.setattr(uvicorn.Server, "run", run)
+    out = run_cli("serve", "--http-port", "0", "--simulated", *args)
+    return out, (seen[0] if seen else None)
+
+
+def test_serve_on_every_network_makes_a_128_bit_token_and_prints_it(monkeypatch, tmp_path):
+    out, config = _serve_once(monkeypatch, "--host", "0.0.0.0", "--jobs-dir", tmp_path)
+    assert out.returncode == 0, out.stderr
+    assert config is not None and len(config.token) == 22
+    url = next(line for line in out.stdout.splitlines() if "web page at" in line)
+    assert url.endswith(f"/?token={config.token}"), url
+    again, other = _serve_once(monkeypatch, "--host", "0.0.0.0", "--jobs-dir", tmp_path)
+    assert other.token != config.token
+    local, config = _serve_once(monkeypatch, "--jobs-dir", tmp_path)  # localhost: no token
+    assert local.returncode == 0 and config.token is None and "token" not in local.stdout
+
+
+@pytest.mark.parametrize("token", ["a", "fifteen-chars!!"])
+def test_serve_refuses_a_short_token_in_one_line(monkeypatch, token):
+    out, config = _serve_once(monkeypatch, "--host", "0.0.0.0", "--token", token)
+    assert out.returncode == 2 and config is None
+    lines = out.stderr.strip().splitlines()
+    assert len(lines) == 1 and "--token must be at least 16 characters" in lines[0], out.stderr
+
+
 # ------------------------------------------------------------------------------------
 # JSON bodies: size and depth
 # ------------------------------------------------------------------------------------

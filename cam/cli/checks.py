@@ -21,7 +21,7 @@ from typing import Optional
 
 from ..choices import DIGITIZED_SUFFIXES, SUFFIXES, job_kind
 from ..errors import CamError
-from ..options import OPTION_OF_DEST, OPTIONS
+from ..options import OPTION_OF_DEST, OPTIONS, degenerate
 
 __all__ = ["check_args", "job_kind_of", "OUTPUTS", "APPLIES_TO", "check_output_path"]
 
@@ -133,6 +133,9 @@ def check_args(args: argparse.Namespace) -> None:
         print(f"warning: {w}", file=sys.stderr)
     if kind is not None:
         _check_applies(args, kind)
+    odd = degenerate(lambda name: getattr(args, OPTIONS[name].dest, None))  # zero where zero is unsafe
+    if odd is not None:
+        raise CamError(f"{OPTIONS[odd[0]].flag} {odd[1]}")
     for dest, value in _DEFAULTS.items():
         if hasattr(args, dest) and getattr(args, dest) is None:
             setattr(args, dest, value)

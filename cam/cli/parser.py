@@ -258,6 +258,7 @@ def _add_cut_options(d: argparse.ArgumentParser) -> None:
     g = d.add_argument_group("depths and heights in mm (one name on every file kind and on the web page)")
     _add_option(g, "cut_depth_mm")
     _add_option(g, "travel_height_mm")
+    _add_option(g, "allow_surface_travel")
     f = d.add_argument_group(f"drill, HPGL and SVG files ({_listed(EXCELLON_SUFFIXES)} {_listed(HPGL_SUFFIXES)} "
                              f"{_listed(SVG_SUFFIXES)})")
     for name in ("offset_mm", "mirror_x", "drill_order"):
@@ -547,7 +548,11 @@ def _add_serve(sub: argparse._SubParsersAction) -> None:
     )
     sv.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1; 0.0.0.0 = every network, needs a token)")
     sv.add_argument("--http-port", type=_whole("--http-port", 0, 65535), default=8000, metavar="N", help="TCP port of the web page (default 8000)")
-    sv.add_argument("--token", help="token every request must carry (default: none on localhost, a new random one otherwise)")
+    sv.add_argument("--token", help="token every request must carry, at least 16 characters (default: none on "
+                    "localhost, a new random one of 128 bits otherwise, printed in the page's URL)")
+    sv.add_argument("--allow-host", action="append", metavar="NAME",
+                    help="with a token: a name the page may be opened by besides localhost, an IP address and this "
+                    "computer's own name (repeatable; e.g. a DNS name of this computer)")
     sv.add_argument("--jobs-dir", metavar="DIR", help="folder for uploaded files (default: a new temporary folder)")
     sv.add_argument("--max-upload-mb", type=_number("--max-upload-mb", 0.001, 100_000), default=50.0, metavar="MB", help="larger uploads are refused (default 50)")
     sv.add_argument("--port", default="mock", metavar="PORT",

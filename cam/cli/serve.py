@@ -5,7 +5,7 @@ import argparse
 import importlib.util
 
 from ..errors import CamError
-from ..web.server import ServerConfig, serve
+from ..web.server import ServerConfig, is_loopback, new_token, serve
 from .common import port_settings
 
 __all__ = ["cmd_serve", "missing_web_packages"]
@@ -36,7 +36,11 @@ def cmd_serve(args: argparse.Namespace) -> int:
         ("work_time_limit_s", args.work_time_limit),
         ("work_memory_limit_bytes", None if args.work_memory_limit is None else int(args.work_memory_limit * 2**20)),
     ) if value is not None}  # the rest: ServerConfig's defaults
-    config = ServerConfig(host=args.host, port=args.http_port, token=args.token, jobs_dir=args.jobs_dir,
+    token = args.token
+    if token is None and not is_loopback(args.host):
+        token = new_token()  # printed in the page's URL by serve()
+    config = ServerConfig(host=args.host, port=args.http_port, token=token, jobs_dir=args.jobs_dir,
+                          allowed_hosts=tuple(args.allow_host or ()),
                           max_upload_bytes=int(args.max_upload_mb * 1024 * 1024), settings=settings,
                           machine_port=args.port, realtime=args.realtime, **limits)
     config.checked()

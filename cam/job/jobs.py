@@ -42,7 +42,7 @@ from ..drive.chunks import plan_chunks
 from ..errors import CamError
 from ..formats.excellon import load_excellon
 from ..formats.gcode import load_tool_table, open_gcode
-from ..options import JOB_OPTIONS, Option, MAX_DEPTH_PX, MAX_MM, MAX_PX, check_range  # noqa: F401 (the limits re-exported)
+from ..options import JOB_OPTIONS, Option, MAX_DEPTH_PX, MAX_MM, MAX_PX, check_range, degenerate  # noqa: F401 (the limits re-exported)
 from ..formats.hpgl import scan_hpgl
 from ..formats.svg import load_svg
 from ..digitize.sketch import load_sketch, trace
@@ -207,6 +207,9 @@ class JobOptions:
             raise bad("line_width_mm", "cannot be given together with a depth (the width sets it)")
         if self.cut_depth_mm is not None and self.depth is not None:
             raise bad("cut_depth_mm", "cannot be given together with depth (Z pixels per object)")
+        odd = degenerate(lambda name: getattr(self, name))  # zero where zero is unsafe (cam.options)
+        if odd is not None:
+            raise bad(*odd)
         return self
 
     def check_kind(self, kind: str, source: str = "options") -> "JobOptions":
@@ -752,12 +755,36 @@ def prepare_job(
         job = _prepare_svg(p, opts, settings)
     else:
         job = _prepare_hpgl(p, opts, settings, progress)
+    _refuse_nothing(job, opts, settings)
     job.warnings[:0] = kind_warnings
     job.name = name or p.name
     job.summary = job.name + job.summary[len(p.name):]
     job.identity = identity_of(p, opts, settings)
     job.plan_sha256 = plan_fingerprint(job.toolpath)
     return _finish(job)
+
+
+_CUTS = {"excellon": "holes", "svg": "strokes", "hpgl": "strokes"}
+"""What a vector job's report counts, whose cuts a scale or a step size could put on one X/Y step."""
+
+
+def _refuse_nothing(job: PreparedJob, options: JobOptions, settings: MachineSettings) -> None:
+    """Refuse a job that its scale or the machine's step size rounds to nothing (issue #33 point 8): the whole
+    job moves 0 steps, or a drill, SVG or HPGL job of several holes or strokes puts them all on one X/Y step."""
+    total = np.asarray(job.plan.steps_total, np.int64)
+    cuts = _CUTS.get(job.kind, "")
+    n_cuts = int(job.report.get(cuts, 0)) if cuts else 0
+    if total.any() and not (n_cuts > 1 and not total[:2].any()):
+        return
+    if options.scale is not None:
+        cause = f"--scale {options.scale:g} makes it smaller than one step"
+    elif options.fit_mm is not None:
+        cause = f"--fit {options.fit_mm[0]:g}x{options.fit_mm[1]:g} makes it smaller than one step"
+    else:
+        cause = (f"the machine's steps ({settings.mm_per_step_xy:g} mm per X/Y step, {settings.mm_per_step_z:g} mm "
+                 "per Z step) are larger than it")
+    what = "moves 0 steps" if not total.any() else f"puts all its {n_cuts} {cuts} on one X/Y step"
+    raise CamError(f"{job.source}: the job {what}: {cause}, so nothing would be cut as drawn")
 
 
 def file_sha256(path: str | os.PathLike) -> str:

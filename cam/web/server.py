@@ -19,11 +19,16 @@ stands and is checked against the machine travel from there.
 Security:
 
 * it listens on 127.0.0.1 unless told otherwise; any other address needs a
-  token (``serve`` makes one), and with a token every ``/api`` request must
-  carry it (header ``X-Cam-Token``, ``Authorization: Bearer``, or ``?token=``
-  for the event stream and pictures), else 401;
-* without a token, requests must name a localhost ``Host`` (no DNS
-  rebinding);
+  token (``serve`` makes a random one of 128 bits, :func:`new_token`; one
+  given must be at least :data:`TOKEN_MIN_CHARS` characters), and with a
+  token every ``/api`` request must carry it (header ``X-Cam-Token``,
+  ``Authorization: Bearer``, or ``?token=`` for the event stream and
+  pictures), else 401;
+* requests must name this computer in their ``Host`` (no DNS rebinding):
+  without a token a localhost name; with one also an IP address, this
+  computer's own name (``NAME``, ``NAME.local``) or a name given by
+  ``allowed_hosts`` (``--allow-host``), as a rebinding page would name its
+  own site;
 * only the page itself may ask (with or without a token): an ``Origin`` header
   must be the server's own origin, ``scheme://host:port`` as the page was
   served (``null``, another port, another site: 403), and so must a browser's
@@ -55,6 +60,7 @@ Security:
 from __future__ import annotations
 
 import asyncio
+import ipaddress
 import json
 import re
 import secrets
@@ -87,10 +93,13 @@ from .work import WARM_UP, pin_log_csv, plan_with_preview, preview_of, resumed_f
 if TYPE_CHECKING:
     from starlette.requests import Request
 
-__all__ = ["ServerConfig", "HttpError", "create_app", "uvicorn_config", "serve", "LOCAL_HOSTS"]
+__all__ = ["ServerConfig", "HttpError", "create_app", "uvicorn_config", "serve", "new_token", "is_loopback",
+           "LOCAL_HOSTS", "TOKEN_MIN_CHARS"]
 
 STATIC_DIR = Path(__file__).resolve().parent / "static"
 LOCAL_HOSTS = ("127.0.0.1", "localhost", "::1")
+TOKEN_MIN_CHARS = 16
+"""A token given to the server must be at least this long (a short one can be guessed)."""
 _DRAIN_LIMIT_BYTES = 64 * 1024 * 1024  # read and drop at most this much of a refused upload
 _MAX_JSON_BYTES = 8 * 1024  # a JSON request body (the largest, planning options, is well under 1 kB)
 _MAX_JSON_DEPTH = 16  # arrays and objects inside each other (the requests use 3)
@@ -104,7 +113,10 @@ class ServerConfig:
 
     Attributes:
         host, port: where it listens (default 127.0.0.1:8000).
-        token: required on every ``/api`` request when set (None = none needed; only for localhost).
+        token: required on every ``/api`` request when set (None = none needed; only for localhost); at least
+            :data:`TOKEN_MIN_CHARS` characters (:func:`new_token` makes one).
+        allowed_hosts: ``Host`` names accepted besides localhost, IP addresses and this computer's own name
+            (with a token only; a reverse proxy's or a DNS name for this computer).
         jobs_dir: the folder uploads are stored in (None = a new temporary folder).
         max_upload_bytes: larger uploads get 413.
         settings: the machine settings; machine_port: "mock" or a device such as /dev/parport0.
@@ -120,6 +132,7 @@ class ServerConfig:
     host: str = "127.0.0.1"
     port: int = 8000
     token: Optional[str] = None
+    allowed_hosts: tuple[str, ...] = ()
     jobs_dir: Optional[str] = None
     max_upload_bytes: int = 50 * 1024 * 1024
     settings: MachineSettings = DEFAULT_SETTINGS
@@ -133,9 +146,14 @@ class ServerConfig:
     work_memory_limit_bytes: Optional[int] = None
 
     def checked(self) -> "ServerConfig":
-        """Refuse a non-local address without a token; returns self."""
-        if self.host not in LOCAL_HOSTS and not self.token:
+        """Refuse a non-local address without a token, and a short token; returns self."""
+        if not is_loopback(self.host) and not self.token:
             raise CamError(f"listening on {self.host} needs a token (--token, or let 'cam serve' make one)")
+        if self.token is not None and len(self.token) < TOKEN_MIN_CHARS:
+            raise CamError(f"--token must be at least {TOKEN_MIN_CHARS} characters, got {len(self.token)} (a short "
+                           "one can be guessed); leave it out and 'cam serve' makes a random one")
+        if self.allowed_hosts and not self.token:
+            raise CamError("--allow-host needs a token: without one only localhost names are served")
         if self.max_upload_bytes < 1:
             raise CamError(f"the upload limit must be > 0 bytes, got {self.max_upload_bytes}")
         for name in ("max_connections", "max_event_streams", "header_timeout_s", "body_timeout_s",
@@ -248,13 +266,62 @@ def _own_origin(request: Request) -> str:
     return f"{request.url.scheme}://{(request.headers.get('host') or '').lower()}"
 
 
+def new_token() -> str:
+    """A random token of 128 bits (22 URL-safe characters), as ``cam serve`` makes for a non-local address."""
+    return secrets.token_urlsafe(16)
+
+
+def is_loopback(host: str) -> bool:
+    """Whether ``host`` (a listening address) reaches this computer only: localhost or a loopback address."""
+    if host.lower() in LOCAL_HOSTS:
+        return True
+    try:
+        return ipaddress.ip_address(host.strip("[]")).is_loopback
+    except ValueError:
+        return False
+
+
+@lru_cache(maxsize=1)
+def _own_names() -> frozenset[str]:
+    """This computer's own names, as a browser on the network may address it (no DNS lookup)."""
+    name = socket.gethostname().lower()
+    short = name.split(".", 1)[0]
+    return frozenset(n for n in (name, short, f"{short}.local") if n)
+
+
+def _check_host(config: ServerConfig, host_header: str) -> None:
+    """HttpError 403 unless the ``Host`` names this computer (no DNS rebinding, with or without a token).
+
+    Without a token: a localhost name.  With one also an IP address (a page served from an address is this
+    server's own page, a rebinding page names its own site), this computer's own name, or one of
+    ``config.allowed_hosts``."""
+    host = host_header.lower()
+    host = host[1:].split("]", 1)[0] if host.startswith("[") else host.rsplit(":", 1)[0]
+    if host in LOCAL_HOSTS:
+        return
+    if config.token:
+        try:
+            ipaddress.ip_address(host)
+            return
+        except ValueError:
+            pass
+        if host in _own_names() or host in (h.lower() for h in config.allowed_hosts):
+            return
+        raise HttpError(403, f"requests must be addressed to this computer (an IP address, localhost or "
+                             f"{sorted(_own_names())[0] if _own_names() else 'its name'}), not {host!r}; "
+                             "another name needs --allow-host")
+    raise HttpError(403, f"requests must be addressed to localhost, not {host!r}")
+
+
 def _authorise(config: ServerConfig, request: Request) -> None:
-    """The token when the server has one, else a localhost ``Host``; then only the page itself (HttpError).
+    """A ``Host`` naming this computer (:func:`_check_host`), the token when the server has one; then only the
+    page itself (HttpError).
 
     The page itself: an ``Origin`` equal to :func:`_own_origin`, no ``Sec-Fetch-Site`` naming another
     site, and for a request that changes anything with no ``Origin``, one of :data:`_CUSTOM_HEADERS`.
     """
     headers = request.headers
+    _check_host(config, headers.get("host") or "")
     if config.token:
         given = (headers.get("x-cam-token") or request.query_params.get("token") or "")
         auth = headers.get("authorization", "")
@@ -262,10 +329,6 @@ def _authorise(config: ServerConfig, request: Request) -> None:
             given = given or auth[7:].strip()
         if not secrets.compare_digest(given.encode(), config.token.encode()):
             raise HttpError(401, "this server needs its token: open the URL it printed (with ?token=...)")
-    else:
-        host = (headers.get("host") or "").rsplit(":", 1)[0].strip("[]").lower()
-        if host not in LOCAL_HOSTS:
-            raise HttpError(403, f"requests must be addressed to localhost, not {host!r}")
     origin = headers.get("origin")
     if origin is not None and origin.lower() != _own_origin(request):
         raise HttpError(403, f"cross-site request from {origin} refused: only the page at "
@@ -1022,8 +1085,8 @@ def serve(config: ServerConfig, announce: Callable[[str], None] = print) -> int:
     """Run the server until Ctrl-C; a running job is stopped (tool lifted) on the way out.  Returns 0."""
     import uvicorn
 
-    if config.host not in LOCAL_HOSTS and not config.token:
-        config.token = secrets.token_urlsafe(24)
+    if not is_loopback(config.host) and not config.token:
+        config.token = new_token()
     sock = bind_socket(config.host, config.port)
     try:
         app = create_app(config)

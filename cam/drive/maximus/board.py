@@ -38,6 +38,7 @@ Safety rules kept by every method:
 """
 from __future__ import annotations
 
+import os
 import threading
 import time
 from contextlib import AbstractContextManager
@@ -184,6 +185,12 @@ def open_maximus(url: str, settings: Optional[Maximus] = None, timeout_s: Option
     return MaximusBoard(url, settings, timeout_s=timeout_s)
 
 
+def _why(exc: BaseException) -> str:
+    """What the system said of a failed port call, in a few words (pyserial repeats the device name)."""
+    code = getattr(exc, "errno", None)
+    return os.strerror(code) if isinstance(code, int) and code > 0 else (str(exc) or type(exc).__name__)
+
+
 class MaximusBoard(_Drilling, _Link, AbstractContextManager):
     """A MAXIMUS control board on a serial port.
 
@@ -235,7 +242,9 @@ class MaximusBoard(_Drilling, _Link, AbstractContextManager):
             self._ser = serial.Serial(device, baudrate=self.maximus.baud, bytesize=8, parity="N", stopbits=1,
                                       timeout=self.timeout_s, write_timeout=self.timeout_s)
         except (serial.SerialException, OSError, ValueError) as exc:
-            raise PortError(f"cannot open MAXIMUS port {device}: {exc}") from exc
+            raise PortError(f"cannot open MAXIMUS port {device} ({_why(exc)}): check that the board is plugged in "
+                            "and switched on, the device name (ls /dev/ttyUSB* /dev/ttyACM* /dev/ttyS*) and that "
+                            "you may use it (the dialout group)") from exc
         if handshake:
             try:
                 self.handshake()
@@ -267,7 +276,7 @@ class MaximusBoard(_Drilling, _Link, AbstractContextManager):
             self._ser.flush()
         except (serial.SerialException, OSError) as exc:
             self._state = _UNKNOWN
-            raise PortError(f"cannot write to MAXIMUS port {self.device}: {exc}") from exc
+            raise self._port_lost("write to", exc) from exc
 
     def _read_byte(self, timeout_s: float | None = None) -> int | None:
         try:
@@ -276,11 +285,20 @@ class MaximusBoard(_Drilling, _Link, AbstractContextManager):
             data = self._ser.read(1)
         except (serial.SerialException, OSError) as exc:
             self._state = _UNKNOWN
-            raise PortError(f"cannot read from MAXIMUS port {self.device}: {exc}") from exc
+            raise self._port_lost("read from", exc) from exc
         finally:
             if timeout_s is not None:
-                self._ser.timeout = self.timeout_s
+                try:
+                    self._ser.timeout = self.timeout_s
+                except (serial.SerialException, OSError):  # a port gone: the read's error (or the next) says so
+                    self._state = _UNKNOWN
         return data[0] if data else None
+
+    def _port_lost(self, action: str, exc: BaseException) -> PortError:
+        """The one-line error of a port that failed while open (unplugged, switched off)."""
+        return PortError(f"cannot {action} MAXIMUS port {self.device} ({_why(exc)}): check the cable and that the "
+                         "board is switched on; the head's position is unknown: jog it to the board origin again "
+                         "before the next job")
 
     def _require(self, state: str) -> None:
         if self._state == _UNKNOWN:
@@ -307,7 +325,7 @@ class MaximusBoard(_Drilling, _Link, AbstractContextManager):
                 if waiting:
                     seen += self._ser.read(waiting)
             except (serial.SerialException, OSError) as exc:
-                raise PortError(f"cannot read from MAXIMUS port {self.device}: {exc}") from exc
+                raise self._port_lost("read from", exc) from exc
             self._write(bytes([ISMACHINEREADY]))
             deadline = time.monotonic() + self.timeout_s
             while True:
