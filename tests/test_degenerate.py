@@ -189,3 +189,15 @@ def test_a_lost_serial_port_is_one_line_saying_what_to_check(monkeypatch, call):
     message = str(caught.value)
     assert "MAXIMUS port /dev/ttyUSB0" in message and "check the cable" in message and "\n" not in message
     assert "position is unknown" in message and not b.in_step
+
+
+@pytest.mark.parametrize("name", ["board.drl", "logo.svg", "extended.plt"])
+def test_a_travel_height_that_rounds_to_the_surface_is_refused_too(name):
+    """0.005 mm is less than half the thesis machine's Z step (0.0157 mm): 0 steps, the surface."""
+    step = cam.MachineSettings().mm_per_step_z
+    refused(run_cli("drill", SAMPLES / name, "--travel-height", "0.005", "--yes"), "0.005 mm",
+            "less than half a Z step", "--allow-surface-travel")
+    with pytest.raises(CamError, match="less than half a Z step"):
+        prepare_job(SAMPLES / name, JobOptions(travel_height_mm=step / 3))
+    assert prepare_job(SAMPLES / name, JobOptions(travel_height_mm=step / 3, allow_surface_travel=True))
+    assert prepare_job(SAMPLES / name, JobOptions(travel_height_mm=step))

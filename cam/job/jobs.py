@@ -743,6 +743,7 @@ def prepare_job(
     if kind not in KINDS:
         raise CamError(f"{p.name}: {KIND_NAMES.get(kind, kind)} cannot be cut by this version of cam")
     opts = (options or JobOptions()).checked().check_kind(kind, p.name)
+    _refuse_surface_travel(opts, settings)
     if not p.is_file():
         raise CamError(f"{p}: file not found")
     if kind in ("drawing", "digitized"):
@@ -762,6 +763,20 @@ def prepare_job(
     job.identity = identity_of(p, opts, settings)
     job.plan_sha256 = plan_fingerprint(job.toolpath)
     return _finish(job)
+
+
+def _refuse_surface_travel(options: JobOptions, settings: MachineSettings) -> None:
+    """Refuse a travel height that rounds to 0 Z steps, the surface (issue #33 point 8), unless
+    ``allow_surface_travel``: ``travel_height_mm`` 0 is refused with the options (:func:`cam.options.degenerate`),
+    a height under half a Z step here, where the machine's step is known."""
+    height = options.travel_height_mm
+    if height is None or height <= 0 or options.allow_surface_travel:
+        return
+    if int(round(height / settings.mm_per_step_z)) == 0:
+        raise CamError(f"a travel height of {height:g} mm is less than half a Z step ({settings.mm_per_step_z:g} mm): "
+                       "the tool would travel between cuts at the surface, across the work; give a height of at "
+                       "least one Z step, or --allow-surface-travel (the page: allow_surface_travel) if that is "
+                       "meant")
 
 
 _CUTS = {"excellon": "holes", "svg": "strokes", "hpgl": "strokes"}
