@@ -55,6 +55,8 @@ def _name(byte: int) -> str:
     return f"{BYTE_NAMES.get(byte, 'unknown byte')} ({byte:#04x})"
 
 
+_SWITCH_OFF = "nothing more sent, switch the machine off, then on, and jog to the board origin again"
+
 _CLOSE_DRILL = _Exchange("the closing drill packet", DRILLMODE1DONE, False, "drill", _MODE)
 
 
@@ -197,7 +199,7 @@ class _Link(_Trust):
         if reply is None:
             self._state = _UNKNOWN
             self._stop_error = PortError(f"emergency stop sent during {ex.what} but the board did not "
-                                         f"answer within {self._deadline_s(ex):.1f} s")
+                                         f"answer within {self._deadline_s(ex):.1f} s: {_SWITCH_OFF}")
             return self._stop_error
         if reply == ex.expected or reply in SWITCH_NAMES:
             # The move ended as the stop byte arrived.  If the UART ISR still caught it,
@@ -209,10 +211,11 @@ class _Link(_Trust):
                                  f"MACHINESTOPPED, drivers disabled, spindle off")
             self._state = _UNKNOWN
             self._stop_error = PortError(f"emergency stop reached the board after {ex.what} had ended; it "
-                                         f"read the stop byte as packet data and is out of step: reset it")
+                                         f"read the stop byte as packet data and is out of step: {_SWITCH_OFF}")
             return self._stop_error
         self._state = _UNKNOWN
-        self._stop_error = PortError(f"emergency stop during {ex.what}: the board answered {_name(reply)}")
+        self._stop_error = PortError(f"emergency stop during {ex.what}: the board answered {_name(reply)}: "
+                                     f"{_SWITCH_OFF}")
         return self._stop_error
 
     # ------------------------------------------------------------------ emergency stop
