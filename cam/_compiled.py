@@ -119,6 +119,8 @@ def aot_status() -> str:
 
 
 _SCALARS = {bool: "bool", int: "int64", float: "float64"}
+_ARRAY_NAMES: dict[tuple, str] = {}
+_SCALAR_NAMES: dict[type, str] = {}
 
 
 def type_key(value: Any) -> Optional[str]:
@@ -126,16 +128,21 @@ def type_key(value: Any) -> Optional[str]:
     kernels take: arrays, Python and numpy scalars; None for anything else.  Computed here without numba's
     ``typeof``, which interns a type object on every call."""
     if isinstance(value, np.ndarray):
-        if not value.flags.aligned:
+        flags = value.flags
+        if not flags.aligned:
             return None
-        layout = "C" if value.flags.c_contiguous else "F" if value.flags.f_contiguous else "A"
-        readonly = "" if value.flags.writeable else "readonly "
-        return f"{readonly}array({value.dtype.name}, {value.ndim}d, {layout})"
+        shape = (value.dtype, value.ndim, flags.c_contiguous, flags.f_contiguous, flags.writeable)
+        name = _ARRAY_NAMES.get(shape)
+        if name is None:  # numpy builds a dtype's name on every ask: each kind of array is named once
+            layout = "C" if flags.c_contiguous else "F" if flags.f_contiguous else "A"
+            readonly = "" if flags.writeable else "readonly "
+            name = _ARRAY_NAMES[shape] = f"{readonly}array({value.dtype.name}, {value.ndim}d, {layout})"
+        return name
     kind = _SCALARS.get(type(value))
     if kind is not None:
         return kind
     if isinstance(value, (np.integer, np.floating, np.bool_)):
-        return value.dtype.name
+        return _SCALAR_NAMES.get(type(value)) or _SCALAR_NAMES.setdefault(type(value), value.dtype.name)
     return None
 
 

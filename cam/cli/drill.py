@@ -93,7 +93,9 @@ def cmd_drill(args: argparse.Namespace) -> int:
         read_journal(args.resume)  # a bad journal: one line, before anything is planned
     settings = port_settings(args, args.port)
     check_port_options(args, settings)
+    planning_t0 = time.monotonic()
     job = prepare(args, settings)
+    planning_s = time.monotonic() - planning_t0
     start_steps = None
     if getattr(args, "resume", None):
         job, start_steps = _resumed(args, job)
@@ -113,5 +115,7 @@ def cmd_drill(args: argparse.Namespace) -> int:
     t0 = time.monotonic()
     outcome = execute(job, args, settings, start_steps=start_steps, journal=journal)
     summary = summary_of(job)
-    return _finish(args, outcome, job.full_report(), f"{summary} from {args.image}" if job.kind == "hpgl" else summary,
-                   time.monotonic() - t0)
+    report = job.full_report()  # after the run: the run's pass over the ramps gave the machine time
+    run_s = time.monotonic() - t0
+    report.update(planning_s=round(planning_s, 3), run_s=round(run_s, 3))  # wall times of this process
+    return _finish(args, outcome, report, f"{summary} from {args.image}" if job.kind == "hpgl" else summary, run_s)
