@@ -176,11 +176,33 @@ def test_a_drill_job_starts_where_the_tool_is_and_the_state_keeps_its_end(tmp_pa
 def test_a_job_stopped_at_a_prompt_records_where_it_stopped(tmp_path):
     st = tmp_path / "m.json"
     ok(run_cli("goto", "10,10,0", "--state", st))
+    ok(run_cli("zero", "--state", st))  # a drill file starts at the work zero: here
     proc = run_cli("drill", SAMPLES / "board.drl", "--state", st, "--pin-log", tmp_path / "p.csv")  # no answer
     assert proc.returncode == 130, proc.stderr
     end = tuple(a + b for a, b in zip((80, 80, 0), moved_by(tmp_path / "p.csv")))
     s = state_of(st)
     assert s.position_steps == end != (80, 80, 0) and s.position_known and s.running is None
+
+
+def test_a_drill_file_is_placed_at_the_work_zero(tmp_path):
+    st, fresh = tmp_path / "m.json", tmp_path / "fresh.json"
+    ref = ok(run_cli("drill", SAMPLES / "board.drl", "--yes", "--state", fresh, "--pin-log", tmp_path / "ref.csv"))
+    assert "work zero" not in ref.stderr  # the tool stands at the work zero already
+    ok(run_cli("goto", "1000,600,0", "--unit", "steps", "--state", st))
+    ok(run_cli("zero", "--state", st))
+    ok(run_cli("goto", "0,0,0", "--machine-coords", "--state", st))
+    proc = ok(run_cli("drill", SAMPLES / "board.drl", "--yes", "--state", st, "--pin-log", tmp_path / "j.csv"))
+    assert "going to the work zero first: machine [0, 0, 0] -> [1000, 600, 0] steps" in proc.stderr
+    job = decode_pin_log(read_pin_log(tmp_path / "j.csv"), S).position_steps
+    want = decode_pin_log(read_pin_log(tmp_path / "ref.csv"), S).position_steps
+    assert np.array_equal(job, want)  # the same job, in its own frame: the pin log holds the job only
+    assert state_of(st).position_steps == tuple(int(z) + int(m) for z, m in zip((1000, 600, 0), want[-1]))
+    # placed where it does not fit: refused in the machine frame, naming the axis and by how much
+    ok(run_cli("zero", "--at", "285,0,0", "--state", st))  # 9862 steps
+    line = one_line_error(run_cli("drill", SAMPLES / "board.drl", "--yes", "--state", st), "G54 work zero",
+                          "leaves the X travel", "steps beyond")
+    assert "machine [9862, 0, 0] steps" in line
+    assert state_of(st).running is None and state_of(st).position_known
 
 
 def test_a_port_that_fails_before_sending_keeps_the_position_known(tmp_path):

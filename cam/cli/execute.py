@@ -23,12 +23,13 @@ from ..drive.ports import MockPort, port_kind, require
 from ..drive.runner import EMERGENCY_STOPPED, FINISHED, STOPPED
 from ..drive.session import MachineSession, Prompt
 from ..drive.state import MachineState, PositionUnknownError, StateHold, check_in_travel
-from ..errors import CapabilityError, PortError
+from ..errors import CapabilityError, PortError, TravelError
+from ..job.model import Job
 from ..settings import MachineSettings
 from ..verify.pinlog import write_pin_log
 from .checks import job_kind_of
 from .common import progress_wanted
-from .machine_state import hold_machine
+from .machine_state import goto_path, hold_machine
 
 __all__ = ["execute", "Outcome", "check_port_options", "ended_state"]
 
@@ -178,7 +179,10 @@ def _run(job: Any, args: argparse.Namespace, settings: MachineSettings, hold: St
     elif port_kind(args.port) == "mock" and not realtime:
         port = MockPort(keep_log=False)  # nobody reads this run's pin log: the writes are counted, not kept
     session = MachineSession(port, settings, realtime=realtime, on_prompt=_ask(args, stopping))
-    session.set_position(start)
+    approach = None if getattr(args, "resume", None) else approach_to_work_zero(job, hold.state, start, settings,
+                                                                                port_kind(args.port))
+    at = start if approach is None else hold.state.work_zero_steps()
+    session.set_position(at)
     session.check_job(job)  # before the progress bar: a bad job is one clean line
     # the machine time takes a pass over the ramps: only worked out before the run for a bar to show it
     bar = _bar(args, float(getattr(job, "estimated_time_s", 0.0))) if progress_wanted(args) else None
@@ -187,17 +191,24 @@ def _run(job: Any, args: argparse.Namespace, settings: MachineSettings, hold: St
     # each hole on a board that drills by itself, as the MAXIMUS PC program shows it ("Drilling hole n of N")
     session.on_detail = (lambda text: bar.write(text, file=sys.stderr)) if bar is not None else \
         (lambda text: print(text, file=sys.stderr, flush=True))
+    sessions = [session]
+
     def stop(signum: int, frame: Any) -> None:
         stopping.set()
-        session.stop()
+        for s in sessions:
+            s.stop()
 
-    spec = None
-    if journal is not None:
-        spec = journal_spec(job, journal, home_steps=session.position_steps(),
-                            pin_log_path=getattr(args, "pin_log", None))
     previous = {s: signal.signal(s, stop) for s in _STOP_SIGNALS}
+    ended, ended_start = session, at
     try:
         hold.mark_running(_command_text(args))
+        if approach is not None:
+            ended, ended_start = _approach(approach, args, settings, start, sessions), start
+            if ended.last_run.get("status") != FINISHED:
+                return _outcome(ended, args, pin_log=False)
+            ended, ended_start = session, at
+        spec = None if journal is None else journal_spec(job, journal, home_steps=session.position_steps(),
+                                                         pin_log_path=getattr(args, "pin_log", None))
         session.start(job, journal=spec)
         if bar is not None and not bar.total:  # a jog or a go-to: its time is known once the session planned it
             bar.total = round(session.state()["remaining_s"], 3)
@@ -206,12 +217,54 @@ def _run(job: Any, args: argparse.Namespace, settings: MachineSettings, hold: St
             pass
     finally:
         if hold.state.running is not None:  # recorded before the handlers go: a SIGTERM now still stops cleanly
-            hold.record(ended_state(hold.state, session, start, getattr(args, "tool", None)))
+            hold.record(ended_state(hold.state, ended, ended_start, getattr(args, "tool", None)))
         for s, handler in previous.items():
             signal.signal(s, handler)
         if bar is not None:
             bar.close()
     return _outcome(session, args)
+
+
+def approach_to_work_zero(job: Any, state: MachineState, start: tuple[int, int, int], settings: MachineSettings,
+                          kind: str) -> Optional[Job]:
+    """The travel that places a drill file's job at the active work zero (issue #29 point 1, drill files on
+    step/dir ports): its home, where its own frame's (0, 0, 0) is (the board's top-left hole, or the board
+    origin with ``--offset 0,0``), goes to the work zero.  None when the tool is there already, or for any
+    other job (planned from where the tool stands).  Positions in the machine frame.
+
+    Raises:
+        TravelError: the job placed there leaves the travel (naming the axis and by how much), before
+        anything moves.
+    """
+    job_kind = getattr(job, "kind", None)  # a PreparedJob's file kind (a Job's is an array of move kinds)
+    if not isinstance(job_kind, str) or job_kind != "excellon" or kind == "maximus":
+        return None
+    zero = state.work_zero_steps()
+    extent = getattr(job, "extent_steps", None)
+    if extent is not None:
+        for a, (lo, hi) in enumerate(settings.travel.bounds_steps()):
+            reach = (zero[a] + int(extent[a][0]), zero[a] + int(extent[a][1]))
+            if reach[0] < lo or reach[1] > hi:
+                v, beyond = (reach[0], lo - reach[0]) if reach[0] < lo else (reach[1], reach[1] - hi)
+                raise TravelError(
+                    f"the drill job placed at the {state.active_offset} work zero (machine {list(zero)} steps) "
+                    f"leaves the {'XYZ'[a]} travel ({lo}..{hi} steps from the home): it reaches {v}, {beyond} "
+                    f"steps beyond; set the work zero elsewhere (cam zero)")
+    return goto_path(start, zero, zero[2], settings)
+
+
+def _approach(job: Job, args: argparse.Namespace, settings: MachineSettings, start: tuple[int, int, int],
+              sessions: list) -> MachineSession:
+    """Travel to the work zero in a session of its own (the job's pin log holds the job only); returns it."""
+    first = MachineSession(args.port, settings, realtime=getattr(args, "realtime", False))
+    first.set_position(start)
+    sessions.append(first)
+    print(f"going to the work zero first: machine {list(first.position_steps())} -> "
+          f"{[int(s) + int(v) for s, v in zip(start, job.points_steps[-1])]} steps", file=sys.stderr, flush=True)
+    first.start(job, label="to the work zero")
+    while not first.wait_idle(0.2):
+        pass
+    return first
 
 
 def _command_text(args: argparse.Namespace) -> str:
@@ -248,12 +301,12 @@ def ended_state(state: MachineState, session: MachineSession, start: tuple[int, 
         else done
 
 
-def _outcome(session: MachineSession, args: argparse.Namespace) -> Outcome:
+def _outcome(session: MachineSession, args: argparse.Namespace, pin_log: bool = True) -> Outcome:
     info = session.last_run
     result = session.last_result
     if info.get("status") == "error":
         raise PortError("; ".join(info.get("messages") or ["the run failed"]))
-    if getattr(args, "pin_log", None) and result is not None:
+    if getattr(args, "pin_log", None) and result is not None and pin_log:
         if isinstance(result.port, MockPort) and result.port.pin_log_path is not None:
             result.port.finish_pin_log()
         else:

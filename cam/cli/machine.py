@@ -7,22 +7,18 @@ from __future__ import annotations
 
 import argparse
 import sys
-from typing import Optional
-
-import numpy as np
 
 from ..drive.ports import port_kind
 from ..drive.state import check_in_travel, steps_to_mm
 from ..errors import CamError
-from ..job.model import Job, travel_job
 from ..job.moves import jog, jog_steps
 from ..settings import MachineSettings
 from .common import port_settings
 from .execute import check_port_options, execute
-from .machine_state import hold_machine
+from .machine_state import goto_path, hold_machine
 from .parser import EXIT_INTERRUPTED
 
-__all__ = ["cmd_goto", "cmd_jog", "goto_path", "target_steps"]
+__all__ = ["cmd_goto", "cmd_jog", "target_steps"]
 
 Steps3 = tuple[int, int, int]
 
@@ -41,24 +37,6 @@ def target_steps(values: list[float], unit: str, settings: MachineSettings) -> S
         return tuple(int(v) * p for v, p in zip(values, per))  # type: ignore[return-value]
     per_mm = (settings.mm_per_step_xy, settings.mm_per_step_xy, settings.mm_per_step_z)
     return tuple(int(round(float(v) / p)) for v, p in zip(values, per_mm))  # type: ignore[return-value]
-
-
-def goto_path(start_steps: Steps3, target_steps: Steps3, safe_z_steps: int, settings: MachineSettings
-              ) -> Optional[Job]:
-    """Go To from ``start_steps`` to ``target_steps`` (both machine frame): up to the safe height first (the
-    highest of where the tool is, ``safe_z_steps`` and the target's Z; +Z is deeper), travel at it, then Z
-    to the target.  The job's points are relative to the start; None when the tool is there already."""
-    x0, y0, z0 = (int(v) for v in start_steps)
-    x, y, z = (int(v) for v in target_steps)
-    h = min(z0, int(safe_z_steps), z)
-    rel: list[Steps3] = []
-    for p in ((x0, y0, h), (x, y, h), (x, y, z)):
-        r = (p[0] - x0, p[1] - y0, p[2] - z0)
-        if r != (0, 0, 0) and (not rel or rel[-1] != r):
-            rel.append(r)
-    if not rel:
-        return None
-    return travel_job(np.array(rel, np.int64).reshape(-1, 3), settings, source="go to")
 
 
 def _where_line(machine: Steps3, work: Steps3, offset: str, settings: MachineSettings) -> str:
