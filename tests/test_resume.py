@@ -404,3 +404,21 @@ def test_the_journal_is_never_ahead_of_the_machine(tmp_path):
         assert job.steps.point_write[j.last_move] < j.writes_done
         assert j.last_move + 1 == len(job.toolpath) or job.steps.point_write[j.last_move + 1] >= j.writes_done
     assert read_journal(journal).state == "finished"
+
+
+def test_a_tampered_journal_is_refused_in_one_line_before_anything_is_planned(tmp_path):
+    """Positions no run on this machine could have written (issue #33 point 4): refused from the numbers, at once
+    (a position of 10^18 steps used to be walked a write at a time by the way in)."""
+    done = _cam(_drill_args("2d", tmp_path, "--report", str(tmp_path / "r.json")))
+    assert done.returncode == 0, done.stderr
+    good = json.loads((tmp_path / "r.journal.json").read_text())
+    good["state"] = "stopped"
+    journal = tmp_path / "j.journal.json"
+    for key, value, message in (
+            ("position_steps", [10 ** 18, 0, 0], "'position_steps' puts the tool at X=1000000000000000000"),
+            ("position_steps", [0, -5, 0], "'position_steps' puts the tool at Y=-5"),
+            ("home_steps", [0, 0, 10 ** 9], "'home_steps' puts the tool at Z=1000000000"),
+            ("writes_done", good["writes_total"] + 1, "is outside 0..writes_total")):
+        journal.write_text(json.dumps(dict(good, **{key: value})))
+        done = _cam(_drill_args("2d", tmp_path, "--resume", str(journal)))
+        assert done.returncode == 2 and message in done.stderr and _one_line(done.stderr), (key, done.stderr)

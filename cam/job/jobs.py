@@ -19,6 +19,7 @@ stands can check the job against the machine travel before it starts.
 """
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import math
 import os
@@ -63,7 +64,8 @@ from .hpgl import DEFAULT_TRAVEL_HEIGHT_MM as HPGL_TRAVEL_HEIGHT_MM
 from .drawing_stream import STREAM_TARGETS, plan, stream_drawing
 from .hpgl_stream import STREAM_POINTS, stream_hpgl
 from .model import Job
-from .resume import Journal, JournalBase, check_journal, job_identity, plan_fingerprint, resume_pieces
+from .resume import (Journal, JournalBase, check_journal, check_journal_numbers, job_identity, plan_fingerprint,
+                     resume_pieces)
 from .svg import DEFAULT_CUT_DEPTH_MM as SVG_CUT_DEPTH_MM
 from .svg import DEFAULT_TRAVEL_HEIGHT_MM as SVG_TRAVEL_HEIGHT_MM
 from .svg import plan_svg
@@ -842,10 +844,12 @@ def resume_job(job: PreparedJob, journal: Journal, *, position_steps: Optional[t
     Raises:
         CamError: the journal was written for another input, options, settings or plan, or its job finished.
     """
+    start = tuple(int(v) for v in (journal.position_steps if position_steps is None else position_steps))
+    # every number against the travel before anything is planned from them (a tampered journal: one line, at once)
+    check_journal_numbers(dataclasses.replace(journal, position_steps=start), job.settings, where)
     check_journal(journal, job.identity, job.plan_sha256, where)
     if job.toolpath is None:
         raise CamError(f"{job.name}: a {job.kind} job has no moves to resume")
-    start = tuple(int(v) for v in (journal.position_steps if position_steps is None else position_steps))
     resumed, move_index, j = resume_pieces(job.toolpath, journal.last_move, start,  # type: ignore[arg-type]
                                            pause_pending=journal.pause_pending)
     # a job held in memory is resumed in memory (its run reads every move at once: linear40 ramps, the

@@ -50,7 +50,7 @@ from .model import CUT, RETRACT, TRAVEL, Job, JobLike, PixelFrame, join_pieces
 __all__ = [
     "JOURNAL_FORMAT", "JOURNAL_STATES", "Journal", "JournalBase", "Resumed", "job_identity", "plan_fingerprint",
     "PlanFingerprint", "check_journal", "resume_pieces", "resume_toolpath", "ResumedJob", "MoveIndex",
-    "last_completed", "journal_record", "cutting_moves",
+    "last_completed", "journal_record", "cutting_moves", "check_journal_numbers",
 ]
 
 JOURNAL_FORMAT = 1
@@ -295,6 +295,32 @@ def check_journal(journal: Journal, identity: str, plan_sha256: str, where: str 
                        f"cam?); start the job again without --resume")
     if journal.state == "finished":
         raise CamError(f"journal {where}: the job finished; there is nothing to resume")
+
+
+def check_journal_numbers(journal: Journal, settings: MachineSettings, where: str = "journal") -> None:
+    """Refuse a journal whose numbers no run on this machine could have written, before anything is planned.
+
+    The machine positions it implies (``home_steps``; ``home_steps + position_steps`` and
+    ``home_steps + start_position_steps``, its positions being steps from the job's home) must be inside the
+    travel, and its write counts consistent; a tampered journal is refused at once, never walked.
+
+    Raises:
+        CamError: one line naming ``where``, the key and the axis.
+    """
+    bounds = settings.travel.bounds_steps()
+    home = np.asarray(journal.home_steps, np.int64)
+    triples = [("home_steps", home)]
+    triples += [(name, home + np.asarray(getattr(journal, name), np.int64))
+                for name in ("position_steps", "start_position_steps") if getattr(journal, name, None) is not None]
+    for name, machine in triples:
+        for a, (lo, hi) in enumerate(bounds):
+            if not lo <= int(machine[a]) <= hi:
+                raise CamError(f"journal {where}: '{name}' puts the tool at {'XYZ'[a]}={int(machine[a])} steps from "
+                               f"the machine's home, outside its {'XYZ'[a]} travel {lo}..{hi}; not a journal of "
+                               f"this machine")
+    if not 0 <= journal.writes_done <= journal.writes_total:
+        raise CamError(f"journal {where}: writes_done {journal.writes_done} is outside 0..writes_total "
+                       f"{journal.writes_total}")
 
 
 def cutting_moves(job: JobLike) -> np.ndarray:
