@@ -159,18 +159,30 @@ def test_the_default_state_file_is_per_machine_file_and_port(tmp_path, state_hom
 
 # -- jobs: the state after a finished and a stopped job --------------------------------------------------------
 
-def test_a_drill_job_starts_where_the_tool_is_and_the_state_keeps_its_end(tmp_path):
+def test_a_drawing_job_is_cut_at_the_work_zero_and_the_state_keeps_its_end(tmp_path):
     st = tmp_path / "m.json"
-    ok(run_cli("goto", "100,50,0", "--state", st))
-    ok(run_cli("drill", SAMPLES / "ellipse.png", "--depth", "2", "--state", st, "--pin-log", tmp_path / "j.csv",
-               "--tool", "point"))
+    ref = ok(run_cli("drill", SAMPLES / "ellipse.png", "--depth", "2", "--state", tmp_path / "fresh.json",
+                     "--pin-log", tmp_path / "ref.csv"))
+    assert "work zero" not in ref.stderr
+    want = decode_pin_log(read_pin_log(tmp_path / "ref.csv"), S).position_steps
+    ok(run_cli("goto", "100,50,0", "--state", st))  # the case: a go-to, then a job
+    proc = ok(run_cli("drill", SAMPLES / "ellipse.png", "--depth", "2", "--state", st, "--pin-log",
+                      tmp_path / "j.csv", "--tool", "point"))
+    assert "going to the work zero first: machine [800, 400, 0] -> [0, 0, 0] steps" in proc.stderr
+    assert np.array_equal(decode_pin_log(read_pin_log(tmp_path / "j.csv"), S).position_steps, want)
     s = state_of(st)
-    assert s.position_steps == (800, 400, 0) and moved_by(tmp_path / "j.csv") == (0, 0, 0)  # a job ends at its home
-    assert s.position_known and s.running is None and s.tool == "point"
-    # from a position where the job does not fit: refused in the machine frame, the state untouched
-    ok(run_cli("goto", "1240,1240,0", "--state", st))
-    one_line_error(run_cli("drill", SAMPLES / "ellipse.png", "--depth", "2", "--state", st), "travel")
-    assert state_of(st).position_steps == (9920, 9920, 0) and state_of(st).running is None
+    assert s.position_steps == (0, 0, 0) and s.position_known and s.running is None and s.tool == "point"
+    ok(run_cli("goto", "100,50,3", "--state", st))
+    ok(run_cli("zero", "--state", st))  # a work zero 3 steps deep: the job is cut from there
+    ok(run_cli("drill", SAMPLES / "ellipse.png", "--depth", "2", "--state", st, "--pin-log", tmp_path / "k.csv"))
+    assert np.array_equal(decode_pin_log(read_pin_log(tmp_path / "k.csv"), S).position_steps, want)
+    assert state_of(st).position_steps == (800, 400, 3)  # a job ends at its home: the work zero
+    # placed where it does not fit: refused in the machine frame, naming the axis and by how much
+    ok(run_cli("zero", "XY", "--at", "286,286,0", "--state", st))
+    line = one_line_error(run_cli("drill", SAMPLES / "ellipse.png", "--depth", "2", "--state", st),
+                          "the drawing job placed at the G54 work zero (machine [9896, 9896, 3] steps)",
+                          "leaves the X travel", "steps beyond")
+    assert state_of(st).position_steps == (800, 400, 3) and state_of(st).running is None, line
 
 
 def test_a_job_stopped_at_a_prompt_records_where_it_stopped(tmp_path):
@@ -199,7 +211,8 @@ def test_a_drill_file_is_placed_at_the_work_zero(tmp_path):
     assert state_of(st).position_steps == tuple(int(z) + int(m) for z, m in zip((1000, 600, 0), want[-1]))
     # placed where it does not fit: refused in the machine frame, naming the axis and by how much
     ok(run_cli("zero", "--at", "285,0,0", "--state", st))  # 9862 steps
-    line = one_line_error(run_cli("drill", SAMPLES / "board.drl", "--yes", "--state", st), "G54 work zero",
+    line = one_line_error(run_cli("drill", SAMPLES / "board.drl", "--yes", "--state", st),
+                          "the drill job placed at the G54 work zero",
                           "leaves the X travel", "steps beyond")
     assert "machine [9862, 0, 0] steps" in line
     assert state_of(st).running is None and state_of(st).position_known

@@ -31,7 +31,7 @@ from .checks import job_kind_of
 from .common import progress_wanted
 from .machine_state import goto_path, hold_machine
 
-__all__ = ["execute", "Outcome", "check_port_options", "ended_state"]
+__all__ = ["execute", "Outcome", "check_port_options", "ended_state", "approach_to_work_zero", "PLACED_KINDS"]
 
 
 @dataclass
@@ -225,19 +225,26 @@ def _run(job: Any, args: argparse.Namespace, settings: MachineSettings, hold: St
     return _outcome(session, args)
 
 
+PLACED_KINDS = {"drawing": "drawing job", "digitized": "digitized matrix job", "excellon": "drill job",
+                "hpgl": "HPGL job", "svg": "SVG job"}
+"""The file kinds whose job is placed at the active work zero, and what messages call them (G-code programs:
+not yet, issue #29 point 4)."""
+
+
 def approach_to_work_zero(job: Any, state: MachineState, start: tuple[int, int, int], settings: MachineSettings,
                           kind: str) -> Optional[Job]:
-    """The travel that places a drill file's job at the active work zero (issue #29 point 1, drill files on
-    step/dir ports): its home, where its own frame's (0, 0, 0) is (the board's top-left hole, or the board
-    origin with ``--offset 0,0``), goes to the work zero.  None when the tool is there already, or for any
-    other job (planned from where the tool stands).  Positions in the machine frame.
+    """The travel that places a file's job at the active work zero (issue #29 point 1, on step/dir ports): its
+    home, its own frame's (0, 0, 0), goes to the work zero: a drawing's top-left pixel at the surface (the
+    thesis's), a drill file's top-left hole (or the board origin with ``--offset 0,0``), an HPGL or SVG file's
+    origin as its ``--offset`` places it.  None when the tool is there already, or for a G-code program or
+    any other job (planned from where the tool stands).  Positions in the machine frame.
 
     Raises:
         TravelError: the job placed there leaves the travel (naming the axis and by how much), before
         anything moves.
     """
     job_kind = getattr(job, "kind", None)  # a PreparedJob's file kind (a Job's is an array of move kinds)
-    if not isinstance(job_kind, str) or job_kind != "excellon" or kind == "maximus":
+    if not isinstance(job_kind, str) or job_kind not in PLACED_KINDS or kind == "maximus":
         return None
     zero = state.work_zero_steps()
     extent = getattr(job, "extent_steps", None)
@@ -247,7 +254,7 @@ def approach_to_work_zero(job: Any, state: MachineState, start: tuple[int, int, 
             if reach[0] < lo or reach[1] > hi:
                 v, beyond = (reach[0], lo - reach[0]) if reach[0] < lo else (reach[1], reach[1] - hi)
                 raise TravelError(
-                    f"the drill job placed at the {state.active_offset} work zero (machine {list(zero)} steps) "
+                    f"the {PLACED_KINDS[job_kind]} placed at the {state.active_offset} work zero (machine {list(zero)} steps) "
                     f"leaves the {'XYZ'[a]} travel ({lo}..{hi} steps from the home): it reaches {v}, {beyond} "
                     f"steps beyond; set the work zero elsewhere (cam zero)")
     return goto_path(start, zero, zero[2], settings)
