@@ -37,12 +37,23 @@ def _finish(args: argparse.Namespace, outcome: Outcome, report: dict, summary: s
     if port_kind(args.port) == "maximus":  # the board keeps its own time
         print(f"job finished: {summary}; total time {format_duration(wall_s)}")
         return 0
-    print(
-        f"job finished: {summary}; total time {format_duration(outcome.machine_time_s)} "
-        f"({outcome.machine_time_s:.1f} s machine time, {ramp} ramps"
-        f"{'' if args.realtime or args.port != 'mock' else ', simulated'})"
-    )
+    print(finish_line(summary, outcome, ramp, wall_s, simulated=not args.realtime and args.port == "mock"))
     return 0
+
+
+def finish_line(summary: str, outcome: Outcome, ramp: str, wall_s: float, *, simulated: bool) -> str:
+    """The line a finished step/dir job ends with: the machine time and, in real time, how long the run took
+    and, when it ran late, by how much and how many stalls (a late write moves the rest of the run later)."""
+    if simulated:
+        return f"job finished: {summary}; total time {format_duration(outcome.machine_time_s)} " \
+               f"({outcome.machine_time_s:.1f} s machine time, {ramp} ramps, simulated)"
+    line = f"job finished: {summary}; the run took {format_duration(wall_s)} " \
+           f"({outcome.machine_time_s:.1f} s machine time planned, {ramp} ramps"
+    late_s, stalls = float(outcome.timing.get("late_total_s", 0.0)), int(outcome.timing.get("stalls", 0))
+    if late_s >= 0.001 or stalls:
+        line += (f"; {late_s:.1f} s late: {stalls} stall{'s' if stalls != 1 else ''} over 1 ms, the longest "
+                 f"{1000 * float(outcome.timing.get('max_late_s', 0.0)):.0f} ms")
+    return line + ")"
 
 
 def board_report(job, settings) -> dict:
