@@ -360,6 +360,7 @@ def _long_job(st: Path, pins: Path) -> subprocess.Popen:
 def test_sigterm_during_a_job_records_where_it_stopped_and_a_second_command_is_refused(tmp_path):
     st, pins = tmp_path / "m.json", tmp_path / "p.csv"
     ok(run_cli("goto", "10,20,0", "--state", st))
+    ok(run_cli("zero", "--state", st))  # the job is cut here
     proc = _long_job(st, pins)
     try:
         wait_for_progress(proc, 3)
@@ -379,7 +380,7 @@ def test_sigterm_during_a_job_records_where_it_stopped_and_a_second_command_is_r
     end = tuple(a + b for a, b in zip((80, 160, 0), moved_by(pins)))
     assert s.running is None and s.position_known and s.position_steps == end != (80, 160, 0)
     assert end[2] <= 0  # the stop lifted the tool
-    ok(run_cli("goto", "10,20,0", "--state", st, "--pin-log", tmp_path / "back.csv"))
+    ok(run_cli("goto", "0,0,0", "--state", st, "--pin-log", tmp_path / "back.csv"))
     assert moved_by(tmp_path / "back.csv") == tuple(a - b for a, b in zip((80, 160, 0), end))
 
 
@@ -406,3 +407,29 @@ def test_sigkill_during_a_job_leaves_the_position_unknown(tmp_path):
     ok(run_cli("where", "--set", "0,0,0", "--state", st))
     ok(run_cli("goto", "1,1,0", "--state", st))
     assert state_of(st).position_steps == (8, 8, 0)
+
+
+@pytest.mark.realtime
+def test_sigterm_on_the_way_to_the_work_zero_records_where_the_tool_stopped(tmp_path):
+    st, pins = tmp_path / "m.json", tmp_path / "p.csv"
+    write_state(st, MachineState(position_steps=(5000, 0, 0)))  # 5000 steps from the work zero: about 25 s
+    proc = subprocess.Popen([sys.executable, "-m", "cam", "drill", str(SAMPLES / "board.drl"), "--yes", "--realtime",
+                             "--state", str(st), "--pin-log", str(pins)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=ENV)
+    try:
+        deadline = time.monotonic() + 60
+        while state_of(st).running is None:  # it drives the machine now
+            assert time.monotonic() < deadline and proc.poll() is None
+            time.sleep(0.05)
+        time.sleep(3)
+        proc.send_signal(signal.SIGTERM)
+        out, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        proc.wait()
+    assert proc.returncode == 130, err
+    assert b"going to the work zero first" in err and b"job finished" not in out
+    s = state_of(st)
+    assert s.position_known and s.running is None and 0 < s.position_steps[0] < 5000 and s.position_steps[1:] == (0, 0)
+    assert not pins.exists()  # the job itself never started
