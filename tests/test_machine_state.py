@@ -196,6 +196,27 @@ def test_a_job_stopped_at_a_prompt_records_where_it_stopped(tmp_path):
     assert s.position_steps == end != (80, 80, 0) and s.position_known and s.running is None
 
 
+def test_resume_goes_on_from_the_journal_and_refuses_a_tool_moved_since(tmp_path):
+    st, journal = tmp_path / "m.json", tmp_path / "j.journal.json"
+    ok(run_cli("goto", "10,10,0", "--state", st))
+    ok(run_cli("zero", "--state", st))
+    stopped = run_cli("drill", SAMPLES / "board.drl", "--state", st, "--journal", journal)  # no answer: stops
+    assert stopped.returncode == 130, stopped.stderr
+    where = state_of(st).position_steps
+    ok(run_cli("jog", "X+", "10", "--state", st))
+    refused = run_cli("drill", SAMPLES / "board.drl", "--yes", "--state", st, "--resume", journal)
+    assert refused.returncode == 2 and "Traceback" not in refused.stderr  # after cam drill's "resuming at" note:
+    last = refused.stderr.strip().splitlines()[-1]  # the state is checked when the run starts
+    for fragment in (f"has the tool at {[where[0] + 10, where[1], where[2]]} steps", f"left it at {list(where)}",
+                     "go back there"):
+        assert fragment in last, last
+    ok(run_cli("jog", "X-", "10", "--state", st))
+    proc = ok(run_cli("drill", SAMPLES / "board.drl", "--yes", "--state", st, "--resume", journal))
+    assert "work zero" not in proc.stderr  # a resumed job goes on from where the tool is
+    s = state_of(st)
+    assert s.position_steps == (80, 80, 0) and s.position_known and s.running is None  # the job ends at its home
+
+
 def test_a_drill_file_is_placed_at_the_work_zero(tmp_path):
     st, fresh = tmp_path / "m.json", tmp_path / "fresh.json"
     ref = ok(run_cli("drill", SAMPLES / "board.drl", "--yes", "--state", fresh, "--pin-log", tmp_path / "ref.csv"))
