@@ -214,8 +214,12 @@ def test_allow_host_names_another_host():
     _check_host(config, "CNC.example.lan:8000")
     with pytest.raises(HttpError):
         _check_host(config, "other.example.lan:8000")
-    with pytest.raises(HttpError):  # no token: localhost names only
+    with pytest.raises(HttpError):  # no token: localhost and loopback addresses only
         _check_host(ServerConfig(), "192.168.1.5:8000")
+    with pytest.raises(HttpError):
+        _check_host(ServerConfig(), "localhost.evil.example:8000")
+    for host in ("localhost:8000", "127.0.0.2:8000", "[::1]:8000", "LOCALHOST"):
+        _check_host(ServerConfig(), host)
 
 
 def test_short_tokens_are_refused():

@@ -292,12 +292,12 @@ def _own_names() -> frozenset[str]:
 def _check_host(config: ServerConfig, host_header: str) -> None:
     """HttpError 403 unless the ``Host`` names this computer (no DNS rebinding, with or without a token).
 
-    Without a token: a localhost name.  With one also an IP address (a page served from an address is this
+    Without a token: localhost or a loopback address.  With one also an IP address (a page served from an address is this
     server's own page, a rebinding page names its own site), this computer's own name, or one of
     ``config.allowed_hosts``."""
     host = host_header.lower()
     host = host[1:].split("]", 1)[0] if host.startswith("[") else host.rsplit(":", 1)[0]
-    if host in LOCAL_HOSTS:
+    if host and is_loopback(host):  # localhost, 127.x.y.z, ::1
         return
     if config.token:
         try:
