@@ -22,8 +22,8 @@ import cam
 from cam.cli.execute import ended_state
 from cam.drive.session import MachineSession
 from cam.drive.state import (
-    OFFSET_NAMES, MachineLock, MachineState, PositionUnknownError, StateBusyError, StateError, StateHold,
-    default_state_path, parse_state, read_state, state_dir, write_state,
+    OFFSET_NAMES, MachineLock, MachineState, StateBusyError, StateError, StateHold, default_state_path,
+    parse_state, read_state, state_dir, unknown_message, write_state,
 )
 from cam.drive.runner import Controller
 from cam.job.model import CUT
@@ -345,9 +345,10 @@ def test_state_file_round_trip_and_its_frames():
     assert parse_state(s.to_json(), S, "x") == s
     assert s.to_work((10, 20, 3)) == (6, 15, 2) and s.to_machine((6, 15, 2)) == (10, 20, 3)
     assert s.to_work((10, 20, 3), "G54") == (10, 20, 3) and set(s.offsets_steps) == set(OFFSET_NAMES)
-    with pytest.raises(PositionUnknownError):
-        lost = s.lost("test")
-        StateHold.require_known(type("H", (), {"state": lost})())  # type: ignore[arg-type]
+    lost = s.lost("an emergency stop")
+    assert not lost.position_known and not lost.homed and lost.position_steps == (10, 20, 3)
+    assert "(an emergency stop)" in unknown_message(lost) and "cam where --set X,Y,Z" in unknown_message(lost)
+    assert lost.moved_to((1, 2, 3)).position_known and lost.moved_to((1, 2, 3)).unknown_reason == ""
 
 
 def test_where_prints_both_frames_and_json(tmp_path):
