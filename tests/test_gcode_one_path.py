@@ -246,6 +246,25 @@ def test_checks_over_the_whole_program_are_made_piece_by_piece(tmp_path):
             list(stream_gcode(open_gcode(year, max_lines=10**5), SETTINGS, piece_moves=k).pieces())
 
 
+def test_a_spilled_stream_reads_back_the_same_pieces(programs, monkeypatch):
+    """With ``spill`` the first whole pass keeps its pieces in a temporary file and later passes read them: the
+    same pieces, the program not interpreted again; an unfinished pass spills nothing."""
+    path, options = {p.name: (p, o) for p, o in programs}["pauses.ngc"]
+    want = list(stream_gcode(open_gcode(path, **options), SETTINGS, piece_moves=2).pieces())
+    stream = stream_gcode(open_gcode(path, **options), SETTINGS, piece_moves=2, spill=True)
+    next(stream.pieces())  # abandoned
+    assert stream._spilled is None and not stream._spilling
+    first = list(stream.pieces())
+    def again(*args):
+        raise AssertionError("the program was interpreted again")
+    monkeypatch.setattr(stream.src, "move_batches", again)
+    for got in (first, list(stream.pieces()), list(stream.pieces())):
+        assert len(got) == len(want) > 2
+        for a, b in zip(got, want):
+            _assert_same_job(a, b, "spilled piece")
+    assert stream.held(10**9) is not None and stream.held(3) is None
+
+
 def test_prepare_job_keeps_a_large_job_as_its_pieces(tmp_path, monkeypatch):
     """Over STREAM_MOVES moves ``prepare_job`` keeps the file's stream (interpreted again on each pass) instead of
     the joined job: the same plan, report and pin log."""

@@ -20,6 +20,8 @@ these periods again), with the move's feed as its nominal period.
 from __future__ import annotations
 
 import math
+import os
+import tempfile
 from dataclasses import dataclass, field
 from itertools import chain
 from typing import Any, Iterator, Optional, Union
@@ -522,6 +524,43 @@ class _Planner:
         return self.moves.piece(self.settings, self.source, warnings)
 
 
+_SPILL_COLUMNS = (("points_steps", np.int64, 3), ("kind", np.uint8, 1), ("target", np.bool_, 1),
+                  ("pause", np.bool_, 1), ("period_ns", np.int64, 1), ("periods", np.int64, 1),
+                  ("move_start", np.bool_, 1), ("rest", np.bool_, 1))
+"""The per-move columns of a G-code piece as :class:`_Spill` stores them (name, dtype, values per move)."""
+_SPILL_BYTES = sum(np.dtype(dtype).itemsize * width for _, dtype, width in _SPILL_COLUMNS)
+
+
+class _Spill:
+    """A pass's pieces kept in an anonymous temporary file (45 bytes a move), read back by later passes: the
+    program is interpreted once however often its job is read, and nothing per move stays in memory.  Each
+    piece's notes and warnings stay in memory (a few per piece); reads use their own offsets, so passes may run
+    side by side."""
+
+    def __init__(self) -> None:
+        self.file = tempfile.TemporaryFile(prefix="cam-gcode-")
+        self.index: list[tuple[int, int, list[str], list[str]]] = []  # (offset, moves, notes, warnings)
+        self.end = 0
+
+    def write(self, piece: Job) -> None:
+        data = b"".join(np.ascontiguousarray(getattr(piece, name), dtype).tobytes()
+                        for name, dtype, _ in _SPILL_COLUMNS)
+        self.file.write(data)
+        self.index.append((self.end, len(piece), list(piece.pause_notes or []), list(piece.warnings)))
+        self.end += len(data)
+
+    def pieces(self, settings: MachineSettings, source: str) -> Iterator[Job]:
+        self.file.flush()
+        for offset, n, notes, warnings in self.index:
+            buf = bytearray(os.pread(self.file.fileno(), n * _SPILL_BYTES, offset))
+            cols, at = {}, 0
+            for name, dtype, width in _SPILL_COLUMNS:
+                size = n * width * np.dtype(dtype).itemsize
+                cols[name] = np.frombuffer(buf, dtype, n * width, at).reshape((n, 3) if width == 3 else n)
+                at += size
+            yield Job(**cols, settings=settings, pause_notes=list(notes), warnings=list(warnings), source=source)
+
+
 @dataclass
 class GcodeJobStream:
     """The G-code job as consecutive :class:`~cam.job.model.Job` pieces (a :class:`~cam.job.model.JobLike`):
@@ -541,6 +580,7 @@ class GcodeJobStream:
         piece_moves: program moves planned into one piece.
         n_moves: the job's moves (rows), -1 until a pass ended; n_program_moves: the program's moves (the same).
         pause_notes, warnings: the job's (the warnings: a file's, once a pass ended).
+        spill: keep the first whole pass's pieces in a temporary file for the later passes (:class:`_Spill`).
         safe_z_steps: 0 (a stop lifts to the home plane); pixels, tool: None (no drawing frame; the point tool).
     """
 
@@ -554,6 +594,9 @@ class GcodeJobStream:
     safe_z_steps: int = 0
     pixels: Optional[PixelFrame] = None
     tool: Any = None
+    spill: bool = False
+    _spilled: Optional[_Spill] = field(default=None, repr=False)
+    _spilling: bool = field(default=False, repr=False)
 
     @property
     def source(self) -> str:
@@ -574,15 +617,19 @@ class GcodeJobStream:
         return join_pieces(self.pieces(), self)
 
     def held(self, max_moves: int) -> Optional[Job]:
-        """:meth:`joined` if the job has at most ``max_moves`` moves, else None (found in one pass that stops
-        once more are planned: the pieces are never all held for a larger job)."""
-        parts, rows = [], 0
+        """:meth:`joined` if the job has at most ``max_moves`` moves, else None (found in one pass, in which the
+        pieces are never all held for a larger job; with :attr:`spill` the pass goes on to the end, spilling)."""
+        parts: Optional[list[Job]] = []
+        rows = 0
         for piece in self.pieces():
             rows += len(piece)
-            if rows > max_moves:
+            if parts is not None and rows <= max_moves:
+                parts.append(piece)
+                continue
+            parts = None
+            if not self.spill:
                 return None
-            parts.append(piece)
-        return join_pieces(parts, self)
+        return None if parts is None else join_pieces(parts, self)
 
     def pieces(self) -> Iterator[Job]:
         """The job's moves as consecutive :class:`~cam.job.model.Job` pieces (at least one; each made of
@@ -592,6 +639,25 @@ class GcodeJobStream:
             ParseError: the program is malformed (``file:line``, when its line is reached);
             TravelError, PlanError: as :func:`plan_gcode`.
         """
+        if self._spilled is not None:
+            yield from self._spilled.pieces(self.settings, self.source)
+            return
+        spill = _Spill() if self.spill and not self._spilling else None
+        self._spilling |= spill is not None
+        try:
+            for piece in self._planned():
+                if spill is not None:
+                    spill.write(piece)
+                yield piece
+            if spill is not None:
+                self._spilled, spill = spill, None
+        finally:
+            if spill is not None:
+                self._spilling = False
+                spill.file.close()
+
+    def _planned(self) -> Iterator[Job]:
+        """The pieces, planned from the program's moves (see :meth:`pieces`)."""
         planner = _Planner(self.settings, self.flip_y, self.source)
         notes: list[str] = []
         warnings: list[str] = []
@@ -613,10 +679,13 @@ class GcodeJobStream:
 
 
 def stream_gcode(src: Union[GcodeProgram, GcodeFile], settings: MachineSettings = DEFAULT_SETTINGS, *,
-                 flip_y: bool = False, piece_moves: int = PIECE_MOVES) -> GcodeJobStream:
+                 flip_y: bool = False, piece_moves: int = PIECE_MOVES, spill: bool = False) -> GcodeJobStream:
     """The job of a G-code program as a :class:`GcodeJobStream` (a :class:`~cam.formats.gcode.GcodeFile`'s: bounded
-    memory; a :class:`~cam.formats.gcode.GcodeProgram`'s moves are sliced).  See :func:`plan_gcode`."""
-    return GcodeJobStream(src, settings, bool(flip_y), max(1, int(piece_moves)))
+    memory; a :class:`~cam.formats.gcode.GcodeProgram`'s moves are sliced).  See :func:`plan_gcode`.
+
+    ``spill``: the first pass that runs to the end keeps its pieces in a temporary file, which later passes read
+    instead of interpreting and planning the program again (the same pieces)."""
+    return GcodeJobStream(src, settings, bool(flip_y), max(1, int(piece_moves)), spill=bool(spill))
 
 
 def plan_gcode(program: Union[GcodeProgram, GcodeFile], settings: MachineSettings = DEFAULT_SETTINGS, *,

@@ -632,9 +632,10 @@ def _prepare_gcode(path: Path, options: JobOptions, settings: MachineSettings) -
         path, home_g28_mm=(s.g28_x_mm, s.g28_y_mm, s.g28_z_mm), home_g30_mm=(s.g30_x_mm, s.g30_y_mm, s.g30_z_mm),
         tool_lengths_mm=load_tool_table(options.tool_table) if options.tool_table else None,
         subroutine_path=options.subroutine_path, max_lines=options.max_lines)
-    stream = stream_gcode(program, settings, flip_y=options.flip_y)
-    # one planner whatever the size: a job of over STREAM_MOVES moves is kept as its pieces, the file interpreted
-    # again on every pass (bounded memory); a smaller one is held joined
+    stream = stream_gcode(program, settings, flip_y=options.flip_y, spill=True)
+    # one planner whatever the size: a job of over STREAM_MOVES moves is kept as its pieces (bounded memory), the
+    # file interpreted once, a line at a time, and the pieces kept in a temporary file for the later passes; a
+    # smaller one is held joined
     held = stream.held(GCODE_STREAM_MOVES)
     toolpath = stream if held is None else held
     steps = plan_chunks(toolpath)  # after a whole pass (held's or this) the program's moves and warnings are known

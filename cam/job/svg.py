@@ -23,6 +23,14 @@ and every point of the curve within one step of a cut position (0.15 + 0.125 + 0
    stroke that starts within one step of where the last one ended is cut on without lifting.  The job starts
    and ends at (0, 0, 0).
 
+The job is made whole, one :class:`~cam.job.model.Job` (a job held in memory is one piece of a
+:class:`~cam.job.model.JobLike`), not a piece at a time as HPGL's and G-code's are: the default placement
+needs the extent of every stroke (the top-left of what is cut goes to the home), the travel check gives the
+drawing's whole extent, and the cutting order (step 3) picks from all the strokes left the one nearest to
+where the tool is, so no stroke can be cut before every stroke is known.  What it holds is bounded by the
+input anyway: the SVG document is parsed into memory (an XML tree), and its strokes' positions are the job's
+rows.
+
 >>> from cam.formats.svg import parse_svg
 >>> d = parse_svg('<svg xmlns="http://www.w3.org/2000/svg" width="10mm" height="10mm" viewBox="0 0 10 10">'
 ...               '<path d="M0,0 H1 V1" stroke="black"/></svg>')
