@@ -32,7 +32,7 @@ from typing import Any, Callable, Optional
 import llvmlite.binding as llvm
 import numpy as np
 
-__all__ = ["entry", "KERNEL_MODULES", "source_digest", "aot_status", "ENTRIES", "type_key"]
+__all__ = ["entry", "KERNEL_MODULES", "source_digest", "aot_status", "ENTRIES", "type_key", "resolved"]
 
 KERNEL_MODULES = (
     "cam.digitize._classify",
@@ -159,11 +159,12 @@ class _Kernel:
         self._table = table
 
     def __call__(self, *args: Any) -> Any:
-        key = tuple(type_key(a) for a in args)
-        function = self._table.get(key)
-        if function is None:
-            return self.dispatcher(*args)
-        return function(*args)
+        return self.resolve(*args)(*args)
+
+    def resolve(self, *args: Any) -> Callable:
+        """What serves arguments of the types of ``args``: the ahead-of-time build, else numba's dispatcher (a
+        caller that makes many small calls with the same types resolves once)."""
+        return self._table.get(tuple(type_key(a) for a in args)) or self.dispatcher
 
 
 def entry(dispatcher: Any) -> Any:
@@ -176,3 +177,9 @@ def entry(dispatcher: Any) -> Any:
     ENTRIES[qualname] = dispatcher
     table = _load().get(qualname)
     return _Kernel(dispatcher, table) if table else dispatcher
+
+
+def resolved(kernel: Any, *args: Any) -> Callable:
+    """What serves ``kernel`` for arguments of the types of ``args`` (:meth:`_Kernel.resolve`; a plain numba
+    dispatcher serves itself)."""
+    return kernel.resolve(*args) if isinstance(kernel, _Kernel) else kernel

@@ -88,9 +88,13 @@ class SessionView:
     def log(self, text: str, level: str = "info") -> None:
         """Add a line to the session's log."""
         with self._lock:
-            self._log_seq += 1
-            self._log.append({"seq": self._log_seq, "level": level, "text": text, "t": time.time()})
+            self._log_line(text, level)
             self._bump()
+
+    def _log_line(self, text: str, level: str) -> None:
+        """Append a log line (the lock held; the caller bumps)."""
+        self._log_seq += 1
+        self._log.append({"seq": self._log_seq, "level": level, "text": text, "t": time.time()})
 
     @property
     def busy(self) -> bool:
@@ -224,12 +228,12 @@ class SessionControls(SessionView):
             ctl = a.controller if a else None
             self._prompt_seq += 1
             self._prompt = Prompt(self._prompt_seq, note,
-                                  tuple(int(v) + int(p) for v, p in zip(self._position, position_steps)))
+                                  tuple(int(v) + int(p) for v, p in zip(self._position.tolist(), position_steps)))
             prompt = self._prompt
             self._answer.clear()
             self._answer_action = "continue"
-            self._bump()
-        self.log(f"{note}: waiting for an answer", "prompt")
+            self._log_line(f"{note}: waiting for an answer", "prompt")
+            self._bump()  # the prompt and its log line seen at once
         if self.on_prompt is not None:
             self._answer_action = self.on_prompt(prompt)
         else:

@@ -28,6 +28,7 @@ from ..errors import CamError
 from ..job.model import Job, JobLike
 from ..settings import MachineSettings
 from ..verify.pinlog import PinLog, carve, decode_pin_log
+from .._compiled import resolved
 from ._kernels import net_steps_kernel
 from .ports import MockPort, Port, open_port
 from .pins import axis_bits
@@ -187,6 +188,7 @@ class Cursor:
         self.last_data = 0
         self.last_t_ns = 0
         self._pos = np.zeros(3, np.int64)
+        self._count: dict[tuple, Callable] = {}  # the step counting kernel, resolved once per kind of writes array
 
     @property
     def sent(self) -> int:
@@ -202,7 +204,13 @@ class Cursor:
         """The writes ``(K,)`` times and data just went out, in order."""
         if not len(data):
             return
-        self._pos = self._pos + net_steps_kernel(data, np.int64(self.last_data), self.clock, self.dirbit)
+        args = (data, np.int64(self.last_data), self.clock, self.dirbit)
+        flags = data.flags
+        kind = (data.dtype, flags.c_contiguous, flags.writeable)
+        count = self._count.get(kind)
+        if count is None:
+            count = self._count[kind] = resolved(net_steps_kernel, *args)
+        self._pos = self._pos + count(*args)
         self.last_data, self.last_t_ns = int(data[-1]), int(t_ns[-1])
         self.live = (self.live[0] + len(data), tuple(self._pos.tolist()))  # type: ignore[assignment]
 
