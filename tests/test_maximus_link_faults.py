@@ -20,13 +20,14 @@ import pytest
 
 from cam.cli import main  # noqa: E402
 from cam.drive.maximus.board import LinkFault, MaximusBoard  # noqa: E402
+from cam.drive.maximus._trust import fault_marker  # noqa: E402
 from cam.drive.maximus.protocol import (  # noqa: E402
     ATOFFSETPOS, DRILLMODE1DONE, DRILLMODE1INITIALIZED, DRILLMODE1ON, JOGMODEDONE, JOGMODEOFF, JOGMODEON,
     ONEHOLEDRILLED,
 )
 from cam.errors import CamError  # noqa: E402
 from cam.settings import Maximus  # noqa: E402
-from cam.sim.maximus import BUSY, start_emulator  # noqa: E402
+from cam.sim.maximus import BUSY, POWER_UP, start_emulator  # noqa: E402
 from support.serial_proxy import PtyProxy  # noqa: E402
 
 FAST = Maximus(delay_x=1, delay_y=1, delay_z_up=1, delay_z_down=1)  # 5000 pulses/s, half steps
@@ -233,6 +234,29 @@ def test_a_reply_lost_on_the_way_to_the_host_is_a_fault(clean_run, byte, nth):
         assert_safe(emu, proxy, error)
 
 
+def test_no_board_is_opened_after_a_fault_until_its_marker_is_deleted(clean_run):
+    """The next handshake byte (0x61) would complete the half packet the firmware holds: the fault leaves a
+    marker, and no MaximusBoard sends anything on that device until the user, having switched the machine off
+    and on, deletes it."""
+    with line(drop_offsets={clean_run["first"]["hole"] + 4}) as (emu, proxy):
+        run_faulty(emu, proxy)
+        settle(emu, proxy)
+        sent, holes = len(proxy.to_board), emu.hole_log()
+        marker = fault_marker(proxy.device_path)
+        with pytest.raises(LinkFault, match=r"an earlier command on .* ended in a link fault, .*switch the machine "
+                                            r"off and on, then delete .*maximus-link-fault"):
+            MaximusBoard(proxy.device_path, FAST, timeout_s=MARGIN_S)
+        assert marker.exists() and len(proxy.to_board) == sent and emu.hole_log() == holes
+        n = emu.power_ups
+        emu.reset()  # switched off and on: the half packet is gone
+        deadline = time.monotonic() + 2
+        while emu.power_ups == n and time.monotonic() < deadline:
+            time.sleep(0.002)
+        assert emu.wait_for_state(POWER_UP)
+        marker.unlink()
+        assert drill(proxy) == len(HOLES)
+
+
 # ---------------------------------------------------------------------- the command line
 def small_board(tmp_path, name: str = "small.drl"):
     path = tmp_path / name
@@ -264,7 +288,7 @@ def _hole_packet_ends(stream_len: int, packets) -> list[int]:
     return ends
 
 
-def cli_run(tmp_path, capsys, delay: int, inject_after: Optional[int] = None) -> dict:
+def cli_run(tmp_path, capsys, delay: int, inject_after: Optional[int] = None, then=None) -> dict:
     """``cam drill`` through the proxy; with ``inject_after``, ONEHOLEDRILLED 10 ms after the host's byte
     number ``inject_after`` (the end of a hole packet, from a clean run of the same command)."""
     with line() as (emu, proxy):
@@ -278,6 +302,8 @@ def cli_run(tmp_path, capsys, delay: int, inject_after: Optional[int] = None) ->
         sent = len(proxy.to_board)
         time.sleep(0.15)
         assert len(proxy.to_board) == sent and emu.state != BUSY  # nothing sent after the end, nothing moves
+        if then is not None:
+            then(proxy)
         return {"code": code, "out": out, "err": err, "holes": [tuple(r[1:3]) for r in emu.hole_log()],
                 "ends": _hole_packet_ends(len(proxy.to_board), emu.packet_log())}
 
@@ -296,7 +322,18 @@ def assert_cli_fault(clean: dict, faulty: dict, hole_index: int, tmp_path) -> No
 
 def test_the_command_reports_a_link_fault_in_one_line_and_no_job_finished(tmp_path, capsys):
     clean = cli_run(tmp_path, capsys, 1)
-    faulty = cli_run(tmp_path, capsys, 1, inject_after=clean["ends"][1])
+
+    def next_command_sends_nothing(proxy: PtyProxy) -> None:
+        """A jog (allowed with the position unknown) is refused before its handshake byte."""
+        sent = len(proxy.to_board)
+        capsys.readouterr()
+        assert main(["jog", "--port", f"maximus:{proxy.device_path}", "X+", "1"]) != 0
+        err = capsys.readouterr().err
+        assert "ended in a link fault" in err and len(err.splitlines()) == 1, err
+        assert len(proxy.to_board) == sent
+        fault_marker(proxy.device_path).unlink()
+
+    faulty = cli_run(tmp_path, capsys, 1, inject_after=clean["ends"][1], then=next_command_sends_nothing)
     assert_cli_fault(clean, faulty, 1, tmp_path)
 
 

@@ -152,7 +152,7 @@ from ._maximus_base import (  # noqa: F401  (the labels are part of this module'
     BUSY, DRILL_MODE1_INITIALIZE, DRILL_MODE1_INPUT, INITIALIZE_DRILL_MODE, JOG_DATA_INPUT, MODE_SELECTION, POWER_UP,
     _Halt, _PowerOn, _ReplyFault,
 )
-from ..drive.maximus._trust import EMULATOR_SPEEDS_ENV
+from ..drive.maximus._trust import EMULATOR_SPEEDS_ENV, clear_fault_marker
 from ._maximus_hardware import _Hardware
 from ._maximus_program import _Program
 from ._maximus_uart import _Uart
@@ -300,6 +300,7 @@ class MaximusEmulator(_Program, _Hardware, _Uart, AbstractContextManager):
         self.device_path = os.ttyname(self._slave)
         if self._speed != 1.0:
             _register_speed(self.device_path, self._speed)
+        clear_fault_marker(self.device_path)  # a board just switched on holds no half packet
         self._thread = threading.Thread(target=self._serve, name="maximus-firmware", daemon=True)
         self._thread.start()
         return self
@@ -326,6 +327,7 @@ class MaximusEmulator(_Program, _Hardware, _Uart, AbstractContextManager):
 
     def reset(self) -> None:
         """Press the reset button: the firmware starts again at ``main()`` and prints its banner."""
+        clear_fault_marker(self.device_path)
         self._reset_event.set()
         self._wake.set()
 

@@ -18,13 +18,17 @@ might complete it into a move (docs/maximus.md, "When the link fails").  The pos
 from __future__ import annotations
 
 import os
+import re
 import time
+from pathlib import Path
 from typing import Any, Optional
 
 from ...errors import PortError
-from .protocol import BYTE_NAMES, DEBOUNCE_NS, SWITCH_NAMES
+from ..state import state_dir
+from .protocol import BANNER, BYTE_NAMES, DEBOUNCE_NS, SWITCH_NAMES
 
-__all__ = ["LinkFault", "EARLY_FRACTION", "EARLY_MARGIN_S", "QUIET_S", "EMULATOR_SPEEDS_ENV", "emulator_speed"]
+__all__ = ["LinkFault", "EARLY_FRACTION", "EARLY_MARGIN_S", "QUIET_S", "EMULATOR_SPEEDS_ENV", "emulator_speed",
+           "fault_marker", "clear_fault_marker"]
 
 EARLY_FRACTION = 0.95
 """A reply may come no sooner than this share of its move's time at the packet's Delay bytes: the PIC's
@@ -66,6 +70,33 @@ def emulator_speed(device: str) -> float:
     return 1.0
 
 
+def fault_marker(device: str) -> Path:
+    """The file a link fault on ``device`` leaves (in `cam`'s state folder) until the user removes it, having
+    switched the board off and on: until then no command opens the board, because its first byte (the
+    handshake's ISMACHINEREADY) would complete a packet the firmware may still hold."""
+    slug = re.sub(r"[^A-Za-z0-9._]+", "-", device).strip("-.") or "port"
+    return state_dir() / f"maximus-link-fault-{slug}.txt"
+
+
+def clear_fault_marker(device: str) -> None:
+    """The board on ``device`` was switched off and on (its banner was seen, or an emulator powered up)."""
+    try:
+        fault_marker(device).unlink(missing_ok=True)
+    except OSError:
+        pass
+
+
+def _leave_fault_marker(device: str, message: str) -> Optional[Path]:
+    """Write the marker (None if it cannot be written: the message itself still says to switch off)."""
+    try:
+        path = fault_marker(device)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(message + "\n", encoding="utf-8")
+        return path
+    except OSError:
+        return None
+
+
 class _Trust:
     """The board supplies ``_ser``, ``_state``, ``position_pulses``, ``position_known``, ``_time_scale``,
     ``_where`` and ``_read_byte``."""
@@ -100,9 +131,28 @@ class _Trust:
         where = self._where()  # type: ignore[attr-defined]
         self._state = "unknown"
         self.position_known = False
-        return LinkFault(f"link fault during {what}: {reason}; nothing more sent, the head's position is unknown "
-                         f"({where}): the board may still be moving with the spindle on, switch the machine off, "
-                         f"then on, and jog to the board origin again")
+        message = (f"link fault during {what}: {reason}; nothing more sent, the head's position is unknown "
+                   f"({where}): the board may still be moving with the spindle on, switch the machine off, then on, "
+                   f"and jog to the board origin again")
+        marker = _leave_fault_marker(self.device, message)  # type: ignore[attr-defined]
+        if marker is not None:
+            message += f" (then delete {marker}: until then no command opens this board)"
+        return LinkFault(message)
+
+    def _refuse_after_fault(self, seen: bytes) -> None:
+        """Before the handshake's first byte: refuse while an earlier link fault's marker stands, unless the
+        bytes already waiting hold the power-up banner (the board was switched off and on)."""
+        device: str = self.device  # type: ignore[attr-defined]
+        marker = fault_marker(device)
+        if not marker.exists():
+            return
+        if BANNER in seen:
+            clear_fault_marker(device)
+            return
+        self._state = "unknown"
+        raise LinkFault(f"an earlier command on {device} ended in a link fault, so the board may hold part of a "
+                        f"packet that this command's first byte would complete into a move: switch the machine "
+                        f"off and on, then delete {marker} and run this again")
 
     def _stray_bytes(self) -> bytes:
         """Bytes waiting on the line now (read and returned)."""

@@ -326,6 +326,7 @@ class MaximusBoard(_Drilling, _Link, AbstractContextManager):
                     seen += self._ser.read(waiting)
             except (serial.SerialException, OSError) as exc:
                 raise self._port_lost("read from", exc) from exc
+            self._refuse_after_fault(bytes(seen))  # after a link fault: nothing until the board was reset
             self._write(bytes([ISMACHINEREADY]))
             deadline = time.monotonic() + self.timeout_s
             while True:
