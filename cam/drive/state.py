@@ -29,6 +29,11 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Mapping, Optional
 
+try:
+    import fcntl
+except ImportError:  # pragma: no cover - not a POSIX system: no lock (one command at a time is the user's care)
+    fcntl = None  # type: ignore[assignment]
+
 from ..errors import BusyError, CamError, TravelError
 from ..fileio import atomic_write_text
 from ..settings import MachineSettings
@@ -367,8 +372,8 @@ class MachineLock:
 
     def holder(self) -> Optional[int]:
         """The process id that holds the lock now (0: one whose id is not written yet), or None when free."""
-        import fcntl
-
+        if fcntl is None:
+            return None
         fd = self._open()
         try:
             try:
@@ -387,9 +392,10 @@ class MachineLock:
         Raises:
             StateBusyError: another process holds it (the message names its process id).
         """
-        import fcntl
-
         fd = self._open()
+        if fcntl is None:
+            self._fd = fd
+            return
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
@@ -405,11 +411,10 @@ class MachineLock:
     def release(self) -> None:
         """Let the lock go (the lock file stays: removing it would race with the next holder)."""
         if self._fd is not None:
-            import fcntl
-
             fd, self._fd = self._fd, None
-            os.ftruncate(fd, 0)
-            fcntl.flock(fd, fcntl.LOCK_UN)
+            if fcntl is not None:
+                os.ftruncate(fd, 0)
+                fcntl.flock(fd, fcntl.LOCK_UN)
             os.close(fd)
 
     @property
