@@ -234,7 +234,8 @@ def test_no_planner_keyword_is_a_second_name_of_an_option():
         for param in inspect.signature(planner).parameters:
             option = by_stem.get(_stem(param))
             assert option is None or param == option, f"{planner.__name__}({param}=): the option is {option}"
-    wanted = {"stepdown_mm", "stepover", "rough_tool", "tool", "depth", "passes", "start_at", "pause_at", "profile"}
+    wanted = {"stepdown_mm", "stepover", "rough_tool", "tool", "depth", "cut_depth_mm", "passes", "start_at",
+              "pause_at", "profile"}
     for planner in _planners()[:2]:
         assert wanted <= set(inspect.signature(planner).parameters), planner.__name__
     for planner in _planners()[-3:-1]:
@@ -270,6 +271,35 @@ def test_trace_takes_drill_traces_flags():
     trace = build_parser().parse_args(["trace", "p.jpg", "-o", "d.png", "--trace-min-length", "12", "--trace-fill"])
     drill = build_parser().parse_args(["drill", "p.jpg", "--trace", "--trace-min-length", "12", "--trace-fill"])
     assert (trace.trace_min_length, trace.trace_fill) == (drill.trace_min_length, drill.trace_fill) == (12, True)
+
+
+def test_the_drawing_planner_takes_the_cut_depth_in_mm(monkeypatch):
+    """cam.plan(cut_depth_mm=) is --cut-depth: prepare_job gives the option unchanged, the planner makes it whole
+    Z pixels (depth_px_of), the same job as the depth in Z pixels."""
+    import cam
+    from cam.job import jobs
+    from cam.job.drawing_stream import depth_px_of
+
+    s = cam.MachineSettings()
+    d = cam.digitize(cam.load_image(SAMPLES / "ellipse.png"))
+    one = s.px_to_mm_z(1)
+    assert [depth_px_of(k * one, s) for k in (0.5001, 1, 4.4, 4.6)] == [1, 1, 4, 5]
+    a, b = cam.plan(d, cut_depth_mm=5 * one), cam.plan(d, depth=5)
+    assert (a.points_steps == b.points_steps).all()
+    with pytest.raises(CamError, match="less than one Z pixel"):
+        cam.plan(d, cut_depth_mm=one / 3)
+    with pytest.raises(CamError, match="give the depth once"):
+        cam.plan(d, depth=5, cut_depth_mm=1.0)
+    seen: dict = {}
+    real = jobs.plan
+
+    def spy(digitized, **kw):
+        seen.update(kw)
+        return real(digitized, **kw)
+
+    monkeypatch.setattr(jobs, "plan", spy)
+    jobs.prepare_job(SAMPLES / "ellipse.png", JobOptions(cut_depth_mm=0.2), s)
+    assert seen["cut_depth_mm"] == 0.2 and seen["depth"] is None
 
 
 def test_the_stepdown_is_converted_in_one_place(monkeypatch):

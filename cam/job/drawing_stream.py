@@ -45,7 +45,8 @@ from .drawing import (_assemble, _drop_maps, _fits_travel, _guard_diagonals, _ob
 from .model import RETRACT, Job, PixelFrame, check_travel, join_pieces
 from .subpixel import finer_grids, rest_positions
 
-__all__ = ["plan", "DrawingJobStream", "stream_drawing", "stepdown_px_of", "STREAM_TARGETS", "PIECE_TARGETS"]
+__all__ = ["plan", "DrawingJobStream", "stream_drawing", "depth_px_of", "stepdown_px_of", "STREAM_TARGETS",
+           "PIECE_TARGETS"]
 
 STREAM_TARGETS = 4_000_000
 """Drawings with more cut points than this (targets of every pass) are kept as a stream by
@@ -327,6 +328,7 @@ def stream_drawing(
     rough_tool: Tool | str | None = None,
     subpixel: bool = True,
     piece_targets: Optional[int] = None,
+    cut_depth_mm: float | None = None,
 ) -> DrawingJobStream:
     """Plan the job of a digitized drawing as a :class:`DrawingJobStream` (see :func:`plan`,
     which is this joined, for the options).
@@ -338,6 +340,10 @@ def stream_drawing(
         PlanError: bad options, nothing to cut; TravelError: the job leaves the travel (its extent is checked
         here, before a piece is made; the first point outside is named).
     """
+    if cut_depth_mm is not None:
+        if depth is not None:
+            raise PlanError("give the depth once: depth in Z pixels per object, or cut_depth_mm for every object")
+        depth = depth_px_of(cut_depth_mm, settings)
     depth_px, warnings = _object_depths(digitized, depth, profile, passes)
     order = _pass_order(depth_px, passes)
     if not order:
@@ -419,6 +425,22 @@ def _tool_maps(digitized: Digitized, order: list[tuple[int, int]], asked: np.nda
     return allowed, corners, _Part(f_targets, f_asked, f_corners, k=int(k), finer=True)
 
 
+def depth_px_of(cut_depth_mm: float, settings: MachineSettings) -> int:
+    """A depth for every object in Z pixels: ``cut_depth_mm`` over one Z pixel's mm, rounded to the nearest.  The
+    one place the drawing planner converts the job option ``cut_depth_mm`` (``--cut-depth``).
+
+    Raises:
+        PlanError: out of the option's range, or less than half a Z pixel (it would cut nothing).
+    """
+    o = OPTIONS["cut_depth_mm"]
+    if not o.in_range(float(cut_depth_mm)):
+        raise PlanError(f"cut_depth_mm must be {o.range_text()} mm, got {cut_depth_mm}")
+    depth_px = int(round(cut_depth_mm / settings.px_to_mm_z(1)))
+    if depth_px < 1:
+        raise PlanError(f"a cut depth of {cut_depth_mm:g} mm is less than one Z pixel ({settings.px_to_mm_z(1):g} mm)")
+    return depth_px
+
+
 def stepdown_px_of(stepdown_mm: float, settings: MachineSettings) -> int:
     """The roughing levels' spacing in Z pixels: ``stepdown_mm`` over one Z pixel's mm
     (:meth:`~cam.settings.MachineSettings.px_to_mm_z`), rounded down, at least 1 (a step-down finer than one
@@ -478,6 +500,7 @@ def plan(
     stepover: float = 0.5,
     rough_tool: Tool | str | None = None,
     subpixel: bool = True,
+    cut_depth_mm: float | None = None,
 ) -> Job:
     """Plan the job of a digitized drawing (the drawing planner: pixels in, machine steps out).
 
@@ -512,6 +535,8 @@ def plan(
         subpixel: 3D with a real tool: after the pixel centres, finish at the positions between them (on the
             finest grid the machine's steps reach, up to a quarter pixel) that leave less material
             (:mod:`cam.job.subpixel`).  Its points are not targets (``target`` False).
+        cut_depth_mm: instead of ``depth``, one depth in mm for every object: the job option of the same name
+            (``--cut-depth``), whole Z pixels by :func:`depth_px_of`.
 
     Returns:
         The :class:`~cam.job.model.Job` in machine steps, with its :class:`~cam.job.model.PixelFrame`,
@@ -522,4 +547,4 @@ def plan(
     """
     return stream_drawing(digitized, depth=depth, settings=settings, passes=passes, start_at=start_at,
                           pause_at=pause_at, profile=profile, tool=tool, stepdown_mm=stepdown_mm, stepover=stepover,
-                          rough_tool=rough_tool, subpixel=subpixel).joined()
+                          rough_tool=rough_tool, subpixel=subpixel, cut_depth_mm=cut_depth_mm).joined()

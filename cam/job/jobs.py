@@ -563,17 +563,12 @@ def _finish(job: PreparedJob) -> PreparedJob:
     return job
 
 
-def _drawing_depth(options: JobOptions, settings: MachineSettings) -> Any:
-    """The drawing's depth in Z pixels: ``depth`` (one for all or one per object), or ``cut_depth_mm`` for all."""
-    if options.cut_depth_mm is None:
-        if options.depth is None:
-            return None
-        return options.depth[0] if len(options.depth) == 1 else list(options.depth)
-    depth_px = int(round(options.cut_depth_mm / settings.px_to_mm_z(1)))
-    if depth_px < 1:
-        raise CamError(f"a cut depth of {options.cut_depth_mm:g} mm is less than one Z pixel "
-                       f"({settings.px_to_mm_z(1):g} mm)")
-    return depth_px
+def _drawing_depth(options: JobOptions) -> Any:
+    """The drawing planner's ``depth`` in Z pixels (one for all or one per object), or None (``cut_depth_mm``,
+    which the planner takes as it is and converts, or the default)."""
+    if options.depth is None:
+        return None
+    return options.depth[0] if len(options.depth) == 1 else list(options.depth)
 
 
 def _prepare_pixels(path: Path, kind: str, options: JobOptions, settings: MachineSettings) -> PreparedJob:
@@ -601,14 +596,16 @@ def _prepare_pixels(path: Path, kind: str, options: JobOptions, settings: Machin
     elif options.profile_expr:
         profile = profile_from_expr(options.profile_expr, max(1, digitized.n_layers))
     cutter = parse_tool(options.tool, "--tool") if options.tool else tool_of_settings(settings.tool)
-    depth = _drawing_depth(options, settings)
+    depth, cut_depth_mm = _drawing_depth(options), options.cut_depth_mm
     if options.line_width_mm is not None:
         if digitized.mode == "3d":
             raise CamError("--line-width sets the depth of a 2D drawing's engraved lines; this drawing is 3D")
-        depth = max(1, int(round(cutter.depth_for_width_mm(options.line_width_mm) / settings.px_to_mm_z(1))))
+        depth, cut_depth_mm = max(1, int(round(cutter.depth_for_width_mm(options.line_width_mm)
+                                               / settings.px_to_mm_z(1)))), None
     kw: dict[str, Any] = dict(depth=depth, settings=settings, passes=options.passes, start_at=options.start_at,
                               pause_at=list(options.pause_at), profile=profile, tool=cutter,
-                              stepdown_mm=options.stepdown_mm, stepover=options.stepover, rough_tool=options.rough_tool)
+                              stepdown_mm=options.stepdown_mm, stepover=options.stepover, rough_tool=options.rough_tool,
+                              cut_depth_mm=cut_depth_mm)
     # one planner at every size: a large job is kept in pieces (bounded memory), a smaller one joined (the
     # same moves, held in memory)
     big = digitized.n_points * options.passes > STREAM_TARGETS
