@@ -230,6 +230,8 @@ def test_short_tokens_are_refused():
         with pytest.raises(CamError, match="at least 16 characters"):
             ServerConfig(host="0.0.0.0", token=short).checked()
     ServerConfig(host="0.0.0.0", token="x" * 16).checked()
+    with pytest.raises(CamError, match="--allow-host needs a token"):
+        ServerConfig(allowed_hosts=("cnc.example.lan",)).checked()
     tokens = {new_token() for _ in range(100)}
     assert len(tokens) == 100 and all(len(t) == 22 for t in tokens)  # 16 random bytes, URL-safe base64
 
