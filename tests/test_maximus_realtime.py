@@ -146,6 +146,8 @@ def test_ctrl_c_during_a_jog_stops_the_board_and_the_next_jog_works(emu, capsys)
     x = emu.position_pulses[0]
     assert 100 < x < 3000 and emu.wait_for_state(MODE_SELECTION)
     assert 0x80 in [b for _, b, where in emu.rx_log() if where == "isr"]  # the firmware's stop byte
+    # the stop left the position unknown (the machine state): the user says where the head is, then jogs
+    assert main(["where", "--set", "0,0,0", "--port", f"maximus:{emu.device_path}"]) == 0, capsys.readouterr().err
     assert main(["jog", "--port", f"maximus:{emu.device_path}", "X-", "50"]) == 0, capsys.readouterr().err
     # a stop between a pulse's falling and rising edge leaves STEP_X low: the listing's next X move then makes
     # one rising edge more than it asks (see cam.sim.maximus, point 14)
@@ -163,6 +165,7 @@ def test_ctrl_c_during_a_drill_move_exits_130_at_once_with_the_spindle_off(emu, 
     spindle = [(v >> 2) & 1 for _, port, v in emu.port_log() if port == "B"]
     assert 1 in spindle and spindle[-1] == 0
     assert emu.wait_for_state(MODE_SELECTION) and emu.hole_log() == []
+    assert main(["where", "--set", "0,0,0", "--port", f"maximus:{emu.device_path}"]) == 0, capsys.readouterr().err
     assert main(["jog", "--port", f"maximus:{emu.device_path}", "Z-", "10"]) == 0, capsys.readouterr().err
 
 
