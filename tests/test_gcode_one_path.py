@@ -6,6 +6,7 @@ memory (slow tier)."""
 from __future__ import annotations
 
 import os
+import pickle
 import resource
 import subprocess
 import sys
@@ -263,6 +264,11 @@ def test_a_spilled_stream_reads_back_the_same_pieces(programs, monkeypatch):
         for a, b in zip(got, want):
             _assert_same_job(a, b, "spilled piece")
     assert stream.held(10**9) is not None and stream.held(3) is None
+    monkeypatch.undo()
+    copy = pickle.loads(pickle.dumps(stream))  # to the page's worker and back: without the spill file
+    assert copy._spilled is None and stream._spilled is not None
+    for a, b in zip(list(copy.pieces()), want):
+        _assert_same_job(a, b, "pickled stream")
 
 
 def test_prepare_job_keeps_a_large_job_as_its_pieces(tmp_path, monkeypatch):

@@ -606,6 +606,11 @@ class GcodeJobStream:
     def warnings(self) -> list[str]:
         return list(self.src.warnings)
 
+    def __getstate__(self) -> dict:
+        """Pickled (to another process: the page's worker) without its spill, a temporary file of this process:
+        the receiver plans the program again on its first pass."""
+        return {**self.__dict__, "_spilled": None, "_spilling": False}
+
     def __len__(self) -> int:
         if self.n_moves < 0:
             for _ in self.pieces():
