@@ -364,6 +364,7 @@ def test_where_prints_both_frames_and_json(tmp_path):
     text = ok(run_cli("where", "--state", st)).stdout
     assert "machine: X=6.358 Y=2.89 Z=0.157 mm (X=220 Y=100 Z=10 steps)" in text
     assert "work G54: " in text and "(X=20 Y=0 Z=10 steps)" in text and "position known; not homed" in text
+    assert "work zeros (machine steps): G54 X=200 Y=100 Z=0" in text
     for command in ("where", "zero", "goto", "jog", "drill"):
         assert "--state" in ok(run_cli(command, "--help")).stdout
     one_line_error(run_cli("where", "--set", "1,2"), "--set")

@@ -82,6 +82,8 @@ def _print_where(rep: dict) -> None:
     print(f"work {rep['active_offset']}: {_triple(rep['work_mm'])} mm ({_triple(rep['work_steps'])} steps)")
     known = "position known" if rep["position_known"] else f"position UNKNOWN ({rep['unknown_reason']})"
     print(f"{known}; {'homed' if rep['homed'] else 'not homed'}; tool: {rep['tool'] or 'not said'}")
+    set_offsets = [f"{k} {_triple(v)}" for k, v in rep["offsets_steps"].items() if any(v)]
+    print(f"work zeros (machine steps): {'; '.join(set_offsets) if set_offsets else 'all at the home'}")
     if rep["running"]:
         r = rep["running"]
         print(f"driven now by pid {r['pid']} ({r['command']}, since {r['since']}): this is where it started")
