@@ -29,7 +29,9 @@ Safety rules kept by every method:
   stop byte (the firmware may hold part of a packet that any byte would
   complete into a move), the firmware's state and the head's position are
   unknown, and every later call fails until :meth:`MaximusBoard.handshake`
-  succeeds again (after the board is switched off and on);
+  succeeds again (after the board is switched off and on); the fault leaves
+  a marker file (:func:`~._trust.fault_marker`) and no handshake sends a
+  byte on that device while it stands;
 * a limit switch or an emergency stop ends the job with a one-line
   ``PortError`` naming the hole index and the last known position; the
   spindle is switched off and the firmware is back at mode selection;
