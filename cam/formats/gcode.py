@@ -28,6 +28,11 @@ Every error is a :class:`~cam.errors.ParseError` naming ``file:line``, the word 
 Every number a word takes is checked against :mod:`cam.limits` before it is used.  A program runs
 at most ``max_lines`` lines (a loop that never ends is an error, not a hang).
 
+The interpreter runs a line at a time and gives its moves in batches (:class:`MoveBatch`): :func:`parse_gcode`
+and :func:`load_gcode` hold them all (a :class:`GcodeProgram`); :func:`open_gcode` gives a :class:`GcodeFile`,
+whose program is interpreted again on each pass, its file read a line at a time
+(:mod:`cam.formats._gcode_lines`), so neither its lines nor its moves are ever all held.
+
 Planning the motion (frames, arcs, feeds, the half-step accuracy) is :mod:`cam.job.gcode`.
 """
 from __future__ import annotations

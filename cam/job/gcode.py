@@ -16,6 +16,14 @@ computes the exact path point at the end of every step period and rounds
 it; consecutive periods that step the same axes the same way are one
 straight move of the job (so :func:`cam.drive.steps.plan_steps` makes exactly
 these periods again), with the move's feed as its nominal period.
+
+The job is made a piece at a time (:class:`GcodeJobStream`, a :class:`~cam.job.model.JobLike`) from the
+program's moves in batches (:meth:`cam.formats.gcode.GcodeProgram.move_batches` of a program held in memory,
+:meth:`cam.formats.gcode.GcodeFile.move_batches` of a file interpreted a line at a time); what a move needs from
+the moves before it (where the last one ended, exactly and rounded, and the program's time so far) is carried
+from piece to piece (:class:`_Planner`), and no move's rows depend on the next move, so the pieces joined are
+the same job at any piece size.  :func:`plan_gcode` is :func:`stream_gcode`'s pieces joined.  Consecutive
+straight moves are planned together (:func:`_straight_run`) with the arithmetic of one move at a time.
 """
 from __future__ import annotations
 
