@@ -73,6 +73,10 @@ class GcodeProgram:
 
 
 def _strip_comments(line: str, err) -> str:
+    """``line`` without its comments (``( )`` and ``;`` to the end); ``err(message)`` makes the error of a
+    malformed one."""
+    if "(" not in line and ")" not in line and ";" not in line:
+        return line  # nothing to strip (most lines): no walk over the characters
     out = []
     depth = 0
     for ch in line:
