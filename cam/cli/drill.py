@@ -53,6 +53,9 @@ def finish_line(summary: str, outcome: Outcome, ramp: str, wall_s: float, *, sim
     if late_s >= 0.001 or stalls:
         line += (f"; {late_s:.1f} s late: {stalls} stall{'s' if stalls != 1 else ''} over 1 ms, the longest "
                  f"{1000 * float(outcome.timing.get('max_late_s', 0.0)):.0f} ms")
+        reramps = int(outcome.timing.get("reramps", 0))
+        if reramps:
+            line += f", {reramps} re-ramp{'s' if reramps != 1 else ''}"
     return line + ")"
 
 

@@ -321,5 +321,5 @@ def _outcome(session: MachineSession, args: argparse.Namespace, pin_log: bool = 
     if result is None:  # a MAXIMUS board: it reports no time
         return Outcome(info.get("status", "error"), list(info.get("messages", [])),
                        position_steps=session.position_steps())
-    timing = {k: info[k] for k in ("max_late_s", "stalls", "late_total_s") if k in info}
+    timing = {k: info[k] for k in ("max_late_s", "stalls", "late_total_s", "reramps") if k in info}
     return Outcome(result.status, list(result.messages), result.machine_time_s, session.position_steps(), timing)

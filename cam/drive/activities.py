@@ -81,7 +81,7 @@ def run_steps(session: Any, name: str, plan: "StepPlan | ChunkedPlan", ctl: Cont
                 step_period_ns=int(max(plan.settings.delay_xy_ns, plan.settings.delay_z_ns)))
     if session.realtime:
         info.update(max_late_s=round(result.lateness.max_ns / 1e9, 6), stalls=result.lateness.stalls,
-                    late_total_s=round(result.lateness.total_ns / 1e9, 6))
+                    late_total_s=round(result.lateness.total_ns / 1e9, 6), reramps=result.lateness.reramps)
     log = None
     if isinstance(result.port, MockPort):  # its log stays with the port (bounded memory), read when asked
         info["last_write_job_ns"] = result.port.last_t_ns

@@ -15,6 +15,7 @@ at the Z step rate; an emergency stop sends nothing more at all.
 """
 from __future__ import annotations
 
+import math
 import queue
 import sys
 import threading
@@ -35,7 +36,7 @@ from .pins import axis_bits
 from .chunks import ChunkedPlan, StepChunk, plan_chunks
 from .steps import StepPlan
 
-__all__ = ["Controller", "Cursor", "RunResult", "Lateness", "STALL_NS", "run", "simulate_surface", "FINISHED",
+__all__ = ["Controller", "Cursor", "RunResult", "Lateness", "STALL_NS", "JITTER_NS", "run", "simulate_surface", "FINISHED",
            "STOPPED", "EMERGENCY_STOPPED"]
 
 Plan = Union[StepPlan, ChunkedPlan]
@@ -100,6 +101,9 @@ class Controller:
 
 STALL_NS = 1_000_000
 """A real-time write later than its (shifted) time by more than this counts as a stall in the report."""
+JITTER_NS = 100_000
+"""A real-time write later than this is booked by index (``Lateness.slow_writes``): the slowdown it made is the
+host's, not the plan's, and the ramp checker judges the re-ramp after it."""
 
 
 @dataclass
@@ -111,21 +115,32 @@ class Lateness:
         total_ns: the sum of the delays: how much later than planned the run ended (pauses not counted).
         late_writes: writes sent after their time at all.
         stalls: writes late by more than :data:`STALL_NS`.
+        reramps: re-ramps after late writes (the steps held back to the machine's acceleration).
     """
 
     max_ns: int = 0
     total_ns: int = 0
     late_writes: int = 0
     stalls: int = 0
+    reramps: int = 0
+    """Times the run came back to its plan through a re-ramp (:class:`_ReRamp`) after writes went out late."""
+    stall_writes: list[int] = field(default_factory=list)
+    """The plan's writes sent over :data:`STALL_NS` late (:func:`cam.verify.ramps.check_ramps` takes them)."""
+    slow_writes: list[int] = field(default_factory=list)
+    """The plan's writes sent over :data:`JITTER_NS` late (the stalls among them)."""
 
-    def add(self, late_ns: int) -> None:
-        """Book one write sent ``late_ns`` (> 0) after its time."""
+    def add(self, late_ns: int, write: Optional[int] = None) -> None:
+        """Book write number ``write`` (of the plan; None: not one) sent ``late_ns`` (> 0) after its time."""
         self.late_writes += 1
         self.total_ns += late_ns
         if late_ns > self.max_ns:
             self.max_ns = late_ns
+        if late_ns > JITTER_NS and write is not None:
+            self.slow_writes.append(write)
         if late_ns > STALL_NS:
             self.stalls += 1
+            if write is not None:
+                self.stall_writes.append(write)
 
 
 @dataclass
@@ -295,6 +310,70 @@ class _SimulatedClock:
         pass
 
 
+class _ReRamp:
+    """After a late write the motors ran slower than planned, or stopped: the steps that follow are held back so
+    that the step rate grows again within the machine's limits instead of jumping back to the plan.
+
+    After a stall (a write over :data:`STALL_NS` late) the motors have stopped: the interval after the first step
+    that follows is one step at ``u_start``, the slowest axis's start speed in steps per second (an axis stepping
+    in every period starts at no more than its start speed).  After that, or after a smaller delay, a step may
+    come no sooner than the rate ``max(u_start, sqrt(u_last^2 + 2 alpha))`` allows, ``u_last`` the rate of the
+    interval before it and ``alpha`` the smallest axis acceleration in steps/s^2 (with the look-ahead planner's
+    margin).  This holds until the plan's own time for a step is no sooner than the limit (the run is back on its
+    plan); a run on time is never touched.  Times are wall ns.
+    """
+
+    def __init__(self, settings: MachineSettings, lateness: Lateness) -> None:
+        s_mm, v_start, _, acc = settings.axis_limits()
+        self.u_start = min(v / s for v, s in zip(v_start, s_mm))
+        self.alpha = _RERAMP_MARGIN * min(a / s for a, s in zip(acc, s_mm))
+        clock, _ = axis_bits(settings)
+        self.clocks = int(np.bitwise_or.reduce(clock))
+        self.lateness = lateness
+        self.active = False
+        self.held = False  # this re-ramp has held a step back (counted once)
+        self.restart = 0  # 1: stalled, the first step after it is due; 2: that step went out, the next starts
+        self.last_ns: Optional[int] = None  # wall time of the last step write
+        self.last_interval_ns = 0
+
+    def late(self, stalled: bool) -> None:
+        """A write went out late (``stalled``: by over :data:`STALL_NS`): the next steps re-ramp."""
+        if not self.active:
+            self.active, self.held = True, False
+        if stalled:
+            self.restart = 1
+
+    def earliest(self, data: int, target_ns: int) -> int:
+        """The wall time write ``data`` due at ``target_ns`` may go out (later while re-ramping a step)."""
+        if not self.active or not data & self.clocks or self.last_ns is None or self.restart == 1:
+            return target_ns
+        if self.restart == 2:
+            u = self.u_start
+        else:
+            u_last = 1e9 / max(1, self.last_interval_ns)
+            u = max(self.u_start, math.sqrt(u_last * u_last + 2.0 * self.alpha))
+        limit = self.last_ns + int(math.ceil(1e9 / u))
+        if limit <= target_ns:
+            if self.restart == 0:
+                self.active = False  # back on the plan
+            return target_ns
+        if not self.held:
+            self.held = True
+            self.lateness.reramps += 1
+        return limit
+
+    def sent(self, data: int, now_ns: int) -> None:
+        if data & self.clocks:
+            if self.last_ns is not None:
+                self.last_interval_ns = now_ns - self.last_ns
+            self.last_ns = now_ns
+            self.restart = 2 if self.restart == 1 else 0
+
+
+_RERAMP_MARGIN = 0.9
+"""Fraction of the machine's acceleration a re-ramp uses (as the look-ahead planner's)."""
+
+
 class _RealClock:
     """Each write at its time after ``t0`` (monotonic ns), pauses added.
 
@@ -307,10 +386,11 @@ class _RealClock:
 
     batch = 1 << 62  # a batch ends at a progress report, a pause, or the chunk's end
 
-    def __init__(self, t0: int) -> None:
+    def __init__(self, t0: int, settings: MachineSettings) -> None:
         self.t0 = t0
         self.offset = 0
         self.lateness = Lateness()
+        self.reramp = _ReRamp(settings, self.lateness)
         self.last_progress = -_PROGRESS_EVERY_NS
 
     def chunks(self, plan: Plan) -> Iterator[StepChunk]:
@@ -330,6 +410,10 @@ class _RealClock:
         j = i
         while j < end:
             target = self.t0 + self.offset + int(t_ns[j])
+            held = self.reramp.earliest(int(data[j]), target)
+            if held > target:  # re-ramping: this and every later write move later (as for a late write)
+                self.offset += held - target
+                target = held
             while True:
                 if ctl.halted:
                     return j
@@ -351,8 +435,10 @@ class _RealClock:
             late_ns = now - target
             if late_ns > 0:  # behind: the rest of the schedule moves later, so no interval is shorter than planned
                 self.offset += late_ns
-                self.lateness.add(late_ns)
+                self.lateness.add(late_ns, chunk.first_write + j)
+                self.reramp.late(late_ns > STALL_NS)  # ... and the motors, slowed or stopped, re-ramp to the plan
             p.write(int(data[j]), int(strobe[j]), now - self.t0)
+            self.reramp.sent(int(data[j]), now)
             j += 1
             if int(t_ns[j - 1]) - self.last_progress > _PROGRESS_EVERY_NS:
                 self.last_progress = int(t_ns[j - 1])
@@ -395,7 +481,7 @@ def run(
     cursor = cursor or Cursor(plan.settings)
     pauses = _Pauses(plan, ctl, on_pause, controller is not None)
     wall0 = time.monotonic_ns()
-    clock: "_SimulatedClock | _RealClock" = _RealClock(wall0) if realtime else _SimulatedClock()
+    clock: "_SimulatedClock | _RealClock" = _RealClock(wall0, plan.settings) if realtime else _SimulatedClock()
     if realtime:
         switch_s = sys.getswitchinterval()
         sys.setswitchinterval(min(switch_s, _SWITCH_S))  # the thread making chunks yields the interpreter soon

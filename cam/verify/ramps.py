@@ -276,6 +276,8 @@ def check_ramps(
     settings: MachineSettings = DEFAULT_SETTINGS,
     *,
     pause_writes: np.ndarray | list[int] = (),
+    stall_writes: np.ndarray | list[int] = (),
+    slow_writes: np.ndarray | list[int] = (),
 ) -> RampReport:
     """Check rules R1..R3 (module docstring) on a pin log.
 
@@ -285,6 +287,13 @@ def check_ramps(
             the whole log gives.
         settings: mm per step, start / top speed and acceleration per axis; pin map.
         pause_writes: write indices after which the job paused (``StepPlan.pause_writes``): rests.
+        stall_writes: write indices a real-time run sent over :data:`cam.drive.runner.STALL_NS` late
+            (``RunResult.lateness.stall_writes``): the motors stopped there, not by the plan, so each is a rest
+            whose stop is not judged (the host could not help it) while the start after it is (R3, and R2 on):
+            the runner must re-ramp.
+        slow_writes: write indices a real-time run sent late at all (over
+            :data:`cam.drive.runner.JITTER_NS`: ``RunResult.lateness.slow_writes``): the slowdown into the
+            interval that holds one is not judged (R2), the speed-up out of it is.
 
     Returns:
         A :class:`RampReport`; ``report.ok`` is the verdict.
@@ -295,7 +304,8 @@ def check_ramps(
         pieces = iter_pin_log(log)
     else:
         pieces = log
-    checker = _Checker(settings, np.asarray(pause_writes, np.int64))
+    checker = _Checker(settings, np.asarray(pause_writes, np.int64), np.asarray(stall_writes, np.int64),
+                       np.asarray(slow_writes, np.int64))
     for piece in pieces:
         checker.add(piece)
     return checker.report()
@@ -315,8 +325,14 @@ class _Checker:
     reads neighbouring slots, which that array keeps.
     """
 
-    def __init__(self, settings: MachineSettings, pause_writes: np.ndarray) -> None:
+    def __init__(self, settings: MachineSettings, pause_writes: np.ndarray,
+                 stall_writes: np.ndarray = np.zeros(0, np.int64),
+                 slow_writes: np.ndarray = np.zeros(0, np.int64)) -> None:
         self.settings = settings
+        self.stall_writes = np.sort(stall_writes)
+        self.stall_t: list[int] = []
+        self.slow_writes = np.sort(slow_writes)
+        self.slow_t: list[int] = []
         self.clock, self.dirbit = axis_bits(settings)
         self.limits = settings.axis_limits()
         self.pause_writes = np.sort(pause_writes)
@@ -351,6 +367,10 @@ class _Checker:
             self.last_t = int(t[-1])
         at = self.pause_writes[(self.pause_writes >= w0) & (self.pause_writes < w0 + n)]
         self.pause_t += t[at - w0].tolist()
+        at = self.stall_writes[(self.stall_writes >= w0) & (self.stall_writes < w0 + n)]
+        self.stall_t += t[at - w0].tolist()
+        at = self.slow_writes[(self.slow_writes >= w0) & (self.slow_writes < w0 + n)]
+        self.slow_t += t[at - w0].tolist()
         odd = w0 + (1 - w0 % 2)  # the first slot write (odd global index) of the piece
         chunk_slot0, chunk_slot_t = (odd - 1) // 2, t[odd - w0::2]
         self.last_slot = max(self.last_slot, chunk_slot0 + len(chunk_slot_t) - 1)
@@ -399,10 +419,20 @@ class _Checker:
             if self.pause_t:
                 pause_t = np.sort(np.asarray(self.pause_t, np.int64))
                 brk[1:] |= np.searchsorted(pause_t, ts[:-1], "left") != np.searchsorted(pause_t, ts[1:], "left")
+        stalled = np.zeros(n, bool)  # a stall (a late write) between steps j - 1 and j, step j's own included
+        if n > 1 and self.stall_t:
+            stall_t = np.sort(np.asarray(self.stall_t, np.int64))
+            stalled[1:] = np.searchsorted(stall_t, ts[:-1], "right") != np.searchsorted(stall_t, ts[1:], "right")
+            brk |= stalled
         r1, r2, r3 = (np.zeros(n) for _ in range(3))
         if n:
             check_axis_steps(ts, np.searchsorted(needed, slot), slot_t, brk, s_mm[a], v_start[a], v_max[a], acc[a],
                              r1, r2, r3)
+            r3[:-2][stalled[2:]] = 0.0  # the stop at a stall is the host's lateness, not the plan: not judged
+            if n > 2 and self.slow_t:  # the slowdown into an interval that holds a late write is the host's too
+                slow_t = np.sort(np.asarray(self.slow_t, np.int64))
+                slowed = np.searchsorted(slow_t, ts[:-1], "right") != np.searchsorted(slow_t, ts[1:], "right")
+                r2[:-1][slowed & (np.diff(ts) > np.r_[np.inf, np.diff(ts)[:-1]])] = 0.0
         # what this piece judges, in local step indices: intervals j -> j + 1, pairs around j
         i_lo, i_hi = self.judged[a][0] - g0, (n - 1 if final else n - 2)
         p_lo, p_hi = max(self.judged[a][1] - g0, 1), n - 1
