@@ -57,3 +57,37 @@ def test_without_the_re_ramp_the_stall_breaks_the_rules(monkeypatch):
     monkeypatch.setattr(runner._ReRamp, "earliest", lambda self, data, target_ns: target_ns)
     _, report = _stalled_run(400)
     assert not report.ok
+
+
+@pytest.mark.realtime
+def test_a_stopped_runner_process_re_ramps_when_it_goes_on():
+    """SIGSTOP of the real-time runner process at cruise speed for 0.1 s, then SIGCONT: the pin log passes."""
+    import os
+    import signal
+    import threading
+
+    from cam.drive.session import MachineSession
+
+    job = travel_job(np.array([[400, 100, 0]]), FAST)
+    session = MachineSession("mock", FAST, realtime=True)
+    stopped = threading.Event()
+
+    def at_cruise(done, total, t_ns):
+        if done >= total // 2 and not stopped.is_set():
+            stopped.set()
+            pid = session.runner_process().pid
+            os.kill(pid, signal.SIGSTOP)
+            threading.Timer(0.1, os.kill, (pid, signal.SIGCONT)).start()
+
+    session.on_progress = at_cruise
+    try:
+        session.start(job)
+        session.wait_idle(None)
+        result = session.last_result
+    finally:
+        session.shutdown()
+    assert stopped.is_set() and result.status == "finished"
+    assert result.lateness.max_ns >= 80_000_000 and result.lateness.reramps >= 1
+    report = check_ramps(result.pin_log(), FAST, stall_writes=result.lateness.stall_writes,
+                         slow_writes=result.lateness.slow_writes)
+    assert report.ok, report.summary()
