@@ -12,9 +12,10 @@ from tqdm import tqdm
 
 from ..drive.maximus.board import MAXIMUS_SETTINGS, board_settings, with_delays
 from ..drive.ports import port_kind
+from ..drive.ramps import check_delay_speeds, top_speeds_mm_s
 from ..settings import MachineSettings, load_settings
 
-__all__ = ["machine_settings", "port_settings", "format_duration", "progress_wanted", "reading_bar"]
+__all__ = ["speeds_line", "machine_settings", "port_settings", "format_duration", "progress_wanted", "reading_bar"]
 
 
 def machine_settings(args: argparse.Namespace) -> MachineSettings:
@@ -27,7 +28,10 @@ def machine_settings(args: argparse.Namespace) -> MachineSettings:
         changes["delay_xy_ms"], changes["delay_z_ms"] = args.delay
     if getattr(args, "ramp", None):
         changes["ramp"] = args.ramp
-    return s.replace(**changes) if changes else s
+    s = s.replace(**changes) if changes else s
+    if args.delay:
+        check_delay_speeds(s)  # a delay the ramps would not honour is refused, naming what limits it
+    return s
 
 
 def port_settings(args: argparse.Namespace, port: str) -> MachineSettings:
@@ -45,6 +49,13 @@ def port_settings(args: argparse.Namespace, port: str) -> MachineSettings:
     if getattr(args, "spindle", None):
         s = s.replace(maximus=dataclasses.replace(s.maximus, spindle=args.spindle == "on"))
     return s
+
+
+def speeds_line(settings: MachineSettings) -> str:
+    """One line: the top speed of each axis with the settings' ramps and delays (what ``cam info`` shows)."""
+    x, y, z = top_speeds_mm_s(settings)
+    return (f"top speeds: X {x:.3g}, Y {y:.3g}, Z {z:.3g} mm/s ({settings.ramp} ramps, delays "
+            f"{settings.delay_xy_ms:g}/{settings.delay_z_ms:g} ms)")
 
 
 def format_duration(seconds: float) -> str:

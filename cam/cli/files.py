@@ -17,7 +17,7 @@ from ..formats.gcode_export import save_gcode
 from ..formats.hpgl import PLOTTER_UNIT_MM, scan_hpgl
 from ..job.model import pause_points
 from ..render.report import format_report, image_report
-from .common import format_duration, machine_settings, reading_bar
+from .common import format_duration, machine_settings, reading_bar, speeds_line
 from .checks import job_kind_of
 from .planning import excellon_digits, prepare, profile_of, write_job_preview
 
@@ -154,7 +154,14 @@ def _info_svg(args: argparse.Namespace) -> int:
 
 
 def cmd_info(args: argparse.Namespace) -> int:
-    kind = job_kind_of(args)
+    settings = machine_settings(args)  # a delay the ramps would not honour: refused before anything is read
+    code = _info_of_kind(args, job_kind_of(args))
+    if not args.json:
+        print(speeds_line(settings))
+    return code
+
+
+def _info_of_kind(args: argparse.Namespace, kind: str) -> int:
     if kind == "svg":
         return _info_svg(args)
     if kind == "hpgl":

@@ -57,9 +57,11 @@ from .._compiled import entry
 
 from ..settings import RAMP_MODES, MachineSettings
 from ..verify.ramps import STANDSTILL_STEPS, check_axis_steps, standstills
+from ..errors import CamError
 from .pins import axis_bits
 
-__all__ = ["RAMP_MODES", "ramp_periods", "linear40_periods", "RAMP_STEPS_LINEAR40"]
+__all__ = ["RAMP_MODES", "ramp_periods", "linear40_periods", "RAMP_STEPS_LINEAR40", "top_speeds_mm_s",
+           "check_delay_speeds"]
 
 RAMP_STEPS_LINEAR40 = 40
 """Steps of the seed's linear delay ramp at each end of a move (004, section 3.5.2)."""
@@ -429,3 +431,35 @@ def _check_axis(axis: tuple[np.ndarray, np.ndarray], mid: np.ndarray, limits: _L
     brk = brk | standstills(t, s_mm[a], v_start[a])  # as the checker judges: where the planned times stand still
     n_broken = check_axis_steps(t, per, mid, brk, s_mm[a], v_start[a], v_max[a], acc[a], r1, r2, r3)
     return n_broken, r1, r2, r3
+
+
+def top_speeds_mm_s(settings: MachineSettings) -> tuple[float, float, float]:
+    """The top speed of X, Y and Z in mm/s: one step per step delay (``delay_xy_ms``, ``delay_z_ms``) and, with
+    ramps, no more than the axis's ``max_speed_*_mm_s``."""
+    s_mm, _, v_max, _ = settings.axis_limits()
+    delays_s = (settings.delay_xy_ns / 1e9, settings.delay_xy_ns / 1e9, settings.delay_z_ns / 1e9)
+    by_delay = [s / d for s, d in zip(s_mm, delays_s)]
+    if settings.ramp == "constant":
+        return tuple(by_delay)  # type: ignore[return-value]
+    return tuple(min(v, m) for v, m in zip(by_delay, v_max))  # type: ignore[return-value]
+
+
+def check_delay_speeds(settings: MachineSettings, what: str = "--delay") -> None:
+    """Refuse step delays that ask an axis for more than its top speed with ramps (the delay would not mean what it
+    says: the ramps would hold the axis to ``max_speed_*_mm_s``).
+
+    Raises:
+        CamError: one line naming the delay, the axis, the speed it asks and the setting that limits it.
+    """
+    if settings.ramp == "constant":
+        return  # no ramps: the delay is the speed
+    s_mm, _, v_max, _ = settings.axis_limits()
+    delays_ms = (settings.delay_xy_ns / 1e6, settings.delay_xy_ns / 1e6, settings.delay_z_ns / 1e6)
+    for a, (s, d_ms, v) in enumerate(zip(s_mm, delays_ms, v_max)):
+        asked = s / (d_ms / 1e3)
+        if asked > v * (1 + 1e-9):
+            name = "xyz"[a]
+            least_ms = s / v * 1e3
+            raise CamError(f"{what} {d_ms:g} ms asks {name.upper()} for {asked:.3g} mm/s, over its top speed "
+                           f"max_speed_{name}_mm_s = {v:g} mm/s: raise max_speed_{name}_mm_s in the machine file, use "
+                           f"a delay of {least_ms:.3g} ms or more, or --ramp constant")
