@@ -305,16 +305,17 @@ def _big_program(path: Path, n_lines: int) -> None:
 
 @pytest.mark.slow
 def test_a_big_file_runs_through_cam_drill_in_bounded_memory(tmp_path):
-    """Two million lines (about 40 MB) planned, checked and run on the mock by ``cam drill --yes``: the peak RSS of
-    the process stays under 500 MB (the file's moves are never all held)."""
+    """Two million lines (29 MB) planned, checked and run on the mock by ``cam drill --yes``: the peak RSS of the
+    process stays under 500 MB (the file's moves are never all held).  The thesis machine's step delays: with much
+    shorter ones (0.05 ms) the look-ahead ramps plan windows of a million periods on each side of a chunk, which
+    alone take some 350 MB (cam/drive/chunks.py, whatever the job)."""
     n = 2_000_000
     path = tmp_path / "big.ngc"
     _big_program(path, n)
-    assert path.stat().st_size > 30 * 2**20
+    assert path.stat().st_size > 25 * 2**20
     before = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
     t0 = time.time()
-    out = subprocess.run([sys.executable, "-m", "cam", "drill", str(path), "--yes", "--max-lines", str(n + 100),
-                          "--delay", "0.05,0.05"],
+    out = subprocess.run([sys.executable, "-m", "cam", "drill", str(path), "--yes", "--max-lines", str(n + 100)],
                          capture_output=True, text=True, env={**os.environ, "PYTHONPATH": str(SAMPLES.parent)})
     took = time.time() - t0
     peak_mb = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
