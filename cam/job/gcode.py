@@ -464,7 +464,8 @@ def _straight_run(frame: _Frame, mvs: list[GcodeMove], start_mm: np.ndarray, sta
 
 class _Planner:
     """Plans a program's moves one after the other, carrying what joins one piece to the next: where the last
-    move ended (mm and the exact path point in steps), the last row and the program's time so far."""
+    move ended (in mm, its exact path point in steps, and the rounded position the rows reached) and the
+    program's time so far."""
 
     def __init__(self, settings: MachineSettings, flip_y: bool, source: str) -> None:
         self.settings, self.source = settings, source
@@ -574,12 +575,13 @@ class GcodeJobStream:
     """The G-code job as consecutive :class:`~cam.job.model.Job` pieces (a :class:`~cam.job.model.JobLike`):
     :func:`plan_gcode` is :meth:`joined`.
 
-    :meth:`pieces` plans them anew on each pass from the moves of ``src``: a :class:`~cam.formats.gcode.GcodeFile`
-    (interpreted again a line at a time: nothing per line or per move is held) or a
-    :class:`~cam.formats.gcode.GcodeProgram` held in memory.  Each piece is the rows of about ``piece_moves``
-    program moves (a program move is never split, so a piece holds at most one move's
-    :data:`~cam.limits.MAX_MOVE_PERIODS` rows more); what joins it to the next is carried over (:class:`_Planner`),
-    so the pieces joined are the same job whatever the piece size (tested).  Every check of
+    :meth:`pieces` plans them anew on each pass from the moves of ``src`` (or, with :attr:`spill`, reads back the
+    first whole pass's): a :class:`~cam.formats.gcode.GcodeFile` (interpreted again a line at a time: nothing per
+    line or per move is held) or a :class:`~cam.formats.gcode.GcodeProgram` held in memory.  Each piece is the
+    rows of a batch of about ``piece_moves`` program moves (the interpreter never splits a line's moves), ended
+    early after the move that brings its rows to :data:`PIECE_ROWS` (a move is never split: a piece holds at most
+    one move's :data:`~cam.limits.MAX_MOVE_PERIODS` rows more); what joins it to the next is carried over
+    (:class:`_Planner`), so the pieces joined are the same job whatever the piece size (tested).  Every check of
     :func:`plan_gcode` (travel, a move's periods and time, the program's time so far) is made as the piece of
     its move is made, naming the line.
 
@@ -645,8 +647,8 @@ class GcodeJobStream:
         return None if parts is None else join_pieces(parts, self)
 
     def pieces(self) -> Iterator[Job]:
-        """The job's moves as consecutive :class:`~cam.job.model.Job` pieces (at least one; each made of
-        ``piece_moves`` program moves or more, but the last).
+        """The job's moves as consecutive :class:`~cam.job.model.Job` pieces (at least one; see the class
+        docstring for their size).
 
         Raises:
             ParseError: the program is malformed (``file:line``, when its line is reached);
