@@ -171,6 +171,11 @@ JOB_OPTIONS: tuple[Option, ...] = (
     _opt("allow_surface_travel", "--allow-surface-travel", "flag", "", _VECTORS, False,
          "accept --travel-height 0: the tool travels between cuts touching the surface (a pen or a drag knife), "
          "which on a cutter scratches the work"),
+    _opt("origin", "--origin", "choice", "", _DRAWINGS | _VECTORS, None,
+         "which point of the job goes to the active work zero (cam zero): file (a drawing's top-left pixel), "
+         "upper-left, lower-left or center of what is cut; default: file for drawings and digitized matrices (the "
+         "thesis), upper-left for drill, HPGL and SVG files",
+         choices=("file", "upper-left", "lower-left", "center")),
     # drill files, HPGL and SVG
     _opt("offset_mm", "--offset", "numbers", "mm", _VECTORS, None,
          "machine position (mm from where the tool stands) of the board, plotter or SVG page origin; default: the "

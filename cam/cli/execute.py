@@ -31,7 +31,8 @@ from .checks import job_kind_of
 from .common import progress_wanted
 from .machine_state import goto_path, hold_machine
 
-__all__ = ["execute", "Outcome", "check_port_options", "ended_state", "approach_to_work_zero", "PLACED_KINDS"]
+__all__ = ["execute", "Outcome", "check_port_options", "ended_state", "approach_to_work_zero", "PLACED_KINDS",
+           "ORIGINS", "origin_anchor", "placed_home"]
 
 
 @dataclass
@@ -180,8 +181,9 @@ def _run(job: Any, args: argparse.Namespace, settings: MachineSettings, hold: St
         port = MockPort(keep_log=False)  # nobody reads this run's pin log: the writes are counted, not kept
     session = MachineSession(port, settings, realtime=realtime, on_prompt=_ask(args, stopping))
     approach = None if getattr(args, "resume", None) else approach_to_work_zero(job, hold.state, start, settings,
-                                                                                port_kind(args.port))
-    at = start if approach is None else hold.state.work_zero_steps()
+                                                                                port_kind(args.port),
+                                                                                getattr(args, "origin", None))
+    at = start if approach is None else placed_home(job, hold.state, getattr(args, "origin", None))
     session.set_position(at)
     session.check_job(job)  # before the progress bar: a bad job is one clean line
     # the machine time takes a pass over the ramps: only worked out before the run for a bar to show it
@@ -231,8 +233,40 @@ PLACED_KINDS = {"drawing": "drawing job", "digitized": "digitized matrix job", "
 not yet, issue #29 point 4)."""
 
 
+ORIGINS = ("file", "upper-left", "lower-left", "center")
+"""Which point of a drawing, drill or vector job ``--origin`` puts at the work zero (see :func:`origin_anchor`)."""
+
+
+def origin_anchor(job: Any, origin: Optional[str]) -> tuple[int, int]:
+    """The ``(x, y)`` point of a prepared job, in its own frame (steps, +y toward the front of the machine), that
+    goes to the work zero: ``file`` its frame's zero (a drawing's top-left pixel, the thesis's; a drill, HPGL or
+    SVG file's own zero with ``--origin file``), ``upper-left``, ``lower-left`` or ``center`` of what it cuts (the
+    XY extent of the tool below the surface).  None: ``file`` for drawings and digitized matrices, ``upper-left``
+    for the other kinds."""
+    kind = getattr(job, "kind", "")
+    origin = origin or ("file" if kind in ("drawing", "digitized") else "upper-left")
+    if origin == "file":
+        return 0, 0
+    extent, cut = job.plan.motion_extent()
+    box = cut if cut[2, 1] > 0 else extent
+    (x0, x1), (y0, y1) = (int(v) for v in box[0]), (int(v) for v in box[1])
+    if origin == "upper-left":
+        return x0, y0
+    if origin == "lower-left":
+        return x0, y1
+    return (x0 + x1) // 2, (y0 + y1) // 2
+
+
+def placed_home(job: Any, state: MachineState, origin: Optional[str]) -> tuple[int, int, int]:
+    """Where (machine frame, steps) a job placed at the active work zero starts: its own frame's zero, so that its
+    :func:`origin_anchor` lands on the work zero (Z: the work zero's surface)."""
+    zero = state.work_zero_steps()
+    ax, ay = origin_anchor(job, origin)
+    return zero[0] - ax, zero[1] - ay, zero[2]
+
+
 def approach_to_work_zero(job: Any, state: MachineState, start: tuple[int, int, int], settings: MachineSettings,
-                          kind: str) -> Optional[Job]:
+                          kind: str, origin: Optional[str] = None) -> Optional[Job]:
     """The travel that places a file's job at the active work zero (issue #29 point 1, on step/dir ports): its
     home, its own frame's (0, 0, 0), goes to the work zero: a drawing's top-left pixel at the surface (the
     thesis's), a drill file's top-left hole (or the board origin with ``--offset 0,0``), an HPGL or SVG file's
@@ -246,7 +280,7 @@ def approach_to_work_zero(job: Any, state: MachineState, start: tuple[int, int, 
     job_kind = getattr(job, "kind", None)  # a PreparedJob's file kind (a Job's is an array of move kinds)
     if not isinstance(job_kind, str) or job_kind not in PLACED_KINDS or kind == "maximus":
         return None
-    zero = state.work_zero_steps()
+    zero = placed_home(job, state, origin)
     extent = getattr(job, "extent_steps", None)
     if extent is not None:
         for a, (lo, hi) in enumerate(settings.travel.bounds_steps()):
@@ -254,7 +288,8 @@ def approach_to_work_zero(job: Any, state: MachineState, start: tuple[int, int, 
             if reach[0] < lo or reach[1] > hi:
                 v, beyond = (reach[0], lo - reach[0]) if reach[0] < lo else (reach[1], reach[1] - hi)
                 raise TravelError(
-                    f"the {PLACED_KINDS[job_kind]} placed at the {state.active_offset} work zero (machine {list(zero)} steps) "
+                    f"the {PLACED_KINDS[job_kind]} placed at the {state.active_offset} work zero (machine "
+                    f"{list(state.work_zero_steps())} steps) "
                     f"leaves the {'XYZ'[a]} travel ({lo}..{hi} steps from the home): it reaches {v}, {beyond} "
                     f"steps beyond; set the work zero elsewhere (cam zero)")
     return goto_path(start, zero, zero[2], settings)

@@ -307,7 +307,7 @@ def _add_job_options(d: argparse.ArgumentParser) -> None:
     _add_option(d, "depth")
     _add_profile_options(d)
     _add_tool_options(d)
-    for name in ("passes", "start_at", "pause_at"):
+    for name in ("passes", "start_at", "pause_at", "origin"):
         _add_option(d, name)
     sk = d.add_argument_group("sketches and photos (drawings)")
     _add_option(sk, "trace", default=None)

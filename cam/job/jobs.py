@@ -743,6 +743,9 @@ def prepare_job(
     if kind not in KINDS:
         raise CamError(f"{p.name}: {KIND_NAMES.get(kind, kind)} cannot be cut by this version of cam")
     opts = (options or JobOptions()).checked().check_kind(kind, p.name)
+    if opts.origin == "file" and kind in ("excellon", "hpgl", "svg"):
+        raise CamError(f"{p.name}: --origin file (the file's own zero at the work zero) is not available for "
+                       f"{KIND_NAMES.get(kind, kind)} yet: use upper-left, lower-left or center")
     _refuse_surface_travel(opts, settings)
     if not p.is_file():
         raise CamError(f"{p}: file not found")
