@@ -80,10 +80,37 @@ and then keeps its built-in value.  An unknown key or a bad value is a
     diameter_mm = 0.0   # flat and ball: the cutting diameter; V: where the cone ends (0: 1/8 inch)
     angle_deg = 0.0     # V: the included angle
     tip_mm = 0.0        # V: the flat tip's diameter (0: sharp)
+
+    [inputs]            # switches on the status pins 10, 11, 12, 13, 15: "N" active high, "!N" active low
+    home_x = "!10"      # "" (the default): not wired
+    home_y = "!11"
+    home_z = "!12"
+    limit_x_min = ""    # a pin may serve several limits (both ends of an axis, or every axis) and its axis's home
+    limit_x_max = "!13"
+    limit_y_min = ""
+    limit_y_max = "!13"
+    limit_z_min = ""
+    limit_z_max = "!13"
+    estop = "!15"       # the e-stop button: a pin of its own
+
+    [homing]            # cam home (LinuxCNC's HOME_SEARCH_VEL / HOME_LATCH_VEL / HOME_OFFSET)
+    order = "zxy"       # the axes homed, one after another (Z first: the tool goes up out of the way)
+    search_speed_x_mm_s = 1.0   # toward the switch until it closes (at most the axis's start speed)
+    latch_speed_x_mm_s = 0.1    # toward it again, slowly, after backing off until it opened
+    direction_x = "-"   # where the switch is: "-" or "+" (+Z is deeper: "-" is up)
+    backoff_x_mm = 0.5  # moved on beyond where the switch opened before the latch
+    offset_x_mm = 0.0   # the machine coordinate of the latch point: the machine's zero is offset_x_mm from it
+    # ... the same keys for y and z
+
+    [mock]              # the mock port's simulated switches, machine steps (tests and trying cam home on the mock)
+    home_x_steps = 0    # home_x closes at or beyond this X on its direction's side
+    limit_x_max_steps = 9000    # limit_x_max closes at X >= 9000 (limit_*_min: at or below)
+    estop_after_s = 2.0 # the e-stop input closes this long after a run starts (machine time)
 """
 from __future__ import annotations
 
 import dataclasses
+import math
 import os
 import sys
 from dataclasses import dataclass, field
@@ -97,7 +124,8 @@ else:  # pragma: no cover
 
 from .errors import CamError, SettingsError
 
-__all__ = ["Travel", "Pins", "Maximus", "MachineSettings", "load_settings", "DEFAULT_SETTINGS", "RAMP_MODES"]
+__all__ = ["Travel", "Pins", "Maximus", "Inputs", "Homing", "MockSwitches", "MachineSettings", "load_settings",
+           "DEFAULT_SETTINGS", "RAMP_MODES", "INPUT_PINS", "INPUT_BITS", "SWITCH_NAMES"]
 
 RAMP_MODES = ("lookahead", "linear40", "constant")
 """Speed ramp modes (see :mod:`cam.drive.ramps`)."""
@@ -156,6 +184,101 @@ class Pins:
     def bit(self, name: str) -> int:
         """Data-register bit (0..7) of the signal ``name`` (e.g. ``"clock_x"``)."""
         return getattr(self, name) - 2
+
+
+INPUT_PINS = (10, 11, 12, 13, 15)
+"""The parallel port's input pins: its status register (``shared/seeds/001`` section 3.1.1.2: "five digital
+input terminals, of which one of them is inverted", at base + 1: 379h for LPT1)."""
+INPUT_BITS = {10: 6, 11: 7, 12: 5, 13: 4, 15: 3}
+"""Input pin -> its bit in :meth:`cam.drive.ports.Port.read_inputs` (the status register's bit: pin 10 ACK = bit 6,
+11 BUSY = bit 7, 12 PAPER-OUT = bit 5, 13 SELECT = bit 4, 15 ERROR = bit 3), each bit the pin's electrical level
+(1 = high; BUSY's inversion in the hardware undone, as pyparallel's ``getInBusy`` does)."""
+SWITCH_NAMES = ("home_x", "home_y", "home_z", "limit_x_min", "limit_x_max", "limit_y_min", "limit_y_max",
+                "limit_z_min", "limit_z_max", "estop")
+"""What an input pin may be wired to (the keys of ``[inputs]``)."""
+
+
+@dataclass(frozen=True)
+class Inputs:
+    """Switches wired to the parallel port's input pins (``[inputs]``): each key ``""`` (not wired), ``"N"``
+    (active high: the switch closed makes pin N high) or ``"!N"`` (active low), N one of :data:`INPUT_PINS`."""
+
+    home_x: str = ""
+    home_y: str = ""
+    home_z: str = ""
+    """Home switches, sought by ``cam home``; they stop nothing."""
+    limit_x_min: str = ""
+    limit_x_max: str = ""
+    limit_y_min: str = ""
+    limit_y_max: str = ""
+    limit_z_min: str = ""
+    limit_z_max: str = ""
+    """Limit switches at each end of each axis: one closing stops the motion, the position becomes unknown."""
+    estop: str = ""
+    """The e-stop button: closed stops the motion and sends nothing more."""
+
+    def wired(self) -> dict[str, tuple[int, bool]]:
+        """Each wired switch's ``name -> (pin, active_high)``."""
+        out: dict[str, tuple[int, bool]] = {}
+        for name in SWITCH_NAMES:
+            text = getattr(self, name).strip()
+            if text:
+                out[name] = (int(text.lstrip("!").strip()), not text.startswith("!"))
+        return out
+
+
+@dataclass(frozen=True)
+class Homing:
+    """How ``cam home`` homes each axis (``[homing]``): LinuxCNC's HOME_SEARCH_VEL, HOME_LATCH_VEL, HOME_OFFSET."""
+
+    order: str = "zxy"
+    """The axes homed, one after another (Z first: the tool goes up, clear of the work)."""
+    search_speed_x_mm_s: float = 1.0
+    search_speed_y_mm_s: float = 1.0
+    search_speed_z_mm_s: float = 0.5
+    """Speed toward the switch until it closes, and away until it opens (at most the axis's start speed: the
+    axis stops at once when the switch closes)."""
+    latch_speed_x_mm_s: float = 0.1
+    latch_speed_y_mm_s: float = 0.1
+    latch_speed_z_mm_s: float = 0.05
+    """The slow approach that latches the home (at most the search speed)."""
+    direction_x: str = "-"
+    direction_y: str = "-"
+    direction_z: str = "-"
+    """Where the switch lies: ``"-"`` or ``"+"`` (+Z is deeper: ``"-"`` is up)."""
+    backoff_x_mm: float = 0.5
+    backoff_y_mm: float = 0.5
+    backoff_z_mm: float = 0.5
+    """Moved on, away from the switch, beyond where it opened, before the latch."""
+    offset_x_mm: float = 0.0
+    offset_y_mm: float = 0.0
+    offset_z_mm: float = 0.0
+    """The machine coordinate of the latch point (the tool stands there after homing)."""
+
+
+@dataclass(frozen=True)
+class MockSwitches:
+    """The mock port's simulated switches (``[mock]``), machine frame: where each closes (None: never)."""
+
+    home_x_steps: int | None = None
+    home_y_steps: int | None = None
+    home_z_steps: int | None = None
+    """A home switch closes at or beyond this coordinate on its ``[homing]`` direction's side."""
+    limit_x_min_steps: int | None = None
+    limit_x_max_steps: int | None = None
+    limit_y_min_steps: int | None = None
+    limit_y_max_steps: int | None = None
+    limit_z_min_steps: int | None = None
+    limit_z_max_steps: int | None = None
+    """A ``_min`` limit closes at or below its coordinate, a ``_max`` one at or above it."""
+    estop_after_s: float | None = None
+    """The e-stop closes this long after a run starts (the run's time: planned on the simulated clock)."""
+
+    def places(self) -> dict[str, float]:
+        """Each simulated switch's ``name -> coordinate (steps) or time (s)``."""
+        return {f.name.removesuffix("_steps").removesuffix("_after_s"): getattr(self, f.name)
+                for f in dataclasses.fields(self)
+                if getattr(self, f.name) is not None}
 
 
 @dataclass(frozen=True)
@@ -262,6 +385,9 @@ class MachineSettings:
     pins: Pins = field(default_factory=Pins)
     maximus: Maximus = field(default_factory=Maximus)
     tool: ToolShape = field(default_factory=ToolShape)
+    inputs: Inputs = field(default_factory=Inputs)
+    homing: Homing = field(default_factory=Homing)
+    mock: MockSwitches = field(default_factory=MockSwitches)
 
     def replace(self, **changes: Any) -> "MachineSettings":
         """A copy with some fields changed; values are validated."""
@@ -299,7 +425,8 @@ class MachineSettings:
 
 DEFAULT_SETTINGS = MachineSettings()
 
-_SECTIONS = {"travel": Travel, "pins": Pins, "maximus": Maximus, "tool": ToolShape}
+_SECTIONS = {"travel": Travel, "pins": Pins, "maximus": Maximus, "tool": ToolShape, "inputs": Inputs,
+             "homing": Homing, "mock": MockSwitches}
 
 
 def _type_ok(value: Any, kind: type) -> bool:
@@ -330,7 +457,8 @@ def _build(cls: type, table: Mapping[str, Any], prefix: str, source: str, base: 
             values[key] = _build(_SECTIONS[key], value, f"{key}.", source,
                                  None if base is None else getattr(base, key))
             continue
-        kind = {"int": int, "float": float, "bool": bool, "str": str}[f.type if isinstance(f.type, str) else f.type.__name__]
+        kind = {"int": int, "float": float, "bool": bool, "str": str, "int | None": int, "float | None": float}[
+            f.type if isinstance(f.type, str) else f.type.__name__]
         if not _type_ok(value, kind):
             raise SettingsError(f"{source}: '{name}' must be {kind.__name__}, got {value!r}")
         try:
@@ -385,6 +513,79 @@ def _validate(s: MachineSettings, source: str) -> None:
         seen[pin] = name
     _validate_maximus(s.maximus, bad)
     _validate_tool(s.tool, bad)
+    _validate_inputs(s.inputs, bad)
+    _validate_homing(s, bad)
+    _validate_mock(s.mock, bad)
+
+
+def _validate_inputs(inputs: Inputs, bad: Any) -> None:
+    """Each key a pin of :data:`INPUT_PINS`, ``!`` before it for active low; a pin shared only by limits and
+    their axis's home switch, at one level; the e-stop on a pin of its own."""
+    users: dict[int, tuple[str, bool]] = {}
+    for name in SWITCH_NAMES:
+        text = getattr(inputs, name).strip()
+        if not text:
+            continue
+        digits = text.lstrip("!").strip()
+        if text.count("!") > 1 or not digits.isdigit() or int(digits) not in INPUT_PINS:
+            raise bad(f"inputs.{name}", f"must be an input pin 10, 11, 12, 13 or 15, with '!' before it for "
+                      f"active low (e.g. \"!10\"), or \"\" when not wired, got {text[:20]!r}")
+        pin, high = int(digits), not text.startswith("!")
+        if pin in users:
+            other, other_high = users[pin]
+            if other_high != high:
+                raise bad(f"inputs.{name}", f"reads pin {pin} active {'high' if high else 'low'}, but "
+                          f"'inputs.{other}' reads it active {'high' if other_high else 'low'}")
+            if not _may_share(name, other):
+                raise bad(f"inputs.{name}", f"uses pin {pin}, already used by 'inputs.{other}' (a pin may serve "
+                          f"several limits and the home switch of their axis; the e-stop needs a pin of its own)")
+        else:
+            users[pin] = (name, high)
+
+
+def _may_share(a: str, b: str) -> bool:
+    """Whether switches ``a`` and ``b`` may share a pin: limits, and a home switch with its own axis's limits."""
+    if "estop" in (a, b) or (a.startswith("home") and b.startswith("home")):
+        return False
+    home, other = (a, b) if a.startswith("home") else (b, a)
+    return not home.startswith("home") or home[-1] == other[6]
+
+
+def _validate_homing(s: MachineSettings, bad: Any) -> None:
+    h = s.homing
+    order = h.order.lower()
+    if not order or any(a not in "xyz" for a in order) or len(set(order)) != len(order):
+        raise bad("homing.order", f"must be the axes to home, each once, in order (e.g. \"zxy\"), got {h.order!r}")
+    start = {"x": s.start_speed_x_mm_s, "y": s.start_speed_y_mm_s, "z": s.start_speed_z_mm_s}
+    for a in "xyz":
+        search, latch = getattr(h, f"search_speed_{a}_mm_s"), getattr(h, f"latch_speed_{a}_mm_s")
+        if not MIN_SPEED_MM_S <= search <= start[a]:
+            raise bad(f"homing.search_speed_{a}_mm_s", f"must be {MIN_SPEED_MM_S:g} mm/s..start_speed_{a}_mm_s "
+                      f"({start[a]}: the axis stops at once when the switch closes), got {search}")
+        if not MIN_SPEED_MM_S <= latch <= search:
+            raise bad(f"homing.latch_speed_{a}_mm_s",
+                      f"must be {MIN_SPEED_MM_S:g} mm/s..homing.search_speed_{a}_mm_s ({search}), got {latch}")
+        if getattr(h, f"direction_{a}") not in ("-", "+"):
+            raise bad(f"homing.direction_{a}", f"must be \"-\" or \"+\", got {getattr(h, f'direction_{a}')!r}")
+        if not 0 <= getattr(h, f"backoff_{a}_mm") <= 1000:
+            raise bad(f"homing.backoff_{a}_mm", f"must be 0..1000 mm, got {getattr(h, f'backoff_{a}_mm')}")
+        lo, hi = s.travel.bounds_steps()["xyz".index(a)]
+        per = s.mm_per_step_z if a == "z" else s.mm_per_step_xy
+        offset = getattr(h, f"offset_{a}_mm")
+        if not (math.isfinite(offset) and lo <= round(offset / per) <= hi):
+            raise bad(f"homing.offset_{a}_mm", f"must lie in the {a.upper()} travel ({lo * per:g}..{hi * per:g} "
+                      f"mm), got {offset}")
+
+
+def _validate_mock(m: MockSwitches, bad: Any) -> None:
+    for f in dataclasses.fields(m):
+        v = getattr(m, f.name)
+        if v is None:
+            continue
+        if f.name == "estop_after_s" and not (0 <= v <= 1e6):
+            raise bad("mock.estop_after_s", f"must be 0..1e6 s, got {v}")
+        if f.name != "estop_after_s" and abs(v) > MAX_TRAVEL_STEPS:
+            raise bad(f"mock.{f.name}", f"must be within {MAX_TRAVEL_STEPS} steps of the home, got {v}")
 
 
 def _validate_tool(t: ToolShape, bad: Any) -> None:

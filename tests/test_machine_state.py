@@ -274,7 +274,7 @@ def test_a_running_marker_left_behind_makes_the_next_move_refused_until_where_se
     with StateHold(st, S) as hold:  # a command that starts driving, then vanishes without recording
         hold.mark_running("cam drill part.png")
     line = one_line_error(run_cli("goto", "1,1,0", "--state", st), "position is unknown", "cam drill part.png",
-                          "cam home, not built yet", "cam where --set X,Y,Z")
+                          "home the machine (cam home)", "cam where --set X,Y,Z")
     assert "ended without recording" in line
     rep = json.loads(ok(run_cli("where", "--json", "--state", st)).stdout)
     assert rep["position_known"] is False and rep["running"] is None and rep["homed"] is False

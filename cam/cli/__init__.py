@@ -31,6 +31,7 @@ COMMANDS = {
     "goto": ("cam.cli.machine", "cmd_goto"),
     "where": ("cam.cli.machine_state", "cmd_where"),
     "zero": ("cam.cli.machine_state", "cmd_zero"),
+    "home": ("cam.cli.home", "cmd_home"),
     "serve": ("cam.cli.serve", "cmd_serve"),
     "emulate-maximus": ("cam.cli.emulate", "cmd_emulate"),
 }

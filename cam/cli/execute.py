@@ -19,8 +19,8 @@ from typing import Any, Optional
 from tqdm import tqdm
 
 from ..drive.journal import journal_spec, read_journal
-from ..drive.ports import MockPort, port_kind, require
-from ..drive.runner import EMERGENCY_STOPPED, FINISHED, STOPPED
+from ..drive.ports import MockPort, SwitchSchedule, port_kind, require
+from ..drive.runner import EMERGENCY_STOPPED, FINISHED, LIMIT_STOPPED, STOPPED
 from ..drive.session import MachineSession, Prompt
 from ..drive.state import MachineState, PositionUnknownError, StateHold, check_in_travel
 from ..errors import CapabilityError, PortError, TravelError
@@ -179,12 +179,16 @@ def _run(job: Any, args: argparse.Namespace, settings: MachineSettings, hold: St
         port = MockPort(pin_log_path=args.pin_log)  # the pin log streams to its file: nothing held
     elif port_kind(args.port) == "mock" and not realtime:
         port = MockPort(keep_log=False)  # nobody reads this run's pin log: the writes are counted, not kept
+    elif port_kind(args.port) == "mock" and settings.mock.places():
+        port = MockPort()  # simulated switches (below): a mock of this process, in real time too
     session = MachineSession(port, settings, realtime=realtime, on_prompt=_ask(args, stopping))
     approach = None if getattr(args, "resume", None) else approach_to_work_zero(job, hold.state, start, settings,
                                                                                 port_kind(args.port),
                                                                                 getattr(args, "origin", None))
     at = start if approach is None else placed_home(job, hold.state, getattr(args, "origin", None))
     session.set_position(at)
+    if isinstance(port, MockPort) and settings.mock.places():  # the machine file's simulated switches ([mock])
+        port.switches = SwitchSchedule(settings, at)
     session.check_job(job)  # before the progress bar: a bad job is one clean line
     # the machine time takes a pass over the ramps: only worked out before the run for a bar to show it
     bar = _bar(args, float(getattr(job, "estimated_time_s", 0.0))) if progress_wanted(args) else None
@@ -328,6 +332,11 @@ def ended_state(state: MachineState, session: MachineSession, start: tuple[int, 
     end = session.position_steps()
     if status is None:
         return state.moved_to(start)
+    if status == LIMIT_STOPPED and session.last_sent()[1] == (0, 0, 0):  # stopped before its first step
+        return state.moved_to(end)
+    if status == LIMIT_STOPPED:
+        switch = (info.get("messages") or ["a limit switch closed"])[0].split(";")[0]
+        return state.lost(f"{switch} during {info.get('label') or 'the run'}, at machine {list(end)} steps", end)
     if status == EMERGENCY_STOPPED:
         return state.lost(f"an emergency stop ended {info.get('label') or 'the run'} (steps may have been lost)",
                           end)

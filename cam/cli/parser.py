@@ -537,6 +537,30 @@ def _add_zero(sub: argparse._SubParsersAction) -> None:
     _add_state_machine(z)
 
 
+def _add_home(sub: argparse._SubParsersAction) -> None:
+    h = sub.add_parser("home", help="find the home switches and set the machine's zero there",
+                       description="Home the machine (LinuxCNC's pattern): each axis of [homing] order in the "
+                       "machine file (Z first by default) seeks its home switch ([inputs] home_x, ...) at its search "
+                       "speed, backs off until it opens, comes back at the slow latch speed, and the machine "
+                       "coordinate there is its [homing] offset. The position is then known and homed. Works while "
+                       "the position is unknown. On the mock the switches are simulated at the machine file's "
+                       "[mock] places.")
+    h.add_argument("--axes", type=_axes_text, metavar="AXES",
+                   help="home only these axes, in this order (e.g. Z, XY; default: [homing] order)")
+    h.add_argument("--port", default="mock", help="'mock' (default: [mock] simulated switches) or /dev/parport0")
+    _add_state_option(h)
+    _add_machine_options(h)
+    h.add_argument("--realtime", action="store_true", help="run the mock in real time")
+    h.add_argument("--pin-log", metavar="FILE.csv", help="write the mock's pin log of every homing move")
+
+
+def _axes_text(text: str) -> str:
+    axes = text.lower()
+    if not axes or any(a not in "xyz" for a in axes) or len(set(axes)) != len(axes):
+        raise argparse.ArgumentTypeError(f"--axes takes X, Y, Z or several of them, each once (ZXY), got '{text}'")
+    return axes
+
+
 def _add_serve(sub: argparse._SubParsersAction) -> None:
     sv = sub.add_parser(
         "serve", help="control the machine from a web page (phone or desktop)",
@@ -580,7 +604,7 @@ def _add_serve(sub: argparse._SubParsersAction) -> None:
 
 
 _COMMAND_PARSERS = (_add_drill, _add_export, _add_preview, _add_digitize, _add_trace, _add_info, _add_profile, _add_jog,
-                    _add_emulate_maximus, _add_goto, _add_where, _add_zero, _add_serve)
+                    _add_emulate_maximus, _add_goto, _add_where, _add_zero, _add_home, _add_serve)
 """Each adds one command's subparser, in the order ``cam --help`` lists them."""
 
 

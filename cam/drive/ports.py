@@ -10,23 +10,38 @@
   (:mod:`cam.drive.maximus`): it takes drill files and jogs, not step/dir writes.
 
 What each kind can do is :data:`CAPABILITIES`; :func:`require` refuses the rest
-with one message that every front end shows.  A step/dir port only writes;
-*when* to write is the runner's business.
+with one message that every front end shows.  A step/dir port writes, and reads
+its five input pins (:meth:`Port.read_inputs`: home, limit and e-stop switches,
+``[inputs]`` of the machine file); *when* to write and what a switch means is the
+runner's business.  The mock simulates switches from a schedule
+(:class:`SwitchSchedule`: where each closes, in the machine frame).
 """
 from __future__ import annotations
 
 import os
 import tempfile
+import time
 from pathlib import Path
 from typing import IO, Iterator, Optional
 
 import numpy as np
 
 from ..errors import CapabilityError, PortError
+from ..settings import INPUT_BITS, MachineSettings
 from ..verify.pinlog import HEADER as PIN_LOG_HEADER
 from ..verify.pinlog import PinLog, read_pin_log
+from .pins import axis_bits
 
-__all__ = ["Port", "MockPort", "ParallelPort", "open_port", "port_kind", "CAPABILITIES", "require", "MAXIMUS_PREFIX"]
+__all__ = ["Port", "MockPort", "ParallelPort", "open_port", "port_kind", "CAPABILITIES", "require", "MAXIMUS_PREFIX",
+           "SwitchSchedule", "IDLE_INPUTS", "input_mask"]
+
+IDLE_INPUTS = 0xF8
+""":meth:`Port.read_inputs` with nothing connected: every input pin high (the port's pull-ups), bits 3..7."""
+
+
+def input_mask(pin: int) -> int:
+    """The bit of input ``pin`` (10, 11, 12, 13, 15) in :meth:`Port.read_inputs` (:data:`cam.settings.INPUT_BITS`)."""
+    return 1 << INPUT_BITS[pin]
 
 MAXIMUS_PREFIX = "maximus:"
 
@@ -64,6 +79,17 @@ class Port:
         for t, d, s in zip(t_ns.tolist(), data.tolist(), strobe.tolist()):
             self.write(d, s, t)
 
+    def read_inputs(self) -> int:
+        """The levels of the input pins now: bit 6 = pin 10 (ACK), 7 = pin 11 (BUSY), 5 = pin 12 (PAPER-OUT),
+        4 = pin 13 (SELECT), 3 = pin 15 (ERROR), 1 = high (BUSY's hardware inversion undone); the other bits 0.
+        A port that reads no inputs returns :data:`IDLE_INPUTS`."""
+        return IDLE_INPUTS
+
+    @property
+    def reads_inputs(self) -> bool:
+        """Whether :meth:`read_inputs` reads real or simulated switches (the runner samples them then)."""
+        return False
+
     def close(self) -> None:
         """Release the port."""
 
@@ -90,11 +116,19 @@ class MockPort(Port):
     without it, the first :data:`_HELD_WRITES` writes are held in memory and the rest go to an anonymous
     temporary file (13 bytes a write), read back only when :meth:`pin_log` or :meth:`pin_log_pieces` asks;
     with ``keep_log=False`` nothing is kept (``cam drill`` on the mock without ``--pin-log``).
+
+    ``switches``: simulated home, limit and e-stop switches (:class:`SwitchSchedule`); the mock then counts the
+    steps of its writes, and :meth:`read_inputs` gives the levels at the position they reached.
     """
 
     name = "mock"
 
-    def __init__(self, pin_log_path: "str | os.PathLike | None" = None, *, keep_log: bool = True) -> None:
+    def __init__(self, pin_log_path: "str | os.PathLike | None" = None, *, keep_log: bool = True,
+                 switches: "Optional[SwitchSchedule]" = None) -> None:
+        self.switches = switches
+        self.time_offset_ns = 0
+        """Added to the time of every write: runs one after another on one port (homing's phases) keep one
+        time line in the pin log."""
         self.keep_log = keep_log or pin_log_path is not None
         """False: the writes are counted and dropped, as a real port sends them (a run nobody will decode)."""
         self._t: list[np.ndarray] = []
@@ -108,14 +142,35 @@ class MockPort(Port):
         self.n_writes = 0
         self.last_t_ns: Optional[int] = None
 
+    @property
+    def reads_inputs(self) -> bool:
+        return self.switches is not None
+
+    def read_inputs(self) -> int:
+        """The simulated switches' levels where the writes so far took the tool (:data:`IDLE_INPUTS` without a
+        schedule)."""
+        if self.switches is None:
+            return IDLE_INPUTS
+        return self.switches.levels_now()
+
+    def inputs_along(self, t_ns: np.ndarray, data: np.ndarray) -> np.ndarray:
+        """``(K,)`` the input levels before each of these writes, were they sent (nothing is sent): the simulated
+        clock looks a batch ahead."""
+        assert self.switches is not None
+        return self.switches.levels_along(np.asarray(t_ns, np.int64) + self.time_offset_ns, data)
+
     def write(self, data: int, strobe: int, t_ns: int) -> None:
-        self._pending.append((int(t_ns), int(data), int(strobe)))
+        if self.switches is not None:
+            self.switches.sent(np.array([data], np.uint8), int(t_ns) + self.time_offset_ns)
+        self._pending.append((int(t_ns) + self.time_offset_ns, int(data), int(strobe)))
         if len(self._pending) >= _PENDING_WRITES:
             self._flush()
 
     def write_many(self, t_ns: np.ndarray, data: np.ndarray, strobe: np.ndarray) -> None:
         self._flush()
-        self._keep(np.asarray(t_ns, np.int64), np.asarray(data, np.uint8), np.asarray(strobe, np.uint8))
+        if self.switches is not None and len(t_ns):
+            self.switches.sent(np.asarray(data, np.uint8), int(t_ns[-1]) + self.time_offset_ns)
+        self._keep(np.asarray(t_ns, np.int64) + self.time_offset_ns, np.asarray(data, np.uint8), np.asarray(strobe, np.uint8))
 
     def _keep(self, t_ns: np.ndarray, data: np.ndarray, strobe: np.ndarray) -> None:
         if not len(t_ns):
@@ -242,6 +297,23 @@ class ParallelPort(Port):
         except OSError as exc:  # pragma: no cover - hardware
             raise PortError(f"{self.name}: write failed ({exc.strerror or exc})") from None
 
+    @property
+    def reads_inputs(self) -> bool:
+        return True
+
+    def read_inputs(self) -> int:
+        """The status register's five input pins, one read (ppdev's PPRSTATUS; else pyparallel's ``getIn*``)."""
+        try:
+            raw = getattr(self._port, "PPRSTATUS", None)
+            if raw is not None:  # pyparallel on Linux: the register as it is, BUSY (bit 7) inverted by the hardware
+                return (int(raw()) ^ 0x80) & IDLE_INPUTS
+            port = self._port  # pyparallel elsewhere: each pin's level (getInBusy undoes the inversion)
+            return sum(input_mask(pin) for pin, level in (
+                (10, port.getInAcknowledge()), (11, port.getInBusy()), (12, port.getInPaperOut()),
+                (13, port.getInSelected()), (15, port.getInError())) if level)
+        except OSError as exc:  # pragma: no cover - hardware
+            raise PortError(f"{self.name}: reading the input pins failed ({exc.strerror or exc})") from None
+
     def close(self) -> None:  # pragma: no cover - hardware
         port = getattr(self, "_port", None)
         if port is not None:
@@ -249,6 +321,91 @@ class ParallelPort(Port):
                 port.setData(0)
             finally:
                 del self._port
+
+
+class SwitchSchedule:
+    """The mock port's simulated switches: where each closes, in the machine frame, or when.
+
+    A position switch is closed while the tool's coordinate on its axis is at or beyond a place: a ``_min``
+    limit at or below it, a ``_max`` limit at or above it, a home switch on its ``[homing]`` direction's side.
+    The e-stop closes at a time of the run (ns, the writes' own times).  The levels follow the machine file's
+    ``[inputs]`` (a closed active-low switch pulls its pin low); unwired pins read high.
+
+    Args:
+        settings: the pin map (to count the steps of the writes), ``[inputs]`` and ``[homing]``.
+        start_steps: where the tool stands when the port opens (machine frame).
+        places: ``switch name -> coordinate in steps`` (``"estop"``: seconds); None: the machine file's
+            ``[mock]`` table (:meth:`cam.settings.MockSwitches.places`).
+
+    Raises:
+        PortError: a place for a switch the machine file does not wire.
+    """
+
+    def __init__(self, settings: MachineSettings, start_steps: tuple[int, int, int] = (0, 0, 0),
+                 places: Optional[dict] = None) -> None:
+        wired = settings.inputs.wired()
+        places = settings.mock.places() if places is None else dict(places)
+        clock, dirbit = axis_bits(settings)
+        self.clock, self.dirbit = clock.astype(np.int64), dirbit.astype(np.int64)
+        self.position_steps = np.asarray(start_steps, np.int64).reshape(3).copy()
+        self.last_data = 0
+        self.t_ns = 0
+        self.wall_ns = 0  # time.monotonic_ns() at the last write (0: none yet)
+        self.idle = IDLE_INPUTS
+        for pin, high in wired.values():
+            self.idle = self.idle & ~input_mask(pin) if high else self.idle | input_mask(pin)
+        self.rules: list[tuple[int, bool, int, int, int]] = []  # (mask, active_high, axis, place, side)
+        self.timed: list[tuple[int, bool, int]] = []  # (mask, active_high, t_ns)
+        for name, place in places.items():
+            if name not in wired:
+                raise PortError(f"the mock's switch {name} is not wired: give it a pin in [inputs]")
+            pin, high = wired[name]
+            if name == "estop":
+                self.timed.append((input_mask(pin), high, int(round(float(place) * 1e9))))
+                continue
+            axis = "xyz".index(name.split("_")[1])
+            side = (-1 if getattr(settings.homing, f"direction_{name[-1]}") == "-" else 1) \
+                if name.startswith("home") else (-1 if name.endswith("min") else 1)
+            self.rules.append((input_mask(pin), high, axis, int(place), side))
+
+    def _levels(self, positions: np.ndarray, t_ns: np.ndarray) -> np.ndarray:
+        """``(K,)`` levels at ``(K, 3)`` positions and times."""
+        closed = {}  # mask -> (K,) closed by any switch on that pin
+        for mask, high, axis, place, side in self.rules:
+            c = positions[:, axis] <= place if side < 0 else positions[:, axis] >= place
+            closed[(mask, high)] = closed.get((mask, high), False) | c
+        for mask, high, t in self.timed:
+            closed[(mask, high)] = closed.get((mask, high), False) | (t_ns >= t)
+        levels = np.full(len(positions), self.idle, np.int64)
+        for (mask, high), c in closed.items():
+            levels = np.where(c, (levels | mask) if high else (levels & ~mask), levels)
+        return levels
+
+    def _steps(self, data: np.ndarray, prev: int) -> np.ndarray:
+        """``(K, 3)`` the signed step each write makes on each axis."""
+        d = np.asarray(data, np.int64)
+        before = np.concatenate([[prev], d[:-1]])
+        rising = d & ~before
+        return np.where((rising[:, None] & self.clock) != 0, np.where(d[:, None] & self.dirbit, 1, -1), 0)
+
+    def levels_along(self, t_ns: np.ndarray, data: np.ndarray) -> np.ndarray:
+        """``(K,)`` the levels before each of the writes ``data`` (after those before it), were they sent."""
+        steps = self._steps(data, self.last_data)
+        before = self.position_steps + np.cumsum(steps, axis=0) - steps
+        return self._levels(before, np.asarray(t_ns, np.int64))  # sampled at each write's time, before it
+
+    def levels_now(self) -> int:
+        """The levels where the tool stands now (a real-time run's sample: its time runs on from the last
+        write's by the wall clock)."""
+        t_now = self.t_ns + (time.monotonic_ns() - self.wall_ns if self.wall_ns else 0)
+        return int(self._levels(self.position_steps[None, :], np.array([t_now], np.int64))[0])
+
+    def sent(self, data: np.ndarray, t_ns: int) -> None:
+        """These writes went out, the last at job time ``t_ns``: the tool moved on."""
+        self.t_ns, self.wall_ns = t_ns, time.monotonic_ns()
+        if len(data):
+            self.position_steps = self.position_steps + self._steps(data, self.last_data).sum(axis=0)
+            self.last_data = int(data[-1])
 
 
 def port_kind(name: str | Port) -> str:

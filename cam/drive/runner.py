@@ -7,6 +7,11 @@ Two clocks:
 * **real time** (``realtime=True``, always for a real port): each write waits
   for its scheduled time; the mock then logs the measured time of each write.
 
+Switches (``[inputs]`` of the machine file, :class:`SwitchWatch`) are sampled before every write on a port
+that reads inputs (a parallel port; the mock with a :class:`~cam.drive.ports.SwitchSchedule`, looked at a
+batch ahead on the simulated clock): a closed limit switch or e-stop ends the run before the next write, and
+nothing more is sent.  Without switches the send loop is as it was.
+
 Control (:class:`Controller`, thread-safe, usable from another thread or a
 signal handler) is checked before every write, and every wait wakes on a
 control request, so a stop or an emergency stop takes effect well within
@@ -27,7 +32,7 @@ import numpy as np
 
 from ..errors import CamError
 from ..job.model import Job, JobLike
-from ..settings import MachineSettings
+from ..settings import INPUT_BITS, MachineSettings
 from ..verify.pinlog import PinLog, carve, decode_pin_log
 from .._compiled import resolved
 from ._kernels import net_steps_kernel
@@ -37,7 +42,7 @@ from .chunks import ChunkedPlan, StepChunk, plan_chunks
 from .steps import StepPlan
 
 __all__ = ["Controller", "Cursor", "RunResult", "Lateness", "STALL_NS", "JITTER_NS", "run", "simulate_surface", "FINISHED",
-           "STOPPED", "EMERGENCY_STOPPED"]
+           "STOPPED", "EMERGENCY_STOPPED", "LIMIT_STOPPED", "SWITCHED", "SwitchWatch"]
 
 Plan = Union[StepPlan, ChunkedPlan]
 """What the runner sends: a step plan, made a chunk at a time or held whole (both have ``chunks()``)."""
@@ -45,6 +50,10 @@ Plan = Union[StepPlan, ChunkedPlan]
 FINISHED = "finished"
 STOPPED = "stopped"
 EMERGENCY_STOPPED = "emergency-stopped"
+LIMIT_STOPPED = "limit-stopped"
+"""A limit switch closed: the run ended before the next write, nothing more was sent."""
+SWITCHED = "switched"
+"""The switch the run waited for (:attr:`SwitchWatch.until`, homing) changed: the run ended there."""
 
 _BATCH = 16384
 _SPIN_NS = 2_000_000  # busy-wait the last 2 ms before a write: sleeps here overshoot by up to ~1.5 ms (p99)
@@ -158,6 +167,7 @@ class RunResult:
         started_ns: ``time.monotonic_ns()`` at the job start; the real-time
             mock logs write times relative to it.
         lateness: how late real-time writes went out (each delay moved the rest of the run later).
+        switch: the switch that ended the run (``limit_x_max``, ``estop``, a homing's ``home_z``), or "".
     """
 
     status: str
@@ -170,6 +180,7 @@ class RunResult:
     messages: list[str] = field(default_factory=list)
     started_ns: int = 0
     lateness: Lateness = field(default_factory=Lateness)
+    switch: str = ""
 
     def pin_log(self) -> PinLog:
         """The mock port's pin log (only for the mock)."""
@@ -287,22 +298,135 @@ class _Pauses:
         return _wait_while_paused(self.ctl)
 
 
+class SwitchWatch:
+    """What the runner does with the input pins (``[inputs]``): a closed limit switch or e-stop ends the run.
+
+    A limit switch that closes during the run ends it before the next write.  One closed already when the run
+    starts (the tool stopped on it) stops only a step of its axis toward its side (``limit_x_max``: an X+ step),
+    so the axis may move off it, until it has opened; a pin shared by both ends of an axis then stops that axis
+    both ways.  The e-stop ends the run whenever it is closed.
+
+    Args:
+        settings: the machine settings (``settings.inputs`` wires the switches; the pin map).
+        until: ``(switch name, closed)``: end the run when that switch is closed (True) or open (False), status
+            :data:`SWITCHED` (homing); None: run to the end.
+        ignore: limit switches that stop nothing in this run (homing: those sharing the home switch's pin).
+    """
+
+    def __init__(self, settings: MachineSettings, until: Optional[tuple[str, bool]] = None,
+                 ignore: "tuple[str, ...] | frozenset[str]" = ()) -> None:
+        wired = settings.inputs.wired()
+        bits = {name: (1 << INPUT_BITS[pin], high) for name, (pin, high) in wired.items()}
+        clock, dirbit = axis_bits(settings)
+        self.stops = []  # (name, mask, high, clock bit, dir bit, side: +1 max / -1 min / 0 e-stop)
+        for name, (mask, high) in bits.items():
+            if name == "estop" or (name.startswith("limit") and name not in ignore):
+                a = "xyz".index(name[6]) if name != "estop" else 0
+                self.stops.append((name, mask, high, int(clock[a]), int(dirbit[a]),
+                                   0 if name == "estop" else (1 if name.endswith("max") else -1)))
+        self.until = None if until is None else (until[0], *bits[until[0]], bool(until[1]))
+        self.pins = {name: pin for name, (pin, _) in wired.items()}
+        self.seen_open = {name: False for name, *_ in self.stops}
+        self.last_data = 0
+        self.tripped = ""
+        """The switch that ended the run ("" while none has)."""
+
+    @property
+    def active(self) -> bool:
+        """Whether anything is watched at all."""
+        return bool(self.stops) or self.until is not None
+
+    def check(self, levels: int, data: int) -> bool:
+        """Sampled ``levels`` (:meth:`~cam.drive.ports.Port.read_inputs`) before write ``data``: True to send it
+        and no more."""
+        return self.first(np.array([levels], np.int64), np.array([data], np.int64)) == 0
+
+    def _stop_at(self, on: np.ndarray, d: np.ndarray, prev: np.ndarray, name: str, clock: int, dirbit: int,
+                 side: int) -> int:
+        """The first write a closed limit or e-stop forbids (K: none); notes whether it has been seen open."""
+        k = len(on)
+        if side == 0 or self.seen_open[name]:
+            return int(np.argmax(on)) if on.any() else k
+        opened = int(np.argmax(~on)) if (~on).any() else k
+        toward = ((d & clock) != 0) & ((prev & clock) == 0) & (((d & dirbit) != 0) == (side > 0))
+        first_toward = int(np.argmax(toward[:opened])) if toward[:opened].any() else k
+        if opened < k:
+            self.seen_open[name] = True
+            closes = on[opened:]
+            first_toward = min(first_toward, opened + int(np.argmax(closes)) if closes.any() else k)
+        return first_toward
+
+    def first(self, levels: np.ndarray, data: np.ndarray) -> int:
+        """The first of ``(K,)`` writes ``data`` that must not go out, ``levels`` sampled before each (K: none);
+        books the switch that forbids it."""
+        d = np.asarray(data, np.int64)
+        prev = np.concatenate([[self.last_data], d[:-1]])
+        hit, name = len(levels), ""
+        for n, mask, high, clock, dirbit, side in self.stops:
+            k = self._stop_at(((levels & mask) != 0) == high, d, prev, n, clock, dirbit, side)
+            if k < hit or (k == hit and n == "estop" and k < len(levels)):
+                hit, name = k, n
+        if self.until is not None:
+            n, mask, high, closed = self.until
+            on = ((levels & mask) != 0) == high
+            k = int(np.argmax(on == closed)) if np.any(on == closed) else len(levels)
+            if k < hit:
+                hit, name = k, n
+        if hit < len(levels):
+            self.tripped = name
+        if hit > 0:
+            self.last_data = int(d[hit - 1])
+        return hit
+
+    def message(self, position_steps: tuple[int, int, int]) -> str:
+        """The one line that says which switch ended the run (``position_steps``: the run's own frame)."""
+        name = self.tripped
+        pin = self.pins.get(name, 0)
+        moved = " ".join(f"{a}={v:+d}" for a, v in zip("XYZ", position_steps))
+        if name == "estop":
+            return f"emergency stop: the e-stop input (pin {pin}) is closed; nothing more was sent (the run " \
+                   f"moved {moved} steps)"
+        if name.startswith("limit") and not any(position_steps):
+            return f"limit switch {name} (pin {pin}) is closed: no step toward it was sent, the tool did not move"
+        if name.startswith("limit"):
+            return f"limit switch {name} (pin {pin}) closed; the motion stopped, nothing more was sent (the run " \
+                   f"moved {moved} steps); the position is unknown until cam home or cam where --set"
+        return f"{name} (pin {pin}) {'closed' if self.until and self.until[3] else 'opened'} (the run moved {moved} " \
+               f"steps)"
+
+
+def switch_watch(settings: MachineSettings, port: Port, given: Optional[SwitchWatch]) -> Optional[SwitchWatch]:
+    """The watch of a run: ``given``, else the machine file's limit and e-stop switches; None when the port reads
+    no inputs or nothing is wired (the send loop then samples nothing)."""
+    if not port.reads_inputs:
+        return None
+    watch = given if given is not None else SwitchWatch(settings)
+    return watch if watch.active else None
+
+
 class _SimulatedClock:
-    """Writes go out in batches at once, stamped with their scheduled times (the mock's default)."""
+    """Writes go out in batches at once, stamped with their scheduled times (the mock's default).  With
+    ``switches`` (a mock with a switch schedule), each batch is sent up to the first write a switch forbids."""
 
     batch = _BATCH
 
-    def __init__(self) -> None:
+    def __init__(self, switches: Optional[SwitchWatch] = None) -> None:
         self.lateness = Lateness()  # nothing is late on the simulated clock
+        self.switches = switches
 
     def chunks(self, plan: Plan) -> Iterator[StepChunk]:
         return _made_ahead(plan.chunks())  # the next chunks are planned (compiled, without the GIL) meanwhile
 
     def may_go(self, ctl: Controller) -> bool:
-        """Before a batch: False if the run is halted (a pause waits here for its end)."""
+        """Before a batch: False if the run is halted or a switch ended it (a pause waits here for its end)."""
+        if self.switches is not None and self.switches.tripped:
+            return False
         return not (ctl.halted or (ctl.paused and not _wait_while_paused(ctl)))
 
     def send(self, p: Port, chunk: StepChunk, i: int, end: int, ctl: Controller) -> int:
+        if self.switches is not None:  # the mock's levels before each write of the batch: up to the first stop
+            end = i + self.switches.first(p.inputs_along(chunk.t_ns[i:end], chunk.data[i:end]),  # type: ignore
+                                          chunk.data[i:end])
         p.write_many(chunk.t_ns[i:end], chunk.data[i:end], chunk.strobe[i:end])
         return end
 
@@ -386,8 +510,9 @@ class _RealClock:
 
     batch = 1 << 62  # a batch ends at a progress report, a pause, or the chunk's end
 
-    def __init__(self, t0: int, settings: MachineSettings) -> None:
+    def __init__(self, t0: int, settings: MachineSettings, switches: Optional[SwitchWatch] = None) -> None:
         self.t0 = t0
+        self.switches = switches
         self.offset = 0
         self.lateness = Lateness()
         self.reramp = _ReRamp(settings, self.lateness)
@@ -397,7 +522,7 @@ class _RealClock:
         return _made_ahead(plan.chunks())
 
     def may_go(self, ctl: Controller) -> bool:
-        return not ctl.halted
+        return not ctl.halted and not (self.switches is not None and self.switches.tripped)
 
     def paused_for(self, ns: int) -> None:
         self.offset += ns
@@ -431,6 +556,8 @@ class _RealClock:
                 if remaining > _SPIN_NS:
                     wake.wait((remaining - _SPIN_NS) / 1e9)
                     wake.clear()
+            if self.switches is not None and self.switches.check(p.read_inputs(), int(data[j])):
+                return j  # a switch closed (or the one waited for changed): nothing more is sent
             now = time.monotonic_ns()
             late_ns = now - target
             if late_ns > 0:  # behind: the rest of the schedule moves later, so no interval is shorter than planned
@@ -455,6 +582,7 @@ def run(
     progress: Optional[ProgressFn] = None,
     on_pause: Optional[PauseFn] = None,
     cursor: Optional[Cursor] = None,
+    switches: Optional[SwitchWatch] = None,
 ) -> RunResult:
     """Run a job on a port: its step plan a chunk at a time, through one send loop.
 
@@ -469,6 +597,8 @@ def run(
             controller and waits for :meth:`Controller.resume` (or continues
             at once when no controller was given).
         cursor: where the run is, moved on as the writes go out (a new one if None): the live position.
+        switches: what the input pins do (:class:`SwitchWatch`); None: the limit and e-stop switches of
+            ``plan.settings.inputs``.  Sampled only on a port that reads inputs (:attr:`Port.reads_inputs`).
 
     Returns:
         A :class:`RunResult`; the mock's pin log is ``result.pin_log()``.
@@ -480,8 +610,10 @@ def run(
     ctl = controller or Controller()
     cursor = cursor or Cursor(plan.settings)
     pauses = _Pauses(plan, ctl, on_pause, controller is not None)
+    watch = switch_watch(plan.settings, p, switches)
     wall0 = time.monotonic_ns()
-    clock: "_SimulatedClock | _RealClock" = _RealClock(wall0, plan.settings) if realtime else _SimulatedClock()
+    clock: "_SimulatedClock | _RealClock" = _RealClock(wall0, plan.settings, watch) if realtime \
+        else _SimulatedClock(watch)
     if realtime:
         switch_s = sys.getswitchinterval()
         sys.setswitchinterval(min(switch_s, _SWITCH_S))  # the thread making chunks yields the interpreter soon
@@ -490,10 +622,10 @@ def run(
     finally:
         if realtime:
             sys.setswitchinterval(switch_s)
-    status, position, messages = _ending(plan, p, ctl, cursor, wall0 if realtime else None, clock.lateness)
+    status, position, messages = _ending(plan, p, ctl, cursor, wall0 if realtime else None, clock.lateness, watch)
     wall = (time.monotonic_ns() - wall0) / 1e9
     return RunResult(status, position, cursor.sent, cursor.last_t_ns / 1e9, wall, pauses.count, p, messages, wall0,
-                     clock.lateness)
+                     clock.lateness, watch.tripped if watch is not None else "")
 
 
 def _send(plan: Plan, p: Port, ctl: Controller, clock: "_SimulatedClock | _RealClock", cursor: Cursor,
@@ -523,15 +655,19 @@ def _send(plan: Plan, p: Port, ctl: Controller, clock: "_SimulatedClock | _RealC
                 return
 
 
-def _ending(plan: Plan, p: Port, ctl: Controller, cursor: Cursor, t0: Optional[int], lateness: Lateness
-            ) -> tuple[str, tuple[int, int, int], list[str]]:
+def _ending(plan: Plan, p: Port, ctl: Controller, cursor: Cursor, t0: Optional[int], lateness: Lateness,
+            watch: Optional[SwitchWatch] = None) -> tuple[str, tuple[int, int, int], list[str]]:
     """How a run ends: ``(status, position_steps, messages)``.  A run halted before its last write lifts the tool
-    (:func:`_stop`); an emergency stop sends nothing more.  The mock's log is flushed."""
+    (:func:`_stop`); an emergency stop, or a switch, sends nothing more.  The mock's log is flushed."""
     status = FINISHED
     messages: list[str] = []
     position = cursor.position_steps
     if cursor.sent < len(plan):
-        if ctl.estop_requested:
+        if watch is not None and watch.tripped:
+            status = {"estop": EMERGENCY_STOPPED}.get(watch.tripped, LIMIT_STOPPED if watch.tripped.startswith(
+                "limit") else SWITCHED)
+            messages.append(watch.message(position))
+        elif ctl.estop_requested:
             status = EMERGENCY_STOPPED
             messages.append(f"emergency stop at {position} steps; nothing more was sent")
         else:

@@ -302,7 +302,7 @@ def now_text() -> str:
 def unknown_message(state: MachineState) -> str:
     """The one-line error of a move asked for while the position is unknown."""
     return (f"the machine position is unknown ({state.unknown_reason or 'not recorded'}): home the machine "
-            f"(cam home, not built yet) or say where the tool is, in machine mm, with cam where --set X,Y,Z")
+            f"(cam home) or say where the tool is, in machine mm, with cam where --set X,Y,Z")
 
 
 # -- where the file is ---------------------------------------------------------------------------------------
