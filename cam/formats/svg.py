@@ -32,6 +32,7 @@ from __future__ import annotations
 import io
 import math
 import os
+from xml.etree import ElementTree
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Union
@@ -44,13 +45,17 @@ from ..choices import SVG_SUFFIXES
 from ..errors import ParseError
 from ..render.picture import encode_png
 
-__all__ = ["SvgDrawing", "parse_svg", "load_svg", "SVG_SUFFIXES", "MM_PER_PX", "MAX_SVG_BYTES"]
+__all__ = ["SvgDrawing", "parse_svg", "load_svg", "SVG_SUFFIXES", "MM_PER_PX", "MAX_SVG_BYTES", "MAX_SVG_ELEMENTS",
+           "expanded_size"]
 
 MM_PER_PX = 25.4 / 96.0
 """An SVG user unit without a physical size (CSS px) is 1/96 inch."""
 MAX_SVG_BYTES = 64 * 1024 * 1024
 """Larger SVG files are refused before they are parsed."""
 MAX_SEGMENTS_PER_CURVE = 100_000
+MAX_SVG_ELEMENTS = 200_000
+"""Elements an SVG may hold once its ``<use>`` references are expanded (counted before anything is expanded: ten
+levels of ``<use>`` fanning out four ways make a million copies from 2 kB)."""
 """The most straight pieces one curve is flattened into (a curve longer than 1 km at the finest tolerance)."""
 
 LINE, QUADRATIC, CUBIC = 2, 3, 4
@@ -209,6 +214,48 @@ def _subpaths(path, k: float, close_open: bool) -> list[tuple[list[np.ndarray], 
     return out
 
 
+def expanded_size(raw: bytes, source: str = "<svg>") -> int:
+    """How many elements the document holds once every ``<use>`` is replaced by what it references (nested
+    ``<use>`` included), counted on the XML tree without expanding anything: an element counts 1 plus its
+    children; a ``<use>`` counts 1 plus its target.  A reference cycle counts as nothing more (svgelements drops
+    it).  Unreadable XML counts 0 (the SVG reader says why).
+
+    Raises:
+        ParseError: the count passes :data:`MAX_SVG_ELEMENTS` (one line, naming it and the limit).
+    """
+    try:
+        root = ElementTree.fromstring(raw)
+    except (ElementTree.ParseError, ValueError):
+        return 0
+    by_id = {el.get("id"): el for el in root.iter() if el.get("id")}
+    memo: dict[int, int] = {}
+
+    def size(el, active: frozenset) -> int:  # noqa: ANN001 - an ElementTree element
+        key = id(el)
+        if key in memo:
+            return memo[key]
+        if key in active:
+            return 0  # a cycle
+        inner = active | {key}
+        n = 1 + sum(size(child, inner) for child in el)
+        if el.tag.rsplit("}", 1)[-1] == "use":
+            ref = el.get("{http://www.w3.org/1999/xlink}href") or el.get("href") or ""
+            target = by_id.get(ref[1:]) if ref.startswith("#") else None
+            if target is not None:
+                n += size(target, inner)
+        memo[key] = n = min(n, MAX_SVG_ELEMENTS + 1)
+        return n
+
+    try:
+        total = size(root, frozenset())
+    except RecursionError:
+        raise ParseError(f"{source}: elements nested too deeply to read") from None
+    if total > MAX_SVG_ELEMENTS:
+        raise ParseError(f"{source}: its <use> references expand to more than {MAX_SVG_ELEMENTS:,} elements; cam "
+                         f"refuses it before expanding them (ungroup or unlink the clones, or split the drawing)")
+    return total
+
+
 def parse_svg(data: Union[bytes, str], *, source: str = "<svg>") -> SvgDrawing:
     """Read an SVG document (the text or its bytes) into an :class:`SvgDrawing` in mm.
 
@@ -217,6 +264,7 @@ def parse_svg(data: Union[bytes, str], *, source: str = "<svg>") -> SvgDrawing:
         not a finite number.
     """
     raw = data.encode("utf-8") if isinstance(data, str) else bytes(data)
+    expanded_size(raw, source)  # counted before svgelements expands a single <use>
     try:
         svg = se.SVG.parse(io.BytesIO(raw), reify=True, ppi=96.0)
     except Exception as exc:  # svgelements raises the XML parser's and its own errors
