@@ -22,7 +22,7 @@ from cam.drive.runner import LIMIT_STOPPED, SwitchWatch, run
 from cam.job.model import travel_job
 from cam.settings import load_settings, settings_from_mapping
 from cam.verify.pinlog import decode_pin_log, read_pin_log
-from conftest import run_cli
+from conftest import SAMPLES, run_cli
 
 MACHINE = """
 [inputs]
@@ -165,6 +165,26 @@ def test_a_limit_switch_mid_move_makes_the_position_unknown_until_home_or_where_
     assert run_cli("where", "--set", "11.56,0,0", "--machine", m, "--state", st).returncode == 0
     assert run_cli("jog", "X-", "100", "--machine", m, "--state", st).returncode == 0  # off the switch
     assert where(tmp_path, m)["machine_steps"] == [300, 0, 0]
+
+
+def test_a_limit_switch_closing_mid_job_stops_the_drill_within_one_period(tmp_path):
+    text = MACHINE.replace('limit_x_max = "!13"', 'limit_x_max = "!13"\nlimit_y_max = "!13"')
+    m, st = machine(tmp_path, text.replace("limit_x_max_steps = 400", "limit_y_max_steps = 700")), tmp_path / "s.json"
+    proc = run_cli("drill", SAMPLES / "ellipse.png", "--depth", "2", "--machine", m, "--state", st, "--pin-log",
+                   tmp_path / "p.csv", "--report", tmp_path / "r.json")
+    assert proc.returncode == 130 and "limit switch limit_x_max/limit_y_max (pin 13) closed" in proc.stderr, \
+        proc.stderr  # one pin for both: it cannot tell which
+    assert json.loads((tmp_path / "r.json").read_text())["status"] == LIMIT_STOPPED
+    s = load_settings(m)
+    log = read_pin_log(tmp_path / "p.csv")
+    pos, step = steps_after(log, s)
+    closed = int(np.argmax(pos[:, 1] >= 700))
+    assert pos[closed, 1] == 700 and closed == len(pos) - 1 and not step[closed + 1:].any()
+    assert 1000 < len(pos) < 14457  # mid-job: the whole ellipse is 14457 writes
+    rep = where(tmp_path, m)
+    assert not rep["position_known"] and rep["machine_steps"] == [int(v) for v in pos[-1]]
+    one_line(run_cli("drill", SAMPLES / "ellipse.png", "--depth", "2", "--machine", m, "--state", st),
+             "position is unknown", "limit_y_max")
 
 
 def test_the_e_stop_input_stops_the_job_and_the_position_is_unknown(tmp_path):

@@ -382,6 +382,8 @@ class SwitchWatch:
         """The one line that says which switch ended the run (``position_steps``: the run's own frame)."""
         name = self.tripped
         pin = self.pins.get(name, 0)
+        if name.startswith("limit"):  # a pin shared by several limits: which one closed, the pin cannot tell
+            name = "/".join(n for n, *_ in self.stops if n != "estop" and self.pins[n] == pin)
         moved = " ".join(f"{a}={v:+d}" for a, v in zip("XYZ", position_steps))
         if name == "estop":
             return f"emergency stop: the e-stop input (pin {pin}) is closed; nothing more was sent (the run " \
