@@ -373,11 +373,27 @@ def _lookahead(high: np.ndarray, per_ns: np.ndarray, settings: MachineSettings,
         hits = 0
         for a, n_broken in enumerate(broken):
             if n_broken:  # check again, recording where, and lower the caps there
+                _new_standstills(axes, a, mid, limits, cap, alpha, upull)
                 _, r1, r2, r3 = _check_axis(axes[a], mid, limits, a, True)
                 hits += _drop_caps(axes[a][0], r1, r2, r3, u, cap, _DROP)
         if hits == 0:
             break
     return out
+
+
+def _new_standstills(axes: list, a: int, mid: np.ndarray, limits: _Limits, cap: np.ndarray, alpha: np.ndarray,
+                     upull: np.ndarray) -> None:
+    """Where the planned times make axis ``a`` stand still and step 1 did not know it (a gap the rates made long):
+    a stop and a start there too, its caps lowered at once to the start speed on each side (step 1 again for the
+    axis, which only lowers caps) rather than a factor a round."""
+    per, brk = axes[a]
+    s_mm, v_start, v_max, acc = limits
+    more = brk | standstills(mid[per], s_mm[a], v_start[a])
+    if np.array_equal(more, brk):
+        return
+    axes[a] = (per, more)
+    _axis_caps(per, more, s_mm[a], v_start[a], v_max[a], acc[a] * _ALPHA_MARGIN, cap, alpha, upull)
+    np.minimum(upull, cap, out=upull)
 
 
 def _caps(high: np.ndarray, per_ns: np.ndarray, settings: MachineSettings, stop_idx: np.ndarray,
