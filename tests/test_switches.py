@@ -187,6 +187,15 @@ def test_a_limit_switch_closing_mid_job_stops_the_drill_within_one_period(tmp_pa
              "position is unknown", "limit_y_max")
 
 
+def test_a_limit_switch_stops_the_travel_to_the_work_zero_too(tmp_path):
+    m, st = machine(tmp_path), tmp_path / "s.json"
+    assert run_cli("zero", "XY", "--at", "14.45,0,0", "--machine", m, "--state", st).returncode == 0  # X=500 steps
+    proc = run_cli("drill", SAMPLES / "ellipse.png", "--depth", "2", "--machine", m, "--state", st)
+    assert proc.returncode == 130 and "limit switch limit_x_max (pin 13) closed" in proc.stderr, proc.stderr
+    rep = where(tmp_path, m)
+    assert not rep["position_known"] and rep["machine_steps"] == [400, 0, 0]
+
+
 def test_the_e_stop_input_stops_the_job_and_the_position_is_unknown(tmp_path):
     m, st = machine(tmp_path, MACHINE + "estop_after_s = 0.5\n"), tmp_path / "s.json"
     proc = run_cli("goto", "300,300,0", "--unit", "steps", "--machine", m, "--state", st, "--pin-log",

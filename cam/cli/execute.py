@@ -302,7 +302,9 @@ def approach_to_work_zero(job: Any, state: MachineState, start: tuple[int, int, 
 def _approach(job: Job, args: argparse.Namespace, settings: MachineSettings, start: tuple[int, int, int],
               sessions: list) -> MachineSession:
     """Travel to the work zero in a session of its own (the job's pin log holds the job only); returns it."""
-    first = MachineSession(args.port, settings, realtime=getattr(args, "realtime", False))
+    simulated = port_kind(args.port) == "mock" and settings.mock.places()  # the mock's switches ([mock]) too
+    port = MockPort(switches=SwitchSchedule(settings, start)) if simulated else args.port
+    first = MachineSession(port, settings, realtime=getattr(args, "realtime", False))
     first.set_position(start)
     sessions.append(first)
     print(f"going to the work zero first: machine {list(first.position_steps())} -> "
