@@ -95,8 +95,8 @@ and then keeps its built-in value.  An unknown key or a bad value is a
 
     [homing]            # cam home (LinuxCNC's HOME_SEARCH_VEL / HOME_LATCH_VEL / HOME_OFFSET)
     order = "zxy"       # the axes homed, one after another (Z first: the tool goes up out of the way)
-    search_speed_x_mm_s = 1.0   # toward the switch until it closes (at most the axis's start speed)
-    latch_speed_x_mm_s = 0.1    # toward it again, slowly, after backing off until it opened
+    search_speed_x_mm_s = 0.0   # toward the switch until it closes (at most the axis's start speed; 0: that)
+    latch_speed_x_mm_s = 0.0    # toward it again, slowly, after backing off until it opened (0: search / 10)
     direction_x = "-"   # where the switch is: "-" or "+" (+Z is deeper: "-" is up)
     backoff_x_mm = 0.5  # moved on beyond where the switch opened before the latch
     offset_x_mm = 0.0   # the machine coordinate of the latch point: the machine's zero is offset_x_mm from it
@@ -233,15 +233,20 @@ class Homing:
 
     order: str = "zxy"
     """The axes homed, one after another (Z first: the tool goes up, clear of the work)."""
-    search_speed_x_mm_s: float = 1.0
-    search_speed_y_mm_s: float = 1.0
-    search_speed_z_mm_s: float = 0.5
+    search_speed_x_mm_s: float = 0.0
+    search_speed_y_mm_s: float = 0.0
+    search_speed_z_mm_s: float = 0.0
     """Speed toward the switch until it closes, and away until it opens (at most the axis's start speed: the
-    axis stops at once when the switch closes)."""
-    latch_speed_x_mm_s: float = 0.1
-    latch_speed_y_mm_s: float = 0.1
-    latch_speed_z_mm_s: float = 0.05
-    """The slow approach that latches the home (at most the search speed)."""
+    axis stops at once when the switch closes); 0: the axis's start speed."""
+    latch_speed_x_mm_s: float = 0.0
+    latch_speed_y_mm_s: float = 0.0
+    latch_speed_z_mm_s: float = 0.0
+    """The slow approach that latches the home (at most the search speed); 0: a tenth of the search speed."""
+
+    def speeds_mm_s(self, settings: "MachineSettings", axis: str) -> tuple[float, float]:
+        """``(search, latch)`` speed of ``axis`` ("x", "y", "z") in mm/s, the defaults (0) worked out."""
+        search = getattr(self, f"search_speed_{axis}_mm_s") or getattr(settings, f"start_speed_{axis}_mm_s")
+        return search, getattr(self, f"latch_speed_{axis}_mm_s") or search / 10
     direction_x: str = "-"
     direction_y: str = "-"
     direction_z: str = "-"
@@ -558,13 +563,13 @@ def _validate_homing(s: MachineSettings, bad: Any) -> None:
         raise bad("homing.order", f"must be the axes to home, each once, in order (e.g. \"zxy\"), got {h.order!r}")
     start = {"x": s.start_speed_x_mm_s, "y": s.start_speed_y_mm_s, "z": s.start_speed_z_mm_s}
     for a in "xyz":
-        search, latch = getattr(h, f"search_speed_{a}_mm_s"), getattr(h, f"latch_speed_{a}_mm_s")
-        if not MIN_SPEED_MM_S <= search <= start[a]:
-            raise bad(f"homing.search_speed_{a}_mm_s", f"must be {MIN_SPEED_MM_S:g} mm/s..start_speed_{a}_mm_s "
-                      f"({start[a]}: the axis stops at once when the switch closes), got {search}")
-        if not MIN_SPEED_MM_S <= latch <= search:
+        search, latch = h.speeds_mm_s(s, a)
+        if not MIN_SPEED_MM_S / 10 <= search <= start[a]:
+            raise bad(f"homing.search_speed_{a}_mm_s", f"must be {MIN_SPEED_MM_S / 10:g} mm/s..start_speed_{a}_mm_s "
+                      f"({start[a]}: the axis stops at once when the switch closes), or 0, got {search}")
+        if not MIN_SPEED_MM_S / 10 <= latch <= search:
             raise bad(f"homing.latch_speed_{a}_mm_s",
-                      f"must be {MIN_SPEED_MM_S:g} mm/s..homing.search_speed_{a}_mm_s ({search}), got {latch}")
+                      f"must be {MIN_SPEED_MM_S / 10:g} mm/s..the search speed ({search}), or 0, got {latch}")
         if getattr(h, f"direction_{a}") not in ("-", "+"):
             raise bad(f"homing.direction_{a}", f"must be \"-\" or \"+\", got {getattr(h, f'direction_{a}')!r}")
         if not 0 <= getattr(h, f"backoff_{a}_mm") <= 1000:

@@ -33,6 +33,8 @@ limit_x_max = "!13"
 estop = "!15"
 
 [homing]
+search_speed_z_mm_s = 0.5
+latch_speed_z_mm_s = 0.05
 offset_x_mm = 0.289
 offset_z_mm = -3.14
 
@@ -86,7 +88,7 @@ def steps_after(log, settings) -> tuple[np.ndarray, np.ndarray]:
     ('[inputs]\nswitch_x = "!10"\n', "inputs.switch_x"),
     ('[homing]\norder = "xx"\n', "homing.order"),
     ('[homing]\nsearch_speed_x_mm_s = 5.0\n', "homing.search_speed_x_mm_s"),
-    ('[homing]\nlatch_speed_z_mm_s = 0.6\n', "homing.latch_speed_z_mm_s"),
+    ('[homing]\nlatch_speed_z_mm_s = 0.9\n', "homing.latch_speed_z_mm_s"),
     ('[homing]\ndirection_y = "up"\n', "homing.direction_y"),
     ('[homing]\noffset_x_mm = -5.0\n', "homing.offset_x_mm"),
     ('[mock]\nlimit_x_max_steps = 2000000000\n', "mock.limit_x_max_steps"),
@@ -94,6 +96,12 @@ def steps_after(log, settings) -> tuple[np.ndarray, np.ndarray]:
 def test_a_bad_inputs_or_homing_key_is_one_line_naming_it(tmp_path, table, key):
     m = machine(tmp_path, table)
     one_line(run_cli("where", "--machine", m, "--state", tmp_path / "s.json"), f"'{key}'", str(m))
+
+
+def test_homing_speeds_follow_the_start_speeds_by_default():
+    s = settings_from_mapping({"start_speed_z_mm_s": 0.2})  # a slow Z: no [homing] key needs changing
+    assert s.homing.speeds_mm_s(s, "z") == (0.2, pytest.approx(0.02))
+    assert s.homing.speeds_mm_s(s, "x") == (s.start_speed_x_mm_s, pytest.approx(s.start_speed_x_mm_s / 10))
 
 
 def test_inputs_read_as_pins_and_levels():
@@ -307,6 +315,6 @@ def test_the_e_stop_input_stops_a_real_time_homing():
     with pytest.raises(HomingError, match="e-stop input .pin 15. is closed"):
         home(port, s, (0, 0, 100), realtime=True)
     t = port.pin_log().t_ns
-    period_ns = s.mm_per_step_z / s.homing.search_speed_z_mm_s * 1e9
+    period_ns = s.mm_per_step_z / s.homing.speeds_mm_s(s, "z")[0] * 1e9
     assert 0.5e9 - 2 * period_ns < t[-1] < 0.5e9  # sampled before every write: none after it closed
     assert not port.read_inputs() & input_mask(15)  # still pressed: pin 15 pulled low

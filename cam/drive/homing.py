@@ -128,7 +128,7 @@ class _Homer:
         per_mm = self.settings.mm_per_step_z if a == "z" else self.settings.mm_per_step_xy
         lo, hi = self.settings.travel.bounds_steps()[i]
         reach = (hi - lo) * 3 // 2 + 10
-        search, latch = getattr(h, f"search_speed_{a}_mm_s"), getattr(h, f"latch_speed_{a}_mm_s")
+        search, latch = h.speeds_mm_s(self.settings, a)
         name = f"home_{a}"
         ignore = frozenset(n for n, (pin, _) in self.settings.inputs.wired().items()
                            if n.startswith("limit") and pin == self.settings.inputs.wired()[name][0])
