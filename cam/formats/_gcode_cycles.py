@@ -11,6 +11,9 @@ import math
 from ._gcode_data import _CYCLE_PECK, GcodeMove
 from ._gcode_state import _State
 
+MAX_PECKS = 100_000
+"""Pecks of one G73/G83 hole (Q against the depth) past which the line is refused before a peck is made."""
+
 
 class _Cycles(_State):
     """The holes of a canned cycle line, made moves by :meth:`go` (:class:`~._gcode_motion._Motion`)."""
@@ -87,6 +90,10 @@ class _Cycles(_State):
         x, y = xy
         if code in (73, 83):
             delta = self.cycle["q"]
+            pecks = math.ceil((r - cc) / delta) if r > cc else 0  # counted before one is made
+            if pecks > MAX_PECKS:
+                raise self.err(f"canned cycle G{code} would peck {pecks:,} times (Q{delta:g} mm over {r - cc:g} mm); "
+                               f"at most {MAX_PECKS:,} pecks a hole are made: check the Q word's units")
             depth = r - delta
             while depth > cc:
                 self.go("feed", (x, y, depth), **feed)
