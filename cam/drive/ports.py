@@ -161,7 +161,7 @@ class MockPort(Port):
 
     def write(self, data: int, strobe: int, t_ns: int) -> None:
         if self.switches is not None:
-            self.switches.sent(np.array([data], np.uint8), int(t_ns) + self.time_offset_ns)
+            self.switches.sent_one(int(data), int(t_ns) + self.time_offset_ns)
         self._pending.append((int(t_ns) + self.time_offset_ns, int(data), int(strobe)))
         if len(self._pending) >= _PENDING_WRITES:
             self._flush()
@@ -398,7 +398,27 @@ class SwitchSchedule:
         """The levels where the tool stands now (a real-time run's sample: its time runs on from the last
         write's by the wall clock)."""
         t_now = self.t_ns + (time.monotonic_ns() - self.wall_ns if self.wall_ns else 0)
-        return int(self._levels(self.position_steps[None, :], np.array([t_now], np.int64))[0])
+        closed: dict[tuple[int, bool], bool] = {}
+        for mask, high, axis, place, side in self.rules:  # plain integers: the real-time runner asks every write
+            v = int(self.position_steps[axis])
+            closed[(mask, high)] = closed.get((mask, high), False) or (v <= place if side < 0 else v >= place)
+        for mask, high, t in self.timed:
+            closed[(mask, high)] = closed.get((mask, high), False) or t_now >= t
+        levels = self.idle
+        for (mask, high), c in closed.items():
+            if c:
+                levels = (levels | mask) if high else (levels & ~mask)
+        return int(levels)
+
+    def sent_one(self, data: int, t_ns: int) -> None:
+        """One write went out at job time ``t_ns`` (:meth:`sent` in plain integers, for the real-time runner)."""
+        self.t_ns, self.wall_ns = t_ns, time.monotonic_ns()
+        rising = data & ~self.last_data
+        if rising:
+            for a in range(3):
+                if rising & int(self.clock[a]):
+                    self.position_steps[a] += 1 if data & int(self.dirbit[a]) else -1
+        self.last_data = data
 
     def sent(self, data: np.ndarray, t_ns: int) -> None:
         """These writes went out, the last at job time ``t_ns``: the tool moved on."""

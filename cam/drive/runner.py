@@ -36,6 +36,7 @@ from ..settings import INPUT_BITS, MachineSettings
 from ..verify.pinlog import PinLog, carve, decode_pin_log
 from .._compiled import resolved
 from ._kernels import net_steps_kernel
+from .priority import as_background
 from .ports import MockPort, Port, open_port
 from .pins import axis_bits
 from .chunks import ChunkedPlan, StepChunk, plan_chunks
@@ -338,8 +339,27 @@ class SwitchWatch:
 
     def check(self, levels: int, data: int) -> bool:
         """Sampled ``levels`` (:meth:`~cam.drive.ports.Port.read_inputs`) before write ``data``: True to send it
-        and no more."""
-        return self.first(np.array([levels], np.int64), np.array([data], np.int64)) == 0
+        and no more.  The rule of :meth:`first` for one write, in plain integers (the real-time runner calls it
+        before every write: a few microseconds)."""
+        prev, hit = self.last_data, ""
+        for n, mask, high, clock, dirbit, side in self.stops:
+            on = bool(levels & mask) == high
+            if side == 0 or self.seen_open[n]:
+                if on and (not hit or n == "estop"):
+                    hit = n
+            elif not on:
+                self.seen_open[n] = True
+            elif data & clock and not prev & clock and bool(data & dirbit) == (side > 0) and not hit:
+                hit = n
+        if not hit and self.until is not None:
+            n, mask, high, closed = self.until
+            if (bool(levels & mask) == high) == closed:
+                hit = n
+        if hit:
+            self.tripped = hit
+            return True
+        self.last_data = int(data)
+        return False
 
     def _stop_at(self, on: np.ndarray, d: np.ndarray, prev: np.ndarray, name: str, clock: int, dirbit: int,
                  side: int) -> int:
@@ -723,6 +743,7 @@ def _made_ahead(chunks: Iterator[StepChunk], ahead: int = 2) -> Iterator[StepChu
     end = object()
 
     def make() -> None:
+        as_background()  # in the real-time runner process: not the writer's class and core
         try:
             for chunk in chunks:
                 while not done.is_set():
