@@ -113,6 +113,51 @@ def test_inputs_read_as_pins_and_levels():
     assert cam.settings.DEFAULT_SETTINGS.inputs.wired() == {}  # nothing wired: nothing sampled
 
 
+class _FakePpdev:
+    """pyparallel's ppdev port as far as the inputs go: the status register as the hardware gives it."""
+
+    def __init__(self, status: int) -> None:
+        self.status = status
+
+    def PPRSTATUS(self) -> int:  # noqa: N802 - pyparallel's name
+        return self.status
+
+
+class _FakeOther:
+    """pyparallel elsewhere: each pin's level (getInBusy already undoes BUSY's inversion)."""
+
+    def getInAcknowledge(self): return False  # noqa: E704,N802
+    def getInBusy(self): return True  # noqa: E704,N802
+    def getInPaperOut(self): return False  # noqa: E704,N802
+    def getInSelected(self): return True  # noqa: E704,N802
+    def getInError(self): return False  # noqa: E704,N802
+
+
+def test_the_parallel_port_reads_its_status_register_as_pin_levels():
+    from cam.drive.ports import ParallelPort
+
+    port = object.__new__(ParallelPort)
+    port.name = "/dev/parport0"
+    port._port = _FakePpdev(0x70)  # BUSY bit 0 (pin 11 high: the hardware inverts it), ACK, PAPER-OUT, SELECT high
+    assert port.reads_inputs and port.read_inputs() == IDLE_INPUTS & ~input_mask(15)  # ERROR (pin 15) low
+    port._port = _FakeOther()
+    assert port.read_inputs() == input_mask(11) | input_mask(13)
+
+
+def test_the_real_time_check_is_the_batch_rule():
+    s = settings_from_mapping({"inputs": {"limit_x_max": "!13", "limit_y_min": "!13", "estop": "!15",
+                                          "home_x": "!10"}})
+    rng = np.random.default_rng(7)
+    for _ in range(200):
+        levels = rng.choice([IDLE_INPUTS, IDLE_INPUTS & ~16, IDLE_INPUTS & ~8, IDLE_INPUTS & ~24], 30,
+                            p=[.7, .15, .05, .1]).astype(np.int64)
+        data = rng.integers(0, 256, 30)
+        batch, one = SwitchWatch(s), SwitchWatch(s)
+        k = batch.first(levels, data)
+        assert k == next((i for i in range(30) if one.check(int(levels[i]), int(data[i]))), 30)
+        assert batch.tripped == one.tripped
+
+
 # -- a limit switch and the e-stop stop the motion -----------------------------------------------------------
 
 def test_a_limit_switch_closing_mid_move_stops_before_the_next_step():
