@@ -18,7 +18,7 @@ import cam
 from cam.drive.homing import HomingError, home
 from cam.drive.ports import IDLE_INPUTS, MockPort, SwitchSchedule, input_mask
 from cam.drive.chunks import plan_chunks
-from cam.drive.runner import LIMIT_STOPPED, SwitchWatch, run
+from cam.drive.runner import LIMIT_STOPPED, Controller, SwitchWatch, run
 from cam.job.model import travel_job
 from cam.settings import load_settings, settings_from_mapping
 from cam.verify.pinlog import decode_pin_log, read_pin_log
@@ -204,6 +204,20 @@ def test_the_watch_books_the_first_switch():
     assert w.first(np.array([idle, idle, idle & ~8, idle & ~8]), np.zeros(4, np.int64)) == 2 and w.tripped == "estop"
 
 
+def test_the_lift_after_a_stop_samples_the_switches_too():
+    s = settings_from_mapping({"inputs": {"limit_z_min": "!13"}})
+    job = travel_job(np.array([[0, 0, 100], [2000, 0, 100]]), s)
+    job.pause[0] = True  # stopped at the pause, 100 steps deep: the lift up meets limit_z_min at Z=50
+    ctl = Controller()
+    port = MockPort(switches=SwitchSchedule(s, (0, 0, 0), {"limit_z_min": 50}))
+    r = run(plan_chunks(job), port, controller=ctl, on_pause=lambda position, note: ctl.stop())
+    assert r.status == LIMIT_STOPPED and r.position_steps == (0, 0, 50) and "limit_z_min" in r.messages[0]
+    pos, step = steps_after(r.pin_log(), s)
+    peak = int(np.argmax(pos[:, 2] == 100))
+    closed = peak + int(np.argmax(pos[peak:, 2] <= 50))
+    assert tuple(pos[-1]) == (0, 0, 50) and not step[closed + 1:].any()
+
+
 def test_a_limit_switch_mid_move_makes_the_position_unknown_until_home_or_where_set(tmp_path):
     m, st = machine(tmp_path), tmp_path / "s.json"
     proc = run_cli("goto", "600,0,0", "--unit", "steps", "--machine", m, "--state", st, "--pin-log",
@@ -350,6 +364,18 @@ def test_a_limit_switch_stops_a_real_time_run_on_the_mock():
     pos, step = steps_after(r.pin_log(), s)
     assert not step[int(np.argmax(pos[:, 1] >= 40)) + 1:].any()
     assert r.wall_time_s < 1.0  # it ended there, not after the whole move
+
+
+@pytest.mark.realtime
+def test_a_limit_switch_ends_a_real_time_lift():
+    s = settings_from_mapping({"inputs": {"limit_z_min": "!13"}, "delay_xy_ms": 1.0, "delay_z_ms": 1.0,
+                               "ramp": "constant"})
+    job = travel_job(np.array([[0, 0, 100], [2000, 0, 100]]), s)
+    ctl = Controller()
+    port = MockPort(switches=SwitchSchedule(s, (0, 0, 0), {"limit_z_min": 50}))
+    r = run(plan_chunks(job), port, realtime=True, controller=ctl,
+            progress=lambda done, total, t_ns: ctl.stop() if done > 300 else None)
+    assert r.status == LIMIT_STOPPED and r.position_steps[2] == 50, r.messages
 
 
 @pytest.mark.realtime

@@ -686,33 +686,47 @@ def _ending(plan: Plan, p: Port, ctl: Controller, cursor: Cursor, t0: Optional[i
     position = cursor.position_steps
     if cursor.sent < len(plan):
         if watch is not None and watch.tripped:
-            status = {"estop": EMERGENCY_STOPPED}.get(watch.tripped, LIMIT_STOPPED if watch.tripped.startswith(
-                "limit") else SWITCHED)
+            status = _switch_status(watch)
             messages.append(watch.message(position))
         elif ctl.estop_requested:
             status = EMERGENCY_STOPPED
             messages.append(f"emergency stop at {position} steps; nothing more was sent")
         else:
-            status, position = _stop(plan, p, ctl, cursor, t0, lateness)
-            messages.append(f"stopped at X={position[0]} Y={position[1]} steps; tool lifted to Z={position[2]}")
+            status, position = _stop(plan, p, ctl, cursor, t0, lateness, watch)
+            messages.append(watch.message(position) if watch is not None and watch.tripped else
+                            f"stopped at X={position[0]} Y={position[1]} steps; tool lifted to Z={position[2]}")
     if isinstance(p, MockPort):
         p._flush()
     return status, position, messages
 
 
-def _stop(plan: Plan, p: Port, ctl: Controller, cursor: Cursor, t0: Optional[int], lateness: Lateness
-          ) -> tuple[str, tuple[int, int, int]]:
+def _switch_status(watch: SwitchWatch) -> str:
+    """The status of a run a switch ended."""
+    return {"estop": EMERGENCY_STOPPED}.get(watch.tripped, LIMIT_STOPPED if watch.tripped.startswith("limit")
+                                            else SWITCHED)
+
+
+def _stop(plan: Plan, p: Port, ctl: Controller, cursor: Cursor, t0: Optional[int], lateness: Lateness,
+          watch: Optional[SwitchWatch] = None) -> tuple[str, tuple[int, int, int]]:
     """Lift the tool straight up to the safe plane where the cursor is; returns (status, position_steps).
 
     ``t0``: the real-time job start (monotonic ns), None on the simulated clock.  An emergency stop
     during a real-time lift ends it (status :data:`EMERGENCY_STOPPED`).  A late lift write moves the
-    rest of the lift later, as in a job.
+    rest of the lift later, as in a job.  ``watch``: the switches are sampled before every lift write too (a
+    limit switch or the e-stop ends the lift, :func:`_switch_status`).
     """
     position = cursor.position_steps
     lift_t, lift_d = _lift_writes(plan.settings, plan.safe_z_steps, cursor.last_data, position[2])
     strobe = 1 if plan.settings.half_step else 0
     if t0 is None:
-        p.write_many(cursor.last_t_ns + lift_t, lift_d, np.full(len(lift_t), strobe, np.uint8))
+        n = len(lift_t)
+        if watch is not None:  # the mock's simulated switches before each lift write
+            n = watch.first(p.inputs_along(cursor.last_t_ns + lift_t, lift_d), lift_d)  # type: ignore[attr-defined]
+        p.write_many(cursor.last_t_ns + lift_t[:n], lift_d[:n], np.full(n, strobe, np.uint8))
+        if n < len(lift_t):  # a switch ended the lift: each Z clock write before it lifted one step
+            z_clock = int(axis_bits(plan.settings)[0][2])
+            return _switch_status(watch), (position[0], position[1],  # type: ignore[arg-type]
+                                           position[2] - int(np.count_nonzero(lift_d[:n] & z_clock)))
         return STOPPED, (position[0], position[1], min(position[2], plan.safe_z_steps))
     start = time.monotonic_ns() - t0
     z_clock = int(axis_bits(plan.settings)[0][2])
@@ -724,6 +738,8 @@ def _stop(plan: Plan, p: Port, ctl: Controller, cursor: Cursor, t0: Optional[int
             time.sleep(min(0.001, max(0.0, (t_rel - (time.monotonic_ns() - t_lift0)) / 1e9)))
         if ctl.estop_requested:
             return EMERGENCY_STOPPED, position
+        if watch is not None and watch.check(p.read_inputs(), d):
+            return _switch_status(watch), position
         now = time.monotonic_ns()
         late_ns = now - t_lift0 - t_rel
         if late_ns > 0:
