@@ -170,7 +170,8 @@ class MockPort(Port):
         self._flush()
         if self.switches is not None and len(t_ns):
             self.switches.sent(np.asarray(data, np.uint8), int(t_ns[-1]) + self.time_offset_ns)
-        self._keep(np.asarray(t_ns, np.int64) + self.time_offset_ns, np.asarray(data, np.uint8), np.asarray(strobe, np.uint8))
+        self._keep(np.asarray(t_ns, np.int64) + self.time_offset_ns, np.asarray(data, np.uint8),
+                   np.asarray(strobe, np.uint8))
 
     def _keep(self, t_ns: np.ndarray, data: np.ndarray, strobe: np.ndarray) -> None:
         if not len(t_ns):
