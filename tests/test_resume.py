@@ -401,7 +401,7 @@ def test_the_journal_is_never_ahead_of_the_machine(tmp_path):
     positions = decode_pin_log(cam.PinLog(job.steps.t_ns, job.steps.data, job.steps.strobe), job.settings)
     for j in running:
         assert tuple(positions.position_steps[j.writes_done - 1]) == j.position_steps
-        assert job.steps.point_write[j.last_move] < j.writes_done
+        assert j.last_move == -1 or job.steps.point_write[j.last_move] < j.writes_done  # -1: no move done yet
         assert j.last_move + 1 == len(job.toolpath) or job.steps.point_write[j.last_move + 1] >= j.writes_done
     assert read_journal(journal).state == "finished"
 

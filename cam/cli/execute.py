@@ -243,8 +243,8 @@ ORIGINS = ("file", "upper-left", "lower-left", "center")
 
 def origin_anchor(job: Any, origin: Optional[str]) -> tuple[int, int]:
     """The ``(x, y)`` point of a prepared job, in its own frame (steps, +y toward the front of the machine), that
-    goes to the work zero: ``file`` its frame's zero (a drawing's top-left pixel, the thesis's; a drill, HPGL or
-    SVG file's own zero with ``--origin file``), ``upper-left``, ``lower-left`` or ``center`` of what it cuts (the
+    goes to the work zero: ``file`` its frame's zero (a drawing's top-left pixel, the thesis's), ``upper-left``,
+    ``lower-left`` or ``center`` of what it cuts (the
     XY extent of the tool below the surface).  None: ``file`` for drawings and digitized matrices, ``upper-left``
     for the other kinds."""
     kind = getattr(job, "kind", "")

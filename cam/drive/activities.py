@@ -41,8 +41,12 @@ def run_steps(session: Any, name: str, plan: "StepPlan | ChunkedPlan", ctl: Cont
             if port_kind(session.port) != "mock":
                 open_port(session.port).close()  # a port that cannot be opened: its own message, from here
             # the child makes a chunked plan's writes itself, a chunk at a time (bounded memory)
-            result = session.runner_process().run(plan, session.port, ctl, progress=session.progress,
-                                                  on_pause=session.prompt, journal=journal, cursor=cursor)
+            runner = session.runner_process()
+            if not runner.claimed:  # a new runner process: say once what it got (class, memory, core)
+                runner.start()
+                session.log(f"step runner: {runner.claimed or 'started'}")
+            result = runner.run(plan, session.port, ctl, progress=session.progress, on_pause=session.prompt,
+                                journal=journal, cursor=cursor)
         else:  # the simulated clock, or a port object the caller opened
             port = open_port(session.port)
             cursor = cursor or Cursor(plan.settings)

@@ -44,6 +44,7 @@ from ..errors import CamError, PortError
 from ..verify.pinlog import PinLog, write_pin_log
 from .journal import JournalSpec, JournalWriter, journal_state_of
 from .ports import MockPort, Port, open_port
+from .priority import claim_machine
 from .runner import Controller, Cursor, PauseFn, ProgressFn, RunResult, run
 from .chunks import ChunkedPlan
 from .steps import StepPlan
@@ -58,9 +59,11 @@ _PAUSE, _STOP, _ESTOP = 1, 2, 4
 _PAGE_BYTES = 4096
 _POLL_S = 0.0005  # the child's longest sleep between looks at the controls
 _PARENT_POLL_S = 0.005  # the parent's look at the progress
+_START_S = 30.0  # the longest wait for a new runner process to say what it got
 _NICE = -10
-"""The runner's niceness step (more CPU share than other processes, yet never starving them as a real-time
-scheduling class would: the runner busy-waits the last moments before each write)."""
+"""The runner's niceness step where a real-time class is not permitted (:func:`cam.drive.priority.claim_machine`:
+with SCHED_FIFO the runner keeps one core, the one it busy-waits on before each write, and the others serve the
+rest)."""
 
 
 def _flags_of(ctl: Controller) -> int:
@@ -132,11 +135,9 @@ def _child(sock_fd: int, page_fd: int, parent_pid: int) -> None:
     for name in ("SIGINT", "SIGTERM", "SIGHUP"):
         if hasattr(signal, name):
             signal.signal(getattr(signal, name), signal.SIG_IGN)
-    try:
-        os.nice(_NICE)  # ahead of the web server, the planning worker and the rest when the CPU is busy
-    except OSError:  # not allowed (not root, no CAP_SYS_NICE): the ordinary priority
-        pass
+    claimed = claim_machine(_NICE)  # the machine first: a real-time class, locked memory, a core of its own
     conn = Connection(sock_fd)
+    conn.send(("claimed", claimed))
     page = mmap.mmap(page_fd, _PAGE_BYTES)
     slots = np.frombuffer(page, np.int64)
     slots[_ALIVE] = os.getpid()
@@ -236,6 +237,8 @@ class RunnerProcess:
         self._page: Optional[mmap.mmap] = None
         self._slots: Optional[np.ndarray] = None
         self._lock = threading.Lock()
+        self.claimed = ""
+        """What the runner process got: its scheduling class, locked memory, its core (one line)."""
 
     @property
     def pid(self) -> Optional[int]:
@@ -267,6 +270,10 @@ class RunnerProcess:
         page_file.close()
         self._slots = np.frombuffer(self._page, np.int64)
         self._conn = Connection(ours.detach())
+        if self._conn.poll(_START_S):  # what the runner got from the system, said once (the session logs it)
+            message = self._conn.recv()
+            if message[0] == "claimed":
+                self.claimed = str(message[1])
 
     def run(self, plan: "StepPlan | ChunkedPlan", port_name: str, controller: Controller,
             progress: Optional[ProgressFn] = None, on_pause: Optional[PauseFn] = None,
