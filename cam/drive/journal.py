@@ -34,6 +34,7 @@ from ..fileio import atomic_write_text, read_text
 from ..job.model import JobLike
 from ..job.resume import Journal, JournalBase, journal_record, plan_fingerprint
 from .runner import Cursor
+from .priority import as_background
 
 __all__ = ["JOURNAL_PERIOD_S", "JournalSpec", "JournalWriter", "journal_spec", "read_journal", "write_journal",
            "journal_state_of"]
@@ -134,6 +135,7 @@ class JournalWriter:
         return int(sent), position
 
     def _loop(self) -> None:
+        as_background()  # in the real-time runner process: not the writing thread's class and core
         while not self._closing.wait(JOURNAL_PERIOD_S):
             sent, position = self._sent_and_position()
             if sent != self._written:
