@@ -39,6 +39,7 @@ SIGNATURES = {
         "(Array(int64, 1, 'C'), Array(boolean, 1, 'C'), Array(int64, 1, 'C'), )",
     ],
     'cam.drive.ramps._drop_caps': [
+        "(Array(int64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), float64, )",
     ],
     'cam.drive.ramps._passes': [
         "(Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(boolean, 1, 'C'), Array(float64, 1, 'C'), )",
