@@ -81,7 +81,9 @@ other reliefs run in the slow tier."""
 
 SLOW_CASES = {"test_pin_logs_gcode_and_pictures_are_the_same_at_any_piece_size[3d-ball-finer-pause-start]",
               "test_pin_logs_gcode_and_pictures_are_the_same_at_any_piece_size[2d-v-tool-passes]",
-              "test_a_prepared_job_is_the_same_held_or_in_pieces[roughing]"}
+              "test_a_prepared_job_is_the_same_held_or_in_pieces[roughing]",
+              "test_pin_logs_gcode_and_pictures_are_the_same_at_any_piece_size[2d-depth-list-passes-pause-start]",
+              "test_a_prepared_job_is_the_same_held_or_in_pieces[finer-pass]"}
 """Fast-tier cases that run in the slow tier all the same (tests/conftest.py): the same checks run fast on the
 2D cases and, for the relief, in the other tests of this module."""
 

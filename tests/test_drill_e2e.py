@@ -12,6 +12,9 @@ from cam.job.drill import plan_drill
 from cam.verify.pinlog import decode_pin_log, read_pin_log
 from cam.drive.runner import run
 
+SLOW_CASES = {'test_three_tool_board_on_the_emulated_maximus_board'}
+"""Cases run in the slow tier only (tests/conftest.py): the fast tier stays under 3 minutes."""
+
 TOOLS_MM = {1: 1.0, 2: 0.8, 3: 3.2}  # T2 is the smallest: it is drilled first
 
 

@@ -2,6 +2,8 @@
 it ended and how many stalls, not only the planned machine time."""
 import re
 
+import pytest
+
 from cam.cli.drill import finish_line
 from cam.cli.execute import Outcome
 from cam.drive.runner import FINISHED
@@ -22,6 +24,7 @@ def test_an_on_time_run_says_how_long_it_took_and_nothing_about_lateness():
     assert "the run took 0:00:02 (2.0 s machine time planned, constant ramps)" in line and "late" not in line
 
 
+@pytest.mark.realtime
 def test_a_real_time_mock_run_prints_the_elapsed_time(tmp_path):
     r = run_cli("drill", SAMPLES / "board.drl", "--yes", "--realtime", "--delay", "0.1,0.1", "--ramp", "constant")
     assert r.returncode == 0, r.stderr

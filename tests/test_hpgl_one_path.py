@@ -18,7 +18,7 @@ from cam.job.hpgl_stream import HpglJobStream, stream_hpgl
 from cam.job.model import Job, JobLike, pause_points
 from test_hpgl_stream import _random_hpgl as random_hpgl
 
-SLOW_CASES = {'test_gcode_is_identical'}
+SLOW_CASES = {'test_gcode_is_identical', 'test_pin_logs_are_byte_identical', 'test_any_piece_size_joins_to_the_same_job[3]'}
 """Cases that run in the slow tier only (tests/conftest.py): the same checks keep faster cases here."""
 
 

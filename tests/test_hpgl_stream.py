@@ -22,7 +22,8 @@ from cam.job.hpgl_stream import stream_hpgl
 from cam.job.jobs import JobOptions, prepare_job
 from cam.verify.pinlog import read_pin_log
 
-SLOW_CASES = {'test_streamed_plan_equals_whole_plan[lookahead]'}
+SLOW_CASES = {'test_streamed_plan_equals_whole_plan[lookahead]',
+              'test_a_stopped_streamed_hpgl_job_resumes_and_carves_as_an_uninterrupted_run[0.3]'}
 """Cases that run in the slow tier only (tests/conftest.py): the same checks keep faster cases here."""
 
 

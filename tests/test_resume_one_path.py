@@ -28,6 +28,9 @@ from cam.job.resume import MoveIndex, PlanFingerprint, ResumedJob, plan_fingerpr
 from cam.settings import MachineSettings, Travel
 from conftest import SAMPLES
 
+SLOW_CASES = {'test_resumed_in_memory_or_in_pieces_is_the_same[drawing]'}
+"""Cases run in the slow tier only (tests/conftest.py): the fast tier stays under 3 minutes."""
+
 SETTINGS = cam.MachineSettings().replace(ramp="constant", delay_xy_ms=0.05, delay_z_ms=0.05, travel=Travel(
     x_min_steps=-10**5, x_max_steps=10**5, y_min_steps=-10**5, y_max_steps=10**5, z_min_steps=-10**4,
     z_max_steps=10**4))

@@ -14,6 +14,9 @@ from support.lcnc import canonical_motion, canonical_time_s, parse_canonical, ru
 
 from conftest import ROOT, SAMPLES, carve_job, drawing_from_rows
 
+SLOW_CASES = {'test_rs274_path_carved_with_the_tool_equals_cams_carve[disc.png-dome.png-ball:1]'}
+"""Cases run in the slow tier only (tests/conftest.py): the fast tier stays under 3 minutes."""
+
 needs_rs274 = pytest.mark.skipif(
     shutil.which("rs274") is None and not os.environ.get("CI"), reason="rs274 (linuxcnc-uspace) not installed"
 )

@@ -15,6 +15,9 @@ import cam
 from conftest import SAMPLES
 from test_web import MEDIUM, Server, compiled_kernels, servers  # noqa: F401 (fixtures)
 
+SLOW_CASES = {'test_planning_over_the_work_memory_limit_is_a_clean_error'}
+"""Cases run in the slow tier only (tests/conftest.py): the fast tier stays under 3 minutes."""
+
 HALF_MS = MEDIUM.replace(delay_xy_ms=0.5, delay_z_ms=0.5)
 PNG = (SAMPLES / "ellipse.png").read_bytes()
 DRILLS = "M48\nMETRIC\nT1C0.8\n%\nT1\n" + "".join(f"X{x * 0.5:.1f}Y{y * 0.5:.1f}\n" for y in range(5)
