@@ -193,11 +193,12 @@ def test_import_cam_loads_no_heavy_package():
     assert _heavy(json.loads(proc.stdout)) == []
 
 
+SLOW_CASES = {'test_only_the_emulator_command_imports_the_emulator'}
+"""Cases run in the slow tier only (tests/conftest.py): the fast tier stays under 3 minutes."""
+
 RUNNER = r"""
 import contextlib, io, json, runpy, sys
 
-SLOW_CASES = {'test_only_the_emulator_command_imports_the_emulator'}
-"""Cases run in the slow tier only (tests/conftest.py): the fast tier stays under 3 minutes."""
 heavy, runs, report = set(sys.argv[1].split(",")), json.loads(sys.argv[2]), {}
 for argv in runs:
     sys.argv = ["cam", *argv]

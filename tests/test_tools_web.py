@@ -11,10 +11,10 @@ from cam.job.jobs import JobOptions, prepare_job
 from conftest import ROOT, SAMPLES
 
 from test_web import FAST, Server, browser  # noqa: E402,F401  (the real server on a free port, in a thread;
+# the browser fixture: Debian chromium through Playwright)
 
 SLOW_CASES = {'test_api_plan_names_the_tool'}
 """Cases run in the slow tier only (tests/conftest.py): the fast tier stays under 3 minutes."""
-# the browser fixture: Debian chromium through Playwright)
 
 DOME = ROOT / "profiles" / "dome.png"
 
