@@ -19,6 +19,7 @@ from cam.job.drill import DrillJobStream, _machine_mm, _tool_runs, plan_drill
 from cam.job.model import CUT, RETRACT, TRAVEL, JobLike
 from cam.job.resume import plan_fingerprint
 from conftest import SAMPLES
+from support.pinlogs import pin_log_bytes as _pin_log_bytes
 
 SETTINGS = cam.MachineSettings().replace(delay_xy_ms=0.05, delay_z_ms=0.05)
 PER_MOVE = ("points_steps", "kind", "target", "pause")
@@ -98,14 +99,6 @@ def test_plan_drill_is_its_pieces_joined_and_the_reference(hole_lists, drill_ord
         for name in PER_MOVE:
             np.testing.assert_array_equal(getattr(joined, name), getattr(job, name))
         assert joined.pause_notes == job.pause_notes and joined.warnings == job.warnings
-
-
-def _pin_log_bytes(job, tmp_path: Path, name: str) -> bytes:
-    path = tmp_path / name
-    result = run(job, MockPort(pin_log_path=path), on_pause=lambda *a: None)
-    assert result.status == "finished"
-    log = result.pin_log()
-    return b"".join(np.ascontiguousarray(a).tobytes() for a in (log.t_ns, log.data, log.strobe)) + path.read_bytes()
 
 
 def test_the_pieces_run_plan_and_export_as_the_joined_job(tmp_path):

@@ -30,6 +30,7 @@ from cam.job.model import Job, JobLike
 from cam.job.resume import plan_fingerprint
 from conftest import SAMPLES
 from test_gcode_lang import CONSTRUCTS, HOME_G28_IN, HOME_G30_IN, SUBROUTINE, TOOLS_IN
+from support.pinlogs import pin_log_bytes as _pin_log_bytes
 
 PER_MOVE = ("points_steps", "kind", "target", "pause", "period_ns", "periods", "move_start", "rest")
 ONE_PIECE = 10**9
@@ -194,14 +195,6 @@ def test_pauses_warnings_and_counts_come_through(programs):
     assert stream.warnings == job.warnings and bool(job.rest.any())
     plan = plan_chunks(stream)
     assert plan.pause_notes == job.pause_notes and plan.warnings == job.warnings
-
-
-def _pin_log_bytes(job, tmp_path: Path, name: str) -> bytes:
-    path = tmp_path / name
-    result = run(job, MockPort(pin_log_path=path), on_pause=lambda *a: None)
-    assert result.status == "finished"
-    log = result.pin_log()
-    return b"".join(np.ascontiguousarray(a).tobytes() for a in (log.t_ns, log.data, log.strobe)) + path.read_bytes()
 
 
 @pytest.mark.parametrize("name", ["pauses.ngc", "flow.ngc", pytest.param("bolt_plate.ngc", marks=pytest.mark.slow)])

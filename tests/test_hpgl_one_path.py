@@ -17,6 +17,7 @@ from cam.job.hpgl import plan_hpgl
 from cam.job.hpgl_stream import HpglJobStream, stream_hpgl
 from cam.job.model import Job, JobLike, pause_points
 from test_hpgl_stream import _random_hpgl as random_hpgl
+from support.pinlogs import pin_log_bytes as _pin_log_bytes
 
 SLOW_CASES = {'test_gcode_is_identical', 'test_pin_logs_are_byte_identical', 'test_any_piece_size_joins_to_the_same_job[3]'}
 """Cases that run in the slow tier only (tests/conftest.py): the same checks keep faster cases here."""
@@ -130,14 +131,6 @@ def test_plan_hpgl_is_the_stream_joined(files):
             _assert_same_job(plan_hpgl(drawing, settings=SETTINGS, offset_mm=offset, cut_depth_mm=0.3),
                              stream_hpgl(path, settings=SETTINGS, offset_mm=offset, cut_depth_mm=0.3, piece_points=5,
                                          chunk_bytes=64).joined(), f"{path.name} offset {offset}")
-
-
-def _pin_log_bytes(job, tmp_path: Path, name: str) -> bytes:
-    path = tmp_path / name
-    result = run(job, MockPort(pin_log_path=path), on_pause=lambda *a: None)
-    assert result.status == "finished"
-    log = result.pin_log()
-    return b"".join(np.ascontiguousarray(a).tobytes() for a in (log.t_ns, log.data, log.strobe)) + path.read_bytes()
 
 
 def test_pin_logs_are_byte_identical(files, tmp_path):
