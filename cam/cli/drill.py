@@ -12,7 +12,7 @@ from ..digitize.digitized import save_digitized
 from ..drive.maximus.board import drill_stroke
 from ..drive.journal import read_journal
 from ..drive.ports import port_kind
-from ..errors import CapabilityError
+from ..errors import CamError, CapabilityError
 from ..job.jobs import resume_job
 from .checks import check_output_path
 from ..fileio import atomic_write_text
@@ -28,17 +28,29 @@ def _finish(args: argparse.Namespace, outcome: Outcome, report: dict, summary: s
     report["status"] = outcome.status
     report.update(outcome.timing)
     ramp = report["ramp"]
+    report_error = None
     if args.report:
-        atomic_write_text(args.report, json.dumps(report, indent=2) + "\n")
+        try:
+            atomic_write_text(args.report, json.dumps(report, indent=2) + "\n")
+        except CamError as exc:  # the job has run: what it did is said first, then that its report is missing
+            report_error = f"the report was not written: {exc}"
     if not outcome.finished:
         for m in outcome.messages:
             print(m, file=sys.stderr)
+        if report_error is not None:
+            raise CamError(report_error)
         return EXIT_INTERRUPTED
-    if port_kind(args.port) == "maximus":  # the board keeps its own time
-        print(f"job finished: {summary}; total time {format_duration(wall_s)}")
-        return 0
-    print(finish_line(summary, outcome, ramp, wall_s, simulated=not args.realtime and args.port == "mock"))
+    _finished_line(args, outcome, ramp, summary, wall_s)
+    if report_error is not None:
+        raise CamError(report_error)
     return 0
+
+
+def _finished_line(args: argparse.Namespace, outcome: Outcome, ramp: str, summary: str, wall_s: float) -> None:
+    if port_kind(args.port) == "maximus":  # the board keeps its own time
+        print(f"job finished: {summary}; total time {format_duration(wall_s)}", flush=True)
+        return
+    print(finish_line(summary, outcome, ramp, wall_s, simulated=not args.realtime and args.port == "mock"), flush=True)
 
 
 def finish_line(summary: str, outcome: Outcome, ramp: str, wall_s: float, *, simulated: bool) -> str:

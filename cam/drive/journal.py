@@ -126,6 +126,8 @@ class JournalWriter:
         self._lock = threading.Lock()
         self._closing = threading.Event()
         self._write(0, (0, 0, 0), "running")
+        if self.error is not None:  # no journal, no resume: the job does not start without one
+            raise CamError(f"{self.error}; the job was not started (its journal could not be written)")
         self._thread = threading.Thread(target=self._loop, name="cam-journal", daemon=True)
         self._thread.start()
 

@@ -183,15 +183,19 @@ class MockPort(Port):
         if self.pin_log_path is None:
             self._hold(t_ns, data, strobe)
             return
-        if self._file is None:
-            self._file = open(self._part(), "w", encoding="utf-8")
-            self._file.write(PIN_LOG_HEADER + "\n")
         from ._kernels import pin_rows_kernel  # numba: only when a pin log streams
 
-        for i in range(0, len(t_ns), 1 << 18):  # the rows np.savetxt(fmt="%d") writes, formatted compiled
-            rows = pin_rows_kernel(np.ascontiguousarray(t_ns[i:i + (1 << 18)], np.int64),
-                                   data[i:i + (1 << 18)].astype(np.int64), strobe[i:i + (1 << 18)].astype(np.int64))
-            self._file.write(rows.tobytes().decode("ascii"))
+        try:
+            if self._file is None:
+                self._file = open(self._part(), "w", encoding="utf-8")
+                self._file.write(PIN_LOG_HEADER + "\n")
+            for i in range(0, len(t_ns), 1 << 18):  # the rows np.savetxt(fmt="%d") writes, formatted compiled
+                rows = pin_rows_kernel(np.ascontiguousarray(t_ns[i:i + (1 << 18)], np.int64),
+                                       data[i:i + (1 << 18)].astype(np.int64),
+                                       strobe[i:i + (1 << 18)].astype(np.int64))
+                self._file.write(rows.tobytes().decode("ascii"))
+        except OSError as exc:
+            self._abandon_pin_log(exc)
 
     def _hold(self, t_ns: np.ndarray, data: np.ndarray, strobe: np.ndarray) -> None:
         room = max(0, _HELD_WRITES - self._held)
@@ -244,15 +248,36 @@ class MockPort(Port):
         if self.pin_log_path is None:
             return None
         self._flush()
-        if self._file is None:
-            self._file = open(self._part(), "w", encoding="utf-8")
-            self._file.write(PIN_LOG_HEADER + "\n")
-        self._file.flush()
-        os.fsync(self._file.fileno())
-        self._file.close()
-        self._file = None
-        os.replace(self._part(), self.pin_log_path)
+        try:
+            if self._file is None:
+                self._file = open(self._part(), "w", encoding="utf-8")
+                self._file.write(PIN_LOG_HEADER + "\n")
+            self._file.flush()
+            os.fsync(self._file.fileno())
+            self._file.close()
+            self._file = None
+            os.replace(self._part(), self.pin_log_path)
+        except OSError as exc:
+            self._abandon_pin_log(exc)
         return self.pin_log_path
+
+    def _abandon_pin_log(self, exc: OSError) -> None:
+        """A pin log write failed (a full disk, a lost folder): drop its ``.part`` file, keep counting the writes
+        without a log, and raise one line naming the file and the cause."""
+        if self._file is not None:
+            try:
+                self._file.close()
+            except OSError:
+                pass
+            self._file = None
+        try:
+            os.unlink(self._part())
+        except OSError:
+            pass
+        self.keep_log = False
+        assert self.pin_log_path is not None
+        raise PortError(f"{self.pin_log_path}: cannot write the pin log ({exc.strerror or exc}); nothing of it was "
+                        f"kept") from None
 
     def pin_log(self) -> PinLog:
         """Every write so far, in order (read back from the file when it streams to one)."""
