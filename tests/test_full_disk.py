@@ -62,3 +62,38 @@ def test_a_finished_job_whose_report_cannot_be_written_says_both(tmp_path, monke
     line = _one_error_line(r.stderr)
     assert f"the report was not written: {report}: cannot write (No space left on device)" in line
     assert report.read_text() == '{"status": "an earlier run"}\n'  # the earlier output is intact
+
+
+@pytest.mark.realtime
+def test_a_journal_write_that_fails_during_a_run_stops_the_job_there(tmp_path, monkeypatch):
+    """The disk fills during the run: the job stops (tool lifted) at the first failed journal write instead of
+    running on without a journal, and says why."""
+    import numpy as np
+
+    from cam.drive.ports import MockPort
+    from cam.drive.session import MachineSession
+    import dataclasses
+
+    from cam.job.model import CUT, travel_job
+    from cam.settings import DEFAULT_SETTINGS
+
+    real, calls = cam.drive.journal.atomic_write_text, []
+
+    def fills_up(path, text):
+        calls.append(path)
+        if len(calls) > 2:
+            raise CamError(f"{path}: cannot write (No space left on device)")
+        return real(path, text)
+
+    monkeypatch.setattr(cam.drive.journal, "atomic_write_text", fills_up)
+    session = MachineSession(MockPort(), DEFAULT_SETTINGS, realtime=True)
+    try:
+        line = travel_job(np.array([[0, 0, 2], [600, 0, 2], [600, 0, 0]]), DEFAULT_SETTINGS)
+        job = dataclasses.replace(line, kind=np.full(3, CUT, np.uint8))  # a cut (a travel alone is a jog)
+        session.start(job, journal=str(tmp_path / "j.json"))
+        session.wait_idle(None)
+    finally:
+        session.shutdown()
+    info = session.last_run
+    assert info["status"] == "stopped" and 0 < info["writes"] < 1 + 2 * 604, info
+    assert any("No space left on device" in m for m in info["messages"]), info["messages"]

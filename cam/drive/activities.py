@@ -51,7 +51,7 @@ def run_steps(session: Any, name: str, plan: "StepPlan | ChunkedPlan", ctl: Cont
             port = open_port(session.port)
             cursor = cursor or Cursor(plan.settings)
             if journal is not None:
-                writer = JournalWriter(journal, plan, cursor)
+                writer = JournalWriter(journal, plan, cursor, on_error=ctl.stop)
             result = run(plan, port, realtime=session.realtime, controller=ctl, progress=session.progress,
                          on_pause=session.prompt, cursor=cursor)
             if writer is not None:

@@ -149,7 +149,7 @@ def _child(sock_fd: int, page_fd: int, parent_pid: int) -> None:
         _, plan, port_name, journal = message
         ctl = _SharedController(slots, parent_pid)
         cursor = Cursor(plan.settings)
-        writer = JournalWriter(journal, plan, cursor) if journal is not None else None
+        writer = JournalWriter(journal, plan, cursor, on_error=ctl.stop) if journal is not None else None
 
         def progress(done: int, total: int, machine_ns: int) -> None:
             sent, position = cursor.live

@@ -25,7 +25,7 @@ import os
 import threading
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Optional
+from typing import Any, Callable, Optional
 
 import numpy as np
 
@@ -115,8 +115,12 @@ class JournalWriter:
     The first write (state ``running``) happens here, before the run sends anything.
     """
 
-    def __init__(self, spec: JournalSpec, plan: Any, cursor: Cursor) -> None:
+    def __init__(self, spec: JournalSpec, plan: Any, cursor: Cursor,
+                 on_error: Optional[Callable[[], None]] = None) -> None:
         self.spec = spec
+        self.on_error = on_error
+        """Called once when a write during the run fails (the runner stops the job there: a run whose journal
+        no longer says where it is could not be resumed)."""
         self.plan = plan
         self.cursor = cursor  # the run's: (writes sent, position after them), replaced whole by the runner
         self.error: Optional[str] = None
@@ -151,7 +155,10 @@ class JournalWriter:
                 write_journal(record, self.spec.path)
                 self._written = sent
             except CamError as exc:
+                first = self.error is None
                 self.error = str(exc)
+                if first and state == "running" and self._written >= 0 and self.on_error is not None:
+                    self.on_error()
 
     def close(self, state: str, writes_done: Optional[int] = None,
               position_steps: Optional[tuple[int, int, int]] = None) -> Optional[str]:
