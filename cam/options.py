@@ -107,12 +107,22 @@ class Option:
         return f"{self.lo:g}..{self.hi:g}"
 
     def in_range(self, value: float) -> bool:
-        """Whether one number lies in the range (finite, and within lo..hi)."""
+        """Whether one number lies in the range (finite, and within lo..hi; an integer too large for a float is
+        not)."""
+        value = _as_float(value)
         if not math.isfinite(value):
             return False
         if self.lo is not None and (value <= self.lo if self.lo_open else value < self.lo):
             return False
         return self.hi is None or value <= self.hi
+
+
+def _as_float(value: Any) -> float:
+    """``value`` as a float; an integer too large for one (10^400) as infinity (out of every range)."""
+    try:
+        return float(value)
+    except OverflowError:
+        return math.inf
 
 
 def check_range(option: Option, value: Any) -> Optional[str]:
@@ -128,7 +138,7 @@ def check_range(option: Option, value: Any) -> Optional[str]:
             stack.extend(v)
         else:
             flat.append(v)
-    if all(option.in_range(float(v)) for v in flat):
+    if all(option.in_range(v) for v in flat):
         return None
     unit = f" {option.unit}" if option.unit else ""
     each = "" if option.type in ("whole", "number") else "each value "

@@ -83,3 +83,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     except BrokenPipeError:  # e.g. `cam info board.drl | head`: the reader left; that is not an error
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
+    except OSError as exc:  # a path the system refuses (a name too long, no permission): one line, not a traceback
+        name = str(exc.filename)[:80] + ("..." if len(str(exc.filename)) > 80 else "") if exc.filename else ""
+        print(f"cam: error: {name + ': ' if name else ''}{exc.strerror or exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT

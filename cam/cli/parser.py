@@ -144,7 +144,7 @@ def _schema_list(o: Option, flag: str, whole: bool, separator: str = ",",
             raise argparse.ArgumentTypeError(f"{flag} takes {what} as {shape}, got '{text}'") from None
         if o.count is not None and len(values) != o.count:
             raise argparse.ArgumentTypeError(f"{flag} takes {o.count} {what} as {shape}, got '{text}'")
-        if not all(o.in_range(float(v)) for v in values):
+        if not all(o.in_range(v) for v in values):
             raise argparse.ArgumentTypeError(f"{flag} values must be {o.range_text()}, got '{text}'")
         return values
 

@@ -246,6 +246,8 @@ def _float(value: Any) -> float:
         out = float(value.strip() if isinstance(value, str) else value)
     except (TypeError, ValueError):
         raise ValueError("must be a number") from None
+    except OverflowError:  # an integer too large for a float (10^400)
+        raise ValueError("must be a finite number") from None
     if not math.isfinite(out):
         raise ValueError("must be a finite number")
     return out

@@ -5,6 +5,8 @@ when the job starts (see :mod:`cam.job.model`).
 """
 from __future__ import annotations
 
+import math
+
 from typing import Optional
 
 import numpy as np
@@ -40,17 +42,25 @@ def jog_steps(axis: str, amount: float, unit: str = "steps", *, settings: Machin
     a = str(axis).lower()
     if a not in AXES:
         raise PlanError(f"axis must be x, y or z, got {axis!r}")
-    if unit not in JOG_UNITS:
-        raise PlanError(f"jog unit must be one of {', '.join(JOG_UNITS)}, got {unit!r}")
+    if not isinstance(unit, str) or unit not in JOG_UNITS:
+        raise PlanError(f"jog unit must be one of {', '.join(JOG_UNITS)}, got {str(unit)[:40]!r}")
     if isinstance(amount, bool) or not isinstance(amount, (int, float, np.integer, np.floating)) \
-            or not np.isfinite(amount):
-        raise PlanError(f"a jog needs a number, got {amount!r}")
+            or not _finite(amount):
+        raise PlanError(f"a jog needs a number, got {str(amount)[:40]}")
     if unit in ("steps", "full-steps"):
         if float(amount) != int(amount):
             raise PlanError(f"a jog in {unit} needs a whole number, got {amount!r}")
         return int(amount) * (2 if unit == "full-steps" and half_step else 1)
     mm_per_step = settings.mm_per_step_z if a == "z" else settings.mm_per_step_xy
     return int(round(float(amount) * JOG_UNITS[unit] / mm_per_step))
+
+
+def _finite(amount: float) -> bool:
+    """A finite number as a float (an integer of 10^400 digits is not: it overflows one)."""
+    try:
+        return math.isfinite(float(amount))
+    except OverflowError:
+        return False
 
 
 def goto(position_px: tuple[int, int, int], *, settings: MachineSettings = DEFAULT_SETTINGS) -> Job:
