@@ -400,6 +400,35 @@ def test_page_runs_a_drawing_and_the_pin_log_carves_exactly(page, fast, tmp_path
 
 
 @pytest.mark.browser
+def test_page_emergency_stop_is_sent_again_until_the_server_answers(page, servers):
+    """The page's e-stop retries (issue #33 point 3): the first three tries are lost (503, a dropped
+    connection), the fourth reaches the server and stops the job."""
+    s = servers("slow-retried", settings=SLOW, realtime=True)  # its own: it ends e-stopped
+    s.session.wait_idle()
+    _open(page, s)
+    _load(page, SAMPLES / "ellipse.png", depth="2")
+    tries = []
+
+    def flaky(route):
+        tries.append(1)
+        if len(tries) == 1:
+            route.fulfill(status=503, content_type="application/json", body='{"error": "busy"}')
+        elif len(tries) <= 3:
+            route.abort("connectionreset")
+        else:
+            route.continue_()
+
+    page.route("**/api/estop", flaky)
+    page.click("#start")
+    page.wait_for_function("parseFloat(document.getElementById('percent').textContent) > 2")
+    page.click("#estop")
+    deadline = time.monotonic() + 10
+    while s.session.busy and time.monotonic() < deadline:
+        page.wait_for_timeout(50)  # the page's retries run while this waits (Playwright's routes need it)
+    assert len(tries) >= 4 and s.session.state()["last"]["status"] == EMERGENCY_STOPPED, len(tries)
+
+
+@pytest.mark.browser
 def test_page_emergency_stop_halts_within_one_step_period(page, servers):
     s = servers("slow", settings=SLOW, realtime=True)
     s.session.wait_idle()

@@ -272,7 +272,15 @@
     const now = Date.now();
     if (now - page.estopAt < 300) return;  // pointerdown and the click after it
     page.estopAt = now;
-    api("/api/estop", { json: {} }).catch(() => {});
+    sendEstop(0);
+  }
+  function sendEstop(attempt) {
+    // sent again every 50 ms until the server answers it (a busy or flooded server, a dropped connection):
+    // only a refusal that another try cannot change (a 4xx other than 429) ends the tries, after 5 s at most
+    api("/api/estop", { json: {} }).catch((e) => {
+      const again = !e.status || e.status >= 500 || e.status === 429;
+      if (again && attempt < 100) setTimeout(() => sendEstop(attempt + 1), 50);
+    });
   }
   $("estop").addEventListener("pointerdown", estop);
   $("estop").addEventListener("click", estop);
