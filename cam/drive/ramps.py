@@ -56,7 +56,7 @@ from numba import njit
 from .._compiled import entry
 
 from ..settings import RAMP_MODES, MachineSettings
-from ..verify.ramps import STANDSTILL_STEPS, check_axis_steps, standstills
+from ..verify.ramps import check_axis_steps
 from ..errors import CamError
 from .pins import axis_bits
 
@@ -373,27 +373,11 @@ def _lookahead(high: np.ndarray, per_ns: np.ndarray, settings: MachineSettings,
         hits = 0
         for a, n_broken in enumerate(broken):
             if n_broken:  # check again, recording where, and lower the caps there
-                _new_standstills(axes, a, mid, limits, cap, alpha, upull)
                 _, r1, r2, r3 = _check_axis(axes[a], mid, limits, a, True)
                 hits += _drop_caps(axes[a][0], r1, r2, r3, u, cap, _DROP)
         if hits == 0:
             break
     return out
-
-
-def _new_standstills(axes: list, a: int, mid: np.ndarray, limits: _Limits, cap: np.ndarray, alpha: np.ndarray,
-                     upull: np.ndarray) -> None:
-    """Where the planned times make axis ``a`` stand still and step 1 did not know it (a gap the rates made long):
-    a stop and a start there too, its caps lowered at once to the start speed on each side (step 1 again for the
-    axis, which only lowers caps) rather than a factor a round."""
-    per, brk = axes[a]
-    s_mm, v_start, v_max, acc = limits
-    more = brk | standstills(mid[per], s_mm[a], v_start[a])
-    if np.array_equal(more, brk):
-        return
-    axes[a] = (per, more)
-    _axis_caps(per, more, s_mm[a], v_start[a], v_max[a], acc[a] * _ALPHA_MARGIN, cap, alpha, upull)
-    np.minimum(upull, cap, out=upull)
 
 
 def _caps(high: np.ndarray, per_ns: np.ndarray, settings: MachineSettings, stop_idx: np.ndarray,
@@ -415,15 +399,6 @@ def _caps(high: np.ndarray, per_ns: np.ndarray, settings: MachineSettings, stop_
     upull = np.full(n, np.inf)
     axes = list(_pool().map(lambda a: _axis_steps_and_breaks(high, int(clock[a]), int(dirbit[a]), stop_idx),
                             range(3)))
-    # where an axis certainly stands still (its steps further apart than STANDSTILL_STEPS start-speed steps even
-    # at the nominal periods, which ramps only lengthen): a stop and a start of that axis, so the intervals on
-    # each side of the wait are capped at its start speed (a corner taken as grbl's junction rule would)
-    between_ns = np.concatenate([[0], np.cumsum(per_ns)])
-    for a in range(3):
-        per, brk = axes[a]
-        if len(per) > 1:
-            least_ns = between_ns[per[1:]] - between_ns[per[:-1] + 1]  # the periods strictly between two steps
-            brk[1:] |= least_ns > STANDSTILL_STEPS * s_mm[a] / v_start[a] * 1e9
     for a in range(3):
         per, brk = axes[a]
         _axis_caps(per, brk, s_mm[a], v_start[a], v_max[a], acc[a] * _ALPHA_MARGIN, cap, alpha, upull)
@@ -444,7 +419,6 @@ def _check_axis(axis: tuple[np.ndarray, np.ndarray], mid: np.ndarray, limits: _L
     if len(per) < 2:
         return 0, r1, r2, r3
     t = mid[per]
-    brk = brk | standstills(t, s_mm[a], v_start[a])  # as the checker judges: where the planned times stand still
     n_broken = check_axis_steps(t, per, mid, brk, s_mm[a], v_start[a], v_max[a], acc[a], r1, r2, r3)
     return n_broken, r1, r2, r3
 
