@@ -476,6 +476,7 @@ class _ReRamp:
         clock, _ = axis_bits(settings)
         self.clocks = int(np.bitwise_or.reduce(clock))
         self.lateness = lateness
+        self.ramped = settings.ramp != "constant"
         self.active = False
         self.held = False  # this re-ramp has held a step back (counted once)
         self.restart = 0  # 1: stalled, the first step after it is due; 2: that step went out, the next starts
@@ -483,7 +484,10 @@ class _ReRamp:
         self.last_interval_ns = 0
 
     def late(self, stalled: bool) -> None:
-        """A write went out late (``stalled``: by over :data:`STALL_NS`): the next steps re-ramp."""
+        """A write went out late (``stalled``: by over :data:`STALL_NS`): the next steps re-ramp (with speed ramps
+        only: the ``constant`` mode, the thesis's, plans no acceleration to come back within)."""
+        if not self.ramped:
+            return
         if not self.active:
             self.active, self.held = True, False
         if stalled:
