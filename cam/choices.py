@@ -24,7 +24,7 @@ __all__ = [
     "PROFILE_SUFFIXES", "SVG_SUFFIXES", "SUFFIXES", "FILE_JOB_SUFFIXES", "START_RULES",
 ]
 
-DRAWING_SUFFIXES = (".png", ".bmp", ".jpg", ".jpeg", ".tif", ".tiff")
+DRAWING_SUFFIXES = (".png", ".bmp", ".jpg", ".jpeg", ".tif", ".tiff", ".gif")
 """Drawings: black curves on white (2D), a black contour around red (3D)."""
 DIGITIZED_SUFFIXES = (".txt", ".dig")
 """Saved digitized matrices (``cam digitize -o``, ``--load-digitized``)."""

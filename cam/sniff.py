@@ -37,7 +37,7 @@ KIND_NAMES = {
 }
 """How messages name each kind."""
 
-_IMAGE_MAGIC = (b"\x89PNG\r\n\x1a\n", b"\xff\xd8\xff", b"II*\x00", b"MM\x00*")
+_IMAGE_MAGIC = (b"\x89PNG\r\n\x1a\n", b"\xff\xd8\xff", b"II*\x00", b"MM\x00*", b"GIF87a", b"GIF89a")
 
 # -- Excellon ---------------------------------------------------------------------------------------------
 _EXC_HEADER = re.compile(
@@ -124,7 +124,7 @@ def sniff_kind(head: bytes, *, truncated: Optional[bool] = None) -> Optional[str
             ``head`` is :data:`HEAD_BYTES` long.
 
     Returns:
-        "drawing" (PNG, JPEG, BMP, TIFF), "svg", "digitized", "hpgl", "excellon", "gcode" or None.
+        "drawing" (PNG, JPEG, BMP, TIFF, GIF), "svg", "digitized", "hpgl", "excellon", "gcode" or None.
 
     >>> sniff_kind(b"M48\\nMETRIC\\nT1C0.8\\n%\\nT1\\nX1.0Y2.0\\nM30\\n")
     'excellon'

@@ -3,8 +3,8 @@
 A compressed image says how large it is in its first bytes; decoding a
 279 KB PNG of 16000 x 16000 pixels takes 768 MB before anything can look at
 it.  :func:`image_size_px` reads the width and height from the header of a
-PNG (``IHDR``), JPEG (the first start-of-frame marker), BMP (the DIB header)
-or TIFF file (the first image's ``ImageWidth`` and ``ImageLength`` tags), so a
+PNG (``IHDR``), JPEG (the first start-of-frame marker), BMP (the DIB header),
+GIF (the logical screen) or TIFF file (the first image's ``ImageWidth`` and ``ImageLength`` tags), so a
 drawing too large for the machine is refused before it is decoded
 (:func:`cam.digitize.drawing.load_image`, :func:`cam.job.jobs.prepare_job`).
 
@@ -14,6 +14,8 @@ Pure computation on bytes, standard library only.
 >>> png = b"\\x89PNG\\r\\n\\x1a\\n" + struct.pack(">I4sII", 13, b"IHDR", 16000, 9000) + bytes(5)
 >>> image_size_px(png)
 (16000, 9000)
+>>> image_size_px(b"GIF89a" + struct.pack("<HH", 640, 480))
+(640, 480)
 >>> image_size_px(b"GIF89a...") is None
 True
 """
@@ -24,7 +26,7 @@ from typing import Optional
 
 __all__ = ["image_size_px", "HEADER_FORMATS"]
 
-HEADER_FORMATS = ("PNG", "JPEG", "BMP", "TIFF")
+HEADER_FORMATS = ("PNG", "JPEG", "BMP", "TIFF", "GIF")
 """The image formats whose size :func:`image_size_px` reads (the drawing suffixes of :mod:`cam.choices`)."""
 
 _PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
@@ -46,7 +48,7 @@ def image_size_px(header: bytes) -> Optional[tuple[int, int]]:
         before the size.
     """
     data = bytes(header)
-    for reader in (_png, _jpeg, _bmp, _tiff):
+    for reader in (_png, _jpeg, _bmp, _tiff, _gif):
         size = reader(data)
         if size is not None:
             return size
@@ -123,3 +125,11 @@ def _tiff(data: bytes) -> Optional[tuple[int, int]]:
     if 256 in size and 257 in size:
         return size[256], size[257]
     return None
+
+
+def _gif(data: bytes) -> Optional[tuple[int, int]]:
+    """The logical screen's size (every frame lies within it); None for an empty screen (no real GIF's)."""
+    if data[:6] not in (b"GIF87a", b"GIF89a") or len(data) < 10:
+        return None
+    width, height = struct.unpack("<HH", data[6:10])
+    return (width, height) if width and height else None
