@@ -264,7 +264,7 @@ def drawing_size_px(path: str | os.PathLike) -> tuple[int, int]:
     """``(width, height)`` of an image file from its header, without decoding it (see :mod:`.image_size`).
 
     Raises:
-        DrawingError: a missing file, or one whose header is not a PNG, JPEG, BMP or TIFF image's.
+        DrawingError: a missing file, or one whose header is not a PNG, JPEG, BMP, TIFF or GIF image's.
     """
     p = Path(path)
     _check_file(p)
@@ -288,11 +288,38 @@ def _read_image(path: Path) -> tuple[np.ndarray, bool]:
     if image_size_px(header) is None and data.size > _HEADER_BYTES:
         header = data.tobytes()
     check_image_size(*_size_of(header, str(path)), str(path))  # before decoding: a small file may hold a huge image
-    img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None
+    bgr = header[:6] not in _GIF_SIGNATURES
+    if not bgr:
+        img = _decode_gif(data)
+    else:
+        img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None
     if img is None:
-        raise DrawingError(f"{path}: not a readable image (PNG, BMP, JPEG, GIF-free formats OpenCV reads)")
+        raise DrawingError(f"{path}: not a readable image (PNG, BMP, JPEG, TIFF or GIF)")
     check_image_size(img.shape[1], img.shape[0], str(path))
-    return img, True
+    return img, bgr
+
+
+_GIF_SIGNATURES = (b"GIF87a", b"GIF89a")
+
+
+def _decode_gif(data: np.ndarray) -> "np.ndarray | None":
+    """The first frame of a GIF file's bytes, ``(H, W, 3)`` RGB or ``(H, W, 4)`` RGBA when it has a transparent
+    colour (composited over white paper as a PNG's alpha is); None when it cannot be decoded.
+
+    Pillow decodes it: OpenCV reads GIF only from 4.11 on, and only when it was built with its GIF codec.
+    The palette is exact, so a GIF gives the very pixels of the PNG it was saved from.
+    """
+    import io
+
+    from PIL import Image, UnidentifiedImageError
+
+    try:
+        with Image.open(io.BytesIO(data.tobytes())) as im:
+            im.seek(0)
+            transparent = "transparency" in im.info or im.mode in ("RGBA", "LA", "PA")
+            return np.asarray(im.convert("RGBA" if transparent else "RGB"))
+    except (OSError, ValueError, EOFError, UnidentifiedImageError, Image.DecompressionBombError):
+        return None
 
 
 def _to_rgb(img: np.ndarray, *, bgr: bool, source: str) -> np.ndarray:
@@ -320,7 +347,7 @@ def load_image(path_or_array: str | os.PathLike | np.ndarray) -> Drawing:
     """Load and classify a drawing.
 
     Args:
-        path_or_array: an image file (PNG, BMP, JPEG or TIFF; its size is read
+        path_or_array: an image file (PNG, BMP, JPEG, TIFF or GIF; its size is read
             from its header before it is decoded and may be at most
             :data:`~cam.limits.MAX_IMAGE_SIDE_PX` on a side and
             :data:`~cam.limits.MAX_IMAGE_PIXELS` in all) or an array: ``(H, W)`` grey,
