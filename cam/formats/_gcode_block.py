@@ -15,7 +15,8 @@ from ..limits import (
     MIN_FEED_MM_MIN,
 )
 from ._gcode_data import (
-    _CS, _CYCLES, _IGNORED_M, _IO_M, _LETTERS, _MOTION, _REFUSED_G, _SPLINES, _SUPPORTED_G, GcodeMove, _End, _shown,
+    _CS, _CYCLES, _IGNORED_M, _IO_M, _LETTERS, _MARLIN, _MARLIN_G, _MARLIN_M, _MOTION, _REFUSED_G, _SPLINES,
+    _SUPPORTED_G, _End, _shown,
 )
 from ._gcode_state import _State
 from .ngc import Line
@@ -74,6 +75,12 @@ class _Block(_State):
             word = _shown(text.upper())
             if letter in "gm" and not math.isfinite(v):
                 raise self.err(f"unsupported word '{word}'")
+            if letter == "e":
+                raise self.err(f"'{word}' is " + _MARLIN.format(what="extruder word"))
+            if letter == "m" and v in _MARLIN_M:
+                raise self.err(f"'M{v:g}' is " + _MARLIN.format(what="code"))
+            if letter == "g" and round(v * 10) in _MARLIN_G and abs(v * 10 - round(v * 10)) <= 1e-6:
+                raise self.err(f"'G{v:g}' is " + _MARLIN.format(what="code"))
             if letter == "g":
                 code = int(round(v * 10))
                 if abs(v * 10 - code) > 1e-6 or code in _REFUSED_G or code not in _SUPPORTED_G:
@@ -130,16 +137,23 @@ class _Block(_State):
             self.spindle_rpm = vals["s"]
         if mcodes & {3, 4}:
             self.spindle_on = True
+            self.spindle = 4 if 4 in mcodes else 3
         if 5 in mcodes:
             self.spindle_on = False
+            self.spindle = 0
+        if self.spindle and not self.spindle_noted:
+            self.spindle_noted = True
+            self.warnings.append(f"{self.source.name}:{self.line_no}: spindle M{self.spindle} S{self.spindle_rpm:g} "
+                                 "recorded with the moves, for ports that switch a spindle; a step/dir port (the "
+                                 "parallel port, the mock) has no spindle output and ignores it: run the spindle "
+                                 "by hand")
         if "t" in vals:
             t = int(vals["t"])
             if self.tool_lengths_mm is not None and t and t not in self.tool_lengths_mm:
                 raise self.err(f"tool 'T{t}' is not in the tool table")
             self.selected_tool = t
         if 6 in mcodes:
-            self.moves.append(GcodeMove("pause", self.line_no, tuple(self.mach),
-                                        note=f"tool change: T{self.selected_tool} (line {self.line_no})"))
+            self.emit("pause", note=f"tool change: T{self.selected_tool} (line {self.line_no})")
             self.tool = self.selected_tool
             self.resync = self.pos()
         if 61 in mcodes:
@@ -174,7 +188,7 @@ class _Block(_State):
         if 40 in codes:
             if "p" not in vals:
                 raise self.err("G4 needs a dwell time 'P' in seconds")
-            self.moves.append(GcodeMove("dwell", self.line_no, tuple(self.mach), seconds=vals["p"]))
+            self.emit("dwell", seconds=vals["p"])
         for code, plane in ((170, "XY"), (180, "XZ"), (190, "YZ")):
             if code in codes:
                 self.plane = plane
@@ -246,11 +260,9 @@ class _Block(_State):
         """M0, M1 and M60 pause after the line's motion; M2 and M30 end the program."""
         if mcodes & {0, 1}:
             for m in sorted(mcodes & {0, 1}):
-                self.moves.append(GcodeMove("pause", self.line_no, tuple(self.mach),
-                                            note=f"program pause M{m} (line {self.line_no})"))
+                self.emit("pause", note=f"program pause M{m} (line {self.line_no})")
         if 60 in mcodes:
-            self.moves.append(GcodeMove("pause", self.line_no, tuple(self.mach),
-                                        note=f"pallet change pause M60 (line {self.line_no})"))
+            self.emit("pause", note=f"pallet change pause M60 (line {self.line_no})")
         if mcodes & {2, 30}:
             raise _End
 

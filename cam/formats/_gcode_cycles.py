@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 
-from ._gcode_data import _CYCLE_PECK, GcodeMove
+from ._gcode_data import _CYCLE_PECK
 from ._gcode_state import _State
 
 MAX_PECKS = 100_000
@@ -108,7 +108,7 @@ class _Cycles(_State):
             return
         self.go("feed", (x, y, cc), **feed)
         if code in (82, 89):
-            self.moves.append(GcodeMove("dwell", self.line_no, tuple(self.mach), seconds=self.cycle.get("p", 0.0)))
+            self.emit("dwell", seconds=self.cycle.get("p", 0.0))
         if code == 85:
             self.go("feed", (x, y, r), **feed)
             if clear != r:

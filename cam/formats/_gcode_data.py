@@ -7,7 +7,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Iterator
+from typing import Iterator, Optional
 
 from ._gcode_lines import _Source
 
@@ -25,7 +25,13 @@ class GcodeMove:
     and ``turns``; a spline (G5, G5.1) is the Bezier curve from where the last move ended through its inner
     ``controls`` (absolute mm: one for G5.1, two for G5; Z as at the start) to ``end``; dwell carries
     ``seconds``; pause carries ``note``; ``feed_mm_min`` applies to feed, arc and spline moves, or
-    ``minutes`` (G93 inverse time) when it is more than 0.
+    ``minutes`` (G93 inverse time) when it is more than 0.  ``spindle`` is the spindle's state the move runs
+    with (3: M3 clockwise, 4: M4 counter-clockwise, 0: stopped, M5) and ``spindle_rpm`` the S word in force:
+    recorded for ports that switch a spindle; the step/dir planner ignores them.
+
+    Frame: :func:`cam.formats.gcode.parse_gcode`'s ``start_mm`` is subtracted from every position (``end``,
+    ``center``, ``controls``), so the moves are given from where the tool stood when the program started
+    (the machine frame itself when ``start_mm`` is the home, the default).
     """
 
     kind: str
@@ -41,6 +47,8 @@ class GcodeMove:
     minutes: float = 0.0
     controls: tuple[tuple[float, float, float], ...] = ()
     file: str = ""  # the file of ``line`` when it is not the program's own (a subroutine file)
+    spindle: int = 0
+    spindle_rpm: float = 0.0
 
 
 @dataclass
@@ -50,6 +58,9 @@ class MoveBatch:
 
     moves: list[GcodeMove]
     warnings: list[str] = field(default_factory=list)
+    work_offsets_mm: Optional[dict[str, tuple[float, float, float]]] = None
+    """The last batch of a program that ran to its end: the work offsets G54..G59.3 as the program left them
+    (machine mm, G-code axes; ``G10 L2``/``L20`` change them); None on the others."""
 
 
 @dataclass
@@ -63,13 +74,17 @@ class GcodeProgram:
     moves: list[GcodeMove]
     source: str = "<gcode>"
     warnings: list[str] = field(default_factory=list)
+    work_offsets_mm: Optional[dict[str, tuple[float, float, float]]] = None
+    """The work offsets as the program left them (see :attr:`MoveBatch.work_offsets_mm`)."""
 
     def move_batches(self, batch_moves: int) -> Iterator[MoveBatch]:
         """The moves in batches of ``batch_moves`` (the last shorter; one empty batch when there are none); the
         first batch carries the warnings."""
         step = max(1, int(batch_moves))
         for i in range(0, max(1, len(self.moves)), step):
-            yield MoveBatch(self.moves[i:i + step], list(self.warnings) if i == 0 else [])
+            last = i + step >= len(self.moves)
+            yield MoveBatch(self.moves[i:i + step], list(self.warnings) if i == 0 else [],
+                            dict(self.work_offsets_mm) if last and self.work_offsets_mm is not None else None)
 
 
 def _strip_comments(line: str, err) -> str:
@@ -126,8 +141,15 @@ _CYCLES = {730, 810, 820, 830, 850, 890}
 _MOTION = {0, 10, 20, 30, 330, 800} | _CYCLES
 _SPLINES = {50, 51}  # G5, G5.1: motion on their own line only (rs274 keeps the modal motion mode)
 _CS = {540: 1, 550: 2, 560: 3, 570: 4, 580: 5, 590: 6, 591: 7, 592: 8, 593: 9}
+CS_NAMES = ("G54", "G55", "G56", "G57", "G58", "G59", "G59.1", "G59.2", "G59.3")
+"""The work offsets (coordinate systems 1..9, P1..P9 of G10), as senders and the machine state name them."""
 _IGNORED_M = {3, 4, 5, 48, 49, 50, 51, 52, 53}
 _IO_M = {62, 63, 64, 65, 66, 67, 68}
+_MARLIN_M = {17, 18, 82, 83, 84, 92, 104, 105, 106, 107, 109, 114, 117, 140, 190, 201, 203, 204, 205, 220, 221,
+             500, 501, 503}
+_MARLIN_G = {290}  # G29: bed levelling
+_MARLIN = "a Marlin (3D printer firmware) {what}: this program drives a 3D printer, not a mill; give G-code for " \
+          "LinuxCNC or grbl"
 _AXIS_WORDS = "xyz"
 _LETTERS = set("xyzijkrfstpqlhn@^")
 _CYCLE_PECK = 0.254  # mm: LinuxCNC's G73 chip-break retract and G83 rapid stop above the last peck (0.010 in)

@@ -13,7 +13,7 @@ from typing import Iterator
 
 from ..fileio import read_text
 from ..limits import MAX_GCODE_CALL_DEPTH, MAX_REPEAT
-from ._gcode_data import _End, _Frame, _Source, _strip_comments
+from ._gcode_data import _End, _Frame, _Source, _shown, _strip_comments
 from ._gcode_lines import CACHE_LINES
 from ._gcode_state import _State
 from .ngc import Line, NgcSyntaxError, read_line
@@ -43,6 +43,9 @@ class _Flow(_State):
                                "exit?); raise the limit with --max-lines")
             body, line = self._read(src, idx)
             if line is None:
+                if body.startswith("$"):
+                    self.note_once("$", f"grbl system command '{_shown(self.raw.strip())}' skipped (and any later "
+                                        "'$' lines): it is a command to grbl itself, not G-code")
                 if body == "%":
                     if percent or ran:
                         return  # the closing '%' ends the program
@@ -73,7 +76,7 @@ class _Flow(_State):
         if body.startswith("/"):
             body = body[1:]  # block delete is off, as in rs274: the line runs
         line = None
-        if body and body != "%":
+        if body and body != "%" and not body.startswith("$"):
             try:
                 line = read_line(body)
             except NgcSyntaxError as exc:

@@ -36,6 +36,11 @@ def _decoded(raw: bytes, path: Path) -> list[str]:
     return text.splitlines() or [""]
 
 
+def _no_bom(text: str) -> str:
+    """The text without a UTF-8 byte-order mark at its start (Windows editors and some posts write one)."""
+    return text[1:] if text.startswith("\ufeff") else text
+
+
 class _Source:
     """One program file's lines, read on demand (``line(i)``), and where its O words are.
 
@@ -45,7 +50,7 @@ class _Source:
     def __init__(self, name: str, text: Optional[str] = None, *, path: Optional[Path] = None) -> None:
         self.name = name
         self.path = path
-        self._lines: Optional[Sequence[str]] = text.splitlines() if text is not None else None
+        self._lines: Optional[Sequence[str]] = _no_bom(text).splitlines() if text is not None else None
         self.o_at: dict[str, list[tuple[int, str]]] = {}  # label -> [(index, keyword)] in order
         self.subs: dict[str, int] = {}
         self.cache: dict[int, Any] = {}
@@ -92,6 +97,8 @@ class _Source:
             offset = 0
             for raw in f:
                 lines = _decoded(raw, self.path)  # type: ignore[arg-type]
+                if n == 0:
+                    lines[0] = _no_bom(lines[0])
                 if mark_next or n - last_mark >= MARK_EVERY:
                     self._marks.append((n, offset))
                     last_mark, mark_next = n, False
@@ -115,7 +122,8 @@ class _Source:
             raw = self._handle.readline()  # type: ignore[union-attr]
             self._pending = _decoded(raw, self.path) if raw else [""]  # type: ignore[arg-type]
         self._next += 1
-        return self._pending.pop(0)
+        text = self._pending.pop(0)
+        return _no_bom(text) if i == 0 else text
 
     def _seek(self, i: int) -> None:
         """Go to line ``i`` of the file: seek to the last mark at or before it and read on."""

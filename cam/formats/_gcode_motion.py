@@ -10,7 +10,7 @@ import math
 from typing import Sequence
 
 from ..limits import MAX_COORD_MM, MAX_FEED_MM_MIN, MIN_FEED_MM_MIN
-from ._gcode_data import PLANE_AXES, GcodeMove
+from ._gcode_data import PLANE_AXES
 from ._gcode_state import _State
 
 
@@ -48,21 +48,23 @@ class _Motion(_State):
         for a, p, q in zip("XYZ", prog, mach):
             if not (abs(p) <= MAX_COORD_MM and abs(q) <= MAX_COORD_MM):
                 raise self.err(f"the move reaches {a}{q:.6g} mm, beyond {MAX_COORD_MM:g} mm from the origin")
+        st = self.start  # the moves are given from where the tool stood at the start
         if "center" in kw:
             first, second, _ = PLANE_AXES[kw.get("plane", "XY")]
             c = kw["center"]
-            kw["center"] = (c[0] + off[first], c[1] + off[second])
+            kw["center"] = (c[0] + off[first] - st[first], c[1] + off[second] - st[second])
         if "controls" in kw:
-            kw["controls"] = tuple(tuple(p + o for p, o in zip(c, off)) for c in kw["controls"])
-            for c_prog, c_mach in zip(controls_prog, kw["controls"]):
+            controls_mach = tuple(tuple(p + o for p, o in zip(c, off)) for c in kw["controls"])
+            for c_prog, c_mach in zip(controls_prog, controls_mach):
                 for a, p, q in zip("XY", c_prog, c_mach):
                     if not (abs(p) <= MAX_COORD_MM and abs(q) <= MAX_COORD_MM):
                         raise self.err(f"the spline's control point reaches {a}{q:.6g} mm, beyond "
                                        f"{MAX_COORD_MM:g} mm from the origin")
+            kw["controls"] = tuple(tuple(q - s for q, s in zip(c, st)) for c in controls_mach)
         self.g5_reflect = None
         if self.source is not self.main:
             kw["file"] = self.source.name
-        self.moves.append(GcodeMove(kind, self.line_no, tuple(mach), **kw))
+        self.emit(kind, mach, **kw)
         self.mach = mach
 
     def feed_kw(self, vals: dict[str, float], what: str = "") -> dict:
@@ -200,8 +202,9 @@ class _Motion(_State):
                 cu, cv = mu - h * ev, mv + h * eu
         else:
             third_word = names[PLANE_AXES[self.plane][2]]
-            if third_word in vals:
-                raise self.err(f"'{texts_of(third_word)}' is not a centre word of an arc in the {self.plane} plane")
+            if third_word in vals and vals[third_word] != 0:  # grbl ignores it (FreeCAD's grbl post writes K0)
+                self.note_once("ijk", f"'{texts_of(third_word)}' is not a centre word of an arc in the {self.plane} "
+                                      "plane: ignored, as grbl does (LinuxCNC refuses it)")
             if not any(names[i] in vals for i in (first, second)):
                 raise self.err(f"G{self.motion} arc needs {names[first].upper()}/{names[second].upper()} or R")
             if self.arc_absolute:

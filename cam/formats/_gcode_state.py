@@ -9,7 +9,7 @@ from pathlib import Path
 
 from ..errors import ParseError
 from ..limits import MAX_TOOL_NUMBER
-from ._gcode_data import GcodeMove, _Frame, _Source
+from ._gcode_data import CS_NAMES, GcodeMove, _Frame, _Source
 from .ngc import NgcSyntaxError, evaluate
 
 
@@ -17,7 +17,7 @@ class _State:
     """Everything one run of a program keeps between its lines, and the words that read or set it."""
 
     def __init__(self, source: _Source, *, home_g28_mm, home_g30_mm, tool_lengths_mm, subroutine_path,
-                 max_lines) -> None:
+                 max_lines, start_mm=(0.0, 0.0, 0.0), work_offsets_mm=None, active_offset="G54") -> None:
         self.main = source
         self.tool_lengths_mm = None if tool_lengths_mm is None else dict(tool_lengths_mm)
         self.path = [Path(p) for p in subroutine_path]
@@ -29,18 +29,31 @@ class _State:
         self.sync_warned = False
         self.spindle_rpm = 0.0  # S: the machine has no spindle output; G33's feed is K x S
         self.spindle_on = False  # M3/M4 (on) or M5 (off): rs274 refuses G33 with the spindle stopped
+        self.spindle = 0  # 3 (M3), 4 (M4) or 0 (M5): recorded with each move
+        self.spindle_noted = False
+        self.dialect_noted: set[str] = set()  # the grbl habits already warned about (one warning each)
         self.params: dict[int, float] = {}
         for i, a in enumerate(home_g28_mm):
             self.params[5161 + i] = float(a)
         for i, a in enumerate(home_g30_mm):
             self.params[5181 + i] = float(a)
-        self.params[5220] = 1.0
+        for name, zero in (work_offsets_mm or {}).items():
+            if name not in CS_NAMES:
+                raise ParseError(f"{source.name}: unknown work offset {str(name)[:20]!r} (known: "
+                                 f"{', '.join(CS_NAMES)})")
+            for i, v in enumerate(zero):
+                self.params[5221 + 20 * CS_NAMES.index(name) + i] = float(v)
+        if active_offset not in CS_NAMES:
+            raise ParseError(f"{source.name}: unknown work offset {str(active_offset)[:20]!r} (known: "
+                             f"{', '.join(CS_NAMES)})")
         self.globals: dict[str, float] = {}
         self.frames: list[_Frame] = [_Frame(source, -1, "", {})]
-        self.mach = [0.0, 0.0, 0.0]  # machine position, mm
+        self.start = tuple(float(v) for v in start_mm)  # where the tool stands at the start, machine mm
+        self.mach = list(self.start)  # machine position, mm
         self.g92 = [0.0, 0.0, 0.0]
         self.tlo = 0.0
         self.cs = 1
+        self.select_cs(CS_NAMES.index(active_offset) + 1)
         self.scale = 1.0
         self.absolute = True
         self.arc_absolute = False
@@ -66,6 +79,25 @@ class _State:
 
     def err(self, msg: str) -> ParseError:
         return ParseError(f'{self.source.name}:{self.line_no}: {msg} "{self.raw.strip()[:60]}"')
+
+    def note_once(self, key: str, message: str) -> None:
+        """Warn ``message`` (with ``file:line``) the first time the habit ``key`` is met in the run."""
+        if key not in self.dialect_noted:
+            self.dialect_noted.add(key)
+            self.warnings.append(f"{self.source.name}:{self.line_no}: {message}")
+
+    def emit(self, kind: str, mach=None, **kw) -> GcodeMove:
+        """Record a move of ``kind`` ending at machine mm ``mach`` (default: where the tool is), given from
+        where the tool stood at the start (:attr:`start`), with the spindle's state."""
+        end = tuple(m - s for m, s in zip(self.mach if mach is None else mach, self.start))
+        move = GcodeMove(kind, self.line_no, end, spindle=self.spindle,  # type: ignore[arg-type]
+                         spindle_rpm=self.spindle_rpm if self.spindle else 0.0, **kw)
+        self.moves.append(move)
+        return move
+
+    def work_offsets_mm(self) -> dict[str, tuple[float, float, float]]:
+        """Every work offset's zero as it stands now (machine mm, G-code axes), by name (G54..G59.3)."""
+        return {name: tuple(self.g5x(k + 1)) for k, name in enumerate(CS_NAMES)}  # type: ignore[misc]
 
     def g5x(self, cs: int | None = None) -> list[float]:
         base = 5221 + 20 * ((cs or self.cs) - 1)

@@ -120,7 +120,9 @@ def _interpret(src: _Source, batch_moves: int, options: dict) -> Iterator[MoveBa
         for _ in interp.run():
             if len(interp.moves) >= batch_moves:
                 yield take()
-        yield take()
+        last = take()
+        last.work_offsets_mm = interp.work_offsets_mm()
+        yield last
     except RecursionError:  # pragma: no cover - an expression nested thousands deep
         raise interp.err("expression nested too deep") from None
     finally:
@@ -137,8 +139,10 @@ class GcodeFile:
 
     Attributes:
         path: the file; source: its name in messages.
-        home_g28_mm, home_g30_mm, tool_lengths_mm, subroutine_path, max_lines: as :func:`parse_gcode`'s.
+        home_g28_mm, home_g30_mm, tool_lengths_mm, subroutine_path, max_lines, start_mm, work_offsets_mm,
+        active_offset: as :func:`parse_gcode`'s.
         warnings: the warnings of the last pass that ran to the end (empty before).
+        end_offsets_mm: the work offsets as the last pass that ran to the end left them (None before).
     """
 
     path: Path
@@ -149,6 +153,10 @@ class GcodeFile:
     subroutine_path: Sequence[str | os.PathLike] = ()
     max_lines: int = DEFAULT_GCODE_LINES
     warnings: list[str] = field(default_factory=list)
+    start_mm: Sequence[float] = (0.0, 0.0, 0.0)
+    work_offsets_mm: Mapping[str, Sequence[float]] | None = None
+    active_offset: str = "G54"
+    end_offsets_mm: dict[str, tuple[float, float, float]] | None = None
 
     def move_batches(self, batch_moves: int = BATCH_MOVES) -> Iterator[MoveBatch]:
         """The program's moves in order, in batches of at least ``batch_moves`` (see :class:`MoveBatch`).
@@ -158,17 +166,23 @@ class GcodeFile:
         """
         options = dict(home_g28_mm=self.home_g28_mm, home_g30_mm=self.home_g30_mm,
                        tool_lengths_mm=self.tool_lengths_mm, subroutine_path=self.subroutine_path,
-                       max_lines=self.max_lines)
+                       max_lines=self.max_lines, start_mm=self.start_mm, work_offsets_mm=self.work_offsets_mm,
+                       active_offset=self.active_offset)
         found: list[str] = []
         for batch in _interpret(_Source(self.source, path=self.path), max(1, int(batch_moves)), options):
             found += batch.warnings
+            if batch.work_offsets_mm is not None:
+                self.end_offsets_mm = batch.work_offsets_mm
             yield batch
         self.warnings = found
 
 
 def open_gcode(path: str | os.PathLike, *, home_g28_mm: Sequence[float] = (0.0, 0.0, 0.0),
                home_g30_mm: Sequence[float] = (0.0, 0.0, 0.0), tool_lengths_mm: Mapping[int, float] | None = None,
-               subroutine_path: Sequence[str | os.PathLike] = (), max_lines: int = DEFAULT_GCODE_LINES) -> GcodeFile:
+               subroutine_path: Sequence[str | os.PathLike] = (), max_lines: int = DEFAULT_GCODE_LINES,
+               start_mm: Sequence[float] = (0.0, 0.0, 0.0),
+               work_offsets_mm: Mapping[str, Sequence[float]] | None = None,
+               active_offset: str = "G54") -> GcodeFile:
     """A G-code file to interpret a pass at a time (:class:`GcodeFile`); the options as :func:`parse_gcode`'s.
 
     Raises:
@@ -178,29 +192,45 @@ def open_gcode(path: str | os.PathLike, *, home_g28_mm: Sequence[float] = (0.0, 
     if not p.is_file():
         raise ParseError(f"{p}: file not found")
     return GcodeFile(p, str(p), tuple(home_g28_mm), tuple(home_g30_mm), tool_lengths_mm, tuple(subroutine_path),
-                     int(max_lines))
+                     int(max_lines), start_mm=tuple(start_mm),
+                     work_offsets_mm=None if work_offsets_mm is None else dict(work_offsets_mm),
+                     active_offset=active_offset)
 
 
 def _program(batches: Iterator[MoveBatch], source: str) -> GcodeProgram:
     moves: list[GcodeMove] = []
     warnings: list[str] = []
+    offsets = None
     for batch in batches:
         moves += batch.moves
         warnings += batch.warnings
-    return GcodeProgram(moves, source, warnings)
+        offsets = batch.work_offsets_mm if batch.work_offsets_mm is not None else offsets
+    return GcodeProgram(moves, source, warnings, offsets)
 
 
 def parse_gcode(
     text: str, *, source: str = "<gcode>", home_g28_mm: Sequence[float] = (0.0, 0.0, 0.0),
     home_g30_mm: Sequence[float] = (0.0, 0.0, 0.0), tool_lengths_mm: Mapping[int, float] | None = None,
     subroutine_path: Sequence[str | os.PathLike] = (), max_lines: int = DEFAULT_GCODE_LINES,
+    start_mm: Sequence[float] = (0.0, 0.0, 0.0), work_offsets_mm: Mapping[str, Sequence[float]] | None = None,
+    active_offset: str = "G54",
 ) -> GcodeProgram:
-    """Interpret G-code text into absolute moves in mm (machine frame), held in memory.
+    """Interpret G-code text into absolute moves in mm, held in memory.
+
+    The program runs as a G-code sender runs it: program coordinates are machine coordinates minus the active
+    work offset (and G92), the tool starts where it stands (``start_mm``), G53 moves and G28/G30's homes are
+    machine positions.  Machine mm are in G-code's axes (+Y away from the operator, +Z up) from the machine's
+    home.  The moves are given from ``start_mm``: a move's ``end`` is its machine position minus ``start_mm``.
 
     Args:
         text: the program.
         source: its name in messages.
         home_g28_mm, home_g30_mm: where G28 and G30 go, machine mm (parameters 5161.. and 5181..).
+        start_mm: where the tool stands when the program starts, machine mm.
+        work_offsets_mm: work offset name (``"G54"`` .. ``"G59.3"``) -> its zero, machine mm (the
+            machine state's; parameters 5221..); None or a name left out: zero.  ``G10 L2``/``L20`` change
+            them for this run only; the program's :attr:`GcodeProgram.work_offsets_mm` says how it left them.
+        active_offset: the work offset in force when the program starts (``G54`` unless the state says).
         tool_lengths_mm: tool number -> Z length offset mm, for G43 (a tool table file's, see
             :func:`load_tool_table`); None: G43 with a tool other than 0 is an error.
         subroutine_path: folders where ``O<name> call`` finds ``name.ngc``.
@@ -211,7 +241,8 @@ def parse_gcode(
             for a program that runs more than ``max_lines`` lines.
     """
     options = dict(home_g28_mm=home_g28_mm, home_g30_mm=home_g30_mm, tool_lengths_mm=tool_lengths_mm,
-                   subroutine_path=subroutine_path, max_lines=max_lines)
+                   subroutine_path=subroutine_path, max_lines=max_lines, start_mm=start_mm,
+                   work_offsets_mm=work_offsets_mm, active_offset=active_offset)
     return _program(_interpret(_Source(source, text), 1 << 62, options), source)
 
 
