@@ -89,6 +89,9 @@ __all__ = [
     "DEFAULT_UNITS",
     "DEFAULT_DIGITS",
     "DEFAULT_ZEROS",
+    "PLAUSIBLE_DRILL_MM",
+    "PLAUSIBLE_BOARD_MM",
+    "parse_nc_param",
 ]
 
 DEFAULT_UNITS = "inch"
@@ -133,6 +136,12 @@ class HoleList:
         line_of_hole: ``(N,)`` int64 source line (1-based) of each hole.
         warnings: ``"file:line: message: 'line text'"`` for each recoverable oddity.
         source: the file name used in messages.
+        slot_paths_mm: the slots to mill, each a ``(K, 2)`` float64 path (K >= 2, board frame, mm): a ``G85``
+            slot is its two ends, a route (``M15`` ... ``M16``) the points its ``G01`` / ``G02`` / ``G03`` moves
+            pass (arcs as short chords).
+        tool_of_slot, line_of_slot: ``(M,)`` int64 tool and first source line of each slot.
+        skipped: tool -> number of its holes and slots left out because the tool cannot be drilled (zero size,
+            larger than :data:`~cam.limits.MAX_TOOL_DIAMETER_MM`); such a tool is not in ``tools``.
     """
 
     holes_mm: np.ndarray
@@ -141,14 +150,29 @@ class HoleList:
     line_of_hole: np.ndarray
     warnings: list[str] = field(default_factory=list)
     source: str = "<excellon>"
+    slot_paths_mm: list[np.ndarray] = field(default_factory=list)
+    tool_of_slot: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    line_of_slot: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    skipped: dict[int, int] = field(default_factory=dict)
 
     def extent_mm(self) -> tuple[float, float, float, float]:
-        """``(x0, y0, x1, y1)``: the smallest and largest hole centre coordinates (mm); all 0.0 without holes."""
-        if len(self.holes_mm) == 0:
+        """``(x0, y0, x1, y1)``: the smallest and largest hole centre coordinates (mm), or of the slots' points in
+        a file of slots only; all 0.0 without either (:meth:`points_mm` has both)."""
+        pts = self.holes_mm if len(self.holes_mm) else self.points_mm()
+        if len(pts) == 0:
             return (0.0, 0.0, 0.0, 0.0)
-        lo = self.holes_mm.min(axis=0)
-        hi = self.holes_mm.max(axis=0)
+        lo = pts.min(axis=0)
+        hi = pts.max(axis=0)
         return (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]))
+
+    def points_mm(self) -> np.ndarray:
+        """``(N, 2)`` every hole centre and slot point (mm), holes first."""
+        return np.concatenate([np.asarray(self.holes_mm, np.float64).reshape(-1, 2)]
+                              + [np.asarray(p, np.float64).reshape(-1, 2) for p in self.slot_paths_mm])
+
+    def slot_count(self, tool: int) -> int:
+        """How many slots ``tool`` mills."""
+        return int(np.count_nonzero(np.asarray(self.tool_of_slot) == tool))
 
     def tool_table(self) -> list[tuple[int, float, int]]:
         """``[(tool, diameter_mm, hole_count)]`` for every *defined* tool, by tool number.
@@ -172,10 +196,13 @@ class _Reader:
     commands to :func:`_command` and comments to :func:`_comment`.
     """
 
-    def __init__(self, source: str, units, digits, zeros) -> None:
+    def __init__(self, source: str, units, digits, zeros, guess=None, max_lines: int | None = None) -> None:
         self.source = source
         # what the caller gave for "when the file does not say"
         self.opt_units, self.opt_digits, self.opt_zeros = units, digits, zeros
+        # the reading tried for what neither says (_Guess), else the built-in defaults
+        self.guess = guess
+        self.max_lines = max_lines
         # what the file said (None = not stated)
         self.units: str | None = None
         self.digits: tuple[int, int] | None = None
@@ -196,6 +223,15 @@ class _Reader:
         self.after_end: list[int] = []
         self.lineno = 0
         self.text = ""
+        self.default_warnings: list[int] = []  # indexes into warnings of the "does not state" ones
+        self.first_default_units: str | None = None  # the units where a number was first read by default
+        self.bad_tools: dict[int, str] = {}  # tool -> why it cannot be drilled
+        self.comment_tools: dict[int, float] = {}  # Allegro ';T01 Holesize 1. = 12.0 ... MILS': tool -> mm
+        self.slots: list[tuple[list[tuple[float, float]], int, int]] = []  # (path, tool, line)
+        self.route_path: list[tuple[float, float]] | None = None  # the route being cut (between M15 and M16)
+        self.route_line = 0
+        self.route_mode = 0  # G00 / G01 / G02 / G03 in routing
+        self.warned_slot = self.warned_route = False
 
     # -- messages ---------------------------------------------------------------------------
     def where(self, col: int | None = None) -> str:
@@ -223,7 +259,8 @@ class _Reader:
 
     def current_units(self) -> tuple[str, bool]:
         units, src = self._setting("units")
-        return (units or DEFAULT_UNITS), src == "default"
+        guessed = self.guess.units if self.guess is not None else DEFAULT_UNITS
+        return (units or guessed), src == "default"
 
     def current_format(self, units: str) -> tuple[tuple[int, int], str, list[str]]:
         """Digits and zeros for implied decimals, and which of them come from the built-in defaults."""
@@ -231,10 +268,11 @@ class _Reader:
         zeros, _ = self._setting("zeros")
         assumed = []
         if digits is None:
-            digits = DEFAULT_DIGITS[units]
+            g = self.guess
+            digits = g.digits if g is not None and g.digits_units == units else DEFAULT_DIGITS[units]
             assumed.append("digits")
         if zeros is None:
-            zeros = DEFAULT_ZEROS
+            zeros = self.guess.zeros if self.guess is not None else DEFAULT_ZEROS
             assumed.append("zeros")
         return digits, zeros, assumed
 
@@ -250,6 +288,9 @@ class _Reader:
             parts.append(f"digits ({digits[0]}:{digits[1]})")
         if "zeros" in what:
             parts.append(f"zeros ({zeros}: {'leading' if zeros == 'TZ' else 'trailing'} zeros suppressed)")
+        self.default_warnings.append(len(self.warnings))
+        if self.first_default_units is None:
+            self.first_default_units = units
         self.warn("the file does not state its " + ", ".join(parts) + "; read with these defaults "
                   "(set --excellon-units / --excellon-digits / --excellon-zeros if the holes look wrong)")
 
@@ -276,6 +317,8 @@ class _Reader:
             assumed.insert(0, "units")
         sign = -1 if text.startswith("-") else 1
         body = text.lstrip("+-")
+        if not body.strip("0"):
+            return 0.0  # zero in every format
         n_int, n_frac = digits
         if len(body) > n_int + n_frac:
             raise self.error(
@@ -342,6 +385,8 @@ class _Reader:
     def hole(self) -> None:
         if self.tool is None:
             raise self.error("a hole before any tool is selected")
+        if self.route_path is not None:
+            return  # a position in a route: part of the cut
         if len(self.holes) >= MAX_HOLES:
             raise self.error(f"more than {MAX_HOLES} holes")
         self.holes.append((self.pos_mm[0], self.pos_mm[1]))
@@ -349,6 +394,21 @@ class _Reader:
         self.hole_line.append(self.lineno)
 
     # -- one line -----------------------------------------------------------------------------------
+    def slot(self, path: list[tuple[float, float]], line: int) -> None:
+        """A slot or route milled with the current tool along ``path`` (board mm)."""
+        if self.tool is None:
+            raise self.error("a slot before any tool is selected")
+        if len(self.slots) >= MAX_HOLES:
+            raise self.error(f"more than {MAX_HOLES} slots")
+        if len(path) >= 2:
+            self.slots.append((path, self.tool, line))
+
+    def end_route(self) -> None:
+        """``M16`` / ``M17`` / ``G05``: the tool lifts; the route cut so far becomes a slot."""
+        if self.route_path is not None:
+            self.slot(self.route_path, self.route_line)
+        self.route_path = None
+
     def line(self, lineno: int, raw: str) -> None:
         self.lineno = lineno
         self.text = raw.strip()
@@ -431,7 +491,25 @@ def _siemens_format(r: _Reader, m: re.Match) -> None:
     r.zeros = "LZ" if zeros.lower() == "leading" else "TZ"
 
 
-_COMMENT_HANDLERS = ((_KICAD_FORMAT, _kicad_format), (_FILE_FORMAT, _file_format), (_SIEMENS_FORMAT, _siemens_format))
+_HOLESIZE = re.compile(r"(?:\bT(\d+)\s+)?HOLESIZE\s+(\d+)\.?\s*=\s*([0-9]*\.?[0-9]+)(.*)", re.IGNORECASE)
+_SIZE_UNITS_MM = {"MILS": 0.0254, "MIL": 0.0254, "MM": 1.0, "INCH": MM_PER_INCH, "INCHES": MM_PER_INCH, "IN": MM_PER_INCH}
+
+
+def _size_mm(value: str, rest: str) -> float:
+    """A size with the first unit word of ``rest`` (MILS, MM, INCH); Allegro writes mils when it does not say."""
+    unit = next((w for w in re.findall(r"[A-Za-z]+", rest.upper()) if w in _SIZE_UNITS_MM), "MILS")
+    return float(value) * _SIZE_UNITS_MM[unit]
+
+
+def _holesize(r: _Reader, m: re.Match) -> None:
+    """Cadence Allegro's ``;T01 Holesize 1. = 12.000000 Tolerance = ... PLATED MILS Quantity = 20``: the size of
+    the tool the body selects with ``T01`` (a definition with ``C`` wins)."""
+    tool, index, value, rest = m.groups()
+    r.comment_tools[int(tool if tool is not None else index)] = _size_mm(value, rest)
+
+
+_COMMENT_HANDLERS = ((_KICAD_FORMAT, _kicad_format), (_FILE_FORMAT, _file_format), (_SIEMENS_FORMAT, _siemens_format),
+                     (_HOLESIZE, _holesize))
 """Format hints that CAD programs write in comments, tried in order; the first that matches is read."""
 
 
@@ -495,12 +573,16 @@ def _coordinates(r: _Reader, words) -> None:
         r.move(words[:i])
         start = tuple(r.pos_mm)
         r.move(words[i + 1:])
-        r.warn(f"slot (G85) from X{start[0]:.3f} Y{start[1]:.3f} to X{r.pos_mm[0]:.3f} "
-               f"Y{r.pos_mm[1]:.3f} mm is not drilled: left out")
+        if not r.warned_slot:
+            r.warned_slot = True
+            r.warn(f"slot (G85) from X{start[0]:.3f} Y{start[1]:.3f} to X{r.pos_mm[0]:.3f} "
+                   f"Y{r.pos_mm[1]:.3f} mm: slots are milled with their tool (plunge, along the slot, lift)")
+        r.slot([start, (r.pos_mm[0], r.pos_mm[1])], r.lineno)
+        return
+    if r.state == "route":
+        _route_move(r, words)
         return
     r.move(words)
-    if r.state == "route":
-        return
     r.hole()
 
 
@@ -516,6 +598,8 @@ def _tool_word(r: _Reader, words) -> None:
         if number == 0:
             r.tool = None
             return
+        if number not in r.tools and number in r.comment_tools:
+            r.tools[number] = r.comment_tools[number]  # Allegro: the size is in a comment or nc_param.txt
         if number not in r.tools:
             raise r.error(f"tool T{number} is selected but never defined")
         r.tool = number
@@ -534,11 +618,17 @@ def _define_tool(r: _Reader, number: int, text: str, col: int) -> None:
     if not _NUMBER.fullmatch(text):
         raise r.error(f"tool T{number} has a bad diameter '{text}'", col)
     dia_mm = r.value_mm(text, "C", col)
-    if not 0 < dia_mm <= MAX_TOOL_DIAMETER_MM:
+    if dia_mm < 0:
         raise r.error(f"tool T{number} has a bad diameter {_shown(text)} (must be > 0 and at most "
                       f"{MAX_TOOL_DIAMETER_MM:g} mm)", col)
-    if number == 0:
-        raise r.error("tool T0 cannot be defined (T0 unloads the tool)")
+    if number == 0:  # T0 unloads the tool: a definition of it can drill nothing (issue #31 point 3)
+        r.bad_tools[0] = f"T0 {dia_mm:.3f} mm (T0 unloads the tool)"
+        return
+    if dia_mm == 0 or dia_mm > MAX_TOOL_DIAMETER_MM:  # not a bad file: its holes are left out, if it has any
+        why = "zero size" if dia_mm == 0 else f"larger than the {MAX_TOOL_DIAMETER_MM:g} mm a drill may be"
+        r.bad_tools[number] = f"T{number} {dia_mm:.3f} mm ({why})"
+    else:
+        r.bad_tools.pop(number, None)
     if number in r.tools and abs(r.tools[number] - dia_mm) > 1e-9:
         r.warn(f"tool T{number} redefined: {r.tools[number]:.4f} mm -> {dia_mm:.4f} mm")
     r.tools[number] = dia_mm
@@ -552,12 +642,17 @@ def _g_word(r: _Reader, words) -> None:
     code = r.integer(words[0])
     rest = words[1:]
     if code in (0, 1, 2, 3):
-        if r.state != "route":
-            r.warn("routing (G00/G01/G02/G03 with M15/M16) is not drilled: left out up to the next G05")
+        if r.state != "route" and not r.warned_route:
+            r.warned_route = True
+            r.warn("routing (G00/G01/G02/G03 with M15/M16): routes are milled with their tool up to the next G05")
         r.state = "route"
+        r.route_mode = code
+        if code == 0:
+            r.end_route()  # a rapid move lifts the tool
         if rest:
             _route_move(r, rest)
     elif code in (5, 81):
+        r.end_route()
         if r.state in ("start", "header", "route"):
             r.state = "body"
         if rest:
@@ -585,11 +680,55 @@ def _g_word(r: _Reader, words) -> None:
 
 
 def _route_move(r: _Reader, words) -> None:
+    """A move in routing: with the tool down (after ``M15``) it extends the route being cut; ``G02`` / ``G03``
+    arcs (centre by ``I`` / ``J`` from the start, or radius ``A``) become chords of at most 0.01 mm error."""
     allowed = [w for w in words if w[0] in "XY"]
     others = [w for w in words if w[0] not in "XYAIJ"]
     if others:
         raise r.error(f"unexpected {others[0][0]}{others[0][1]} in a routing move", others[0][2])
+    start = (r.pos_mm[0], r.pos_mm[1])
     r.move(allowed)
+    end = (r.pos_mm[0], r.pos_mm[1])
+    if r.route_path is None:
+        return
+    if r.route_mode in (2, 3):
+        arc = {w[0]: r.value_mm(w[1], w[0], w[2]) for w in words if w[0] in "AIJ"}
+        r.route_path.extend(_arc_points(start, end, arc, r.route_mode == 2))
+    else:
+        r.route_path.append(end)
+
+
+def _arc_points(start, end, arc: dict[str, float], clockwise: bool) -> list[tuple[float, float]]:
+    """Points after ``start`` up to ``end`` along a routed arc (``I``/``J`` centre offsets or ``A`` radius)."""
+    sx, sy = start
+    ex, ey = end
+    if "I" in arc or "J" in arc:
+        cx, cy = sx + arc.get("I", 0.0), sy + arc.get("J", 0.0)
+    elif "A" in arc and arc["A"] > 0:
+        radius = arc["A"]
+        mx, my = (sx + ex) / 2, (sy + ey) / 2
+        dx, dy = ex - sx, ey - sy
+        half = np.hypot(dx, dy) / 2
+        if half == 0 or half > radius:
+            return [end]
+        h = np.sqrt(radius * radius - half * half)
+        side = -1.0 if clockwise else 1.0  # the short arc
+        cx, cy = mx - side * h * dy / (2 * half), my + side * h * dx / (2 * half)
+    else:
+        return [end]
+    radius = float(np.hypot(sx - cx, sy - cy))
+    a0, a1 = np.arctan2(sy - cy, sx - cx), np.arctan2(ey - cy, ex - cx)
+    sweep = a1 - a0
+    if clockwise:
+        sweep = sweep if sweep < 0 else sweep - 2 * np.pi
+    else:
+        sweep = sweep if sweep > 0 else sweep + 2 * np.pi
+    if radius <= 0:
+        return [end]
+    step = 2 * np.arccos(max(-1.0, 1 - 0.01 / radius)) if radius > 0.01 else np.pi / 2
+    n = int(min(max(2, np.ceil(abs(sweep) / step)), 720))
+    t = a0 + sweep * np.arange(1, n) / n
+    return [(float(cx + radius * np.cos(a)), float(cy + radius * np.sin(a))) for a in t] + [end]
 
 
 def _m_word(r: _Reader, words) -> None:
@@ -609,8 +748,14 @@ def _m_word(r: _Reader, words) -> None:
         r.state = "end"
     elif code in (71, 72):
         r.units = "metric" if code == 71 else "inch"
-    elif code in (15, 16, 17):
-        pass  # plunge / retract in routing: the route itself is left out
+    elif code == 15:  # plunge: the route starts here
+        if r.tool is None:
+            raise r.error("a route before any tool is selected")
+        r.end_route()
+        r.route_path = [(r.pos_mm[0], r.pos_mm[1])]
+        r.route_line = r.lineno
+    elif code in (16, 17):  # retract: the route ends
+        r.end_route()
     elif code in (25, 1, 8) or code == 2:
         raise r.error(f"repeated patterns (M25/M01/M02/M08) are not supported (M{words[0][1]})")
     elif code in (97, 98):
@@ -659,6 +804,184 @@ def _check_options(excellon_units, excellon_digits, excellon_zeros) -> None:
                            f"(2, 4), got {excellon_digits!r}")
 
 
+# ---------------------------------------------------------------------- reading by plausibility
+PLAUSIBLE_DRILL_MM = (0.1, 6.5)
+"""Tool diameters a drill file plausibly holds (issue #31 point 2)."""
+PLAUSIBLE_BOARD_MM = 500.0
+"""The largest board a drill file plausibly holds, either way."""
+_PITCHES_MM = np.array([0.5, 0.635, 0.65, 0.8, 1.0, 1.27, 1.5, 1.778, 2.0, 2.5, 2.54, 3.0, 3.5, 3.81, 3.96, 5.0,
+                        5.08, 7.62])
+"""Distances between neighbouring holes that boards are made of (pin pitches in mm and in tenths of an inch)."""
+_GUESS_LINES = 1500
+"""How many lines of a file the readings are tried on (the chosen one then reads the whole file)."""
+_DIGIT_CHOICES = {"inch": ((2, 4), (2, 3), (2, 5), (3, 3), (3, 4)), "metric": ((3, 3), (4, 2), (3, 2), (4, 3), (3, 4))}
+_NUMBER_TEXT = re.compile(r"[XY][+-]?([0-9]+)(?![0-9.])")
+
+
+@dataclass(frozen=True)
+class _Guess:
+    """A reading of what a file does not state: its units, the digits in those units, its zeros."""
+
+    units: str
+    digits: tuple[int, int]
+    zeros: str
+
+    @property
+    def digits_units(self) -> str:
+        return self.units
+
+    def describe(self, what: set[str]) -> str:
+        parts = []
+        if "units" in what:
+            parts.append(self.units)
+        if "digits" in what:
+            parts.append(f"{self.digits[0]}:{self.digits[1]}")
+        if "zeros" in what:
+            parts.append(f"{self.zeros} ({'leading' if self.zeros == 'TZ' else 'trailing'} zeros suppressed)")
+        return " ".join(parts)
+
+
+def _read(text: str, source: str, units, digits, zeros, guess: _Guess | None = None,
+          max_lines: int | None = None, params: dict | None = None) -> _Reader:
+    r = _Reader(source, units, digits, zeros, guess, max_lines)
+    if params:
+        _apply_params(r, params)
+    for lineno, raw in enumerate(text.splitlines(), start=1):
+        if max_lines is not None and lineno > max_lines:
+            break
+        r.line(lineno, raw)
+    r.end_route()
+    return r
+
+
+def _plausibility(r: _Reader, numbers: list[str], guess: _Guess) -> tuple[float, str]:
+    """How implausible a reading is (lower is better) and why, in a few words: its holes should lie on
+    the pitches boards are made of, its tools be drills of 0.1-6.5 mm, its board fit in half a metre, and
+    its numbers' zeros be the kind it suppresses (a leading-zero number shorter than the format is not
+    trailing-zero, and the other way round)."""
+    penalty = 0.0
+    holes = np.array(r.holes, np.float64).reshape(-1, 2)
+    pts = np.concatenate([holes] + [np.array(p, np.float64) for p, _, _ in r.slots])
+    used = [t for t in set(r.hole_tool) | {t for _, t, _ in r.slots} if t in r.tools]
+    lo, hi = PLAUSIBLE_DRILL_MM
+    odd_tools = [t for t in used if not lo <= r.tools[t] <= hi]
+    if used:
+        penalty += 4.0 * len(odd_tools) / len(used)
+    span = (pts.max(axis=0) - pts.min(axis=0)) if len(pts) else np.zeros(2)
+    if span.max() > PLAUSIBLE_BOARD_MM:
+        penalty += 10.0
+    if len(pts) >= 4 and span.max() < 2.0:
+        penalty += 5.0
+    on_pitch = 0.0
+    if len(holes) >= 3:
+        sample = holes[:: max(1, len(holes) // 600)]
+        d = np.hypot(*(sample[:, None, :] - sample[None, :, :]).transpose(2, 0, 1))
+        d[d < 1e-6] = np.inf
+        nearest = d.min(axis=1)
+        nearest = nearest[np.isfinite(nearest)]
+        if len(nearest):
+            err = np.abs(nearest[:, None] - _PITCHES_MM[None, :]).min(axis=1)
+            on_pitch = float(np.mean(err <= np.maximum(0.012, 0.004 * nearest)))
+            penalty += 2.0 * (1.0 - on_pitch)
+    width = sum(guess.digits)
+    short = [n for n in numbers if len(n) < width]
+    if short:
+        wrong = sum(1 for n in short if (n.startswith("0") if guess.zeros == "TZ" else n.endswith("0")))
+        penalty += 3.0 * wrong / len(short)
+    why = f"{span[0]:.1f} x {span[1]:.1f} mm"
+    if odd_tools:
+        why += ", tools " + ", ".join(f"T{t} {r.tools[t]:.3f} mm" for t in sorted(odd_tools)[:3])
+    if len(holes) >= 3:
+        why += f", {on_pitch:.0%} of holes at a usual pitch from their neighbour"
+    return penalty, why
+
+
+def _guesses(unstated: set[str], units, digits, zeros, stated_units: str) -> list[_Guess]:
+    """The readings to try, the built-in defaults first (a given option is never varied); ``stated_units``: the
+    units in effect where the first number was read by default."""
+    if units is not None or "units" not in unstated:
+        all_units: tuple[str, ...] = (units or stated_units,)
+    else:
+        all_units = (DEFAULT_UNITS, "metric")
+    out = []
+    for u in all_units:
+        digit_choices = (tuple(digits),) if digits is not None else (
+            _DIGIT_CHOICES[u] if "digits" in unstated else (DEFAULT_DIGITS[u],))
+        zero_choices = (zeros,) if zeros is not None else ((DEFAULT_ZEROS, "LZ") if "zeros" in unstated
+                                                           else (DEFAULT_ZEROS,))
+        for d in digit_choices:
+            for z in zero_choices:
+                out.append(_Guess(u, tuple(d), z))
+    return out
+
+
+def _choose(text: str, source: str, units, digits, zeros, params, first: _Reader) -> tuple[_Guess, str] | None:
+    """The most plausible reading of what the file does not state, and the warning naming it and the
+    runner-up; None when the defaults are the only reading."""
+    unstated = set(first.defaults_warned)
+    numbers = _NUMBER_TEXT.findall("\n".join(text.splitlines()[:_GUESS_LINES]).upper())
+    scored = []
+    for k, guess in enumerate(_guesses(unstated, units, digits, zeros, first.first_default_units or DEFAULT_UNITS)):
+        try:
+            r = _read(text, source, units, digits, zeros, guess, _GUESS_LINES, params)
+        except ParseError:
+            continue
+        penalty, why = _plausibility(r, numbers, guess)
+        key = np.round(np.array(r.holes, np.float64), 6).tobytes() + repr(sorted(r.tools.items())).encode()
+        scored.append((penalty + (0.15 if k else 0.0) + 0.01 * k, k, guess, why, key))
+    if not scored:
+        return None
+    scored.sort(key=lambda s: s[:2])
+    best = scored[0]
+    runner = next((s for s in scored[1:] if s[4] != best[4]), None)
+    note = f"read as the most plausible: {best[2].describe(unstated)} ({best[3]})"
+    if runner is not None:
+        note += f"; the runner-up {runner[2].describe(unstated)} gives {runner[3]}"
+    return best[2], note
+
+
+# ---------------------------------------------------------------------- nc_param.txt (Allegro)
+NC_PARAM_NAME = "nc_param.txt"
+"""The parameter file Cadence Allegro writes beside its drill files: the format and (tool lines) the sizes."""
+
+
+def parse_nc_param(text: str, source: str = NC_PARAM_NAME) -> dict:
+    """What an Allegro ``nc_param.txt`` states: ``{"units", "digits", "zeros", "incremental", "tools"}`` (only
+    the keys it states; ``tools`` maps tool number -> mm from lines ``T01 12.0 MILS``).
+
+    >>> parse_nc_param("FORMAT 2.5\\nOUTPUT-UNITS ENGLISH\\nSUPPRESS-LEAD-ZEROES YES\\nT01 12.0\\n")["digits"]
+    (2, 5)
+    """
+    out: dict = {"tools": {}}
+    for raw in text.splitlines():
+        words = raw.strip().split()
+        if len(words) < 2:
+            continue
+        key, value = words[0].upper(), words[1].upper()
+        if key == "FORMAT" and re.fullmatch(r"[0-9]\.[0-9]", value):
+            out["digits"] = (int(value[0]), int(value[2]))
+        elif key == "OUTPUT-UNITS":
+            out["units"] = "inch" if value in ("ENGLISH", "INCH", "INCHES") else "metric"
+        elif key == "SUPPRESS-LEAD-ZEROES" and value == "YES":
+            out["zeros"] = "TZ"
+        elif key == "SUPPRESS-TRAIL-ZEROES" and value == "YES":
+            out["zeros"] = "LZ"
+        elif key == "COORDINATES":
+            out["incremental"] = value.startswith("INCREMENTAL")
+        elif re.fullmatch(r"T[0-9]+", key) and re.fullmatch(r"[0-9]*\.?[0-9]+", value):
+            out["tools"][int(key[1:])] = _size_mm(value, " ".join(words[2:]))
+    return out
+
+
+def _apply_params(r: _Reader, params: dict) -> None:
+    r.units = params.get("units", r.units)
+    r.digits = params.get("digits", r.digits)
+    r.zeros = params.get("zeros", r.zeros)
+    r.incremental = params.get("incremental", r.incremental)
+    r.comment_tools.update(params.get("tools", {}))
+
+
+# ---------------------------------------------------------------------- the reader
 def parse_excellon(
     text: str,
     *,
@@ -666,52 +989,145 @@ def parse_excellon(
     excellon_units: str | None = None,
     excellon_digits: tuple[int, int] | None = None,
     excellon_zeros: str | None = None,
+    strict: bool = False,
+    nc_param: str | None = None,
 ) -> HoleList:
-    """Read the holes of an Excellon drill program (pure: no I/O).
+    """Read the holes and slots of an Excellon drill program (pure: no I/O).
 
     Args:
         text: the whole file.
         source: file name used in messages.
-        excellon_units: "inch" or "metric" when the file does not say (default :data:`DEFAULT_UNITS`).
-        excellon_digits: (integer, fraction) digits of implied-decimal numbers when the file does not say
-            (default :data:`DEFAULT_DIGITS` for the units).
-        excellon_zeros: "LZ" (leading zeros kept) or "TZ" (trailing zeros kept) when the file does not say
-            (default :data:`DEFAULT_ZEROS`).
+        excellon_units: "inch" or "metric" when the file does not say.
+        excellon_digits: (integer, fraction) digits of implied-decimal numbers when the file does not say.
+        excellon_zeros: "LZ" (leading zeros kept) or "TZ" (trailing zeros kept) when the file does not say.
 
         The three are the job options of the same names (:data:`cam.options.OPTIONS`, ``--excellon-units``,
-        ``--excellon-digits``, ``--excellon-zeros``).
+        ``--excellon-digits``, ``--excellon-zeros``).  What neither the file nor they say is chosen by
+        plausibility (issue #31 point 2): of the readings (units, digits, zeros; the built-in defaults first,
+        :data:`DEFAULT_UNITS`, :data:`DEFAULT_DIGITS`, :data:`DEFAULT_ZEROS`), the one whose holes lie at the
+        pitches boards are made of, whose tools are drills of :data:`PLAUSIBLE_DRILL_MM`, whose board fits in
+        :data:`PLAUSIBLE_BOARD_MM` and whose numbers' zeros are the kind it suppresses; one warning names it
+        and the runner-up.
+        strict: refuse a used tool that cannot be drilled (zero size, larger than
+            :data:`~cam.limits.MAX_TOOL_DIAMETER_MM`) instead of leaving its holes out with a warning.
+        nc_param: the text of an Allegro ``nc_param.txt`` beside the file (:func:`parse_nc_param`): what it
+            states counts as stated by the file.
 
     Returns:
-        The holes (board frame, mm) with their tools, lines and warnings.
+        The holes (board frame, mm) with their tools, lines and warnings; the slots to mill.
 
     Raises:
         ParseError: not an Excellon file, a number the format cannot read, a hole without a tool,
-            a tool selected but never defined, a bad diameter, ... (``file:line: what: 'line text'``).
+            a tool selected but never defined, a negative diameter, a board that no reading fits in half a
+            metre, a tool that cannot be drilled with ``strict`` ... (``file:line: what: 'line text'``).
         CamError: a bad keyword argument.
     """
     _check_options(excellon_units, excellon_digits, excellon_zeros)
-    r = _Reader(source, excellon_units, tuple(excellon_digits) if excellon_digits is not None else None,
-                excellon_zeros)
-    for lineno, raw in enumerate(text.splitlines(), start=1):
-        r.line(lineno, raw)
+    digits = tuple(excellon_digits) if excellon_digits is not None else None
+    params = parse_nc_param(nc_param) if nc_param else None
+    chosen = None
+    try:  # the first lines tell whether anything is read by default
+        sample = _read(text, source, excellon_units, digits, excellon_zeros, None, _GUESS_LINES, params)
+    except ParseError:
+        sample = None  # the whole reading below names the error
+    if sample is not None and sample.defaults_warned:
+        chosen = _choose(text, source, excellon_units, digits, excellon_zeros, params, sample)
+    r = _read(text, source, excellon_units, digits, excellon_zeros, chosen[0] if chosen else None, None, params)
     if not r.seen_excellon:
         raise ParseError(f"{source}: not an Excellon drill file (no header, tool or hole)")
+    lines = text.splitlines()
+    if r.default_warnings:  # one warning, where the first number read so was, naming the choice and the runner-up
+        first = r.warnings[r.default_warnings[0]]
+        stated = first.split("; read with these defaults")[0]
+        note = chosen[1] if chosen is not None else "read with these defaults"
+        line_text = first[first.rindex(": '"):]
+        merged = (f"{stated}; {note} (set --excellon-units / --excellon-digits / --excellon-zeros if the holes "
+                  f"look wrong){line_text}")
+        if len(r.default_warnings) > 1:  # the other fields came later: name them in the one warning
+            for k in r.default_warnings[1:]:
+                more = r.warnings[k].split("does not state its ", 1)[1].split("; read with")[0]
+                merged = merged.replace(" does not state its ", f" does not state its {more}, ", 1)
+        drop = set(r.default_warnings)
+        r.warnings = [merged if k == r.default_warnings[0] else w for k, w in enumerate(r.warnings) if k == r.default_warnings[0] or k not in drop]
     if r.after_end:
         r.lineno = r.after_end[0]
-        r.text = text.splitlines()[r.lineno - 1].strip()
+        r.text = lines[r.lineno - 1].strip()
         r.warn(f"{len(r.after_end)} statement(s) after the end of the program (M30/M00) ignored")
-    if not r.holes:
-        r.lineno, r.text = len(text.splitlines()), ""
+    skipped = _bad_tools(r, strict)
+    _check_plausible(r, chosen is not None, any(v is not None for v in (excellon_units, digits, excellon_zeros)))
+    if not r.holes and not r.slots:
         r.warnings.append(f"{source}: no holes to drill")
     holes = np.array(r.holes, np.float64).reshape(-1, 2)
     return HoleList(
         holes_mm=holes,
         tool_of_hole=np.array(r.hole_tool, np.int64),
-        tools=dict(r.tools),
+        tools={t: d for t, d in r.tools.items() if t not in r.bad_tools},
         line_of_hole=np.array(r.hole_line, np.int64),
         warnings=r.warnings,
         source=source,
+        slot_paths_mm=[np.array(p, np.float64) for p, _, _ in r.slots],
+        tool_of_slot=np.array([t for _, t, _ in r.slots], np.int64),
+        line_of_slot=np.array([ln for _, _, ln in r.slots], np.int64),
+        skipped=skipped,
     )
+
+
+def _bad_tools(r: _Reader, strict: bool) -> dict[int, int]:
+    """Leave out the holes and slots of tools that cannot be drilled, with a warning naming them (an error with
+    ``strict``); a bad tool never used is ignored with a note.  Returns tool -> holes and slots left out."""
+    skipped: dict[int, int] = {}
+    if not r.bad_tools:
+        return skipped
+    tools = np.array(r.hole_tool, np.int64)
+    lines = np.array(r.hole_line, np.int64)
+    for tool, why in sorted(r.bad_tools.items()):
+        mine = np.flatnonzero(tools == tool)
+        slot_lines = [ln for _, t, ln in r.slots if t == tool]
+        n = len(mine) + len(slot_lines)
+        if n == 0:
+            r.warnings.append(f"{r.source}: tool {why} is defined but never used: ignored")
+            continue
+        first = int(lines[mine[0]]) if len(mine) else slot_lines[0]
+        shown = ", ".join(str(int(v)) for v in sorted(lines[mine].tolist() + slot_lines)[:5])
+        more = ", ..." if n > 5 else ""
+        what = f"tool {why} cannot be drilled: its {n} hole(s) and slot(s) (lines {shown}{more})"
+        if strict:
+            raise ParseError(f"{r.source}:{first}: {what} (refused: --strict)")
+        r.warnings.append(f"{r.source}:{first}: {what} are left out (--strict refuses the file instead)")
+        keep = tools != tool
+        r.holes = [h for h, k in zip(r.holes, keep) if k]
+        r.hole_tool = [t for t, k in zip(r.hole_tool, keep) if k]
+        r.hole_line = [ln for ln, k in zip(r.hole_line, keep) if k]
+        tools, lines = tools[keep], lines[keep]
+        r.slots = [s for s in r.slots if s[1] != tool]
+        skipped[tool] = n
+    return skipped
+
+
+def _check_plausible(r: _Reader, guessed: bool, given: bool) -> None:
+    """After the reading: a board larger than half a metre when the reading was a guess (and no format option
+    was given) is an error naming the farthest hole; a used tool outside :data:`PLAUSIBLE_DRILL_MM` is a warning naming it and its holes."""
+    holes = np.array(r.holes, np.float64).reshape(-1, 2)
+    if guessed and not given and len(holes) >= 2:
+        span = holes.max(axis=0) - holes.min(axis=0)
+        if span.max() > PLAUSIBLE_BOARD_MM:
+            axis = int(np.argmax(span))
+            far = int(np.argmax(np.abs(holes[:, axis] - np.median(holes[:, axis]))))
+            raise ParseError(
+                f"{r.source}:{r.hole_line[far]}: no reading of this file's unstated format fits the board in "
+                f"{PLAUSIBLE_BOARD_MM:g} mm: the hole at X{holes[far, 0]:.3f} Y{holes[far, 1]:.3f} mm makes it "
+                f"{span[axis]:.0f} mm; give --excellon-units / --excellon-digits / --excellon-zeros")
+    lo, hi = PLAUSIBLE_DRILL_MM
+    tools = np.array(r.hole_tool, np.int64)
+    for tool in sorted(set(r.hole_tool) | {t for _, t, _ in r.slots}):
+        dia = r.tools.get(tool)
+        if dia is None or lo <= dia <= hi:
+            continue
+        n = int(np.count_nonzero(tools == tool)) + sum(1 for _, t, _ in r.slots if t == tool)
+        first = next((ln for ln, t in zip(r.hole_line, r.hole_tool) if t == tool), None)
+        first = first if first is not None else next(ln for _, t, ln in r.slots if t == tool)
+        r.warnings.append(f"{r.source}:{first}: tool T{tool} {dia:.3f} mm is not a usual drill "
+                          f"({lo:g}-{hi:g} mm): {n} hole(s) and slot(s) use it")
 
 
 def load_excellon(
@@ -720,8 +1136,11 @@ def load_excellon(
     excellon_units: str | None = None,
     excellon_digits: tuple[int, int] | None = None,
     excellon_zeros: str | None = None,
+    strict: bool = False,
 ) -> HoleList:
     """Read an Excellon drill file; see :func:`parse_excellon` for the arguments and the result.
+
+    An Allegro ``nc_param.txt`` in the same folder (any case) is read with it (:func:`parse_nc_param`).
 
     Raises:
         ParseError: the file is binary, not Excellon, or has a bad statement (naming file and line).
@@ -739,5 +1158,12 @@ def load_excellon(
         text = data.decode("utf-8")
     except UnicodeDecodeError:
         text = data.decode("latin-1")
+    nc_param = None
+    try:
+        beside = [q for q in p.parent.iterdir() if q.name.lower() == NC_PARAM_NAME and q.is_file()]
+        if beside:
+            nc_param = beside[0].read_text(encoding="latin-1")
+    except OSError:
+        nc_param = None
     return parse_excellon(text, source=str(p), excellon_units=excellon_units, excellon_digits=excellon_digits,
-                          excellon_zeros=excellon_zeros)
+                          excellon_zeros=excellon_zeros, strict=strict, nc_param=nc_param)
