@@ -146,7 +146,6 @@ def _error(text: str, **kw) -> str:
     ("M48\nMETRIC\nT1C0.8\n%\nX1.0Y1.0\n", "X1.0Y1.0", "5: a hole before any tool is selected"),
     ("M48\nMETRIC\nT1C0.8\n%\nT1\nX1.0Y1.0\nT0\nX2.0Y1.0\n", "X2.0Y1.0", "8: a hole before any tool"),
     ("M48\nMETRIC\nT1C0.8\n%\nT2\nX1.0Y1.0\n", "T2", "5: tool T2 is selected but never defined"),
-    ("M48\nMETRIC\nT1C0\n%\n", "T1C0", "3:3: tool T1 has a bad diameter 0"),
     ("M48\nMETRIC\nT1C-0.8\n%\n", "T1C-0.8", "3:3: tool T1 has a bad diameter -0.8"),
     ("M48\nMETRIC\nT1F200S100\n%\n", "T1F200S100", "3: tool T1 is defined without a diameter"),
     ("M48\nMETRIC\nT1C0.8Q5\n%\n", "T1C0.8Q5", "3:7: unexpected Q5 in a tool definition"),
@@ -217,9 +216,9 @@ def test_slots_routing_and_other_oddities_are_warnings_with_the_line():
     assert len(w) == len(expect), w
     for msg, (where, what, line) in zip(w, expect):
         assert msg.startswith(where) and what in msg and msg.endswith(f": '{line}'"), msg
-    # the tool of a slot-only or route-only file still shows, with no holes
+    # the tool of a slot-only or route-only file still shows, with no holes, and its slot is kept (issue #31)
     only, ws = _warnings("M48\nMETRIC\nT1C2.0\n%\nT1\nX0Y0G85X1.0Y0\nM30\n")
-    assert only.tool_table() == [(1, 2.0, 0)] and any("no holes" in m for m in ws)
+    assert only.tool_table() == [(1, 2.0, 0)] and only.slot_paths_mm[0].tolist() == [[0, 0], [1, 0]]  # milled
 
 
 def test_headers_from_other_programs_are_accepted():
