@@ -48,6 +48,7 @@ class _Flow(_State):
                                         "'$' lines): it is a command to grbl itself, not G-code")
                 if body == "%":
                     if percent or ran:
+                        self._after_percent(src, idx)
                         return  # the closing '%' ends the program
                     percent = True
                 idx += 1
@@ -63,6 +64,17 @@ class _Flow(_State):
             if self.moves:
                 yield
             idx += 1
+
+    def _after_percent(self, src: _Source, idx: int) -> None:
+        """The closing ``%`` at line ``idx`` ends the program, as in LinuxCNC; one warning when lines that would
+        run follow it (a grbl sender skips ``%`` lines and would run them)."""
+        for j in range(idx + 1, src.n_lines):
+            text = src.line(j)
+            if text.strip() and re.sub(r"\s+", "", text.split("(", 1)[0].split(";", 1)[0]) not in ("", "%"):
+                self.warnings.append(f"{src.name}:{idx + 1}: the program ends at this '%', as in LinuxCNC: line "
+                                     f"{j + 1} and those after it are not run (a grbl sender would skip the '%' "
+                                     "and run them)")
+                return
 
     def _read(self, src: _Source, idx: int) -> tuple[str, Line | None]:
         """Line ``idx`` of ``src`` made current (:attr:`source`, :attr:`line_no`, :attr:`raw`): its body (no
