@@ -3,7 +3,8 @@
 Frames, as for G-code out (:mod:`cam.formats.gcode_export`): machine X steps = X mm / mm per step;
 machine Y steps = -Y mm / mm per step (machine Y grows upward, the drawing
 frame's rows downward; ``flip_y`` uses +Y); machine Z steps = -Z mm / mm per
-step Z (+Z up in G-code, deeper is + in `cam`).  G-code (0, 0, 0) is the home.
+step Z (+Z up in G-code, deeper is + in `cam`).  G-code (0, 0, 0) is the job's zero: where the tool
+stands when it starts (``home_steps`` in the machine frame; the interpreter gives the moves from there).
 
 Motion is generated so that every position the motors take is the nearest
 step to a point on the programmed path: each period moves every axis by at
@@ -42,7 +43,8 @@ from ..limits import MAX_MOVE_PERIODS, MAX_MOVE_S, MAX_PROGRAM_S
 from ..settings import DEFAULT_SETTINGS, MachineSettings
 from .model import CUT, TRAVEL, Job, PixelFrame, join_pieces
 
-__all__ = ["plan_gcode", "stream_gcode", "GcodeJobStream", "PIECE_MOVES", "STREAM_MOVES"]
+__all__ = ["plan_gcode", "stream_gcode", "GcodeJobStream", "PIECE_MOVES", "STREAM_MOVES", "steps_to_gcode_mm",
+           "gcode_mm_to_steps"]
 
 PIECE_MOVES = 1 << 12
 """Program moves planned into one piece of a :class:`GcodeJobStream` (at most: see :data:`PIECE_ROWS`)."""
@@ -300,13 +302,15 @@ class _Moves:
 class _Frame:
     """G-code millimetres to machine steps, and the travel in both."""
 
-    def __init__(self, settings: MachineSettings, flip_y: bool) -> None:
+    def __init__(self, settings: MachineSettings, flip_y: bool, home_steps=(0, 0, 0)) -> None:
         s = settings
         self.to_steps = np.array([1 / s.mm_per_step_xy, (1 if flip_y else -1) / s.mm_per_step_xy, -1 / s.mm_per_step_z])
         self.step_mm = np.array([s.mm_per_step_xy, s.mm_per_step_xy, s.mm_per_step_z])
         self.to_mm_y = s.mm_per_step_xy * (1 if flip_y else -1)
-        self.lo = np.array([b[0] for b in s.travel.bounds_steps()], np.float64)
-        self.hi = np.array([b[1] for b in s.travel.bounds_steps()], np.float64)
+        # the travel in the job's frame: its zero is at machine ``home_steps`` (where the tool stands at the start)
+        self.home = np.asarray(home_steps, np.float64).reshape(3)
+        self.lo = np.array([b[0] for b in s.travel.bounds_steps()], np.float64) - self.home
+        self.hi = np.array([b[1] for b in s.travel.bounds_steps()], np.float64) - self.home
         self.min_period = {True: max(s.delay_xy_ns, s.delay_z_ns), False: s.delay_xy_ns}
         self.delay_z_ns = s.delay_z_ns
 
@@ -321,10 +325,13 @@ class _Frame:
             self.refuse(way_mm[int(np.flatnonzero(outside)[0])], where)
 
     def refuse(self, q_mm: np.ndarray, where: str) -> None:
-        """Raise the TravelError of a move that leaves the travel at ``q_mm`` (the first point outside)."""
-        x_mm = sorted(v * self.step_mm[0] + 0.0 for v in (self.lo[0], self.hi[0]))
-        y_mm = sorted(self.to_mm_y * v + 0.0 for v in (self.lo[1], self.hi[1]))
-        z_mm = sorted(-v * self.step_mm[2] + 0.0 for v in (self.lo[2], self.hi[2]))
+        """Raise the TravelError of a move that leaves the travel at ``q_mm`` (the first point outside), both in
+        machine mm (G-code axes, from the machine's home)."""
+        lo, hi = self.lo + self.home, self.hi + self.home
+        q_mm = np.asarray(q_mm, np.float64) + self.home / self.to_steps
+        x_mm = sorted(v * self.step_mm[0] + 0.0 for v in (lo[0], hi[0]))
+        y_mm = sorted(self.to_mm_y * v + 0.0 for v in (lo[1], hi[1]))
+        z_mm = sorted(-v * self.step_mm[2] + 0.0 for v in (lo[2], hi[2]))
         raise TravelError(
             f"{where}: move to X{q_mm[0]:.3f} Y{q_mm[1]:.3f} Z{q_mm[2]:.3f} mm leaves the machine "
             f"travel (X {x_mm[0]:g}..{x_mm[1]:g} mm, Y {y_mm[0]:g}..{y_mm[1]:g} mm, Z {z_mm[0]:g}..{z_mm[1]:g} mm)"
@@ -467,9 +474,9 @@ class _Planner:
     move ended (in mm, its exact path point in steps, and the rounded position the rows reached) and the
     program's time so far."""
 
-    def __init__(self, settings: MachineSettings, flip_y: bool, source: str) -> None:
+    def __init__(self, settings: MachineSettings, flip_y: bool, source: str, home_steps=(0, 0, 0)) -> None:
         self.settings, self.source = settings, source
-        self.frame = _Frame(settings, flip_y)
+        self.frame = _Frame(settings, flip_y, home_steps)
         self.moves = _Moves()
         self.cur_mm = np.zeros(3)  # G-code frame
         self.cur_steps = np.zeros(3)  # the exact path point, in steps
@@ -592,6 +599,8 @@ class GcodeJobStream:
         pause_notes, warnings: the job's (the warnings: a file's, once a pass ended).
         spill: keep the first whole pass's pieces in a temporary file for the later passes (:class:`_Spill`).
         safe_z_steps: 0 (a stop lifts to the home plane); pixels, tool: None (no drawing frame; the point tool).
+        home_steps: the machine position of the job's zero, where the tool stands when it starts (the program's
+            ``start_mm``): the travel is checked in the machine frame, before anything moves.
     """
 
     src: Union[GcodeProgram, GcodeFile]
@@ -607,6 +616,7 @@ class GcodeJobStream:
     spill: bool = False
     _spilled: Optional[_Spill] = field(default=None, repr=False)
     _spilling: bool = field(default=False, repr=False)
+    home_steps: tuple[int, int, int] = (0, 0, 0)
 
     @property
     def source(self) -> str:
@@ -673,7 +683,7 @@ class GcodeJobStream:
 
     def _planned(self) -> Iterator[Job]:
         """The pieces, planned from the program's moves (see :meth:`pieces`)."""
-        planner = _Planner(self.settings, self.flip_y, self.source)
+        planner = _Planner(self.settings, self.flip_y, self.source, self.home_steps)
         notes: list[str] = []
         warnings: list[str] = []
         n_rows = n_program = 0
@@ -694,13 +704,16 @@ class GcodeJobStream:
 
 
 def stream_gcode(src: Union[GcodeProgram, GcodeFile], settings: MachineSettings = DEFAULT_SETTINGS, *,
-                 flip_y: bool = False, piece_moves: int = PIECE_MOVES, spill: bool = False) -> GcodeJobStream:
+                 flip_y: bool = False, piece_moves: int = PIECE_MOVES, spill: bool = False,
+                 home_steps: tuple[int, int, int] = (0, 0, 0)) -> GcodeJobStream:
     """The job of a G-code program as a :class:`GcodeJobStream` (a :class:`~cam.formats.gcode.GcodeFile`'s: bounded
     memory; a :class:`~cam.formats.gcode.GcodeProgram`'s moves are sliced).  See :func:`plan_gcode`.
 
     ``spill``: the first pass that runs to the end keeps its pieces in a temporary file, which later passes read
-    instead of interpreting and planning the program again (the same pieces)."""
-    return GcodeJobStream(src, settings, bool(flip_y), max(1, int(piece_moves)), spill=bool(spill))
+    instead of interpreting and planning the program again (the same pieces).  ``home_steps``: the machine
+    position of the job's zero (see :class:`GcodeJobStream`)."""
+    return GcodeJobStream(src, settings, bool(flip_y), max(1, int(piece_moves)), spill=bool(spill),
+                          home_steps=tuple(int(v) for v in home_steps))  # type: ignore[arg-type]
 
 
 def plan_gcode(program: Union[GcodeProgram, GcodeFile], settings: MachineSettings = DEFAULT_SETTINGS, *,
@@ -722,6 +735,21 @@ def plan_gcode(program: Union[GcodeProgram, GcodeFile], settings: MachineSetting
         PlanError: a move too long or too slow, a program too long (naming the line).
     """
     return stream_gcode(program, settings, flip_y=flip_y).joined()
+
+
+def steps_to_gcode_mm(xyz_steps: Any, settings: MachineSettings = DEFAULT_SETTINGS, *, flip_y: bool = False
+                      ) -> tuple[float, float, float]:
+    """A machine-frame position in steps as G-code mm (X right, Y = -y steps or +y with ``flip_y``, Z up), the
+    inverse of the planner's frame: what the interpreter's ``start_mm`` and ``work_offsets_mm`` take."""
+    to = _Frame(settings, flip_y).to_steps
+    return tuple(float(int(v) / t) + 0.0 for v, t in zip(xyz_steps, to))  # type: ignore[return-value]
+
+
+def gcode_mm_to_steps(xyz_mm: Any, settings: MachineSettings = DEFAULT_SETTINGS, *, flip_y: bool = False
+                      ) -> tuple[int, int, int]:
+    """G-code mm (see :func:`steps_to_gcode_mm`) as the nearest machine steps."""
+    to = _Frame(settings, flip_y).to_steps
+    return tuple(int(math.floor(float(v) * t + 0.5)) for v, t in zip(xyz_mm, to))  # type: ignore[return-value]
 
 
 def _add_time(program_ns: int, move_ns: int, where: str) -> int:
