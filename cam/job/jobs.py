@@ -58,7 +58,7 @@ from .drill import DEFAULT_CUT_DEPTH_MM as DRILL_DEPTH_MM
 from .drill import DEFAULT_TRAVEL_HEIGHT_MM as DRILL_TRAVEL_HEIGHT_MM
 from .drill import plan_drill
 from .gcode import STREAM_MOVES as GCODE_STREAM_MOVES
-from .gcode import stream_gcode
+from .gcode import gcode_mm_to_steps, steps_to_gcode_mm, stream_gcode
 from .hpgl import DEFAULT_CUT_DEPTH_MM as HPGL_CUT_DEPTH_MM
 from .hpgl import DEFAULT_TRAVEL_HEIGHT_MM as HPGL_TRAVEL_HEIGHT_MM
 from .drawing_stream import STREAM_TARGETS, plan, stream_drawing
@@ -624,23 +624,38 @@ def _prepare_pixels(path: Path, kind: str, options: JobOptions, settings: Machin
     )
 
 
-def _prepare_gcode(path: Path, options: JobOptions, settings: MachineSettings) -> PreparedJob:
-
+def _prepare_gcode(path: Path, options: JobOptions, settings: MachineSettings,
+                   machine_state: Optional[Any] = None) -> PreparedJob:
+    """``machine_state``: a :class:`cam.drive.state.MachineState` (the tool's machine position, the work offsets,
+    the active one): the program runs as a G-code sender runs it from there (None: from the home, offsets 0)."""
     s = settings
+    start = (0, 0, 0) if machine_state is None else tuple(int(v) for v in machine_state.position_steps)
+    frame: dict[str, Any] = {}
+    if machine_state is not None:
+        frame = dict(start_mm=steps_to_gcode_mm(start, s, flip_y=options.flip_y),
+                     work_offsets_mm={k: steps_to_gcode_mm(v, s, flip_y=options.flip_y)
+                                      for k, v in machine_state.offsets_steps.items()},
+                     active_offset=machine_state.active_offset)
     program = open_gcode(
         path, home_g28_mm=(s.g28_x_mm, s.g28_y_mm, s.g28_z_mm), home_g30_mm=(s.g30_x_mm, s.g30_y_mm, s.g30_z_mm),
         tool_lengths_mm=load_tool_table(options.tool_table) if options.tool_table else None,
-        subroutine_path=options.subroutine_path, max_lines=options.max_lines)
-    stream = stream_gcode(program, settings, flip_y=options.flip_y, spill=True)
+        subroutine_path=options.subroutine_path, max_lines=options.max_lines, **frame)
+    stream = stream_gcode(program, settings, flip_y=options.flip_y, spill=True, home_steps=start)
     # one planner whatever the size: a job of over STREAM_MOVES moves is kept as its pieces (bounded memory), the
     # file interpreted once, a line at a time, and the pieces kept in a temporary file for the later passes; a
     # smaller one is held joined
     held = stream.held(GCODE_STREAM_MOVES)
     toolpath = stream if held is None else held
-    steps = plan_chunks(toolpath)  # after a whole pass (held's or this) the program's moves and warnings are known
+    # after a whole pass (held's or this) the program's moves and warnings are known; the travel checked in the
+    # machine frame, from where the tool stands
+    steps = plan_chunks(toolpath, start_steps=start)  # type: ignore[arg-type]
     return PreparedJob(
         source=str(path), kind="gcode", plan=steps, settings=settings, toolpath=toolpath, warnings=stream.warnings,
-        summary=f"{path.name}: {stream.n_program_moves} moves", report={"moves": stream.n_program_moves},
+        summary=f"{path.name}: {stream.n_program_moves} moves",
+        report={"moves": stream.n_program_moves, "start_steps": list(start),
+                # the work offsets as the program left them (G10 L2/L20), machine steps: cam drill --keep-offsets
+                "work_offsets_end_steps": {k: list(gcode_mm_to_steps(v, s, flip_y=options.flip_y))
+                                           for k, v in (program.end_offsets_mm or {}).items()}},
     )
 
 
@@ -686,7 +701,7 @@ def _prepare_hpgl(path: Path, options: JobOptions, settings: MachineSettings, pr
     scan = scan_hpgl(path, progress=progress)
     stream = stream_hpgl(path, settings=settings, cut_depth_mm=depth_mm,
                          travel_height_mm=_or(options.travel_height_mm, HPGL_TRAVEL_HEIGHT_MM),
-                         offset_mm=options.offset_mm, scan=scan)
+                         offset_mm=options.offset_mm, scan=scan, scale=options.scale, fit_mm=options.fit_mm)
     # one planner whatever the size: above STREAM_POINTS its pieces are read from the file on every pass (bounded
     # memory), below they are joined and held (the step planner then sees every move: linear40 ramps)
     toolpath = stream if scan.n_points > STREAM_POINTS else stream.joined()
@@ -716,7 +731,7 @@ def _prepare_svg(path: Path, options: JobOptions, settings: MachineSettings) -> 
 
 def prepare_job(
     path: str | os.PathLike, options: Optional[JobOptions] = None, settings: MachineSettings = DEFAULT_SETTINGS,
-    *, name: Optional[str] = None, progress: Optional[Any] = None,
+    *, name: Optional[str] = None, progress: Optional[Any] = None, machine_state: Optional[Any] = None,
 ) -> PreparedJob:
     """Read a job file and plan it into steps.
 
@@ -726,6 +741,8 @@ def prepare_job(
         settings: the machine settings.
         name: the name the summary gives the file (default: its file name).
         progress: ``progress(bytes_read, total_bytes)`` while an HPGL file streams in (large files).
+        machine_state: G-code: the machine state (:class:`cam.drive.state.MachineState`) the program runs in:
+            it starts where the tool stands, in the state's work offsets (None: at the home, offsets 0).
 
     Returns:
         The :class:`PreparedJob`, planned relative to where the tool stands when it starts.
@@ -754,7 +771,7 @@ def prepare_job(
     if kind in ("drawing", "digitized"):
         job = _prepare_pixels(p, kind, opts, settings)
     elif kind == "gcode":
-        job = _prepare_gcode(p, opts, settings)
+        job = _prepare_gcode(p, opts, settings, machine_state)
     elif kind == "excellon":
         job = _prepare_excellon(p, opts, settings)
     elif kind == "svg":
