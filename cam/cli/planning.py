@@ -44,7 +44,8 @@ def prepare(args: argparse.Namespace, settings: Optional[MachineSettings] = None
     if not path:
         raise CamError(f"{args.command} needs an IMAGE or --load-digitized FILE")
     with reading_bar(args) as progress:
-        job = prepare_job(path, job_options(args), settings or machine_settings(args), name=path, progress=progress)
+        job = prepare_job(path, job_options(args), settings or machine_settings(args), name=path, progress=progress,
+                          machine_state=getattr(args, "machine_state", None))  # G-code: where it runs (cam drill)
     if getattr(args, "load_digitized", None) and args.image:
         drawing = load_image(args.image)
         d = job.digitized
