@@ -357,6 +357,9 @@ def _add_drill(sub: argparse._SubParsersAction) -> None:
     g.add_argument("--yes", action="store_true", help="answer every prompt (tool changes, pauses) with Enter")
     g.add_argument("--spindle", choices=("on", "off"),
                    help="MAXIMUS board: run the spindle while drilling (default on; off for a dry run)")
+    g.add_argument("--keep-offsets", action="store_true",
+                   help="G-code: keep the work offsets the program sets (G10 L2/L20) in the machine state after it "
+                   "finishes (default: they hold for the program only)")
     _add_cut_options(d)
     _add_svg_options(d)
     _add_progress_options(g)
