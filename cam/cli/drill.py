@@ -11,13 +11,15 @@ from typing import Optional
 from ..digitize.digitized import save_digitized
 from ..drive.maximus.board import drill_stroke
 from ..drive.journal import read_journal
+from ..drive.state import StateHold, check_in_travel
 from ..drive.ports import port_kind
 from ..errors import CamError, CapabilityError
 from ..job.jobs import resume_job
-from .checks import check_output_path
+from .checks import check_output_path, job_kind_of
 from ..fileio import atomic_write_text
 from .common import format_duration, port_settings
 from .execute import Outcome, check_port_options, execute
+from .machine_state import hold_machine
 from .parser import EXIT_INTERRUPTED
 from .planning import prepare, summary_of, write_job_preview
 
@@ -110,6 +112,48 @@ def _resumed(args: argparse.Namespace, job):
     return resumed, journal.position_steps
 
 
+def _gcode_hold(args: argparse.Namespace, settings) -> Optional[StateHold]:
+    """A G-code program runs as a sender runs it, from where the machine state says the tool stands and in its
+    work offsets (issue #29 point 4): the machine's hold is taken before the program is planned, and
+    ``args.machine_state`` is what it is planned in (a resumed run's: the journal's start).  None for other
+    kinds (planned from their own zero, placed at the work zero when they run)."""
+    if job_kind_of(args) != "gcode":
+        if getattr(args, "keep_offsets", False):
+            raise CamError("--keep-offsets keeps the work offsets a G-code program sets (G10 L2/L20); this is not "
+                           "a G-code program")
+        return None
+    hold = hold_machine(args, settings, "cam drill")
+    try:
+        if getattr(args, "resume", None):
+            args.machine_state = hold.state.moved_to(read_journal(args.resume).home_steps)
+        else:
+            hold.require_known()
+            args.machine_state = hold.state
+    except BaseException:
+        hold.close()
+        raise
+    return hold
+
+
+def _offsets_kept(args: argparse.Namespace, job, hold: Optional[StateHold]) -> dict:
+    """The work offsets the program changed (G10 L2/L20), machine steps, checked against the travel before
+    anything moves when --keep-offsets keeps them; says on stderr when they are not kept."""
+    if hold is None:
+        return {}
+    ends = job.report.get("work_offsets_end_steps") or {}
+    changed = {k: tuple(v) for k, v in ends.items() if tuple(v) != tuple(hold.state.offsets_steps[k])}
+    if not changed:
+        return {}
+    names = ", ".join(changed)
+    if not getattr(args, "keep_offsets", False):
+        print(f"note: the program sets work offset {names} (G10) for itself only; --keep-offsets keeps it",
+              file=sys.stderr)
+        return {}
+    for name, zero in changed.items():
+        check_in_travel(zero, hold.settings, f"work offset {name} as the program sets it (--keep-offsets)")
+    return changed
+
+
 def cmd_drill(args: argparse.Namespace) -> int:
     check_port_options(args)
     if getattr(args, "resume", None):
@@ -119,6 +163,15 @@ def cmd_drill(args: argparse.Namespace) -> int:
         read_journal(args.resume)  # a bad journal: one line, before anything is planned
     settings = port_settings(args, args.port)
     check_port_options(args, settings)
+    hold = _gcode_hold(args, settings)
+    try:
+        return _drill(args, settings, hold)
+    finally:
+        if hold is not None:
+            hold.close()
+
+
+def _drill(args: argparse.Namespace, settings, hold: Optional[StateHold]) -> int:
     planning_t0 = time.monotonic()
     job = prepare(args, settings)
     planning_s = time.monotonic() - planning_t0
@@ -138,8 +191,15 @@ def cmd_drill(args: argparse.Namespace) -> int:
     journal = journal_path(args)
     if journal is not None:
         job.report["journal"] = journal
+    kept = _offsets_kept(args, job, hold)
     t0 = time.monotonic()
-    outcome = execute(job, args, settings, start_steps=start_steps, journal=journal)
+    outcome = execute(job, args, settings, start_steps=start_steps, journal=journal, hold=hold)
+    if kept and outcome.finished and hold is not None:
+        state = hold.state
+        for name, zero in kept.items():
+            state = state.with_offset(name, zero)
+        hold.record(state)
+        print(f"work offset {', '.join(kept)} kept as the program set it (--keep-offsets)", file=sys.stderr)
     summary = summary_of(job)
     report = job.full_report()  # after the run: the run's pass over the ramps gave the machine time
     run_s = time.monotonic() - t0
