@@ -23,7 +23,8 @@ import re
 from pathlib import Path
 from typing import Optional
 
-__all__ = ["HEAD_BYTES", "GENERIC_SUFFIXES", "KIND_NAMES", "read_head", "sniff_kind", "decide_kind"]
+__all__ = ["HEAD_BYTES", "GENERIC_SUFFIXES", "KIND_NAMES", "FORCED_KINDS", "read_head", "sniff_kind", "decide_kind",
+           "forced_kind"]
 
 HEAD_BYTES = 8192
 """How much of a file is read to tell its kind."""
@@ -77,23 +78,54 @@ def _lines(text: str, truncated: bool) -> list[str]:
     return [ln.strip().upper() for ln in lines if ln.strip()]
 
 
+_EXC_REPEAT = re.compile(r"R\d+(?:X[-+]?[\d.]+)?(?:Y[-+]?[\d.]+)?")  # Allegro's R02X001000: a repeated hole
+_EXC_ROUTE_M = re.compile(r"M1[567]")  # Excellon routing: plunge, retract
+_EXC_ROUTE = re.compile(r"G0[0-3](?:X[-+]?[\d.]+)?(?:Y[-+]?[\d.]+)?(?:[AIJ][-+]?[\d.]+)*")  # G00X..Y.., no spaces
+_EXC_DRILL_G = re.compile(r"G(?:05|85|90|93)(?:X[-+]?[\d.]+)?(?:Y[-+]?[\d.]+)?|(?:X[-+]?[\d.]+)?(?:Y[-+]?[\d.]+)?G85.*")
+_EXC_HOLESIZE = re.compile(r";\s*(?:T\d+\s+)?HOLESIZE\s+\d+", re.I)
+
+
 def _excellon_or_gcode(lines: list[str]) -> Optional[str]:
-    exc_header = exc_coord = exc_tool = gcode_strong = gcode_like = 0
+    """Excellon or G-code by weighed evidence (issue #31 point 1).
+
+    For Excellon: a header (``M48``, ``M71`` / ``M72``, ``INCH`` / ``METRIC``, ``FMAT``, tool definitions
+    ``T1C0.8``), its comments (Allegro's ``;T01 Holesize 1. = ...``, ``;FILE_FORMAT``, ...), ``R`` repeat codes,
+    routing (``M15`` / ``M16`` with the ``G00`` / ``G01`` moves between them, written without spaces), tool
+    selections and bare ``X..Y..`` holes.  For G-code: words with spaces, ``Z``, ``F``, ``S``, spindle and tool
+    change ``M`` codes, plane and unit ``G`` codes, ``I`` / ``J`` arcs outside Excellon routing.
+    """
+    routes = any(_EXC_ROUTE_M.fullmatch(_GC_COMMENT.sub("", raw).strip()) for raw in lines)
+    exc_strong = 0.0
+    exc_weak = 0.0
+    exc_tool = exc_coord = 0
+    gcode_strong = gcode_like = 0
     for raw in lines:
         if raw.startswith(";"):
-            exc_header += bool(_EXC_COMMENT.match(raw))
+            if _EXC_HOLESIZE.match(raw):
+                exc_strong += 3
+            elif _EXC_COMMENT.match(raw):
+                exc_strong += 2
             continue
         line = _GC_COMMENT.sub("", raw).strip()
         if not line or line == "%":
             continue
         if _EXC_HEADER.fullmatch(line):
-            exc_header += 1
+            exc_strong += 3
             continue
         if _EXC_TOOL.fullmatch(line):
             exc_tool += 1
             continue
         if " " not in line and ("X" in line or "Y" in line) and _EXC_COORD.fullmatch(line):
             exc_coord += 1
+            continue
+        if " " not in line and _EXC_REPEAT.fullmatch(line):
+            exc_strong += 2
+            continue
+        if routes and " " not in line and (_EXC_ROUTE_M.fullmatch(line) or _EXC_ROUTE.fullmatch(line)):
+            exc_strong += 1
+            continue
+        if " " not in line and _EXC_DRILL_G.fullmatch(line):
+            exc_weak += 1
             continue
         if not _GC_LINE.fullmatch(line):
             continue
@@ -104,14 +136,16 @@ def _excellon_or_gcode(lines: list[str]) -> Optional[str]:
                 or any(letter == "G" and value in (0, 1, 2, 3, 17, 20, 21, 28, 54, 91) for letter, value in words)
                 or any(letter == "M" and value in (3, 4, 5, 6) for letter, value in words)):
             gcode_strong += 1
-    if exc_header and exc_header >= gcode_strong:
+    exc_score = exc_strong + exc_weak + exc_tool + 0.25 * exc_coord
+    gcode_score = 2.0 * gcode_strong + 0.5 * (gcode_like - gcode_strong)
+    if exc_strong and exc_score >= gcode_score:
         return "excellon"
-    if gcode_strong:
-        return "gcode"
-    if exc_tool and exc_coord:
+    if exc_tool and exc_coord and exc_score >= gcode_score:
         return "excellon"  # a headless drill file (old Eagle, P-CAD): tool selects and X..Y.. holes
     if gcode_like:
         return "gcode"
+    if exc_tool and exc_coord:
+        return "excellon"
     return None
 
 
@@ -178,3 +212,17 @@ def decide_kind(
         return suffix_kind, None
     return content, (f"{name}: the suffix {Path(name).suffix} says {KIND_NAMES.get(suffix_kind, suffix_kind)} but "
                      f"the content is {KIND_NAMES.get(content, content)}; read as {KIND_NAMES.get(content, content)}")
+
+
+FORCED_KINDS = {"excellon": "excellon", "gcode": "gcode", "hpgl": "hpgl", "svg": "svg", "drawing": "drawing",
+                "matrix": "digitized"}
+"""``--kind`` names (issue #31 point 1) and the job kind each forces ("matrix": a saved digitized matrix)."""
+
+
+def forced_kind(name: Optional[str]) -> Optional[str]:
+    """The job kind ``--kind NAME`` forces, or None when not given.
+
+    >>> forced_kind("matrix"), forced_kind(None)
+    ('digitized', None)
+    """
+    return None if name is None else FORCED_KINDS[name]
