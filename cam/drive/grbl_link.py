@@ -1,0 +1,537 @@
+"""The host side of a grbl 1.1 serial link: ``grbl:/dev/ttyUSB0?baud=115200``.
+
+:class:`GrblLink` opens the device with pyserial (8N1), waits for grbl's welcome line (``Grbl 1.1h ['$' for
+help]``; when none comes, as when the board did not reset on open, it sends a soft reset 0x18 to get one), reads
+``$$`` into :attr:`GrblLink.settings`, and streams G-code with *character counting*: it keeps a count of the
+bytes sent whose ``ok``/``error`` has not come back yet and sends the next line as soon as it fits in grbl's
+128-byte serial receive buffer, never waiting for each ``ok`` first (grbl's interface.md, "Streaming
+Protocol: Character-Counting"), so grbl's planner keeps blocks to plan on short segments.
+
+grbl's answers become one line each: ``error:n`` a :class:`GrblError` naming the line and grbl's meaning of
+``n``, ``ALARM:n`` a :class:`GrblAlarm` with the alarm's meaning, a closed or silent port a
+:class:`~cam.errors.PortError`.  The meanings paraphrase grbl's tables (gnea/grbl ``doc/markdown/interface.md``,
+"Grbl Response Messages" and "Alarm Message"; ``doc/csv/error_codes_en_US.csv``,
+``doc/csv/alarm_codes_en_US.csv``).
+
+Real-time commands go out at once, outside the count: :meth:`GrblLink.hold` (``!``), :meth:`GrblLink.resume`
+(``~``), :meth:`GrblLink.soft_reset` (0x18), :meth:`GrblLink.override` (0x90-0x9D) and :meth:`GrblLink.status`
+(``?``, parsed into a :class:`GrblStatus` with machine and work positions from ``MPos``/``WPos`` and the last
+``WCO``).  This module is the link only: the machine session does not use it yet.
+"""
+from __future__ import annotations
+
+import threading
+import time
+from collections import deque
+from dataclasses import dataclass
+from typing import Callable, Iterable, Optional
+from urllib.parse import parse_qs
+
+import serial
+
+from ..errors import PortError
+
+__all__ = [
+    "GRBL_PREFIX", "RX_BUFFER_BYTES", "ERROR_MEANINGS", "ALARM_MEANINGS", "GrblError", "GrblAlarm", "GrblStatus",
+    "StreamReport", "GrblLink", "parse_grbl_url", "parse_status", "open_grbl",
+]
+
+GRBL_PREFIX = "grbl:"
+RX_BUFFER_BYTES = 128
+DEFAULT_BAUD = 115200
+
+# grbl 1.1 error codes (interface.md "Grbl Response Messages"; doc/csv/error_codes_en_US.csv), paraphrased.
+ERROR_MEANINGS: dict[int, str] = {
+    1: "a G-code word has no letter",
+    2: "a number is missing or badly formed",
+    3: "unknown or unsupported '$' command",
+    4: "negative value where a positive one is expected",
+    5: "homing is not enabled ($22)",
+    6: "step pulse time must be at least 3 microseconds",
+    7: "EEPROM read failed; settings restored to defaults",
+    8: "'$' command refused unless grbl is idle",
+    9: "G-code is locked out in the alarm or jog state",
+    10: "soft limits need homing enabled",
+    11: "line too long (over grbl's 80 characters); not executed",
+    12: "setting would exceed the maximum step rate",
+    13: "safety door open",
+    14: "build info or startup line too long for EEPROM",
+    15: "jog target outside the machine travel; jog ignored",
+    16: "bad jog command (no '=' or a forbidden G-code)",
+    17: "laser mode needs PWM output",
+    20: "unsupported or invalid G-code command",
+    21: "two G-code commands of the same modal group in one block",
+    22: "feed rate not set",
+    23: "this G-code command needs an integer value",
+    24: "two G-code commands in the block both need the axis words",
+    25: "a G-code word is repeated in the block",
+    26: "the command needs axis words and the block has none",
+    27: "line number out of range (1-9,999,999)",
+    28: "a required P or L value word is missing",
+    29: "only G54-G59 work coordinate systems exist (no G59.x)",
+    30: "G53 needs G0 or G1 motion mode",
+    31: "axis words in the block with no motion using them (G80)",
+    32: "G2/G3 arc without an axis word in the selected plane",
+    33: "invalid motion target (impossible arc or probe target)",
+    34: "arc radius definition cannot be computed",
+    35: "G2/G3 arc without an I/J/K offset word in the selected plane",
+    36: "unused value words left in the block",
+    37: "G43.1 tool length offset on an axis other than the configured one",
+    38: "tool number above the supported maximum",
+}
+
+# grbl 1.1 alarm codes (interface.md "Alarm Message"; doc/csv/alarm_codes_en_US.csv), paraphrased.
+ALARM_MEANINGS: dict[int, str] = {
+    1: "hard limit triggered; the machine position is probably lost, re-home",
+    2: "motion target beyond the machine travel (soft limit); position kept, unlock with $X",
+    3: "reset while moving; the position may be lost, re-home",
+    4: "probe fail: the probe was not in its expected state before the cycle",
+    5: "probe fail: no contact within the programmed travel",
+    6: "homing fail: the homing cycle was reset",
+    7: "homing fail: the safety door opened during homing",
+    8: "homing fail: pull-off did not clear the limit switch",
+    9: "homing fail: limit switch not found within the search distance",
+}
+
+
+class GrblError(PortError):
+    """grbl refused a line (``error:n``) or the link broke its protocol; one line, grbl's meaning in it."""
+
+    def __init__(self, message: str, code: Optional[int] = None) -> None:
+        super().__init__(message)
+        self.code = code
+
+
+class GrblAlarm(GrblError):
+    """grbl raised ``ALARM:n``: it halted and locks out G-code until a reset, ``$X`` or ``$H``."""
+
+
+def error_text(code: int) -> str:
+    return f"error:{code} ({ERROR_MEANINGS.get(code, 'unknown grbl error code')})"
+
+
+def alarm_text(code: int) -> str:
+    return f"ALARM:{code} ({ALARM_MEANINGS.get(code, 'unknown grbl alarm code')})"
+
+
+def parse_grbl_url(url: str) -> tuple[str, int]:
+    """``grbl:/dev/ttyUSB0?baud=115200`` -> ``("/dev/ttyUSB0", 115200)`` (baud 115200 when not given).
+
+    >>> parse_grbl_url("grbl:/dev/ttyACM0?baud=250000")
+    ('/dev/ttyACM0', 250000)
+    >>> parse_grbl_url("grbl:COM3")
+    ('COM3', 115200)
+    """
+    rest = url[len(GRBL_PREFIX):] if url.startswith(GRBL_PREFIX) else url
+    device, _, query = rest.partition("?")
+    if not device:
+        raise PortError(f"{url!r}: no device after 'grbl:' (e.g. grbl:/dev/ttyUSB0?baud=115200)")
+    baud = DEFAULT_BAUD
+    params = parse_qs(query, keep_blank_values=True)
+    for key in params:
+        if key != "baud":
+            raise PortError(f"{url!r}: unknown option {key!r} (only baud=)")
+    if "baud" in params:
+        try:
+            baud = int(params["baud"][-1])
+        except ValueError:
+            raise PortError(f"{url!r}: baud must be a whole number, got {params['baud'][-1]!r}") from None
+        if baud <= 0:
+            raise PortError(f"{url!r}: baud must be > 0")
+    return device, baud
+
+
+@dataclass(frozen=True)
+class GrblStatus:
+    """One ``?`` status report.  Positions in mm (or inches with ``$13=1``), X, Y, Z; a position grbl did not
+    send is worked out from the other and the last ``WCO`` (``WPos = MPos - WCO``)."""
+
+    state: str                                  # Idle, Run, Hold:0, Hold:1, Jog, Alarm, Door:n, Check, Home, Sleep
+    mpos_mm: tuple[float, ...]
+    wpos_mm: tuple[float, ...]
+    wco_mm: tuple[float, ...]
+    feed_mm_min: float
+    spindle_rpm: float
+    planner_free: Optional[int] = None          # Bf: blocks free
+    rx_free: Optional[int] = None               # Bf: bytes free
+    overrides: Optional[tuple[int, int, int]] = None
+    raw: str = ""
+
+
+def parse_status(line: str, last_wco_mm: Optional[tuple[float, ...]] = None) -> GrblStatus:
+    """Parse ``<Idle|MPos:1.000,2.000,0.000|FS:0,0|WCO:0.000,1.000,0.000>`` (interface.md, "Real-time Status
+    reports").
+
+    >>> s = parse_status("<Run|MPos:1.000,2.000,3.000|Bf:14,100|FS:500,0|WCO:1.000,0.000,0.000>")
+    >>> s.state, s.wpos_mm, s.planner_free, s.feed_mm_min
+    ('Run', (0.0, 2.0, 3.0), 14, 500.0)
+    """
+    text = line.strip()
+    if not (text.startswith("<") and text.endswith(">")):
+        raise GrblError(f"not a grbl status report: {line!r}")
+    fields = text[1:-1].split("|")
+    state = fields[0]
+    values: dict[str, str] = {}
+    for item in fields[1:]:
+        key, _, val = item.partition(":")
+        values[key] = val
+
+    def nums(key: str) -> tuple[float, ...]:
+        try:
+            return tuple(float(v) for v in values[key].split(","))
+        except ValueError:
+            raise GrblError(f"bad {key} in grbl status report {line!r}") from None
+
+    wco = nums("WCO") if "WCO" in values else (last_wco_mm or (0.0, 0.0, 0.0))
+    if "MPos" in values:
+        mpos = nums("MPos")
+        wpos = tuple(m - w for m, w in zip(mpos, wco))
+    elif "WPos" in values:
+        wpos = nums("WPos")
+        mpos = tuple(p + w for p, w in zip(wpos, wco))
+    else:
+        raise GrblError(f"grbl status report without a position: {line!r}")
+    feed = rpm = 0.0
+    if "FS" in values:
+        fs = nums("FS")
+        feed, rpm = fs[0], (fs[1] if len(fs) > 1 else 0.0)
+    elif "F" in values:
+        feed = nums("F")[0]
+    planner_free = rx_free = None
+    if "Bf" in values:
+        bf = nums("Bf")
+        planner_free, rx_free = int(bf[0]), int(bf[1])
+    overrides = None
+    if "Ov" in values:
+        ov = nums("Ov")
+        overrides = (int(ov[0]), int(ov[1]), int(ov[2]))
+    return GrblStatus(state, mpos, wpos, wco, feed, rpm, planner_free, rx_free, overrides, text)
+
+
+@dataclass(frozen=True)
+class StreamReport:
+    """What a :meth:`GrblLink.stream` sent: lines, bytes, and the most bytes it had outstanding at once."""
+
+    lines: int
+    bytes_sent: int
+    max_outstanding_bytes: int
+
+
+class GrblLink:
+    """A grbl 1.1 board on a serial port (see the module docstring).
+
+    Args:
+        url: ``grbl:DEVICE?baud=N`` or a bare device path.
+        welcome_timeout_s: how long to wait for the welcome line the board prints when the port opens (an
+            Arduino resets then) before sending a soft reset to get one.
+        timeout_s: how long grbl may stay silent (status polls unanswered) before the link counts as lost.
+        poll_s: the status poll period while waiting for grbl.
+        read_settings: read ``$$`` once connected.
+    """
+
+    def __init__(self, url: str, *, welcome_timeout_s: float = 2.5, timeout_s: float = 5.0, poll_s: float = 0.2,
+                 read_settings: bool = True) -> None:
+        self.url = url
+        self.device, self.baud = parse_grbl_url(url)
+        self.timeout_s = float(timeout_s)
+        self.poll_s = float(poll_s)
+        self.settings: dict[int, float] = {}
+        self.welcome = ""
+        self.messages: list[str] = []          # [MSG:...] and other push messages, in order
+        self.status_report: Optional[GrblStatus] = None
+        self._cond = threading.Condition()
+        self._outstanding: deque[list] = deque()   # [bytes, line number, text, answer or None, info lines]
+        self._outstanding_bytes = 0
+        self._info: list[str] = []
+        self._done_errors: list[list] = []
+        self._alarm: Optional[int] = None
+        self._welcomes = 0
+        self._status_seq = 0
+        self._lost: Optional[BaseException] = None
+        self._last_rx = time.monotonic()
+        self._closing = False
+        self._wco: Optional[tuple[float, ...]] = None
+        self._serial_errors = (serial.SerialException, OSError)
+        try:
+            self._ser = serial.Serial(self.device, baudrate=self.baud, bytesize=8, parity="N", stopbits=1,
+                                      timeout=0.05, write_timeout=self.timeout_s)
+        except (serial.SerialException, OSError, ValueError) as exc:
+            raise PortError(f"cannot open grbl port {self.device}: {exc}") from None
+        self._reader = threading.Thread(target=self._read_loop, name="grbl-link-reader", daemon=True)
+        self._reader.start()
+        try:
+            self._connect(welcome_timeout_s)
+            if read_settings:
+                self.read_settings()
+        except BaseException:
+            self.close()
+            raise
+
+    # ------------------------------------------------------------------ connection
+    def _connect(self, welcome_timeout_s: float) -> None:
+        if not self._wait(lambda: self._welcomes > 0, welcome_timeout_s, check=False):
+            self._write(b"\x18")
+            if not self._wait(lambda: self._welcomes > 0, self.timeout_s, check=False):
+                self._raise_if_lost()
+                raise PortError(f"no grbl on {self.device}: no welcome line within "
+                                f"{welcome_timeout_s + self.timeout_s:g} s, even after a soft reset "
+                                f"(is it grbl 1.1 at {self.baud} baud?)")
+        with self._cond:
+            self._welcomes = 0
+
+    def close(self) -> None:
+        """Close the port (grbl keeps running whatever it has queued)."""
+        self._closing = True
+        try:
+            self._ser.close()
+        except self._serial_errors:
+            pass
+        if self._reader.is_alive() and self._reader is not threading.current_thread():
+            self._reader.join(timeout=1.0)
+
+    def __enter__(self) -> "GrblLink":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # ------------------------------------------------------------------ reader
+    def _read_loop(self) -> None:
+        buf = bytearray()
+        while not self._closing:
+            try:
+                chunk = self._ser.read(max(1, self._ser.in_waiting))
+            except self._serial_errors as exc:
+                if not self._closing:
+                    with self._cond:
+                        self._lost = exc
+                        self._cond.notify_all()
+                return
+            except TypeError:   # pyserial after close() from another thread
+                return
+            if not chunk:
+                continue
+            buf += chunk
+            while True:
+                cut = buf.find(b"\n")
+                if cut < 0:
+                    break
+                line = buf[:cut].decode("ascii", "replace").strip()
+                del buf[:cut + 1]
+                if line:
+                    self._on_line(line)
+
+    def _on_line(self, line: str) -> None:
+        with self._cond:
+            self._last_rx = time.monotonic()
+            if line == "ok" or line.startswith("error:"):
+                if self._outstanding:
+                    entry = self._outstanding.popleft()
+                    self._outstanding_bytes -= entry[0]
+                    entry[3] = line
+                    entry[4] = self._info
+                    self._info = []
+                    if line != "ok":
+                        self._done_errors.append(entry)
+            elif line.startswith("<"):
+                try:
+                    status = parse_status(line, self._wco)
+                except GrblError:
+                    status = None
+                if status is not None:
+                    self._wco = status.wco_mm
+                    self.status_report = status
+                    self._status_seq += 1
+            elif line.startswith("ALARM:"):
+                try:
+                    self._alarm = int(line[6:])
+                except ValueError:
+                    self._alarm = -1
+                self.messages.append(line)
+            elif line.startswith("Grbl ") and "for help" in line:
+                self.welcome = line
+                self._welcomes += 1
+                self._outstanding.clear()   # a reset empties grbl's buffers: nothing sent is pending any more
+                self._outstanding_bytes = 0
+                self._info = []
+            else:
+                if line.startswith("[MSG:") or line.startswith(">"):
+                    self.messages.append(line)
+                self._info.append(line)
+            self._cond.notify_all()
+
+    # ------------------------------------------------------------------ helpers
+    def _write(self, data: bytes) -> None:
+        self._raise_if_lost()
+        try:
+            self._ser.write(data)
+        except self._serial_errors as exc:
+            raise PortError(f"grbl link on {self.device} lost: {exc}") from None
+
+    def _raise_if_lost(self) -> None:
+        if self._lost is not None:
+            raise PortError(f"grbl link on {self.device} lost: {self._lost}") from None
+
+    def _check(self, where: str = "") -> None:
+        """Raise the first fault seen: a lost link, an alarm, a reset grbl did on its own, a refused line."""
+        self._raise_if_lost()
+        if self._alarm is not None:
+            code, self._alarm = self._alarm, None
+            raise GrblAlarm(f"grbl on {self.device} raised {alarm_text(code)}{where}", code)
+        if self._welcomes:
+            self._welcomes = 0
+            raise GrblError(f"grbl on {self.device} reset itself{where} (its buffers and the job are lost)")
+        if self._done_errors:
+            entry = self._done_errors.pop(0)
+            self._done_errors.clear()
+            code = int(entry[3][6:]) if entry[3][6:].isdigit() else -1
+            raise GrblError(f"grbl refused line {entry[1]} {entry[2]!r}: {error_text(code)}", code)
+
+    def _wait(self, predicate: Callable[[], bool], timeout_s: Optional[float], *, check: bool = True,
+              where: str = "") -> bool:
+        """Wait for ``predicate`` (under the lock), polling ``?`` so that a silent grbl is found out."""
+        deadline = None if timeout_s is None else time.monotonic() + timeout_s
+        next_poll = time.monotonic() + self.poll_s
+        with self._cond:
+            while True:
+                if check:
+                    self._check(where)
+                else:
+                    self._raise_if_lost()
+                if predicate():
+                    return True
+                now = time.monotonic()
+                if deadline is not None and now >= deadline:
+                    return False
+                if check and now - self._last_rx > self.timeout_s:
+                    raise PortError(f"grbl on {self.device} stopped answering (nothing for {self.timeout_s:g} s, "
+                                    f"status polls included){where}")
+                if check and now >= next_poll:
+                    self._cond.release()
+                    try:
+                        self._write(b"?")
+                    finally:
+                        self._cond.acquire()
+                    next_poll = now + self.poll_s
+                wake = next_poll if deadline is None else min(next_poll, deadline)
+                self._cond.wait(max(0.001, wake - now))
+
+    # ------------------------------------------------------------------ lines
+    def _send_line(self, text: str, number: int) -> list:
+        data = (text + "\n").encode("ascii", "replace")
+        if len(data) > RX_BUFFER_BYTES:
+            raise GrblError(f"line {number} is {len(data)} bytes, more than grbl's {RX_BUFFER_BYTES}-byte "
+                            f"receive buffer: {text[:40]!r}")
+        where = f" at line {number} {text!r}"
+        self._wait(lambda: self._outstanding_bytes + len(data) <= RX_BUFFER_BYTES, None, where=where)
+        entry = [len(data), number, text, None, []]
+        with self._cond:
+            self._outstanding.append(entry)
+            self._outstanding_bytes += len(data)
+        self._write(data)
+        return entry
+
+    def command(self, line: str, timeout_s: Optional[float] = None) -> list[str]:
+        """Send one line, wait for its ``ok`` and return the lines grbl pushed before it (``$#``, ``$G``...)."""
+        entry = self._send_line(line.strip(), 0)
+        self._wait(lambda: entry[3] is not None, timeout_s if timeout_s is not None else None,
+                   where=f" answering {line.strip()!r}")
+        if entry[3] is None:
+            raise PortError(f"grbl on {self.device} did not answer {line.strip()!r} within {timeout_s:g} s")
+        return list(entry[4])
+
+    def read_settings(self) -> dict[int, float]:
+        """``$$`` into :attr:`settings` (``{100: 250.0, ...}``)."""
+        settings: dict[int, float] = {}
+        for text in self.command("$$", timeout_s=self.timeout_s):
+            key, eq, value = text.partition("=")
+            if eq and key.startswith("$") and key[1:].isdigit():
+                try:
+                    settings[int(key[1:])] = float(value)
+                except ValueError:
+                    raise GrblError(f"grbl on {self.device} sent a bad setting line {text!r}") from None
+        self.settings = settings
+        return settings
+
+    def stream(self, lines: Iterable[str], *, progress: Optional[Callable[[int], None]] = None,
+               wait_idle: bool = True) -> StreamReport:
+        """Stream G-code lines with character counting; return when grbl has answered every one (and, with
+        ``wait_idle``, the machine has stopped).  Blank lines are skipped; line numbers in errors count every
+        line given, from 1."""
+        sent = total = peak = 0
+        for number, raw in enumerate(lines, 1):
+            text = raw.strip()
+            if not text:
+                continue
+            self._send_line(text, number)
+            sent += 1
+            total += len(text) + 1
+            with self._cond:
+                peak = max(peak, self._outstanding_bytes)
+                self._check(f" at line {number} {text!r}")
+            if progress is not None:
+                progress(number)
+        self._wait(lambda: not self._outstanding, None, where=" at the end of the stream")
+        if wait_idle:
+            self.wait_idle()
+        return StreamReport(sent, total, peak)
+
+    def wait_idle(self, timeout_s: Optional[float] = None) -> GrblStatus:
+        """Poll ``?`` until grbl reports Idle (every queued motion done)."""
+        deadline = None if timeout_s is None else time.monotonic() + timeout_s
+        while True:
+            status = self.status()
+            if status.state == "Idle":
+                return status
+            if deadline is not None and time.monotonic() > deadline:
+                raise PortError(f"grbl on {self.device} still {status.state} after {timeout_s:g} s")
+            time.sleep(self.poll_s / 2)
+
+    # ------------------------------------------------------------------ real-time
+    def status(self, timeout_s: Optional[float] = None) -> GrblStatus:
+        """Send ``?`` and return the report that answers it."""
+        with self._cond:
+            seq = self._status_seq
+            self._check()
+        self._write(b"?")
+        ok = self._wait(lambda: self._status_seq > seq, timeout_s if timeout_s is not None else self.timeout_s)
+        if not ok or self.status_report is None:
+            raise PortError(f"grbl on {self.device} sent no status report")
+        return self.status_report
+
+    def hold(self) -> None:
+        """Feed hold ``!``: decelerate to a stop, keep the rest queued."""
+        self._write(b"!")
+
+    def resume(self) -> None:
+        """Cycle start ``~``: resume after a feed hold or an M0 pause."""
+        self._write(b"~")
+
+    def override(self, byte: int) -> None:
+        """One of grbl's override bytes (0x90-0x9D feed, rapid and spindle; 0x9E-0xA1 toggles)."""
+        if not 0x90 <= byte <= 0xA1:
+            raise PortError(f"not a grbl override byte: {byte:#04x}")
+        self._write(bytes([byte]))
+
+    def soft_reset(self, timeout_s: Optional[float] = None) -> str:
+        """Ctrl-X: grbl stops at once (``ALARM:3`` if it was moving) and restarts; returns the welcome line.
+        An alarm the reset raises is kept in :attr:`messages`, not raised."""
+        with self._cond:
+            self._welcomes = 0
+            self._done_errors.clear()
+        self._write(b"\x18")
+        if not self._wait(lambda: self._welcomes > 0, timeout_s or self.timeout_s, check=False):
+            raise PortError(f"grbl on {self.device} did not restart after a soft reset")
+        with self._cond:
+            self._welcomes = 0
+            self._alarm = None
+        return self.welcome
+
+    def unlock(self) -> None:
+        """``$X``: leave the alarm state."""
+        self.command("$X", timeout_s=self.timeout_s)
+
+
+def open_grbl(url: str, **options: object) -> GrblLink:
+    """Open ``grbl:DEVICE?baud=N`` (keyword arguments: :class:`GrblLink`'s)."""
+    return GrblLink(url, **options)  # type: ignore[arg-type]
