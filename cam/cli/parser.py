@@ -483,6 +483,15 @@ def _add_emulate_maximus(sub: argparse._SubParsersAction) -> None:
                     "(half steps from the emulator's power-up position, Y up, Z height)")
 
 
+def _add_emulate_grbl(sub: argparse._SubParsersAction) -> None:
+    em = sub.add_parser("emulate-grbl", help="run a grbl 1.1 controller emulator on a pseudo-terminal",
+                        description="Serve a grbl 1.1 emulator on a pty and print its device path; point "
+                        "--port grbl:PATH at it. Ctrl-C ends it (docs/grbl.md).")
+    em.add_argument("--speed", type=_number("--speed", 1e-3, 1e6), default=1.0, help="machine time per real time (1 = real time)")
+    em.add_argument("--set", action="append", default=[], metavar="N=VALUE", help="a $ setting, e.g. --set 22=1 (repeatable)")
+    em.add_argument("--log", metavar="FILE.csv", help="write one row per executed block (machine coordinates, mm)")
+
+
 def _add_goto(sub: argparse._SubParsersAction) -> None:
     gt = sub.add_parser("goto", help="move the tool to X,Y,Z of the active work offset and stop there",
                         description="Go To (thesis 4.1.2): from where the machine state file says the tool stands, "
@@ -607,7 +616,7 @@ def _add_serve(sub: argparse._SubParsersAction) -> None:
 
 
 _COMMAND_PARSERS = (_add_drill, _add_export, _add_preview, _add_digitize, _add_trace, _add_info, _add_profile, _add_jog,
-                    _add_emulate_maximus, _add_goto, _add_where, _add_zero, _add_home, _add_serve)
+                    _add_emulate_maximus, _add_emulate_grbl, _add_goto, _add_where, _add_zero, _add_home, _add_serve)
 """Each adds one command's subparser, in the order ``cam --help`` lists them."""
 
 
