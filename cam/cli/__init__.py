@@ -34,6 +34,7 @@ COMMANDS = {
     "home": ("cam.cli.home", "cmd_home"),
     "serve": ("cam.cli.serve", "cmd_serve"),
     "emulate-maximus": ("cam.cli.emulate", "cmd_emulate"),
+    "emulate-grbl": ("cam.cli.emulate", "cmd_emulate_grbl"),
 }
 """Command name -> (module, function).  The module is imported only when its command runs: lazy by design."""
 
