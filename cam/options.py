@@ -201,6 +201,16 @@ JOB_OPTIONS: tuple[Option, ...] = (
          count=2, metavar="I:F", aliases=("--excellon-format",)),
     _opt("excellon_zeros", "--excellon-zeros", "choice", "", {"excellon"}, None,
          "zero suppression when the file does not say", choices=("LZ", "TZ")),
+    _opt("kind", "--kind", "choice", "", _DRAWINGS | _VECTORS | {"gcode"}, None,
+         "read the file as this kind whatever its name and content say (matrix: a saved digitized matrix); with "
+         "--kind excellon the --excellon-* flags apply", choices=("excellon", "gcode", "hpgl", "svg", "drawing",
+                                                                  "matrix")),
+    _opt("strict", "--strict", "flag", "", {"excellon"}, False,
+         "drill files: refuse a file with a tool that cannot be drilled (zero size, too large) instead of leaving "
+         "its holes out with a warning"),
+    _opt("mill_holes_over_mm", "--mill-holes-over", "number", "mm", {"excellon"}, None,
+         "drill files: mill holes larger than MM with an MM bit (circles at the cut depth, within the hole) "
+         "instead of drilling them", lo=0.0, hi=100.0, lo_open=True, metavar="MM"),
     # G-code
     _opt("flip_y", "--flip-y", "flag", "", {"gcode"}, False, "G-code input: machine Y = +Y mm instead of -Y mm"),
     # SVG
