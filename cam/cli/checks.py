@@ -22,6 +22,7 @@ from typing import Optional
 from ..choices import DIGITIZED_SUFFIXES, SUFFIXES, job_kind
 from ..errors import CamError
 from ..options import OPTION_OF_DEST, OPTIONS, degenerate
+from ..sniff import forced_kind
 
 __all__ = ["check_args", "job_kind_of", "OUTPUTS", "APPLIES_TO", "check_output_path"]
 
@@ -66,6 +67,8 @@ def job_kind_of(args: argparse.Namespace, warnings: Optional[list[str]] = None) 
     """The kind of the command's input file ("drawing", "excellon", ...) by its suffix and, where the suffix is
     generic, unknown or contradicted, its first few kB (:func:`cam.choices.job_kind`), or None."""
     image = getattr(args, "image", None)
+    if image and getattr(args, "kind", None):  # --kind: what the user says, whatever the name and content
+        return forced_kind(args.kind)
     if image:
         return job_kind(image, warnings)
     if getattr(args, "load_digitized", None):

@@ -76,7 +76,7 @@ def cmd_digitize(args: argparse.Namespace) -> int:
 
 def _load_drill_file(args: argparse.Namespace) -> HoleList:
     return load_excellon(args.image, excellon_units=args.excellon_units, excellon_digits=excellon_digits(args),
-                         excellon_zeros=args.excellon_zeros)
+                         excellon_zeros=args.excellon_zeros, strict=bool(getattr(args, "strict", False)))
 
 
 def _info_excellon(args: argparse.Namespace) -> int:

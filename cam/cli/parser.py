@@ -245,6 +245,8 @@ def _add_excellon_options(d: argparse.ArgumentParser) -> None:
     g = d.add_argument_group(f"drill files that do not say their number format (Excellon: {_listed(EXCELLON_SUFFIXES)})")
     for name in ("excellon_units", "excellon_digits", "excellon_zeros"):
         _add_option(g, name)
+    for name in ("kind", "strict", "mill_holes_over_mm"):  # issue #31: the kind forced, bad tools, large holes
+        _add_option(g, name)
 
 
 def _add_svg_options(d: argparse.ArgumentParser, scale: bool = True) -> None:
