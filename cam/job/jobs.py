@@ -50,7 +50,7 @@ from ..digitize.sketch import load_sketch, trace
 from ..tool import parse_tool, tool_of_settings
 from ..render.picture import LEGEND_PX, depth_colours, encode_png, toolpath_picture
 from ..render.report import job_report
-from ..sniff import KIND_NAMES
+from ..sniff import KIND_NAMES, forced_kind
 from ..settings import DEFAULT_SETTINGS, MachineSettings
 from ..verify.pinlog import PinLog, decode_pin_log
 from .drawing import check_drawing_size
@@ -665,21 +665,25 @@ def _or(value: Optional[float], default: float) -> float:
 
 def _prepare_excellon(path: Path, options: JobOptions, settings: MachineSettings) -> PreparedJob:
     holes = load_excellon(path, excellon_units=options.excellon_units, excellon_digits=options.excellon_digits,
-                          excellon_zeros=options.excellon_zeros)
+                          excellon_zeros=options.excellon_zeros, strict=bool(options.strict))
     depth_mm = _or(options.cut_depth_mm, DRILL_DEPTH_MM)
     dp = plan_drill(holes, settings=settings, cut_depth_mm=depth_mm,
                     travel_height_mm=_or(options.travel_height_mm, DRILL_TRAVEL_HEIGHT_MM), offset_mm=options.offset_mm,
-                    mirror_x=options.mirror_x, drill_order=options.drill_order)
+                    mirror_x=options.mirror_x, drill_order=options.drill_order,
+                    mill_holes_over_mm=options.mill_holes_over_mm)
     steps = plan_chunks(dp.toolpath)
     tools = ", ".join(f"T{t} {dia:.3f} mm x{n}" for t, dia, n in dp.tool_sequence)
     hole_xy = np.asarray(dp.holes_steps, np.int64).reshape(-1, 2)
-    span = hole_xy.max(axis=0) - hole_xy.min(axis=0)
+    span = dp.extent_steps[1] - dp.extent_steps[0]  # holes and milled slots (issue #31 point 4)
+    milled = (f", {dp.n_slots} slots" if dp.n_slots else "") + (f", {dp.n_milled} holes milled" if dp.n_milled else "")
     return PreparedJob(
         source=str(path), kind="excellon", plan=steps, settings=settings, toolpath=dp.toolpath,
         size_mm=(round(float(span[0]) * settings.mm_per_step_xy, 3), round(float(span[1]) * settings.mm_per_step_xy, 3)),
         depth_mm=round(depth_mm, 4),
-        warnings=list(holes.warnings), summary=f"{path.name}: {len(hole_xy)} holes ({tools})",
-        report={"holes": len(hole_xy), "tools": [list(t) for t in dp.tool_sequence]}, drill_plan=dp,
+        warnings=list(holes.warnings), summary=f"{path.name}: {len(hole_xy)} holes{milled} ({tools})",
+        report={"holes": len(hole_xy), "tools": [list(t) for t in dp.tool_sequence],
+                **({"slots": dp.n_slots} if dp.n_slots else {}), **({"milled_holes": dp.n_milled} if dp.n_milled else {})},
+        drill_plan=dp if not (dp.n_slots or dp.n_milled) else None,  # the MAXIMUS board's drill mode only drills
     )
 
 
@@ -758,7 +762,7 @@ def prepare_job(
     if not p.is_file() and p.suffix == "":
         raise CamError(f"{p}: file not found")
     kind_warnings: list[str] = []
-    kind = job_kind(p, kind_warnings)
+    kind = forced_kind(options.kind) if options is not None and options.kind else job_kind(p, kind_warnings)
     if kind not in KINDS:
         raise CamError(f"{p.name}: {KIND_NAMES.get(kind, kind)} cannot be cut by this version of cam")
     opts = (options or JobOptions()).checked().check_kind(kind, p.name)
