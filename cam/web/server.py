@@ -47,15 +47,17 @@ Security:
 * a job or jog while another runs gets 409; bad requests get 4xx JSON
   ``{"error": "..."}`` before anything moves;
 * JSON bodies are limited to 8 kB (413) and 16 levels of nesting (400);
-* slow clients cannot hold the server (run through :func:`uvicorn_config`,
-  as ``serve`` does): a request head must arrive whole within
-  ``header_timeout_s`` (5 s; else 408 and closed), a body may pause at most
-  ``body_timeout_s`` (10 s), and an idle connection is closed after 5 s; at
-  most ``max_connections`` (100) connections are kept: beyond that the oldest
-  one without a request in progress (a half-sent head, an idle keep-alive) is
-  closed, and when every one is busy a new request gets 503 JSON -- except
-  the emergency stop, which is always served; at most ``max_event_streams``
-  (16) live event streams at once, more get 503.
+* slow clients and floods cannot keep the emergency stop out (run through :func:`uvicorn_config`, as
+  ``serve`` does; the rules are in :mod:`cam.web.connections`): ``POST /api/estop``, ``/api/stop``,
+  ``/api/pause`` and ``GET /api/state`` are told from their request line and never refused for load; a
+  connection beyond ``max_connections_per_client`` (50) from one address may only ask for those; at most
+  ``max_connections`` (100) other requests are in progress (more get 503 JSON); up to
+  ``max_open_connections`` (2000) connections are held, and beyond that an idle or half-sent one is closed
+  (never one whose unread bytes are an e-stop); a request head must arrive whole within ``header_timeout_s`` (5 s; else
+  408 and closed), a body announced over its route's limit gets 413 before any of it is read, and a body
+  must come whole within ``body_timeout_s`` (10 s) plus 1 s per 16 kB, pausing at most ``body_timeout_s``;
+  an idle connection is closed after 5 s; at most ``max_event_streams`` (16) live event streams at once,
+  more get 503.
 """
 from __future__ import annotations
 
@@ -88,6 +90,7 @@ from ..options import schema_json
 from ..job.jobs import PROFILE_SUFFIXES, JobOptions, PreparedJob, accepted_suffixes, job_kind
 from ..settings import DEFAULT_SETTINGS, MachineSettings
 from ..worker import DEFAULT_TIME_LIMIT_S, Worker, default_memory_limit_bytes
+from .connections import ConnectionGuard, guarded_h11, is_safety_route
 from .work import WARM_UP, pin_log_csv, plan_with_preview, preview_of, resumed_from_journal, save_pin_log_raw
 
 if TYPE_CHECKING:
@@ -104,6 +107,7 @@ _DRAIN_LIMIT_BYTES = 64 * 1024 * 1024  # read and drop at most this much of a re
 _MAX_JSON_BYTES = 8 * 1024  # a JSON request body (the largest, planning options, is well under 1 kB)
 _MAX_JSON_DEPTH = 16  # arrays and objects inside each other (the requests use 3)
 _MULTIPART_SLACK_BYTES = 64 * 1024  # form boundaries and headers around the file
+_BACKLOG = 2048  # connections the kernel holds for accept (a reconnect flood must not crowd the e-stop out)
 _EVENT_PERIOD_S = 0.25  # live views get at most four snapshots a second (a running job changes all the time)
 
 
@@ -121,8 +125,10 @@ class ServerConfig:
         max_upload_bytes: larger uploads get 413.
         settings: the machine settings; machine_port: "mock" or a device such as /dev/parport0.
         realtime: run the mock on the real clock (real ports always are).
-        max_connections: connections kept at once (see :class:`_ConnectionGuard`); max_event_streams:
-            live event streams at once (more get 503).
+        max_connections: requests in progress at once (safety routes aside); max_connections_per_client:
+            connections from one client address beyond which a new one may only ask for a safety route;
+            max_open_connections: connections held at once (beyond, idle and half-sent ones are closed); see
+            :mod:`cam.web.connections`.  max_event_streams: live event streams at once (more get 503).
         header_timeout_s: a request head must arrive whole within this time of the connection opening or
             the previous answer (else 408, closed); body_timeout_s: the longest pause inside a request body.
         work_time_limit_s, work_memory_limit_bytes: the limits of one planning, preview or pin-log export,
@@ -139,6 +145,8 @@ class ServerConfig:
     machine_port: str = "mock"
     realtime: bool = True
     max_connections: int = 100
+    max_connections_per_client: int = 50
+    max_open_connections: int = 2000
     max_event_streams: int = 16
     header_timeout_s: float = 5.0
     body_timeout_s: float = 10.0
@@ -156,7 +164,7 @@ class ServerConfig:
             raise CamError("--allow-host needs a token: without one only localhost names are served")
         if self.max_upload_bytes < 1:
             raise CamError(f"the upload limit must be > 0 bytes, got {self.max_upload_bytes}")
-        for name in ("max_connections", "max_event_streams", "header_timeout_s", "body_timeout_s",
+        for name in ("max_connections", "max_connections_per_client", "max_open_connections", "max_event_streams", "header_timeout_s", "body_timeout_s",
                      "work_time_limit_s"):
             if not getattr(self, name) > 0:
                 raise CamError(f"{name} must be > 0, got {getattr(self, name)}")
@@ -814,149 +822,24 @@ def _routes(st: _AppState) -> list:
     ]
 
 
-class _ConnectionGuard:
-    """The server's open connections, oldest first, and the requests inside the application now.
-
-    Shared by the HTTP protocol (:func:`_guarded_h11`), which registers connections and closes the oldest
-    idle one when there are more than ``max_connections``, and by :func:`_front_door`, which counts the
-    requests and answers 503 when ``max_connections`` of them are already in progress.
-    """
-
-    def __init__(self, config: ServerConfig) -> None:
-        self.config = config
-        self.connections: dict[Any, None] = {}  # protocol -> None, in the order they connected
-        self.requests = 0
-
-    def make_room(self, newcomer: Any) -> None:
-        """Over the limit: close the oldest connection (not ``newcomer``) with no request in the application."""
-        if len(self.connections) <= self.config.max_connections:
-            return
-        for conn in self.connections:
-            if conn is not newcomer and conn.idle():
-                conn.evict()
-                return
+def _body_cap(method: str, path: str, config: ServerConfig) -> int:
+    """The most body bytes the route takes: an upload's limit and its form around it, else a JSON body's."""
+    if (method, path) == ("POST", "/api/upload"):
+        return config.max_upload_bytes + _MULTIPART_SLACK_BYTES
+    return _MAX_JSON_BYTES
 
 
-def _plain_response(status: int, reason: str, text: str) -> bytes:
-    """A whole HTTP/1.1 response that closes the connection (written where no request has been read)."""
-    body = (text + "\n").encode()
-    return (f"HTTP/1.1 {status} {reason}\r\ncontent-type: text/plain; charset=utf-8\r\nconnection: close\r\n"
-            f"content-length: {len(body)}\r\n\r\n").encode() + body
+def _front_door(inner: Callable[..., Awaitable[None]], guard: ConnectionGuard) -> Callable[..., Awaitable[None]]:
+    """The ASGI app ``inner`` behind the load rules of :mod:`cam.web.connections`, with :data:`_SECURITY_HEADERS`
+    on every HTTP response.
 
-
-class _Deadlines:
-    """The deadline and eviction half of the guarded h11 protocol (:func:`_guarded_h11`).
-
-    Mixed into uvicorn's ``H11Protocol``, whose ``conn``, ``cycle``, ``flow``, ``loop`` and ``transport`` it
-    uses; ``_h11`` is the h11 module uvicorn's protocol runs on (set by :func:`_guarded_h11`, so this module
-    imports without the web stack).
-    """
-
-    _h11: Any = None
-    guard: _ConnectionGuard
-    deadline: Optional[asyncio.TimerHandle]
-    head_begun: bool
-
-    def idle(self) -> bool:
-        """No request of this connection is in the application (waiting for a head, or for the rest of
-        a body already answered)."""
-        return self.cycle is None or self.cycle.response_complete
-
-    def evict(self) -> None:
-        self.guard.connections.pop(self, None)  # closing: no longer counted, never chosen again
-        if self.head_begun and self.conn.their_state is self._h11.IDLE:
-            limit = self.guard.config.max_connections
-            self.transport.write(_plain_response(503, "Service Unavailable",
-                                                 f"too many connections (the limit is {limit}); try again"))
-        self.transport.close()
-
-    def await_head(self) -> None:
-        self.head_begun = False
-        self.set_deadline(self.guard.config.header_timeout_s)
-
-    def set_deadline(self, delay_s: Optional[float]) -> None:
-        if self.deadline is not None:
-            self.deadline.cancel()
-        self.deadline = None if delay_s is None else self.loop.call_later(delay_s, self.expire)
-
-    def expire(self) -> None:
-        self.deadline = None
-        if self.transport.is_closing():
-            return
-        state = self.conn.their_state
-        if state is self._h11.SEND_BODY and self.flow.read_paused:  # the application has not read on yet
-            self.set_deadline(self.guard.config.body_timeout_s)
-            return
-        if state is self._h11.IDLE and self.head_begun:
-            timeout = self.guard.config.header_timeout_s
-            self.transport.write(_plain_response(408, "Request Timeout",
-                                                 f"the request head did not come whole within {timeout:g} s"))
-        if state in (self._h11.IDLE, self._h11.SEND_BODY):
-            self.transport.close()
-
-
-@lru_cache(maxsize=None)
-def _guarded_h11() -> type:
-    """uvicorn's h11 protocol with deadlines on the client and the connection limit of a :class:`_ConnectionGuard`.
-
-    The client must keep up whenever the server waits for it: the request head whole within
-    ``header_timeout_s`` of the connection opening or the previous answer (more bytes do not extend it),
-    and no pause longer than ``body_timeout_s`` inside a body; else the connection is closed (a half-sent
-    head gets 408 first).  While the application is the one that is slow (an answer being made, a body
-    not read yet) there is no deadline.
-    """
-    from uvicorn.protocols.http.h11_impl import H11Protocol, h11  # h11 as uvicorn's protocol uses it
-
-    class GuardedH11Protocol(_Deadlines, H11Protocol):
-        _h11 = h11
-
-        def __init__(self, *args: Any, guard: _ConnectionGuard, **kwargs: Any) -> None:
-            super().__init__(*args, **kwargs)
-            self.guard = guard
-            self.deadline: Optional[asyncio.TimerHandle] = None
-            self.head_begun = False  # bytes of the awaited request head have come
-
-        def connection_made(self, transport: Any) -> None:  # type: ignore[override]
-            super().connection_made(transport)
-            self.guard.connections[self] = None
-            self.await_head()
-            self.guard.make_room(self)
-
-        def connection_lost(self, exc: Optional[Exception]) -> None:
-            self.guard.connections.pop(self, None)
-            self.set_deadline(None)
-            super().connection_lost(exc)
-
-        def data_received(self, data: bytes) -> None:
-            super().data_received(data)
-            state = self.conn.their_state
-            if state is h11.IDLE:
-                self.head_begun = True  # the head's deadline stands
-            elif state is h11.SEND_BODY:
-                self.set_deadline(self.guard.config.body_timeout_s)
-            else:
-                self.set_deadline(None)  # the whole request is in: the application's turn
-
-        def on_response_complete(self) -> None:
-            super().on_response_complete()
-            if self.transport.is_closing():
-                return
-            state = self.conn.their_state
-            if state is h11.IDLE:
-                self.await_head()
-            elif state is h11.SEND_BODY:  # answered before the body came whole: the rest must come on time
-                self.set_deadline(self.guard.config.body_timeout_s)
-
-    return GuardedH11Protocol
-
-
-def _front_door(inner: Callable[..., Awaitable[None]], guard: _ConnectionGuard) -> Callable[..., Awaitable[None]]:
-    """The ASGI app ``inner`` behind the request limit, with :data:`_SECURITY_HEADERS` on every HTTP response.
-
-    When ``max_connections`` requests are in progress a new one gets 503 (and the connection is closed),
-    except ``POST /api/estop``: stopping the machine is never refused for being busy.
+    Before any body is read: a ``Content-Length`` over the route's limit gets 413 at once (closed); then a
+    safety route (:data:`~cam.web.connections.SAFETY_ROUTES`: e-stop, stop, pause, state) goes in whatever the
+    load.  Any other request gets 503 (closed) when its connection came over a connection limit and none could
+    be closed for it (probation), or when ``max_connections`` requests are already in progress.
     """
     limit = guard.config.max_connections
+    close = {"Connection": "close", "Retry-After": "1"}
 
     async def app(scope, receive, send):
         if scope["type"] != "http":
@@ -968,16 +851,37 @@ def _front_door(inner: Callable[..., Awaitable[None]], guard: _ConnectionGuard) 
                 message = {**message, "headers": list(message.get("headers", [])) + _SECURITY_HEADERS}
             await send(message)
 
-        if guard.requests >= limit and (scope["method"], scope["path"]) != ("POST", "/api/estop"):
-            busy = _json_error(503, f"the server is busy: {limit} requests at once is its limit; close a page "
-                                    "or try again", {"Connection": "close", "Retry-After": "1"})
-            await busy(scope, receive, send_wrapped)
+        method, path = scope["method"], scope["path"]
+        refusal = None
+        length = next((v for k, v in scope["headers"] if k == b"content-length"), None)
+        cap = _body_cap(method, path, guard.config)
+        if length is not None and length.isdigit() and int(length) > cap:
+            refusal = (_too_large(guard.config.max_upload_bytes, {"Connection": "close"})
+                       if cap > _MAX_JSON_BYTES else
+                       _json_error(413, f"request body too large: JSON requests are limited to "
+                                        f"{_MAX_JSON_BYTES // 1024} kB", {"Connection": "close"}))
+        safety = is_safety_route(method, path)
+        if refusal is None and not safety:
+            conn = guard.connection_of(scope.get("client"))
+            if conn is not None and conn.probation:
+                conn.refused_for_load = True
+                refusal = _json_error(503, f"too many connections (at most {guard.config.max_connections}, "
+                                           f"{guard.config.max_connections_per_client} from one address); close a "
+                                           "page or try again", close)
+            elif guard.requests >= limit:
+                if conn is not None:
+                    conn.refused_for_load = True
+                refusal = _json_error(503, f"the server is busy: {limit} requests at once is its limit; close a "
+                                           "page or try again", close)
+        if refusal is not None:
+            await refusal(scope, receive, send_wrapped)
             return
-        guard.requests += 1
+        counter = "safety_requests" if safety else "requests"
+        setattr(guard, counter, getattr(guard, counter) + 1)
         try:
             await inner(scope, receive, send_wrapped)
         finally:
-            guard.requests -= 1
+            setattr(guard, counter, getattr(guard, counter) - 1)
 
     return app
 
@@ -1007,7 +911,7 @@ def create_app(config: ServerConfig, session: Optional[MachineSession] = None):
     inner.state.session = session
     inner.state.config = config
     inner.state.closing = st.closing
-    inner.state.guard = _ConnectionGuard(config)
+    inner.state.guard = ConnectionGuard(config, partial(_body_cap, config=config))
     app = _front_door(inner, inner.state.guard)
     app.state = inner.state  # type: ignore[attr-defined]
     return app
@@ -1017,13 +921,15 @@ def uvicorn_config(app: Any, **options: Any) -> Any:
     """The ``uvicorn.Config`` that runs ``app`` (from :func:`create_app`) with its connection limits.
 
     The HTTP protocol is h11 with the deadlines and the connection limit of ``app.state.config`` (see
-    :func:`_guarded_h11`); proxy headers are ignored (nothing proxies this server) and there are no
+    :func:`cam.web.connections.guarded_h11`); proxy headers are ignored (nothing proxies this server) and there are no
     websockets.  uvicorn's own ``limit_concurrency`` is not used: it counts half-sent connections too, so
-    a flood of them would get the emergency stop refused.  ``options`` go to ``uvicorn.Config``.
+    a flood of them would get the emergency stop refused.  ``options`` go to ``uvicorn.Config`` (the listen
+    backlog is 2048 unless given).
     """
     import uvicorn
 
-    http = partial(_guarded_h11(), guard=app.state.guard)
+    http = partial(guarded_h11(), guard=app.state.guard)
+    options.setdefault("backlog", _BACKLOG)
     return uvicorn.Config(app, http=http, ws="none", proxy_headers=False, lifespan="on", **options)
 
 
@@ -1058,7 +964,7 @@ def bind_socket(host: str, port: int) -> socket.socket:
     except OSError as exc:
         sock.close()
         raise CamError(f"cannot listen on {host}:{port} ({exc.strerror or exc})") from None
-    sock.listen(128)
+    sock.listen(_BACKLOG)
     sock.set_inheritable(True)
     return sock
 
