@@ -470,7 +470,7 @@ def test_slow_or_half_sent_requests_time_out(tmp_path):
 
 
 def test_connections_and_live_views_are_capped_with_503(tmp_path):
-    s = Server(tmp_path, settings=FAST, max_connections=3, max_event_streams=2)
+    s = Server(tmp_path, settings=FAST, max_connections=3, max_event_streams=2, max_open_connections=3)
     port = _port(s.url)
     streams, socks = [], []
     try:
@@ -498,7 +498,7 @@ def test_connections_and_live_views_are_capped_with_503(tmp_path):
         slow.sendall((f"POST /api/jog HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\nOrigin: {s.url}\r\n"
                       "Content-Type: application/json\r\nContent-Length: 26\r\n\r\n").encode() + b'{"axis": "y", ')
         wait_for_requests(3)  # its head read: the jog waits for the rest of its body
-        status, headers, payload = _raw(s.url, "GET", "/api/state")
+        status, headers, payload = _raw(s.url, "GET", "/api/config")  # (state is a safety route: never refused)
         assert status == 503 and "busy" in json.loads(payload)["error"] and headers["connection"] == "close"
         assert _raw(s.url, "POST", "/api/estop", b"{}", {**s.page_headers("POST"),
                                                           "Content-Type": "application/json"})[0] == 200
@@ -544,7 +544,8 @@ def test_connections_and_live_views_are_capped_with_503(tmp_path):
 def test_a_thousand_half_open_connections_do_not_delay_the_emergency_stop(tmp_path):
     """Finding (3): ``cam serve`` in a process that may open only 512 files; 1,000 connections to it each
     send half a request line and stop.  The e-stop still answers within 50 ms, and the server closes them
-    (the oldest at once, the rest when their head's deadline passes)."""
+    (the oldest at once beyond what it holds, a quarter of its file limit; the rest when their head's deadline
+    passes)."""
     def small_file_limit():
         resource.setrlimit(resource.RLIMIT_NOFILE, (512, resource.getrlimit(resource.RLIMIT_NOFILE)[1]))
 
@@ -575,7 +576,7 @@ def test_a_thousand_half_open_connections_do_not_delay_the_emergency_stop(tmp_pa
         print(f"e-stop round trip: idle {idle_ms} ms, with 1,000 half-open connections {loaded_ms} ms")
         assert loaded_ms[2] < 50 and loaded_ms[-1] < 1000, loaded_ms  # the median, and no stall
         closed_at_once = sum(_closed_within(sock, 0.001)[0] for sock in socks)
-        assert closed_at_once >= 1000 - 100, closed_at_once  # only max_connections are kept
+        assert closed_at_once >= 1000 - 512 // 4 - 50, closed_at_once  # held: a quarter of the file limit at most
         t0 = time.monotonic()
         still_open = [sock for sock in socks if not _closed_within(sock, max(0.001, 7 - (time.monotonic() - t0)))[0]]
         assert not still_open, f"{len(still_open)} half-open connections held over 7 s"
