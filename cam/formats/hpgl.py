@@ -5,25 +5,63 @@ pen/tool n, ``PU`` lifts the tool, ``PD`` lowers it, ``PAx,y`` moves in
 absolute plotter units; one plotter unit is 0.025 mm (40 units per mm).
 Beyond the seed, so that files from Inkscape, vpype and CAD programs work:
 
-* ``IN`` (initialise: pen up, absolute moves), ``DF`` (defaults: absolute
-  moves), ``PR`` (relative moves);
+* ``IN`` (initialise: pen up, absolute moves, default P1 and P2, no
+  scaling, chord angles), ``DF`` (defaults: absolute moves, no scaling,
+  chord angles), ``PR`` (relative moves);
 * ``PU``/``PD``/``PA``/``PR`` with any number of coordinate pairs
   (``PD10,10,20,10,20,20;``), signed and decimal numbers;
 * commands separated by ``;``, by a newline, or by nothing (the next
   two-letter mnemonic starts a command); whitespace anywhere; numbers
   separated by ``,`` or whitespace;
+* ``SC`` and ``IP`` scale the plot as an HP-GL/2 plotter does (below);
+* ``CI`` circles, ``AA``/``AR`` arcs, ``CT`` chord tolerance mode (below);
 * anything else is an unknown command: skipped with a warning naming its
   byte offset and line (``LT``, ``VS``, ``CO "comment"``; ``LB`` label text
   runs to the label terminator, ETX ``\\x03`` or the character set by ``DT``;
-  ``PE`` runs to ``;``).  Drawing commands outside the subset (arcs ``AA``,
-  circles ``CI``, encoded polylines ``PE``, ...) are therefore not cut.
+  ``PE`` runs to ``;``).  Drawing commands outside the subset (encoded
+  polylines ``PE``, three-point arcs ``AT``/``RT``, Beziers, rectangles and
+  wedges, labels, ...) are therefore not cut.
+
+Scaling (HP-GL/2): ``IP x1,y1,x2,y2`` sets the scaling points P1 and P2 in
+plotter units (``IP x1,y1`` moves P1 and keeps P2 where it was relative to
+it; ``IP;`` and ``IN`` restore the defaults, :data:`DEFAULT_P1_PU` and
+:data:`DEFAULT_P2_PU`: an HP 7475A's on A4 paper, 250 x 180 mm apart; a P2
+equal to P1 on an axis is moved one unit on).  ``SC xmin,xmax,ymin,ymax``
+(type 0, anisotropic) maps user (xmin, ymin) to P1 and (xmax, ymax) to P2;
+``SC xmin,xmax,ymin,ymax,1[,left,bottom]`` (isotropic) gives both axes the
+smaller unit and leaves ``left`` % of the unused width to the left and
+``bottom`` % of the unused height below (50, 50: centred);
+``SC xmin,xfactor,ymin,yfactor,2`` (point factor) puts user (xmin, ymin) at
+P1 with ``factor`` plotter units per user unit.  ``SC;``, ``DF`` and ``IN``
+turn scaling off.  While scaling is on, ``PA``/``PU``/``PD`` coordinates,
+``PR`` increments, arc centres and radii are user units; a new ``IP`` rescales
+the user units that follow; the pen stays where it is (points are kept in
+plotter units).
+
+Circles and arcs (HP-GL/2): ``CI r[,chord]`` draws a circle about the pen,
+whether the pen is up or down: it starts at 0 degrees (180 for a negative
+radius), counter-clockwise, a stroke of its own; the pen then stands at the
+centre again, up or down as before (down: the next move draws from the centre;
+no plunge there unless it moves).  ``AA x,y,sweep[,chord]`` (centre absolute)
+and ``AR dx,dy,sweep[,chord]`` (centre relative to the pen) draw from the pen
+through ``sweep`` degrees (positive counter-clockwise) when the pen is down,
+and only move the pen when it is up.  Arcs are drawn in user units, so
+anisotropic scaling makes ellipses.  The chord parameter is a chord angle in
+degrees (default 5), or with ``CT1`` the most a chord may stray from the arc
+(in the radius's units; ``CT0``/``CT;`` back to angles); the angle is clamped
+to 0.5..180 degrees and the arc drawn with the fewest equal chords within it.
+A circle's or an arc's chords are counted before one is made: more than
+:data:`MAX_ARC_CHORDS` is a :class:`~cam.errors.ParseError` naming the
+command and the count.
 
 Malformed input is a :class:`~cam.errors.ParseError` ``file:line:column:``:
 a malformed number (``1.2.3``, ``12x``, ``--4``), an empty parameter
 (``PA,5``), an odd number of coordinates, an unterminated command at the end
 of the file (``PA100,`` or a dangling mnemonic), a coordinate or a pen position beyond
-:data:`MAX_COORD_PU` either way (a number of hundreds of digits included), a pen beyond
-:data:`cam.limits.MAX_TOOL_NUMBER`.
+:data:`MAX_COORD_PU` either way (a number of hundreds of digits included; after scaling), a pen beyond
+:data:`cam.limits.MAX_TOOL_NUMBER`, a scaling, circle or arc command with the wrong number of
+parameters, a degenerate ``SC`` (xmin = xmax, a factor 0, left/bottom outside 0..100), a circle or
+arc that reaches beyond :data:`MAX_COORD_PU` or would take more than :data:`MAX_ARC_CHORDS` chords.
 
 Streaming: the file is read in chunks (:data:`CHUNK_BYTES`) by a compiled
 tokenizer and a compiled interpreter, so :func:`scan_hpgl` keeps memory flat
@@ -61,7 +99,8 @@ from ..errors import ParseError
 from ..limits import MAX_COORD_MM, MAX_TOOL_NUMBER
 
 __all__ = [
-    "HPGL_SUFFIXES", "PLOTTER_UNIT_MM", "CHUNK_BYTES", "MAX_COORD_PU",
+    "HPGL_SUFFIXES", "PLOTTER_UNIT_MM", "CHUNK_BYTES", "MAX_COORD_PU", "MAX_ARC_CHORDS", "DEFAULT_P1_PU",
+    "DEFAULT_P2_PU", "KNOWN",
     "HpglCommand", "HpglScan", "HpglDrawing", "PointBatch",
     "iter_hpgl", "scan_hpgl", "load_hpgl", "parse_hpgl", "point_batches",
 ]
@@ -88,13 +127,34 @@ def _name(code: int) -> str:
 
 C_IN, C_DF, C_SP, C_PU, C_PD, C_PA, C_PR = (_code(m) for m in ("IN", "DF", "SP", "PU", "PD", "PA", "PR"))
 C_LB, C_DT, C_PE = _code("LB"), _code("DT"), _code("PE")
-KNOWN = ("IN", "DF", "SP", "PU", "PD", "PA", "PR")
+C_SC, C_IP, C_CI, C_AA, C_AR, C_CT = (_code(m) for m in ("SC", "IP", "CI", "AA", "AR", "CT"))
+KNOWN = ("IN", "DF", "SP", "PU", "PD", "PA", "PR", "SC", "IP", "CI", "AA", "AR", "CT")
+ARC_CODES = np.array([C_CI, C_AA, C_AR], np.int64)
+"""The commands that draw chords (their points are counted before they are made)."""
 
 # tokenizer modes
 M_IDLE, M_MN1, M_PARAMS, M_SKIP, M_QUOTE, M_LABEL, M_DT, M_PE = range(8)
 # error codes
 (E_NONE, E_CHAR, E_MNEMONIC, E_NUMBER, E_EMPTY, E_TRAIL, E_EOF_COMMA, E_EOF_MNEMONIC, E_EOF_LABEL,
- E_EOF_STRING, E_ODD, E_SP, E_RANGE) = range(13)
+ E_EOF_STRING, E_ODD, E_SP, E_RANGE, E_ARGS, E_SCALE, E_CHORDS, E_ARC_RANGE) = range(17)
+# interpreter state slots (float64, kept from one chunk to the next): pen down, relative moves, the pen's
+# position (plotter units), the pen, where the last coordinate stood, a pen down to restore after a circle
+# (the stroke starts at the next move), P1 and P2, scaling on, its type and six parameters, the user-to-plotter
+# transform (plotter = a * user + b per axis), the chord tolerance mode
+(I_DOWN, I_REL, I_X, I_Y, I_PEN, I_LINE, I_COL, I_PENDING, I_P1X, I_P1Y, I_P2X, I_P2Y, I_SC, I_SCTYPE,
+ I_SC0, I_SC1, I_SC2, I_SC3, I_SC4, I_SC5, I_AX, I_BX, I_AY, I_BY, I_CT) = range(25)
+N_IST = 25
+DEFAULT_P1_PU = (603.0, 521.0)
+DEFAULT_P2_PU = (10603.0, 7721.0)
+"""P1 and P2 after ``IN`` or ``IP;``: an HP 7475A's on A4 paper (10000 x 7200 plotter units, 250 x 180 mm apart)."""
+DEFAULT_CHORD_DEG = 5.0
+MIN_CHORD_DEG, MAX_CHORD_DEG = 0.5, 180.0
+"""A chord angle (given, or made from a chord tolerance) is clamped to 0.5..180 degrees (HP-GL/2)."""
+MAX_ARC_CHORDS = 100_000
+"""One circle or arc (``CI``, ``AA``, ``AR``) is drawn with at most this many chords (139 turns at the finest
+chord angle); its count is known before a chord is made, and a file that asks for more is refused naming it."""
+BATCH_POINTS = 1 << 20
+"""The most pen-down points made at once from a chunk with circles and arcs (memory stays flat)."""
 # tokenizer state slots (int64): kept from one chunk to the next ...
 (S_LINE, S_LSTART, S_BASE, S_TERM, S_RESUME, S_COFF, S_CLINE, S_CCOL, S_CONSUMED, S_NCMD, S_NPAR,
  S_ERR, S_ERRPOS, S_ERRLINE, S_ERRCOL, S_ERRAUX) = range(16)
@@ -140,7 +200,9 @@ def _coord_cmd(code):
 
 @njit(cache=True)
 def _known(code):
-    return _coord_cmd(code) or code == 0x494E or code == 0x4446 or code == 0x5350  # IN DF SP
+    return (_coord_cmd(code) or code == 0x494E or code == 0x4446 or code == 0x5350  # IN DF SP
+            or code == 0x5343 or code == 0x4950 or code == 0x4349 or code == 0x4141  # SC IP CI AA
+            or code == 0x4152 or code == 0x4354)  # AR CT
 
 
 @njit(cache=True)
@@ -520,93 +582,285 @@ def _tokenize(buf, final, st, c_code, c_off, c_line, c_col, c_p0, c_np, p_val, p
 
 
 @njit(cache=True)
-def _point(o_x, o_y, o_line, o_col, o_start, o_pen, k, x, y, line, col, start, pen):
-    """Record pen-down point ``k`` (:data:`_POINT_DTYPES`); return k + 1."""
-    o_x[k], o_y[k] = x, y
-    o_line[k], o_col[k] = line, col
-    o_start[k], o_pen[k] = start, pen
+def _point(o_x, o_y, o_line, o_col, o_start, o_pen, k, x, y, line, col, start, pen, write):
+    """Record pen-down point ``k`` (:data:`_POINT_DTYPES`) when ``write`` (else only count it); return k + 1."""
+    if write:
+        o_x[k], o_y[k] = x, y
+        o_line[k], o_col[k] = line, col
+        o_start[k], o_pen[k] = start, pen
     return k + 1
+
+
+@njit(cache=True)
+def _rescale(ist):
+    """The user-to-plotter transform (``ist[I_AX..I_BY]``) from P1, P2 and the ``SC`` parameters (HP-GL/2):
+    type 0 maps (xmin, ymin) to P1 and (xmax, ymax) to P2; type 1 does so with one unit size for both axes
+    (the smaller), the unused space split by the left and bottom percentages; type 2 puts (xmin, ymin) at P1
+    with the given plotter units per user unit.  Scaling off: user units are plotter units."""
+    if ist[I_SC] == 0:
+        ist[I_AX], ist[I_BX], ist[I_AY], ist[I_BY] = 1.0, 0.0, 1.0, 0.0
+        return
+    p1x, p1y, p2x, p2y = ist[I_P1X], ist[I_P1Y], ist[I_P2X], ist[I_P2Y]
+    kind = ist[I_SCTYPE]
+    xmin, ymin = ist[I_SC0], ist[I_SC2]
+    if kind == 2:
+        ax, ay = ist[I_SC1], ist[I_SC3]
+        bx, by = p1x - xmin * ax, p1y - ymin * ay
+    else:
+        ax = (p2x - p1x) / (ist[I_SC1] - xmin)
+        ay = (p2y - p1y) / (ist[I_SC3] - ymin)
+        bx, by = p1x - xmin * ax, p1y - ymin * ay
+        if kind == 1:
+            unit = min(abs(ax), abs(ay))
+            ax = unit if ax > 0 else -unit
+            ay = unit if ay > 0 else -unit
+            spare_x = (p2x - p1x) - ax * (ist[I_SC1] - xmin)
+            spare_y = (p2y - p1y) - ay * (ist[I_SC3] - ymin)
+            bx = p1x + ist[I_SC4] / 100.0 * spare_x - xmin * ax
+            by = p1y + ist[I_SC5] / 100.0 * spare_y - ymin * ay
+    ist[I_AX], ist[I_BX], ist[I_AY], ist[I_BY] = ax, bx, ay, by
+
+
+@njit(cache=True)
+def _reset(ist, initialise):
+    """``DF`` (scaling off, chord angles) and, with ``initialise``, ``IN`` (also P1 and P2 to their defaults)."""
+    ist[I_SC] = 0.0
+    ist[I_CT] = 0.0
+    if initialise:
+        ist[I_P1X], ist[I_P1Y] = DEFAULT_P1_PU[0], DEFAULT_P1_PU[1]
+        ist[I_P2X], ist[I_P2Y] = DEFAULT_P2_PU[0], DEFAULT_P2_PU[1]
+    _rescale(ist)
+
+
+@njit(cache=True)
+def _chords(ist, sweep_deg, radius_user, has_chord, chord):
+    """The number of equal chords of an arc of ``sweep_deg`` (float: it may be huge): the chord angle (or, in
+    ``CT1`` mode, the angle whose chord strays ``chord`` from the arc, in the radius's units) clamped to
+    0.5..180 degrees, as few chords as keep each within it."""
+    angle = DEFAULT_CHORD_DEG
+    if has_chord:
+        angle = abs(chord)
+        if ist[I_CT] != 0:
+            tolerance = abs(chord)
+            r = abs(radius_user)
+            angle = MAX_CHORD_DEG
+            if r > 0 and tolerance < r:
+                angle = math.degrees(2.0 * math.acos(1.0 - tolerance / r))
+    angle = min(max(angle, MIN_CHORD_DEG), MAX_CHORD_DEG)
+    n = np.ceil(abs(sweep_deg) / angle - 1e-9)  # a float: a huge sweep must not overflow an integer
+    return max(n, 1.0) if sweep_deg != 0 else 0.0
+
+
+@njit(cache=True)
+def _fail(err, code, line, col, aux, aux2):
+    err[0], err[1], err[2], err[3], err[4] = code, line, col, aux, aux2
 
 
 @entry
 @njit(cache=True)
-def _interpret(n_cmd, c_code, c_line, c_col, c_p0, c_np, p_val, p_line, p_col, ist,
-               o_x, o_y, o_line, o_col, o_start, o_pen, err):
-    """Pen-down points of one chunk's commands; ``ist`` carries the plotter state between chunks.
+def _interpret(c0, c1, c_code, c_line, c_col, c_p0, c_np, p_val, p_line, p_col, ist,
+               o_x, o_y, o_line, o_col, o_start, o_pen, err, write, counts):
+    """Pen-down points of commands ``c0`` to ``c1`` of a chunk; ``ist`` carries the plotter state between chunks
+    (the ``I_`` slots).
 
-    Returns the number of points written to the ``o_`` arrays (:data:`_POINT_DTYPES`).
+    ``write``: record the points in the ``o_`` arrays (:data:`_POINT_DTYPES`); else only count them, each
+    command's count in ``counts[ci - c0]`` (a circle's or an arc's chords are known before they are made).
+    Returns the number of points.
     """
-    pen_down = ist[0] != 0
-    rel = ist[1] != 0
-    cx = ist[2]
-    cy = ist[3]
-    pen = int(ist[4])
-    cl = int(ist[5])
-    cc = int(ist[6])
+    pen_down = ist[I_DOWN] != 0
+    rel = ist[I_REL] != 0
+    pending = ist[I_PENDING] != 0
+    cx = ist[I_X]
+    cy = ist[I_Y]
+    pen = int(ist[I_PEN])
+    cl = int(ist[I_LINE])
+    cc = int(ist[I_COL])
     k = 0
-    for ci in range(n_cmd):
+    for ci in range(c0, c1):
+        k_before = k
         code = c_code[ci]
         p0 = c_p0[ci]
         m = c_np[ci]
-        if code == C_IN:
-            pen_down = False
+        line, col = c_line[ci], c_col[ci]
+        if code == C_IN or code == C_DF:  # parameters (a reset level some plotters take) are ignored
+            if code == C_IN:
+                pen_down = False
+                pending = False
             rel = False
-        elif code == C_DF:
-            rel = False
+            _reset(ist, code == C_IN)
         elif code == C_SP:
             v = p_val[p0] if m else 0.0
             if m > 1 or v < 0 or v != np.floor(v) or v > MAX_TOOL_NUMBER:
-                err[0] = E_SP
-                err[1] = c_line[ci]
-                err[2] = c_col[ci]
+                _fail(err, E_SP, line, col, 0, 0)
                 return k
             pen = int(v)
             pen_down = False
+            pending = False
+        elif code == C_IP:
+            if not (m == 0 or m == 2 or m == 4):
+                _fail(err, E_ARGS, line, col, m, code)
+                return k
+            for q in range(p0, p0 + m):
+                if not abs(p_val[q]) <= MAX_COORD_PU:
+                    _fail(err, E_RANGE, p_line[q], p_col[q], q, 0)
+                    return k
+            if m == 0:
+                ist[I_P1X], ist[I_P1Y] = DEFAULT_P1_PU[0], DEFAULT_P1_PU[1]
+                ist[I_P2X], ist[I_P2Y] = DEFAULT_P2_PU[0], DEFAULT_P2_PU[1]
+            else:
+                dx, dy = ist[I_P2X] - ist[I_P1X], ist[I_P2Y] - ist[I_P1Y]
+                ist[I_P1X], ist[I_P1Y] = p_val[p0], p_val[p0 + 1]
+                if m == 4:
+                    ist[I_P2X], ist[I_P2Y] = p_val[p0 + 2], p_val[p0 + 3]
+                else:  # P2 keeps its place relative to P1
+                    ist[I_P2X], ist[I_P2Y] = ist[I_P1X] + dx, ist[I_P1Y] + dy
+                if ist[I_P2X] == ist[I_P1X]:  # HP-GL/2: P2 one unit further
+                    ist[I_P2X] += 1.0
+                if ist[I_P2Y] == ist[I_P1Y]:
+                    ist[I_P2Y] += 1.0
+            _rescale(ist)
+        elif code == C_SC:
+            kind = p_val[p0 + 4] if m >= 5 else 0.0
+            if not (m == 0 or m == 4 or m == 5 or (m == 7 and kind == 1)) or not (kind == 0 or kind == 1
+                                                                                   or kind == 2):
+                _fail(err, E_ARGS, line, col, m, code)
+                return k
+            if m == 0:
+                ist[I_SC] = 0.0
+            else:
+                a0, a1, a2, a3 = p_val[p0], p_val[p0 + 1], p_val[p0 + 2], p_val[p0 + 3]
+                left = p_val[p0 + 5] if m == 7 else 50.0
+                bottom = p_val[p0 + 6] if m == 7 else 50.0
+                if (kind == 2 and (a1 == 0 or a3 == 0)) or (kind != 2 and (a0 == a1 or a2 == a3)) \
+                        or not (0 <= left <= 100 and 0 <= bottom <= 100):
+                    _fail(err, E_SCALE, line, col, 0, code)
+                    return k
+                ist[I_SC], ist[I_SCTYPE] = 1.0, kind
+                ist[I_SC0], ist[I_SC1], ist[I_SC2], ist[I_SC3] = a0, a1, a2, a3
+                ist[I_SC4], ist[I_SC5] = left, bottom
+            _rescale(ist)
+        elif code == C_CT:
+            v = p_val[p0] if m else 0.0
+            if m > 1 or not (v == 0 or v == 1):
+                _fail(err, E_ARGS, line, col, m, code)
+                return k
+            ist[I_CT] = v
+        elif code == C_CI or code == C_AA or code == C_AR:
+            circle = code == C_CI
+            if (circle and not (m == 1 or m == 2)) or (not circle and not (m == 3 or m == 4)):
+                _fail(err, E_ARGS, line, col, m, code)
+                return k
+            ax, ay = ist[I_AX], ist[I_AY]
+            if circle:
+                ccx, ccy = cx, cy
+                radius = p_val[p0]
+                sweep = 360.0
+                theta0 = 0.0
+                has_chord = m == 2
+                chord = p_val[p0 + 1] if has_chord else 0.0
+            else:
+                if code == C_AA:
+                    ccx, ccy = ax * p_val[p0] + ist[I_BX], ay * p_val[p0 + 1] + ist[I_BY]
+                else:
+                    ccx, ccy = cx + ax * p_val[p0], cy + ay * p_val[p0 + 1]
+                ux, uy = (cx - ccx) / ax, (cy - ccy) / ay
+                radius = math.hypot(ux, uy)
+                theta0 = math.atan2(uy, ux)
+                sweep = p_val[p0 + 2]
+                has_chord = m == 4
+                chord = p_val[p0 + 3] if has_chord else 0.0
+            n_f = _chords(ist, sweep, radius, has_chord, chord)
+            if n_f > MAX_ARC_CHORDS:
+                _fail(err, E_CHORDS, line, col, int(min(n_f, 4e18)), code)
+                return k
+            n = int(n_f)
+            reach_x, reach_y = abs(ax * radius), abs(ay * radius)
+            if not (abs(ccx) + reach_x <= MAX_COORD_PU and abs(ccy) + reach_y <= MAX_COORD_PU):
+                _fail(err, E_ARC_RANGE, line, col, 0, code)
+                return k
+            if circle:
+                sx, sy = ccx + ax * radius, ccy  # a positive radius starts at 0 degrees, a negative one at 180
+                ex, ey = sx, sy
+            else:
+                sx, sy = cx, cy
+                t = theta0 + math.radians(sweep)
+                ex, ey = ccx + ax * radius * math.cos(t), ccy + ay * radius * math.sin(t)
+            draw = (circle or pen_down) and n > 0
+            if draw and write:
+                if circle or pending:
+                    k = _point(o_x, o_y, o_line, o_col, o_start, o_pen, k, sx, sy, line, col, True, pen, True)
+                sweep_rad = math.radians(sweep)
+                for j in range(1, n):
+                    t = theta0 + sweep_rad * j / n
+                    k = _point(o_x, o_y, o_line, o_col, o_start, o_pen, k, ccx + ax * radius * math.cos(t),
+                               ccy + ay * radius * math.sin(t), line, col, False, pen, True)
+                k = _point(o_x, o_y, o_line, o_col, o_start, o_pen, k, ex, ey, line, col, False, pen, True)
+            elif draw:
+                k += n + (1 if circle or pending else 0)
+            if circle:
+                pending = pen_down  # the pen goes back to the centre up; down again there, it draws from the next move
+            elif n > 0:
+                cx, cy = ex, ey
+                if draw:
+                    pending = False
+            cl, cc = line, col
         elif _coord_cmd(code):
             if m % 2:
-                err[0] = E_ODD
-                err[1] = p_line[p0 + m - 1]
-                err[2] = p_col[p0 + m - 1]
-                err[3] = m
+                _fail(err, E_ODD, p_line[p0 + m - 1], p_col[p0 + m - 1], m, 0)
                 return k
             if code == C_PU:
                 pen_down = False
+                pending = False
             elif code == C_PD:
                 if not pen_down:
-                    k = _point(o_x, o_y, o_line, o_col, o_start, o_pen, k, cx, cy, cl if cl > 0 else c_line[ci],
-                               cc if cl > 0 else c_col[ci], True, pen)
+                    k = _point(o_x, o_y, o_line, o_col, o_start, o_pen, k, cx, cy, cl if cl > 0 else line,
+                               cc if cl > 0 else col, True, pen, write)
                     pen_down = True
+                    pending = False
             elif code == C_PA:
                 rel = False
             else:
                 rel = True
+            ax, bx, ay, by = ist[I_AX], ist[I_BX], ist[I_AY], ist[I_BY]
             for q in range(p0, p0 + m, 2):
+                if pen_down and pending:
+                    k = _point(o_x, o_y, o_line, o_col, o_start, o_pen, k, cx, cy, cl, cc, True, pen, write)
+                    pending = False
                 if rel:
-                    cx += p_val[q]
-                    cy += p_val[q + 1]
+                    cx += ax * p_val[q]
+                    cy += ay * p_val[q + 1]
                 else:
-                    cx = p_val[q]
-                    cy = p_val[q + 1]
+                    cx = ax * p_val[q] + bx
+                    cy = ay * p_val[q + 1] + by
                 cl = p_line[q]
                 cc = p_col[q]
                 if not (abs(cx) <= MAX_COORD_PU and abs(cy) <= MAX_COORD_PU):  # NaN too
                     bad = q if not abs(cx) <= MAX_COORD_PU else q + 1
-                    err[0] = E_RANGE
-                    err[1] = p_line[bad]
-                    err[2] = p_col[bad]
-                    err[3] = bad
-                    err[4] = 1 if rel else 0
+                    _fail(err, E_RANGE, p_line[bad], p_col[bad], bad, 1 if rel else 0)
                     return k
                 if pen_down:
-                    k = _point(o_x, o_y, o_line, o_col, o_start, o_pen, k, cx, cy, cl, cc, False, pen)
-    ist[0] = 1.0 if pen_down else 0.0
-    ist[1] = 1.0 if rel else 0.0
-    ist[2] = cx
-    ist[3] = cy
-    ist[4] = pen
-    ist[5] = cl
-    ist[6] = cc
+                    k = _point(o_x, o_y, o_line, o_col, o_start, o_pen, k, cx, cy, cl, cc, False, pen, write)
+        if not write:
+            counts[ci - c0] = k - k_before
+    ist[I_DOWN] = 1.0 if pen_down else 0.0
+    ist[I_REL] = 1.0 if rel else 0.0
+    ist[I_PENDING] = 1.0 if pending else 0.0
+    ist[I_X] = cx
+    ist[I_Y] = cy
+    ist[I_PEN] = pen
+    ist[I_LINE] = cl
+    ist[I_COL] = cc
     return k
+
+
+def _initial_state() -> np.ndarray:
+    """The interpreter's state before the first command: pen up at plotter (0, 0), absolute moves, P1 and P2 at
+    their defaults, scaling off, chord angles."""
+    ist = np.zeros(N_IST, np.float64)
+    ist[I_P1X], ist[I_P1Y] = DEFAULT_P1_PU
+    ist[I_P2X], ist[I_P2Y] = DEFAULT_P2_PU
+    ist[I_AX] = ist[I_AY] = 1.0
+    return ist
 
 
 @dataclass(frozen=True)
@@ -618,7 +872,7 @@ class HpglCommand:
         params: numeric parameters, in order (``()`` for unknown commands, whose parameters are skipped).
         offset: byte offset of the mnemonic from the start of the file.
         line, column: where the mnemonic stands (1-based; columns count bytes).
-        known: True for the commands `cam` interprets (IN, DF, SP, PU, PD, PA, PR).
+        known: True for the commands `cam` interprets (:data:`KNOWN`).
 
     A coordinate command longer than a chunk comes as several commands with the same position.
     """
@@ -816,43 +1070,88 @@ class _Unknown:
         return out
 
 
+def _raise(err: np.ndarray, b: _Block, name: str, scaled: bool) -> None:
+    """The one-line :class:`ParseError` of the interpreter's error ``err``."""
+    where = f"{name}:{int(err[1])}:{int(err[2])}"
+    code, aux, aux2 = int(err[0]), int(err[3]), int(err[4])
+    if code == E_SP:
+        raise ParseError(f"{where}: 'SP' takes one pen number (a whole number 0..{MAX_TOOL_NUMBER})")
+    limit = f"at most {MAX_COORD_PU:.0f} plotter units = {MAX_COORD_MM:g} mm either way"
+    if code == E_RANGE:
+        value = float(b.val[aux])
+        number = f"{value:g}" if math.isfinite(value) else "of more than 300 digits"
+        what = f"the pen position after the relative move {number} lies" if aux2 else f"the coordinate {number} is"
+        raise ParseError(f"{where}: {what} out of range{' (scaled by SC)' if scaled else ''} ({limit})")
+    mnemonic = _name(aux2)
+    if code == E_ARGS:
+        forms = {"SC": "none, 4 (xmin,xmax,ymin,ymax), 5 (with a type 0, 1 or 2) or 7 (type 1 with left,bottom)",
+                 "IP": "none, 2 (P1) or 4 (P1 and P2)", "CI": "1 (radius) or 2 (with a chord angle)",
+                 "AA": "3 (x,y centre, sweep) or 4 (with a chord angle)", "AR": "3 (dx,dy centre, sweep) or 4 "
+                 "(with a chord angle)", "CT": "none, 0 (chord angles) or 1 (chord tolerance)"}
+        raise ParseError(f"{where}: '{mnemonic}' takes {forms[mnemonic]} parameters, got {aux}")
+    if code == E_SCALE:
+        raise ParseError(f"{where}: 'SC' needs xmin != xmax and ymin != ymax (type 2: factors != 0), "
+                         "left and bottom 0..100")
+    if code == E_CHORDS:
+        count = f"more than {aux:,}" if aux >= 4e18 else f"{aux:,}"
+        raise ParseError(f"{where}: '{mnemonic}' would be drawn as {count} chords; at most {MAX_ARC_CHORDS:,} "
+                         "chords a circle or arc (a smaller sweep, or a larger chord angle)")
+    if code == E_ARC_RANGE:
+        raise ParseError(f"{where}: the {'circle' if mnemonic == 'CI' else 'arc'} '{mnemonic}' reaches out of "
+                         f"range ({limit})")
+    raise ParseError(f"{where}: odd number of coordinates ({aux}): an x without its y")
+
+
 def _points(src: Source, *, source: Optional[str], progress: Optional[Progress], unknown: _Unknown,
             counts: dict[int, int], chunk_bytes: int = CHUNK_BYTES) -> Iterator[PointBatch]:
-    """Pen-down points per chunk (views into reused arrays)."""
-    ist = np.zeros(7, np.float64)
+    """Pen-down points per chunk (views into reused arrays; a chunk with circles and arcs may give several
+    batches: their points are counted first, then made at most :data:`BATCH_POINTS` at a time)."""
+    ist = _initial_state()
     err = np.zeros(5, np.int64)
     cap = 0
     name = source
     last_off = -1
+    no_counts = np.zeros(1, np.int64)
     for b in _chunks(src, source=source, progress=progress, chunk_bytes=chunk_bytes):
         if name is None:
             name = source or (str(src) if isinstance(src, (str, os.PathLike)) else str(getattr(src, "name", "<hpgl>")))
-        need = b.n_cmd + int(b.np_[:b.n_cmd].sum()) // 2 + 1
-        if need > cap:
-            cap = max(need, chunk_bytes // 4)
-            out = _arrays(cap, _POINT_DTYPES)
-        k = _interpret(b.n_cmd, b.code, b.line, b.col, b.p0, b.np_, b.val, b.vline, b.vcol, ist, *out, err)
-        if err[0]:
-            where = f"{name}:{int(err[1])}:{int(err[2])}"
-            if err[0] == E_SP:
-                raise ParseError(f"{where}: 'SP' takes one pen number (a whole number 0..{MAX_TOOL_NUMBER})")
-            if err[0] == E_RANGE:
-                value = float(b.val[int(err[3])])
-                number = f"{value:g}" if math.isfinite(value) else "of more than 300 digits"
-                what = f"the pen position after the relative move {number} lies" if err[4] else \
-                    f"the coordinate {number} is"
-                raise ParseError(f"{where}: {what} out of range (at most {MAX_COORD_PU:.0f} plotter units = "
-                                 f"{MAX_COORD_MM:g} mm either way)")
-            raise ParseError(f"{where}: odd number of coordinates ({int(err[3])}): an x without its y")
+        n_cmd = b.n_cmd
+        if np.isin(b.code[:n_cmd], ARC_CODES).any():
+            per_cmd = np.zeros(max(n_cmd, 1), np.int64)
+            probe = ist.copy()
+            _interpret(0, n_cmd, b.code, b.line, b.col, b.p0, b.np_, b.val, b.vline, b.vcol, probe,
+                       *_arrays(0, _POINT_DTYPES), err, False, per_cmd)
+            if err[0]:
+                _raise(err, b, name, bool(probe[I_SC]))
+            ends = np.cumsum(per_cmd[:n_cmd])
+            ranges = []
+            c0 = 0
+            while c0 < n_cmd:  # as many commands as make at most BATCH_POINTS points (one at least)
+                base = int(ends[c0 - 1]) if c0 else 0
+                c1 = max(c0 + 1, int(np.searchsorted(ends, base + BATCH_POINTS, side="right")))
+                ranges.append((c0, c1, int(ends[c1 - 1]) - base))
+                c0 = c1
+        else:
+            ranges = [(0, n_cmd, n_cmd + int(b.np_[:n_cmd].sum()) // 2 + 1)]
+        for c0, c1, need in ranges:
+            if need + 1 > cap:
+                cap = max(need + 1, chunk_bytes // 4)
+                out = _arrays(cap, _POINT_DTYPES)
+            k = _interpret(c0, c1, b.code, b.line, b.col, b.p0, b.np_, b.val, b.vline, b.vcol, ist, *out, err, True,
+                           no_counts)
+            if err[0]:
+                _raise(err, b, name, bool(ist[I_SC]))
+            if len(ranges) > 1 and k == 0:
+                continue
+            yield PointBatch(*[a[:k] for a in out])
         unknown.add(b)
-        offs = b.off[:b.n_cmd]
+        offs = b.off[:n_cmd]
         fresh = offs != np.concatenate([[last_off], offs[:-1]])  # pieces of one long command share its offset
-        if b.n_cmd:
+        if n_cmd:
             last_off = int(offs[-1])
-        uniq, cnt = np.unique(b.code[:b.n_cmd][fresh], return_counts=True)
+        uniq, cnt = np.unique(b.code[:n_cmd][fresh], return_counts=True)
         for u, n in zip(uniq.tolist(), cnt.tolist()):
             counts[u] = counts.get(u, 0) + n
-        yield PointBatch(*[a[:k] for a in out])
 
 
 def point_batches(src: Source, *, source: Optional[str] = None,

@@ -1,12 +1,14 @@
 """HPGL to one job in machine steps, held in memory (seed 004, section 3.6.2).
 
-Frames and units (as :mod:`cam.job.drill`): HPGL X right, Y up, plotter units.
+Frames and units (as :mod:`cam.job.drill`): HPGL X right, Y up, plotter units
+(the file's ``SC``/``IP`` scaling already applied by the reader), times ``scale``
+mm cut per mm plotted (``fit_mm`` picks it; 1 by default).
 Machine x = X, machine y = -Y (toward the operator), in steps of
 ``settings.mm_per_step_xy``, rounded to the nearest step (the seed truncates:
 ``xsteps = xcoord * 250 / 254`` in integer arithmetic, 004 section 3.6.2).  By
 default the drawing's top-left corner (smallest X, largest Y of its pen-down
 points) is placed at the home (0, 0); ``offset_mm=(X, Y)`` instead puts
-plotter (0, 0) at machine (X, Y) mm from the home.
+plotter (0, 0), scaled, at machine (X, Y) mm from the home.
 
 There is one HPGL planner, :mod:`cam.job.hpgl_stream`, which makes the job a
 piece at a time; :func:`plan_hpgl` is its pieces joined into one
@@ -30,7 +32,7 @@ import numpy as np
 
 from ..formats.hpgl import HpglDrawing
 from ..settings import DEFAULT_SETTINGS, MachineSettings
-from .hpgl_stream import DEFAULT_CUT_DEPTH_MM, DEFAULT_TRAVEL_HEIGHT_MM, stream_hpgl, xy_steps
+from .hpgl_stream import DEFAULT_CUT_DEPTH_MM, DEFAULT_TRAVEL_HEIGHT_MM, hpgl_scale, stream_hpgl, xy_steps
 from .hpgl_stream import _rows, _z_steps  # noqa: F401  (cam.job.svg plans its strokes with them)
 from .model import CUT, Job  # noqa: F401  (CUT: the doctest)
 
@@ -38,7 +40,8 @@ __all__ = ["plan_hpgl", "hpgl_steps", "DEFAULT_CUT_DEPTH_MM", "DEFAULT_TRAVEL_HE
 
 
 def hpgl_steps(drawing: HpglDrawing, *, settings: MachineSettings = DEFAULT_SETTINGS,
-               offset_mm: Optional[tuple[float, float]] = None) -> np.ndarray:
+               offset_mm: Optional[tuple[float, float]] = None, scale: Optional[float] = None,
+               fit_mm: Optional[tuple[float, float]] = None) -> np.ndarray:
     """``(N, 2)`` int64 machine ``(x, y)`` steps of every point of ``drawing`` (see the module docstring).
 
     Nearest step: ``floor(v + 0.5)`` of the exact position in steps (:func:`cam.job.hpgl_stream.xy_steps`).
@@ -46,7 +49,8 @@ def hpgl_steps(drawing: HpglDrawing, *, settings: MachineSettings = DEFAULT_SETT
     pu = drawing.points_pu
     if len(pu) == 0:
         return np.zeros((0, 2), np.int64)
-    return xy_steps(pu[:, 0], pu[:, 1], drawing.extent_pu(), settings, offset_mm)
+    factor = hpgl_scale(drawing.summary(), scale=scale, fit_mm=fit_mm)
+    return xy_steps(pu[:, 0], pu[:, 1], drawing.extent_pu(), settings, offset_mm, factor)
 
 
 def plan_hpgl(
@@ -56,6 +60,8 @@ def plan_hpgl(
     cut_depth_mm: float = DEFAULT_CUT_DEPTH_MM,
     travel_height_mm: float = DEFAULT_TRAVEL_HEIGHT_MM,
     offset_mm: Optional[tuple[float, float]] = None,
+    scale: Optional[float] = None,
+    fit_mm: Optional[tuple[float, float]] = None,
 ) -> Job:
     """Plan the cutting of an HPGL drawing, in machine steps: the pieces of
     :func:`cam.job.hpgl_stream.stream_hpgl` joined.
@@ -71,7 +77,10 @@ def plan_hpgl(
         drawing: the strokes (:func:`cam.formats.hpgl.load_hpgl`), or the HPGL file (read a chunk at a time).
         settings: machine settings (mm per step, delays, travel).
         cut_depth_mm: cutting depth below the surface (> 0); travel_height_mm: travel height above it (>= 0).
-        offset_mm: machine position (mm from the home) of plotter (0, 0); None = the drawing's top-left at the home.
+        offset_mm: machine position (mm from the home) of plotter (0, 0), scaled; None = the drawing's top-left at
+            the home.
+        scale: mm cut per mm of the plot (after its own ``SC``/``IP`` scaling); fit_mm: or the ``(width, height)``
+            mm to scale it to fit, keeping its proportions (as SVG's ``--scale`` and ``--fit``).
 
     Returns:
         A :class:`~cam.job.model.Job` in machine steps: CUT points at the
@@ -82,4 +91,4 @@ def plan_hpgl(
         ParseError: a malformed file.
     """
     return stream_hpgl(drawing, settings=settings, cut_depth_mm=cut_depth_mm, travel_height_mm=travel_height_mm,
-                       offset_mm=offset_mm).joined()
+                       offset_mm=offset_mm, scale=scale, fit_mm=fit_mm).joined()

@@ -35,7 +35,7 @@ from ..formats.hpgl import (CHUNK_BYTES, PLOTTER_UNIT_MM, HpglDrawing, HpglScan,
 from ..settings import DEFAULT_SETTINGS, MachineSettings
 from .model import CUT, RETRACT, TRAVEL, Job, PixelFrame, check_travel, join_pieces
 
-__all__ = ["HpglJobStream", "stream_hpgl", "xy_steps", "STREAM_POINTS", "PIECE_POINTS", "DEFAULT_CUT_DEPTH_MM",
+__all__ = ["HpglJobStream", "stream_hpgl", "xy_steps", "hpgl_scale", "STREAM_POINTS", "PIECE_POINTS", "DEFAULT_CUT_DEPTH_MM",
            "DEFAULT_TRAVEL_HEIGHT_MM"]
 
 DEFAULT_CUT_DEPTH_MM = 0.5
@@ -48,22 +48,52 @@ PIECE_POINTS = 1 << 17
 
 
 def xy_steps(x_pu: np.ndarray, y_pu: np.ndarray, extent_pu: Optional[tuple[float, float, float, float]],
-             settings: MachineSettings, offset_mm: Optional[tuple[float, float]]) -> np.ndarray:
-    """``(N, 2)`` int64 machine ``(x, y)`` steps of ``(N,)`` plotter points (HPGL frame, Y up).
+             settings: MachineSettings, offset_mm: Optional[tuple[float, float]], scale: float = 1.0) -> np.ndarray:
+    """``(N, 2)`` int64 machine ``(x, y)`` steps of ``(N,)`` plotter points (HPGL frame, Y up), ``scale`` mm cut
+    per mm of the plot.
 
     ``offset_mm`` None: the drawing's top-left (``x_min``, ``y_max`` of ``extent_pu``, the whole drawing's
-    ``(x_min, y_min, x_max, y_max)`` plotter units) at the home; else plotter (0, 0) at machine ``offset_mm``.
-    Nearest step: ``floor(v + 0.5)`` of the exact position in steps.
+    ``(x_min, y_min, x_max, y_max)`` plotter units) at the home; else plotter (0, 0), scaled, at machine
+    ``offset_mm``.  Nearest step: ``floor(v + 0.5)`` of the exact position in steps.
     """
+    mm_per_pu = PLOTTER_UNIT_MM if scale == 1.0 else PLOTTER_UNIT_MM * scale
     if offset_mm is None:
         x0, _, _, y1 = extent_pu if extent_pu is not None else (0.0, 0.0, 0.0, 0.0)
-        k = PLOTTER_UNIT_MM / settings.mm_per_step_xy
+        k = mm_per_pu / settings.mm_per_step_xy
         x_steps, y_steps = (x_pu - x0) * k, (y1 - y_pu) * k
     else:
         ox, oy = offset_mm
-        x_steps = (ox + x_pu * PLOTTER_UNIT_MM) / settings.mm_per_step_xy
-        y_steps = (oy - y_pu * PLOTTER_UNIT_MM) / settings.mm_per_step_xy
+        x_steps = (ox + x_pu * mm_per_pu) / settings.mm_per_step_xy
+        y_steps = (oy - y_pu * mm_per_pu) / settings.mm_per_step_xy
     return np.floor(np.column_stack([x_steps, y_steps]) + 0.5).astype(np.int64)
+
+
+@dataclass
+class _Extent:
+    """A scan's drawn extent in mm, as :func:`cam.job.svg.svg_scale` reads a drawing's."""
+
+    scan: HpglScan
+
+    @property
+    def source(self) -> str:
+        return self.scan.source
+
+    def extent_mm(self) -> tuple[float, float, float, float]:
+        x0, y0, x1, y1 = self.scan.extent_pu if self.scan.extent_pu is not None else (0.0, 0.0, 0.0, 0.0)
+        return (x0 * PLOTTER_UNIT_MM, y0 * PLOTTER_UNIT_MM, x1 * PLOTTER_UNIT_MM, y1 * PLOTTER_UNIT_MM)
+
+
+def hpgl_scale(scan: HpglScan, *, scale: Optional[float] = None, fit_mm: Optional[tuple[float, float]] = None) -> float:
+    """mm cut per mm of the plot (its ``SC``/``IP`` scaling applied): ``scale``, or the largest that fits the drawn
+    extent in ``fit_mm`` ``(width, height)`` keeping its proportions, or 1 -- as SVG's ``--scale``/``--fit``
+    (:func:`cam.job.svg.svg_scale`, the same rules and messages).
+
+    Raises:
+        PlanError: both given, a factor that is not > 0, nothing to fit.
+    """
+    from .svg import svg_scale  # here: cam.job.svg plans its strokes with this package's rows
+
+    return svg_scale(_Extent(scan), scale=scale, fit_mm=fit_mm)  # type: ignore[arg-type]
 
 
 def _z_steps(cut_depth_mm: float, travel_height_mm: float, settings: MachineSettings) -> tuple[int, int]:
@@ -229,7 +259,7 @@ class HpglJobStream:
         src: the HPGL file, or the drawing; scan: what a first pass over it found (extent, counts, pens).
         settings, depth_steps, safe_z_steps: the machine settings, the cutting depth and the travel height
             (Z steps, +Z deeper: the travel height is <= 0).
-        offset_mm: as :func:`~cam.job.hpgl.plan_hpgl`'s.
+        offset_mm: as :func:`~cam.job.hpgl.plan_hpgl`'s; scale: mm cut per mm of the plot (:func:`hpgl_scale`).
         piece_points: pen-down points planned into a piece (at least); chunk_bytes: bytes of a file read at once.
         n_moves: moves of the job (-1 until a pass ended); pause_notes: its pauses' notes (after a pass).
         pixels, tool: None (no drawing frame; the point tool).
@@ -241,6 +271,7 @@ class HpglJobStream:
     depth_steps: int
     safe_z_steps: int
     offset_mm: Optional[tuple[float, float]] = None
+    scale: float = 1.0
     piece_points: int = PIECE_POINTS
     chunk_bytes: int = CHUNK_BYTES
     n_moves: int = -1
@@ -304,7 +335,7 @@ class HpglJobStream:
 
     def _piece(self, batch: PointBatch, carry: _Carry, *, last: bool) -> Optional[Job]:
         """The rows of the points of ``batch`` (None: none are left); ``last``: the job's end follows."""
-        xy = xy_steps(batch.x, batch.y, self.scan.extent_pu, self.settings, self.offset_mm)
+        xy = xy_steps(batch.x, batch.y, self.scan.extent_pu, self.settings, self.offset_mm, self.scale)
         _check_xy(self.source, batch, xy, self.settings)
         xy, group, pause_group, before, notes = _strokes(xy, batch.start, batch.pen, carry)
         pts, kind, pause = _rows(xy, group, pause_group, self.depth_steps, self.safe_z_steps, before=before,
@@ -321,7 +352,8 @@ class HpglJobStream:
 def stream_hpgl(src: Union[str, os.PathLike, HpglDrawing], *, settings: MachineSettings = DEFAULT_SETTINGS,
                 cut_depth_mm: float = DEFAULT_CUT_DEPTH_MM, travel_height_mm: float = DEFAULT_TRAVEL_HEIGHT_MM,
                 offset_mm: Optional[tuple[float, float]] = None, scan: Optional[HpglScan] = None,
-                piece_points: int = PIECE_POINTS, chunk_bytes: int = CHUNK_BYTES) -> HpglJobStream:
+                piece_points: int = PIECE_POINTS, chunk_bytes: int = CHUNK_BYTES, scale: Optional[float] = None,
+                fit_mm: Optional[tuple[float, float]] = None) -> HpglJobStream:
     """The HPGL job of a file or a drawing as a :class:`HpglJobStream` (a file's: bounded memory).
 
     Args:
@@ -330,9 +362,10 @@ def stream_hpgl(src: Union[str, os.PathLike, HpglDrawing], *, settings: MachineS
         settings, cut_depth_mm, travel_height_mm, offset_mm: as :func:`~cam.job.hpgl.plan_hpgl`.
         scan: the file's :func:`~cam.formats.hpgl.scan_hpgl`, if made already.
         piece_points, chunk_bytes: pen-down points per piece (at least), bytes read at a time.
+        scale, fit_mm: mm cut per mm of the plot, or the ``(width, height)`` mm to fit it in (:func:`hpgl_scale`).
 
     Raises:
-        PlanError: bad options, nothing drawn; ParseError: a malformed file; TravelError: the depths outside
+        PlanError: bad options (both scale and fit_mm), nothing drawn; ParseError: a malformed file; TravelError: the depths outside
         the Z travel, a point outside the travel (found as the pieces are made).
     """
     if not (cut_depth_mm > 0) or not (travel_height_mm >= 0):
@@ -345,6 +378,7 @@ def stream_hpgl(src: Union[str, os.PathLike, HpglDrawing], *, settings: MachineS
         scan = scan if scan is not None else scan_hpgl(src, chunk_bytes=chunk_bytes)
     if scan.n_points == 0:
         raise PlanError(f"{scan.source}: nothing to cut (no pen-down moves)")
+    factor = hpgl_scale(scan, scale=scale, fit_mm=fit_mm)
     depth_steps, safe_z_steps = _z_steps(cut_depth_mm, travel_height_mm, settings)
-    return HpglJobStream(points, scan, settings, depth_steps, safe_z_steps, offset_mm, max(1, int(piece_points)),
-                         int(chunk_bytes))
+    return HpglJobStream(points, scan, settings, depth_steps, safe_z_steps, offset_mm, factor,
+                         max(1, int(piece_points)), int(chunk_bytes))
