@@ -214,11 +214,11 @@ JOB_OPTIONS: tuple[Option, ...] = (
     # G-code
     _opt("flip_y", "--flip-y", "flag", "", {"gcode"}, False, "G-code input: machine Y = +Y mm instead of -Y mm"),
     # SVG
-    _opt("scale", "--scale", "number", "", {"svg"}, None,
-         "SVG: mm cut per mm of the drawing (default 1: its own size)", lo=0.0, hi=MAX_MM, lo_open=True,
+    _opt("scale", "--scale", "number", "", {"svg", "hpgl"}, None,
+         "SVG and HPGL: mm cut per mm of the drawing (default 1: its own size)", lo=0.0, hi=MAX_MM, lo_open=True,
          metavar="FACTOR"),
-    _opt("fit_mm", "--fit", "size", "mm", {"svg"}, None,
-         "SVG: scale the drawing to fit WIDTHxHEIGHT mm, keeping its proportions (e.g. 80x40)",
+    _opt("fit_mm", "--fit", "size", "mm", {"svg", "hpgl"}, None,
+         "SVG and HPGL: scale the drawing to fit WIDTHxHEIGHT mm, keeping its proportions (e.g. 80x40)",
          lo=0.0, hi=MAX_MM, lo_open=True, count=2, metavar="WxH"),
     # G-code programs (the first two name files on the machine that runs cam: command line only)
     _opt("tool_table", "--tool-table", "text", "", {"gcode"}, None,
