@@ -814,7 +814,7 @@ _PITCHES_MM = np.array([0.5, 0.635, 0.65, 0.8, 1.0, 1.27, 1.5, 1.778, 2.0, 2.5, 
 """Distances between neighbouring holes that boards are made of (pin pitches in mm and in tenths of an inch)."""
 _GUESS_LINES = 1500
 """How many lines of a file the readings are tried on (the chosen one then reads the whole file)."""
-_DIGIT_CHOICES = {"inch": ((2, 4), (2, 3), (2, 5), (3, 3), (3, 4)), "metric": ((3, 3), (4, 2), (3, 2), (4, 3), (3, 4))}
+_DIGIT_CHOICES = {"inch": ((2, 4), (2, 3), (2, 5), (3, 3)), "metric": ((3, 3), (4, 2), (3, 2), (4, 3))}
 _NUMBER_TEXT = re.compile(r"[XY][+-]?([0-9]+)(?![0-9.])")
 
 
@@ -1112,7 +1112,7 @@ def _check_plausible(r: _Reader, guessed: bool, given: bool) -> None:
         span = holes.max(axis=0) - holes.min(axis=0)
         if span.max() > PLAUSIBLE_BOARD_MM:
             axis = int(np.argmax(span))
-            far = int(np.argmax(np.abs(holes[:, axis] - np.median(holes[:, axis]))))
+            far = int(np.argmax(np.abs(holes[:, axis])))
             raise ParseError(
                 f"{r.source}:{r.hole_line[far]}: no reading of this file's unstated format fits the board in "
                 f"{PLAUSIBLE_BOARD_MM:g} mm: the hole at X{holes[far, 0]:.3f} Y{holes[far, 1]:.3f} mm makes it "

@@ -109,17 +109,19 @@ def _machine_mm(holes_mm: np.ndarray, offset_mm, mirror_x: bool, extent_mm: Opti
     return np.column_stack([ox + xy[:, 0], oy - xy[:, 1]])
 
 
-def milled_hole_path_mm(centre_mm, hole_mm: float, bit_mm: float) -> np.ndarray:
+def milled_hole_path_mm(centre_mm, hole_mm: float, bit_mm: float, margin_mm: float = 0.0) -> np.ndarray:
     """The path (``(K, 2)`` mm) of a ``bit_mm`` bit milling a round hole of ``hole_mm`` at ``centre_mm``: the
     centre (where it goes down), then concentric circles at most 0.8 bit apart out to the radius where the bit's
-    edge reaches the hole's edge, each of chords within 0.01 mm of the circle (all inside it).
+    edge reaches the hole's edge less ``margin_mm``, each of chords within 0.01 mm of the circle (all inside
+    it).  :func:`plan_drill` gives a margin of 1.5 X/Y steps: the points are rounded to steps and the
+    machine's straight moves between them to steps again, and neither may take the cut out of the hole.
 
     >>> p = milled_hole_path_mm((0.0, 0.0), 3.0, 1.0)
     >>> p[0].tolist(), round(float(np.hypot(*p[1:].T).max()), 6)
     ([0.0, 0.0], 1.0)
     """
     cx, cy = (float(v) for v in centre_mm)
-    r_max = (hole_mm - bit_mm) / 2
+    r_max = (hole_mm - bit_mm) / 2 - margin_mm
     pts = [(cx, cy)]
     if r_max <= 0:
         return np.array(pts, np.float64)
@@ -181,7 +183,7 @@ def plan_drill(
         bit_tool = next((t for t, d in sorted(holes.tools.items()) if abs(d - mill_holes_over_mm) <= 1e-6), -1)
         for i in np.flatnonzero(big):
             paths_mm.append(milled_hole_path_mm(holes.holes_mm[i], float(holes.tools[int(tool_of[i])]),
-                                                mill_holes_over_mm))
+                                                mill_holes_over_mm, 1.5 * settings.mm_per_step_xy))
             path_dia.append(float(mill_holes_over_mm))
             path_tool.append(bit_tool)
         n_milled = int(big.sum())
