@@ -94,7 +94,8 @@ def _info_excellon(args: argparse.Namespace) -> int:
     lines = [f"{args.image}: {len(holes.holes_mm)} holes, board extent X {x0:.3f}..{x1:.3f} mm, "
              f"Y {y0:.3f}..{y1:.3f} mm ({x1 - x0:.2f} x {y1 - y0:.2f} mm)"]
     for tool, dia, count in holes.tool_table():
-        lines.append(f"  T{tool}: {dia:.3f} mm, {count} holes")
+        slots = holes.slot_count(tool)
+        lines.append(f"  T{tool}: {dia:.3f} mm, {count} holes" + (f", {slots} slots" if slots else ""))
     lines += [f"warning: {w}" for w in holes.warnings]
     print("\n".join(lines))
     return 0
