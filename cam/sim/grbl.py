@@ -37,8 +37,10 @@ planner and is answered ``ok`` once queued.  Each block moves at its feed (or th
 rapids, times the override) with the ``$120-$122`` acceleration along its direction, in a trapezoid whose
 entry and exit speeds come from a look-ahead over the queued blocks (junction speeds from ``$11``, every
 block able to stop by the end of the queue); positions are exact at every block end.  The planner running dry
-between two motions (the second one arriving after the first ended, with no dwell, pause or command that
-waits for the machine in between) is a *starvation* (:attr:`GrblEmulator.starvation_count`).
+while the job goes on is a *starvation* (:attr:`GrblEmulator.starvation_count`): a block finished and left
+nothing queued behind the running one (or nothing at all), and another motion came within a second, with no
+dwell, pause, ``$`` command or other line that waits for the machine in between.  (A planner with one block
+has nothing to look ahead to: the machine slows down to be able to stop at that block's end.)
 
 Time: a simulated clock that runs ``speed`` times faster than the wall clock (``speed=None``: as fast as it
 can, never sleeping).  Motion advances in ticks of 1 ms of simulated time; the serial line and the latency are
@@ -75,6 +77,7 @@ RX_BUFFER_BYTES = 128
 PLANNER_BLOCKS = 15
 LINE_MAX_CHARS = 80
 TICK_S = 0.001
+BOOT_WALL_S = 0.02     # a host opened the port: the board restarts this long after (the host's open has flushed)
 STARVE_WINDOW_S = 1.0   # a planner dry for longer than this before the next motion: the host paused, not starved
 MM_PER_INCH = 25.4
 
@@ -434,6 +437,7 @@ class GrblEmulator(AbstractContextManager):
     def _serve(self) -> None:
         poller = select.poll()
         hung_up = True
+        boot_at: Optional[float] = None
         try:
             poller.register(self._master, select.POLLIN)
             while not self._stop_event.is_set():
@@ -442,9 +446,12 @@ class GrblEmulator(AbstractContextManager):
                         return
                     events = poller.poll(0)
                     hup = any(ev & select.POLLHUP for _, ev in events)
-                    if hung_up and not hup:
-                        self._host_opened()
+                    if hung_up and not hup and self._reset_on_open:
+                        boot_at = time.monotonic() + BOOT_WALL_S
                     hung_up = hup
+                    if boot_at is not None and time.monotonic() >= boot_at:
+                        boot_at = None
+                        self._host_opened()
                     if not hup:
                         self._read_master(self._t)
                     now = self._sim_now(self._busy())
@@ -453,9 +460,9 @@ class GrblEmulator(AbstractContextManager):
                         self._t0 -= now - self._t - self._max_lag_s
                         now = self._t + self._max_lag_s
                     self._advance(now)
-                    self._flush_tx(hup)
+                    self._flush_tx(hup or boot_at is not None)
                     busy = self._busy()
-                wait_s = 0.0005 if busy else 0.02
+                wait_s = 0.0005 if busy or boot_at is not None else 0.02
                 if self._speed is None and busy:
                     continue
                 if hup:
@@ -466,7 +473,7 @@ class GrblEmulator(AbstractContextManager):
             self.error = exc
 
     def _host_opened(self) -> None:
-        self._event("host opened the port")
+        self._event("host opened the port: the board restarts")
         if self._reset_on_open:
             self._tx.clear()
             self._wire.clear()
@@ -484,11 +491,13 @@ class GrblEmulator(AbstractContextManager):
             last = max(last, now + self._latency_s) + self._byte_s
             self._wire.append((last, b))
 
-    def _flush_tx(self, hung_up: bool) -> None:
+    def _flush_tx(self, hold_back: bool) -> None:
+        if hold_back:
+            return
         out = bytearray()
         while self._tx and (self._tx[0][0] <= self._t or self._speed is None):
             out += self._tx.popleft()[1]
-        if out and not hung_up:
+        if out:
             try:
                 os.write(self._master, bytes(out))
             except OSError:
@@ -715,10 +724,10 @@ class GrblEmulator(AbstractContextManager):
         self._log_block(blk, blk.end, halted=False)
         if self._trips and self._trips[0][0] > 0:
             self._trips[0][0] -= 1
+        if self._state == "Run" and len(self._planner) <= 1 and self._dry_at is None:
+            self._dry_at = self._t   # nothing queued behind the running block: no look-ahead left
         if not self._planner:
             self._v = 0.0
-            if self._state == "Run":
-                self._dry_at = self._t
             if self._state in ("Run", "Jog"):
                 self._state = "Idle"
 
@@ -762,7 +771,8 @@ class GrblEmulator(AbstractContextManager):
             blk.junction_mm_s = self._junction(self._planner[-1], blk)
         if self._dry_at is not None and not blk.jog and self._t - self._dry_at <= STARVE_WINDOW_S:
             self.starvation_count += 1
-            self._event(f"planner starved: ran dry {self._t - self._dry_at:.4f} s before line {blk.line}")
+            self._event(f"planner starved: nothing queued behind the running block for "
+                        f"{self._t - self._dry_at:.4f} s before line {blk.line}")
         self._dry_at = None
         self._planner.append(blk)
         if self._state == "Idle":

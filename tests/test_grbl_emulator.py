@@ -1,0 +1,257 @@
+"""The grbl 1.1 emulator (cam.sim.grbl) on a pty, driven by the host link (cam.drive.grbl_link) and by raw
+pyserial: welcome and $$, character-counting flow control against the 128-byte receive buffer, planner
+starvation, feed hold and resume, soft reset, an alarm mid-job, a lost link (issue #30 points 1 and 3).
+
+The emulator runs sped up here (``speed``: machine time per wall time), except the ``realtime`` test."""
+from __future__ import annotations
+
+import math
+import sys
+import threading
+import time
+
+import pytest
+import serial
+
+from cam.drive.grbl_link import GrblAlarm, GrblError, GrblLink, parse_grbl_url, parse_status
+from cam.errors import PortError
+from cam.sim.grbl import DEFAULT_SETTINGS, WELCOME, start_emulator
+
+# grbl's defaults (500 mm/min, 10 mm/s^2) would cap these feeds; a small router's rates and accelerations
+FAST = {110: 5000.0, 111: 5000.0, 112: 5000.0, 120: 500.0, 121: 500.0, 122: 500.0}
+
+
+@pytest.fixture(autouse=True)
+def quick_thread_switches():
+    """The emulator, the link's reader and the test share the GIL: switch threads every 0.5 ms, not 5 ms."""
+    before = sys.getswitchinterval()
+    sys.setswitchinterval(0.0005)
+    yield
+    sys.setswitchinterval(before)
+
+
+@pytest.fixture
+def emulator(request):
+    options = getattr(request, "param", {})
+    emu = start_emulator(**{"speed": 5.0, "settings": FAST, **options})
+    yield emu
+    emu.stop()
+    assert emu.error is None
+
+
+def connect(emu, **options) -> GrblLink:
+    return GrblLink(f"grbl:{emu.device_path}?baud=115200", welcome_timeout_s=1.0, **options)
+
+
+def short_segments(n: int, step_mm: float = 0.15, feed_mm_min: float = 3000.0) -> tuple[list[str], tuple]:
+    """A gentle spiral of ``n`` chords of ``step_mm``: 3 ms each at 50 mm/s, lines of about 20 bytes."""
+    lines = ["G21 G90", f"G1 F{feed_mm_min:g}"]
+    x = y = 0.0
+    for i in range(n):
+        heading = i * 0.02
+        x += step_mm * math.cos(heading)
+        y += step_mm * math.sin(heading)
+        lines.append(f"G1 X{x:.3f} Y{y:.3f}")
+    return lines, (round(x, 3), round(y, 3), 0.0)
+
+
+def test_welcome_and_settings():
+    emu = start_emulator(speed=None, settings={100: 80.0, 22: 1})
+    try:
+        with connect(emu) as link:
+            assert link.welcome == WELCOME
+            expected = {**DEFAULT_SETTINGS, 100: 80.0, 22: 1.0}
+            assert link.settings == pytest.approx(expected)
+            # homing enabled: grbl starts locked in alarm and says how to unlock
+            assert "[MSG:'$H'|'$X' to unlock]" in link.messages
+            assert link.status().state == "Alarm"
+            with pytest.raises(GrblError, match=r"error:9 \(G-code is locked out"):
+                link.command("G0 X-1")
+            link.unlock()
+            assert link.status().state == "Idle"
+            link.command("$H", timeout_s=10)
+            status = link.wait_idle()
+            assert status.mpos_mm == pytest.approx((-1.0, -1.0, -1.0))   # the pull-off $27 from the switches
+    finally:
+        emu.stop()
+
+
+def test_200_lines_with_flow_control_never_overflow(emulator):
+    lines, end = short_segments(200)
+    with connect(emulator) as link:
+        report = link.stream(lines)
+        assert report.lines == 202 and report.max_outstanding_bytes <= 128
+        assert report.max_outstanding_bytes > 100        # it did fill grbl's buffer, not send-and-wait
+    assert emulator.overflow_bytes == 0
+    assert emulator.max_rx_bytes <= 128
+    executed = emulator.executed()
+    assert executed[-1].end_mm == pytest.approx(end, abs=1e-9)
+    assert executed[-1].line == 203 and not any(b.halted for b in executed)
+    assert [answer for _, _, answer in emulator.lines()][-202:] == ["ok"] * 202
+    # consecutive blocks join exactly: each starts where the one before ended
+    assert all(a.end_mm == b.start_mm for a, b in zip(executed, executed[1:]))
+
+
+def test_the_emulator_counts_an_overflow(emulator):
+    """A host that ignores the buffer (the whole program at once) loses bytes, and the emulator says so."""
+    lines, _ = short_segments(40)
+    with serial.Serial(emulator.device_path, 115200, timeout=0.5) as ser:
+        ser.readline()
+        ser.write(("\n".join(lines) + "\n").encode())
+        assert emulator.wait_for(lambda e: e.overflow_bytes > 0, 2.0)
+    assert any("overflow" in text for _, text in emulator.events)
+
+
+def send_and_wait(device: str, lines: list[str]) -> None:
+    """The naive streamer: one line, then wait for its ok."""
+    with serial.Serial(device, 115200, timeout=2.0) as ser:
+        assert ser.readline().strip().decode() == WELCOME
+        for line in lines:
+            ser.write((line + "\n").encode())
+            answer = ser.readline().strip()
+            assert answer == b"ok", answer
+
+
+@pytest.mark.parametrize("emulator", [{"speed": 2.0, "latency_s": 0.008}], indirect=True)
+def test_no_starvation_with_character_counting_but_with_send_and_wait(emulator):
+    """115200 baud, a USB adapter that holds each answer 8 ms (an FTDI's latency timer is 16 ms by default),
+    3 ms segments: with 128 bytes in flight the planner keeps blocks to look ahead to; one line per round
+    trip leaves it with none behind the running block, line after line."""
+    lines, end = short_segments(100)
+    with connect(emulator) as link:
+        link.stream(lines)
+    assert emulator.executed()[-1].end_mm == pytest.approx(end)
+    assert emulator.starvation_count == 0, emulator.events
+    send_and_wait(emulator.device_path, lines[:32])  # reopening resets the board (Arduino DTR): position 0
+    assert emulator.wait_for(lambda e: e.state == "Idle" and e.planner_blocks == 0)
+    assert emulator.starvation_count > 20, emulator.events
+
+
+def wait_status(link: GrblLink, predicate, timeout_s: float = 5.0):
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        status = link.status()
+        if predicate(status):
+            return status
+        time.sleep(0.005)
+    raise AssertionError(f"status never matched; last {status}")
+
+
+@pytest.mark.parametrize("emulator", [{"speed": 10.0}], indirect=True)
+def test_feed_hold_and_resume_mid_job(emulator):
+    with connect(emulator) as link:
+        link.command("G1 X40 F1200")                 # 20 mm/s: 2 s of machine time
+        wait_status(link, lambda s: s.state == "Run" and s.mpos_mm[0] > 5)
+        link.hold()
+        held = wait_status(link, lambda s: s.state == "Hold:0")
+        assert 5 < held.mpos_mm[0] < 40
+        time.sleep(0.05)                             # half a second of machine time: it stays put
+        again = link.status()
+        assert again.state == "Hold:0" and again.mpos_mm == held.mpos_mm and again.feed_mm_min == 0
+        link.resume()
+        done = link.wait_idle()
+        assert done.mpos_mm == pytest.approx((40.0, 0.0, 0.0))
+    (block,) = emulator.executed()
+    assert block.end_mm == (40.0, 0.0, 0.0) and not block.halted
+
+
+@pytest.mark.parametrize("emulator", [{"speed": 10.0}], indirect=True)
+def test_soft_reset_mid_job_alarms_and_x_unlocks(emulator):
+    with connect(emulator) as link:
+        link.command("G1 X40 F1200")
+        wait_status(link, lambda s: s.state == "Run" and s.mpos_mm[0] > 5)
+        assert link.soft_reset() == WELCOME
+        assert "ALARM:3" in link.messages
+        stopped = link.status()
+        assert stopped.state == "Alarm" and 5 < stopped.mpos_mm[0] < 40
+        with pytest.raises(GrblError, match="error:9"):
+            link.command("G1 X0")
+        link.unlock()
+        assert link.status().state == "Idle"
+        link.stream(["G0 X0"])
+        assert link.status().mpos_mm == (0.0, 0.0, 0.0)
+    assert emulator.executed()[0].halted
+
+
+def test_an_alarm_mid_job_is_one_line(emulator):
+    lines, _ = short_segments(200)
+    emulator.trip_hard_limit(after_blocks=60)
+    with connect(emulator) as link:
+        with pytest.raises(GrblAlarm) as caught:
+            link.stream(lines)
+        message = str(caught.value)
+        assert "\n" not in message and "ALARM:1" in message and "hard limit" in message
+        assert caught.value.code == 1
+        link.soft_reset()
+        assert link.status().state == "Alarm"
+    executed = emulator.executed()
+    assert len(executed) == 61 and executed[-1].halted
+
+
+def test_a_refused_line_is_one_line_with_its_number_and_meaning(emulator):
+    with connect(emulator) as link:
+        with pytest.raises(GrblError, match=r"^grbl refused line 2 'G1 X1': error:22 \(feed rate not set\)$"):
+            link.stream(["G21", "G1 X1", "G1 X2"])
+
+
+def test_a_lost_link_is_one_line(emulator):
+    lines, _ = short_segments(400, step_mm=0.5, feed_mm_min=600)   # 50 ms a segment: 4 s at speed 5
+    with connect(emulator) as link:
+        threading.Timer(0.2, emulator.unplug).start()
+        with pytest.raises(PortError) as caught:
+            link.stream(lines)
+    message = str(caught.value)
+    assert "\n" not in message and "lost" in message and emulator.device_path in message
+
+
+def test_work_offsets_and_status_positions(emulator):
+    with connect(emulator) as link:
+        link.stream(["G0 X10 Y20 Z-5", "G10 L20 P1 X0 Y0 Z0"])
+        status = link.status()
+        assert status.mpos_mm == (10.0, 20.0, -5.0)
+        assert status.wco_mm == (10.0, 20.0, -5.0) and status.wpos_mm == (0.0, 0.0, 0.0)
+        assert "[G54:10.000,20.000,-5.000]" in link.command("$#")
+        link.stream(["G55", "G10 L2 P2 X1", "G0 X0", "G53 G0 X3"])
+        assert link.status().mpos_mm == (3.0, 20.0, -5.0)
+        assert link.command("$G")[0].startswith("[GC:G0 G55 G17 G21 G90 G94")
+        link.command("$10=0")                                        # WPos reports
+        status = link.status()
+        assert "WPos:2.000,20.000,-5.000" in status.raw and status.mpos_mm == (3.0, 20.0, -5.0)
+
+
+def test_arcs_and_overrides(emulator):
+    with connect(emulator) as link:
+        link.override(0x91)                                          # feed +10 %
+        link.stream(["G1 X10 F3000", "G2 X20 Y0 I5 J0 K0"])          # a K word in G17: taken, as grbl does
+        assert link.status().overrides in (None, (110, 100, 100))
+    arc = [b for b in emulator.executed() if b.kind == "G2"]
+    assert len(arc) > 10
+    for block in arc:   # every chord end on the circle of centre (15, 0), radius 5, above the X axis
+        x, y, _ = block.end_mm
+        assert math.hypot(x - 15, y) == pytest.approx(5.0, abs=1e-9) and y >= -1e-9
+    assert arc[-1].end_mm == (20.0, 0.0, 0.0)
+
+
+def test_url_and_status_parsing():
+    assert parse_grbl_url("grbl:/dev/ttyUSB0?baud=250000") == ("/dev/ttyUSB0", 250000)
+    with pytest.raises(PortError, match="baud must be a whole number"):
+        parse_grbl_url("grbl:/dev/ttyUSB0?baud=fast")
+    with pytest.raises(PortError, match="cannot open grbl port /nonexistent/tty"):
+        GrblLink("grbl:/nonexistent/tty")
+    status = parse_status("<Hold:0|WPos:1.000,2.000,3.000|FS:0,0>", (1.0, 1.0, 1.0))
+    assert status.state == "Hold:0" and status.mpos_mm == (2.0, 3.0, 4.0)
+
+
+@pytest.mark.realtime
+def test_a_job_at_real_speed():
+    emu = start_emulator(speed=1.0, settings=FAST)
+    try:
+        lines, end = short_segments(150)          # about half a second of machine time
+        with connect(emu) as link:
+            report = link.stream(lines)
+            assert link.status().mpos_mm == pytest.approx(end)
+        assert report.max_outstanding_bytes <= 128 and emu.overflow_bytes == 0
+        assert emu.starvation_count == 0, emu.events
+        assert emu.executed()[-1].end_mm == pytest.approx(end, abs=1e-9)
+    finally:
+        emu.stop()
