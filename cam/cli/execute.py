@@ -233,8 +233,9 @@ def _run(job: Any, args: argparse.Namespace, settings: MachineSettings, hold: St
 
 PLACED_KINDS = {"drawing": "drawing job", "digitized": "digitized matrix job", "excellon": "drill job",
                 "hpgl": "HPGL job", "svg": "SVG job"}
-"""The file kinds whose job is placed at the active work zero, and what messages call them (G-code programs:
-not yet, issue #29 point 4)."""
+"""The file kinds whose job is placed at the active work zero, and what messages call them (a G-code program is
+not placed: it runs in the state's work offsets from where the tool stands, planned so by ``cam drill``, see
+:func:`cam.job.jobs.prepare_job`'s ``machine_state``)."""
 
 
 ORIGINS = ("file", "upper-left", "lower-left", "center")
@@ -274,8 +275,8 @@ def approach_to_work_zero(job: Any, state: MachineState, start: tuple[int, int, 
     """The travel that places a file's job at the active work zero (issue #29 point 1, on step/dir ports): its
     home, its own frame's (0, 0, 0), goes to the work zero: a drawing's top-left pixel at the surface (the
     thesis's), a drill file's top-left hole (or the board origin with ``--offset 0,0``), an HPGL or SVG file's
-    origin as its ``--offset`` places it.  None when the tool is there already, or for a G-code program or
-    any other job (planned from where the tool stands).  Positions in the machine frame.
+    origin as its ``--offset`` places it.  None when the tool is there already, or for a G-code program (its
+    own work offsets place it) or any other job (planned from where the tool stands).  Positions in the machine frame.
 
     Raises:
         TravelError: the job placed there leaves the travel (naming the axis and by how much), before
