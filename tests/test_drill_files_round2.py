@@ -272,3 +272,13 @@ def test_cli_drills_mills_and_reports(tmp_path, capsys):
     assert "T3 = T4 1.000 mm" in err and "2 slots" in err
     assert main(["drill", str(FILES["kicad7"]), "--yes", "--no-progress", "--mill-holes-over", "0.8"]) == 0
     assert "holes over 0.8 mm milled" in capsys.readouterr().err
+
+
+def test_slots_are_exported_as_cuts_at_the_drill_depth(tmp_path, capsys):
+    out = tmp_path / "k.ngc"
+    assert main(["export", str(FILES["kicad7"]), "-o", str(out)]) == 0
+    lines = out.read_text().splitlines()
+    depth_lines = [i for i, ln in enumerate(lines) if ln.startswith("G1 Z-")]
+    along = [lines[i + 1] for i in depth_lines if lines[i + 1].startswith("G1 X")]
+    assert len(depth_lines) == 13 and len(along) == 2  # 11 holes drilled, 2 slots milled: down, along, up
+    assert all(lines[i + 2].startswith("G0 Z") for i in depth_lines if lines[i + 1].startswith("G1 X"))

@@ -25,11 +25,15 @@ Eagle, OrCAD, Fritzing, EasyEDA, ...), one statement per line:
   ``n`` times at that step;
 * ``M30`` / ``M00`` end the program (later statements are ignored with a warning).
 
-Left out, each with a warning naming the line: slots (``X..Y..G85X..Y..``),
-routing (``G00`` ... ``M15`` / ``G01`` / ``G02`` / ``G03`` ... ``M16``, until
-``G05``), routed circles (``G32`` / ``G33``) and canned text (``M97`` / ``M98``).
-Their tool still appears in :meth:`HoleList.tool_table` (with the holes it drills,
-possibly 0).  Repeated patterns (``M25`` ... ``M01`` / ``M02X..Y..``, ``M08``)
+Slots to mill (issue #31 point 4), kept as paths in :attr:`HoleList.slot_paths_mm` with a
+warning at the first of each kind: slots (``X..Y..G85X..Y..``) and routing (``G00`` ... ``M15``
+/ ``G01`` / ``G02`` / ``G03`` ... ``M16``, until ``G05``; arcs as chords).  Left out, each with a
+warning naming the line: routed circles (``G32`` / ``G33``) and canned text (``M97`` / ``M98``).
+Every defined tool appears in :meth:`HoleList.tool_table` (with the holes it drills,
+possibly 0).  Cadence Allegro's tool sizes come from its ``;T01 Holesize 1. = 12.0 ... MILS``
+comments and an ``nc_param.txt`` beside the file (:func:`parse_nc_param`).  A tool that cannot
+be drilled (zero size, over :data:`~cam.limits.MAX_TOOL_DIAMETER_MM`, a ``T0`` definition)
+leaves its holes out with a warning (``strict=True``: an error); unused, it is ignored.  Repeated patterns (``M25`` ... ``M01`` / ``M02X..Y..``, ``M08``)
 are refused with a :class:`~cam.errors.ParseError`: leaving them out would drop
 holes without a trace.
 
@@ -38,7 +42,8 @@ holes without a trace.
 trailing zeros (leading ones may be dropped, so ``X12500`` in 3:3 is 12.5).  The
 ``excellon_zeros`` argument uses the same names.
 
-**Defaults** when the file does not state them (each settable by the keyword
+**Defaults** when the file does not state them -- the first readings tried: what is
+finally read is the most plausible reading (:func:`parse_excellon`) -- (each settable by the keyword
 arguments ``excellon_units``, ``excellon_digits`` and ``excellon_zeros``, the job options of the same names
 (:mod:`cam.options`, flags ``--excellon-units`` ...), which in turn give way to what the file says):
 
@@ -50,14 +55,14 @@ arguments ``excellon_units``, ``excellon_digits`` and ``excellon_zeros``, the jo
   and DipTrace files do and what gerbonara assumes.  Full-width numbers such as
   Table 8-1's read the same either way.
 
-When a coordinate is read with a built-in default (not stated in the file nor
-given by an argument), the hole list carries a warning that says so.
+When a coordinate is read with a reading not stated in the file nor given by an
+argument, the hole list carries one warning that names it and the runner-up.
 
 Frame: the board frame of the file, X right, Y up, in mm (inch values times 25.4).
 
 Numbers are checked before use (:mod:`cam.limits`): coordinates and the positions they lead to
 (incremental sums, ``G93`` zeros) at most :data:`~cam.limits.MAX_COORD_MM` either way, tool diameters
-more than 0 and at most :data:`~cam.limits.MAX_TOOL_DIAMETER_MM`, tool numbers at most
+not negative (zero or over :data:`~cam.limits.MAX_TOOL_DIAMETER_MM`: the tool's holes are left out), tool numbers at most
 :data:`~cam.limits.MAX_TOOL_NUMBER`, ``R`` repeats at most :data:`~cam.limits.MAX_REPEAT`, at most
 :data:`~cam.limits.MAX_HOLES` holes; whole numbers (``G``, ``M``, ``T``, ``R``) have at most nine digits.
 
