@@ -15,7 +15,8 @@ import serial
 
 from cam.drive.grbl_link import GrblAlarm, GrblError, GrblLink, parse_grbl_url, parse_status
 from cam.errors import PortError
-from cam.sim.grbl import DEFAULT_SETTINGS, WELCOME, start_emulator
+from cam.sim.grbl import DEFAULT_SETTINGS, LOG_HEADER, WELCOME, start_emulator
+from conftest import run_cli
 
 # grbl's defaults (500 mm/min, 10 mm/s^2) would cap these feeds; a small router's rates and accelerations
 FAST = {110: 5000.0, 111: 5000.0, 112: 5000.0, 120: 500.0, 121: 500.0, 122: 500.0}
@@ -240,6 +241,30 @@ def test_url_and_status_parsing():
         GrblLink("grbl:/nonexistent/tty")
     status = parse_status("<Hold:0|WPos:1.000,2.000,3.000|FS:0,0>", (1.0, 1.0, 1.0))
     assert status.state == "Hold:0" and status.mpos_mm == (2.0, 3.0, 4.0)
+
+
+def test_log_comments_and_bad_lines(tmp_path):
+    log = tmp_path / "grbl.csv"
+    emu = start_emulator(speed=None, log_path=str(log))
+    try:
+        with connect(emu) as link:
+            link.stream(["G0 X-1 (where? here!)", "", "G0 Y-2 ; a comment~"])
+            assert [text for _, text, _ in emu.lines()][-2:] == ["G0 X-1", "G0 Y-2"]
+            with pytest.raises(GrblError, match=r"^line 1 'G0 X1!' holds '!', which grbl would take as a real-time"):
+                link.stream(["G0 X1!"])
+            with pytest.raises(GrblError, match=r"^grbl refused '\$5=-1': error:4 \(negative value"):
+                link.command("$5=-1")
+    finally:
+        emu.stop()
+    rows = log.read_text().splitlines()
+    assert rows[0] == LOG_HEADER                     # line numbers count every line: line 1 was the link's $$
+    assert rows[1].split(",")[:8] == ["2", "G0", "0.0000", "0.0000", "0.0000", "-1.0000", "0.0000", "0.0000"]
+    assert rows[2].split(",")[:2] == ["3", "G0"] and rows[2].split(",")[5:8] == ["-1.0000", "-2.0000", "0.0000"]
+
+
+def test_emulate_grbl_refuses_a_bad_setting_in_one_line():
+    run = run_cli("emulate-grbl", "--set", "999=1")
+    assert run.returncode == 2 and run.stderr.strip().count("\n") == 0 and "$999" in run.stderr
 
 
 @pytest.mark.realtime

@@ -33,7 +33,7 @@ from ..errors import PortError
 
 __all__ = [
     "GRBL_PREFIX", "RX_BUFFER_BYTES", "ERROR_MEANINGS", "ALARM_MEANINGS", "GrblError", "GrblAlarm", "GrblStatus",
-    "StreamReport", "GrblLink", "parse_grbl_url", "parse_status", "open_grbl",
+    "StreamReport", "GrblLink", "parse_grbl_url", "parse_status", "strip_comments", "open_grbl",
 ]
 
 GRBL_PREFIX = "grbl:"
@@ -112,6 +112,27 @@ def error_text(code: int) -> str:
 
 def alarm_text(code: int) -> str:
     return f"ALARM:{code} ({ALARM_MEANINGS.get(code, 'unknown grbl alarm code')})"
+
+
+def strip_comments(line: str) -> str:
+    """A G-code line without its ``( )`` and ``;`` comments and outer spaces.
+
+    >>> strip_comments("G1 X1 (ok?) Y2 ; done!")
+    'G1 X1  Y2'
+    """
+    out = []
+    depth = 0
+    for ch in line:
+        if depth:
+            depth = 0 if ch == ")" else 1
+            continue
+        if ch == "(":
+            depth = 1
+        elif ch == ";":
+            break
+        else:
+            out.append(ch)
+    return "".join(out).strip()
 
 
 def parse_grbl_url(url: str) -> tuple[str, int]:
@@ -385,11 +406,13 @@ class GrblLink:
             entry = self._done_errors.pop(0)
             self._done_errors.clear()
             code = int(entry[3][6:]) if entry[3][6:].isdigit() else -1
-            raise GrblError(f"grbl refused line {entry[1]} {entry[2]!r}: {error_text(code)}", code)
+            what = f"line {entry[1]} {entry[2]!r}" if entry[1] else repr(entry[2])
+            raise GrblError(f"grbl refused {what}: {error_text(code)}", code)
 
     def _wait(self, predicate: Callable[[], bool], timeout_s: Optional[float], *, check: bool = True,
-              where: str = "") -> bool:
-        """Wait for ``predicate`` (under the lock), polling ``?`` so that a silent grbl is found out."""
+              where: str = "", quiet_ok: bool = False) -> bool:
+        """Wait for ``predicate`` (under the lock), polling ``?`` so that a silent grbl is found out (unless
+        ``quiet_ok``: grbl answers no status report while homing)."""
         deadline = None if timeout_s is None else time.monotonic() + timeout_s
         next_poll = time.monotonic() + self.poll_s
         with self._cond:
@@ -403,7 +426,7 @@ class GrblLink:
                 now = time.monotonic()
                 if deadline is not None and now >= deadline:
                     return False
-                if check and now - self._last_rx > self.timeout_s:
+                if check and not quiet_ok and now - self._last_rx > self.timeout_s:
                     raise PortError(f"grbl on {self.device} stopped answering (nothing for {self.timeout_s:g} s, "
                                     f"status polls included){where}")
                 if check and now >= next_poll:
@@ -418,11 +441,16 @@ class GrblLink:
 
     # ------------------------------------------------------------------ lines
     def _send_line(self, text: str, number: int) -> list:
-        data = (text + "\n").encode("ascii", "replace")
+        label = f"line {number}" if number else "command"
+        bad = next((ch for ch in text if ch in "?!~" or not " " <= ch < "\x7f"), None)
+        if bad is not None:
+            raise GrblError(f"{label} {text[:40]!r} holds {bad!r}, which grbl would take as a real-time command "
+                            f"or cannot read (ASCII only)")
+        data = (text + "\n").encode("ascii")
         if len(data) > RX_BUFFER_BYTES:
-            raise GrblError(f"line {number} is {len(data)} bytes, more than grbl's {RX_BUFFER_BYTES}-byte "
+            raise GrblError(f"{label} is {len(data)} bytes, more than grbl's {RX_BUFFER_BYTES}-byte "
                             f"receive buffer: {text[:40]!r}")
-        where = f" at line {number} {text!r}"
+        where = f" at {label} {text!r}"
         self._wait(lambda: self._outstanding_bytes + len(data) <= RX_BUFFER_BYTES, None, where=where)
         entry = [len(data), number, text, None, []]
         with self._cond:
@@ -433,9 +461,9 @@ class GrblLink:
 
     def command(self, line: str, timeout_s: Optional[float] = None) -> list[str]:
         """Send one line, wait for its ``ok`` and return the lines grbl pushed before it (``$#``, ``$G``...)."""
-        entry = self._send_line(line.strip(), 0)
-        self._wait(lambda: entry[3] is not None, timeout_s if timeout_s is not None else None,
-                   where=f" answering {line.strip()!r}")
+        text = line.strip()
+        entry = self._send_line(text, 0)
+        self._wait(lambda: entry[3] is not None, timeout_s, where=f" answering {text!r}", quiet_ok=text == "$H")
         if entry[3] is None:
             raise PortError(f"grbl on {self.device} did not answer {line.strip()!r} within {timeout_s:g} s")
         return list(entry[4])
@@ -456,11 +484,12 @@ class GrblLink:
     def stream(self, lines: Iterable[str], *, progress: Optional[Callable[[int], None]] = None,
                wait_idle: bool = True) -> StreamReport:
         """Stream G-code lines with character counting; return when grbl has answered every one (and, with
-        ``wait_idle``, the machine has stopped).  Blank lines are skipped; line numbers in errors count every
-        line given, from 1."""
+        ``wait_idle``, the machine has stopped).  Comments are dropped (grbl would drop them, and a ``?``, ``!``
+        or ``~`` in one would act as a real-time command), blank lines skipped; line numbers in errors count
+        every line given, from 1."""
         sent = total = peak = 0
         for number, raw in enumerate(lines, 1):
-            text = raw.strip()
+            text = strip_comments(raw)
             if not text:
                 continue
             self._send_line(text, number)

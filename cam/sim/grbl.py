@@ -1051,15 +1051,8 @@ class GrblEmulator(AbstractContextManager):
             self._actions = deque([("block", blk)])
 
     def _within_travel(self, target: Sequence[float]) -> bool:
-        for i in range(3):
-            travel = self.settings[130 + i]
-            if int(self.settings[23]) >> i & 1:
-                lo, hi = -travel, 0.0   # homed toward -: grbl's frame stays [-travel, 0] in this emulator
-            else:
-                lo, hi = -travel, 0.0
-            if not lo - 1e-6 <= target[i] <= hi + 1e-6:
-                return False
-        return True
+        # either homing direction leaves grbl's machine space at [-travel, 0] (zero at the switch end)
+        return all(-self.settings[130 + i] - 1e-6 <= target[i] <= 1e-6 for i in range(3))
 
     # ------------------------------------------------------------------ g-code
     @staticmethod
