@@ -402,3 +402,24 @@ def test_where_the_tool_stands_is_where_the_program_starts():
     prog = parse_gcode("G21\n#1=#5420\n#2=#5421\nG0 X#1 Y#2\nM2\n", start_mm=(30.0, -40.0, 5.0),
                        work_offsets_mm={"G54": (10.0, -10.0, 0.0)})
     assert np.allclose(prog.moves[0].end, (0.0, 0.0, 0.0))
+
+
+def test_pieces_of_a_program_in_the_state_join_to_the_whole(tmp_path):
+    """The one-path rule with a start and work offsets: any piece size, a file streamed or a program held, the
+    same job; the G10 offsets the program leaves are those of its last pass."""
+    from cam.formats.gcode import load_gcode, open_gcode
+    from cam.job.gcode import steps_to_gcode_mm, stream_gcode
+
+    path = tmp_path / "g10.ngc"
+    path.write_text(G10_PROGRAM.replace("M2\n", "") + PYCAM)
+    state = _state_at(ZERO).moved_to((2000, 7000, 600))
+    frame = dict(start_mm=steps_to_gcode_mm(state.position_steps, S),
+                 work_offsets_mm={k: steps_to_gcode_mm(v, S) for k, v in state.offsets_steps.items()})
+    whole = stream_gcode(load_gcode(path, **frame), S, home_steps=state.position_steps).joined()
+    for k in (1, 3, 1000):
+        f = open_gcode(path, **frame)
+        job = stream_gcode(f, S, piece_moves=k, home_steps=state.position_steps).joined()
+        assert np.array_equal(job.points_steps, whole.points_steps)
+        assert np.array_equal(job.period_ns, whole.period_ns)
+        assert f.end_offsets_mm == load_gcode(path, **frame).work_offsets_mm
+        assert f.end_offsets_mm["G55"] == pytest.approx((20.0, -30.0, 0.0))
