@@ -51,7 +51,7 @@ SIGNATURES = {
         "(Array(uint8, 1, 'C'), int64, int64, )",
     ],
     'cam.formats.hpgl._interpret': [
-        "(int64, Array(int64, 1, 'C'), Array(int32, 1, 'C'), Array(int32, 1, 'C'), Array(int32, 1, 'C'), Array(int32, 1, 'C'), Array(float64, 1, 'C'), Array(int32, 1, 'C'), Array(int32, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(int32, 1, 'C'), Array(int32, 1, 'C'), Array(boolean, 1, 'C'), Array(int32, 1, 'C'), Array(int64, 1, 'C'), )",
+        "(int64, int64, Array(int64, 1, 'C'), Array(int32, 1, 'C'), Array(int32, 1, 'C'), Array(int32, 1, 'C'), Array(int32, 1, 'C'), Array(float64, 1, 'C'), Array(int32, 1, 'C'), Array(int32, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(int32, 1, 'C'), Array(int32, 1, 'C'), Array(boolean, 1, 'C'), Array(int32, 1, 'C'), Array(int64, 1, 'C'), boolean, Array(int64, 1, 'C'), )",
     ],
     'cam.formats.hpgl._tokenize': [
         "(Array(uint8, 1, 'C', readonly=True), boolean, Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int32, 1, 'C'), Array(int32, 1, 'C'), Array(int32, 1, 'C'), Array(int32, 1, 'C'), Array(float64, 1, 'C'), Array(int32, 1, 'C'), Array(int32, 1, 'C'), )",
