@@ -332,6 +332,8 @@ def guarded_h11() -> type:
             config = self.guard.config
             if state is h11.SEND_BODY and self.flow.read_paused and self.cycle is not None \
                     and not self.cycle.response_complete:  # the application has not read on yet: its turn
+                if self.body_deadline_at is not None:  # the client is not to blame for that time
+                    self.body_deadline_at += config.body_timeout_s
                 self.set_deadline(config.body_timeout_s)
                 return
             if state is h11.IDLE and self.head_begun:
