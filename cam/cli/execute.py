@@ -13,23 +13,26 @@ import select
 import signal
 import sys
 import threading
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import Any, Optional
 
 from tqdm import tqdm
 
 from ..drive.journal import journal_spec, read_journal
 from ..drive.ports import MockPort, SwitchSchedule, port_kind, require
-from ..drive.runner import EMERGENCY_STOPPED, FINISHED, LIMIT_STOPPED, STOPPED
+from ..drive.runner import FINISHED
 from ..drive.session import MachineSession, Prompt
-from ..drive.state import MachineState, PositionUnknownError, StateHold, check_in_travel
-from ..errors import CapabilityError, PortError, TravelError
+from ..drive.state import PositionUnknownError, StateHold, check_in_travel
+from ..errors import CapabilityError, PortError
 from ..job.model import Job
 from ..settings import MachineSettings
 from ..verify.pinlog import write_pin_log
 from .checks import job_kind_of
 from .common import progress_wanted
-from .machine_state import goto_path, hold_machine
+from .machine_state import hold_machine
+from ..drive.placement import (
+    ORIGINS, PLACED_KINDS, approach_to_work_zero, ended_state, origin_anchor, placed_home,
+)
 
 __all__ = ["execute", "Outcome", "check_port_options", "ended_state", "approach_to_work_zero", "PLACED_KINDS",
            "ORIGINS", "origin_anchor", "placed_home"]
@@ -231,75 +234,6 @@ def _run(job: Any, args: argparse.Namespace, settings: MachineSettings, hold: St
     return _outcome(session, args)
 
 
-PLACED_KINDS = {"drawing": "drawing job", "digitized": "digitized matrix job", "excellon": "drill job",
-                "hpgl": "HPGL job", "svg": "SVG job"}
-"""The file kinds whose job is placed at the active work zero, and what messages call them (a G-code program is
-not placed: it runs in the state's work offsets from where the tool stands, planned so by ``cam drill``, see
-:func:`cam.job.jobs.prepare_job`'s ``machine_state``)."""
-
-
-ORIGINS = ("file", "upper-left", "lower-left", "center")
-"""Which point of a drawing, drill or vector job ``--origin`` puts at the work zero (see :func:`origin_anchor`)."""
-
-
-def origin_anchor(job: Any, origin: Optional[str]) -> tuple[int, int]:
-    """The ``(x, y)`` point of a prepared job, in its own frame (steps, +y toward the front of the machine), that
-    goes to the work zero: ``file`` its frame's zero (a drawing's top-left pixel, the thesis's), ``upper-left``,
-    ``lower-left`` or ``center`` of what it cuts (the
-    XY extent of the tool below the surface).  None: ``file`` for drawings and digitized matrices, ``upper-left``
-    for the other kinds."""
-    kind = getattr(job, "kind", "")
-    origin = origin or ("file" if kind in ("drawing", "digitized") else "upper-left")
-    if origin == "file":
-        return 0, 0
-    extent, cut = job.plan.motion_extent()
-    box = cut if cut[2, 1] > 0 else extent
-    (x0, x1), (y0, y1) = (int(v) for v in box[0]), (int(v) for v in box[1])
-    if origin == "upper-left":
-        return x0, y0
-    if origin == "lower-left":
-        return x0, y1
-    return (x0 + x1) // 2, (y0 + y1) // 2
-
-
-def placed_home(job: Any, state: MachineState, origin: Optional[str]) -> tuple[int, int, int]:
-    """Where (machine frame, steps) a job placed at the active work zero starts: its own frame's zero, so that its
-    :func:`origin_anchor` lands on the work zero (Z: the work zero's surface)."""
-    zero = state.work_zero_steps()
-    ax, ay = origin_anchor(job, origin)
-    return zero[0] - ax, zero[1] - ay, zero[2]
-
-
-def approach_to_work_zero(job: Any, state: MachineState, start: tuple[int, int, int], settings: MachineSettings,
-                          kind: str, origin: Optional[str] = None) -> Optional[Job]:
-    """The travel that places a file's job at the active work zero (issue #29 point 1, on step/dir ports): its
-    home, its own frame's (0, 0, 0), goes to the work zero: a drawing's top-left pixel at the surface (the
-    thesis's), a drill file's top-left hole (or the board origin with ``--offset 0,0``), an HPGL or SVG file's
-    origin as its ``--offset`` places it.  None when the tool is there already, or for a G-code program (its
-    own work offsets place it) or any other job (planned from where the tool stands).  Positions in the machine frame.
-
-    Raises:
-        TravelError: the job placed there leaves the travel (naming the axis and by how much), before
-        anything moves.
-    """
-    job_kind = getattr(job, "kind", None)  # a PreparedJob's file kind (a Job's is an array of move kinds)
-    if not isinstance(job_kind, str) or job_kind not in PLACED_KINDS or kind == "maximus":
-        return None
-    zero = placed_home(job, state, origin)
-    extent = getattr(job, "extent_steps", None)
-    if extent is not None:
-        for a, (lo, hi) in enumerate(settings.travel.bounds_steps()):
-            reach = (zero[a] + int(extent[a][0]), zero[a] + int(extent[a][1]))
-            if reach[0] < lo or reach[1] > hi:
-                v, beyond = (reach[0], lo - reach[0]) if reach[0] < lo else (reach[1], reach[1] - hi)
-                raise TravelError(
-                    f"the {PLACED_KINDS[job_kind]} placed at the {state.active_offset} work zero (machine "
-                    f"{list(state.work_zero_steps())} steps) "
-                    f"leaves the {'XYZ'[a]} travel ({lo}..{hi} steps from the home): it reaches {v}, {beyond} "
-                    f"steps beyond; set the work zero elsewhere (cam zero)")
-    return goto_path(start, zero, zero[2], settings)
-
-
 def _approach(job: Job, args: argparse.Namespace, settings: MachineSettings, start: tuple[int, int, int],
               sessions: list) -> MachineSession:
     """Travel to the work zero in a session of its own (the job's pin log holds the job only); returns it."""
@@ -320,39 +254,6 @@ def _command_text(args: argparse.Namespace) -> str:
     """The command as the running marker names it (``drill part.png``)."""
     what = getattr(args, "image", None) or getattr(args, "load_digitized", None) or ""
     return f"cam {args.command} {what}".strip()
-
-
-def ended_state(state: MachineState, session: MachineSession, start: tuple[int, int, int],
-                tool: Optional[str] = None) -> MachineState:
-    """The machine state after the session's last activity (positions in the machine frame).
-
-    Finished or stopped: the tool where the session booked it.  An emergency stop, or a fault after writes
-    were sent (or on a MAXIMUS board, which then has lost its offset): where it got to, position unknown.  A
-    fault before anything was sent, or no run at all (refused before it started): where it started.
-    """
-    info = session.last_run
-    status = info.get("status")
-    end = session.position_steps()
-    if status is None:
-        return state.moved_to(start)
-    if status == LIMIT_STOPPED and session.last_sent()[1] == (0, 0, 0):  # stopped before its first step
-        return state.moved_to(end)
-    if status == LIMIT_STOPPED:
-        switch = (info.get("messages") or ["a limit switch closed"])[0].split(";")[0]
-        return state.lost(f"{switch} during {info.get('label') or 'the run'}, at machine {list(end)} steps", end)
-    if status == EMERGENCY_STOPPED:
-        return state.lost(f"an emergency stop ended {info.get('label') or 'the run'} (steps may have been lost)",
-                          end)
-    if status not in (FINISHED, STOPPED):
-        sent, moved = session.last_sent()
-        if sent or session.kind == "maximus":
-            guess = end if session.last_result is not None else tuple(s + m for s, m in zip(end, moved))
-            reason = "; ".join(info.get("messages") or ["the run failed"])
-            return state.lost(f"{info.get('label') or 'the run'} failed while moving ({reason})", guess)
-        return state.moved_to(end)
-    done = state.moved_to(end)
-    return replace(done, tool=tool) if tool and status == FINISHED and session.last_run.get("activity") == "job" \
-        else done
 
 
 def _outcome(session: MachineSession, args: argparse.Namespace, pin_log: bool = True) -> Outcome:

@@ -15,7 +15,8 @@ from ..job.moves import jog, jog_steps
 from ..settings import MachineSettings
 from .common import port_settings
 from .execute import check_port_options, execute
-from .machine_state import goto_path, hold_machine
+from .machine_state import hold_machine
+from ..drive.placement import goto_path
 from .parser import EXIT_INTERRUPTED
 
 __all__ = ["cmd_goto", "cmd_jog", "target_steps"]

@@ -9,20 +9,17 @@ from __future__ import annotations
 import argparse
 from dataclasses import replace
 from pathlib import Path
-from typing import Any, Optional
-
-import numpy as np
+from typing import Any
 
 from ..drive.state import (
     MachineLock, MachineState, StateHold, check_in_travel, default_state_path, dump_json, mm_to_steps,
     read_state, steps_to_mm,
 )
 from ..errors import CamError
-from ..job.model import Job, travel_job
 from ..settings import MachineSettings
 from .common import port_settings
 
-__all__ = ["cmd_where", "cmd_zero", "hold_machine", "state_path_of", "goto_path"]
+__all__ = ["cmd_where", "cmd_zero", "hold_machine", "state_path_of"]
 
 Steps3 = tuple[int, int, int]
 
@@ -38,24 +35,6 @@ def state_path_of(args: argparse.Namespace) -> Path:
 def hold_machine(args: argparse.Namespace, settings: MachineSettings, what: str) -> StateHold:
     """The command's hold on its machine's state file (the lock taken; see :class:`StateHold`)."""
     return StateHold(state_path_of(args), settings, what)
-
-
-def goto_path(start_steps: Steps3, target_steps: Steps3, safe_z_steps: int, settings: MachineSettings
-              ) -> Optional[Job]:
-    """Go To from ``start_steps`` to ``target_steps`` (both machine frame): up to the safe height first (the
-    highest of where the tool is, ``safe_z_steps`` and the target's Z; +Z is deeper), travel at it, then Z
-    to the target.  The job's points are relative to the start; None when the tool is there already."""
-    x0, y0, z0 = (int(v) for v in start_steps)
-    x, y, z = (int(v) for v in target_steps)
-    h = min(z0, int(safe_z_steps), z)
-    rel: list[Steps3] = []
-    for p in ((x0, y0, h), (x, y, h), (x, y, z)):
-        r = (p[0] - x0, p[1] - y0, p[2] - z0)
-        if r != (0, 0, 0) and (not rel or rel[-1] != r):
-            rel.append(r)
-    if not rel:
-        return None
-    return travel_job(np.array(rel, np.int64).reshape(-1, 3), settings, source="go to")
 
 
 def _triple(text: str) -> str:
