@@ -256,7 +256,7 @@ def guarded_h11() -> type:
             self.body_deadline_at: Optional[float] = None  # the body must be whole by then (monotonic)
             self.probation = False  # came over its address's limit: only a safety route is served
             self.refused_for_load = False  # answered 503 for load: let go slowly (see linger)
-            self.lost = False
+            self.lost = False  # gone, or the server is stopping: close without lingering
             self.lingered_bytes = 0
             self.raw_transport: Any = None
             self.client_host = ""
@@ -360,6 +360,14 @@ def guarded_h11() -> type:
             self.guard.add(self)
             self.await_head()
             self.guard.make_room(self)
+
+        def shutdown(self) -> None:
+            """The server is stopping: nothing lingers (a connection being let go is closed now)."""
+            self.lost = True
+            if self.transport.lingering:
+                self.raw_transport.close()
+                return
+            super().shutdown()
 
         def connection_lost(self, exc: Optional[Exception]) -> None:
             self.lost = True
