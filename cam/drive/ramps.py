@@ -56,7 +56,7 @@ from numba import njit
 from .._compiled import entry
 
 from ..settings import RAMP_MODES, MachineSettings
-from ..verify.ramps import check_axis_steps
+from ..verify.ramps import STANDSTILL_STEPS, check_axis_steps, standstills
 from ..errors import CamError
 from .pins import axis_bits
 
@@ -399,6 +399,15 @@ def _caps(high: np.ndarray, per_ns: np.ndarray, settings: MachineSettings, stop_
     upull = np.full(n, np.inf)
     axes = list(_pool().map(lambda a: _axis_steps_and_breaks(high, int(clock[a]), int(dirbit[a]), stop_idx),
                             range(3)))
+    # where an axis certainly stands still (its steps further apart than STANDSTILL_STEPS start-speed steps even
+    # at the nominal periods, which ramps only lengthen): a stop and a start of that axis, so the intervals on
+    # each side of the wait are capped at its start speed (a corner taken as grbl's junction rule would)
+    between_ns = np.concatenate([[0], np.cumsum(per_ns)])
+    for a in range(3):
+        per, brk = axes[a]
+        if len(per) > 1:
+            least_ns = between_ns[per[1:]] - between_ns[per[:-1] + 1]  # the periods strictly between two steps
+            brk[1:] |= least_ns > STANDSTILL_STEPS * s_mm[a] / v_start[a] * 1e9
     for a in range(3):
         per, brk = axes[a]
         _axis_caps(per, brk, s_mm[a], v_start[a], v_max[a], acc[a] * _ALPHA_MARGIN, cap, alpha, upull)
@@ -419,6 +428,7 @@ def _check_axis(axis: tuple[np.ndarray, np.ndarray], mid: np.ndarray, limits: _L
     if len(per) < 2:
         return 0, r1, r2, r3
     t = mid[per]
+    brk = brk | standstills(t, s_mm[a], v_start[a])  # as the checker judges: where the planned times stand still
     n_broken = check_axis_steps(t, per, mid, brk, s_mm[a], v_start[a], v_max[a], acc[a], r1, r2, r3)
     return n_broken, r1, r2, r3
 

@@ -7,8 +7,11 @@ axis's ``s`` = mm per step, ``v_max``, start (pull-in) speed ``v_s`` and
 acceleration ``A`` from the machine settings.
 
 Runs.  An axis is at rest before its first step, after its last step, at a
-reversal (two consecutive steps in opposite directions) and at a pause
-(Pause At, tool change: ``pause_writes``).  Its steps between two such rests
+reversal (two consecutive steps in opposite directions), at a pause
+(Pause At, tool change: ``pause_writes``) and at a standstill: no step for
+longer than :data:`STANDSTILL_STEPS` steps at its start speed (a corner where
+the other axes go on while this one waits, then starts again: it stopped,
+so it must start again at or below its start speed, as from any rest).  Its steps between two such rests
 form a run; the interval between the last step of one run and the first of
 the next is not a motion and is not judged.
 
@@ -74,10 +77,24 @@ from ..settings import DEFAULT_SETTINGS, MachineSettings
 from .pinlog import PinLog, iter_pin_log, rising_edges
 from ..drive.pins import axis_bits
 
-__all__ = ["RampViolation", "RampReport", "check_ramps", "check_axis_steps"]
+__all__ = ["RampViolation", "RampReport", "check_ramps", "check_axis_steps", "standstills", "STANDSTILL_STEPS"]
 
 _TOL_NS = 1.0
 _TOL_MM_S = 1e-6
+STANDSTILL_STEPS = 2.0
+"""An interval between two steps of an axis longer than this many steps at its start speed is a stop and a start,
+not an interval of one motion (issue #32: an axis that waited 112 ms at a corner restarted at three times its start
+speed, within the quantisation tolerance of R2)."""
+
+
+def standstills(t_ns: np.ndarray, s_mm: float, v_start: float) -> np.ndarray:
+    """``(n,)`` bool: a standstill right before step j of one axis (``(n,)`` int64 step times ``t_ns``): the
+    interval from step j - 1 is longer than :data:`STANDSTILL_STEPS` steps at the start speed ``v_start``."""
+    out = np.zeros(len(t_ns), bool)
+    if len(t_ns) > 1:
+        out[1:] = np.diff(np.asarray(t_ns, np.int64)) > STANDSTILL_STEPS * s_mm / v_start * 1e9
+    return out
+
 
 
 @njit(cache=True)
@@ -395,13 +412,13 @@ class _Checker:
         needed = np.unique(np.concatenate([slot - 1, slot, slot + 1])) if n else np.zeros(0, np.int64)
         needed = needed[(needed >= 0) & (needed <= self.last_slot)]  # a later slot: only for steps not judged here
         slot_t = self._slot_times(needed, chunk_slot0, chunk_slot_t)
-        brk = np.zeros(n, bool)
+        s_mm, v_start, v_max, acc = self.limits
+        brk = standstills(ts, s_mm[a], v_start[a])
         if n > 1:
-            brk[1:] = up[1:] != up[:-1]
+            brk[1:] |= up[1:] != up[:-1]
             if self.pause_t:
                 pause_t = np.sort(np.asarray(self.pause_t, np.int64))
                 brk[1:] |= np.searchsorted(pause_t, ts[:-1], "left") != np.searchsorted(pause_t, ts[1:], "left")
-        s_mm, v_start, v_max, acc = self.limits
         stalled = np.zeros(n, bool)  # a stall (a late write) between steps j - 1 and j, step j's own included
         if n > 1 and self.stall_t:
             stall_t = np.sort(np.asarray(self.stall_t, np.int64))
