@@ -262,10 +262,16 @@ class SessionControls(SessionView):
         self.log(f"{note}: {action}")
 
     def wait_idle(self, timeout_s: Optional[float] = 10.0) -> bool:
-        """Wait for the running activity to end; True when idle."""
-        t = self._thread
-        if t is not None:
-            t.join(timeout_s)
+        """Wait for the running activity to end (and what it starts when it finishes: a job after the travel
+        to its work zero); True when idle."""
+        deadline = None if timeout_s is None else time.monotonic() + timeout_s
+        while True:
+            t = self._thread
+            if t is None:
+                break
+            t.join(None if deadline is None else max(0.0, deadline - time.monotonic()))
+            if t is self._thread or t.is_alive() or (deadline is not None and time.monotonic() >= deadline):
+                break
         return not self.busy
 
     def shutdown(self) -> None:

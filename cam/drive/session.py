@@ -13,10 +13,16 @@ origin on it, one at a time, in a background thread::
     session.state()                # position, progress, prompt, log: JSON-able
     session.last_result            # the runner's RunResult (step/dir ports: the mock's pin log)
 
-Frames: positions are machine steps ``(x, y, z)`` from the *home*, where the
-tool stood when the session opened (+Z deeper).  A job starts where the tool
-stands and is checked against the machine travel from there before anything
-is sent.
+Frames: positions are machine steps ``(x, y, z)`` from the *home* (+Z deeper).
+Without a machine state file the home is where the tool stood when the
+session opened, and a job starts where the tool stands.  With one
+(``state=``, a :class:`~cam.drive.state.StateHold`: issue #29) the home is the
+machine's, the session starts where the file says the tool stands, keeps the
+work offsets (G54-G59.3) there, places every file's job at the active work
+zero (travelling there first, :mod:`cam.drive.placement`), refuses moves
+while the position is unknown, and records where every activity ended (also
+after a stop, an emergency stop or a fault).  Either way the travel is
+checked before anything is sent.
 
 What a port cannot do (the MAXIMUS firmware has no pause and takes drill
 files only) is refused through one check, :func:`cam.drive.ports.require`,
@@ -58,6 +64,8 @@ from .ports import MockPort, port_kind, require
 from .runner import Controller, Cursor, RunResult
 from .chunks import ChunkedPlan, plan_chunks
 from .steps import StepPlan
+from .placement import approach_to_work_zero, ended_state, goto_path, placed_home
+from .state import StateHold, check_in_travel, mm_to_steps, steps_to_mm
 
 __all__ = ["MachineSession", "Prompt", "PromptFn", "MAX_JOG_STEPS", "run"]
 
@@ -74,10 +82,14 @@ class MachineSession(SessionControls):
         realtime: run the mock on the real clock (real ports always are).
         on_prompt: answers prompts in the worker thread (the CLI asks on the terminal); None: a prompt
             waits for :meth:`answer` (the web page).
+        state: the hold on the machine's state file (:class:`~cam.drive.state.StateHold`, its lock taken by
+            the caller, who closes it): positions in the machine frame, work offsets, jobs placed at the work
+            zero, every end recorded (see the module docstring).  None: the home is where the tool stands now.
     """
 
     def __init__(self, port: str = "mock", settings: MachineSettings = DEFAULT_SETTINGS, *,
-                 realtime: bool = False, on_prompt: Optional[PromptFn] = None) -> None:
+                 realtime: bool = False, on_prompt: Optional[PromptFn] = None,
+                 state: Optional[StateHold] = None) -> None:
         self.kind = port_kind(port)
         self.port = maximus_port(port, settings) if self.kind == "maximus" else port
         self.settings = settings
@@ -105,6 +117,11 @@ class MachineSession(SessionControls):
         self._last_job_log: Any = None
         self.version = 0
         self._runner_process: Optional[RunnerProcess] = None
+        self.state_hold = state
+        self._activity_start = (0, 0, 0)  # machine frame: where the running activity started
+        self._then: Optional[Callable[[], None]] = None  # what starts when the running activity finishes
+        if state is not None:
+            self._position = np.asarray(state.state.position_steps, np.int64).copy()
 
     @property
     def last_job_pin_log(self) -> Any:
@@ -127,6 +144,10 @@ class MachineSession(SessionControls):
         with self._lock:
             self._check_free()
             self._position = np.asarray(position_steps, np.int64).reshape(3).copy()
+            if self.state_hold is not None:  # the user's word: the machine frame is not the switches' any more
+                check_in_travel(tuple(self._position), self.settings, "the position given")
+                st = self.state_hold.state.moved_to(tuple(int(v) for v in self._position))
+                self.state_hold.record(replace(st, homed=False))
             self._bump()
 
     def last_sent(self) -> tuple[int, tuple[int, int, int]]:
@@ -168,7 +189,7 @@ class MachineSession(SessionControls):
             check_travel(np.asarray(job.points_steps, np.int64) + self._position, self.settings, job.pixels)
 
     def start(self, job: Any, *, label: Optional[str] = None, controller: Optional[Controller] = None,
-              journal: Any = None) -> None:
+              journal: Any = None, origin: Optional[str] = None) -> None:
         """Run a job from where the tool stands, in the background.
 
         Args:
@@ -180,6 +201,10 @@ class MachineSession(SessionControls):
             journal: keep the job's journal (:mod:`cam.drive.journal`) in this file (a path), or as a
                 :class:`~cam.drive.journal.JournalSpec` says; None: no journal.  A resumed job
                 (:func:`cam.job.jobs.resume_job`) starts where its journal says the tool stands.
+            origin: with a state file, which point of a file's job goes to the active work zero (``file``,
+                ``upper-left``, ``lower-left``, ``center``; None: the kind's default, see
+                :func:`cam.drive.placement.origin_anchor`); the session travels there first (lifted), then runs
+                the job.  A resumed job (a journal) and a G-code program start where the tool stands.
 
         Raises:
             BusyError: something runs; CapabilityError: the port cannot run this job; TravelError:
@@ -187,9 +212,13 @@ class MachineSession(SessionControls):
         """
         with self._lock:
             self._check_free()
+            self._require_known()
+            travel_only = isinstance(job, Job) and len(job) and np.all(job.kind == TRAVEL)
+            if not travel_only and self._place(job, label, controller, journal, origin):
+                return
             self._check_job(job)
             name = label or f"job {getattr(job, 'name', '') or getattr(job, 'source', '') or 'job'}"
-            if isinstance(job, Job) and len(job) and np.all(job.kind == TRAVEL):  # only travel: a jog or a go-to
+            if travel_only:  # a jog or a go-to
                 self._start_moves("jog", job, label or job.source or "move")
                 return
             if self.kind == "maximus":
@@ -199,6 +228,35 @@ class MachineSession(SessionControls):
             plan = self._plan(job)
             self._launch_steps("job", plan, name, lambda: getattr(job, "estimated_time_s", plan.estimated_time_s),
                                controller, spec)
+
+    def _require_known(self) -> None:
+        if self.state_hold is not None:
+            self.state_hold.require_known()
+
+    def _place(self, job: Any, label: Optional[str], controller: Optional[Controller], journal: Any,
+               origin: Optional[str]) -> bool:
+        """With a state file: travel to the job's place at the work zero first (the job starts when the travel
+        has finished).  True when that travel was started; False: the job starts here, as it is."""
+        if self.state_hold is None or self.kind == "maximus" or getattr(job, "resumed", None) is not None:
+            return False
+        st = self.state_hold.state
+        here = tuple(int(v) for v in self._position)
+        approach = approach_to_work_zero(job, st, here, self.settings, self.kind, origin)  # TravelError: no move
+        if approach is None:
+            return False
+        home = np.asarray(placed_home(job, st, origin), np.int64)
+        self._position, saved = home, self._position
+        try:
+            self._check_job(job)  # the job as it will start there: everything checked before the travel
+        finally:
+            self._position = saved
+
+        def then() -> None:
+            self.start(job, label=label, controller=controller, journal=journal, origin=origin)
+
+        self._start_moves("jog", approach, "to the work zero")
+        self._then = then
+        return True
 
     def _journal_spec(self, job: Any, journal: Any) -> Optional[JournalSpec]:
         if journal is None or isinstance(journal, JournalSpec):
@@ -231,14 +289,120 @@ class MachineSession(SessionControls):
             raise PlanError(f"steps must be at most {MAX_JOG_STEPS} either way, got {n} ({steps!r} {unit})")
         with self._lock:
             self._check_free()
+            self._require_known()
             job = jog_job(axis, n, settings=self.settings, position_steps=self.position_steps())
             self._start_moves("jog", job, job.source)
 
     def set_offset(self) -> None:
         """Make where the head stands the origin (the PC program's Set Offset: "positionX = 0; positionY = 0;
-        positionZ = 0", seed 000 Appendix 2, ``BtnSetOffsetPositionClick``); refused while busy."""
+        positionZ = 0", seed 000 Appendix 2, ``BtnSetOffsetPositionClick``); refused while busy.  With a state
+        file: the active work offset's zero of X, Y and Z here (:meth:`zero`)."""
+        if self.state_hold is not None:
+            self.zero("XYZ")
+            return
         self.set_position((0, 0, 0))
         self.log("this position is the origin now")
+
+    def zero(self, axes: str = "XYZ", offset: Optional[str] = None) -> None:
+        """Work zero of ``axes`` (``"X"``, ``"XY"``, ``"XYZ"``...) where the tool stands, in work offset ``offset``
+        (``"G54"``..``"G59.3"``; None: the active one).  Without a state file the session's home moves there on
+        those axes instead.  Refused while busy or while the position is unknown."""
+        names = str(axes).upper()
+        if not names or any(a not in "XYZ" for a in names) or len(set(names)) != len(names):
+            raise PlanError(f"axes must be X, Y, Z or several of them (XY, XYZ), got {axes!r}")
+        with self._lock:
+            self._check_free()
+            self._require_known()
+            here = [int(v) for v in self._position]
+            if self.state_hold is None:
+                for a in names:
+                    here["XYZ".index(a)] = 0
+                self._position = np.asarray(here, np.int64)
+                self._bump()
+                self.log(f"this position is the origin of {names} now")
+                return
+            st = self.state_hold.state
+            name = offset or st.active_offset
+            if name not in st.offsets_steps:
+                raise PlanError(f"offset must be one of {', '.join(st.offsets_steps)}, got {offset!r}")
+            zero = list(st.work_zero_steps(name))
+            for a in names:
+                zero["XYZ".index(a)] = here["XYZ".index(a)]
+            self.state_hold.record(st.with_offset(name, tuple(zero)))  # type: ignore[arg-type]
+            self._bump()
+        zmm = steps_to_mm(zero, self.settings)
+        self.log(f"{name} zero of {names} set here: machine {', '.join(f'{v:g}' for v in zmm)} mm")
+
+    def use_offset(self, offset: str) -> None:
+        """Make work offset ``offset`` (``"G54"``..``"G59.3"``) the active one (a state file is needed)."""
+        with self._lock:
+            self._check_free()
+            if self.state_hold is None:
+                raise CamError("work offsets need a machine state file (cam serve --state FILE)")
+            st = self.state_hold.state
+            if offset not in st.offsets_steps:
+                raise PlanError(f"offset must be one of {', '.join(st.offsets_steps)}, got {offset!r}")
+            self.state_hold.record(replace(st, active_offset=offset))
+            self._bump()
+        self.log(f"work offset {offset} active")
+
+    def go_to(self, xyz: Any, unit: str = "mm", *, machine_coords: bool = False) -> None:
+        """Go To ``xyz`` (3 numbers, ``unit`` ``"mm"`` or ``"steps"``) in the active work frame (``machine_coords``:
+        the machine frame): lifted to the safe height first (the work zero's surface, or higher), across, then
+        down.  Refused while busy, while the position is unknown, or outside the travel (nothing moves)."""
+        try:
+            values = [float(v) for v in xyz]
+        except (TypeError, ValueError):
+            raise PlanError(f"a go-to needs X, Y and Z numbers, got {xyz!r}") from None
+        if len(values) != 3 or not all(np.isfinite(values)) or max(abs(v) for v in values) > 1e7:
+            raise PlanError(f"a go-to needs 3 finite X, Y, Z numbers, got {xyz!r}")
+        if unit not in ("mm", "steps"):
+            raise PlanError(f"unit must be 'mm' or 'steps', got {unit!r}")
+        rel = mm_to_steps(values, self.settings) if unit == "mm" else tuple(int(round(v)) for v in values)
+        with self._lock:
+            self._check_free()
+            self._require_known()
+            st = self.state_hold.state if self.state_hold is not None else None
+            zero = (0, 0, 0) if machine_coords or st is None else st.work_zero_steps()
+            target = tuple(int(z) + int(r) for z, r in zip(zero, rel))
+            frame = "machine" if machine_coords or st is None else st.active_offset
+            if st is not None:
+                check_in_travel(target, self.settings, f"X,Y,Z {', '.join(f'{v:g}' for v in values)} {unit} in "
+                                                       f"{frame} (machine {list(target)} steps)")
+            here = tuple(int(v) for v in self._position)
+            job = goto_path(here, target, zero[2], self.settings)  # type: ignore[arg-type]
+            if job is None:
+                self.log("already there")
+                return
+            self._start_moves("jog", job, f"go to {', '.join(f'{v:g}' for v in values)} {unit} ({frame})")
+
+    def state(self, log_after: int = 0) -> dict[str, Any]:
+        """The view's snapshot (:meth:`SessionView.state`) with ``where``: machine and work position, live
+        (:meth:`where`)."""
+        with self._lock:
+            snap = super().state(log_after)
+            snap["where"] = self.where()
+            return snap
+
+    def where(self) -> dict[str, Any]:
+        """Machine and work position now (live while something runs), the active offset and the flags:
+        JSON-able.  Without a state file the machine frame is the session's (home: where the tool stood at
+        the start), and the work frame is the same."""
+        s = self.settings
+        pos = self.position_steps()
+        st = self.state_hold.state if self.state_hold is not None else None
+        work = pos if st is None else st.to_work(pos)
+        return {
+            "machine_steps": list(pos), "machine_mm": [round(v, 4) for v in steps_to_mm(pos, s)],
+            "work_steps": list(work), "work_mm": [round(v, 4) for v in steps_to_mm(work, s)],
+            "active_offset": "G54" if st is None else st.active_offset,
+            "offsets_mm": {} if st is None else {k: [round(v, 4) for v in steps_to_mm(z, s)]
+                                                 for k, z in st.offsets_steps.items()},
+            "position_known": True if st is None else st.position_known,
+            "unknown_reason": "" if st is None else st.unknown_reason,
+            "homed": False if st is None else st.homed,
+            "state_file": None if self.state_hold is None else str(self.state_hold.path),
+        }
 
     def set_drill_z(self, which: str) -> None:
         """Z Drill Up (``"up"``) or Down (``"down"``) of the MAXIMUS drill stroke from where the head stands:
@@ -276,7 +440,11 @@ class MachineSession(SessionControls):
             self.on_detail(text)
 
     def go_to_origin(self) -> None:
-        """Back to the home: lift out of the material first, travel at that height, then Z to the home."""
+        """Back to the home: lift out of the material first, travel at that height, then Z to the home.  With a
+        state file: to the active work zero (:meth:`go_to` 0, 0, 0)."""
+        if self.state_hold is not None and self.kind != "maximus":
+            self.go_to((0, 0, 0))
+            return
         with self._lock:
             self._check_free()
             job = to_origin(self.position_steps(), settings=self.settings)
@@ -289,6 +457,7 @@ class MachineSession(SessionControls):
         """Travel through ``(N, 3)`` points given relative to where the tool stands."""
         with self._lock:
             self._check_free()
+            self._require_known()
             self._start_moves("jog", travel_job(points_steps, self.settings), label)
 
     def _start_moves(self, activity: str, job: Job, label: str) -> None:
@@ -300,6 +469,9 @@ class MachineSession(SessionControls):
         self._launch_steps(activity, plan, label, lambda: plan.estimated_time_s)
 
     def _begin(self, activity: Activity) -> None:
+        if self.state_hold is not None:  # the marker a killed process leaves: the position then unknown
+            self.state_hold.mark_running(f"{activity.name}: {activity.label}")
+        self._activity_start = tuple(int(v) for v in self._position)
         self._activity = activity
         self._estop_request_ns = None
         self._prompt = None
@@ -357,7 +529,24 @@ class MachineSession(SessionControls):
             self._activity = None
             self._prompt = None
             self._finished_wall = time.monotonic()
+            self._record_state()
             self._bump()
+            then, self._then = self._then, None
+            if then is not None and info.get("status") == "finished":
+                try:
+                    then()
+                except CamError as e:
+                    self.log(f"the job did not start: {e}")
+                    self.last_run = dict(info, status="error", messages=[str(e)])
+
+    def _record_state(self) -> None:
+        """Book where the activity left the machine in the state file (a write that fails is logged)."""
+        if self.state_hold is None:
+            return
+        try:
+            self.state_hold.record(ended_state(self.state_hold.state, self, self._activity_start))
+        except (CamError, OSError) as e:
+            self.log(f"the machine state file {self.state_hold.path} was not written: {e}")
 
 
 
