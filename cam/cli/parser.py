@@ -596,6 +596,7 @@ def _add_serve(sub: argparse._SubParsersAction) -> None:
     sv.add_argument("--port", default="mock", metavar="PORT",
                     help="'mock' (default: logs, moves nothing), a device like /dev/parport0, or maximus:/dev/ttyUSB0")
     _add_machine_options(sv)
+    _add_state_option(sv)
     clock = sv.add_mutually_exclusive_group()
     clock.add_argument("--realtime", dest="realtime", action="store_true", default=True,
                        help="run the mock in real time, so the page shows live progress (default)")

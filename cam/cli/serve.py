@@ -7,6 +7,7 @@ import importlib.util
 from ..errors import CamError
 from ..web.server import ServerConfig, is_loopback, new_token, serve
 from .common import port_settings
+from .machine_state import state_path_of
 
 __all__ = ["cmd_serve", "missing_web_packages"]
 
@@ -42,6 +43,7 @@ def cmd_serve(args: argparse.Namespace) -> int:
     config = ServerConfig(host=args.host, port=args.http_port, token=token, jobs_dir=args.jobs_dir,
                           allowed_hosts=tuple(args.allow_host or ()),
                           max_upload_bytes=int(args.max_upload_mb * 1024 * 1024), settings=settings,
-                          machine_port=args.port, realtime=args.realtime, **limits)
+                          machine_port=args.port, realtime=args.realtime,
+                          state_file=str(state_path_of(args)), **limits)
     config.checked()
     return serve(config, announce=lambda line: print(line, flush=True))

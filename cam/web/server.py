@@ -83,6 +83,7 @@ except ImportError:  # pragma: no cover - not Unix: no file limit to raise
 
 from ..drive.journal import read_journal
 from ..drive.session import MachineSession
+from ..drive.state import StateHold
 from ..errors import BusyError, CamError, CapabilityError
 from ..fileio import atomic_write_bytes
 from ..sniff import HEAD_BYTES
@@ -133,6 +134,10 @@ class ServerConfig:
             the previous answer (else 408, closed); body_timeout_s: the longest pause inside a request body.
         work_time_limit_s, work_memory_limit_bytes: the limits of one planning, preview or pin-log export,
             which run in a worker process apart from the machine (None: half the memory, at most 8 GiB).
+        state_file: the machine state file (:mod:`cam.drive.state`), locked while the server runs: the page
+            works in the machine and work frames, jobs are placed at the work zero, every end is recorded
+            (``cam serve`` passes the machine's default one).  None: no file; the home is where the tool stands
+            when the server starts.
     """
 
     host: str = "127.0.0.1"
@@ -152,6 +157,7 @@ class ServerConfig:
     body_timeout_s: float = 10.0
     work_time_limit_s: float = DEFAULT_TIME_LIMIT_S
     work_memory_limit_bytes: Optional[int] = None
+    state_file: Optional[str] = None
 
     def checked(self) -> "ServerConfig":
         """Refuse a non-local address without a token, and a short token; returns self."""
@@ -233,6 +239,8 @@ class _AppState:
         self.closing.set()
         self.worker.close()
         self.session.shutdown()
+        if self.session.state_hold is not None:
+            self.session.state_hold.close()
 
 
 Handler = Callable[[_AppState, "Request"], Awaitable[Any]]
@@ -657,6 +665,24 @@ async def _jog(st: _AppState, request: Request) -> dict[str, Any]:
     return st.session.state()
 
 
+async def _zero(st: _AppState, request: Request) -> dict[str, Any]:
+    body = await _body_json(request)
+    st.session.zero(str(body.get("axes", "XYZ")), body.get("offset") or None)
+    return st.session.state()
+
+
+async def _goto(st: _AppState, request: Request) -> dict[str, Any]:
+    body = await _body_json(request)
+    st.session.go_to(body.get("xyz"), str(body.get("unit", "mm")), machine_coords=body.get("machine") is True)
+    return st.session.state()
+
+
+async def _use_offset(st: _AppState, request: Request) -> dict[str, Any]:
+    body = await _body_json(request)
+    st.session.use_offset(str(body.get("offset", "")))
+    return st.session.state()
+
+
 async def _drill_z(st: _AppState, request: Request) -> dict[str, Any]:
     """Z Drill Up / Down (``which``) of a MAXIMUS board from where the head stands."""
     body = await _body_json(request)
@@ -813,6 +839,9 @@ def _routes(st: _AppState) -> list:
         Route("/api/origin", json_api(partial(_control, action=session.go_to_origin)), methods=post),
         Route("/api/offset", json_api(partial(_control, action=session.set_offset)), methods=post),
         Route("/api/drill-z", json_api(_drill_z), methods=post),
+        Route("/api/zero", json_api(_zero), methods=post),
+        Route("/api/goto", json_api(_goto), methods=post),
+        Route("/api/use-offset", json_api(_use_offset), methods=post),
         Route("/api/answer", json_api(_answer), methods=post),
         Route("/api/state", _api(st, _state)),
         Route("/api/events", _api(st, _events)),
@@ -895,7 +924,14 @@ def create_app(config: ServerConfig, session: Optional[MachineSession] = None):
     jobs_dir = Path(config.jobs_dir or tempfile.mkdtemp(prefix="cam-jobs-")).resolve()
     jobs_dir.mkdir(parents=True, exist_ok=True)
     config.jobs_dir = str(jobs_dir)
-    session = session or MachineSession(config.machine_port, config.settings, realtime=config.realtime)
+    if session is None:
+        hold = StateHold(config.state_file, config.settings, "cam serve") if config.state_file else None
+        try:
+            session = MachineSession(config.machine_port, config.settings, realtime=config.realtime, state=hold)
+        except BaseException:
+            if hold is not None:
+                hold.close()
+            raise
     worker = Worker(time_limit_s=config.work_time_limit_s,
                     memory_limit_bytes=config.work_memory_limit_bytes or default_memory_limit_bytes(),
                     warm_up=WARM_UP)

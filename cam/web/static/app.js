@@ -264,6 +264,15 @@
     post("/api/jog", { axis: b.dataset.axis, steps: n, unit: $("jog-unit").value });
   }));
   $("set-offset").addEventListener("click", () => post("/api/offset"));
+  document.querySelectorAll("button.zero").forEach((b) => b.addEventListener("click", () => {
+    post("/api/zero", { axes: b.dataset.axes });
+  }));
+  $("offset-select").addEventListener("change", () => post("/api/use-offset", { offset: $("offset-select").value }));
+  $("goto-form").addEventListener("submit", (ev) => {
+    ev.preventDefault();
+    const xyz = ["x", "y", "z"].map((a) => parseFloat($("goto-" + a).value));
+    post("/api/goto", { xyz: xyz, unit: "mm", machine: $("goto-machine").checked });
+  });
   document.querySelectorAll("button.drill-z").forEach((b) => b.addEventListener("click", () => {
     post("/api/drill-z", { which: b.dataset.which });
   }));
@@ -315,7 +324,8 @@
     // after a stop, an emergency stop or a failed run, the job's journal says how far it got
     $("resume-job").disabled = !(idle && s.last && s.last.activity === "job" && s.last.journal &&
                                  ["stopped", "emergency-stopped", "error"].includes(s.last.status));
-    document.querySelectorAll("button.jog, #origin, #set-offset, button.drill-z").forEach((b) => { b.disabled = !idle; });
+    document.querySelectorAll("button.jog, #origin, #set-offset, button.drill-z, button.zero, #goto, #offset-select")
+      .forEach((b) => { b.disabled = !idle; });
     document.querySelectorAll("button.drill-z").forEach((b) => { b.hidden = !s.port.startsWith("maximus"); });
     const shown = job || (idle && s.last && s.last.activity === "job");
     const pct = shown ? s.progress : 0;
@@ -325,6 +335,14 @@
     $("remaining").textContent = hms(shown ? s.remaining_s : 0);
     $("pos-steps").textContent = s.position_steps.join(", ");
     $("pos-mm").textContent = s.position_mm.map((v) => v.toFixed(3)).join(", ");
+    if (s.where) {  // machine and work frames, live during every activity
+      $("work-mm").textContent = s.where.work_mm.map((v) => v.toFixed(3)).join(", ");
+      $("work-offset").textContent = s.where.active_offset;
+      if (document.activeElement !== $("offset-select")) $("offset-select").value = s.where.active_offset;
+      $("pos-known").textContent = s.where.position_known ? (s.where.homed ? "position known, homed" : "position known")
+        : "POSITION UNKNOWN: " + s.where.unknown_reason;
+      $("pos-known").dataset.known = s.where.position_known ? "yes" : "no";
+    }
     const dlg = $("prompt-dialog");
     if (s.prompt) {
       if (page.promptShown !== s.prompt.id) {
