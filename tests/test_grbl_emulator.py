@@ -220,6 +220,41 @@ def test_work_offsets_and_status_positions(emulator):
         assert "WPos:2.000,20.000,-5.000" in status.raw and status.mpos_mm == (3.0, 20.0, -5.0)
 
 
+@pytest.mark.parametrize("emulator", [{"speed": 20.0}], indirect=True)
+def test_stored_positions_pause_jog_check_mode_and_soft_limits(emulator):
+    with connect(emulator) as link:
+        link.stream(["G0 X-10 Y-10", "G28.1", "G0 X-20 Y-5 Z-3", "G30.1", "G0 X0 Y0 Z0", "G28"])
+        assert link.status().mpos_mm == (-10.0, -10.0, 0.0)
+        link.stream(["G30 X-1"])                                     # via X-1, then to the G30 position
+        assert link.status().mpos_mm == (-20.0, -5.0, -3.0)
+        assert [b.end_mm for b in emulator.executed()[-2:]] == [(-1.0, -10.0, 0.0), (-20.0, -5.0, -3.0)]
+        link.stream(["G92 X0 Y0"])
+        assert link.status().wpos_mm == (0.0, 0.0, -3.0)
+        link.stream(["G92.1"])
+        paused = []
+
+        def resume_when_paused():
+            paused.append(emulator.wait_for(lambda e: e.state == "Hold:0" and e.planner_blocks == 0, 5.0))
+            paused.append(emulator.machine_position_mm)
+            link.resume()
+
+        threading.Thread(target=resume_when_paused).start()
+        link.stream(["G1 X-5 F600", "M0", "G0 X-6"])                  # M0 pauses until cycle start
+        assert paused == [True, (-5.0, -5.0, -3.0)] and link.status().mpos_mm == (-6.0, -5.0, -3.0)
+        link.command("$J=G91 X-30 F600")
+        wait_status(link, lambda s: s.state == "Jog" and s.mpos_mm[0] < -7)
+        link.jog_cancel()
+        stopped = wait_status(link, lambda s: s.state == "Idle")
+        assert -36 < stopped.mpos_mm[0] < -7 and emulator.executed()[-1].halted
+        assert link.command("$C") == ["[MSG:Enabled]"]
+        link.stream(["G0 X-100"])                                    # checked, not moved
+        assert link.command("$C") == ["[MSG:Disabled]"] and link.status().mpos_mm == stopped.mpos_mm
+        link.command("$22=1")
+        link.command("$20=1")
+        with pytest.raises(GrblAlarm, match=r"ALARM:2 \(motion target beyond the machine travel"):
+            link.stream(["G0 X10"])
+
+
 def test_arcs_and_overrides(emulator):
     with connect(emulator) as link:
         link.override(0x91)                                          # feed +10 %

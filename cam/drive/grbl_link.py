@@ -267,6 +267,7 @@ class GrblLink:
         self._done_errors: list[list] = []
         self._alarm: Optional[int] = None
         self._welcomes = 0
+        self._expected_resets = 0
         self._status_seq = 0
         self._lost: Optional[BaseException] = None
         self._last_rx = time.monotonic()
@@ -352,6 +353,8 @@ class GrblLink:
                     entry[3] = line
                     entry[4] = self._info
                     self._info = []
+                    if "[MSG:Disabled]" in entry[4]:   # check mode left: grbl resets itself, as documented
+                        self._expected_resets += 1
                     if line != "ok":
                         self._done_errors.append(entry)
             elif line.startswith("<"):
@@ -371,7 +374,10 @@ class GrblLink:
                 self.messages.append(line)
             elif line.startswith("Grbl ") and "for help" in line:
                 self.welcome = line
-                self._welcomes += 1
+                if self._expected_resets:
+                    self._expected_resets -= 1
+                else:
+                    self._welcomes += 1
                 self._outstanding.clear()   # a reset empties grbl's buffers: nothing sent is pending any more
                 self._outstanding_bytes = 0
                 self._info = []
@@ -506,12 +512,15 @@ class GrblLink:
         return StreamReport(sent, total, peak)
 
     def wait_idle(self, timeout_s: Optional[float] = None) -> GrblStatus:
-        """Poll ``?`` until grbl reports Idle (every queued motion done)."""
+        """Poll ``?`` until grbl reports Idle (every queued motion done; ``Check`` in check mode)."""
         deadline = None if timeout_s is None else time.monotonic() + timeout_s
         while True:
             status = self.status()
-            if status.state == "Idle":
+            if status.state in ("Idle", "Check"):
                 return status
+            if status.state in ("Alarm", "Sleep"):
+                raise GrblAlarm(f"grbl on {self.device} is in the {status.state} state, not running the job "
+                                f"(unlock with $X or home with $H)")
             if deadline is not None and time.monotonic() > deadline:
                 raise PortError(f"grbl on {self.device} still {status.state} after {timeout_s:g} s")
             time.sleep(self.poll_s / 2)
@@ -535,6 +544,10 @@ class GrblLink:
     def resume(self) -> None:
         """Cycle start ``~``: resume after a feed hold or an M0 pause."""
         self._write(b"~")
+
+    def jog_cancel(self) -> None:
+        """0x85: stop a ``$J=`` jog and drop the jogs queued behind it."""
+        self._write(b"\x85")
 
     def override(self, byte: int) -> None:
         """One of grbl's override bytes (0x90-0x9D feed, rapid and spindle; 0x9E-0xA1 toggles)."""
