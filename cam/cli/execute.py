@@ -185,10 +185,11 @@ def _run(job: Any, args: argparse.Namespace, settings: MachineSettings, hold: St
     elif port_kind(args.port) == "mock" and settings.mock.places():
         port = MockPort()  # simulated switches (below): a mock of this process, in real time too
     session = MachineSession(port, settings, realtime=realtime, on_prompt=_ask(args, stopping))
+    # --offset X,Y says where the file's own origin goes (from the work zero): the file's zero is the anchor then
+    origin = getattr(args, "origin", None) or ("file" if getattr(args, "offset", None) is not None else None)
     approach = None if getattr(args, "resume", None) else approach_to_work_zero(job, hold.state, start, settings,
-                                                                                port_kind(args.port),
-                                                                                getattr(args, "origin", None))
-    at = start if approach is None else placed_home(job, hold.state, getattr(args, "origin", None))
+                                                                                port_kind(args.port), origin)
+    at = start if approach is None else placed_home(job, hold.state, origin)
     session.set_position(at)
     if isinstance(port, MockPort) and settings.mock.places():  # the machine file's simulated switches ([mock])
         port.switches = SwitchSchedule(settings, at)

@@ -152,6 +152,9 @@ def drill_work(job: Any, settings: MachineSettings) -> BoardWork:
     def work(board: MaximusBoard, session: Any) -> None:
         def on_hole(drilled: int) -> None:
             session.progress(drilled, n_holes, int(job.estimated_time_s * 1e9 * drilled / max(1, n_holes)))
+            moved = _board_moved(board)
+            if moved is not None:
+                session.board_moved(drilled, moved)  # the page's live position: after every hole
 
         def on_tool_change(index: int, note: str) -> None:
             x, y = (int(v) for v in holes_steps[index - 1]) if index > 0 else (0, 0)

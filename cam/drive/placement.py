@@ -83,7 +83,8 @@ def placed_home(job: Any, state: MachineState, origin: Optional[str]) -> tuple[i
 
 def approach_to_work_zero(job: Any, state: MachineState, start: tuple[int, int, int], settings: MachineSettings,
                           kind: str, origin: Optional[str] = None) -> Optional[Job]:
-    """The travel that places a file's job at the active work zero (issue #29 point 1, on step/dir ports): its
+    """The travel that places a file's job at the active work zero (issue #29 points 1 and 6, on every port: a MAXIMUS
+    board drills a file's holes from where its head stands, so it travels there first too): its
     home, its own frame's (0, 0, 0), goes to the work zero: a drawing's top-left pixel at the surface (the
     thesis's), a drill file's top-left hole (or the board origin with ``--offset 0,0``), an HPGL or SVG file's
     origin as its ``--offset`` places it.  None when the tool is there already, or for a G-code program (its
@@ -94,7 +95,7 @@ def approach_to_work_zero(job: Any, state: MachineState, start: tuple[int, int, 
         anything moves.
     """
     job_kind = getattr(job, "kind", None)  # a PreparedJob's file kind (a Job's is an array of move kinds)
-    if not isinstance(job_kind, str) or job_kind not in PLACED_KINDS or kind == "maximus":
+    if not isinstance(job_kind, str) or job_kind not in PLACED_KINDS:
         return None
     zero = placed_home(job, state, origin)
     extent = getattr(job, "extent_steps", None)
@@ -135,7 +136,8 @@ def ended_state(state: MachineState, session: Any, start: tuple[int, int, int],
     if status not in (FINISHED, STOPPED):
         sent, moved = session.last_sent()
         if sent or session.kind == "maximus":
-            guess = end if session.last_result is not None else tuple(s + m for s, m in zip(end, moved))
+            booked = session.last_result is not None or session.kind == "maximus"  # a board's replies are booked
+            guess = end if booked else tuple(s + m for s, m in zip(end, moved))
             reason = "; ".join(info.get("messages") or ["the run failed"])
             return state.lost(f"{info.get('label') or 'the run'} failed while moving ({reason})", guess)
         return state.moved_to(end)

@@ -237,7 +237,7 @@ class MachineSession(SessionControls):
                origin: Optional[str]) -> bool:
         """With a state file: travel to the job's place at the work zero first (the job starts when the travel
         has finished).  True when that travel was started; False: the job starts here, as it is."""
-        if self.state_hold is None or self.kind == "maximus" or getattr(job, "resumed", None) is not None:
+        if self.state_hold is None or getattr(job, "resumed", None) is not None:
             return False
         st = self.state_hold.state
         here = tuple(int(v) for v in self._position)
@@ -417,7 +417,10 @@ class MachineSession(SessionControls):
             raise PlanError(f"which must be 'up' or 'down', got {which!r}")
         with self._lock:
             self._check_free()
-            z = int(self._position[2])
+            self._require_known()
+            z = int(self._position[2])  # below the origin: the work zero's Z with a state file, else the home's
+            if self.state_hold is not None:
+                z -= int(self.state_hold.state.work_zero_steps()[2])
             m = self.settings.maximus
             up, down = (z, m.drill_z_down_steps) if which == "up" else (m.drill_z_up_steps, z)
             if which == "up" and z < 0:
@@ -429,6 +432,15 @@ class MachineSession(SessionControls):
             self.settings = self.settings.replace(maximus=replace(m, drill_z_up_steps=up, drill_z_down_steps=down))
         self.log(f"Z Drill {which.capitalize()} = {z} steps below the origin"
                  + ("" if down else "; now set Z Drill Down"))
+
+    def board_moved(self, done: int, moved_steps: Any) -> None:
+        """A MAXIMUS board confirmed a move: the head stands ``moved_steps`` (x, y, z, session frame) from where the
+        running activity started, after ``done`` holes or moves (the live position: after every hole)."""
+        with self._lock:
+            if self._activity is not None:
+                self._activity.positions = _BoardPosition(int(done), tuple(int(v) for v in moved_steps))
+                self._activity.done = max(self._activity.done, int(done))
+                self._bump()
 
     def detail(self, text: str) -> None:
         """What the running activity does now (e.g. "drilling hole 3 of 44"): shown in the state and logged."""
@@ -442,7 +454,7 @@ class MachineSession(SessionControls):
     def go_to_origin(self) -> None:
         """Back to the home: lift out of the material first, travel at that height, then Z to the home.  With a
         state file: to the active work zero (:meth:`go_to` 0, 0, 0)."""
-        if self.state_hold is not None and self.kind != "maximus":
+        if self.state_hold is not None:
             self.go_to((0, 0, 0))
             return
         with self._lock:
@@ -548,6 +560,14 @@ class MachineSession(SessionControls):
         except (CamError, OSError) as e:
             self.log(f"the machine state file {self.state_hold.path} was not written: {e}")
 
+
+
+class _BoardPosition:
+    """The live position of a MAXIMUS activity, as a runner's cursor gives it (``sent``, ``position_steps``)."""
+
+    def __init__(self, sent: int, position_steps: tuple[int, int, int]) -> None:
+        self.sent = sent
+        self.position_steps = position_steps
 
 
 def run(job: Any, port: Any = "mock", *, realtime: bool = False, controller: Optional[Controller] = None,
