@@ -148,3 +148,21 @@ def test_without_a_state_file_the_session_keeps_its_own_frame():
     ses.wait_idle(30)
     ses.zero("X")
     assert ses.where()["machine_steps"] == [0, 8, 0] and ses.where()["state_file"] is None
+
+
+@pytest.mark.realtime
+def test_the_finished_line_of_a_real_time_run_gives_the_elapsed_time_and_lateness():
+    """The page's log line (issue #32 point 6): how long the run took, the plan's machine time, and how late."""
+    fast = cam.MachineSettings().replace(delay_xy_ms=0.05, delay_z_ms=0.05, ramp="constant")
+    job = prepare_job(SAMPLES / "ellipse.png", JobOptions(depth=(1,)), fast)
+    ses = MachineSession("mock", fast, realtime=True)
+    info = ses.run(job)
+    assert info["status"] == "finished"
+    line = [e["text"] for e in ses.state()["log"] if "finished" in e["text"]][-1]
+    assert "the run took 0:00:" in line and "s machine time planned, constant ramps" in line, line
+    if info["stalls"]:
+        assert f"{info['stalls']} stall" in line and "the longest" in line, line
+    simulated = MachineSession("mock", fast)
+    simulated.run(job)
+    line = [e["text"] for e in simulated.state()["log"] if "finished" in e["text"]][-1]
+    assert "total time 0:00:" in line and "simulated" in line, line

@@ -11,6 +11,7 @@ from typing import Any
 from tqdm import tqdm
 
 from ..drive.maximus.board import MAXIMUS_SETTINGS, board_settings, with_delays
+from ..drive.activities import format_duration
 from ..drive.ports import port_kind
 from ..drive.ramps import check_delay_speeds, top_speeds_mm_s
 from ..settings import MachineSettings, load_settings
@@ -56,12 +57,6 @@ def speeds_line(settings: MachineSettings) -> str:
     x, y, z = top_speeds_mm_s(settings)
     return (f"top speeds: X {x:.3g}, Y {y:.3g}, Z {z:.3g} mm/s ({settings.ramp} ramps, delays "
             f"{settings.delay_xy_ms:g}/{settings.delay_z_ms:g} ms)")
-
-
-def format_duration(seconds: float) -> str:
-    """``H:MM:SS``, rounded to the second."""
-    s = int(round(seconds))
-    return f"{s // 3600}:{s % 3600 // 60:02d}:{s % 60:02d}"
 
 
 def progress_wanted(args: argparse.Namespace) -> bool:

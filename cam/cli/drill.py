@@ -17,6 +17,7 @@ from ..errors import CamError, CapabilityError
 from ..job.jobs import resume_job
 from .checks import check_output_path, job_kind_of
 from ..fileio import atomic_write_text
+from ..drive.activities import run_timing_text
 from .common import format_duration, port_settings
 from .execute import Outcome, check_port_options, execute
 from .machine_state import hold_machine
@@ -58,19 +59,8 @@ def _finished_line(args: argparse.Namespace, outcome: Outcome, ramp: str, summar
 def finish_line(summary: str, outcome: Outcome, ramp: str, wall_s: float, *, simulated: bool) -> str:
     """The line a finished step/dir job ends with: the machine time and, in real time, how long the run took
     and, when it ran late, by how much and how many stalls (a late write moves the rest of the run later)."""
-    if simulated:
-        return f"job finished: {summary}; total time {format_duration(outcome.machine_time_s)} " \
-               f"({outcome.machine_time_s:.1f} s machine time, {ramp} ramps, simulated)"
-    line = f"job finished: {summary}; the run took {format_duration(wall_s)} " \
-           f"({outcome.machine_time_s:.1f} s machine time planned, {ramp} ramps"
-    late_s, stalls = float(outcome.timing.get("late_total_s", 0.0)), int(outcome.timing.get("stalls", 0))
-    if late_s >= 0.001 or stalls:
-        line += (f"; {late_s:.1f} s late: {stalls} stall{'s' if stalls != 1 else ''} over 1 ms, the longest "
-                 f"{1000 * float(outcome.timing.get('max_late_s', 0.0)):.0f} ms")
-        reramps = int(outcome.timing.get("reramps", 0))
-        if reramps:
-            line += f", {reramps} re-ramp{'s' if reramps != 1 else ''}"
-    return line + ")"
+    return f"job finished: {summary}; " + run_timing_text(outcome.machine_time_s, wall_s, outcome.timing, ramp,
+                                                          simulated=simulated)
 
 
 def board_report(job, settings) -> dict:

@@ -93,9 +93,37 @@ def run_steps(session: Any, name: str, plan: "StepPlan | ChunkedPlan", ctl: Cont
     session.finish(info, np.array(result.position_steps, np.int64), result=result,
                    pin_log=log if name == "job" else None)
     text = f"{label}: {result.status}"
+    if result.status == "finished" and name == "job":  # the page's finished line: elapsed, and how late
+        text += "; " + run_timing_text(result.machine_time_s, result.wall_time_s, info, plan.settings.ramp,
+                                       simulated=not session.realtime)
     if result.messages:
         text += " (" + "; ".join(result.messages) + ")"
     session.log(text, "info" if result.status == "finished" else "warning")
+
+
+def format_duration(seconds: float) -> str:
+    """``H:MM:SS``, rounded to the second."""
+    s = int(round(seconds))
+    return f"{s // 3600}:{s % 3600 // 60:02d}:{s % 60:02d}"
+
+
+def run_timing_text(machine_time_s: float, wall_s: float, timing: dict, ramp: str, *, simulated: bool) -> str:
+    """How long a finished step/dir run took, as the CLI's and the page's finished lines say it (issue #32 point 6):
+    on the simulated clock the machine time; in real time the elapsed time, the planned machine time and, when
+    the run was late, by how much, its stalls over 1 ms, the longest, and the re-ramps after them.  ``timing``:
+    ``late_total_s``, ``stalls``, ``max_late_s``, ``reramps`` (a run's :class:`~cam.drive.runner.Lateness`)."""
+    if simulated:
+        return (f"total time {format_duration(machine_time_s)} ({machine_time_s:.1f} s machine time, {ramp} ramps, "
+                f"simulated)")
+    text = f"the run took {format_duration(wall_s)} ({machine_time_s:.1f} s machine time planned, {ramp} ramps"
+    late_s, stalls = float(timing.get("late_total_s", 0.0)), int(timing.get("stalls", 0))
+    if late_s >= 0.001 or stalls:
+        text += (f"; {late_s:.1f} s late: {stalls} stall{'s' if stalls != 1 else ''} over 1 ms, the longest "
+                 f"{1000 * float(timing.get('max_late_s', 0.0)):.0f} ms")
+        reramps = int(timing.get("reramps", 0))
+        if reramps:
+            text += f", {reramps} re-ramp{'s' if reramps != 1 else ''}"
+    return text + ")"
 
 
 class BoardControl:
