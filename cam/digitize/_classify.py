@@ -19,6 +19,7 @@ from .._compiled import entry
 WHITE, BLACK, RED, BLUE = 0, 1, 2, 3
 UNKNOWN = 255
 _RED_TO_BLACK = 4  # a red pixel that the contour rule makes black (still red for its neighbours' rule)
+_VALLEY_TO_BLACK = 5  # the same, by the thin-dark-line rule (its second pass)
 _HSV_SHIFT = 12
 
 
@@ -121,46 +122,58 @@ def _luma(img, k, ch_r, ch_b):
 
 @njit(cache=True, nogil=True)
 def _contour_in_red(img, ch_r, ch_b, contour_y_max, core_y_max, valley_min, out, w):
-    """The JPEG contour rule (module docstring of :mod:`cam.digitize.drawing`), on red pixels only, in place."""
+    """The JPEG contour rule (module docstring of :mod:`cam.digitize.drawing`), on red pixels only, in place.
+
+    Two passes, so that no pixel's fate depends on the scan order: first the dark red pixels that touch white
+    (the contour's outer side), then the thin dark lines among the rest; a thin-line candidate with three or
+    more black 8-neighbours after the first pass lies beside the contour, not on it (JPEG's dark ringing on the
+    inner side of a staircase contour, darker than the white and the red across the line's corner): the
+    1-pixel contour has at most two (thesis 4.1.1), so it stays red.
+    """
     n = out.shape[0]
     h = n // w
     y_contour = np.float32(contour_y_max)
     y_core = np.float32(core_y_max)
     v_min = np.float32(valley_min)
     flipped = False
-    for k in range(n):
-        if out[k] != RED:
-            continue
-        y = _luma(img, k, ch_r, ch_b)
-        if not y < y_contour:
-            continue
-        i = k // w
-        j = k - i * w
-        dark = (i == 0 or out[k - w] == WHITE or i == h - 1 or out[k + w] == WHITE
-                or j == 0 or out[k - 1] == WHITE or j == w - 1 or out[k + 1] == WHITE)
-        if not dark and y < y_core:
-            valley = -np.inf
-            for d in range(4):  # along a row, a column and both diagonals; the image edge repeats
-                di = 0 if d == 0 else 1
-                dj = 1 if d == 0 else (0 if d == 1 else (1 if d == 2 else -1))
-                k0 = min(max(i - di, 0), h - 1) * w + min(max(j - dj, 0), w - 1)
-                k1 = min(max(i + di, 0), h - 1) * w + min(max(j + dj, 0), w - 1)
-                valley = max(valley, min(_luma(img, k0, ch_r, ch_b), _luma(img, k1, ch_r, ch_b)) - y)
-            dark = valley >= v_min
-        if not dark:
-            continue
-        lone = True  # a red pixel with no red 8-neighbour (a profile's origin) stays red
-        for a in range(max(i - 1, 0), min(i + 2, h)):
-            for b in range(max(j - 1, 0), min(j + 2, w)):
-                q = out[a * w + b]
-                if (a != i or b != j) and (q == RED or q == _RED_TO_BLACK):
-                    lone = False
-        if not lone:
-            out[k] = _RED_TO_BLACK
+    for second in (False, True):
+        for k in range(n):
+            if out[k] != RED:
+                continue
+            y = _luma(img, k, ch_r, ch_b)
+            if not y < (y_core if second else y_contour):
+                continue
+            i = k // w
+            j = k - i * w
+            if not second:
+                if not (i == 0 or out[k - w] == WHITE or i == h - 1 or out[k + w] == WHITE
+                        or j == 0 or out[k - 1] == WHITE or j == w - 1 or out[k + 1] == WHITE):
+                    continue
+            else:
+                valley = -np.inf
+                for d in range(4):  # along a row, a column and both diagonals; the image edge repeats
+                    di = 0 if d == 0 else 1
+                    dj = 1 if d == 0 else (0 if d == 1 else (1 if d == 2 else -1))
+                    k0 = min(max(i - di, 0), h - 1) * w + min(max(j - dj, 0), w - 1)
+                    k1 = min(max(i + di, 0), h - 1) * w + min(max(j + dj, 0), w - 1)
+                    valley = max(valley, min(_luma(img, k0, ch_r, ch_b), _luma(img, k1, ch_r, ch_b)) - y)
+                if not valley >= v_min:
+                    continue
+            lone = True  # a red pixel with no red 8-neighbour (a profile's origin) stays red
+            n_black = 0
+            for a in range(max(i - 1, 0), min(i + 2, h)):
+                for b in range(max(j - 1, 0), min(j + 2, w)):
+                    q = out[a * w + b]
+                    if (a != i or b != j) and (q == RED or q == _RED_TO_BLACK or q == _VALLEY_TO_BLACK):
+                        lone = False
+                    n_black += q == BLACK or q == _RED_TO_BLACK
+            if lone or (second and n_black > 2):
+                continue
+            out[k] = _VALLEY_TO_BLACK if second else _RED_TO_BLACK
             flipped = True
     if flipped:
         for k in range(n):
-            if out[k] == _RED_TO_BLACK:
+            if out[k] == _RED_TO_BLACK or out[k] == _VALLEY_TO_BLACK:
                 out[k] = BLACK
 
 

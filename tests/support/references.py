@@ -297,11 +297,16 @@ def classify_reference(rgb: np.ndarray) -> np.ndarray:
         before = padded[1 - dr:1 - dr + h, 1 - dc:1 - dc + w]
         after = padded[1 + dr:1 + dr + h, 1 + dc:1 + dc + w]
         valley = np.maximum(valley, np.minimum(before, after) - luma)
-    dark = ((luma < CONTOUR_Y_MAX) & white4) | ((luma < CORE_Y_MAX) & (valley >= VALLEY_MIN))
     kernel = np.ones((3, 3), np.float32)
     kernel[1, 1] = 0
     red_neighbours = cv2.filter2D(red.astype(np.uint8), cv2.CV_16S, kernel, borderType=cv2.BORDER_CONSTANT)
-    out[red & dark & (red_neighbours > 0)] = BLACK
+    contour = red & (luma < CONTOUR_Y_MAX) & white4 & (red_neighbours > 0)  # first: dark red touching white
+    black = (out == BLACK) | contour
+    black_neighbours = cv2.filter2D(black.astype(np.uint8), cv2.CV_16S, np.ones((3, 3), np.float32),
+                                    borderType=cv2.BORDER_CONSTANT)  # itself is red, not black: 8-neighbours
+    line = (red & ~contour & (luma < CORE_Y_MAX) & (valley >= VALLEY_MIN) & (red_neighbours > 0)
+            & (black_neighbours <= 2))  # then thin dark lines, not beside the contour
+    out[contour | line] = BLACK
     return out
 
 
