@@ -70,6 +70,8 @@ class DrillPlan:
             coordinate ``safe_z_steps`` = ``-safe_steps`` (<= 0, as :attr:`cam.job.model.Job.safe_z_steps`).
         n_slots: slots milled (``G85`` and routed); n_milled: holes milled with the ``mill_holes_over_mm`` bit.
         extent_steps: ``(2, 2)`` int64 smallest and largest machine (x, y) steps of every hole and milled path.
+        holes_mm: ``(N, 2)`` machine (x, y) mm of each hole in drilling order, before rounding to steps (exact
+            G-code out, :mod:`cam.formats.gcode_export`).
     """
 
     toolpath: Job
@@ -81,6 +83,7 @@ class DrillPlan:
     n_slots: int = 0
     n_milled: int = 0
     extent_steps: Optional[np.ndarray] = None
+    holes_mm: Optional[np.ndarray] = None
 
     @property
     def safe_z_steps(self) -> int:
@@ -220,7 +223,8 @@ def plan_drill(
     cut = np.concatenate([steps_xy[order_arr]] + paths_steps).reshape(-1, 2)
     extent = np.array([cut.min(axis=0), cut.max(axis=0)], np.int64)
     return DrillPlan(toolpath, steps_xy[order_arr], order_arr, sequence, depth_steps, -safe_z_steps,
-                     n_slots=len(slot_paths), n_milled=n_milled, extent_steps=extent)
+                     n_slots=len(slot_paths), n_milled=n_milled, extent_steps=extent,
+                     holes_mm=machine_mm[order_arr])
 
 
 def _with_paths(runs, diameters, paths_steps, path_dia, path_tool, holes_steps_f, order, n_slots: int):
