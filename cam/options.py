@@ -220,6 +220,14 @@ JOB_OPTIONS: tuple[Option, ...] = (
     _opt("fit_mm", "--fit", "size", "mm", {"svg", "hpgl"}, None,
          "SVG and HPGL: scale the drawing to fit WIDTHxHEIGHT mm, keeping its proportions (e.g. 80x40)",
          lo=0.0, hi=MAX_MM, lo_open=True, count=2, metavar="WxH"),
+    _opt("layers", "--layers", "text", "", {"svg"}, None,
+         "SVG: cut only these layers, in this order (Inkscape layer names, 'parent/child' for a sublayer, or stroke "
+         "colours such as '#ff0000' or red when the file has no layers; 'cam info' lists them); default: every "
+         "layer in file order", metavar="NAME,NAME"),
+    _opt("pause_between_layers", "--pause-between-layers", "flag", "", {"svg"}, False,
+         "SVG: pause before each layer after the first, to change the pen or the tool (Enter resumes)"),
+    _opt("keep_duplicates", "--keep-duplicates", "flag", "", {"svg"}, False,
+         "SVG: cut a segment that traces one already cut again (by default it is cut once)"),
     # G-code programs (the first two name files on the machine that runs cam: command line only)
     _opt("tool_table", "--tool-table", "text", "", {"gcode"}, None,
          "LinuxCNC tool table (T1 P1 Z12.5 ...; lengths in mm) for G43 H tool length offsets",

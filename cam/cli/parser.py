@@ -254,6 +254,8 @@ def _add_svg_options(d: argparse.ArgumentParser, scale: bool = True) -> None:
     if scale:
         _add_option(g, "scale")
     _add_option(g, "fit_mm")
+    for name in ("layers", "pause_between_layers", "keep_duplicates"):  # issue #31 point 6
+        _add_option(g, name)
 
 
 def _add_cut_options(d: argparse.ArgumentParser) -> None:
