@@ -261,6 +261,21 @@ JOB_OPTIONS: tuple[Option, ...] = (
          lo_open=True, metavar="FRACTION"),
     _opt("rough_tool", "--rough-tool", "tool", "", _DRAWINGS, None,
          "a larger roughing tool (as --tool); the job pauses at the home to change to --tool", metavar="SHAPE"),
+    # grey-level reliefs (issue #31 point 7)
+    _opt("heightmap", "--heightmap", "flag", "", {"drawing"}, False,
+         "the image is a height map: each pixel's grey is its depth (black deepest), cut in rows with the tool "
+         "by the drop-cutter rule (never below the depth asked)"),
+    _opt("invert", "--invert", "flag", "", {"drawing"}, False,
+         "with --heightmap: white is deepest instead of black"),
+    _opt("max_depth_mm", "--max-depth", "number", "mm", {"drawing"}, None,
+         "with --heightmap: the depth of the deepest grey (default 1.0)", lo=0.0, hi=100.0, lo_open=True,
+         metavar="MM"),
+    _opt("pixel_size_mm", "--pixel-size", "number", "mm", {"drawing"}, None,
+         "with --heightmap: a pixel's width (default the machine's drawing pixel, rounded to whole steps)",
+         lo=0.0, hi=100.0, lo_open=True, metavar="MM"),
+    _opt("heightmap_order", "--heightmap-order", "choice", "", {"drawing"}, "rows",
+         "with --heightmap: rows (zig-zag along X) or peel (the thesis's order: level by level, shallowest first)",
+         choices=("rows", "peel")),
 )
 """Every job option, in the order of :class:`cam.job.jobs.JobOptions`' fields."""
 

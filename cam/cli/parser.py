@@ -317,6 +317,9 @@ def _add_job_options(d: argparse.ArgumentParser) -> None:
     _add_option(sk, "trace", default=None)
     _add_option(sk, "trace_min_length_px")
     _add_option(sk, "trace_fill", default=None)
+    hm = d.add_argument_group("grey-level reliefs (height maps)")
+    for name in ("heightmap", "invert", "max_depth_mm", "pixel_size_mm", "heightmap_order"):
+        _add_option(hm, name)
     _add_machine_options(d)
     _add_gcode_options(d)
 
