@@ -721,14 +721,19 @@ def _prepare_svg(path: Path, options: JobOptions, settings: MachineSettings) -> 
     depth_mm, engraving = _engraving(options, settings, SVG_CUT_DEPTH_MM)
     toolpath = plan_svg(drawing, settings=settings, cut_depth_mm=depth_mm,
                         travel_height_mm=_or(options.travel_height_mm, SVG_TRAVEL_HEIGHT_MM),
-                        scale=options.scale, fit_mm=options.fit_mm, offset_mm=options.offset_mm)
+                        scale=options.scale, fit_mm=options.fit_mm, offset_mm=options.offset_mm,
+                        layers=options.layers, pause_between_layers=bool(options.pause_between_layers),
+                        keep_duplicates=bool(options.keep_duplicates))
     steps = plan_chunks(toolpath)
     counts = ", ".join(f"{n} {name}" for name, n in sorted(drawing.element_counts.items()))
+    layer_list = [{"name": name, "strokes": int((drawing.layer_of_stroke == i).sum()), "length_mm": round(length, 3)}
+                  for i, (name, length) in enumerate(zip(drawing.layers(), drawing.layer_lengths_mm()))]
     return PreparedJob(
         source=str(path), kind="svg", plan=steps, settings=settings, toolpath=toolpath,
         warnings=list(drawing.warnings), summary=f"{path.name}: {drawing.n_strokes} strokes ({counts})",
         report={"strokes": drawing.n_strokes, "elements": dict(drawing.element_counts),
                 "segments": drawing.segment_counts, "document_mm": [round(v, 3) for v in drawing.size_mm],
+                "layers": layer_list, "layers_from": drawing.layers_from,
                 **engraving},
     )
 
@@ -772,7 +777,10 @@ def prepare_job(
     _refuse_surface_travel(opts, settings)
     if not p.is_file():
         raise CamError(f"{p}: file not found")
-    if kind in ("drawing", "digitized"):
+    if kind == "drawing" and opts.heightmap:  # a grey-level relief (issue #31 point 7)
+        from .heightmap import prepare_heightmap
+        job = prepare_heightmap(p, opts, settings)
+    elif kind in ("drawing", "digitized"):
         job = _prepare_pixels(p, kind, opts, settings)
     elif kind == "gcode":
         job = _prepare_gcode(p, opts, settings, machine_state)
