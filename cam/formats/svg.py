@@ -17,6 +17,13 @@ module only picks what is to be cut and keeps it as exact segments:
   error asks for the text to be converted to paths.  ``<image>`` is skipped
   with a warning.
 
+Layers (issue #31 point 6): every stroke belongs to one layer.  When the file has Inkscape layers
+(``<g inkscape:groupmode="layer" inkscape:label="...">``), a stroke's layer is the innermost layer group it is
+in, named by its label (a sublayer as ``parent/child``; a layer without a label by its ``id``; strokes outside
+every layer in ``(no layer)``; two layers of one name are one).  Otherwise strokes are grouped by their
+stroke colour (a shape with no stroke by its fill colour), named by the colour in hex (``#ff0000``); a
+drawing in one colour is one layer.  Layers are listed in file order (the order their first strokes come in).
+
 Frame: SVG user space of the whole document in mm, x to the right, y *down*
 (as on the page; the machine's y grows toward the operator, the same way).
 
@@ -26,6 +33,8 @@ Frame: SVG user space of the whole document in mm, x to the right, y *down*
 (1, {'line': 1, 'quadratic': 1, 'cubic': 0})
 >>> d.polylines(0.5)[0].round(3).tolist()
 [[1.0, 1.0], [11.0, 1.0], [14.75, 2.25], [16.0, 6.0]]
+>>> d.layer_names, d.layers_from
+(['#000000'], 'colour')
 """
 from __future__ import annotations
 
@@ -35,7 +44,7 @@ import os
 from xml.etree import ElementTree
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Union
+from typing import Optional, Union
 
 import cv2
 import numpy as np
@@ -46,7 +55,7 @@ from ..errors import ParseError
 from ..render.picture import encode_png
 
 __all__ = ["SvgDrawing", "parse_svg", "load_svg", "SVG_SUFFIXES", "MM_PER_PX", "MAX_SVG_BYTES", "MAX_SVG_ELEMENTS",
-           "expanded_size"]
+           "expanded_size", "NO_LAYER"]
 
 MM_PER_PX = 25.4 / 96.0
 """An SVG user unit without a physical size (CSS px) is 1/96 inch."""
@@ -57,6 +66,10 @@ MAX_SVG_ELEMENTS = 200_000
 """Elements an SVG may hold once its ``<use>`` references are expanded (counted before anything is expanded: ten
 levels of ``<use>`` fanning out four ways make a million copies from 2 kB)."""
 """The most straight pieces one curve is flattened into (a curve longer than 1 km at the finest tolerance)."""
+
+NO_LAYER = "(no layer)"
+"""The layer of strokes outside every Inkscape layer of a file that has some."""
+_INKSCAPE = "{http://www.inkscape.org/namespaces/inkscape}"
 
 LINE, QUADRATIC, CUBIC = 2, 3, 4
 """Segment kinds by their number of control points."""
@@ -76,6 +89,9 @@ class SvgDrawing:
         element_counts: how many of each element kind were cut (``{"path": 3, "circle": 1, ...}``).
         warnings: what was skipped and why.
         source: the file name.
+        layer_names: the layers in file order (see the module docstring); empty: one unnamed layer.
+        stroke_layer: ``(S,)`` int, the index in ``layer_names`` of each stroke's layer (None: all in layer 0).
+        layers_from: what named the layers: "inkscape" (layer groups) or "colour" (stroke colours).
     """
 
     strokes: list[list[np.ndarray]]
@@ -84,6 +100,39 @@ class SvgDrawing:
     element_counts: dict[str, int] = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
     source: str = "<svg>"
+    layer_names: list[str] = field(default_factory=list)
+    stroke_layer: Optional[np.ndarray] = None
+    layers_from: str = "colour"
+
+    @property
+    def layer_of_stroke(self) -> np.ndarray:
+        """``(S,)`` int64, each stroke's index in :meth:`layers` (0 for all when the drawing names none)."""
+        if self.stroke_layer is None:
+            return np.zeros(len(self.strokes), np.int64)
+        return np.asarray(self.stroke_layer, np.int64)
+
+    def layers(self) -> list[str]:
+        """The layer names in file order (one layer, ``"all"``, when the drawing names none)."""
+        return list(self.layer_names) or ["all"]
+
+    def layer_lengths_mm(self, tolerance_mm: float = 1e-3) -> list[float]:
+        """The length of every layer's strokes in mm (as :meth:`layers`; curves flattened within ``tolerance_mm``)."""
+        out = np.zeros(len(self.layers()))
+        for poly, layer in zip(self.polylines(tolerance_mm), self.layer_of_stroke):
+            out[layer] += float(np.hypot(*np.diff(poly, axis=0).T).sum())
+        return out.tolist()
+
+    def find_layers(self, name: str) -> list[int]:
+        """The indices (file order) of the layers ``name`` selects: the layer of that name and its sublayers
+        (``parent`` selects ``parent/child``); when the layers are colours, any CSS colour that is the same
+        (``red`` is ``#ff0000``).  Empty when none is."""
+        names = self.layers()
+        want = name.strip()
+        hit = [i for i, n in enumerate(names) if n == want or n.startswith(want + "/")]
+        if hit or self.layers_from != "colour":
+            return hit
+        colour = _colour_hex(want)
+        return [i for i, n in enumerate(names) if colour is not None and n == colour]
 
     @property
     def n_strokes(self) -> int:
@@ -151,6 +200,48 @@ def _flatten_segment(seg: np.ndarray, tolerance_mm: float) -> np.ndarray:
     if k == QUADRATIC:
         return s * s * seg[0] + 2 * s * t * seg[1] + t * t * seg[2]
     return s ** 3 * seg[0] + 3 * s * s * t * seg[1] + 3 * s * t * t * seg[2] + t ** 3 * seg[3]
+
+
+def _colour_hex(text: str) -> Optional[str]:
+    """A CSS colour (``red``, ``#f00``, ``rgb(255,0,0)``) as the hex the layers are named by, or None."""
+    try:
+        colour = se.Color(text)
+    except Exception:  # svgelements' parser raises on odd input
+        return None
+    if int(colour) == 255 and text.strip().lower() not in ("black", "#000", "#000000", "#000000ff", "rgb(0,0,0)"):
+        return None  # svgelements reads what is no colour as black
+    return colour.hex
+
+
+def _colour_of(element) -> str:
+    """The layer name of a shape in a file without Inkscape layers: its stroke colour, else its fill colour."""
+    stroke = element.stroke
+    if stroke is not None and stroke.value is not None and stroke.alpha != 0:
+        return stroke.hex
+    return element.fill.hex if element.fill is not None and element.fill.value is not None else "none"
+
+
+def _walk(svg) -> list[tuple[object, Optional[str]]]:
+    """Every element under ``svg`` in document order (as ``svg.elements()`` gives them), each with the path of
+    the Inkscape layers it is in (``parent/child``; None: in none)."""
+    out: list[tuple[object, Optional[str]]] = []
+    stack = [(iter(svg), None)]
+    while stack:
+        items, layer = stack[-1]
+        element = next(items, None)
+        if element is None:
+            stack.pop()
+            continue
+        out.append((element, layer))
+        if isinstance(element, (se.Group, se.Use)):
+            inner = layer
+            attributes = element.values.get("attributes", {}) if isinstance(element, se.Group) else {}
+            if attributes.get(_INKSCAPE + "groupmode") == "layer":
+                label = (attributes.get(_INKSCAPE + "label") or attributes.get("id") or "layer").strip()
+                label = label.replace("/", "-") or "layer"
+                inner = label if layer is None else f"{layer}/{label}"
+            stack.append((iter(element), inner))
+    return out
 
 
 def _visible(element) -> tuple[bool, bool]:
@@ -278,8 +369,10 @@ def parse_svg(data: Union[bytes, str], *, source: str = "<svg>") -> SvgDrawing:
     counts: dict[str, int] = {}
     warnings: list[str] = []
     images = 0
+    layer_paths: list[Optional[str]] = []
+    colours: list[str] = []
     try:
-        for element in svg.elements():
+        for element, layer in _walk(svg):
             if isinstance(element, se.Text):
                 words = (element.text or "").strip()
                 shown = f" '{words[:30]}'" if words else ""
@@ -299,17 +392,26 @@ def parse_svg(data: Union[bytes, str], *, source: str = "<svg>") -> SvgDrawing:
                 continue
             name = type(element).__name__.lower().replace("simpleline", "line")
             counts[name] = counts.get(name, 0) + 1
+            colour = _colour_of(element)
             for segs, is_closed in pieces:
                 strokes.append(segs)
                 closed.append(is_closed)
+                layer_paths.append(layer)
+                colours.append(colour)
     except ValueError as exc:
         raise ParseError(f"{source}: {exc}") from None
     if images:
         warnings.append(f"{images} embedded image(s) skipped: only strokes and outlines are cut")
     w, h = svg.width, svg.height
     size = (float(w) * k, float(h) * k) if w and h and math.isfinite(w) and math.isfinite(h) else (0.0, 0.0)
+    inkscape = any(layer is not None for layer in layer_paths)
+    names = [NO_LAYER if layer is None else layer for layer in layer_paths] if inkscape else colours
+    layer_names = list(dict.fromkeys(names))  # file order of first appearance
+    index = {name: i for i, name in enumerate(layer_names)}
     drawing = SvgDrawing(strokes=strokes, closed=np.array(closed, bool), size_mm=size, element_counts=counts,
-                         warnings=warnings, source=source)
+                         warnings=warnings, source=source, layer_names=layer_names,
+                         stroke_layer=np.array([index[n] for n in names], np.int64),
+                         layers_from="inkscape" if inkscape else "colour")
     if drawing.size_mm == (0.0, 0.0) and strokes:
         x0, y0, x1, y1 = drawing.extent_mm()
         drawing.size_mm = (x1 - x0, y1 - y0)

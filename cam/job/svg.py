@@ -18,10 +18,21 @@ and every point of the curve within one step of a cut position (0.15 + 0.125 + 0
    rounds to it would be left more than 0.7 step from any cut position; runs of the same unit move are joined into one straight move (which visits the same positions).
 3. Strokes are ordered for short travel: from where the tool is, the stroke whose nearer end is nearest
    comes next, cut from that end (a stroke is reversed only when its end is strictly nearer than its
-   start).
+   start).  Layers (:attr:`SvgDrawing.layers <cam.formats.svg.SvgDrawing.layers>`) are cut one after the
+   other, in file order or in the order ``layers`` names them (only those), and the nearest-stroke order
+   stays within a layer (it starts where the layer before ended).  ``pause_between_layers``: the job pauses
+   (lifted, above the end of the layer before) before each layer after the first, with the note
+   ``layer 'NAME': change the pen``.
 4. Each stroke: lift, travel at the safe height above its start, plunge to the cutting depth, cut, lift; a
-   stroke that starts within one step of where the last one ended is cut on without lifting.  The job starts
-   and ends at (0, 0, 0).
+   stroke that starts within one step of where the last one ended is cut on without lifting (never across a
+   pause).  The job starts and ends at (0, 0, 0).
+
+Duplicates (unless ``keep_duplicates``): before step 2, every straight piece of the polylines (a line, or
+one chord of a flattened curve) longer than :data:`MIN_DUPLICATE_STEPS` whose two ends lie within
+:data:`DUPLICATE_STEPS` (in x and in y) of the two ends of a piece that comes earlier in cutting order and is
+cut, in either direction, traces what is already cut, and is dropped; a stroke is cut in the runs of pieces
+left.  A job warning counts them.  (Pieces are compared end to end: a line drawn once as one piece and once
+as two is not found.)
 
 The job is made whole, one :class:`~cam.job.model.Job` (a job held in memory is one piece of a
 :class:`~cam.job.model.JobLike`), not a piece at a time as HPGL's and G-code's are: the default placement
@@ -40,8 +51,9 @@ rows.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
-from typing import Optional
+from typing import Optional, Sequence, Union
 
 import numpy as np
 
@@ -51,7 +63,8 @@ from ..settings import DEFAULT_SETTINGS, MachineSettings
 from .hpgl import _rows, _z_steps
 from .model import CUT, Job, check_travel
 
-__all__ = ["plan_svg", "svg_strokes_steps", "svg_scale", "DEFAULT_CUT_DEPTH_MM", "DEFAULT_TRAVEL_HEIGHT_MM"]
+__all__ = ["plan_svg", "svg_strokes_steps", "svg_scale", "svg_layer_order", "DEFAULT_CUT_DEPTH_MM",
+           "DEFAULT_TRAVEL_HEIGHT_MM", "DUPLICATE_STEPS", "MIN_DUPLICATE_STEPS"]
 
 DEFAULT_CUT_DEPTH_MM = 0.5
 """As HPGL's pen-down depth: a vector drawing engraved."""
@@ -62,6 +75,11 @@ SAMPLE_STEPS = 0.25
 """The polylines are sampled at most this many steps apart before rounding."""
 CORNER_REACH_STEPS = 0.7
 """A staircase corner is dropped only when each of its samples lies this near a neighbouring kept position."""
+DUPLICATE_STEPS = 0.25
+"""A piece whose ends lie this near (steps, in x and in y) the ends of a piece already cut is a duplicate."""
+MIN_DUPLICATE_STEPS = 2 * DUPLICATE_STEPS
+"""Pieces no longer than this (steps) are never duplicates: a piece that short is within a step of its
+neighbours, and dropping it would only split its stroke."""
 
 
 def svg_scale(drawing: SvgDrawing, *, scale: Optional[float] = None,
@@ -156,7 +174,14 @@ def svg_strokes_steps(drawing: SvgDrawing, *, settings: MachineSettings = DEFAUL
                       scale: Optional[float] = None, fit_mm: Optional[tuple[float, float]] = None,
                       offset_mm: Optional[tuple[float, float]] = None) -> list[np.ndarray]:
     """Each stroke as ``(M, 2)`` int64 machine ``(x, y)`` steps, in file order and direction (steps 1 and 2
-    of the module docstring)."""
+    of the module docstring; every stroke, duplicates kept)."""
+    return [_cells(p) for p in _polylines_steps(drawing, settings, scale, fit_mm, offset_mm)]
+
+
+def _polylines_steps(drawing: SvgDrawing, settings: MachineSettings, scale: Optional[float],
+                     fit_mm: Optional[tuple[float, float]], offset_mm: Optional[tuple[float, float]]
+                     ) -> list[np.ndarray]:
+    """Each stroke's polyline (step 1) as ``(N, 2)`` float64 machine ``(x, y)`` steps, placed and scaled."""
     k = svg_scale(drawing, scale=scale, fit_mm=fit_mm)
     mm_per_step = settings.mm_per_step_xy
     polys = drawing.polylines(FLATTEN_STEPS * mm_per_step / k)
@@ -167,17 +192,113 @@ def svg_strokes_steps(drawing: SvgDrawing, *, settings: MachineSettings = DEFAUL
         origin = -lo
     else:
         origin = np.asarray(offset_mm, float)
-    return [_cells((origin + p * k) / mm_per_step) for p in polys]
+    return [(origin + p * k) / mm_per_step for p in polys]
 
 
-def _order(strokes: list[np.ndarray]) -> list[np.ndarray]:
-    """The strokes in cutting order, each forwards or reversed (step 3 of the module docstring)."""
+def svg_layer_order(drawing: SvgDrawing, layers: Optional[Union[str, Sequence[str]]] = None) -> list[int]:
+    """The layers to cut, as indices of ``drawing.layers()`` in cutting order: all in file order (None), or
+    those ``layers`` names (a list, or text of names separated by commas), in that order, each once; a name
+    selects its sublayers too, and on a drawing layered by colour any spelling of the colour (``red``).
+
+    Raises:
+        PlanError: a name that is no layer of the drawing (one line, naming the layers there are).
+    """
+    names = drawing.layers()
+    if layers is None:
+        return list(range(len(names)))
+    wanted = [n.strip() for n in (layers.split(",") if isinstance(layers, str) else layers) if n.strip()]
+    if not wanted:
+        raise PlanError(f"{drawing.source}: --layers names no layer; the layers are " + _listed(names))
+    out: list[int] = []
+    for name in wanted:
+        found = drawing.find_layers(name)
+        if not found:
+            raise PlanError(f"{drawing.source}: no layer '{name}'; the layers are " + _listed(names))
+        out += [i for i in found if i not in out]
+    return out
+
+
+def _listed(names: list[str]) -> str:
+    return ", ".join(f"'{n}'" for n in names)
+
+
+def _drop_duplicates(polys: list[np.ndarray]) -> tuple[list[np.ndarray], list[int], int, float]:
+    """The polylines (float steps, in cutting order) without the pieces that trace pieces before them (the
+    module docstring): ``(runs, stroke of each run, pieces dropped, steps dropped)``."""
+    counts = np.array([len(p) - 1 for p in polys], np.int64)
+    n = int(counts.sum())
+    if n < 2:
+        return list(polys), list(range(len(polys))), 0, 0.0
+    a = np.concatenate([p[:-1] for p in polys if len(p) > 1])
+    b = np.concatenate([p[1:] for p in polys if len(p) > 1])
+    length = np.hypot(*(b - a).T)
+    long = np.flatnonzero(length > MIN_DUPLICATE_STEPS)
+    dropped = np.zeros(n, bool)
+    if len(long) > 1:
+        fwd = np.hstack([a[long], b[long]])
+        rev = np.hstack([b[long], a[long]])
+        canon = _canonical(fwd, rev)
+        # exact repeats first (bounded work however many copies there are), then the near ones among the rest
+        _, first, inverse = np.unique(canon, axis=0, return_index=True, return_inverse=True)
+        inverse = inverse.reshape(-1)
+        repeat = first[inverse] != np.arange(len(long))
+        reps = np.sort(first)
+        from scipy.spatial import cKDTree  # scikit-image's dependency, already cam's (cam.digitize.sketch)
+
+        rows = np.vstack([fwd[reps], rev[reps]])
+        pairs = cKDTree(rows).query_pairs(DUPLICATE_STEPS, p=np.inf, output_type="ndarray")
+        gone = np.zeros(len(reps), bool)
+        if len(pairs):
+            i, j = pairs[:, 0] % len(reps), pairs[:, 1] % len(reps)
+            lo, hi = np.minimum(i, j), np.maximum(i, j)
+            pick = lo != hi
+            lo, hi = lo[pick], hi[pick]
+            for k in np.lexsort((lo, hi)):  # in order of the later piece: each earlier one is decided by then
+                if not gone[lo[k]]:
+                    gone[hi[k]] = True
+        rep_gone = np.zeros(len(long), bool)
+        rep_gone[reps] = gone
+        dropped[long] = repeat | rep_gone
+    if not dropped.any():
+        return list(polys), list(range(len(polys))), 0, 0.0
+    runs: list[np.ndarray] = []
+    owner: list[int] = []
+    start = 0
+    for s, (poly, m) in enumerate(zip(polys, counts)):
+        keep = ~dropped[start:start + m]
+        start += m
+        if m == 0:
+            runs.append(poly)
+            owner.append(s)
+            continue
+        edges = np.diff(np.r_[0, keep.astype(np.int8), 0])
+        for r0, r1 in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)):
+            runs.append(poly[r0:r1 + 1])
+            owner.append(s)
+    return runs, owner, int(dropped.sum()), float(length[dropped].sum())
+
+
+def _canonical(fwd: np.ndarray, rev: np.ndarray) -> np.ndarray:
+    """Each piece's ends in the order that is lexicographically smaller (``(K, 4)`` rows), so that a piece and
+    its exact reverse are equal rows."""
+    swap = np.zeros(len(fwd), bool)
+    undecided = np.ones(len(fwd), bool)
+    for c in range(4):
+        less, more = rev[:, c] < fwd[:, c], rev[:, c] > fwd[:, c]
+        swap |= undecided & less
+        undecided &= ~(less | more)
+    return np.where(swap[:, None], rev, fwd)
+
+
+def _order(strokes: list[np.ndarray], at: Optional[np.ndarray] = None) -> list[np.ndarray]:
+    """The strokes in cutting order, each forwards or reversed, from ``at`` (the home by default; step 3 of the
+    module docstring)."""
     if not strokes:
         return []
     starts = np.array([s[0] for s in strokes], float)
     ends = np.array([s[-1] for s in strokes], float)
     left = np.ones(len(strokes), bool)
-    at = np.zeros(2)
+    at = np.zeros(2) if at is None else np.asarray(at, float)
     out = []
     for _ in range(len(strokes)):
         ds = np.hypot(*(starts - at).T)
@@ -202,6 +323,9 @@ def plan_svg(
     scale: Optional[float] = None,
     fit_mm: Optional[tuple[float, float]] = None,
     offset_mm: Optional[tuple[float, float]] = None,
+    layers: Optional[Union[str, Sequence[str]]] = None,
+    pause_between_layers: bool = False,
+    keep_duplicates: bool = False,
 ) -> Job:
     """Plan the engraving of every stroke of an SVG drawing, in machine steps (see the module docstring).
 
@@ -212,32 +336,78 @@ def plan_svg(
         scale: mm of the job per mm of the drawing; fit_mm: or ``(width, height)`` mm the drawing is scaled to fit.
         offset_mm: machine position (mm from the home) of the page's origin; None = the top-left of what is
             cut at the home.
+        layers: the layers to cut, in this order (names, or text of names separated by commas; see
+            :func:`svg_layer_order`); None: every layer in file order.  What is cut (these layers) is what
+            ``fit_mm`` fits and the default placement puts at the home.
+        pause_between_layers: pause before each layer after the first (a pen or tool change).
+        keep_duplicates: cut pieces that trace pieces already cut again (default: once).
 
     Returns:
         A :class:`~cam.job.model.Job`: CUT points at the cutting depth (``target`` marks them), TRAVEL at the
-        safe height, RETRACT straight up.
+        safe height, RETRACT straight up; its ``pause_notes`` name the layer each pause is for.
 
     Raises:
-        PlanError: bad options, nothing to cut; TravelError: the drawing does not fit the travel (checked
-        before the job is built, with its extent in mm).
+        PlanError: bad options, a layer that is not in the drawing, nothing to cut; TravelError: the drawing
+        does not fit the travel (checked before the job is built, with its extent in mm).
     """
     if not (cut_depth_mm > 0) or not (travel_height_mm >= 0):
         raise PlanError("the cutting depth must be > 0 mm and the safe height >= 0 mm")
-    strokes = svg_strokes_steps(drawing, settings=settings, scale=scale, fit_mm=fit_mm, offset_mm=offset_mm)
-    if not strokes:
+    chosen = svg_layer_order(drawing, layers)
+    names = drawing.layers()
+    part, part_layer = _selected(drawing, chosen)
+    polys = _polylines_steps(part, settings, scale, fit_mm, offset_mm)
+    if not polys:
         raise PlanError(f"{drawing.source}: nothing to cut (no visible stroke or outline)")
+    warnings = list(drawing.warnings)
+    owner = list(range(len(polys)))
+    if not keep_duplicates:
+        polys, owner, n_dup, dup_steps = _drop_duplicates(polys)
+        if n_dup:
+            warnings.append(f"{n_dup} duplicate segment(s) ({dup_steps * settings.mm_per_step_xy:.1f} mm) trace "
+                            "what is already cut: cut once (--keep-duplicates cuts them again)")
+    strokes = [_cells(p) for p in polys]
+    stroke_layer = part_layer[np.asarray(owner, np.int64)]
     _check_extent(drawing, strokes, settings)
     depth_steps, safe_z_steps = _z_steps(cut_depth_mm, travel_height_mm, settings)
-    ordered = _order(strokes)
+    ordered: list[np.ndarray] = []
+    pause_first: list[int] = []  # the stroke (index in ordered) each pause comes before
+    notes: list[str] = []
+    at = np.zeros(2)
+    for layer in chosen:
+        mine = [strokes[i] for i in np.flatnonzero(stroke_layer == layer)]
+        if not mine:
+            continue  # every piece of it traced another layer's
+        if pause_between_layers and ordered:
+            pause_first.append(len(ordered))
+            notes.append(f"layer '{names[layer]}': change the pen")
+        layer_order = _order(mine, at)
+        ordered += layer_order
+        at = layer_order[-1][-1].astype(float)
     xy = np.concatenate(ordered)
     group = np.zeros(len(xy), bool)
+    pause_group = np.zeros(len(xy), bool)
     first = np.cumsum([0] + [len(s) for s in ordered[:-1]])
     gap = np.array([np.abs(ordered[i][0] - ordered[i - 1][-1]).max() if i else 2 for i in range(len(ordered))])
     group[first[gap > 1]] = True
-    pts, kind, pause = _rows(xy, group, np.zeros(len(xy), bool), depth_steps, safe_z_steps)
+    group[first[pause_first]] = True  # a pause lifts first, whatever the gap
+    pause_group[first[pause_first]] = True
+    pts, kind, pause = _rows(xy, group, pause_group, depth_steps, safe_z_steps)
     check_travel(pts, settings)
     return Job(points_steps=pts, kind=kind, target=(kind == CUT) & (pts[:, 2] == depth_steps), pause=pause,
-               settings=settings, warnings=list(drawing.warnings), pause_notes=[], source=drawing.source)
+               settings=settings, warnings=warnings, pause_notes=notes, source=drawing.source)
+
+
+def _selected(drawing: SvgDrawing, chosen: list[int]) -> tuple[SvgDrawing, np.ndarray]:
+    """The drawing with only the strokes of the ``chosen`` layers, in that order (file order within a layer),
+    and the layer of each of its strokes."""
+    layer_of = drawing.layer_of_stroke
+    idx = np.concatenate([np.flatnonzero(layer_of == layer) for layer in chosen]) if chosen else np.zeros(0, int)
+    idx = idx.astype(np.int64)
+    if len(idx) == len(layer_of) and np.array_equal(idx, np.arange(len(idx))):
+        return drawing, layer_of
+    part = dataclasses.replace(drawing, strokes=[drawing.strokes[i] for i in idx],
+                               closed=np.asarray(drawing.closed)[idx], stroke_layer=layer_of[idx])
+    return part, layer_of[idx]
 
 
 def _check_extent(drawing: SvgDrawing, strokes: list[np.ndarray], settings: MachineSettings) -> None:
