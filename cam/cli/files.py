@@ -149,6 +149,10 @@ def _info_svg(args: argparse.Namespace) -> int:
              f"  segments: {segments} (arcs as cubic Béziers)",
              f"  page {dw:.2f} x {dh:.2f} mm; cut area {w:.2f} x {h:.2f} mm at scale 1, machine time "
              f"{format_duration(job.estimated_time_s)} at 0.5 mm deep"]
+    layers = rep.get("layers", [])  # issue #31 point 6: what --layers can name
+    lines.append(f"  {len(layers)} layer(s), " + ("Inkscape layers" if rep.get("layers_from") == "inkscape" else
+                                                   "by stroke colour") + ", in file order:")
+    lines += [f"    '{layer['name']}': {layer['strokes']} strokes, {layer['length_mm']:.1f} mm" for layer in layers]
     lines += [f"warning: {w}" for w in job.warnings]
     print("\n".join(lines))
     return 0
