@@ -18,20 +18,43 @@ names it: a ``(tool: ball 1 mm, spec ball:1)`` comment in the header and
 ``T1 M6`` before the first move.  Z is then the tool's tip (the planner's
 depths are the tip's), so the program is run with the tool's length offset
 measured to its tip.  A point-tool job writes neither.
+
+Targets (``post``, ``cam export --post``, issue #30 point 4): ``generic`` (the default, as above),
+``linuxcnc`` and ``grbl``.  All three are written in millimetres (G21), which both controllers take.  Feeds
+in mm/min come from the step delays or ``feed_mm_min`` / ``plunge_feed_mm_min`` (Z moves down); a grbl or
+LinuxCNC program and every fitted program give ``F`` only where it changes.  ``spindle_rpm`` starts the
+spindle with ``M3 S<rpm>`` before the first move and stops it with ``M5`` before the end (and around each
+tool change).  A tool change is ``T<n> M6`` for LinuxCNC and generic, and for grbl (which has no tool
+changer, and answers ``M6`` with error 20) a comment naming the tool followed by a pause ``M0``: cycle start
+goes on with the new tool.
+
+Exact geometry: a job's points are machine steps; where the exact mm of a point is known (``exact_xy_mm``:
+a drill file's holes, :attr:`cam.job.drill.DrillPlan.holes_mm`, see :func:`exact_geometry`; ``exact_z_mm``:
+the drill depth asked for) it is written instead of the step's position, unless ``snap`` is set.
+
+Arcs (``arc_tolerance_mm``): each run of cutting moves is fitted with lines and XY arcs
+(:func:`cam.job.arcs.fit_path`), each within the tolerance of the job's own polyline, and written as
+``G1``/``G2``/``G3``; an arc's centre (``I``/``J``) is put on the bisector of its written ends, so the start
+and end radii agree to the last written digit.
 """
 from __future__ import annotations
 
 import io
 import os
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any, Iterator, Optional
 
 import numpy as np
 
 from ..fileio import atomic_write_text
+from ..errors import CamError
+from ..job.arcs import Segment, arc_centre_for_ends, fit_path
 from ..job.model import RETRACT, TRAVEL, Job
 
-__all__ = ["to_gcode", "gcode_pieces", "save_gcode", "feeds_mm_per_min"]
+__all__ = ["to_gcode", "gcode_pieces", "save_gcode", "feeds_mm_per_min", "exact_geometry", "POSTS"]
+
+POSTS = ("generic", "grbl", "linuxcnc")
+"""The targets G-code is written for (``cam export --post``)."""
 
 
 def feeds_mm_per_min(settings) -> tuple[float, float]:
@@ -51,36 +74,45 @@ def _comment(text: str) -> str:
     return text.replace("(", "[").replace(")", "]")
 
 
-def to_gcode(
-    toolpath: Job,
-    *,
-    flip_y: bool = False,
-    travel_height_mm: float = 1.0,
-    title: str = "cam job",
-    tool_changes: dict[int, tuple[int, str]] | None = None,
-) -> str:
-    """RS-274/NGC text for ``toolpath``.
-
-    Args:
-        toolpath: any planned job.
-        flip_y: write Y = +row (mirror) instead of the default Y = -row.
-        travel_height_mm: height above the surface for moves between cuts.
-        title: first comment line.
-        tool_changes: ``{point index: (tool number, comment)}`` -- a ``T<n> M6``
-            is written before that point.  Without it, a job planned for a real cutter
-            (``toolpath.tool``) gets ``T1 M6`` with the tool's shape and size before its first move.
+def to_gcode(toolpath: Job, **options: Any) -> str:
+    """RS-274/NGC text for ``toolpath``: every keyword of :func:`gcode_pieces`.
 
     Returns:
         The program text, ending with M2.
     """
-    return "".join(gcode_pieces(toolpath, flip_y=flip_y, travel_height_mm=travel_height_mm, title=title,
-                                tool_changes=tool_changes))
+    return "".join(gcode_pieces(toolpath, **options))
 
 
 def _point_pieces(toolpath: Any) -> Iterator[tuple[list, list]]:
     """``(points, kinds)`` lists of consecutive pieces of a job (one for a Job; a stream's pieces, one at a time)."""
     for piece in toolpath.pieces():
         yield np.asarray(piece.points_steps).tolist(), np.asarray(piece.kind).tolist()
+
+
+def exact_geometry(prepared: Any, cut_depth_mm: Optional[float] = None
+                   ) -> tuple[dict[tuple[int, int], tuple[float, float]], dict[int, float]]:
+    """``(exact_xy_mm, exact_z_mm)`` of a :class:`cam.job.jobs.PreparedJob` for :func:`gcode_pieces`: a drill
+    file's holes at their mm before rounding to steps (the first hole of a step wins), and ``cut_depth_mm``
+    for its drill depth; empty for other kinds (their points are the job's own)."""
+    xy: dict[tuple[int, int], tuple[float, float]] = {}
+    z: dict[int, float] = {}
+    plan = getattr(prepared, "drill_plan", None)
+    if plan is not None and getattr(plan, "holes_mm", None) is not None:
+        for (xs, ys), (xm, ym) in zip(np.asarray(plan.holes_steps).tolist(), np.asarray(plan.holes_mm).tolist()):
+            xy.setdefault((int(xs), int(ys)), (float(xm), float(ym)))
+        if cut_depth_mm is not None and plan.depth_steps > 0:
+            z[int(plan.depth_steps)] = float(cut_depth_mm)
+    return xy, z
+
+
+def _check_options(post: str, feed_mm_min: Optional[float], plunge_feed_mm_min: Optional[float],
+                   spindle_rpm: Optional[float], arc_tolerance_mm: Optional[float]) -> None:
+    if post not in POSTS:
+        raise CamError(f"unknown G-code target '{post}': one of {', '.join(POSTS)}")
+    for name, value in (("feed", feed_mm_min), ("plunge feed", plunge_feed_mm_min), ("spindle rpm", spindle_rpm),
+                        ("arc tolerance", arc_tolerance_mm)):
+        if value is not None and not (np.isfinite(value) and value > 0):
+            raise CamError(f"the {name} must be a number > 0, got {value!r}")
 
 
 def gcode_pieces(
@@ -90,19 +122,50 @@ def gcode_pieces(
     travel_height_mm: float = 1.0,
     title: str = "cam job",
     tool_changes: dict[int, tuple[int, str]] | None = None,
+    post: str = "generic",
+    feed_mm_min: Optional[float] = None,
+    plunge_feed_mm_min: Optional[float] = None,
+    spindle_rpm: Optional[float] = None,
+    exact_xy_mm: Optional[dict[tuple[int, int], tuple[float, float]]] = None,
+    exact_z_mm: Optional[dict[int, float]] = None,
+    snap: bool = False,
+    arc_tolerance_mm: Optional[float] = None,
 ) -> Iterator[str]:
-    """:func:`to_gcode`'s text in consecutive pieces, made a piece of the job at a time (a job planned a piece
-    at a time, :mod:`cam.job.drawing_stream`, :mod:`cam.job.hpgl_stream`, is never held whole)."""
+    """The program text for ``toolpath`` in consecutive pieces, made a piece of the job at a time (a job planned
+    a piece at a time, :mod:`cam.job.drawing_stream`, :mod:`cam.job.hpgl_stream`, is never held whole).
+
+    Args:
+        toolpath: any planned job.
+        flip_y: write Y = +row (mirror) instead of the default Y = -row.
+        travel_height_mm: height above the surface for moves between cuts.
+        title: first comment line.
+        tool_changes: ``{point index: (tool number, comment)}`` -- a tool change is written before that point.
+            Without it, a job planned for a real cutter (``toolpath.tool``) gets tool 1 with the tool's shape and
+            size before its first move.
+        post: the target, one of :data:`POSTS`.
+        feed_mm_min, plunge_feed_mm_min: X/Y (and 3D) feed and Z feed; None: from the step delays.
+        spindle_rpm: ``M3 S<rpm>`` before the first move, ``M5`` at the end; None: no spindle commands.
+        exact_xy_mm: ``{(x steps, y steps): (x mm, y mm)}`` in the steps' frame (before ``flip_y``): the exact
+            position a point of those steps stands for; exact_z_mm: ``{depth steps: depth mm}`` likewise.
+        snap: write every point at its steps even where the exact mm is known.
+        arc_tolerance_mm: fit lines and arcs to the cutting runs within this many mm; None: one G1 a point.
+    """
+    _check_options(post, feed_mm_min, plunge_feed_mm_min, spindle_rpm, arc_tolerance_mm)
     s = toolpath.settings
     mm_xy = s.mm_per_step_xy
     mm_z = s.mm_per_step_z
     y_sign = 1.0 if flip_y else -1.0
-    feed_xy, feed_z = feeds_mm_per_min(s)
+    delay_xy, delay_z = feeds_mm_per_min(s)
+    feed_xy = delay_xy if feed_mm_min is None else float(feed_mm_min)
+    feed_z = delay_z if plunge_feed_mm_min is None else float(plunge_feed_mm_min)
+    exact_xy = {} if snap or not exact_xy_mm else exact_xy_mm
+    exact_z = {} if snap or not exact_z_mm else exact_z_mm
+    modal_feed = post != "generic" or arc_tolerance_mm is not None
     oz_mm = toolpath.pixels.origin_px[2] * s.steps_per_px_z * mm_z if toolpath.pixels else 0.0
     safe_z = -oz_mm + travel_height_mm
     out = io.StringIO()
     w = out.write
-    w(f"({title.replace('(', '[').replace(')', ']')})\n")
+    w(f"({_comment(title)})\n")
     w("(generated by cam: units mm, absolute coordinates)\n")
     px = toolpath.pixels  # a drawing job: say it in the drawing's pixels
     unit_x, unit_y, unit_z = ("column", "row", "depth") if px else ("x steps", "y steps", "depth steps")
@@ -110,54 +173,133 @@ def gcode_pieces(
     w(f"(X = {unit_x} x {k_xy * mm_xy:.4f} mm; Y = {'+' if flip_y else '-'}{unit_y} x {k_xy * mm_xy:.4f} mm"
       f"{' [flipped]' if flip_y else ' [rows grow down, machine Y grows up]'})\n")
     w(f"(Z = -{unit_z} x {k_z * mm_z:.4f} mm; Z = 0 is the material surface; safe height {_fmt(safe_z)} mm)\n")
-    w(f"(feeds: X/Y {_fmt(feed_xy)} mm/min, Z {_fmt(feed_z)} mm/min, from the step delays)\n")
+    where = "from the step delays" if feed_mm_min is None and plunge_feed_mm_min is None else "as asked"
+    w(f"(feeds: X/Y {_fmt(feed_xy)} mm/min, Z {_fmt(feed_z)} mm/min, {where})\n")
+    if post != "generic" or exact_xy or exact_z or snap or arc_tolerance_mm is not None:
+        geometry = "snapped to the machine's steps" if snap else (
+            "exact where the source gives it" if exact_xy or exact_z else "the job's steps")
+        arcs = f"lines and arcs fitted within {_fmt(arc_tolerance_mm)} mm" if arc_tolerance_mm else "one line a point"
+        w(f"(target {post}; geometry {geometry}; {arcs})\n")
     cutter = getattr(toolpath, "tool", None)
     if cutter is not None and not cutter.is_point:
         w(f"(tool: {_comment(cutter.describe())}, spec {cutter.spec()}; Z is its tip)\n")
     w("G21 G90 G17 G94\n")
+    if post == "linuxcnc" and arc_tolerance_mm:
+        w(f"G64 P{_fmt(arc_tolerance_mm)}\n")  # blend corners no further from the path than the fit
+    spindle = f"M3 S{_fmt(spindle_rpm)}\n" if spindle_rpm else ""
+
+    def tool_change(n: int, comment: str) -> None:
+        if spindle:
+            w("M5\n")
+        if post == "grbl":
+            w(f"(tool change: T{n} {_comment(comment)}; cycle start to go on)\nM0\n")
+        else:
+            w(f"T{n} M6 ({_comment(comment)})\n")
+        w(spindle)
+
     if cutter is not None and not cutter.is_point and not tool_changes:
-        w(f"T1 M6 ({_comment(cutter.describe())})\n")
+        if post == "grbl":
+            w(f"(load tool 1: {_comment(cutter.describe())})\n")
+        else:
+            w(f"T1 M6 ({_comment(cutter.describe())})\n")
     w(f"G0 Z{_fmt(safe_z)}\n")
-    x_mm, y_mm, z_mm = 0.0, 0.0, safe_z
+    w(spindle)
+    state = {"x": 0.0, "y": 0.0, "z": safe_z, "f": None}
     above = True  # at the safe plane
+    run: list[tuple[float, float, float]] = []  # the cutting run being gathered: vertices in mm
+
+    def feed_word(f: float) -> str:
+        if modal_feed and state["f"] == f:
+            return ""
+        state["f"] = f
+        return f" F{_fmt(f)}"
+
+    def written(v: float) -> float:
+        return float(_fmt(v))
+
+    def flush() -> None:
+        """Write the gathered cutting run: a G1 a vertex, or fitted lines and arcs."""
+        if len(run) < 2:
+            run.clear()
+            return
+        pts = np.asarray(run, np.float64)
+        if arc_tolerance_mm:
+            segments = fit_path(pts, arc_tolerance_mm)
+        else:
+            segments = [Segment(k, "line") for k in range(1, len(pts))]
+        sx, sy, sz = written(pts[0, 0]), written(pts[0, 1]), written(pts[0, 2])
+        for seg in segments:
+            ex, ey, ez = (float(v) for v in pts[seg.end])
+            wx, wy, wz = written(ex), written(ey), written(ez)
+            if seg.kind == "line":
+                words = ""
+                if (wx, wy) != (sx, sy):
+                    words += f" X{_fmt(ex)} Y{_fmt(ey)}"
+                if wz != sz:
+                    words += f" Z{_fmt(ez)}"
+                if words:
+                    w(f"G1{words}{feed_word(feed_xy if (wx, wy) != (sx, sy) else feed_z)}\n")
+            else:
+                cx, cy = arc_centre_for_ends((sx, sy), (wx, wy), seg.centre_mm)
+                w(f"{'G2' if seg.kind == 'cw' else 'G3'} X{_fmt(ex)} Y{_fmt(ey)} I{_fmt(cx - sx)} J{_fmt(cy - sy)}"
+                  f"{feed_word(feed_xy)}\n")
+            sx, sy, sz = wx, wy, wz
+        state["x"], state["y"], state["z"] = float(pts[-1, 0]), float(pts[-1, 1]), float(pts[-1, 2])
+        run.clear()
+
+    def go_up() -> None:
+        nonlocal above
+        flush()
+        if not above:
+            w(f"G0 Z{_fmt(safe_z)}\n")
+            above, state["z"] = True, safe_z
+
+    def vertex(x: float, y: float, z: float) -> None:
+        if not run:
+            run.append((state["x"], state["y"], state["z"]))
+        if (x, y, z) != run[-1]:
+            run.append((x, y, z))
+
     tool_changes = tool_changes or {}
     i = -1
     for points, kinds in _point_pieces(toolpath):
+        flush()
         yield out.getvalue()  # what the piece before wrote
         out.seek(0)
         out.truncate()
         for (xp, yp, zp), kind in zip(points, kinds):
             i += 1
             if i in tool_changes:
-                n, comment = tool_changes[i]
-                if not above:
-                    w(f"G0 Z{_fmt(safe_z)}\n")
-                    above, z_mm = True, safe_z
-                w(f"T{n} M6 ({comment})\n")
-            nx, ny, nz = xp * mm_xy, y_sign * yp * mm_xy, -zp * mm_z
+                go_up()
+                tool_change(*tool_changes[i])
+            if exact_xy and (xp, yp) in exact_xy:
+                ex_mm, ey_mm = exact_xy[(xp, yp)]
+                nx, ny = float(ex_mm), y_sign * float(ey_mm)
+            else:
+                nx, ny = xp * mm_xy, y_sign * yp * mm_xy
+            nz = -float(exact_z[zp]) if zp in exact_z else -zp * mm_z
             if kind in (RETRACT, TRAVEL) and nz >= -oz_mm - 1e-9:
                 # at or above the surface: go up to the safe plane, travel there
-                if not above:
-                    w(f"G0 Z{_fmt(safe_z)}\n")
-                    above, z_mm = True, safe_z
-                if (nx, ny) != (x_mm, y_mm):
+                go_up()
+                if (nx, ny) != (state["x"], state["y"]):
                     w(f"G0 X{_fmt(nx)} Y{_fmt(ny)}\n")
-                    x_mm, y_mm = nx, ny
+                    state["x"], state["y"] = nx, ny
                 continue
-            if (nx, ny) != (x_mm, y_mm):
+            cur = run[-1] if run else (state["x"], state["y"], state["z"])
+            if (nx, ny) != (cur[0], cur[1]):
                 if above:  # cutting move starting from the safe plane: come down to the surface first
-                    w(f"G1 Z{_fmt(-oz_mm)} F{_fmt(feed_z)}\n")
-                    above, z_mm = False, -oz_mm
-                w(f"G1 X{_fmt(nx)} Y{_fmt(ny)} F{_fmt(feed_xy)}\n")
-                x_mm, y_mm = nx, ny
-            if nz != z_mm:
-                w(f"G1 Z{_fmt(nz)} F{_fmt(feed_z)}\n")
-                z_mm = nz
+                    w(f"G1 Z{_fmt(-oz_mm)}{feed_word(feed_z)}\n")
+                    above, state["z"] = False, -oz_mm
+                    cur = (cur[0], cur[1], -oz_mm)
+                vertex(nx, ny, cur[2])
+            if nz != cur[2]:
+                vertex(nx, ny, nz)
                 above = False
-    if not above:
-        w(f"G0 Z{_fmt(safe_z)}\n")
-    if (x_mm, y_mm) != (0.0, 0.0):
+    go_up()
+    if (state["x"], state["y"]) != (0.0, 0.0):
         w("G0 X0 Y0\n")
+    if spindle:
+        w("M5\n")
     w("M2\n")
     yield out.getvalue()
 
