@@ -383,6 +383,47 @@ def _add_export(sub: argparse._SubParsersAction) -> None:
     _add_svg_options(e)
     e.add_argument("-o", "--output", required=True, metavar="FILE.ngc", help="where to write the G-code")
     _add_option(e, "flip_y", help="write Y = +row (mirrored) instead of Y = -row (every file kind)")
+    t = e.add_argument_group("the target (issue #30 point 4; docs/file-formats.md)")
+    t.add_argument("--post", choices=("generic", "grbl", "linuxcnc"), default="generic",
+                   help="the controller the program is for: tool changes as T<n> M6 (linuxcnc, generic) or a "
+                   "comment and an M0 pause (grbl); default generic")
+    t.add_argument("--feed", type=_positive_mm("--feed"), metavar="MM_PER_MIN",
+                   help="X/Y feed in mm/min (default: the machine settings' X/Y rate)")
+    t.add_argument("--plunge-feed", type=_positive_mm("--plunge-feed"), metavar="MM_PER_MIN",
+                   help="Z feed in mm/min (default: the machine settings' Z rate)")
+    t.add_argument("--spindle-rpm", type=_positive_mm("--spindle-rpm"), metavar="RPM",
+                   help="start the spindle with M3 S<RPM> before the first move, stop it with M5 at the end")
+    t.add_argument("--snap", action="store_true",
+                   help="write every point at this machine's steps, even where the file gives it exactly")
+    t.add_argument("--arc-tolerance", type=_non_negative_mm("--arc-tolerance"), default=0.01, metavar="MM",
+                   help="fit lines and G2/G3 arcs to the cutting moves within this many mm (default 0.01; "
+                   "0: one G1 a point)")
+
+
+def _positive_mm(flag: str):
+    """An argparse type: a finite number > 0."""
+    def parse(text: str) -> float:
+        try:
+            v = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{flag} takes a number, got '{text}'") from None
+        if not (math.isfinite(v) and 0 < v <= 1e6):
+            raise argparse.ArgumentTypeError(f"{flag} must be > 0 and at most 1000000, got '{text}'")
+        return v
+    return parse
+
+
+def _non_negative_mm(flag: str):
+    """An argparse type: a finite number >= 0, at most 10 mm."""
+    def parse(text: str) -> float:
+        try:
+            v = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{flag} takes a number, got '{text}'") from None
+        if not (math.isfinite(v) and 0 <= v <= 10):
+            raise argparse.ArgumentTypeError(f"{flag} must be 0..10 mm, got '{text}'")
+        return v
+    return parse
 
 
 def _add_preview(sub: argparse._SubParsersAction) -> None:
