@@ -106,6 +106,9 @@ def test_the_emulator_counts_an_overflow(emulator):
 def send_and_wait(device: str, lines: list[str]) -> None:
     """The naive streamer: one line, then wait for its ok."""
     with serial.Serial(device, 115200, timeout=2.0) as ser:
+        time.sleep(0.1)               # the restart on open, if the emulator saw the port closed in between
+        ser.reset_input_buffer()
+        ser.write(b"\x18")            # a soft reset: the welcome line, at once
         assert ser.readline().strip().decode() == WELCOME
         for line in lines:
             ser.write((line + "\n").encode())
@@ -123,7 +126,8 @@ def test_no_starvation_with_character_counting_but_with_send_and_wait(emulator):
         link.stream(lines)
     assert emulator.executed()[-1].end_mm == pytest.approx(end)
     assert emulator.starvation_count == 0, emulator.events
-    send_and_wait(emulator.device_path, lines[:32])  # reopening resets the board (Arduino DTR): position 0
+    emulator.wait_for(lambda e: e.state == "Idle")
+    send_and_wait(emulator.device_path, lines[:32])
     assert emulator.wait_for(lambda e: e.state == "Idle" and e.planner_blocks == 0)
     assert emulator.starvation_count > 20, emulator.events
 
@@ -266,6 +270,17 @@ def test_arcs_and_overrides(emulator):
         x, y, _ = block.end_mm
         assert math.hypot(x - 15, y) == pytest.approx(5.0, abs=1e-9) and y >= -1e-9
     assert arc[-1].end_mm == (20.0, 0.0, 0.0)
+
+
+@pytest.mark.parametrize("emulator", [{"speed": None}], indirect=True)
+@pytest.mark.parametrize("radius, top_mm", [(6, 2.6834), (-6, 9.3166)])   # R < 0: the arc over 180 degrees
+def test_radius_arcs_go_the_way_grbl_documents(emulator, radius, top_mm):
+    with connect(emulator) as link:
+        link.stream(["G1 F3000", f"G2 X10 Y0 R{radius}"])                # clockwise from (0, 0): above the chord
+    ends = [b.end_mm for b in emulator.executed()]
+    centre_y = -math.sqrt(11.0) if radius > 0 else math.sqrt(11.0)   # the centre below, or above, (5, 0)
+    assert all(math.hypot(x - 5, y - centre_y) == pytest.approx(6.0, abs=1e-9) for x, y, _ in ends)
+    assert max(y for _, y, _ in ends) == pytest.approx(top_mm, abs=2e-3) and ends[-1] == (10.0, 0.0, 0.0)
 
 
 def test_url_and_status_parsing():

@@ -33,7 +33,7 @@ from ..errors import PortError
 
 __all__ = [
     "GRBL_PREFIX", "RX_BUFFER_BYTES", "ERROR_MEANINGS", "ALARM_MEANINGS", "GrblError", "GrblAlarm", "GrblStatus",
-    "StreamReport", "GrblLink", "parse_grbl_url", "parse_status", "strip_comments", "open_grbl",
+    "StreamReport", "GrblLink", "parse_grbl_url", "parse_settings", "parse_status", "strip_comments", "open_grbl",
 ]
 
 GRBL_PREFIX = "grbl:"
@@ -160,6 +160,23 @@ def parse_grbl_url(url: str) -> tuple[str, int]:
         if baud <= 0:
             raise PortError(f"{url!r}: baud must be > 0")
     return device, baud
+
+
+def parse_settings(lines: Iterable[str], device: str = "grbl") -> dict[int, float]:
+    """grbl's ``$$`` answer (``$100=250.000`` lines) as ``{100: 250.0}``.
+
+    >>> parse_settings(["$0=10", "$100=250.000", "[MSG:x]"])
+    {0: 10.0, 100: 250.0}
+    """
+    settings: dict[int, float] = {}
+    for text in lines:
+        key, eq, value = text.partition("=")
+        if eq and key.startswith("$") and key[1:].isdigit():
+            try:
+                settings[int(key[1:])] = float(value)
+            except ValueError:
+                raise GrblError(f"{device} sent a bad setting line {text!r}") from None
+    return settings
 
 
 @dataclass(frozen=True)
@@ -476,16 +493,8 @@ class GrblLink:
 
     def read_settings(self) -> dict[int, float]:
         """``$$`` into :attr:`settings` (``{100: 250.0, ...}``)."""
-        settings: dict[int, float] = {}
-        for text in self.command("$$", timeout_s=self.timeout_s):
-            key, eq, value = text.partition("=")
-            if eq and key.startswith("$") and key[1:].isdigit():
-                try:
-                    settings[int(key[1:])] = float(value)
-                except ValueError:
-                    raise GrblError(f"grbl on {self.device} sent a bad setting line {text!r}") from None
-        self.settings = settings
-        return settings
+        self.settings = parse_settings(self.command("$$", timeout_s=self.timeout_s), self.device)
+        return self.settings
 
     def stream(self, lines: Iterable[str], *, progress: Optional[Callable[[int], None]] = None,
                wait_idle: bool = True) -> StreamReport:
