@@ -377,9 +377,40 @@ def load_image(path_or_array: str | os.PathLike | np.ndarray) -> Drawing:
         raise DrawingError(f"{source}: image is empty (shape {img.shape})")
     classes, n_bad, first, n_black = _classify_pixels(img, bgr=bgr)
     if n_bad:
-        raise _unknown_error(img, n_bad, first, source, bgr)
+        error = _unknown_error(img, n_bad, first, source, bgr)
+        if n_bad >= PHOTO_PIXELS * classes.size and _grey_levels(img) >= PHOTO_GREY_LEVELS:
+            raise DrawingError(f"{error}; {PHOTO_HINT}")
+        raise error
     if n_black == 0:
         if not np.any(classes != WHITE):
             raise DrawingError(f"{source}: the drawing is empty (no black pixels)")
         raise DrawingError(f"{source}: the drawing has no black pixels (curves and contours must be black)")
-    return Drawing(classes=classes, warnings=check_rules(classes), source=source)
+    warnings = check_rules(classes)
+    if _looks_like_photo(img, classes, n_black):
+        warnings.append(f"{source}: {PHOTO_HINT}")
+    return Drawing(classes=classes, warnings=warnings, source=source)
+
+
+PHOTO_HINT = ("this looks like a photograph or a height map, not a line drawing: --trace traces a sketch or photo "
+              "into lines first, --heightmap cuts its grey levels as depths (black deepest)")
+"""The hint of a drawing that is plainly a photograph or a height map (issue #31 point 7)."""
+PHOTO_GREY_LEVELS = 32
+"""Grey levels (each on at least 0.05 % of the pixels) from which an image may be a photograph or a height map."""
+PHOTO_PIXELS = 0.01
+"""The share of pixels that fit no class, or of black pixels in thick areas, that with many grey levels makes one."""
+
+
+def _grey_levels(img: np.ndarray) -> int:
+    """How many 8-bit grey levels (the channels' mean) each cover at least 0.05 % of the image's pixels."""
+    grey = np.asarray(img[:, :, :3], np.uint16).sum(axis=2) // 3
+    counts = np.bincount(grey.ravel(), minlength=256)
+    return int(np.count_nonzero(counts >= max(1, 0.0005 * grey.size)))
+
+
+def _looks_like_photo(img: np.ndarray, classes: np.ndarray, n_black: int) -> bool:
+    """Many grey levels and black mostly in thick areas (not 1-pixel lines): a photograph or a height map."""
+    if n_black < PHOTO_PIXELS * classes.size:
+        return False
+    black = classes == BLACK
+    thick = int(np.count_nonzero(black & (neighbour_count(black) > 2)))
+    return thick >= 0.5 * n_black and _grey_levels(img) >= PHOTO_GREY_LEVELS
