@@ -144,3 +144,34 @@ def test_cli_heightmap_and_its_bad_input(tmp_path):
     assert bad.returncode == 2 and len(bad.stderr.strip().splitlines()) == 1
     with pytest.raises(CamError):
         plan_heightmap(np.zeros((2, 2), np.int64), heightmap_order="spiral")
+
+
+def test_a_height_map_read_as_a_drawing_gets_the_hint(tmp_path):
+    from cam.digitize.drawing import PHOTO_HINT
+
+    path = tmp_path / "torus.png"
+    cv2.imwrite(str(path), cv2.resize(torus_grey(40), (160, 160)))
+    d = cam.load_image(path)
+    assert any(PHOTO_HINT in w for w in d.warnings) and "--trace" in PHOTO_HINT and "--heightmap" in PHOTO_HINT
+    out = run_cli("info", str(path))
+    assert "--heightmap" in out.stdout + out.stderr
+
+
+def test_a_colour_photograph_is_refused_with_the_hint(tmp_path):
+    yy, xx = np.mgrid[0:80, 0:80]
+    photo = np.dstack([(xx * 3) % 256, (yy * 3) % 256, ((xx + yy) * 2) % 256]).astype(np.uint8)
+    path = tmp_path / "photo.png"
+    cv2.imwrite(str(path), photo)
+    with pytest.raises(CamError, match="--heightmap"):
+        cam.load_image(path)
+
+
+def test_line_drawings_get_no_hint():
+    from pathlib import Path
+
+    from cam.digitize.drawing import PHOTO_HINT
+
+    samples = sorted((Path(__file__).resolve().parent.parent / "samples").glob("*.png"))
+    assert samples
+    for path in samples:
+        assert not any(PHOTO_HINT in w for w in cam.load_image(path).warnings), path.name
