@@ -13,7 +13,8 @@ from ..digitize.drawing import load_image
 from ..digitize.profile import load_profile
 from ..errors import CamError
 from ..formats.excellon import HoleList, load_excellon
-from ..formats.gcode_export import save_gcode
+from ..formats.gcode_export import exact_geometry, save_gcode
+from ..job.drill import DEFAULT_CUT_DEPTH_MM
 from ..formats.hpgl import PLOTTER_UNIT_MM, scan_hpgl
 from ..job.model import pause_points
 from ..render.report import format_report, image_report
@@ -38,8 +39,13 @@ def cmd_export(args: argparse.Namespace) -> int:
     else:  # HPGL: "tool change: pen N"; a drawing's pauses are Pause At points, no tool
         changes = {int(i): (int(note.split()[-1]), note) for i, note in zip(at, job.toolpath.pause_notes or [])
                    if note.split()[-1].isdigit()}
+    exact_xy, exact_z = exact_geometry(job, DEFAULT_CUT_DEPTH_MM if args.cut_depth is None else args.cut_depth)
     save_gcode(job.toolpath, args.output, flip_y=args.flip_y, travel_height_mm=travel_height_mm,
-               title=f"cam: {args.image or args.load_digitized}", tool_changes=changes)
+               title=f"cam: {args.image or args.load_digitized}", tool_changes=changes,
+               post=getattr(args, "post", "generic"), feed_mm_min=getattr(args, "feed", None),
+               plunge_feed_mm_min=getattr(args, "plunge_feed", None), spindle_rpm=getattr(args, "spindle_rpm", None),
+               exact_xy_mm=exact_xy, exact_z_mm=exact_z, snap=getattr(args, "snap", False),
+               arc_tolerance_mm=getattr(args, "arc_tolerance", None) or None)  # issue #30 point 4
     if job.kind in ("drawing", "digitized"):
         print(f"{args.output}: {job.toolpath.n_targets} points, {job.toolpath.n_retracts} retracts")
     else:
