@@ -55,6 +55,8 @@ __all__ = ["to_gcode", "gcode_pieces", "save_gcode", "feeds_mm_per_min", "exact_
 
 POSTS = ("generic", "grbl", "linuxcnc")
 """The targets G-code is written for (``cam export --post``)."""
+MAX_RUN_POINTS = 50_000
+"""The most points of a cutting run held for fitting at once (a longer run is fitted in parts this long)."""
 
 
 def feeds_mm_per_min(settings) -> tuple[float, float]:
@@ -100,7 +102,8 @@ def exact_geometry(prepared: Any, cut_depth_mm: Optional[float] = None
     if plan is not None and getattr(plan, "holes_mm", None) is not None:
         for (xs, ys), (xm, ym) in zip(np.asarray(plan.holes_steps).tolist(), np.asarray(plan.holes_mm).tolist()):
             xy.setdefault((int(xs), int(ys)), (float(xm), float(ym)))
-        if cut_depth_mm is not None and plan.depth_steps > 0:
+        mm_z = prepared.settings.mm_per_step_z
+        if cut_depth_mm is not None and plan.depth_steps > 0 and round(cut_depth_mm / mm_z) == plan.depth_steps:
             z[int(plan.depth_steps)] = float(cut_depth_mm)
     return xy, z
 
@@ -188,14 +191,17 @@ def gcode_pieces(
         w(f"G64 P{_fmt(arc_tolerance_mm)}\n")  # blend corners no further from the path than the fit
     spindle = f"M3 S{_fmt(spindle_rpm)}\n" if spindle_rpm else ""
 
+    spindle_on = False  # started lazily before the first cut, and after each tool change
+
     def tool_change(n: int, comment: str) -> None:
-        if spindle:
+        nonlocal spindle_on
+        if spindle_on:
             w("M5\n")
+            spindle_on = False
         if post == "grbl":
-            w(f"(tool change: T{n} {_comment(comment)}; cycle start to go on)\nM0\n")
+            w(f"(load tool {n}: {_comment(comment)}; then cycle start)\nM0\n")
         else:
             w(f"T{n} M6 ({_comment(comment)})\n")
-        w(spindle)
 
     if cutter is not None and not cutter.is_point and not tool_changes:
         if post == "grbl":
@@ -203,7 +209,6 @@ def gcode_pieces(
         else:
             w(f"T1 M6 ({_comment(cutter.describe())})\n")
     w(f"G0 Z{_fmt(safe_z)}\n")
-    w(spindle)
     state = {"x": 0.0, "y": 0.0, "z": safe_z, "f": None}
     above = True  # at the safe plane
     run: list[tuple[float, float, float]] = []  # the cutting run being gathered: vertices in mm
@@ -255,6 +260,8 @@ def gcode_pieces(
             above, state["z"] = True, safe_z
 
     def vertex(x: float, y: float, z: float) -> None:
+        if len(run) >= MAX_RUN_POINTS:  # by count, not by piece: a job written whole or a piece at a time is alike
+            flush()
         if not run:
             run.append((state["x"], state["y"], state["z"]))
         if (x, y, z) != run[-1]:
@@ -263,7 +270,6 @@ def gcode_pieces(
     tool_changes = tool_changes or {}
     i = -1
     for points, kinds in _point_pieces(toolpath):
-        flush()
         yield out.getvalue()  # what the piece before wrote
         out.seek(0)
         out.truncate()
@@ -288,17 +294,23 @@ def gcode_pieces(
             cur = run[-1] if run else (state["x"], state["y"], state["z"])
             if (nx, ny) != (cur[0], cur[1]):
                 if above:  # cutting move starting from the safe plane: come down to the surface first
+                    if spindle and not spindle_on:
+                        w(spindle)
+                        spindle_on = True
                     w(f"G1 Z{_fmt(-oz_mm)}{feed_word(feed_z)}\n")
                     above, state["z"] = False, -oz_mm
                     cur = (cur[0], cur[1], -oz_mm)
                 vertex(nx, ny, cur[2])
             if nz != cur[2]:
+                if spindle and not spindle_on:
+                    w(spindle)
+                    spindle_on = True
                 vertex(nx, ny, nz)
                 above = False
     go_up()
     if (state["x"], state["y"]) != (0.0, 0.0):
         w("G0 X0 Y0\n")
-    if spindle:
+    if spindle_on:
         w("M5\n")
     w("M2\n")
     yield out.getvalue()
