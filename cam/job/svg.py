@@ -206,7 +206,7 @@ def svg_layer_order(drawing: SvgDrawing, layers: Optional[Union[str, Sequence[st
     names = drawing.layers()
     if layers is None:
         return list(range(len(names)))
-    wanted = [n.strip() for n in (layers.split(",") if isinstance(layers, str) else layers) if n.strip()]
+    wanted = [n.strip() for n in (_split_names(layers) if isinstance(layers, str) else layers) if n.strip()]
     if not wanted:
         raise PlanError(f"{drawing.source}: --layers names no layer; the layers are " + _listed(names))
     out: list[int] = []
@@ -216,6 +216,17 @@ def svg_layer_order(drawing: SvgDrawing, layers: Optional[Union[str, Sequence[st
             raise PlanError(f"{drawing.source}: no layer '{name}'; the layers are " + _listed(names))
         out += [i for i in found if i not in out]
     return out
+
+
+def _split_names(text: str) -> list[str]:
+    """Names separated by commas, a comma inside parentheses kept (``rgb(255,0,0)``)."""
+    out, depth, start = [], 0, 0
+    for i, ch in enumerate(text):
+        depth += (ch == "(") - (ch == ")")
+        if ch == "," and depth <= 0:
+            out.append(text[start:i])
+            start = i + 1
+    return out + [text[start:]]
 
 
 def _listed(names: list[str]) -> str:
