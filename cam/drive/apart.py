@@ -26,6 +26,7 @@ does.  If the parent dies, the child stops the job (tool lifted) and ends.
 """
 from __future__ import annotations
 
+import gc
 import mmap
 import os
 import signal
@@ -135,6 +136,10 @@ def _child(sock_fd: int, page_fd: int, parent_pid: int) -> None:
     for name in ("SIGINT", "SIGTERM", "SIGHUP"):
         if hasattr(signal, name):
             signal.signal(getattr(signal, name), signal.SIG_IGN)
+    # the objects of the imports (numba, numpy: hundreds of thousands) out of the collector's full passes: such a
+    # pass held the interpreter for 50 ms every 2 s of a run, and the writer with it (benchmarks/busy_pc.py)
+    gc.collect()
+    gc.freeze()
     claimed = claim_machine(_NICE)  # the machine first: a real-time class, locked memory, a core of its own
     conn = Connection(sock_fd)
     conn.send(("claimed", claimed))

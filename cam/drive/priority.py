@@ -15,7 +15,7 @@ import os
 import resource
 from typing import Optional
 
-__all__ = ["claim_machine", "as_background", "FIFO_PRIORITY"]
+__all__ = ["claim_machine", "as_background", "real_time_class", "FIFO_PRIORITY", "CLAIM_ENV"]
 
 FIFO_PRIORITY = 20
 """SCHED_FIFO priority of the runner: above every ordinary process, below the kernel's own real-time threads
@@ -66,18 +66,47 @@ def _own_core() -> str:
     return f"on core {cpus[-1]} of {len(cpus)}"
 
 
+CLAIM_ENV = "CAM_RUNNER_CLAIM"
+"""``nice``: the runner only takes the niceness step, as before issue #32 point 2 (benchmarks/busy_pc.py compares the
+two); anything else, or unset: the full claim."""
+
+
 def claim_machine(nice_fallback: int = -10) -> str:
     """Ask for SCHED_FIFO (else the ``nice_fallback`` niceness step), lock the process's memory and keep the calling
-    thread on the last core; returns one line saying what was got."""
+    thread on the last core; returns one line saying what was got (with ``CAM_RUNNER_CLAIM=nice`` in the
+    environment: the niceness step only)."""
+    if os.environ.get(CLAIM_ENV) == "nice":
+        try:
+            os.nice(nice_fallback)
+            return f"nice {os.nice(0)} only ({CLAIM_ENV}=nice)"
+        except OSError:
+            return f"the ordinary priority ({CLAIM_ENV}=nice)"
     return f"{_real_time(nice_fallback)}, {_lock_memory()}, {_own_core()}"
 
 
-def as_background() -> None:
-    """The calling thread back in the ordinary scheduling class, on every core the process had (a helper thread
-    of the runner: it inherited the runner's class and core)."""
+HELPER_PRIORITY = 10
+"""SCHED_FIFO priority of the runner's helper threads (the chunk maker, the journal): below the writer, above every
+ordinary process.  They share the interpreter with the writer, so one that an ordinary process preempted while it
+held the interpreter's lock held the writer up until it ran again: 50 ms stalls with both cores busy
+(benchmarks/busy_pc.py)."""
+
+
+def real_time_class() -> bool:
+    """Whether the calling thread runs in a real-time scheduling class (SCHED_FIFO or SCHED_RR)."""
     try:
-        if os.sched_getscheduler(0) != os.SCHED_OTHER:
-            os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+        return os.sched_getscheduler(0) in (os.SCHED_FIFO, os.SCHED_RR)
+    except (OSError, AttributeError):
+        return False
+
+
+def as_background() -> None:
+    """The calling thread (a helper thread of the runner: it inherited the runner's class and core) below the
+    writer: SCHED_FIFO at :data:`HELPER_PRIORITY` when the writer has a real-time class (so no ordinary process
+    preempts it while it holds the interpreter's lock the writer needs), else the ordinary class; on every core the
+    process had."""
+    try:
+        if os.sched_getscheduler(0) == os.SCHED_FIFO:
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(HELPER_PRIORITY))
     except (OSError, AttributeError):
         pass
     if _EVERY_CPU is not None:

@@ -36,7 +36,7 @@ from ..settings import INPUT_BITS, MachineSettings
 from ..verify.pinlog import PinLog, carve, decode_pin_log
 from .._compiled import resolved
 from ._kernels import net_steps_kernel
-from .priority import as_background
+from .priority import as_background, real_time_class
 from .ports import MockPort, Port, open_port
 from .pins import axis_bits
 from .chunks import ChunkedPlan, StepChunk, plan_chunks
@@ -58,6 +58,10 @@ SWITCHED = "switched"
 
 _BATCH = 16384
 _SPIN_NS = 2_000_000  # busy-wait the last 2 ms before a write: sleeps here overshoot by up to ~1.5 ms (p99)
+_SPIN_REAL_TIME_NS = 200_000
+"""The busy-wait of a writer in a real-time scheduling class, whose sleeps end on time: short, because the kernel
+stops a real-time task that runs all the time for 50 ms each second (``sched_rt_runtime_us``, 950 ms of 1 s by
+default): with the 2 ms spin a 0.5 ms job spun without a break and stalled 50 ms every second."""
 _PROGRESS_EVERY_NS = 50_000_000
 _SWITCH_S = 0.0002
 """The interpreter's switch interval during a chunked real-time run (Python's default is 5 ms): how long the
@@ -543,6 +547,7 @@ class _RealClock:
         self.lateness = Lateness()
         self.reramp = _ReRamp(settings, self.lateness)
         self.last_progress = -_PROGRESS_EVERY_NS
+        self.spin_ns = _SPIN_REAL_TIME_NS if real_time_class() else _SPIN_NS
 
     def chunks(self, plan: Plan) -> Iterator[StepChunk]:
         return _made_ahead(plan.chunks())
@@ -579,8 +584,8 @@ class _RealClock:
                 remaining = target - time.monotonic_ns()
                 if remaining <= 0:
                     break
-                if remaining > _SPIN_NS:
-                    wake.wait((remaining - _SPIN_NS) / 1e9)
+                if remaining > self.spin_ns:
+                    wake.wait((remaining - self.spin_ns) / 1e9)
                     wake.clear()
             if self.switches is not None and self.switches.check(p.read_inputs(), int(data[j])):
                 return j  # a switch closed (or the one waited for changed): nothing more is sent
