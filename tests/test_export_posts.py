@@ -1,0 +1,285 @@
+"""G-code for a target (issue #30 point 4): `cam export --post grbl|linuxcnc|generic`, feeds, spindle, tool
+changes, exact geometry (no snapping unless --snap) and lines and arcs fitted within --arc-tolerance.
+
+Checked by LinuxCNC's interpreter (rs274) for ``linuxcnc``, by the grbl emulator (cam.sim.grbl, driven by the
+host link) for ``grbl``, and the fitted path against the job's own: the same job written one G1 a point (through
+rs274) and the mock's decoded pin log."""
+from __future__ import annotations
+
+import math
+import re
+import shutil
+import sys
+
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+import cam
+from cam.cli import main
+from cam.formats.gcode_export import to_gcode
+from cam.job.arcs import fit_path
+from conftest import SAMPLES
+from support.lcnc import canonical_polyline_mm, parse_canonical, run_rs274
+
+needs_rs274 = pytest.mark.skipif(shutil.which("rs274") is None, reason="rs274 (linuxcnc-uspace) not installed")
+
+GRBL_WORDS = re.compile(r"^(G0|G1|G2|G3|G17|G21|G90|G94|M0|M2|M3|M5|[XYZIJFS]-?\d+(\.\d+)?)$")
+"""The words the grbl post may write: all grbl 1.1 takes (no M6, no G64, no T)."""
+
+
+def _drill_file(tmp_path, tools=((1, 0.8, [(7.62, 2.54), (10.16, 5.08)]),)):
+    body = ["M48", "METRIC"] + [f"T{t}C{d:.3f}" for t, d, _ in tools] + ["%"]
+    for t, _, holes in tools:
+        body.append(f"T{t}")
+        body += [f"X{x:.3f}Y{y:.3f}" for x, y in holes]
+    body.append("M30")
+    path = tmp_path / "board.drl"
+    path.write_text("\n".join(body) + "\n")
+    return path
+
+
+def _code_lines(text: str) -> list[str]:
+    return [ln for ln in (re.sub(r"\(.*?\)", "", ln).strip() for ln in text.splitlines()) if ln]
+
+
+def _canon_path(text: str, tmp_path, name: str) -> tuple[np.ndarray, list]:
+    path = tmp_path / name
+    path.write_text(text)
+    moves = parse_canonical(run_rs274(str(path)))
+    pts, _ = canonical_polyline_mm(moves, max_chord_mm=0.004)
+    return _dense(pts, 0.004), moves
+
+
+def _dense(points: np.ndarray, chord_mm: float = 0.002) -> np.ndarray:
+    """A polyline split into chords of at most ``chord_mm``."""
+    out = [points[:1]]
+    for a, b in zip(points[:-1], points[1:]):
+        n = max(1, int(math.ceil(np.linalg.norm(b - a) / chord_mm)))
+        out.append(a + (b - a) * (np.arange(1, n + 1) / n)[:, None])
+    return np.concatenate(out)
+
+
+def _below(points: np.ndarray) -> np.ndarray:
+    return points[points[:, 2] < -1e-6]
+
+
+def _hausdorff(a: np.ndarray, b: np.ndarray) -> float:
+    """The larger of the two one-way distances between two point sets (dense polylines)."""
+    return float(max(cKDTree(b).query(a)[0].max(), cKDTree(a).query(b)[0].max()))
+
+
+# ---------------------------------------------------------------------------------------------- fitting
+
+
+def _segment_points(points: np.ndarray, segments) -> np.ndarray:
+    """The fitted path sampled every ~1 micrometre (arcs by their centre and direction, as G2/G3 run)."""
+    out = [points[:1]]
+    start = points[0]
+    for seg in segments:
+        end = points[seg.end]
+        if seg.kind == "line":
+            out.append(_dense(np.array([start, end]), 0.001)[1:])
+        else:
+            cx, cy = seg.centre_mm
+            a0 = math.atan2(start[1] - cy, start[0] - cx)
+            a1 = math.atan2(end[1] - cy, end[0] - cx)
+            sweep = (a1 - a0) % (2 * math.pi) if seg.kind == "ccw" else -((a0 - a1) % (2 * math.pi))
+            r = math.hypot(start[0] - cx, start[1] - cy)
+            n = max(2, int(abs(sweep) * r / 0.001))
+            a = a0 + sweep * np.arange(1, n + 1) / n
+            out.append(np.column_stack([cx + r * np.cos(a), cy + r * np.sin(a), np.full(n, start[2])]))
+        start = end
+    return np.concatenate(out)
+
+
+def test_a_circle_is_one_arc_and_a_line_one_line():
+    a = np.linspace(0, 1.9 * math.pi, 500)
+    circle = np.column_stack([5 * np.cos(a), 5 * np.sin(a), np.zeros_like(a)])
+    segs = fit_path(circle, 0.01)
+    assert [s.kind for s in segs] == ["ccw"] and segs[0].end == 499
+    assert segs[0].centre_mm == pytest.approx((0.0, 0.0), abs=1e-9)
+    assert [s.kind for s in fit_path(circle[::-1], 0.01)] == ["cw"]
+    line = np.column_stack([np.linspace(0, 10, 50), np.linspace(0, 3, 50), np.linspace(0, -1, 50)])
+    assert [(s.kind, s.end) for s in fit_path(line, 0.01)] == [("line", 49)]
+
+
+@pytest.mark.parametrize("tol", [0.01, 0.05])
+def test_fitted_path_stays_within_the_tolerance_of_a_noisy_curve(tol):
+    rng = np.random.default_rng(7)
+    t = np.linspace(0, 3 * math.pi, 1500)
+    r = 4 + 0.5 * np.sin(t / 3)
+    pts = np.column_stack([r * np.cos(t), r * np.sin(t), np.zeros_like(t)])
+    pts[:, :2] += rng.uniform(-0.004, 0.004, (len(t), 2))
+    pts[700:, 2] = -0.5  # a change of depth: an arc never spans it
+    segs = fit_path(pts, tol)
+    assert len(segs) < len(pts) / 10 and segs[-1].end == len(pts) - 1
+    assert any(s.kind != "line" for s in segs)
+    assert _hausdorff(_segment_points(pts, segs), _dense(pts, 0.001)) <= tol + 0.001
+
+
+# ---------------------------------------------------------------------------------------------- exact geometry
+
+
+def test_holes_are_written_where_the_file_puts_them_unless_snap(tmp_path):
+    src = _drill_file(tmp_path)
+    out = tmp_path / "exact.ngc"
+    assert main(["export", str(src), "-o", str(out), "--offset", "0,10", "--cut-depth", "1.5"]) == 0
+    text = out.read_text()
+    assert "G0 X7.62 Y-7.46" in text and "G0 X10.16 Y-4.92" in text and "G1 Z-1.5 " in text
+    assert "7.6296" not in text
+    assert main(["export", str(src), "-o", str(out), "--offset", "0,10", "--cut-depth", "1.5", "--snap"]) == 0
+    snapped = out.read_text()
+    assert "G0 X7.6296 Y-7.4562" in snapped and "G1 Z-1.5072 " in snapped  # 264 x 0.0289 mm, 96 x 0.0157 mm
+
+
+@needs_rs274
+def test_linuxcnc_drills_the_exact_holes_with_tool_changes_and_spindle(tmp_path):
+    src = _drill_file(tmp_path, ((1, 0.8, [(7.62, 2.54), (10.16, 5.08)]), (2, 1.0, [(3.3, 4.4)])))
+    out = tmp_path / "lc.ngc"
+    assert main(["export", str(src), "-o", str(out), "--post", "linuxcnc", "--offset", "0,10", "--cut-depth",
+                 "1.5", "--spindle-rpm", "12000", "--feed", "800", "--plunge-feed", "200"]) == 0
+    text = out.read_text()
+    code = _code_lines(text)
+    assert [ln for ln in code if "M6" in ln] == ["T1 M6", "T2 M6"]
+    # the spindle stops before each tool change and starts again before the next cut
+    assert [ln for ln in code if ln.startswith(("M3", "M5", "T"))] == \
+        ["T1 M6", "M3 S12000", "M5", "T2 M6", "M3 S12000", "M5"]
+    canon = run_rs274(str(out))
+    assert canon.count("CHANGE_TOOL(") == 2 and canon.count("START_SPINDLE_CLOCKWISE") == 2
+    assert "SET_SPINDLE_SPEED(0, 12000.0000)" in canon or "SET_SPINDLE_SPEED(12000.0000)" in canon
+    assert "SET_FEED_RATE(200.0000)" in canon
+    bottoms = np.array([m.end for m in parse_canonical(canon) if m.kind == "feed" and m.end[2] < 0])
+    holes = {(7.62, -7.46), (10.16, -4.92), (3.3, -5.6)}
+    assert {(round(x, 6), round(y, 6)) for x, y, _ in bottoms} == holes
+    assert np.allclose(bottoms[:, 2], -1.5, atol=1e-6)
+
+
+def test_grbl_tool_changes_are_a_comment_and_a_pause_in_grbl_words(tmp_path):
+    src = _drill_file(tmp_path, ((1, 0.8, [(7.62, 2.54)]), (2, 1.0, [(3.3, 4.4)])))
+    out = tmp_path / "g.ngc"
+    assert main(["export", str(src), "-o", str(out), "--post", "grbl", "--offset", "0,10",
+                 "--spindle-rpm", "9000"]) == 0
+    lines = out.read_text().splitlines()
+    pauses = [i for i, ln in enumerate(lines) if ln == "M0"]
+    assert len(pauses) == 2
+    assert all(lines[i - 1].startswith("(load tool ") for i in pauses)
+    assert "(load tool 2: T2 1.000 mm" in lines[pauses[1] - 1]
+    for ln in _code_lines("\n".join(lines)):
+        assert all(GRBL_WORDS.match(w) for w in ln.split()), ln
+        assert len(ln) <= 80
+
+
+def test_feeds_are_the_settings_or_the_options_and_only_written_when_they_change():
+    job = cam.plan(cam.digitize(cam.load_image(SAMPLES / "ellipse.png")), depth=3)
+    text = to_gcode(job, post="grbl", feed_mm_min=900, plunge_feed_mm_min=120, spindle_rpm=10000)
+    code = _code_lines(text)
+    feeds = [w for ln in code for w in ln.split() if w.startswith("F")]
+    assert set(feeds) == {"F900", "F120"}
+    assert len(feeds) <= 2 * sum(ln.startswith("G0 Z") for ln in code)  # at most a change per plunge
+    first_cut = next(i for i, ln in enumerate(code) if ln.startswith("G1"))
+    assert code[first_cut - 1] == "M3 S10000" and code[-2:] == ["M5", "M2"]
+    generic = _code_lines(to_gcode(job))
+    assert "M3" not in " ".join(generic) and any(ln.endswith("F346.8") for ln in generic)  # the step delays
+
+
+def test_bad_target_options_are_one_line_errors(tmp_path, capsys):
+    src = _drill_file(tmp_path)
+    for bad in (["--post", "marlin"], ["--feed", "-5"]):
+        with pytest.raises(SystemExit) as exit_:
+            main(["export", str(src), "-o", str(tmp_path / "x.ngc"), *bad])
+        assert exit_.value.code == 2
+    err = capsys.readouterr().err
+    assert "--feed must be > 0" in err and "Traceback" not in err
+    job = cam.plan(cam.digitize(cam.load_image(SAMPLES / "ellipse.png")), depth=3)
+    with pytest.raises(cam.CamError, match="unknown G-code target 'fanuc'"):
+        to_gcode(job, post="fanuc")
+
+
+# ---------------------------------------------------------------------------------------------- arcs, checked
+
+
+def _drawing_job():
+    return cam.plan(cam.digitize(cam.load_image(SAMPLES / "ellipse.png")), depth=3)
+
+
+def _relief_job():
+    d = cam.digitize(cam.load_image(SAMPLES / "disc.png"))
+    return cam.plan(d, profile=cam.load_profile(SAMPLES.parent / "profiles" / "dome.png"))
+
+
+@needs_rs274
+@pytest.mark.parametrize("make, tol, ratio", [
+    (_drawing_job, 0.01, 0.6),
+    pytest.param(_drawing_job, 0.1, 0.35, marks=pytest.mark.slow),
+    pytest.param(_relief_job, 0.01, 0.6, marks=pytest.mark.slow),
+])
+def test_fitted_program_is_shorter_and_within_the_tolerance_of_the_job(tmp_path, make, tol, ratio):
+    job = make()
+    plain = to_gcode(job, post="linuxcnc")
+    fitted = to_gcode(job, post="linuxcnc", arc_tolerance_mm=tol)
+    assert len(fitted.splitlines()) < ratio * len(plain.splitlines())
+    want, _ = _canon_path(plain, tmp_path, "plain.ngc")
+    got, moves = _canon_path(fitted, tmp_path, "fitted.ngc")
+    if tol >= 0.1:
+        assert sum(m.kind == "arc" for m in moves) > 20
+    assert _hausdorff(_below(got), _below(want)) <= tol + 0.003
+
+
+@needs_rs274
+@pytest.mark.slow
+def test_fitted_path_follows_the_mocks_pin_log(tmp_path):
+    """The fitted program's path against what the job itself drives: the mock's pin log, decoded.  The steps
+    stand up to one step off the straight line between two points (the motion is stepped), so the bound is the
+    tolerance and a step."""
+    job = _drawing_job()
+    tol = 0.05
+    got, _ = _canon_path(to_gcode(job, post="linuxcnc", arc_tolerance_mm=tol), tmp_path, "f.ngc")
+    motion = cam.decode_pin_log(cam.run(job).pin_log(), job.settings)
+    s = job.settings
+    pos = motion.position_steps.astype(float) * (s.mm_per_step_xy, -s.mm_per_step_xy, -s.mm_per_step_z)
+    steps = _below(_dense(pos, 0.005))
+    assert _hausdorff(_below(got), steps) <= tol + s.mm_per_step_xy * math.sqrt(2) + 0.003
+
+
+# ---------------------------------------------------------------------------------------------- grbl emulator
+
+
+@pytest.fixture
+def quick_thread_switches():
+    before = sys.getswitchinterval()
+    sys.setswitchinterval(0.0005)
+    yield
+    sys.setswitchinterval(before)
+
+
+@pytest.mark.slow
+@pytest.mark.usefixtures("quick_thread_switches")
+def test_grbl_emulator_runs_the_grbl_program_to_the_end_on_the_jobs_path(tmp_path):
+    from cam.drive.grbl_link import GrblLink
+    from cam.sim.grbl import start_emulator
+
+    job = _drawing_job()
+    tol = 0.05
+    text = to_gcode(job, post="grbl", arc_tolerance_mm=tol, spindle_rpm=10000, feed_mm_min=3000,
+                    plunge_feed_mm_min=1000)
+    assert "G2 " in text or "G3 " in text
+    emu = start_emulator(speed=None, settings={110: 5000.0, 111: 5000.0, 112: 5000.0, 120: 500.0, 121: 500.0,
+                                                122: 500.0})
+    try:
+        with GrblLink(f"grbl:{emu.device_path}?baud=115200", welcome_timeout_s=1.0) as link:
+            report = link.stream(text.splitlines())   # raises on any error:n or alarm
+        assert report.max_outstanding_bytes <= 128
+    finally:
+        emu.stop()
+    assert emu.error is None
+    answers = [a for _, _, a in emu.lines()]
+    assert answers and all(a == "ok" for a in answers)
+    executed = emu.executed()
+    assert executed[-1].end_mm == pytest.approx((0.0, 0.0, 1.0), abs=1e-9)   # home at the safe height
+    ends = np.array([b.end_mm for b in executed if b.kind != "G0"])
+    want, _ = _canon_path(to_gcode(job, post="linuxcnc"), tmp_path, "plain.ngc") if shutil.which("rs274") \
+        else (None, None)
+    if want is not None:
+        d = cKDTree(_below(want)).query(_below(ends))[0]
+        assert d.max() <= tol + 0.003
