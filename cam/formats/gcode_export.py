@@ -199,7 +199,7 @@ def gcode_pieces(
             w("M5\n")
             spindle_on = False
         if post == "grbl":
-            w(f"(load tool {n}: {_comment(comment)}; then cycle start)\nM0\n")
+            w(f"(load tool {n}: {_comment(comment)}, then cycle start)\nM0\n")
         else:
             w(f"T{n} M6 ({_comment(comment)})\n")
 
