@@ -39,10 +39,11 @@ def carve(job: cam.Job, shape: tuple[int, int], spec: str) -> np.ndarray:
     return cut.depth_steps
 
 
+@pytest.mark.parametrize("slopes", [True, False])
 @pytest.mark.parametrize("spec", ["ball:1", "flat:1", "v:60:0:3.175", "point"])
-def test_no_pixel_is_cut_deeper_than_asked(spec):
+def test_no_pixel_is_cut_deeper_than_asked(spec, slopes):
     depth = depth_steps_of(torus_grey(24) / 255.0, 0.8, S)
-    job = plan_heightmap(depth, tool=spec, settings=S, stepover=0.5)
+    job = plan_heightmap(depth, tool=spec, settings=S, stepover=0.5, slopes=slopes)
     cut = carve(job, depth.shape, spec)
     c = compare_surface(cut, depth, S)
     assert c.max_gouge_mm == 0
@@ -55,7 +56,7 @@ def test_no_pixel_is_cut_deeper_than_asked(spec):
     if spec == "point":
         assert np.array_equal(cut, depth)  # the point tool cuts every pixel exactly
     # rows one pixel apart: the material left is no more than the drop-cutter surface itself leaves
-    job = plan_heightmap(depth, tool=spec, settings=S, stepover=0.01)
+    job = plan_heightmap(depth, tool=spec, settings=S, stepover=0.01, slopes=slopes)
     cut = carve(job, depth.shape, spec)
     assert compare_surface(cut, depth, S).max_gouge_mm == 0
     reach = reach_depth_px(allowed, parse_tool(spec), S.px_to_mm_xy(1), S.mm_per_step_z)
@@ -66,17 +67,23 @@ def test_random_ridges_are_not_gouged():
     rng = np.random.default_rng(7)
     grey = rng.integers(0, 256, (14, 16)).astype(np.float64) / 255
     depth = depth_steps_of(grey, 0.5, S)
-    for spec in ("ball:1", "v:90:0.1"):
-        job = plan_heightmap(depth, tool=spec, settings=S, stepover=0.3, pixel_size_mm=0.3)
-        assert compare_surface(carve(job, depth.shape, spec), depth, S).max_gouge_mm == 0
+    for spec in ("ball:1", "v:90:0.1", "flat:0.8"):
+        for slopes in (True, False):
+            job = plan_heightmap(depth, tool=spec, settings=S, stepover=0.3, pixel_size_mm=0.3, slopes=slopes)
+            assert compare_surface(carve(job, depth.shape, spec), depth, S).max_gouge_mm == 0, (spec, slopes)
 
 
-def test_moves_change_xy_or_z_never_both_and_end_home():
+@pytest.mark.parametrize("slopes", [False, True])
+def test_moves_and_the_end_home(slopes):
     depth = depth_steps_of(torus_grey(20) / 255.0, 0.5, S)
-    job = plan_heightmap(depth, tool="ball:1", settings=S)
+    job = plan_heightmap(depth, tool="ball:1", settings=S, slopes=slopes)
     p = np.vstack([[0, 0, 0], job.points_steps])
     d = np.diff(p, axis=0)
-    assert not np.any(np.any(d[:, :2] != 0, axis=1) & (d[:, 2] != 0))
+    both = np.any(d[:, :2] != 0, axis=1) & (d[:, 2] != 0)
+    if slopes:  # X and Z together only along a row
+        assert both.any() and not np.any(d[both, 1])
+    else:  # the staircase: X/Y or Z, never both
+        assert not both.any()
     assert np.array_equal(job.points_steps[-1], [0, 0, 0])
     assert int(job.points_steps[:, 2].max()) == int(drop_surface_steps(depth, parse_tool("ball:1"), S.px_to_mm_xy(1),
                                                                        S).max())
@@ -133,6 +140,12 @@ def test_prepare_job_reads_an_image_as_a_heightmap(tmp_path):
     assert inv.toolpath.points_steps[:, 2].max() != job.toolpath.points_steps[:, 2].max() or \
         not np.array_equal(inv.toolpath.points_steps, job.toolpath.points_steps)
     assert job.preview_png()[:4] == b"\x89PNG"
+    # of the two paths the faster is kept
+    depth = depth_steps_of(torus_grey(30) / 255.0, 0.5, S)
+    times = {slopes: cam.plan_steps(plan_heightmap(depth, tool="ball:1", settings=S, slopes=slopes)).estimated_time_s
+             for slopes in (True, False)}
+    assert job.estimated_time_s == pytest.approx(min(times.values()))
+    assert job.report["heightmap"]["path"] == ("every X step" if times[True] < times[False] else "pixel centres")
 
 
 def test_cli_heightmap_and_its_bad_input(tmp_path):

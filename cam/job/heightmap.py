@@ -17,11 +17,16 @@
   drop-cutter depth (:func:`cam.tool.drop_depth_px`: the least, over the
   pixels under the tool, of their depth plus the tool's rise there),
   worked out in bands of rows (memory bounded by the band, whatever the
-  image's height).  Every move goes between two pixel centres side by side,
-  changing X/Y or Z, never both, at a depth no deeper than both ends allow:
-  going deeper it moves then plunges, going shallower it lifts then moves.
-  A pixel centre is then nearest one end of every move, so no position
-  along it cuts any pixel centre below its target.
+  image's height).  Along a row the tool follows the drop-cutter depth at every X step
+  (:func:`sub_drop_steps`), X and Z together, where the step planner's DDA
+  keeps every position it passes through at or above it (:func:`_row_fine`),
+  or, at pixel centres only, a staircase: every move between two pixel
+  centres side by side changes X/Y or Z, never both, at a depth no deeper
+  than both ends allow (going deeper it moves then plunges, going shallower
+  it lifts then moves); a pixel centre is then nearest one end of every
+  move, so no position along it cuts any pixel centre below its target.
+  :func:`prepare_heightmap` plans both and keeps the one with the shorter
+  machine time.
 * **Order.** ``rows``: rows ``stepover`` x the tool's diameter apart (at
   least one pixel; every row for the point tool), the last row always cut,
   zig-zag along X, each row from its first to its last pixel with any
@@ -51,7 +56,7 @@ from ..tool import POINT, Tool, drop_depth_px, parse_tool, tool_of_settings
 from .model import CUT, RETRACT, TRAVEL, Job, PixelFrame, check_travel
 
 __all__ = ["DEFAULT_MAX_DEPTH_MM", "BAND_ROWS", "grey_of_image", "load_heightmap", "depth_steps_of",
-           "drop_surface_steps", "pixel_steps_of", "row_spacing_px", "plan_heightmap", "prepare_heightmap"]
+           "drop_surface_steps", "sub_drop_steps", "pixel_steps_of", "row_spacing_px", "plan_heightmap", "prepare_heightmap"]
 
 DEFAULT_MAX_DEPTH_MM = 1.0
 """The depth of the deepest grey when ``max_depth_mm`` is not given."""
@@ -136,6 +141,46 @@ def drop_surface_steps(depth_steps: np.ndarray, tool: Tool, px_mm: float, settin
     return out
 
 
+def sub_drop_steps(depth_steps: np.ndarray, tool: Tool, px_mm: float, steps_per_px: int,
+                   settings: MachineSettings = DEFAULT_SETTINGS, band_rows: int = BAND_ROWS) -> np.ndarray:
+    """``(H, W, steps_per_px)`` int64: the drop-cutter depth (as :func:`drop_surface_steps`) with the tool's axis
+    ``m`` X steps right of each pixel centre, ``m = 0 .. steps_per_px - 1`` (``m = 0``: the centre itself), in
+    bands of rows."""
+    from ..tool import _lowest, footprint_px
+
+    d = np.asarray(depth_steps, np.int64)
+    h, w = d.shape
+    out = np.empty((h, w, steps_per_px), np.int64)
+    if tool.is_point:
+        out[:] = 0
+        out[:, :, 0] = d
+        return out
+    feet = [footprint_px(tool, px_mm, settings.mm_per_step_z, centre=(m / steps_per_px, 0.0))
+            for m in range(steps_per_px)]
+    reach = int(math.ceil(tool.radius_mm / px_mm)) + 2
+    for r0 in range(0, h, band_rows):
+        r1 = min(h, r0 + band_rows)
+        a0, a1 = max(0, r0 - reach), min(h, r1 + reach)
+        for m, (dy, dx, rise) in enumerate(feet):
+            low = _lowest(d[a0:a1], dy, dx, rise, (a1 - a0, w), 0)[r0 - a0:r1 - a0]
+            out[r0:r1, :, m] = np.maximum(low, 0)
+    out[:, :, 0] = np.minimum(out[:, :, 0], d)
+    return out
+
+
+def _sub_along(sub_row: np.ndarray, xs: np.ndarray, steps_per_px: int) -> np.ndarray:
+    """``(len(xs), steps_per_px)``: the drop-cutter depths of a row (``sub_row``, :func:`sub_drop_steps`) at X
+    step ``m`` from each pixel of ``xs`` toward the next (``xs`` side by side, either way)."""
+    if len(xs) < 2 or xs[1] > xs[0]:
+        return sub_row[xs]
+    n = steps_per_px
+    out = np.empty((len(xs), n), np.int64)
+    out[:, 0] = sub_row[xs, 0]
+    left = np.maximum(xs - 1, 0)
+    out[:, 1:] = sub_row[left][:, :0:-1]  # X = x - m / n = (x - 1) + (n - m) / n
+    return out
+
+
 def row_spacing_px(tool: Tool, px_mm: float, stepover: float) -> int:
     """Rows ``stepover`` x the tool's diameter apart in whole pixels (at least 1; 1 for the point tool)."""
     if tool.is_point:
@@ -151,16 +196,20 @@ def _rows(h: int, spacing: int) -> list[int]:
 
 
 class _Path:
-    """Points (pixel x, pixel y, Z steps) and their kinds, appended a move at a time (X/Y or Z, never both)."""
+    """Points (x, y in X/Y steps, z in Z steps) and their kinds, appended a move at a time."""
 
-    def __init__(self) -> None:
+    def __init__(self, steps_per_px: int) -> None:
+        self.spp = steps_per_px
         self.pts: list[np.ndarray] = [np.zeros((0, 3), np.int64)]
         self.kind: list[np.ndarray] = [np.zeros(0, np.uint8)]
         self.target: list[np.ndarray] = [np.zeros(0, bool)]
         self.at = np.zeros(3, np.int64)
 
-    def add(self, pts: np.ndarray, kind: int, target: Any = False) -> None:
-        pts = np.asarray(pts, np.int64).reshape(-1, 3)
+    def add(self, pts_steps: Any, kind: int, target: Any = False) -> None:
+        pts = np.asarray(pts_steps, np.int64).reshape(-1, 3)
+        if len(pts) and np.array_equal(pts[0], self.at):
+            pts = pts[1:]
+            target = np.asarray(target, bool)[1:] if np.ndim(target) else target
         if not len(pts):
             return
         self.pts.append(pts)
@@ -169,27 +218,58 @@ class _Path:
         self.at = pts[-1].copy()
 
     def go(self, x: int, y: int, z_cap: int, allowed: np.ndarray) -> None:
-        """From where the tool is to pixel (x, y), along its row then down the column, at the shallowest depth
-        allowed on the way (never deeper than where it is), then down to (x, y)'s own depth."""
-        x0, y0, z0 = (int(v) for v in self.at)
-        xs = allowed[y0, min(x0, x):max(x0, x) + 1] if 0 <= y0 < allowed.shape[0] else np.zeros(1, np.int64)
+        """From the pixel centre where the tool is to pixel (x, y)'s centre, along its row then down the column,
+        at the shallowest depth allowed on the way (never deeper than where it is nor than ``z_cap``)."""
+        s = self.spp
+        x0, y0, z0 = int(self.at[0]) // s, int(self.at[1]) // s, int(self.at[2])
+        xs = allowed[y0, min(x0, x):max(x0, x) + 1]
         ys = allowed[min(y0, y):max(y0, y) + 1, x]
         z = int(max(0, min(z0, int(xs.min()), int(ys.min()), z_cap)))
-        if z != z0:
-            self.add([(x0, y0, z)], RETRACT)
-        if x != x0:
-            self.add([(x, y0, z)], TRAVEL)
-        if y != y0:
-            self.add([(x, y, z)], TRAVEL)
+        self.add([(x0 * s, y0 * s, z)], RETRACT)
+        self.add([(x * s, y0 * s, z)], TRAVEL)
+        self.add([(x * s, y * s, z)], TRAVEL)
 
     def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         return np.vstack(self.pts), np.concatenate(self.kind), np.concatenate(self.target)
 
 
+def _row_fine(y_steps: int, x0_steps: int, way: int, sub_t: np.ndarray, steps_per_px: int
+              ) -> tuple[np.ndarray, np.ndarray]:
+    """The path along a row at every X step: ``sub_t[t]`` is the drop-cutter depth ``t`` X steps from the
+    first pixel centre ``x0_steps`` the way ``way`` (+1 or -1).
+
+    A move of one X step going deeper passes through its start's X at depths down to one step above its
+    end (the step planner's DDA steps X in its last period), so it goes to at most one step below the
+    depth allowed where it starts, and the rest is a plunge at its end.  Going up, a move stays at or
+    above both ends.  Runs of equal moves are joined (the DDA passes the same positions).  Returns the
+    points ``(K, 3)`` in steps (the first included) and whether each is at a pixel centre's own depth.
+    """
+    d = np.asarray(sub_t, np.int64)
+    t = np.arange(len(d))
+    arrive = np.r_[d[0], np.minimum(d[1:], d[:-1] + 1)]
+    extra = d > arrive
+    n = len(d) + int(np.count_nonzero(extra))
+    pos = np.arange(len(d)) + np.r_[0, np.cumsum(extra)[:-1]]
+    x = np.empty(n, np.int64)
+    z = np.empty(n, np.int64)
+    tgt = np.zeros(n, bool)
+    x[pos], z[pos] = t, arrive
+    x[pos[extra] + 1], z[pos[extra] + 1] = t[extra], d[extra]
+    centre = t % steps_per_px == 0
+    tgt[pos[centre & ~extra]] = True
+    tgt[pos[centre & extra] + 1] = True
+    pts = np.column_stack([x0_steps + way * x, np.full(n, y_steps, np.int64), z])
+    if len(pts) > 2:  # a point between two equal moves is dropped (a run of equal moves is one)
+        v = np.diff(pts, axis=0)
+        keep = np.r_[True, np.any(v[1:] != v[:-1], axis=1), True]
+        pts, tgt = pts[keep], tgt[keep]
+    return pts, tgt
+
+
 def _row_points(y: int, xs: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The staircase through pixels ``xs`` (side by side, in cutting order) of row ``y`` at depths ``z``:
-    going deeper, move then plunge; going shallower, lift then move.  Points ``(K, 3)`` and whether each
-    is at a pixel's own depth; runs at one depth are one move."""
+    going deeper, move then plunge; going shallower, lift then move.  Points ``(K, 3)`` in pixels (Z in
+    steps) and whether each is at a pixel's own depth; runs at one depth are one move."""
     n = len(xs)
     nxt_z = np.r_[z[1:], z[-1]]
     deeper = nxt_z > z
@@ -218,7 +298,7 @@ def _row_points(y: int, xs: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, np.n
 def plan_heightmap(
     depth_steps: np.ndarray, *, tool: Tool | str | None = None, settings: MachineSettings = DEFAULT_SETTINGS,
     pixel_size_mm: Optional[float] = None, stepover: float = 0.5, heightmap_order: str = "rows",
-    stepdown_mm: Optional[float] = None, source: str = "<heightmap>",
+    stepdown_mm: Optional[float] = None, slopes: bool = True, source: str = "<heightmap>",
 ) -> Job:
     """The job that cuts the relief ``depth_steps`` with ``tool`` (see the module docstring).
 
@@ -230,6 +310,8 @@ def plan_heightmap(
         stepover: rows' spacing as a fraction of the tool's diameter (at least one pixel).
         heightmap_order: ``"rows"`` or ``"peel"`` (level by level, shallowest first).
         stepdown_mm: the levels' spacing of ``peel`` (None: an eighth of the deepest depth).
+        slopes: follow the drop-cutter depth at every X step along the rows, moving X and Z together
+            (:func:`_row_fine`); False: pixel centres only, in a staircase (as the point tool always is).
 
     Returns:
         A :class:`~cam.job.model.Job` from and back to where the tool stands, with its pixel frame.
@@ -249,6 +331,7 @@ def plan_heightmap(
     frame = PixelFrame(width_px=w, height_px=h, steps_per_px_xy=spp, steps_per_px_z=1)
     check_travel(np.array([[0, 0, 0], [(w - 1) * spp, (h - 1) * spp, int(d.max(initial=0))]]), settings, frame)
     allowed = drop_surface_steps(d, cutter, px_mm, settings)
+    sub = sub_drop_steps(d, cutter, px_mm, spp, settings) if slopes and not cutter.is_point else None
     rows = _rows(h, row_spacing_px(cutter, px_mm, stepover))
     deepest = int(allowed.max(initial=0))
     if heightmap_order == "peel" and deepest > 0:
@@ -257,7 +340,7 @@ def plan_heightmap(
         levels = list(range(step, deepest, step)) + [deepest]
     else:
         levels = [deepest]
-    path = _Path()
+    path = _Path(spp)
     flip = False
     previous = 0
     for level in levels:
@@ -273,19 +356,18 @@ def plan_heightmap(
             flip = not flip
             z = cap[y, xs]
             path.go(int(xs[0]), y, int(z[0]), allowed)
-            if path.at[2] != z[0]:
-                path.add([(xs[0], y, z[0])], CUT, True)
-            pts, tgt = _row_points(y, xs, z)
-            if len(pts) and np.array_equal(pts[0], path.at):
-                pts, tgt = pts[1:], tgt[1:]
-            path.add(pts, CUT, tgt)
+            if sub is None or len(xs) < 2:
+                pts, tgt = _row_points(y, xs, z)
+                path.add(pts * np.array([spp, spp, 1]), CUT, tgt)
+            else:
+                along = np.minimum(_sub_along(sub[y], xs, spp).reshape(-1)[:(len(xs) - 1) * spp + 1], level)
+                pts, tgt = _row_fine(y * spp, int(xs[0]) * spp, 1 if xs[-1] > xs[0] else -1, along, spp)
+                path.add(pts, CUT, tgt)
         previous = level
     if path.at[2]:  # lift where it stands, then home at the surface
         path.add([(path.at[0], path.at[1], 0)], RETRACT)
-    if path.at.any():
-        path.add([(0, 0, 0)], TRAVEL)
-    pts_px, kind, tgt = path.arrays()
-    pts_steps = frame.to_steps(pts_px)
+    path.add([(0, 0, 0)], TRAVEL)
+    pts_steps, kind, tgt = path.arrays()
     rest = d - allowed
     if cutter.is_point:
         pass
@@ -306,9 +388,17 @@ def prepare_heightmap(path: Path, options: Any, settings: MachineSettings) -> An
     cutter = parse_tool(options.tool, "--tool") if options.tool else tool_of_settings(settings.tool)
     max_depth_mm = options.max_depth_mm if options.max_depth_mm is not None else DEFAULT_MAX_DEPTH_MM
     depth = depth_steps_of(grey, max_depth_mm, settings, invert=bool(options.invert))
-    job = plan_heightmap(depth, tool=cutter, settings=settings, pixel_size_mm=options.pixel_size_mm,
-                         stepover=options.stepover, heightmap_order=options.heightmap_order,
-                         stepdown_mm=options.stepdown_mm, source=path.name)
+    # the path at every X step (X and Z together) is faster on smooth slopes, the staircase at pixel centres on
+    # jagged ones (a flat end mill's drop-cutter depth between centres): both are planned, the faster kept
+    best = None
+    for slopes in ((True, False) if not cutter.is_point else (False,)):
+        candidate = plan_heightmap(depth, tool=cutter, settings=settings, pixel_size_mm=options.pixel_size_mm,
+                                   stepover=options.stepover, heightmap_order=options.heightmap_order,
+                                   stepdown_mm=options.stepdown_mm, slopes=slopes, source=path.name)
+        steps = plan_chunks(candidate)
+        if best is None or steps.estimated_time_s < best[1].estimated_time_s:
+            best = (candidate, steps, slopes)
+    job, steps, slopes = best  # type: ignore[misc]
     spp = job.pixels.steps_per_px_xy
     h, w = depth.shape
     levels = len(np.unique(np.rint(grey * 255)))
@@ -317,7 +407,8 @@ def prepare_heightmap(path: Path, options: Any, settings: MachineSettings) -> An
     rgb = np.repeat(np.rint(grey * 255).astype(np.uint8)[:, :, None], 3, axis=2)
     report = {"heightmap": {"width_px": w, "height_px": h, "pixel_size_mm": spp * settings.mm_per_step_xy,
                             "max_depth_mm": max_depth_mm, "invert": bool(options.invert),
-                            "order": options.heightmap_order, "grey_levels": levels},
+                            "order": options.heightmap_order, "grey_levels": levels,
+                            "path": "every X step" if slopes else "pixel centres"},
               "points": len(job), "tool": cutter.describe()}
-    return PreparedJob(source=str(path), kind="drawing", plan=plan_chunks(job), settings=settings, toolpath=job,
+    return PreparedJob(source=str(path), kind="drawing", plan=steps, settings=settings, toolpath=job,
                        warnings=list(job.warnings), summary=summary, report=report, drawing_rgb=rgb)
