@@ -212,6 +212,7 @@ class GrblEmulator(_System, _GCode, _Realtime, _Motion, AbstractContextManager):
         if self._log_path:
             self._log_file = open(self._log_path, "w", encoding="utf-8")
             self._log_file.write(LOG_HEADER + "\n")
+        self._tx.clear()   # what the board said at power-up went to no one: no host had the port open
         self._wall0 = time.monotonic()
         self._t0 = self._t
         # the most simulated time one pass may run without looking at the port (2 ms of wall time, at least
@@ -327,7 +328,7 @@ class GrblEmulator(_System, _GCode, _Realtime, _Motion, AbstractContextManager):
                         self._t0 -= now - self._t - self._max_lag_s
                         now = self._t + self._max_lag_s
                     self._advance(now)
-                    self._flush_tx(hup or boot_at is not None)
+                    self._flush_tx(discard=hup or boot_at is not None)
                     busy = self._busy()
                 wait_s = 0.0005 if busy or boot_at is not None else 0.02
                 if self._speed is None and busy:
@@ -358,13 +359,13 @@ class GrblEmulator(_System, _GCode, _Realtime, _Motion, AbstractContextManager):
             last = max(last, now + self._latency_s) + self._byte_s
             self._wire.append((last, b))
 
-    def _flush_tx(self, hold_back: bool) -> None:
-        if hold_back:
-            return
+    def _flush_tx(self, discard: bool) -> None:
+        """Write the replies whose time has come; with no host on the port (or the board restarting) they
+        are lost, as on a real line."""
         out = bytearray()
         while self._tx and (self._tx[0][0] <= self._t or self._speed is None):
             out += self._tx.popleft()[1]
-        if out:
+        if out and not discard:
             try:
                 os.write(self._master, bytes(out))
             except OSError:
