@@ -5,8 +5,9 @@ the same path in far fewer blocks: a run of points that lie within ``tol_mm`` of
 ``G1``, a run that lies within ``tol_mm`` of one circular arc in the XY plane (at one height) is one ``G2``/``G3``.
 
 :func:`fit_path` is greedy: from the first point of what is left it takes the longest run that a line fits, and
-the longest that an arc fits (found by doubling the run, then halving back), whichever reaches further (a line
-when they tie), and goes on from that run's end.  Each segment ends on a point of the path, so the fitted path
+the longest that an arc fits (found by doubling the run, then halving back), and takes the arc only when it
+reaches :data:`ARC_COST_LINES` times as far as the line (an arc's block is that much longer), and goes on from
+that run's end.  Each segment ends on a point of the path, so the fitted path
 passes through every point it keeps.  What is checked, for every run taken:
 
 * a line: every point of the run within ``tol_mm`` of the segment from its first point to its last (3D);
@@ -34,6 +35,9 @@ DEFAULT_ARC_TOLERANCE_MM = 0.01
 """``cam export --arc-tolerance``'s default: 10 micrometres."""
 MAX_RADIUS_MM = 1000.0
 """The largest radius an arc is written with (a flatter run is a line)."""
+ARC_COST_LINES = 1.8
+"""An arc is taken only when it reaches this many times as many points as a line from the same point: its
+block (``G2 X Y I J``) is about that many times as long as a line's (``G1 X Y``)."""
 
 
 @dataclass(frozen=True)
@@ -156,7 +160,7 @@ def fit_path(points_mm: np.ndarray, tol_mm: float = DEFAULT_ARC_TOLERANCE_MM, *,
     while i < n - 1:
         j_line = _longest(i, n, lambda j: _line_ok(p, i, j, tol_mm), i + 1)
         j_arc = _longest(i, n, lambda j: _arc_fit(p, i, j, tol_mm, max_radius_mm) is not None, i + 2)
-        if j_arc > j_line:
+        if j_arc - i > ARC_COST_LINES * (j_line - i):
             arc = _arc_fit(p, i, j_arc, tol_mm, max_radius_mm)
             assert arc is not None
             segments.append(arc)
