@@ -47,6 +47,10 @@ can, never sleeping).  Motion advances in ticks of 1 ms of simulated time; the s
 on the same clock.  Machine coordinates: as grbl's with homing toward +X+Y+Z, the machine space is
 ``[-$13x, 0]``; the emulated carriage starts at ``start_mm`` (machine coordinates of power-up are 0 there).
 
+The parts: this module (the port, the clock, the thread, the controls), ``_grbl_motion`` (planner and
+motion, homing, limits), ``_grbl_realtime`` (real-time bytes and status reports), ``_grbl_system`` (lines,
+answers and ``$`` commands), ``_grbl_gcode`` (the G-code parser) and ``_grbl_base`` (constants and types).
+
 Logs, for tests: :meth:`GrblEmulator.executed` (one :class:`ExecutedBlock` per planner block run, with its line
 number and exact start and end machine positions), :meth:`GrblEmulator.lines` (every line taken, with its
 answer), :attr:`GrblEmulator.events` (overflows, starvations, alarms, resets).
