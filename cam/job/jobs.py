@@ -781,6 +781,8 @@ def prepare_job(
         from .heightmap import prepare_heightmap
         job = prepare_heightmap(p, opts, settings)
     elif kind in ("drawing", "digitized"):
+        from .heightmap import check_heightmap_options
+        check_heightmap_options(opts, p.name)  # --invert, --max-depth, ... only with --heightmap
         job = _prepare_pixels(p, kind, opts, settings)
     elif kind == "gcode":
         job = _prepare_gcode(p, opts, settings, machine_state)
