@@ -200,8 +200,6 @@ def drill_file(*body: str, header: str = "T1C0.8") -> str:
     (drill_file("G93X900000.0Y0", "X900000.0Y0"), "7", "the position X1.8e+06 mm lies beyond"),
     (drill_file("X0Y0", "R9000X200.0"), "7", "the position X1.0002e+06 mm lies beyond"),
     (drill_file("X1.0Y1.0", header=f"T1C{DIGITS_400}.0"), "3:3", "C999999999999999999999... is out of range"),
-    (drill_file("X1.0Y1.0", header="T1C100.1"), "3:3", "bad diameter 100.1 (must be > 0 and at most 100 mm)"),
-    (drill_file("X1.0Y1.0", header="T1C0"), "3:3", "bad diameter 0"),
     (drill_file("X1.0Y1.0", header="T1000000C0.8"), "3:1", "T1000000 is out of range (a whole number 0..999999)"),
     (drill_file("X1.0Y1.0", header=f"T{'9' * 5000}C0.8"), "3:1", "is out of range (a whole number 0..999999)"),
     (drill_file("X1.0Y1.0", f"G{'9' * 5000}"), "7:1", "is out of range (a whole number 0..999999999)"),
@@ -213,6 +211,18 @@ def test_excellon_numbers_out_of_range_name_the_line(text, where, fragment):
     message = str(info.value)
     assert message.startswith(f"big.drl:{where}:") and fragment in message, message
     assert len(message) < 260
+
+
+@pytest.mark.parametrize("header, why", [("T1C100.1", "T1 100.100 mm (larger than the 100 mm a drill may be)"),
+                                         ("T1C0", "T1 0.000 mm (zero size)")])
+def test_excellon_tools_that_cannot_be_drilled_are_left_out_or_refused(header, why):
+    """A bad tool is not a bad file (issue #31 point 3): its holes are left out with a warning; strict refuses the
+    file, naming the tool and the line of its hole."""
+    h = cam.parse_excellon(drill_file("X1.0Y1.0", header=header), source="big.drl")
+    assert len(h.holes_mm) == 0 and h.skipped == {1: 1} and any(why in w for w in h.warnings)
+    with pytest.raises(cam.ParseError) as info:
+        cam.parse_excellon(drill_file("X1.0Y1.0", header=header), source="big.drl", strict=True)
+    assert str(info.value).startswith("big.drl:6: tool ") and why in str(info.value)
 
 
 def test_excellon_repeats_are_bounded_in_all():
