@@ -20,7 +20,7 @@ from ..job.model import pause_points
 from ..render.report import format_report, image_report
 from .common import format_duration, machine_settings, reading_bar, speeds_line
 from .checks import job_kind_of
-from .planning import excellon_digits, prepare, profile_of, write_job_preview
+from .planning import excellon_digits, job_options, prepare, profile_of, write_job_preview
 
 __all__ = ["cmd_export", "cmd_preview", "cmd_info", "cmd_digitize", "cmd_profile"]
 
@@ -39,7 +39,8 @@ def cmd_export(args: argparse.Namespace) -> int:
     else:  # HPGL: "tool change: pen N"; a drawing's pauses are Pause At points, no tool
         changes = {int(i): (int(note.split()[-1]), note) for i, note in zip(at, job.toolpath.pause_notes or [])
                    if note.split()[-1].isdigit()}
-    exact_xy, exact_z = exact_geometry(job, DEFAULT_CUT_DEPTH_MM if args.cut_depth is None else args.cut_depth)
+    exact_xy, exact_z = exact_geometry(job, DEFAULT_CUT_DEPTH_MM if args.cut_depth is None else args.cut_depth,
+                                       job_options(args))
     save_gcode(job.toolpath, args.output, flip_y=args.flip_y, travel_height_mm=travel_height_mm,
                title=f"cam: {args.image or args.load_digitized}", tool_changes=changes,
                post=getattr(args, "post", "generic"), feed_mm_min=getattr(args, "feed", None),
