@@ -51,7 +51,8 @@ from ..errors import CamError
 from ..job.arcs import Segment, arc_centre_for_ends, fit_path
 from ..job.model import RETRACT, TRAVEL, Job
 
-__all__ = ["to_gcode", "gcode_pieces", "save_gcode", "feeds_mm_per_min", "exact_geometry", "POSTS"]
+__all__ = ["to_gcode", "gcode_pieces", "save_gcode", "feeds_mm_per_min", "exact_geometry", "svg_exact_xy_mm",
+           "POSTS"]
 
 POSTS = ("generic", "grbl", "linuxcnc")
 """The targets G-code is written for (``cam export --post``)."""
@@ -91,13 +92,20 @@ def _point_pieces(toolpath: Any) -> Iterator[tuple[list, list]]:
         yield np.asarray(piece.points_steps).tolist(), np.asarray(piece.kind).tolist()
 
 
-def exact_geometry(prepared: Any, cut_depth_mm: Optional[float] = None
+def exact_geometry(prepared: Any, cut_depth_mm: Optional[float] = None, options: Any = None
                    ) -> tuple[dict[tuple[int, int], tuple[float, float]], dict[int, float]]:
     """``(exact_xy_mm, exact_z_mm)`` of a :class:`cam.job.jobs.PreparedJob` for :func:`gcode_pieces`: a drill
     file's holes at their mm before rounding to steps (the first hole of a step wins), and ``cut_depth_mm``
-    for its drill depth; empty for other kinds (their points are the job's own)."""
+    for its drill depth; an SVG file's strokes (:func:`svg_exact_xy_mm`, with the job's
+    :class:`cam.job.jobs.JobOptions` ``options``: scale, fit, offset, layers); empty for other kinds (their
+    points are the job's own)."""
     xy: dict[tuple[int, int], tuple[float, float]] = {}
     z: dict[int, float] = {}
+    if getattr(prepared, "kind", None) == "svg" and options is not None:
+        from .svg import load_svg
+
+        return svg_exact_xy_mm(load_svg(prepared.source), prepared.settings, scale=options.scale,
+                               fit_mm=options.fit_mm, offset_mm=options.offset_mm, layers=options.layers), z
     plan = getattr(prepared, "drill_plan", None)
     if plan is not None and getattr(plan, "holes_mm", None) is not None:
         for (xs, ys), (xm, ym) in zip(np.asarray(plan.holes_steps).tolist(), np.asarray(plan.holes_mm).tolist()):
@@ -106,6 +114,73 @@ def exact_geometry(prepared: Any, cut_depth_mm: Optional[float] = None
         if cut_depth_mm is not None and plan.depth_steps > 0 and round(cut_depth_mm / mm_z) == plan.depth_steps:
             z[int(plan.depth_steps)] = float(cut_depth_mm)
     return xy, z
+
+
+SAMPLE_STEPS = 0.1
+"""The spacing, in steps, of the samples of an SVG stroke that :func:`svg_exact_xy_mm` rounds like the planner."""
+FLATTEN_MM = 0.0005
+"""How close to an SVG curve the polylines :func:`svg_exact_xy_mm` samples are (half a micrometre)."""
+MAX_SAMPLES = 2_000_000
+"""More samples than this: an SVG drawing is written at its steps (the exact positions would take too much memory)."""
+
+
+def svg_exact_xy_mm(drawing: Any, settings: Any, *, scale: Optional[float] = None,
+                    fit_mm: Optional[tuple[float, float]] = None, offset_mm: Optional[tuple[float, float]] = None,
+                    layers: Any = None) -> dict[tuple[int, int], tuple[float, float]]:
+    """``{(x steps, y steps): (x mm, y mm)}``: for each step an SVG job's strokes pass through, a point of the
+    strokes themselves in it, placed and scaled as :func:`cam.job.svg.plan_svg` places them.
+
+    The strokes are flattened within :data:`FLATTEN_MM` and sampled every :data:`SAMPLE_STEPS` steps; each
+    sample goes to the step it rounds to (as the planner rounds its samples) and the eight around it, and a step
+    keeps a vertex of the strokes that rounds to it (a corner, a stroke's end) or else the sample nearest its
+    centre.  So a job point
+    is written on the drawing's own curve, within a step of where the steps put it, and a circle's points lie
+    on the circle (an arc fits them).
+    """
+    from ..job.svg import FLATTEN_STEPS, _selected, svg_layer_order, svg_scale
+
+    part, _ = _selected(drawing, svg_layer_order(drawing, layers))
+    k = svg_scale(part, scale=scale, fit_mm=fit_mm)
+    mm = settings.mm_per_step_xy
+    if offset_mm is None:
+        coarse = part.polylines(FLATTEN_STEPS * mm / k)  # the planner's placement: its polylines' top-left
+        if not coarse:
+            return {}
+        origin = -np.concatenate(coarse).min(axis=0) * k
+    else:
+        origin = np.asarray(offset_mm, np.float64)
+    polys = [(origin + p * k) / mm for p in part.polylines(FLATTEN_MM / k)]
+    polys = [p for p in polys if len(p)]
+    if not polys:
+        return {}
+    samples, vertex = [], []
+    total = 0
+    for p in polys:
+        d = np.diff(p, axis=0)
+        n = np.maximum(1, np.ceil(np.hypot(d[:, 0], d[:, 1]) / SAMPLE_STEPS)).astype(np.int64)
+        total += int(n.sum()) + 1
+        if total > MAX_SAMPLES:
+            return {}
+        seg = np.repeat(np.arange(len(d)), n)
+        t = (np.arange(len(seg)) - np.repeat(np.cumsum(n) - n, n)) / np.repeat(n, n)
+        samples.append(np.vstack([p[seg] + d[seg] * t[:, None], p[-1:]]))
+        vertex.append(np.append(t == 0, True))
+    pts = np.concatenate(samples)
+    own = np.floor(pts + 0.5).astype(np.int64)
+    is_vertex = np.concatenate(vertex)
+    # every sample is offered to its own step and the 8 around it (the planner's coarser polyline may round a
+    # sample into a step next to the fine curve's): a vertex in its own step first, then the nearest sample
+    cells = np.concatenate([own + (dx, dy) for dx in (-1, 0, 1) for dy in (-1, 0, 1)])
+    src = np.tile(np.arange(len(pts)), 9)
+    off = np.hypot(*(pts[src] - cells).T)
+    off[4 * len(pts):5 * len(pts)] -= 2.0 * is_vertex  # (dx, dy) = (0, 0)
+    order = np.lexsort((off, cells[:, 1], cells[:, 0]))
+    c = cells[order]
+    first = np.ones(len(c), bool)
+    first[1:] = np.any(c[1:] != c[:-1], axis=1)
+    keep = order[first]
+    exact = pts[src[keep]] * mm
+    return dict(zip(map(tuple, cells[keep].tolist()), map(tuple, exact.tolist())))
 
 
 def _check_options(post: str, feed_mm_min: Optional[float], plunge_feed_mm_min: Optional[float],
