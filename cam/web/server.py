@@ -62,6 +62,7 @@ Security:
 from __future__ import annotations
 
 import asyncio
+import gc
 import ipaddress
 import json
 import re
@@ -1029,10 +1030,9 @@ def _freeze_startup_objects() -> None:
 
     A full pass over them takes tens to hundreds of milliseconds, during which the event loop answers no
     one; connection churn (a flood) makes such passes come every few seconds, and each one held up an
-    emergency stop that came during it.  The web stack's own first-use imports are made first.
+    emergency stop that came during it.  The web stack's own first-use imports are made first; ``serve``
+    unfreezes when the server has stopped.
     """
-    import gc
-
     import uvicorn.protocols.http.h11_impl  # noqa: F401 (imported by the server at its start otherwise)
     from starlette.responses import FileResponse, JSONResponse, StreamingResponse  # noqa: F401
 
@@ -1061,5 +1061,8 @@ def serve(config: ServerConfig, announce: Callable[[str], None] = print) -> int:
     _freeze_startup_objects()
     announce(f"cam: web page at {page_url(config, port)}")
     announce(f"cam: machine port {config.machine_port} ({mode}); uploads in {config.jobs_dir}; Ctrl-C stops")
-    server.run(sockets=[sock])
+    try:
+        server.run(sockets=[sock])
+    finally:
+        gc.unfreeze()  # what the server held (its session, the machine's lock) may be let go again
     return 0
