@@ -45,6 +45,7 @@ FUNCTION_LEVEL_IMPORTS = {
         "optional dependency: the web stack (cam[web]); cam.web.server imports without it, so 'cam serve' "
         "can name the extra in one line",
     ("cam.web.server", "uvicorn"): "optional dependency: the web stack (cam[web]), as starlette",
+    ("cam.web.connections", "uvicorn"): "optional dependency: the web stack (cam[web]), as cam.web.server",
     ("cam.cli", "numba"): "heavy (about half a second): the first-compile note is registered only when a "
                           "command runs, so --help and bad options stay quick",
 }
