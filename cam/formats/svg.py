@@ -316,7 +316,7 @@ def expanded_size(raw: bytes, source: str = "<svg>") -> int:
     """
     try:
         root = ElementTree.fromstring(raw)
-    except (ElementTree.ParseError, ValueError):
+    except (ElementTree.ParseError, ValueError, LookupError):  # LookupError: an unknown declared encoding
         return 0
     by_id = {el.get("id"): el for el in root.iter() if el.get("id")}
     memo: dict[int, int] = {}

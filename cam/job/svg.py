@@ -376,9 +376,9 @@ def plan_svg(
         if n_dup:
             warnings.append(f"{n_dup} duplicate segment(s) ({dup_steps * settings.mm_per_step_xy:.1f} mm) trace "
                             "what is already cut: cut once (--keep-duplicates cuts them again)")
+    _check_extent(drawing, polys, settings)  # before the samples are made: their count follows the size
     strokes = [_cells(p) for p in polys]
     stroke_layer = part_layer[np.asarray(owner, np.int64)]
-    _check_extent(drawing, strokes, settings)
     depth_steps, safe_z_steps = _z_steps(cut_depth_mm, travel_height_mm, settings)
     ordered: list[np.ndarray] = []
     pause_first: list[int] = []  # the stroke (index in ordered) each pause comes before
@@ -421,15 +421,19 @@ def _selected(drawing: SvgDrawing, chosen: list[int]) -> tuple[SvgDrawing, np.nd
     return part, layer_of[idx]
 
 
-def _check_extent(drawing: SvgDrawing, strokes: list[np.ndarray], settings: MachineSettings) -> None:
-    """TravelError giving the drawing's extent in mm when it leaves the X/Y travel."""
-    xy = np.concatenate(strokes)
-    lo, hi = xy.min(axis=0), xy.max(axis=0)
+def _check_extent(drawing: SvgDrawing, polys: list[np.ndarray], settings: MachineSettings) -> None:
+    """TravelError giving the drawing's size in mm when it is larger than the X/Y travel (``polys``: the strokes as
+    ``(N, 2)`` float polylines in steps, before they are sampled: a drawing metres wide is refused before millions
+    of samples are made).  Where the job goes is checked in the machine frame when it is placed (at the work
+    zero, or from where the tool stands)."""
+    lo = np.min([p.min(axis=0) for p in polys], axis=0)
+    hi = np.max([p.max(axis=0) for p in polys], axis=0)
     (x_lo, x_hi), (y_lo, y_hi), _ = settings.travel.bounds_steps()
-    if lo[0] < x_lo or hi[0] > x_hi or lo[1] < y_lo or hi[1] > y_hi:
+    if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))) or hi[0] - lo[0] > x_hi - x_lo \
+            or hi[1] - lo[1] > y_hi - y_lo:
         mm = settings.mm_per_step_xy
         raise TravelError(
-            f"{drawing.source}: the drawing spans X {lo[0] * mm:.2f}..{hi[0] * mm:.2f} mm, Y {lo[1] * mm:.2f}.."
-            f"{hi[1] * mm:.2f} mm from the home; the travel is X {x_lo * mm:g}..{x_hi * mm:g} mm, "
-            f"Y {y_lo * mm:g}..{y_hi * mm:g} mm (make it smaller with --fit or --scale)"
+            f"{drawing.source}: the drawing is {(hi[0] - lo[0]) * mm:.2f} x {(hi[1] - lo[1]) * mm:.2f} mm "
+            f"(X {lo[0] * mm:.2f}..{hi[0] * mm:.2f}, Y {lo[1] * mm:.2f}..{hi[1] * mm:.2f} mm); the travel is "
+            f"{(x_hi - x_lo) * mm:g} x {(y_hi - y_lo) * mm:g} mm (make it smaller with --fit or --scale)"
         )
