@@ -12,8 +12,16 @@ A small interpreter for the LinuxCNC language (tested against LinuxCNC's own ``r
 * frames: G20/G21 anywhere, G90/G91, G53 (one line in machine coordinates), G54..G59.3 work
   offsets with G10 L2/L20, G92, G92.1, G92.2, G92.3, G43 H / G43.1 / G49 tool length offsets
   (a tool table in LinuxCNC's format), G28/G30 (and G28.1/G30.1) to the homes the caller gives;
+* as a G-code sender runs a program: it starts where the tool stands (``start_mm``, machine mm) in the work
+  offsets the caller gives (the machine state's G54..G59.3 and the active one); program coordinates are
+  machine coordinates minus the active offset (and G92); G53, G28 and G30 are machine positions; the moves
+  are given from ``start_mm``; the program's G10 L2/L20 hold for its run, and it says how it left them;
+* grbl's dialect: an arc's centre word of another plane (K0 on a G17 arc) ignored, ``$`` lines skipped (one
+  warning), a UTF-8 byte-order mark accepted; M3/M4/M5 and S recorded on every move (``spindle``,
+  ``spindle_rpm``: for ports with a spindle; one warning that a step/dir port ignores them); Marlin's words
+  (E, M17, M104, M140, G29, ...) refused naming Marlin;
 * accepted without motion: G61, G61.1, G64 (P Q), G93/G94 feed modes (G93 gives each move its time),
-  G40, G8, G96/G97, M3/M4/M5, M48..M53, M61 Q; M7/M8/M9 (no coolant output: one warning);
+  G40, G8, G96/G97, M48..M53, M61 Q; M7/M8/M9 (no coolant output: one warning);
 * pauses: M6 with T (tool change), M0, M1, M60; M2/M30 (and a second ``%``) end the program;
 * the language: numbered and named parameters (local ``#<name>``, global ``#<_name>``), expressions
   (:mod:`cam.formats.ngc`), O words (sub/endsub/call/return, if/elseif/else/endif, while/endwhile,
