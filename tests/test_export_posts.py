@@ -283,3 +283,59 @@ def test_grbl_emulator_runs_the_grbl_program_to_the_end_on_the_jobs_path(tmp_pat
     if want is not None:
         d = cKDTree(_below(want)).query(_below(ends))[0]
         assert d.max() <= tol + 0.003
+
+
+# ---------------------------------------------------------------------------------------------- SVG strokes
+
+
+CIRCLE_SVG = """<svg xmlns="http://www.w3.org/2000/svg" width="40mm" height="40mm" viewBox="0 0 40 40">
+<circle cx="20" cy="20" r="15" fill="none" stroke="black"/>
+<path d="M 5 5 L 35 5" stroke="black" fill="none"/>
+</svg>
+"""
+
+
+def test_every_svg_job_point_gets_a_point_of_the_drawings_own_curves(tmp_path):
+    from cam.formats.gcode_export import svg_exact_xy_mm
+    from cam.formats.svg import load_svg
+
+    src = tmp_path / "c.svg"
+    src.write_text(CIRCLE_SVG)
+    settings = cam.MachineSettings()
+    drawing = load_svg(src)
+    exact = svg_exact_xy_mm(drawing, settings)
+    job = cam.plan_svg(drawing, settings=settings) if hasattr(cam, "plan_svg") else \
+        __import__("cam.job.svg", fromlist=["plan_svg"]).plan_svg(drawing, settings=settings)
+    mm = settings.mm_per_step_xy
+    for xs, ys, _ in np.asarray(job.points_steps).tolist():
+        x, y = exact.get((xs, ys))
+        assert max(abs(x / mm - xs), abs(y / mm - ys)) <= 1.0    # within a step of the planner's point
+        # on the circle (centre (15, 15) mm, the drawing's top-left (5, 5) at the home) or on the line y = 0
+        assert min(abs(math.hypot(x - 15, y - 15) - 15), abs(y) + max(0.0, -x, x - 30)) <= 0.001
+
+
+@needs_rs274
+@pytest.mark.slow
+def test_an_svg_circle_is_written_on_the_circle_as_a_few_arcs(tmp_path):
+    src = tmp_path / "c.svg"
+    src.write_text(CIRCLE_SVG)
+    out = tmp_path / "c.ngc"
+    assert main(["export", str(src), "-o", str(out), "--post", "linuxcnc"]) == 0
+    text = out.read_text()
+    code = _code_lines(text)
+    assert sum(ln.startswith(("G2 ", "G3 ")) for ln in code) <= 8 and len(code) < 40
+    got, _ = _canon_path(text, tmp_path, "run.ngc")
+    cut = _below(got)
+    # placed with the drawing's top-left (5, 5) at the home: the circle's centre at (15, -15) mm
+    r = np.hypot(cut[:, 0] - 15.0, cut[:, 1] + 15.0)
+    on_line = np.abs(cut[:, 1]) <= 1e-4                        # the straight line at Y = 0 (the circle's tangent)
+    r = r[~on_line & (np.abs(r - 15.0) < 0.5)]
+    # on the circle within the tolerance, but where the planner joined a straight run of one-step moves
+    # (at the circle's flat top, bottom and sides) the job's own chord is kept: up to half a step off
+    assert np.quantile(np.abs(r - 15.0), 0.9) <= 0.01 + 0.001
+    assert np.abs(r - 15.0).max() <= cam.MachineSettings().mm_per_step_xy / 2 + 0.002
+    assert len(r) > 0.8 * (~on_line).sum()
+    line = cut[on_line]
+    assert line[:, 0].min() == pytest.approx(0.0, abs=1e-4) and line[:, 0].max() == pytest.approx(30.0, abs=1e-4)
+    assert main(["export", str(src), "-o", str(out), "--post", "linuxcnc", "--snap"]) == 0
+    assert len(_code_lines(out.read_text())) > 10 * len(code)   # at the steps, the circle is a staircase

@@ -116,7 +116,7 @@ def exact_geometry(prepared: Any, cut_depth_mm: Optional[float] = None, options:
     return xy, z
 
 
-SAMPLE_STEPS = 0.1
+SAMPLE_STEPS = 0.2
 """The spacing, in steps, of the samples of an SVG stroke that :func:`svg_exact_xy_mm` rounds like the planner."""
 FLATTEN_MM = 0.0005
 """How close to an SVG curve the polylines :func:`svg_exact_xy_mm` samples are (half a micrometre)."""
@@ -131,9 +131,10 @@ def svg_exact_xy_mm(drawing: Any, settings: Any, *, scale: Optional[float] = Non
     strokes themselves in it, placed and scaled as :func:`cam.job.svg.plan_svg` places them.
 
     The strokes are flattened within :data:`FLATTEN_MM` and sampled every :data:`SAMPLE_STEPS` steps; each
-    sample goes to the step it rounds to (as the planner rounds its samples) and the eight around it, and a step
-    keeps a vertex of the strokes that rounds to it (a corner, a stroke's end) or else the sample nearest its
-    centre.  So a job point
+    sample goes to the step it rounds to (as the planner rounds its samples), and a step keeps a vertex of the
+    strokes that rounds to it (a corner, a stroke's end) or else the sample nearest its centre; a step the
+    planner's points reach but no sample does (its polyline is coarser) takes the nearest of the eight around
+    it (the mapping's ``get``).  So a job point
     is written on the drawing's own curve, within a step of where the steps put it, and a circle's points lie
     on the circle (an arc fits them).
     """
@@ -166,21 +167,37 @@ def svg_exact_xy_mm(drawing: Any, settings: Any, *, scale: Optional[float] = Non
         samples.append(np.vstack([p[seg] + d[seg] * t[:, None], p[-1:]]))
         vertex.append(np.append(t == 0, True))
     pts = np.concatenate(samples)
-    own = np.floor(pts + 0.5).astype(np.int64)
-    is_vertex = np.concatenate(vertex)
-    # every sample is offered to its own step and the 8 around it (the planner's coarser polyline may round a
-    # sample into a step next to the fine curve's): a vertex in its own step first, then the nearest sample
-    cells = np.concatenate([own + (dx, dy) for dx in (-1, 0, 1) for dy in (-1, 0, 1)])
-    src = np.tile(np.arange(len(pts)), 9)
-    off = np.hypot(*(pts[src] - cells).T)
-    off[4 * len(pts):5 * len(pts)] -= 2.0 * is_vertex  # (dx, dy) = (0, 0)
-    order = np.lexsort((off, cells[:, 1], cells[:, 0]))
-    c = cells[order]
-    first = np.ones(len(c), bool)
-    first[1:] = np.any(c[1:] != c[:-1], axis=1)
-    keep = order[first]
-    exact = pts[src[keep]] * mm
-    return dict(zip(map(tuple, cells[keep].tolist()), map(tuple, exact.tolist())))
+    cells = np.floor(pts + 0.5).astype(np.int64)
+    off = np.hypot(*(pts - cells).T) - 2.0 * np.concatenate(vertex)  # a vertex first, then the nearest sample
+    key = (cells[:, 0] << 32) + cells[:, 1]
+    by_off = np.argsort(off, kind="stable")
+    _, first = np.unique(key[by_off], return_index=True)
+    keep = by_off[first]
+    found = _StepPoints(zip(map(tuple, cells[keep].tolist()), map(tuple, (pts[keep] * mm).tolist())))
+    found.mm_per_step = mm
+    return found
+
+
+class _StepPoints(dict):
+    """``{(x steps, y steps): (x mm, y mm)}`` whose :meth:`get` of a step it lacks takes the nearest of the
+    eight around it (the planner's coarser polyline may round a sample into a step beside the fine curve's)."""
+
+    mm_per_step: float = 1.0
+
+    def get(self, key: Any, default: Any = None) -> Any:  # type: ignore[override]
+        value = dict.get(self, key)
+        if value is not None:
+            return value
+        x, y = key
+        best, best_d = default, 2.0
+        for dx in (-1, 0, 1):
+            for dy in (-1, 0, 1):
+                v = dict.get(self, (x + dx, y + dy))
+                if v is not None:
+                    d = max(abs(v[0] / self.mm_per_step - x), abs(v[1] / self.mm_per_step - y))
+                    if d < best_d:
+                        best, best_d = v, d
+        return best
 
 
 def _check_options(post: str, feed_mm_min: Optional[float], plunge_feed_mm_min: Optional[float],
@@ -353,9 +370,9 @@ def gcode_pieces(
             if i in tool_changes:
                 go_up()
                 tool_change(*tool_changes[i])
-            if exact_xy and (xp, yp) in exact_xy:
-                ex_mm, ey_mm = exact_xy[(xp, yp)]
-                nx, ny = float(ex_mm), y_sign * float(ey_mm)
+            found = exact_xy.get((xp, yp)) if exact_xy else None
+            if found is not None:
+                nx, ny = float(found[0]), y_sign * float(found[1])
             else:
                 nx, ny = xp * mm_xy, y_sign * yp * mm_xy
             nz = -float(exact_z[zp]) if zp in exact_z else -zp * mm_z
