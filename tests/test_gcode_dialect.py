@@ -127,9 +127,11 @@ def test_the_spindle_note_is_a_warning_of_cam_drill(tmp_path):
     ("G29", "'G29'"), ("M107", "'M107'"), ("M84", "'M84'"),
 ])
 def test_marlin_words_are_refused_naming_the_dialect(tmp_path, line, word):
+    """Marlin's own words say so; those that are LinuxCNC user M codes too (M104, M140, M107) are refused as user
+    M codes, naming Marlin as well."""
     path = tmp_path / "print.gcode"
     path.write_text(f";FLAVOR:Marlin\nG21\n{line}\nG1 X1 F100\n")
-    with pytest.raises(cam.ParseError, match="print.gcode:3: " + word.replace(".", r"\.") + " is a Marlin"):
+    with pytest.raises(cam.ParseError, match="print.gcode:3: .*" + word.replace(".", r"\.") + ".* Marlin"):
         load_gcode(path)
     assert_one_line_error(cli("drill", path, "--state", tmp_path / "s.json"), "print.gcode:3:", word,
                           "Marlin (3D printer firmware)", "not a mill")

@@ -15,7 +15,7 @@ from ..limits import (
     MIN_FEED_MM_MIN,
 )
 from ._gcode_data import (
-    _CS, _CYCLES, _IGNORED_M, _IO_M, _LETTERS, _MARLIN, _MARLIN_G, _MARLIN_M, _MOTION, _REFUSED_G, _SPLINES,
+    _CS, _CYCLES, _IGNORED_M, _IO_M, _LETTERS, _MARLIN, _MARLIN_G, _MARLIN_M, _MARLIN_USER_M, _MOTION, _REFUSED_G, _SPLINES,
     _SUPPORTED_G, _End, _shown,
 )
 from ._gcode_state import _State
@@ -123,7 +123,10 @@ class _Block(_State):
         """Every M code of the line one that runs here (user M codes and I/O refused, each saying why)."""
         for m, text in ms:
             if 100 <= m <= 199:
-                raise self.err(f"user M code '{text}' is not supported: it would run a program outside the G-code")
+                hint = f" ({text} is also a Marlin (3D printer firmware) code: if this program drives a 3D " \
+                       "printer, it is not a mill's program)" if m in _MARLIN_USER_M else ""
+                raise self.err(f"user M code '{text}' is not supported: it would run a program outside the G-code"
+                               + hint)
             if m in _IO_M:
                 raise self.err(f"'{text}': digital and analog I/O is not supported: the machine has none")
             if m not in (0, 1, 2, 6, 7, 8, 9, 30, 60, 61, 70, 71, 72, 73) and m not in _IGNORED_M:

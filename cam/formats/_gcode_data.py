@@ -145,8 +145,8 @@ CS_NAMES = ("G54", "G55", "G56", "G57", "G58", "G59", "G59.1", "G59.2", "G59.3")
 """The work offsets (coordinate systems 1..9, P1..P9 of G10), as senders and the machine state name them."""
 _IGNORED_M = {3, 4, 5, 48, 49, 50, 51, 52, 53}
 _IO_M = {62, 63, 64, 65, 66, 67, 68}
-_MARLIN_M = {17, 18, 82, 83, 84, 92, 104, 105, 106, 107, 109, 114, 117, 140, 190, 201, 203, 204, 205, 220, 221,
-             500, 501, 503}
+_MARLIN_M = {17, 18, 82, 83, 84, 92, 201, 203, 204, 205, 220, 221, 500, 501, 503}  # Marlin's only: no G-code has them
+_MARLIN_USER_M = {104, 105, 106, 107, 109, 114, 117, 140, 190}  # Marlin's, and user M codes in LinuxCNC
 _MARLIN_G = {290}  # G29: bed levelling
 _MARLIN = "a Marlin (3D printer firmware) {what}: this program drives a 3D printer, not a mill; give G-code for " \
           "LinuxCNC or grbl"
