@@ -153,7 +153,18 @@ def fit_path(points_mm: np.ndarray, tol_mm: float = DEFAULT_ARC_TOLERANCE_MM, *,
     """
     if not tol_mm > 0:
         raise ValueError(f"the arc tolerance must be > 0 mm, got {tol_mm!r}")
-    p = np.asarray(points_mm, np.float64).reshape(-1, 3)
+    full = np.asarray(points_mm, np.float64).reshape(-1, 3)
+    # a point in the middle of a straight run (the same direction before and after it) changes nothing: fit
+    # the others (far fewer checks on rasters), and give the segments' ends as indices of all the points
+    d = np.diff(full, axis=0)
+    middle = np.zeros(len(full), bool)
+    if len(d) > 1:
+        cross = np.cross(d[:-1], d[1:])
+        scale = np.linalg.norm(d[:-1], axis=1) * np.linalg.norm(d[1:], axis=1)
+        middle[1:-1] = (np.linalg.norm(cross, axis=1) <= 1e-12 * np.maximum(scale, 1e-300)) & \
+            ((d[:-1] * d[1:]).sum(axis=1) > 0)
+    index = np.flatnonzero(~middle)
+    p = full[index]
     n = len(p)
     segments: list[Segment] = []
     i = 0
@@ -163,10 +174,10 @@ def fit_path(points_mm: np.ndarray, tol_mm: float = DEFAULT_ARC_TOLERANCE_MM, *,
         if j_arc - i > ARC_COST_LINES * (j_line - i):
             arc = _arc_fit(p, i, j_arc, tol_mm, max_radius_mm)
             assert arc is not None
-            segments.append(arc)
+            segments.append(Segment(int(index[j_arc]), arc.kind, arc.centre_mm))
             i = j_arc
         else:
-            segments.append(Segment(j_line, "line"))
+            segments.append(Segment(int(index[j_line]), "line"))
             i = j_line
     return segments
 
