@@ -339,3 +339,45 @@ def test_an_svg_circle_is_written_on_the_circle_as_a_few_arcs(tmp_path):
     assert line[:, 0].min() == pytest.approx(0.0, abs=1e-4) and line[:, 0].max() == pytest.approx(30.0, abs=1e-4)
     assert main(["export", str(src), "-o", str(out), "--post", "linuxcnc", "--snap"]) == 0
     assert len(_code_lines(out.read_text())) > 10 * len(code)   # at the steps, the circle is a staircase
+
+
+@pytest.mark.slow
+@pytest.mark.usefixtures("quick_thread_switches")
+def test_grbl_emulator_pauses_at_each_tool_change_and_drills_the_exact_holes(tmp_path):
+    import threading
+
+    from cam.drive.grbl_link import GrblLink
+    from cam.sim.grbl import start_emulator
+
+    src = _drill_file(tmp_path, ((1, 0.8, [(7.62, 2.54), (10.16, 5.08)]), (2, 1.0, [(3.3, 4.4)])))
+    out = tmp_path / "g.ngc"
+    assert main(["export", str(src), "-o", str(out), "--post", "grbl", "--offset", "0,10", "--cut-depth", "1.5",
+                 "--spindle-rpm", "9000", "--feed", "600", "--plunge-feed", "300"]) == 0
+    emu = start_emulator(speed=None, settings={110: 5000.0, 111: 5000.0, 112: 5000.0, 120: 500.0, 121: 500.0,
+                                                122: 500.0})
+    pauses: list[tuple] = []
+    try:
+        with GrblLink(f"grbl:{emu.device_path}?baud=115200", welcome_timeout_s=1.0) as link:
+            done = threading.Event()
+
+            def cycle_start_at_each_pause():
+                while not done.is_set():
+                    if emu.wait_for(lambda e: e.state == "Hold:0" and e.planner_blocks == 0, 0.2):
+                        pauses.append(emu.machine_position_mm)
+                        link.resume()
+                        emu.wait_for(lambda e: not e.state.startswith("Hold"), 2.0)
+
+            helper = threading.Thread(target=cycle_start_at_each_pause)
+            helper.start()
+            try:
+                link.stream(out.read_text().splitlines())
+            finally:
+                done.set()
+                helper.join()
+    finally:
+        emu.stop()
+    assert emu.error is None and all(a == "ok" for _, _, a in emu.lines())
+    assert len(pauses) == 2 and all(p[2] == pytest.approx(1.0) for p in pauses)   # lifted to the safe height
+    bottoms = {(round(b.end_mm[0], 6), round(b.end_mm[1], 6)) for b in emu.executed()
+               if b.kind == "G1" and b.end_mm[2] == pytest.approx(-1.5, abs=1e-9)}
+    assert bottoms == {(7.62, -7.46), (10.16, -4.92), (3.3, -5.6)}
