@@ -920,13 +920,16 @@ def _guesses(unstated: set[str], units, digits, zeros, stated_units: str) -> lis
     return out
 
 
-def _choose(text: str, source: str, units, digits, zeros, params, first: _Reader) -> tuple[_Guess, str] | None:
+def _choose(text: str, source: str, units, digits, zeros, params, first: _Reader | None
+            ) -> tuple[_Guess, str] | None:
     """The most plausible reading of what the file does not state, and the warning naming it and the
-    runner-up; None when the defaults are the only reading."""
-    unstated = set(first.defaults_warned)
+    runner-up; None when no reading reads the first lines.  ``first``: the first lines read with the defaults
+    (None when they cannot be: a number too long for the default digits, say; then every reading is tried)."""
+    unstated = set(first.defaults_warned) if first is not None else {"units", "digits", "zeros"}
     numbers = _NUMBER_TEXT.findall("\n".join(text.splitlines()[:_GUESS_LINES]).upper())
     scored = []
-    for k, guess in enumerate(_guesses(unstated, units, digits, zeros, first.first_default_units or DEFAULT_UNITS)):
+    stated_units = (first.first_default_units if first is not None else None) or DEFAULT_UNITS
+    for k, guess in enumerate(_guesses(unstated, units, digits, zeros, stated_units)):
         try:
             r = _read(text, source, units, digits, zeros, guess, _GUESS_LINES, params)
         except ParseError:
@@ -1035,7 +1038,7 @@ def parse_excellon(
         sample = _read(text, source, excellon_units, digits, excellon_zeros, None, _GUESS_LINES, params)
     except ParseError:
         sample = None  # the whole reading below names the error
-    if sample is not None and sample.defaults_warned:
+    if sample is None or sample.defaults_warned:
         chosen = _choose(text, source, excellon_units, digits, excellon_zeros, params, sample)
     r = _read(text, source, excellon_units, digits, excellon_zeros, chosen[0] if chosen else None, None, params)
     if not r.seen_excellon:
