@@ -20,7 +20,7 @@ from cam.formats.svg import parse_svg
 from cam.job.svg import plan_svg, svg_layer_order
 from cam.verify.pinlog import read_pin_log
 
-from conftest import run_cli
+from conftest import SAMPLES, run_cli
 
 S = cam.MachineSettings()
 MM = S.mm_per_step_xy
@@ -321,3 +321,19 @@ def test_a_partial_duplicate_leaves_the_rest_of_its_stroke_and_curves_are_compar
     kept = cut_sequence(plan_svg(d, offset_mm=(0.0, 0.0), keep_duplicates=True))
     assert int(np.all(kept == south, axis=1).sum()) == 2
     assert "73 duplicate segment(s)" in job.warnings[-1]  # the circle's 72 pieces and the square's side
+
+
+def test_the_page_options_reach_the_job(tmp_path):
+    """The page sends its form as a mapping (JobOptions.from_mapping): the layers, their pauses (the job's tool
+    changes, which the page lists) and the report's layers."""
+    from cam.job.jobs import JobOptions, prepare_job
+
+    card = write(tmp_path, "birthday-card.svg", card_svg())
+    opts = JobOptions.from_mapping({"layers": "blue pen, red pen", "pause_between_layers": "on", "offset_mm": "0,0"})
+    job = prepare_job(card, opts)
+    assert job.tool_changes == ["layer 'red pen': change the pen"]
+    assert [layer["name"] for layer in job.report["layers"]] == CARD_NAMES
+    result = cam.run(job.toolpath, on_pause=lambda pos, note: None)
+    assert runs(card_layer_of(positions_at_depth(cam.decode_pin_log(result.pin_log(), S), None))) == [4, 0]
+    with pytest.raises(cam.CamError, match="does not apply"):
+        prepare_job(SAMPLES / "extended.plt", JobOptions(layers="red pen"))
