@@ -337,3 +337,15 @@ def test_the_page_options_reach_the_job(tmp_path):
     assert runs(card_layer_of(positions_at_depth(cam.decode_pin_log(result.pin_log(), S), None))) == [4, 0]
     with pytest.raises(cam.CamError, match="does not apply"):
         prepare_job(SAMPLES / "extended.plt", JobOptions(layers="red pen"))
+
+
+def test_a_segment_in_two_layers_is_cut_by_both_pens():
+    """Duplicates are looked for within a layer: the same line in the red and the blue layer is two pens'
+    lines, cut in each; a second copy within the blue layer is cut once."""
+    text = ('<svg xmlns="http://www.w3.org/2000/svg" width="20mm" height="20mm" viewBox="0 0 20 20" fill="none">'
+            '<path d="M2,2 H12" stroke="red"/><path d="M2,2 H12" stroke="blue"/>'
+            '<path d="M12,2 H2" stroke="blue"/></svg>')
+    job = plan_svg(parse_svg(text), offset_mm=(0.0, 0.0))
+    mid = np.rint(np.array([7.0, 2.0]) / MM).astype(np.int64)
+    assert int(np.all(cut_sequence(job) == mid, axis=1).sum()) == 2
+    assert any(w.startswith("1 duplicate segment(s)") for w in job.warnings)

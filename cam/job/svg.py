@@ -29,8 +29,8 @@ and every point of the curve within one step of a cut position (0.15 + 0.125 + 0
 
 Duplicates (unless ``keep_duplicates``): before step 2, every straight piece of the polylines (a line, or
 one chord of a flattened curve) longer than :data:`MIN_DUPLICATE_STEPS` whose two ends lie within
-:data:`DUPLICATE_STEPS` (in x and in y) of the two ends of a piece that comes earlier in cutting order and is
-cut, in either direction, traces what is already cut, and is dropped; a stroke is cut in the runs of pieces
+:data:`DUPLICATE_STEPS` (in x and in y) of the two ends of a piece of the same layer that comes earlier in
+file order and is cut, in either direction, traces what is already cut, and is dropped; a stroke is cut in the runs of pieces
 left.  A job warning counts them.  (Pieces are compared end to end: a line drawn once as one piece and once
 as two is not found.)
 
@@ -289,6 +289,22 @@ def _drop_duplicates(polys: list[np.ndarray]) -> tuple[list[np.ndarray], list[in
     return runs, owner, int(dropped.sum()), float(length[dropped].sum())
 
 
+def _drop_duplicates_by_layer(polys: list[np.ndarray], layer_of: np.ndarray
+                              ) -> tuple[list[np.ndarray], list[int], int, float]:
+    """:func:`_drop_duplicates` within each layer (a line drawn in two layers is two pens' lines: both are
+    cut); the runs come layer by layer, as the strokes do."""
+    runs: list[np.ndarray] = []
+    owner: list[int] = []
+    n_dup, dup_steps = 0, 0.0
+    for layer in dict.fromkeys(np.asarray(layer_of).tolist()):
+        mine = np.flatnonzero(layer_of == layer)
+        r, o, n, length = _drop_duplicates([polys[i] for i in mine])
+        runs += r
+        owner += [int(mine[i]) for i in o]
+        n_dup, dup_steps = n_dup + n, dup_steps + length
+    return runs, owner, n_dup, dup_steps
+
+
 def _canonical(fwd: np.ndarray, rev: np.ndarray) -> np.ndarray:
     """Each piece's ends in the order that is lexicographically smaller (``(K, 4)`` rows), so that a piece and
     its exact reverse are equal rows."""
@@ -372,7 +388,7 @@ def plan_svg(
     warnings = list(drawing.warnings)
     owner = list(range(len(polys)))
     if not keep_duplicates:
-        polys, owner, n_dup, dup_steps = _drop_duplicates(polys)
+        polys, owner, n_dup, dup_steps = _drop_duplicates_by_layer(polys, part_layer)
         if n_dup:
             warnings.append(f"{n_dup} duplicate segment(s) ({dup_steps * settings.mm_per_step_xy:.1f} mm) trace "
                             "what is already cut: cut once (--keep-duplicates cuts them again)")
