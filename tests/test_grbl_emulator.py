@@ -13,8 +13,9 @@ import time
 import pytest
 import serial
 
-from cam.drive.grbl_link import GrblAlarm, GrblError, GrblLink, parse_grbl_url, parse_status
+from cam.drive.grbl_link import GrblAlarm, GrblError, GrblLink, parse_grbl_url, parse_status, settings_mismatches
 from cam.errors import PortError
+from cam.settings import MachineSettings, Travel
 from cam.sim.grbl import DEFAULT_SETTINGS, LOG_HEADER, WELCOME, start_emulator
 from conftest import run_cli
 
@@ -296,6 +297,21 @@ def test_radius_arcs_go_the_way_grbl_documents(emulator, radius, top_mm):
     centre_y = -math.sqrt(11.0) if radius > 0 else math.sqrt(11.0)   # the centre below, or above, (5, 0)
     assert all(math.hypot(x - 5, y - centre_y) == pytest.approx(6.0, abs=1e-9) for x, y, _ in ends)
     assert max(y for _, y, _ in ends) == pytest.approx(top_mm, abs=2e-3) and ends[-1] == (10.0, 0.0, 0.0)
+
+
+def test_settings_read_from_grbl_against_the_machine_file():
+    emu = start_emulator(speed=None, settings={100: 260.0})
+    try:
+        with connect(emu) as link:
+            grbl = link.settings
+    finally:
+        emu.stop()
+    same = MachineSettings().replace(
+        mm_per_step_xy=0.004, mm_per_step_z=0.004, max_speed_x_mm_s=500 / 60, max_speed_y_mm_s=500 / 60,
+        max_speed_z_mm_s=500 / 60, accel_x_mm_s2=10.0, accel_y_mm_s2=10.0, accel_z_mm_s2=10.0,
+        travel=Travel(0, 50000, 0, 50000, -10000, 40000))                # 200 mm on each axis
+    assert settings_mismatches(grbl, same) == ["X steps/mm $100=260 vs 250"]
+    assert len(settings_mismatches(grbl, MachineSettings())) == 12          # the thesis machine: all differ
 
 
 def test_url_and_status_parsing():

@@ -30,10 +30,12 @@ from urllib.parse import parse_qs
 import serial
 
 from ..errors import PortError
+from ..settings import MachineSettings
 
 __all__ = [
     "GRBL_PREFIX", "RX_BUFFER_BYTES", "ERROR_MEANINGS", "ALARM_MEANINGS", "GrblError", "GrblAlarm", "GrblStatus",
-    "StreamReport", "GrblLink", "parse_grbl_url", "parse_settings", "parse_status", "strip_comments", "open_grbl",
+    "StreamReport", "GrblLink", "parse_grbl_url", "parse_settings", "parse_status", "settings_mismatches",
+    "strip_comments", "open_grbl",
 ]
 
 GRBL_PREFIX = "grbl:"
@@ -177,6 +179,30 @@ def parse_settings(lines: Iterable[str], device: str = "grbl") -> dict[int, floa
             except ValueError:
                 raise GrblError(f"{device} sent a bad setting line {text!r}") from None
     return settings
+
+
+def settings_mismatches(grbl: dict[int, float], machine: MachineSettings, *,
+                        rel_tolerance: float = 0.01) -> list[str]:
+    """Where grbl's ``$$`` disagrees with the machine file by more than ``rel_tolerance``: steps/mm ($100-$102
+    against 1 / ``mm_per_step``), max rates ($110-$112, mm/min, against ``max_speed_*_mm_s``), accelerations
+    ($120-$122) and travel ($130-$132 against the travel limits' span).  One short item each; a setting grbl
+    did not send is skipped.
+
+    >>> settings_mismatches({100: 250.0, 120: 50.0}, MachineSettings())
+    ['X steps/mm $100=250 vs 34.6']
+    """
+    per_step = (machine.mm_per_step_xy, machine.mm_per_step_xy, machine.mm_per_step_z)
+    rate = (machine.max_speed_x_mm_s, machine.max_speed_y_mm_s, machine.max_speed_z_mm_s)
+    accel = (machine.accel_x_mm_s2, machine.accel_y_mm_s2, machine.accel_z_mm_s2)
+    span = [(hi - lo) * per_step[i] for i, (lo, hi) in enumerate(machine.travel.bounds_steps())]
+    out = []
+    for i, axis in enumerate("XYZ"):
+        for base, what, want in ((100, "steps/mm", 1.0 / per_step[i]), (110, "max rate mm/min", rate[i] * 60.0),
+                                 (120, "accel mm/s^2", accel[i]), (130, "travel mm", span[i])):
+            have = grbl.get(base + i)
+            if have is not None and abs(have - want) > rel_tolerance * max(abs(want), 1e-9):
+                out.append(f"{axis} {what} ${base + i}={have:g} vs {want:.3g}")
+    return out
 
 
 @dataclass(frozen=True)
