@@ -208,6 +208,198 @@ class ConnectionGuard:
         return False
 
 
+class _LingeringTransport:
+    """The connection's transport as uvicorn's protocol sees it: ``close()`` after an answer given before
+    the request's body came whole, or after a refusal for load, lets the connection linger (see
+    :data:`LINGER_S`) instead of closing it at once."""
+
+    def __init__(self, transport: Any, protocol: "_GuardedConnection") -> None:
+        self._transport = transport
+        self._protocol = protocol
+        self.lingering = False
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._transport, name)
+
+    def is_closing(self) -> bool:
+        return self.lingering or self._transport.is_closing()
+
+    def close(self) -> None:
+        p = self._protocol
+        if (not self.lingering and not p.lost and not self._transport.is_closing()
+                and (p.conn.their_state is p._h11.SEND_BODY or p.refused_for_load)):
+            self.lingering = True
+            p.linger()
+            return
+        self._transport.close()
+
+
+class _GuardedConnection:
+    """The rules of this module as a mixin of uvicorn's ``H11Protocol`` (whose ``conn``, ``cycle``, ``flow``,
+    ``loop``, ``client``, ``headers`` and ``scope`` it uses); ``_h11`` is the h11 module uvicorn's protocol runs
+    on (set by :func:`guarded_h11`, so this module imports without the web stack)."""
+
+    _h11: Any = None
+
+    def __init__(self, *args: Any, guard: ConnectionGuard, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self.guard = guard
+        self.deadline: Optional[asyncio.TimerHandle] = None
+        self.head_begun = False  # bytes of the awaited request head have come
+        self.head_prefix = b""  # its first bytes (to tell a safety route)
+        self.head_begun_at = 0.0
+        self.body_deadline_at: Optional[float] = None  # the body must be whole by then (monotonic)
+        self.probation = False  # came over its address's limit: only a safety route is served
+        self.refused_for_load = False  # answered 503 for load: let go slowly (see linger)
+        self.lost = False  # gone, or the server is stopping: close without lingering
+        self.lingered_bytes = 0
+        self.raw_transport: Any = None
+        self.client_host = ""
+
+    # -- the guard's view ------------------------------------------------------------
+    def idle(self) -> bool:
+        """No request of this connection is in the application (waiting for a head, for the rest of a body
+        already answered, or being let go)."""
+        return self.cycle is None or self.cycle.response_complete
+
+    def room_rank(self, now_s: float) -> Optional[int]:
+        """0: may be closed to make room now (a half-sent head of another route, an answered connection
+        being let go); 1: silent or idle, may be closed unless its unread bytes name a safety route;
+        None: keep (a request in progress, or a safety head on its way)."""
+        if not self.idle():
+            return None
+        if self.transport.lingering:
+            return 0
+        if self.head_begun:
+            if safety_head(self.head_prefix) is True and now_s - self.head_begun_at < SAFETY_GRACE_S:
+                return None
+            return 0
+        return 1
+
+    def evict(self) -> None:
+        self.guard.remove(self)  # closing: no longer counted, never chosen again
+        self.guard.closed_for_room += 1
+        if self.head_begun and self.conn.their_state is self._h11.IDLE:
+            self.raw_transport.write(plain_response(
+                503, "Service Unavailable", "too many connections (the limit is "
+                f"{self.guard.config.max_connections}, {self.guard.config.max_connections_per_client} from one "
+                "address); try again"))
+        self.raw_transport.close()
+
+    # -- deadlines -------------------------------------------------------------------
+    def await_head(self) -> None:
+        self.head_begun = False
+        self.head_prefix = b""
+        self.body_deadline_at = None
+        # up to half as long again, at random: connections that came together (a flood) do not all
+        # expire, and reconnect, together
+        self.set_deadline(self.guard.config.header_timeout_s * (1.0 + 0.5 * random.random()))
+
+    def set_deadline(self, delay_s: Optional[float]) -> None:
+        if self.deadline is not None:
+            self.deadline.cancel()
+        self.deadline = None if delay_s is None else self.loop.call_later(max(0.0, delay_s), self.expire)
+
+    def body_deadline(self) -> None:
+        """The deadline while the body comes: the next byte within ``body_timeout_s``, all by its time limit."""
+        config = self.guard.config
+        now = time.monotonic()
+        if self.body_deadline_at is None:
+            scope = self.scope or {}
+            expected = self.guard.body_cap(scope.get("method", ""), scope.get("path", ""))
+            for name, value in self.headers or ():
+                if name == b"content-length":
+                    try:
+                        expected = min(expected, int(value))
+                    except ValueError:
+                        pass
+            self.body_deadline_at = now + config.body_timeout_s + expected / MIN_BODY_BYTES_PER_S
+        self.set_deadline(min(config.body_timeout_s, self.body_deadline_at - now))
+
+    def expire(self) -> None:
+        self.deadline = None
+        if self.raw_transport.is_closing():
+            return
+        if self.transport.lingering:
+            self.raw_transport.close()
+            return
+        state = self.conn.their_state
+        config = self.guard.config
+        if state is self._h11.SEND_BODY and self.flow.read_paused and self.cycle is not None \
+                and not self.cycle.response_complete:  # the application has not read on yet: its turn
+            if self.body_deadline_at is not None:  # the client is not to blame for that time
+                self.body_deadline_at += config.body_timeout_s
+            self.set_deadline(config.body_timeout_s)
+            return
+        if state is self._h11.IDLE and self.head_begun:
+            self.raw_transport.write(plain_response(
+                408, "Request Timeout", f"the request head did not come whole within {config.header_timeout_s:g} s"))
+        elif state is self._h11.SEND_BODY and self.cycle is not None and not self.cycle.response_started:
+            self.raw_transport.write(plain_response(
+                408, "Request Timeout", "the request body came too slowly (a pause over "
+                f"{config.body_timeout_s:g} s, or under {MIN_BODY_BYTES_PER_S // 1024} kB/s)"))
+        if state in (self._h11.IDLE, self._h11.SEND_BODY):
+            self.raw_transport.close()
+
+    def linger(self) -> None:
+        """Answered before the body came whole, or refused for load: drop what comes for a while, then
+        close (the client has its whole answer, told by its length, and may close first)."""
+        self.raw_transport.resume_reading()
+        self.set_deadline(LINGER_S * (1.0 + 0.5 * random.random()))
+
+    # -- the protocol ----------------------------------------------------------------
+    def connection_made(self, transport: Any) -> None:  # type: ignore[override]
+        self.raw_transport = transport
+        super().connection_made(_LingeringTransport(transport, self))  # type: ignore[misc]
+        self.client_host = self.client[0] if self.client else ""
+        self.guard.add(self)
+        self.await_head()
+        self.guard.make_room(self)
+
+    def shutdown(self) -> None:
+        """The server is stopping: nothing lingers (a connection being let go is closed now)."""
+        self.lost = True
+        if self.transport.lingering:
+            self.raw_transport.close()
+            return
+        super().shutdown()
+
+    def connection_lost(self, exc: Optional[Exception]) -> None:
+        self.lost = True
+        self.guard.remove(self)
+        self.set_deadline(None)
+        super().connection_lost(exc)
+
+    def data_received(self, data: bytes) -> None:
+        if self.transport.lingering:  # answered and being let go: dropped
+            self.lingered_bytes += len(data)
+            if self.lingered_bytes > LINGER_BYTES:
+                self.raw_transport.close()
+            return
+        if self.conn.their_state is self._h11.IDLE and len(self.head_prefix) < _HEAD_PREFIX_BYTES:
+            if not self.head_prefix:
+                self.head_begun_at = time.monotonic()
+            self.head_prefix += data[:_HEAD_PREFIX_BYTES - len(self.head_prefix)]
+        super().data_received(data)
+        state = self.conn.their_state
+        if state is self._h11.IDLE:
+            self.head_begun = True  # the head's deadline stands
+        elif state is self._h11.SEND_BODY:
+            self.body_deadline()
+        elif not self.transport.is_closing():
+            self.set_deadline(None)  # the whole request is in: the application's turn
+
+    def on_response_complete(self) -> None:
+        super().on_response_complete()
+        if self.transport.is_closing():
+            return
+        state = self.conn.their_state
+        if state is self._h11.IDLE:
+            self.await_head()
+        elif state is self._h11.SEND_BODY:  # answered before the body came whole: the rest must come on time
+            self.body_deadline()
+
+
 @lru_cache(maxsize=None)
 def guarded_h11() -> type:
     """uvicorn's h11 protocol with the rules of this module over a :class:`ConnectionGuard` (passed as
@@ -221,187 +413,7 @@ def guarded_h11() -> type:
     """
     from uvicorn.protocols.http.h11_impl import H11Protocol, h11  # h11 as uvicorn's protocol uses it
 
-    class LingeringTransport:
-        """The connection's transport as uvicorn's protocol sees it: ``close()`` after an answer given before
-        the request's body came whole half-closes and lets the rest come (see :data:`LINGER_S`)."""
-
-        def __init__(self, transport: Any, protocol: "GuardedH11Protocol") -> None:
-            self._transport = transport
-            self._protocol = protocol
-            self.lingering = False
-
-        def __getattr__(self, name: str) -> Any:
-            return getattr(self._transport, name)
-
-        def is_closing(self) -> bool:
-            return self.lingering or self._transport.is_closing()
-
-        def close(self) -> None:
-            p = self._protocol
-            if (not self.lingering and not p.lost and not self._transport.is_closing()
-                    and (p.conn.their_state is h11.SEND_BODY or p.refused_for_load)):
-                self.lingering = True
-                p.linger()
-                return
-            self._transport.close()
-
-    class GuardedH11Protocol(H11Protocol):
-        def __init__(self, *args: Any, guard: ConnectionGuard, **kwargs: Any) -> None:
-            super().__init__(*args, **kwargs)
-            self.guard = guard
-            self.deadline: Optional[asyncio.TimerHandle] = None
-            self.head_begun = False  # bytes of the awaited request head have come
-            self.head_prefix = b""  # its first bytes (to tell a safety route)
-            self.head_begun_at = 0.0
-            self.body_deadline_at: Optional[float] = None  # the body must be whole by then (monotonic)
-            self.probation = False  # came over its address's limit: only a safety route is served
-            self.refused_for_load = False  # answered 503 for load: let go slowly (see linger)
-            self.lost = False  # gone, or the server is stopping: close without lingering
-            self.lingered_bytes = 0
-            self.raw_transport: Any = None
-            self.client_host = ""
-
-        # -- the guard's view ------------------------------------------------------------
-        def idle(self) -> bool:
-            """No request of this connection is in the application (waiting for a head, for the rest of a body
-            already answered, or being let go)."""
-            return self.cycle is None or self.cycle.response_complete
-
-        def room_rank(self, now_s: float) -> Optional[int]:
-            """0: may be closed to make room now (a half-sent head of another route, an answered connection
-            being let go); 1: silent or idle, may be closed unless its unread bytes name a safety route;
-            None: keep (a request in progress, or a safety head on its way)."""
-            if not self.idle():
-                return None
-            if self.transport.lingering:
-                return 0
-            if self.head_begun:
-                if safety_head(self.head_prefix) is True and now_s - self.head_begun_at < SAFETY_GRACE_S:
-                    return None
-                return 0
-            return 1
-
-        def evict(self) -> None:
-            self.guard.remove(self)  # closing: no longer counted, never chosen again
-            self.guard.closed_for_room += 1
-            if self.head_begun and self.conn.their_state is h11.IDLE:
-                self.raw_transport.write(plain_response(
-                    503, "Service Unavailable", "too many connections (the limit is "
-                    f"{self.guard.config.max_connections}, {self.guard.config.max_connections_per_client} from one "
-                    "address); try again"))
-            self.raw_transport.close()
-
-        # -- deadlines -------------------------------------------------------------------
-        def await_head(self) -> None:
-            self.head_begun = False
-            self.head_prefix = b""
-            self.body_deadline_at = None
-            # up to half as long again, at random: connections that came together (a flood) do not all
-            # expire, and reconnect, together
-            self.set_deadline(self.guard.config.header_timeout_s * (1.0 + 0.5 * random.random()))
-
-        def set_deadline(self, delay_s: Optional[float]) -> None:
-            if self.deadline is not None:
-                self.deadline.cancel()
-            self.deadline = None if delay_s is None else self.loop.call_later(max(0.0, delay_s), self.expire)
-
-        def body_deadline(self) -> None:
-            """The deadline while the body comes: the next byte within ``body_timeout_s``, all by its time limit."""
-            config = self.guard.config
-            now = time.monotonic()
-            if self.body_deadline_at is None:
-                scope = self.scope or {}
-                expected = self.guard.body_cap(scope.get("method", ""), scope.get("path", ""))
-                for name, value in self.headers or ():
-                    if name == b"content-length":
-                        try:
-                            expected = min(expected, int(value))
-                        except ValueError:
-                            pass
-                self.body_deadline_at = now + config.body_timeout_s + expected / MIN_BODY_BYTES_PER_S
-            self.set_deadline(min(config.body_timeout_s, self.body_deadline_at - now))
-
-        def expire(self) -> None:
-            self.deadline = None
-            if self.raw_transport.is_closing():
-                return
-            if self.transport.lingering:
-                self.raw_transport.close()
-                return
-            state = self.conn.their_state
-            config = self.guard.config
-            if state is h11.SEND_BODY and self.flow.read_paused and self.cycle is not None \
-                    and not self.cycle.response_complete:  # the application has not read on yet: its turn
-                if self.body_deadline_at is not None:  # the client is not to blame for that time
-                    self.body_deadline_at += config.body_timeout_s
-                self.set_deadline(config.body_timeout_s)
-                return
-            if state is h11.IDLE and self.head_begun:
-                self.raw_transport.write(plain_response(
-                    408, "Request Timeout", f"the request head did not come whole within {config.header_timeout_s:g} s"))
-            elif state is h11.SEND_BODY and self.cycle is not None and not self.cycle.response_started:
-                self.raw_transport.write(plain_response(
-                    408, "Request Timeout", "the request body came too slowly (a pause over "
-                    f"{config.body_timeout_s:g} s, or under {MIN_BODY_BYTES_PER_S // 1024} kB/s)"))
-            if state in (h11.IDLE, h11.SEND_BODY):
-                self.raw_transport.close()
-
-        def linger(self) -> None:
-            """Answered before the body came whole, or refused for load: drop what comes for a while, then
-            close (the client has its whole answer, told by its length, and may close first)."""
-            self.raw_transport.resume_reading()
-            self.set_deadline(LINGER_S * (1.0 + 0.5 * random.random()))
-
-        # -- the protocol ----------------------------------------------------------------
-        def connection_made(self, transport: Any) -> None:  # type: ignore[override]
-            self.raw_transport = transport
-            super().connection_made(LingeringTransport(transport, self))
-            self.client_host = self.client[0] if self.client else ""
-            self.guard.add(self)
-            self.await_head()
-            self.guard.make_room(self)
-
-        def shutdown(self) -> None:
-            """The server is stopping: nothing lingers (a connection being let go is closed now)."""
-            self.lost = True
-            if self.transport.lingering:
-                self.raw_transport.close()
-                return
-            super().shutdown()
-
-        def connection_lost(self, exc: Optional[Exception]) -> None:
-            self.lost = True
-            self.guard.remove(self)
-            self.set_deadline(None)
-            super().connection_lost(exc)
-
-        def data_received(self, data: bytes) -> None:
-            if self.transport.lingering:  # answered and being let go: dropped
-                self.lingered_bytes += len(data)
-                if self.lingered_bytes > LINGER_BYTES:
-                    self.raw_transport.close()
-                return
-            if self.conn.their_state is h11.IDLE and len(self.head_prefix) < _HEAD_PREFIX_BYTES:
-                if not self.head_prefix:
-                    self.head_begun_at = time.monotonic()
-                self.head_prefix += data[:_HEAD_PREFIX_BYTES - len(self.head_prefix)]
-            super().data_received(data)
-            state = self.conn.their_state
-            if state is h11.IDLE:
-                self.head_begun = True  # the head's deadline stands
-            elif state is h11.SEND_BODY:
-                self.body_deadline()
-            elif not self.transport.is_closing():
-                self.set_deadline(None)  # the whole request is in: the application's turn
-
-        def on_response_complete(self) -> None:
-            super().on_response_complete()
-            if self.transport.is_closing():
-                return
-            state = self.conn.their_state
-            if state is h11.IDLE:
-                self.await_head()
-            elif state is h11.SEND_BODY:  # answered before the body came whole: the rest must come on time
-                self.body_deadline()
+    class GuardedH11Protocol(_GuardedConnection, H11Protocol):
+        _h11 = h11
 
     return GuardedH11Protocol
