@@ -57,15 +57,15 @@ from ..job.moves import jog_steps, to_origin
 from ..settings import DEFAULT_SETTINGS, MachineSettings
 from .apart import RunnerProcess
 from .journal import JournalSpec, journal_spec
-from ._session_parts import Activity, Prompt, PromptFn, SessionControls
+from ._session_parts import Activity, Prompt, PromptFn
+from ._session_frames import SessionFrames
 from .activities import BoardControl, drill_work, move_work, run_on_board, run_steps
 from .maximus.board import drill_arguments, drill_job, maximus_port
 from .ports import MockPort, port_kind, require
 from .runner import Controller, Cursor, RunResult
 from .chunks import ChunkedPlan, plan_chunks
 from .steps import StepPlan
-from .placement import approach_to_work_zero, ended_state, goto_path, placed_home
-from .state import StateHold, check_in_travel, mm_to_steps, steps_to_mm
+from .state import StateHold, check_in_travel
 
 __all__ = ["MachineSession", "Prompt", "PromptFn", "MAX_JOG_STEPS", "run"]
 
@@ -73,7 +73,7 @@ MAX_JOG_STEPS = 100_000
 """The longest jog one request may ask for, either way."""
 
 
-class MachineSession(SessionControls):
+class MachineSession(SessionFrames):
     """The machine as every front end sees it (thread-safe).
 
     Args:
@@ -229,35 +229,6 @@ class MachineSession(SessionControls):
             self._launch_steps("job", plan, name, lambda: getattr(job, "estimated_time_s", plan.estimated_time_s),
                                controller, spec)
 
-    def _require_known(self) -> None:
-        if self.state_hold is not None:
-            self.state_hold.require_known()
-
-    def _place(self, job: Any, label: Optional[str], controller: Optional[Controller], journal: Any,
-               origin: Optional[str]) -> bool:
-        """With a state file: travel to the job's place at the work zero first (the job starts when the travel
-        has finished).  True when that travel was started; False: the job starts here, as it is."""
-        if self.state_hold is None or getattr(job, "resumed", None) is not None:
-            return False
-        st = self.state_hold.state
-        here = tuple(int(v) for v in self._position)
-        approach = approach_to_work_zero(job, st, here, self.settings, self.kind, origin)  # TravelError: no move
-        if approach is None:
-            return False
-        home = np.asarray(placed_home(job, st, origin), np.int64)
-        self._position, saved = home, self._position
-        try:
-            self._check_job(job)  # the job as it will start there: everything checked before the travel
-        finally:
-            self._position = saved
-
-        def then() -> None:
-            self.start(job, label=label, controller=controller, journal=journal, origin=origin)
-
-        self._start_moves("jog", approach, "to the work zero")
-        self._then = then
-        return True
-
     def _journal_spec(self, job: Any, journal: Any) -> Optional[JournalSpec]:
         if journal is None or isinstance(journal, JournalSpec):
             return journal
@@ -302,145 +273,6 @@ class MachineSession(SessionControls):
             return
         self.set_position((0, 0, 0))
         self.log("this position is the origin now")
-
-    def zero(self, axes: str = "XYZ", offset: Optional[str] = None) -> None:
-        """Work zero of ``axes`` (``"X"``, ``"XY"``, ``"XYZ"``...) where the tool stands, in work offset ``offset``
-        (``"G54"``..``"G59.3"``; None: the active one).  Without a state file the session's home moves there on
-        those axes instead.  Refused while busy or while the position is unknown."""
-        names = str(axes).upper()
-        if not names or any(a not in "XYZ" for a in names) or len(set(names)) != len(names):
-            raise PlanError(f"axes must be X, Y, Z or several of them (XY, XYZ), got {axes!r}")
-        with self._lock:
-            self._check_free()
-            self._require_known()
-            here = [int(v) for v in self._position]
-            if self.state_hold is None:
-                for a in names:
-                    here["XYZ".index(a)] = 0
-                self._position = np.asarray(here, np.int64)
-                self._bump()
-                self.log(f"this position is the origin of {names} now")
-                return
-            st = self.state_hold.state
-            name = offset or st.active_offset
-            if name not in st.offsets_steps:
-                raise PlanError(f"offset must be one of {', '.join(st.offsets_steps)}, got {offset!r}")
-            zero = list(st.work_zero_steps(name))
-            for a in names:
-                zero["XYZ".index(a)] = here["XYZ".index(a)]
-            self.state_hold.record(st.with_offset(name, tuple(zero)))  # type: ignore[arg-type]
-            self._bump()
-        zmm = steps_to_mm(zero, self.settings)
-        self.log(f"{name} zero of {names} set here: machine {', '.join(f'{v:g}' for v in zmm)} mm")
-
-    def use_offset(self, offset: str) -> None:
-        """Make work offset ``offset`` (``"G54"``..``"G59.3"``) the active one (a state file is needed)."""
-        with self._lock:
-            self._check_free()
-            if self.state_hold is None:
-                raise CamError("work offsets need a machine state file (cam serve --state FILE)")
-            st = self.state_hold.state
-            if offset not in st.offsets_steps:
-                raise PlanError(f"offset must be one of {', '.join(st.offsets_steps)}, got {offset!r}")
-            self.state_hold.record(replace(st, active_offset=offset))
-            self._bump()
-        self.log(f"work offset {offset} active")
-
-    def go_to(self, xyz: Any, unit: str = "mm", *, machine_coords: bool = False) -> None:
-        """Go To ``xyz`` (3 numbers, ``unit`` ``"mm"`` or ``"steps"``) in the active work frame (``machine_coords``:
-        the machine frame): lifted to the safe height first (the work zero's surface, or higher), across, then
-        down.  Refused while busy, while the position is unknown, or outside the travel (nothing moves)."""
-        try:
-            values = [float(v) for v in xyz]
-        except (TypeError, ValueError):
-            raise PlanError(f"a go-to needs X, Y and Z numbers, got {xyz!r}") from None
-        if len(values) != 3 or not all(np.isfinite(values)) or max(abs(v) for v in values) > 1e7:
-            raise PlanError(f"a go-to needs 3 finite X, Y, Z numbers, got {xyz!r}")
-        if unit not in ("mm", "steps"):
-            raise PlanError(f"unit must be 'mm' or 'steps', got {unit!r}")
-        rel = mm_to_steps(values, self.settings) if unit == "mm" else tuple(int(round(v)) for v in values)
-        with self._lock:
-            self._check_free()
-            self._require_known()
-            st = self.state_hold.state if self.state_hold is not None else None
-            zero = (0, 0, 0) if machine_coords or st is None else st.work_zero_steps()
-            target = tuple(int(z) + int(r) for z, r in zip(zero, rel))
-            frame = "machine" if machine_coords or st is None else st.active_offset
-            if st is not None:
-                check_in_travel(target, self.settings, f"X,Y,Z {', '.join(f'{v:g}' for v in values)} {unit} in "
-                                                       f"{frame} (machine {list(target)} steps)")
-            here = tuple(int(v) for v in self._position)
-            job = goto_path(here, target, zero[2], self.settings)  # type: ignore[arg-type]
-            if job is None:
-                self.log("already there")
-                return
-            self._start_moves("jog", job, f"go to {', '.join(f'{v:g}' for v in values)} {unit} ({frame})")
-
-    def state(self, log_after: int = 0) -> dict[str, Any]:
-        """The view's snapshot (:meth:`SessionView.state`) with ``where``: machine and work position, live
-        (:meth:`where`)."""
-        with self._lock:
-            snap = super().state(log_after)
-            snap["where"] = self.where()
-            return snap
-
-    def where(self) -> dict[str, Any]:
-        """Machine and work position now (live while something runs), the active offset and the flags:
-        JSON-able.  Without a state file the machine frame is the session's (home: where the tool stood at
-        the start), and the work frame is the same."""
-        s = self.settings
-        pos = self.position_steps()
-        st = self.state_hold.state if self.state_hold is not None else None
-        work = pos if st is None else st.to_work(pos)
-        return {
-            "machine_steps": list(pos), "machine_mm": [round(v, 4) for v in steps_to_mm(pos, s)],
-            "work_steps": list(work), "work_mm": [round(v, 4) for v in steps_to_mm(work, s)],
-            "active_offset": "G54" if st is None else st.active_offset,
-            "offsets_mm": {} if st is None else {k: [round(v, 4) for v in steps_to_mm(z, s)]
-                                                 for k, z in st.offsets_steps.items()},
-            "position_known": True if st is None else st.position_known,
-            "unknown_reason": "" if st is None else st.unknown_reason,
-            "homed": False if st is None else st.homed,
-            "state_file": None if self.state_hold is None else str(self.state_hold.path),
-        }
-
-    def set_drill_z(self, which: str) -> None:
-        """Z Drill Up (``"up"``) or Down (``"down"``) of the MAXIMUS drill stroke from where the head stands:
-        its depth below the origin in steps (seed 000 Appendix 2, ``BtnSetZDrillUpPositionClick``: up must be
-        below the origin, down below up).  Drill jobs of this session use them from now on.
-
-        Raises:
-            CapabilityError: not a MAXIMUS board; PlanError: a position the stroke cannot have; BusyError.
-        """
-        require(self.port, "drill_stroke", what="Z Drill Up / Down")
-        if which not in ("up", "down"):
-            raise PlanError(f"which must be 'up' or 'down', got {which!r}")
-        with self._lock:
-            self._check_free()
-            self._require_known()
-            z = int(self._position[2])  # below the origin: the work zero's Z with a state file, else the home's
-            if self.state_hold is not None:
-                z -= int(self.state_hold.state.work_zero_steps()[2])
-            m = self.settings.maximus
-            up, down = (z, m.drill_z_down_steps) if which == "up" else (m.drill_z_up_steps, z)
-            if which == "up" and z < 0:
-                raise PlanError(f"Z Drill Up must not be above the origin; the head is {-z} steps above it")
-            if which == "down" and not z > up:
-                raise PlanError(f"Z Drill Down must be below Z Drill Up ({up} steps); the head is at {z}")
-            if which == "up" and down and not down > z:
-                down = 0  # the old Z down lies above the new Z up: set it again
-            self.settings = self.settings.replace(maximus=replace(m, drill_z_up_steps=up, drill_z_down_steps=down))
-        self.log(f"Z Drill {which.capitalize()} = {z} steps below the origin"
-                 + ("" if down else "; now set Z Drill Down"))
-
-    def board_moved(self, done: int, moved_steps: Any) -> None:
-        """A MAXIMUS board confirmed a move: the head stands ``moved_steps`` (x, y, z, session frame) from where the
-        running activity started, after ``done`` holes or moves (the live position: after every hole)."""
-        with self._lock:
-            if self._activity is not None:
-                self._activity.positions = _BoardPosition(int(done), tuple(int(v) for v in moved_steps))
-                self._activity.done = max(self._activity.done, int(done))
-                self._bump()
 
     def detail(self, text: str) -> None:
         """What the running activity does now (e.g. "drilling hole 3 of 44"): shown in the state and logged."""
@@ -550,25 +382,6 @@ class MachineSession(SessionControls):
                 except CamError as e:
                     self.log(f"the job did not start: {e}")
                     self.last_run = dict(info, status="error", messages=[str(e)])
-
-    def _record_state(self) -> None:
-        """Book where the activity left the machine in the state file (a write that fails is logged)."""
-        if self.state_hold is None:
-            return
-        try:
-            self.state_hold.record(ended_state(self.state_hold.state, self, self._activity_start))
-        except (CamError, OSError) as e:
-            self.log(f"the machine state file {self.state_hold.path} was not written: {e}")
-
-
-
-class _BoardPosition:
-    """The live position of a MAXIMUS activity, as a runner's cursor gives it (``sent``, ``position_steps``)."""
-
-    def __init__(self, sent: int, position_steps: tuple[int, int, int]) -> None:
-        self.sent = sent
-        self.position_steps = position_steps
-
 
 def run(job: Any, port: Any = "mock", *, realtime: bool = False, controller: Optional[Controller] = None,
         progress: Optional[Callable[[int, int, int], None]] = None,
