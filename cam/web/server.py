@@ -1064,5 +1064,8 @@ def serve(config: ServerConfig, announce: Callable[[str], None] = print) -> int:
     try:
         server.run(sockets=[sock])
     finally:
-        gc.unfreeze()  # what the server held (its session, the machine's lock) may be let go again
+        gc.unfreeze()  # what the server held may be let go again
+        hold = app.state.session.state_hold
+        if hold is not None:  # the machine's lock goes with the server, however it ended (again: no harm)
+            hold.close()
     return 0
