@@ -35,12 +35,14 @@ image border, an isolated black pixel.
 """
 from __future__ import annotations
 
+import io
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import cv2
 import numpy as np
+import PIL.Image  # GIF drawings (see _decode_gif)
 
 from ..errors import DrawingError
 from ..limits import MAX_IMAGE_PIXELS, MAX_IMAGE_SIDE_PX
@@ -309,16 +311,12 @@ def _decode_gif(data: np.ndarray) -> "np.ndarray | None":
     Pillow decodes it: OpenCV reads GIF only from 4.11 on, and only when it was built with its GIF codec.
     The palette is exact, so a GIF gives the very pixels of the PNG it was saved from.
     """
-    import io
-
-    from PIL import Image, UnidentifiedImageError
-
     try:
-        with Image.open(io.BytesIO(data.tobytes())) as im:
+        with PIL.Image.open(io.BytesIO(data.tobytes())) as im:
             im.seek(0)
             transparent = "transparency" in im.info or im.mode in ("RGBA", "LA", "PA")
             return np.asarray(im.convert("RGBA" if transparent else "RGB"))
-    except (OSError, ValueError, EOFError, UnidentifiedImageError, Image.DecompressionBombError):
+    except (OSError, ValueError, EOFError, PIL.UnidentifiedImageError, PIL.Image.DecompressionBombError):
         return None
 
 

@@ -656,6 +656,151 @@ def _fail(err, code, line, col, aux, aux2):
     err[0], err[1], err[2], err[3], err[4] = code, line, col, aux, aux2
 
 
+@njit(cache=True)
+def _ip(m, p0, p_val, p_line, p_col, line, col, ist, err):
+    """``IP``: the scaling points P1 and P2 (plotter units).  Returns False after recording an error in ``err``."""
+    if not (m == 0 or m == 2 or m == 4):
+        _fail(err, E_ARGS, line, col, m, C_IP)
+        return False
+    for q in range(p0, p0 + m):
+        if not abs(p_val[q]) <= MAX_COORD_PU:
+            _fail(err, E_RANGE, p_line[q], p_col[q], q, 0)
+            return False
+    if m == 0:
+        ist[I_P1X], ist[I_P1Y] = DEFAULT_P1_PU[0], DEFAULT_P1_PU[1]
+        ist[I_P2X], ist[I_P2Y] = DEFAULT_P2_PU[0], DEFAULT_P2_PU[1]
+    else:
+        dx, dy = ist[I_P2X] - ist[I_P1X], ist[I_P2Y] - ist[I_P1Y]
+        ist[I_P1X], ist[I_P1Y] = p_val[p0], p_val[p0 + 1]
+        if m == 4:
+            ist[I_P2X], ist[I_P2Y] = p_val[p0 + 2], p_val[p0 + 3]
+        else:  # P2 keeps its place relative to P1
+            ist[I_P2X], ist[I_P2Y] = ist[I_P1X] + dx, ist[I_P1Y] + dy
+        if ist[I_P2X] == ist[I_P1X]:  # HP-GL/2: P2 one unit further
+            ist[I_P2X] += 1.0
+        if ist[I_P2Y] == ist[I_P1Y]:
+            ist[I_P2Y] += 1.0
+    _rescale(ist)
+    return True
+
+
+@njit(cache=True)
+def _sc(m, p0, p_val, line, col, ist, err):
+    """``SC``: scaling on (its type and parameters) or off.  Returns False after recording an error in ``err``."""
+    kind = p_val[p0 + 4] if m >= 5 else 0.0
+    if not (m == 0 or m == 4 or m == 5 or (m == 7 and kind == 1)) or not (kind == 0 or kind == 1
+                                                                           or kind == 2):
+        _fail(err, E_ARGS, line, col, m, C_SC)
+        return False
+    if m == 0:
+        ist[I_SC] = 0.0
+    else:
+        a0, a1, a2, a3 = p_val[p0], p_val[p0 + 1], p_val[p0 + 2], p_val[p0 + 3]
+        left = p_val[p0 + 5] if m == 7 else 50.0
+        bottom = p_val[p0 + 6] if m == 7 else 50.0
+        if (kind == 2 and (a1 == 0 or a3 == 0)) or (kind != 2 and (a0 == a1 or a2 == a3)) \
+                or not (0 <= left <= 100 and 0 <= bottom <= 100):
+            _fail(err, E_SCALE, line, col, 0, C_SC)
+            return False
+        ist[I_SC], ist[I_SCTYPE] = 1.0, kind
+        ist[I_SC0], ist[I_SC1], ist[I_SC2], ist[I_SC3] = a0, a1, a2, a3
+        ist[I_SC4], ist[I_SC5] = left, bottom
+    _rescale(ist)
+    return True
+
+
+@njit(cache=True)
+def _arc(code, m, p0, p_val, line, col, ist, cx, cy, pen_down, pending, pen, write, k,
+         o_x, o_y, o_line, o_col, o_start, o_pen, err):
+    """``CI``, ``AA`` or ``AR`` from the pen at ``(cx, cy)`` (plotter units): its points recorded from ``k`` (or only
+    counted).  Returns ``(k, cx, cy, pending, ok)``; not ``ok``: an error is recorded in ``err``."""
+    circle = code == C_CI
+    if (circle and not (m == 1 or m == 2)) or (not circle and not (m == 3 or m == 4)):
+        _fail(err, E_ARGS, line, col, m, code)
+        return k, cx, cy, pending, False
+    ax, ay = ist[I_AX], ist[I_AY]
+    if circle:
+        ccx, ccy = cx, cy
+        radius = p_val[p0]
+        sweep = 360.0
+        theta0 = 0.0
+        has_chord = m == 2
+        chord = p_val[p0 + 1] if has_chord else 0.0
+    else:
+        if code == C_AA:
+            ccx, ccy = ax * p_val[p0] + ist[I_BX], ay * p_val[p0 + 1] + ist[I_BY]
+        else:
+            ccx, ccy = cx + ax * p_val[p0], cy + ay * p_val[p0 + 1]
+        ux, uy = (cx - ccx) / ax, (cy - ccy) / ay
+        radius = math.hypot(ux, uy)
+        theta0 = math.atan2(uy, ux)
+        sweep = p_val[p0 + 2]
+        has_chord = m == 4
+        chord = p_val[p0 + 3] if has_chord else 0.0
+    n_f = _chords(ist, sweep, radius, has_chord, chord)
+    if n_f > MAX_ARC_CHORDS:
+        _fail(err, E_CHORDS, line, col, int(min(n_f, 4e18)), code)
+        return k, cx, cy, pending, False
+    n = int(n_f)
+    reach_x, reach_y = abs(ax * radius), abs(ay * radius)
+    if not (abs(ccx) + reach_x <= MAX_COORD_PU and abs(ccy) + reach_y <= MAX_COORD_PU):
+        _fail(err, E_ARC_RANGE, line, col, 0, code)
+        return k, cx, cy, pending, False
+    if circle:
+        sx, sy = ccx + ax * radius, ccy  # a positive radius starts at 0 degrees, a negative one at 180
+        ex, ey = sx, sy
+    else:
+        sx, sy = cx, cy
+        t = theta0 + math.radians(sweep)
+        ex, ey = ccx + ax * radius * math.cos(t), ccy + ay * radius * math.sin(t)
+    draw = (circle or pen_down) and n > 0
+    if draw and write:
+        if circle or pending:
+            k = _point(o_x, o_y, o_line, o_col, o_start, o_pen, k, sx, sy, line, col, True, pen, True)
+        sweep_rad = math.radians(sweep)
+        for j in range(1, n):
+            t = theta0 + sweep_rad * j / n
+            k = _point(o_x, o_y, o_line, o_col, o_start, o_pen, k, ccx + ax * radius * math.cos(t),
+                       ccy + ay * radius * math.sin(t), line, col, False, pen, True)
+        k = _point(o_x, o_y, o_line, o_col, o_start, o_pen, k, ex, ey, line, col, False, pen, True)
+    elif draw:
+        k += n + (1 if circle or pending else 0)
+    if circle:
+        pending = pen_down  # the pen goes back to the centre up; down again there, it draws from the next move
+    elif n > 0:
+        cx, cy = ex, ey
+        if draw:
+            pending = False
+    return k, cx, cy, pending, True
+
+
+@njit(cache=True)
+def _pairs(p0, m, p_val, p_line, p_col, ist, cx, cy, cl, cc, pen_down, pending, rel, pen, write, k,
+           o_x, o_y, o_line, o_col, o_start, o_pen, err):
+    """The coordinate pairs of a ``PU``/``PD``/``PA``/``PR`` (user units, absolute or ``rel``): the pen moves, and
+    draws when down.  Returns ``(k, cx, cy, cl, cc, pending, ok)``; not ``ok``: an error is recorded in ``err``."""
+    ax, bx, ay, by = ist[I_AX], ist[I_BX], ist[I_AY], ist[I_BY]
+    for q in range(p0, p0 + m, 2):
+        if pen_down and pending:
+            k = _point(o_x, o_y, o_line, o_col, o_start, o_pen, k, cx, cy, cl, cc, True, pen, write)
+            pending = False
+        if rel:
+            cx += ax * p_val[q]
+            cy += ay * p_val[q + 1]
+        else:
+            cx = ax * p_val[q] + bx
+            cy = ay * p_val[q + 1] + by
+        cl = p_line[q]
+        cc = p_col[q]
+        if not (abs(cx) <= MAX_COORD_PU and abs(cy) <= MAX_COORD_PU):  # NaN too
+            bad = q if not abs(cx) <= MAX_COORD_PU else q + 1
+            _fail(err, E_RANGE, p_line[bad], p_col[bad], bad, 1 if rel else 0)
+            return k, cx, cy, cl, cc, pending, False
+        if pen_down:
+            k = _point(o_x, o_y, o_line, o_col, o_start, o_pen, k, cx, cy, cl, cc, False, pen, write)
+    return k, cx, cy, cl, cc, pending, True
+
+
 @entry
 @njit(cache=True)
 def _interpret(c0, c1, c_code, c_line, c_col, c_p0, c_np, p_val, p_line, p_col, ist,
@@ -670,11 +815,8 @@ def _interpret(c0, c1, c_code, c_line, c_col, c_p0, c_np, p_val, p_line, p_col, 
     pen_down = ist[I_DOWN] != 0
     rel = ist[I_REL] != 0
     pending = ist[I_PENDING] != 0
-    cx = ist[I_X]
-    cy = ist[I_Y]
-    pen = int(ist[I_PEN])
-    cl = int(ist[I_LINE])
-    cc = int(ist[I_COL])
+    cx, cy = ist[I_X], ist[I_Y]
+    pen, cl, cc = int(ist[I_PEN]), int(ist[I_LINE]), int(ist[I_COL])
     k = 0
     for ci in range(c0, c1):
         k_before = k
@@ -694,51 +836,13 @@ def _interpret(c0, c1, c_code, c_line, c_col, c_p0, c_np, p_val, p_line, p_col, 
                 _fail(err, E_SP, line, col, 0, 0)
                 return k
             pen = int(v)
-            pen_down = False
-            pending = False
+            pen_down = pending = False
         elif code == C_IP:
-            if not (m == 0 or m == 2 or m == 4):
-                _fail(err, E_ARGS, line, col, m, code)
+            if not _ip(m, p0, p_val, p_line, p_col, line, col, ist, err):
                 return k
-            for q in range(p0, p0 + m):
-                if not abs(p_val[q]) <= MAX_COORD_PU:
-                    _fail(err, E_RANGE, p_line[q], p_col[q], q, 0)
-                    return k
-            if m == 0:
-                ist[I_P1X], ist[I_P1Y] = DEFAULT_P1_PU[0], DEFAULT_P1_PU[1]
-                ist[I_P2X], ist[I_P2Y] = DEFAULT_P2_PU[0], DEFAULT_P2_PU[1]
-            else:
-                dx, dy = ist[I_P2X] - ist[I_P1X], ist[I_P2Y] - ist[I_P1Y]
-                ist[I_P1X], ist[I_P1Y] = p_val[p0], p_val[p0 + 1]
-                if m == 4:
-                    ist[I_P2X], ist[I_P2Y] = p_val[p0 + 2], p_val[p0 + 3]
-                else:  # P2 keeps its place relative to P1
-                    ist[I_P2X], ist[I_P2Y] = ist[I_P1X] + dx, ist[I_P1Y] + dy
-                if ist[I_P2X] == ist[I_P1X]:  # HP-GL/2: P2 one unit further
-                    ist[I_P2X] += 1.0
-                if ist[I_P2Y] == ist[I_P1Y]:
-                    ist[I_P2Y] += 1.0
-            _rescale(ist)
         elif code == C_SC:
-            kind = p_val[p0 + 4] if m >= 5 else 0.0
-            if not (m == 0 or m == 4 or m == 5 or (m == 7 and kind == 1)) or not (kind == 0 or kind == 1
-                                                                                   or kind == 2):
-                _fail(err, E_ARGS, line, col, m, code)
+            if not _sc(m, p0, p_val, line, col, ist, err):
                 return k
-            if m == 0:
-                ist[I_SC] = 0.0
-            else:
-                a0, a1, a2, a3 = p_val[p0], p_val[p0 + 1], p_val[p0 + 2], p_val[p0 + 3]
-                left = p_val[p0 + 5] if m == 7 else 50.0
-                bottom = p_val[p0 + 6] if m == 7 else 50.0
-                if (kind == 2 and (a1 == 0 or a3 == 0)) or (kind != 2 and (a0 == a1 or a2 == a3)) \
-                        or not (0 <= left <= 100 and 0 <= bottom <= 100):
-                    _fail(err, E_SCALE, line, col, 0, code)
-                    return k
-                ist[I_SC], ist[I_SCTYPE] = 1.0, kind
-                ist[I_SC0], ist[I_SC1], ist[I_SC2], ist[I_SC3] = a0, a1, a2, a3
-                ist[I_SC4], ist[I_SC5] = left, bottom
-            _rescale(ist)
         elif code == C_CT:
             v = p_val[p0] if m else 0.0
             if m > 1 or not (v == 0 or v == 1):
@@ -746,63 +850,10 @@ def _interpret(c0, c1, c_code, c_line, c_col, c_p0, c_np, p_val, p_line, p_col, 
                 return k
             ist[I_CT] = v
         elif code == C_CI or code == C_AA or code == C_AR:
-            circle = code == C_CI
-            if (circle and not (m == 1 or m == 2)) or (not circle and not (m == 3 or m == 4)):
-                _fail(err, E_ARGS, line, col, m, code)
+            k, cx, cy, pending, ok = _arc(code, m, p0, p_val, line, col, ist, cx, cy, pen_down, pending, pen, write, k,
+                                          o_x, o_y, o_line, o_col, o_start, o_pen, err)
+            if not ok:
                 return k
-            ax, ay = ist[I_AX], ist[I_AY]
-            if circle:
-                ccx, ccy = cx, cy
-                radius = p_val[p0]
-                sweep = 360.0
-                theta0 = 0.0
-                has_chord = m == 2
-                chord = p_val[p0 + 1] if has_chord else 0.0
-            else:
-                if code == C_AA:
-                    ccx, ccy = ax * p_val[p0] + ist[I_BX], ay * p_val[p0 + 1] + ist[I_BY]
-                else:
-                    ccx, ccy = cx + ax * p_val[p0], cy + ay * p_val[p0 + 1]
-                ux, uy = (cx - ccx) / ax, (cy - ccy) / ay
-                radius = math.hypot(ux, uy)
-                theta0 = math.atan2(uy, ux)
-                sweep = p_val[p0 + 2]
-                has_chord = m == 4
-                chord = p_val[p0 + 3] if has_chord else 0.0
-            n_f = _chords(ist, sweep, radius, has_chord, chord)
-            if n_f > MAX_ARC_CHORDS:
-                _fail(err, E_CHORDS, line, col, int(min(n_f, 4e18)), code)
-                return k
-            n = int(n_f)
-            reach_x, reach_y = abs(ax * radius), abs(ay * radius)
-            if not (abs(ccx) + reach_x <= MAX_COORD_PU and abs(ccy) + reach_y <= MAX_COORD_PU):
-                _fail(err, E_ARC_RANGE, line, col, 0, code)
-                return k
-            if circle:
-                sx, sy = ccx + ax * radius, ccy  # a positive radius starts at 0 degrees, a negative one at 180
-                ex, ey = sx, sy
-            else:
-                sx, sy = cx, cy
-                t = theta0 + math.radians(sweep)
-                ex, ey = ccx + ax * radius * math.cos(t), ccy + ay * radius * math.sin(t)
-            draw = (circle or pen_down) and n > 0
-            if draw and write:
-                if circle or pending:
-                    k = _point(o_x, o_y, o_line, o_col, o_start, o_pen, k, sx, sy, line, col, True, pen, True)
-                sweep_rad = math.radians(sweep)
-                for j in range(1, n):
-                    t = theta0 + sweep_rad * j / n
-                    k = _point(o_x, o_y, o_line, o_col, o_start, o_pen, k, ccx + ax * radius * math.cos(t),
-                               ccy + ay * radius * math.sin(t), line, col, False, pen, True)
-                k = _point(o_x, o_y, o_line, o_col, o_start, o_pen, k, ex, ey, line, col, False, pen, True)
-            elif draw:
-                k += n + (1 if circle or pending else 0)
-            if circle:
-                pending = pen_down  # the pen goes back to the centre up; down again there, it draws from the next move
-            elif n > 0:
-                cx, cy = ex, ey
-                if draw:
-                    pending = False
             cl, cc = line, col
         elif _coord_cmd(code):
             if m % 2:
@@ -821,25 +872,10 @@ def _interpret(c0, c1, c_code, c_line, c_col, c_p0, c_np, p_val, p_line, p_col, 
                 rel = False
             else:
                 rel = True
-            ax, bx, ay, by = ist[I_AX], ist[I_BX], ist[I_AY], ist[I_BY]
-            for q in range(p0, p0 + m, 2):
-                if pen_down and pending:
-                    k = _point(o_x, o_y, o_line, o_col, o_start, o_pen, k, cx, cy, cl, cc, True, pen, write)
-                    pending = False
-                if rel:
-                    cx += ax * p_val[q]
-                    cy += ay * p_val[q + 1]
-                else:
-                    cx = ax * p_val[q] + bx
-                    cy = ay * p_val[q + 1] + by
-                cl = p_line[q]
-                cc = p_col[q]
-                if not (abs(cx) <= MAX_COORD_PU and abs(cy) <= MAX_COORD_PU):  # NaN too
-                    bad = q if not abs(cx) <= MAX_COORD_PU else q + 1
-                    _fail(err, E_RANGE, p_line[bad], p_col[bad], bad, 1 if rel else 0)
-                    return k
-                if pen_down:
-                    k = _point(o_x, o_y, o_line, o_col, o_start, o_pen, k, cx, cy, cl, cc, False, pen, write)
+            k, cx, cy, cl, cc, pending, ok = _pairs(p0, m, p_val, p_line, p_col, ist, cx, cy, cl, cc, pen_down, pending,
+                                                    rel, pen, write, k, o_x, o_y, o_line, o_col, o_start, o_pen, err)
+            if not ok:
+                return k
         if not write:
             counts[ci - c0] = k - k_before
     ist[I_DOWN] = 1.0 if pen_down else 0.0

@@ -22,6 +22,7 @@ units; machine x = X, y = -Y, nearest step; +Z deeper).
 """
 from __future__ import annotations
 
+import math
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -68,32 +69,29 @@ def xy_steps(x_pu: np.ndarray, y_pu: np.ndarray, extent_pu: Optional[tuple[float
     return np.floor(np.column_stack([x_steps, y_steps]) + 0.5).astype(np.int64)
 
 
-@dataclass
-class _Extent:
-    """A scan's drawn extent in mm, as :func:`cam.job.svg.svg_scale` reads a drawing's."""
-
-    scan: HpglScan
-
-    @property
-    def source(self) -> str:
-        return self.scan.source
-
-    def extent_mm(self) -> tuple[float, float, float, float]:
-        x0, y0, x1, y1 = self.scan.extent_pu if self.scan.extent_pu is not None else (0.0, 0.0, 0.0, 0.0)
-        return (x0 * PLOTTER_UNIT_MM, y0 * PLOTTER_UNIT_MM, x1 * PLOTTER_UNIT_MM, y1 * PLOTTER_UNIT_MM)
-
-
 def hpgl_scale(scan: HpglScan, *, scale: Optional[float] = None, fit_mm: Optional[tuple[float, float]] = None) -> float:
     """mm cut per mm of the plot (its ``SC``/``IP`` scaling applied): ``scale``, or the largest that fits the drawn
-    extent in ``fit_mm`` ``(width, height)`` keeping its proportions, or 1 -- as SVG's ``--scale``/``--fit``
-    (:func:`cam.job.svg.svg_scale`, the same rules and messages).
+    extent in ``fit_mm`` ``(width, height)`` keeping its proportions, or 1 -- SVG's ``--scale``/``--fit`` rules and
+    messages (:func:`cam.job.svg.svg_scale`; not imported from there: cam.job.svg plans with this module's rows).
 
     Raises:
         PlanError: both given, a factor that is not > 0, nothing to fit.
     """
-    from .svg import svg_scale  # here: cam.job.svg plans its strokes with this package's rows
-
-    return svg_scale(_Extent(scan), scale=scale, fit_mm=fit_mm)  # type: ignore[arg-type]
+    if scale is not None and fit_mm is not None:
+        raise PlanError("give --scale or --fit, not both")
+    if scale is not None:
+        if not (math.isfinite(scale) and scale > 0):
+            raise PlanError(f"the scale must be a number > 0, got {scale:g}")
+        return float(scale)
+    if fit_mm is None:
+        return 1.0
+    fw, fh = (float(v) for v in fit_mm)
+    if not (fw > 0 and fh > 0 and math.isfinite(fw) and math.isfinite(fh)):
+        raise PlanError(f"--fit takes a width and a height > 0 mm, got {fw:g}x{fh:g}")
+    w, h = scan.size_mm()
+    if w <= 0 and h <= 0:
+        raise PlanError(f"{scan.source}: nothing to fit (the drawing has no extent)")
+    return min(fw / w if w > 0 else math.inf, fh / h if h > 0 else math.inf)
 
 
 def _z_steps(cut_depth_mm: float, travel_height_mm: float, settings: MachineSettings) -> tuple[int, int]:
