@@ -432,6 +432,11 @@ class _Reader:
         self.statement(code)
 
     def statement(self, line: str) -> None:
+        if len(line) > MAX_STATEMENT_CHARS:  # before any word is split: every reading of the file meets it
+            if not self.seen_excellon:
+                raise self.not_excellon()
+            raise self.error(f"a statement of {len(line):,} characters (drill files write under "
+                             f"{MAX_STATEMENT_CHARS})")
         if line == "%":
             if self.state == "header":
                 self.state = "body"
@@ -946,6 +951,11 @@ def _choose(text: str, source: str, units, digits, zeros, params, first: _Reader
     if runner is not None:
         note += f"; the runner-up {runner[2].describe(unstated)} gives {runner[3]}"
     return best[2], note
+
+
+MAX_STATEMENT_CHARS = 1000
+"""The longest statement read; a longer line is an error naming it (a coordinate line is under 40 characters, a
+header line under 100), so a 100,000-character line is not split into words once per reading tried."""
 
 
 # ---------------------------------------------------------------------- nc_param.txt (Allegro)

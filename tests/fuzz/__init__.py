@@ -107,7 +107,67 @@ def seeds() -> dict[str, list[tuple[str, bytes]]]:
                  ("star.plt", (ROOT / "samples" / "inkscape_star.plt").read_bytes()[:4000])],
         "gcode": [("job.ngc", b"%\n(square)\nG21 G90\nG0 Z1\nG0 X1 Y-1\nG1 Z-0.3 F200\nG1 X4 F600\nG2 X4 Y-4 I0 J-1.5\n"
                               b"G1 X1\nG4 P0.5\nM6 T2\nG1 Y-1\nG0 Z1\nM2\n%\n")],
+        "svg": [("logo.svg", (ROOT / "samples" / "logo.svg").read_bytes()), ("inkscape.svg", INKSCAPE_SVG),
+                ("potrace.svg", POTRACE_SVG), ("uses.svg", USES_SVG)],
+        "web": [(f"{route.strip('/').replace('/', '-')}.json", body) for route, body in WEB_BODIES],
     }
+
+
+INKSCAPE_SVG = b"""<?xml version="1.0" encoding="UTF-8" standalone="no"?>
+<svg xmlns:inkscape="http://www.inkscape.org/namespaces/inkscape"
+   xmlns:sodipodi="http://sodipodi.sourceforge.net/DTD/sodipodi-0.dtd"
+   xmlns="http://www.w3.org/2000/svg" xmlns:svg="http://www.w3.org/2000/svg"
+   width="60mm" height="40mm" viewBox="0 0 60 40" version="1.1" id="svg8">
+  <sodipodi:namedview id="base" inkscape:document-units="mm" />
+  <g inkscape:label="Layer 1" inkscape:groupmode="layer" id="layer1" transform="translate(0,-257)">
+    <path style="fill:none;stroke:#000000;stroke-width:0.26458332px" d="m 10,270 c 5,-8 15,-8 20,0 s 15,8 20,0"
+       id="path10" inkscape:connector-curvature="0" />
+    <rect style="fill:none;stroke:#ff0000;stroke-width:0.26" id="rect12" width="20" height="10" x="5" y="280"
+       ry="2" />
+    <ellipse style="fill:none;stroke:#0000ff" id="e1" cx="45" cy="285" rx="8" ry="4" transform="rotate(15,45,285)"/>
+    <path d="M 30,290 A 5,5 0 1 1 40,290 Z" style="stroke:#000;fill:none" id="arc"/>
+  </g>
+</svg>
+"""
+
+POTRACE_SVG = b"""<?xml version="1.0" standalone="no"?>
+<!DOCTYPE svg PUBLIC "-//W3C//DTD SVG 20010904//EN" "http://www.w3.org/TR/2001/REC-SVG-20010904/DTD/svg10.dtd">
+<svg version="1.0" xmlns="http://www.w3.org/2000/svg" width="200.000000pt" height="100.000000pt"
+ viewBox="0 0 200.000000 100.000000" preserveAspectRatio="xMidYMid meet">
+<metadata>Created by potrace 1.16, written by Peter Selinger 2001-2019</metadata>
+<g transform="translate(0.000000,100.000000) scale(0.100000,-0.100000)" fill="#000000" stroke="none">
+<path d="M320 820 c-58 -31 -90 -86 -90 -155 0 -110 80 -185 195 -185 65 0 117 27 150 77 l22 33 3 -48 c2
+-26 9 -50 17 -53 10 -4 13 21 13 123 0 141 -14 180 -80 213 -51 26 -182 23 -230 -5z M1200 500 l0 -300 100 0
+100 0 0 300 0 300 -100 0 -100 0 0 -300z"/>
+</g>
+</svg>
+"""
+
+USES_SVG = b"""<svg xmlns="http://www.w3.org/2000/svg" xmlns:xlink="http://www.w3.org/1999/xlink" width="80mm"
+ height="80mm" viewBox="0 0 80 80">
+  <defs><circle id="dot" cx="0" cy="0" r="1.5" fill="none" stroke="black"/>
+    <g id="row"><use xlink:href="#dot" x="10"/><use href="#dot" x="20"/><use xlink:href="#dot" x="30"/></g></defs>
+  <use xlink:href="#row" y="10"/><use xlink:href="#row" y="20" transform="scale(1.1) skewX(5)"/>
+  <polyline points="5,70 20,60 35,70 50,60" fill="none" stroke="black"/>
+  <line x1="60" y1="5" x2="75" y2="40" stroke="black"/>
+</svg>
+"""
+
+WEB_BODIES: list[tuple[str, bytes]] = [
+    ("/api/jog", b'{"axis": "x", "steps": 10, "unit": "steps"}'),
+    ("/api/goto", b'{"xyz": [1, 2, 0], "unit": "mm", "machine": false}'),
+    ("/api/zero", b'{"axes": "XY", "offset": "G55"}'),
+    ("/api/use-offset", b'{"offset": "G54"}'),
+    ("/api/plan", b'{"job": "1", "options": {}}'),
+    ("/api/start", b'{"job": "1"}'),
+    ("/api/answer", b'{"prompt": 1, "action": "continue"}'),
+    ("/api/drill-z", b'{"which": "up"}'),
+    ("/api/pause", b"{}"), ("/api/resume", b"{}"), ("/api/stop", b"{}"), ("/api/resume-job", b'{"job": "1"}'),
+    ("/api/upload", b"--B\r\nContent-Disposition: form-data; name=\"role\"\r\n\r\njob\r\n--B\r\n"
+                    b"Content-Disposition: form-data; name=\"file\"; filename=\"a.ngc\"\r\n"
+                    b"Content-Type: application/octet-stream\r\n\r\nG0 X1\nG1 X2 F100\r\n--B--\r\n"),
+]
+"""A JSON (or multipart) body of each route of the page, as the page sends it."""
 
 
 def _digitized_text(img: np.ndarray) -> bytes:
@@ -200,10 +260,70 @@ MUTATORS: list[Callable[[np.random.Generator, bytes], bytes]] = [
 ]
 
 
-def mutate(rng: np.random.Generator, data: bytes) -> bytes:
-    """One to three mutations of ``data``."""
+def _svg_structure(rng: np.random.Generator, data: bytes) -> bytes:
+    """What breaks SVG readers: deep nesting, huge coordinates and viewBoxes, NaN transforms, broken paths,
+    external entities and entity expansion, `<use>` fan-out."""
+    choice = int(rng.integers(8))
+    body_at = data.rfind(b"</svg>")
+    body_at = len(data) if body_at < 0 else body_at
+    if choice == 0:
+        depth = int(rng.choice([50, 500, 5000]))
+        extra = b"<g>" * depth + b'<path d="M0 0 L1 1"/>' + b"</g>" * depth
+    elif choice == 1:
+        extra = b'<path d="M 1e308 -1e308 L 1e30 1e30 C 9e300 0 0 9e300 1 1" stroke="black"/>'
+    elif choice == 2:
+        extra = b'<g transform="matrix(nan,0,0,inf,1e308,-1e308) rotate(1e309)"><rect width="5" height="5"/></g>'
+    elif choice == 3:
+        extra = b'<path d="M 10 10 L 20 Q 5 z z A 1 1 0 2 2 5 5 M" stroke="black"/>'
+    elif choice == 4:  # entity expansion and an external entity before the root
+        dtd = (b'<?xml version="1.0"?><!DOCTYPE svg [<!ENTITY a "aaaaaaaaaa"><!ENTITY b "&a;&a;&a;&a;&a;&a;&a;&a;">'
+               b'<!ENTITY c "&b;&b;&b;&b;&b;&b;&b;&b;"><!ENTITY d "&c;&c;&c;&c;&c;&c;&c;&c;">'
+               b'<!ENTITY x SYSTEM "file:///etc/passwd">]>')
+        start = data.find(b"<svg")
+        return dtd + (data[start:] if start >= 0 else data).replace(b"</svg>", b"<text>&d;&x;</text></svg>", 1)
+    elif choice == 5:
+        return data.replace(b"viewBox=", b'viewBox="0 0 1e300 1e-300" data-old=', 1)
+    elif choice == 6:
+        fan = int(rng.choice([4, 10, 30]))
+        defs = b'<defs><path id="u0" d="M0 0 L1 1"/>' + b"".join(
+            b'<g id="u%d">' % (i + 1) + b'<use href="#u%d"/>' % i * fan + b"</g>" for i in range(10)) + b"</defs>"
+        extra = defs + b'<use href="#u10"/>'
+    else:
+        n = int(rng.choice([100, 1000]))  # a halftone's habit (50,000 circles: benchmarks, not the fuzzing)
+        extra = b"".join(b'<circle cx="%d" cy="%d" r="0.3" stroke="black" fill="none"/>' % (i % 300, i // 300)
+                         for i in range(n))
+    return data[:body_at] + extra + data[body_at:]
+
+
+def _json_values(rng: np.random.Generator, data: bytes) -> bytes:
+    """A JSON value swapped for a wrong type, a huge or deep one, NaN, infinity or an empty string."""
+    import re
+
+    values = [b"NaN", b"Infinity", b"-Infinity", b"1e308", b"1" + b"0" * 30, b"1" + b"0" * 4000, b"[]", b"{}",
+              b'""', b"null", b"true", b"[1, 2, 3]", b'{"a": {"b": {"c": 1}}}', b"[" * 5000 + b"]" * 5000,
+              b'"' + b"x" * 100_000 + b'"', b"-0", b"0.0000001", b'"G59.3"', b'"XYZ"', b"[1e9, -1e9, 1e9]"]
+    spans = [m.span(1) for m in re.finditer(rb':\s*("[^"]*"|[-\w.]+|\[[^\]]*\])', data)]
+    if not spans:
+        return data
+    a, b = spans[int(rng.integers(len(spans)))]
+    return data[:a] + values[int(rng.integers(len(values)))] + data[b:]
+
+
+KIND_MUTATORS: dict[str, list[Callable[[np.random.Generator, bytes], bytes]]] = {
+    "svg": [_svg_structure, _svg_structure, _number],
+    "web": [_json_values, _json_values, _json_values],
+}
+"""Mutators a kind gets besides :data:`MUTATORS` (chosen as often as all of those together)."""
+
+
+def mutate(rng: np.random.Generator, data: bytes, kind: str = "") -> bytes:
+    """One to three mutations of ``data`` (of input kind ``kind``: its own mutators half the time)."""
+    extra = KIND_MUTATORS.get(kind, [])
     for _ in range(int(rng.integers(1, 4))):
-        data = MUTATORS[int(rng.integers(len(MUTATORS)))](rng, data)
+        if extra and rng.integers(2):
+            data = extra[int(rng.integers(len(extra)))](rng, data)
+        else:
+            data = MUTATORS[int(rng.integers(len(MUTATORS)))](rng, data)
     return data[:10_000_000]
 
 
@@ -235,9 +355,96 @@ def _pinlog(path: Path) -> None:
         pass
 
 
+def _svg(path: Path) -> None:
+    """What ``cam drill`` and ``cam preview`` do with an SVG file: plan it, then draw its preview."""
+    from cam.job.jobs import JobOptions, prepare_job
+    from cam.web.work import preview_of
+
+    preview_of(prepare_job(path, JobOptions(), SETTINGS))
+
+
+class _LiveServer:
+    """One ``cam serve`` on the mock (simulated clock) for the whole campaign, with a planned job "1"."""
+
+    instance: "Optional[_LiveServer]" = None
+
+    def __init__(self) -> None:
+        import socket
+        import threading
+
+        import uvicorn
+
+        from cam.web.server import ServerConfig, create_app, uvicorn_config
+
+        self.tmp = tempfile.mkdtemp(prefix="cam-fuzz-web-")
+        self.config = ServerConfig(jobs_dir=self.tmp, port=0, realtime=False, settings=SETTINGS,
+                                   state_file=str(Path(self.tmp) / "machine.json"))
+        self.app = create_app(self.config)
+        self.session = self.app.state.session
+        sock = socket.socket()
+        sock.bind(("127.0.0.1", 0))
+        self.url = f"http://127.0.0.1:{sock.getsockname()[1]}"
+        self.server = uvicorn.Server(uvicorn_config(self.app, log_level="critical"))
+        threading.Thread(target=self.server.run, kwargs={"sockets": [sock]}, daemon=True).start()
+        while not self.server.started:
+            time.sleep(0.01)
+        _, body, _ = self.post("/api/upload", WEB_BODIES[-1][1], "multipart/form-data; boundary=B")
+        self.post("/api/plan", b'{"job": "1", "options": {}}')
+
+    @classmethod
+    def get(cls) -> "_LiveServer":
+        if cls.instance is None:
+            cls.instance = cls()
+        return cls.instance
+
+    def post(self, route: str, body: bytes, ctype: str = "application/json") -> tuple[int, bytes, str]:
+        import urllib.error
+        import urllib.request
+
+        req = urllib.request.Request(self.url + route, data=body, method="POST", headers={
+            "Content-Type": ctype, "Origin": self.url, "X-Requested-With": "cam"})
+        try:
+            with urllib.request.urlopen(req, timeout=TIME_LIMIT_S) as resp:
+                return resp.status, resp.read(), resp.headers.get("content-type", "")
+        except urllib.error.HTTPError as exc:
+            return exc.code, exc.read(), exc.headers.get("content-type", "")
+
+
+class WebFailure(Exception):
+    """The server answered a request in a way no request may get (a 5xx, not one line, the machine moving on a
+    refused request)."""
+
+
+def _web(path: Path) -> None:
+    """POST the body to its route of a live ``cam serve`` (the route from the file name: ``api-jog.json``)."""
+    import json
+
+    srv = _LiveServer.get()
+    route = "/" + path.stem.replace("-", "/", 1)
+    ctype = "multipart/form-data; boundary=B" if route == "/api/upload" else "application/json"
+    srv.session.wait_idle(TIME_LIMIT_S)
+    before = (srv.session.position_steps(), srv.session.version)
+    status, body, got_type = srv.post(route, path.read_bytes(), ctype)
+    if status >= 500:
+        raise WebFailure(f"{route}: HTTP {status}: {body[:200]!r}")
+    if status >= 400:
+        try:
+            message = json.loads(body)["error"]
+        except (ValueError, KeyError, TypeError):
+            raise WebFailure(f"{route}: HTTP {status} without a JSON error: {body[:200]!r}") from None
+        if not message or "\n" in message.strip() or "Traceback" in message:
+            raise WebFailure(f"{route}: HTTP {status}, not one line: {message[:300]!r}")
+        time.sleep(0.01)
+        if srv.session.busy or srv.session.position_steps() != before[0]:
+            raise WebFailure(f"{route}: the machine moved on a refused request ({status}: {message})")
+        raise CamError(message)  # a clean refusal
+    srv.session.stop()  # an accepted motion: ended, so the next input starts idle
+    srv.session.wait_idle(TIME_LIMIT_S)
+
+
 TARGETS: dict[str, Callable[[Path], None]] = {
     "drawing": _job, "digitized": _job, "settings": _settings, "profile": _profile_target,
-    "pinlog": _pinlog, "excellon": _job, "hpgl": _job, "gcode": _job,
+    "pinlog": _pinlog, "excellon": _job, "hpgl": _job, "gcode": _job, "svg": _svg, "web": _web,
 }
 
 
@@ -252,6 +459,8 @@ def run_one(kind: str, name: str, data: bytes, folder: Path) -> Outcome:
     """Run one input through its kind's target; never raises."""
     path = folder / name
     path.write_bytes(data)
+    if kind == "web":
+        _LiveServer.get()  # started once, outside the timed call
     previous = signal.signal(signal.SIGALRM, _alarm)
     signal.setitimer(signal.ITIMER_REAL, TIME_LIMIT_S)
     t0 = time.perf_counter()
@@ -290,7 +499,7 @@ def campaign(count: int, seed: int = 0, kinds: Optional[list[str]] = None, save:
         for i in range(count):
             kind = names[i % len(names)]
             name, base = all_seeds[kind][int(rng.integers(len(all_seeds[kind])))]
-            data = mutate(rng, base)
+            data = mutate(rng, base, kind)
             o = run_one(kind, name, data, folder)
             outcomes.append(o)
             if o.status == "failure" and save is not None:
