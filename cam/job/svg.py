@@ -56,6 +56,7 @@ import math
 from typing import Optional, Sequence, Union
 
 import numpy as np
+from scipy.spatial import cKDTree  # duplicate pieces; scipy comes with scikit-image (cam.digitize.sketch uses it)
 
 from ..errors import PlanError, TravelError
 from ..formats.svg import SvgDrawing
@@ -254,8 +255,6 @@ def _drop_duplicates(polys: list[np.ndarray]) -> tuple[list[np.ndarray], list[in
         inverse = inverse.reshape(-1)
         repeat = first[inverse] != np.arange(len(long))
         reps = np.sort(first)
-        from scipy.spatial import cKDTree  # scikit-image's dependency, already cam's (cam.digitize.sketch)
-
         rows = np.vstack([fwd[reps], rev[reps]])
         pairs = cKDTree(rows).query_pairs(DUPLICATE_STEPS, p=np.inf, output_type="ndarray")
         gone = np.zeros(len(reps), bool)
