@@ -63,6 +63,7 @@ from .hpgl import DEFAULT_CUT_DEPTH_MM as HPGL_CUT_DEPTH_MM
 from .hpgl import DEFAULT_TRAVEL_HEIGHT_MM as HPGL_TRAVEL_HEIGHT_MM
 from .drawing_stream import STREAM_TARGETS, plan, stream_drawing
 from .hpgl_stream import STREAM_POINTS, stream_hpgl
+from .heightmap import check_heightmap_options, prepare_heightmap
 from .model import Job
 from .resume import (Journal, JournalBase, check_journal, check_journal_numbers, job_identity, plan_fingerprint,
                      resume_pieces)
@@ -778,10 +779,8 @@ def prepare_job(
     if not p.is_file():
         raise CamError(f"{p}: file not found")
     if kind == "drawing" and opts.heightmap:  # a grey-level relief (issue #31 point 7)
-        from .heightmap import prepare_heightmap
-        job = prepare_heightmap(p, opts, settings)
+        job = PreparedJob(**prepare_heightmap(p, opts, settings))
     elif kind in ("drawing", "digitized"):
-        from .heightmap import check_heightmap_options
         check_heightmap_options(opts, p.name)  # --invert, --max-depth, ... only with --heightmap
         job = _prepare_pixels(p, kind, opts, settings)
     elif kind == "gcode":
