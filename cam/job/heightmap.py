@@ -50,9 +50,11 @@ from typing import Any, Optional
 
 import numpy as np
 
+from ..digitize.drawing import _read_image
+from ..drive.chunks import plan_chunks
 from ..errors import CamError
 from ..settings import DEFAULT_SETTINGS, MachineSettings
-from ..tool import POINT, Tool, drop_depth_px, parse_tool, tool_of_settings
+from ..tool import POINT, Tool, _lowest, drop_depth_px, footprint_px, parse_tool, tool_of_settings
 from .model import CUT, RETRACT, TRAVEL, Job, PixelFrame, check_travel
 
 __all__ = ["DEFAULT_MAX_DEPTH_MM", "BAND_ROWS", "grey_of_image", "load_heightmap", "depth_steps_of",
@@ -91,9 +93,7 @@ def load_heightmap(path: str | Path) -> np.ndarray:
     Raises:
         CamError: unreadable, too large.
     """
-    from ..digitize.drawing import _read_image  # the drawings' reader: the same formats and size checks
-
-    img, bgr = _read_image(Path(path))
+    img, bgr = _read_image(Path(path))  # the drawings' reader: the same formats and size checks
     return grey_of_image(img, bgr=bgr)
 
 
@@ -147,8 +147,6 @@ def sub_drop_steps(depth_steps: np.ndarray, tool: Tool, px_mm: float, steps_per_
     """``(H, W, steps_per_px)`` int64: the drop-cutter depth (as :func:`drop_surface_steps`) with the tool's axis
     ``m`` X steps right of each pixel centre, ``m = 0 .. steps_per_px - 1`` (``m = 0``: the centre itself), in
     bands of rows."""
-    from ..tool import _lowest, footprint_px
-
     d = np.asarray(depth_steps, np.int64)
     h, w = d.shape
     out = np.empty((h, w, steps_per_px), np.int64)
@@ -329,7 +327,7 @@ def plan_heightmap(
     spp, warnings = pixel_steps_of(pixel_size_mm, settings)
     px_mm = spp * settings.mm_per_step_xy
     h, w = d.shape
-    frame = PixelFrame(width_px=w, height_px=h, steps_per_px_xy=spp, steps_per_px_z=1)
+    frame = PixelFrame(w, h, (0, 0, 0), spp, 1)  # depths are Z steps: one step per Z unit of the frame
     check_travel(np.array([[0, 0, 0], [(w - 1) * spp, (h - 1) * spp, int(d.max(initial=0))]]), settings, frame)
     allowed = drop_surface_steps(d, cutter, px_mm, settings)
     sub = sub_drop_steps(d, cutter, px_mm, spp, settings) if slopes and not cutter.is_point else None
@@ -406,11 +404,9 @@ def check_heightmap_options(options: Any, source: str) -> None:
         raise CamError(f"{source}: --heightmap-order applies with --heightmap only (an image read as a height map)")
 
 
-def prepare_heightmap(path: Path, options: Any, settings: MachineSettings) -> Any:
-    """The :class:`cam.job.jobs.PreparedJob` of an image cut as a height map (``options.heightmap``)."""
-    from ..drive.chunks import plan_chunks
-    from .jobs import PreparedJob
-
+def prepare_heightmap(path: Path, options: Any, settings: MachineSettings) -> dict[str, Any]:
+    """The fields of the :class:`cam.job.jobs.PreparedJob` of an image cut as a height map (``options.heightmap``,
+    a :class:`cam.job.jobs.JobOptions`)."""
     check_heightmap_options(options, path.name)
 
     grey = load_heightmap(path)
@@ -439,5 +435,5 @@ def prepare_heightmap(path: Path, options: Any, settings: MachineSettings) -> An
                             "order": options.heightmap_order, "grey_levels": levels,
                             "path": "every X step" if slopes else "pixel centres"},
               "points": len(job), "tool": cutter.describe()}
-    return PreparedJob(source=str(path), kind="drawing", plan=steps, settings=settings, toolpath=job,
-                       warnings=list(job.warnings), summary=summary, report=report, drawing_rgb=rgb)
+    return dict(source=str(path), kind="drawing", plan=steps, settings=settings, toolpath=job,
+                warnings=list(job.warnings), summary=summary, report=report, drawing_rgb=rgb)
