@@ -81,7 +81,7 @@ class SessionFrames(SessionControls):
                 return
             st = self.state_hold.state
             name = offset or st.active_offset
-            if name not in st.offsets_steps:
+            if not isinstance(name, str) or name not in st.offsets_steps:
                 raise PlanError(f"offset must be one of {', '.join(st.offsets_steps)}, got {offset!r}")
             zero = list(st.work_zero_steps(name))
             for a in names:
@@ -110,7 +110,7 @@ class SessionFrames(SessionControls):
         down.  Refused while busy, while the position is unknown, or outside the travel (nothing moves)."""
         try:
             values = [float(v) for v in xyz]
-        except (TypeError, ValueError):
+        except (TypeError, ValueError, OverflowError):
             raise PlanError(f"a go-to needs X, Y and Z numbers, got {xyz!r}") from None
         if len(values) != 3 or not all(np.isfinite(values)) or max(abs(v) for v in values) > 1e7:
             raise PlanError(f"a go-to needs 3 finite X, Y, Z numbers, got {xyz!r}")
