@@ -436,7 +436,7 @@ class _Reader:
             if not self.seen_excellon:
                 raise self.not_excellon()
             raise self.error(f"a statement of {len(line):,} characters (drill files write under "
-                             f"{MAX_STATEMENT_CHARS})")
+                             f"{MAX_STATEMENT_CHARS})", 1)
         if line == "%":
             if self.state == "header":
                 self.state = "body"
@@ -953,9 +953,10 @@ def _choose(text: str, source: str, units, digits, zeros, params, first: _Reader
     return best[2], note
 
 
-MAX_STATEMENT_CHARS = 1000
+MAX_STATEMENT_CHARS = 10_000
 """The longest statement read; a longer line is an error naming it (a coordinate line is under 40 characters, a
-header line under 100), so a 100,000-character line is not split into words once per reading tried."""
+header line under 100; a number of a few thousand digits still gets its own range error), so a 100,000-character
+line is not split into words once per reading tried."""
 
 
 # ---------------------------------------------------------------------- nc_param.txt (Allegro)
