@@ -36,6 +36,7 @@ import cam  # noqa: E402
 from cam.drive.priority import CLAIM_ENV  # noqa: E402
 from cam.drive.session import MachineSession  # noqa: E402
 from cam.job.jobs import JobOptions, prepare_job  # noqa: E402
+from machine_first import print_table  # noqa: E402 (this folder: the benchmarks' table)
 
 
 def _burn(stop_at: float) -> None:
@@ -124,11 +125,7 @@ def main(argv=None) -> int:
     ap.add_argument("--quick", action="store_true", help="one repeat, a shorter job")
     ap.add_argument("--with-tests", action="store_true", help="run the fast test tier beside the CPU burners")
     args = ap.parse_args(argv)
-    print("| workload | cam (median s) | reference (median s) | result | target | met |")
-    print("| --- | ---: | ---: | --- | --- | --- |")
-    for r in bench_rows(args.quick, args.with_tests):
-        met = {True: "yes", False: "**no**", None: "n/a"}[r["met"]]
-        print(f"| {r['name']} | {r['cam']:.6f} | {r['ref']:.6f} | {r['ratio']} | {r['target']} | {met} |")
+    print_table(bench_rows(args.quick, args.with_tests))
     return 0
 
 

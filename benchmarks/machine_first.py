@@ -263,12 +263,17 @@ def main(argv=None) -> int:
     ap.add_argument("--quick", action="store_true", help="one repeat a load")
     ap.add_argument("--loads", default="idle,preview,streams,half-open", help="which loads (idle is the reference)")
     args = ap.parse_args(argv)
+    print_table(bench_rows(args.quick, tuple(args.loads.split(","))))
+    return 0
+
+
+def print_table(rows) -> None:
+    """The rows (dicts: name, cam, ref, ratio, target, met) as the benchmarks' Markdown table, times in s."""
     print("| workload | cam (median s) | reference (median s) | result | target | met |")
     print("| --- | ---: | ---: | --- | --- | --- |")
-    for r in bench_rows(args.quick, tuple(args.loads.split(","))):
+    for r in rows:
         met = {True: "yes", False: "**no**", None: "n/a"}[r["met"]]
         print(f"| {r['name']} | {r['cam']:.6f} | {r['ref']:.6f} | {r['ratio']} | {r['target']} | {met} |")
-    return 0
 
 
 if __name__ == "__main__":
