@@ -33,7 +33,7 @@ import numpy as np
 from ..formats.hpgl import HpglDrawing
 from ..settings import DEFAULT_SETTINGS, MachineSettings
 from .hpgl_stream import DEFAULT_CUT_DEPTH_MM, DEFAULT_TRAVEL_HEIGHT_MM, hpgl_scale, stream_hpgl, xy_steps
-from .hpgl_stream import _rows, _z_steps  # noqa: F401  (cam.job.svg plans its strokes with them)
+from .hpgl_stream import _rows, _z_steps, scale_to_fit  # noqa: F401  (cam.job.svg plans its strokes with them)
 from .model import CUT, Job  # noqa: F401  (CUT: the doctest)
 
 __all__ = ["plan_hpgl", "hpgl_steps", "DEFAULT_CUT_DEPTH_MM", "DEFAULT_TRAVEL_HEIGHT_MM"]

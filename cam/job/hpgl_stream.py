@@ -26,7 +26,7 @@ import math
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterator, Optional, Union
+from typing import Any, Callable, Iterator, Optional, Union
 
 import numpy as np
 
@@ -70,12 +70,21 @@ def xy_steps(x_pu: np.ndarray, y_pu: np.ndarray, extent_pu: Optional[tuple[float
 
 
 def hpgl_scale(scan: HpglScan, *, scale: Optional[float] = None, fit_mm: Optional[tuple[float, float]] = None) -> float:
-    """mm cut per mm of the plot (its ``SC``/``IP`` scaling applied): ``scale``, or the largest that fits the drawn
-    extent in ``fit_mm`` ``(width, height)`` keeping its proportions, or 1 -- SVG's ``--scale``/``--fit`` rules and
-    messages (:func:`cam.job.svg.svg_scale`; not imported from there: cam.job.svg plans with this module's rows).
+    """mm cut per mm of the plot (its ``SC``/``IP`` scaling applied): :func:`scale_to_fit` of its drawn extent.
 
     Raises:
         PlanError: both given, a factor that is not > 0, nothing to fit.
+    """
+    return scale_to_fit(scan.size_mm, scan.source, scale=scale, fit_mm=fit_mm)
+
+
+def scale_to_fit(size_mm: Callable[[], tuple[float, float]], source: str, *, scale: Optional[float] = None,
+                 fit_mm: Optional[tuple[float, float]] = None) -> float:
+    """``--scale``/``--fit`` of a vector job (HPGL, SVG): ``scale``, or the largest factor that fits the drawing's
+    ``size_mm()`` ``(width, height)`` (asked only when fitting) in ``fit_mm`` keeping its proportions, or 1.
+
+    Raises:
+        PlanError: both given, a factor that is not > 0, nothing to fit (named by ``source``).
     """
     if scale is not None and fit_mm is not None:
         raise PlanError("give --scale or --fit, not both")
@@ -88,9 +97,9 @@ def hpgl_scale(scan: HpglScan, *, scale: Optional[float] = None, fit_mm: Optiona
     fw, fh = (float(v) for v in fit_mm)
     if not (fw > 0 and fh > 0 and math.isfinite(fw) and math.isfinite(fh)):
         raise PlanError(f"--fit takes a width and a height > 0 mm, got {fw:g}x{fh:g}")
-    w, h = scan.size_mm()
+    w, h = size_mm()
     if w <= 0 and h <= 0:
-        raise PlanError(f"{scan.source}: nothing to fit (the drawing has no extent)")
+        raise PlanError(f"{source}: nothing to fit (the drawing has no extent)")
     return min(fw / w if w > 0 else math.inf, fh / h if h > 0 else math.inf)
 
 

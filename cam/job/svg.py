@@ -61,7 +61,7 @@ from scipy.spatial import cKDTree  # duplicate pieces; scipy comes with scikit-i
 from ..errors import PlanError, TravelError
 from ..formats.svg import SvgDrawing
 from ..settings import DEFAULT_SETTINGS, MachineSettings
-from .hpgl import _rows, _z_steps
+from .hpgl import _rows, _z_steps, scale_to_fit
 from .model import CUT, Job, check_travel
 
 __all__ = ["plan_svg", "svg_strokes_steps", "svg_scale", "svg_layer_order", "DEFAULT_CUT_DEPTH_MM",
@@ -86,27 +86,16 @@ neighbours, and dropping it would only split its stroke."""
 def svg_scale(drawing: SvgDrawing, *, scale: Optional[float] = None,
               fit_mm: Optional[tuple[float, float]] = None) -> float:
     """The factor from the drawing's mm to the job's mm: ``scale``, or the largest that fits ``fit_mm``
-    ``(width, height)`` (the drawing keeps its proportions), or 1.
+    ``(width, height)`` (the drawing keeps its proportions), or 1 (:func:`cam.job.hpgl_stream.scale_to_fit`).
 
     Raises:
         PlanError: both given, a factor that is not > 0, nothing to fit.
     """
-    if scale is not None and fit_mm is not None:
-        raise PlanError("give --scale or --fit, not both")
-    if scale is not None:
-        if not (math.isfinite(scale) and scale > 0):
-            raise PlanError(f"the scale must be a number > 0, got {scale:g}")
-        return float(scale)
-    if fit_mm is None:
-        return 1.0
-    fw, fh = (float(v) for v in fit_mm)
-    if not (fw > 0 and fh > 0 and math.isfinite(fw) and math.isfinite(fh)):
-        raise PlanError(f"--fit takes a width and a height > 0 mm, got {fw:g}x{fh:g}")
-    x0, y0, x1, y1 = drawing.extent_mm()
-    w, h = x1 - x0, y1 - y0
-    if w <= 0 and h <= 0:
-        raise PlanError(f"{drawing.source}: nothing to fit (the drawing has no extent)")
-    return min(fw / w if w > 0 else math.inf, fh / h if h > 0 else math.inf)
+    def size_mm() -> tuple[float, float]:
+        x0, y0, x1, y1 = drawing.extent_mm()
+        return x1 - x0, y1 - y0
+
+    return scale_to_fit(size_mm, drawing.source, scale=scale, fit_mm=fit_mm)
 
 
 CORNER_DEG = 20.0
