@@ -60,7 +60,6 @@ from __future__ import annotations
 import argparse
 import os
 import select
-import sys
 import termios
 import threading
 import time
@@ -69,6 +68,7 @@ from collections import deque
 from contextlib import AbstractContextManager
 from typing import Any, Callable, Optional, Sequence
 
+from ._serve import serve_until_stopped
 from ..errors import CamError, PortError
 from ._grbl_base import (BOOT_WALL_S, DEFAULT_SETTINGS, LOG_HEADER, TICK_S, UNLOCK_MSG, WELCOME, Block,
                          ExecutedBlock, GrblCodeError, ParserState)
@@ -457,17 +457,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             raise CamError(f"--set {item!r}: expected N=VALUE, e.g. 22=1") from None
     emulator = start_emulator(speed=args.speed or None, baud=args.baud, settings=settings, log_path=args.log)
     print(emulator.device_path, flush=True)
-    try:
-        while emulator.error is None:
-            time.sleep(0.2)
-    except KeyboardInterrupt:
-        pass
-    finally:
-        emulator.stop()
-    if emulator.error is not None:
-        print(f"emulator stopped: {emulator.error}", file=sys.stderr)
-        return 1
-    return 0
+    return serve_until_stopped(emulator)
 
 
 if __name__ == "__main__":

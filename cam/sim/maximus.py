@@ -156,6 +156,7 @@ from ..drive.maximus._trust import EMULATOR_SPEEDS_ENV, clear_fault_marker
 from ._maximus_hardware import _Hardware
 from ._maximus_program import _Program
 from ._maximus_uart import _Uart
+from ._serve import serve_until_stopped
 from ..errors import CamError, PortError
 
 __all__ = [
@@ -508,17 +509,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"faster than the firmware: start hosts with {EMULATOR_SPEEDS_ENV}="
               f"{os.environ.get(EMULATOR_SPEEDS_ENV, '')} (they refuse replies sooner than a real board's)",
               file=sys.stderr, flush=True)
-    try:
-        while emulator.error is None:
-            time.sleep(0.2)
-    except KeyboardInterrupt:
-        pass
-    finally:
-        emulator.stop()
-    if emulator.error is not None:
-        print(f"emulator stopped: {emulator.error}", file=sys.stderr)
-        return 1
-    return 0
+    return serve_until_stopped(emulator)
 
 
 if __name__ == "__main__":
