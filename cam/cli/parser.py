@@ -69,15 +69,17 @@ def _whole(name: str, lo: int, hi: int = MAX_WHOLE) -> Callable[[str], int]:
     return parse
 
 
-def _number(name: str, lo: float, hi: float) -> Callable[[str], float]:
-    """A finite number in ``lo..hi`` (no inf or nan reaches a plan, a file or a report)."""
+def _number(name: str, lo: float, hi: float, *, above: bool = False) -> Callable[[str], float]:
+    """A finite number in ``lo..hi`` (``above``: greater than ``lo``, not equal to it), so no inf or nan reaches a
+    plan, a file or a report."""
     def parse(text: str) -> float:
         try:
             value = float(text)
         except ValueError:
             raise argparse.ArgumentTypeError(f"{name} takes a number, got '{text}'") from None
-        if not math.isfinite(value) or not lo <= value <= hi:
-            raise argparse.ArgumentTypeError(f"{name} must be a number {lo:g}..{hi:g}, got '{text}'")
+        if not math.isfinite(value) or not (lo < value if above else lo <= value) or not value <= hi:
+            wanted = f"> {lo:.15g} and at most {hi:.15g}" if above else f"a number {lo:g}..{hi:g}"
+            raise argparse.ArgumentTypeError(f"{name} must be {wanted}, got '{text}'")
         return value
 
     return parse
@@ -387,43 +389,17 @@ def _add_export(sub: argparse._SubParsersAction) -> None:
     t.add_argument("--post", choices=("generic", "grbl", "linuxcnc"), default="generic",
                    help="the controller the program is for: tool changes as T<n> M6 (linuxcnc, generic) or a "
                    "comment and an M0 pause (grbl); default generic")
-    t.add_argument("--feed", type=_positive_mm("--feed"), metavar="MM_PER_MIN",
+    t.add_argument("--feed", type=_number("--feed", 0, 1e6, above=True), metavar="MM_PER_MIN",
                    help="X/Y feed in mm/min (default: the machine settings' X/Y rate)")
-    t.add_argument("--plunge-feed", type=_positive_mm("--plunge-feed"), metavar="MM_PER_MIN",
+    t.add_argument("--plunge-feed", type=_number("--plunge-feed", 0, 1e6, above=True), metavar="MM_PER_MIN",
                    help="Z feed in mm/min (default: the machine settings' Z rate)")
-    t.add_argument("--spindle-rpm", type=_positive_mm("--spindle-rpm"), metavar="RPM",
+    t.add_argument("--spindle-rpm", type=_number("--spindle-rpm", 0, 1e6, above=True), metavar="RPM",
                    help="start the spindle with M3 S<RPM> before the first move, stop it with M5 at the end")
     t.add_argument("--snap", action="store_true",
                    help="write every point at this machine's steps, even where the file gives it exactly")
-    t.add_argument("--arc-tolerance", type=_non_negative_mm("--arc-tolerance"), default=0.01, metavar="MM",
+    t.add_argument("--arc-tolerance", type=_number("--arc-tolerance", 0, 10), default=0.01, metavar="MM",
                    help="fit lines and G2/G3 arcs to the cutting moves within this many mm (default 0.01; "
                    "0: one G1 a point)")
-
-
-def _positive_mm(flag: str):
-    """An argparse type: a finite number > 0."""
-    def parse(text: str) -> float:
-        try:
-            v = float(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{flag} takes a number, got '{text}'") from None
-        if not (math.isfinite(v) and 0 < v <= 1e6):
-            raise argparse.ArgumentTypeError(f"{flag} must be > 0 and at most 1000000, got '{text}'")
-        return v
-    return parse
-
-
-def _non_negative_mm(flag: str):
-    """An argparse type: a finite number >= 0, at most 10 mm."""
-    def parse(text: str) -> float:
-        try:
-            v = float(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{flag} takes a number, got '{text}'") from None
-        if not (math.isfinite(v) and 0 <= v <= 10):
-            raise argparse.ArgumentTypeError(f"{flag} must be 0..10 mm, got '{text}'")
-        return v
-    return parse
 
 
 def _add_preview(sub: argparse._SubParsersAction) -> None:
