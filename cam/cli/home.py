@@ -18,7 +18,8 @@ from ..drive.homing import HomingError, HomingPhase, check_homing, home
 from ..drive.ports import MockPort, SwitchSchedule, open_port, port_kind, require
 from ..drive.runner import Controller
 from ..drive.state import steps_to_mm
-from ..errors import CapabilityError
+from ..drive.session import MachineSession
+from ..errors import CamError, CapabilityError
 from ..settings import MachineSettings
 from ..verify.pinlog import write_pin_log
 from .common import port_settings
@@ -52,6 +53,8 @@ def _say(phase: HomingPhase) -> None:
 
 def cmd_home(args: argparse.Namespace) -> int:
     settings = port_settings(args, args.port)
+    if port_kind(args.port) == "grbl":
+        return _home_grbl(args, settings)
     order = check_homing(settings, args.axes)
     with hold_machine(args, settings, "cam home") as hold:
         start = hold.state.position_steps
@@ -79,4 +82,20 @@ def cmd_home(args: argparse.Namespace) -> int:
     x, y, z = steps_to_mm(result.position_steps, settings)
     print(f"homed {order.upper()}: the machine stands at X={x:g} Y={y:g} Z={z:g} mm "
           f"({' '.join(f'{a}={v}' for a, v in zip('XYZ', result.position_steps))} steps), position known")
+    return 0
+
+
+def _home_grbl(args: argparse.Namespace, settings: MachineSettings) -> int:
+    """``cam home`` on a grbl port: grbl's own homing cycle ``$H`` (its ``$2x`` settings); the machine frame is
+    then grbl's machine coordinates."""
+    if args.axes:
+        raise CamError(f"grbl homes all its axes with $H (its own [homing] order, $23-$27); drop --axes {args.axes}")
+    with hold_machine(args, settings, "cam home") as hold:
+        session = MachineSession(args.port, settings, state=hold)
+        print("homing with grbl's $H ...", file=sys.stderr, flush=True)
+        session.home()
+        pos = hold.state.position_steps
+    x, y, z = steps_to_mm(pos, settings)
+    print(f"homed: the machine stands at X={x:g} Y={y:g} Z={z:g} mm "
+          f"({' '.join(f'{a}={v}' for a, v in zip('XYZ', pos))} steps), position known")
     return 0

@@ -15,6 +15,9 @@ from ..drive.state import (
     MachineLock, MachineState, StateHold, check_in_travel, default_state_path, dump_json, mm_to_steps,
     read_state, steps_to_mm,
 )
+from ..drive.grbl_machine import grbl_machine
+from ..drive.ports import port_kind
+from ..drive.session import MachineSession
 from ..errors import CamError
 from ..settings import MachineSettings
 from .common import port_settings
@@ -33,8 +36,17 @@ def state_path_of(args: argparse.Namespace) -> Path:
 
 
 def hold_machine(args: argparse.Namespace, settings: MachineSettings, what: str) -> StateHold:
-    """The command's hold on its machine's state file (the lock taken; see :class:`StateHold`)."""
-    return StateHold(state_path_of(args), settings, what)
+    """The command's hold on its machine's state file (the lock taken; see :class:`StateHold`).  On a grbl
+    port the board is asked where it stands first (:func:`cam.drive.grbl_machine.adopt_position`): the state
+    file then says what grbl says."""
+    hold = StateHold(state_path_of(args), settings, what)
+    if port_kind(getattr(args, "port", None) or "mock") == "grbl":
+        try:
+            MachineSession(args.port, settings, state=hold, on_prompt=None)
+        except BaseException:
+            hold.close()
+            raise
+    return hold
 
 
 def _triple(text: str) -> str:
@@ -86,13 +98,19 @@ def cmd_where(args: argparse.Namespace) -> int:
     settings = port_settings(args, args.port)
     path = state_path_of(args)
     driving = None
-    if args.set is not None or args.use:
+    grbl = port_kind(args.port or "mock") == "grbl"
+    if args.set is not None or args.use or grbl:  # grbl: what the board says, read now
         with hold_machine(args, settings, "cam where --set/--use") as hold:
             state = hold.state
             if args.set is not None:
                 steps = mm_to_steps(args.set, settings)
                 check_in_travel(steps, settings, f"--set {','.join(f'{v:g}' for v in args.set)} mm")
                 state = replace(state.moved_to(steps), homed=False)
+                if grbl:  # the user's word: grbl unlocked where the tool stands, its MPos read from here
+                    machine = grbl_machine(args.port, settings)
+                    if machine.in_alarm():
+                        machine.unlock()
+                    machine.rebase(steps)
             if args.use:
                 state = replace(state, active_offset=args.use)
             hold.record(state)
@@ -116,6 +134,8 @@ def _axes(text: str) -> str:
 def cmd_zero(args: argparse.Namespace) -> int:
     axes = _axes(args.axes)
     settings = port_settings(args, args.port)
+    if port_kind(args.port or "mock") == "grbl" and args.at is None:
+        return _zero_on_grbl(args, axes, settings)
     with hold_machine(args, settings, "cam zero") as hold:
         state = hold.state
         name = args.offset or state.active_offset
@@ -134,4 +154,18 @@ def cmd_zero(args: argparse.Namespace) -> int:
     print(f"{name} zero of {axes} set: its zero is at machine {_triple(zmm)} mm ({_triple(zero)} steps)"
           + ("" if name == state.active_offset else f"; the active offset is still {state.active_offset} "
              f"(cam where --use {name})"))
+    return 0
+
+
+def _zero_on_grbl(args: argparse.Namespace, axes: str, settings: MachineSettings) -> int:
+    """``cam zero`` on a grbl port: the state file's offset and grbl's own (``G10 L20``), where grbl says the
+    tool stands."""
+    with hold_machine(args, settings, "cam zero") as hold:
+        session = MachineSession(args.port, settings, state=hold)
+        session.zero(axes, args.offset)
+        state = hold.state
+    name = args.offset or state.active_offset
+    zero = state.work_zero_steps(name)
+    print(f"{name} zero of {axes} set here (grbl's too): its zero is at machine {_triple(steps_to_mm(zero, settings))} "
+          f"mm ({_triple(zero)} steps)")
     return 0

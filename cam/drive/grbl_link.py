@@ -16,7 +16,10 @@ grbl's answers become one line each: ``error:n`` a :class:`GrblError` naming the
 Real-time commands go out at once, outside the count: :meth:`GrblLink.hold` (``!``), :meth:`GrblLink.resume`
 (``~``), :meth:`GrblLink.soft_reset` (0x18), :meth:`GrblLink.override` (0x90-0x9D) and :meth:`GrblLink.status`
 (``?``, parsed into a :class:`GrblStatus` with machine and work positions from ``MPos``/``WPos`` and the last
-``WCO``).  This module is the link only: the machine session does not use it yet.
+``WCO``).  :meth:`GrblLink.cancel` shuts the gate on lines: a stream waiting for room ends with a
+:class:`~cam.errors.PortError` and nothing more is sent until :meth:`GrblLink.allow` (a stop must never let a
+queued line through after the reset that ends it).  The machine session drives a board through
+:mod:`cam.drive.grbl_machine`.
 """
 from __future__ import annotations
 
@@ -281,7 +284,48 @@ class StreamReport:
     max_outstanding_bytes: int
 
 
-class GrblLink:
+class _RealtimeBytes:
+    """grbl's real-time commands that answer nothing (a part of :class:`GrblLink`)."""
+
+    _cond: threading.Condition
+    _cancelled: Optional[str]
+
+    def _write(self, data: bytes) -> None:
+        raise NotImplementedError
+
+    def cancel(self, reason: str) -> None:
+        """Shut the gate on lines: a stream or command waiting ends with ``PortError(reason)``, and no line goes
+        out until :meth:`allow` (real-time bytes still do)."""
+        with self._cond:
+            self._cancelled = reason
+            self._cond.notify_all()
+
+    def allow(self) -> None:
+        """Open the gate :meth:`cancel` shut (the next activity sends again)."""
+        with self._cond:
+            self._cancelled = None
+
+
+    def hold(self) -> None:
+        """Feed hold ``!``: decelerate to a stop, keep the rest queued."""
+        self._write(b"!")
+
+    def resume(self) -> None:
+        """Cycle start ``~``: resume after a feed hold or an M0 pause."""
+        self._write(b"~")
+
+    def jog_cancel(self) -> None:
+        """0x85: stop a ``$J=`` jog and drop the jogs queued behind it."""
+        self._write(b"\x85")
+
+    def override(self, byte: int) -> None:
+        """One of grbl's override bytes (0x90-0x9D feed, rapid and spindle; 0x9E-0xA1 toggles)."""
+        if not 0x90 <= byte <= 0xA1:
+            raise PortError(f"not a grbl override byte: {byte:#04x}")
+        self._write(bytes([byte]))
+
+
+class GrblLink(_RealtimeBytes):
     """A grbl 1.1 board on a serial port (see the module docstring).
 
     Args:
@@ -316,6 +360,8 @@ class GrblLink:
         self._last_rx = time.monotonic()
         self._closing = False
         self._wco: Optional[tuple[float, ...]] = None
+        self._cancelled: Optional[str] = None
+        self.reset_on_open = False   # the welcome came by itself when the port opened: grbl restarted (power-up)
         self._serial_errors = (serial.SerialException, OSError)
         try:
             self._ser = serial.Serial(self.device, baudrate=self.baud, bytesize=8, parity="N", stopbits=1,
@@ -334,7 +380,8 @@ class GrblLink:
 
     # ------------------------------------------------------------------ connection
     def _connect(self, welcome_timeout_s: float) -> None:
-        if not self._wait(lambda: self._welcomes > 0, welcome_timeout_s, check=False):
+        self.reset_on_open = self._wait(lambda: self._welcomes > 0, welcome_timeout_s, check=False)
+        if not self.reset_on_open:
             self._write(b"\x18")
             if not self._wait(lambda: self._welcomes > 0, self.timeout_s, check=False):
                 self._raise_if_lost()
@@ -443,8 +490,11 @@ class GrblLink:
             raise PortError(f"grbl link on {self.device} lost: {self._lost}") from None
 
     def _check(self, where: str = "") -> None:
-        """Raise the first fault seen: a lost link, an alarm, a reset grbl did on its own, a refused line."""
+        """Raise the first fault seen: a lost link, a cancelled stream, an alarm, a reset grbl did on its own, a
+        refused line."""
         self._raise_if_lost()
+        if self._cancelled is not None:
+            raise PortError(self._cancelled)
         if self._alarm is not None:
             code, self._alarm = self._alarm, None
             raise GrblAlarm(f"grbl on {self.device} raised {alarm_text(code)}{where}", code)
@@ -503,9 +553,11 @@ class GrblLink:
         self._wait(lambda: self._outstanding_bytes + len(data) <= RX_BUFFER_BYTES, None, where=where)
         entry = [len(data), number, text, None, []]
         with self._cond:
+            if self._cancelled is not None:  # cancelled while it waited: the gate is shut
+                raise PortError(self._cancelled)
             self._outstanding.append(entry)
             self._outstanding_bytes += len(data)
-        self._write(data)
+            self._write(data)  # under the lock: a cancel cannot slip between the check and the write
         return entry
 
     def command(self, line: str, timeout_s: Optional[float] = None) -> list[str]:
@@ -572,24 +624,6 @@ class GrblLink:
             raise PortError(f"grbl on {self.device} sent no status report")
         return self.status_report
 
-    def hold(self) -> None:
-        """Feed hold ``!``: decelerate to a stop, keep the rest queued."""
-        self._write(b"!")
-
-    def resume(self) -> None:
-        """Cycle start ``~``: resume after a feed hold or an M0 pause."""
-        self._write(b"~")
-
-    def jog_cancel(self) -> None:
-        """0x85: stop a ``$J=`` jog and drop the jogs queued behind it."""
-        self._write(b"\x85")
-
-    def override(self, byte: int) -> None:
-        """One of grbl's override bytes (0x90-0x9D feed, rapid and spindle; 0x9E-0xA1 toggles)."""
-        if not 0x90 <= byte <= 0xA1:
-            raise PortError(f"not a grbl override byte: {byte:#04x}")
-        self._write(bytes([byte]))
-
     def soft_reset(self, timeout_s: Optional[float] = None) -> str:
         """Ctrl-X: grbl stops at once (``ALARM:3`` if it was moving) and restarts; returns the welcome line.
         An alarm the reset raises is kept in :attr:`messages`, not raised."""
@@ -603,6 +637,11 @@ class GrblLink:
             self._welcomes = 0
             self._alarm = None
         return self.welcome
+
+    @property
+    def alarm_pending(self) -> Optional[int]:
+        """The code of an ``ALARM:n`` seen and not raised yet, or None."""
+        return self._alarm
 
     def unlock(self) -> None:
         """``$X``: leave the alarm state."""

@@ -8,6 +8,8 @@
   a port is opened.
 * ``"maximus:DEVICE"`` -- the MAXIMUS PCB driller's PIC board on RS-232
   (:mod:`cam.drive.maximus`): it takes drill files and jogs, not step/dir writes.
+* ``"grbl:DEVICE?baud=N"`` -- a grbl 1.1 board on USB serial (:mod:`cam.drive.grbl_machine`): every job
+  and move goes to it as G-code; it makes the steps itself.
 
 What each kind can do is :data:`CAPABILITIES`; :func:`require` refuses the rest
 with one message that every front end shows.  A step/dir port writes, and reads
@@ -33,7 +35,7 @@ from ..verify.pinlog import PinLog, read_pin_log
 from .pins import axis_bits
 
 __all__ = ["Port", "MockPort", "ParallelPort", "open_port", "port_kind", "CAPABILITIES", "require", "MAXIMUS_PREFIX",
-           "SwitchSchedule", "IDLE_INPUTS", "input_mask"]
+           "GRBL_PREFIX", "SwitchSchedule", "IDLE_INPUTS", "input_mask"]
 
 IDLE_INPUTS = 0xF8
 """:meth:`Port.read_inputs` with nothing connected: every input pin high (the port's pull-ups), bits 3..7."""
@@ -44,11 +46,13 @@ def input_mask(pin: int) -> int:
     return 1 << INPUT_BITS[pin]
 
 MAXIMUS_PREFIX = "maximus:"
+GRBL_PREFIX = "grbl:"
 
 CAPABILITIES = {
     "mock": frozenset({"step_dir", "pause", "pin_log", "drill_files"}),
     "parport": frozenset({"step_dir", "pause", "drill_files"}),
     "maximus": frozenset({"drill_files", "jog", "delay", "spindle", "drill_stroke"}),
+    "grbl": frozenset({"gcode", "pause", "drill_files", "jog", "overrides", "grbl_home"}),
 }
 """What each kind of port can do."""
 
@@ -61,6 +65,18 @@ _CANNOT = {
     "jog": "{port} cannot jog",
     "delay": "{port} takes its step delays from the machine settings; {what} applies to the MAXIMUS board only",
     "spindle": "{port} has no spindle switch; {what} applies to the MAXIMUS board only",
+    "drill_stroke": "{port} takes its drill depth from each job; {what} applies to the MAXIMUS board only",
+    "gcode": "{port} is not a grbl board; {what} applies to grbl ports (grbl:/dev/ttyUSB0) only",
+    "overrides": "{port} has no feed override; {what} applies to grbl ports (grbl:/dev/ttyUSB0) only",
+    "grbl_home": "{port} is not a grbl board; {what} applies to grbl ports only",
+}
+_CANNOT_GRBL = {
+    "step_dir": "{port} (a grbl board) takes G-code and makes its own steps; {what} needs a step/dir port "
+                "(mock or /dev/parportN)",
+    "pin_log": "{port} keeps no pin log: a pin log records the mock port's writes (--port mock)",
+    "delay": "{port} takes its rates from grbl's own settings ($110-$112); {what} applies to the MAXIMUS board "
+             "only",
+    "spindle": "{port}: {what} applies to the MAXIMUS board only (grbl programs switch the spindle with M3/M5)",
     "drill_stroke": "{port} takes its drill depth from each job; {what} applies to the MAXIMUS board only",
 }
 
@@ -455,10 +471,10 @@ class SwitchSchedule:
 
 
 def port_kind(name: str | Port) -> str:
-    """``"mock"``, ``"parport"`` or ``"maximus"``: the kind of port a name opens.
+    """``"mock"``, ``"parport"``, ``"maximus"`` or ``"grbl"``: the kind of port a name opens.
 
-    >>> port_kind("mock"), port_kind("/dev/parport0"), port_kind("maximus:/dev/ttyUSB0")
-    ('mock', 'parport', 'maximus')
+    >>> port_kind("mock"), port_kind("/dev/parport0"), port_kind("maximus:/dev/ttyUSB0"), port_kind("grbl:COM3")
+    ('mock', 'parport', 'maximus', 'grbl')
 
     Raises:
         PortError: an unknown name.
@@ -469,10 +485,12 @@ def port_kind(name: str | Port) -> str:
         return "parport"
     if (name.startswith(MAXIMUS_PREFIX) and len(name) > len(MAXIMUS_PREFIX)) or name == MAXIMUS_PREFIX[:-1]:
         return "maximus"  # "maximus" alone: the machine settings' serial port
+    if name.startswith(GRBL_PREFIX) and len(name) > len(GRBL_PREFIX):
+        return "grbl"
     if name.startswith("/dev/"):
         return "parport"
     raise PortError(f"unknown port '{name}' (use 'mock', a device path such as /dev/parport0, "
-                    f"maximus:/dev/ttyUSB0, or maximus for the machine file's serial_port)")
+                    f"maximus:/dev/ttyUSB0, maximus for the machine file's serial_port, or grbl:/dev/ttyUSB0)")
 
 
 def require(name: str | Port, capability: str, *, what: str = "this job") -> None:
@@ -481,8 +499,10 @@ def require(name: str | Port, capability: str, *, what: str = "this job") -> Non
     Raises:
         CapabilityError: the port's kind lacks ``capability`` (see :data:`CAPABILITIES`).
     """
-    if capability not in CAPABILITIES[port_kind(name)]:
-        raise CapabilityError(_CANNOT[capability].format(port=str(name), what=what))
+    kind = port_kind(name)
+    if capability not in CAPABILITIES[kind]:
+        text = _CANNOT_GRBL.get(capability) if kind == "grbl" else None
+        raise CapabilityError((text or _CANNOT[capability]).format(port=str(name), what=what))
 
 
 def open_port(name: str | Port = "mock") -> Port:

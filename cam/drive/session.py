@@ -58,9 +58,10 @@ from ..settings import DEFAULT_SETTINGS, MachineSettings
 from .apart import RunnerProcess
 from .journal import JournalSpec, journal_spec
 from ._session_parts import Activity, Prompt, PromptFn
-from ._session_frames import SessionFrames
+from ._session_grbl import SessionGrbl
 from .activities import BoardControl, drill_work, move_work, run_on_board, run_steps
 from .maximus.board import drill_arguments, drill_job, maximus_port
+from .grbl_machine import adopt_position, grbl_machine
 from .ports import MockPort, port_kind, require
 from .runner import Controller, Cursor, RunResult
 from .chunks import ChunkedPlan, plan_chunks
@@ -73,7 +74,7 @@ MAX_JOG_STEPS = 100_000
 """The longest jog one request may ask for, either way."""
 
 
-class MachineSession(SessionFrames):
+class MachineSession(SessionGrbl):
     """The machine as every front end sees it (thread-safe).
 
     Args:
@@ -122,6 +123,11 @@ class MachineSession(SessionFrames):
         self._then: Optional[Callable[[], None]] = None  # what starts when the running activity finishes
         if state is not None:
             self._position = np.asarray(state.state.position_steps, np.int64).copy()
+        self.grbl = grbl_machine(port, settings) if self.kind == "grbl" else None
+        if self.grbl is not None:  # where the tool stands: grbl's word (with the state file's frame)
+            if self.grbl.warning:
+                self.log(self.grbl.warning, "warning")
+            self._position = np.asarray(adopt_position(self.grbl, state, self.log), np.int64)
 
     @property
     def last_job_pin_log(self) -> Any:
@@ -144,6 +150,8 @@ class MachineSession(SessionFrames):
         with self._lock:
             self._check_free()
             self._position = np.asarray(position_steps, np.int64).reshape(3).copy()
+            if self.grbl is not None and self.grbl.position_steps(self.grbl.status()) != tuple(self._position):
+                self.grbl.rebase(tuple(int(v) for v in self._position))  # grbl's MPos is read from here on
             if self.state_hold is not None:  # the user's word: the machine frame is not the switches' any more
                 check_in_travel(tuple(self._position), self.settings, "the position given")
                 st = self.state_hold.state.moved_to(tuple(int(v) for v in self._position))
@@ -174,7 +182,9 @@ class MachineSession(SessionFrames):
         if settings is not None and (settings.travel != self.settings.travel or settings.pins != self.settings.pins):
             raise CamError("the job was planned for other machine settings; plan it again")
         if isinstance(job, Job) and len(job) and np.all(job.kind == TRAVEL):
-            require(self.port, "jog" if self.kind == "maximus" else "step_dir", what="a move")
+            require(self.port, "jog" if self.kind in ("maximus", "grbl") else "step_dir", what="a move")
+        elif self.kind == "grbl":
+            self._grbl_job(job)  # a job with moves: a step plan has none
         elif self.kind == "maximus":
             require(self.port, "drill_files", what=f"a {getattr(job, 'kind', 'step')} job")
             if getattr(job, "drill_plan", None) is None:
@@ -222,7 +232,13 @@ class MachineSession(SessionFrames):
                 self._start_moves("jog", job, label or job.source or "move")
                 return
             if self.kind == "maximus":
-                self._launch_board("job", drill_work(job, self.settings), job, name)
+                self._launch_board("job", drill_work(job, self.settings, self._journal_spec(job, journal)), job, name)
+                return
+            if self.grbl is not None:
+                if journal is not None:  # what was done is grbl's reported position; nothing to resume from yet
+                    self.log(f"{self.port}: a job on grbl keeps no journal (grbl reports where it stopped)",
+                             "warning")
+                self._launch_grbl("job", self._grbl_job(job), name, float(getattr(job, "estimated_time_s", 0.0)))
                 return
             spec = self._journal_spec(job, journal)
             plan = self._plan(job)
@@ -305,6 +321,9 @@ class MachineSession(SessionFrames):
             self._start_moves("jog", travel_job(points_steps, self.settings), label)
 
     def _start_moves(self, activity: str, job: Job, label: str) -> None:
+        if self.grbl is not None:
+            self._launch_grbl(activity, job, label, 0.0)
+            return
         if self.kind == "maximus":
             self._launch_board(activity, move_work(job.points_steps), None, label,
                                moved_steps=job.points_steps[-1])

@@ -1,0 +1,95 @@
+"""A part of :class:`~cam.drive.session.MachineSession`: a grbl board (issue #30 point 2).
+
+:class:`SessionGrbl` runs the session's activities on a grbl port (:mod:`cam.drive.grbl_machine`): the moves of
+any job streamed as G-code in a worker thread, the feed override, and grbl's own homing.  Like the other parts
+it keeps no state of its own: it works on the attributes ``MachineSession.__init__`` sets (``grbl``, ``port``,
+``settings``, ``state_hold``, ``_lock``, ``_position``) and calls the session's methods (``_begin``,
+``_spawn``, ``_check_free``, ``log``, ``_bump``).
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+
+from ..errors import CamError, CapabilityError
+from ..job.model import JobLike
+from ._session_frames import SessionFrames
+from ._session_parts import Activity
+from .chunks import ChunkedPlan
+from .grbl_machine import GrblControl, GrblPosition, run_on_grbl, travel_advice
+from .ports import require
+from .state import check_in_travel
+from .steps import StepPlan
+
+__all__ = ["SessionGrbl"]
+
+
+class SessionGrbl(SessionFrames):
+    """Jobs, moves, the feed override and homing on a grbl board (a mixin; see the module)."""
+
+    def _grbl_job(self, job: Any) -> Any:
+        """The moves (a :class:`~cam.job.model.JobLike`) grbl runs for ``job``."""
+        if isinstance(job, StepPlan):
+            raise CapabilityError(f"{self.port} (a grbl board) runs jobs as G-code: start the job or the prepared "
+                                  f"job, not its step plan")
+        plan = getattr(job, "plan", None)
+        if isinstance(plan, ChunkedPlan):  # a PreparedJob
+            return plan.job
+        if isinstance(job, ChunkedPlan):
+            return job.job
+        if isinstance(job, JobLike):
+            return job
+        raise CapabilityError(f"{self.port} (a grbl board) cannot run a {type(job).__name__}")
+
+    def _launch_grbl(self, name: str, job: Any, label: str, estimated_s: float) -> None:
+        assert self.grbl is not None
+        ctl = GrblControl(self.grbl)
+        start = tuple(int(v) for v in self._position)
+        position = GrblPosition(self.grbl, start)  # type: ignore[arg-type]
+        total = sum(len(piece) for piece in job.pieces())
+        self._begin(Activity(name, label, ctl, total, estimated_s, position))
+        self.log(f"{label}: started on {self.port}")
+        self._spawn(run_on_grbl, (self, name, job, ctl, label, start, position, total, estimated_s), name)
+
+    def feed_override(self, percent: int) -> None:
+        """Set the feed override to ``percent`` (10..200; grbl's real-time override bytes).
+
+        Raises:
+            CapabilityError: the port has no feed override (not grbl); PlanError: outside 10..200."""
+        require(self.port, "overrides", what="a feed override")
+        assert self.grbl is not None
+        self.grbl.feed_override(int(percent))
+        self.log(f"feed override {int(percent)} %")
+        with self._lock:
+            self._bump()
+
+    def home(self) -> None:
+        """Home a grbl board (``$H``) and wait for it: the machine frame is then grbl's (the switches').
+
+        Raises:
+            CapabilityError: not grbl (a step/dir port homes with ``cam home``, :mod:`cam.drive.homing`);
+            BusyError; GrblAlarm/PortError: homing failed (the position is then unknown)."""
+        require(self.port, "grbl_home", what="homing from the session")
+        assert self.grbl is not None
+        with self._lock:
+            self._check_free()
+        try:
+            pos = self.grbl.home()
+        except CamError as exc:
+            if self.state_hold is not None:
+                self.state_hold.record(self.state_hold.state.lost(f"homing did not finish ({exc})"))
+            raise
+        with self._lock:
+            self._position = np.asarray(pos, np.int64)
+            try:
+                check_in_travel(pos, self.settings, "where grbl's $H left the tool")
+            except CamError as exc:
+                raise CamError(f"{exc}; grbl's machine zero is its homing corner: give the machine file "
+                               f"{travel_advice(self.grbl.link.settings, self.settings)}") from None
+            if self.state_hold is not None:
+                self.state_hold.record(replace(self.state_hold.state.moved_to(pos), homed=True))
+            self._bump()
+        self.log(f"homed: machine {list(pos)} steps")
+
