@@ -231,7 +231,8 @@ def test_homing_enabled_grbl_needs_home_then_reads_back(grbl, tmp_path):
     with pytest.raises(cam.CamError, match="unknown|home"):
         session.jog("x", 10)
     session.home()
-    assert hold.state.homed and hold.state.position_known
+    assert session.wait_idle(60) and session.last_run["status"] == "finished", session.last_run
+    assert hold.state.homed and hold.state.position_known and hold.state.running is None
     mpos = session.grbl.status().mpos_mm
     assert session.position_steps() == mpos_to_steps(mpos, HOMED_SETTINGS)
     hold.close()

@@ -93,7 +93,18 @@ def _home_grbl(args: argparse.Namespace, settings: MachineSettings) -> int:
     with hold_machine(args, settings, "cam home") as hold:
         session = MachineSession(args.port, settings, state=hold)
         print("homing with grbl's $H ...", file=sys.stderr, flush=True)
-        session.home()
+        previous = {s: signal.signal(s, lambda signum, frame: session.stop()) for s in _STOP_SIGNALS}
+        try:
+            session.home()
+            while not session.wait_idle(0.2):  # wakes for Ctrl-C
+                pass
+        finally:
+            for s, handler in previous.items():
+                signal.signal(s, handler)
+        if session.last_run.get("status") != "finished":
+            print(f"homing did not finish: {'; '.join(session.last_run.get('messages') or ['stopped'])}; the "
+                  f"machine is not homed, its position unknown", file=sys.stderr)
+            return EXIT_INTERRUPTED if session.last_run.get("status") == "emergency-stopped" else 2
         pos = hold.state.position_steps
     x, y, z = steps_to_mm(pos, settings)
     print(f"homed: the machine stands at X={x:g} Y={y:g} Z={z:g} mm "

@@ -18,7 +18,7 @@ from ..job.model import JobLike
 from ._session_frames import SessionFrames
 from ._session_parts import Activity
 from .chunks import ChunkedPlan
-from .grbl_machine import GrblControl, GrblPosition, run_on_grbl, travel_advice
+from .grbl_machine import GrblControl, GrblPosition, finish_stop, run_on_grbl, travel_advice
 from .ports import require
 from .state import check_in_travel
 from .steps import StepPlan
@@ -66,30 +66,62 @@ class SessionGrbl(SessionFrames):
             self._bump()
 
     def home(self) -> None:
-        """Home a grbl board (``$H``) and wait for it: the machine frame is then grbl's (the switches').
+        """Start grbl's homing cycle (``$H``) in the background: the machine frame is then grbl's (the switches'),
+        the position known and homed.  Stop and emergency stop end it (grbl's soft reset).
 
         Raises:
             CapabilityError: not grbl (a step/dir port homes with ``cam home``, :mod:`cam.drive.homing`);
-            BusyError; GrblAlarm/PortError: homing failed (the position is then unknown)."""
+            BusyError.  A homing that fails ends the activity with its one-line reason, the position unknown."""
         require(self.port, "grbl_home", what="homing from the session")
         assert self.grbl is not None
         with self._lock:
             self._check_free()
-        try:
-            pos = self.grbl.home()
-        except CamError as exc:
-            if self.state_hold is not None:
-                self.state_hold.record(self.state_hold.state.lost(f"homing did not finish ({exc})"))
-            raise
-        with self._lock:
-            self._position = np.asarray(pos, np.int64)
-            try:
-                check_in_travel(pos, self.settings, "where grbl's $H left the tool")
-            except CamError as exc:
-                raise CamError(f"{exc}; grbl's machine zero is its homing corner: give the machine file "
-                               f"{travel_advice(self.grbl.link.settings, self.settings)}") from None
-            if self.state_hold is not None:
-                self.state_hold.record(replace(self.state_hold.state.moved_to(pos), homed=True))
-            self._bump()
-        self.log(f"homed: machine {list(pos)} steps")
+            ctl = GrblControl(self.grbl, stop_resets=True)
+            self._begin(Activity("home", "home ($H)", ctl, 1, 0.0))
+            self.log("home ($H): started")
+            self._spawn(home_on_grbl, (self, ctl), "home")
 
+    def state(self, log_after: int = 0) -> dict[str, Any]:
+        """The snapshot (:meth:`SessionFrames.state`); on grbl also its feed override and its own state name."""
+        with self._lock:
+            snap = super().state(log_after)
+            if self.grbl is not None:
+                last = self.grbl.last_status()
+                snap["grbl"] = {"feed_override_pct": self.grbl.feed_override_pct,
+                                "state": last.state if last is not None else "",
+                                "warning": self.grbl.warning}
+            return snap
+
+
+def home_on_grbl(session: Any, ctl: GrblControl) -> None:
+    """The worker of :meth:`SessionGrbl.home`: ``$H``, the travel checked, the state file told (homed, or the
+    position unknown when homing failed)."""
+    machine = session.grbl
+    error = ""
+    pos = None
+    try:
+        pos = machine.home()
+        try:
+            check_in_travel(pos, session.settings, "where grbl's $H left the tool")
+        except CamError as exc:
+            raise CamError(f"{exc}; grbl's machine zero is its homing corner: give the machine file "
+                           f"{travel_advice(machine.link.settings, session.settings)}") from None
+    except CamError as exc:
+        error = "stopped" if ctl.halted else str(exc)
+    if ctl.halted:
+        try:
+            finish_stop(machine, ctl)
+        except CamError:
+            pass
+    moved = None if pos is None else np.asarray(pos, np.int64) - np.asarray(session.position_steps(), np.int64)
+    status = "finished" if not error else ("emergency-stopped" if ctl.estopped else "error")
+    session.finish({"activity": "home", "label": "home ($H)", "status": status,
+                    "messages": [error] if error else []}, moved)
+    hold = session.state_hold
+    if hold is not None:
+        if error:
+            hold.record(hold.state.lost(f"homing did not finish ({error})"))
+        else:
+            hold.record(replace(hold.state, homed=True))
+    session.log(f"homed: machine {list(pos)} steps" if not error else f"home ($H): {error}",
+                "info" if not error else "error")

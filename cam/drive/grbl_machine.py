@@ -320,8 +320,9 @@ class GrblControl:
     """Pause / stop controls of an activity on a grbl board (the :class:`~cam.drive.runner.Controller` of
     step/dir ports): see the module docstring for what each sends."""
 
-    def __init__(self, machine: GrblMachine) -> None:
+    def __init__(self, machine: GrblMachine, *, stop_resets: bool = False) -> None:
         self.machine = machine
+        self.stop_resets = stop_resets  # homing: grbl holds no homing cycle, a stop is a reset
         self.paused = False
         self.halted = False
         self.estopped = False
@@ -337,6 +338,9 @@ class GrblControl:
     def stop(self) -> None:
         """Feed hold now; the worker resets grbl once it stands still (:func:`finish_stop`)."""
         if self.halted:
+            return
+        if self.stop_resets:
+            self.emergency_stop()
             return
         self.halted = True
         self.machine.link.hold()

@@ -85,7 +85,7 @@ except ImportError:  # pragma: no cover - not Unix: no file limit to raise
 from ..drive.journal import read_journal
 from ..drive.session import MachineSession
 from ..drive.state import StateHold
-from ..errors import BusyError, CamError, CapabilityError
+from ..errors import BusyError, CamError, CapabilityError, PlanError
 from ..fileio import atomic_write_bytes
 from ..sniff import HEAD_BYTES
 from ..options import schema_json
@@ -684,6 +684,16 @@ async def _use_offset(st: _AppState, request: Request) -> dict[str, Any]:
     return st.session.state()
 
 
+async def _feed_override(st: _AppState, request: Request) -> dict[str, Any]:
+    """``{"percent": 10..200}``: the feed override of a grbl board (its real-time override bytes)."""
+    body = await _body_json(request)
+    percent = body.get("percent")
+    if isinstance(percent, bool) or not isinstance(percent, (int, float)) or percent != percent:
+        raise PlanError(f"percent must be a number 10..200, got {percent!r}")
+    st.session.feed_override(int(round(percent)))
+    return st.session.state()
+
+
 async def _drill_z(st: _AppState, request: Request) -> dict[str, Any]:
     """Z Drill Up / Down (``which``) of a MAXIMUS board from where the head stands."""
     body = await _body_json(request)
@@ -840,6 +850,8 @@ def _routes(st: _AppState) -> list:
         Route("/api/origin", json_api(partial(_control, action=session.go_to_origin)), methods=post),
         Route("/api/offset", json_api(partial(_control, action=session.set_offset)), methods=post),
         Route("/api/drill-z", json_api(_drill_z), methods=post),
+        Route("/api/feed-override", json_api(_feed_override), methods=post),
+        Route("/api/home", json_api(partial(_control, action=session.home)), methods=post),
         Route("/api/zero", json_api(_zero), methods=post),
         Route("/api/goto", json_api(_goto), methods=post),
         Route("/api/use-offset", json_api(_use_offset), methods=post),

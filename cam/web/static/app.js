@@ -276,6 +276,8 @@
   document.querySelectorAll("button.drill-z").forEach((b) => b.addEventListener("click", () => {
     post("/api/drill-z", { which: b.dataset.which });
   }));
+  $("home").addEventListener("click", () => post("/api/home"));
+  $("feed-set").addEventListener("click", () => post("/api/feed-override", { percent: parseFloat($("feed-override").value) }));
 
   function estop() {
     const now = Date.now();
@@ -327,6 +329,9 @@
     document.querySelectorAll("button.jog, #origin, #set-offset, button.drill-z, button.zero, #goto, #offset-select")
       .forEach((b) => { b.disabled = !idle; });
     document.querySelectorAll("button.drill-z").forEach((b) => { b.hidden = !s.port.startsWith("maximus"); });
+    $("grbl-row").hidden = !s.grbl;  // a grbl board: its homing cycle and feed override
+    $("home").disabled = !idle;
+    if (s.grbl && document.activeElement !== $("feed-override")) $("feed-override").value = s.grbl.feed_override_pct;
     const shown = job || (idle && s.last && s.last.activity === "job");
     const pct = shown ? s.progress : 0;
     $("progress-bar").value = pct;
