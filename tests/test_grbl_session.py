@@ -314,3 +314,23 @@ def test_cli_home_on_grbl_then_a_move(grbl, tmp_path):
 def test_home_outside_the_machine_files_travel_says_what_to_write(grbl, tmp_path):
     r = run_cli("home", "--port", url(grbl), "--state", str(tmp_path / "s.json"))
     assert r.returncode == 2 and "x_min_steps = -6920" in r.stderr and "Traceback" not in r.stderr, r.stderr
+
+
+def test_cli_feed_override_and_the_settings_warning(tmp_path):
+    emu = start_emulator(speed=20.0, settings={110: 5000.0, 111: 5000.0, 112: 5000.0})  # grbl's own $100 = 250
+    try:
+        f = tmp_path / "two.drl"
+        f.write_text("M48\nMETRIC\nT1C0.8\n%\nT1\nX1.0Y-1.0\nX2.0Y-1.0\nM30\n")
+        r = run_cli("drill", str(f), "--port", url(emu), "--yes", "--feed-override", "150",
+                    "--state", str(tmp_path / "s.json"))
+        assert r.returncode == 0, r.stderr
+        warning = [line for line in r.stderr.splitlines() if "grbl's settings differ" in line]
+        assert len(warning) == 1 and "$100=250" in warning[0], r.stderr
+        assert emu._feed_ov == 150
+    finally:
+        close_grbl_machines()
+        emu.stop()
+    r = run_cli("drill", str(f), "--yes", "--feed-override", "150")
+    assert r.returncode == 2 and "grbl" in r.stderr and "Traceback" not in r.stderr, r.stderr
+    r = run_cli("drill", str(f), "--yes", "--feed-override", "500")
+    assert r.returncode == 2 and "--feed-override" in r.stderr

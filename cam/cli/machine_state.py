@@ -7,6 +7,7 @@ state folder, named after the machine file and the port.  Positions given on the
 from __future__ import annotations
 
 import argparse
+import sys
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -42,7 +43,10 @@ def hold_machine(args: argparse.Namespace, settings: MachineSettings, what: str)
     hold = StateHold(state_path_of(args), settings, what)
     if port_kind(getattr(args, "port", None) or "mock") == "grbl":
         try:
-            MachineSession(args.port, settings, state=hold, on_prompt=None)
+            session = MachineSession(args.port, settings, state=hold, on_prompt=None)
+            if session.grbl is not None and session.grbl.warning and not session.grbl.warned:
+                session.grbl.warned = True  # once a process
+                print(f"warning: {session.grbl.warning}", file=sys.stderr)
         except BaseException:
             hold.close()
             raise

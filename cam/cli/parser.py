@@ -348,8 +348,13 @@ def _add_drill(sub: argparse._SubParsersAction) -> None:
     )
     _add_job_options(d)
     g = d.add_argument_group("port and outputs")
-    g.add_argument("--port", default="mock", help="'mock' (default: logs, moves nothing), a device like /dev/parport0, or maximus:/dev/ttyUSB0 (drill files)")
+    g.add_argument("--port", default="mock", help="'mock' (default: logs, moves nothing), a device like /dev/parport0, "
+                   "maximus:/dev/ttyUSB0 (drill files), or grbl:/dev/ttyUSB0[?baud=115200] (a grbl board: the job "
+                   "streams to it as G-code)")
     g.add_argument("--realtime", action="store_true", help="run the mock in real time, sleeping like the real port")
+    g.add_argument("--feed-override", type=_number("--feed-override", 10, 200), metavar="PERCENT",
+                   help="grbl ports: grbl's feed override for this job, 10..200 %% (its real-time override bytes; "
+                   "the page can change it while the job runs)")
     _add_state_option(g)
     g.add_argument("--pin-log", metavar="FILE.csv", help="write the mock's pin log (t_ns,data,strobe)")
     g.add_argument("--save-digitized", metavar="FILE", help="save the digitized matrix")
@@ -489,7 +494,8 @@ def _add_jog(sub: argparse._SubParsersAction) -> None:
     jg.add_argument("--unit", choices=JOG_UNIT_NAMES, default="steps",
                     help="steps (default: machine steps, a MAXIMUS clock pulse), full-steps (motor steps), "
                     "0.1mm, mm or 0.1in (2.54 mm): the MAXIMUS Jog screen's units")
-    jg.add_argument("--port", default="mock", help="'mock' (default), /dev/parport0 or maximus:/dev/ttyUSB0")
+    jg.add_argument("--port", default="mock", help="'mock' (default), /dev/parport0, maximus:/dev/ttyUSB0 or "
+                    "grbl:/dev/ttyUSB0")
     _add_state_option(jg)
     _add_machine_options(jg)
     jg.add_argument("--realtime", action="store_true", help="run the mock in real time")
@@ -529,7 +535,8 @@ def _add_goto(sub: argparse._SubParsersAction) -> None:
     gt.add_argument("--machine-coords", action="store_true",
                     help="X,Y,Z in the machine frame (from the machine's home) instead of the active work offset's")
     _add_machine_options(gt)
-    gt.add_argument("--port", default="mock", help="'mock' (default) or a device like /dev/parport0")
+    gt.add_argument("--port", default="mock", help="'mock' (default), a device like /dev/parport0, "
+                    "maximus:/dev/ttyUSB0 or grbl:/dev/ttyUSB0")
     _add_state_option(gt)
     gt.add_argument("--realtime", action="store_true", help="run the mock in real time")
     gt.add_argument("--pin-log", metavar="FILE.csv", help="write the mock's pin log")
@@ -541,8 +548,9 @@ OFFSET_CHOICES = ("G54", "G55", "G56", "G57", "G58", "G59", "G59.1", "G59.2", "G
 
 
 def _add_state_machine(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--port", default="mock", help="'mock' (default), /dev/parport0 or maximus:/dev/ttyUSB0: "
-                   "names the default state file")
+    p.add_argument("--port", default="mock", help="'mock' (default), /dev/parport0, maximus:/dev/ttyUSB0 or "
+                   "grbl:/dev/ttyUSB0: names the default state file (on grbl: the board is asked where it stands, "
+                   "cam zero also sets grbl's own offset with G10 L20, cam where --set unlocks it there)")
     _add_state_option(p)
     _add_machine_options(p)
 
@@ -583,7 +591,8 @@ def _add_home(sub: argparse._SubParsersAction) -> None:
                        "[mock] places.")
     h.add_argument("--axes", type=_axes_text, metavar="AXES",
                    help="home only these axes, in this order (e.g. Z, XY; default: [homing] order)")
-    h.add_argument("--port", default="mock", help="'mock' (default: [mock] simulated switches) or /dev/parport0")
+    h.add_argument("--port", default="mock", help="'mock' (default: [mock] simulated switches), /dev/parport0, or "
+                   "grbl:/dev/ttyUSB0 (grbl's own homing cycle $H)")
     _add_state_option(h)
     _add_machine_options(h)
     h.add_argument("--realtime", action="store_true", help="run the mock in real time")
@@ -616,7 +625,8 @@ def _add_serve(sub: argparse._SubParsersAction) -> None:
     sv.add_argument("--jobs-dir", metavar="DIR", help="folder for uploaded files (default: a new temporary folder)")
     sv.add_argument("--max-upload-mb", type=_number("--max-upload-mb", 0.001, 100_000), default=50.0, metavar="MB", help="larger uploads are refused (default 50)")
     sv.add_argument("--port", default="mock", metavar="PORT",
-                    help="'mock' (default: logs, moves nothing), a device like /dev/parport0, or maximus:/dev/ttyUSB0")
+                    help="'mock' (default: logs, moves nothing), a device like /dev/parport0, maximus:/dev/ttyUSB0, or "
+                    "grbl:/dev/ttyUSB0 (Home and a feed override appear on the page)")
     _add_machine_options(sv)
     _add_state_option(sv)
     clock = sv.add_mutually_exclusive_group()

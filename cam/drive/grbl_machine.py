@@ -233,6 +233,7 @@ class GrblMachine:
         self.feed_override_pct = 100
         self._closing = threading.Event()
         mismatch = settings_mismatches(self.link.settings, settings)
+        self.warned = False
         self.warning = (f"grbl's settings differ from the machine file: {'; '.join(mismatch)}"
                         if mismatch else "")
         self.status()
