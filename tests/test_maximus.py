@@ -272,7 +272,7 @@ def assert_stopped_at(emu, hole_index: int) -> None:
 def test_dropped_reply_times_out_and_nothing_follows(emu, board):
     emu.drop_next_reply(match=ONEHOLEDRILLED, skip=2)  # the SDF answer, hole 0, then hole 1's is lost
     t0 = time.monotonic()
-    with pytest.raises(LinkFault, match=r"link fault during hole index 1: the MAXIMUS board did not answer within "
+    with pytest.raises(LinkFault, match=r"link fault during hole 2: the MAXIMUS board did not answer within "
                                         r"[0-9.]+ s .*nothing more sent.*last known position X=10 Y=5.*switch the "
                                         r"machine off") as info:
         board.drill(HOLES, z_down_steps=10)
@@ -291,7 +291,7 @@ def test_dropped_reply_times_out_and_nothing_follows(emu, board):
 
 def test_corrupted_reply_is_refused(emu, board):
     emu.corrupt_next_reply(match=ONEHOLEDRILLED, skip=3)
-    with pytest.raises(LinkFault, match=r"link fault during hole index 2: the board answered unknown byte \(0x96\) "
+    with pytest.raises(LinkFault, match=r"link fault during hole 3: the board answered unknown byte \(0x96\) "
                                         r"instead of ONEHOLEDRILLED \(0x69\)"):
         board.drill(HOLES, z_down_steps=10)
     assert_stopped_at(emu, 2)
@@ -302,9 +302,9 @@ def test_late_reply(emu, board):
     emu.delay_next_reply(0.3, match=ONEHOLEDRILLED, skip=1)  # late but inside the margin: fine
     assert board.drill(HOLES[:2], z_down_steps=5) == 2
     n_before = len(hole_packets(emu))
-    emu.delay_next_reply(3.0, match=ONEHOLEDRILLED, skip=4)  # hole index 3 answers long after its deadline
+    emu.delay_next_reply(3.0, match=ONEHOLEDRILLED, skip=4)  # hole 4 answers long after its deadline
     t0 = time.monotonic()
-    with pytest.raises(LinkFault, match=r"during hole index 3: the MAXIMUS board did not answer within [0-9.]+ s"):
+    with pytest.raises(LinkFault, match=r"during hole 4: the MAXIMUS board did not answer within [0-9.]+ s"):
         board.drill(HOLES, z_down_steps=5)
     assert time.monotonic() - t0 < 2.0  # the move's few ms, a switch's 0.44 s, the 0.5 s margin; no stop byte
     time.sleep(0.05)
@@ -316,7 +316,7 @@ def test_limit_switch_at_the_travel_end_ends_the_job():
     try:
         with MaximusBoard(emu.device_path, FAST, timeout_s=TIMEOUT_S) as board:
             holes = np.array([[20, 0], [60, 10], [100, 10], [300, 10], [0, 0]])
-            with pytest.raises(PortError, match=r"limit switch LIMIT_SWITCH_X \(0x02\) tripped during hole index 3; "
+            with pytest.raises(PortError, match=r"limit switch LIMIT_SWITCH_X \(0x02\) tripped during hole 4; "
                                                 r".*last known position X=100 Y=10"):
                 board.drill(holes, z_down_steps=5)
             assert_stopped_at(emu, 3)
@@ -366,7 +366,7 @@ def test_emergency_stop_during_a_move():
         assert not worker.is_alive()
         error = result["error"]
         assert isinstance(error, PortError)
-        assert "emergency stop during hole index 1" in str(error) and "MACHINESTOPPED" in str(error)
+        assert "emergency stop during hole 2" in str(error) and "MACHINESTOPPED" in str(error)
         assert_stopped_at(emu, 1)
         x = emu.position_pulses[0]
         assert 300 <= x < 2005
@@ -421,7 +421,7 @@ def test_emergency_stop_between_moves_sends_no_stop_byte(emu, board):
     def tool_change(index: int, message: str) -> None:
         answers.append(board.emergency_stop())  # the head is between holes
 
-    with pytest.raises(PortError, match=r"emergency stop before hole index 3: no move was running; job closed"):
+    with pytest.raises(PortError, match=r"emergency stop before hole 4: no move was running; job closed"):
         board.drill(HOLES, z_down_steps=10, tool_changes=[(3, "T2")], on_tool_change=tool_change)
     assert answers == [False]
     assert 0x80 not in [b for _, b, _ in emu.rx_log()]

@@ -173,7 +173,7 @@ def test_the_issues_stray_onehole_drilled_names_the_hole_and_its_timing(clean_ru
     with line() as (emu, proxy):
         proxy.inject(bytes([ONEHOLEDRILLED]), after_offset=offset, delay_s=0.010)
         error = run_faulty(emu, proxy)
-        assert "link fault during hole index 1: ONEHOLEDRILLED (0x69) came 0.0" in str(error)
+        assert "link fault during hole 2: ONEHOLEDRILLED (0x69) came 0.0" in str(error)
         assert "but its move takes" in str(error) and "switch the machine off" in str(error)
         assert_safe(emu, proxy, error)
         assert [tuple(r[1:3]) for r in emu.hole_log()] == [tuple(h) for h in HOLES[:2].tolist()]  # it ends hole 1
@@ -313,7 +313,7 @@ def assert_cli_fault(clean: dict, faulty: dict, hole_index: int, tmp_path) -> No
     assert faulty["code"] != 0
     assert "job finished" not in faulty["out"] + faulty["err"]
     faults = [text for text in faulty["err"].splitlines() if "link fault" in text]
-    assert len(faults) == 1 and f"link fault during hole index {hole_index}" in faults[0], faulty["err"]
+    assert len(faults) == 1 and f"link fault during hole {hole_index + 1}" in faults[0], faulty["err"]
     report = tmp_path / "report.json"  # the faulty run's, if it wrote one
     assert not report.exists() or json.loads(report.read_text())["status"] != "finished"
     assert set(faulty["holes"]) <= set(clean["holes"])  # every hole drilled is one of the file's

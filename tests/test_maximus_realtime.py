@@ -161,7 +161,7 @@ def test_ctrl_c_during_a_drill_move_exits_130_at_once_with_the_spindle_off(emu, 
     proc.send_signal(signal.SIGINT)
     out, err = proc.communicate(timeout=10)
     assert proc.returncode == 130, err
-    assert "MACHINESTOPPED" in err and "hole index 0" in err
+    assert "MACHINESTOPPED" in err and "hole 1" in err
     spindle = [(v >> 2) & 1 for _, port, v in emu.port_log() if port == "B"]
     assert 1 in spindle and spindle[-1] == 0
     assert emu.wait_for_state(MODE_SELECTION) and emu.hole_log() == []

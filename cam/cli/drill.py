@@ -10,10 +10,11 @@ from typing import Optional
 
 from ..digitize.digitized import save_digitized
 from ..drive.maximus.board import drill_stroke
+from ..drive.maximus.resume import resume_board_job
 from ..drive.journal import read_journal
 from ..drive.state import StateHold, check_in_travel
 from ..drive.ports import port_kind
-from ..errors import CamError, CapabilityError
+from ..errors import CamError
 from ..job.jobs import resume_job
 from .checks import check_output_path, job_kind_of
 from ..fileio import atomic_write_text
@@ -92,6 +93,11 @@ def journal_path(args: argparse.Namespace) -> Optional[str]:
 def _resumed(args: argparse.Namespace, job):
     """The prepared job resumed after the stop its journal (--resume) records; says so on stderr."""
     journal = read_journal(args.resume)
+    if port_kind(args.port) == "maximus":  # the board drills by itself: it goes on from the next hole
+        resumed = resume_board_job(job, journal, where=args.resume)
+        print(f"resuming at hole {journal.holes_done + 1} of {len(job.drill_plan.holes_steps)} from "
+              f"{list(journal.position_steps)} steps ({journal.state})", file=sys.stderr)
+        return resumed, journal.position_steps
     resumed = resume_job(job, journal, where=args.resume)
     if journal.state == "running":
         print(f"warning: journal {args.resume} was not closed (its run ended without a word): where it says the "
@@ -147,8 +153,6 @@ def _offsets_kept(args: argparse.Namespace, job, hold: Optional[StateHold]) -> d
 def cmd_drill(args: argparse.Namespace) -> int:
     check_port_options(args)
     if getattr(args, "resume", None):
-        if port_kind(args.port) == "maximus":
-            raise CapabilityError(f"{args.port} drills by itself: --resume runs on step/dir ports")
         check_output_path(args.resume, "--resume")
         read_journal(args.resume)  # a bad journal: one line, before anything is planned
     settings = port_settings(args, args.port)

@@ -14,7 +14,8 @@ import numpy as np
 from ..errors import CamError, PortError
 from ..settings import MachineSettings
 from .maximus.board import MaximusBoard, drill_arguments, from_board, to_board
-from .journal import JournalSpec, JournalWriter, journal_state_of
+from .journal import HoleJournal, JournalSpec, JournalWriter, journal_state_of
+from .maximus.resume import holes_left, resumed_arguments
 from .ports import MockPort, open_port, port_kind, require
 from .runner import Controller, Cursor, run
 from .chunks import ChunkedPlan
@@ -22,8 +23,9 @@ from .steps import StepPlan
 
 __all__ = ["run_steps", "run_on_board", "BoardControl", "drill_work", "move_work"]
 
-BoardWork = Callable[[MaximusBoard, Any], None]
-"""work(board, session): what to do with an open board."""
+BoardWork = Callable[[MaximusBoard, Any], Any]
+"""work(board, session): what to do with an open board; it may return where the head ended (x, y, z steps from
+where it started), else the activity's own ``moved_steps`` say."""
 
 
 def run_steps(session: Any, name: str, plan: "StepPlan | ChunkedPlan", ctl: Controller, label: str,
@@ -167,32 +169,61 @@ class BoardControl:
         require(self.port, "pause")
 
 
-def drill_work(job: Any, settings: MachineSettings) -> BoardWork:
+def drill_work(job: Any, settings: MachineSettings, journal: Optional[JournalSpec] = None) -> BoardWork:
     """The board work of a prepared drill job: every hole, with its tool-change prompts and progress.
 
     Each hole is announced as the PC program does ("Drilling hole n of N", seed 000 Appendix 2,
-    ``ComPort1RxChar``) through the session's :meth:`~cam.drive.session.MachineSession.detail`.
+    ``ComPort1RxChar``) through the session's :meth:`~cam.drive.session.MachineSession.detail`; hole numbers
+    count from 1 in every message.  ``journal``: keep the job's journal of the holes drilled
+    (:class:`~cam.drive.journal.HoleJournal`).  A resumed job (:func:`cam.drive.maximus.resume.resume_board_job`)
+    first brings the head to the start height, then goes on from the first hole not drilled and ends at the
+    job's home (:mod:`cam.drive.maximus.resume`); the work returns where the head ended, from where it started.
     """
-    arguments = drill_arguments(job.drill_plan, settings)
     holes_steps = np.asarray(job.drill_plan.holes_steps, np.int64).reshape(-1, 2)
     n_holes = len(holes_steps)
+    done0, start = holes_left(job)
+    arguments, lift_steps = resumed_arguments(drill_arguments(job.drill_plan, settings), done0, start)
+    p0 = np.asarray(start, np.int64)
 
-    def work(board: MaximusBoard, session: Any) -> None:
+    def work(board: MaximusBoard, session: Any) -> np.ndarray:
+        def here() -> tuple[int, int, int]:  # where the head stands, steps from the job's home
+            return tuple(int(v) for v in p0 + _board_moved(board))  # type: ignore[return-value]
+
+        keeper = None if journal is None else HoleJournal(journal, job.drill_plan.hole_index, done0, start,
+                                                           on_error=board.emergency_stop)
+
         def on_hole(drilled: int) -> None:
-            session.progress(drilled, n_holes, int(job.estimated_time_s * 1e9 * drilled / max(1, n_holes)))
-            moved = _board_moved(board)
-            if moved is not None:
-                session.board_moved(drilled, moved)  # the page's live position: after every hole
+            done = done0 + drilled
+            session.progress(done, n_holes, int(job.estimated_time_s * 1e9 * done / max(1, n_holes)))
+            session.board_moved(done, _board_moved(board))  # the page's live position: after every hole
+            if keeper is not None:
+                keeper.hole_done(done, here())
 
-        def on_tool_change(index: int, note: str) -> None:
-            x, y = (int(v) for v in holes_steps[index - 1]) if index > 0 else (0, 0)
-            session.prompt((x, y, 0), note)  # spindle off, head at the start height
+        def on_tool_change(index: int, note: str) -> None:  # spindle off, head at the start height
+            i = done0 + index
+            x, y = (int(v) for v in holes_steps[i - 1]) if i > 0 else (0, 0)
+            if index == 0 and done0:  # a resumed job: the head lifted where the stop left it
+                x, y = int(p0[0]), int(p0[1])
+            session.prompt((x - int(p0[0]), y - int(p0[1]), -int(p0[2])), note)
 
         if settings.maximus.drill_stroke_set:
             session.log(f"Z drill up {arguments['z_up_steps']}, down {arguments['z_down_steps']} steps below the "
                         f"origin, from the machine settings (the job's travel height and cut depth do not apply)")
-        board.drill(**arguments, on_tool_change=on_tool_change, on_hole=on_hole,
-                    before_hole=lambda i: session.detail(f"drilling hole {i + 1} of {n_holes}"))
+        try:
+            if lift_steps:
+                board.move(0, 0, lift_steps)  # a resumed job: the head to the start height first
+            if len(arguments["holes_steps"]):
+                board.drill(**arguments, on_tool_change=on_tool_change, on_hole=on_hole,
+                            before_hole=lambda i: session.detail(f"drilling hole {done0 + i + 1} of {n_holes}"))
+            elif np.any(p0[:2]):  # every hole was drilled: only the way back to the job's home is left
+                board.move(-int(p0[0]), int(p0[1]), 0)
+        except BaseException:
+            if keeper is not None:
+                keeper.close("emergency-stopped" if board.stop_asked else "failed", here())
+            raise
+        if keeper is not None and keeper.close("finished", (0, 0, 0)):
+            session.log(f"the journal was not written at the end: {keeper.error}", "warning")
+        return -p0  # back at the job's home, Z at the start height
 
     return work
 
@@ -225,7 +256,9 @@ def run_on_board(session: Any, name: str, work: BoardWork, ctl: BoardControl, la
     try:
         board = MaximusBoard(session.port, session.settings.maximus)
         ctl.attach(board)
-        work(board, session)
+        ended = work(board, session)
+        if ended is not None:  # the work says where the head ended (a resumed drill job: at the job's home)
+            moved_steps = np.asarray(ended, np.int64)
     except CamError as exc:
         error = str(exc)
     except Exception as exc:  # noqa: BLE001 - reported in the log; the host sent nothing more

@@ -25,7 +25,7 @@ import os
 import threading
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Optional
+from typing import Any, Callable, Optional, Sequence
 
 import numpy as np
 
@@ -37,7 +37,7 @@ from .runner import Cursor
 from .priority import as_background
 
 __all__ = ["JOURNAL_PERIOD_S", "JournalSpec", "JournalWriter", "journal_spec", "read_journal", "write_journal",
-           "journal_state_of"]
+           "journal_state_of", "HoleJournal"]
 
 JOURNAL_PERIOD_S = 0.25
 """The shortest time between two journal writes while a job runs."""
@@ -174,3 +174,61 @@ class JournalWriter:
             writes_done, position_steps = self._sent_and_position()
         self._write(int(writes_done), tuple(int(v) for v in position_steps), state)  # type: ignore[arg-type]
         return self.error
+
+
+class HoleJournal:
+    """Keeps a MAXIMUS board job's journal: a :class:`~cam.job.resume.Journal` whose moves are the holes in
+    drilling order (``holes_done``, ``hole_order``), in the same file format, written atomically as the step/dir
+    journal is: once before the first packet, once after each hole's reply (ONEHOLEDRILLED), once at the end.
+
+    The board answers each hole (seconds apart), so each write is made at once, from the thread that drills;
+    a journal is never ahead of the board: a hole counts once its reply came.  Positions are steps from the
+    job's home (`cam`'s frame); ``spec.home_steps`` places the home in the session's frame.
+    """
+
+    def __init__(self, spec: JournalSpec, hole_order: Sequence[int], holes_done: int = 0,
+                 position_steps: tuple[int, int, int] = (0, 0, 0),
+                 on_error: Optional[Callable[[], None]] = None) -> None:
+        self.spec = spec
+        self.hole_order = tuple(int(v) for v in hole_order)
+        self.on_error: Optional[Callable[[], None]] = None
+        self.error: Optional[str] = None
+        self.holes_done = int(holes_done)
+        self.position_steps = tuple(int(v) for v in position_steps)
+        self._write("running")
+        if self.error is not None:  # no journal, no resume: the job does not start without one
+            raise CamError(f"{self.error}; the job was not started (its journal could not be written)")
+        self.on_error = on_error
+        """Called once when a write during the run fails (the board stops before its next hole)."""
+
+    def hole_done(self, holes_done: int, position_steps: tuple[int, int, int]) -> None:
+        """The board answered a hole: ``holes_done`` in all, the head at ``position_steps``."""
+        self.holes_done, self.position_steps = int(holes_done), tuple(int(v) for v in position_steps)
+        self._write("running")
+
+    def close(self, state: str, position_steps: Optional[tuple[int, int, int]] = None) -> Optional[str]:
+        """The run ended in ``state`` (:data:`~cam.job.resume.JOURNAL_STATES`), the head at ``position_steps``
+        (None: where the last hole left it).  Returns the message of a write that failed, or None."""
+        if position_steps is not None:
+            self.position_steps = tuple(int(v) for v in position_steps)
+        if state == "finished":
+            self.holes_done = len(self.hole_order)
+        self._write(state)
+        return self.error
+
+    def _write(self, state: str) -> None:
+        base = self.spec.base
+        n = len(self.hole_order)
+        record = Journal(identity=base.identity, plan_sha256=base.plan_sha256, source=base.source, moves=n,
+                         last_move=self.holes_done - 1, position_steps=self.position_steps,  # type: ignore[arg-type]
+                         state=state, writes_done=self.holes_done, writes_total=n,
+                         home_steps=self.spec.home_steps, resumed_at_move=base.resumed_at_move,
+                         start_position_steps=tuple(int(v) for v in base.start_position_steps),  # type: ignore[arg-type]
+                         holes_done=self.holes_done, hole_order=self.hole_order)
+        try:
+            write_journal(record, self.spec.path)
+        except CamError as exc:
+            first = self.error is None
+            self.error = str(exc)
+            if first and state == "running" and self.on_error is not None:
+                self.on_error()

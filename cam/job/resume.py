@@ -79,6 +79,11 @@ class Journal:
         home_steps: where the job's home is in the machine session's frame (the web page's session).
         resumed_at_move: the run was itself a resumed one, from this move (None: from the start).
         start_position_steps: where the run began, steps from the job's home.
+        holes_done: a MAXIMUS board job's journal (:class:`cam.drive.journal.HoleJournal`): the holes drilled,
+            counted in drilling order (its ``moves`` are the holes, ``last_move`` is ``holes_done - 1``); None:
+            a step/dir job's journal.
+        hole_order: a board job's journal: the drill file's index (from 0, file order) of each hole in drilling
+            order.
     """
 
     identity: str
@@ -94,12 +99,16 @@ class Journal:
     home_steps: tuple[int, int, int] = (0, 0, 0)
     resumed_at_move: Optional[int] = None
     start_position_steps: tuple[int, int, int] = (0, 0, 0)
+    holes_done: Optional[int] = None
+    hole_order: Optional[tuple[int, ...]] = None
 
     def to_dict(self) -> dict[str, Any]:
         """The JSON object of the journal file."""
         out: dict[str, Any] = {"cam_journal": JOURNAL_FORMAT}
         for f in fields(self):
             value = getattr(self, f.name)
+            if value is None and f.name in ("holes_done", "hole_order"):  # a step/dir job's journal: as it was
+                continue
             out[f.name] = list(value) if isinstance(value, tuple) else value
         return out
 
@@ -124,10 +133,15 @@ class Journal:
             raise CamError(f"{source}: unknown journal state {journal.state!r}")
         if not (-1 <= journal.last_move < max(journal.moves, 0)) or journal.moves < 0:
             raise CamError(f"{source}: last_move {journal.last_move} is outside the job's {journal.moves} moves")
+        if journal.holes_done is not None and journal.holes_done != journal.last_move + 1:
+            raise CamError(f"{source}: holes_done {journal.holes_done} does not follow last_move {journal.last_move}")
+        if journal.hole_order is not None and len(journal.hole_order) != journal.moves:
+            raise CamError(f"{source}: hole_order names {len(journal.hole_order)} holes, the job has {journal.moves}")
         return journal
 
 
 _INTS = ("moves", "last_move", "writes_done", "writes_total")
+_OPTIONAL = ("resumed_at_move", "holes_done", "hole_order")
 _TRIPLES = ("position_steps", "home_steps", "start_position_steps")
 
 
@@ -135,9 +149,14 @@ def _checked(name: str, value: Any, source: str) -> Any:
     def bad(why: str) -> CamError:
         return CamError(f"{source}: journal key '{name}' {why}, got {value!r}"[:300])
 
-    if name in _INTS or name == "resumed_at_move":
-        if value is None and name == "resumed_at_move":
-            return None
+    if value is None and name in _OPTIONAL:
+        return None
+    if name == "hole_order":
+        if not isinstance(value, list) or \
+                not all(isinstance(v, int) and not isinstance(v, bool) and 0 <= v < 1 << 62 for v in value):
+            raise bad("must be a list of hole numbers")
+        return tuple(value)
+    if name in _INTS or name in _OPTIONAL:
         if isinstance(value, bool) or not isinstance(value, int) or abs(value) > 1 << 62:
             raise bad("must be a whole number")
         return value

@@ -153,6 +153,7 @@ from ._maximus_base import (  # noqa: F401  (the labels are part of this module'
     _Halt, _PowerOn, _ReplyFault,
 )
 from ..drive.maximus._trust import EMULATOR_SPEEDS_ENV, clear_fault_marker
+from ..cli.parser import add_maximus_switch_options
 from ._maximus_hardware import _Hardware
 from ._maximus_program import _Program
 from ._maximus_uart import _Uart
@@ -160,7 +161,7 @@ from ._serve import serve_until_stopped
 from ..errors import CamError, PortError
 
 __all__ = [
-    "MaximusEmulator", "PortLog", "start_emulator", "main", "HOLE_LOG_HEADER",
+    "MaximusEmulator", "PortLog", "start_emulator", "main", "HOLE_LOG_HEADER", "SWITCH_OPTIONS", "travel_error",
     # where the firmware waits (the listing's labels), for tests and tools that watch it
     "POWER_UP", "MODE_SELECTION", "JOG_DATA_INPUT", "DRILL_MODE1_INITIALIZE", "INITIALIZE_DRILL_MODE",
     "DRILL_MODE1_INPUT", "BUSY",
@@ -487,23 +488,39 @@ def _travel_arg(values: Sequence[int] | None) -> tuple[int, int] | None:
     return None if values is None else (int(values[0]), int(values[1]))
 
 
+SWITCH_OPTIONS = {name.lower().replace("_switch_", "-"): byte for byte, name in SWITCH_NAMES.items()}
+"""The switch byte of each ``--trip`` name: ``home-x`` (HOME_SWITCH_X), ``limit-x``, ``home-y``, ... ``limit-z``."""
+
+
+def travel_error(args: argparse.Namespace) -> str | None:
+    """What is wrong with the ``--travel-AXIS LOW HIGH`` options (LOW must be below HIGH), or None."""
+    for axis in "xyz":
+        ends = getattr(args, f"travel_{axis}", None)
+        if ends is not None and not ends[0] < ends[1]:
+            return f"--travel-{axis} LOW HIGH needs LOW < HIGH, got {ends[0]} {ends[1]}"
+    return None
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Serve an emulated MAXIMUS board until Ctrl-C; prints the device path to open."""
     parser = argparse.ArgumentParser(prog="python -m cam.sim.maximus", description=main.__doc__)
     parser.add_argument("--speed", type=float, default=1.0,
                         help="simulated seconds per real second (0 = never sleep); default 1")
     parser.add_argument("--log", metavar="FILE.csv", help=f"write one row per drilled hole: {HOLE_LOG_HEADER}")
-    for axis in "xyz":
-        parser.add_argument(f"--travel-{axis}", type=int, nargs=2, metavar=("LOW", "HIGH"),
-                            help=f"{axis.upper()} travel ends in pulses from power-up (limit switches)")
+    add_maximus_switch_options(parser)
     args = parser.parse_args(argv)
+    if travel_error(args):
+        parser.error(str(travel_error(args)))
     emulator = start_emulator(
         speed=args.speed or None,
         travel_x_pulses=_travel_arg(args.travel_x),
         travel_y_pulses=_travel_arg(args.travel_y),
         travel_z_pulses=_travel_arg(args.travel_z),
+        axis_delay=args.axis_delay,
         log_path=args.log,
     )
+    for name, skip in args.trip:
+        emulator.trip_limit_switch(SWITCH_OPTIONS[name], skip_moves=skip)
     print(emulator.device_path, flush=True)
     if emulator._speed != 1.0:
         print(f"faster than the firmware: start hosts with {EMULATOR_SPEEDS_ENV}="

@@ -7,6 +7,7 @@ hole and the closing packet, between tool-change prompts and the head's moves to
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import partial
 from typing import Callable, Optional, Sequence
 
 import numpy as np
@@ -15,8 +16,8 @@ from ...errors import PlanError
 from ...settings import Maximus
 from ._link import _CLOSE_DRILL, _DRILL, _INIT, _OFFSET, _Exchange
 from .packets import (
-    MAX_FIELD, close_drill_packet, drill_moves, drill_packet, drill_time_ns, init_packet, init_time_ns,
-    offset_packet, offset_time_ns, start_drill_packet,
+    MAX_FIELD, close_drill_packet, drill_moved, drill_moves, drill_packet, drill_time_ns, init_packet,
+    init_time_ns, offset_packet, offset_time_ns, start_drill_packet,
 )
 from .protocol import ATOFFSETPOS, DRILLMODE1INITIALIZED, DRILLMODE1ON, ONEHOLEDRILLED, OPENDRILLMODE1
 
@@ -42,13 +43,20 @@ class _DrillJob:
     offset_height_steps: int  # board-frame height move of the offset packet (+ up)
     z_up_steps: int
     groups: list[_Group]
-    back_steps: np.ndarray  # (2,) int64 x, y back to the start after the last hole
+    back_steps: np.ndarray  # (2,) int64 x, y back to the holes' origin after the last hole
+    first_number: int = 1  # what messages call the first hole (hole numbers count from 1)
+
+    def number(self, index: int) -> int:
+        """The hole number messages give the hole of this job's ``index`` (from 0)."""
+        return self.first_number + int(index)
 
 
 def drill_job(holes_steps: np.ndarray, z_up_steps: int, z_down_steps: int, tool_changes: Sequence[tuple[int, str]] = (),
-              settings: Optional[Maximus] = None) -> _DrillJob:
+              settings: Optional[Maximus] = None, *, start_steps: tuple[int, int] = (0, 0),
+              first_number: int = 1) -> _DrillJob:
     """The packets of a drill job (see :meth:`~cam.drive.maximus.board.MaximusBoard.drill`), checked: nothing is
-    sent.
+    sent.  ``start_steps``: where the head stands, board-frame (x, y) pulses from the holes' origin (the first
+    move starts there; the move back ends at the origin); ``first_number``: what messages call the first hole.
 
     Raises:
         PlanError: a move longer than the 16-bit fields, a bad Z stroke or tool change, an inverted Z.
@@ -57,7 +65,8 @@ def drill_job(holes_steps: np.ndarray, z_up_steps: int, z_down_steps: int, tool_
     if m.invert_z:
         raise PlanError("invert_z cannot apply in Drill mode: the firmware lowers Z with DIR_Z = 1 "
                         "(seed 000 Appendix 1); wire the Z motor the other way round instead")
-    moves = drill_moves(holes_steps)
+    start = np.asarray(start_steps, np.int64).reshape(2)
+    moves = drill_moves(np.asarray(holes_steps, np.int64).reshape(-1, 2) - start)
     if not 0 <= z_up_steps < z_down_steps <= MAX_FIELD:
         raise PlanError(f"Z drill up {z_up_steps} and down {z_down_steps} pulses below the start: need "
                         f"0 <= up < down <= {MAX_FIELD}")
@@ -68,7 +77,7 @@ def drill_job(holes_steps: np.ndarray, z_up_steps: int, z_down_steps: int, tool_
     changes: dict[int, list[str]] = {}
     for index, message in tool_changes:
         if not 0 <= int(index) < len(moves):
-            raise PlanError(f"tool change before hole {index}: there are {len(moves)} holes")
+            raise PlanError(f"tool change before hole {int(index) + first_number}: there are {len(moves)} holes")
         changes.setdefault(int(index), []).append(str(message))
     modes = (m.half_step_x, m.half_step_y, m.half_step_z)
     offset = offset_packet(0, 0, offset_height_steps, delay_x=m.delay_x, delay_y=m.delay_y, delay_z=m.delay_z_up,
@@ -81,8 +90,8 @@ def drill_job(holes_steps: np.ndarray, z_up_steps: int, z_down_steps: int, tool_
         part = moves[a:b]
         groups.append(_Group(a, changes.get(a, []), [drill_packet(int(dx), int(dy), invert_x=m.invert_x,
                                                                   invert_y=m.invert_y) for dx, dy in part], part))
-    back = -moves.sum(axis=0) if len(moves) else np.zeros(2, np.int64)
-    return _DrillJob(offset, init, stroke_steps, offset_height_steps, z_up_steps, groups, back)
+    back = -(moves.sum(axis=0) + start)
+    return _DrillJob(offset, init, stroke_steps, offset_height_steps, z_up_steps, groups, back, int(first_number))
 
 
 
@@ -98,14 +107,14 @@ class _Drilling:
         drilled = 0
         for group in job.groups:
             for message in group.notes:
-                self._check_stop(f"hole index {group.first}")
+                self._check_stop(f"hole {job.number(group.first)}")
                 if on_tool_change is not None:
                     on_tool_change(group.first, message)
-            self._check_stop(f"hole index {group.first}")
+            self._check_stop(f"hole {job.number(group.first)}")
             if spindle:
                 self._jog_session([("z", 0)], spindle=True)
             drilled = self._drill_group(job, group, drilled, on_hole, before_hole)
-            self._check_stop(f"raising the head after hole index {drilled - 1}")
+            self._check_stop(f"raising the head after hole {job.number(drilled - 1)}")
             self._jog_session([("z", job.z_up_steps)])  # spindle bit clear: off as the head rises
         if return_to_start and np.any(job.back_steps):
             self._check_stop("the move back to the start")
@@ -114,7 +123,7 @@ class _Drilling:
 
     def _drill_group(self, job: _DrillJob, group: _Group, drilled: int, on_hole: Callable[[int], None] | None,
                      before_hole: Callable[[int], None] | None) -> int:
-        before = f"before hole index {group.first}"
+        before = f"before hole {job.number(group.first)}"
         self._check_stop(f"Drill mode {before}")
         self._exchange(bytes([OPENDRILLMODE1]), _Exchange(f"OPENDRILLMODE1 {before}", DRILLMODE1ON, False, "drill",
                                                           _OFFSET))
@@ -128,12 +137,13 @@ class _Drilling:
                        _Exchange(f"the start (SDF) packet {before}", ONEHOLEDRILLED, False, "drill", _DRILL))
         for k, packet in enumerate(group.packets):
             i = group.first + k
-            self._check_stop(f"hole index {i}")
+            self._check_stop(f"hole {job.number(i)}")
             if before_hole is not None:
                 before_hole(i)
             dx, dy = (int(v) for v in group.moves[k])
-            self._exchange(packet, _Exchange(f"hole index {i}", ONEHOLEDRILLED, True, "drill", _DRILL,
-                                             drill_time_ns(packet, job.init), (dx, dy, 0)))
+            self._exchange(packet, _Exchange(f"hole {job.number(i)}", ONEHOLEDRILLED, True, "drill", _DRILL,
+                                             drill_time_ns(packet, job.init), (dx, dy, 0),
+                                             partial(drill_moved, dx, dy, job.init)))
             drilled += 1
             if on_hole is not None:
                 on_hole(drilled)

@@ -42,13 +42,14 @@ instructions: seed 000 Appendix 1, ``dly_100us``: "3us+(1.2us+d)*n"); a deadline
 class _Exchange:
     """A packet sent whose reply is still due."""
 
-    what: str  # e.g. "hole index 3"
+    what: str  # e.g. "hole 3"
     expected: int
     moving: bool  # the firmware has interrupts enabled: an emergency stop is honoured
     mode: str  # "jog" or "drill"
     next_state: str
     move_ns: int = 0  # how long the firmware moves before it answers
     moved: tuple[int, int, int] = (0, 0, 0)  # board-frame pulses (x, y, height) the move makes
+    progress: Optional[Callable[[int], tuple[int, int, int]]] = None  # pulses moved after so many ns of the move
 
 
 def _name(byte: int) -> str:
@@ -181,8 +182,14 @@ class _Link(_Trust):
         self._exchange(jog_exit_packet(), _Exchange("the Jog exit packet", JOGMODEOFF, False, "jog", _MODE))
 
     def _book_stopped_move(self, ex: _Exchange) -> None:
-        """A move of one axis stopped part of the way: book the pulses its time allowed (an estimate: the
-        firmware does not say how far it went)."""
+        """A move stopped part of the way: book the pulses its time allowed (an estimate: the firmware does not
+        say how far it went).  A Drill Data Packet (XY, then the stroke) by its ``progress`` until the stop byte
+        was sent; a move of one axis by its share of the time until the answer."""
+        if ex.progress is not None and self._estop_sent_s is not None:
+            elapsed_ns = int((self._estop_sent_s - self._sent_s) * 1e9 * self._time_scale)  # type: ignore[attr-defined]
+            moved = ex.progress(elapsed_ns)
+            self.position_pulses = tuple(p + int(d) for p, d in zip(self.position_pulses, moved))  # type: ignore
+            return
         if not ex.move_ns or sum(1 for d in ex.moved if d) != 1:
             return
         share = min(1.0, (time.monotonic() - self._sent_s) * 1e9 / ex.move_ns)
@@ -241,6 +248,7 @@ class _Link(_Trust):
                 as the move ended and was taken as packet data.
         """
         with self._lock:
+            self.stop_asked = True
             ex = self._pending
             between_moves = ex is None or not ex.moving
             if between_moves:
@@ -251,6 +259,7 @@ class _Link(_Trust):
             elif not self._estop_sent:
                 self._estop_sent = True
                 self._stop_error = None
+                self._estop_sent_s = time.monotonic()
                 self._write(bytes([EMERGENCYSTOP]))
             reader = self._reader_active
         if between_moves:
@@ -306,6 +315,7 @@ class _Link(_Trust):
                 raise PortError("a MAXIMUS job is already running on this board")
             self._job_active = True
             self._stop_requested = False
+            self.stop_asked = False
 
     def _end_job(self) -> None:
         with self._lock:

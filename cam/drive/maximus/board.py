@@ -33,7 +33,7 @@ Safety rules kept by every method:
   a marker file (:func:`~._trust.fault_marker`) and no handshake sends a
   byte on that device while it stands;
 * a limit switch or an emergency stop ends the job with a one-line
-  ``PortError`` naming the hole index and the last known position; the
+  ``PortError`` naming the hole (numbered from 1) and the last known position; the
   spindle is switched off and the firmware is back at mode selection;
 * the spindle (RB2) runs only while Drill mode drills; it is off for tool
   changes, jogs, travel, at the end and after every stop.
@@ -208,7 +208,9 @@ class MaximusBoard(_Drilling, _Link, AbstractContextManager):
         position_pulses: ``(x, y, z)`` board-frame pulses (y up, z height) from where the board was opened, as
             far as confirmed replies tell.
         position_known: False after a link fault (:class:`~._trust.LinkFault`) or an unanswered stop: the head
-            may have moved since ``position_pulses``.
+            may have moved since ``position_pulses``.  After a stopped move ``position_pulses`` is an estimate
+            from the time the move ran (the firmware does not say where it stopped).
+        stop_asked: :meth:`emergency_stop` was called during the current (or last) job.
     """
 
     def __init__(self, url_or_device: str, settings: Optional[Maximus] = None, *, timeout_s: Optional[float] = None,
@@ -234,6 +236,8 @@ class MaximusBoard(_Drilling, _Link, AbstractContextManager):
         self._job_active = False
         self._stop_requested = False
         self._estop_sent = False
+        self._estop_sent_s: Optional[float] = None
+        self.stop_asked = False
         self._stop_done = threading.Event()
         self._stop_error: PortError | None = None
         self._spindle_on: Optional[bool] = None  # unknown until a Jog packet sets it
@@ -477,6 +481,8 @@ class MaximusBoard(_Drilling, _Link, AbstractContextManager):
         return_to_start: bool = True,
         on_hole: Callable[[int], None] | None = None,
         before_hole: Callable[[int], None] | None = None,
+        start_steps: tuple[int, int] = (0, 0),
+        first_number: int = 1,
     ) -> int:
         """Drill every hole in Drill mode, Z Drill Up / Down as the PC program's settings, and come back.
 
@@ -494,10 +500,11 @@ class MaximusBoard(_Drilling, _Link, AbstractContextManager):
         packet -> DRILLMODE1INITIALIZED; the SDF packet (no motion) -> ONEHOLEDRILLED; one Drill Data Packet
         per hole (relative XY move, then the stroke) -> ONEHOLEDRILLED; the CDF-clear packet ->
         DRILLMODE1DONE; then a Jog packet raises the head by Z up to the start height with the spindle bit
-        clear.  At the end, if ``return_to_start``, X and Y go back to the start in one move.
+        clear.  At the end, if ``return_to_start``, X and Y go back to the holes' origin in one move.
 
         Args:
-            holes_steps: ``(N, 2)`` integer board-frame (x, y up) pulses relative to the start position.
+            holes_steps: ``(N, 2)`` integer board-frame (x, y up) pulses relative to the holes' origin (the start
+                position, unless ``start_steps`` says otherwise).
             z_down_steps: the bottom of a hole, pulses below the start height (1..65535).
             z_up_steps: where the head travels between holes, pulses below the start height (0..z_down - 1).
             tool_changes: ``(index_before_which, message)`` pairs; ``on_tool_change(index, message)`` is called,
@@ -508,6 +515,9 @@ class MaximusBoard(_Drilling, _Link, AbstractContextManager):
             return_to_start: move X and Y back to the start after the last hole.
             on_hole: called with the number of holes drilled so far after each one (progress).
             before_hole: called with the index of each hole as its packet goes out.
+            start_steps: where the head stands, board-frame (x, y) pulses from the holes' origin (a resumed job:
+                the first move starts there and the move back ends at the origin); the head at the start height.
+            first_number: what messages call the first hole (a resumed job's: its number in the whole job).
 
         Returns:
             The number of holes drilled.
@@ -515,9 +525,10 @@ class MaximusBoard(_Drilling, _Link, AbstractContextManager):
         Raises:
             PlanError: a bad hole list or option (nothing is sent).
             PortError: a timeout, an unexpected reply, a limit switch or an emergency stop;
-                the message names the hole index.
+                the message names the hole, counted from ``first_number``.
         """
-        job = drill_job(holes_steps, int(z_up_steps), int(z_down_steps), tool_changes, self.maximus)
+        job = drill_job(holes_steps, int(z_up_steps), int(z_down_steps), tool_changes, self.maximus,
+                        start_steps=start_steps, first_number=first_number)
         return self._run_job(lambda: self._drill_session(job, on_tool_change, on_hole, before_hole, bool(spindle),
                                                          return_to_start))
 

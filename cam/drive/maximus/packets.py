@@ -20,7 +20,7 @@ from .protocol import DEBOUNCE_NS, DELAY_UNIT_NS, STEPSBACKATLIMIT
 __all__ = [
     "MAX_FIELD", "DEFAULT_DELAY", "jog_packet", "jog_exit_packet", "offset_packet", "init_packet",
     "start_drill_packet", "drill_packet", "close_drill_packet", "drill_moves", "pulses_ns", "jog_time_ns",
-    "offset_time_ns", "init_time_ns", "drill_time_ns", "switch_time_ns",
+    "offset_time_ns", "init_time_ns", "drill_time_ns", "switch_time_ns", "drill_moved",
 ]
 
 MAX_FIELD = 0xFFFF  # 16-bit step fields (seed 000, Appendix 1: make16(high, low))
@@ -169,7 +169,7 @@ def drill_moves(holes_steps: np.ndarray) -> np.ndarray:
     moves = np.diff(np.vstack([np.zeros((1, 2), np.int64), holes]), axis=0)
     big = np.flatnonzero(np.abs(moves).max(axis=1, initial=0) > MAX_FIELD) if len(moves) else []
     if len(big):
-        raise PlanError(f"the move to hole {int(big[0])} is longer than {MAX_FIELD} pulses")
+        raise PlanError(f"the move to hole {int(big[0]) + 1} is longer than {MAX_FIELD} pulses")
     return moves
 
 
@@ -239,3 +239,35 @@ def drill_time_ns(packet: bytes, init: bytes) -> int:
     alone_ns = pulses_ns(nx - both, delay_x) if nx > ny else pulses_ns(ny - both, delay_y)
     return (pulses_ns(both, max(delay_x, delay_y)) + alone_ns + pulses_ns(_field(init, 3), delay_z_down)
             + pulses_ns(_field(init, 1), delay_z_up))
+
+
+def _done(elapsed_ns: int, n_pulses: int, delay: int) -> tuple[int, int]:
+    """Pulses of a run of ``n_pulses`` at Delay ``delay`` made within ``elapsed_ns``, and the time left after it."""
+    period_ns = pulses_ns(1, delay)
+    if not n_pulses or not period_ns:
+        return n_pulses, elapsed_ns
+    k = min(int(n_pulses), max(0, int(elapsed_ns)) // period_ns)
+    return k, elapsed_ns - pulses_ns(n_pulses, delay) if k == n_pulses else 0
+
+
+def drill_moved(dx_steps: int, dy_steps: int, init: bytes, elapsed_ns: int) -> tuple[int, int, int]:
+    """How far a Drill Data Packet of the XY move ``(dx_steps, dy_steps)`` (board frame) has moved the head
+    ``elapsed_ns`` into its move, as :func:`drill_time_ns` times it: the dog-leg XY move, then Z down by the
+    Init packet's second field and up by its first.  Returns board-frame ``(x, y, height)`` pulses: the host's
+    estimate of where an emergency stop left the head (the firmware does not say).
+
+    >>> init = init_packet(100, 100, delay_x=10, delay_y=10, delay_z_up=10, delay_z_down=10)   # 2 ms a pulse
+    >>> drill_moved(300, -100, init, 250_000_000), drill_moved(300, -100, init, 700_000_000)
+    ((125, -100, 0), (300, -100, -50))
+    """
+    nx, ny = abs(int(dx_steps)), abs(int(dy_steps))
+    delay_x, delay_y, delay_z_up, delay_z_down = init[5], init[6], init[7], init[8]
+    both, t = _done(elapsed_ns, min(nx, ny), max(delay_x, delay_y))
+    x = y = both
+    if t > 0 and nx != ny:
+        alone, t = _done(t, abs(nx - ny), delay_x if nx > ny else delay_y)
+        x, y = (both + alone, both) if nx > ny else (both, both + alone)
+    down, t = _done(t, _field(init, 3), delay_z_down) if t > 0 else (0, 0)
+    up, _ = _done(t, _field(init, 1), delay_z_up) if t > 0 else (0, 0)
+    sx, sy = (1 if dx_steps >= 0 else -1), (1 if dy_steps >= 0 else -1)
+    return sx * x, sy * y, up - down
