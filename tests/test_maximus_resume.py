@@ -249,3 +249,39 @@ def test_at_real_speed_ctrl_c_in_a_move_then_resume_drills_every_hole_once(tmp_p
     finally:
         emu.stop()
     assert emu.error is None, repr(emu.error)
+
+
+@pytest.mark.slow  # the page's server and its worker process: 3 s
+def test_the_pages_resume_job_goes_on_from_the_next_hole(emu, tmp_path):
+    from test_web import Server
+
+    s = Server(tmp_path, settings=MAXIMUS_SETTINGS, machine_port=f"maximus:{emu.device_path}", realtime=True)
+    try:
+        status, r = s.upload("board.drl", write_board(tmp_path).read_bytes())
+        assert status == 200, r
+        options = {"travel_height_mm": "0.1", "cut_depth_mm": "0.2"}
+        status, plan = s.call("POST", "/api/plan", {"job": r["job"], "options": options})
+        assert status == 200, plan
+
+        def run(answers: list[str]) -> dict:
+            deadline = time.monotonic() + 60
+            while s.session.busy:
+                assert time.monotonic() < deadline, "the job did not end"
+                st = s.session.state()
+                if st["prompt"]:
+                    action = answers.pop(0)
+                    assert s.call("POST", "/api/answer", {"prompt": st["prompt"]["id"], "action": action})[0] == 200
+                time.sleep(0.01)
+            return s.session.state()
+
+        assert s.call("POST", "/api/start", {"job": plan["job"]})[0] == 200
+        st = run(["continue", "stop"])  # stopped at the second tool change: three holes drilled
+        assert st["last"]["status"] == "emergency-stopped" and len(emu.hole_log()) == 3, st["last"]
+        status, st = s.call("POST", "/api/resume-job", {})
+        assert status == 200, st
+        st = run(["continue", "continue"])
+        assert st["last"]["status"] == "finished", st["last"]
+        assert "drilling hole 4 of 6" in {e["text"] for e in st["log"]}
+    finally:
+        s.close()
+    assert_each_hole_once(emu, planned_holes(write_board(tmp_path)))

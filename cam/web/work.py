@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from ..drive.journal import read_journal
+from ..drive.maximus.resume import resume_board_job
 from ..job.jobs import JobOptions, PreparedJob, prepare_job, resume_job
 from ..settings import MachineSettings
 from ..verify.pinlog import PinLog, write_pin_log
@@ -32,8 +33,12 @@ def plan_with_preview(path: str, options: JobOptions, settings: MachineSettings,
 
 def resumed_from_journal(job: PreparedJob, journal_path: str, position_steps: tuple[int, int, int]) -> PreparedJob:
     """The page's job resumed after the stop its journal records, from where the tool stands (in the worker):
-    :func:`cam.job.jobs.resume_job`, the function ``cam drill --resume`` calls."""
-    return resume_job(job, read_journal(journal_path), position_steps=position_steps, where=Path(journal_path).name)
+    :func:`cam.job.jobs.resume_job`, the function ``cam drill --resume`` calls (a MAXIMUS board job's journal:
+    :func:`~cam.drive.maximus.resume.resume_board_job`, on from the next hole)."""
+    journal = read_journal(journal_path)
+    if journal.holes_done is not None:
+        return resume_board_job(job, journal, where=Path(journal_path).name)
+    return resume_job(job, journal, position_steps=position_steps, where=Path(journal_path).name)
 
 
 def preview_of(job: PreparedJob) -> bytes:

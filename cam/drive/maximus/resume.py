@@ -53,7 +53,8 @@ def resume_board_job(job: Any, journal: Journal, where: str = "journal") -> Any:
                        last_move=journal.holes_done - 1, resumed_at_move=journal.holes_done,
                        start_position_steps=tuple(int(v) for v in journal.position_steps))  # type: ignore[arg-type]
     report = dict(job.report)
-    report.update(resumed_at_hole=journal.holes_done + 1, start_position_steps=list(journal.position_steps),
+    report.update(resumed_at_hole=journal.holes_done + 1, resumed_at_move=journal.holes_done,
+                  start_position_steps=list(journal.position_steps),
                   resumed_from_state=journal.state)
     extent = np.asarray(job.extent_steps, np.int64) - np.asarray(base.start_position_steps, np.int64)[:, None]
     return dataclasses.replace(job, resumed=base, report=report, extent_steps=extent,
