@@ -95,6 +95,9 @@ def _resumed(args: argparse.Namespace, job):
     journal = read_journal(args.resume)
     if port_kind(args.port) == "maximus":  # the board drills by itself: it goes on from the next hole
         resumed = resume_board_job(job, journal, where=args.resume)
+        if journal.state == "running":
+            print(f"warning: journal {args.resume} was not closed (its run ended without a word): the board may "
+                  f"have moved on after its last hole; reset it and check the head", file=sys.stderr)
         print(f"resuming at hole {journal.holes_done + 1} of {len(job.drill_plan.holes_steps)} from "
               f"{list(journal.position_steps)} steps ({journal.state})", file=sys.stderr)
         return resumed, journal.position_steps
