@@ -281,7 +281,11 @@ def test_cli_commands_chain_across_port_opens(grbl, tmp_path):
         assert r.returncode == 0, (args, r.stderr)
         steps.append(r.stdout)
         close_grbl_machines()  # as a new process: the next open restarts the board
-    r = run_cli("where", "--json", *common)
+    r = run_cli("where", "--use", "G55", *common)
+    assert r.returncode == 0, r.stderr
+    assert any(text == "G55" for _, text, _ in grbl.lines())
+    close_grbl_machines()
+    r = run_cli("where", "--json", "--use", "G54", *common)
     assert r.returncode == 0, r.stderr
     import json
     rep = json.loads(r.stdout)

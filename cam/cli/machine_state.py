@@ -16,7 +16,7 @@ from ..drive.state import (
     MachineLock, MachineState, StateHold, check_in_travel, default_state_path, dump_json, mm_to_steps,
     read_state, steps_to_mm,
 )
-from ..drive.grbl_machine import grbl_machine
+from ..drive.grbl_machine import GRBL_OFFSETS, grbl_machine
 from ..drive.ports import port_kind
 from ..drive.session import MachineSession
 from ..errors import CamError
@@ -117,6 +117,8 @@ def cmd_where(args: argparse.Namespace) -> int:
                     machine.rebase(steps)
             if args.use:
                 state = replace(state, active_offset=args.use)
+                if grbl and args.use in GRBL_OFFSETS:  # grbl's own active offset too
+                    grbl_machine(args.port, settings).use_offset(args.use)
             hold.record(state)
     else:
         state, driving = _read_now(path, settings)
