@@ -277,6 +277,7 @@ def test_the_pages_resume_job_goes_on_from_the_next_hole(emu, tmp_path):
         assert s.call("POST", "/api/start", {"job": plan["job"]})[0] == 200
         st = run(["continue", "stop"])  # stopped at the second tool change: three holes drilled
         assert st["last"]["status"] == "emergency-stopped" and len(emu.hole_log()) == 3, st["last"]
+        assert st["last"]["journal"], "the page's Resume job button is enabled by the journal the run names"
         status, st = s.call("POST", "/api/resume-job", {})
         assert status == 200, st
         st = run(["continue", "continue"])

@@ -225,6 +225,7 @@ def drill_work(job: Any, settings: MachineSettings, journal: Optional[JournalSpe
             session.log(f"the journal was not written at the end: {keeper.error}", "warning")
         return -p0  # back at the job's home, Z at the start height
 
+    work.journal_path = None if journal is None else journal.path  # type: ignore[attr-defined]  # the page's Resume
     return work
 
 
@@ -266,13 +267,15 @@ def run_on_board(session: Any, name: str, work: BoardWork, ctl: BoardControl, la
     finally:
         if board is not None:
             board.close()
+    kept = {"journal": work.journal_path} if getattr(work, "journal_path", None) else {}  # a drill job's journal
     if error is None:
-        session.finish({"activity": name, "label": label, "status": "finished", "messages": []}, moved_steps)
+        session.finish({"activity": name, "label": label, "status": "finished", "messages": [], **kept}, moved_steps)
         session.log(f"{label}: finished")
         return
     status = "emergency-stopped" if ctl.halted else "error"
     # a stopped move has moved part of the way: where the head is, is not known exactly any more (the PC
     # program says "Offset Coordinates lost!", seed 000 Appendix 2, GoEStopExecute)
-    session.finish({"activity": name, "label": label, "status": status, "messages": [error]}, _board_moved(board))
+    session.finish({"activity": name, "label": label, "status": status, "messages": [error], **kept},
+                   _board_moved(board))
     session.log(f"{label}: {error} (the head's position is not known exactly any more: jog it to the board "
                 f"origin and set the offset there)", "error")

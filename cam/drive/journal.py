@@ -219,11 +219,12 @@ class HoleJournal:
     def _write(self, state: str) -> None:
         base = self.spec.base
         n = len(self.hole_order)
+        start = tuple(int(v) for v in base.start_position_steps)
         record = Journal(identity=base.identity, plan_sha256=base.plan_sha256, source=base.source, moves=n,
                          last_move=self.holes_done - 1, position_steps=self.position_steps,  # type: ignore[arg-type]
                          state=state, writes_done=self.holes_done, writes_total=n,
                          home_steps=self.spec.home_steps, resumed_at_move=base.resumed_at_move,
-                         start_position_steps=tuple(int(v) for v in base.start_position_steps),  # type: ignore[arg-type]
+                         start_position_steps=start,  # type: ignore[arg-type]
                          holes_done=self.holes_done, hole_order=self.hole_order)
         try:
             write_journal(record, self.spec.path)
