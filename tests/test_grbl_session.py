@@ -338,3 +338,9 @@ def test_cli_feed_override_and_the_settings_warning(tmp_path):
     assert r.returncode == 2 and "grbl" in r.stderr and "Traceback" not in r.stderr, r.stderr
     r = run_cli("drill", str(f), "--yes", "--feed-override", "500")
     assert r.returncode == 2 and "--feed-override" in r.stderr
+
+
+def test_cam_run_names_the_session_for_a_board():
+    _, job = two_d_job()
+    with pytest.raises(CapabilityError, match="MachineSession"):
+        cam.run(job, port="grbl:/dev/ttyUSB9")

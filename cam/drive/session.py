@@ -430,6 +430,8 @@ def run(job: Any, port: Any = "mock", *, realtime: bool = False, controller: Opt
             controller.pause()  # held until the caller resumes it
         return "continue"
 
+    if isinstance(port, str) and port_kind(port) in ("grbl", "maximus"):
+        require(port, "step_dir", what="cam.run (a board that makes its own steps runs through MachineSession)")
     settings = getattr(job, "settings", DEFAULT_SETTINGS)
     session = MachineSession(port, settings, realtime=realtime, on_prompt=on_prompt)
     session.on_progress = progress
