@@ -10,6 +10,7 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -286,3 +287,23 @@ def test_the_pages_resume_job_goes_on_from_the_next_hole(emu, tmp_path):
     finally:
         s.close()
     assert_each_hole_once(emu, planned_holes(write_board(tmp_path)))
+
+
+@pytest.mark.realtime
+def test_a_stopped_xy_move_books_how_far_its_time_took_the_head():
+    emu = start_emulator(speed=1.0)  # the firmware's own timing: the move takes 1.2 s
+    try:
+        board = MaximusBoard(emu.device_path, MAXIMUS_SETTINGS.maximus)
+        try:
+            wait = threading.Timer(0.5, board.emergency_stop)
+            wait.start()
+            with pytest.raises(PortError, match="MACHINESTOPPED"):
+                board.move(600, -300, 0)  # both axes at once: a Drill Data Packet, its XY move a dog-leg
+            wait.join()
+            x, y, z = emu.position_pulses
+            assert 100 < x < 600 and -300 < y < 0, (x, y)
+            assert np.abs(np.subtract(board.position_pulses, (x, y, z))).max() <= 2, (board.position_pulses, x, y)
+        finally:
+            board.close()
+    finally:
+        emu.stop()

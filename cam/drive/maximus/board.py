@@ -45,6 +45,7 @@ import threading
 import time
 from contextlib import AbstractContextManager
 from dataclasses import replace
+from functools import partial
 from typing import Any, Callable, Optional, Sequence
 
 import numpy as np
@@ -56,7 +57,7 @@ from ._drill import _Drilling, drill_job
 from ._trust import LinkFault, emulator_speed
 from ._link import _CLOSE_DRILL, _DRILL, _INIT, _JOG, _MODE, _OFFSET, _UNKNOWN, _Exchange, _Link
 from .packets import (
-    MAX_FIELD, close_drill_packet, drill_moves, drill_packet, drill_time_ns, init_packet, jog_exit_packet,
+    MAX_FIELD, close_drill_packet, drill_moved, drill_moves, drill_packet, drill_time_ns, init_packet, jog_exit_packet,
     jog_packet, jog_time_ns, offset_packet, start_drill_packet,
 )
 from .protocol import (
@@ -465,7 +466,8 @@ class MaximusBoard(_Drilling, _Link, AbstractContextManager):
                                                        _DRILL))
         packet = drill_packet(dx_steps, dy_steps, invert_x=m.invert_x, invert_y=m.invert_y)
         self._exchange(packet, _Exchange(f"the XY move {dx_steps}, {dy_steps}", ONEHOLEDRILLED, True, "drill",
-                                         _DRILL, drill_time_ns(packet, init), (dx_steps, dy_steps, 0)))
+                                         _DRILL, drill_time_ns(packet, init), (dx_steps, dy_steps, 0),
+                                         partial(drill_moved, dx_steps, dy_steps, init)))
         self._exchange(close_drill_packet(), _CLOSE_DRILL)
 
     # ------------------------------------------------------------------ drill
