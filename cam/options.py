@@ -182,14 +182,15 @@ JOB_OPTIONS: tuple[Option, ...] = (
          "accept --travel-height 0: the tool travels between cuts touching the surface (a pen or a drag knife), "
          "which on a cutter scratches the work"),
     _opt("origin", "--origin", "choice", "", _DRAWINGS | _VECTORS, None,
-         "which point of the job goes to the active work zero (cam zero): file (a drawing's top-left pixel), "
-         "upper-left, lower-left or center of what is cut; default: file for drawings and digitized matrices (the "
-         "thesis), upper-left for drill, HPGL and SVG files",
+         "which point of the job goes to the active work zero (cam zero): file (the file's own zero: a drawing's "
+         "top-left pixel, a drill, HPGL or SVG file's 0,0), upper-left, lower-left or center of what is cut; "
+         "default: file for drawings and digitized matrices (the thesis), upper-left for drill, HPGL and SVG files "
+         "(file when --offset is given)",
          choices=("file", "upper-left", "lower-left", "center")),
     # drill files, HPGL and SVG
     _opt("offset_mm", "--offset", "numbers", "mm", _VECTORS, None,
-         "machine position (mm from where the tool stands) of the board, plotter or SVG page origin; default: the "
-         "top-left of what is cut at the start position", lo=-MAX_MM, hi=MAX_MM, count=2, metavar="X,Y"),
+         "where the board, plotter or SVG page origin goes, mm from the work zero (cam export: from the "
+         "program's zero); default: the top-left of what is cut there", lo=-MAX_MM, hi=MAX_MM, count=2, metavar="X,Y"),
     _opt("mirror_x", "--mirror-x", "flag", "", {"excellon"}, False,
          "drill files: mirror the board for drilling from the back"),
     _opt("drill_order", "--drill-order", "choice", "", {"excellon"}, "tour",

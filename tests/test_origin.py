@@ -48,11 +48,11 @@ def test_the_default_keeps_each_kind_where_it_was(tmp_path):
     assert np.array_equal(box, same_box) and box[0, 0] > zero[0] and box[1, 0] > zero[1]  # margin around it
 
 
-def test_origin_file_of_a_drill_file_is_refused_in_one_line(tmp_path):
-    """Not built yet: the file's own zero of a drill, HPGL or SVG file at the work zero (the planners still check
-    the travel from the job's home): said in one line, nothing moves."""
+def test_origin_file_of_a_drill_file_at_the_home_is_refused_in_one_line(tmp_path):
+    """The board's own zero at a work zero at the home: its holes (Y up, toward the back) leave the Y travel, said
+    in one line naming the axis (tests/test_origin_file.py runs it where it fits)."""
     r = run_cli("drill", SAMPLES / "board.drl", "--yes", "--origin", "file")
-    assert r.returncode == 2 and "--origin file" in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
+    assert r.returncode == 2 and "beyond the Y travel" in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
 
 
 def test_an_origin_for_a_g_code_program_is_refused_in_one_line(tmp_path):

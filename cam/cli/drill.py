@@ -23,7 +23,7 @@ from .common import format_duration, port_settings
 from .execute import Outcome, check_port_options, execute
 from .machine_state import hold_machine
 from .parser import EXIT_INTERRUPTED
-from .planning import prepare, summary_of, write_job_preview
+from .planning import placed_by_own_zero, prepare, summary_of, write_job_preview
 
 __all__ = ["cmd_drill", "journal_path"]
 
@@ -115,12 +115,14 @@ def _gcode_hold(args: argparse.Namespace, settings) -> Optional[StateHold]:
     """A G-code program runs as a sender runs it, from where the machine state says the tool stands and in its
     work offsets (issue #29 point 4): the machine's hold is taken before the program is planned, and
     ``args.machine_state`` is what it is planned in (a resumed run's: the journal's start).  None for other
-    kinds (planned from their own zero, placed at the work zero when they run)."""
+    kinds (planned from their own zero, placed at the work zero when they run) but a drill, HPGL or SVG file
+    placed by its own zero (--origin file: planned from the work zero as a program is)."""
     if job_kind_of(args) != "gcode":
         if getattr(args, "keep_offsets", False):
             raise CamError("--keep-offsets keeps the work offsets a G-code program sets (G10 L2/L20); this is not "
                            "a G-code program")
-        return None
+        if not placed_by_own_zero(args):
+            return None
     hold = hold_machine(args, settings, "cam drill")
     try:
         if getattr(args, "resume", None):

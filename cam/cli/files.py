@@ -36,9 +36,10 @@ def cmd_export(args: argparse.Namespace) -> int:
     if job.drill_plan is not None:
         changes = {int(i): (tool, f"T{tool} {dia:.3f} mm, {n} holes")
                    for i, (tool, dia, n) in zip(at, job.drill_plan.tool_sequence)}
-    else:  # HPGL: "tool change: pen N"; a drawing's pauses are Pause At points, no tool
-        changes = {int(i): (int(note.split()[-1]), note) for i, note in zip(at, job.toolpath.pause_notes or [])
-                   if note.split()[-1].isdigit()}
+    else:  # HPGL: "tool change: pen N"; other pauses (Pause At, between SVG layers) are M0 with their note
+        notes = job.toolpath.pause_notes or ["Pause At"] * len(at)
+        changes = {int(i): ((int(note.split()[-1]) if note.split() and note.split()[-1].isdigit() else None), note)
+                   for i, note in zip(at, notes)}
     exact_xy, exact_z = exact_geometry(job, DEFAULT_CUT_DEPTH_MM if args.cut_depth is None else args.cut_depth,
                                        job_options(args))
     save_gcode(job.toolpath, args.output, flip_y=args.flip_y, travel_height_mm=travel_height_mm,
@@ -48,9 +49,12 @@ def cmd_export(args: argparse.Namespace) -> int:
                exact_xy_mm=exact_xy, exact_z_mm=exact_z, snap=getattr(args, "snap", False),
                arc_tolerance_mm=getattr(args, "arc_tolerance", None) or None)  # issue #30 point 4
     if job.kind in ("drawing", "digitized"):
-        print(f"{args.output}: {job.toolpath.n_targets} points, {job.toolpath.n_retracts} retracts")
+        print(f"{args.output}: {job.toolpath.n_targets} points, {job.toolpath.n_retracts} retracts"
+              + (f", {len(changes)} pause(s)" if changes else ""))
     else:
-        print(f"{args.output}: {job.summary}, {len(changes)} tool change(s)")
+        tools = sum(n is not None for n, _ in changes.values())
+        pauses = len(changes) - tools
+        print(f"{args.output}: {job.summary}, {tools} tool change(s)" + (f", {pauses} pause(s)" if pauses else ""))
     return 0
 
 

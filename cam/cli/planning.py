@@ -12,8 +12,8 @@ from ..digitize.drawing import load_image
 from ..digitize.profile import Profile, load_profile, profile_from_expr
 from ..drive.chunks import ChunkedPlan, plan_chunks
 from ..drive.pins import axis_bits
-from ..errors import CamError
-from ..job.jobs import JobOptions, PreparedJob, prepare_job
+from ..errors import CamError, TravelError
+from ..job.jobs import JobOptions, PreparedJob, own_zero_home, prepare_job
 from ..options import JOB_OPTIONS, Option
 from ..job.model import JobLike
 from ..render.picture import save_picture, surface_picture, toolpath_picture, toolpath_svg
@@ -26,7 +26,7 @@ FILE_JOB_KINDS = ("excellon", "gcode", "hpgl")
 """Kinds of file that are jobs already (not drawings)."""
 
 __all__ = [
-    "is_file_job", "prepare", "summary_of", "job_options", "excellon_digits", "profile_of",
+    "is_file_job", "placed_by_own_zero", "prepare", "summary_of", "job_options", "excellon_digits", "profile_of",
     "write_preview", "write_job_preview", "write_file_job_preview", "carved_surface",
 ]
 
@@ -37,15 +37,32 @@ def is_file_job(args: argparse.Namespace) -> bool:
     return bool(getattr(args, "image", None)) and job_kind_of(args) in FILE_JOB_KINDS
 
 
+def placed_by_own_zero(args: argparse.Namespace) -> bool:
+    """Whether the command's drill, HPGL or SVG file is placed by its own zero (--origin file, or --offset without
+    --origin): ``cam drill`` then holds the machine before planning and plans the file from the active work zero
+    (``args.machine_state``), its travel checked in the machine frame, as it plans a G-code program
+    (:func:`cam.job.jobs.own_zero_home`)."""
+    return own_zero_home(job_kind_of(args) or "", job_options(args)) is not None
+
+
 def prepare(args: argparse.Namespace, settings: Optional[MachineSettings] = None) -> PreparedJob:
     """The command's file (a drawing, --load-digitized matrix, G-code, drill or HPGL file) planned with its
     options by :func:`cam.job.jobs.prepare_job`, the call the web page makes too (progress bar by bytes read)."""
     path = getattr(args, "load_digitized", None) or args.image
     if not path:
         raise CamError(f"{args.command} needs an IMAGE or --load-digitized FILE")
-    with reading_bar(args) as progress:
-        job = prepare_job(path, job_options(args), settings or machine_settings(args), name=path, progress=progress,
-                          machine_state=getattr(args, "machine_state", None))  # G-code: where it runs (cam drill)
+    state = getattr(args, "machine_state", None)  # where it runs (cam drill): G-code, and a drill, HPGL or SVG
+    # file placed by its own zero (placed_by_own_zero)
+    try:
+        with reading_bar(args) as progress:
+            job = prepare_job(path, job_options(args), settings or machine_settings(args), name=path,
+                              progress=progress, machine_state=state)
+    except TravelError as exc:
+        if state is None or job_kind_of(args) == "gcode" or not placed_by_own_zero(args):
+            raise
+        raise TravelError(f"{exc}; the file's own zero goes to the {state.active_offset} work zero (machine "
+                          f"{list(state.work_zero_steps())} steps): set the work zero elsewhere (cam zero) or "
+                          "choose another --origin") from None
     if getattr(args, "load_digitized", None) and args.image:
         drawing = load_image(args.image)
         d = job.digitized

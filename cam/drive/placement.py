@@ -57,10 +57,11 @@ def origin_anchor(job: Any, origin: Optional[str]) -> tuple[int, int]:
     """The ``(x, y)`` point of a prepared job, in its own frame (steps, +y toward the front of the machine), that
     goes to the work zero: ``file`` its frame's zero (a drawing's top-left pixel, the thesis's), ``upper-left``,
     ``lower-left`` or ``center`` of what it cuts (the
-    XY extent of the tool below the surface).  None: ``file`` for drawings and digitized matrices, ``upper-left``
-    for the other kinds."""
+    XY extent of the tool below the surface).  None: the job's own ``origin`` (the one its options chose,
+    ``JobOptions.origin``), else ``file`` for drawings and digitized matrices, ``upper-left`` for the other kinds
+    (the command line passes ``file`` for an ``--offset`` without ``--origin``)."""
     kind = getattr(job, "kind", "")
-    origin = origin or ("file" if kind in ("drawing", "digitized") else "upper-left")
+    origin = origin or getattr(job, "origin", None) or ("file" if kind in ("drawing", "digitized") else "upper-left")
     if origin == "file":
         return 0, 0
     extent, cut = job.plan.motion_extent()
@@ -86,8 +87,9 @@ def approach_to_work_zero(job: Any, state: MachineState, start: tuple[int, int, 
     """The travel that places a file's job at the active work zero (issue #29 points 1 and 6, on every port: a MAXIMUS
     board drills a file's holes from where its head stands, so it travels there first too): its
     home, its own frame's (0, 0, 0), goes to the work zero: a drawing's top-left pixel at the surface (the
-    thesis's), a drill file's top-left hole (or the board origin with ``--offset 0,0``), an HPGL or SVG file's
-    origin as its ``--offset`` places it.  None when the tool is there already, or for a G-code program (its
+    thesis's), a drill file's top-left hole, or with ``origin`` "file" (or an ``--offset``) a drill, HPGL or SVG
+    file's own zero (its job planned from the work zero, :func:`cam.job.jobs.own_zero_home`).  None when the
+    tool is there already, or for a G-code program (its
     own work offsets place it) or any other job (planned from where the tool stands).  Positions in the machine frame.
 
     Raises:

@@ -214,7 +214,7 @@ def gcode_pieces(
     flip_y: bool = False,
     travel_height_mm: float = 1.0,
     title: str = "cam job",
-    tool_changes: dict[int, tuple[int, str]] | None = None,
+    tool_changes: dict[int, tuple[Optional[int], str]] | None = None,
     post: str = "generic",
     feed_mm_min: Optional[float] = None,
     plunge_feed_mm_min: Optional[float] = None,
@@ -232,9 +232,10 @@ def gcode_pieces(
         flip_y: write Y = +row (mirror) instead of the default Y = -row.
         travel_height_mm: height above the surface for moves between cuts.
         title: first comment line.
-        tool_changes: ``{point index: (tool number, comment)}`` -- a tool change is written before that point.
-            Without it, a job planned for a real cutter (``toolpath.tool``) gets tool 1 with the tool's shape and
-            size before its first move.
+        tool_changes: ``{point index: (tool number, comment)}`` -- a tool change is written before that point
+            (the tool lifted to the travel height, the spindle stopped); tool number None: a pause ``M0`` with
+            the comment (a Pause At point, a pause between SVG layers).  Without it, a job planned for a real
+            cutter (``toolpath.tool``) gets tool 1 with the tool's shape and size before its first move.
         post: the target, one of :data:`POSTS`.
         feed_mm_min, plunge_feed_mm_min: X/Y (and 3D) feed and Z feed; None: from the step delays.
         spindle_rpm: ``M3 S<rpm>`` before the first move, ``M5`` at the end; None: no spindle commands.
@@ -334,11 +335,13 @@ class _Writer:
                 w(f"T1 M6 ({_comment(cutter.describe())})\n")
         w(f"G0 Z{_fmt(self.safe_z)}\n")
 
-    def tool_change(self, n: int, comment: str) -> None:
+    def tool_change(self, n: Optional[int], comment: str) -> None:
         if self.spindle_on:
             self.w("M5\n")
             self.spindle_on = False
-        if self.post == "grbl":
+        if n is None:  # a pause with no tool (Pause At, between SVG layers): the program stops, cycle start goes on
+            self.w(f"(pause: {_comment(comment)}, then cycle start)\nM0\n")
+        elif self.post == "grbl":
             self.w(f"(load tool {n}: {_comment(comment)}, then cycle start)\nM0\n")
         else:
             self.w(f"T{n} M6 ({_comment(comment)})\n")

@@ -7,7 +7,10 @@ default the board's top-left corner (smallest X, largest Y of its holes) is
 placed where the tool stands when the job starts (the home, (0, 0, 0)), so
 every hole lies inside the travel; ``offset_mm=(X, Y)`` instead puts the
 board origin (0, 0) at machine (X, Y) mm from the home.  ``mirror_x`` mirrors
-the board about its vertical axis for drilling from the back side.
+the board about its vertical axis for drilling from the back side.  The job's
+points are steps from its home; ``home_steps`` says where that home is in the
+machine frame (a file placed by its own zero at a work zero: ``offset_mm``
+(0, 0) and the work zero), and every hole is checked against the travel there.
 
 The drill cycle for each hole (thesis-machine step/dir port): rapid at the
 safe height to above the hole, plunge to the drill depth, retract to the
@@ -47,6 +50,7 @@ from ..errors import PlanError, TravelError
 from ..settings import DEFAULT_SETTINGS, MachineSettings
 from .model import CUT, RETRACT, TRAVEL, Job, PixelFrame, check_travel, join_pieces
 from .drill_order import drill_order
+from .hpgl_stream import outside_travel
 
 __all__ = ["DrillPlan", "DrillJobStream", "plan_drill", "DEFAULT_CUT_DEPTH_MM", "DEFAULT_TRAVEL_HEIGHT_MM"]
 
@@ -146,6 +150,7 @@ def plan_drill(
     mirror_x: bool = False,
     drill_order: str = "tour",
     mill_holes_over_mm: Optional[float] = None,
+    home_steps: tuple[int, int, int] = (0, 0, 0),
 ) -> DrillPlan:
     """Plan the drilling of a :class:`~cam.formats.excellon.HoleList`: its holes drilled, its slots milled.
 
@@ -159,6 +164,8 @@ def plan_drill(
             tools: a prompt at each change of tool).
         mill_holes_over_mm: mill every hole whose tool is larger than this with a bit of this diameter (None:
             drill every hole with its own tool).
+        home_steps: the machine position of the job's home (its (0, 0, 0), where ``offset_mm`` is measured from):
+            the holes, paths and depths are checked against the travel in the machine frame from there.
 
     Raises:
         PlanError: bad options; TravelError: a hole outside the travel (naming the hole and its line).
@@ -191,32 +198,26 @@ def plan_drill(
             path_tool.append(bit_tool)
         n_milled = int(big.sum())
     every_mm = np.concatenate([np.asarray(holes.holes_mm, np.float64).reshape(-1, 2)] + paths_mm)
+    home = np.asarray(home_steps, np.int64).reshape(3)
     machine_mm = _machine_mm(holes.holes_mm, offset_mm, mirror_x, every_mm)
     steps_xy = np.rint(machine_mm / settings.mm_per_step_xy).astype(np.int64)
-    _check_holes(holes, machine_mm, steps_xy, settings)
+    _check_holes(holes, steps_xy + home[:2], settings)
     paths_steps = [np.rint(_machine_mm(p, offset_mm, mirror_x, every_mm) / settings.mm_per_step_xy).astype(np.int64)
                    for p in paths_mm]
     for k, p in enumerate(paths_steps):
         if k < len(slot_paths):
-            _check_holes_path(holes, k, p, settings)
+            _check_holes_path(holes, k, p + home[:2], settings)
         else:
-            check_travel(np.column_stack([p, np.zeros(len(p), np.int64)]), settings)
-    depth_steps = int(round(cut_depth_mm / settings.mm_per_step_z))
-    if depth_steps < 1:
-        raise PlanError(f"drill depth {cut_depth_mm:g} mm is less than one Z step (mm_per_step_z = "
-                        f"{settings.mm_per_step_z:g} mm): nothing would be drilled")
-    safe_z_steps = -int(round(travel_height_mm / settings.mm_per_step_z))
-    _, _, (z_lo, z_hi) = settings.travel.bounds_steps()
-    if depth_steps > z_hi or safe_z_steps < z_lo:  # before the tour: a million holes take a while to order
-        raise TravelError(f"drill depth {cut_depth_mm:g} mm and safe height {travel_height_mm:g} mm need Z "
-                          f"{safe_z_steps}..{depth_steps} steps; the Z travel is {z_lo}..{z_hi} steps")
+            check_travel(np.column_stack([p, np.zeros(len(p), np.int64)]) + home, settings)
+    depth_steps, safe_z_steps = _drill_z_steps(cut_depth_mm, travel_height_mm, settings, int(home[2]))
     runs = _tool_runs(holes, machine_mm, drill_order, drilled)
     runs3, diameters = _with_paths(runs, [float(holes.tools[t]) for t, _ in runs], paths_steps, path_dia, path_tool,
                                    machine_mm / settings.mm_per_step_xy, drill_order, len(slot_paths))
     notes = _notes(holes, runs3, diameters, len(slot_paths), mill_holes_over_mm)
     stream = DrillJobStream([(t, idx) for t, idx, _ in runs3], steps_xy, diameters, depth_steps, safe_z_steps,
                             settings, str(holes.source), list(holes.warnings), paths_steps=paths_steps,
-                            path_runs=[pidx for _, _, pidx in runs3], notes=notes)
+                            path_runs=[pidx for _, _, pidx in runs3], notes=notes,
+                            home_steps=tuple(int(v) for v in home))  # type: ignore[arg-type]
     toolpath = stream.joined()
     order_arr = np.concatenate([np.zeros(0, np.int64)] + [idx for _, idx, _ in runs3]).astype(np.int64)
     sequence = [(tool, dia, len(idx)) for (tool, idx, _), dia in zip(runs3, diameters)]
@@ -225,6 +226,24 @@ def plan_drill(
     return DrillPlan(toolpath, steps_xy[order_arr], order_arr, sequence, depth_steps, -safe_z_steps,
                      n_slots=len(slot_paths), n_milled=n_milled, extent_steps=extent,
                      holes_mm=machine_mm[order_arr])
+
+
+def _drill_z_steps(cut_depth_mm: float, travel_height_mm: float, settings: MachineSettings, home_z_steps: int
+                   ) -> tuple[int, int]:
+    """(drill depth, travel Z) in Z steps (+Z deeper: the travel Z is <= 0), checked against the Z travel with the
+    board's surface at machine Z ``home_z_steps`` (before the tour: a million holes take a while to order)."""
+    depth_steps = int(round(cut_depth_mm / settings.mm_per_step_z))
+    if depth_steps < 1:
+        raise PlanError(f"drill depth {cut_depth_mm:g} mm is less than one Z step (mm_per_step_z = "
+                        f"{settings.mm_per_step_z:g} mm): nothing would be drilled")
+    safe_z_steps = -int(round(travel_height_mm / settings.mm_per_step_z))
+    _, _, (z_lo, z_hi) = settings.travel.bounds_steps()
+    if depth_steps + home_z_steps > z_hi or safe_z_steps + home_z_steps < z_lo:
+        surface = f" from a surface at machine Z {home_z_steps}" if home_z_steps else ""
+        raise TravelError(f"drill depth {cut_depth_mm:g} mm and safe height {travel_height_mm:g} mm need Z "
+                          f"{safe_z_steps + home_z_steps}..{depth_steps + home_z_steps} steps{surface}; the Z "
+                          f"travel is {z_lo}..{z_hi} steps")
+    return depth_steps, safe_z_steps
 
 
 def _with_paths(runs, diameters, paths_steps, path_dia, path_tool, holes_steps_f, order, n_slots: int):
@@ -287,13 +306,13 @@ def _notes(holes, runs3, diameters, n_slots: int, bit_mm) -> list[str]:
 
 
 def _check_holes_path(holes, k: int, path_steps: np.ndarray, settings: MachineSettings) -> None:
-    """TravelError naming slot ``k`` (``file:line``) when its path leaves the travel."""
-    try:
-        check_travel(np.column_stack([path_steps, np.zeros(len(path_steps), np.int64)]), settings)
-    except TravelError as exc:
+    """TravelError naming slot ``k`` (``file:line``) when its ``(K, 2)`` machine steps leave the travel, the axis
+    and by how much."""
+    found = outside_travel(path_steps, settings)
+    if found is not None:
         lines = getattr(holes, "line_of_slot", [])
         where = f"{holes.source}:{int(lines[k])}" if len(lines) > k else holes.source
-        raise TravelError(f"{where}: slot {k + 1} lies outside the machine travel ({exc})") from None
+        raise TravelError(f"{where}: slot {k + 1} lies outside the machine travel ({found[1]})")
 
 
 def _tool_runs(holes, machine_mm: np.ndarray, order: str, drilled: Optional[np.ndarray] = None
@@ -332,18 +351,17 @@ def _tool_runs(holes, machine_mm: np.ndarray, order: str, drilled: Optional[np.n
     return runs
 
 
-def _check_holes(holes, machine_mm: np.ndarray, steps_xy: np.ndarray, settings: MachineSettings) -> None:
-    """TravelError naming the first hole (``file:line``) whose ``(N, 2)`` machine (x, y) steps leave the travel."""
-    lo = np.array([b[0] for b in settings.travel.bounds_steps()])
-    hi = np.array([b[1] for b in settings.travel.bounds_steps()])
-    bad = np.flatnonzero(np.any((steps_xy < lo[:2]) | (steps_xy > hi[:2]), axis=1))
-    if len(bad):
-        i = int(bad[0])
+def _check_holes(holes, steps_xy: np.ndarray, settings: MachineSettings) -> None:
+    """TravelError naming the first hole (``file:line``) whose ``(N, 2)`` machine (x, y) steps leave the travel, the
+    axis and by how much."""
+    found = outside_travel(steps_xy, settings)
+    if found is not None:
+        i, beyond = found
         lines = getattr(holes, "line_of_hole", None)
         where = f"{holes.source}:{int(lines[i])}" if lines is not None and len(lines) > i else holes.source
         raise TravelError(
             f"{where}: hole {i + 1} at X{holes.holes_mm[i, 0]:.3f} Y{holes.holes_mm[i, 1]:.3f} mm lies "
-            f"outside the machine travel (machine {machine_mm[i, 0]:.2f}, {machine_mm[i, 1]:.2f} mm)"
+            f"outside the machine travel ({beyond})"
         )
 
 
@@ -368,6 +386,7 @@ class DrillJobStream:
         paths_steps: ``(K, 2)`` int64 machine (x, y) steps of each milled path (slots, milled holes); path_runs:
             each run's path indices, milled after its holes (above the first point, down, along at the drill
             depth, up at the last); notes: each run's tool-change prompt (default: tool, diameter, holes).
+        home_steps: the machine position of the job's home: each piece is checked against the travel from there.
     """
 
     runs: list[tuple[int, np.ndarray]]
@@ -384,6 +403,7 @@ class DrillJobStream:
     paths_steps: list[np.ndarray] = field(default_factory=list)
     path_runs: Optional[list[np.ndarray]] = None
     notes: Optional[list[str]] = None
+    home_steps: tuple[int, int, int] = (0, 0, 0)
 
     def joined(self) -> Job:
         """Every move in one :class:`~cam.job.model.Job` (:func:`~cam.job.model.join_pieces` of :meth:`pieces`)."""
@@ -444,6 +464,6 @@ class DrillJobStream:
         if not last:
             pause[len(head) + len(holes) + len(paths) - 1] = True
             notes.append(self._note(k + 1))
-        check_travel(pts, self.settings)
+        check_travel(pts + np.asarray(self.home_steps, np.int64), self.settings)
         return Job(points_steps=pts, kind=kind, target=kind == CUT, pause=pause, settings=self.settings,
                    warnings=list(self.warnings) if k == 0 else [], pause_notes=notes, source=self.source)

@@ -62,6 +62,7 @@ def plan_hpgl(
     offset_mm: Optional[tuple[float, float]] = None,
     scale: Optional[float] = None,
     fit_mm: Optional[tuple[float, float]] = None,
+    home_steps: tuple[int, int, int] = (0, 0, 0),
 ) -> Job:
     """Plan the cutting of an HPGL drawing, in machine steps: the pieces of
     :func:`cam.job.hpgl_stream.stream_hpgl` joined.
@@ -81,6 +82,8 @@ def plan_hpgl(
             the home.
         scale: mm cut per mm of the plot (after its own ``SC``/``IP`` scaling); fit_mm: or the ``(width, height)``
             mm to scale it to fit, keeping its proportions (as SVG's ``--scale`` and ``--fit``).
+        home_steps: the machine position of the job's home, its (0, 0, 0): the travel is checked in the machine
+            frame from there (a file placed by its own zero at a work zero, ``offset_mm`` (0, 0)).
 
     Returns:
         A :class:`~cam.job.model.Job` in machine steps: CUT points at the
@@ -91,4 +94,4 @@ def plan_hpgl(
         ParseError: a malformed file.
     """
     return stream_hpgl(drawing, settings=settings, cut_depth_mm=cut_depth_mm, travel_height_mm=travel_height_mm,
-                       offset_mm=offset_mm, scale=scale, fit_mm=fit_mm).joined()
+                       offset_mm=offset_mm, scale=scale, fit_mm=fit_mm, home_steps=home_steps).joined()

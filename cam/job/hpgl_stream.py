@@ -36,8 +36,8 @@ from ..formats.hpgl import (CHUNK_BYTES, PLOTTER_UNIT_MM, HpglDrawing, HpglScan,
 from ..settings import DEFAULT_SETTINGS, MachineSettings
 from .model import CUT, RETRACT, TRAVEL, Job, PixelFrame, check_travel, join_pieces
 
-__all__ = ["HpglJobStream", "stream_hpgl", "xy_steps", "hpgl_scale", "STREAM_POINTS", "PIECE_POINTS", "DEFAULT_CUT_DEPTH_MM",
-           "DEFAULT_TRAVEL_HEIGHT_MM"]
+__all__ = ["HpglJobStream", "stream_hpgl", "xy_steps", "hpgl_scale", "outside_travel", "STREAM_POINTS", "PIECE_POINTS",
+           "DEFAULT_CUT_DEPTH_MM", "DEFAULT_TRAVEL_HEIGHT_MM"]
 
 DEFAULT_CUT_DEPTH_MM = 0.5
 DEFAULT_TRAVEL_HEIGHT_MM = 1.0
@@ -103,32 +103,66 @@ def scale_to_fit(size_mm: Callable[[], tuple[float, float]], source: str, *, sca
     return min(fw / w if w > 0 else math.inf, fh / h if h > 0 else math.inf)
 
 
-def _z_steps(cut_depth_mm: float, travel_height_mm: float, settings: MachineSettings) -> tuple[int, int]:
-    """(cutting depth, safe height) in Z steps (+Z deeper: the safe height is <= 0), checked against the Z travel."""
+def _z_steps(cut_depth_mm: float, travel_height_mm: float, settings: MachineSettings,
+             home_z_steps: int = 0) -> tuple[int, int]:
+    """(cutting depth, safe height) in Z steps (+Z deeper: the safe height is <= 0), checked against the Z travel
+    with the job's surface at machine Z ``home_z_steps``."""
     _, _, (z_lo, z_hi) = settings.travel.bounds_steps()
     depth_steps = int(round(cut_depth_mm / settings.mm_per_step_z))
     safe_z_steps = -int(round(travel_height_mm / settings.mm_per_step_z))
     if depth_steps < 1:
         raise PlanError(f"cutting depth {cut_depth_mm:g} mm is less than one Z step ({settings.mm_per_step_z:g} mm)")
-    if depth_steps > z_hi or safe_z_steps < z_lo:
+    z0 = int(home_z_steps)
+    if depth_steps + z0 > z_hi or safe_z_steps + z0 < z_lo:
+        surface = f" from a surface at machine Z {z0}" if z0 else ""
         raise TravelError(f"cutting depth {cut_depth_mm:g} mm and safe height {travel_height_mm:g} mm need Z "
-                          f"{safe_z_steps}..{depth_steps} steps; the Z travel is {z_lo}..{z_hi} steps")
+                          f"{safe_z_steps + z0}..{depth_steps + z0} steps{surface}; the Z travel is {z_lo}..{z_hi} "
+                          "steps")
     return depth_steps, safe_z_steps
+
+
+def outside_travel(points_steps: np.ndarray, settings: MachineSettings, *, farthest: bool = False
+                   ) -> Optional[tuple[int, str]]:
+    """The first of ``(N, 2)`` machine ``(x, y)`` (or ``(N, 3)``) steps outside the travel (``farthest``: the one
+    farthest outside), and what a message says of it: ``(index, "machine Y -1.24 mm, 1.24 mm (43 steps) beyond
+    the Y travel 0..289 mm")``, its first axis outside (``farthest``: the farthest); None when all are inside.
+    The first, not the farthest, is the same point however the points are batched (:class:`HpglJobStream`).
+
+    >>> pts = np.array([[5, 5], [5, -40], [5, -43]])
+    >>> outside_travel(pts, DEFAULT_SETTINGS)
+    (1, 'machine Y -1.16 mm, 1.16 mm (40 steps) beyond the Y travel 0..289 mm')
+    >>> outside_travel(pts, DEFAULT_SETTINGS, farthest=True)[0]
+    2
+    """
+    pts = np.asarray(points_steps, np.int64)
+    k = pts.shape[1] if pts.ndim == 2 else 0
+    bounds = np.array(settings.travel.bounds_steps()[:k], np.int64).reshape(-1, 2)
+    if not len(pts) or not k or (np.all(pts.min(axis=0) >= bounds[:, 0]) and np.all(pts.max(axis=0) <= bounds[:, 1])):
+        return None  # the extent is inside (the usual case: two passes)
+    over = np.maximum(np.maximum(bounds[:, 0] - pts, pts - bounds[:, 1]), 0)
+    if farthest:
+        i, a = (int(v) for v in np.unravel_index(int(np.argmax(over)), over.shape))
+    else:
+        i = int(np.flatnonzero(np.any(over > 0, axis=1))[0])
+        a = int(np.flatnonzero(over[i] > 0)[0])
+    beyond = int(over[i, a])
+    lo, hi = (int(v) for v in bounds[a])
+    v = int(pts[i, a])
+    mm = settings.mm_per_step_xy if a < 2 else settings.mm_per_step_z
+    name = "XYZ"[a]
+    return i, (f"machine {name} {v * mm:.2f} mm, {beyond * mm:.2f} mm ({beyond} steps) beyond the {name} travel "
+               f"{lo * mm:g}..{hi * mm:g} mm")
 
 
 def _check_xy(source: str, batch: PointBatch, xy: np.ndarray, settings: MachineSettings) -> None:
     """TravelError naming the first point (``file:line:column``) of ``batch`` whose ``(n, 2)`` machine steps
-    ``xy`` leave the travel."""
-    (x_lo, x_hi), (y_lo, y_hi), _ = settings.travel.bounds_steps()
-    bad = np.flatnonzero((xy[:, 0] < x_lo) | (xy[:, 0] > x_hi) | (xy[:, 1] < y_lo) | (xy[:, 1] > y_hi))
-    if len(bad):
-        i = int(bad[0])
-        mm = settings.mm_per_step_xy
+    ``xy`` leave the travel, the axis and by how much."""
+    found = outside_travel(xy, settings)
+    if found is not None:
+        i, beyond = found
         raise TravelError(
             f"{source}:{int(batch.line[i])}:{int(batch.col[i])}: point "
-            f"X{batch.x[i]:g} Y{batch.y[i]:g} (plotter units) lies outside the machine "
-            f"travel (machine {xy[i, 0] * mm:.2f}, {xy[i, 1] * mm:.2f} mm; travel X {x_lo * mm:g}..{x_hi * mm:g} mm, "
-            f"Y {y_lo * mm:g}..{y_hi * mm:g} mm)"
+            f"X{batch.x[i]:g} Y{batch.y[i]:g} (plotter units) lies outside the machine travel ({beyond})"
         )
 
 
@@ -267,6 +301,8 @@ class HpglJobStream:
         settings, depth_steps, safe_z_steps: the machine settings, the cutting depth and the travel height
             (Z steps, +Z deeper: the travel height is <= 0).
         offset_mm: as :func:`~cam.job.hpgl.plan_hpgl`'s; scale: mm cut per mm of the plot (:func:`hpgl_scale`).
+        home_steps: the machine position of the job's home (its points are steps from it): the travel is checked
+            in the machine frame from there ((0, 0, 0): the job's own frame, a job placed later).
         piece_points: pen-down points planned into a piece (at least); chunk_bytes: bytes of a file read at once.
         n_moves: moves of the job (-1 until a pass ended); pause_notes: its pauses' notes (after a pass).
         pixels, tool: None (no drawing frame; the point tool).
@@ -281,6 +317,7 @@ class HpglJobStream:
     scale: float = 1.0
     piece_points: int = PIECE_POINTS
     chunk_bytes: int = CHUNK_BYTES
+    home_steps: tuple[int, int, int] = (0, 0, 0)
     n_moves: int = -1
     pause_notes: list[str] = field(default_factory=list)
     pixels: Optional[PixelFrame] = None
@@ -343,14 +380,15 @@ class HpglJobStream:
     def _piece(self, batch: PointBatch, carry: _Carry, *, last: bool) -> Optional[Job]:
         """The rows of the points of ``batch`` (None: none are left); ``last``: the job's end follows."""
         xy = xy_steps(batch.x, batch.y, self.scan.extent_pu, self.settings, self.offset_mm, self.scale)
-        _check_xy(self.source, batch, xy, self.settings)
+        home = np.asarray(self.home_steps, np.int64).reshape(3)
+        _check_xy(self.source, batch, xy + home[:2], self.settings)
         xy, group, pause_group, before, notes = _strokes(xy, batch.start, batch.pen, carry)
         pts, kind, pause = _rows(xy, group, pause_group, self.depth_steps, self.safe_z_steps, before=before,
                                  finish=last, end_xy=carry.last_kept, last_row=carry.last_row)
         if not len(pts):
             return None
         carry.last_row = pts[-1].copy()
-        check_travel(pts, self.settings)
+        check_travel(pts + home, self.settings)
         return Job(points_steps=pts, kind=kind, target=(kind == CUT) & (pts[:, 2] == self.depth_steps), pause=pause,
                    settings=self.settings, warnings=[], pause_notes=notes, source=self.source,
                    safe_z_steps=self.safe_z_steps)
@@ -360,7 +398,8 @@ def stream_hpgl(src: Union[str, os.PathLike, HpglDrawing], *, settings: MachineS
                 cut_depth_mm: float = DEFAULT_CUT_DEPTH_MM, travel_height_mm: float = DEFAULT_TRAVEL_HEIGHT_MM,
                 offset_mm: Optional[tuple[float, float]] = None, scan: Optional[HpglScan] = None,
                 piece_points: int = PIECE_POINTS, chunk_bytes: int = CHUNK_BYTES, scale: Optional[float] = None,
-                fit_mm: Optional[tuple[float, float]] = None) -> HpglJobStream:
+                fit_mm: Optional[tuple[float, float]] = None,
+                home_steps: tuple[int, int, int] = (0, 0, 0)) -> HpglJobStream:
     """The HPGL job of a file or a drawing as a :class:`HpglJobStream` (a file's: bounded memory).
 
     Args:
@@ -370,6 +409,8 @@ def stream_hpgl(src: Union[str, os.PathLike, HpglDrawing], *, settings: MachineS
         scan: the file's :func:`~cam.formats.hpgl.scan_hpgl`, if made already.
         piece_points, chunk_bytes: pen-down points per piece (at least), bytes read at a time.
         scale, fit_mm: mm cut per mm of the plot, or the ``(width, height)`` mm to fit it in (:func:`hpgl_scale`).
+        home_steps: the machine position of the job's home (where ``offset_mm`` is measured from): every point is
+            checked against the travel in the machine frame from there (:class:`HpglJobStream`).
 
     Raises:
         PlanError: bad options (both scale and fit_mm), nothing drawn; ParseError: a malformed file; TravelError: the depths outside
@@ -386,6 +427,7 @@ def stream_hpgl(src: Union[str, os.PathLike, HpglDrawing], *, settings: MachineS
     if scan.n_points == 0:
         raise PlanError(f"{scan.source}: nothing to cut (no pen-down moves)")
     factor = hpgl_scale(scan, scale=scale, fit_mm=fit_mm)
-    depth_steps, safe_z_steps = _z_steps(cut_depth_mm, travel_height_mm, settings)
+    home = tuple(int(v) for v in home_steps)
+    depth_steps, safe_z_steps = _z_steps(cut_depth_mm, travel_height_mm, settings, home[2])
     return HpglJobStream(points, scan, settings, depth_steps, safe_z_steps, offset_mm, factor,
-                         max(1, int(piece_points)), int(chunk_bytes))
+                         max(1, int(piece_points)), int(chunk_bytes), home)  # type: ignore[arg-type]

@@ -72,7 +72,7 @@ from .svg import DEFAULT_TRAVEL_HEIGHT_MM as SVG_TRAVEL_HEIGHT_MM
 from .svg import plan_svg
 
 __all__ = [
-    "JobOptions", "PreparedJob", "prepare_job", "resume_job", "job_kind", "accepted_suffixes", "KINDS",
+    "JobOptions", "PreparedJob", "prepare_job", "own_zero_home", "resume_job", "job_kind", "accepted_suffixes", "KINDS",
     "DRAWING_SUFFIXES", "DIGITIZED_SUFFIXES", "EXCELLON_SUFFIXES", "HPGL_SUFFIXES", "PROFILE_SUFFIXES",
 ]
 
@@ -366,6 +366,9 @@ class PreparedJob:
         identity: sha256 of the input's bytes, the options and the settings (:func:`cam.job.resume.job_identity`).
         plan_sha256: the toolpath's :func:`cam.job.resume.plan_fingerprint`.
         resumed: a resumed run's :class:`cam.job.resume.JournalBase` (None: a run from the start).
+        origin: the point placed at the work zero its options chose (``JobOptions.origin``: "file" plans a drill,
+            HPGL or SVG file from its own zero, :func:`own_zero_home`); None: the kind's default
+            (:func:`cam.drive.placement.origin_anchor`).
     """
 
     source: str
@@ -387,6 +390,7 @@ class PreparedJob:
     identity: str = ""
     plan_sha256: str = ""
     resumed: Any = None
+    origin: Optional[str] = None
     _steps: Any = field(default=None, repr=False)
 
     @property
@@ -664,15 +668,30 @@ def _or(value: Optional[float], default: float) -> float:
     return default if value is None else value
 
 
-def _prepare_excellon(path: Path, options: JobOptions, settings: MachineSettings) -> PreparedJob:
+def own_zero_home(kind: str, options: JobOptions, machine_state: Optional[Any] = None
+                  ) -> Optional[tuple[int, int, int]]:
+    """Where (machine frame, steps) a drill, HPGL or SVG file placed by its own zero is planned from (issue #29
+    point 1): with ``origin`` "file", or an ``offset_mm`` and no origin, the file's zero (or the point
+    ``offset_mm`` from it) goes to the active work zero of ``machine_state`` (None: the home, a new machine's
+    work zero), and its travel is checked in the machine frame from there, as a G-code program's is.  None for
+    every other job (planned in its own frame, placed at the work zero by its extent when it runs)."""
+    if kind not in ("excellon", "hpgl", "svg"):
+        return None
+    if options.origin != "file" and (options.origin is not None or options.offset_mm is None):
+        return None
+    return (0, 0, 0) if machine_state is None else tuple(int(v) for v in machine_state.work_zero_steps())
+
+
+def _prepare_excellon(path: Path, options: JobOptions, settings: MachineSettings,
+                      home: tuple[int, int, int] = (0, 0, 0)) -> PreparedJob:
     holes = load_excellon(path, excellon_units=options.excellon_units, excellon_digits=options.excellon_digits,
                           excellon_zeros=options.excellon_zeros, strict=bool(options.strict))
     depth_mm = _or(options.cut_depth_mm, DRILL_DEPTH_MM)
     dp = plan_drill(holes, settings=settings, cut_depth_mm=depth_mm,
                     travel_height_mm=_or(options.travel_height_mm, DRILL_TRAVEL_HEIGHT_MM), offset_mm=options.offset_mm,
                     mirror_x=options.mirror_x, drill_order=options.drill_order,
-                    mill_holes_over_mm=options.mill_holes_over_mm)
-    steps = plan_chunks(dp.toolpath)
+                    mill_holes_over_mm=options.mill_holes_over_mm, home_steps=home)
+    steps = plan_chunks(dp.toolpath, start_steps=home)
     tools = ", ".join(f"T{t} {dia:.3f} mm x{n}" for t, dia, n in dp.tool_sequence)
     hole_xy = np.asarray(dp.holes_steps, np.int64).reshape(-1, 2)
     span = dp.extent_steps[1] - dp.extent_steps[0]  # holes and milled slots (issue #31 point 4)
@@ -701,31 +720,35 @@ def _engraving(options: JobOptions, settings: MachineSettings, default_depth_mm:
     return depth_mm, {"tool": cutter.describe(), "line_width_mm": round(cutter.width_at_depth_mm(depth_mm), 4)}
 
 
-def _prepare_hpgl(path: Path, options: JobOptions, settings: MachineSettings, progress=None) -> PreparedJob:
+def _prepare_hpgl(path: Path, options: JobOptions, settings: MachineSettings, progress=None,
+                  home: tuple[int, int, int] = (0, 0, 0)) -> PreparedJob:
     depth_mm, engraving = _engraving(options, settings, HPGL_CUT_DEPTH_MM)
     scan = scan_hpgl(path, progress=progress)
     stream = stream_hpgl(path, settings=settings, cut_depth_mm=depth_mm,
                          travel_height_mm=_or(options.travel_height_mm, HPGL_TRAVEL_HEIGHT_MM),
-                         offset_mm=options.offset_mm, scan=scan, scale=options.scale, fit_mm=options.fit_mm)
+                         offset_mm=options.offset_mm, scan=scan, scale=options.scale, fit_mm=options.fit_mm,
+                         home_steps=home)
     # one planner whatever the size: above STREAM_POINTS its pieces are read from the file on every pass (bounded
     # memory), below they are joined and held (the step planner then sees every move: linear40 ramps)
     toolpath = stream if scan.n_points > STREAM_POINTS else stream.joined()
     return PreparedJob(
-        source=str(path), kind="hpgl", plan=plan_chunks(toolpath), settings=settings, toolpath=toolpath,
+        source=str(path), kind="hpgl", plan=plan_chunks(toolpath, start_steps=home), settings=settings,
+        toolpath=toolpath,
         warnings=list(scan.warnings), summary=f"{path.name}: {scan.n_strokes} pen-down strokes",
         report={"strokes": scan.n_strokes, "points": scan.n_points, "pens": sorted(set(scan.pens)), **engraving},
     )
 
 
-def _prepare_svg(path: Path, options: JobOptions, settings: MachineSettings) -> PreparedJob:
+def _prepare_svg(path: Path, options: JobOptions, settings: MachineSettings,
+                 home: tuple[int, int, int] = (0, 0, 0)) -> PreparedJob:
     drawing = load_svg(path)
     depth_mm, engraving = _engraving(options, settings, SVG_CUT_DEPTH_MM)
     toolpath = plan_svg(drawing, settings=settings, cut_depth_mm=depth_mm,
                         travel_height_mm=_or(options.travel_height_mm, SVG_TRAVEL_HEIGHT_MM),
                         scale=options.scale, fit_mm=options.fit_mm, offset_mm=options.offset_mm,
                         layers=options.layers, pause_between_layers=bool(options.pause_between_layers),
-                        keep_duplicates=bool(options.keep_duplicates))
-    steps = plan_chunks(toolpath)
+                        keep_duplicates=bool(options.keep_duplicates), home_steps=home)
+    steps = plan_chunks(toolpath, start_steps=home)
     counts = ", ".join(f"{n} {name}" for name, n in sorted(drawing.element_counts.items()))
     layer_list = [{"name": name, "strokes": int((drawing.layer_of_stroke == i).sum()), "length_mm": round(length, 3)}
                   for i, (name, length) in enumerate(zip(drawing.layers(), drawing.layer_lengths_mm()))]
@@ -752,7 +775,9 @@ def prepare_job(
         name: the name the summary gives the file (default: its file name).
         progress: ``progress(bytes_read, total_bytes)`` while an HPGL file streams in (large files).
         machine_state: G-code: the machine state (:class:`cam.drive.state.MachineState`) the program runs in:
-            it starts where the tool stands, in the state's work offsets (None: at the home, offsets 0).
+            it starts where the tool stands, in the state's work offsets (None: at the home, offsets 0).  A
+            drill, HPGL or SVG file placed by its own zero (``origin`` "file", or an ``offset_mm``): the state
+            whose active work zero that zero goes to (:func:`own_zero_home`).
 
     Returns:
         The :class:`PreparedJob`, planned relative to where the tool stands when it starts.
@@ -772,9 +797,9 @@ def prepare_job(
     if kind not in KINDS:
         raise CamError(f"{p.name}: {KIND_NAMES.get(kind, kind)} cannot be cut by this version of cam")
     opts = (options or JobOptions()).checked().check_kind(kind, p.name)
-    if opts.origin == "file" and kind in ("excellon", "hpgl", "svg"):
-        raise CamError(f"{p.name}: --origin file (the file's own zero at the work zero) is not available for "
-                       f"{KIND_NAMES.get(kind, kind)} yet: use upper-left, lower-left or center")
+    home = own_zero_home(kind, opts, machine_state)
+    if home is not None and opts.offset_mm is None:
+        opts = dataclasses.replace(opts, offset_mm=(0.0, 0.0))  # the file's own zero at the work zero
     _refuse_surface_travel(opts, settings)
     if not p.is_file():
         raise CamError(f"{p}: file not found")
@@ -786,17 +811,18 @@ def prepare_job(
     elif kind == "gcode":
         job = _prepare_gcode(p, opts, settings, machine_state)
     elif kind == "excellon":
-        job = _prepare_excellon(p, opts, settings)
+        job = _prepare_excellon(p, opts, settings, home or (0, 0, 0))
     elif kind == "svg":
-        job = _prepare_svg(p, opts, settings)
+        job = _prepare_svg(p, opts, settings, home or (0, 0, 0))
     else:
-        job = _prepare_hpgl(p, opts, settings, progress)
+        job = _prepare_hpgl(p, opts, settings, progress, home or (0, 0, 0))
     _refuse_nothing(job, opts, settings)
     job.warnings[:0] = kind_warnings
     job.name = name or p.name
     job.summary = job.name + job.summary[len(p.name):]
     job.identity = identity_of(p, opts, settings)
     job.plan_sha256 = plan_fingerprint(job.toolpath)
+    job.origin = opts.origin
     return _finish(job)
 
 

@@ -5,7 +5,10 @@ Frames and units: the drawing's strokes are in mm, x right, y down the page
 operator, as a drawing's rows do), in steps of ``settings.mm_per_step_xy``.
 The drawing is scaled by ``scale`` (or to fit ``fit_mm``), then placed: by
 default the top-left of what is cut at the home (0, 0); ``offset_mm=(X, Y)``
-instead puts the page's origin (0, 0), scaled, at machine (X, Y) mm.
+instead puts the page's origin (0, 0), scaled, at machine (X, Y) mm from the
+home.  The job's points are steps from its home; ``home_steps`` says where the
+home is in the machine frame (a file placed by its own zero at a work zero:
+``offset_mm`` (0, 0) and the work zero), and the travel is checked there.
 
 How a curve becomes steps, so that every cut position lies within one step of the exact curve (0.71 + 0.15)
 and every point of the curve within one step of a cut position (0.15 + 0.125 + 0.71):
@@ -62,6 +65,7 @@ from ..errors import PlanError, TravelError
 from ..formats.svg import SvgDrawing
 from ..settings import DEFAULT_SETTINGS, MachineSettings
 from .hpgl import _rows, _z_steps, scale_to_fit
+from .hpgl_stream import outside_travel
 from .model import CUT, Job, check_travel
 
 __all__ = ["plan_svg", "svg_strokes_steps", "svg_scale", "svg_layer_order", "DEFAULT_CUT_DEPTH_MM",
@@ -341,6 +345,7 @@ def plan_svg(
     layers: Optional[Union[str, Sequence[str]]] = None,
     pause_between_layers: bool = False,
     keep_duplicates: bool = False,
+    home_steps: tuple[int, int, int] = (0, 0, 0),
 ) -> Job:
     """Plan the engraving of every stroke of an SVG drawing, in machine steps (see the module docstring).
 
@@ -356,6 +361,8 @@ def plan_svg(
             ``fit_mm`` fits and the default placement puts at the home.
         pause_between_layers: pause before each layer after the first (a pen or tool change).
         keep_duplicates: cut pieces that trace pieces already cut again (default: once).
+        home_steps: the machine position of the job's home (its (0, 0, 0), where ``offset_mm`` is measured
+            from): the drawing is checked against the travel in the machine frame from there.
 
     Returns:
         A :class:`~cam.job.model.Job`: CUT points at the cutting depth (``target`` marks them), TRAVEL at the
@@ -363,7 +370,8 @@ def plan_svg(
 
     Raises:
         PlanError: bad options, a layer that is not in the drawing, nothing to cut; TravelError: the drawing
-        does not fit the travel (checked before the job is built, with its extent in mm).
+        does not fit the travel or, placed at ``home_steps``, leaves it (checked before the job is built, with
+        its extent in mm, naming the axis and by how much).
     """
     if not (cut_depth_mm > 0) or not (travel_height_mm >= 0):
         raise PlanError("the cutting depth must be > 0 mm and the safe height >= 0 mm")
@@ -380,10 +388,11 @@ def plan_svg(
         if n_dup:
             warnings.append(f"{n_dup} duplicate segment(s) ({dup_steps * settings.mm_per_step_xy:.1f} mm) trace "
                             "what is already cut: cut once (--keep-duplicates cuts them again)")
-    _check_extent(drawing, polys, settings)  # before the samples are made: their count follows the size
+    home = np.asarray(home_steps, np.int64).reshape(3)
+    _check_extent(drawing, polys, settings, home)  # before the samples are made: their count follows the size
     strokes = [_cells(p) for p in polys]
     stroke_layer = part_layer[np.asarray(owner, np.int64)]
-    depth_steps, safe_z_steps = _z_steps(cut_depth_mm, travel_height_mm, settings)
+    depth_steps, safe_z_steps = _z_steps(cut_depth_mm, travel_height_mm, settings, int(home[2]))
     ordered: list[np.ndarray] = []
     pause_first: list[int] = []  # the stroke (index in ordered) each pause comes before
     notes: list[str] = []
@@ -407,7 +416,7 @@ def plan_svg(
     group[first[pause_first]] = True  # a pause lifts first, whatever the gap
     pause_group[first[pause_first]] = True
     pts, kind, pause = _rows(xy, group, pause_group, depth_steps, safe_z_steps)
-    check_travel(pts, settings)
+    check_travel(pts + home, settings)
     return Job(points_steps=pts, kind=kind, target=(kind == CUT) & (pts[:, 2] == depth_steps), pause=pause,
                settings=settings, warnings=warnings, pause_notes=notes, source=drawing.source)
 
@@ -425,10 +434,12 @@ def _selected(drawing: SvgDrawing, chosen: list[int]) -> tuple[SvgDrawing, np.nd
     return part, layer_of[idx]
 
 
-def _check_extent(drawing: SvgDrawing, polys: list[np.ndarray], settings: MachineSettings) -> None:
+def _check_extent(drawing: SvgDrawing, polys: list[np.ndarray], settings: MachineSettings,
+                  home_steps: np.ndarray) -> None:
     """TravelError giving the drawing's size in mm when it is larger than the X/Y travel (``polys``: the strokes as
     ``(N, 2)`` float polylines in steps, before they are sampled: a drawing metres wide is refused before millions
-    of samples are made).  Where the job goes is checked in the machine frame when it is placed (at the work
+    of samples are made), or naming the axis and by how much when its extent from machine ``home_steps`` leaves
+    the travel.  Where a job placed later goes is checked in the machine frame when it is placed (at the work
     zero, or from where the tool stands)."""
     lo = np.min([p.min(axis=0) for p in polys], axis=0)
     hi = np.max([p.max(axis=0) for p in polys], axis=0)
@@ -441,3 +452,10 @@ def _check_extent(drawing: SvgDrawing, polys: list[np.ndarray], settings: Machin
             f"(X {lo[0] * mm:.2f}..{hi[0] * mm:.2f}, Y {lo[1] * mm:.2f}..{hi[1] * mm:.2f} mm); the travel is "
             f"{(x_hi - x_lo) * mm:g} x {(y_hi - y_lo) * mm:g} mm (make it smaller with --fit or --scale)"
         )
+    corners = np.floor(np.array([lo, hi]) + 0.5).astype(np.int64) + np.asarray(home_steps, np.int64)[:2]
+    found = outside_travel(corners, settings, farthest=True)
+    if found is not None:
+        raise TravelError(f"{drawing.source}: the drawing (X {lo[0] * settings.mm_per_step_xy:.2f}.."
+                          f"{hi[0] * settings.mm_per_step_xy:.2f}, Y {lo[1] * settings.mm_per_step_xy:.2f}.."
+                          f"{hi[1] * settings.mm_per_step_xy:.2f} mm from the job's home) lies outside the machine "
+                          f"travel ({found[1]})")

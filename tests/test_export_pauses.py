@@ -1,0 +1,50 @@
+"""G-code out keeps a job's pauses (issue #31: export dropped them): a drawing's Pause At points and the pauses
+between SVG layers are written as ``M0`` with their note, the tool lifted and the spindle stopped first, and
+LinuxCNC's interpreter stops the program there; tool changes stay ``T<n> M6`` (LinuxCNC) or a comment and ``M0``
+(grbl)."""
+from __future__ import annotations
+
+import re
+
+import pytest
+
+from conftest import SAMPLES, run_cli
+from support.lcnc import run_rs274
+from test_svg_layers import card_svg, write
+
+
+def test_a_drawings_pause_at_point_is_an_m0_that_rs274_stops_at(tmp_path):
+    out = tmp_path / "e.ngc"
+    r = run_cli("export", SAMPLES / "ellipse.png", "--depth", "2", "--pause-at", "135,7", "--post", "linuxcnc",
+                "--spindle-rpm", "9000", "-o", out)
+    assert r.returncode == 0, r.stderr
+    assert "1 pause(s)" in r.stdout
+    text = out.read_text()
+    lines = text.splitlines()
+    k = lines.index("M0")
+    assert lines[k - 1].startswith("(pause: Pause At")
+    assert "M5" in lines[k - 3:k] and any(ln.startswith("G0 Z") for ln in lines[k - 4:k])  # lifted, spindle off
+    assert "M3 S9000" in lines[k + 1:]  # the spindle starts again before the next cut
+    canon = run_rs274(str(out))
+    assert "PROGRAM_STOP" in canon
+
+
+@pytest.mark.parametrize("post", ["grbl", "linuxcnc"])
+def test_pauses_between_svg_layers_are_written(tmp_path, post):
+    card = write(tmp_path, "card.svg", card_svg())
+    out = tmp_path / "card.ngc"
+    r = run_cli("export", card, "--layers", "yellow pen,red pen", "--pause-between-layers", "--post", post,
+                "-o", out)
+    assert r.returncode == 0, r.stderr
+    text = out.read_text()
+    pauses = re.findall(r"^\(pause: (.*), then cycle start\)\nM0$", text, re.M)
+    assert len(pauses) == 1 and "red pen" in pauses[0], pauses
+    if post == "linuxcnc":
+        assert "PROGRAM_STOP" in run_rs274(str(out))
+
+
+def test_without_pauses_there_is_no_m0(tmp_path):
+    out = tmp_path / "e.ngc"
+    r = run_cli("export", SAMPLES / "ellipse.png", "--depth", "2", "-o", out)
+    assert r.returncode == 0, r.stderr
+    assert "M0" not in out.read_text().splitlines()
