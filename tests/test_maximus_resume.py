@@ -134,6 +134,9 @@ def test_a_journal_of_another_file_or_options_is_refused_in_one_line(emu, tmp_pa
         lines = out.stderr.strip().splitlines()
         assert len(lines) == 1 and why in lines[0] and str(used) in lines[0], (argv, out.stderr)
     assert len(emu.packet_log()) == sent, "nothing was sent to the board"
+    on_the_mock = run_cli("drill", path, "--resume", journal, "--yes", *FLAGS)  # the board's journal, a step/dir run
+    assert on_the_mock.returncode == 2 and "is a MAXIMUS board job's journal" in on_the_mock.stderr, on_the_mock.stderr
+    assert len(on_the_mock.stderr.strip().splitlines()) == 1
     assert read_journal(journal).holes_done == 3, "a refused resume leaves the journal as it was"
 
 

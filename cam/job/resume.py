@@ -300,12 +300,21 @@ def plan_fingerprint(job: JobLike) -> str:
         h.close()
 
 
-def check_journal(journal: Journal, identity: str, plan_sha256: str, where: str = "journal") -> None:
-    """Refuse a journal written for another job, or one whose job finished.
+def check_journal(journal: Journal, identity: str, plan_sha256: str, where: str = "journal", *,
+                  board: bool = False) -> None:
+    """Refuse a journal written for another job, or one whose job finished; ``board``: the run to resume is a
+    MAXIMUS board job's (its journal counts holes, :attr:`Journal.holes_done`), else a step/dir job's, and a
+    journal of the other kind is refused too.
 
     Raises:
         CamError: one line naming ``where`` (the journal file).
     """
+    if board and journal.holes_done is None:
+        raise CamError(f"journal {where} is a step/dir job's journal, not a MAXIMUS board job's; resume it on its "
+                       f"own port, or start the job again without --resume")
+    if not board and journal.holes_done is not None:
+        raise CamError(f"journal {where} is a MAXIMUS board job's journal (it counts holes); resume it with "
+                       f"--port maximus:DEVICE, or start the job again without --resume")
     if journal.identity != identity:
         raise CamError(f"journal {where} was written for another input or options; run the same file with the "
                        f"same options and machine settings, or start the job again without --resume")

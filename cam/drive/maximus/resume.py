@@ -35,11 +35,9 @@ def resume_board_job(job: Any, journal: Journal, where: str = "journal") -> Any:
         CamError: one line naming ``where``: a step/dir job's journal, another file, options, settings or hole
             order, a finished job, or numbers no run on this machine could have written.
     """
-    if journal.holes_done is None:
-        raise CamError(f"journal {where} is a step/dir job's journal, not a MAXIMUS board job's; resume it on its "
-                       f"own port, or start the job again without --resume")
     check_journal_numbers(journal, job.settings, where)
-    check_journal(journal, job.identity, job.plan_sha256, where)
+    check_journal(journal, job.identity, job.plan_sha256, where, board=True)
+    done = int(journal.holes_done or 0)
     plan = getattr(job, "drill_plan", None)
     if plan is None:
         raise CamError(f"journal {where}: {job.name} has no holes to drill on the board")
@@ -47,18 +45,18 @@ def resume_board_job(job: Any, journal: Journal, where: str = "journal") -> Any:
     if journal.hole_order is not None and tuple(journal.hole_order) != order:
         raise CamError(f"journal {where} was written for another order of the holes (--drill-order?); run the "
                        f"same file with the same options, or start the job again without --resume")
-    if journal.holes_done > len(order):
-        raise CamError(f"journal {where}: holes_done {journal.holes_done} is more than the job's {len(order)} holes")
+    if done > len(order):
+        raise CamError(f"journal {where}: holes_done {done} is more than the job's {len(order)} holes")
     base = JournalBase(identity=job.identity, plan_sha256=job.plan_sha256, source=job.source, moves=len(order),
-                       last_move=journal.holes_done - 1, resumed_at_move=journal.holes_done,
+                       last_move=done - 1, resumed_at_move=done,
                        start_position_steps=tuple(int(v) for v in journal.position_steps))  # type: ignore[arg-type]
     report = dict(job.report)
-    report.update(resumed_at_hole=journal.holes_done + 1, resumed_at_move=journal.holes_done,
+    report.update(resumed_at_hole=done + 1, resumed_at_move=done,
                   start_position_steps=list(journal.position_steps),
                   resumed_from_state=journal.state)
     extent = np.asarray(job.extent_steps, np.int64) - np.asarray(base.start_position_steps, np.int64)[:, None]
     return dataclasses.replace(job, resumed=base, report=report, extent_steps=extent,
-                               summary=f"{job.summary}, resumed at hole {journal.holes_done + 1} of {len(order)}")
+                               summary=f"{job.summary}, resumed at hole {done + 1} of {len(order)}")
 
 
 def holes_left(job: Any) -> tuple[int, tuple[int, int, int]]:
