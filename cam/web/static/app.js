@@ -162,6 +162,8 @@
     const first = order.findIndex((name) => o[name] !== undefined);
     order.slice(first + 1).forEach((name) => { if (first >= 0) delete o[name]; });
     if (!o.trace) { delete o.trace; delete o.trace_min_length_px; delete o.trace_fill; }
+    delete o.kind;
+    if ($("read-as").value) o.kind = $("read-as").value;  // cam drill --kind: the file read as this kind
     return o;
   }
 
@@ -185,6 +187,8 @@
     clearError();
     $("plan").disabled = true;
     $("job-summary").textContent = "planning…";
+    const forced = { matrix: "digitized" }[$("read-as").value] || $("read-as").value;
+    if (forced && forced !== page.kind) { page.kind = forced; showKind(forced); }  // its options apply
     try {
       const options = collectOptions();
       const bad = Object.keys(options).map((name) => outOfRange(name, options[name])).find((why) => why);
@@ -195,6 +199,7 @@
         r.depth_mm.toFixed(2) + " mm";
       $("job-time").textContent = hms(r.estimated_time_s) + " (" + r.estimated_time_s.toFixed(1) + " s)";
       $("job-summary").textContent = r.summary;
+      if (r.kind && r.kind !== page.kind) { page.kind = r.kind; showKind(r.kind); }  // read as another kind
       $("job-tools").textContent = r.tool_changes.length ? r.tool_changes.join("; ") : "none";
       $("job-cutter").textContent = (r.tool || "point") +
         (r.line_width_mm ? ", lines " + r.line_width_mm.toFixed(3) + " mm wide" : "");
@@ -231,6 +236,8 @@
       render(page.state);
     }
   });
+
+  $("read-as").addEventListener("change", () => planJob());
 
   $("profile-file").addEventListener("change", async (ev) => {
     const file = ev.target.files[0];
