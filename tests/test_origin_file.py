@@ -165,3 +165,37 @@ def test_a_session_places_a_job_planned_from_its_own_zero_by_that_zero(tmp_path)
         assert {(int(x), int(y)) for x, y in deepest[:, :2]} == want
     finally:
         hold.close()
+
+
+def test_a_run_stopped_at_its_first_pause_resumes_at_the_work_zero(tmp_path):
+    """--resume of a file placed by its own zero is checked from the work zero too (as the run was)."""
+    state, journal, log = tmp_path / "state.json", tmp_path / "j.journal.json", tmp_path / "res.csv"
+    zero = _zero(state, "50,50,0")
+    path = _file(tmp_path, "board.drl")
+    stopped = run_cli("drill", path, "--origin", "file", "--state", state, "--journal", journal)  # no answer: stops
+    assert stopped.returncode == 130, stopped.stderr
+    r = run_cli("drill", path, "--origin", "file", "--yes", "--state", state, "--resume", journal, "--pin-log", log)
+    assert r.returncode == 0, r.stderr
+    where = json.loads(run_cli("where", "--json", "--state", state).stdout)
+    assert where["machine_steps"] == zero.tolist()  # the job ends at its home: the file's zero, at the work zero
+    pos = decode_pin_log(read_pin_log(log), S).position_steps + zero
+    deepest = pos[pos[:, 2] == pos[:, 2].max()]
+    assert {(int(x), int(y)) for x, y in deepest[:, :2]} == {(int(zero[0]) + x, int(zero[1]) + y)
+                                                             for x, y in _own_steps("board.drl")}
+
+
+def test_a_g_code_program_stopped_at_m0_resumes_from_where_it_started(tmp_path):
+    """A program is checked in the machine frame from its start, and so is its resumed run: one that goes
+    toward the back of the machine (G-code +Y) from a work zero with room there resumes."""
+    state, journal = tmp_path / "state.json", tmp_path / "g.journal.json"
+    _zero(state, "50,50,0")
+    r = run_cli("goto", "0,0,0", "--state", state)
+    assert r.returncode == 0, r.stderr
+    prog = tmp_path / "p.ngc"
+    prog.write_text("G21 G90\nG0 X10 Y10\nG1 Z-1 F100\nM0\nG1 X20 F200\nG0 Z1\nG0 X0 Y0\nG0 Z0\nM2\n")
+    stopped = run_cli("drill", prog, "--state", state, "--journal", journal)
+    assert stopped.returncode == 130, stopped.stderr
+    r = run_cli("drill", prog, "--yes", "--state", state, "--resume", journal)
+    assert r.returncode == 0, r.stderr
+    where = json.loads(run_cli("where", "--json", "--state", state).stdout)
+    assert where["work_steps"] == [0, 0, 0], where

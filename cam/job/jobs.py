@@ -369,6 +369,9 @@ class PreparedJob:
         origin: the point placed at the work zero its options chose (``JobOptions.origin``: "file" plans a drill,
             HPGL or SVG file from its own zero, :func:`own_zero_home`); None: the kind's default
             (:func:`cam.drive.placement.origin_anchor`).
+        home_steps: the machine position ``plan`` was checked against the travel from, its home: a G-code
+            program's start, the work zero of a file placed by its own zero; (0, 0, 0): planned in its own frame
+            (placed when it runs).  A resumed run is checked from there too (:func:`resume_job`).
     """
 
     source: str
@@ -391,6 +394,7 @@ class PreparedJob:
     plan_sha256: str = ""
     resumed: Any = None
     origin: Optional[str] = None
+    home_steps: tuple[int, int, int] = (0, 0, 0)
     _steps: Any = field(default=None, repr=False)
 
     @property
@@ -656,6 +660,7 @@ def _prepare_gcode(path: Path, options: JobOptions, settings: MachineSettings,
     steps = plan_chunks(toolpath, start_steps=start)  # type: ignore[arg-type]
     return PreparedJob(
         source=str(path), kind="gcode", plan=steps, settings=settings, toolpath=toolpath, warnings=stream.warnings,
+        home_steps=start,  # type: ignore[arg-type]
         summary=f"{path.name}: {stream.n_program_moves} moves",
         report={"moves": stream.n_program_moves, "start_steps": list(start),
                 # the work offsets as the program left them (G10 L2/L20), machine steps: cam drill --keep-offsets
@@ -823,6 +828,8 @@ def prepare_job(
     job.identity = identity_of(p, opts, settings)
     job.plan_sha256 = plan_fingerprint(job.toolpath)
     job.origin = opts.origin
+    if home is not None:
+        job.home_steps = home
     return _finish(job)
 
 
@@ -914,7 +921,8 @@ def resume_job(job: PreparedJob, journal: Journal, *, position_steps: Optional[t
     # a job held in memory is resumed in memory (its run reads every move at once: linear40 ramps, the
     # pictures); a job made a piece at a time is resumed a piece at a time
     toolpath = resumed.joined() if isinstance(job.toolpath, Job) else resumed
-    steps = plan_chunks(toolpath, start_steps=start)  # type: ignore[arg-type]
+    # checked in the machine frame when the job was (a program's start, a work zero: its home_steps)
+    steps = plan_chunks(toolpath, start_steps=tuple(h + s for h, s in zip(job.home_steps, start)))  # type: ignore[arg-type]
     base = JournalBase(identity=job.identity, plan_sha256=job.plan_sha256, source=job.source,
                        moves=resumed.job_moves, move_index=move_index, last_move=journal.last_move,
                        pause_pending=journal.pause_pending, resumed_at_move=j,
@@ -926,5 +934,6 @@ def resume_job(job: PreparedJob, journal: Journal, *, position_steps: Optional[t
         size_mm=job.size_mm, depth_mm=job.depth_mm, warnings=list(job.warnings),
         summary=f"{job.summary}, resumed at move {j} of {resumed.job_moves}", report=report,
         drawing_rgb=job.drawing_rgb, identity=job.identity, plan_sha256=job.plan_sha256, resumed=base,
+        origin=job.origin, home_steps=job.home_steps,
     )
     return _finish(out)
