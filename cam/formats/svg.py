@@ -41,6 +41,7 @@ from __future__ import annotations
 import io
 import math
 import os
+import re
 from xml.etree import ElementTree
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -157,13 +158,7 @@ class SvgDrawing:
         """
         if not tolerance_mm > 0:
             raise ValueError("the flattening tolerance must be > 0 mm")
-        out = []
-        for stroke in self.strokes:
-            pieces = [stroke[0][:1]]
-            for seg in stroke:
-                pieces.append(_flatten_segment(seg, tolerance_mm)[1:])
-            out.append(np.concatenate(pieces))
-        return out
+        return _flatten_strokes(self.strokes, tolerance_mm)
 
     def extent_mm(self, tolerance_mm: float = 1e-3) -> tuple[float, float, float, float]:
         """``(x0, y0, x1, y1)`` of the strokes in mm, within ``tolerance_mm``; zeros when there are none."""
@@ -200,6 +195,59 @@ def _flatten_segment(seg: np.ndarray, tolerance_mm: float) -> np.ndarray:
     if k == QUADRATIC:
         return s * s * seg[0] + 2 * s * t * seg[1] + t * t * seg[2]
     return s ** 3 * seg[0] + 3 * s * s * t * seg[1] + 3 * s * t * t * seg[2] + t ** 3 * seg[3]
+
+
+def _flatten_strokes(strokes: list[list[np.ndarray]], tolerance_mm: float) -> list[np.ndarray]:
+    """Every stroke's polyline (see :meth:`SvgDrawing.polylines`), all segments of one kind at once: the same
+    points :func:`_flatten_segment` gives one segment at a time."""
+    segs = [seg for stroke in strokes for seg in stroke]
+    if not segs:
+        return [np.zeros((0, 2)) for _ in strokes]
+    kinds = np.fromiter((len(seg) for seg in segs), np.int64, len(segs))
+    n = np.ones(len(segs), np.int64)
+    curves = {}
+    for k in (QUADRATIC, CUBIC):
+        where = np.flatnonzero(kinds == k)
+        if len(where):
+            ctrl = np.stack([segs[i] for i in where])
+            second = ctrl[:, :-2] - 2 * ctrl[:, 1:-1] + ctrl[:, 2:]
+            m = np.sqrt((second ** 2).sum(axis=2)).max(axis=1)
+            bound = 6 * m if k == CUBIC else 2 * m
+            with np.errstate(invalid="ignore"):
+                pieces = np.ceil(np.sqrt(bound / (8 * tolerance_mm)))
+            n[where] = np.where(bound > 0, np.clip(pieces, 1, MAX_SEGMENTS_PER_CURVE), 1).astype(np.int64)
+            curves[k] = (where, ctrl)
+    lengths = np.fromiter((len(stroke) for stroke in strokes), np.int64, len(strokes))
+    seg_stroke = np.repeat(np.arange(len(strokes)), lengths)
+    ends = np.cumsum(n) + seg_stroke + 1  # one past each segment's last point in the joined output
+    starts = ends - n
+    out = np.empty((int(ends[-1]) if len(ends) else 0, 2))
+    first = np.cumsum(lengths) - lengths
+    heads = starts[first[lengths > 0]] - 1
+    out[heads] = np.stack([stroke[0][0] for stroke in strokes if stroke])
+    lines = np.flatnonzero(kinds == LINE)
+    if len(lines):
+        out[starts[lines]] = np.stack([segs[i][-1] for i in lines])
+    for k, (where, ctrl) in curves.items():
+        _evaluate(out, ctrl, n[where], starts[where], k)
+    bounds = np.concatenate([[0], ends[np.cumsum(lengths)[lengths > 0] - 1]])
+    polys = iter(np.split(out, bounds[1:-1]))
+    return [next(polys) if length else np.zeros((0, 2)) for length in lengths]
+
+
+def _evaluate(out: np.ndarray, ctrl: np.ndarray, n: np.ndarray, starts: np.ndarray, k: int) -> None:
+    """Write the points ``t = 1/n .. 1`` of every curve ``ctrl[i]`` (``n[i]`` pieces) at ``out[starts[i]:]``."""
+    index = np.repeat(np.arange(len(n)), n)
+    step = np.arange(len(index)) - np.repeat(np.cumsum(n) - n, n) + 1  # 1..n within each curve
+    pieces = n[index]
+    t = np.where(step == pieces, 1.0, step * (1.0 / pieces))[:, None]
+    s = 1 - t
+    p = ctrl[index]
+    if k == QUADRATIC:
+        pts = s * s * p[:, 0] + 2 * s * t * p[:, 1] + t * t * p[:, 2]
+    else:
+        pts = s ** 3 * p[:, 0] + 3 * s * s * t * p[:, 1] + 3 * s * t * t * p[:, 2] + t ** 3 * p[:, 3]
+    out[np.repeat(starts, n) + step - 1] = pts
 
 
 def _colour_hex(text: str) -> Optional[str]:
@@ -318,6 +366,11 @@ def expanded_size(raw: bytes, source: str = "<svg>") -> int:
         root = ElementTree.fromstring(raw)
     except (ElementTree.ParseError, ValueError, LookupError):  # LookupError: an unknown declared encoding
         return 0
+    return _expanded_count(root, source)
+
+
+def _expanded_count(root, source: str) -> int:  # noqa: ANN001 - an ElementTree element
+    """:func:`expanded_size` of a parsed document."""
     by_id = {el.get("id"): el for el in root.iter() if el.get("id")}
     memo: dict[int, int] = {}
 
@@ -355,7 +408,21 @@ def parse_svg(data: Union[bytes, str], *, source: str = "<svg>") -> SvgDrawing:
         not a finite number.
     """
     raw = data.encode("utf-8") if isinstance(data, str) else bytes(data)
-    expanded_size(raw, source)  # counted before svgelements expands a single <use>
+    tree = _read_tree(raw)
+    if tree is None:
+        return _parse_svgelements(raw, source)  # it says why it cannot read it
+    _expanded_count(tree[0], source)  # counted before svgelements expands a single <use>
+    try:
+        _check_walkable(*tree)
+        return _parse_fast(tree[0], source)
+    except MemoryError:
+        raise
+    except Exception:  # what the fast reader does not read (or finds wrong) svgelements reads, and says why
+        return _parse_svgelements(raw, source)
+
+
+def _parse_svgelements(raw: bytes, source: str) -> SvgDrawing:
+    """:func:`parse_svg` by svgelements alone (the whole document; ``<use>`` counted already)."""
     try:
         svg = se.SVG.parse(io.BytesIO(raw), reify=True, ppi=96.0)
     except Exception as exc:  # svgelements raises the XML parser's and its own errors
@@ -404,6 +471,431 @@ def parse_svg(data: Union[bytes, str], *, source: str = "<svg>") -> SvgDrawing:
         warnings.append(f"{images} embedded image(s) skipped: only strokes and outlines are cut")
     w, h = svg.width, svg.height
     size = (float(w) * k, float(h) * k) if w and h and math.isfinite(w) and math.isfinite(h) else (0.0, 0.0)
+    return _drawing(strokes, closed, size, counts, warnings, source, layer_paths, colours)
+
+
+# --- the fast reader (issue #32 point 5) --------------------------------------------------------------------------
+# svgelements builds a Python object per point, segment and shape: about 0.5 ms per circle.  The fast reader walks
+# the XML tree itself and computes what svgelements would for the common cases (the same inherited values, the
+# same transforms, circles and ellipses as the same 12 cubic Béziers, paths without arcs), with numpy for the
+# arithmetic.  An element it does not compute itself (a rect, a line, a path with arcs, an odd attribute) is built
+# by svgelements from the same values; a document it cannot walk (``<use>``, ``<style>``, text, images, nested
+# ``<svg>``, anything that raises) is read by svgelements whole, as before.
+
+class _Unsupported(Exception):
+    """The fast reader leaves this document to svgelements."""
+
+
+_SVG_NS = "{http://www.w3.org/2000/svg"
+_WHOLE_DOCUMENT_TAGS = frozenset({"use", "style", "text", "tspan", "textPath", "image", "svg"})
+"""Tags only svgelements reads (a ``<use>`` expands, a ``<style>`` restyles what follows, ``<text>`` is an error)."""
+_NOT_RENDERED = frozenset({"defs", "clipPath", "pattern"})
+_SHAPES = frozenset({"path", "circle", "ellipse", "line", "polyline", "polygon", "rect"})
+_NON_PROPAGATING = ("preserveAspectRatio", "viewBox", "id", "class", "clip-path")
+_STYLE_KEYS = ("stroke", "stroke_opacity", "stroke-opacity", "fill", "fill_opacity", "fill-opacity", "stroke_width",
+               "stroke-width", "visibility")
+_READ_KEYS = frozenset(_STYLE_KEYS + ("transform", "display", "color", "style", "d", "cx", "cy", "r", "rx", "ry",
+                                      "center", "attributes", "tag", "x", "y", "width", "height", "points", "x1",
+                                      "y1", "x2", "y2", "viewport_transform", "apply", "vector-effect"))
+_FLOAT = re.compile(se.PATTERN_FLOAT)
+_PATH_TOKEN = re.compile(r"([MmZzLlHhVvCcSsQqTt])|(" + se.PATTERN_FLOAT + ")")
+_PATH_WELL_FORMED = re.compile(r"(?:[MmZzLlHhVvCcSsQqTt]|" + se.PATTERN_FLOAT + r"|[ ,\t\n\r\f]+)*")
+_ARITY = {"M": 2, "L": 2, "T": 2, "H": 1, "V": 1, "C": 6, "S": 4, "Q": 4, "Z": 0}
+_MOVE, _CLOSE = 0, 1
+_TAU = math.tau
+
+
+def _read_tree(raw: bytes):
+    """``(root element, namespace prefixes declared)`` of the XML, or None when it is not well-formed XML."""
+    prefixes: set[str] = set()
+    try:
+        parser = ElementTree.iterparse(io.BytesIO(raw), events=("start-ns",))
+        for _event, (prefix, _uri) in parser:
+            prefixes.add(prefix)
+        return parser.root, prefixes
+    except (ElementTree.ParseError, ValueError, LookupError):
+        return None
+
+
+def _local(tag) -> str:
+    """An element's tag as svgelements names it (the SVG namespace dropped)."""
+    if not isinstance(tag, str):
+        return ""
+    return tag[28:] if tag.startswith(_SVG_NS) else tag
+
+
+def _check_walkable(root, prefixes: set[str]) -> None:
+    """Raise :class:`_Unsupported` for a document only svgelements reads."""
+    if _local(root.tag) != "svg" or prefixes & _READ_KEYS:
+        raise _Unsupported
+    for el in root.iter():
+        if el is not root and _local(el.tag) in _WHOLE_DOCUMENT_TAGS:
+            raise _Unsupported
+
+
+def _values(elem, tag: str, parent: dict) -> dict:
+    """The values svgelements gives an element: its parent's, its attributes and ``style`` over them, ``transform``
+    appended to the parent's (as :meth:`svgelements.SVG.parse` computes them, with no style sheet)."""
+    values = dict(parent)
+    for key in _NON_PROPAGATING:
+        values.pop(key, None)
+    attributes = dict(elem.attrib)
+    attributes["tag"] = tag
+    style = attributes.get("style")
+    if style is not None:
+        for equate in style.split(";"):
+            item = equate.split(":")
+            if len(item) == 2:
+                attributes[item[0].strip()] = item[1].strip()
+    for key in ("fill", "stroke"):
+        if attributes.get(key) == "currentColor":
+            attributes[key] = attributes["color"] if "color" in attributes else values["color"]
+    if "transform" in attributes and "transform" in values:
+        attributes["transform"] = values["transform"] + " " + attributes["transform"]
+    values.update(attributes)
+    values["attributes"] = attributes
+    return values
+
+
+def _hidden(values: dict) -> bool:
+    return "display" in values and values["display"].lower() == "none"
+
+
+class _Walk:
+    """One document walked: what each shape becomes, in document order (see :func:`_parse_fast`)."""
+
+    def __init__(self, k: float):
+        self.k = k
+        self.items: list[tuple] = []  # (kind name, pieces or circle index, layer, colour)
+        self.circles: list[tuple[float, float, float, float]] = []
+        self.size = (0.0, 0.0)
+        self.viewport = (0.0, 0.0)
+        self.matrices: dict[str, se.Matrix] = {}
+        self.styles: dict[tuple, tuple[bool, bool, str]] = {}
+
+    def matrix(self, text: str) -> se.Matrix:
+        m = self.matrices.get(text)
+        if m is None:
+            m = self.matrices[text] = se.Matrix(text)
+        return m
+
+    def style(self, values: dict) -> tuple[bool, bool, str]:
+        """(cut it, only its fill makes it cut, its colour) of a shape, as :func:`_visible` and :func:`_colour_of`
+        find them on the svgelements shape (computed once for each combination of the values they read)."""
+        key = tuple(values.get(name) for name in _STYLE_KEYS)
+        got = self.styles.get(key)
+        if got is None:
+            probe = se.Path({name: v for name, v in zip(_STYLE_KEYS, key) if v is not None})
+            got = self.styles[key] = (*_visible(probe), _colour_of(probe))
+        return got
+
+    def root(self, root) -> dict:
+        """The values of the ``<svg>`` element, its viewport transform appended (as svgelements does)."""
+        values = _values(root, "svg", {"color": "black", "fill": "black", "stroke": "none"})
+        if _hidden(values):
+            raise _Unsupported
+        s = se.SVG(values)
+        width = s.viewbox.width if s.viewbox is not None else 1000
+        height = s.viewbox.height if s.viewbox is not None else 1000
+        s.render(ppi=96.0, width=width, height=height, viewbox=s.viewbox)
+        self.size = (s.width, s.height)
+        self.viewport = (s.height, s.width)  # sic: svgelements swaps them when there is no viewBox
+        if s.viewbox is not None:
+            if s.height == 0 or s.width == 0:
+                raise _Unsupported
+            transform = s.viewbox_transform  # ZeroDivisionError: left to svgelements
+            values["transform"] = values["transform"] + " " + transform if "transform" in values else transform
+            values["viewport_transform"] = values["transform"]
+            self.viewport = (s.viewbox.width, s.viewbox.height)
+        self.matrix(values.get("transform", ""))
+        return values
+
+    def children(self, elem, values: dict, layer: Optional[str]) -> None:
+        """Walk the children of an element whose values are ``values`` (iteratively: no recursion limit)."""
+        stack = [(iter(elem), values, layer)]
+        while stack:
+            items, values, layer = stack[-1]
+            child = next(items, None)
+            if child is None:
+                stack.pop()
+                continue
+            tag = _local(child.tag)
+            if not tag or _hidden(values):
+                continue
+            own = _values(child, tag, values)
+            if _hidden(own) or tag in _NOT_RENDERED:
+                continue
+            self.matrix(own.get("transform", ""))  # a transform svgelements cannot read is left to it
+            inner = layer
+            if tag == "g":
+                attributes = own["attributes"]
+                if attributes.get(_INKSCAPE + "groupmode") == "layer":
+                    label = (attributes.get(_INKSCAPE + "label") or attributes.get("id") or "layer").strip()
+                    label = label.replace("/", "-") or "layer"
+                    inner = label if layer is None else f"{layer}/{label}"
+            elif tag in _SHAPES:
+                self.shape(tag, own, layer)
+            stack.append((iter(child), own, inner))
+
+    def shape(self, tag: str, values: dict, layer: Optional[str]) -> None:
+        cut, fill_only, colour = self.style(values)
+        if tag in ("circle", "ellipse") and self.round_shape(values, layer, cut, colour):
+            return
+        if tag == "path" and cut:
+            pieces = _path_pieces(values, self.matrix(values.get("transform", "")), self.k, fill_only)
+            if pieces is not None:
+                self.add("path", pieces, layer, colour)
+                return
+        element = _svgelements_shape(tag, values, self.viewport)
+        if element is None or not cut or (fill_only and tag == "line"):
+            return
+        name = type(element).__name__.lower().replace("simpleline", "line")
+        self.add(name, _subpaths(abs(se.Path(element)), self.k, close_open=fill_only), layer, colour)
+
+    def round_shape(self, values: dict, layer: Optional[str], cut: bool, colour: str) -> bool:
+        """A circle or ellipse whose transform only scales (by > 0) and moves it: recorded for :func:`_circles`
+        (or dropped when invisible or of no size); False when svgelements is to build it."""
+        m = self.matrix(values.get("transform", ""))
+        if m.b != 0 or m.c != 0 or not (m.a > 0 and m.d > 0) or "center" in values:
+            return False
+        if "r" in values:
+            numbers = [values.get("cx", "0"), values.get("cy", "0"), values["r"], values["r"]]
+        else:
+            numbers = [values.get("cx", "0"), values.get("cy", "0"), values.get("rx"), values.get("ry")]
+        if not all(isinstance(v, str) and _FLOAT.fullmatch(v) for v in numbers):
+            return False
+        cx, cy, rx, ry = (float(v) for v in numbers)
+        rx, ry = m.a * rx, m.d * ry
+        if not (rx > 0 and ry > 0 and math.isfinite(rx) and math.isfinite(ry)):
+            return rx == 0 or ry == 0  # no size: svgelements drops it; a negative radius is left to it
+        if cut:
+            self.circles.append((cx * m.a + m.e, cy * m.d + m.f, rx, ry))
+            self.add(values["tag"], len(self.circles) - 1, layer, colour)
+        return True
+
+    def add(self, name: str, pieces, layer: Optional[str], colour: str) -> None:
+        self.items.append((name, pieces, layer, colour))
+
+
+def _path_commands(d: str) -> Optional[list[tuple[str, list[float]]]]:
+    """The commands of a path's ``d`` with their numbers, or None unless it is well formed (every command with
+    whole groups of numbers, starting with a move) and has no arcs: svgelements then reads it as SVG says."""
+    if not _PATH_WELL_FORMED.fullmatch(d):
+        return None
+    out: list[tuple[str, list[float]]] = []
+    for command, number in _PATH_TOKEN.findall(d):
+        if command:
+            out.append((command, []))
+        elif not out:
+            return None
+        else:
+            out[-1][1].append(float(number))
+    if not out or out[0][0] not in "Mm":
+        return None
+    for command, numbers in out:
+        arity = _ARITY[command.upper()]
+        if (arity == 0 and numbers) or (arity and (not numbers or len(numbers) % arity)):
+            return None
+    return out
+
+
+def _path_segments(commands: list[tuple[str, list[float]]]) -> tuple[list[int], list[tuple[float, float]]]:
+    """The segments svgelements makes of the commands, in user units before the transform: each segment's kind
+    (:data:`_MOVE`, :data:`_CLOSE` or its number of control points) and its points (a move its end, a close its
+    start and end, a curve all its control points), all in one list."""
+    kinds: list[int] = []
+    pts: list[tuple[float, float]] = []
+    cur = z = None
+    last_kind, last_ctrl = _MOVE, None
+    for command, numbers in commands:
+        op, rel = command.upper(), command.islower()
+        if op == "Z":
+            kinds.append(_CLOSE)
+            pts += [cur, z]
+            cur, last_kind = z, _CLOSE
+            continue
+        arity = _ARITY[op]
+        for i in range(0, len(numbers), arity):
+            v = numbers[i:i + arity]
+            if op in "HV":
+                value = v[0] + (cur[0] if op == "H" else cur[1]) if rel else v[0]
+                v = [value, cur[1]] if op == "H" else [cur[0], value]
+            elif rel and cur is not None:
+                v = [x + cur[j % 2] for j, x in enumerate(v)]
+            given = [(v[j], v[j + 1]) for j in range(0, len(v), 2)]
+            if op == "M" and i == 0:
+                kinds.append(_MOVE)
+                pts.append(given[0])
+                cur = z = given[0]
+                last_kind = _MOVE
+                continue
+            if op in "ST":
+                smooth = cur if last_kind not in (QUADRATIC, CUBIC) else \
+                    (cur[0] + (cur[0] - last_ctrl[0]), cur[1] + (cur[1] - last_ctrl[1]))
+                given = [smooth] + given
+            ctrl = [cur] + given
+            kinds.append(len(ctrl))
+            pts += ctrl
+            cur, last_kind, last_ctrl = ctrl[-1], len(ctrl), ctrl[-2]
+    return kinds, pts
+
+
+def _path_pieces(values: dict, m: se.Matrix, k: float, close_open: bool):
+    """A path's subpaths as :func:`_subpaths` gives them, or None when svgelements is to read its ``d``."""
+    d = values.get("d")
+    commands = _path_commands(d) if isinstance(d, str) else None
+    if commands is None:
+        return None
+    kinds, pts = _path_segments(commands)
+    xy = np.array(pts, float).reshape(-1, 2)
+    px = np.empty_like(xy)
+    px[:, 0] = xy[:, 0] * m.a + xy[:, 1] * m.c + 1 * m.e
+    px[:, 1] = xy[:, 0] * m.b + xy[:, 1] * m.d + 1 * m.f
+    mm = px * k
+    return _pieces_from(kinds, px, mm, close_open)
+
+
+def _pieces_from(kinds: list[int], px: np.ndarray, mm: np.ndarray, close_open: bool):
+    """:func:`_subpaths` on segments given as kinds and points (px, to compare as svgelements does; mm, kept)."""
+    out: list[tuple[list[np.ndarray], bool]] = []
+    segs: list[np.ndarray] = []
+
+    def finish(closed: bool) -> None:
+        nonlocal segs
+        if segs:
+            if close_open and not closed and np.any(segs[-1][-1] != segs[0][0]):
+                segs.append(_checked(np.array([segs[-1][-1], segs[0][0]])))
+                closed = True
+            out.append((segs, closed or bool(np.all(segs[-1][-1] == segs[0][0]))))
+        segs = []
+
+    kind_of = np.array(kinds, np.int64)
+    counts = np.where(kind_of == _MOVE, 1, np.where(kind_of == _CLOSE, 2, kind_of))
+    cut = np.repeat(kind_of >= LINE, counts)  # the points of lines and curves, checked as _point does
+    good = np.isfinite(mm).all(axis=1) & (np.abs(mm).max(axis=1, initial=0.0) <= 1e6)
+    check = _checked if not good[cut].all() else (lambda pts: pts)
+    at = 0
+    for kind in kinds:
+        if kind == _MOVE:
+            finish(False)
+            at += 1
+            continue
+        if kind == _CLOSE:
+            (x0, y0), (x1, y1) = px[at], px[at + 1]
+            if not (abs(x0 - x1) <= se.ERROR and abs(y0 - y1) <= se.ERROR):
+                segs.append(_checked(mm[at:at + 2]))
+            at += 2
+            finish(True)
+            continue
+        segs.append(check(mm[at:at + kind]))
+        at += kind
+    finish(False)
+    return out
+
+
+def _checked(pts: np.ndarray) -> np.ndarray:
+    """``pts`` (mm), or ValueError as :func:`_point` raises it."""
+    if not (np.all(np.isfinite(pts)) and np.abs(pts).max(initial=0.0) <= 1e6):
+        raise ValueError("a coordinate is not a finite number within 1 km")
+    return pts
+
+
+def _svgelements_shape(tag: str, values: dict, viewport: tuple[float, float]):
+    """The shape svgelements builds of an element with these values (rendered, its transform applied), or None
+    where it drops it (as :meth:`svgelements.SVG.parse` does)."""
+    element = None
+    try:
+        if tag == "path":
+            element = se.Path(values, pathd_loaded=True)
+            element.parse(values.get("d"))
+        else:
+            element = _SHAPE_CLASSES[tag](values)
+    except ValueError:
+        if element is None:
+            return None
+    element.render(ppi=96.0, width=viewport[0], height=viewport[1])
+    element.reify()
+    return None if element.is_degenerate() else element
+
+
+_SHAPE_CLASSES = {"circle": se.Circle, "ellipse": se.Ellipse, "line": se.SimpleLine, "polyline": se.Polyline,
+                  "polygon": se.Polygon, "rect": se.Rect}
+
+
+def _quarter_turns() -> tuple[list[float], float, float]:
+    """The parameters svgelements draws a circle with: ``t`` of the 5 quarter points (added up as it adds them),
+    and the step and ``alpha`` of its 3 cubics a quarter (:meth:`svgelements.Arc.as_cubic_curves`)."""
+    quarter = _TAU / 4
+    t = [0.0]
+    for _ in range(4):
+        t.append(t[-1] + quarter)
+    step = quarter / 3.0
+    alpha = math.sin(step) * (math.sqrt(4 + 3 * pow(math.tan(step / 2.0), 2)) - 1) / 3.0
+    return t, step, alpha
+
+
+def _circles(params: list[tuple[float, float, float, float]], k: float) -> tuple[np.ndarray, np.ndarray]:
+    """The 12 cubic Béziers (``(N, 12, 4, 2)`` mm) svgelements makes of each circle or ellipse ``(cx, cy, rx, ry)``
+    (px, axis-aligned), and ``(N,)`` bool: its closing line is not of zero length (it then cuts it too)."""
+    p = np.array(params, float).reshape(-1, 4)
+    cx, cy, rx, ry = (p[:, i:i + 1] for i in range(4))
+    quarters, step, alpha = _quarter_turns()
+    t0 = np.array([quarters[q] + j * step for q in range(4) for j in range(3)])
+    t1 = np.array([quarters[q] + (j + 1) * step for q in range(4) for j in range(3)])
+    cos0, sin0 = np.array([math.cos(t) for t in t0]), np.array([math.sin(t) for t in t0])
+    cos1, sin1 = np.array([math.cos(t) for t in t1]), np.array([math.sin(t) for t in t1])
+    cq = np.array([math.cos(t) for t in quarters])
+    sq = np.array([math.sin(t) for t in quarters])
+    corner_x, corner_y = cx + rx * cq, cy + ry * sq  # the quarter points (N, 5)
+    end_x, end_y = cx + rx * cos1, cy + ry * sin1
+    end_x[:, 2::3], end_y[:, 2::3] = corner_x[:, 1:], corner_y[:, 1:]
+    start_x = np.concatenate([corner_x[:, :1], end_x[:, :-1]], axis=1)
+    start_y = np.concatenate([corner_y[:, :1], end_y[:, :-1]], axis=1)
+    start_x[:, 0::3], start_y[:, 0::3] = corner_x[:, :4], corner_y[:, :4]
+    out = np.empty((len(p), 12, 4, 2))
+    out[:, :, 0, 0], out[:, :, 0, 1] = start_x, start_y
+    out[:, :, 1, 0], out[:, :, 1, 1] = start_x + alpha * (-rx * sin0), start_y + alpha * (ry * cos0)
+    out[:, :, 2, 0], out[:, :, 2, 1] = end_x - alpha * (-rx * sin1), end_y - alpha * (ry * cos1)
+    out[:, :, 3, 0], out[:, :, 3, 1] = end_x, end_y
+    gap = (np.abs(corner_x[:, 4] - corner_x[:, 0]) > se.ERROR) | (np.abs(corner_y[:, 4] - corner_y[:, 0]) > se.ERROR)
+    return out * k, gap
+
+
+def _parse_fast(root, source: str) -> SvgDrawing:
+    """:func:`parse_svg` by the fast reader (raises :class:`_Unsupported` or any error for svgelements to read
+    the document instead)."""
+    k = MM_PER_PX
+    walk = _Walk(k)
+    walk.children(root, walk.root(root), None)
+    cubics, gaps = _circles(walk.circles, k)
+    _checked(cubics)  # every control point is cut
+    strokes: list[list[np.ndarray]] = []
+    closed: list[bool] = []
+    counts: dict[str, int] = {}
+    layer_paths: list[Optional[str]] = []
+    colours: list[str] = []
+    for name, pieces, layer, colour in walk.items:
+        if isinstance(pieces, int):
+            segs = list(cubics[pieces])
+            if gaps[pieces]:
+                segs.append(_checked(np.array([segs[-1][-1], segs[0][0]])))
+            pieces = [(segs, True)]
+        if not pieces:
+            continue
+        counts[name] = counts.get(name, 0) + 1
+        for segs, is_closed in pieces:
+            strokes.append(segs)
+            closed.append(is_closed)
+            layer_paths.append(layer)
+            colours.append(colour)
+    w, h = walk.size
+    size = (float(w) * k, float(h) * k) if w and h and math.isfinite(w) and math.isfinite(h) else (0.0, 0.0)
+    return _drawing(strokes, closed, size, counts, [], source, layer_paths, colours)
+
+
+def _drawing(strokes: list[list[np.ndarray]], closed: list[bool], size: tuple[float, float], counts: dict[str, int],
+             warnings: list[str], source: str, layer_paths: list[Optional[str]], colours: list[str]) -> SvgDrawing:
+    """The drawing of the strokes read, with its layers (see the module docstring) and its size."""
     inkscape = any(layer is not None for layer in layer_paths)
     names = [NO_LAYER if layer is None else layer for layer in layer_paths] if inkscape else colours
     layer_names = list(dict.fromkeys(names))  # file order of first appearance

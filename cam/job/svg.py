@@ -164,6 +164,104 @@ def _drop_corners(cells: np.ndarray, fixed: np.ndarray, samples: np.ndarray, run
     return cells[~corner]
 
 
+CELLS_CHUNK_SAMPLES = 1 << 20
+""":func:`_cells_many` samples about this many positions at a time (its memory is bounded by it)."""
+
+
+def _cells_many(polys: list[np.ndarray]) -> list[np.ndarray]:
+    """``[_cells(p) for p in polys]``: the same positions, many polylines at a time (a halftone's 50,000
+    strokes are not 50,000 passes of a few dozen numpy calls each), about :data:`CELLS_CHUNK_SAMPLES` samples
+    at a time."""
+    if not polys:
+        return []
+    sizes = np.array([len(p) for p in polys], np.int64)
+    joined = np.concatenate(polys)
+    steps = np.abs(np.diff(joined, axis=0)).max(axis=1, initial=0.0) if len(joined) > 1 else np.zeros(0)
+    samples = np.maximum(1, np.ceil(steps / SAMPLE_STEPS))
+    samples[np.cumsum(sizes)[:-1] - 1] = 0  # the step from one polyline to the next is no segment
+    per_poly = np.add.reduceat(np.r_[samples, 0.0], np.cumsum(sizes) - sizes) + 1
+    chunk = np.floor_divide(np.cumsum(per_poly) - per_poly, CELLS_CHUNK_SAMPLES).astype(np.int64)
+    out: list[np.ndarray] = []
+    for c in np.unique(chunk):
+        lo, hi = np.searchsorted(chunk, [c, c + 1])
+        out += _cells_chunk(polys[lo:hi])
+    return out
+
+
+def _cells_chunk(polys: list[np.ndarray]) -> list[np.ndarray]:
+    """:func:`_cells_many` of one chunk."""
+    out: list[Optional[np.ndarray]] = [np.floor(p + 0.5).astype(np.int64) if len(p) < 2 else None for p in polys]
+    multi = [i for i, p in enumerate(polys) if len(p) >= 2]
+    if not multi:
+        return out
+    v_count = np.array([len(polys[i]) for i in multi], np.int64)
+    vert = np.concatenate([polys[i] for i in multi]).astype(float)
+    last_vertex = np.cumsum(v_count) - 1
+    seg_v = np.delete(np.arange(len(vert)), last_vertex)  # each segment's first vertex
+    seg_poly = np.repeat(np.arange(len(multi)), v_count - 1)
+    d = vert[seg_v + 1] - vert[seg_v]
+    n = np.maximum(1, np.ceil(np.abs(d).max(axis=1) / SAMPLE_STEPS)).astype(np.int64)
+    first_seg = np.ones(len(d), bool)
+    first_seg[1:] = seg_poly[1:] != seg_poly[:-1]
+    length = np.hypot(d[:, 0], d[:, 1])
+    turn = first_seg.copy()  # each segment's first vertex: an end, or a sharp turn
+    ok = (length[:-1] > 0) & (length[1:] > 0)
+    cos = np.einsum("ij,ij->i", d[:-1], d[1:]) / np.where(ok, length[:-1] * length[1:], 1.0)
+    turn[1:] |= ~first_seg[1:] & ok & (cos < math.cos(math.radians(CORNER_DEG)))
+    seg = np.repeat(np.arange(len(d)), n)
+    i_in_seg = np.arange(len(seg)) - np.repeat(np.cumsum(n) - n, n)
+    t = i_in_seg / np.repeat(n, n)
+    total = len(seg) + len(multi)
+    pts = np.empty((total, 2))
+    at = np.arange(len(seg)) + seg_poly[seg]  # each poly's samples, then its last vertex
+    pts[at] = vert[seg_v][seg] + d[seg] * t[:, None]
+    ends = np.cumsum(v_count - 1 + np.bincount(seg_poly, weights=n - 1, minlength=len(multi)).astype(np.int64)) \
+        + np.arange(len(multi))
+    pts[ends] = vert[last_vertex]
+    fixed = np.ones(total, bool)
+    fixed[at] = turn[seg] & (i_in_seg == 0)
+    sample_poly = np.empty(total, np.int64)
+    sample_poly[at], sample_poly[ends] = seg_poly[seg], np.arange(len(multi))
+    cells = np.floor(pts + 0.5).astype(np.int64)
+    new = np.ones(total, bool)
+    new[1:] = np.any(cells[1:] != cells[:-1], axis=1) | (sample_poly[1:] != sample_poly[:-1])
+    run = np.cumsum(new) - 1
+    fixed_kept = np.logical_or.reduceat(fixed, np.flatnonzero(new))  # runs are consecutive samples
+    kept, kept_poly = _drop_corners_many(cells[new], sample_poly[new], fixed_kept, pts, run)
+    inner = np.zeros(len(kept), bool)
+    inner[1:-1] = (kept_poly[:-2] == kept_poly[1:-1]) & (kept_poly[2:] == kept_poly[1:-1])
+    same = np.zeros(len(kept), bool)
+    same[1:-1] = inner[1:-1] & np.all(kept[1:-1] - kept[:-2] == kept[2:] - kept[1:-1], axis=1)
+    kept, kept_poly = kept[~same], kept_poly[~same]
+    pieces = np.split(kept, np.cumsum(np.bincount(kept_poly, minlength=len(multi)))[:-1])
+    for i, piece in zip(multi, pieces):
+        out[i] = piece
+    return out
+
+
+def _drop_corners_many(cells: np.ndarray, poly: np.ndarray, fixed: np.ndarray, samples: np.ndarray,
+                       run: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_drop_corners` on the kept positions of many polylines at once (``poly``: each one's polyline)."""
+    inner = np.zeros(len(cells), bool)
+    inner[1:-1] = (poly[:-2] == poly[1:-1]) & (poly[2:] == poly[1:-1])
+    corner = np.zeros(len(cells), bool)
+    corner[1:-1] = inner[1:-1] & (np.abs(cells[2:] - cells[:-2]).max(axis=1) <= 1) & ~fixed[1:-1]
+    near = inner[run]
+    r = run[near]
+    s = samples[near]
+    reach = np.minimum(np.hypot(*(s - cells[r - 1]).T), np.hypot(*(s - cells[r + 1]).T))
+    worst = np.zeros(len(cells))
+    if len(r):
+        group = np.flatnonzero(np.r_[True, r[1:] != r[:-1]])  # r never decreases
+        worst[r[group]] = np.maximum.reduceat(reach, group)
+    corner &= worst <= CORNER_REACH_STEPS
+    # of consecutive corners only every other one goes, from the first (never two in a row)
+    begins = corner & ~np.r_[False, corner[:-1]]
+    first = np.maximum.accumulate(np.where(begins, np.arange(len(cells)), 0))
+    corner &= (np.arange(len(cells)) - first) % 2 == 0
+    return cells[~corner], poly[~corner]
+
+
 def svg_strokes_steps(drawing: SvgDrawing, *, settings: MachineSettings = DEFAULT_SETTINGS,
                       scale: Optional[float] = None, fit_mm: Optional[tuple[float, float]] = None,
                       offset_mm: Optional[tuple[float, float]] = None) -> list[np.ndarray]:
@@ -249,7 +347,9 @@ def _drop_duplicates(polys: list[np.ndarray]) -> tuple[list[np.ndarray], list[in
         repeat = first[inverse] != np.arange(len(long))
         reps = np.sort(first)
         rows = np.vstack([fwd[reps], rev[reps]])
-        pairs = cKDTree(rows).query_pairs(DUPLICATE_STEPS, p=np.inf, output_type="ndarray")
+        # near in all four coordinates: near in the first two (a 2D search, quicker), then in the other two
+        pairs = cKDTree(rows[:, :2]).query_pairs(DUPLICATE_STEPS, p=np.inf, output_type="ndarray")
+        pairs = pairs[np.all(np.abs(rows[pairs[:, 0], 2:] - rows[pairs[:, 1], 2:]) <= DUPLICATE_STEPS, axis=1)]
         gone = np.zeros(len(reps), bool)
         if len(pairs):
             i, j = pairs[:, 0] % len(reps), pairs[:, 1] % len(reps)
@@ -267,10 +367,12 @@ def _drop_duplicates(polys: list[np.ndarray]) -> tuple[list[np.ndarray], list[in
     runs: list[np.ndarray] = []
     owner: list[int] = []
     start = 0
-    for s, (poly, m) in enumerate(zip(polys, counts)):
-        keep = ~dropped[start:start + m]
+    gone_before = np.r_[0, np.cumsum(dropped)]
+    gone_in = (gone_before[np.cumsum(counts)] - gone_before[np.cumsum(counts) - counts]).tolist()
+    for s, (poly, m) in enumerate(zip(polys, counts.tolist())):
+        keep = ~dropped[start:start + m] if gone_in[s] else None
         start += m
-        if m == 0:
+        if keep is None:  # nothing of it dropped (or no pieces): the whole stroke
             runs.append(poly)
             owner.append(s)
             continue
@@ -311,26 +413,53 @@ def _canonical(fwd: np.ndarray, rev: np.ndarray) -> np.ndarray:
 
 def _order(strokes: list[np.ndarray], at: Optional[np.ndarray] = None) -> list[np.ndarray]:
     """The strokes in cutting order, each forwards or reversed, from ``at`` (the home by default; step 3 of the
-    module docstring)."""
+    module docstring).  The nearest ends are found with a KD-tree (rebuilt as strokes are taken), and the pick
+    among the few nearest is made with the distances and tie rule (lowest index) of a search of every stroke."""
     if not strokes:
         return []
+    n = len(strokes)
     starts = np.array([s[0] for s in strokes], float)
     ends = np.array([s[-1] for s in strokes], float)
-    left = np.ones(len(strokes), bool)
+    left = np.ones(n, bool)
     at = np.zeros(2) if at is None else np.asarray(at, float)
+    owner = np.r_[0:n, 0:n]  # the stroke of each end in the tree (its starts, then its ends)
+    tree = cKDTree(np.vstack([starts, ends]))
     out = []
-    for _ in range(len(strokes)):
-        ds = np.hypot(*(starts - at).T)
-        de = np.hypot(*(ends - at).T)
-        ds[~left] = np.inf
-        de[~left] = np.inf
-        near = np.minimum(ds, de)
-        i = int(np.argmin(near))
+    gone = 0  # strokes taken since the tree was built
+    for _ in range(n):
+        if 4 * gone >= len(owner) > 64:  # half the ends in the tree are gone: rebuild it without them
+            keep = left[owner]
+            tree, owner, gone = cKDTree(tree.data[keep]), owner[keep], 0
+        gone += 1
+        i = _nearest_stroke(tree, owner, left, starts, ends, at)
         left[i] = False
-        stroke = strokes[i][::-1] if de[i] < ds[i] else strokes[i]
+        ds, de = np.hypot(*(starts[i] - at)), np.hypot(*(ends[i] - at))
+        stroke = strokes[i][::-1] if de < ds else strokes[i]
         out.append(stroke)
         at = stroke[-1].astype(float)
     return out
+
+
+def _nearest_stroke(tree: cKDTree, owner: np.ndarray, left: np.ndarray, starts: np.ndarray, ends: np.ndarray,
+                    at: np.ndarray) -> int:
+    """The stroke left whose nearer end is nearest ``at`` (ties: the lowest index), as a search of every stroke
+    finds it (``np.hypot``); the tree only finds the few candidates, with a margin for its own rounding."""
+    k = 8
+    while True:
+        d, j = tree.query(at, k=min(k, len(owner)))
+        d, j = np.atleast_1d(d), np.atleast_1d(j)
+        mine = owner[j]
+        alive = left[mine]
+        if alive.any():
+            reach = d[alive.argmax()] * (1 + 1e-9) + 1e-9
+            if d[-1] > reach or k >= len(owner):
+                cand = mine[alive & (d <= reach)]
+                if (cand == cand[0]).all():  # one stroke within reach (one end of it, or both)
+                    return int(cand[0])
+                cand = np.unique(cand)
+                near = np.minimum(np.hypot(*(starts[cand] - at).T), np.hypot(*(ends[cand] - at).T))
+                return int(cand[np.argmin(near)])
+        k *= 4
 
 
 def plan_svg(
@@ -390,7 +519,7 @@ def plan_svg(
                             "what is already cut: cut once (--keep-duplicates cuts them again)")
     home = np.asarray(home_steps, np.int64).reshape(3)
     _check_extent(drawing, polys, settings, home)  # before the samples are made: their count follows the size
-    strokes = [_cells(p) for p in polys]
+    strokes = _cells_many(polys)
     stroke_layer = part_layer[np.asarray(owner, np.int64)]
     depth_steps, safe_z_steps = _z_steps(cut_depth_mm, travel_height_mm, settings, int(home[2]))
     ordered: list[np.ndarray] = []
