@@ -103,3 +103,40 @@ def test_page_zero_go_to_and_live_work_position(page, tmp_path):  # noqa: F811
         page.wait_for_function("document.getElementById('work-offset').textContent === 'G55'")
     finally:
         s.close()
+
+
+def test_a_page_drill_file_placed_by_its_own_zero_is_planned_from_the_work_zero(tmp_path):
+    """A file whose own Y grows up (board coordinates) fits only below a work zero away from the home: the page
+    plans it there (the session's machine state reaches the planner), and the holes are drilled at work zero +
+    their own coordinates."""
+    state_file = tmp_path / "m.json"
+    s = Server(tmp_path, settings=FAST, realtime=False, state_file=str(state_file))
+    try:
+        s.call("POST", "/api/goto", {"xyz": [100, 600, 0], "unit": "steps", "machine": True})
+        s.wait_idle()
+        status, st = s.call("POST", "/api/zero", {"axes": "XYZ"})
+        assert status == 200, st
+        drl = "M48\nMETRIC\nT1C0.8\n%\nT1\nX2.0Y3.0\nX5.0Y12.0\nM30\n"
+        status, up = s.upload("board.drl", drl.encode())
+        assert status == 200, up
+        status, planned = s.call("POST", "/api/plan", {"job": up["job"], "options": {"origin": "file"}})
+        assert status == 200, planned
+        status, st = s.call("POST", "/api/start", {"job": planned["job"]})
+        assert status == 200, st
+        deadline = time.monotonic() + 30
+        while s.session.busy and time.monotonic() < deadline:  # the tool change prompt: go on
+            st = s.session.state()
+            if st["prompt"]:
+                s.call("POST", "/api/answer", {"prompt": st["prompt"]["id"], "action": "continue"})
+            time.sleep(0.02)
+        st = s.wait_idle()
+        assert st["last"]["status"] == "finished", st["last"]
+        pos = decode_pin_log(s.session.last_job_pin_log, FAST).position_steps
+        deepest = pos[:, 2].max()
+        at_bottom = {tuple(int(v) for v in p[:2]) for p in pos if p[2] == deepest}
+        mm = FAST.mm_per_step_xy
+        want = {(round(2.0 / mm), -round(3.0 / mm)), (round(5.0 / mm), -round(12.0 / mm))}
+        # the pin log is relative to where the job started: the work zero (its own zero) after the travel there
+        assert at_bottom == want, (at_bottom, want)
+    finally:
+        s.close()

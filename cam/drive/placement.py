@@ -138,7 +138,7 @@ def ended_state(state: MachineState, session: Any, start: tuple[int, int, int],
     if status not in (FINISHED, STOPPED):
         sent, moved = session.last_sent()
         if sent or session.kind == "maximus":
-            booked = session.last_result is not None or session.kind == "maximus"  # a board's replies are booked
+            booked = session.last_result is not None or session.kind in ("maximus", "grbl")  # a board's word
             guess = end if booked else tuple(s + m for s, m in zip(end, moved))
             reason = "; ".join(info.get("messages") or ["the run failed"])
             return state.lost(f"{info.get('label') or 'the run'} failed while moving ({reason})", guess)

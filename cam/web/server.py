@@ -581,8 +581,10 @@ async def _plan_job(st: _AppState, request: Request) -> dict[str, Any]:
     options = _job_options(st, body.get("options") or {})
     session = st.session
     upload = st.uploads[job_id]
+    machine_state = session.state_hold.state if session.state_hold is not None else None
     job, png = await run_in_threadpool(st.worker.call, plan_with_preview, upload["path"], options,
-                                       st.config.settings, upload["name"], what=f"planning {upload['name']}")
+                                       st.config.settings, upload["name"], machine_state,
+                                       what=f"planning {upload['name']}")
     st.counter += 1
     st.prepared.pop(job_id, None)  # re-planned: the newest again, so the last eight planned stay
     st.prepared[job_id] = job

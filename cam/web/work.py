@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -25,9 +26,11 @@ WARM_UP = ("cam.job.jobs", "cam.web.work", "cam.digitize._kernels", "cam.drive.r
 
 
 def plan_with_preview(path: str, options: JobOptions, settings: MachineSettings,
-                      name: str) -> tuple[PreparedJob, bytes]:
-    """Plan an uploaded file and draw its preview: ``(job, PNG bytes)`` (in the worker)."""
-    job = prepare_job(path, options, settings, name=name)
+                      name: str, machine_state: Any = None) -> tuple[PreparedJob, bytes]:
+    """Plan an uploaded file and draw its preview: ``(job, PNG bytes)`` (in the worker).  ``machine_state``: the
+    session's :class:`~cam.drive.state.MachineState` (a G-code program, or a file placed by its own zero, is
+    planned from the work zero in the machine frame, as ``cam drill`` plans it)."""
+    job = prepare_job(path, options, settings, name=name, machine_state=machine_state)
     return job, job.preview_png()
 
 
