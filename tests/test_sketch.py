@@ -95,6 +95,24 @@ def test_synthetic_scans_trace_to_their_centre_lines(seed, thick, quality):
     assert_follows_the_sketch(d, scan)
 
 
+@pytest.mark.parametrize("thick", [10, 12])
+@pytest.mark.parametrize("quality", [70, 90])
+def test_thick_strokes_keep_their_square_corners(thick, quality):
+    """Thinning rounds a thick stroke's corner (2.24 px inside the drawn corner before corners were redrawn,
+    issue #32 point 9): every point of the centre lines, corners included, has a traced pixel within 2 px."""
+    scan = shapes(1, thick)
+    d = trace(scan.image(quality=quality))
+    assert d.curves == 3
+    black = d.classes == BLACK
+    xy = np.argwhere(black)[:, ::-1].astype(float)
+    truth = scan.centre_lines()
+    near, _ = cKDTree(xy).query(truth)
+    far, _ = cKDTree(truth).query(xy)
+    worst = truth[np.argmax(near)]
+    assert near.max() <= 2.0, f"the centre line at {worst} is {near.max():.2f} px from the trace"
+    assert far.max() <= 1.5 and neighbour_count(black)[black].max() <= 2 and check_rules(d.classes) == []
+
+
 def test_a_phone_photo_in_colour_with_strong_shading():
     scan = shapes(3)
     d = trace(scan.image(colour=True, light=(0.45, 1.0), noise=7))

@@ -25,8 +25,10 @@ The steps of :func:`trace`:
    stay joined through the junction; the others are cut back until no pixel
    has more than two black neighbours.  What is left of them is kept if it is
    still ``trace_min_length_px`` long.
-6. **Border.**  Nothing is left on the image border.
-7. ``trace_fill=True``: every white region enclosed by a curve (4-connected, not
+6. **Corners.**  Thinning rounds the corner of a stroke 10 px wide or more by 2-3 px; a turn between two
+   straight runs is redrawn through the runs' lines' intersection (:mod:`cam.digitize._corners`).
+7. **Border.**  Nothing is left on the image border.
+8. ``trace_fill=True``: every white region enclosed by a curve (4-connected, not
    reaching the border) becomes red: a 3D drawing.
 
 >>> import numpy as np
@@ -49,6 +51,7 @@ from skimage.morphology import skeletonize
 
 from ..errors import DrawingError
 from ..options import OPTIONS
+from ._corners import sharpen_corners
 from .drawing import BLACK, RED, WHITE, Drawing, _read_rgb, check_rules
 
 __all__ = ["trace", "load_sketch", "TracedDrawing", "DEFAULT_MIN_LENGTH_PX", "DEFAULT_MAX_SIDE_PX", "INK_MAX", "LOCAL_CONTRAST"]
@@ -430,6 +433,8 @@ def trace(
     skel, specks = _remove_specks(skel, min_length_px)
     skel, spurs = _remove_spurs(skel, min_length_px)
     skel, junctions = _split_junctions(skel)
+    skel = _minimal(skel)
+    skel, _ = sharpen_corners(skel, ink)  # thinning rounds a thick stroke's corner: meet where its lines meet
     skel = _minimal(skel)
     skel, stubs = _remove_specks(skel, min_length_px)
     classes = np.where(skel, BLACK, WHITE).astype(np.uint8)
