@@ -48,3 +48,20 @@ def test_without_pauses_there_is_no_m0(tmp_path):
     r = run_cli("export", SAMPLES / "ellipse.png", "--depth", "2", "-o", out)
     assert r.returncode == 0, r.stderr
     assert "M0" not in out.read_text().splitlines()
+
+
+def test_tool_changes_stay_tool_changes_and_a_mill_bit_is_a_pause(tmp_path):
+    drl = tmp_path / "slot.drl"
+    drl.write_text("M48\nMETRIC\nT1C1.0\nT3C2.0\n%\nT1\nX5.0Y5.0\nX10.0Y5.0G85X15.0Y5.0\nT3\nX30.0Y10.0\nM30\n")
+    out = tmp_path / "slot.ngc"
+    r = run_cli("export", drl, "--mill-holes-over", "1.5", "--post", "linuxcnc", "-o", out)
+    assert r.returncode == 0, r.stderr
+    text = out.read_text()
+    assert re.search(r"^T1 M6 \(tool change: T1\b", text, re.M), text
+    assert re.search(r"^\(pause: tool change: mill bit 1\.500 mm.*\)\nM0$", text, re.M), text
+    plt = tmp_path / "pens.plt"
+    plt.write_text("IN;SP1;PU0,0;PD400,0;SP2;PU0,400;PD400,400;PU;")
+    r = run_cli("export", plt, "--post", "linuxcnc", "-o", out)
+    assert r.returncode == 0, r.stderr
+    assert re.findall(r"^T(\d) M6", out.read_text(), re.M) == ["1", "2"]
+    run_rs274(str(out))

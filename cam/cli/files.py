@@ -3,7 +3,9 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import sys
+from typing import Optional
 
 
 from ..sniff import KIND_NAMES
@@ -38,8 +40,7 @@ def cmd_export(args: argparse.Namespace) -> int:
                    for i, (tool, dia, n) in zip(at, job.drill_plan.tool_sequence)}
     else:  # HPGL: "tool change: pen N"; other pauses (Pause At, between SVG layers) are M0 with their note
         notes = job.toolpath.pause_notes or ["Pause At"] * len(at)
-        changes = {int(i): ((int(note.split()[-1]) if note.split() and note.split()[-1].isdigit() else None), note)
-                   for i, note in zip(at, notes)}
+        changes = {int(i): (_tool_number(note), note) for i, note in zip(at, notes)}
     exact_xy, exact_z = exact_geometry(job, DEFAULT_CUT_DEPTH_MM if args.cut_depth is None else args.cut_depth,
                                        job_options(args))
     save_gcode(job.toolpath, args.output, flip_y=args.flip_y, travel_height_mm=travel_height_mm,
@@ -56,6 +57,16 @@ def cmd_export(args: argparse.Namespace) -> int:
         pauses = len(changes) - tools
         print(f"{args.output}: {job.summary}, {tools} tool change(s)" + (f", {pauses} pause(s)" if pauses else ""))
     return 0
+
+
+def _tool_number(note: str) -> Optional[int]:
+    """The tool a pause's note changes to (``tool change: pen 2``, ``tool change: T3 ...``), or None: a pause.
+
+    >>> _tool_number("tool change: pen 2"), _tool_number("tool change: T3 = T4 1.000 mm"), _tool_number("Pause At")
+    (2, 3, None)
+    """
+    found = re.match(r"tool change: (?:pen (\d+)$|T(\d+)\b)", note)
+    return None if found is None else int(found.group(1) or found.group(2))
 
 
 def cmd_preview(args: argparse.Namespace) -> int:
