@@ -29,8 +29,12 @@ changer, and answers ``M6`` with error 20) a comment naming the tool followed by
 goes on with the new tool.
 
 Exact geometry: a job's points are machine steps; where the exact mm of a point is known (``exact_xy_mm``:
-a drill file's holes, :attr:`cam.job.drill.DrillPlan.holes_mm`, see :func:`exact_geometry`; ``exact_z_mm``:
-the drill depth asked for) it is written instead of the step's position, unless ``snap`` is set.
+a drill file's holes, :attr:`cam.job.drill.DrillPlan.holes_mm`, see :func:`exact_geometry`; an SVG file's
+curves, :func:`svg_exact_xy_mm`; an HPGL file's points, :func:`hpgl_exact_xy_mm`; ``exact_z_mm``: the drill
+depth asked for) it is written instead of the step's position, unless ``snap`` is set.  A mapping that knows
+which moves are chords of the source's circles and arcs (``on_arc(from steps, to steps)``: an HPGL ``CI``,
+``AA``, ``AR``) has the fitter hold an arc over them to the chords' ends only, so those come out as
+``G2``/``G3``.
 
 Arcs (``arc_tolerance_mm``): each run of cutting moves is fitted with lines and XY arcs
 (:func:`cam.job.arcs.fit_path`), each within the tolerance of the job's own polyline, and written as
@@ -50,11 +54,13 @@ from ..fileio import atomic_write_text
 from ..errors import CamError
 from ..job.arcs import Segment, arc_centre_for_ends, fit_path
 from ..job.model import RETRACT, TRAVEL, Job
+from ..job.hpgl_stream import hpgl_scale, xy_steps_exact
 from ..job.svg import FLATTEN_STEPS, _selected, svg_layer_order, svg_scale
+from .hpgl import ARC_MNEMONICS, HpglDrawing, iter_hpgl, load_hpgl
 from .svg import load_svg
 
 __all__ = ["to_gcode", "gcode_pieces", "save_gcode", "feeds_mm_per_min", "exact_geometry", "svg_exact_xy_mm",
-           "POSTS"]
+           "hpgl_exact_xy_mm", "POSTS"]
 
 POSTS = ("generic", "grbl", "linuxcnc")
 """The targets G-code is written for (``cam export --post``)."""
@@ -99,13 +105,27 @@ def exact_geometry(prepared: Any, cut_depth_mm: Optional[float] = None, options:
     """``(exact_xy_mm, exact_z_mm)`` of a :class:`cam.job.jobs.PreparedJob` for :func:`gcode_pieces`: a drill
     file's holes at their mm before rounding to steps (the first hole of a step wins), and ``cut_depth_mm``
     for its drill depth; an SVG file's strokes (:func:`svg_exact_xy_mm`, with the job's
-    :class:`cam.job.jobs.JobOptions` ``options``: scale, fit, offset, layers); empty for other kinds (their
-    points are the job's own)."""
+    :class:`cam.job.jobs.JobOptions` ``options``: scale, fit, offset, layers); an HPGL file's pen-down points
+    and which of its chords are arcs (:func:`hpgl_exact_xy_mm`, the same options but layers; not a file of more
+    than :data:`MAX_SAMPLES` points); empty for other kinds (their points are the job's own).
+
+    A file placed by its own zero (``options.origin`` "file" and no offset) is placed as the planner placed it:
+    its zero at the job's home."""
     xy: dict[tuple[int, int], tuple[float, float]] = {}
     z: dict[int, float] = {}
-    if getattr(prepared, "kind", None) == "svg" and options is not None:
-        return svg_exact_xy_mm(load_svg(prepared.source), prepared.settings, scale=options.scale,
-                               fit_mm=options.fit_mm, offset_mm=options.offset_mm, layers=options.layers), z
+    kind = getattr(prepared, "kind", None)
+    if kind in ("svg", "hpgl") and options is not None:
+        offset = options.offset_mm
+        if offset is None and getattr(options, "origin", None) == "file":
+            offset = (0.0, 0.0)  # as cam.job.jobs.prepare_job plans it
+        if kind == "svg":
+            return svg_exact_xy_mm(load_svg(prepared.source), prepared.settings, scale=options.scale,
+                                   fit_mm=options.fit_mm, offset_mm=offset, layers=options.layers), z
+        if int((getattr(prepared, "report", None) or {}).get("points", 0)) > MAX_SAMPLES:
+            return xy, z  # a file streamed a piece at a time: written at its steps
+        return hpgl_exact_xy_mm(load_hpgl(prepared.source), prepared.settings, scale=options.scale,
+                                fit_mm=options.fit_mm, offset_mm=offset, arc_positions=_arc_positions(
+                                    prepared.source)), z
     plan = getattr(prepared, "drill_plan", None)
     if plan is not None and getattr(plan, "holes_mm", None) is not None:
         for (xs, ys), (xm, ym) in zip(np.asarray(plan.holes_steps).tolist(), np.asarray(plan.holes_mm).tolist()):
@@ -176,11 +196,61 @@ def svg_exact_xy_mm(drawing: Any, settings: Any, *, scale: Optional[float] = Non
     return found
 
 
+def _arc_positions(path: Any) -> set[tuple[int, int]]:
+    """``{(line, column)}`` of the circle and arc commands (``CI``, ``AA``, ``AR``) of an HPGL file."""
+    return {(c.line, c.column) for c in iter_hpgl(path) if c.name in ARC_MNEMONICS}
+
+
+def hpgl_exact_xy_mm(drawing: HpglDrawing, settings: Any, *, scale: Optional[float] = None,
+                     fit_mm: Optional[tuple[float, float]] = None, offset_mm: Optional[tuple[float, float]] = None,
+                     arc_positions: Optional[set[tuple[int, int]]] = None
+                     ) -> dict[tuple[int, int], tuple[float, float]]:
+    """``{(x steps, y steps): (x mm, y mm)}``: for each step an HPGL job's pen-down points round to, the exact
+    position of the first of them, placed and scaled as :func:`cam.job.hpgl.plan_hpgl` places them
+    (:func:`cam.job.hpgl_stream.xy_steps_exact`: ``scale``/``fit_mm``, ``offset_mm`` or the drawing's top-left).
+
+    ``arc_positions``: the ``(line, column)`` of the file's ``CI``/``AA``/``AR`` commands.  The reader gives
+    every point of a circle or an arc its command's position (a ``PD`` point has its own coordinates'), so a
+    point there that starts no stroke ends a chord of the arc: the mapping's :meth:`~_StepPoints.on_arc` says
+    which moves between two steps stand for an arc of the file (the fitter then holds an arc to the chords'
+    ends, which lie on the file's circle, and not to the chords), and a circle comes out as ``G2``/``G3``.
+    """
+    pu = drawing.points_pu
+    mm = settings.mm_per_step_xy
+    found = _StepPoints()
+    found.mm_per_step = mm
+    if len(pu) == 0:
+        return found
+    factor = hpgl_scale(drawing.summary(), scale=scale, fit_mm=fit_mm)
+    exact = xy_steps_exact(pu[:, 0], pu[:, 1], drawing.extent_pu(), settings, offset_mm, factor)
+    cells = np.floor(exact + 0.5).astype(np.int64)
+    key = (cells[:, 0] << 32) + cells[:, 1]
+    _, first = np.unique(key, return_index=True)
+    found.update(zip(map(tuple, cells[first].tolist()), map(tuple, (exact[first] * mm).tolist())))
+    start = np.zeros(len(pu), bool)
+    start[drawing.stroke_start] = True
+    positions = np.asarray(sorted(arc_positions or ()), np.int64).reshape(-1, 2)
+    on_arc = ~start & np.isin((np.asarray(drawing.point_line, np.int64) << 32) + drawing.point_col,
+                              (positions[:, 0] << 32) + positions[:, 1])
+    # the planner drops a point in the step of the one before it: a move joins two steps in a row
+    moves = np.flatnonzero(on_arc)
+    moves = moves[(moves > 0) & (key[moves] != key[moves - 1])]
+    found.arc_moves = set(zip(key[moves - 1].tolist(), key[moves].tolist()))
+    return found
+
+
 class _StepPoints(dict):
     """``{(x steps, y steps): (x mm, y mm)}`` whose :meth:`get` of a step it lacks takes the nearest of the
     eight around it (the planner's coarser polyline may round a sample into a step beside the fine curve's)."""
 
     mm_per_step: float = 1.0
+    arc_moves: set = frozenset()  # type: ignore[assignment]  # {(from key, to key)}: see on_arc
+
+    def on_arc(self, from_steps: tuple[int, int], to_steps: tuple[int, int]) -> bool:
+        """Whether the move between these two steps stands for an arc of the source (:func:`hpgl_exact_xy_mm`)."""
+        if not self.arc_moves:
+            return False
+        return ((from_steps[0] << 32) + from_steps[1], (to_steps[0] << 32) + to_steps[1]) in self.arc_moves
 
     def get(self, key: Any, default: Any = None) -> Any:  # type: ignore[override]
         value = dict.get(self, key)
@@ -292,6 +362,9 @@ class _Writer:
         self.f: Optional[float] = None
         self.above = True  # at the safe plane
         self.run: list[tuple[float, float, float]] = []
+        self.run_arc: list[bool] = []  # the move to each vertex of the run stands for an arc of the source
+        self.on_arc = getattr(exact_xy, "on_arc", None)
+        self.last_steps: Optional[tuple[int, int]] = None  # the job's point before
         self.out = io.StringIO()
         self.w = self.out.write
 
@@ -362,9 +435,12 @@ class _Writer:
         run, w = self.run, self.w
         if len(run) < 2:
             run.clear()
+            self.run_arc.clear()
             return
         pts = np.asarray(run, np.float64)
-        segments = fit_path(pts, self.tol) if self.tol else [Segment(k, "line") for k in range(1, len(pts))]
+        on_arc = np.asarray(self.run_arc, bool) if any(self.run_arc) else None
+        segments = fit_path(pts, self.tol, on_arc=on_arc) if self.tol else \
+            [Segment(k, "line") for k in range(1, len(pts))]
         sx, sy, sz = _written(pts[0, 0]), _written(pts[0, 1]), _written(pts[0, 2])
         for seg in segments:
             ex, ey, ez = (float(v) for v in pts[seg.end])
@@ -384,6 +460,7 @@ class _Writer:
             sx, sy, sz = wx, wy, wz
         self.x, self.y, self.z = float(pts[-1, 0]), float(pts[-1, 1]), float(pts[-1, 2])
         run.clear()
+        self.run_arc.clear()
 
     def go_up(self) -> None:
         self.flush()
@@ -391,16 +468,19 @@ class _Writer:
             self.w(f"G0 Z{_fmt(self.safe_z)}\n")
             self.above, self.z = True, self.safe_z
 
-    def vertex(self, x: float, y: float, z: float) -> None:
+    def vertex(self, x: float, y: float, z: float, arc: bool = False) -> None:
         if len(self.run) >= MAX_RUN_POINTS:  # by count, not by piece: a job written whole or in pieces is alike
             self.flush()
         if not self.run:
             self.run.append((self.x, self.y, self.z))
+            self.run_arc.append(False)
         if (x, y, z) != self.run[-1]:
             self.run.append((x, y, z))
+            self.run_arc.append(arc)
 
     def point(self, xp: int, yp: int, zp: int, kind: int) -> None:
         """One point of the job (machine steps) and its kind."""
+        last, self.last_steps = self.last_steps, (xp, yp)
         found = self.exact_xy.get((xp, yp)) if self.exact_xy else None
         if found is not None:
             nx, ny = float(found[0]), self.y_sign * float(found[1])
@@ -421,7 +501,7 @@ class _Writer:
                 self.w(f"G1 Z{_fmt(-self.oz_mm)}{self.feed_word(self.feed_z)}\n")
                 self.above, self.z = False, -self.oz_mm
                 cur = (cur[0], cur[1], -self.oz_mm)
-            self.vertex(nx, ny, cur[2])
+            self.vertex(nx, ny, cur[2], bool(self.on_arc and last is not None and self.on_arc(last, (xp, yp))))
         if nz != cur[2]:
             self.start_spindle()
             self.vertex(nx, ny, nz)

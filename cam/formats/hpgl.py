@@ -99,8 +99,8 @@ from ..errors import ParseError
 from ..limits import MAX_COORD_MM, MAX_TOOL_NUMBER
 
 __all__ = [
-    "HPGL_SUFFIXES", "PLOTTER_UNIT_MM", "CHUNK_BYTES", "MAX_COORD_PU", "MAX_ARC_CHORDS", "DEFAULT_P1_PU",
-    "DEFAULT_P2_PU", "KNOWN",
+    "HPGL_SUFFIXES", "PLOTTER_UNIT_MM", "CHUNK_BYTES", "MAX_COORD_PU", "MAX_ARC_CHORDS", "ARC_MNEMONICS",
+    "DEFAULT_P1_PU", "DEFAULT_P2_PU", "KNOWN",
     "HpglCommand", "HpglScan", "HpglDrawing", "PointBatch",
     "iter_hpgl", "scan_hpgl", "load_hpgl", "parse_hpgl", "point_batches",
 ]
@@ -129,7 +129,9 @@ C_IN, C_DF, C_SP, C_PU, C_PD, C_PA, C_PR = (_code(m) for m in ("IN", "DF", "SP",
 C_LB, C_DT, C_PE = _code("LB"), _code("DT"), _code("PE")
 C_SC, C_IP, C_CI, C_AA, C_AR, C_CT = (_code(m) for m in ("SC", "IP", "CI", "AA", "AR", "CT"))
 KNOWN = ("IN", "DF", "SP", "PU", "PD", "PA", "PR", "SC", "IP", "CI", "AA", "AR", "CT")
-ARC_CODES = np.array([C_CI, C_AA, C_AR], np.int64)
+ARC_MNEMONICS = ("CI", "AA", "AR")
+"""The commands that draw circles and arcs (each of their points carries the command's line and column)."""
+ARC_CODES = np.array([_code(m) for m in ARC_MNEMONICS], np.int64)
 """The commands that draw chords (their points are counted before they are made)."""
 
 # tokenizer modes

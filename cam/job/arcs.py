@@ -14,11 +14,15 @@ passes through every point it keeps.  What is checked, for every run taken:
 * an arc: the circle through the run's first, middle and last point (XY, every point of the run at the first
   one's Z); every point's distance from the circle, plus the largest sagitta of a chord between consecutive
   points (the arc bulges out of the chord by that much), at most ``tol_mm``; the points go round the centre one
-  way, each less than half a turn after the one before and all of them less than a full turn; the radius at
+  way, each less than half a turn after the one before and all of them less than a full turn (an arc that
+  only that stopped, a closed circle, is taken to its middle point, so the rest of the circle is one more arc
+  and not an arc a chord short of closing and a line); the radius at
   most ``max_radius_mm`` (a flatter arc is a line to every controller).
 
 So every point of the fitted path lies within ``tol_mm`` of the polyline and every point of the polyline within
-``tol_mm`` of the fitted path.  Frames: any right-handed mm frame (``ccw`` is counter-clockwise seen from +Z, a
+``tol_mm`` of the fitted path.  Where the polyline's chords stand for arcs of the source (``on_arc``: an HPGL
+circle drawn as chords), the path there is those arcs: an arc is held to the chords' ends only (their
+sagitta is not counted), so it lies within ``tol_mm`` of the source's circle rather than of its chords.  Frames: any right-handed mm frame (``ccw`` is counter-clockwise seen from +Z, a
 ``G3`` in G-code's XY plane).  Pure computation, no I/O.
 """
 from __future__ import annotations
@@ -86,15 +90,19 @@ def _circle(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> Optional[tuple[float
     return ux, uy, math.hypot(ax - ux, ay - uy)
 
 
-def _arc_fit(p: np.ndarray, i: int, j: int, tol_mm: float, max_radius_mm: float) -> Optional[Segment]:
-    """The arc through ``p[i..j]`` within ``tol_mm`` (see the module's rules), or None."""
+def _arc_fit(p: np.ndarray, i: int, j: int, tol_mm: float, max_radius_mm: float,
+             on_arc: Optional[np.ndarray] = None, max_sweep_rad: float = 2 * math.pi - 1e-6) -> Optional[Segment]:
+    """The arc through ``p[i..j]`` within ``tol_mm`` (see the module's rules), or None; ``on_arc[k]``: the path
+    from ``p[k - 1]`` to ``p[k]`` is an arc of the source (its chord's sagitta is not counted)."""
     if j - i < 2:
         return None
     run = p[i:j + 1]
     if float(np.abs(run[:, 2] - run[0, 2]).max()) > 1e-9:
         return None
     xy = run[:, :2]
-    fit = _circle(xy[0], xy[(j - i) // 2], xy[-1])
+    k = j - i
+    closed = bool(np.all(xy[0] == xy[-1]))  # a whole circle (asked with max_sweep_rad above a full turn)
+    fit = _circle(xy[0], xy[k // 3], xy[2 * k // 3]) if closed else _circle(xy[0], xy[k // 2], xy[-1])
     if fit is None:
         return None
     ux, uy, r = fit
@@ -107,9 +115,10 @@ def _arc_fit(p: np.ndarray, i: int, j: int, tol_mm: float, max_radius_mm: float)
     turn = np.arctan2(cross, dot)  # signed angle from each point to the next, seen from the centre
     total = float(turn.sum())
     sign = 1.0 if total > 0 else -1.0
-    if not (sign * turn > 0).all() or abs(total) >= 2 * math.pi - 1e-6:
+    if not (sign * turn > 0).all() or abs(total) >= max_sweep_rad:
         return None
-    sagitta = r * (1.0 - math.cos(float(np.abs(turn).max()) / 2.0))
+    chords = np.abs(turn) if on_arc is None else np.abs(turn)[~on_arc[i + 1:j + 1]]
+    sagitta = r * (1.0 - math.cos(float(chords.max()) / 2.0)) if len(chords) else 0.0
     if radial + sagitta > tol_mm:
         return None
     return Segment(j, "ccw" if sign > 0 else "cw", (float(ux), float(uy)))
@@ -141,11 +150,16 @@ def _longest(i: int, n: int, ok: Callable[[int], bool], first: int) -> int:
 
 
 def fit_path(points_mm: np.ndarray, tol_mm: float = DEFAULT_ARC_TOLERANCE_MM, *,
-             max_radius_mm: float = MAX_RADIUS_MM) -> list[Segment]:
+             max_radius_mm: float = MAX_RADIUS_MM, on_arc: Optional[np.ndarray] = None) -> list[Segment]:
     """Lines and XY arcs through ``points_mm`` (``(N, 3)`` mm, N >= 1), each within ``tol_mm`` of the polyline.
 
     Returns the segments in order; the first starts at ``points_mm[0]``, each ends on a point of the path, the
     last on its last point.  Give it no two equal consecutive points (an arc never spans them).
+
+    ``on_arc``: ``(N,)`` bool, True at ``k`` where the path from point ``k - 1`` to point ``k`` stands for an
+    arc of the source that passes through both (an HPGL ``CI``/``AA``/``AR`` drawn as chords): the path there
+    is the arc, not its chord, so an arc fitted over it is held to its points only (every point within
+    ``tol_mm`` of the fitted circle, the chord's sagitta not counted).
 
     >>> p = np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0], [3, 0.001, 0]])
     >>> fit_path(p, 0.01)
@@ -165,14 +179,21 @@ def fit_path(points_mm: np.ndarray, tol_mm: float = DEFAULT_ARC_TOLERANCE_MM, *,
             ((d[:-1] * d[1:]).sum(axis=1) > 0)
     index = np.flatnonzero(~middle)
     p = full[index]
+    arcs = None
+    if on_arc is not None:  # a kept chord stands for an arc when every chord it joins does
+        plain = np.concatenate([[0], np.cumsum(~np.asarray(on_arc, bool).reshape(-1)[1:])])
+        arcs = np.zeros(len(index), bool)
+        arcs[1:] = plain[index[1:]] == plain[index[:-1]]
     n = len(p)
     segments: list[Segment] = []
     i = 0
     while i < n - 1:
         j_line = _longest(i, n, lambda j: _line_ok(p, i, j, tol_mm), i + 1)
-        j_arc = _longest(i, n, lambda j: _arc_fit(p, i, j, tol_mm, max_radius_mm) is not None, i + 2)
+        j_arc = _longest(i, n, lambda j: _arc_fit(p, i, j, tol_mm, max_radius_mm, arcs) is not None, i + 2)
         if j_arc - i > ARC_COST_LINES * (j_line - i):
-            arc = _arc_fit(p, i, j_arc, tol_mm, max_radius_mm)
+            if j_arc + 1 < n and _arc_fit(p, i, j_arc + 1, tol_mm, max_radius_mm, arcs, math.inf) is not None:
+                j_arc = (i + j_arc + 1) // 2  # stopped by the full turn only: half now, the rest closes it
+            arc = _arc_fit(p, i, j_arc, tol_mm, max_radius_mm, arcs)
             assert arc is not None
             segments.append(Segment(int(index[j_arc]), arc.kind, arc.centre_mm))
             i = j_arc

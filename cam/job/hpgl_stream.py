@@ -36,7 +36,8 @@ from ..formats.hpgl import (CHUNK_BYTES, PLOTTER_UNIT_MM, HpglDrawing, HpglScan,
 from ..settings import DEFAULT_SETTINGS, MachineSettings
 from .model import CUT, RETRACT, TRAVEL, Job, PixelFrame, check_travel, join_pieces
 
-__all__ = ["HpglJobStream", "stream_hpgl", "xy_steps", "hpgl_scale", "outside_travel", "STREAM_POINTS", "PIECE_POINTS",
+__all__ = ["HpglJobStream", "stream_hpgl", "xy_steps", "xy_steps_exact", "hpgl_scale", "outside_travel",
+           "STREAM_POINTS", "PIECE_POINTS",
            "DEFAULT_CUT_DEPTH_MM", "DEFAULT_TRAVEL_HEIGHT_MM"]
 
 DEFAULT_CUT_DEPTH_MM = 0.5
@@ -55,8 +56,17 @@ def xy_steps(x_pu: np.ndarray, y_pu: np.ndarray, extent_pu: Optional[tuple[float
 
     ``offset_mm`` None: the drawing's top-left (``x_min``, ``y_max`` of ``extent_pu``, the whole drawing's
     ``(x_min, y_min, x_max, y_max)`` plotter units) at the home; else plotter (0, 0), scaled, at machine
-    ``offset_mm``.  Nearest step: ``floor(v + 0.5)`` of the exact position in steps.
+    ``offset_mm``.  Nearest step: ``floor(v + 0.5)`` of the exact position in steps (:func:`xy_steps_exact`).
     """
+    exact = xy_steps_exact(x_pu, y_pu, extent_pu, settings, offset_mm, scale)
+    return np.floor(exact + 0.5).astype(np.int64)
+
+
+def xy_steps_exact(x_pu: np.ndarray, y_pu: np.ndarray, extent_pu: Optional[tuple[float, float, float, float]],
+                   settings: MachineSettings, offset_mm: Optional[tuple[float, float]],
+                   scale: float = 1.0) -> np.ndarray:
+    """``(N, 2)`` float64 machine ``(x, y)`` of ``(N,)`` plotter points in steps, before :func:`xy_steps` rounds
+    them (the same placement; times ``settings.mm_per_step_xy``: the exact mm, G-code out)."""
     mm_per_pu = PLOTTER_UNIT_MM if scale == 1.0 else PLOTTER_UNIT_MM * scale
     if offset_mm is None:
         x0, _, _, y1 = extent_pu if extent_pu is not None else (0.0, 0.0, 0.0, 0.0)
@@ -66,7 +76,7 @@ def xy_steps(x_pu: np.ndarray, y_pu: np.ndarray, extent_pu: Optional[tuple[float
         ox, oy = offset_mm
         x_steps = (ox + x_pu * mm_per_pu) / settings.mm_per_step_xy
         y_steps = (oy - y_pu * mm_per_pu) / settings.mm_per_step_xy
-    return np.floor(np.column_stack([x_steps, y_steps]) + 0.5).astype(np.int64)
+    return np.column_stack([x_steps, y_steps])
 
 
 def hpgl_scale(scan: HpglScan, *, scale: Optional[float] = None, fit_mm: Optional[tuple[float, float]] = None) -> float:
