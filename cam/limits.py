@@ -61,11 +61,12 @@ MAX_MOVE_PERIODS = 1 << 22
 path at 0.0289 mm per step.  Bounds the memory of planning one move (about 150 bytes a period); checked
 before an arc is sampled, after its bounding box is checked against the travel."""
 
-DEFAULT_GCODE_LINES = 1_000_000
+DEFAULT_GCODE_LINES = 250_000
 MAX_GCODE_LINES = 1_000_000_000
-"""A G-code program may run at most this many lines, each pass of a loop and each line of a subroutine
-counted (``--max-lines``, default a million, about half a minute of interpreting): a loop that never ends
-is an error naming the line it reached, not a hang.  The option itself is 1..1e9."""
+"""A G-code program may run at most this many lines more than its own (the file's lines once, then each
+further pass of a loop and each line of a subroutine counted: ``--max-lines``, default 250,000, a few seconds
+of interpreting, issue #32 point 3): a loop that never ends is an error naming the line it reached, not a
+hang, and a program of millions of straight lines runs whole.  The option itself is 1..1e9."""
 
 MAX_GCODE_CALL_DEPTH = 100
 """G-code subroutines may call each other at most 100 deep (endless recursion is an error)."""

@@ -236,8 +236,9 @@ JOB_OPTIONS: tuple[Option, ...] = (
     _opt("subroutine_path", "--subroutine-path", "paths", "", {"gcode"}, (),
          "folder where 'O<name> call' finds name.ngc (repeatable, searched in order)", metavar="DIR", web=False),
     _opt("max_lines", "--max-lines", "whole", "lines", {"gcode"}, DEFAULT_GCODE_LINES,
-         f"stop a program that runs more than N lines, loops counted each pass (default {DEFAULT_GCODE_LINES:,}): "
-         "a loop that never ends is an error, not a hang", lo=1, hi=MAX_GCODE_LINES, metavar="N"),
+         f"stop a program that runs N lines more than its own length, loops and subroutine calls counted each "
+         f"pass (default {DEFAULT_GCODE_LINES:,}): a loop that never ends is an error, not a hang; a long "
+         "program runs whole", lo=1, hi=MAX_GCODE_LINES, metavar="N"),
     # sketches and photos traced into drawings
     _opt("trace", "--trace", "flag", "", {"drawing"}, False,
          "the image is a scanned sketch or a photo of one: trace it into 1-pixel curves first (as 'cam trace' "

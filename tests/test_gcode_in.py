@@ -185,7 +185,7 @@ def test_bad_gcode_names_line_and_word(text, line, fragment):
 
 def test_a_program_that_never_ends_is_stopped_at_the_line_limit():
     endless = "G21 G90\nG1 F100\no100 while [1]\nG1 X1\nG1 X0\no100 endwhile\nM2\n"
-    with pytest.raises(cam.ParseError, match=r"loop\.ngc:\d: the program has run 5000 lines and does not end"):
+    with pytest.raises(cam.ParseError, match=r"loop\.ngc:\d: the program has run 5,000 lines more than its own 7 and does not end"):
         parse_gcode(endless, source="loop.ngc", max_lines=5000)
     quiet = "#1=0\no1 do\n#1=[#1+1]\no1 while [1]\n"  # no motion at all
     with pytest.raises(cam.ParseError, match="does not end"):
@@ -229,3 +229,13 @@ def test_cli_preview_of_a_gcode_program(tmp_path):
     assert "<line" in (tmp_path / "e.svg").read_text()
     assert_one_line_error(cli("drill", good, "--preview", tmp_path / "e.gif", "--no-progress"), "e.gif", ".png")
     assert not (tmp_path / "e.gif").exists()
+
+
+def test_a_long_straight_program_runs_whole_and_only_repeats_count():
+    straight = "G21 G90\nG1 F100\n" + "".join(f"G1 X{i % 7} Y-{i % 5}\n" for i in range(3000)) + "M2\n"
+    program = parse_gcode(straight, source="long.ngc", max_lines=100)  # 3,003 lines run: its own, none repeated
+    assert len(program.moves) >= 3000
+    looped = "G21 G90\nG1 F100\n#1=0\no1 while [#1 LT 40]\nG1 X1\nG1 X0\n#1=[#1+1]\no1 endwhile\nM2\n"
+    parse_gcode(looped, source="ok.ngc", max_lines=200)  # 40 passes of 5 lines: 200 more than its own 9
+    with pytest.raises(cam.ParseError, match="150 lines more than its own 9"):
+        parse_gcode(looped, source="ok.ngc", max_lines=150)

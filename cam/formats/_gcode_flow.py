@@ -27,6 +27,7 @@ class _Flow(_State):
         takes :attr:`moves` then; :func:`cam.formats.gcode.interpret`), and ends with the program."""
         src, idx = self.main, 0
         executed = 0
+        budget = self.max_lines + src.n_lines  # one pass of the file's own lines, then max_lines more
         percent = False
         ran = False
         while True:
@@ -37,10 +38,10 @@ class _Flow(_State):
                     raise self.err(f"the file ends inside subroutine 'o{self.frames[-1].label}'")
                 return
             executed += 1
-            if executed > self.max_lines:
+            if executed > budget:
                 self.source, self.line_no, self.raw = src, idx + 1, src.line(idx)
-                raise self.err(f"the program has run {self.max_lines} lines and does not end (a loop without an "
-                               "exit?); raise the limit with --max-lines")
+                raise self.err(f"the program has run {self.max_lines:,} lines more than its own {self.main.n_lines:,} "
+                               "and does not end (a loop without an exit?); raise the limit with --max-lines")
             body, line = self._read(src, idx)
             if line is None:
                 if body.startswith("$"):
