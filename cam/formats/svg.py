@@ -63,10 +63,15 @@ MM_PER_PX = 25.4 / 96.0
 MAX_SVG_BYTES = 64 * 1024 * 1024
 """Larger SVG files are refused before they are parsed."""
 MAX_SEGMENTS_PER_CURVE = 100_000
+EVALUATE_POINTS = 1 << 17
+"""Curves are flattened in blocks of about this many points."""
 MAX_SVG_ELEMENTS = 200_000
 """Elements an SVG may hold once its ``<use>`` references are expanded (counted before anything is expanded: ten
 levels of ``<use>`` fanning out four ways make a million copies from 2 kB)."""
 """The most straight pieces one curve is flattened into (a curve longer than 1 km at the finest tolerance)."""
+
+Stroke = Union[list[np.ndarray], np.ndarray]
+"""A stroke's segments: ``(k, 2)`` arrays (see :attr:`SvgDrawing.strokes`)."""
 
 NO_LAYER = "(no layer)"
 """The layer of strokes outside every Inkscape layer of a file that has some."""
@@ -82,8 +87,9 @@ class SvgDrawing:
     """The strokes of an SVG file as exact segments in mm (see the module docstring for the frame).
 
     Attributes:
-        strokes: one entry per stroke (a subpath): a list of ``(k, 2)`` float64 control point arrays in mm,
-            ``k`` = 2 (line), 3 (quadratic Bézier) or 4 (cubic Bézier), each starting where the last ended.
+        strokes: one entry per stroke (a subpath): a sequence of ``(k, 2)`` float64 control point arrays in
+            mm, ``k`` = 2 (line), 3 (quadratic Bézier) or 4 (cubic Bézier), each starting where the last ended
+            (a list, or one ``(n, k, 2)`` array when all are of one kind: a circle's 12 cubics).
         closed: ``(S,)`` bool, the stroke ends where it starts.
         size_mm: the document's ``(width, height)`` in mm (its viewport), or the extent of the strokes
             when the file gives none.
@@ -95,7 +101,7 @@ class SvgDrawing:
         layers_from: what named the layers: "inkscape" (layer groups) or "colour" (stroke colours).
     """
 
-    strokes: list[list[np.ndarray]]
+    strokes: list[Stroke]
     closed: np.ndarray
     size_mm: tuple[float, float] = (0.0, 0.0)
     element_counts: dict[str, int] = field(default_factory=dict)
@@ -118,10 +124,13 @@ class SvgDrawing:
 
     def layer_lengths_mm(self, tolerance_mm: float = 1e-3) -> list[float]:
         """The length of every layer's strokes in mm (as :meth:`layers`; curves flattened within ``tolerance_mm``)."""
-        out = np.zeros(len(self.layers()))
-        for poly, layer in zip(self.polylines(tolerance_mm), self.layer_of_stroke):
-            out[layer] += float(np.hypot(*np.diff(poly, axis=0).T).sum())
-        return out.tolist()
+        if not self.strokes:
+            return [0.0] * len(self.layers())
+        pts, bounds = _flatten_joined(self.strokes, tolerance_mm)
+        step = np.hypot(*np.diff(pts, axis=0).T)
+        step[bounds[1:-1] - 1] = 0.0  # from one stroke's end to the next one's start: no length
+        per_stroke = np.add.reduceat(np.r_[step, 0.0], bounds[:-1])
+        return np.bincount(self.layer_of_stroke, per_stroke, len(self.layers())).tolist()
 
     def find_layers(self, name: str) -> list[int]:
         """The indices (file order) of the layers ``name`` selects: the layer of that name and its sublayers
@@ -164,7 +173,7 @@ class SvgDrawing:
         """``(x0, y0, x1, y1)`` of the strokes in mm, within ``tolerance_mm``; zeros when there are none."""
         if not self.strokes:
             return (0.0, 0.0, 0.0, 0.0)
-        pts = np.concatenate(self.polylines(tolerance_mm))
+        pts = _flatten_joined(self.strokes, tolerance_mm)[0]
         lo, hi = pts.min(axis=0), pts.max(axis=0)
         return (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]))
 
@@ -197,19 +206,24 @@ def _flatten_segment(seg: np.ndarray, tolerance_mm: float) -> np.ndarray:
     return s ** 3 * seg[0] + 3 * s * s * t * seg[1] + 3 * s * t * t * seg[2] + t ** 3 * seg[3]
 
 
-def _flatten_strokes(strokes: list[list[np.ndarray]], tolerance_mm: float) -> list[np.ndarray]:
+def _flatten_strokes(strokes: list[Stroke], tolerance_mm: float) -> list[np.ndarray]:
     """Every stroke's polyline (see :meth:`SvgDrawing.polylines`), all segments of one kind at once: the same
     points :func:`_flatten_segment` gives one segment at a time."""
-    segs = [seg for stroke in strokes for seg in stroke]
-    if not segs:
-        return [np.zeros((0, 2)) for _ in strokes]
-    kinds = np.fromiter((len(seg) for seg in segs), np.int64, len(segs))
-    n = np.ones(len(segs), np.int64)
+    if not strokes:
+        return []
+    out, bounds = _flatten_joined(strokes, tolerance_mm)
+    return np.split(out, bounds[1:-1])
+
+
+def _flatten_joined(strokes: list[Stroke], tolerance_mm: float) -> tuple[np.ndarray, np.ndarray]:
+    """The polylines of :func:`_flatten_strokes` one after another (``(P, 2)``), and where each begins (``(S + 1,)``
+    offsets, the last ``P``); every stroke has a segment."""
+    kinds, parts = _segments_by_kind(strokes)
+    n = np.ones(len(kinds), np.int64)
     curves = {}
     for k in (QUADRATIC, CUBIC):
-        where = np.flatnonzero(kinds == k)
-        if len(where):
-            ctrl = np.stack([segs[i] for i in where])
+        if parts[k][0]:
+            where, ctrl = np.concatenate(parts[k][0]), np.concatenate(parts[k][1])
             second = ctrl[:, :-2] - 2 * ctrl[:, 1:-1] + ctrl[:, 2:]
             m = np.sqrt((second ** 2).sum(axis=2)).max(axis=1)
             bound = 6 * m if k == CUBIC else 2 * m
@@ -224,15 +238,40 @@ def _flatten_strokes(strokes: list[list[np.ndarray]], tolerance_mm: float) -> li
     out = np.empty((int(ends[-1]) if len(ends) else 0, 2))
     first = np.cumsum(lengths) - lengths
     heads = starts[first[lengths > 0]] - 1
-    out[heads] = np.stack([stroke[0][0] for stroke in strokes if stroke])
-    lines = np.flatnonzero(kinds == LINE)
-    if len(lines):
-        out[starts[lines]] = np.stack([segs[i][-1] for i in lines])
+    out[heads] = np.stack([stroke[0][0] for stroke in strokes if len(stroke)])
+    if parts[LINE][0]:
+        out[starts[np.concatenate(parts[LINE][0])]] = np.concatenate(parts[LINE][1])[:, -1]
     for k, (where, ctrl) in curves.items():
-        _evaluate(out, ctrl, n[where], starts[where], k)
-    bounds = np.concatenate([[0], ends[np.cumsum(lengths)[lengths > 0] - 1]])
-    polys = iter(np.split(out, bounds[1:-1]))
-    return [next(polys) if length else np.zeros((0, 2)) for length in lengths]
+        # a block of curves at a time: about EVALUATE_POINTS points (the memory of a block, not of the drawing)
+        block = np.searchsorted(np.cumsum(n[where]), np.arange(EVALUATE_POINTS, int(n[where].sum()), EVALUATE_POINTS))
+        for lo, hi in zip(np.r_[0, block], np.r_[block, len(where)]):
+            if hi > lo:
+                _evaluate(out, ctrl[lo:hi], n[where[lo:hi]], starts[where[lo:hi]], k)
+    return out, np.concatenate([[0], ends[np.cumsum(lengths) - 1]])
+
+
+def _segments_by_kind(strokes: list[Stroke]) -> tuple[np.ndarray, dict[int, tuple[list, list]]]:
+    """Every segment's kind (``(G,)``, in stroke order) and, for each kind, the segments' indices and control
+    points as lists of arrays to join (a stroke held as one ``(n, k, 2)`` array is taken whole)."""
+    parts: dict[int, tuple[list, list]] = {k: ([], []) for k in (LINE, QUADRATIC, CUBIC)}
+    kinds: list[np.ndarray] = []
+    at = 0
+    for stroke in strokes:
+        if isinstance(stroke, np.ndarray):
+            k = stroke.shape[1]
+            parts[k][0].append(np.arange(at, at + len(stroke)))
+            parts[k][1].append(stroke)
+            kinds.append(np.full(len(stroke), k, np.int64))
+        else:
+            ks = np.fromiter((len(seg) for seg in stroke), np.int64, len(stroke))
+            for k in (LINE, QUADRATIC, CUBIC):
+                mine = np.flatnonzero(ks == k)
+                if len(mine):
+                    parts[k][0].append(at + mine)
+                    parts[k][1].append(np.stack([stroke[i] for i in mine]))
+            kinds.append(ks)
+        at += len(stroke)
+    return np.concatenate(kinds), parts
 
 
 def _evaluate(out: np.ndarray, ctrl: np.ndarray, n: np.ndarray, starts: np.ndarray, k: int) -> None:
@@ -869,16 +908,16 @@ def _parse_fast(root, source: str) -> SvgDrawing:
     walk.children(root, walk.root(root), None)
     cubics, gaps = _circles(walk.circles, k)
     _checked(cubics)  # every control point is cut
-    strokes: list[list[np.ndarray]] = []
+    strokes: list[Stroke] = []
     closed: list[bool] = []
     counts: dict[str, int] = {}
     layer_paths: list[Optional[str]] = []
     colours: list[str] = []
     for name, pieces, layer, colour in walk.items:
         if isinstance(pieces, int):
-            segs = list(cubics[pieces])
+            segs = cubics[pieces]  # one array of its 12 cubics (a stroke of one kind of segment)
             if gaps[pieces]:
-                segs.append(_checked(np.array([segs[-1][-1], segs[0][0]])))
+                segs = list(segs) + [_checked(np.array([segs[-1][-1], segs[0][0]]))]
             pieces = [(segs, True)]
         if not pieces:
             continue
@@ -893,7 +932,7 @@ def _parse_fast(root, source: str) -> SvgDrawing:
     return _drawing(strokes, closed, size, counts, [], source, layer_paths, colours)
 
 
-def _drawing(strokes: list[list[np.ndarray]], closed: list[bool], size: tuple[float, float], counts: dict[str, int],
+def _drawing(strokes: list[Stroke], closed: list[bool], size: tuple[float, float], counts: dict[str, int],
              warnings: list[str], source: str, layer_paths: list[Optional[str]], colours: list[str]) -> SvgDrawing:
     """The drawing of the strokes read, with its layers (see the module docstring) and its size."""
     inkscape = any(layer is not None for layer in layer_paths)

@@ -164,7 +164,7 @@ def _drop_corners(cells: np.ndarray, fixed: np.ndarray, samples: np.ndarray, run
     return cells[~corner]
 
 
-CELLS_CHUNK_SAMPLES = 1 << 20
+CELLS_CHUNK_SAMPLES = 1 << 18
 """:func:`_cells_many` samples about this many positions at a time (its memory is bounded by it)."""
 
 
@@ -210,18 +210,24 @@ def _cells_chunk(polys: list[np.ndarray]) -> list[np.ndarray]:
     turn[1:] |= ~first_seg[1:] & ok & (cos < math.cos(math.radians(CORNER_DEG)))
     seg = np.repeat(np.arange(len(d)), n)
     i_in_seg = np.arange(len(seg)) - np.repeat(np.cumsum(n) - n, n)
-    t = i_in_seg / np.repeat(n, n)
     total = len(seg) + len(multi)
-    pts = np.empty((total, 2))
     at = np.arange(len(seg)) + seg_poly[seg]  # each poly's samples, then its last vertex
-    pts[at] = vert[seg_v][seg] + d[seg] * t[:, None]
     ends = np.cumsum(v_count - 1 + np.bincount(seg_poly, weights=n - 1, minlength=len(multi)).astype(np.int64)) \
         + np.arange(len(multi))
-    pts[ends] = vert[last_vertex]
     fixed = np.ones(total, bool)
     fixed[at] = turn[seg] & (i_in_seg == 0)
     sample_poly = np.empty(total, np.int64)
     sample_poly[at], sample_poly[ends] = seg_poly[seg], np.arange(len(multi))
+    pts = np.empty((total, 2))
+    t = i_in_seg / np.repeat(n, n)
+    del i_in_seg
+    step = d[seg]  # the samples, made in place: a long stroke is millions of them
+    step *= t[:, None]
+    del t
+    step += vert[seg_v][seg]
+    pts[at] = step
+    del step, at, seg
+    pts[ends] = vert[last_vertex]
     cells = np.floor(pts + 0.5).astype(np.int64)
     new = np.ones(total, bool)
     new[1:] = np.any(cells[1:] != cells[:-1], axis=1) | (sample_poly[1:] != sample_poly[:-1])
