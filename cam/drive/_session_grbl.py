@@ -115,13 +115,12 @@ def home_on_grbl(session: Any, ctl: GrblControl) -> None:
             pass
     moved = None if pos is None else np.asarray(pos, np.int64) - np.asarray(session.position_steps(), np.int64)
     status = "finished" if not error else ("emergency-stopped" if ctl.estopped else "error")
+    hold = session.state_hold
+    if hold is not None and not error:  # before the end is booked: whoever sees the session idle sees it homed
+        hold.record(replace(hold.state.moved_to(tuple(int(v) for v in pos)), homed=True))
     session.finish({"activity": "home", "label": "home ($H)", "status": status,
                     "messages": [error] if error else []}, moved)
-    hold = session.state_hold
-    if hold is not None:
-        if error:
-            hold.record(hold.state.lost(f"homing did not finish ({error})"))
-        else:
-            hold.record(replace(hold.state, homed=True))
+    if hold is not None and error:
+        hold.record(hold.state.lost(f"homing did not finish ({error})"))
     session.log(f"homed: machine {list(pos)} steps" if not error else f"home ($H): {error}",
                 "info" if not error else "error")
