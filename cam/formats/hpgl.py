@@ -13,14 +13,16 @@ Beyond the seed, so that files from Inkscape, vpype and CAD programs work:
 * commands separated by ``;``, by a newline, or by nothing (the next
   two-letter mnemonic starts a command); whitespace anywhere; numbers
   separated by ``,`` or whitespace;
-* ``SC`` and ``IP`` scale the plot as an HP-GL/2 plotter does (below);
-* ``CI`` circles, ``AA``/``AR`` arcs, ``CT`` chord tolerance mode (below);
+* ``SC``, ``IP`` and ``IR`` scale the plot as an HP-GL/2 plotter does, ``RO``
+  turns its coordinate system (below);
+* ``CI`` circles, ``AA``/``AR`` arcs, ``AT``/``RT`` three-point arcs, ``CT``
+  chord tolerance mode (below);
 * anything else is an unknown command: skipped with a warning naming its
   byte offset and line (``LT``, ``VS``, ``CO "comment"``; ``LB`` label text
   runs to the label terminator, ETX ``\\x03`` or the character set by ``DT``;
   ``PE`` runs to ``;``).  Drawing commands outside the subset (encoded
-  polylines ``PE``, three-point arcs ``AT``/``RT``, Beziers, rectangles and
-  wedges, labels, ...) are therefore not cut.
+  polylines ``PE``, Beziers, rectangles and wedges, labels, ...) are therefore
+  not cut.
 
 Scaling (HP-GL/2): ``IP x1,y1,x2,y2`` sets the scaling points P1 and P2 in
 plotter units (``IP x1,y1`` moves P1 and keeps P2 where it was relative to
@@ -36,7 +38,15 @@ P1 with ``factor`` plotter units per user unit.  ``SC;``, ``DF`` and ``IN``
 turn scaling off.  While scaling is on, ``PA``/``PU``/``PD`` coordinates,
 ``PR`` increments, arc centres and radii are user units; a new ``IP`` rescales
 the user units that follow; the pen stays where it is (points are kept in
-plotter units).
+plotter units).  ``IR x1,y1[,x2,y2]`` is ``IP`` in percent (0..100) of the
+rectangle from the default P1 to the default P2 (the page this reader
+assumes); ``IR;`` restores the defaults.  ``RO angle`` (0, 90, 180 or 270;
+``RO;`` and ``IN``: 0) turns the coordinate system that many degrees from +X
+toward +Y about plotter (0, 0): a point (x, y) that follows is plotted at
+(x, y) turned by the angle, P1 and P2 keep their values in the turned system,
+and the pen stays where it is on the paper (its coordinates change).  The
+shift a plotter adds to keep a turned plot on its page is not made: the
+drawing is placed by its extent (or ``--offset``) when it is cut.
 
 Circles and arcs (HP-GL/2): ``CI r[,chord]`` draws a circle about the pen,
 whether the pen is up or down: it starts at 0 degrees (180 for a negative
@@ -46,7 +56,16 @@ no plunge there unless it moves).  ``AA x,y,sweep[,chord]`` (centre absolute)
 and ``AR dx,dy,sweep[,chord]`` (centre relative to the pen) draw from the pen
 through ``sweep`` degrees (positive counter-clockwise) when the pen is down,
 and only move the pen when it is up.  Arcs are drawn in user units, so
-anisotropic scaling makes ellipses.  The chord parameter is a chord angle in
+anisotropic scaling makes ellipses.  ``AT xi,yi,xe,ye[,chord]`` (absolute)
+and ``RT`` (both points relative to the pen) draw from the pen through the
+intermediate point to the end point, the way round that passes the
+intermediate point first, and leave the pen at the end point (up: it only
+moves there).  The intermediate point at the pen or at the end point, or on
+the line between them, draws a line; the end point at the pen draws a whole
+circle whose diameter runs from the pen to the intermediate point; three points
+on one line with the intermediate point outside the other two (a plotter
+draws two lines out to the page's edges) is a :class:`~cam.errors.ParseError`.
+The chord parameter is a chord angle in
 degrees (default 5), or with ``CT1`` the most a chord may stray from the arc
 (in the radius's units; ``CT0``/``CT;`` back to angles); the angle is clamped
 to 0.5..180 degrees and the arc drawn with the fewest equal chords within it.
@@ -61,7 +80,8 @@ of the file (``PA100,`` or a dangling mnemonic), a coordinate or a pen position 
 :data:`MAX_COORD_PU` either way (a number of hundreds of digits included; after scaling), a pen beyond
 :data:`cam.limits.MAX_TOOL_NUMBER`, a scaling, circle or arc command with the wrong number of
 parameters, a degenerate ``SC`` (xmin = xmax, a factor 0, left/bottom outside 0..100), a circle or
-arc that reaches beyond :data:`MAX_COORD_PU` or would take more than :data:`MAX_ARC_CHORDS` chords.
+arc that reaches beyond :data:`MAX_COORD_PU` or would take more than :data:`MAX_ARC_CHORDS` chords, an
+``RO`` angle other than 0, 90, 180, 270, an ``IR`` percentage outside 0..100, the ``AT``/``RT`` above.
 
 Streaming: the file is read in chunks (:data:`CHUNK_BYTES`) by a compiled
 tokenizer and a compiled interpreter, so :func:`scan_hpgl` keeps memory flat
@@ -128,8 +148,9 @@ def _name(code: int) -> str:
 C_IN, C_DF, C_SP, C_PU, C_PD, C_PA, C_PR = (_code(m) for m in ("IN", "DF", "SP", "PU", "PD", "PA", "PR"))
 C_LB, C_DT, C_PE = _code("LB"), _code("DT"), _code("PE")
 C_SC, C_IP, C_CI, C_AA, C_AR, C_CT = (_code(m) for m in ("SC", "IP", "CI", "AA", "AR", "CT"))
-KNOWN = ("IN", "DF", "SP", "PU", "PD", "PA", "PR", "SC", "IP", "CI", "AA", "AR", "CT")
-ARC_MNEMONICS = ("CI", "AA", "AR")
+C_AT, C_RT, C_RO, C_IR = (_code(m) for m in ("AT", "RT", "RO", "IR"))
+KNOWN = ("IN", "DF", "SP", "PU", "PD", "PA", "PR", "SC", "IP", "CI", "AA", "AR", "CT", "AT", "RT", "RO", "IR")
+ARC_MNEMONICS = ("CI", "AA", "AR", "AT", "RT")
 """The commands that draw circles and arcs (each of their points carries the command's line and column)."""
 ARC_CODES = np.array([_code(m) for m in ARC_MNEMONICS], np.int64)
 """The commands that draw chords (their points are counted before they are made)."""
@@ -138,14 +159,15 @@ ARC_CODES = np.array([_code(m) for m in ARC_MNEMONICS], np.int64)
 M_IDLE, M_MN1, M_PARAMS, M_SKIP, M_QUOTE, M_LABEL, M_DT, M_PE = range(8)
 # error codes
 (E_NONE, E_CHAR, E_MNEMONIC, E_NUMBER, E_EMPTY, E_TRAIL, E_EOF_COMMA, E_EOF_MNEMONIC, E_EOF_LABEL,
- E_EOF_STRING, E_ODD, E_SP, E_RANGE, E_ARGS, E_SCALE, E_CHORDS, E_ARC_RANGE) = range(17)
+ E_EOF_STRING, E_ODD, E_SP, E_RANGE, E_ARGS, E_SCALE, E_CHORDS, E_ARC_RANGE, E_VALUE, E_ARC_LINE) = range(19)
 # interpreter state slots (float64, kept from one chunk to the next): pen down, relative moves, the pen's
 # position (plotter units), the pen, where the last coordinate stood, a pen down to restore after a circle
 # (the stroke starts at the next move), P1 and P2, scaling on, its type and six parameters, the user-to-plotter
-# transform (plotter = a * user + b per axis), the chord tolerance mode
+# transform (plotter = a * user + b per axis), the chord tolerance mode, the coordinate system's rotation
+# (``RO``, in quarter turns: the pen's position and P1, P2 are in the rotated system, points as plotted)
 (I_DOWN, I_REL, I_X, I_Y, I_PEN, I_LINE, I_COL, I_PENDING, I_P1X, I_P1Y, I_P2X, I_P2Y, I_SC, I_SCTYPE,
- I_SC0, I_SC1, I_SC2, I_SC3, I_SC4, I_SC5, I_AX, I_BX, I_AY, I_BY, I_CT) = range(25)
-N_IST = 25
+ I_SC0, I_SC1, I_SC2, I_SC3, I_SC4, I_SC5, I_AX, I_BX, I_AY, I_BY, I_CT, I_RO) = range(26)
+N_IST = 26
 DEFAULT_P1_PU = (603.0, 521.0)
 DEFAULT_P2_PU = (10603.0, 7721.0)
 """P1 and P2 after ``IN`` or ``IP;``: an HP 7475A's on A4 paper (10000 x 7200 plotter units, 250 x 180 mm apart)."""
@@ -204,7 +226,8 @@ def _coord_cmd(code):
 def _known(code):
     return (_coord_cmd(code) or code == 0x494E or code == 0x4446 or code == 0x5350  # IN DF SP
             or code == 0x5343 or code == 0x4950 or code == 0x4349 or code == 0x4141  # SC IP CI AA
-            or code == 0x4152 or code == 0x4354)  # AR CT
+            or code == 0x4152 or code == 0x4354 or code == 0x4154 or code == 0x5254  # AR CT AT RT
+            or code == 0x524F or code == 0x4952)  # RO IR
 
 
 @njit(cache=True)
@@ -584,13 +607,27 @@ def _tokenize(buf, final, st, c_code, c_off, c_line, c_col, c_p0, c_np, p_val, p
 
 
 @njit(cache=True)
-def _point(o_x, o_y, o_line, o_col, o_start, o_pen, k, x, y, line, col, start, pen, write):
-    """Record pen-down point ``k`` (:data:`_POINT_DTYPES`) when ``write`` (else only count it); return k + 1."""
+def _point(o_x, o_y, o_line, o_col, o_start, o_pen, k, x, y, line, col, start, pen, write, ro=0.0):
+    """Record pen-down point ``k`` (:data:`_POINT_DTYPES`) when ``write`` (else only count it); return k + 1.
+    ``(x, y)`` is in the coordinate system turned ``ro`` quarter turns (``RO``): recorded as plotted."""
     if write:
-        o_x[k], o_y[k] = x, y
+        o_x[k], o_y[k] = _turn(x, y, ro)
         o_line[k], o_col[k] = line, col
         o_start[k], o_pen[k] = start, pen
     return k + 1
+
+
+@njit(cache=True)
+def _turn(x, y, quarters):
+    """``(x, y)`` turned ``quarters`` quarter turns counter-clockwise (+X toward +Y) about (0, 0); exact."""
+    q = int(quarters) % 4
+    if q == 1:
+        return -y, x
+    if q == 2:
+        return -x, -y
+    if q == 3:
+        return y, -x
+    return x, y
 
 
 @njit(cache=True)
@@ -668,14 +705,39 @@ def _ip(m, p0, p_val, p_line, p_col, line, col, ist, err):
         if not abs(p_val[q]) <= MAX_COORD_PU:
             _fail(err, E_RANGE, p_line[q], p_col[q], q, 0)
             return False
+    _p1p2(m, p_val[p0:p0 + m], ist)
+    return True
+
+
+@njit(cache=True)
+def _ir(m, p0, p_val, p_line, p_col, line, col, ist, err):
+    """``IR``: P1 and P2 at percentages (0..100) of the rectangle between the default P1 and P2 (the page this
+    reader assumes, :data:`DEFAULT_P1_PU`, :data:`DEFAULT_P2_PU`).  Returns False after recording an error."""
+    if not (m == 0 or m == 2 or m == 4):
+        _fail(err, E_ARGS, line, col, m, C_IR)
+        return False
+    at = np.empty(m)
+    for q in range(p0, p0 + m):
+        if not 0.0 <= p_val[q] <= 100.0:
+            _fail(err, E_VALUE, p_line[q], p_col[q], q, C_IR)
+            return False
+        axis = (q - p0) % 2
+        at[q - p0] = DEFAULT_P1_PU[axis] + p_val[q] / 100.0 * (DEFAULT_P2_PU[axis] - DEFAULT_P1_PU[axis])
+    _p1p2(m, at, ist)
+    return True
+
+
+@njit(cache=True)
+def _p1p2(m, at, ist):
+    """P1 (and P2) at ``at`` (plotter units; ``m`` 0: the defaults; 2: P2 keeps its place relative to P1)."""
     if m == 0:
         ist[I_P1X], ist[I_P1Y] = DEFAULT_P1_PU[0], DEFAULT_P1_PU[1]
         ist[I_P2X], ist[I_P2Y] = DEFAULT_P2_PU[0], DEFAULT_P2_PU[1]
     else:
         dx, dy = ist[I_P2X] - ist[I_P1X], ist[I_P2Y] - ist[I_P1Y]
-        ist[I_P1X], ist[I_P1Y] = p_val[p0], p_val[p0 + 1]
+        ist[I_P1X], ist[I_P1Y] = at[0], at[1]
         if m == 4:
-            ist[I_P2X], ist[I_P2Y] = p_val[p0 + 2], p_val[p0 + 3]
+            ist[I_P2X], ist[I_P2Y] = at[2], at[3]
         else:  # P2 keeps its place relative to P1
             ist[I_P2X], ist[I_P2Y] = ist[I_P1X] + dx, ist[I_P1Y] + dy
         if ist[I_P2X] == ist[I_P1X]:  # HP-GL/2: P2 one unit further
@@ -683,7 +745,114 @@ def _ip(m, p0, p_val, p_line, p_col, line, col, ist, err):
         if ist[I_P2Y] == ist[I_P1Y]:
             ist[I_P2Y] += 1.0
     _rescale(ist)
-    return True
+
+
+@njit(cache=True)
+def _turn_to(quarters, ist, cx, cy):
+    """``RO`` (``IN``: back to none): the coordinate system turned ``quarters`` quarter turns from the plotter's.
+    The pen stays where it is on the paper, so its coordinates in the new system change; returns them."""
+    x, y = _turn(cx, cy, ist[I_RO] - quarters)
+    ist[I_RO] = quarters
+    return x, y
+
+
+@njit(cache=True)
+def _setting(code, m, p0, p_val, p_line, p_col, line, col, ist, cx, cy, err):
+    """``CT``, ``RO`` or ``IR``.  Returns ``(cx, cy, ok)``, the pen in the (new) coordinate system; not ``ok``: an
+    error is recorded in ``err``."""
+    v = p_val[p0] if m else 0.0
+    if code == C_IR:
+        return cx, cy, _ir(m, p0, p_val, p_line, p_col, line, col, ist, err)
+    if m > 1 or (code == C_CT and not (v == 0 or v == 1)):
+        _fail(err, E_ARGS, line, col, m, code)
+        return cx, cy, False
+    if code == C_CT:
+        ist[I_CT] = v
+        return cx, cy, True
+    if not (v == 0 or v == 90 or v == 180 or v == 270):
+        _fail(err, E_VALUE, p_line[p0], p_col[p0], p0, C_RO)
+        return cx, cy, False
+    cx, cy = _turn_to(v / 90.0, ist, cx, cy)
+    return cx, cy, True
+
+
+@njit(cache=True)
+def _three_points(ui, vi, ue, ve):
+    """The arc from (0, 0) through ``(ui, vi)`` to ``(ue, ve)`` (``AT``/``RT`` in user units from the pen), as
+    HP-GL/2 draws it: ``(kind, centre x, centre y, radius, start angle (radians), sweep (degrees))``, kind 1 an
+    arc (a whole circle, the first two points its diameter, when the end is the pen), 0 a line to the end (the
+    intermediate point at an end, or between them on one line), 2 three points on a line with the intermediate
+    point outside (a plotter draws two lines to the page's edges)."""
+    if (ui == 0 and vi == 0) or (ui == ue and vi == ve):
+        return 0, 0.0, 0.0, 0.0, 0.0, 0.0
+    if ue == 0 and ve == 0:
+        ux, uy = ui / 2.0, vi / 2.0
+        return 1, ux, uy, math.hypot(ux, uy), math.atan2(-uy, -ux), 360.0
+    cross = ui * ve - vi * ue
+    if abs(cross) <= 1e-12 * math.hypot(ui, vi) * math.hypot(ue, ve):
+        between = ui * ue + vi * ve > 0 and (ue - ui) * ue + (ve - vi) * ve > 0
+        return (0 if between else 2), 0.0, 0.0, 0.0, 0.0, 0.0
+    d = 2.0 * cross
+    i2, e2 = ui * ui + vi * vi, ue * ue + ve * ve
+    ux, uy = (ve * i2 - vi * e2) / d, (ui * e2 - ue * i2) / d
+    theta0 = math.atan2(-uy, -ux)
+    to_end = (math.atan2(ve - uy, ue - ux) - theta0) % (2.0 * math.pi)
+    to_mid = (math.atan2(vi - uy, ui - ux) - theta0) % (2.0 * math.pi)
+    sweep = to_end if to_mid < to_end else to_end - 2.0 * math.pi
+    return 1, ux, uy, math.hypot(ux, uy), theta0, math.degrees(sweep)
+
+
+@njit(cache=True)
+def _arc3(code, m, p0, p_val, p_line, p_col, line, col, ist, cx, cy, pen_down, pending, pen, write, k,
+          o_x, o_y, o_line, o_col, o_start, o_pen, err):
+    """``AT``/``RT`` from the pen at ``(cx, cy)`` (plotter units) through an intermediate point to an end point
+    (user units, absolute or relative to the pen): drawn when the pen is down, else the pen only moves to the
+    end.  Returns ``(k, cx, cy, pending, ok)``; not ``ok``: an error is recorded in ``err``."""
+    if not (m == 4 or m == 5):
+        _fail(err, E_ARGS, line, col, m, code)
+        return k, cx, cy, pending, False
+    ax, bx, ay, by = ist[I_AX], ist[I_BX], ist[I_AY], ist[I_BY]
+    rel = code == C_RT
+    if rel:
+        ex, ey = cx + ax * p_val[p0 + 2], cy + ay * p_val[p0 + 3]
+        ui, vi = p_val[p0], p_val[p0 + 1]
+    else:
+        ex, ey = ax * p_val[p0 + 2] + bx, ay * p_val[p0 + 3] + by
+        ui, vi = (ax * p_val[p0] + bx - cx) / ax, (ay * p_val[p0 + 1] + by - cy) / ay
+    for q in range(2):
+        if not abs(ex if q == 0 else ey) <= MAX_COORD_PU:  # NaN too
+            _fail(err, E_RANGE, p_line[p0 + 2 + q], p_col[p0 + 2 + q], p0 + 2 + q, 1 if rel else 0)
+            return k, cx, cy, pending, False
+    kind, ux, uy, radius, theta0, sweep = _three_points(ui, vi, (ex - cx) / ax, (ey - cy) / ay)
+    if kind == 2:
+        _fail(err, E_ARC_LINE, line, col, 0, code)
+        return k, cx, cy, pending, False
+    n = 1
+    ccx, ccy = cx, cy
+    if kind == 1:
+        n_f = _chords(ist, sweep, radius, m == 5, p_val[p0 + 4] if m == 5 else 0.0)
+        if n_f > MAX_ARC_CHORDS:
+            _fail(err, E_CHORDS, line, col, int(min(n_f, 4e18)), code)
+            return k, cx, cy, pending, False
+        n = int(n_f)
+        ccx, ccy = cx + ax * ux, cy + ay * uy
+        if not (abs(ccx) + abs(ax * radius) <= MAX_COORD_PU and abs(ccy) + abs(ay * radius) <= MAX_COORD_PU):
+            _fail(err, E_ARC_RANGE, line, col, 0, code)
+            return k, cx, cy, pending, False
+    if pen_down:
+        ro = ist[I_RO]
+        if pending:
+            k = _point(o_x, o_y, o_line, o_col, o_start, o_pen, k, cx, cy, line, col, True, pen, write, ro)
+            pending = False
+        sweep_rad = math.radians(sweep)
+        for j in range(1, n):
+            t = theta0 + sweep_rad * j / n
+            k = _point(o_x, o_y, o_line, o_col, o_start, o_pen, k, ccx + ax * radius * math.cos(t),
+                       ccy + ay * radius * math.sin(t), line, col, False, pen, write, ro)
+        # an arc's points carry the command's place, a line's end its own (so G-code out fits no arc to it)
+        el, ec = (line, col) if kind == 1 else (p_line[p0 + 2], p_col[p0 + 2])
+        k = _point(o_x, o_y, o_line, o_col, o_start, o_pen, k, ex, ey, el, ec, False, pen, write, ro)
+    return k, ex, ey, pending, True
 
 
 @njit(cache=True)
@@ -712,10 +881,14 @@ def _sc(m, p0, p_val, line, col, ist, err):
 
 
 @njit(cache=True)
-def _arc(code, m, p0, p_val, line, col, ist, cx, cy, pen_down, pending, pen, write, k,
+def _arc(code, m, p0, p_val, p_line, p_col, line, col, ist, cx, cy, pen_down, pending, pen, write, k,
          o_x, o_y, o_line, o_col, o_start, o_pen, err):
-    """``CI``, ``AA`` or ``AR`` from the pen at ``(cx, cy)`` (plotter units): its points recorded from ``k`` (or only
-    counted).  Returns ``(k, cx, cy, pending, ok)``; not ``ok``: an error is recorded in ``err``."""
+    """``CI``, ``AA`` or ``AR`` (``AT``, ``RT``: :func:`_arc3`) from the pen at ``(cx, cy)`` (plotter units): its
+    points recorded from ``k`` (or only counted).  Returns ``(k, cx, cy, pending, ok)``; not ``ok``: an error is
+    recorded in ``err``."""
+    if code == C_AT or code == C_RT:
+        return _arc3(code, m, p0, p_val, p_line, p_col, line, col, ist, cx, cy, pen_down, pending, pen, write, k,
+                     o_x, o_y, o_line, o_col, o_start, o_pen, err)
     circle = code == C_CI
     if (circle and not (m == 1 or m == 2)) or (not circle and not (m == 3 or m == 4)):
         _fail(err, E_ARGS, line, col, m, code)
@@ -756,15 +929,16 @@ def _arc(code, m, p0, p_val, line, col, ist, cx, cy, pen_down, pending, pen, wri
         t = theta0 + math.radians(sweep)
         ex, ey = ccx + ax * radius * math.cos(t), ccy + ay * radius * math.sin(t)
     draw = (circle or pen_down) and n > 0
+    ro = ist[I_RO]
     if draw and write:
         if circle or pending:
-            k = _point(o_x, o_y, o_line, o_col, o_start, o_pen, k, sx, sy, line, col, True, pen, True)
+            k = _point(o_x, o_y, o_line, o_col, o_start, o_pen, k, sx, sy, line, col, True, pen, True, ro)
         sweep_rad = math.radians(sweep)
         for j in range(1, n):
             t = theta0 + sweep_rad * j / n
             k = _point(o_x, o_y, o_line, o_col, o_start, o_pen, k, ccx + ax * radius * math.cos(t),
-                       ccy + ay * radius * math.sin(t), line, col, False, pen, True)
-        k = _point(o_x, o_y, o_line, o_col, o_start, o_pen, k, ex, ey, line, col, False, pen, True)
+                       ccy + ay * radius * math.sin(t), line, col, False, pen, True, ro)
+        k = _point(o_x, o_y, o_line, o_col, o_start, o_pen, k, ex, ey, line, col, False, pen, True, ro)
     elif draw:
         k += n + (1 if circle or pending else 0)
     if circle:
@@ -784,7 +958,7 @@ def _pairs(p0, m, p_val, p_line, p_col, ist, cx, cy, cl, cc, pen_down, pending, 
     ax, bx, ay, by = ist[I_AX], ist[I_BX], ist[I_AY], ist[I_BY]
     for q in range(p0, p0 + m, 2):
         if pen_down and pending:
-            k = _point(o_x, o_y, o_line, o_col, o_start, o_pen, k, cx, cy, cl, cc, True, pen, write)
+            k = _point(o_x, o_y, o_line, o_col, o_start, o_pen, k, cx, cy, cl, cc, True, pen, write, ist[I_RO])
             pending = False
         if rel:
             cx += ax * p_val[q]
@@ -799,7 +973,7 @@ def _pairs(p0, m, p_val, p_line, p_col, ist, cx, cy, cl, cc, pen_down, pending, 
             _fail(err, E_RANGE, p_line[bad], p_col[bad], bad, 1 if rel else 0)
             return k, cx, cy, cl, cc, pending, False
         if pen_down:
-            k = _point(o_x, o_y, o_line, o_col, o_start, o_pen, k, cx, cy, cl, cc, False, pen, write)
+            k = _point(o_x, o_y, o_line, o_col, o_start, o_pen, k, cx, cy, cl, cc, False, pen, write, ist[I_RO])
     return k, cx, cy, cl, cc, pending, True
 
 
@@ -830,6 +1004,7 @@ def _interpret(c0, c1, c_code, c_line, c_col, c_p0, c_np, p_val, p_line, p_col, 
             if code == C_IN:
                 pen_down = False
                 pending = False
+                cx, cy = _turn_to(0.0, ist, cx, cy)
             rel = False
             _reset(ist, code == C_IN)
         elif code == C_SP:
@@ -845,15 +1020,13 @@ def _interpret(c0, c1, c_code, c_line, c_col, c_p0, c_np, p_val, p_line, p_col, 
         elif code == C_SC:
             if not _sc(m, p0, p_val, line, col, ist, err):
                 return k
-        elif code == C_CT:
-            v = p_val[p0] if m else 0.0
-            if m > 1 or not (v == 0 or v == 1):
-                _fail(err, E_ARGS, line, col, m, code)
+        elif code == C_CT or code == C_RO or code == C_IR:
+            cx, cy, ok = _setting(code, m, p0, p_val, p_line, p_col, line, col, ist, cx, cy, err)
+            if not ok:
                 return k
-            ist[I_CT] = v
-        elif code == C_CI or code == C_AA or code == C_AR:
-            k, cx, cy, pending, ok = _arc(code, m, p0, p_val, line, col, ist, cx, cy, pen_down, pending, pen, write, k,
-                                          o_x, o_y, o_line, o_col, o_start, o_pen, err)
+        elif code == C_CI or code == C_AA or code == C_AR or code == C_AT or code == C_RT:
+            k, cx, cy, pending, ok = _arc(code, m, p0, p_val, p_line, p_col, line, col, ist, cx, cy, pen_down, pending,
+                                          pen, write, k, o_x, o_y, o_line, o_col, o_start, o_pen, err)
             if not ok:
                 return k
             cl, cc = line, col
@@ -867,7 +1040,7 @@ def _interpret(c0, c1, c_code, c_line, c_col, c_p0, c_np, p_val, p_line, p_col, 
             elif code == C_PD:
                 if not pen_down:
                     k = _point(o_x, o_y, o_line, o_col, o_start, o_pen, k, cx, cy, cl if cl > 0 else line,
-                               cc if cl > 0 else col, True, pen, write)
+                               cc if cl > 0 else col, True, pen, write, ist[I_RO])
                     pen_down = True
                     pending = False
             elif code == C_PA:
@@ -1125,8 +1298,18 @@ def _raise(err: np.ndarray, b: _Block, name: str, scaled: bool) -> None:
         forms = {"SC": "none, 4 (xmin,xmax,ymin,ymax), 5 (with a type 0, 1 or 2) or 7 (type 1 with left,bottom)",
                  "IP": "none, 2 (P1) or 4 (P1 and P2)", "CI": "1 (radius) or 2 (with a chord angle)",
                  "AA": "3 (x,y centre, sweep) or 4 (with a chord angle)", "AR": "3 (dx,dy centre, sweep) or 4 "
-                 "(with a chord angle)", "CT": "none, 0 (chord angles) or 1 (chord tolerance)"}
+                 "(with a chord angle)", "CT": "none, 0 (chord angles) or 1 (chord tolerance)",
+                 "AT": "4 (xi,yi intermediate, xe,ye end) or 5 (with a chord angle)",
+                 "RT": "4 (dxi,dyi intermediate, dxe,dye end) or 5 (with a chord angle)",
+                 "RO": "none or 1 (an angle)", "IR": "none, 2 (P1) or 4 (P1 and P2)"}
         raise ParseError(f"{where}: '{mnemonic}' takes {forms[mnemonic]} parameters, got {aux}")
+    if code == E_VALUE:
+        value = float(b.val[aux])
+        what = "an angle of 0, 90, 180 or 270 degrees" if mnemonic == "RO" else "percentages 0..100"
+        raise ParseError(f"{where}: '{mnemonic}' takes {what}, got {value:g}")
+    if code == E_ARC_LINE:
+        raise ParseError(f"{where}: '{mnemonic}' has its three points on one line with the intermediate point "
+                         "outside the other two (a plotter draws two lines out to the page's edges); not cut")
     if code == E_SCALE:
         raise ParseError(f"{where}: 'SC' needs xmin != xmax and ymin != ymax (type 2: factors != 0), "
                          "left and bottom 0..100")
