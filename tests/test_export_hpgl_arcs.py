@@ -109,7 +109,7 @@ def test_every_hpgl_job_point_maps_to_its_exact_point_within_a_step():
     assert exact.on_arc((1384, 865), (1381, 805)) and not exact.on_arc((1381, 805), (1384, 865))
 
 
-@pytest.mark.skipif(shutil.which("rs274") is None, reason="rs274 (linuxcnc-uspace) not installed")
+@needs_rs274
 def test_linuxcnc_runs_the_arcs_within_the_tolerance_of_the_files_circles(tmp_path):
     text = _export(tmp_path, CIRCLE_ARC, "--post", "linuxcnc")
     assert _arc_lines(text) == 3
