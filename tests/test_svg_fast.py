@@ -149,6 +149,12 @@ def test_text_and_bad_coordinates_are_still_one_line_errors():
         parse_svg(doc('<path d="M0,0 L1e12,0" stroke="black"/>'))
 
 
+def test_a_path_not_starting_with_a_move_reads_without_a_traceback():
+    d = parse_svg(doc('<path d="L1 2 L5 5 L9 2" stroke="black" fill="none"/>'))
+    assert d.n_strokes == 1
+    assert np.allclose(d.polylines(0.1)[0], [[1, 2], [5, 5], [9, 2]], atol=1e-4)  # from its first point on
+
+
 def test_polylines_are_the_segments_flattened_one_by_one():
     d = parse_svg(DOCS["every path command, absolute and relative"] + b"")
     d2 = parse_svg(DOCS["inkscape layers with other shapes (rect, line, polyline, polygon, arcs)"])
