@@ -344,3 +344,50 @@ def test_cam_run_names_the_session_for_a_board():
     _, job = two_d_job()
     with pytest.raises(CapabilityError, match="MachineSession"):
         cam.run(job, port="grbl:/dev/ttyUSB9")
+
+
+def _on_path(points: np.ndarray, path: np.ndarray) -> bool:
+    """Every point of ``points`` ((N, 3) steps, in order) lies on the polyline ``path`` ((M, 3) steps), in order."""
+    j = 0
+    for p in points:
+        while j + 1 < len(path):
+            a, b = path[j], path[j + 1]
+            ab, ap = b - a, p - a
+            inside = np.all(np.cross(ab, ap) == 0) and 0 <= ap @ ab <= ab @ ab
+            if inside and (ab.any() or not ap.any()):
+                break
+            if not ab.any() and not ap.any():
+                break
+            j += 1
+        else:
+            return bool(np.array_equal(p, path[-1]))
+    return True
+
+
+@pytest.mark.parametrize("name", ["inkscape_star.plt", "logo.svg", "bolt_plate.ngc", "board.drl", "matrix"])
+def test_every_job_kind_runs_on_grbl_through_its_own_points(name, tmp_path):
+    """HPGL, SVG, a G-code program, a drill file (tool changes answered) and a saved digitized matrix: grbl
+    executes lines whose ends are the job's own points, in order, and every point of the job lies on them."""
+    if name == "matrix":
+        path = tmp_path / "ellipse.txt"
+        cam.save_digitized(cam.digitize(cam.load_image(SAMPLES / "ellipse.png")), path)
+    else:
+        path = SAMPLES / name
+    prepared = cam.prepare_job(str(path), settings=SETTINGS)
+    emu = start_emulator(speed=200.0, settings=FAST)
+    try:
+        session = MachineSession(url(emu), SETTINGS, on_prompt=lambda p: "continue")
+        session.start(prepared)
+        assert session.wait_idle(120)
+        assert session.last_run["status"] == "finished", session.last_run
+        blocks = [b for b in emu.executed() if b.kind in ("G0", "G1")]
+        first = np.asarray(mpos_to_steps(blocks[0].start_mm, SETTINGS), np.int64)
+        executed = np.array([np.zeros(3, np.int64)] + [np.asarray(mpos_to_steps(b.end_mm, SETTINGS)) - first
+                                                      for b in blocks])
+        job = np.concatenate([np.asarray(p.points_steps, np.int64) for p in prepared.plan.job.pieces()])
+        assert _on_path(job, executed), name
+        assert {tuple(p) for p in executed[1:]} <= {tuple(p) for p in job} | {(0, 0, 0)}  # no point of its own
+        assert emu.overflow_bytes == 0
+    finally:
+        close_grbl_machines()
+        emu.stop()
