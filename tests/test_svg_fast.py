@@ -222,6 +222,16 @@ def test_batched_cells_in_small_chunks(monkeypatch):
         assert np.array_equal(got, want)
 
 
+def test_a_long_stroke_cut_into_pieces_at_corners_gives_the_same_cells(monkeypatch):
+    monkeypatch.setattr(plan, "CELLS_CHUNK_SAMPLES", 64)
+    rng = np.random.default_rng(5)
+    for _ in range(60):
+        walk = rng.choice([rng.normal(0, 3, (150, 2)), rng.integers(-3, 4, (150, 2)).astype(float),
+                           rng.normal(0, 0.7, (150, 2))])
+        poly = np.cumsum(walk, axis=0)
+        assert np.array_equal(plan._cells_many([poly])[0], plan._cells(poly))
+
+
 def order_by_search(strokes, at=None):
     """The cutting order as a search of every stroke at every step finds it (the order before the KD-tree)."""
     starts = np.array([s[0] for s in strokes], float)

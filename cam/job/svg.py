@@ -184,12 +184,40 @@ def _cells_many(polys: list[np.ndarray]) -> list[np.ndarray]:
     out: list[np.ndarray] = []
     for c in np.unique(chunk):
         lo, hi = np.searchsorted(chunk, [c, c + 1])
-        out += _cells_chunk(polys[lo:hi])
+        if hi - lo == 1 and per_poly[lo] > 2 * CELLS_CHUNK_SAMPLES:
+            out.append(_cells_long(polys[lo]))
+        else:
+            out += _cells_chunk(polys[lo:hi])
     return out
 
 
-def _cells_chunk(polys: list[np.ndarray]) -> list[np.ndarray]:
-    """:func:`_cells_many` of one chunk."""
+def _cells_long(poly: np.ndarray) -> np.ndarray:
+    """:func:`_cells` of one long polyline, in pieces of about :data:`CELLS_CHUNK_SAMPLES` samples cut at sharp
+    corners: a corner's position is kept by both pieces (never a staircase corner, so each piece drops the same
+    positions next to it as the whole would); the pieces are joined there and runs of one unit move are joined
+    over the whole."""
+    d = np.diff(poly, axis=0)
+    length = np.hypot(d[:, 0], d[:, 1])
+    ok = (length[:-1] > 0) & (length[1:] > 0)
+    cos = np.einsum("ij,ij->i", d[:-1], d[1:]) / np.where(ok, length[:-1] * length[1:], 1.0)
+    corners = np.flatnonzero(ok & (cos < math.cos(math.radians(CORNER_DEG)))) + 1  # vertices
+    before = np.r_[0, np.cumsum(np.maximum(1, np.ceil(np.abs(d).max(axis=1) / SAMPLE_STEPS)))]  # samples
+    cuts = np.unique(corners[np.maximum(0, np.searchsorted(
+        before[corners], np.arange(CELLS_CHUNK_SAMPLES, before[-1], CELLS_CHUNK_SAMPLES), side="right") - 1)]) \
+        if len(corners) else np.zeros(0, np.int64)
+    bounds = np.r_[0, cuts, len(poly) - 1]
+    parts = [_cells_chunk([poly[a:b + 1]], join_runs=False)[0] for a, b in zip(bounds[:-1], bounds[1:])]
+    cells = np.concatenate([parts[0]] + [part[1:] for part in parts[1:]])
+    if len(cells) < 3:
+        return cells
+    step = np.diff(cells, axis=0)
+    same = np.zeros(len(cells), bool)
+    same[1:-1] = np.all(step[1:] == step[:-1], axis=1)
+    return cells[~same]
+
+
+def _cells_chunk(polys: list[np.ndarray], join_runs: bool = True) -> list[np.ndarray]:
+    """:func:`_cells_many` of one chunk (``join_runs`` False: runs of one unit move are left as they are)."""
     out: list[Optional[np.ndarray]] = [np.floor(p + 0.5).astype(np.int64) if len(p) < 2 else None for p in polys]
     multi = [i for i, p in enumerate(polys) if len(p) >= 2]
     if not multi:
@@ -237,7 +265,7 @@ def _cells_chunk(polys: list[np.ndarray]) -> list[np.ndarray]:
     inner = np.zeros(len(kept), bool)
     inner[1:-1] = (kept_poly[:-2] == kept_poly[1:-1]) & (kept_poly[2:] == kept_poly[1:-1])
     same = np.zeros(len(kept), bool)
-    same[1:-1] = inner[1:-1] & np.all(kept[1:-1] - kept[:-2] == kept[2:] - kept[1:-1], axis=1)
+    same[1:-1] = inner[1:-1] & np.all(kept[1:-1] - kept[:-2] == kept[2:] - kept[1:-1], axis=1) & join_runs
     kept, kept_poly = kept[~same], kept_poly[~same]
     pieces = np.split(kept, np.cumsum(np.bincount(kept_poly, minlength=len(multi)))[:-1])
     for i, piece in zip(multi, pieces):
