@@ -310,3 +310,15 @@ def test_a_stopped_xy_move_books_how_far_its_time_took_the_head():
             board.close()
     finally:
         emu.stop()
+
+
+def test_a_drill_file_with_slots_is_refused_on_the_board_in_one_line(emu, tmp_path):
+    """The firmware drills only: slots (or holes milled with --mill-holes-over) make a milling tool path, refused
+    before anything is sent (it was a traceback)."""
+    f = tmp_path / "slot.drl"
+    f.write_text("M48\nMETRIC\nT1C1.0\n%\nT1\nX5.0Y5.0\nX10.0Y5.0G85X15.0Y5.0\nM30\n")
+    r = run_cli("drill", f, "--port", f"maximus:{emu.device_path}", "--yes", "--state", tmp_path / "s.json")
+    assert r.returncode == 2 and "drills holes only" in r.stderr and "Traceback" not in r.stderr, r.stderr
+    r = run_cli("drill", f, "--port", f"maximus:{emu.device_path}", "--yes", "--state", tmp_path / "s.json",
+                "--mill-holes-over", "0.5")
+    assert r.returncode == 2 and "drills holes only" in r.stderr, r.stderr

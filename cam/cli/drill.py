@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Optional
 
 from ..digitize.digitized import save_digitized
-from ..drive.maximus.board import drill_stroke
+from ..drive.maximus.board import drill_stroke, require_drilling
 from ..drive.maximus.resume import resume_board_job
 from ..drive.journal import read_journal
 from ..drive.state import StateHold, check_in_travel
@@ -186,6 +186,7 @@ def _drill(args: argparse.Namespace, settings, hold: Optional[StateHold]) -> int
     if args.save_digitized:
         save_digitized(job.digitized, args.save_digitized)
     if port_kind(args.port) == "maximus":
+        require_drilling(job, args.port)  # slots or milled holes: a milling tool path, which the board cannot run
         job.report["board"] = board_report(job, settings)
     journal = journal_path(args)
     if journal is not None:

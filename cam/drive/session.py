@@ -60,7 +60,7 @@ from .journal import JournalSpec, journal_spec
 from ._session_parts import Activity, Prompt, PromptFn
 from ._session_grbl import SessionGrbl
 from .activities import BoardControl, drill_work, move_work, run_on_board, run_steps
-from .maximus.board import drill_arguments, drill_job, maximus_port
+from .maximus.board import drill_arguments, drill_job, maximus_port, require_drilling
 from .grbl_machine import adopt_position, grbl_machine
 from .ports import MockPort, port_kind, require
 from .runner import Controller, Cursor, RunResult
@@ -187,6 +187,8 @@ class MachineSession(SessionGrbl):
             self._grbl_job(job)  # a job with moves: a step plan has none
         elif self.kind == "maximus":
             require(self.port, "drill_files", what=f"a {getattr(job, 'kind', 'step')} job")
+            if getattr(job, "kind", None) == "excellon":
+                require_drilling(job, self.port)  # slots or milled holes: the firmware drills only
             if getattr(job, "drill_plan", None) is None:
                 require(self.port, "step_dir", what=f"a {getattr(job, 'kind', 'step')} job")
             arguments = drill_arguments(job.drill_plan, self.settings)  # the board's packets fit (nothing sent)

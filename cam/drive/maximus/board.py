@@ -51,7 +51,7 @@ from typing import Any, Callable, Optional, Sequence
 import numpy as np
 import serial
 
-from ...errors import PlanError, PortError, SettingsError
+from ...errors import CapabilityError, PlanError, PortError, SettingsError
 from ...settings import DEFAULT_SETTINGS, MachineSettings, Maximus, Travel
 from ._drill import _Drilling, drill_job
 from ._trust import LinkFault, emulator_speed
@@ -69,7 +69,7 @@ __all__ = [
     "MaximusBoard", "LinkFault", "open_maximus", "URL_PREFIX", "MAXIMUS_SETTINGS", "maximus_holes", "drill_arguments",
     "board_settings", "with_delays", "maximus_port", "to_board", "from_board", "drill_stroke", "drill_job",
     "jog_packet", "jog_exit_packet", "offset_packet", "init_packet", "start_drill_packet",
-    "drill_packet", "close_drill_packet", "drill_moves",
+    "drill_packet", "close_drill_packet", "drill_moves", "require_drilling",
 ]
 
 URL_PREFIX = "maximus:"
@@ -540,3 +540,17 @@ def _pieces(pulses: int) -> list[int]:
     sign = 1 if pulses > 0 else -1
     n = abs(int(pulses))
     return [sign * min(MAX_FIELD, n - k) for k in range(0, n, MAX_FIELD)]
+
+
+def require_drilling(job: Any, port: str) -> None:
+    """Refuse, in one line, a job the board cannot drill: a drill file with slots, or holes milled with
+    ``--mill-holes-over``, is a milling tool path (no :class:`~cam.job.drill.DrillPlan`), and the firmware drills
+    only.
+
+    Raises:
+        CapabilityError: the job has no drill plan.
+    """
+    if getattr(job, "drill_plan", None) is None:
+        what = getattr(job, "summary", "") or f"a {getattr(job, 'kind', 'step')} job"
+        raise CapabilityError(f"{port} (the MAXIMUS board) drills holes only; {what} needs milling (its slots, or "
+                              f"holes milled with --mill-holes-over): cut it on a step/dir or grbl port")
