@@ -287,6 +287,14 @@ def _add_state_option(g: argparse._ActionsContainer) -> None:
                    "~/.local/state/cam/, named after --machine and --port, e.g. default-mock.json)")
 
 
+def _add_view_state(p: argparse.ArgumentParser) -> None:
+    """--port and --state of info and preview: a G-code program (or a file placed by its own zero) is planned from
+    that machine's active work zero, as cam drill would run it (its state file is read, never changed)."""
+    g = p.add_argument_group("the machine it would run on")
+    g.add_argument("--port", default="mock", help="names the default state file, as cam drill's --port")
+    _add_state_option(g)
+
+
 def _float_triple(name: str) -> Callable[[str], list[float]]:
     """X,Y,Z: three finite numbers, each at most MAX_WHOLE either way."""
     def parse(text: str) -> list[float]:
@@ -419,6 +427,7 @@ def _add_preview(sub: argparse._SubParsersAction) -> None:
     _add_option(pv, "flip_y")
     pv.add_argument("-o", "--output", required=True, metavar="OUT.png|OUT.svg", help="picture to write")
     pv.add_argument("--surface", action="store_true", help="draw the cut surface instead of the toolpath")
+    _add_view_state(pv)
     _add_option(pv, "scale", metavar="N",
                 help="picture pixels per drawing pixel, 1..64 (default: automatic); for an SVG file, its scale "
                 "as in drill")
@@ -451,6 +460,7 @@ def _add_info(sub: argparse._SubParsersAction) -> None:
     _add_gcode_options(i)
     i.add_argument("--json", action="store_true", help="print the report as JSON (every file kind)")
     _add_excellon_options(i)
+    _add_view_state(i)
 
 
 def _add_trace(sub: argparse._SubParsersAction) -> None:

@@ -12,6 +12,7 @@ from ..digitize.drawing import load_image
 from ..digitize.profile import Profile, load_profile, profile_from_expr
 from ..drive.chunks import ChunkedPlan, plan_chunks
 from ..drive.pins import axis_bits
+from ..drive.state import MachineState, read_state
 from ..errors import CamError, TravelError
 from ..job.jobs import JobOptions, PreparedJob, own_zero_home, prepare_job
 from ..options import JOB_OPTIONS, Option
@@ -21,6 +22,7 @@ from ..settings import MachineSettings
 from ..verify.pinlog import Motion, _decode, _pixel_under, carve
 from .checks import job_kind_of
 from .common import machine_settings, reading_bar
+from .machine_state import state_path_of
 
 FILE_JOB_KINDS = ("excellon", "gcode", "hpgl")
 """Kinds of file that are jobs already (not drawings)."""
@@ -53,6 +55,9 @@ def prepare(args: argparse.Namespace, settings: Optional[MachineSettings] = None
         raise CamError(f"{args.command} needs an IMAGE or --load-digitized FILE")
     state = getattr(args, "machine_state", None)  # where it runs (cam drill): G-code, and a drill, HPGL or SVG
     # file placed by its own zero (placed_by_own_zero)
+    if state is None and args.command in ("info", "preview") and (job_kind_of(args) == "gcode"
+                                                                 or placed_by_own_zero(args)):
+        state = _state_to_view(args, settings or machine_settings(args))
     try:
         with reading_bar(args) as progress:
             job = prepare_job(path, job_options(args), settings or machine_settings(args), name=path,
@@ -71,6 +76,15 @@ def prepare(args: argparse.Namespace, settings: Optional[MachineSettings] = None
                            f"{args.image} is {drawing.width_px}x{drawing.height_px}")
         job.drawing_rgb = drawing.to_rgb()
     return job
+
+
+def _state_to_view(args: argparse.Namespace, settings: MachineSettings) -> Optional[MachineState]:
+    """The machine state ``cam info`` and ``cam preview`` plan a G-code program in (its work zero and offsets, as
+    ``cam drill`` would run it): the state file read, not locked or changed; None when it cannot be read."""
+    try:
+        return read_state(state_path_of(args), settings)
+    except CamError:
+        return None
 
 
 def summary_of(job: PreparedJob) -> str:

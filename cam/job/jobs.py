@@ -556,6 +556,9 @@ def _finish(job: PreparedJob) -> PreparedJob:
     job.extent_steps, cut = job.plan.motion_extent()  # one pass over the chunks
     if job.size_mm == (0.0, 0.0):
         job.size_mm, job.depth_mm = _cut_extent(job.extent_steps, cut, job.settings)
+        surface = int(job.report.get("surface_z_steps", 0))  # a G-code program's Z = 0 below or above its start
+        if surface:
+            job.depth_mm = round(max(0, int(job.extent_steps[2, 1]) - surface) * job.settings.mm_per_step_z, 4)
     job.tool_changes = list(job.plan.pause_notes or [])
     for w in job.plan.warnings:
         if w not in job.warnings:
@@ -663,6 +666,8 @@ def _prepare_gcode(path: Path, options: JobOptions, settings: MachineSettings,
         home_steps=start,  # type: ignore[arg-type]
         summary=f"{path.name}: {stream.n_program_moves} moves",
         report={"moves": stream.n_program_moves, "start_steps": list(start),
+                # the program's Z = 0 (the active work zero's), from where it starts: depths are below it
+                "surface_z_steps": 0 if machine_state is None else int(machine_state.work_zero_steps()[2]) - start[2],
                 # the work offsets as the program left them (G10 L2/L20), machine steps: cam drill --keep-offsets
                 "work_offsets_end_steps": {k: list(gcode_mm_to_steps(v, s, flip_y=options.flip_y))
                                            for k, v in (program.end_offsets_mm or {}).items()}},
