@@ -8,7 +8,10 @@ Workloads: ``samples/sketch.jpg`` traced (``cam.trace``, as ``--trace``) and pla
 --arc-tolerance 0`` (one ``G1`` a point, the feed written only where it changes, as the grbl post does).
 Columns: lines and bytes of each program and their ratio (reference / fitted), the arcs written, the largest
 deviation of the fitted path from the reference path below the surface (both decoded here from the G-code, arcs
-split into 2 micrometre chords), and the median time to write each program (3 runs).
+split into 2 micrometre chords), the median time to write each program (3 runs), and (``--grbl``) the machine
+time of each program on the grbl emulator (``cam.sim.grbl``: grbl's accelerations and junction speeds, a router's
+rates; streamed by ``cam.drive.grbl_link`` with character counting at 1 Mbaud, the emulator 10x sped up so the
+rows take minutes, not hours) with its planner starvations.
 """
 from __future__ import annotations
 
@@ -26,7 +29,12 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 import cam  # noqa: E402
+from cam.drive.grbl_link import GrblLink  # noqa: E402
 from cam.formats.gcode_export import to_gcode  # noqa: E402
+from cam.sim.grbl import start_emulator  # noqa: E402
+
+GRBL = {110: 3000.0, 111: 3000.0, 112: 1500.0, 120: 200.0, 121: 200.0, 122: 200.0}
+"""A small router's $110-$122 (the feeds of these programs are the thesis machine's 347 mm/min)."""
 
 
 def path_of(text: str, chord_mm: float = 0.002) -> np.ndarray:
@@ -78,9 +86,22 @@ def timed(job, **options) -> tuple[str, float]:
     return text, statistics.median(times)
 
 
+def grbl_machine_s(text: str) -> tuple[float, int]:
+    """(simulated machine seconds, planner starvations) of a program on the grbl emulator."""
+    emu = start_emulator(speed=10.0, settings=GRBL, baud=1_000_000)
+    try:
+        with GrblLink(f"grbl:{emu.device_path}?baud=1000000") as link:
+            t0 = emu.time_s
+            link.stream([ln for ln in text.splitlines() if not ln.startswith("M0")])
+            return emu.executed()[-1].t_end_s - t0, emu.starvation_count
+    finally:
+        emu.stop()
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="the ellipse drawing instead of the traced sketch")
+    ap.add_argument("--grbl", action="store_true", help="also each program's machine time on the grbl emulator")
     args = ap.parse_args(argv)
     if args.quick:
         drawing = cam.load_image(ROOT / "samples" / "ellipse.png")
@@ -90,17 +111,22 @@ def main(argv=None) -> int:
         first = ("traced sketch", cam.plan(cam.digitize(traced), depth=3))
     relief = cam.plan(cam.digitize(cam.load_image(ROOT / "samples" / "disc.png")),
                       profile=cam.load_profile(ROOT / "profiles" / "dome.png"))
+    extra = " grbl s ref | grbl s fitted | ratio | starved ref/fitted |" if args.grbl else ""
     print("| job | tolerance mm | lines ref | lines fitted | ratio | bytes ref | bytes fitted | ratio | arcs "
-          "| max deviation mm | write s ref | write s fitted |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+          "| max deviation mm | write s ref | write s fitted |" + extra)
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|" + ("---|---|---|---|" if args.grbl else ""))
     for name, job in (first, ("dome relief", relief)):
         ref, t_ref = timed(job)
         for tol in (0.01, 0.05):
             fit, t_fit = timed(job, arc_tolerance_mm=tol)
             n_ref, n_fit = len(ref.splitlines()), len(fit.splitlines())
             arcs = sum(ln.startswith(("G2 ", "G3 ")) for ln in fit.splitlines())
-            print(f"| {name} | {tol:g} | {n_ref} | {n_fit} | {n_ref / n_fit:.2f} | {len(ref)} | {len(fit)} "
-                  f"| {len(ref) / len(fit):.2f} | {arcs} | {deviation_mm(fit, ref):.4f} | {t_ref:.3f} | {t_fit:.3f} |")
+            row = (f"| {name} | {tol:g} | {n_ref} | {n_fit} | {n_ref / n_fit:.2f} | {len(ref)} | {len(fit)} "
+                   f"| {len(ref) / len(fit):.2f} | {arcs} | {deviation_mm(fit, ref):.4f} | {t_ref:.3f} | {t_fit:.3f} |")
+            if args.grbl:
+                (m_ref, s_ref), (m_fit, s_fit) = grbl_machine_s(ref), grbl_machine_s(fit)
+                row += f" {m_ref:.1f} | {m_fit:.1f} | {m_ref / m_fit:.2f} | {s_ref}/{s_fit} |"
+            print(row, flush=True)
     return 0
 
 
