@@ -391,3 +391,18 @@ def test_every_job_kind_runs_on_grbl_through_its_own_points(name, tmp_path):
     finally:
         close_grbl_machines()
         emu.stop()
+
+
+def test_a_lost_link_mid_job_is_one_line_and_the_position_unknown(grbl, tmp_path):
+    _, job = two_d_job()
+    hold = StateHold(tmp_path / "m.json", SETTINGS, "test")
+    session = MachineSession(url(grbl), SETTINGS, state=hold)
+    session.start(job)
+    assert grbl.wait_for(lambda e: len(e.executed()) >= 3, 20)
+    grbl.unplug()
+    assert session.wait_idle(30)
+    assert session.last_run["status"] == "error", session.last_run
+    msg = session.last_run["messages"][0]
+    assert "lost" in msg and "\n" not in msg, msg
+    assert not hold.state.position_known  # where grbl stopped is not known any more
+    hold.close()
