@@ -368,12 +368,12 @@ def _lookahead(high: np.ndarray, per_ns: np.ndarray, settings: MachineSettings,
         _periods_from_rates(u, per_ns, out, mid)
         if rnd == _ROUNDS:
             break
-        # compiled without the GIL: the axes are checked in parallel
-        broken = [r[0] for r in _pool().map(lambda a: _check_axis(axes[a], mid, limits, a, False), range(3))]
+        # compiled without the GIL: the axes are checked in parallel, each recording where a rule broke (a
+        # window's rounds after the first break a few rules: checking again to record them cost a third)
+        checked = list(_pool().map(lambda a: _check_axis(axes[a], mid, limits, a, True), range(3)))
         hits = 0
-        for a, n_broken in enumerate(broken):
-            if n_broken:  # check again, recording where, and lower the caps there
-                _, r1, r2, r3 = _check_axis(axes[a], mid, limits, a, True)
+        for a, (n_broken, r1, r2, r3) in enumerate(checked):
+            if n_broken:  # lower the caps where it broke
                 hits += _drop_caps(axes[a][0], r1, r2, r3, u, cap, _DROP)
         if hits == 0:
             break
