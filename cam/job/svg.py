@@ -460,12 +460,14 @@ def _order(strokes: list[np.ndarray], at: Optional[np.ndarray] = None) -> list[n
     tree = cKDTree(np.vstack([starts, ends]))
     out = []
     gone = 0  # strokes taken since the tree was built
+    owner_of = owner.tolist()
     for _ in range(n):
         if 4 * gone >= len(owner) > 64:  # half the ends in the tree are gone: rebuild it without them
             keep = left[owner]
             tree, owner, gone = cKDTree(tree.data[keep]), owner[keep], 0
+            owner_of = owner.tolist()
         gone += 1
-        i = _nearest_stroke(tree, owner, left, starts, ends, at)
+        i = _nearest_stroke(tree, owner_of, left, starts, ends, at)
         left[i] = False
         ds, de = np.hypot(*(starts[i] - at)), np.hypot(*(ends[i] - at))
         stroke = strokes[i][::-1] if de < ds else strokes[i]
@@ -474,25 +476,23 @@ def _order(strokes: list[np.ndarray], at: Optional[np.ndarray] = None) -> list[n
     return out
 
 
-def _nearest_stroke(tree: cKDTree, owner: np.ndarray, left: np.ndarray, starts: np.ndarray, ends: np.ndarray,
+def _nearest_stroke(tree: cKDTree, owner: list[int], left: np.ndarray, starts: np.ndarray, ends: np.ndarray,
                     at: np.ndarray) -> int:
     """The stroke left whose nearer end is nearest ``at`` (ties: the lowest index), as a search of every stroke
     finds it (``np.hypot``); the tree only finds the few candidates, with a margin for its own rounding."""
     k = 8
     while True:
         d, j = tree.query(at, k=min(k, len(owner)))
-        d, j = np.atleast_1d(d), np.atleast_1d(j)
-        mine = owner[j]
-        alive = left[mine]
-        if alive.any():
-            reach = d[alive.argmax()] * (1 + 1e-9) + 1e-9
-            if d[-1] > reach or k >= len(owner):
-                cand = mine[alive & (d <= reach)]
-                if (cand == cand[0]).all():  # one stroke within reach (one end of it, or both)
-                    return int(cand[0])
-                cand = np.unique(cand)
+        found = [(dist, owner[e]) for dist, e in zip(np.atleast_1d(d).tolist(), np.atleast_1d(j).tolist())]
+        alive = [(dist, i) for dist, i in found if left[i]]
+        if alive:
+            reach = alive[0][0] * (1 + 1e-9) + 1e-9
+            if found[-1][0] > reach or k >= len(owner):
+                cand = sorted({i for dist, i in alive if dist <= reach})
+                if len(cand) == 1:  # one stroke within reach (one end of it, or both)
+                    return cand[0]
                 near = np.minimum(np.hypot(*(starts[cand] - at).T), np.hypot(*(ends[cand] - at).T))
-                return int(cand[np.argmin(near)])
+                return cand[int(np.argmin(near))]
         k *= 4
 
 
