@@ -6,7 +6,6 @@ The emulator runs sped up here (``speed``: machine time per wall time), except t
 from __future__ import annotations
 
 import math
-import sys
 import threading
 import time
 
@@ -18,18 +17,12 @@ from cam.errors import PortError
 from cam.settings import MachineSettings, Travel
 from cam.sim.grbl import DEFAULT_SETTINGS, LOG_HEADER, WELCOME, start_emulator
 from conftest import run_cli
+from support.grbl import quick_thread_switches  # noqa: F401 (autouse)
 
 # grbl's defaults (500 mm/min, 10 mm/s^2) would cap these feeds; a small router's rates and accelerations
 FAST = {110: 5000.0, 111: 5000.0, 112: 5000.0, 120: 500.0, 121: 500.0, 122: 500.0}
 
 
-@pytest.fixture(autouse=True)
-def quick_thread_switches():
-    """The emulator, the link's reader and the test share the GIL: switch threads every 0.5 ms, not 5 ms."""
-    before = sys.getswitchinterval()
-    sys.setswitchinterval(0.0005)
-    yield
-    sys.setswitchinterval(before)
 
 
 @pytest.fixture

@@ -6,15 +6,13 @@ prompt, zero/offsets mirrored to grbl, homing, the feed override.
 The emulator runs sped up (``speed``) except in the ``realtime`` test."""
 from __future__ import annotations
 
-import sys
-import threading
 import time
 
 import numpy as np
 import pytest
 
 import cam
-from cam.drive.grbl_machine import close_grbl_machines, job_lines, mpos_to_steps, GrblPause
+from cam.drive.grbl_machine import close_grbl_machines, job_lines, mpos_to_steps
 from cam.drive.session import MachineSession
 from cam.drive.state import StateHold
 from cam.errors import CapabilityError
@@ -22,6 +20,7 @@ from cam.settings import Travel
 from cam.sim.grbl import start_emulator
 from cam.verify.pinlog import Motion
 from conftest import SAMPLES, assert_surface_equal, drawing_from_rows, expected_surface_2d, run_cli
+from support.grbl import quick_thread_switches  # noqa: F401 (autouse)
 
 SETTINGS = cam.MachineSettings()
 STEPS_PER_MM = {100: 1 / SETTINGS.mm_per_step_xy, 101: 1 / SETTINGS.mm_per_step_xy,
@@ -32,13 +31,6 @@ HOMED_SETTINGS = SETTINGS.replace(travel=Travel(x_min_steps=-6920, x_max_steps=0
 FAST = {110: 5000.0, 111: 5000.0, 112: 5000.0, 120: 500.0, 121: 500.0, 122: 500.0, **STEPS_PER_MM}
 
 
-@pytest.fixture(autouse=True)
-def quick_thread_switches():
-    before = sys.getswitchinterval()
-    sys.setswitchinterval(0.0005)
-    yield
-    sys.setswitchinterval(before)
-    close_grbl_machines()
 
 
 @pytest.fixture

@@ -3,7 +3,6 @@
 shows the position live from grbl's status reports; in Chromium too."""
 from __future__ import annotations
 
-import sys
 import time
 
 import numpy as np
@@ -16,17 +15,11 @@ from cam.job.jobs import JobOptions, prepare_job
 from cam.sim.grbl import start_emulator
 from cam.verify.pinlog import decode_pin_log
 from conftest import SAMPLES, assert_surface_equal
+from support.grbl import quick_thread_switches  # noqa: F401 (autouse)
 from test_grbl_session import FAST as GRBL_FAST, HOMED_SETTINGS, HOMING, SETTINGS, executed_motion
 from test_web import Server, _load, _open, _wait_done, browser, page  # noqa: F401 (fixtures)
 
 
-@pytest.fixture(autouse=True)
-def quick_thread_switches():
-    before = sys.getswitchinterval()
-    sys.setswitchinterval(0.0005)
-    yield
-    sys.setswitchinterval(before)
-    close_grbl_machines()
 
 
 @pytest.fixture
