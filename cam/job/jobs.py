@@ -498,15 +498,10 @@ def motion_picture(
             xy, z = full_xy[keep], full_z[keep]
             below = (z[1:] > 0) & (z[:-1] > 0)
             if layer == "above":
-                for i in np.flatnonzero(~below):
-                    a, b = tuple(int(v) for v in xy[i]), tuple(int(v) for v in xy[i + 1])
-                    if a != b:
-                        cv2.line(img, a, b, (170, 170, 170), 1, cv2.LINE_AA)
+                moved = np.any(xy[1:] != xy[:-1], axis=1)
+                _draw_runs(img, xy, ~below & moved, np.zeros((len(xy), 3), np.uint8) + 170, 1, cv2.LINE_AA)
             elif layer == "below":
-                cols = depth_colours(np.maximum(z, 0), zmax)
-                for i in np.flatnonzero(below):
-                    a, b = tuple(int(v) for v in xy[i]), tuple(int(v) for v in xy[i + 1])
-                    cv2.line(img, a, b, tuple(int(v) for v in cols[i + 1]), 2, cv2.LINE_8)
+                _draw_runs(img, xy, below, depth_colours(np.maximum(z, 0), zmax), 2, cv2.LINE_8)
             else:  # a plunge's deepest point: judged once its next point is known (the last of a piece: in the
                 # next piece, where it is point 0 and the point before it is carried)
                 cols = depth_colours(np.maximum(z, 0), zmax)
@@ -526,6 +521,26 @@ def motion_picture(
     cv2.putText(img, "grey: above the surface", (100, h + 36), cv2.FONT_HERSHEY_SIMPLEX, 0.4, (120, 120, 120), 1,
                 cv2.LINE_AA)
     return img
+
+
+def _draw_runs(img: np.ndarray, xy: np.ndarray, draw: np.ndarray, cols: np.ndarray, thickness: int,
+               line_type: int) -> None:
+    """Draw segment ``i`` (``xy[i]`` to ``xy[i + 1]``, ``(N, 2)`` picture pixels) where ``draw[i]``, in the colour
+    of its end ``cols[i + 1]``: consecutive segments of one colour as one polyline (one OpenCV call for a run,
+    not one a segment: the same pixels, a 50,000-circle halftone's picture in a fraction of the time)."""
+    idx = np.flatnonzero(draw)
+    if not len(idx):
+        return
+    colour_key = cols[idx + 1].astype(np.int64) @ np.array([1 << 16, 1 << 8, 1], np.int64)
+    new_run = np.ones(len(idx), bool)
+    new_run[1:] = (np.diff(idx) != 1) | (colour_key[1:] != colour_key[:-1])
+    starts = np.flatnonzero(new_run)
+    ends = np.r_[starts[1:], len(idx)]
+    pts = xy.astype(np.int32)
+    for r0, r1 in zip(starts.tolist(), ends.tolist()):
+        run = pts[idx[r0]:idx[r1 - 1] + 2]
+        colour = tuple(int(v) for v in cols[idx[r0] + 1])
+        cv2.polylines(img, [run.reshape(-1, 1, 2)], False, colour, thickness, line_type)
 
 
 def _with_last(arrays: Any) -> Any:
