@@ -802,9 +802,10 @@ def _path_pieces(values: dict, m: se.Matrix, k: float, close_open: bool):
     kinds, pts = _path_segments(commands)
     xy = np.array(pts, float).reshape(-1, 2)
     px = np.empty_like(xy)
-    px[:, 0] = xy[:, 0] * m.a + xy[:, 1] * m.c + 1 * m.e
-    px[:, 1] = xy[:, 0] * m.b + xy[:, 1] * m.d + 1 * m.f
-    mm = px * k
+    with np.errstate(over="ignore", invalid="ignore"):  # a huge transform: inf, refused in one line later
+        px[:, 0] = xy[:, 0] * m.a + xy[:, 1] * m.c + 1 * m.e
+        px[:, 1] = xy[:, 0] * m.b + xy[:, 1] * m.d + 1 * m.f
+        mm = px * k
     return _pieces_from(kinds, px, mm, close_open)
 
 
