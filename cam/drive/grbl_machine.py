@@ -36,6 +36,7 @@ from typing import Any, Callable, Iterator, Optional
 import numpy as np
 
 from ..errors import CamError, PlanError, PortError
+from ..formats.gcode_export import format_mm
 from ..job.model import CUT
 from ..settings import MachineSettings, Travel
 from .runner import EMERGENCY_STOPPED, FINISHED, STOPPED
@@ -92,11 +93,6 @@ def travel_advice(grbl: dict[int, float], settings: MachineSettings) -> str:
             f"{t.y_max_steps}, z_min_steps = 0, z_max_steps = {t.z_max_steps}")
 
 
-def _fmt(v: float) -> str:
-    s = f"{v:.4f}".rstrip("0").rstrip(".")
-    return "0" if s in ("-0", "") else s
-
-
 @dataclass(frozen=True)
 class GrblPause:
     """Where a job waits for the operator: after point ``index`` (0-based), ``position_steps`` from the job's
@@ -144,15 +140,15 @@ def job_lines(job: Any, start_steps: Steps3, base_steps: Steps3, settings: Machi
     def line(end: np.ndarray, feed: float, rapid: bool) -> str:
         nonlocal feed_now
         mm = steps_to_mpos(origin + end, settings)
-        words = "".join(f"{a}{t}" for a, t, w in zip("XYZ", (_fmt(v) for v in mm), written) if t != w)
-        for i, t in enumerate(_fmt(v) for v in mm):
+        words = "".join(f"{a}{t}" for a, t, w in zip("XYZ", (format_mm(v) for v in mm), written) if t != w)
+        for i, t in enumerate(format_mm(v) for v in mm):
             written[i] = t
         if rapid:
             return f"G53G0{words}"
         text = f"G53G1{words}"
         if feed != feed_now:
             feed_now = feed
-            text += f"F{_fmt(feed)}"
+            text += f"F{format_mm(feed)}"
         return text
 
     for piece in job.pieces():

@@ -59,7 +59,7 @@ from ..job.svg import FLATTEN_STEPS, _selected, svg_layer_order, svg_scale
 from .hpgl import ARC_MNEMONICS, HpglDrawing, iter_hpgl, load_hpgl
 from .svg import load_svg
 
-__all__ = ["to_gcode", "gcode_pieces", "save_gcode", "feeds_mm_per_min", "exact_geometry", "svg_exact_xy_mm",
+__all__ = ["format_mm", "to_gcode", "gcode_pieces", "save_gcode", "feeds_mm_per_min", "exact_geometry", "svg_exact_xy_mm",
            "hpgl_exact_xy_mm", "POSTS"]
 
 POSTS = ("generic", "grbl", "linuxcnc")
@@ -75,7 +75,12 @@ def feeds_mm_per_min(settings) -> tuple[float, float]:
     return xy, z
 
 
-def _fmt(v: float) -> str:
+def format_mm(v: float) -> str:
+    """``v`` with at most 4 decimals, trailing zeros dropped, no minus zero: how every written number looks.
+
+    >>> format_mm(1.25), format_mm(-0.00001), format_mm(3.0)
+    ('1.25', '0', '3')
+    """
     s = f"{v:.4f}".rstrip("0").rstrip(".")
     return "0" if s in ("-0", "") else s
 
@@ -356,7 +361,7 @@ class _Writer:
         self.modal_feed = post != "generic" or arc_tolerance_mm is not None
         self.oz_mm = toolpath.pixels.origin_px[2] * s.steps_per_px_z * self.mm_z if toolpath.pixels else 0.0
         self.safe_z = -self.oz_mm + travel_height_mm
-        self.spindle = f"M3 S{_fmt(spindle_rpm)}\n" if spindle_rpm else ""
+        self.spindle = f"M3 S{format_mm(spindle_rpm)}\n" if spindle_rpm else ""
         self.spindle_on = False  # started before the first cut, and after each tool change
         self.x, self.y, self.z = 0.0, 0.0, self.safe_z
         self.f: Optional[float] = None
@@ -386,27 +391,27 @@ class _Writer:
         w(f"(X = {unit_x} x {k_xy * self.mm_xy:.4f} mm; Y = {'+' if flip else '-'}{unit_y} x "
           f"{k_xy * self.mm_xy:.4f} mm{' [flipped]' if flip else ' [rows grow down, machine Y grows up]'})\n")
         w(f"(Z = -{unit_z} x {k_z * self.mm_z:.4f} mm; Z = 0 is the material surface; safe height "
-          f"{_fmt(self.safe_z)} mm)\n")
+          f"{format_mm(self.safe_z)} mm)\n")
         where = "as asked" if self.feeds_asked else "from the step delays"
-        w(f"(feeds: X/Y {_fmt(self.feed_xy)} mm/min, Z {_fmt(self.feed_z)} mm/min, {where})\n")
+        w(f"(feeds: X/Y {format_mm(self.feed_xy)} mm/min, Z {format_mm(self.feed_z)} mm/min, {where})\n")
         exact = bool(self.exact_xy or self.exact_z)
         if self.post != "generic" or exact or snap or self.tol is not None:
             geometry = "snapped to the machine's steps" if snap else (
                 "exact where the source gives it" if exact else "the job's steps")
-            arcs = f"lines and arcs fitted within {_fmt(self.tol)} mm" if self.tol else "one line a point"
+            arcs = f"lines and arcs fitted within {format_mm(self.tol)} mm" if self.tol else "one line a point"
             w(f"(target {self.post}; geometry {geometry}; {arcs})\n")
         cutter = getattr(toolpath, "tool", None)
         if cutter is not None and not cutter.is_point:
             w(f"(tool: {_comment(cutter.describe())}, spec {cutter.spec()}; Z is its tip)\n")
         w("G21 G90 G17 G94\n")
         if self.post == "linuxcnc" and self.tol:
-            w(f"G64 P{_fmt(self.tol)}\n")  # blend corners no further from the path than the fit
+            w(f"G64 P{format_mm(self.tol)}\n")  # blend corners no further from the path than the fit
         if cutter is not None and not cutter.is_point and not has_tool_changes:
             if self.post == "grbl":
                 w(f"(load tool 1: {_comment(cutter.describe())})\n")
             else:
                 w(f"T1 M6 ({_comment(cutter.describe())})\n")
-        w(f"G0 Z{_fmt(self.safe_z)}\n")
+        w(f"G0 Z{format_mm(self.safe_z)}\n")
 
     def tool_change(self, n: Optional[int], comment: str) -> None:
         if self.spindle_on:
@@ -428,7 +433,7 @@ class _Writer:
         if self.modal_feed and self.f == f:
             return ""
         self.f = f
-        return f" F{_fmt(f)}"
+        return f" F{format_mm(f)}"
 
     def flush(self) -> None:
         """Write the gathered cutting run: a G1 a vertex, or fitted lines and arcs."""
@@ -448,14 +453,14 @@ class _Writer:
             if seg.kind == "line":
                 words = ""
                 if (wx, wy) != (sx, sy):
-                    words += f" X{_fmt(ex)} Y{_fmt(ey)}"
+                    words += f" X{format_mm(ex)} Y{format_mm(ey)}"
                 if wz != sz:
-                    words += f" Z{_fmt(ez)}"
+                    words += f" Z{format_mm(ez)}"
                 if words:
                     w(f"G1{words}{self.feed_word(self.feed_xy if (wx, wy) != (sx, sy) else self.feed_z)}\n")
             else:
                 cx, cy = arc_centre_for_ends((sx, sy), (wx, wy), seg.centre_mm)
-                w(f"{'G2' if seg.kind == 'cw' else 'G3'} X{_fmt(ex)} Y{_fmt(ey)} I{_fmt(cx - sx)} J{_fmt(cy - sy)}"
+                w(f"{'G2' if seg.kind == 'cw' else 'G3'} X{format_mm(ex)} Y{format_mm(ey)} I{format_mm(cx - sx)} J{format_mm(cy - sy)}"
                   f"{self.feed_word(self.feed_xy)}\n")
             sx, sy, sz = wx, wy, wz
         self.x, self.y, self.z = float(pts[-1, 0]), float(pts[-1, 1]), float(pts[-1, 2])
@@ -465,7 +470,7 @@ class _Writer:
     def go_up(self) -> None:
         self.flush()
         if not self.above:
-            self.w(f"G0 Z{_fmt(self.safe_z)}\n")
+            self.w(f"G0 Z{format_mm(self.safe_z)}\n")
             self.above, self.z = True, self.safe_z
 
     def vertex(self, x: float, y: float, z: float, arc: bool = False) -> None:
@@ -491,14 +496,14 @@ class _Writer:
             # at or above the surface: go up to the safe plane, travel there
             self.go_up()
             if (nx, ny) != (self.x, self.y):
-                self.w(f"G0 X{_fmt(nx)} Y{_fmt(ny)}\n")
+                self.w(f"G0 X{format_mm(nx)} Y{format_mm(ny)}\n")
                 self.x, self.y = nx, ny
             return
         cur = self.run[-1] if self.run else (self.x, self.y, self.z)
         if (nx, ny) != (cur[0], cur[1]):
             if self.above:  # cutting move starting from the safe plane: come down to the surface first
                 self.start_spindle()
-                self.w(f"G1 Z{_fmt(-self.oz_mm)}{self.feed_word(self.feed_z)}\n")
+                self.w(f"G1 Z{format_mm(-self.oz_mm)}{self.feed_word(self.feed_z)}\n")
                 self.above, self.z = False, -self.oz_mm
                 cur = (cur[0], cur[1], -self.oz_mm)
             self.vertex(nx, ny, cur[2], bool(self.on_arc and last is not None and self.on_arc(last, (xp, yp))))
@@ -518,7 +523,7 @@ class _Writer:
 
 def _written(v: float) -> float:
     """``v`` as the program gives it (4 decimals)."""
-    return float(_fmt(v))
+    return float(format_mm(v))
 
 
 def save_gcode(toolpath: Job, path: str | os.PathLike, **options) -> Path:
