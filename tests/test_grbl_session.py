@@ -139,12 +139,18 @@ def test_stop_keeps_the_position_and_sends_nothing_more(grbl):
     assert not any("ALARM:3" in text for _, text in grbl.events)
 
 
-def test_emergency_stop_resets_at_once_and_the_position_is_unknown(grbl, tmp_path):
+def running_with_state(grbl, tmp_path, blocks: int) -> tuple[MachineSession, StateHold]:
+    """A session with a state file, running the small drawing on ``grbl`` once ``blocks`` blocks have executed."""
     _, job = two_d_job()
     hold = StateHold(tmp_path / "m.json", SETTINGS, "test")
     session = MachineSession(url(grbl), SETTINGS, state=hold)
     session.start(job)
-    assert grbl.wait_for(lambda e: len(e.executed()) >= 2, 20)
+    assert grbl.wait_for(lambda e: len(e.executed()) >= blocks, 20)
+    return session, hold
+
+
+def test_emergency_stop_resets_at_once_and_the_position_is_unknown(grbl, tmp_path):
+    session, hold = running_with_state(grbl, tmp_path, 2)
     session.emergency_stop()
     assert session.wait_idle(30)
     assert session.last_run["status"] == "emergency-stopped"
@@ -386,11 +392,7 @@ def test_every_job_kind_runs_on_grbl_through_its_own_points(name, tmp_path):
 
 
 def test_a_lost_link_mid_job_is_one_line_and_the_position_unknown(grbl, tmp_path):
-    _, job = two_d_job()
-    hold = StateHold(tmp_path / "m.json", SETTINGS, "test")
-    session = MachineSession(url(grbl), SETTINGS, state=hold)
-    session.start(job)
-    assert grbl.wait_for(lambda e: len(e.executed()) >= 3, 20)
+    session, hold = running_with_state(grbl, tmp_path, 3)
     grbl.unplug()
     assert session.wait_idle(30)
     assert session.last_run["status"] == "error", session.last_run

@@ -16,7 +16,7 @@ from ..drive.state import (
     MachineLock, MachineState, StateHold, check_in_travel, default_state_path, dump_json, mm_to_steps,
     read_state, steps_to_mm,
 )
-from ..drive.grbl_machine import GRBL_OFFSETS, grbl_machine
+from ..drive.grbl_machine import GRBL_OFFSETS, adopt_position, grbl_machine
 from ..drive.ports import port_kind
 from ..drive.session import MachineSession
 from ..errors import CamError
@@ -43,10 +43,11 @@ def hold_machine(args: argparse.Namespace, settings: MachineSettings, what: str)
     hold = StateHold(state_path_of(args), settings, what)
     if port_kind(getattr(args, "port", None) or "mock") == "grbl":
         try:
-            session = MachineSession(args.port, settings, state=hold, on_prompt=None)
-            if session.grbl is not None and session.grbl.warning and not session.grbl.warned:
-                session.grbl.warned = True  # once a process
-                print(f"warning: {session.grbl.warning}", file=sys.stderr)
+            machine = grbl_machine(args.port, settings)
+            if machine.warning and not machine.warned:
+                machine.warned = True  # once a process
+                print(f"warning: {machine.warning}", file=sys.stderr)
+            adopt_position(machine, hold, lambda text, level: None)  # why it is unknown: in the state file
         except BaseException:
             hold.close()
             raise
