@@ -41,6 +41,7 @@ KERNEL_MODULES = (
     "cam.drive.ramps",
     "cam.job.drill_order",
     "cam.job._route",
+    "cam.job._svg_kernels",
     "cam.formats.hpgl",
     "cam.verify.ramps",
 )

@@ -3,8 +3,8 @@
 Every document here is read twice: by :func:`cam.formats.svg._parse_fast` (the fast reader, which must take it)
 and by :func:`cam.formats.svg._parse_svgelements` (svgelements alone, the reader before); the polylines agree
 within 1e-9 mm, with the same closed flags, element and segment counts, layers and page size.  The planner's
-batched steps (:func:`cam.job.svg._cells_many`, :func:`cam.job.svg._order`) are checked against the one-stroke
-versions they replace.
+compiled steps (:func:`cam.job.svg._cells_many`, :func:`cam.job.svg._order`, the duplicate search) are checked
+against the one-stroke numpy version and searches of every stroke or pair.
 """
 import math
 
@@ -16,6 +16,7 @@ from cam.errors import ParseError
 from cam.formats import svg as svgmod
 from cam.formats.svg import parse_svg
 from cam.job import svg as plan
+from cam.job._svg_kernels import duplicate_pieces_kernel
 
 NS = 'xmlns="http://www.w3.org/2000/svg" xmlns:inkscape="http://www.inkscape.org/namespaces/inkscape"'
 
@@ -214,22 +215,46 @@ def test_batched_cells_are_the_one_stroke_cells():
             assert np.array_equal(got, want)
 
 
-def test_batched_cells_in_small_chunks(monkeypatch):
-    monkeypatch.setattr(plan, "CELLS_CHUNK_SAMPLES", 40)
+def test_batched_cells_of_long_strokes_and_repeated_vertices():
+    """Strokes of thousands of positions (the compiled pass grows its buffers), single points between them, and
+    vertices repeated (zero-length segments) or on a staircase."""
     rng = np.random.default_rng(2)
-    polys = [np.cumsum(rng.normal(0, 1.5, (int(rng.integers(1, 30)), 2)), axis=0) for _ in range(40)]
-    for got, want in zip(plan._cells_many(polys), [plan._cells(p) for p in polys], strict=True):
-        assert np.array_equal(got, want)
+    for _ in range(30):
+        polys = []
+        for _ in range(int(rng.integers(1, 6))):
+            m = int(rng.integers(1, 400))
+            walk = [rng.normal(0, 3, (m, 2)), rng.integers(-3, 4, (m, 2)).astype(float), rng.normal(0, 0.7, (m, 2)),
+                    np.repeat(rng.normal(0, 2, (m, 2)), 2, axis=0)][int(rng.integers(0, 4))]
+            polys.append(np.cumsum(walk, axis=0) + rng.uniform(-100, 100, 2))
+        for got, want in zip(plan._cells_many(polys), [plan._cells(p) for p in polys], strict=True):
+            assert np.array_equal(got, want)
 
 
-def test_a_long_stroke_cut_into_pieces_at_corners_gives_the_same_cells(monkeypatch):
-    monkeypatch.setattr(plan, "CELLS_CHUNK_SAMPLES", 64)
-    rng = np.random.default_rng(5)
-    for _ in range(60):
-        walk = rng.choice([rng.normal(0, 3, (150, 2)), rng.integers(-3, 4, (150, 2)).astype(float),
-                           rng.normal(0, 0.7, (150, 2))])
-        poly = np.cumsum(walk, axis=0)
-        assert np.array_equal(plan._cells_many([poly])[0], plan._cells(poly))
+def duplicates_by_search(a, b, near):
+    """Which pieces trace an earlier piece that is kept, by comparing every pair (the rule of
+    :func:`cam.job._svg_kernels.duplicate_pieces_kernel`)."""
+    gone = np.zeros(len(a), bool)
+    for h in range(1, len(a)):
+        fwd = np.all(np.abs(a[:h] - a[h]) <= near, axis=1) & np.all(np.abs(b[:h] - b[h]) <= near, axis=1)
+        rev = np.all(np.abs(b[:h] - a[h]) <= near, axis=1) & np.all(np.abs(a[:h] - b[h]) <= near, axis=1)
+        gone[h] = np.any((fwd | rev) & ~gone[:h])
+    return gone
+
+
+@pytest.mark.parametrize("spread", [0.3, 2.0, 1e6])
+def test_the_duplicate_search_is_the_search_of_every_pair(spread):
+    rng = np.random.default_rng(int(spread * 10))
+    for _ in range(40):
+        k = int(rng.integers(1, 300))
+        a = np.round(rng.uniform(0, spread, (k, 2)) * 8) / 8  # ends on the cells' edges too
+        b = a + rng.choice([0.0, 0.125, 0.25, 0.375, 1.0], (k, 2)) * rng.choice([-1, 1], (k, 2))
+        swap = rng.random(k) < 0.5
+        a[swap], b[swap] = b[swap].copy(), a[swap].copy()
+        chain = rng.normal(0, 0.1, (k, 2)).cumsum(axis=0)  # runs of pieces each near the one before
+        if rng.random() < 0.5:
+            a, b = a + chain, b + chain
+        got = duplicate_pieces_kernel(np.ascontiguousarray(a), np.ascontiguousarray(b), 0.25)
+        assert np.array_equal(got, duplicates_by_search(a, b, 0.25))
 
 
 def order_by_search(strokes, at=None):
@@ -254,6 +279,7 @@ def test_the_cutting_order_is_the_nearest_stroke_search(span):
     rng = np.random.default_rng(span)
     for _ in range(40):
         strokes = [rng.integers(0, span, (int(rng.integers(1, 4)), 2)) for _ in range(int(rng.integers(1, 150)))]
-        got, want = plan._order(strokes), order_by_search(strokes)
+        at = [None, np.array([-5.0 * span, 2.0]), rng.uniform(0, span, 2)][int(rng.integers(0, 3))]
+        got, want = plan._order(strokes, at), order_by_search(strokes, at)
         assert len(got) == len(want)
         assert all(np.array_equal(g, w) for g, w in zip(got, want))

@@ -59,11 +59,11 @@ import math
 from typing import Optional, Sequence, Union
 
 import numpy as np
-from scipy.spatial import cKDTree  # duplicate pieces; scipy comes with scikit-image (cam.digitize.sketch uses it)
 
 from ..errors import PlanError, TravelError
 from ..formats.svg import SvgDrawing
 from ..settings import DEFAULT_SETTINGS, MachineSettings
+from ._svg_kernels import cells_kernel, duplicate_pieces_kernel, nearest_order_kernel
 from .hpgl import _rows, _z_steps, scale_to_fit
 from .hpgl_stream import outside_travel
 from .model import CUT, Job, check_travel
@@ -164,136 +164,18 @@ def _drop_corners(cells: np.ndarray, fixed: np.ndarray, samples: np.ndarray, run
     return cells[~corner]
 
 
-CELLS_CHUNK_SAMPLES = 1 << 18
-""":func:`_cells_many` samples about this many positions at a time (its memory is bounded by it)."""
-
-
 def _cells_many(polys: list[np.ndarray]) -> list[np.ndarray]:
-    """``[_cells(p) for p in polys]``: the same positions, many polylines at a time (a halftone's 50,000
-    strokes are not 50,000 passes of a few dozen numpy calls each), about :data:`CELLS_CHUNK_SAMPLES` samples
-    at a time."""
+    """``[_cells(p) for p in polys]``: the same positions, made by one compiled pass over all the polylines
+    (:func:`cam.job._svg_kernels.cells_kernel`: a halftone's 50,000 strokes are not 50,000 passes of a few dozen
+    numpy calls each, and a long stroke's millions of samples are never held at once)."""
     if not polys:
         return []
-    sizes = np.array([len(p) for p in polys], np.int64)
-    joined = np.concatenate(polys)
-    steps = np.abs(np.diff(joined, axis=0)).max(axis=1, initial=0.0) if len(joined) > 1 else np.zeros(0)
-    samples = np.maximum(1, np.ceil(steps / SAMPLE_STEPS))
-    samples[np.cumsum(sizes)[:-1] - 1] = 0  # the step from one polyline to the next is no segment
-    per_poly = np.add.reduceat(np.r_[samples, 0.0], np.cumsum(sizes) - sizes) + 1
-    chunk = np.floor_divide(np.cumsum(per_poly) - per_poly, CELLS_CHUNK_SAMPLES).astype(np.int64)
-    out: list[np.ndarray] = []
-    for c in np.unique(chunk):
-        lo, hi = np.searchsorted(chunk, [c, c + 1])
-        if hi - lo == 1 and per_poly[lo] > 2 * CELLS_CHUNK_SAMPLES:
-            out.append(_cells_long(polys[lo]))
-        else:
-            out += _cells_chunk(polys[lo:hi])
-    return out
-
-
-def _cells_long(poly: np.ndarray) -> np.ndarray:
-    """:func:`_cells` of one long polyline, in pieces of about :data:`CELLS_CHUNK_SAMPLES` samples cut at sharp
-    corners: a corner's position is kept by both pieces (never a staircase corner, so each piece drops the same
-    positions next to it as the whole would); the pieces are joined there and runs of one unit move are joined
-    over the whole."""
-    d = np.diff(poly, axis=0)
-    length = np.hypot(d[:, 0], d[:, 1])
-    ok = (length[:-1] > 0) & (length[1:] > 0)
-    cos = np.einsum("ij,ij->i", d[:-1], d[1:]) / np.where(ok, length[:-1] * length[1:], 1.0)
-    corners = np.flatnonzero(ok & (cos < math.cos(math.radians(CORNER_DEG)))) + 1  # vertices
-    before = np.r_[0, np.cumsum(np.maximum(1, np.ceil(np.abs(d).max(axis=1) / SAMPLE_STEPS)))]  # samples
-    cuts = np.unique(corners[np.maximum(0, np.searchsorted(
-        before[corners], np.arange(CELLS_CHUNK_SAMPLES, before[-1], CELLS_CHUNK_SAMPLES), side="right") - 1)]) \
-        if len(corners) else np.zeros(0, np.int64)
-    bounds = np.r_[0, cuts, len(poly) - 1]
-    parts = [_cells_chunk([poly[a:b + 1]], join_runs=False)[0] for a, b in zip(bounds[:-1], bounds[1:])]
-    cells = np.concatenate([parts[0]] + [part[1:] for part in parts[1:]])
-    if len(cells) < 3:
-        return cells
-    step = np.diff(cells, axis=0)
-    same = np.zeros(len(cells), bool)
-    same[1:-1] = np.all(step[1:] == step[:-1], axis=1)
-    return cells[~same]
-
-
-def _cells_chunk(polys: list[np.ndarray], join_runs: bool = True) -> list[np.ndarray]:
-    """:func:`_cells_many` of one chunk (``join_runs`` False: runs of one unit move are left as they are)."""
-    out: list[Optional[np.ndarray]] = [np.floor(p + 0.5).astype(np.int64) if len(p) < 2 else None for p in polys]
-    multi = [i for i, p in enumerate(polys) if len(p) >= 2]
-    if not multi:
-        return out
-    v_count = np.array([len(polys[i]) for i in multi], np.int64)
-    vert = np.concatenate([polys[i] for i in multi]).astype(float)
-    last_vertex = np.cumsum(v_count) - 1
-    seg_v = np.delete(np.arange(len(vert)), last_vertex)  # each segment's first vertex
-    seg_poly = np.repeat(np.arange(len(multi)), v_count - 1)
-    d = vert[seg_v + 1] - vert[seg_v]
-    n = np.maximum(1, np.ceil(np.abs(d).max(axis=1) / SAMPLE_STEPS)).astype(np.int64)
-    first_seg = np.ones(len(d), bool)
-    first_seg[1:] = seg_poly[1:] != seg_poly[:-1]
-    length = np.hypot(d[:, 0], d[:, 1])
-    turn = first_seg.copy()  # each segment's first vertex: an end, or a sharp turn
-    ok = (length[:-1] > 0) & (length[1:] > 0)
-    cos = np.einsum("ij,ij->i", d[:-1], d[1:]) / np.where(ok, length[:-1] * length[1:], 1.0)
-    turn[1:] |= ~first_seg[1:] & ok & (cos < math.cos(math.radians(CORNER_DEG)))
-    seg = np.repeat(np.arange(len(d)), n)
-    i_in_seg = np.arange(len(seg)) - np.repeat(np.cumsum(n) - n, n)
-    total = len(seg) + len(multi)
-    at = np.arange(len(seg)) + seg_poly[seg]  # each poly's samples, then its last vertex
-    ends = np.cumsum(v_count - 1 + np.bincount(seg_poly, weights=n - 1, minlength=len(multi)).astype(np.int64)) \
-        + np.arange(len(multi))
-    fixed = np.ones(total, bool)
-    fixed[at] = turn[seg] & (i_in_seg == 0)
-    sample_poly = np.empty(total, np.int64)
-    sample_poly[at], sample_poly[ends] = seg_poly[seg], np.arange(len(multi))
-    pts = np.empty((total, 2))
-    t = i_in_seg / np.repeat(n, n)
-    del i_in_seg
-    step = d[seg]  # the samples, made in place: a long stroke is millions of them
-    step *= t[:, None]
-    del t
-    step += vert[seg_v][seg]
-    pts[at] = step
-    del step, at, seg
-    pts[ends] = vert[last_vertex]
-    cells = np.floor(pts + 0.5).astype(np.int64)
-    new = np.ones(total, bool)
-    new[1:] = np.any(cells[1:] != cells[:-1], axis=1) | (sample_poly[1:] != sample_poly[:-1])
-    run = np.cumsum(new) - 1
-    fixed_kept = np.logical_or.reduceat(fixed, np.flatnonzero(new))  # runs are consecutive samples
-    kept, kept_poly = _drop_corners_many(cells[new], sample_poly[new], fixed_kept, pts, run)
-    inner = np.zeros(len(kept), bool)
-    inner[1:-1] = (kept_poly[:-2] == kept_poly[1:-1]) & (kept_poly[2:] == kept_poly[1:-1])
-    same = np.zeros(len(kept), bool)
-    same[1:-1] = inner[1:-1] & np.all(kept[1:-1] - kept[:-2] == kept[2:] - kept[1:-1], axis=1) & join_runs
-    kept, kept_poly = kept[~same], kept_poly[~same]
-    pieces = np.split(kept, np.cumsum(np.bincount(kept_poly, minlength=len(multi)))[:-1])
-    for i, piece in zip(multi, pieces):
-        out[i] = piece
-    return out
-
-
-def _drop_corners_many(cells: np.ndarray, poly: np.ndarray, fixed: np.ndarray, samples: np.ndarray,
-                       run: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`_drop_corners` on the kept positions of many polylines at once (``poly``: each one's polyline)."""
-    inner = np.zeros(len(cells), bool)
-    inner[1:-1] = (poly[:-2] == poly[1:-1]) & (poly[2:] == poly[1:-1])
-    corner = np.zeros(len(cells), bool)
-    corner[1:-1] = inner[1:-1] & (np.abs(cells[2:] - cells[:-2]).max(axis=1) <= 1) & ~fixed[1:-1]
-    near = inner[run]
-    r = run[near]
-    s = samples[near]
-    reach = np.minimum(np.hypot(*(s - cells[r - 1]).T), np.hypot(*(s - cells[r + 1]).T))
-    worst = np.zeros(len(cells))
-    if len(r):
-        group = np.flatnonzero(np.r_[True, r[1:] != r[:-1]])  # r never decreases
-        worst[r[group]] = np.maximum.reduceat(reach, group)
-    corner &= worst <= CORNER_REACH_STEPS
-    # of consecutive corners only every other one goes, from the first (never two in a row)
-    begins = corner & ~np.r_[False, corner[:-1]]
-    first = np.maximum.accumulate(np.where(begins, np.arange(len(cells)), 0))
-    corner &= (np.arange(len(cells)) - first) % 2 == 0
-    return cells[~corner], poly[~corner]
+    start = np.zeros(len(polys) + 1, np.int64)
+    np.cumsum([len(p) for p in polys], out=start[1:])
+    found = cells_kernel(np.ascontiguousarray(np.concatenate(polys), dtype=float), start, float(SAMPLE_STEPS),
+                         math.cos(math.radians(CORNER_DEG)), float(CORNER_REACH_STEPS))
+    bounds = found[len(found) - len(polys) - 1:, 0]
+    return np.split(found[:bounds[-1]], bounds[1:-1])
 
 
 def svg_strokes_steps(drawing: SvgDrawing, *, settings: MachineSettings = DEFAULT_SETTINGS,
@@ -371,31 +253,8 @@ def _drop_duplicates(polys: list[np.ndarray]) -> tuple[list[np.ndarray], list[in
     length = np.hypot(*(b - a).T)
     long = np.flatnonzero(length > MIN_DUPLICATE_STEPS)
     dropped = np.zeros(n, bool)
-    if len(long) > 1:
-        fwd = np.hstack([a[long], b[long]])
-        rev = np.hstack([b[long], a[long]])
-        canon = _canonical(fwd, rev)
-        # exact repeats first (bounded work however many copies there are), then the near ones among the rest
-        _, first, inverse = np.unique(canon, axis=0, return_index=True, return_inverse=True)
-        inverse = inverse.reshape(-1)
-        repeat = first[inverse] != np.arange(len(long))
-        reps = np.sort(first)
-        rows = np.vstack([fwd[reps], rev[reps]])
-        # near in all four coordinates: near in the first two (a 2D search, quicker), then in the other two
-        pairs = cKDTree(rows[:, :2]).query_pairs(DUPLICATE_STEPS, p=np.inf, output_type="ndarray")
-        pairs = pairs[np.all(np.abs(rows[pairs[:, 0], 2:] - rows[pairs[:, 1], 2:]) <= DUPLICATE_STEPS, axis=1)]
-        gone = np.zeros(len(reps), bool)
-        if len(pairs):
-            i, j = pairs[:, 0] % len(reps), pairs[:, 1] % len(reps)
-            lo, hi = np.minimum(i, j), np.maximum(i, j)
-            pick = lo != hi
-            lo, hi = lo[pick], hi[pick]
-            for k in np.lexsort((lo, hi)):  # in order of the later piece: each earlier one is decided by then
-                if not gone[lo[k]]:
-                    gone[hi[k]] = True
-        rep_gone = np.zeros(len(long), bool)
-        rep_gone[reps] = gone
-        dropped[long] = repeat | rep_gone
+    if len(long) > 1 and np.isfinite(a[long]).all() and np.isfinite(b[long]).all():  # else refused by the travel
+        dropped[long] = duplicate_pieces_kernel(a[long], b[long], float(DUPLICATE_STEPS))
     if not dropped.any():
         return list(polys), list(range(len(polys))), 0, 0.0
     runs: list[np.ndarray] = []
@@ -433,67 +292,19 @@ def _drop_duplicates_by_layer(polys: list[np.ndarray], layer_of: np.ndarray
     return runs, owner, n_dup, dup_steps
 
 
-def _canonical(fwd: np.ndarray, rev: np.ndarray) -> np.ndarray:
-    """Each piece's ends in the order that is lexicographically smaller (``(K, 4)`` rows), so that a piece and
-    its exact reverse are equal rows."""
-    swap = np.zeros(len(fwd), bool)
-    undecided = np.ones(len(fwd), bool)
-    for c in range(4):
-        less, more = rev[:, c] < fwd[:, c], rev[:, c] > fwd[:, c]
-        swap |= undecided & less
-        undecided &= ~(less | more)
-    return np.where(swap[:, None], rev, fwd)
-
-
 def _order(strokes: list[np.ndarray], at: Optional[np.ndarray] = None) -> list[np.ndarray]:
     """The strokes in cutting order, each forwards or reversed, from ``at`` (the home by default; step 3 of the
-    module docstring).  The nearest ends are found with a KD-tree (rebuilt as strokes are taken), and the pick
-    among the few nearest is made with the distances and tie rule (lowest index) of a search of every stroke."""
+    module docstring): the nearest stroke of a search of every stroke (``np.hypot`` distances, ties to the
+    lowest index), found on a grid (:func:`cam.job._svg_kernels.nearest_order_kernel`)."""
     if not strokes:
         return []
     n = len(strokes)
-    starts = np.array([s[0] for s in strokes], float)
-    ends = np.array([s[-1] for s in strokes], float)
-    left = np.ones(n, bool)
-    at = np.zeros(2) if at is None else np.asarray(at, float)
-    owner = np.r_[0:n, 0:n]  # the stroke of each end in the tree (its starts, then its ends)
-    tree = cKDTree(np.vstack([starts, ends]))
-    out = []
-    gone = 0  # strokes taken since the tree was built
-    owner_of = owner.tolist()
-    for _ in range(n):
-        if 4 * gone >= len(owner) > 64:  # half the ends in the tree are gone: rebuild it without them
-            keep = left[owner]
-            tree, owner, gone = cKDTree(tree.data[keep]), owner[keep], 0
-            owner_of = owner.tolist()
-        gone += 1
-        i = _nearest_stroke(tree, owner_of, left, starts, ends, at)
-        left[i] = False
-        ds, de = np.hypot(*(starts[i] - at)), np.hypot(*(ends[i] - at))
-        stroke = strokes[i][::-1] if de < ds else strokes[i]
-        out.append(stroke)
-        at = stroke[-1].astype(float)
-    return out
-
-
-def _nearest_stroke(tree: cKDTree, owner: list[int], left: np.ndarray, starts: np.ndarray, ends: np.ndarray,
-                    at: np.ndarray) -> int:
-    """The stroke left whose nearer end is nearest ``at`` (ties: the lowest index), as a search of every stroke
-    finds it (``np.hypot``); the tree only finds the few candidates, with a margin for its own rounding."""
-    k = 8
-    while True:
-        d, j = tree.query(at, k=min(k, len(owner)))
-        found = [(dist, owner[e]) for dist, e in zip(np.atleast_1d(d).tolist(), np.atleast_1d(j).tolist())]
-        alive = [(dist, i) for dist, i in found if left[i]]
-        if alive:
-            reach = alive[0][0] * (1 + 1e-9) + 1e-9
-            if found[-1][0] > reach or k >= len(owner):
-                cand = sorted({i for dist, i in alive if dist <= reach})
-                if len(cand) == 1:  # one stroke within reach (one end of it, or both)
-                    return cand[0]
-                near = np.minimum(np.hypot(*(starts[cand] - at).T), np.hypot(*(ends[cand] - at).T))
-                return cand[int(np.argmin(near))]
-        k *= 4
+    ends = np.empty((2 * n, 2))
+    ends[:n] = [s[0] for s in strokes]
+    ends[n:] = [s[-1] for s in strokes]
+    at = np.zeros(2) if at is None else np.asarray(at, float).reshape(2)
+    found = nearest_order_kernel(ends, np.ascontiguousarray(at))
+    return [strokes[i][::-1] if back else strokes[i] for i, back in zip(found[:n].tolist(), found[n:].tolist())]
 
 
 def plan_svg(
