@@ -59,6 +59,15 @@ SIGNATURES = {
     'cam.job._route.bfs_kernel': [
         "(Array(boolean, 2, 'C'), int64, int64, int64, Array(int32, 1, 'C'), )",
     ],
+    'cam.job._svg_kernels.cells_kernel': [
+        "(Array(float64, 2, 'C'), Array(int64, 1, 'C'), float64, float64, float64, )",
+    ],
+    'cam.job._svg_kernels.duplicate_pieces_kernel': [
+        "(Array(float64, 2, 'C'), Array(float64, 2, 'C'), float64, )",
+    ],
+    'cam.job._svg_kernels.nearest_order_kernel': [
+        "(Array(float64, 2, 'C'), Array(float64, 1, 'C'), )",
+    ],
     'cam.job.drill_order._exact_path': [
         "(Array(float64, 2, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), boolean, )",
     ],
