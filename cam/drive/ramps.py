@@ -39,8 +39,14 @@ The look-ahead planner, with the period index ``k`` as the path parameter and
    (accelerate; 0 at a rest) and the same backward (decelerate); the
    pointwise minimum of a 1-D path-parametrised problem.
 3. The result is checked with the pin-log rules on its own step times; the
-   caps of every period under a broken rule drop by 15 % and steps 2-3
-   repeat.  After 25 rounds (not seen on the samples) every period is capped
+   caps of every period under a broken rule drop (an interval too fast for
+   the top speed or for a stop, R1 or R3, straight to the rate that meets the
+   rule; an acceleration break, R2, by 15 %) and steps 2-3 repeat.  A repeat
+   works out again only what the lowered caps reach: the passes from each
+   lowered cap until the rates meet the old ones, the periods and edge times
+   from the first changed period, and the rules for the steps within three
+   steps of a changed period (everything else is bit for bit what it was, and
+   passed).  After 25 rounds (not seen on the samples) every period is capped
    at ``u_pull``: then every axis is at or below its start speed everywhere,
    which meets every rule, so the planner always returns a plan that passes.
 
@@ -56,7 +62,7 @@ from numba import njit
 from .._compiled import entry
 
 from ..settings import RAMP_MODES, MachineSettings
-from ..verify.ramps import STANDSTILL_STEPS, check_axis_steps, standstills
+from ..verify.ramps import STANDSTILL_STEPS, check_steps_range
 from ..errors import CamError
 from .pins import axis_bits
 
@@ -95,11 +101,13 @@ def _steps_of_axis(high, clk, dbit):
 
 @entry
 @njit(cache=True, nogil=True)
-def _breaks(per, up, stop_idx):
-    """Rest before step j: reversal, or a stop between the periods of steps j-1 and j.
+def _breaks(per, up, stop_idx, start_ns, still_ns):
+    """Rest before step j: reversal, a stop between the periods of steps j-1 and j, or a certain standstill.
 
     ``stop_idx``: increasing period indices k with a rest before period k; a rest lies between
-    steps in periods p0 < p1 when p0 < k <= p1 for one of them.
+    steps in periods p0 < p1 when p0 < k <= p1 for one of them.  ``start_ns``: ``(P + 1,)`` start of each period
+    at the nominal lengths (and the end); a standstill: the periods strictly between the two steps last longer
+    than ``still_ns`` even at the nominal lengths, which ramps only lengthen.
     """
     n = per.shape[0]
     brk = np.zeros(n, np.bool_)
@@ -108,6 +116,8 @@ def _breaks(per, up, stop_idx):
         while i < stop_idx.shape[0] and stop_idx[i] <= per[j - 1]:
             i += 1
         if up[j] != up[j - 1] or (i < stop_idx.shape[0] and stop_idx[i] <= per[j]):
+            brk[j] = True
+        elif float(start_ns[per[j]] - start_ns[per[j - 1] + 1]) > still_ns:
             brk[j] = True
     return brk
 
@@ -123,9 +133,9 @@ def _pool():
     return _POOL
 
 
-def _axis_steps_and_breaks(high, clk, dbit, stop_idx):
+def _axis_steps_and_breaks(high, clk, dbit, stop_idx, start_ns, still_ns):
     per, up = _steps_of_axis(high, clk, dbit)
-    return per, _breaks(per, up, stop_idx)
+    return per, _breaks(per, up, stop_idx, start_ns, still_ns)
 
 
 @njit(cache=True)
@@ -153,7 +163,7 @@ def _pair_cap(m1, m2, s, v_start, acc, u_hi):
 
 
 @entry
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _axis_caps(per, brk, s, v_start, v_max, acc, cap, alpha, upull):
     """Step 1 of the planner (module docstring) for one axis: lower ``cap``, ``alpha``, ``upull`` in place."""
     n = per.shape[0]
@@ -199,78 +209,182 @@ def _axis_caps(per, brk, s, v_start, v_max, acc, cap, alpha, upull):
 
 
 @entry
-@njit(cache=True)
-def _passes(cap, alpha, upull, stop_before, u):
-    """Step 2: forward (accelerate) then backward (decelerate) passes; ``u`` out."""
+@njit(cache=True, nogil=True)
+def _passes(cap, alpha, upull, stop_before, fwd, u, cap_dirty, changed, full):
+    """Step 2: forward (accelerate, into ``fwd``) then backward (decelerate) passes; ``u`` out.
+
+    ``full``: every period; else only what the caps lowered where ``cap_dirty`` reach (the rates are worked out
+    again from each such cap on until they meet the old ones; the result is the same to the bit).  ``changed``
+    out: where ``u`` changed (not set when ``full``).
+    """
     n = cap.shape[0]
+    carry = full
     prev = 0.0
-    for k in range(n):
-        if stop_before[k]:
-            prev = 0.0
+    for k in range(n):  # forward: accelerate
+        changed[k] = False
+        if not (carry or cap_dirty[k]):
+            continue
+        prev = 0.0 if stop_before[k] or k == 0 else fwd[k - 1]
         if prev >= cap[k]:  # cruising at the cap (upull <= cap): no need to accelerate
-            u[k] = cap[k]
-            prev = cap[k]
-            continue
-        a = alpha[k]
-        if k > 0 and alpha[k - 1] < a:
-            a = alpha[k - 1]
-        v = np.sqrt(prev * prev + 2.0 * a) if a < np.inf else np.inf
-        if upull[k] > v:
-            v = upull[k]
-        if cap[k] < v:
             v = cap[k]
-        u[k] = v
-        prev = v
-    nxt = 0.0
-    for k in range(n - 1, -1, -1):
-        if stop_before[k + 1]:
-            nxt = 0.0
-        if nxt >= u[k]:  # the forward speed here is reachable from what follows
-            nxt = u[k]
+        else:
+            a = alpha[k]
+            if k > 0 and alpha[k - 1] < a:
+                a = alpha[k - 1]
+            v = np.sqrt(prev * prev + 2.0 * a) if a < np.inf else np.inf
+            if upull[k] > v:
+                v = upull[k]
+            if cap[k] < v:
+                v = cap[k]
+        if not full:
+            carry = v != fwd[k]
+            changed[k] = carry
+        fwd[k] = v
+    carry = full
+    for k in range(n - 1, -1, -1):  # backward: decelerate
+        if not (carry or changed[k]):
             continue
-        a = alpha[k]
-        if k + 1 < n and alpha[k + 1] < a:
-            a = alpha[k + 1]
-        v = np.sqrt(nxt * nxt + 2.0 * a) if a < np.inf else np.inf
-        if upull[k] > v:
-            v = upull[k]
-        if v < u[k]:
-            u[k] = v
-        nxt = u[k]
+        nxt = 0.0 if stop_before[k + 1] else u[k + 1]
+        v = fwd[k]
+        if nxt < v:  # else the forward speed here is reachable from what follows
+            a = alpha[k]
+            if k + 1 < n and alpha[k + 1] < a:
+                a = alpha[k + 1]
+            w = np.sqrt(nxt * nxt + 2.0 * a) if a < np.inf else np.inf
+            if upull[k] > w:
+                w = upull[k]
+            if w < v:
+                v = w
+        if not full:
+            carry = v != u[k]
+            changed[k] = carry
+        u[k] = v
 
 
 @entry
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _periods_from_rates(u, floor_ns, out, mid):
     """Period lengths from the rates (never below the nominal), and each period's rising-edge time
     (start + T // 2, as :func:`cam.drive.steps._writes` places it)."""
     t_ns = 0
     for k in range(u.shape[0]):
         t = np.ceil(1e9 / u[k]) if u[k] > 0 else floor_ns[k]
-        per = max(floor_ns[k], np.int64(t))
-        out[k] = per
-        mid[k] = t_ns + per // 2
-        t_ns += per
+        out[k] = max(floor_ns[k], np.int64(t))
+        mid[k] = t_ns + out[k] // 2
+        t_ns += out[k]
 
 
 @entry
-@njit(cache=True)
-def _drop_caps(per, r1, r2, r3, u, cap, factor):
-    """Lower the caps of the periods under every broken rule to ``factor`` x their slowest rate there."""
+@njit(cache=True, nogil=True)
+def _reperiods(u, floor_ns, out, mid, changed, cap_dirty, judge):
+    """:func:`_periods_from_rates` again where the rates ``changed``; ``judge`` out: the periods to judge again
+    (a changed period length, or a cap lowered at the last check); clears ``cap_dirty``."""
+    n = u.shape[0]
+    first = -1
+    t_ns = 0
+    for k in range(n):
+        judge[k] = cap_dirty[k]
+        cap_dirty[k] = False
+        if changed[k]:
+            t = np.ceil(1e9 / u[k]) if u[k] > 0 else floor_ns[k]
+            per = max(floor_ns[k], np.int64(t))  # as _periods_from_rates
+            if per != out[k]:
+                if first < 0:
+                    first = k
+                    t_ns = mid[k] - out[k] // 2  # the start of period k (the periods before it are the same)
+                out[k] = per
+                judge[k] = True
+    if first >= 0:
+        for k in range(first, n):
+            mid[k] = t_ns + out[k] // 2
+            t_ns += out[k]
+
+
+@entry
+@njit(cache=True, nogil=True)
+def _judge_axis(per, brk, mid, judge, s, v_start, v_max, acc, r1, r2, r3):
+    """Step 3 for one axis (``per``: ``(S,)`` periods of its steps, ``brk``: rests before them): the pin-log rules
+    (:func:`cam.verify.ramps.check_steps_range`) on the rising edges ``mid``, judged again only for the steps
+    within three steps of a period marked in ``judge`` (``(P,)`` bool; the rest passed last time and nothing they
+    depend on changed).  Records the breaks in ``r1``..``r3`` (``(S,)``, zero elsewhere); returns their number."""
+    n = per.shape[0]
+    n_p = judge.shape[0]
+    r1[:] = 0.0
+    r2[:] = 0.0
+    r3[:] = 0.0
+    if n < 2:
+        return 0
+    marked = np.zeros(n_p + 1, np.int64)  # prefix count of the marked periods
+    for k in range(n_p):
+        marked[k + 1] = marked[k] + (1 if judge[k] else 0)
+    still_ns = STANDSTILL_STEPS * s / v_start * 1e9
+    bad = 0
+    j = 0
+    while j < n:
+        if not _near_marked(per, marked, j):
+            j += 1
+            continue
+        j_lo = j
+        while j < n and _near_marked(per, marked, j):
+            j += 1
+        c0 = max(0, j_lo - 3)
+        c1 = min(n, j + 3)
+        t = np.empty(c1 - c0, np.int64)
+        b = brk[c0:c1].copy()
+        for i in range(c1 - c0):
+            t[i] = mid[per[c0 + i]]
+            if i > 0 and float(t[i] - t[i - 1]) > still_ns:  # a standstill, as the checker judges it
+                b[i] = True
+        bad += check_steps_range(t, per[c0:c1], mid, b, s, v_start, v_max, acc, r1[c0:c1], r2[c0:c1], r3[c0:c1],
+                                 j_lo - c0, j - c0)
+    return bad
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _near_marked(per, marked, j):
+    """Whether a marked period lies within step ``j``'s reach: from the period before the step three before it to
+    the period after the step three after it (what its interval, pair, rests and free slots depend on)."""
+    n = per.shape[0]
+    lo = max(per[max(j - 3, 0)] - 1, 0)
+    hi = min(per[min(j + 3, n - 1)] + 1, marked.shape[0] - 2)
+    return marked[hi + 1] - marked[lo] > 0
+
+
+@entry
+@njit(cache=True, nogil=True)
+def _drop_caps(per, r1, r2, r3, u, cap, factor, s, v_start, v_max, cap_dirty):
+    """Lower the caps of the periods under every broken rule (and mark them in ``cap_dirty``).
+
+    A broken top speed (R1) or stop (R3) of an interval of ``m`` periods caps them at the rate that meets the
+    rule, ``v * m / s``, at once; any other break (R2), or one whose cap is that low already, to ``factor`` x the
+    slowest rate there.
+    """
     n = per.shape[0]
     hits = 0
     for j in range(n):
         lo = -1
         hi = -1
+        exact = np.inf
         if j + 1 < n and (r1[j] > 0 or r3[j] > 0):
             lo = per[j]
             hi = per[j + 1]
+            m = hi - lo
+            exact = (v_start if r3[j] > 0 else v_max) * m / s
         if r2[j] > 0 and 0 < j < n - 1:
             lo = per[j - 1]
             hi = per[j + 1]
+            exact = np.inf
         if lo < 0:
             continue
         hits += 1
+        lowered = False
+        for k in range(lo, hi + 1):
+            if exact < cap[k]:
+                cap[k] = exact
+                cap_dirty[k] = True
+                lowered = True
+        if lowered:
+            continue
         slow = np.inf
         for k in range(lo, hi + 1):
             if u[k] < slow:
@@ -278,6 +392,7 @@ def _drop_caps(per, r1, r2, r3, u, cap, factor):
         for k in range(lo, hi + 1):
             if factor * slow < cap[k]:
                 cap[k] = factor * slow
+                cap_dirty[k] = True
     return hits
 
 
@@ -358,23 +473,30 @@ def _lookahead(high: np.ndarray, per_ns: np.ndarray, settings: MachineSettings,
         stop_before[np.asarray(stops, np.int64)] = True
     limits = settings.axis_limits()
     axes, cap, alpha, upull = _caps(high, per_ns, settings, np.flatnonzero(stop_before), limits)
-    u = np.empty(n)
-    out = np.empty(n, np.int64)
-    mid = np.empty(n, np.int64)
+    fwd, u = np.empty(n), np.empty(n)
+    out, mid = np.empty(n, np.int64), np.empty(n, np.int64)
+    judge, cap_dirty, changed = np.ones(n, bool), np.zeros(n, bool), np.zeros(n, bool)
+    marks = [tuple(np.zeros(len(axes[a][0])) for _ in range(3)) for a in range(3)]  # r1, r2, r3 per axis
     for rnd in range(_ROUNDS + 1):
         if rnd == _ROUNDS:
             cap = np.minimum(cap, upull)  # every axis at or below its start speed: meets every rule
-        _passes(cap, alpha, upull, stop_before, u)
-        _periods_from_rates(u, per_ns, out, mid)
+        full = rnd == 0 or rnd == _ROUNDS  # else only what the lowered caps reach is planned and judged again
+        _passes(cap, alpha, upull, stop_before, fwd, u, cap_dirty, changed, full)
+        if full:
+            _periods_from_rates(u, per_ns, out, mid)
+        else:
+            _reperiods(u, per_ns, out, mid, changed, cap_dirty, judge)
         if rnd == _ROUNDS:
             break
-        # compiled without the GIL: the axes are checked in parallel, each recording where a rule broke (a
-        # window's rounds after the first break a few rules: checking again to record them cost a third)
-        checked = list(_pool().map(lambda a: _check_axis(axes[a], mid, limits, a, True), range(3)))
+        # compiled without the GIL: the axes are judged in parallel, each recording where a rule broke
+        broken = list(_pool().map(lambda a: _judge_axis(axes[a][0], axes[a][1], mid, judge, limits[0][a],
+                                                        limits[1][a], limits[2][a], limits[3][a], *marks[a]),
+                                  range(3)))
         hits = 0
-        for a, (n_broken, r1, r2, r3) in enumerate(checked):
-            if n_broken:  # lower the caps where it broke
-                hits += _drop_caps(axes[a][0], r1, r2, r3, u, cap, _DROP)
+        for a in range(3):
+            if broken[a]:  # lower the caps where it broke
+                hits += _drop_caps(axes[a][0], *marks[a], u, cap, _DROP, limits[0][a], limits[1][a],
+                                   limits[2][a], cap_dirty)
         if hits == 0:
             break
     return out
@@ -397,40 +519,19 @@ def _caps(high: np.ndarray, per_ns: np.ndarray, settings: MachineSettings, stop_
     cap = np.divide(1e9, per_ns, dtype=np.float64)
     alpha = np.full(n, np.inf)
     upull = np.full(n, np.inf)
-    axes = list(_pool().map(lambda a: _axis_steps_and_breaks(high, int(clock[a]), int(dirbit[a]), stop_idx),
-                            range(3)))
     # where an axis certainly stands still (its steps further apart than STANDSTILL_STEPS start-speed steps even
     # at the nominal periods, which ramps only lengthen): a stop and a start of that axis, so the intervals on
     # each side of the wait are capped at its start speed (a corner taken as grbl's junction rule would)
-    between_ns = np.concatenate([[0], np.cumsum(per_ns)])
-    for a in range(3):
-        per, brk = axes[a]
-        if len(per) > 1:
-            least_ns = between_ns[per[1:]] - between_ns[per[:-1] + 1]  # the periods strictly between two steps
-            brk[1:] |= least_ns > STANDSTILL_STEPS * s_mm[a] / v_start[a] * 1e9
+    start_ns = np.zeros(n + 1, np.int64)
+    np.cumsum(per_ns, out=start_ns[1:])
+    axes = list(_pool().map(lambda a: _axis_steps_and_breaks(high, int(clock[a]), int(dirbit[a]), stop_idx, start_ns,
+                                                             STANDSTILL_STEPS * s_mm[a] / v_start[a] * 1e9),
+                            range(3)))
     for a in range(3):
         per, brk = axes[a]
         _axis_caps(per, brk, s_mm[a], v_start[a], v_max[a], acc[a] * _ALPHA_MARGIN, cap, alpha, upull)
     np.minimum(upull, cap, out=upull)
     return axes, cap, alpha, upull
-
-
-def _check_axis(axis: tuple[np.ndarray, np.ndarray], mid: np.ndarray, limits: _Limits, a: int,
-                record: bool) -> tuple[int, np.ndarray, np.ndarray, np.ndarray]:
-    """Step 3 for axis ``a``: the pin-log rules on the rising edges ``mid`` (``(P,)`` ns).
-
-    Returns:
-        The number of broken rules and, when ``record``, ``(S,)`` marks of where R1, R2, R3 broke.
-    """
-    per, brk = axis
-    s_mm, v_start, v_max, acc = limits
-    r1, r2, r3 = (np.zeros(len(per) if record else 0) for _ in range(3))
-    if len(per) < 2:
-        return 0, r1, r2, r3
-    t = mid[per]
-    brk = brk | standstills(t, s_mm[a], v_start[a])  # as the checker judges: where the planned times stand still
-    n_broken = check_axis_steps(t, per, mid, brk, s_mm[a], v_start[a], v_max[a], acc[a], r1, r2, r3)
-    return n_broken, r1, r2, r3
 
 
 def top_speeds_mm_s(settings: MachineSettings) -> tuple[float, float, float]:

@@ -143,13 +143,23 @@ def check_axis_steps(t_ns, slot_of_step, slot_t_ns, brk, s_mm, v_start, v_max, a
     Returns:
         How many rule breaks were found (0 = the axis passes).
     """
+    return check_steps_range(t_ns, slot_of_step, slot_t_ns, brk, s_mm, v_start, v_max, acc, r1, r2, r3, 0,
+                             t_ns.shape[0])
+
+
+@njit(cache=True, nogil=True)
+def check_steps_range(t_ns, slot_of_step, slot_t_ns, brk, s_mm, v_start, v_max, acc, r1, r2, r3, j_lo, j_hi):
+    """:func:`check_axis_steps` judging only the intervals from steps ``j_lo .. j_hi - 1`` and the pairs around
+    them (the arrays hold the steps around them too, which decide whether a judged interval starts or ends a
+    run); records only there.  A kernel for other kernels (the look-ahead planner re-judges only what changed).
+    """
     n = t_ns.shape[0]
     n_bad = 0
     record = r1.shape[0] > 0
     s_ns = s_mm * 1e9
     dmin = s_ns / v_max
     ds = s_ns / v_start
-    for j in range(n - 1):
+    for j in range(max(j_lo, 0), min(j_hi, n - 1)):
         if record:
             r1[j] = 0.0
             r3[j] = 0.0
@@ -166,17 +176,19 @@ def check_axis_steps(t_ns, slot_of_step, slot_t_ns, brk, s_mm, v_start, v_max, a
             if record:
                 r3[j] = s_ns / max(d, 1.0) - v_start
             n_bad += 1
-    if n > 0 and record:
-        r1[n - 1] = 0.0
-        r3[n - 1] = 0.0
-        r2[0] = 0.0
-        r2[n - 1] = 0.0
+    if record and n > 0:
+        if j_lo <= n - 1 < j_hi:  # no interval starts at the last step; no pair around the first or the last
+            r1[n - 1] = 0.0
+            r3[n - 1] = 0.0
+            r2[n - 1] = 0.0
+        if j_lo <= 0 < j_hi:
+            r2[0] = 0.0
     last_d1 = -1.0
     last_d2 = -1.0
     last_lo = np.int64(-1)
     last_hi = np.int64(-1)
     last_ex = 0.0
-    for j in range(1, n - 1):
+    for j in range(max(j_lo, 1), min(j_hi, n - 1)):
         if record:
             r2[j] = 0.0
         if brk[j] or brk[j + 1]:
