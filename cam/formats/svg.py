@@ -177,6 +177,15 @@ class SvgDrawing:
             raise ValueError("the flattening tolerance must be > 0 mm")
         return _flatten_strokes(self.strokes, tolerance_mm)
 
+    def polylines_joined(self, tolerance_mm: float) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`polylines` one after another: ``(P, 2)`` float64 points in mm and ``(S + 1,)`` int64 offsets
+        where each stroke's polyline begins (the last ``P``)."""
+        if not tolerance_mm > 0:
+            raise ValueError("the flattening tolerance must be > 0 mm")
+        if not self.strokes:
+            return np.zeros((0, 2)), np.zeros(1, np.int64)
+        return _flatten_joined(self.strokes, tolerance_mm)
+
     def extent_mm(self, tolerance_mm: float = 1e-3) -> tuple[float, float, float, float]:
         """``(x0, y0, x1, y1)`` of the strokes in mm, within ``tolerance_mm``; zeros when there are none."""
         if not self.strokes:

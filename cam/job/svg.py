@@ -165,17 +165,24 @@ def _drop_corners(cells: np.ndarray, fixed: np.ndarray, samples: np.ndarray, run
 
 
 def _cells_many(polys: list[np.ndarray]) -> list[np.ndarray]:
-    """``[_cells(p) for p in polys]``: the same positions, made by one compiled pass over all the polylines
-    (:func:`cam.job._svg_kernels.cells_kernel`: a halftone's 50,000 strokes are not 50,000 passes of a few dozen
-    numpy calls each, and a long stroke's millions of samples are never held at once)."""
+    """``[_cells(p) for p in polys]``, by :func:`_cells_joined`."""
     if not polys:
         return []
-    start = np.zeros(len(polys) + 1, np.int64)
-    np.cumsum([len(p) for p in polys], out=start[1:])
-    found = cells_kernel(np.ascontiguousarray(np.concatenate(polys), dtype=float), start, float(SAMPLE_STEPS),
-                         math.cos(math.radians(CORNER_DEG)), float(CORNER_REACH_STEPS))
-    bounds = found[len(found) - len(polys) - 1:, 0]
-    return np.split(found[:bounds[-1]], bounds[1:-1])
+    bounds = np.zeros(len(polys) + 1, np.int64)
+    np.cumsum([len(p) for p in polys], out=bounds[1:])
+    cells, cell_bounds = _cells_joined(np.concatenate(polys), bounds)
+    return np.split(cells, cell_bounds[1:-1])
+
+
+def _cells_joined(pts: np.ndarray, bounds: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The positions of :func:`_cells` of every polyline ``pts[bounds[i]:bounds[i + 1]]``, one after another, and
+    where each polyline's begin (``(S + 1,)``): one compiled pass over all of them
+    (:func:`cam.job._svg_kernels.cells_kernel`: a halftone's 50,000 strokes are not 50,000 passes of a few dozen
+    numpy calls each, and a long stroke's millions of samples are never held at once)."""
+    found = cells_kernel(np.ascontiguousarray(pts, dtype=float), np.ascontiguousarray(bounds, dtype=np.int64),
+                         float(SAMPLE_STEPS), math.cos(math.radians(CORNER_DEG)), float(CORNER_REACH_STEPS))
+    cell_bounds = found[len(found) - len(bounds):, 0].copy()
+    return found[:cell_bounds[-1]], cell_bounds
 
 
 def svg_strokes_steps(drawing: SvgDrawing, *, settings: MachineSettings = DEFAULT_SETTINGS,
@@ -183,24 +190,22 @@ def svg_strokes_steps(drawing: SvgDrawing, *, settings: MachineSettings = DEFAUL
                       offset_mm: Optional[tuple[float, float]] = None) -> list[np.ndarray]:
     """Each stroke as ``(M, 2)`` int64 machine ``(x, y)`` steps, in file order and direction (steps 1 and 2
     of the module docstring; every stroke, duplicates kept)."""
-    return [_cells(p) for p in _polylines_steps(drawing, settings, scale, fit_mm, offset_mm)]
+    pts, bounds = _polylines_steps(drawing, settings, scale, fit_mm, offset_mm)
+    return [_cells(p) for p in np.split(pts, bounds[1:-1])] if len(bounds) > 1 else []
 
 
 def _polylines_steps(drawing: SvgDrawing, settings: MachineSettings, scale: Optional[float],
                      fit_mm: Optional[tuple[float, float]], offset_mm: Optional[tuple[float, float]]
-                     ) -> list[np.ndarray]:
-    """Each stroke's polyline (step 1) as ``(N, 2)`` float64 machine ``(x, y)`` steps, placed and scaled."""
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """Each stroke's polyline (step 1) in float64 machine ``(x, y)`` steps, placed and scaled, one after another
+    (``(P, 2)``), and where each begins (``(S + 1,)``, the last ``P``)."""
     k = svg_scale(drawing, scale=scale, fit_mm=fit_mm)
     mm_per_step = settings.mm_per_step_xy
-    polys = drawing.polylines(FLATTEN_STEPS * mm_per_step / k)
-    if not polys:
-        return []
-    if offset_mm is None:
-        lo = np.concatenate(polys).min(axis=0) * k
-        origin = -lo
-    else:
-        origin = np.asarray(offset_mm, float)
-    return [(origin + p * k) / mm_per_step for p in polys]
+    pts, bounds = drawing.polylines_joined(FLATTEN_STEPS * mm_per_step / k)
+    if len(bounds) < 2:
+        return pts, bounds
+    origin = -(pts.min(axis=0) * k) if offset_mm is None else np.asarray(offset_mm, float)
+    return (origin + pts * k) / mm_per_step, bounds
 
 
 def svg_layer_order(drawing: SvgDrawing, layers: Optional[Union[str, Sequence[str]]] = None) -> list[int]:
@@ -241,70 +246,86 @@ def _listed(names: list[str]) -> str:
     return ", ".join(f"'{n}'" for n in names)
 
 
-def _drop_duplicates(polys: list[np.ndarray]) -> tuple[list[np.ndarray], list[int], int, float]:
-    """The polylines (float steps, in cutting order) without the pieces that trace pieces before them (the
-    module docstring): ``(runs, stroke of each run, pieces dropped, steps dropped)``."""
-    counts = np.array([len(p) - 1 for p in polys], np.int64)
-    n = int(counts.sum())
-    if n < 2:
-        return list(polys), list(range(len(polys))), 0, 0.0
-    a = np.concatenate([p[:-1] for p in polys if len(p) > 1])
-    b = np.concatenate([p[1:] for p in polys if len(p) > 1])
+def _drop_duplicates(pts: np.ndarray, bounds: np.ndarray, layer_of: np.ndarray
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, float]:
+    """The polylines ``pts[bounds[i]:bounds[i + 1]]`` (float steps, in cutting order, stroke ``i`` in layer
+    ``layer_of[i]``) without the pieces that trace pieces before them in their layer (the module docstring; a line
+    drawn in two layers is two pens' lines: both are cut): ``(points, bounds of the runs left, stroke of each run,
+    pieces dropped, steps dropped)``, the runs in stroke order."""
+    n_strokes = len(bounds) - 1
+    owner = np.arange(n_strokes)
+    if len(pts) < 2:
+        return pts, bounds, owner, 0, 0.0
+    a, b = pts[:-1], pts[1:]
     length = np.hypot(*(b - a).T)
-    long = np.flatnonzero(length > MIN_DUPLICATE_STEPS)
-    dropped = np.zeros(n, bool)
-    if len(long) > 1 and np.isfinite(a[long]).all() and np.isfinite(b[long]).all():  # else refused by the travel
-        dropped[long] = duplicate_pieces_kernel(a[long], b[long], float(DUPLICATE_STEPS))
+    counts = np.diff(bounds) - 1
+    piece = np.ones(len(a), bool)
+    piece[bounds[1:-1] - 1] = False  # from one stroke's last point to the next one's first: no piece
+    piece_layer = np.repeat(np.asarray(layer_of, np.int64), np.maximum(counts, 0))
+    where = np.flatnonzero(piece)
+    long_piece = length[where] > MIN_DUPLICATE_STEPS
+    dropped = np.zeros(len(a), bool)
+    dup_steps = 0.0
+    for layer in dict.fromkeys(np.asarray(layer_of).tolist()):
+        mine = where[long_piece & (piece_layer == layer)]
+        if len(mine) > 1 and np.isfinite(a[mine]).all() and np.isfinite(b[mine]).all():  # else refused later
+            gone = duplicate_pieces_kernel(a[mine], b[mine], float(DUPLICATE_STEPS))
+            dropped[mine[gone]] = True
+            dup_steps += float(length[mine[gone]].sum())  # layer by layer, as the warning has always added them
     if not dropped.any():
-        return list(polys), list(range(len(polys))), 0, 0.0
-    runs: list[np.ndarray] = []
+        return pts, bounds, owner, 0, 0.0
+    return (*_runs_left(pts, bounds, dropped), int(dropped.sum()), dup_steps)
+
+
+def _runs_left(pts: np.ndarray, bounds: np.ndarray, dropped: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The runs of pieces not ``dropped`` (``dropped[j]``: the piece from ``pts[j]`` to ``pts[j + 1]``) of each
+    polyline, a polyline none of whose pieces is dropped whole: ``(points, bounds, polyline of each run)``."""
+    lo: list[int] = []
+    hi: list[int] = []
     owner: list[int] = []
-    start = 0
     gone_before = np.r_[0, np.cumsum(dropped)]
-    gone_in = (gone_before[np.cumsum(counts)] - gone_before[np.cumsum(counts) - counts]).tolist()
-    for s, (poly, m) in enumerate(zip(polys, counts.tolist())):
-        keep = ~dropped[start:start + m] if gone_in[s] else None
-        start += m
-        if keep is None:  # nothing of it dropped (or no pieces): the whole stroke
-            runs.append(poly)
+    touched = gone_before[bounds[1:] - 1] > gone_before[bounds[:-1]]
+    for s, (b0, b1) in enumerate(zip(bounds[:-1].tolist(), bounds[1:].tolist())):
+        if not touched[s]:
+            lo.append(b0)
+            hi.append(b1)
             owner.append(s)
             continue
-        edges = np.diff(np.r_[0, keep.astype(np.int8), 0])
-        for r0, r1 in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)):
-            runs.append(poly[r0:r1 + 1])
+        edges = np.diff(np.r_[0, (~dropped[b0:b1 - 1]).astype(np.int8), 0])
+        for r0, r1 in zip(np.flatnonzero(edges == 1).tolist(), np.flatnonzero(edges == -1).tolist()):
+            lo.append(b0 + r0)
+            hi.append(b0 + r1 + 1)
             owner.append(s)
-    return runs, owner, int(dropped.sum()), float(length[dropped].sum())
-
-
-def _drop_duplicates_by_layer(polys: list[np.ndarray], layer_of: np.ndarray
-                              ) -> tuple[list[np.ndarray], list[int], int, float]:
-    """:func:`_drop_duplicates` within each layer (a line drawn in two layers is two pens' lines: both are
-    cut); the runs come layer by layer, as the strokes do."""
-    runs: list[np.ndarray] = []
-    owner: list[int] = []
-    n_dup, dup_steps = 0, 0.0
-    for layer in dict.fromkeys(np.asarray(layer_of).tolist()):
-        mine = np.flatnonzero(layer_of == layer)
-        r, o, n, length = _drop_duplicates([polys[i] for i in mine])
-        runs += r
-        owner += [int(mine[i]) for i in o]
-        n_dup, dup_steps = n_dup + n, dup_steps + length
-    return runs, owner, n_dup, dup_steps
+    sizes = np.array(hi, np.int64) - np.array(lo, np.int64)
+    run_bounds = np.zeros(len(sizes) + 1, np.int64)
+    np.cumsum(sizes, out=run_bounds[1:])
+    index = np.arange(run_bounds[-1]) + np.repeat(np.array(lo, np.int64) - run_bounds[:-1], sizes)
+    return pts[index], run_bounds, np.array(owner, np.int64)
 
 
 def _order(strokes: list[np.ndarray], at: Optional[np.ndarray] = None) -> list[np.ndarray]:
-    """The strokes in cutting order, each forwards or reversed, from ``at`` (the home by default; step 3 of the
-    module docstring): the nearest stroke of a search of every stroke (``np.hypot`` distances, ties to the
-    lowest index), found on a grid (:func:`cam.job._svg_kernels.nearest_order_kernel`)."""
+    """The strokes in cutting order, each forwards or reversed, from ``at`` (the home by default), by
+    :func:`_order_ends`."""
     if not strokes:
         return []
-    n = len(strokes)
+    order, backwards = _order_ends(np.array([s[0] for s in strokes]), np.array([s[-1] for s in strokes]), at)
+    return [strokes[i][::-1] if back else strokes[i] for i, back in zip(order.tolist(), backwards.tolist())]
+
+
+def _order_ends(first: np.ndarray, last: np.ndarray, at: Optional[np.ndarray] = None
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """The cutting order of strokes whose first and last positions are ``first`` and ``last`` (``(N, 2)``), from
+    ``at`` (the home by default; step 3 of the module docstring), and which are cut backwards: the nearest stroke
+    of a search of every stroke (``np.hypot`` distances, ties to the lowest index), found on a grid
+    (:func:`cam.job._svg_kernels.nearest_order_kernel`)."""
+    n = len(first)
     ends = np.empty((2 * n, 2))
-    ends[:n] = [s[0] for s in strokes]
-    ends[n:] = [s[-1] for s in strokes]
+    ends[:n] = first
+    ends[n:] = last
     at = np.zeros(2) if at is None else np.asarray(at, float).reshape(2)
     found = nearest_order_kernel(ends, np.ascontiguousarray(at))
-    return [strokes[i][::-1] if back else strokes[i] for i, back in zip(found[:n].tolist(), found[n:].tolist())]
+    return found[:n], found[n:].astype(bool)
 
 
 def plan_svg(
@@ -352,40 +373,29 @@ def plan_svg(
     chosen = svg_layer_order(drawing, layers)
     names = drawing.layers()
     part, part_layer = _selected(drawing, chosen)
-    polys = _polylines_steps(part, settings, scale, fit_mm, offset_mm)
-    if not polys:
+    pts, bounds = _polylines_steps(part, settings, scale, fit_mm, offset_mm)
+    if len(bounds) < 2:
         raise PlanError(f"{drawing.source}: nothing to cut (no visible stroke or outline)")
     warnings = list(drawing.warnings)
-    owner = list(range(len(polys)))
+    owner = np.arange(len(bounds) - 1)
     if not keep_duplicates:
-        polys, owner, n_dup, dup_steps = _drop_duplicates_by_layer(polys, part_layer)
+        pts, bounds, owner, n_dup, dup_steps = _drop_duplicates(pts, bounds, part_layer)
         if n_dup:
             warnings.append(f"{n_dup} duplicate segment(s) ({dup_steps * settings.mm_per_step_xy:.1f} mm) trace "
                             "what is already cut: cut once (--keep-duplicates cuts them again)")
     home = np.asarray(home_steps, np.int64).reshape(3)
-    _check_extent(drawing, polys, settings, home)  # before the samples are made: their count follows the size
-    strokes = _cells_many(polys)
-    stroke_layer = part_layer[np.asarray(owner, np.int64)]
+    _check_extent(drawing, pts, settings, home)  # before the samples are made: their count follows the size
+    cells, cell_bounds = _cells_joined(pts, bounds)
+    del pts
     depth_steps, safe_z_steps = _z_steps(cut_depth_mm, travel_height_mm, settings, int(home[2]))
-    ordered: list[np.ndarray] = []
-    pause_first: list[int] = []  # the stroke (index in ordered) each pause comes before
-    notes: list[str] = []
-    at = np.zeros(2)
-    for layer in chosen:
-        mine = [strokes[i] for i in np.flatnonzero(stroke_layer == layer)]
-        if not mine:
-            continue  # every piece of it traced another layer's
-        if pause_between_layers and ordered:
-            pause_first.append(len(ordered))
-            notes.append(f"layer '{names[layer]}': change the pen")
-        layer_order = _order(mine, at)
-        ordered += layer_order
-        at = layer_order[-1][-1].astype(float)
-    xy = np.concatenate(ordered)
+    order, backwards, pause_first, notes = _cut_order(cells, cell_bounds, part_layer[owner], chosen,
+                                                       names if pause_between_layers else None)
+    xy, first = _gather(cells, cell_bounds, order, backwards)
+    del cells
+    gap = np.full(len(first), 2, np.int64)
+    gap[1:] = np.abs(xy[first[1:]] - xy[first[1:] - 1]).max(axis=1)
     group = np.zeros(len(xy), bool)
     pause_group = np.zeros(len(xy), bool)
-    first = np.cumsum([0] + [len(s) for s in ordered[:-1]])
-    gap = np.array([np.abs(ordered[i][0] - ordered[i - 1][-1]).max() if i else 2 for i in range(len(ordered))])
     group[first[gap > 1]] = True
     group[first[pause_first]] = True  # a pause lifts first, whatever the gap
     pause_group[first[pause_first]] = True
@@ -393,6 +403,47 @@ def plan_svg(
     check_travel(pts + home, settings)
     return Job(points_steps=pts, kind=kind, target=(kind == CUT) & (pts[:, 2] == depth_steps), pause=pause,
                settings=settings, warnings=warnings, pause_notes=notes, source=drawing.source)
+
+
+def _cut_order(cells: np.ndarray, bounds: np.ndarray, run_layer: np.ndarray, chosen: list[int],
+               pause_names: Optional[list[str]]) -> tuple[np.ndarray, np.ndarray, list[int], list[str]]:
+    """The runs ``cells[bounds[i]:bounds[i + 1]]`` (run ``i`` in layer ``run_layer[i]``) in cutting order: the
+    ``chosen`` layers one after the other, each in nearest-stroke order from where the one before ended (step 3):
+    ``(runs, cut backwards, where the pauses come (index in the order), their notes)``; ``pause_names``: the layer
+    names when the job pauses between layers (None: it does not)."""
+    first, last = cells[bounds[:-1]], cells[bounds[1:] - 1]
+    order: list[np.ndarray] = []
+    backwards: list[np.ndarray] = []
+    pause_first: list[int] = []
+    notes: list[str] = []
+    at = np.zeros(2)
+    done = 0
+    for layer in chosen:
+        mine = np.flatnonzero(run_layer == layer)
+        if not len(mine):
+            continue  # every piece of it traced another layer's
+        if pause_names is not None and done:
+            pause_first.append(done)
+            notes.append(f"layer '{pause_names[layer]}': change the pen")
+        layer_order, back = _order_ends(first[mine], last[mine], at)
+        order.append(mine[layer_order])
+        backwards.append(back)
+        done += len(mine)
+        at = (first if back[-1] else last)[order[-1][-1]].astype(float)
+    return np.concatenate(order), np.concatenate(backwards), pause_first, notes
+
+
+def _gather(cells: np.ndarray, bounds: np.ndarray, order: np.ndarray, backwards: np.ndarray
+            ) -> tuple[np.ndarray, np.ndarray]:
+    """The positions of the runs ``cells[bounds[i]:bounds[i + 1]]`` in the ``order`` given, each reversed where
+    ``backwards``, one after another, and where each run begins among them."""
+    sizes = (bounds[1:] - bounds[:-1])[order]
+    first = np.zeros(len(order), np.int64)
+    np.cumsum(sizes[:-1], out=first[1:])
+    within = np.arange(int(sizes.sum())) - np.repeat(first, sizes)
+    back = np.repeat(backwards, sizes)
+    index = np.where(back, np.repeat(bounds[order + 1] - 1, sizes) - within, np.repeat(bounds[order], sizes) + within)
+    return cells[index], first
 
 
 def _selected(drawing: SvgDrawing, chosen: list[int]) -> tuple[SvgDrawing, np.ndarray]:
@@ -408,15 +459,14 @@ def _selected(drawing: SvgDrawing, chosen: list[int]) -> tuple[SvgDrawing, np.nd
     return part, layer_of[idx]
 
 
-def _check_extent(drawing: SvgDrawing, polys: list[np.ndarray], settings: MachineSettings,
+def _check_extent(drawing: SvgDrawing, pts: np.ndarray, settings: MachineSettings,
                   home_steps: np.ndarray) -> None:
-    """TravelError giving the drawing's size in mm when it is larger than the X/Y travel (``polys``: the strokes as
-    ``(N, 2)`` float polylines in steps, before they are sampled: a drawing metres wide is refused before millions
-    of samples are made), or naming the axis and by how much when its extent from machine ``home_steps`` leaves
+    """TravelError giving the drawing's size in mm when it is larger than the X/Y travel (``pts``: the points of
+    the strokes' float polylines in steps, before they are sampled: a drawing metres wide is refused before
+    millions of samples are made), or naming the axis and by how much when its extent from machine ``home_steps`` leaves
     the travel.  Where a job placed later goes is checked in the machine frame when it is placed (at the work
     zero, or from where the tool stands)."""
-    lo = np.min([p.min(axis=0) for p in polys], axis=0)
-    hi = np.max([p.max(axis=0) for p in polys], axis=0)
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
     (x_lo, x_hi), (y_lo, y_hi), _ = settings.travel.bounds_steps()
     if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))) or hi[0] - lo[0] > x_hi - x_lo \
             or hi[1] - lo[1] > y_hi - y_lo:
