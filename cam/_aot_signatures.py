@@ -42,7 +42,7 @@ SIGNATURES = {
         "(Array(int64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), float64, float64, float64, float64, Array(boolean, 1, 'C'), )",
     ],
     'cam.drive.ramps._judge_axis': [
-        "(Array(int64, 1, 'C'), Array(boolean, 1, 'C'), Array(int64, 1, 'C'), Array(boolean, 1, 'C'), float64, float64, float64, float64, Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), )",
+        "(Array(int64, 1, 'C'), Array(boolean, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), int64, float64, float64, float64, float64, Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), )",
     ],
     'cam.drive.ramps._passes': [
         "(Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(boolean, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(boolean, 1, 'C'), Array(boolean, 1, 'C'), boolean, )",
@@ -51,7 +51,7 @@ SIGNATURES = {
         "(Array(float64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), )",
     ],
     'cam.drive.ramps._reperiods': [
-        "(Array(float64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(boolean, 1, 'C'), Array(boolean, 1, 'C'), Array(boolean, 1, 'C'), )",
+        "(Array(float64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(boolean, 1, 'C'), Array(boolean, 1, 'C'), Array(int64, 1, 'C'), )",
     ],
     'cam.drive.ramps._steps_of_axis': [
         "(Array(uint8, 1, 'C'), int64, int64, )",

@@ -19,9 +19,10 @@ def _whole_rounds(monkeypatch):
         cap_dirty[:] = False
         passes(cap, alpha, upull, stop_before, fwd, u, cap_dirty, changed, True)
 
-    def full_periods(u, floor_ns, out, mid, changed, cap_dirty, judge):
+    def full_periods(u, floor_ns, out, mid, changed, cap_dirty, spans):
         periods(u, floor_ns, out, mid)
-        judge[:] = True
+        spans[:2] = (0, len(u) - 1)
+        return 1
 
     monkeypatch.setattr(ramps, "_passes", full_passes)
     monkeypatch.setattr(ramps, "_reperiods", full_periods)
@@ -33,9 +34,9 @@ def _windows(job, n_windows):
     found = []
     judge_axis = ramps._judge_axis
 
-    def counting(per, brk, mid, judge, *args):
-        n_broken = judge_axis(per, brk, mid, judge, *args)
-        if not judge.all():
+    def counting(per, brk, mid, spans, n_spans, *args):
+        n_broken = judge_axis(per, brk, mid, spans, n_spans, *args)
+        if (n_spans, spans[0], spans[1]) != (1, 0, len(mid) - 1):  # a repeat round: not every period
             found.append(n_broken)
         return n_broken
 

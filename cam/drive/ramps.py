@@ -276,14 +276,18 @@ def _periods_from_rates(u, floor_ns, out, mid):
 
 @entry
 @njit(cache=True, nogil=True)
-def _reperiods(u, floor_ns, out, mid, changed, cap_dirty, judge):
-    """:func:`_periods_from_rates` again where the rates ``changed``; ``judge`` out: the periods to judge again
-    (a changed period length, or a cap lowered at the last check); clears ``cap_dirty``."""
+def _reperiods(u, floor_ns, out, mid, changed, cap_dirty, spans):
+    """:func:`_periods_from_rates` again where the rates ``changed``; clears ``cap_dirty``.
+
+    Returns the number of spans of periods to judge again (a changed period length, or a cap lowered at the last
+    check), written as first and last period into ``spans[2 i]``, ``spans[2 i + 1]`` (``(2 P,)`` int64).
+    """
     n = u.shape[0]
     first = -1
     t_ns = 0
+    n_spans = 0
     for k in range(n):
-        judge[k] = cap_dirty[k]
+        mark = cap_dirty[k]
         cap_dirty[k] = False
         if changed[k]:
             t = np.ceil(1e9 / u[k]) if u[k] > 0 else floor_ns[k]
@@ -293,61 +297,70 @@ def _reperiods(u, floor_ns, out, mid, changed, cap_dirty, judge):
                     first = k
                     t_ns = mid[k] - out[k] // 2  # the start of period k (the periods before it are the same)
                 out[k] = per
-                judge[k] = True
+                mark = True
+        if mark:
+            if n_spans and spans[2 * n_spans - 1] == k - 1:
+                spans[2 * n_spans - 1] = k
+            else:
+                spans[2 * n_spans] = k
+                spans[2 * n_spans + 1] = k
+                n_spans += 1
     if first >= 0:
         for k in range(first, n):
             mid[k] = t_ns + out[k] // 2
             t_ns += out[k]
+    return n_spans
 
 
 @entry
 @njit(cache=True, nogil=True)
-def _judge_axis(per, brk, mid, judge, s, v_start, v_max, acc, r1, r2, r3):
+def _judge_axis(per, brk, mid, spans, n_spans, s, v_start, v_max, acc, r1, r2, r3):
     """Step 3 for one axis (``per``: ``(S,)`` periods of its steps, ``brk``: rests before them): the pin-log rules
-    (:func:`cam.verify.ramps.check_steps_range`) on the rising edges ``mid``, judged again only for the steps
-    within three steps of a period marked in ``judge`` (``(P,)`` bool; the rest passed last time and nothing they
-    depend on changed).  Records the breaks in ``r1``..``r3`` (``(S,)``, zero elsewhere); returns their number."""
+    (:func:`cam.verify.ramps.check_steps_range`) on the rising edges ``mid``, judged again only for the steps that
+    reach into one of the ``n_spans`` spans of periods in ``spans`` (as :func:`_reperiods` writes them; the rest
+    passed last time and nothing they depend on changed).  A step reaches from the period before the step three
+    before it to the period after the step three after it: what its interval, pair, rests and free slots depend
+    on.  Records the breaks in ``r1``..``r3`` (``(S,)``, zero elsewhere); returns their number."""
     n = per.shape[0]
-    n_p = judge.shape[0]
     r1[:] = 0.0
     r2[:] = 0.0
     r3[:] = 0.0
     if n < 2:
         return 0
-    marked = np.zeros(n_p + 1, np.int64)  # prefix count of the marked periods
-    for k in range(n_p):
-        marked[k + 1] = marked[k] + (1 if judge[k] else 0)
     still_ns = STANDSTILL_STEPS * s / v_start * 1e9
     bad = 0
-    j = 0
-    while j < n:
-        if not _near_marked(per, marked, j):
-            j += 1
-            continue
-        j_lo = j
-        while j < n and _near_marked(per, marked, j):
-            j += 1
-        c0 = max(0, j_lo - 3)
-        c1 = min(n, j + 3)
-        t = np.empty(c1 - c0, np.int64)
-        b = brk[c0:c1].copy()
-        for i in range(c1 - c0):
-            t[i] = mid[per[c0 + i]]
-            if i > 0 and float(t[i] - t[i - 1]) > still_ns:  # a standstill, as the checker judges it
-                b[i] = True
-        bad += check_steps_range(t, per[c0:c1], mid, b, s, v_start, v_max, acc, r1[c0:c1], r2[c0:c1], r3[c0:c1],
-                                 j_lo - c0, j - c0)
+    j_lo = -1
+    j_hi = -1
+    for i in range(n_spans + 1):
+        if i < n_spans:  # the steps reaching into span i
+            a = max(np.searchsorted(per, spans[2 * i] - 1) - 3, 0)
+            b = min(np.searchsorted(per, spans[2 * i + 1] + 1, "right") + 3, n)
+            if a >= b:
+                continue
+            if j_lo >= 0 and a <= j_hi:  # overlaps the steps gathered so far
+                j_hi = max(j_hi, b)
+                continue
+        if j_lo >= 0:
+            bad += _judge_steps(per, brk, mid, j_lo, j_hi, still_ns, s, v_start, v_max, acc, r1, r2, r3)
+        if i < n_spans:
+            j_lo, j_hi = a, b
     return bad
 
 
-@njit(cache=True, nogil=True, inline="always")
-def _near_marked(per, marked, j):
-    """Whether a marked period lies within step ``j``'s reach: from the period before the step three before it to
-    the period after the step three after it (what its interval, pair, rests and free slots depend on)."""
+@njit(cache=True, nogil=True)
+def _judge_steps(per, brk, mid, j_lo, j_hi, still_ns, s, v_start, v_max, acc, r1, r2, r3):
+    """The rules for steps ``j_lo .. j_hi - 1`` of one axis, with three steps around them for their rests."""
     n = per.shape[0]
-    lo = max(per[max(j - 3, 0)] - 1, 0)
-    hi = min(per[min(j + 3, n - 1)] + 1, marked.shape[0] - 2)
-    return marked[hi + 1] - marked[lo] > 0
+    c0 = max(0, j_lo - 3)
+    c1 = min(n, j_hi + 3)
+    t = np.empty(c1 - c0, np.int64)
+    b = brk[c0:c1].copy()
+    for i in range(c1 - c0):
+        t[i] = mid[per[c0 + i]]
+        if i > 0 and float(t[i] - t[i - 1]) > still_ns:  # a standstill, as the checker judges it
+            b[i] = True
+    return check_steps_range(t, per[c0:c1], mid, b, s, v_start, v_max, acc, r1[c0:c1], r2[c0:c1], r3[c0:c1],
+                             j_lo - c0, j_hi - c0)
 
 
 @entry
@@ -475,7 +488,8 @@ def _lookahead(high: np.ndarray, per_ns: np.ndarray, settings: MachineSettings,
     axes, cap, alpha, upull = _caps(high, per_ns, settings, np.flatnonzero(stop_before), limits)
     fwd, u = np.empty(n), np.empty(n)
     out, mid = np.empty(n, np.int64), np.empty(n, np.int64)
-    judge, cap_dirty, changed = np.ones(n, bool), np.zeros(n, bool), np.zeros(n, bool)
+    cap_dirty, changed = np.zeros(n, bool), np.zeros(n, bool)
+    spans = np.empty(2 * n + 2, np.int64)  # spans of periods to judge (first, last), as _reperiods writes them
     marks = [tuple(np.zeros(len(axes[a][0])) for _ in range(3)) for a in range(3)]  # r1, r2, r3 per axis
     for rnd in range(_ROUNDS + 1):
         if rnd == _ROUNDS:
@@ -484,12 +498,13 @@ def _lookahead(high: np.ndarray, per_ns: np.ndarray, settings: MachineSettings,
         _passes(cap, alpha, upull, stop_before, fwd, u, cap_dirty, changed, full)
         if full:
             _periods_from_rates(u, per_ns, out, mid)
+            spans[:2], n_spans = (0, n - 1), 1
         else:
-            _reperiods(u, per_ns, out, mid, changed, cap_dirty, judge)
+            n_spans = _reperiods(u, per_ns, out, mid, changed, cap_dirty, spans)
         if rnd == _ROUNDS:
             break
         # compiled without the GIL: the axes are judged in parallel, each recording where a rule broke
-        broken = list(_pool().map(lambda a: _judge_axis(axes[a][0], axes[a][1], mid, judge, limits[0][a],
+        broken = list(_pool().map(lambda a: _judge_axis(axes[a][0], axes[a][1], mid, spans, n_spans, limits[0][a],
                                                         limits[1][a], limits[2][a], limits[3][a], *marks[a]),
                                   range(3)))
         hits = 0
