@@ -161,6 +161,9 @@ class SvgDrawing:
         """How many segments of each kind: ``{"line": n, "quadratic": n, "cubic": n}`` (arcs are cubics)."""
         counts = {name: 0 for name in _KIND_NAMES.values()}
         for stroke in self.strokes:
+            if isinstance(stroke, np.ndarray):  # segments of one kind
+                counts[_KIND_NAMES[stroke.shape[1]]] += len(stroke)
+                continue
             for seg in stroke:
                 counts[_KIND_NAMES[len(seg)]] += 1
         return counts
@@ -235,7 +238,7 @@ def _flatten_strokes(strokes: list[Stroke], tolerance_mm: float) -> list[np.ndar
 def _flatten_joined(strokes: list[Stroke], tolerance_mm: float) -> tuple[np.ndarray, np.ndarray]:
     """The polylines of :func:`_flatten_strokes` one after another (``(P, 2)``), and where each begins (``(S + 1,)``
     offsets, the last ``P``); every stroke has a segment."""
-    kinds, parts = _segments_by_kind(strokes)
+    kinds, parts, first_point = _segments_by_kind(strokes)
     n = np.ones(len(kinds), np.int64)
     curves = {}
     for k in (QUADRATIC, CUBIC):
@@ -255,7 +258,7 @@ def _flatten_joined(strokes: list[Stroke], tolerance_mm: float) -> tuple[np.ndar
     out = np.empty((int(ends[-1]) if len(ends) else 0, 2))
     first = np.cumsum(lengths) - lengths
     heads = starts[first[lengths > 0]] - 1
-    out[heads] = np.stack([stroke[0][0] for stroke in strokes if len(stroke)])
+    out[heads] = first_point[first[lengths > 0]]
     if parts[LINE][0]:
         out[starts[np.concatenate(parts[LINE][0])]] = np.concatenate(parts[LINE][1])[:, -1]
     for k, (where, ctrl) in curves.items():
@@ -267,28 +270,38 @@ def _flatten_joined(strokes: list[Stroke], tolerance_mm: float) -> tuple[np.ndar
     return out, np.concatenate([[0], ends[np.cumsum(lengths) - 1]])
 
 
-def _segments_by_kind(strokes: list[Stroke]) -> tuple[np.ndarray, dict[int, tuple[list, list]]]:
+def _segments_by_kind(strokes: list[Stroke]) -> tuple[np.ndarray, dict[int, tuple[list, list]], np.ndarray]:
     """Every segment's kind (``(G,)``, in stroke order) and, for each kind, the segments' indices and control
-    points as lists of arrays to join (a stroke held as one ``(n, k, 2)`` array is taken whole)."""
+    points as lists of arrays to join (the strokes held as one ``(n, k, 2)`` array are taken whole, all of one
+    kind at once), and each segment's first control point (``(G, 2)``)."""
     parts: dict[int, tuple[list, list]] = {k: ([], []) for k in (LINE, QUADRATIC, CUBIC)}
-    kinds: list[np.ndarray] = []
-    at = 0
-    for stroke in strokes:
+    lengths = np.fromiter((len(stroke) for stroke in strokes), np.int64, len(strokes))
+    at = np.cumsum(lengths) - lengths
+    kinds = np.zeros(int(lengths.sum()), np.int64)
+    whole: dict[int, list[int]] = {LINE: [], QUADRATIC: [], CUBIC: []}
+    for s, stroke in enumerate(strokes):
         if isinstance(stroke, np.ndarray):
-            k = stroke.shape[1]
-            parts[k][0].append(np.arange(at, at + len(stroke)))
-            parts[k][1].append(stroke)
-            kinds.append(np.full(len(stroke), k, np.int64))
-        else:
-            ks = np.fromiter((len(seg) for seg in stroke), np.int64, len(stroke))
-            for k in (LINE, QUADRATIC, CUBIC):
-                mine = np.flatnonzero(ks == k)
-                if len(mine):
-                    parts[k][0].append(at + mine)
-                    parts[k][1].append(np.stack([stroke[i] for i in mine]))
-            kinds.append(ks)
-        at += len(stroke)
-    return np.concatenate(kinds), parts
+            whole[stroke.shape[1]].append(s)
+            continue
+        ks = np.fromiter((len(seg) for seg in stroke), np.int64, len(stroke))
+        kinds[at[s]:at[s] + len(stroke)] = ks
+        for k in (LINE, QUADRATIC, CUBIC):
+            mine = np.flatnonzero(ks == k)
+            if len(mine):
+                parts[k][0].append(at[s] + mine)
+                parts[k][1].append(np.stack([stroke[i] for i in mine]))
+    for k, chosen in whole.items():
+        if chosen:
+            n = lengths[chosen]
+            where = np.repeat(at[chosen] - (np.cumsum(n) - n), n) + np.arange(int(n.sum()))
+            kinds[where] = k
+            parts[k][0].append(where)
+            parts[k][1].append(np.concatenate([strokes[s] for s in chosen]))
+    first_point = np.empty((len(kinds), 2))
+    for k, (where, ctrl) in parts.items():
+        for w, c in zip(where, ctrl):
+            first_point[w] = c[:, 0]
+    return kinds, parts, first_point
 
 
 def _evaluate(out: np.ndarray, ctrl: np.ndarray, n: np.ndarray, starts: np.ndarray, k: int) -> None:
