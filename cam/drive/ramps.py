@@ -320,11 +320,9 @@ def _judge_axis(per, brk, mid, spans, n_spans, s, v_start, v_max, acc, r1, r2, r
     reach into one of the ``n_spans`` spans of periods in ``spans`` (as :func:`_reperiods` writes them; the rest
     passed last time and nothing they depend on changed).  A step reaches from the period before the step three
     before it to the period after the step three after it: what its interval, pair, rests and free slots depend
-    on.  Records the breaks in ``r1``..``r3`` (``(S,)``, zero elsewhere); returns their number."""
+    on.  Records the breaks in ``r1``..``r3`` (``(S,)``; zero when called, as :func:`_drop_caps` leaves them);
+    returns their number."""
     n = per.shape[0]
-    r1[:] = 0.0
-    r2[:] = 0.0
-    r3[:] = 0.0
     if n < 2:
         return 0
     still_ns = STANDSTILL_STEPS * s / v_start * 1e9
@@ -370,7 +368,8 @@ def _drop_caps(per, r1, r2, r3, u, cap, factor, s, v_start, v_max, cap_dirty):
 
     A broken top speed (R1) or stop (R3) of an interval of ``m`` periods caps them at the rate that meets the
     rule, ``v * m / s``, at once; any other break (R2), or one whose cap is that low already, to ``factor`` x the
-    slowest rate there.
+    slowest rate there.  The marks ``r1``..``r3`` are zero again afterwards (for :func:`_judge_axis`, which only
+    writes where it judges): a lowered cap is always within reach of the step whose break lowered it.
     """
     n = per.shape[0]
     hits = 0
@@ -387,6 +386,9 @@ def _drop_caps(per, r1, r2, r3, u, cap, factor, s, v_start, v_max, cap_dirty):
             lo = per[j - 1]
             hi = per[j + 1]
             exact = np.inf
+        r1[j] = 0.0
+        r2[j] = 0.0
+        r3[j] = 0.0
         if lo < 0:
             continue
         hits += 1

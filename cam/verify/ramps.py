@@ -188,6 +188,8 @@ def check_steps_range(t_ns, slot_of_step, slot_t_ns, brk, s_mm, v_start, v_max, 
     last_lo = np.int64(-1)
     last_hi = np.int64(-1)
     last_ex = 0.0
+    w_d = -1.0  # the last pair's second interval and its w (the next pair's first interval, most often)
+    w_of_d = 0.0
     for j in range(max(j_lo, 1), min(j_hi, n - 1)):
         if record:
             r2[j] = 0.0
@@ -195,10 +197,11 @@ def check_steps_range(t_ns, slot_of_step, slot_t_ns, brk, s_mm, v_start, v_max, 
             continue
         d1 = max(float(t_ns[j] - t_ns[j - 1]), 1.0)  # two steps at one time (a broken log): R1 has it already
         d2 = max(float(t_ns[j + 1] - t_ns[j]), 1.0)
-        if d1 == d2:
-            continue  # same speed
-        w1 = max(s_ns / d1, v_start)
+        if d1 == d2 or (d1 >= ds and d2 >= ds):
+            continue  # same speed, or both at or below the start speed (w = v_start for both)
+        w1 = w_of_d if d1 == w_d else max(s_ns / d1, v_start)
         w2 = max(s_ns / d2, v_start)
+        w_d, w_of_d = d2, w2
         if abs(w2 - w1) <= acc * (min(d1, ds) + min(d2, ds)) * 0.5e-9 + _TOL_MM_S:
             continue  # passes unshifted (the common case)
         q_lo, q_hi = _shift_limits(slot_of_step, slot_t_ns, j)
