@@ -654,7 +654,7 @@ class _Walk:
     def style(self, values: dict) -> tuple[bool, bool, str]:
         """(cut it, only its fill makes it cut, its colour) of a shape, as :func:`_visible` and :func:`_colour_of`
         find them on the svgelements shape (computed once for each combination of the values they read)."""
-        key = tuple(values.get(name) for name in _STYLE_KEYS)
+        key = tuple(map(values.get, _STYLE_KEYS))
         got = self.styles.get(key)
         if got is None:
             probe = se.Path({name: v for name, v in zip(_STYLE_KEYS, key) if v is not None})
@@ -734,9 +734,10 @@ class _Walk:
             numbers = [values.get("cx", "0"), values.get("cy", "0"), values["r"], values["r"]]
         else:
             numbers = [values.get("cx", "0"), values.get("cy", "0"), values.get("rx"), values.get("ry")]
-        if not all(isinstance(v, str) and _FLOAT.fullmatch(v) for v in numbers):
-            return False
-        cx, cy, rx, ry = (float(v) for v in numbers)
+        for v in numbers:
+            if not (isinstance(v, str) and _FLOAT.fullmatch(v)):
+                return False
+        cx, cy, rx, ry = map(float, numbers)
         rx, ry = m.a * rx, m.d * ry
         if not (rx > 0 and ry > 0 and math.isfinite(rx) and math.isfinite(ry)):
             return rx == 0 or ry == 0  # no size: svgelements drops it; a negative radius is left to it
