@@ -29,6 +29,9 @@ SIGNATURES = {
     'cam.drive._kernels.pin_rows_kernel': [
         "(Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), )",
     ],
+    'cam.drive._kernels.straight_rows_kernel': [
+        "(Array(float64, 2, 'C'), Array(float64, 2, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), )",
+    ],
     'cam.drive._kernels.stretch_kernel': [
         "(Array(int64, 2, 'C'), int64, int64, Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), int64, int64, int64, )",
     ],

@@ -37,6 +37,7 @@ from typing import Any, Iterator, Optional, Union
 
 import numpy as np
 
+from ..drive._kernels import straight_rows_kernel
 from ..errors import PlanError, TravelError
 from ..formats.gcode import PLANE_AXES, GcodeFile, GcodeMove, GcodeProgram
 from ..limits import MAX_MOVE_PERIODS, MAX_MOVE_S, MAX_PROGRAM_S
@@ -451,22 +452,10 @@ def _straight_run(frame: _Frame, mvs: list[GcodeMove], start_mm: np.ndarray, sta
     times = program_ns + np.cumsum(per_ns * n)
     if times[-1] > MAX_PROGRAM_S * 1e9:
         return None
-    first = np.cumsum(n) - n
-    seg = np.repeat(np.arange(len(n)), n)
-    k = np.arange(int(n.sum())) - np.repeat(first, n) + 1
-    positions = np.floor(starts[seg] + d[seg] * (k / n[seg])[:, None] + 0.5).astype(np.int64)
-    signed = np.diff(np.vstack([at[None, :], positions]), axis=0)
-    change = np.ones(len(signed), bool)
-    change[1:] = np.any(signed[1:] != signed[:-1], axis=1)
-    change[first] = True
-    row0 = np.flatnonzero(change)
-    last = np.append(row0[1:], len(signed)) - 1
-    move_of = seg[row0]
+    points, count, move_of, is_first = straight_rows_kernel(np.ascontiguousarray(starts), np.ascontiguousarray(d),
+                                                            n.astype(np.int64), np.asarray(at, np.int64))
     kind = np.where(np.array([mv.kind == "rapid" for mv in mvs]), TRAVEL, CUT).astype(np.uint8)
-    is_first = np.zeros(len(signed), bool)
-    is_first[first] = True
-    return _Run(positions[last], per_ns[move_of], last - row0 + 1, kind[move_of], is_first[row0], ends[-1],
-                way_steps[-1], int(times[-1]))
+    return _Run(points, per_ns[move_of], count, kind[move_of], is_first, ends[-1], way_steps[-1], int(times[-1]))
 
 
 class _Planner:
