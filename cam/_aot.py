@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from . import _compiled
-from ._compiled import ENTRIES, EXTENSION, KERNEL_MODULES, MANIFEST, host_cpu, source_digest, symbol_of
+from ._compiled import ENTRIES, EXTENSION, HOLDS_GIL, KERNEL_MODULES, MANIFEST, host_cpu, source_digest, symbol_of
 
 ROOT = Path(__file__).resolve().parent
 SAMPLES = ROOT.parent / "samples"
@@ -130,7 +130,8 @@ def build(out_dir: Path) -> Path:
     from ._aot_signatures import SIGNATURES
 
     class _Flags(pycc_compiler.Flags):
-        """Every exported kernel releases the GIL, as the JIT kernels marked ``nogil`` do."""
+        """Every exported kernel releases the GIL (as the JIT kernels marked ``nogil`` do) but those of
+        :data:`cam._compiled.HOLDS_GIL`."""
 
         def __init__(self, *args: Any, **kwargs: Any) -> None:
             super().__init__(*args, **kwargs)
@@ -138,6 +139,15 @@ def build(out_dir: Path) -> Path:
             self.nopython = True
 
     pycc_compiler.Flags = _Flags
+    compile_extra = pycc_compiler.compile_extra
+    holds_gil = {ENTRIES[name].py_func for name in HOLDS_GIL if name in ENTRIES}
+
+    def _compile_extra(typingctx: Any, targetctx: Any, func: Any, *args: Any, **kwargs: Any) -> Any:
+        flags = args[2]
+        flags.release_gil = func not in holds_gil
+        return compile_extra(typingctx, targetctx, func, *args, **kwargs)
+
+    pycc_compiler.compile_extra = _compile_extra
     _load_kernels()
     _no_ir_inlining()
     names = vars(nbtypes)

@@ -32,7 +32,7 @@ from typing import Any, Callable, Optional
 import llvmlite.binding as llvm
 import numpy as np
 
-__all__ = ["entry", "KERNEL_MODULES", "source_digest", "aot_status", "ENTRIES", "type_key", "resolved"]
+__all__ = ["entry", "KERNEL_MODULES", "HOLDS_GIL", "source_digest", "aot_status", "ENTRIES", "type_key", "resolved"]
 
 KERNEL_MODULES = (
     "cam.digitize._classify",
@@ -46,6 +46,11 @@ KERNEL_MODULES = (
     "cam.verify.ramps",
 )
 """Modules holding numba kernels; the ahead-of-time build is valid only for their exact sources."""
+
+HOLDS_GIL = frozenset({"cam.drive._kernels.net_steps_kernel"})
+"""Kernels whose ahead-of-time build keeps the GIL: called in the send loop once a batch of a few hundred writes
+(microseconds each), where letting go of the GIL hands it to the thread making the next chunks and the send loop
+then waits to take it back."""
 
 EXTENSION = "cam._aot_kernels"
 MANIFEST = "_aot_kernels.json"
