@@ -24,6 +24,8 @@ one window of periods; it does not grow with the number of step periods.
 """
 from __future__ import annotations
 
+import collections
+import concurrent.futures
 import math
 from dataclasses import dataclass, field
 from typing import Iterator, Optional
@@ -201,6 +203,17 @@ def lookahead_margin(settings: MachineSettings, min_period_ns: int) -> int:
     ramp = u_max * u_max / (2.0 * alpha)
     reach = max(s * u_max / v for s, v in zip(s_mm, v_start))
     return int(max(4096, 8 * math.ceil(ramp + reach + 2)))
+
+
+_WINDOW_POOL: Optional[concurrent.futures.ThreadPoolExecutor] = None  # made on first use
+
+
+def _window_pool() -> concurrent.futures.ThreadPoolExecutor:
+    """Two threads that plan look-ahead windows (:meth:`ChunkedPlan._windows`)."""
+    global _WINDOW_POOL
+    if _WINDOW_POOL is None:
+        _WINDOW_POOL = concurrent.futures.ThreadPoolExecutor(2, thread_name_prefix="cam-window")
+    return _WINDOW_POOL
 
 
 @dataclass
@@ -406,7 +419,29 @@ class ChunkedPlan:
                 return
 
     def _windows(self) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray]]:
-        """Look-ahead ramps a chunk at a time, each planned in a window with ``margin_periods`` on each side."""
+        """Look-ahead ramps a chunk at a time, each planned in a window with ``margin_periods`` on each side.
+
+        Windows are planned independently of each other, so the next one is planned by another thread (the
+        compiled planner lets go of the GIL) while this one's chunk is handed out: two windows at most at once.
+        """
+        pending: collections.deque = collections.deque()
+        for high, dirs, window_high, window_per, inner, keep in self._window_tasks():
+            pending.append((_window_pool().submit(_lookahead, window_high, window_per, self.settings, inner), high,
+                            dirs, keep))
+            if len(pending) > 1:
+                yield self._planned(pending.popleft())
+        while pending:
+            yield self._planned(pending.popleft())
+
+    @staticmethod
+    def _planned(task: tuple) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        future, high, dirs, (a, b) = task
+        return high, dirs, future.result()[a:b]
+
+    def _window_tasks(self) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+                                              tuple[int, int]]]:
+        """``(high, dirs, window_high, window_nominal_ns, window_stops, (a, b))`` of each chunk: its periods, the
+        window's around them and the rests inside it, and where the chunk lies in the window."""
         c, m = self.chunk_periods, self.margin_periods
         buf: list[np.ndarray] = [np.zeros(0, np.uint8), np.zeros(0, np.uint8), np.zeros(0, np.int64)]
         buf_start = 0  # global period index of buf[.][0]
@@ -427,9 +462,8 @@ class ChunkedPlan:
             w0, w1 = max(buf_start, done - m), min(buf_end, kept_end + m)
             a, b = w0 - buf_start, w1 - buf_start
             inner = self._stops[(self._stops > w0) & (self._stops < w1)] - w0
-            per = _lookahead(buf[0][a:b], buf[2][a:b], self.settings, inner)
             ka, kb = done - buf_start, kept_end - buf_start
-            yield buf[0][ka:kb], buf[1][ka:kb], per[done - w0:kept_end - w0]
+            yield buf[0][ka:kb], buf[1][ka:kb], buf[0][a:b], buf[2][a:b], inner, (done - w0, kept_end - w0)
             done = kept_end
             drop = max(0, done - m - buf_start)
             if drop:
