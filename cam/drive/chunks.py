@@ -206,6 +206,8 @@ def lookahead_margin(settings: MachineSettings, min_period_ns: int) -> int:
 
 
 _WINDOW_POOL: Optional[concurrent.futures.ThreadPoolExecutor] = None  # made on first use
+_PARALLEL_WINDOW_PERIODS = 1 << 20
+"""Look-ahead windows up to this many periods are planned two at a time (:meth:`ChunkedPlan._windows`)."""
 
 
 def _window_pool() -> concurrent.futures.ThreadPoolExecutor:
@@ -422,10 +424,14 @@ class ChunkedPlan:
         """Look-ahead ramps a chunk at a time, each planned in a window with ``margin_periods`` on each side.
 
         Windows are planned independently of each other, so the next one is planned by another thread (the
-        compiled planner lets go of the GIL) while this one's chunk is handed out: two windows at most at once.
+        compiled planner lets go of the GIL) while this one's chunk is handed out: two windows at most at once,
+        and only one when a window is longer than :data:`_PARALLEL_WINDOW_PERIODS` (long ramps: the planner's
+        memory, about 100 bytes a period, is then that of one window).
         """
         pending: collections.deque = collections.deque()
         for high, dirs, window_high, window_per, inner, keep in self._window_tasks():
+            if pending and len(window_per) > _PARALLEL_WINDOW_PERIODS:
+                yield self._planned(pending.popleft())
             pending.append((_window_pool().submit(_lookahead, window_high, window_per, self.settings, inner), high,
                             dirs, keep))
             if len(pending) > 1:
