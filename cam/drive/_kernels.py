@@ -135,31 +135,52 @@ def pin_rows_kernel(t_ns, data, strobe):
     """
     n = t_ns.shape[0]
     out = np.empty(n * 30 + 1, np.uint8)
-    digits = np.empty(20, np.uint8)
+    pairs = np.empty(200, np.uint8)  # "00" .. "99": two digits a division
+    for v in range(100):
+        pairs[2 * v] = 48 + v // 10
+        pairs[2 * v + 1] = 48 + v % 10
     k = 0
     for i in range(n):
-        for col in range(3):
-            v = t_ns[i] if col == 0 else (data[i] if col == 1 else strobe[i])
-            neg = v < 0
-            if neg:
-                v = -v
-            m = 0
-            while True:
-                digits[m] = 48 + v % 10
-                v //= 10
-                m += 1
-                if v == 0:
-                    break
-            if neg:
-                out[k] = 45
-                k += 1
-            while m > 0:
-                m -= 1
-                out[k] = digits[m]
-                k += 1
-            out[k] = 44 if col < 2 else 10
-            k += 1
+        k = _put_int(out, k, t_ns[i], pairs)
+        out[k] = 44
+        k = _put_int(out, k + 1, data[i], pairs)
+        out[k] = 44
+        k = _put_int(out, k + 1, strobe[i], pairs)
+        out[k] = 10
+        k += 1
     return out[:k]
+
+
+@njit(cache=True, inline="always")
+def _put_int(out, k, v, pairs):
+    """Write integer ``v`` in decimal at ``out[k:]``; returns the index after it."""
+    if v < 0:
+        out[k] = 45
+        k += 1
+        v = -v
+    if v < 10:
+        out[k] = 48 + v
+        return k + 1
+    m = 1  # the number of digits
+    x = v
+    while x >= 10:
+        x //= 10
+        m += 1
+    e = k + m
+    while v >= 100:
+        r = v % 100
+        v //= 100
+        e -= 2
+        out[e] = pairs[2 * r]
+        out[e + 1] = pairs[2 * r + 1]
+    if v >= 10:
+        e -= 2
+        out[e] = pairs[2 * v]
+        out[e + 1] = pairs[2 * v + 1]
+    else:
+        e -= 1
+        out[e] = 48 + v
+    return k + m
 
 
 @entry

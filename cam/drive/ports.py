@@ -154,7 +154,7 @@ class MockPort(Port):
         self._spill: Optional[IO[bytes]] = None
         self._pending: list[tuple[int, int, int]] = []
         self.pin_log_path = Path(pin_log_path) if pin_log_path is not None else None
-        self._file: Optional[IO[str]] = None
+        self._file: Optional[IO[bytes]] = None
         self.n_writes = 0
         self.last_t_ns: Optional[int] = None
 
@@ -203,13 +203,12 @@ class MockPort(Port):
 
         try:
             if self._file is None:
-                self._file = open(self._part(), "w", encoding="utf-8")
-                self._file.write(PIN_LOG_HEADER + "\n")
+                self._file = open(self._part(), "wb")
+                self._file.write((PIN_LOG_HEADER + "\n").encode("ascii"))
             for i in range(0, len(t_ns), 1 << 18):  # the rows np.savetxt(fmt="%d") writes, formatted compiled
-                rows = pin_rows_kernel(np.ascontiguousarray(t_ns[i:i + (1 << 18)], np.int64),
-                                       data[i:i + (1 << 18)].astype(np.int64),
-                                       strobe[i:i + (1 << 18)].astype(np.int64))
-                self._file.write(rows.tobytes().decode("ascii"))
+                self._file.write(pin_rows_kernel(np.ascontiguousarray(t_ns[i:i + (1 << 18)], np.int64),
+                                                 data[i:i + (1 << 18)].astype(np.int64),
+                                                 strobe[i:i + (1 << 18)].astype(np.int64)))
         except OSError as exc:
             self._abandon_pin_log(exc)
 
@@ -266,8 +265,8 @@ class MockPort(Port):
         self._flush()
         try:
             if self._file is None:
-                self._file = open(self._part(), "w", encoding="utf-8")
-                self._file.write(PIN_LOG_HEADER + "\n")
+                self._file = open(self._part(), "wb")
+                self._file.write((PIN_LOG_HEADER + "\n").encode("ascii"))
             self._file.flush()
             os.fsync(self._file.fileno())
             self._file.close()
