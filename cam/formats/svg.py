@@ -134,11 +134,13 @@ class SvgDrawing:
         """The length of every layer's strokes in mm (as :meth:`layers`; curves flattened within ``tolerance_mm``)."""
         if not self.strokes:
             return [0.0] * len(self.layers())
-        pts, bounds = _flatten_joined(self.strokes, tolerance_mm)
-        step = np.hypot(*np.diff(pts, axis=0).T)
-        step[bounds[1:-1] - 1] = 0.0  # from one stroke's end to the next one's start: no length
-        per_stroke = np.add.reduceat(np.r_[step, 0.0], bounds[:-1])
-        return np.bincount(self.layer_of_stroke, per_stroke, len(self.layers())).tolist()
+        per_stroke = []
+        for lo, hi in _stroke_blocks(self.strokes):  # a block of strokes at a time: the memory of a block
+            pts, bounds = _flatten_block(self.strokes[lo:hi], tolerance_mm)
+            step = np.hypot(*np.diff(pts, axis=0).T)
+            step[bounds[1:-1] - 1] = 0.0  # from one stroke's end to the next one's start: no length
+            per_stroke.append(np.add.reduceat(np.r_[step, 0.0], bounds[:-1]))
+        return np.bincount(self.layer_of_stroke, np.concatenate(per_stroke), len(self.layers())).tolist()
 
     def find_layers(self, name: str) -> list[int]:
         """The indices (file order) of the layers ``name`` selects: the layer of that name and its sublayers
@@ -209,6 +211,14 @@ class SvgDrawing:
         return encode_png(img)
 
 
+def _stroke_blocks(strokes: list[Stroke], segments: int = 1 << 15) -> list[tuple[int, int]]:
+    """``(first, last + 1)`` of consecutive strokes of about ``segments`` segments each (a stroke is never cut)."""
+    lengths = np.fromiter((len(stroke) for stroke in strokes), np.int64, len(strokes))
+    cuts = np.unique(np.searchsorted(np.cumsum(lengths), np.arange(segments, int(lengths.sum()), segments)) + 1)
+    bounds = np.r_[0, cuts[cuts < len(strokes)], len(strokes)]
+    return list(zip(bounds[:-1].tolist(), bounds[1:].tolist()))
+
+
 def _flatten_segment(seg: np.ndarray, tolerance_mm: float) -> np.ndarray:
     """``(n + 1, 2)`` points of one segment (see :meth:`SvgDrawing.polylines`)."""
     k = len(seg)
@@ -237,7 +247,24 @@ def _flatten_strokes(strokes: list[Stroke], tolerance_mm: float) -> list[np.ndar
 
 def _flatten_joined(strokes: list[Stroke], tolerance_mm: float) -> tuple[np.ndarray, np.ndarray]:
     """The polylines of :func:`_flatten_strokes` one after another (``(P, 2)``), and where each begins (``(S + 1,)``
-    offsets, the last ``P``); every stroke has a segment."""
+    offsets, the last ``P``); every stroke has a segment.  Made a block of strokes at a time
+    (:func:`_stroke_blocks`): the working arrays are those of a block."""
+    blocks = _stroke_blocks(strokes)
+    if len(blocks) == 1:
+        return _flatten_block(strokes, tolerance_mm)
+    pts: list[np.ndarray] = []
+    bounds: list[np.ndarray] = [np.zeros(1, np.int64)]
+    done = 0
+    for lo, hi in blocks:
+        block_pts, block_bounds = _flatten_block(strokes[lo:hi], tolerance_mm)
+        pts.append(block_pts)
+        bounds.append(block_bounds[1:] + done)
+        done += len(block_pts)
+    return np.concatenate(pts), np.concatenate(bounds)
+
+
+def _flatten_block(strokes: list[Stroke], tolerance_mm: float) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_flatten_joined` of a few strokes at once."""
     kinds, parts, first_point = _segments_by_kind(strokes)
     n = np.ones(len(kinds), np.int64)
     curves = {}
@@ -872,7 +899,7 @@ def _pieces_from(kinds: list[int], px: np.ndarray, mm: np.ndarray, close_open: b
 
 def _checked(pts: np.ndarray) -> np.ndarray:
     """``pts`` (mm), or ValueError as :func:`_point` raises it."""
-    if not (np.all(np.isfinite(pts)) and np.abs(pts).max(initial=0.0) <= 1e6):
+    if not (np.all(np.isfinite(pts)) and max(pts.max(initial=0.0), -pts.min(initial=0.0)) <= 1e6):
         raise ValueError("a coordinate is not a finite number within 1 km")
     return pts
 
@@ -935,7 +962,8 @@ def _circles(params: list[tuple[float, float, float, float]], k: float) -> tuple
     out[:, :, 2, 0], out[:, :, 2, 1] = end_x - alpha * (-rx * sin1), end_y - alpha * (ry * cos1)
     out[:, :, 3, 0], out[:, :, 3, 1] = end_x, end_y
     gap = (np.abs(corner_x[:, 4] - corner_x[:, 0]) > se.ERROR) | (np.abs(corner_y[:, 4] - corner_y[:, 0]) > se.ERROR)
-    return out * k, gap
+    out *= k
+    return out, gap
 
 
 def _parse_fast(root, source: str) -> SvgDrawing:
