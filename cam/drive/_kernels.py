@@ -251,3 +251,22 @@ def straight_rows_kernel(starts, d, n, at):
             points[r, 0], points[r, 1], points[r, 2] = x, y, z
             p0, p1, p2 = x, y, z
     return points[:r + 1].copy(), count[:r + 1].copy(), move_of[:r + 1].copy(), first[:r + 1].copy()
+
+
+@entry
+@njit(cache=True, nogil=True)
+def move_periods_kernel(pts, prev):
+    """Periods of the moves to ``(B, 3)`` int64 points ``pts`` from ``(3,)`` ``prev`` (the longest axis's steps of
+    each, ``(B,)`` int64) and the steps each axis makes over them (``(3,)`` int64)."""
+    n = pts.shape[0]
+    npm = np.empty(n, np.int64)
+    steps = np.zeros(3, np.int64)
+    p0, p1, p2 = prev[0], prev[1], prev[2]
+    for i in range(n):
+        a0, a1, a2 = abs(pts[i, 0] - p0), abs(pts[i, 1] - p1), abs(pts[i, 2] - p2)
+        npm[i] = max(a0, max(a1, a2))
+        steps[0] += a0
+        steps[1] += a1
+        steps[2] += a2
+        p0, p1, p2 = pts[i, 0], pts[i, 1], pts[i, 2]
+    return npm, steps

@@ -34,7 +34,7 @@ import numpy as np
 
 from ..job.model import Job, JobLike, check_travel
 from ..settings import MachineSettings
-from ._kernels import chunk_writes_kernel, stretch_kernel
+from ._kernels import chunk_writes_kernel, move_periods_kernel, stretch_kernel
 from .pins import axis_bits
 from .ramps import _lookahead, linear40_periods
 
@@ -141,12 +141,11 @@ class _RecentMoves:
 def _per_move(piece: Job, pts: np.ndarray, prev: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(n_per_move, nominal_ns, steps)`` of the moves to ``(B, 3)`` points ``pts`` from ``(1, 3)`` ``prev``:
     ``(B,)`` int64 periods each takes and its nominal period (0: the settings' delays), ``(3,)`` steps per axis."""
-    d = np.abs(pts - np.vstack([prev, pts[:-1]])) if len(pts) else np.zeros((0, 3), np.int64)
-    npm = d.max(axis=1) if len(pts) else np.zeros(0, np.int64)
+    npm, steps = move_periods_kernel(np.ascontiguousarray(pts, np.int64), np.asarray(prev, np.int64).reshape(3))
     if piece.periods is not None:
         npm = np.maximum(npm, np.asarray(piece.periods, np.int64))
     nom = np.zeros(len(pts), np.int64) if piece.period_ns is None else np.asarray(piece.period_ns, np.int64)
-    return npm, nom, d.sum(axis=0)
+    return npm, nom, steps
 
 
 def move_extent(pts: np.ndarray, n_per_move: np.ndarray, extent: np.ndarray, cut: np.ndarray) -> None:
