@@ -54,8 +54,7 @@ def job_report(
     rep: dict[str, Any] = image_report(digitized, s) if digitized is not None else {"warnings": []}
     depth_px = 0
     if toolpath.height_px and toolpath.n_targets:
-        deepest = getattr(toolpath, "deepest_px", None)  # a streamed job knows it without a map of its own
-        depth_px = int(deepest if deepest is not None else toolpath.asked_depth_px().max())
+        depth_px = int(toolpath.deepest_px)
     rep.update(
         {
             "depth_px": depth_px,
