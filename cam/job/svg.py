@@ -281,27 +281,24 @@ def _runs_left(pts: np.ndarray, bounds: np.ndarray, dropped: np.ndarray
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The runs of pieces not ``dropped`` (``dropped[j]``: the piece from ``pts[j]`` to ``pts[j + 1]``) of each
     polyline, a polyline none of whose pieces is dropped whole: ``(points, bounds, polyline of each run)``."""
-    lo: list[int] = []
-    hi: list[int] = []
-    owner: list[int] = []
     gone_before = np.r_[0, np.cumsum(dropped)]
     touched = gone_before[bounds[1:] - 1] > gone_before[bounds[:-1]]
-    for s, (b0, b1) in enumerate(zip(bounds[:-1].tolist(), bounds[1:].tolist())):
-        if not touched[s]:
-            lo.append(b0)
-            hi.append(b1)
-            owner.append(s)
-            continue
+    lo, hi, owner = [bounds[:-1][~touched]], [bounds[1:][~touched]], [np.flatnonzero(~touched)]
+    for s in np.flatnonzero(touched).tolist():  # only the polylines that lost a piece are cut into runs
+        b0, b1 = int(bounds[s]), int(bounds[s + 1])
         edges = np.diff(np.r_[0, (~dropped[b0:b1 - 1]).astype(np.int8), 0])
-        for r0, r1 in zip(np.flatnonzero(edges == 1).tolist(), np.flatnonzero(edges == -1).tolist()):
-            lo.append(b0 + r0)
-            hi.append(b0 + r1 + 1)
-            owner.append(s)
-    sizes = np.array(hi, np.int64) - np.array(lo, np.int64)
+        r0, r1 = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+        lo.append(b0 + r0)
+        hi.append(b0 + r1 + 1)
+        owner.append(np.full(len(r0), s))
+    run_owner = np.concatenate(owner).astype(np.int64)
+    keep = np.argsort(run_owner, kind="stable")  # the runs in polyline order, each polyline's in order
+    run_lo, run_hi, run_owner = np.concatenate(lo)[keep], np.concatenate(hi)[keep], run_owner[keep]
+    sizes = run_hi - run_lo
     run_bounds = np.zeros(len(sizes) + 1, np.int64)
     np.cumsum(sizes, out=run_bounds[1:])
-    index = np.arange(run_bounds[-1]) + np.repeat(np.array(lo, np.int64) - run_bounds[:-1], sizes)
-    return pts[index], run_bounds, np.array(owner, np.int64)
+    index = np.arange(run_bounds[-1]) + np.repeat(run_lo - run_bounds[:-1], sizes)
+    return pts[index], run_bounds, run_owner
 
 
 def _order(strokes: list[np.ndarray], at: Optional[np.ndarray] = None) -> list[np.ndarray]:
