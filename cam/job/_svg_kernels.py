@@ -230,6 +230,7 @@ def cells_kernel(vert, poly_start, sample_steps, corner_cos, reach_steps):
     cell = np.empty((64, 2), np.int64)  # one polyline's positions before corners are dropped
     fixed = np.empty(64, np.bool_)
     worst = np.empty(64)
+    begin = np.empty((64, 2), np.int64)  # the segment and sample each position's samples begin at
     used = 0
     for p in range(n_poly):
         v0 = poly_start[p]
@@ -267,14 +268,16 @@ def cells_kernel(vert, poly_start, sample_steps, corner_cos, reach_steps):
                 cy = np.int64(np.floor(dy * t + vert[i, 1] + 0.5))
                 if k == 0 or cx != cell[k - 1, 0] or cy != cell[k - 1, 1]:
                     if k == cell.shape[0]:
-                        cell, fixed, worst = _grow(cell, fixed, worst)
+                        cell, fixed, worst, begin = _grow(cell, fixed, worst, begin)
                     cell[k, 0] = cx
                     cell[k, 1] = cy
                     fixed[k] = turn and j == 0
+                    begin[k, 0] = i
+                    begin[k, 1] = j
                     k += 1
                 elif turn and j == 0:
                     fixed[k - 1] = True
-        _corner_reach(vert, v0, v1, sample_steps, cell, k, worst)
+        _corner_reach(vert, v1, sample_steps, cell, fixed, begin, k, worst)
         out = _room(out, used + k + n_poly + 1)
         used = _keep(cell, fixed, worst, k, reach_steps, out, used)
     starts[n_poly] = used
@@ -304,31 +307,40 @@ def _sharp(px, py, plen, dx, dy, length, corner_cos):
 
 
 @njit(cache=True)
-def _corner_reach(vert, v0, v1, sample_steps, cell, k, worst):
-    """``worst[r]``: the farthest any sample of position ``r`` (not an end) lies from the nearer of its two
-    neighbours (the samples made again, as :func:`cells_kernel` made them)."""
-    worst[:k] = 0.0
-    r = -1
-    for i in range(v0, v1):
-        if i == v1 - 1:
-            dx = dy = 0.0
-            ns = 1
-        else:
-            dx = vert[i + 1, 0] - vert[i, 0]
-            dy = vert[i + 1, 1] - vert[i, 1]
-            ns = max(np.int64(1), np.int64(np.ceil(max(abs(dx), abs(dy)) / sample_steps)))
-        for j in range(ns):
-            t = j / ns
-            x = dx * t + vert[i, 0]
-            y = dy * t + vert[i, 1]
-            cx = np.int64(np.floor(x + 0.5))
-            cy = np.int64(np.floor(y + 0.5))
-            if r < 0 or cx != cell[r, 0] or cy != cell[r, 1]:
-                r += 1
-            if 0 < r < k - 1:
+def _corner_reach(vert, v1, sample_steps, cell, fixed, begin, k, worst):
+    """``worst[r]``: the farthest any sample of position ``r`` lies from the nearer of its two neighbours, for
+    the positions that may be staircase corners (not fixed, not an end, the neighbours 8-neighbours of each
+    other; 0 for the others): their samples made again from where they begin, as :func:`cells_kernel` made
+    them."""
+    for r in range(k):
+        worst[r] = 0.0
+        if r == 0 or r == k - 1 or fixed[r] or abs(cell[r + 1, 0] - cell[r - 1, 0]) > 1 \
+                or abs(cell[r + 1, 1] - cell[r - 1, 1]) > 1:
+            continue
+        i = begin[r, 0]
+        j = begin[r, 1]
+        done = False
+        while not done and i < v1:
+            if i == v1 - 1:
+                dx = dy = 0.0
+                ns = 1
+            else:
+                dx = vert[i + 1, 0] - vert[i, 0]
+                dy = vert[i + 1, 1] - vert[i, 1]
+                ns = max(np.int64(1), np.int64(np.ceil(max(abs(dx), abs(dy)) / sample_steps)))
+            while j < ns:
+                t = j / ns
+                x = dx * t + vert[i, 0]
+                y = dy * t + vert[i, 1]
+                if np.int64(np.floor(x + 0.5)) != cell[r, 0] or np.int64(np.floor(y + 0.5)) != cell[r, 1]:
+                    done = True  # the next position's samples
+                    break
                 reach = min(math.hypot(x - cell[r - 1, 0], y - cell[r - 1, 1]),
                             math.hypot(x - cell[r + 1, 0], y - cell[r + 1, 1]))
                 worst[r] = max(worst[r], reach)
+                j += 1
+            i += 1
+            j = 0
 
 
 @njit(cache=True)
@@ -374,11 +386,13 @@ def _room(out, rows):
 
 
 @njit(cache=True)
-def _grow(cell, fixed, worst):
-    """The three buffers of one polyline's positions, twice as long."""
+def _grow(cell, fixed, worst, begin):
+    """The buffers of one polyline's positions, twice as long."""
     n = cell.shape[0]
     cell2 = np.empty((2 * n, 2), np.int64)
     cell2[:n] = cell
     fixed2 = np.empty(2 * n, np.bool_)
     fixed2[:n] = fixed
-    return cell2, fixed2, np.empty(2 * n)
+    begin2 = np.empty((2 * n, 2), np.int64)
+    begin2[:n] = begin
+    return cell2, fixed2, np.empty(2 * n), begin2
