@@ -204,6 +204,40 @@ def lookahead_margin(settings: MachineSettings, min_period_ns: int) -> int:
     return int(max(4096, 8 * math.ceil(ramp + reach + 2)))
 
 
+def _constant_time_ns(pts: np.ndarray, npm: np.ndarray, nom: np.ndarray, s: MachineSettings) -> int:
+    """Machine time of ``(B,)`` moves with constant ramps: ``pts`` ``(B + 1, 3)`` the point before them, then theirs;
+    each move's periods at its nominal length, else the settings' delay for the axes it moves."""
+    d = pts[1:] - pts[:-1]
+    xy, z = (d[:, 0] != 0) | (d[:, 1] != 0), d[:, 2] != 0
+    per = np.where(xy & z, max(s.delay_xy_ns, s.delay_z_ns), np.where(xy, s.delay_xy_ns, s.delay_z_ns))
+    return int((npm * np.where(nom > 0, nom, per)).sum())
+
+
+class _Reach:
+    """Where a job's moves take the tool (:func:`move_extent`) and, with constant ramps, their machine time: worked
+    out from the moves in the pass of :func:`plan_chunks`, so no later pass over the job is needed for them."""
+
+    def __init__(self, settings: MachineSettings) -> None:
+        self.settings = settings
+        self.extent = np.zeros((3, 2), np.int64)
+        big = np.iinfo(np.int64).max
+        self.cut = np.array([[big, -big]] * 3, np.int64)
+        self.time_ns = 0
+
+    def add(self, pts: np.ndarray, npm: np.ndarray, nom: np.ndarray, prev: np.ndarray) -> None:
+        """The moves to ``(B, 3)`` points ``pts`` from ``(1, 3)`` ``prev``, ``(B,)`` periods and nominal periods."""
+        for b0 in range(0, len(pts), _MOVE_BLOCK):
+            b1 = min(len(pts), b0 + _MOVE_BLOCK)
+            block = np.vstack([pts[b0 - 1:b0] if b0 else prev, pts[b0:b1]])
+            move_extent(block, npm[b0:b1], self.extent, self.cut)
+            if self.settings.ramp == "constant":
+                self.time_ns += _constant_time_ns(block, npm[b0:b1], nom[b0:b1], self.settings)
+
+    def extent_and_cut(self) -> tuple[np.ndarray, np.ndarray]:
+        """As :meth:`ChunkedPlan.motion_extent`."""
+        return self.extent, self.cut if self.cut[0, 0] != np.iinfo(np.int64).max else np.zeros((3, 2), np.int64)
+
+
 _WINDOW_POOL: Optional[concurrent.futures.ThreadPoolExecutor] = None  # made on first use
 _PARALLEL_WINDOW_PERIODS = 1 << 20
 """Look-ahead windows up to this many periods are planned two at a time (:meth:`ChunkedPlan._windows`)."""
@@ -302,14 +336,7 @@ class ChunkedPlan:
         """The job's machine time: the constant ramps' from the moves, else one pass over the ramped periods
         (no writes made)."""
         if self.settings.ramp == "constant":
-            s = self.settings
-            total = 0
-            for pts, npm, nom, _, _ in self._move_blocks():
-                d = pts[1:] - pts[:-1]
-                xy, z = (d[:, 0] != 0) | (d[:, 1] != 0), d[:, 2] != 0
-                per = np.where(xy & z, max(s.delay_xy_ns, s.delay_z_ns), np.where(xy, s.delay_xy_ns, s.delay_z_ns))
-                total += int((npm * np.where(nom > 0, nom, per)).sum())
-            return total
+            return sum(_constant_time_ns(pts, npm, nom, self.settings) for pts, npm, nom, _, _ in self._move_blocks())
         return sum(int(per.sum()) for _, _, per in self._ramped())
 
     # -- the stream ------------------------------------------------------------------------------------
@@ -547,6 +574,7 @@ def plan_chunks(job: JobLike, *, start_steps: tuple[int, int, int] = (0, 0, 0),
     min_nominal: Optional[int] = None
     any_move_start = False
     last = (0, 0, 0)
+    reach = _Reach(s)
     for piece in job.pieces():
         pts = np.asarray(piece.points_steps, np.int64).reshape(-1, 3)
         if not len(pts):
@@ -555,6 +583,7 @@ def plan_chunks(job: JobLike, *, start_steps: tuple[int, int, int] = (0, 0, 0),
             check_travel(pts[b0:b0 + _MOVE_BLOCK * 16] + origin, s, piece.pixels)
         npm, nom, d = _per_move(piece, pts, prev)
         steps_total += d
+        reach.add(pts, npm, nom, prev)
         point_period = period0 + np.cumsum(npm)
         pause_idx = np.flatnonzero(np.asarray(piece.pause, bool))
         stops.append(point_period[pause_idx])
@@ -577,7 +606,8 @@ def plan_chunks(job: JobLike, *, start_steps: tuple[int, int, int] = (0, 0, 0),
         job=job, settings=s, n_periods=period0, pause_writes=np.concatenate(pause_writes or [np.zeros(0, np.int64)]),
         steps_total=steps_total, end_steps=last, safe_z_steps=int(job.safe_z_steps),
         chunk_periods=int(chunk_periods), margin_periods=margin, pause_notes=notes, warnings=warnings,
-        any_move_start=any_move_start, _stops=np.unique(np.concatenate(stops or [np.zeros(0, np.int64)])))
+        any_move_start=any_move_start, _stops=np.unique(np.concatenate(stops or [np.zeros(0, np.int64)])),
+        _time_ns=reach.time_ns if s.ramp == "constant" else None, _extent=reach.extent_and_cut())
 
 
 def plan_steps(job: JobLike, *, start_steps: tuple[int, int, int] = (0, 0, 0)) -> StepPlan:
