@@ -212,8 +212,9 @@ def test_cli_prompts_between_layers_and_yes_goes_on(tmp_path):
     out = run_cli("drill", card, "--layers", "yellow pen,red pen", "--pause-between-layers", "--yes",
                   "--offset", "0,0", "--pin-log", pins)
     assert out.returncode == 0, out.stderr
-    prompts = [line for line in out.stderr.splitlines() if "press Enter" in line]
-    assert len(prompts) == 1 and prompts[0].startswith("layer 'red pen': change the pen: paused at")
+    prompts = [line for line in out.stderr.splitlines() if "going on (--yes)" in line]
+    assert len(prompts) == 1 and prompts[0].startswith("layer 'red pen': change the pen: at X=")
+    assert "press Enter" not in out.stderr  # nobody is asked to press anything: --yes answers
     seq = positions_at_depth(cam.decode_pin_log(read_pin_log(pins), S), None)
     assert runs(card_layer_of(seq)) == [2, 0]
     # nobody at the keyboard (no --yes, stdin closed): the job stops at the pause, before the red pen's line

@@ -105,9 +105,10 @@ def _read_answer(stopping: threading.Event) -> str:
 def _ask(args: argparse.Namespace, stopping: threading.Event):
     def on_prompt(prompt: Prompt) -> str:
         x, y, z = prompt.position_steps
-        print(f"{prompt.note}: paused at X={x} Y={y} Z={z} steps; press Enter to resume", file=sys.stderr)
         if getattr(args, "yes", False):
+            print(f"{prompt.note}: at X={x} Y={y} Z={z} steps; going on (--yes)", file=sys.stderr)
             return "continue"
+        print(f"{prompt.note}: paused at X={x} Y={y} Z={z} steps; press Enter to resume", file=sys.stderr)
         if _read_answer(stopping) == "":  # stopped meanwhile, or nobody can answer: stop, never carry on blindly
             if not stopping.is_set():
                 print("no answer at the pause (stdin closed): stopping", file=sys.stderr)
