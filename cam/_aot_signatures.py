@@ -38,29 +38,8 @@ SIGNATURES = {
     'cam.drive._kernels.stretch_kernel': [
         "(Array(int64, 2, 'C'), int64, int64, Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), int64, int64, int64, )",
     ],
-    'cam.drive.ramps._axis_caps': [
-        "(Array(int64, 1, 'C'), Array(boolean, 1, 'C'), float64, float64, float64, float64, Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), )",
-    ],
-    'cam.drive.ramps._breaks': [
-        "(Array(int64, 1, 'C'), Array(boolean, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), float64, )",
-    ],
-    'cam.drive.ramps._drop_caps': [
-        "(Array(int64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), float64, float64, float64, float64, Array(boolean, 1, 'C'), )",
-    ],
-    'cam.drive.ramps._judge_axis': [
-        "(Array(int64, 1, 'C'), Array(boolean, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), int64, float64, float64, float64, float64, Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), )",
-    ],
-    'cam.drive.ramps._passes': [
-        "(Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(boolean, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(boolean, 1, 'C'), Array(boolean, 1, 'C'), boolean, )",
-    ],
-    'cam.drive.ramps._periods_from_rates': [
-        "(Array(float64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), )",
-    ],
-    'cam.drive.ramps._reperiods': [
-        "(Array(float64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(boolean, 1, 'C'), Array(boolean, 1, 'C'), Array(int64, 1, 'C'), )",
-    ],
-    'cam.drive.ramps._steps_of_axis': [
-        "(Array(uint8, 1, 'C'), int64, int64, )",
+    'cam.drive.ramps._plan_window': [
+        "(Array(uint8, 1, 'C'), Array(int64, 1, 'C'), Array(boolean, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), boolean, )",
     ],
     'cam.formats.hpgl._interpret': [
         "(int64, int64, Array(int64, 1, 'C'), Array(int32, 1, 'C'), Array(int32, 1, 'C'), Array(int32, 1, 'C'), Array(int32, 1, 'C'), Array(float64, 1, 'C'), Array(int32, 1, 'C'), Array(int32, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(int32, 1, 'C'), Array(int32, 1, 'C'), Array(boolean, 1, 'C'), Array(int32, 1, 'C'), Array(int64, 1, 'C'), boolean, Array(int64, 1, 'C'), )",

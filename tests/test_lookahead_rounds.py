@@ -11,42 +11,25 @@ from cam.job.hpgl import plan_hpgl
 from conftest import SAMPLES
 
 
-def _whole_rounds(monkeypatch):
-    """Make every round plan and judge the whole window (the planner before the partial rounds)."""
-    passes, periods = ramps._passes, ramps._periods_from_rates
+def _compare_windows(job, monkeypatch, n_windows=200):
+    """Plan the first ``n_windows`` look-ahead windows of a job both ways; returns (windows, rule breaks the
+    partial repeat rounds found: a repeat that finds one more shows the partial judging at work)."""
+    seen = {"windows": 0, "found": 0}
 
-    def full_passes(cap, alpha, upull, stop_before, fwd, u, cap_dirty, changed, full):
-        cap_dirty[:] = False
-        passes(cap, alpha, upull, stop_before, fwd, u, cap_dirty, changed, True)
+    def both(high, per_ns, settings, stops):
+        args = ramps._window_args(high, per_ns, settings, stops)
+        partial, found = ramps._plan_window(*args, True)
+        whole, _ = ramps._plan_window(*args, False)
+        np.testing.assert_array_equal(partial, whole)
+        seen["windows"] += 1
+        seen["found"] += int(found)
+        return partial
 
-    def full_periods(u, floor_ns, out, mid, changed, cap_dirty, spans):
-        periods(u, floor_ns, out, mid)
-        spans[:2] = (0, len(u) - 1)
-        return 1
-
-    monkeypatch.setattr(ramps, "_passes", full_passes)
-    monkeypatch.setattr(ramps, "_reperiods", full_periods)
-
-
-def _windows(job, n_windows):
-    """The ramped periods of the first ``n_windows`` chunks of a job's plan, and how many rule breaks the repeat
-    rounds found (a repeat that finds one more shows the partial judging at work)."""
-    found = []
-    judge_axis = ramps._judge_axis
-
-    def counting(per, brk, mid, spans, n_spans, *args):
-        n_broken = judge_axis(per, brk, mid, spans, n_spans, *args)
-        if (n_spans, spans[0], spans[1]) != (1, 0, len(mid) - 1):  # a repeat round: not every period
-            found.append(n_broken)
-        return n_broken
-
-    ramps._judge_axis = counting
-    try:
-        plan = chunks.plan_chunks(job, chunk_periods=1 << 16)
-        out = [per.copy() for _, (_, _, per) in zip(range(n_windows), plan._ramped())]
-    finally:
-        ramps._judge_axis = judge_axis
-    return out, sum(found), len(found)
+    monkeypatch.setattr(chunks, "_lookahead", both)
+    plan = chunks.plan_chunks(job, chunk_periods=1 << 16)
+    for _, _ in zip(range(n_windows), plan._ramped()):
+        pass
+    return seen["windows"], seen["found"]
 
 
 def _two_pen_job(tmp_path, n_strokes=8000):
@@ -70,13 +53,14 @@ def test_partial_rounds_give_the_periods_of_whole_rounds(make, tmp_path, monkeyp
         job = cam.plan(cam.digitize(cam.load_image(SAMPLES / "ellipse.png")), depth=5)
     else:
         job = plan_hpgl(load_hpgl(SAMPLES / "inkscape_star.plt"))
-    partial, found, repeats = _windows(job, 200)
-    assert repeats > 0  # the job needs repeat rounds
+    windows, found = _compare_windows(job, monkeypatch)
+    assert windows >= 1
     if make == "two pens":
-        assert found > 0  # and some repeat round finds a rule broken that the first did not
-    with monkeypatch.context() as m:
-        _whole_rounds(m)
-        whole, _, _ = _windows(job, 200)
-    assert len(partial) == len(whole)
-    for a, b in zip(partial, whole):
-        np.testing.assert_array_equal(a, b)
+        assert found > 0  # some repeat round found a rule broken that the first did not
+
+
+def test_partial_rounds_on_a_window_planned_whole(monkeypatch):
+    """One window with every kind of rest: pauses inside it and both ends."""
+    job = plan_hpgl(load_hpgl(SAMPLES / "seed_tools.plt"))
+    windows, _ = _compare_windows(job, monkeypatch)
+    assert windows >= 1

@@ -50,11 +50,12 @@ The look-ahead planner, with the period index ``k`` as the path parameter and
    at ``u_pull``: then every axis is at or below its start speed everywhere,
    which meets every rule, so the planner always returns a plan that passes.
 
-Everything per period runs compiled (numba) over flat arrays.
+Everything per period runs compiled (numba) over flat arrays: a window is one
+call (:func:`_plan_window`) that lets go of the GIL, so windows are planned
+in parallel (:meth:`cam.drive.chunks.ChunkedPlan._windows`) while the send
+loop runs.
 """
 from __future__ import annotations
-
-import concurrent.futures
 
 import numpy as np
 from numba import njit
@@ -76,12 +77,7 @@ _ROUNDS = 25
 _DROP = 0.85
 _ALPHA_MARGIN = 0.9
 
-_Limits = tuple[tuple[float, float, float], ...]
-"""(mm per step, start speed mm/s, max speed mm/s, acceleration mm/s^2), each per axis (X, Y, Z):
-:meth:`MachineSettings.axis_limits`."""
 
-
-@entry
 @njit(cache=True, nogil=True)
 def _steps_of_axis(high, clk, dbit):
     n = 0
@@ -99,7 +95,6 @@ def _steps_of_axis(high, clk, dbit):
     return per, up
 
 
-@entry
 @njit(cache=True, nogil=True)
 def _breaks(per, up, stop_idx, start_ns, still_ns):
     """Rest before step j: reversal, a stop between the periods of steps j-1 and j, or a certain standstill.
@@ -120,22 +115,6 @@ def _breaks(per, up, stop_idx, start_ns, still_ns):
         elif float(start_ns[per[j]] - start_ns[per[j - 1] + 1]) > still_ns:
             brk[j] = True
     return brk
-
-
-_POOL = None  # a concurrent.futures.ThreadPoolExecutor, made on first use
-
-
-def _pool():
-    """Three threads for the per-axis kernels (compiled with ``nogil``, so they run in parallel)."""
-    global _POOL
-    if _POOL is None:
-        _POOL = concurrent.futures.ThreadPoolExecutor(3, thread_name_prefix="cam-axes")
-    return _POOL
-
-
-def _axis_steps_and_breaks(high, clk, dbit, stop_idx, start_ns, still_ns):
-    per, up = _steps_of_axis(high, clk, dbit)
-    return per, _breaks(per, up, stop_idx, start_ns, still_ns)
 
 
 @njit(cache=True)
@@ -162,7 +141,6 @@ def _pair_cap(m1, m2, s, v_start, acc, u_hi):
     return lo
 
 
-@entry
 @njit(cache=True, nogil=True)
 def _axis_caps(per, brk, s, v_start, v_max, acc, cap, alpha, upull):
     """Step 1 of the planner (module docstring) for one axis: lower ``cap``, ``alpha``, ``upull`` in place."""
@@ -208,7 +186,6 @@ def _axis_caps(per, brk, s, v_start, v_max, acc, cap, alpha, upull):
                 upull[k] = p
 
 
-@entry
 @njit(cache=True, nogil=True)
 def _passes(cap, alpha, upull, stop_before, fwd, u, cap_dirty, changed, full):
     """Step 2: forward (accelerate, into ``fwd``) then backward (decelerate) passes; ``u`` out.
@@ -261,7 +238,6 @@ def _passes(cap, alpha, upull, stop_before, fwd, u, cap_dirty, changed, full):
         u[k] = v
 
 
-@entry
 @njit(cache=True, nogil=True)
 def _periods_from_rates(u, floor_ns, out, mid):
     """Period lengths from the rates (never below the nominal), and each period's rising-edge time
@@ -274,7 +250,6 @@ def _periods_from_rates(u, floor_ns, out, mid):
         t_ns += out[k]
 
 
-@entry
 @njit(cache=True, nogil=True)
 def _reperiods(u, floor_ns, out, mid, changed, cap_dirty, spans):
     """:func:`_periods_from_rates` again where the rates ``changed``; clears ``cap_dirty``.
@@ -312,7 +287,6 @@ def _reperiods(u, floor_ns, out, mid, changed, cap_dirty, spans):
     return n_spans
 
 
-@entry
 @njit(cache=True, nogil=True)
 def _judge_axis(per, brk, mid, spans, n_spans, s, v_start, v_max, acc, r1, r2, r3):
     """Step 3 for one axis (``per``: ``(S,)`` periods of its steps, ``brk``: rests before them): the pin-log rules
@@ -361,7 +335,6 @@ def _judge_steps(per, brk, mid, j_lo, j_hi, still_ns, s, v_start, v_max, acc, r1
                              j_lo - c0, j_hi - c0)
 
 
-@entry
 @njit(cache=True, nogil=True)
 def _drop_caps(per, r1, r2, r3, u, cap, factor, s, v_start, v_max, cap_dirty):
     """Lower the caps of the periods under every broken rule (and mark them in ``cap_dirty``).
@@ -475,80 +448,110 @@ def ramp_periods(high: np.ndarray, period_ns: np.ndarray, settings: MachineSetti
 
 
 def _lookahead(high: np.ndarray, per_ns: np.ndarray, settings: MachineSettings,
-               stops: np.ndarray | None) -> np.ndarray:
+               stops: np.ndarray | None, partial: bool = True) -> np.ndarray:
     """The look-ahead planner (module docstring): ``(P,)`` int64 period lengths in ns.
 
     ``high``: ``(P,)`` uint8, ``per_ns``: ``(P,)`` int64 nominal lengths (P > 0), ``stops`` as
-    :func:`ramp_periods`.
+    :func:`ramp_periods`.  ``partial``: repeat rounds work out again only what the lowered caps reach (False: the
+    whole window every round; the same periods, for tests).  One compiled call, without the GIL.
     """
+    return _plan_window(*_window_args(high, per_ns, settings, stops), partial)[0]
+
+
+def _window_args(high: np.ndarray, per_ns: np.ndarray, settings: MachineSettings, stops: np.ndarray | None) -> tuple:
+    """The arguments of :func:`_plan_window` but ``partial``."""
     n = len(per_ns)
     stop_before = np.zeros(n + 1, bool)
     stop_before[0] = stop_before[n] = True
     if stops is not None and len(stops):
         stop_before[np.asarray(stops, np.int64)] = True
-    limits = settings.axis_limits()
-    axes, cap, alpha, upull = _caps(high, per_ns, settings, np.flatnonzero(stop_before), limits)
-    fwd, u = np.empty(n), np.empty(n)
-    out, mid = np.empty(n, np.int64), np.empty(n, np.int64)
-    cap_dirty, changed = np.zeros(n, bool), np.zeros(n, bool)
-    spans = np.empty(2 * n + 2, np.int64)  # spans of periods to judge (first, last), as _reperiods writes them
-    marks = [tuple(np.zeros(len(axes[a][0])) for _ in range(3)) for a in range(3)]  # r1, r2, r3 per axis
-    for rnd in range(_ROUNDS + 1):
-        if rnd == _ROUNDS:
-            cap = np.minimum(cap, upull)  # every axis at or below its start speed: meets every rule
-        full = rnd == 0 or rnd == _ROUNDS  # else only what the lowered caps reach is planned and judged again
-        _passes(cap, alpha, upull, stop_before, fwd, u, cap_dirty, changed, full)
-        if full:
-            _periods_from_rates(u, per_ns, out, mid)
-            spans[:2], n_spans = (0, n - 1), 1
-        else:
-            n_spans = _reperiods(u, per_ns, out, mid, changed, cap_dirty, spans)
-        if rnd == _ROUNDS:
-            break
-        # compiled without the GIL: the axes are judged in parallel, each recording where a rule broke
-        broken = list(_pool().map(lambda a: _judge_axis(axes[a][0], axes[a][1], mid, spans, n_spans, limits[0][a],
-                                                        limits[1][a], limits[2][a], limits[3][a], *marks[a]),
-                                  range(3)))
-        hits = 0
-        for a in range(3):
-            if broken[a]:  # lower the caps where it broke
-                hits += _drop_caps(axes[a][0], *marks[a], u, cap, _DROP, limits[0][a], limits[1][a],
-                                   limits[2][a], cap_dirty)
-        if hits == 0:
-            break
-    return out
-
-
-def _caps(high: np.ndarray, per_ns: np.ndarray, settings: MachineSettings, stop_idx: np.ndarray,
-          limits: _Limits) -> tuple[list, np.ndarray, np.ndarray, np.ndarray]:
-    """Step 1 of the planner over the three axes.
-
-    ``stop_idx``: increasing period indices ``k`` in ``0..P`` with a rest before period ``k``.
-
-    Returns:
-        ``axes``: per axis (X, Y, Z) the ``(S,)`` periods of its steps and ``(S,)`` rests before them;
-        ``cap``, ``alpha``, ``upull``: ``(P,)`` float64 rate caps, path accelerations and pull-in rates
-        (periods per second; ``upull`` <= ``cap``).
-    """
     clock, dirbit = axis_bits(settings)
-    s_mm, v_start, v_max, acc = limits
-    n = len(per_ns)
-    cap = np.divide(1e9, per_ns, dtype=np.float64)
+    s_mm, v_start, v_max, acc = (np.asarray(v, np.float64) for v in settings.axis_limits())
+    return (np.ascontiguousarray(high, np.uint8), np.ascontiguousarray(per_ns, np.int64), stop_before,
+            np.asarray(clock, np.int64), np.asarray(dirbit, np.int64), s_mm, v_start, v_max, acc)
+
+
+@entry
+@njit(cache=True, nogil=True)
+def _plan_window(high, per_ns, stop_before, clock, dirbit, s_mm, v_start, v_max, acc, partial):
+    """Steps 1-3 of the planner (module docstring) over one window: ``(out, found)``, the ``(P,)`` int64 period
+    lengths and the rule breaks the repeat rounds found (after the first round).
+
+    ``stop_before``: ``(P + 1,)`` bool, a rest before period k (both ends set); ``clock``, ``dirbit``: ``(3,)`` int64
+    the axes' bits; ``s_mm``, ``v_start``, ``v_max``, ``acc``: ``(3,)`` float64 per-axis limits.
+    """
+    n = per_ns.shape[0]
+    cap = np.empty(n)
+    for k in range(n):
+        cap[k] = 1e9 / per_ns[k]
     alpha = np.full(n, np.inf)
     upull = np.full(n, np.inf)
+    stop_idx = np.flatnonzero(stop_before)
     # where an axis certainly stands still (its steps further apart than STANDSTILL_STEPS start-speed steps even
     # at the nominal periods, which ramps only lengthen): a stop and a start of that axis, so the intervals on
     # each side of the wait are capped at its start speed (a corner taken as grbl's junction rule would)
     start_ns = np.zeros(n + 1, np.int64)
-    np.cumsum(per_ns, out=start_ns[1:])
-    axes = list(_pool().map(lambda a: _axis_steps_and_breaks(high, int(clock[a]), int(dirbit[a]), stop_idx, start_ns,
-                                                             STANDSTILL_STEPS * s_mm[a] / v_start[a] * 1e9),
-                            range(3)))
+    for k in range(n):
+        start_ns[k + 1] = start_ns[k] + per_ns[k]
+    per_x, up_x = _steps_of_axis(high, clock[0], dirbit[0])
+    per_y, up_y = _steps_of_axis(high, clock[1], dirbit[1])
+    per_z, up_z = _steps_of_axis(high, clock[2], dirbit[2])
+    pers = (per_x, per_y, per_z)
+    brks = (_breaks(per_x, up_x, stop_idx, start_ns, STANDSTILL_STEPS * s_mm[0] / v_start[0] * 1e9),
+            _breaks(per_y, up_y, stop_idx, start_ns, STANDSTILL_STEPS * s_mm[1] / v_start[1] * 1e9),
+            _breaks(per_z, up_z, stop_idx, start_ns, STANDSTILL_STEPS * s_mm[2] / v_start[2] * 1e9))
     for a in range(3):
-        per, brk = axes[a]
-        _axis_caps(per, brk, s_mm[a], v_start[a], v_max[a], acc[a] * _ALPHA_MARGIN, cap, alpha, upull)
-    np.minimum(upull, cap, out=upull)
-    return axes, cap, alpha, upull
+        _axis_caps(pers[a], brks[a], s_mm[a], v_start[a], v_max[a], acc[a] * _ALPHA_MARGIN, cap, alpha, upull)
+    for k in range(n):
+        if cap[k] < upull[k]:
+            upull[k] = cap[k]
+    return _rounds(pers, brks, per_ns, stop_before, cap, alpha, upull, s_mm, v_start, v_max, acc, partial)
+
+
+@njit(cache=True, nogil=True)
+def _rounds(pers, brks, per_ns, stop_before, cap, alpha, upull, s_mm, v_start, v_max, acc, partial):
+    """Steps 2-3, repeated (module docstring): ``(out, found)`` as :func:`_plan_window`."""
+    n = per_ns.shape[0]
+    fwd = np.empty(n)
+    u = np.empty(n)
+    out = np.empty(n, np.int64)
+    mid = np.empty(n, np.int64)
+    cap_dirty = np.zeros(n, np.bool_)
+    changed = np.zeros(n, np.bool_)
+    spans = np.empty(2 * n + 2, np.int64)  # spans of periods to judge (first, last), as _reperiods writes them
+    marks = (np.zeros((3, pers[0].shape[0])), np.zeros((3, pers[1].shape[0])), np.zeros((3, pers[2].shape[0])))
+    found = 0
+    for rnd in range(_ROUNDS + 1):
+        if rnd == _ROUNDS:
+            for k in range(n):  # every axis at or below its start speed: meets every rule
+                if upull[k] < cap[k]:
+                    cap[k] = upull[k]
+        full = rnd == 0 or rnd == _ROUNDS or not partial  # else only what the lowered caps reach is done again
+        if full:
+            cap_dirty[:] = False
+        _passes(cap, alpha, upull, stop_before, fwd, u, cap_dirty, changed, full)
+        if full:
+            _periods_from_rates(u, per_ns, out, mid)
+            spans[0] = 0
+            spans[1] = n - 1
+            n_spans = 1
+        else:
+            n_spans = _reperiods(u, per_ns, out, mid, changed, cap_dirty, spans)
+        if rnd == _ROUNDS:
+            break
+        hits = 0
+        for a in range(3):
+            r = marks[a]
+            broken = _judge_axis(pers[a], brks[a], mid, spans, n_spans, s_mm[a], v_start[a], v_max[a], acc[a],
+                                 r[0], r[1], r[2])
+            if rnd > 0:
+                found += broken
+            if broken:  # lower the caps where it broke
+                hits += _drop_caps(pers[a], r[0], r[1], r[2], u, cap, _DROP, s_mm[a], v_start[a], v_max[a],
+                                   cap_dirty)
+        if hits == 0:
+            break
+    return out, found
 
 
 def top_speeds_mm_s(settings: MachineSettings) -> tuple[float, float, float]:
