@@ -13,6 +13,7 @@ import select
 import signal
 import sys
 import threading
+import time
 from dataclasses import dataclass, field
 from typing import Any, Optional
 
@@ -102,20 +103,42 @@ def _read_answer(stopping: threading.Event) -> str:
     return ""
 
 
-def _ask(args: argparse.Namespace, stopping: threading.Event):
-    def on_prompt(prompt: Prompt) -> str:
+class _Answers:
+    """The session's ``on_prompt``: what the command line answers at a pause.  With ``--yes`` it goes on and says
+    so in a line; those lines are written a few at a time (at most a quarter second late), since a job of tens of
+    thousands of tool changes would otherwise write to stderr, and wait to take the GIL back, at each one.
+    Without ``--yes`` it asks on stdin and stops when nobody can answer."""
+
+    FLUSH_S = 0.25
+
+    def __init__(self, args: argparse.Namespace, stopping: threading.Event) -> None:
+        self.yes = bool(getattr(args, "yes", False))
+        self.stopping = stopping
+        self.lines: list[str] = []
+        self.flushed_s = time.monotonic()
+
+    def __call__(self, prompt: Prompt) -> str:
         x, y, z = prompt.position_steps
-        if getattr(args, "yes", False):
-            print(f"{prompt.note}: at X={x} Y={y} Z={z} steps; going on (--yes)", file=sys.stderr)
+        if self.yes:
+            self.lines.append(f"{prompt.note}: at X={x} Y={y} Z={z} steps; going on (--yes)\n")
+            if time.monotonic() - self.flushed_s >= self.FLUSH_S:
+                self.flush()
             return "continue"
+        self.flush()
         print(f"{prompt.note}: paused at X={x} Y={y} Z={z} steps; press Enter to resume", file=sys.stderr)
-        if _read_answer(stopping) == "":  # stopped meanwhile, or nobody can answer: stop, never carry on blindly
-            if not stopping.is_set():
+        if _read_answer(self.stopping) == "":  # stopped meanwhile, or nobody can answer: stop, never carry on blindly
+            if not self.stopping.is_set():
                 print("no answer at the pause (stdin closed): stopping", file=sys.stderr)
             return "stop"
         return "continue"
 
-    return on_prompt
+    def flush(self) -> None:
+        """Write the lines held back."""
+        if self.lines:
+            lines, self.lines = self.lines, []
+            sys.stderr.write("".join(lines))
+            sys.stderr.flush()
+        self.flushed_s = time.monotonic()
 
 
 def _bar(args: argparse.Namespace, estimated_s: float) -> Optional[Any]:
@@ -185,7 +208,8 @@ def _run(job: Any, args: argparse.Namespace, settings: MachineSettings, hold: St
         port = MockPort(keep_log=False)  # nobody reads this run's pin log: the writes are counted, not kept
     elif port_kind(args.port) == "mock" and settings.mock.places():
         port = MockPort()  # simulated switches (below): a mock of this process, in real time too
-    session = MachineSession(port, settings, realtime=realtime, on_prompt=_ask(args, stopping))
+    answers = _Answers(args, stopping)
+    session = MachineSession(port, settings, realtime=realtime, on_prompt=answers)
     if getattr(args, "feed_override", None) is not None:  # grbl's override (CapabilityError elsewhere)
         session.feed_override(int(round(args.feed_override)))
     # --offset X,Y says where the file's own origin goes (from the work zero): the file's zero is the anchor then
@@ -202,8 +226,14 @@ def _run(job: Any, args: argparse.Namespace, settings: MachineSettings, hold: St
     if bar is not None:
         session.on_progress = lambda done, total, t_ns: bar.update(round(t_ns / 1e9, 3) - bar.n)
     # each hole on a board that drills by itself, as the MAXIMUS PC program shows it ("Drilling hole n of N")
-    session.on_detail = (lambda text: bar.write(text, file=sys.stderr)) if bar is not None else \
-        (lambda text: print(text, file=sys.stderr, flush=True))
+    def detail(text: str) -> None:
+        answers.flush()  # the pause lines held back come first
+        if bar is not None:
+            bar.write(text, file=sys.stderr)
+        else:
+            print(text, file=sys.stderr, flush=True)
+
+    session.on_detail = detail
     sessions = [session]
 
     def stop(signum: int, frame: Any) -> None:
@@ -229,6 +259,7 @@ def _run(job: Any, args: argparse.Namespace, settings: MachineSettings, hold: St
         while not session.wait_idle(0.2):  # wakes for signals (Ctrl-C), not for each change of the session
             pass
     finally:
+        answers.flush()
         if hold.state.running is not None:  # recorded before the handlers go: a SIGTERM now still stops cleanly
             hold.record(ended_state(hold.state, ended, ended_start, getattr(args, "tool", None)))
         for s, handler in previous.items():
