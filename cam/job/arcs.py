@@ -190,11 +190,15 @@ def fit_path(points_mm: np.ndarray, tol_mm: float = DEFAULT_ARC_TOLERANCE_MM, *,
     while i < n - 1:
         j_line = _longest(i, n, lambda j: _line_ok(p, i, j, tol_mm), i + 1)
         j_arc = _longest(i, n, lambda j: _arc_fit(p, i, j, tol_mm, max_radius_mm, arcs) is not None, i + 2)
-        if j_arc - i > ARC_COST_LINES * (j_line - i):
-            if j_arc + 1 < n and _arc_fit(p, i, j_arc + 1, tol_mm, max_radius_mm, arcs, math.inf) is not None:
-                j_arc = (i + j_arc + 1) // 2  # stopped by the full turn only: half now, the rest closes it
-            arc = _arc_fit(p, i, j_arc, tol_mm, max_radius_mm, arcs)
-            assert arc is not None
+        arc = _arc_fit(p, i, j_arc, tol_mm, max_radius_mm, arcs) if j_arc - i > ARC_COST_LINES * (j_line - i) \
+            else None  # _longest found j_arc fitting, so None here means lines are cheaper
+        if arc is not None and j_arc + 1 < n and \
+                _arc_fit(p, i, j_arc + 1, tol_mm, max_radius_mm, arcs, math.inf) is not None:
+            half = (i + j_arc + 1) // 2  # stopped by the full turn only: half now, the rest closes it
+            half_arc = _arc_fit(p, i, half, tol_mm, max_radius_mm, arcs)
+            if half_arc is not None:  # (a circle through other points of the half may miss the tolerance)
+                j_arc, arc = half, half_arc
+        if arc is not None:
             segments.append(Segment(int(index[j_arc]), arc.kind, arc.centre_mm))
             i = j_arc
         else:
