@@ -260,10 +260,18 @@ class _Moves:
         if n:
             self.at = points[-1]
 
-    def motion(self, positions: np.ndarray, period_ns: int, kind: int) -> None:
-        """One G-code move: the rounded position after each of its periods, ``(P, 3)`` int64."""
+    def motion(self, positions: np.ndarray, period_ns: int, kind: int, where: str = "") -> None:
+        """One G-code move (at ``where``, file:line): the rounded position after each of its periods, ``(P, 3)``
+        int64.
+
+        Raises:
+            PlanError: a period would move an axis by more than one step (an inner rule of the planner broken:
+                named, not a traceback).
+        """
         signed = np.diff(np.vstack([self.at[None, :], positions]), axis=0)
-        assert signed.size == 0 or np.abs(signed).max() <= 1, "a period moved an axis by more than one step"
+        if signed.size and np.abs(signed).max() > 1:
+            raise PlanError(f"{where or 'G-code'}: this move would step an axis more than once in one step period "
+                            f"(a planner fault: please report the file)")
         if len(signed) == 0:
             return
         change = np.ones(len(signed), bool)
@@ -497,7 +505,7 @@ class _Planner:
         way_steps = way * frame.to_steps
         frame.check(way, way_steps, where)
         positions, per_ns = _periods(frame, mv, self.cur_mm, self.cur_steps, way, way_steps, where)
-        self.moves.motion(positions, per_ns, TRAVEL if mv.kind == "rapid" else CUT)
+        self.moves.motion(positions, per_ns, TRAVEL if mv.kind == "rapid" else CUT, where)
         self.program_ns = _add_time(self.program_ns, per_ns * len(positions), where)
         self.cur_mm, self.cur_steps = end, way_steps[-1]
 
