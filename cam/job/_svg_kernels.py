@@ -15,7 +15,7 @@ import numpy as np
 from numba import njit
 
 from .._compiled import entry
-from .drill_order import _grid
+from .drill_order import _grid, _grid_remove
 
 __all__ = ["duplicate_pieces_kernel", "nearest_order_kernel"]
 
@@ -135,20 +135,24 @@ def nearest_order_kernel(ends, at):
         backwards = d_end < d_start
         out[n + step] = 1 if backwards else 0
         for e in (s, s + n):  # both ends leave the grid
-            c = min(max(int((ends[e, 1] - y0) / cell), 0), gy - 1) * gx \
-                + min(max(int((ends[e, 0] - x0) / cell), 0), gx - 1)
-            t = where[e]
-            last = cell_start[c] + alive[c] - 1
-            q = items[last]
-            items[t] = q
-            where[q] = t
-            items[last] = e
-            where[e] = last
-            alive[c] -= 1
+            _grid_remove(ends[e, 0], ends[e, 1], e, x0, y0, cell, gx, gy, cell_start, items, where, alive)
         e = s if backwards else s + n
         ax = ends[e, 0]
         ay = ends[e, 1]
     return out
+
+
+@njit(cache=True)
+def _nearest_in_cell(ends, ax, ay, c, cell_start, items, alive, n, best, best_s, best_d):
+    """The nearest so far ``(best end, its stroke, distance)`` after the ends left in grid cell ``c`` (ties to the
+    lowest stroke)."""
+    for t in range(cell_start[c], cell_start[c] + alive[c]):
+        e = items[t]
+        s = e if e < n else e - n
+        d = math.hypot(ends[e, 0] - ax, ends[e, 1] - ay)
+        if d < best_d or (d == best_d and s < best_s):
+            best, best_s, best_d = e, s, d
+    return best, best_s, best_d
 
 
 @njit(cache=True)
@@ -164,12 +168,7 @@ def _nearest_end(ends, ax, ay, x0, y0, cell, gx, gy, cell_start, items, alive, s
     ccy_f = math.floor((ay - y0) / cell)
     if not (0 <= ccx_f < gx and 0 <= ccy_f < gy):
         for c in range(gx * gy):
-            for t in range(cell_start[c], cell_start[c] + alive[c]):
-                e = items[t]
-                s = e if e < n else e - n
-                d = math.hypot(ends[e, 0] - ax, ends[e, 1] - ay)
-                if d < best_d or (d == best_d and s < best_s):
-                    best, best_s, best_d = e, s, d
+            best, best_s, best_d = _nearest_in_cell(ends, ax, ay, c, cell_start, items, alive, n, best, best_s, best_d)
         return best
     ccx = int(ccx_f)
     ccy = int(ccy_f)
@@ -183,13 +182,8 @@ def _nearest_end(ends, ax, ay, x0, y0, cell, gx, gy, cell_start, items, alive, s
             xx = ccx - r
             while xx <= ccx + r:
                 if 0 <= xx < gx:
-                    c = yy * gx + xx
-                    for t in range(cell_start[c], cell_start[c] + alive[c]):
-                        e = items[t]
-                        s = e if e < n else e - n
-                        d = math.hypot(ends[e, 0] - ax, ends[e, 1] - ay)
-                        if d < best_d or (d == best_d and s < best_s):
-                            best, best_s, best_d = e, s, d
+                    best, best_s, best_d = _nearest_in_cell(ends, ax, ay, yy * gx + xx, cell_start, items, alive, n,
+                                                            best, best_s, best_d)
                 xx += xstep
         if r > gx + gy:
             return best

@@ -330,18 +330,25 @@ def _nn_path(pts, start):
             r += 1
         order[step] = best
         # remove `best` from its cell: swap with the last alive point of the cell
-        c = min(max(int((pts[best, 1] - y0) / cell), 0), gy - 1) * gx + min(max(int((pts[best, 0] - x0) / cell), 0), gx - 1)
-        t = where[best]
-        last = cell_start[c] + alive[c] - 1
-        q = items[last]
-        items[t] = q
-        where[q] = t
-        items[last] = best
-        where[best] = last
-        alive[c] -= 1
+        _grid_remove(pts[best, 0], pts[best, 1], best, x0, y0, cell, gx, gy, cell_start, items, where, alive)
         cx_ = pts[best, 0]
         cy_ = pts[best, 1]
     return order
+
+
+@njit(cache=True)
+def _grid_remove(x, y, item, x0, y0, cell, gx, gy, cell_start, items, where, alive):
+    """Take ``item`` (at ``(x, y)``) out of its grid cell (:func:`_grid`): it swaps places with the cell's last item
+    still there, and the cell holds one item less."""
+    c = min(max(int((y - y0) / cell), 0), gy - 1) * gx + min(max(int((x - x0) / cell), 0), gx - 1)
+    t = where[item]
+    last = cell_start[c] + alive[c] - 1
+    q = items[last]
+    items[t] = q
+    where[q] = t
+    items[last] = item
+    where[item] = last
+    alive[c] -= 1
 
 
 @njit(cache=True)
