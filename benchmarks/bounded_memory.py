@@ -116,7 +116,9 @@ parent's RSS at the fork, and ``benchmarks/run.py`` has grown to gigabytes by th
 def peak_rss_mb(argv: list[str], cwd: Path) -> tuple[float, float]:
     """``(peak RSS in MB, wall seconds)`` of one whole process (``wait4``'s ``ru_maxrss``, from a small
     launcher); raises on a failed run."""
-    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    # the mock's state file and lock in the run's folder: a cam command elsewhere (or a killed run of this one) on
+    # the default mock does not make a row refuse to start
+    env = dict(os.environ, PYTHONPATH=str(ROOT), XDG_STATE_HOME=str(cwd / "state"))
     t0 = time.perf_counter()
     out = subprocess.run([sys.executable, "-c", LAUNCHER, *argv], cwd=cwd, env=env, stdin=subprocess.DEVNULL,
                          capture_output=True, text=True)
