@@ -172,8 +172,12 @@ class DrawingJobStream:
 
     @property
     def deepest_px(self) -> int:
-        """The deepest target depth anywhere, Z pixels below the surface."""
-        return int(self.asked_depth_px().max())
+        """The deepest target depth anywhere, Z pixels below the surface: ``asked_depth_px().max()`` without making
+        that map (an int64 copy of the drawing's size: 134 MB at 4096^2)."""
+        deepest = int(self.asked[: self.height_px, : self.width_px].max(initial=0))
+        if self.roughing is not None:
+            deepest = max(deepest, int(self.roughing.reached.max(initial=0)))
+        return deepest
 
     def _targets(self) -> Iterator[tuple[np.ndarray, bool]]:
         """``((M, 3) int64 targets, last)``: the pixel-centre pass's cut targets (x, y, depth below the surface;
