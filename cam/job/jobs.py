@@ -602,19 +602,17 @@ def _drawing_depth(options: JobOptions) -> Any:
 
 def _prepare_pixels(path: Path, kind: str, options: JobOptions, settings: MachineSettings) -> PreparedJob:
 
-    rgb = None
+    drawing = None
     traced: list[str] = []
     if kind == "drawing" and options.trace:  # a sketch or a photo: its size is checked once traced (shrunk)
         drawing = trace(load_sketch(path), trace_min_length_px=options.trace_min_length_px,
                         trace_fill=options.trace_fill, source=str(path))
         check_drawing_size(drawing.width_px, drawing.height_px, settings, str(path))
         traced.append(f"{path.name}: traced: {drawing.summary()}")
-        rgb = drawing.to_rgb()
         digitized = digitize(drawing, start=options.start)
     elif kind == "drawing":
         check_drawing_size(*drawing_size_px(path), settings, str(path))  # from the header: before decoding
         drawing = load_image(path)
-        rgb = drawing.to_rgb()
         digitized = digitize(drawing, start=options.start)
     else:
         digitized = load_digitized(path)
@@ -641,6 +639,7 @@ def _prepare_pixels(path: Path, kind: str, options: JobOptions, settings: Machin
     toolpath = stream_drawing(digitized, **kw) if big else plan(digitized, **kw)
     steps = plan_chunks(toolpath)
     report = job_report(digitized, toolpath, steps)
+    rgb = drawing.to_rgb() if drawing is not None else None  # made after the report: not held while it counts
     summary = (f"{path.name}: {report['objects']} object(s), {report['points']} points, "
                f"{report['retracts']} retracts")
     return PreparedJob(

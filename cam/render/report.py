@@ -37,10 +37,20 @@ def image_report(digitized: Digitized, settings: MachineSettings = DEFAULT_SETTI
         drawn = np.zeros((digitized.height_px, digitized.width_px), np.uint8)
         for obj in digitized.objects:
             drawn[obj[:, 1], obj[:, 0]] = 1
-        rep["objects"] = int(cv2.connectedComponents(drawn, connectivity=8)[0] - 1)
+        rep["objects"] = _components(drawn) - 1
         rep["rings"] = len(digitized.objects)
         rep["layers"] = digitized.n_layers
     return rep
+
+
+def _components(mask_hw: np.ndarray) -> int:
+    """The number of 8-connected components of a ``(H, W)`` uint8 mask, its background included: labelled in 16
+    bits (half the memory of 32: 33 MB at 4096^2), in 32 when there are more labels than 16 bits hold (OpenCV
+    refuses the 16-bit labelling then)."""
+    try:
+        return int(cv2.connectedComponents(mask_hw, connectivity=8, ltype=cv2.CV_16U)[0])
+    except cv2.error:
+        return int(cv2.connectedComponents(mask_hw, connectivity=8, ltype=cv2.CV_32S)[0])
 
 
 def job_report(
