@@ -38,8 +38,18 @@ def test_a_moderate_fan_out_is_read_and_counted_exactly():
     assert expanded_size(text.encode()) > 4 ** 4
 
 
-def test_a_reference_cycle_counts_nothing_more():
-    text = HEAD + '<g id="a"><use xlink:href="#b"/></g><g id="b"><use xlink:href="#a"/></g></svg>'
-    assert expanded_size(text.encode()) < 10
+def test_a_reference_cycle_is_refused_in_one_line(tmp_path):
+    text = HEAD + '<g id="a"><use xlink:href="#b"/></g><g id="b"><use xlink:href="#a"/></g><use xlink:href="#a"/></svg>'
+    with pytest.raises(ParseError, match=r"^c\.svg: a <use> refers to an element that holds it \(#a\)"):
+        expanded_size(text.encode(), "c.svg")
     with pytest.raises(ParseError):
         expanded_size(fan_out(10).encode(), "fan.svg")
+    # a group that uses itself four times over, behind ten levels of fan-out (a fuzzed potrace file): svgelements
+    # expanded it for over a minute; now one line at once
+    levels = "".join(f'<g id="u{i}">' + f'<use xlink:href="#u{i - 1}"/>' * 4 + "</g>" for i in range(1, 11))
+    selfish = HEAD + '<defs><path id="u0" d="M0 0 L1 1"/>' + levels.replace(
+        '<g id="u5">', '<g id="u5"><use xlink:href="#u5"/>') + '</defs><use xlink:href="#u10"/></svg>'
+    path = tmp_path / "selfish.svg"
+    path.write_text(selfish)
+    r = run_cli("info", path)
+    assert r.returncode == 2 and "reference cycle" in r.stderr and "Traceback" not in r.stderr

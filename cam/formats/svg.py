@@ -455,11 +455,12 @@ def _subpaths(path, k: float, close_open: bool) -> list[tuple[list[np.ndarray], 
 def expanded_size(raw: bytes, source: str = "<svg>") -> int:
     """How many elements the document holds once every ``<use>`` is replaced by what it references (nested
     ``<use>`` included), counted on the XML tree without expanding anything: an element counts 1 plus its
-    children; a ``<use>`` counts 1 plus its target.  A reference cycle counts as nothing more (svgelements drops
-    it).  Unreadable XML counts 0 (the SVG reader says why).
+    children; a ``<use>`` counts 1 plus its target.  Unreadable XML counts 0 (the SVG reader says why).
 
     Raises:
-        ParseError: the count passes :data:`MAX_SVG_ELEMENTS` (one line, naming it and the limit).
+        ParseError: the count passes :data:`MAX_SVG_ELEMENTS` (one line, naming it and the limit), or a ``<use>``
+            refers to an element that holds it (a reference cycle, an error in SVG: svgelements expanded it until
+            Python's recursion limit, for minutes when it fans out).
     """
     try:
         root = ElementTree.fromstring(raw)
@@ -478,7 +479,9 @@ def _expanded_count(root, source: str) -> int:  # noqa: ANN001 - an ElementTree 
         if key in memo:
             return memo[key]
         if key in active:
-            return 0  # a cycle
+            raise ParseError(f"{source}: a <use> refers to an element that holds it"
+                             f"{' (#' + el.get('id') + ')' if el.get('id') else ''}: a reference cycle, which SVG "
+                             f"does not allow; cam refuses it")
         inner = active | {key}
         n = 1 + sum(size(child, inner) for child in el)
         if el.tag.rsplit("}", 1)[-1] == "use":
