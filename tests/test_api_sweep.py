@@ -10,6 +10,9 @@ from cam.options import JOB_OPTIONS
 from conftest import SAMPLES, run_cli
 from test_web import servers, fast, FAST  # noqa: F401 (fixtures)
 
+# over 2 s each: the slow tier (the fast tier stays under 3 minutes, docs/tests.md)
+SLOW_CASES = {'test_every_job_option_takes_any_json_value_without_a_500'}
+
 WEIRD_JSON = ["NaN", "Infinity", "-Infinity", "1e308", "-1e308", "1" + "0" * 30, "1" + "0" * 4000, "[]", "{}", '""',
               "[1, [2, [3, []]]]", '{"a": {"b": {"c": {}}}}', "null", "true", '"x"', "-1", "0"]
 """JSON texts of the values swept (NaN and Infinity as Python's json writes them; 10^4000 as a bare integer)."""

@@ -16,6 +16,9 @@ from cam.options import OPTIONS, degenerate
 from conftest import SAMPLES, run_cli
 from test_web import FAST, Server, compiled_kernels, fast, servers  # noqa: F401 (fixtures)
 
+# over 1.3 s each: the slow tier (the fast tier stays under 3 minutes, docs/tests.md)
+SLOW_CASES = {'test_the_page_refuses_a_travel_height_at_the_surface_with_a_400'}
+
 
 def refused(out, *fragments: str) -> str:
     """The one line of a refused command (exit code 2), which names every fragment."""

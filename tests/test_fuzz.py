@@ -6,6 +6,9 @@ import pytest
 
 from fuzz import campaign, regression_inputs, run_one, seeds, table
 
+# over 2 s each: the slow tier (the fast tier stays under 3 minutes, docs/tests.md)
+SLOW_CASES = {'test_quick_fuzz_finds_no_failure'}
+
 
 def test_quick_fuzz_finds_no_failure():
     outcomes = campaign(400, seed=20261123)

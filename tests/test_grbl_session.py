@@ -22,6 +22,9 @@ from cam.verify.pinlog import Motion
 from conftest import SAMPLES, assert_surface_equal, drawing_from_rows, expected_surface_2d, run_cli
 from support.grbl import quick_thread_switches  # noqa: F401 (autouse)
 
+# over 2 s each: the slow tier (the fast tier stays under 3 minutes, docs/tests.md)
+SLOW_CASES = {'test_every_job_kind_runs_on_grbl_through_its_own_points[board.drl]', 'test_every_job_kind_runs_on_grbl_through_its_own_points[inkscape_star.plt]', 'test_cli_home_on_grbl_then_a_move[grbl0]', 'test_home_outside_the_machine_files_travel_says_what_to_write[grbl0]', 'test_homing_enabled_grbl_needs_home_then_reads_back[grbl0]', 'test_every_job_kind_runs_on_grbl_through_its_own_points[bolt_plate.ngc]', 'test_an_alarm_mid_job_is_one_line', 'test_every_job_kind_runs_on_grbl_through_its_own_points[logo.svg]'}
+
 SETTINGS = cam.MachineSettings()
 STEPS_PER_MM = {100: 1 / SETTINGS.mm_per_step_xy, 101: 1 / SETTINGS.mm_per_step_xy,
                 102: 1 / SETTINGS.mm_per_step_z}

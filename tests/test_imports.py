@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import ast
+import functools
 import importlib
 import json
 import os
@@ -113,6 +114,13 @@ def _ancestors(name: str) -> list[str]:
     return [".".join(parts[:i]) for i in range(1, len(parts))]
 
 
+@functools.lru_cache(maxsize=None)
+def _module_imports(name: str) -> list[tuple[ast.stmt, Optional[str]]]:
+    """The import statements of cam module ``name`` (:func:`_imports`), its source parsed once for every test."""
+    path = MODULES[name]
+    return list(_imports(ast.parse(path.read_text(), str(path))))
+
+
 def import_graph() -> dict[str, set[str]]:
     """cam module -> the cam modules its module-level imports load.
 
@@ -122,7 +130,7 @@ def import_graph() -> dict[str, set[str]]:
     graph: dict[str, set[str]] = {name: set() for name in MODULES}
     for importer, path in MODULES.items():
         own = set(_ancestors(importer)) | {importer}
-        for node, function in _imports(ast.parse(path.read_text(), str(path))):
+        for node, function in _module_imports(importer):
             if function is not None:
                 continue
             for target in _targets(importer, node):
@@ -166,7 +174,7 @@ def function_level_imports() -> dict[tuple[str, str], list[str]]:
     """
     found: dict[tuple[str, str], list[str]] = {}
     for importer, path in MODULES.items():
-        for node, function in _imports(ast.parse(path.read_text(), str(path))):
+        for node, function in _module_imports(importer):
             if function is None:
                 continue
             target = _targets(importer, node)[0]

@@ -16,6 +16,9 @@ from cam.limits import MAX_MOVE_S
 
 from test_cli_checks import ENV, cli, refused
 
+# over 1.3 s each: the slow tier (the fast tier stays under 3 minutes, docs/tests.md)
+SLOW_CASES = {'test_excellon_repeats_are_bounded_in_all'}
+
 DIGITS_400 = "9" * 400
 
 

@@ -28,6 +28,9 @@ from conftest import SAMPLES, assert_surface_equal
 
 from cam.web.server import ServerConfig, bind_socket, create_app, safe_name, uvicorn_config  # noqa: E402
 
+# over 1.3 s each: the slow tier (the fast tier stays under 3 minutes, docs/tests.md)
+SLOW_CASES = {'test_api_bad_requests_are_4xx_json_and_nothing_moves'}
+
 CHROMIUM = "/usr/bin/chromium"
 ROOT = Path(__file__).resolve().parent.parent
 

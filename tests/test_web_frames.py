@@ -15,6 +15,9 @@ from cam.verify.pinlog import decode_pin_log
 from conftest import SAMPLES
 from test_web import FAST, Server, _load, _open, _wait_done, browser, page  # noqa: F401 (fixtures)
 
+# over 2 s each: the slow tier (the fast tier stays under 3 minutes, docs/tests.md)
+SLOW_CASES = {'test_a_page_job_is_placed_at_the_work_zero_and_recorded', 'test_a_page_drill_file_placed_by_its_own_zero_is_planned_from_the_work_zero'}
+
 MEDIUM = cam.MachineSettings().replace(delay_xy_ms=0.3, delay_z_ms=0.3, ramp="constant")
 
 

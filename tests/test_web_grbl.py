@@ -19,6 +19,9 @@ from support.grbl import quick_thread_switches  # noqa: F401 (autouse)
 from test_grbl_session import FAST as GRBL_FAST, HOMED_SETTINGS, HOMING, SETTINGS, executed_motion
 from test_web import Server, _load, _open, _wait_done, browser, page  # noqa: F401 (fixtures)
 
+# over 2 s each: the slow tier (the fast tier stays under 3 minutes, docs/tests.md)
+SLOW_CASES = {'test_a_page_job_on_grbl_cuts_what_the_mock_cuts'}
+
 
 
 

@@ -7,6 +7,9 @@ import pytest
 
 from test_web import FAST, Server, _open, browser, page  # noqa: F401 (fixtures)
 
+# over 2 s each: the slow tier (the fast tier stays under 3 minutes, docs/tests.md)
+SLOW_CASES = {'test_plan_route_reads_a_file_as_the_kind_asked'}
+
 HOLES = "M48\nMETRIC\nT1C0.8\n%\nT1\nX10.0Y10.0\nX20.0Y10.0\nX20.0Y20.0\nM30\n"
 
 

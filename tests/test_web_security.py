@@ -24,6 +24,9 @@ import pytest
 from conftest import ROOT, SAMPLES
 from test_web import FAST, MEDIUM, TOKEN, Server, browser, compiled_kernels, fast, servers  # noqa: F401 (fixtures)
 
+# over 2 s each: the slow tier (the fast tier stays under 3 minutes, docs/tests.md)
+SLOW_CASES = {'test_slow_or_half_sent_requests_time_out', 'test_only_the_page_itself_may_upload_plan_start_jog_or_estop'}
+
 PNG = (SAMPLES / "ellipse.png").read_bytes()
 
 
