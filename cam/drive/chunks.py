@@ -229,10 +229,14 @@ class _Reach:
         """The moves to ``(B, 3)`` points ``pts`` from ``(1, 3)`` ``prev``, ``(B,)`` periods and nominal periods."""
         for b0 in range(0, len(pts), _MOVE_BLOCK):
             b1 = min(len(pts), b0 + _MOVE_BLOCK)
-            block = np.vstack([pts[b0 - 1:b0] if b0 else prev, pts[b0:b1]])
-            move_extent(block, npm[b0:b1], self.extent, self.cut)
-            if self.settings.ramp == "constant":
-                self.time_ns += _constant_time_ns(block, npm[b0:b1], nom[b0:b1], self.settings)
+            self.add_block(np.vstack([pts[b0 - 1:b0] if b0 else prev, pts[b0:b1]]), npm[b0:b1], nom[b0:b1])
+
+    def add_block(self, pts: np.ndarray, npm: np.ndarray, nom: np.ndarray) -> None:
+        """``(B,)`` moves: ``pts`` ``(B + 1, 3)`` the point before them, then theirs; their periods and nominal
+        periods."""
+        move_extent(pts, npm, self.extent, self.cut)
+        if self.settings.ramp == "constant":
+            self.time_ns += _constant_time_ns(pts, npm, nom, self.settings)
 
     def extent_and_cut(self) -> tuple[np.ndarray, np.ndarray]:
         """As :meth:`ChunkedPlan.motion_extent`."""
@@ -344,20 +348,22 @@ class ChunkedPlan:
         extent is that of the points, and a move that crosses the surface is cut from the period its DDA
         crosses it.  One pass over the job's pieces; kept.
         """
-        if self._extent is None:
-            extent = np.zeros((3, 2), np.int64)
-            big = np.iinfo(np.int64).max
-            cut = np.array([[big, -big]] * 3, np.int64)
-            for pts, npm, _, _, _ in self._move_blocks():
-                move_extent(pts, npm, extent, cut)
-            self._extent = (extent, cut if cut[0, 0] != big else np.zeros((3, 2), np.int64))
+        if self._extent is None:  # (plan_chunks gives it from its own pass)
+            self._extent = self._reach().extent_and_cut()
         return self._extent
+
+    def _reach(self) -> _Reach:
+        """One pass over the moves: their extent and constant-ramp machine time (:class:`_Reach`)."""
+        reach = _Reach(self.settings)
+        for pts, npm, nom, _, _ in self._move_blocks():
+            reach.add_block(pts, npm, nom)
+        return reach
 
     def _machine_time_ns(self) -> int:
         """The job's machine time: the constant ramps' from the moves, else one pass over the ramped periods
         (no writes made)."""
         if self.settings.ramp == "constant":
-            return sum(_constant_time_ns(pts, npm, nom, self.settings) for pts, npm, nom, _, _ in self._move_blocks())
+            return self._reach().time_ns
         return sum(int(per.sum()) for _, _, per in self._ramped())
 
     # -- the stream ------------------------------------------------------------------------------------
