@@ -202,13 +202,11 @@ class MockPort(Port):
         from ._kernels import pin_rows_kernel  # numba: only when a pin log streams
 
         try:
-            if self._file is None:
-                self._file = open(self._part(), "wb")
-                self._file.write((PIN_LOG_HEADER + "\n").encode("ascii"))
+            log = self._open_log()
             for i in range(0, len(t_ns), 1 << 18):  # the rows np.savetxt(fmt="%d") writes, formatted compiled
-                self._file.write(pin_rows_kernel(np.ascontiguousarray(t_ns[i:i + (1 << 18)], np.int64),
-                                                 data[i:i + (1 << 18)].astype(np.int64),
-                                                 strobe[i:i + (1 << 18)].astype(np.int64)))
+                log.write(pin_rows_kernel(np.ascontiguousarray(t_ns[i:i + (1 << 18)], np.int64),
+                                          data[i:i + (1 << 18)].astype(np.int64),
+                                          strobe[i:i + (1 << 18)].astype(np.int64)))
         except OSError as exc:
             self._abandon_pin_log(exc)
 
@@ -264,17 +262,22 @@ class MockPort(Port):
             return None
         self._flush()
         try:
-            if self._file is None:
-                self._file = open(self._part(), "wb")
-                self._file.write((PIN_LOG_HEADER + "\n").encode("ascii"))
-            self._file.flush()
-            os.fsync(self._file.fileno())
-            self._file.close()
+            log = self._open_log()  # (a run of no writes still gets its header)
+            log.flush()
+            os.fsync(log.fileno())
+            log.close()
             self._file = None
             os.replace(self._part(), self.pin_log_path)
         except OSError as exc:
             self._abandon_pin_log(exc)
         return self.pin_log_path
+
+    def _open_log(self) -> IO[bytes]:
+        """The streamed pin log's ``.part`` file, opened with its header line on first use."""
+        if self._file is None:
+            self._file = open(self._part(), "wb")
+            self._file.write((PIN_LOG_HEADER + "\n").encode("ascii"))
+        return self._file
 
     def _abandon_pin_log(self, exc: OSError) -> None:
         """A pin log write failed (a full disk, a lost folder): drop its ``.part`` file, keep counting the writes
