@@ -12,14 +12,111 @@ import re
 from typing import Iterator
 
 from ..fileio import read_text
-from ..limits import MAX_GCODE_CALL_DEPTH, MAX_REPEAT
-from ._gcode_data import _End, _Frame, _Source, _shown, _strip_comments
+from ..limits import MAX_COORD_MM, MAX_FEED_MM_MIN, MAX_GCODE_CALL_DEPTH, MAX_LINE_NUMBER, MAX_REPEAT, MIN_FEED_MM_MIN
+from ._gcode_data import GcodeMove, _End, _Frame, _Source, _shown, _strip_comments
 from ._gcode_lines import CACHE_LINES
 from ._gcode_state import _State
 from .ngc import Line, NgcSyntaxError, read_line
 
+FAST_LINES = True
+"""Run plain lines (:data:`_PLAIN`) by :meth:`_PlainLines.plain_lines`; False: every line by the general
+interpreter (the tests compare the two)."""
 
-class _Flow(_State):
+_NUM = r"([-+]?(?:\d+\.?\d*|\.\d+))"
+_PLAIN = re.compile(r"[ \t]*(?:[nN](\d+)[ \t]*)?(?:[gG]0*([01])(?![\d.])[ \t]*)?"
+                    + "".join(rf"(?:[{a}{a.upper()}]{_NUM}[ \t]*)?" for a in "xyzf"))
+"""A plain line, as most of a CAM post's lines are: an optional N, G0 or G1, then X Y Z F in that order, each a
+plain decimal number at most once, spaces or tabs between words; nothing else (no comment, parameter,
+expression or other word)."""
+
+
+class _PlainLines(_State):
+    """Plain lines (:data:`_PLAIN`) run without the general interpreter: the same moves, and a line that the
+    general interpreter would refuse (a feed move without F, a word or move out of range), or that the modal
+    state makes anything but a straight move, is left to it."""
+
+    def plain_lines(self, src: _Source, idx: int, limit: int) -> tuple[int, str | None]:
+        """Run the plain lines from line ``idx`` of ``src`` on, at most ``limit``, and stop once :attr:`moves`
+        holds :attr:`batch_moves` (as :func:`cam.formats.gcode._interpret` takes them after each line): how many
+        lines ran, and the text of the line they stopped at when it was read (None: not read)."""
+        if self.inverse_time or self.resync is not None or (self.spindle and not self.spindle_noted):
+            return 0, None
+        scale, absolute, start = self.scale, self.absolute, self.start
+        off = self.offsets()
+        mach, motion, feed = self.mach, self.motion, self.feed
+        spindle = self.spindle
+        rpm = self.spindle_rpm if spindle else 0.0
+        file = "" if src is self.main else src.name
+        cache, moves, match = src.cache, self.moves, _PLAIN.fullmatch
+        n, end_idx, stop = 0, min(src.n_lines, idx + limit), self.batch_moves
+        raw, pending = "", None
+        while idx + n < end_idx and len(moves) < stop:  # a batch ends where it would line by line
+            i = idx + n
+            cached = cache.get(i)
+            if cached is None:
+                pending = text = src.line(i)
+                m = match(text)
+                if m is None or m.lastindex is None:
+                    break
+                if len(cache) >= CACHE_LINES:
+                    cache.clear()
+                cache[i] = (text, m)
+            elif len(cached) == 2:
+                pending, m = cached
+                text = pending
+            else:
+                pending = None
+                break
+            ns, gs, xs, ys, zs, fs = m.groups()
+            if ns is not None and not float(ns) <= MAX_LINE_NUMBER:
+                break
+            new_motion = motion if gs is None else int(gs)
+            new_feed = feed
+            if fs is not None:
+                new_feed = float(fs) * scale
+                if not MIN_FEED_MM_MIN <= new_feed <= MAX_FEED_MM_MIN:
+                    break
+            if xs is not None or ys is not None or zs is not None:
+                if new_motion not in (0, 1) or (new_motion == 1 and new_feed <= 0):
+                    break
+                t = [mach[0] - off[0], mach[1] - off[1], mach[2] - off[2]]
+                for k, word in enumerate((xs, ys, zs)):
+                    if word is not None:
+                        v = float(word) * scale
+                        if not abs(v) <= MAX_COORD_MM:
+                            break
+                        t[k] = v if absolute else t[k] + v
+                else:
+                    to = [t[0] + off[0], t[1] + off[1], t[2] + off[2]]
+                    if not (abs(t[0]) <= MAX_COORD_MM and abs(t[1]) <= MAX_COORD_MM and abs(t[2]) <= MAX_COORD_MM
+                            and abs(to[0]) <= MAX_COORD_MM and abs(to[1]) <= MAX_COORD_MM
+                            and abs(to[2]) <= MAX_COORD_MM):
+                        break
+                    end = (to[0] - start[0], to[1] - start[1], to[2] - start[2])
+                    if new_motion:
+                        moves.append(GcodeMove("feed", i + 1, end, new_feed, file=file, spindle=spindle,
+                                               spindle_rpm=rpm))
+                    else:
+                        moves.append(GcodeMove("rapid", i + 1, end, file=file, spindle=spindle, spindle_rpm=rpm))
+                    mach = to
+                    self.g5_reflect = None
+                    raw, n, motion, feed, pending = text, n + 1, new_motion, new_feed, None
+                    if gs is not None:
+                        self.cycle_il = None
+                    continue
+                break
+            if gs is not None:
+                if new_motion not in (0, 1):  # pragma: no cover - the pattern takes G0 and G1 only
+                    break
+                self.cycle_il = None
+            raw, n, motion, feed, pending = text, n + 1, new_motion, new_feed, None
+        if n:
+            self.mach, self.motion, self.feed = mach, motion, feed
+            self.source, self.line_no, self.raw = src, idx + n, raw
+        return n, pending
+
+
+class _Flow(_PlainLines):
     """Runs the lines: each block (:meth:`block`, from :class:`~._gcode_block._Block`) or O word in turn."""
 
     def run(self) -> Iterator[None]:
@@ -30,6 +127,7 @@ class _Flow(_State):
         budget = self.max_lines + src.n_lines  # one pass of the file's own lines, then max_lines more
         percent = False
         ran = False
+        pending = None  # the text of line idx when the plain lines before it read it
         while True:
             if idx >= src.n_lines:
                 if len(self.frames) > 1:
@@ -42,7 +140,17 @@ class _Flow(_State):
                 self.source, self.line_no, self.raw = src, idx + 1, src.line(idx)
                 raise self.err(f"the program has run {self.max_lines:,} lines more than its own {self.main.n_lines:,} "
                                "and does not end (a loop without an exit?); raise the limit with --max-lines")
-            body, line = self._read(src, idx)
+            if FAST_LINES and pending is None:
+                done, pending = self.plain_lines(src, idx, budget - executed + 1)
+                if done:
+                    ran = True
+                    executed += done - 1
+                    idx += done
+                    if self.moves:
+                        yield
+                    continue
+            body, line = self._read(src, idx, pending)
+            pending = None
             if line is None:
                 if body.startswith("$"):
                     self.note_once("$", f"grbl system command '{_shown(self.raw.strip())}' skipped (and any later "
@@ -77,14 +185,17 @@ class _Flow(_State):
                                      "and run them)")
                 return
 
-    def _read(self, src: _Source, idx: int) -> tuple[str, Line | None]:
+    def _read(self, src: _Source, idx: int, text: str | None = None) -> tuple[str, Line | None]:
         """Line ``idx`` of ``src`` made current (:attr:`source`, :attr:`line_no`, :attr:`raw`): its body (no
-        comments, no spaces, lower case) and what it says (None: nothing to run, or ``%``); cached."""
+        comments, no spaces, lower case) and what it says (None: nothing to run, or ``%``); cached.  ``text``:
+        the line's text when it was read already."""
         cached = src.cache.get(idx)
         if cached is not None:
-            self.source, self.line_no, self.raw = src, idx + 1, cached[0]
-            return cached[1], cached[2]
-        self.source, self.line_no, self.raw = src, idx + 1, src.line(idx)
+            if len(cached) == 3:
+                self.source, self.line_no, self.raw = src, idx + 1, cached[0]
+                return cached[1], cached[2]
+            text = cached[0]  # a plain line (:meth:`plain_lines`) not run as one
+        self.source, self.line_no, self.raw = src, idx + 1, src.line(idx) if text is None else text
         body = re.sub(r"\s+", "", _strip_comments(self.raw, self.err)).lower()
         if body.startswith("/"):
             body = body[1:]  # block delete is off, as in rs274: the line runs

@@ -24,6 +24,7 @@ class _State:
         self.max_lines = int(max_lines)
         self.files: dict[str, _Source] = {}
         self.moves: list[GcodeMove] = []
+        self.batch_moves = 1 << 62  # the caller takes the moves once they are this many (after a line)
         self.warnings: list[str] = []
         self.coolant_warned = False
         self.sync_warned = False

@@ -116,6 +116,7 @@ def _interpret(src: _Source, batch_moves: int, options: dict) -> Iterator[MoveBa
     ``batch_moves`` (the last may be shorter, and is given even when empty), each with the warnings first given
     while its moves were made."""
     interp = _Interp(src, **options)
+    interp.batch_moves = batch_moves
     warned = 0
 
     def take() -> MoveBatch:
