@@ -205,6 +205,14 @@ def lookahead_margin(settings: MachineSettings, min_period_ns: int) -> int:
     return int(max(4096, 8 * math.ceil(ramp + reach + 2)))
 
 
+def _move_blocks_of(pts: np.ndarray, prev: np.ndarray) -> Iterator[tuple[int, int, np.ndarray]]:
+    """``(b0, b1, block)`` of the moves to ``(B, 3)`` points ``pts`` from ``(1, 3)`` ``prev``, at most
+    ``_MOVE_BLOCK`` at a time: ``block`` ``(b1 - b0 + 1, 3)`` is the point before ``pts[b0]``, then ``pts[b0:b1]``."""
+    for b0 in range(0, len(pts), _MOVE_BLOCK):
+        b1 = min(len(pts), b0 + _MOVE_BLOCK)
+        yield b0, b1, np.vstack([pts[b0 - 1:b0] if b0 else prev, pts[b0:b1]])
+
+
 def _constant_time_ns(pts: np.ndarray, npm: np.ndarray, nom: np.ndarray, s: MachineSettings) -> int:
     """Machine time of ``(B,)`` moves with constant ramps: ``pts`` ``(B + 1, 3)`` the point before them, then theirs;
     each move's periods at its nominal length, else the settings' delay for the axes it moves."""
@@ -227,9 +235,8 @@ class _Reach:
 
     def add(self, pts: np.ndarray, npm: np.ndarray, nom: np.ndarray, prev: np.ndarray) -> None:
         """The moves to ``(B, 3)`` points ``pts`` from ``(1, 3)`` ``prev``, ``(B,)`` periods and nominal periods."""
-        for b0 in range(0, len(pts), _MOVE_BLOCK):
-            b1 = min(len(pts), b0 + _MOVE_BLOCK)
-            self.add_block(np.vstack([pts[b0 - 1:b0] if b0 else prev, pts[b0:b1]]), npm[b0:b1], nom[b0:b1])
+        for b0, b1, block in _move_blocks_of(pts, prev):
+            self.add_block(block, npm[b0:b1], nom[b0:b1])
 
     def add_block(self, pts: np.ndarray, npm: np.ndarray, nom: np.ndarray) -> None:
         """``(B,)`` moves: ``pts`` ``(B + 1, 3)`` the point before them, then theirs; their periods and nominal
@@ -384,10 +391,8 @@ class ChunkedPlan:
                 starts = np.ones(len(p), bool)
             else:
                 starts = np.asarray(piece.move_start, bool)
-            for b0 in range(0, len(p), _MOVE_BLOCK):
-                b1 = min(len(p), b0 + _MOVE_BLOCK)
-                yield (np.vstack([p[b0 - 1:b0] if b0 else prev, p[b0:b1]]), npm[b0:b1], nom[b0:b1], first + b0,
-                       starts[b0:b1])
+            for b0, b1, block in _move_blocks_of(p, prev):
+                yield block, npm[b0:b1], nom[b0:b1], first + b0, starts[b0:b1]
             if len(p):
                 prev = p[-1:]
             first += len(p)
