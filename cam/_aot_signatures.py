@@ -71,6 +71,9 @@ SIGNATURES = {
     'cam.job.drill_order._nn_path': [
         "(Array(float64, 2, 'C'), Array(float64, 1, 'C'), )",
     ],
+    'cam.verify.ramps._standstills_kernel': [
+        "(Array(int64, 1, 'C'), float64, Array(boolean, 1, 'C'), )",
+    ],
     'cam.verify.ramps.check_axis_steps': [
         "(Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(boolean, 1, 'C'), float64, float64, float64, float64, Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), )",
     ],

@@ -63,7 +63,7 @@ from numba import njit
 from .._compiled import entry
 
 from ..settings import RAMP_MODES, MachineSettings
-from ..verify.ramps import STANDSTILL_STEPS, check_steps_range
+from ..verify.ramps import check_steps_range, mark_standstills, standstill_ns
 from ..errors import CamError
 from .pins import axis_bits
 
@@ -299,7 +299,7 @@ def _judge_axis(per, brk, mid, spans, n_spans, s, v_start, v_max, acc, r1, r2, r
     n = per.shape[0]
     if n < 2:
         return 0
-    still_ns = STANDSTILL_STEPS * s / v_start * 1e9
+    still_ns = standstill_ns(s, v_start)
     bad = 0
     j_lo = -1
     j_hi = -1
@@ -326,11 +326,10 @@ def _judge_steps(per, brk, mid, j_lo, j_hi, still_ns, s, v_start, v_max, acc, r1
     c0 = max(0, j_lo - 3)
     c1 = min(n, j_hi + 3)
     t = np.empty(c1 - c0, np.int64)
-    b = brk[c0:c1].copy()
     for i in range(c1 - c0):
         t[i] = mid[per[c0 + i]]
-        if i > 0 and float(t[i] - t[i - 1]) > still_ns:  # a standstill, as the checker judges it
-            b[i] = True
+    b = brk[c0:c1].copy()
+    mark_standstills(t, still_ns, b)  # a standstill, as the checker judges it
     return check_steps_range(t, per[c0:c1], mid, b, s, v_start, v_max, acc, r1[c0:c1], r2[c0:c1], r3[c0:c1],
                              j_lo - c0, j_hi - c0)
 
@@ -487,7 +486,7 @@ def _plan_window(high, per_ns, stop_before, clock, dirbit, s_mm, v_start, v_max,
     alpha = np.full(n, np.inf)
     upull = np.full(n, np.inf)
     stop_idx = np.flatnonzero(stop_before)
-    # where an axis certainly stands still (its steps further apart than STANDSTILL_STEPS start-speed steps even
+    # where an axis certainly stands still (its steps further apart than standstill_ns even
     # at the nominal periods, which ramps only lengthen): a stop and a start of that axis, so the intervals on
     # each side of the wait are capped at its start speed (a corner taken as grbl's junction rule would)
     start_ns = np.zeros(n + 1, np.int64)
@@ -497,9 +496,9 @@ def _plan_window(high, per_ns, stop_before, clock, dirbit, s_mm, v_start, v_max,
     per_y, up_y = _steps_of_axis(high, clock[1], dirbit[1])
     per_z, up_z = _steps_of_axis(high, clock[2], dirbit[2])
     pers = (per_x, per_y, per_z)
-    brks = (_breaks(per_x, up_x, stop_idx, start_ns, STANDSTILL_STEPS * s_mm[0] / v_start[0] * 1e9),
-            _breaks(per_y, up_y, stop_idx, start_ns, STANDSTILL_STEPS * s_mm[1] / v_start[1] * 1e9),
-            _breaks(per_z, up_z, stop_idx, start_ns, STANDSTILL_STEPS * s_mm[2] / v_start[2] * 1e9))
+    brks = (_breaks(per_x, up_x, stop_idx, start_ns, standstill_ns(s_mm[0], v_start[0])),
+            _breaks(per_y, up_y, stop_idx, start_ns, standstill_ns(s_mm[1], v_start[1])),
+            _breaks(per_z, up_z, stop_idx, start_ns, standstill_ns(s_mm[2], v_start[2])))
     for a in range(3):
         _axis_caps(pers[a], brks[a], s_mm[a], v_start[a], v_max[a], acc[a] * _ALPHA_MARGIN, cap, alpha, upull)
     for k in range(n):

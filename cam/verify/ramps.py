@@ -77,7 +77,8 @@ from ..settings import DEFAULT_SETTINGS, MachineSettings
 from .pinlog import PinLog, iter_pin_log, rising_edges
 from ..drive.pins import axis_bits
 
-__all__ = ["RampViolation", "RampReport", "check_ramps", "check_axis_steps", "standstills", "STANDSTILL_STEPS"]
+__all__ = ["RampViolation", "RampReport", "check_ramps", "check_axis_steps", "standstills", "standstill_ns",
+           "mark_standstills", "STANDSTILL_STEPS"]
 
 _TOL_NS = 1.0
 _TOL_MM_S = 1e-6
@@ -87,13 +88,37 @@ not an interval of one motion (issue #32: an axis that waited 112 ms at a corner
 speed, within the quantisation tolerance of R2)."""
 
 
+@njit(cache=True)
+def standstill_ns(s_mm: float, v_start: float) -> float:
+    """The interval (ns) between two steps of an axis beyond which it stood still: :data:`STANDSTILL_STEPS`
+    steps of ``s_mm`` mm at its start speed ``v_start`` (mm/s).  A kernel for kernels; Python calls its
+    ``py_func``."""
+    return STANDSTILL_STEPS * s_mm / v_start * 1e9
+
+
 def standstills(t_ns: np.ndarray, s_mm: float, v_start: float) -> np.ndarray:
     """``(n,)`` bool: a standstill right before step j of one axis (``(n,)`` int64 step times ``t_ns``): the
-    interval from step j - 1 is longer than :data:`STANDSTILL_STEPS` steps at the start speed ``v_start``."""
+    interval from step j - 1 is longer than :func:`standstill_ns`."""
     out = np.zeros(len(t_ns), bool)
-    if len(t_ns) > 1:
-        out[1:] = np.diff(np.asarray(t_ns, np.int64)) > STANDSTILL_STEPS * s_mm / v_start * 1e9
+    _standstills_kernel(np.ascontiguousarray(t_ns, np.int64), standstill_ns.py_func(s_mm, v_start), out)
     return out
+
+
+@njit(cache=True, nogil=True)
+def mark_standstills(t_ns, still_ns, brk):
+    """Set ``brk[j]`` (``(n,)`` bool) where the interval from step j - 1 to step j (``(n,)`` int64 times ``t_ns``)
+    is longer than ``still_ns``: the standstill rule, for :func:`standstills` and the look-ahead planner's judge
+    (:func:`cam.drive.ramps._judge_steps`) alike."""
+    for j in range(1, t_ns.shape[0]):
+        if float(t_ns[j] - t_ns[j - 1]) > still_ns:
+            brk[j] = True
+
+
+@entry
+@njit(cache=True, nogil=True)
+def _standstills_kernel(t_ns, still_ns, brk):
+    """:func:`mark_standstills`, called from Python (:func:`standstills`)."""
+    mark_standstills(t_ns, still_ns, brk)
 
 
 
