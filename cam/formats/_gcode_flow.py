@@ -41,15 +41,16 @@ class _PlainLines(_State):
         lines ran, and the text of the line they stopped at when it was read (None: not read)."""
         if self.inverse_time or self.resync is not None or (self.spindle and not self.spindle_noted):
             return 0, None
-        scale, absolute, start = self.scale, self.absolute, self.start
-        off = self.offsets()
-        mach, motion, feed = self.mach, self.motion, self.feed
-        spindle = self.spindle
+        scale, absolute, lim = self.scale, self.absolute, MAX_COORD_MM
+        o0, o1, o2 = self.offsets()  # nothing a plain line does changes them
+        s0, s1, s2 = self.start
+        m0, m1, m2 = self.mach
+        motion, feed, spindle = self.motion, self.feed, self.spindle
         rpm = self.spindle_rpm if spindle else 0.0
         file = "" if src is self.main else src.name
         cache, moves, match = src.cache, self.moves, _PLAIN.fullmatch
         n, end_idx, stop = 0, min(src.n_lines, idx + limit), self.batch_moves
-        raw, pending = "", None
+        raw, pending, moved = "", None, False
         while idx + n < end_idx and len(moves) < stop:  # a batch ends where it would line by line
             i = idx + n
             cached = cache.get(i)
@@ -62,8 +63,8 @@ class _PlainLines(_State):
                     cache.clear()
                 cache[i] = (text, m)
             elif len(cached) == 2:
-                pending, m = cached
-                text = pending
+                pending = text = cached[0]
+                m = cached[1]
             else:
                 pending = None
                 break
@@ -79,39 +80,35 @@ class _PlainLines(_State):
             if xs is not None or ys is not None or zs is not None:
                 if new_motion not in (0, 1) or (new_motion == 1 and new_feed <= 0):
                     break
-                t = [mach[0] - off[0], mach[1] - off[1], mach[2] - off[2]]
-                for k, word in enumerate((xs, ys, zs)):
-                    if word is not None:
-                        v = float(word) * scale
-                        if not abs(v) <= MAX_COORD_MM:
-                            break
-                        t[k] = v if absolute else t[k] + v
-                else:
-                    to = [t[0] + off[0], t[1] + off[1], t[2] + off[2]]
-                    if not (abs(t[0]) <= MAX_COORD_MM and abs(t[1]) <= MAX_COORD_MM and abs(t[2]) <= MAX_COORD_MM
-                            and abs(to[0]) <= MAX_COORD_MM and abs(to[1]) <= MAX_COORD_MM
-                            and abs(to[2]) <= MAX_COORD_MM):
-                        break
-                    end = (to[0] - start[0], to[1] - start[1], to[2] - start[2])
-                    if new_motion:
-                        moves.append(GcodeMove("feed", i + 1, end, new_feed, file=file, spindle=spindle,
-                                               spindle_rpm=rpm))
-                    else:
-                        moves.append(GcodeMove("rapid", i + 1, end, file=file, spindle=spindle, spindle_rpm=rpm))
-                    mach = to
-                    self.g5_reflect = None
-                    raw, n, motion, feed, pending = text, n + 1, new_motion, new_feed, None
-                    if gs is not None:
-                        self.cycle_il = None
-                    continue
-                break
-            if gs is not None:
-                if new_motion not in (0, 1):  # pragma: no cover - the pattern takes G0 and G1 only
+                # as the general interpreter: the program position, the axis words, the machine position
+                p0, p1, p2 = m0 - o0, m1 - o1, m2 - o2
+                v0 = v1 = v2 = 0.0
+                if xs is not None:
+                    v0 = float(xs) * scale
+                    p0 = v0 if absolute else p0 + v0
+                if ys is not None:
+                    v1 = float(ys) * scale
+                    p1 = v1 if absolute else p1 + v1
+                if zs is not None:
+                    v2 = float(zs) * scale
+                    p2 = v2 if absolute else p2 + v2
+                q0, q1, q2 = p0 + o0, p1 + o1, p2 + o2
+                if not (abs(v0) <= lim and abs(v1) <= lim and abs(v2) <= lim and abs(p0) <= lim and abs(p1) <= lim
+                        and abs(p2) <= lim and abs(q0) <= lim and abs(q1) <= lim and abs(q2) <= lim):
                     break
-                self.cycle_il = None
+                end = (q0 - s0, q1 - s1, q2 - s2)
+                if new_motion:
+                    moves.append(GcodeMove("feed", i + 1, end, new_feed, file=file, spindle=spindle, spindle_rpm=rpm))
+                else:
+                    moves.append(GcodeMove("rapid", i + 1, end, file=file, spindle=spindle, spindle_rpm=rpm))
+                m0, m1, m2, moved = q0, q1, q2, True
+            if gs is not None:
+                self.cycle_il = None  # G0, G1: a new series of canned cycles starts where the tool stands
             raw, n, motion, feed, pending = text, n + 1, new_motion, new_feed, None
+        if moved:
+            self.mach, self.g5_reflect = [m0, m1, m2], None
         if n:
-            self.mach, self.motion, self.feed = mach, motion, feed
+            self.motion, self.feed = motion, feed
             self.source, self.line_no, self.raw = src, idx + n, raw
         return n, pending
 
