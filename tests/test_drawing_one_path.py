@@ -79,7 +79,11 @@ FAST_CASES = ("2d-depth-list-passes-pause-start", "2d-v-tool-passes", "3d-ball-f
 other reliefs run in the slow tier."""
 
 
-SLOW_CASES = {"test_pin_logs_gcode_and_pictures_are_the_same_at_any_piece_size[3d-ball-finer-pause-start]",
+SLOW_CASES = {
+    'test_the_piece_size_never_changes_the_joined_job[3d-ball-finer-pause-start-1]',
+    'test_the_surface_carved_a_chunk_at_a_time_is_the_simulated_surface[2d-v-tool-passes-2]',
+    'test_the_surface_carved_a_chunk_at_a_time_is_the_simulated_surface[2d-v-tool-passes-3]',
+    "test_pin_logs_gcode_and_pictures_are_the_same_at_any_piece_size[3d-ball-finer-pause-start]",
               "test_pin_logs_gcode_and_pictures_are_the_same_at_any_piece_size[2d-v-tool-passes]",
               "test_a_prepared_job_is_the_same_held_or_in_pieces[roughing]",
               "test_pin_logs_gcode_and_pictures_are_the_same_at_any_piece_size[2d-depth-list-passes-pause-start]",

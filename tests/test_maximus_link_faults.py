@@ -31,7 +31,12 @@ from cam.sim.maximus import BUSY, POWER_UP, start_emulator  # noqa: E402
 from support.serial_proxy import PtyProxy  # noqa: E402
 
 # over 1.3 s each: the slow tier (the fast tier stays under 3 minutes, docs/tests.md)
-SLOW_CASES = {'test_no_board_is_opened_after_a_fault_until_its_marker_is_deleted'}
+SLOW_CASES = {
+    'test_a_byte_lost_on_the_way_to_the_board_is_a_fault_and_nothing_moves[hole-4]',
+    'test_a_byte_lost_on_the_way_to_the_board_is_a_fault_and_nothing_moves[jog-3]',
+    'test_a_byte_lost_on_the_way_to_the_board_is_a_fault_and_nothing_moves[offset-9]',
+    'test_a_cut_cable_is_a_fault[hole-2]',
+    'test_no_board_is_opened_after_a_fault_until_its_marker_is_deleted'}
 
 FAST = Maximus(delay_x=1, delay_y=1, delay_z_up=1, delay_z_down=1)  # 5000 pulses/s, half steps
 MARGIN_S = 0.2

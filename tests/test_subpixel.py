@@ -16,6 +16,11 @@ SETTINGS = cam.MachineSettings()  # 8 steps per pixel: grids of an eighth, a qua
 STEP_MM = SETTINGS.mm_per_step_z
 
 
+SLOW_CASES = {  # the fast tier keeps the other cases of these tests (tests/conftest.py)
+    'test_the_finer_pass_takes_what_the_grid_allows_and_never_gouges[stepped pyramid-v:60:0]',
+}
+
+
 def _cut(name: str, spec: str, subpixel: bool, settings=SETTINGS):
     drawing, expr = RELIEFS[name]
     d = cam.digitize(drawing())

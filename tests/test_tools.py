@@ -30,6 +30,12 @@ STEP_MM = SETTINGS.mm_per_step_z
 TOOLS = ["ball:1", "flat:1", "v:60:0", "v:90:0.1"]
 
 
+SLOW_CASES = {  # the fast tier keeps the other cases of these tests (tests/conftest.py)
+    'test_no_gouge_and_rest_only_where_the_tool_cannot_reach[stepped pyramid-v:90:0.1]',
+    'test_no_gouge_and_rest_only_where_the_tool_cannot_reach[hemisphere-v:90:0.1]',
+}
+
+
 def disc(size: int, radius: int) -> Drawing:
     yy, xx = np.mgrid[:size, :size]
     rr = np.hypot(yy - size // 2, xx - size // 2)
