@@ -23,6 +23,9 @@ SIGNATURES = {
     'cam.drive._kernels.chunk_writes_kernel': [
         "(Array(uint8, 1, 'C'), Array(uint8, 1, 'C'), Array(int64, 1, 'C'), uint8, int64, )",
     ],
+    'cam.drive._kernels.move_extent_kernel': [
+        "(Array(int64, 2, 'C'), Array(int64, 1, 'C'), Array(int64, 2, 'C'), Array(int64, 2, 'C'), )",
+    ],
     'cam.drive._kernels.move_periods_kernel': [
         "(Array(int64, 2, 'C'), Array(int64, 1, 'C'), )",
     ],

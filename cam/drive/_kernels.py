@@ -270,3 +270,40 @@ def move_periods_kernel(pts, prev):
         steps[2] += a2
         p0, p1, p2 = pts[i, 0], pts[i, 1], pts[i, 2]
     return npm, steps
+
+
+@njit(cache=True, inline="always")
+def _widen(box, a, v):
+    if v < box[a, 0]:
+        box[a, 0] = v
+    if v > box[a, 1]:
+        box[a, 1] = v
+
+
+@entry
+@njit(cache=True, nogil=True)
+def move_extent_kernel(pts, n_per_move, extent, cut):
+    """:func:`cam.drive.chunks.move_extent` in one pass: widen ``extent`` and ``cut`` (``(3, 2)`` int64 min/max,
+    in place) by the positions the moves between rows of ``(B + 1, 3)`` int64 ``pts`` take the tool through,
+    ``(B,)`` int64 ``n_per_move`` periods each.  A move that enters the work (z from <= 0 to > 0) is cut from
+    the first period k with ``z_a + floor(k |dz| / n) >= 1``; one that leaves it up to the last such period."""
+    for i in range(pts.shape[0]):
+        for a in range(3):
+            _widen(extent, a, pts[i, a])
+        if pts[i, 2] > 0:
+            for a in range(3):
+                _widen(cut, a, pts[i, a])
+    for i in range(pts.shape[0] - 1):
+        n = n_per_move[i]
+        za, zb = pts[i, 2], pts[i + 1, 2]
+        if n <= 0 or (za > 0) == (zb > 0):
+            continue
+        adz = abs(zb - za)
+        if zb > 0:  # enters: k = ceil((1 - za) n / |dz|)
+            k = -((-(1 - za) * n) // adz)
+        else:  # leaves: k = ceil(za n / |dz|) - 1
+            k = -((-za * n) // adz) - 1
+        for a in range(3):
+            d = pts[i + 1, a] - pts[i, a]
+            step = (k * abs(d)) // n
+            _widen(cut, a, pts[i, a] + step if d > 0 else pts[i, a] - step)

@@ -35,7 +35,7 @@ import numpy as np
 
 from ..job.model import Job, JobLike, check_travel
 from ..settings import MachineSettings
-from ._kernels import chunk_writes_kernel, move_periods_kernel, stretch_kernel
+from ._kernels import chunk_writes_kernel, move_extent_kernel, move_periods_kernel, stretch_kernel
 from .pins import axis_bits
 from .ramps import _lookahead, linear40_periods
 
@@ -163,31 +163,7 @@ def move_extent(pts: np.ndarray, n_per_move: np.ndarray, extent: np.ndarray, cut
     ends below the surface is cut whole; one that crosses it is cut from (or up to) the period at which its
     Z passes from 0 to 1, and its X and Y there follow from the same floor.
     """
-    if not len(pts):
-        return
-    lo, hi = pts.min(axis=0), pts.max(axis=0)
-    np.minimum(extent[:, 0], lo, out=extent[:, 0])
-    np.maximum(extent[:, 1], hi, out=extent[:, 1])
-    a, b, n = pts[:-1], pts[1:], np.asarray(n_per_move, np.int64)
-    below = pts[:, 2] > 0
-    parts = [pts[below]]
-    down = ~below[:-1] & below[1:] & (n > 0)  # enters the work: cut from period k1 on
-    up = below[:-1] & ~below[1:] & (n > 0)  # leaves it: cut up to period k2
-    for sel, entering in ((down, True), (up, False)):
-        if not sel.any():
-            continue
-        a_s, b_s, n_s = a[sel], b[sel], n[sel]
-        ad = np.abs(b_s - a_s)
-        if entering:  # z_k = a_z + floor(k ad_z / n) >= 1  <=>  k >= ceil((1 - a_z) n / ad_z)
-            k = -((-(1 - a_s[:, 2]) * n_s) // ad[:, 2])
-        else:  # z_k = a_z - floor(k ad_z / n) >= 1  <=>  k <= ceil(a_z n / ad_z) - 1
-            k = -((-a_s[:, 2] * n_s) // ad[:, 2]) - 1
-        at = a_s + np.sign(b_s - a_s) * ((k[:, None] * ad) // n_s[:, None])
-        parts.append(at)
-    cut_pts = np.concatenate(parts)
-    if len(cut_pts):
-        np.minimum(cut[:, 0], cut_pts.min(axis=0), out=cut[:, 0])
-        np.maximum(cut[:, 1], cut_pts.max(axis=0), out=cut[:, 1])
+    move_extent_kernel(np.ascontiguousarray(pts, np.int64), np.ascontiguousarray(n_per_move, np.int64), extent, cut)
 
 
 def lookahead_margin(settings: MachineSettings, min_period_ns: int) -> int:
