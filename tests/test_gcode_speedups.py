@@ -3,14 +3,15 @@ without the general interpreter) gives exactly what the general interpreter give
 ``repr``, so every float bit for bit, -0.0 included), warnings, batches, work offsets and errors (``file:line``
 and text), for programs that change the offsets, units, modes and motion between runs of plain lines, for the
 post-processor programs and constructs of test_gcode_lang, LinuxCNC's example programs and random programs.
-``FAST_LINES = False`` is the general interpreter alone, the reference."""
+``FAST_LINES = False`` is the general interpreter alone, the reference; ``ngc.PLAIN_NUMBERS = False`` reads every
+value of a line by the expression reader (the reference for its short cut for plain numbers)."""
 import ast
 import random
 
 import pytest
 
 from cam.errors import ParseError
-from cam.formats import _gcode_flow
+from cam.formats import _gcode_flow, ngc
 from cam.formats.gcode import open_gcode, parse_gcode
 from cam.limits import MAX_COORD_MM
 from test_gcode_lang import CONSTRUCTS, NCFILES, POSTS, RS274_DEFAULT_TOOLS_MM, SUBROUTINE
@@ -67,6 +68,7 @@ def compare(monkeypatch, tmp_path):
         got = {}
         for fast in (False, True):
             monkeypatch.setattr(_gcode_flow, "FAST_LINES", fast)
+            monkeypatch.setattr(ngc, "PLAIN_NUMBERS", fast)
 
             def held():
                 program = parse_gcode(text, source=f"{name}.ngc", **options)
@@ -332,23 +334,24 @@ PLAIN = ["G1 X{x} Y{y}", "X{x} Y{y}", "G0 Z{z}", "N{n} G1 X{x} F{f}", "Y{y}", "G
          "F{f}", "G0", "G1", "  X{x}\t", "G0 X{x} Y{y} Z{z}", "N{n}", "X{x} Y{y} Z{z} F{f}"]
 OTHER = ["G90", "G91", "G20", "G21", "G92 X{x} Y{y}", "G92.1", "G92.2", "G92.3", "G10 L2 P{p} X{x} Y{y} Z{z}",
          "G10 L20 P0 X{x}", "G5{cs}", "G59.{p3}", "#5221={x}", "#5242=[#5242+{z}]", "G43 H1", "G43.1 Z{z}", "G49",
-         "M6 T2", "T1 M6 G43 H1", "G93", "G94", "G93 G1 X{x} F2", "G81 R1 Z-1 X{x} Y{y}", "G80", "G2 X{x} Y{y} R50",
-         "G53 G0 X{x}", "M3 S1000", "M5", "G28", "(comment) X{x}", "X{x} (c)", "G0 X{x} ; c", "", "G4 P0.01", "G18",
-         "G17", "M70", "M72", "G64", "#1={x}", "X#1", "G91.1", "X{x} X{x}", "G1 X{x} I1"]
-BAD = ["X{big}", "F0.00001", "F0", "N99999999999", "G1 X{x} F-1", "G0 X{x} Y{y} A1"]
+         "M6 T2", "T1 M6 G43 H1", "G93 G1 X{x} F2\nG94", "G81 R1 Z-1 X{x} Y{y}", "G80", "G2 X{x} Y{y} R50\nG1",
+         "G90 G53 G0 X{x}", "M3 S1000", "M5", "G28", "(comment) X{x}", "X{x} (c)", "G0 X{x} ; c", "", "G4 P0.01",
+         "G18", "G17", "M70\nG20 G91\nX{x}\nM72", "G64", "#1={x}", "X#1", "G91.1", "G1 X[{x} + 1] Y-{y}"]
+BAD = ["X{big}", "F0.00001", "F0", "N99999999999", "G1 X{x} F-1", "G0 X{x} Y{y} A1", "X{x} X{x}", "G1 X{x} I1",
+       "G1 X{x} F1e3", "G2 X{x} Y{y}", "G80 X{x}"]
 
 
 def _random_program(rng: random.Random, lines: int) -> str:
     def fill(template: str) -> str:
         return template.format(x=f"{rng.uniform(-40, 40):.{rng.randint(0, 4)}f}",
                                y=f"{rng.uniform(-40, 40):.{rng.randint(0, 4)}f}",
-                               z=f"{rng.uniform(-5, 5):.3f}", f=rng.choice(["100", "250.5", "1e3", "0", "3000"]),
+                               z=f"{rng.uniform(-5, 5):.3f}", f=rng.choice(["100", "250.5", "1000.", "3000"]),
                                n=rng.randint(0, 99999), p=rng.randint(0, 9), p3=rng.randint(1, 3),
                                cs=rng.randint(4, 9), big=rng.choice(["2000000", "999999.9", "-1000000.5"]))
-    out = [rng.choice(["G21 G90", "G20 G90", "G21 G91", ""])]
+    out = [rng.choice(["G21 G90", "G20 G90", "G21 G91", ""]) + " G1 F200"]
     for _ in range(lines):
         roll = rng.random()
-        pool = PLAIN if roll < 0.7 else OTHER if roll < 0.98 else BAD
+        pool = PLAIN if roll < 0.7 else OTHER if roll < 0.99 else BAD
         out.append(fill(rng.choice(pool)))
     return "\n".join(out) + "\n"
 
@@ -356,11 +359,13 @@ def _random_program(rng: random.Random, lines: int) -> str:
 @pytest.mark.parametrize("seed", range(12))
 def test_random_programs(compare, seed):
     rng = random.Random(seed)
-    fast = 0
+    fast = ended = 0
     for k in range(15):
-        fast += compare(_random_program(rng, 40), name=f"r{seed}_{k}", batches=(1 << 62, 2),
-                        tool_lengths_mm=TOOLS_MM, start_mm=(1.0, -2.0, 0.5))[0]
-    assert fast > 0
+        ran, outcome = compare(_random_program(rng, 40), name=f"r{seed}_{k}", batches=(1 << 62, 2),
+                               tool_lengths_mm=TOOLS_MM, start_mm=(1.0, -2.0, 0.5))
+        fast += ran
+        ended += outcome[1] is None
+    assert fast > 100 and ended >= 3, (fast, ended)
 
 
 def test_a_plain_move_ends_a_series_of_g5_splines(compare):
@@ -368,3 +373,27 @@ def test_a_plain_move_ends_a_series_of_g5_splines(compare):
     _, outcome = compare(text, name="g5")
     assert "G5 needs I and J unless the move before it is a G5" in outcome[1]
     assert outcome[1].startswith("g5.ngc:4: ")
+
+
+BODIES = ["g1x1.5y-2", "g0x+.5y-0.z1.", "x1y2x3", "g2x1i-0j+0", "n10g1x1e5", "x1.5.3", "x-", "x--1", "x+-1",
+          "g1x[1+2]y#1", "x-[1]", "#1=2x#1", "m3s1000", "x1y", "@5^-90", "f1e3", "x" + "9" * 400, "x-" + "9" * 400,
+          "gx1", "x1..2", "x.", "x-.5", "xsin[30]", "g01x1y2z3f4", "é1", "x1#2=3", ""]
+
+
+def _read(body: str):
+    try:
+        line = ngc.read_line(body)
+    except ngc.NgcSyntaxError as exc:
+        return "error", str(exc)
+    return line.o, line.words, line.assigns
+
+
+def test_plain_numbers_read_as_the_expression_reader_reads_them(monkeypatch):
+    rng = random.Random(7)
+    bodies = BODIES + ["".join(rng.choice("gxyzfn@^-+.0123456789#[]=e") for _ in range(rng.randint(1, 14)))
+                       for _ in range(3000)]
+    for body in bodies:
+        monkeypatch.setattr(ngc, "PLAIN_NUMBERS", False)
+        want = _read(body)
+        monkeypatch.setattr(ngc, "PLAIN_NUMBERS", True)
+        assert repr(_read(body)) == repr(want), body

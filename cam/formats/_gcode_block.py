@@ -71,7 +71,7 @@ class _Block(_State):
         vals: dict[str, float] = {}
         texts: dict[str, str] = {}
         for letter, tree, text in line.words:
-            v = self.value_of(tree)
+            v = tree[1] if tree[0] == "n" else self.value_of(tree)  # a number is its value (as evaluate gives it)
             word = _shown(text.upper())
             if letter in "gm" and not math.isfinite(v):
                 raise self.err(f"unsupported word '{word}'")

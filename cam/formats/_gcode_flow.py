@@ -41,6 +41,12 @@ class _PlainLines(_State):
         lines ran, and the text of the line they stopped at when it was read (None: not read)."""
         if self.inverse_time or self.resync is not None or (self.spindle and not self.spindle_noted):
             return 0, None
+        if idx not in src.cache:  # most lines of a program that is not plain: no set-up for them
+            text = src.line(idx)
+            m = _PLAIN.fullmatch(text)
+            if m is None or m.lastindex is None:
+                return 0, text
+            src.cache[idx] = (text, m)  # one line more than CACHE_LINES at most, until the next clear
         scale, absolute, lim = self.scale, self.absolute, MAX_COORD_MM
         o0, o1, o2 = self.offsets()  # nothing a plain line does changes them
         s0, s1, s2 = self.start
@@ -193,7 +199,7 @@ class _Flow(_PlainLines):
                 return cached[1], cached[2]
             text = cached[0]  # a plain line (:meth:`plain_lines`) not run as one
         self.source, self.line_no, self.raw = src, idx + 1, src.line(idx) if text is None else text
-        body = re.sub(r"\s+", "", _strip_comments(self.raw, self.err)).lower()
+        body = "".join(_strip_comments(self.raw, self.err).split()).lower()  # the spaces str.split takes are re's \s
         if body.startswith("/"):
             body = body[1:]  # block delete is off, as in rs274: the line runs
         line = None

@@ -5,6 +5,7 @@ The base of the interpreter's parts (:mod:`._gcode_flow`, :mod:`._gcode_block`, 
 """
 from __future__ import annotations
 
+from operator import sub
 from pathlib import Path
 
 from ..errors import ParseError
@@ -90,7 +91,7 @@ class _State:
     def emit(self, kind: str, mach=None, **kw) -> GcodeMove:
         """Record a move of ``kind`` ending at machine mm ``mach`` (default: where the tool is), given from
         where the tool stood at the start (:attr:`start`), with the spindle's state."""
-        end = tuple(m - s for m, s in zip(self.mach if mach is None else mach, self.start))
+        end = tuple(map(sub, self.mach if mach is None else mach, self.start))
         move = GcodeMove(kind, self.line_no, end, spindle=self.spindle,  # type: ignore[arg-type]
                          spindle_rpm=self.spindle_rpm if self.spindle else 0.0, **kw)
         self.moves.append(move)
@@ -105,8 +106,10 @@ class _State:
         return [self.params.get(base + i, 0.0) for i in range(3)]
 
     def offsets(self) -> list[float]:
-        g = self.g5x()
-        return [g[0] + self.g92[0], g[1] + self.g92[1], g[2] + self.g92[2] + self.tlo]
+        """The active work offset plus G92 (and the tool length offset in Z), mm: as ``g5x()`` + ``g92``."""
+        base = 5221 + 20 * (self.cs - 1)
+        get, g92 = self.params.get, self.g92
+        return [get(base, 0.0) + g92[0], get(base + 1, 0.0) + g92[1], get(base + 2, 0.0) + g92[2] + self.tlo]
 
     def pos(self) -> list[float]:
         """The program position (mm, in the active coordinate system)."""

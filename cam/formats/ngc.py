@@ -33,6 +33,14 @@ O_KEYWORDS = ("endsub", "endwhile", "endif", "endrepeat", "elseif", "else", "sub
               "break", "continue", "return", "repeat")
 
 _NUMBER = re.compile(r"\d+\.?\d*|\.\d+")
+PLAIN_NUMBERS = True
+"""Read words with plain numbers by :data:`_PLAIN_WORDS` and :data:`_SIGNED`; False: every value by
+:meth:`_Reader.value` (the tests compare the two)."""
+_SIGNED = re.compile(r"([-+]?)(\d+\.?\d*|\.\d+)")
+"""A word's value when it is a plain number (the most common case): read as :meth:`_Reader.value` reads it."""
+_PLAIN_WORDS = re.compile(r"(?:[a-z@^][-+]?(?:\d+\.?\d*|\.\d+))+")
+"""A line of words with plain numbers only (``g1x1.5y-2``): each word ends where the next letter starts."""
+_WORD = re.compile(r"([a-z@^])([-+]?)(\d+\.?\d*|\.\d+)")
 _NAME_OPS = ("mod", "eq", "ne", "gt", "ge", "lt", "le", "and", "or", "xor")
 _PRECEDENCE = {"**": 4, "*": 3, "/": 3, "mod": 3, "+": 2, "-": 2,
                "eq": 1, "ne": 1, "gt": 1, "ge": 1, "lt": 1, "le": 1, "and": 0, "or": 0, "xor": 0}
@@ -198,6 +206,12 @@ def read_line(body: str) -> Line:
             raise r.fail("unexpected text after the O word")
         line.o = (label, kw, args)
         return line
+    if PLAIN_NUMBERS and _PLAIN_WORDS.fullmatch(body):  # the words the loop below would read, without its steps
+        for m in _WORD.finditer(body):
+            c, sign, digits = m.groups()
+            tree = ("n", float(digits))
+            line.words.append((c, ("neg", tree) if sign == "-" else tree, m.group(0)))
+        return line
     while r.i < len(body):
         c = r.peek()
         start = r.i
@@ -213,7 +227,14 @@ def read_line(body: str) -> Line:
             nxt = r.peek()
             if not nxt or nxt.isalpha() and not any(body.startswith(f, r.i) for f in _FUNCTIONS):
                 raise NgcSyntaxError(f"word '{c.upper()}' has no number")
-            tree = r.value()
+            m = _SIGNED.match(body, r.i) if PLAIN_NUMBERS else None
+            if m is not None:  # the tree value() makes of it: a sign is a "neg" node, as '-' before any value
+                r.i = m.end()
+                tree = ("n", float(m.group(2)))
+                if m.group(1) == "-":
+                    tree = ("neg", tree)
+            else:
+                tree = r.value()
             line.words.append((c, tree, body[start:r.i]))
         else:
             raise r.fail("cannot read")
