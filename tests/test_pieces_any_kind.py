@@ -73,3 +73,15 @@ def test_every_consumer_gives_the_same_for_any_piece_size(tmp_path, name, option
                                           extent_steps=extent, holes=name.endswith(".drl")))
                 for j in (sliced, job)]
     assert pictures[0] == pictures[1]
+
+
+@pytest.mark.parametrize("name,options", CASES, ids=[name for name, _ in CASES])
+def test_the_planning_pass_gives_the_journals_fingerprint(name, options):
+    """prepare_job takes a job's fingerprint from the step planner's own pass over its pieces (no pass of its
+    own): the same sha256 that a pass of plan_fingerprint gives, whole or in pieces of 3 moves."""
+    prepared = prepare_job(SAMPLES / name, options, SETTINGS)
+    assert prepared.plan.job_sha256 is not None
+    assert prepared.plan_sha256 == prepared.plan.job_sha256 == plan_fingerprint(prepared.toolpath)
+    job = prepared.toolpath.joined()
+    assert plan_chunks(Sliced(job, 3), fingerprint=True).job_sha256 == prepared.plan_sha256
+    assert plan_chunks(job).job_sha256 is None  # only when asked: the hashing is not free

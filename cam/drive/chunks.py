@@ -33,7 +33,7 @@ from typing import Iterator, Optional
 
 import numpy as np
 
-from ..job.model import Job, JobLike, check_travel
+from ..job.model import Job, JobLike, PlanFingerprint, check_travel
 from ..settings import MachineSettings
 from ._kernels import chunk_writes_kernel, move_extent_kernel, move_periods_kernel, stretch_kernel
 from .pins import axis_bits
@@ -274,6 +274,8 @@ class ChunkedPlan:
         chunk_periods: step periods per chunk; margin_periods: look-ahead periods on each side of a chunk.
         any_move_start: whether some piece marks where source moves begin (``linear40`` ramps); if none
             does, the job is one ramp segment from its first move, as the whole-job ramp planner takes it.
+        job_sha256: the job's :func:`cam.job.resume.plan_fingerprint` when :func:`plan_chunks` was asked for it,
+            else None.
     """
 
     job: JobLike
@@ -289,6 +291,7 @@ class ChunkedPlan:
     warnings: list[str] = field(default_factory=list)
     any_move_start: bool = True
     _stops: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64), repr=False)
+    job_sha256: Optional[str] = None
     _time_ns: Optional[int] = field(default=None, repr=False)
     _extent: Optional[tuple[np.ndarray, np.ndarray]] = field(default=None, repr=False)
     recent: Optional[_RecentMoves] = field(default=None, repr=False)
@@ -555,7 +558,8 @@ class ChunkedPlan:
 
 
 def plan_chunks(job: JobLike, *, start_steps: tuple[int, int, int] = (0, 0, 0),
-                chunk_periods: int = DEFAULT_CHUNK_PERIODS, margin_periods: Optional[int] = None) -> ChunkedPlan:
+                chunk_periods: int = DEFAULT_CHUNK_PERIODS, margin_periods: Optional[int] = None,
+                fingerprint: bool = False) -> ChunkedPlan:
     """The step plan of a job of any size, made a chunk at a time (:class:`ChunkedPlan`).
 
     One pass over the job's pieces checks every point against the travel and counts what the plan needs
@@ -567,6 +571,8 @@ def plan_chunks(job: JobLike, *, start_steps: tuple[int, int, int] = (0, 0, 0),
         start_steps: where the tool stands in the machine frame (the job is checked against the travel).
         chunk_periods: step periods per chunk.
         margin_periods: look-ahead periods on each side of a chunk (None: :func:`lookahead_margin`).
+        fingerprint: also work out the job's :func:`cam.job.resume.plan_fingerprint` in this pass
+            (:attr:`ChunkedPlan.job_sha256`; a job kept as pieces is then not made again for it).
 
     Raises:
         TravelError: a point of the job is outside the machine travel (nothing is planned).
@@ -584,7 +590,8 @@ def plan_chunks(job: JobLike, *, start_steps: tuple[int, int, int] = (0, 0, 0),
     any_move_start = False
     last = (0, 0, 0)
     reach = _Reach(s)
-    for piece in job.pieces():
+    sha = PlanFingerprint() if fingerprint else None
+    for piece in job.pieces() if sha is None else _hashed(job.pieces(), sha):
         pts = np.asarray(piece.points_steps, np.int64).reshape(-1, 3)
         if not len(pts):
             continue
@@ -609,14 +616,26 @@ def plan_chunks(job: JobLike, *, start_steps: tuple[int, int, int] = (0, 0, 0),
         period0 = int(point_period[-1])
         prev = pts[-1:]
         last = tuple(int(v) for v in pts[-1])  # type: ignore[assignment]
+    job_sha256 = None
+    if sha is not None:
+        job_sha256 = sha.hexdigest()
+        sha.close()
     min_period = min([s.delay_xy_ns, s.delay_z_ns] + ([min_nominal] if min_nominal is not None else []))
     margin = lookahead_margin(s, min_period) if margin_periods is None else int(margin_periods)
     return ChunkedPlan(
         job=job, settings=s, n_periods=period0, pause_writes=np.concatenate(pause_writes or [np.zeros(0, np.int64)]),
         steps_total=steps_total, end_steps=last, safe_z_steps=int(job.safe_z_steps),
         chunk_periods=int(chunk_periods), margin_periods=margin, pause_notes=notes, warnings=warnings,
-        any_move_start=any_move_start, _stops=np.unique(np.concatenate(stops or [np.zeros(0, np.int64)])),
+        any_move_start=any_move_start, job_sha256=job_sha256,
+        _stops=np.unique(np.concatenate(stops or [np.zeros(0, np.int64)])),
         _time_ns=reach.time_ns if s.ramp == "constant" else None, _extent=reach.extent_and_cut())
+
+
+def _hashed(pieces: Iterator[Job], sha: PlanFingerprint) -> Iterator[Job]:
+    """``pieces``, each added to ``sha`` as it passes."""
+    for piece in pieces:
+        sha.add(piece)
+        yield piece
 
 
 def plan_steps(job: JobLike, *, start_steps: tuple[int, int, int] = (0, 0, 0)) -> StepPlan:

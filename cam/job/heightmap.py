@@ -420,7 +420,7 @@ def prepare_heightmap(path: Path, options: Any, settings: MachineSettings) -> di
         candidate = plan_heightmap(depth, tool=cutter, settings=settings, pixel_size_mm=options.pixel_size_mm,
                                    stepover=options.stepover, heightmap_order=options.heightmap_order,
                                    stepdown_mm=options.stepdown_mm, slopes=slopes, source=path.name)
-        steps = plan_chunks(candidate)
+        steps = plan_chunks(candidate, fingerprint=True)
         if best is None or steps.estimated_time_s < best[1].estimated_time_s:
             best = (candidate, steps, slopes)
     job, steps, slopes = best  # type: ignore[misc]

@@ -637,7 +637,7 @@ def _prepare_pixels(path: Path, kind: str, options: JobOptions, settings: Machin
     # same moves, held in memory)
     big = digitized.n_points * options.passes > STREAM_TARGETS
     toolpath = stream_drawing(digitized, **kw) if big else plan(digitized, **kw)
-    steps = plan_chunks(toolpath)
+    steps = plan_chunks(toolpath, fingerprint=True)
     report = job_report(digitized, toolpath, steps)
     rgb = drawing.to_rgb() if drawing is not None else None  # made after the report: not held while it counts
     summary = (f"{path.name}: {report['objects']} object(s), {report['points']} points, "
@@ -674,7 +674,7 @@ def _prepare_gcode(path: Path, options: JobOptions, settings: MachineSettings,
     toolpath = stream if held is None else held
     # after a whole pass (held's or this) the program's moves and warnings are known; the travel checked in the
     # machine frame, from where the tool stands
-    steps = plan_chunks(toolpath, start_steps=start)  # type: ignore[arg-type]
+    steps = plan_chunks(toolpath, start_steps=start, fingerprint=True)  # type: ignore[arg-type]
     return PreparedJob(
         source=str(path), kind="gcode", plan=steps, settings=settings, toolpath=toolpath, warnings=stream.warnings,
         home_steps=start,  # type: ignore[arg-type]
@@ -715,7 +715,7 @@ def _prepare_excellon(path: Path, options: JobOptions, settings: MachineSettings
                     travel_height_mm=_or(options.travel_height_mm, DRILL_TRAVEL_HEIGHT_MM), offset_mm=options.offset_mm,
                     mirror_x=options.mirror_x, drill_order=options.drill_order,
                     mill_holes_over_mm=options.mill_holes_over_mm, home_steps=home)
-    steps = plan_chunks(dp.toolpath, start_steps=home)
+    steps = plan_chunks(dp.toolpath, start_steps=home, fingerprint=True)
     tools = ", ".join(f"T{t} {dia:.3f} mm x{n}" for t, dia, n in dp.tool_sequence)
     hole_xy = np.asarray(dp.holes_steps, np.int64).reshape(-1, 2)
     span = dp.extent_steps[1] - dp.extent_steps[0]  # holes and milled slots (issue #31 point 4)
@@ -756,8 +756,8 @@ def _prepare_hpgl(path: Path, options: JobOptions, settings: MachineSettings, pr
     # memory), below they are joined and held (the step planner then sees every move: linear40 ramps)
     toolpath = stream if scan.n_points > STREAM_POINTS else stream.joined()
     return PreparedJob(
-        source=str(path), kind="hpgl", plan=plan_chunks(toolpath, start_steps=home), settings=settings,
-        toolpath=toolpath,
+        source=str(path), kind="hpgl", plan=plan_chunks(toolpath, start_steps=home, fingerprint=True),
+        settings=settings, toolpath=toolpath,
         warnings=list(scan.warnings), summary=f"{path.name}: {scan.n_strokes} pen-down strokes",
         report={"strokes": scan.n_strokes, "points": scan.n_points, "pens": sorted(set(scan.pens)), **engraving},
     )
@@ -772,7 +772,7 @@ def _prepare_svg(path: Path, options: JobOptions, settings: MachineSettings,
                         scale=options.scale, fit_mm=options.fit_mm, offset_mm=options.offset_mm,
                         layers=options.layers, pause_between_layers=bool(options.pause_between_layers),
                         keep_duplicates=bool(options.keep_duplicates), home_steps=home)
-    steps = plan_chunks(toolpath, start_steps=home)
+    steps = plan_chunks(toolpath, start_steps=home, fingerprint=True)
     counts = ", ".join(f"{n} {name}" for name, n in sorted(drawing.element_counts.items()))
     layer_list = [{"name": name, "strokes": int((drawing.layer_of_stroke == i).sum()), "length_mm": round(length, 3)}
                   for i, (name, length) in enumerate(zip(drawing.layers(), drawing.layer_lengths_mm()))]
@@ -845,7 +845,7 @@ def prepare_job(
     job.name = name or p.name
     job.summary = job.name + job.summary[len(p.name):]
     job.identity = identity_of(p, opts, settings)
-    job.plan_sha256 = plan_fingerprint(job.toolpath)
+    job.plan_sha256 = job.plan.job_sha256 or plan_fingerprint(job.toolpath)  # (made in the planning pass)
     job.origin = opts.origin
     if home is not None:
         job.home_steps = home

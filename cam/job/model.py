@@ -33,6 +33,8 @@ drawing pictures need.
 """
 from __future__ import annotations
 
+import hashlib
+import tempfile
 from dataclasses import dataclass, field, fields
 from typing import Any, Iterable, Iterator, Optional, Protocol, runtime_checkable
 
@@ -43,7 +45,7 @@ from ..errors import TravelError
 from ..settings import DEFAULT_SETTINGS, MachineSettings
 from ..render.picture import encode_png, toolpath_picture
 
-__all__ = ["Job", "JobLike", "PixelFrame", "CUT", "RETRACT", "TRAVEL", "check_travel", "check_reach", "travel_job",
+__all__ = ["Job", "JobLike", "PixelFrame", "PlanFingerprint", "CUT", "RETRACT", "TRAVEL", "check_travel", "check_reach", "travel_job",
            "pause_points", "join_pieces"]
 
 CUT = 0
@@ -344,3 +346,44 @@ def pause_points(toolpath: JobLike) -> np.ndarray:
         found.append(np.flatnonzero(piece.pause) + first)
         first += len(piece.points_steps)
     return np.concatenate(found) if found else np.zeros(0, np.int64)
+
+
+class PlanFingerprint:
+    """sha256 of a job's moves fed a piece at a time, in bounded memory (:func:`cam.job.resume.plan_fingerprint`;
+    :func:`cam.drive.chunks.plan_chunks` makes it in its own pass when asked).
+
+    The bytes hashed are those of the whole job's arrays, whatever the pieces: its ``(N, 3)`` int64 points,
+    ``0``, its ``(N,)`` uint8 kinds, ``0``, its ``(N,)`` bool pauses, ``0``.  The points go to the hash as
+    they come; the kinds and the pauses (two bytes a move) wait in spooled temporary files (on disk past a
+    few MiB) until :meth:`hexdigest`.
+    """
+
+    SPOOL_BYTES = 8 << 20
+
+    def __init__(self) -> None:
+        self._h = hashlib.sha256()
+        self._kinds = tempfile.SpooledTemporaryFile(max_size=self.SPOOL_BYTES)
+        self._pauses = tempfile.SpooledTemporaryFile(max_size=self.SPOOL_BYTES)
+
+    def add(self, piece: Job) -> None:
+        """Hash the moves of ``piece``, the next piece of the job."""
+        self._h.update(np.ascontiguousarray(np.asarray(piece.points_steps, np.int64)).tobytes())
+        self._kinds.write(np.ascontiguousarray(np.asarray(piece.kind, np.uint8)).tobytes())
+        self._pauses.write(np.ascontiguousarray(np.asarray(piece.pause, np.bool_)).tobytes())
+
+    def hexdigest(self) -> str:
+        """The fingerprint of the moves added so far (sha256, hex); more may be added after."""
+        h = self._h.copy()
+        h.update(b"\0")
+        for spool in (self._kinds, self._pauses):
+            spool.seek(0)
+            for chunk in iter(lambda: spool.read(1 << 20), b""):
+                h.update(chunk)
+            spool.seek(0, 2)  # back to the end: later pieces are appended
+            h.update(b"\0")
+        return h.hexdigest()
+
+    def close(self) -> None:
+        """Let the spooled files go (nothing more may be added)."""
+        self._kinds.close()
+        self._pauses.close()

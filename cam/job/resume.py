@@ -37,7 +37,6 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
-import tempfile
 from dataclasses import asdict, dataclass, field, fields
 from typing import Any, Iterator, Mapping, Optional
 
@@ -45,7 +44,7 @@ import numpy as np
 
 from ..errors import CamError
 from ..settings import MachineSettings
-from .model import CUT, RETRACT, TRAVEL, Job, JobLike, PixelFrame, join_pieces
+from .model import CUT, RETRACT, TRAVEL, Job, JobLike, PixelFrame, PlanFingerprint, join_pieces
 
 __all__ = [
     "JOURNAL_FORMAT", "JOURNAL_STATES", "Journal", "JournalBase", "Resumed", "job_identity", "plan_fingerprint",
@@ -242,46 +241,6 @@ def job_identity(input_sha256: str, options: Mapping[str, Any], settings: Machin
     _sha_update_json(h, {"input": input_sha256, "options": dict(options), "settings": asdict(settings),
                          "files": dict(files_sha256 or {})})
     return h.hexdigest()
-
-
-class PlanFingerprint:
-    """sha256 of a job's moves fed a piece at a time (see :func:`plan_fingerprint`), in bounded memory.
-
-    The bytes hashed are those of the whole job's arrays, whatever the pieces: its ``(N, 3)`` int64 points,
-    ``0``, its ``(N,)`` uint8 kinds, ``0``, its ``(N,)`` bool pauses, ``0``.  The points go to the hash as
-    they come; the kinds and the pauses (two bytes a move) wait in spooled temporary files (on disk past a
-    few MiB) until :meth:`hexdigest`.
-    """
-
-    SPOOL_BYTES = 8 << 20
-
-    def __init__(self) -> None:
-        self._h = hashlib.sha256()
-        self._kinds = tempfile.SpooledTemporaryFile(max_size=self.SPOOL_BYTES)
-        self._pauses = tempfile.SpooledTemporaryFile(max_size=self.SPOOL_BYTES)
-
-    def add(self, piece: Job) -> None:
-        """Hash the moves of ``piece``, the next piece of the job."""
-        self._h.update(np.ascontiguousarray(np.asarray(piece.points_steps, np.int64)).tobytes())
-        self._kinds.write(np.ascontiguousarray(np.asarray(piece.kind, np.uint8)).tobytes())
-        self._pauses.write(np.ascontiguousarray(np.asarray(piece.pause, np.bool_)).tobytes())
-
-    def hexdigest(self) -> str:
-        """The fingerprint of the moves added so far (sha256, hex); more may be added after."""
-        h = self._h.copy()
-        h.update(b"\0")
-        for spool in (self._kinds, self._pauses):
-            spool.seek(0)
-            for chunk in iter(lambda: spool.read(1 << 20), b""):
-                h.update(chunk)
-            spool.seek(0, 2)  # back to the end: later pieces are appended
-            h.update(b"\0")
-        return h.hexdigest()
-
-    def close(self) -> None:
-        """Let the spooled files go (nothing more may be added)."""
-        self._kinds.close()
-        self._pauses.close()
 
 
 def plan_fingerprint(job: JobLike) -> str:
