@@ -47,6 +47,8 @@ FUNCTION_LEVEL_IMPORTS = {
         "can name the extra in one line",
     ("cam.web.server", "uvicorn"): "optional dependency: the web stack (cam[web]), as starlette",
     ("cam.web.connections", "uvicorn"): "optional dependency: the web stack (cam[web]), as cam.web.server",
+    ("cam.job.jobs", "cam.digitize.sketch"): "heavy (scipy.ndimage and scikit-image, about 0.6 s): loaded only "
+                                             "when a sketch is traced (--trace), not for every job",
     ("cam.cli", "numba"): "heavy (about half a second): the first-compile note is registered only when a "
                           "command runs, so --help and bad options stay quick",
 }

@@ -46,7 +46,6 @@ from ..formats.gcode import load_tool_table, open_gcode
 from ..options import JOB_OPTIONS, Option, MAX_DEPTH_PX, MAX_MM, MAX_PX, check_range, degenerate  # noqa: F401 (the limits re-exported)
 from ..formats.hpgl import scan_hpgl
 from ..formats.svg import load_svg
-from ..digitize.sketch import load_sketch, trace
 from ..tool import parse_tool, tool_of_settings
 from ..render.picture import LEGEND_PX, depth_colours, encode_png, toolpath_picture
 from ..render.report import job_report
@@ -605,6 +604,8 @@ def _prepare_pixels(path: Path, kind: str, options: JobOptions, settings: Machin
     drawing = None
     traced: list[str] = []
     if kind == "drawing" and options.trace:  # a sketch or a photo: its size is checked once traced (shrunk)
+        from ..digitize.sketch import load_sketch, trace  # scipy and scikit-image: 0.6 s, for a traced sketch only
+
         drawing = trace(load_sketch(path), trace_min_length_px=options.trace_min_length_px,
                         trace_fill=options.trace_fill, source=str(path))
         check_drawing_size(drawing.width_px, drawing.height_px, settings, str(path))
