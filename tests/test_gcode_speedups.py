@@ -11,7 +11,7 @@ import random
 import pytest
 
 from cam.errors import ParseError
-from cam.formats import _gcode_flow, ngc
+from cam.formats import _gcode_flow, _gcode_lines, ngc
 from cam.formats.gcode import open_gcode, parse_gcode
 from cam.limits import MAX_COORD_MM
 from test_gcode_lang import CONSTRUCTS, NCFILES, POSTS, RS274_DEFAULT_TOOLS_MM, SUBROUTINE
@@ -397,3 +397,42 @@ def test_plain_numbers_read_as_the_expression_reader_reads_them(monkeypatch):
         want = _read(body)
         monkeypatch.setattr(ngc, "PLAIN_NUMBERS", True)
         assert repr(_read(body)) == repr(want), body
+
+
+FILE_BYTES = [
+    b"G21 G90\nG0 X1\n\nG1 Y-2 F100\nG1 X3",
+    b"\xef\xbb\xbfG21\r\nG0 X1\r\n(\xc3\xa9t\xc3\xa9)\nG1 Y-2 F100\r\n",
+    b"G21\rG0 X1\rG1 X2 F100\r",
+    b"G21 G90\x0cG0 X1\n\x1c\nG1 Y-2 F100\x0b\x1dG1 X3\x1e\n\n\n",
+    b"",
+    b"\n",
+    b"o100 sub\nG0 X1\no100 endsub\nM2\n" * 3,
+]
+
+
+@pytest.mark.parametrize("block", [1, 5, 64, 1 << 16])
+def test_a_file_read_a_block_at_a_time_gives_its_lines(tmp_path, monkeypatch, block):
+    """``_Source`` reads a file a block of lines at a time: the lines ``str.splitlines`` of its text gives, read in
+    order or after seeks (every mark, any line), whatever the block size."""
+    monkeypatch.setattr(_gcode_lines, "_BLOCK_BYTES", block)
+    monkeypatch.setattr(_gcode_lines, "MARK_EVERY", 2)
+    rng = random.Random(block)
+    for k, data in enumerate(FILE_BYTES + [b"X1 Y-1\n" * 50 + b"X\xc3\xa9\n" + b"X2 Y-2\r\n" * 50]):
+        path = tmp_path / f"f{k}.ngc"
+        path.write_bytes(data)
+        want = _gcode_lines._Source("m", data.decode("utf-8"))
+        got = _gcode_lines._Source("f", path=path)
+        assert got.n_lines == want.n_lines and got.o_at == want.o_at and got.subs == want.subs, k
+        lines = [want.line(i) for i in range(want.n_lines)]
+        assert [got.line(i) for i in range(got.n_lines)] == lines, k
+        for i in [rng.randrange(max(1, got.n_lines)) for _ in range(30)] if got.n_lines else []:
+            assert got.line(i) == lines[i], (k, i)
+        got.close()
+
+
+def test_small_blocks_and_marks_give_the_same_moves(compare, monkeypatch):
+    monkeypatch.setattr(_gcode_lines, "_BLOCK_BYTES", 9)
+    monkeypatch.setattr(_gcode_lines, "MARK_EVERY", 3)
+    monkeypatch.setattr(_gcode_flow, "CACHE_LINES", 2)
+    for name in ("subroutines_loops", "spindle_comments_blank_lines"):
+        assert compare(FRAMES[name], name=name)[1][1] is None

@@ -46,7 +46,8 @@ class _PlainLines(_State):
             m = _PLAIN.fullmatch(text)
             if m is None or m.lastindex is None:
                 return 0, text
-            src.cache[idx] = (text, m)  # one line more than CACHE_LINES at most, until the next clear
+            if src.o_at:  # lines run again only by O words (loops, calls, branches)
+                src.cache[idx] = (text, m)  # one line more than CACHE_LINES at most, until the next clear
         scale, absolute, lim = self.scale, self.absolute, MAX_COORD_MM
         o0, o1, o2 = self.offsets()  # nothing a plain line does changes them
         s0, s1, s2 = self.start
@@ -55,6 +56,7 @@ class _PlainLines(_State):
         rpm = self.spindle_rpm if spindle else 0.0
         file = "" if src is self.main else src.name
         cache, moves, match = src.cache, self.moves, _PLAIN.fullmatch
+        keep = bool(src.o_at)  # cache the lines: O words may run them again
         n, end_idx, stop = 0, min(src.n_lines, idx + limit), self.batch_moves
         raw, pending, moved = "", None, False
         while idx + n < end_idx and len(moves) < stop:  # a batch ends where it would line by line
@@ -65,9 +67,10 @@ class _PlainLines(_State):
                 m = match(text)
                 if m is None or m.lastindex is None:
                     break
-                if len(cache) >= CACHE_LINES:
-                    cache.clear()
-                cache[i] = (text, m)
+                if keep:
+                    if len(cache) >= CACHE_LINES:
+                        cache.clear()
+                    cache[i] = (text, m)
             elif len(cached) == 2:
                 pending = text = cached[0]
                 m = cached[1]

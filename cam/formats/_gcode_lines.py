@@ -36,6 +36,24 @@ def _decoded(raw: bytes, path: Path) -> list[str]:
     return text.splitlines() or [""]
 
 
+_BLOCK_BYTES = 1 << 16
+"""About how much of a file is read at a time."""
+_OTHER_ENDS = (b"\r", b"\x0b", b"\x0c", b"\x1c", b"\x1d", b"\x1e")
+"""The ASCII characters other than ``\\n`` that end a line for ``str.splitlines``."""
+
+
+def _block_lines(raws: list[bytes], path: Path) -> list[str]:
+    """The lines of consecutive ``\\n``-ended pieces of a file, as :func:`_decoded` gives them one by one: a
+    piece of ASCII without another line end is one line, its text without the ``\\n``."""
+    block = b"".join(raws)
+    if not block.isascii() or any(end in block for end in _OTHER_ENDS):
+        return [text for raw in raws for text in _decoded(raw, path)]
+    lines = block.decode("ascii").split("\n")
+    if block.endswith(b"\n"):
+        lines.pop()
+    return lines
+
+
 def _no_bom(text: str) -> str:
     """The text without a UTF-8 byte-order mark at its start (Windows editors and some posts write one)."""
     return text[1:] if text.startswith("\ufeff") else text
@@ -57,7 +75,7 @@ class _Source:
         self._marks: list[tuple[int, int]] = []  # (line index, byte offset of the file line it starts)
         self._handle: Optional[BinaryIO] = None
         self._next = 0  # the index of the line the file gives next
-        self._pending: list[str] = []  # lines read from the file that come before the next file line
+        self._pending: list[str] = []  # the lines read from the file and not yet given, the next one last
         self.n_lines = self.scan()
 
     def _open(self) -> BinaryIO:
@@ -118,11 +136,11 @@ class _Source:
             return self._lines[i]
         if i != self._next or self._handle is None:
             self._seek(i)
-        if not self._pending:
-            raw = self._handle.readline()  # type: ignore[union-attr]
-            self._pending = _decoded(raw, self.path) if raw else [""]  # type: ignore[arg-type]
+        if not self._pending:  # the next lines, last first
+            raws = self._handle.readlines(_BLOCK_BYTES)  # type: ignore[union-attr]
+            self._pending = _block_lines(raws, self.path)[::-1] if raws else [""]  # type: ignore[arg-type]
         self._next += 1
-        text = self._pending.pop(0)
+        text = self._pending.pop()
         return _no_bom(text) if i == 0 else text
 
     def _seek(self, i: int) -> None:
