@@ -513,12 +513,13 @@ class _Planner:
         """Plan ``mvs`` in order (consecutive straight moves at once, :func:`_straight_run`); yields whenever
         ``piece_rows`` rows or more wait for :meth:`piece` (between two moves)."""
         i = 0
+        step_mm = float(self.frame.step_mm.min())
         while i < len(mvs):
             j = i
             periods = 0
             while j < len(mvs) and mvs[j].kind in ("rapid", "feed") and (j == i or periods < RUN_PERIODS):
-                periods += int(max(abs(a - b) for a, b in zip(mvs[j].end, mvs[j - 1].end if j > i else self.cur_mm))
-                               / float(self.frame.step_mm.min())) + 1
+                a, b = mvs[j].end, mvs[j - 1].end if j > i else self.cur_mm
+                periods += int(max(abs(a[0] - b[0]), abs(a[1] - b[1]), abs(a[2] - b[2])) / step_mm) + 1
                 j += 1
             run = _straight_run(self.frame, mvs[i:j], self.cur_mm, self.cur_steps, self.moves.at, self.program_ns) \
                 if j > i + 1 else None
