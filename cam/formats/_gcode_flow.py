@@ -39,15 +39,13 @@ class _PlainLines(_State):
         """Run the plain lines from line ``idx`` of ``src`` on, at most ``limit``, and stop once :attr:`moves`
         holds :attr:`batch_moves` (as :func:`cam.formats.gcode._interpret` takes them after each line): how many
         lines ran, and the text of the line they stopped at when it was read (None: not read)."""
-        if self.inverse_time or self.resync is not None or (self.spindle and not self.spindle_noted):
+        if self.inverse_time or self.resync is not None or (self.spindle and not self.spindle_noted) \
+                or len(self.moves) >= self.batch_moves:
             return 0, None
-        if idx not in src.cache:  # most lines of a program that is not plain: no set-up for them
-            text = src.line(idx)
-            m = _PLAIN.fullmatch(text)
-            if m is None or m.lastindex is None:
-                return 0, text
-            if src.o_at:  # lines run again only by O words (loops, calls, branches)
-                src.cache[idx] = (text, m)  # one line more than CACHE_LINES at most, until the next clear
+        keep = bool(src.o_at)  # cache the lines: O words may run them again
+        text, m = _plain_at(src, idx, keep)
+        if m is None:  # most lines of a program that is not plain: no set-up for them
+            return 0, text
         scale, absolute, lim = self.scale, self.absolute, MAX_COORD_MM
         o0, o1, o2 = self.offsets()  # nothing a plain line does changes them
         s0, s1, s2 = self.start
@@ -55,28 +53,10 @@ class _PlainLines(_State):
         motion, feed, spindle = self.motion, self.feed, self.spindle
         rpm = self.spindle_rpm if spindle else 0.0
         file = "" if src is self.main else src.name
-        cache, moves, match = src.cache, self.moves, _PLAIN.fullmatch
-        keep = bool(src.o_at)  # cache the lines: O words may run them again
-        n, end_idx, stop = 0, min(src.n_lines, idx + limit), self.batch_moves
-        raw, pending, moved = "", None, False
-        while idx + n < end_idx and len(moves) < stop:  # a batch ends where it would line by line
-            i = idx + n
-            cached = cache.get(i)
-            if cached is None:
-                pending = text = src.line(i)
-                m = match(text)
-                if m is None or m.lastindex is None:
-                    break
-                if keep:
-                    if len(cache) >= CACHE_LINES:
-                        cache.clear()
-                    cache[i] = (text, m)
-            elif len(cached) == 2:
-                pending = text = cached[0]
-                m = cached[1]
-            else:
-                pending = None
-                break
+        moves, n, stop = self.moves, 0, self.batch_moves
+        end_idx = min(src.n_lines, idx + limit)
+        raw, moved = "", False
+        while True:
             ns, gs, xs, ys, zs, fs = m.groups()
             if ns is not None and not float(ns) <= MAX_LINE_NUMBER:
                 break
@@ -107,19 +87,44 @@ class _PlainLines(_State):
                     break
                 end = (q0 - s0, q1 - s1, q2 - s2)
                 if new_motion:
-                    moves.append(GcodeMove("feed", i + 1, end, new_feed, file=file, spindle=spindle, spindle_rpm=rpm))
+                    moves.append(GcodeMove("feed", idx + n + 1, end, new_feed, file=file, spindle=spindle,
+                                           spindle_rpm=rpm))
                 else:
-                    moves.append(GcodeMove("rapid", i + 1, end, file=file, spindle=spindle, spindle_rpm=rpm))
+                    moves.append(GcodeMove("rapid", idx + n + 1, end, file=file, spindle=spindle, spindle_rpm=rpm))
                 m0, m1, m2, moved = q0, q1, q2, True
             if gs is not None:
                 self.cycle_il = None  # G0, G1: a new series of canned cycles starts where the tool stands
-            raw, n, motion, feed, pending = text, n + 1, new_motion, new_feed, None
+            raw, n, motion, feed, text = text, n + 1, new_motion, new_feed, None
+            if idx + n >= end_idx or len(moves) >= stop:  # a batch ends where it would line by line
+                break
+            text, m = _plain_at(src, idx + n, keep)
+            if m is None:
+                break
         if moved:
             self.mach, self.g5_reflect = [m0, m1, m2], None
         if n:
             self.motion, self.feed = motion, feed
             self.source, self.line_no, self.raw = src, idx + n, raw
-        return n, pending
+        return n, text
+
+
+def _plain_at(src: _Source, i: int, keep: bool) -> tuple[str | None, re.Match | None]:
+    """Line ``i`` of ``src`` and its match of :data:`_PLAIN` (None: not a plain line); ``(None, None)``: the line
+    is cached as the general interpreter read it.  ``keep``: cache a plain line."""
+    cached = src.cache.get(i)
+    if cached is None:
+        text = src.line(i)
+        m = _PLAIN.fullmatch(text)
+        if m is None or m.lastindex is None:
+            return text, None
+        if keep:
+            if len(src.cache) >= CACHE_LINES:
+                src.cache.clear()
+            src.cache[i] = (text, m)
+        return text, m
+    if len(cached) == 2:
+        return cached
+    return None, None
 
 
 class _Flow(_PlainLines):
