@@ -22,7 +22,7 @@ FAST_LINES = True
 """Run plain lines (:data:`_PLAIN`) by :meth:`_PlainLines.plain_lines`; False: every line by the general
 interpreter (the tests compare the two)."""
 
-_NUM = r"([-+]?(?:\d+\.?\d*|\.\d+))"
+_NUM = r"([-+]?(?:\d+(?:\.\d*)?|\.\d+))"
 _PLAIN = re.compile(r"[ \t]*(?:[nN](\d+)[ \t]*)?(?:[gG]0*([01])(?![\d.])[ \t]*)?"
                     + "".join(rf"(?:[{a}{a.upper()}]{_NUM}[ \t]*)?" for a in "xyzf"))
 """A plain line, as most of a CAM post's lines are: an optional N, G0 or G1, then X Y Z F in that order, each a

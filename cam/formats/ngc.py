@@ -32,15 +32,15 @@ class NgcSyntaxError(Exception):
 O_KEYWORDS = ("endsub", "endwhile", "endif", "endrepeat", "elseif", "else", "sub", "call", "do", "while", "if",
               "break", "continue", "return", "repeat")
 
-_NUMBER = re.compile(r"\d+\.?\d*|\.\d+")
+_NUMBER = re.compile(r"\d+(?:\.\d*)?|\.\d+")
 PLAIN_NUMBERS = True
 """Read words with plain numbers by :data:`_PLAIN_WORDS` and :data:`_SIGNED`; False: every value by
 :meth:`_Reader.value` (the tests compare the two)."""
-_SIGNED = re.compile(r"([-+]?)(\d+\.?\d*|\.\d+)")
+_SIGNED = re.compile(r"([-+]?)(\d+(?:\.\d*)?|\.\d+)")
 """A word's value when it is a plain number (the most common case): read as :meth:`_Reader.value` reads it."""
-_PLAIN_WORDS = re.compile(r"(?:[a-z@^][-+]?(?:\d+\.?\d*|\.\d+))+")
+_PLAIN_WORDS = re.compile(r"(?:[a-z@^][-+]?(?:\d+(?:\.\d*)?|\.\d+))+")
 """A line of words with plain numbers only (``g1x1.5y-2``): each word ends where the next letter starts."""
-_WORD = re.compile(r"([a-z@^])([-+]?)(\d+\.?\d*|\.\d+)")
+_WORD = re.compile(r"([a-z@^])([-+]?)(\d+(?:\.\d*)?|\.\d+)")
 _NAME_OPS = ("mod", "eq", "ne", "gt", "ge", "lt", "le", "and", "or", "xor")
 _PRECEDENCE = {"**": 4, "*": 3, "/": 3, "mod": 3, "+": 2, "-": 2,
                "eq": 1, "ne": 1, "gt": 1, "ge": 1, "lt": 1, "le": 1, "and": 0, "or": 0, "xor": 0}
