@@ -22,6 +22,12 @@ JOBS += [(name, dict(profile=ROOT / "profiles" / prof))
 FAST_JOBS = 5 + 4  # the 2D samples and each profile on the first relief; the other reliefs in the slow tier
 
 
+SLOW_CASES = {  # the fast tier keeps the other cases of these tests (tests/conftest.py)
+    'test_rs274_accepts_export_and_carves_the_same[disc.png-/profiles/flat.png]',
+    'test_rs274_accepts_export_and_carves_the_same[disc.png-/profiles/dome.png]',
+}
+
+
 def test_header_units_feeds_and_end():
     d = cam.digitize(drawing_from_rows(["......", ".##...", "......"]))
     g = to_gcode(cam.plan(d, depth=3))

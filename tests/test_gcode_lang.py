@@ -17,7 +17,9 @@ from cam.job.gcode import plan_gcode
 from cam.settings import MachineSettings, Travel
 from support.lcnc import CanonMove, bezier_mm, canonical_polyline_mm, parse_canonical, mark_spline_ends, run_rs274
 
-SLOW_CASES = {'test_splines_follow_the_exact_curve_and_rs274_after_offsets[G21-1.0]'}
+SLOW_CASES = {
+    'test_post_processor_programs_follow_rs274[carbide_create]',
+    'test_splines_follow_the_exact_curve_and_rs274_after_offsets[G21-1.0]'}
 """Cases run in the slow tier only (tests/conftest.py): the fast tier stays under 3 minutes."""
 
 needs_rs274 = pytest.mark.skipif(

@@ -21,7 +21,11 @@ from cam.verify.pinlog import write_pin_log
 from conftest import SAMPLES
 from test_resume_one_path import Sliced  # a Job cut into pieces of a given size
 
-SLOW_CASES = {'test_every_consumer_gives_the_same_for_any_piece_size[1000-pyramid.png]'}
+SLOW_CASES = {
+    'test_the_planning_pass_gives_the_journals_fingerprint[pyramid.png]',
+    'test_every_consumer_gives_the_same_for_any_piece_size[1-ellipse.png]',
+    'test_every_consumer_gives_the_same_for_any_piece_size[1-board.drl]',
+    'test_every_consumer_gives_the_same_for_any_piece_size[1000-pyramid.png]'}
 """Cases run in the slow tier only (tests/conftest.py): the fast tier stays under 3 minutes."""
 
 SETTINGS = cam.MachineSettings().replace(delay_xy_ms=0.05, delay_z_ms=0.05)

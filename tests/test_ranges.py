@@ -17,7 +17,9 @@ from cam.limits import MAX_MOVE_S
 from test_cli_checks import ENV, cli, refused
 
 # over 1.3 s each: the slow tier (the fast tier stays under 3 minutes, docs/tests.md)
-SLOW_CASES = {'test_excellon_repeats_are_bounded_in_all'}
+SLOW_CASES = {
+    'test_a_program_longer_than_a_year_is_refused_naming_the_line',
+    'test_excellon_repeats_are_bounded_in_all'}
 
 DIGITS_400 = "9" * 400
 

@@ -16,7 +16,9 @@ SETTINGS = cam.MachineSettings()  # 8 steps per pixel: grids of an eighth, a qua
 STEP_MM = SETTINGS.mm_per_step_z
 
 
-SLOW_CASES = {  # the fast tier keeps the other cases of these tests (tests/conftest.py)
+SLOW_CASES = {
+    'test_the_finer_pass_takes_what_the_grid_allows_and_never_gouges[hemisphere-v:60:0]',
+      # the fast tier keeps the other cases of these tests (tests/conftest.py)
     'test_the_finer_pass_takes_what_the_grid_allows_and_never_gouges[stepped pyramid-v:60:0]',
 }
 
