@@ -36,6 +36,8 @@ exit code, one real run, and what needs a process (signals, a terminal, a killed
 """
 from __future__ import annotations
 
+import ast
+import functools
 import io
 import os
 import shutil
@@ -72,6 +74,12 @@ SAMPLES = ROOT / "samples"
 # session's own, emptied before each test, never the user's ~/.local/state/cam (see state_home below).
 STATE_HOME = Path(tempfile.mkdtemp(prefix="cam-tests-state-"))
 os.environ["XDG_STATE_HOME"] = str(STATE_HOME)
+
+
+@functools.lru_cache(maxsize=None)
+def parsed_source(path: Path) -> ast.Module:
+    """The syntax tree of a source file, parsed once for every test that reads cam's sources (do not change it)."""
+    return ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
 
 
 @pytest.fixture(autouse=True)

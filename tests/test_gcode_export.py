@@ -22,7 +22,9 @@ JOBS += [(name, dict(profile=ROOT / "profiles" / prof))
 FAST_JOBS = 5 + 4  # the 2D samples and each profile on the first relief; the other reliefs in the slow tier
 
 
-SLOW_CASES = {  # the fast tier keeps the other cases of these tests (tests/conftest.py)
+SLOW_CASES = {
+    'test_rs274_accepts_export_and_carves_the_same[disc.png-/profiles/pyramid.png]',
+      # the fast tier keeps the other cases of these tests (tests/conftest.py)
     'test_rs274_accepts_export_and_carves_the_same[disc.png-/profiles/flat.png]',
     'test_rs274_accepts_export_and_carves_the_same[disc.png-/profiles/dome.png]',
 }

@@ -22,7 +22,7 @@ from cam.cli import COMMANDS
 from cam.cli.parser import build_parser
 from cam.job import jobs
 
-from conftest import ROOT
+from conftest import ROOT, parsed_source
 
 ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
 
@@ -120,7 +120,7 @@ def _ancestors(name: str) -> list[str]:
 def _module_imports(name: str) -> list[tuple[ast.stmt, Optional[str]]]:
     """The import statements of cam module ``name`` (:func:`_imports`), its source parsed once for every test."""
     path = MODULES[name]
-    return list(_imports(ast.parse(path.read_text(), str(path))))
+    return list(_imports(parsed_source(path)))
 
 
 def import_graph() -> dict[str, set[str]]:
@@ -304,7 +304,7 @@ def test_cli_functions_are_short():
     long = []
     for name, path in MODULES.items():
         if name == "cam.cli" or name.startswith("cam.cli."):
-            for node in ast.walk(ast.parse(path.read_text())):
+            for node in ast.walk(parsed_source(path)):
                 if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
                     n = node.end_lineno - node.lineno + 1
                     if n > MAX_CLI_FUNCTION_LINES:

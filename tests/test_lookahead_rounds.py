@@ -11,6 +11,11 @@ from cam.job.hpgl import plan_hpgl
 from conftest import SAMPLES
 
 
+SLOW_CASES = {  # the fast tier keeps the other cases of these tests (tests/conftest.py)
+    'test_partial_rounds_give_the_periods_of_whole_rounds[two pens]',
+}
+
+
 def _compare_windows(job, monkeypatch, n_windows=200):
     """Plan the first ``n_windows`` look-ahead windows of a job both ways; returns (windows, rule breaks the
     partial repeat rounds found: a repeat that finds one more shows the partial judging at work)."""

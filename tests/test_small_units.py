@@ -7,6 +7,8 @@ unit around it: it is part of that unit's text)."""
 import ast
 from pathlib import Path
 
+from conftest import parsed_source
+
 MAX_FUNCTION_LINES = 80
 MAX_CLASS_LINES = 300
 
@@ -41,7 +43,7 @@ def unit_sizes(path: Path) -> list[tuple[int, str, str, int]]:
             else:
                 visit(child, prefix)
 
-    visit(ast.parse(text, filename=str(path)), "")
+    visit(parsed_source(path), "")
     return out
 
 
