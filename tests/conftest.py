@@ -21,13 +21,9 @@ command).  ``python -m pytest -m "not slow"`` is the fast tier, for every commit
 behaviour, with at least one end-to-end test per input kind (2D and 3D drawings, profiles, digitized matrices,
 Excellon, HPGL, SVG, G-code) and the mock port's pin-log carve check.  ``-m slow`` runs the rest.
 
-Measured on the 2-core development machine (2026-11-25, other test runs sharing it, load 1-3):
-``python -m pytest tests -m "not slow"`` over the files this tier was cut for took 1 min 50 s (1105 passed,
-2 skipped; the files added during issue #28, test_drawing_one_path, test_hpgl_one_path, test_one_path,
-test_resume_one_path and test_pieces_any_kind, ran with it too: 6 min in all, 1247 passed, those five files
-232 s of it, so they need their own slow marks to keep this tier under 3 minutes).  The slow tier is 134
-tests; ``python -m pytest tests`` runs both, 20-30 minutes.  Keep a new test in the fast tier only if it
-takes well under a second; give its costly cases ``pytest.param(..., marks=pytest.mark.slow)``.
+The measured time of each tier is in docs/tests.md (the fast tier: 1,729 tests in 2 min 52 s on the idle 2-core
+machine, 2026-11-26).  Keep a new test in the fast tier only if it takes well under a second; give its costly
+cases ``pytest.param(..., marks=pytest.mark.slow)``, or name them in the module's ``SLOW_CASES``.
 
 The command line is tested in this process (:func:`run_cli`: ``cam.cli.main`` with its own stdout, stderr and
 stdin, exit code from its return value or ``SystemExit``), which saves the 2.6 s of imports every
