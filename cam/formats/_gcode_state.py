@@ -14,6 +14,12 @@ from ._gcode_data import CS_NAMES, GcodeMove, _Frame, _Source
 from .ngc import NgcSyntaxError, evaluate
 
 
+def _cs_param(cs: int) -> int:
+    """The parameter holding the X offset of coordinate system ``cs`` (1 = G54 .. 9 = G59.3); Y and Z follow it.
+    LinuxCNC's numbering: #5221 for G54, each system 20 further."""
+    return 5221 + 20 * (cs - 1)
+
+
 class _State:
     """Everything one run of a program keeps between its lines, and the words that read or set it."""
 
@@ -44,7 +50,7 @@ class _State:
                 raise ParseError(f"{source.name}: unknown work offset {str(name)[:20]!r} (known: "
                                  f"{', '.join(CS_NAMES)})")
             for i, v in enumerate(zero):
-                self.params[5221 + 20 * CS_NAMES.index(name) + i] = float(v)
+                self.params[_cs_param(CS_NAMES.index(name) + 1) + i] = float(v)
         if active_offset not in CS_NAMES:
             raise ParseError(f"{source.name}: unknown work offset {str(active_offset)[:20]!r} (known: "
                              f"{', '.join(CS_NAMES)})")
@@ -102,12 +108,12 @@ class _State:
         return {name: tuple(self.g5x(k + 1)) for k, name in enumerate(CS_NAMES)}  # type: ignore[misc]
 
     def g5x(self, cs: int | None = None) -> list[float]:
-        base = 5221 + 20 * ((cs or self.cs) - 1)
+        base = _cs_param(cs or self.cs)
         return [self.params.get(base + i, 0.0) for i in range(3)]
 
     def offsets(self) -> list[float]:
         """The active work offset plus G92 (and the tool length offset in Z), mm: as ``g5x()`` + ``g92``."""
-        base = 5221 + 20 * (self.cs - 1)
+        base = _cs_param(self.cs)
         get, g92 = self.params.get, self.g92
         return [get(base, 0.0) + g92[0], get(base + 1, 0.0) + g92[1], get(base + 2, 0.0) + g92[2] + self.tlo]
 
@@ -245,7 +251,7 @@ class _State:
         if vals.get("r", 0.0):
             raise self.err("coordinate system rotation (G10 L2 R) is not supported")
         cs = p or self.cs
-        base = 5221 + 20 * (cs - 1)
+        base = _cs_param(cs)
         for i, a in enumerate("xyz"):
             if a in vals:
                 v = vals[a] * self.scale
