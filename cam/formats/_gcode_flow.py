@@ -16,13 +16,13 @@ from ..limits import MAX_COORD_MM, MAX_FEED_MM_MIN, MAX_GCODE_CALL_DEPTH, MAX_LI
 from ._gcode_data import GcodeMove, _End, _Frame, _Source, _shown, _strip_comments
 from ._gcode_lines import CACHE_LINES
 from ._gcode_state import _State
-from .ngc import Line, NgcSyntaxError, read_line
+from .ngc import NUMBER, Line, NgcSyntaxError, read_line
 
 FAST_LINES = True
 """Run plain lines (:data:`_PLAIN`) by :meth:`_PlainLines.plain_lines`; False: every line by the general
 interpreter (the tests compare the two)."""
 
-_NUM = r"([-+]?(?:\d+(?:\.\d*)?|\.\d+))"
+_NUM = rf"([-+]?(?:{NUMBER}))"
 _PLAIN = re.compile(r"[ \t]*(?:[nN](\d+)[ \t]*)?(?:[gG]0*([01])(?![\d.])[ \t]*)?"
                     + "".join(rf"(?:[{a}{a.upper()}]{_NUM}[ \t]*)?" for a in "xyzf"))
 """A plain line, as most of a CAM post's lines are: an optional N, G0 or G1, then X Y Z F in that order, each a

@@ -32,15 +32,19 @@ class NgcSyntaxError(Exception):
 O_KEYWORDS = ("endsub", "endwhile", "endif", "endrepeat", "elseif", "else", "sub", "call", "do", "while", "if",
               "break", "continue", "return", "repeat")
 
-_NUMBER = re.compile(r"\d+(?:\.\d*)?|\.\d+")
+NUMBER = r"\d+(?:\.\d*)?|\.\d+"
+r"""An unsigned decimal number, as G-code writes it (``12``, ``1.``, ``.5``, ``1.25``); every pattern of the G-code
+reader that reads one is made from this.  Each number matches one way only: ``\d+\.?\d*`` could split ``2001``
+into ``20`` and ``01``, and a long line of words that did not fit a pattern then backtracked exponentially."""
+_NUMBER = re.compile(NUMBER)
 PLAIN_NUMBERS = True
 """Read words with plain numbers by :data:`_PLAIN_WORDS` and :data:`_SIGNED`; False: every value by
 :meth:`_Reader.value` (the tests compare the two)."""
-_SIGNED = re.compile(r"([-+]?)(\d+(?:\.\d*)?|\.\d+)")
+_SIGNED = re.compile(rf"([-+]?)({NUMBER})")
 """A word's value when it is a plain number (the most common case): read as :meth:`_Reader.value` reads it."""
-_PLAIN_WORDS = re.compile(r"(?:[a-z@^][-+]?(?:\d+(?:\.\d*)?|\.\d+))+")
+_PLAIN_WORDS = re.compile(rf"(?:[a-z@^][-+]?(?:{NUMBER}))+")
 """A line of words with plain numbers only (``g1x1.5y-2``): each word ends where the next letter starts."""
-_WORD = re.compile(r"([a-z@^])([-+]?)(\d+(?:\.\d*)?|\.\d+)")
+_WORD = re.compile(rf"([a-z@^])([-+]?)({NUMBER})")
 _NAME_OPS = ("mod", "eq", "ne", "gt", "ge", "lt", "le", "and", "or", "xor")
 _PRECEDENCE = {"**": 4, "*": 3, "/": 3, "mod": 3, "+": 2, "-": 2,
                "eq": 1, "ne": 1, "gt": 1, "ge": 1, "lt": 1, "le": 1, "and": 0, "or": 0, "xor": 0}
