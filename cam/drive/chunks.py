@@ -591,7 +591,9 @@ def plan_chunks(job: JobLike, *, start_steps: tuple[int, int, int] = (0, 0, 0),
     last = (0, 0, 0)
     reach = _Reach(s)
     sha = PlanFingerprint() if fingerprint else None
-    for piece in job.pieces() if sha is None else _hashed(job.pieces(), sha):
+    for piece in job.pieces():
+        if sha is not None:
+            sha.add(piece)
         pts = np.asarray(piece.points_steps, np.int64).reshape(-1, 3)
         if not len(pts):
             continue
@@ -629,13 +631,6 @@ def plan_chunks(job: JobLike, *, start_steps: tuple[int, int, int] = (0, 0, 0),
         any_move_start=any_move_start, job_sha256=job_sha256,
         _stops=np.unique(np.concatenate(stops or [np.zeros(0, np.int64)])),
         _time_ns=reach.time_ns if s.ramp == "constant" else None, _extent=reach.extent_and_cut())
-
-
-def _hashed(pieces: Iterator[Job], sha: PlanFingerprint) -> Iterator[Job]:
-    """``pieces``, each added to ``sha`` as it passes."""
-    for piece in pieces:
-        sha.add(piece)
-        yield piece
 
 
 def plan_steps(job: JobLike, *, start_steps: tuple[int, int, int] = (0, 0, 0)) -> StepPlan:

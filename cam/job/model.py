@@ -45,8 +45,8 @@ from ..errors import TravelError
 from ..settings import DEFAULT_SETTINGS, MachineSettings
 from ..render.picture import encode_png, toolpath_picture
 
-__all__ = ["Job", "JobLike", "PixelFrame", "PlanFingerprint", "CUT", "RETRACT", "TRAVEL", "check_travel", "check_reach", "travel_job",
-           "pause_points", "join_pieces"]
+__all__ = ["Job", "JobLike", "PixelFrame", "PlanFingerprint", "CUT", "RETRACT", "TRAVEL", "check_travel", "check_reach",
+           "travel_job", "pause_points", "join_pieces"]
 
 CUT = 0
 """A point at or above the asked depth of what is cut (the tool is in the material or at the surface over it)."""
