@@ -193,16 +193,21 @@ def net_steps_kernel(data, prev_byte, clock, dirbit):
         data: ``(M,)`` uint8 data register after each write; prev_byte: the register before the first.
         clock, dirbit: ``(3,)`` int64 clock and direction bit of X, Y, Z.
     """
-    out = np.zeros(3, np.int64)
+    cx, cy, cz = clock[0], clock[1], clock[2]
+    dx, dy, dz = dirbit[0], dirbit[1], dirbit[2]
+    x = np.int64(0)
+    y = np.int64(0)
+    z = np.int64(0)
     prev = np.int64(prev_byte)
-    for i in range(data.shape[0]):
+    for i in range(data.shape[0]):  # without branches: the steps of the minor axes come irregularly
         d = np.int64(data[i])
         rising = d & ~prev
-        if rising:
-            for a in range(3):
-                if rising & clock[a]:
-                    out[a] += 1 if d & dirbit[a] else -1
+        x += np.int64((rising & cx) != 0) * (2 * np.int64((d & dx) != 0) - 1)
+        y += np.int64((rising & cy) != 0) * (2 * np.int64((d & dy) != 0) - 1)
+        z += np.int64((rising & cz) != 0) * (2 * np.int64((d & dz) != 0) - 1)
         prev = d
+    out = np.empty(3, np.int64)
+    out[0], out[1], out[2] = x, y, z
     return out
 
 

@@ -227,8 +227,8 @@ class SessionControls(SessionView):
             a = self._activity
             ctl = a.controller if a else None
             self._prompt_seq += 1
-            self._prompt = Prompt(self._prompt_seq, note,
-                                  tuple(int(v) + int(p) for v, p in zip(self._position.tolist(), position_steps)))
+            (hx, hy, hz), (x, y, z) = self._position.tolist(), position_steps
+            self._prompt = Prompt(self._prompt_seq, note, (hx + int(x), hy + int(y), hz + int(z)))
             prompt = self._prompt
             self._answer.clear()
             self._answer_action = "continue"

@@ -218,7 +218,6 @@ class Cursor:
         """``(writes sent, position_steps after them)``."""
         self.last_data = 0
         self.last_t_ns = 0
-        self._pos = np.zeros(3, np.int64)
         self._count: dict[tuple, Callable] = {}  # the step counting kernel, resolved once per kind of writes array
 
     @property
@@ -233,7 +232,8 @@ class Cursor:
 
     def note(self, t_ns: np.ndarray, data: np.ndarray) -> None:
         """The writes ``(K,)`` times and data just went out, in order."""
-        if not len(data):
+        n = len(data)
+        if not n:
             return
         args = (data, np.int64(self.last_data), self.clock, self.dirbit)
         flags = data.flags
@@ -241,9 +241,10 @@ class Cursor:
         count = self._count.get(kind)
         if count is None:
             count = self._count[kind] = resolved(net_steps_kernel, *args)
-        self._pos = self._pos + count(*args)
+        dx, dy, dz = count(*args).tolist()
+        sent, (x, y, z) = self.live
         self.last_data, self.last_t_ns = int(data[-1]), int(t_ns[-1])
-        self.live = (self.live[0] + len(data), tuple(self._pos.tolist()))  # type: ignore[assignment]
+        self.live = (sent + n, (x + dx, y + dy, z + dz))
 
     def set(self, sent: int, position_steps: tuple[int, int, int]) -> None:
         """Mirror another process's run (the real-time runner's): ``sent`` writes, then ``position_steps``."""
