@@ -240,6 +240,7 @@ def _keep_freed_memory() -> None:
     _ALLOCATOR_TUNED = True
     try:
         libc = ctypes.CDLL("libc.so.6")
+        libc.mallopt(-8, 1)  # M_ARENA_MAX: every thread allocates from the one heap
         libc.mallopt(-3, 32 << 20)  # M_MMAP_THRESHOLD: blocks under 32 MB come from the heap
         libc.mallopt(-1, 128 << 20)  # M_TRIM_THRESHOLD: up to 128 MB freed at the heap's top stay for reuse
     except (OSError, AttributeError):
@@ -577,6 +578,7 @@ def plan_chunks(job: JobLike, *, start_steps: tuple[int, int, int] = (0, 0, 0),
     Raises:
         TravelError: a point of the job is outside the machine travel (nothing is planned).
     """
+    _keep_freed_memory()  # before the threads that will run the plan exist: they share one heap
     s = job.settings
     origin = np.asarray(start_steps, np.int64)
     prev = np.zeros((1, 3), np.int64)

@@ -254,8 +254,9 @@ def _periods_from_rates(u, floor_ns, out, mid):
 def _reperiods(u, floor_ns, out, mid, changed, cap_dirty, spans):
     """:func:`_periods_from_rates` again where the rates ``changed``; clears ``cap_dirty``.
 
-    Returns the number of spans of periods to judge again (a changed period length, or a cap lowered at the last
-    check), written as first and last period into ``spans[2 i]``, ``spans[2 i + 1]`` (``(2 P,)`` int64).
+    Returns ``(n_spans, spans)``: the number of spans of periods to judge again (a changed period length, or a cap
+    lowered at the last check), written as first and last period into ``spans[2 i]``, ``spans[2 i + 1]`` (int64;
+    ``spans`` itself, or a larger copy when it was full: it grows with what changed, not with the window).
     """
     n = u.shape[0]
     first = -1
@@ -277,6 +278,10 @@ def _reperiods(u, floor_ns, out, mid, changed, cap_dirty, spans):
             if n_spans and spans[2 * n_spans - 1] == k - 1:
                 spans[2 * n_spans - 1] = k
             else:
+                if 2 * n_spans + 2 > spans.shape[0]:
+                    grown = np.empty(2 * spans.shape[0] + 2, np.int64)
+                    grown[:2 * n_spans] = spans[:2 * n_spans]
+                    spans = grown
                 spans[2 * n_spans] = k
                 spans[2 * n_spans + 1] = k
                 n_spans += 1
@@ -284,7 +289,7 @@ def _reperiods(u, floor_ns, out, mid, changed, cap_dirty, spans):
         for k in range(first, n):
             mid[k] = t_ns + out[k] // 2
             t_ns += out[k]
-    return n_spans
+    return n_spans, spans
 
 
 @njit(cache=True, nogil=True)
@@ -485,6 +490,20 @@ def _plan_window(high, per_ns, stop_before, clock, dirbit, s_mm, v_start, v_max,
         cap[k] = 1e9 / per_ns[k]
     alpha = np.full(n, np.inf)
     upull = np.full(n, np.inf)
+    pers, brks = _axes_steps(high, per_ns, stop_before, clock, dirbit, s_mm, v_start)
+    for a in range(3):
+        _axis_caps(pers[a], brks[a], s_mm[a], v_start[a], v_max[a], acc[a] * _ALPHA_MARGIN, cap, alpha, upull)
+    for k in range(n):
+        if cap[k] < upull[k]:
+            upull[k] = cap[k]
+    return _rounds(pers, brks, per_ns, stop_before, cap, alpha, upull, s_mm, v_start, v_max, acc, partial)
+
+
+@njit(cache=True, nogil=True)
+def _axes_steps(high, per_ns, stop_before, clock, dirbit, s_mm, v_start):
+    """``(pers, brks)``: each axis's step periods and the rests before them (:func:`_steps_of_axis`,
+    :func:`_breaks`); what they are worked out from is let go on return (a window's planner holds less)."""
+    n = per_ns.shape[0]
     stop_idx = np.flatnonzero(stop_before)
     # where an axis certainly stands still (its steps further apart than standstill_ns even
     # at the nominal periods, which ramps only lengthen): a stop and a start of that axis, so the intervals on
@@ -495,16 +514,10 @@ def _plan_window(high, per_ns, stop_before, clock, dirbit, s_mm, v_start, v_max,
     per_x, up_x = _steps_of_axis(high, clock[0], dirbit[0])
     per_y, up_y = _steps_of_axis(high, clock[1], dirbit[1])
     per_z, up_z = _steps_of_axis(high, clock[2], dirbit[2])
-    pers = (per_x, per_y, per_z)
     brks = (_breaks(per_x, up_x, stop_idx, start_ns, standstill_ns(s_mm[0], v_start[0])),
             _breaks(per_y, up_y, stop_idx, start_ns, standstill_ns(s_mm[1], v_start[1])),
             _breaks(per_z, up_z, stop_idx, start_ns, standstill_ns(s_mm[2], v_start[2])))
-    for a in range(3):
-        _axis_caps(pers[a], brks[a], s_mm[a], v_start[a], v_max[a], acc[a] * _ALPHA_MARGIN, cap, alpha, upull)
-    for k in range(n):
-        if cap[k] < upull[k]:
-            upull[k] = cap[k]
-    return _rounds(pers, brks, per_ns, stop_before, cap, alpha, upull, s_mm, v_start, v_max, acc, partial)
+    return (per_x, per_y, per_z), brks
 
 
 @njit(cache=True, nogil=True)
@@ -517,8 +530,10 @@ def _rounds(pers, brks, per_ns, stop_before, cap, alpha, upull, s_mm, v_start, v
     mid = np.empty(n, np.int64)
     cap_dirty = np.zeros(n, np.bool_)
     changed = np.zeros(n, np.bool_)
-    spans = np.empty(2 * n + 2, np.int64)  # spans of periods to judge (first, last), as _reperiods writes them
-    marks = (np.zeros((3, pers[0].shape[0])), np.zeros((3, pers[1].shape[0])), np.zeros((3, pers[2].shape[0])))
+    spans = np.empty(1024, np.int64)  # spans of periods to judge (first, last), as _reperiods writes them
+    # the rule breaks _judge_axis records (only ever tested > 0: single precision holds any excess it records)
+    marks = (np.zeros((3, pers[0].shape[0]), np.float32), np.zeros((3, pers[1].shape[0]), np.float32),
+             np.zeros((3, pers[2].shape[0]), np.float32))
     found = 0
     for rnd in range(_ROUNDS + 1):
         if rnd == _ROUNDS:
@@ -535,7 +550,7 @@ def _rounds(pers, brks, per_ns, stop_before, cap, alpha, upull, s_mm, v_start, v
             spans[1] = n - 1
             n_spans = 1
         else:
-            n_spans = _reperiods(u, per_ns, out, mid, changed, cap_dirty, spans)
+            n_spans, spans = _reperiods(u, per_ns, out, mid, changed, cap_dirty, spans)
         if rnd == _ROUNDS:
             break
         hits = 0
