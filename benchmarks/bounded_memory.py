@@ -5,7 +5,9 @@
 
 Jobs: the 200 MB HPGL file and the 4096^2 relief with ``--pin-log``; HPGL files of 40,000 and 80,000 strokes
 alternating two pens (SP1/SP2: a tool-change pause each) inside 40 x 30 mm with the default look-ahead
-ramps, with and without ``--pin-log``; and a job of 10^9 step periods (5,000 HPGL strokes across the travel,
+ramps, with and without ``--pin-log``, and the 40,000 on a machine file of long ramps (0.05 ms step delays,
+600 mm/s top speeds, 50 mm/s^2: a stop from full speed takes 128,000 periods, so each look-ahead window holds
+2.3M periods); and a job of 10^9 step periods (5,000 HPGL strokes across the travel,
 constant ramps, no pin log: it would be 30 GB).  Besides the peak RSS, each row gives the job's step periods
 per second of planning and simulating (the report's ``periods`` over its ``planning_s`` + ``run_s``: reading,
 planning and the simulated run of the process, its start-up imports not counted) and of the whole process.
@@ -50,6 +52,15 @@ y_max_steps = 200000
 z_min_steps = -2000
 z_max_steps = 2000
 """
+
+LONG_RAMPS_TOML = """
+delay_xy_ms = 0.05
+delay_z_ms = 0.05
+max_speed_x_mm_s = 600
+max_speed_y_mm_s = 600
+max_speed_z_mm_s = 600
+"""
+"""A machine file whose ramps are long in periods: short step delays, high top speeds, the default 50 mm/s^2."""
 
 
 def write_hpgl(path: Path, size_bytes: int) -> int:
@@ -151,6 +162,10 @@ def _jobs(tmp: Path, quick: bool) -> list[tuple[str, list[str]]]:
         jobs.append((name + ")", [*drill, f"pens{n}.plt", "--yes", "--no-progress", "--report", f"pens{n}.json"]))
         jobs.append((name + ", --pin-log)", [*drill, f"pens{n}.plt", "--yes", "--no-progress", "--pin-log",
                                              f"pens{n}.csv", "--report", f"pens{n}-log.json"]))
+        if n == 40_000 // (16 if quick else 1):
+            jobs.append((name + ", a machine file of long ramps: 0.05 ms delays, 600 mm/s, 50 mm/s^2)",
+                         [*drill, f"pens{n}.plt", "--yes", "--no-progress", "--machine", "long_ramps.toml",
+                          "--report", f"pens{n}-long.json"]))
     strokes = 5_031 // (10 if quick else 1)
     write_long_strokes(tmp / "long.plt", strokes, 230_000)
     jobs.append((f"10^{8 if quick else 9} step periods: {strokes:,} strokes across the travel (constant ramps)",
@@ -164,6 +179,7 @@ def bench_rows(quick: bool, repeats: int = 1) -> list[dict]:
     tmp = Path(tempfile.mkdtemp(prefix="cam-mem-"))
     try:
         (tmp / "machine.toml").write_text(MACHINE_TOML)
+        (tmp / "long_ramps.toml").write_text(LONG_RAMPS_TOML)
         py = sys.executable
         floor = statistics.median(peak_rss_mb([py, "-c", "import cam, numpy, cv2"], tmp)[0] for _ in range(repeats))
         rows = []

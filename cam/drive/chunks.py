@@ -233,7 +233,10 @@ def _keep_freed_memory() -> None:
     """Ask glibc's allocator (once per process) to keep freed blocks of up to 128 MB for the next ones instead of
     handing them back to the system: each chunk and look-ahead window makes a dozen arrays of megabytes, and fresh
     pages (mapped, zeroed and faulted in by the kernel) were a third of the planner's time (the two-pen benchmark
-    job: 5.4M -> 7.3M periods/s, peak RSS 301 -> 332 MB).  Elsewhere than Linux with glibc: nothing."""
+    job: 5.4M -> 7.3M periods/s, peak RSS 301 -> 332 MB).  Every thread allocates from the one heap: glibc gave
+    each thread that allocates its own, and each kept freed blocks of its own (the two-pen job on a machine file of
+    long ramps: peak RSS 480 -> 463 MB, 575 MB before the planner held less).  Elsewhere than Linux with glibc:
+    nothing."""
     global _ALLOCATOR_TUNED
     if _ALLOCATOR_TUNED:
         return
