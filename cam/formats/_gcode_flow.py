@@ -14,7 +14,7 @@ from typing import Iterator
 from ..fileio import read_text
 from ..limits import MAX_COORD_MM, MAX_FEED_MM_MIN, MAX_GCODE_CALL_DEPTH, MAX_LINE_NUMBER, MAX_REPEAT, MIN_FEED_MM_MIN
 from ._gcode_data import GcodeMove, _End, _Frame, _Source, _shown, _strip_comments
-from ._gcode_lines import CACHE_LINES
+from ._gcode_lines import CACHE_LINES, PlainLine, ReadLine
 from ._gcode_state import _State
 from .ngc import NUMBER, Line, NgcSyntaxError, read_line
 
@@ -120,9 +120,9 @@ def _plain_at(src: _Source, i: int, keep: bool) -> tuple[str | None, re.Match | 
         if keep:
             if len(src.cache) >= CACHE_LINES:
                 src.cache.clear()
-            src.cache[i] = (text, m)
+            src.cache[i] = PlainLine(text, m)
         return text, m
-    if len(cached) == 2:
+    if isinstance(cached, PlainLine):
         return cached
     return None, None
 
@@ -201,11 +201,11 @@ class _Flow(_PlainLines):
         comments, no spaces, lower case) and what it says (None: nothing to run, or ``%``); cached.  ``text``:
         the line's text when it was read already."""
         cached = src.cache.get(idx)
+        if isinstance(cached, ReadLine):
+            self.source, self.line_no, self.raw = src, idx + 1, cached.raw
+            return cached.body, cached.line
         if cached is not None:
-            if len(cached) == 3:
-                self.source, self.line_no, self.raw = src, idx + 1, cached[0]
-                return cached[1], cached[2]
-            text = cached[0]  # a plain line (:meth:`plain_lines`) not run as one
+            text = cached.text  # a plain line (:meth:`plain_lines`) not run as one
         self.source, self.line_no, self.raw = src, idx + 1, src.line(idx) if text is None else text
         body = "".join(_strip_comments(self.raw, self.err).split()).lower()  # the spaces str.split takes are re's \s
         if body.startswith("/"):
@@ -218,7 +218,7 @@ class _Flow(_PlainLines):
                 raise self.err(str(exc)) from None
         if len(src.cache) >= CACHE_LINES:
             src.cache.clear()
-        src.cache[idx] = (self.raw, body, line)
+        src.cache[idx] = ReadLine(self.raw, body, line)
         return body, line
 
     # -- O words ----------------------------------------------------------------------------------------------

@@ -14,7 +14,7 @@ from __future__ import annotations
 import bisect
 import re
 from pathlib import Path
-from typing import Any, BinaryIO, Optional, Sequence
+from typing import Any, BinaryIO, NamedTuple, Optional, Sequence, Union
 
 from ..errors import ParseError
 
@@ -24,6 +24,27 @@ CACHE_LINES = 1 << 14
 """Lines kept with their parsed form (the cache is emptied when it is full)."""
 
 _O = re.compile(r"^\s*/?\s*[oO]\s*(<[^>]*>|\d+)\s*([a-zA-Z]+)")
+
+
+class PlainLine(NamedTuple):
+    """A cached line the plain-line path read (:func:`cam.formats._gcode_flow._plain_at`): its text and its
+    match of the plain-line pattern."""
+
+    text: str
+    match: "re.Match[str]"
+
+
+class ReadLine(NamedTuple):
+    """A cached line the general interpreter read (:meth:`cam.formats._gcode_flow._Flow._read`): its text, its
+    body (no comments or spaces, lower case) and what it says (a parsed :class:`cam.formats.ngc.Line`, or None)."""
+
+    raw: str
+    body: str
+    line: Any
+
+
+CachedLine = Union[PlainLine, ReadLine]
+"""What :attr:`_Source.cache` holds for a line."""
 
 
 def _decoded(raw: bytes, path: Path) -> list[str]:
@@ -71,7 +92,7 @@ class _Source:
         self._lines: Optional[Sequence[str]] = _no_bom(text).splitlines() if text is not None else None
         self.o_at: dict[str, list[tuple[int, str]]] = {}  # label -> [(index, keyword)] in order
         self.subs: dict[str, int] = {}
-        self.cache: dict[int, Any] = {}
+        self.cache: dict[int, CachedLine] = {}
         self._marks: list[tuple[int, int]] = []  # (line index, byte offset of the file line it starts)
         self._handle: Optional[BinaryIO] = None
         self._next = 0  # the index of the line the file gives next
