@@ -256,9 +256,16 @@ def _reperiods(u, floor_ns, out, mid, changed, cap_dirty, spans):
 
     Returns ``(n_spans, spans)``: the number of spans of periods to judge again (a changed period length, or a cap
     lowered at the last check), written as first and last period into ``spans[2 i]``, ``spans[2 i + 1]`` (int64;
-    ``spans`` itself, or a larger copy when it was full: it grows with what changed, not with the window).
+    ``spans`` itself, or a new larger array when it could be too small: it grows with what changed, not with the
+    window).
     """
     n = u.shape[0]
+    need = 0  # spans at most: one per period to look at again
+    for k in range(n):
+        if cap_dirty[k] or changed[k]:
+            need += 1
+    if 2 * need + 2 > spans.shape[0]:  # (made larger here, not in the loop: numba counts references there)
+        spans = np.empty(2 * need + 2, np.int64)
     first = -1
     t_ns = 0
     n_spans = 0
@@ -278,10 +285,6 @@ def _reperiods(u, floor_ns, out, mid, changed, cap_dirty, spans):
             if n_spans and spans[2 * n_spans - 1] == k - 1:
                 spans[2 * n_spans - 1] = k
             else:
-                if 2 * n_spans + 2 > spans.shape[0]:
-                    grown = np.empty(2 * spans.shape[0] + 2, np.int64)
-                    grown[:2 * n_spans] = spans[:2 * n_spans]
-                    spans = grown
                 spans[2 * n_spans] = k
                 spans[2 * n_spans + 1] = k
                 n_spans += 1
