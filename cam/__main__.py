@@ -1,7 +1,7 @@
 """``python -m cam``: see :mod:`cam.cli`."""
 import sys
 
-from .cli import main
+from .cli import main_process
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(main_process())

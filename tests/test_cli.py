@@ -360,3 +360,23 @@ def test_an_interrupted_jog_says_how_far_it_moved():
     assert proc.returncode == 130, err
     moved = int(re.search(r"jog stopped: moved X=(\d+) Y=0 Z=0 steps", err).group(1))
     assert 0 < moved < 2000
+
+
+def test_only_a_process_of_its_own_freezes_what_the_imports_made(monkeypatch, capsys):
+    """``python -m cam`` and the ``cam`` script leave the objects of the imports to the garbage collector's
+    permanent generation (a long job's send loop does not walk them again and again); a caller of ``main`` in
+    its own process (a notebook, the tests) keeps its collector as it was."""
+    import gc
+    from cam import cli
+
+    frozen = []
+    monkeypatch.setattr(gc, "freeze", lambda: frozen.append(True))
+    assert cli.main(["info", str(SAMPLES / "board.drl")]) == 0
+    assert frozen == []
+    monkeypatch.setattr(cli, "main", lambda argv=None, *, own_process=False: frozen.append(own_process) or 0)
+    assert cli.main_process() == 0
+    assert frozen == [True]
+    monkeypatch.undo()
+    monkeypatch.setattr(gc, "freeze", lambda: frozen.append("frozen"))
+    assert cli.main(["info", str(SAMPLES / "board.drl")], own_process=True) == 0
+    assert frozen == [True, "frozen"]

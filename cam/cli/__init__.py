@@ -8,6 +8,7 @@ code 2.
 """
 from __future__ import annotations
 
+import gc
 import importlib
 import os
 import sys
@@ -62,8 +63,17 @@ def _note_first_compile() -> None:
     event.register("numba:compile", _Note())
 
 
-def main(argv: Optional[Sequence[str]] = None) -> int:
-    """Entry point of ``python -m cam``; returns the exit code."""
+def main_process() -> int:
+    """Entry point of the ``cam`` script and ``python -m cam``: :func:`main` in a process of its own."""
+    return main(own_process=True)
+
+
+def main(argv: Optional[Sequence[str]] = None, *, own_process: bool = False) -> int:
+    """Entry point of ``python -m cam``; returns the exit code.
+
+    ``own_process``: this process runs only this command (``python -m cam``): once the command's modules are
+    imported, the garbage collector is told to leave everything that exists then alone (:func:`gc.freeze`: a
+    long job's send loop then does not pay for walking numba's objects over and over)."""
     parser = build_parser()
     args = parser.parse_args(argv)
     if not args.command:
@@ -74,6 +84,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         check_args(args)
         _note_first_compile()  # every output path and flag, before anything is planned, written or sent
         command = getattr(importlib.import_module(module_name), function_name)
+        if own_process:
+            gc.freeze()
         return int(command(args))
     except CamError as exc:
         print(f"cam: error: {exc}", file=sys.stderr)
