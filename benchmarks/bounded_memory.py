@@ -173,9 +173,10 @@ def _jobs(tmp: Path, quick: bool) -> list[tuple[str, list[str]]]:
     return jobs
 
 
-def bench_rows(quick: bool, repeats: int = 1) -> list[dict]:
-    """One row per job: peak RSS of the whole process against the import floor (medians of ``repeats``), and
-    the job's step periods per second of that process."""
+def bench_rows(quick: bool, repeats: int = 1, only: tuple[str, ...] = ()) -> list[dict]:
+    """One row per job: peak RSS of the whole process against the import floor, and the job's step periods per
+    second of that process (medians of ``repeats`` runs: this shared machine's speed varies by +-15 % from one
+    minute to the next).  ``only``: the jobs whose names hold one of these strings (all when empty)."""
     tmp = Path(tempfile.mkdtemp(prefix="cam-mem-"))
     try:
         (tmp / "machine.toml").write_text(MACHINE_TOML)
@@ -184,19 +185,26 @@ def bench_rows(quick: bool, repeats: int = 1) -> list[dict]:
         floor = statistics.median(peak_rss_mb([py, "-c", "import cam, numpy, cv2"], tmp)[0] for _ in range(repeats))
         rows = []
         for name, argv in _jobs(tmp, quick):
+            if only and not any(o in name for o in only):
+                continue
+            runs, rates = [], []
             try:
-                runs = [peak_rss_mb([py, *argv], tmp) for _ in range(repeats)]
+                for _ in range(repeats):
+                    runs.append(peak_rss_mb([py, *argv], tmp))
+                    report = json.loads((tmp / argv[argv.index("--report") + 1]).read_text())
+                    rates.append(report["periods"] / max(1e-9, report["planning_s"] + report["run_s"]))
             except RuntimeError as exc:
                 rows.append(dict(name=f"memory: cam drill {name} on the mock, peak RSS", cam=None, ref=floor,
                                  ratio="failed", target=f"< {GOAL_MB:.0f} MB", met=False, note=str(exc)[-200:]))
                 continue
             peak = statistics.median(r[0] for r in runs)
             wall_s = statistics.median(r[1] for r in runs)
-            report = json.loads((tmp / argv[argv.index("--report") + 1]).read_text())
             periods = report["periods"]
-            rate = periods / max(1e-9, report["planning_s"] + report["run_s"])
+            rate = statistics.median(rates)
             note = (f"{periods / 1e6:.1f}M periods, planning and simulating at {rate / 1e6:.1f}M periods/s "
                     f"(the whole process, imports and reading included: {periods / wall_s / 1e6:.1f}M/s)")
+            if repeats > 1:
+                note += f"; medians of {repeats} runs, rates {min(rates) / 1e6:.1f}-{max(rates) / 1e6:.1f}M/s"
             if "--pin-log" in argv:
                 note += f", pin log {(tmp / argv[argv.index('--pin-log') + 1]).stat().st_size / 2**20:.0f} MB"
                 (tmp / argv[argv.index("--pin-log") + 1]).unlink()
@@ -213,10 +221,13 @@ def bench_rows(quick: bool, repeats: int = 1) -> list[dict]:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="1/16 of the HPGL file, a 1024^2 relief")
+    ap.add_argument("--repeats", type=int, default=1, metavar="N", help="runs of each job (medians; default 1)")
+    ap.add_argument("--only", action="append", default=[], metavar="TEXT",
+                    help="only the jobs whose names hold TEXT (repeatable), e.g. --only 'strokes alternating'")
     args = ap.parse_args(argv)
     print("| workload | cam peak RSS (MB) | floor (MB) | result | target | met |")
     print("| --- | ---: | ---: | --- | --- | --- |")
-    for r in bench_rows(args.quick):
+    for r in bench_rows(args.quick, max(1, args.repeats), tuple(args.only)):
         cam_mb = "" if r["cam"] is None else f"{r['cam']:.0f}"
         print(f"| {r['name']} | {cam_mb} | {r['ref']:.0f} | {r['ratio']} ({r['note']}) | {r['target']} | "
               f"{'yes' if r['met'] else '**no**'} |")
