@@ -417,8 +417,9 @@ class ChunkedPlan:
         for part in self._stretches(segment_starts):
             parts.append(part)
             have += len(part[2])
-            while have >= self.chunk_periods:
-                joined = [np.concatenate([p[j] for p in parts]) for j in range(3)]
+            while have >= self.chunk_periods:  # (one part, as a whole chunk's stretch most often is: no copy)
+                joined = list(parts[0]) if len(parts) == 1 else [np.concatenate([p[j] for p in parts])
+                                                                 for j in range(3)]
                 c = self.chunk_periods
                 yield joined[0][:c], joined[1][:c], joined[2][:c]
                 parts = [(joined[0][c:], joined[1][c:], joined[2][c:])]

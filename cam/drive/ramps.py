@@ -187,55 +187,86 @@ def _axis_caps(per, brk, s, v_start, v_max, acc, cap, alpha, upull):
 
 
 @njit(cache=True, nogil=True)
-def _passes(cap, alpha, upull, stop_before, fwd, u, cap_dirty, changed, full):
+def _passes(cap, alpha, upull, stop_before, fwd, u, changed, dirty, n_dirty, full, runs):
     """Step 2: forward (accelerate, into ``fwd``) then backward (decelerate) passes; ``u`` out.
 
-    ``full``: every period; else only what the caps lowered where ``cap_dirty`` reach (the rates are worked out
-    again from each such cap on until they meet the old ones; the result is the same to the bit).  ``changed``
-    out: where ``u`` changed (not set when ``full``).
+    ``full``: every period (``dirty`` holds one run, all of them); else only what the caps lowered in the
+    ``n_dirty`` runs of ``dirty`` reach: the rates are worked out again from each such run on until they meet the
+    old ones (the result is the same to the bit: a period neither pass reaches would come out as it is).
+    ``dirty``: sorted, disjoint runs ``(first, last)`` of periods as ``dirty[2 i]``, ``dirty[2 i + 1]``.
+    ``changed`` out: where ``u`` changed (all False when ``full``; it is False outside the runs when called).
+    Returns the number of runs of periods the backward pass went over, written into ``runs`` (``(2 n_dirty + 2,)``
+    int64, as ``dirty``): they hold every period that changed and every period of ``dirty``.
     """
     n = cap.shape[0]
-    carry = full
-    prev = 0.0
-    for k in range(n):  # forward: accelerate
-        changed[k] = False
-        if not (carry or cap_dirty[k]):
-            continue
-        prev = 0.0 if stop_before[k] or k == 0 else fwd[k - 1]
-        if prev >= cap[k]:  # cruising at the cap (upull <= cap): no need to accelerate
-            v = cap[k]
+    n_fwd = 0
+    k = 0
+    for r in range(n_dirty):  # forward: accelerate
+        if k > dirty[2 * r + 1]:
+            continue  # reached already
+        k = max(k, dirty[2 * r])
+        if n_fwd and runs[2 * n_fwd - 1] == k - 1:
+            n_fwd -= 1  # goes on from the last run
         else:
-            a = alpha[k]
-            if k > 0 and alpha[k - 1] < a:
-                a = alpha[k - 1]
-            v = np.sqrt(prev * prev + 2.0 * a) if a < np.inf else np.inf
-            if upull[k] > v:
-                v = upull[k]
-            if cap[k] < v:
+            runs[2 * n_fwd] = k
+        carry = True
+        while k < n and (carry or k <= dirty[2 * r + 1]):
+            prev = 0.0 if stop_before[k] or k == 0 else fwd[k - 1]
+            if prev >= cap[k]:  # cruising at the cap (upull <= cap): no need to accelerate
                 v = cap[k]
-        if not full:
-            carry = v != fwd[k]
+            else:
+                a = alpha[k]
+                if k > 0 and alpha[k - 1] < a:
+                    a = alpha[k - 1]
+                v = np.sqrt(prev * prev + 2.0 * a) if a < np.inf else np.inf
+                if upull[k] > v:
+                    v = upull[k]
+                if cap[k] < v:
+                    v = cap[k]
+            carry = (not full) and v != fwd[k]
             changed[k] = carry
-        fwd[k] = v
-    carry = full
-    for k in range(n - 1, -1, -1):  # backward: decelerate
-        if not (carry or changed[k]):
+            fwd[k] = v
+            k += 1
+        runs[2 * n_fwd + 1] = k - 1
+        n_fwd += 1
+    # backward: decelerate, from the end of each forward run down (the runs it makes overwrite the forward
+    # ones from the top, never ahead of where it reads)
+    n_back = 0
+    low = n  # the lowest period visited so far
+    out_at = 2 * n_fwd  # the backward runs go into runs[out_at:] first, then are moved down
+    for r in range(n_fwd - 1, -1, -1):
+        top = min(runs[2 * r + 1], low - 1)
+        if top < runs[2 * r]:
             continue
-        nxt = 0.0 if stop_before[k + 1] else u[k + 1]
-        v = fwd[k]
-        if nxt < v:  # else the forward speed here is reachable from what follows
-            a = alpha[k]
-            if k + 1 < n and alpha[k + 1] < a:
-                a = alpha[k + 1]
-            w = np.sqrt(nxt * nxt + 2.0 * a) if a < np.inf else np.inf
-            if upull[k] > w:
-                w = upull[k]
-            if w < v:
-                v = w
-        if not full:
-            carry = v != u[k]
+        k = top
+        carry = True
+        while k >= 0 and (carry or k >= runs[2 * r]):
+            nxt = 0.0 if stop_before[k + 1] else u[k + 1]
+            v = fwd[k]
+            if nxt < v:  # else the forward speed here is reachable from what follows
+                a = alpha[k]
+                if k + 1 < n and alpha[k + 1] < a:
+                    a = alpha[k + 1]
+                w = np.sqrt(nxt * nxt + 2.0 * a) if a < np.inf else np.inf
+                if upull[k] > w:
+                    w = upull[k]
+                if w < v:
+                    v = w
+            carry = (not full) and v != u[k]
             changed[k] = carry
-        u[k] = v
+            u[k] = v
+            k -= 1
+        if n_back and runs[out_at + 2 * n_back - 2] == top + 1:
+            runs[out_at + 2 * n_back - 2] = k + 1  # joins the run above it
+        else:
+            runs[out_at + 2 * n_back] = k + 1
+            runs[out_at + 2 * n_back + 1] = top
+            n_back += 1
+        low = k + 1
+    for i in range(n_back):  # ascending, to the front
+        runs[2 * i] = runs[out_at + 2 * (n_back - 1 - i)]
+        runs[2 * i + 1] = runs[out_at + 2 * (n_back - 1 - i) + 1]
+    return n_back
 
 
 @njit(cache=True, nogil=True)
@@ -251,43 +282,43 @@ def _periods_from_rates(u, floor_ns, out, mid):
 
 
 @njit(cache=True, nogil=True)
-def _reperiods(u, floor_ns, out, mid, changed, cap_dirty, spans):
-    """:func:`_periods_from_rates` again where the rates ``changed``; clears ``cap_dirty``.
+def _reperiods(u, floor_ns, out, mid, changed, cap_dirty, runs, n_runs):
+    """:func:`_periods_from_rates` again where the rates ``changed``, in the ``n_runs`` runs of periods of ``runs``
+    (as :func:`_passes` gives them: ``changed`` and ``cap_dirty`` are False outside them); clears ``changed`` and
+    ``cap_dirty`` there.
 
-    Returns ``(n_spans, spans)``: the number of spans of periods to judge again (a changed period length, or a cap
-    lowered at the last check), written as first and last period into ``spans[2 i]``, ``spans[2 i + 1]`` (int64;
-    ``spans`` itself, or a new larger array when it could be too small: it grows with what changed, not with the
-    window).
+    Returns ``(n_spans, spans)``: the spans of periods to judge again (a changed period length, or a cap lowered at
+    the last check), each first and last period as ``spans[2 i]``, ``spans[2 i + 1]`` (int64).
     """
     n = u.shape[0]
-    need = 0  # spans at most: one per period to look at again
-    for k in range(n):
-        if cap_dirty[k] or changed[k]:
-            need += 1
-    if 2 * need + 2 > spans.shape[0]:  # (made larger here, not in the loop: numba counts references there)
-        spans = np.empty(2 * need + 2, np.int64)
+    need = 0  # spans at most: one per period of the runs
+    for r in range(n_runs):
+        need += runs[2 * r + 1] - runs[2 * r] + 1
+    spans = np.empty(2 * need + 2, np.int64)
     first = -1
     t_ns = 0
     n_spans = 0
-    for k in range(n):
-        mark = cap_dirty[k]
-        cap_dirty[k] = False
-        if changed[k]:
-            t = np.ceil(1e9 / u[k]) if u[k] > 0 else floor_ns[k]
-            per = max(floor_ns[k], np.int64(t))  # as _periods_from_rates
-            if per != out[k]:
-                if first < 0:
-                    first = k
-                    t_ns = mid[k] - out[k] // 2  # the start of period k (the periods before it are the same)
-                out[k] = per
-                mark = True
-        if mark:
-            if n_spans and spans[2 * n_spans - 1] == k - 1:
-                spans[2 * n_spans - 1] = k
-            else:
-                spans[2 * n_spans] = k
-                spans[2 * n_spans + 1] = k
-                n_spans += 1
+    for r in range(n_runs):
+        for k in range(runs[2 * r], runs[2 * r + 1] + 1):
+            mark = cap_dirty[k]
+            cap_dirty[k] = False
+            if changed[k]:
+                changed[k] = False
+                t = np.ceil(1e9 / u[k]) if u[k] > 0 else floor_ns[k]
+                per = max(floor_ns[k], np.int64(t))  # as _periods_from_rates
+                if per != out[k]:
+                    if first < 0:
+                        first = k
+                        t_ns = mid[k] - out[k] // 2  # the start of period k (the periods before it are the same)
+                    out[k] = per
+                    mark = True
+            if mark:
+                if n_spans and spans[2 * n_spans - 1] == k - 1:
+                    spans[2 * n_spans - 1] = k
+                else:
+                    spans[2 * n_spans] = k
+                    spans[2 * n_spans + 1] = k
+                    n_spans += 1
     if first >= 0:
         for k in range(first, n):
             mid[k] = t_ns + out[k] // 2
@@ -296,19 +327,21 @@ def _reperiods(u, floor_ns, out, mid, changed, cap_dirty, spans):
 
 
 @njit(cache=True, nogil=True)
-def _judge_axis(per, brk, mid, spans, n_spans, s, v_start, v_max, acc, r1, r2, r3):
+def _judge_axis(per, brk, mid, spans, n_spans, s, v_start, v_max, acc, r1, r2, r3, judged):
     """Step 3 for one axis (``per``: ``(S,)`` periods of its steps, ``brk``: rests before them): the pin-log rules
     (:func:`cam.verify.ramps.check_steps_range`) on the rising edges ``mid``, judged again only for the steps that
     reach into one of the ``n_spans`` spans of periods in ``spans`` (as :func:`_reperiods` writes them; the rest
     passed last time and nothing they depend on changed).  A step reaches from the period before the step three
     before it to the period after the step three after it: what its interval, pair, rests and free slots depend
-    on.  Records the breaks in ``r1``..``r3`` (``(S,)``; zero when called, as :func:`_drop_caps` leaves them);
-    returns their number."""
+    on.  Records the breaks in ``r1``..``r3`` (``(S,)``; zero when called, as :func:`_drop_caps` leaves them)
+    and the runs of steps judged, ``[j_lo, j_hi)`` as ``judged[2 i]``, ``judged[2 i + 1]`` (``(2 n_spans + 2,)``
+    int64, ascending); returns ``(breaks, runs judged)``."""
     n = per.shape[0]
     if n < 2:
-        return 0
+        return 0, 0
     still_ns = standstill_ns(s, v_start)
     bad = 0
+    n_judged = 0
     j_lo = -1
     j_hi = -1
     for i in range(n_spans + 1):
@@ -322,9 +355,12 @@ def _judge_axis(per, brk, mid, spans, n_spans, s, v_start, v_max, acc, r1, r2, r
                 continue
         if j_lo >= 0:
             bad += _judge_steps(per, brk, mid, j_lo, j_hi, still_ns, s, v_start, v_max, acc, r1, r2, r3)
+            judged[2 * n_judged] = j_lo
+            judged[2 * n_judged + 1] = j_hi
+            n_judged += 1
         if i < n_spans:
             j_lo, j_hi = a, b
-    return bad
+    return bad, n_judged
 
 
 @njit(cache=True, nogil=True)
@@ -343,52 +379,80 @@ def _judge_steps(per, brk, mid, j_lo, j_hi, still_ns, s, v_start, v_max, acc, r1
 
 
 @njit(cache=True, nogil=True)
-def _drop_caps(per, r1, r2, r3, u, cap, factor, s, v_start, v_max, cap_dirty):
-    """Lower the caps of the periods under every broken rule (and mark them in ``cap_dirty``).
+def _drop_caps(per, r1, r2, r3, u, cap, factor, s, v_start, v_max, cap_dirty, judged, n_judged, dirty, n_dirty):
+    """Lower the caps of the periods under every broken rule (and mark them in ``cap_dirty``), looking at the
+    ``n_judged`` runs of steps :func:`_judge_axis` judged (``judged``; the marks are zero elsewhere).
 
     A broken top speed (R1) or stop (R3) of an interval of ``m`` periods caps them at the rate that meets the
     rule, ``v * m / s``, at once; any other break (R2), or one whose cap is that low already, to ``factor`` x the
     slowest rate there.  The marks ``r1``..``r3`` are zero again afterwards (for :func:`_judge_axis`, which only
     writes where it judges): a lowered cap is always within reach of the step whose break lowered it.
+    Each run of periods whose caps it lowered is added to ``dirty`` (as ``(first, last)`` from ``dirty[2 n_dirty]``
+    on; room for one a break); returns ``(breaks, n_dirty)``.
     """
     n = per.shape[0]
     hits = 0
-    for j in range(n):
-        lo = -1
-        hi = -1
-        exact = np.inf
-        if j + 1 < n and (r1[j] > 0 or r3[j] > 0):
-            lo = per[j]
-            hi = per[j + 1]
-            m = hi - lo
-            exact = (v_start if r3[j] > 0 else v_max) * m / s
-        if r2[j] > 0 and 0 < j < n - 1:
-            lo = per[j - 1]
-            hi = per[j + 1]
+    for i in range(n_judged):
+        for j in range(judged[2 * i], judged[2 * i + 1]):
+            lo = -1
+            hi = -1
             exact = np.inf
-        r1[j] = 0.0
-        r2[j] = 0.0
-        r3[j] = 0.0
-        if lo < 0:
-            continue
-        hits += 1
-        lowered = False
-        for k in range(lo, hi + 1):
-            if exact < cap[k]:
-                cap[k] = exact
-                cap_dirty[k] = True
-                lowered = True
-        if lowered:
-            continue
-        slow = np.inf
-        for k in range(lo, hi + 1):
-            if u[k] < slow:
-                slow = u[k]
-        for k in range(lo, hi + 1):
-            if factor * slow < cap[k]:
-                cap[k] = factor * slow
-                cap_dirty[k] = True
-    return hits
+            if j + 1 < n and (r1[j] > 0 or r3[j] > 0):
+                lo = per[j]
+                hi = per[j + 1]
+                m = hi - lo
+                exact = (v_start if r3[j] > 0 else v_max) * m / s
+            if r2[j] > 0 and 0 < j < n - 1:
+                lo = per[j - 1]
+                hi = per[j + 1]
+                exact = np.inf
+            r1[j] = 0.0
+            r2[j] = 0.0
+            r3[j] = 0.0
+            if lo < 0:
+                continue
+            hits += 1
+            lowered = False
+            for k in range(lo, hi + 1):
+                if exact < cap[k]:
+                    cap[k] = exact
+                    cap_dirty[k] = True
+                    lowered = True
+            if not lowered:
+                slow = np.inf
+                for k in range(lo, hi + 1):
+                    if u[k] < slow:
+                        slow = u[k]
+                for k in range(lo, hi + 1):
+                    if factor * slow < cap[k]:
+                        cap[k] = factor * slow
+                        cap_dirty[k] = True
+                        lowered = True
+            if lowered:
+                dirty[2 * n_dirty] = lo
+                dirty[2 * n_dirty + 1] = hi
+                n_dirty += 1
+    return hits, n_dirty
+
+
+@njit(cache=True, nogil=True)
+def _merged_runs(runs, n_runs):
+    """Sort the ``n_runs`` runs ``(first, last)`` of ``runs`` (as :func:`_drop_caps` adds them) and join those
+    that overlap or touch, in place; returns how many are left."""
+    if n_runs == 0:
+        return 0
+    order = np.argsort(runs[0:2 * n_runs:2], kind="mergesort")
+    firsts = runs[0:2 * n_runs:2][order]
+    lasts = runs[1:2 * n_runs:2][order]
+    m = 0
+    for i in range(n_runs):
+        if m and firsts[i] <= runs[2 * m - 1] + 1:
+            runs[2 * m - 1] = max(runs[2 * m - 1], lasts[i])
+        else:
+            runs[2 * m] = firsts[i]
+            runs[2 * m + 1] = lasts[i]
+            m += 1
+    return m
 
 
 def linear40_periods(high: np.ndarray, period_ns: np.ndarray, move_first: np.ndarray, clock, s, v_start) -> np.ndarray:
@@ -533,10 +597,14 @@ def _rounds(pers, brks, per_ns, stop_before, cap, alpha, upull, s_mm, v_start, v
     mid = np.empty(n, np.int64)
     cap_dirty = np.zeros(n, np.bool_)
     changed = np.zeros(n, np.bool_)
-    spans = np.empty(1024, np.int64)  # spans of periods to judge (first, last), as _reperiods writes them
     # the rule breaks _judge_axis records (only ever tested > 0: single precision holds any excess it records)
     marks = (np.zeros((3, pers[0].shape[0]), np.float32), np.zeros((3, pers[1].shape[0]), np.float32),
              np.zeros((3, pers[2].shape[0]), np.float32))
+    whole = np.empty(2, np.int64)  # every period, as one run
+    whole[0] = 0
+    whole[1] = n - 1
+    dirty = whole  # the runs of periods whose caps the last check lowered
+    n_dirty = 1
     found = 0
     for rnd in range(_ROUNDS + 1):
         if rnd == _ROUNDS:
@@ -546,28 +614,39 @@ def _rounds(pers, brks, per_ns, stop_before, cap, alpha, upull, s_mm, v_start, v
         full = rnd == 0 or rnd == _ROUNDS or not partial  # else only what the lowered caps reach is done again
         if full:
             cap_dirty[:] = False
-        _passes(cap, alpha, upull, stop_before, fwd, u, cap_dirty, changed, full)
+            dirty = whole
+            n_dirty = 1
+        runs = np.empty(4 * n_dirty + 4, np.int64)
+        n_runs = _passes(cap, alpha, upull, stop_before, fwd, u, changed, dirty, n_dirty, full, runs)
         if full:
             _periods_from_rates(u, per_ns, out, mid)
-            spans[0] = 0
-            spans[1] = n - 1
+            spans = whole
             n_spans = 1
         else:
-            n_spans, spans = _reperiods(u, per_ns, out, mid, changed, cap_dirty, spans)
+            n_spans, spans = _reperiods(u, per_ns, out, mid, changed, cap_dirty, runs, n_runs)
         if rnd == _ROUNDS:
             break
         hits = 0
+        n_dirty = 0
+        dirty = np.empty(2, np.int64)
         for a in range(3):
             r = marks[a]
-            broken = _judge_axis(pers[a], brks[a], mid, spans, n_spans, s_mm[a], v_start[a], v_max[a], acc[a],
-                                 r[0], r[1], r[2])
+            judged = np.empty(2 * n_spans + 2, np.int64)
+            broken, n_judged = _judge_axis(pers[a], brks[a], mid, spans, n_spans, s_mm[a], v_start[a], v_max[a],
+                                           acc[a], r[0], r[1], r[2], judged)
             if rnd > 0:
                 found += broken
             if broken:  # lower the caps where it broke
-                hits += _drop_caps(pers[a], r[0], r[1], r[2], u, cap, _DROP, s_mm[a], v_start[a], v_max[a],
-                                   cap_dirty)
+                if 2 * (n_dirty + broken) > dirty.shape[0]:
+                    room = np.empty(2 * (n_dirty + broken), np.int64)
+                    room[:2 * n_dirty] = dirty[:2 * n_dirty]
+                    dirty = room
+                hit, n_dirty = _drop_caps(pers[a], r[0], r[1], r[2], u, cap, _DROP, s_mm[a], v_start[a], v_max[a],
+                                          cap_dirty, judged, n_judged, dirty, n_dirty)
+                hits += hit
         if hits == 0:
             break
+        n_dirty = _merged_runs(dirty, n_dirty)
     return out, found
 
 
