@@ -69,7 +69,8 @@ def main_process() -> int:
 
 
 def main(argv: Optional[Sequence[str]] = None, *, own_process: bool = False) -> int:
-    """Entry point of ``python -m cam``; returns the exit code.
+    """Run one command (``argv``: the command line without the program name; None: ``sys.argv[1:]``); returns
+    the exit code.  :func:`main_process` is the entry point of ``python -m cam`` and the ``cam`` script.
 
     ``own_process``: this process runs only this command (``python -m cam``): once the command's modules are
     imported, the garbage collector is told to leave everything that exists then alone (:func:`gc.freeze`: a

@@ -195,8 +195,9 @@ def _passes(cap, alpha, upull, stop_before, fwd, u, changed, dirty, n_dirty, ful
     old ones (the result is the same to the bit: a period neither pass reaches would come out as it is).
     ``dirty``: sorted, disjoint runs ``(first, last)`` of periods as ``dirty[2 i]``, ``dirty[2 i + 1]``.
     ``changed`` out: where ``u`` changed (all False when ``full``; it is False outside the runs when called).
-    Returns the number of runs of periods the backward pass went over, written into ``runs`` (``(2 n_dirty + 2,)``
-    int64, as ``dirty``): they hold every period that changed and every period of ``dirty``.
+    Returns the number of runs of periods the backward pass went over, written into ``runs`` (``(4 n_dirty + 4,)``
+    int64, as ``dirty``; the backward runs are made in its second half, then moved to the front): they hold every
+    period that changed and every period of ``dirty``.
     """
     n = cap.shape[0]
     n_fwd = 0
