@@ -403,3 +403,22 @@ def test_a_lost_link_mid_job_is_one_line_and_the_position_unknown(grbl, tmp_path
     assert "lost" in msg and "\n" not in msg, msg
     assert not hold.state.position_known  # where grbl stopped is not known any more
     hold.close()
+
+
+def test_closing_a_grbl_machine_stops_its_poller_before_the_link(grbl):
+    """The poller's ``?`` never races the link's close: a write as the link closed raised a TypeError in
+    pyserial, in a thread nobody saw (a warning in a CI run)."""
+    from cam.drive.grbl_machine import GrblMachine
+
+    m = GrblMachine(url(grbl), SETTINGS)
+    time.sleep(0.4)  # a few polls
+    close = m.link.close
+    seen = []
+
+    def closing():
+        seen.append(m._poller.is_alive())
+        close()
+
+    m.link.close = closing
+    m.close()
+    assert seen == [False]

@@ -109,7 +109,7 @@ def test_home_route_on_grbl(grbl, tmp_path):
 
 
 @pytest.mark.browser
-@pytest.mark.parametrize("grbl", [{"settings": {**GRBL_FAST, **HOMING, 110: 600.0, 111: 600.0}, "speed": 1.0}],
+@pytest.mark.parametrize("grbl", [{"settings": {**GRBL_FAST, **HOMING, 110: 300.0, 111: 300.0}, "speed": 1.0}],
                          indirect=True)
 def test_page_homes_grbl_sets_the_feed_and_shows_the_position_live(grbl, page, tmp_path):  # noqa: F811
     s = Server(tmp_path, settings=HOMED_SETTINGS, machine_port=f"grbl:{grbl.device_path}", realtime=True,

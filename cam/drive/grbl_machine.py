@@ -244,8 +244,11 @@ class GrblMachine:
                 return
 
     def close(self) -> None:
-        """Stop polling and close the link."""
+        """Stop polling and close the link (the poller first: a ``?`` it was writing as the link closed failed
+        in pyserial with a TypeError on the closed file)."""
         self._closing.set()
+        if self._poller is not threading.current_thread():
+            self._poller.join(POLL_S + 1.0)
         self.link.close()
 
     @property
