@@ -30,7 +30,7 @@ SIGNATURES = {
         "(Array(int64, 2, 'C'), Array(int64, 1, 'C'), )",
     ],
     'cam.drive._kernels.net_steps_kernel': [
-        "(Array(uint8, 1, 'C'), int64, Array(int64, 1, 'C'), Array(int64, 1, 'C'), )",
+        "(Array(uint8, 1, 'C'), int64, Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), )",
     ],
     'cam.drive._kernels.pin_rows_kernel': [
         "(Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), )",

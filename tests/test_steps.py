@@ -1,4 +1,5 @@
 import numpy as np
+import pytest
 
 import cam
 from cam.drive.steps import plan_steps
@@ -117,3 +118,35 @@ def test_run_cursor_and_chunked_extent_equal_the_full_decode(monkeypatch):
     assert extent[:, 1].tolist() == with_start.max(axis=0).tolist()
     below = full[full[:, 2] > 0]
     assert cut[:, 0].tolist() == below.min(axis=0).tolist() and cut[:, 1].tolist() == below.max(axis=0).tolist()
+
+
+
+@pytest.mark.parametrize("batch", [16384, 7])
+def test_the_position_at_each_pause_is_the_decoded_one(monkeypatch, tmp_path, batch):
+    """The send loop counts a chunk's steps once up to each pause in it (not batch by batch): the position each
+    pause is told, and the run's end, are those decoded from the pin log, with pauses at chunk borders and inside
+    chunks, and with batches that end between pauses (a small ``_BATCH``)."""
+    from cam.drive import runner
+    from cam.drive.chunks import plan_chunks
+    from cam.formats.hpgl import load_hpgl
+    from cam.job.hpgl import plan_hpgl
+
+    monkeypatch.setattr(runner, "_BATCH", batch)
+    (tmp_path / "pens.plt").write_text("IN;" + "".join(f"SP{1 + i % 2};PU{40 * i},0;PD{40 * i},{200 + 40 * i};"
+                                                       for i in range(12)) + "PU0,0;")
+    job = plan_hpgl(load_hpgl(tmp_path / "pens.plt"))
+    assert len(job.pause_notes) == 12
+    plan = plan_chunks(job, chunk_periods=50)
+    seen = []
+    counted = []
+    counts = runner.Cursor.counts
+    monkeypatch.setattr(runner.Cursor, "counts", lambda self, data, ends: counted.append(len(ends)) or
+                        counts(self, data, ends))
+    result = runner.run(plan, cam.MockPort(), on_pause=lambda pos, note: seen.append(pos))
+    if batch > 2 * 50 + 1:  # longer than a chunk: every batch ends at a pause or a chunk's end, one count a chunk
+        assert len(counted) == sum(1 for _ in plan.chunks()) and sum(counted) == len(counted) + 12
+    motion = cam.decode_pin_log(result.pin_log(), job.settings)
+    pause_writes = np.asarray(plan.pause_writes, np.int64)
+    assert len(seen) == len(pause_writes) == 12
+    assert seen == [tuple(int(v) for v in motion.position_steps[w]) for w in pause_writes]
+    assert result.position_steps == motion.final_steps

@@ -185,29 +185,34 @@ def _put_int(out, k, v, pairs):
 
 @entry
 @njit(cache=True)
-def net_steps_kernel(data, prev_byte, clock, dirbit):
-    """``(3,)`` int64 steps each axis made over a stretch of writes, as :func:`cam.verify.pinlog.net_steps`
-    counts them (a step per rising clock, + with its direction bit set), in one pass without temporaries.
+def net_steps_kernel(data, prev_byte, clock, dirbit, ends):
+    """``(K, 3)`` int64 steps each axis made over the writes ``data[:ends[k]]``, as
+    :func:`cam.verify.pinlog.net_steps` counts them (a step per rising clock, + with its direction bit set), in one
+    pass without temporaries: the send loop counts a chunk once up to every pause in it.
 
     Args:
         data: ``(M,)`` uint8 data register after each write; prev_byte: the register before the first.
         clock, dirbit: ``(3,)`` int64 clock and direction bit of X, Y, Z.
+        ends: ``(K,)`` int64 ascending write counts, each at most M.
     """
     cx, cy, cz = clock[0], clock[1], clock[2]
     dx, dy, dz = dirbit[0], dirbit[1], dirbit[2]
+    out = np.empty((ends.shape[0], 3), np.int64)
     x = np.int64(0)
     y = np.int64(0)
     z = np.int64(0)
     prev = np.int64(prev_byte)
-    for i in range(data.shape[0]):  # without branches: the steps of the minor axes come irregularly
-        d = np.int64(data[i])
-        rising = d & ~prev
-        x += np.int64((rising & cx) != 0) * (2 * np.int64((d & dx) != 0) - 1)
-        y += np.int64((rising & cy) != 0) * (2 * np.int64((d & dy) != 0) - 1)
-        z += np.int64((rising & cz) != 0) * (2 * np.int64((d & dz) != 0) - 1)
-        prev = d
-    out = np.empty(3, np.int64)
-    out[0], out[1], out[2] = x, y, z
+    i = 0
+    for k in range(ends.shape[0]):
+        while i < ends[k]:  # without branches: the steps of the minor axes come irregularly
+            d = np.int64(data[i])
+            rising = d & ~prev
+            x += np.int64((rising & cx) != 0) * (2 * np.int64((d & dx) != 0) - 1)
+            y += np.int64((rising & cy) != 0) * (2 * np.int64((d & dy) != 0) - 1)
+            z += np.int64((rising & cz) != 0) * (2 * np.int64((d & dz) != 0) - 1)
+            prev = d
+            i += 1
+        out[k, 0], out[k, 1], out[k, 2] = x, y, z
     return out
 
 

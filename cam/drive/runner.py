@@ -230,18 +230,24 @@ class Cursor:
         """Position (x, y, z) in steps after the writes sent so far."""
         return self.live[1]
 
-    def note(self, t_ns: np.ndarray, data: np.ndarray) -> None:
-        """The writes ``(K,)`` times and data just went out, in order."""
-        n = len(data)
-        if not n:
-            return
-        args = (data, np.int64(self.last_data), self.clock, self.dirbit)
+    def counts(self, data: np.ndarray, ends: np.ndarray) -> np.ndarray:
+        """``(K, 3)`` int64 steps (x, y, z) the writes ``data[:ends[k]]`` would make after those noted so far
+        (``data``: ``(M,)`` uint8; ``ends``: ``(K,)`` int64 ascending, at most M), counted in one pass."""
+        args = (data, np.int64(self.last_data), self.clock, self.dirbit, ends)
         flags = data.flags
         kind = (data.dtype, flags.c_contiguous, flags.writeable)
         count = self._count.get(kind)
         if count is None:
             count = self._count[kind] = resolved(net_steps_kernel, *args)
-        dx, dy, dz = count(*args).tolist()
+        return count(*args)
+
+    def note(self, t_ns: np.ndarray, data: np.ndarray, steps: Optional[tuple[int, int, int]] = None) -> None:
+        """The writes ``(K,)`` times and data just went out, in order; ``steps``: the steps (x, y, z) they make,
+        when the caller has counted them already (:meth:`counts`), else they are counted here."""
+        n = len(data)
+        if not n:
+            return
+        dx, dy, dz = steps if steps is not None else self.counts(data, np.array([n], np.int64))[0].tolist()
         sent, (x, y, z) = self.live
         self.last_data, self.last_t_ns = int(data[-1]), int(t_ns[-1])
         self.live = (sent + n, (x + dx, y + dy, z + dz))
@@ -287,6 +293,15 @@ class _Pauses:
         self._writes: list[int] = self.writes.tolist()
         self._next = 0
         self.count = 0
+
+    def marks(self, chunk: StepChunk, cursor: Cursor) -> dict[int, tuple[int, int, int]]:
+        """The steps (x, y, z) ``chunk``'s writes make up to its end and up to each pause in it (by write count in
+        the chunk, from the cursor's position before it), counted in one pass: the send loop's batches end there
+        (a job of tens of thousands of tool changes counted batch by batch paid a compiled call at each)."""
+        n = len(chunk)
+        lo, hi = np.searchsorted(self.writes, (chunk.first_write, chunk.first_write + n))
+        ends = np.append(self.writes[lo:hi] - (chunk.first_write - 1), n)
+        return dict(zip(ends.tolist(), map(tuple, cursor.counts(chunk.data, ends).tolist()))) | {0: (0, 0, 0)}
 
     def next_after(self, write: int) -> int:
         """The first pause write at or after ``write`` (a huge number: none); ``write`` never goes back."""
@@ -669,13 +684,16 @@ def _send(plan: Plan, p: Port, ctl: Controller, clock: "_SimulatedClock | _RealC
     total = len(plan)
     for chunk in clock.chunks(plan):
         i, n = 0, len(chunk)
+        marks = pauses.marks(chunk, cursor)
         while i < n:
             if not clock.may_go(ctl):
                 return
             pause = pauses.next_after(chunk.first_write + i)
             end = min(n, i + clock.batch, pause - chunk.first_write + 1)
             j = clock.send(p, chunk, i, end, ctl)
-            cursor.note(chunk.t_ns[i:j], chunk.data[i:j])
+            a, b = marks.get(i), marks.get(j)
+            cursor.note(chunk.t_ns[i:j], chunk.data[i:j],
+                        None if a is None or b is None else (b[0] - a[0], b[1] - a[1], b[2] - a[2]))
             i = j
             sent = cursor.sent
             if progress and j > 0:
