@@ -386,8 +386,8 @@ def _drop_caps(per, r1, r2, r3, u, cap, factor, s, v_start, v_max, cap_dirty, ju
 
     A broken top speed (R1) or stop (R3) of an interval of ``m`` periods caps them at the rate that meets the
     rule, ``v * m / s``, at once; any other break (R2), or one whose cap is that low already, to ``factor`` x the
-    slowest rate there.  The marks ``r1``..``r3`` are zero again afterwards (for :func:`_judge_axis`, which only
-    writes where it judges): a lowered cap is always within reach of the step whose break lowered it.
+    slowest rate there.  The marks ``r1``..``r3`` are zero again afterwards (for :func:`_judge_axis`, which writes
+    only the breaks): a lowered cap is always within reach of the step whose break lowered it.
     Each run of periods whose caps it lowered is added to ``dirty`` (as ``(first, last)`` from ``dirty[2 n_dirty]``
     on; room for one a break); returns ``(breaks, n_dirty)``.
     """
@@ -395,6 +395,8 @@ def _drop_caps(per, r1, r2, r3, u, cap, factor, s, v_start, v_max, cap_dirty, ju
     hits = 0
     for i in range(n_judged):
         for j in range(judged[2 * i], judged[2 * i + 1]):
+            if not (r1[j] > 0 or r2[j] > 0 or r3[j] > 0):
+                continue  # (most steps: nothing written, nothing to reset)
             lo = -1
             hi = -1
             exact = np.inf

@@ -163,7 +163,8 @@ def check_axis_steps(t_ns, slot_of_step, slot_t_ns, brk, s_mm, v_start, v_max, a
         s_mm, v_start, v_max, acc: mm per step, start and top speed (mm/s), acceleration (mm/s^2).
         r1, r3: ``(n,)`` float64 out: speed excess (mm/s) of the interval from step j to j + 1 (0 = ok).
         r2: ``(n,)`` float64 out: acceleration excess (mm/s) of the pair around step j (0 = ok).
-            Pass three empty arrays to only count (the planner's check: nothing to record when it passes).
+            Zero when called: only the breaks are written.  Pass three empty arrays to only count (nothing to
+            record when it passes).
 
     Returns:
         How many rule breaks were found (0 = the axis passes).
@@ -176,8 +177,9 @@ def check_axis_steps(t_ns, slot_of_step, slot_t_ns, brk, s_mm, v_start, v_max, a
 def check_steps_range(t_ns, slot_of_step, slot_t_ns, brk, s_mm, v_start, v_max, acc, r1, r2, r3, j_lo, j_hi):
     """:func:`check_axis_steps` judging only the intervals from steps ``j_lo .. j_hi - 1`` and the pairs around
     them (the arrays hold the steps around them too, which decide whether a judged interval starts or ends a
-    run); records only there.  A kernel for other kernels (the look-ahead planner re-judges only what changed).
-    """
+    run); records only there, and only the breaks (``r1``..``r3`` are zero there when called: the look-ahead
+    planner's :func:`~cam.drive.ramps._drop_caps` leaves them so).  A kernel for other kernels (the planner
+    re-judges only what changed)."""
     n = t_ns.shape[0]
     n_bad = 0
     record = r1.shape[0] > 0
@@ -185,9 +187,6 @@ def check_steps_range(t_ns, slot_of_step, slot_t_ns, brk, s_mm, v_start, v_max, 
     dmin = s_ns / v_max
     ds = s_ns / v_start
     for j in range(max(j_lo, 0), min(j_hi, n - 1)):
-        if record:
-            r1[j] = 0.0
-            r3[j] = 0.0
         if brk[j + 1]:
             continue
         d = float(t_ns[j + 1] - t_ns[j])
@@ -201,13 +200,6 @@ def check_steps_range(t_ns, slot_of_step, slot_t_ns, brk, s_mm, v_start, v_max, 
             if record:
                 r3[j] = s_ns / max(d, 1.0) - v_start
             n_bad += 1
-    if record and n > 0:
-        if j_lo <= n - 1 < j_hi:  # no interval starts at the last step; no pair around the first or the last
-            r1[n - 1] = 0.0
-            r3[n - 1] = 0.0
-            r2[n - 1] = 0.0
-        if j_lo <= 0 < j_hi:
-            r2[0] = 0.0
     last_d1 = -1.0
     last_d2 = -1.0
     last_lo = np.int64(-1)
@@ -216,8 +208,6 @@ def check_steps_range(t_ns, slot_of_step, slot_t_ns, brk, s_mm, v_start, v_max, 
     w_d = -1.0  # the last pair's second interval and its w (the next pair's first interval, most often)
     w_of_d = 0.0
     for j in range(max(j_lo, 1), min(j_hi, n - 1)):
-        if record:
-            r2[j] = 0.0
         if brk[j] or brk[j + 1]:
             continue
         d1 = max(float(t_ns[j] - t_ns[j - 1]), 1.0)  # two steps at one time (a broken log): R1 has it already
