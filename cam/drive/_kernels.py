@@ -122,7 +122,7 @@ def chunk_writes_kernel(high, dirs, per, next_dirs, t0):
 
 
 @entry
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def pin_rows_kernel(t_ns, data, strobe):
     """The pin log CSV rows ``t_ns,data,strobe\\n`` of writes, as ``np.savetxt(fmt="%d", delimiter=",")``
     writes them, in ASCII bytes.

@@ -21,7 +21,9 @@ runner's business.  The mock simulates switches from a schedule
 from __future__ import annotations
 
 import os
+import queue
 import tempfile
+import threading
 import time
 from pathlib import Path
 from typing import IO, Iterator, Optional
@@ -124,6 +126,57 @@ _PENDING_WRITES = 1 << 14
 """Single writes (the real-time clock's) gathered before they join the log."""
 
 
+_LOG_ROWS = 1 << 18
+"""Rows of a streamed pin log formatted at a time, and gathered before they go to its writer thread."""
+
+
+class _PinLogWriter:
+    """Formats a streamed pin log's rows and writes them to its ``.part`` file in a thread of its own, so the
+    send loop goes on meanwhile (the CSV is about 40 bytes a step period: the disk, not the loop, sets its pace).
+
+    Holds at most :data:`_LOG_QUEUE` groups of about :data:`_LOG_ROWS` writes.  A failed write is kept in
+    :attr:`error` (the rest is dropped); the port raises it at its next write or at the end."""
+
+    def __init__(self, file: IO[bytes]) -> None:
+        self.file = file
+        self.error: Optional[OSError] = None
+        self._queue: "queue.Queue[Optional[list[tuple[np.ndarray, np.ndarray, np.ndarray]]]]" = \
+            queue.Queue(maxsize=_LOG_QUEUE)
+        self._thread = threading.Thread(target=self._run, name="cam-pin-log", daemon=True)
+        self._thread.start()
+
+    def put(self, parts: list[tuple[np.ndarray, np.ndarray, np.ndarray]]) -> None:
+        """Write these ``(t_ns, data, strobe)`` arrays (int64, uint8, uint8), in order, after those put before."""
+        self._queue.put(parts)
+
+    def close(self) -> Optional[OSError]:
+        """Write what was put and end the thread; the error that stopped the writing, if any."""
+        self._queue.put(None)
+        self._thread.join()
+        return self.error
+
+    def _run(self) -> None:
+        from ._kernels import pin_rows_kernel  # numba: only when a pin log streams
+
+        while True:
+            parts = self._queue.get()
+            if parts is None:
+                return
+            if self.error is not None:
+                continue
+            t_ns, data, strobe = (np.concatenate(a) if len(a) > 1 else a[0] for a in zip(*parts))
+            try:
+                for i in range(0, len(t_ns), _LOG_ROWS):  # the rows np.savetxt(fmt="%d") writes, formatted compiled
+                    self.file.write(pin_rows_kernel(t_ns[i:i + _LOG_ROWS], data[i:i + _LOG_ROWS].astype(np.int64),
+                                                    strobe[i:i + _LOG_ROWS].astype(np.int64)))
+            except OSError as exc:
+                self.error = exc
+
+
+_LOG_QUEUE = 4
+"""Groups of writes a :class:`_PinLogWriter` holds before the send loop waits for the disk."""
+
+
 class MockPort(Port):
     """The logging mock port.  :meth:`pin_log` returns everything written so far.
 
@@ -155,6 +208,9 @@ class MockPort(Port):
         self._pending: list[tuple[int, int, int]] = []
         self.pin_log_path = Path(pin_log_path) if pin_log_path is not None else None
         self._file: Optional[IO[bytes]] = None
+        self._writer: Optional[_PinLogWriter] = None
+        self._to_log: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []  # writes not yet handed to the writer
+        self._to_log_n = 0
         self.n_writes = 0
         self.last_t_ns: Optional[int] = None
 
@@ -207,16 +263,23 @@ class MockPort(Port):
         if self.pin_log_path is None:
             self._hold(t_ns, data, strobe)
             return
-        from ._kernels import pin_rows_kernel  # numba: only when a pin log streams
+        if self._writer is None:
+            try:
+                self._writer = _PinLogWriter(self._open_log())
+            except OSError as exc:
+                self._abandon_pin_log(exc)
+        elif self._writer.error is not None:
+            self._abandon_pin_log(self._writer.error)
+        # (t_ns is the port's own, its offset added; data and strobe are copied: the caller's may be reused)
+        self._to_log.append((t_ns, np.array(data, np.uint8), np.array(strobe, np.uint8)))
+        self._to_log_n += len(t_ns)
+        if self._to_log_n >= _LOG_ROWS:
+            self._hand_to_writer()
 
-        try:
-            log = self._open_log()
-            for i in range(0, len(t_ns), 1 << 18):  # the rows np.savetxt(fmt="%d") writes, formatted compiled
-                log.write(pin_rows_kernel(np.ascontiguousarray(t_ns[i:i + (1 << 18)], np.int64),
-                                          data[i:i + (1 << 18)].astype(np.int64),
-                                          strobe[i:i + (1 << 18)].astype(np.int64)))
-        except OSError as exc:
-            self._abandon_pin_log(exc)
+    def _hand_to_writer(self) -> None:
+        if self._to_log and self._writer is not None:
+            self._writer.put(self._to_log)
+        self._to_log, self._to_log_n = [], 0
 
     def _hold(self, t_ns: np.ndarray, data: np.ndarray, strobe: np.ndarray) -> None:
         room = max(0, _HELD_WRITES - self._held)
@@ -269,6 +332,11 @@ class MockPort(Port):
         if self.pin_log_path is None:
             return None
         self._flush()
+        self._hand_to_writer()
+        error = self._writer.close() if self._writer is not None else None
+        self._writer = None
+        if error is not None:
+            self._abandon_pin_log(error)
         try:
             log = self._open_log()  # (a run of no writes still gets its header)
             log.flush()
@@ -290,6 +358,10 @@ class MockPort(Port):
     def _abandon_pin_log(self, exc: OSError) -> None:
         """A pin log write failed (a full disk, a lost folder): drop its ``.part`` file, keep counting the writes
         without a log, and raise one line naming the file and the cause."""
+        if self._writer is not None:
+            self._to_log, self._to_log_n = [], 0
+            self._writer.close()
+            self._writer = None
         if self._file is not None:
             try:
                 self._file.close()
