@@ -322,7 +322,7 @@ def check_ramps(
             whose stop is not judged (the host could not help it) while the start after it is (R3, and R2 on):
             the runner must re-ramp.
         slow_writes: write indices a real-time run sent late at all (over
-            :data:`cam.drive.runner.JITTER_NS`: ``RunResult.lateness.slow_writes``): the slowdown into the
+            :data:`cam.drive.runner.JITTER_NS`, 10 us: ``RunResult.lateness.slow_writes``): the slowdown into the
             interval that holds one is not judged (R2), the speed-up out of it is.
 
     Returns:
