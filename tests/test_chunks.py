@@ -120,3 +120,27 @@ def test_peak_memory_does_not_grow_with_the_job_length():
     _peak_bytes(4_000, 8)  # kernels compiled or loaded, numba's lazy imports of every type seen done
     small, large = _peak_bytes(4_000, 1), _peak_bytes(4_000, 8)
     assert large < 1.5 * small, (small, large)
+
+
+@pytest.mark.parametrize("chunk", [97, 1000])
+def test_windows_end_at_rests_and_plan_what_the_whole_job_plans(chunk, monkeypatch):
+    """A look-ahead window ends at the nearest rest outside its chunk: on a machine file of long ramps (a margin
+    of about a million periods) a job of tool changes every few hundred periods is planned in windows of about
+    its chunk's size, and the writes are those of the whole job planned at once."""
+    from cam.drive import chunks as chunks_module
+
+    s = cam.MachineSettings().replace(ramp="lookahead", delay_xy_ms=0.05, delay_z_ms=0.05, max_speed_x_mm_s=600.0,
+                                      max_speed_y_mm_s=600.0, max_speed_z_mm_s=300.0, travel=BIG)
+    job = _zigzag(300, s, pause_every=7)
+    whole = plan_chunks(job, chunk_periods=1 << 30).to_plan()
+    plan = plan_chunks(job, chunk_periods=chunk)
+    assert plan.margin_periods > 500_000 > len(plan)  # without the rests, every window would be the whole job
+    sizes = []
+    planned = chunks_module._lookahead
+    monkeypatch.setattr(chunks_module, "_lookahead", lambda high, *a: sizes.append(len(high)) or planned(high, *a))
+    got = plan.to_plan()
+    np.testing.assert_array_equal(got.t_ns, whole.t_ns)
+    np.testing.assert_array_equal(got.data, whole.data)
+    gaps = np.diff(np.concatenate([plan._stops, [plan.n_periods]]))  # between rests, after the long first move
+    assert len(sizes) > 10 and max(sizes[len(sizes) // 2:]) <= chunk + 2 * int(gaps.max()) < plan.n_periods // 8
+    assert sum(sizes) < len(sizes) * plan.n_periods / 4

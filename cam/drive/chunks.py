@@ -510,7 +510,7 @@ class ChunkedPlan:
             if done >= buf_end:
                 return
             kept_end = min(done + c, buf_end)
-            w0, w1 = max(buf_start, done - m), min(buf_end, kept_end + m)
+            w0, w1 = self._window_ends(max(buf_start, done - m), done, kept_end, min(buf_end, kept_end + m))
             a, b = w0 - buf_start, w1 - buf_start
             inner = self._stops[(self._stops > w0) & (self._stops < w1)] - w0
             ka, kb = done - buf_start, kept_end - buf_start
@@ -520,6 +520,22 @@ class ChunkedPlan:
             if drop:
                 buf = [v[drop:] for v in buf]
                 buf_start += drop
+
+    def _window_ends(self, w0: int, done: int, kept_end: int, w1: int) -> tuple[int, int]:
+        """The window ``[w0, w1)`` around the chunk ``[done, kept_end)`` (periods), each end brought in to the
+        nearest rest outside the chunk (a pause, a tool change, a stop of every axis) when there is one within
+        the margin: the passes start again at a rest and no rule judges an interval or a pair across one, so
+        what lies beyond a rest changes nothing before it, and the window's end is a rest to it as it is to the
+        whole job.  A job of frequent rests is then planned in windows about the size of its chunks whatever
+        the machine's ramps (a machine file of long ramps has margins of a million periods)."""
+        stops = self._stops
+        i = int(np.searchsorted(stops, done, "right"))  # the last rest at or before the chunk's start
+        if i and stops[i - 1] > w0:
+            w0 = int(stops[i - 1])
+        k = int(np.searchsorted(stops, kept_end, "left"))  # the first rest at or after its end
+        if k < len(stops) and stops[k] < w1:
+            w1 = int(stops[k])
+        return w0, w1
 
     def chunks(self) -> Iterator[StepChunk]:
         """The job's writes in order, a chunk at a time (the first holds the initial write at t = 0)."""
