@@ -500,7 +500,8 @@ class ChunkedPlan:
         stretches = self._rebatched()
         finished = False
         while True:
-            while not finished and buf_start + len(buf[2]) < done + c + m:
+            need = self._window_ends(done - m, done, done + c, done + c + m)[1]  # read no further than a rest
+            while not finished and buf_start + len(buf[2]) < need:
                 nxt = next(stretches, None)
                 if nxt is None:
                     finished = True
@@ -516,7 +517,7 @@ class ChunkedPlan:
             ka, kb = done - buf_start, kept_end - buf_start
             yield buf[0][ka:kb], buf[1][ka:kb], buf[0][a:b], buf[2][a:b], inner, (done - w0, kept_end - w0)
             done = kept_end
-            drop = max(0, done - m - buf_start)
+            drop = max(0, self._window_ends(done - m, done, done + c, done + c + m)[0] - buf_start)
             if drop:
                 buf = [v[drop:] for v in buf]
                 buf_start += drop
