@@ -10,12 +10,13 @@ A :class:`ChunkedPlan` makes the same writes a chunk at a time:
 2. the speed ramps lengthen them: ``constant`` keeps the nominal periods,
    ``linear40`` ramps each source move from its length and step counts (known
    from the moves, so a move may span chunks), ``lookahead`` plans a *window*:
-   the chunk and ``margin_periods`` periods on each side, and keeps the
-   chunk.  The margin is many times the longest ramp (the periods a stop
-   from full speed takes, :func:`lookahead_margin`), so the chunk's periods
-   are those of the whole-job planner: a ramp that must slow down before a
-   stop in the next chunk starts in this one.  Tests check the identity on
-   jobs whose chunk boundaries fall inside ramps;
+   the chunk and ``margin_periods`` periods on each side, or up to the
+   nearest rest when it is closer (nothing is planned across a rest), and
+   keeps the chunk.  The margin is many times the longest ramp (the periods a
+   stop from full speed takes, :func:`lookahead_margin`), so the chunk's
+   periods are those of the whole-job planner: a ramp that must slow down
+   before a stop in the next chunk starts in this one.  Tests check the
+   identity on jobs whose chunk boundaries fall inside ramps;
 3. the writes follow (:func:`cam.drive._kernels.chunk_writes_kernel`) with
    absolute times and write indices.
 
