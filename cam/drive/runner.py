@@ -453,6 +453,7 @@ class _SimulatedClock:
     ``switches`` (a mock with a switch schedule), each batch is sent up to the first write a switch forbids."""
 
     batch = _BATCH
+    counts_chunks = True  # a chunk's steps counted once up to each pause in it (_Pauses.marks)
 
     def __init__(self, switches: Optional[SwitchWatch] = None) -> None:
         self.lateness = Lateness()  # nothing is late on the simulated clock
@@ -559,6 +560,8 @@ class _RealClock:
     """
 
     batch = 1 << 62  # a batch ends at a progress report, a pause, or the chunk's end
+    counts_chunks = False  # each batch's steps are counted after it went out, before the next write is due: a
+    # chunk counted at its start would hold its first write back (about a millisecond for 2^18 periods)
 
     def __init__(self, t0: int, settings: MachineSettings, switches: Optional[SwitchWatch] = None) -> None:
         self.t0 = t0
@@ -686,7 +689,7 @@ def _send(plan: Plan, p: Port, ctl: Controller, clock: "_SimulatedClock | _RealC
     total = len(plan)
     for chunk in clock.chunks(plan):
         i, n = 0, len(chunk)
-        marks = pauses.marks(chunk, cursor)
+        marks = pauses.marks(chunk, cursor) if clock.counts_chunks else {}
         while i < n:
             if not clock.may_go(ctl):
                 return
