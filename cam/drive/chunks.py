@@ -501,8 +501,12 @@ class ChunkedPlan:
         stretches = self._rebatched()
         finished = False
         while True:
-            need = self._window_ends(done - m, done, done + c, done + c + m)[1]  # read no further than a rest
-            while not finished and buf_start + len(buf[2]) < need:
+            lo, hi = self._window_ends(done - m, done, done + c, done + c + m)  # this chunk's window, at most
+            drop = max(0, lo - buf_start)  # nothing before it is needed again
+            if drop:
+                buf = [v[drop:] for v in buf]
+                buf_start += drop
+            while not finished and buf_start + len(buf[2]) < hi:  # read no further than it
                 nxt = next(stretches, None)
                 if nxt is None:
                     finished = True
@@ -512,16 +516,12 @@ class ChunkedPlan:
             if done >= buf_end:
                 return
             kept_end = min(done + c, buf_end)
-            w0, w1 = self._window_ends(max(buf_start, done - m), done, kept_end, min(buf_end, kept_end + m))
+            w0, w1 = max(buf_start, lo), min(buf_end, hi)
             a, b = w0 - buf_start, w1 - buf_start
             inner = self._stops[(self._stops > w0) & (self._stops < w1)] - w0
             ka, kb = done - buf_start, kept_end - buf_start
             yield buf[0][ka:kb], buf[1][ka:kb], buf[0][a:b], buf[2][a:b], inner, (done - w0, kept_end - w0)
             done = kept_end
-            drop = max(0, self._window_ends(done - m, done, done + c, done + c + m)[0] - buf_start)
-            if drop:
-                buf = [v[drop:] for v in buf]
-                buf_start += drop
 
     def _window_ends(self, w0: int, done: int, kept_end: int, w1: int) -> tuple[int, int]:
         """The window ``[w0, w1)`` around the chunk ``[done, kept_end)`` (periods), each end brought in to the
