@@ -31,6 +31,13 @@ import numpy as np
 from .errors import CamError
 MAX_MM = 100.0
 """The largest tool dimension accepted (mm)."""
+MIN_MM = 0.001
+"""The smallest tool dimension accepted other than 0 (mm, one micrometre): a smaller one is a slip, and the
+divisions by it (a V bit's depth for a width, the footprint in pixels) would overflow."""
+MIN_V_ANGLE_DEG = 1.0
+MAX_V_ANGLE_DEG = 179.0
+"""A V bit's included angle is 1..179 degrees: a sharper one would cut a line 0.3 mm wide deeper than any
+machine's travel (the depth grows as 1 / tan(angle / 2), infinite at 0), a flatter one would be no V bit."""
 
 __all__ = ["Tool", "POINT", "parse_tool", "drop_depth_px", "reach_depth_px", "tool_of_settings", "corner_depth_px", "footprint_px", "TOOL_SHAPES"]
 
@@ -58,15 +65,19 @@ class Tool:
     def __post_init__(self) -> None:
         if self.shape not in TOOL_SHAPES:
             raise CamError(f"tool: unknown shape {self.shape!r} (one of {', '.join(TOOL_SHAPES)})")
-        for key in ("diameter_mm", "angle_deg", "tip_mm"):
+        for key, hi in (("diameter_mm", MAX_MM), ("angle_deg", MAX_V_ANGLE_DEG), ("tip_mm", MAX_MM)):
             value = getattr(self, key)
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and 0 <= value <= MAX_MM):
-                raise CamError(f"tool: {key} must be a number 0..{MAX_MM:g}, got {value!r}")
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not _finite(value) \
+                    or not 0 <= value <= hi:
+                raise CamError(f"tool: {key} must be a number 0..{hi:g}, got {str(value)[:40]}")
+            if key != "angle_deg" and 0 < value < MIN_MM:
+                raise CamError(f"tool: {key} must be 0 or {MIN_MM:g}..{MAX_MM:g} mm, got {value:g}")
         if self.shape in ("flat", "ball") and not self.diameter_mm > 0:
             raise CamError(f"tool: a {self.shape} cutter needs a diameter > 0 mm (e.g. {self.shape}:1)")
         if self.shape == "v":
-            if not 0 < self.angle_deg < 180:
-                raise CamError(f"tool: a V bit's angle must be between 0 and 180 degrees, got {self.angle_deg:g}")
+            if not MIN_V_ANGLE_DEG <= self.angle_deg <= MAX_V_ANGLE_DEG:
+                raise CamError(f"tool: a V bit's angle must be {MIN_V_ANGLE_DEG:g}..{MAX_V_ANGLE_DEG:g} degrees, "
+                               f"got {self.angle_deg:g}")
             if not self.tip_mm < self.diameter_mm:
                 raise CamError(f"tool: a V bit's tip ({self.tip_mm:g} mm) must be narrower than its diameter "
                                f"({self.diameter_mm:g} mm)")
@@ -135,6 +146,14 @@ class Tool:
         if self.shape == "v":
             return f"v:{self.angle_deg:g}:{self.tip_mm:g}:{self.diameter_mm:g}"
         return f"{self.shape}:{self.diameter_mm:g}"
+
+
+def _finite(value: float) -> bool:
+    """A finite number as a float (an integer of 400 digits is not: it overflows one)."""
+    try:
+        return math.isfinite(float(value))
+    except OverflowError:
+        return False
 
 
 POINT = Tool()

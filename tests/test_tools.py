@@ -243,6 +243,40 @@ def test_bad_tools_are_one_line_errors(tmp_path, args, message):
     assert "Traceback" not in done.stderr
 
 
+def test_cli_tool_v_1e_308_is_one_line_error(tmp_path):
+    """Issue #43 point 8: a V bit of 1e-308 degrees made --line-width's depth infinite (a traceback); the angle
+    is refused with its range, one line, exit code 2."""
+    done = _cam("drill", str(ROOT / "samples" / "ellipse.png"), "--tool", "v:1e-308:0", "--line-width", "0.3",
+                cwd=tmp_path)
+    assert done.returncode == 2, done.stderr
+    assert len(done.stderr.strip().splitlines()) == 1 and "Traceback" not in done.stderr
+    assert "--tool" in done.stderr and "angle" in done.stderr and "1..179 degrees" in done.stderr
+
+
+@pytest.mark.parametrize("spec, message", [
+    ("v:0.5:0", "1..179 degrees"), ("v:180:0", "angle"), ("v:1e999:0", "angle_deg must be a number"),
+    ("flat:1e-308", "diameter_mm must be 0 or 0.001..100 mm"), ("ball:0.0001", "0.001..100 mm"),
+    ("v:60:1e-308", "tip_mm must be 0 or 0.001..100 mm"), ("flat:1e308", "diameter_mm must be a number 0..100"),
+    ("ball:nan", "diameter_mm must be a number"), ("v:60:0:" + "9" * 400, "diameter_mm must be a number"),
+])
+def test_absurd_tool_sizes_are_refused_with_their_range(spec, message):
+    with pytest.raises(CamError, match="^--tool: tool: ") as err:
+        parse_tool(spec)
+    assert message in str(err.value) and "\n" not in str(err.value) and len(str(err.value)) < 200
+
+
+def test_v_bits_of_1_to_179_degrees_plan_a_finite_depth_for_any_line_width():
+    """Every V bit the ranges let in gives a finite depth for every width it can cut (120 degrees included,
+    which the mm range of the sizes used to refuse); nothing downstream can overflow."""
+    for spec in ("v:1:0", "v:120:0", "v:179:0.001", "v:1:0:100"):
+        tool = parse_tool(spec)
+        for width_mm in (tool.tip_mm, tool.diameter_mm, (tool.tip_mm + tool.diameter_mm) / 2):
+            depth_mm = tool.depth_for_width_mm(width_mm)
+            assert math.isfinite(depth_mm) and 0 <= depth_mm < 6000, (spec, width_mm, depth_mm)
+            if width_mm > tool.tip_mm:  # at the tip's own width the depth is 0, where nothing is cut
+                assert tool.width_at_depth_mm(depth_mm) == pytest.approx(width_mm)
+
+
 def test_a_bad_tool_table_names_the_key(tmp_path):
     machine = tmp_path / "m.toml"
     machine.write_text('[tool]\nshape = "ball"\n')

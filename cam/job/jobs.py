@@ -628,8 +628,11 @@ def _prepare_pixels(path: Path, kind: str, options: JobOptions, settings: Machin
     if options.line_width_mm is not None:
         if digitized.mode == "3d":
             raise CamError("--line-width sets the depth of a 2D drawing's engraved lines; this drawing is 3D")
-        depth, cut_depth_mm = max(1, int(round(cutter.depth_for_width_mm(options.line_width_mm)
-                                               / settings.px_to_mm_z(1)))), None
+        depth_px = _line_depth_mm(cutter, options.line_width_mm) / settings.px_to_mm_z(1)
+        if not depth_px <= MAX_DEPTH_PX:
+            raise CamError(f"--line-width: a {options.line_width_mm:g} mm line of a {cutter.describe()} is "
+                           f"{depth_px:.3g} Z pixels deep, more than {MAX_DEPTH_PX}")
+        depth, cut_depth_mm = max(1, int(round(depth_px))), None
     kw: dict[str, Any] = dict(depth=depth, settings=settings, passes=options.passes, start_at=options.start_at,
                               pause_at=list(options.pause_at), profile=profile, tool=cutter,
                               stepdown_mm=options.stepdown_mm, stepover=options.stepover, rough_tool=options.rough_tool,
@@ -732,6 +735,16 @@ def _prepare_excellon(path: Path, options: JobOptions, settings: MachineSettings
     )
 
 
+def _line_depth_mm(cutter: Any, width_mm: float) -> float:
+    """The depth at which ``cutter`` (a V bit) cuts a line ``width_mm`` wide, at most :data:`MAX_MM`: CamError
+    naming ``--line-width`` for a deeper one (a very sharp bit), so no depth downstream overflows."""
+    depth_mm = cutter.depth_for_width_mm(width_mm)
+    if not (math.isfinite(depth_mm) and depth_mm <= MAX_MM):
+        raise CamError(f"--line-width: a {width_mm:g} mm line of a {cutter.describe()} is {depth_mm:.3g} mm deep, "
+                       f"more than {MAX_MM:g} mm")
+    return depth_mm
+
+
 def _engraving(options: JobOptions, settings: MachineSettings, default_depth_mm: float
                ) -> tuple[float, dict[str, Any]]:
     """A vector file's cut depth (mm) and the report's tool and line width: ``--line-width`` with a V bit sets
@@ -739,7 +752,7 @@ def _engraving(options: JobOptions, settings: MachineSettings, default_depth_mm:
     cutter = parse_tool(options.tool, "--tool") if options.tool else tool_of_settings(settings.tool)
     depth_mm = _or(options.cut_depth_mm, default_depth_mm)
     if options.line_width_mm is not None:
-        depth_mm = cutter.depth_for_width_mm(options.line_width_mm)
+        depth_mm = _line_depth_mm(cutter, options.line_width_mm)
     if cutter.is_point:
         return depth_mm, {}
     return depth_mm, {"tool": cutter.describe(), "line_width_mm": round(cutter.width_at_depth_mm(depth_mm), 4)}
