@@ -23,6 +23,8 @@ queued line through after the reset that ends it).  The machine session drives a
 """
 from __future__ import annotations
 
+import math
+import re
 import threading
 import time
 from collections import deque
@@ -43,6 +45,11 @@ __all__ = [
 
 GRBL_PREFIX = "grbl:"
 RX_BUFFER_BYTES = 128
+PLANNER_BLOCKS = 15
+"""grbl 1.1's planner blocks on an ATmega328P (config.h ``BLOCK_BUFFER_SIZE`` 16, one kept free): the most
+motion that can be queued behind a line grbl has not answered yet."""
+HOMING_S = 600.0
+"""The longest a ``$H`` may take before its answer is overdue (a homing cycle's search distance at its slowest)."""
 DEFAULT_BAUD = 115200
 
 # grbl 1.1 error codes (interface.md "Grbl Response Messages"; doc/csv/error_codes_en_US.csv), paraphrased.
@@ -225,53 +232,76 @@ class GrblStatus:
     raw: str = ""
 
 
+MAX_POSITION_MM = 1.0e5
+"""The largest machine or work coordinate a status report may hold, mm (100 m: no desktop machine comes near;
+a value past it is a corrupted report, not a place)."""
+
+
+def _numbers(text: str) -> Optional[tuple[float, ...]]:
+    """``"1.0,2,3"`` as floats, or None when a value is not a plain finite number."""
+    try:
+        values = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        return None
+    return values if all(math.isfinite(v) for v in values) else None
+
+
 def parse_status(line: str, last_wco_mm: Optional[tuple[float, ...]] = None) -> GrblStatus:
     """Parse ``<Idle|MPos:1.000,2.000,0.000|FS:0,0|WCO:0.000,1.000,0.000>`` (interface.md, "Real-time Status
-    reports").
+    reports"), as grbl 1.1, grblHAL and FluidNC send it.
+
+    A report is data: the positions (``MPos``, ``WPos``, ``WCO``) must hold at least X, Y and Z as finite
+    numbers within :data:`MAX_POSITION_MM` (more axes, as grblHAL and FluidNC send for A/B/C, are dropped), or
+    the report is refused with a :class:`GrblError`, a link fault; the optional fields (``Bf``, ``FS``, ``F``,
+    ``Ov``) are taken when well formed and ignored otherwise, and fields ``cam`` does not use (``Pn``, ``Ln``,
+    ``A``, ``T``, ``H``, ``SD`` ...) are ignored.
 
     >>> s = parse_status("<Run|MPos:1.000,2.000,3.000|Bf:14,100|FS:500,0|WCO:1.000,0.000,0.000>")
     >>> s.state, s.wpos_mm, s.planner_free, s.feed_mm_min
     ('Run', (0.0, 2.0, 3.0), 14, 500.0)
+    >>> parse_status("<Idle|MPos:1,2,3|Bf:15|Ov:100,100>").overrides is None
+    True
     """
     text = line.strip()
-    if not (text.startswith("<") and text.endswith(">")):
-        raise GrblError(f"not a grbl status report: {line!r}")
+    if not (text.startswith("<") and text.endswith(">")) or len(text) > 400:
+        raise GrblError(f"not a grbl status report: {line[:80]!r}")
     fields = text[1:-1].split("|")
     state = fields[0]
+    if not state or not state.replace(":", "").isalnum():
+        raise GrblError(f"grbl status report with no state: {line[:80]!r}")
     values: dict[str, str] = {}
     for item in fields[1:]:
         key, _, val = item.partition(":")
         values[key] = val
 
-    def nums(key: str) -> tuple[float, ...]:
-        try:
-            return tuple(float(v) for v in values[key].split(","))
-        except ValueError:
-            raise GrblError(f"bad {key} in grbl status report {line!r}") from None
+    def position(key: str) -> tuple[float, ...]:
+        nums = _numbers(values[key])
+        if nums is None or len(nums) < 3 or any(abs(v) > MAX_POSITION_MM for v in nums[:3]):
+            raise GrblError(f"impossible {key} in grbl status report {line[:80]!r} (X, Y, Z must be finite "
+                            f"numbers within {MAX_POSITION_MM:g} mm)")
+        return nums[:3]
 
-    wco = nums("WCO") if "WCO" in values else (last_wco_mm or (0.0, 0.0, 0.0))
+    def optional(key: str, count: int) -> Optional[tuple[float, ...]]:
+        nums = _numbers(values[key]) if key in values else None
+        return nums if nums is not None and len(nums) >= count and all(abs(v) < 1e9 for v in nums) else None
+
+    wco = position("WCO") if "WCO" in values else (last_wco_mm or (0.0, 0.0, 0.0))
     if "MPos" in values:
-        mpos = nums("MPos")
+        mpos = position("MPos")
         wpos = tuple(m - w for m, w in zip(mpos, wco))
     elif "WPos" in values:
-        wpos = nums("WPos")
+        wpos = position("WPos")
         mpos = tuple(p + w for p, w in zip(wpos, wco))
     else:
-        raise GrblError(f"grbl status report without a position: {line!r}")
+        raise GrblError(f"grbl status report without a position: {line[:80]!r}")
     feed = rpm = 0.0
-    if "FS" in values:
-        fs = nums("FS")
+    fs = optional("FS", 1) or optional("F", 1)
+    if fs is not None:
         feed, rpm = fs[0], (fs[1] if len(fs) > 1 else 0.0)
-    elif "F" in values:
-        feed = nums("F")[0]
-    planner_free = rx_free = None
-    if "Bf" in values:
-        bf = nums("Bf")
-        planner_free, rx_free = int(bf[0]), int(bf[1])
-    overrides = None
-    if "Ov" in values:
-        ov = nums("Ov")
-        overrides = (int(ov[0]), int(ov[1]), int(ov[2]))
+    bf = optional("Bf", 2)
+    planner_free, rx_free = (int(bf[0]), int(bf[1])) if bf is not None else (None, None)
+    ov = optional("Ov", 3)
+    overrides = (int(ov[0]), int(ov[1]), int(ov[2])) if ov is not None else None
     return GrblStatus(state, mpos, wpos, wco, feed, rpm, planner_free, rx_free, overrides, text)
 
 
@@ -282,6 +312,75 @@ class StreamReport:
     lines: int
     bytes_sent: int
     max_outstanding_bytes: int
+
+
+_WORD = re.compile(r"([A-Z])\s*([-+]?(?:\d+\.?\d*|\.\d+))")
+
+
+class LineTimer:
+    """How long grbl may take to run a G-code line, in seconds at 100 % override, from grbl's own ``$$``: the
+    path at the line's feed (rapids at the slowest moving axis' ``$11x``) plus one full acceleration and
+    deceleration at the lowest ``$12x``; dwells their ``P``; ``$H`` :data:`HOMING_S`.  It follows the modal
+    state the lines set (position, feed, G0/G1, G90/G91, G20/G21).  An axis whose position is not known yet
+    counts its whole travel (``$13x``, else 1 m).  An upper bound for the answer deadline, not a planner.
+
+    >>> t = LineTimer({110: 600.0, 111: 600.0, 112: 600.0, 120: 10.0, 121: 10.0, 122: 10.0})
+    >>> t.time_s("G53G0X0Y0Z0") > 0, round(t.time_s("G53G1X10F600"), 3)
+    (True, 2.0)
+    """
+
+    def __init__(self, settings: dict[int, float]) -> None:
+        self.rate_mm_s = [max(1e-3, settings.get(110 + i, 500.0) / 60.0) for i in range(3)]
+        self.accel_mm_s2 = [max(1e-3, settings.get(120 + i, 10.0)) for i in range(3)]
+        self.travel_mm = [settings.get(130 + i, 0.0) or 1000.0 for i in range(3)]
+        self.pos_mm: list[Optional[float]] = [None, None, None]
+        self.feed_mm_min = 0.0
+        self.motion = 0.0
+        self.absolute = True
+        self.inch = False
+
+    def time_s(self, text: str) -> float:
+        upper = text.upper()
+        if upper.startswith("$H"):
+            return HOMING_S
+        if upper.startswith("$J="):
+            upper = "G1" + upper[3:]
+        elif upper.startswith("$"):
+            return 0.0
+        words = _WORD.findall(upper)
+        gs = [float(v) for k, v in words if k == "G"]
+        axes = {"XYZ".index(k): float(v) for k, v in words if k in "XYZ"}
+        for g in gs:
+            if g in (20.0, 21.0):
+                self.inch = g == 20.0
+            elif g in (90.0, 91.0):
+                self.absolute = g == 90.0
+            elif g in (0.0, 1.0, 2.0, 3.0) or 38.0 <= g < 39.0:
+                self.motion = g
+        scale = 25.4 if self.inch else 1.0
+        for k, v in words:
+            if k == "F":
+                self.feed_mm_min = float(v) * scale
+        if 4.0 in gs:
+            return max(0.0, next((float(v) for k, v in words if k == "P"), 0.0))
+        if not axes:
+            return 0.0
+        absolute = self.absolute or 53.0 in gs
+        delta = [0.0, 0.0, 0.0]
+        for i, v in axes.items():
+            here = self.pos_mm[i]
+            target = v * scale if absolute else (here or 0.0) + v * scale
+            delta[i] = self.travel_mm[i] if here is None else abs(target - here)
+            self.pos_mm[i] = target if absolute or here is not None else None
+        length_mm = math.sqrt(sum(d * d for d in delta))
+        moving = [i for i in range(3) if delta[i] > 0] or [0]
+        if self.motion == 0.0:
+            speed = min(self.rate_mm_s[i] for i in moving)
+        else:
+            speed = max(1e-3, min(self.feed_mm_min / 60.0, *(self.rate_mm_s[i] for i in moving)))
+        if self.motion in (2.0, 3.0):
+            length_mm = length_mm * math.pi + 2.0 * max(self.travel_mm)  # an arc's path is unknown here: bound it
+        return length_mm / speed + speed / min(self.accel_mm_s2[i] for i in moving)
 
 
 class _RealtimeBytes:
@@ -361,6 +460,13 @@ class GrblLink(_RealtimeBytes):
         self._closing = False
         self._wco: Optional[tuple[float, ...]] = None
         self._cancelled: Optional[str] = None
+        self._fault: Optional[str] = None      # a link fault: replies that cannot be right; sticky until a reset
+        self._connected = False                 # the welcome came: from here on every reply is counted
+        self._answered_s: deque[float] = deque(maxlen=PLANNER_BLOCKS + 2)  # machine time of the last answers
+        self._answer_clock = time.monotonic()   # the last answer (or a hold, which stops the clock)
+        self.reply_margin_s = max(10.0, 2.0 * self.timeout_s)
+        self.slowest_override_pct = 100         # the lowest of grbl's feed and rapid overrides, percent
+        self._timer: Optional[LineTimer] = None
         self.reset_on_open = False   # the welcome came by itself when the port opened: grbl restarted (power-up)
         self._serial_errors = (serial.SerialException, OSError)
         try:
@@ -390,6 +496,7 @@ class GrblLink(_RealtimeBytes):
                                 f"(is it grbl 1.1 at {self.baud} baud?)")
         with self._cond:
             self._welcomes = 0
+            self._connected = True
 
     def close(self) -> None:
         """Close the port (grbl keeps running whatever it has queued)."""
@@ -435,47 +542,88 @@ class GrblLink(_RealtimeBytes):
 
     def _on_line(self, line: str) -> None:
         with self._cond:
-            self._last_rx = time.monotonic()
-            if line == "ok" or line.startswith("error:"):
-                if self._outstanding:
-                    entry = self._outstanding.popleft()
-                    self._outstanding_bytes -= entry[0]
-                    entry[3] = line
-                    entry[4] = self._info
-                    self._info = []
-                    if "[MSG:Disabled]" in entry[4]:   # check mode left: grbl resets itself, as documented
-                        self._expected_resets += 1
-                    if line != "ok":
-                        self._done_errors.append(entry)
-            elif line.startswith("<"):
-                try:
-                    status = parse_status(line, self._wco)
-                except GrblError:
-                    status = None
-                if status is not None:
-                    self._wco = status.wco_mm
-                    self.status_report = status
-                    self._status_seq += 1
-            elif line.startswith("ALARM:"):
-                try:
-                    self._alarm = int(line[6:])
-                except ValueError:
-                    self._alarm = -1
-                self.messages.append(line)
-            elif line.startswith("Grbl ") and "for help" in line:
-                self.welcome = line
-                if self._expected_resets:
-                    self._expected_resets -= 1
-                else:
-                    self._welcomes += 1
-                self._outstanding.clear()   # a reset empties grbl's buffers: nothing sent is pending any more
-                self._outstanding_bytes = 0
-                self._info = []
-            else:
-                if line.startswith("[MSG:") or line.startswith(">"):
-                    self.messages.append(line)
-                self._info.append(line)
+            try:
+                self._take_line(line)
+            except Exception as exc:  # noqa: BLE001 - a reply cam cannot read is a link fault, never a dead reader
+                self._set_fault(f"grbl on {self.device} sent {line[:60]!r}, which cam cannot read "
+                                f"({type(exc).__name__}: {exc})")
             self._cond.notify_all()
+
+    def _set_fault(self, reason: str) -> None:
+        """Book a link fault (under the lock): the first one is kept and raised by every check until a reset."""
+        if self._fault is None:
+            self._fault = reason
+        self._cond.notify_all()
+
+    def _take_line(self, line: str) -> None:
+        now = time.monotonic()
+        self._last_rx = now
+        if line == "ok" or line.startswith("error:"):
+            if not self._outstanding:
+                if self._connected:
+                    self._set_fault(f"grbl on {self.device} answered {line!r} with no line waiting for an answer "
+                                    f"(a duplicated or stray reply): its receive buffer can no longer be counted")
+                return
+            self._answer(line, now)
+        elif line.startswith("<"):
+            try:
+                status = parse_status(line, self._wco)
+            except GrblError as exc:
+                self._set_fault(f"grbl on {self.device} sent {exc}")
+                return
+            self._take_status(status, now)
+        else:
+            self._take_push(line)
+
+    def _answer(self, line: str, now: float) -> None:
+        entry = self._outstanding.popleft()
+        self._outstanding_bytes -= entry[0]
+        entry[3] = line
+        entry[4] = self._info
+        self._info = []
+        self._answered_s.append(entry[6])
+        self._answer_clock = now
+        if "[MSG:Disabled]" in entry[4]:   # check mode left: grbl resets itself, as documented
+            self._expected_resets += 1
+        if line != "ok":
+            self._done_errors.append(entry)
+
+    def _take_status(self, status: GrblStatus, now: float) -> None:
+        self._wco = status.wco_mm
+        self.status_report = status
+        self._status_seq += 1
+        if status.state.startswith(("Hold", "Door", "Tool")):
+            self._answer_clock = now  # held by the operator: the queued moves' time stands still
+        if status.overrides is not None:
+            self.slowest_override_pct = max(1, min(status.overrides[0], status.overrides[1]))
+        if status.rx_free is not None and self._connected:
+            held_bytes = RX_BUFFER_BYTES - 1 - status.rx_free  # at least what grbl's receive buffer holds
+            if held_bytes > self._outstanding_bytes:
+                self._set_fault(f"grbl on {self.device} holds at least {held_bytes} bytes in its receive buffer "
+                                f"but cam counted {self._outstanding_bytes} unanswered (a duplicated reply was "
+                                f"counted): its receive buffer can no longer be counted")
+
+    def _take_push(self, line: str) -> None:
+        if line.startswith("ALARM:"):
+            try:
+                self._alarm = int(line[6:])
+            except ValueError:
+                self._alarm = -1
+            self.messages.append(line)
+        elif line.startswith("Grbl ") and "for help" in line:
+            self.welcome = line
+            if self._expected_resets:
+                self._expected_resets -= 1
+            else:
+                self._welcomes += 1
+            self._outstanding.clear()   # a reset empties grbl's buffers: nothing sent is pending any more
+            self._outstanding_bytes = 0
+            self._answered_s.clear()
+            self._info = []
+        else:
+            if line.startswith("[MSG:") or line.startswith(">"):
+                self.messages.append(line)
+            self._info.append(line)
 
     # ------------------------------------------------------------------ helpers
     def _write(self, data: bytes) -> None:
@@ -493,6 +641,8 @@ class GrblLink(_RealtimeBytes):
         """Raise the first fault seen: a lost link, a cancelled stream, an alarm, a reset grbl did on its own, a
         refused line."""
         self._raise_if_lost()
+        if self._fault is not None:
+            raise GrblError(self._fault)
         if self._cancelled is not None:
             raise PortError(self._cancelled)
         if self._alarm is not None:
@@ -528,6 +678,11 @@ class GrblLink(_RealtimeBytes):
                 if check and not quiet_ok and now - self._last_rx > self.timeout_s:
                     raise PortError(f"grbl on {self.device} stopped answering (nothing for {self.timeout_s:g} s, "
                                     f"status polls included){where}")
+                if check and self._outstanding:
+                    overdue = self._overdue(now)
+                    if overdue:
+                        self._set_fault(overdue)
+                        continue
                 if check and now >= next_poll:
                     self._cond.release()
                     try:
@@ -537,6 +692,21 @@ class GrblLink(_RealtimeBytes):
                     next_poll = now + self.poll_s
                 wake = next_poll if deadline is None else min(next_poll, deadline)
                 self._cond.wait(max(0.001, wake - now))
+
+    def _overdue(self, now: float) -> str:
+        """Why the oldest unanswered line's answer is overdue, or "" (under the lock).  grbl answers a line once
+        it is planned, so at the latest when the moves queued before it (the last answered lines, no more than
+        its planner holds) are done: their time at the slowest override, three times over (a simulated board
+        runs slower than a real one), plus :attr:`reply_margin_s`; a hold stops the clock."""
+        head = self._outstanding[0]
+        since = max(self._answer_clock, head[5])
+        queued_s = (sum(self._answered_s) + head[6]) * 100.0 / max(1, self.slowest_override_pct)
+        allowed_s = self.reply_margin_s + 3.0 * queued_s
+        if now - since <= allowed_s:
+            return ""
+        what = f"line {head[1]} {head[2]!r}" if head[1] else repr(head[2])
+        return (f"grbl on {self.device} has not answered {what} for {now - since:.1f} s, longer than the moves "
+                f"queued before it could take ({allowed_s:.1f} s with margin): a reply was lost")
 
     # ------------------------------------------------------------------ lines
     def _send_line(self, text: str, number: int) -> list:
@@ -551,10 +721,14 @@ class GrblLink(_RealtimeBytes):
                             f"receive buffer: {text[:40]!r}")
         where = f" at {label} {text!r}"
         self._wait(lambda: self._outstanding_bytes + len(data) <= RX_BUFFER_BYTES, None, where=where)
-        entry = [len(data), number, text, None, []]
+        if self._timer is None:
+            self._timer = LineTimer(self.settings)
+        entry = [len(data), number, text, None, [], time.monotonic(), self._timer.time_s(text)]
         with self._cond:
             if self._cancelled is not None:  # cancelled while it waited: the gate is shut
                 raise PortError(self._cancelled)
+            if not self._outstanding:
+                self._answer_clock = entry[5]
             self._outstanding.append(entry)
             self._outstanding_bytes += len(data)
             self._write(data)  # under the lock: a cancel cannot slip between the check and the write
@@ -572,6 +746,7 @@ class GrblLink(_RealtimeBytes):
     def read_settings(self) -> dict[int, float]:
         """``$$`` into :attr:`settings` (``{100: 250.0, ...}``)."""
         self.settings = parse_settings(self.command("$$", timeout_s=self.timeout_s), self.device)
+        self._timer = LineTimer(self.settings)
         return self.settings
 
     def stream(self, lines: Iterable[str], *, progress: Optional[Callable[[int], None]] = None,
@@ -636,7 +811,48 @@ class GrblLink(_RealtimeBytes):
         with self._cond:
             self._welcomes = 0
             self._alarm = None
+            self._fault = None  # the reset emptied grbl's buffers: the counts start again
         return self.welcome
+
+    def halt(self, reason: str, *, hold_wait_s: Optional[float] = None) -> bool:
+        """Stop grbl after a fault so that nothing queued before it runs: shut the gate on lines
+        (:meth:`cancel`), feed hold ``!`` at once, wait until grbl reports it stands still (at most
+        ``hold_wait_s``; by default three times the longest stop its ``$$`` allows, plus a second), then soft
+        reset (0x18), which drops every block still queued, and wait for the restart.  Never raises: returns
+        True when grbl restarted, False when the link is gone.  The link's fault is cleared (its counts start
+        again from the reset); the gate stays shut until :meth:`allow`."""
+        self.cancel(reason)
+        try:
+            self._write(b"!")
+        except PortError:
+            return False
+        if hold_wait_s is None:
+            rate = max(self.settings.get(110 + i, 500.0) for i in range(3)) / 60.0
+            accel = min(max(1e-3, self.settings.get(120 + i, 10.0)) for i in range(3))
+            hold_wait_s = 3.0 * rate / accel + 1.0
+        deadline = time.monotonic() + hold_wait_s
+        with self._cond:
+            seq = self._status_seq
+        try:
+            while time.monotonic() < deadline:
+                self._write(b"?")
+                with self._cond:
+                    self._cond.wait_for(lambda: self._status_seq > seq or self._lost is not None, 0.05)
+                    report, fresh = self.status_report, self._status_seq > seq
+                    seq = self._status_seq
+                if fresh and report is not None and report.state.startswith(("Hold:0", "Idle", "Alarm", "Door:0")):
+                    break
+            with self._cond:
+                self._welcomes = 0
+            self._write(b"\x18")
+            restarted = self._wait(lambda: self._welcomes > 0, self.timeout_s, check=False)
+        except PortError:
+            return False
+        with self._cond:
+            self._welcomes = 0
+            self._fault = None
+            self._done_errors.clear()
+        return restarted
 
     @property
     def alarm_pending(self) -> Optional[int]:

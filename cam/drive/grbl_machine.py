@@ -42,7 +42,7 @@ from ..settings import MachineSettings, Travel
 from .runner import EMERGENCY_STOPPED, FINISHED, STOPPED
 from .grbl_link import GrblLink, GrblStatus, alarm_text, open_grbl, parse_grbl_url, settings_mismatches
 
-__all__ = ["GrblMachine", "GrblControl", "GrblPause", "GrblPosition", "adopt_position", "run_on_grbl", "grbl_machine", "close_grbl_machines", "job_lines",
+__all__ = ["GrblMachine", "GrblControl", "GrblPause", "GrblPosition", "adopt_position", "fault_stop", "run_on_grbl", "grbl_machine", "close_grbl_machines", "job_lines",
            "mpos_to_steps", "steps_to_mpos", "grbl_travel", "travel_advice", "override_bytes", "POLL_S", "GRBL_OFFSETS"]
 
 ERROR = "error"
@@ -314,6 +314,7 @@ class GrblMachine:
         for b in data:
             self.link.override(b)
         self.feed_override_pct = int(percent)
+        self.link.slowest_override_pct = min(self.link.slowest_override_pct, int(percent))
 
 
 class GrblControl:
@@ -383,6 +384,19 @@ def finish_stop(machine: GrblMachine, ctl: GrblControl, timeout_s: float = 30.0)
         link.allow()
         link.unlock()
     return ""
+
+
+def fault_stop(machine: GrblMachine, error: str) -> str:
+    """After any fault of an activity on grbl (a refused line, an alarm, a lost or unexpected reply, a reply
+    overdue, a report cam cannot read, a reset, a cable pulled): stop the machine before anything else, feed
+    hold and then a soft reset (:meth:`~cam.drive.grbl_link.GrblLink.halt`), so that no block queued before the
+    fault runs.  Returns the one line that says what happened; the position is then unknown."""
+    restarted = machine.link.halt(error)
+    if restarted:
+        machine.link.allow()  # the stream has ended: status reports may be read again for the booking
+    done = ("cam sent a feed hold and a soft reset, so nothing queued after it ran" if restarted else
+            "cam could not reach grbl to stop it: check the machine")
+    return f"{error}; {done}; the position is unknown until Home or Set position"
 
 
 def adopt_position(machine: GrblMachine, hold: Any, log: Callable[[str, str], None]) -> Steps3:
@@ -485,6 +499,8 @@ def run_on_grbl(session: Any, name: str, job: Any, ctl: GrblControl, label: str,
             lost = finish_stop(machine, ctl)
         except CamError as exc:
             lost = str(exc)
+    elif error:
+        lost = fault_stop(machine, error)
     _book_end(session, name, label, ctl, start_steps, error, lost)
 
 

@@ -59,6 +59,8 @@ class _Realtime:
 
     def _feed_hold(self) -> None:
         if self._state in ("Idle", "Run", "Jog"):
+            if self._state != "Idle":
+                self._event("feed hold")
             self._hold = True
             if self._state != "Jog":
                 self._state = "Hold"

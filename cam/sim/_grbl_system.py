@@ -54,6 +54,8 @@ class _System:
         for k in range(len(self._lines) - 1, -1, -1):
             if self._lines[k][2] == "pending":
                 self._lines[k] = (self._lines[k][0], self._lines[k][1], text)
+                if text != "ok":
+                    self._event(f"{text} for line {self._lines[k][0]}")
                 break
         self._send(text)
 
@@ -160,8 +162,8 @@ class _System:
             if self._check:
                 self._send("[MSG:Disabled]")
                 self._answer("ok")
-                self._answered = True
                 self._reset_state(alarm_code=None)
+                self._answered = True  # after the reset, which clears it: grbl answers $C once, before its restart
                 return
             self._check = True
             self._state = "Check"

@@ -4,7 +4,12 @@
 (:attr:`PtyProxy.device_path`) for the host.  A thread forwards bytes both ways as they come, in real time,
 and on request drops a byte the host sent, adds bytes towards the host after a delay, floods the host, or
 cuts the cable (forwards nothing more either way).  Offsets count the bytes the host has sent since the
-proxy started (``to_board``, before any fault)."""
+proxy started (``to_board``, before any fault).
+
+For line protocols (grbl) two hooks edit whole lines: ``host_line_filter(n, line)`` gets each line the host
+sends (n from 0, its end of line included; real-time bytes, ``?!~``, 0x18 and 0x80 up, pass at once and are
+not part of a line) and returns the bytes to forward instead; ``board_line_filter(line)`` does the same for
+the board's lines.  Both run in the proxy's thread."""
 from __future__ import annotations
 
 import os
@@ -14,6 +19,7 @@ import threading
 import time
 import tty
 from dataclasses import dataclass, field
+from typing import Callable, Optional
 
 
 @dataclass
@@ -33,6 +39,8 @@ class PtyProxy:
     to_board: bytearray = field(default_factory=bytearray)
     to_host: bytearray = field(default_factory=bytearray)
     injected: bytearray = field(default_factory=bytearray)
+    host_line_filter: Optional[Callable[[int, bytes], bytes]] = None
+    board_line_filter: Optional[Callable[[bytes], bytes]] = None
 
     def __post_init__(self) -> None:
         self._board = os.open(self.board_device, os.O_RDWR | os.O_NOCTTY)
@@ -47,6 +55,9 @@ class PtyProxy:
         self._stop = threading.Event()
         self.cut = False
         self.forwarded = 0  # bytes the board was given
+        self._host_line = bytearray()
+        self._host_lines = 0
+        self._board_line = bytearray()
         self._thread = threading.Thread(target=self._run, name="pty-proxy", daemon=True)
         self._thread.start()
 
@@ -85,7 +96,14 @@ class PtyProxy:
             if self.cut_after_offset is not None and offset >= self.cut_after_offset:
                 self.cut = True
             if not self.cut and offset not in self.drop_offsets:
-                out.append(b)
+                if self.host_line_filter is None or b in b"?!~\x18" or b >= 0x80:
+                    out.append(b)
+                else:
+                    self._host_line.append(b)
+                    if b == 0x0A:
+                        out += self.host_line_filter(self._host_lines, bytes(self._host_line))
+                        self._host_lines += 1
+                        self._host_line.clear()
             with self._lock:
                 for inj in self._injections:
                     if inj.due_s is None and len(self.to_board) >= inj.after_offset:
@@ -100,7 +118,13 @@ class PtyProxy:
             offset = len(self.to_host)
             self.to_host.append(b)
             if not self.cut and offset not in self.drop_reply_offsets:
-                out.append(b)
+                if self.board_line_filter is None:
+                    out.append(b)
+                else:
+                    self._board_line.append(b)
+                    if b == 0x0A:
+                        out += self.board_line_filter(bytes(self._board_line))
+                        self._board_line.clear()
         if out:
             self._write(self._master, bytes(out))
 
