@@ -14,6 +14,7 @@ __all__ = [
     "SettingsError",
     "PlanError",
     "TravelError",
+    "StalePlanError",
     "PortError",
     "CapabilityError",
     "BusyError",
@@ -42,6 +43,11 @@ class PlanError(CamError):
 
 class TravelError(PlanError):
     """A move would leave the configured machine travel."""
+
+
+class StalePlanError(PlanError):
+    """A job was planned for another machine state (the tool elsewhere, another work zero) than the one it would
+    start in: it must be planned again there (issue #43 point 6)."""
 
 
 class PortError(CamError):

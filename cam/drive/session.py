@@ -50,7 +50,7 @@ from typing import Any, Callable, Optional
 
 import numpy as np
 
-from ..errors import BusyError, CamError, PlanError, PortError
+from ..errors import BusyError, CamError, PlanError, PortError, StalePlanError
 from ..job.model import TRAVEL, Job, JobLike, check_reach, check_travel, travel_job
 from ..job.moves import jog as jog_job
 from ..job.moves import jog_steps, to_origin
@@ -181,6 +181,7 @@ class MachineSession(SessionGrbl):
         settings = getattr(job, "settings", None)
         if settings is not None and (settings.travel != self.settings.travel or settings.pins != self.settings.pins):
             raise CamError("the job was planned for other machine settings; plan it again")
+        self._check_planned_in(job)
         if isinstance(job, Job) and len(job) and np.all(job.kind == TRAVEL):
             require(self.port, "jog" if self.kind in ("maximus", "grbl") else "step_dir", what="a move")
         elif self.kind == "grbl":
@@ -200,6 +201,19 @@ class MachineSession(SessionGrbl):
         if isinstance(job, Job):
             check_travel(np.asarray(job.points_steps, np.int64) + self._position, self.settings, job.pixels)
 
+    def _check_planned_in(self, job: Any) -> None:
+        """Refuse a prepared job planned for another machine state than the session's now (issue #43 point 6): a
+        G-code program planned with the tool elsewhere, or a job planned from another work zero
+        (:class:`~cam.job.jobs.PlannedIn`; the work offsets compared when the session keeps the state file)."""
+        planned = getattr(job, "planned_in", None)
+        if planned is None or getattr(job, "resumed", None) is not None:
+            return
+        st = self.state_hold.state if self.state_hold is not None else None
+        why = planned.differs(tuple(int(v) for v in self._position), None if st is None else st.offsets_steps,
+                              None if st is None else st.active_offset)
+        if why:
+            raise StalePlanError(why)
+
     def start(self, job: Any, *, label: Optional[str] = None, controller: Optional[Controller] = None,
               journal: Any = None, origin: Optional[str] = None) -> None:
         """Run a job from where the tool stands, in the background.
@@ -218,13 +232,19 @@ class MachineSession(SessionGrbl):
                 :func:`cam.drive.placement.origin_anchor`); the session travels there first (lifted), then runs
                 the job.  A resumed job (a journal) and a G-code program start where the tool stands.
 
+        A prepared job holds for the machine state it was planned in (:attr:`~cam.job.jobs.PreparedJob.planned_in`):
+        a G-code program runs from where the tool stood when it was planned, in those work offsets, as ``cam drill``
+        plans it; anywhere else it is refused (StalePlanError: plan it again), never run shifted.
+
         Raises:
             BusyError: something runs; CapabilityError: the port cannot run this job; TravelError:
-            the job leaves the travel from here (nothing is sent in every case).
+            the job leaves the travel from here; StalePlanError: it was planned for another position or work
+            zero (nothing is sent in every case).
         """
         with self._lock:
             self._check_free()
             self._require_known()
+            self._check_planned_in(job)
             travel_only = isinstance(job, Job) and len(job) and np.all(job.kind == TRAVEL)
             if not travel_only and self._place(job, label, controller, journal, origin):
                 return

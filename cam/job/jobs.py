@@ -71,7 +71,7 @@ from .svg import DEFAULT_TRAVEL_HEIGHT_MM as SVG_TRAVEL_HEIGHT_MM
 from .svg import plan_svg
 
 __all__ = [
-    "JobOptions", "PreparedJob", "prepare_job", "own_zero_home", "resume_job", "job_kind", "accepted_suffixes", "KINDS",
+    "JobOptions", "PreparedJob", "PlannedIn", "prepare_job", "own_zero_home", "resume_job", "job_kind", "accepted_suffixes", "KINDS",
     "DRAWING_SUFFIXES", "DIGITIZED_SUFFIXES", "EXCELLON_SUFFIXES", "HPGL_SUFFIXES", "PROFILE_SUFFIXES",
 ]
 
@@ -339,6 +339,58 @@ _PARSERS = {o.name: p for o in JOB_OPTIONS if (p := _parser_of(o)) is not None}
 
 
 
+Steps3 = tuple[int, int, int]
+
+
+@dataclass(frozen=True)
+class PlannedIn:
+    """The machine state a job's plan holds for (issue #43 point 6), as far as the plan depends on it; positions in
+    the machine frame, steps.  A G-code program runs from where the tool stands, in the work offsets: its plan holds
+    there only.  A drill, HPGL or SVG file placed by its own zero is planned from the active work zero: its plan
+    holds from any position (it travels there first), for that work zero only.
+
+    Attributes:
+        position_steps: where the tool stood (a G-code program); None: any position.
+        offsets_steps: the work offsets the plan used, ``((name, zero), ...)`` (a program: every one, it may
+            switch to any; a file placed by its own zero: the active one); empty: none known (planned without a
+            machine state, in the home's frame).
+        active_offset: the work offset active when it was planned (None: not known).
+    """
+
+    position_steps: Optional[Steps3]
+    offsets_steps: tuple[tuple[str, Steps3], ...] = ()
+    active_offset: Optional[str] = None
+
+    @classmethod
+    def of(cls, machine_state: Any, *, position: bool, every_offset: bool) -> "PlannedIn":
+        """What a plan made in ``machine_state`` (a :class:`cam.drive.state.MachineState`) depends on: the
+        tool's position when ``position``, every work offset when ``every_offset`` (else the active one)."""
+        active = str(machine_state.active_offset)
+        names = list(machine_state.offsets_steps) if every_offset else [active]
+        return cls(tuple(int(v) for v in machine_state.position_steps) if position else None,  # type: ignore[arg-type]
+                   tuple((n, tuple(int(v) for v in machine_state.offsets_steps[n])) for n in names),  # type: ignore[misc]
+                   active)
+
+    def differs(self, position_steps: Any, offsets_steps: Optional[Mapping[str, Any]] = None,
+                active_offset: Optional[str] = None) -> str:
+        """Why the plan does not hold with the tool at ``position_steps`` and these work offsets (None: not known,
+        not compared), as one line ending in "plan it again"; "" when it holds."""
+        here = tuple(int(v) for v in position_steps)
+        if self.position_steps is not None and here != tuple(self.position_steps):
+            return (f"the job was planned when the tool was at machine {list(self.position_steps)} steps, it is now "
+                    f"at {list(here)}: plan it again from here")
+        if offsets_steps is not None:
+            for name, zero in self.offsets_steps:
+                now = tuple(int(v) for v in offsets_steps.get(name, zero))
+                if now != tuple(zero):
+                    return (f"the job was planned with the {name} work zero at machine {list(zero)} steps, it is now "
+                            f"at {list(now)}: plan it again")
+        if active_offset is not None and self.active_offset is not None and active_offset != self.active_offset:
+            return (f"the job was planned in work offset {self.active_offset}, {active_offset} is active now: plan it "
+                    f"again")
+        return ""
+
+
 @dataclass
 class PreparedJob:
     """A job ready to run.
@@ -371,6 +423,9 @@ class PreparedJob:
         home_steps: the machine position ``plan`` was checked against the travel from, its home: a G-code
             program's start, the work zero of a file placed by its own zero; (0, 0, 0): planned in its own frame
             (placed when it runs).  A resumed run is checked from there too (:func:`resume_job`).
+        planned_in: the machine state the plan holds for (:class:`PlannedIn`: a G-code program's start and work
+            offsets, the work zero of a file placed by its own zero); None: it holds anywhere (placed when it
+            runs, or resumed from where the tool stands).  A machine session refuses it elsewhere.
     """
 
     source: str
@@ -394,6 +449,7 @@ class PreparedJob:
     resumed: Any = None
     origin: Optional[str] = None
     home_steps: tuple[int, int, int] = (0, 0, 0)
+    planned_in: Optional[PlannedIn] = None
     _steps: Any = field(default=None, repr=False)
 
     @property
@@ -863,6 +919,11 @@ def prepare_job(
     job.origin = opts.origin
     if home is not None:
         job.home_steps = home
+    if kind == "gcode":  # it runs from where the tool stood, in the work offsets it was planned in
+        job.planned_in = PlannedIn((0, 0, 0)) if machine_state is None else \
+            PlannedIn.of(machine_state, position=True, every_offset=True)
+    elif home is not None and machine_state is not None:  # from the active work zero, wherever the tool stands
+        job.planned_in = PlannedIn.of(machine_state, position=False, every_offset=False)
     return _finish(job)
 
 

@@ -72,7 +72,7 @@ import tempfile
 import threading
 import time
 from contextlib import asynccontextmanager
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import lru_cache, partial
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Awaitable, Callable, Optional
@@ -84,8 +84,8 @@ except ImportError:  # pragma: no cover - not Unix: no file limit to raise
 
 from ..drive.journal import read_journal
 from ..drive.session import MachineSession
-from ..drive.state import StateHold
-from ..errors import BusyError, CamError, CapabilityError, PlanError
+from ..drive.state import MachineState, StateHold
+from ..errors import BusyError, CamError, CapabilityError, PlanError, StalePlanError
 from ..fileio import atomic_write_bytes
 from ..sniff import HEAD_BYTES
 from ..options import schema_json
@@ -224,6 +224,7 @@ class _AppState:
     worker: Worker  # planning, previews and pin-log exports: never in the machine's process
     uploads: dict[str, dict[str, Any]] = field(default_factory=dict)  # id -> path, name, kind, role
     prepared: dict[str, PreparedJob] = field(default_factory=dict)  # the last eight planned, oldest first
+    plan_options: dict[str, JobOptions] = field(default_factory=dict)  # id -> the options it was planned with
     previews: dict[str, bytes] = field(default_factory=dict)  # id -> PNG
     counter: int = 0
     last_job: Optional[str] = None  # the id of the job started last (the Resume job button resumes it)
@@ -572,30 +573,46 @@ def _job_options(st: _AppState, raw: Any) -> JobOptions:
 
 
 async def _plan_job(st: _AppState, request: Request) -> dict[str, Any]:
-    from starlette.concurrency import run_in_threadpool
-
     body = await _body_json(request)
     job_id = str(body.get("job", ""))
     if job_id not in st.uploads or st.uploads[job_id]["role"] != "job":
         raise HttpError(404, f"no uploaded job {job_id!r}; upload a file first")
     options = _job_options(st, body.get("options") or {})
-    session = st.session
+    job = await _plan(st, job_id, options)
+    for w in job.warnings:
+        st.session.log(f"{st.uploads[job_id]['name']}: {w}", "warning")
+    st.session.log(f"planned {job.summary}; {job.estimated_time_s:.1f} s")
+    return _job_summary(st, job_id, job)
+
+
+def _planning_state(session: MachineSession) -> MachineState:
+    """The machine state a job is planned in (issue #43 point 6): the state file's work offsets, or without one
+    the session's frame (offsets at its home), with the tool where the session has it now (a G-code program runs
+    from there, as ``cam drill`` plans it)."""
+    here = tuple(int(v) for v in session.position_steps())
+    st = session.state_hold.state if session.state_hold is not None else MachineState()
+    return replace(st, position_steps=here)
+
+
+async def _plan(st: _AppState, job_id: str, options: JobOptions) -> PreparedJob:
+    """Plan upload ``job_id`` with ``options`` in the worker, in the machine state now (:func:`_planning_state`),
+    and keep it (with its options and preview) as the job's plan."""
+    from starlette.concurrency import run_in_threadpool
+
     upload = st.uploads[job_id]
-    machine_state = session.state_hold.state if session.state_hold is not None else None
     job, png = await run_in_threadpool(st.worker.call, plan_with_preview, upload["path"], options,
-                                       st.config.settings, upload["name"], machine_state,
+                                       st.config.settings, upload["name"], _planning_state(st.session),
                                        what=f"planning {upload['name']}")
     st.counter += 1
     st.prepared.pop(job_id, None)  # re-planned: the newest again, so the last eight planned stay
     st.prepared[job_id] = job
+    st.plan_options[job_id] = options
     st.previews[job_id] = png
     for old in list(st.prepared)[:-8]:
         st.prepared.pop(old, None)
         st.previews.pop(old, None)
-    for w in job.warnings:
-        session.log(f"{upload['name']}: {w}", "warning")
-    session.log(f"planned {job.summary}; {job.estimated_time_s:.1f} s")
-    return _job_summary(st, job_id, job)
+        st.plan_options.pop(old, None)
+    return job
 
 
 async def _preview(st: _AppState, request: Request):
@@ -613,15 +630,35 @@ async def _preview(st: _AppState, request: Request):
 
 
 async def _start(st: _AppState, request: Request) -> dict[str, Any]:
+    """Start a planned job.  A plan holds for the machine state it was made in (issue #43 point 6): planned before a
+    jog, a Go To or a new work zero, the job is planned again from where the tool stands now (with the same options,
+    as ``cam drill`` would plan it) and that plan runs; the answer then carries it as ``planned``."""
     body = await _body_json(request)
     job_id = str(body.get("job", ""))
     job = st.prepared.get(job_id)
     if job is None:
         raise HttpError(404 if job_id not in st.uploads else 409,
                         f"job {job_id!r} is not planned; upload it and set its options first")
+    replanned = None
+    try:
+        _start_planned(st, job_id, job)
+    except StalePlanError as exc:
+        st.session.log(f"{exc.args[0].split(':')[0]}: planned again from where the tool stands now")
+        job = await _plan(st, job_id, st.plan_options[job_id])
+        try:
+            _start_planned(st, job_id, job)
+        except StalePlanError as again:  # the machine moved again meanwhile
+            raise HttpError(409, str(again)) from None
+        replanned = _job_summary(st, job_id, job)
+    out = st.session.state()
+    if replanned is not None:
+        out["planned"] = replanned
+    return out
+
+
+def _start_planned(st: _AppState, job_id: str, job: PreparedJob) -> None:
     st.session.start(job, label=f"job {job.name or Path(job.source).name}", journal=str(_journal_path(st, job_id)))
     st.last_job = job_id
-    return st.session.state()
 
 
 def _journal_path(st: _AppState, job_id: str) -> Path:

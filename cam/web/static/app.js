@@ -260,7 +260,14 @@
 
   // -- run controls ----------------------------------------------------------------
   function post(path, body) { clearError(); return api(path, { json: body || {} }).then(render, () => {}); }
-  $("start").addEventListener("click", () => page.planned && post("/api/start", { job: page.planned.job }));
+  $("start").addEventListener("click", () => {  // a job planned elsewhere comes back planned again from here
+    if (!page.planned) return;
+    clearError();
+    api("/api/start", { json: { job: page.planned.job } }).then((s) => {
+      if (s.planned) { page.planned = s.planned; $("preview").src = withToken(s.planned.preview); }
+      render(s);
+    }, () => {});
+  });
   $("pause").addEventListener("click", () => post("/api/pause"));
   $("resume").addEventListener("click", () => post("/api/resume"));
   $("stop").addEventListener("click", () => post("/api/stop"));
