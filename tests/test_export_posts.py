@@ -381,3 +381,136 @@ def test_grbl_emulator_pauses_at_each_tool_change_and_drills_the_exact_holes(tmp
     bottoms = {(round(b.end_mm[0], 6), round(b.end_mm[1], 6)) for b in emu.executed()
                if b.kind == "G1" and b.end_mm[2] == pytest.approx(-1.5, abs=1e-9)}
     assert bottoms == {(7.62, -7.46), (10.16, -4.92), (3.3, -5.6)}
+
+
+# ------------------------------------------------------------------------------ every hole moved to (issue #43)
+
+ROOT = SAMPLES.parent
+HOLE_FILES = [ROOT / "tests" / "data" / "drill_round2" / "kicad7" / "board-PTH.drl",  # first hole at the home
+              ROOT / "samples" / "drill" / "eagle9_metric.drl"]  # five tools, T2 coming back
+"""Drill files of several tools.  On the KiCad board the first hole is where the job starts (X0 Y0 after
+placing): the first tool change was followed by the plunge alone."""
+_CANON_CALL = re.compile(r"^\s*\d+\s+N[.\d]*\s*(\w+)\(")
+_SAFE_Z_MM = 1.0  # cam export's travel height for G-code out
+
+
+def _shared_hole_file(tmp_path):
+    """T2's only hole is T1's last: the tour ends the first tool right above the next tool's hole."""
+    return _drill_file(tmp_path, ((1, 0.8, [(0.0, 0.0), (5.0, 0.0)]), (2, 1.0, [(5.0, 0.0)])))
+
+
+def _file_holes_mm(path) -> np.ndarray:
+    """Where cam export (no --offset) writes the file's holes, worked out from the file itself: the board's
+    top-left (of its holes and slots) at X0 Y0, Y up as on the board; slot ends count as holes (a slot is
+    entered at one of its ends).  ``(N, 2)`` mm."""
+    from cam.formats.excellon import load_excellon
+
+    holes = load_excellon(path)
+    drilled = np.asarray(holes.holes_mm, np.float64).reshape(-1, 2)
+    slots = [np.asarray(p, np.float64).reshape(-1, 2) for p in holes.slot_paths_mm]
+    every = np.concatenate([drilled] + slots)
+    corner = np.array([every[:, 0].min(), every[:, 1].max()])
+    ends = [p[[0, -1]] for p in slots]
+    return np.concatenate([drilled] + ends) - corner, drilled - corner
+
+
+def _rs274_events(path) -> list[tuple]:
+    """The program as LinuxCNC's interpreter runs it (with a tool table of tools 1..99): ("G0"|"G1", x, y, z) for
+    each straight move and ("change",) at each tool change (CHANGE_TOOL) or program stop (M0: PROGRAM_STOP)."""
+    table = path.with_suffix(".tbl")
+    table.write_text("".join(f"T{n} P{n} Z0 D1 ;tool {n}\n" for n in range(1, 100)))
+    text = run_rs274(str(path), tool_table=str(table))
+    moves = iter(parse_canonical(text))
+    events: list[tuple] = []
+    for line in text.splitlines():
+        m = _CANON_CALL.match(line)
+        if not m:
+            continue
+        name = m.group(1)
+        if name in ("CHANGE_TOOL", "PROGRAM_STOP"):
+            events.append(("change",))
+        elif name in ("STRAIGHT_TRAVERSE", "STRAIGHT_FEED", "ARC_FEED", "NURBS_FEED"):
+            move = next(moves)
+            events.append(({"traverse": "G0", "feed": "G1"}.get(move.kind, move.kind), *move.end))
+    return events
+
+
+def _grbl_events(text: str) -> list[tuple]:
+    """The grbl program read line by line (every word is one grbl takes; G0/G1 modal, absolute mm): the same
+    events as :func:`_rs274_events`, an ``M0`` for "change"."""
+    events: list[tuple] = []
+    motion, at = None, [0.0, 0.0, 0.0]
+    for line in _code_lines(text):
+        words = line.split()
+        assert all(GRBL_WORDS.match(w) for w in words), line
+        moved = False
+        for w in words:
+            if w in ("G0", "G1", "G2", "G3"):
+                motion = w
+            elif w[0] in "XYZ":
+                at["XYZ".index(w[0])] = float(w[1:])
+                moved = True
+        if moved:
+            assert motion in ("G0", "G1"), line  # a drill program has no arcs
+            events.append((motion, *at))
+        if "M0" in words:
+            events.append(("change",))
+    return events
+
+
+def _check_every_plunge(events: list[tuple], holes_mm: np.ndarray, drilled_mm: np.ndarray, post: str) -> None:
+    """Each plunge (a feed from above the surface to below it) goes straight down over a hole of the file; after
+    a tool change or a pause the program itself goes up to the safe height and over the hole, with rapids,
+    before it plunges; every drilled hole of the file is plunged."""
+    tol_mm = 0.5 * cam.MachineSettings().mm_per_step_xy + 1e-4  # each axis: a hole written at its steps
+    at = None  # where the interpreter stands
+    since_change: list[tuple] | None = None  # the moves since the last tool change or pause
+    plunged = []
+    n_after_change = 0
+    for ev in events:
+        if ev[0] == "change":
+            since_change = []
+            continue
+        kind, x, y, z = ev
+        if kind == "G1" and z < -1e-9 and at is not None and at[2] >= -1e-9:  # a plunge
+            where = f"{post}: plunge at X{x:g} Y{y:g}"
+            assert (abs(x - at[0]) < 1e-9 and abs(y - at[1]) < 1e-9), f"{where} is not straight down from {at}"
+            d = np.abs(holes_mm - (x, y)).max(axis=1).min()
+            assert d <= tol_mm, f"{where} is {d:.4f} mm from the nearest hole of the file"
+            if since_change is not None:
+                n_after_change += 1
+                assert since_change, f"{where}: no move to it after the tool change"
+                assert all(k == "G0" for k, *_ in since_change), f"{where}: a cut before the move to it"
+                first, last = since_change[0], since_change[-1]
+                assert first[3] >= _SAFE_Z_MM - 1e-9, f"{where}: not to the safe height first ({first})"
+                assert (last[1], last[2]) == (x, y) and last[3] >= _SAFE_Z_MM - 1e-9, \
+                    f"{where}: the move to it after the tool change is not a rapid over it at the safe height"
+            plunged.append((x, y))
+            since_change = None
+        elif since_change is not None:
+            since_change.append(ev)
+        at = (x, y, z)
+    assert n_after_change >= 2, f"{post}: {n_after_change} plunges after a tool change"
+    got = np.array(plunged)
+    missed = [h for h in drilled_mm if np.abs(got - h).max(axis=1).min() > tol_mm]
+    assert not missed, f"{post}: holes never drilled: {missed[:5]}"
+
+
+@needs_rs274
+@pytest.mark.parametrize("post", ["linuxcnc", "grbl", "generic"])
+def test_export_moves_to_every_hole_before_plunging(tmp_path, post):
+    """Issue #43 point 9: after a tool change (T<n> M6, or grbl's M0) the next hole was plunged with no move to it
+    when the tool already stood over it in the program's own reckoning (the first hole at X0 Y0, a tool's first
+    hole where the last one ended); a controller that moves for a tool change drilled it wherever the tool was
+    left.  Read back by LinuxCNC's interpreter (linuxcnc, generic) or line by line (grbl)."""
+    files = HOLE_FILES + [_shared_hole_file(tmp_path)]
+    for src in files:
+        out = tmp_path / f"{src.stem}-{post}.ngc"
+        assert main(["export", str(src), "-o", str(out), "--post", post]) == 0
+        text = out.read_text()
+        changes = len(re.findall(r"^T\d+ M6\b|^M0$", text, re.M))
+        assert changes >= 2, (src.name, changes)
+        events = _grbl_events(text) if post == "grbl" else _rs274_events(out)
+        assert sum(ev[0] == "change" for ev in events) == changes
+        holes_mm, drilled_mm = _file_holes_mm(src)
+        _check_every_plunge(events, holes_mm, drilled_mm, f"{post} {src.name}")

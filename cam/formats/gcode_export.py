@@ -26,7 +26,9 @@ LinuxCNC program and every fitted program give ``F`` only where it changes.  ``s
 spindle with ``M3 S<rpm>`` before the first move and stops it with ``M5`` before the end (and around each
 tool change).  A tool change is ``T<n> M6`` for LinuxCNC and generic, and for grbl (which has no tool
 changer, and answers ``M6`` with error 20) a comment naming the tool followed by a pause ``M0``: cycle start
-goes on with the new tool.
+goes on with the new tool.  After every tool change and pause (and a first ``T1 M6``) the program goes up to
+the safe height and over the next point's X, Y with rapids before it moves on (a controller may move the tool
+for a change, or the operator during a pause): every hole is moved to before it is plunged (issue #43 point 9).
 
 Exact geometry: a job's points are machine steps; where the exact mm of a point is known (``exact_xy_mm``:
 a drill file's holes, :attr:`cam.job.drill.DrillPlan.holes_mm`, see :func:`exact_geometry`; an SVG file's
@@ -364,6 +366,9 @@ class _Writer:
         self.spindle = f"M3 S{format_mm(spindle_rpm)}\n" if spindle_rpm else ""
         self.spindle_on = False  # started before the first cut, and after each tool change
         self.x, self.y, self.z = 0.0, 0.0, self.safe_z
+        # False after a tool change or a pause (and a first T1 M6): a controller may have moved the tool for it,
+        # so the next move goes back to the safe height and to X, Y with rapids before anything else (issue #43)
+        self.xy_known = True
         self.f: Optional[float] = None
         self.above = True  # at the safe plane
         self.run: list[tuple[float, float, float]] = []
@@ -411,6 +416,7 @@ class _Writer:
                 w(f"(load tool 1: {_comment(cutter.describe())})\n")
             else:
                 w(f"T1 M6 ({_comment(cutter.describe())})\n")
+                self.xy_known = False
         w(f"G0 Z{format_mm(self.safe_z)}\n")
 
     def tool_change(self, n: Optional[int], comment: str) -> None:
@@ -423,6 +429,11 @@ class _Writer:
             self.w(f"(load tool {n}: {_comment(comment)}, then cycle start)\nM0\n")
         else:
             self.w(f"T{n} M6 ({_comment(comment)})\n")
+        # a tool change may leave the tool anywhere (a changer's position, a jog during the pause): back up to the
+        # safe height now, and to X, Y before the next move (point)
+        self.w(f"G0 Z{format_mm(self.safe_z)}\n")
+        self.above, self.z = True, self.safe_z
+        self.xy_known = False
 
     def start_spindle(self) -> None:
         if self.spindle and not self.spindle_on:
@@ -495,10 +506,13 @@ class _Writer:
         if kind in (RETRACT, TRAVEL) and nz >= -self.oz_mm - 1e-9:
             # at or above the surface: go up to the safe plane, travel there
             self.go_up()
-            if (nx, ny) != (self.x, self.y):
+            if (nx, ny) != (self.x, self.y) or not self.xy_known:
                 self.w(f"G0 X{format_mm(nx)} Y{format_mm(ny)}\n")
-                self.x, self.y = nx, ny
+                self.x, self.y, self.xy_known = nx, ny, True
             return
+        if not self.xy_known:  # a cut right after a tool change: back over where the tool was first, at safe Z
+            self.w(f"G0 X{format_mm(self.x)} Y{format_mm(self.y)}\n")
+            self.xy_known = True
         cur = self.run[-1] if self.run else (self.x, self.y, self.z)
         if (nx, ny) != (cur[0], cur[1]):
             if self.above:  # cutting move starting from the safe plane: come down to the surface first
@@ -514,7 +528,7 @@ class _Writer:
 
     def finish(self) -> None:
         self.go_up()
-        if (self.x, self.y) != (0.0, 0.0):
+        if (self.x, self.y) != (0.0, 0.0) or not self.xy_known:
             self.w("G0 X0 Y0\n")
         if self.spindle_on:
             self.w("M5\n")
