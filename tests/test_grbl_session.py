@@ -14,7 +14,7 @@ import pytest
 import cam
 from cam.drive.grbl_machine import close_grbl_machines, job_lines, mpos_to_steps
 from cam.drive.session import MachineSession
-from cam.drive.state import StateHold
+from cam.drive.state import MachineState, StateHold, write_state
 from cam.errors import CapabilityError
 from cam.settings import Travel
 from cam.sim.grbl import start_emulator
@@ -142,10 +142,17 @@ def test_stop_keeps_the_position_and_sends_nothing_more(grbl):
     assert not any("ALARM:3" in text for _, text in grbl.events)
 
 
+def known_at_home(path):
+    """A state file that says the tool stands at the home, position known (on a real port a missing one is a
+    position unknown: issue #43 point 5); returns ``path``."""
+    write_state(path, MachineState())
+    return path
+
+
 def running_with_state(grbl, tmp_path, blocks: int) -> tuple[MachineSession, StateHold]:
     """A session with a state file, running the small drawing on ``grbl`` once ``blocks`` blocks have executed."""
     _, job = two_d_job()
-    hold = StateHold(tmp_path / "m.json", SETTINGS, "test")
+    hold = StateHold(known_at_home(tmp_path / "m.json"), SETTINGS, "test")
     session = MachineSession(url(grbl), SETTINGS, state=hold)
     session.start(job)
     assert grbl.wait_for(lambda e: len(e.executed()) >= blocks, 20)
@@ -195,7 +202,7 @@ def test_a_drill_file_prompts_at_the_tool_change(grbl, tmp_path):
 
 
 def test_zero_offsets_and_goto_are_grbls_own(grbl, tmp_path):
-    hold = StateHold(tmp_path / "m.json", SETTINGS, "test")
+    hold = StateHold(known_at_home(tmp_path / "m.json"), SETTINGS, "test")
     session = MachineSession(url(grbl), SETTINGS, state=hold)
     session.go_to((10, 5, 0), "mm", machine_coords=True)
     assert session.wait_idle(30) and session.last_run["status"] == "finished"
@@ -248,7 +255,7 @@ def test_a_step_plan_is_refused_on_grbl(grbl):
 
 def test_cli_drill_on_grbl(grbl, tmp_path):
     f = SAMPLES / "two_curves.png"
-    r = run_cli("drill", str(f), "--port", url(grbl), "--yes", "--state", str(tmp_path / "s.json"))
+    r = run_cli("drill", str(f), "--port", url(grbl), "--yes", "--state", str(known_at_home(tmp_path / "s.json")))
     assert r.returncode == 0, r.stderr
     assert any(b.kind == "G1" for b in grbl.executed())
 
@@ -274,7 +281,7 @@ def test_a_drawing_at_real_speed_never_starves_grbls_planner():
 def test_cli_commands_chain_across_port_opens(grbl, tmp_path):
     """Each command opens the port anew (an Arduino restarts then: grbl's zero is where it stands); the state
     file carries the machine frame across, and grbl's own G54 is set by cam zero."""
-    common = ["--port", url(grbl), "--state", str(tmp_path / "s.json")]
+    common = ["--port", url(grbl), "--state", str(known_at_home(tmp_path / "s.json"))]
     steps = []
     for args in (("goto", "3,2,0", "--unit", "mm", "--machine-coords"), ("zero", "XY"),
                  ("jog", "X+", "1", "--unit", "mm")):
@@ -327,7 +334,7 @@ def test_cli_feed_override_and_the_settings_warning(tmp_path):
         f = tmp_path / "two.drl"
         f.write_text("M48\nMETRIC\nT1C0.8\n%\nT1\nX1.0Y-1.0\nX2.0Y-1.0\nM30\n")
         r = run_cli("drill", str(f), "--port", url(emu), "--yes", "--feed-override", "150",
-                    "--state", str(tmp_path / "s.json"))
+                    "--state", str(known_at_home(tmp_path / "s.json")))
         assert r.returncode == 0, r.stderr
         warning = [line for line in r.stderr.splitlines() if "grbl's settings differ" in line]
         assert len(warning) == 1 and "$100=250" in warning[0], r.stderr

@@ -152,8 +152,10 @@ def test_the_default_state_file_is_per_machine_file_and_port(tmp_path, state_hom
     assert read_state(state_home / "mill-mock.json", cam.load_settings(machine)).position_steps == (0, 5, 0)
     assert state_of(state_home / "default-mock.json").position_steps == (10, 0, 0)
     env = {"XDG_STATE_HOME": "/s"}
-    assert default_state_path(None, "/dev/parport0", env).as_posix() == "/s/cam/default-dev-parport0.json"
-    assert default_state_path("a/b.toml", "maximus:/dev/ttyUSB0", env).name == "b-maximus-dev-ttyUSB0.json"
+    # a real port's state is the port's (issue #43 point 5: it records its machine file instead)
+    assert default_state_path(None, "/dev/parport0", env).as_posix() == "/s/cam/dev-parport0.json"
+    assert default_state_path("a/b.toml", "maximus:/dev/ttyUSB0", env).name == "maximus-dev-ttyUSB0.json"
+    assert default_state_path("a/b.toml", "grbl:/dev/ttyUSB0?baud=9600", env).name == "grbl-dev-ttyUSB0.json"
     assert state_dir({"XDG_STATE_HOME": "relative"}) == Path.home() / ".local" / "state" / "cam"
 
 

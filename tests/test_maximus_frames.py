@@ -10,7 +10,7 @@ import pytest
 from cam.cli import main
 from cam.drive.maximus.board import MAXIMUS_SETTINGS
 from cam.drive.session import MachineSession
-from cam.drive.state import StateHold, read_state
+from cam.drive.state import MachineState, StateHold, read_state, write_state
 from cam.job.jobs import JobOptions, prepare_job
 from cam.sim.maximus import LIMIT_SWITCH_X
 from support.maximus_log import decode_port_log
@@ -31,6 +31,8 @@ def head(emu) -> list[int]:
 
 def test_zero_then_drill_then_goto_zero_on_the_board(emu, tmp_path, capsys):
     port, st = f"maximus:{emu.device_path}", str(tmp_path / "m.json")
+    # a new machine: its position unknown until said (issue #43 point 5); the head stands at the board origin
+    assert main(["where", "--set", "0,0,0", "--port", port, "--state", st]) == 0
     assert main(["goto", "400,300,0", "--unit", "steps", "--port", port, "--state", st]) == 0, capsys.readouterr().err
     assert head(emu) == [400, -300, 0]  # cam's +Y is toward the operator: the board's -Y
     assert main(["zero", "--port", port, "--state", st]) == 0  # the PC program's Set Offset: the work zero here
@@ -54,6 +56,7 @@ def test_the_position_is_live_after_every_hole_and_a_limit_switch_makes_it_unkno
     path = _board(tmp_path, ["T1", "X1.0Y-1.0", "X2.0Y-1.0", "X3.0Y-1.0"])
     job = prepare_job(path, JobOptions(offset_mm=(0.0, 0.0), travel_height_mm=0.2, cut_depth_mm=0.3),
                       MAXIMUS_SETTINGS)
+    write_state(tmp_path / "m.json", MachineState())  # known at the home (a missing file would be unknown)
     hold = StateHold(tmp_path / "m.json", MAXIMUS_SETTINGS, "the test")
     try:
         ses = MachineSession(f"maximus:{emu.device_path}", MAXIMUS_SETTINGS, state=hold,

@@ -25,6 +25,14 @@ def session_on(emu, settings=MAXIMUS_SETTINGS) -> MachineSession:
     return MachineSession(f"maximus:{emu.device_path}", settings)
 
 
+def head_here_is(port: str, *more: str, steps=(0, 0, 0)) -> None:
+    """Say where the head stands (machine ``steps``) with ``cam where --set``: the first command on a new
+    machine, whose state file is missing (its position unknown on a real port: issue #43 point 5)."""
+    from cam.drive.state import steps_to_mm
+    mm = ",".join(f"{v:g}" for v in steps_to_mm(steps, MAXIMUS_SETTINGS))
+    assert main(["where", "--set", mm, "--port", port, *more]) == 0
+
+
 def run(session: MachineSession, call, *args) -> dict:
     call(*args)
     assert session.wait_idle(30)
@@ -196,6 +204,7 @@ def small_board(tmp_path, lines: list[str], name: str = "small.drl"):
 def test_offset_0_0_drills_from_the_board_origin_as_the_pc_program(emu, tmp_path, capsys):
     """Holes measured from the origin set by jogging (Y up from it, as the firmware counts): all inside."""
     path = small_board(tmp_path, ["T1", "X2.0Y1.0", "X2.5Y1.5", "T2", "X3.0Y1.0"])
+    head_here_is(f"maximus:{emu.device_path}")
     code = main(["drill", str(path), "--yes", "--offset", "0,0", "--port", f"maximus:{emu.device_path}",
                  "--travel-height", "0.2", "--cut-depth", "0.3"])
     assert code == 0, capsys.readouterr().err
@@ -208,6 +217,7 @@ def test_offset_0_0_drills_from_the_board_origin_as_the_pc_program(emu, tmp_path
 
 def test_drill_order_file_keeps_the_files_order_of_tools(emu, tmp_path, capsys):
     path = small_board(tmp_path, ["T2", "X1.0Y1.0", "X2.0Y1.0", "T1", "X1.5Y1.0", "T2", "X3.0Y1.0"])
+    head_here_is(f"maximus:{emu.device_path}")
     code = main(["drill", str(path), "--yes", "--drill-order", "file", "--offset", "0,0",
                  "--port", f"maximus:{emu.device_path}", "--travel-height", "0.1", "--cut-depth", "0.1"])
     err = capsys.readouterr().err
@@ -222,6 +232,7 @@ def test_drill_order_file_keeps_the_files_order_of_tools(emu, tmp_path, capsys):
 def test_preview_report_and_delay_on_the_board(emu, tmp_path, capsys):
     path = small_board(tmp_path, ["T1", "X1.0Y1.0", "X1.2Y1.0", "T2", "X1.4Y1.2"])
     preview, report = tmp_path / "p.png", tmp_path / "r.json"
+    head_here_is(f"maximus:{emu.device_path}")
     code = main(["drill", str(path), "--yes", "--port", f"maximus:{emu.device_path}", "--preview", str(preview),
                  "--report", str(report), "--delay", "0.4,1.0", "--spindle", "off"])
     assert code == 0, capsys.readouterr().err
@@ -277,6 +288,7 @@ def test_goto_and_jog_from_the_command_line(emu, tmp_path, capsys):
     """Go To travels at Z = 0 with X and Y in one move, then moves Z; jog takes the Jog screen's units; --port
     maximus opens the machine file's serial port."""
     port = f"maximus:{emu.device_path}"
+    head_here_is(port)
     assert main(["goto", "40,25,3", "--port", port]) == 0, capsys.readouterr().err  # pixels: 8 steps XY, 1 Z
     pos, moved = xy_moves_at(emu, 0)
     assert pos[-1].tolist() == [320, -200, -3]  # Y toward the operator is the board's -Y; Z +3 is down
@@ -285,7 +297,13 @@ def test_goto_and_jog_from_the_command_line(emu, tmp_path, capsys):
     assert pos[moved[0] - 1 + int(np.flatnonzero(ys == -200)[0]), 0] == 200  # together, then X alone
     machine = tmp_path / "m.toml"
     machine.write_text(f'[maximus]\nserial_port = "{emu.device_path}"\n')
+    # "maximus" is another port name, whose state file is its own: say where the head is there too
+    head_here_is("maximus", "--machine", str(machine), steps=(320, 200, 3))
     assert main(["jog", "--port", "maximus", "--machine", str(machine), "Y-", "0.5", "--unit", "mm"]) == 0
     assert head(emu) == [320, -200 + 114, -3]
-    assert main(["jog", "--port", "maximus", "Y-", "1"]) == 2
+    # without --machine: the machine file the port's state file records (issue #43 point 5), so its serial_port
+    assert main(["jog", "--port", "maximus", "Y-", "1"]) == 0
+    assert head(emu) == [320, -200 + 115, -3]
+    capsys.readouterr()
+    assert main(["jog", "--port", "maximus", "--state", str(tmp_path / "new.json"), "Y-", "1"]) == 2  # none recorded
     assert "serial_port" in capsys.readouterr().err

@@ -16,7 +16,7 @@ from cam.sim.grbl import start_emulator
 from cam.verify.pinlog import decode_pin_log
 from conftest import SAMPLES, assert_surface_equal
 from support.grbl import quick_thread_switches  # noqa: F401 (autouse)
-from test_grbl_session import FAST as GRBL_FAST, HOMED_SETTINGS, HOMING, SETTINGS, executed_motion
+from test_grbl_session import FAST as GRBL_FAST, HOMED_SETTINGS, HOMING, SETTINGS, executed_motion, known_at_home
 from test_web import Server, _load, _open, _wait_done, browser, page  # noqa: F401 (fixtures)
 
 # over 2 s each: the slow tier (the fast tier stays under 3 minutes, docs/tests.md)
@@ -36,7 +36,7 @@ def grbl(request):
 
 def test_a_page_job_on_grbl_cuts_what_the_mock_cuts(grbl, tmp_path):
     s = Server(tmp_path, settings=SETTINGS, machine_port=f"grbl:{grbl.device_path}",
-               state_file=str(tmp_path / "m.json"))
+               state_file=str(known_at_home(tmp_path / "m.json")))
     try:
         status, up = s.upload("two_curves.png", (SAMPLES / "two_curves.png").read_bytes())
         assert status == 200, up
@@ -87,7 +87,7 @@ def test_feed_override_is_refused_on_the_mock(tmp_path):
 
 @pytest.mark.parametrize("grbl", [{"settings": {**GRBL_FAST, **HOMING}}], indirect=True)
 def test_home_route_on_grbl(grbl, tmp_path):
-    state_file = tmp_path / "m.json"
+    state_file = known_at_home(tmp_path / "m.json")  # known: grbl's Alarm is what makes it unknown
     s = Server(tmp_path, settings=HOMED_SETTINGS, machine_port=f"grbl:{grbl.device_path}",
                state_file=str(state_file))
     try:

@@ -1,4 +1,4 @@
-"""Helpers every command shares: machine settings from the options, durations, progress bars."""
+"""Helpers every command shares: machine settings from the options, the state file, durations, progress bars."""
 from __future__ import annotations
 
 import argparse
@@ -14,9 +14,40 @@ from ..drive.maximus.board import MAXIMUS_SETTINGS, board_settings, with_delays
 from ..drive.activities import format_duration
 from ..drive.ports import port_kind
 from ..drive.ramps import check_delay_speeds, top_speeds_mm_s
+from ..drive.state import default_state_path, recorded_machine
+from ..errors import CamError
 from ..settings import MachineSettings, load_settings
 
-__all__ = ["speeds_line", "machine_settings", "port_settings", "format_duration", "progress_wanted", "reading_bar"]
+__all__ = ["speeds_line", "machine_settings", "port_settings", "format_duration", "progress_wanted", "reading_bar",
+           "state_path_of", "use_recorded_machine"]
+
+
+def state_path_of(args: argparse.Namespace) -> Path:
+    """The state file of a command: ``--state``, else the default one of ``--port`` (and ``--machine`` on the
+    mock; :func:`cam.drive.state.default_state_path`)."""
+    given = getattr(args, "state", None)
+    if given:
+        return Path(given)
+    return default_state_path(getattr(args, "machine", None), getattr(args, "port", None) or "mock")
+
+
+def use_recorded_machine(args: argparse.Namespace) -> None:
+    """A command that holds the machine without ``--machine`` (nor ``--machine-changed``) runs with the machine
+    file its state file records (issue #43 point 5): ``args.machine`` is set to it.
+
+    Raises:
+        CamError: the recorded machine file is gone (one line naming it and the state file).
+    """
+    if getattr(args, "machine", None) or getattr(args, "machine_changed", False) or not hasattr(args, "state"):
+        return
+    path = state_path_of(args)
+    record = recorded_machine(path)
+    if record is None or record.path is None:
+        return
+    if not Path(record.path).is_file():
+        raise CamError(f"the state file {path} records machine file {record.path}, which is not there any more: "
+                       f"give --machine FILE (with --machine-changed if the machine changed)")
+    args.machine = record.path
 
 
 def machine_settings(args: argparse.Namespace) -> MachineSettings:
@@ -40,8 +71,10 @@ def port_settings(args: argparse.Namespace, port: str) -> MachineSettings:
 
     A MAXIMUS board starts from its own settings (resolution, step modes, 16-bit travel, the PC program's
     Machine Settings form); --machine changes the keys it gives, --delay sets its Delay bytes and --spindle
-    whether the spindle runs while it drills.
+    whether the spindle runs while it drills.  Without --machine, a command that holds the machine uses the
+    machine file its state file records (:func:`use_recorded_machine`).
     """
+    use_recorded_machine(args)
     if port_kind(port) != "maximus":
         return machine_settings(args)
     s = board_settings(load_settings(args.machine, base=MAXIMUS_SETTINGS))

@@ -13,34 +13,34 @@ from pathlib import Path
 from typing import Any
 
 from ..drive.state import (
-    MachineLock, MachineState, StateHold, check_in_travel, default_state_path, dump_json, mm_to_steps,
-    read_state, steps_to_mm,
+    MachineLock, MachineState, StateHold, check_in_travel, dump_json, machine_record, mm_to_steps, read_state,
+    steps_to_mm,
 )
 from ..drive.grbl_machine import GRBL_OFFSETS, adopt_position, grbl_machine
 from ..drive.ports import port_kind
 from ..drive.session import MachineSession
 from ..errors import CamError
 from ..settings import MachineSettings
-from .common import port_settings
+from .common import port_settings, state_path_of
 
 __all__ = ["cmd_where", "cmd_zero", "hold_machine", "state_path_of"]
 
 Steps3 = tuple[int, int, int]
 
 
-def state_path_of(args: argparse.Namespace) -> Path:
-    """The state file of a command: ``--state``, else the default one of ``--machine`` and ``--port``."""
-    given = getattr(args, "state", None)
-    if given:
-        return Path(given)
-    return default_state_path(getattr(args, "machine", None), getattr(args, "port", None) or "mock")
-
-
 def hold_machine(args: argparse.Namespace, settings: MachineSettings, what: str) -> StateHold:
     """The command's hold on its machine's state file (the lock taken; see :class:`StateHold`).  On a grbl
     port the board is asked where it stands first (:func:`cam.drive.grbl_machine.adopt_position`): the state
-    file then says what grbl says."""
-    hold = StateHold(state_path_of(args), settings, what)
+    file then says what grbl says.
+
+    The hold is the port's (:class:`StateHold` with ``port``): on a real port the device's own lock is taken
+    first (a second command on the device is refused, naming the first), a missing state file is a position
+    unknown, and another machine file than the recorded one is refused unless ``--machine-changed``."""
+    hold = StateHold(state_path_of(args), settings, what, port=getattr(args, "port", None) or "mock",
+                     machine=machine_record(getattr(args, "machine", None)),
+                     machine_changed=bool(getattr(args, "machine_changed", False)))
+    for warning in hold.warnings:
+        print(f"warning: {warning}", file=sys.stderr)
     if port_kind(getattr(args, "port", None) or "mock") == "grbl":
         try:
             machine = grbl_machine(args.port, settings)
@@ -70,6 +70,7 @@ def where_report(state: MachineState, settings: MachineSettings, path: Path, dri
         "position_known": state.position_known, "unknown_reason": state.unknown_reason, "homed": state.homed,
         "tool": state.tool,
         "running": None if driving is None else vars(driving),
+        "machine_file": None if state.machine is None else state.machine.named(),
     }
 
 
@@ -83,13 +84,15 @@ def _print_where(rep: dict) -> None:
     if rep["running"]:
         r = rep["running"]
         print(f"driven now by pid {r['pid']} ({r['command']}, since {r['since']}): this is where it started")
-    print(f"state file: {rep['state_file']}")
+    print(f"state file: {rep['state_file']}" + (f" (machine file: {rep['machine_file']})" if rep["machine_file"]
+                                               else ""))
 
 
-def _read_now(path: Path, settings: MachineSettings) -> tuple[MachineState, Any]:
+def _read_now(path: Path, settings: MachineSettings, port: str) -> tuple[MachineState, Any]:
     """The state as it stands, without the lock: a running marker whose process holds no lock any more is
-    shown as what it is (the position unknown); one that does names the command driving the machine."""
-    state = read_state(path, settings)
+    shown as what it is (the position unknown); one that does names the command driving the machine.  A
+    missing file on a real port: the position unknown."""
+    state = read_state(path, settings, port)
     r = state.running
     if r is None:
         return state, None
@@ -105,7 +108,8 @@ def cmd_where(args: argparse.Namespace) -> int:
     driving = None
     grbl = port_kind(args.port or "mock") == "grbl"
     if args.set is not None or args.use or grbl:  # grbl: what the board says, read now
-        with hold_machine(args, settings, "cam where --set/--use") as hold:
+        with hold_machine(args, settings, "cam where --set/--use" if args.set is not None or args.use
+                          else "cam where") as hold:
             state = hold.state
             if args.set is not None:
                 steps = mm_to_steps(args.set, settings)
@@ -122,7 +126,7 @@ def cmd_where(args: argparse.Namespace) -> int:
                     grbl_machine(args.port, settings).use_offset(args.use)
             hold.record(state)
     else:
-        state, driving = _read_now(path, settings)
+        state, driving = _read_now(path, settings, args.port or "mock")
     rep = where_report(state, settings, path, driving)
     if args.json:
         print(dump_json(rep), end="")

@@ -279,12 +279,21 @@ def _add_progress_options(g: argparse._ActionsContainer) -> None:
     bar.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
-def _add_state_option(g: argparse._ActionsContainer) -> None:
-    """--state: the machine state file (every command that moves the machine or reads where it is)."""
+def _add_state_option(g: argparse._ActionsContainer, holds: bool = True) -> None:
+    """--state: the machine state file (every command that moves the machine or reads where it is); ``holds``:
+    the command holds the machine (and takes --machine-changed)."""
     g.add_argument("--state", metavar="FILE.json",
-                   help="the machine state file: where the machine stands, its work offsets, kept from one command "
-                   "to the next and locked while one drives the machine (default: $XDG_STATE_HOME/cam/ or "
-                   "~/.local/state/cam/, named after --machine and --port, e.g. default-mock.json)")
+                   help="the machine state file: where the machine stands, its work offsets and its machine file, "
+                   "kept from one command to the next and locked while one drives the machine (default: "
+                   "$XDG_STATE_HOME/cam/ or ~/.local/state/cam/: on a real port named after the port, e.g. "
+                   "grbl-dev-ttyUSB0.json; on the mock after --machine too, e.g. default-mock.json). On a real "
+                   "port a missing file means the position is unknown")
+    if holds:
+        g.add_argument("--machine-changed", action="store_true",
+                       help="the machine on this port changed: record this --machine (or the built-in settings) in "
+                       "the port's state file instead of the one it records, the position then unknown (without "
+                       "it another machine file on a real port is refused; without --machine the recorded one is "
+                       "used)")
 
 
 def _add_view_state(p: argparse.ArgumentParser) -> None:
@@ -292,7 +301,7 @@ def _add_view_state(p: argparse.ArgumentParser) -> None:
     that machine's active work zero, as cam drill would run it (its state file is read, never changed)."""
     g = p.add_argument_group("the machine it would run on")
     g.add_argument("--port", default="mock", help="names the default state file, as cam drill's --port")
-    _add_state_option(g)
+    _add_state_option(g, holds=False)
 
 
 def _float_triple(name: str) -> Callable[[str], list[float]]:

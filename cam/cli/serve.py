@@ -44,6 +44,7 @@ def cmd_serve(args: argparse.Namespace) -> int:
                           allowed_hosts=tuple(args.allow_host or ()),
                           max_upload_bytes=int(args.max_upload_mb * 1024 * 1024), settings=settings,
                           machine_port=args.port, realtime=args.realtime,
-                          state_file=str(state_path_of(args)), **limits)
+                          state_file=str(state_path_of(args)), machine_file=args.machine or "",
+                          machine_changed=args.machine_changed, **limits)
     config.checked()
     return serve(config, announce=lambda line: print(line, flush=True))

@@ -85,13 +85,17 @@ class MachineSession(SessionGrbl):
             waits for :meth:`answer` (the web page).
         state: the hold on the machine's state file (:class:`~cam.drive.state.StateHold`, its lock taken by
             the caller, who closes it): positions in the machine frame, work offsets, jobs placed at the work
-            zero, every end recorded (see the module docstring).  None: the home is where the tool stands now.
+            zero, every end recorded (see the module docstring).  The session binds it to ``port``
+            (:meth:`~cam.drive.state.StateHold.bind_port`): on a real port the device's own lock is taken and a
+            new state file is a position unknown.  None: the home is where the tool stands now (no lock).
     """
 
     def __init__(self, port: str = "mock", settings: MachineSettings = DEFAULT_SETTINGS, *,
                  realtime: bool = False, on_prompt: Optional[PromptFn] = None,
                  state: Optional[StateHold] = None) -> None:
         self.kind = port_kind(port)
+        if state is not None:  # the device's own lock before the port opens; a real port's new file: unknown
+            state.bind_port(port)
         self.port = maximus_port(port, settings) if self.kind == "maximus" else port
         self.settings = settings
         self.realtime = realtime or self.kind != "mock"

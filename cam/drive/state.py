@@ -1,11 +1,13 @@
 """The machine state file: where the machine stands, kept from one command to the next (issue #29 points 2-3).
 
-One small JSON file per machine (the machine file and the port) holds the machine position, whether it is
-known, whether the machine was homed, the work offsets G54..G59.3 and the active one, the tool, and a
-``running`` marker while a command drives the machine.  It is written atomically
-(:func:`cam.fileio.atomic_write_text`) and locked: the one command that may drive the machine holds an
-``fcntl.flock`` on ``FILE.lock`` beside it, so a second one is refused (:class:`StateBusyError`, naming the
-other process).
+One small JSON file per machine holds the machine position, whether it is known, whether the machine was
+homed, the work offsets G54..G59.3 and the active one, the tool, the machine file it was kept with
+(:class:`MachineRecord`), and a ``running`` marker while a command drives the machine.  On a real port
+(parallel port, MAXIMUS, grbl) the file belongs to the port; on the mock, a simulated machine, to the port and
+its machine file.  It is written atomically (:func:`cam.fileio.atomic_write_text`) and locked: the one command
+that may drive the machine holds an ``fcntl.flock`` on ``FILE.lock`` beside it, and on a real port also one on
+the device itself (:class:`DeviceLock`: a lock file named after the device's real path, and the device), so a
+second one is refused (:class:`StateBusyError`, naming the other process and its command; issue #43 point 4).
 
 Frames (every position here says which):
 
@@ -17,14 +19,18 @@ Frames (every position here says which):
 Everything here is pure computation except :func:`read_state`, :func:`write_state`, :func:`state_dir`
 (reads the environment) and :class:`MachineLock`.
 
-A missing file is a new machine: the tool at the home, position known, not homed, every offset zero.
+A missing file is a new machine, every offset zero, not homed: on the mock the tool at the home, position known;
+on a real port the position **unknown** (a new machine, or a ``--state`` typo: nothing says where the tool
+stands; issue #43 point 5).
 """
 from __future__ import annotations
 
 import datetime
+import hashlib
 import json
 import os
 import re
+import stat
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Mapping, Optional
@@ -42,6 +48,8 @@ __all__ = [
     "STATE_VERSION", "OFFSET_NAMES", "MachineState", "Running", "StateError", "StateBusyError",
     "PositionUnknownError", "parse_state", "read_state", "write_state", "state_dir", "default_state_path",
     "mm_to_steps", "steps_to_mm", "check_in_travel", "MachineLock", "StateHold", "unknown_message", "dump_json",
+    "MachineRecord", "MachineFileError", "machine_record", "recorded_machine", "new_machine_state", "DeviceLock",
+    "port_device", "is_real_port",
 ]
 
 STATE_VERSION = 1
@@ -64,6 +72,27 @@ class StateBusyError(BusyError):
 
 class PositionUnknownError(CamError):
     """The machine position is not known: a move needs homing or ``cam where --set`` first."""
+
+
+class MachineFileError(StateError):
+    """The machine file given is not the one the port's state file records (the message names both)."""
+
+
+@dataclass(frozen=True)
+class MachineRecord:
+    """The machine file a state file was kept with.
+
+    Attributes:
+        path: its absolute path (None: the built-in settings, no ``--machine``).
+        sha256: the hex sha256 of its bytes when it was recorded (None: the built-in settings).
+    """
+
+    path: Optional[str] = None
+    sha256: Optional[str] = None
+
+    def named(self) -> str:
+        """How a message names it: the path, or "the built-in settings"."""
+        return self.path if self.path is not None else "the built-in settings (no --machine)"
 
 
 @dataclass(frozen=True)
@@ -96,6 +125,7 @@ class MachineState:
         active_offset: the work offset moves and ``cam where`` use (one of :data:`OFFSET_NAMES`).
         tool: the cutter in the spindle as the last job named it (None: not said).
         running: the command that drives the machine now (None: none).
+        machine: the machine file the state was kept with (None: not recorded, a file of an older cam).
     """
 
     position_steps: Steps3 = (0, 0, 0)
@@ -106,6 +136,7 @@ class MachineState:
     active_offset: str = "G54"
     tool: Optional[str] = None
     running: Optional[Running] = None
+    machine: Optional[MachineRecord] = None
 
     def work_zero_steps(self, name: Optional[str] = None) -> Steps3:
         """The zero of work offset ``name`` (default: the active one), machine frame."""
@@ -150,6 +181,7 @@ class MachineState:
             "active_offset": self.active_offset,
             "tool": self.tool,
             "running": None if self.running is None else vars(self.running),
+            "machine_file": None if self.machine is None else vars(self.machine),
         }
         return dump_json(values)
 
@@ -164,6 +196,7 @@ def dump_json(values: Mapping[str, Any]) -> str:
 
 _KEYS = {"cam_machine_state", "position_steps", "position_known", "unknown_reason", "homed", "offsets_steps",
          "active_offset", "tool", "running"}
+_OPTIONAL_KEYS = {"machine_file"}  # absent from the files of an older cam: not recorded
 
 
 def check_in_travel(position_steps: Any, settings: MachineSettings, what: str) -> None:
@@ -212,6 +245,19 @@ def _running(value: Any) -> Optional[Running]:
     return Running(pid, _text(value["command"], "running.command"), _text(value["since"], "running.since"))
 
 
+def _machine(value: Any) -> Optional[MachineRecord]:
+    if value is None:
+        return None
+    if not isinstance(value, dict) or set(value) != {"path", "sha256"}:
+        raise ValueError("machine_file must be null or {path, sha256}")
+    path, digest = value["path"], value["sha256"]
+    if path is not None and (not isinstance(path, str) or not path or len(path) > 4096 or "\x00" in path):
+        raise ValueError("machine_file.path must be null or a path")
+    if digest is not None and (not isinstance(digest, str) or not re.fullmatch(r"[0-9a-f]{64}", digest)):
+        raise ValueError("machine_file.sha256 must be null or 64 hex digits")
+    return MachineRecord(path, digest)
+
+
 def _offsets(value: Any, settings: MachineSettings) -> dict[str, Steps3]:
     if not isinstance(value, dict):
         raise ValueError("offsets_steps must be an object of work offsets (G54..G59.3)")
@@ -227,7 +273,7 @@ def _offsets(value: Any, settings: MachineSettings) -> dict[str, Steps3]:
 def _state_of(values: Any, settings: MachineSettings) -> MachineState:
     if not isinstance(values, dict) or values.get("cam_machine_state") != STATE_VERSION:
         raise ValueError(f"not a cam machine state file (no \"cam_machine_state\": {STATE_VERSION})")
-    unknown = sorted(set(values) - _KEYS)
+    unknown = sorted(set(values) - _KEYS - _OPTIONAL_KEYS)
     if unknown:
         raise ValueError(f"unknown key {unknown[0][:40]!r}")
     missing = sorted(_KEYS - set(values))
@@ -242,7 +288,7 @@ def _state_of(values: Any, settings: MachineSettings) -> MachineState:
     reason = _text(values["unknown_reason"], "unknown_reason")
     return MachineState(position, known, "" if known else reason, _flag(values["homed"], "homed"),
                         _offsets(values["offsets_steps"], settings), active, _text(values["tool"], "tool", True),
-                        _running(values["running"]))
+                        _running(values["running"]), _machine(values.get("machine_file")))
 
 
 def parse_state(text: str, settings: MachineSettings, where: str | os.PathLike) -> MachineState:
@@ -261,8 +307,26 @@ def parse_state(text: str, settings: MachineSettings, where: str | os.PathLike) 
                      f"is with cam where --set X,Y,Z")
 
 
-def read_state(path: str | os.PathLike, settings: MachineSettings) -> MachineState:
-    """The state in ``path`` (a missing file: a new machine, :class:`MachineState`'s defaults).
+def is_real_port(port: Any) -> bool:
+    """Whether ``port`` (a name, or an open port) drives a real machine: anything but the mock (None: the mock)."""
+    if port is None:
+        return False
+    from .ports import port_kind
+    return port_kind(port) != "mock"
+
+
+def new_machine_state(port: Any = None, path: str | os.PathLike = "") -> MachineState:
+    """The state of a machine whose state file ``path`` is missing.  The mock (``port`` None or ``"mock"``), a
+    simulated machine: at its home, position known.  A real port: position unknown, since nothing says where its
+    tool stands (a new machine, or a typo in ``--state``)."""
+    if not is_real_port(port):
+        return MachineState()
+    return MachineState().lost(f"{port} has no state file {path}: a new machine, or a typo in --state")
+
+
+def read_state(path: str | os.PathLike, settings: MachineSettings, port: Any = None) -> MachineState:
+    """The state in ``path``; a missing file is a new machine (:func:`new_machine_state` of ``port``: on a real
+    port the position unknown).
 
     Raises:
         StateError: the file cannot be read or is broken.
@@ -271,7 +335,7 @@ def read_state(path: str | os.PathLike, settings: MachineSettings) -> MachineSta
     try:
         raw = p.read_bytes()
     except FileNotFoundError:
-        return MachineState()
+        return new_machine_state(port, p)
     except OSError as exc:
         raise StateError(f"machine state file {p}: cannot read ({exc.strerror or exc})") from None
     if len(raw) > 1 << 16:
@@ -282,6 +346,33 @@ def read_state(path: str | os.PathLike, settings: MachineSettings) -> MachineSta
     except UnicodeDecodeError:
         text = "\x00"  # not JSON: parse_state says so
     return parse_state(text, settings, p)
+
+
+def recorded_machine(path: str | os.PathLike) -> Optional[MachineRecord]:
+    """The machine file a state file records, read without the machine's settings (they come from it) and
+    without the lock; None when the file is missing, records none, or cannot be read (the command's own read
+    of it then says what is wrong)."""
+    try:
+        values = json.loads(Path(path).read_bytes()[: 1 << 16].decode("utf-8"))
+        return _machine(values.get("machine_file")) if isinstance(values, dict) else None
+    except (OSError, ValueError):
+        return None
+
+
+def machine_record(machine_file: Optional[str | os.PathLike]) -> MachineRecord:
+    """The record of ``machine_file`` (None: the built-in settings): its absolute path and the sha256 of its bytes.
+
+    Raises:
+        StateError: the file cannot be read.
+    """
+    if machine_file is None:
+        return MachineRecord()
+    p = Path(os.path.abspath(os.path.expanduser(os.fspath(machine_file))))
+    try:
+        digest = hashlib.sha256(p.read_bytes()).hexdigest()
+    except OSError as exc:
+        raise StateError(f"machine file {p}: cannot read ({exc.strerror or exc})") from None
+    return MachineRecord(str(p), digest)
 
 
 def write_state(path: str | os.PathLike, state: MachineState) -> None:
@@ -299,8 +390,13 @@ def now_text() -> str:
     return datetime.datetime.now(datetime.timezone.utc).replace(microsecond=0).isoformat()
 
 
-def unknown_message(state: MachineState) -> str:
-    """The one-line error of a move asked for while the position is unknown."""
+def unknown_message(state: MachineState, port: Any = None) -> str:
+    """The one-line error of a move asked for while the position is unknown (on a MAXIMUS board, which has no
+    home switches ``cam`` reads, ``cam where --set`` only)."""
+    from .ports import port_kind
+    if isinstance(port, str) and is_real_port(port) and port_kind(port) == "maximus":
+        return (f"the machine position is unknown ({state.unknown_reason or 'not recorded'}): say where the head "
+                f"is, in machine mm, with cam where --set X,Y,Z (e.g. 0,0,0 where the board origin is)")
     return (f"the machine position is unknown ({state.unknown_reason or 'not recorded'}): home the machine "
             f"(cam home) or say where the tool is, in machine mm, with cam where --set X,Y,Z")
 
@@ -322,13 +418,22 @@ def _slug(text: str) -> str:
 
 def default_state_path(machine_file: Optional[str], port: str,
                        environ: Optional[Mapping[str, str]] = None) -> Path:
-    """The default state file of a machine: ``{state_dir}/{machine file's stem, or "default"}-{port}.json``.
+    """The default state file of a machine.  The mock (a simulated machine for each machine file):
+    ``{state_dir}/{machine file's stem, or "default"}-mock.json``.  A real port: the state belongs to the port
+    (the machine on it), ``{state_dir}/{port, without its ?options}.json``, whatever ``--machine`` says (the
+    file records its machine file: :class:`MachineRecord`).
 
     >>> default_state_path(None, "mock", {"XDG_STATE_HOME": "/s"}).as_posix()
     '/s/cam/default-mock.json'
+    >>> default_state_path("shop/mill.toml", "mock", {"XDG_STATE_HOME": "/s"}).name
+    'mill-mock.json'
     >>> default_state_path("shop/mill.toml", "maximus:/dev/ttyUSB0", {"XDG_STATE_HOME": "/s"}).name
-    'mill-maximus-dev-ttyUSB0.json'
+    'maximus-dev-ttyUSB0.json'
+    >>> default_state_path(None, "grbl:/dev/ttyACM0?baud=115200", {"XDG_STATE_HOME": "/s"}).name
+    'grbl-dev-ttyACM0.json'
     """
+    if is_real_port(str(port)):
+        return state_dir(environ) / f"{_slug(str(port).partition('?')[0])}.json"
     machine = _slug(Path(machine_file).stem) if machine_file else "default"
     return state_dir(environ) / f"{machine}-{_slug(str(port))}.json"
 
@@ -347,28 +452,39 @@ def steps_to_mm(xyz_steps: Any, settings: MachineSettings) -> tuple[float, float
     return tuple(round(int(v) * p, 4) for v, p in zip(xyz_steps, per))  # type: ignore[return-value]
 
 
-# -- the lock -----------------------------------------------------------------------------------------------
+# -- the locks ----------------------------------------------------------------------------------------------
 
-class MachineLock:
-    """The lock that lets one command at a time drive a machine: ``flock`` on ``STATE.lock`` beside the state
-    file, which holds the holder's process id.  The kernel releases it when the process ends, however.
+def _holder_text(fd: int) -> tuple[Optional[int], str]:
+    """What a lock file says of its holder: (process id or None, its command or "")."""
+    text = os.pread(fd, 600, 0).decode("utf-8", "replace").strip()
+    pid, _, command = text.partition(" ")
+    return (int(pid) if pid.isdigit() else None), command.strip()
 
-    Args:
-        state_path: the state file (the lock file is its name plus ``.lock``).
-    """
 
-    def __init__(self, state_path: str | os.PathLike) -> None:
-        self.state_path = Path(state_path)
-        self.path = self.state_path.with_name(self.state_path.name + ".lock")
+def _holder_words(fd: int) -> str:
+    pid, command = _holder_text(fd)
+    who = f"pid {pid}" if pid is not None else "a process"
+    return f"{who}: {command}" if command else who
+
+
+class _LockFile:
+    """An ``flock`` on a lock file that holds its holder's process id and command (one line).  The kernel
+    releases it when the process ends, however; a lock is one open file, so a second holder in the same process
+    is refused too."""
+
+    def __init__(self, path: str | os.PathLike) -> None:
+        self.path = Path(path)
         self._fd: Optional[int] = None
+
+    def _open_error(self, exc: OSError) -> CamError:
+        return StateError(f"cannot open the lock {self.path} ({exc.strerror or exc})")
 
     def _open(self) -> int:
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             return os.open(self.path, os.O_RDWR | os.O_CREAT, 0o666)
         except OSError as exc:
-            raise StateError(f"machine state file {self.state_path}: cannot open its lock {self.path} "
-                             f"({exc.strerror or exc})") from None
+            raise self._open_error(exc) from None
 
     def holder(self) -> Optional[int]:
         """The process id that holds the lock now (0: one whose id is not written yet), or None when free."""
@@ -379,18 +495,21 @@ class MachineLock:
             try:
                 fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
             except BlockingIOError:
-                text = os.pread(fd, 32, 0).decode("ascii", "replace").strip()
-                return int(text) if text.isdigit() else 0
+                pid, _ = _holder_text(fd)
+                return 0 if pid is None else pid
             fcntl.flock(fd, fcntl.LOCK_UN)
             return None
         finally:
             os.close(fd)
 
+    def _refusal(self, what: str, holder: str) -> CamError:
+        return StateBusyError(f"{what} refused: {self.path} is held by another cam command ({holder})")
+
     def acquire(self, what: str = "this command") -> None:
-        """Take the lock, or refuse.
+        """Take the lock, or refuse.  ``what``: the command, written for the next one's refusal to name.
 
         Raises:
-            StateBusyError: another process holds it (the message names its process id).
+            StateBusyError: another process (or another hold of this one) holds it, named in the message.
         """
         fd = self._open()
         if fcntl is None:
@@ -399,13 +518,11 @@ class MachineLock:
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
-            text = os.pread(fd, 32, 0).decode("ascii", "replace").strip()
+            holder = _holder_words(fd)
             os.close(fd)
-            pid = f"pid {text}" if text.isdigit() else "a process"
-            raise StateBusyError(f"{what} refused: another cam command ({pid}) drives the machine of "
-                                 f"{self.state_path}; try again when it has ended") from None
+            raise self._refusal(what, holder) from None
         os.ftruncate(fd, 0)
-        os.pwrite(fd, f"{os.getpid()}\n".encode("ascii"), 0)
+        os.pwrite(fd, f"{os.getpid()} {' '.join(what.split())[:MAX_TEXT]}\n".encode("utf-8"), 0)
         self._fd = fd
 
     def release(self) -> None:
@@ -422,7 +539,7 @@ class MachineLock:
         """Whether this object holds the lock."""
         return self._fd is not None
 
-    def __enter__(self) -> "MachineLock":
+    def __enter__(self) -> "_LockFile":
         self.acquire()
         return self
 
@@ -430,49 +547,232 @@ class MachineLock:
         self.release()
 
 
+class MachineLock(_LockFile):
+    """The lock that lets one command at a time drive a machine: ``flock`` on ``STATE.lock`` beside the state
+    file, which holds the holder's process id and command.
+
+    Args:
+        state_path: the state file (the lock file is its name plus ``.lock``).
+    """
+
+    def __init__(self, state_path: str | os.PathLike) -> None:
+        self.state_path = Path(state_path)
+        super().__init__(self.state_path.with_name(self.state_path.name + ".lock"))
+
+    def _open_error(self, exc: OSError) -> CamError:
+        return StateError(f"machine state file {self.state_path}: cannot open its lock {self.path} "
+                          f"({exc.strerror or exc})")
+
+    def _refusal(self, what: str, holder: str) -> CamError:
+        return StateBusyError(f"{what} refused: another cam command ({holder}) drives the machine of "
+                              f"{self.state_path}; try again when it has ended")
+
+
+def port_device(port: Any, settings: Optional[MachineSettings] = None) -> Optional[str]:
+    """The device a port name opens (``/dev/parport0``, a grbl or MAXIMUS board's serial device), or None: the
+    mock, an open port object, or a bare ``maximus`` without the settings that name its device.
+
+    Raises:
+        PortError: a bare ``maximus`` whose settings name no serial port."""
+    if not isinstance(port, str) or not is_real_port(port):
+        return None
+    from .ports import MAXIMUS_PREFIX, port_kind
+    kind = port_kind(port)
+    if kind == "grbl":
+        from .grbl_link import parse_grbl_url
+        return parse_grbl_url(port)[0]
+    if kind == "maximus":
+        if port == MAXIMUS_PREFIX[:-1]:  # the machine file's serial_port (none: the one-line PortError)
+            if settings is None:
+                return None
+            from .maximus.board import maximus_port
+            return maximus_port(port, settings)[len(MAXIMUS_PREFIX):]
+        return port[len(MAXIMUS_PREFIX):]
+    return port
+
+
+class DeviceLock(_LockFile):
+    """One port, one user (issue #43 point 4): the lock on a machine's device itself, whatever state file a
+    command keeps.  An ``flock`` on ``{state_dir}/ports/{the device's real path}.lock`` (holding the holder's
+    process id and command), and, on a character device, an ``flock`` on the device too (which also keeps out
+    other programs that lock it, such as pyserial's ``exclusive=True``, and users with another state folder).
+
+    Args:
+        device: the device path (a symbolic link is resolved: two names of one device are one lock).
+        port: the port name, for messages.
+    """
+
+    def __init__(self, device: str, port: Optional[str] = None,
+                 environ: Optional[Mapping[str, str]] = None) -> None:
+        self.device = device
+        self.real = os.path.realpath(device)
+        self.port = port or device
+        self._device_fd: Optional[int] = None
+        super().__init__(state_dir(environ) / "ports" / f"{_slug(self.real)}.lock")
+
+    def _refusal(self, what: str, holder: str) -> CamError:
+        return StateBusyError(f"{what} refused: {self.port} ({self.real}) is in use by another cam command "
+                              f"({holder}); try again when it has ended")
+
+    def acquire(self, what: str = "this command") -> None:
+        """Take the lock file's lock and the device's own, or refuse (:class:`StateBusyError`, one line)."""
+        super().acquire(what)
+        try:
+            self._lock_device(what)
+        except BaseException:
+            super().release()
+            raise
+
+    def _lock_device(self, what: str) -> None:
+        if fcntl is None:
+            return
+        try:
+            if not stat.S_ISCHR(os.stat(self.real).st_mode):
+                return  # not a device (a missing one: opening the port says so)
+            fd = os.open(self.real, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
+        except OSError:
+            return  # no such device, or not ours to open: opening the port says so in its own words
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            os.close(fd)
+            raise StateBusyError(f"{what} refused: {self.port} ({self.real}) is in use by another program (it holds "
+                                 f"a lock on the device); try again when it has ended") from None
+        except OSError:
+            os.close(fd)  # a device that cannot be locked: the lock file alone
+            return
+        self._device_fd = fd
+
+    def release(self) -> None:
+        """Let both locks go."""
+        if self._device_fd is not None:
+            fd, self._device_fd = self._device_fd, None
+            try:
+                fcntl.flock(fd, fcntl.LOCK_UN)
+            finally:
+                os.close(fd)
+        super().release()
+
+
 class StateHold:
-    """A command's hold on a machine: the lock (taken here), and the state read under it.
+    """A command's hold on a machine: the locks (taken here), and the state read under them.
 
     A ``running`` marker found under the lock was left by a command that ended without recording where the
     tool stopped (SIGKILL, a power cut): the position becomes unknown, and is written so at once.  Every
     position is in the machine frame.
 
+    On a real ``port`` the device's own lock (:class:`DeviceLock`) is taken first, a missing file is a position
+    unknown (:func:`new_machine_state`), and a ``machine`` file other than the one the state records is refused
+    (:class:`MachineFileError`, naming both) unless ``machine_changed``: the new one is then recorded and the
+    position is unknown.  On the mock another machine file is recorded as it comes.
+
     Args:
         path: the state file.
         settings: the machine's settings (its travel checks every number of the file).
-        what: what the command is, for the message that refuses it while another one holds the lock.
+        what: what the command is, for the message that refuses it while another one holds the lock (and the
+            one that refuses the next while this one does).
+        port: the port name the machine is driven on (None: not said yet; :meth:`bind_port` says it, as
+            :class:`~cam.drive.session.MachineSession` does).
+        machine: the machine file the command runs with (:func:`machine_record`; None: not said, nothing
+            checked or recorded).
+        machine_changed: the user says the machine on this port changed (``--machine-changed``).
 
     Raises:
-        StateBusyError: another command holds the lock; StateError: the file is broken.
+        StateBusyError: another command holds a lock; StateError: the file is broken; MachineFileError.
     """
 
-    def __init__(self, path: str | os.PathLike, settings: MachineSettings, what: str = "this command") -> None:
+    def __init__(self, path: str | os.PathLike, settings: MachineSettings, what: str = "this command", *,
+                 port: Optional[str] = None, machine: Optional[MachineRecord] = None,
+                 machine_changed: bool = False) -> None:
         self.path = Path(path)
         self.settings = settings
+        self.what = what
+        self.port: Optional[str] = None
+        self.device_lock: Optional[DeviceLock] = None
+        self.machine = machine
+        self.warnings: list[str] = []
+        """What the command should say on stderr (a machine file changed since it was recorded)."""
+        self._fresh = False  # a missing file nothing has been written to yet
         self.lock = MachineLock(self.path)
-        self.lock.acquire(what)
         try:
+            self._lock_device(port)
+            self.lock.acquire(what)
             self.existed = self.path.exists()
-            """Whether the file was there (False: a new machine, at the home by default)."""
+            """Whether the file was there (False: a new machine: at the home on the mock, else unknown)."""
+            self._fresh = not self.existed
             self.state = read_state(self.path, settings)
             r = self.state.running
             if r is not None:
                 self.save(replace(self.state.lost(
                     f"cam (pid {r.pid}: {r.command}) drove the machine from {r.since} and ended without recording "
                     f"where the tool stopped: killed, or a power cut"), running=None))
+            if port is not None:
+                self.bind_port(port)
+            self._check_machine(machine_changed)
         except BaseException:
-            self.lock.release()
+            self.close()
             raise
+
+    def _lock_device(self, port: Any) -> None:
+        device = port_device(port, self.settings)
+        if device is not None and self.device_lock is None:
+            lock = DeviceLock(device, str(port))
+            lock.acquire(self.what)
+            self.device_lock = lock
+
+    def bind_port(self, port: Any) -> None:
+        """Say which port the machine is driven on (once; the session does): on a real port its device's lock is
+        taken (if not yet) and a missing file, nothing written to it yet, is a position unknown.
+
+        Raises:
+            StateBusyError: another command uses the device; StateError: the hold is another port's.
+        """
+        name = port if isinstance(port, str) else None
+        if self.port is not None:
+            if name is not None and port_device(name, self.settings) != port_device(self.port, self.settings):
+                raise StateError(f"machine state file {self.path} is held for {self.port}, not {name}")
+            return
+        self._lock_device(name)
+        self.port = name if name is not None else ("mock" if not is_real_port(port) else None)
+        if self._fresh and is_real_port(port):
+            self.state = replace(new_machine_state(port, self.path), machine=self.state.machine)
+
+    def _check_machine(self, machine_changed: bool) -> None:
+        given, recorded = self.machine, self.state.machine
+        if given is None:
+            return
+        if recorded is None or recorded == given:
+            self.state = replace(self.state, machine=given)
+            return
+        if recorded.path == given.path:
+            self.warnings.append(f"machine file {given.path} changed since the state file {self.path} recorded it: "
+                                 f"if its steps per mm or travel changed, home the machine (cam home) or say where "
+                                 f"the tool is (cam where --set X,Y,Z)")
+            self.state = replace(self.state, machine=given)
+            return
+        if not is_real_port(self.port):  # the mock: a simulated machine, the new file recorded as it comes
+            self.state = replace(self.state, machine=given)
+            return
+        if not machine_changed:
+            raise MachineFileError(
+                f"{self.what} refused: the state file {self.path} of {self.port} records machine file "
+                f"{recorded.named()}, not {given.named()}: drop --machine to use the recorded one, or add "
+                f"--machine-changed if the machine on this port changed (its position is then unknown)")
+        self.save(replace(self.state.lost(f"the machine changed (--machine-changed): {recorded.named()} -> "
+                                          f"{given.named()}"), machine=given))
 
     def require_known(self) -> None:
         """Refuse a move while the position is unknown (:class:`PositionUnknownError`, one line)."""
         if not self.state.position_known:
-            raise PositionUnknownError(unknown_message(self.state))
+            raise PositionUnknownError(unknown_message(self.state, self.port))
 
     def save(self, state: MachineState) -> None:
-        """Write ``state`` and keep it as the current one."""
+        """Write ``state`` and keep it as the current one (with the hold's machine file, when it has one)."""
+        if self.machine is not None and state.machine != self.machine:
+            state = replace(state, machine=self.machine)
         write_state(self.path, state)
         self.state = state
+        self._fresh = False
 
     def mark_running(self, command: str) -> None:
         """This process drives the machine from now on (the marker a killed command leaves behind)."""
@@ -483,9 +783,11 @@ class StateHold:
         self.save(replace(state, running=None))
 
     def close(self) -> None:
-        """Let the lock go (a running marker never recorded stays: the next command treats the position as
+        """Let the locks go (a running marker never recorded stays: the next command treats the position as
         unknown)."""
         self.lock.release()
+        if self.device_lock is not None:
+            self.device_lock.release()
 
     def __enter__(self) -> "StateHold":
         return self

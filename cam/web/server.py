@@ -84,8 +84,8 @@ except ImportError:  # pragma: no cover - not Unix: no file limit to raise
 
 from ..drive.journal import read_journal
 from ..drive.session import MachineSession
-from ..drive.state import MachineState, StateHold
-from ..errors import BusyError, CamError, CapabilityError, PlanError, StalePlanError
+from ..drive.state import MachineState, StateHold, machine_record
+from ..errors import BusyError, CamError, CapabilityError, StalePlanError
 from ..fileio import atomic_write_bytes
 from ..sniff import HEAD_BYTES
 from ..options import schema_json
@@ -139,6 +139,10 @@ class ServerConfig:
             works in the machine and work frames, jobs are placed at the work zero, every end is recorded
             (``cam serve`` passes the machine's default one).  None: no file; the home is where the tool stands
             when the server starts.
+        machine_file, machine_changed: the machine file the settings came from ("": the built-in settings;
+            None: not said, nothing checked) and whether the user says the machine on the port changed: the
+            state file records it, and on a real port refuses another one than it records unless changed
+            (:class:`~cam.drive.state.StateHold`).  On a real port the device itself is locked too.
     """
 
     host: str = "127.0.0.1"
@@ -159,6 +163,8 @@ class ServerConfig:
     work_time_limit_s: float = DEFAULT_TIME_LIMIT_S
     work_memory_limit_bytes: Optional[int] = None
     state_file: Optional[str] = None
+    machine_file: Optional[str] = None
+    machine_changed: bool = False
 
     def checked(self) -> "ServerConfig":
         """Refuse a non-local address without a token, and a short token; returns self."""
@@ -977,9 +983,13 @@ def create_app(config: ServerConfig, session: Optional[MachineSession] = None):
     jobs_dir.mkdir(parents=True, exist_ok=True)
     config.jobs_dir = str(jobs_dir)
     if session is None:
-        hold = StateHold(config.state_file, config.settings, "cam serve") if config.state_file else None
+        machine = None if config.machine_file is None else machine_record(config.machine_file or None)
+        hold = StateHold(config.state_file, config.settings, "cam serve", port=config.machine_port, machine=machine,
+                         machine_changed=config.machine_changed) if config.state_file else None
         try:
             session = MachineSession(config.machine_port, config.settings, realtime=config.realtime, state=hold)
+            for warning in hold.warnings if hold is not None else ():
+                session.log(warning, "warning")
         except BaseException:
             if hold is not None:
                 hold.close()
