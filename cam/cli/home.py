@@ -58,6 +58,7 @@ def cmd_home(args: argparse.Namespace) -> int:
     order = check_homing(settings, args.axes)
     with hold_machine(args, settings, "cam home") as hold:
         start = hold.state.position_steps
+        was_known = hold.state.position_known
         port = _port_of(args, settings, start)
         ctl = Controller()
         previous = {s: signal.signal(s, lambda signum, frame: ctl.stop()) for s in _STOP_SIGNALS}
@@ -78,6 +79,16 @@ def cmd_home(args: argparse.Namespace) -> int:
                 write_pin_log(port.pin_log(), args.pin_log)
             elif not isinstance(port, MockPort):
                 port.close()
+        left = "".join(a for a in "XYZ" if a.lower() not in order)
+        if left and not was_known and not hold.existed:
+            # a new machine (no state file): the axes not homed have no coordinate at all, not even a guess to keep
+            # (issue #43 point 5); after a stop the file's guess is kept, as before
+            hold.record(replace(hold.state, position_steps=tuple(result.position_steps)).lost(
+                f"homed {order.upper()} only, {left} unknown: home every axis (cam home) or say where the tool is "
+                f"(cam where --set X,Y,Z)"))
+            print(f"homed {order.upper()}; {left} not homed on a new machine: the position stays unknown "
+                  f"(home every axis with cam home, or cam where --set X,Y,Z)", file=sys.stderr)
+            return 0
         hold.record(replace(hold.state.moved_to(result.position_steps), homed=True))
     x, y, z = steps_to_mm(result.position_steps, settings)
     print(f"homed {order.upper()}: the machine stands at X={x:g} Y={y:g} Z={z:g} mm "

@@ -76,6 +76,8 @@ class SessionGrbl(SessionFrames):
         assert self.grbl is not None
         with self._lock:
             self._check_free()
+            if self.state_hold is not None:  # until $H has finished nothing says where the tool is (issue #43)
+                self.state_hold.record(self.state_hold.state.lost("homing ($H) did not finish"))
             ctl = GrblControl(self.grbl, stop_resets=True)
             self._begin(Activity("home", "home ($H)", ctl, 1, 0.0))
             self.log("home ($H): started")
@@ -116,11 +118,13 @@ def home_on_grbl(session: Any, ctl: GrblControl) -> None:
     moved = None if pos is None else np.asarray(pos, np.int64) - np.asarray(session.position_steps(), np.int64)
     status = "finished" if not error else ("emergency-stopped" if ctl.estopped else "error")
     hold = session.state_hold
-    if hold is not None and not error:  # before the end is booked: whoever sees the session idle sees it homed
+    # before the end is booked (issue #43 point 5): whoever sees the session idle sees it homed, or the position
+    # unknown; never the position known after a homing that failed (the end booked keeps it so: ended_state)
+    if hold is not None and not error:
         hold.record(replace(hold.state.moved_to(tuple(int(v) for v in pos)), homed=True))
+    elif hold is not None:
+        hold.record(hold.state.lost(f"homing did not finish ({error})"))
     session.finish({"activity": "home", "label": "home ($H)", "status": status,
                     "messages": [error] if error else []}, moved)
-    if hold is not None and error:
-        hold.record(hold.state.lost(f"homing did not finish ({error})"))
     session.log(f"homed: machine {list(pos)} steps" if not error else f"home ($H): {error}",
                 "info" if not error else "error")

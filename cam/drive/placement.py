@@ -118,13 +118,17 @@ def ended_state(state: MachineState, session: Any, start: tuple[int, int, int],
                 tool: Optional[str] = None) -> MachineState:
     """The machine state after the session's last activity (positions in the machine frame).
 
-    Finished or stopped: the tool where the session booked it.  An emergency stop, or a fault after writes
+    A homing that did not finish: the position unknown (issue #43 point 5).  Finished or stopped: the tool
+    where the session booked it.  An emergency stop, or a fault after writes
     were sent (or on a MAXIMUS board, which then has lost its offset): where it got to, position unknown.  A
     fault before anything was sent, or no run at all (refused before it started): where it started.
     """
     info = session.last_run
     status = info.get("status")
     end = session.position_steps()
+    if info.get("activity") == "home" and status != FINISHED:  # a homing that failed never makes it known
+        reason = "; ".join(info.get("messages") or [str(status or "stopped")])
+        return state.lost(f"homing did not finish ({reason})", end)
     if status is None:
         return state.moved_to(start)
     if status == LIMIT_STOPPED and session.last_sent()[1] == (0, 0, 0):  # stopped before its first step
