@@ -73,6 +73,9 @@ X10.0Y10.0
 M30
 """
 
+HTTP_HANG_S = 600.0
+"""How long a test's request may wait for its answer before the server counts as hung."""
+
 
 class Server:
     """A real server on a free localhost port, in a thread.
@@ -132,7 +135,9 @@ class Server:
         h = {k: v for k, v in h.items() if v is not None}
         req = urllib.request.Request(self.url + path, data=data, method=method, headers=h)
         try:
-            with urllib.request.urlopen(req, timeout=30) as resp:
+            # the answer is the condition waited for; the socket's timeout only keeps a dead server from
+            # hanging the suite (30 s was too short for a relief planned on a 2-core machine under load)
+            with urllib.request.urlopen(req, timeout=HTTP_HANG_S) as resp:
                 status, payload, ctype = resp.status, resp.read(), resp.headers.get("content-type", "")
         except urllib.error.HTTPError as exc:
             status, payload, ctype = exc.code, exc.read(), exc.headers.get("content-type", "")
