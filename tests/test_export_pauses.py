@@ -65,3 +65,22 @@ def test_tool_changes_stay_tool_changes_and_a_mill_bit_is_a_pause(tmp_path):
     assert r.returncode == 0, r.stderr
     assert re.findall(r"^T(\d) M6", out.read_text(), re.M) == ["1", "2"]
     run_rs274(str(out))
+
+
+@pytest.mark.parametrize("post", ["grbl", "linuxcnc", "generic"])
+def test_after_a_pause_the_program_goes_back_over_the_cut_before_cutting_on(tmp_path, post):
+    """Issue #43 point 9: after a pause (M0) the tool may have been moved (a jog, a look at the work); the program
+    goes up to the safe height and back over where it stopped with rapids before its next cut."""
+    out = tmp_path / "e.ngc"
+    r = run_cli("export", SAMPLES / "ellipse.png", "--depth", "2", "--pause-at", "135,7", "--post", post, "-o", out)
+    assert r.returncode == 0, r.stderr
+    code = [ln for ln in (re.sub(r"\(.*?\)", "", ln).strip() for ln in out.read_text().splitlines()) if ln]
+    k = code.index("M0")
+    xy = {}
+    for ln in code[:k]:  # where the program stood at the pause
+        xy.update(re.findall(r"([XY])(-?[\d.]+)", ln))
+    after = code[k + 1:]
+    assert after[0].startswith("G0 Z") and float(after[0][4:]) > 0, after[:3]  # up to the safe height first
+    first_cut = next(i for i, ln in enumerate(after) if ln.startswith(("G1", "G2", "G3")))
+    rapids = [dict(re.findall(r"([XY])(-?[\d.]+)", ln)) for ln in after[:first_cut] if ln.startswith("G0 X")]
+    assert rapids and rapids[0] == xy, (xy, after[:first_cut + 1])  # back over where it stopped, at the safe height
