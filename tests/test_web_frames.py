@@ -40,12 +40,12 @@ def test_routes_zero_goto_and_offsets_keep_the_state_file(tmp_path):
         assert status == 200 and st["where"]["active_offset"] == "G55"
         assert read_state(state_file, FAST).active_offset == "G55"
         for route, body, words in (("/api/zero", {"axes": "Q"}, "axes must be"),
-                                   ("/api/goto", {"xyz": [1, "a", 0]}, "X, Y and Z numbers"),
+                                   ("/api/goto", {"xyz": [1, "a", 0]}, "xyz Y must be a number"),
                                    ("/api/goto", {"xyz": [-1000, 0, 0], "machine": True}, "outside the X travel"),
                                    ("/api/use-offset", {"offset": "G99"}, "offset must be one of"),
                                    # found by the fuzzing: a 500 each before
                                    ("/api/zero", {"axes": "XY", "offset": {"a": {"b": 1}}}, "offset must be one of"),
-                                   ("/api/goto", {"xyz": [1, 10 ** 400, 0]}, "X, Y and Z numbers")):
+                                   ("/api/goto", {"xyz": [1, 10 ** 400, 0]}, "xyz Y must be a finite number")):
             status, err = s.call("POST", route, body)
             assert 400 <= status < 500 and words in err["error"] and "\n" not in err["error"], (route, err)
     finally:

@@ -211,7 +211,7 @@ def _run(job: Any, args: argparse.Namespace, settings: MachineSettings, hold: St
     answers = _Answers(args, stopping)
     session = MachineSession(port, settings, realtime=realtime, on_prompt=answers)
     if getattr(args, "feed_override", None) is not None:  # grbl's override (CapabilityError elsewhere)
-        session.feed_override(int(round(args.feed_override)))
+        session.feed_override(args.feed_override)
     # --offset X,Y says where the file's own origin goes (from the work zero): the file's zero is the anchor then
     origin = getattr(args, "origin", None) or ("file" if getattr(args, "offset", None) is not None else None)
     approach = None if getattr(args, "resume", None) else approach_to_work_zero(job, hold.state, start, settings,

@@ -24,7 +24,8 @@ from .grbl_machine import GRBL_OFFSETS
 from .placement import approach_to_work_zero, ended_state, goto_path, placed_home
 from .ports import require
 from .runner import Controller
-from .state import mm_to_steps, steps_to_mm, check_in_travel
+from .state import steps_to_mm, check_in_travel
+from ..values import shown, steps_in_range, xyz_numbers
 
 __all__ = ["SessionFrames"]
 
@@ -66,9 +67,9 @@ class SessionFrames(SessionControls):
         """Work zero of ``axes`` (``"X"``, ``"XY"``, ``"XYZ"``...) where the tool stands, in work offset ``offset``
         (``"G54"``..``"G59.3"``; None: the active one).  Without a state file the session's home moves there on
         those axes instead.  Refused while busy or while the position is unknown."""
-        names = str(axes).upper()
+        names = axes.upper() if isinstance(axes, str) else ""
         if not names or any(a not in "XYZ" for a in names) or len(set(names)) != len(names):
-            raise PlanError(f"axes must be X, Y, Z or several of them (XY, XYZ), got {axes!r}")
+            raise PlanError(f"axes must be X, Y, Z or several of them (XY, XYZ), got {shown(axes)}")
         with self._lock:
             self._check_free()
             self._require_known()
@@ -103,8 +104,8 @@ class SessionFrames(SessionControls):
             if self.state_hold is None:
                 raise CamError("work offsets need a machine state file (cam serve --state FILE)")
             st = self.state_hold.state
-            if offset not in st.offsets_steps:
-                raise PlanError(f"offset must be one of {', '.join(st.offsets_steps)}, got {offset!r}")
+            if not isinstance(offset, str) or offset not in st.offsets_steps:
+                raise PlanError(f"offset must be one of {', '.join(st.offsets_steps)}, got {shown(offset)}")
             self.state_hold.record(replace(st, active_offset=offset))
             if self.grbl is not None and offset in GRBL_OFFSETS:
                 self.grbl.use_offset(offset)
@@ -112,18 +113,19 @@ class SessionFrames(SessionControls):
         self.log(f"work offset {offset} active")
 
     def go_to(self, xyz: Any, unit: str = "mm", *, machine_coords: bool = False) -> None:
-        """Go To ``xyz`` (3 numbers, ``unit`` ``"mm"`` or ``"steps"``) in the active work frame (``machine_coords``:
-        the machine frame): lifted to the safe height first (the work zero's surface, or higher), across, then
-        down.  Refused while busy, while the position is unknown, or outside the travel (nothing moves)."""
-        try:
-            values = [float(v) for v in xyz]
-        except (TypeError, ValueError, OverflowError):
-            raise PlanError(f"a go-to needs X, Y and Z numbers, got {xyz!r}") from None
-        if len(values) != 3 or not all(np.isfinite(values)) or max(abs(v) for v in values) > 1e7:
-            raise PlanError(f"a go-to needs 3 finite X, Y, Z numbers, got {xyz!r}")
-        if unit not in ("mm", "steps"):
-            raise PlanError(f"unit must be 'mm' or 'steps', got {unit!r}")
-        rel = mm_to_steps(values, self.settings) if unit == "mm" else tuple(int(round(v)) for v in values)
+        """Go To ``xyz`` (a list of 3 numbers, ``unit`` ``"mm"`` or ``"steps"``) in the active work frame
+        (``machine_coords``: the machine frame): lifted to the safe height first (the work zero's surface, or
+        higher), across, then down.  Each number must be finite (no text such as ``"123"``, no booleans) and, in
+        steps, at most :data:`cam.values.MAX_ABS_STEPS` either way.  Refused while busy, while the position is
+        unknown, or outside the travel (nothing moves)."""
+        values = xyz_numbers(xyz, "xyz")
+        if not isinstance(machine_coords, bool):
+            raise PlanError(f"machine must be true or false, got {shown(machine_coords)}")
+        if not isinstance(unit, str) or unit not in ("mm", "steps"):
+            raise PlanError(f"unit must be 'mm' or 'steps', got {shown(unit)}")
+        s = self.settings
+        per = (s.mm_per_step_xy, s.mm_per_step_xy, s.mm_per_step_z) if unit == "mm" else (1.0, 1.0, 1.0)
+        rel = tuple(steps_in_range(v / p, f"xyz {a}", asked=f"{v:g} {unit}") for v, p, a in zip(values, per, "XYZ"))
         with self._lock:
             self._check_free()
             self._require_known()

@@ -15,10 +15,11 @@ import numpy as np
 
 from ..errors import CamError, CapabilityError
 from ..job.model import JobLike
+from ..values import finite_number
 from ._session_frames import SessionFrames
 from ._session_parts import Activity
 from .chunks import ChunkedPlan
-from .grbl_machine import GrblControl, GrblPosition, finish_stop, run_on_grbl, travel_advice
+from .grbl_machine import FEED_OVERRIDE_RANGE, GrblControl, GrblPosition, finish_stop, run_on_grbl, travel_advice
 from .ports import require
 from .state import check_in_travel
 from .steps import StepPlan
@@ -53,15 +54,19 @@ class SessionGrbl(SessionFrames):
         self.log(f"{label}: started on {self.port}")
         self._spawn(run_on_grbl, (self, name, job, ctl, label, start, position, total, estimated_s), name)
 
-    def feed_override(self, percent: int) -> None:
-        """Set the feed override to ``percent`` (10..200; grbl's real-time override bytes).
+    def feed_override(self, percent: float) -> None:
+        """Set the feed override to ``percent`` (a number 10..200, rounded to a whole percent; grbl's real-time
+        override bytes).
 
         Raises:
-            CapabilityError: the port has no feed override (not grbl); PlanError: outside 10..200."""
+            PlanError: not a finite number (text, a boolean, infinity) or outside 10..200 (checked first, on any
+            port); CapabilityError: the port has no feed override (not grbl)."""
+        lo, hi = FEED_OVERRIDE_RANGE
+        pct = int(round(finite_number(percent, "percent", lo=lo, hi=hi, unit="%")))
         require(self.port, "overrides", what="a feed override")
         assert self.grbl is not None
-        self.grbl.feed_override(int(percent))
-        self.log(f"feed override {int(percent)} %")
+        self.grbl.feed_override(pct)
+        self.log(f"feed override {pct} %")
         with self._lock:
             self._bump()
 

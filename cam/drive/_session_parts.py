@@ -21,6 +21,7 @@ import numpy as np
 
 from ..errors import BusyError, PlanError
 from ..settings import MachineSettings
+from ..values import shown, whole_number
 from .ports import require
 
 __all__ = ["Activity", "Prompt", "PromptFn", "SessionControls", "SessionView"]
@@ -248,9 +249,13 @@ class SessionControls(SessionView):
             ctl.stop()
 
     def answer(self, prompt_id: Any, action: str) -> None:
-        """Answer the pending prompt: ``action`` "continue" or "stop"."""
-        if action not in ("continue", "stop"):
-            raise PlanError(f"action must be 'continue' or 'stop', got {action!r}")
+        """Answer the pending prompt ``prompt_id`` (a whole number, the prompt's ``id``; None: whichever waits):
+        ``action`` "continue" or "stop".  PlanError for a bad value (text or a boolean for the id), BusyError when
+        no prompt, or another one, waits."""
+        if not isinstance(action, str) or action not in ("continue", "stop"):
+            raise PlanError(f"action must be 'continue' or 'stop', got {shown(action)}")
+        if prompt_id is not None:
+            prompt_id = whole_number(prompt_id, "prompt")
         with self._lock:
             if self._prompt is None:
                 raise BusyError("no prompt is waiting for an answer")

@@ -55,6 +55,7 @@ from ..job.model import TRAVEL, Job, JobLike, check_reach, check_travel, travel_
 from ..job.moves import jog as jog_job
 from ..job.moves import jog_steps, to_origin
 from ..settings import DEFAULT_SETTINGS, MachineSettings
+from ..values import xyz_steps
 from .apart import RunnerProcess
 from .journal import JournalSpec, journal_spec
 from ._session_parts import Activity, Prompt, PromptFn
@@ -150,10 +151,12 @@ class MachineSession(SessionGrbl):
         return self._runner_process
 
     def set_position(self, position_steps: tuple[int, int, int]) -> None:
-        """Tell the session where the tool stands (e.g. after homing by hand); refused while busy."""
+        """Tell the session where the tool stands (e.g. after homing by hand): 3 whole numbers of steps
+        (:func:`cam.values.xyz_steps`: no text, no booleans, none out of range); refused while busy."""
+        position = xyz_steps(position_steps, "position")
         with self._lock:
             self._check_free()
-            self._position = np.asarray(position_steps, np.int64).reshape(3).copy()
+            self._position = np.asarray(position, np.int64)
             if self.grbl is not None and self.grbl.position_steps(self.grbl.status()) != tuple(self._position):
                 self.grbl.rebase(tuple(int(v) for v in self._position))  # grbl's MPos is read from here on
             if self.state_hold is not None:  # the user's word: the machine frame is not the switches' any more
@@ -293,13 +296,13 @@ class MachineSession(SessionGrbl):
 
     def jog(self, axis: str, steps: float, unit: str = "steps") -> None:
         """Move one axis by ``steps`` in ``unit`` (see :data:`cam.job.moves.JOG_UNITS`: machine steps, full
-        steps, 0.1 mm, mm, 0.1 inch).  BusyError while something runs; PlanError/TravelError for a bad jog."""
+        steps, 0.1 mm, mm, 0.1 inch).  ``steps`` must be a finite number (no text, no boolean), at most
+        :data:`MAX_JOG_STEPS` machine steps either way once converted.  BusyError while something runs;
+        PlanError (naming the field) or TravelError for a bad jog."""
         a = str(axis).lower()
         half = getattr(self.settings.maximus, f"half_step_{a}", False) if self.kind == "maximus" \
             else self.settings.half_step
-        n = jog_steps(axis, steps, unit, settings=self.settings, half_step=bool(half))
-        if abs(n) > MAX_JOG_STEPS:
-            raise PlanError(f"steps must be at most {MAX_JOG_STEPS} either way, got {n} ({steps!r} {unit})")
+        n = jog_steps(axis, steps, unit, settings=self.settings, half_step=bool(half), max_steps=MAX_JOG_STEPS)
         with self._lock:
             self._check_free()
             self._require_known()

@@ -5,14 +5,13 @@ when the job starts (see :mod:`cam.job.model`).
 """
 from __future__ import annotations
 
-import math
-
 from typing import Optional
 
 import numpy as np
 
 from ..errors import PlanError
 from ..settings import DEFAULT_SETTINGS, MachineSettings
+from ..values import MAX_ABS_STEPS, finite_number, shown, steps_in_range
 from .model import Job, PixelFrame, check_reach, check_travel, travel_job
 
 __all__ = ["goto", "jog", "to_origin", "jog_steps", "AXES", "JOG_UNITS"]
@@ -25,11 +24,12 @@ Appendix 2, ``TFormJog::ToolBtnXrightClick``: "100 um", "1 mm", "2.54 mm" and "F
 
 
 def jog_steps(axis: str, amount: float, unit: str = "steps", *, settings: MachineSettings = DEFAULT_SETTINGS,
-              half_step: bool = False) -> int:
+              half_step: bool = False, max_steps: int = MAX_ABS_STEPS) -> int:
     """A jog of ``amount`` in ``unit`` as a whole number of machine steps (rounded to the nearest).
 
     ``"full-steps"`` are motor steps: two machine steps when the axis runs in half steps (``half_step``), as
-    the PC program's ``(machineMode + 1) * N``.
+    the PC program's ``(machineMode + 1) * N``.  The count is checked after the conversion (at most
+    ``max_steps`` either way), so no unit makes it overflow (:func:`cam.values.steps_in_range`).
 
     >>> jog_steps("x", 1, "mm", settings=DEFAULT_SETTINGS.replace(mm_per_step_xy=0.004375))
     229
@@ -37,30 +37,23 @@ def jog_steps(axis: str, amount: float, unit: str = "steps", *, settings: Machin
     6
 
     Raises:
-        PlanError: an unknown unit or a count that is not whole in a step unit.
+        PlanError: an unknown axis or unit, an amount that is no finite number (text, a boolean), a count that
+        is not whole in a step unit, or more than ``max_steps`` steps; each naming the field.
     """
     a = str(axis).lower()
     if a not in AXES:
-        raise PlanError(f"axis must be x, y or z, got {axis!r}")
+        raise PlanError(f"axis must be x, y or z, got {shown(axis)}")
     if not isinstance(unit, str) or unit not in JOG_UNITS:
-        raise PlanError(f"jog unit must be one of {', '.join(JOG_UNITS)}, got {str(unit)[:40]!r}")
-    if isinstance(amount, bool) or not isinstance(amount, (int, float, np.integer, np.floating)) \
-            or not _finite(amount):
-        raise PlanError(f"a jog needs a number, got {str(amount)[:40]}")
+        raise PlanError(f"jog unit must be one of {', '.join(JOG_UNITS)}, got {shown(unit)}")
+    value = finite_number(amount, "steps")
     if unit in ("steps", "full-steps"):
-        if float(amount) != int(amount):
-            raise PlanError(f"a jog in {unit} needs a whole number, got {amount!r}")
-        return int(amount) * (2 if unit == "full-steps" and half_step else 1)
-    mm_per_step = settings.mm_per_step_z if a == "z" else settings.mm_per_step_xy
-    return int(round(float(amount) * JOG_UNITS[unit] / mm_per_step))
-
-
-def _finite(amount: float) -> bool:
-    """A finite number as a float (an integer of 10^400 digits is not: it overflows one)."""
-    try:
-        return math.isfinite(float(amount))
-    except OverflowError:
-        return False
+        if not value.is_integer():
+            raise PlanError(f"a jog in {unit} needs a whole number of steps, got {shown(amount)}")
+        n = value * (2 if unit == "full-steps" and half_step else 1)
+    else:
+        mm_per_step = settings.mm_per_step_z if a == "z" else settings.mm_per_step_xy
+        n = value * JOG_UNITS[unit] / mm_per_step
+    return steps_in_range(n, "steps", max_abs_steps=max_steps, asked=f"a jog of {value:g} {unit}")
 
 
 def goto(position_px: tuple[int, int, int], *, settings: MachineSettings = DEFAULT_SETTINGS) -> Job:

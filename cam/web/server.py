@@ -713,29 +713,27 @@ async def _jog(st: _AppState, request: Request) -> dict[str, Any]:
 
 async def _zero(st: _AppState, request: Request) -> dict[str, Any]:
     body = await _body_json(request)
-    st.session.zero(str(body.get("axes", "XYZ")), body.get("offset") or None)
+    st.session.zero(body.get("axes", "XYZ"), body.get("offset") or None)
     return st.session.state()
 
 
 async def _goto(st: _AppState, request: Request) -> dict[str, Any]:
     body = await _body_json(request)
-    st.session.go_to(body.get("xyz"), str(body.get("unit", "mm")), machine_coords=body.get("machine") is True)
+    st.session.go_to(body.get("xyz"), body.get("unit", "mm"), machine_coords=body.get("machine", False))
     return st.session.state()
 
 
 async def _use_offset(st: _AppState, request: Request) -> dict[str, Any]:
     body = await _body_json(request)
-    st.session.use_offset(str(body.get("offset", "")))
+    st.session.use_offset(body.get("offset", ""))
     return st.session.state()
 
 
 async def _feed_override(st: _AppState, request: Request) -> dict[str, Any]:
-    """``{"percent": 10..200}``: the feed override of a grbl board (its real-time override bytes)."""
+    """``{"percent": 10..200}``: the feed override of a grbl board (its real-time override bytes); the session
+    checks the number."""
     body = await _body_json(request)
-    percent = body.get("percent")
-    if isinstance(percent, bool) or not isinstance(percent, (int, float)) or percent != percent:
-        raise PlanError(f"percent must be a number 10..200, got {percent!r}")
-    st.session.feed_override(int(round(percent)))
+    st.session.feed_override(body.get("percent"))
     return st.session.state()
 
 
