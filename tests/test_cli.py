@@ -306,8 +306,12 @@ def test_missing_extras_are_one_line_naming_the_extra(drawing):
     assert_one_line_error(proc, "starlette", "cam[web]")
 
 
-def test_missing_parallel_port_is_one_line_with_hint(drawing):
-    proc = cli("drill", drawing, "--port", "/dev/parport-does-not-exist", "--no-progress")
+def test_missing_parallel_port_is_one_line_with_hint(drawing, tmp_path):
+    from cam.drive.state import MachineState, write_state
+
+    known = tmp_path / "known.json"  # the position known (a missing state file on a real port is unknown: #43)
+    write_state(known, MachineState())
+    proc = cli("drill", drawing, "--port", "/dev/parport-does-not-exist", "--no-progress", "--state", known)
     assert_one_line_error(proc, "/dev/parport-does-not-exist")
     assert "modprobe ppdev" in proc.stderr or "permission" in proc.stderr
     assert_one_line_error(cli("drill", drawing, "--port", "lpt1"), "unknown port 'lpt1'")

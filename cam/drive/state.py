@@ -40,9 +40,11 @@ try:
 except ImportError:  # pragma: no cover - not a POSIX system: no lock (one command at a time is the user's care)
     fcntl = None  # type: ignore[assignment]
 
-from ..errors import BusyError, CamError, TravelError
+from ..errors import BusyError, CamError, PortError, TravelError
 from ..fileio import atomic_write_text
 from ..settings import MachineSettings
+from .grbl_link import parse_grbl_url
+from .ports import MAXIMUS_PREFIX, port_kind
 
 __all__ = [
     "STATE_VERSION", "OFFSET_NAMES", "MachineState", "Running", "StateError", "StateBusyError",
@@ -311,7 +313,6 @@ def is_real_port(port: Any) -> bool:
     """Whether ``port`` (a name, or an open port) drives a real machine: anything but the mock (None: the mock)."""
     if port is None:
         return False
-    from .ports import port_kind
     return port_kind(port) != "mock"
 
 
@@ -393,7 +394,6 @@ def now_text() -> str:
 def unknown_message(state: MachineState, port: Any = None) -> str:
     """The one-line error of a move asked for while the position is unknown (on a MAXIMUS board, which has no
     home switches ``cam`` reads, ``cam where --set`` only)."""
-    from .ports import port_kind
     if isinstance(port, str) and is_real_port(port) and port_kind(port) == "maximus":
         return (f"the machine position is unknown ({state.unknown_reason or 'not recorded'}): say where the head "
                 f"is, in machine mm, with cam where --set X,Y,Z (e.g. 0,0,0 where the board origin is)")
@@ -576,17 +576,17 @@ def port_device(port: Any, settings: Optional[MachineSettings] = None) -> Option
         PortError: a bare ``maximus`` whose settings name no serial port."""
     if not isinstance(port, str) or not is_real_port(port):
         return None
-    from .ports import MAXIMUS_PREFIX, port_kind
     kind = port_kind(port)
     if kind == "grbl":
-        from .grbl_link import parse_grbl_url
         return parse_grbl_url(port)[0]
     if kind == "maximus":
         if port == MAXIMUS_PREFIX[:-1]:  # the machine file's serial_port (none: the one-line PortError)
             if settings is None:
                 return None
-            from .maximus.board import maximus_port
-            return maximus_port(port, settings)[len(MAXIMUS_PREFIX):]
+            if not settings.maximus.serial_port:  # as cam.drive.maximus.board.maximus_port says it
+                raise PortError("--port maximus needs a device: maximus:/dev/ttyUSB0, or serial_port in the [maximus] "
+                                "table of the machine file")
+            return settings.maximus.serial_port
         return port[len(MAXIMUS_PREFIX):]
     return port
 
