@@ -152,3 +152,21 @@ def test_cli_jog_of_too_many_steps_is_one_line_error(tmp_path, amount, words):
     assert r.returncode == 2, (r.returncode, r.stderr)
     assert len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr
     assert words in r.stderr, r.stderr
+
+
+def test_api_job_options_refuse_booleans_infinity_and_absurd_tools(fast):
+    """Job options keep their documented forms (numbers, or numbers as the form's text); a boolean for a number,
+    NaN or infinity, and the V bit of 1e-308 degrees (issue #43 point 8) get a one-line 400 naming the option."""
+    from conftest import SAMPLES
+
+    status, up = fast.upload("ellipse.png", (SAMPLES / "ellipse.png").read_bytes())
+    assert status == 200, up
+    for options, words in (('{"depth": true}', "option 'depth' must be a whole number"),
+                           ('{"passes": 1.5}', "option 'passes' must be a whole number"),
+                           ('{"stepover": Infinity}', "option 'stepover' must be a finite number"),
+                           ('{"cut_depth_mm": NaN}', "option 'cut_depth_mm' must be a finite number"),
+                           ('{"tool": "v:1e-308:0", "line_width_mm": 0.3}', "angle must be 1..179 degrees")):
+        status, reply = _post_text(fast, "/api/plan", f'{{"job": "{up["job"]}", "options": {options}}}')
+        _refused(fast, status, reply, words)
+    status, reply = fast.call("POST", "/api/plan", {"job": up["job"], "options": {"depth": "2"}})  # the form's text
+    assert status == 200, reply
