@@ -235,12 +235,14 @@ def test_an_ok_with_nothing_outstanding_is_a_fault_never_credit():
         assert any(text.startswith("soft reset") for _, text in emu.events)
 
 
-def test_every_ok_doubled_with_buffer_reports_is_found_before_grbl_overflows():
-    """Issue #43 point 2: every ``ok`` doubled.  With grbl's buffer report on (``$10=3``: ``Bf:`` in every
-    status report), a report that shows more bytes in grbl's receive buffer than cam counts unanswered is a
-    fault; the machine stops and no byte sent was lost."""
-    with emulator_rig(settings={10: 3}) as (emu, proxy):
+def test_every_ok_doubled_is_found_before_grbl_overflows():
+    """Issue #43 point 2: every ``ok`` doubled.  cam turns grbl's buffer report on (``$10`` 1 -> 3: ``Bf:`` in
+    every status report); a report that shows more bytes in grbl's receive buffer than cam counts unanswered
+    is a fault; the machine stops and no byte sent was lost."""
+    with emulator_rig() as (emu, proxy):
         session = open_session(proxy)
+        assert emu.settings[10] == 3
+        assert any("turned on grbl's buffer report" in e["text"] for e in session.state()["log"])
         proxy.board_line_filter = double_ok(every=True)
         run_to_end(session, zigzag_job(SETTINGS, segments=120, step_mm=0.3))
         msg = fault_message(session)

@@ -232,9 +232,24 @@ class GrblMachine:
         self.warned = False
         self.warning = (f"grbl's settings differ from the machine file: {'; '.join(mismatch)}"
                         if mismatch else "")
+        self.notice = self._buffer_report_on()
         self.status()
         self._poller = threading.Thread(target=self._poll, name="grbl-poll", daemon=True)
         self._poller.start()
+
+    def _buffer_report_on(self) -> str:
+        """Turn on grbl's buffer report (``$10`` bit 1: ``Bf:planner blocks,rx bytes`` in every status report)
+        when it is off, keeping the position bit: each report then checks cam's count of grbl's receive buffer
+        (a duplicated ``ok`` counted as credit is found at the next report, :class:`GrblLink`).  Returns what was
+        changed, for the log ("" when it was on already or grbl has no ``$10``)."""
+        mask = self.link.settings.get(10)
+        if mask is None or int(mask) & 2:
+            return ""
+        new_mask = int(mask) | 2
+        self.link.command(f"$10={new_mask}", timeout_s=self.link.timeout_s)
+        self.link.settings[10] = float(new_mask)
+        return (f"cam turned on grbl's buffer report ($10={int(mask)} -> {new_mask}, kept in its EEPROM): each "
+                f"status report checks cam's count of grbl's receive buffer")
 
     def _poll(self) -> None:
         while not self._closing.wait(POLL_S):

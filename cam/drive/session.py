@@ -132,6 +132,9 @@ class MachineSession(SessionGrbl):
         if self.grbl is not None:  # where the tool stands: grbl's word (with the state file's frame)
             if self.grbl.warning:
                 self.log(self.grbl.warning, "warning")
+            if self.grbl.notice:
+                self.log(self.grbl.notice, "info")
+                self.grbl.notice = ""  # once: the machine is shared by the sessions of this process
             self._position = np.asarray(adopt_position(self.grbl, state, self.log), np.int64)
 
     @property
