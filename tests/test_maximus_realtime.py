@@ -76,6 +76,7 @@ def emu(tmp_path):
 
 def test_a_jog_whose_reply_takes_longer_than_2_s(emu, capsys):
     """Issue #14 reproduction 1: 1100 pulses at Delay 10 take 2.2 s; the reply deadline follows the move."""
+    assert main(["where", "--set", "0,0,0", "--port", f"maximus:{emu.device_path}"]) == 0  # a new machine (#43)
     assert main(["jog", "--port", f"maximus:{emu.device_path}", "X+", "1100"]) == 0, capsys.readouterr().err
     assert decode_port_log(emu.port_log())[-1].tolist() == [1100, 0, 0]
     assert emu.wait_for_state(MODE_SELECTION)
