@@ -12,16 +12,17 @@ from ..digitize.digitized import save_digitized
 from ..drive.maximus.board import drill_stroke, require_drilling
 from ..drive.maximus.resume import resume_board_job
 from ..drive.journal import read_journal
-from ..drive.state import StateHold, check_in_travel
+from ..drive.state import StateHold, check_in_travel, read_state
 from ..drive.ports import port_kind
 from ..errors import CamError
 from ..job.jobs import resume_job
+from ..job.resume import resume_start
 from .checks import check_output_path, job_kind_of
 from ..fileio import atomic_write_text
 from ..drive.activities import run_timing_text
 from .common import format_duration, port_settings
 from .execute import Outcome, check_port_options, execute
-from .machine_state import hold_machine
+from .machine_state import hold_machine, state_path_of
 from .parser import EXIT_INTERRUPTED
 from .planning import placed_by_own_zero, prepare, summary_of, write_job_preview
 
@@ -41,13 +42,19 @@ def _finish(args: argparse.Namespace, outcome: Outcome, report: dict, summary: s
     if not outcome.finished:
         for m in outcome.messages:
             print(m, file=sys.stderr)
-        if report_error is not None:
-            raise CamError(report_error)
+        _raise_unwritten(report_error, outcome.state_error)
         return EXIT_INTERRUPTED
     _finished_line(args, outcome, ramp, summary, wall_s)
-    if report_error is not None:
-        raise CamError(report_error)
+    _raise_unwritten(report_error, outcome.state_error)
     return 0
+
+
+def _raise_unwritten(report_error: Optional[str], state_error: Optional[str]) -> None:
+    """After the run's own outcome: one error line for what was not written (the state file first: where the tool
+    is matters more than the report)."""
+    errors = [e for e in (state_error, report_error) if e is not None]
+    if errors:
+        raise CamError("; and ".join(errors))
 
 
 def _finished_line(args: argparse.Namespace, outcome: Outcome, ramp: str, summary: str, wall_s: float) -> None:
@@ -90,10 +97,14 @@ def journal_path(args: argparse.Namespace) -> Optional[str]:
     return None
 
 
-def _resumed(args: argparse.Namespace, job):
-    """The prepared job resumed after the stop its journal (--resume) records; says so on stderr."""
+def _resumed(args: argparse.Namespace, job, hold: StateHold, reported_stop: Optional[tuple[int, int, int]]):
+    """The prepared job resumed after the stop its journal (--resume) records; says so on stderr.  A journal that
+    may be behind the stop (not closed) is not trusted for the position: the run goes on from where the machine
+    state has the tool, refused while that is unknown (:func:`cam.job.resume.resume_start`, issue #43 point 7)."""
     journal = read_journal(args.resume)
     if port_kind(args.port) == "maximus":  # the board drills by itself: it goes on from the next hole
+        if journal.state == "running":
+            resume_start(journal, hold.state, where=args.resume, reported_stop_steps=reported_stop)  # known, or refused
         resumed = resume_board_job(job, journal, where=args.resume)
         if journal.state == "running":
             print(f"warning: journal {args.resume} was not closed (its run ended without a word): the board may "
@@ -101,14 +112,40 @@ def _resumed(args: argparse.Namespace, job):
         print(f"resuming at hole {journal.holes_done + 1} of {len(job.drill_plan.holes_steps)} from "
               f"{list(journal.position_steps)} steps ({journal.state})", file=sys.stderr)
         return resumed, journal.position_steps
-    resumed = resume_job(job, journal, where=args.resume)
+    start = resume_start(journal, hold.state, where=args.resume, reported_stop_steps=reported_stop)
+    resumed = resume_job(job, journal, position_steps=start, where=args.resume)
     if journal.state == "running":
-        print(f"warning: journal {args.resume} was not closed (its run ended without a word): where it says the "
-              f"tool stands, {list(journal.position_steps)} steps, may be a little behind; check the tool",
-              file=sys.stderr)
+        print(f"note: journal {args.resume} was not closed (its run ended without its last write), so it may be "
+              f"behind the stop: resuming from where the machine state has the tool, machine "
+              f"{list(hold.state.position_steps)} steps", file=sys.stderr)
     print(f"resuming at move {resumed.report['resumed_at_move']} of {len(job.toolpath)} from "
-          f"{list(journal.position_steps)} steps ({journal.state})", file=sys.stderr)
-    return resumed, journal.position_steps
+          f"{list(start)} steps ({journal.state})", file=sys.stderr)
+    return resumed, start
+
+
+def _reported_stop(args: argparse.Namespace, settings) -> Optional[tuple[int, int, int]]:
+    """Where the machine state file recorded the tool at the stop of the run a --resume goes on from, when it
+    recorded one with the position unknown (an emergency stop, a fault while moving: the machine's last word),
+    read before the machine is held; None when it recorded none (a run that ended without recording, killed or
+    its disk full: its running marker) or the position is known (then it is used)."""
+    try:
+        state = read_state(state_path_of(args), settings)
+    except CamError:
+        return None
+    if state.running is not None or state.position_known or "without recording" in state.unknown_reason:
+        return None  # a marker left behind (turned into an unknown position by an earlier hold: its wording)
+    return state.position_steps
+
+
+def _machine_hold(args: argparse.Namespace, settings) -> tuple[Optional[StateHold], Optional[tuple[int, int, int]]]:
+    """The machine's hold, taken before the job is planned when it is planned in the machine state
+    (:func:`_gcode_hold`) or resumed (where the tool stands decides where the run goes on), and where the state
+    file recorded the last stop (:func:`_reported_stop`, a resume's)."""
+    reported = _reported_stop(args, settings) if getattr(args, "resume", None) else None
+    hold = _gcode_hold(args, settings)
+    if hold is None and getattr(args, "resume", None):
+        hold = hold_machine(args, settings, "cam drill")
+    return hold, reported
 
 
 def _gcode_hold(args: argparse.Namespace, settings) -> Optional[StateHold]:
@@ -162,21 +199,23 @@ def cmd_drill(args: argparse.Namespace) -> int:
         read_journal(args.resume)  # a bad journal: one line, before anything is planned
     settings = port_settings(args, args.port)
     check_port_options(args, settings)
-    hold = _gcode_hold(args, settings)
+    hold, reported_stop = _machine_hold(args, settings)
     try:
-        return _drill(args, settings, hold)
+        return _drill(args, settings, hold, reported_stop)
     finally:
         if hold is not None:
             hold.close()
 
 
-def _drill(args: argparse.Namespace, settings, hold: Optional[StateHold]) -> int:
+def _drill(args: argparse.Namespace, settings, hold: Optional[StateHold],
+           reported_stop: Optional[tuple[int, int, int]] = None) -> int:
     planning_t0 = time.monotonic()
     job = prepare(args, settings)
     planning_s = time.monotonic() - planning_t0
     start_steps = None
     if getattr(args, "resume", None):
-        job, start_steps = _resumed(args, job)
+        assert hold is not None  # taken before planning (_machine_hold)
+        job, start_steps = _resumed(args, job, hold, reported_stop)
     for w in job.warnings:
         if w not in getattr(args, "kind_warnings", ()):  # check_args said it already
             print(f"warning: {w}", file=sys.stderr)
@@ -193,8 +232,9 @@ def _drill(args: argparse.Namespace, settings, hold: Optional[StateHold]) -> int
         job.report["journal"] = journal
     kept = _offsets_kept(args, job, hold)
     t0 = time.monotonic()
-    outcome = execute(job, args, settings, start_steps=start_steps, journal=journal, hold=hold)
-    if kept and outcome.finished and hold is not None:
+    outcome = execute(job, args, settings, start_steps=start_steps, journal=journal, hold=hold,
+                      state_error_in_outcome=True)
+    if kept and outcome.finished and hold is not None and outcome.state_error is None:
         state = hold.state
         for name, zero in kept.items():
             state = state.with_offset(name, zero)

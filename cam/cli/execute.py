@@ -23,8 +23,8 @@ from ..drive.journal import journal_spec, read_journal
 from ..drive.ports import MockPort, SwitchSchedule, port_kind, require
 from ..drive.runner import FINISHED
 from ..drive.session import MachineSession, Prompt
-from ..drive.state import PositionUnknownError, StateHold, check_in_travel
-from ..errors import CapabilityError, PortError
+from ..drive.state import MachineState, PositionUnknownError, StateHold, check_in_travel, steps_to_mm
+from ..errors import CamError, CapabilityError, PortError
 from ..job.model import Job
 from ..settings import MachineSettings
 from ..verify.pinlog import write_pin_log
@@ -35,8 +35,8 @@ from ..drive.placement import (
     ORIGINS, PLACED_KINDS, approach_to_work_zero, ended_state, origin_anchor, placed_home,
 )
 
-__all__ = ["execute", "Outcome", "check_port_options", "ended_state", "approach_to_work_zero", "PLACED_KINDS",
-           "ORIGINS", "origin_anchor", "placed_home"]
+__all__ = ["execute", "Outcome", "check_port_options", "ended_state", "unrecorded_message", "approach_to_work_zero",
+           "PLACED_KINDS", "ORIGINS", "origin_anchor", "placed_home"]
 
 
 @dataclass
@@ -52,6 +52,9 @@ class Outcome:
     timing: dict = field(default_factory=dict)
     """Real-time runs: ``max_late_s`` (the latest write), ``stalls`` (writes over 1 ms late) and ``late_total_s``
     (how much later the run ended than planned); every delay moved the rest of the run later."""
+    state_error: Optional[str] = None
+    """The machine state file could not record where the run left the tool (one line naming it, with the
+    position): said after the run's own outcome, which is kept whole."""
 
     @property
     def finished(self) -> bool:
@@ -153,7 +156,7 @@ def _bar(args: argparse.Namespace, estimated_s: float) -> Optional[Any]:
 
 def execute(job: Any, args: argparse.Namespace, settings: MachineSettings, *,
             start_steps: Optional[tuple[int, int, int]] = None, journal: Optional[str] = None,
-            hold: Optional[StateHold] = None) -> Outcome:
+            hold: Optional[StateHold] = None, state_error_in_outcome: bool = False) -> Outcome:
     """Run a job (a Job, a PreparedJob or a StepPlan) on ``args.port`` through a machine session.
 
     The job starts where the machine state file (``args.state``, else the machine's default one: see
@@ -164,6 +167,9 @@ def execute(job: Any, args: argparse.Namespace, settings: MachineSettings, *,
     cleanly (tool lifted, position reported).  Writes ``args.pin_log`` after a run on the mock.
     ``journal``: keep the job's journal in this file (:mod:`cam.drive.journal`); should this process die,
     the real-time runner process writes the journal and the pin log itself.
+    ``state_error_in_outcome``: a state file that cannot record where the run ended comes back as the outcome's
+    ``state_error`` (the caller says what the run did first, then that error); else it is raised (after the
+    pin log was written).
 
     Raises:
         CamError: the job does not fit the port or the travel (nothing is sent), the position is unknown,
@@ -174,7 +180,10 @@ def execute(job: Any, args: argparse.Namespace, settings: MachineSettings, *,
         hold = hold_machine(args, settings, "cam drill")
     try:
         start = _start_position(hold, args, start_steps)
-        return _run(job, args, settings, hold, start, journal)
+        outcome = _run(job, args, settings, hold, start, journal)
+        if outcome.state_error is not None and not state_error_in_outcome:
+            raise CamError(outcome.state_error)
+        return outcome
     finally:
         if own:
             hold.close()
@@ -199,6 +208,17 @@ def _start_position(hold: StateHold, args: argparse.Namespace,
 
 def _run(job: Any, args: argparse.Namespace, settings: MachineSettings, hold: StateHold,
          start: tuple[int, int, int], journal: Optional[str]) -> Outcome:
+    """Run the job; a state file that cannot be written at the end does not take the outcome with it (its pin log,
+    its report, its finished line): it comes back in ``state_error`` (issue #43 point 7)."""
+    unrecorded: list[str] = []
+    outcome = _drive(job, args, settings, hold, start, journal, unrecorded)
+    if unrecorded:
+        outcome.state_error = unrecorded[0]
+    return outcome
+
+
+def _drive(job: Any, args: argparse.Namespace, settings: MachineSettings, hold: StateHold,
+           start: tuple[int, int, int], journal: Optional[str], unrecorded: list[str]) -> Outcome:
     stopping = threading.Event()
     realtime = getattr(args, "realtime", False)
     port: Any = args.port
@@ -261,12 +281,26 @@ def _run(job: Any, args: argparse.Namespace, settings: MachineSettings, hold: St
     finally:
         answers.flush()
         if hold.state.running is not None:  # recorded before the handlers go: a SIGTERM now still stops cleanly
-            hold.record(ended_state(hold.state, ended, ended_start, getattr(args, "tool", None)))
+            end = ended_state(hold.state, ended, ended_start, getattr(args, "tool", None))
+            try:
+                hold.record(end)
+            except CamError as exc:  # a full disk: what the run did is still said and written
+                unrecorded.append(unrecorded_message(end, exc, settings))
         for s, handler in previous.items():
             signal.signal(s, handler)
         if bar is not None:
             bar.close()
     return _outcome(session, args)
+
+
+def unrecorded_message(end: MachineState, exc: Exception, settings: MachineSettings) -> str:
+    """The one line of a state file that could not record where a run left the tool (``end``, machine frame):
+    the cause, the position (the next command finds it unknown) and how to say it."""
+    mm = ", ".join(f"{v:g}" for v in steps_to_mm(end.position_steps, settings))
+    where = f"at machine {list(end.position_steps)} steps ({mm} mm)"
+    said = f"the tool stands {where}" if end.position_known else f"the machine's last word had the tool {where}"
+    return (f"the machine state was not recorded ({exc}): {said}; the next command finds the position unknown: "
+            f"free the disk, then say where the tool is (cam where --set X,Y,Z) or home the machine (cam home)")
 
 
 def _approach(job: Job, args: argparse.Namespace, settings: MachineSettings, start: tuple[int, int, int],

@@ -14,9 +14,11 @@ the runner never waits for the disk), and once at the end with the exact
 position.  Every write goes through :func:`cam.fileio.atomic_write_text`:
 the old journal or the new one, never half of one.  A journal is never
 ahead of the machine: its move and position come from the writes already
-sent, so a journal left behind by a process that died (state ``running``)
-is at most a moment behind, and resuming from it cuts a little again,
-never skips.
+sent, so a journal left behind by a run that ended without its last write
+(state ``running``: killed, or its disk filled) is behind, never ahead:
+resuming it cuts a little again, never skips.  Its position is not trusted
+(:func:`cam.job.resume.resume_start`, issue #43 point 7): the run goes on
+from where the machine state has the tool, once that is known.
 """
 from __future__ import annotations
 

@@ -49,7 +49,7 @@ from .model import CUT, RETRACT, TRAVEL, Job, JobLike, PixelFrame, PlanFingerpri
 __all__ = [
     "JOURNAL_FORMAT", "JOURNAL_STATES", "Journal", "JournalBase", "Resumed", "job_identity", "plan_fingerprint",
     "PlanFingerprint", "check_journal", "resume_pieces", "resume_toolpath", "ResumedJob", "MoveIndex",
-    "last_completed", "journal_record", "cutting_moves", "check_journal_numbers",
+    "last_completed", "journal_record", "cutting_moves", "check_journal_numbers", "resume_start",
 ]
 
 JOURNAL_FORMAT = 1
@@ -651,3 +651,33 @@ def journal_record(base: JournalBase, point_write: np.ndarray, pause_writes: set
                    writes_done=int(writes_done), writes_total=int(writes_total),
                    home_steps=tuple(int(v) for v in home_steps),  # type: ignore[arg-type]
                    resumed_at_move=base.resumed_at_move, start_position_steps=tuple(int(v) for v in start))  # type: ignore[arg-type]
+
+
+def resume_start(journal: Journal, state: Any, *, where: str = "journal",
+                 reported_stop_steps: Optional[tuple[int, int, int]] = None) -> tuple[int, int, int]:
+    """Where a resumed run of ``journal`` starts, steps from the job's home (issue #43 point 7).
+
+    A closed journal (its run's last write: stopped, emergency-stopped, failed) holds the position the run ended
+    at: its own.  A journal still ``running`` was left by a run that ended without its last write (killed, or its
+    disk filled): it may be behind what was sent, so its position is not trusted; the run goes on from where the
+    machine ``state`` (a :class:`cam.drive.state.MachineState`, machine frame) has the tool, which must be known:
+    recorded at the stop, or set since by homing or ``cam where --set``.  ``reported_stop_steps``: where the machine reported the tool at the stop
+    (machine frame), when the state file recorded one, for the message.
+
+    Raises:
+        CamError: a journal that may be behind, and the position unknown (one line: where the journal
+            says, where the machine reported the stop when known, and how to make it known).
+    """
+    if journal.state != "running":
+        return tuple(int(v) for v in journal.position_steps)  # type: ignore[return-value]
+    home = tuple(int(v) for v in journal.home_steps)
+    if state.position_known:
+        return tuple(int(p) - h for p, h in zip(state.position_steps, home))  # type: ignore[return-value]
+    said = [int(p) + h for p, h in zip(journal.position_steps, home)]
+    reported = "" if reported_stop_steps is None else \
+        f"; the machine reported the stop at machine {[int(v) for v in reported_stop_steps]} steps"
+    raise CamError(
+        f"journal {where} was not closed (its run ended without its last write: killed, or its disk filled), so "
+        f"where it says the tool stands, machine {said} steps, may be behind the stop; the machine position is "
+        f"unknown ({state.unknown_reason or 'not recorded'}){reported}: home the machine (cam home) or say where the "
+        f"tool is (cam where --set X,Y,Z, machine mm), then resume again: it goes on from there")
