@@ -40,6 +40,8 @@ class _Block(_State):
         self.check_m_codes(ms)
         motions = codes & _MOTION
         splines = codes & _SPLINES
+        if 800 in motions and len(motions | splines) > 1:
+            motions.discard(800)  # rs274: G80 with another motion code of group 1 on its line gives way to it
         if len(motions | splines) > 1:
             raise self.err("two motion codes on one line")
         if 930 in codes:

@@ -166,6 +166,9 @@ class _Flow(_PlainLines):
                 if body.startswith("$"):
                     self.note_once("$", f"grbl system command '{_shown(self.raw.strip())}' skipped (and any later "
                                         "'$' lines): it is a command to grbl itself, not G-code")
+                elif body == "?":
+                    self.note_once("?", "grbl real-time status query '?' skipped (and any later '?' lines): it "
+                                        "asks grbl where it is, it is not G-code")
                 if body == "%":
                     if percent or ran:
                         self._after_percent(src, idx)
@@ -211,7 +214,7 @@ class _Flow(_PlainLines):
         if body.startswith("/"):
             body = body[1:]  # block delete is off, as in rs274: the line runs
         line = None
-        if body and body != "%" and not body.startswith("$"):
+        if body and body not in ("%", "?") and not body.startswith("$"):
             try:
                 line = read_line(body)
             except NgcSyntaxError as exc:

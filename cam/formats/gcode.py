@@ -16,10 +16,12 @@ A small interpreter for the LinuxCNC language (tested against LinuxCNC's own ``r
   offsets the caller gives (the machine state's G54..G59.3 and the active one); program coordinates are
   machine coordinates minus the active offset (and G92); G53, G28 and G30 are machine positions; the moves
   are given from ``start_mm``; the program's G10 L2/L20 hold for its run, and it says how it left them;
-* grbl's dialect: an arc's centre word of another plane (K0 on a G17 arc) ignored, ``$`` lines skipped (one
-  warning), a UTF-8 byte-order mark accepted; M3/M4/M5 and S recorded on every move (``spindle``,
+* grbl's dialect: an arc's centre word of another plane (K0 on a G17 arc) ignored, ``$`` lines and ``?`` lines
+  (grbl's status query) skipped (one warning each), a UTF-8 byte-order mark accepted; M3/M4/M5 and S recorded on every move (``spindle``,
   ``spindle_rpm``: for ports with a spindle; one warning that a step/dir port ignores them); Marlin's words
   (E, M17, M104, M140, G29, ...) refused naming Marlin;
+* as rs274: a bare program number line (``O1000``, ``O1000 (name)``) runs nothing; G80 on a line with another
+  motion code gives way to it (``G0 G90 G40 G21 G17 G94 G80`` leaves G0 the motion mode);
 * accepted without motion: G61, G61.1, G64 (P Q), G93/G94 feed modes (G93 gives each move its time),
   G40, G8, G96/G97, M48..M53, M61 Q; M7/M8/M9 (no coolant output: one warning);
 * pauses: M6 with T (tool change), M0, M1, M60; M2/M30 (and a second ``%``) end the program;

@@ -196,6 +196,8 @@ def read_line(body: str) -> Line:
                 raise r.fail("O word needs a number or a <name>")
             label = str(int(float(m.group(0))))
             r.i = m.end()
+            if r.i == len(body):  # a bare program number ('O1000'), as rs274 reads it: nothing to run
+                return line
         for kw in O_KEYWORDS:
             if body.startswith(kw, r.i):
                 r.i += len(kw)

@@ -49,6 +49,8 @@ __all__ = ["plan_gcode", "stream_gcode", "GcodeJobStream", "PIECE_MOVES", "STREA
 
 PIECE_MOVES = 1 << 12
 """Program moves planned into one piece of a :class:`GcodeJobStream` (at most: see :data:`PIECE_ROWS`)."""
+_MOTIONS = ("rapid", "feed", "arc", "spline")
+"""The kinds of :class:`~cam.formats.gcode.GcodeMove` that move the tool."""
 PIECE_ROWS = 1 << 17
 """A piece ends after the move that makes its rows this many or more."""
 STREAM_MOVES = 1 << 20
@@ -594,6 +596,8 @@ class GcodeJobStream:
         src: the program; settings: the machine settings; flip_y: G-code +Y is machine +Y.
         piece_moves: program moves planned into one piece.
         n_moves: the job's moves (rows), -1 until a pass ended; n_program_moves: the program's moves (the same).
+        n_motions: the program's moves that go somewhere (a G0, G1, arc, spline or cycle move that ends elsewhere
+            than it starts, or a full circle), -1 until a pass ended: 0 is a program that makes no moves.
         pause_notes, warnings: the job's (the warnings: a file's, once a pass ended).
         spill: keep the first whole pass's pieces in a temporary file for the later passes (:class:`_Spill`).
         safe_z_steps: 0 (a stop lifts to the home plane); pixels, tool: None (no drawing frame; the point tool).
@@ -607,6 +611,7 @@ class GcodeJobStream:
     piece_moves: int = PIECE_MOVES
     n_moves: int = -1
     n_program_moves: int = -1
+    n_motions: int = -1
     pause_notes: list[str] = field(default_factory=list)
     safe_z_steps: int = 0
     pixels: Optional[PixelFrame] = None
@@ -684,10 +689,15 @@ class GcodeJobStream:
         planner = _Planner(self.settings, self.flip_y, self.source, self.home_steps)
         notes: list[str] = []
         warnings: list[str] = []
-        n_rows = n_program = 0
+        n_rows = n_program = n_motions = 0
         given = False
+        last_end_mm: tuple[float, float, float] = (0.0, 0.0, 0.0)  # the moves are given from where the tool starts
         for batch in self.src.move_batches(self.piece_moves):
             warnings += batch.warnings
+            for mv in batch.moves:
+                if mv.kind in _MOTIONS:
+                    n_motions += mv.end != last_end_mm or mv.kind == "arc"
+                    last_end_mm = mv.end
             for _ in chain(planner.plan(batch.moves, PIECE_ROWS), [None]):
                 if planner.moves.n_rows:
                     piece = planner.piece(warnings)
@@ -699,6 +709,7 @@ class GcodeJobStream:
         if warnings or not given:
             yield planner.piece(warnings)
         self.n_moves, self.n_program_moves, self.pause_notes = n_rows, n_program, notes
+        self.n_motions = n_motions
 
 
 def stream_gcode(src: Union[GcodeProgram, GcodeFile], settings: MachineSettings = DEFAULT_SETTINGS, *,

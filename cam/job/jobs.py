@@ -739,7 +739,7 @@ def _prepare_gcode(path: Path, options: JobOptions, settings: MachineSettings,
         source=str(path), kind="gcode", plan=steps, settings=settings, toolpath=toolpath, warnings=stream.warnings,
         home_steps=start,  # type: ignore[arg-type]
         summary=f"{path.name}: {stream.n_program_moves} moves",
-        report={"moves": stream.n_program_moves, "start_steps": list(start),
+        report={"moves": stream.n_program_moves, "motions": stream.n_motions, "start_steps": list(start),
                 # the program's Z = 0 (the active work zero's), from where it starts: depths are below it
                 "surface_z_steps": 0 if machine_state is None else int(machine_state.work_zero_steps()[2]) - start[2],
                 # the work offsets as the program left them (G10 L2/L20), machine steps: cam drill --keep-offsets
@@ -949,6 +949,9 @@ def _refuse_nothing(job: PreparedJob, options: JobOptions, settings: MachineSett
     """Refuse a job that its scale or the machine's step size rounds to nothing (issue #33 point 8): the whole
     job moves 0 steps, or a drill, SVG or HPGL job of several holes or strokes puts them all on one X/Y step."""
     total = np.asarray(job.plan.steps_total, np.int64)
+    if job.kind == "gcode" and job.report.get("motions") == 0 and not total.any():
+        raise CamError(f"{job.source}: the program makes no moves (no G0, G1, G2, G3, G5 or canned cycle that goes "
+                       "anywhere): there is nothing to run")
     cuts = _CUTS.get(job.kind, "")
     n_cuts = int(job.report.get(cuts, 0)) if cuts else 0
     if total.any() and not (n_cuts > 1 and not total[:2].any()):

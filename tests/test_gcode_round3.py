@@ -1,0 +1,103 @@
+"""G-code that LinuxCNC's rs274 runs, from real files (issue #44 point 6, round three): a bare program number, a line
+of modal codes with G80 and a motion code, grbl's ``?`` query, cutter radius compensation G41/G42, a program
+that makes no moves, and ``cam info`` of a program whose origin is the stock's corner from a fresh state."""
+import math
+import os
+import shutil
+
+import numpy as np
+import pytest
+
+from cam.formats.gcode import parse_gcode
+from support.lcnc import canonical_polyline_mm, parse_canonical, run_rs274
+
+from test_cli import assert_one_line_error, cli
+
+needs_rs274 = pytest.mark.skipif(
+    shutil.which("rs274") is None and not os.environ.get("CI"), reason="rs274 (linuxcnc-uspace) not installed"
+)
+
+
+def _rs274_ends(tmp_path, text: str, name: str = "p.ngc") -> list:
+    """rs274's traverses and feeds of ``text``: (kind, end mm rounded to 1e-4), zero-length moves left out."""
+    path = tmp_path / name
+    path.write_text(text)
+    out, last = [], (0.0, 0.0, 0.0)
+    for mv in parse_canonical(run_rs274(str(path))):
+        end = tuple(round(v, 4) + 0.0 for v in mv.end)
+        if end != last or mv.kind == "arc":
+            out.append(("rapid" if mv.kind == "traverse" else mv.kind, end))
+        last = end
+    return out
+
+
+def _cam_ends(text: str) -> list:
+    out, last = [], (0.0, 0.0, 0.0)
+    for mv in parse_gcode(text, source="p.ngc").moves:
+        end = tuple(round(v, 4) + 0.0 for v in mv.end)
+        if end != last or mv.kind == "arc":
+            out.append((mv.kind, end))
+        last = end
+    return out
+
+
+@needs_rs274
+@pytest.mark.parametrize("head", ["O1000", "O1000 (engrave the plate)", "o0042", "%\nO1000"])
+def test_gcode_bare_program_number_runs_like_rs274(tmp_path, head):
+    text = f"{head}\nG21 G90\nG0 Z2\nG0 X5 Y3\nG1 Z-0.5 F100\nG1 X9\nG0 Z2\nM2\n" + ("%\n" if "%" in head else "")
+    assert _cam_ends(text) == _rs274_ends(tmp_path, text) == [
+        ("rapid", (0.0, 0.0, 2.0)), ("rapid", (5.0, 3.0, 2.0)), ("feed", (5.0, 3.0, -0.5)), ("feed", (9.0, 3.0, -0.5)),
+        ("rapid", (9.0, 3.0, 2.0))]
+    assert parse_gcode(text, source="p.ngc").warnings == []
+    # a program number with words after it is an O word without a keyword, refused as rs274 refuses it
+    with pytest.raises(Exception, match=r"p.ngc:2: unknown O word keyword"):
+        parse_gcode("G21\nO1000 G0 X1\nM2\n", source="p.ngc")
+
+
+@needs_rs274
+@pytest.mark.parametrize("line, then", [
+    ("G0 G90 G40 G21 G17 G94 G80", "X5 Y2"),  # a post's safety line: G0 wins over G80, as in rs274
+    ("G80 G1 G21 F100", "X5 Y2"),  # either order
+    ("G21 G1 G80 X3 F100", "X5 Y2"),
+    ("G21 G80 G81 R1 Z-1 X2 F100", "X5 Y2"),  # a canned cycle with G80 on its line: the cycle runs
+])
+def test_gcode_modal_codes_on_one_line_like_rs274(tmp_path, line, then):
+    text = f"G21\n{line}\n{then}\nM2\n"
+    ends = _cam_ends(text)
+    assert ends == _rs274_ends(tmp_path, text) and ends
+    prog = parse_gcode(f"G20 G91\n{line}\n#<m> = #<_motion_mode>\n#<u> = #<_metric>\n#<a> = #<_absolute>\n"
+                       "G0 X[#<m>] Y[#<u>] Z[#<a>]\nM2\n", source="p.ngc")
+    motion = {"G0": 0, "G1": 10, "G81": 810}[next(w for w in line.split() if w in ("G0", "G1", "G81"))]
+    assert prog.moves[-1].end == pytest.approx((motion, 1.0, 1.0) if "G90" in line else
+                                               (prog.moves[-1].end[0], 1.0, prog.moves[-1].end[2]))
+    # two motion codes other than G80 are refused as rs274 refuses them, in one line naming the line
+    path = tmp_path / "two.ngc"
+    path.write_text("G21\nG0 G1 X1 F100\nM2\n")
+    with pytest.raises(Exception, match="rs274 reports: Two g codes used from same modal group"):
+        run_rs274(str(path))
+    assert_one_line_error(cli("info", path, "--state", tmp_path / "s.json"), "two.ngc:2:", "two motion codes")
+
+
+def test_gcode_question_mark_line_is_skipped():
+    text = "?\nG21 G90\n?\nG0 X5 Y-5\n  ? \nG1 Z-0.2 F100\nG0 Z1\nM2\n"
+    program = parse_gcode(text, source="ugs.nc")
+    assert program.warnings == ["ugs.nc:1: grbl real-time status query '?' skipped (and any later '?' lines): it "
+                                "asks grbl where it is, it is not G-code"]
+    plain = parse_gcode("\n".join(ln for ln in text.splitlines() if ln.strip() != "?"), source="ugs.nc")
+    assert [(m.kind, m.end) for m in program.moves] == [(m.kind, m.end) for m in plain.moves]
+    with pytest.raises(Exception, match=r"ugs.nc:2: "):  # a '?' among words is still no G-code
+        parse_gcode("G21\nG0 X1 ?\n", source="ugs.nc")
+
+
+@pytest.mark.parametrize("text", ["G21 G90\nM2\n", "%\nO1000\nG21 G90 G17 (set up only)\nG4 P0.5\nM2\n%\n",
+                                  "(nothing but a comment)\n"])
+def test_gcode_without_moves_says_so(tmp_path, text):
+    path = tmp_path / "empty.ngc"
+    path.write_text(text)
+    for command in ("info", "drill"):
+        proc = cli(command, path, "--state", tmp_path / "s.json", *(["--no-progress"] if command == "drill" else []))
+        assert_one_line_error(proc, "empty.ngc", "the program makes no moves")
+        assert "steps" not in proc.stderr
+    # a move shorter than a step is still the steps' message
+    path.write_text("G21\nG0 X0.001\nM2\n")
+    assert_one_line_error(cli("info", path, "--state", tmp_path / "s.json"), "moves 0 steps", "larger than it")
