@@ -17,6 +17,7 @@ Beyond the seed, so that files from Inkscape, vpype and CAD programs work:
   turns its coordinate system (below);
 * ``CI`` circles, ``AA``/``AR`` arcs, ``AT``/``RT`` three-point arcs, ``CT``
   chord tolerance mode (below);
+* ``IW`` input window: pen-down strokes clipped to it (below);
 * anything else is an unknown command: skipped with a warning naming its
   byte offset and line (``LT``, ``VS``, ``CO "comment"``; ``LB`` label text
   runs to the label terminator, ETX ``\\x03`` or the character set by ``DT``;
@@ -47,6 +48,18 @@ toward +Y about plotter (0, 0): a point (x, y) that follows is plotted at
 and the pen stays where it is on the paper (its coordinates change).  The
 shift a plotter adds to keep a turned plot on its page is not made: the
 drawing is placed by its extent (or ``--offset``) when it is cut.
+
+Input window (HP-GL/2): ``IW xll,yll,xur,yur`` sets the soft-clip window, its
+corners either way round, in the current units (plotter units; user units
+while scaling is on); a plotter draws only inside it, so every pen-down
+segment (lines, and the chords of circles and arcs) is clipped to it, edges
+included: the part inside is drawn, a segment coming in starts a stroke where
+it crosses the edge, one going out ends there, and the pen moves up outside (a
+dot outside is not made).  A window given in user units keeps its user
+coordinates when ``IP``/``IR`` move P1 and P2, until an ``SC`` binds it to the
+plotter units where it stands; a window in plotter units stays put.  It is
+fixed on the paper as plotted: a later ``RO`` does not turn it.  ``IW;``, ``DF``
+and ``IN`` take it away (the hard-clip limits: none, the page is not known).
 
 Circles and arcs (HP-GL/2): ``CI r[,chord]`` draws a circle about the pen,
 whether the pen is up or down: it starts at 0 degrees (180 for a negative
@@ -81,7 +94,8 @@ of the file (``PA100,`` or a dangling mnemonic), a coordinate or a pen position 
 :data:`cam.limits.MAX_TOOL_NUMBER`, a scaling, circle or arc command with the wrong number of
 parameters, a degenerate ``SC`` (xmin = xmax, a factor 0, left/bottom outside 0..100), a circle or
 arc that reaches beyond :data:`MAX_COORD_PU` or would take more than :data:`MAX_ARC_CHORDS` chords, an
-``RO`` angle other than 0, 90, 180, 270, an ``IR`` percentage outside 0..100, the ``AT``/``RT`` above.
+``RO`` angle other than 0, 90, 180, 270, an ``IR`` percentage outside 0..100, the ``AT``/``RT`` above, an
+``IW`` with other than 0 or 4 parameters.
 
 Streaming: the file is read in chunks (:data:`CHUNK_BYTES`) by a compiled
 tokenizer and a compiled interpreter, so :func:`scan_hpgl` keeps memory flat
@@ -148,8 +162,8 @@ def _name(code: int) -> str:
 C_IN, C_DF, C_SP, C_PU, C_PD, C_PA, C_PR = (_code(m) for m in ("IN", "DF", "SP", "PU", "PD", "PA", "PR"))
 C_LB, C_DT, C_PE = _code("LB"), _code("DT"), _code("PE")
 C_SC, C_IP, C_CI, C_AA, C_AR, C_CT = (_code(m) for m in ("SC", "IP", "CI", "AA", "AR", "CT"))
-C_AT, C_RT, C_RO, C_IR = (_code(m) for m in ("AT", "RT", "RO", "IR"))
-KNOWN = ("IN", "DF", "SP", "PU", "PD", "PA", "PR", "SC", "IP", "CI", "AA", "AR", "CT", "AT", "RT", "RO", "IR")
+C_AT, C_RT, C_RO, C_IR, C_IW = (_code(m) for m in ("AT", "RT", "RO", "IR", "IW"))
+KNOWN = ("IN", "DF", "SP", "PU", "PD", "PA", "PR", "SC", "IP", "CI", "AA", "AR", "CT", "AT", "RT", "RO", "IR", "IW")
 ARC_MNEMONICS = ("CI", "AA", "AR", "AT", "RT")
 """The commands that draw circles and arcs (each of their points carries the command's line and column)."""
 ARC_CODES = np.array([_code(m) for m in ARC_MNEMONICS], np.int64)
@@ -164,10 +178,14 @@ M_IDLE, M_MN1, M_PARAMS, M_SKIP, M_QUOTE, M_LABEL, M_DT, M_PE = range(8)
 # position (plotter units), the pen, where the last coordinate stood, a pen down to restore after a circle
 # (the stroke starts at the next move), P1 and P2, scaling on, its type and six parameters, the user-to-plotter
 # transform (plotter = a * user + b per axis), the chord tolerance mode, the coordinate system's rotation
-# (``RO``, in quarter turns: the pen's position and P1, P2 are in the rotated system, points as plotted)
+# (``RO``, in quarter turns: the pen's position and P1, P2 are in the rotated system, points as plotted), the
+# input window (``IW``: on, its corners as plotted, whether it is bound to user units and its corners in them),
+# and the clip's state: the last point of the stroke as plotted (before clipping) and whether the clipped stroke
+# is open there (the pen is down inside the window)
 (I_DOWN, I_REL, I_X, I_Y, I_PEN, I_LINE, I_COL, I_PENDING, I_P1X, I_P1Y, I_P2X, I_P2Y, I_SC, I_SCTYPE,
- I_SC0, I_SC1, I_SC2, I_SC3, I_SC4, I_SC5, I_AX, I_BX, I_AY, I_BY, I_CT, I_RO) = range(26)
-N_IST = 26
+ I_SC0, I_SC1, I_SC2, I_SC3, I_SC4, I_SC5, I_AX, I_BX, I_AY, I_BY, I_CT, I_RO,
+ I_IW, I_IWX0, I_IWY0, I_IWX1, I_IWY1, I_IWU, I_IWU0, I_IWU1, I_IWU2, I_IWU3, I_LX, I_LY, I_LIN) = range(39)
+N_IST = 39
 DEFAULT_P1_PU = (603.0, 521.0)
 DEFAULT_P2_PU = (10603.0, 7721.0)
 """P1 and P2 after ``IN`` or ``IP;``: an HP 7475A's on A4 paper (10000 x 7200 plotter units, 250 x 180 mm apart)."""
@@ -227,7 +245,7 @@ def _known(code):
     return (_coord_cmd(code) or code == 0x494E or code == 0x4446 or code == 0x5350  # IN DF SP
             or code == 0x5343 or code == 0x4950 or code == 0x4349 or code == 0x4141  # SC IP CI AA
             or code == 0x4152 or code == 0x4354 or code == 0x4154 or code == 0x5254  # AR CT AT RT
-            or code == 0x524F or code == 0x4952)  # RO IR
+            or code == 0x524F or code == 0x4952 or code == 0x4957)  # RO IR IW
 
 
 @njit(cache=True)
@@ -618,6 +636,124 @@ def _point(o_x, o_y, o_line, o_col, o_start, o_pen, k, x, y, line, col, start, p
 
 
 @njit(cache=True)
+def _clip(ax, ay, bx, by, x0, y0, x1, y1):
+    """The part of the segment from ``(ax, ay)`` to ``(bx, by)`` inside the box ``x0..x1`` by ``y0..y1`` (edges
+    included): its parameters ``(t0, t1)`` along the segment, ``t0 > t1`` when it misses the box (Liang and
+    Barsky's clip)."""
+    t0, t1 = 0.0, 1.0
+    dx, dy = bx - ax, by - ay
+    for side in range(4):
+        if side == 0:
+            p, q = -dx, ax - x0
+        elif side == 1:
+            p, q = dx, x1 - ax
+        elif side == 2:
+            p, q = -dy, ay - y0
+        else:
+            p, q = dy, y1 - ay
+        if p == 0.0:
+            if q < 0.0:
+                return 1.0, 0.0
+        else:
+            r = q / p
+            if p < 0.0:
+                if r > t1:
+                    return 1.0, 0.0
+                t0 = max(t0, r)
+            else:
+                if r < t0:
+                    return 1.0, 0.0
+                t1 = min(t1, r)
+    return t0, t1
+
+
+@njit(cache=True)
+def _along(ax, ay, bx, by, t, ist):
+    """The point at ``t`` along the segment from ``(ax, ay)`` to ``(bx, by)``, kept inside the window (a point
+    computed on its edge may not stray off it by rounding); its ends exactly."""
+    if t <= 0.0:
+        return ax, ay
+    if t >= 1.0:
+        return bx, by
+    x = min(max(ax + (bx - ax) * t, ist[I_IWX0]), ist[I_IWX1])
+    y = min(max(ay + (by - ay) * t, ist[I_IWY0]), ist[I_IWY1])
+    return x, y
+
+
+@njit(cache=True)
+def _plot(ist, o_x, o_y, o_line, o_col, o_start, o_pen, k, x, y, line, col, start, pen, write):
+    """The pen down at ``(x, y)`` (the coordinate system turned ``ist[I_RO]``, a stroke's first point when
+    ``start``): the points it plots, recorded from ``k`` (:func:`_point`) as plotted, or only counted; returns the
+    next ``k``.  With an input window (``IW``) the stroke is clipped to it as a plotter clips it: the part of each
+    segment inside the window is drawn, a segment coming in starts a stroke where it crosses the edge, one
+    going out ends there, and the pen moves up outside; the same points are counted as recorded."""
+    px, py = _turn(x, y, ist[I_RO])
+    ax, ay = ist[I_LX], ist[I_LY]
+    ist[I_LX], ist[I_LY] = px, py
+    if ist[I_IW] == 0:
+        if not start and ist[I_LIN] == 0:  # the window was taken away with the pen down outside it
+            k = _point(o_x, o_y, o_line, o_col, o_start, o_pen, k, ax, ay, line, col, True, pen, write)
+        ist[I_LIN] = 1.0
+        return _point(o_x, o_y, o_line, o_col, o_start, o_pen, k, px, py, line, col, start, pen, write)
+    x0, y0, x1, y1 = ist[I_IWX0], ist[I_IWY0], ist[I_IWX1], ist[I_IWY1]
+    if start:
+        inside = x0 <= px <= x1 and y0 <= py <= y1
+        ist[I_LIN] = 1.0 if inside else 0.0
+        if inside:
+            k = _point(o_x, o_y, o_line, o_col, o_start, o_pen, k, px, py, line, col, True, pen, write)
+        return k
+    t0, t1 = _clip(ax, ay, px, py, x0, y0, x1, y1)
+    if t0 >= t1 and not (ax == px and ay == py and t0 <= t1):  # misses the window, or only touches it
+        ist[I_LIN] = 0.0
+        return k
+    if t0 > 0.0 or ist[I_LIN] == 0:
+        sx, sy = _along(ax, ay, px, py, t0, ist)
+        k = _point(o_x, o_y, o_line, o_col, o_start, o_pen, k, sx, sy, line, col, True, pen, write)
+    ex, ey = _along(ax, ay, px, py, t1, ist)
+    k = _point(o_x, o_y, o_line, o_col, o_start, o_pen, k, ex, ey, line, col, False, pen, write)
+    ist[I_LIN] = 1.0 if t1 >= 1.0 else 0.0
+    return k
+
+
+@njit(cache=True)
+def _window(ist):
+    """The input window's corners as plotted (``ist[I_IWX0..I_IWY1]``, lower left and upper right) from its
+    corners as ``IW`` gave them (``ist[I_IWU0..I_IWU3]``, in the units in force then: user units, through the
+    scaling, while it is on), and whether the stroke is open at the pen (the pen down inside the window)."""
+    ax, bx, ay, by = ist[I_AX], ist[I_BX], ist[I_AY], ist[I_BY]
+    xa, ya = _turn(ax * ist[I_IWU0] + bx, ay * ist[I_IWU1] + by, ist[I_RO])
+    xb, yb = _turn(ax * ist[I_IWU2] + bx, ay * ist[I_IWU3] + by, ist[I_RO])
+    ist[I_IWX0], ist[I_IWX1] = min(xa, xb), max(xa, xb)
+    ist[I_IWY0], ist[I_IWY1] = min(ya, yb), max(ya, yb)
+    ist[I_IW] = 1.0
+    lx, ly = ist[I_LX], ist[I_LY]
+    inside = ist[I_IWX0] <= lx <= ist[I_IWX1] and ist[I_IWY0] <= ly <= ist[I_IWY1]
+    ist[I_LIN] = 1.0 if ist[I_LIN] != 0 and inside else 0.0
+
+
+@njit(cache=True)
+def _iw(m, p0, p_val, p_line, p_col, line, col, ist, err):
+    """``IW xll,yll,xur,yur``: the input window, in the current units (user units while scaling is on; the window
+    then keeps its user coordinates when P1 and P2 move, until an ``SC`` binds it to plotter units); ``IW;``: no
+    window (the hard-clip limits: none here).  Returns False after recording an error in ``err``."""
+    if not (m == 0 or m == 4):
+        _fail(err, E_ARGS, line, col, m, C_IW)
+        return False
+    if m == 0:
+        ist[I_IW] = 0.0
+        ist[I_IWU] = 0.0
+        return True
+    for q in range(p0, p0 + 4):
+        if not abs(p_val[q]) <= MAX_COORD_PU:
+            _fail(err, E_RANGE, p_line[q], p_col[q], q, 0)
+            return False
+    ist[I_IWU0], ist[I_IWU1], ist[I_IWU2], ist[I_IWU3] = p_val[p0], p_val[p0 + 1], p_val[p0 + 2], p_val[p0 + 3]
+    ist[I_IWU] = ist[I_SC]
+    _window(ist)
+    return True
+
+
+@njit(cache=True)
 def _turn(x, y, quarters):
     """``(x, y)`` turned ``quarters`` quarter turns counter-clockwise (+X toward +Y) about (0, 0); exact."""
     q = int(quarters) % 4
@@ -665,6 +801,7 @@ def _reset(ist, initialise):
     """``DF`` (scaling off, chord angles) and, with ``initialise``, ``IN`` (also P1 and P2 to their defaults)."""
     ist[I_SC] = 0.0
     ist[I_CT] = 0.0
+    ist[I_IW] = ist[I_IWU] = 0.0  # no input window
     if initialise:
         ist[I_P1X], ist[I_P1Y] = DEFAULT_P1_PU[0], DEFAULT_P1_PU[1]
         ist[I_P2X], ist[I_P2Y] = DEFAULT_P2_PU[0], DEFAULT_P2_PU[1]
@@ -745,6 +882,8 @@ def _p1p2(m, at, ist):
         if ist[I_P2Y] == ist[I_P1Y]:
             ist[I_P2Y] += 1.0
     _rescale(ist)
+    if ist[I_IW] != 0 and ist[I_IWU] != 0:  # a window in user units keeps them: it moves with P1 and P2
+        _window(ist)
 
 
 @njit(cache=True)
@@ -840,18 +979,17 @@ def _arc3(code, m, p0, p_val, p_line, p_col, line, col, ist, cx, cy, pen_down, p
             _fail(err, E_ARC_RANGE, line, col, 0, code)
             return k, cx, cy, pending, False
     if pen_down:
-        ro = ist[I_RO]
         if pending:
-            k = _point(o_x, o_y, o_line, o_col, o_start, o_pen, k, cx, cy, line, col, True, pen, write, ro)
+            k = _plot(ist, o_x, o_y, o_line, o_col, o_start, o_pen, k, cx, cy, line, col, True, pen, write)
             pending = False
         sweep_rad = math.radians(sweep)
         for j in range(1, n):
             t = theta0 + sweep_rad * j / n
-            k = _point(o_x, o_y, o_line, o_col, o_start, o_pen, k, ccx + ax * radius * math.cos(t),
-                       ccy + ay * radius * math.sin(t), line, col, False, pen, write, ro)
+            k = _plot(ist, o_x, o_y, o_line, o_col, o_start, o_pen, k, ccx + ax * radius * math.cos(t),
+                      ccy + ay * radius * math.sin(t), line, col, False, pen, write)
         # an arc's points carry the command's place, a line's end its own (so G-code out fits no arc to it)
         el, ec = (line, col) if kind == 1 else (p_line[p0 + 2], p_col[p0 + 2])
-        k = _point(o_x, o_y, o_line, o_col, o_start, o_pen, k, ex, ey, el, ec, False, pen, write, ro)
+        k = _plot(ist, o_x, o_y, o_line, o_col, o_start, o_pen, k, ex, ey, el, ec, False, pen, write)
     return k, ex, ey, pending, True
 
 
@@ -863,6 +1001,7 @@ def _sc(m, p0, p_val, line, col, ist, err):
                                                                            or kind == 2):
         _fail(err, E_ARGS, line, col, m, C_SC)
         return False
+    ist[I_IWU] = 0.0  # an SC binds the window to the plotter units it stands at
     if m == 0:
         ist[I_SC] = 0.0
     else:
@@ -929,18 +1068,19 @@ def _arc(code, m, p0, p_val, p_line, p_col, line, col, ist, cx, cy, pen_down, pe
         t = theta0 + math.radians(sweep)
         ex, ey = ccx + ax * radius * math.cos(t), ccy + ay * radius * math.sin(t)
     draw = (circle or pen_down) and n > 0
-    ro = ist[I_RO]
-    if draw and write:
+    if draw and (write or ist[I_IW] != 0):  # clipped to a window: its points are counted as they are made
         if circle or pending:
-            k = _point(o_x, o_y, o_line, o_col, o_start, o_pen, k, sx, sy, line, col, True, pen, True, ro)
+            k = _plot(ist, o_x, o_y, o_line, o_col, o_start, o_pen, k, sx, sy, line, col, True, pen, write)
         sweep_rad = math.radians(sweep)
         for j in range(1, n):
             t = theta0 + sweep_rad * j / n
-            k = _point(o_x, o_y, o_line, o_col, o_start, o_pen, k, ccx + ax * radius * math.cos(t),
-                       ccy + ay * radius * math.sin(t), line, col, False, pen, True, ro)
-        k = _point(o_x, o_y, o_line, o_col, o_start, o_pen, k, ex, ey, line, col, False, pen, True, ro)
-    elif draw:
+            k = _plot(ist, o_x, o_y, o_line, o_col, o_start, o_pen, k, ccx + ax * radius * math.cos(t),
+                      ccy + ay * radius * math.sin(t), line, col, False, pen, write)
+        k = _plot(ist, o_x, o_y, o_line, o_col, o_start, o_pen, k, ex, ey, line, col, False, pen, write)
+    elif draw:  # counted only (no window: one point a chord); the pen is where the last would be
         k += n + (1 if circle or pending else 0)
+        ist[I_LX], ist[I_LY] = _turn(ex, ey, ist[I_RO])
+        ist[I_LIN] = 1.0
     if circle:
         pending = pen_down  # the pen goes back to the centre up; down again there, it draws from the next move
     elif n > 0:
@@ -958,7 +1098,7 @@ def _pairs(p0, m, p_val, p_line, p_col, ist, cx, cy, cl, cc, pen_down, pending, 
     ax, bx, ay, by = ist[I_AX], ist[I_BX], ist[I_AY], ist[I_BY]
     for q in range(p0, p0 + m, 2):
         if pen_down and pending:
-            k = _point(o_x, o_y, o_line, o_col, o_start, o_pen, k, cx, cy, cl, cc, True, pen, write, ist[I_RO])
+            k = _plot(ist, o_x, o_y, o_line, o_col, o_start, o_pen, k, cx, cy, cl, cc, True, pen, write)
             pending = False
         if rel:
             cx += ax * p_val[q]
@@ -973,7 +1113,7 @@ def _pairs(p0, m, p_val, p_line, p_col, ist, cx, cy, cl, cc, pen_down, pending, 
             _fail(err, E_RANGE, p_line[bad], p_col[bad], bad, 1 if rel else 0)
             return k, cx, cy, cl, cc, pending, False
         if pen_down:
-            k = _point(o_x, o_y, o_line, o_col, o_start, o_pen, k, cx, cy, cl, cc, False, pen, write, ist[I_RO])
+            k = _plot(ist, o_x, o_y, o_line, o_col, o_start, o_pen, k, cx, cy, cl, cc, False, pen, write)
     return k, cx, cy, cl, cc, pending, True
 
 
@@ -1020,6 +1160,9 @@ def _interpret(c0, c1, c_code, c_line, c_col, c_p0, c_np, p_val, p_line, p_col, 
         elif code == C_SC:
             if not _sc(m, p0, p_val, line, col, ist, err):
                 return k
+        elif code == C_IW:
+            if not _iw(m, p0, p_val, p_line, p_col, line, col, ist, err):
+                return k
         elif code == C_CT or code == C_RO or code == C_IR:
             cx, cy, ok = _setting(code, m, p0, p_val, p_line, p_col, line, col, ist, cx, cy, err)
             if not ok:
@@ -1039,8 +1182,8 @@ def _interpret(c0, c1, c_code, c_line, c_col, c_p0, c_np, p_val, p_line, p_col, 
                 pending = False
             elif code == C_PD:
                 if not pen_down:
-                    k = _point(o_x, o_y, o_line, o_col, o_start, o_pen, k, cx, cy, cl if cl > 0 else line,
-                               cc if cl > 0 else col, True, pen, write, ist[I_RO])
+                    k = _plot(ist, o_x, o_y, o_line, o_col, o_start, o_pen, k, cx, cy, cl if cl > 0 else line,
+                              cc if cl > 0 else col, True, pen, write)
                     pen_down = True
                     pending = False
             elif code == C_PA:
@@ -1301,7 +1444,8 @@ def _raise(err: np.ndarray, b: _Block, name: str, scaled: bool) -> None:
                  "(with a chord angle)", "CT": "none, 0 (chord angles) or 1 (chord tolerance)",
                  "AT": "4 (xi,yi intermediate, xe,ye end) or 5 (with a chord angle)",
                  "RT": "4 (dxi,dyi intermediate, dxe,dye end) or 5 (with a chord angle)",
-                 "RO": "none or 1 (an angle)", "IR": "none, 2 (P1) or 4 (P1 and P2)"}
+                 "RO": "none or 1 (an angle)", "IR": "none, 2 (P1) or 4 (P1 and P2)",
+                 "IW": "none (no window) or 4 (xll,yll,xur,yur: the window's corners)"}
         raise ParseError(f"{where}: '{mnemonic}' takes {forms[mnemonic]} parameters, got {aux}")
     if code == E_VALUE:
         value = float(b.val[aux])
@@ -1337,7 +1481,8 @@ def _points(src: Source, *, source: Optional[str], progress: Optional[Progress],
         if name is None:
             name = source or (str(src) if isinstance(src, (str, os.PathLike)) else str(getattr(src, "name", "<hpgl>")))
         n_cmd = b.n_cmd
-        if np.isin(b.code[:n_cmd], ARC_CODES).any():
+        if np.isin(b.code[:n_cmd], ARC_CODES).any() or ist[I_IW] or (b.code[:n_cmd] == C_IW).any():
+            # circles and arcs, or clipping to a window (a segment may give two points): counted first
             per_cmd = np.zeros(max(n_cmd, 1), np.int64)
             probe = ist.copy()
             _interpret(0, n_cmd, b.code, b.line, b.col, b.p0, b.np_, b.val, b.vline, b.vcol, probe,
