@@ -313,6 +313,93 @@ def fmat1_inch(board: Board) -> Generated:
     return g
 
 
+MIL_MM = 0.0254
+
+
+def apart(board: Board, clearance_mm: float = 0.15) -> Board:
+    """``board`` without the holes (vias, in practice) that a real board could not have: each kept hole at least
+    ``clearance_mm`` of copper from every hole kept before it (the board's own order: mounting holes first)."""
+    keep: list[int] = []
+    dia = np.asarray(board.diameters_mm)[board.tool]
+    for i, (xy, d) in enumerate(zip(board.holes_mm, dia)):
+        if keep:
+            gap = np.hypot(*(board.holes_mm[keep] - xy).T) - 0.5 * (dia[keep] + d)
+            if gap.min() < clearance_mm:
+                continue
+        keep.append(i)
+    k = np.array(keep, np.int64)
+    return Board(board.holes_mm[k], board.tool[k], list(board.diameters_mm), board.size_mm,
+                 None if board.kind is None else board.kind[k])
+
+
+def allegro_fixed_width(board: Board, *, digits: tuple[int, int] = (3, 5), name: str = "MinnowMax_RevA1_NCDRILL",
+                        design: str = "MinnowMax_RevA1") -> Generated:
+    """Cadence Allegro's NC drill tape as it writes it with ``nc_param.txt`` at ``FORMAT 3.5``, ``OUTPUT-UNITS
+    ENGLISH`` and no zero suppression (issue #44 point 1): the paper-tape header comments (``;LEADER: 12``,
+    ``;HEADER:``, ``;CODE  : ASCII``, ``;FILE  :``, ``;DESIGN:``), the tool sizes only in ``;T01 Holesize 1. =
+    8.000000 Tolerance = ... PLATED MILS Quantity = 34`` comments (whole mils), ``%`` with no ``M48``, ``G90``,
+    ``T01`` selections, every coordinate 8 digits wide (``X00130500Y00184500``), an axis equal to the last left
+    out (``SUPPRESS-EQUAL YES``), ``M30``, CRLF line ends.  The format is in ``nc_param.txt`` only
+    (:func:`allegro_nc_param`, :func:`allegro_ncdrill_log`): ``states_format`` is False."""
+    mils = [int(round(d / MIL_MM)) for d in board.diameters_mm]
+    sized = Board(board.holes_mm, board.tool, [m * MIL_MM for m in mils], board.size_mm, board.kind)
+    counts = [int(np.count_nonzero(board.tool == k)) for k in range(len(mils))]
+    header = [";LEADER: 12", ";HEADER:", ";CODE  : ASCII", f";FILE  : {name.lower()}.drl for ... layers TOP and BOTTOM",
+              f";DESIGN: {design}.brd", ";DESCRIPTION: "]
+    for k, (m, n) in enumerate(zip(mils, counts)):
+        plating = "NON_PLATED" if m >= 100 else "PLATED"
+        tol = "+3.000000/-3.000000" if m >= 100 else "+2.000000/-2.000000"
+        header.append(f";T{k + 1:02d} Holesize {k + 1}. = {m:.6f} Tolerance = {tol} {plating} MILS Quantity = {n}")
+    g = _write("allegro_fixed_width", sized, units="inch", digits=digits, mode="full", header=header,
+               tool_def=lambda n, d: "", tool_frac=3, body_start=["G90"], end=["M30"], modal=True,
+               select_fmt="T{n:02d}", def_in_body=False, zeros="TZ", states_format=False)
+    lines = [ln for ln in g.text.splitlines() if ln != ""]  # no tool definitions: the sizes are comments
+    g.text = "\r\n".join(lines) + "\r\n"
+    g.tools = {k + 1: m * MIL_MM for k, m in enumerate(mils)}
+    g.gerbonara_settings = ("inch", digits, "trailing")
+    g.notes.append(name + ".drl")
+    return g
+
+
+def allegro_nc_param(digits: tuple[int, int] = (3, 5)) -> str:
+    """The ``nc_param.txt`` Allegro writes beside :func:`allegro_fixed_width` (its NC Parameters form)."""
+    rows = [("FORMAT", f"{digits[0]}.{digits[1]}"), ("OFFSETX", "0"), ("OFFSETY", "0"), ("FEEDRATE", "0"),
+            ("COORDINATES", "ABSOLUTE"), ("OUTPUT-UNITS", "ENGLISH"), ("TOOL-ORDER", "INCREASING"),
+            ("TOOL-SELECT", "YES"), ("REPEAT-CODES", "NO"), ("SUPPRESS-LEAD-ZEROES", "NO"),
+            ("SUPPRESS-TRAIL-ZEROES", "NO"), ("SUPPRESS-EQUAL", "YES"), ("OPTIMIZE-DRILLING", "NO")]
+    return "".join(f"{k:<26}{v}\r\n" for k, v in rows)
+
+
+def allegro_ncdrill_log(g: Generated, digits: tuple[int, int] = (3, 5)) -> str:
+    """The ``ncdrill.log`` Allegro writes with :func:`allegro_fixed_width`: a banner, the parameters used (the
+    ``nc_param.txt`` lines, indented) and the tool table (``T01  1.  8.000000  +2.0/-2.0  PLATED  34``)."""
+    lines = ["", "  Allegro PCB Editor NC drill log", "  --------------------------------",
+             "  Design: MinnowMax_RevA1.brd", "  Date:   Tue Mar 11 10:15:02 2014", "", "  Parameters used:"]
+    lines += ["    " + ln for ln in allegro_nc_param(digits).splitlines()]
+    lines += ["", f"  Drill tape: {g.notes[0] if g.notes else 'ncdrill1.drl'}  for layers TOP and BOTTOM", "",
+              "  Tool  Index  Holesize   Tolerance            Plating      Quantity"]
+    for t, d in sorted(g.tools.items()):
+        m = d / MIL_MM
+        n = int(np.count_nonzero(g.tool_of_hole == t))
+        plating = "NON_PLATED" if m >= 100 else "PLATED"
+        lines.append(f"  T{t:02d}   {t}.   {m:.6f}   +2.000000/-2.000000  {plating:<12} {n}")
+    lines += ["", "  NC drill complete."]
+    return "\r\n".join(lines) + "\r\n"
+
+
+def zuken_fdr(board: Board, *, digits: tuple[int, int] = (4, 4)) -> Generated:
+    """Zuken CR-8000's ``.fdr`` drill data (issue #44 point 6): ``M48``, ``INCH,LZ``, ``ICI,OFF``, ``VER,1``,
+    ``FMAT,2``, ``DETECT,ON``, ``ATC,ON``, tools ``T1C0.1260``, ``%``, ``M06`` before each ``T01``, every coordinate
+    8 digits wide (4:4 inch, leading zeros kept: ``X00060236Y-00038189``), the board below the X axis, ending
+    ``M06`` / ``T00`` / ``M00``.  The digits are in Zuken's ``.fdl`` log only: ``states_format`` is False."""
+    header = ["M48", "INCH,LZ", "ICI,OFF", "VER,1", "FMAT,2", "DETECT,ON", "ATC,ON"]
+    g = _write("zuken_fdr", board, units="inch", digits=digits, mode="full", header=header,
+               tool_def=lambda n, d: f"T{n}C{d}", tool_frac=4, body_start=[], end=["M06", "T00", "M00"],
+               select_fmt="M06\nT{n:02d}", y_sign=-1.0, origin_mm=(2.0, -1.0), zeros="LZ", states_format=False)
+    g.gerbonara_settings = ("inch", digits, "trailing")
+    return g
+
+
 STYLES = {f.__name__: f for f in (
     kicad_metric_decimal, kicad_inch_suppress_leading, kicad_metric_suppress_trailing, altium_inch_2_5,
     eagle_inch_2_4, eagle9_metric, orcad_table_8_1, fritzing_inch, metric_tz_implied, incremental_g91, fmat1_inch,

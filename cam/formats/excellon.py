@@ -58,6 +58,13 @@ arguments ``excellon_units``, ``excellon_digits`` and ``excellon_zeros``, the jo
 When a coordinate is read with a reading not stated in the file nor given by an
 argument, the hole list carries one warning that names it and the runner-up.
 
+**Fixed-width fields** (issue #44): coordinates all of one width with leading zeros kept and no format stated
+(Allegro's ``X00130500Y00184500``, 3:5 inch; Zuken's ``.fdr``, 4:4) are tried in every integer:fraction split of
+that width, and the hole sizes weigh them (:func:`_size_evidence`): holes do not cut into each other and a board is
+much larger than its holes, so a 3.175 mm mounting hole rules out the 9 x 7 mm board of a 2:6 reading.  A
+``--excellon-digits`` the file's comment hole sizes cannot fit is read as given, with a warning naming the
+plausible format.  Allegro's ``ncdrill.log`` is read when there is no ``nc_param.txt``.
+
 Frame: the board frame of the file, X right, Y up, in mm (inch values times 25.4).
 
 Numbers are checked before use (:mod:`cam.limits`): coordinates and the positions they lead to
@@ -879,11 +886,12 @@ def _read(text: str, source: str, units, digits, zeros, guess: _Guess | None = N
     return r
 
 
-def _plausibility(r: _Reader, numbers: list[str], guess: _Guess) -> tuple[float, str]:
+def _plausibility(r: _Reader, numbers: list[str], guess: _Guess | None) -> tuple[float, str]:
     """How implausible a reading is (lower is better) and why, in a few words: its holes should lie on
-    the pitches boards are made of, its tools be drills of 0.1-6.5 mm, its board fit in half a metre, and
-    its numbers' zeros be the kind it suppresses (a leading-zero number shorter than the format is not
-    trailing-zero, and the other way round)."""
+    the pitches boards are made of, its tools be drills of 0.1-6.5 mm, its board fit in half a metre and be much
+    larger than its holes, its holes not cut into each other (:func:`_size_evidence`), and its numbers' zeros be
+    the kind it suppresses (a leading-zero number shorter than the format is not trailing-zero, and the other way
+    round).  ``guess``: the reading tried (None: the options given, whose zeros are not weighed)."""
     penalty = 0.0
     holes = np.array(r.holes, np.float64).reshape(-1, 2)
     pts = np.concatenate([holes] + [np.array(p, np.float64) for p, _, _ in r.slots])
@@ -898,6 +906,7 @@ def _plausibility(r: _Reader, numbers: list[str], guess: _Guess) -> tuple[float,
     if len(pts) >= 4 and span.max() < 2.0:
         penalty += 5.0
     on_pitch = 0.0
+    nearest = np.zeros(0)
     if len(holes) >= 3:
         sample = holes[:: max(1, len(holes) // 600)]
         d = np.hypot(*(sample[:, None, :] - sample[None, :, :]).transpose(2, 0, 1))
@@ -908,22 +917,89 @@ def _plausibility(r: _Reader, numbers: list[str], guess: _Guess) -> tuple[float,
             err = np.abs(nearest[:, None] - _PITCHES_MM[None, :]).min(axis=1)
             on_pitch = float(np.mean(err <= np.maximum(0.012, 0.004 * nearest)))
             penalty += 2.0 * (1.0 - on_pitch)
-    width = sum(guess.digits)
-    short = [n for n in numbers if len(n) < width]
-    if short:
-        wrong = sum(1 for n in short if (n.startswith("0") if guess.zeros == "TZ" else n.endswith("0")))
-        penalty += 3.0 * wrong / len(short)
+    size_penalty, size_why = _size_evidence(r)
+    penalty += size_penalty
+    if guess is not None:
+        width = sum(guess.digits)
+        short = [n for n in numbers if len(n) < width]
+        if short:
+            wrong = sum(1 for n in short if (n.startswith("0") if guess.zeros == "TZ" else n.endswith("0")))
+            penalty += 3.0 * wrong / len(short)
     why = f"{span[0]:.1f} x {span[1]:.1f} mm"
     if odd_tools:
         why += ", tools " + ", ".join(f"T{t} {r.tools[t]:.3f} mm" for t in sorted(odd_tools)[:3])
     if len(holes) >= 3:
         why += f", {on_pitch:.0%} of holes at a usual pitch from their neighbour"
+    why += "".join(", " + w for w in size_why)
     return penalty, why
 
 
-def _guesses(unstated: set[str], units, digits, zeros, stated_units: str) -> list[_Guess]:
+BOARD_PER_HOLE = 5.0
+"""A board's hole centres span at least this many times its largest hole (a board is larger than its holes by a
+lot): a reading that makes a board smaller is implausible."""
+SMALLEST_BOARD_MM = 5.0
+"""The smallest board a drill file plausibly holds (its holes' centres span at least this)."""
+
+
+def _size_evidence(r: _Reader) -> tuple[float, list[str]]:
+    """What the hole sizes say of a reading's positions (penalty, reasons): holes are drilled apart, so a hole
+    whose nearest neighbour is closer than their mean diameter (the two cut into each other) is implausible, and so
+    is a board under :data:`SMALLEST_BOARD_MM` or under :data:`BOARD_PER_HOLE` times its largest hole.  Telling
+    when the sizes do not scale with the reading (Allegro's ``;T01 Holesize`` comments, ``nc_param.txt``)."""
+    holes = np.array(r.holes, np.float64).reshape(-1, 2)
+    dia_mm = np.array([r.tools.get(t, np.nan) for t in r.hole_tool], np.float64)
+    lo, hi = PLAUSIBLE_DRILL_MM  # an odd tool is weighed as such (:func:`_plausibility`), not its holes' sizes
+    known = np.isfinite(dia_mm) & (dia_mm >= lo) & (dia_mm <= hi)
+    holes, dia_mm = holes[known], dia_mm[known]
+    if len(holes) < 2:
+        return 0.0, []
+    penalty, why = 0.0, []
+    step = max(1, len(holes) // 600)
+    sample, sample_dia = holes[::step], dia_mm[::step]
+    d_mm = np.hypot(*(sample[:, None, :] - sample[None, :, :]).transpose(2, 0, 1))
+    d_mm[d_mm < 1e-6] = np.inf  # a hole drilled twice is not two holes
+    j = np.argmin(d_mm, axis=1)
+    near_mm = d_mm[np.arange(len(sample)), j]
+    finite = np.isfinite(near_mm)
+    if finite.any():
+        cut = near_mm[finite] < 0.5 * (sample_dia[finite] + sample_dia[j[finite]])
+        overlap = float(np.mean(cut))
+        if overlap > 0:
+            penalty += 6.0 * overlap
+            why.append(f"{overlap:.0%} of holes cut into their neighbour")
+    span_mm = float((holes.max(axis=0) - holes.min(axis=0)).max())
+    biggest_mm = float(dia_mm.max())
+    if span_mm < SMALLEST_BOARD_MM:
+        penalty += 3.0
+        why.append(f"a board under {SMALLEST_BOARD_MM:g} mm")
+    elif span_mm < BOARD_PER_HOLE * biggest_mm:
+        penalty += 3.0
+        why.append(f"a board under {BOARD_PER_HOLE:g} times its {biggest_mm:.3f} mm hole")
+    return penalty, why
+
+
+def _fixed_width(numbers: list[str]) -> int | None:
+    """The width of a fixed-width number field with no zero suppression (every coordinate the same number of
+    digits, some with a leading zero: ``X00130500``), else None."""
+    widths = {len(n) for n in numbers}
+    if len(numbers) >= 2 and len(widths) == 1 and any(n.startswith("0") for n in numbers):
+        width = widths.pop()
+        return width if width >= 2 else None
+    return None
+
+
+def _fixed_digits(width: int) -> list[tuple[int, int]]:
+    """The digit formats of a ``width``-digit field: every integer:fraction split the options allow."""
+    o = OPTIONS["excellon_digits"]
+    return [(i, width - i) for i in range(1, width) if o.in_range(float(i)) and o.in_range(float(width - i))]
+
+
+def _guesses(unstated: set[str], units, digits, zeros, stated_units: str, fixed_width: int | None = None
+             ) -> list[_Guess]:
     """The readings to try, the built-in defaults first (a given option is never varied); ``stated_units``: the
-    units in effect where the first number was read by default."""
+    units in effect where the first number was read by default; ``fixed_width``: the width of a fixed-width field
+    (:func:`_fixed_width`), whose every integer:fraction split is tried too (with one zeros: full-width numbers
+    read alike)."""
     if units is not None or "units" not in unstated:
         all_units: tuple[str, ...] = (units or stated_units,)
     else:
@@ -937,6 +1013,9 @@ def _guesses(unstated: set[str], units, digits, zeros, stated_units: str) -> lis
         for d in digit_choices:
             for z in zero_choices:
                 out.append(_Guess(u, tuple(d), z))
+        if fixed_width is not None and digits is None and "digits" in unstated:
+            tried = {tuple(d) for d in digit_choices}
+            out += [_Guess(u, d, zero_choices[0]) for d in _fixed_digits(fixed_width) if d not in tried]
     return out
 
 
@@ -944,23 +1023,26 @@ def _choose(text: str, source: str, units, digits, zeros, params, first: _Reader
             ) -> tuple[_Guess, str] | None:
     """The most plausible reading of what the file does not state, and the warning naming it and the
     runner-up; None when no reading reads the first lines.  ``first``: the first lines read with the defaults
-    (None when they cannot be: a number too long for the default digits, say; then every reading is tried)."""
+    (None when they cannot be: a number too long for the default digits, say; then every reading is tried, and
+    what the file leaves unstated is what the readings that read it assumed)."""
     unstated = set(first.defaults_warned) if first is not None else {"units", "digits", "zeros"}
     numbers = _NUMBER_TEXT.findall("\n".join(text.splitlines()[:_GUESS_LINES]).upper())
     scored = []
     stated_units = (first.first_default_units if first is not None else None) or DEFAULT_UNITS
-    for k, guess in enumerate(_guesses(unstated, units, digits, zeros, stated_units)):
+    for k, guess in enumerate(_guesses(unstated, units, digits, zeros, stated_units, _fixed_width(numbers))):
         try:
             r = _read(text, source, units, digits, zeros, guess, _GUESS_LINES, params)
         except ParseError:
             continue
         penalty, why = _plausibility(r, numbers, guess)
         key = np.round(np.array(r.holes, np.float64), 6).tobytes() + repr(sorted(r.tools.items())).encode()
-        scored.append((penalty + (0.15 if k else 0.0) + 0.01 * k, k, guess, why, key))
+        scored.append((penalty + (0.15 if k else 0.0) + 0.01 * k, k, guess, why, key, r.defaults_warned))
     if not scored:
         return None
     scored.sort(key=lambda s: s[:2])
     best = scored[0]
+    if first is None:
+        unstated = set(best[5]) or unstated
     runner = next((s for s in scored[1:] if s[4] != best[4]), None)
     note = f"read as the most plausible: {best[2].describe(unstated)} ({best[3]})"
     if runner is not None:
@@ -977,33 +1059,57 @@ line is not split into words once per reading tried."""
 # ---------------------------------------------------------------------- nc_param.txt (Allegro)
 NC_PARAM_NAME = "nc_param.txt"
 """The parameter file Cadence Allegro writes beside its drill files: the format and (tool lines) the sizes."""
+NC_LOG_NAME = "ncdrill.log"
+"""The log Allegro writes with its drill files: the same parameters and a tool table; read when there is no
+:data:`NC_PARAM_NAME`."""
 
 
 def parse_nc_param(text: str, source: str = NC_PARAM_NAME) -> dict:
-    """What an Allegro ``nc_param.txt`` states: ``{"units", "digits", "zeros", "incremental", "tools"}`` (only
-    the keys it states; ``tools`` maps tool number -> mm from lines ``T01 12.0 MILS``).
+    """What an Allegro ``nc_param.txt`` (or the parameter lines of its ``ncdrill.log``) states: ``{"units",
+    "digits", "zeros", "incremental", "tools"}`` (only the keys it states; ``tools`` maps tool number -> mm from
+    lines ``T01 12.0 MILS`` or the log's ``T01  1.  12.0  +2.0/-2.0  PLATED  34``).
+
+    ``FORMAT 3.5`` (or ``INTEGER-PLACES`` / ``DECIMAL-PLACES``) gives the digits; ``SUPPRESS-LEAD-ZEROES`` and
+    ``SUPPRESS-TRAIL-ZEROES`` both ``NO`` state full-width numbers, read alike either way (``"TZ"``).
 
     >>> parse_nc_param("FORMAT 2.5\\nOUTPUT-UNITS ENGLISH\\nSUPPRESS-LEAD-ZEROES YES\\nT01 12.0\\n")["digits"]
     (2, 5)
     """
     out: dict = {"tools": {}}
+    suppress: dict[str, bool] = {}
+    size_unit = ""
+    n_int = n_frac = None
     for raw in text.splitlines():
         words = raw.strip().split()
         if len(words) < 2:
             continue
         key, value = words[0].upper(), words[1].upper()
         if key == "FORMAT" and re.fullmatch(r"[0-9]\.[0-9]", value):
-            out["digits"] = (int(value[0]), int(value[2]))
+            n_int, n_frac = int(value[0]), int(value[2])
+        elif key == "INTEGER-PLACES" and value.isdigit() and len(value) == 1:
+            n_int = int(value)
+        elif key == "DECIMAL-PLACES" and value.isdigit() and len(value) == 1:
+            n_frac = int(value)
         elif key == "OUTPUT-UNITS":
             out["units"] = "inch" if value in ("ENGLISH", "INCH", "INCHES") else "metric"
-        elif key == "SUPPRESS-LEAD-ZEROES" and value == "YES":
-            out["zeros"] = "TZ"
-        elif key == "SUPPRESS-TRAIL-ZEROES" and value == "YES":
-            out["zeros"] = "LZ"
+            size_unit = "MILS" if out["units"] == "inch" else "MM"
+        elif key in ("SUPPRESS-LEAD-ZEROES", "SUPPRESS-TRAIL-ZEROES") and value in ("YES", "NO"):
+            suppress[key] = value == "YES"
         elif key == "COORDINATES":
             out["incremental"] = value.startswith("INCREMENTAL")
         elif re.fullmatch(r"T[0-9]+", key) and re.fullmatch(r"[0-9]*\.?[0-9]+", value):
-            out["tools"][int(key[1:])] = _size_mm(value, " ".join(words[2:]))
+            out["tools"][int(key[1:])] = _size_mm(value, " ".join(words[2:] + [size_unit]))
+        elif (re.fullmatch(r"T[0-9]+", key) and re.fullmatch(r"[0-9]+\.", value) and len(words) >= 3
+              and re.fullmatch(r"[0-9]*\.?[0-9]+", words[2])):  # ncdrill.log: tool, index, size, ...
+            out["tools"][int(key[1:])] = _size_mm(words[2], " ".join(words[3:] + [size_unit]))
+    if n_int is not None and n_frac is not None:
+        out["digits"] = (n_int, n_frac)
+    if suppress.get("SUPPRESS-LEAD-ZEROES"):
+        out["zeros"] = "TZ"
+    elif suppress.get("SUPPRESS-TRAIL-ZEROES"):
+        out["zeros"] = "LZ"
+    elif len(suppress) == 2:
+        out["zeros"] = "TZ"  # no suppression: full-width numbers, read alike with TZ and LZ
     return out
 
 
@@ -1089,6 +1195,8 @@ def parse_excellon(
         r.warn(f"{len(r.after_end)} statement(s) after the end of the program (M30/M00) ignored")
     skipped = _bad_tools(r, strict)
     _check_plausible(r, chosen is not None, any(v is not None for v in (excellon_units, digits, excellon_zeros)))
+    if digits is not None and r.digits is None:
+        _check_given_digits(r, text, excellon_units, digits, excellon_zeros, params)
     if not r.holes and not r.slots:
         r.warnings.append(f"{source}: no holes to drill")
     holes = np.array(r.holes, np.float64).reshape(-1, 2)
@@ -1164,6 +1272,42 @@ def _check_plausible(r: _Reader, guessed: bool, given: bool) -> None:
                           f"({lo:g}-{hi:g} mm): {n} hole(s) and slot(s) use it")
 
 
+def _check_given_digits(r: _Reader, text: str, units, digits: tuple[int, int], zeros, params) -> None:
+    """``--excellon-digits`` given for a file that does not state them, with hole sizes that do not depend on them
+    (Allegro's ``;T01 Holesize`` comments, ``nc_param.txt``): when the sizes say the board the digits make cannot
+    be (holes cutting into each other, a board hardly larger than its holes; :func:`_size_evidence`) and another
+    split of the same width fits clearly better, one warning names it (the digits given are still used)."""
+    used = set(r.hole_tool)
+    if not used or not any(t in r.comment_tools and r.tools.get(t) == r.comment_tools[t] for t in used):
+        return
+    given_penalty, given_why = _size_evidence(r)
+    if given_penalty <= 0:
+        return
+    numbers = _NUMBER_TEXT.findall("\n".join(text.splitlines()[:_GUESS_LINES]).upper())
+    width = max((len(n) for n in numbers), default=sum(digits))
+    mine, _ = _plausibility(r, numbers, None)
+    better = []
+    for d in _fixed_digits(width):
+        if d == tuple(digits):
+            continue
+        try:
+            other = _read(text, r.source, units, d, zeros, None, _GUESS_LINES, params)
+        except ParseError:
+            continue
+        penalty, why = _plausibility(other, numbers, None)
+        if penalty < mine - 1.5 and _size_evidence(other)[0] < given_penalty:
+            better.append((penalty, d, why))
+    if not better:
+        return
+    _, d, why = min(better)
+    holes = np.array(r.holes, np.float64).reshape(-1, 2)
+    span = holes.max(axis=0) - holes.min(axis=0)
+    r.warnings.append(
+        f"{r.source}:{r.hole_line[0]}: --excellon-digits {digits[0]}:{digits[1]} makes the board "
+        f"{span[0]:.1f} x {span[1]:.1f} mm with {', '.join(given_why)}, which the hole sizes in the file's comments "
+        f"cannot fit; {d[0]}:{d[1]} is more plausible ({why})")
+
+
 def load_excellon(
     path: str | os.PathLike,
     *,
@@ -1174,7 +1318,8 @@ def load_excellon(
 ) -> HoleList:
     """Read an Excellon drill file; see :func:`parse_excellon` for the arguments and the result.
 
-    An Allegro ``nc_param.txt`` in the same folder (any case) is read with it (:func:`parse_nc_param`).
+    An Allegro ``nc_param.txt`` in the same folder (any case), else its ``ncdrill.log``, is read with it
+    (:func:`parse_nc_param`).
 
     Raises:
         ParseError: the file is binary, not Excellon, or has a bad statement (naming file and line).
@@ -1194,9 +1339,11 @@ def load_excellon(
         text = data.decode("latin-1")
     nc_param = None
     try:
-        beside = [q for q in p.parent.iterdir() if q.name.lower() == NC_PARAM_NAME and q.is_file()]
-        if beside:
-            nc_param = beside[0].read_text(encoding="latin-1")
+        beside = {q.name.lower(): q for q in p.parent.iterdir() if q.name.lower() in (NC_PARAM_NAME, NC_LOG_NAME)
+                  and q.is_file()}
+        found = beside.get(NC_PARAM_NAME) or beside.get(NC_LOG_NAME)
+        if found is not None:
+            nc_param = found.read_text(encoding="latin-1")
     except OSError:
         nc_param = None
     return parse_excellon(text, source=str(p), excellon_units=excellon_units, excellon_digits=excellon_digits,
