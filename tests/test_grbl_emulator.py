@@ -13,7 +13,7 @@ import pytest
 import serial
 
 from cam.drive.grbl_link import GrblAlarm, GrblError, GrblLink, parse_grbl_url, parse_status, settings_mismatches
-from cam.errors import PortError
+from cam.errors import CamError, PortError
 from cam.settings import MachineSettings, Travel
 from cam.sim.grbl import DEFAULT_SETTINGS, LOG_HEADER, WELCOME, start_emulator
 from conftest import run_cli
@@ -48,6 +48,23 @@ def short_segments(n: int, step_mm: float = 0.15, feed_mm_min: float = 3000.0) -
         y += step_mm * math.sin(heading)
         lines.append(f"G1 X{x:.3f} Y{y:.3f}")
     return lines, (round(x, 3), round(y, 3), 0.0)
+
+
+def test_build_info_is_the_boards_identity():
+    """``$I`` answers grbl 1.1h's ``[VER:...:build info]`` and ``[OPT:...]``; ``$I=`` stores the build info as grbl's
+    pre-parser leaves it (upper case, no spaces), kept across a reset; the link reads it (issue #44 point 5)."""
+    emu = start_emulator(speed=None, build_info="MILL-A")
+    try:
+        with connect(emu) as link:
+            assert link.command("$I") == ["[VER:1.1h.20190830:MILL-A]", "[OPT:V,15,128]"]
+            assert link.read_identity() == link.identity == "[VER:1.1h.20190830:MILL-A] [OPT:V,15,128]"
+            link.command("$I=mill b")
+            link.soft_reset()
+            assert link.read_identity() == "[VER:1.1h.20190830:MILLB] [OPT:V,15,128]"
+    finally:
+        emu.stop()
+    with pytest.raises(CamError, match="build_info"):
+        start_emulator(speed=None, build_info="two words")
 
 
 def test_welcome_and_settings():

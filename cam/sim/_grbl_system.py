@@ -15,6 +15,7 @@ class _System:
     """The grbl emulator's line handling: the receive buffer's lines, ``ok``/``error``, waits, ``$`` commands."""
 
     settings: dict
+    build_info: str
 
     def _take_line(self) -> Optional[str]:
         for i, b in enumerate(self._rx):
@@ -113,7 +114,8 @@ class _System:
             raise GrblCodeError(8)
 
     def _system_command(self, line: str) -> None:
-        """A ``$`` line: a report (``$`` ``$$`` ``$#`` ``$G`` ``$I`` ``$N``) or a control command."""
+        """A ``$`` line: a report (``$`` ``$$`` ``$#`` ``$G`` ``$I`` ``$N``), the build info (``$I=``) or a control
+        command."""
         self._dry_at = None
         if line == "$":
             self._send(HELP)
@@ -138,9 +140,13 @@ class _System:
             self._send(f"[GC:{motion} G{54 + p.wcs} G{p.plane} {'G20' if p.inches else 'G21'} "
                        f"{'G91' if p.incremental else 'G90'} {'G93' if p.inverse_time else 'G94'} M{p.spindle} "
                        f"{coolant} T{p.tool} F{p.feed / (MM_PER_INCH if p.inches else 1):.0f} S{p.rpm:.0f}]")
-        elif line == "$I":
-            self._send("[VER:1.1h.20190830:]")
+        elif line == "$I":  # grbl 1.1h: [VER:version.build:build info] then [OPT:...], in Idle or Alarm
+            self._require_idle()
+            self._send(f"[VER:1.1h.20190830:{self.build_info}]")
             self._send(f"[OPT:V,{PLANNER_BLOCKS},{RX_BUFFER_BYTES}]")
+        elif line.startswith("$I="):  # the build info kept in the EEPROM (upper case, no spaces: the pre-parser's)
+            self._require_idle()
+            self.build_info = line[3:]
         elif line == "$N":
             for k, text in enumerate(self._startup):
                 self._send(f"$N{k}={text}")

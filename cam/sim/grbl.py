@@ -19,7 +19,8 @@ What it answers, as grbl 1.1h does:
   ``$10`` bit 0, ``Bf:blocks,bytes`` by bit 1, ``WCO`` in the first report after a reset, after an offset
   changed and every 10 (moving) or 30 (idle) reports, ``Ov`` (with ``A:``) one report after a reset, after a
   change and every 10 / 20 reports;
-* ``$`` (help), ``$$``, ``$x=val`` (checked: error 3, 4, 6, 10), ``$#``, ``$G``, ``$I``, ``$N``, ``$Nx=``,
+* ``$`` (help), ``$$``, ``$x=val`` (checked: error 3, 4, 6, 10), ``$#``, ``$G``, ``$I`` (``[VER:1.1h.20190830:
+  build info]`` and ``[OPT:V,15,128]``), ``$I=`` (the build info, ``build_info`` at power-up), ``$N``, ``$Nx=``,
   ``$C``, ``$X``, ``$H`` (``$22=1``; error 5 otherwise), ``$J=`` jogging, ``$RST=``;
 * G-code: G0 G1 G2 G3 (offset and radius arcs in G17/G18/G19, cut into chords within ``$12``) G4 G10 L2/L20
   G17-G19 G20 G21 G28 G28.1 G30 G30.1 G40 G43.1 G49 G53 G54-G59 G61 G80 G90 G91 G91.1 G92 G92.1 G93 G94,
@@ -70,8 +71,8 @@ from typing import Any, Callable, Optional, Sequence
 
 from ._serve import serve_until_stopped
 from ..errors import CamError, PortError
-from ._grbl_base import (BOOT_WALL_S, DEFAULT_SETTINGS, LOG_HEADER, TICK_S, UNLOCK_MSG, WELCOME, Block,
-                         ExecutedBlock, GrblCodeError, ParserState)
+from ._grbl_base import (BOOT_WALL_S, DEFAULT_SETTINGS, LINE_MAX_CHARS, LOG_HEADER, TICK_S, UNLOCK_MSG, WELCOME,
+                         Block, ExecutedBlock, GrblCodeError, ParserState)
 from ._grbl_gcode import _GCode
 from ._grbl_motion import _Motion
 from ._grbl_realtime import _Realtime
@@ -92,11 +93,14 @@ class GrblEmulator(_System, _GCode, _Realtime, _Motion, AbstractContextManager):
             as an Arduino does when pyserial raises DTR.
         start_mm: where the carriage stands at power-up, in the homed machine frame (for ``$H``'s travel).
         log_path: also write each executed block as a CSV row (see :data:`LOG_HEADER`).
+        build_info: the board's build info in its EEPROM, which ``$I`` reports (``[VER:1.1h.20190830:NAME]``)
+            and ``$I=NAME`` sets: two emulators with different ones are two boards that tell themselves apart.
     """
 
     def __init__(self, *, speed: Optional[float] = 1.0, settings: Optional[dict[int, float]] = None,
                  baud: int = 115200, latency_s: float = 0.001, reset_on_open: bool = True,
-                 start_mm: Sequence[float] = (-100.0, -100.0, -10.0), log_path: Optional[str] = None) -> None:
+                 start_mm: Sequence[float] = (-100.0, -100.0, -10.0), log_path: Optional[str] = None,
+                 build_info: str = "") -> None:
         if speed is not None and not speed > 0:
             raise CamError(f"speed must be > 0 or None, got {speed!r}")
         if not baud > 0:
@@ -124,6 +128,11 @@ class GrblEmulator(_System, _GCode, _Realtime, _Motion, AbstractContextManager):
         self._g28_mm = [0.0, 0.0, 0.0]
         self._g30_mm = [0.0, 0.0, 0.0]
         self._startup = ["", ""]
+        if len(build_info) > LINE_MAX_CHARS or not all(" " < ch < "\x7f" and ch not in "()[];" for ch in build_info):
+            raise CamError(f"build_info must be at most {LINE_MAX_CHARS} printable characters without spaces, "
+                           f"brackets or ';' (what $I= can store), got {build_info!r}")
+        self.build_info = build_info
+        """The build info in the EEPROM (``$I`` reports it, ``$I=`` sets it; kept across resets)."""
         # logs and counters (kept across resets)
         self._executed: list[ExecutedBlock] = []
         self._lines: list[tuple[int, str, str]] = []
