@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import re
 from typing import Callable, Optional, Sequence
 
 from .. import __version__
@@ -45,8 +46,20 @@ FILE_KINDS_HELP = (
 """The files a job command or info takes as its positional argument, by kind."""
 
 
+NEGATIVE_VALUE = re.compile(r"^-\.?\d[0-9.,;:eE+-]*$")
+"""A word argparse takes as a value, not an option, though it starts with ``-``: a negative number or a list
+of numbers that starts with one (``-200,20,0``, ``-1.5,-2``, ``-1e3``, ``-1,-1;2,2``).  argparse's own rule
+takes only a single plain negative number (``-5``, ``-.5``), so ``cam where --set -200,20,0`` and ``cam goto
+-10,0,0`` were refused as unknown options (issue #44 point 7).  No flag of cam starts with ``-`` and a digit."""
+
+
 class _Parser(argparse.ArgumentParser):
-    """argparse with one-line errors (exit code 2)."""
+    """argparse with one-line errors (exit code 2), and values that start with a negative number
+    (:data:`NEGATIVE_VALUE`) taken as values after an option or as positionals, never as unknown options."""
+
+    def __init__(self, *args: object, **kwargs: object) -> None:
+        super().__init__(*args, **kwargs)  # type: ignore[arg-type]
+        self._negative_number_matcher = NEGATIVE_VALUE
 
     def error(self, message: str) -> None:  # type: ignore[override]
         self.exit(EXIT_BAD_INPUT, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
