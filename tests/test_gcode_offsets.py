@@ -276,8 +276,8 @@ def test_a_job_planned_in_the_state_is_checked_in_the_machine_frame(tmp_path):
     path.write_text("G21 G90\nG0 Z2\nG0 X0 Y0\nG1 Z-0.5 F200\nG1 X100 Y50 F400\nG0 Z2\nM2\n")
     job = prepare_job(path, settings=S, machine_state=_state_at(ZERO))
     assert job.report["start_steps"] == list(ZERO)
-    with pytest.raises(cam.TravelError, match=r"p\.ngc:5: move to X149\.997 Y35\.550 Z-10\.548 mm leaves the "
-                       r"machine travel \(X 0\.\.289 mm, Y -289"):
+    with pytest.raises(cam.TravelError, match=r"p\.ngc:5: move to machine X149\.997 Y-35\.550 Z10\.548 mm leaves the "
+                       r"machine travel \(machine X 0\.\.289, Y 0\.\.289, Z -10\.048\.\.31\.4 mm; the machine frame"):
         prepare_job(path, settings=S, machine_state=_state_at((1730, 500, 640)))
 
 

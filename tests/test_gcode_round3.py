@@ -1,6 +1,7 @@
 """G-code that LinuxCNC's rs274 runs, from real files (issue #44 point 6, round three): a bare program number, a line
 of modal codes with G80 and a motion code, grbl's ``?`` query, cutter radius compensation G41/G42, a program
 that makes no moves, and ``cam info`` of a program whose origin is the stock's corner from a fresh state."""
+import json
 import math
 import os
 import shutil
@@ -101,3 +102,41 @@ def test_gcode_without_moves_says_so(tmp_path, text):
     # a move shorter than a step is still the steps' message
     path.write_text("G21\nG0 X0.001\nM2\n")
     assert_one_line_error(cli("info", path, "--state", tmp_path / "s.json"), "moves 0 steps", "larger than it")
+
+
+CORNER = "G21 G90\nG0 Z5\nG0 X10 Y10\nG1 Z-1 F100\nG1 X50 Y10\nG3 X50 Y30 I0 J10\nG1 X10 Y30\nG0 Z5\nM2\n"
+"""A program whose origin is the stock's lower left corner (X and Y up from it): from the home of a fresh state
+(the work zero at the home, the back left corner) its Y goes off the table."""
+
+
+def test_cam_info_shows_a_program_extent_from_a_fresh_state(tmp_path):
+    path = tmp_path / "corner.ngc"
+    path.write_text(CORNER)
+    state = tmp_path / "s.json"  # no file yet: a fresh state
+    proc = cli("info", path, "--state", state)
+    assert proc.returncode == 0, proc.stderr
+    lines = proc.stdout.splitlines()
+    # not planned from the fresh work zero, said in the machine frame (machine +Y toward the operator, +Z deeper)
+    assert "not planned where it would run now" in lines[0] and "corner.ngc:3: move to machine X10.000 Y-10.000 " \
+        "Z-5.000 mm leaves the machine travel (machine X 0..289, Y 0..289" in lines[0] and "+Y toward the operator" \
+        in lines[0]
+    # the extent in its own frame: the arc bulges to X60 (centre X50 Y20, radius 10)
+    assert lines[1] == ("  extent in the program's own frame (G-code mm from its zero, +Y up, +Z up): X 0.000..60.000, "
+                        "Y 0.000..30.000, Z -1.000..5.000 mm (60.00 x 30.00 x 6.00 mm)")
+    # where its zero may go: travel X 0..289, Y 0..289, Z -10.048..31.4 machine mm (the thesis machine)
+    assert lines[2].startswith("  fits the machine travel with its work zero at machine X 0.000..229.000, "
+                               "Y 30.000..289.000, Z -5.048..30.400 mm (the machine frame of cam where")
+    rep = json.loads(cli("info", path, "--state", state, "--json").stdout)
+    assert rep["extent_program_mm"] == [[0.0, 0.0, -1.0], [60.0, 30.0, 5.0]]
+    assert rep["work_zero_fits_machine_mm"] == [[0.0, 30.0, -5.048], [229.0, 289.0, 30.4]]
+    assert "leaves the machine travel" in rep["travel_error"]
+    # a zero in that range (cam zero --at speaks the same frame): the program is planned there, as cam drill runs it
+    assert cli("zero", "--at", "0,30,0", "--state", state).returncode == 0
+    proc = cli("info", path, "--state", state)
+    assert proc.returncode == 0 and proc.stdout.startswith(f"{path}: 7 moves, cut area 50.00 x 20.00 mm"), proc.stdout
+    assert proc.stdout.splitlines()[1] == lines[1]
+    # just outside it: refused again, named in the machine frame; a bad program is still a one-line error
+    assert cli("zero", "--at", "0,29,0", "--state", state).returncode == 0
+    assert "not planned where it would run now" in cli("info", path, "--state", state).stdout
+    path.write_text("G21\nG0 X1 A2\n")
+    assert_one_line_error(cli("info", path, "--state", state), "corner.ngc:2:", "rotary axis")

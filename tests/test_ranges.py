@@ -106,7 +106,8 @@ def test_a_huge_arc_is_refused_before_it_is_sampled():
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=ENV, timeout=300)
     assert proc.returncode == 0, proc.stderr[-2000:]
     # clockwise from the left of a circle 1 km wide: the first point goes up (+Y), off the travel's Y 0 edge
-    assert proc.stdout.startswith("huge.ngc:3: move to X1.000 Y0.026 Z0.000 mm leaves the machine travel"), proc.stdout
+    assert proc.stdout.startswith("huge.ngc:3: move to machine X1.000 Y-0.026 Z0.000 mm leaves the machine travel"), \
+        proc.stdout
 
 
 def test_cli_refuses_a_huge_arc_in_one_line(tmp_path):

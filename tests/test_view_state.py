@@ -16,7 +16,9 @@ def test_info_and_preview_plan_a_program_from_the_work_zero(tmp_path):
     prog.write_text(CENTRE)
     state = ["--state", str(tmp_path / "m.json")]
     r = run_cli("info", prog, *state)
-    assert r.returncode == 2 and "leaves the machine travel" in r.stderr  # the home: X-10 is off the table
+    # the home: X-10 is off the table; info says so and still shows the program's extent (issue #44 point 6)
+    assert r.returncode == 0 and "not planned where it would run now" in r.stdout \
+        and "leaves the machine travel" in r.stdout and "extent in the program's own frame" in r.stdout, r.stdout
     assert run_cli("goto", "100,100,0", "--unit", "mm", "--machine-coords", *state).returncode == 0
     assert run_cli("zero", "XYZ", *state).returncode == 0
     before = (tmp_path / "m.json").read_bytes()

@@ -7,15 +7,18 @@ import re
 import sys
 from typing import Optional
 
+import numpy as np
 
 from ..sniff import KIND_NAMES
 from ..digitize import digitize
 from ..digitize.digitized import save_digitized
 from ..digitize.drawing import load_image
 from ..digitize.profile import load_profile
-from ..errors import CamError
+from ..errors import CamError, TravelError
 from ..formats.excellon import HoleList, load_excellon
+from ..formats.gcode import load_tool_table, open_gcode
 from ..formats.gcode_export import exact_geometry, save_gcode
+from ..job.gcode import program_extent_mm, work_zero_range_mm
 from ..job.drill import DEFAULT_CUT_DEPTH_MM
 from ..formats.hpgl import PLOTTER_UNIT_MM, scan_hpgl
 from ..job.model import pause_points
@@ -143,16 +146,67 @@ def _info_hpgl(args: argparse.Namespace) -> int:
     return 0
 
 
+def _gcode_extent(args: argparse.Namespace) -> Optional[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]:
+    """The program's extent in its own frame (run from its work zero, offsets 0: G-code mm, +Y up, +Z up) and the
+    work zeros that keep it in the travel (machine frame: +Y toward the operator, +Z deeper), each ``(lo, hi)``;
+    None when it makes no moves.  Nothing is planned: a program that does not fit where it would run now still
+    has them."""
+    settings, options = machine_settings(args), job_options(args)
+    s = settings
+    program = open_gcode(
+        args.image, home_g28_mm=(s.g28_x_mm, s.g28_y_mm, s.g28_z_mm), home_g30_mm=(s.g30_x_mm, s.g30_y_mm, s.g30_z_mm),
+        tool_lengths_mm=load_tool_table(options.tool_table) if options.tool_table else None,
+        subroutine_path=options.subroutine_path, max_lines=options.max_lines)
+    extent = program_extent_mm(program)
+    if extent is None:
+        return None
+    return (*extent, *work_zero_range_mm(extent, settings, flip_y=options.flip_y))
+
+
 def _info_gcode(args: argparse.Namespace) -> int:
-    job = prepare(args)
+    """``cam info`` of a G-code program: its report as planned where it would run now (the machine state), its
+    extent in its own frame and where its work zero may stand; a program that leaves the travel from the work
+    zero it would run from now is not refused (its size is what a user needs to choose a zero)."""
+    travel_error: Optional[str] = None
+    job = None
+    try:
+        job = prepare(args)
+    except TravelError as exc:
+        travel_error = str(exc)
+    extent = _gcode_extent(args)
     if args.json:
-        print(json.dumps(job.full_report(), indent=2))
+        rep = job.full_report() if job is not None else {"source": args.image, "kind": "gcode"}
+        if extent is not None:
+            rep["extent_program_mm"] = [[round(float(v), 4) for v in extent[0]], [round(float(v), 4) for v in extent[1]]]
+            rep["work_zero_fits_machine_mm"] = [[round(float(v), 4) for v in extent[2]],
+                                                [round(float(v), 4) for v in extent[3]]]
+        if travel_error is not None:
+            rep["travel_error"] = travel_error
+        print(json.dumps(rep, indent=2))
         return 0
-    w, h = job.size_mm
-    lines = [f"{args.image}: {job.report.get('moves', 0)} moves, cut area {w:.2f} x {h:.2f} mm, depth "
-             f"{job.depth_mm:.3f} mm, machine time {format_duration(job.estimated_time_s)}"]
-    lines += [f"  {note}" for note in job.tool_changes]
-    lines += [f"warning: {w}" for w in job.warnings]
+    if job is not None:
+        w, h = job.size_mm
+        lines = [f"{args.image}: {job.report.get('moves', 0)} moves, cut area {w:.2f} x {h:.2f} mm, depth "
+                 f"{job.depth_mm:.3f} mm, machine time {format_duration(job.estimated_time_s)}"]
+    else:
+        lines = [f"{args.image}: G-code program, not planned where it would run now: {travel_error}"]
+    if extent is not None:
+        lo, hi, zero_lo, zero_hi = extent
+        size = hi - lo
+        lines.append(f"  extent in the program's own frame (G-code mm from its zero, +Y up, +Z up): "
+                     f"X {lo[0]:.3f}..{hi[0]:.3f}, Y {lo[1]:.3f}..{hi[1]:.3f}, Z {lo[2]:.3f}..{hi[2]:.3f} mm "
+                     f"({size[0]:.2f} x {size[1]:.2f} x {size[2]:.2f} mm)")
+        too_large = [f"{'XYZ'[a]}" for a in range(3) if zero_lo[a] > zero_hi[a]]
+        if too_large:
+            lines.append(f"  it does not fit the machine travel on {', '.join(too_large)} wherever its zero is")
+        else:
+            lines.append(f"  fits the machine travel with its work zero at machine X {zero_lo[0]:.3f}..{zero_hi[0]:.3f}, "
+                         f"Y {zero_lo[1]:.3f}..{zero_hi[1]:.3f}, Z {zero_lo[2]:.3f}..{zero_hi[2]:.3f} mm (the machine "
+                         "frame of cam where, cam zero --at and cam goto: from the home, +Y toward the operator, "
+                         "+Z deeper)")
+    if job is not None:
+        lines += [f"  {note}" for note in job.tool_changes]
+        lines += [f"warning: {w}" for w in job.warnings]
     print("\n".join(lines))
     return 0
 

@@ -45,7 +45,7 @@ from ..settings import DEFAULT_SETTINGS, MachineSettings
 from .model import CUT, TRAVEL, Job, PixelFrame, join_pieces
 
 __all__ = ["plan_gcode", "stream_gcode", "GcodeJobStream", "PIECE_MOVES", "STREAM_MOVES", "steps_to_gcode_mm",
-           "gcode_mm_to_steps"]
+           "gcode_mm_to_steps", "program_extent_mm", "work_zero_range_mm"]
 
 PIECE_MOVES = 1 << 12
 """Program moves planned into one piece of a :class:`GcodeJobStream` (at most: see :data:`PIECE_ROWS`)."""
@@ -317,7 +317,6 @@ class _Frame:
         s = settings
         self.to_steps = np.array([1 / s.mm_per_step_xy, (1 if flip_y else -1) / s.mm_per_step_xy, -1 / s.mm_per_step_z])
         self.step_mm = np.array([s.mm_per_step_xy, s.mm_per_step_xy, s.mm_per_step_z])
-        self.to_mm_y = s.mm_per_step_xy * (1 if flip_y else -1)
         # the travel in the job's frame: its zero is at machine ``home_steps`` (where the tool stands at the start)
         self.home = np.asarray(home_steps, np.float64).reshape(3)
         self.lo = np.array([b[0] for b in s.travel.bounds_steps()], np.float64) - self.home
@@ -336,16 +335,17 @@ class _Frame:
             self.refuse(way_mm[int(np.flatnonzero(outside)[0])], where)
 
     def refuse(self, q_mm: np.ndarray, where: str) -> None:
-        """Raise the TravelError of a move that leaves the travel at ``q_mm`` (the first point outside), both in
-        machine mm (G-code axes, from the machine's home)."""
+        """Raise the TravelError of a move that leaves the travel at ``q_mm`` (the first point outside, G-code mm
+        from where the tool started): the point and the travel in the machine frame as ``cam where``, ``cam
+        zero --at`` and ``cam goto`` give it (machine mm from the home, +Y toward the operator, +Z deeper), the
+        frame named (the program's own coordinates are its line's)."""
         lo, hi = self.lo + self.home, self.hi + self.home
-        q_mm = np.asarray(q_mm, np.float64) + self.home / self.to_steps
-        x_mm = sorted(v * self.step_mm[0] + 0.0 for v in (lo[0], hi[0]))
-        y_mm = sorted(self.to_mm_y * v + 0.0 for v in (lo[1], hi[1]))
-        z_mm = sorted(-v * self.step_mm[2] + 0.0 for v in (lo[2], hi[2]))
+        q = (np.asarray(q_mm, np.float64) * self.to_steps + self.home) * self.step_mm + 0.0
+        x_mm, y_mm, z_mm = (sorted(v * self.step_mm[a] + 0.0 for v in (lo[a], hi[a])) for a in range(3))
         raise TravelError(
-            f"{where}: move to X{q_mm[0]:.3f} Y{q_mm[1]:.3f} Z{q_mm[2]:.3f} mm leaves the machine "
-            f"travel (X {x_mm[0]:g}..{x_mm[1]:g} mm, Y {y_mm[0]:g}..{y_mm[1]:g} mm, Z {z_mm[0]:g}..{z_mm[1]:g} mm)"
+            f"{where}: move to machine X{q[0]:.3f} Y{q[1]:.3f} Z{q[2]:.3f} mm leaves the machine travel (machine "
+            f"X {x_mm[0]:g}..{x_mm[1]:g}, Y {y_mm[0]:g}..{y_mm[1]:g}, Z {z_mm[0]:g}..{z_mm[1]:g} mm; the machine "
+            "frame of cam where and cam goto: from the home, +Y toward the operator, +Z deeper)"
         )
 
     def box_mm(self) -> tuple[np.ndarray, np.ndarray]:
@@ -767,3 +767,45 @@ def _add_time(program_ns: int, move_ns: int, where: str) -> int:
     if total_ns > MAX_PROGRAM_S * 1e9:
         raise PlanError(f"{where}: the program takes more than {MAX_PROGRAM_S / 86400:g} days up to this line")
     return total_ns
+
+
+def program_extent_mm(program: Union[GcodeProgram, GcodeFile]) -> Optional[tuple[np.ndarray, np.ndarray]]:
+    """The box ``(lo, hi)`` (``(3,)`` mm each, G-code axes: +Y up, +Z up) that the program's moves reach, in the
+    frame its moves are given in (its own frame when it runs from its work zero with the offsets 0: the default of
+    :func:`cam.formats.gcode.open_gcode`); arcs and splines by their exact bounding boxes.  None: no moves.
+
+    Nothing is planned, so a program that leaves the travel from where it would run now still has its extent
+    (``cam info`` from a fresh state).  Reads the program a batch of moves at a time (bounded memory).
+    """
+    lo = np.full(3, np.inf)
+    hi = np.full(3, -np.inf)
+    p0 = np.zeros(3)
+    for batch in program.move_batches(PIECE_MOVES):
+        for mv in batch.moves:
+            if mv.kind not in _MOTIONS:
+                continue
+            end = np.array(mv.end, np.float64)
+            if mv.kind == "arc":
+                a, b = _Arc.of(p0, mv).box_mm()
+            elif mv.kind == "spline":
+                a, b = _Bezier.of(p0, mv).box_mm()
+            else:
+                a = b = end
+            lo, hi = np.minimum(lo, a), np.maximum(hi, b)
+            p0 = end
+    return None if not np.all(np.isfinite(lo)) else (lo + 0.0, hi + 0.0)
+
+
+def work_zero_range_mm(extent_mm: tuple[np.ndarray, np.ndarray], settings: MachineSettings = DEFAULT_SETTINGS, *,
+                       flip_y: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """Where a work zero may stand for a program of extent ``extent_mm`` (:func:`program_extent_mm`) to stay in
+    the machine travel: ``(lo, hi)`` ``(3,)`` each in the machine frame of ``cam where``, ``cam zero --at`` and
+    ``cam goto`` (machine mm from the home, +Y toward the operator unless ``flip_y``, +Z deeper); an axis with
+    ``lo > hi`` is one the program is too large for."""
+    s = settings
+    sign = np.array([1.0, 1.0 if flip_y else -1.0, -1.0])
+    step_mm = np.array([s.mm_per_step_xy, s.mm_per_step_xy, s.mm_per_step_z])
+    bounds = np.array(s.travel.bounds_steps(), np.float64) * step_mm[:, None]  # (3, 2) machine mm
+    a, b = sign * extent_mm[0], sign * extent_mm[1]  # the extent's reach in the machine's sense
+    reach_lo, reach_hi = np.minimum(a, b), np.maximum(a, b)
+    return bounds[:, 0] - reach_lo + 0.0, bounds[:, 1] - reach_hi + 0.0
