@@ -393,10 +393,15 @@ def now_text() -> str:
 
 def unknown_message(state: MachineState, port: Any = None) -> str:
     """The one-line error of a move asked for while the position is unknown (on a MAXIMUS board, which has no
-    home switches ``cam`` reads, ``cam where --set`` only)."""
+    home switches ``cam`` reads, ``cam where --set`` only; on the mock, ``port`` None or ``"mock"``, also how to
+    start the simulated machine again at its home: ``cam where --set=0,0,0``)."""
     if isinstance(port, str) and is_real_port(port) and port_kind(port) == "maximus":
         return (f"the machine position is unknown ({state.unknown_reason or 'not recorded'}): say where the head "
                 f"is, in machine mm, with cam where --set X,Y,Z (e.g. 0,0,0 where the board origin is)")
+    if not is_real_port(port):  # the mock: a simulated machine, nothing really stands anywhere (issue #44 point 7)
+        return (f"the machine position is unknown ({state.unknown_reason or 'not recorded'}): on the mock (a "
+                f"simulated machine) start it again at its home with cam where --set=0,0,0, or home the machine "
+                f"(cam home), or say where the tool is, in machine mm, with cam where --set X,Y,Z")
     return (f"the machine position is unknown ({state.unknown_reason or 'not recorded'}): home the machine "
             f"(cam home) or say where the tool is, in machine mm, with cam where --set X,Y,Z")
 
