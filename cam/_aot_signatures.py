@@ -15,7 +15,7 @@ SIGNATURES = {
         "(Array(uint8, 2, 'C'), int64, int64, int64, )",
     ],
     'cam.digitize._kernels.trace2d_kernel': [
-        "(Array(uint8, 1, 'C'), Array(int64, 1, 'C'), int64, Array(int64, 1, 'C'), boolean, int64, int64, )",
+        "(Array(uint8, 1, 'C'), Array(int64, 1, 'C'), int64, Array(int64, 1, 'C'), boolean, int64, int64, boolean, )",
     ],
     'cam.digitize._kernels.trace_layers_kernel': [
         "(Array(int32, 1, 'C'), int64, Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), )",

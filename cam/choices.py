@@ -53,7 +53,8 @@ FILE_JOB_SUFFIXES = EXCELLON_SUFFIXES + GCODE_SUFFIXES + HPGL_SUFFIXES + SVG_SUF
 """Files that are jobs already (not drawings): the job is in the file, not traced from a picture."""
 
 START_RULES = OPTIONS["start"].choices
-"""Where each 2D object starts: first pixel in scan order, or nearest the tool (:func:`cam.digitize.digitize`)."""
+"""Where each 2D object starts: first pixel in scan order, nearest the tool, or nearest the origin (the thesis's
+Min Distance rule) (:func:`cam.digitize.digitize`)."""
 
 
 def job_kind(path: str | os.PathLike, warnings: Optional[list[str]] = None, *, head: Optional[bytes] = None) -> str:

@@ -159,8 +159,9 @@ JOB_OPTIONS: tuple[Option, ...] = (
     _opt("passes", "--passes", "whole", "", _DRAWINGS, 1,
          "Repeat Drill: cut in N passes of increasing depth (default 1)", lo=1, hi=1000, metavar="N"),
     _opt("start", "--start", "choice", "", {"drawing"}, "top",
-         "2D: where each object starts: first pixel in scan order (top) or nearest the tool (min-distance)",
-         choices=("top", "min-distance")),
+         "2D: where each object starts: first pixel in scan order (top), nearest the tool (min-distance), or "
+         "nearest the origin, the thesis's Min Distance rule (thesis)",
+         choices=("top", "min-distance", "thesis")),
     _opt("start_at", "--start-at", "wholes", "px", _DRAWINGS, (0, 0, 0),
          "offset the whole job by this many pixels", lo=-MAX_PX, hi=MAX_PX, count=3, metavar="X,Y,Z"),
     _opt("pause_at", "--pause-at", "points", "px", _DRAWINGS, (),

@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 import cam
-from cam.digitize.trace2d import trace_curves
+from cam.digitize.trace2d import START_RULES, trace_curves
 
 from conftest import drawing_from_rows
 
@@ -134,7 +134,7 @@ def test_compiled_tracer_equals_reference_on_random_curves():
         c = (int(rng.integers(15, 145)), int(rng.integers(15, 105)))
         cv2.ellipse(m, c, (int(rng.integers(4, 14)), int(rng.integers(3, 10))), 0, 0, int(rng.integers(90, 361)),
                     1, 1, cv2.LINE_8)
-    for start in ("top", "min-distance"):
+    for start in START_RULES:
         a = trace_curves(m > 0, start=start)
         b = trace_curves_reference(m > 0, start=start)
         assert len(a) == len(b) and all(np.array_equal(x, y) for x, y in zip(a, b))

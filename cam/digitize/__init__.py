@@ -31,7 +31,7 @@ def digitize(drawing: Drawing | np.ndarray | str, *, start: str = "top") -> Digi
 
     Args:
         drawing: a :class:`Drawing` (or anything :func:`cam.load_image` accepts).
-        start: ``"top"`` or ``"min-distance"`` (thesis 4.1.4.2; see
+        start: ``"top"``, ``"min-distance"`` or ``"thesis"`` (thesis 4.1.4.2; see
             :func:`cam.digitize.trace2d.trace_curves`).
 
     Returns:

@@ -38,8 +38,11 @@ def _walk(flat, cur, offsets, out, n_out):
 
 @entry
 @njit(cache=True)
-def trace2d_kernel(flat, scan, wp, offsets, min_distance, tool_x, tool_y):
+def trace2d_kernel(flat, scan, wp, offsets, min_distance, tool_x, tool_y, from_origin):
     """2D trace of every set pixel of ``flat`` (modified in place).
+
+    ``min_distance``: each object starts at the untraced pixel nearest ``(tool_x, tool_y)``, which is then the end
+    of the object before, or, with ``from_origin`` (the thesis's Min Distance rule), stays where it was given.
 
     Returns ``(path, starts)``: flat indices in cutting order and the start of each object in ``path``
     (``starts[-1] == len(path)``).
@@ -104,9 +107,10 @@ def trace2d_kernel(flat, scan, wp, offsets, min_distance, tool_x, tool_y):
             n_path = end
         else:
             n_path = n1_end
-        last = path[n_path - 1]
-        tool_x = last % wp - 1
-        tool_y = last // wp - 1
+        if not from_origin:
+            last = path[n_path - 1]
+            tool_x = last % wp - 1
+            tool_y = last // wp - 1
     starts[n_obj] = n_path
     return path[:n_path], starts[: n_obj + 1]
 

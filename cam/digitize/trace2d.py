@@ -44,14 +44,19 @@ def trace_curves(
         start: ``"top"`` -- each object starts at the first untraced black
             pixel in scan order; ``"min-distance"`` -- at the untraced black
             pixel nearest (Euclidean) the tool's current position, which is
-            the end of the previous object, ties going to scan order.
-        tool_xy_px: tool position (x, y) before the first object.
+            the end of the previous object, ties going to scan order;
+            ``"thesis"`` -- the thesis's own Min Distance rule (4.1.4.2): at
+            the untraced black pixel nearest the origin, ``tool_xy_px``, for
+            every object (the objects then come in order of that distance).
+        tool_xy_px: tool position (x, y) before the first object (the origin
+            of ``"thesis"``).
 
     Returns:
         One ``(n, 2)`` int32 array of ``(x, y)`` pixels per object, in cutting
         order.  Every black pixel appears exactly once.  An open curve runs
         end to end: in ``top`` mode from its end first in scan order, in
-        ``min-distance`` mode from its end nearest the tool.
+        ``min-distance`` mode from its end nearest the tool, in ``thesis``
+        mode from its end nearest the origin.
 
     >>> import numpy as np
     >>> m = np.zeros((4, 5), bool); m[1, 1:4] = True   # a 3-pixel dash
@@ -66,8 +71,8 @@ def trace_curves(
     wp = w + 2
     flat, scan = pad_mask_kernel(image, np.uint8(value))
     offsets = np.array([dr * wp + dc for dr, dc in NEIGHBOURS_2D], np.int64)
-    path, starts = trace2d_kernel(flat, scan, wp, offsets, start == "min-distance", int(tool_xy_px[0]),
-                                  int(tool_xy_px[1]))
+    path, starts = trace2d_kernel(flat, scan, wp, offsets, start != "top", int(tool_xy_px[0]),
+                                  int(tool_xy_px[1]), start == "thesis")
     xy = np.empty((len(path), 2), np.int32)
     xy[:, 0] = path % wp - 1
     xy[:, 1] = path // wp - 1

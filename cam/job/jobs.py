@@ -115,7 +115,7 @@ class JobOptions:
             drawing; on a 3D drawing one value cuts every layer at it, a flat-bottomed pocket, instead of a
             profile).
         passes: cut in this many passes of increasing depth (Repeat Drill).
-        start: where each 2D object starts, "top" or "min-distance".
+        start: where each 2D object starts, "top", "min-distance" or "thesis" (nearest the origin).
         start_at: ``(x, y, z)`` pixel offset of the whole job (Start At).
         pause_at: drawing points ``(x, y)`` where the job pauses (Pause At).
         profile: path of a profile drawing or CSV (3D drawings); profile_expr: or an expression in k and n.

@@ -115,7 +115,8 @@ def trace_curves_reference(
         obj[:, 0] = idx % wp - 1
         obj[:, 1] = idx // wp - 1
         objects.append(obj)
-        tool_x, tool_y = int(obj[-1, 0]), int(obj[-1, 1])
+        if start != "thesis":  # the thesis's Min Distance rule: every object from the origin, tool_xy_px
+            tool_x, tool_y = int(obj[-1, 0]), int(obj[-1, 1])
     return objects
 
 
