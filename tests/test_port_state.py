@@ -234,3 +234,50 @@ def test_second_opener_of_a_grbl_port_is_refused(grbl, tmp_path, state_home):
         one_line_error(run_cli("where", "--port", port), "refused", "cam serve")
         assert session.wait_idle(30) and session.last_run["status"] == "finished", session.last_run
         assert hold.state.position_known and hold.state.position_steps == (400, 0, 0)
+
+
+# -- issue #44 point 5: a state file names the machine, not only the device path --------------------------
+
+ADAPTER = "usb-1a86_USB2.0-Serial-if00-port0"  # a CH340 adapter without a serial number, as udev names it
+
+
+def by_id_folder(tmp_path, monkeypatch, **links):
+    """A stand-in for /dev/serial/by-id (``$CAM_SERIAL_BY_ID``): a folder of links ``name -> device``."""
+    folder = tmp_path / "by-id"
+    folder.mkdir(exist_ok=True)
+    for name, device in links.items():
+        (folder / name).unlink(missing_ok=True)
+        (folder / name).symlink_to(device)
+    monkeypatch.setenv("CAM_SERIAL_BY_ID", str(folder))
+    return folder
+
+
+def board_state(state_home, name: str = ADAPTER) -> dict:
+    return json.loads((state_home / f"grbl-by-id-{name}.json").read_text())
+
+
+def test_state_file_named_after_serial_by_id_when_present(grbl, tmp_path, state_home, monkeypatch):
+    from cam.drive.grbl_machine import close_grbl_machines
+
+    folder = by_id_folder(tmp_path, monkeypatch, **{"usb-other-board-if00": tmp_path / "gone", ADAPTER:
+                                                    grbl.device_path})
+    # the device path given: the state file is named after the link in by-id that points at it
+    ok(run_cli("where", "--set", "0,0,0", "--port", url(grbl)))
+    ok(run_cli("jog", "X+", "400", "--port", url(grbl)))
+    assert sorted(p.name for p in state_home.glob("*.json")) == [f"grbl-by-id-{ADAPTER}.json"]
+    assert board_state(state_home)["position_steps"] == [400, 0, 0]
+    # the by-id path given directly: the same state file, the same position (and one link to the device)
+    close_grbl_machines()
+    by_id_port = f"grbl:{folder / ADAPTER}?baud=115200"
+    ok(run_cli("jog", "X+", "100", "--port", by_id_port))
+    rep = json.loads(ok(run_cli("where", "--json", "--port", url(grbl))).stdout)
+    assert rep["state_file"] == str(state_home / f"grbl-by-id-{ADAPTER}.json")
+    assert rep["position_known"] and rep["machine_steps"][0] == 500
+    assert sorted(p.name for p in state_home.glob("*.json")) == [f"grbl-by-id-{ADAPTER}.json"]
+    # a MAXIMUS board's state is named the same way (it cannot say which board it is: the name is all there is)
+    assert default_state_path(None, f"maximus:{grbl.device_path}").name == f"maximus-by-id-{ADAPTER}.json"
+    # no link to the device: the state file is named after the device path, a new machine: position unknown
+    (folder / ADAPTER).unlink()
+    rep = json.loads(ok(run_cli("where", "--json", "--port", url(grbl))).stdout)
+    assert rep["state_file"] == str(state_home / f"grbl{grbl.device_path.replace('/', '-')}.json")
+    assert not rep["position_known"] and "no state file" in rep["unknown_reason"]

@@ -28,6 +28,7 @@ its position.  The machine keeps the link (:class:`~cam.drive.grbl_link.GrblLink
 from __future__ import annotations
 
 import math
+import os
 import threading
 import time
 from dataclasses import dataclass, replace
@@ -547,8 +548,9 @@ _MACHINES_LOCK = threading.Lock()
 
 def grbl_machine(url: str, settings: MachineSettings) -> GrblMachine:
     """The process's :class:`GrblMachine` for the device ``url`` names (opened at the first call; opened again
-    when its link was lost)."""
-    device, _ = parse_grbl_url(url)
+    when its link was lost).  Two names of one device (``/dev/serial/by-id/...`` and the ``/dev/ttyUSBn`` it
+    points at) are one machine: opening the device twice would split grbl's answers between the two links."""
+    device = os.path.realpath(parse_grbl_url(url)[0])
     with _MACHINES_LOCK:
         m = _MACHINES.get(device)
         if m is None or m.lost:

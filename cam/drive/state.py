@@ -51,7 +51,7 @@ __all__ = [
     "PositionUnknownError", "parse_state", "read_state", "write_state", "state_dir", "default_state_path",
     "mm_to_steps", "steps_to_mm", "check_in_travel", "MachineLock", "StateHold", "unknown_message", "dump_json",
     "MachineRecord", "MachineFileError", "machine_record", "recorded_machine", "new_machine_state", "DeviceLock",
-    "port_device", "is_real_port",
+    "port_device", "is_real_port", "serial_by_id", "SERIAL_BY_ID",
 ]
 
 STATE_VERSION = 1
@@ -421,12 +421,39 @@ def _slug(text: str) -> str:
     return re.sub(r"[^A-Za-z0-9._]+", "-", text).strip("-.") or "port"
 
 
+SERIAL_BY_ID = "/dev/serial/by-id"
+"""Where udev keeps a stable name of each USB serial device (the adapter's maker, model and serial number)."""
+
+
+def serial_by_id(device: str, environ: Optional[Mapping[str, str]] = None) -> Optional[str]:
+    """The stable name of the serial device ``device``: its link's name in ``/dev/serial/by-id`` (given directly,
+    or the link there that points at ``device``), or None when there is none (no such folder, a pseudo-terminal,
+    a parallel port).  ``$CAM_SERIAL_BY_ID`` names another folder to look in (tests).
+
+    >>> serial_by_id("/dev/serial/by-id/usb-FTDI_FT232R_A9ABCDEF-if00-port0")
+    'usb-FTDI_FT232R_A9ABCDEF-if00-port0'
+    """
+    env = os.environ if environ is None else environ
+    folder = os.path.abspath(env.get("CAM_SERIAL_BY_ID") or SERIAL_BY_ID)
+    given = os.path.abspath(device)
+    if os.path.dirname(given) in (folder, SERIAL_BY_ID):
+        return os.path.basename(given)
+    real = os.path.realpath(device)
+    try:
+        names = sorted(os.listdir(folder))
+    except OSError:
+        return None
+    return next((name for name in names if os.path.realpath(os.path.join(folder, name)) == real), None)
+
+
 def default_state_path(machine_file: Optional[str], port: str,
                        environ: Optional[Mapping[str, str]] = None) -> Path:
     """The default state file of a machine.  The mock (a simulated machine for each machine file):
     ``{state_dir}/{machine file's stem, or "default"}-mock.json``.  A real port: the state belongs to the port
-    (the machine on it), ``{state_dir}/{port, without its ?options}.json``, whatever ``--machine`` says (the
-    file records its machine file: :class:`MachineRecord`).
+    (the machine on it), whatever ``--machine`` says (the file records its machine file: :class:`MachineRecord`):
+    a grbl or MAXIMUS board whose device has a stable name (:func:`serial_by_id`: the USB adapter's, whichever
+    ``/dev/ttyUSBn`` it got today) ``{state_dir}/{grbl|maximus}-by-id-{that name}.json``, else
+    ``{state_dir}/{port, without its ?options}.json`` (issue #44 point 5).
 
     >>> default_state_path(None, "mock", {"XDG_STATE_HOME": "/s"}).as_posix()
     '/s/cam/default-mock.json'
@@ -438,6 +465,11 @@ def default_state_path(machine_file: Optional[str], port: str,
     'grbl-dev-ttyACM0.json'
     """
     if is_real_port(str(port)):
+        kind = port_kind(str(port))
+        device = port_device(str(port)) if kind in ("grbl", "maximus") else None
+        stable = serial_by_id(device, environ) if device is not None else None
+        if stable is not None:
+            return state_dir(environ) / f"{kind}-by-id-{_slug(stable)}.json"
         return state_dir(environ) / f"{_slug(str(port).partition('?')[0])}.json"
     machine = _slug(Path(machine_file).stem) if machine_file else "default"
     return state_dir(environ) / f"{machine}-{_slug(str(port))}.json"
