@@ -281,3 +281,106 @@ def test_state_file_named_after_serial_by_id_when_present(grbl, tmp_path, state_
     rep = json.loads(ok(run_cli("where", "--json", "--port", url(grbl))).stdout)
     assert rep["state_file"] == str(state_home / f"grbl{grbl.device_path.replace('/', '-')}.json")
     assert not rep["position_known"] and "no state file" in rep["unknown_reason"]
+
+
+@pytest.fixture
+def boards():
+    """Start grbl emulators (``boards(build_info)``), each stopped at the end."""
+    from cam.drive.grbl_machine import close_grbl_machines
+
+    started = []
+
+    def start(build_info: str):
+        started.append(start_emulator(speed=20.0, settings=FAST, build_info=build_info))
+        return started[-1]
+    yield start
+    close_grbl_machines()
+    for emu in started:
+        emu.stop()
+        assert emu.error is None
+
+
+def board_session(port: str, state_home):
+    """A session on ``port`` with the port's default state file (the page's, or the Python API's)."""
+    hold = StateHold(default_state_path(None, port), SETTINGS, "the test", port=port)
+    return hold, MachineSession(port, SETTINGS, state=hold)
+
+
+def board_lines(session) -> list[str]:
+    return [e["text"] for e in session.state()["log"] if "another board" in e["text"]]
+
+
+def test_a_different_grbl_board_on_the_same_path_is_position_unknown(boards, tmp_path, state_home, monkeypatch):
+    """Two boards behind adapters with one by-id name (cheap CH340s have no serial number) on different days:
+    their state file is one, and grbl's $I build info tells them apart."""
+    from cam.drive.grbl_machine import close_grbl_machines
+
+    mill_a = boards("MILL-A")
+    folder = by_id_folder(tmp_path, monkeypatch, **{ADAPTER: mill_a.device_path})
+    port = f"grbl:{folder / ADAPTER}"
+    ok(run_cli("where", "--set", "0,0,0", "--port", port))
+    ok(run_cli("jog", "X+", "400", "--port", port))
+    recorded = board_state(state_home)
+    assert recorded["board"] == "[VER:1.1h.20190830:MILL-A] [OPT:V,15,128]" and recorded["position_known"]
+    close_grbl_machines()  # another day: mill A is unplugged, mill B is plugged in
+    mill_a.stop()
+    mill_b = boards("MILL-B")
+    by_id_folder(tmp_path, monkeypatch, **{ADAPTER: mill_b.device_path})
+    hold, session = board_session(port, state_home)
+    try:
+        lines = board_lines(session)  # said in one line, naming both boards
+        assert len(lines) == 1 and "\n" not in lines[0], session.state()["log"]
+        assert "MILL-A" in lines[0] and "MILL-B" in lines[0] and str(folder / ADAPTER) in lines[0], lines
+        assert not session.state()["where"]["position_known"] and not hold.state.position_known
+        moves = len(mill_b.executed())
+        with pytest.raises(cam.CamError, match="position is unknown.*MILL-B.*MILL-A"):
+            session.jog("x", 10)
+        assert len(mill_b.executed()) == moves
+    finally:
+        hold.close()
+    st = board_state(state_home)
+    assert st["board"] == "[VER:1.1h.20190830:MILL-B] [OPT:V,15,128]" and not st["position_known"]
+    assert "MILL-A" in st["unknown_reason"] and "MILL-B" in st["unknown_reason"]
+    # the command line says it in its one refusal line; once the position is said, mill B goes on as itself
+    one_line_error(run_cli("jog", "X+", "10", "--port", port), "position is unknown", "another board", "MILL-A",
+                   "MILL-B")
+    ok(run_cli("where", "--set", "1,0,0", "--port", port))
+    ok(run_cli("jog", "X+", "10", "--port", port))
+    assert board_state(state_home)["position_known"]
+    # a board renamed with $I= is another board too
+    from cam.drive.grbl_machine import grbl_machine
+    grbl_machine(port, SETTINGS).link.command("$I=mill b2")
+    assert mill_b.build_info == "MILLB2"  # grbl's pre-parser: upper case, no spaces
+    close_grbl_machines()
+    one_line_error(run_cli("jog", "X+", "10", "--port", port), "position is unknown", "MILL-B]", "MILLB2")
+
+
+def test_the_same_grbl_board_keeps_its_position(boards, tmp_path, state_home, monkeypatch):
+    from cam.drive.grbl_machine import close_grbl_machines
+
+    mill = boards("MILL-A")
+    folder = by_id_folder(tmp_path, monkeypatch, **{ADAPTER: mill.device_path})
+    port = f"grbl:{folder / ADAPTER}"
+    ok(run_cli("where", "--set", "0,0,0", "--port", port))
+    ok(run_cli("jog", "X+", "400", "--port", port))
+    for again in ("the port opened again (grbl restarts)", "the same board on another device (power-cycled)"):
+        close_grbl_machines()
+        if again.startswith("the same board"):
+            mill.stop()
+            mill = boards("MILL-A")  # the same build info: the same board, re-enumerated on a new device
+            by_id_folder(tmp_path, monkeypatch, **{ADAPTER: mill.device_path})
+        hold, session = board_session(port, state_home)
+        try:
+            assert not board_lines(session), (again, session.state()["log"])
+            where = session.state()["where"]
+            assert where["position_known"], (again, where)
+            assert hold.state.position_steps == (400, 0, 0)
+            assert hold.state.board == "[VER:1.1h.20190830:MILL-A] [OPT:V,15,128]"
+            session.jog("x", 100)
+            assert session.wait_idle(30) and session.last_run["status"] == "finished", session.last_run
+            assert hold.state.position_known and hold.state.position_steps == (500, 0, 0)
+            session.jog("x", -100)
+            assert session.wait_idle(30) and hold.state.position_steps == (400, 0, 0)
+        finally:
+            hold.close()
+    assert board_state(state_home)["position_known"]

@@ -71,6 +71,7 @@ def where_report(state: MachineState, settings: MachineSettings, path: Path, dri
         "tool": state.tool,
         "running": None if driving is None else vars(driving),
         "machine_file": None if state.machine is None else state.machine.named(),
+        "board": state.board,
     }
 
 
@@ -86,6 +87,8 @@ def _print_where(rep: dict) -> None:
         print(f"driven now by pid {r['pid']} ({r['command']}, since {r['since']}): this is where it started")
     print(f"state file: {rep['state_file']}" + (f" (machine file: {rep['machine_file']})" if rep["machine_file"]
                                                else ""))
+    if rep["board"]:
+        print(f"board: {rep['board']}")
 
 
 def _read_now(path: Path, settings: MachineSettings, port: str) -> tuple[MachineState, Any]:

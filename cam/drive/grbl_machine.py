@@ -225,6 +225,9 @@ class GrblMachine:
         self.url = url
         self.settings = settings
         self.link = link if link is not None else open_grbl(url)
+        self.identity: Optional[str] = self.link.read_identity()
+        """What the board says it is (``$I``; None: it cannot say): the state file records it, and another board
+        on the port makes the position unknown (:func:`adopt_position`)."""
         self.base_steps: Steps3 = (0, 0, 0)
         self.homed_here = False  # $H finished on this link: grbl's frame is the machine frame (base 0)
         self.feed_override_pct = 100
@@ -425,7 +428,15 @@ def adopt_position(machine: GrblMachine, hold: Any, log: Callable[[str, str], No
       is unknown until ``cam home`` (or ``cam where --set``, which unlocks grbl where the tool stands).
     * otherwise grbl's zero is where it started: the state file's position (else the session's home, here)
       is where the tool stands, and grbl's ``MPos`` is read from there on.
+
+    First of all the board's ``$I`` (:attr:`GrblMachine.identity`) is held against the one the state file
+    records (:meth:`~cam.drive.state.StateHold.bind_board`): another board on the port (one that says another
+    ``$I``) makes the position unknown, logged in one line naming both (issue #44 point 5).
     """
+    if hold is not None:
+        changed = hold.bind_board(machine.identity, machine.link.device)
+        if changed:
+            log(changed, "warning")
     st = hold.state if hold is not None else None
     status = machine.status()
     if machine.homed_here or (st is not None and st.homed and st.position_known

@@ -2,9 +2,11 @@
 
 One small JSON file per machine holds the machine position, whether it is known, whether the machine was
 homed, the work offsets G54..G59.3 and the active one, the tool, the machine file it was kept with
-(:class:`MachineRecord`), and a ``running`` marker while a command drives the machine.  On a real port
-(parallel port, MAXIMUS, grbl) the file belongs to the port; on the mock, a simulated machine, to the port and
-its machine file.  It is written atomically (:func:`cam.fileio.atomic_write_text`) and locked: the one command
+(:class:`MachineRecord`), the board it was kept with when the board can say what it is (grbl's ``$I``:
+:meth:`StateHold.bind_board`), and a ``running`` marker while a command drives the machine.  On a real port
+(parallel port, MAXIMUS, grbl) the file belongs to the port, named after the machine's stable device name when
+the system gives one (``/dev/serial/by-id``: :func:`serial_by_id`); on the mock, a simulated machine, to the
+port and its machine file.  It is written atomically (:func:`cam.fileio.atomic_write_text`) and locked: the one command
 that may drive the machine holds an ``fcntl.flock`` on ``FILE.lock`` beside it, and on a real port also one on
 the device itself (:class:`DeviceLock`: a lock file named after the device's real path, and the device), so a
 second one is refused (:class:`StateBusyError`, naming the other process and its command; issue #43 point 4).
@@ -128,6 +130,8 @@ class MachineState:
         tool: the cutter in the spindle as the last job named it (None: not said).
         running: the command that drives the machine now (None: none).
         machine: the machine file the state was kept with (None: not recorded, a file of an older cam).
+        board: what the board the state was kept with says it is (grbl's ``$I``; None: not recorded, or a board
+            that cannot say, such as MAXIMUS).
     """
 
     position_steps: Steps3 = (0, 0, 0)
@@ -139,6 +143,7 @@ class MachineState:
     tool: Optional[str] = None
     running: Optional[Running] = None
     machine: Optional[MachineRecord] = None
+    board: Optional[str] = None
 
     def work_zero_steps(self, name: Optional[str] = None) -> Steps3:
         """The zero of work offset ``name`` (default: the active one), machine frame."""
@@ -184,6 +189,7 @@ class MachineState:
             "tool": self.tool,
             "running": None if self.running is None else vars(self.running),
             "machine_file": None if self.machine is None else vars(self.machine),
+            "board": self.board,
         }
         return dump_json(values)
 
@@ -198,7 +204,7 @@ def dump_json(values: Mapping[str, Any]) -> str:
 
 _KEYS = {"cam_machine_state", "position_steps", "position_known", "unknown_reason", "homed", "offsets_steps",
          "active_offset", "tool", "running"}
-_OPTIONAL_KEYS = {"machine_file"}  # absent from the files of an older cam: not recorded
+_OPTIONAL_KEYS = {"machine_file", "board"}  # absent from the files of an older cam: not recorded
 
 
 def check_in_travel(position_steps: Any, settings: MachineSettings, what: str) -> None:
@@ -290,7 +296,8 @@ def _state_of(values: Any, settings: MachineSettings) -> MachineState:
     reason = _text(values["unknown_reason"], "unknown_reason")
     return MachineState(position, known, "" if known else reason, _flag(values["homed"], "homed"),
                         _offsets(values["offsets_steps"], settings), active, _text(values["tool"], "tool", True),
-                        _running(values["running"]), _machine(values.get("machine_file")))
+                        _running(values["running"]), _machine(values.get("machine_file")),
+                        _text(values.get("board"), "board", True))
 
 
 def parse_state(text: str, settings: MachineSettings, where: str | os.PathLike) -> MachineState:
@@ -727,6 +734,8 @@ class StateHold:
         self.port: Optional[str] = None
         self.device_lock: Optional[DeviceLock] = None
         self.machine = machine
+        self.board: Optional[str] = None
+        """What the board on the port says it is (:meth:`bind_board`; None: not said): every write records it."""
         self.warnings: list[str] = []
         """What the command should say on stderr (a machine file changed since it was recorded)."""
         self._fresh = False  # a missing file nothing has been written to yet
@@ -798,15 +807,39 @@ class StateHold:
         self.save(replace(self.state.lost(f"the machine changed (--machine-changed): {recorded.named()} -> "
                                           f"{given.named()}"), machine=given))
 
+    def bind_board(self, identity: Optional[str], where: str) -> str:
+        """Say what the board on the port says it is (grbl's ``$I``; None: it cannot say, nothing is checked),
+        and hold it against the one the state file records (issue #44 point 5).  Another one makes the position
+        unknown, recorded at once with the new board; the one-line reason, naming both, is returned for the log
+        ("" when it is the recorded board, or the file records none: the board is recorded then, at once when
+        the file exists, and by every write from now on).  ``where``: the device, for the reason."""
+        if identity is None:
+            return ""
+        recorded, self.board = self.state.board, identity[:MAX_TEXT]
+        if recorded == self.board:
+            return ""
+        if recorded is None:
+            if self._fresh:  # a new file: the board goes with its first write
+                self.state = replace(self.state, board=self.board)
+            else:
+                self.save(self.state)
+            return ""
+        reason = f"another board on {where}: it says {self.board}, the state file recorded {recorded}"
+        self.save(self.state.lost(reason))
+        return self.state.unknown_reason
+
     def require_known(self) -> None:
         """Refuse a move while the position is unknown (:class:`PositionUnknownError`, one line)."""
         if not self.state.position_known:
             raise PositionUnknownError(unknown_message(self.state, self.port))
 
     def save(self, state: MachineState) -> None:
-        """Write ``state`` and keep it as the current one (with the hold's machine file, when it has one)."""
+        """Write ``state`` and keep it as the current one (with the hold's machine file and board, when it has
+        them)."""
         if self.machine is not None and state.machine != self.machine:
             state = replace(state, machine=self.machine)
+        if self.board is not None and state.board != self.board:
+            state = replace(state, board=self.board)
         write_state(self.path, state)
         self.state = state
         self._fresh = False
