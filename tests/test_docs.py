@@ -114,3 +114,63 @@ def test_the_checks_catch_what_they_should():
     for wrong in ("cam.load_gcode", "cam.plan_gcode", "cam.job.no_such_module.x"):
         with pytest.raises((AttributeError, ImportError)):
             resolve(wrong)
+
+
+STALE = (
+    (r"G-code program is still run from where the tool stands", "a G-code program runs in the state's work offsets"),
+    (r"G54\.\.G59\.3 inside programs are issue #29", "work offsets inside programs are done (issue #29 point 4)"),
+    (r"plan a program from the home with every offset 0, as before", "info and preview read the state file"),
+    (r"placed where the tool stands", "drill, HPGL and SVG jobs are placed at the active work zero"),
+)
+"""Statements the docs once made about where a job runs that the code no longer does (issue #44 point 7), and
+what is true instead (cam.drive.placement, cam.job.jobs.prepare_job's machine_state)."""
+
+
+def test_docs_do_not_say_gcode_runs_from_where_the_tool_stands():
+    """A G-code program runs as a sender runs it, in the state's work offsets (G54..G59.3, G10, G53), from where
+    the tool stands; drill, HPGL and SVG files are placed at the active work zero. No page says otherwise."""
+    from cam.drive.placement import PLACED_KINDS
+
+    assert "gcode" not in PLACED_KINDS and {"excellon", "hpgl", "svg"} <= set(PLACED_KINDS)  # what the docs say
+    found = []
+    for page in PAGES:
+        text = " ".join(page.read_text(encoding="utf-8").split())
+        found += [f"{page.name}: '{m.group(0)}' ({why})" for pattern, why in STALE
+                  for m in re.finditer(pattern, text)]
+    assert not found, "stale statements:\n" + "\n".join(found)
+    ports = " ".join((ROOT / "docs" / "machine-and-ports.md").read_text(encoding="utf-8").split())
+    assert re.search(r"A G-code program is not moved to the work zero: it runs as a G-code sender runs it, its "
+                     r"coordinates in the state's work offsets", ports)
+
+
+def test_readme_map_names_every_reader_and_planner():
+    """The README's data-flow map names a reader and the planner of every file kind (the grey-level relief's
+    too), each name resolving into that module, and every kind of port."""
+    from cam.choices import SUFFIXES
+    from cam.drive.ports import CAPABILITIES
+
+    text = README.read_text(encoding="utf-8")
+    block = FENCE.search(text, text.index("## Data flow"))
+    assert block is not None
+    modules = set()
+    for dotted in {m.group(0) for m in DOTTED.finditer(block.group(2))}:
+        obj = resolve(dotted)
+        modules.add(obj.__name__ if isinstance(obj, type(cam)) else getattr(obj, "__module__", ""))
+    wanted = {  # file kind -> (reader module, planner module)
+        "drawing": ("cam.digitize.drawing", "cam.digitize"),
+        "digitized": ("cam.digitize.digitized", "cam.job.drawing_stream"),
+        "excellon": ("cam.formats.excellon", "cam.job.drill"),
+        "hpgl": ("cam.formats.hpgl", "cam.job.hpgl_stream"),
+        "svg": ("cam.formats.svg", "cam.job.svg"),
+        "gcode": ("cam.formats.gcode", "cam.job.gcode"),
+    }
+    assert set(wanted) == set(SUFFIXES), "a new file kind: add its reader and planner to the README's map and here"
+    wanted["heightmap"] = ("cam.job.heightmap", "cam.job.heightmap")  # drawings cut as grey-level reliefs
+    wanted["sketch"] = ("cam.digitize.sketch", "cam.digitize.sketch")  # photos traced into drawings
+    wanted["profile"] = ("cam.digitize.profile", "cam.digitize.profile")  # 3D depth profiles
+    wanted["moves"] = ("cam.job.moves", "cam.job.moves")  # jog, go to
+    missing = [f"{kind}: {m}" for kind, pair in wanted.items() for m in pair if m not in modules]
+    assert not missing, "the README's map leaves out:\n" + "\n".join(missing)
+    spelled = {"mock": '"mock"', "parport": '"/dev/parport', "maximus": '"maximus:', "grbl": '"grbl:'}
+    assert set(spelled) == set(CAPABILITIES), "a new kind of port: add it to the README's map and here"
+    assert all(s in block.group(2) for s in spelled.values()), [k for k, s in spelled.items() if s not in block.group(2)]
