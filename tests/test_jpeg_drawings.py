@@ -99,3 +99,47 @@ def test_3d_drawings_at_every_jpeg_quality_from_70_to_95_are_their_originals(nam
             rgb = np.ascontiguousarray(cv2.imdecode(buf, cv2.IMREAD_COLOR)[:, :, ::-1])
             got = cam.digitize(cam.load_image(rgb))
             assert np.array_equal(got.to_array(), clean.to_array()), (quality, sampling)
+
+
+def _jpeg_copies(rgb: np.ndarray, quality: int):
+    """``(label, decoded RGB)`` of ``rgb`` saved as JPEG at ``quality`` by OpenCV and by Pillow, each with 4:2:0
+    chroma subsampling and without (4:4:4)."""
+    import io
+
+    from PIL import Image as image
+
+    bgr = np.ascontiguousarray(rgb[:, :, ::-1])
+    for sampling in (cv2.IMWRITE_JPEG_SAMPLING_FACTOR_420, cv2.IMWRITE_JPEG_SAMPLING_FACTOR_444):
+        ok, buf = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, quality, cv2.IMWRITE_JPEG_SAMPLING_FACTOR,
+                                             sampling])
+        assert ok
+        yield f"cv2 q{quality} {'4:2:0' if sampling == cv2.IMWRITE_JPEG_SAMPLING_FACTOR_420 else '4:4:4'}", \
+            np.ascontiguousarray(cv2.imdecode(buf, cv2.IMREAD_COLOR)[:, :, ::-1])
+    for subsampling, label in ((2, "4:2:0"), (0, "4:4:4")):
+        out = io.BytesIO()
+        image.fromarray(rgb).save(out, "JPEG", quality=quality, subsampling=subsampling)
+        yield f"PIL q{quality} {label}", np.asarray(image.open(io.BytesIO(out.getvalue())).convert("RGB"))
+
+
+@pytest.mark.parametrize("name", SAMPLES_3D)
+def test_every_jpeg_quality_of_every_3d_drawing_digitizes_like_the_png(name):
+    """Issue #44 point 2: every quality 60..95 (step 5), OpenCV and Pillow, 4:2:0 and 4:4:4, gives the clean
+    drawing's classes and matrix.  Below 70 JPEG dims the red beside the contour to a near-grey (129, 50, 53),
+    leaves pale cyan or pink ringing beside the contour on the white, and a contour pixel as bright as (115, 39, 15);
+    on the inner side of a diagonal contour a dark interior pixel would have thickened the line."""
+    rgb = np.ascontiguousarray(cv2.imread(str(SAMPLES / name))[:, :, ::-1])
+    clean = cam.load_image(rgb)
+    matrix = cam.digitize(clean).to_array()
+    assert cam.digitize(clean).mode == "3d"
+    wrong = []
+    for quality in range(60, 100, 5):
+        for label, decoded in _jpeg_copies(rgb, quality):
+            try:
+                drawing = cam.load_image(decoded)
+                same = (np.array_equal(drawing.classes, clean.classes)
+                        and np.array_equal(cam.digitize(drawing).to_array(), matrix))
+            except cam.CamError as exc:
+                same = str(exc)
+            if same is not True:
+                wrong.append((label, same))
+    assert wrong == []

@@ -20,7 +20,22 @@ WHITE, BLACK, RED, BLUE = 0, 1, 2, 3
 UNKNOWN = 255
 _RED_TO_BLACK = 4  # a red pixel that the contour rule makes black (still red for its neighbours' rule)
 _VALLEY_TO_BLACK = 5  # the same, by the thin-dark-line rule (its second pass)
+_DIM_RED = 6  # a neutral-looking dark pixel that is the interior's red dimmed by JPEG (red after the hue loop)
+_PALE_TO_WHITE = 7  # a pale red or unnamed colour beside white that the pale rule makes white
+_DIM_TO_BLACK = 8  # a dim red pixel beside white: an anti-aliased contour pixel, black
 _HSV_SHIFT = 12
+
+DIM_CHROMA_MIN = 40
+"""A pixel below :data:`~cam.digitize.drawing.CHROMA_MIN` but with at least this chroma, a red hue (red the
+largest channel, ``2 |G - B| <= chroma``) and the luminance of red (:data:`DIM_RED_Y_MIN`) is red, not black: JPEG
+at quality 60 dims the interior's red beside the contour to (129, 50, 53), chroma 79, as bright as pure red."""
+DIM_RED_Y_MIN = 64
+"""The least luminance of such a dim red pixel (the contour's black, however red JPEG makes it, stays below); one
+4-adjacent to white is the contour, blurred with the red and the white beside it (anti-aliasing), so black."""
+PALE_MIN = 128
+"""A red or unnamed-colour pixel whose every channel is at least this (paler than halfway to white) and that is
+4-adjacent to white is white: JPEG's ringing beside a black line on white (pale cyan (166, 255, 240), pink
+(238, 160, 156)); a 3D drawing's red never touches white, and a patch of a wrong colour keeps its inner pixels."""
 
 
 def hue_division_table() -> np.ndarray:
@@ -53,6 +68,9 @@ def classify_kernel(img, ch_r, ch_b, chroma_min, dark_sum_max, hue_class, hdiv, 
     last_packed = -1
     last_class = np.uint8(UNKNOWN)
     for k in range(n if n_coloured else 0):
+        if out[k] == _DIM_RED:  # red or black by its neighbours (_pale_to_white)
+            n_red += 1
+            continue
         if out[k] != UNKNOWN:
             continue
         r = np.int64(img[3 * k + ch_r])
@@ -72,6 +90,8 @@ def classify_kernel(img, ch_r, ch_b, chroma_min, dark_sum_max, hue_class, hdiv, 
             if n_unknown == 0:
                 first_unknown = k
             n_unknown += 1
+    if n_red or n_unknown:
+        n_red, n_unknown, first_unknown = _pale_to_white(img, out, w)
     if n_red:
         _contour_in_red(img, ch_r, ch_b, contour_y_max, core_y_max, valley_min, out, w)
     n_black = 0
@@ -101,17 +121,59 @@ def _hue_class(r, g, b, hue_class, hdiv):
 
 @njit(cache=True, inline="always")
 def _neutral(img, out, n, ch_r, ch_b, chroma_min, dark_sum_max):
-    """Neutral pixels, branch-free; coloured ones marked UNKNOWN (for the hue loop); returns how many."""
+    """Neutral pixels, branch-free; coloured ones marked UNKNOWN (for the hue loop), dim red ones
+    :data:`_DIM_RED` (see :data:`DIM_CHROMA_MIN`); returns how many of both."""
     n_coloured = 0
     for k in range(n):
         r = np.int32(img[3 * k + ch_r])
         g = np.int32(img[3 * k + 1])
         b = np.int32(img[3 * k + ch_b])
         diff = max(r, max(g, b)) - min(r, min(g, b))
-        c = np.uint8(BLACK) if r + g + b < dark_sum_max else np.uint8(WHITE)
+        dark = r + g + b < dark_sum_max
+        dim_red = (dark and diff >= DIM_CHROMA_MIN and r >= g and r >= b and 2 * abs(g - b) <= diff
+                   and 299 * r + 587 * g + 114 * b >= 1000 * DIM_RED_Y_MIN)
+        c = np.uint8(_DIM_RED) if dim_red else (np.uint8(BLACK) if dark else np.uint8(WHITE))
         out[k] = c if diff < chroma_min else np.uint8(UNKNOWN)
-        n_coloured += diff >= chroma_min
+        n_coloured += (diff >= chroma_min) or dim_red
     return n_coloured
+
+
+@njit(cache=True, nogil=True)
+def _pale_to_white(img, out, w):
+    """The pale rule (:data:`PALE_MIN`) and the dim red rule (:data:`DIM_RED_Y_MIN`: red, black beside white), in
+    place, order-free (decided on the classes before it); returns the red and unknown pixels left, and the flat
+    index of the first unknown one (-1 if none)."""
+    n = out.shape[0]
+    h = n // w
+    flipped = False
+    for k in range(n):
+        c = out[k]
+        if c != RED and c != UNKNOWN and c != _DIM_RED:
+            continue
+        if c != _DIM_RED and min(img[3 * k], min(img[3 * k + 1], img[3 * k + 2])) < PALE_MIN:
+            continue
+        i = k // w
+        j = k - i * w
+        if ((i > 0 and out[k - w] == WHITE) or (i < h - 1 and out[k + w] == WHITE)
+                or (j > 0 and out[k - 1] == WHITE) or (j < w - 1 and out[k + 1] == WHITE)):
+            out[k] = _DIM_TO_BLACK if c == _DIM_RED else _PALE_TO_WHITE
+            flipped = True
+    n_red = 0
+    n_unknown = 0
+    first_unknown = -1
+    for k in range(n):
+        if out[k] == _DIM_RED:
+            out[k] = RED
+        elif flipped and out[k] == _PALE_TO_WHITE:
+            out[k] = WHITE
+        elif flipped and out[k] == _DIM_TO_BLACK:
+            out[k] = BLACK
+        n_red += out[k] == RED
+        if out[k] == UNKNOWN:
+            if n_unknown == 0:
+                first_unknown = k
+            n_unknown += 1
+    return n_red, n_unknown, first_unknown
 
 
 @njit(cache=True, inline="always")
@@ -128,7 +190,9 @@ def _contour_in_red(img, ch_r, ch_b, contour_y_max, core_y_max, valley_min, out,
     (the contour's outer side), then the thin dark lines among the rest; a thin-line candidate with three or
     more black 8-neighbours after the first pass lies beside the contour, not on it (JPEG's dark ringing on the
     inner side of a staircase contour, darker than the white and the red across the line's corner): the
-    1-pixel contour has at most two (thesis 4.1.1), so it stays red.
+    1-pixel contour has at most two (thesis 4.1.1), so it stays red; so does one beside a black pixel that already
+    has two black neighbours (black, it would thicken the contour into a corner, as on the inner side of a
+    diagonal contour).
     """
     n = out.shape[0]
     h = n // w
@@ -161,20 +225,40 @@ def _contour_in_red(img, ch_r, ch_b, contour_y_max, core_y_max, valley_min, out,
                     continue
             lone = True  # a red pixel with no red 8-neighbour (a profile's origin) stays red
             n_black = 0
+            a0 = b0 = a1 = b1 = -9
             for a in range(max(i - 1, 0), min(i + 2, h)):
                 for b in range(max(j - 1, 0), min(j + 2, w)):
                     q = out[a * w + b]
                     if (a != i or b != j) and (q == RED or q == _RED_TO_BLACK or q == _VALLEY_TO_BLACK):
                         lone = False
-                    n_black += q == BLACK or q == _RED_TO_BLACK
+                    if q == BLACK or q == _RED_TO_BLACK:
+                        n_black += 1
+                        if n_black == 1:
+                            a0, b0 = a, b
+                        else:
+                            a1, b1 = a, b
             if lone or (second and n_black > 2):
                 continue
+            if second and n_black > 0 and (_thickened(out, a0, b0, h, w) or (n_black == 2
+                                                                            and _thickened(out, a1, b1, h, w))):
+                continue  # black, it would give a contour pixel a third black neighbour: beside the contour
             out[k] = _VALLEY_TO_BLACK if second else _RED_TO_BLACK
             flipped = True
     if flipped:
         for k in range(n):
             if out[k] == _RED_TO_BLACK or out[k] == _VALLEY_TO_BLACK:
                 out[k] = BLACK
+
+
+@njit(cache=True, inline="always")
+def _thickened(out, a, b, h, w):
+    """Whether the black pixel ``(a, b)`` already has two black 8-neighbours (one more breaks thesis 4.1.1)."""
+    n_black = 0
+    for c in range(max(a - 1, 0), min(a + 2, h)):
+        for d in range(max(b - 1, 0), min(b + 2, w)):
+            q = out[c * w + d]
+            n_black += (c != a or d != b) and (q == BLACK or q == _RED_TO_BLACK)
+    return n_black >= 2
 
 
 @entry

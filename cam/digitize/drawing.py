@@ -27,7 +27,17 @@ line), is **black**: the 1-pixel contour of a 3D drawing (a red pixel with no re
 neighbour, a profile's origin, stays red).  JPEG's 4:2:0 chroma
 subsampling gives the contour the red of the interior around it (dark red,
 which pixel by pixel reads as red), but keeps its luminance; and no red pixel
-of a closed contour's interior touches white.
+of a closed contour's interior touches white.  A thin-line pixel beside a black
+pixel that already has two black neighbours stays red (it would thicken the
+contour on the inner side of a diagonal).
+
+Low JPEG qualities (60-65, issue #44 point 2), before the rules above: a near-grey
+pixel with a red hue and the luminance of red (``chroma >= 40``, luminance at least
+:data:`~cam.digitize._classify.DIM_RED_Y_MIN`: the interior's red dimmed by JPEG) is
+red, unless it is 4-adjacent to white (then it is an anti-aliased contour pixel:
+black); a red or unnamed-colour pixel paler than halfway to white (every channel at
+least :data:`~cam.digitize._classify.PALE_MIN`) that is 4-adjacent to white is white
+(JPEG's pale cyan or pink ringing beside a black line on white).
 
 Rule checks (thesis 4.1.1) give warnings with coordinates, never errors: a
 black pixel with more than two black 8-neighbours, a black pixel on the
@@ -80,9 +90,10 @@ DARK_MAX = 128
 HUE_TOLERANCE_DEG = 30
 """Coloured pixels within this many degrees of red (0) or blue (240) count as red or blue."""
 
-CONTOUR_Y_MAX = 56
+CONTOUR_Y_MAX = 64
 """A red-looking pixel 4-adjacent to white and darker than this (luminance) is the contour: pure red (76) is
-not, so a contour left open in pure red is still an error, never healed."""
+not, so a contour left open in pure red is still an error, never healed (JPEG at quality 60 leaves a contour pixel
+at (115, 39, 15), luminance 59)."""
 CORE_Y_MAX = 40
 """A red-looking pixel darker than this that is a thin dark line (see :data:`VALLEY_MIN`) is black."""
 VALLEY_MIN = 12

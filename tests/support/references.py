@@ -268,12 +268,17 @@ def classify_reference(rgb: np.ndarray) -> np.ndarray:
     from cam.digitize.drawing import (BLACK, BLUE, CHROMA_MIN, CONTOUR_Y_MAX, CORE_Y_MAX, DARK_MAX,
                                       HUE_TOLERANCE_DEG, RED, VALLEY_MIN, WHITE)
 
+    from cam.digitize._classify import DIM_CHROMA_MIN, DIM_RED_Y_MIN, PALE_MIN
+
     rgb = np.asarray(rgb)
-    c = rgb.astype(np.int16)
+    c = rgb.astype(np.int32)
     chroma = c.max(axis=2) - c.min(axis=2)
     neutral = chroma < CHROMA_MIN
     out = np.full(rgb.shape[:2], 255, np.uint8)
     dark = c.sum(axis=2) < 3 * DARK_MAX
+    r, g, b = c[..., 0], c[..., 1], c[..., 2]
+    dim_red = (neutral & dark & (chroma >= DIM_CHROMA_MIN) & (r >= g) & (r >= b) & (2 * np.abs(g - b) <= chroma)
+               & (299 * r + 587 * g + 114 * b >= 1000 * DIM_RED_Y_MIN))  # the interior's red, dimmed by JPEG
     out[neutral & dark] = BLACK
     out[neutral & ~dark] = WHITE
     coloured = ~neutral
@@ -284,6 +289,12 @@ def classify_reference(rgb: np.ndarray) -> np.ndarray:
         dist_blue = np.abs(hue_deg - 240.0)
         out[coloured & (dist_red <= HUE_TOLERANCE_DEG)] = RED
         out[coloured & (dist_blue <= HUE_TOLERANCE_DEG)] = BLUE
+    # pale red or unnamed colours beside white (JPEG's ringing by a black line) are white
+    inside = np.pad(out == WHITE, 1, constant_values=False)
+    beside_white = inside[:-2, 1:-1] | inside[2:, 1:-1] | inside[1:-1, :-2] | inside[1:-1, 2:]
+    pale = ((out == RED) | (out == 255)) & (c.min(axis=2) >= PALE_MIN) & beside_white
+    out[pale] = WHITE
+    out[dim_red & ~beside_white] = RED  # beside white: the anti-aliased contour, black
     red = out == RED
     if not red.any():
         return out
@@ -305,8 +316,10 @@ def classify_reference(rgb: np.ndarray) -> np.ndarray:
     black = (out == BLACK) | contour
     black_neighbours = cv2.filter2D(black.astype(np.uint8), cv2.CV_16S, np.ones((3, 3), np.float32),
                                     borderType=cv2.BORDER_CONSTANT)  # itself is red, not black: 8-neighbours
+    crowded = black & (black_neighbours - black >= 2)  # black pixels with two black neighbours already
+    next_to_crowded = cv2.filter2D(crowded.astype(np.uint8), cv2.CV_16S, kernel, borderType=cv2.BORDER_CONSTANT)
     line = (red & ~contour & (luma < CORE_Y_MAX) & (valley >= VALLEY_MIN) & (red_neighbours > 0)
-            & (black_neighbours <= 2))  # then thin dark lines, not beside the contour
+            & (black_neighbours <= 2) & (next_to_crowded == 0))  # then thin dark lines, not beside the contour
     out[contour | line] = BLACK
     return out
 
