@@ -171,7 +171,12 @@ def test_the_maximus_board_takes_drill_files_and_a_delay_its_delay_bytes_can_mak
     # --delay sets the board's Delay bytes (2 x Delay x 0.1 ms per pulse): 0.2..51 ms, else one line
     for delay in ("0.05,2", "2,60"):
         refused(cli("drill", SAMPLES / "board.drl", "--port", port, "--delay", delay), "--delay", "Delay 1..255")
-    refused(cli("drill", SAMPLES / "board.drl", "--port", port, "--delay", "2,2"), "cannot open MAXIMUS port")
+    from cam.drive.state import MachineState, write_state
+
+    known = tmp_path / "known.json"  # the position known (a missing state file on a real port is unknown: #43)
+    write_state(known, MachineState())
+    refused(cli("drill", SAMPLES / "board.drl", "--port", port, "--delay", "2,2", "--state", known),
+            "cannot open MAXIMUS port")
     # flags that mean nothing to the board are refused, never ignored
     refused(cli("drill", SAMPLES / "board.drl", "--port", port, "--ramp", "linear40"), "--ramp", "constant speed")
     refused(cli("drill", SAMPLES / "board.drl", "--spindle", "on"), "--spindle", "MAXIMUS")

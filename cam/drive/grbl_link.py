@@ -401,12 +401,24 @@ class LineTimer:
 
 
 class _RealtimeBytes:
-    """grbl's real-time commands that answer nothing (a part of :class:`GrblLink`)."""
+    """grbl's real-time commands that answer nothing, and the halt after a fault (a part of :class:`GrblLink`)."""
 
     _cond: threading.Condition
     _cancelled: Optional[str]
+    _status_seq: int
+    _lost: Optional[BaseException]
+    _welcomes: int
+    _fault: Optional[str]
+    _done_errors: list
+    status_report: Optional["GrblStatus"]
+    settings: dict[int, float]
+    timeout_s: float
 
     def _write(self, data: bytes) -> None:
+        raise NotImplementedError
+
+    def _wait(self, predicate: Callable[[], bool], timeout_s: Optional[float], *, check: bool = True,
+              where: str = "", quiet_ok: bool = False) -> bool:
         raise NotImplementedError
 
     def cancel(self, reason: str) -> None:
@@ -440,99 +452,77 @@ class _RealtimeBytes:
             raise PortError(f"not a grbl override byte: {byte:#04x}")
         self._write(bytes([byte]))
 
-
-class GrblLink(_RealtimeBytes):
-    """A grbl 1.1 board on a serial port (see the module docstring).
-
-    Args:
-        url: ``grbl:DEVICE?baud=N`` or a bare device path.
-        welcome_timeout_s: how long to wait for the welcome line the board prints when the port opens (an
-            Arduino resets then) before sending a soft reset to get one.
-        timeout_s: how long grbl may stay silent (status polls unanswered) before the link counts as lost.
-        poll_s: the status poll period while waiting for grbl.
-        read_settings: read ``$$`` once connected.
-    """
-
-    def __init__(self, url: str, *, welcome_timeout_s: float = 2.5, timeout_s: float = 5.0, poll_s: float = 0.2,
-                 read_settings: bool = True) -> None:
-        self.url = url
-        self.device, self.baud = parse_grbl_url(url)
-        self.timeout_s = float(timeout_s)
-        self.poll_s = float(poll_s)
-        self.settings: dict[int, float] = {}
-        self.identity: Optional[str] = None   # $I: what the board says it is (:meth:`read_identity`)
-        self.welcome = ""
-        self.messages: list[str] = []          # [MSG:...] and other push messages, in order
-        self.status_report: Optional[GrblStatus] = None
-        self._cond = threading.Condition()
-        self._outstanding: deque[list] = deque()   # [bytes, line number, text, answer or None, info lines]
-        self._outstanding_bytes = 0
-        self._info: list[str] = []
-        self._done_errors: list[list] = []
-        self._alarm: Optional[int] = None
-        self._welcomes = 0
-        self._expected_resets = 0
-        self._status_seq = 0
-        self._lost: Optional[BaseException] = None
-        self._last_rx = time.monotonic()
-        self._closing = False
-        self._wco: Optional[tuple[float, ...]] = None
-        self._cancelled: Optional[str] = None
-        self._fault: Optional[str] = None      # a link fault: replies that cannot be right; sticky until a reset
-        self._connected = False                 # the welcome came: from here on every reply is counted
-        self._answered_s: deque[float] = deque(maxlen=PLANNER_BLOCKS + 2)  # machine time of the last answers
-        self._answer_clock = time.monotonic()   # the last answer (or a hold, which stops the clock)
-        self.reply_margin_s = max(10.0, 2.0 * self.timeout_s)
-        self.slowest_override_pct = 100         # the lowest of grbl's feed and rapid overrides, percent
-        self._timer: Optional[LineTimer] = None
-        self.reset_on_open = False   # the welcome came by itself when the port opened: grbl restarted (power-up)
-        self._serial_errors = (serial.SerialException, OSError)
+    def halt(self, reason: str, *, hold_wait_s: Optional[float] = None) -> bool:
+        """Stop grbl after a fault so that nothing queued before it runs: shut the gate on lines
+        (:meth:`cancel`), feed hold ``!`` at once, wait until grbl reports it stands still (at most
+        ``hold_wait_s``; by default three times the longest stop its ``$$`` allows, plus a second), then soft
+        reset (0x18), which drops every block still queued, and wait for the restart.  Never raises: returns
+        True when grbl restarted, False when the link is gone.  The link's fault is cleared (its counts start
+        again from the reset); the gate stays shut until :meth:`allow`."""
+        self.cancel(reason)
         try:
-            self._ser = serial.Serial(self.device, baudrate=self.baud, bytesize=8, parity="N", stopbits=1,
-                                      timeout=0.05, write_timeout=self.timeout_s)
-        except (serial.SerialException, OSError, ValueError) as exc:
-            raise PortError(f"cannot open grbl port {self.device}: {exc}") from None
-        self._reader = threading.Thread(target=self._read_loop, name="grbl-link-reader", daemon=True)
-        self._reader.start()
+            self._write(b"!")
+        except PortError:
+            return False
+        if hold_wait_s is None:
+            rate = max(self.settings.get(110 + i, 500.0) for i in range(3)) / 60.0
+            accel = min(max(1e-3, self.settings.get(120 + i, 10.0)) for i in range(3))
+            hold_wait_s = 3.0 * rate / accel + 1.0
+        deadline = time.monotonic() + hold_wait_s
+        with self._cond:
+            seq = self._status_seq
         try:
-            self._connect(welcome_timeout_s)
-            if read_settings:
-                self.read_settings()
-        except BaseException:
-            self.close()
-            raise
-
-    # ------------------------------------------------------------------ connection
-    def _connect(self, welcome_timeout_s: float) -> None:
-        self.reset_on_open = self._wait(lambda: self._welcomes > 0, welcome_timeout_s, check=False)
-        if not self.reset_on_open:
+            while time.monotonic() < deadline:
+                self._write(b"?")
+                with self._cond:
+                    self._cond.wait_for(lambda: self._status_seq > seq or self._lost is not None, 0.05)
+                    report, fresh = self.status_report, self._status_seq > seq
+                    seq = self._status_seq
+                if fresh and report is not None and report.state.startswith(("Hold:0", "Idle", "Alarm", "Door:0")):
+                    break
+            with self._cond:
+                self._welcomes = 0
             self._write(b"\x18")
-            if not self._wait(lambda: self._welcomes > 0, self.timeout_s, check=False):
-                self._raise_if_lost()
-                raise PortError(f"no grbl on {self.device}: no welcome line within "
-                                f"{welcome_timeout_s + self.timeout_s:g} s, even after a soft reset "
-                                f"(is it grbl 1.1 at {self.baud} baud?)")
+            restarted = self._wait(lambda: self._welcomes > 0, self.timeout_s, check=False)
+        except PortError:
+            return False
         with self._cond:
             self._welcomes = 0
-            self._connected = True
+            self._fault = None
+            self._done_errors.clear()
+        return restarted
 
-    def close(self) -> None:
-        """Close the port (grbl keeps running whatever it has queued)."""
-        self._closing = True
-        try:
-            self._ser.close()
-        except self._serial_errors:
-            pass
-        if self._reader.is_alive() and self._reader is not threading.current_thread():
-            self._reader.join(timeout=1.0)
 
-    def __enter__(self) -> "GrblLink":
-        return self
+class _Replies:
+    """The reader side of :class:`GrblLink`: its thread reads grbl's lines and books each one under the link's
+    lock (answers against the unanswered lines, status reports, push messages); a reply it cannot make sense of
+    is a link fault, never a dead thread."""
 
-    def __exit__(self, *exc: object) -> None:
-        self.close()
+    _cond: threading.Condition
+    _ser: serial.Serial
+    _closing: bool
+    _lost: Optional[BaseException]
+    _fault: Optional[str]
+    _connected: bool
+    _outstanding: deque
+    _outstanding_bytes: int
+    _info: list
+    _done_errors: list
+    _answered_s: deque
+    _answer_clock: float
+    _expected_resets: int
+    _welcomes: int
+    _alarm: Optional[int]
+    _status_seq: int
+    _last_rx: float
+    _wco: Optional[tuple[float, ...]]
+    _serial_errors: tuple
+    device: str
+    welcome: str
+    messages: list[str]
+    status_report: Optional[GrblStatus]
+    slowest_override_pct: int
 
-    # ------------------------------------------------------------------ reader
     def _read_loop(self) -> None:
         buf = bytearray()
         while not self._closing:
@@ -642,6 +632,98 @@ class GrblLink(_RealtimeBytes):
             if line.startswith("[MSG:") or line.startswith(">"):
                 self.messages.append(line)
             self._info.append(line)
+
+
+class GrblLink(_Replies, _RealtimeBytes):
+    """A grbl 1.1 board on a serial port (see the module docstring).
+
+    Args:
+        url: ``grbl:DEVICE?baud=N`` or a bare device path.
+        welcome_timeout_s: how long to wait for the welcome line the board prints when the port opens (an
+            Arduino resets then) before sending a soft reset to get one.
+        timeout_s: how long grbl may stay silent (status polls unanswered) before the link counts as lost.
+        poll_s: the status poll period while waiting for grbl.
+        read_settings: read ``$$`` once connected.
+    """
+
+    def __init__(self, url: str, *, welcome_timeout_s: float = 2.5, timeout_s: float = 5.0, poll_s: float = 0.2,
+                 read_settings: bool = True) -> None:
+        self.url = url
+        self.device, self.baud = parse_grbl_url(url)
+        self.timeout_s = float(timeout_s)
+        self.poll_s = float(poll_s)
+        self.settings: dict[int, float] = {}
+        self.identity: Optional[str] = None   # $I: what the board says it is (:meth:`read_identity`)
+        self.welcome = ""
+        self.messages: list[str] = []          # [MSG:...] and other push messages, in order
+        self.status_report: Optional[GrblStatus] = None
+        self._cond = threading.Condition()
+        self._outstanding: deque[list] = deque()   # [bytes, line number, text, answer or None, info lines]
+        self._outstanding_bytes = 0
+        self._info: list[str] = []
+        self._done_errors: list[list] = []
+        self._alarm: Optional[int] = None
+        self._welcomes = 0
+        self._expected_resets = 0
+        self._status_seq = 0
+        self._lost: Optional[BaseException] = None
+        self._last_rx = time.monotonic()
+        self._closing = False
+        self._wco: Optional[tuple[float, ...]] = None
+        self._cancelled: Optional[str] = None
+        self._fault: Optional[str] = None      # a link fault: replies that cannot be right; sticky until a reset
+        self._connected = False                 # the welcome came: from here on every reply is counted
+        self._answered_s: deque[float] = deque(maxlen=PLANNER_BLOCKS + 2)  # machine time of the last answers
+        self._answer_clock = time.monotonic()   # the last answer (or a hold, which stops the clock)
+        self.reply_margin_s = max(10.0, 2.0 * self.timeout_s)
+        self.slowest_override_pct = 100         # the lowest of grbl's feed and rapid overrides, percent
+        self._timer: Optional[LineTimer] = None
+        self.reset_on_open = False   # the welcome came by itself when the port opened: grbl restarted (power-up)
+        self._serial_errors = (serial.SerialException, OSError)
+        try:
+            self._ser = serial.Serial(self.device, baudrate=self.baud, bytesize=8, parity="N", stopbits=1,
+                                      timeout=0.05, write_timeout=self.timeout_s)
+        except (serial.SerialException, OSError, ValueError) as exc:
+            raise PortError(f"cannot open grbl port {self.device}: {exc}") from None
+        self._reader = threading.Thread(target=self._read_loop, name="grbl-link-reader", daemon=True)
+        self._reader.start()
+        try:
+            self._connect(welcome_timeout_s)
+            if read_settings:
+                self.read_settings()
+        except BaseException:
+            self.close()
+            raise
+
+    # ------------------------------------------------------------------ connection
+    def _connect(self, welcome_timeout_s: float) -> None:
+        self.reset_on_open = self._wait(lambda: self._welcomes > 0, welcome_timeout_s, check=False)
+        if not self.reset_on_open:
+            self._write(b"\x18")
+            if not self._wait(lambda: self._welcomes > 0, self.timeout_s, check=False):
+                self._raise_if_lost()
+                raise PortError(f"no grbl on {self.device}: no welcome line within "
+                                f"{welcome_timeout_s + self.timeout_s:g} s, even after a soft reset "
+                                f"(is it grbl 1.1 at {self.baud} baud?)")
+        with self._cond:
+            self._welcomes = 0
+            self._connected = True
+
+    def close(self) -> None:
+        """Close the port (grbl keeps running whatever it has queued)."""
+        self._closing = True
+        try:
+            self._ser.close()
+        except self._serial_errors:
+            pass
+        if self._reader.is_alive() and self._reader is not threading.current_thread():
+            self._reader.join(timeout=1.0)
+
+    def __enter__(self) -> "GrblLink":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
 
     # ------------------------------------------------------------------ helpers
     def _write(self, data: bytes) -> None:
@@ -845,46 +927,6 @@ class GrblLink(_RealtimeBytes):
             self._alarm = None
             self._fault = None  # the reset emptied grbl's buffers: the counts start again
         return self.welcome
-
-    def halt(self, reason: str, *, hold_wait_s: Optional[float] = None) -> bool:
-        """Stop grbl after a fault so that nothing queued before it runs: shut the gate on lines
-        (:meth:`cancel`), feed hold ``!`` at once, wait until grbl reports it stands still (at most
-        ``hold_wait_s``; by default three times the longest stop its ``$$`` allows, plus a second), then soft
-        reset (0x18), which drops every block still queued, and wait for the restart.  Never raises: returns
-        True when grbl restarted, False when the link is gone.  The link's fault is cleared (its counts start
-        again from the reset); the gate stays shut until :meth:`allow`."""
-        self.cancel(reason)
-        try:
-            self._write(b"!")
-        except PortError:
-            return False
-        if hold_wait_s is None:
-            rate = max(self.settings.get(110 + i, 500.0) for i in range(3)) / 60.0
-            accel = min(max(1e-3, self.settings.get(120 + i, 10.0)) for i in range(3))
-            hold_wait_s = 3.0 * rate / accel + 1.0
-        deadline = time.monotonic() + hold_wait_s
-        with self._cond:
-            seq = self._status_seq
-        try:
-            while time.monotonic() < deadline:
-                self._write(b"?")
-                with self._cond:
-                    self._cond.wait_for(lambda: self._status_seq > seq or self._lost is not None, 0.05)
-                    report, fresh = self.status_report, self._status_seq > seq
-                    seq = self._status_seq
-                if fresh and report is not None and report.state.startswith(("Hold:0", "Idle", "Alarm", "Door:0")):
-                    break
-            with self._cond:
-                self._welcomes = 0
-            self._write(b"\x18")
-            restarted = self._wait(lambda: self._welcomes > 0, self.timeout_s, check=False)
-        except PortError:
-            return False
-        with self._cond:
-            self._welcomes = 0
-            self._fault = None
-            self._done_errors.clear()
-        return restarted
 
     @property
     def alarm_pending(self) -> Optional[int]:

@@ -1,0 +1,65 @@
+"""A part of :class:`~cam.drive.session.MachineSession`: what is checked before a job starts, nothing sent.
+
+Like the other parts it keeps no state of its own: it works on the attributes ``MachineSession.__init__`` sets
+(``port``, ``kind``, ``settings``, ``state_hold``, ``_lock``, ``_position``) and calls its ``_grbl_job``.
+"""
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from ..errors import CamError, StalePlanError
+from ..job.model import TRAVEL, Job, check_reach, check_travel
+from ._session_grbl import SessionGrbl
+from .maximus.board import drill_arguments, drill_job, require_drilling
+from .ports import require
+
+__all__ = ["SessionChecks"]
+
+
+class SessionChecks(SessionGrbl):
+    """The checks of a job against the machine, its port and the state it was planned in (a mixin)."""
+
+    def check_job(self, job: Any) -> None:
+        """Everything :meth:`start` checks before anything moves, without starting (raises CamError)."""
+        with self._lock:
+            self._check_job(job)
+
+    def _check_job(self, job: Any) -> None:
+        settings = getattr(job, "settings", None)
+        if settings is not None and (settings.travel != self.settings.travel or settings.pins != self.settings.pins):
+            raise CamError("the job was planned for other machine settings; plan it again")
+        self._check_planned_in(job)
+        if isinstance(job, Job) and len(job) and np.all(job.kind == TRAVEL):
+            require(self.port, "jog" if self.kind in ("maximus", "grbl") else "step_dir", what="a move")
+        elif self.kind == "grbl":
+            self._grbl_job(job)  # a job with moves: a step plan has none
+        elif self.kind == "maximus":
+            require(self.port, "drill_files", what=f"a {getattr(job, 'kind', 'step')} job")
+            if getattr(job, "kind", None) == "excellon":
+                require_drilling(job, self.port)  # slots or milled holes: the firmware drills only
+            if getattr(job, "drill_plan", None) is None:
+                require(self.port, "step_dir", what=f"a {getattr(job, 'kind', 'step')} job")
+            arguments = drill_arguments(job.drill_plan, self.settings)  # the board's packets fit (nothing sent)
+            drill_job(arguments["holes_steps"], arguments["z_up_steps"], arguments["z_down_steps"],
+                      arguments["tool_changes"], self.settings.maximus)
+        extent = getattr(job, "extent_steps", None)
+        if extent is not None:
+            check_reach(self._position, extent, self.settings, "the job")
+        if isinstance(job, Job):
+            check_travel(np.asarray(job.points_steps, np.int64) + self._position, self.settings, job.pixels)
+
+    def _check_planned_in(self, job: Any) -> None:
+        """Refuse a prepared job planned for another machine state than the session's now (issue #43 point 6): a
+        G-code program planned with the tool elsewhere, or a job planned from another work zero
+        (:class:`~cam.job.jobs.PlannedIn`; the work offsets compared when the session keeps the state file)."""
+        planned = getattr(job, "planned_in", None)
+        if planned is None or getattr(job, "resumed", None) is not None:
+            return
+        st = self.state_hold.state if self.state_hold is not None else None
+        why = planned.differs(tuple(int(v) for v in self._position), None if st is None else st.offsets_steps,
+                              None if st is None else st.active_offset)
+        if why:
+            raise StalePlanError(why)
+
