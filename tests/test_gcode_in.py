@@ -137,7 +137,7 @@ def test_feed_rate_sets_step_periods():
         ("G21\nG1 X1 F100\nG2 X5 Y0 R1\n", 3, "radius 1 is too small"),
         ("G21\nG38.2 Z-5 F10\n", 2, "'G38.2': probing is not supported"),
         ("G21\nG0 X1 A90\n", 2, "rotary axis word 'A90' is not supported"),
-        ("G21\nG41 D1\n", 2, "'G41': cutter radius compensation is not supported"),
+        ("G21\nG41 D1\n", 2, "'G41': cutter radius compensation G41/G42 takes the tool's radius from the tool table"),
         ("G21\nG71 P1 Q2\n", 2, "'G71': lathe cycles are not supported"),
         ("G21\nG76 P1 Z-5\n", 2, "'G76': lathe cycles are not supported"),
         ("G21\nM101\n", 2, "user M code 'M101' is not supported"),

@@ -4,13 +4,14 @@ that makes no moves, and ``cam info`` of a program whose origin is the stock's c
 import json
 import math
 import os
+import re
 import shutil
 
 import numpy as np
 import pytest
 
 from cam.formats.gcode import parse_gcode
-from support.lcnc import canonical_polyline_mm, parse_canonical, run_rs274
+from support.lcnc import parse_canonical, run_rs274
 
 from test_cli import assert_one_line_error, cli
 
@@ -140,3 +141,52 @@ def test_cam_info_shows_a_program_extent_from_a_fresh_state(tmp_path):
     assert "not planned where it would run now" in cli("info", path, "--state", state).stdout
     path.write_text("G21\nG0 X1 A2\n")
     assert_one_line_error(cli("info", path, "--state", state), "corner.ngc:2:", "rotary axis")
+
+
+COMP_PROGRAMS = {
+    # left: a convex entry (an arc about the first point), concave and convex corners, the exit after G40
+    "left": "G21 G90 G17\nG0 X-10 Y-10 Z1\nG41.1 D4\nG1 X0 Y0 F100\nG1 X20 Y0\nG1 X20 Y10\nG1 X30 Y20\nG1 X10 Y20\n"
+            "G40\nG0 X-10 Y30\nM2\n",
+    # right: a concave entry, a Z-only plunge held with the corner, a helical line, a G0 (straight corner)
+    "right": "G21 G90 G17\nG0 X-10 Y-10 Z1\nG42.1 D4\nG1 X0 Y0 F100\nG1 Z-1\nG1 X20 Y0\nG1 X20 Y10 Z-2\n"
+             "G0 X10 Y10\nG40\nG1 X-10 Y30\nM2\n",
+    # a pocket's outline in inches and incremental moves, compensation on the entry's own line, off on the exit's
+    "inch": "G20 G91 G17\nG0 X-0.5 Y-0.5\nG1 Z-0.05 F10\nG41.1 D0.125 X0.5 Y0.5\nX1\nY0.6\nX-1\nY-0.6\n"
+            "G40 X-0.3 Y-0.3\nG90 G0 Z0.5\nM2\n",
+    # a plain exit line naming X only: its Y is the programmed one, not the tool centre's
+    "exit": "G21 G90 G17\nG0 X-10 Y-10\nG41.1 D4\nG1 X0 Y0 F100\nG1 X20 Y0\nG40\nG1 X30\nG91 X1\nM2\n",
+}
+
+
+@needs_rs274
+@pytest.mark.parametrize("name", sorted(COMP_PROGRAMS))
+def test_gcode_cutter_compensation_matches_rs274(tmp_path, name):
+    text = COMP_PROGRAMS[name]
+    path = tmp_path / f"{name}.ngc"
+    path.write_text(text)
+    want = [(mv.kind.replace("traverse", "rapid"), mv.end, mv.center, mv.rotation < 0)
+            for mv in parse_canonical(run_rs274(str(path)))]
+    got = [(mv.kind, mv.end, mv.center, mv.clockwise) for mv in parse_gcode(text, source=path.name).moves]
+    atol_mm = 3e-3 if "G20" in text else 1e-4  # rs274 prints 4 decimals of its units
+    assert len(got) == len(want), (got, want)
+    for (kind, end, centre, cw), (want_kind, want_end, want_centre, want_cw) in zip(got, want):
+        assert kind == want_kind and np.allclose(end, want_end, atol=atol_mm), (got, want)
+        if kind == "arc":
+            assert np.allclose(centre, want_centre, atol=atol_mm) and cw == want_cw
+    assert sum(kind == "arc" for kind, *_ in got) >= 1  # a convex corner is rounded
+
+
+@pytest.mark.parametrize("line, fragment", [
+    ("G2 X20 Y10 I0 J5", "p.ngc:5: an arc (G2/G3) while cutter compensation is on"),
+    ("G4 P1", "p.ngc:5: a dwell (G4) while cutter compensation is on"),
+    ("G92 X0", "p.ngc:5: a change of plane, coordinate system or offsets while cutter compensation is on"),
+    ("G41.1 D2", "p.ngc:5: cutter compensation is already on"),
+])
+def test_gcode_cutter_compensation_refuses_the_rest_in_one_line(line, fragment):
+    head = "G21 G90\nG0 X-10 Y-10\nG41.1 D4\nG1 X0 Y0 F100\n"
+    with pytest.raises(Exception, match=re.escape(fragment)):
+        parse_gcode(head + line + "\nM2\n", source="p.ngc")
+    with pytest.raises(Exception, match=r"p.ngc:2: 'G41': cutter radius compensation G41/G42 takes the tool's radius from the tool table"):
+        parse_gcode("G21\nG41 D1\n", source="p.ngc")
+    with pytest.raises(Exception, match=r"p.ngc:3: the cutter compensation entry move \(1\) is not longer than"):
+        parse_gcode("G21\nG41.1 D4\nG1 X1 F100\n", source="p.ngc")

@@ -19,6 +19,9 @@ from ._gcode_data import (
     _SUPPORTED_G, _End, _shown,
 )
 from ._gcode_state import _State
+
+_COMP_FRAME = {100, 180, 190, 280, 300, 430, 431, 490, 920, 921, 922, 923, 540, 550, 560, 570, 580, 590, 591, 592, 593}
+"""Codes refused while cutter compensation is on (they change the plane or the frame its held moves are in)."""
 from .ngc import Line
 
 
@@ -101,7 +104,9 @@ class _Block(_State):
             elif letter in "uvw":
                 raise self.err(f"axis word '{word}' is not supported: the machine has three axes, X Y Z")
             elif letter == "d":
-                raise self.err(f"cutter compensation word '{word}' is not supported: give the tool centre's path")
+                if "d" in vals:
+                    raise self.err("word 'D' appears twice")
+                vals["d"], texts["d"] = v, word
             elif letter not in _LETTERS:
                 raise self.err(f"unsupported word '{word}'")
             elif letter in vals:
@@ -109,7 +114,10 @@ class _Block(_State):
             else:
                 vals[letter] = v
                 texts[letter] = word
-        return {c for c, _ in gs}, ms, vals, texts
+        codes = {c for c, _ in gs}
+        if "d" in vals and not codes & {411, 421}:
+            raise self.err(f"cutter compensation word '{texts['d']}' without G41.1/G42.1 is not supported")
+        return codes, ms, vals, texts
 
     def assign(self, line: Line) -> None:
         """The line's parameter settings (``#1=2``): every value found before any is set, as in rs274."""
@@ -194,9 +202,21 @@ class _Block(_State):
             if "p" not in vals:
                 raise self.err("G4 needs a dwell time 'P' in seconds")
             self.emit("dwell", seconds=vals["p"])
+        if self.comp_side and codes & _COMP_FRAME:
+            raise self.err("a change of plane, coordinate system or offsets while cutter compensation is on is not "
+                           "supported: turn it off (G40) first")
         for code, plane in ((170, "XY"), (180, "XZ"), (190, "YZ")):
             if code in codes:
                 self.plane = plane
+        if 400 in codes:
+            self.comp_off()
+        if codes & {411, 421}:
+            if "d" not in vals:
+                raise self.err("cutter compensation G41.1/G42.1 needs the tool's diameter 'D'")
+            if "l" in vals:
+                raise self.err(f"'L{vals['l']:g}' (a lathe tool's orientation) with cutter compensation G41.1/G42.1 is "
+                               "not supported: the machine is a 3-axis mill")
+            self.comp_on(1 if 411 in codes else -1, vals["d"])
         if 430 in codes or 431 in codes:
             self.tool_length(codes, vals)
         if 490 in codes:
@@ -269,6 +289,7 @@ class _Block(_State):
         if 60 in mcodes:
             self.emit("pause", note=f"pallet change pause M60 (line {self.line_no})")
         if mcodes & {2, 30}:
+            self.comp_off()  # as rs274: the program's end turns compensation off
             raise _End
 
     def check_words(self, vals: dict[str, float], texts: dict[str, str], *, pq_offsets: bool = False) -> None:
@@ -277,7 +298,7 @@ class _Block(_State):
         scale = self.scale
         for k, v in vals.items():
             word = texts[k]
-            if k in "xyzijkrq@" or (k == "p" and pq_offsets):
+            if k in "xyzijkrqd@" or (k == "p" and pq_offsets):
                 if not abs(v * scale) <= MAX_COORD_MM:
                     raise self.err(f"word '{word}' is out of range: coordinates are at most {MAX_COORD_MM:g} mm "
                                    "either way")

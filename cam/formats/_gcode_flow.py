@@ -39,7 +39,8 @@ class _PlainLines(_State):
         """Run the plain lines from line ``idx`` of ``src`` on, at most ``limit``, and stop once :attr:`moves`
         holds :attr:`batch_moves` (as :func:`cam.formats.gcode._interpret` takes them after each line): how many
         lines ran, and the text of the line they stopped at when it was read (None: not read)."""
-        if self.inverse_time or self.resync is not None or (self.spindle and not self.spindle_noted) \
+        if self.inverse_time or self.resync is not None or (self.spindle and not self.spindle_noted) or self.comp_side \
+                or self.comp_exit is not None \
                 or len(self.moves) >= self.batch_moves:
             return 0, None
         keep = bool(src.o_at)  # cache the lines: O words may run them again

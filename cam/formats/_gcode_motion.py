@@ -18,8 +18,9 @@ class _Motion(_State):
     """Moves in the motion mode; a canned cycle's (:meth:`canned_cycle`) are :class:`~._gcode_cycles._Cycles`'."""
 
     def target(self, vals: dict[str, float]) -> list[float]:
-        """The program position (mm) the axis words of a line lead to."""
-        pos = self.pos()
+        """The program position (mm) the axis words of a line lead to (from the programmed position while
+        cutter compensation is on)."""
+        pos = self.comp_base()
         t = list(pos)
         for i, a in enumerate("xyz"):
             if a in vals:
@@ -100,6 +101,10 @@ class _Motion(_State):
         if self.motion in (0, 1):
             if any(k in vals for k in "ijk") or ("r" in vals):
                 raise self.err("I, J, K or R given without G2/G3")
+            if self.comp_side and not machine:
+                self.comp_move("rapid" if self.motion == 0 else "feed", t,
+                               {} if self.motion == 0 else self.feed_kw(vals))
+                return
             if self.motion == 0:
                 self.go("rapid", t)
             else:
@@ -108,6 +113,9 @@ class _Motion(_State):
         if self.motion == 33:
             self.thread_feed(vals, t)
             return
+        if self.comp_side:  # not compensated yet: refused before its centre is checked against the offset path
+            raise self.err("an arc (G2/G3) while cutter compensation is on is not supported: turn it off (G40) "
+                           "first")
         self.arc(vals, t)
 
     def spline(self, code: int, vals: dict[str, float]) -> None:

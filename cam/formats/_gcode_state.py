@@ -23,6 +23,10 @@ def _cs_param(cs: int) -> int:
 class _State:
     """Everything one run of a program keeps between its lines, and the words that read or set it."""
 
+    comp_side = 0  # cutter radius compensation (:class:`~._gcode_comp._Comp`): +1 left, -1 right, 0 off
+    comp_emitting = False  # its held moves are being recorded
+    comp_exit = None  # after G40: the programmed position the exit move starts from
+
     def __init__(self, source: _Source, *, home_g28_mm, home_g30_mm, tool_lengths_mm, subroutine_path,
                  max_lines, start_mm=(0.0, 0.0, 0.0), work_offsets_mm=None, active_offset="G54") -> None:
         self.main = source
@@ -97,6 +101,10 @@ class _State:
     def emit(self, kind: str, mach=None, **kw) -> GcodeMove:
         """Record a move of ``kind`` ending at machine mm ``mach`` (default: where the tool is), given from
         where the tool stood at the start (:attr:`start`), with the spindle's state."""
+        if self.comp_side and not self.comp_emitting:
+            what = {"dwell": "a dwell (G4)", "pause": "a pause or a tool change", "arc": "an arc (G2/G3)",
+                    "spline": "a spline (G5/G5.1)"}.get(kind, "a move other than G0/G1 (a canned cycle, G28/G30, G53)")
+            raise self.err(f"{what} while cutter compensation is on is not supported: turn it off (G40) first")
         end = tuple(map(sub, self.mach if mach is None else mach, self.start))
         move = GcodeMove(kind, self.line_no, end, spindle=self.spindle,  # type: ignore[arg-type]
                          spindle_rpm=self.spindle_rpm if self.spindle else 0.0, **kw)

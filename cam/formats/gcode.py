@@ -30,8 +30,12 @@ A small interpreter for the LinuxCNC language (tested against LinuxCNC's own ``r
   do/while, repeat/endrepeat, break/continue), M70..M73 modal state, and ``O<name> call`` of
   ``name.ngc`` found in the subroutine path.
 
+Cutter radius compensation G41.1/G42.1 D<diameter> for G0/G1 moves in G17 as rs274 runs it (entry move,
+concave corners intersected, convex ones rounded, Z-only moves, G40 and the exit move): :mod:`._gcode_comp`.
+
 Refused, each with a message saying why: probing (G38.x), rotary axes (A B C) and U V W, cutter
-radius compensation (G41/G42), lathe cycles and modes (G7, G7x, G76), rigid tapping (G33.1), NURBS blocks
+radius compensation G41/G42 by tool number (the tool table's diameter is not read) and arcs, cycles, dwells,
+pauses or frame changes while it is on, lathe cycles and modes (G7, G7x, G76), rigid tapping (G33.1), NURBS blocks
 (G5.2/G5.3), spindle cycles (G84, G86..G88), user M codes (M100..M199) and I/O (M62..M68).
 
 Every error is a :class:`~cam.errors.ParseError` naming ``file:line``, the word and the line.
@@ -58,6 +62,7 @@ from ..errors import ParseError
 from ..fileio import read_text
 from ..limits import DEFAULT_GCODE_LINES, MAX_COORD_MM, MAX_TOOL_NUMBER
 from ._gcode_block import _Block
+from ._gcode_comp import _Comp
 from ._gcode_cycles import _Cycles
 from ._gcode_data import PLANE_AXES, GcodeMove, GcodeProgram, MoveBatch, _shown
 from ._gcode_flow import _Flow
@@ -103,7 +108,7 @@ def load_tool_table(path: str | os.PathLike) -> dict[int, float]:
     return table
 
 
-class _Interp(_Flow, _Block, _Motion, _Cycles):
+class _Interp(_Flow, _Block, _Motion, _Cycles, _Comp):
     """The interpreter: one run of one program (its parts, each a module: the state and parameters
     :mod:`._gcode_state`, the lines and O words :mod:`._gcode_flow`, one block :mod:`._gcode_block`, motion
     :mod:`._gcode_motion`, canned cycles :mod:`._gcode_cycles`)."""
@@ -131,6 +136,7 @@ def _interpret(src: _Source, batch_moves: int, options: dict) -> Iterator[MoveBa
         for _ in interp.run():
             if len(interp.moves) >= batch_moves:
                 yield take()
+        interp.comp_off()  # the file ends with compensation on: its held moves run
         last = take()
         last.work_offsets_mm = interp.work_offsets_mm()
         yield last
