@@ -32,6 +32,7 @@ from test_grbl_session import FAST, SETTINGS, url
 SLOW_CASES: set[str] = set()
 
 FAKE_PARPORT = "/dev/cam-test-parport-43"  # a parallel port name no test machine has: nothing is ever opened
+NEW_DEVICE = "/dev/null"  # a device that is there (a new machine's), never opened as a port by these tests
 
 
 def one_line_error(proc, *fragments: str) -> str:
@@ -74,14 +75,18 @@ def mill(tmp_path, name: str = "mill.toml", x_max_steps: int = 12000):
 def test_missing_state_file_on_real_port_is_position_unknown(tmp_path, state_home):
     # the first command on a new machine says in one line how to set its position, and opens nothing
     for argv in (["jog", "X+", "10"], ["goto", "1,1,0"], ["zero"]):
-        one_line_error(run_cli(*argv, "--port", FAKE_PARPORT), "position is unknown", "no state file",
+        one_line_error(run_cli(*argv, "--port", NEW_DEVICE), "position is unknown", "no state file",
                        "cam home", "cam where --set X,Y,Z")
-    rep = json.loads(ok(run_cli("where", "--json", "--port", FAKE_PARPORT)).stdout)
+    # ... unless the device is not there at all: a typo in --port comes first
+    for argv in (["jog", "X+", "10"], ["goto", "1,1,0"]):
+        one_line_error(run_cli(*argv, "--port", FAKE_PARPORT), "cannot open parallel port", FAKE_PARPORT,
+                       "No such file or directory", "modprobe ppdev")
+    rep = json.loads(ok(run_cli("where", "--json", "--port", FAKE_PARPORT)).stdout)  # where opens nothing
     assert rep["position_known"] is False and "no state file" in rep["unknown_reason"]
     assert rep["state_file"] == str(state_home / "dev-cam-test-parport-43.json")
     # a typo in --state is a new (missing) file: position unknown too, nothing written
     typo = tmp_path / "mil.json"
-    one_line_error(run_cli("jog", "X+", "10", "--port", FAKE_PARPORT, "--state", typo), "position is unknown",
+    one_line_error(run_cli("jog", "X+", "10", "--port", NEW_DEVICE, "--state", typo), "position is unknown",
                    "typo in --state")
     assert not typo.exists()
     # the MAXIMUS board and grbl are real ports too; the mock, a simulated machine, starts at its home

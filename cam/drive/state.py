@@ -635,6 +635,19 @@ def port_device(port: Any, settings: Optional[MachineSettings] = None) -> Option
     return port
 
 
+def missing_device_message(port: str, device: str) -> str:
+    """One line for a real port whose device does not exist: what to check, in the words the port's own open
+    would use."""
+    kind = port_kind(port)
+    if kind == "parport":
+        return (f"cannot open parallel port {device} (No such file or directory): load the kernel driver "
+                f"(sudo modprobe ppdev), check the name (ls /dev/parport*) and that you may use it (the lp group)")
+    name = {"maximus": "MAXIMUS", "grbl": "grbl"}.get(kind, kind)
+    return (f"cannot open {name} port {device} (No such file or directory): check that the board is plugged in "
+            f"and switched on, the device name (ls /dev/ttyUSB* /dev/ttyACM* /dev/ttyS*) and that you may use it "
+            f"(the dialout group)")
+
+
 class DeviceLock(_LockFile):
     """One port, one user (issue #43 point 4): the lock on a machine's device itself, whatever state file a
     command keeps.  An ``flock`` on ``{state_dir}/ports/{the device's real path}.lock`` (holding the holder's
@@ -829,8 +842,14 @@ class StateHold:
         return self.state.unknown_reason
 
     def require_known(self) -> None:
-        """Refuse a move while the position is unknown (:class:`PositionUnknownError`, one line)."""
+        """Refuse a move while the position is unknown (:class:`PositionUnknownError`, one line).  A real port
+        with no state file and no device either is refused for the device (:func:`missing_device_message`): a
+        typo in ``--port`` is what the user has to fix first, not the position."""
         if not self.state.position_known:
+            if not self.existed and self.port is not None:
+                device = port_device(self.port, self.settings)
+                if device is not None and not os.path.exists(device):
+                    raise PortError(missing_device_message(str(self.port), device))
             raise PositionUnknownError(unknown_message(self.state, self.port))
 
     def save(self, state: MachineState) -> None:
