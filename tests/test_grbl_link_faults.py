@@ -209,6 +209,7 @@ def double_ok(every: bool = False, k: int = 0) -> Callable[[bytes], bytes]:
     return edit
 
 
+@pytest.mark.slow  # the answer is overdue after the queued moves' time three times over: about 8 s
 def test_a_lost_ok_is_a_fault_in_bounded_time_not_a_hang():
     """Issue #43 point 2: one ``ok`` lost.  cam waits no longer than the queued moves could take plus its
     margin, then stops the machine with one line."""
@@ -216,7 +217,7 @@ def test_a_lost_ok_is_a_fault_in_bounded_time_not_a_hang():
         proxy.board_line_filter = drop_ok(12)
         session = open_session(proxy, reply_margin_s=1.0)
         t0 = time.monotonic()
-        run_to_end(session, zigzag_job(SETTINGS))
+        run_to_end(session, zigzag_job(SETTINGS, feed_mm_min=3000.0))
         msg = fault_message(session)
         assert "has not answered" in msg and "a reply was lost" in msg and "soft reset" in msg, msg
         assert time.monotonic() - t0 < 60
@@ -272,6 +273,7 @@ BAD_REPORTS = [
     b"<Run|WPos:1.000,2.000,-inf>",
     b"<Run|FS:300,0>",
     b"<|MPos:0,0,0>",
+    b"<Run|MPos:1.000,0.0",  # cut short, and no reset after it
 ]
 HARMLESS_REPORTS = [
     b"<Run|MPos:1.000,0.000,0.000|Bf:15|FS:300,0>",

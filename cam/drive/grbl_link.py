@@ -49,6 +49,9 @@ RX_BUFFER_BYTES = 128
 PLANNER_BLOCKS = 15
 """grbl 1.1's planner blocks on an ATmega328P (config.h ``BLOCK_BUFFER_SIZE`` 16, one kept free): the most
 motion that can be queued behind a line grbl has not answered yet."""
+CUT_SHORT_S = 0.5
+"""How long a status report cut short (no ``>``) waits for the line after it: grbl's welcome says a reset cut
+it, anything else (or nothing) makes it a link fault."""
 HOMING_S = 600.0
 """The longest a ``$H`` may take before its answer is overdue (a homing cycle's search distance at its slowest)."""
 DEFAULT_BAUD = 115200
@@ -493,6 +496,11 @@ class _RealtimeBytes:
         return restarted
 
 
+def _is_welcome(line: str) -> bool:
+    """grbl's welcome line (``Grbl 1.1h ['$' for help]``), printed at every start and reset."""
+    return line.startswith("Grbl ") and "for help" in line
+
+
 class _Replies:
     """The reader side of :class:`GrblLink`: its thread reads grbl's lines and books each one under the link's
     lock (answers against the unanswered lines, status reports, push messages); a reply it cannot make sense of
@@ -503,6 +511,7 @@ class _Replies:
     _closing: bool
     _lost: Optional[BaseException]
     _fault: Optional[str]
+    _cut_short: Optional[tuple[str, float]]
     _connected: bool
     _outstanding: deque
     _outstanding_bytes: int
@@ -566,6 +575,13 @@ class _Replies:
     def _take_line(self, line: str) -> None:
         now = time.monotonic()
         self._last_rx = now
+        if self._cut_short is not None:
+            cut, self._cut_short = self._cut_short[0], None
+            if not _is_welcome(line):  # a welcome next: grbl was reset mid-report, which the welcome tells
+                self._set_fault(f"grbl on {self.device} sent a status report cut short ({cut[:60]!r})")
+        if line.startswith("<") and not line.endswith(">"):
+            self._cut_short = (line, now)  # a reset cuts grbl's output short: wait for the next line
+            return
         if line == "ok" or line.startswith("error:"):
             if not self._outstanding:
                 if self._connected:
@@ -618,7 +634,7 @@ class _Replies:
             except ValueError:
                 self._alarm = -1
             self.messages.append(line)
-        elif line.startswith("Grbl ") and "for help" in line:
+        elif _is_welcome(line):
             self.welcome = line
             if self._expected_resets:
                 self._expected_resets -= 1
@@ -672,6 +688,7 @@ class GrblLink(_Replies, _RealtimeBytes):
         self._wco: Optional[tuple[float, ...]] = None
         self._cancelled: Optional[str] = None
         self._fault: Optional[str] = None      # a link fault: replies that cannot be right; sticky until a reset
+        self._cut_short: Optional[tuple[str, float]] = None  # a status report with no end, and when it came
         self._connected = False                 # the welcome came: from here on every reply is counted
         self._answered_s: deque[float] = deque(maxlen=PLANNER_BLOCKS + 2)  # machine time of the last answers
         self._answer_clock = time.monotonic()   # the last answer (or a hold, which stops the clock)
@@ -741,6 +758,9 @@ class GrblLink(_Replies, _RealtimeBytes):
         """Raise the first fault seen: a lost link, a cancelled stream, an alarm, a reset grbl did on its own, a
         refused line."""
         self._raise_if_lost()
+        if self._cut_short is not None and time.monotonic() - self._cut_short[1] > CUT_SHORT_S:
+            self._set_fault(f"grbl on {self.device} sent a status report cut short ({self._cut_short[0][:60]!r})")
+            self._cut_short = None
         if self._fault is not None:
             raise GrblError(self._fault)
         if self._cancelled is not None:
