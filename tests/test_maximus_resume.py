@@ -222,6 +222,7 @@ def test_at_real_speed_ctrl_c_in_a_move_then_resume_drills_every_hole_once(tmp_p
     try:
         path, journal = write_board(tmp_path), tmp_path / "board.journal.json"
         port = f"maximus:{emu.device_path}"
+        assert main(["where", "--set", "0,0,0", "--port", port]) == 0  # a new machine (#43 point 5)
         env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
         proc = subprocess.Popen([sys.executable, "-m", "cam", "drill", str(path), "--yes", "--port", port,
                                  "--journal", str(journal), *FLAGS], cwd=tmp_path, env=env,
