@@ -10,6 +10,7 @@ import shutil
 import numpy as np
 import pytest
 
+from cam.errors import CamError, ParseError
 from cam.formats.gcode import parse_gcode
 from support.lcnc import parse_canonical, run_rs274
 
@@ -190,3 +191,186 @@ def test_gcode_cutter_compensation_refuses_the_rest_in_one_line(line, fragment):
         parse_gcode("G21\nG41 D1\n", source="p.ngc")
     with pytest.raises(Exception, match=r"p.ngc:3: the cutter compensation entry move \(1\) is not longer than"):
         parse_gcode("G21\nG41.1 D4\nG1 X1 F100\n", source="p.ngc")
+
+
+def _rs274_refusal(path) -> tuple[str, int] | None:
+    """rs274's refusal of the program at ``path``: (its message, the number of the line it names), or None."""
+    var = path.with_suffix(".var")
+    var.touch()  # rs274's parameters in the test's own directory (a missing file is one more line of stderr)
+    try:
+        run_rs274(str(path), var_file=var)
+    except CamError as exc:
+        message, _, line = str(exc).split("rs274 reports: ", 1)[1].partition(" / ")
+        lines = path.read_text().splitlines()
+        assert lines.count(line) == 1, (line, lines)
+        return message, lines.index(line) + 1
+    return None
+
+
+GOUGES = {
+    # left: up 1 after a long move, the next corner is concave again: the offset of the short move runs back 3
+    "left_concave": ("G21 G90 G17\nG0 X-10 Y-10\nG41.1 D4\nG1 X0 Y0 F100\nG1 X20 Y0\nG1 X20 Y1\nG1 X0 Y1\n"
+                     "G40\nG0 X-10 Y-10\nM2\n", 7, "feed"),
+    # right, traverses: a notch 1 wide with a tool 4 wide
+    "right_notch": ("G21 G90 G17\nG0 X-10 Y10\nG42.1 D4\nG0 X0 Y0\nG0 X20 Y0\nG0 X20 Y5\nG0 X21 Y5\nG0 X21 Y0\n"
+                    "G40\nM2\n", 8, "traverse"),
+    # the short move's own corner is concave, the next one convex: refused when the convex corner runs it
+    "then_convex": ("G21 G90 G17\nG0 X-10 Y-10\nG41.1 D4\nG1 X0 Y0 F100\nG1 X20 Y0\nG1 X20 Y1\nG1 X40 Y1\n"
+                    "G40\nM2\n", 7, "feed"),
+    # ... or when G40 (or M2) runs it
+    "then_g40": ("G21 G90 G17\nG0 X-10 Y-10\nG41.1 D4\nG1 X0 Y0 F100\nG1 X20 Y0\nG1 X20 Y1\nG40\nG0 X0 Y-10\n"
+                 "M2\n", 7, "feed"),
+    "then_m2": ("G20 G90 G17\nG0 X-1 Y-1\nG41.1 D0.25\nG1 X0 Y0 F10\nG1 X2 Y0\nG1 X2 Y0.1\nM2\n", 7, "feed"),
+}
+
+
+@needs_rs274
+@pytest.mark.parametrize("name", sorted(GOUGES))
+def test_cutter_comp_refuses_a_concave_corner_tighter_than_the_tool_like_rs274(tmp_path, name):
+    text, line, what = GOUGES[name]
+    path = tmp_path / f"{name}.ngc"
+    path.write_text(text)
+    assert _rs274_refusal(path) == (f"Straight {what} in concave corner cannot be reached by the tool without "
+                                    "gouging", line)
+    proc = cli("info", path, "--state", tmp_path / "s.json")
+    assert_one_line_error(proc, f"{name}.ngc:{line}: cutter compensation would gouge the part: a concave corner is "
+                                "too tight for the tool radius", f"rs274: Straight {what} in concave corner")
+    with pytest.raises(ParseError, match=f"{name}.ngc:{line}: "):
+        parse_gcode(text, source=path.name)
+    # the same outline with the tool small enough (radius 0.4 < the short move 1) runs as rs274 runs it
+    small = text.replace("D4", "D0.8").replace("D0.25", "D0.08")
+    path.write_text(small)
+    assert _rs274_refusal(path) is None
+    _assert_same_moves(small, path)
+
+
+def _assert_same_moves(text: str, path) -> None:
+    """cam runs ``text`` (in ``path``) as rs274 runs it: the same moves, ends and arcs."""
+    want = [(mv.kind.replace("traverse", "rapid"), mv.end, mv.center, mv.rotation < 0)
+            for mv in parse_canonical(run_rs274(str(path), var_file=path.with_suffix(".var")))]
+    got = [(mv.kind, mv.end, mv.center, mv.clockwise) for mv in parse_gcode(text, source=path.name).moves]
+    atol_mm = 3e-3 if "G20" in text else 2e-4  # rs274 prints 4 decimals of its units
+    assert len(got) == len(want), (got, want)
+    for (kind, end, centre, cw), (want_kind, want_end, want_centre, want_cw) in zip(got, want):
+        assert kind == want_kind and np.allclose(end, want_end, atol=atol_mm), (got, want)
+        if kind == "arc":
+            assert np.allclose(centre, want_centre, atol=atol_mm) and cw == want_cw, (got, want)
+
+
+@needs_rs274
+@pytest.mark.parametrize("entry, line", [
+    ("G1 X-8 Y-10 F100", 4),  # 2 long, the radius is 2
+    ("G1 X-8.5 Y-9 F100", 4),  # shorter than the radius
+    ("G1 Z-1 F100\nG1 X0 Y0", 4),  # a Z-only first move is an entry move of length 0
+    ("G0 X-10 Y-10 (stay)\nG1 X0 Y0 F100", 4),  # so is a move to where the tool stands
+])
+def test_cutter_comp_refuses_a_short_entry_move_like_rs274(tmp_path, entry, line):
+    text = f"G21 G90 G17\nG0 X-10 Y-10\nG41.1 D4\n{entry}\nG1 X20 Y0\nG40\nM2\n"
+    path = tmp_path / "entry.ngc"
+    path.write_text(text)
+    assert _rs274_refusal(path) == ("Length of cutter compensation entry move is not greater than the tool radius",
+                                    line)
+    assert_one_line_error(cli("info", path, "--state", tmp_path / "s.json"), f"entry.ngc:{line}: the cutter "
+                          "compensation entry move", "is not longer than the tool radius")
+    # a little longer than the radius: runs as rs274 runs it; with D0 even a Z-only first move does
+    for longer in (text.replace("X-8 Y-10", "X-7.9 Y-10"), text.replace("D4", "D0")):
+        if longer != text:
+            path.write_text(longer)
+            assert _rs274_refusal(path) is None
+            _assert_same_moves(longer, path)
+
+
+_CANON_N = re.compile(r"^\s*\d+\s+N(\d+)\s+(STRAIGHT_FEED|STRAIGHT_TRAVERSE|ARC_FEED)\(([^)]*)\)")
+
+
+def _rs274_runs_backwards(text: str, path, line: int, at: int) -> bool:
+    """Whether rs274, running the block of line ``at``, makes a straight move against the programmed move of line
+    ``line`` (a gouge).  Every line of ``text`` is numbered N10 x its line number; each move gives X and Y."""
+    xy = [dict(re.findall(r"([XY])(-?[\d.]+)", ln)) for ln in text.splitlines()]
+    prev = next(w for w in reversed(xy[:line - 1]) if w)
+    direction = (float(xy[line - 1]["X"]) - float(prev["X"]), float(xy[line - 1]["Y"]) - float(prev["Y"]))
+    last, backwards = (0.0, 0.0), False
+    for canon in run_rs274(str(path), var_file=path.with_suffix(".var")).splitlines():
+        m = _CANON_N.match(canon)
+        if m:
+            end = tuple(float(a) for a in m.group(3).split(",")[:2])
+            backwards |= (int(m.group(1)) == 10 * at and m.group(2) != "ARC_FEED"
+                          and (end[0] - last[0]) * direction[0] + (end[1] - last[1]) * direction[1] < -1e-3)
+            last = end
+    return backwards
+
+
+def _random_comp_program(rng) -> str:
+    """A random outline run with cutter compensation: an entry from outside, 3..7 corners (some closing the
+    outline, some with a Z-only move or a traverse), G40 and an exit move; every line numbered (N) so that the line
+    rs274 names can be found."""
+    def xy() -> str:
+        return f"X{rng.uniform(-30, 30):.3f} Y{rng.uniform(-30, 30):.3f}"
+
+    body = [f"G0 X{rng.uniform(-60, -40):.3f} Y{rng.uniform(-60, 60):.3f} Z1",
+            f"G{rng.choice(['41.1', '42.1'])} D{rng.uniform(0.2, 12):.3f}", f"G1 {xy()} F100"]
+    first = body[-1].split()[1:3]
+    for _ in range(rng.integers(3, 8)):
+        roll = rng.random()
+        body.append(f"G1 Z{rng.uniform(-2, 0):.3f}" if roll < 0.1 else f"G0 {xy()}" if roll < 0.2 else f"G1 {xy()}")
+    if rng.random() < 0.5:
+        body.append("G1 " + " ".join(first))
+    body += ["G40", f"G0 X{rng.uniform(40, 60):.3f} Y{rng.uniform(-60, 60):.3f}", "M2"]
+    return "G21 G90 G17\n" + "".join(f"N{10 * (i + 2)} {ln}\n" for i, ln in enumerate(body))
+
+
+def _assert_runs_like_rs274(text: str, path, refusal: tuple[str, int] | None) -> None:
+    """cam runs the compensated program ``text`` as rs274 does (``refusal``: :func:`_rs274_refusal`'s): the same
+    moves, or a one-line refusal naming the line rs274 names (a gouge for a gouge); or, where rs274 runs a move
+    backwards straight on (a corner within its 0.05 rad of straight: not checked) and gouges, a refusal."""
+    if refusal is None:
+        try:
+            parse_gcode(text, source=path.name)
+        except ParseError as exc:
+            m = re.match(rf"{path.name}:(\d+): cutter compensation would gouge the part: .* the compensated move of "
+                         r"line (\d+) would run backwards", str(exc))
+            assert m and _rs274_runs_backwards(text, path, int(m.group(2)), int(m.group(1))), (str(exc), text)
+            return
+        _assert_same_moves(text, path)
+        return
+    with pytest.raises(ParseError) as exc:
+        parse_gcode(text, source=path.name)
+    message = str(exc.value)
+    assert "\n" not in message and message.startswith(f"{path.name}:{refusal[1]}: "), (refusal, message, text)
+    assert ("gouge" in message) == ("gouging" in refusal[0]), (refusal, message)
+
+
+@needs_rs274
+def test_cutter_comp_agrees_with_rs274_on_random_polygons(tmp_path):
+    """40 random outlines and tool radii: where rs274 runs one, cam runs the same moves; where rs274 refuses it
+    (a tool too big for a corner, a short entry), cam refuses it in one line naming the same line."""
+    rng = np.random.default_rng(44_6)
+    texts = [_random_comp_program(rng) for _ in range(40)]
+    paths = [tmp_path / f"r{i}.ngc" for i in range(len(texts))]
+    for path, text in zip(paths, texts):
+        path.write_text(text)
+    refusals = [_rs274_refusal(path) for path in paths]  # one at a time: rs274s at once may crash (SIGBUS)
+    for path, text, refusal in zip(paths, texts, refusals):
+        _assert_runs_like_rs274(text, path, refusal)
+    assert 8 <= refusals.count(None) <= 32, refusals  # both kinds are met
+
+
+@needs_rs274
+def test_cutter_comp_refuses_a_backwards_move_that_rs274_runs_straight_on(tmp_path):
+    # up 1 after a long move (a concave corner meeting 2 above), then straight on up: rs274 checks no move before
+    # a corner within 0.05 rad of straight, and runs the short move's offset back down 1 mm: the tool, 2 mm in
+    # radius, cuts 1 mm below the edge Y0.  cam refuses it in one line.
+    body = ["G21 G90 G17", "G0 X-10 Y-10", "G41.1 D4", "G1 X0 Y0 F100", "G1 X20 Y0", "G1 X20 Y1", "G1 X20 Y30",
+            "G40", "G0 X40 Y40", "M2"]
+    text = "".join(f"N{10 * i} {ln}\n" for i, ln in enumerate(body, 1))
+    path = tmp_path / "on.ngc"
+    path.write_text(text)
+    assert _rs274_refusal(path) is None and _rs274_runs_backwards(text, path, 6, 7)
+    assert_one_line_error(cli("info", path, "--state", tmp_path / "s.json"), "on.ngc:7: cutter compensation would "
+                          "gouge the part", "the compensated move of line 6 would run backwards")
+    # an arc just after G40 is refused by both
+    path.write_text(text.replace("X20 Y1\n", "X20 Y10\n").replace("G0 X40 Y40", "G2 X30 Y10 R10"))
+    assert _rs274_refusal(path) == ("The move just after exiting cutter compensation mode must be straight, not an arc",
+                                    9)
+    assert_one_line_error(cli("info", path, "--state", tmp_path / "s.json"), "on.ngc:9: the move just after cutter "
+                          "compensation is turned off (G40) must be straight")

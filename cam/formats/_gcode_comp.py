@@ -10,8 +10,15 @@ travel:
   compensation side) at their intersection, which moves the end of the move before it (and any Z-only moves
   in between); a convex one (turning away) with an arc about the programmed corner at the radius (a feed;
   before a G0, a straight traverse), flat at the height the move before it ended;
+* a corner turning less than 0.05 radians either way is run straight on (neither met nor rounded), as rs274;
 * a Z-only move keeps the XY offset of the move before it; G40 ends compensation and the next move runs
-  straight from the offset point to its programmed end (the exit move).
+  straight from the offset point to its programmed end (the exit move), which must not be an arc;
+* D0 runs the programmed path.
+
+Gouges are refused, each in one line naming the line that decides them, as rs274 refuses them: an entry move
+not longer than the radius; a held move (not the entry move) whose end a concave corner moved back past its
+start, so that the tool would run it backwards and cut into the part ("concave corner too tight").  rs274 does
+not check a move run straight on after such a corner and cuts there: `cam` refuses that too.
 
 Moves are held until the next XY move decides their ends (one corner of lookahead).  Refused while compensation
 is on, each in one line naming the line: arcs (G2/G3), splines, canned cycles, G28/G30, G53, changes of the
@@ -26,6 +33,7 @@ from typing import Any, Optional
 from ._gcode_state import _State
 
 _EPS = 1e-9
+_SMALL = 0.05  # radians: a corner turning less is run straight on, neither met nor rounded (as rs274)
 
 
 class _Comp(_State):
@@ -77,10 +85,25 @@ class _Comp(_State):
             raise self.err(f"{what} while cutter compensation is on is not supported: turn it off (G40) first")
 
     def comp_flush(self) -> None:
-        """Run the held moves."""
+        """Run the held moves, refusing one that would run backwards against its programmed direction: its end
+        was moved back past its start by a concave corner too tight for the tool (rs274 refuses it too), the
+        tool would cut into the part."""
         queue, self.comp_queue = self.comp_queue or [], []
         for mv in queue:
+            if not mv["follows"] and not mv["entry"]:  # the entry move's end may move anywhere, as in rs274
+                self._comp_check(mv)
             self._comp_go(mv["kind"], [mv["x"], mv["y"], mv["z"]], mv["line"], mv["source"], mv["kw"])
+
+    def _comp_check(self, mv: dict[str, Any]) -> None:
+        """Refuse the held straight move ``mv`` if it would run against its programmed direction."""
+        sx, sy = self.pos()[:2]
+        d = mv["d"]
+        if (mv["x"] - sx) * d[0] + (mv["y"] - sy) * d[1] < -1e-9:
+            what = "traverse" if mv["kind"] == "rapid" else "feed"
+            raise self.err(f"cutter compensation would gouge the part: a concave corner is too tight for the tool "
+                           f"radius {self.comp_radius_mm / self.scale:g}, the compensated move of line {mv['line']} "
+                           f"would run backwards (rs274: Straight {what} in concave corner cannot be reached by the "
+                           "tool without gouging)")
 
     def _comp_go(self, kind: str, prog: list[float], line: int, source: Any, kw: dict) -> None:
         here = (self.line_no, self.source)
@@ -100,6 +123,11 @@ class _Comp(_State):
         """A G0 (``kind`` "rapid") or G1 ("feed") move to the program position ``t`` while compensation is on."""
         p = self.comp_prog
         r = self.comp_radius_mm
+        if r == 0:  # as rs274: a zero radius runs the programmed path
+            self.comp_flush()
+            self._comp_go(kind, list(t), self.line_no, self.source, kw)
+            self.comp_prog = list(t)
+            return
         dx, dy = t[0] - p[0], t[1] - p[1]
         length = math.hypot(dx, dy)
         queue = self.comp_queue
@@ -119,14 +147,13 @@ class _Comp(_State):
             if length <= r:
                 raise self.err(f"the cutter compensation entry move ({length / self.scale:g}) is not longer than the "
                                f"tool radius ({r / self.scale:g})")
-            queue.append({**entry, "x": t[0] + r * n[0], "y": t[1] + r * n[1], "follows": False})
         else:
             d1 = self.comp_dir
             n1 = self._normal(d1)
             cx, cy = self.comp_corner
             cross = d1[0] * d[1] - d1[1] * d[0]
-            dot = d1[0] * d[0] + d1[1] * d[1]
-            if self.comp_side * cross > 1e-12 and dot > -1 + 1e-12:  # concave: the offset lines meet
+            turn = self.comp_side * math.atan2(cross, d1[0] * d[0] + d1[1] * d[1])  # > 0: toward the offset side
+            if _SMALL < turn < math.pi - _SMALL:  # concave: the offset lines meet
                 # (c + r n1) + s d1 = (c + r n) + u d: solve for s
                 ax, ay = r * (n[0] - n1[0]), r * (n[1] - n1[1])
                 s = (ax * d[1] - ay * d[0]) / cross
@@ -136,17 +163,19 @@ class _Comp(_State):
                     if not mv["follows"]:
                         break
                 self.comp_flush()
-            else:
+            elif turn < -_SMALL or turn >= math.pi - _SMALL:  # convex: round the corner at the radius
                 self.comp_flush()
                 sx, sy = cx + r * n[0], cy + r * n[1]
-                if abs(cross) > 1e-12 or dot < 0:  # convex: round the corner at the radius
-                    z = self.pos()[2]
-                    if kind == "rapid":
-                        self._comp_go("rapid", [sx, sy, z], self.line_no, self.source, {})
-                    elif r > 0:
-                        self._comp_go("arc", [sx, sy, z], self.line_no, self.source,
-                                      dict(center=(cx, cy), clockwise=self.comp_side > 0, plane="XY", turns=1, **kw))
-            self.comp_queue.append({**entry, "x": t[0] + r * n[0], "y": t[1] + r * n[1], "follows": False})
+                z = self.pos()[2]
+                if kind == "rapid":
+                    self._comp_go("rapid", [sx, sy, z], self.line_no, self.source, {})
+                else:
+                    self._comp_go("arc", [sx, sy, z], self.line_no, self.source,
+                                  dict(center=(cx, cy), clockwise=self.comp_side > 0, plane="XY", turns=1, **kw))
+            else:  # (nearly) straight on, within rs274's 0.05 radians: straight to the next offset end
+                self.comp_flush()
+        self.comp_queue.append({**entry, "x": t[0] + r * n[0], "y": t[1] + r * n[1], "d": d, "follows": False,
+                                "entry": self.comp_dir is None})
         self.comp_dir = d
         self.comp_corner = (t[0], t[1])
         self.comp_prog = list(t)

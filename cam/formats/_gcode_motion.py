@@ -94,6 +94,9 @@ class _Motion(_State):
                 if a in vals:
                     t[i] = vals[a] * self.scale - off[i]
         elif self.motion in (0, 1, 2, 3, 33):
+            if self.motion in (2, 3) and self.comp_exit is not None:
+                raise self.err("the move just after cutter compensation is turned off (G40) must be straight, not an "
+                               "arc (as rs274)")
             t = self.target(vals)
         else:
             self.canned_cycle(vals)
