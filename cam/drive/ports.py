@@ -26,14 +26,14 @@ import tempfile
 import threading
 import time
 from pathlib import Path
-from typing import IO, Iterator, Optional
+from typing import IO, Any, Iterator, Optional
 
 import numpy as np
 
 from ..errors import CapabilityError, PortError
 from ..settings import INPUT_BITS, MachineSettings
 from ..verify.pinlog import HEADER as PIN_LOG_HEADER
-from ..verify.pinlog import PinLog, read_pin_log
+from ..verify.pinlog import PinLog, PinLogPart, read_pin_log
 from .pins import axis_bits
 
 __all__ = ["Port", "MockPort", "ParallelPort", "open_port", "port_kind", "CAPABILITIES", "require", "MAXIMUS_PREFIX",
@@ -145,8 +145,9 @@ class _PinLogWriter:
         self._thread = threading.Thread(target=self._run, name="cam-pin-log", daemon=True)
         self._thread.start()
 
-    def put(self, parts: list[tuple[np.ndarray, np.ndarray, np.ndarray]]) -> None:
-        """Write these ``(t_ns, data, strobe)`` arrays (int64, uint8, uint8), in order, after those put before."""
+    def put(self, parts: "list[tuple[np.ndarray, np.ndarray, np.ndarray] | bytes]") -> None:
+        """Write these ``(t_ns, data, strobe)`` arrays (int64, uint8, uint8) and bytes (a part's comment line), in
+        order, after those put before."""
         self._queue.put(parts)
 
     def close(self) -> Optional[OSError]:
@@ -164,13 +165,24 @@ class _PinLogWriter:
                 return
             if self.error is not None:
                 continue
-            t_ns, data, strobe = (np.concatenate(a) if len(a) > 1 else a[0] for a in zip(*parts))
             try:
-                for i in range(0, len(t_ns), _LOG_ROWS):  # the rows np.savetxt(fmt="%d") writes, formatted compiled
-                    self.file.write(pin_rows_kernel(t_ns[i:i + _LOG_ROWS], data[i:i + _LOG_ROWS].astype(np.int64),
-                                                    strobe[i:i + _LOG_ROWS].astype(np.int64)))
+                rows: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+                for item in parts + [b""]:  # runs of rows, and a part's comment line between them
+                    if not isinstance(item, bytes):
+                        rows.append(item)
+                        continue
+                    if rows:
+                        self._write_rows(rows, pin_rows_kernel)
+                        rows = []
+                    self.file.write(item)
             except OSError as exc:
                 self.error = exc
+
+    def _write_rows(self, rows: list[tuple[np.ndarray, np.ndarray, np.ndarray]], kernel: Any) -> None:
+        t_ns, data, strobe = (np.concatenate(a) if len(a) > 1 else a[0] for a in zip(*rows))
+        for i in range(0, len(t_ns), _LOG_ROWS):  # the rows np.savetxt(fmt="%d") writes, formatted compiled
+            self.file.write(kernel(t_ns[i:i + _LOG_ROWS], data[i:i + _LOG_ROWS].astype(np.int64),
+                                   strobe[i:i + _LOG_ROWS].astype(np.int64)))
 
 
 _LOG_QUEUE = 4
@@ -188,6 +200,9 @@ class MockPort(Port):
 
     ``switches``: simulated home, limit and e-stop switches (:class:`SwitchSchedule`); the mock then counts the
     steps of its writes, and :meth:`read_inputs` gives the levels at the position they reached.
+
+    One mock may log several runs of a command (``cam drill``'s travel to the work zero, then the job):
+    :meth:`begin_part` marks where each begins and goes on with the time line (:class:`PinLogPart`).
     """
 
     name = "mock"
@@ -209,10 +224,12 @@ class MockPort(Port):
         self.pin_log_path = Path(pin_log_path) if pin_log_path is not None else None
         self._file: Optional[IO[bytes]] = None
         self._writer: Optional[_PinLogWriter] = None
-        self._to_log: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []  # writes not yet handed to the writer
+        self._to_log: list[tuple[np.ndarray, np.ndarray, np.ndarray] | bytes] = []  # not yet handed to the writer
         self._to_log_n = 0
         self.n_writes = 0
         self.last_t_ns: Optional[int] = None
+        self.parts: list[PinLogPart] = []
+        """The parts of the command marked so far (:meth:`begin_part`)."""
 
     @property
     def reads_inputs(self) -> bool:
@@ -276,6 +293,20 @@ class MockPort(Port):
         if self._to_log_n >= _LOG_ROWS:
             self._hand_to_writer()
 
+    def begin_part(self, name: str, start_steps: tuple[int, int, int], gap_ns: int = 0) -> PinLogPart:
+        """The writes from here on are part ``name`` of the command (``travel``, ``job``), which starts with the
+        tool at ``start_steps`` (machine frame): marked in the pin log (its comment line, when it streams), its
+        times ``gap_ns`` after the last write so far (the writes' own times run from 0 at the part's start)."""
+        self._flush()
+        if self.last_t_ns is not None:
+            self.time_offset_ns = int(self.last_t_ns) + int(gap_ns)
+        part = PinLogPart(str(name), self.n_writes, tuple(int(v) for v in start_steps),  # type: ignore[arg-type]
+                          self.time_offset_ns)
+        self.parts.append(part)
+        if self.keep_log and self.pin_log_path is not None:  # in order with the rows; the file opens at a write
+            self._to_log.append((part.line() + "\n").encode("ascii"))
+        return part
+
     def _hand_to_writer(self) -> None:
         if self._to_log and self._writer is not None:
             self._writer.put(self._to_log)
@@ -332,6 +363,11 @@ class MockPort(Port):
         if self.pin_log_path is None:
             return None
         self._flush()
+        if self._writer is None and self._to_log and self.keep_log:  # part lines before any write
+            try:
+                self._writer = _PinLogWriter(self._open_log())
+            except OSError as exc:
+                self._abandon_pin_log(exc)
         self._hand_to_writer()
         error = self._writer.close() if self._writer is not None else None
         self._writer = None
@@ -381,15 +417,16 @@ class MockPort(Port):
         """Every write so far, in order (read back from the file when it streams to one)."""
         self._flush()
         if self.pin_log_path is not None:
-            if self._file is not None:
+            if self._file is not None or self._to_log:
                 self.finish_pin_log()
             return read_pin_log(self.pin_log_path)
         pieces = list(self.pin_log_pieces())
         if not pieces:
-            return PinLog(np.zeros(0, np.int64), np.zeros(0, np.uint8), np.zeros(0, np.uint8))
-        if len(pieces) == 1:
+            return PinLog(np.zeros(0, np.int64), np.zeros(0, np.uint8), np.zeros(0, np.uint8), tuple(self.parts))
+        if len(pieces) == 1 and not self.parts:
             return pieces[0]
-        return PinLog(*(np.concatenate([getattr(p, f) for p in pieces]) for f in ("t_ns", "data", "strobe")))
+        return PinLog(*(np.concatenate([getattr(p, f) for p in pieces]) for f in ("t_ns", "data", "strobe")),
+                      tuple(self.parts))
 
 
 class ParallelPort(Port):
