@@ -90,10 +90,11 @@ def run_steps(session: Any, name: str, plan: "StepPlan | ChunkedPlan", ctl: Cont
                     late_total_s=round(result.lateness.total_ns / 1e9, 6), reramps=result.lateness.reramps)
     log = None
     if isinstance(result.port, MockPort):  # its log stays with the port (bounded memory), read when asked
-        info["last_write_job_ns"] = result.port.last_t_ns
+        last = result.port.last_t_ns
+        info["last_write_job_ns"] = None if last is None else last - result.port.time_offset_ns  # the run's own
         log = result.port if result.port.pin_log_path is None else None
-    session.finish(info, np.array(result.position_steps, np.int64), result=result,
-                   pin_log=log if name == "job" else None)
+    # (a travel's too: the session keeps the one to a job's work zero with the job's)
+    session.finish(info, np.array(result.position_steps, np.int64), result=result, pin_log=log)
     text = f"{label}: {result.status}"
     if result.status == "finished" and name == "job":  # the page's finished line: elapsed, and how late
         text += "; " + run_timing_text(result.machine_time_s, result.wall_time_s, info, plan.settings.ramp,

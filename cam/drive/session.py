@@ -60,6 +60,7 @@ from .apart import RunnerProcess
 from .journal import JournalSpec, journal_spec
 from ._session_parts import Activity, Prompt, PromptFn
 from ._session_checks import SessionChecks
+from ._session_pinlog import SessionPinLogs
 from .activities import BoardControl, drill_work, move_work, run_on_board, run_steps
 from .maximus.board import maximus_port
 from .grbl_machine import adopt_position, grbl_machine
@@ -75,7 +76,7 @@ MAX_JOG_STEPS = 100_000
 """The longest jog one request may ask for, either way."""
 
 
-class MachineSession(SessionChecks):
+class MachineSession(SessionChecks, SessionPinLogs):
     """The machine as every front end sees it (thread-safe).
 
     Args:
@@ -121,6 +122,9 @@ class MachineSession(SessionChecks):
         self.last_result: Optional[RunResult] = None
         self._last_job_port: Optional[MockPort] = None  # the mock that ran the last job: it holds its log
         self._last_job_log: Any = None
+        self._last_job_parts: list = []  # its (name, mock, start: machine frame) parts: the travel there, the job
+        self._last_pin_log: Any = None
+        self._travel_port: Any = None  # (mock, start) of the travel to the work zero of the job that runs next
         self.version = 0
         self._runner_process: Optional[RunnerProcess] = None
         self.state_hold = state
@@ -136,15 +140,6 @@ class MachineSession(SessionChecks):
                 self.log(self.grbl.notice, "info")
                 self.grbl.notice = ""  # once: the machine is shared by the sessions of this process
             self._position = np.asarray(adopt_position(self.grbl, state, self.log), np.int64)
-
-    @property
-    def last_job_pin_log(self) -> Any:
-        """The pin log of the last job run on the mock port (a :class:`~cam.verify.pinlog.PinLog`, read from the
-        port when first asked: the run itself holds no more than the mock's bounded buffer), or None."""
-        with self._lock:
-            if self._last_job_log is None and self._last_job_port is not None:
-                self._last_job_log = self._last_job_port.pin_log()
-            return self._last_job_log
 
     def runner_process(self) -> RunnerProcess:
         """The process real-time step plans run in (started at the first; ended with the session)."""
@@ -377,8 +372,8 @@ class MachineSession(SessionChecks):
             self.last_run = info
             self._last_activity = a
             self.last_result = result
-            if pin_log is not None:
-                self._last_job_port, self._last_job_log = pin_log, None
+            self._book_pin_log(None if a is None else a.name, pin_log, tuple(int(v) for v in self._activity_start),
+                               self._then is not None and info.get("status") == "finished")
             self._activity = None
             self._prompt = None
             self._finished_wall = time.monotonic()
@@ -389,6 +384,7 @@ class MachineSession(SessionChecks):
                 try:
                     then()
                 except CamError as e:
+                    self._travel_port = None
                     self.log(f"the job did not start: {e}")
                     self.last_run = dict(info, status="error", messages=[str(e)])
 

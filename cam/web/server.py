@@ -842,7 +842,7 @@ async def _pinlog(st: _AppState, request: Request):
     from starlette.concurrency import run_in_threadpool
     from starlette.responses import FileResponse
 
-    log = st.session.last_job_pin_log
+    log = st.session.last_pin_log  # every write: the travel to the work zero too, each part marked
     if log is None:
         raise HttpError(404, "no job has run on the mock port yet")
     if st.pin_log_csv is None or st.pin_log_csv[0] is not log:

@@ -17,7 +17,7 @@ from ..drive.journal import read_journal
 from ..drive.maximus.resume import resume_board_job
 from ..job.jobs import JobOptions, PreparedJob, prepare_job, resume_job
 from ..settings import MachineSettings
-from ..verify.pinlog import PinLog, write_pin_log
+from ..verify.pinlog import PinLog, PinLogPart, write_pin_log
 
 __all__ = ["plan_with_preview", "preview_of", "resumed_from_journal", "save_pin_log_raw", "pin_log_csv", "WARM_UP"]
 
@@ -50,7 +50,9 @@ def preview_of(job: PreparedJob) -> bytes:
 
 
 def save_pin_log_raw(log: PinLog, path: str | os.PathLike) -> None:
-    """Write a pin log's three arrays, one after the other, as ``.npy`` records (the server's side).
+    """Write a pin log's three arrays, one after the other, as ``.npy`` records (the server's side), then its parts
+    (the travel to the work zero, the job: :class:`~cam.verify.pinlog.PinLogPart`) as two more: their names and
+    ``(first row, x, y, z, t0_ns)``.
 
     ``numpy`` writes each array's bytes with the interpreter lock released, so the step runner's
     thread is not held up however long the log.
@@ -58,12 +60,17 @@ def save_pin_log_raw(log: PinLog, path: str | os.PathLike) -> None:
     with open(path, "wb") as handle:
         for values in (log.t_ns, log.data, log.strobe):
             np.save(handle, np.ascontiguousarray(values), allow_pickle=False)
+        np.save(handle, np.array([p.name for p in log.parts], dtype="U16"), allow_pickle=False)
+        np.save(handle, np.array([(p.first_row, *p.start_steps, p.t0_ns) for p in log.parts], np.int64).reshape(-1, 5),
+                allow_pickle=False)
 
 
 def pin_log_csv(raw_path: str, csv_path: str) -> str:
     """Read a raw pin log of :func:`save_pin_log_raw` and write its CSV (in the worker); returns ``csv_path``."""
     with open(raw_path, "rb") as handle:
-        t_ns, data, strobe = (np.load(handle, allow_pickle=False) for _ in range(3))
-    write_pin_log(PinLog(t_ns, data, strobe), csv_path)
+        t_ns, data, strobe, names, marks = (np.load(handle, allow_pickle=False) for _ in range(5))
+    parts = tuple(PinLogPart(str(n), int(m[0]), (int(m[1]), int(m[2]), int(m[3])), int(m[4]))
+                  for n, m in zip(names, marks))
+    write_pin_log(PinLog(t_ns, data, strobe, parts), csv_path)
     Path(raw_path).unlink(missing_ok=True)
     return csv_path
