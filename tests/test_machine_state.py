@@ -171,13 +171,13 @@ def test_a_drawing_job_is_cut_at_the_work_zero_and_the_state_keeps_its_end(tmp_p
     proc = ok(run_cli("drill", SAMPLES / "ellipse.png", "--depth", "2", "--state", st, "--pin-log",
                       tmp_path / "j.csv", "--tool", "point"))
     assert "going to the work zero first: machine [800, 400, 0] -> [0, 0, 0] steps" in proc.stderr
-    assert np.array_equal(decode_pin_log(read_pin_log(tmp_path / "j.csv"), S).position_steps, want)
+    assert np.array_equal(decode_pin_log(read_pin_log(tmp_path / "j.csv", part="job"), S).position_steps, want)
     s = state_of(st)
     assert s.position_steps == (0, 0, 0) and s.position_known and s.running is None and s.tool == "point"
     ok(run_cli("goto", "100,50,3", "--state", st))
     ok(run_cli("zero", "--state", st))  # a work zero 3 steps deep: the job is cut from there
     ok(run_cli("drill", SAMPLES / "ellipse.png", "--depth", "2", "--state", st, "--pin-log", tmp_path / "k.csv"))
-    assert np.array_equal(decode_pin_log(read_pin_log(tmp_path / "k.csv"), S).position_steps, want)
+    assert np.array_equal(decode_pin_log(read_pin_log(tmp_path / "k.csv", part="job"), S).position_steps, want)
     assert state_of(st).position_steps == (800, 400, 3)  # a job ends at its home: the work zero
     # placed where it does not fit: refused in the machine frame, naming the axis and by how much
     ok(run_cli("zero", "XY", "--at", "286,286,0", "--state", st))
@@ -228,9 +228,9 @@ def test_a_drill_file_is_placed_at_the_work_zero(tmp_path):
     ok(run_cli("goto", "0,0,0", "--machine-coords", "--state", st))
     proc = ok(run_cli("drill", SAMPLES / "board.drl", "--yes", "--state", st, "--pin-log", tmp_path / "j.csv"))
     assert "going to the work zero first: machine [0, 0, 0] -> [1000, 600, 0] steps" in proc.stderr
-    job = decode_pin_log(read_pin_log(tmp_path / "j.csv"), S).position_steps
+    job = decode_pin_log(read_pin_log(tmp_path / "j.csv", part="job"), S).position_steps
     want = decode_pin_log(read_pin_log(tmp_path / "ref.csv"), S).position_steps
-    assert np.array_equal(job, want)  # the same job, in its own frame: the pin log holds the job only
+    assert np.array_equal(job, want)  # the same job, in its own frame: the pin log marks the job's part
     assert state_of(st).position_steps == tuple(int(z) + int(m) for z, m in zip((1000, 600, 0), want[-1]))
     # placed where it does not fit: refused in the machine frame, naming the axis and by how much
     ok(run_cli("zero", "--at", "285,0,0", "--state", st))  # 9862 steps

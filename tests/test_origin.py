@@ -24,9 +24,11 @@ def _cut_box(tmp_path, name: str, *flags: str) -> tuple[np.ndarray, np.ndarray]:
     assert r.returncode == 0, r.stderr
     where = json.loads(run_cli("where", "--json", "--state", state).stdout)
     zero = np.array(where["offsets_steps"]["G54"], np.int64)
-    home = np.array(where["machine_steps"], np.int64)  # every job ends back at its own home
-    pos = decode_pin_log(read_pin_log(log), DEFAULT_SETTINGS).position_steps + home
-    cut = pos[pos[:, 2] > home[2]]
+    whole = read_pin_log(log)  # every write of the command (issue #44 point 4): from where it started
+    pos = decode_pin_log(whole, DEFAULT_SETTINGS).position_steps + np.array(whole.parts[0].start_steps, np.int64)
+    job = whole.parts[-1]  # every job ends back at its own home, where it started
+    assert job.name == "job" and tuple(where["machine_steps"]) == job.start_steps
+    cut = pos[pos[:, 2] > zero[2]]
     return zero, np.array([[cut[:, 0].min(), cut[:, 0].max()], [cut[:, 1].min(), cut[:, 1].max()]])
 
 

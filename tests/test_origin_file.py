@@ -66,7 +66,7 @@ def _cut(tmp_path, name: str, *flags: str, at_mm: str = "50,50,0") -> tuple[np.n
     r = run_cli("drill", _file(tmp_path, name), "--yes", "--state", state, "--pin-log", log, *flags)
     assert r.returncode == 0, r.stderr
     home = np.array(json.loads(run_cli("where", "--json", "--state", state).stdout)["machine_steps"], np.int64)
-    pos = decode_pin_log(read_pin_log(log), S).position_steps + home  # a job ends at its home
+    pos = decode_pin_log(read_pin_log(log, part="job"), S).position_steps + home  # a job ends at its home
     return zero, home, pos[pos[:, 2] > zero[2]]
 
 
@@ -178,7 +178,7 @@ def test_a_run_stopped_at_its_first_pause_resumes_at_the_work_zero(tmp_path):
     assert r.returncode == 0, r.stderr
     where = json.loads(run_cli("where", "--json", "--state", state).stdout)
     assert where["machine_steps"] == zero.tolist()  # the job ends at its home: the file's zero, at the work zero
-    pos = decode_pin_log(read_pin_log(log), S).position_steps + zero
+    pos = decode_pin_log(read_pin_log(log, part="job"), S).position_steps + zero
     deepest = pos[pos[:, 2] == pos[:, 2].max()]
     assert {(int(x), int(y)) for x, y in deepest[:, :2]} == {(int(zero[0]) + x, int(zero[1]) + y)
                                                              for x, y in _own_steps("board.drl")}

@@ -3,7 +3,8 @@
 The session (:class:`cam.drive.session.MachineSession`) does the work on every
 port; here are only the terminal's parts: the progress bar, the prompts at
 tool changes and Pause At points (Enter, or ``--yes``), Ctrl-C (stop: the tool
-is lifted), the pin log file, and the machine state file (:mod:`cam.drive.state`):
+is lifted), the pin log file (every write of the command: the travel to the work
+zero, then the job, each part marked), and the machine state file (:mod:`cam.drive.state`):
 every run starts where it says the tool stands and records where it ended.
 """
 from __future__ import annotations
@@ -27,7 +28,7 @@ from ..drive.state import MachineState, PositionUnknownError, StateHold, check_i
 from ..errors import CamError, CapabilityError, PortError
 from ..job.model import Job
 from ..settings import MachineSettings
-from ..verify.pinlog import write_pin_log
+from ..verify.pinlog import join_pin_logs, write_pin_log
 from .checks import job_kind_of
 from .common import progress_wanted
 from .machine_state import hold_machine
@@ -164,7 +165,8 @@ def execute(job: Any, args: argparse.Namespace, settings: MachineSettings, *,
     SIGTERM or a fault.  ``hold``: the caller's hold on that file (a go-to or a jog, planned from its
     position); None: taken here, for the run.  ``start_steps``: a resumed job's start in its own frame (the
     journal's ``position_steps``; the journal's home places it in the machine frame).  Ctrl-C stops the job
-    cleanly (tool lifted, position reported).  Writes ``args.pin_log`` after a run on the mock.
+    cleanly (tool lifted, position reported).  Writes ``args.pin_log`` after a run on the mock: every write of the
+    command, the travel to the work zero (part ``travel``) and the job (part ``job``) on one time line.
     ``journal``: keep the job's journal in this file (:mod:`cam.drive.journal`); should this process die,
     the real-time runner process writes the journal and the pin log itself.
     ``state_error_in_outcome``: a state file that cannot record where the run ended comes back as the outcome's
@@ -240,6 +242,9 @@ def _drive(job: Any, args: argparse.Namespace, settings: MachineSettings, hold: 
     session.set_position(at)
     if isinstance(port, MockPort) and settings.mock.places():  # the machine file's simulated switches ([mock])
         port.switches = SwitchSchedule(settings, at)
+    # the streamed pin log: the travel to the work zero runs on this mock too, its part marked before the job's
+    shared = port if isinstance(port, MockPort) and port.pin_log_path is not None else None
+    runs: list[tuple[str, MachineSession, tuple[int, int, int]]] = []  # the command's parts that ran
     session.check_job(job)  # before the progress bar: a bad job is one clean line
     # the machine time takes a pass over the ramps: only worked out before the run for a bar to show it
     bar = _bar(args, float(getattr(job, "estimated_time_s", 0.0))) if progress_wanted(args) else None
@@ -266,10 +271,14 @@ def _drive(job: Any, args: argparse.Namespace, settings: MachineSettings, hold: 
     try:
         hold.mark_running(_command_text(args))
         if approach is not None:
-            ended, ended_start = _approach(approach, args, settings, start, sessions), start
+            ended, ended_start = _approach(approach, args, settings, start, sessions, shared), start
+            runs.append(("travel", ended, start))
             if ended.last_run.get("status") != FINISHED:
-                return _outcome(ended, args, pin_log=False)
+                return _outcome(ended, args, runs)
             ended, ended_start = session, at
+        if isinstance(port, MockPort):
+            port.begin_part("job", at, _step_period_ns(settings))
+        runs.append(("job", session, at))
         spec = None if journal is None else journal_spec(job, journal, home_steps=session.position_steps(),
                                                          pin_log_path=getattr(args, "pin_log", None))
         session.start(job, journal=spec)
@@ -290,7 +299,7 @@ def _drive(job: Any, args: argparse.Namespace, settings: MachineSettings, hold: 
             signal.signal(s, handler)
         if bar is not None:
             bar.close()
-    return _outcome(session, args)
+    return _outcome(session, args, runs)
 
 
 def unrecorded_message(end: MachineState, exc: Exception, settings: MachineSettings) -> str:
@@ -304,10 +313,17 @@ def unrecorded_message(end: MachineState, exc: Exception, settings: MachineSetti
 
 
 def _approach(job: Job, args: argparse.Namespace, settings: MachineSettings, start: tuple[int, int, int],
-              sessions: list) -> MachineSession:
-    """Travel to the work zero in a session of its own (the job's pin log holds the job only); returns it."""
+              sessions: list, shared: Optional[MockPort] = None) -> MachineSession:
+    """Travel to the work zero in a session of its own; returns it.  ``shared``: the mock whose pin log streams
+    (``--pin-log``): the travel runs on it, its part marked (the job's comes next); else the pin log joins the
+    travel's writes to the job's at the end (:func:`_write_pin_log`)."""
     simulated = port_kind(args.port) == "mock" and settings.mock.places()  # the mock's switches ([mock]) too
-    port = MockPort(switches=SwitchSchedule(settings, start)) if simulated else args.port
+    port: Any = MockPort(switches=SwitchSchedule(settings, start)) if simulated else args.port
+    if shared is not None:
+        job_switches, port = shared.switches, shared
+        if simulated:
+            shared.switches = SwitchSchedule(settings, start)
+        shared.begin_part("travel", start)
     first = MachineSession(port, settings, realtime=getattr(args, "realtime", False))
     first.set_position(start)
     sessions.append(first)
@@ -316,7 +332,29 @@ def _approach(job: Job, args: argparse.Namespace, settings: MachineSettings, sta
     first.start(job, label="to the work zero")
     while not first.wait_idle(0.2):
         pass
+    if shared is not None:
+        shared.switches = job_switches
     return first
+
+
+def _step_period_ns(settings: MachineSettings) -> int:
+    """The time between one part's last write and the next part's first in a command's pin log: a step period."""
+    return int(max(settings.delay_xy_ns, settings.delay_z_ns))
+
+
+def _write_pin_log(args: argparse.Namespace, runs: list[tuple[str, MachineSession, tuple[int, int, int]]]) -> None:
+    """``--pin-log``: every write of the command, each part marked (:class:`~cam.verify.pinlog.PinLogPart`): put in
+    place when it streamed to its file, else the parts' logs joined on one time line and written."""
+    done = [(name, s.last_result, at) for name, s, at in runs if s.last_result is not None]
+    if not done:
+        return
+    last = done[-1][1].port
+    if isinstance(last, MockPort) and last.pin_log_path is not None:  # every part streamed to it
+        last.finish_pin_log()
+        return
+    settings = runs[-1][1].settings
+    write_pin_log(join_pin_logs([(name, r.pin_log(), at) for name, r, at in done], _step_period_ns(settings)),
+                  args.pin_log)
 
 
 def _command_text(args: argparse.Namespace) -> str:
@@ -325,16 +363,15 @@ def _command_text(args: argparse.Namespace) -> str:
     return f"cam {args.command} {what}".strip()
 
 
-def _outcome(session: MachineSession, args: argparse.Namespace, pin_log: bool = True) -> Outcome:
+def _outcome(session: MachineSession, args: argparse.Namespace,
+             runs: list[tuple[str, MachineSession, tuple[int, int, int]]]) -> Outcome:
+    """How the command ended (``session``: its last run); writes ``--pin-log`` of every part in ``runs``."""
     info = session.last_run
     result = session.last_result
     if info.get("status") == "error":
         raise PortError("; ".join(info.get("messages") or ["the run failed"]))
-    if getattr(args, "pin_log", None) and result is not None and pin_log:
-        if isinstance(result.port, MockPort) and result.port.pin_log_path is not None:
-            result.port.finish_pin_log()
-        else:
-            write_pin_log(result.pin_log(), args.pin_log)
+    if getattr(args, "pin_log", None) and result is not None:
+        _write_pin_log(args, runs)
     if result is None:  # a MAXIMUS board: it reports no time
         return Outcome(info.get("status", "error"), list(info.get("messages", [])),
                        position_steps=session.position_steps())
