@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 import cam
-from cam.drive.grbl_machine import close_grbl_machines, job_lines, mpos_to_steps
+from cam.drive.grbl_machine import PATH_TOLERANCE_STEPS, close_grbl_machines, job_lines, mpos_to_steps
 from cam.drive.session import MachineSession
 from cam.drive.state import MachineState, StateHold, write_state
 from cam.errors import CapabilityError
@@ -354,28 +354,29 @@ def test_cam_run_names_the_session_for_a_board():
         cam.run(job, port="grbl:/dev/ttyUSB9")
 
 
-def _on_path(points: np.ndarray, path: np.ndarray) -> bool:
-    """Every point of ``points`` ((N, 3) steps, in order) lies on the polyline ``path`` ((M, 3) steps), in order."""
+def _on_path(points: np.ndarray, path: np.ndarray, tolerance_steps: float = 0.0) -> bool:
+    """Every point of ``points`` ((N, 3) steps, in order) lies within ``tolerance_steps`` of the polyline ``path``
+    ((M, 3) steps), in order (0: exactly on it)."""
     j = 0
     for p in points:
         while j + 1 < len(path):
-            a, b = path[j], path[j + 1]
+            a, b = path[j].astype(np.float64), path[j + 1].astype(np.float64)
             ab, ap = b - a, p - a
-            inside = np.all(np.cross(ab, ap) == 0) and 0 <= ap @ ab <= ab @ ab
-            if inside and (ab.any() or not ap.any()):
-                break
-            if not ab.any() and not ap.any():
+            t = min(1.0, max(0.0, float(ap @ ab) / float(ab @ ab))) if ab.any() else 0.0
+            if np.linalg.norm(ap - t * ab) <= tolerance_steps + 1e-9:
                 break
             j += 1
         else:
-            return bool(np.array_equal(p, path[-1]))
+            return bool(np.abs(p - path[-1]).max() <= tolerance_steps)
     return True
 
 
 @pytest.mark.parametrize("name", ["inkscape_star.plt", "logo.svg", "bolt_plate.ngc", "board.drl", "matrix"])
 def test_every_job_kind_runs_on_grbl_through_its_own_points(name, tmp_path):
     """HPGL, SVG, a G-code program, a drill file (tool changes answered) and a saved digitized matrix: grbl
-    executes lines whose ends are the job's own points, in order, and every point of the job lies on them."""
+    executes lines whose ends are the job's own points, in order, and every point of the job lies within
+    PATH_TOLERANCE_STEPS of them (a staircase of steps goes out as the straight line it stands for, issue #45
+    point 4), far fewer lines than points where the job has long straight or gently curved paths."""
     if name == "matrix":
         path = tmp_path / "ellipse.txt"
         cam.save_digitized(cam.digitize(cam.load_image(SAMPLES / "ellipse.png")), path)
@@ -393,7 +394,7 @@ def test_every_job_kind_runs_on_grbl_through_its_own_points(name, tmp_path):
         executed = np.array([np.zeros(3, np.int64)] + [np.asarray(mpos_to_steps(b.end_mm, SETTINGS)) - first
                                                       for b in blocks])
         job = np.concatenate([np.asarray(p.points_steps, np.int64) for p in prepared.plan.job.pieces()])
-        assert _on_path(job, executed), name
+        assert _on_path(job, executed, PATH_TOLERANCE_STEPS), name
         assert {tuple(p) for p in executed[1:]} <= {tuple(p) for p in job} | {(0, 0, 0)}  # no point of its own
         assert emu.overflow_bytes == 0
     finally:

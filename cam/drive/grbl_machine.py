@@ -104,17 +104,63 @@ class GrblPause:
     note: str
 
 
-def _feed_mm_min(d: np.ndarray, period_ns: int, periods: int, settings: MachineSettings) -> float:
-    length_mm = math.sqrt((d[0] * settings.mm_per_step_xy) ** 2 + (d[1] * settings.mm_per_step_xy) ** 2
-                          + (d[2] * settings.mm_per_step_z) ** 2)
-    return round(length_mm / (periods * period_ns * 1e-9) * 60.0, 1)
-
-
 def _default_period_ns(d: np.ndarray, settings: MachineSettings) -> int:
     xy, z = bool(d[0] or d[1]), bool(d[2])
     if xy and z:
         return int(max(settings.delay_xy_ns, settings.delay_z_ns))
     return int(settings.delay_z_ns if z else settings.delay_xy_ns)
+
+
+PATH_TOLERANCE_STEPS = 1.0
+"""How far (steps) a point of the job may lie from the straight line grbl is sent for it: the job's points are
+the nearest steps to its path (a line at a slope is a staircase of them, each within half a step of the path on each
+axis), so grbl gets the path, not the steps."""
+RUN_POINTS = 1024
+"""The most job points one line stands for (a bound on the work of checking a run)."""
+
+
+class _Runs:
+    """Joins consecutive points of a job into straight lines: one run is points of one kind (cut or not) and one
+    nominal step period (a G-code move's feed, a drawing's step delay), every point within
+    :data:`PATH_TOLERANCE_STEPS` of the line from the run's start to its end."""
+
+    def __init__(self, settings: MachineSettings) -> None:
+        self.scale_mm = np.array([settings.mm_per_step_xy, settings.mm_per_step_xy, settings.mm_per_step_z])
+        self.start = np.zeros(3, np.int64)
+        self.points = np.zeros((RUN_POINTS, 3), np.int64)
+        self.count = 0
+        self.rapid = False
+        self.period_ns = 0
+        self.time_ns = 0
+        self.last_index = -1
+
+    def fits(self, p: np.ndarray, rapid: bool, period_ns: int) -> bool:
+        if self.count == 0:
+            return True
+        if rapid != self.rapid or period_ns != self.period_ns or self.count >= RUN_POINTS:
+            return False
+        chord = (p - self.start).astype(np.float64)
+        inner = self.points[:self.count].astype(np.float64) - self.start
+        length2 = float(chord @ chord)
+        t = np.clip(inner @ chord / length2, 0.0, 1.0) if length2 else np.zeros(self.count)
+        off = inner - t[:, None] * chord
+        return float(np.max(np.einsum("ij,ij->i", off, off))) <= PATH_TOLERANCE_STEPS ** 2
+
+    def add(self, p: np.ndarray, rapid: bool, period_ns: int, time_ns: int, index: int) -> None:
+        if self.count == 0:
+            self.rapid, self.period_ns, self.time_ns = rapid, period_ns, 0
+        self.points[self.count] = p
+        self.count += 1
+        self.time_ns += time_ns
+        self.last_index = index
+
+    def take(self) -> tuple[np.ndarray, bool, float, int, int]:
+        """The run as (end point, rapid, length mm, time ns, index of its last point); a new run starts at its
+        end."""
+        end = self.points[self.count - 1].copy()
+        length_mm = float(np.linalg.norm((end - self.start) * self.scale_mm))
+        self.start, self.count = end, 0
+        return end, self.rapid, length_mm, self.time_ns, self.last_index
 
 
 def job_lines(job: Any, start_steps: Steps3, base_steps: Steps3, settings: MachineSettings,
@@ -123,22 +169,25 @@ def job_lines(job: Any, start_steps: Steps3, base_steps: Steps3, settings: Machi
 
     Args:
         job: points in steps relative to where the tool stands at the start (``start_steps``, ``cam``'s
-            machine frame); each point's feed from its ``period_ns``/``periods`` (else the step delays).
+            machine frame); each point's time from its ``period_ns``/``periods`` (else the step delays).
         base_steps: ``cam``'s machine steps of grbl's machine zero (see the module docstring).
         on_point: told the index of the last point a yielded line reaches (progress).
 
     Yields:
         ``"G53G1X..Y..Z..F.."`` lines (no spaces: fewer bytes on the link) and a :class:`GrblPause` after each
-        point the job pauses at.  Moves in one direction at one feed and of one kind are joined.
+        point the job pauses at.  Moves are joined into the straight lines of the job's path (:class:`_Runs`):
+        a G-code program's line goes out as one line at its own feed, not as the staircase of steps it is
+        planned into for a step/dir drive.
     """
     origin = np.asarray(start_steps, np.int64) - np.asarray(base_steps, np.int64)  # grbl frame, in steps
     prev = np.zeros(3, np.int64)
     written = [None, None, None]  # the axis values written last (mm text)
-    pending: Optional[tuple] = None  # (end point, unit direction, feed, rapid, last index)
+    runs = _Runs(settings)
+    move: list[tuple[np.ndarray, bool, float, int, int]] = []  # the lines of the job's move being joined
     feed_now: Optional[float] = None
     index = -1
 
-    def line(end: np.ndarray, feed: float, rapid: bool) -> str:
+    def text(end: np.ndarray, rapid: bool, feed: float) -> str:
         nonlocal feed_now
         mm = steps_to_mpos(origin + end, settings)
         words = "".join(f"{a}{t}" for a, t, w in zip("XYZ", (format_mm(v) for v in mm), written) if t != w)
@@ -146,11 +195,29 @@ def job_lines(job: Any, start_steps: Steps3, base_steps: Steps3, settings: Machi
             written[i] = t
         if rapid:
             return f"G53G0{words}"
-        text = f"G53G1{words}"
+        out = f"G53G1{words}"
         if feed != feed_now:
             feed_now = feed
-            text += f"F{format_mm(feed)}"
-        return text
+            out += f"F{format_mm(feed)}"
+        return out
+
+    def close_run() -> None:
+        if runs.count:
+            move.append(runs.take())
+
+    def lines_of_move() -> Iterator[str]:
+        """The move's lines at one feed: its length over its time (a move of the source, e.g. one G-code line
+        or arc, keeps its own feed whatever staircase of steps it was planned into; in a job that marks no
+        moves, each line is one: its length over its points' time, as a step/dir drive runs it)."""
+        close_run()
+        length_mm = sum(m[2] for m in move)
+        time_ns = sum(m[3] for m in move)
+        feed = round(length_mm / max(1e-9, time_ns * 1e-9) * 60.0, 1)
+        for end, rapid, _, _, last in move:
+            yield text(end, rapid, 0.0 if rapid else feed)
+            if on_point is not None:
+                on_point(last)
+        move.clear()
 
     for piece in job.pieces():
         pts = np.asarray(piece.points_steps, np.int64).reshape(-1, 3)
@@ -159,36 +226,30 @@ def job_lines(job: Any, start_steps: Steps3, base_steps: Steps3, settings: Machi
         notes = list(piece.pause_notes) if piece.pause_notes is not None else []
         period_ns = None if piece.period_ns is None else np.asarray(piece.period_ns).tolist()
         periods = None if piece.periods is None else np.asarray(piece.periods).tolist()
+        starts = None if piece.move_start is None else np.asarray(piece.move_start, bool).tolist()
         for k in range(len(pts)):
             index += 1
             p = pts[k]
             d = p - prev
             prev = p
             if d.any():
-                g = math.gcd(math.gcd(abs(int(d[0])), abs(int(d[1]))), abs(int(d[2])))
-                unit = (int(d[0]) // g, int(d[1]) // g, int(d[2]) // g)
                 rapid = kinds[k] != CUT
                 n = periods[k] if periods is not None else int(np.abs(d).max())
-                per = period_ns[k] if period_ns is not None else _default_period_ns(d, settings)
-                feed = 0.0 if rapid else _feed_mm_min(d, int(per), max(1, int(n)), settings)
-                if pending is not None and pending[1] == unit and pending[2] == feed and pending[3] == rapid:
-                    pending = (p, unit, feed, rapid, index)
-                else:
-                    if pending is not None:
-                        yield line(pending[0], pending[2], pending[3])
-                        if on_point is not None:
-                            on_point(pending[4])
-                    pending = (p, unit, feed, rapid, index)
+                per = int(period_ns[k]) if period_ns is not None else _default_period_ns(d, settings)
+                if (starts is not None and starts[k]) or (move and (rapid != move[0][1] or len(move) >= RUN_POINTS)):
+                    yield from lines_of_move()
+                elif not runs.fits(p, rapid, per):
+                    close_run()
+                    if starts is None:  # a job that marks no moves: each line its own feed
+                        yield from lines_of_move()
+                runs.add(p, rapid, per, max(1, int(n)) * per, index)
             if pauses[k]:
-                if pending is not None:
-                    yield line(pending[0], pending[2], pending[3])
-                    pending = None
+                yield from lines_of_move()
                 if on_point is not None:
                     on_point(index)
                 note = notes.pop(0) if notes else "Pause At"
                 yield GrblPause(index, (int(p[0]), int(p[1]), int(p[2])), note)
-    if pending is not None:
-        yield line(pending[0], pending[2], pending[3])
+    yield from lines_of_move()
     if on_point is not None:
         on_point(index)
 
