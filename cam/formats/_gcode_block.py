@@ -16,7 +16,7 @@ from ..limits import (
 )
 from ._gcode_data import (
     _CS, _CYCLES, _IGNORED_M, _IO_M, _LETTERS, _MARLIN, _MARLIN_G, _MARLIN_M, _MARLIN_USER_M, _MOTION, _REFUSED_G, _SPLINES,
-    _SUPPORTED_G, _End, _shown,
+    _SUPPORTED_G, COMP_NO_TABLE, _End, _shown,
 )
 from ._gcode_state import _State
 
@@ -115,8 +115,9 @@ class _Block(_State):
                 vals[letter] = v
                 texts[letter] = word
         codes = {c for c, _ in gs}
-        if "d" in vals and not codes & {411, 421}:
-            raise self.err(f"cutter compensation word '{texts['d']}' without G41.1/G42.1 is not supported")
+        if "d" in vals and not codes & {410, 411, 420, 421}:
+            raise self.err(f"cutter compensation word '{texts['d']}' without G41.1/G42.1 is not supported (nor "
+                           "without G41/G42)")
         return codes, ms, vals, texts
 
     def assign(self, line: Line) -> None:
@@ -216,7 +217,9 @@ class _Block(_State):
             if "l" in vals:
                 raise self.err(f"'L{vals['l']:g}' (a lathe tool's orientation) with cutter compensation G41.1/G42.1 is "
                                "not supported: the machine is a 3-axis mill")
-            self.comp_on(1 if 411 in codes else -1, vals["d"])
+            self.comp_on(1 if 411 in codes else -1, vals["d"] * self.scale)
+        if codes & {410, 420}:
+            self.comp_on(1 if 410 in codes else -1, self.tool_diameter(410 if 410 in codes else 420, vals))
         if 430 in codes or 431 in codes:
             self.tool_length(codes, vals)
         if 490 in codes:
@@ -291,6 +294,22 @@ class _Block(_State):
         if mcodes & {2, 30}:
             self.comp_off()  # as rs274: the program's end turns compensation off
             raise _End
+
+    def tool_diameter(self, code: int, vals: dict[str, float]) -> float:
+        """The diameter (mm) G41/G42 (``code`` 410/420) take from the tool table: tool D, or the tool in the
+        spindle's (D omitted or D0), as rs274; tool 0 (none) is 0."""
+        name = f"G{code // 10}"
+        if self.tool_diameters_mm is None:
+            raise self.err(f"'{name}': {COMP_NO_TABLE}")
+        if "d" in vals and (vals["d"] != int(vals["d"]) or vals["d"] < 0):
+            raise self.err(f"{name} needs a tool number 'D' (a whole number 0 or more), not 'D{vals['d']:g}': for a "
+                           f"diameter give {name}.1 D<diameter>")
+        tool = int(vals["d"]) if vals.get("d") else self.tool  # D0: the spindle's, as rs274
+        if not tool:
+            return 0.0
+        if tool not in self.tool_lengths_mm:
+            raise self.err(f"{name}: tool {tool} is not in the tool table")
+        return self.tool_diameters_mm.get(tool, 0.0)
 
     def check_words(self, vals: dict[str, float], texts: dict[str, str], *, pq_offsets: bool = False) -> None:
         """Every word of one line finite and in its range (:mod:`cam.limits`); ``pq_offsets``: P is a

@@ -22,8 +22,8 @@ not check a move run straight on after such a corner and cuts there: `cam` refus
 
 Moves are held until the next XY move decides their ends (one corner of lookahead).  Refused while compensation
 is on, each in one line naming the line: arcs (G2/G3), splines, canned cycles, G28/G30, G53, changes of the
-coordinate system or offsets, dwells and pauses; G41/G42 with a tool number D (the tool table's diameter is not
-read): give G41.1/G42.1 D<diameter>.
+coordinate system or offsets, dwells and pauses.  G41/G42 take the diameter of tool D (D omitted or D0: the tool
+in the spindle, tool 0 none) from the tool table (a file's, or G10 L1 R); without a table they are refused.
 """
 from __future__ import annotations
 
@@ -48,17 +48,18 @@ class _Comp(_State):
     comp_emitting = False
     comp_exit: Optional[list[float]] = None  # after G40: the programmed position the exit move starts from
 
-    def comp_on(self, side: int, diameter: float) -> None:
-        """G41.1 (``side`` +1) or G42.1 (-1) with the tool's ``diameter`` (program units)."""
+    def comp_on(self, side: int, diameter_mm: float) -> None:
+        """G41/G41.1 (``side`` +1) or G42/G42.1 (-1) with the tool's diameter (mm)."""
         if self.comp_side:
             raise self.err("cutter compensation is already on: turn it off (G40) before turning it on again")
         if self.plane != "XY":
             raise self.err("cutter compensation here works in the XY plane only (G17)")
-        if not 0 <= diameter:
+        if not 0 <= diameter_mm:
             raise self.err("cutter compensation needs a tool diameter 'D' of 0 or more")
         self.comp_side = side
-        self.comp_radius_mm = diameter * self.scale / 2.0
-        self.comp_prog = self.pos()
+        self.comp_radius_mm = diameter_mm / 2.0
+        # the entry move starts from the programmed position (right after G40: the exit's, not the tool's), as rs274
+        self.comp_prog, self.comp_exit = (self.pos() if self.comp_exit is None else list(self.comp_exit)), None
         self.comp_dir = None
         self.comp_queue = []
 

@@ -121,8 +121,6 @@ def _shown(word: str) -> str:
 
 _REFUSED_G = {
     **{c: "probing is not supported: the machine has no probe input" for c in (382, 383, 384, 385)},
-    **{c: "cutter radius compensation G41/G42 takes the tool's radius from the tool table's diameter, which is not "
-          "read here: give G41.1/G42.1 D<diameter>, or the tool centre's path" for c in (410, 420)},
     **{c: "lathe cycles are not supported: the machine is a 3-axis mill" for c in (700, 710, 711, 720, 721, 760)},
     70: "lathe diameter mode is not supported: the machine is a 3-axis mill",
     331: "rigid tapping is not supported: the machine has no spindle encoder",
@@ -134,10 +132,13 @@ _REFUSED_G = {
     171: "user-defined planes are not supported", 181: "user-defined planes are not supported",
     191: "user-defined planes are not supported",
 }
-_SUPPORTED_G = {0, 10, 20, 30, 40, 50, 51, 330, 80, 100, 170, 180, 190, 200, 210, 280, 281, 300, 301, 400, 411, 421,
+_SUPPORTED_G = {0, 10, 20, 30, 40, 50, 51, 330, 80, 100, 170, 180, 190, 200, 210, 280, 281, 300, 301, 400, 410, 411,
+                420, 421,
                 430, 431, 490, 530,
                 540, 550, 560, 570, 580, 590, 591, 592, 593, 610, 611, 640, 730, 800, 810, 820, 830, 850, 890,
                 900, 901, 910, 911, 920, 921, 922, 923, 930, 940, 960, 970, 980, 990}
+COMP_NO_TABLE = ("cutter radius compensation G41/G42 takes the tool's radius from the tool table's diameter, and "
+                 "there is none: give one (--tool-table FILE), or G41.1/G42.1 D<diameter>, or the tool centre's path")
 _CYCLES = {730, 810, 820, 830, 850, 890}
 _MOTION = {0, 10, 20, 30, 330, 800} | _CYCLES
 _SPLINES = {50, 51}  # G5, G5.1: motion on their own line only (rs274 keeps the modal motion mode)

@@ -31,6 +31,9 @@ class _State:
                  max_lines, start_mm=(0.0, 0.0, 0.0), work_offsets_mm=None, active_offset="G54") -> None:
         self.main = source
         self.tool_lengths_mm = None if tool_lengths_mm is None else dict(tool_lengths_mm)
+        # tool number -> diameter mm, for G41/G42 (a tool table's, see cam.formats.gcode.ToolTable; G10 L1 R)
+        self.tool_diameters_mm = None if tool_lengths_mm is None else dict(getattr(tool_lengths_mm, "diameters_mm",
+                                                                                   {}))
         self.path = [Path(p) for p in subroutine_path]
         self.max_lines = int(max_lines)
         self.files: dict[str, _Source] = {}
@@ -248,9 +251,14 @@ class _State:
             if not 1 <= p <= MAX_TOOL_NUMBER:
                 raise self.err("G10 L1 needs a tool number 'P'")
             if self.tool_lengths_mm is None:
-                self.tool_lengths_mm = {}
+                self.tool_lengths_mm, self.tool_diameters_mm = {}, {}
             if "z" in vals:
                 self.tool_lengths_mm[p] = vals["z"] * self.scale
+            if "r" in vals:  # the tool's radius, as in rs274
+                if vals["r"] < 0:
+                    raise self.err("G10 L1 'R' (the tool's radius) must be 0 or more")
+                self.tool_lengths_mm.setdefault(p, 0.0)
+                self.tool_diameters_mm[p] = 2 * vals["r"] * self.scale
             for a in "xyz":
                 vals.pop(a, None)
             return

@@ -30,11 +30,12 @@ A small interpreter for the LinuxCNC language (tested against LinuxCNC's own ``r
   do/while, repeat/endrepeat, break/continue), M70..M73 modal state, and ``O<name> call`` of
   ``name.ngc`` found in the subroutine path.
 
-Cutter radius compensation G41.1/G42.1 D<diameter> for G0/G1 moves in G17 as rs274 runs it (entry move,
+Cutter radius compensation G41.1/G42.1 D<diameter>, and G41/G42 D<tool> (the tool table's diameter, D
+omitted: the tool in the spindle's) for G0/G1 moves in G17 as rs274 runs it (entry move,
 concave corners intersected, convex ones rounded, Z-only moves, G40 and the exit move): :mod:`._gcode_comp`.
 
 Refused, each with a message saying why: probing (G38.x), rotary axes (A B C) and U V W, cutter
-radius compensation G41/G42 by tool number (the tool table's diameter is not read) and arcs, cycles, dwells,
+radius compensation G41/G42 by tool number without a tool table, and arcs, cycles, dwells,
 pauses or frame changes while it is on, lathe cycles and modes (G7, G7x, G76), rigid tapping (G33.1), NURBS blocks
 (G5.2/G5.3), spindle cycles (G84, G86..G88), user M codes (M100..M199) and I/O (M62..M68).
 
@@ -71,18 +72,28 @@ from ._gcode_motion import _Motion
 
 __all__ = [
     "GcodeMove", "GcodeProgram", "GcodeFile", "MoveBatch", "PLANE_AXES", "parse_gcode", "load_gcode", "open_gcode",
-    "load_tool_table", "GCODE_SUFFIXES", "BATCH_MOVES",
+    "load_tool_table", "ToolTable", "GCODE_SUFFIXES", "BATCH_MOVES",
 ]
 
 
-def load_tool_table(path: str | os.PathLike) -> dict[int, float]:
+class ToolTable(dict):
+    """A tool table: tool number -> Z length offset mm (the dict), and :attr:`diameters_mm`, tool number -> its
+    diameter D in mm (0 where a line gives none, as in LinuxCNC) for cutter compensation G41/G42."""
+
+    def __init__(self, lengths_mm=(), diameters_mm=None) -> None:
+        super().__init__(lengths_mm)
+        self.diameters_mm: dict[int, float] = dict(diameters_mm or {})
+
+
+def load_tool_table(path: str | os.PathLike) -> ToolTable:
     """A LinuxCNC tool table file (``T1 P1 Z0.511 D0.125 ;comment`` lines, the ``tool_table`` option's path):
-    tool number -> Z length offset in mm, the ``tool_lengths_mm`` of :func:`parse_gcode`.
+    tool number -> Z length offset in mm, the ``tool_lengths_mm`` of :func:`parse_gcode`, with the diameters
+    (:class:`ToolTable`) that G41/G42 take.
 
     The table is in the machine's units, millimetres for `cam`.  Errors name ``file:line``.
     """
     p, text = read_text(path, not_text="not a tool table text file")
-    table: dict[int, float] = {}
+    table = ToolTable()
     for no, raw in enumerate(text.splitlines(), start=1):
         body = raw.split(";", 1)[0].strip()
         if not body:
@@ -104,7 +115,11 @@ def load_tool_table(path: str | os.PathLike) -> dict[int, float]:
             raise ParseError(f"{p}:{no}: tool 'T{tool:g}' is out of range: a whole number 0..{MAX_TOOL_NUMBER}")
         if abs(z) > MAX_COORD_MM:
             raise ParseError(f"{p}:{no}: tool length 'Z{z:g}' is beyond {MAX_COORD_MM:g} mm")
+        dia = words.get("D", 0.0)
+        if not 0 <= dia <= MAX_COORD_MM:
+            raise ParseError(f"{p}:{no}: tool diameter 'D{dia:g}' must be 0..{MAX_COORD_MM:g} mm")
         table[int(tool)] = z
+        table.diameters_mm[int(tool)] = dia
     return table
 
 
@@ -249,7 +264,8 @@ def parse_gcode(
             them for this run only; the program's :attr:`GcodeProgram.work_offsets_mm` says how it left them.
         active_offset: the work offset in force when the program starts (``G54`` unless the state says).
         tool_lengths_mm: tool number -> Z length offset mm, for G43 (a tool table file's, see
-            :func:`load_tool_table`); None: G43 with a tool other than 0 is an error.
+            :func:`load_tool_table`); None: G43 with a tool other than 0 is an error.  A :class:`ToolTable`'s
+            diameters are the ones G41/G42 take (a plain mapping: every diameter 0); None: G41/G42 are errors.
         subroutine_path: folders where ``O<name> call`` finds ``name.ngc``.
         max_lines: the most lines the program may run (loops count each time).
 
