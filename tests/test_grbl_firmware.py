@@ -2,7 +2,8 @@
 build on a simulated ATmega328P behind a pty and logs its step pins.  A drawing, a drill file (its tool change
 answered), an HPGL file and a G-code program are streamed by the session; the path the firmware stepped
 (decoded from its pins) must follow the job's own: every stepped position within a step and a half of the job's
-polyline, every point of the job reached within a step, the end where the job ends.  A reset of the board
+polyline, every point of the job reached within a step, the end where the job ends, and the machine time planned
+(grbl's own rules, cam.drive.grbl_time) within 10 % of the firmware's time in motion.  A reset of the board
 mid-job (its reset button) stops the stream with one line, and the position is unknown.
 
 All slow: the simulator runs grbl at 16 MHz of simulated time, about as fast as a real Uno."""
@@ -82,13 +83,18 @@ def open_firmware_session(device: str, state=None) -> MachineSession:
     return MachineSession(url, SETTINGS, state=state, on_prompt=lambda prompt: "continue")
 
 
-def stepped_steps(out: Path) -> np.ndarray:
-    """``(N, 3)`` the firmware's position after every step, in cam's machine steps (grbl's Y and Z turned
-    round), from its pin log."""
+def decode_points(out: Path) -> list:
+    """grbl_avr's decoder: ``(t_s, x, y, z)`` in grbl's steps after every step of the firmware's pin log."""
     sys.path.insert(0, str(GRBL_AVR))
     import decode  # grbl_avr's pin decoder
 
-    rows = decode.points(str(out / "pins.csv"))
+    return decode.points(str(out / "pins.csv"))
+
+
+def stepped_steps(out: Path) -> np.ndarray:
+    """``(N, 3)`` the firmware's position after every step, in cam's machine steps (grbl's Y and Z turned
+    round), from its pin log."""
+    rows = decode_points(out)
     pts = np.array([(int(p[1]), -int(p[2]), -int(p[3])) for p in rows], np.int64).reshape(-1, 3)
     return np.vstack([np.zeros((1, 3), np.int64), pts])
 
@@ -140,6 +146,13 @@ def test_every_job_kind_on_grbls_own_firmware_steps_the_jobs_path(kind, tmp_path
     reached = distance_to_path(vertices, stepped)  # each job point against the stepped polyline
     assert reached.max() <= 1.0, (kind, float(reached.max()), vertices[int(reached.argmax())])
     assert np.abs(stepped[-1] - vertices[-1]).max() <= 1, (stepped[-1], vertices[-1])
+    # the planned machine time is grbl's own, within 10 % of what the firmware took to step (its time in motion:
+    # the waits at a tool change are the host's)
+    step_t_s = np.array([float(row[0]) for row in decode_points(out)])
+    gaps_s = np.diff(step_t_s)
+    moving_s = float(gaps_s[gaps_s < 0.25].sum())
+    planned_s = session.last_run["machine_time_s"]
+    assert abs(planned_s - moving_s) <= 0.10 * moving_s, (kind, planned_s, moving_s)
     stats = json.loads((out / "stats.json").read_text())
     assert stats["rx_overflow"] == 0, stats
     uart = uart_events(out / "uart.log")

@@ -372,8 +372,8 @@ def _outcome(session: MachineSession, args: argparse.Namespace,
         raise PortError("; ".join(info.get("messages") or ["the run failed"]))
     if getattr(args, "pin_log", None) and result is not None:
         _write_pin_log(args, runs)
-    if result is None:  # a MAXIMUS board: it reports no time
+    if result is None:  # a board that makes its own steps: its planned time, where it has one (grbl)
         return Outcome(info.get("status", "error"), list(info.get("messages", [])),
-                       position_steps=session.position_steps())
+                       float(info.get("machine_time_s", 0.0)), position_steps=session.position_steps())
     timing = {k: info[k] for k in ("max_late_s", "stalls", "late_total_s", "reramps") if k in info}
     return Outcome(result.status, list(result.messages), result.machine_time_s, session.position_steps(), timing)

@@ -19,7 +19,9 @@ from ..values import finite_number
 from ._session_frames import SessionFrames
 from ._session_parts import Activity
 from .chunks import ChunkedPlan
-from .grbl_machine import FEED_OVERRIDE_RANGE, GrblControl, GrblPosition, finish_stop, run_on_grbl, travel_advice
+from .grbl_machine import (FEED_OVERRIDE_RANGE, GrblControl, GrblPosition, finish_stop, job_lines, run_on_grbl,
+                           steps_to_mpos, travel_advice)
+from .grbl_time import grbl_time_s
 from .ports import require
 from .state import check_in_travel
 from .steps import StepPlan
@@ -45,9 +47,16 @@ class SessionGrbl(SessionFrames):
         raise CapabilityError(f"{self.port} (a grbl board) cannot run a {type(job).__name__}")
 
     def _launch_grbl(self, name: str, job: Any, label: str, estimated_s: float) -> None:
+        """Stream ``job`` to grbl in the background.  Its planned machine time is grbl's own
+        (:func:`~cam.drive.grbl_time.grbl_time_s` of the lines it will get, from grbl's ``$$``), not the step
+        plan's (``estimated_s``, kept only when the lines cannot be timed)."""
         assert self.grbl is not None
         ctl = GrblControl(self.grbl)
         start = tuple(int(v) for v in self._position)
+        start_mm = steps_to_mpos(np.asarray(start, np.int64) - np.asarray(self.grbl.base_steps, np.int64),
+                                 self.settings)
+        estimated_s = grbl_time_s(job_lines(job, start, self.grbl.base_steps, self.settings),
+                                  self.grbl.link.settings, start_mm) or estimated_s
         position = GrblPosition(self.grbl, start)  # type: ignore[arg-type]
         total = sum(len(piece) for piece in job.pieces())
         self._begin(Activity(name, label, ctl, total, estimated_s, position))

@@ -27,7 +27,6 @@ its position.  The machine keeps the link (:class:`~cam.drive.grbl_link.GrblLink
 """
 from __future__ import annotations
 
-import math
 import os
 import threading
 import time
@@ -589,11 +588,11 @@ def run_on_grbl(session: Any, name: str, job: Any, ctl: GrblControl, label: str,
             lost = str(exc)
     elif error:
         lost = fault_stop(machine, error)
-    _book_end(session, name, label, ctl, start_steps, error, lost)
+    _book_end(session, name, label, ctl, start_steps, error, lost, estimated_s)
 
 
 def _book_end(session: Any, name: str, label: str, ctl: GrblControl, start_steps: Steps3, error: str,
-              lost: str) -> None:
+              lost: str, estimated_s: float = 0.0) -> None:
     machine: GrblMachine = session.grbl
     try:
         end = machine.position_steps(machine.status())
@@ -608,7 +607,8 @@ def _book_end(session: Any, name: str, label: str, ctl: GrblControl, start_steps
         status, messages = ERROR, [error]
     else:
         status, messages = FINISHED, []
-    info = {"activity": name, "label": label, "status": status, "messages": messages}
+    info = {"activity": name, "label": label, "status": status, "messages": messages,
+            "machine_time_s": round(float(estimated_s), 3)}
     session.finish(info, moved)
     text = f"{label}: {status}" + (f" ({'; '.join(messages)})" if messages else "")
     session.log(text, "info" if status == FINISHED else ("warning" if status == STOPPED else "error"))
