@@ -430,3 +430,31 @@ def test_closing_a_grbl_machine_stops_its_poller_before_the_link(grbl):
     m.link.close = closing
     m.close()
     assert seen == [False]
+
+
+def test_a_grblhal_board_is_recognised_and_streamed_to_its_own_buffer():
+    """grblHAL (issue #45 point 4): its banner ``GrblHAL 1.1f ['$' or '$HELP' for help]`` is a welcome, and its
+    ``$I`` ``[OPT:VNMSL,35,1024]`` sizes the stream: more than grbl's 128 bytes go out unanswered, never more than
+    its 1024, and the drawing cuts exactly what it asks."""
+    emu = start_emulator(speed=20.0, settings=FAST, rx_buffer_bytes=1024, planner_blocks=35,
+                         welcome="GrblHAL 1.1f ['$' or '$HELP' for help]")
+    try:
+        d, job = two_d_job()
+        session = MachineSession(url(emu), SETTINGS)
+        assert (session.grbl.link.rx_buffer_bytes, session.grbl.link.planner_blocks) == (1024, 35)
+        session.start(job)
+        assert session.wait_idle(60)
+        assert session.last_run["status"] == "finished", session.last_run
+        got = cam.carve(executed_motion(emu), (job.height_px, job.width_px), SETTINGS, origin_px=job.origin_px)
+        assert_surface_equal(got, expected_surface_2d(d, depths(d), SETTINGS))
+        # a job of many short lines: the planner's 35 blocks fill, then the receive buffer past grbl's 128 bytes
+        from test_grbl_link_faults import zigzag_job
+
+        zigzag = zigzag_job(SETTINGS, segments=300, step_mm=0.3, feed_mm_min=600.0)
+        session.start(zigzag)
+        assert session.wait_idle(120)
+        assert session.last_run["status"] == "finished", session.last_run
+        assert emu.overflow_bytes == 0 and 128 < emu.max_rx_bytes <= 1024, emu.max_rx_bytes
+    finally:
+        close_grbl_machines()
+        emu.stop()

@@ -39,7 +39,7 @@ from ..settings import MachineSettings
 
 __all__ = [
     "GRBL_PREFIX", "RX_BUFFER_BYTES", "ERROR_MEANINGS", "ALARM_MEANINGS", "GrblError", "GrblAlarm", "GrblStatus",
-    "StreamReport", "GrblLink", "parse_grbl_url", "parse_identity", "parse_settings", "parse_status",
+    "StreamReport", "GrblLink", "parse_grbl_url", "parse_identity", "parse_buffer_sizes", "parse_settings", "parse_status",
     "settings_mismatches",
     "strip_comments", "open_grbl",
 ]
@@ -192,6 +192,30 @@ def parse_identity(lines: Iterable[str]) -> Optional[str]:
     if not any(text.startswith("[VER:") for text in found):
         return None
     return " ".join(found)[:200]
+
+
+def parse_buffer_sizes(identity: Optional[str]) -> Optional[tuple[int, int]]:
+    """``(planner blocks, receive buffer bytes)`` from the ``[OPT:codes,blocks,bytes...]`` of a ``$I`` answer
+    (grbl 1.1: ``[OPT:V,15,128]``; grblHAL: ``[OPT:VNMSL,35,1024,3,0]``), or None when it says no sizes, or
+    sizes no board has.
+
+    >>> parse_buffer_sizes("[VER:1.1h.20190830:] [OPT:V,15,128]")
+    (15, 128)
+    >>> parse_buffer_sizes("[VER:1.1f.20220325:] [OPT:VNMSL,35,1024,3,0]")
+    (35, 1024)
+    >>> parse_buffer_sizes("[VER:1.1h.20190830:]") is None
+    True
+    """
+    if not identity or "[OPT:" not in identity:
+        return None
+    fields = identity.split("[OPT:", 1)[1].split("]", 1)[0].split(",")
+    try:
+        blocks, rx_bytes = int(fields[1]), int(fields[2])
+    except (IndexError, ValueError):
+        return None
+    if not (1 <= blocks <= 1000 and 64 <= rx_bytes <= 65536):
+        return None
+    return blocks, rx_bytes
 
 
 def parse_settings(lines: Iterable[str], device: str = "grbl") -> dict[int, float]:
@@ -497,8 +521,14 @@ class _RealtimeBytes:
 
 
 def _is_welcome(line: str) -> bool:
-    """grbl's welcome line (``Grbl 1.1h ['$' for help]``), printed at every start and reset."""
-    return line.startswith("Grbl ") and "for help" in line
+    """The welcome line a board of the grbl family prints at every start and reset: grbl's ``Grbl 1.1h ['$' for
+    help]``, grblHAL's ``GrblHAL 1.1f ['$' or '$HELP' for help]``, FluidNC's ``Grbl 3.7 [FluidNC v3.7.8 (wifi)
+    '$' for help]``.
+
+    >>> [_is_welcome(t) for t in ("Grbl 1.1h ['$' for help]", "GrblHAL 1.1f ['$' or '$HELP' for help]", "ok")]
+    [True, True, False]
+    """
+    return line.startswith(("Grbl ", "GrblHAL ")) and "for help" in line
 
 
 class _Replies:
@@ -531,6 +561,7 @@ class _Replies:
     messages: list[str]
     status_report: Optional[GrblStatus]
     slowest_override_pct: int
+    rx_buffer_bytes: int
 
     def _read_loop(self) -> None:
         buf = bytearray()
@@ -621,7 +652,7 @@ class _Replies:
         if status.overrides is not None:
             self.slowest_override_pct = max(1, min(status.overrides[0], status.overrides[1]))
         if status.rx_free is not None and self._connected:
-            held_bytes = RX_BUFFER_BYTES - 1 - status.rx_free  # at least what grbl's receive buffer holds
+            held_bytes = self.rx_buffer_bytes - 1 - status.rx_free  # at least what grbl's receive buffer holds
             if held_bytes > self._outstanding_bytes:
                 self._set_fault(f"grbl on {self.device} holds at least {held_bytes} bytes in its receive buffer "
                                 f"but cam counted {self._outstanding_bytes} unanswered (a duplicated reply was "
@@ -690,6 +721,8 @@ class GrblLink(_Replies, _RealtimeBytes):
         self._fault: Optional[str] = None      # a link fault: replies that cannot be right; sticky until a reset
         self._cut_short: Optional[tuple[str, float]] = None  # a status report with no end, and when it came
         self._connected = False                 # the welcome came: from here on every reply is counted
+        self.rx_buffer_bytes = RX_BUFFER_BYTES  # the board's receive buffer and planner (its $I [OPT:] when it says)
+        self.planner_blocks = PLANNER_BLOCKS
         self._answered_s: deque[float] = deque(maxlen=PLANNER_BLOCKS + 2)  # machine time of the last answers
         self._answer_clock = time.monotonic()   # the last answer (or a hold, which stops the clock)
         self.reply_margin_s = max(10.0, 2.0 * self.timeout_s)
@@ -836,11 +869,11 @@ class GrblLink(_Replies, _RealtimeBytes):
             raise GrblError(f"{label} {text[:40]!r} holds {bad!r}, which grbl would take as a real-time command "
                             f"or cannot read (ASCII only)")
         data = (text + "\n").encode("ascii")
-        if len(data) > RX_BUFFER_BYTES:
-            raise GrblError(f"{label} is {len(data)} bytes, more than grbl's {RX_BUFFER_BYTES}-byte "
+        if len(data) > self.rx_buffer_bytes:
+            raise GrblError(f"{label} is {len(data)} bytes, more than grbl's {self.rx_buffer_bytes}-byte "
                             f"receive buffer: {text[:40]!r}")
         where = f" at {label} {text!r}"
-        self._wait(lambda: self._outstanding_bytes + len(data) <= RX_BUFFER_BYTES, None, where=where)
+        self._wait(lambda: self._outstanding_bytes + len(data) <= self.rx_buffer_bytes, None, where=where)
         if self._timer is None:
             self._timer = LineTimer(self.settings)
         entry = [len(data), number, text, None, [], time.monotonic(), self._timer.time_s(text)]
@@ -875,6 +908,11 @@ class GrblLink(_Replies, _RealtimeBytes):
                 raise
             lines = []  # refused (error:n): a board with no $I
         self.identity = parse_identity(lines)
+        sizes = parse_buffer_sizes(self.identity)
+        if sizes is not None:  # stream to the board's own sizes (grblHAL's 1024 bytes, not grbl's 128)
+            with self._cond:
+                self.planner_blocks, self.rx_buffer_bytes = sizes
+                self._answered_s = deque(self._answered_s, maxlen=self.planner_blocks + 2)
         return self.identity
 
     def read_settings(self) -> dict[int, float]:

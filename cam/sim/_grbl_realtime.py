@@ -4,8 +4,8 @@ A part of :class:`cam.sim.grbl.GrblEmulator`.
 """
 from __future__ import annotations
 
-from ._grbl_base import (MM_PER_INCH, PLANNER_BLOCKS, RT_FLOOD, RT_HOLD, RT_JOG_CANCEL, RT_MIST, RT_RESET,
-                         RT_SPINDLE_STOP, RT_START, RT_STATUS, RX_BUFFER_BYTES, fmt)
+from ._grbl_base import (MM_PER_INCH, RT_FLOOD, RT_HOLD, RT_JOG_CANCEL, RT_MIST, RT_RESET,
+                         RT_SPINDLE_STOP, RT_START, RT_STATUS, fmt)
 
 
 class _Realtime:
@@ -26,9 +26,9 @@ class _Realtime:
         elif b >= 0x80:
             self._realtime_ext(b)
         else:
-            if len(self._rx) >= RX_BUFFER_BYTES:
+            if len(self._rx) >= self.rx_buffer_bytes:
                 self._service()  # the parser may free room first, as grbl's would between two bytes
-            if len(self._rx) >= RX_BUFFER_BYTES:
+            if len(self._rx) >= self.rx_buffer_bytes:
                 self.overflow_bytes += 1
                 self._event(f"serial receive buffer overflow: byte {b:#04x} lost")
                 return
@@ -93,7 +93,7 @@ class _Realtime:
         else:
             fields = [self._state_text(), "WPos:" + fmt([self._pos[i] - wco[i] for i in range(3)], inches)]
         if mask & 2:
-            fields.append(f"Bf:{PLANNER_BLOCKS - len(self._planner)},{RX_BUFFER_BYTES - len(self._rx)}")
+            fields.append(f"Bf:{self.planner_size - len(self._planner)},{self.rx_buffer_bytes - len(self._rx)}")
         feed = self._v * 60.0 / (MM_PER_INCH if inches else 1.0)
         fields.append(f"FS:{feed:.1f},{self._rpm_now():.0f}" if inches else f"FS:{feed:.0f},{self._rpm_now():.0f}")
         moving = self._state in ("Run", "Jog", "Hold", "Home")

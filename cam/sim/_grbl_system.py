@@ -8,7 +8,7 @@ from collections import deque
 from typing import Optional
 
 from ._grbl_base import (BOOL_SETTINGS, DEFAULT_SETTINGS, HELP, INT_SETTINGS, LINE_MAX_CHARS, MM_PER_INCH,
-                         NUM_RE, PLANNER_BLOCKS, RX_BUFFER_BYTES, SETTING_RE, GrblCodeError, fmt, preparse)
+                         NUM_RE, SETTING_RE, GrblCodeError, fmt, preparse)
 
 
 class _System:
@@ -67,7 +67,7 @@ class _System:
                 return False
             kind, arg = self._actions[0]
             if kind == "block":
-                if len(self._planner) >= PLANNER_BLOCKS:
+                if len(self._planner) >= self.planner_size:
                     return False
                 self._queue_block(arg)
             elif kind == "sync":
@@ -143,7 +143,7 @@ class _System:
         elif line == "$I":  # grbl 1.1h: [VER:version.build:build info] then [OPT:...], in Idle or Alarm
             self._require_idle()
             self._send(f"[VER:1.1h.20190830:{self.build_info}]")
-            self._send(f"[OPT:V,{PLANNER_BLOCKS},{RX_BUFFER_BYTES}]")
+            self._send(f"[OPT:V,{self.planner_size},{self.rx_buffer_bytes}]")
         elif line.startswith("$I="):  # the build info kept in the EEPROM (upper case, no spaces: the pre-parser's)
             self._require_idle()
             self.build_info = line[3:]

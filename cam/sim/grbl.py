@@ -71,7 +71,8 @@ from typing import Any, Callable, Optional, Sequence
 
 from ._serve import serve_until_stopped
 from ..errors import CamError, PortError
-from ._grbl_base import (BOOT_WALL_S, DEFAULT_SETTINGS, LINE_MAX_CHARS, LOG_HEADER, TICK_S, UNLOCK_MSG, WELCOME,
+from ._grbl_base import (BOOT_WALL_S, DEFAULT_SETTINGS, LINE_MAX_CHARS, LOG_HEADER, PLANNER_BLOCKS, RX_BUFFER_BYTES,
+                         TICK_S, UNLOCK_MSG, WELCOME,
                          Block, ExecutedBlock, GrblCodeError, ParserState)
 from ._grbl_gcode import _GCode
 from ._grbl_motion import _Motion
@@ -100,7 +101,8 @@ class GrblEmulator(_System, _GCode, _Realtime, _Motion, AbstractContextManager):
     def __init__(self, *, speed: Optional[float] = 1.0, settings: Optional[dict[int, float]] = None,
                  baud: int = 115200, latency_s: float = 0.001, reset_on_open: bool = True,
                  start_mm: Sequence[float] = (-100.0, -100.0, -10.0), log_path: Optional[str] = None,
-                 build_info: str = "") -> None:
+                 build_info: str = "", rx_buffer_bytes: int = RX_BUFFER_BYTES, planner_blocks: int = PLANNER_BLOCKS,
+                 welcome: str = WELCOME) -> None:
         if speed is not None and not speed > 0:
             raise CamError(f"speed must be > 0 or None, got {speed!r}")
         if not baud > 0:
@@ -110,6 +112,9 @@ class GrblEmulator(_System, _GCode, _Realtime, _Motion, AbstractContextManager):
             if int(key) not in DEFAULT_SETTINGS:
                 raise CamError(f"grbl has no setting ${key}")
             self.settings[int(key)] = float(value)
+        self.rx_buffer_bytes = int(rx_buffer_bytes)   # grblHAL: 1024; FluidNC: its own
+        self.planner_size = int(planner_blocks)       # planner blocks; grblHAL: 100 and more
+        self.welcome = welcome                        # grblHAL: "GrblHAL 1.1f ['$' or '$HELP' for help]"
         self._speed = speed
         self._byte_s = 10.0 / baud
         self._latency_s = float(latency_s)
@@ -183,7 +188,7 @@ class GrblEmulator(_System, _GCode, _Realtime, _Motion, AbstractContextManager):
         if alarm_code is not None:
             self._alarm = True
         self._state = "Alarm" if self._alarm else "Idle"
-        self._send(WELCOME)
+        self._send(self.welcome)
         if self._alarm:
             self._send(UNLOCK_MSG)
         else:
