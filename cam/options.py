@@ -232,7 +232,7 @@ JOB_OPTIONS: tuple[Option, ...] = (
          "SVG: cut a segment that traces one already cut again (by default it is cut once)"),
     # G-code programs (the first two name files on the machine that runs cam: command line only)
     _opt("tool_table", "--tool-table", "text", "", {"gcode"}, None,
-         "LinuxCNC tool table (T1 P1 Z12.5 ...; lengths in mm) for G43 H tool length offsets",
+         "LinuxCNC tool table (T1 P1 Z12.5 D3 ...; mm) for G43 H tool length offsets and G41/G42 D cutter radii",
          metavar="FILE.tbl", web=False),
     _opt("subroutine_path", "--subroutine-path", "paths", "", {"gcode"}, (),
          "folder where 'O<name> call' finds name.ngc (repeatable, searched in order)", metavar="DIR", web=False),
