@@ -205,6 +205,24 @@ def _numba_listeners() -> tuple:
     return event, list(event._registered.get("numba:compile", []))
 
 
+def one_line_error(proc, *fragments: str) -> str:
+    """Exit 2 and one error line on stderr (no traceback; the first-run notice and grbl's settings warning
+    aside) naming every fragment; returns the line."""
+    assert proc.returncode == 2, (proc.returncode, proc.stdout, proc.stderr)
+    lines = [line for line in proc.stderr.splitlines()
+             if line.strip() and "first run only" not in line and not line.startswith("warning: grbl's settings")]
+    assert len(lines) == 1 and "Traceback" not in proc.stderr, proc.stderr
+    for f in fragments:
+        assert f in lines[0], (f, lines[0])
+    return lines[0]
+
+
+def ok(proc):
+    """Exit 0 (else the command's output in the failure); returns ``proc``."""
+    assert proc.returncode == 0, (proc.stdout, proc.stderr)
+    return proc
+
+
 def run_cli(*args, cwd: Optional[os.PathLike] = None, env: Optional[dict] = None, stdin: str = "",
             timeout: Optional[float] = None) -> CliRun:
     """``python -m cam ARGS`` in this process: ``cam.cli.main`` with its own stdout and stderr (pipes to it:

@@ -29,25 +29,10 @@ from cam.drive.runner import Controller
 from cam.job.model import CUT
 from cam.job.moves import jog as jog_job
 from cam.verify.pinlog import decode_pin_log, read_pin_log
-from conftest import ROOT, SAMPLES, run_cli, wait_for_progress
+from conftest import ok, one_line_error, ROOT, run_cli, SAMPLES, wait_for_progress
 
 S = cam.MachineSettings()
 ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
-
-
-def one_line_error(proc, *fragments: str) -> str:
-    """Exit 2 and one line on stderr (no traceback) naming every fragment; returns the line."""
-    assert proc.returncode == 2, (proc.returncode, proc.stdout, proc.stderr)
-    lines = [line for line in proc.stderr.splitlines() if line.strip() and "first run only" not in line]
-    assert len(lines) == 1 and "Traceback" not in proc.stderr, proc.stderr
-    for f in fragments:
-        assert f in lines[0], (f, lines[0])
-    return lines[0]
-
-
-def ok(proc):
-    assert proc.returncode == 0, (proc.stdout, proc.stderr)
-    return proc
 
 
 def state_of(path: Path) -> MachineState:

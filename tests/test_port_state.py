@@ -24,7 +24,7 @@ from cam.drive.state import (
     MachineState, StateBusyError, StateHold, default_state_path, read_state, write_state,
 )
 from cam.sim.grbl import start_emulator
-from conftest import ROOT, run_cli
+from conftest import ok, one_line_error, ROOT, run_cli
 from support.grbl import quick_thread_switches  # noqa: F401 (autouse)
 from test_grbl_session import FAST, SETTINGS, url
 
@@ -33,23 +33,6 @@ SLOW_CASES: set[str] = set()
 
 FAKE_PARPORT = "/dev/cam-test-parport-43"  # a parallel port name no test machine has: nothing is ever opened
 NEW_DEVICE = "/dev/null"  # a device that is there (a new machine's), never opened as a port by these tests
-
-
-def one_line_error(proc, *fragments: str) -> str:
-    """Exit 2 and one error line on stderr (no traceback; grbl's settings warning aside) naming every fragment;
-    returns the line."""
-    assert proc.returncode == 2, (proc.returncode, proc.stdout, proc.stderr)
-    lines = [line for line in proc.stderr.splitlines()
-             if line.strip() and "first run only" not in line and not line.startswith("warning: grbl's settings")]
-    assert len(lines) == 1 and "Traceback" not in proc.stderr, proc.stderr
-    for f in fragments:
-        assert f in lines[0], (f, lines[0])
-    return lines[0]
-
-
-def ok(proc):
-    assert proc.returncode == 0, (proc.stdout, proc.stderr)
-    return proc
 
 
 @pytest.fixture

@@ -15,32 +15,17 @@ import re
 from pathlib import Path
 
 import numpy as np
-import pytest
 
 import cam
 from cam.cli.parser import build_parser
 from cam.digitize.trace2d import START_RULES
 from cam.drive.state import MachineState, StateHold, read_state, unknown_message, write_state
-from cam.options import JOB_OPTIONS, OPTIONS
+from cam.options import JOB_OPTIONS
 from cam.settings import load_settings
-from conftest import SAMPLES, assert_surface_equal, carve_job, drawing_from_rows, expected_surface_2d, run_cli
+from conftest import (assert_surface_equal, carve_job, drawing_from_rows, expected_surface_2d, ok, one_line_error,
+                      run_cli)
 
 S = cam.MachineSettings()
-
-
-def one_line_error(proc, *fragments: str) -> str:
-    """Exit 2 and one line on stderr (no traceback) naming every fragment; returns the line."""
-    assert proc.returncode == 2, (proc.returncode, proc.stdout, proc.stderr)
-    lines = [line for line in proc.stderr.splitlines() if line.strip() and "first run only" not in line]
-    assert len(lines) == 1 and "Traceback" not in proc.stderr, proc.stderr
-    for f in fragments:
-        assert f in lines[0], (f, lines[0])
-    return lines[0]
-
-
-def ok(proc):
-    assert proc.returncode == 0, (proc.stdout, proc.stderr)
-    return proc
 
 
 # -- negative numbers after an option -------------------------------------------------------------------------
