@@ -310,7 +310,7 @@ def test_cli_home_on_grbl_then_a_move(grbl, tmp_path):
     machine.write_text(f"[travel]\nx_min_steps = {t.x_min_steps}\nx_max_steps = 0\ny_min_steps = 0\n"
                        f"y_max_steps = {t.y_max_steps}\nz_min_steps = 0\nz_max_steps = {t.z_max_steps}\n")
     common = ["--port", url(grbl), "--state", str(tmp_path / "s.json"), "--machine", str(machine)]
-    r = run_cli("jog", "X-", "1", "--unit", "mm", *common)
+    r = run_cli("goto", "0,0,0", "--machine-coords", *common)  # a jog would be allowed (issue #45 point 3)
     assert r.returncode == 2 and "home" in r.stderr and "Traceback" not in r.stderr, r.stderr
     r = run_cli("home", *common)
     assert r.returncode == 0, r.stderr
@@ -348,9 +348,11 @@ def test_cli_feed_override_and_the_settings_warning(tmp_path):
     assert r.returncode == 2 and "--feed-override" in r.stderr
 
 
-def test_cam_run_names_the_session_for_a_board():
+def test_cam_run_on_a_board_that_is_not_there_is_one_line():
+    """cam.run runs on a board through a session (issue #45 point 3: test_recovery.py); a missing one is a
+    PortError naming the device."""
     _, job = two_d_job()
-    with pytest.raises(CapabilityError, match="MachineSession"):
+    with pytest.raises(cam.errors.PortError, match="/dev/ttyUSB9"):
         cam.run(job, port="grbl:/dev/ttyUSB9")
 
 

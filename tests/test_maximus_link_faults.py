@@ -336,17 +336,20 @@ def test_the_command_reports_a_link_fault_in_one_line_and_no_job_finished(tmp_pa
     clean = cli_run(tmp_path, capsys, 1)
 
     def next_command_sends_nothing(proxy: PtyProxy) -> None:
-        """A jog is refused before its handshake byte: the position is unknown after the fault (the port's state file,
-        issue #43 point 5), and once the user says where the head is, the board's fault marker refuses it."""
+        """A move is refused before its handshake byte: the position is unknown after the fault (the port's state
+        file, issue #43 point 5), so a go-to is refused for it; a jog, allowed while the position is unknown (issue
+        #45 point 3), and any move once the user says where the head is, are refused by the board's fault marker."""
         sent = len(proxy.to_board)
         capsys.readouterr()
-        assert main(["jog", "--port", f"maximus:{proxy.device_path}", "X+", "1"]) != 0
+        assert main(["goto", "0,0,0", "--port", f"maximus:{proxy.device_path}"]) != 0
         assert "position is unknown" in capsys.readouterr().err
-        assert main(["where", "--set", "0,0,0", "--port", f"maximus:{proxy.device_path}"]) == 0
-        capsys.readouterr()
-        assert main(["jog", "--port", f"maximus:{proxy.device_path}", "X+", "1"]) != 0
-        err = capsys.readouterr().err
-        assert "ended in a link fault" in err and len(err.splitlines()) == 1, err
+        for argv in (["jog", "X+", "1"], ["where", "--set", "0,0,0"], ["jog", "X+", "1"]):
+            code = main([*argv[:1], "--port", f"maximus:{proxy.device_path}", *argv[1:]])
+            err = capsys.readouterr().err
+            if argv[0] == "where":
+                assert code == 0, err
+                continue
+            assert code != 0 and "ended in a link fault" in err and len(err.splitlines()) == 1, err
         assert len(proxy.to_board) == sent
         fault_marker(proxy.device_path).unlink()
 

@@ -57,7 +57,7 @@ def mill(tmp_path, name: str = "mill.toml", x_max_steps: int = 12000):
 
 def test_missing_state_file_on_real_port_is_position_unknown(tmp_path, state_home):
     # the first command on a new machine says in one line how to set its position, and opens nothing
-    for argv in (["jog", "X+", "10"], ["goto", "1,1,0"], ["zero"]):
+    for argv in (["goto", "1,1,0"], ["zero"]):  # a jog is allowed (issue #45 point 3): test_recovery.py
         one_line_error(run_cli(*argv, "--port", NEW_DEVICE), "position is unknown", "no state file",
                        "cam home", "cam where --set X,Y,Z")
     # ... unless the device is not there at all: a typo in --port comes first
@@ -69,7 +69,7 @@ def test_missing_state_file_on_real_port_is_position_unknown(tmp_path, state_hom
     assert rep["state_file"] == str(state_home / "dev-cam-test-parport-43.json")
     # a typo in --state is a new (missing) file: position unknown too, nothing written
     typo = tmp_path / "mil.json"
-    one_line_error(run_cli("jog", "X+", "10", "--port", NEW_DEVICE, "--state", typo), "position is unknown",
+    one_line_error(run_cli("goto", "1,1,0", "--port", NEW_DEVICE, "--state", typo), "position is unknown",
                    "typo in --state")
     assert not typo.exists()
     # the MAXIMUS board and grbl are real ports too; the mock, a simulated machine, starts at its home
@@ -120,7 +120,7 @@ def test_other_machine_file_on_real_port_refused_unless_changed(tmp_path, state_
     rep = json.loads(ok(run_cli("where", "--json", "--port", FAKE_PARPORT)).stdout)  # the recorded one, untouched
     assert rep["machine_file"] == str(a) and rep["position_known"] and rep["machine_steps"][0] == 35
     # the user says the machine changed: b is recorded, and its position is unknown until said
-    one_line_error(run_cli("jog", "X+", "10", "--port", FAKE_PARPORT, "--machine", b, "--machine-changed"),
+    one_line_error(run_cli("goto", "1,1,0", "--port", FAKE_PARPORT, "--machine", b, "--machine-changed"),
                    "position is unknown", "the machine changed", str(a), str(b))
     rep = json.loads(ok(run_cli("where", "--json", "--port", FAKE_PARPORT)).stdout)
     assert rep["machine_file"] == str(b) and not rep["position_known"]
@@ -143,8 +143,8 @@ def test_other_machine_file_on_real_port_refused_unless_changed(tmp_path, state_
 @pytest.mark.parametrize("before", ["unknown", "known"])
 def test_failed_home_never_marks_position_known(grbl, tmp_path, before):
     """grbl with homing disabled answers $H with error:5: from the start of homing to its end, and after it, the
-    session, its snapshot (what the page shows) and the state file never say the position is known; a jog
-    then is refused."""
+    session, its snapshot (what the page shows) and the state file never say the position is known; a go-to
+    then is refused (a jog is allowed: issue #45 point 3)."""
     path = tmp_path / "m.json"
     state = MachineState(position_steps=(100, 0, 0))
     write_state(path, state if before == "known" else state.lost("an emergency stop ended the job"))
@@ -176,7 +176,7 @@ def test_failed_home_never_marks_position_known(grbl, tmp_path, before):
         assert not session.state()["where"]["position_known"] and not hold.state.homed
         assert "homing" in hold.state.unknown_reason
         with pytest.raises(cam.CamError, match="unknown"):
-            session.jog("x", 10)
+            session.go_to((0, 0, 0))
     finally:
         hold.close()
     assert not read_state(path, SETTINGS).position_known
@@ -322,7 +322,7 @@ def test_a_different_grbl_board_on_the_same_path_is_position_unknown(boards, tmp
         assert not session.state()["where"]["position_known"] and not hold.state.position_known
         moves = len(mill_b.executed())
         with pytest.raises(cam.CamError, match="position is unknown.*MILL-B.*MILL-A"):
-            session.jog("x", 10)
+            session.go_to((1, 0, 0))  # a jog is allowed (issue #45 point 3), a go-to is not
         assert len(mill_b.executed()) == moves
     finally:
         hold.close()
@@ -330,7 +330,7 @@ def test_a_different_grbl_board_on_the_same_path_is_position_unknown(boards, tmp
     assert st["board"] == "[VER:1.1h.20190830:MILL-B] [OPT:V,15,128]" and not st["position_known"]
     assert "MILL-A" in st["unknown_reason"] and "MILL-B" in st["unknown_reason"]
     # the command line says it in its one refusal line; once the position is said, mill B goes on as itself
-    one_line_error(run_cli("jog", "X+", "10", "--port", port), "position is unknown", "another board", "MILL-A",
+    one_line_error(run_cli("goto", "1,0,0", "--port", port), "position is unknown", "another board", "MILL-A",
                    "MILL-B")
     ok(run_cli("where", "--set", "1,0,0", "--port", port))
     ok(run_cli("jog", "X+", "10", "--port", port))
@@ -340,7 +340,7 @@ def test_a_different_grbl_board_on_the_same_path_is_position_unknown(boards, tmp
     grbl_machine(port, SETTINGS).link.command("$I=mill b2")
     assert mill_b.build_info == "MILLB2"  # grbl's pre-parser: upper case, no spaces
     close_grbl_machines()
-    one_line_error(run_cli("jog", "X+", "10", "--port", port), "position is unknown", "MILL-B]", "MILLB2")
+    one_line_error(run_cli("goto", "1,0,0", "--port", port), "position is unknown", "MILL-B]", "MILLB2")
 
 
 def test_the_same_grbl_board_keeps_its_position(boards, tmp_path, state_home, monkeypatch):

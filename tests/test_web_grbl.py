@@ -93,8 +93,13 @@ def test_home_route_on_grbl(grbl, tmp_path):
     try:
         status, st = s.call("GET", "/api/state")
         assert not st["where"]["position_known"] and "Alarm" in st["where"]["unknown_reason"]
-        status, st = s.call("POST", "/api/jog", {"axis": "x", "steps": -10})
+        status, st = s.call("POST", "/api/goto", {"xyz": [0, 0, 0], "machine": True})
         assert 400 <= status < 500 and "home" in st["error"], st
+        # a jog is allowed (issue #45 point 3: grbl's alarm unlocked for it), the position still unknown
+        status, st = s.call("POST", "/api/jog", {"axis": "x", "steps": -10})
+        assert status == 200, st
+        st = s.wait_idle()
+        assert st["last"]["status"] == "finished" and not st["where"]["position_known"], st["last"]
         status, st = s.call("POST", "/api/home", {})
         assert status == 200, st
         st = s.wait_idle()

@@ -24,7 +24,7 @@ from .grbl_machine import GRBL_OFFSETS
 from .placement import approach_to_work_zero, ended_state, goto_path, placed_home
 from .ports import require
 from .runner import Controller
-from .state import steps_to_mm, check_in_travel
+from .state import steps_to_mm, check_in_travel, still_unknown
 from ..values import shown, steps_in_range, xyz_numbers
 
 __all__ = ["SessionFrames"]
@@ -216,7 +216,11 @@ class SessionFrames(SessionControls):
         if self.state_hold is None:
             return
         try:
-            self.state_hold.record(ended_state(self.state_hold.state, self, self._activity_start))
+            end = ended_state(self.state_hold.state, self, self._activity_start)
+            a = self._last_activity
+            if a is not None and a.unknown_reason:  # a jog made while the position was unknown: still unknown
+                end = still_unknown(end, a.unknown_reason, self.settings)
+            self.state_hold.record(end)
         except (CamError, OSError) as e:
             self.log(f"the machine state file {self.state_hold.path} was not written: {e}")
 

@@ -79,12 +79,12 @@ class SessionGrbl(SessionFrames):
         with self._lock:
             self._bump()
 
-    def home(self) -> None:
+    def home_grbl(self) -> None:
         """Start grbl's homing cycle (``$H``) in the background: the machine frame is then grbl's (the switches'),
         the position known and homed.  Stop and emergency stop end it (grbl's soft reset).
 
         Raises:
-            CapabilityError: not grbl (a step/dir port homes with ``cam home``, :mod:`cam.drive.homing`);
+            CapabilityError: not grbl (:meth:`~cam.drive._session_recover.SessionRecover.home` homes every port);
             BusyError.  A homing that fails ends the activity with its one-line reason, the position unknown."""
         require(self.port, "grbl_home", what="homing from the session")
         assert self.grbl is not None

@@ -54,6 +54,7 @@ class Activity:
     machine_ns: int = 0
     detail: str = ""
     started_wall: float = field(default_factory=time.monotonic)
+    unknown_reason: str = ""  # the position stays unknown after it, for this reason (a jog made while unknown)
 
     @property
     def estimated_s(self) -> float:

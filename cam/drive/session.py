@@ -45,7 +45,6 @@ import collections
 import threading
 import time
 import weakref
-from dataclasses import replace
 from typing import Any, Callable, Optional
 
 import numpy as np
@@ -55,28 +54,27 @@ from ..job.model import TRAVEL, Job, JobLike, travel_job
 from ..job.moves import jog as jog_job
 from ..job.moves import jog_steps, to_origin
 from ..settings import DEFAULT_SETTINGS, MachineSettings
-from ..values import xyz_steps
 from .apart import RunnerProcess
 from .journal import JournalSpec, journal_spec
 from ._session_parts import Activity, Prompt, PromptFn
-from ._session_checks import SessionChecks
+from ._session_recover import UNKNOWN_JOG_LINE, SessionRecover
 from ._session_pinlog import SessionPinLogs
 from .activities import BoardControl, drill_work, move_work, run_on_board, run_steps
 from .maximus.board import maximus_port
 from .grbl_machine import adopt_position, grbl_machine
-from .ports import MockPort, port_kind, require
+from .ports import MockPort, Port, port_kind
 from .runner import Controller, Cursor, RunResult
 from .chunks import ChunkedPlan, plan_chunks
 from .steps import StepPlan
-from .state import StateHold, check_in_travel
+from .state import StateHold
 
-__all__ = ["MachineSession", "Prompt", "PromptFn", "MAX_JOG_STEPS", "run"]
+__all__ = ["MachineSession", "Prompt", "PromptFn", "MAX_JOG_STEPS", "UNKNOWN_JOG_LINE", "run"]
 
 MAX_JOG_STEPS = 100_000
 """The longest jog one request may ask for, either way."""
 
 
-class MachineSession(SessionChecks, SessionPinLogs):
+class MachineSession(SessionRecover, SessionPinLogs):
     """The machine as every front end sees it (thread-safe).
 
     Args:
@@ -147,21 +145,6 @@ class MachineSession(SessionChecks, SessionPinLogs):
             self._runner_process = RunnerProcess()
             weakref.finalize(self, self._runner_process.close)
         return self._runner_process
-
-    def set_position(self, position_steps: tuple[int, int, int]) -> None:
-        """Tell the session where the tool stands (e.g. after homing by hand): 3 whole numbers of steps
-        (:func:`cam.values.xyz_steps`: no text, no booleans, none out of range); refused while busy."""
-        position = xyz_steps(position_steps, "position")
-        with self._lock:
-            self._check_free()
-            self._position = np.asarray(position, np.int64)
-            if self.grbl is not None and self.grbl.position_steps(self.grbl.status()) != tuple(self._position):
-                self.grbl.rebase(tuple(int(v) for v in self._position))  # grbl's MPos is read from here on
-            if self.state_hold is not None:  # the user's word: the machine frame is not the switches' any more
-                check_in_travel(tuple(self._position), self.settings, "the position given")
-                st = self.state_hold.state.moved_to(tuple(int(v) for v in self._position))
-                self.state_hold.record(replace(st, homed=False))
-            self._bump()
 
     def last_sent(self) -> tuple[int, tuple[int, int, int]]:
         """``(writes sent, position in steps from where it started)`` of the activity that ended last, from its
@@ -254,14 +237,17 @@ class MachineSession(SessionChecks, SessionPinLogs):
         """Move one axis by ``steps`` in ``unit`` (see :data:`cam.job.moves.JOG_UNITS`: machine steps, full
         steps, 0.1 mm, mm, 0.1 inch).  ``steps`` must be a finite number (no text, no boolean), at most
         :data:`MAX_JOG_STEPS` machine steps either way once converted.  BusyError while something runs;
-        PlanError (naming the field) or TravelError for a bad jog."""
+        PlanError (naming the field) or TravelError for a bad jog.  With the position unknown (a state file's
+        latch after an emergency stop, a limit or a fault) the jog is allowed with the soft limits off, as
+        LinuxCNC jogs an unhomed machine, and the position stays unknown (:mod:`cam.drive._session_recover`)."""
         a = str(axis).lower()
         half = getattr(self.settings.maximus, f"half_step_{a}", False) if self.kind == "maximus" \
             else self.settings.half_step
         n = jog_steps(axis, steps, unit, settings=self.settings, half_step=bool(half), max_steps=MAX_JOG_STEPS)
         with self._lock:
             self._check_free()
-            self._require_known()
+            if self._jog_unknown(axis, n):  # the position unknown: soft limits off, still unknown after
+                return
             job = jog_job(axis, n, settings=self.settings, position_steps=self.position_steps())
             self._start_moves("jog", job, job.source)
 
@@ -391,11 +377,13 @@ class MachineSession(SessionChecks, SessionPinLogs):
 def run(job: Any, port: Any = "mock", *, realtime: bool = False, controller: Optional[Controller] = None,
         progress: Optional[Callable[[int, int, int], None]] = None,
         on_pause: Optional[Callable[[tuple[int, int, int], str], None]] = None) -> RunResult:
-    """Run a job on a step/dir port and wait for the end: a one-job :class:`MachineSession`.
+    """Run a job on any machine and wait for the end: a one-job :class:`MachineSession`.
 
     Args:
-        job: a :class:`~cam.job.model.Job`, a :class:`~cam.drive.steps.StepPlan` or a prepared job.
-        port: a port name (``"mock"``, ``"/dev/parport0"``) or an open step/dir port.
+        job: a :class:`~cam.job.model.Job`, a :class:`~cam.drive.steps.StepPlan` or a prepared job (a board takes
+            what its session takes: grbl any job with moves, the MAXIMUS board drill files).
+        port: a port name (``"mock"``, ``"/dev/parport0"``, ``"grbl:/dev/ttyUSB0"``, ``"maximus:/dev/ttyUSB0"``)
+            or an open step/dir port.
         realtime: wait for each write's time (forced on for real ports).
         controller: pause / resume / stop / emergency stop from another thread.
         progress: called now and then with (writes done, writes total, machine ns done).
@@ -404,7 +392,9 @@ def run(job: Any, port: Any = "mock", *, realtime: bool = False, controller: Opt
             at once when there is no controller.
 
     Returns:
-        The :class:`~cam.drive.runner.RunResult`; the mock's pin log is ``result.pin_log()``.
+        The :class:`~cam.drive.runner.RunResult`; the mock's pin log is ``result.pin_log()``.  On a board: its
+        status, where the tool ended (steps from where it started), the lines or holes done, the planned machine
+        time; it keeps no pin log (``result.pin_log()`` says so in one line).
 
     Raises:
         CamError: the job does not fit the travel, the port cannot be opened or cannot run it.
@@ -416,13 +406,49 @@ def run(job: Any, port: Any = "mock", *, realtime: bool = False, controller: Opt
             controller.pause()  # held until the caller resumes it
         return "continue"
 
-    if isinstance(port, str) and port_kind(port) in ("grbl", "maximus"):
-        require(port, "step_dir", what="cam.run (a board that makes its own steps runs through MachineSession)")
     settings = getattr(job, "settings", DEFAULT_SETTINGS)
     session = MachineSession(port, settings, realtime=realtime, on_prompt=on_prompt)
     session.on_progress = progress
+    if session.kind in ("grbl", "maximus"):
+        return _run_on_board(session, job, controller)
     session.start(job, controller=controller)
     session.wait_idle(None)
     if session.last_result is None:
         raise PortError("; ".join(session.last_run.get("messages") or ["the run failed"]))
     return session.last_result
+
+
+class _BoardPort(Port):
+    """What a board's :class:`RunResult` names as its port: the board's port name (it keeps no pin log)."""
+
+    def __init__(self, name: str) -> None:
+        self.name = name
+
+
+def _run_on_board(session: MachineSession, job: Any, controller: Optional[Controller]) -> RunResult:
+    """:func:`run` on a board that makes its own steps (grbl, MAXIMUS): the session runs it; the caller's
+    ``controller`` is passed on (pause, stop, emergency stop) while it runs."""
+    t0 = time.monotonic()
+    session.start(job)
+    passed = (False, False, False)
+    while not session.wait_idle(0.05):
+        if controller is None:
+            continue
+        now = (controller.paused, controller.stop_requested, controller.estop_requested)
+        try:
+            if now[2] and not passed[2]:
+                session.emergency_stop()
+            elif now[1] and not passed[1]:
+                session.stop()
+            elif now[0] != passed[0]:
+                session.pause() if now[0] else session.resume()
+        except CamError as exc:  # a board that cannot pause: said once, the job goes on
+            session.log(str(exc), "warning")
+        passed = now
+    info = session.last_run
+    if info.get("status") not in ("finished", "stopped", "emergency-stopped"):
+        raise PortError("; ".join(info.get("messages") or ["the run failed"]))
+    a = session._last_activity
+    return RunResult(str(info["status"]), session.position_steps(), int(a.done if a is not None else 0),
+                     float(info.get("machine_time_s", getattr(job, "estimated_time_s", 0.0))),
+                     time.monotonic() - t0, 0, _BoardPort(str(session.port)), list(info.get("messages") or []))

@@ -44,7 +44,7 @@ except ImportError:  # pragma: no cover - not a POSIX system: no lock (one comma
 
 from ..errors import BusyError, CamError, PortError, TravelError
 from ..fileio import atomic_write_text
-from ..settings import MachineSettings
+from ..settings import MAX_TRAVEL_STEPS, MachineSettings, Travel
 from .grbl_link import parse_grbl_url
 from .ports import MAXIMUS_PREFIX, port_kind
 
@@ -53,7 +53,7 @@ __all__ = [
     "PositionUnknownError", "parse_state", "read_state", "write_state", "state_dir", "default_state_path",
     "mm_to_steps", "steps_to_mm", "check_in_travel", "MachineLock", "StateHold", "unknown_message", "dump_json",
     "MachineRecord", "MachineFileError", "machine_record", "recorded_machine", "new_machine_state", "DeviceLock",
-    "port_device", "is_real_port", "serial_by_id", "SERIAL_BY_ID",
+    "port_device", "is_real_port", "serial_by_id", "SERIAL_BY_ID", "soft_limits_off", "still_unknown",
 ]
 
 STATE_VERSION = 1
@@ -71,7 +71,11 @@ class StateError(CamError):
 
 
 class StateBusyError(BusyError):
-    """Another command drives the machine (the message names its process)."""
+    """Another command drives the machine (the message names its process; a lock's refusal also says it in
+    ``holder_pid``, None when not written yet, and ``holder_command``, e.g. ``"cam serve"``)."""
+
+    holder_pid: Optional[int] = None
+    holder_command: str = ""
 
 
 class PositionUnknownError(CamError):
@@ -219,6 +223,23 @@ def check_in_travel(position_steps: Any, settings: MachineSettings, what: str) -
             beyond = lo - v if v < lo else v - hi
             raise TravelError(f"{what} is outside the {'XYZ'[a]} travel ({lo}..{hi} steps from the home): "
                               f"{v} is {beyond} steps beyond")
+
+
+def soft_limits_off(settings: MachineSettings) -> MachineSettings:
+    """``settings`` with no travel limits: a jog while the position is unknown (nothing says where the limits are;
+    issue #45 point 3)."""
+    wide = Travel(-MAX_TRAVEL_STEPS, MAX_TRAVEL_STEPS, -MAX_TRAVEL_STEPS, MAX_TRAVEL_STEPS, -MAX_TRAVEL_STEPS,
+                  MAX_TRAVEL_STEPS)
+    return replace(settings, travel=wide)
+
+
+def still_unknown(end: MachineState, reason: str, settings: MachineSettings) -> MachineState:
+    """The state after a jog made while the position was unknown (``reason``: why it was): still unknown (a jog
+    does not make it known; the reason an end of its own gives, else the one before), the guess kept inside the
+    travel (a state file holds no position outside it)."""
+    bounds = settings.travel.bounds_steps()
+    guess = tuple(min(max(int(v), lo), hi) for v, (lo, hi) in zip(end.position_steps, bounds))
+    return end.lost(end.unknown_reason or reason, guess)  # type: ignore[arg-type]
 
 
 def _steps3(value: Any, key: str) -> Steps3:
@@ -563,8 +584,11 @@ class _LockFile:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
             holder = _holder_words(fd)
+            pid, command = _holder_text(fd)
             os.close(fd)
-            raise self._refusal(what, holder) from None
+            refusal = self._refusal(what, holder)
+            refusal.holder_pid, refusal.holder_command = pid, command  # type: ignore[attr-defined]
+            raise refusal from None
         os.ftruncate(fd, 0)
         os.pwrite(fd, f"{os.getpid()} {' '.join(what.split())[:MAX_TEXT]}\n".encode("utf-8"), 0)
         self._fd = fd
