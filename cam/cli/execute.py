@@ -24,7 +24,9 @@ from ..drive.journal import journal_spec, read_journal
 from ..drive.ports import MockPort, SwitchSchedule, port_kind, require
 from ..drive.runner import FINISHED
 from ..drive.session import MachineSession, Prompt
-from ..drive.state import MachineState, PositionUnknownError, StateHold, check_in_travel, steps_to_mm
+from ..drive.state import (
+    MachineState, PositionUnknownError, StateHold, check_in_travel, steps_to_mm, still_unknown,
+)
 from ..errors import CamError, CapabilityError, PortError
 from ..job.model import Job
 from ..settings import MachineSettings
@@ -195,7 +197,8 @@ def _start_position(hold: StateHold, args: argparse.Namespace,
                     start_steps: Optional[tuple[int, int, int]]) -> tuple[int, int, int]:
     """Where the run starts, machine frame: the state's position, or a resumed job's journal's."""
     if start_steps is None:
-        hold.require_known()
+        if not getattr(args, "position_unknown", None):  # cam jog: a jog with the position unknown (issue #45)
+            hold.require_known()
         return hold.state.position_steps
     home = read_journal(args.resume).home_steps if getattr(args, "resume", None) else (0, 0, 0)
     start = tuple(int(s) + int(h) for s, h in zip(start_steps, home))
@@ -290,7 +293,7 @@ def _drive(job: Any, args: argparse.Namespace, settings: MachineSettings, hold: 
     finally:
         answers.flush()
         if hold.state.running is not None:  # recorded before the handlers go: a SIGTERM now still stops cleanly
-            end = ended_state(hold.state, ended, ended_start, getattr(args, "tool", None))
+            end = _ended_state(hold, ended, ended_start, args)
             try:
                 hold.record(end)
             except CamError as exc:  # a full disk: what the run did is still said and written
@@ -300,6 +303,15 @@ def _drive(job: Any, args: argparse.Namespace, settings: MachineSettings, hold: 
         if bar is not None:
             bar.close()
     return _outcome(session, args, runs)
+
+
+def _ended_state(hold: StateHold, ended: MachineSession, start: tuple[int, int, int],
+                 args: argparse.Namespace) -> MachineState:
+    """Where the run left the machine (:func:`ended_state`); after a jog made with the position unknown
+    (``args.position_unknown``: why it was) the position stays unknown (:func:`still_unknown`)."""
+    end = ended_state(hold.state, ended, start, getattr(args, "tool", None))
+    reason = getattr(args, "position_unknown", None)
+    return end if not reason else still_unknown(end, reason, hold.settings)
 
 
 def unrecorded_message(end: MachineState, exc: Exception, settings: MachineSettings) -> str:

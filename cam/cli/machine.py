@@ -9,7 +9,8 @@ import argparse
 import sys
 
 from ..drive.ports import port_kind
-from ..drive.state import check_in_travel, steps_to_mm
+from ..drive.state import PositionUnknownError, StateHold, check_in_travel, soft_limits_off, steps_to_mm
+from ..drive.session import UNKNOWN_JOG_LINE
 from ..errors import CamError
 from ..job.moves import jog, jog_steps
 from ..settings import MachineSettings
@@ -87,15 +88,33 @@ def _jog_steps(args: argparse.Namespace, settings: MachineSettings) -> tuple[str
     return axis[0], n if axis[1] == "+" else -n
 
 
+def _unknown(hold: StateHold, args: argparse.Namespace) -> bool:
+    """Whether the position is unknown (a jog is allowed then, issue #45 point 3): keeps why in
+    ``args.position_unknown`` for the run (:func:`cam.cli.execute.execute`).  A missing device is refused."""
+    if hold.state.position_known:
+        return False
+    try:
+        hold.require_known()  # a typo in --port (no such device) is what the user fixes first
+    except PositionUnknownError:
+        pass
+    args.position_unknown = hold.state.unknown_reason or "not recorded"
+    return True
+
+
 def cmd_jog(args: argparse.Namespace) -> int:
     check_port_options(args)
     settings = port_settings(args, args.port)
     axis, n = _jog_steps(args, settings)
     with hold_machine(args, settings, "cam jog") as hold:
-        hold.require_known()
         start = hold.state.position_steps
-        outcome = execute(jog(axis, n, settings=settings, position_steps=start), args, settings, hold=hold)
+        if _unknown(hold, args):  # as LinuxCNC jogs an unhomed machine: soft limits off, still unknown after
+            free = soft_limits_off(settings)
+            outcome = execute(jog(axis, n, settings=free), args, free, hold=hold)
+        else:
+            outcome = execute(jog(axis, n, settings=settings, position_steps=start), args, settings, hold=hold)
         state = hold.state
+    if getattr(args, "position_unknown", None):  # once the jog ran (a port that did not open: its one line only)
+        print(UNKNOWN_JOG_LINE, file=sys.stderr, flush=True)
     if not outcome.finished:
         for m in outcome.messages:
             print(m, file=sys.stderr)
@@ -103,5 +122,6 @@ def cmd_jog(args: argparse.Namespace) -> int:
         print(f"jog stopped: moved X={moved[0]} Y={moved[1]} Z={moved[2]} steps", file=sys.stderr)
         return EXIT_INTERRUPTED
     print(f"jogged {axis} by {n} steps; "
-          + _where_line(state.position_steps, state.to_work(state.position_steps), state.active_offset, settings))
+          + _where_line(state.position_steps, state.to_work(state.position_steps), state.active_offset, settings)
+          + ("" if state.position_known else "; the position is still unknown (cam home, or cam where --set X,Y,Z)"))
     return 0

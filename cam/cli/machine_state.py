@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from ..drive.state import (
-    MachineLock, MachineState, StateHold, check_in_travel, dump_json, machine_record, mm_to_steps, read_state,
+    MachineLock, MachineState, StateBusyError, StateHold, check_in_travel, dump_json, machine_record, mm_to_steps, read_state,
     steps_to_mm,
 )
 from ..drive.grbl_machine import GRBL_OFFSETS, adopt_position, grbl_machine
@@ -105,14 +105,28 @@ def _read_now(path: Path, settings: MachineSettings, port: str) -> tuple[Machine
     return state, r
 
 
+def _hold_unless_served(args: argparse.Namespace, settings: MachineSettings) -> StateHold:
+    """``cam where``'s hold on the machine.  While ``cam serve`` drives it (the server holds the lock, issue #45
+    point 3) the state is the server's to change: one line naming its pid and the page's Set position (nothing is
+    routed to the server: the page is where its operator sees what the machine does)."""
+    what = "cam where --set/--use" if args.set is not None or args.use else "cam where"
+    try:
+        return hold_machine(args, settings, what)
+    except StateBusyError as exc:
+        if not (exc.holder_command or "").startswith("cam serve"):
+            raise
+        pid = f"pid {exc.holder_pid}" if exc.holder_pid is not None else "another process"
+        raise StateBusyError(f"{what} refused: cam serve ({pid}) drives this machine; use Set position (or Home) on "
+                             f"its page, or stop the server first") from None
+
+
 def cmd_where(args: argparse.Namespace) -> int:
     settings = port_settings(args, args.port)
     path = state_path_of(args)
     driving = None
     grbl = port_kind(args.port or "mock") == "grbl"
     if args.set is not None or args.use or grbl:  # grbl: what the board says, read now
-        with hold_machine(args, settings, "cam where --set/--use" if args.set is not None or args.use
-                          else "cam where") as hold:
+        with _hold_unless_served(args, settings) as hold:
             state = hold.state
             if args.set is not None:
                 steps = mm_to_steps(args.set, settings)
