@@ -723,6 +723,15 @@ async def _goto(st: _AppState, request: Request) -> dict[str, Any]:
     return st.session.state()
 
 
+async def _set_position(st: _AppState, request: Request) -> dict[str, Any]:
+    """``{"xyz": [x, y, z], "unit": "mm" | "steps"}``: where the tool stands, machine frame (the page's Set
+    position, ``cam where --set``): after an emergency stop or a limit stop the position is known again, no restart
+    (issue #45 point 3).  The session checks the numbers."""
+    body = await _body_json(request)
+    st.session.set_position(body.get("xyz"), body.get("unit", "mm"), name="xyz")
+    return st.session.state()
+
+
 async def _use_offset(st: _AppState, request: Request) -> dict[str, Any]:
     body = await _body_json(request)
     st.session.use_offset(body.get("offset", ""))
@@ -895,6 +904,7 @@ def _routes(st: _AppState) -> list:
         Route("/api/drill-z", json_api(_drill_z), methods=post),
         Route("/api/feed-override", json_api(_feed_override), methods=post),
         Route("/api/home", json_api(partial(_control, action=session.home)), methods=post),
+        Route("/api/set-position", json_api(_set_position), methods=post),
         Route("/api/zero", json_api(_zero), methods=post),
         Route("/api/goto", json_api(_goto), methods=post),
         Route("/api/use-offset", json_api(_use_offset), methods=post),

@@ -291,6 +291,11 @@
     post("/api/drill-z", { which: b.dataset.which });
   }));
   $("home").addEventListener("click", () => post("/api/home"));
+  $("setpos-form").addEventListener("submit", (ev) => {  // the user's word: the position is known again
+    ev.preventDefault();
+    const xyz = ["x", "y", "z"].map((a) => parseFloat($("setpos-" + a).value));
+    post("/api/set-position", { xyz: xyz, unit: "mm" });
+  });
   $("feed-set").addEventListener("click", () => post("/api/feed-override", { percent: parseFloat($("feed-override").value) }));
 
   function estop() {
@@ -340,10 +345,10 @@
     // after a stop, an emergency stop or a failed run, the job's journal says how far it got
     $("resume-job").disabled = !(idle && s.last && s.last.activity === "job" && s.last.journal &&
                                  ["stopped", "emergency-stopped", "error"].includes(s.last.status));
-    document.querySelectorAll("button.jog, #origin, #set-offset, button.drill-z, button.zero, #goto, #offset-select")
+    document.querySelectorAll("button.jog, #origin, #set-offset, button.drill-z, button.zero, #goto, #offset-select, #set-position")
       .forEach((b) => { b.disabled = !idle; });
     document.querySelectorAll("button.drill-z").forEach((b) => { b.hidden = !s.port.startsWith("maximus"); });
-    $("grbl-row").hidden = !s.grbl;  // a grbl board: its homing cycle and feed override
+    $("grbl-row").hidden = !s.grbl;  // a grbl board: its feed override
     $("home").disabled = !idle;
     if (s.grbl && document.activeElement !== $("feed-override")) $("feed-override").value = s.grbl.feed_override_pct;
     const shown = job || (idle && s.last && s.last.activity === "job");
