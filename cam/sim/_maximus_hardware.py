@@ -5,8 +5,6 @@ A part of :class:`cam.sim.maximus.MaximusEmulator`.
 """
 from __future__ import annotations
 
-import time
-
 from ..drive.maximus.protocol import (
     AXIS_PINS, DEBOUNCE_NS, DELAY_UNIT_NS, DIR_X, DIR_Y, EMERGENCYSTOP, ENABLE_X, ENABLE_Y, ENABLE_Z, HOME_SWITCH_X,
     HOME_SWITCH_Y, HOME_SWITCH_Z, LIMIT_SWITCH_X, LIMIT_SWITCH_Y, LIMIT_SWITCH_Z, MACHINESTOPPED, MODE_X, MODE_Y,
@@ -71,19 +69,28 @@ class _Hardware:
         self._advance(n * DELAY_UNIT_NS)
 
     def _advance(self, ns: int) -> None:
-        self._t_ns += ns
+        """Simulated time runs ``ns`` on, at ``speed`` on the wall clock.  With the UART interrupt on, a byte that
+        arrives within that time is served at its arrival, in the middle of the delay as on the PIC; if the
+        thread is late (a busy computer) it catches up to that time first, never stopping sooner."""
+        end = self._t_ns + ns
         self._check_halt()
-        if self._speed is None or ns == 0:
+        if self._speed is None:
+            self._t_ns = end
             return
-        target = self._anchor_real + (self._t_ns - self._anchor_sim_ns) / 1e9 / self._speed
-        ahead = target - time.monotonic()
-        if ahead > 0.001:
-            self._wake.wait(ahead)
+        while True:
+            if self._gie and self._int_rda:
+                at = self._arrival_by(end)
+                if at is not None:
+                    self._t_ns = at
+                    self._poll_interrupts(fetch=False)  # the UART ISR, now: it may stop the move (_Goto)
+                    if self._t_ns >= end:
+                        break
+                    continue
+            if not self._wait_for_wall(end, self._gie and self._int_rda):
+                break
             self._check_halt()
-
-    def _anchor(self) -> None:
-        self._anchor_real = time.monotonic()
-        self._anchor_sim_ns = self._t_ns
+        self._t_ns = end
+        self._check_halt()
 
     # ------------------------------------------------------------------ pins
     def _output_bit(self, pin: tuple[int, int], value: int) -> None:
@@ -162,12 +169,9 @@ class _Hardware:
             if self._int_ext and self._intf:
                 self._isr_ext()
                 continue
-            if self._int_rda:
-                if fetch:
-                    self._fill_rx(0.0)
-                if self._rx:
-                    self._isr_rda()
-                    continue
+            if self._int_rda and self._byte_due(fetch):
+                self._isr_rda()
+                continue
             return
 
     def _isr_ext(self) -> None:
@@ -197,7 +201,7 @@ class _Hardware:
     def _isr_rda(self) -> None:
         """``serial_isr()``: a byte arrived during a move."""
         self._gie = False
-        b = self._rx.popleft()
+        b = self._pop_byte()
         with self._lock:
             self._rx_rows.append((self._t_ns, b, "isr"))
         if b == EMERGENCYSTOP:

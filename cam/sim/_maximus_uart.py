@@ -1,5 +1,13 @@
 """The PIC's UART as the MAXIMUS firmware emulator serves it: bytes from the host through the pseudo-terminal,
-replies (with the faults a test asked for) back to it.
+each stamped with the time it arrived, and replies (with the faults a test asked for) back to it.
+
+A real PIC takes a byte the moment its stop bit ends: the UART sets RCIF and, with interrupts enabled, the
+``serial_isr`` runs at once, in the middle of a ``dly_100us`` if need be (seed 000 Appendix 1: ``#int_rda``,
+``enable_interrupts(INT_RDA)`` before each move).  The emulator's thread, though, runs when the operating
+system lets it: on a busy computer it is late, then catches up.  So the bytes are not taken when that thread
+happens to look, but when they arrived: a reader thread waits in ``select`` on the line and stamps each byte
+with the wall clock as it comes (the firmware's thread stamps them itself when it finds one first), and the
+firmware acts on a byte at the simulated time of its stamp (:meth:`_Uart._sim_ns`, through the clock's anchor).
 
 A part of :class:`cam.sim.maximus.MaximusEmulator`.
 """
@@ -7,46 +15,150 @@ from __future__ import annotations
 
 import os
 import select
+import threading
+import time
+from typing import Optional
 
 from ._maximus_base import BUSY, _Halt
 
 
 class _Uart:
-    """``getc()`` / ``putc()`` and the pseudo-terminal's master side."""
+    """``getc()`` / ``putc()``, the line's arrival stamps and the pseudo-terminal's master side."""
 
-    def _drain_master(self) -> None:
-        while self._master >= 0:
-            r, _, _ = select.select([self._master], [], [], 0)
-            if not r:
-                return
+    # ------------------------------------------------------------------ the line: bytes stamped as they arrive
+    def _open_line(self) -> None:
+        """Start the reader thread (after the pseudo-terminal is open)."""
+        self._line_wake_r, self._line_wake_w = os.pipe()
+        self._reader = threading.Thread(target=self._read_line, name="maximus-uart", daemon=True)
+        self._reader.start()
+
+    def _close_line(self) -> None:
+        """Stop the reader thread (before the pseudo-terminal is closed)."""
+        if self._reader is not None:
+            os.write(self._line_wake_w, b"x")
+            self._reader.join(timeout=5.0)
+            self._reader = None
+            for fd in (self._line_wake_r, self._line_wake_w):
+                os.close(fd)
+
+    def _read_line(self) -> None:
+        """The reader thread: blocked in select until a byte comes, it stamps it as it wakes."""
+        while True:
             try:
-                if not os.read(self._master, 4096):
-                    return
-            except OSError:
+                ready, _, _ = select.select([self._master, self._line_wake_r], [], [])
+            except (OSError, ValueError):
                 return
+            seen = time.monotonic()
+            if self._line_wake_r in ready:
+                return
+            if not self._take_bytes(seen) and self._stop_event.wait(0.01):
+                return  # the line failed (nobody holds the slave side): look again soon, unless stopping
 
-    def _fill_rx(self, timeout_s: float) -> None:
-        if self._master < 0:
-            raise _Halt()
-        try:
-            r, _, _ = select.select([self._master], [], [], timeout_s)
-            if r:
+    def _take_bytes(self, seen: Optional[float] = None) -> bool:
+        """Move what the line holds into the receive buffer, stamped ``seen`` (the reader's wake-up) or now;
+        False if the line could not be read."""
+        with self._line:
+            if self._master < 0:
+                return False
+            try:
+                ready, _, _ = select.select([self._master], [], [], 0)
+                if not ready:
+                    return True
+                stamp = time.monotonic() if seen is None else seen
                 data = os.read(self._master, 4096)
-                self._rx.extend(data)
-        except OSError:
-            self._wake.wait(max(timeout_s, 0.01))
+            except (OSError, ValueError):
+                return False
+            if not data:
+                return False
+            self._arrivals.extend((stamp, b) for b in data)
+            self._line.notify_all()
+            return True
 
+    def _discard_line(self) -> None:
+        """At power-up: what arrived before is lost."""
+        self._take_bytes()
+        with self._line:
+            self._arrivals.clear()
+
+    def _wake_line(self) -> None:
+        """Wake the firmware's thread from a wait on the line (stop, reset)."""
+        with self._line:
+            self._line.notify_all()
+
+    # ------------------------------------------------------------------ the clock: wall time <-> simulated time
+    def _wall_s(self, t_ns: int) -> float:
+        """When (``time.monotonic``) simulated time ``t_ns`` is due on the wall clock (speed not None)."""
+        return self._anchor_real + (t_ns - self._anchor_sim_ns) / 1e9 / self._speed
+
+    def _sim_ns(self, wall_s: float) -> int:
+        """The simulated time of a wall-clock time (speed not None)."""
+        return self._anchor_sim_ns + int(round((wall_s - self._anchor_real) * 1e9 * self._speed))
+
+    def _anchor(self, wall_s: Optional[float] = None) -> None:
+        """The simulated clock runs on from ``wall_s`` (default now) at the current simulated time."""
+        self._anchor_real = time.monotonic() if wall_s is None else wall_s
+        self._anchor_sim_ns = self._t_ns
+
+    def _byte_due(self, fetch: bool = True) -> bool:
+        """Whether the first byte received has arrived by the current simulated time (speed None: by now, or
+        with ``fetch`` False by the last reply's write)."""
+        if fetch:
+            self._take_bytes()
+        with self._line:
+            if not self._arrivals:
+                return False
+            seen = self._arrivals[0][0]
+        if self._speed is None:
+            return fetch or seen <= self._reply_wall_s
+        return self._sim_ns(seen) <= self._t_ns
+
+    def _arrival_by(self, end_ns: int) -> Optional[int]:
+        """The simulated time the first byte received arrived at, if that is by ``end_ns`` (None: no byte
+        came by then).  A byte that came while this thread was late is taken at its own time, never sooner."""
+        self._take_bytes()
+        with self._line:
+            if not self._arrivals:
+                return None
+            at = self._sim_ns(self._arrivals[0][0])
+        return max(at, self._t_ns) if at <= end_ns else None
+
+    def _wait_for_wall(self, end_ns: int, interruptible: bool) -> bool:
+        """Wait until simulated time ``end_ns`` is due on the wall clock; True if a byte that arrived before
+        then (``interruptible``: the UART interrupt is on) ends the wait first."""
+        target = self._wall_s(end_ns)
+        with self._line:
+            while not (self._stop_event.is_set() or self._reset_event.is_set()):
+                if interruptible and self._arrivals and self._arrivals[0][0] <= target:
+                    return True
+                left = target - time.monotonic()
+                if left <= 0:
+                    return False
+                self._line.wait(left)
+        return False
+
+    # ------------------------------------------------------------------ getc / putc
     def _getc(self, where: str) -> int:
+        """``getc()``: the next byte, waiting for it.  Waiting takes no simulated time: the clock runs on from
+        the byte's arrival (or from now, if it was waiting already)."""
         self._state = where
-        while not self._rx:
+        while True:
             self._check_halt()
-            self._fill_rx(0.05)
-        b = self._rx.popleft()
+            with self._line:
+                if self._arrivals:
+                    seen, b = self._arrivals.popleft()
+                    break
+                self._line.wait(0.05)
         with self._lock:
             self._rx_rows.append((self._t_ns, b, where))
         self._state = BUSY
-        self._anchor()
+        if self._speed is not None and seen > self._wall_s(self._t_ns):
+            self._anchor(seen)
         return b
+
+    def _pop_byte(self) -> int:
+        """The first byte received (the UART ISR's read)."""
+        with self._line:
+            return self._arrivals.popleft()[1]
 
     def _read_packet(self, n: int, where: str, kind: str) -> bytes:
         data = bytes(self._getc(where) for _ in range(n))
@@ -80,6 +192,7 @@ class _Uart:
             self._anchor()
         with self._lock:
             self._tx_rows.append((self._t_ns, byte, sent))
+        self._reply_wall_s = time.monotonic()
         if sent is not None:
             self._write_master(bytes([sent]))
 

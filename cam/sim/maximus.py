@@ -35,12 +35,16 @@ simulated time.  One step pulse of ``constspeed`` therefore lasts
 ``2 * delay * 100 us`` (f = 5000 / delay Hz).  ``t_ns`` in :meth:`port_log`
 is on this clock, so logs are deterministic.  In real time the emulator paces
 itself so that simulated time runs ``speed`` times faster than the wall clock
-(``speed=None``: no sleeping at all).
+(``speed=None``: no sleeping at all), never ahead of it.  Each byte from the host
+is stamped with the wall clock as it arrives (a reader thread waits on the line)
+and the firmware takes it at that simulated time, as the PIC's UART interrupt
+does: in the middle of a delay, and after a late thread has caught up with the
+pulses due before it, never sooner (cam/sim/_maximus_uart.py).
 
 Interrupts are emulated where they can happen: while the listing has them
 enabled (from just before a Jog, Offset or Drill move until just after its
-reply) the emulator checks the UART and the limit-switch flag after every port
-write and around each reply.  A received byte is then consumed by the UART
+reply) the emulator checks the limit-switch flag after every port write, and a
+byte is served at its arrival's time.  A received byte is then consumed by the UART
 ISR; only EMERGENCYSTOP (0x80) does anything.  Outside a move a packet is
 read byte by byte (``getc()`` with interrupts off, as listed): a packet that
 lost a byte on the line waits, silent and still, and the next byte, whatever
@@ -279,7 +283,10 @@ class MaximusEmulator(_Program, _Hardware, _Uart, AbstractContextManager):
         self._t_ns = 0
         self._anchor_real = time.monotonic()
         self._anchor_sim_ns = 0
-        self._rx: deque[int] = deque()
+        self._arrivals: deque[tuple[float, int]] = deque()  # (time.monotonic() it came, byte): the UART's buffer
+        self._line = threading.Condition()  # guards _arrivals; notified as bytes come
+        self._reader: threading.Thread | None = None
+        self._reply_wall_s = 0.0  # when the last reply was written
         self._gie = False
         self._int_ext = False
         self._int_rda = False
@@ -303,6 +310,7 @@ class MaximusEmulator(_Program, _Hardware, _Uart, AbstractContextManager):
         if self._speed != 1.0:
             _register_speed(self.device_path, self._speed)
         clear_fault_marker(self.device_path)  # a board just switched on holds no half packet
+        self._open_line()
         self._thread = threading.Thread(target=self._serve, name="maximus-firmware", daemon=True)
         self._thread.start()
         return self
@@ -311,9 +319,11 @@ class MaximusEmulator(_Program, _Hardware, _Uart, AbstractContextManager):
         """Stop the firmware thread and close the pseudo-terminal."""
         self._stop_event.set()
         self._wake.set()
+        self._wake_line()
         if self._thread is not None:
             self._thread.join(timeout=5.0)
             self._thread = None
+        self._close_line()
         for fd in (self._master, self._slave):
             if fd >= 0:
                 try:
@@ -332,6 +342,7 @@ class MaximusEmulator(_Program, _Hardware, _Uart, AbstractContextManager):
         clear_fault_marker(self.device_path)
         self._reset_event.set()
         self._wake.set()
+        self._wake_line()
 
     def __exit__(self, *exc: object) -> None:
         self.stop()
@@ -438,8 +449,7 @@ class MaximusEmulator(_Program, _Hardware, _Uart, AbstractContextManager):
                     self._reset_event.clear()
                     if not self._stop_event.is_set():
                         self._wake.clear()
-                    self._rx.clear()
-                    self._drain_master()
+                    self._discard_line()
                     continue
         except _Halt:
             return
