@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -16,18 +17,21 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import serial
 
 import cam.sim.maximus as maximus_sim
 from cam.cli import main
 from cam.cli.parser import MAXIMUS_SWITCHES
 from cam.drive.journal import read_journal
 from cam.drive.maximus.board import MAXIMUS_SETTINGS, MaximusBoard, maximus_holes
-from cam.drive.maximus.packets import drill_moves
+from cam.drive.maximus.packets import drill_moves, jog_packet
 from cam.drive.maximus.resume import resumed_arguments
 from cam.drive.session import MachineSession
 from cam.errors import PlanError, PortError
 from cam.job.jobs import JobOptions, prepare_job
-from cam.drive.maximus.protocol import LIMIT_SWITCH_X, LIMIT_SWITCH_Y
+from cam.drive.maximus.protocol import (
+    EMERGENCYSTOP, ISMACHINEREADY, JOGMODEON, LIMIT_SWITCH_X, LIMIT_SWITCH_Y, MACHINEREADY, MACHINESTOPPED, OPENJOGMODE,
+)
 from cam.sim.maximus import start_emulator
 from conftest import run_cli
 from support.maximus_log import decode_port_log
@@ -239,18 +243,60 @@ def test_at_real_speed_ctrl_c_in_a_move_then_resume_drills_every_hole_once(tmp_p
         assert (j.holes_done, j.state) == (2, "emergency-stopped")
         x, y, z = emu.position_pulses
         assert holes[1][0] + 150 < x < holes[2][0] and z == 0
-        # the host's estimate of where the stop left the head (the firmware does not say): within a pulse or two
-        assert np.abs(np.subtract(j.position_steps, (x, -y, -z))).max() <= 2, (j.position_steps, (x, y, z))
+        # the host's estimate of where the stop left the head (the firmware does not say): within the emulator's
+        # resolution, a pulse, unless the host says in its message that a busy computer made it less sure
+        said = re.search(r"known within ±(\d+) pulses", err)
+        bound = max(1, int(said.group(1)) if said else 0)
+        assert np.abs(np.subtract(j.position_steps, (x, -y, -z))).max() <= bound, (j.position_steps, (x, y, z), err)
+        # a stop between a pulse's falling and rising edge leaves STEP_X low: the next X move makes one rising edge
+        # more than it asks (the listing's "Add last step", cam.sim.maximus point 14)
+        step_x_low = [v for _, p, v in emu.port_log() if p == "D"][-1] & 0x02 == 0
         code = main(["drill", str(path), "--yes", "--port", port, "--resume", str(journal), *FLAGS])
         assert code == 0
-        # the holes after the stop are as far off as that estimate (and the firmware's own extra step after a
-        # stop, cam.sim.maximus point 14): 2 pulses, 9 um
-        assert_each_hole_once(emu, holes, tolerance_pulses=2)
+        # the holes after the stop are as far off as that estimate, and that edge
+        assert_each_hole_once(emu, holes, tolerance_pulses=bound + step_x_low)
         assert read_journal(journal).state == "finished"
         pos = decode_port_log(emu.port_log())
         assert np.abs(pos[-1]).max() <= 2 and pos[-1][2] == 0, pos[-1]
         xy_moved = np.flatnonzero(np.any(pos[1:, :2] != pos[:-1, :2], axis=1)) + 1
         assert (pos[xy_moved, 2] >= 0).all(), "X and Y only move with the head at the start height"
+    finally:
+        emu.stop()
+    assert emu.error is None, repr(emu.error)
+
+
+@pytest.mark.realtime
+def test_a_late_emulator_thread_still_stops_at_the_stop_bytes_arrival(monkeypatch):
+    """The emulator plays a PIC, which takes a byte as it arrives: its thread, late on a busy computer (here on
+    purpose: held 20 ms at the 50th pulse, the stop byte written 10 ms into that), catches up with the pulses
+    due until the stop byte's arrival and stops there, neither where it happened to look nor later."""
+    emu = start_emulator(speed=1.0)
+    try:
+        with serial.Serial(emu.device_path, 115200, timeout=2.0) as line:
+            line.write(bytes([ISMACHINEREADY]))
+            assert line.read_until(bytes([MACHINEREADY])).endswith(bytes([MACHINEREADY]))
+            line.write(bytes([OPENJOGMODE]))
+            assert line.read(1) == bytes([JOGMODEON])
+            stop: list[float] = []
+            step = emu._after_step
+
+            def late_step() -> None:
+                step()
+                if emu.position_pulses[0] == 50 and not stop:
+                    time.sleep(0.010)  # the thread is late...
+                    stop.append(time.monotonic())
+                    os.write(line.fileno(), bytes([EMERGENCYSTOP]))  # ...as the stop byte arrives
+                    stop.append(time.monotonic())
+                    time.sleep(0.010)
+
+            monkeypatch.setattr(emu, "_after_step", late_step)
+            t0 = time.monotonic()
+            line.write(jog_packet("x", 400, delay=10))  # 2 ms a pulse
+            t1 = time.monotonic()
+            assert line.read(1) == bytes([MACHINESTOPPED])
+        earliest, latest = int((stop[0] - t1) / 0.002), int((stop[1] - t0) / 0.002)  # pulses due by its arrival
+        x = emu.position_pulses[0]
+        assert 55 <= x and earliest - 1 <= x <= latest + 1, (earliest, x, latest)
     finally:
         emu.stop()
     assert emu.error is None, repr(emu.error)

@@ -16,7 +16,9 @@ from dataclasses import dataclass
 from typing import Callable, Optional, TypeVar
 
 from ...errors import PortError
-from .packets import close_drill_packet, init_packet, jog_exit_packet, jog_packet, offset_packet, switch_time_ns
+from .packets import (
+    close_drill_packet, init_packet, jog_exit_packet, jog_packet, offset_packet, stopped_between, switch_time_ns,
+)
 from ._trust import LinkFault, _Trust
 from .protocol import (
     ATOFFSETPOS, BYTE_NAMES, DRILLMODE1DONE, DRILLMODE1INITIALIZED, EMERGENCYSTOP, JOGMODEDONE, JOGMODEOFF, JOGMODEON,
@@ -98,7 +100,7 @@ class _Link(_Trust):
                 self._pending = None
                 self._reader_active = False
                 raise
-            self._sent_s = time.monotonic()
+            self._sent_s = time.monotonic()  # ... and has left by this
             if ex.mode == "jog" and len(packet) == 4 and packet[0] >> 6:
                 self._last_jog_delay = packet[3]  # the firmware's axisDelay from now on
         try:
@@ -181,27 +183,35 @@ class _Link(_Trust):
         """Send the Jog exit packet and expect JOGMODEOFF (no motion)."""
         self._exchange(jog_exit_packet(), _Exchange("the Jog exit packet", JOGMODEOFF, False, "jog", _MODE))
 
-    def _book_stopped_move(self, ex: _Exchange) -> None:
-        """A move stopped part of the way: book the pulses its time allowed (an estimate: the firmware does not
-        say how far it went).  A Drill Data Packet (XY, then the stroke) by its ``progress`` until the stop byte
-        was sent; a move of one axis by its share of the time until the answer."""
-        if ex.progress is not None and self._estop_sent_s is not None:
-            elapsed_ns = int((self._estop_sent_s - self._sent_s) * 1e9 * self._time_scale)  # type: ignore[attr-defined]
-            moved = ex.progress(elapsed_ns)
-            self.position_pulses = tuple(p + int(d) for p, d in zip(self.position_pulses, moved))  # type: ignore
-            return
-        if not ex.move_ns or sum(1 for d in ex.moved if d) != 1:
-            return
-        share = min(1.0, (time.monotonic() - self._sent_s) * 1e9 / ex.move_ns)
-        self.position_pulses = tuple(p + int(round(d * share)) for p, d in zip(self.position_pulses, ex.moved))  # type: ignore
+    def _book_stopped_move(self, ex: _Exchange) -> int:
+        """A move stopped part of the way: book the pulses its time allowed until the stop byte (an estimate: the
+        firmware does not say how far it went).  The move began as the packet's write went out and ended as the
+        stop byte's did; each is known between the clock read before its write and the one after (a busy
+        computer may pause between them), so the middle is booked.  Returns how many pulses either end of that
+        time lies from the booking (0 or 1 on an idle computer)."""
+        progress = ex.progress
+        if progress is None and ex.move_ns and sum(1 for d in ex.moved if d) == 1:  # one axis at one delay
+            move_ns, moved = ex.move_ns, ex.moved
+            progress = lambda t: tuple((1 if d > 0 else -1) * (abs(d) * min(move_ns, max(0, t)) // move_ns)  # noqa: E731
+                                       for d in moved)
+        if progress is None or self._estop_sent_s is None:
+            return 0
+        scale = 1e9 * self._time_scale  # type: ignore[attr-defined]
+        earliest, latest = (int(min(seconds * scale, 2.0 ** 62)) for seconds in (
+            self._estop_sent_s - self._sent_s, self._estop_done_s - self._send_start_s))
+        moved, bound = stopped_between(progress, earliest, latest)
+        self.position_pulses = tuple(p + int(d) for p, d in zip(self.position_pulses, moved))  # type: ignore
+        return bound
 
     def _resolve_stop(self, ex: _Exchange, reply: Optional[int]) -> PortError:
         """The reply to a move during which EMERGENCYSTOP was sent: the error the job ends with."""
         if reply == MACHINESTOPPED:
-            self._book_stopped_move(ex)
+            bound = self._book_stopped_move(ex)
             self._after_stop(ex.mode)
+            busy = (f"; the computer was busy as the stop went out, so where the head stopped is known within "
+                    f"±{bound} pulses" if bound > 1 else "")
             return PortError(f"emergency stop during {ex.what}: the board answered MACHINESTOPPED, drivers "
-                             f"disabled, spindle off")
+                             f"disabled, spindle off{busy}")
         self.position_known = False  # the stop byte met no move, or the board did not say where it stopped
         if reply is None:
             self._state = _UNKNOWN
@@ -259,8 +269,9 @@ class _Link(_Trust):
             elif not self._estop_sent:
                 self._estop_sent = True
                 self._stop_error = None
-                self._estop_sent_s = time.monotonic()
+                self._estop_sent_s = time.monotonic()  # the stop byte leaves between this and _estop_done_s
                 self._write(bytes([EMERGENCYSTOP]))
+                self._estop_done_s = time.monotonic()
             reader = self._reader_active
         if between_moves:
             if finish_here:

@@ -237,7 +237,8 @@ class MaximusBoard(_Drilling, _Link, AbstractContextManager):
         self._job_active = False
         self._stop_requested = False
         self._estop_sent = False
-        self._estop_sent_s: Optional[float] = None
+        self._estop_sent_s: Optional[float] = None  # the stop byte's write: the clock before it and after it
+        self._estop_done_s = 0.0
         self.stop_asked = False
         self._stop_done = threading.Event()
         self._stop_error: PortError | None = None

@@ -10,7 +10,7 @@ Directions are the board's own: x and y grow when their DIR bit is 1 (the PC pro
 """
 from __future__ import annotations
 
-from typing import Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 
@@ -20,7 +20,7 @@ from .protocol import DEBOUNCE_NS, DELAY_UNIT_NS, STEPSBACKATLIMIT
 __all__ = [
     "MAX_FIELD", "DEFAULT_DELAY", "jog_packet", "jog_exit_packet", "offset_packet", "init_packet",
     "start_drill_packet", "drill_packet", "close_drill_packet", "drill_moves", "pulses_ns", "jog_time_ns",
-    "offset_time_ns", "init_time_ns", "drill_time_ns", "switch_time_ns", "drill_moved",
+    "offset_time_ns", "init_time_ns", "drill_time_ns", "switch_time_ns", "drill_moved", "stopped_between",
 ]
 
 MAX_FIELD = 0xFFFF  # 16-bit step fields (seed 000, Appendix 1: make16(high, low))
@@ -271,3 +271,21 @@ def drill_moved(dx_steps: int, dy_steps: int, init: bytes, elapsed_ns: int) -> t
     up, _ = _done(t, _field(init, 1), delay_z_up) if t > 0 else (0, 0)
     sx, sy = (1 if dx_steps >= 0 else -1), (1 if dy_steps >= 0 else -1)
     return sx * x, sy * y, up - down
+
+
+def stopped_between(progress: Callable[[int], Sequence[int]], earliest_ns: int, latest_ns: int
+                    ) -> tuple[tuple[int, ...], int]:
+    """Where a move stopped whose stop came between ``earliest_ns`` and ``latest_ns`` into it (the host knows
+    the time only so well: it cannot tell when, within its own write calls, the packet and the stop byte left):
+    the pulses ``progress`` gives the middle of that time, and how many pulses either end lies from them.
+
+    >>> init = init_packet(100, 100, delay_x=10, delay_y=10, delay_z_up=10, delay_z_down=10)   # 2 ms a pulse
+    >>> stopped_between(lambda t: drill_moved(300, 0, init, t), 250_000_000, 250_100_000)
+    ((125, 0, 0), 0)
+    >>> stopped_between(lambda t: drill_moved(300, 0, init, t), 240_000_000, 260_000_000)   # 20 ms: 5 pulses
+    ((125, 0, 0), 5)
+    """
+    lo, mid, hi = (np.asarray(progress(int(t)), np.int64)
+                   for t in (earliest_ns, (earliest_ns + latest_ns) // 2, latest_ns))
+    bound = int(max(np.abs(mid - lo).max(initial=0), np.abs(hi - mid).max(initial=0)))
+    return tuple(int(v) for v in mid), bound
