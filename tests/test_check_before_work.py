@@ -13,6 +13,7 @@ import pytest
 import cam
 from cam.digitize import drawing as drawing_module
 from cam.digitize.image_size import image_size_px
+from cam.drive.chunks import plan_chunks
 from cam.job import drawing as planner
 from cam.job import jobs
 from cam.job.drawing import check_drawing_size, max_drawing_size_px
@@ -149,8 +150,10 @@ def _refuse_routing(monkeypatch):
 
 
 def test_a_job_outside_the_travel_is_refused_before_it_is_routed(monkeypatch):
-    """word.png bridges two gaps inside the material (the router runs); moved off the travel by Start At, or on a
-    machine too small for it, it is refused naming its first point outside, and the router never runs."""
+    """word.png bridges two gaps inside the material (the router runs); made wider than the travel by Start At
+    (its home is part of it), or on a machine too small for it, it is refused naming the first point that makes it
+    too wide, and the router never runs.  A drawing job is planned in its own frame (issue #45 point 4): what fits
+    the travel's span is planned, and checked where it is placed when it runs."""
     d = cam.digitize(cam.load_image(SAMPLES / "word.png"))
     assert cam.plan(d, depth=3).n_targets  # fits: routed as usual
     _refuse_routing(monkeypatch)
@@ -159,35 +162,46 @@ def test_a_job_outside_the_travel_is_refused_before_it_is_routed(monkeypatch):
         cam.plan(d, depth=3, start_at=(1200, 0, 0))
     with pytest.raises(cam.TravelError, match=r"X travel is 0\.\.800 steps"):
         cam.plan(d, depth=3, settings=cam.MachineSettings().replace(travel=cam.settings.Travel(x_max_steps=800)))
-    with pytest.raises(cam.TravelError, match=r"Z travel is -640\.\.2000 steps"):
-        cam.plan(d, depth=2001)
-    with pytest.raises(cam.TravelError, match=r"point 0 \(x=0, y=0, z=-641 px"):  # the safe plane above the Z travel
-        cam.plan(d, depth=3, start_at=(0, -3, -641),
+    with pytest.raises(cam.TravelError, match=r"Z travel is -640\.\.2000 steps .* and the job spans Z 0\.\.2641"):
+        cam.plan(d, depth=2641)  # 2001 fits the 2640 steps of Z travel: placed at a work zero above the home plane
+    with pytest.raises(cam.TravelError, match=r"point 0 \(x=0, y=0, z=-2641 px"):  # the safe plane: too high
+        cam.plan(d, depth=3, start_at=(0, -3, -2641),
                  settings=cam.MachineSettings().replace(travel=cam.settings.Travel(y_min_steps=-100)))
 
 
 def test_the_extent_check_agrees_with_the_travel_check():
-    """Over Start At offsets around a small travel's edges: every job the extent check lets through is inside the
-    travel (the planner asserts it), and every refusal names a point outside it."""
+    """Over Start At offsets around a small travel's edges: the planner's extent check lets through exactly the jobs
+    whose extent, the home included, fits the travel's span (the planner asserts it; a drawing job is planned in
+    its own frame, issue #45 point 4); run from the home (the step planner), every job with a point outside the
+    travel is refused naming a point outside it, and every other job is planned."""
     d = cam.digitize(drawing_from_rows(["..........", ".###...##.", "....#.#...", ".....#....", ".#######.."]))
     settings = cam.MachineSettings().replace(
         steps_per_px_xy=2, travel=cam.settings.Travel(-30, 30, -20, 24, -6, 9))
     lo = np.array([b[0] for b in settings.travel.bounds_steps()])
     hi = np.array([b[1] for b in settings.travel.bounds_steps()])
-    planned = refusals = 0
-    for ox in range(-18, 12, 3):
+    planned = refusals = too_wide = 0
+    for ox in range(-36, 12, 3):
         for oy in range(-13, 10, 2):
             for oz in (-7, -1, 0, 3):
                 try:
                     job = cam.plan(d, depth=[3, 5, 2], start_at=(ox, oy, oz), settings=settings)
                 except cam.TravelError as exc:
+                    assert "wherever it is placed" in str(exc), str(exc)
+                    too_wide += 1
+                    continue
+                pts = np.vstack([job.points_steps, np.zeros((1, 3), np.int64)])  # the home is part of the job
+                assert np.all(pts.max(axis=0) - pts.min(axis=0) <= hi - lo)
+                planned += 1
+                try:
+                    plan_chunks(job)  # run from the home
+                except cam.TravelError as exc:
                     steps = [int(v) for v in str(exc).split(" px = ")[1].split(" steps")[0].split(", ")]
                     assert np.any((steps < lo) | (steps > hi)), str(exc)
+                    assert np.any((job.points_steps < lo) | (job.points_steps > hi))
                     refusals += 1
                 else:
                     assert np.all((job.points_steps >= lo) & (job.points_steps <= hi))
-                    planned += 1
-    assert planned > 20 and refusals > 100
+    assert planned > 20 and refusals > 100 and too_wide > 20, (planned, refusals, too_wide)
 
 
 # -- bridges inside the material: the compiled search finds the plain-Python search's path ------------------------
@@ -213,12 +227,20 @@ def test_the_compiled_route_equals_the_reference():
 
 
 def test_a_drill_depth_outside_the_z_travel_is_refused_before_the_tour(monkeypatch):
+    """Placed by its own zero (a machine home): the depths against the Z travel from there.  In its own frame
+    (issue #45 point 4): against the Z travel's span (2640 steps), where 40 mm (2548 steps) fits."""
     from cam.job import drill
 
     holes = cam.parse_excellon("M48\nMETRIC\nT1C0.8\n%\nT1\nX1.0Y-1.0\nX5.0Y-2.0\nX3.0Y-4.0\nM30\n")
     monkeypatch.setattr(drill, "drill_order", lambda *a, **k: pytest.fail("the holes were ordered"))
     with pytest.raises(cam.TravelError, match=r"drill depth 40 mm and safe height 1 mm need Z -64\.\.2548 steps; "
                                               r"the Z travel is -640\.\.2000 steps"):
-        cam.plan_drill(holes, cut_depth_mm=40.0)
+        cam.plan_drill(holes, cut_depth_mm=40.0, home_steps=(0, 0, 0))
     with pytest.raises(cam.TravelError, match=r"need Z -764\.\.127 steps"):
-        cam.plan_drill(holes, travel_height_mm=12.0)
+        cam.plan_drill(holes, travel_height_mm=12.0, home_steps=(0, 0, 0))
+    with pytest.raises(cam.TravelError, match=r"drill depth 45 mm and safe height 1 mm need Z -64\.\.2866 steps "
+                                              r"\(.* mm\) from the surface, more than the Z travel holds wherever the "
+                                              r"work zero is: the Z travel is -640\.\.2000 steps"):
+        cam.plan_drill(holes, cut_depth_mm=45.0)
+    with pytest.raises(cam.TravelError, match=r"safe height 50 mm need Z -3185\.\.127 steps"):
+        cam.plan_drill(holes, travel_height_mm=50.0)

@@ -235,10 +235,20 @@ def test_tool_changes_pause_in_order_at_the_safe_height():
 
 
 def test_outside_the_travel_names_line_and_column():
-    with pytest.raises(cam.TravelError, match=r"^far\.plt:2:9: point X12000 Y0 .*outside the machine travel"):
+    """Wider than the travel (300 mm on a 289 mm X travel): refused wherever it would be placed, naming the point
+    that makes it too wide.  Placed by its own zero (a machine home, ``home_steps``), a point outside the travel is
+    named; without a home the job is planned in its own frame (issue #45 point 4): 5 mm left of its home fits the
+    travel's span, and where it runs is checked when it is placed (from the home here: refused before a step)."""
+    with pytest.raises(cam.TravelError, match=r"^far\.plt:2:9: point X12000 Y0 \(plotter units\) lies outside the "
+                                              r"machine travel: X travel is 0\.\.10000 "
+                                              r"steps \(0\.\.289 mm, 289 mm\) and the job spans X 0\.\.10381"):
         plan_hpgl(parse_hpgl(b"SP1;PU0,0;\nPD400,0,12000,0;", source="far.plt"))
-    with pytest.raises(cam.TravelError, match=r"^o\.plt:1:3: point X0 Y0"):
-        plan_hpgl(parse_hpgl(b"PU0,0PD40,0", source="o.plt"), offset_mm=(-5.0, 10.0))
+    with pytest.raises(cam.TravelError, match=r"^o\.plt:1:3: point X0 Y0 .*beyond the X travel"):
+        plan_hpgl(parse_hpgl(b"PU0,0PD40,0", source="o.plt"), offset_mm=(-5.0, 10.0), home_steps=(0, 0, 0))
+    own = plan_hpgl(parse_hpgl(b"PU0,0PD40,0", source="o.plt"), offset_mm=(-5.0, 10.0))
+    assert own.points_steps[:, 0].min() < 0  # left of its home
+    with pytest.raises(cam.TravelError, match="leaves the machine travel"):
+        cam.plan_steps(own)  # run from the home
     with pytest.raises(cam.PlanError, match="nothing to cut"):
         plan_hpgl(parse_hpgl(b"IN;PU100,100;"))
 

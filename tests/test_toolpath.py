@@ -140,6 +140,16 @@ def test_every_start_at_inside_the_travel_cuts_exactly_the_moved_drawing(start_a
 
 @pytest.mark.parametrize("start_at", [(0, -1000, 0), (100_000_000, 0, 0), (-5, 0, 0)])
 def test_a_start_at_outside_the_travel_is_refused(start_at):
+    """A drawing job is planned in its own frame (issue #45 point 4): a Start At that makes it wider than the travel
+    (its home included) is refused when it is planned; one that fits the travel's span is planned, and refused
+    before a step where it runs (from the home here)."""
     d = cam.digitize(drawing_from_rows(["....", ".##.", "...."]))
+    if start_at[0] > 10_000:
+        with pytest.raises(cam.TravelError, match="travel .*wherever it is placed"):
+            cam.plan(d, depth=2, start_at=start_at)
+        return
+    job = cam.plan(d, depth=2, start_at=start_at)
+    with pytest.raises(cam.TravelError, match="leaves the machine travel"):
+        cam.plan_steps(job)
     with pytest.raises(cam.TravelError, match="travel"):
-        cam.plan(d, depth=2, start_at=start_at)
+        cam.run(job)

@@ -168,7 +168,7 @@ def write_preview(args: argparse.Namespace, job: JobLike, path: str, surface: bo
         raise CamError(f"{path}: pictures are written as .png or .svg")
     if surface and suffix != ".png":
         raise CamError(f"{path}: the surface picture is written as .png")
-    steps = plan_chunks(job)
+    steps = plan_chunks(job, start_steps=None)  # a picture of the job in its own frame (issue #45 point 4)
     if surface:
         s = carved_surface(job, steps)
         st = job.settings
@@ -198,7 +198,7 @@ def carved_surface(job: JobLike, steps: Optional[ChunkedPlan] = None) -> np.ndar
     clock, dirbit = axis_bits(st)
     out = np.zeros((h, w), np.int64)
     pos, prev_byte, before = np.zeros(3, np.int64), 0, None
-    for chunk in (steps or plan_chunks(job)).chunks():
+    for chunk in (steps or plan_chunks(job, start_steps=None)).chunks():  # its own frame: nothing moves
         if not len(chunk.data):
             continue
         p, counts = _decode(chunk.data, prev_byte, pos, clock, dirbit)

@@ -34,7 +34,7 @@ from typing import Iterator, Optional
 
 import numpy as np
 
-from ..job.model import Job, JobLike, PlanFingerprint, check_travel
+from ..job.model import Job, JobLike, PlanFingerprint, TravelSpan, check_span, check_travel
 from ..settings import MachineSettings
 from ._kernels import chunk_writes_kernel, move_extent_kernel, move_periods_kernel, stretch_kernel
 from .pins import axis_bits
@@ -583,7 +583,7 @@ class ChunkedPlan:
             warnings=list(self.warnings))
 
 
-def plan_chunks(job: JobLike, *, start_steps: tuple[int, int, int] = (0, 0, 0),
+def plan_chunks(job: JobLike, *, start_steps: Optional[tuple[int, int, int]] = (0, 0, 0),
                 chunk_periods: int = DEFAULT_CHUNK_PERIODS, margin_periods: Optional[int] = None,
                 fingerprint: bool = False) -> ChunkedPlan:
     """The step plan of a job of any size, made a chunk at a time (:class:`ChunkedPlan`).
@@ -594,18 +594,24 @@ def plan_chunks(job: JobLike, *, start_steps: tuple[int, int, int] = (0, 0, 0),
     Args:
         job: the moves, in steps relative to where the tool stands when it starts (any
             :class:`~cam.job.model.JobLike`: a :class:`~cam.job.model.Job` is one piece).
-        start_steps: where the tool stands in the machine frame (the job is checked against the travel).
+        start_steps: where the tool stands in the machine frame (the job is checked against the travel).  None:
+            the job is planned in its own frame and placed when it runs (a drawing, a relief, a file placed by its
+            extent: :func:`cam.job.jobs.prepare_job`): checked here to fit the travel's span
+            (:class:`~cam.job.model.TravelSpan`), and in the machine frame where it is placed (the session checks
+            the plan's extent from where it starts).
         chunk_periods: step periods per chunk.
         margin_periods: look-ahead periods on each side of a chunk (None: :func:`lookahead_margin`).
         fingerprint: also work out the job's :func:`cam.job.resume.plan_fingerprint` in this pass
             (:attr:`ChunkedPlan.job_sha256`; a job kept as pieces is then not made again for it).
 
     Raises:
-        TravelError: a point of the job is outside the machine travel (nothing is planned).
+        TravelError: a point of the job is outside the machine travel, or (``start_steps`` None) the job is wider
+        than it (nothing is planned).
     """
     _keep_freed_memory()  # before the threads that will run the plan exist: they share one heap
     s = job.settings
-    origin = np.asarray(start_steps, np.int64)
+    origin = None if start_steps is None else np.asarray(start_steps, np.int64)
+    span = TravelSpan(s) if origin is None else None
     prev = np.zeros((1, 3), np.int64)
     steps_total = np.zeros(3, np.int64)
     period0 = 0
@@ -625,7 +631,10 @@ def plan_chunks(job: JobLike, *, start_steps: tuple[int, int, int] = (0, 0, 0),
         if not len(pts):
             continue
         for b0 in range(0, len(pts), _MOVE_BLOCK * 16):
-            check_travel(pts[b0:b0 + _MOVE_BLOCK * 16] + origin, s, piece.pixels)
+            if origin is None:
+                check_span(pts[b0:b0 + _MOVE_BLOCK * 16], s, piece.pixels, span)
+            else:
+                check_travel(pts[b0:b0 + _MOVE_BLOCK * 16] + origin, s, piece.pixels)
         npm, nom, d = _per_move(piece, pts, prev)
         steps_total += d
         reach.add(pts, npm, nom, prev)

@@ -20,8 +20,11 @@ Rules the planner keeps (and tests check):
   the surface, travels there, and plunges at the next point;
 * Z never goes below the depth asked for at the pixel the tool is over:
   going deeper, move then plunge; going shallower, lift then move;
-* the job ends at (0, 0, 0); a job with any point outside the machine travel
-  is refused before the first step, naming the first offending point.
+* the job ends at (0, 0, 0); it is planned in its own frame, and a job wider
+  than the machine travel on some axis is refused when it is planned, naming
+  the point that makes it too wide; placed (at the work zero, or where the tool
+  stands), a job with any point outside the travel is refused before the first
+  step (issue #45 point 4).
 """
 from __future__ import annotations
 
@@ -250,8 +253,11 @@ def _guard_diagonals(pts: np.ndarray, kind: np.ndarray, tgt: np.ndarray, pause: 
 
 
 def _fits_travel(targets: np.ndarray, offset_px: tuple[int, int], safe: int, settings: MachineSettings) -> bool:
-    """Whether every point of the job lies in the travel, from its extent alone: the targets ``(M, 3)`` (drawing
-    frame, Start At Z included) moved by ``offset_px``, the home (0, 0, 0) and the safe plane ``safe`` (Z pixels).
+    """Whether the job fits the machine wherever it is placed, from its extent alone: the box of the targets
+    ``(M, 3)`` (drawing frame, Start At Z included) moved by ``offset_px``, the home (0, 0, 0) and the safe plane
+    ``safe`` (Z pixels) is no wider than the travel on each axis (:class:`cam.job.model.TravelSpan`).  A drawing
+    job is planned in its own frame: where it goes is checked in the machine frame when it is placed (at the
+    work zero, or from where the tool stands; issue #45 point 4).
 
     Bridges run through targets' pixels, lifts and travels at the surface or the safe plane, so no point of
     the job lies outside this box, and its corners' coordinates are all taken by points of the job.
@@ -261,7 +267,7 @@ def _fits_travel(targets: np.ndarray, offset_px: tuple[int, int], safe: int, set
     hi_px = np.maximum(most + np.array([*offset_px, 0]), 0)
     scale = np.array([settings.steps_per_px_xy, settings.steps_per_px_xy, settings.steps_per_px_z], np.int64)
     bounds = np.array(settings.travel.bounds_steps(), np.int64)
-    return bool(np.all(lo_px * scale >= bounds[:, 0]) and np.all(hi_px * scale <= bounds[:, 1]))
+    return bool(np.all((hi_px - lo_px) * scale <= bounds[:, 1] - bounds[:, 0]))
 
 
 def _gap_block(

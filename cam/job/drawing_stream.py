@@ -36,13 +36,13 @@ import numpy as np
 
 from ..digitize.digitized import Digitized
 from ..digitize.profile import ProfileLike
-from ..errors import PlanError, TravelError
+from ..errors import PlanError
 from ..options import OPTIONS
 from ..settings import DEFAULT_SETTINGS, MachineSettings
 from ..tool import Tool, parse_tool, reach_depth_px
 from .drawing import (_assemble, _drop_maps, _fits_travel, _guard_diagonals, _object_depths, _pass_order,
                       _pause_map, _roughing_targets)
-from .model import RETRACT, Job, PixelFrame, check_travel, join_pieces
+from .model import RETRACT, Job, PixelFrame, TravelSpan, check_span, join_pieces
 from .subpixel import finer_grids, rest_positions
 
 __all__ = ["plan", "DrawingJobStream", "stream_drawing", "depth_px_of", "stepdown_px_of", "STREAM_TARGETS",
@@ -231,20 +231,22 @@ class DrawingJobStream:
         the finer pass (see the module docstring).
 
         Raises:
-            TravelError: a point lies outside the machine travel (found as the pieces are made).
+            TravelError: the job is wider than the machine travel on some axis (found as the pieces are made;
+            the job is planned in its own frame, placed and checked in the machine frame when it runs).
         """
         counts = {"moves": 0, "targets": 0, "retracts": 0, "pauses": 0}
+        span = TravelSpan(self.settings)  # the job's extent so far: it must fit the travel wherever it is placed
         if self.roughing is not None:
-            yield from self._part(self._held(self.roughing.targets), self.roughing, None, True, counts)
+            yield from self._part(self._held(self.roughing.targets), self.roughing, None, True, counts, span)
         centres = _Part(None, self.asked, self.corners)
-        after = yield from self._part(self._targets(), centres, None, self.finer is None, counts,
+        after = yield from self._part(self._targets(), centres, None, self.finer is None, counts, span,
                                       pause_px=self.pause_px)
         if self.finer is not None:
-            yield from self._part(self._held(self.finer.targets), self.finer, after, True, counts)
+            yield from self._part(self._held(self.finer.targets), self.finer, after, True, counts, span)
         self.counts = counts
 
     def _part(self, chunks: Iterator[tuple[np.ndarray, bool]], part: _Part, after_px: Optional[np.ndarray],
-              home: bool, counts: dict[str, int], pause_px: Optional[np.ndarray] = None
+              home: bool, counts: dict[str, int], span: TravelSpan, pause_px: Optional[np.ndarray] = None
               ) -> Generator[Job, None, Optional[np.ndarray]]:
         """The pieces of one part of the job from its targets ``chunks`` (see :meth:`_targets`): planned on the
         part's grid (drawing frame, ``part.k`` positions per pixel, Start At Z added here), from ``after_px``
@@ -279,13 +281,15 @@ class DrawingJobStream:
                 notes = [part.change_note]
             if part.finer:
                 tgt, pause = np.zeros(len(pts), bool), np.zeros(len(pts), bool)
-            yield self._piece(frame.to_steps(pts), kind, tgt, pause, notes, counts)
+            yield self._piece(frame.to_steps(pts), kind, tgt, pause, notes, counts, span)
         return after
 
     def _piece(self, points_steps: np.ndarray, kind: np.ndarray, tgt: np.ndarray, pause: np.ndarray,
-               notes: Optional[list[str]], counts: dict[str, int]) -> Job:
-        """One piece of the job, checked against the travel (its points named by their index in the job)."""
-        _check_piece_travel(points_steps, counts["moves"], self.settings, self.pixels)
+               notes: Optional[list[str]], counts: dict[str, int], span: TravelSpan) -> Job:
+        """One piece of the job, its extent so far (``span``) checked against the travel's span: the job is
+        planned in its own frame and placed when it runs (:class:`~cam.job.model.TravelSpan`; the point that
+        makes it too wide named by its index in the job and its pixel)."""
+        check_span(points_steps, self.settings, self.pixels, span)
         counts["moves"] += len(points_steps)
         counts["targets"] += int(np.count_nonzero(tgt))
         counts["retracts"] += int(np.count_nonzero(kind == RETRACT))
@@ -306,17 +310,6 @@ def _guard_after(last_pt: Optional[np.ndarray], pts: np.ndarray, kind: np.ndarra
                                              np.concatenate([[False], tgt]), np.concatenate([[False], pause]),
                                              corners, oz)
     return pts[1:], kind[1:], tgt[1:], pause[1:]
-
-
-def _check_piece_travel(points_steps: np.ndarray, first: int, settings: MachineSettings, pixels: PixelFrame) -> None:
-    """:func:`cam.job.model.check_travel` of a piece whose first point is point ``first`` of the job: the error
-    names the point by its index in the job, as the check of the whole job does."""
-    try:
-        check_travel(points_steps, settings, pixels)
-    except TravelError as e:
-        bounds = np.array(settings.travel.bounds_steps(), np.int64)
-        i = int(np.flatnonzero(np.any((points_steps < bounds[:, 0]) | (points_steps > bounds[:, 1]), axis=1))[0])
-        raise TravelError(str(e).replace(f"at point {i} (", f"at point {first + i} (", 1)) from None
 
 
 def stream_drawing(
@@ -343,8 +336,10 @@ def stream_drawing(
         piece_targets: cut points per piece (at most; None: :data:`PIECE_TARGETS`).
 
     Raises:
-        PlanError: bad options, nothing to cut; TravelError: the job leaves the travel (its extent is checked
-        here, before a piece is made; the first point outside is named).
+        PlanError: bad options, nothing to cut; TravelError: the job does not fit the travel wherever it is placed
+        (its extent, the home included, is checked here against the travel's span before a piece is made; the
+        first point that makes it too wide is named).  A job planned in its own frame: where it runs is checked
+        when it is placed (issue #45 point 4).
     """
     if cut_depth_mm is not None:
         if depth is not None:
@@ -383,10 +378,10 @@ def stream_drawing(
                            tool=None if cutter.is_point else cutter, warnings=warnings, roughing=roughing,
                            finer=finer,
                            piece_targets=max(1, int(PIECE_TARGETS if piece_targets is None else piece_targets)))
-    if not fits:  # assembled without bridges up to its first point outside the travel, which is named
+    if not fits:  # assembled without bridges up to its first point that makes it too wide, which is named
         for _ in job.pieces():
             pass
-        raise AssertionError("a job whose extent leaves the travel passed the travel check")
+        raise AssertionError("a job whose extent is wider than the travel passed the travel check")
     return job
 
 
@@ -549,7 +544,8 @@ def plan(
         ending at (0, 0, 0).
 
     Raises:
-        PlanError: fewer depths than objects, bad options; TravelError: the job leaves the travel.
+        PlanError: fewer depths than objects, bad options; TravelError: the job is wider than the travel
+        (see :func:`stream_drawing`).
     """
     return stream_drawing(digitized, depth=depth, settings=settings, passes=passes, start_at=start_at,
                           pause_at=pause_at, profile=profile, tool=tool, stepdown_mm=stepdown_mm, stepover=stepover,

@@ -11,6 +11,9 @@ the board about its vertical axis for drilling from the back side.  The job's
 points are steps from its home; ``home_steps`` says where that home is in the
 machine frame (a file placed by its own zero at a work zero: ``offset_mm``
 (0, 0) and the work zero), and every hole is checked against the travel there.
+Without it the job is planned in its own frame, placed at the work zero when it
+runs and checked there; here it must fit the travel's span on each axis (the
+hole or slot that makes it too wide is named; issue #45 point 4).
 
 The drill cycle for each hole (thesis-machine step/dir port): rapid at the
 safe height to above the hole, plunge to the drill depth, retract to the
@@ -48,9 +51,9 @@ import numpy as np
 
 from ..errors import PlanError, TravelError
 from ..settings import DEFAULT_SETTINGS, MachineSettings
-from .model import CUT, RETRACT, TRAVEL, Job, PixelFrame, check_travel, join_pieces
+from .model import CUT, RETRACT, TRAVEL, Job, PixelFrame, TravelSpan, check_span, check_travel, join_pieces
 from .drill_order import drill_order
-from .hpgl_stream import outside_travel
+from .hpgl_stream import outside_travel, z_span_check
 
 __all__ = ["DrillPlan", "DrillJobStream", "plan_drill", "DEFAULT_CUT_DEPTH_MM", "DEFAULT_TRAVEL_HEIGHT_MM"]
 
@@ -150,7 +153,7 @@ def plan_drill(
     mirror_x: bool = False,
     drill_order: str = "tour",
     mill_holes_over_mm: Optional[float] = None,
-    home_steps: tuple[int, int, int] = (0, 0, 0),
+    home_steps: Optional[tuple[int, int, int]] = None,
 ) -> DrillPlan:
     """Plan the drilling of a :class:`~cam.formats.excellon.HoleList`: its holes drilled, its slots milled.
 
@@ -165,10 +168,12 @@ def plan_drill(
         mill_holes_over_mm: mill every hole whose tool is larger than this with a bit of this diameter (None:
             drill every hole with its own tool).
         home_steps: the machine position of the job's home (its (0, 0, 0), where ``offset_mm`` is measured from):
-            the holes, paths and depths are checked against the travel in the machine frame from there.
+            the holes, paths and depths are checked against the travel in the machine frame from there; None: the
+            job's own frame (placed when it runs, where it is checked): they must fit the travel's span.
 
     Raises:
-        PlanError: bad options; TravelError: a hole outside the travel (naming the hole and its line).
+        PlanError: bad options; TravelError: a hole outside the travel, or (in its own frame) one that makes the
+        job wider than the travel (naming the hole and its line).
     """
 
     if cut_depth_mm <= 0 or travel_height_mm < 0:
@@ -198,18 +203,25 @@ def plan_drill(
             path_tool.append(bit_tool)
         n_milled = int(big.sum())
     every_mm = np.concatenate([np.asarray(holes.holes_mm, np.float64).reshape(-1, 2)] + paths_mm)
-    home = np.asarray(home_steps, np.int64).reshape(3)
+    own = home_steps is None  # the job's own frame: it must fit the travel's span (placed and checked when it runs)
+    home = np.zeros(3, np.int64) if own else np.asarray(home_steps, np.int64).reshape(3)
+    span = TravelSpan(settings) if own else None
     machine_mm = _machine_mm(holes.holes_mm, offset_mm, mirror_x, every_mm)
     steps_xy = np.rint(machine_mm / settings.mm_per_step_xy).astype(np.int64)
-    _check_holes(holes, steps_xy + home[:2], settings)
+    _check_holes(holes, steps_xy + home[:2], settings, span)
     paths_steps = [np.rint(_machine_mm(p, offset_mm, mirror_x, every_mm) / settings.mm_per_step_xy).astype(np.int64)
                    for p in paths_mm]
     for k, p in enumerate(paths_steps):
         if k < len(slot_paths):
-            _check_holes_path(holes, k, p + home[:2], settings)
+            _check_holes_path(holes, k, p + home[:2], settings, span)
+        elif span is not None:
+            found = span.over(p)
+            if found is not None:
+                raise TravelError(f"{holes.source}: a milled hole lies outside the machine travel: {found[1]}")
         else:
             check_travel(np.column_stack([p, np.zeros(len(p), np.int64)]) + home, settings)
-    depth_steps, safe_z_steps = _drill_z_steps(cut_depth_mm, travel_height_mm, settings, int(home[2]))
+    depth_steps, safe_z_steps = _drill_z_steps(cut_depth_mm, travel_height_mm, settings,
+                                               None if own else int(home[2]))
     runs = _tool_runs(holes, machine_mm, drill_order, drilled)
     runs3, diameters = _with_paths(runs, [float(holes.tools[t]) for t, _ in runs], paths_steps, path_dia, path_tool,
                                    machine_mm / settings.mm_per_step_xy, drill_order, len(slot_paths))
@@ -217,7 +229,7 @@ def plan_drill(
     stream = DrillJobStream([(t, idx) for t, idx, _ in runs3], steps_xy, diameters, depth_steps, safe_z_steps,
                             settings, str(holes.source), list(holes.warnings), paths_steps=paths_steps,
                             path_runs=[pidx for _, _, pidx in runs3], notes=notes,
-                            home_steps=tuple(int(v) for v in home))  # type: ignore[arg-type]
+                            home_steps=None if own else tuple(int(v) for v in home))  # type: ignore[arg-type]
     toolpath = stream.joined()
     order_arr = np.concatenate([np.zeros(0, np.int64)] + [idx for _, idx, _ in runs3]).astype(np.int64)
     sequence = [(tool, dia, len(idx)) for (tool, idx, _), dia in zip(runs3, diameters)]
@@ -228,15 +240,20 @@ def plan_drill(
                      holes_mm=machine_mm[order_arr])
 
 
-def _drill_z_steps(cut_depth_mm: float, travel_height_mm: float, settings: MachineSettings, home_z_steps: int
-                   ) -> tuple[int, int]:
+def _drill_z_steps(cut_depth_mm: float, travel_height_mm: float, settings: MachineSettings,
+                   home_z_steps: Optional[int]) -> tuple[int, int]:
     """(drill depth, travel Z) in Z steps (+Z deeper: the travel Z is <= 0), checked against the Z travel with the
-    board's surface at machine Z ``home_z_steps`` (before the tour: a million holes take a while to order)."""
+    board's surface at machine Z ``home_z_steps`` (None: a job planned in its own frame, against the Z travel's
+    span) before the tour: a million holes take a while to order."""
     depth_steps = int(round(cut_depth_mm / settings.mm_per_step_z))
     if depth_steps < 1:
         raise PlanError(f"drill depth {cut_depth_mm:g} mm is less than one Z step (mm_per_step_z = "
                         f"{settings.mm_per_step_z:g} mm): nothing would be drilled")
     safe_z_steps = -int(round(travel_height_mm / settings.mm_per_step_z))
+    if home_z_steps is None:
+        z_span_check(f"drill depth {cut_depth_mm:g} mm and safe height {travel_height_mm:g} mm", depth_steps,
+                     safe_z_steps, settings)
+        return depth_steps, safe_z_steps
     _, _, (z_lo, z_hi) = settings.travel.bounds_steps()
     if depth_steps + home_z_steps > z_hi or safe_z_steps + home_z_steps < z_lo:
         surface = f" from a surface at machine Z {home_z_steps}" if home_z_steps else ""
@@ -305,14 +322,17 @@ def _notes(holes, runs3, diameters, n_slots: int, bit_mm) -> list[str]:
     return notes
 
 
-def _check_holes_path(holes, k: int, path_steps: np.ndarray, settings: MachineSettings) -> None:
+def _check_holes_path(holes, k: int, path_steps: np.ndarray, settings: MachineSettings,
+                      span: Optional[TravelSpan] = None) -> None:
     """TravelError naming slot ``k`` (``file:line``) when its ``(K, 2)`` machine steps leave the travel, the axis
-    and by how much."""
-    found = outside_travel(path_steps, settings)
+    and by how much; with ``span`` (the job's own frame, its extent so far): when it makes the job wider than the
+    travel."""
+    found = outside_travel(path_steps, settings) if span is None else span.over(path_steps)
     if found is not None:
         lines = getattr(holes, "line_of_slot", [])
         where = f"{holes.source}:{int(lines[k])}" if len(lines) > k else holes.source
-        raise TravelError(f"{where}: slot {k + 1} lies outside the machine travel ({found[1]})")
+        said = f": {found[1]}" if span is not None else f" ({found[1]})"
+        raise TravelError(f"{where}: slot {k + 1} lies outside the machine travel{said}")
 
 
 def _tool_runs(holes, machine_mm: np.ndarray, order: str, drilled: Optional[np.ndarray] = None
@@ -351,17 +371,19 @@ def _tool_runs(holes, machine_mm: np.ndarray, order: str, drilled: Optional[np.n
     return runs
 
 
-def _check_holes(holes, steps_xy: np.ndarray, settings: MachineSettings) -> None:
+def _check_holes(holes, steps_xy: np.ndarray, settings: MachineSettings, span: Optional[TravelSpan] = None) -> None:
     """TravelError naming the first hole (``file:line``) whose ``(N, 2)`` machine (x, y) steps leave the travel, the
-    axis and by how much."""
-    found = outside_travel(steps_xy, settings)
+    axis and by how much; with ``span`` (the job's own frame: steps from its home, its extent so far): the first
+    hole that makes the job wider than the travel (:class:`~cam.job.model.TravelSpan`)."""
+    found = outside_travel(steps_xy, settings) if span is None else span.over(steps_xy)
     if found is not None:
         i, beyond = found
         lines = getattr(holes, "line_of_hole", None)
         where = f"{holes.source}:{int(lines[i])}" if lines is not None and len(lines) > i else holes.source
+        said = f": {beyond}" if span is not None else f" ({beyond})"
         raise TravelError(
             f"{where}: hole {i + 1} at X{holes.holes_mm[i, 0]:.3f} Y{holes.holes_mm[i, 1]:.3f} mm lies "
-            f"outside the machine travel ({beyond})"
+            f"outside the machine travel{said}"
         )
 
 
@@ -386,7 +408,8 @@ class DrillJobStream:
         paths_steps: ``(K, 2)`` int64 machine (x, y) steps of each milled path (slots, milled holes); path_runs:
             each run's path indices, milled after its holes (above the first point, down, along at the drill
             depth, up at the last); notes: each run's tool-change prompt (default: tool, diameter, holes).
-        home_steps: the machine position of the job's home: each piece is checked against the travel from there.
+        home_steps: the machine position of the job's home: each piece is checked against the travel from there
+            (None: the job's own frame; each piece is checked to keep the job within the travel's span).
     """
 
     runs: list[tuple[int, np.ndarray]]
@@ -403,16 +426,18 @@ class DrillJobStream:
     paths_steps: list[np.ndarray] = field(default_factory=list)
     path_runs: Optional[list[np.ndarray]] = None
     notes: Optional[list[str]] = None
-    home_steps: tuple[int, int, int] = (0, 0, 0)
+    home_steps: Optional[tuple[int, int, int]] = None
 
     def joined(self) -> Job:
         """Every move in one :class:`~cam.job.model.Job` (:func:`~cam.job.model.join_pieces` of :meth:`pieces`)."""
         return join_pieces(self.pieces(), self)
 
     def pieces(self) -> Iterator[Job]:
-        """One piece per tool run (see the class docstring); each checked against the travel."""
+        """One piece per tool run (see the class docstring); each checked against the travel (in its own frame:
+        the job's extent so far against the travel's span)."""
+        span = TravelSpan(self.settings) if self.home_steps is None else None
         for k in range(len(self.runs)):
-            yield self._piece(k)
+            yield self._piece(k, span)
 
     def _note(self, k: int) -> str:
         if self.notes is not None:
@@ -440,7 +465,7 @@ class DrillJobStream:
             kinds.append(np.concatenate([[TRAVEL], np.full(n, CUT), [RETRACT]]).astype(np.uint8))
         return np.vstack(rows), np.concatenate(kinds)
 
-    def _piece(self, k: int) -> Job:
+    def _piece(self, k: int, span: Optional[TravelSpan] = None) -> Job:
         """Run ``k``: (the first run) a lift, or a point at the home, where the first tool change pauses; each
         hole above, down, up; the last row pauses for the next run's tool, or (the last run) home."""
         safe, last = self.travel_z_steps, k == len(self.runs) - 1
@@ -464,6 +489,9 @@ class DrillJobStream:
         if not last:
             pause[len(head) + len(holes) + len(paths) - 1] = True
             notes.append(self._note(k + 1))
-        check_travel(pts + np.asarray(self.home_steps, np.int64), self.settings)
+        if self.home_steps is None:
+            check_span(pts, self.settings, span=span)
+        else:
+            check_travel(pts + np.asarray(self.home_steps, np.int64), self.settings)
         return Job(points_steps=pts, kind=kind, target=kind == CUT, pause=pause, settings=self.settings,
                    warnings=list(self.warnings) if k == 0 else [], pause_notes=notes, source=self.source)

@@ -55,7 +55,7 @@ from ..drive.chunks import plan_chunks
 from ..errors import CamError
 from ..settings import DEFAULT_SETTINGS, MachineSettings
 from ..tool import POINT, Tool, _lowest, drop_depth_px, footprint_px, parse_tool, tool_of_settings
-from .model import CUT, RETRACT, TRAVEL, Job, PixelFrame, check_travel
+from .model import CUT, RETRACT, TRAVEL, Job, PixelFrame, check_span
 
 __all__ = ["DEFAULT_MAX_DEPTH_MM", "BAND_ROWS", "grey_of_image", "load_heightmap", "depth_steps_of",
            "drop_surface_steps", "sub_drop_steps", "pixel_steps_of", "row_spacing_px", "plan_heightmap",
@@ -316,7 +316,8 @@ def plan_heightmap(
         A :class:`~cam.job.model.Job` from and back to where the tool stands, with its pixel frame.
 
     Raises:
-        CamError: a bad order; TravelError: the relief does not fit the machine travel.
+        CamError: a bad order; TravelError: the relief is wider (or deeper) than the machine travel (it is
+        planned in its own frame: where it runs is checked when it is placed).
     """
     d = np.asarray(depth_steps, np.int64)
     if d.ndim != 2 or not d.size:
@@ -328,7 +329,8 @@ def plan_heightmap(
     px_mm = spp * settings.mm_per_step_xy
     h, w = d.shape
     frame = PixelFrame(w, h, (0, 0, 0), spp, 1)  # depths are Z steps: one step per Z unit of the frame
-    check_travel(np.array([[0, 0, 0], [(w - 1) * spp, (h - 1) * spp, int(d.max(initial=0))]]), settings, frame)
+    # planned in its own frame, placed at the work zero when it runs (checked there): it must fit the travel's span
+    check_span(np.array([[0, 0, 0], [(w - 1) * spp, (h - 1) * spp, int(d.max(initial=0))]]), settings, frame)
     allowed = drop_surface_steps(d, cutter, px_mm, settings)
     sub = sub_drop_steps(d, cutter, px_mm, spp, settings) if slopes and not cutter.is_point else None
     rows = _rows(h, row_spacing_px(cutter, px_mm, stepover))
@@ -420,7 +422,7 @@ def prepare_heightmap(path: Path, options: Any, settings: MachineSettings) -> di
         candidate = plan_heightmap(depth, tool=cutter, settings=settings, pixel_size_mm=options.pixel_size_mm,
                                    stepover=options.stepover, heightmap_order=options.heightmap_order,
                                    stepdown_mm=options.stepdown_mm, slopes=slopes, source=path.name)
-        steps = plan_chunks(candidate, fingerprint=True)
+        steps = plan_chunks(candidate, start_steps=None, fingerprint=True)  # its own frame: placed when it runs
         if best is None or steps.estimated_time_s < best[1].estimated_time_s:
             best = (candidate, steps, slopes)
     job, steps, slopes = best  # type: ignore[misc]

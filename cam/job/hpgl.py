@@ -62,7 +62,7 @@ def plan_hpgl(
     offset_mm: Optional[tuple[float, float]] = None,
     scale: Optional[float] = None,
     fit_mm: Optional[tuple[float, float]] = None,
-    home_steps: tuple[int, int, int] = (0, 0, 0),
+    home_steps: Optional[tuple[int, int, int]] = None,
 ) -> Job:
     """Plan the cutting of an HPGL drawing, in machine steps: the pieces of
     :func:`cam.job.hpgl_stream.stream_hpgl` joined.
@@ -83,14 +83,16 @@ def plan_hpgl(
         scale: mm cut per mm of the plot (after its own ``SC``/``IP`` scaling); fit_mm: or the ``(width, height)``
             mm to scale it to fit, keeping its proportions (as SVG's ``--scale`` and ``--fit``).
         home_steps: the machine position of the job's home, its (0, 0, 0): the travel is checked in the machine
-            frame from there (a file placed by its own zero at a work zero, ``offset_mm`` (0, 0)).
+            frame from there (a file placed by its own zero at a work zero, ``offset_mm`` (0, 0)); None: the job's
+            own frame (placed when it runs, where it is checked): it must fit the travel's span.
 
     Returns:
         A :class:`~cam.job.model.Job` in machine steps: CUT points at the
         cutting depth (``target`` marks them), TRAVEL at the safe height, RETRACT straight up.
 
     Raises:
-        PlanError: bad options, nothing drawn; TravelError: a point outside the travel, ``file:line:column``;
+        PlanError: bad options, nothing drawn; TravelError: a point outside the travel (or, in its own frame, one
+        that makes the job wider than the travel), ``file:line:column``;
         ParseError: a malformed file.
     """
     return stream_hpgl(drawing, settings=settings, cut_depth_mm=cut_depth_mm, travel_height_mm=travel_height_mm,

@@ -34,10 +34,10 @@ from ..errors import PlanError, TravelError
 from ..formats.hpgl import (CHUNK_BYTES, PLOTTER_UNIT_MM, HpglDrawing, HpglScan, PointBatch, point_batches,
                             scan_hpgl)
 from ..settings import DEFAULT_SETTINGS, MachineSettings
-from .model import CUT, RETRACT, TRAVEL, Job, PixelFrame, check_travel, join_pieces
+from .model import CUT, RETRACT, TRAVEL, Job, PixelFrame, TravelSpan, check_span, check_travel, join_pieces
 
 __all__ = ["HpglJobStream", "stream_hpgl", "xy_steps", "xy_steps_exact", "hpgl_scale", "outside_travel",
-           "STREAM_POINTS", "PIECE_POINTS",
+           "z_span_check", "STREAM_POINTS", "PIECE_POINTS",
            "DEFAULT_CUT_DEPTH_MM", "DEFAULT_TRAVEL_HEIGHT_MM"]
 
 DEFAULT_CUT_DEPTH_MM = 0.5
@@ -114,14 +114,19 @@ def scale_to_fit(size_mm: Callable[[], tuple[float, float]], source: str, *, sca
 
 
 def _z_steps(cut_depth_mm: float, travel_height_mm: float, settings: MachineSettings,
-             home_z_steps: int = 0) -> tuple[int, int]:
+             home_z_steps: Optional[int] = 0) -> tuple[int, int]:
     """(cutting depth, safe height) in Z steps (+Z deeper: the safe height is <= 0), checked against the Z travel
-    with the job's surface at machine Z ``home_z_steps``."""
+    with the job's surface at machine Z ``home_z_steps`` (None: a job planned in its own frame, placed when it
+    runs: against the Z travel's span, :func:`z_span_check`)."""
     _, _, (z_lo, z_hi) = settings.travel.bounds_steps()
     depth_steps = int(round(cut_depth_mm / settings.mm_per_step_z))
     safe_z_steps = -int(round(travel_height_mm / settings.mm_per_step_z))
     if depth_steps < 1:
         raise PlanError(f"cutting depth {cut_depth_mm:g} mm is less than one Z step ({settings.mm_per_step_z:g} mm)")
+    if home_z_steps is None:
+        z_span_check(f"cutting depth {cut_depth_mm:g} mm and safe height {travel_height_mm:g} mm", depth_steps,
+                     safe_z_steps, settings)
+        return depth_steps, safe_z_steps
     z0 = int(home_z_steps)
     if depth_steps + z0 > z_hi or safe_z_steps + z0 < z_lo:
         surface = f" from a surface at machine Z {z0}" if z0 else ""
@@ -129,6 +134,22 @@ def _z_steps(cut_depth_mm: float, travel_height_mm: float, settings: MachineSett
                           f"{safe_z_steps + z0}..{depth_steps + z0} steps{surface}; the Z travel is {z_lo}..{z_hi} "
                           "steps")
     return depth_steps, safe_z_steps
+
+
+def z_span_check(what: str, depth_steps: int, safe_z_steps: int, settings: MachineSettings) -> None:
+    """TravelError when a job planned in its own frame (its surface at Z 0, placed when it runs) needs more Z than
+    the travel has: from ``safe_z_steps`` (<= 0) to ``depth_steps`` (> 0); ``what`` names the two (issue #45 point 4).
+
+    >>> z_span_check("depth 40 mm", 2548, -64, DEFAULT_SETTINGS) is None  # 2612 of the 2640 steps
+    True
+    """
+    _, _, (z_lo, z_hi) = settings.travel.bounds_steps()
+    lo, hi = min(0, int(safe_z_steps)), max(0, int(depth_steps))
+    if hi - lo > z_hi - z_lo:
+        mm = settings.mm_per_step_z
+        raise TravelError(f"{what} need Z {lo}..{hi} steps ({(hi - lo) * mm:.3f} mm) from the surface, more than "
+                          f"the Z travel holds wherever the work zero is: the Z travel is {z_lo}..{z_hi} steps "
+                          f"({(z_hi - z_lo) * mm:.3f} mm)")
 
 
 def outside_travel(points_steps: np.ndarray, settings: MachineSettings, *, farthest: bool = False
@@ -164,9 +185,19 @@ def outside_travel(points_steps: np.ndarray, settings: MachineSettings, *, farth
                f"{lo * mm:g}..{hi * mm:g} mm")
 
 
-def _check_xy(source: str, batch: PointBatch, xy: np.ndarray, settings: MachineSettings) -> None:
+def _check_xy(source: str, batch: PointBatch, xy: np.ndarray, settings: MachineSettings,
+              span: Optional[TravelSpan] = None) -> None:
     """TravelError naming the first point (``file:line:column``) of ``batch`` whose ``(n, 2)`` machine steps
-    ``xy`` leave the travel, the axis and by how much."""
+    ``xy`` leave the travel, the axis and by how much; with ``span`` (a job planned in its own frame: ``xy`` are
+    steps from its home, the extent so far in ``span``): the first point that makes the job wider than the
+    travel (:class:`~cam.job.model.TravelSpan`)."""
+    if span is not None:
+        found = span.over(xy)
+        if found is not None:
+            i, text = found
+            raise TravelError(f"{source}:{int(batch.line[i])}:{int(batch.col[i])}: point X{batch.x[i]:g} "
+                              f"Y{batch.y[i]:g} (plotter units) lies outside the machine travel: {text}")
+        return
     found = outside_travel(xy, settings)
     if found is not None:
         i, beyond = found
@@ -185,6 +216,8 @@ class _Carry:
     tool: int = 0  # the tool in the machine: the last pen selected (0: none yet)
     last_row: Optional[np.ndarray] = None  # (3,) the last row of the job (None: no row yet)
     n_strokes: int = 0
+    xy_span: Optional[TravelSpan] = None  # a job planned in its own frame: its points' extent so far
+    row_span: Optional[TravelSpan] = None  # and its rows'
 
 
 def _strokes(xy: np.ndarray, start: np.ndarray, pen: np.ndarray,
@@ -312,7 +345,9 @@ class HpglJobStream:
             (Z steps, +Z deeper: the travel height is <= 0).
         offset_mm: as :func:`~cam.job.hpgl.plan_hpgl`'s; scale: mm cut per mm of the plot (:func:`hpgl_scale`).
         home_steps: the machine position of the job's home (its points are steps from it): the travel is checked
-            in the machine frame from there ((0, 0, 0): the job's own frame, a job placed later).
+            in the machine frame from there (a file placed by its own zero); None: the job's own frame, a job
+            placed when it runs (at the work zero, checked there): checked to fit the travel's span
+            (:class:`~cam.job.model.TravelSpan`, issue #45 point 4).
         piece_points: pen-down points planned into a piece (at least); chunk_bytes: bytes of a file read at once.
         n_moves: moves of the job (-1 until a pass ended); pause_notes: its pauses' notes (after a pass).
         pixels, tool: None (no drawing frame; the point tool).
@@ -327,7 +362,7 @@ class HpglJobStream:
     scale: float = 1.0
     piece_points: int = PIECE_POINTS
     chunk_bytes: int = CHUNK_BYTES
-    home_steps: tuple[int, int, int] = (0, 0, 0)
+    home_steps: Optional[tuple[int, int, int]] = None
     n_moves: int = -1
     pause_notes: list[str] = field(default_factory=list)
     pixels: Optional[PixelFrame] = None
@@ -363,9 +398,12 @@ class HpglJobStream:
 
         Raises:
             ParseError: the file changed into something malformed since it was scanned;
-            TravelError: a point lies outside the machine travel (``file:line:column``).
+            TravelError: a point lies outside the machine travel (``file:line:column``), or (a job planned in its
+            own frame) makes the job wider than the travel.
         """
         carry = _Carry()
+        if self.home_steps is None:
+            carry.xy_span, carry.row_span = TravelSpan(self.settings), TravelSpan(self.settings)
         notes: list[str] = []
         n_moves = have = 0
         held: list[PointBatch] = []
@@ -390,15 +428,21 @@ class HpglJobStream:
     def _piece(self, batch: PointBatch, carry: _Carry, *, last: bool) -> Optional[Job]:
         """The rows of the points of ``batch`` (None: none are left); ``last``: the job's end follows."""
         xy = xy_steps(batch.x, batch.y, self.scan.extent_pu, self.settings, self.offset_mm, self.scale)
-        home = np.asarray(self.home_steps, np.int64).reshape(3)
-        _check_xy(self.source, batch, xy + home[:2], self.settings)
+        home = None if self.home_steps is None else np.asarray(self.home_steps, np.int64).reshape(3)
+        if home is None:
+            _check_xy(self.source, batch, xy, self.settings, carry.xy_span)
+        else:
+            _check_xy(self.source, batch, xy + home[:2], self.settings)
         xy, group, pause_group, before, notes = _strokes(xy, batch.start, batch.pen, carry)
         pts, kind, pause = _rows(xy, group, pause_group, self.depth_steps, self.safe_z_steps, before=before,
                                  finish=last, end_xy=carry.last_kept, last_row=carry.last_row)
         if not len(pts):
             return None
         carry.last_row = pts[-1].copy()
-        check_travel(pts + home, self.settings)
+        if home is None:
+            check_span(pts, self.settings, span=carry.row_span)
+        else:
+            check_travel(pts + home, self.settings)
         return Job(points_steps=pts, kind=kind, target=(kind == CUT) & (pts[:, 2] == self.depth_steps), pause=pause,
                    settings=self.settings, warnings=[], pause_notes=notes, source=self.source,
                    safe_z_steps=self.safe_z_steps)
@@ -409,7 +453,7 @@ def stream_hpgl(src: Union[str, os.PathLike, HpglDrawing], *, settings: MachineS
                 offset_mm: Optional[tuple[float, float]] = None, scan: Optional[HpglScan] = None,
                 piece_points: int = PIECE_POINTS, chunk_bytes: int = CHUNK_BYTES, scale: Optional[float] = None,
                 fit_mm: Optional[tuple[float, float]] = None,
-                home_steps: tuple[int, int, int] = (0, 0, 0)) -> HpglJobStream:
+                home_steps: Optional[tuple[int, int, int]] = None) -> HpglJobStream:
     """The HPGL job of a file or a drawing as a :class:`HpglJobStream` (a file's: bounded memory).
 
     Args:
@@ -420,7 +464,8 @@ def stream_hpgl(src: Union[str, os.PathLike, HpglDrawing], *, settings: MachineS
         piece_points, chunk_bytes: pen-down points per piece (at least), bytes read at a time.
         scale, fit_mm: mm cut per mm of the plot, or the ``(width, height)`` mm to fit it in (:func:`hpgl_scale`).
         home_steps: the machine position of the job's home (where ``offset_mm`` is measured from): every point is
-            checked against the travel in the machine frame from there (:class:`HpglJobStream`).
+            checked against the travel in the machine frame from there (:class:`HpglJobStream`); None: the job's
+            own frame (placed when it runs): checked to fit the travel's span.
 
     Raises:
         PlanError: bad options (both scale and fit_mm), nothing drawn; ParseError: a malformed file; TravelError: the depths outside
@@ -437,7 +482,7 @@ def stream_hpgl(src: Union[str, os.PathLike, HpglDrawing], *, settings: MachineS
     if scan.n_points == 0:
         raise PlanError(f"{scan.source}: nothing to cut (no pen-down moves)")
     factor = hpgl_scale(scan, scale=scale, fit_mm=fit_mm)
-    home = tuple(int(v) for v in home_steps)
-    depth_steps, safe_z_steps = _z_steps(cut_depth_mm, travel_height_mm, settings, home[2])
+    home = None if home_steps is None else tuple(int(v) for v in home_steps)
+    depth_steps, safe_z_steps = _z_steps(cut_depth_mm, travel_height_mm, settings, None if home is None else home[2])
     return HpglJobStream(points, scan, settings, depth_steps, safe_z_steps, offset_mm, factor,
                          max(1, int(piece_points)), int(chunk_bytes), home)  # type: ignore[arg-type]

@@ -15,7 +15,13 @@ the content contradicts is a warning of the job.  A file neither tells is a
 :class:`~cam.errors.CamError` naming the file and the accepted types.  Every job is planned relative to where the tool stands when it
 starts (the job's home, (0, 0, 0) in machine steps); :attr:`PreparedJob.extent_steps`
 says how far it reaches from there, so a caller that knows where the tool
-stands can check the job against the machine travel before it starts.
+stands can check the job against the machine travel before it starts.  A job
+that has a real machine home (a G-code program's start, a drill, HPGL or SVG
+file placed by its own zero: :func:`own_zero_home`) is checked against the
+travel in the machine frame when it is planned; every other job (a drawing, a
+relief, a file placed by its extent) is planned in its own frame, placed at the
+work zero when it runs and checked there, and here only to fit the travel's
+span on each axis (issue #45 point 4).
 """
 from __future__ import annotations
 
@@ -421,8 +427,10 @@ class PreparedJob:
             HPGL or SVG file from its own zero, :func:`own_zero_home`); None: the kind's default
             (:func:`cam.drive.placement.origin_anchor`).
         home_steps: the machine position ``plan`` was checked against the travel from, its home: a G-code
-            program's start, the work zero of a file placed by its own zero; (0, 0, 0): planned in its own frame
-            (placed when it runs).  A resumed run is checked from there too (:func:`resume_job`).
+            program's start, the work zero of a file placed by its own zero; None: planned in its own frame
+            (placed when it runs, where the session checks it; at planning it is checked to fit the travel's span,
+            :class:`~cam.job.model.TravelSpan`, issue #45 point 4).  A resumed run is checked so too
+            (:func:`resume_job`).
         planned_in: the machine state the plan holds for (:class:`PlannedIn`: a G-code program's start and work
             offsets, the work zero of a file placed by its own zero); None: it holds anywhere (placed when it
             runs, or resumed from where the tool stands).  A machine session refuses it elsewhere.
@@ -448,7 +456,7 @@ class PreparedJob:
     plan_sha256: str = ""
     resumed: Any = None
     origin: Optional[str] = None
-    home_steps: tuple[int, int, int] = (0, 0, 0)
+    home_steps: Optional[tuple[int, int, int]] = None
     planned_in: Optional[PlannedIn] = None
     _steps: Any = field(default=None, repr=False)
 
@@ -697,7 +705,7 @@ def _prepare_pixels(path: Path, kind: str, options: JobOptions, settings: Machin
     # same moves, held in memory)
     big = digitized.n_points * options.passes > STREAM_TARGETS
     toolpath = stream_drawing(digitized, **kw) if big else plan(digitized, **kw)
-    steps = plan_chunks(toolpath, fingerprint=True)
+    steps = plan_chunks(toolpath, start_steps=None, fingerprint=True)  # its own frame: placed when it runs
     report = job_report(digitized, toolpath, steps)
     rgb = drawing.to_rgb() if drawing is not None else None  # made after the report: not held while it counts
     summary = (f"{path.name}: {report['objects']} object(s), {report['points']} points, "
@@ -767,7 +775,7 @@ def own_zero_home(kind: str, options: JobOptions, machine_state: Optional[Any] =
 
 
 def _prepare_excellon(path: Path, options: JobOptions, settings: MachineSettings,
-                      home: tuple[int, int, int] = (0, 0, 0)) -> PreparedJob:
+                      home: Optional[tuple[int, int, int]] = None) -> PreparedJob:
     holes = load_excellon(path, excellon_units=options.excellon_units, excellon_digits=options.excellon_digits,
                           excellon_zeros=options.excellon_zeros, strict=bool(options.strict))
     depth_mm = _or(options.cut_depth_mm, DRILL_DEPTH_MM)
@@ -815,7 +823,7 @@ def _engraving(options: JobOptions, settings: MachineSettings, default_depth_mm:
 
 
 def _prepare_hpgl(path: Path, options: JobOptions, settings: MachineSettings, progress=None,
-                  home: tuple[int, int, int] = (0, 0, 0)) -> PreparedJob:
+                  home: Optional[tuple[int, int, int]] = None) -> PreparedJob:
     depth_mm, engraving = _engraving(options, settings, HPGL_CUT_DEPTH_MM)
     scan = scan_hpgl(path, progress=progress)
     stream = stream_hpgl(path, settings=settings, cut_depth_mm=depth_mm,
@@ -834,7 +842,7 @@ def _prepare_hpgl(path: Path, options: JobOptions, settings: MachineSettings, pr
 
 
 def _prepare_svg(path: Path, options: JobOptions, settings: MachineSettings,
-                 home: tuple[int, int, int] = (0, 0, 0)) -> PreparedJob:
+                 home: Optional[tuple[int, int, int]] = None) -> PreparedJob:
     drawing = load_svg(path)
     depth_mm, engraving = _engraving(options, settings, SVG_CUT_DEPTH_MM)
     toolpath = plan_svg(drawing, settings=settings, cut_depth_mm=depth_mm,
@@ -905,11 +913,11 @@ def prepare_job(
     elif kind == "gcode":
         job = _prepare_gcode(p, opts, settings, machine_state)
     elif kind == "excellon":
-        job = _prepare_excellon(p, opts, settings, home or (0, 0, 0))
+        job = _prepare_excellon(p, opts, settings, home)
     elif kind == "svg":
-        job = _prepare_svg(p, opts, settings, home or (0, 0, 0))
+        job = _prepare_svg(p, opts, settings, home)
     else:
-        job = _prepare_hpgl(p, opts, settings, progress, home or (0, 0, 0))
+        job = _prepare_hpgl(p, opts, settings, progress, home)
     _refuse_nothing(job, opts, settings)
     job.warnings[:0] = kind_warnings
     job.name = name or p.name
@@ -1018,8 +1026,10 @@ def resume_job(job: PreparedJob, journal: Journal, *, position_steps: Optional[t
     # a job held in memory is resumed in memory (its run reads every move at once: linear40 ramps, the
     # pictures); a job made a piece at a time is resumed a piece at a time
     toolpath = resumed.joined() if isinstance(job.toolpath, Job) else resumed
-    # checked in the machine frame when the job was (a program's start, a work zero: its home_steps)
-    steps = plan_chunks(toolpath, start_steps=tuple(h + s for h, s in zip(job.home_steps, start)))  # type: ignore[arg-type]
+    # checked in the machine frame when the job was (a program's start, a work zero: its home_steps); a job planned
+    # in its own frame by its span, and where it runs by the session (its extent from where the tool stands)
+    steps = plan_chunks(toolpath, start_steps=None if job.home_steps is None else
+                        tuple(h + s for h, s in zip(job.home_steps, start)))  # type: ignore[arg-type]
     base = JournalBase(identity=job.identity, plan_sha256=job.plan_sha256, source=job.source,
                        moves=resumed.job_moves, move_index=move_index, last_move=journal.last_move,
                        pause_pending=journal.pause_pending, resumed_at_move=j,

@@ -46,7 +46,7 @@ from ..settings import DEFAULT_SETTINGS, MachineSettings
 from ..render.picture import encode_png, toolpath_picture
 
 __all__ = ["Job", "JobLike", "PixelFrame", "PlanFingerprint", "CUT", "RETRACT", "TRAVEL", "check_travel", "check_reach",
-           "travel_job", "pause_points", "join_pieces"]
+           "TravelSpan", "check_span", "travel_job", "pause_points", "join_pieces"]
 
 CUT = 0
 """A point at or above the asked depth of what is cut (the tool is in the material or at the surface over it)."""
@@ -312,6 +312,95 @@ def check_travel(points_steps: np.ndarray, settings: MachineSettings, pixels: Op
     raise TravelError(
         f"job leaves the machine travel at point {i} ({where}): {'XYZ'[a]} travel is {lo[a]}..{hi[a]} steps"
     )
+
+
+def _mm1(value: float) -> str:
+    return f"{round(value, 3):g}"
+
+
+class TravelSpan:
+    """Whether a job planned in its own frame fits the machine wherever it is placed (issue #45 point 4).
+
+    A drawing, a relief, or a drill, HPGL or SVG file placed by its extent is planned from its own home
+    (0, 0, 0) and placed at the work zero when it runs (:func:`cam.drive.placement.approach_to_work_zero`), where
+    every point is checked against the travel in the machine frame (the session's check of the job's extent
+    from where it starts).  What is known before then is position-free: the job's extent, its home included
+    (it starts and ends there), must be no wider than the travel on each axis.  Fed the job's points in order
+    (a piece at a time: the extent so far is kept), :meth:`over` finds the first point that makes it too wide.
+    """
+
+    def __init__(self, settings: MachineSettings) -> None:
+        self.settings = settings
+        self.bounds = np.array(settings.travel.bounds_steps(), np.int64)
+        self.lo = np.zeros(3, np.int64)  # the extent so far, the home (0, 0, 0) included
+        self.hi = np.zeros(3, np.int64)
+        self.n = 0  # points taken in
+
+    def over(self, points_steps: np.ndarray) -> Optional[tuple[int, str]]:
+        """Take in ``(N, k)`` points (k = 2: x, y; 3: x, y, z) steps from the job's home, in the job's order: None
+        while the extent fits the travel's span, else ``(i, text)``: point ``i`` of them is the first that makes
+        it wider than the travel, and what a message says of it (the axis, the travel, the job's extent from its
+        home, in steps and mm).  Nothing of a refused batch is taken in.
+
+        >>> span = TravelSpan(DEFAULT_SETTINGS)
+        >>> span.over(np.array([[9000, 5], [-300, 2]])) is None  # 9300 steps wide: it fits somewhere
+        True
+        >>> i, text = span.over(np.array([[100, 0], [-1100, 0]]))
+        >>> i, text[:48]
+        (1, 'X travel is 0..10000 steps (0..289 mm, 289 mm) a')
+        """
+        pts = np.asarray(points_steps, np.int64)
+        if not pts.size:
+            return None
+        k = pts.shape[-1]
+        pts = pts.reshape(-1, k)
+        span = self.bounds[:k, 1] - self.bounds[:k, 0]
+        least, most = column_range(pts)
+        lo, hi = np.minimum(self.lo[:k], least), np.maximum(self.hi[:k], most)
+        if np.all(hi - lo <= span):
+            self.lo[:k], self.hi[:k] = lo, hi
+            self.n += len(pts)
+            return None
+        run_lo = np.minimum(np.minimum.accumulate(pts, axis=0), self.lo[:k])
+        run_hi = np.maximum(np.maximum.accumulate(pts, axis=0), self.hi[:k])
+        wide = run_hi - run_lo > span
+        i = int(np.flatnonzero(wide.any(axis=1))[0])
+        a = int(np.flatnonzero(wide[i])[0])
+        return i, self.describe(a, int(run_lo[i, a]), int(run_hi[i, a]))
+
+    def describe(self, axis: int, lo: int, hi: int) -> str:
+        """What a message says of an extent ``lo..hi`` steps (from the job's home) on ``axis`` (0, 1, 2) wider than
+        the travel."""
+        mm = self.settings.mm_per_step_xy if axis < 2 else self.settings.mm_per_step_z
+        t_lo, t_hi = (int(v) for v in self.bounds[axis])
+        name = "XYZ"[axis]
+        return (f"{name} travel is {t_lo}..{t_hi} steps ({_mm1(t_lo * mm)}..{_mm1(t_hi * mm)} mm, "
+                f"{_mm1((t_hi - t_lo) * mm)} mm) and the job spans {name} {lo}..{hi} steps "
+                f"({_mm1(lo * mm)}..{_mm1(hi * mm)} mm, {_mm1((hi - lo) * mm)} mm) from its home: it does not fit "
+                f"the machine wherever it is placed")
+
+
+def check_span(points_steps: np.ndarray, settings: MachineSettings, pixels: Optional[PixelFrame] = None,
+               span: Optional[TravelSpan] = None) -> None:
+    """Raise :class:`TravelError` when ``(N, 3)`` points of a job planned in its own frame (steps from its home)
+    make its extent wider than the travel (:class:`TravelSpan`): one line naming the first such point (its
+    index in the job, in drawing pixels too with ``pixels``), the axis, the travel and the job's extent.
+    ``span``: the job's extent so far (a job checked a piece at a time, in order; None: these points are the
+    whole job).  Where the job goes is checked when it is placed (:func:`check_travel` from there)."""
+    span = span if span is not None else TravelSpan(settings)
+    first = span.n
+    found = span.over(np.asarray(points_steps, np.int64).reshape(-1, 3))
+    if found is None:
+        return
+    i, text = found
+    steps = np.asarray(points_steps, np.int64).reshape(-1, 3)[i]
+    xs, ys, zs = (int(v) for v in steps)
+    if pixels is not None:
+        x, y, z = (int(v) for v in pixels.to_px(steps)[0])
+        where = f"x={x}, y={y}, z={z} px = {xs}, {ys}, {zs} steps"
+    else:
+        where = f"{xs}, {ys}, {zs} steps = {_mm(settings, steps)}"
+    raise TravelError(f"job leaves the machine travel at point {first + i} ({where}): {text}")
 
 
 def check_reach(position_steps: np.ndarray, extent_steps: np.ndarray, settings: MachineSettings, what: str) -> None:

@@ -9,6 +9,8 @@ instead puts the page's origin (0, 0), scaled, at machine (X, Y) mm from the
 home.  The job's points are steps from its home; ``home_steps`` says where the
 home is in the machine frame (a file placed by its own zero at a work zero:
 ``offset_mm`` (0, 0) and the work zero), and the travel is checked there.
+Without it the job is planned in its own frame, placed at the work zero when it
+runs and checked there; here it must fit the travel's span (issue #45 point 4).
 
 How a curve becomes steps, so that every cut position lies within one step of the exact curve (0.71 + 0.15)
 and every point of the curve within one step of a cut position (0.15 + 0.125 + 0.71):
@@ -66,7 +68,7 @@ from ..settings import DEFAULT_SETTINGS, MachineSettings
 from ._svg_kernels import cells_kernel, duplicate_pieces_kernel, nearest_order_kernel
 from .hpgl import _rows, _z_steps, scale_to_fit
 from .hpgl_stream import outside_travel
-from .model import CUT, Job, check_travel
+from .model import CUT, Job, TravelSpan, check_span, check_travel
 
 __all__ = ["plan_svg", "svg_strokes_steps", "svg_scale", "svg_layer_order", "DEFAULT_CUT_DEPTH_MM",
            "DEFAULT_TRAVEL_HEIGHT_MM", "DUPLICATE_STEPS", "MIN_DUPLICATE_STEPS"]
@@ -337,7 +339,7 @@ def plan_svg(
     layers: Optional[Union[str, Sequence[str]]] = None,
     pause_between_layers: bool = False,
     keep_duplicates: bool = False,
-    home_steps: tuple[int, int, int] = (0, 0, 0),
+    home_steps: Optional[tuple[int, int, int]] = None,
 ) -> Job:
     """Plan the engraving of every stroke of an SVG drawing, in machine steps (see the module docstring).
 
@@ -354,7 +356,8 @@ def plan_svg(
         pause_between_layers: pause before each layer after the first (a pen or tool change).
         keep_duplicates: cut pieces that trace pieces already cut again (default: once).
         home_steps: the machine position of the job's home (its (0, 0, 0), where ``offset_mm`` is measured
-            from): the drawing is checked against the travel in the machine frame from there.
+            from): the drawing is checked against the travel in the machine frame from there; None: the job's own
+            frame (placed when it runs, where it is checked): it must fit the travel's span.
 
     Returns:
         A :class:`~cam.job.model.Job`: CUT points at the cutting depth (``target`` marks them), TRAVEL at the
@@ -363,7 +366,8 @@ def plan_svg(
     Raises:
         PlanError: bad options, a layer that is not in the drawing, nothing to cut; TravelError: the drawing
         does not fit the travel or, placed at ``home_steps``, leaves it (checked before the job is built, with
-        its extent in mm, naming the axis and by how much).
+        its extent in mm, naming the axis and by how much); in its own frame, the job with its home is wider than
+        the travel.
     """
     if not (cut_depth_mm > 0) or not (travel_height_mm >= 0):
         raise PlanError("the cutting depth must be > 0 mm and the safe height >= 0 mm")
@@ -380,11 +384,11 @@ def plan_svg(
         if n_dup:
             warnings.append(f"{n_dup} duplicate segment(s) ({dup_steps * settings.mm_per_step_xy:.1f} mm) trace "
                             "what is already cut: cut once (--keep-duplicates cuts them again)")
-    home = np.asarray(home_steps, np.int64).reshape(3)
+    home = None if home_steps is None else np.asarray(home_steps, np.int64).reshape(3)
     _check_extent(drawing, pts, settings, home)  # before the samples are made: their count follows the size
     cells, cell_bounds = _cells_joined(pts, bounds)
     del pts
-    depth_steps, safe_z_steps = _z_steps(cut_depth_mm, travel_height_mm, settings, int(home[2]))
+    depth_steps, safe_z_steps = _z_steps(cut_depth_mm, travel_height_mm, settings, None if home is None else int(home[2]))
     order, backwards, pause_first, notes = _cut_order(cells, cell_bounds, part_layer[owner], chosen,
                                                        names if pause_between_layers else None)
     xy, first = _gather(cells, cell_bounds, order, backwards)
@@ -397,7 +401,10 @@ def plan_svg(
     group[first[pause_first]] = True  # a pause lifts first, whatever the gap
     pause_group[first[pause_first]] = True
     pts, kind, pause = _rows(xy, group, pause_group, depth_steps, safe_z_steps)
-    check_travel(pts + home, settings)
+    if home is None:
+        check_span(pts, settings)  # its own frame: placed, and checked in the machine frame, when it runs
+    else:
+        check_travel(pts + home, settings)
     return Job(points_steps=pts, kind=kind, target=(kind == CUT) & (pts[:, 2] == depth_steps), pause=pause,
                settings=settings, warnings=warnings, pause_notes=notes, source=drawing.source)
 
@@ -457,12 +464,13 @@ def _selected(drawing: SvgDrawing, chosen: list[int]) -> tuple[SvgDrawing, np.nd
 
 
 def _check_extent(drawing: SvgDrawing, pts: np.ndarray, settings: MachineSettings,
-                  home_steps: np.ndarray) -> None:
+                  home_steps: Optional[np.ndarray]) -> None:
     """TravelError giving the drawing's size in mm when it is larger than the X/Y travel (``pts``: the points of
     the strokes' float polylines in steps, before they are sampled: a drawing metres wide is refused before
     millions of samples are made), or naming the axis and by how much when its extent from machine ``home_steps`` leaves
-    the travel.  Where a job placed later goes is checked in the machine frame when it is placed (at the work
-    zero, or from where the tool stands)."""
+    the travel (None: a job planned in its own frame, its extent with the home (0, 0) against the travel's span).
+    Where a job placed later goes is checked in the machine frame when it is placed (at the work zero, or from
+    where the tool stands)."""
     lo, hi = pts.min(axis=0), pts.max(axis=0)
     (x_lo, x_hi), (y_lo, y_hi), _ = settings.travel.bounds_steps()
     if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))) or hi[0] - lo[0] > x_hi - x_lo \
@@ -473,7 +481,17 @@ def _check_extent(drawing: SvgDrawing, pts: np.ndarray, settings: MachineSetting
             f"(X {lo[0] * mm:.2f}..{hi[0] * mm:.2f}, Y {lo[1] * mm:.2f}..{hi[1] * mm:.2f} mm); the travel is "
             f"{(x_hi - x_lo) * mm:g} x {(y_hi - y_lo) * mm:g} mm (make it smaller with --fit or --scale)"
         )
-    corners = np.floor(np.array([lo, hi]) + 0.5).astype(np.int64) + np.asarray(home_steps, np.int64)[:2]
+    corners = np.floor(np.array([lo, hi]) + 0.5).astype(np.int64)
+    if home_steps is None:
+        span = TravelSpan(settings)
+        found = span.over(corners)
+        if found is not None:
+            mm = settings.mm_per_step_xy
+            raise TravelError(f"{drawing.source}: the drawing (X {lo[0] * mm:.2f}..{hi[0] * mm:.2f}, Y "
+                              f"{lo[1] * mm:.2f}..{hi[1] * mm:.2f} mm from the job's home) lies outside the machine "
+                              f"travel: {found[1]}")
+        return
+    corners = corners + np.asarray(home_steps, np.int64)[:2]
     found = outside_travel(corners, settings, farthest=True)
     if found is not None:
         raise TravelError(f"{drawing.source}: the drawing (X {lo[0] * settings.mm_per_step_xy:.2f}.."
