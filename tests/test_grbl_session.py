@@ -6,8 +6,10 @@ prompt, zero/offsets mirrored to grbl, homing, the feed override.
 The emulator runs sped up (``speed``) except in the ``realtime`` test."""
 from __future__ import annotations
 
+import dataclasses
 import time
 
+import cv2
 import numpy as np
 import pytest
 
@@ -15,11 +17,12 @@ import cam
 from cam.drive.grbl_machine import PATH_TOLERANCE_STEPS, close_grbl_machines, job_lines, mpos_to_steps
 from cam.drive.session import MachineSession
 from cam.drive.state import MachineState, StateHold, write_state
-from cam.errors import CapabilityError
+from cam.errors import CapabilityError, TravelError
+from cam.job.jobs import JobOptions, prepare_job
 from cam.settings import Travel
 from cam.sim.grbl import start_emulator
 from cam.verify.pinlog import Motion
-from conftest import SAMPLES, assert_surface_equal, drawing_from_rows, expected_surface_2d, run_cli
+from conftest import ROOT, SAMPLES, assert_surface_equal, drawing_from_rows, expected_surface_2d, run_cli
 from support.grbl import quick_thread_switches  # noqa: F401 (autouse)
 
 # over 2 s each: the slow tier (the fast tier stays under 3 minutes, docs/tests.md)
@@ -460,3 +463,179 @@ def test_a_grblhal_board_is_recognised_and_streamed_to_its_own_buffer():
     finally:
         close_grbl_machines()
         emu.stop()
+
+
+# -- a stock machine whose space is negative (issue #45 point 4) ----------------------------------------------------
+
+PROFILE_3018 = ROOT / "profiles" / "grbl-3018.toml"
+GRBL_3018 = {100: 800.0, 101: 800.0, 102: 800.0, 110: 3000.0, 111: 3000.0, 112: 3000.0, 120: 500.0, 121: 500.0,
+             122: 500.0, 130: 300.0, 131: 180.0, 132: 45.0}
+"""grbl's own settings of the 3018 profile's machine: X travel -240000..0, Y 0..144000, Z 0..36000 steps."""
+
+
+def small_files(tmp_path) -> dict[str, list]:
+    """A file of each placed kind, small enough to run in a second on the emulator, and its ``cam drill`` options:
+    a drawing (two lines 12 px long, 5 px apart), an HPGL star, an SVG stroke and a drill file."""
+    png = tmp_path / "lines.png"
+    img = np.full((8, 14), 255, np.uint8)
+    img[1, 1:13] = img[6, 1:13] = 0
+    cv2.imwrite(str(png), img)
+    svg = tmp_path / "stroke.svg"
+    svg.write_text('<svg xmlns="http://www.w3.org/2000/svg" width="12mm" height="6mm" viewBox="0 0 12 6">'
+                   '<path d="M1 1 L11 1 L11 5 L4 5" stroke="black" fill="none"/></svg>')
+    drl = tmp_path / "holes.drl"
+    drl.write_text("M48\nMETRIC\nT1C0.8\nT2C1.0\n%\nT1\nX1.0Y-1.0\nX9.0Y-2.0\nT2\nX4.0Y-5.0\nM30\n")
+    return {"drawing": [png, "--depth", "2"], "hpgl": [SAMPLES / "inkscape_star.plt"], "svg": [svg], "drill": [drl]}
+
+
+def _3018_cli(emu, state) -> list:
+    return ["--port", url(emu), "--machine", PROFILE_3018, "--state", state]
+
+
+def _state_of(path) -> dict:
+    import json
+
+    return json.loads(path.read_text())
+
+
+def test_negative_machine_space_runs_a_drawing_hpgl_svg_and_drill_file_at_the_work_zero(tmp_path):
+    """grbl's machine space is negative (its machine zero is the homing corner): X -300..0 mm.  Every job planned in
+    its own frame (a drawing, and HPGL, SVG and drill files placed by their extent) used to be checked as if its
+    home were machine (0, 0, 0) and was refused ("job leaves the machine travel at point 0 (x=134, ...)").  Placed
+    at a work zero inside the space, each runs to its end: what grbl executed lies inside the travel, the travel to
+    the job ends at the work zero, the cut lies right of and in front of it (its upper-left corner there for the
+    vector files), and the job ends back where it started."""
+    from cam.settings import load_settings
+
+    s = load_settings(PROFILE_3018)
+    lo = np.array([b[0] for b in s.travel.bounds_steps()])
+    hi = np.array([b[1] for b in s.travel.bounds_steps()])
+    emu = start_emulator(speed=200.0, settings=GRBL_3018)
+    state = tmp_path / "s.json"
+    try:
+        for args in (("where", "--set=-150,20,10"), ("zero", "XYZ")):
+            r = run_cli(*args, *_3018_cli(emu, state))
+            assert r.returncode == 0, (args, r.stderr)
+            close_grbl_machines()  # as a new process
+        zero = np.array([-120000, 16000, 8000])
+        assert _state_of(state)["offsets_steps"]["G54"] == zero.tolist()
+        for kind, (path, *options) in small_files(tmp_path).items():
+            start = np.array(_state_of(state)["position_steps"])
+            n0 = len(emu.executed())
+            r = run_cli("drill", path, "--yes", *options, *_3018_cli(emu, state))
+            close_grbl_machines()
+            assert r.returncode == 0 and "Traceback" not in r.stderr, (kind, r.stderr)
+            blocks = [b for b in emu.executed()[n0:] if b.kind in ("G0", "G1", "jog")]
+            assert blocks, kind
+            base = start - np.array(mpos_to_steps(blocks[0].start_mm, s))
+            ends = np.array([mpos_to_steps(b.end_mm, s) for b in blocks]) + base  # cam's machine frame
+            assert np.all((ends >= lo) & (ends <= hi)), (kind, ends.min(axis=0), ends.max(axis=0))
+            assert any((e == zero).all() for e in ends), kind  # the travel to the work zero ended there
+            cut = ends[ends[:, 2] > zero[2]]  # below the work zero's surface
+            assert len(cut) and np.all(cut[:, :2] >= zero[:2]), kind
+            if kind != "drawing":  # placed by the upper-left corner of what they cut
+                assert cut[:, :2].min(axis=0).tolist() == zero[:2].tolist(), kind
+            assert ends[-1].tolist() == zero.tolist(), kind  # the job's home, where it started
+            assert _state_of(state)["position_steps"] == zero.tolist(), kind
+    finally:
+        close_grbl_machines()
+        emu.stop()
+    assert emu.error is None
+
+
+def test_a_job_too_big_for_the_travel_span_is_refused_at_planning(tmp_path):
+    """A job planned in its own frame is checked where it can be: its extent, its home included, fits the travel
+    on each axis, or it is refused when it is planned in one line naming the axis, the travel and the job's
+    extent in steps and mm (a drawing's pixel, an HPGL point's file:line:column, a drill file's hole and line),
+    whatever the work zero: on the 3018 profile, whose space is negative, as on the default machine."""
+    from cam.settings import load_settings
+
+    s = load_settings(PROFILE_3018)
+    files = small_files(tmp_path)
+    travel = r"X travel is -240000\.\.0 steps \(-300\.\.0 mm, 300 mm\) and the job spans X 0\.\."
+    cases = [
+        ("drawing", JobOptions(depth=(2,), start_at=(3000, 0, 0)),
+         r"^job leaves the machine travel at point \d+ \(x=3001, y=1, z=0 px = 240080, 80, 0 steps\): " + travel
+         + r"240080 steps \(0\.\.300\.1 mm, 300\.1 mm\) from its home: it does not fit the machine wherever it is "
+           r"placed$"),
+        ("hpgl", JobOptions(scale=20.0),
+         r"inkscape_star\.plt:1:10: point X1200 Y2200 \(plotter units\) lies outside the machine travel: " + travel),
+        ("svg", JobOptions(scale=40.0), r"stroke\.svg: the drawing is 400\.00 x 160\.00 mm .*the travel is "
+                                        r"300 x 180 mm \(make it smaller with --fit or --scale\)$"),
+        ("drill", JobOptions(cut_depth_mm=50.0),
+         r"^drill depth 50 mm and safe height 1 mm need Z -800\.\.40000 steps \(51\.000 mm\) from the surface, "
+         r"more than the Z travel holds wherever the work zero is: the Z travel is 0\.\.36000 steps \(45\.000 mm\)$"),
+    ]
+    for kind, options, message in cases:
+        path = files[kind][0]
+        with pytest.raises(TravelError, match=message):
+            prepare_job(path, options, s)
+    wide = tmp_path / "wide.drl"
+    wide.write_text("M48\nMETRIC\nT1C0.8\n%\nT1\nX1.0Y-1.0\nX150.0Y-2.0\nX310.0Y-2.0\nM30\n")
+    with pytest.raises(TravelError, match=r"wide\.drl:8: hole 3 at X310\.000 Y-2\.000 mm lies outside the machine "
+                                          r"travel: X travel is -240000\.\.0 steps "
+                                          r"\(-300\.\.0 mm, 300 mm\) and the job spans X 0\.\.247200 steps"):
+        prepare_job(wide, None, s)
+    relief = JobOptions(heightmap=True, pixel_size_mm=3.0)  # 14 px of 3 mm: 42 mm wide, fits; 1.4 m does not
+    assert prepare_job(files["drawing"][0], relief, s).plan.motion_extent()[0][0, 1] > 0
+    with pytest.raises(TravelError, match=r"^job leaves the machine travel at point 1 \(x=13, y=7, z=\d+ px = "
+                                          r"1040000, 560000, \d+ steps\): X travel is -240000\.\.0 steps"):
+        prepare_job(files["drawing"][0], dataclasses.replace(relief, pixel_size_mm=100.0), s)
+    # the command line: exit 2, one line, nothing sent to the machine (no port needed to plan)
+    r = run_cli("drill", wide, "--yes", "--machine", PROFILE_3018, "--port", "mock", "--state", tmp_path / "m.json")
+    assert r.returncode == 2 and "Traceback" not in r.stderr, r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1 and "hole 3" in r.stderr, r.stderr
+
+
+def test_a_job_placed_where_it_leaves_the_travel_is_refused_before_anything_moves(tmp_path):
+    """Planned in its own frame, a job is checked where it runs: placed at a work zero 0.5 mm from the X travel's end
+    (and, for the vector files, 0.5 mm below the top of Z, under their 1 mm travel height), every kind is refused
+    in one line naming the axis, before anything moves: grbl executes nothing and gets no motion line."""
+    emu = start_emulator(speed=200.0, settings=GRBL_3018)
+    state = tmp_path / "s.json"
+    files = small_files(tmp_path)
+    try:
+        for where, kinds, axis in (("--set=-0.5,20,10", ("drawing", "hpgl", "svg", "drill"), "X"),
+                                   ("--set=-150,20,0.5", ("hpgl", "svg", "drill"), "Z")):
+            for args in (("where", where), ("zero", "XYZ")):
+                r = run_cli(*args, *_3018_cli(emu, state))
+                assert r.returncode == 0, (args, r.stderr)
+                close_grbl_machines()
+            for kind in kinds:
+                path, *options = files[kind]
+                n_lines, n_blocks = len(emu.lines()), len(emu.executed())
+                r = run_cli("drill", path, "--yes", *options, *_3018_cli(emu, state))
+                close_grbl_machines()
+                assert r.returncode == 2 and "Traceback" not in r.stderr, (kind, r.stderr)
+                error = [line for line in r.stderr.splitlines() if not line.startswith("warning:")]
+                assert len(error) == 1 and f"leaves the {axis} travel" in error[0] and "work zero" in error[0], \
+                    (kind, r.stderr)
+                assert len(emu.executed()) == n_blocks, kind
+                sent = [text for _, text, _ in emu.lines()[n_lines:]]
+                assert not [t for t in sent if t[:1] in "GXYZ" or t.startswith("$J")], (kind, sent)
+    finally:
+        close_grbl_machines()
+        emu.stop()
+    assert emu.error is None
+
+
+def test_a_plan_made_in_its_own_frame_is_checked_from_where_it_starts(grbl):
+    """A prepared job's plan planned in its own frame is not checked against the travel from the machine's (0, 0, 0)
+    any more; started alone, without the prepared job's extent (its ChunkedPlan, its StepPlan, the pieces grbl
+    runs), it is checked from where the tool stands before anything moves: on the 3018 profile, from grbl's
+    machine zero (its corner), a job to the right of the tool leaves the X travel."""
+    from cam.settings import load_settings
+
+    s = load_settings(PROFILE_3018)
+    prepared = prepare_job(SAMPLES / "inkscape_star.plt", None, s)
+    for job in (prepared.plan, prepared.steps):
+        with pytest.raises(TravelError, match="leaves the X travel|X travel"):
+            MachineSession("mock", s).start(job)
+    from cam.job.hpgl_stream import stream_hpgl
+
+    session = MachineSession(url(grbl), s)
+    pieces = stream_hpgl(SAMPLES / "inkscape_star.plt", settings=s, piece_points=8)  # a job kept as pieces
+    for job in (prepared.plan, prepared.plan.job, prepared, pieces):
+        with pytest.raises(TravelError, match="travel"):
+            session.start(job)
+    assert not grbl.executed()

@@ -10,7 +10,10 @@ from typing import Any
 import numpy as np
 
 from ..errors import CamError, StalePlanError
-from ..job.model import TRAVEL, Job, check_reach, check_travel
+from ..job.model import TRAVEL, Job, JobLike, check_reach, check_travel
+from ..verify.pinlog import motion_extent
+from .chunks import ChunkedPlan
+from .steps import StepPlan
 from ._session_grbl import SessionGrbl
 from .maximus.board import drill_arguments, drill_job, require_drilling
 from .ports import require
@@ -47,8 +50,17 @@ class SessionChecks(SessionGrbl):
         extent = getattr(job, "extent_steps", None)
         if extent is not None:
             check_reach(self._position, extent, self.settings, "the job")
+        elif isinstance(job, ChunkedPlan):  # a prepared job's plan started alone: its extent, from here
+            check_reach(self._position, job.motion_extent()[0], self.settings, "the job")
+        elif isinstance(job, StepPlan):
+            check_reach(self._position, motion_extent(job.data, job.settings)[0], self.settings, "the job")
         if isinstance(job, Job):
             check_travel(np.asarray(job.points_steps, np.int64) + self._position, self.settings, job.pixels)
+        elif self.kind == "grbl" and isinstance(job, JobLike) and extent is None:
+            # a job kept as pieces (a drawing, an HPGL file...) planned in its own frame: grbl runs its points as
+            # they are, no step plan checks them from here (issue #45 point 4)
+            for piece in job.pieces():
+                check_travel(np.asarray(piece.points_steps, np.int64) + self._position, self.settings, piece.pixels)
 
     def _check_planned_in(self, job: Any) -> None:
         """Refuse a prepared job planned for another machine state than the session's now (issue #43 point 6): a
