@@ -222,17 +222,24 @@ def _run(job: Any, args: argparse.Namespace, settings: MachineSettings, hold: St
     return outcome
 
 
+def _job_port(args: argparse.Namespace, settings: MachineSettings, realtime: bool) -> Any:
+    """The port a job runs on: ``--port`` as named, but the mock as the run needs it."""
+    if port_kind(args.port) != "mock":
+        return args.port
+    if getattr(args, "pin_log", None) and not realtime:
+        return MockPort(pin_log_path=args.pin_log)  # the pin log streams to its file: nothing held
+    if not realtime:
+        return MockPort(keep_log=False)  # nobody reads this run's pin log: the writes are counted, not kept
+    if settings.mock.places():
+        return MockPort()  # simulated switches (below): a mock of this process, in real time too
+    return args.port
+
+
 def _drive(job: Any, args: argparse.Namespace, settings: MachineSettings, hold: StateHold,
            start: tuple[int, int, int], journal: Optional[str], unrecorded: list[str]) -> Outcome:
     stopping = threading.Event()
     realtime = getattr(args, "realtime", False)
-    port: Any = args.port
-    if getattr(args, "pin_log", None) and port_kind(args.port) == "mock" and not realtime:
-        port = MockPort(pin_log_path=args.pin_log)  # the pin log streams to its file: nothing held
-    elif port_kind(args.port) == "mock" and not realtime:
-        port = MockPort(keep_log=False)  # nobody reads this run's pin log: the writes are counted, not kept
-    elif port_kind(args.port) == "mock" and settings.mock.places():
-        port = MockPort()  # simulated switches (below): a mock of this process, in real time too
+    port = _job_port(args, settings, realtime)
     answers = _Answers(args, stopping)
     session = MachineSession(port, settings, realtime=realtime, on_prompt=answers)
     if getattr(args, "feed_override", None) is not None:  # grbl's override (CapabilityError elsewhere)

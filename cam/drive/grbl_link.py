@@ -49,6 +49,11 @@ RX_BUFFER_BYTES = 128
 PLANNER_BLOCKS = 15
 """grbl 1.1's planner blocks on an ATmega328P (config.h ``BLOCK_BUFFER_SIZE`` 16, one kept free): the most
 motion that can be queued behind a line grbl has not answered yet."""
+RING_POLL_S = 0.02
+"""How often a line waiting for room in grbl's receive buffer asks for a status report: the room the buffer
+report shows is what lets it go."""
+ASK_AGAIN_S = 0.5
+"""How long a ``?`` may stay unanswered before the next poll asks again (a report lost on the line)."""
 CUT_SHORT_S = 0.5
 """How long a status report cut short (no ``>``) waits for the line after it: grbl's welcome says a reset cut
 it, anything else (or nothing) makes it a link fault."""
@@ -445,7 +450,10 @@ class _RealtimeBytes:
         raise NotImplementedError
 
     def _wait(self, predicate: Callable[[], bool], timeout_s: Optional[float], *, check: bool = True,
-              where: str = "", quiet_ok: bool = False) -> bool:
+              where: str = "", quiet_ok: bool = False, poll_s: Optional[float] = None) -> bool:
+        raise NotImplementedError
+
+    def _ask_status(self, *, again: bool = False) -> None:
         raise NotImplementedError
 
     def cancel(self, reason: str) -> None:
@@ -500,7 +508,7 @@ class _RealtimeBytes:
             seq = self._status_seq
         try:
             while time.monotonic() < deadline:
-                self._write(b"?")
+                self._ask_status()
                 with self._cond:
                     self._cond.wait_for(lambda: self._status_seq > seq or self._lost is not None, 0.05)
                     report, fresh = self.status_report, self._status_seq > seq
@@ -542,6 +550,10 @@ class _Replies:
     _lost: Optional[BaseException]
     _fault: Optional[str]
     _cut_short: Optional[tuple[str, float]]
+    _line_bytes_written: int
+    _asks: deque
+    _ring_bound: Optional[int]
+    _ring_base: int
     _connected: bool
     _outstanding: deque
     _outstanding_bytes: int
@@ -562,6 +574,10 @@ class _Replies:
     status_report: Optional[GrblStatus]
     slowest_override_pct: int
     rx_buffer_bytes: int
+    reply_margin_s: float
+
+    def _write(self, data: bytes) -> None:
+        raise NotImplementedError
 
     def _read_loop(self) -> None:
         buf = bytearray()
@@ -651,6 +667,9 @@ class _Replies:
             self._answer_clock = now  # held by the operator: the queued moves' time stands still
         if status.overrides is not None:
             self.slowest_override_pct = max(1, min(status.overrides[0], status.overrides[1]))
+        base = self._asks.popleft()[0] if self._asks else None  # a report answers the oldest ? (or a later one)
+        if status.rx_free is not None and base is not None:
+            self._ring_bound, self._ring_base = self.rx_buffer_bytes - status.rx_free, base
         if status.rx_free is not None and self._connected:
             held_bytes = self.rx_buffer_bytes - 1 - status.rx_free  # at least what grbl's receive buffer holds
             if held_bytes > self._outstanding_bytes:
@@ -674,11 +693,48 @@ class _Replies:
             self._outstanding.clear()   # a reset empties grbl's buffers: nothing sent is pending any more
             self._outstanding_bytes = 0
             self._answered_s.clear()
+            self._asks.clear()
+            self._ring_bound, self._ring_base = 0, self._line_bytes_written
             self._info = []
         else:
             if line.startswith("[MSG:") or line.startswith(">"):
                 self.messages.append(line)
             self._info.append(line)
+
+    def _ask_status(self, *, again: bool = False) -> None:
+        """Send ``?``, booking how many line bytes went before it: the report that answers it bounds grbl's
+        receive buffer (:meth:`_ring_fits`).  One ``?`` at a time (so that grbl never answers two with one
+        report), unless ``again`` or the last one went unanswered for :data:`ASK_AGAIN_S`; a report answering
+        a later ``?`` than the one it is booked against only makes the bound larger (safe)."""
+        with self._cond:
+            now = time.monotonic()
+            if self._asks and not again and now - self._asks[-1][1] < ASK_AGAIN_S:
+                return
+            self._asks.append((self._line_bytes_written, now))
+            self._write(b"?")
+
+    def _ring_fits(self, n_bytes: int) -> bool:
+        """Whether ``n_bytes`` more fit into grbl's receive buffer whatever its answers said (under the lock): the
+        last buffer report's bytes plus every line byte written after the ``?`` it answers, plus these, within
+        the buffer.  Without a buffer report (``Bf`` off) the count of answers alone decides."""
+        if self._ring_bound is None:
+            return True
+        return self._ring_bound + (self._line_bytes_written - self._ring_base) + n_bytes <= self.rx_buffer_bytes - 1
+
+    def _overdue(self, now: float) -> str:
+        """Why the oldest unanswered line's answer is overdue, or "" (under the lock).  grbl answers a line once
+        it is planned, so at the latest when the moves queued before it (the last answered lines, no more than
+        its planner holds) are done: their time at the slowest override, three times over (a simulated board
+        runs slower than a real one), plus :attr:`reply_margin_s`; a hold stops the clock."""
+        head = self._outstanding[0]
+        since = max(self._answer_clock, head[5])
+        queued_s = (sum(self._answered_s) + head[6]) * 100.0 / max(1, self.slowest_override_pct)
+        allowed_s = self.reply_margin_s + 3.0 * queued_s
+        if now - since <= allowed_s:
+            return ""
+        what = f"line {head[1]} {head[2]!r}" if head[1] else repr(head[2])
+        return (f"grbl on {self.device} has not answered {what} for {now - since:.1f} s, longer than the moves "
+                f"queued before it could take ({allowed_s:.1f} s with margin): a reply was lost")
 
 
 class GrblLink(_Replies, _RealtimeBytes):
@@ -720,6 +776,10 @@ class GrblLink(_Replies, _RealtimeBytes):
         self._cancelled: Optional[str] = None
         self._fault: Optional[str] = None      # a link fault: replies that cannot be right; sticky until a reset
         self._cut_short: Optional[tuple[str, float]] = None  # a status report with no end, and when it came
+        self._line_bytes_written = 0            # every line byte written since the link opened
+        self._asks: deque[tuple[int, float]] = deque()  # each unanswered ?: line bytes written before it, when
+        self._ring_bound: Optional[int] = None  # grbl's receive buffer at the last report (Bf) can hold no more
+        self._ring_base = 0                     # ... than this, and every line byte written after its ?
         self._connected = False                 # the welcome came: from here on every reply is counted
         self.rx_buffer_bytes = RX_BUFFER_BYTES  # the board's receive buffer and planner (its $I [OPT:] when it says)
         self.planner_blocks = PLANNER_BLOCKS
@@ -812,9 +872,9 @@ class GrblLink(_Replies, _RealtimeBytes):
             raise GrblError(f"grbl refused {what}: {error_text(code)}", code)
 
     def _wait(self, predicate: Callable[[], bool], timeout_s: Optional[float], *, check: bool = True,
-              where: str = "", quiet_ok: bool = False) -> bool:
-        """Wait for ``predicate`` (under the lock), polling ``?`` so that a silent grbl is found out (unless
-        ``quiet_ok``: grbl answers no status report while homing)."""
+              where: str = "", quiet_ok: bool = False, poll_s: Optional[float] = None) -> bool:
+        """Wait for ``predicate`` (under the lock), polling ``?`` (every ``poll_s``, default :attr:`poll_s`) so that
+        a silent grbl is found out (unless ``quiet_ok``: grbl answers no status report while homing)."""
         deadline = None if timeout_s is None else time.monotonic() + timeout_s
         next_poll = time.monotonic() + self.poll_s
         with self._cond:
@@ -837,29 +897,10 @@ class GrblLink(_Replies, _RealtimeBytes):
                         self._set_fault(overdue)
                         continue
                 if check and now >= next_poll:
-                    self._cond.release()
-                    try:
-                        self._write(b"?")
-                    finally:
-                        self._cond.acquire()
-                    next_poll = now + self.poll_s
+                    self._ask_status()
+                    next_poll = now + (poll_s or self.poll_s)
                 wake = next_poll if deadline is None else min(next_poll, deadline)
                 self._cond.wait(max(0.001, wake - now))
-
-    def _overdue(self, now: float) -> str:
-        """Why the oldest unanswered line's answer is overdue, or "" (under the lock).  grbl answers a line once
-        it is planned, so at the latest when the moves queued before it (the last answered lines, no more than
-        its planner holds) are done: their time at the slowest override, three times over (a simulated board
-        runs slower than a real one), plus :attr:`reply_margin_s`; a hold stops the clock."""
-        head = self._outstanding[0]
-        since = max(self._answer_clock, head[5])
-        queued_s = (sum(self._answered_s) + head[6]) * 100.0 / max(1, self.slowest_override_pct)
-        allowed_s = self.reply_margin_s + 3.0 * queued_s
-        if now - since <= allowed_s:
-            return ""
-        what = f"line {head[1]} {head[2]!r}" if head[1] else repr(head[2])
-        return (f"grbl on {self.device} has not answered {what} for {now - since:.1f} s, longer than the moves "
-                f"queued before it could take ({allowed_s:.1f} s with margin): a reply was lost")
 
     # ------------------------------------------------------------------ lines
     def _send_line(self, text: str, number: int) -> list:
@@ -873,7 +914,8 @@ class GrblLink(_Replies, _RealtimeBytes):
             raise GrblError(f"{label} is {len(data)} bytes, more than grbl's {self.rx_buffer_bytes}-byte "
                             f"receive buffer: {text[:40]!r}")
         where = f" at {label} {text!r}"
-        self._wait(lambda: self._outstanding_bytes + len(data) <= self.rx_buffer_bytes, None, where=where)
+        self._wait(lambda: self._outstanding_bytes + len(data) <= self.rx_buffer_bytes and self._ring_fits(len(data)),
+                   None, where=where, poll_s=RING_POLL_S)
         if self._timer is None:
             self._timer = LineTimer(self.settings)
         entry = [len(data), number, text, None, [], time.monotonic(), self._timer.time_s(text)]
@@ -884,6 +926,7 @@ class GrblLink(_Replies, _RealtimeBytes):
                 self._answer_clock = entry[5]
             self._outstanding.append(entry)
             self._outstanding_bytes += len(data)
+            self._line_bytes_written += len(data)
             self._write(data)  # under the lock: a cancel cannot slip between the check and the write
         return entry
 
@@ -963,9 +1006,12 @@ class GrblLink(_Replies, _RealtimeBytes):
     def status(self, timeout_s: Optional[float] = None) -> GrblStatus:
         """Send ``?`` and return the report that answers it."""
         with self._cond:
-            seq = self._status_seq
             self._check()
-        self._write(b"?")
+            if self._asks:  # a ? already on its way: its report may be older than this call; ask anew after it
+                seq = self._status_seq
+                self._wait(lambda: self._status_seq > seq, min(self.timeout_s, ASK_AGAIN_S))
+            seq = self._status_seq
+            self._ask_status(again=True)
         ok = self._wait(lambda: self._status_seq > seq, timeout_s if timeout_s is not None else self.timeout_s)
         if not ok or self.status_report is None:
             raise PortError(f"grbl on {self.device} sent no status report")

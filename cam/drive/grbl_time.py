@@ -62,6 +62,47 @@ def _block_time_s(length_mm: float, v_entry: float, v_nominal: float, v_exit: fl
     return (v_peak - v_entry) / accel + (v_peak - v_exit) / accel
 
 
+def _planned_time_s(blocks: list[tuple[float, float, float, float]]) -> float:
+    """The time of ``blocks`` ``(length mm, nominal speed, acceleration, max entry speed)`` planned from a stop to
+    a stop: each block's entry speed the lowest of its junction's and what a stop at the end allows (backward
+    pass), then what its entry allows it to reach (forward pass), then each trapezoid's time."""
+    if not blocks:
+        return 0.0
+    n = len(blocks)
+    entry = [min(b[3], b[1]) for b in blocks]
+    entry[0] = 0.0
+    exit_next = 0.0
+    for i in range(n - 1, -1, -1):  # each block must be able to slow to the next one's entry (or stop)
+        length, _, a, _ = blocks[i]
+        entry[i] = min(entry[i], math.sqrt(exit_next ** 2 + 2 * a * length))
+        exit_next = entry[i]
+    time_s = 0.0
+    for i in range(n):  # ... and reach it from its own entry
+        length, nominal, a, _ = blocks[i]
+        v_exit = entry[i + 1] if i + 1 < n else 0.0
+        v_exit = min(v_exit, math.sqrt(entry[i] ** 2 + 2 * a * length))
+        if i + 1 < n:
+            entry[i + 1] = v_exit
+        time_s += _block_time_s(length, entry[i], nominal, v_exit, a)
+    return time_s
+
+
+def _junction_speed(prev_unit: Optional[np.ndarray], unit: np.ndarray, accel: np.ndarray, deviation: float) -> float:
+    """The fastest speed through the corner from direction ``prev_unit`` into ``unit`` (grbl's junction
+    deviation model; a start or a reversal: a stop; straight on: no limit)."""
+    if prev_unit is None:
+        return 0.0
+    cos_theta = -float(prev_unit @ unit)
+    if cos_theta > 0.999999:
+        return 0.0
+    if cos_theta < -0.999999:
+        return math.inf
+    junction = unit - prev_unit
+    a_junction = _limit_by_axes(accel, junction / max(float(np.linalg.norm(junction)), _EPS))
+    sin_half = math.sqrt(0.5 * (1.0 - cos_theta))
+    return math.sqrt(max(0.0, a_junction * deviation * sin_half / (1.0 - sin_half)))
+
+
 def grbl_time_s(lines: Iterable[object], settings: dict[int, float], start_mm: Optional[tuple] = None) -> float:
     """Seconds grbl takes for ``lines`` (G-code strings; anything else, such as a pause marker, is a stop).
 
@@ -92,32 +133,10 @@ def grbl_time_s(lines: Iterable[object], settings: dict[int, float], start_mm: O
     prev_unit: Optional[np.ndarray] = None
     rapid = False  # G0/G1 are modal
 
-    def settle() -> float:
-        """Plan the blocks since the last stop: backward then forward pass, then each block's time."""
-        if not blocks:
-            return 0.0
-        n = len(blocks)
-        entry = [min(b[3], b[1]) for b in blocks]
-        entry[0] = 0.0
-        exit_next = 0.0
-        for i in range(n - 1, -1, -1):  # each block must be able to slow to the next one's entry (or stop)
-            length, _, a, _ = blocks[i]
-            entry[i] = min(entry[i], math.sqrt(exit_next ** 2 + 2 * a * length))
-            exit_next = entry[i]
-        time_s = 0.0
-        for i in range(n):  # ... and reach it from its own entry
-            length, nominal, a, _ = blocks[i]
-            v_exit = entry[i + 1] if i + 1 < n else 0.0
-            v_exit = min(v_exit, math.sqrt(entry[i] ** 2 + 2 * a * length))
-            if i + 1 < n:
-                entry[i + 1] = v_exit
-            time_s += _block_time_s(length, entry[i], nominal, v_exit, a)
-        blocks.clear()
-        return time_s
-
     for item in lines:
         if not isinstance(item, str):
-            total_s += settle()
+            total_s += _planned_time_s(blocks)
+            blocks.clear()
             prev_unit = None
             continue
         text = item.upper()
@@ -147,20 +166,6 @@ def grbl_time_s(lines: Iterable[object], settings: dict[int, float], start_mm: O
         nominal = _limit_by_axes(rate, unit)
         if not rapid:
             nominal = min(nominal, max(feed_mm_s, _EPS))
-        a = _limit_by_axes(accel, unit)
-        if prev_unit is None:
-            v_junction = 0.0
-        else:
-            cos_theta = -float(prev_unit @ unit)
-            if cos_theta > 0.999999:
-                v_junction = 0.0  # a reversal
-            elif cos_theta < -0.999999:
-                v_junction = math.inf  # straight on
-            else:
-                junction = unit - prev_unit
-                a_junction = _limit_by_axes(accel, junction / max(float(np.linalg.norm(junction)), _EPS))
-                sin_half = math.sqrt(0.5 * (1.0 - cos_theta))
-                v_junction = math.sqrt(max(0.0, a_junction * deviation * sin_half / (1.0 - sin_half)))
-        blocks.append((length, nominal, a, v_junction))
+        blocks.append((length, nominal, _limit_by_axes(accel, unit), _junction_speed(prev_unit, unit, accel, deviation)))
         prev_unit = unit
-    return float(total_s + settle())
+    return float(total_s + _planned_time_s(blocks))

@@ -25,6 +25,23 @@ _COMP_FRAME = {100, 180, 190, 280, 300, 430, 431, 490, 920, 921, 922, 923, 540, 
 from .ngc import Line
 
 
+def _tool_diameter(block: _State, code: int, vals: dict[str, float]) -> float:
+    """The diameter (mm) G41/G42 (``code`` 410/420) take from the tool table: tool D, or the tool in the
+    spindle's (D omitted or D0), as rs274; tool 0 (none) is 0."""
+    name = f"G{code // 10}"
+    if block.tool_diameters_mm is None:
+        raise block.err(f"'{name}': {COMP_NO_TABLE}")
+    if "d" in vals and (vals["d"] != int(vals["d"]) or vals["d"] < 0):
+        raise block.err(f"{name} needs a tool number 'D' (a whole number 0 or more), not 'D{vals['d']:g}': for a "
+                        f"diameter give {name}.1 D<diameter>")
+    tool = int(vals["d"]) if vals.get("d") else block.tool  # D0: the spindle's, as rs274
+    if not tool:
+        return 0.0
+    if tool not in block.tool_lengths_mm:
+        raise block.err(f"{name}: tool {tool} is not in the tool table")
+    return block.tool_diameters_mm.get(tool, 0.0)
+
+
 class _Block(_State):
     """Runs one line that is not an O word; the motion it makes is :class:`~._gcode_motion._Motion`'s."""
 
@@ -219,7 +236,7 @@ class _Block(_State):
                                "not supported: the machine is a 3-axis mill")
             self.comp_on(1 if 411 in codes else -1, vals["d"] * self.scale)
         if codes & {410, 420}:
-            self.comp_on(1 if 410 in codes else -1, self.tool_diameter(410 if 410 in codes else 420, vals))
+            self.comp_on(1 if 410 in codes else -1, _tool_diameter(self, 410 if 410 in codes else 420, vals))
         if 430 in codes or 431 in codes:
             self.tool_length(codes, vals)
         if 490 in codes:
@@ -294,22 +311,6 @@ class _Block(_State):
         if mcodes & {2, 30}:
             self.comp_off()  # as rs274: the program's end turns compensation off
             raise _End
-
-    def tool_diameter(self, code: int, vals: dict[str, float]) -> float:
-        """The diameter (mm) G41/G42 (``code`` 410/420) take from the tool table: tool D, or the tool in the
-        spindle's (D omitted or D0), as rs274; tool 0 (none) is 0."""
-        name = f"G{code // 10}"
-        if self.tool_diameters_mm is None:
-            raise self.err(f"'{name}': {COMP_NO_TABLE}")
-        if "d" in vals and (vals["d"] != int(vals["d"]) or vals["d"] < 0):
-            raise self.err(f"{name} needs a tool number 'D' (a whole number 0 or more), not 'D{vals['d']:g}': for a "
-                           f"diameter give {name}.1 D<diameter>")
-        tool = int(vals["d"]) if vals.get("d") else self.tool  # D0: the spindle's, as rs274
-        if not tool:
-            return 0.0
-        if tool not in self.tool_lengths_mm:
-            raise self.err(f"{name}: tool {tool} is not in the tool table")
-        return self.tool_diameters_mm.get(tool, 0.0)
 
     def check_words(self, vals: dict[str, float], texts: dict[str, str], *, pq_offsets: bool = False) -> None:
         """Every word of one line finite and in its range (:mod:`cam.limits`); ``pq_offsets``: P is a
