@@ -252,6 +252,35 @@ def test_every_ok_doubled_is_found_before_grbl_overflows():
         assert emu.overflow_bytes == 0, emu.events
 
 
+def double_oks(numbers: set) -> Callable[[bytes], bytes]:
+    count = [0]
+
+    def edit(line: bytes) -> bytes:
+        if line.strip() == b"ok":
+            count[0] += 1
+            if count[0] in numbers:
+                return line + line
+        return line
+    return edit
+
+
+@pytest.mark.parametrize("doubled", [{20, 21, 22}, {20, 22, 24, 26}, set(range(20, 40))],
+                         ids=["three in a row", "every other", "twenty in a row"])
+def test_duplicated_oks_never_overflow_grbls_receive_buffer(doubled):
+    """Issue #43 point 2: ``ok``s doubled mid-stream while grbl's buffer is full (three in a row lost 33 bytes and
+    merged lines before).  What cam sends is bounded by the last buffer report plus every line byte written
+    after the ``?`` it answers, whatever the ``ok``s say: no byte is lost, and the extra ``ok`` is a fault."""
+    with emulator_rig() as (emu, proxy):
+        session = open_session(proxy)
+        proxy.board_line_filter = double_oks(doubled)
+        run_to_end(session, zigzag_job(SETTINGS, segments=120, step_mm=0.3))
+        msg = fault_message(session)
+        assert "soft reset" in msg, msg
+        assert emu.overflow_bytes == 0, (emu.overflow_bytes, emu.events)
+        refused = [answer for _, _, answer in emu.lines() if answer.startswith("error")]
+        assert not refused, refused  # no line merged with another
+
+
 # ---------------------------------------------------------------------------------------------- reports
 def garble_status(k: int, text: bytes) -> Callable[[bytes], bytes]:
     count = [0]

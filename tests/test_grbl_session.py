@@ -239,8 +239,8 @@ def test_homing_enabled_grbl_needs_home_then_reads_back(grbl, tmp_path):
     hold = StateHold(tmp_path / "m.json", HOMED_SETTINGS, "test")
     session = MachineSession(url(grbl), HOMED_SETTINGS, state=hold)
     assert not hold.state.position_known
-    with pytest.raises(cam.CamError, match="unknown|home"):
-        session.jog("x", 10)
+    with pytest.raises(cam.CamError, match="unknown|home"):  # a jog is allowed (soft limits off), a go-to is not
+        session.go_to([1, 1, 0], "mm")
     session.home()
     assert session.wait_idle(60) and session.last_run["status"] == "finished", session.last_run
     assert hold.state.homed and hold.state.position_known and hold.state.running is None

@@ -49,7 +49,7 @@ RX_BUFFER_BYTES = 128
 PLANNER_BLOCKS = 15
 """grbl 1.1's planner blocks on an ATmega328P (config.h ``BLOCK_BUFFER_SIZE`` 16, one kept free): the most
 motion that can be queued behind a line grbl has not answered yet."""
-RING_POLL_S = 0.02
+RING_POLL_S = 0.01
 """How often a line waiting for room in grbl's receive buffer asks for a status report: the room the buffer
 report shows is what lets it go."""
 ASK_AGAIN_S = 0.5
@@ -668,7 +668,9 @@ class _Replies:
         if status.overrides is not None:
             self.slowest_override_pct = max(1, min(status.overrides[0], status.overrides[1]))
         base = self._asks.popleft()[0] if self._asks else None  # a report answers the oldest ? (or a later one)
-        if status.rx_free is not None and base is not None:
+        if status.rx_free is None:
+            self._ring_bound = None  # no buffer report ($10 without bit 1): the count of answers alone decides
+        elif base is not None:
             self._ring_bound, self._ring_base = self.rx_buffer_bytes - status.rx_free, base
         if status.rx_free is not None and self._connected:
             held_bytes = self.rx_buffer_bytes - 1 - status.rx_free  # at least what grbl's receive buffer holds
@@ -694,7 +696,7 @@ class _Replies:
             self._outstanding_bytes = 0
             self._answered_s.clear()
             self._asks.clear()
-            self._ring_bound, self._ring_base = 0, self._line_bytes_written
+            self._ring_bound = None  # until the next buffer report: the reset emptied it
             self._info = []
         else:
             if line.startswith("[MSG:") or line.startswith(">"):
@@ -876,7 +878,7 @@ class GrblLink(_Replies, _RealtimeBytes):
         """Wait for ``predicate`` (under the lock), polling ``?`` (every ``poll_s``, default :attr:`poll_s`) so that
         a silent grbl is found out (unless ``quiet_ok``: grbl answers no status report while homing)."""
         deadline = None if timeout_s is None else time.monotonic() + timeout_s
-        next_poll = time.monotonic() + self.poll_s
+        next_poll = time.monotonic() + (poll_s or self.poll_s)
         with self._cond:
             while True:
                 if check:

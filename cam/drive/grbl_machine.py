@@ -318,7 +318,7 @@ class GrblMachine:
     def _poll(self) -> None:
         while not self._closing.wait(POLL_S):
             try:
-                self.link._write(b"?")
+                self.link._ask_status()
             except PortError:
                 return
 
