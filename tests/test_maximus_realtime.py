@@ -85,6 +85,7 @@ def test_a_jog_whose_reply_takes_longer_than_2_s(emu, capsys):
 def test_a_small_two_tool_board_from_the_command_line(emu, tmp_path):
     """The seed's workflow at real speed: holes measured from the origin (--offset 0,0), the first reply after
     2.3 s of XY move, tool prompts, the head back at the origin."""
+    assert main(["where", "--set", "0,0,0", "--port", f"maximus:{emu.device_path}"]) == 0  # a new machine (#43)
     proc = cli("drill", str(write_board(tmp_path)), "--yes", "--offset", "0,0", "--port",
                f"maximus:{emu.device_path}", "--travel-height", "0.1", "--cut-depth", "0.2", "--delay", "2,0.4")
     out, err = proc.communicate(timeout=120)
@@ -138,6 +139,7 @@ def wait_for(condition, timeout_s: float = 10.0) -> None:
 
 def test_ctrl_c_during_a_jog_stops_the_board_and_the_next_jog_works(emu, capsys):
     """Issue #14 reproduction 4 and issue #20: the stop byte, MACHINESTOPPED, exit 130 at once, board ready."""
+    assert main(["where", "--set", "0,0,0", "--port", f"maximus:{emu.device_path}"]) == 0  # a new machine (#43)
     proc = cli("jog", "--port", f"maximus:{emu.device_path}", "X+", "3000")  # 6 s at Delay 10
     wait_for(lambda: emu.position_pulses[0] > 100)
     proc.send_signal(signal.SIGINT)
@@ -156,6 +158,7 @@ def test_ctrl_c_during_a_jog_stops_the_board_and_the_next_jog_works(emu, capsys)
 
 
 def test_ctrl_c_during_a_drill_move_exits_130_at_once_with_the_spindle_off(emu, tmp_path, capsys):
+    assert main(["where", "--set", "0,0,0", "--port", f"maximus:{emu.device_path}"]) == 0  # a new machine (#43)
     proc = cli("drill", str(write_board(tmp_path)), "--yes", "--offset", "0,0", "--port",
                f"maximus:{emu.device_path}", "--travel-height", "0.1", "--cut-depth", "0.2")
     wait_for(lambda: emu.position_pulses[0] > 100, 20)  # on the way to the first hole, spindle running
