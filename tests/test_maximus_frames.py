@@ -10,7 +10,7 @@ import pytest
 from cam.cli import main
 from cam.drive.maximus.board import MAXIMUS_SETTINGS
 from cam.drive.session import MachineSession
-from cam.drive.state import MachineState, StateHold, read_state, write_state
+from cam.drive.state import MachineState, PositionUnknownError, StateHold, read_state, write_state
 from cam.job.jobs import JobOptions, prepare_job
 from cam.sim.maximus import LIMIT_SWITCH_X
 from support.maximus_log import decode_port_log
@@ -76,8 +76,9 @@ def test_the_position_is_live_after_every_hole_and_a_limit_switch_makes_it_unkno
         assert ses.last_run["status"] != "finished"
         s = read_state(hold.path, MAXIMUS_SETTINGS)
         assert not s.position_known and s.unknown_reason, s
-        with pytest.raises(Exception, match="unknown"):
-            ses.jog("x", 10)
+        # a go-to is refused; a jog would be allowed to find the work (issue #45 point 3: test_recovery.py)
+        with pytest.raises(PositionUnknownError, match="unknown"):
+            ses.go_to((0, 0, 0))
     finally:
         hold.close()
 
@@ -89,6 +90,7 @@ def test_at_real_speed_a_go_to_and_a_drill_job_from_the_work_zero(tmp_path, caps
     emu = start_emulator(speed=1.0)
     try:
         port, st = f"maximus:{emu.device_path}", str(tmp_path / "m.json")
+        assert main(["where", "--set", "0,0,0", "--port", port, "--state", st]) == 0  # a new machine (#43 point 5)
         assert main(["goto", "200,100,0", "--unit", "steps", "--port", port, "--state", st]) == 0
         assert main(["zero", "XY", "--port", port, "--state", st]) == 0
         path = _board(tmp_path, ["T1", "X0.5Y-0.5", "X1.0Y-0.5"])
