@@ -270,6 +270,7 @@ def test_emulator_log_file_from_the_command_line(tmp_path, monkeypatch):
         # an emulator 1000 times faster than the firmware answers sooner than a board could: the host is told
         monkeypatch.setenv("CAM_MAXIMUS_EMULATOR_SPEEDS", f"{device}=1000")
         path = small_board(tmp_path, ["T1", "X1.0Y1.0", "X1.5Y1.0"])
+        assert main(["where", "--set", "0,0,0", "--port", f"maximus:{device}"]) == 0  # a new machine (#43 point 5)
         assert main(["drill", str(path), "--yes", "--offset", "0,0", "--port", f"maximus:{device}",
                      "--travel-height", "0.1", "--cut-depth", "0.2"]) == 0
         time.sleep(0.1)
