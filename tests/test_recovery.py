@@ -179,6 +179,8 @@ def test_page_recovers_after_estop_with_set_position_then_moves(tmp_path):
         assert st["last"]["status"] == "emergency-stopped" and not st["where"]["position_known"], st["last"]
         status, err = s.call("POST", "/api/goto", {"xyz": [0, 0, 0]})
         assert status == 400 and "position is unknown" in err["error"] and "\n" not in err["error"]
+        for said in ("Home on the page", "Set position on the page", "cam where --set X,Y,Z", "a jog is allowed"):
+            assert said in err["error"], err  # what works, the page's own words first
         # a jog finds the work again (soft limits off), the position still unknown
         status, st = s.call("POST", "/api/jog", {"axis": "z", "steps": -5})
         assert status == 200, st

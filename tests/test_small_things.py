@@ -196,3 +196,11 @@ def test_mock_unknown_position_says_how_to_recover(tmp_path):
     for port in ("/dev/parport0", "grbl:/dev/ttyUSB0", "maximus:/dev/ttyUSB0"):
         assert "mock" not in unknown_message(lost, port) and "cam where --set X,Y,Z" in unknown_message(lost, port)
     assert "cam where --set=0,0,0" in unknown_message(lost, "mock") == unknown_message(lost)
+    # every port: what works, for the page and the command line alike, in one line (issue #45 point 3)
+    for port in ("mock", "/dev/parport0", "grbl:/dev/ttyUSB0", "maximus:/dev/ttyUSB0"):
+        line = unknown_message(lost, port)
+        assert "\n" not in line and "Set position on the page" in line and "cam where --set X,Y,Z" in line, line
+        assert "a jog is allowed meanwhile to find the work (soft limits off)" in line, line
+        can_home = not port.startswith("maximus:")  # the MAXIMUS board has no switches cam reads
+        assert ("Home on the page" in line and "(cam home)" in line) == can_home, line
+        assert ("cannot home" in line) != can_home, line

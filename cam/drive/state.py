@@ -420,18 +420,22 @@ def now_text() -> str:
 
 
 def unknown_message(state: MachineState, port: Any = None) -> str:
-    """The one-line error of a move asked for while the position is unknown (on a MAXIMUS board, which has no
-    home switches ``cam`` reads, ``cam where --set`` only; on the mock, ``port`` None or ``"mock"``, also how to
-    start the simulated machine again at its home: ``cam where --set=0,0,0``)."""
+    """The one-line error of a move asked for while the position is unknown: what makes it known again, for the
+    command line and the page alike (issue #45 point 3) - Home where the port can home (``cam home`` or the
+    page's Home; a MAXIMUS board cannot), Set position on the page or ``cam where --set X,Y,Z`` - and that a jog
+    is allowed meanwhile to find the work, its soft limits off.  On the mock (``port`` None or ``"mock"``) also
+    how to start the simulated machine again at its home: ``cam where --set=0,0,0``."""
+    why = f"the machine position is unknown ({state.unknown_reason or 'not recorded'})"
+    jog = "; a jog is allowed meanwhile to find the work (soft limits off)"
     if isinstance(port, str) and is_real_port(port) and port_kind(port) == "maximus":
-        return (f"the machine position is unknown ({state.unknown_reason or 'not recorded'}): say where the head "
-                f"is, in machine mm, with cam where --set X,Y,Z (e.g. 0,0,0 where the board origin is)")
+        return (f"{why}: the board cannot home, so say where the head is, in machine mm, with Set position on the "
+                f"page or cam where --set X,Y,Z (e.g. 0,0,0 where the board origin is){jog}")
     if not is_real_port(port):  # the mock: a simulated machine, nothing really stands anywhere (issue #44 point 7)
-        return (f"the machine position is unknown ({state.unknown_reason or 'not recorded'}): on the mock (a "
-                f"simulated machine) start it again at its home with cam where --set=0,0,0, or home the machine "
-                f"(cam home), or say where the tool is, in machine mm, with cam where --set X,Y,Z")
-    return (f"the machine position is unknown ({state.unknown_reason or 'not recorded'}): home the machine "
-            f"(cam home) or say where the tool is, in machine mm, with cam where --set X,Y,Z")
+        return (f"{why}: on the mock (a simulated machine) start it again at its home with cam where --set=0,0,0, "
+                f"or Home on the page or home the machine (cam home), or say where the tool is, in machine mm, with "
+                f"Set position on the page or cam where --set X,Y,Z{jog}")
+    return (f"{why}: Home on the page or home the machine (cam home), or say where the tool is, in machine mm, with "
+            f"Set position on the page or cam where --set X,Y,Z{jog}")
 
 
 # -- where the file is ---------------------------------------------------------------------------------------
