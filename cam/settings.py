@@ -62,9 +62,12 @@ and then keeps its built-in value.  An unknown key or a bad value is a
     delay_y = 10
     delay_z_up = 10
     delay_z_down = 10
-    half_step_x = true  # the MODE bit of each axis's L297 (mm_per_step_* are mm per clock pulse in this mode)
+    half_step_x = true  # the MODE bit of each axis's L297: a clock pulse is half a motor step
     half_step_y = true
     half_step_z = true
+    mm_per_full_step_x = 0.00875  # travel per motor step of each axis: a pulse is half of it in half steps
+    mm_per_full_step_y = 0.00875  # (on the board these set mm per step, not mm_per_step_xy / _z)
+    mm_per_full_step_z = 0.00875
     invert_x = false    # flip the DIR bit of an axis wired the other way round
     invert_y = false
     invert_z = false
@@ -324,6 +327,12 @@ class Maximus:
     half_step_y: bool = True
     half_step_z: bool = True
     """The MODE bit of each axis: True = half steps (one clock pulse = half a motor step)."""
+    mm_per_full_step_x: float = 0.00875
+    mm_per_full_step_y: float = 0.00875
+    mm_per_full_step_z: float = 0.00875
+    """Travel of each axis per motor (full) step: 8.75 um, the PC program's OneStepX "008.7500" um (seed 000
+    section 9: "theoretical resolution of 4.375 microns" in half steps).  One clock pulse moves an axis this
+    far in full-step mode, half of it in half-step mode (:meth:`mm_per_pulse`)."""
     invert_x: bool = False
     invert_y: bool = False
     invert_z: bool = False
@@ -341,6 +350,15 @@ class Maximus:
     """Serial speed (the firmware's ``#use rs232(baud=115200, ...)``)."""
     reply_margin_s: float = 1.0
     """How long after its move should have ended a reply may still come before the board counts as lost."""
+
+    def mm_per_pulse(self) -> tuple[float, float, float]:
+        """Travel of X, Y, Z per L297 clock pulse: the axis's mm per full step, halved in half-step mode.
+
+        >>> Maximus(half_step_x=False).mm_per_pulse()
+        (0.00875, 0.004375, 0.004375)
+        """
+        return tuple(getattr(self, f"mm_per_full_step_{a}") / (2 if getattr(self, f"half_step_{a}") else 1)
+                     for a in "xyz")  # type: ignore[return-value]
 
     @property
     def drill_stroke_set(self) -> bool:
@@ -361,6 +379,9 @@ class MachineSettings:
     mm_per_step_xy: float = 0.0289
     mm_per_step_z: float = 0.0157
     """Travel per step of the thesis machine's lead screws."""
+    mm_per_step_y: float = 0.0
+    """Y's travel per step where it differs from X's (0: ``mm_per_step_xy``).  Not a machine-file key: a MAXIMUS
+    board's settings set it from its ``[maximus]`` table (an axis in full steps, the other in half steps)."""
     half_step: bool = False
     """Half/Full* on pin 1 (strobe): low = full steps."""
     ramp: str = "lookahead"
@@ -410,10 +431,15 @@ class MachineSettings:
         """Step period of the Z motor in nanoseconds."""
         return int(round(self.delay_z_ms * 1_000_000))
 
+    @property
+    def mm_per_step_axes(self) -> tuple[float, float, float]:
+        """Travel per step of X, Y and Z (Y: ``mm_per_step_y`` when set, else ``mm_per_step_xy``)."""
+        return self.mm_per_step_xy, self.mm_per_step_y or self.mm_per_step_xy, self.mm_per_step_z
+
     def axis_limits(self) -> "tuple[tuple[float, float, float], ...]":
         """Per-axis (X, Y, Z) motion limits: (mm_per_step, start_speed_mm_s, max_speed_mm_s, accel_mm_s2)."""
         return (
-            (self.mm_per_step_xy, self.mm_per_step_xy, self.mm_per_step_z),
+            self.mm_per_step_axes,
             (self.start_speed_x_mm_s, self.start_speed_y_mm_s, self.start_speed_z_mm_s),
             (self.max_speed_x_mm_s, self.max_speed_y_mm_s, self.max_speed_z_mm_s),
             (self.accel_x_mm_s2, self.accel_y_mm_s2, self.accel_z_mm_s2),
@@ -429,6 +455,9 @@ class MachineSettings:
 
 
 DEFAULT_SETTINGS = MachineSettings()
+
+_DERIVED = frozenset({"mm_per_step_y"})
+"""Settings no machine file gives: the MAXIMUS board's settings derive them (:class:`MachineSettings`)."""
 
 _SECTIONS = {"travel": Travel, "pins": Pins, "maximus": Maximus, "tool": ToolShape, "inputs": Inputs,
              "homing": Homing, "mock": MockSwitches}
@@ -448,7 +477,7 @@ def _type_ok(value: Any, kind: type) -> bool:
 
 def _build(cls: type, table: Mapping[str, Any], prefix: str, source: str, base: Any = None) -> Any:
     """``cls`` from a TOML table: the keys given, the others from ``base`` (or the built-in values)."""
-    fields = {f.name: f for f in dataclasses.fields(cls)}
+    fields = {f.name: f for f in dataclasses.fields(cls) if prefix or f.name not in _DERIVED}
     values: dict[str, Any] = {}
     for key, value in table.items():
         name = f"{prefix}{key}"
@@ -486,6 +515,8 @@ def _validate(s: MachineSettings, source: str) -> None:
     for key in ("mm_per_step_xy", "mm_per_step_z"):
         if not (MIN_MM_PER_STEP <= getattr(s, key) <= 100):
             raise bad(key, f"must be {MIN_MM_PER_STEP:g}..100 mm, got {getattr(s, key)}")
+    if s.mm_per_step_y and not (MIN_MM_PER_STEP <= s.mm_per_step_y <= 100):
+        raise bad("mm_per_step_y", f"must be 0 (as X) or {MIN_MM_PER_STEP:g}..100 mm, got {s.mm_per_step_y}")
     if s.ramp not in RAMP_MODES:
         raise bad("ramp", f"must be one of {', '.join(RAMP_MODES)}, got {s.ramp!r}")
     for axis in "xyz":
@@ -606,6 +637,10 @@ def _validate_maximus(m: Maximus, bad: Any) -> None:
     for key in ("delay_x", "delay_y", "delay_z_up", "delay_z_down"):
         if not 1 <= getattr(m, key) <= 255:  # one byte; 0 would make no delay at all (seed 000 App. 1 dly_100us)
             raise bad(f"maximus.{key}", f"must be a Delay byte 1..255 (pulses at 5000/Delay Hz), got {getattr(m, key)}")
+    for a in "xyz":
+        if not MIN_MM_PER_STEP <= getattr(m, f"mm_per_full_step_{a}") <= 100:
+            raise bad(f"maximus.mm_per_full_step_{a}", f"must be {MIN_MM_PER_STEP:g}..100 mm, got "
+                      f"{getattr(m, f'mm_per_full_step_{a}')}")
     up, down = m.drill_z_up_steps, m.drill_z_down_steps
     if not (0 <= up <= 0xFFFF and (down == 0 or up < down <= 0xFFFF)):  # 16-bit fields (seed 000 App. 1 make16)
         raise bad("maximus.drill_z_down_steps", f"must be deeper (more pulses below the origin) than "

@@ -10,7 +10,7 @@ from typing import Any
 
 from tqdm import tqdm
 
-from ..drive.maximus.board import MAXIMUS_SETTINGS, board_settings, with_delays
+from ..drive.maximus.board import MAXIMUS_SETTINGS, board_settings, board_speeds_line, with_delays
 from ..drive.activities import format_duration
 from ..drive.ports import port_kind
 from ..drive.ramps import check_delay_speeds, top_speeds_mm_s
@@ -85,8 +85,11 @@ def port_settings(args: argparse.Namespace, port: str) -> MachineSettings:
     return s
 
 
-def speeds_line(settings: MachineSettings) -> str:
-    """One line: the top speed of each axis with the settings' ramps and delays (what ``cam info`` shows)."""
+def speeds_line(settings: MachineSettings, port: str = "mock") -> str:
+    """One line: the top speed of each axis with the settings' ramps and delays (what ``cam info`` shows); on a
+    MAXIMUS board its Delay bytes' feeds (:func:`~cam.drive.maximus.board.board_speeds_line`)."""
+    if port_kind(port) == "maximus":
+        return board_speeds_line(settings)
     x, y, z = top_speeds_mm_s(settings)
     return (f"top speeds: X {x:.3g}, Y {y:.3g}, Z {z:.3g} mm/s ({settings.ramp} ramps, delays "
             f"{settings.delay_xy_ms:g}/{settings.delay_z_ms:g} ms)")

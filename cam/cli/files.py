@@ -14,6 +14,7 @@ from ..digitize import digitize
 from ..digitize.digitized import save_digitized
 from ..digitize.drawing import load_image
 from ..digitize.profile import load_profile
+from ..drive.ports import port_kind
 from ..errors import CamError, TravelError
 from ..formats.excellon import HoleList, load_excellon
 from ..formats.gcode import load_tool_table, open_gcode
@@ -23,7 +24,7 @@ from ..job.drill import DEFAULT_CUT_DEPTH_MM
 from ..formats.hpgl import PLOTTER_UNIT_MM, scan_hpgl
 from ..job.model import pause_points
 from ..render.report import format_report, image_report
-from .common import format_duration, machine_settings, reading_bar, speeds_line
+from .common import format_duration, machine_settings, port_settings, reading_bar, speeds_line
 from .checks import job_kind_of
 from .planning import excellon_digits, job_options, prepare, profile_of, write_job_preview
 
@@ -235,10 +236,12 @@ def _info_svg(args: argparse.Namespace) -> int:
 
 
 def cmd_info(args: argparse.Namespace) -> int:
-    settings = machine_settings(args)  # a delay the ramps would not honour: refused before anything is read
+    port = getattr(args, "port", None) or "mock"
+    # a delay the ramps would not honour: refused before anything is read; a MAXIMUS board: its own settings
+    settings = port_settings(args, port) if port_kind(port) == "maximus" else machine_settings(args)
     code = _info_of_kind(args, job_kind_of(args))
     if not args.json:
-        print(speeds_line(settings))
+        print(speeds_line(settings, port))
     return code
 
 

@@ -17,8 +17,8 @@ from typing import Any
 from ..drive.homing import check_homing
 from ..drive.ports import MockPort, port_kind
 from ..drive.state import steps_to_mm
-from ..drive.session import MachineSession
-from ..errors import CamError, CapabilityError
+from ..drive.session import MachineSession, maximus_cannot_home
+from ..errors import CamError
 from ..verify.pinlog import write_pin_log
 from .common import port_settings
 from .machine_state import hold_machine
@@ -41,8 +41,7 @@ def cmd_home(args: argparse.Namespace) -> int:
     settings = port_settings(args, args.port)
     kind = port_kind(args.port)
     if kind == "maximus":
-        raise CapabilityError(f"{args.port} (the MAXIMUS board) has no home switches cam reads: cam home needs a "
-                              f"step/dir port (/dev/parportN, or the mock with [mock] switch places)")
+        raise maximus_cannot_home(args.port)  # what it can do instead, as the page's Home says
     if kind == "grbl" and args.axes:
         raise CamError(f"grbl homes all its axes with $H (its own [homing] order, $23-$27); drop --axes {args.axes}")
     order = "" if kind == "grbl" else check_homing(settings, args.axes)  # before anything opens: one line

@@ -37,7 +37,7 @@ def target_steps(values: list[float], unit: str, settings: MachineSettings) -> S
         per = (settings.steps_per_px_xy, settings.steps_per_px_xy, settings.steps_per_px_z) if unit == "px" \
             else (1, 1, 1)
         return tuple(int(v) * p for v, p in zip(values, per))  # type: ignore[return-value]
-    per_mm = (settings.mm_per_step_xy, settings.mm_per_step_xy, settings.mm_per_step_z)
+    per_mm = settings.mm_per_step_axes
     return tuple(int(round(float(v) / p)) for v, p in zip(values, per_mm))  # type: ignore[return-value]
 
 

@@ -124,7 +124,7 @@ class SessionFrames(SessionControls):
         if not isinstance(unit, str) or unit not in ("mm", "steps"):
             raise PlanError(f"unit must be 'mm' or 'steps', got {shown(unit)}")
         s = self.settings
-        per = (s.mm_per_step_xy, s.mm_per_step_xy, s.mm_per_step_z) if unit == "mm" else (1.0, 1.0, 1.0)
+        per = s.mm_per_step_axes if unit == "mm" else (1.0, 1.0, 1.0)
         rel = tuple(steps_in_range(v / p, f"xyz {a}", asked=f"{v:g} {unit}") for v, p, a in zip(values, per, "XYZ"))
         with self._lock:
             self._check_free()

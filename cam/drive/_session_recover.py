@@ -35,10 +35,20 @@ from .ports import MockPort, SwitchSchedule, open_port, require
 from .runner import Controller
 from .state import MachineState, PositionUnknownError, check_in_travel, soft_limits_off
 
-__all__ = ["SessionRecover", "UNKNOWN_JOG_LINE", "steps_of"]
+__all__ = ["SessionRecover", "UNKNOWN_JOG_LINE", "steps_of", "maximus_cannot_home"]
 
 UNKNOWN_JOG_LINE = "position unknown: soft limits are off for this jog"
 """What the log (and the CLI's stderr) says of a jog made while the position is unknown."""
+
+
+def maximus_cannot_home(port: str) -> CapabilityError:
+    """What a MAXIMUS board can do instead of homing, in one line (cam home and the page's Home say it alike): its
+    firmware has no homing (seed 000 Appendix 1: mode selection, Jog and Drill mode only) and its limit switches
+    only stop a move, so the board origin is where the operator jogs the head and sets it."""
+    return CapabilityError(f"{port} (the MAXIMUS board) cannot home: its firmware has no homing and its limit "
+                           f"switches only stop a move; jog the head to the board origin (cam jog, the page's jog "
+                           f"buttons) and set it there (cam where --set 0,0,0, the page's Set position). Homing "
+                           f"needs a step/dir port with home switches, or grbl")
 
 
 def steps_of(xyz: Any, unit: Any, settings: MachineSettings, name: str = "xyz") -> tuple[int, int, int]:
@@ -52,7 +62,7 @@ def steps_of(xyz: Any, unit: Any, settings: MachineSettings, name: str = "xyz") 
     if unit == "steps":
         return xyz_steps(xyz, name)
     values = xyz_numbers(xyz, name)
-    per = (settings.mm_per_step_xy, settings.mm_per_step_xy, settings.mm_per_step_z)
+    per = settings.mm_per_step_axes
     x, y, z = (steps_in_range(v / p, f"{name} {a}", asked=f"{v:g} mm") for v, p, a in zip(values, per, "XYZ"))
     return x, y, z
 
@@ -116,8 +126,7 @@ class SessionRecover(SessionChecks):
             CapabilityError: a MAXIMUS board (no home switches cam reads), the mock without simulated switches,
             ``axes`` on grbl; HomingError: no home switch wired; BusyError."""
         if self.kind == "maximus":
-            raise CapabilityError(f"{self.port} (the MAXIMUS board) cannot home: it has no home switches cam reads; "
-                                  f"jog the head to the board origin and use Set position (cam where --set 0,0,0)")
+            raise maximus_cannot_home(self.port)
         if self.grbl is not None:
             if axes:
                 raise CamError(f"grbl homes all its axes with $H (its own [homing] order, $23-$27); drop axes {axes}")

@@ -57,7 +57,7 @@ from ..settings import DEFAULT_SETTINGS, MachineSettings
 from .apart import RunnerProcess
 from .journal import JournalSpec, journal_spec
 from ._session_parts import Activity, Prompt, PromptFn
-from ._session_recover import UNKNOWN_JOG_LINE, SessionRecover
+from ._session_recover import UNKNOWN_JOG_LINE, SessionRecover, maximus_cannot_home
 from ._session_pinlog import SessionPinLogs
 from .activities import BoardControl, drill_work, move_work, run_on_board, run_steps
 from .maximus.board import maximus_port
@@ -68,7 +68,7 @@ from .chunks import ChunkedPlan, plan_chunks
 from .steps import StepPlan
 from .state import StateHold
 
-__all__ = ["MachineSession", "Prompt", "PromptFn", "MAX_JOG_STEPS", "UNKNOWN_JOG_LINE", "run"]
+__all__ = ["MachineSession", "Prompt", "PromptFn", "MAX_JOG_STEPS", "UNKNOWN_JOG_LINE", "maximus_cannot_home", "run"]
 
 MAX_JOG_STEPS = 100_000
 """The longest jog one request may ask for, either way."""

@@ -511,13 +511,13 @@ def default_state_path(machine_file: Optional[str], port: str,
 
 def mm_to_steps(xyz_mm: Any, settings: MachineSettings) -> Steps3:
     """``(x, y, z)`` mm as the nearest whole steps (same frame; +z deeper)."""
-    per = (settings.mm_per_step_xy, settings.mm_per_step_xy, settings.mm_per_step_z)
+    per = settings.mm_per_step_axes
     return tuple(int(round(float(v) / p)) for v, p in zip(xyz_mm, per))  # type: ignore[return-value]
 
 
 def steps_to_mm(xyz_steps: Any, settings: MachineSettings) -> tuple[float, float, float]:
     """``(x, y, z)`` steps in mm, rounded to 0.1 um (same frame; +z deeper)."""
-    per = (settings.mm_per_step_xy, settings.mm_per_step_xy, settings.mm_per_step_z)
+    per = settings.mm_per_step_axes
     return tuple(round(int(v) * p, 4) for v, p in zip(xyz_steps, per))  # type: ignore[return-value]
 
 

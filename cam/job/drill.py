@@ -207,9 +207,10 @@ def plan_drill(
     home = np.zeros(3, np.int64) if own else np.asarray(home_steps, np.int64).reshape(3)
     span = TravelSpan(settings) if own else None
     machine_mm = _machine_mm(holes.holes_mm, offset_mm, mirror_x, every_mm)
-    steps_xy = np.rint(machine_mm / settings.mm_per_step_xy).astype(np.int64)
+    per_xy = np.asarray(settings.mm_per_step_axes[:2])  # X and Y may differ (a MAXIMUS board, issue #45 point 5)
+    steps_xy = np.rint(machine_mm / per_xy).astype(np.int64)
     _check_holes(holes, steps_xy + home[:2], settings, span)
-    paths_steps = [np.rint(_machine_mm(p, offset_mm, mirror_x, every_mm) / settings.mm_per_step_xy).astype(np.int64)
+    paths_steps = [np.rint(_machine_mm(p, offset_mm, mirror_x, every_mm) / per_xy).astype(np.int64)
                    for p in paths_mm]
     for k, p in enumerate(paths_steps):
         if k < len(slot_paths):
@@ -224,7 +225,7 @@ def plan_drill(
                                                None if own else int(home[2]))
     runs = _tool_runs(holes, machine_mm, drill_order, drilled)
     runs3, diameters = _with_paths(runs, [float(holes.tools[t]) for t, _ in runs], paths_steps, path_dia, path_tool,
-                                   machine_mm / settings.mm_per_step_xy, drill_order, len(slot_paths))
+                                   machine_mm / per_xy, drill_order, len(slot_paths))
     notes = _notes(holes, runs3, diameters, len(slot_paths), mill_holes_over_mm)
     stream = DrillJobStream([(t, idx) for t, idx, _ in runs3], steps_xy, diameters, depth_steps, safe_z_steps,
                             settings, str(holes.source), list(holes.warnings), paths_steps=paths_steps,

@@ -283,8 +283,8 @@ def _default_column(name: str, piece: Job) -> np.ndarray:
 
 
 def _mm(settings: MachineSettings, steps: np.ndarray) -> str:
-    return (f"{steps[0] * settings.mm_per_step_xy:.3f}, {steps[1] * settings.mm_per_step_xy:.3f}, "
-            f"{steps[2] * settings.mm_per_step_z:.3f} mm")
+    x, y, z = settings.mm_per_step_axes
+    return f"{steps[0] * x:.3f}, {steps[1] * y:.3f}, {steps[2] * z:.3f} mm"
 
 
 def check_travel(points_steps: np.ndarray, settings: MachineSettings, pixels: Optional[PixelFrame] = None) -> None:
@@ -371,7 +371,7 @@ class TravelSpan:
     def describe(self, axis: int, lo: int, hi: int) -> str:
         """What a message says of an extent ``lo..hi`` steps (from the job's home) on ``axis`` (0, 1, 2) wider than
         the travel."""
-        mm = self.settings.mm_per_step_xy if axis < 2 else self.settings.mm_per_step_z
+        mm = self.settings.mm_per_step_axes[axis]
         t_lo, t_hi = (int(v) for v in self.bounds[axis])
         name = "XYZ"[axis]
         return (f"{name} travel is {t_lo}..{t_hi} steps ({_mm1(t_lo * mm)}..{_mm1(t_hi * mm)} mm, "

@@ -51,7 +51,7 @@ def jog_steps(axis: str, amount: float, unit: str = "steps", *, settings: Machin
             raise PlanError(f"a jog in {unit} needs a whole number of steps, got {shown(amount)}")
         n = value * (2 if unit == "full-steps" and half_step else 1)
     else:
-        mm_per_step = settings.mm_per_step_z if a == "z" else settings.mm_per_step_xy
+        mm_per_step = settings.mm_per_step_axes["xyz".index(a)]
         n = value * JOG_UNITS[unit] / mm_per_step
     return steps_in_range(n, "steps", max_abs_steps=max_steps, asked=f"a jog of {value:g} {unit}")
 

@@ -464,7 +464,7 @@ async def _get_config(st: _AppState, request: Request) -> dict[str, Any]:
         "max_upload_bytes": config.max_upload_bytes,
         "accepted": {k: list(v) for k, v in accepted_suffixes().items()},
         "profile_suffixes": list(PROFILE_SUFFIXES),
-        "mm_per_step": [s.mm_per_step_xy, s.mm_per_step_xy, s.mm_per_step_z],
+        "mm_per_step": list(s.mm_per_step_axes),
         "travel_steps": [list(b) for b in s.travel.bounds_steps()],
         "options": JobOptions().__dict__,
     }

@@ -67,7 +67,7 @@ from .protocol import (
 
 __all__ = [
     "MaximusBoard", "LinkFault", "open_maximus", "URL_PREFIX", "MAXIMUS_SETTINGS", "maximus_holes", "drill_arguments",
-    "board_settings", "with_delays", "maximus_port", "to_board", "from_board", "drill_stroke", "drill_job",
+    "board_settings", "board_speeds_line", "with_delays", "maximus_port", "to_board", "from_board", "drill_stroke", "drill_job",
     "jog_packet", "jog_exit_packet", "offset_packet", "init_packet", "start_drill_packet",
     "drill_packet", "close_drill_packet", "drill_moves", "require_drilling",
 ]
@@ -98,10 +98,42 @@ _DELAY_MS = 2 * DELAY_UNIT_NS / 1e6
 
 def board_settings(settings: MachineSettings) -> MachineSettings:
     """``settings`` with the step periods and ramp that the board's Delay bytes give, so that planned times
-    (progress, reports) are the board's: constant speed, ``2 * Delay * 0.1 ms`` per pulse."""
+    (progress, reports) are the board's: constant speed, ``2 * Delay * 0.1 ms`` per pulse; and one step per
+    clock pulse of each axis (issue #45 point 5): its ``[maximus]`` mm per full step, halved in half-step mode
+    (:meth:`~cam.settings.Maximus.mm_per_pulse`; X and Y may differ).
+
+    Raises:
+        SettingsError: a machine file's ``mm_per_step_xy`` / ``mm_per_step_z`` that says otherwise.
+    """
     m = settings.maximus
+    x, y, z = m.mm_per_pulse()
+    for key, given, axes in (("mm_per_step_xy", settings.mm_per_step_xy, ((x, "x"), (y, "y"))),
+                             ("mm_per_step_z", settings.mm_per_step_z, ((z, "z"),))):
+        if given != MAXIMUS_SETTINGS.mm_per_step_xy and any(abs(given - v) > 1e-12 for v, _ in axes):
+            raise SettingsError(f"{key} = {given:g}: on the MAXIMUS board a step is one clock pulse, "
+                                + ", ".join(f"{a.upper()} {v:g} mm" for v, a in axes)
+                                + " from [maximus] mm_per_full_step_* and half_step_*: set those instead")
     return settings.replace(ramp="constant", delay_xy_ms=round(_DELAY_MS * max(m.delay_x, m.delay_y), 6),
-                            delay_z_ms=round(_DELAY_MS * max(m.delay_z_up, m.delay_z_down), 6))
+                            delay_z_ms=round(_DELAY_MS * max(m.delay_z_up, m.delay_z_down), 6),
+                            mm_per_step_xy=x, mm_per_step_y=0.0 if y == x else y, mm_per_step_z=z)
+
+
+def board_speeds_line(settings: MachineSettings) -> str:
+    """One line: the board's feed of each axis, from its ``[maximus]`` Delay bytes and step modes (constant speed, a
+    pulse every ``2 * Delay * 0.1 ms``, seed 003), what ``cam info --port maximus:...`` shows.
+
+    >>> board_speeds_line(MAXIMUS_SETTINGS)[:60]
+    'MAXIMUS board speeds (its Delay bytes, constant, no ramps): '
+    """
+    m = settings.maximus
+    x, y, z = m.mm_per_pulse()
+    parts = []
+    for name, delay, mm, half in (("X", m.delay_x, x, m.half_step_x), ("Y", m.delay_y, y, m.half_step_y),
+                                  ("Z up", m.delay_z_up, z, m.half_step_z), ("Z down", m.delay_z_down, z, m.half_step_z)):
+        period_ms = _DELAY_MS * delay
+        parts.append(f"{name} {mm / period_ms * 1000:.3g} mm/s (Delay {delay}: a pulse every {period_ms:g} ms, "
+                     f"{'half' if half else 'full'} steps of {mm:g} mm)")
+    return "MAXIMUS board speeds (its Delay bytes, constant, no ramps): " + ", ".join(parts)
 
 
 def with_delays(settings: MachineSettings, xy_ms: float, z_ms: float) -> MachineSettings:
