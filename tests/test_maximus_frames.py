@@ -66,9 +66,9 @@ def test_the_position_is_live_after_every_hole_and_a_limit_switch_makes_it_unkno
         ses.run(job)
         assert ses.last_run["status"] == "finished", ses.last_run
         xs = [round(pos[0] * MM, 1) for text, pos in seen if text.startswith("drilling hole")]
-        # placed by its upper-left hole at the work zero (the home): the job starts 1 mm left of it, and before
-        # hole n + 1 the head stands at hole n: live, not only at the end
-        assert xs == [-1.0, 0.0, 1.0], seen
+        # offset_mm (0, 0) places the file's own zero at the work zero (the home), as --offset 0,0 does (issue #45
+        # point 5): the job starts there, and before hole n + 1 the head stands at hole n: live, not only at the end
+        assert xs == [0.0, 1.0, 2.0], seen
         assert read_state(hold.path, MAXIMUS_SETTINGS).position_known
         emu.trip_limit_switch(LIMIT_SWITCH_X)
         ses.jog("x", 200)

@@ -244,8 +244,9 @@ def _drive(job: Any, args: argparse.Namespace, settings: MachineSettings, hold: 
     session = MachineSession(port, settings, realtime=realtime, on_prompt=answers)
     if getattr(args, "feed_override", None) is not None:  # grbl's override (CapabilityError elsewhere)
         session.feed_override(args.feed_override)
-    # --offset X,Y says where the file's own origin goes (from the work zero): the file's zero is the anchor then
-    origin = getattr(args, "origin", None) or ("file" if getattr(args, "offset", None) is not None else None)
+    # --origin, else the job's own (an --offset places the file by its own zero: cam.job.jobs.prepare_job, the rule
+    # the page's offset_mm follows too)
+    origin = getattr(args, "origin", None)
     approach = None if getattr(args, "resume", None) else approach_to_work_zero(job, hold.state, start, settings,
                                                                                 port_kind(args.port), origin)
     at = start if approach is None else placed_home(job, hold.state, origin)

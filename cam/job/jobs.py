@@ -424,7 +424,8 @@ class PreparedJob:
         plan_sha256: the toolpath's :func:`cam.job.resume.plan_fingerprint`.
         resumed: a resumed run's :class:`cam.job.resume.JournalBase` (None: a run from the start).
         origin: the point placed at the work zero its options chose (``JobOptions.origin``: "file" plans a drill,
-            HPGL or SVG file from its own zero, :func:`own_zero_home`); None: the kind's default
+            HPGL or SVG file from its own zero, :func:`own_zero_home`, as an ``offset_mm`` without an origin does,
+            which then makes it "file" too, from the command line or the page alike); None: the kind's default
             (:func:`cam.drive.placement.origin_anchor`).
         home_steps: the machine position ``plan`` was checked against the travel from, its home: a G-code
             program's start, the work zero of a file placed by its own zero; None: planned in its own frame
@@ -624,7 +625,8 @@ def _cut_extent(extent: np.ndarray, cut: np.ndarray, settings: MachineSettings) 
     use = cut if cut[2, 1] > 0 else extent
     span = use[:2, 1] - use[:2, 0]
     depth = max(0, int(extent[2, 1]))
-    return ((round(float(span[0]) * settings.mm_per_step_xy, 3), round(float(span[1]) * settings.mm_per_step_xy, 3)),
+    x, y, _ = settings.mm_per_step_axes
+    return ((round(float(span[0]) * x, 3), round(float(span[1]) * y, 3)),
             round(depth * settings.mm_per_step_z, 4))
 
 
@@ -790,7 +792,8 @@ def _prepare_excellon(path: Path, options: JobOptions, settings: MachineSettings
     milled = (f", {dp.n_slots} slots" if dp.n_slots else "") + (f", {dp.n_milled} holes milled" if dp.n_milled else "")
     return PreparedJob(
         source=str(path), kind="excellon", plan=steps, settings=settings, toolpath=dp.toolpath,
-        size_mm=(round(float(span[0]) * settings.mm_per_step_xy, 3), round(float(span[1]) * settings.mm_per_step_xy, 3)),
+        size_mm=(round(float(span[0]) * settings.mm_per_step_axes[0], 3),
+                 round(float(span[1]) * settings.mm_per_step_axes[1], 3)),
         depth_mm=round(depth_mm, 4),
         warnings=list(holes.warnings), summary=f"{path.name}: {len(hole_xy)} holes{milled} ({tools})",
         report={"holes": len(hole_xy), "tools": [list(t) for t in dp.tool_sequence],
@@ -899,6 +902,10 @@ def prepare_job(
     if kind not in KINDS:
         raise CamError(f"{p.name}: {KIND_NAMES.get(kind, kind)} cannot be cut by this version of cam")
     opts = (options or JobOptions()).checked().check_kind(kind, p.name)
+    if kind != "excellon" and settings.mm_per_step_axes[1] != settings.mm_per_step_xy:
+        raise CamError(f"{p.name}: {KIND_NAMES.get(kind, kind)} is planned with one step for X and Y, and this "
+                       f"machine's differ (X {settings.mm_per_step_xy:g} mm, Y {settings.mm_per_step_axes[1]:g} mm "
+                       f"per step): only drill files run on it")
     home = own_zero_home(kind, opts, machine_state)
     if home is not None and opts.offset_mm is None:
         opts = dataclasses.replace(opts, offset_mm=(0.0, 0.0))  # the file's own zero at the work zero
@@ -924,7 +931,10 @@ def prepare_job(
     job.summary = job.name + job.summary[len(p.name):]
     job.identity = identity_of(p, opts, settings)
     job.plan_sha256 = job.plan.job_sha256 or plan_fingerprint(job.toolpath)  # (made in the planning pass)
-    job.origin = opts.origin
+    # a drill, HPGL or SVG file placed by its own zero (origin "file", or an offset_mm and no origin) keeps that
+    # origin where it runs, whichever front end asked (issue #45 point 5: the API placed offset_mm [0, 0] by the
+    # holes' upper-left corner, the command line's --offset 0,0 by the file's zero)
+    job.origin = "file" if home is not None else opts.origin
     if home is not None:
         job.home_steps = home
     if kind == "gcode":  # it runs from where the tool stood, in the work offsets it was planned in
