@@ -168,7 +168,11 @@ def test_the_page_offers_every_choice_of_the_schema():
     checked = 0
     for o in JOB_OPTIONS:
         if o.type == "choice" and o.name in selects:
-            assert re.findall(r'<option value="([^"]*)"', selects[o.name]) == list(o.choices), o.name
+            offered = re.findall(r'<option value="([^"]*)"', selects[o.name])
+            if o.default is None:  # an empty first choice leaves the option unset: the kind's own default
+                assert offered[:1] == [""], o.name
+                offered = offered[1:]
+            assert offered == list(o.choices), o.name
             checked += 1
     assert "start" in selects and checked >= 1
 
