@@ -297,8 +297,12 @@ def cli_without(module: str, *args):
 
 
 @pytest.mark.slow
-def test_missing_extras_are_one_line_naming_the_extra(drawing):
-    proc = cli_without("parallel", "drill", drawing, "--port", "/dev/parport0", "--no-progress")
+def test_missing_extras_are_one_line_naming_the_extra(drawing, tmp_path):
+    from cam.drive.state import MachineState, write_state
+
+    known = tmp_path / "known.json"  # a machine whose position is known: the port itself is reached
+    write_state(known, MachineState())
+    proc = cli_without("parallel", "drill", drawing, "--port", "/dev/parport0", "--no-progress", "--state", known)
     assert_one_line_error(proc, "/dev/parport0", "pyparallel", "cam[parport]")
     proc = cli_without("uvicorn", "serve", "--http-port", "0")
     assert_one_line_error(proc, "uvicorn", "cam[web]")
