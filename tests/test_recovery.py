@@ -128,7 +128,7 @@ def test_jog_allowed_with_position_unknown_soft_limits_off(unknown_machine, tmp_
             with pytest.raises(PositionUnknownError, match="unknown"):
                 move()
         session.jog("x", -10)  # again: still allowed, still unknown
-        assert session.wait_idle(30) and session.last_run["status"] == "finished"
+        assert session.wait_idle(30) and session.last_run["status"] == "finished", session.last_run
         assert not read_state(state, m.settings).position_known
         if m.kind == "maximus":  # no switches cam reads: one line, nothing sent
             with pytest.raises(CapabilityError, match="cannot home"):
