@@ -215,6 +215,12 @@ def drill_arguments(drill_plan: Any, settings: MachineSettings = MAXIMUS_SETTING
             "tool_changes": drill_plan.tool_changes, "spindle": settings.maximus.spindle}
 
 
+HANDSHAKE_S = 5.0
+"""The least time the handshake waits for MACHINEREADY.  It is no move's margin (``timeout_s``, short so that a
+board gone silent mid-job is found soon): the board answers in milliseconds, but a busy host or emulator may read
+it late, and a short wait there refused a board that was answering."""
+
+
 def open_maximus(url: str, settings: Optional[Maximus] = None, timeout_s: Optional[float] = None) -> "MaximusBoard":
     """Open ``maximus:/dev/ttyUSB0`` (or a bare device path) as a :class:`MaximusBoard`."""
     return MaximusBoard(url, settings, timeout_s=timeout_s)
@@ -354,7 +360,7 @@ class MaximusBoard(_Drilling, _Link, AbstractContextManager):
         The firmware answers 0x61 with 0x62 at power-up and at mode selection
         (seed 000 Appendix 1, main()); anything else it may send first (the
         ``MAXIMUS_V1.0`` banner) is skipped.  Raises PortError if no
-        MACHINEREADY arrives within ``timeout_s``.
+        MACHINEREADY arrives within ``timeout_s`` (at least :data:`HANDSHAKE_S`).
         """
         with self._lock:
             if self._pending is not None or self._job_active:
@@ -368,14 +374,15 @@ class MaximusBoard(_Drilling, _Link, AbstractContextManager):
                 raise self._port_lost("read from", exc) from exc
             self._refuse_after_fault(bytes(seen))  # after a link fault: nothing until the board was reset
             self._write(bytes([ISMACHINEREADY]))
-            deadline = time.monotonic() + self.timeout_s
+            wait_s = max(self.timeout_s, HANDSHAKE_S)
+            deadline = time.monotonic() + wait_s
             while True:
                 remaining = deadline - time.monotonic()
                 b = self._read_byte(max(remaining, 0.001)) if remaining > 0 else None
                 if b is None:
                     self._state = _UNKNOWN
                     raise PortError(f"MAXIMUS board on {self.device} did not answer ISMACHINEREADY (0x61) "
-                                    f"within {self.timeout_s:g} s; check the cable and reset the board")
+                                    f"within {wait_s:g} s; check the cable and reset the board")
                 if b == MACHINEREADY:
                     break
                 seen.append(b)
