@@ -126,6 +126,16 @@ def assert_surface_equal(got: np.ndarray, want: np.ndarray) -> None:
 
 
 @pytest.fixture
+def small_pin_log_queue(monkeypatch):
+    """Makes a streamed pin log's writer queue small (one group of 4096 writes).  How full its default queue (up to
+    about 13 MB) is when a peak of memory is taken depends on the disk and the scheduler, not on the job, so
+    memory tests that compare two jobs' peaks use this to compare what the jobs hold."""
+    import cam.drive.ports as ports
+    monkeypatch.setattr(ports, "_LOG_QUEUE", 1)
+    monkeypatch.setattr(ports, "_LOG_ROWS", 1 << 12)
+
+
+@pytest.fixture
 def tiny_settings() -> cam.MachineSettings:
     """Fast settings for real-time tests: 2 steps/pixel, 1 ms periods."""
     return cam.MachineSettings().replace(steps_per_px_xy=2, delay_xy_ms=1.0, delay_z_ms=1.0)

@@ -186,17 +186,10 @@ def _peak_of_streamed_run(d: cam.Digitized, s: cam.MachineSettings, log: Path) -
 
 
 @pytest.mark.slow
-def test_streamed_memory_grows_with_the_drawing_not_the_job(monkeypatch):
+def test_streamed_memory_grows_with_the_drawing_not_the_job(small_pin_log_queue):
     """A relief of 4x the pixels takes no more memory than its larger maps of the drawing (8 bytes a pixel) beyond
-    the smaller one's: nothing per move is held (the whole job of the larger would take about 6 MB more).
-
-    The pin log's writer thread holds a bounded queue of formatted groups (up to about 13 MB by default); how full
-    it is when the peak is taken depends on the disk and the scheduler, not on the job, so it was the noise that
-    failed this test in CI (5.4 MB one run, 10 MB the next, for the same job).  It is made small here, so
-    what is compared is what the job holds."""
-    import cam.drive.ports as ports
-    monkeypatch.setattr(ports, "_LOG_QUEUE", 1)
-    monkeypatch.setattr(ports, "_LOG_ROWS", 1 << 12)
+    the smaller one's: nothing per move is held (the whole job of the larger would take about 6 MB more).  The pin log's writer queue is made
+    small: its fill at the peak is noise (5.4 MB one CI run, 10 MB the next, for the same job)."""
     s = cam.MachineSettings().replace(travel=cam.settings.Travel(
         x_max_steps=10**6, y_max_steps=10**6, z_min_steps=-10**4, z_max_steps=10**4))
     import tempfile

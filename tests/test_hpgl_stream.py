@@ -172,7 +172,7 @@ def _peak_of_streamed_run(path: Path, s) -> int:
 
 
 @pytest.mark.slow
-def test_streamed_memory_does_not_grow_with_the_file(tmp_path):
+def test_streamed_memory_does_not_grow_with_the_file(tmp_path, small_pin_log_queue):
     """Planning, the extent and a run with its pin log of a file 4x longer take about the same peak memory. (What
     a plan keeps for the journal, the last ~4 chunks of moves, is full at the smaller file already.)"""
     s = cam.MachineSettings().replace(ramp="lookahead", travel=cam.settings.Travel(
