@@ -78,6 +78,13 @@ and then keeps its built-in value.  An unknown key or a bad value is a
     baud = 115200
     reply_margin_s = 1.0     # a reply is due this long after the move it answers should have ended
 
+    [commands]          # a control unit driven by command bytes on the parallel port (seed 004 section 3.5)
+    x_plus = 0x4B       # the byte of one step toward +X (the seed's X_INC); -1 (the default): not declared
+    x_minus = -1        # ... y_plus, y_minus, z_plus (one step deeper), z_minus, spindle_on, spindle_off
+    init = -1           # sent once before the first command byte of a port (-1: nothing)
+    strobe_us = 10.0    # the strobe pulse of each byte
+    byte_gap_us = 20.0  # the least time from one command byte to the next
+
     [tool]              # the cutter drawings are planned for (--tool overrides it)
     shape = "point"     # "point" (the thesis's model), "flat", "ball" or "v"
     diameter_mm = 0.0   # flat and ball: the cutting diameter; V: where the cone ends (0: 1/8 inch)
@@ -127,8 +134,8 @@ else:  # pragma: no cover
 
 from .errors import CamError, SettingsError
 
-__all__ = ["Travel", "Pins", "Maximus", "Inputs", "Homing", "MockSwitches", "MachineSettings", "load_settings",
-           "DEFAULT_SETTINGS", "RAMP_MODES", "INPUT_PINS", "INPUT_BITS", "SWITCH_NAMES"]
+__all__ = ["Travel", "Pins", "Maximus", "Commands", "COMMAND_KEYS", "Inputs", "Homing", "MockSwitches",
+           "MachineSettings", "load_settings", "DEFAULT_SETTINGS", "RAMP_MODES", "INPUT_PINS", "INPUT_BITS", "SWITCH_NAMES"]
 
 RAMP_MODES = ("lookahead", "linear40", "constant")
 """Speed ramp modes (see :mod:`cam.drive.ramps`)."""
@@ -366,6 +373,57 @@ class Maximus:
         return self.drill_z_down_steps > 0
 
 
+COMMAND_KEYS = ("x_plus", "x_minus", "y_plus", "y_minus", "z_plus", "z_minus", "spindle_on", "spindle_off", "init")
+"""The command bytes of ``[commands]``, in the order :class:`Commands` declares them."""
+
+
+@dataclass(frozen=True)
+class Commands:
+    """A control unit that takes command bytes on the parallel port (``[commands]``; the ``cmd:`` ports of
+    :mod:`cam.drive.cmd_port`).
+
+    Seed 004 section 3.5 ("Control the CNC machine"): the standalone controller drives the CNC machine's
+    control unit by sending it commands on the parallel port, one data byte latched by a strobe pulse for
+    each; "one step of the stepper motor results in a movement of 0,0254 mm"; a list of commands "controls
+    the movement in all three axes, spindle control, initialization of the machine"; a timer interrupt sends
+    each command after its delay, "in the order of a couple hundred microseconds" (3.5.1), ramped over 40
+    steps (3.5.2).  The seed gives one byte: ``#define X_INC (0x4B)`` (3.5.3), one step in +X.  Every other
+    byte is the control unit's own: read it off your unit (the seed's authors found theirs with a logic
+    analyser on the port).
+
+    Each byte is -1 (not declared: a job that needs it is refused before anything moves) or 0..255.
+    ``<axis>_plus`` is one step toward + of cam's machine frame on that axis (+Z deeper): the step a step/dir
+    port makes with that axis's direction bit high; ``<axis>_minus`` the step toward -.
+    """
+
+    x_plus: int = -1
+    x_minus: int = -1
+    y_plus: int = -1
+    y_minus: int = -1
+    z_plus: int = -1
+    z_minus: int = -1
+    """One step of an axis toward + (X right, Y toward the operator, Z deeper) or toward - (seed 004: X_INC =
+    0x4B is ``x_plus``)."""
+    spindle_on: int = -1
+    spindle_off: int = -1
+    """Switch the spindle."""
+    init: int = -1
+    """Sent once, before the first command byte a port sends (the seed's "initialization of the machine")."""
+    strobe_us: float = 10.0
+    """Width of the strobe pulse that latches each byte (us)."""
+    byte_gap_us: float = 20.0
+    """The least time from one command byte to the next (us): several axes stepping at once go one after
+    another, this far apart."""
+
+    def declared(self) -> dict[str, int]:
+        """The bytes declared, ``key -> byte``, in the order of :data:`COMMAND_KEYS`.
+
+        >>> Commands(x_plus=0x4B, init=0x01).declared()
+        {'x_plus': 75, 'init': 1}
+        """
+        return {k: getattr(self, k) for k in COMMAND_KEYS if getattr(self, k) >= 0}
+
+
 @dataclass(frozen=True)
 class MachineSettings:
     """Everything `cam` knows about the machine.  Frozen: make changed copies with :meth:`replace`."""
@@ -410,6 +468,7 @@ class MachineSettings:
     travel: Travel = field(default_factory=Travel)
     pins: Pins = field(default_factory=Pins)
     maximus: Maximus = field(default_factory=Maximus)
+    commands: Commands = field(default_factory=Commands)
     tool: ToolShape = field(default_factory=ToolShape)
     inputs: Inputs = field(default_factory=Inputs)
     homing: Homing = field(default_factory=Homing)
@@ -459,8 +518,8 @@ DEFAULT_SETTINGS = MachineSettings()
 _DERIVED = frozenset({"mm_per_step_y"})
 """Settings no machine file gives: the MAXIMUS board's settings derive them (:class:`MachineSettings`)."""
 
-_SECTIONS = {"travel": Travel, "pins": Pins, "maximus": Maximus, "tool": ToolShape, "inputs": Inputs,
-             "homing": Homing, "mock": MockSwitches}
+_SECTIONS = {"travel": Travel, "pins": Pins, "maximus": Maximus, "commands": Commands, "tool": ToolShape,
+             "inputs": Inputs, "homing": Homing, "mock": MockSwitches}
 
 
 def _type_ok(value: Any, kind: type) -> bool:
@@ -548,6 +607,7 @@ def _validate(s: MachineSettings, source: str) -> None:
             raise bad(f"pins.{name}", f"uses pin {pin}, already used by 'pins.{seen[pin]}'")
         seen[pin] = name
     _validate_maximus(s.maximus, bad)
+    _validate_commands(s.commands, bad)
     _validate_tool(s.tool, bad)
     _validate_inputs(s.inputs, bad)
     _validate_homing(s, bad)
@@ -650,6 +710,22 @@ def _validate_maximus(m: Maximus, bad: Any) -> None:
         raise bad("maximus.baud", f"must be 1..4000000, got {m.baud}")
     if not (0.05 <= m.reply_margin_s <= 60):
         raise bad("maximus.reply_margin_s", f"must be 0.05..60 s, got {m.reply_margin_s}")
+
+
+def _validate_commands(c: Commands, bad: Any) -> None:
+    for key in COMMAND_KEYS:
+        if not -1 <= getattr(c, key) <= 255:
+            raise bad(f"commands.{key}", f"must be a byte 0..255, or -1 when not declared, got {getattr(c, key)}")
+    seen: dict[int, str] = {}
+    for key, byte in c.declared().items():
+        if byte in seen:
+            raise bad(f"commands.{key}", f"is 0x{byte:02X}, already the byte of 'commands.{seen[byte]}'")
+        seen[byte] = key
+    if not 0.1 <= c.strobe_us <= 10000:
+        raise bad("commands.strobe_us", f"must be 0.1..10000 us, got {c.strobe_us}")
+    if not c.strobe_us <= c.byte_gap_us <= 100000:
+        raise bad("commands.byte_gap_us", f"must be commands.strobe_us ({c.strobe_us:g})..100000 us (the strobe "
+                  f"pulse ends before the next byte), got {c.byte_gap_us}")
 
 
 def settings_from_mapping(table: Mapping[str, Any], source: str = "settings",
