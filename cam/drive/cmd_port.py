@@ -196,6 +196,8 @@ class CommandMockPort(MockPort):
     """
 
     name = "cmd:mock"
+    backend = "cmd"
+    """The back end that owns this port (:mod:`cam.drive.machines`)."""
 
     def __init__(self, settings: MachineSettings, **mockport_kwargs: Any) -> None:
         if mockport_kwargs.get("switches") is not None:
@@ -233,12 +235,18 @@ class CommandParallelPort(ParallelPort):
     (:meth:`write_many`) goes out at once, byte after byte.
 
     Args:
+        device: the port, e.g. ``/dev/parport0`` (its name is then ``cmd:/dev/parport0``).
         settings: the machine settings (``pins`` of the writes it is given, ``commands``).
-        device: the port, e.g. ``/dev/parport0``.
+
+    Raises:
+        PortError: the port cannot be opened (as :class:`~cam.drive.ports.ParallelPort`).
     """
 
-    def __init__(self, settings: MachineSettings, device: str) -> None:
+    backend = "cmd"
+
+    def __init__(self, device: str, settings: MachineSettings) -> None:
         super().__init__(device)
+        self.name = f"cmd:{device}"
         self.settings = settings
         self._commands = _Translator(settings)
         self._strobe_ns = _ns(settings.commands.strobe_us)
@@ -280,21 +288,21 @@ def _spin_until(wall_ns: int) -> None:
         pass
 
 
-def needed_commands(points_steps: np.ndarray, *, start_steps: Optional[np.ndarray] = None) -> set[str]:
+def needed_commands(points_steps: np.ndarray, *, from_steps: Optional[np.ndarray] = None) -> set[str]:
     """The step commands (``x_plus`` .. ``z_minus``) moves through these points need.
 
     Args:
         points_steps: ``(N, 3)`` int positions (x, y, z) in machine steps (+Z deeper), in the order the tool
             goes through them.
-        start_steps: ``(3,)`` where the tool stands before the first point (None: the moves between the
-            points alone).
+        from_steps: ``(3,)`` where the tool stands before the first point, in the points' frame (None: the moves
+            between the points alone).
 
     >>> sorted(needed_commands(np.array([[0, 0, 0], [5, 0, 2], [3, 4, 2]])))
     ['x_minus', 'x_plus', 'y_plus', 'z_plus']
     """
     pts = np.asarray(points_steps, np.int64).reshape(-1, 3)
-    if start_steps is not None:
-        pts = np.concatenate([np.asarray(start_steps, np.int64).reshape(1, 3), pts])
+    if from_steps is not None:
+        pts = np.concatenate([np.asarray(from_steps, np.int64).reshape(1, 3), pts])
     if len(pts) < 2:
         return set()
     diff = np.diff(pts, axis=0)
@@ -302,12 +310,17 @@ def needed_commands(points_steps: np.ndarray, *, start_steps: Optional[np.ndarra
     return {key for a in range(3) for key, used in zip(STEP_KEYS[a], (up[a], down[a])) if used}
 
 
-def check_commands(job_or_pieces: Any, settings: MachineSettings) -> None:
+def check_commands(job_or_pieces: Any, settings: MachineSettings, *,
+                   start_steps: Optional[tuple[int, int, int]] = None) -> None:
     """Refuse, before anything moves, a job that needs a command ``[commands]`` does not declare.
 
     ``job_or_pieces``: a :class:`~cam.job.model.JobLike` (its :meth:`pieces`, one at a time: bounded memory),
     an iterable of pieces (each with ``points_steps``) or an ``(N, 3)`` array of points.  The tool starts at
     the job's home (0, 0, 0).  A job that goes deeper needs ``z_minus`` too: a stop lifts the tool.
+
+    ``start_steps``: where the tool stands in the machine frame when the job starts (as
+    :func:`~cam.drive.chunks.plan_chunks` takes it).  The job's points are steps from there, so it changes no
+    byte the job needs; it is not read.
 
     Raises:
         CapabilityError: one line naming the first undeclared key (and any others).
@@ -324,7 +337,7 @@ def check_commands(job_or_pieces: Any, settings: MachineSettings) -> None:
         pts = np.asarray(getattr(piece, "points_steps", piece), np.int64).reshape(-1, 3)
         if not len(pts):
             continue
-        needed |= needed_commands(pts, start_steps=last)
+        needed |= needed_commands(pts, from_steps=last)
         last = pts[-1]
     stepped = set(needed)
     if "z_plus" in needed:
