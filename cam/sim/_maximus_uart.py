@@ -74,6 +74,15 @@ class _Uart:
             self._line.notify_all()
             return True
 
+    def _line_readable(self) -> bool:
+        """Whether the line holds bytes not taken into the receive buffer yet (call with ``_line`` held)."""
+        if self._master < 0:
+            return False
+        try:
+            return bool(select.select([self._master], [], [], 0)[0])
+        except (OSError, ValueError):
+            return False
+
     def _discard_line(self) -> None:
         """At power-up: what arrived before is lost."""
         self._take_bytes()
@@ -146,11 +155,11 @@ class _Uart:
             with self._line:
                 if self._arrivals:
                     seen, b = self._arrivals.popleft()
+                    self._state = BUSY  # with the byte taken, under the lock: never idle with a byte in hand
                     break
                 self._line.wait(0.05)
         with self._lock:
             self._rx_rows.append((self._t_ns, b, where))
-        self._state = BUSY
         if self._speed is not None and seen > self._wall_s(self._t_ns):
             self._anchor(seen)
         return b

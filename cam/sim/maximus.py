@@ -357,14 +357,37 @@ class MaximusEmulator(_Program, _Hardware, _Uart, AbstractContextManager):
         """The emulator's own (x, y, z) count of enabled step pulses since power-up."""
         return tuple(self._pos)  # type: ignore[return-value]
 
-    def wait_for_state(self, state: str, timeout_s: float = 2.0) -> bool:
-        """Wait until the firmware waits for a byte at ``state``; False on timeout."""
+    def wait_for_state(self, state: str, timeout_s: float = 30.0) -> bool:
+        """Wait until the firmware waits for a byte at ``state``; False if it does not within ``timeout_s`` (a
+        failure guard: a busy computer may take its time, so it is long)."""
         deadline = time.monotonic() + timeout_s
         while time.monotonic() < deadline:
             if self._state == state:
                 return True
             time.sleep(0.002)
         return self._state == state
+
+    @property
+    def idle(self) -> bool:
+        """Whether the firmware waits for a byte (at a label, not ``"BUSY"``) and none has come that it has not
+        read: every byte written to the line by now is acted on, so nothing more moves or answers until the
+        next one."""
+        with self._line:
+            if self._state in (BUSY, "CRASHED") or self._arrivals:
+                return False
+            return not self._line_readable()
+
+    def wait_until_idle(self, timeout_s: float = 30.0) -> bool:
+        """Wait until the firmware is :attr:`idle`: it has acted on every byte written to it so far (a move it
+        was given has ended, its answer is written) and waits for the next.  False if not within ``timeout_s``
+        (a failure guard).  What a test checks after it (nothing more was sent, nothing moves) is then settled,
+        on a busy computer as on an idle one."""
+        deadline = time.monotonic() + timeout_s
+        while not self.idle:
+            if time.monotonic() >= deadline:
+                return False
+            time.sleep(0.002)
+        return True
 
     # ------------------------------------------------------------------ faults
     def drop_next_reply(self, *, match: int | None = None, skip: int = 0) -> None:
