@@ -15,18 +15,22 @@ from cam.drive.maximus.board import (  # noqa: E402
     LinkFault, MaximusBoard, close_drill_packet, drill_moves, drill_packet, init_packet, jog_exit_packet, jog_packet,
     offset_packet, open_maximus, start_drill_packet,
 )
+from cam.drive.maximus._link import SLOWER_FACTOR  # noqa: E402
+from cam.drive.maximus.packets import drill_time_ns, switch_time_ns  # noqa: E402
 from cam.drive.maximus.protocol import (  # noqa: E402
     BANNER, HOME_SWITCH_Y, ONEHOLEDRILLED, PORT_B, PORT_D, STEPSBACKATLIMIT,
 )
 from cam.sim.maximus import (  # noqa: E402
     DRILL_MODE1_INPUT, JOG_DATA_INPUT, MODE_SELECTION, POWER_UP, PortLog, start_emulator,
 )
+from support.maximus_host import GUARD_MARGIN_S, record_reads, silent_read  # noqa: E402
 from support.maximus_log import decode_port_log, drilled_holes, hole_strokes  # noqa: E402
 
 # over 1.3 s each: the slow tier (the fast tier stays under 3 minutes, docs/tests.md)
 SLOW_CASES = {'test_late_reply'}
 
-TIMEOUT_S = 0.5
+TIMEOUT_S = GUARD_MARGIN_S  # the reply margin: a failure guard (every wait ends as its reply comes)
+SILENT_MARGIN_S = 0.5  # the margin of the one exchange a test makes go unanswered: the host finds it that soon
 HOLES = np.array([[10, 5], [40, 5], [40, 30], [100, -20], [0, 50], [-30, -10]])
 FAST = Maximus(delay_x=1, delay_y=1, delay_z_up=1, delay_z_down=1)  # 5000 pulses/s on every axis
 
@@ -39,7 +43,19 @@ def board(emu):
 
 
 def raw_port(emu) -> "serial.Serial":
-    return serial.Serial(emu.device_path, 115200, timeout=0.3)
+    """The emulator's line, as a host opens it; a read waits for its byte (the timeout is a failure guard)."""
+    return serial.Serial(emu.device_path, 115200, timeout=TIMEOUT_S)
+
+
+def no_answer(emu, ser: "serial.Serial") -> None:
+    """The firmware read every byte sent and answered none: once it waits for the next byte (everything sent is
+    acted on), nothing has come."""
+    assert emu.wait_until_idle()
+    ser.timeout = 0.05  # bytes written by now: only the pseudo-terminal's own delivery
+    try:
+        assert ser.read(1) == b""
+    finally:
+        ser.timeout = TIMEOUT_S
 
 
 def hole_packets(emu) -> list[bytes]:
@@ -108,7 +124,7 @@ def test_decoder_reads_a_hand_built_log():
 
 # ---------------------------------------------------------------------- firmware behaviour
 def wait_for_power_ups(emu, n: int) -> None:
-    deadline = time.monotonic() + 2
+    deadline = time.monotonic() + TIMEOUT_S
     while emu.power_ups < n and time.monotonic() < deadline:
         time.sleep(0.002)
     assert emu.wait_for_state(POWER_UP)
@@ -122,13 +138,14 @@ def test_banner_and_handshake(emu):
         assert ser.read(len(BANNER)) == BANNER == b"MAXIMUS_V1.0"
         wait_for_power_ups(emu, 2)
         ser.write(bytes([0x00, 0x63, 0x80]))  # anything but ISMACHINEREADY: no answer
-        assert ser.read(1) == b""
+        no_answer(emu, ser)
+        assert emu.state == POWER_UP
         ser.write(b"\x61")
         assert ser.read(1) == b"\x62"
         assert emu.wait_for_state(MODE_SELECTION)
         ser.write(b"\x61")  # asked again at mode selection
         assert ser.read(1) == b"\x62"
-        assert ser.read(1) == b""
+        no_answer(emu, ser)
     board = MaximusBoard("maximus:" + emu.device_path, timeout_s=TIMEOUT_S, handshake=False)
     try:
         emu.reset()
@@ -145,8 +162,8 @@ def test_banner_and_handshake(emu):
 def test_unknown_byte_at_mode_selection_falls_into_jog_mode(emu, board):
     with raw_port(emu) as ser:
         ser.write(b"\x00")
-        assert ser.read(1) == b""  # no reply ...
-        assert emu.wait_for_state(JOG_DATA_INPUT)  # ... but the firmware is now in Jog mode
+        no_answer(emu, ser)  # no reply ...
+        assert emu.state == JOG_DATA_INPUT  # ... but the firmware is now in Jog mode
         ser.write(jog_packet("x", 3, delay=1))
         assert ser.read(1) == b"\x66"  # JOGMODEDONE
         ser.write(jog_exit_packet())
@@ -267,24 +284,43 @@ def test_bad_drill_arguments_send_nothing(emu, board):
 
 # ---------------------------------------------------------------------- faults
 def assert_stopped_at(emu, hole_index: int) -> None:
-    """No Drill Data Packet was read after the faulted hole's."""
-    time.sleep(0.05)
+    """No Drill Data Packet was read after the faulted hole's (once the firmware has acted on every byte sent)."""
+    assert emu.wait_until_idle()
     assert len(hole_packets(emu)) == hole_index + 1
+
+
+def silent_hole_deadline_s(dx: int, dy: int, z_down_steps: int) -> float:
+    """How long the host waits for an unanswered hole of ``FAST`` from :data:`SILENT_MARGIN_S`: the hole's move
+    (10 % more), a limit switch's debounce and back-off at Delay 1, the margin."""
+    init = init_packet(z_down_steps, z_down_steps, delay_x=1, delay_y=1, delay_z_up=1, delay_z_down=1)
+    move_ns = drill_time_ns(drill_packet(dx, dy), init)
+    return (move_ns * SLOWER_FACTOR + switch_time_ns(1)) / 1e9 + SILENT_MARGIN_S
+
+
+def quiet_from_hole(board, index: int):
+    """A ``before_hole`` callback: the reply margin is :data:`SILENT_MARGIN_S` from the hole of ``index`` on."""
+    def before_hole(i: int) -> None:
+        if i >= index:
+            board.timeout_s = SILENT_MARGIN_S
+    return before_hole
 
 
 def test_dropped_reply_times_out_and_nothing_follows(emu, board):
     emu.drop_next_reply(match=ONEHOLEDRILLED, skip=2)  # the SDF answer, hole 0, then hole 1's is lost
-    t0 = time.monotonic()
+    reads = record_reads(board)
     with pytest.raises(LinkFault, match=r"link fault during hole 2: the MAXIMUS board did not answer within "
                                         r"[0-9.]+ s .*nothing more sent.*last known position X=10 Y=5.*switch the "
                                         r"machine off") as info:
-        board.drill(HOLES, z_down_steps=10)
-    assert time.monotonic() - t0 < 3
+        board.drill(HOLES, z_down_steps=10, before_hole=quiet_from_hole(board, 1))
+    # the silent board is found as soon as the host's margin allows after the move: it waited for the move, a
+    # switch's allowance and the margin, and no longer (timed against the margin, not the wall clock)
+    silent = silent_read(reads)
+    assert reads[-1] is silent and silent.timeout_s == pytest.approx(silent_hole_deadline_s(30, 0, 10))
+    assert silent.waited_s >= silent.timeout_s - 0.005
+    assert f"within {silent.timeout_s:.1f} s" in str(info.value)
     assert "\n" not in str(info.value)
     assert_stopped_at(emu, 1)
-    n_read = len(emu.rx_log())
-    time.sleep(0.1)
-    assert len(emu.rx_log()) == n_read and 0x80 not in [b for _, b, _ in emu.rx_log()]  # no stop byte: nothing
+    assert 0x80 not in [b for _, b, _ in emu.rx_log()]  # no stop byte: nothing
     assert emu.wait_for_state(DRILL_MODE1_INPUT)  # the firmware waits for the next packet: nothing moves
     assert not board.position_known
     with pytest.raises(PortError, match="out of step"):
@@ -305,13 +341,17 @@ def test_late_reply(emu, board):
     emu.delay_next_reply(0.3, match=ONEHOLEDRILLED, skip=1)  # late but inside the margin: fine
     assert board.drill(HOLES[:2], z_down_steps=5) == 2
     n_before = len(hole_packets(emu))
-    emu.delay_next_reply(3.0, match=ONEHOLEDRILLED, skip=4)  # hole 4 answers long after its deadline
-    t0 = time.monotonic()
+    reads = record_reads(board)
+    late_s = 3 * silent_hole_deadline_s(60, -50, 5)
+    emu.delay_next_reply(late_s, match=ONEHOLEDRILLED, skip=4)  # hole 4 answers long after its deadline
     with pytest.raises(LinkFault, match=r"during hole 4: the MAXIMUS board did not answer within [0-9.]+ s"):
-        board.drill(HOLES, z_down_steps=5)
-    assert time.monotonic() - t0 < 2.0  # the move's few ms, a switch's 0.44 s, the 0.5 s margin; no stop byte
-    time.sleep(0.05)
+        board.drill(HOLES, z_down_steps=5, before_hole=quiet_from_hole(board, 3))
+    # found at its deadline (the move's few ms, a switch's 0.44 s, the margin), not at the late reply
+    silent = silent_read(reads)
+    assert silent.timeout_s == pytest.approx(silent_hole_deadline_s(60, -50, 5))
+    assert emu.wait_until_idle()  # the late reply went out; nothing was sent after the fault, no stop byte:
     assert len(hole_packets(emu)) - n_before == 4
+    assert bytes(b for _, b, _ in emu.rx_log()[-5:]) == hole_packets(emu)[-1]  # the last byte read is hole 4's
 
 
 def test_limit_switch_at_the_travel_end_ends_the_job():
@@ -346,10 +386,18 @@ def test_injected_limit_switch_during_a_jog(emu, board):
     assert board.in_step
 
 
+def wait_for(condition, timeout_s: float = TIMEOUT_S) -> None:
+    """Wait for ``condition()`` (``timeout_s``: a failure guard)."""
+    deadline = time.monotonic() + timeout_s
+    while not condition():
+        assert time.monotonic() < deadline, "timed out"
+        time.sleep(0.002)
+
+
 def test_emergency_stop_during_a_move():
     emu = start_emulator(speed=1.0)  # real timing: the long move takes 0.4 s
     try:
-        board = MaximusBoard(emu.device_path, FAST, timeout_s=2.0)
+        board = MaximusBoard(emu.device_path, FAST, timeout_s=TIMEOUT_S)
         holes = np.array([[5, 0], [2005, 0], [2010, 0]])
         result: dict[str, BaseException] = {}
 
@@ -361,11 +409,9 @@ def test_emergency_stop_during_a_move():
 
         worker = threading.Thread(target=job)
         worker.start()
-        deadline = time.monotonic() + 5
-        while emu.position_pulses[0] < 300 and time.monotonic() < deadline:
-            time.sleep(0.002)
+        wait_for(lambda: emu.position_pulses[0] >= 300)
         assert board.emergency_stop() is True
-        worker.join(5)
+        worker.join(TIMEOUT_S)
         assert not worker.is_alive()
         error = result["error"]
         assert isinstance(error, PortError)
@@ -373,8 +419,7 @@ def test_emergency_stop_during_a_move():
         assert_stopped_at(emu, 1)
         x = emu.position_pulses[0]
         assert 300 <= x < 2005
-        time.sleep(0.1)
-        assert emu.position_pulses[0] == x  # nothing moves any more
+        assert emu.wait_until_idle() and emu.position_pulses[0] == x  # nothing moves any more
         # MACHINESTOPPED came right after the stop byte cut the drivers (ENABLE_X, _Y, _Z low); then the host
         # switched the spindle off, with a Jog packet of no pulses (it energises the motors again, standing still)
         ports, cut = {}, False
@@ -396,10 +441,10 @@ def test_ctrl_c_during_a_move_then_emergency_stop_like_the_cli():
     # Ctrl-C as a terminal delivers it: Python's own SIGINT handler, whatever earlier tests in this process left
     previous = signal.signal(signal.SIGINT, signal.default_int_handler)
     try:
-        board = MaximusBoard(emu.device_path, FAST, timeout_s=2.0)
+        board = MaximusBoard(emu.device_path, FAST, timeout_s=TIMEOUT_S)
 
         def press_ctrl_c() -> None:
-            deadline = time.monotonic() + 5
+            deadline = time.monotonic() + TIMEOUT_S
             while emu.position_pulses[0] < 300 and time.monotonic() < deadline:
                 time.sleep(0.002)
             signal.pthread_kill(main_ident, signal.SIGINT)

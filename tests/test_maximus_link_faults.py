@@ -13,6 +13,7 @@ import json
 import random
 import time
 from contextlib import contextmanager
+from dataclasses import dataclass, field
 from typing import Iterator, Optional
 
 import numpy as np
@@ -20,6 +21,8 @@ import pytest
 
 from cam.cli import main  # noqa: E402
 from cam.drive.maximus.board import LinkFault, MaximusBoard  # noqa: E402
+from cam.drive.maximus._link import SLOWER_FACTOR  # noqa: E402
+from cam.drive.maximus.packets import switch_time_ns  # noqa: E402
 from cam.drive.maximus._trust import fault_marker  # noqa: E402
 from cam.drive.maximus.protocol import (  # noqa: E402
     ATOFFSETPOS, DRILLMODE1DONE, DRILLMODE1INITIALIZED, DRILLMODE1ON, JOGMODEDONE, JOGMODEOFF, JOGMODEON,
@@ -28,6 +31,9 @@ from cam.drive.maximus.protocol import (  # noqa: E402
 from cam.errors import CamError  # noqa: E402
 from cam.settings import Maximus  # noqa: E402
 from cam.sim.maximus import BUSY, POWER_UP, start_emulator  # noqa: E402
+from support.maximus_host import (  # noqa: E402
+    GUARD_MARGIN_S, Read, record_reads, short_margin_from, silent_read, writes_after_fault,
+)
 from support.serial_proxy import PtyProxy  # noqa: E402
 
 # over 1.3 s each: the slow tier (the fast tier stays under 3 minutes, docs/tests.md)
@@ -39,7 +45,8 @@ SLOW_CASES = {
     'test_no_board_is_opened_after_a_fault_until_its_marker_is_deleted'}
 
 FAST = Maximus(delay_x=1, delay_y=1, delay_z_up=1, delay_z_down=1)  # 5000 pulses/s, half steps
-MARGIN_S = 0.2
+MARGIN_S = 0.2  # the reply margin from the packet a fault leaves unanswered: the host finds the silence that soon
+# (every other reply's margin is GUARD_MARGIN_S, a failure guard: those replies come, however busy the computer)
 HOLES = np.array([[300, 120], [520, 120], [520, 400]])  # board pulses from the start, y up
 Z_DOWN = 60
 
@@ -74,8 +81,24 @@ def line(**proxy_options) -> Iterator[tuple[object, PtyProxy]]:
     assert emu.error is None, repr(emu.error)
 
 
-def drill(proxy: PtyProxy) -> int:
-    with MaximusBoard(proxy.device_path, FAST, timeout_s=MARGIN_S) as board:
+@dataclass
+class Host:
+    """What a test saw the host do: its reads (:func:`record_reads`) and its writes after a link fault."""
+
+    reads: list[Read] = field(default_factory=list)
+    after_fault: list[bytes] = field(default_factory=list)
+
+
+def drill(proxy: PtyProxy, silent_from: Optional[int] = None, host: Optional[Host] = None) -> int:
+    """The job through the proxy; the reply margin is MARGIN_S from the packet holding the host's byte number
+    ``silent_from`` (counted as the proxy counts: the handshake's byte is 0) on, the guard before it."""
+    with MaximusBoard(proxy.device_path, FAST, timeout_s=GUARD_MARGIN_S, handshake=False) as board:
+        if silent_from is not None:
+            short_margin_from(board, silent_from, MARGIN_S)
+        if host is not None:
+            host.reads = record_reads(board)
+            host.after_fault = writes_after_fault(board)
+        board.handshake()
         try:
             return board.drill(HOLES, z_down_steps=Z_DOWN)
         finally:
@@ -87,18 +110,22 @@ def clean_run() -> dict:
     """The job on a clean line: the host's byte stream, where each packet starts in it, the replies."""
     with line() as (emu, proxy):
         assert drill(proxy) == len(HOLES)
-        time.sleep(0.05)
+        settle(emu, proxy)
         packets = emu.packet_log()
         stream = bytes(proxy.to_board)
         holes = [tuple(r[1:3]) for r in emu.hole_log()]
         to_host = bytes(proxy.to_host)
+        replies = len(emu.tx_log())  # MACHINEREADY, then one reply per packet
+        moves_s = emu.port_log().t_ns[-1] / 1e9  # the whole job's moves, on the firmware's clock
     assert holes == [tuple(h) for h in HOLES.tolist()]
     offset = len(stream) - sum(len(p) for _, p in packets)  # the power-up handshake's byte is no packet
     first: dict[str, int] = {}
     holes_before: dict[str, int] = {}  # hole packets before the first packet of each kind
     holes_at: list[int] = []
+    starts: list[int] = []  # where each packet starts in the host's stream
     for kind, packet in packets:
         assert stream[offset:offset + len(packet)] == packet
+        starts.append(offset)
         name = label(kind, packet)
         first.setdefault(name, offset)
         holes_before.setdefault(name, len(holes_at))
@@ -107,36 +134,49 @@ def clean_run() -> dict:
         offset += len(packet)
     assert offset == len(stream) and set(first) == set(REPLY)
     first["hole"], holes_before["hole"] = holes_at[1], 1  # the second hole: one is drilled before the fault
-    return {"first": first, "holes_before": holes_before, "stream": stream, "to_host": to_host}
+    assert replies == len(packets) + 1 and len(to_host) >= replies
+    return {"first": first, "holes_before": holes_before, "stream": stream, "to_host": to_host, "starts": starts,
+            "first_reply": len(to_host) - replies, "moves_s": moves_s}
 
 
-def settle(emu, proxy: PtyProxy, timeout_s: float = 10.0) -> None:
-    """Wait until the board has read every byte it was given and ended the move they asked for, if any."""
-    deadline = time.monotonic() + timeout_s
-    while (emu.state == BUSY or len(emu.rx_log()) < proxy.forwarded) and time.monotonic() < deadline:
-        time.sleep(0.005)
+def settle(emu, proxy: PtyProxy) -> None:
+    """Wait until the line has passed on every byte either way and the board has acted on every byte it was given
+    (a move it got has ended, its answer is out) and waits for the next (GUARD_MARGIN_S: a failure guard)."""
+    deadline = time.monotonic() + GUARD_MARGIN_S
+    while not (proxy.drained and len(emu.rx_log()) >= proxy.forwarded and emu.idle):
+        assert time.monotonic() < deadline, (emu.state, len(emu.rx_log()), proxy.forwarded)
+        time.sleep(0.002)
 
 
-def assert_safe(emu, proxy: PtyProxy, error: BaseException) -> None:
+def assert_safe(emu, proxy: PtyProxy, error: BaseException, host: Host) -> None:
     """The host raised a LinkFault and sent nothing after it; the board drilled only holes of the job and
     nothing moves any more."""
     assert isinstance(error, LinkFault) and isinstance(error, CamError), repr(error)
     assert "\n" not in str(error) and "nothing more sent" in str(error)
-    sent = len(proxy.to_board)
-    settle(emu, proxy)
-    at = emu.position_pulses
-    time.sleep(0.15)
-    assert emu.position_pulses == at and emu.state != BUSY  # nothing moves: the firmware waits for a byte
-    assert len(proxy.to_board) == sent  # the host sent nothing after the fault
+    assert host.after_fault == []  # the host sent nothing after the fault
+    settle(emu, proxy)  # nothing moves: the firmware acted on every byte it got and waits for a byte
+    assert emu.state != BUSY
     file_holes = {tuple(h) for h in HOLES.tolist()}
     drilled = [tuple(r[1:3]) for r in emu.hole_log()]
     assert set(drilled) <= file_holes, drilled
 
 
-def run_faulty(emu, proxy: PtyProxy) -> BaseException:
+def run_faulty(emu, proxy: PtyProxy, silent_from: Optional[int] = None) -> tuple[BaseException, Host]:
+    host = Host()
     with pytest.raises(LinkFault) as info:
-        drill(proxy)
-    return info.value
+        drill(proxy, silent_from, host)
+    return info.value, host
+
+
+def assert_found_at_its_deadline(clean_run: dict, error: BaseException, host: Host) -> None:
+    """The silence was found as soon as the margin allows after the move: the host waited its deadline (the
+    unanswered packet's move, 10 % more, a limit switch's allowance, the margin MARGIN_S) and no longer; timed
+    against the margin, not the wall clock."""
+    silent = silent_read(host.reads)
+    allowance_s = SLOWER_FACTOR * clean_run["moves_s"] + switch_time_ns(1) / 1e9  # the longest move can't be longer
+    assert MARGIN_S <= silent.timeout_s <= MARGIN_S + allowance_s, (silent, allowance_s)
+    assert silent.waited_s >= silent.timeout_s - 0.005, silent
+    assert f"did not answer within {silent.timeout_s:.1f} s" in str(error)
 
 
 def cases(values, fast) -> list:
@@ -158,11 +198,9 @@ def test_a_byte_lost_on_the_way_to_the_board_is_a_fault_and_nothing_moves(clean_
     interrupts off) and tells the user to switch the machine off."""
     offset = clean_run["first"][name] + k
     with line(drop_offsets={offset}) as (emu, proxy):
-        t0 = time.monotonic()
-        error = run_faulty(emu, proxy)
-        assert time.monotonic() - t0 < 3
-        assert "did not answer within" in str(error)
-        assert_safe(emu, proxy, error)
+        error, host = run_faulty(emu, proxy, silent_from=offset)
+        assert_found_at_its_deadline(clean_run, error, host)
+        assert_safe(emu, proxy, error, host)
         assert len(emu.hole_log()) == clean_run["holes_before"][name]  # the holes before it, where they belong
 
 
@@ -173,17 +211,17 @@ def test_an_early_reply_byte_is_a_fault(clean_run, name):
     offset = clean_run["first"][name] + LENGTH[name]
     with line() as (emu, proxy):
         proxy.inject(bytes([REPLY[name]]), after_offset=offset, delay_s=0.010)
-        assert_safe(emu, proxy, run_faulty(emu, proxy))
+        assert_safe(emu, proxy, *run_faulty(emu, proxy))
 
 
 def test_the_issues_stray_onehole_drilled_names_the_hole_and_its_timing(clean_run):
     offset = clean_run["first"]["hole"] + 5
     with line() as (emu, proxy):
         proxy.inject(bytes([ONEHOLEDRILLED]), after_offset=offset, delay_s=0.010)
-        error = run_faulty(emu, proxy)
-        assert "link fault during hole 2: ONEHOLEDRILLED (0x69) came 0.0" in str(error)
+        error, host = run_faulty(emu, proxy)
+        assert "link fault during hole 2: ONEHOLEDRILLED (0x69) came 0." in str(error)
         assert "but its move takes" in str(error) and "switch the machine off" in str(error)
-        assert_safe(emu, proxy, error)
+        assert_safe(emu, proxy, error, host)
         assert [tuple(r[1:3]) for r in emu.hole_log()] == [tuple(h) for h in HOLES[:2].tolist()]  # it ends hole 1
 
 
@@ -199,7 +237,7 @@ def test_garbage_towards_the_host_is_a_fault(clean_run, where, garbage):
     offset = clean_run["first"][where] + LENGTH[where]
     with line() as (emu, proxy):
         proxy.inject(garbage, after_offset=offset, delay_s=0.002)
-        assert_safe(emu, proxy, run_faulty(emu, proxy))
+        assert_safe(emu, proxy, *run_faulty(emu, proxy))
 
 
 def test_a_flood_towards_the_host_is_a_fault(clean_run):
@@ -207,14 +245,14 @@ def test_a_flood_towards_the_host_is_a_fault(clean_run):
     flood = bytes(rng.randrange(256) for _ in range(3000))
     with line() as (emu, proxy):
         proxy.inject(flood, after_offset=clean_run["first"]["hole"] + 5, delay_s=0.005)
-        assert_safe(emu, proxy, run_faulty(emu, proxy))
+        assert_safe(emu, proxy, *run_faulty(emu, proxy))
 
 
 def test_a_flood_of_the_expected_byte_is_a_fault(clean_run):
     with line() as (emu, proxy):
         proxy.inject(bytes([ONEHOLEDRILLED]) * 500, after_offset=clean_run["first"]["start (SDF)"] + 5,
                      delay_s=0.0)
-        assert_safe(emu, proxy, run_faulty(emu, proxy))
+        assert_safe(emu, proxy, *run_faulty(emu, proxy))
 
 
 @pytest.mark.parametrize("name,k", cases([("hole", 2), ("hole", 5), ("init", 4), ("offset", 10), ("OPENJOGMODE", 0)],
@@ -222,10 +260,11 @@ def test_a_flood_of_the_expected_byte_is_a_fault(clean_run):
 def test_a_cut_cable_is_a_fault(clean_run, name, k):
     """The proxy forwards nothing more either way from the k-th byte of the packet (k = its length: right after
     it): the board ends the move it got, if any, and waits."""
-    with line(cut_after_offset=clean_run["first"][name] + k) as (emu, proxy):
-        error = run_faulty(emu, proxy)
-        assert "did not answer within" in str(error)
-        assert_safe(emu, proxy, error)
+    cut = clean_run["first"][name] + k  # the host sends this byte only after the last reply came: unanswered
+    with line(cut_after_offset=cut) as (emu, proxy):
+        error, host = run_faulty(emu, proxy, silent_from=cut)
+        assert_found_at_its_deadline(clean_run, error, host)
+        assert_safe(emu, proxy, error, host)
 
 
 def _reply_offset(to_host: bytes, byte: int, nth: int) -> int:
@@ -236,28 +275,32 @@ def _reply_offset(to_host: bytes, byte: int, nth: int) -> int:
 @pytest.mark.parametrize("byte,nth", cases([(ONEHOLEDRILLED, 2), (ATOFFSETPOS, 0), (DRILLMODE1INITIALIZED, 0),
                                             (JOGMODEDONE, 0)], {(ONEHOLEDRILLED, 2)}))
 def test_a_reply_lost_on_the_way_to_the_host_is_a_fault(clean_run, byte, nth):
-    with line(drop_reply_offsets={_reply_offset(clean_run["to_host"], byte, nth)}) as (emu, proxy):
-        error = run_faulty(emu, proxy)
-        assert "did not answer within" in str(error)
-        assert_safe(emu, proxy, error)
+    lost = _reply_offset(clean_run["to_host"], byte, nth)
+    packet = clean_run["starts"][lost - clean_run["first_reply"] - 1]  # the packet it answers (MACHINEREADY first)
+    with line(drop_reply_offsets={lost}) as (emu, proxy):
+        error, host = run_faulty(emu, proxy, silent_from=packet)
+        assert_found_at_its_deadline(clean_run, error, host)
+        assert_safe(emu, proxy, error, host)
 
 
 def test_no_board_is_opened_after_a_fault_until_its_marker_is_deleted(clean_run):
     """The next handshake byte (0x61) would complete the half packet the firmware holds: the fault leaves a
     marker, and no MaximusBoard sends anything on that device until the user, having switched the machine off
     and on, deletes it."""
-    with line(drop_offsets={clean_run["first"]["hole"] + 4}) as (emu, proxy):
-        run_faulty(emu, proxy)
+    dropped = clean_run["first"]["hole"] + 4
+    with line(drop_offsets={dropped}) as (emu, proxy):
+        run_faulty(emu, proxy, silent_from=dropped)
         settle(emu, proxy)
         sent, holes = len(proxy.to_board), emu.hole_log()
         marker = fault_marker(proxy.device_path)
         with pytest.raises(LinkFault, match=r"an earlier command on .* ended in a link fault, .*switch the machine "
                                             r"off and on, then delete .*maximus-link-fault"):
-            MaximusBoard(proxy.device_path, FAST, timeout_s=MARGIN_S)
+            MaximusBoard(proxy.device_path, FAST, timeout_s=GUARD_MARGIN_S)
+        settle(emu, proxy)
         assert marker.exists() and len(proxy.to_board) == sent and emu.hole_log() == holes
         n = emu.power_ups
         emu.reset()  # switched off and on: the half packet is gone
-        deadline = time.monotonic() + 2
+        deadline = time.monotonic() + GUARD_MARGIN_S
         while emu.power_ups == n and time.monotonic() < deadline:
             time.sleep(0.002)
         assert emu.wait_for_state(POWER_UP)
@@ -280,7 +323,7 @@ def machine_file(tmp_path, delay: int, margin_s: float):
     return path
 
 
-def cli_drill(tmp_path, port: str, delay: int = 1, margin_s: float = MARGIN_S) -> list[str]:
+def cli_drill(tmp_path, port: str, delay: int = 1, margin_s: float = GUARD_MARGIN_S) -> list[str]:
     return ["drill", str(small_board(tmp_path)), "--yes", "--offset", "0,0", "--port", f"maximus:{port}",
             "--machine", str(machine_file(tmp_path, delay, margin_s)), "--travel-height", "0.1",
             "--cut-depth", "0.2", "--report", str(tmp_path / "report.json")]
@@ -312,7 +355,7 @@ def cli_run(tmp_path, capsys, delay: int, inject_after: Optional[int] = None, th
         out, err = capsys.readouterr()
         settle(emu, proxy)  # the hole the board was given may still end
         sent = len(proxy.to_board)
-        time.sleep(0.15)
+        settle(emu, proxy)
         assert len(proxy.to_board) == sent and emu.state != BUSY  # nothing sent after the end, nothing moves
         if then is not None:
             then(proxy)

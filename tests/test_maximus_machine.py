@@ -260,7 +260,6 @@ def test_pin_log_on_the_board_is_refused_before_anything_is_sent(emu, tmp_path, 
 def test_emulator_log_file_from_the_command_line(tmp_path, monkeypatch):
     import subprocess
     import sys
-    import time
 
     log = tmp_path / "holes.csv"
     proc = subprocess.Popen([sys.executable, "-m", "cam", "emulate-maximus", "--speed", "1000", "--log", str(log)],
@@ -272,8 +271,7 @@ def test_emulator_log_file_from_the_command_line(tmp_path, monkeypatch):
         path = small_board(tmp_path, ["T1", "X1.0Y1.0", "X1.5Y1.0"])
         assert main(["where", "--set", "0,0,0", "--port", f"maximus:{device}"]) == 0  # a new machine (#43 point 5)
         assert main(["drill", str(path), "--yes", "--offset", "0,0", "--port", f"maximus:{device}",
-                     "--travel-height", "0.1", "--cut-depth", "0.2"]) == 0
-        time.sleep(0.1)
+                     "--travel-height", "0.1", "--cut-depth", "0.2"]) == 0  # each hole logged before its reply
     finally:
         proc.terminate()
         proc.wait(10)

@@ -18,23 +18,34 @@ from cam.drive.maximus.protocol import (
 from cam.sim.maximus import (
     DRILL_MODE1_INITIALIZE, DRILL_MODE1_INPUT, INITIALIZE_DRILL_MODE, JOG_DATA_INPUT, MODE_SELECTION, start_emulator,
 )
+from support.maximus_host import GUARD_MARGIN_S as GUARD_S
 
 
-def ask(ser: "serial.Serial", data: bytes, reply: int | None, wait_s: float = 0.2) -> None:
+def ask(ser: "serial.Serial", data: bytes, reply: int) -> None:
+    """Send ``data`` and read its reply (waited for: the timeout is a failure guard)."""
     ser.write(data)
-    ser.timeout = wait_s
+    ser.timeout = GUARD_S
     got = ser.read(1)
-    assert got == (bytes([reply]) if reply is not None else b""), (data.hex(), got)
+    assert got == bytes([reply]), (data.hex(), got)
+
+
+def unanswered(ser: "serial.Serial", emu, data: bytes, state: str) -> tuple[int, int, int]:
+    """Send ``data``: the firmware reads it all and waits at ``state``, without an answer, with nothing moving."""
+    at = emu.position_pulses
+    ser.write(data)
+    assert emu.wait_until_idle()  # it acted on every byte and waits for the next: an answer would be out by now
+    assert emu.state == state and emu.position_pulses == at
+    ser.timeout = 0.05  # only the pseudo-terminal's own delivery
+    assert ser.read(1) == b"", data.hex()
+    return at
 
 
 @pytest.fixture
 def port(emu):
-    with serial.Serial(emu.device_path, 115200, timeout=0.2) as ser:
+    with serial.Serial(emu.device_path, 115200, timeout=GUARD_S) as ser:
         ser.reset_input_buffer()
         ser.write(bytes([ISMACHINEREADY]))
-        deadline = time.monotonic() + 2
-        while ser.read(1) != bytes([MACHINEREADY]):
-            assert time.monotonic() < deadline
+        assert ser.read_until(bytes([MACHINEREADY])).endswith(bytes([MACHINEREADY]))
         assert emu.wait_for_state(MODE_SELECTION)
         yield ser
 
@@ -46,25 +57,17 @@ def drill_mode(ser, emu, stroke: int = 20) -> None:
     ask(ser, start_drill_packet(), ONEHOLEDRILLED)
 
 
-def still(emu, state: str) -> tuple[int, int, int]:
-    assert emu.wait_for_state(state)
-    at = emu.position_pulses
-    time.sleep(0.1)
-    assert emu.position_pulses == at and emu.state == state
-    return at
-
-
 @pytest.mark.parametrize("lost", [0, 1] + [pytest.param(k, marks=pytest.mark.slow) for k in (2, 3, 4)])
 def test_a_drill_packet_that_lost_a_byte_waits_and_the_stop_byte_completes_it(emu, port, lost):
     drill_mode(port, emu)
     packet = drill_packet(300, 40)  # 83 2c 01 28 00
-    ask(port, packet[:lost] + packet[lost + 1:], None)  # four bytes: no answer, no motion
-    assert still(emu, DRILL_MODE1_INPUT) == (0, 0, 0) and emu.hole_log() == []
+    assert unanswered(port, emu, packet[:lost] + packet[lost + 1:], DRILL_MODE1_INPUT) == (0, 0, 0)  # four bytes
+    assert emu.hole_log() == []
     if lost == 0:  # the first field's low byte 0x2c is read as the configuration: CDF clear, Drill mode ends
         ask(port, bytes([EMERGENCYSTOP]), DRILLMODE1DONE)
         assert emu.position_pulses == (0, 0, 0) and emu.hole_log() == []
         return
-    ask(port, bytes([EMERGENCYSTOP]), ONEHOLEDRILLED, 20.0)  # the "stop" byte is the fifth byte: a hole, not a stop
+    ask(port, bytes([EMERGENCYSTOP]), ONEHOLEDRILLED)  # the "stop" byte is the fifth byte: a hole, not a stop
     data = [p for kind, p in emu.packet_log() if kind == "drill"][-1]
     assert data == packet[:lost] + packet[lost + 1:] + bytes([EMERGENCYSTOP])
     assert MACHINESTOPPED not in [sent for _, _, sent in emu.tx_log()]
@@ -75,9 +78,8 @@ def test_a_drill_packet_that_lost_a_byte_waits_and_the_stop_byte_completes_it(em
 def test_a_jog_packet_that_lost_a_byte_waits_for_one_more(emu, port):
     ask(port, bytes([OPENJOGMODE]), JOGMODEON)
     packet = jog_packet("x", 300, delay=1)
-    ask(port, packet[:1] + packet[2:], None)
-    assert still(emu, JOG_DATA_INPUT) == (0, 0, 0)
-    ask(port, bytes([EMERGENCYSTOP]), JOGMODEDONE, 5.0)  # completed: X moves 0x0101 pulses at Delay 0x80
+    assert unanswered(port, emu, packet[:1] + packet[2:], JOG_DATA_INPUT) == (0, 0, 0)
+    ask(port, bytes([EMERGENCYSTOP]), JOGMODEDONE)  # completed: X moves 0x0101 pulses at Delay 0x80
     assert emu.position_pulses[0] == 0x0101
 
 
@@ -89,8 +91,7 @@ def test_offset_and_init_packets_that_lost_a_byte_wait(emu, port, length, state)
         packet = init_packet(30, 30, delay_x=1, delay_y=1, delay_z_up=1, delay_z_down=1)
     else:
         packet = offset_packet(30, 0, 0, delay_x=1, delay_y=1, delay_z=1)
-    ask(port, packet[:-1], None)
-    assert still(emu, state) == (0, 0, 0)
+    assert unanswered(port, emu, packet[:-1], state) == (0, 0, 0)
 
 
 def test_bytes_during_a_move_are_read_and_forgotten_but_the_stop_byte():
@@ -98,19 +99,21 @@ def test_bytes_during_a_move_are_read_and_forgotten_but_the_stop_byte():
     does anything (serial_isr's switch)."""
     emu = start_emulator(speed=1.0)  # the move takes 0.4 s: the bytes come during it
     try:
-        with serial.Serial(emu.device_path, 115200, timeout=1.0) as ser:
+        with serial.Serial(emu.device_path, 115200, timeout=GUARD_S) as ser:
             ser.write(bytes([ISMACHINEREADY]))
-            assert ser.read(13).endswith(bytes([MACHINEREADY]))
+            assert ser.read_until(bytes([MACHINEREADY])).endswith(bytes([MACHINEREADY]))
             drill_mode(ser, emu)
             before = len(emu.rx_log())
             ser.write(drill_packet(2000, 0))
-            time.sleep(0.05)
+            deadline = time.monotonic() + GUARD_S
+            while emu.position_pulses[0] == 0:  # the move has begun
+                assert time.monotonic() < deadline
+                time.sleep(0.002)
             ser.write(bytes([0x61, 0x00, 0x69]))
-            ser.timeout = 2.0
             assert ser.read(1) == bytes([ONEHOLEDRILLED])
-            assert emu.wait_for_state(DRILL_MODE1_INPUT)
+            assert emu.wait_until_idle() and emu.state == DRILL_MODE1_INPUT
             assert [where for _, _, where in emu.rx_log()[before:]][-3:] == ["isr"] * 3
-            ser.timeout = 0.2
+            ser.timeout = 0.05  # written by now if at all: only the pseudo-terminal's own delivery
             assert ser.read(1) == b"" and emu.position_pulses[0] == 2000
     finally:
         emu.stop()

@@ -34,6 +34,7 @@ from cam.drive.maximus.protocol import (
 )
 from cam.sim.maximus import start_emulator
 from conftest import run_cli
+from support.maximus_host import GUARD_MARGIN_S
 from support.maximus_log import decode_port_log
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -160,7 +161,7 @@ def test_hole_numbers_count_from_1_in_every_message(emu, tmp_path):
 
 
 def test_a_board_job_numbers_its_holes_from_first_number(emu):
-    board = MaximusBoard(emu.device_path, MAXIMUS_SETTINGS.maximus, timeout_s=0.5)
+    board = MaximusBoard(emu.device_path, MAXIMUS_SETTINGS.maximus, timeout_s=GUARD_MARGIN_S)
     try:
         emu.trip_limit_switch(LIMIT_SWITCH_Y, skip_moves=3)  # spindle, offset, the first hole: the second one
         with pytest.raises(PortError, match=r"tripped during hole 12;"):
@@ -194,7 +195,7 @@ def test_emulate_maximus_has_the_simulators_limit_switch_options(monkeypatch, ca
     try:
         assert emu.device_path in capsys.readouterr().out
         assert emu._axis_delay == 3
-        board = MaximusBoard(emu.device_path, MAXIMUS_SETTINGS.maximus, timeout_s=0.5)
+        board = MaximusBoard(emu.device_path, MAXIMUS_SETTINGS.maximus, timeout_s=GUARD_MARGIN_S)
         try:
             board.jog("z", -10)  # the first move: --trip limit-y@1 lets it go by
             with pytest.raises(PortError, match="LIMIT_SWITCH_Y"):
@@ -272,7 +273,7 @@ def test_a_late_emulator_thread_still_stops_at_the_stop_bytes_arrival(monkeypatc
     due until the stop byte's arrival and stops there, neither where it happened to look nor later."""
     emu = start_emulator(speed=1.0)
     try:
-        with serial.Serial(emu.device_path, 115200, timeout=2.0) as line:
+        with serial.Serial(emu.device_path, 115200, timeout=GUARD_MARGIN_S) as line:
             line.write(bytes([ISMACHINEREADY]))
             assert line.read_until(bytes([MACHINEREADY])).endswith(bytes([MACHINEREADY]))
             line.write(bytes([OPENJOGMODE]))
@@ -343,9 +344,13 @@ def test_the_pages_resume_job_goes_on_from_the_next_hole(emu, tmp_path):
 def test_a_stopped_xy_move_books_how_far_its_time_took_the_head():
     emu = start_emulator(speed=1.0)  # the firmware's own timing: the move takes 1.2 s
     try:
-        board = MaximusBoard(emu.device_path, MAXIMUS_SETTINGS.maximus)
+        board = MaximusBoard(emu.device_path, MAXIMUS_SETTINGS.maximus, timeout_s=GUARD_MARGIN_S)
         try:
-            wait = threading.Timer(0.5, board.emergency_stop)
+            def stop_in_the_move() -> None:
+                wait_for(lambda: emu.position_pulses[0] > 150)  # a quarter of the way (the X-and-Y part: to 300)
+                board.emergency_stop()
+
+            wait = threading.Thread(target=stop_in_the_move)
             wait.start()
             with pytest.raises(PortError, match="MACHINESTOPPED"):
                 board.move(600, -300, 0)  # both axes at once: a Drill Data Packet, its XY move a dog-leg

@@ -52,6 +52,7 @@ class PtyProxy:
         os.set_blocking(self._board, False)
         self._injections: list[_Injection] = []
         self._lock = threading.Lock()
+        self._pass = threading.Lock()  # held while the thread forwards what it read: see drained
         self._stop = threading.Event()
         self.cut = False
         self.forwarded = 0  # bytes the board was given
@@ -75,11 +76,30 @@ class PtyProxy:
             except (OSError, ValueError):
                 return
             now = time.monotonic()
-            if self._master in readable:
-                self._from_host(self._read(self._master), now)
-            if self._board in readable:
-                self._from_board(self._read(self._board))
+            with self._pass:
+                if self._master in readable:
+                    self._from_host(self._read(self._master), now)
+                if self._board in readable:
+                    self._from_board(self._read(self._board))
             self._due_injections(time.monotonic())
+
+    @property
+    def drained(self) -> bool:
+        """Whether every byte written to either side by now has been passed on (or dropped, as asked)."""
+        with self._pass:
+            try:
+                return not select.select([self._master, self._board], [], [], 0)[0]
+            except (OSError, ValueError):
+                return True
+
+    def wait_drained(self, timeout_s: float = 30.0) -> bool:
+        """Wait until :attr:`drained`; False if not within ``timeout_s`` (a failure guard)."""
+        deadline = time.monotonic() + timeout_s
+        while not self.drained:
+            if time.monotonic() >= deadline:
+                return False
+            time.sleep(0.002)
+        return True
 
     @staticmethod
     def _read(fd: int) -> bytes:
