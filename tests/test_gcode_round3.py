@@ -179,7 +179,8 @@ def test_gcode_cutter_compensation_matches_rs274(tmp_path, name):
 
 
 @pytest.mark.parametrize("line, fragment", [
-    ("G2 X20 Y10 I0 J5", "p.ngc:5: an arc (G2/G3) while cutter compensation is on"),
+    ("G5 X20 Y10 I0 J5 P0 Q-5", "p.ngc:5: a spline (G5/G5.1) while cutter compensation is on"),  # arcs run
+    ("G81 X5 Y5 Z-1 R1", "p.ngc:5: a move other than G0..G3 (a canned cycle, G28/G30, G53) while cutter"),
     ("G4 P1", "p.ngc:5: a dwell (G4) while cutter compensation is on"),
     ("G92 X0", "p.ngc:5: a change of plane, coordinate system or offsets while cutter compensation is on"),
     ("G41.1 D2", "p.ngc:5: cutter compensation is already on"),

@@ -116,9 +116,6 @@ class _Motion(_State):
         if self.motion == 33:
             self.thread_feed(vals, t)
             return
-        if self.comp_side:  # not compensated yet: refused before its centre is checked against the offset path
-            raise self.err("an arc (G2/G3) while cutter compensation is on is not supported: turn it off (G40) "
-                           "first")
         self.arc(vals, t)
 
     def spline(self, code: int, vals: dict[str, float]) -> None:
@@ -193,7 +190,7 @@ class _Motion(_State):
         feed = self.feed_kw(vals)
         first, second, _ = PLANE_AXES[self.plane]
         names = "ijk"
-        p0 = self.pos()
+        p0 = list(self.comp_prog) if self.comp_side else self.pos()  # compensated: from the programmed start
         u0, v0, u1, v1 = p0[first], p0[second], t[first], t[second]
         if "r" in vals:
             if any(names[i] in vals for i in (first, second)):
@@ -233,6 +230,9 @@ class _Motion(_State):
             if vals["p"] != int(vals["p"]) or not 1 <= vals["p"] <= 1000:
                 raise self.err("arc turns 'P' must be a whole number 1..1000")
             turns = int(vals["p"])
+        if self.comp_side:
+            self.comp_arc(t, (cu, cv), self.motion == 2, turns, feed)
+            return
         self.go("arc", t, center=(cu, cv), clockwise=self.motion == 2, plane=self.plane, turns=turns, **feed)
 
     def go_home(self, g30: bool, vals: dict[str, float]) -> None:

@@ -105,8 +105,8 @@ class _State:
         """Record a move of ``kind`` ending at machine mm ``mach`` (default: where the tool is), given from
         where the tool stood at the start (:attr:`start`), with the spindle's state."""
         if self.comp_side and not self.comp_emitting:
-            what = {"dwell": "a dwell (G4)", "pause": "a pause or a tool change", "arc": "an arc (G2/G3)",
-                    "spline": "a spline (G5/G5.1)"}.get(kind, "a move other than G0/G1 (a canned cycle, G28/G30, G53)")
+            what = {"dwell": "a dwell (G4)", "pause": "a pause or a tool change", "spline": "a spline (G5/G5.1)"}.get(
+                kind, "a move other than G0..G3 (a canned cycle, G28/G30, G53)")
             raise self.err(f"{what} while cutter compensation is on is not supported: turn it off (G40) first")
         end = tuple(map(sub, self.mach if mach is None else mach, self.start))
         move = GcodeMove(kind, self.line_no, end, spindle=self.spindle,  # type: ignore[arg-type]
