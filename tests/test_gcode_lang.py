@@ -12,7 +12,7 @@ import pytest
 from scipy.spatial import cKDTree
 
 import cam
-from cam.formats.gcode import load_gcode, load_tool_table, parse_gcode
+from cam.formats.gcode import ToolTable, load_gcode, load_tool_table, parse_gcode
 from cam.job.gcode import plan_gcode
 from cam.settings import MachineSettings, Travel
 from support.lcnc import CanonMove, bezier_mm, canonical_polyline_mm, parse_canonical, mark_spline_ends, run_rs274
@@ -33,8 +33,10 @@ WIDE = MachineSettings(travel=Travel(-10**8, 10**8, -10**8, 10**8, -10**8, 10**8
 TOOLS_IN = {1: 0.5, 2: -0.25, 3: 1.0, 102: 0.75}
 HOME_G28_IN = (1.0, -2.0, 0.5)
 HOME_G30_IN = (0.5, -0.5, 0.25)
-RS274_DEFAULT_TOOLS_MM = {1: 0.511 * 25.4, 2: 0.1 * 25.4, 3: 1.273 * 25.4}
-"""The tool table rs274 uses when given none (its lengths in inches, here in mm)."""
+RS274_DEFAULT_TOOLS_MM = ToolTable({1: 0.511 * 25.4, 2: 0.1 * 25.4, 3: 1.273 * 25.4},
+                                   diameters_mm={1: 0.125 * 25.4, 2: 0.0625 * 25.4, 3: 0.201 * 25.4})
+"""The tool table rs274 uses when given none (LinuxCNC's sample ``tool.tbl``: its lengths and the diameters G41/G42
+take, in inches; here in mm)."""
 
 SUBROUTINE = """o<square> sub (side, depth: a square pocket outline from where the tool stands)
 #<side> = #1
