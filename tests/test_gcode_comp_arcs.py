@@ -335,3 +335,13 @@ def test_compensated_arcs_agree_with_rs274_on_random_outlines(tmp_path):
         runs += 1
     assert runs >= 20 and refused >= 3, (runs, refused)
 
+
+@needs_rs274
+@pytest.mark.parametrize("between", ["G43.1 Z3", "T1 M6\nG43"])
+def test_exit_move_after_an_offset_or_a_tool_change_starts_like_rs274(tmp_path, between):
+    # after G40 the exit move starts from the programmed position: a tool length offset taken before it keeps
+    # the machine position (Z), a tool change reads the position again (the tool's, offset in Y); the exit move
+    # names X only
+    text = f"G21 G90 G17\nG0 X-10 Y-10\nG41.1 D4\nG1 X0 Y0 F100\nG1 X20 Y0\nG40\n{between}\nG0 X30\nM2\n"
+    moves = _moves_like_rs274(tmp_path, "exit", text)
+    assert np.allclose(moves[-1].end, (30, 2 if "M6" in between else 0, 0))

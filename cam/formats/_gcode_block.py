@@ -187,6 +187,7 @@ class _Block(_State):
             self.emit("pause", note=f"tool change: T{self.selected_tool} (line {self.line_no})")
             self.tool = self.selected_tool
             self.resync = self.pos()
+            self.comp_exit = None  # the position is read again: after G40 too, the next move starts where the tool is
         if 61 in mcodes:
             if "q" not in vals or vals["q"] != int(vals["q"]) or not 0 <= vals["q"] <= MAX_TOOL_NUMBER:
                 raise self.err("M61 needs a tool number 'Q'")

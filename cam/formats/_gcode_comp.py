@@ -19,7 +19,9 @@ G42 with G2) and grows where it is outside:
   corner that turns back on itself (within 0.05 radians of a half turn) is met where the tool is outside the
   arc after it (or, before a line, outside the arc before it), else rounded, as rs274;
 * a Z-only move keeps the XY offset of the move before it; G40 ends compensation and the next move runs
-  straight from the offset point to its programmed end (the exit move), which must not be an arc;
+  straight from the offset point to its programmed end (the exit move), which must not be an arc; an offset
+  changed before it keeps the machine position, and a tool change (M6) reads the position again, so that the
+  exit move then starts where the tool is (as rs274);
 * D0 runs the programmed path.
 
 Gouges are refused, each in one line naming the line that decides them, as rs274 refuses them: an entry move
@@ -83,7 +85,7 @@ class _Comp(_State):
     comp_corner: _Vec = (0.0, 0.0)  # the programmed end of the last XY move
     comp_queue: Optional[list[dict[str, Any]]] = None  # moves held until the next XY move decides their ends
     comp_emitting = False
-    comp_exit: Optional[list[float]] = None  # after G40: the programmed position the exit move starts from
+    comp_exit: Optional[list[float]] = None  # after G40: the programmed position the exit move starts from, machine mm
 
     def comp_on(self, side: int, diameter_mm: float) -> None:
         """G41/G41.1 (``side`` +1) or G42/G42.1 (-1) with the tool's diameter (mm)."""
@@ -96,7 +98,7 @@ class _Comp(_State):
         self.comp_side = side
         self.comp_radius_mm = diameter_mm / 2.0
         # the entry move starts from the programmed position (right after G40: the exit's, not the tool's), as rs274
-        self.comp_prog, self.comp_exit = (self.pos() if self.comp_exit is None else list(self.comp_exit)), None
+        self.comp_prog = self.comp_base()
         self.comp_dir = None
         self.comp_queue = []
 
@@ -105,7 +107,9 @@ class _Comp(_State):
         if self.comp_side:
             self.comp_flush()
             self.comp_side = 0
-            self.comp_exit, self.comp_prog = self.comp_prog, None
+            # kept in the machine frame: an offset changed before the exit move keeps the machine position (rs274)
+            self.comp_exit = [p + o for p, o in zip(self.comp_prog, self.offsets())]
+            self.comp_prog = None
 
     def comp_base(self) -> list[float]:
         """The position incremental words, unnamed axes and arc centres start from: the programmed one while
@@ -113,7 +117,7 @@ class _Comp(_State):
         if self.comp_side and self.comp_prog is not None:
             return list(self.comp_prog)
         if self.comp_exit is not None:
-            base, self.comp_exit = self.comp_exit, None
+            base, self.comp_exit = [m - o for m, o in zip(self.comp_exit, self.offsets())], None
             return base
         return self.pos()
 

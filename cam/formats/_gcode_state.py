@@ -25,7 +25,7 @@ class _State:
 
     comp_side = 0  # cutter radius compensation (:class:`~._gcode_comp._Comp`): +1 left, -1 right, 0 off
     comp_emitting = False  # its held moves are being recorded
-    comp_exit = None  # after G40: the programmed position the exit move starts from
+    comp_exit = None  # after G40: the programmed position the exit move starts from (machine mm)
 
     def __init__(self, source: _Source, *, home_g28_mm, home_g30_mm, tool_lengths_mm, subroutine_path,
                  max_lines, start_mm=(0.0, 0.0, 0.0), work_offsets_mm=None, active_offset="G54") -> None:
