@@ -31,11 +31,13 @@ A small interpreter for the LinuxCNC language (tested against LinuxCNC's own ``r
   ``name.ngc`` found in the subroutine path.
 
 Cutter radius compensation G41.1/G42.1 D<diameter>, and G41/G42 D<tool> (the tool table's diameter, D
-omitted: the tool in the spindle's) for G0/G1 moves in G17 as rs274 runs it (entry move,
-concave corners intersected, convex ones rounded, Z-only moves, G40 and the exit move): :mod:`._gcode_comp`.
+omitted: the tool in the spindle's) for G0/G1 moves and G2/G3 arcs in G17 as rs274 runs it (entry move or arc,
+arcs offset about their centres, concave corners between lines and arcs met where the offsets cross, convex ones
+rounded, Z-only moves, G40 and the exit move; a tool too big for an arc it runs inside or for a corner refused):
+:mod:`._gcode_comp`.
 
 Refused, each with a message saying why: probing (G38.x), rotary axes (A B C) and U V W, cutter
-radius compensation G41/G42 by tool number without a tool table, and arcs, cycles, dwells,
+radius compensation G41/G42 by tool number without a tool table, and splines, cycles, dwells,
 pauses or frame changes while it is on, lathe cycles and modes (G7, G7x, G76), rigid tapping (G33.1), NURBS blocks
 (G5.2/G5.3), spindle cycles (G84, G86..G88), user M codes (M100..M199) and I/O (M62..M68).
 
