@@ -16,7 +16,7 @@ from ...errors import PlanError
 from ...settings import Maximus
 from ._link import _CLOSE_DRILL, _DRILL, _INIT, _OFFSET, _Exchange
 from .packets import (
-    MAX_FIELD, close_drill_packet, drill_moved, drill_moves, drill_packet, drill_time_ns, init_packet,
+    MAX_FIELD, close_drill_packet, drill_directions, drill_moved, drill_moves, drill_packet, drill_time_ns, init_packet,
     init_time_ns, offset_packet, offset_time_ns, start_drill_packet,
 )
 from .protocol import ATOFFSETPOS, DRILLMODE1INITIALIZED, DRILLMODE1ON, ONEHOLEDRILLED, OPENDRILLMODE1
@@ -143,7 +143,8 @@ class _Drilling:
             dx, dy = (int(v) for v in group.moves[k])
             self._exchange(packet, _Exchange(f"hole {job.number(i)}", ONEHOLEDRILLED, True, "drill", _DRILL,
                                              drill_time_ns(packet, job.init), (dx, dy, 0),
-                                             partial(drill_moved, dx, dy, job.init)))
+                                             partial(drill_moved, dx, dy, job.init, whole=True),
+                                             partial(drill_directions, dx, dy, job.init)))
             drilled += 1
             if on_hole is not None:
                 on_hole(drilled)

@@ -13,11 +13,13 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from typing import Callable, Optional, TypeVar
+from functools import partial
+from typing import Callable, Optional, Sequence, TypeVar
 
 from ...errors import PortError
 from .packets import (
-    close_drill_packet, init_packet, jog_exit_packet, jog_packet, offset_packet, stopped_between, switch_time_ns,
+    close_drill_packet, finish_pulse_packet, init_packet, jog_exit_packet, jog_moved, jog_packet, offset_packet,
+    stopped_between, switch_time_ns,
 )
 from ._trust import LinkFault, _Trust
 from .protocol import (
@@ -51,7 +53,10 @@ class _Exchange:
     next_state: str
     move_ns: int = 0  # how long the firmware moves before it answers
     moved: tuple[int, int, int] = (0, 0, 0)  # board-frame pulses (x, y, height) the move makes
-    progress: Optional[Callable[[int], tuple[int, int, int]]] = None  # pulses moved after so many ns of the move
+    # pulses moved after so many ns of the move, a pulse half made counted whole (packets.drill_moved's ``whole``)
+    progress: Optional[Callable[[int], tuple[int, int, int]]] = None
+    # the direction (+1, -1, 0: still) each axis steps in after so many ns of the move (default: its move's sign)
+    directions: Optional[Callable[[int], tuple[int, int, int]]] = None
 
 
 def _name(byte: int) -> str:
@@ -158,14 +163,39 @@ class _Link(_Trust):
                                     f"off or disconnected")
 
     # -------------------------------------------------------------- after a stop: spindle off, mode closed
-    def _after_stop(self, mode: str) -> None:
+    def _after_stop(self, mode: str, finish: Sequence[tuple[str, int]] = ()) -> None:
         """After MACHINESTOPPED or a switch byte: Drill mode is at mode selection, Jog mode still in Jog.
 
-        The firmware leaves the spindle pin (RB2) as it was (seed 000 Appendix 1: only a Jog packet sets
-        it), so a Jog packet of no pulses with the spindle bit clear switches it off; then Jog mode is left.
+        ``finish``: ``(axis, direction)`` of each axis whose pulse the stop may have left half made; a Jog packet
+        of no pulses in that direction ends it (:meth:`_finish_pulses`).  The firmware leaves the spindle pin (RB2)
+        as it was (seed 000 Appendix 1: only a Jog packet sets it), so a Jog packet of no pulses with the spindle
+        bit clear switches it off (those packets do); then Jog mode is left.
         """
         self._state = _JOG if mode == "jog" else _MODE
+        if finish:
+            self._finish_pulses(finish)
         self._spindle_off_now()
+
+    def _finish_pulses(self, finish: Sequence[tuple[str, int]]) -> None:
+        """End the pulses a stop may have left half made, each in the direction its axis stepped, spindle off.
+
+        A stop between a pulse's falling and rising edge leaves that STEP pin low, and the axis's next move would
+        make one rising edge more than it asks, in that move's direction (the listing's "Add last step";
+        cam.sim.maximus point 14): the head would stand a pulse off where the host books it.  A Jog packet of no
+        pulses ends with that rising edge (:func:`~.packets.finish_pulse_packet`): the pulse is made now, in the
+        stopped move's direction, so the head stands where the stopped move's time says to the nearest whole
+        pulse, which is what :meth:`_book_stopped_move` books.  A pin left high makes nothing."""
+        if self._state == _MODE:
+            self._exchange(bytes([OPENJOGMODE]), _Exchange("OPENJOGMODE", JOGMODEON, False, "jog", _JOG))
+        m = self.maximus
+        for axis, direction in finish:
+            i = "xyz".index(axis)
+            packet = finish_pulse_packet(axis, direction, delay=(m.delay_x, m.delay_y, m.delay_z_up)[i],
+                                         half_step=(m.half_step_x, m.half_step_y, m.half_step_z)[i],
+                                         invert=(m.invert_x, m.invert_y, m.invert_z)[i])
+            self._exchange(packet, _Exchange(f"the end of the stopped {axis.upper()} pulse (no pulses)", JOGMODEDONE,
+                                             True, "jog", _JOG))
+            self._spindle_on = False
 
     def _spindle_off_now(self) -> None:
         """From mode selection or Jog data input: the spindle off, back at mode selection."""
@@ -183,31 +213,37 @@ class _Link(_Trust):
         """Send the Jog exit packet and expect JOGMODEOFF (no motion)."""
         self._exchange(jog_exit_packet(), _Exchange("the Jog exit packet", JOGMODEOFF, False, "jog", _MODE))
 
-    def _book_stopped_move(self, ex: _Exchange) -> int:
+    def _book_stopped_move(self, ex: _Exchange) -> tuple[int, list[tuple[str, int]]]:
         """A move stopped part of the way: book the pulses its time allowed until the stop byte (an estimate: the
         firmware does not say how far it went).  The move began as the packet's write went out and ended as the
         stop byte's did; each is known between the clock read before its write and the one after (a busy
-        computer may pause between them), so the middle is booked.  Returns how many pulses either end of that
-        time lies from the booking (0 or 1 on an idle computer)."""
-        progress = ex.progress
+        computer may pause between them), so the middle is booked, a pulse half made there counted whole.
+
+        Returns how many pulses either end of that time lies from the booking (0 or 1 on an idle computer), and
+        ``(axis, direction)`` of each axis the move steps, in its direction at that middle: the pulses
+        :meth:`_finish_pulses` ends, so that the head stands where it is booked."""
+        progress, directions = ex.progress, ex.directions
         if progress is None and ex.move_ns and sum(1 for d in ex.moved if d) == 1:  # one axis at one delay
-            move_ns, moved = ex.move_ns, ex.moved
-            progress = lambda t: tuple((1 if d > 0 else -1) * (abs(d) * min(move_ns, max(0, t)) // move_ns)  # noqa: E731
-                                       for d in moved)
+            progress = partial(jog_moved, ex.moved, ex.move_ns, whole=True)
         if progress is None or self._estop_sent_s is None:
-            return 0
+            return 0, []
+        if directions is None:
+            signs = tuple(1 if d > 0 else -1 if d < 0 else 0 for d in ex.moved)
+            directions = lambda t: signs  # noqa: E731
         scale = 1e9 * self._time_scale  # type: ignore[attr-defined]
         earliest, latest = (int(min(seconds * scale, 2.0 ** 62)) for seconds in (
             self._estop_sent_s - self._sent_s, self._estop_done_s - self._send_start_s))
         moved, bound = stopped_between(progress, earliest, latest)
         self.position_pulses = tuple(p + int(d) for p, d in zip(self.position_pulses, moved))  # type: ignore
-        return bound
+        steps = directions((earliest + latest) // 2)
+        finish = [(axis, int(d)) for axis, d in zip("xyz", steps) if d]
+        return bound, sorted(finish, key=lambda item: item[0] != "z")  # Z first: it switches the spindle off
 
     def _resolve_stop(self, ex: _Exchange, reply: Optional[int]) -> PortError:
         """The reply to a move during which EMERGENCYSTOP was sent: the error the job ends with."""
         if reply == MACHINESTOPPED:
-            bound = self._book_stopped_move(ex)
-            self._after_stop(ex.mode)
+            bound, finish = self._book_stopped_move(ex)
+            self._after_stop(ex.mode, finish)
             busy = (f"; the computer was busy as the stop went out, so where the head stopped is known within "
                     f"±{bound} pulses" if bound > 1 else "")
             return PortError(f"emergency stop during {ex.what}: the board answered MACHINESTOPPED, drivers "
@@ -284,7 +320,7 @@ class _Link(_Trust):
                     self._unwind()
             return False
         if reader:
-            wait_s = 4 * self.timeout_s + 1.0  # the answer, then the spindle-off and exit packets
+            wait_s = 7 * self.timeout_s + 1.0  # the answer, the packets that end half-made pulses, the exit packets
             if not self._stop_done.wait(wait_s):
                 raise PortError(f"emergency stop sent; no answer was read within {wait_s:g} s")
         else:

@@ -57,8 +57,8 @@ from ._drill import _Drilling, drill_job
 from ._trust import LinkFault, emulator_speed
 from ._link import _CLOSE_DRILL, _DRILL, _INIT, _JOG, _MODE, _OFFSET, _UNKNOWN, _Exchange, _Link
 from .packets import (
-    MAX_FIELD, close_drill_packet, drill_moved, drill_moves, drill_packet, drill_time_ns, init_packet, jog_exit_packet,
-    jog_packet, jog_time_ns, offset_packet, start_drill_packet,
+    MAX_FIELD, close_drill_packet, drill_directions, drill_moved, drill_moves, drill_packet, drill_time_ns, init_packet,
+    jog_exit_packet, jog_packet, jog_time_ns, offset_packet, start_drill_packet,
 )
 from .protocol import (
     ATOFFSETPOS, BANNER, DELAY_UNIT_NS, DRILLMODE1INITIALIZED, DRILLMODE1ON, ISMACHINEREADY,
@@ -248,7 +248,8 @@ class MaximusBoard(_Drilling, _Link, AbstractContextManager):
             far as confirmed replies tell.
         position_known: False after a link fault (:class:`~._trust.LinkFault`) or an unanswered stop: the head
             may have moved since ``position_pulses``.  After a stopped move ``position_pulses`` is an estimate
-            from the time the move ran (the firmware does not say where it stopped).
+            from the time the move ran (the firmware does not say where it stopped), to the nearest whole pulse: a
+            pulse the stop left half made is ended at once (``_Link._finish_pulses``), so no later move adds it.
         stop_asked: :meth:`emergency_stop` was called during the current (or last) job.
     """
 
@@ -507,7 +508,8 @@ class MaximusBoard(_Drilling, _Link, AbstractContextManager):
         packet = drill_packet(dx_steps, dy_steps, invert_x=m.invert_x, invert_y=m.invert_y)
         self._exchange(packet, _Exchange(f"the XY move {dx_steps}, {dy_steps}", ONEHOLEDRILLED, True, "drill",
                                          _DRILL, drill_time_ns(packet, init), (dx_steps, dy_steps, 0),
-                                         partial(drill_moved, dx_steps, dy_steps, init)))
+                                         partial(drill_moved, dx_steps, dy_steps, init, whole=True),
+                                         partial(drill_directions, dx_steps, dy_steps, init)))
         self._exchange(close_drill_packet(), _CLOSE_DRILL)
 
     # ------------------------------------------------------------------ drill

@@ -18,9 +18,10 @@ from ...errors import PlanError
 from .protocol import DEBOUNCE_NS, DELAY_UNIT_NS, STEPSBACKATLIMIT
 
 __all__ = [
-    "MAX_FIELD", "DEFAULT_DELAY", "jog_packet", "jog_exit_packet", "offset_packet", "init_packet",
-    "start_drill_packet", "drill_packet", "close_drill_packet", "drill_moves", "pulses_ns", "jog_time_ns",
-    "offset_time_ns", "init_time_ns", "drill_time_ns", "switch_time_ns", "drill_moved", "stopped_between",
+    "MAX_FIELD", "DEFAULT_DELAY", "jog_packet", "jog_exit_packet", "finish_pulse_packet", "offset_packet",
+    "init_packet", "start_drill_packet", "drill_packet", "close_drill_packet", "drill_moves", "pulses_ns",
+    "jog_time_ns", "offset_time_ns", "init_time_ns", "drill_time_ns", "switch_time_ns", "drill_moved",
+    "drill_directions", "jog_moved", "stopped_between",
 ]
 
 MAX_FIELD = 0xFFFF  # 16-bit step fields (seed 000, Appendix 1: make16(high, low))
@@ -74,6 +75,25 @@ def jog_packet(axis: str, steps: int, *, delay: int = DEFAULT_DELAY, half_step: 
 def jog_exit_packet() -> bytes:
     """Four zero bytes: leave Jog mode (seed 000 section 8.3 step 7)."""
     return bytes(4)
+
+
+def finish_pulse_packet(axis: str, direction: int, *, delay: int = DEFAULT_DELAY, half_step: bool = False,
+                        spindle: bool = False, invert: bool = False) -> bytes:
+    """A Jog Data Packet of no pulses whose DIR bit is that of a move of ``direction`` (+1 or -1, board frame).
+
+    ``constspeed(0, ...)`` makes no pulse; it only ends with ``output_bit(STEP, 1)``, the listing's "Add last step"
+    (seed 000 Appendix 1), which puts the STEP pin back to its idle level.  An emergency stop that came between a
+    pulse's falling and rising edge left that pin low, and this is then the pulse's rising edge: one step, now, in
+    ``direction`` (without it, the next move of the axis makes it, in that move's direction: cam.sim.maximus point
+    14).  With the pin high it does nothing.
+
+    >>> finish_pulse_packet("x", -1, delay=5).hex(), finish_pulse_packet("z", -1, delay=3).hex()   # z down: DIR_Z = 1
+    ('40000005', 'd0000003')
+    """
+    if direction not in (1, -1):
+        raise PlanError(f"direction must be +1 or -1, got {direction!r}")
+    packet = jog_packet(axis, direction, delay=delay, half_step=half_step, spindle=spindle, invert=invert)
+    return packet[:1] + bytes(2) + packet[3:]
 
 
 def offset_packet(x_steps: int, y_steps: int, z_steps: int, *, delay_x: int = DEFAULT_DELAY,
@@ -241,36 +261,80 @@ def drill_time_ns(packet: bytes, init: bytes) -> int:
             + pulses_ns(_field(init, 1), delay_z_up))
 
 
-def _done(elapsed_ns: int, n_pulses: int, delay: int) -> tuple[int, int]:
-    """Pulses of a run of ``n_pulses`` at Delay ``delay`` made within ``elapsed_ns``, and the time left after it."""
+def _done(elapsed_ns: int, n_pulses: int, delay: int, whole: bool = False) -> tuple[int, int]:
+    """Pulses of a run of ``n_pulses`` at Delay ``delay`` made within ``elapsed_ns``, and the time left after it.
+
+    A pulse's rising edge (the step) comes at the end of its period, its falling edge half way (``constspeed``: the
+    STEP pin idles high; each pulse is ``dly_100us(delay)`` high, then low, then the rise).  ``whole``: count the
+    pulse whose falling edge has come too, as if its rising edge followed at once (what a stop there leaves, once
+    :func:`finish_pulse_packet` has ended the pulse): the pulses to the nearest whole period."""
     period_ns = pulses_ns(1, delay)
     if not n_pulses or not period_ns:
         return n_pulses, elapsed_ns
-    k = min(int(n_pulses), max(0, int(elapsed_ns)) // period_ns)
+    late_ns = period_ns // 2 if whole else 0
+    k = min(int(n_pulses), (max(0, int(elapsed_ns)) + late_ns) // period_ns)
     return k, elapsed_ns - pulses_ns(n_pulses, delay) if k == n_pulses else 0
 
 
-def drill_moved(dx_steps: int, dy_steps: int, init: bytes, elapsed_ns: int) -> tuple[int, int, int]:
+def drill_moved(dx_steps: int, dy_steps: int, init: bytes, elapsed_ns: int, *, whole: bool = False
+                ) -> tuple[int, int, int]:
     """How far a Drill Data Packet of the XY move ``(dx_steps, dy_steps)`` (board frame) has moved the head
     ``elapsed_ns`` into its move, as :func:`drill_time_ns` times it: the dog-leg XY move, then Z down by the
     Init packet's second field and up by its first.  Returns board-frame ``(x, y, height)`` pulses: the host's
-    estimate of where an emergency stop left the head (the firmware does not say).
+    estimate of where an emergency stop left the head (the firmware does not say).  ``whole``: a pulse half made
+    (its falling edge come, not its rising one) counts, as once :func:`finish_pulse_packet` has ended it, in the
+    directions :func:`drill_directions` gives.
 
     >>> init = init_packet(100, 100, delay_x=10, delay_y=10, delay_z_up=10, delay_z_down=10)   # 2 ms a pulse
     >>> drill_moved(300, -100, init, 250_000_000), drill_moved(300, -100, init, 700_000_000)
     ((125, -100, 0), (300, -100, -50))
+    >>> drill_moved(300, -100, init, 251_500_000), drill_moved(300, -100, init, 251_500_000, whole=True)
+    ((125, -100, 0), (126, -100, 0))
     """
     nx, ny = abs(int(dx_steps)), abs(int(dy_steps))
     delay_x, delay_y, delay_z_up, delay_z_down = init[5], init[6], init[7], init[8]
-    both, t = _done(elapsed_ns, min(nx, ny), max(delay_x, delay_y))
+    both, t = _done(elapsed_ns, min(nx, ny), max(delay_x, delay_y), whole)
     x = y = both
     if t > 0 and nx != ny:
-        alone, t = _done(t, abs(nx - ny), delay_x if nx > ny else delay_y)
+        alone, t = _done(t, abs(nx - ny), delay_x if nx > ny else delay_y, whole)
         x, y = (both + alone, both) if nx > ny else (both, both + alone)
-    down, t = _done(t, _field(init, 3), delay_z_down) if t > 0 else (0, 0)
-    up, _ = _done(t, _field(init, 1), delay_z_up) if t > 0 else (0, 0)
+    down, t = _done(t, _field(init, 3), delay_z_down, whole) if t > 0 else (0, 0)
+    up, _ = _done(t, _field(init, 1), delay_z_up, whole) if t > 0 else (0, 0)
     sx, sy = (1 if dx_steps >= 0 else -1), (1 if dy_steps >= 0 else -1)
     return sx * x, sy * y, up - down
+
+
+def drill_directions(dx_steps: int, dy_steps: int, init: bytes, elapsed_ns: int) -> tuple[int, int, int]:
+    """The direction (+1, -1; 0: the axis does not move) in which each axis of a Drill Data Packet's move steps
+    ``elapsed_ns`` into it: X and Y their move's, Z down (-1) until its descent has ended, then up.
+
+    >>> init = init_packet(100, 100, delay_x=10, delay_y=10, delay_z_up=10, delay_z_down=10)   # 2 ms a pulse
+    >>> drill_directions(300, 0, init, 250_000_000), drill_directions(300, 0, init, 900_000_000)
+    ((1, 0, -1), (1, 0, 1))
+    """
+    nx, ny = abs(int(dx_steps)), abs(int(dy_steps))
+    delay_x, delay_y, delay_z_down = init[5], init[6], init[8]
+    both = min(nx, ny)
+    descent_ends_ns = (pulses_ns(both, max(delay_x, delay_y)) + pulses_ns(nx - both, delay_x)
+                       + pulses_ns(ny - both, delay_y) + pulses_ns(_field(init, 3), delay_z_down))
+    z = 0 if not (_field(init, 3) or _field(init, 1)) else -1 if elapsed_ns < descent_ends_ns else 1
+    return (int(np.sign(dx_steps)), int(np.sign(dy_steps)), z)
+
+
+def jog_moved(moved: Sequence[int], move_ns: int, elapsed_ns: int, *, whole: bool = False) -> tuple[int, ...]:
+    """How far a move of one axis at one Delay (a Jog packet, an Offset packet of one axis) of ``moved`` pulses
+    (per axis, board frame) taking ``move_ns`` has moved the head ``elapsed_ns`` into it; ``whole`` as in
+    :func:`drill_moved`.
+
+    >>> jog_moved((0, -100, 0), 200_000_000, 51_500_000), jog_moved((0, -100, 0), 200_000_000, 51_500_000, whole=True)
+    ((0, -25, 0), (0, -26, 0))
+    """
+    n = max(abs(int(d)) for d in moved)
+    if not n or not move_ns:
+        return tuple(int(d) for d in moved)
+    period_ns = int(move_ns) // n
+    k = min(n, (max(0, int(elapsed_ns)) + (period_ns // 2 if whole else 0)) // period_ns)
+    return tuple((1 if d > 0 else -1) * k if d else 0 for d in moved)
 
 
 def stopped_between(progress: Callable[[int], Sequence[int]], earliest_ns: int, latest_ns: int
