@@ -50,7 +50,7 @@ _LAZY = {
     "run": "cam.drive.session", "MachineSession": "cam.drive.session",
     "Controller": "cam.drive.runner", "RunResult": "cam.drive.runner",
     "simulate_surface": "cam.drive.runner",
-    "open_port": "cam.drive.ports", "MockPort": "cam.drive.ports",
+    "open_port": "cam.drive.machines", "MockPort": "cam.drive.ports",
     "decode_pin_log": "cam.verify.pinlog", "read_pin_log": "cam.verify.pinlog",
     "write_pin_log": "cam.verify.pinlog", "PinLog": "cam.verify.pinlog", "Motion": "cam.verify.pinlog",
     "carve": "cam.verify.pinlog",
@@ -102,7 +102,8 @@ if TYPE_CHECKING:  # pragma: no cover - for type checkers and editors only
     from .digitize.digitized import Digitized, load_digitized, save_digitized
     from .digitize.drawing import Drawing, load_image
     from .digitize.profile import Profile, load_profile, profile_from_expr
-    from .drive.ports import MockPort, open_port
+    from .drive.machines import open_port
+    from .drive.ports import MockPort
     from .drive.runner import Controller, RunResult, simulate_surface
     from .drive.session import MachineSession, run
     from .drive.steps import StepPlan, plan_steps

@@ -18,7 +18,7 @@ from .errors import CamError
 from .options import OPTION_KINDS, OPTIONS  # which option applies to which kind: declared with the option
 from .sniff import decide_kind, read_head
 
-__all__ = [
+__all__ = ["POSTS", "DEFAULT_PORT", 
     "job_kind", "OPTION_KINDS",
     "DRAWING_SUFFIXES", "DIGITIZED_SUFFIXES", "EXCELLON_SUFFIXES", "HPGL_SUFFIXES", "GCODE_SUFFIXES",
     "PROFILE_SUFFIXES", "SVG_SUFFIXES", "SUFFIXES", "FILE_JOB_SUFFIXES", "START_RULES",
@@ -83,3 +83,9 @@ def job_kind(path: str | os.PathLike, warnings: Optional[list[str]] = None, *, h
     listed = "; ".join(f"{k} {' '.join(v)}" for k, v in SUFFIXES.items())
     raise CamError(f"{Path(path).name}: unknown file type '{suffix or '(none)'}' (accepted: {listed})")
 
+POSTS = ("generic", "grbl", "linuxcnc")
+"""The controllers G-code is written for (``cam export --post``; :mod:`cam.formats.gcode_export`)."""
+
+DEFAULT_PORT = "mock"
+"""The port every command and the page use when none is named: the logging mock (nothing leaves the PC;
+:mod:`cam.drive.machines`)."""

@@ -293,10 +293,24 @@ def test_an_unknown_byte_in_a_command_log_is_refused_naming_the_write():
 
 def test_a_command_log_reads_back_with_held_directions_and_half_step():
     s = MachineSettings(half_step=True, commands=Commands(**BYTES, init=0x01, spindle_on=0x53))
-    log = PinLog(np.arange(12) * 10, np.array([0x01, 0x01, 0x53, 0x53, 0x4B, 0x4B, 0x5A, 0x5A, 0x59, 0x59,
-                                               0x4C, 0x4C], np.uint8), np.array([1, 0] * 6, np.uint8))
-    back = commands_to_step_log(log, s)
-    assert back.t_ns.tolist() == [40, 50, 60, 70, 80, 90, 100, 110]
+    log = PinLog(np.arange(12) * 100_000, np.array([0x01, 0x01, 0x53, 0x53, 0x4B, 0x4B, 0x5A, 0x5A, 0x59, 0x59,
+                                                    0x4C, 0x4C], np.uint8), np.array([1, 0] * 6, np.uint8))
+    back = commands_to_step_log(log, s)  # bytes 100 us apart: each its own step time
+    assert back.t_ns.tolist() == [400_000, 500_000, 600_000, 700_000, 800_000, 900_000, 1_000_000, 1_100_000]
     assert back.data.tolist() == [DX | CX, DX, DX | CY, DX, DX | DY | CY, DX | DY, DY | CX, DY]
     assert back.strobe.tolist() == [1] * 8
     assert cam.decode_pin_log(back, s).final_steps == (0, 0, 0)
+
+
+def test_the_bytes_of_one_step_time_read_back_as_one_diagonal_step():
+    """A diagonal step's X and Y bytes, one gap (20 us) apart, are one step/dir write with both clocks high (the
+    motors take them as one step time); a later X byte of the same burst window starts a new step, and bytes
+    further apart than the gap stay apart."""
+    s = MachineSettings(commands=Commands(**BYTES))
+    t = np.array([0, 10_000, 20_000, 30_000, 40_000, 50_000, 500_000, 510_000, 600_000, 610_000])
+    data = np.array([0x4B, 0x4B, 0x59, 0x59, 0x4B, 0x4B, 0x4B, 0x4B, 0x59, 0x59], np.uint8)
+    back = commands_to_step_log(PinLog(t, data, np.array([1, 0] * 5, np.uint8)), s)
+    assert back.t_ns.tolist() == [0, 30_000, 40_000, 50_000, 500_000, 510_000, 600_000, 610_000]
+    h = DX | DY  # both directions toward + from the first burst on
+    assert back.data.tolist() == [h | CX | CY, h, h | CX, h, h | CX, h, h | CY, h]
+    assert cam.decode_pin_log(back, s).final_steps == (3, 2, 0)

@@ -147,7 +147,9 @@ def test_readme_map_names_every_reader_and_planner():
     """The README's data-flow map names a reader and the planner of every file kind (the grey-level relief's
     too), each name resolving into that module, and every kind of port."""
     from cam.choices import SUFFIXES
-    from cam.drive.ports import CAPABILITIES
+    from cam.drive.machines import REGISTRY, backend_of
+
+    backend_of("mock")  # the registry loaded
 
     text = README.read_text(encoding="utf-8")
     block = FENCE.search(text, text.index("## Data flow"))
@@ -171,6 +173,6 @@ def test_readme_map_names_every_reader_and_planner():
     wanted["moves"] = ("cam.job.moves", "cam.job.moves")  # jog, go to
     missing = [f"{kind}: {m}" for kind, pair in wanted.items() for m in pair if m not in modules]
     assert not missing, "the README's map leaves out:\n" + "\n".join(missing)
-    spelled = {"mock": '"mock"', "parport": '"/dev/parport', "maximus": '"maximus:', "grbl": '"grbl:'}
-    assert set(spelled) == set(CAPABILITIES), "a new kind of port: add it to the README's map and here"
+    spelled = {"mock": '"mock"', "parport": '"/dev/parport', "cmd": '"cmd:', "maximus": '"maximus:', "grbl": '"grbl:'}
+    assert set(spelled) == {b.kind for b in REGISTRY}, "a new kind of port: add it to the README's map and here"
     assert all(s in block.group(2) for s in spelled.values()), [k for k, s in spelled.items() if s not in block.group(2)]

@@ -49,6 +49,9 @@ FUNCTION_LEVEL_IMPORTS = {
     ("cam.web.connections", "uvicorn"): "optional dependency: the web stack (cam[web]), as cam.web.server",
     ("cam.job.jobs", "cam.digitize.sketch"): "heavy (scipy.ndimage and scikit-image, about 0.6 s): loaded only "
                                              "when a sketch is traced (--trace), not for every job",
+    ("cam.drive.machines", "cam.drive.machines"): "the registry's back ends register themselves when a port is "
+                                                  "first named: each imports the registry's base, and the grbl "
+                                                  "and MAXIMUS hosts load only for a port that needs them",
     ("cam.cli", "numba"): "heavy (about half a second): the first-compile note is registered only when a "
                           "command runs, so --help and bad options stay quick",
 }
@@ -271,7 +274,8 @@ def test_cli_parser_imports_only_light_modules():
             seen.add(name)
             todo.extend(graph[name])
     assert seen <= {"cam", "cam.cli", "cam.cli.parser", "cam.cli.checks", "cam.choices", "cam.sniff", "cam.errors",
-                    "cam.settings", "cam.limits", "cam.options"}, seen  # cam.limits, cam.options: standard library
+                    "cam.settings", "cam.limits", "cam.options",  # cam.limits, cam.options: standard library
+                    "cam.drive", "cam.drive.machines"}, seen  # the registry's base: its back ends load when asked
 
 
 def test_only_the_emulator_command_imports_the_emulator():

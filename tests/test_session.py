@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 import cam
-from cam.drive import ports
+from cam.drive import machines
 from cam.drive.session import MachineSession
 from cam.errors import BusyError, CapabilityError, PortError, TravelError
 from cam.job.moves import jog
@@ -14,20 +14,20 @@ SLOW = cam.MachineSettings().replace(delay_xy_ms=2.0, delay_z_ms=2.0, ramp="cons
 
 
 def test_ports_are_chosen_by_name_in_one_place():
-    assert [ports.port_kind(n) for n in ("mock", "/dev/parport0", "maximus:/dev/ttyUSB0")] == \
+    assert [machines.port_kind(n) for n in ("mock", "/dev/parport0", "maximus:/dev/ttyUSB0")] == \
         ["mock", "parport", "maximus"]
     for bad in ("com1", "maximus:", "parport0"):
         with pytest.raises(PortError, match="unknown port"):
-            ports.port_kind(bad)
+            machines.port_kind(bad)
 
 
 def test_one_capability_check_says_what_a_port_cannot_do():
-    ports.require("mock", "pause")
-    ports.require("mock", "pin_log")
+    machines.require("mock", "pause")
+    machines.require("mock", "pin_log")
     with pytest.raises(CapabilityError, match="cannot pause") as pause:
-        ports.require("maximus:/dev/ttyUSB0", "pause")
+        machines.require("maximus:/dev/ttyUSB0", "pause")
     with pytest.raises(CapabilityError, match="pin log"):
-        ports.require("/dev/parport0", "pin_log")
+        machines.require("/dev/parport0", "pin_log")
     # the session raises the very same message (the web page shows it as a 409, the CLI as one line)
     session = MachineSession("maximus:/dev/ttyUSB0", SLOW)
     with pytest.raises(CapabilityError) as again:

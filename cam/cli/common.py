@@ -10,9 +10,9 @@ from typing import Any
 
 from tqdm import tqdm
 
-from ..drive.maximus.board import MAXIMUS_SETTINGS, board_settings, board_speeds_line, with_delays
+from ..drive.maximus.board import with_delays
 from ..drive.activities import format_duration
-from ..drive.ports import port_kind
+from ..drive.machines import DEFAULT_PORT, backend_of
 from ..drive.ramps import check_delay_speeds, top_speeds_mm_s
 from ..drive.state import default_state_path, recorded_machine
 from ..errors import CamError
@@ -28,7 +28,7 @@ def state_path_of(args: argparse.Namespace) -> Path:
     given = getattr(args, "state", None)
     if given:
         return Path(given)
-    return default_state_path(getattr(args, "machine", None), getattr(args, "port", None) or "mock")
+    return default_state_path(getattr(args, "machine", None), getattr(args, "port", None) or DEFAULT_PORT)
 
 
 def use_recorded_machine(args: argparse.Namespace) -> None:
@@ -75,9 +75,11 @@ def port_settings(args: argparse.Namespace, port: str) -> MachineSettings:
     machine file its state file records (:func:`use_recorded_machine`).
     """
     use_recorded_machine(args)
-    if port_kind(port) != "maximus":
+    backend = backend_of(port)
+    base = backend.base_settings()
+    if base is None:
         return machine_settings(args)
-    s = board_settings(load_settings(args.machine, base=MAXIMUS_SETTINGS))
+    s = backend.adapt_settings(load_settings(args.machine, base=base))
     if getattr(args, "delay", None):
         s = with_delays(s, *args.delay)
     if getattr(args, "spindle", None):
@@ -85,11 +87,12 @@ def port_settings(args: argparse.Namespace, port: str) -> MachineSettings:
     return s
 
 
-def speeds_line(settings: MachineSettings, port: str = "mock") -> str:
+def speeds_line(settings: MachineSettings, port: str = DEFAULT_PORT) -> str:
     """One line: the top speed of each axis with the settings' ramps and delays (what ``cam info`` shows); on a
     MAXIMUS board its Delay bytes' feeds (:func:`~cam.drive.maximus.board.board_speeds_line`)."""
-    if port_kind(port) == "maximus":
-        return board_speeds_line(settings)
+    own = backend_of(port).speeds_line(settings)
+    if own is not None:
+        return own
     x, y, z = top_speeds_mm_s(settings)
     return (f"top speeds: X {x:.3g}, Y {y:.3g}, Z {z:.3g} mm/s ({settings.ramp} ramps, delays "
             f"{settings.delay_xy_ms:g}/{settings.delay_z_ms:g} ms)")

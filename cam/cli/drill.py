@@ -13,7 +13,7 @@ from ..drive.maximus.board import drill_stroke, require_drilling
 from ..drive.maximus.resume import resume_board_job
 from ..drive.journal import read_journal
 from ..drive.state import StateHold, check_in_travel, read_state
-from ..drive.ports import port_kind
+from ..drive.machines import can
 from ..errors import CamError
 from ..job.jobs import resume_job
 from ..job.resume import resume_start
@@ -58,10 +58,11 @@ def _raise_unwritten(report_error: Optional[str], state_error: Optional[str]) ->
 
 
 def _finished_line(args: argparse.Namespace, outcome: Outcome, ramp: str, summary: str, wall_s: float) -> None:
-    if port_kind(args.port) == "maximus":  # the board keeps its own time
+    if can(args.port, "drills_alone"):  # the board keeps its own time
         print(f"job finished: {summary}; total time {format_duration(wall_s)}", flush=True)
         return
-    print(finish_line(summary, outcome, ramp, wall_s, simulated=not args.realtime and args.port == "mock"), flush=True)
+    simulated = not args.realtime and can(args.port, "simulated")
+    print(finish_line(summary, outcome, ramp, wall_s, simulated=simulated), flush=True)
 
 
 def finish_line(summary: str, outcome: Outcome, ramp: str, wall_s: float, *, simulated: bool) -> str:
@@ -92,7 +93,7 @@ def journal_path(args: argparse.Namespace) -> Optional[str]:
         if output:
             p = Path(output)
             return str(p.with_name(p.stem + ".journal.json"))
-    if args.port != "mock":
+    if not can(args.port, "simulated"):
         return Path(getattr(args, "load_digitized", None) or args.image).name + ".journal.json"
     return None
 
@@ -102,7 +103,7 @@ def _resumed(args: argparse.Namespace, job, hold: StateHold, reported_stop: Opti
     may be behind the stop (not closed) is not trusted for the position: the run goes on from where the machine
     state has the tool, refused while that is unknown (:func:`cam.job.resume.resume_start`, issue #43 point 7)."""
     journal = read_journal(args.resume)
-    if port_kind(args.port) == "maximus":  # the board drills by itself: it goes on from the next hole
+    if can(args.port, "drills_alone"):  # the board drills by itself: it goes on from the next hole
         if journal.state == "running":
             resume_start(journal, hold.state, where=args.resume, reported_stop_steps=reported_stop)  # known, or refused
         resumed = resume_board_job(job, journal, where=args.resume)
@@ -224,7 +225,7 @@ def _drill(args: argparse.Namespace, settings, hold: Optional[StateHold],
         write_job_preview(args, job, args.preview)
     if args.save_digitized:
         save_digitized(job.digitized, args.save_digitized)
-    if port_kind(args.port) == "maximus":
+    if can(args.port, "drills_alone"):
         require_drilling(job, args.port)  # slots or milled holes: a milling tool path, which the board cannot run
         job.report["board"] = board_report(job, settings)
     journal = journal_path(args)

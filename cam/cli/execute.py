@@ -21,7 +21,8 @@ from typing import Any, Optional
 from tqdm import tqdm
 
 from ..drive.journal import journal_spec, read_journal
-from ..drive.ports import MockPort, SwitchSchedule, port_kind, require
+from ..drive.machines import backend_of, can, require
+from ..drive.ports import MockPort, SwitchSchedule
 from ..drive.runner import FINISHED
 from ..drive.session import MachineSession, Prompt
 from ..drive.state import (
@@ -71,17 +72,17 @@ def check_port_options(args: argparse.Namespace, settings: Optional[MachineSetti
     --cut-depth and --travel-height an error: they would say the same thing twice).
     """
     kind = job_kind_of(args)
-    maximus = port_kind(args.port) == "maximus"
-    if kind is not None and kind != "excellon" and maximus:
+    drills_alone = can(args.port, "drills_alone")
+    if kind is not None and kind != "excellon" and drills_alone:
         require(args.port, "step_dir", what=f"a {kind} job")
     if getattr(args, "pin_log", None):
         require(args.port, "pin_log")
     if getattr(args, "spindle", None):
         require(args.port, "spindle", what="--spindle")
-    if maximus and getattr(args, "ramp", None):
+    if drills_alone and getattr(args, "ramp", None):
         raise CapabilityError(f"{args.port} moves at the constant speed of its Delay bytes: --ramp applies to "
                               f"step/dir ports (set the speed with --delay)")
-    if maximus and settings is not None and settings.maximus.drill_stroke_set:
+    if can(args.port, "drill_stroke") and settings is not None and settings.maximus.drill_stroke_set:
         for flag in ("cut_depth", "travel_height"):
             if getattr(args, flag, None) is not None:
                 raise CapabilityError(
@@ -223,15 +224,17 @@ def _run(job: Any, args: argparse.Namespace, settings: MachineSettings, hold: St
 
 
 def _job_port(args: argparse.Namespace, settings: MachineSettings, realtime: bool) -> Any:
-    """The port a job runs on: ``--port`` as named, but the mock as the run needs it."""
-    if port_kind(args.port) != "mock":
+    """The port a job runs on: ``--port`` as named, but a logging port (the mock, ``cmd:mock``) as the run needs
+    it (:meth:`~cam.drive.machines.Backend.logging_port`)."""
+    backend = backend_of(args.port)
+    if not backend.can("pin_log", args.port):
         return args.port
-    if getattr(args, "pin_log", None) and not realtime:
-        return MockPort(pin_log_path=args.pin_log)  # the pin log streams to its file: nothing held
-    if not realtime:
-        return MockPort(keep_log=False)  # nobody reads this run's pin log: the writes are counted, not kept
-    if settings.mock.places():
-        return MockPort()  # simulated switches (below): a mock of this process, in real time too
+    if getattr(args, "pin_log", None) and not realtime:  # the pin log streams to its file: nothing held
+        return backend.logging_port(args.port, settings, pin_log_path=args.pin_log)
+    if not realtime:  # nobody reads this run's pin log: the writes are counted, not kept
+        return backend.logging_port(args.port, settings, keep_log=False)
+    if settings.mock.places() and backend.can("home_switches", args.port):
+        return backend.logging_port(args.port, settings)  # simulated switches (below): in real time too
     return args.port
 
 
@@ -248,7 +251,7 @@ def _drive(job: Any, args: argparse.Namespace, settings: MachineSettings, hold: 
     # the page's offset_mm follows too)
     origin = getattr(args, "origin", None)
     approach = None if getattr(args, "resume", None) else approach_to_work_zero(job, hold.state, start, settings,
-                                                                                port_kind(args.port), origin)
+                                                                                origin)
     at = start if approach is None else placed_home(job, hold.state, origin)
     session.set_position(at)
     if isinstance(port, MockPort) and settings.mock.places():  # the machine file's simulated switches ([mock])
@@ -337,7 +340,7 @@ def _approach(job: Job, args: argparse.Namespace, settings: MachineSettings, sta
     """Travel to the work zero in a session of its own; returns it.  ``shared``: the mock whose pin log streams
     (``--pin-log``): the travel runs on it, its part marked (the job's comes next); else the pin log joins the
     travel's writes to the job's at the end (:func:`_write_pin_log`)."""
-    simulated = port_kind(args.port) == "mock" and settings.mock.places()  # the mock's switches ([mock]) too
+    simulated = can(args.port, "simulated") and can(args.port, "home_switches") and settings.mock.places()
     port: Any = MockPort(switches=SwitchSchedule(settings, start)) if simulated else args.port
     if shared is not None:
         job_switches, port = shared.switches, shared

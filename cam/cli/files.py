@@ -14,7 +14,7 @@ from ..digitize import digitize
 from ..digitize.digitized import save_digitized
 from ..digitize.drawing import load_image
 from ..digitize.profile import load_profile
-from ..drive.ports import port_kind
+from ..drive.machines import DEFAULT_PORT, can
 from ..errors import CamError, TravelError
 from ..formats.excellon import HoleList, load_excellon
 from ..formats.gcode import load_tool_table, open_gcode
@@ -236,9 +236,9 @@ def _info_svg(args: argparse.Namespace) -> int:
 
 
 def cmd_info(args: argparse.Namespace) -> int:
-    port = getattr(args, "port", None) or "mock"
+    port = getattr(args, "port", None) or DEFAULT_PORT
     # a delay the ramps would not honour: refused before anything is read; a MAXIMUS board: its own settings
-    settings = port_settings(args, port) if port_kind(port) == "maximus" else machine_settings(args)
+    settings = port_settings(args, port) if can(port, "board_settings") else machine_settings(args)
     code = _info_of_kind(args, job_kind_of(args))
     if not args.json:
         print(speeds_line(settings, port))

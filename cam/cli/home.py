@@ -15,9 +15,10 @@ import sys
 from typing import Any
 
 from ..drive.homing import check_homing
-from ..drive.ports import MockPort, port_kind
+from ..drive.machines import backend_of
+from ..drive.ports import MockPort
 from ..drive.state import steps_to_mm
-from ..drive.session import MachineSession, maximus_cannot_home
+from ..drive.session import MachineSession
 from ..errors import CamError
 from ..verify.pinlog import write_pin_log
 from .common import port_settings
@@ -29,28 +30,30 @@ __all__ = ["cmd_home"]
 _STOP_SIGNALS = tuple(getattr(signal, n) for n in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, n))
 
 
-def _port_of(args: argparse.Namespace) -> Any:
+def _port_of(args: argparse.Namespace, settings: Any) -> Any:
     """The port the session homes on: a mock of this command's (its pin log written here; the session gives it
     the machine file's simulated switches, and refuses a mock without them), else the port's name."""
-    return MockPort() if port_kind(args.port) == "mock" else args.port
+    return backend_of(args.port).logging_port(args.port, settings)
 
 
 def cmd_home(args: argparse.Namespace) -> int:
     """``cam home``: the session's :meth:`~cam.drive.session.MachineSession.home` (the page's Home runs the same),
     each phase said on stderr, the end in one line."""
     settings = port_settings(args, args.port)
-    kind = port_kind(args.port)
-    if kind == "maximus":
-        raise maximus_cannot_home(args.port)  # what it can do instead, as the page's Home says
-    if kind == "grbl" and args.axes:
-        raise CamError(f"grbl homes all its axes with $H (its own [homing] order, $23-$27); drop --axes {args.axes}")
-    order = "" if kind == "grbl" else check_homing(settings, args.axes)  # before anything opens: one line
+    backend = backend_of(args.port)
+    own_cycle = backend.can("homes_itself", args.port)
+    if own_cycle and args.axes:
+        raise CamError(f"{args.port} homes all its axes with its own cycle ($H, its own [homing] order, $23-$27); "
+                       f"drop --axes {args.axes}")
+    if not own_cycle:
+        backend.home_refusal(args.port)  # a machine that cannot home: what it can do instead, in one line
+    order = "" if own_cycle else check_homing(settings, args.axes)  # before anything opens: one line
     with hold_machine(args, settings, "cam home") as hold:
-        port = _port_of(args)
+        port = _port_of(args, settings)
         session = MachineSession(port, settings, realtime=bool(getattr(args, "realtime", False)), state=hold)
         session.on_detail = lambda text: print(text, file=sys.stderr, flush=True)
-        if kind == "grbl":
-            print("homing with grbl's $H ...", file=sys.stderr, flush=True)
+        if own_cycle:
+            print("homing with the board's own cycle ($H) ...", file=sys.stderr, flush=True)
         previous = {s: signal.signal(s, lambda signum, frame: session.stop()) for s in _STOP_SIGNALS}
         try:
             session.home(order or None)
@@ -65,7 +68,7 @@ def cmd_home(args: argparse.Namespace) -> int:
         if status != "finished":
             print(f"homing did not finish: {'; '.join(session.last_run.get('messages') or ['stopped'])}; the "
                   f"machine is not homed, its position unknown", file=sys.stderr)
-            return 2 if kind == "grbl" and status != "emergency-stopped" else EXIT_INTERRUPTED
+            return 2 if own_cycle and status != "emergency-stopped" else EXIT_INTERRUPTED
         state = hold.state
     if not state.position_known:  # a new machine homed on some axes only: the others have no coordinate at all
         left = "".join(a for a in "XYZ" if a.lower() not in order)

@@ -8,7 +8,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from ..drive.ports import port_kind
+from ..drive.machines import backend_of
 from ..drive.state import PositionUnknownError, StateHold, check_in_travel, soft_limits_off, steps_to_mm
 from ..drive.session import UNKNOWN_JOG_LINE
 from ..errors import CamError
@@ -80,8 +80,7 @@ def _jog_steps(args: argparse.Namespace, settings: MachineSettings) -> tuple[str
         raise CamError(f"axis must be X+, X-, Y+, Y-, Z+ or Z-, got '{args.axis}'")
     if args.steps <= 0:
         raise CamError(f"steps must be > 0, got {args.steps:g}")
-    half = getattr(settings.maximus, f"half_step_{axis[0].lower()}") if port_kind(args.port) == "maximus" \
-        else settings.half_step
+    half = backend_of(args.port).half_step(settings, axis[0].lower())
     n = jog_steps(axis[0], args.steps, args.unit, settings=settings, half_step=half)
     if n == 0:
         raise CamError(f"a jog of {args.steps:g} {args.unit} is less than one step")

@@ -17,7 +17,7 @@ from ..drive.state import (
     steps_to_mm,
 )
 from ..drive.grbl_machine import GRBL_OFFSETS, adopt_position, grbl_machine
-from ..drive.ports import port_kind
+from ..drive.machines import DEFAULT_PORT, can
 from ..drive.session import MachineSession
 from ..errors import CamError
 from ..settings import MachineSettings
@@ -36,12 +36,12 @@ def hold_machine(args: argparse.Namespace, settings: MachineSettings, what: str)
     The hold is the port's (:class:`StateHold` with ``port``): on a real port the device's own lock is taken
     first (a second command on the device is refused, naming the first), a missing state file is a position
     unknown, and another machine file than the recorded one is refused unless ``--machine-changed``."""
-    hold = StateHold(state_path_of(args), settings, what, port=getattr(args, "port", None) or "mock",
+    hold = StateHold(state_path_of(args), settings, what, port=getattr(args, "port", None) or DEFAULT_PORT,
                      machine=machine_record(getattr(args, "machine", None)),
                      machine_changed=bool(getattr(args, "machine_changed", False)))
     for warning in hold.warnings:
         print(f"warning: {warning}", file=sys.stderr)
-    if port_kind(getattr(args, "port", None) or "mock") == "grbl":
+    if can(getattr(args, "port", None) or DEFAULT_PORT, "reports_position"):
         try:
             machine = grbl_machine(args.port, settings)
             if machine.warning and not machine.warned:
@@ -124,7 +124,7 @@ def cmd_where(args: argparse.Namespace) -> int:
     settings = port_settings(args, args.port)
     path = state_path_of(args)
     driving = None
-    grbl = port_kind(args.port or "mock") == "grbl"
+    grbl = can(args.port or DEFAULT_PORT, "reports_position")
     if args.set is not None or args.use or grbl:  # grbl: what the board says, read now
         with _hold_unless_served(args, settings) as hold:
             state = hold.state
@@ -143,7 +143,7 @@ def cmd_where(args: argparse.Namespace) -> int:
                     grbl_machine(args.port, settings).use_offset(args.use)
             hold.record(state)
     else:
-        state, driving = _read_now(path, settings, args.port or "mock")
+        state, driving = _read_now(path, settings, args.port or DEFAULT_PORT)
     rep = where_report(state, settings, path, driving)
     if args.json:
         print(dump_json(rep), end="")
@@ -162,7 +162,7 @@ def _axes(text: str) -> str:
 def cmd_zero(args: argparse.Namespace) -> int:
     axes = _axes(args.axes)
     settings = port_settings(args, args.port)
-    if port_kind(args.port or "mock") == "grbl" and args.at is None:
+    if can(args.port or DEFAULT_PORT, "reports_position") and args.at is None:
         return _zero_on_grbl(args, axes, settings)
     with hold_machine(args, settings, "cam zero") as hold:
         state = hold.state

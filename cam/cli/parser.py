@@ -18,7 +18,7 @@ from typing import Callable, Optional, Sequence
 from .. import __version__
 from ..choices import (
     DIGITIZED_SUFFIXES, DRAWING_SUFFIXES, EXCELLON_SUFFIXES, GCODE_SUFFIXES, HPGL_SUFFIXES, PROFILE_SUFFIXES,
-    SVG_SUFFIXES,
+    DEFAULT_PORT, POSTS, SVG_SUFFIXES,
 )
 from ..options import MAX_MM, OPTIONS, Option
 from ..settings import RAMP_MODES
@@ -313,7 +313,7 @@ def _add_view_state(p: argparse.ArgumentParser) -> None:
     """--port and --state of info and preview: a G-code program (or a file placed by its own zero) is planned from
     that machine's active work zero, as cam drill would run it (its state file is read, never changed)."""
     g = p.add_argument_group("the machine it would run on")
-    g.add_argument("--port", default="mock", help="names the default state file, as cam drill's --port")
+    g.add_argument("--port", default=DEFAULT_PORT, help="names the default state file, as cam drill's --port")
     _add_state_option(g, holds=False)
 
 
@@ -378,7 +378,7 @@ def _add_drill(sub: argparse._SubParsersAction) -> None:
     )
     _add_job_options(d)
     g = d.add_argument_group("port and outputs")
-    g.add_argument("--port", default="mock", help="'mock' (default: logs, moves nothing), a device like /dev/parport0, "
+    g.add_argument("--port", default=DEFAULT_PORT, help="'mock' (default: logs, moves nothing), a device like /dev/parport0, "
                    "maximus:/dev/ttyUSB0 (drill files), or grbl:/dev/ttyUSB0[?baud=115200] (a grbl board: the job "
                    "streams to it as G-code)")
     g.add_argument("--realtime", action="store_true", help="run the mock in real time, sleeping like the real port")
@@ -421,7 +421,7 @@ def _add_export(sub: argparse._SubParsersAction) -> None:
     e.add_argument("-o", "--output", required=True, metavar="FILE.ngc", help="where to write the G-code")
     _add_option(e, "flip_y", help="write Y = +row (mirrored) instead of Y = -row (every file kind)")
     t = e.add_argument_group("the target (issue #30 point 4; docs/file-formats.md)")
-    t.add_argument("--post", choices=("generic", "grbl", "linuxcnc"), default="generic",
+    t.add_argument("--post", choices=POSTS, default="generic",
                    help="the controller the program is for: tool changes as T<n> M6 (linuxcnc, generic) or a "
                    "comment and an M0 pause (grbl); default generic")
     t.add_argument("--feed", type=_number("--feed", 0, 1e6, above=True), metavar="MM_PER_MIN",
@@ -526,7 +526,7 @@ def _add_jog(sub: argparse._SubParsersAction) -> None:
     jg.add_argument("--unit", choices=JOG_UNIT_NAMES, default="steps",
                     help="steps (default: machine steps, a MAXIMUS clock pulse), full-steps (motor steps), "
                     "0.1mm, mm or 0.1in (2.54 mm): the MAXIMUS Jog screen's units")
-    jg.add_argument("--port", default="mock", help="'mock' (default), /dev/parport0, maximus:/dev/ttyUSB0 or "
+    jg.add_argument("--port", default=DEFAULT_PORT, help="'mock' (default), /dev/parport0, maximus:/dev/ttyUSB0 or "
                     "grbl:/dev/ttyUSB0")
     _add_state_option(jg)
     _add_machine_options(jg)
@@ -616,7 +616,7 @@ def _add_goto(sub: argparse._SubParsersAction) -> None:
     gt.add_argument("--machine-coords", action="store_true",
                     help="X,Y,Z in the machine frame (from the machine's home) instead of the active work offset's")
     _add_machine_options(gt)
-    gt.add_argument("--port", default="mock", help="'mock' (default), a device like /dev/parport0, "
+    gt.add_argument("--port", default=DEFAULT_PORT, help="'mock' (default), a device like /dev/parport0, "
                     "maximus:/dev/ttyUSB0 or grbl:/dev/ttyUSB0")
     _add_state_option(gt)
     gt.add_argument("--realtime", action="store_true", help="run the mock in real time")
@@ -629,7 +629,7 @@ OFFSET_CHOICES = ("G54", "G55", "G56", "G57", "G58", "G59", "G59.1", "G59.2", "G
 
 
 def _add_state_machine(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--port", default="mock", help="'mock' (default), /dev/parport0, maximus:/dev/ttyUSB0 or "
+    p.add_argument("--port", default=DEFAULT_PORT, help="'mock' (default), /dev/parport0, maximus:/dev/ttyUSB0 or "
                    "grbl:/dev/ttyUSB0: names the default state file (on grbl: the board is asked where it stands, "
                    "cam zero also sets grbl's own offset with G10 L20, cam where --set unlocks it there)")
     _add_state_option(p)
@@ -672,7 +672,7 @@ def _add_home(sub: argparse._SubParsersAction) -> None:
                        "[mock] places.")
     h.add_argument("--axes", type=_axes_text, metavar="AXES",
                    help="home only these axes, in this order (e.g. Z, XY; default: [homing] order)")
-    h.add_argument("--port", default="mock", help="'mock' (default: [mock] simulated switches), /dev/parport0, or "
+    h.add_argument("--port", default=DEFAULT_PORT, help="'mock' (default: [mock] simulated switches), /dev/parport0, or "
                    "grbl:/dev/ttyUSB0 (grbl's own homing cycle $H)")
     _add_state_option(h)
     _add_machine_options(h)
@@ -705,7 +705,7 @@ def _add_serve(sub: argparse._SubParsersAction) -> None:
                     "computer's own name (repeatable; e.g. a DNS name of this computer)")
     sv.add_argument("--jobs-dir", metavar="DIR", help="folder for uploaded files (default: a new temporary folder)")
     sv.add_argument("--max-upload-mb", type=_number("--max-upload-mb", 0.001, 100_000), default=50.0, metavar="MB", help="larger uploads are refused (default 50)")
-    sv.add_argument("--port", default="mock", metavar="PORT",
+    sv.add_argument("--port", default=DEFAULT_PORT, metavar="PORT",
                     help="'mock' (default: logs, moves nothing), a device like /dev/parport0, maximus:/dev/ttyUSB0, or "
                     "grbl:/dev/ttyUSB0 (Home and a feed override appear on the page)")
     _add_machine_options(sv)

@@ -1,7 +1,8 @@
 """A part of :class:`~cam.drive.session.MachineSession`: what is checked before a job starts, nothing sent.
 
 Like the other parts it keeps no state of its own: it works on the attributes ``MachineSession.__init__`` sets
-(``port``, ``kind``, ``settings``, ``state_hold``, ``_lock``, ``_position``) and calls its ``_grbl_job``.
+(``port``, ``backend``, ``settings``, ``state_hold``, ``_lock``, ``_position``); what a machine cannot run its
+back end refuses (:meth:`~cam.drive.machines.Backend.check_job`).
 """
 from __future__ import annotations
 
@@ -15,8 +16,6 @@ from ..verify.pinlog import motion_extent
 from .chunks import ChunkedPlan
 from .steps import StepPlan
 from ._session_grbl import SessionGrbl
-from .maximus.board import drill_arguments, drill_job, require_drilling
-from .ports import require
 
 __all__ = ["SessionChecks"]
 
@@ -35,18 +34,9 @@ class SessionChecks(SessionGrbl):
             raise CamError("the job was planned for other machine settings; plan it again")
         self._check_planned_in(job)
         if isinstance(job, Job) and len(job) and np.all(job.kind == TRAVEL):
-            require(self.port, "jog" if self.kind in ("maximus", "grbl") else "step_dir", what="a move")
-        elif self.kind == "grbl":
-            self._grbl_job(job)  # a job with moves: a step plan has none
-        elif self.kind == "maximus":
-            require(self.port, "drill_files", what=f"a {getattr(job, 'kind', 'step')} job")
-            if getattr(job, "kind", None) == "excellon":
-                require_drilling(job, self.port)  # slots or milled holes: the firmware drills only
-            if getattr(job, "drill_plan", None) is None:
-                require(self.port, "step_dir", what=f"a {getattr(job, 'kind', 'step')} job")
-            arguments = drill_arguments(job.drill_plan, self.settings)  # the board's packets fit (nothing sent)
-            drill_job(arguments["holes_steps"], arguments["z_up_steps"], arguments["z_down_steps"],
-                      arguments["tool_changes"], self.settings.maximus)
+            self.backend.require(self.port, "jog", "a move")
+        else:
+            self.backend.check_job(self, job)  # what this machine cannot run, before anything moves
         extent = getattr(job, "extent_steps", None)
         if extent is not None:
             check_reach(self._position, extent, self.settings, "the job")
@@ -56,7 +46,7 @@ class SessionChecks(SessionGrbl):
             check_reach(self._position, motion_extent(job.data, job.settings)[0], self.settings, "the job")
         if isinstance(job, Job):
             check_travel(np.asarray(job.points_steps, np.int64) + self._position, self.settings, job.pixels)
-        elif self.kind == "grbl" and isinstance(job, JobLike) and extent is None:
+        elif self.backend.can("gcode") and isinstance(job, JobLike) and extent is None:
             # a job kept as pieces (a drawing, an HPGL file...) planned in its own frame: grbl runs its points as
             # they are, no step plan checks them from here (issue #45 point 4)
             for piece in job.pieces():

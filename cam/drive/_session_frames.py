@@ -22,7 +22,7 @@ from ..errors import CamError, PlanError
 from ._session_parts import SessionControls
 from .grbl_machine import GRBL_OFFSETS
 from .placement import approach_to_work_zero, ended_state, goto_path, placed_home
-from .ports import require
+from .machines import require
 from .runner import Controller
 from .state import steps_to_mm, check_in_travel, still_unknown
 from ..values import shown, steps_in_range, xyz_numbers
@@ -45,7 +45,7 @@ class SessionFrames(SessionControls):
             return False
         st = self.state_hold.state
         here = tuple(int(v) for v in self._position)
-        approach = approach_to_work_zero(job, st, here, self.settings, self.kind, origin)  # TravelError: no move
+        approach = approach_to_work_zero(job, st, here, self.settings, origin)  # TravelError: no move
         if approach is None:
             return False
         home = np.asarray(placed_home(job, st, origin), np.int64)

@@ -22,7 +22,7 @@ from .chunks import ChunkedPlan
 from .grbl_machine import (FEED_OVERRIDE_RANGE, GrblControl, GrblPosition, finish_stop, job_lines, run_on_grbl,
                            steps_to_mpos, travel_advice)
 from .grbl_time import grbl_time_s
-from .ports import require
+from .machines import require
 from .state import check_in_travel
 from .steps import StepPlan
 
@@ -86,7 +86,7 @@ class SessionGrbl(SessionFrames):
         Raises:
             CapabilityError: not grbl (:meth:`~cam.drive._session_recover.SessionRecover.home` homes every port);
             BusyError.  A homing that fails ends the activity with its one-line reason, the position unknown."""
-        require(self.port, "grbl_home", what="homing from the session")
+        require(self.port, "homes_itself", what="homing from the session")
         assert self.grbl is not None
         with self._lock:
             self._check_free()

@@ -22,7 +22,7 @@ import numpy as np
 from ..errors import BusyError, PlanError
 from ..settings import MachineSettings
 from ..values import shown, whole_number
-from .ports import require
+from .machines import require
 
 __all__ = ["Activity", "Prompt", "PromptFn", "SessionControls", "SessionView"]
 
@@ -69,6 +69,7 @@ class SessionView:
     """The session as a snapshot: state, live position, progress, prompt and log (a mixin)."""
 
     port: str
+    backend: Any  # the machine's back end (cam.drive.machines.Backend)
     settings: MachineSettings
     realtime: bool
     version: int
@@ -149,6 +150,7 @@ class SessionView:
                 "last": dict(self.last_run),
                 "log": [dict(e) for e in self._log if e["seq"] > log_after][-100:],
                 "port": self.port,
+                "capabilities": sorted(self.backend.capabilities_of(self.port)),  # the page asks these, not names
                 "realtime": self.realtime,
                 "version": self.version,
             }

@@ -31,7 +31,8 @@ from ..values import shown, steps_in_range, xyz_numbers, xyz_steps
 from ._session_checks import SessionChecks
 from ._session_parts import Activity
 from .homing import HomingPhase, check_homing, home
-from .ports import MockPort, SwitchSchedule, open_port, require
+from .machines import open_port
+from .ports import MockPort, SwitchSchedule
 from .runner import Controller
 from .state import MachineState, PositionUnknownError, check_in_travel, soft_limits_off
 
@@ -104,7 +105,7 @@ class SessionRecover(SessionChecks):
             hold.require_known()  # a missing device (a typo in --port) is still refused first
         except PositionUnknownError:
             pass
-        require(self.port, "jog" if self.kind in ("maximus", "grbl") else "step_dir", what="a jog")
+        self.backend.require(self.port, "jog", "a jog")
         reason = hold.state.unknown_reason or "not recorded"
         job = jog_job(axis, steps, settings=soft_limits_off(self.settings))
         self.log(UNKNOWN_JOG_LINE, "warning")
@@ -125,13 +126,9 @@ class SessionRecover(SessionChecks):
         Raises:
             CapabilityError: a MAXIMUS board (no home switches cam reads), the mock without simulated switches,
             ``axes`` on grbl; HomingError: no home switch wired; BusyError."""
-        if self.kind == "maximus":
-            raise maximus_cannot_home(self.port)
-        if self.grbl is not None:
-            if axes:
-                raise CamError(f"grbl homes all its axes with $H (its own [homing] order, $23-$27); drop axes {axes}")
-            self.home_grbl()
+        if self.backend.home(self, axes):  # a board that homes with its own cycle (grbl's $H)
             return
+        self.backend.home_refusal(self.port)
         order = check_homing(self.settings, axes)
         with self._lock:
             self._check_free()
@@ -148,7 +145,7 @@ class SessionRecover(SessionChecks):
     def _homing_port(self) -> Any:
         """The port homing runs on: the session's own mock (given its switches), a new mock with the machine
         file's simulated switches, or the parallel port (opened by the worker)."""
-        if self.kind != "mock":
+        if not self.backend.can("simulated", self.port):
             return self.port
         if not self.settings.mock.places():
             raise CapabilityError("the mock port has no switches to find: give their places in the machine file's "
@@ -174,7 +171,7 @@ def home_on_steps(session: Any, ctl: Controller, order: str, port: Any, was: Opt
 
     opened = None
     try:
-        opened = open_port(port)
+        opened = open_port(port, session.settings)
         result = home(opened, session.settings, start, axes=order, realtime=session.realtime, controller=ctl,
                       on_phase=said)
         end = tuple(int(v) for v in result.position_steps)

@@ -16,7 +16,8 @@ from ..settings import MachineSettings
 from .maximus.board import MaximusBoard, drill_arguments, from_board, to_board
 from .journal import HoleJournal, JournalSpec, JournalWriter, journal_state_of
 from .maximus.resume import holes_left, resumed_arguments
-from .ports import MockPort, open_port, port_kind, require
+from .machines import open_port, require
+from .ports import MockPort
 from .runner import Controller, Cursor, run
 from .chunks import ChunkedPlan
 from .steps import StepPlan
@@ -40,8 +41,8 @@ def run_steps(session: Any, name: str, plan: "StepPlan | ChunkedPlan", ctl: Cont
     writer: Optional[JournalWriter] = None
     try:
         if session.realtime and isinstance(session.port, str):  # a process of its own: nothing holds it up
-            if port_kind(session.port) != "mock":
-                open_port(session.port).close()  # a port that cannot be opened: its own message, from here
+            if not session.backend.can("simulated", session.port):
+                open_port(session.port, session.settings).close()  # a port that cannot be opened: its own message
             # the child makes a chunked plan's writes itself, a chunk at a time (bounded memory)
             runner = session.runner_process()
             if not runner.claimed:  # a new runner process: say once what it got (class, memory, core)
@@ -50,7 +51,7 @@ def run_steps(session: Any, name: str, plan: "StepPlan | ChunkedPlan", ctl: Cont
             result = runner.run(plan, session.port, ctl, progress=session.progress, on_pause=session.prompt,
                                 journal=journal, cursor=cursor)
         else:  # the simulated clock, or a port object the caller opened
-            port = open_port(session.port)
+            port = open_port(session.port, session.settings)
             cursor = cursor or Cursor(plan.settings)
             if journal is not None:
                 writer = JournalWriter(journal, plan, cursor, on_error=ctl.stop)

@@ -44,7 +44,8 @@ import numpy as np
 from ..errors import CamError, PortError
 from ..verify.pinlog import PinLog, write_pin_log
 from .journal import JournalSpec, JournalWriter, journal_state_of
-from .ports import MockPort, Port, open_port
+from .machines import open_port
+from .ports import MockPort, Port
 from .priority import claim_machine
 from .runner import Controller, Cursor, PauseFn, ProgressFn, RunResult, run
 from .chunks import ChunkedPlan
@@ -174,7 +175,7 @@ def _child(sock_fd: int, page_fd: int, parent_pid: int) -> None:
 
         port: Optional[Port] = None
         try:
-            port = open_port(port_name)
+            port = open_port(port_name, plan.settings)
             result = run(plan, port, realtime=True, controller=ctl, progress=progress, on_pause=on_pause,
                          cursor=cursor)
             log = result.pin_log() if isinstance(port, MockPort) else None

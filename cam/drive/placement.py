@@ -83,7 +83,7 @@ def placed_home(job: Any, state: MachineState, origin: Optional[str]) -> tuple[i
 
 
 def approach_to_work_zero(job: Any, state: MachineState, start: tuple[int, int, int], settings: MachineSettings,
-                          kind: str, origin: Optional[str] = None) -> Optional[Job]:
+                          origin: Optional[str] = None) -> Optional[Job]:
     """The travel that places a file's job at the active work zero (issue #29 points 1 and 6, on every port: a MAXIMUS
     board drills a file's holes from where its head stands, so it travels there first too): its
     home, its own frame's (0, 0, 0), goes to the work zero: a drawing's top-left pixel at the surface (the
@@ -141,8 +141,9 @@ def ended_state(state: MachineState, session: Any, start: tuple[int, int, int],
                           end)
     if status not in (FINISHED, STOPPED):
         sent, moved = session.last_sent()
-        if sent or session.kind == "maximus":
-            booked = session.last_result is not None or session.kind in ("maximus", "grbl")  # a board's word
+        own_steps = not session.backend.can("step_dir", session.port)  # a board: its word, not a cursor's
+        if sent or session.backend.can("drills_alone"):
+            booked = session.last_result is not None or own_steps
             guess = end if booked else tuple(s + m for s, m in zip(end, moved))
             reason = "; ".join(info.get("messages") or ["the run failed"])
             return state.lost(f"{info.get('label') or 'the run'} failed while moving ({reason})", guess)

@@ -11,8 +11,8 @@
 * ``"grbl:DEVICE?baud=N"`` -- a grbl 1.1 board on USB serial (:mod:`cam.drive.grbl_machine`): every job
   and move goes to it as G-code; it makes the steps itself.
 
-What each kind can do is :data:`CAPABILITIES`; :func:`require` refuses the rest
-with one message that every front end shows.  A step/dir port writes, and reads
+Which back end a name opens, what it can do, and opening it are :mod:`cam.drive.machines` (one registry:
+``open_port``, ``require``).  A step/dir port writes, and reads
 its five input pins (:meth:`Port.read_inputs`: home, limit and e-stop switches,
 ``[inputs]`` of the machine file); *when* to write and what a switch means is the
 runner's business.  The mock simulates switches from a schedule
@@ -36,7 +36,7 @@ from ..verify.pinlog import HEADER as PIN_LOG_HEADER
 from ..verify.pinlog import PinLog, PinLogPart, read_pin_log
 from .pins import axis_bits
 
-__all__ = ["Port", "MockPort", "ParallelPort", "open_port", "port_kind", "CAPABILITIES", "require", "MAXIMUS_PREFIX",
+__all__ = ["Port", "MockPort", "ParallelPort", "MAXIMUS_PREFIX",
            "GRBL_PREFIX", "SwitchSchedule", "IDLE_INPUTS", "input_mask"]
 
 IDLE_INPUTS = 0xF8
@@ -49,39 +49,6 @@ def input_mask(pin: int) -> int:
 
 MAXIMUS_PREFIX = "maximus:"
 GRBL_PREFIX = "grbl:"
-
-CAPABILITIES = {
-    "mock": frozenset({"step_dir", "pause", "pin_log", "drill_files"}),
-    "parport": frozenset({"step_dir", "pause", "drill_files"}),
-    "maximus": frozenset({"drill_files", "jog", "delay", "spindle", "drill_stroke"}),
-    "grbl": frozenset({"gcode", "pause", "drill_files", "jog", "overrides", "grbl_home"}),
-}
-"""What each kind of port can do."""
-
-_CANNOT = {
-    "pause": "{port} cannot pause a job (the MAXIMUS firmware has no pause): stop it, or wait for a tool change",
-    "pin_log": "{port} keeps no pin log: a pin log records the mock port's writes (--port mock)",
-    "step_dir": "{port} (the MAXIMUS board) drills drill files (Excellon) and jogs only; {what} needs a "
-                "step/dir port (mock or /dev/parportN)",
-    "drill_files": "{port} cannot drill {what}",
-    "jog": "{port} cannot jog",
-    "delay": "{port} takes its step delays from the machine settings; {what} applies to the MAXIMUS board only",
-    "spindle": "{port} has no spindle switch; {what} applies to the MAXIMUS board only",
-    "drill_stroke": "{port} takes its drill depth from each job; {what} applies to the MAXIMUS board only",
-    "gcode": "{port} is not a grbl board; {what} applies to grbl ports (grbl:/dev/ttyUSB0) only",
-    "overrides": "{port} has no feed override; {what} applies to grbl ports (grbl:/dev/ttyUSB0) only",
-    "grbl_home": "{port} is not a grbl board; {what} applies to grbl ports only",
-}
-_CANNOT_GRBL = {
-    "step_dir": "{port} (a grbl board) takes G-code and makes its own steps; {what} needs a step/dir port "
-                "(mock or /dev/parportN)",
-    "pin_log": "{port} keeps no pin log: a pin log records the mock port's writes (--port mock)",
-    "delay": "{port} takes its rates from grbl's own settings ($110-$112); {what} applies to the MAXIMUS board "
-             "only",
-    "spindle": "{port}: {what} applies to the MAXIMUS board only (grbl programs switch the spindle with M3/M5)",
-    "drill_stroke": "{port} takes its drill depth from each job; {what} applies to the MAXIMUS board only",
-}
-
 
 class Port:
     """A place to send data-register and strobe writes to."""
@@ -587,53 +554,3 @@ class SwitchSchedule:
         if len(data):
             self.position_steps = self.position_steps + self._steps(data, self.last_data).sum(axis=0)
             self.last_data = int(data[-1])
-
-
-def port_kind(name: str | Port) -> str:
-    """``"mock"``, ``"parport"``, ``"maximus"`` or ``"grbl"``: the kind of port a name opens.
-
-    >>> port_kind("mock"), port_kind("/dev/parport0"), port_kind("maximus:/dev/ttyUSB0"), port_kind("grbl:COM3")
-    ('mock', 'parport', 'maximus', 'grbl')
-
-    Raises:
-        PortError: an unknown name.
-    """
-    if isinstance(name, MockPort) or name == "mock":
-        return "mock"
-    if isinstance(name, Port):
-        return "parport"
-    if (name.startswith(MAXIMUS_PREFIX) and len(name) > len(MAXIMUS_PREFIX)) or name == MAXIMUS_PREFIX[:-1]:
-        return "maximus"  # "maximus" alone: the machine settings' serial port
-    if name.startswith(GRBL_PREFIX) and len(name) > len(GRBL_PREFIX):
-        return "grbl"
-    if name.startswith("/dev/"):
-        return "parport"
-    raise PortError(f"unknown port '{name}' (use 'mock', a device path such as /dev/parport0, "
-                    f"maximus:/dev/ttyUSB0, maximus for the machine file's serial_port, or grbl:/dev/ttyUSB0)")
-
-
-def require(name: str | Port, capability: str, *, what: str = "this job") -> None:
-    """Refuse what the port ``name`` cannot do, with the one message every front end shows.
-
-    Raises:
-        CapabilityError: the port's kind lacks ``capability`` (see :data:`CAPABILITIES`).
-    """
-    kind = port_kind(name)
-    if capability not in CAPABILITIES[kind]:
-        text = _CANNOT_GRBL.get(capability) if kind == "grbl" else None
-        raise CapabilityError((text or _CANNOT[capability]).format(port=str(name), what=what))
-
-
-def open_port(name: str | Port = "mock") -> Port:
-    """Open a step/dir port by name: ``"mock"`` or a device path (``/dev/parport0``).  A Port passes through.
-
-    Raises:
-        CapabilityError: a MAXIMUS board (it takes drill files and jogs, see :mod:`cam.drive.session`);
-        PortError: an unknown name or a port that cannot be opened.
-    """
-    if isinstance(name, Port):
-        return name
-    require(name, "step_dir", what="a step/dir job")
-    if port_kind(name) == "mock":
-        return MockPort()
-    return ParallelPort(name)

@@ -37,7 +37,8 @@ from ..verify.pinlog import PinLog, carve, decode_pin_log
 from .._compiled import resolved
 from ._kernels import net_steps_kernel
 from .priority import as_background, real_time_class
-from .ports import MockPort, Port, open_port
+from .machines import open_port
+from .ports import MockPort, Port
 from .pins import axis_bits
 from .chunks import ChunkedPlan, StepChunk, plan_chunks
 from .steps import StepPlan
@@ -657,10 +658,10 @@ def run(
     Returns:
         A :class:`RunResult`; the mock's pin log is ``result.pin_log()``.
     """
-    p = open_port(port)
+    plan: Plan = job if isinstance(job, (StepPlan, ChunkedPlan)) else plan_chunks(job)  # type: ignore[assignment]
+    p = open_port(port, plan.settings)
     if not isinstance(p, MockPort):
         realtime = True
-    plan: Plan = job if isinstance(job, (StepPlan, ChunkedPlan)) else plan_chunks(job)  # type: ignore[assignment]
     ctl = controller or Controller()
     cursor = cursor or Cursor(plan.settings)
     pauses = _Pauses(plan, ctl, on_pause, controller is not None)

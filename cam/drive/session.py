@@ -2,11 +2,11 @@
 
 Every front end drives the machine through a :class:`MachineSession`: the
 CLI, the web page and the Python API (:func:`cam.run`).  A session owns a
-port opened by name (``"mock"``, ``"/dev/parport0"``, ``"maximus:/dev/ttyUSB0"``:
-see :mod:`cam.drive.ports`) and runs jobs, jogs, go-tos and moves back to the
+port opened by name (``mock``, ``/dev/parport0``, ``cmd:/dev/parport0``, ``maximus:/dev/ttyUSB0``,
+``grbl:/dev/ttyUSB0``: the back end it names does the machine's part, :mod:`cam.drive.machines`) and runs jobs, jogs, go-tos and moves back to the
 origin on it, one at a time, in a background thread::
 
-    session = MachineSession("mock")
+    session = MachineSession()      # the mock
     session.start(job)             # a Job, a PreparedJob or a StepPlan
     session.pause(); session.resume(); session.stop(); session.emergency_stop()
     session.wait_idle()
@@ -25,7 +25,7 @@ after a stop, an emergency stop or a fault).  Either way the travel is
 checked before anything is sent.
 
 What a port cannot do (the MAXIMUS firmware has no pause and takes drill
-files only) is refused through one check, :func:`cam.drive.ports.require`,
+files only) is refused through one check, :func:`cam.drive.machines.require`,
 with the same message in every front end.
 
 On a MAXIMUS board the session's frame is the same (+y toward the operator,
@@ -59,10 +59,9 @@ from .journal import JournalSpec, journal_spec
 from ._session_parts import Activity, Prompt, PromptFn
 from ._session_recover import UNKNOWN_JOG_LINE, SessionRecover, maximus_cannot_home
 from ._session_pinlog import SessionPinLogs
-from .activities import BoardControl, drill_work, move_work, run_on_board, run_steps
-from .maximus.board import maximus_port
-from .grbl_machine import adopt_position, grbl_machine
-from .ports import MockPort, Port, port_kind
+from .activities import BoardControl, run_on_board, run_steps
+from .machines import DEFAULT_PORT, backend_of
+from .ports import MockPort, Port
 from .runner import Controller, Cursor, RunResult
 from .chunks import ChunkedPlan, plan_chunks
 from .steps import StepPlan
@@ -90,15 +89,16 @@ class MachineSession(SessionRecover, SessionPinLogs):
             new state file is a position unknown.  None: the home is where the tool stands now (no lock).
     """
 
-    def __init__(self, port: str = "mock", settings: MachineSettings = DEFAULT_SETTINGS, *,
+    def __init__(self, port: str = DEFAULT_PORT, settings: MachineSettings = DEFAULT_SETTINGS, *,
                  realtime: bool = False, on_prompt: Optional[PromptFn] = None,
                  state: Optional[StateHold] = None) -> None:
-        self.kind = port_kind(port)
+        self.backend = backend_of(port)
+        self.kind = self.backend.kind
         if state is not None:  # the device's own lock before the port opens; a real port's new file: unknown
             state.bind_port(port)
-        self.port = maximus_port(port, settings) if self.kind == "maximus" else port
+        self.port = self.backend.resolve(port, settings)
         self.settings = settings
-        self.realtime = realtime or self.kind != "mock"
+        self.realtime = realtime or not self.backend.can("simulated", port)
         self.on_prompt = on_prompt
         self.on_progress: Optional[Callable[[int, int, int], None]] = None
         self.on_detail: Optional[Callable[[str], None]] = None
@@ -130,14 +130,8 @@ class MachineSession(SessionRecover, SessionPinLogs):
         self._then: Optional[Callable[[], None]] = None  # what starts when the running activity finishes
         if state is not None:
             self._position = np.asarray(state.state.position_steps, np.int64).copy()
-        self.grbl = grbl_machine(port, settings) if self.kind == "grbl" else None
-        if self.grbl is not None:  # where the tool stands: grbl's word (with the state file's frame)
-            if self.grbl.warning:
-                self.log(self.grbl.warning, "warning")
-            if self.grbl.notice:
-                self.log(self.grbl.notice, "info")
-                self.grbl.notice = ""  # once: the machine is shared by the sessions of this process
-            self._position = np.asarray(adopt_position(self.grbl, state, self.log), np.int64)
+        self.grbl: Any = None  # the grbl board the grbl back end attaches
+        self.backend.attach(self)  # a board that reports its position: where the tool stands is its word
 
     def runner_process(self) -> RunnerProcess:
         """The process real-time step plans run in (started at the first; ended with the session)."""
@@ -199,19 +193,7 @@ class MachineSession(SessionRecover, SessionPinLogs):
             if travel_only:  # a jog or a go-to
                 self._start_moves("jog", job, label or job.source or "move")
                 return
-            if self.kind == "maximus":
-                self._launch_board("job", drill_work(job, self.settings, self._journal_spec(job, journal)), job, name)
-                return
-            if self.grbl is not None:
-                if journal is not None:  # what was done is grbl's reported position; nothing to resume from yet
-                    self.log(f"{self.port}: a job on grbl keeps no journal (grbl reports where it stopped)",
-                             "warning")
-                self._launch_grbl("job", self._grbl_job(job), name, float(getattr(job, "estimated_time_s", 0.0)))
-                return
-            spec = self._journal_spec(job, journal)
-            plan = self._plan(job)
-            self._launch_steps("job", plan, name, lambda: getattr(job, "estimated_time_s", plan.estimated_time_s),
-                               controller, spec)
+            self.backend.start_job(self, job, name, journal, controller)
 
     def _journal_spec(self, job: Any, journal: Any) -> Optional[JournalSpec]:
         if journal is None or isinstance(journal, JournalSpec):
@@ -241,8 +223,7 @@ class MachineSession(SessionRecover, SessionPinLogs):
         latch after an emergency stop, a limit or a fault) the jog is allowed with the soft limits off, as
         LinuxCNC jogs an unhomed machine, and the position stays unknown (:mod:`cam.drive._session_recover`)."""
         a = str(axis).lower()
-        half = getattr(self.settings.maximus, f"half_step_{a}", False) if self.kind == "maximus" \
-            else self.settings.half_step
+        half = self.backend.half_step(self.settings, a)
         n = jog_steps(axis, steps, unit, settings=self.settings, half_step=bool(half), max_steps=MAX_JOG_STEPS)
         with self._lock:
             self._check_free()
@@ -292,15 +273,7 @@ class MachineSession(SessionRecover, SessionPinLogs):
             self._start_moves("jog", travel_job(points_steps, self.settings), label)
 
     def _start_moves(self, activity: str, job: Job, label: str) -> None:
-        if self.grbl is not None:
-            self._launch_grbl(activity, job, label, 0.0)
-            return
-        if self.kind == "maximus":
-            self._launch_board(activity, move_work(job.points_steps), None, label,
-                               moved_steps=job.points_steps[-1])
-            return
-        plan = plan_chunks(job, start_steps=tuple(int(v) for v in self._position))
-        self._launch_steps(activity, plan, label, lambda: plan.estimated_time_s)
+        self.backend.start_moves(self, activity, job, label)
 
     def _begin(self, activity: Activity) -> None:
         if self.state_hold is not None:  # the marker a killed process leaves: the position then unknown
@@ -374,7 +347,7 @@ class MachineSession(SessionRecover, SessionPinLogs):
                     self.log(f"the job did not start: {e}")
                     self.last_run = dict(info, status="error", messages=[str(e)])
 
-def run(job: Any, port: Any = "mock", *, realtime: bool = False, controller: Optional[Controller] = None,
+def run(job: Any, port: Any = DEFAULT_PORT, *, realtime: bool = False, controller: Optional[Controller] = None,
         progress: Optional[Callable[[int, int, int], None]] = None,
         on_pause: Optional[Callable[[tuple[int, int, int], str], None]] = None) -> RunResult:
     """Run a job on any machine and wait for the end: a one-job :class:`MachineSession`.
@@ -382,7 +355,7 @@ def run(job: Any, port: Any = "mock", *, realtime: bool = False, controller: Opt
     Args:
         job: a :class:`~cam.job.model.Job`, a :class:`~cam.drive.steps.StepPlan` or a prepared job (a board takes
             what its session takes: grbl any job with moves, the MAXIMUS board drill files).
-        port: a port name (``"mock"``, ``"/dev/parport0"``, ``"grbl:/dev/ttyUSB0"``, ``"maximus:/dev/ttyUSB0"``)
+        port: a port name (``mock``, ``/dev/parport0``, ``cmd:mock``, ``grbl:/dev/ttyUSB0``, ``maximus:/dev/ttyUSB0``)
             or an open step/dir port.
         realtime: wait for each write's time (forced on for real ports).
         controller: pause / resume / stop / emergency stop from another thread.
@@ -409,7 +382,7 @@ def run(job: Any, port: Any = "mock", *, realtime: bool = False, controller: Opt
     settings = getattr(job, "settings", DEFAULT_SETTINGS)
     session = MachineSession(port, settings, realtime=realtime, on_prompt=on_prompt)
     session.on_progress = progress
-    if session.kind in ("grbl", "maximus"):
+    if not session.backend.can("step_dir", session.port):  # a board that makes its own steps
         return _run_on_board(session, job, controller)
     session.start(job, controller=controller)
     session.wait_idle(None)

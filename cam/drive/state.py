@@ -45,8 +45,7 @@ except ImportError:  # pragma: no cover - not a POSIX system: no lock (one comma
 from ..errors import BusyError, CamError, PortError, TravelError
 from ..fileio import atomic_write_text
 from ..settings import MAX_TRAVEL_STEPS, MachineSettings, Travel
-from .grbl_link import parse_grbl_url
-from .ports import MAXIMUS_PREFIX, port_kind
+from .machines import backend_of, can, port_kind
 
 __all__ = [
     "STATE_VERSION", "OFFSET_NAMES", "MachineState", "Running", "StateError", "StateBusyError",
@@ -341,7 +340,7 @@ def is_real_port(port: Any) -> bool:
     """Whether ``port`` (a name, or an open port) drives a real machine: anything but the mock (None: the mock)."""
     if port is None:
         return False
-    return port_kind(port) != "mock"
+    return not can(port, "simulated")
 
 
 def new_machine_state(port: Any = None, path: str | os.PathLike = "") -> MachineState:
@@ -498,7 +497,7 @@ def default_state_path(machine_file: Optional[str], port: str,
     """
     if is_real_port(str(port)):
         kind = port_kind(str(port))
-        device = port_device(str(port)) if kind in ("grbl", "maximus") else None
+        device = port_device(str(port)) if kind in ("grbl", "maximus") else None  # serial: a stable by-id name
         stable = serial_by_id(device, environ) if device is not None else None
         if stable is not None:
             return state_dir(environ) / f"{kind}-by-id-{_slug(stable)}.json"
@@ -646,28 +645,16 @@ def port_device(port: Any, settings: Optional[MachineSettings] = None) -> Option
 
     Raises:
         PortError: a bare ``maximus`` whose settings name no serial port."""
-    if not isinstance(port, str) or not is_real_port(port):
+    if not isinstance(port, str):
         return None
-    kind = port_kind(port)
-    if kind == "grbl":
-        return parse_grbl_url(port)[0]
-    if kind == "maximus":
-        if port == MAXIMUS_PREFIX[:-1]:  # the machine file's serial_port (none: the one-line PortError)
-            if settings is None:
-                return None
-            if not settings.maximus.serial_port:  # as cam.drive.maximus.board.maximus_port says it
-                raise PortError("--port maximus needs a device: maximus:/dev/ttyUSB0, or serial_port in the [maximus] "
-                                "table of the machine file")
-            return settings.maximus.serial_port
-        return port[len(MAXIMUS_PREFIX):]
-    return port
+    return backend_of(port).device(port, settings)
 
 
 def missing_device_message(port: str, device: str) -> str:
     """One line for a real port whose device does not exist: what to check, in the words the port's own open
     would use."""
     kind = port_kind(port)
-    if kind == "parport":
+    if kind in ("parport", "cmd"):
         return (f"cannot open parallel port {device} (No such file or directory): load the kernel driver "
                 f"(sudo modprobe ppdev), check the name (ls /dev/parport*) and that you may use it (the lp group)")
     name = {"maximus": "MAXIMUS", "grbl": "grbl"}.get(kind, kind)

@@ -60,12 +60,11 @@ from ..job.hpgl_stream import hpgl_scale, xy_steps_exact
 from ..job.svg import FLATTEN_STEPS, _selected, svg_layer_order, svg_scale
 from .hpgl import ARC_MNEMONICS, HpglDrawing, iter_hpgl, load_hpgl
 from .svg import load_svg
+from ..choices import POSTS
 
 __all__ = ["format_mm", "to_gcode", "gcode_pieces", "save_gcode", "feeds_mm_per_min", "exact_geometry", "svg_exact_xy_mm",
            "hpgl_exact_xy_mm", "POSTS"]
 
-POSTS = ("generic", "grbl", "linuxcnc")
-"""The targets G-code is written for (``cam export --post``)."""
 MAX_RUN_POINTS = 50_000
 """The most points of a cutting run held for fitting at once (a longer run is fitted in parts this long)."""
 

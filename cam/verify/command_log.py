@@ -22,12 +22,14 @@ _QUIET_KEYS = ("init", "spindle_on", "spindle_off")
 
 
 def commands_to_step_log(log: PinLog, settings: MachineSettings) -> PinLog:
-    """The step/dir writes of a command pin log: each step byte as the two writes a step/dir port makes.
+    """The step/dir writes of a command pin log: each step time's bytes as the two writes a step/dir port makes.
 
     Each rising edge of the strobe (0 before the first write) latches that write's data byte, looked up in
     ``settings.commands``: a step byte of axis ``a`` toward + (``<a>_plus``) or - (``<a>_minus``) becomes a
     write with that axis's clock bit high at the byte's time, then one with every clock low at the next row's
-    time (the strobe's fall); every direction bit holds the last direction its axis stepped in (low before its
+    time (the strobe's fall); the bytes of one step time (a diagonal step's X and Y bytes, a gap apart:
+    :func:`_bursts`) are one write with each of their clock bits high, as a step/dir port steps them; every
+    direction bit holds the last direction its axis stepped in (low before its
     first step), so the clock's rising edge has its step's direction, as :func:`~cam.verify.pinlog.
     decode_pin_log` reads it.  ``init`` and the spindle bytes make no writes.  The strobe column is the
     step/dir port's Half/Full* level: 1 with ``settings.half_step``, else 0.  The log's parts
@@ -39,7 +41,7 @@ def commands_to_step_log(log: PinLog, settings: MachineSettings) -> PinLog:
         settings: ``commands`` (the bytes) and ``pins`` (the step/dir bits of the writes made).
 
     Returns:
-        A :class:`~cam.verify.pinlog.PinLog` of ``2 S`` step/dir writes for the ``S`` step bytes.
+        A :class:`~cam.verify.pinlog.PinLog` of ``2 G`` step/dir writes for the ``G`` step times.
 
     Raises:
         CamError: a latched byte ``[commands]`` does not declare (naming the write, 0-based, and the byte).
@@ -91,13 +93,39 @@ def commands_to_step_log(log: PinLog, settings: MachineSettings) -> PinLog:
         last = np.maximum.accumulate(np.where(mine, index, -1))  # the latest step of this axis, up to each byte
         high = (last >= 0) & (up[np.maximum(last, 0)] == 1)
         held |= np.where(high, dirbit[a], 0).astype(np.uint8)
-    out_t = np.empty(2 * s, np.int64)
-    out_d = np.empty(2 * s, np.uint8)
-    out_t[0::2] = t_ns[rows]
-    out_t[1::2] = t_ns[np.minimum(rows + 1, max(n - 1, 0))] if s else t_ns[rows]
-    out_d[0::2] = held | clock[axis]
-    out_d[1::2] = held
-    out_s = np.full(2 * s, 1 if settings.half_step else 0, np.uint8)
+    first, last = _bursts(t_ns[rows], axis, int(round(settings.commands.byte_gap_us * 1000)))
+    g = len(first)
+    out_t = np.empty(2 * g, np.int64)
+    out_d = np.empty(2 * g, np.uint8)
+    out_t[0::2] = t_ns[rows[first]]
+    out_t[1::2] = t_ns[np.minimum(rows[last] + 1, max(n - 1, 0))] if s else t_ns[rows[last]]
+    clocks = np.bitwise_or.reduceat(clock[axis], first) if s else np.zeros(0, np.uint8)
+    out_d[0::2] = held[last] | clocks
+    out_d[1::2] = held[last]
+    out_s = np.full(2 * g, 1 if settings.half_step else 0, np.uint8)
+    rows = rows[first]
     parts = tuple(PinLogPart(part.name, 2 * int(np.searchsorted(rows, part.first_row)), part.start_steps,
                              part.t0_ns) for part in log.parts)
     return PinLog(out_t, out_d, out_s, parts)
+
+
+def _bursts(t_ns: np.ndarray, axis: np.ndarray, gap_ns: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(first, last)``: ``(G,)`` indices of the first and last step byte of each burst.  A burst is the bytes one
+    step time sent (a diagonal step: X then Y, ``byte_gap_us`` apart): each byte at most one gap after the one
+    before, within two gaps of the burst's first, of an axis not yet in it.  Its axes step together, as a
+    step/dir port steps them in one write: the control unit's motors take tens of microseconds' bytes as one
+    step time (a step lasts a step period, at least three gaps and a strobe long)."""
+    s = len(t_ns)
+    if s == 0:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    start = np.ones(s, bool)
+    first_of = np.arange(s)
+    mask = (1 << axis).astype(np.int64)
+    for i in np.flatnonzero(np.diff(t_ns) <= gap_ns) + 1:  # only bytes close after another: diagonal steps
+        g = int(first_of[i - 1])
+        if t_ns[i] - t_ns[g] <= 2 * gap_ns and not mask[i - 1] & (1 << int(axis[i])):
+            start[i] = False
+            first_of[i] = g
+            mask[i] = mask[i - 1] | (1 << int(axis[i]))
+    first = np.flatnonzero(start)
+    return first, np.append(first[1:], s) - 1

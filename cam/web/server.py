@@ -83,6 +83,7 @@ except ImportError:  # pragma: no cover - not Unix: no file limit to raise
     resource = None  # type: ignore[assignment]
 
 from ..drive.journal import read_journal
+from ..drive.machines import DEFAULT_PORT, can
 from ..drive.session import MachineSession
 from ..drive.state import MachineState, StateHold, machine_record
 from ..errors import BusyError, CamError, CapabilityError, StalePlanError
@@ -125,7 +126,7 @@ class ServerConfig:
             (with a token only; a reverse proxy's or a DNS name for this computer).
         jobs_dir: the folder uploads are stored in (None = a new temporary folder).
         max_upload_bytes: larger uploads get 413.
-        settings: the machine settings; machine_port: "mock" or a device such as /dev/parport0.
+        settings: the machine settings; machine_port: a port name (:mod:`cam.drive.machines`; the mock by default).
         realtime: run the mock on the real clock (real ports always are).
         max_connections: requests in progress at once (safety routes aside); max_connections_per_client:
             connections from one client address beyond which a new one may only ask for a safety route;
@@ -152,7 +153,7 @@ class ServerConfig:
     jobs_dir: Optional[str] = None
     max_upload_bytes: int = 50 * 1024 * 1024
     settings: MachineSettings = DEFAULT_SETTINGS
-    machine_port: str = "mock"
+    machine_port: str = DEFAULT_PORT
     realtime: bool = True
     max_connections: int = 100
     max_connections_per_client: int = 50
@@ -460,7 +461,7 @@ async def _get_config(st: _AppState, request: Request) -> dict[str, Any]:
     config = st.config
     s = config.settings
     return {
-        "port": config.machine_port, "realtime": st.session.realtime or config.machine_port != "mock",
+        "port": config.machine_port, "realtime": st.session.realtime,
         "max_upload_bytes": config.max_upload_bytes,
         "accepted": {k: list(v) for k, v in accepted_suffixes().items()},
         "profile_suffixes": list(PROFILE_SUFFIXES),
@@ -1126,7 +1127,7 @@ def serve(config: ServerConfig, announce: Callable[[str], None] = print) -> int:
     ucfg = uvicorn_config(app, host=config.host, port=port, log_level="warning", access_log=False,
                           timeout_graceful_shutdown=2)
     server = uvicorn.Server(ucfg)
-    mode = "real time" if (config.realtime or config.machine_port != "mock") else "simulated clock"
+    mode = "real time" if (config.realtime or not can(config.machine_port, "simulated")) else "simulated clock"
     _freeze_startup_objects()
     announce(f"cam: web page at {page_url(config, port)}")
     announce(f"cam: machine port {config.machine_port} ({mode}); uploads in {config.jobs_dir}; Ctrl-C stops")

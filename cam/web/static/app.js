@@ -347,7 +347,7 @@
                                  ["stopped", "emergency-stopped", "error"].includes(s.last.status));
     document.querySelectorAll("button.jog, #origin, #set-offset, button.drill-z, button.zero, #goto, #offset-select, #set-position")
       .forEach((b) => { b.disabled = !idle; });
-    document.querySelectorAll("button.drill-z").forEach((b) => { b.hidden = !s.port.startsWith("maximus"); });
+    document.querySelectorAll("button.drill-z").forEach((b) => { b.hidden = !(s.capabilities || []).includes("drill_stroke"); });
     $("grbl-row").hidden = !s.grbl;  // a grbl board: its feed override
     $("home").disabled = !idle;
     if (s.grbl && document.activeElement !== $("feed-override")) $("feed-override").value = s.grbl.feed_override_pct;
