@@ -5,6 +5,7 @@ emulate-maximus` has the simulator's limit-switch options.  The emulator's own h
 drilled exactly once.  Sped-up emulator here; the stop in the middle of a move at real speed at the end."""
 from __future__ import annotations
 
+import ctypes
 import json
 import os
 import re
@@ -13,6 +14,7 @@ import subprocess
 import sys
 import threading
 import time
+import tty
 from pathlib import Path
 
 import numpy as np
@@ -32,6 +34,7 @@ from cam.job.jobs import JobOptions, prepare_job
 from cam.drive.maximus.protocol import (
     EMERGENCYSTOP, ISMACHINEREADY, JOGMODEON, LIMIT_SWITCH_X, LIMIT_SWITCH_Y, MACHINEREADY, MACHINESTOPPED, OPENJOGMODE,
 )
+from cam.sim._maximus_line import LineReader
 from cam.sim.maximus import start_emulator
 from conftest import run_cli
 from support.maximus_host import GUARD_MARGIN_S
@@ -297,6 +300,73 @@ def test_a_late_emulator_thread_still_stops_at_the_stop_bytes_arrival(monkeypatc
         earliest, latest = int((stop[0] - t1) / 0.002), int((stop[1] - t0) / 0.002)  # pulses due by its arrival
         x = emu.position_pulses[0]
         assert 55 <= x and earliest - 1 <= x <= latest + 1, (earliest, x, latest)
+    finally:
+        emu.stop()
+    assert emu.error is None, repr(emu.error)
+
+
+def hold_the_gil(us: int) -> None:
+    """Keep this process busy ``us`` microseconds with the GIL held: libc's usleep called through ctypes.PyDLL,
+    which does not release it, so no other thread of the process runs meanwhile (a deliberate lateness)."""
+    ctypes.PyDLL(None).usleep(ctypes.c_uint(us))
+
+
+@pytest.mark.realtime
+def test_the_line_stamps_a_byte_as_it_arrives_while_the_emulators_process_holds_the_gil():
+    """The emulator's line reader is a process of its own: a byte written while the emulator's process holds the
+    GIL (50 ms here) is stamped as it arrived, not when a thread of that process could run again."""
+    master, slave = os.openpty()
+    tty.setraw(slave)
+    reader = LineReader(master).start()
+    try:
+        assert reader.alive, "the reader process started"
+        before = time.monotonic()
+        os.write(slave, bytes([EMERGENCYSTOP]))
+        hold_the_gil(50_000)
+        held_until = time.monotonic()
+        chunks = reader.collect()
+        assert [data for _, data in chunks] == [bytes([EMERGENCYSTOP])]
+        # stamped as it came, not when this process's threads could run again (a thread reader's stamp)
+        assert before <= chunks[0][0] < held_until - 0.025, (chunks[0][0] - before, held_until - before)
+        assert reader.collect() == [], "collected once"
+    finally:
+        reader.stop()
+        os.close(master)
+        os.close(slave)
+    assert not reader.alive
+
+
+@pytest.mark.realtime
+def test_a_busy_emulator_process_still_stops_at_the_stop_bytes_arrival(monkeypatch):
+    """As test_a_late_emulator_thread_still_stops_at_the_stop_bytes_arrival, but the emulator's whole process is
+    busy as the stop byte arrives (the GIL held 20 ms at the 50th pulse, 10 pulses): its reader process stamps
+    the byte as it comes, so the firmware stops there, not 10 pulses later when a thread of it could look."""
+    emu = start_emulator(speed=1.0)
+    try:
+        with serial.Serial(emu.device_path, 115200, timeout=GUARD_MARGIN_S) as line:
+            line.write(bytes([ISMACHINEREADY]))
+            assert line.read_until(bytes([MACHINEREADY])).endswith(bytes([MACHINEREADY]))
+            line.write(bytes([OPENJOGMODE]))
+            assert line.read(1) == bytes([JOGMODEON])
+            stop: list[float] = []
+            step = emu._after_step
+
+            def busy_step() -> None:
+                step()
+                if emu.position_pulses[0] == 50 and not stop:
+                    stop.append(time.monotonic())
+                    os.write(line.fileno(), bytes([EMERGENCYSTOP]))
+                    stop.append(time.monotonic())
+                    hold_the_gil(20_000)
+
+            monkeypatch.setattr(emu, "_after_step", busy_step)
+            t0 = time.monotonic()
+            line.write(jog_packet("x", 400, delay=10))  # 2 ms a pulse
+            t1 = time.monotonic()
+            assert line.read(1) == bytes([MACHINESTOPPED])
+        earliest, latest = int((stop[0] - t1) / 0.002), int((stop[1] - t0) / 0.002)  # pulses due by its arrival
+        x = emu.position_pulses[0]
+        assert 50 <= x <= 55 and earliest - 1 <= x <= latest + 1, (earliest, x, latest)
     finally:
         emu.stop()
     assert emu.error is None, repr(emu.error)

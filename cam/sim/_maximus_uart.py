@@ -4,10 +4,12 @@ each stamped with the time it arrived, and replies (with the faults a test asked
 A real PIC takes a byte the moment its stop bit ends: the UART sets RCIF and, with interrupts enabled, the
 ``serial_isr`` runs at once, in the middle of a ``dly_100us`` if need be (seed 000 Appendix 1: ``#int_rda``,
 ``enable_interrupts(INT_RDA)`` before each move).  The emulator's thread, though, runs when the operating
-system lets it: on a busy computer it is late, then catches up.  So the bytes are not taken when that thread
-happens to look, but when they arrived: a reader thread waits in ``select`` on the line and stamps each byte
-with the wall clock as it comes (the firmware's thread stamps them itself when it finds one first), and the
-firmware acts on a byte at the simulated time of its stamp (:meth:`_Uart._sim_ns`, through the clock's anchor).
+system (and its process's GIL) lets it: on a busy computer it is late, then catches up.  So the bytes are not
+taken when that thread happens to look, but when they arrived: a reader process of its own waits in ``select``
+on the line and stamps each chunk as it comes (cam/sim/_maximus_line.py), and the firmware acts on a byte at the
+simulated time of its stamp (:meth:`_Uart._sim_ns`, through the clock's anchor).  Before it lets simulated time
+pass a moment, the firmware's thread collects every byte that arrived by then, waiting for one the reader has
+not passed on yet.
 
 A part of :class:`cam.sim.maximus.MaximusEmulator`.
 """
@@ -15,11 +17,11 @@ from __future__ import annotations
 
 import os
 import select
-import threading
 import time
 from typing import Optional
 
 from ._maximus_base import BUSY, _Halt
+from ._maximus_line import LineReader
 
 
 class _Uart:
@@ -27,72 +29,62 @@ class _Uart:
 
     # ------------------------------------------------------------------ the line: bytes stamped as they arrive
     def _open_line(self) -> None:
-        """Start the reader thread (after the pseudo-terminal is open)."""
+        """Start the reader process (after the pseudo-terminal is open)."""
         self._line_wake_r, self._line_wake_w = os.pipe()
-        self._reader = threading.Thread(target=self._read_line, name="maximus-uart", daemon=True)
-        self._reader.start()
+        os.set_blocking(self._line_wake_w, False)
+        self._line_reader = LineReader(self._master).start()
 
     def _close_line(self) -> None:
-        """Stop the reader thread (before the pseudo-terminal is closed)."""
-        if self._reader is not None:
-            os.write(self._line_wake_w, b"x")
-            self._reader.join(timeout=5.0)
-            self._reader = None
+        """Stop the reader process (before the pseudo-terminal is closed)."""
+        if self._line_reader is not None:
+            self._line_reader.stop()
+            self._line_reader = None
             for fd in (self._line_wake_r, self._line_wake_w):
                 os.close(fd)
+            self._line_wake_r = self._line_wake_w = -1  # a late reset() must not write to a reused descriptor
 
-    def _read_line(self) -> None:
-        """The reader thread: blocked in select until a byte comes, it stamps it as it wakes."""
-        while True:
-            try:
-                ready, _, _ = select.select([self._master, self._line_wake_r], [], [])
-            except (OSError, ValueError):
-                return
-            seen = time.monotonic()
-            if self._line_wake_r in ready:
-                return
-            if not self._take_bytes(seen) and self._stop_event.wait(0.01):
-                return  # the line failed (nobody holds the slave side): look again soon, unless stopping
-
-    def _take_bytes(self, seen: Optional[float] = None) -> bool:
-        """Move what the line holds into the receive buffer, stamped ``seen`` (the reader's wake-up) or now;
-        False if the line could not be read."""
+    def _take_bytes(self) -> None:
+        """Move every byte that arrived by now into the receive buffer, with its arrival stamp (firmware thread;
+        under ``_line``, so that :attr:`~cam.sim.maximus.MaximusEmulator.idle` sees a byte in one place or the
+        other)."""
         with self._line:
-            if self._master < 0:
-                return False
-            try:
-                ready, _, _ = select.select([self._master], [], [], 0)
-                if not ready:
-                    return True
-                stamp = time.monotonic() if seen is None else seen
-                data = os.read(self._master, 4096)
-            except (OSError, ValueError):
-                return False
-            if not data:
-                return False
-            self._arrivals.extend((stamp, b) for b in data)
-            self._line.notify_all()
-            return True
+            if self._line_reader is None:
+                return
+            for stamp, data in self._line_reader.collect():
+                self._arrivals.extend((stamp, b) for b in data)
+
+    def _wait_line(self, timeout_s: float) -> None:
+        """Block the firmware's thread until bytes come, a stop or reset wakes it, or ``timeout_s`` passes."""
+        if self._line_reader is None:
+            return
+        try:
+            select.select([self._line_reader.wait_fd(), self._line_wake_r], [], [], max(0.0, timeout_s))
+        except (OSError, ValueError):
+            pass
 
     def _line_readable(self) -> bool:
-        """Whether the line holds bytes not taken into the receive buffer yet (call with ``_line`` held)."""
-        if self._master < 0:
-            return False
-        try:
-            return bool(select.select([self._master], [], [], 0)[0])
-        except (OSError, ValueError):
-            return False
+        """Whether bytes came that are not in the receive buffer yet: in the line or in the reader's hands (call
+        with ``_line`` held)."""
+        reader = self._line_reader
+        return reader is not None and reader.pending()
 
     def _discard_line(self) -> None:
-        """At power-up: what arrived before is lost."""
+        """At power-up: what arrived before is lost (and so are the wake-ups of the reset)."""
         self._take_bytes()
         with self._line:
             self._arrivals.clear()
+        try:
+            while _readable(self._line_wake_r):
+                os.read(self._line_wake_r, 4096)
+        except OSError:
+            pass
 
     def _wake_line(self) -> None:
-        """Wake the firmware's thread from a wait on the line (stop, reset)."""
-        with self._line:
-            self._line.notify_all()
+        """Wake the firmware's thread from a wait on the line (stop, reset; any thread)."""
+        try:
+            os.write(self._line_wake_w, b"x")
+        except (OSError, AttributeError):
+            pass  # full (it is awake anyway) or closed
 
     # ------------------------------------------------------------------ the clock: wall time <-> simulated time
     def _wall_s(self, t_ns: int) -> float:
@@ -113,10 +105,9 @@ class _Uart:
         with ``fetch`` False by the last reply's write)."""
         if fetch:
             self._take_bytes()
-        with self._line:
-            if not self._arrivals:
-                return False
-            seen = self._arrivals[0][0]
+        if not self._arrivals:
+            return False
+        seen = self._arrivals[0][0]
         if self._speed is None:
             return fetch or seen <= self._reply_wall_s
         return self._sim_ns(seen) <= self._t_ns
@@ -125,24 +116,23 @@ class _Uart:
         """The simulated time the first byte received arrived at, if that is by ``end_ns`` (None: no byte
         came by then).  A byte that came while this thread was late is taken at its own time, never sooner."""
         self._take_bytes()
-        with self._line:
-            if not self._arrivals:
-                return None
-            at = self._sim_ns(self._arrivals[0][0])
+        if not self._arrivals:
+            return None
+        at = self._sim_ns(self._arrivals[0][0])
         return max(at, self._t_ns) if at <= end_ns else None
 
     def _wait_for_wall(self, end_ns: int, interruptible: bool) -> bool:
         """Wait until simulated time ``end_ns`` is due on the wall clock; True if a byte that arrived before
         then (``interruptible``: the UART interrupt is on) ends the wait first."""
         target = self._wall_s(end_ns)
-        with self._line:
-            while not (self._stop_event.is_set() or self._reset_event.is_set()):
-                if interruptible and self._arrivals and self._arrivals[0][0] <= target:
-                    return True
-                left = target - time.monotonic()
-                if left <= 0:
-                    return False
-                self._line.wait(left)
+        while not (self._stop_event.is_set() or self._reset_event.is_set()):
+            now = time.monotonic()  # read first: what is collected next covers every byte that came by then
+            self._take_bytes()
+            if interruptible and self._arrivals and self._arrivals[0][0] <= target:
+                return True
+            if now >= target:
+                return False
+            self._wait_line(target - now)
         return False
 
     # ------------------------------------------------------------------ getc / putc
@@ -152,12 +142,13 @@ class _Uart:
         self._state = where
         while True:
             self._check_halt()
+            self._take_bytes()
             with self._line:
                 if self._arrivals:
                     seen, b = self._arrivals.popleft()
                     self._state = BUSY  # with the byte taken, under the lock: never idle with a byte in hand
                     break
-                self._line.wait(0.05)
+            self._wait_line(0.05)
         with self._lock:
             self._rx_rows.append((self._t_ns, b, where))
         if self._speed is not None and seen > self._wall_s(self._t_ns):
@@ -166,8 +157,7 @@ class _Uart:
 
     def _pop_byte(self) -> int:
         """The first byte received (the UART ISR's read)."""
-        with self._line:
-            return self._arrivals.popleft()[1]
+        return self._arrivals.popleft()[1]
 
     def _read_packet(self, n: int, where: str, kind: str) -> bytes:
         data = bytes(self._getc(where) for _ in range(n))
@@ -212,3 +202,7 @@ class _Uart:
             os.write(self._master, data)
         except OSError:
             pass  # nobody listening: the bytes are lost, as on a real line
+
+
+def _readable(fd: int) -> bool:
+    return bool(select.select([fd], [], [], 0)[0])

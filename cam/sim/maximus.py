@@ -36,10 +36,12 @@ simulated time.  One step pulse of ``constspeed`` therefore lasts
 is on this clock, so logs are deterministic.  In real time the emulator paces
 itself so that simulated time runs ``speed`` times faster than the wall clock
 (``speed=None``: no sleeping at all), never ahead of it.  Each byte from the host
-is stamped with the wall clock as it arrives (a reader thread waits on the line)
-and the firmware takes it at that simulated time, as the PIC's UART interrupt
-does: in the middle of a delay, and after a late thread has caught up with the
-pulses due before it, never sooner (cam/sim/_maximus_uart.py).
+is stamped with the wall clock as it arrives (a reader process of its own waits
+on the line, so a busy computer or the caller's threads do not make the stamps
+late: cam/sim/_maximus_line.py) and the firmware takes it at that simulated
+time, as the PIC's UART interrupt does: in the middle of a delay, and after a
+late thread has caught up with the pulses due before it, never sooner
+(cam/sim/_maximus_uart.py).
 
 Interrupts are emulated where they can happen: while the listing has them
 enabled (from just before a Jog, Offset or Drill move until just after its
@@ -284,8 +286,8 @@ class MaximusEmulator(_Program, _Hardware, _Uart, AbstractContextManager):
         self._anchor_real = time.monotonic()
         self._anchor_sim_ns = 0
         self._arrivals: deque[tuple[float, int]] = deque()  # (time.monotonic() it came, byte): the UART's buffer
-        self._line = threading.Condition()  # guards _arrivals; notified as bytes come
-        self._reader: threading.Thread | None = None
+        self._line_reader = None  # the reader process that stamps them (cam/sim/_maximus_line.py); firmware thread only
+        self._line = threading.Lock()  # held as bytes move from the reader into _arrivals and out of it (see idle)
         self._reply_wall_s = 0.0  # when the last reply was written
         self._gie = False
         self._int_ext = False
