@@ -30,6 +30,7 @@ from cam.job.jobs import JobOptions, prepare_job
 from cam.settings import load_settings
 from cam.sim.grbl import start_emulator as start_grbl
 from cam.sim.maximus import start_emulator as start_maximus
+from cam.verify.command_log import commands_to_step_log
 from cam.verify.pinlog import decode_pin_log, read_pin_log
 from conftest import SAMPLES, drawing_from_rows, run_cli
 from support.grbl import quick_thread_switches  # noqa: F401 (autouse)
@@ -80,14 +81,19 @@ class _Machine:
         elif kind == "maximus":
             self.emu = start_maximus(speed=None)
             self.port, self.settings = f"maximus:{self.emu.device_path}", MAXIMUS_SETTINGS
+        elif kind == "cmd":  # seed 004's command-byte unit, logged (issue #45 point 2)
+            self.port, self.settings = "cmd:mock", load_settings(Path(__file__).parent.parent / "profiles" /
+                                                                 "seed004-controller.toml")
         else:
             self.port = "mock"
 
     def moved_x(self, session: MachineSession) -> int:
         """The steps X moved in the last activity, from what the machine did."""
-        if self.kind == "mock":
-            pos = decode_pin_log(session.last_result.pin_log(), self.settings).position_steps
-            return int(pos[-1][0] - pos[0][0]) if len(pos) else 0
+        if self.kind in ("mock", "cmd"):
+            log = session.last_result.pin_log()
+            if self.kind == "cmd":
+                log = commands_to_step_log(log, self.settings)
+            return int(decode_pin_log(log, self.settings).final_steps[0])  # steps from where the run started
         if self.kind == "grbl":
             b = [b for b in self.emu.executed() if b.kind in ("G0", "G1")][-1]
             return int(mpos_to_steps(b.end_mm, S)[0] - mpos_to_steps(b.start_mm, S)[0])
@@ -99,7 +105,7 @@ class _Machine:
             self.emu.stop()
 
 
-@pytest.fixture(params=["mock", "grbl", "maximus"])
+@pytest.fixture(params=["mock", "grbl", "maximus", "cmd"])
 def unknown_machine(request, tmp_path):
     m = _Machine(request.param)
     yield m
@@ -130,8 +136,8 @@ def test_jog_allowed_with_position_unknown_soft_limits_off(unknown_machine, tmp_
         session.jog("x", -10)  # again: still allowed, still unknown
         assert session.wait_idle(30) and session.last_run["status"] == "finished", session.last_run
         assert not read_state(state, m.settings).position_known
-        if m.kind == "maximus":  # no switches cam reads: one line, nothing sent
-            with pytest.raises(CapabilityError, match="cannot home"):
+        if m.kind in ("maximus", "cmd"):  # no switches cam reads: one line, nothing sent
+            with pytest.raises(CapabilityError, match="cannot home|no switches"):
                 session.home()
         session.set_position((0, 0, 0))  # the explicit recovery: known, soft limits back
         assert read_state(state, m.settings).position_known
