@@ -1,7 +1,6 @@
 """Machines as one protocol (issue #45 points 1 and 2): one registry of back ends, capabilities instead of port
 names, and seed 004's command-byte control unit (``cmd:``) as the proof that a new machine is one module."""
 import re
-from pathlib import Path
 
 import numpy as np
 import pytest
