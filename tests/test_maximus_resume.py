@@ -471,7 +471,10 @@ def test_a_stop_between_a_pulses_edges_is_booked_where_the_head_ends_up():
                         d = log.value[log.port == ord("D")]
                         return emu.position_pulses[0] >= start + 3 and not d[-1] & 0x02
 
-                    wait_for(pin_fell)
+                    deadline = time.monotonic() + GUARD_MARGIN_S
+                    while not pin_fell():  # looked at often: the aim below starts from when it is seen
+                        assert time.monotonic() < deadline, "the jog did not begin"
+                        time.sleep(0.001)
                     # aim at the middle of the low half that began as the pin fell (a busy computer may miss it:
                     # the stop then lands in the high half after it, which this loop checks too, and tries again)
                     time.sleep(half_s / 2)
