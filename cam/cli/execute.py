@@ -21,6 +21,7 @@ from typing import Any, Optional
 from tqdm import tqdm
 
 from ..drive.journal import journal_spec, read_journal
+from ..drive.machine_job import machine_job
 from ..drive.machines import backend_of, can, require
 from ..drive.ports import MockPort, SwitchSchedule
 from ..drive.runner import FINISHED
@@ -79,6 +80,9 @@ def check_port_options(args: argparse.Namespace, settings: Optional[MachineSetti
         require(args.port, "pin_log")
     if getattr(args, "spindle", None):
         require(args.port, "spindle", what="--spindle")
+    if drills_alone and getattr(args, "level", None):
+        raise CapabilityError(f"--level: {args.port} drills every hole at its own Z stroke and cannot follow a "
+                              f"levelled job; level it on a step/dir or grbl port")
     if drills_alone and getattr(args, "ramp", None):
         raise CapabilityError(f"{args.port} moves at the constant speed of its Delay bytes: --ramp applies to "
                               f"step/dir ports (set the speed with --delay)")
@@ -261,7 +265,7 @@ def _drive(job: Any, args: argparse.Namespace, settings: MachineSettings, hold: 
     runs: list[tuple[str, MachineSession, tuple[int, int, int]]] = []  # the command's parts that ran
     session.check_job(job)  # before the progress bar: a bad job is one clean line
     # the machine time takes a pass over the ramps: only worked out before the run for a bar to show it
-    bar = _bar(args, float(getattr(job, "estimated_time_s", 0.0))) if progress_wanted(args) else None
+    bar = _bar(args, machine_job(job).estimated_s()) if progress_wanted(args) else None
     if bar is not None:
         session.on_progress = lambda done, total, t_ns: bar.update(round(t_ns / 1e9, 3) - bar.n)
     # each hole on a board that drills by itself, as the MAXIMUS PC program shows it ("Drilling hole n of N")

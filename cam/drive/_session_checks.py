@@ -6,14 +6,13 @@ back end refuses (:meth:`~cam.drive.machines.Backend.check_job`).
 """
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 
 from ..errors import CamError, StalePlanError
-from ..job.model import TRAVEL, Job, JobLike, check_reach, check_travel
+from ..job.model import Job, check_reach, check_travel
 from ..verify.pinlog import motion_extent
 from .chunks import ChunkedPlan
+from .machine_job import JobInput, MachineJob, machine_job
 from .steps import StepPlan
 from ._session_grbl import SessionGrbl
 
@@ -23,41 +22,41 @@ __all__ = ["SessionChecks"]
 class SessionChecks(SessionGrbl):
     """The checks of a job against the machine, its port and the state it was planned in (a mixin)."""
 
-    def check_job(self, job: Any) -> None:
+    def check_job(self, job: JobInput) -> None:
         """Everything :meth:`start` checks before anything moves, without starting (raises CamError)."""
         with self._lock:
-            self._check_job(job)
+            self._check_job(machine_job(job))
 
-    def _check_job(self, job: Any) -> None:
-        settings = getattr(job, "settings", None)
+    def _check_job(self, mj: MachineJob) -> None:
+        settings = mj.settings
         if settings is not None and (settings.travel != self.settings.travel or settings.pins != self.settings.pins):
             raise CamError("the job was planned for other machine settings; plan it again")
-        self._check_planned_in(job)
-        if isinstance(job, Job) and len(job) and np.all(job.kind == TRAVEL):
+        self._check_planned_in(mj)
+        if mj.travel_only:
             self.backend.require(self.port, "jog", "a move")
         else:
-            self.backend.check_job(self, job)  # what this machine cannot run, before anything moves
-        extent = getattr(job, "extent_steps", None)
-        if extent is not None:
-            check_reach(self._position, extent, self.settings, "the job")
-        elif isinstance(job, ChunkedPlan):  # a prepared job's plan started alone: its extent, from here
-            check_reach(self._position, job.motion_extent()[0], self.settings, "the job")
-        elif isinstance(job, StepPlan):
-            check_reach(self._position, motion_extent(job.data, job.settings)[0], self.settings, "the job")
-        if isinstance(job, Job):
-            check_travel(np.asarray(job.points_steps, np.int64) + self._position, self.settings, job.pixels)
-        elif self.backend.can("gcode") and isinstance(job, JobLike) and extent is None:
+            self.backend.check_job(self, mj)  # what this machine cannot run, before anything moves
+        given = mj.given
+        if mj.extent_steps is not None:
+            check_reach(self._position, mj.extent_steps, self.settings, "the job")
+        elif isinstance(given, ChunkedPlan):  # a prepared job's plan started alone: its extent, from here
+            check_reach(self._position, given.motion_extent()[0], self.settings, "the job")
+        elif isinstance(given, StepPlan):
+            check_reach(self._position, motion_extent(given.data, given.settings)[0], self.settings, "the job")
+        if isinstance(given, Job):
+            check_travel(np.asarray(given.points_steps, np.int64) + self._position, self.settings, given.pixels)
+        elif self.backend.can("gcode") and mj.moves is not None and mj.extent_steps is None:
             # a job kept as pieces (a drawing, an HPGL file...) planned in its own frame: grbl runs its points as
             # they are, no step plan checks them from here (issue #45 point 4)
-            for piece in job.pieces():
+            for piece in mj.moves.pieces():
                 check_travel(np.asarray(piece.points_steps, np.int64) + self._position, self.settings, piece.pixels)
 
-    def _check_planned_in(self, job: Any) -> None:
+    def _check_planned_in(self, mj: MachineJob) -> None:
         """Refuse a prepared job planned for another machine state than the session's now (issue #43 point 6): a
         G-code program planned with the tool elsewhere, or a job planned from another work zero
         (:class:`~cam.job.jobs.PlannedIn`; the work offsets compared when the session keeps the state file)."""
-        planned = getattr(job, "planned_in", None)
-        if planned is None or getattr(job, "resumed", None) is not None:
+        planned = mj.planned_in
+        if planned is None or mj.resumed:
             return
         st = self.state_hold.state if self.state_hold is not None else None
         why = planned.differs(tuple(int(v) for v in self._position), None if st is None else st.offsets_steps,

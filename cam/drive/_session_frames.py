@@ -22,6 +22,7 @@ from ..errors import CamError, PlanError
 from ._session_parts import SessionControls
 from .grbl_machine import GRBL_OFFSETS
 from .placement import approach_to_work_zero, ended_state, goto_path, placed_home
+from .machine_job import MachineJob
 from .machines import require
 from .runner import Controller
 from .state import steps_to_mm, check_in_travel, still_unknown
@@ -37,11 +38,11 @@ class SessionFrames(SessionControls):
         if self.state_hold is not None:
             self.state_hold.require_known()
 
-    def _place(self, job: Any, label: Optional[str], controller: Optional[Controller], journal: Any,
+    def _place(self, job: MachineJob, label: Optional[str], controller: Optional[Controller], journal: Any,
                origin: Optional[str]) -> bool:
         """With a state file: travel to the job's place at the work zero first (the job starts when the travel
         has finished).  True when that travel was started; False: the job starts here, as it is."""
-        if self.state_hold is None or getattr(job, "resumed", None) is not None:
+        if self.state_hold is None or job.resumed:
             return False
         st = self.state_hold.state
         here = tuple(int(v) for v in self._position)

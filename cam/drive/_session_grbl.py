@@ -9,7 +9,7 @@ it keeps no state of its own: it works on the attributes ``MachineSession.__init
 from __future__ import annotations
 
 from dataclasses import replace
-from typing import Any
+from typing import Any, Optional
 
 import numpy as np
 
@@ -18,13 +18,13 @@ from ..job.model import JobLike
 from ..values import finite_number
 from ._session_frames import SessionFrames
 from ._session_parts import Activity
-from .chunks import ChunkedPlan
 from .grbl_machine import (FEED_OVERRIDE_RANGE, GrblControl, GrblPosition, finish_stop, job_lines, run_on_grbl,
                            steps_to_mpos, travel_advice)
 from .grbl_time import grbl_time_s
+from .machine_job import JobInput, MachineJob, machine_job
+from .journal import JournalSpec
 from .machines import require
 from .state import check_in_travel
-from .steps import StepPlan
 
 __all__ = ["SessionGrbl"]
 
@@ -32,24 +32,20 @@ __all__ = ["SessionGrbl"]
 class SessionGrbl(SessionFrames):
     """Jobs, moves, the feed override and homing on a grbl board (a mixin; see the module)."""
 
-    def _grbl_job(self, job: Any) -> Any:
+    def _grbl_job(self, job: "JobInput | MachineJob") -> JobLike:
         """The moves (a :class:`~cam.job.model.JobLike`) grbl runs for ``job``."""
-        if isinstance(job, StepPlan):
+        mj = machine_job(job)
+        if mj.moves is None:
             raise CapabilityError(f"{self.port} (a grbl board) runs jobs as G-code: start the job or the prepared "
                                   f"job, not its step plan")
-        plan = getattr(job, "plan", None)
-        if isinstance(plan, ChunkedPlan):  # a PreparedJob
-            return plan.job
-        if isinstance(job, ChunkedPlan):
-            return job.job
-        if isinstance(job, JobLike):
-            return job
-        raise CapabilityError(f"{self.port} (a grbl board) cannot run a {type(job).__name__}")
+        return mj.moves
 
-    def _launch_grbl(self, name: str, job: Any, label: str, estimated_s: float) -> None:
+    def _launch_grbl(self, name: str, job: Any, label: str, estimated_s: float,
+                     journal: Optional[JournalSpec] = None) -> None:
         """Stream ``job`` to grbl in the background.  Its planned machine time is grbl's own
         (:func:`~cam.drive.grbl_time.grbl_time_s` of the lines it will get, from grbl's ``$$``), not the step
-        plan's (``estimated_s``, kept only when the lines cannot be timed)."""
+        plan's (``estimated_s``, kept only when the lines cannot be timed).  ``journal``: keep the job's journal
+        (:mod:`cam.drive.grbl_journal`)."""
         assert self.grbl is not None
         ctl = GrblControl(self.grbl)
         start = tuple(int(v) for v in self._position)
@@ -61,7 +57,7 @@ class SessionGrbl(SessionFrames):
         total = sum(len(piece) for piece in job.pieces())
         self._begin(Activity(name, label, ctl, total, estimated_s, position))
         self.log(f"{label}: started on {self.port}")
-        self._spawn(run_on_grbl, (self, name, job, ctl, label, start, position, total, estimated_s), name)
+        self._spawn(run_on_grbl, (self, name, job, ctl, label, start, position, total, estimated_s, journal), name)
 
     def feed_override(self, percent: float) -> None:
         """Set the feed override to ``percent`` (a number 10..200, rounded to a whole percent; grbl's real-time

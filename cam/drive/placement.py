@@ -12,9 +12,11 @@ from typing import Any, Optional
 
 import numpy as np
 
-from ..errors import TravelError
+from ..errors import CamError, TravelError
 from ..job.model import Job, travel_job
 from ..settings import MachineSettings
+from .chunks import ChunkedPlan
+from .machine_job import JobInput, MachineJob, machine_job
 from .runner import EMERGENCY_STOPPED, FINISHED, LIMIT_STOPPED, STOPPED
 from .state import MachineState
 
@@ -53,18 +55,20 @@ ORIGINS = ("file", "upper-left", "lower-left", "center")
 """Which point of a drawing, drill or vector job ``--origin`` puts at the work zero (see :func:`origin_anchor`)."""
 
 
-def origin_anchor(job: Any, origin: Optional[str]) -> tuple[int, int]:
+def origin_anchor(job: "JobInput | MachineJob", origin: Optional[str]) -> tuple[int, int]:
     """The ``(x, y)`` point of a prepared job, in its own frame (steps, +y toward the front of the machine), that
     goes to the work zero: ``file`` its frame's zero (a drawing's top-left pixel, the thesis's), ``upper-left``,
     ``lower-left`` or ``center`` of what it cuts (the
     XY extent of the tool below the surface).  None: the job's own ``origin`` (the one its options chose,
     ``JobOptions.origin``), else ``file`` for drawings and digitized matrices, ``upper-left`` for the other kinds
     (the command line passes ``file`` for an ``--offset`` without ``--origin``)."""
-    kind = getattr(job, "kind", "")
-    origin = origin or getattr(job, "origin", None) or ("file" if kind in ("drawing", "digitized") else "upper-left")
+    mj = machine_job(job)
+    origin = origin or mj.origin or ("file" if mj.kind in ("drawing", "digitized") else "upper-left")
     if origin == "file":
         return 0, 0
-    extent, cut = job.plan.motion_extent()
+    if not isinstance(mj.plan, ChunkedPlan):
+        raise CamError(f"--origin {origin} places a file's job: {mj.name} has no plan of its own to measure")
+    extent, cut = mj.plan.motion_extent()
     box = cut if cut[2, 1] > 0 else extent
     (x0, x1), (y0, y1) = (int(v) for v in box[0]), (int(v) for v in box[1])
     if origin == "upper-left":
@@ -74,16 +78,21 @@ def origin_anchor(job: Any, origin: Optional[str]) -> tuple[int, int]:
     return (x0 + x1) // 2, (y0 + y1) // 2
 
 
-def placed_home(job: Any, state: MachineState, origin: Optional[str]) -> tuple[int, int, int]:
+def placed_home(job: "JobInput | MachineJob", state: MachineState, origin: Optional[str]) -> tuple[int, int, int]:
     """Where (machine frame, steps) a job placed at the active work zero starts: its own frame's zero, so that its
-    :func:`origin_anchor` lands on the work zero (Z: the work zero's surface)."""
+    :func:`origin_anchor` lands on the work zero (Z: the work zero's surface).  A job levelled to a height map
+    starts where it was levelled (its ``levelled_home_steps``, placed so for this work zero: its ``planned_in``
+    refuses another)."""
+    mj = machine_job(job)
+    if mj.levelled_home_steps is not None:
+        return mj.levelled_home_steps
     zero = state.work_zero_steps()
-    ax, ay = origin_anchor(job, origin)
+    ax, ay = origin_anchor(mj, origin)
     return zero[0] - ax, zero[1] - ay, zero[2]
 
 
-def approach_to_work_zero(job: Any, state: MachineState, start: tuple[int, int, int], settings: MachineSettings,
-                          origin: Optional[str] = None) -> Optional[Job]:
+def approach_to_work_zero(job: "JobInput | MachineJob", state: MachineState, start: tuple[int, int, int],
+                          settings: MachineSettings, origin: Optional[str] = None) -> Optional[Job]:
     """The travel that places a file's job at the active work zero (issue #29 points 1 and 6, on every port: a MAXIMUS
     board drills a file's holes from where its head stands, so it travels there first too): its
     home, its own frame's (0, 0, 0), goes to the work zero: a drawing's top-left pixel at the surface (the
@@ -96,11 +105,12 @@ def approach_to_work_zero(job: Any, state: MachineState, start: tuple[int, int, 
         TravelError: the job placed there leaves the travel (naming the axis and by how much), before
         anything moves.
     """
-    job_kind = getattr(job, "kind", None)  # a PreparedJob's file kind (a Job's is an array of move kinds)
-    if not isinstance(job_kind, str) or job_kind not in PLACED_KINDS:
+    mj = machine_job(job)
+    job_kind = mj.kind  # a prepared job's file kind; moves alone and step plans are not placed
+    if job_kind not in PLACED_KINDS:
         return None
-    zero = placed_home(job, state, origin)
-    extent = getattr(job, "extent_steps", None)
+    zero = placed_home(mj, state, origin)
+    extent = mj.extent_steps
     if extent is not None:
         for a, (lo, hi) in enumerate(settings.travel.bounds_steps()):
             reach = (zero[a] + int(extent[a][0]), zero[a] + int(extent[a][1]))

@@ -50,7 +50,7 @@ from typing import Any, Callable, Optional
 import numpy as np
 
 from ..errors import BusyError, CamError, PortError
-from ..job.model import TRAVEL, Job, JobLike, travel_job
+from ..job.model import Job, travel_job
 from ..job.moves import jog as jog_job
 from ..job.moves import jog_steps, to_origin
 from ..settings import DEFAULT_SETTINGS, MachineSettings
@@ -60,6 +60,7 @@ from ._session_parts import Activity, Prompt, PromptFn
 from ._session_recover import UNKNOWN_JOG_LINE, SessionRecover, maximus_cannot_home
 from ._session_pinlog import SessionPinLogs
 from .activities import BoardControl, run_on_board, run_steps
+from .machine_job import JobInput, MachineJob, machine_job
 from .machines import DEFAULT_PORT, backend_of
 from .ports import MockPort, Port
 from .runner import Controller, Cursor, RunResult
@@ -154,13 +155,15 @@ class MachineSession(SessionRecover, SessionPinLogs):
         if self._activity is not None:
             raise BusyError(f"the machine is busy ({self._activity.label}); wait for it to end or stop it")
 
-    def start(self, job: Any, *, label: Optional[str] = None, controller: Optional[Controller] = None,
+    def start(self, job: JobInput, *, label: Optional[str] = None, controller: Optional[Controller] = None,
               journal: Any = None, origin: Optional[str] = None) -> None:
         """Run a job from where the tool stands, in the background.
 
         Args:
             job: a :class:`~cam.job.model.Job` (planned into steps here, checked against the travel from
-                where the tool stands), a :class:`~cam.job.jobs.PreparedJob` or a :class:`StepPlan`.
+                where the tool stands), a job kept as pieces, a :class:`~cam.job.jobs.PreparedJob`, a chunked
+                plan or a :class:`StepPlan` (:data:`cam.drive.machine_job.JobInput`: read once into the typed
+                :class:`~cam.drive.machine_job.MachineJob` the machine's back end takes).
             label: what the log calls it.
             controller: a :class:`~cam.drive.runner.Controller` of the caller's (step/dir ports), else a new one;
                 :meth:`pause` and the other controls work either way.
@@ -181,35 +184,34 @@ class MachineSession(SessionRecover, SessionPinLogs):
             the job leaves the travel from here; StalePlanError: it was planned for another position or work
             zero (nothing is sent in every case).
         """
+        mj = machine_job(job)
         with self._lock:
             self._check_free()
             self._require_known()
-            self._check_planned_in(job)
-            travel_only = isinstance(job, Job) and len(job) and np.all(job.kind == TRAVEL)
-            if not travel_only and self._place(job, label, controller, journal, origin):
+            self._check_planned_in(mj)
+            if not mj.travel_only and self._place(mj, label, controller, journal, origin):
                 return
-            self._check_job(job)
-            name = label or f"job {getattr(job, 'name', '') or getattr(job, 'source', '') or 'job'}"
-            if travel_only:  # a jog or a go-to
-                self._start_moves("jog", job, label or job.source or "move")
+            self._check_job(mj)
+            name = label or f"job {mj.name}"
+            if mj.travel_only:  # a jog or a go-to
+                self._start_moves("jog", mj.given, label or mj.name)  # type: ignore[arg-type]
                 return
-            self.backend.start_job(self, job, name, journal, controller)
+            self.backend.start_job(self, mj, name, journal, controller)
 
-    def _journal_spec(self, job: Any, journal: Any) -> Optional[JournalSpec]:
+    def _journal_spec(self, mj: MachineJob, journal: Any) -> Optional[JournalSpec]:
         if journal is None or isinstance(journal, JournalSpec):
             return journal
-        if isinstance(job, StepPlan):
+        if isinstance(mj.given, StepPlan):
             raise CamError("a step plan has no moves to keep a journal of: start the job or the prepared job")
-        return journal_spec(job, journal, home_steps=tuple(int(v) for v in self._position))
+        return journal_spec(mj.given, journal, home_steps=tuple(int(v) for v in self._position))
 
-    def _plan(self, job: Any) -> "StepPlan | ChunkedPlan":
-        if isinstance(job, (StepPlan, ChunkedPlan)):
-            return job
-        if isinstance(job, JobLike):
-            return plan_chunks(job, start_steps=tuple(int(v) for v in self._position))
-        return job.plan  # a PreparedJob: planned from its home, checked by its extent
+    def _plan(self, mj: MachineJob) -> "StepPlan | ChunkedPlan":
+        if mj.plan is not None:  # a prepared job's (planned from its home, checked by its extent) or one given
+            return mj.plan
+        assert mj.moves is not None
+        return plan_chunks(mj.moves, start_steps=tuple(int(v) for v in self._position))
 
-    def run(self, job: Any, *, label: Optional[str] = None) -> dict[str, Any]:
+    def run(self, job: JobInput, *, label: Optional[str] = None) -> dict[str, Any]:
         """:meth:`start` and wait for the end; returns :attr:`last_run`."""
         self.start(job, label=label)
         self.wait_idle(None)
@@ -292,11 +294,12 @@ class MachineSession(SessionRecover, SessionPinLogs):
         self.log(f"{label}: started")
         self._spawn(run_steps, (self, name, plan, ctl, label, journal, cursor), name)
 
-    def _launch_board(self, name: str, work: Callable[[Any, Any], None], job: Any, label: str,
+    def _launch_board(self, name: str, work: Callable[[Any, Any], None], job: Optional[MachineJob], label: str,
                       moved_steps: Any = (0, 0, 0)) -> None:
         ctl = BoardControl(self.port)
-        total = len(job.drill_plan.holes_steps) if job is not None else 1
-        self._begin(Activity(name, label, ctl, total, lambda: getattr(job, "estimated_time_s", 0.0)))
+        holes = None if job is None or job.drill_plan is None else job.drill_plan.holes_steps
+        total = len(holes) if holes is not None else 1
+        self._begin(Activity(name, label, ctl, total, job.estimated_s if job is not None else 0.0))
         self.log(f"{label}: started on {self.port}")
         self._spawn(run_on_board, (self, name, work, ctl, label, np.asarray(moved_steps, np.int64)), name)
 
@@ -347,7 +350,7 @@ class MachineSession(SessionRecover, SessionPinLogs):
                     self.log(f"the job did not start: {e}")
                     self.last_run = dict(info, status="error", messages=[str(e)])
 
-def run(job: Any, port: Any = DEFAULT_PORT, *, realtime: bool = False, controller: Optional[Controller] = None,
+def run(job: JobInput, port: Any = DEFAULT_PORT, *, realtime: bool = False, controller: Optional[Controller] = None,
         progress: Optional[Callable[[int, int, int], None]] = None,
         on_pause: Optional[Callable[[tuple[int, int, int], str], None]] = None) -> RunResult:
     """Run a job on any machine and wait for the end: a one-job :class:`MachineSession`.
@@ -379,12 +382,13 @@ def run(job: Any, port: Any = DEFAULT_PORT, *, realtime: bool = False, controlle
             controller.pause()  # held until the caller resumes it
         return "continue"
 
-    settings = getattr(job, "settings", DEFAULT_SETTINGS)
+    mj = machine_job(job)
+    settings = mj.settings or DEFAULT_SETTINGS
     session = MachineSession(port, settings, realtime=realtime, on_prompt=on_prompt)
     session.on_progress = progress
     if not session.backend.can("step_dir", session.port):  # a board that makes its own steps
-        return _run_on_board(session, job, controller)
-    session.start(job, controller=controller)
+        return _run_on_board(session, mj, controller)
+    session.start(mj, controller=controller)
     session.wait_idle(None)
     if session.last_result is None:
         raise PortError("; ".join(session.last_run.get("messages") or ["the run failed"]))
@@ -398,7 +402,7 @@ class _BoardPort(Port):
         self.name = name
 
 
-def _run_on_board(session: MachineSession, job: Any, controller: Optional[Controller]) -> RunResult:
+def _run_on_board(session: MachineSession, job: MachineJob, controller: Optional[Controller]) -> RunResult:
     """:func:`run` on a board that makes its own steps (grbl, MAXIMUS): the session runs it; the caller's
     ``controller`` is passed on (pause, stop, emergency stop) while it runs."""
     t0 = time.monotonic()
@@ -423,5 +427,5 @@ def _run_on_board(session: MachineSession, job: Any, controller: Optional[Contro
         raise PortError("; ".join(info.get("messages") or ["the run failed"]))
     a = session._last_activity
     return RunResult(str(info["status"]), session.position_steps(), int(a.done if a is not None else 0),
-                     float(info.get("machine_time_s", getattr(job, "estimated_time_s", 0.0))),
+                     float(info.get("machine_time_s", job.estimated_s())),
                      time.monotonic() - t0, 0, _BoardPort(str(session.port)), list(info.get("messages") or []))

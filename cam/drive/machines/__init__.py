@@ -25,6 +25,7 @@ from ...choices import DEFAULT_PORT
 from ...errors import CapabilityError, PortError
 from ...settings import DEFAULT_SETTINGS, MachineSettings
 from ..chunks import plan_chunks
+from ..machine_job import MachineJob
 from ..ports import Port
 
 __all__ = ["Backend", "REGISTRY", "CAPABILITY_MEANINGS", "DEFAULT_PORT", "backend_of", "can", "require",
@@ -151,15 +152,15 @@ class Backend:
     def attach(self, session: Any) -> None:
         """The session opened on this machine (grbl: connect, and take where the board says the tool stands)."""
 
-    def check_job(self, session: Any, job: Any) -> None:
+    def check_job(self, session: Any, job: MachineJob) -> None:
         """Refuse, before anything moves, a job this machine cannot run (beyond the travel, checked by the session)."""
 
-    def start_job(self, session: Any, job: Any, name: str, journal: Any, controller: Any) -> None:
+    def start_job(self, session: Any, job: MachineJob, name: str, journal: Any, controller: Any) -> None:
         """Start ``job`` (checked, placed) in the background: a step plan from where the tool stands."""
         spec = session._journal_spec(job, journal)
         plan = session._plan(job)
-        session._launch_steps("job", plan, name, lambda: getattr(job, "estimated_time_s", plan.estimated_time_s),
-                              controller, spec)
+        session._launch_steps("job", plan, name, job.estimated_s if job.plan is not None else
+                              (lambda: plan.estimated_time_s), controller, spec)
 
     def start_moves(self, session: Any, activity: str, job: Any, label: str) -> None:
         """Start a travel-only job (a jog, a go-to, the way to a work zero) in the background."""

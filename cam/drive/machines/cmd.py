@@ -12,7 +12,8 @@ from __future__ import annotations
 from typing import Any, Optional
 
 from ...settings import MachineSettings
-from ..chunks import ChunkedPlan
+from ...job.model import Job
+from ..machine_job import MachineJob, machine_job
 from ..cmd_port import CommandMockPort, CommandParallelPort, check_command_timing, check_commands
 from . import Backend, register
 
@@ -65,14 +66,13 @@ class CmdBackend(Backend):
         mock_options.pop("switches", None)  # the control unit has no switches cam reads
         return CommandMockPort(settings, **mock_options)
 
-    def check_job(self, session: Any, job: Any) -> None:
+    def check_job(self, session: Any, job: "MachineJob | Job") -> None:
         """Every command byte the job needs is declared in ``[commands]`` (CapabilityError naming the first that
         is not), and three axes' bytes fit in the shortest step period."""
         check_command_timing(session.settings)
-        moves = job.plan.job if isinstance(getattr(job, "plan", None), ChunkedPlan) else \
-            job.job if isinstance(job, ChunkedPlan) else job
-        if hasattr(moves, "pieces"):
-            check_commands(moves, session.settings)
+        job = machine_job(job)
+        if job.moves is not None:  # a step plan alone has no moves left to read: its bytes are checked as sent
+            check_commands(job.moves, session.settings)
 
     def start_moves(self, session: Any, activity: str, job: Any, label: str) -> None:
         self.check_job(session, job)

@@ -14,6 +14,7 @@ import numpy as np
 from ...settings import MachineSettings
 from .._session_recover import maximus_cannot_home
 from ..activities import drill_work, move_work
+from ..machine_job import MachineJob
 from ..maximus.board import (MAXIMUS_SETTINGS, board_settings, board_speeds_line, drill_arguments, drill_job,
                              maximus_port, require_drilling)
 from . import Backend, register
@@ -61,22 +62,22 @@ class MaximusBackend(Backend):
     def speeds_line(self, settings: MachineSettings) -> Optional[str]:
         return board_speeds_line(settings)
 
-    def check_job(self, session: Any, job: Any) -> None:
+    def check_job(self, session: Any, job: MachineJob) -> None:
         """A drill file with a drill plan whose packets fit the board's fields (nothing sent); slots and milled
         holes refused (the firmware drills only)."""
-        kind = getattr(job, "kind", "step")
+        kind = job.kind
         self.require(session.port, "drill_files", f"a {kind} job")
         if kind == "excellon":
-            require_drilling(job, session.port)
-        if getattr(job, "drill_plan", None) is None:
+            require_drilling(job.given, session.port)
+        if job.drill_plan is None:
             self.require(session.port, "step_dir", f"a {kind} job")
         arguments = drill_arguments(job.drill_plan, session.settings)
         drill_job(arguments["holes_steps"], arguments["z_up_steps"], arguments["z_down_steps"],
                   arguments["tool_changes"], session.settings.maximus)
 
-    def start_job(self, session: Any, job: Any, name: str, journal: Any, controller: Any) -> None:
-        session._launch_board("job", drill_work(job, session.settings, session._journal_spec(job, journal)), job,
-                              name)
+    def start_job(self, session: Any, job: MachineJob, name: str, journal: Any, controller: Any) -> None:
+        session._launch_board("job", drill_work(job.prepared, session.settings, session._journal_spec(job, journal)),
+                              job, name)
 
     def start_moves(self, session: Any, activity: str, job: Any, label: str) -> None:
         session._launch_board(activity, move_work(job.points_steps), None, label,
