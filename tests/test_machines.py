@@ -205,3 +205,24 @@ def test_cmd_emergency_stop_then_resume_carves_as_an_uninterrupted_run(tmp_path)
     assert again.last_run["status"] == "finished", again.last_run
     write_pin_log(commands_to_step_log(again.last_job_pin_log, s), second)
     _check_union("2d", tmp_path, _prepared(args)[0], first, second, record.position_steps)
+
+
+def test_one_typed_job_crosses_into_a_machine():
+    """The session, its parts, placement and the back ends read a MachineJob's typed fields: no attribute probing
+    of a job (``getattr(job, ...)``, ``hasattr(job, ...)``) is left there (issue #45 point 1)."""
+    from cam.drive.machine_job import MachineJob, machine_job
+
+    drive = ROOT / "cam" / "drive"
+    files = [drive / "session.py", drive / "placement.py", *sorted(drive.glob("_session_*.py")),
+             *sorted((drive / "machines").glob("*.py"))]
+    probing = re.compile(r"\b(getattr|hasattr)\((job|mj)\b")
+    found = [f"{p.relative_to(ROOT)}:{n}: {line.strip()}" for p in files
+             for n, line in enumerate(p.read_text(encoding="utf-8").splitlines(), 1) if probing.search(line)]
+    assert not found, "\n".join(found)
+    d = cam.digitize(drawing_from_rows(["..#..", ".###."]))
+    job = cam.plan(d, depth=[2], settings=cam.MachineSettings())
+    mj = machine_job(job)
+    assert isinstance(mj, MachineJob) and mj.moves is job and mj.plan is None and mj.kind == "moves"
+    assert machine_job(mj) is mj
+    with pytest.raises(CapabilityError, match="cannot run a str"):
+        machine_job("job.png")
