@@ -165,37 +165,19 @@ def test_a_new_back_end_is_one_class_and_one_registry_line(monkeypatch):
 @pytest.mark.realtime
 def test_cmd_emergency_stop_then_resume_carves_as_an_uninterrupted_run(tmp_path):
     """Every flow a step/dir port has, on seed 004's unit: a job in real time on ``cmd:mock`` (its runner process
-    opens the port by name), its live position while it runs, an emergency stop, the journal, the resumed rest
-    (planned time not 0 s); the two command logs read back and carved equal one uninterrupted run."""
+    opens the port by name), an emergency stop, the journal, the resumed rest (planned time not 0 s); the two
+    command logs read back and carved equal one uninterrupted run."""
     from cam.drive.journal import read_journal
     from cam.job.jobs import resume_job
-    from test_resume import _check_union, _prepared
-
     from cam.verify.pinlog import write_pin_log
+    from test_resume import _check_union, _prepared, estop_run
 
     args = ["drill", str(SAMPLES / "ellipse.png"), "--depth", "2", "--steps-per-pixel", "2,1", "--machine", str(SEED004)]
     job, _ = _prepared(args)
     s = job.settings
     journal, first, second = tmp_path / "run.journal.json", tmp_path / "run1.csv", tmp_path / "run2.csv"
-    session = MachineSession("cmd:mock", s, realtime=True, on_prompt=lambda prompt: "continue")
-    live = []
-
-    def progress(done, total, t_ns):
-        live.append(tuple(session.state()["position_steps"]))
-        if done >= 0.4 * total:
-            session.emergency_stop()
-
-    session.on_progress = progress
-    try:
-        session.start(job, journal=str(journal))
-        session.wait_idle(None)
-    finally:
-        session.shutdown()
-    assert session.last_run["status"] == "emergency-stopped", session.last_run
-    assert len(set(live)) > 2  # the position moved on while it ran
-    write_pin_log(commands_to_step_log(session.last_result.pin_log(), s), first)
+    estop_run(job, journal, first, 0.4, port="cmd:mock", as_steps=lambda log: commands_to_step_log(log, s))
     record = read_journal(journal)
-    assert record.state == "emergency-stopped"
     resumed = resume_job(_prepared(args)[0], record)
     again = MachineSession("cmd:mock", s, on_prompt=lambda prompt: "continue")
     again.set_position(record.position_steps)

@@ -154,10 +154,11 @@ def _interrupt(kind: str, how: str, seed: int, tmp_path: Path) -> tuple[Path, Pa
     return journal, pins
 
 
-def estop_run(job, journal: Path, pins: Path, stop_at: float) -> None:
-    """Run a prepared job in real time on the mock through a machine session, emergency-stop it after ``stop_at``
-    of its writes, and keep its journal and pin log."""
-    session = MachineSession("mock", job.settings, realtime=True, on_prompt=lambda prompt: "continue")
+def estop_run(job, journal: Path, pins: Path, stop_at: float, port: str = "mock", as_steps=None) -> None:
+    """Run a prepared job in real time on the mock (or ``port``) through a machine session, emergency-stop it after
+    ``stop_at`` of its writes, and keep its journal and pin log (read back into step/dir writes by ``as_steps``,
+    for a port that writes something else)."""
+    session = MachineSession(port, job.settings, realtime=True, on_prompt=lambda prompt: "continue")
     session.on_progress = lambda done, total, t_ns: session.emergency_stop() if done >= stop_at * total else None
     try:
         session.start(job, journal=str(journal))
@@ -165,7 +166,8 @@ def estop_run(job, journal: Path, pins: Path, stop_at: float) -> None:
     finally:
         session.shutdown()
     assert session.last_run["status"] == "emergency-stopped", session.last_run
-    write_pin_log(session.last_result.pin_log(), pins)
+    log = session.last_result.pin_log()
+    write_pin_log(log if as_steps is None else as_steps(log), pins)
     assert read_journal(journal).state == "emergency-stopped"
 
 
