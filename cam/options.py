@@ -53,6 +53,7 @@ counts, a ``WxH`` size, folders."""
 
 _DRAWINGS = frozenset({"drawing", "digitized"})
 _VECTORS = frozenset({"excellon", "hpgl", "svg"})
+_EVERY = _DRAWINGS | _VECTORS | {"gcode"}
 
 
 @dataclass(frozen=True)
@@ -279,6 +280,14 @@ JOB_OPTIONS: tuple[Option, ...] = (
     _opt("heightmap_order", "--heightmap-order", "choice", "", {"drawing"}, "rows",
          "with --heightmap: rows (zig-zag along X) or peel (the thesis's order: level by level, shallowest first)",
          choices=("rows", "peel")),
+    # levelling to a probed surface (issue #46 point 2; a file on the machine that runs cam: command line only)
+    _opt("level", "--level", "text", "", _EVERY, None,
+         "level the job to a height map probed on this machine (cam probe grid --out MAP.json): every move, rapids "
+         "included, is split at the map's spacing and its Z offset by the surface under it (bilinear); the job is "
+         "placed at the active work zero first, whose Z zero must be on the surface", metavar="MAP.json", web=False),
+    _opt("level_extrapolate", "--level-extrapolate", "flag", "", _EVERY, False,
+         "with --level: level moves outside the probed area by extending the map's edge cells (without it such a "
+         "job is refused, naming how far outside)", web=False),
 )
 """Every job option, in the order of :class:`cam.job.jobs.JobOptions`' fields."""
 

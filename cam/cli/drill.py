@@ -154,12 +154,13 @@ def _gcode_hold(args: argparse.Namespace, settings) -> Optional[StateHold]:
     work offsets (issue #29 point 4): the machine's hold is taken before the program is planned, and
     ``args.machine_state`` is what it is planned in (a resumed run's: the journal's start).  None for other
     kinds (planned from their own zero, placed at the work zero when they run) but a drill, HPGL or SVG file
-    placed by its own zero (--origin file: planned from the work zero as a program is)."""
+    placed by its own zero (--origin file: planned from the work zero as a program is) and a job levelled to a
+    height map (--level: levelled where it will run, at the active work zero, issue #46 point 2)."""
     if job_kind_of(args) != "gcode":
         if getattr(args, "keep_offsets", False):
             raise CamError("--keep-offsets keeps the work offsets a G-code program sets (G10 L2/L20); this is not "
                            "a G-code program")
-        if not placed_by_own_zero(args):
+        if not placed_by_own_zero(args) and not getattr(args, "level", None):
             return None
     hold = hold_machine(args, settings, "cam drill")
     try:

@@ -80,6 +80,9 @@ def check_port_options(args: argparse.Namespace, settings: Optional[MachineSetti
         require(args.port, "pin_log")
     if getattr(args, "spindle", None):
         require(args.port, "spindle", what="--spindle")
+    if drills_alone and getattr(args, "level", None):
+        raise CapabilityError(f"--level: {args.port} drills every hole at its own Z stroke and cannot follow a "
+                              f"levelled job; level it on a step/dir or grbl port")
     if drills_alone and getattr(args, "ramp", None):
         raise CapabilityError(f"{args.port} moves at the constant speed of its Delay bytes: --ramp applies to "
                               f"step/dir ports (set the speed with --delay)")

@@ -47,6 +47,8 @@ def cmd_export(args: argparse.Namespace) -> int:
         changes = {int(i): (_tool_number(note), note) for i, note in zip(at, notes)}
     exact_xy, exact_z = exact_geometry(job, DEFAULT_CUT_DEPTH_MM if args.cut_depth is None else args.cut_depth,
                                        job_options(args))
+    if job.levelled_home_steps is not None:  # levelled (--level): its depths are the surface's, not one asked
+        exact_z = {}
     save_gcode(job.toolpath, args.output, flip_y=args.flip_y, travel_height_mm=travel_height_mm,
                title=f"cam: {args.image or args.load_digitized}", tool_changes=changes,
                post=getattr(args, "post", "generic"), feed_mm_min=getattr(args, "feed", None),

@@ -54,9 +54,10 @@ def prepare(args: argparse.Namespace, settings: Optional[MachineSettings] = None
     if not path:
         raise CamError(f"{args.command} needs an IMAGE or --load-digitized FILE")
     state = getattr(args, "machine_state", None)  # where it runs (cam drill): G-code, and a drill, HPGL or SVG
-    # file placed by its own zero (placed_by_own_zero)
-    if state is None and args.command in ("info", "preview") and (job_kind_of(args) == "gcode"
-                                                                 or placed_by_own_zero(args)):
+    # file placed by its own zero (placed_by_own_zero), or any job levelled to a height map (--level)
+    if state is None and ((args.command in ("info", "preview") and (job_kind_of(args) == "gcode"
+                                                                   or placed_by_own_zero(args)))
+                          or (args.command in ("info", "preview", "export") and getattr(args, "level", None))):
         state = _state_to_view(args, settings or machine_settings(args))
     try:
         with reading_bar(args) as progress:

@@ -13,6 +13,7 @@ from typing import Any, Optional
 import numpy as np
 
 from ..errors import CamError, TravelError
+from ..job.jobs import origin_anchor_steps
 from ..job.model import Job, travel_job
 from ..settings import MachineSettings
 from .chunks import ChunkedPlan
@@ -64,18 +65,9 @@ def origin_anchor(job: "JobInput | MachineJob", origin: Optional[str]) -> tuple[
     (the command line passes ``file`` for an ``--offset`` without ``--origin``)."""
     mj = machine_job(job)
     origin = origin or mj.origin or ("file" if mj.kind in ("drawing", "digitized") else "upper-left")
-    if origin == "file":
-        return 0, 0
-    if not isinstance(mj.plan, ChunkedPlan):
+    if origin != "file" and not isinstance(mj.plan, ChunkedPlan):
         raise CamError(f"--origin {origin} places a file's job: {mj.name} has no plan of its own to measure")
-    extent, cut = mj.plan.motion_extent()
-    box = cut if cut[2, 1] > 0 else extent
-    (x0, x1), (y0, y1) = (int(v) for v in box[0]), (int(v) for v in box[1])
-    if origin == "upper-left":
-        return x0, y0
-    if origin == "lower-left":
-        return x0, y1
-    return (x0 + x1) // 2, (y0 + y1) // 2
+    return origin_anchor_steps(mj.kind, origin, mj.plan)  # the rule, where the job layer needs it too (--level)
 
 
 def placed_home(job: "JobInput | MachineJob", state: MachineState, origin: Optional[str]) -> tuple[int, int, int]:

@@ -46,7 +46,7 @@ from ..digitize.digitized import load_digitized
 from ..digitize.drawing import drawing_size_px, load_image
 from ..digitize.profile import load_profile, profile_from_expr
 from ..drive.chunks import plan_chunks
-from ..errors import CamError
+from ..errors import CamError, PlanError
 from ..formats.excellon import load_excellon
 from ..formats.gcode import load_tool_table, open_gcode
 from ..options import JOB_OPTIONS, Option, MAX_DEPTH_PX, MAX_MM, MAX_PX, check_range, degenerate  # noqa: F401 (the limits re-exported)
@@ -69,6 +69,7 @@ from .hpgl import DEFAULT_TRAVEL_HEIGHT_MM as HPGL_TRAVEL_HEIGHT_MM
 from .drawing_stream import STREAM_TARGETS, plan, stream_drawing
 from .hpgl_stream import STREAM_POINTS, stream_hpgl
 from .heightmap import check_heightmap_options, prepare_heightmap
+from .heightmap_level import check_map, level_job, load_height_map, outside_text
 from .model import Job
 from .resume import (Journal, JournalBase, check_journal, check_journal_numbers, job_identity, plan_fingerprint,
                      resume_pieces)
@@ -78,6 +79,7 @@ from .svg import plan_svg
 
 __all__ = [
     "JobOptions", "PreparedJob", "PlannedIn", "prepare_job", "own_zero_home", "resume_job", "job_kind", "accepted_suffixes", "KINDS",
+    "origin_anchor_steps",
     "DRAWING_SUFFIXES", "DIGITIZED_SUFFIXES", "EXCELLON_SUFFIXES", "HPGL_SUFFIXES", "PROFILE_SUFFIXES",
 ]
 
@@ -153,6 +155,11 @@ class JobOptions:
         stepdown_mm: rough a 3D relief in levels this far apart first (None: finish at once); stepover: the
             roughing rings' spacing, a fraction of the roughing tool's diameter; rough_tool: a larger
             roughing tool (a tool-change pause before finishing), None: the finishing tool.
+    Levelling to a probed surface (every kind; :mod:`cam.job.heightmap_level`):
+        level: a height map file (``cam probe grid --out MAP.json``): every move is split at its spacing and its Z
+            offset by the surface under it, where the job runs (see :func:`prepare_job`'s ``machine_state``);
+            a file on the machine that runs `cam`, so command-line and API only.
+        level_extrapolate: level moves outside the probed area by the edge cells extended (else refused).
     """
 
     # the fields (names, defaults) are added from cam.options.JOB_OPTIONS by _schema_fields
@@ -215,6 +222,10 @@ class JobOptions:
             raise bad("line_width_mm", "cannot be given together with a depth (the width sets it)")
         if self.cut_depth_mm is not None and self.depth is not None:
             raise bad("cut_depth_mm", "cannot be given together with depth (Z pixels per object)")
+        if self.level is not None and not self.level.strip():
+            raise bad("level", "must name a height map file")
+        if self.level_extrapolate and not self.level:
+            raise bad("level_extrapolate", "needs a height map to level by (level)")
         odd = degenerate(lambda name: getattr(self, name))  # zero where zero is unsafe (cam.options)
         if odd is not None:
             raise bad(*odd)
@@ -435,6 +446,9 @@ class PreparedJob:
         planned_in: the machine state the plan holds for (:class:`PlannedIn`: a G-code program's start and work
             offsets, the work zero of a file placed by its own zero); None: it holds anywhere (placed when it
             runs, or resumed from where the tool stands).  A machine session refuses it elsewhere.
+        levelled_home_steps: a job levelled to a height map (``JobOptions.level``): the machine position of its
+            home its levelling holds for, where the session places it
+            (:func:`cam.drive.placement.placed_home`); None: not levelled.
     """
 
     source: str
@@ -459,6 +473,7 @@ class PreparedJob:
     origin: Optional[str] = None
     home_steps: Optional[tuple[int, int, int]] = None
     planned_in: Optional[PlannedIn] = None
+    levelled_home_steps: Optional[tuple[int, int, int]] = None
     _steps: Any = field(default=None, repr=False)
 
     @property
@@ -882,7 +897,9 @@ def prepare_job(
         machine_state: G-code: the machine state (:class:`cam.drive.state.MachineState`) the program runs in:
             it starts where the tool stands, in the state's work offsets (None: at the home, offsets 0).  A
             drill, HPGL or SVG file placed by its own zero (``origin`` "file", or an ``offset_mm``): the state
-            whose active work zero that zero goes to (:func:`own_zero_home`).
+            whose active work zero that zero goes to (:func:`own_zero_home`).  A job levelled to a height map
+            (``options.level``): where it runs (placed at that state's active work zero; None: its home at the
+            machine's (0, 0, 0)), the frame the map's X and Y are in.
 
     Returns:
         The :class:`PreparedJob`, planned relative to where the tool stands when it starts.
@@ -912,6 +929,7 @@ def prepare_job(
     _refuse_surface_travel(opts, settings)
     if not p.is_file():
         raise CamError(f"{p}: file not found")
+    height_map = _height_map(opts)  # a bad map: one line, before the file is planned
     if kind == "drawing" and opts.heightmap:  # a grey-level relief (issue #31 point 7)
         job = PreparedJob(**prepare_heightmap(p, opts, settings))
     elif kind in ("drawing", "digitized"):
@@ -930,7 +948,6 @@ def prepare_job(
     job.name = name or p.name
     job.summary = job.name + job.summary[len(p.name):]
     job.identity = identity_of(p, opts, settings)
-    job.plan_sha256 = job.plan.job_sha256 or plan_fingerprint(job.toolpath)  # (made in the planning pass)
     # a drill, HPGL or SVG file placed by its own zero (origin "file", or an offset_mm and no origin) keeps that
     # origin where it runs, whichever front end asked (issue #45 point 5: the API placed offset_mm [0, 0] by the
     # holes' upper-left corner, the command line's --offset 0,0 by the file's zero)
@@ -942,7 +959,92 @@ def prepare_job(
             PlannedIn.of(machine_state, position=True, every_offset=True)
     elif home is not None and machine_state is not None:  # from the active work zero, wherever the tool stands
         job.planned_in = PlannedIn.of(machine_state, position=False, every_offset=False)
+    if height_map is not None:  # where the job goes is known now: level it there (issue #46 point 2)
+        _level(job, height_map, opts, settings, machine_state)
+    job.plan_sha256 = job.plan.job_sha256 or plan_fingerprint(job.toolpath)  # (made in the planning pass)
     return _finish(job)
+
+
+def origin_anchor_steps(kind: str, origin: Optional[str], plan: Any) -> tuple[int, int]:
+    """The ``(x, y)`` point of a job of file ``kind`` (its own frame, steps) that ``origin`` puts at the work zero
+    (:func:`cam.drive.placement.origin_anchor`): ``file`` its frame's zero, ``upper-left``, ``lower-left`` or
+    ``center`` of what its ``plan`` (a :class:`~cam.drive.chunks.ChunkedPlan`) cuts, the XY extent of the tool
+    below the surface (the whole extent when nothing is); None: ``file`` for drawings and digitized matrices,
+    ``upper-left`` for the other kinds."""
+    origin = origin or ("file" if kind in ("drawing", "digitized") else "upper-left")
+    if origin == "file":
+        return 0, 0
+    extent, cut = plan.motion_extent()
+    box = cut if cut[2, 1] > 0 else extent
+    (x0, x1), (y0, y1) = (int(v) for v in box[0]), (int(v) for v in box[1])
+    if origin == "upper-left":
+        return x0, y0
+    if origin == "lower-left":
+        return x0, y1
+    return (x0 + x1) // 2, (y0 + y1) // 2
+
+
+def _height_map(options: JobOptions) -> Any:
+    """The height map ``options.level`` names, read and checked (:func:`cam.job.heightmap_level.check_map`), or
+    None."""
+    if options.level is None:
+        return None
+    return check_map(load_height_map(options.level))
+
+
+def _level(job: PreparedJob, hmap: Any, options: JobOptions, settings: MachineSettings,
+           machine_state: Optional[Any]) -> None:
+    """Level a prepared job to the height map ``hmap`` (of ``options.level``) where it runs (issue #46 point 2), in
+    place: its toolpath becomes its levelled moves (:func:`cam.job.heightmap_level.level_job`: a piece at a time
+    for a job kept as pieces) and its plan is made again from them.
+
+    Where it runs, machine frame: a G-code program from where the tool stands, a file placed by its own zero from
+    the active work zero (their ``home_steps``); any other job placed at the active work zero of ``machine_state``
+    by its origin (:func:`origin_anchor_steps`, of the XY extent levelling leaves as it is), or without
+    a machine state from the machine's (0, 0, 0), where a session without a state file starts.  The plan then
+    holds there only (:attr:`PreparedJob.planned_in`; :attr:`PreparedJob.levelled_home_steps` is where the session
+    places it).  A job reaching outside the probed area is refused here, before a move is levelled, naming how
+    far outside and past which edge (unless ``level_extrapolate``: then a warning says so).
+    """
+    own_frame = job.home_steps is None  # planned in its own frame: placed at the work zero when it runs
+    if not own_frame:
+        home = tuple(int(v) for v in job.home_steps)  # type: ignore[union-attr]
+    elif machine_state is None:
+        home = (0, 0, 0)
+    else:  # placed as cam.drive.placement.placed_home places it: its origin's anchor at the active work zero
+        zero = machine_state.work_zero_steps()
+        ax, ay = origin_anchor_steps(job.kind, job.origin, job.plan)
+        home = (int(zero[0]) - ax, int(zero[1]) - ay, int(zero[2]))
+    extent, _ = job.plan.motion_extent()
+    mx, my, _ = settings.mm_per_step_axes
+    xs = (home[0] + np.asarray(extent[0], np.int64)) * mx  # the job's XY extent (its start included), machine mm
+    ys = (home[1] + np.asarray(extent[1], np.int64)) * my
+    outside = outside_text(hmap, xs, ys, name_point=False)
+    where = f"the job placed with its home at machine {list(home)} steps"
+    if outside is not None and not options.level_extrapolate:
+        raise PlanError(f"{options.level}: {outside} ({where}; the map covers X {hmap.x_mm[0]:g}..{hmap.x_mm[-1]:g}, "
+                        f"Y {hmap.y_mm[0]:g}..{hmap.y_mm[-1]:g} mm): probe a larger area, or --level-extrapolate "
+                        f"(the edge cells extended)")
+    if outside is not None:
+        job.warnings.append(f"levelled outside the probed area by extending its edge cells: {outside}")
+    toolpath = level_job(job.toolpath, hmap, home, extrapolate=bool(options.level_extrapolate))
+    plan_from = None if own_frame and machine_state is None else home
+    job.plan = plan_chunks(toolpath, start_steps=plan_from, fingerprint=True)  # type: ignore[arg-type]
+    job.toolpath = toolpath
+    job.levelled_home_steps = home  # type: ignore[assignment]
+    job.drill_plan = None  # a MAXIMUS board drills every hole at its own Z stroke: it cannot run a levelled job
+    if plan_from is not None:
+        job.home_steps = home  # type: ignore[assignment]
+    if job.planned_in is None:  # the levelling holds where the job was levelled
+        job.planned_in = PlannedIn.of(machine_state, position=False, every_offset=False) \
+            if machine_state is not None else PlannedIn((0, 0, 0))
+    off = hmap.offsets_mm()
+    job.report["level"] = {
+        "map": str(options.level), "points": int(off.size), "spacing_mm": hmap.spacing_mm,
+        "area_mm": [float(hmap.x_mm[0]), float(hmap.y_mm[0]), float(hmap.x_mm[-1]), float(hmap.y_mm[-1])],
+        "offset_mm": [round(float(off.min()), 4), round(float(off.max()), 4)], "home_steps": list(home),
+        "extrapolated": outside is not None}
+    job.summary += f", levelled to {Path(str(options.level)).name}"
 
 
 def _refuse_surface_travel(options: JobOptions, settings: MachineSettings) -> None:
@@ -1002,7 +1104,7 @@ def identity_of(path: str | os.PathLike, options: JobOptions, settings: MachineS
     the files an option names (a profile, a tool table) count by their bytes, not their paths."""
     values = asdict(options)
     files = {}
-    for key in ("profile", "tool_table"):
+    for key in ("profile", "tool_table", "level"):
         if values.get(key):
             files[key] = file_sha256(values.pop(key))
     return job_identity(file_sha256(path), values, settings, files)
@@ -1051,6 +1153,6 @@ def resume_job(job: PreparedJob, journal: Journal, *, position_steps: Optional[t
         size_mm=job.size_mm, depth_mm=job.depth_mm, warnings=list(job.warnings),
         summary=f"{job.summary}, resumed at move {j} of {resumed.job_moves}", report=report,
         drawing_rgb=job.drawing_rgb, identity=job.identity, plan_sha256=job.plan_sha256, resumed=base,
-        origin=job.origin, home_steps=job.home_steps,
+        origin=job.origin, home_steps=job.home_steps, levelled_home_steps=job.levelled_home_steps,
     )
     return _finish(out)
