@@ -17,7 +17,7 @@ from cam.job.heightmap_level import (
 from cam.job.model import CUT, RETRACT, TRAVEL, Job
 from cam.verify.pinlog import decode_pin_log, read_pin_log
 
-from conftest import run_cli
+from conftest import SAMPLES as ROOT_SAMPLES, run_cli
 
 S = cam.MachineSettings()
 MX, MY, MZ = S.mm_per_step_axes
@@ -437,3 +437,30 @@ def test_a_levelled_job_cuts_at_the_asked_depth_below_a_warped_surface_at_every_
           f"{np.abs(writes).mean():.4f} mm); without --level: {len(plain_cuts)} cut points, max {worst_plain:.4f} mm, "
           f"mean {np.abs(plain_cuts).mean():.4f} mm ({len(plain_writes)} writes: max "
           f"{np.abs(plain_writes).max():.4f}, mean {np.abs(plain_writes).mean():.4f} mm)")
+
+
+@pytest.mark.parametrize("kind", ["hpgl", "gcode", "drawing"])
+def test_a_job_kept_as_pieces_is_levelled_a_piece_at_a_time_to_the_same_moves(kind, tmp_path, monkeypatch):
+    """One implementation: a large job's pieces are levelled as they are made (bounded memory), a small one's joined;
+    the levelled moves are the same whatever the pieces."""
+    import cam.job.jobs as jobs
+
+    m = HeightMap([-5, 60, 140], [-5, 50, 110], [[0.0, 0.2, 0.1], [0.1, 0.4, 0.3], [0.3, 0.2, 0.5]],
+                  reference_mm=0.1, spacing_mm=10)
+    path = tmp_path / {"hpgl": "iso.plt", "gcode": "iso.ngc", "drawing": "d.png"}[kind]
+    if kind == "drawing":
+        path.write_bytes((ROOT_SAMPLES / "ellipse.png").read_bytes())
+    else:
+        path.write_text({"hpgl": HPGL, "gcode": GCODE}[kind])
+    options = cam.JobOptions(level=str(save_height_map(m, tmp_path / "map.json")))
+    held = cam.prepare_job(path, options)
+    assert isinstance(held.toolpath, Job)
+    monkeypatch.setattr(jobs, {"hpgl": "STREAM_POINTS", "gcode": "GCODE_STREAM_MOVES",
+                               "drawing": "STREAM_TARGETS"}[kind], 0)
+    streamed = cam.prepare_job(path, options)
+    assert isinstance(streamed.toolpath, LevelledJob) and sum(1 for _ in streamed.toolpath.pieces()) >= 1
+    a, b = held.toolpath, streamed.toolpath.joined()
+    for name in ("points_steps", "kind", "target", "pause"):
+        assert np.array_equal(getattr(a, name), getattr(b, name)), name
+    assert held.plan_sha256 == streamed.plan_sha256 and held.report["level"] == streamed.report["level"]
+    assert len(a) > held.report.get("points", 0)  # split at the spacing: more moves than the file's points
