@@ -102,6 +102,7 @@ and then keeps its built-in value.  An unknown key or a bad value is a
     limit_z_min = ""
     limit_z_max = "!13"
     estop = "!15"       # the e-stop button: a pin of its own
+    probe = ""          # the touch probe (cam probe): a pin of its own, closed while the tool touches the work
 
     [homing]            # cam home (LinuxCNC's HOME_SEARCH_VEL / HOME_LATCH_VEL / HOME_OFFSET)
     order = "zxy"       # the axes homed, one after another (Z first: the tool goes up out of the way)
@@ -116,6 +117,7 @@ and then keeps its built-in value.  An unknown key or a bad value is a
     home_x_steps = 0    # home_x closes at or beyond this X on its direction's side
     limit_x_max_steps = 9000    # limit_x_max closes at X >= 9000 (limit_*_min: at or below)
     estop_after_s = 2.0 # the e-stop input closes this long after a run starts (machine time)
+    probe_surface = "-1.0,0.001,0,0.0001,50,40"  # the work's surface for inputs.probe: z0,ax,ay,b,cx,cy (below)
 """
 from __future__ import annotations
 
@@ -135,7 +137,7 @@ else:  # pragma: no cover
 from .errors import CamError, SettingsError
 
 __all__ = ["Travel", "Pins", "Maximus", "Commands", "COMMAND_KEYS", "Inputs", "Homing", "MockSwitches",
-           "MachineSettings", "load_settings", "DEFAULT_SETTINGS", "RAMP_MODES", "INPUT_PINS", "INPUT_BITS", "SWITCH_NAMES"]
+           "parse_surface", "MachineSettings", "load_settings", "DEFAULT_SETTINGS", "RAMP_MODES", "INPUT_PINS", "INPUT_BITS", "SWITCH_NAMES"]
 
 RAMP_MODES = ("lookahead", "linear40", "constant")
 """Speed ramp modes (see :mod:`cam.drive.ramps`)."""
@@ -204,7 +206,7 @@ INPUT_BITS = {10: 6, 11: 7, 12: 5, 13: 4, 15: 3}
 11 BUSY = bit 7, 12 PAPER-OUT = bit 5, 13 SELECT = bit 4, 15 ERROR = bit 3), each bit the pin's electrical level
 (1 = high; BUSY's inversion in the hardware undone, as pyparallel's ``getInBusy`` does)."""
 SWITCH_NAMES = ("home_x", "home_y", "home_z", "limit_x_min", "limit_x_max", "limit_y_min", "limit_y_max",
-                "limit_z_min", "limit_z_max", "estop")
+                "limit_z_min", "limit_z_max", "estop", "probe")
 """What an input pin may be wired to (the keys of ``[inputs]``)."""
 
 
@@ -226,6 +228,9 @@ class Inputs:
     """Limit switches at each end of each axis: one closing stops the motion, the position becomes unknown."""
     estop: str = ""
     """The e-stop button: closed stops the motion and sends nothing more."""
+    probe: str = ""
+    """The touch probe (``cam probe``): closed while the tool touches the work; it stops nothing but a probing
+    move (:mod:`cam.drive.probing`)."""
 
     def wired(self) -> dict[str, tuple[int, bool]]:
         """Each wired switch's ``name -> (pin, active_high)``."""
@@ -271,6 +276,25 @@ class Homing:
     """The machine coordinate of the latch point (the tool stands there after homing)."""
 
 
+def parse_surface(text: str, name: str = "probe surface") -> tuple[float, float, float, float, float, float] | None:
+    """A probe surface ``"z0,ax,ay,b,cx,cy"`` (:attr:`MockSwitches.probe_surface`) as six floats, missing trailing
+    values 0; None for ``""``.
+
+    Raises:
+        SettingsError: not one to six finite numbers separated by commas (naming ``name``).
+    """
+    if not text.strip():
+        return None
+    try:
+        values = [float(v) for v in text.split(",")]
+    except ValueError:
+        values = []
+    if not 1 <= len(values) <= 6 or not all(math.isfinite(v) and abs(v) <= 1e6 for v in values):
+        raise SettingsError(f"'{name}' must be 1 to 6 numbers z0,ax,ay,b,cx,cy (mm; the surface's height "
+                            f"z0 + ax*x + ay*y + b*((x-cx)^2 + (y-cy)^2)), got {text[:60]!r}")
+    return tuple(values + [0.0] * (6 - len(values)))  # type: ignore[return-value]
+
+
 @dataclass(frozen=True)
 class MockSwitches:
     """The mock port's simulated switches (``[mock]``), machine frame: where each closes (None: never)."""
@@ -288,12 +312,29 @@ class MockSwitches:
     """A ``_min`` limit closes at or below its coordinate, a ``_max`` one at or above it."""
     estop_after_s: float | None = None
     """The e-stop closes this long after a run starts (the run's time: planned on the simulated clock)."""
+    probe_surface: str = ""
+    """The work's surface the probe input (``inputs.probe``) touches, ``"z0,ax,ay,b,cx,cy"`` (missing trailing
+    values 0; "" none): its height in mm (up positive) at machine X, Y in mm is
+    ``z0 + ax*x + ay*y + b*((x-cx)^2 + (y-cy)^2)``, and the probe is closed while the tool tip (``-z_steps *
+    mm_per_step_z`` mm high) is at or below it."""
 
     def places(self) -> dict[str, float]:
-        """Each simulated switch's ``name -> coordinate (steps) or time (s)``."""
+        """Each simulated switch's ``name -> coordinate (steps) or time (s)`` (the probe's surface apart:
+        :meth:`surface`)."""
         return {f.name.removesuffix("_steps").removesuffix("_after_s"): getattr(self, f.name)
                 for f in dataclasses.fields(self)
-                if getattr(self, f.name) is not None}
+                if f.name != "probe_surface" and getattr(self, f.name) is not None}
+
+    def surface(self) -> tuple[float, float, float, float, float, float] | None:
+        """The probe surface's six numbers ``(z0, ax, ay, b, cx, cy)``, or None when none is given.
+
+        >>> MockSwitches(probe_surface="-1.5, 0.01").surface()
+        (-1.5, 0.01, 0.0, 0.0, 0.0, 0.0)
+
+        Raises:
+            SettingsError: not one to six finite numbers separated by commas.
+        """
+        return parse_surface(self.probe_surface, "mock.probe_surface")
 
 
 @dataclass(frozen=True)
@@ -611,7 +652,7 @@ def _validate(s: MachineSettings, source: str) -> None:
     _validate_tool(s.tool, bad)
     _validate_inputs(s.inputs, bad)
     _validate_homing(s, bad)
-    _validate_mock(s.mock, bad)
+    _validate_mock(s.mock, bad, s.inputs)
 
 
 def _validate_inputs(inputs: Inputs, bad: Any) -> None:
@@ -634,14 +675,15 @@ def _validate_inputs(inputs: Inputs, bad: Any) -> None:
                           f"'inputs.{other}' reads it active {'high' if other_high else 'low'}")
             if not _may_share(name, other):
                 raise bad(f"inputs.{name}", f"uses pin {pin}, already used by 'inputs.{other}' (a pin may serve "
-                          f"several limits and the home switch of their axis; the e-stop needs a pin of its own)")
+                          f"several limits and the home switch of their axis; the e-stop and the probe need a pin "
+                          f"of their own)")
         else:
             users[pin] = (name, high)
 
 
 def _may_share(a: str, b: str) -> bool:
     """Whether switches ``a`` and ``b`` may share a pin: limits, and a home switch with its own axis's limits."""
-    if "estop" in (a, b) or (a.startswith("home") and b.startswith("home")):
+    if {"estop", "probe"} & {a, b} or (a.startswith("home") and b.startswith("home")):
         return False
     home, other = (a, b) if a.startswith("home") else (b, a)
     return not home.startswith("home") or home[-1] == other[6]
@@ -673,10 +715,18 @@ def _validate_homing(s: MachineSettings, bad: Any) -> None:
                       f"mm), got {offset}")
 
 
-def _validate_mock(m: MockSwitches, bad: Any) -> None:
+def _validate_mock(m: MockSwitches, bad: Any, inputs: Inputs) -> None:
     for f in dataclasses.fields(m):
         v = getattr(m, f.name)
         if v is None:
+            continue
+        if f.name == "probe_surface":
+            try:
+                m.surface()
+            except SettingsError as exc:
+                raise bad("mock.probe_surface", str(exc).split("' ", 1)[1]) from None
+            if v.strip() and not inputs.probe.strip():
+                raise bad("mock.probe_surface", "needs the probe's input pin: set inputs.probe (e.g. \"!13\")")
             continue
         if f.name == "estop_after_s" and not (0 <= v <= 1e6):
             raise bad("mock.estop_after_s", f"must be 0..1e6 s, got {v}")

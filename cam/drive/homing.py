@@ -30,7 +30,7 @@ from .chunks import plan_chunks
 from .ports import MockPort, Port
 from .runner import FINISHED, SWITCHED, Controller, RunResult, SwitchWatch, run
 
-__all__ = ["HomingError", "HomingPhase", "HomingResult", "home", "check_homing", "PHASES"]
+__all__ = ["HomingError", "HomingPhase", "HomingResult", "home", "check_homing", "seek", "PHASES"]
 
 PHASES = ("search", "back off", "clear", "latch")
 """The runs of one axis's homing, in order ("clear": the back-off's extra ``backoff_A_mm``)."""
@@ -92,6 +92,25 @@ def _speed_settings(settings: MachineSettings, axis: int, speed_mm_s: float) -> 
     return dataclasses.replace(settings, ramp="constant", travel=wide, **{key: period_ms})
 
 
+def seek(port: Port, settings: MachineSettings, axis: int, steps: int, speed_mm_s: float, *,
+         until: Optional[tuple[str, bool]] = None, ignore: "frozenset[str] | tuple[str, ...]" = (),
+         realtime: bool = False, controller: Optional[Controller] = None, source: str = "seek") -> RunResult:
+    """One run of ``steps`` (signed, machine steps) on ``axis`` (0, 1, 2: X, Y, Z) at ``speed_mm_s``, constantly
+    (no ramp: at most the axis's start speed, so it stops at once), ending when ``until`` (``(switch name,
+    closed)``) holds: status :data:`~cam.drive.runner.SWITCHED`, the tool on the first step where it holds.  The
+    limit switches and the e-stop end it too (but those of ``ignore``).  Homing's phases and probing
+    (:mod:`cam.drive.probing`) are such runs.  On a mock the next run's writes go on from this one's time."""
+    s = _speed_settings(settings, axis, speed_mm_s)
+    target = [0, 0, 0]
+    target[axis] = int(steps)
+    plan = plan_chunks(travel_job(np.array([target], np.int64), s, source=source))
+    result = run(plan, port, realtime=realtime, controller=controller or Controller(),
+                 switches=SwitchWatch(s, until=until, ignore=ignore))
+    if isinstance(port, MockPort):  # the next run's writes go on from this one's time
+        port.time_offset_ns += int(round(result.machine_time_s * 1e9)) + int(plan.settings.delay_xy_ns)
+    return result
+
+
 class _Homer:
     """Runs the phases of homing on one open port, one time line (a mock's pin log runs on from phase to
     phase)."""
@@ -105,14 +124,8 @@ class _Homer:
     def move(self, axis: int, steps: int, speed_mm_s: float, phase: str, until: Optional[tuple[str, bool]],
              ignore: frozenset) -> RunResult:
         """One run: ``steps`` on ``axis`` at ``speed_mm_s``, ending when ``until`` holds."""
-        s = _speed_settings(self.settings, axis, speed_mm_s)
-        target = [0, 0, 0]
-        target[axis] = int(steps)
-        plan = plan_chunks(travel_job(np.array([target], np.int64), s, source=f"homing {phase}"))
-        result = run(plan, self.port, realtime=self.realtime, controller=self.ctl,
-                     switches=SwitchWatch(s, until=until, ignore=ignore))
-        if isinstance(self.port, MockPort):  # the next phase's writes go on from this one's time
-            self.port.time_offset_ns += int(round(result.machine_time_s * 1e9)) + int(plan.settings.delay_xy_ns)
+        result = seek(self.port, self.settings, axis, steps, speed_mm_s, until=until, ignore=ignore,
+                      realtime=self.realtime, controller=self.ctl, source=f"homing {phase}")
         done = HomingPhase("xyz"[axis], phase, int(result.position_steps[axis]), speed_mm_s, result.writes)
         self.phases.append(done)
         if self.on_phase is not None:

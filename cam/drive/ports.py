@@ -37,7 +37,7 @@ from ..verify.pinlog import PinLog, PinLogPart, read_pin_log
 from .pins import axis_bits
 
 __all__ = ["Port", "MockPort", "ParallelPort", "MAXIMUS_PREFIX",
-           "GRBL_PREFIX", "SwitchSchedule", "IDLE_INPUTS", "input_mask"]
+           "GRBL_PREFIX", "SwitchSchedule", "IDLE_INPUTS", "input_mask", "surface_height_mm"]
 
 IDLE_INPUTS = 0xF8
 """:meth:`Port.read_inputs` with nothing connected: every input pin high (the port's pull-ups), bits 3..7."""
@@ -451,13 +451,26 @@ class ParallelPort(Port):
                 del self._port
 
 
+def surface_height_mm(surface: Any, x_mm: Any, y_mm: Any) -> Any:
+    """The height (mm, up positive) of a probe surface ``(z0, ax, ay, b, cx, cy)`` at machine X, Y in mm:
+    ``z0 + ax*x + ay*y + b*((x-cx)^2 + (y-cy)^2)`` (numbers or arrays).
+
+    >>> float(surface_height_mm((-1.0, 0.25, 0.0, 0.5, 2.0, 0.0), 4.0, 0.0))
+    2.0
+    """
+    z0, ax, ay, b, cx, cy = surface
+    return z0 + ax * x_mm + ay * y_mm + b * ((x_mm - cx) ** 2 + (y_mm - cy) ** 2)
+
+
 class SwitchSchedule:
     """The mock port's simulated switches: where each closes, in the machine frame, or when.
 
     A position switch is closed while the tool's coordinate on its axis is at or beyond a place: a ``_min``
     limit at or below it, a ``_max`` limit at or above it, a home switch on its ``[homing]`` direction's side.
-    The e-stop closes at a time of the run (ns, the writes' own times).  The levels follow the machine file's
-    ``[inputs]`` (a closed active-low switch pulls its pin low); unwired pins read high.
+    The e-stop closes at a time of the run (ns, the writes' own times).  The probe (``inputs.probe``) is closed
+    while the tool tip, ``-z * mm_per_step_z`` mm high, is at or below the machine file's ``[mock] probe_surface``
+    at the tool's X, Y in mm (:func:`surface_height_mm`).  The levels follow the machine file's ``[inputs]`` (a
+    closed active-low switch pulls its pin low); unwired pins read high.
 
     Args:
         settings: the pin map (to count the steps of the writes), ``[inputs]`` and ``[homing]``.
@@ -484,6 +497,12 @@ class SwitchSchedule:
             self.idle = self.idle & ~input_mask(pin) if high else self.idle | input_mask(pin)
         self.rules: list[tuple[int, bool, int, int, int]] = []  # (mask, active_high, axis, place, side)
         self.timed: list[tuple[int, bool, int]] = []  # (mask, active_high, t_ns)
+        surface = settings.mock.surface()
+        self.probe: Optional[tuple[int, bool, tuple[float, ...], tuple[float, float, float]]] = None
+        """(mask, active_high, surface z0..cy, mm per step X, Y, Z) of the simulated probe, or None."""
+        if surface is not None and "probe" in wired:
+            pin, high = wired["probe"]
+            self.probe = (input_mask(pin), high, surface, settings.mm_per_step_axes)
         for name, place in places.items():
             if name not in wired:
                 raise PortError(f"the mock's switch {name} is not wired: give it a pin in [inputs]")
@@ -504,6 +523,11 @@ class SwitchSchedule:
             closed[(mask, high)] = closed.get((mask, high), False) | c
         for mask, high, t in self.timed:
             closed[(mask, high)] = closed.get((mask, high), False) | (t_ns >= t)
+        if self.probe is not None:
+            mask, high, surface, per = self.probe
+            p = np.asarray(positions, np.float64)
+            touching = -p[:, 2] * per[2] <= surface_height_mm(surface, p[:, 0] * per[0], p[:, 1] * per[1])
+            closed[(mask, high)] = closed.get((mask, high), False) | touching
         levels = np.full(len(positions), self.idle, np.int64)
         for (mask, high), c in closed.items():
             levels = np.where(c, (levels | mask) if high else (levels & ~mask), levels)
@@ -532,6 +556,11 @@ class SwitchSchedule:
             closed[(mask, high)] = closed.get((mask, high), False) or (v <= place if side < 0 else v >= place)
         for mask, high, t in self.timed:
             closed[(mask, high)] = closed.get((mask, high), False) or t_now >= t
+        if self.probe is not None:
+            mask, high, surface, per = self.probe
+            x, y, z = (int(v) for v in self.position_steps)
+            touching = -z * per[2] <= float(surface_height_mm(surface, x * per[0], y * per[1]))
+            closed[(mask, high)] = closed.get((mask, high), False) or touching
         levels = self.idle
         for (mask, high), c in closed.items():
             if c:
