@@ -10,11 +10,12 @@ from dataclasses import dataclass, field
 from typing import Optional
 
 from ._grbl_base import MM_PER_INCH, WORD_RE, Block, GrblCodeError
+from ._grbl_probe import PROBE_CODES
 
 _G_GROUPS = {
-    "motion": (0, 1, 2, 3, 80), "nonmodal": (4, 10, 28, 28.1, 30, 30.1, 53, 92, 92.1), "plane": (17, 18, 19),
-    "distance": (90, 91), "arc": (91.1,), "feedmode": (93, 94), "units": (20, 21), "cutter": (40,),
-    "tlo": (43.1, 49), "wcs": (54, 55, 56, 57, 58, 59), "path": (61,),
+    "motion": (0, 1, 2, 3, 38.2, 38.3, 38.4, 38.5, 80), "nonmodal": (4, 10, 28, 28.1, 30, 30.1, 53, 92, 92.1),
+    "plane": (17, 18, 19), "distance": (90, 91), "arc": (91.1,), "feedmode": (93, 94), "units": (20, 21),
+    "cutter": (40,), "tlo": (43.1, 49), "wcs": (54, 55, 56, 57, 58, 59), "path": (61,),
 }
 _M_GROUPS = {"stop": (0, 1, 2, 30), "spindle": (3, 4, 5), "coolant": (7, 8, 9)}
 
@@ -172,7 +173,9 @@ class _GCode:
         if "coolant" in m_groups:
             coolant = m_groups["coolant"]
             actions.append(("call", lambda: self._set_coolant(coolant)))
-        if not self._check:
+        if not self._check and m.motion in PROBE_CODES and m.axis_cmd == "motion":
+            actions.extend(self._probe_actions(m.motion, blocks))  # a probing cycle (cam.sim._grbl_probe)
+        elif not self._check:
             actions.extend(("block", b) for b in blocks)
         self._parser_pos = list(end)
         stop = m_groups.get("stop")
@@ -203,7 +206,7 @@ class _GCode:
                 raise GrblCodeError(24)
         elif axis:
             axis_cmd = "motion"
-        motion = int(g["motion"]) if "motion" in g else p.motion
+        motion = (g["motion"] if g["motion"] in PROBE_CODES else int(g["motion"])) if "motion" in g else p.motion
         if axis_cmd == "motion" and motion == 80:
             raise GrblCodeError(31)
         inverse_time = g["feedmode"] == 93 if "feedmode" in g else p.inverse_time
@@ -285,7 +288,13 @@ class _GCode:
         elif m.axis_cmd == "motion":
             if m.motion in (1, 2, 3) and ("F" not in values if m.inverse_time else m.feed <= 0):
                 raise GrblCodeError(22)
-            if m.motion in (0, 1):
+            if m.motion in PROBE_CODES:
+                if m.inverse_time or m.feed <= 0:
+                    raise GrblCodeError(22)
+                if all(abs(target[i] - base[i]) < 1e-9 for i in range(3)):
+                    raise GrblCodeError(33)  # a probe target where the carriage stands
+                points, rate = [target], m.feed
+            elif m.motion in (0, 1):
                 points = [target]
                 rate = math.dist(base, target) * m.feed if m.inverse_time and m.motion == 1 else m.feed
             else:

@@ -63,6 +63,8 @@ class _Motion:
                 v1 = max(0.0, self._v - a * dt)
                 if self._v <= 1e-9:
                     self._v = 0.0
+                    if self._probe_stopped():  # a probe's trigger: the cycle ends where the carriage stopped
+                        return
                     if self._state == "Jog":   # a jog cancel: stopped, the other jog blocks flushed
                         self._log_block(blk, list(self._pos), halted=True)
                         self._planner.clear()
@@ -82,6 +84,7 @@ class _Motion:
             if not self._hold:
                 ds = max(ds, 0.5 * a * dt * dt)
             self._check_trip(blk, ds)
+            self._check_probe(blk, ds)
             if self._critical:
                 return
             if ds >= rem - 1e-12:
@@ -123,6 +126,7 @@ class _Motion:
             self._v = 0.0
             if self._state in ("Run", "Jog"):
                 self._state = "Idle"
+        self._probe_block_done(blk)
 
     def _log_block(self, blk: Block, end: Sequence[float], halted: bool) -> None:
         row = ExecutedBlock(blk.line, blk.kind, tuple(blk.start), tuple(end), blk.feed_mm_min, self._t, halted)

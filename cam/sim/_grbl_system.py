@@ -78,6 +78,9 @@ class _System:
                 arg()
                 if self._actions is None:   # it raised an alarm: the line is not answered
                     return False
+            elif kind == "probe":  # the probing cycle (cam.sim._grbl_probe): answered when it has ended
+                if not self._probe_step(arg):
+                    return False
             elif kind == "wait":   # a dwell or the homing cycle: the callable starts it and sets _timed
                 arg()
                 self._actions.popleft()
@@ -132,10 +135,10 @@ class _System:
             self._send(f"[G30:{fmt(self._g30_mm)}]")
             self._send(f"[G92:{fmt(self._parser.g92_mm)}]")
             self._send(f"[TLO:{self._parser.tlo_mm:.3f}]")
-            self._send("[PRB:0.000,0.000,0.000:0]")
+            self._send(f"[PRB:{fmt(self._prb[0])}:{int(self._prb[1])}]")
         elif line == "$G":
             p = self._parser
-            motion = {0: "G0", 1: "G1", 2: "G2", 3: "G3", 80: "G80"}[p.motion]
+            motion = {0: "G0", 1: "G1", 2: "G2", 3: "G3", 80: "G80"}.get(p.motion, f"G{p.motion:g}")
             coolant = " ".join(f"M{c}" for c in sorted(p.coolant)) or "M9"
             self._send(f"[GC:{motion} G{54 + p.wcs} G{p.plane} {'G20' if p.inches else 'G21'} "
                        f"{'G91' if p.incremental else 'G90'} {'G93' if p.inverse_time else 'G94'} M{p.spindle} "

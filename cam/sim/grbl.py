@@ -76,13 +76,14 @@ from ._grbl_base import (BOOT_WALL_S, DEFAULT_SETTINGS, LINE_MAX_CHARS, LOG_HEAD
                          Block, ExecutedBlock, GrblCodeError, ParserState)
 from ._grbl_gcode import _GCode
 from ._grbl_motion import _Motion
+from ._grbl_probe import _Probe, parse_surface_spec
 from ._grbl_realtime import _Realtime
 from ._grbl_system import _System
 
 __all__ = ["GrblEmulator", "ExecutedBlock", "DEFAULT_SETTINGS", "WELCOME", "start_emulator", "main"]
 
 
-class GrblEmulator(_System, _GCode, _Realtime, _Motion, AbstractContextManager):
+class GrblEmulator(_System, _GCode, _Realtime, _Motion, _Probe, AbstractContextManager):
     """A grbl 1.1 board on a pseudo-terminal (see the module docstring).
 
     Args:
@@ -96,13 +97,16 @@ class GrblEmulator(_System, _GCode, _Realtime, _Motion, AbstractContextManager):
         log_path: also write each executed block as a CSV row (see :data:`LOG_HEADER`).
         build_info: the board's build info in its EEPROM, which ``$I`` reports (``[VER:1.1h.20190830:NAME]``)
             and ``$I=NAME`` sets: two emulators with different ones are two boards that tell themselves apart.
+        probe_surface: the work's surface its probe touches (``G38.2``...: :mod:`cam.sim._grbl_probe`), ``(z0, ax,
+            ay, b, cx, cy)`` in grbl's machine frame (mm, up positive) or that as text; None: no probe (nothing
+            touches).
     """
 
     def __init__(self, *, speed: Optional[float] = 1.0, settings: Optional[dict[int, float]] = None,
                  baud: int = 115200, latency_s: float = 0.001, reset_on_open: bool = True,
                  start_mm: Sequence[float] = (-100.0, -100.0, -10.0), log_path: Optional[str] = None,
                  build_info: str = "", rx_buffer_bytes: int = RX_BUFFER_BYTES, planner_blocks: int = PLANNER_BLOCKS,
-                 welcome: str = WELCOME) -> None:
+                 welcome: str = WELCOME, probe_surface: "Optional[Sequence[float] | str]" = None) -> None:
         if speed is not None and not speed > 0:
             raise CamError(f"speed must be > 0 or None, got {speed!r}")
         if not baud > 0:
@@ -149,6 +153,9 @@ class GrblEmulator(_System, _GCode, _Realtime, _Motion, AbstractContextManager):
         self._t = 0.0
         self._line_no = 0
         self._trips: list[list[int]] = []
+        self._probe_surface = parse_surface_spec(probe_surface) if isinstance(probe_surface, str) else \
+            (None if probe_surface is None else parse_surface_spec(",".join(str(float(v)) for v in probe_surface)))
+        self._prb: tuple[list[float], bool] = ([0.0, 0.0, 0.0], False)  # the last probe's [PRB:...] (kept by $#)
         self._power_up()
 
     # ------------------------------------------------------------------ power / reset
@@ -171,6 +178,7 @@ class GrblEmulator(_System, _GCode, _Realtime, _Motion, AbstractContextManager):
         self._s_mm = 0.0
         self._v = 0.0
         self._actions: Optional[deque] = None
+        self._probe: Optional[dict] = None  # the probing cycle under way (cam.sim._grbl_probe)
         self._answered = False
         self._hold = False
         self._pause = False          # M0 / M1 program pause
@@ -461,6 +469,9 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     parser.add_argument("--log", metavar="FILE.csv", help=f"write one row per executed block: {LOG_HEADER}")
     parser.add_argument("--set", action="append", default=[], metavar="N=VALUE",
                         help="a $ setting to change from grbl's defaults, e.g. --set 22=1 (repeatable)")
+    parser.add_argument("--probe-surface", metavar="Z0,AX,AY,B,CX,CY",
+                        help="the surface the probe touches (G38.2): z0 + ax*x + ay*y + b*((x-cx)^2 + (y-cy)^2), "
+                        "machine mm (write it --probe-surface=-5,0.01: it may start with '-')")
     args = parser.parse_args(argv)
     settings: dict[int, float] = {}
     for item in args.set:
@@ -469,7 +480,12 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             settings[int(key.lstrip("$"))] = float(value)
         except ValueError:
             raise CamError(f"--set {item!r}: expected N=VALUE, e.g. 22=1") from None
-    emulator = start_emulator(speed=args.speed or None, baud=args.baud, settings=settings, log_path=args.log)
+    try:
+        surface = parse_surface_spec(args.probe_surface) if args.probe_surface else None
+    except ValueError as exc:
+        raise CamError(f"--probe-surface: {exc}") from None
+    emulator = start_emulator(speed=args.speed or None, baud=args.baud, settings=settings, log_path=args.log,
+                              probe_surface=surface)
     print(emulator.device_path, flush=True)
     return serve_until_stopped(emulator)
 
