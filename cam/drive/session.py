@@ -59,6 +59,7 @@ from .journal import JournalSpec, journal_spec
 from ._session_parts import Activity, Prompt, PromptFn
 from ._session_recover import UNKNOWN_JOG_LINE, SessionRecover, maximus_cannot_home
 from ._session_pinlog import SessionPinLogs
+from ._session_probe import SessionProbe
 from .activities import BoardControl, run_on_board, run_steps
 from .machine_job import JobInput, MachineJob, machine_job
 from .machines import DEFAULT_PORT, backend_of
@@ -74,7 +75,7 @@ MAX_JOG_STEPS = 100_000
 """The longest jog one request may ask for, either way."""
 
 
-class MachineSession(SessionRecover, SessionPinLogs):
+class MachineSession(SessionRecover, SessionPinLogs, SessionProbe):
     """The machine as every front end sees it (thread-safe).
 
     Args:

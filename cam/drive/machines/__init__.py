@@ -50,6 +50,7 @@ CAPABILITY_MEANINGS = {
     "drills_alone": "the board drills a hole by itself: a job is a list of holes, resumed at the next hole",
     "board_settings": "its machine settings start from the board's own (resolution, step modes)",
     "resume": "a stopped job resumes from its journal",
+    "probes": "a touch probe: Z probed down to the work's surface (cam probe; the mock's is simulated)",
 }
 """Every capability a back end may have, in one line each (``cam info --port`` lists a port's)."""
 
@@ -68,6 +69,8 @@ _CANNOT = {
     "home_switches": "{port} has no home switches cam reads; {what} needs a step/dir port with [inputs]",
     "reports_position": "{port} does not report where its tool stands; {what} applies to grbl ports only",
     "resume": "{port} cannot resume a job from a journal",
+    "probes": "{port} has no probe input cam reads; {what} needs a step/dir port with inputs.probe (the mock with "
+              "[mock] probe_surface) or grbl",
 }
 
 
@@ -170,6 +173,11 @@ class Backend:
     def home(self, session: Any, axes: Optional[str]) -> bool:
         """Home this machine its own way and return True; False: the session homes on switches it reads."""
         return False
+
+    def start_probe(self, session: Any, probe_run: Any) -> None:
+        """Start a probing activity (a :class:`~cam.drive.probing.ProbeRun`, checked by the session) through the
+        session's ``_launch_probe``; a machine without a probe refuses in one line."""
+        self.require(session.port, "probes", "probing")
 
     def home_refusal(self, port: Any) -> None:
         """Refuse homing in one line on a machine that can do neither (CapabilityError saying what it can do

@@ -32,6 +32,8 @@ class CmdBackend(Backend):
         "pin_log": "{port} keeps no pin log: a pin log records the mock's writes (cmd:mock logs command bytes)",
         "home_switches": "{port} (seed 004's control unit) has no switches cam reads: jog to a known place and set "
                          "it (cam where --set X,Y,Z)",
+        "probes": "{port} (seed 004's control unit) has no probe input cam reads: {what} needs a step/dir port "
+                  "with inputs.probe or grbl",
     }
 
     def matches(self, name: str) -> bool:

@@ -35,6 +35,8 @@ class MaximusBackend(Backend):
         "pause": "{port} cannot pause a job (the MAXIMUS firmware has no pause): stop it, or wait for a tool change",
         "step_dir": "{port} (the MAXIMUS board) drills drill files (Excellon) and jogs only; {what} needs a "
                     "step/dir port (mock or /dev/parportN)",
+        "probes": "{port} (the MAXIMUS board) has no probe input: {what} needs a step/dir port with inputs.probe "
+                  "or grbl",
     }
 
     def matches(self, name: str) -> bool:

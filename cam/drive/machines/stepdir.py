@@ -10,14 +10,22 @@ from typing import Any
 
 from ...settings import MachineSettings
 from ..ports import MockPort, ParallelPort, Port
+from ..probing import start_probe_on_steps
 from . import Backend, register
 
 __all__ = ["MockBackend", "ParportBackend"]
 
-_STEP_DIR = frozenset({"step_dir", "pause", "drill_files", "jog", "home_switches", "resume"})
+_STEP_DIR = frozenset({"step_dir", "pause", "drill_files", "jog", "home_switches", "resume", "probes"})
 
 
-class MockBackend(Backend):
+class _StepDir(Backend):
+    """What both step/dir back ends do alike: probing on the probe input of ``[inputs]``."""
+
+    def start_probe(self, session: Any, probe_run: Any) -> None:
+        start_probe_on_steps(session, probe_run)
+
+
+class MockBackend(_StepDir):
     """``mock``: nothing leaves the PC; every write is logged (the thesis's Debug Mode)."""
 
     kind = "mock"
@@ -37,7 +45,7 @@ class MockBackend(Backend):
         return MockPort(**mock_options)
 
 
-class ParportBackend(Backend):
+class ParportBackend(_StepDir):
     """``/dev/parportN``: the real parallel port through pyparallel."""
 
     kind = "parport"

@@ -1,0 +1,173 @@
+"""A part of :class:`~cam.drive.session.MachineSession`: probing the work's surface (issue #46 points 1 and 3).
+
+:meth:`SessionProbe.probe_z` probes down where the tool stands, :meth:`SessionProbe.probe_grid` a grid of points
+from a safe height, both one activity in the background (its worker :func:`cam.drive.probing.probe_worker`,
+stoppable, the e-stop served), done by the port's back end (``start_probe``: capability ``probes``; the MAXIMUS
+board and the ``cmd:`` control unit refuse in one line).  :meth:`SessionProbe.set_work_z` puts the active work
+offset's Z zero at a probed height.
+
+Like the other parts it keeps no state of its own but ``_last_probe`` (the results of the last probing): it works on
+the attributes ``MachineSession.__init__`` sets (``port``, ``backend``, ``settings``, ``state_hold``, ``grbl``,
+``_lock``, ``_position``) and calls the session's methods (``_check_free``, ``_require_known``, ``_begin``,
+``_spawn``, ``wait_idle``, ``log``, ``_bump``).  Frames: machine steps, +Z deeper.
+"""
+from __future__ import annotations
+
+import math
+from typing import Any, Callable, Optional, Sequence
+
+import numpy as np
+
+from ..errors import PlanError
+from ..values import shown
+from ._session_parts import Activity
+from .grbl_probe import grbl_set_work_z
+from .probing import DEFAULT_DEPTH_MM, ProbeError, Prober, ProbeResult, ProbeRun, probe_worker
+from .state import check_in_travel, steps_to_mm
+
+__all__ = ["SessionProbe"]
+
+MAX_PROBE_POINTS = 100_000
+"""The most points one grid may probe."""
+
+
+def _depth(value: Any) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not 0 < int(value) <= 10**9:
+        raise PlanError(f"max_depth_steps must be a whole number of steps > 0, got {shown(value)}")
+    return int(value)
+
+
+def _feed(value: Any) -> Optional[float]:
+    if value is None:
+        return None
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) \
+            or not (math.isfinite(float(value)) and 0 < float(value) <= 1e5):
+        raise PlanError(f"the probe feed must be a number of mm/min > 0 (at most 100000), got {shown(value)}")
+    return float(value)
+
+
+class SessionProbe:
+    """Probe Z where the tool stands or over a grid, and set the work Z zero from a probe (a mixin; see the
+    module)."""
+
+    _last_probe: Optional[list[ProbeResult]] = None
+
+    @property
+    def last_probe(self) -> Optional[list[ProbeResult]]:
+        """The probes of the last probing activity, in the order they were made (None: none ran yet)."""
+        with self._lock:
+            return None if self._last_probe is None else list(self._last_probe)
+
+    def probe_z(self, feed_mm_min: Optional[float] = None, max_depth_steps: Optional[int] = None, *,
+                wait: bool = True) -> Optional[ProbeResult]:
+        """Probe down where the tool stands: Z moves down (+Z) at ``feed_mm_min`` (None: the machine's default,
+        :func:`cam.drive.probing.step_dir_feed`) until the probe touches, at most ``max_depth_steps`` (None:
+        :data:`~cam.drive.probing.DEFAULT_DEPTH_MM`), then lifts back to where it began.
+
+        Returns:
+            with ``wait`` the :class:`~cam.drive.probing.ProbeResult` (its ``contact_steps``: machine frame); else
+            None at once (the result then in :attr:`last_probe` and ``last_run["probe"]`` when it has ended).
+
+        Raises:
+            CapabilityError: a machine with no probe (MAXIMUS, ``cmd:``), the mock without a probe surface;
+            ProbeError: no probe input, a feed too fast, or (``wait``) a probe that did not touch, was stopped or
+            failed (one line; the position stays known but after an emergency stop or a limit switch);
+            PlanError, TravelError, BusyError, PositionUnknownError (nothing moves).
+        """
+        depth = _depth(max_depth_steps if max_depth_steps is not None
+                       else int(round(DEFAULT_DEPTH_MM / self.settings.mm_per_step_z)))
+        self.start_probe(ProbeRun((None,), depth, _feed(feed_mm_min), None, "probe Z"))
+        if not wait:
+            return None
+        return self._probe_results()[0]
+
+    def probe_grid(self, points_steps: Sequence[Sequence[int]], safe_z_steps: int, max_depth_steps: int,
+                   feed_mm_min: Optional[float] = None, *, wait: bool = True) -> Optional[list[ProbeResult]]:
+        """Probe each of ``points_steps`` (machine X, Y in steps, in the order given): up to ``safe_z_steps``
+        (machine Z) first, across at that height, probe down at most ``max_depth_steps`` and lift back to it.
+        A point that does not touch ends the grid in one line (ProbeError, with ``wait``).
+
+        Returns:
+            with ``wait`` one :class:`~cam.drive.probing.ProbeResult` per point; else None (see :meth:`probe_z`)."""
+        pts = [(int(p[0]), int(p[1])) for p in points_steps]
+        if not 0 < len(pts) <= MAX_PROBE_POINTS:
+            raise PlanError(f"a probe grid has 1..{MAX_PROBE_POINTS} points, got {len(pts)}")
+        if isinstance(safe_z_steps, bool) or not isinstance(safe_z_steps, (int, np.integer)):
+            raise PlanError(f"safe_z_steps must be a whole number of steps, got {shown(safe_z_steps)}")
+        run = ProbeRun(tuple(pts), _depth(max_depth_steps), _feed(feed_mm_min), int(safe_z_steps),
+                       f"probe grid of {len(pts)} points")
+        self.start_probe(run)
+        if not wait:
+            return None
+        return self._probe_results()
+
+    def _probe_results(self) -> list[ProbeResult]:
+        """Wait for the probing activity; its results, or ProbeError saying in one line why there are none."""
+        self.wait_idle(None)
+        info = self.last_run
+        if info.get("status") != "finished":
+            raise ProbeError("; ".join(info.get("messages") or [str(info.get("status"))]))
+        return list(self._last_probe or [])
+
+    def start_probe(self, probe_run: ProbeRun) -> None:
+        """Start a probing activity (:class:`~cam.drive.probing.ProbeRun`) in the background, checked first: the
+        machine can probe, the position is known, and with a state file every place it goes is in the travel."""
+        self.backend.require(self.port, "probes", "probing")
+        with self._lock:
+            self._check_free()
+            self._require_known()
+            if self.state_hold is not None:
+                self._check_probe_travel(probe_run)
+            self.backend.start_probe(self, probe_run)
+
+    def _check_probe_travel(self, probe_run: ProbeRun) -> None:
+        here = tuple(int(v) for v in self._position)
+        s = self.settings
+        per = s.mm_per_step_z
+        for xy in probe_run.points:
+            top = here[2] if probe_run.safe_z_steps is None else probe_run.safe_z_steps
+            x, y = (here[0], here[1]) if xy is None else xy
+            x_mm, y_mm, _ = steps_to_mm((x, y, 0), s)
+            where = "where the tool stands" if xy is None else f"probe point X={x_mm:g} Y={y_mm:g} mm"
+            if xy is not None:
+                check_in_travel((x, y, top), s, f"the safe height over the {where}")
+            check_in_travel((x, y, top + probe_run.depth_steps), s,
+                            f"the deepest probe ({probe_run.depth_steps * per:g} mm down) {where}")
+
+    def _launch_probe(self, probe_run: ProbeRun, ctl: Any, make_prober: Callable[[], Prober]) -> None:
+        """Begin the probing activity (the lock held; called by a back end's ``start_probe``)."""
+        self._last_probe = None
+        self._begin(Activity("probe", probe_run.label, ctl, len(probe_run.points), 0.0))
+        self.log(f"{probe_run.label}: started at {probe_run.feed_mm_min:g} mm/min")
+        self._spawn(probe_worker, (self, ctl, make_prober, probe_run), "probe")
+
+    def set_work_z(self, z_steps: int, offset: Optional[str] = None) -> None:
+        """The Z zero of work offset ``offset`` (None: the active one) at machine Z ``z_steps`` (a probed surface,
+        a plate's thickness below a contact), X and Y kept; on grbl its own offset too (``G10 L2``).  Without a
+        state file the session's home moves there on Z.  Refused while busy or while the position is unknown."""
+        if isinstance(z_steps, bool) or not isinstance(z_steps, (int, np.integer)):
+            raise PlanError(f"z_steps must be a whole number of steps, got {shown(z_steps)}")
+        with self._lock:
+            self._check_free()
+            self._require_known()
+            hold = self.state_hold
+            if hold is None:
+                self._position = self._position - np.array([0, 0, int(z_steps)], np.int64)
+                if self.grbl is not None:
+                    self.grbl.rebase(tuple(int(v) for v in self._position))
+                self._bump()
+                self.log(f"Z {int(z_steps)} steps is the origin's Z now")
+                return
+            st = hold.state
+            name = offset or st.active_offset
+            if not isinstance(name, str) or name not in st.offsets_steps:
+                raise PlanError(f"offset must be one of {', '.join(st.offsets_steps)}, got {shown(offset)}")
+            zero = list(st.work_zero_steps(name))
+            zero[2] = int(z_steps)
+            check_in_travel(zero, self.settings, f"the {name} work zero")
+            if self.grbl is not None:
+                grbl_set_work_z(self.grbl, name, int(z_steps), self.settings)
+            hold.record(st.with_offset(name, tuple(zero)))
+            self._bump()
+        zmm = steps_to_mm(zero, self.settings)
+        self.log(f"{name} Z zero set at machine Z {zmm[2]:g} mm ({int(z_steps)} steps)")
