@@ -15,6 +15,7 @@ from ...settings import MachineSettings
 from ..grbl_link import parse_grbl_url
 from ..machine_job import MachineJob
 from ..grbl_machine import adopt_position, grbl_machine
+from ..grbl_probe import start_probe_on_grbl
 from . import Backend, register
 
 __all__ = ["GrblBackend"]
@@ -71,6 +72,12 @@ class GrblBackend(Backend):
             raise CamError(f"grbl homes all its axes with $H (its own [homing] order, $23-$27); drop axes {axes}")
         session.home_grbl()
         return True
+
+    capabilities = capabilities | {"probes"}  # G38.2 and its [PRB:...] report
+
+    def start_probe(self, session: Any, probe_run: Any) -> None:
+        """Probe with ``G38.2`` (:mod:`cam.drive.grbl_probe`)."""
+        start_probe_on_grbl(session, probe_run)
 
 
 register(GrblBackend())
