@@ -33,6 +33,7 @@ COMMANDS = {
     "where": ("cam.cli.machine_state", "cmd_where"),
     "zero": ("cam.cli.machine_state", "cmd_zero"),
     "home": ("cam.cli.home", "cmd_home"),
+    "probe": ("cam.cli.probe", "cmd_probe"),
     "serve": ("cam.cli.serve", "cmd_serve"),
     "emulate-maximus": ("cam.cli.emulate", "cmd_emulate"),
     "emulate-grbl": ("cam.cli.emulate", "cmd_emulate_grbl"),

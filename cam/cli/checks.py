@@ -49,6 +49,7 @@ OUTPUTS = {
     "save_digitized": ("--save-digitized", DIGITIZED_SUFFIXES),
     "output": ("--output", None),
     "log": ("--log", (".csv",)),
+    "out": ("--out", (".json",)),
 }
 """Files a command writes, checked before it starts."""
 

@@ -27,4 +27,6 @@ def cmd_emulate(args: argparse.Namespace) -> int:
 
 def cmd_emulate_grbl(args: argparse.Namespace) -> int:
     argv = ["--speed", str(args.speed)] + [f"--set={item}" for item in args.set]
+    if args.probe_surface:
+        argv.append(f"--probe-surface={args.probe_surface}")
     return int(grbl_emulator.main(argv + (["--log", args.log] if args.log else [])) or 0)

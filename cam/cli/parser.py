@@ -606,6 +606,9 @@ def _add_emulate_grbl(sub: argparse._SubParsersAction) -> None:
     em.add_argument("--speed", type=_number("--speed", 1e-3, 1e6), default=1.0, help="machine time per real time (1 = real time)")
     em.add_argument("--set", action="append", default=[], metavar="N=VALUE", help="a $ setting, e.g. --set 22=1 (repeatable)")
     em.add_argument("--log", metavar="FILE.csv", help="write one row per executed block (machine coordinates, mm)")
+    em.add_argument("--probe-surface", metavar="Z0,AX,AY,B,CX,CY",
+                    help="the surface its probe touches (G38.2): z0 + ax*x + ay*y + b*((x-cx)^2 + (y-cy)^2), grbl's "
+                    "machine mm, missing trailing values 0 (write --probe-surface=-5,0.01)")
 
 
 def _add_goto(sub: argparse._SubParsersAction) -> None:
@@ -685,6 +688,75 @@ def _add_home(sub: argparse._SubParsersAction) -> None:
     h.add_argument("--pin-log", metavar="FILE.csv", help="write the mock's pin log of every homing move")
 
 
+def _area(text: str) -> list[float]:
+    """--area X0,Y0,X1,Y1: four finite numbers, the low corner first."""
+    try:
+        values = [float(v) for v in text.split(",")]
+    except ValueError:
+        values = []
+    if len(values) != 4 or not all(math.isfinite(v) and abs(v) <= MAX_MM for v in values):
+        raise argparse.ArgumentTypeError(f"--area takes four numbers X0,Y0,X1,Y1 in mm, got '{text}'")
+    if values[0] > values[2] or values[1] > values[3]:
+        raise argparse.ArgumentTypeError(f"--area X0,Y0,X1,Y1: X0 must not exceed X1 nor Y0 Y1, got '{text}'")
+    return values
+
+
+def _add_probe_machine(p: argparse.ArgumentParser) -> None:
+    """The options both probe commands share: the port, its state file and machine, the feed, the mock."""
+    p.add_argument("--feed", type=_number("--feed", 0.0, 100_000, above=True), metavar="MM_MIN",
+                   help="the probe feed in mm/min (default 20, on a step/dir machine at most Z's start speed: it stops "
+                   "on the step the probe closes)")
+    p.add_argument("--port", default=DEFAULT_PORT, help="'mock' (default: its [mock] probe_surface simulated), "
+                   "/dev/parport0 ([inputs] probe) or grbl:/dev/ttyUSB0 (G38.2); the MAXIMUS board and cmd: have no "
+                   "probe")
+    _add_state_option(p)
+    _add_machine_options(p)
+    p.add_argument("--realtime", action="store_true", help="run the mock in real time")
+    p.add_argument("--pin-log", metavar="FILE.csv", help="write the mock's pin log of every probing move")
+
+
+def _add_probe(sub: argparse._SubParsersAction) -> None:
+    pb = sub.add_parser("probe", help="find the work's surface with a touch probe (Z zero, height map)",
+                        description="Probe the work's surface: Z moves down (+Z) at the probe feed until the probe "
+                        "touches, at most a bounded depth, then lifts back. 'cam probe z' sets the work Z zero on the "
+                        "surface; 'cam probe grid' writes a height map of an area. The e-stop, Ctrl-C (a stop) and "
+                        "the limit switches are served while it probes.")
+    what = pb.add_subparsers(dest="probe_what", metavar="WHAT", parser_class=_Parser, required=True)
+    z = what.add_parser("z", help="probe down here and set the work Z zero on the surface",
+                        description="Probe down where the tool stands, set the active work offset's Z zero on the "
+                        "surface (--plate: that much below the contact), and lift back to where it began.")
+    z.add_argument("--plate", type=_number("--plate", 0.0, 1000.0), default=0.0, metavar="MM",
+                   help="the thickness of a touch plate laid on the work (the zero goes that much below the contact; "
+                   "default 0)")
+    z.add_argument("--depth", type=_number("--depth", 0.0, 1000.0, above=True), default=5.0, metavar="MM",
+                   help="probe at most this far down (default 5): a probe that touches nothing stops there and lifts")
+    _add_probe_machine(z)
+    g = what.add_parser("grid", help="probe a grid over an area and write a height map",
+                        description="Probe a grid of points over an area (--area, or --over a job's file where it "
+                        "would run), row by row in serpentine order: each point travelled to at the safe height, "
+                        "probed down at most --depth, lifted back to the safe height. Writes the height map (JSON, "
+                        "machine frame, heights in mm up positive) to --out; a progress line per point on stderr.")
+    where = g.add_mutually_exclusive_group(required=True)
+    where.add_argument("--area", type=_area, metavar="X0,Y0,X1,Y1",
+                       help="the area in mm, in the active work offset's X, Y (--machine-coords: the machine's)")
+    where.add_argument("--over", metavar="FILE", help=f"the XY extent of what this job cuts where it would run ("
+                       f"{FILE_KINDS_HELP}), placed at the active work zero as cam drill places it")
+    g.add_argument("--origin", choices=("file", "upper-left", "lower-left", "center"),
+                   help="with --over: which point of the file goes to the work zero (as cam drill's --origin)")
+    g.add_argument("--machine-coords", action="store_true", help="--area is in the machine frame")
+    g.add_argument("--spacing", type=_number("--spacing", 0.0, MAX_MM, above=True), default=10.0, metavar="MM",
+                   help="the distance between grid points (default 10)")
+    g.add_argument("--margin", type=_number("--margin", 0.0, MAX_MM), default=0.0, metavar="MM",
+                   help="grow the area by this much on every side (default 0)")
+    g.add_argument("--safe-height", type=_number("--safe-height", 0.0, MAX_MM), default=2.0, metavar="MM",
+                   help="the height above the work Z zero every probe starts from and every move between points "
+                   "is made at (default 2)")
+    g.add_argument("--depth", type=_number("--depth", 0.0, MAX_MM, above=True), metavar="MM",
+                   help="probe at most this far below the safe height (default: the safe height + 2)")
+    g.add_argument("--out", required=True, metavar="MAP.json", help="where to write the height map")
+    _add_probe_machine(g)
+
+
 def _axes_text(text: str) -> str:
     axes = text.lower()
     if not axes or any(a not in "xyz" for a in axes) or len(set(axes)) != len(axes):
@@ -737,7 +809,8 @@ def _add_serve(sub: argparse._SubParsersAction) -> None:
 
 
 _COMMAND_PARSERS = (_add_drill, _add_export, _add_preview, _add_digitize, _add_trace, _add_info, _add_profile, _add_jog,
-                    _add_emulate_maximus, _add_emulate_grbl, _add_goto, _add_where, _add_zero, _add_home, _add_serve)
+                    _add_emulate_maximus, _add_emulate_grbl, _add_goto, _add_where, _add_zero, _add_home, _add_probe,
+                    _add_serve)
 """Each adds one command's subparser, in the order ``cam --help`` lists them."""
 
 

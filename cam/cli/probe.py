@@ -1,0 +1,154 @@
+"""``cam probe z`` and ``cam probe grid``: find the work's surface with a touch probe (issue #46 point 1).
+
+A thin adapter over the machine session's probing (:meth:`cam.drive.session.MachineSession.probe_z`,
+``probe_grid``; :mod:`cam.drive.probing`): the port's back end probes (the mock on its simulated
+``[mock] probe_surface``, a parallel port's ``[inputs] probe``, grbl's ``G38.2``); the MAXIMUS board and ``cmd:``
+refuse in one line.  ``cam probe z`` then sets the active work offset's Z zero on the surface (a ``--plate``'s
+thickness below the contact) in the state file (and grbl's own offset); ``cam probe grid`` writes the height map.
+Ctrl-C stops (the tool lifted); a probe that touches nothing is one line, exit code 2.
+"""
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..drive.machines import backend_of
+from ..drive.ports import MockPort
+from ..drive.probing import grid_axis_mm, job_area_mm, serpentine
+from ..drive.session import MachineSession
+from ..drive.state import steps_to_mm
+from ..errors import CamError
+from ..job.heightmap_level import HeightMap, save_height_map
+from ..job.jobs import JobOptions, prepare_job
+from ..settings import MachineSettings
+from ..verify.pinlog import write_pin_log
+from .common import port_settings
+from .machine_state import hold_machine
+from .parser import EXIT_BAD_INPUT, EXIT_INTERRUPTED
+
+__all__ = ["cmd_probe"]
+
+_STOP_SIGNALS = tuple(getattr(signal, n) for n in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, n))
+
+
+def cmd_probe(args: argparse.Namespace) -> int:
+    """``cam probe WHAT``: z or grid."""
+    settings = port_settings(args, args.port)
+    backend_of(args.port).require(args.port, "probes", f"cam probe {args.probe_what}")  # before anything opens
+    if args.probe_what == "z":
+        return _probe_z(args, settings)
+    return _probe_grid(args, settings)
+
+
+def _run(args: argparse.Namespace, settings: MachineSettings, hold: Any, start: Any) -> tuple[MachineSession, Any]:
+    """A session on the port (a mock of this command's, whose pin log is written here), ``start(session)`` run with
+    Ctrl-C as a stop, waited for; returns the session and the status line when it did not finish."""
+    port = backend_of(args.port).logging_port(args.port, settings)
+    session = MachineSession(port, settings, realtime=bool(args.realtime), state=hold)
+    session.on_detail = lambda text: print(text, file=sys.stderr, flush=True)
+    previous = {s: signal.signal(s, lambda signum, frame: session.stop()) for s in _STOP_SIGNALS}
+    try:
+        start(session)
+        while not session.wait_idle(0.2):  # wakes for Ctrl-C
+            pass
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+        if isinstance(port, MockPort) and args.pin_log:
+            write_pin_log(port.pin_log(), args.pin_log)
+    return session, session.last_run
+
+
+def _ended(info: dict) -> int:
+    """The exit code and line of a probing activity that did not finish: Ctrl-C and the e-stop 130, else 2."""
+    status = info.get("status")
+    said = "; ".join(info.get("messages") or [str(status)])
+    if status in ("stopped", "emergency-stopped"):
+        print(f"cam: probing {status}: {said}", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    print(f"cam: error: {said}", file=sys.stderr)
+    return EXIT_BAD_INPUT
+
+
+def _probe_z(args: argparse.Namespace, settings: MachineSettings) -> int:
+    depth = int(round(args.depth / settings.mm_per_step_z))
+    if depth < 1:
+        raise CamError(f"--depth {args.depth:g} is less than one Z step ({settings.mm_per_step_z:g} mm)")
+    with hold_machine(args, settings, "cam probe z") as hold:
+        session, info = _run(args, settings, hold, lambda s: s.probe_z(args.feed, depth, wait=False))
+        if info.get("status") != "finished":
+            return _ended(info)
+        result = (session.last_probe or [None])[0]
+        zero_z = int(result.contact_steps[2]) + int(round(args.plate / settings.mm_per_step_z))
+        session.set_work_z(zero_z)
+        name = hold.state.active_offset
+        end = hold.state.position_steps
+    per = settings.mm_per_step_z
+    plate = f", {args.plate:g} mm plate" if args.plate else ""
+    print(f"{name} Z zero set on the surface at height {-zero_z * per:.4g} mm (machine Z {zero_z} steps; the contact "
+          f"at {result.contact_steps[2]} steps{plate}); the tool is back {(zero_z - end[2]) * per:.4g} mm above it")
+    return 0
+
+
+def _area_mm(args: argparse.Namespace, settings: MachineSettings, state: Any) -> tuple[float, float, float, float]:
+    """The area to probe in machine mm, before the margin: --area (work or machine frame) or --over's job extent."""
+    if args.area is not None:
+        x0, y0, x1, y1 = args.area
+        if args.machine_coords:
+            return x0, y0, x1, y1
+        zx, zy, _ = steps_to_mm(state.work_zero_steps(), settings)
+        return x0 + zx, y0 + zy, x1 + zx, y1 + zy
+    if args.machine_coords:
+        raise CamError("--machine-coords applies to --area only (--over places the job at the work zero)")
+    if not Path(args.over).is_file():
+        raise CamError(f"--over {args.over}: no such file")
+    job = prepare_job(args.over, JobOptions(), settings, name=args.over, machine_state=state)
+    return job_area_mm(job, state, settings, args.origin)
+
+
+def _probe_grid(args: argparse.Namespace, settings: MachineSettings) -> int:
+    if args.origin and args.over is None:
+        raise CamError("--origin applies to --over only")
+    per_x, per_y, per_z = settings.mm_per_step_axes
+    depth_mm = args.depth if args.depth is not None else args.safe_height + 2.0
+    with hold_machine(args, settings, "cam probe grid") as hold:
+        state = hold.state
+        x0, y0, x1, y1 = _area_mm(args, settings, state)
+        m = args.margin
+        xs = np.rint(grid_axis_mm(x0 - m, x1 + m, args.spacing) / per_x).astype(np.int64)
+        ys = np.rint(grid_axis_mm(y0 - m, y1 + m, args.spacing) / per_y).astype(np.int64)
+        if len(set(xs.tolist())) != len(xs) or len(set(ys.tolist())) != len(ys):
+            raise CamError(f"--spacing {args.spacing:g} is less than one X or Y step")
+        order = serpentine(len(xs), len(ys))
+        points = [(int(xs[i]), int(ys[j])) for i, j in order]
+        zero_z = int(state.work_zero_steps()[2])
+        safe_z = zero_z - int(round(args.safe_height / per_z))
+        depth = max(1, int(round(depth_mm / per_z)))
+        said = (f"probing {len(points)} points ({len(xs)} x {len(ys)}, {args.spacing:g} mm apart) over X "
+                f"{xs[0] * per_x:g}..{xs[-1] * per_x:g}, Y {ys[0] * per_y:g}..{ys[-1] * per_y:g} mm (machine), from "
+                f"{args.safe_height:g} mm above the work Z zero, at most {depth * per_z:g} mm down")
+
+        def start(session: MachineSession) -> None:
+            session.probe_grid(points, safe_z, depth, args.feed, wait=False)  # checked: the travel, the feed
+            print(said, file=sys.stderr, flush=True)
+
+        session, info = _run(args, settings, hold, start)
+        if info.get("status") != "finished":
+            return _ended(info)
+        results = session.last_probe or []
+    heights = np.zeros((len(ys), len(xs)), np.float64)
+    for (i, j), r in zip(order, results):
+        heights[j, i] = r.height_mm(settings)
+    machine = str(Path(args.machine).resolve()) if getattr(args, "machine", None) else None
+    save_height_map(HeightMap(xs * per_x, ys * per_y, heights, reference_mm=-zero_z * per_z, spacing_mm=args.spacing,
+                              machine=machine, time=datetime.now(timezone.utc).isoformat(timespec="seconds")),
+                    args.out)
+    print(f"height map of {len(points)} points written to {args.out}: heights {heights.min():.4g}..{heights.max():.4g} "
+          f"mm (machine frame; the work Z zero at {-zero_z * per_z:.4g} mm)")
+    return 0
