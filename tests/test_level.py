@@ -464,3 +464,42 @@ def test_a_job_kept_as_pieces_is_levelled_a_piece_at_a_time_to_the_same_moves(ki
         assert np.array_equal(getattr(a, name), getattr(b, name)), name
     assert held.plan_sha256 == streamed.plan_sha256 and held.report["level"] == streamed.report["level"]
     assert len(a) > held.report.get("points", 0)  # split at the spacing: more moves than the file's points
+
+
+def _g1_ends_mm(lines: list[str]) -> np.ndarray:
+    """``(K, 3)`` the X, Y, Z (mm) where each G1 line of a program ends (modal words carried)."""
+    at, ends = {"X": 0.0, "Y": 0.0, "Z": 0.0}, []
+    for line in lines:
+        words = line.split()
+        if not words or words[0] not in ("G0", "G1"):
+            continue
+        for w in words[1:]:
+            if w[0] in at:
+                at[w[0]] = float(w[1:])
+        if words[0] == "G1":
+            ends.append((at["X"], at["Y"], at["Z"]))
+    return np.array(ends)
+
+
+def test_export_writes_a_levelled_job_as_straight_xyz_moves_through_its_levelled_points(tmp_path):
+    """``cam export --level``: a cutting move that changes X/Y and Z is one G1 X Y Z (the machine's straight move),
+    not an X/Y move at the last depth and a Z step after it: every G1 in the material ends on a levelled point, and
+    every levelled cut point is the end of a G1."""
+    m = HeightMap([-10, 40, 100], [-10, 30, 80], [[0.0, 0.3, 0.1], [0.2, 0.5, 0.3], [0.1, 0.2, 0.4]],
+                  reference_mm=0.2, spacing_mm=10)
+    level = save_height_map(m, tmp_path / "map.json")
+    (tmp_path / "iso.plt").write_text(HPGL)
+    out = tmp_path / "iso.ngc"
+    ok(run_cli("export", tmp_path / "iso.plt", "--level", level, "--arc-tolerance", "0", "-o", out))
+    lines = out.read_text().splitlines()
+    assert any(line.startswith("G1 X") and " Z" in line for line in lines)  # X, Y and Z together
+    levelled = cam.prepare_job(tmp_path / "iso.plt", cam.JobOptions(level=str(level))).toolpath
+    pts = levelled.points_steps
+    want = np.column_stack([pts[:, 0] * MX, -pts[:, 1] * MY, -pts[:, 2] * MZ])  # as the program writes them
+    ends = _g1_ends_mm(lines)
+    ends = ends[ends[:, 2] < 0]  # in the material (below the work zero's surface)
+    near = (np.abs(ends[:, None, :2] - want[None, :, :2]).max(axis=2) <= MX) & \
+        (np.abs(ends[:, None, 2] - want[None, :, 2]) < 1e-4)
+    assert near.any(axis=1).all(), ends[~near.any(axis=1)][:5]  # no corner at the last depth
+    cuts = (levelled.kind == CUT) & (pts[:, 2] > 0)
+    assert near[:, cuts].any(axis=0).all()  # every levelled cut point written

@@ -11,7 +11,9 @@ Frames and units (also written into every file's header):
   surface, cuts are below it, moves above the surface are G0 at the safe height.
 
 Cutting moves are G1 with the feed the configured delays give (mm/step /
-delay); X/Y moves use the X/Y rate, Z moves the Z rate.
+delay); X/Y moves use the X/Y rate, Z moves the Z rate.  A move in the
+material that changes X/Y and Z together (a job levelled to a height map,
+``--level``) is one straight ``G1 X Y Z``, as the machine cuts it.
 
 A job planned for a real cutter (``job.tool``: flat, ball or V, issue #19)
 names it: a ``(tool: ball 1 mm, spec ball:1)`` comment in the header and
@@ -519,6 +521,10 @@ class _Writer:
                 self.w(f"G1 Z{format_mm(-self.oz_mm)}{self.feed_word(self.feed_z)}\n")
                 self.above, self.z = False, -self.oz_mm
                 cur = (cur[0], cur[1], -self.oz_mm)
+            elif nz != cur[2] and cur[2] < -self.oz_mm - 1e-9:  # in the material, X/Y and Z together (a levelled
+                # or 3D move): one straight move, as the machine cuts it
+                self.vertex(nx, ny, nz)
+                return
             self.vertex(nx, ny, cur[2], bool(self.on_arc and last is not None and self.on_arc(last, (xp, yp))))
         if nz != cur[2]:
             self.start_spindle()
