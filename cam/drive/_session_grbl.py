@@ -9,7 +9,7 @@ it keeps no state of its own: it works on the attributes ``MachineSession.__init
 from __future__ import annotations
 
 from dataclasses import replace
-from typing import Any
+from typing import Any, Optional
 
 import numpy as np
 
@@ -22,6 +22,7 @@ from .grbl_machine import (FEED_OVERRIDE_RANGE, GrblControl, GrblPosition, finis
                            steps_to_mpos, travel_advice)
 from .grbl_time import grbl_time_s
 from .machine_job import JobInput, MachineJob, machine_job
+from .journal import JournalSpec
 from .machines import require
 from .state import check_in_travel
 
@@ -39,10 +40,12 @@ class SessionGrbl(SessionFrames):
                                   f"job, not its step plan")
         return mj.moves
 
-    def _launch_grbl(self, name: str, job: Any, label: str, estimated_s: float) -> None:
+    def _launch_grbl(self, name: str, job: Any, label: str, estimated_s: float,
+                     journal: Optional[JournalSpec] = None) -> None:
         """Stream ``job`` to grbl in the background.  Its planned machine time is grbl's own
         (:func:`~cam.drive.grbl_time.grbl_time_s` of the lines it will get, from grbl's ``$$``), not the step
-        plan's (``estimated_s``, kept only when the lines cannot be timed)."""
+        plan's (``estimated_s``, kept only when the lines cannot be timed).  ``journal``: keep the job's journal
+        (:mod:`cam.drive.grbl_journal`)."""
         assert self.grbl is not None
         ctl = GrblControl(self.grbl)
         start = tuple(int(v) for v in self._position)
@@ -54,7 +57,7 @@ class SessionGrbl(SessionFrames):
         total = sum(len(piece) for piece in job.pieces())
         self._begin(Activity(name, label, ctl, total, estimated_s, position))
         self.log(f"{label}: started on {self.port}")
-        self._spawn(run_on_grbl, (self, name, job, ctl, label, start, position, total, estimated_s), name)
+        self._spawn(run_on_grbl, (self, name, job, ctl, label, start, position, total, estimated_s, journal), name)
 
     def feed_override(self, percent: float) -> None:
         """Set the feed override to ``percent`` (a number 10..200, rounded to a whole percent; grbl's real-time

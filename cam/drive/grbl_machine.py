@@ -40,7 +40,9 @@ from ..formats.gcode_export import format_mm
 from ..job.model import CUT
 from ..settings import MachineSettings, Travel
 from .runner import EMERGENCY_STOPPED, FINISHED, STOPPED
+from .grbl_journal import GrblJournal, GrblLines, Seen, on_path_tolerance_steps
 from .grbl_link import GrblLink, GrblStatus, alarm_text, open_grbl, parse_grbl_url, settings_mismatches
+from .journal import JournalSpec, journal_state_of
 
 __all__ = ["GrblMachine", "GrblControl", "GrblPause", "GrblPosition", "adopt_position", "fault_stop", "run_on_grbl", "grbl_machine", "close_grbl_machines", "job_lines",
            "mpos_to_steps", "steps_to_mpos", "grbl_travel", "travel_advice", "override_bytes", "POLL_S", "GRBL_OFFSETS"]
@@ -163,7 +165,8 @@ class _Runs:
 
 
 def job_lines(job: Any, start_steps: Steps3, base_steps: Steps3, settings: MachineSettings,
-              on_point: Optional[Callable[[int], None]] = None) -> Iterator["str | GrblPause"]:
+              on_point: Optional[Callable[[int], None]] = None,
+              on_line: Optional[Callable[[np.ndarray, int], None]] = None) -> Iterator["str | GrblPause"]:
     """The G-code lines that move grbl through ``job`` (any :class:`~cam.job.model.JobLike`), a piece at a time.
 
     Args:
@@ -171,6 +174,8 @@ def job_lines(job: Any, start_steps: Steps3, base_steps: Steps3, settings: Machi
             machine frame); each point's time from its ``period_ns``/``periods`` (else the step delays).
         base_steps: ``cam``'s machine steps of grbl's machine zero (see the module docstring).
         on_point: told the index of the last point a yielded line reaches (progress).
+        on_line: told each line's end (``(3,)`` steps from ``start_steps``) and the index of the last point it
+            reaches, before the line is yielded (the journal, :class:`~cam.drive.grbl_journal.GrblLines`).
 
     Yields:
         ``"G53G1X..Y..Z..F.."`` lines (no spaces: fewer bytes on the link) and a :class:`GrblPause` after each
@@ -213,6 +218,8 @@ def job_lines(job: Any, start_steps: Steps3, base_steps: Steps3, settings: Machi
         time_ns = sum(m[3] for m in move)
         feed = round(length_mm / max(1e-9, time_ns * 1e-9) * 60.0, 1)
         for end, rapid, _, _, last in move:
+            if on_line is not None:
+                on_line(end, last)
             yield text(end, rapid, 0.0 if rapid else feed)
             if on_point is not None:
                 on_point(last)
@@ -535,6 +542,19 @@ class GrblPosition:
         now = self.machine.position_steps()
         return tuple(int(n) - int(s) for n, s in zip(now, self.start))  # type: ignore[return-value]
 
+    def seen(self, status: Optional[GrblStatus] = None) -> Optional[Seen]:
+        """Where ``status`` (None: the latest report, if any) has the tool, steps from where the activity started:
+        exact (``MPos`` over the resolution, not rounded) and as :attr:`position_steps` books it."""
+        st = status or self.machine.last_status()
+        if st is None:
+            return None
+        s = self.machine.settings
+        x, y, z = (float(v) for v in st.mpos_mm[:3])
+        exact = np.array([x / s.mm_per_step_xy, -y / s.mm_per_step_xy, -z / s.mm_per_step_z]) \
+            + np.asarray(self.machine.base_steps, np.float64) - np.asarray(self.start, np.float64)
+        booked = tuple(int(n) - int(b) for n, b in zip(self.machine.position_steps(st), self.start))
+        return exact, booked  # type: ignore[return-value]
+
 
 def _stream_until_pause(link: GrblLink, items: Iterator[Any], position: GrblPosition) -> Optional[GrblPause]:
     """Stream lines until the next pause (returned) or the end (None), then wait for grbl to stand still."""
@@ -553,12 +573,17 @@ def _stream_until_pause(link: GrblLink, items: Iterator[Any], position: GrblPosi
 
 
 def run_on_grbl(session: Any, name: str, job: Any, ctl: GrblControl, label: str, start_steps: Steps3,
-                position: GrblPosition, total: int, estimated_s: float) -> None:
+                position: GrblPosition, total: int, estimated_s: float, journal: Optional[JournalSpec] = None) -> None:
     """The worker thread of an activity on grbl: stream ``job`` (points relative to ``start_steps``), prompt at
-    its pauses, end a stop as :func:`finish_stop` does, and book where grbl says the tool stands."""
+    its pauses, end a stop as :func:`finish_stop` does, and book where grbl says the tool stands.  ``journal``:
+    keep the job's journal (:class:`~cam.drive.grbl_journal.GrblJournal`: never ahead of where grbl reports the
+    tool, closed with where it reports it after the stop)."""
     machine: GrblMachine = session.grbl
     link = machine.link
     error = lost = ""
+    keeper: Optional[GrblJournal] = None
+    lines: Optional[GrblLines] = None
+    sending = False
 
     def on_point(index: int) -> None:
         done = min(total, index + 1)
@@ -567,16 +592,27 @@ def run_on_grbl(session: Any, name: str, job: Any, ctl: GrblControl, label: str,
     try:
         if ctl.halted:
             raise PortError("stopped before it started")
+        if journal is not None:  # written once before anything is sent: no journal, no job
+            lines = GrblLines(on_path_tolerance_steps(link.settings, session.settings))
+            keeper = GrblJournal(journal, total, lines, position.seen, on_error=ctl.stop)
+        sending = True
         link.allow()
-        items = job_lines(job, start_steps, machine.base_steps, session.settings, on_point)
+        items = job_lines(job, start_steps, machine.base_steps, session.settings, on_point,
+                          None if lines is None else lines.add)
         link.stream(["G21G90G94"], wait_idle=False)
         while True:
             pause = _stream_until_pause(link, items, position)
+            if pause is not None and keeper is not None:  # grbl stands still there: every line sent is done
+                keeper.paused_at(pause.index)
             if pause is None or ctl.halted:
+                if pause is None and lines is not None:  # the end: grbl idle after every line
+                    lines.all_done(-1)
                 break
             session.prompt(pause.position_steps, pause.note)
             if ctl.halted:
                 break
+            if keeper is not None:
+                keeper.answered()
     except CamError as exc:
         error = str(exc)
     except Exception as exc:  # noqa: BLE001 - reported in the log; nothing more is sent
@@ -586,17 +622,21 @@ def run_on_grbl(session: Any, name: str, job: Any, ctl: GrblControl, label: str,
             lost = finish_stop(machine, ctl)
         except CamError as exc:
             lost = str(exc)
-    elif error:
+    elif error and sending:  # (a journal that could not be written: nothing was sent, nothing to stop)
         lost = fault_stop(machine, error)
-    _book_end(session, name, label, ctl, start_steps, error, lost, estimated_s)
+    _book_end(session, name, label, ctl, start_steps, error, lost, estimated_s, keeper, position)
 
 
 def _book_end(session: Any, name: str, label: str, ctl: GrblControl, start_steps: Steps3, error: str,
-              lost: str, estimated_s: float = 0.0) -> None:
+              lost: str, estimated_s: float = 0.0, keeper: Optional[GrblJournal] = None,
+              position: Optional[GrblPosition] = None) -> None:
     machine: GrblMachine = session.grbl
+    seen = None
     try:
-        end = machine.position_steps(machine.status())
+        st = machine.status()
+        end = machine.position_steps(st)
         moved = np.asarray(end, np.int64) - np.asarray(start_steps, np.int64)
+        seen = position.seen(st) if position is not None else None
     except CamError as exc:
         moved, error = None, error or str(exc)
     if ctl.estopped or lost:
@@ -609,6 +649,11 @@ def _book_end(session: Any, name: str, label: str, ctl: GrblControl, start_steps
         status, messages = FINISHED, []
     info = {"activity": name, "label": label, "status": status, "messages": messages,
             "machine_time_s": round(float(estimated_s), 3)}
+    if keeper is not None:  # where grbl reports the tool after the stop: the journal's last word
+        journal_error = keeper.close(journal_state_of(status), seen)
+        if journal_error:
+            messages.append(journal_error)
+        info["journal"] = keeper.spec.path
     session.finish(info, moved)
     text = f"{label}: {status}" + (f" ({'; '.join(messages)})" if messages else "")
     session.log(text, "info" if status == FINISHED else ("warning" if status == STOPPED else "error"))

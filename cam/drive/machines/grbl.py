@@ -2,7 +2,9 @@
 as G-code, and it plans and times its own motion (:mod:`cam.drive.grbl_machine`, :mod:`cam.drive.grbl_link`).
 
 It reports where its tool stands (``MPos``), homes with its own cycle (``$H``), takes a feed override, and
-pauses with a feed hold; its planned time is its own (:mod:`cam.drive.grbl_time`).
+pauses with a feed hold; its planned time is its own (:mod:`cam.drive.grbl_time`).  A job keeps a journal and
+resumes from it as on a step/dir port (:mod:`cam.drive.grbl_journal`: how far grbl certainly got, from where it
+reports the tool).
 """
 from __future__ import annotations
 
@@ -29,14 +31,13 @@ class GrblBackend(Backend):
     kind = "grbl"
     example = "grbl:/dev/ttyUSB0"
     capabilities = frozenset({"gcode", "pause", "drill_files", "jog", "overrides", "homes_itself",
-                              "reports_position", "keeps_own_time"})
+                              "reports_position", "keeps_own_time", "resume"})
     cannot = {
         "step_dir": "{port} (a grbl board) takes G-code and makes its own steps; {what} needs a step/dir port "
                     "(mock or /dev/parportN)",
         "delay": "{port} takes its rates from grbl's own settings ($110-$112); {what} applies to the MAXIMUS board "
                  "only",
         "spindle": "{port}: {what} applies to the MAXIMUS board only (grbl programs switch the spindle with M3/M5)",
-        "resume": "{port}: a job on grbl keeps no journal (grbl reports where it stopped)",
     }
 
     def matches(self, name: str) -> bool:
@@ -60,9 +61,10 @@ class GrblBackend(Backend):
         session._grbl_job(job)  # a job with moves: a step plan has none
 
     def start_job(self, session: Any, job: MachineJob, name: str, journal: Any, controller: Any) -> None:
-        if journal is not None:  # what was done is grbl's reported position; nothing to resume from yet
-            session.log(f"{session.port}: a job on grbl keeps no journal (grbl reports where it stopped)", "warning")
-        session._launch_grbl("job", session._grbl_job(job), name, job.estimated_s())
+        """Stream the job's moves (a resumed job's: from where grbl has the tool); its journal's moves are those
+        grbl certainly finished, from where it reports the tool (:mod:`cam.drive.grbl_journal`)."""
+        session._launch_grbl("job", session._grbl_job(job), name, job.estimated_s(),
+                             session._journal_spec(job, journal))
 
     def start_moves(self, session: Any, activity: str, job: Any, label: str) -> None:
         session._launch_grbl(activity, job, label, 0.0)
