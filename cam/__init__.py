@@ -62,6 +62,8 @@ _LAZY = {
     "job_kind": "cam.choices", "sniff_kind": "cam.sniff",
     "prepare_job": "cam.job.jobs", "resume_job": "cam.job.jobs", "JobOptions": "cam.job.jobs",
     "PreparedJob": "cam.job.jobs", "Journal": "cam.job.resume", "read_journal": "cam.drive.journal",
+    "HeightMap": "cam.job.heightmap_level", "load_height_map": "cam.job.heightmap_level",
+    "save_height_map": "cam.job.heightmap_level",
 }
 
 __all__ = list(_LAZY)
@@ -123,6 +125,7 @@ if TYPE_CHECKING:  # pragma: no cover - for type checkers and editors only
     from .job.model import Job, PixelFrame
     from .job.jobs import JobOptions, PreparedJob, prepare_job, resume_job
     from .job.resume import Journal
+    from .job.heightmap_level import HeightMap, load_height_map, save_height_map
     from .drive.journal import read_journal
     from .job.moves import goto, jog
     from .render.report import image_report, job_report
