@@ -1,0 +1,454 @@
+"""Probing (issue #46 points 1 and 3): ``MachineSession.probe_z`` / ``probe_grid`` and ``cam probe z|grid``.
+
+The mock simulates the probe on the machine file's ``[mock] probe_surface`` (the pin closes while the tool tip is
+at or below ``z0 + ax*x + ay*y + b*((x-cx)^2 + (y-cy)^2)``): a contact must lie within one Z step below the
+formula, a grid map equal it within one step at every point, and the pin log decoded back into motion must show
+the serpentine order, each probe made from the safe height and no move between points below it.  A probe that
+touches nothing is one line with the position known; the e-stop ends probing (the pin, and the page's button);
+the MAXIMUS board and ``cmd:`` refuse in one line.  grbl probes with ``G38.2`` on the emulator (one test at real
+speed) and, in the slow tier, on grbl 1.1h's own firmware (``../shared/grbl_avr``, ``--probe-surface``)."""
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import cam
+from cam.drive.grbl_machine import close_grbl_machines
+from cam.drive.grbl_probe import parse_prb
+from cam.drive.machines import can
+from cam.drive.ports import MockPort, surface_height_mm
+from cam.drive.probing import ProbeError, grid_axis_mm, serpentine
+from cam.drive.session import MachineSession
+from cam.drive.state import StateHold, read_state
+from cam.errors import CapabilityError, SettingsError
+from cam.job.heightmap_level import load_height_map
+from cam.settings import settings_from_mapping
+from cam.sim.grbl import start_emulator
+from cam.verify.pinlog import decode_pin_log, read_pin_log
+from conftest import SAMPLES, one_line_error, ok, run_cli
+from support.grbl import quick_thread_switches  # noqa: F401 (autouse)
+
+FLAT = (-0.8, 0.0, 0.0, 0.0, 0.0, 0.0)
+WARPED = (-0.2, 0.003, -0.002, 0.00005, 20.0, 15.0)
+"""Tilted (0.3 mm over 100 mm in X, -0.2 over 100 in Y) and bowed (0.05 mm at 32 mm from its centre)."""
+MACHINE = {"inputs": {"probe": "!13", "estop": "!15"}, "travel": {"z_min_steps": -2000, "z_max_steps": 2000}}
+
+
+def mock_settings(surface=WARPED, **mock) -> cam.MachineSettings:
+    return settings_from_mapping({**MACHINE, "mock": {"probe_surface": ",".join(str(v) for v in surface), **mock}})
+
+
+def machine_file(tmp_path: Path, surface=WARPED, extra: str = "") -> Path:
+    path = tmp_path / "probe-machine.toml"
+    path.write_text(f'[inputs]\nprobe = "!13"\nestop = "!15"\n[travel]\nz_min_steps = -2000\nz_max_steps = 2000\n'
+                    f'[mock]\nprobe_surface = "{",".join(str(v) for v in surface)}"\n{extra}')
+    return path
+
+
+def surface_at(surface, settings, x_steps, y_steps) -> float:
+    return float(surface_height_mm(surface, x_steps * settings.mm_per_step_xy, y_steps * settings.mm_per_step_xy))
+
+
+def assert_within_a_step(height_mm: float, surface_mm: float, settings) -> None:
+    """The contact is the first Z step at or below the surface: at most one step below it, never above."""
+    assert surface_mm - settings.mm_per_step_z - 1e-9 < height_mm <= surface_mm + 1e-9, (height_mm, surface_mm)
+
+
+# -- the mock ------------------------------------------------------------------------------------------------
+
+def test_mock_probe_z_finds_a_flat_surface_and_lifts_back():
+    s = mock_settings(FLAT)
+    session = MachineSession(MockPort(), s)
+    r = session.probe_z(max_depth_steps=200)
+    assert r.touched and r.start_steps == r.end_steps == (0, 0, 0)
+    assert_within_a_step(r.height_mm(s), FLAT[0], s)
+    assert session.position_steps() == (0, 0, 0) and session.last_run["status"] == "finished"
+    assert session.last_run["probe"][0]["contact_steps"] == list(r.contact_steps)
+
+
+def test_mock_probes_a_tilted_and_bowed_surface_within_a_step_everywhere():
+    s = mock_settings(WARPED)
+    session = MachineSession(MockPort(), s)
+    points = [(0, 0), (1384, 0), (1384, 1038), (0, 1038), (692, 519), (3000, 2500)]
+    results = session.probe_grid(points, -100, 300)
+    assert [r.start_steps[:2] for r in results] == points
+    for (x, y), r in zip(points, results):
+        assert r.contact_steps[:2] == (x, y) and r.end_steps == (x, y, -100)
+        assert_within_a_step(r.height_mm(s), surface_at(WARPED, s, x, y), s)
+    assert len({r.contact_steps[2] for r in results}) > 3  # the surface is not flat: the contacts differ
+
+
+def test_a_probe_that_never_touches_is_one_line_and_the_position_stays_known(tmp_path):
+    s = mock_settings(FLAT)  # the surface 0.8 mm down, 51 steps
+    with StateHold(tmp_path / "state.json", s, "test") as hold:
+        session = MachineSession(MockPort(), s, state=hold)
+        with pytest.raises(ProbeError) as err:
+            session.probe_z(max_depth_steps=20)
+        assert "\n" not in str(err.value) and "no contact within 0.314 mm" in str(err.value)
+        assert "position known" in str(err.value)
+        assert session.position_steps() == (0, 0, 0)  # lifted back
+        assert hold.state.position_known and hold.state.position_steps == (0, 0, 0)
+        r = session.last_probe[0]
+        assert not r.touched and r.depth_steps == 20
+
+
+def test_the_probe_closed_before_it_moves_is_refused_in_one_line():
+    s = mock_settings(FLAT)
+    session = MachineSession(MockPort(), s)
+    session.set_position((0, 0, 60))  # below the surface already: the pin reads closed
+    with pytest.raises(ProbeError, match="closed before probing"):
+        session.probe_z(max_depth_steps=50)
+    assert session.position_steps() == (0, 0, 60)
+
+
+def test_the_e_stop_pin_ends_probing_and_nothing_more_is_sent(tmp_path):
+    s = mock_settings(FLAT, estop_after_s=0.4)  # the e-stop pin closes 0.4 s into the probe's run
+    s = s.replace(start_speed_z_mm_s=0.1)  # a probe at 6 mm/min: a Z step every 157 ms, the surface 51 steps down
+    port = MockPort()
+    with StateHold(tmp_path / "state.json", s, "test") as hold:
+        session = MachineSession(port, s, state=hold)
+        with pytest.raises(ProbeError, match="emergency stop|estop"):
+            session.probe_z(feed_mm_min=6.0, max_depth_steps=200)
+        assert session.last_run["status"] == "emergency-stopped"
+        assert not hold.state.position_known  # an emergency stop: where the tool is, nobody says
+    log = port.pin_log()
+    assert log.t_ns[-1] < 0.4e9  # nothing was written once the e-stop had closed
+    z = decode_pin_log(log, s).position_steps[:, 2]
+    assert 0 < z.max() < 51  # it went down, and stopped above the surface
+
+
+def test_the_emergency_stop_button_ends_a_real_time_probe():
+    s = mock_settings(FLAT)
+    port = MockPort()
+    session = MachineSession(port, s, realtime=True)
+    session.probe_z(feed_mm_min=20.0, max_depth_steps=200, wait=False)  # 21 steps a second
+    deadline = time.monotonic() + 60
+    while port.switches is None or port.switches.position_steps[2] < 3:  # under way: it has stepped down
+        assert time.monotonic() < deadline and session.busy, session.last_run
+        time.sleep(0.005)
+    session.emergency_stop()
+    assert session.wait_idle(60)
+    assert session.last_run["status"] == "emergency-stopped", session.last_run
+    stopped = session.position_steps()[2]
+    assert 3 <= stopped < 51 and port.switches.position_steps[2] == stopped  # booked where the steps stopped
+
+
+def test_a_stop_during_probing_lifts_back_and_keeps_the_position():
+    s = mock_settings(FLAT)
+    port = MockPort()
+    session = MachineSession(port, s, realtime=True)
+    session.probe_z(feed_mm_min=20.0, max_depth_steps=200, wait=False)
+    deadline = time.monotonic() + 60
+    while port.switches is None or port.switches.position_steps[2] < 3:
+        assert time.monotonic() < deadline and session.busy, session.last_run
+        time.sleep(0.005)
+    session.stop()
+    assert session.wait_idle(60)
+    assert session.last_run["status"] == "stopped"
+    assert session.position_steps() == tuple(int(v) for v in port.switches.position_steps) == (0, 0, 0)
+
+
+@pytest.mark.parametrize("port", ["maximus:/dev/ttyUSB9", "cmd:mock"])
+def test_machines_without_a_probe_refuse_in_one_line(port, tmp_path):
+    assert not can(port, "probes")
+    assert can("mock", "probes") and can("/dev/parport0", "probes") and can("grbl:/dev/ttyUSB0", "probes")
+    proc = run_cli("probe", "z", "--port", port, "--state", tmp_path / "state.json")
+    one_line_error(proc, port, "no probe input")
+    if port == "cmd:mock":
+        session = MachineSession(port, cam.MachineSettings())
+        with pytest.raises(CapabilityError, match="no probe input"):
+            session.probe_z()
+
+
+def test_the_mock_needs_a_probe_input_and_a_surface(tmp_path):
+    session = MachineSession(MockPort(), cam.MachineSettings())
+    with pytest.raises(ProbeError, match=r"no probe input.*\[inputs\]"):
+        session.probe_z()
+    bare = settings_from_mapping({"inputs": {"probe": "!13"}})
+    with pytest.raises(CapabilityError, match="probe_surface"):
+        MachineSession(MockPort(), bare).probe_z()
+    for table, key in (({"mock": {"probe_surface": "-1"}}, "needs the probe's input pin"),
+                       ({"inputs": {"probe": "!13"}, "mock": {"probe_surface": "-1,x"}}, "1 to 6 numbers"),
+                       ({"inputs": {"probe": "!15", "estop": "!15"}}, "a pin of their own")):
+        with pytest.raises(SettingsError, match=key):
+            settings_from_mapping(table)
+
+
+def test_the_probe_feed_on_a_step_dir_machine_is_at_most_zs_start_speed():
+    s = mock_settings(FLAT)  # Z starts at 0.785 mm/s = 47.1 mm/min
+    with pytest.raises(ProbeError, match="faster than Z's start speed"):
+        MachineSession(MockPort(), s).probe_z(feed_mm_min=100.0)
+
+
+def test_grid_geometry():
+    assert grid_axis_mm(0, 40, 10).tolist() == [0, 10, 20, 30, 40]
+    assert grid_axis_mm(5, 5, 10).tolist() == [0, 10]
+    assert serpentine(2, 3) == [(0, 0), (1, 0), (1, 1), (0, 1), (0, 2), (1, 2)]
+
+
+# -- the command line --------------------------------------------------------------------------------------
+
+def test_cli_probe_z_sets_the_work_z_zero_on_the_surface_less_the_plate(tmp_path):
+    machine, state = machine_file(tmp_path, FLAT), tmp_path / "state.json"
+    proc = ok(run_cli("probe", "z", "--machine", machine, "--state", state, "--depth", "3"))
+    s = cam.load_settings(machine)
+    st = read_state(state, s)
+    contact = st.offsets_steps["G54"][2]
+    assert_within_a_step(-contact * s.mm_per_step_z, FLAT[0], s)
+    assert "G54 Z zero set on the surface" in proc.stdout and "probe 1/1" in proc.stderr
+    assert st.position_steps == (0, 0, 0) and st.position_known
+    ok(run_cli("probe", "z", "--machine", machine, "--state", state, "--plate", "0.5"))
+    assert read_state(state, s).offsets_steps["G54"][2] == contact + round(0.5 / s.mm_per_step_z)
+
+
+def test_cli_probe_grid_writes_the_map_probed_serpentine_from_the_safe_height(tmp_path):
+    machine, state, out, log = (machine_file(tmp_path, WARPED), tmp_path / "state.json", tmp_path / "map.json",
+                                tmp_path / "grid.csv")
+    proc = ok(run_cli("probe", "grid", "--machine", machine, "--state", state, "--area", "0,0,40,30", "--spacing",
+                      "10", "--safe-height", "1.5", "--out", out, "--pin-log", log))
+    s = cam.load_settings(machine)
+    m = json.loads(out.read_text())
+    assert (m["cam_height_map"], m["frame"], m["units"], m["spacing_mm"]) == (1, "machine", "mm", 10.0)
+    assert m["machine"] == str(machine.resolve()) and m["reference_mm"] == 0.0 and m["time"]
+    nx, ny = len(m["x_mm"]), len(m["y_mm"])
+    assert (nx, ny) == (5, 4) and np.all(np.diff(m["x_mm"]) > 0) and np.all(np.diff(m["y_mm"]) > 0)
+    assert load_height_map(out).shape == (ny, nx)  # the levelling's own reader takes it
+    xs = np.rint(np.array(m["x_mm"]) / s.mm_per_step_xy).astype(int)
+    ys = np.rint(np.array(m["y_mm"]) / s.mm_per_step_xy).astype(int)
+    for j in range(ny):
+        for i in range(nx):
+            assert_within_a_step(m["height_mm"][j][i], surface_at(WARPED, s, xs[i], ys[j]), s)
+    assert proc.stderr.count("probe ") >= nx * ny and "probe 20/20" in proc.stderr
+    # the pin log decoded: each probe straight down from the safe height, no move between points below it
+    safe_z = -round(1.5 / s.mm_per_step_z)
+    pos = decode_pin_log(read_pin_log(log), s).position_steps
+    xy_moves = np.flatnonzero(np.any(np.diff(pos[:, :2], axis=0) != 0, axis=1)) + 1
+    assert np.all(pos[xy_moves, 2] <= safe_z) and np.all(pos[xy_moves - 1, 2] <= safe_z)
+    below = pos[:, 2] > safe_z
+    below[:int(np.argmax(pos[:, 2] <= safe_z))] = False  # where it stood before the first lift to the safe height
+    starts = np.flatnonzero(below & ~np.concatenate([[False], below[:-1]]))
+    ends = np.flatnonzero(below & ~np.concatenate([below[1:], [False]]))
+    probed = [tuple(pos[a, :2]) for a in starts]
+    assert probed == [(xs[i], ys[j]) for i, j in serpentine(nx, ny)]
+    for a, b in zip(starts, ends):  # each probe: one point, down to its contact, back up to the safe height
+        assert np.all(pos[a:b + 1, :2] == pos[a, :2]) and pos[b + 1, 2] == safe_z
+    contacts = {tuple(pos[a, :2]): int(pos[a:b + 1, 2].max()) for a, b in zip(starts, ends)}
+    for j in range(ny):
+        for i in range(nx):
+            assert m["height_mm"][j][i] == pytest.approx(-contacts[(xs[i], ys[j])] * s.mm_per_step_z)
+    assert read_state(state, s).position_steps == (int(xs[0]), int(ys[-1]), safe_z)  # the last point, lifted
+
+
+def test_cli_probe_grid_over_a_job_covers_where_it_would_be_drilled(tmp_path):
+    machine, state, out = machine_file(tmp_path, FLAT), tmp_path / "state.json", tmp_path / "map.json"
+    ok(run_cli("zero", "--at", "20,15,0", "--machine", machine, "--state", state))
+    ok(run_cli("probe", "grid", "--machine", machine, "--state", state, "--over", SAMPLES / "board.drl",
+               "--spacing", "20", "--margin", "2", "--out", out))
+    m = json.loads(out.read_text())
+    s = cam.load_settings(machine)
+    job = cam.prepare_job(str(SAMPLES / "board.drl"), settings=s)
+    _, cut = job.plan.motion_extent()
+    w, h = ((cut[a, 1] - cut[a, 0]) * s.mm_per_step_xy for a in (0, 1))  # its upper-left hole at the work zero
+    x0, y0 = round(20 / s.mm_per_step_xy) * s.mm_per_step_xy, round(15 / s.mm_per_step_xy) * s.mm_per_step_xy
+    assert m["x_mm"][0] <= x0 - 2 + 0.02 and m["x_mm"][-1] >= x0 + w + 2 - 0.02
+    assert m["y_mm"][0] <= y0 - 2 + 0.02 and m["y_mm"][-1] >= y0 + h + 2 - 0.02
+    assert m["x_mm"][0] > x0 - 2 - 20 and m["y_mm"][-1] < y0 + h + 2 + 20  # not more than a spacing beyond
+    assert np.allclose(m["height_mm"], FLAT[0], atol=s.mm_per_step_z)
+
+
+def test_cli_probe_bad_input_is_one_line_exit_2(tmp_path):
+    machine, state = machine_file(tmp_path, FLAT), tmp_path / "state.json"
+    base = ("--machine", machine, "--state", state)
+    for args, fragment in (
+            (("grid", "--area", "10,0,0,10", "--out", tmp_path / "m.json"), "X0 must not exceed X1"),
+            (("grid", "--area", "0,0,10", "--out", tmp_path / "m.json"), "four numbers"),
+            (("grid", "--area", "0,0,10,10", "--out", tmp_path / "m.txt"), "must end in .json"),
+            (("grid", "--area", "0,0,10,10"), "--out"),
+            (("grid", "--area", "0,0,10,10", "--over", "x.drl", "--out", tmp_path / "m.json"), "not allowed with"),
+            (("grid", "--over", tmp_path / "none.drl", "--out", tmp_path / "m.json"), "no such file"),
+            (("grid", "--area", "0,0,10,10", "--out", tmp_path / "m.json", "--spacing", "0"), "--spacing"),
+            (("grid", "--area", "0,0,900,10", "--out", tmp_path / "m.json"), "outside the X travel"),
+            (("z", "--feed", "500"), "faster than Z's start speed"),
+            (("z", "--depth", "-1"), "--depth"),
+            (("z", "--depth", "0.1"), "no contact within")):
+        one_line_error(run_cli("probe", *args, *base), fragment)
+    assert not (tmp_path / "m.json").exists()
+    for what in ("z", "grid"):
+        help_ = ok(run_cli("probe", what, "--help"))
+        assert "--feed" in help_.stdout and "--port" in help_.stdout
+    assert "--safe-height" in run_cli("probe", "grid", "--help").stdout
+    assert run_cli("probe").returncode == 2
+
+
+# -- grbl ------------------------------------------------------------------------------------------------
+
+GRBL_SETTINGS = cam.MachineSettings()
+STEPS_PER_MM = {100: 1 / GRBL_SETTINGS.mm_per_step_xy, 101: 1 / GRBL_SETTINGS.mm_per_step_xy,
+                102: 1 / GRBL_SETTINGS.mm_per_step_z}
+FAST = {110: 5000.0, 111: 5000.0, 112: 5000.0, 120: 500.0, 121: 500.0, 122: 500.0, **STEPS_PER_MM}
+GRBL_SURFACE = (-0.9, 0.004, 0.002, 0.0001, 10.0, -5.0)
+"""In grbl's machine frame (its Y is cam's -Y)."""
+
+
+def grbl_surface_mm(s, x_steps, y_steps) -> float:
+    return float(surface_height_mm(GRBL_SURFACE, x_steps * s.mm_per_step_xy, -y_steps * s.mm_per_step_xy))
+
+
+@pytest.fixture
+def grbl(request):
+    emu = start_emulator(**{"speed": 20.0, "settings": FAST, "probe_surface": GRBL_SURFACE,
+                            **getattr(request, "param", {})})
+    yield emu
+    close_grbl_machines()
+    emu.stop()
+    assert emu.error is None
+
+
+def test_grbl_probes_a_grid_with_g38_2(grbl):
+    s = GRBL_SETTINGS
+    session = MachineSession(f"grbl:{grbl.device_path}", s)
+    points = [(0, 0), (500, 0), (500, 400), (0, 400)]
+    results = session.probe_grid(points, -40, 200, feed_mm_min=60.0)
+    for (x, y), r in zip(points, results):
+        assert r.contact_steps[:2] == (x, y) and r.end_steps == (x, y, -40)
+        assert_within_a_step(r.height_mm(s), grbl_surface_mm(s, x, y), s)
+    probes = [text for _, text, answer in grbl.lines() if "G38.2" in text]
+    assert len(probes) == 4 and all(t.startswith("G91G38.2Z-") and "F60" in t for t in probes)
+    # between probes grbl travelled at the safe height (machine Z -40 steps: grbl's +0.628 mm)
+    travels = [b for b in grbl.executed() if b.kind == "G0" and b.start_mm[:2] != b.end_mm[:2]]
+    assert travels and all(abs(b.start_mm[2] - 40 * s.mm_per_step_z) < 1e-3 for b in travels)
+
+
+def test_grbl_probe_at_real_speed(grbl_realtime):
+    s = GRBL_SETTINGS
+    session = MachineSession(f"grbl:{grbl_realtime.device_path}", s)
+    session.jog("z", 40)  # 0.26 mm above the surface
+    assert session.wait_idle(30) and session.position_steps() == (0, 0, 40)
+    t0 = time.monotonic()
+    r = session.probe_z(feed_mm_min=60.0, max_depth_steps=60)
+    assert time.monotonic() - t0 >= 0.25  # 0.26 mm at 1 mm/s, at grbl's own pace
+    assert_within_a_step(r.height_mm(s), grbl_surface_mm(s, 0, 0), s)
+    assert r.end_steps == (0, 0, 40) and session.position_steps() == (0, 0, 40)
+
+
+@pytest.fixture
+def grbl_realtime():
+    emu = start_emulator(speed=1.0, settings=FAST, probe_surface=GRBL_SURFACE)
+    yield emu
+    close_grbl_machines()
+    emu.stop()
+    assert emu.error is None
+
+
+def test_grbl_alarm_5_is_one_line_and_the_position_is_grbls(grbl, tmp_path):
+    s = GRBL_SETTINGS
+    with StateHold(tmp_path / "state.json", s, "test", port=f"grbl:{grbl.device_path}") as hold:
+        session = MachineSession(f"grbl:{grbl.device_path}", s, state=hold)
+        session.set_position((0, 0, 0))
+        with pytest.raises(ProbeError) as err:
+            session.probe_z(max_depth_steps=20)
+        line = str(err.value)
+        assert "\n" not in line and "no contact" in line and "ALARM:5" in line and "position known" in line
+        assert hold.state.position_known and session.position_steps() == (0, 0, 0)
+        assert grbl.state == "Idle"  # unlocked: it moves again
+        r = session.probe_z(max_depth_steps=200)
+        assert_within_a_step(r.height_mm(s), grbl_surface_mm(s, 0, 0), s)
+
+
+def test_grbl_alarm_4_the_probe_touching_before_it_moves(grbl):
+    s = GRBL_SETTINGS
+    session = MachineSession(f"grbl:{grbl.device_path}", s)
+    session.jog("z", 80)  # below the surface (0.9 mm = 58 steps)
+    assert session.wait_idle(30)
+    with pytest.raises(ProbeError, match="ALARM:4.*closed before it moved"):
+        session.probe_z(max_depth_steps=20)
+    assert session.position_steps() == (0, 0, 80) and grbl.state == "Idle"
+
+
+def test_grbl_e_stop_during_probing(grbl):
+    session = MachineSession(f"grbl:{grbl.device_path}", GRBL_SETTINGS)
+    session.probe_z(feed_mm_min=20.0, max_depth_steps=200, wait=False)
+    assert grbl.wait_for(lambda e: e.machine_position_mm[2] < -0.2, 60)
+    session.emergency_stop()
+    assert session.wait_idle(60)
+    assert session.last_run["status"] == "emergency-stopped"
+
+
+def test_the_emulator_probes_as_grbl_1_1_does():
+    """G38.3 short of the surface: no alarm, [PRB:<end>:0]; $# keeps the last probe; G38.4 from in contact: the
+    first step out of it; a probe target where the carriage stands: error:33; a probe without a feed: error:22."""
+    from cam.drive.grbl_link import GrblError, GrblLink
+
+    emu = start_emulator(speed=50.0, probe_surface="-5,0.01,-0.005,0.0002,50,40")
+    link = GrblLink(f"grbl:{emu.device_path}", welcome_timeout_s=0.5)
+    try:
+        link.stream(["G21G90G0X10Y20Z0"])
+        assert parse_prb(link.command("G38.3Z-4F200")) == ((10.0, 20.0, -4.0), False)
+        assert link.status().state == "Idle"
+        assert parse_prb(link.command("G38.2Z-20F200")) == ((10.0, 20.0, -4.6), True)
+        assert "[PRB:10.000,20.000,-4.600:1]" in link.command("$#")
+        assert parse_prb(link.command("G38.4Z0F200")) == ((10.0, 20.0, -4.596), True)  # one step above the surface
+        for line, code in (("G53G38.2Z-9F100", 30), ("G91G38.2Z0F100", 33)):  # G53 with a probe; no move
+            with pytest.raises(GrblError, match=f"error:{code}"):
+                link.command(line)
+        link.soft_reset()  # no feed given since
+        with pytest.raises(GrblError, match="error:22"):
+            link.command("G38.2Z-9")
+    finally:
+        link.close()
+        emu.stop()
+    assert emu.error is None
+
+
+def test_the_emulators_probe_reports_as_grbl_does():
+    assert parse_prb(["ok", "[PRB:1.000,-2.500,-4.288:1]"]) == ((1.0, -2.5, -4.288), True)
+    assert parse_prb(["[PRB:0.000,0.000,0.000:0]"]) == ((0.0, 0.0, 0.0), False)
+    assert parse_prb(["[GC:G0 G54]"]) is None
+
+
+# -- grbl 1.1h's own firmware ------------------------------------------------------------------------------
+
+@pytest.mark.realtime
+def test_real_grbl_firmware_probes_a_map_within_a_step(tmp_path):
+    from test_grbl_link_faults import GRBL_AVR, _have_grbl_avr
+
+    if not _have_grbl_avr():
+        pytest.skip("needs ../shared/grbl_avr (grbl 1.1h on simavr)")
+    from support.serial_proxy import PtyProxy
+    from test_grbl_firmware import SETTINGS as FW, open_firmware_session
+
+    surface = "-2.5,0.01,-0.005,0.0002,20,10"
+    out, pty = tmp_path / "avr", tmp_path / "ttyGRBL"
+    env = dict(os.environ, GRBL_AVR_WORK=str(tmp_path / "work"))
+    if env.get("GRBL_AVR_BIN_CACHE"):
+        env["GRBL_AVR_WORK"] = env["GRBL_AVR_BIN_CACHE"]
+    subprocess.run(["bash", str(GRBL_AVR / "run.sh"), "start", "--pty", str(pty), "--out", str(out), "--fresh",
+                    "--", "--quiet", f"--probe-surface={surface}"], check=True, env=env, capture_output=True,
+                   timeout=600)
+    proxy = None
+    try:
+        deadline = time.monotonic() + 60
+        while not pty.exists() and time.monotonic() < deadline:
+            time.sleep(0.05)
+        proxy = PtyProxy(str(pty))  # a pty of its own, as the firmware tests open the rig's
+        session = open_firmware_session(proxy.device_path)
+        per = FW.mm_per_step_xy
+        points = [(0, 0), (int(20 / per), 0), (int(20 / per), int(10 / per)), (0, int(10 / per))]
+        results = session.probe_grid(points, 0, int(4 / FW.mm_per_step_z), feed_mm_min=100.0)
+        k = [float(v) for v in surface.split(",")]
+        for (x, y), r in zip(points, results):
+            want = float(surface_height_mm(k, x * per, -y * per))  # grbl's Y is cam's -Y
+            assert_within_a_step(r.height_mm(FW), want, FW)
+            assert r.end_steps == (x, y, 0)
+    finally:
+        close_grbl_machines()
+        if proxy is not None:
+            proxy.close()
+        subprocess.run(["bash", str(GRBL_AVR / "run.sh"), "stop", "--out", str(out)], env=env,
+                       capture_output=True, timeout=60)
