@@ -31,7 +31,7 @@ class GrblBackend(Backend):
     kind = "grbl"
     example = "grbl:/dev/ttyUSB0"
     capabilities = frozenset({"gcode", "pause", "drill_files", "jog", "overrides", "homes_itself",
-                              "reports_position", "keeps_own_time", "resume"})
+                              "reports_position", "keeps_own_time", "resume", "probes"})
     cannot = {
         "step_dir": "{port} (a grbl board) takes G-code and makes its own steps; {what} needs a step/dir port "
                     "(mock or /dev/parportN)",
@@ -74,8 +74,6 @@ class GrblBackend(Backend):
             raise CamError(f"grbl homes all its axes with $H (its own [homing] order, $23-$27); drop axes {axes}")
         session.home_grbl()
         return True
-
-    capabilities = capabilities | {"probes"}  # G38.2 and its [PRB:...] report
 
     def start_probe(self, session: Any, probe_run: Any) -> None:
         """Probe with ``G38.2`` (:mod:`cam.drive.grbl_probe`)."""
