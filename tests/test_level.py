@@ -503,3 +503,30 @@ def test_export_writes_a_levelled_job_as_straight_xyz_moves_through_its_levelled
     assert near.any(axis=1).all(), ends[~near.any(axis=1)][:5]  # no corner at the last depth
     cuts = (levelled.kind == CUT) & (pts[:, 2] > 0)
     assert near[:, cuts].any(axis=0).all()  # every levelled cut point written
+
+
+@pytest.mark.realtime
+def test_a_levelled_job_stopped_and_resumed_cuts_as_its_uninterrupted_run(tmp_path):
+    """A levelled job's journal names its levelled moves: stopped by the e-stop and resumed (``cam.resume_job``), the
+    two runs cut what one levelled run cuts, step for step."""
+    from cam.drive.journal import read_journal
+    from cam.verify.pinlog import write_pin_log
+    from test_resume import _check_union, estop_run
+
+    from cam.settings import Travel
+
+    fast = S.replace(ramp="constant", delay_xy_ms=0.05, delay_z_ms=0.05, travel=Travel(  # around the home: a resumed run starts at 0
+        x_min_steps=-10**5, x_max_steps=10**5, y_min_steps=-10**5, y_max_steps=10**5, z_min_steps=-10**4,
+        z_max_steps=10**4))
+    m = HeightMap([-10, 40, 100], [-10, 30, 80], [[0.0, 0.3, 0.1], [0.2, 0.5, 0.3], [0.1, 0.2, 0.4]],
+                  reference_mm=0.2, spacing_mm=10)
+    (tmp_path / "iso.plt").write_text(HPGL)
+    job = cam.prepare_job(tmp_path / "iso.plt", cam.JobOptions(level=str(save_height_map(m, tmp_path / "m.json"))),
+                          fast)
+    journal, first, second = tmp_path / "j.json", tmp_path / "run1.csv", tmp_path / "run2.csv"
+    estop_run(job, journal, first, 0.4)
+    record = read_journal(journal)
+    assert record.plan_sha256 == job.plan_sha256  # the levelled moves' fingerprint
+    resumed = cam.resume_job(job, record)
+    write_pin_log(cam.run(resumed).pin_log(), second)
+    _check_union("hpgl", tmp_path, job, first, second, record.position_steps)
