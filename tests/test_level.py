@@ -530,3 +530,34 @@ def test_a_levelled_job_stopped_and_resumed_cuts_as_its_uninterrupted_run(tmp_pa
     resumed = cam.resume_job(job, record)
     write_pin_log(cam.run(resumed).pin_log(), second)
     _check_union("hpgl", tmp_path, job, first, second, record.position_steps)
+
+
+@pytest.mark.realtime
+def test_a_levelled_job_streams_to_grbl_through_its_levelled_points(tmp_path):
+    """On a grbl board (its emulator) the levelled moves go as G-code lines: grbl executes lines whose ends are
+    levelled points, and every levelled point lies on them, within the one step grbl's lines are joined by
+    (PATH_TOLERANCE_STEPS)."""
+    from cam.drive.grbl_machine import PATH_TOLERANCE_STEPS, close_grbl_machines, mpos_to_steps
+    from cam.drive.session import MachineSession
+    from cam.sim.grbl import start_emulator
+    from test_grbl_session import FAST, _on_path
+
+    m = HeightMap([-10, 40, 100], [-10, 30, 80], [[0.0, 0.3, 0.1], [0.2, 0.5, 0.3], [0.1, 0.2, 0.4]],
+                  reference_mm=0.2, spacing_mm=10)
+    (tmp_path / "iso.plt").write_text(HPGL)
+    job = cam.prepare_job(tmp_path / "iso.plt", cam.JobOptions(level=str(save_height_map(m, tmp_path / "m.json"))))
+    emu = start_emulator(speed=20.0, settings=FAST)
+    try:
+        session = MachineSession(f"grbl:{emu.device_path}", S, on_prompt=lambda prompt: "continue")
+        session.start(job)
+        assert session.wait_idle(120) and session.last_run["status"] == "finished", session.last_run
+        blocks = [b for b in emu.executed() if b.kind in ("G0", "G1")]
+        first = np.asarray(mpos_to_steps(blocks[0].start_mm, S), np.int64)
+        ends = np.vstack([np.zeros((1, 3), np.int64),  # from the job's start, as its points
+                          np.array([mpos_to_steps(b.end_mm, S) for b in blocks], np.int64) - first])
+    finally:
+        close_grbl_machines()
+        emu.stop()
+    pts = job.toolpath.points_steps
+    assert _on_path(pts, ends, PATH_TOLERANCE_STEPS)
+    assert np.isin(_keys(ends[1:]), _keys(np.vstack([pts, [[0, 0, 0]]]))).all()  # no point of its own
