@@ -17,6 +17,7 @@ import pytest
 from cam.cli import main  # noqa: E402
 from cam.drive.maximus.board import MAXIMUS_SETTINGS  # noqa: E402
 from cam.sim.maximus import MODE_SELECTION, start_emulator  # noqa: E402
+from support.maximus_host import GUARD_MARGIN_S, guard_machine_file  # noqa: E402
 from support.maximus_log import decode_port_log  # noqa: E402
 
 MM = MAXIMUS_SETTINGS.mm_per_step_xy  # mm per half step (a clock pulse in half-step mode)
@@ -138,10 +139,11 @@ def wait_for(condition, timeout_s: float = 30.0) -> None:
         time.sleep(0.005)
 
 
-def test_ctrl_c_during_a_jog_stops_the_board_and_the_next_jog_works(emu, capsys):
+def test_ctrl_c_during_a_jog_stops_the_board_and_the_next_jog_works(emu, tmp_path, capsys):
     """Issue #14 reproduction 4 and issue #20: the stop byte, MACHINESTOPPED, exit 130 at once, board ready."""
-    assert main(["where", "--set", "0,0,0", "--port", f"maximus:{emu.device_path}"]) == 0  # a new machine (#43)
-    proc = cli("jog", "--port", f"maximus:{emu.device_path}", "X+", "3000")  # 6 s at Delay 10
+    port = ["--port", f"maximus:{emu.device_path}", "--machine", guard_machine_file(tmp_path)]  # replies all come
+    assert main(["where", "--set", "0,0,0", *port]) == 0  # a new machine (#43)
+    proc = cli("jog", *port, "X+", "3000")  # 6 s at Delay 10
     wait_for(lambda: emu.position_pulses[0] > 100)
     proc.send_signal(signal.SIGINT)
     out, err = proc.communicate(timeout=30)
@@ -151,17 +153,18 @@ def test_ctrl_c_during_a_jog_stops_the_board_and_the_next_jog_works(emu, capsys)
     assert 100 < x < 3000 and emu.wait_for_state(MODE_SELECTION)
     assert 0x80 in [b for _, b, where in emu.rx_log() if where == "isr"]  # the firmware's stop byte
     # the stop left the position unknown (the machine state): the user says where the head is, then jogs
-    assert main(["where", "--set", "0,0,0", "--port", f"maximus:{emu.device_path}"]) == 0, capsys.readouterr().err
-    assert main(["jog", "--port", f"maximus:{emu.device_path}", "X-", "50"]) == 0, capsys.readouterr().err
+    assert main(["where", "--set", "0,0,0", *port]) == 0, capsys.readouterr().err
+    assert main(["jog", *port, "X-", "50"]) == 0, capsys.readouterr().err
     # a stop between a pulse's falling and rising edge leaves STEP_X low, and the listing's next X move would make
     # one rising edge more than it asks (cam.sim.maximus point 14): the host ended that pulse as it stopped
     assert emu.position_pulses[0] == x - 50
 
 
 def test_ctrl_c_during_a_drill_move_exits_130_at_once_with_the_spindle_off(emu, tmp_path, capsys):
-    assert main(["where", "--set", "0,0,0", "--port", f"maximus:{emu.device_path}"]) == 0  # a new machine (#43)
-    proc = cli("drill", str(write_board(tmp_path)), "--yes", "--offset", "0,0", "--port",
-               f"maximus:{emu.device_path}", "--travel-height", "0.1", "--cut-depth", "0.2")
+    port = ["--port", f"maximus:{emu.device_path}", "--machine", guard_machine_file(tmp_path)]  # replies all come
+    assert main(["where", "--set", "0,0,0", *port]) == 0  # a new machine (#43)
+    proc = cli("drill", str(write_board(tmp_path)), "--yes", "--offset", "0,0", *port, "--travel-height", "0.1",
+               "--cut-depth", "0.2")
     wait_for(lambda: emu.position_pulses[0] > 100, 20)  # on the way to the first hole, spindle running
     proc.send_signal(signal.SIGINT)
     out, err = proc.communicate(timeout=30)
@@ -170,14 +173,16 @@ def test_ctrl_c_during_a_drill_move_exits_130_at_once_with_the_spindle_off(emu, 
     spindle = [(v >> 2) & 1 for _, port, v in emu.port_log() if port == "B"]
     assert 1 in spindle and spindle[-1] == 0
     assert emu.wait_for_state(MODE_SELECTION) and emu.hole_log() == []
-    assert main(["where", "--set", "0,0,0", "--port", f"maximus:{emu.device_path}"]) == 0, capsys.readouterr().err
-    assert main(["jog", "--port", f"maximus:{emu.device_path}", "Z-", "10"]) == 0, capsys.readouterr().err
+    assert main(["where", "--set", "0,0,0", *port]) == 0, capsys.readouterr().err
+    assert main(["jog", *port, "Z-", "10"]) == 0, capsys.readouterr().err
 
 
 def test_the_web_pages_stop_during_a_jog_stops_the_board_and_the_next_jog_works(emu, tmp_path):
     from test_web import Server
 
-    s = Server(tmp_path, settings=MAXIMUS_SETTINGS, machine_port=f"maximus:{emu.device_path}", realtime=True)
+    guard = dataclasses.replace(MAXIMUS_SETTINGS.maximus, reply_margin_s=GUARD_MARGIN_S)  # its replies all come
+    s = Server(tmp_path, settings=MAXIMUS_SETTINGS.replace(maximus=guard), machine_port=f"maximus:{emu.device_path}",
+               realtime=True)
     try:
         assert s.call("POST", "/api/jog", {"axis": "x", "steps": 2000})[0] == 200  # 4 s at Delay 10
         wait_for(lambda: emu.position_pulses[0] > 50)

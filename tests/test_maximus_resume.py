@@ -37,7 +37,7 @@ from cam.drive.maximus.protocol import (
 from cam.sim._maximus_line import LineReader
 from cam.sim.maximus import start_emulator
 from conftest import run_cli
-from support.maximus_host import GUARD_MARGIN_S
+from support.maximus_host import GUARD_MARGIN_S, guard_machine_file
 from support.maximus_log import decode_port_log
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -230,9 +230,10 @@ def test_at_real_speed_ctrl_c_in_a_move_then_resume_drills_every_hole_once(tmp_p
     try:
         path, journal = write_board(tmp_path), tmp_path / "board.journal.json"
         port = f"maximus:{emu.device_path}"
-        assert main(["where", "--set", "0,0,0", "--port", port]) == 0  # a new machine (#43 point 5)
+        machine = ["--machine", guard_machine_file(tmp_path)]  # the built-in machine, its replies' margin a guard
+        assert main(["where", "--set", "0,0,0", "--port", port, *machine]) == 0  # a new machine (#43 point 5)
         env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
-        proc = subprocess.Popen([sys.executable, "-m", "cam", "drill", str(path), "--yes", "--port", port,
+        proc = subprocess.Popen([sys.executable, "-m", "cam", "drill", str(path), "--yes", "--port", port, *machine,
                                  "--journal", str(journal), *FLAGS], cwd=tmp_path, env=env,
                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         holes = planned_holes(path)
@@ -254,7 +255,7 @@ def test_at_real_speed_ctrl_c_in_a_move_then_resume_drills_every_hole_once(tmp_p
         bound = max(1, int(said.group(1)) if said else 0)
         assert np.abs(np.subtract(j.position_steps, (x, -y, -z))).max() <= bound, (j.position_steps, (x, y, z), err)
         assert [v for _, p, v in emu.port_log() if p == "D"][-1] & 0x02, "STEP_X is high again: no edge left over"
-        code = main(["drill", str(path), "--yes", "--port", port, "--resume", str(journal), *FLAGS])
+        code = main(["drill", str(path), "--yes", "--port", port, *machine, "--resume", str(journal), *FLAGS])
         assert code == 0
         # the holes after the stop are as far off as that estimate, no more
         assert_each_hole_once(emu, holes, tolerance_pulses=bound)

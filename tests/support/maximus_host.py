@@ -16,6 +16,16 @@ GUARD_MARGIN_S = 30.0
 """The reply margin of a board whose replies all come: how long a reply may be late before the test fails."""
 
 
+def guard_machine_file(folder: Any) -> str:
+    """A machine file (``--machine``) of the built-in MAXIMUS machine whose reply margin is :data:`GUARD_MARGIN_S`,
+    in ``folder``: for command-line runs whose replies all come, the margin a failure guard only."""
+    from pathlib import Path
+
+    path = Path(folder) / "guard-margin.toml"
+    path.write_text(f"[maximus]\nreply_margin_s = {GUARD_MARGIN_S}\n", encoding="ascii")
+    return str(path)
+
+
 @dataclass(frozen=True)
 class Read:
     """One wait of the host for a byte."""
