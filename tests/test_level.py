@@ -365,7 +365,7 @@ def _keys(pts: np.ndarray) -> np.ndarray:
     return (p[:, 0] << 42) | (p[:, 1] << 21) | p[:, 2]
 
 
-def _cut_errors(kind: str, tmp_path, level: bool) -> tuple[np.ndarray, np.ndarray]:
+def _cut_errors(kind: str, tmp_path, level: bool, probed: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """Set the work zero on the warped surface at machine (30, 30) mm, cut the job (levelled or not) on the mock and
     decode its pin log: the depth below the formula's surface minus the asked depth (mm) ``(at the job's cut points,
     at every write while cutting)``.
@@ -373,25 +373,47 @@ def _cut_errors(kind: str, tmp_path, level: bool) -> tuple[np.ndarray, np.ndarra
     The job's cut points are its points of kind CUT below the travel height (an HPGL pen-down or G-code G1 point,
     a split point of such a move, a hole's bottom), machine frame, each found among the decoded positions (the
     tool stops at every point of the job; asserted); every write while cutting is each decoded position that moves
-    in XY below the travel height, and each hole's bottom."""
+    in XY below the travel height, and each hole's bottom.
+
+    ``probed``: the map and the work Z zero are probed on the mock (``cam probe z``, ``cam probe grid``; the machine
+    file's ``[mock] probe_surface`` is the formula), else the map is the formula sampled and the work Z zero the
+    first step at or below the surface."""
     from cam.drive.state import read_state
 
     state, pins = tmp_path / f"{level}.state.json", tmp_path / f"{level}.pins.csv"
+    machine = tmp_path / "warped.toml"
+    w = WARP
+    machine.write_text('[inputs]\nprobe = "!13"\n[mock]\nprobe_surface = '
+                       f'"{w["z0"]},{w["ax"]},{w["ay"]},{w["b"]!r},{w["cx"]},{w["cy"]}"\n')
+    m = ["--machine", machine, "--state", state]
     zx, zy = round(30.0 / MX), round(30.0 / MY)
-    zz = -round(float(surface_mm(zx * MX, zy * MY)) / MZ)  # the tool tip touches the surface there
-    ok(run_cli("goto", f"{zx},{zy},{zz}", "--unit", "steps", "--machine-coords", "--state", state))
-    ok(run_cli("zero", "XYZ", "--state", state))
+    zz = -math.floor(float(surface_mm(zx * MX, zy * MY)) / MZ)  # the tool tip's first step at or below the surface
+    if probed:  # over the point, zero X and Y there, probe Z's zero, then the board every 10 mm
+        ok(run_cli("goto", f"{zx},{zy},{zz - 100}", "--unit", "steps", "--machine-coords", *m))
+        ok(run_cli("zero", "XY", *m))
+        ok(run_cli("probe", "z", *m))
+        assert read_state(state, S).work_zero_steps() == (zx, zy, zz)  # the contact, as computed
+        x0, y0, x1, y1 = BOARD_MM
+        ok(run_cli("probe", "grid", "--area", f"{x0},{y0},{x1},{y1}", "--machine-coords", "--spacing",
+                   str(SPACING_MM), "--out", tmp_path / "probed.json", *m))
+        ok(run_cli("goto", "0,0,-1", "--unit", "mm", *m))  # back over the work zero
+    else:
+        ok(run_cli("goto", f"{zx},{zy},{zz}", "--unit", "steps", "--machine-coords", *m))
+        ok(run_cli("zero", "XYZ", *m))
     path = tmp_path / {"hpgl": "iso.plt", "excellon": "holes.drl", "gcode": "iso.ngc"}[kind]
     path.write_text({"hpgl": HPGL, "excellon": DRILL, "gcode": GCODE}[kind])
     flags = [] if kind == "gcode" else ["--cut-depth", f"{CUT_STEPS * MZ:.6f}"]
     options = {} if kind == "gcode" else {"cut_depth_mm": float(f"{CUT_STEPS * MZ:.6f}")}
-    if level:
-        options["level"] = str(_map_file(tmp_path, reference_mm=-zz * MZ))  # the contact's height: the reference
+    if level:  # the reference: the height of the work Z zero's contact
+        options["level"] = str(tmp_path / "probed.json") if probed else str(_map_file(tmp_path, -zz * MZ))
         flags += ["--level", options["level"]]
-    planned = cam.prepare_job(path, cam.JobOptions(**options), S, machine_state=read_state(state, S))  # as drill
-    ok(run_cli("drill", path, *flags, "--yes", "--state", state, "--pin-log", pins))
+    settings = cam.load_settings(machine)
+    planned = cam.prepare_job(path, cam.JobOptions(**options), settings, machine_state=read_state(state, settings))
+    if kind == "gcode" and probed:  # a program runs from where the tool stands: over the work zero, 1 mm up
+        assert tuple(read_state(state, settings).position_steps) == (zx, zy, zz - round(1 / MZ))
+    ok(run_cli("drill", path, *flags, "--yes", *m, "--pin-log", pins))
     home = np.array(read_pin_log(pins).parts[-1].start_steps, np.int64)  # the job's part starts at its home
-    pos = decode_pin_log(pins, S, part="job").position_steps + home  # machine frame, after each write
+    pos = decode_pin_log(pins, settings, part="job").position_steps + home  # machine frame, after each write
     pos = pos[np.r_[True, np.any(pos[1:] != pos[:-1], axis=1)]]  # each position once (a step is two writes)
     # cutting, levelled or not: below the travel height (1 mm = 64 steps above the surface) less the warp's
     # +-0.3 mm (+-20 steps), above which the cuts never are
@@ -437,6 +459,27 @@ def test_a_levelled_job_cuts_at_the_asked_depth_below_a_warped_surface_at_every_
           f"{np.abs(writes).mean():.4f} mm); without --level: {len(plain_cuts)} cut points, max {worst_plain:.4f} mm, "
           f"mean {np.abs(plain_cuts).mean():.4f} mm ({len(plain_writes)} writes: max "
           f"{np.abs(plain_writes).max():.4f}, mean {np.abs(plain_writes).mean():.4f} mm)")
+
+
+PROBE_BOUND_MM = 1.5 * MZ + BILINEAR_BOUND_MM
+"""Levelled by a map probed on the mock: a contact is the first Z step at or below the surface, so every probed
+height and the work Z zero lie up to one step below it (the same step a flat board's Z zero has), and the levelled
+point is rounded to whole steps (half a step), besides the map's bilinear error."""
+
+
+@pytest.mark.slow  # probing and three runs: over a second each (the formula's map above is the fast tier's proof)
+@pytest.mark.parametrize("kind", ["hpgl", "excellon", "gcode"])
+def test_a_job_levelled_by_a_map_probed_on_the_mock_cuts_at_the_asked_depth(kind, tmp_path):
+    """The whole loop on the mock: cam probe z sets the work Z zero on the warped surface, cam probe grid probes
+    the board every 10 mm, and cam drill --level cuts every cut point at the asked depth below the formula's
+    surface within the probes' step, the rounding and the bilinear bound (PROBE_BOUND_MM)."""
+    at_cuts, writes = _cut_errors(kind, tmp_path, level=True, probed=True)
+    assert len(at_cuts) >= (20 if kind == "excellon" else 50)
+    worst = float(np.abs(at_cuts).max())
+    assert worst <= PROBE_BOUND_MM, f"{kind}: depth off by {worst:.4f} mm at a cut point (bound {PROBE_BOUND_MM:.4f})"
+    assert float(np.abs(writes).max()) <= PROBE_BOUND_MM + MZ  # and between them the DDA's step
+    print(f"\n{kind} (probed map): {len(at_cuts)} cut points, depth error max {worst:.4f} mm, mean "
+          f"{np.abs(at_cuts).mean():.4f} mm; every write cutting: max {np.abs(writes).max():.4f} mm")
 
 
 @pytest.mark.parametrize("kind", ["hpgl", "gcode", "drawing"])
