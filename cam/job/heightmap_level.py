@@ -53,7 +53,7 @@ from .model import Job, JobLike, join_pieces
 
 __all__ = ["HeightMap", "Levelled", "LevelledJob", "MAP_VERSION", "MAX_MAP_BYTES", "MAX_MAP_POINTS",
            "DEFAULT_MAX_DIFF_MM", "save_height_map", "load_height_map", "height_at", "check_map", "outside_text",
-           "level_points", "level_job"]
+           "level_points", "level_job", "map_summary"]
 
 MAP_VERSION = 1
 """The ``cam_height_map`` value of the file format this module reads and writes."""
@@ -325,6 +325,41 @@ def check_map(height_map: HeightMap, *, max_diff_mm: float = DEFAULT_MAX_DIFF_MM
                    f"{max_diff_mm:g} mm: a probe that missed or touched something else? probe again")
 
 
+def map_summary(height_map: HeightMap) -> dict[str, Any]:
+    """What ``cam info MAP.json`` says of a map, JSON-able: the grid (``points``, ``grid``: ``[NX, NY]``), the
+    spacing it was probed at (``spacing_mm``) and its finest (``cell_mm``: ``[dx, dy]``), the probed area in
+    machine mm (``area_mm``: ``[x0, y0, x1, y1]``, ``size_mm``), the heights (``height_mm``: min, max, mean, and
+    ``range_mm``), the largest difference between two neighbouring points (``max_neighbour_diff_mm``, with both
+    points' machine ``[x, y]`` in ``between_mm``), ``reference_mm``, ``machine`` and ``time``.
+
+    >>> s = map_summary(HeightMap([0, 10, 20], [0, 10], [[0.0, 0.1, 0.4], [0.2, 0.3, 0.5]], spacing_mm=10))
+    >>> s["grid"], s["area_mm"], s["height_mm"], s["max_neighbour_diff_mm"], s["between_mm"]
+    ([3, 2], [0.0, 0.0, 20.0, 10.0], {'min': 0.0, 'max': 0.5, 'mean': 0.25}, 0.3, [[10.0, 0.0], [20.0, 0.0]])
+    """
+    h = height_map.height_mm
+    gx, gy = height_map.x_mm, height_map.y_mm
+    along_x, along_y = np.abs(np.diff(h, axis=1)), np.abs(np.diff(h, axis=0))
+    if float(along_x.max()) >= float(along_y.max()):
+        r, c = (int(v) for v in np.unravel_index(int(np.argmax(along_x)), along_x.shape))
+        worst, between = float(along_x[r, c]), [[gx[c], gy[r]], [gx[c + 1], gy[r]]]
+    else:
+        r, c = (int(v) for v in np.unravel_index(int(np.argmax(along_y)), along_y.shape))
+        worst, between = float(along_y[r, c]), [[gx[c], gy[r]], [gx[c], gy[r + 1]]]
+
+    def mm(v: Any) -> float:
+        return round(float(v), 6)
+
+    return {"kind": "height map", "points": int(h.size), "grid": [len(gx), len(gy)],
+            "spacing_mm": mm(height_map.spacing_mm),
+            "cell_mm": [mm(np.diff(gx).min()), mm(np.diff(gy).min())],
+            "area_mm": [mm(gx[0]), mm(gy[0]), mm(gx[-1]), mm(gy[-1])],
+            "size_mm": [mm(gx[-1] - gx[0]), mm(gy[-1] - gy[0])],
+            "height_mm": {"min": mm(h.min()), "max": mm(h.max()), "mean": mm(h.mean())},
+            "range_mm": mm(h.max() - h.min()), "max_neighbour_diff_mm": mm(worst),
+            "between_mm": [[mm(v) for v in p] for p in between], "reference_mm": mm(height_map.reference_mm),
+            "machine": height_map.machine, "time": height_map.time}
+
+
 def outside_text(height_map: HeightMap, x_mm: Any, y_mm: Any, *, name_point: bool = True) -> Optional[str]:
     """None when every machine ``(x_mm, y_mm)`` (arrays of one shape) lies in the probed area, else what a message
     says of the farthest outside: how far (mm) past which edge, and (``name_point``) the point.
@@ -468,7 +503,6 @@ class LevelledJob:
         self.tool = src.tool
         self.pause_notes = getattr(src, "pause_notes", None)
         self.warnings = list(getattr(src, "warnings", []) or []) + [w for w in self.warnings]
-        self.period_ns = None
         # a stop lifts the tool to the safe plane above the highest probed point, not above the work zero's
         rise = max(0.0, float(self.height_map.offsets_mm().max()))
         self.safe_z_steps: int = int(src.safe_z_steps) - int(math.ceil(rise / self.settings.mm_per_step_z - 1e-9))
