@@ -452,3 +452,101 @@ def test_real_grbl_firmware_probes_a_map_within_a_step(tmp_path):
             proxy.close()
         subprocess.run(["bash", str(GRBL_AVR / "run.sh"), "stop", "--out", str(out)], env=env,
                        capture_output=True, timeout=60)
+
+
+# -- cam probe tool: a new tool keeps the work Z ------------------------------------------------------------
+
+LONGER_MM = 1.2
+"""The second tool is this much longer: on the mock the tip of a longer tool touches the surface with the carriage
+that much higher, the same as the surface that much higher under the first tool (z0 + 1.2 in the machine file)."""
+
+
+def _raised(surface, by_mm):
+    return (surface[0] + by_mm, *surface[1:])
+
+
+def test_probe_tool_shifts_the_work_z_by_the_difference_of_contacts(tmp_path):
+    """Tool 1 sets the work Z on the plate; the tool moves away; tool 2 (1.2 mm longer) is probed at the same XY
+    (travel there lifted) and the work Z moves up by 1.2 mm within a step: tool 2's tip at work Z 0 is on the
+    surface."""
+    s1 = mock_settings(WARPED)
+    state = tmp_path / "state.json"
+    with StateHold(state, s1, "test") as hold:
+        session = MachineSession(MockPort(), s1, state=hold)
+        session.go_to((500, 400, 0), "steps")
+        assert session.wait_idle(30) and session.last_run["status"] == "finished"
+        r1 = session.probe_work_z(0.0, max_depth_steps=300)
+        st = hold.state
+        assert st.tool_probe.contact_steps == r1.contact_steps and st.tool_probe.plate_mm == 0
+        assert st.work_zero_steps()[2] == r1.contact_steps[2]
+        session.go_to((10, 5, -2), "mm")  # the tool change happens elsewhere
+        assert session.wait_idle(30)
+    assert read_state(state, s1).tool_probe.contact_steps == r1.contact_steps  # kept in the file
+    s2 = mock_settings(_raised(WARPED, LONGER_MM))  # the longer tool
+    with StateHold(state, s2, "test") as hold:
+        session = MachineSession(MockPort(), s2, state=hold)
+        zero_before = hold.state.work_zero_steps()
+        r2 = session.probe_tool()
+        assert r2.start_steps[:2] == r1.contact_steps[:2]  # the same XY
+        assert r2.start_steps[2] <= r1.contact_steps[2] - round(5 / s2.mm_per_step_z)  # travelled there lifted
+        assert session.last_run["status"] == "finished"
+        zero = hold.state.work_zero_steps()
+        assert zero[:2] == zero_before[:2]
+        assert zero[2] == zero_before[2] + (r2.contact_steps[2] - r1.contact_steps[2])
+        per = s2.mm_per_step_z
+        assert abs((zero_before[2] - zero[2]) * per - LONGER_MM) <= per + 1e-9
+        # the new tool's tip at work Z 0 over the probe point is on the surface it touches, within a step
+        assert_within_a_step(-zero[2] * per, surface_at(_raised(WARPED, LONGER_MM), s2, *r1.contact_steps[:2]), s2)
+        assert hold.state.tool_probe.contact_steps == r2.contact_steps
+        assert any("probe tool: work Z shifted" in line["text"] for line in session.state()["log"])
+        assert session.position_steps() == r2.end_steps == r2.start_steps  # lifted back over the plate
+
+
+def test_probe_tool_counts_a_different_plate_and_needs_a_first_probe(tmp_path):
+    """The first tool probed on a 0.5 mm plate (the mock's surface 0.5 mm higher: the plate's top), the same tool
+    probed again on the work itself with --plate 0: the work Z stays within a step."""
+    s = mock_settings(_raised(FLAT, 0.5))
+    state = tmp_path / "state.json"
+    with StateHold(state, s, "test") as hold:
+        session = MachineSession(MockPort(), s, state=hold)
+        with pytest.raises(cam.errors.PlanError, match="probe the first tool with cam probe z"):
+            session.probe_tool()
+        r1 = session.probe_work_z(0.5, max_depth_steps=300)
+        per = s.mm_per_step_z
+        assert hold.state.work_zero_steps()[2] == r1.contact_steps[2] + round(0.5 / per)
+        z1 = hold.state.work_zero_steps()[2]
+    s = mock_settings(FLAT)  # the plate taken away
+    with StateHold(state, s, "test") as hold:
+        session = MachineSession(MockPort(), s, state=hold)
+        session.probe_tool(0.0)
+        assert abs(hold.state.work_zero_steps()[2] - z1) <= 1
+        with pytest.raises(cam.errors.PlanError, match="plate"):
+            session.probe_tool(-1)
+        session.set_position((0, 0, 0))  # a new machine frame: the old contact means nothing any more
+        assert hold.state.tool_probe is None
+        with pytest.raises(cam.errors.PlanError, match="said anew"):
+            session.probe_tool()
+
+
+def test_cli_probe_tool_keeps_the_work_z_for_a_longer_tool(tmp_path):
+    machine, state = machine_file(tmp_path, FLAT), tmp_path / "state.json"
+    one_line_error(run_cli("probe", "tool", "--machine", machine, "--state", state), "cam probe z")
+    ok(run_cli("probe", "z", "--machine", machine, "--state", state, "--plate", "0.3"))
+    s = cam.load_settings(machine)
+    before = read_state(state, s)
+    machine_file(tmp_path, _raised(FLAT, LONGER_MM))  # the longer tool in the spindle
+    proc = ok(run_cli("probe", "tool", "--machine", machine, "--state", state))
+    after = read_state(state, s)
+    per = s.mm_per_step_z
+    shift = before.work_zero_steps()[2] - after.work_zero_steps()[2]
+    assert abs(shift * per - LONGER_MM) <= per + 1e-9 and f"Z zero moved {shift * per:+.4g} mm up" in proc.stdout
+    # the tip at work Z 0 is the plate's thickness below the contact: on the work
+    assert_within_a_step(-(after.work_zero_steps()[2] - round(0.3 / per)) * per, FLAT[0] + LONGER_MM, s)
+    machine_file(tmp_path, _raised(FLAT, LONGER_MM - 0.5))  # a tool 0.5 mm shorter, 0.1 mm clearance
+    proc = run_cli("probe", "tool", "--machine", machine, "--state", state, "--clearance", "0.1")
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr  # the changed machine file's warning, then:
+    assert proc.stderr.splitlines()[-1].startswith("cam: error: probe: no contact within"), proc.stderr
+    assert read_state(state, s).work_zero_steps() == after.work_zero_steps()
+    for args, fragment in ((("--plate", "-1"), "--plate"), (("--clearance", "0"), "--clearance")):
+        one_line_error(run_cli("probe", "tool", "--machine", machine, "--state", state, *args), fragment)
+    assert "--clearance" in ok(run_cli("probe", "tool", "--help")).stdout

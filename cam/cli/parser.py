@@ -719,8 +719,9 @@ def _add_probe(sub: argparse._SubParsersAction) -> None:
     pb = sub.add_parser("probe", help="find the work's surface with a touch probe (Z zero, height map)",
                         description="Probe the work's surface: Z moves down (+Z) at the probe feed until the probe "
                         "touches, at most a bounded depth, then lifts back. 'cam probe z' sets the work Z zero on the "
-                        "surface; 'cam probe grid' writes a height map of an area. The e-stop, Ctrl-C (a stop) and "
-                        "the limit switches are served while it probes.")
+                        "surface; 'cam probe tool' keeps it for a new tool after a tool change; 'cam probe grid' "
+                        "writes a height map of an area. The e-stop, Ctrl-C (a stop) and the limit switches are "
+                        "served while it probes.")
     what = pb.add_subparsers(dest="probe_what", metavar="WHAT", parser_class=_Parser, required=True)
     z = what.add_parser("z", help="probe down here and set the work Z zero on the surface",
                         description="Probe down where the tool stands, set the active work offset's Z zero on the "
@@ -731,6 +732,17 @@ def _add_probe(sub: argparse._SubParsersAction) -> None:
     z.add_argument("--depth", type=_number("--depth", 0.0, 1000.0, above=True), default=5.0, metavar="MM",
                    help="probe at most this far down (default 5): a probe that touches nothing stops there and lifts")
     _add_probe_machine(z)
+    t = what.add_parser("tool", help="after a tool change: probe the new tool and keep the work Z for it",
+                        description="After a tool change: go (lifted) to where the tool that set the work Z with "
+                        "'cam probe z' touched the plate or sensor, probe the new tool there, and shift the active "
+                        "work offset's Z by the difference of the two contacts, so the new tool's tip is at the same "
+                        "work Z. The tool stays lifted over the plate.")
+    t.add_argument("--plate", type=_number("--plate", 0.0, 1000.0), metavar="MM",
+                   help="the plate's thickness now (default: the one 'cam probe z' was given)")
+    t.add_argument("--clearance", type=_number("--clearance", 0.0, 1000.0, above=True), default=5.0, metavar="MM",
+                   help="start this far above the old tool's contact and probe at most this far below it (default 5: "
+                   "a new tool up to 5 mm longer or shorter)")
+    _add_probe_machine(t)
     g = what.add_parser("grid", help="probe a grid over an area and write a height map",
                         description="Probe a grid of points over an area (--area, or --over a job's file where it "
                         "would run), row by row in serpentine order: each point travelled to at the safe height, "

@@ -1,10 +1,12 @@
-"""``cam probe z`` and ``cam probe grid``: find the work's surface with a touch probe (issue #46 point 1).
+"""``cam probe z``, ``cam probe tool`` and ``cam probe grid``: find the work's surface with a touch probe (issue #46 point 1).
 
 A thin adapter over the machine session's probing (:meth:`cam.drive.session.MachineSession.probe_z`,
 ``probe_grid``; :mod:`cam.drive.probing`): the port's back end probes (the mock on its simulated
 ``[mock] probe_surface``, a parallel port's ``[inputs] probe``, grbl's ``G38.2``); the MAXIMUS board and ``cmd:``
 refuse in one line.  ``cam probe z`` then sets the active work offset's Z zero on the surface (a ``--plate``'s
-thickness below the contact) in the state file (and grbl's own offset); ``cam probe grid`` writes the height map.
+thickness below the contact) in the state file (and grbl's own offset), keeping the contact there; after a tool
+change ``cam probe tool`` probes the new tool at that contact's X, Y and shifts the work Z by the difference of the
+contacts (:meth:`~cam.drive.session.MachineSession.probe_tool`); ``cam probe grid`` writes the height map.
 Ctrl-C stops (the tool lifted); a probe that touches nothing is one line, exit code 2.
 """
 from __future__ import annotations
@@ -38,11 +40,13 @@ _STOP_SIGNALS = tuple(getattr(signal, n) for n in ("SIGINT", "SIGTERM", "SIGHUP"
 
 
 def cmd_probe(args: argparse.Namespace) -> int:
-    """``cam probe WHAT``: z or grid."""
+    """``cam probe WHAT``: z, tool or grid."""
     settings = port_settings(args, args.port)
     backend_of(args.port).require(args.port, "probes", f"cam probe {args.probe_what}")  # before anything opens
     if args.probe_what == "z":
         return _probe_z(args, settings)
+    if args.probe_what == "tool":
+        return _probe_tool(args, settings)
     return _probe_grid(args, settings)
 
 
@@ -81,18 +85,33 @@ def _probe_z(args: argparse.Namespace, settings: MachineSettings) -> int:
     if depth < 1:
         raise CamError(f"--depth {args.depth:g} is less than one Z step ({settings.mm_per_step_z:g} mm)")
     with hold_machine(args, settings, "cam probe z") as hold:
-        session, info = _run(args, settings, hold, lambda s: s.probe_z(args.feed, depth, wait=False))
+        session, info = _run(args, settings, hold, lambda s: s.probe_work_z(args.plate, args.feed, depth, wait=False))
         if info.get("status") != "finished":
             return _ended(info)
         result = (session.last_probe or [None])[0]
-        zero_z = int(result.contact_steps[2]) + int(round(args.plate / settings.mm_per_step_z))
-        session.set_work_z(zero_z)
+        zero_z = int(hold.state.work_zero_steps()[2])
         name = hold.state.active_offset
         end = hold.state.position_steps
     per = settings.mm_per_step_z
     plate = f", {args.plate:g} mm plate" if args.plate else ""
     print(f"{name} Z zero set on the surface at height {-zero_z * per:.4g} mm (machine Z {zero_z} steps; the contact "
           f"at {result.contact_steps[2]} steps{plate}); the tool is back {(zero_z - end[2]) * per:.4g} mm above it")
+    return 0
+
+
+def _probe_tool(args: argparse.Namespace, settings: MachineSettings) -> int:
+    with hold_machine(args, settings, "cam probe tool") as hold:
+        before = int(hold.state.work_zero_steps()[2])
+        session, info = _run(args, settings, hold, lambda s: s.probe_tool(args.plate, args.feed,
+                                                                          clearance_mm=args.clearance, wait=False))
+        if info.get("status") != "finished":
+            return _ended(info)
+        result = (session.last_probe or [None])[0]
+        zero_z = int(hold.state.work_zero_steps()[2])
+        name = hold.state.active_offset
+    per = settings.mm_per_step_z
+    print(f"{name} Z zero moved {(before - zero_z) * per:+.4g} mm up for the new tool (machine Z {before} -> {zero_z} "
+          f"steps; its contact at {result.contact_steps[2]} steps): its tip is at the same work Z as the old one's")
     return 0
 
 

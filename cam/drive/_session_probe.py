@@ -4,7 +4,9 @@
 from a safe height, both one activity in the background (its worker :func:`cam.drive.probing.probe_worker`,
 stoppable, the e-stop served), done by the port's back end (``start_probe``: capability ``probes``; the MAXIMUS
 board and the ``cmd:`` control unit refuse in one line).  :meth:`SessionProbe.set_work_z` puts the active work
-offset's Z zero at a probed height.
+offset's Z zero at a probed height; :meth:`SessionProbe.probe_work_z` probes and sets it in one activity (remembering
+the contact in the state file, :class:`~cam.drive.state.ToolProbe`), :meth:`SessionProbe.probe_tool` probes the next
+tool at that contact's X, Y and shifts the work Z by the difference of the contacts (a tool change).
 
 Like the other parts it keeps no state of its own but ``_last_probe`` (the results of the last probing): it works on
 the attributes ``MachineSession.__init__`` sets (``port``, ``backend``, ``settings``, ``state_hold``, ``grbl``,
@@ -14,21 +16,33 @@ the attributes ``MachineSession.__init__`` sets (``port``, ``backend``, ``settin
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from typing import Any, Callable, Optional, Sequence
 
 import numpy as np
 
-from ..errors import PlanError
+from ..errors import CamError, PlanError
 from ..values import shown
 from ._session_parts import Activity
 from .grbl_probe import grbl_set_work_z
 from .probing import DEFAULT_DEPTH_MM, ProbeError, Prober, ProbeResult, ProbeRun, probe_worker
-from .state import check_in_travel, steps_to_mm
+from .state import ToolProbe, check_in_travel, steps_to_mm
 
 __all__ = ["SessionProbe"]
 
 MAX_PROBE_POINTS = 100_000
 """The most points one grid may probe."""
+
+DEFAULT_TOOL_CLEARANCE_MM = 5.0
+"""``probe_tool`` starts this far above the first tool's contact and probes at most this far below it: a new tool
+up to this much longer or shorter than the one that set the work Z is found."""
+
+
+def _plate(value: Any) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) \
+            or not (math.isfinite(float(value)) and 0 <= float(value) <= 1000):
+        raise PlanError(f"the plate's thickness must be a number of mm 0..1000, got {shown(value)}")
+    return float(value)
 
 
 def _depth(value: Any) -> int:
@@ -100,6 +114,84 @@ class SessionProbe:
         if not wait:
             return None
         return self._probe_results()
+
+    def probe_work_z(self, plate_mm: float = 0.0, feed_mm_min: Optional[float] = None,
+                     max_depth_steps: Optional[int] = None, *, wait: bool = True) -> Optional[ProbeResult]:
+        """:meth:`probe_z`, then (when it touched) the active work offset's Z zero ``plate_mm`` below the contact
+        (:meth:`set_work_z`; ``cam probe z``, the page's Probe Z), and with a state file the contact kept there
+        (:class:`~cam.drive.state.ToolProbe`) for :meth:`probe_tool` after a tool change.
+
+        Returns:
+            with ``wait`` the probe; else None (the work Z is set when the activity finishes)."""
+        plate = _plate(plate_mm)
+        per = self.settings.mm_per_step_z
+
+        def then() -> None:
+            contact = self._last_probe[0].contact_steps  # type: ignore[index]
+            zero_z = int(contact[2]) + int(round(plate / per))
+            self._after_probe("probe Z", zero_z, ToolProbe(tuple(int(v) for v in contact), plate))  # type: ignore
+
+        with self._lock:  # the end's hook set before the worker can book its end
+            self.probe_z(feed_mm_min, max_depth_steps, wait=False)
+            self._then = then
+        return self._probe_results()[0] if wait else None
+
+    def probe_tool(self, plate_mm: Optional[float] = None, feed_mm_min: Optional[float] = None, *,
+                   clearance_mm: float = DEFAULT_TOOL_CLEARANCE_MM, wait: bool = True) -> Optional[ProbeResult]:
+        """After a tool change: probe the new tool where the tool that set the work Z touched (the state file's
+        :class:`~cam.drive.state.ToolProbe`, kept by :meth:`probe_work_z`), on the same plate or sensor, and shift
+        the active work offset's Z by the difference of the contacts (new minus old; a different ``plate_mm``,
+        default the recorded one, counted in), so the new tool's tip is at the same work Z.  The tool goes there
+        lifted (the higher of where it stands and ``clearance_mm`` above the old contact), probes at most
+        ``clearance_mm`` below the old contact, lifts back to that height and stays there; the contact kept is the
+        new tool's.
+
+        Returns:
+            with ``wait`` the probe; else None (the work Z is shifted when the activity finishes).
+
+        Raises:
+            PlanError: no state file, or no probe of a first tool in it (``cam probe z`` first); the rest as
+            :meth:`probe_grid`."""
+        hold = self.state_hold
+        old = None if hold is None else hold.state.tool_probe
+        if old is None:
+            raise PlanError("no tool has set the work Z by probing on this machine (or its position was said anew "
+                            "since): probe the first tool with cam probe z (the page's Probe Z) on the plate first")
+        plate = old.plate_mm if plate_mm is None else _plate(plate_mm)
+        if isinstance(clearance_mm, bool) or not isinstance(clearance_mm, (int, float)) \
+                or not (math.isfinite(float(clearance_mm)) and 0 < float(clearance_mm) <= 1000):
+            raise PlanError(f"clearance_mm must be a number of mm > 0 (at most 1000), got {shown(clearance_mm)}")
+        per = self.settings.mm_per_step_z
+        clear = max(1, int(round(float(clearance_mm) / per)))
+        x, y, z_old = (int(v) for v in old.contact_steps)
+        old_surface = z_old + int(round(old.plate_mm / per))
+
+        def then() -> None:
+            contact = self._last_probe[0].contact_steps  # type: ignore[index]
+            shift = int(contact[2]) + int(round(plate / per)) - old_surface
+            zero_z = int(hold.state.work_zero_steps()[2]) + shift
+            self._after_probe("probe tool", zero_z, ToolProbe(tuple(int(v) for v in contact), plate),  # type: ignore
+                              f"; the new tool's contact {shift * per:+.4g} mm from the old one's")
+
+        with self._lock:
+            top = min(int(self._position[2]), z_old - clear)
+            self.start_probe(ProbeRun(((x, y),), z_old + clear - top, _feed(feed_mm_min), top, "probe tool"))
+            self._then = then
+        return self._probe_results()[0] if wait else None
+
+    def _after_probe(self, what: str, zero_z: int, probe: ToolProbe, said: str = "") -> None:
+        """The end's hook of :meth:`probe_work_z` and :meth:`probe_tool` (the lock held, the probe finished): the
+        work Z zero at ``zero_z`` and, with a state file, ``probe`` kept; an error ends the activity in one line."""
+        try:
+            self.set_work_z(zero_z)
+            if self.state_hold is not None:
+                self.state_hold.record(replace(self.state_hold.state, tool_probe=probe))
+        except CamError as exc:
+            self.last_run = dict(self.last_run, status="error", messages=[f"{what}: the work Z was not set: {exc}"])
+            self.log(self.last_run["messages"][0], "error")
+            return
+        if said:
+            self.log(f"{what}: work Z shifted{said}")
 
     def _probe_results(self) -> list[ProbeResult]:
         """Wait for the probing activity; its results, or ProbeError saying in one line why there are none."""

@@ -90,7 +90,7 @@ class SessionRecover(SessionChecks):
             self._position = np.asarray(position, np.int64)
             if self.state_hold is not None:  # the user's word: the machine frame is not the switches' any more
                 st = self.state_hold.state.moved_to(position)
-                self.state_hold.record(replace(st, homed=False))
+                self.state_hold.record(replace(st, homed=False, tool_probe=None))  # a new frame: no tool's contact
             self._bump()
         if self.state_hold is not None:
             self.log(f"position set: machine {list(position)} steps (position known)")

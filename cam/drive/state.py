@@ -49,7 +49,7 @@ from .machines import backend_of, can, port_kind
 
 __all__ = [
     "STATE_VERSION", "OFFSET_NAMES", "MachineState", "Running", "StateError", "StateBusyError",
-    "PositionUnknownError", "parse_state", "read_state", "write_state", "state_dir", "default_state_path",
+    "PositionUnknownError", "ToolProbe", "parse_state", "read_state", "write_state", "state_dir", "default_state_path",
     "mm_to_steps", "steps_to_mm", "check_in_travel", "MachineLock", "StateHold", "unknown_message", "dump_json",
     "MachineRecord", "MachineFileError", "machine_record", "recorded_machine", "new_machine_state", "DeviceLock",
     "port_device", "is_real_port", "serial_by_id", "SERIAL_BY_ID", "soft_limits_off", "still_unknown",
@@ -103,6 +103,16 @@ class MachineRecord:
 
 
 @dataclass(frozen=True)
+class ToolProbe:
+    """The probe that set the work Z zero (``cam probe z``; issue #46 point 1): where the tool then in the spindle
+    touched the plate or sensor (``contact_steps``, machine frame) and the plate's thickness (mm).  ``cam probe
+    tool`` probes the next tool at the same X, Y and shifts the work Z by the difference of the contacts."""
+
+    contact_steps: tuple[int, int, int]
+    plate_mm: float = 0.0
+
+
+@dataclass(frozen=True)
 class Running:
     """The marker of a command that drives the machine now: its process id, what it is, since when (ISO)."""
 
@@ -135,6 +145,8 @@ class MachineState:
         machine: the machine file the state was kept with (None: not recorded, a file of an older cam).
         board: what the board the state was kept with says it is (grbl's ``$I``; None: not recorded, or a board
             that cannot say, such as MAXIMUS).
+        tool_probe: the probe contact of the tool that set the work Z (:class:`ToolProbe`; None: none, or the
+            machine frame was said anew since, ``cam where --set``).
     """
 
     position_steps: Steps3 = (0, 0, 0)
@@ -147,6 +159,7 @@ class MachineState:
     running: Optional[Running] = None
     machine: Optional[MachineRecord] = None
     board: Optional[str] = None
+    tool_probe: Optional[ToolProbe] = None
 
     def work_zero_steps(self, name: Optional[str] = None) -> Steps3:
         """The zero of work offset ``name`` (default: the active one), machine frame."""
@@ -194,6 +207,9 @@ class MachineState:
             "machine_file": None if self.machine is None else vars(self.machine),
             "board": self.board,
         }
+        if self.tool_probe is not None:  # absent when none: the files of an older cam read the same
+            values["tool_probe"] = {"contact_steps": list(self.tool_probe.contact_steps),
+                                    "plate_mm": self.tool_probe.plate_mm}
         return dump_json(values)
 
 
@@ -207,7 +223,7 @@ def dump_json(values: Mapping[str, Any]) -> str:
 
 _KEYS = {"cam_machine_state", "position_steps", "position_known", "unknown_reason", "homed", "offsets_steps",
          "active_offset", "tool", "running"}
-_OPTIONAL_KEYS = {"machine_file", "board"}  # absent from the files of an older cam: not recorded
+_OPTIONAL_KEYS = {"machine_file", "board", "tool_probe"}  # absent from the files of an older cam: not recorded
 
 
 def check_in_travel(position_steps: Any, settings: MachineSettings, what: str) -> None:
@@ -286,6 +302,19 @@ def _machine(value: Any) -> Optional[MachineRecord]:
     return MachineRecord(path, digest)
 
 
+def _tool_probe(value: Any, settings: MachineSettings) -> Optional[ToolProbe]:
+    if value is None:
+        return None
+    if not isinstance(value, dict) or set(value) != {"contact_steps", "plate_mm"}:
+        raise ValueError("tool_probe must be null or {contact_steps, plate_mm}")
+    contact = _steps3(value["contact_steps"], "tool_probe.contact_steps")
+    check_in_travel(contact, settings, "tool_probe.contact_steps")
+    plate = value["plate_mm"]
+    if isinstance(plate, bool) or not isinstance(plate, (int, float)) or not 0 <= plate <= 1000:
+        raise ValueError(f"tool_probe.plate_mm must be a number of mm 0..1000, got {json.dumps(plate)[:40]}")
+    return ToolProbe(contact, float(plate))
+
+
 def _offsets(value: Any, settings: MachineSettings) -> dict[str, Steps3]:
     if not isinstance(value, dict):
         raise ValueError("offsets_steps must be an object of work offsets (G54..G59.3)")
@@ -317,7 +346,7 @@ def _state_of(values: Any, settings: MachineSettings) -> MachineState:
     return MachineState(position, known, "" if known else reason, _flag(values["homed"], "homed"),
                         _offsets(values["offsets_steps"], settings), active, _text(values["tool"], "tool", True),
                         _running(values["running"]), _machine(values.get("machine_file")),
-                        _text(values.get("board"), "board", True))
+                        _text(values.get("board"), "board", True), _tool_probe(values.get("tool_probe"), settings))
 
 
 def parse_state(text: str, settings: MachineSettings, where: str | os.PathLike) -> MachineState:
