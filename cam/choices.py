@@ -16,12 +16,13 @@ from typing import Optional
 
 from .errors import CamError
 from .options import OPTION_KINDS, OPTIONS  # which option applies to which kind: declared with the option
-from .sniff import decide_kind, read_head
+from .sniff import decide_kind, read_head, sniff_height_map
 
 __all__ = ["POSTS", "DEFAULT_PORT", 
     "job_kind", "OPTION_KINDS",
     "DRAWING_SUFFIXES", "DIGITIZED_SUFFIXES", "EXCELLON_SUFFIXES", "HPGL_SUFFIXES", "GCODE_SUFFIXES",
-    "PROFILE_SUFFIXES", "SVG_SUFFIXES", "SUFFIXES", "FILE_JOB_SUFFIXES", "START_RULES",
+    "PROFILE_SUFFIXES", "SVG_SUFFIXES", "SUFFIXES", "FILE_JOB_SUFFIXES", "START_RULES", "HEIGHT_MAP_SUFFIXES",
+    "is_height_map",
 ]
 
 DRAWING_SUFFIXES = (".png", ".bmp", ".jpg", ".jpeg", ".tif", ".tiff", ".gif")
@@ -82,6 +83,22 @@ def job_kind(path: str | os.PathLike, warnings: Optional[list[str]] = None, *, h
         return kind
     listed = "; ".join(f"{k} {' '.join(v)}" for k, v in SUFFIXES.items())
     raise CamError(f"{Path(path).name}: unknown file type '{suffix or '(none)'}' (accepted: {listed})")
+
+HEIGHT_MAP_SUFFIXES = (".json",)
+"""Height maps (``cam probe grid --out MAP.json``; :mod:`cam.job.heightmap_level`): not a job, shown by ``cam info``
+and ``cam preview``, read by ``--level``."""
+
+
+def is_height_map(path: str | os.PathLike) -> bool:
+    """Whether ``path`` is a readable file whose content starts as a height map's (:func:`cam.sniff.sniff_height_map`),
+    whatever its suffix.
+
+    >>> is_height_map("no/such/map.json")
+    False
+    """
+    head = read_head(path) if Path(path).is_file() else None
+    return bool(head) and sniff_height_map(head)  # type: ignore[arg-type]
+
 
 POSTS = ("generic", "grbl", "linuxcnc")
 """The controllers G-code is written for (``cam export --post``; :mod:`cam.formats.gcode_export`)."""

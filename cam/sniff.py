@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import Optional
 
 __all__ = ["HEAD_BYTES", "GENERIC_SUFFIXES", "KIND_NAMES", "FORCED_KINDS", "read_head", "sniff_kind", "decide_kind",
-           "forced_kind"]
+           "forced_kind", "sniff_height_map"]
 
 HEAD_BYTES = 8192
 """How much of a file is read to tell its kind."""
@@ -189,6 +189,22 @@ def sniff_kind(head: bytes, *, truncated: Optional[bool] = None) -> Optional[str
         if good >= 0.8 * len(tokens) and any(t[:2] in ("PU", "PD", "PA", "PR") for t in tokens):
             return "hpgl"
     return _excellon_or_gcode(lines)
+
+
+_HEIGHT_MAP_KEY = re.compile(r'^\s*\{[^{}\[\]]*"cam_height_map"\s*:')
+
+
+def sniff_height_map(head: bytes) -> bool:
+    """Whether a file's first bytes are a height map's (``cam probe grid --out MAP.json``): a JSON object whose
+    keys before its first list include ``"cam_height_map"`` (:mod:`cam.job.heightmap_level`).  A height map is
+    not a job kind: ``cam info`` and ``cam preview`` show it, ``--level`` reads it.
+
+    >>> sniff_height_map(b'{"cam_height_map": 1, "frame": "machine", "x_mm": [0, 10]}'), sniff_height_map(b"IN;PU0,0;")
+    (True, False)
+    """
+    if head.startswith(b"\xef\xbb\xbf"):
+        head = head[3:]
+    return bool(_HEIGHT_MAP_KEY.match(head[:HEAD_BYTES].decode("latin-1")))
 
 
 def decide_kind(

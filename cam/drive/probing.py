@@ -43,7 +43,8 @@ from .ports import MockPort, SwitchSchedule
 from .runner import EMERGENCY_STOPPED, FINISHED, LIMIT_STOPPED, STOPPED, SWITCHED, Controller, run
 
 __all__ = ["ProbeError", "ProbeResult", "ProbeRun", "Prober", "StepDirProber", "probe_worker", "DEFAULT_FEED_MM_MIN",
-           "DEFAULT_DEPTH_MM", "grid_axis_mm", "serpentine", "job_area_mm", "start_probe_on_steps", "step_dir_feed"]
+           "DEFAULT_DEPTH_MM", "grid_axis_mm", "serpentine", "job_area_mm", "job_cuts_mm", "start_probe_on_steps",
+           "step_dir_feed"]
 
 Steps3 = tuple[int, int, int]
 
@@ -369,14 +370,44 @@ def serpentine(nx: int, ny: int) -> list[tuple[int, int]]:
     return [(i if j % 2 == 0 else nx - 1 - i, j) for j in range(ny) for i in range(nx)]
 
 
+def _home_of(job: Any, state: Any, origin: Optional[str]) -> tuple[int, int, int]:
+    """Where (machine steps) a prepared job's home stands when it runs: see :func:`job_area_mm`."""
+    kind = getattr(job, "kind", "")
+    return placed_home(job, state, origin) if kind in PLACED_KINDS else tuple(state.position_steps)
+
+
+def job_cuts_mm(job: Any, state: Any, settings: MachineSettings, origin: Optional[str] = None) -> list[np.ndarray]:
+    """What a prepared job cuts, where it would run (placed as :func:`job_area_mm` places it): each run of
+    consecutive points below the surface (``z > 0`` from the job's home) as an ``(N, 2)`` float64 polyline of
+    machine X, Y in mm, in the order cut (N >= 1: a hole's bottom is one point).  Read a piece at a time from the
+    job's plan (a run across two pieces is one)."""
+    hx, hy, _ = _home_of(job, state, origin)
+    per = settings.mm_per_step_axes
+    runs: list[np.ndarray] = []
+    open_run: Optional[np.ndarray] = None  # the last run of the previous piece, when it reached its end
+    for piece in job.plan.job.pieces():
+        pts = np.asarray(piece.points_steps, np.int64).reshape(-1, 3)
+        if not len(pts):
+            continue
+        below = pts[:, 2] > 0
+        edges = np.flatnonzero(np.diff(np.r_[0, below.astype(np.int8), 0]))
+        for a, b in zip(edges[::2], edges[1::2]):
+            xy = pts[a:b, :2]
+            if a == 0 and open_run is not None:
+                xy = np.vstack([open_run, xy])
+                runs.pop()
+            runs.append(xy)
+        open_run = runs[-1] if len(edges) and edges[-1] == len(pts) else None
+    return [np.column_stack([(hx + r[:, 0]) * per[0], (hy + r[:, 1]) * per[1]]) for r in runs]
+
+
 def job_area_mm(job: Any, state: Any, settings: MachineSettings, origin: Optional[str] = None
                 ) -> tuple[float, float, float, float]:
     """The XY extent ``(x0, y0, x1, y1)`` in machine mm of what a prepared job cuts (its moves below the surface;
     all its moves when it cuts nothing) where it would run: a drawing, drill, HPGL or SVG file placed at the active
     work zero (:func:`cam.drive.placement.placed_home`, ``origin`` as ``cam drill --origin``), a G-code program
     from where the tool stands (its own work offsets place it)."""
-    kind = getattr(job, "kind", "")
-    home = placed_home(job, state, origin) if kind in PLACED_KINDS else tuple(state.position_steps)
+    home = _home_of(job, state, origin)
     extent, cut = job.plan.motion_extent()
     box = cut if cut[2, 1] > 0 else extent
     per = settings.mm_per_step_axes
