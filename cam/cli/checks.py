@@ -19,7 +19,7 @@ import sys
 from pathlib import Path
 from typing import Optional
 
-from ..choices import DIGITIZED_SUFFIXES, SUFFIXES, job_kind
+from ..choices import DIGITIZED_SUFFIXES, SUFFIXES, is_height_map, job_kind
 from ..errors import CamError
 from ..options import OPTION_OF_DEST, OPTIONS, degenerate
 from ..sniff import forced_kind
@@ -131,7 +131,15 @@ def check_args(args: argparse.Namespace) -> None:
     """
     _check_outputs(args)
     warnings: list[str] = []
-    kind = job_kind_of(args, warnings) if args.command in ("drill", "export", "preview", "info") else None
+    image = getattr(args, "image", None)
+    if args.command in ("drill", "export", "preview", "info") and image and is_height_map(image):
+        if args.command in ("drill", "export"):  # a map is no job: it levels one
+            raise CamError(f"{image} is a height map, not a job: level a job by it with --level {image}, or show it "
+                           f"with cam info / cam preview")
+        over = getattr(args, "over", None)  # cam preview MAP.json --over FILE: the job's options are FILE's
+        kind = job_kind(over, warnings) if over and Path(over).is_file() else None
+    else:
+        kind = job_kind_of(args, warnings) if args.command in ("drill", "export", "preview", "info") else None
     args.kind_warnings = warnings
     for w in warnings:  # a suffix the content contradicts: said before anything is read
         print(f"warning: {w}", file=sys.stderr)

@@ -9,6 +9,7 @@ from typing import Optional
 
 import numpy as np
 
+from ..choices import is_height_map
 from ..sniff import KIND_NAMES
 from ..digitize import digitize
 from ..digitize.digitized import save_digitized
@@ -26,6 +27,7 @@ from ..job.model import pause_points
 from ..render.report import format_report, image_report
 from .common import format_duration, machine_settings, port_settings, reading_bar, speeds_line
 from .checks import job_kind_of
+from .height_map import info_height_map, preview_height_map
 from .planning import excellon_digits, job_options, prepare, profile_of, write_job_preview
 
 __all__ = ["cmd_export", "cmd_preview", "cmd_info", "cmd_digitize", "cmd_profile"]
@@ -76,6 +78,11 @@ def _tool_number(note: str) -> Optional[int]:
 
 
 def cmd_preview(args: argparse.Namespace) -> int:
+    if args.image and is_height_map(args.image):  # a height map: its picture, a job over it (--over)
+        return preview_height_map(args)
+    if getattr(args, "over", None) is not None:
+        raise CamError(f"--over draws a job over a height map (cam preview MAP.json --over FILE); {args.image} is "
+                       "not one")
     job = prepare(args)
     write_job_preview(args, job, args.output, surface=args.surface)
     print(f"{args.output}: {'cut surface' if args.surface else 'toolpath'} picture")
@@ -238,6 +245,8 @@ def _info_svg(args: argparse.Namespace) -> int:
 
 
 def cmd_info(args: argparse.Namespace) -> int:
+    if is_height_map(args.image):  # not a job: what was probed, where
+        return info_height_map(args)
     port = getattr(args, "port", None) or DEFAULT_PORT
     # a delay the ramps would not honour: refused before anything is read; a MAXIMUS board: its own settings
     settings = port_settings(args, port) if can(port, "board_settings") else machine_settings(args)

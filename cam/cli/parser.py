@@ -447,13 +447,18 @@ def _add_preview(sub: argparse._SubParsersAction) -> None:
         "preview", help="draw the job (or the surface it would cut) as PNG or SVG",
         description="Draw the job over its drawing: cutting moves coloured by depth, moves above the surface "
         "dashed, start and end marked, size, depth range and time in a legend. --surface draws the surface "
-        "the job would cut (run on the mock, decoded, carved with a point tool) as a shaded depth map.",
+        "the job would cut (run on the mock, decoded, carved with a point tool) as a shaded depth map. A height map "
+        "(cam probe grid --out MAP.json) is drawn as a colour scale of its heights with the probed points, and with "
+        "--over FILE the job's cuts over it.",
     )
     _add_job_options(pv)
     _add_cut_options(pv)
     _add_option(pv, "flip_y")
     pv.add_argument("-o", "--output", required=True, metavar="OUT.png|OUT.svg", help="picture to write")
     pv.add_argument("--surface", action="store_true", help="draw the cut surface instead of the toolpath")
+    pv.add_argument("--over", metavar="FILE",
+                    help="with a height map (cam probe grid --out MAP.json) as the file: draw this job's cuts over the "
+                    "map where cam drill would run it (the active work zero, --origin as drill's)")
     _add_view_state(pv)
     _add_option(pv, "scale", metavar="N",
                 help="picture pixels per drawing pixel, 1..64 (default: automatic); for an SVG file, its scale "
@@ -476,7 +481,9 @@ def _add_info(sub: argparse._SubParsersAction) -> None:
                        "and mm, its object count and warnings; for an Excellon drill file "
                        f"({_listed(EXCELLON_SUFFIXES)}) its tools (diameter, hole count), extent and warnings; for "
                        f"an HPGL file ({_listed(HPGL_SUFFIXES)}) its strokes, pens, extent and unknown commands; for "
-                       f"a G-code file ({_listed(GCODE_SUFFIXES)}) its moves, cut area, depth and machine time. "
+                       f"a G-code file ({_listed(GCODE_SUFFIXES)}) its moves, cut area, depth and machine time; for a "
+                       "height map (cam probe grid --out MAP.json) its grid, area, heights and largest neighbour "
+                       "difference. "
                        f"A saved digitized matrix ({_listed(DIGITIZED_SUFFIXES)}) is not read here: cut it with "
                        "'cam drill --load-digitized FILE'.")
     i.add_argument("image", metavar="IMAGE",
