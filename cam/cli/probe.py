@@ -14,19 +14,17 @@ from __future__ import annotations
 import argparse
 import signal
 import sys
-from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 
 from ..drive.machines import backend_of
 from ..drive.ports import MockPort
-from ..drive.probing import grid_axis_mm, job_area_mm, serpentine
+from ..drive.probe_grid import grid_plan
+from ..drive.probing import job_area_mm
 from ..drive.session import MachineSession
 from ..drive.state import steps_to_mm
 from ..errors import CamError
-from ..job.heightmap_level import HeightMap, save_height_map
 from ..job.jobs import JobOptions, prepare_job
 from ..settings import MachineSettings
 from ..verify.pinlog import write_pin_log
@@ -135,39 +133,27 @@ def _probe_grid(args: argparse.Namespace, settings: MachineSettings) -> int:
     if args.origin and args.over is None:
         raise CamError("--origin applies to --over only")
     per_x, per_y, per_z = settings.mm_per_step_axes
-    depth_mm = args.depth if args.depth is not None else args.safe_height + 2.0
     with hold_machine(args, settings, "cam probe grid") as hold:
-        state = hold.state
-        x0, y0, x1, y1 = _area_mm(args, settings, state)
-        m = args.margin
-        xs = np.rint(grid_axis_mm(x0 - m, x1 + m, args.spacing) / per_x).astype(np.int64)
-        ys = np.rint(grid_axis_mm(y0 - m, y1 + m, args.spacing) / per_y).astype(np.int64)
-        if len(set(xs.tolist())) != len(xs) or len(set(ys.tolist())) != len(ys):
-            raise CamError(f"--spacing {args.spacing:g} is less than one X or Y step")
-        order = serpentine(len(xs), len(ys))
-        points = [(int(xs[i]), int(ys[j])) for i, j in order]
-        zero_z = int(state.work_zero_steps()[2])
-        safe_z = zero_z - int(round(args.safe_height / per_z))
-        depth = max(1, int(round(depth_mm / per_z)))
-        said = (f"probing {len(points)} points ({len(xs)} x {len(ys)}, {args.spacing:g} mm apart) over X "
-                f"{xs[0] * per_x:g}..{xs[-1] * per_x:g}, Y {ys[0] * per_y:g}..{ys[-1] * per_y:g} mm (machine), from "
-                f"{args.safe_height:g} mm above the work Z zero, at most {depth * per_z:g} mm down")
+        area = _area_mm(args, settings, hold.state)
+        plan = grid_plan(area, args.spacing, settings, margin_mm=args.margin)  # PlanError before anything opens
+        machine = str(Path(args.machine).resolve()) if getattr(args, "machine", None) else None
+        zero_z = int(hold.state.work_zero_steps()[2])
 
         def start(session: MachineSession) -> None:
-            session.probe_grid(points, safe_z, depth, args.feed, wait=False)  # checked: the travel, the feed
-            print(said, file=sys.stderr, flush=True)
+            session.probe_map(area, args.out, spacing_mm=args.spacing, margin_mm=args.margin,
+                              safe_height_mm=args.safe_height, depth_mm=args.depth, feed_mm_min=args.feed,
+                              machine=machine, wait=False)  # checked: the travel, the feed
+            xs, ys = plan.xs_steps, plan.ys_steps
+            depth_mm = args.depth if args.depth is not None else args.safe_height + 2.0
+            print(f"probing {len(plan.order)} points ({len(xs)} x {len(ys)}, {args.spacing:g} mm apart) over X "
+                  f"{xs[0] * per_x:g}..{xs[-1] * per_x:g}, Y {ys[0] * per_y:g}..{ys[-1] * per_y:g} mm (machine), from "
+                  f"{args.safe_height:g} mm above the work Z zero, at most {max(1, round(depth_mm / per_z)) * per_z:g} "
+                  f"mm down", file=sys.stderr, flush=True)
 
         session, info = _run(args, settings, hold, start)
         if info.get("status") != "finished":
             return _ended(info)
-        results = session.last_probe or []
-    heights = np.zeros((len(ys), len(xs)), np.float64)
-    for (i, j), r in zip(order, results):
-        heights[j, i] = r.height_mm(settings)
-    machine = str(Path(args.machine).resolve()) if getattr(args, "machine", None) else None
-    save_height_map(HeightMap(xs * per_x, ys * per_y, heights, reference_mm=-zero_z * per_z, spacing_mm=args.spacing,
-                              machine=machine, time=datetime.now(timezone.utc).isoformat(timespec="seconds")),
-                    args.out)
-    print(f"height map of {len(points)} points written to {args.out}: heights {heights.min():.4g}..{heights.max():.4g} "
-          f"mm (machine frame; the work Z zero at {-zero_z * per_z:.4g} mm)")
+    heights = session.last_map.height_mm
+    print(f"height map of {len(plan.order)} points written to {args.out}: heights {heights.min():.4g}.."
+          f"{heights.max():.4g} mm (machine frame; the work Z zero at {-zero_z * per_z:.4g} mm)")
     return 0

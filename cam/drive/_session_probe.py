@@ -22,9 +22,11 @@ from typing import Any, Callable, Optional, Sequence
 import numpy as np
 
 from ..errors import CamError, PlanError
+from ..job.heightmap_level import save_height_map
 from ..values import shown
 from ._session_parts import Activity
 from .grbl_probe import grbl_set_work_z
+from .probe_grid import GridPlan, grid_plan, height_map_of
 from .probing import DEFAULT_DEPTH_MM, ProbeError, Prober, ProbeResult, ProbeRun, probe_worker
 from .state import ToolProbe, check_in_travel, steps_to_mm
 
@@ -65,6 +67,10 @@ class SessionProbe:
     module)."""
 
     _last_probe: Optional[list[ProbeResult]] = None
+    last_map: Any = None
+    """The height map the last :meth:`probe_map` wrote (a :class:`~cam.job.heightmap_level.HeightMap`; None: none
+    yet) and :attr:`last_map_path` where."""
+    last_map_path: Optional[str] = None
 
     @property
     def last_probe(self) -> Optional[list[ProbeResult]]:
@@ -178,6 +184,50 @@ class SessionProbe:
             self.start_probe(ProbeRun(((x, y),), z_old + clear - top, _feed(feed_mm_min), top, "probe tool"))
             self._then = then
         return self._probe_results()[0] if wait else None
+
+    def probe_map(self, area_mm: Sequence[float], out: Any, *, spacing_mm: float = 10.0, margin_mm: float = 0.0,
+                  safe_height_mm: float = 2.0, depth_mm: Optional[float] = None, feed_mm_min: Optional[float] = None,
+                  machine: Optional[str] = None, wait: bool = True) -> GridPlan:
+        """Probe a height map over ``area_mm`` (machine mm ``x0, y0, x1, y1``, grown by ``margin_mm``) on a grid
+        ``spacing_mm`` apart (:func:`cam.drive.probe_grid.grid_plan`), each point from ``safe_height_mm`` above the
+        work Z zero, at most ``depth_mm`` below that height (None: the safe height + 2 mm), and when it finishes write
+        the map (:func:`cam.job.heightmap_level.save_height_map`, atomic) to ``out``: then :attr:`last_map` and
+        :attr:`last_map_path` (``cam probe grid``, the page's Probe the job's area).  ``machine``: the machine
+        file's path the map names.
+
+        Returns:
+            the grid probed (``wait``: after the map was written; a probe that found nothing, a stop: ProbeError)."""
+        for name, v in (("the safe height", safe_height_mm), ("the depth", depth_mm)):
+            if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float))
+                                  or not (math.isfinite(v) and 0 <= v <= 1e5)):
+                raise PlanError(f"{name} must be a number of mm 0..100000, got {shown(v)}")
+        plan = grid_plan(area_mm, spacing_mm, self.settings, margin_mm=margin_mm)
+        per = self.settings.mm_per_step_z
+        depth = max(1, int(round((depth_mm if depth_mm is not None else safe_height_mm + 2.0) / per)))
+        path = str(out)
+
+        def then() -> None:
+            try:
+                hmap = height_map_of(plan, self._last_probe or [], self.settings, reference_steps=zero_z,
+                                     machine=machine)
+                save_height_map(hmap, path)
+            except CamError as exc:
+                self.last_run = dict(self.last_run, status="error", messages=[f"the height map was not written: {exc}"])
+                self.log(self.last_run["messages"][0], "error")
+                return
+            self.last_map, self.last_map_path = hmap, path
+            self.log(f"height map of {len(plan.order)} points written to {path}: heights "
+                     f"{hmap.height_mm.min():.4g}..{hmap.height_mm.max():.4g} mm")
+
+        with self._lock:
+            hold = self.state_hold
+            zero_z = int(hold.state.work_zero_steps()[2]) if hold is not None else 0
+            safe_z = zero_z - int(round(float(safe_height_mm) / per))
+            self.probe_grid(plan.points_steps, safe_z, depth, feed_mm_min, wait=False)
+            self._then = then
+        if wait:
+            self._probe_results()
+        return plan
 
     def _after_probe(self, what: str, zero_z: int, probe: ToolProbe, said: str = "") -> None:
         """The end's hook of :meth:`probe_work_z` and :meth:`probe_tool` (the lock held, the probe finished): the
