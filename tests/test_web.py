@@ -696,7 +696,10 @@ def test_api_emergency_stop_on_the_maximus_board(tmp_path):
             time.sleep(0.01)
         st = s.session.state()
         assert s.call("POST", "/api/answer", {"prompt": st["prompt"]["id"], "action": "continue"})[0] == 200
-        time.sleep(0.5)  # the offset and first hole moves are under way
+        deadline = time.monotonic() + 30  # the offset and first hole moves are under way: the head moved
+        while s.session.state()["activity"] and s.session.state()["position_steps"] == st["position_steps"]:
+            assert time.monotonic() < deadline, "the board never moved"
+            time.sleep(0.01)
         assert s.call("POST", "/api/estop", {})[0] == 200
         st = s.wait_idle(20)
         assert st["last"]["status"] == "emergency-stopped", st["last"]
