@@ -65,6 +65,7 @@ import asyncio
 import gc
 import ipaddress
 import json
+import math
 import re
 import secrets
 import socket
@@ -94,7 +95,9 @@ from ..job.jobs import PROFILE_SUFFIXES, JobOptions, PreparedJob, accepted_suffi
 from ..settings import DEFAULT_SETTINGS, MachineSettings
 from ..worker import DEFAULT_TIME_LIMIT_S, Worker, default_memory_limit_bytes
 from .connections import ConnectionGuard, guarded_h11, is_safety_route
-from .work import WARM_UP, pin_log_csv, plan_with_preview, preview_of, resumed_from_journal, save_pin_log_raw
+from .work import (
+    WARM_UP, height_map_png, pin_log_csv, plan_with_preview, preview_of, resumed_from_journal, save_pin_log_raw,
+)
 
 if TYPE_CHECKING:
     from starlette.requests import Request
@@ -607,6 +610,7 @@ async def _plan(st: _AppState, job_id: str, options: JobOptions) -> PreparedJob:
     from starlette.concurrency import run_in_threadpool
 
     upload = st.uploads[job_id]
+    options = _levelled(st, options)
     job, png = await run_in_threadpool(st.worker.call, plan_with_preview, upload["path"], options,
                                        st.config.settings, upload["name"], _planning_state(st.session),
                                        what=f"planning {upload['name']}")
@@ -620,6 +624,85 @@ async def _plan(st: _AppState, job_id: str, options: JobOptions) -> PreparedJob:
         st.previews.pop(old, None)
         st.plan_options.pop(old, None)
     return job
+
+
+# -- probing (issue #46 point 5): thin adapters over the session's probe methods ------------------------------
+
+def _height_map_path(st: _AppState) -> Path:
+    """Where the page's Probe the job's area writes its height map (with the uploads)."""
+    return st.jobs_dir / "height-map.json"
+
+
+def _levelled(st: _AppState, options: JobOptions) -> JobOptions:
+    """``options`` levelled to the map the page probed last (:meth:`MachineSession.probe_map` wrote it), when it
+    did; a job planned after Probe the job's area is levelled to it."""
+    path = str(_height_map_path(st))
+    if st.session.last_map_path != path or options.level:
+        return options
+    return replace(options, level=path)
+
+
+def _mm_field(body: dict[str, Any], key: str, default: Optional[float]) -> Optional[float]:
+    value = body.get(key, default)
+    if value is None or value == "":
+        return default
+    try:
+        number = float(value) if isinstance(value, (int, float)) and not isinstance(value, bool) else math.nan
+    except OverflowError:
+        number = math.nan
+    if not math.isfinite(number):
+        raise HttpError(400, f"{key} must be a number of mm, got {str(json.dumps(value))[:40]}")
+    return number
+
+
+async def _probe_z(st: _AppState, request: Request) -> dict[str, Any]:
+    """``{"plate_mm": 0}``: Probe Z (``cam probe z``): the work Z zero on the surface, the plate below the
+    contact, set when the probe finishes."""
+    body = await _body_json(request)
+    st.session.probe_work_z(_mm_field(body, "plate_mm", 0.0), wait=False)
+    return st.session.state()
+
+
+async def _probe_tool(st: _AppState, request: Request) -> dict[str, Any]:
+    """``{"plate_mm": null}``: Probe tool (``cam probe tool``) after a tool change."""
+    body = await _body_json(request)
+    st.session.probe_tool(_mm_field(body, "plate_mm", None), wait=False)
+    return st.session.state()
+
+
+async def _probe_area(st: _AppState, request: Request) -> dict[str, Any]:
+    """``{"job": id, "spacing_mm": 10, "margin_mm": 0}``: Probe the job's area (``cam probe grid --over``): a
+    height map over where the planned job cuts, which the jobs planned after it are levelled to."""
+    from ..drive.probing import job_area_mm
+
+    body = await _body_json(request)
+    job_id = str(body.get("job", ""))
+    job = st.prepared.get(job_id)
+    if job is None:
+        raise HttpError(409, "no planned job to probe the area of: load a file first")
+    session = st.session
+    session.backend.require(session.port, "probes", "probing")
+    area = job_area_mm(job, _planning_state(session), st.config.settings)
+    out = _height_map_path(st)
+    session.probe_map(area, out, spacing_mm=_mm_field(body, "spacing_mm", 10.0),
+                      margin_mm=_mm_field(body, "margin_mm", 0.0),
+                      machine=str(Path(st.config.machine_file).resolve()) if st.config.machine_file else None,
+                      wait=False)
+    return session.state()
+
+
+async def _height_map(st: _AppState, request: Request):
+    """The PNG of the page's height map with the job (``?job=ID``, planned) over it where it would run."""
+    from starlette.concurrency import run_in_threadpool
+    from starlette.responses import Response
+
+    path = _height_map_path(st)
+    if st.session.last_map_path != str(path) or not path.is_file():
+        raise HttpError(404, "no height map yet: Probe the job's area first")
+    job = st.prepared.get(request.query_params.get("job", ""))
+    png = await run_in_threadpool(st.worker.call, height_map_png, str(path), job, _planning_state(st.session),
+                                  st.config.settings, what="the height map's picture")
+    return Response(png, media_type="image/png", headers={"Cache-Control": "no-store"})
 
 
 async def _preview(st: _AppState, request: Request):
@@ -910,6 +993,10 @@ def _routes(st: _AppState) -> list:
         Route("/api/goto", json_api(_goto), methods=post),
         Route("/api/use-offset", json_api(_use_offset), methods=post),
         Route("/api/answer", json_api(_answer), methods=post),
+        Route("/api/probe-z", json_api(_probe_z), methods=post),
+        Route("/api/probe-tool", json_api(_probe_tool), methods=post),
+        Route("/api/probe-area", json_api(_probe_area), methods=post),
+        Route("/api/height-map.png", _api(st, _height_map)),
         Route("/api/state", _api(st, _state)),
         Route("/api/events", _api(st, _events)),
         Route("/api/pinlog", _api(st, _pinlog)),

@@ -19,7 +19,7 @@ from ..job.jobs import JobOptions, PreparedJob, prepare_job, resume_job
 from ..settings import MachineSettings
 from ..verify.pinlog import PinLog, PinLogPart, write_pin_log
 
-__all__ = ["plan_with_preview", "preview_of", "resumed_from_journal", "save_pin_log_raw", "pin_log_csv", "WARM_UP"]
+__all__ = ["plan_with_preview", "preview_of", "height_map_png", "resumed_from_journal", "save_pin_log_raw", "pin_log_csv", "WARM_UP"]
 
 WARM_UP = ("cam.job.jobs", "cam.web.work", "cam.digitize._kernels", "cam.drive.ramps", "cv2")
 """What the worker imports as it starts: the first planning does not wait for it."""
@@ -47,6 +47,19 @@ def resumed_from_journal(job: PreparedJob, journal_path: str, position_steps: tu
 def preview_of(job: PreparedJob) -> bytes:
     """The PNG preview of a planned job (in the worker)."""
     return job.preview_png()
+
+
+def height_map_png(map_path: str, job: Any, machine_state: Any, settings: MachineSettings) -> bytes:
+    """The PNG of the height map at ``map_path`` (:func:`cam.render.map_picture.height_map_picture`) with ``job``'s
+    cuts over it where it would run in ``machine_state`` (:func:`cam.drive.probing.job_cuts_mm`; None: the map
+    alone), as ``cam preview MAP.json --over FILE`` draws it (in the worker)."""
+    from ..drive.probing import job_cuts_mm
+    from ..job.heightmap_level import load_height_map
+    from ..render.map_picture import height_map_picture
+    from ..render.picture import encode_png
+
+    cuts = None if job is None else job_cuts_mm(job, machine_state, settings)
+    return encode_png(height_map_picture(load_height_map(map_path), cuts_mm=cuts))
 
 
 def save_pin_log_raw(log: PinLog, path: str | os.PathLike) -> None:

@@ -206,6 +206,7 @@
       const img = $("preview");
       img.src = withToken(r.preview);
       img.hidden = false;
+      if (!$("height-map").hidden) showHeightMap();  // the new job over the map
     } catch (e) {
       page.planned = null;
       $("job-summary").textContent = "not planned";
@@ -291,6 +292,18 @@
     post("/api/drill-z", { which: b.dataset.which });
   }));
   $("home").addEventListener("click", () => post("/api/home"));
+  // probing (capability "probes"): the session probes, sets the work Z, writes the height map
+  function plateMm() { const v = $("probe-plate").value; return v === "" ? 0 : parseFloat(v); }
+  $("probe-z").addEventListener("click", () => post("/api/probe-z", { plate_mm: plateMm() }));
+  $("probe-tool").addEventListener("click", () => post("/api/probe-tool", { plate_mm: plateMm() }));
+  $("probe-area").addEventListener("click", () => post("/api/probe-area", {
+    job: page.planned ? page.planned.job : null, spacing_mm: parseFloat($("probe-spacing").value) }));
+  function showHeightMap() {
+    const img = $("height-map");
+    img.src = withToken("/api/height-map.png?job=" + encodeURIComponent(page.planned ? page.planned.job : "") +
+                        "&v=" + Date.now());
+    img.hidden = false;
+  }
   $("setpos-form").addEventListener("submit", (ev) => {  // the user's word: the position is known again
     ev.preventDefault();
     const xyz = ["x", "y", "z"].map((a) => parseFloat($("setpos-" + a).value));
@@ -350,6 +363,10 @@
     document.querySelectorAll("button.drill-z").forEach((b) => { b.hidden = !(s.capabilities || []).includes("drill_stroke"); });
     $("grbl-row").hidden = !s.grbl;  // a grbl board: its feed override
     $("home").disabled = !idle;
+    const probes = (s.capabilities || []).includes("probes");
+    $("probe-row").hidden = !probes;
+    document.querySelectorAll("button.probe").forEach((b) => { b.disabled = !idle; });
+    $("probe-area").disabled = !(idle && page.planned);
     if (s.grbl && document.activeElement !== $("feed-override")) $("feed-override").value = s.grbl.feed_override_pct;
     const shown = job || (idle && s.last && s.last.activity === "job");
     const pct = shown ? s.progress : 0;
@@ -384,6 +401,7 @@
       const li = document.createElement("li");
       li.className = e.level;
       li.textContent = new Date(e.t * 1000).toLocaleTimeString() + "  " + e.text;
+      if (e.text.startsWith("height map of ")) showHeightMap();  // the page's Probe the job's area wrote it
       log.prepend(li);
     }
     while (log.children.length > 200) log.removeChild(log.lastChild);
