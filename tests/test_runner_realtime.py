@@ -39,6 +39,15 @@ def _start(job, controller):
     return t, box, port, t0
 
 
+def _into_the_job(port, writes: int = 40, timeout_s: float = 30.0) -> None:
+    """Wait until the run has sent ``writes`` writes (a busy machine starts later; a fixed sleep would stop it
+    before it began)."""
+    deadline = time.monotonic() + timeout_s
+    while port.n_writes + len(port._pending) < writes:  # real-time writes wait in the mock's pending batch
+        assert time.monotonic() < deadline, "the run never got going"
+        time.sleep(0.005)
+
+
 def _rising(log, settings):
     clock, _ = axis_bits(settings)
     data = log.data
@@ -51,7 +60,7 @@ def test_stop_halts_within_one_period_and_lifts(rt_settings):
     d, job = _job(rt_settings)
     ctl = cam.Controller()
     t, box, port, _ = _start(job, ctl)
-    time.sleep(0.15)
+    _into_the_job(port)
     stop_wall_ns = time.monotonic_ns()
     ctl.stop()
     t.join(5)
@@ -80,7 +89,7 @@ def test_emergency_stop_sends_nothing_more(rt_settings):
     d, job = _job(rt_settings)
     ctl = cam.Controller()
     t, box, port, _ = _start(job, ctl)
-    time.sleep(0.15)
+    _into_the_job(port)
     t_req = time.monotonic_ns()
     ctl.emergency_stop()
     t.join(5)
@@ -98,7 +107,7 @@ def test_pause_and_resume_keep_the_carve_exact(rt_settings):
     d, job = _job(rt_settings)
     ctl = cam.Controller()
     t, box, port, _ = _start(job, ctl)
-    time.sleep(0.1)
+    _into_the_job(port)
     ctl.pause()
     time.sleep(0.02)  # let an in-flight write land
     n_paused = len(port.pin_log())
