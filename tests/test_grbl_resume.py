@@ -247,9 +247,8 @@ def test_a_job_stopped_in_a_cut_resumes_on_grbl_and_nothing_is_skipped(kind, tmp
         check_resumed(job, record, before, after)
         if kind == "drawing":
             drawing_carves_as_uninterrupted(job, before, after)
-        final = read_journal(journal)
-        assert (final.state, final.last_move, final.resumed_at_move) == ("finished", final.moves - 1,
-                                                                         resume_job(job, record).report["resumed_at_move"])
+        final, j = read_journal(journal), resume_job(job, record).report["resumed_at_move"]
+        assert (final.state, final.last_move, final.resumed_at_move) == ("finished", final.moves - 1, j)
     finally:
         close_grbl_machines()
         emu.stop()
