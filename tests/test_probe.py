@@ -550,3 +550,21 @@ def test_cli_probe_tool_keeps_the_work_z_for_a_longer_tool(tmp_path):
     for args, fragment in ((("--plate", "-1"), "--plate"), (("--clearance", "0"), "--clearance")):
         one_line_error(run_cli("probe", "tool", "--machine", machine, "--state", state, *args), fragment)
     assert "--clearance" in ok(run_cli("probe", "tool", "--help")).stdout
+
+
+def test_grbl_probe_z_and_probe_tool_set_grbls_own_work_z(grbl, tmp_path):
+    """On grbl the work Z is set from the probe's end (G10 L2, grbl's G54 too): probe Z, then probe tool on the
+    same tool keeps it."""
+    s = GRBL_SETTINGS
+    with StateHold(tmp_path / "state.json", s, "test", port=f"grbl:{grbl.device_path}") as hold:
+        session = MachineSession(f"grbl:{grbl.device_path}", s, state=hold)
+        if not hold.state.position_known:
+            session.set_position((0, 0, 0))
+        r = session.probe_work_z(0.0, 60.0, 200)
+        assert session.last_run["status"] == "finished", session.last_run
+        assert hold.state.work_zero_steps()[2] == r.contact_steps[2]
+        assert any(t.startswith("G10L2P1Z") for _, t, _ in grbl.lines())
+        session.probe_tool(None, 60.0, clearance_mm=2.0)
+        assert session.last_run["status"] == "finished", session.last_run
+        assert abs(hold.state.work_zero_steps()[2] - r.contact_steps[2]) <= 1
+        assert hold.state.tool_probe is not None

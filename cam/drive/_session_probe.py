@@ -158,6 +158,7 @@ class SessionProbe:
         Raises:
             PlanError: no state file, or no probe of a first tool in it (``cam probe z`` first); the rest as
             :meth:`probe_grid`."""
+        self.backend.require(self.port, "probes", "probing")  # a machine that cannot probe: that first
         hold = self.state_hold
         old = None if hold is None else hold.state.tool_probe
         if old is None:
@@ -201,6 +202,7 @@ class SessionProbe:
             if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float))
                                   or not (math.isfinite(v) and 0 <= v <= 1e5)):
                 raise PlanError(f"{name} must be a number of mm 0..100000, got {shown(v)}")
+        self.backend.require(self.port, "probes", "probing")
         plan = grid_plan(area_mm, spacing_mm, self.settings, margin_mm=margin_mm)
         per = self.settings.mm_per_step_z
         depth = max(1, int(round((depth_mm if depth_mm is not None else safe_height_mm + 2.0) / per)))

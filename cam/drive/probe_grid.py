@@ -57,8 +57,11 @@ def grid_plan(area_mm: Sequence[float], spacing_mm: float, settings: MachineSett
         raise PlanError(f"the area must be four numbers of mm X0,Y0,X1,Y1, got {list(area_mm)!r:.80}")
     if isinstance(margin_mm, bool) or not isinstance(margin_mm, (int, float)) or not 0 <= margin_mm <= 1e5:
         raise PlanError(f"the margin must be a number of mm 0..100000, got {margin_mm!r:.40}")
-    if isinstance(spacing_mm, bool) or not isinstance(spacing_mm, (int, float)):
-        raise PlanError(f"the spacing must be a number of mm > 0, got {spacing_mm!r:.40}")
+    if isinstance(spacing_mm, bool) or not isinstance(spacing_mm, (int, float)) \
+            or not (math.isfinite(spacing_mm) and 0 < spacing_mm <= 1e5):
+        raise PlanError(f"the spacing must be a number of mm > 0 (at most 100000), got {spacing_mm!r:.40}")
+    if any(abs(v) > 1e6 for v in area_mm):
+        raise PlanError(f"the area reaches past a km from the home: {list(area_mm)!r:.80}")
     x0, y0, x1, y1 = (float(v) for v in area_mm)
     per_x, per_y, _ = settings.mm_per_step_axes
     m = float(margin_mm)
