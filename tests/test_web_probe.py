@@ -86,6 +86,17 @@ def test_api_probe_the_jobs_area_writes_the_map_the_next_job_levels_with(tmp_pat
         assert hmap.y_mm[0] <= y0 + 1e-6 and hmap.y_mm[-1] >= y1 - 1e-6
         status, png = s.call("GET", f"/api/height-map.png?job={planned['job']}")
         assert status == 200 and png[:8] == b"\x89PNG\r\n\x1a\n"
+        # the job planned before the map: Start plans it again, levelled to it, and that plan runs
+        status, st = s.call("POST", "/api/start", {"job": planned["job"]})
+        assert status == 200 and "planned" in st, st
+        assert _prepared(s)[planned["job"]].levelled_home_steps is not None
+        deadline = time.monotonic() + 60
+        while s.session.busy:  # its tool change answered
+            assert time.monotonic() < deadline
+            if s.session.state()["prompt"] is not None:
+                s.call("POST", "/api/answer", {"action": "continue"})
+            time.sleep(0.02)
+        assert s.session.last_run["status"] == "finished", s.session.last_run
         status, planned = s.call("POST", "/api/plan", {"job": up["job"], "options": {}})
         assert status == 200, planned
         job = [j for j in _prepared(s).values()][-1]

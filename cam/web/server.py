@@ -235,6 +235,7 @@ class _AppState:
     uploads: dict[str, dict[str, Any]] = field(default_factory=dict)  # id -> path, name, kind, role
     prepared: dict[str, PreparedJob] = field(default_factory=dict)  # the last eight planned, oldest first
     plan_options: dict[str, JobOptions] = field(default_factory=dict)  # id -> the options it was planned with
+    plan_maps: dict[str, Any] = field(default_factory=dict)  # id -> the page's height map it was planned after
     previews: dict[str, bytes] = field(default_factory=dict)  # id -> PNG
     counter: int = 0
     last_job: Optional[str] = None  # the id of the job started last (the Resume job button resumes it)
@@ -618,11 +619,13 @@ async def _plan(st: _AppState, job_id: str, options: JobOptions) -> PreparedJob:
     st.prepared.pop(job_id, None)  # re-planned: the newest again, so the last eight planned stay
     st.prepared[job_id] = job
     st.plan_options[job_id] = options
+    st.plan_maps[job_id] = st.session.last_map
     st.previews[job_id] = png
     for old in list(st.prepared)[:-8]:
         st.prepared.pop(old, None)
         st.previews.pop(old, None)
         st.plan_options.pop(old, None)
+        st.plan_maps.pop(old, None)
     return job
 
 
@@ -730,6 +733,10 @@ async def _start(st: _AppState, request: Request) -> dict[str, Any]:
         raise HttpError(404 if job_id not in st.uploads else 409,
                         f"job {job_id!r} is not planned; upload it and set its options first")
     replanned = None
+    if st.session.last_map is not st.plan_maps.get(job_id) and st.session.last_map_path == str(_height_map_path(st)):
+        st.session.log(f"{job.name or job_id}: planned again, levelled to the height map probed since")
+        job = await _plan(st, job_id, st.plan_options[job_id])  # levelled to it (_levelled)
+        replanned = _job_summary(st, job_id, job)
     try:
         _start_planned(st, job_id, job)
     except StalePlanError as exc:
