@@ -260,7 +260,8 @@ def test_a_step_plan_is_refused_on_grbl(grbl):
 
 def test_cli_drill_on_grbl(grbl, tmp_path):
     f = SAMPLES / "two_curves.png"
-    r = run_cli("drill", str(f), "--port", url(grbl), "--yes", "--state", str(known_at_home(tmp_path / "s.json")))
+    r = run_cli("drill", str(f), "--port", url(grbl), "--yes", "--state", str(known_at_home(tmp_path / "s.json")),
+                cwd=tmp_path)  # its journal (a real port keeps one) beside the file, not in the repository
     assert r.returncode == 0, r.stderr
     assert any(b.kind == "G1" for b in grbl.executed())
 
@@ -339,7 +340,7 @@ def test_cli_feed_override_and_the_settings_warning(tmp_path):
         f = tmp_path / "two.drl"
         f.write_text("M48\nMETRIC\nT1C0.8\n%\nT1\nX1.0Y-1.0\nX2.0Y-1.0\nM30\n")
         r = run_cli("drill", str(f), "--port", url(emu), "--yes", "--feed-override", "150",
-                    "--state", str(known_at_home(tmp_path / "s.json")))
+                    "--state", str(known_at_home(tmp_path / "s.json")), cwd=tmp_path)
         assert r.returncode == 0, r.stderr
         warning = [line for line in r.stderr.splitlines() if "grbl's settings differ" in line]
         assert len(warning) == 1 and "$100=250" in warning[0], r.stderr
@@ -524,7 +525,7 @@ def test_negative_machine_space_runs_a_drawing_hpgl_svg_and_drill_file_at_the_wo
         for kind, (path, *options) in small_files(tmp_path).items():
             start = np.array(_state_of(state)["position_steps"])
             n0 = len(emu.executed())
-            r = run_cli("drill", path, "--yes", *options, *_3018_cli(emu, state))
+            r = run_cli("drill", path, "--yes", *options, *_3018_cli(emu, state), cwd=tmp_path)
             close_grbl_machines()
             assert r.returncode == 0 and "Traceback" not in r.stderr, (kind, r.stderr)
             blocks = [b for b in emu.executed()[n0:] if b.kind in ("G0", "G1", "jog")]
@@ -606,7 +607,7 @@ def test_a_job_placed_where_it_leaves_the_travel_is_refused_before_anything_move
             for kind in kinds:
                 path, *options = files[kind]
                 n_lines, n_blocks = len(emu.lines()), len(emu.executed())
-                r = run_cli("drill", path, "--yes", *options, *_3018_cli(emu, state))
+                r = run_cli("drill", path, "--yes", *options, *_3018_cli(emu, state), cwd=tmp_path)
                 close_grbl_machines()
                 assert r.returncode == 2 and "Traceback" not in r.stderr, (kind, r.stderr)
                 error = [line for line in r.stderr.splitlines() if not line.startswith("warning:")]
