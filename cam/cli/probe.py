@@ -1,4 +1,5 @@
-"""``cam probe z``, ``cam probe tool`` and ``cam probe grid``: find the work's surface with a touch probe (issue #46 point 1).
+"""``cam probe z``, ``cam probe tool`` and ``cam probe grid``: find the work's surface with a touch probe (issue #46
+point 1).
 
 A thin adapter over the machine session's probing (:meth:`cam.drive.session.MachineSession.probe_z`,
 ``probe_grid``; :mod:`cam.drive.probing`): the port's back end probes (the mock on its simulated

@@ -19,7 +19,8 @@ from ..job.jobs import JobOptions, PreparedJob, prepare_job, resume_job
 from ..settings import MachineSettings
 from ..verify.pinlog import PinLog, PinLogPart, write_pin_log
 
-__all__ = ["plan_with_preview", "preview_of", "height_map_png", "resumed_from_journal", "save_pin_log_raw", "pin_log_csv", "WARM_UP"]
+__all__ = ["plan_with_preview", "preview_of", "height_map_png", "resumed_from_journal",
+           "save_pin_log_raw", "pin_log_csv", "WARM_UP"]
 
 WARM_UP = ("cam.job.jobs", "cam.web.work", "cam.digitize._kernels", "cam.drive.ramps", "cv2")
 """What the worker imports as it starts: the first planning does not wait for it."""
