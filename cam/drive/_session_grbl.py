@@ -134,7 +134,7 @@ def home_on_grbl(session: Any, ctl: GrblControl) -> None:
         hold.record(replace(hold.state.moved_to(tuple(int(v) for v in pos)), homed=True))
     elif hold is not None:
         hold.record(hold.state.lost(f"homing did not finish ({error})"))
+    session.log(f"homed: machine {list(pos)} steps" if not error else f"home ($H): {error}",
+                "info" if not error else "error")  # before the end: whoever sees it idle sees this line too
     session.finish({"activity": "home", "label": "home ($H)", "status": status,
                     "messages": [error] if error else []}, moved)
-    session.log(f"homed: machine {list(pos)} steps" if not error else f"home ($H): {error}",
-                "info" if not error else "error")

@@ -206,7 +206,8 @@ def _book_homing(session: Any, ctl: Controller, order: str, start: Any, end: Any
         hold.record(replace(hold.state.moved_to(end), homed=True))
     status = "finished" if not error else ("emergency-stopped" if ctl.estop_requested else
                                            "stopped" if error == "stopped" else "error")
-    session.finish({"activity": "home", "label": f"home {order.upper()}", "status": status,
-                    "messages": [error] if error else []}, np.asarray(end, np.int64) - np.asarray(start, np.int64))
+    # the line first: whoever sees the session idle sees its log line too (a busy machine ran the waiter between)
     session.log(f"homed {order.upper()}: machine {list(end)} steps" if not error else
                 f"home {order.upper()}: {error}; the position is unknown", "info" if not error else "error")
+    session.finish({"activity": "home", "label": f"home {order.upper()}", "status": status,
+                    "messages": [error] if error else []}, np.asarray(end, np.int64) - np.asarray(start, np.int64))
