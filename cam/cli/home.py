@@ -10,30 +10,17 @@ page's Home does (issue #45 point 3); on grbl that is grbl's own ``$H``.
 from __future__ import annotations
 
 import argparse
-import signal
 import sys
-from typing import Any
 
 from ..drive.homing import check_homing
 from ..drive.machines import backend_of
-from ..drive.ports import MockPort
 from ..drive.state import steps_to_mm
-from ..drive.session import MachineSession
 from ..errors import CamError
-from ..verify.pinlog import write_pin_log
 from .common import port_settings
-from .machine_state import hold_machine
+from .machine_state import hold_machine, run_activity
 from .parser import EXIT_INTERRUPTED
 
 __all__ = ["cmd_home"]
-
-_STOP_SIGNALS = tuple(getattr(signal, n) for n in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, n))
-
-
-def _port_of(args: argparse.Namespace, settings: Any) -> Any:
-    """The port the session homes on: a mock of this command's (its pin log written here; the session gives it
-    the machine file's simulated switches, and refuses a mock without them), else the port's name."""
-    return backend_of(args.port).logging_port(args.port, settings)
 
 
 def cmd_home(args: argparse.Namespace) -> int:
@@ -49,21 +36,9 @@ def cmd_home(args: argparse.Namespace) -> int:
         backend.home_refusal(args.port)  # a machine that cannot home: what it can do instead, in one line
     order = "" if own_cycle else check_homing(settings, args.axes)  # before anything opens: one line
     with hold_machine(args, settings, "cam home") as hold:
-        port = _port_of(args, settings)
-        session = MachineSession(port, settings, realtime=bool(getattr(args, "realtime", False)), state=hold)
-        session.on_detail = lambda text: print(text, file=sys.stderr, flush=True)
         if own_cycle:
             print("homing with the board's own cycle ($H) ...", file=sys.stderr, flush=True)
-        previous = {s: signal.signal(s, lambda signum, frame: session.stop()) for s in _STOP_SIGNALS}
-        try:
-            session.home(order or None)
-            while not session.wait_idle(0.2):  # wakes for Ctrl-C
-                pass
-        finally:
-            for s, handler in previous.items():
-                signal.signal(s, handler)
-            if isinstance(port, MockPort) and args.pin_log:
-                write_pin_log(port.pin_log(), args.pin_log)
+        session, _ = run_activity(args, settings, hold, lambda s: s.home(order or None))
         status = session.last_run.get("status")
         if status != "finished":
             print(f"homing did not finish: {'; '.join(session.last_run.get('messages') or ['stopped'])}; the "

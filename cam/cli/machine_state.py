@@ -7,20 +7,23 @@ state folder, named after the machine file and the port.  Positions given on the
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 from ..drive.state import (
     MachineLock, MachineState, StateBusyError, StateHold, check_in_travel, dump_json, machine_record, mm_to_steps, read_state,
     steps_to_mm,
 )
 from ..drive.grbl_machine import GRBL_OFFSETS, adopt_position, grbl_machine
-from ..drive.machines import DEFAULT_PORT, can
+from ..drive.machines import DEFAULT_PORT, backend_of, can
+from ..drive.ports import MockPort
 from ..drive.session import MachineSession
 from ..errors import CamError
 from ..settings import MachineSettings
+from ..verify.pinlog import write_pin_log
 from .common import port_settings, state_path_of
 
 __all__ = ["cmd_where", "cmd_zero", "hold_machine", "state_path_of"]
@@ -197,3 +200,27 @@ def _zero_on_grbl(args: argparse.Namespace, axes: str, settings: MachineSettings
     print(f"{name} zero of {axes} set here (grbl's too): its zero is at machine {_triple(steps_to_mm(zero, settings))} "
           f"mm ({_triple(zero)} steps)")
     return 0
+
+
+_STOP_SIGNALS = tuple(getattr(signal, n) for n in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, n))
+
+
+def run_activity(args: argparse.Namespace, settings: MachineSettings, hold: Any,
+                 start: Callable[[MachineSession], Any]) -> tuple[MachineSession, dict[str, Any]]:
+    """A session on ``--port`` (a mock of this command's, whose pin log ``--pin-log`` is written here) holding the
+    machine by ``hold``; ``start(session)`` run with Ctrl-C (and SIGTERM, SIGHUP) as a stop, each phase it says
+    printed on stderr, waited for.  Returns the session and its last run (``cam home``, ``cam probe``)."""
+    port = backend_of(args.port).logging_port(args.port, settings)
+    session = MachineSession(port, settings, realtime=bool(getattr(args, "realtime", False)), state=hold)
+    session.on_detail = lambda text: print(text, file=sys.stderr, flush=True)
+    previous = {s: signal.signal(s, lambda signum, frame: session.stop()) for s in _STOP_SIGNALS}
+    try:
+        start(session)
+        while not session.wait_idle(0.2):  # wakes for Ctrl-C
+            pass
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+        if isinstance(port, MockPort) and getattr(args, "pin_log", None):
+            write_pin_log(port.pin_log(), args.pin_log)
+    return session, session.last_run

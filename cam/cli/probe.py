@@ -13,14 +13,12 @@ Ctrl-C stops (the tool lifted); a probe that touches nothing is one line, exit c
 from __future__ import annotations
 
 import argparse
-import signal
 import sys
 from pathlib import Path
 from typing import Any
 
 
 from ..drive.machines import backend_of
-from ..drive.ports import MockPort
 from ..drive.probe_grid import grid_plan
 from ..drive.probing import job_area_mm
 from ..drive.session import MachineSession
@@ -28,14 +26,11 @@ from ..drive.state import steps_to_mm
 from ..errors import CamError
 from ..job.jobs import JobOptions, prepare_job
 from ..settings import MachineSettings
-from ..verify.pinlog import write_pin_log
 from .common import port_settings
-from .machine_state import hold_machine
+from .machine_state import hold_machine, run_activity
 from .parser import EXIT_BAD_INPUT, EXIT_INTERRUPTED
 
 __all__ = ["cmd_probe"]
-
-_STOP_SIGNALS = tuple(getattr(signal, n) for n in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, n))
 
 
 def cmd_probe(args: argparse.Namespace) -> int:
@@ -47,25 +42,6 @@ def cmd_probe(args: argparse.Namespace) -> int:
     if args.probe_what == "tool":
         return _probe_tool(args, settings)
     return _probe_grid(args, settings)
-
-
-def _run(args: argparse.Namespace, settings: MachineSettings, hold: Any, start: Any) -> tuple[MachineSession, Any]:
-    """A session on the port (a mock of this command's, whose pin log is written here), ``start(session)`` run with
-    Ctrl-C as a stop, waited for; returns the session and the status line when it did not finish."""
-    port = backend_of(args.port).logging_port(args.port, settings)
-    session = MachineSession(port, settings, realtime=bool(args.realtime), state=hold)
-    session.on_detail = lambda text: print(text, file=sys.stderr, flush=True)
-    previous = {s: signal.signal(s, lambda signum, frame: session.stop()) for s in _STOP_SIGNALS}
-    try:
-        start(session)
-        while not session.wait_idle(0.2):  # wakes for Ctrl-C
-            pass
-    finally:
-        for s, handler in previous.items():
-            signal.signal(s, handler)
-        if isinstance(port, MockPort) and args.pin_log:
-            write_pin_log(port.pin_log(), args.pin_log)
-    return session, session.last_run
 
 
 def _ended(info: dict) -> int:
@@ -84,7 +60,7 @@ def _probe_z(args: argparse.Namespace, settings: MachineSettings) -> int:
     if depth < 1:
         raise CamError(f"--depth {args.depth:g} is less than one Z step ({settings.mm_per_step_z:g} mm)")
     with hold_machine(args, settings, "cam probe z") as hold:
-        session, info = _run(args, settings, hold, lambda s: s.probe_work_z(args.plate, args.feed, depth, wait=False))
+        session, info = run_activity(args, settings, hold, lambda s: s.probe_work_z(args.plate, args.feed, depth, wait=False))
         if info.get("status") != "finished":
             return _ended(info)
         result = (session.last_probe or [None])[0]
@@ -101,7 +77,7 @@ def _probe_z(args: argparse.Namespace, settings: MachineSettings) -> int:
 def _probe_tool(args: argparse.Namespace, settings: MachineSettings) -> int:
     with hold_machine(args, settings, "cam probe tool") as hold:
         before = int(hold.state.work_zero_steps()[2])
-        session, info = _run(args, settings, hold, lambda s: s.probe_tool(args.plate, args.feed,
+        session, info = run_activity(args, settings, hold, lambda s: s.probe_tool(args.plate, args.feed,
                                                                           clearance_mm=args.clearance, wait=False))
         if info.get("status") != "finished":
             return _ended(info)
@@ -151,7 +127,7 @@ def _probe_grid(args: argparse.Namespace, settings: MachineSettings) -> int:
                   f"{args.safe_height:g} mm above the work Z zero, at most {max(1, round(depth_mm / per_z)) * per_z:g} "
                   f"mm down", file=sys.stderr, flush=True)
 
-        session, info = _run(args, settings, hold, start)
+        session, info = run_activity(args, settings, hold, start)
         if info.get("status") != "finished":
             return _ended(info)
     heights = session.last_map.height_mm

@@ -278,10 +278,9 @@ class GrblEmulator(_System, _GCode, _Realtime, _Motion, _Probe, AbstractContextM
         with self._lock:
             self._trips.append([int(after_blocks), float(fraction)])
 
-    # ------------------------------------------------------------------ queries (thread-safe copies)
     @property
     def state(self) -> str:
-        """grbl's machine state as a status report shows it (``Idle``, ``Run``, ``Hold:0``, ``Alarm``...)."""
+        """grbl's state as a status report shows it (``Idle``, ``Run``, ``Hold:0``...); queries return copies."""
         with self._lock:
             return self._state_text()
 

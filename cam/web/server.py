@@ -85,6 +85,7 @@ except ImportError:  # pragma: no cover - not Unix: no file limit to raise
 
 from ..drive.journal import read_journal
 from ..drive.machines import DEFAULT_PORT, can
+from ..drive.probing import job_area_mm
 from ..drive.session import MachineSession
 from ..drive.state import MachineState, StateHold, machine_record
 from ..errors import BusyError, CamError, CapabilityError, StalePlanError
@@ -676,8 +677,6 @@ async def _probe_tool(st: _AppState, request: Request) -> dict[str, Any]:
 async def _probe_area(st: _AppState, request: Request) -> dict[str, Any]:
     """``{"job": id, "spacing_mm": 10, "margin_mm": 0}``: Probe the job's area (``cam probe grid --over``): a
     height map over where the planned job cuts, which the jobs planned after it are levelled to."""
-    from ..drive.probing import job_area_mm
-
     body = await _body_json(request)
     job_id = str(body.get("job", ""))
     job = st.prepared.get(job_id)

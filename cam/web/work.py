@@ -15,7 +15,11 @@ import numpy as np
 
 from ..drive.journal import read_journal
 from ..drive.maximus.resume import resume_board_job
+from ..drive.probing import job_cuts_mm
+from ..job.heightmap_level import load_height_map
 from ..job.jobs import JobOptions, PreparedJob, prepare_job, resume_job
+from ..render.map_picture import height_map_picture
+from ..render.picture import encode_png
 from ..settings import MachineSettings
 from ..verify.pinlog import PinLog, PinLogPart, write_pin_log
 
@@ -54,11 +58,6 @@ def height_map_png(map_path: str, job: Any, machine_state: Any, settings: Machin
     """The PNG of the height map at ``map_path`` (:func:`cam.render.map_picture.height_map_picture`) with ``job``'s
     cuts over it where it would run in ``machine_state`` (:func:`cam.drive.probing.job_cuts_mm`; None: the map
     alone), as ``cam preview MAP.json --over FILE`` draws it (in the worker)."""
-    from ..drive.probing import job_cuts_mm
-    from ..job.heightmap_level import load_height_map
-    from ..render.map_picture import height_map_picture
-    from ..render.picture import encode_png
-
     cuts = None if job is None else job_cuts_mm(job, machine_state, settings)
     return encode_png(height_map_picture(load_height_map(map_path), cuts_mm=cuts))
 
