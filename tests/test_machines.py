@@ -208,3 +208,15 @@ def test_one_typed_job_crosses_into_a_machine():
     assert machine_job(mj) is mj
     with pytest.raises(CapabilityError, match="cannot run a str"):
         machine_job("job.png")
+
+
+def test_the_session_keeps_what_every_machine_shares():
+    """Outside grbl's own session part, the session and its parts reach a machine only through its back end: no
+    branch on the grbl board (set position, work zeros and offsets, a jog while unknown, probing's Z zero go
+    through the back end's hooks)."""
+    drive = ROOT / "cam" / "drive"
+    files = [drive / "session.py", *(p for p in sorted(drive.glob("_session_*.py")) if p.name != "_session_grbl.py")]
+    board = re.compile(r"\b(self|session)\.grbl\b(?!: Any = None)|\bself\.kind\s*[!=]=")
+    found = [f"{p.relative_to(ROOT)}:{n}: {line.strip()}" for p in files
+             for n, line in enumerate(p.read_text(encoding="utf-8").splitlines(), 1) if board.search(line)]
+    assert not found, "\n".join(found)

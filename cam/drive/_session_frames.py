@@ -20,7 +20,6 @@ import numpy as np
 
 from ..errors import CamError, PlanError
 from ._session_parts import SessionControls
-from .grbl_machine import GRBL_OFFSETS
 from .placement import approach_to_work_zero, ended_state, goto_path, placed_home
 from .machine_job import MachineJob
 from .machines import require
@@ -79,8 +78,7 @@ class SessionFrames(SessionControls):
                 for a in names:
                     here["XYZ".index(a)] = 0
                 self._position = np.asarray(here, np.int64)
-                if self.grbl is not None:
-                    self.grbl.rebase(tuple(here))
+                self.backend.rebase(self, tuple(here))
                 self._bump()
                 self.log(f"this position is the origin of {names} now")
                 return
@@ -92,8 +90,7 @@ class SessionFrames(SessionControls):
             for a in names:
                 zero["XYZ".index(a)] = here["XYZ".index(a)]
             self.state_hold.record(st.with_offset(name, tuple(zero)))  # type: ignore[arg-type]
-            if self.grbl is not None and name in GRBL_OFFSETS:  # grbl's own display agrees (G10 L20)
-                self.grbl.set_work_zero(name, names)
+            self.backend.work_zero_set(self, name, names)  # a board that keeps offsets: its own agree
             self._bump()
         zmm = steps_to_mm(zero, self.settings)
         self.log(f"{name} zero of {names} set here: machine {', '.join(f'{v:g}' for v in zmm)} mm")
@@ -108,8 +105,7 @@ class SessionFrames(SessionControls):
             if not isinstance(offset, str) or offset not in st.offsets_steps:
                 raise PlanError(f"offset must be one of {', '.join(st.offsets_steps)}, got {shown(offset)}")
             self.state_hold.record(replace(st, active_offset=offset))
-            if self.grbl is not None and offset in GRBL_OFFSETS:
-                self.grbl.use_offset(offset)
+            self.backend.offset_used(self, offset)
             self._bump()
         self.log(f"work offset {offset} active")
 

@@ -25,7 +25,6 @@ from ..errors import CamError, PlanError
 from ..job.heightmap_level import save_height_map
 from ..values import shown
 from ._session_parts import Activity
-from .grbl_probe import grbl_set_work_z
 from .probe_grid import GridPlan, grid_plan, height_map_of
 from .probing import DEFAULT_DEPTH_MM, ProbeError, Prober, ProbeResult, ProbeRun, probe_worker
 from .state import ToolProbe, check_in_travel, steps_to_mm
@@ -297,8 +296,7 @@ class SessionProbe:
             hold = self.state_hold
             if hold is None:
                 self._position = self._position - np.array([0, 0, int(z_steps)], np.int64)
-                if self.grbl is not None:
-                    self.grbl.rebase(tuple(int(v) for v in self._position))
+                self.backend.rebase(self, tuple(int(v) for v in self._position))
                 self._bump()
                 self.log(f"Z {int(z_steps)} steps is the origin's Z now")
                 return
@@ -309,8 +307,7 @@ class SessionProbe:
             zero = list(st.work_zero_steps(name))
             zero[2] = int(z_steps)
             check_in_travel(zero, self.settings, f"the {name} work zero")
-            if self.grbl is not None:
-                grbl_set_work_z(self.grbl, name, int(z_steps), self.settings)
+            self.backend.work_z_set(self, name, int(z_steps))
             hold.record(st.with_offset(name, tuple(zero)))
             self._bump()
         zmm = steps_to_mm(zero, self.settings)

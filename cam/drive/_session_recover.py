@@ -82,11 +82,7 @@ class SessionRecover(SessionChecks):
             self._check_free()
             if self.state_hold is not None:
                 check_in_travel(position, self.settings, "the position given")
-            if self.grbl is not None:  # the user's word: grbl unlocked where the tool stands, its MPos read from here
-                if self.grbl.in_alarm():
-                    self.grbl.unlock()
-                if self.grbl.position_steps(self.grbl.status()) != position:
-                    self.grbl.rebase(position)
+            self.backend.rebase(self, position)  # the user's word: a board that keeps its position takes it
             self._position = np.asarray(position, np.int64)
             if self.state_hold is not None:  # the user's word: the machine frame is not the switches' any more
                 st = self.state_hold.state.moved_to(position)
@@ -109,9 +105,7 @@ class SessionRecover(SessionChecks):
         reason = hold.state.unknown_reason or "not recorded"
         job = jog_job(axis, steps, settings=soft_limits_off(self.settings))
         self.log(UNKNOWN_JOG_LINE, "warning")
-        if self.grbl is not None and self.grbl.in_alarm():  # grbl refuses every move in its alarm: the user jogs
-            self.grbl.unlock()
-            self.log(f"{self.port}: grbl's alarm unlocked ($X) for this jog; the position stays unknown", "warning")
+        self.backend.before_unknown_jog(self)  # grbl: its alarm unlocked for the jog
         self._start_moves("jog", job, job.source)
         if self._activity is not None:  # the worker books its end under this lock: not before this line
             self._activity.unknown_reason = reason

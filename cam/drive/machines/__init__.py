@@ -179,6 +179,23 @@ class Backend:
         session's ``_launch_probe``; a machine without a probe refuses in one line."""
         self.require(session.port, "probes", "probing")
 
+    # -- the machine's own frame, kept with the session's (a board that keeps its own position: grbl) ------------
+    def rebase(self, session: Any, position_steps: tuple[int, int, int]) -> None:
+        """The session's frame was redefined (Set position, an origin without a state file): the tool stands at
+        ``position_steps`` (machine frame) from now on."""
+
+    def work_zero_set(self, session: Any, offset: str, axes: str) -> None:
+        """Work offset ``offset``'s zero of ``axes`` was set where the tool stands."""
+
+    def work_z_set(self, session: Any, offset: str, z_steps: int) -> None:
+        """Work offset ``offset``'s Z zero was set at machine Z ``z_steps`` (a probe's contact)."""
+
+    def offset_used(self, session: Any, offset: str) -> None:
+        """Work offset ``offset`` is the active one now."""
+
+    def before_unknown_jog(self, session: Any) -> None:
+        """A jog with the position unknown is about to start (soft limits off)."""
+
     def home_refusal(self, port: Any) -> None:
         """Refuse homing in one line on a machine that can do neither (CapabilityError saying what it can do
         instead); nothing on the others."""

@@ -16,8 +16,8 @@ from ...errors import CamError
 from ...settings import MachineSettings
 from ..grbl_link import parse_grbl_url
 from ..machine_job import MachineJob
-from ..grbl_machine import adopt_position, grbl_machine
-from ..grbl_probe import start_probe_on_grbl
+from ..grbl_machine import GRBL_OFFSETS, adopt_position, grbl_machine
+from ..grbl_probe import grbl_set_work_z, start_probe_on_grbl
 from . import Backend, register
 
 __all__ = ["GrblBackend"]
@@ -68,6 +68,31 @@ class GrblBackend(Backend):
 
     def start_moves(self, session: Any, activity: str, job: Any, label: str) -> None:
         session._launch_grbl(activity, job, label, 0.0)
+
+    def rebase(self, session: Any, position_steps: tuple[int, int, int]) -> None:
+        """The user's word: grbl unlocked where the tool stands, its MPos read from here."""
+        grbl = session.grbl
+        if grbl.in_alarm():
+            grbl.unlock()
+        if grbl.position_steps(grbl.status()) != tuple(position_steps):
+            grbl.rebase(tuple(position_steps))
+
+    def work_zero_set(self, session: Any, offset: str, axes: str) -> None:
+        if offset in GRBL_OFFSETS:  # grbl's own display agrees (G10 L20)
+            session.grbl.set_work_zero(offset, axes)
+
+    def work_z_set(self, session: Any, offset: str, z_steps: int) -> None:
+        grbl_set_work_z(session.grbl, offset, int(z_steps), session.settings)
+
+    def offset_used(self, session: Any, offset: str) -> None:
+        if offset in GRBL_OFFSETS:
+            session.grbl.use_offset(offset)
+
+    def before_unknown_jog(self, session: Any) -> None:
+        if session.grbl.in_alarm():  # grbl refuses every move in its alarm: the user jogs
+            session.grbl.unlock()
+            session.log(f"{session.port}: grbl's alarm unlocked ($X) for this jog; the position stays unknown",
+                        "warning")
 
     def home(self, session: Any, axes: Optional[str]) -> bool:
         if axes:
