@@ -17,7 +17,10 @@ from typing import Any, Optional
 
 from .errors import PlanError
 
-__all__ = ["MAX_ABS_STEPS", "finite_number", "whole_number", "xyz_numbers", "xyz_steps", "steps_in_range", "shown"]
+__all__ = ["MAX_ABS_STEPS", "FEED_OVERRIDE_RANGE", "finite_number", "whole_number", "xyz_numbers", "xyz_steps", "steps_in_range", "shown"]
+
+FEED_OVERRIDE_RANGE = (10, 200)
+"""A feed override's limits, percent (grbl's config.h defaults: MIN 10, MAX 200; checked on every machine first)."""
 
 MAX_ABS_STEPS = 1_000_000_000
 """The most machine steps any position or move may be from its origin either way (no machine has that much

@@ -211,11 +211,11 @@ def test_one_typed_job_crosses_into_a_machine():
 
 
 def test_the_session_keeps_what_every_machine_shares():
-    """Outside grbl's own session part, the session and its parts reach a machine only through its back end: no
-    branch on the grbl board (set position, work zeros and offsets, a jog while unknown, probing's Z zero go
-    through the back end's hooks)."""
+    """The session and its parts reach a machine only through its back end: no branch on the grbl board (its jobs,
+    moves, homing, feed override and state, set position, work zeros and offsets, a jog while unknown, probing's Z
+    zero are the grbl back end's, :mod:`cam.drive.machines.grbl`)."""
     drive = ROOT / "cam" / "drive"
-    files = [drive / "session.py", *(p for p in sorted(drive.glob("_session_*.py")) if p.name != "_session_grbl.py")]
+    files = [drive / "session.py", *sorted(drive.glob("_session_*.py"))]
     board = re.compile(r"\b(self|session)\.grbl\b(?!: Any = None)|\bself\.kind\s*[!=]=")
     found = [f"{p.relative_to(ROOT)}:{n}: {line.strip()}" for p in files
              for n, line in enumerate(p.read_text(encoding="utf-8").splitlines(), 1) if board.search(line)]

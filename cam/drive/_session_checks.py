@@ -14,12 +14,12 @@ from ..verify.pinlog import motion_extent
 from .chunks import ChunkedPlan
 from .machine_job import JobInput, MachineJob, machine_job
 from .steps import StepPlan
-from ._session_grbl import SessionGrbl
+from ._session_frames import SessionFrames
 
 __all__ = ["SessionChecks"]
 
 
-class SessionChecks(SessionGrbl):
+class SessionChecks(SessionFrames):
     """The checks of a job against the machine, its port and the state it was planned in (a mixin)."""
 
     def check_job(self, job: JobInput) -> None:

@@ -153,6 +153,7 @@ class SessionView:
                 "capabilities": sorted(self.backend.capabilities_of(self.port)),  # the page asks these, not names
                 "realtime": self.realtime,
                 "version": self.version,
+                **(self.backend.state_extra(self) or {}),  # what the machine adds (grbl: its state, override)
             }
 
     def wait_change(self, version: int, timeout_s: float) -> int:

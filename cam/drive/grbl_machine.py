@@ -39,6 +39,7 @@ from ..errors import CamError, PlanError, PortError
 from ..formats.gcode_export import format_mm
 from ..job.model import CUT
 from ..settings import MachineSettings, Travel
+from ..values import FEED_OVERRIDE_RANGE
 from .runner import EMERGENCY_STOPPED, FINISHED, STOPPED
 from .grbl_journal import GrblJournal, GrblLines, Seen, on_path_tolerance_steps
 from .grbl_link import GrblLink, GrblStatus, alarm_text, open_grbl, parse_grbl_url, settings_mismatches
@@ -52,8 +53,6 @@ POLL_S = 0.15
 """Seconds between ``?`` status polls (about 7 a second: issue #30 asks for 5-10 Hz)."""
 GRBL_OFFSETS = ("G54", "G55", "G56", "G57", "G58", "G59")
 """The work offsets grbl has (no G59.1-G59.3: grbl's error 29)."""
-FEED_OVERRIDE_RANGE = (10, 200)
-"""grbl's feed override limits, percent (grbl's config.h defaults: MIN 10, MAX 200)."""
 
 Steps3 = tuple[int, int, int]
 

@@ -54,6 +54,7 @@ from ..job.model import Job, travel_job
 from ..job.moves import jog as jog_job
 from ..job.moves import jog_steps, to_origin
 from ..settings import DEFAULT_SETTINGS, MachineSettings
+from ..values import FEED_OVERRIDE_RANGE, finite_number
 from .apart import RunnerProcess
 from .journal import JournalSpec, journal_spec
 from ._session_parts import Activity, Prompt, PromptFn
@@ -234,6 +235,21 @@ class MachineSession(SessionRecover, SessionPinLogs, SessionProbe):
                 return
             job = jog_job(axis, n, settings=self.settings, position_steps=self.position_steps())
             self._start_moves("jog", job, job.source)
+
+    def feed_override(self, percent: float) -> None:
+        """Set the feed override to ``percent`` (a number 10..200, rounded to a whole percent) on a machine that
+        has one (grbl: its real-time override bytes).
+
+        Raises:
+            PlanError: not a finite number (text, a boolean, infinity) or outside 10..200 (checked first, on any
+            port); CapabilityError: the machine has no feed override."""
+        lo, hi = FEED_OVERRIDE_RANGE
+        pct = int(round(finite_number(percent, "percent", lo=lo, hi=hi, unit="%")))
+        self.backend.require(self.port, "overrides", "a feed override")
+        self.backend.feed_override(self, pct)
+        self.log(f"feed override {pct} %")
+        with self._lock:
+            self._bump()
 
     def set_offset(self) -> None:
         """Make where the head stands the origin (the PC program's Set Offset: "positionX = 0; positionY = 0;

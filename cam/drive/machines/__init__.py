@@ -179,6 +179,14 @@ class Backend:
         session's ``_launch_probe``; a machine without a probe refuses in one line."""
         self.require(session.port, "probes", "probing")
 
+    def feed_override(self, session: Any, percent: int) -> None:
+        """Set the feed override (back ends with ``overrides``; the session checked the number and the capability)."""
+        raise CapabilityError(_CANNOT["overrides"].format(port=str(session.port), what="a feed override"))
+
+    def state_extra(self, session: Any) -> Optional[dict[str, Any]]:
+        """What this machine adds to the session's snapshot (its own state, overrides), or None."""
+        return None
+
     # -- the machine's own frame, kept with the session's (a board that keeps its own position: grbl) ------------
     def rebase(self, session: Any, position_steps: tuple[int, int, int]) -> None:
         """The session's frame was redefined (Set position, an origin without a state file): the tool stands at
