@@ -61,7 +61,7 @@ from ._session_parts import Activity, Prompt, PromptFn
 from ._session_recover import UNKNOWN_JOG_LINE, SessionRecover, maximus_cannot_home
 from ._session_pinlog import SessionPinLogs
 from ._session_probe import SessionProbe
-from .activities import BoardControl, run_on_board, run_steps
+from .activities import run_steps
 from .machine_job import JobInput, MachineJob, machine_job
 from .machines import DEFAULT_PORT, backend_of
 from .ports import MockPort, Port
@@ -310,15 +310,6 @@ class MachineSession(SessionRecover, SessionPinLogs, SessionProbe):
         self._begin(Activity(name, label, ctl, len(plan), estimated_s, cursor))
         self.log(f"{label}: started")
         self._spawn(run_steps, (self, name, plan, ctl, label, journal, cursor), name)
-
-    def _launch_board(self, name: str, work: Callable[[Any, Any], None], job: Optional[MachineJob], label: str,
-                      moved_steps: Any = (0, 0, 0)) -> None:
-        ctl = BoardControl(self.port)
-        holes = None if job is None or job.drill_plan is None else job.drill_plan.holes_steps
-        total = len(holes) if holes is not None else 1
-        self._begin(Activity(name, label, ctl, total, job.estimated_s if job is not None else 0.0))
-        self.log(f"{label}: started on {self.port}")
-        self._spawn(run_on_board, (self, name, work, ctl, label, np.asarray(moved_steps, np.int64)), name)
 
     def _spawn(self, target: Callable[..., None], args: tuple, name: str) -> None:
         t = threading.Thread(target=target, args=args, name=f"cam-{name}", daemon=True)

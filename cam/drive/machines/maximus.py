@@ -13,7 +13,8 @@ import numpy as np
 
 from ...settings import MachineSettings
 from .._session_recover import maximus_cannot_home
-from ..activities import drill_work, move_work
+from .._session_parts import Activity
+from ..activities import BoardControl, BoardWork, drill_work, move_work, run_on_board
 from ..machine_job import MachineJob
 from ..maximus.board import (MAXIMUS_SETTINGS, board_settings, board_speeds_line, drill_arguments, drill_job,
                              maximus_port, require_drilling)
@@ -78,15 +79,27 @@ class MaximusBackend(Backend):
                   arguments["tool_changes"], session.settings.maximus)
 
     def start_job(self, session: Any, job: MachineJob, name: str, journal: Any, controller: Any) -> None:
-        session._launch_board("job", drill_work(job.prepared, session.settings, session._journal_spec(job, journal)),
-                              job, name)
+        _launch(session, "job", drill_work(job.prepared, session.settings, session._journal_spec(job, journal)), job,
+                name)
 
     def start_moves(self, session: Any, activity: str, job: Any, label: str) -> None:
-        session._launch_board(activity, move_work(job.points_steps), None, label,
+        _launch(session, activity, move_work(job.points_steps), None, label,
                               moved_steps=np.asarray(job.points_steps)[-1])
 
     def home_refusal(self, port: Any) -> None:
         raise maximus_cannot_home(port)
+
+
+def _launch(session: Any, name: str, work: BoardWork, job: Optional[MachineJob], label: str,
+            moved_steps: Any = (0, 0, 0)) -> None:
+    """Run ``work`` on the board in the background (:func:`cam.drive.activities.run_on_board`): a drill job's
+    holes are its progress (one for a move)."""
+    ctl = BoardControl(session.port)
+    holes = None if job is None or job.drill_plan is None else job.drill_plan.holes_steps
+    total = len(holes) if holes is not None else 1
+    session._begin(Activity(name, label, ctl, total, job.estimated_s if job is not None else 0.0))
+    session.log(f"{label}: started on {session.port}")
+    session._spawn(run_on_board, (session, name, work, ctl, label, np.asarray(moved_steps, np.int64)), name)
 
 
 register(MaximusBackend())
