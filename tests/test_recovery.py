@@ -32,7 +32,7 @@ from cam.sim.grbl import start_emulator as start_grbl
 from cam.sim.maximus import start_emulator as start_maximus
 from cam.verify.command_log import commands_to_step_log
 from cam.verify.pinlog import decode_pin_log, read_pin_log
-from conftest import SAMPLES, drawing_from_rows, run_cli
+from conftest import ROOT, SAMPLES, drawing_from_rows, run_cli
 from support.grbl import quick_thread_switches  # noqa: F401 (autouse)
 from support.maximus_log import decode_port_log, hole_strokes
 from test_web import EXCELLON, FAST, Server, _open, browser, page  # noqa: F401 (fixtures)
@@ -168,8 +168,12 @@ def _server_with_state(tmp_path: Path, settings=FAST, **config) -> Server:
     return Server(tmp_path, settings=settings, realtime=False, state_file=str(tmp_path / "m.json"), **config)
 
 
-def test_page_recovers_after_estop_with_set_position_then_moves(tmp_path):
-    s = _server_with_state(tmp_path)
+@pytest.mark.parametrize("port", ["mock", "cmd:mock"])
+def test_page_recovers_after_estop_with_set_position_then_moves(tmp_path, port):
+    """On the mock and on seed 004's command-byte unit (issue #45 point 3: every flow on every machine, from the
+    page): an e-stop mid-job, a jog while unknown, Set position, a jog and a go-to, with no restart."""
+    settings = FAST if port == "mock" else load_settings(ROOT / "profiles" / "seed004-controller.toml")
+    s = _server_with_state(tmp_path, settings, machine_port=port)
     try:
         drl = tmp_path / "two.drl"
         drl.write_text(EXCELLON)
@@ -196,17 +200,20 @@ def test_page_recovers_after_estop_with_set_position_then_moves(tmp_path):
         # Set position: known again, no restart; then it moves as before
         status, st = s.call("POST", "/api/set-position", {"xyz": [1, 2, 0], "unit": "mm"})
         assert status == 200 and st["where"]["position_known"] and not st["where"]["homed"], st
-        assert st["where"]["machine_steps"] == [round(1 / FAST.mm_per_step_xy), round(2 / FAST.mm_per_step_xy), 0]
-        assert read_state(tmp_path / "m.json", FAST).position_known
+        assert st["where"]["machine_steps"] == [round(1 / settings.mm_per_step_xy), round(2 / settings.mm_per_step_xy), 0]
+        assert read_state(tmp_path / "m.json", settings).position_known
         status, st = s.call("POST", "/api/jog", {"axis": "x", "steps": 10})
         assert status == 200, st
         st = s.wait_idle()
-        assert st["last"]["status"] == "finished" and st["where"]["machine_steps"][0] == round(1 / FAST.mm_per_step_xy) + 10
+        assert st["last"]["status"] == "finished" and st["where"]["machine_steps"][0] == round(1 / settings.mm_per_step_xy) + 10
         assert not any("soft limits are off" in line["text"] for line in st["log"][-2:])
         status, st = s.call("POST", "/api/goto", {"xyz": [0, 0, 0], "machine": True})
         assert status == 200, st
         st = s.wait_idle()
         assert st["last"]["status"] == "finished" and st["where"]["machine_steps"] == [0, 0, 0]
+        if port.startswith("cmd:"):  # the control unit has no switches cam reads: the page's Home says so
+            status, err = s.call("POST", "/api/home", {})
+            assert status in (400, 409) and "no switches" in err["error"] and "\n" not in err["error"], err
     finally:
         s.close()
 
