@@ -36,10 +36,12 @@ import ast
 import functools
 import io
 import os
+import re
 import shutil
 import signal
 import sys
 import tempfile
+import threading
 import traceback
 import warnings
 from dataclasses import dataclass
@@ -78,11 +80,23 @@ def parsed_source(path: Path) -> ast.Module:
     return ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
 
 
+_ACTIVITY_THREAD = re.compile(r"cam-(job|jog|origin|home|probe)$")
+"""The names of a machine session's activity threads (cam.drive.session: ``cam-{activity}``)."""
+
+
 @pytest.fixture(autouse=True)
 def state_home():
-    """Each test starts with no machine state: every machine at its home, position known, nothing running."""
+    """Each test starts with no machine state: every machine at its home, position known, nothing running.
+
+    A test ends when the machine activities it started have ended (at most 10 s each): an activity still running
+    when its emulator was stopped ends in a link fault a moment later, and the fault's marker (keyed by the
+    device, /dev/pts/N) must land in this test's state folder, not in the next test's, whose emulator may get the
+    same pty."""
     shutil.rmtree(STATE_HOME / "cam", ignore_errors=True)
     yield STATE_HOME / "cam"
+    for thread in threading.enumerate():
+        if thread is not threading.current_thread() and _ACTIVITY_THREAD.match(thread.name):
+            thread.join(10)
 
 
 def pytest_sessionfinish(session, exitstatus):
