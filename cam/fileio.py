@@ -1,5 +1,5 @@
-"""File helpers: atomic writes (a failed run never leaves a half-written output behind) and text reads
-whose failures are one-line parse errors."""
+"""File helpers: atomic writes (a failed run never leaves a half-written output behind) and bounded reads
+whose failures are one-line parse errors naming the file."""
 from __future__ import annotations
 
 import glob
@@ -7,11 +7,11 @@ import os
 import secrets
 import time
 from pathlib import Path
-from typing import Iterable
+from typing import Iterable, Optional
 
 from .errors import CamError, ParseError
 
-__all__ = ["atomic_write_bytes", "atomic_write_text", "read_text"]
+__all__ = ["atomic_write_bytes", "atomic_write_text", "read_bytes", "read_text"]
 
 _NEW_FILE_MODE = 0o666
 """Mode asked for a new output; the process umask takes its bits away (0o644 under umask 022), as for open()."""
@@ -92,19 +92,62 @@ def atomic_write_text(path: str | os.PathLike, text: str | Iterable[str]) -> Pat
     return atomic_write_bytes(path, (piece.encode("utf-8") for piece in text))
 
 
-def read_text(path: str | os.PathLike, *, not_text: str) -> tuple[Path, str]:
-    """``(path, text)`` of a UTF-8 text file.
+def read_bytes(path: str | os.PathLike, *, max_bytes: Optional[int] = None, what: str = "a file"
+               ) -> tuple[Path, bytes]:
+    """``(path, bytes)`` of a file, read whole, at most ``max_bytes`` long (None: any length).
+
+    The size is taken from the open file and the read stops one byte past ``max_bytes``, so a file that grows
+    while it is read is refused too, and never read past that bound.
 
     Raises:
-        ParseError: ``"{path}: file not found"``, ``"{path}: cannot read (...)"``, or
-            ``"{path}:1: {not_text}"`` when the bytes are not UTF-8.
+        ParseError: one line naming the file: ``"{path}: file not found"``, ``"{path}: is a folder, not {what}"``,
+            ``"{path}: {size} bytes, more than {what} may be ({max_bytes})"`` and ``"{path}: cannot read (...)"``.
+
+    >>> read_bytes("/nonexistent/map.json")
+    Traceback (most recent call last):
+    ...
+    cam.errors.ParseError: /nonexistent/map.json: file not found
     """
     p = Path(path)
+    if max_bytes is not None and (isinstance(max_bytes, bool) or not isinstance(max_bytes, int) or max_bytes < 0):
+        raise ValueError(f"max_bytes must be a whole number >= 0 or None, got {max_bytes!r}")
+
+    def too_big(size: int) -> ParseError:
+        return ParseError(f"{p}: {size:,} bytes, more than {what} may be ({max_bytes:,})")
+
     try:
-        return p, p.read_text(encoding="utf-8")
+        with open(p, "rb") as handle:
+            if max_bytes is None:
+                return p, handle.read()
+            size = os.fstat(handle.fileno()).st_size
+            if size > max_bytes:
+                raise too_big(size)
+            data = handle.read(max_bytes + 1)
     except FileNotFoundError:
         raise ParseError(f"{p}: file not found") from None
+    except IsADirectoryError:
+        raise ParseError(f"{p}: is a folder, not {what}") from None
+    except OSError as exc:
+        if p.is_dir():  # Windows says "permission denied" of a folder
+            raise ParseError(f"{p}: is a folder, not {what}") from None
+        raise ParseError(f"{p}: cannot read ({exc.strerror or exc})") from None
+    if len(data) > max_bytes:  # it grew while it was read
+        raise too_big(len(data))
+    return p, data
+
+
+def read_text(path: str | os.PathLike, *, not_text: str, max_bytes: Optional[int] = None,
+              what: str = "a file") -> tuple[Path, str]:
+    """``(path, text)`` of a UTF-8 text file (read by :func:`read_bytes`, at most ``max_bytes`` long), its line
+    ends made ``\\n`` (``\\r\\n`` and ``\\r`` too, as Python's text files read them).
+
+    Raises:
+        ParseError: the one-line messages of :func:`read_bytes`, or ``"{path}:1: {not_text}"`` when the bytes are
+            not UTF-8.
+    """
+    p, raw = read_bytes(path, max_bytes=max_bytes, what=what)
+    try:
+        text = raw.decode("utf-8")
     except UnicodeDecodeError:
         raise ParseError(f"{p}:1: {not_text}") from None
-    except OSError as exc:
-        raise ParseError(f"{p}: cannot read ({exc.strerror or exc})") from None
+    return p, text.replace("\r\n", "\n").replace("\r", "\n")

@@ -102,3 +102,40 @@ def test_a_killed_or_failed_run_leaves_the_earlier_pin_log_and_report_intact(tmp
     assert bad.returncode == 2
     assert (pins.read_bytes(), report.read_bytes()) == before
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")], "no temporary file left behind"
+
+
+def test_one_bounded_reader_names_the_file_in_each_one_line_failure(tmp_path, monkeypatch):
+    """cam.fileio.read_bytes is the one bounded read (read_text and the height map's reader use it): not found, a
+    folder, too big (by the open file's size, and a file that grew past the bound while it was read) and not
+    readable are each one line naming the file; within the bound the bytes come back whole."""
+    from cam.errors import ParseError
+    from cam.fileio import read_bytes, read_text
+
+    f = tmp_path / "a.bin"
+    f.write_bytes(b"x" * 10)
+    assert read_bytes(f, max_bytes=10) == (f, b"x" * 10) and read_bytes(f) == (f, b"x" * 10)
+    cases = [(tmp_path / "none.bin", 10, f"{tmp_path / 'none.bin'}: file not found"),
+             (tmp_path, 10, f"{tmp_path}: is a folder, not a thing"),
+             (f, 9, f"{f}: 10 bytes, more than a thing may be (9)")]
+    for path, most, want in cases:
+        with pytest.raises(ParseError) as e:
+            read_bytes(path, max_bytes=most, what="a thing")
+        assert str(e.value) == want
+    real_fstat = os.fstat
+    monkeypatch.setattr(os, "fstat", lambda fd: os.stat_result((0,) * 6 + (3,) + (0,) * 3))  # stat said 3 bytes
+    with pytest.raises(ParseError, match=r"a\.bin: 10 bytes, more than a file may be \(9\)$"):
+        read_bytes(f, max_bytes=9)  # it grew: never read past the bound + 1
+    monkeypatch.setattr(os, "fstat", real_fstat)
+    if os.geteuid() != 0:  # root reads any file
+        f.chmod(0)
+        with pytest.raises(ParseError, match=r"a\.bin: cannot read \(Permission denied\)$"):
+            read_bytes(f)
+        f.chmod(0o644)
+    t = tmp_path / "t.txt"
+    t.write_bytes(b"a\r\nb\rc\n")
+    assert read_text(t, not_text="not text") == (t, "a\nb\nc\n")  # line ends as Python's text files read them
+    t.write_bytes(b"\xff")
+    with pytest.raises(ParseError, match=r"t\.txt:1: not text$"):
+        read_text(t, not_text="not text")
+    with pytest.raises(ParseError, match=r": is a folder, not a file$"):
+        read_text(tmp_path, not_text="not text")

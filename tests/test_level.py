@@ -125,8 +125,10 @@ def test_a_missing_huge_or_binary_map_file_is_one_line(tmp_path, monkeypatch):
         load_height_map(tmp_path / "bin.json")
     (tmp_path / "big.json").write_text(_with())
     monkeypatch.setattr(hl, "MAX_MAP_BYTES", 100)
-    with pytest.raises(ParseError, match=r"big\.json: \d+ bytes, more than a height map may be \(100\)"):
+    with pytest.raises(ParseError, match=r"big\.json: \d+ bytes, more than a height map file may be \(100\)$"):
         load_height_map(tmp_path / "big.json")
+    with pytest.raises(ParseError, match=r": is a folder, not a height map file$"):  # cam.fileio.read_bytes's lines
+        load_height_map(tmp_path)
 
 
 def test_a_map_made_in_python_is_checked_as_a_file_is():

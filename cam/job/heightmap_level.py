@@ -47,7 +47,7 @@ from typing import Any, Iterator, Optional
 import numpy as np
 
 from ..errors import CamError, ParseError, PlanError
-from ..fileio import atomic_write_text
+from ..fileio import atomic_write_text, read_bytes
 from ..settings import MachineSettings
 from .model import Job, JobLike, join_pieces
 
@@ -216,19 +216,8 @@ def load_height_map(path: str | os.PathLike) -> HeightMap:
         :data:`MAX_MAP_BYTES`, not JSON, another format or version, a missing key, NaN or infinity, an axis
         not ascending, rows of the wrong length, fewer than 2 x 2 or more than :data:`MAX_MAP_POINTS` points.
     """
-    p = Path(path)
+    p, raw = read_bytes(path, max_bytes=MAX_MAP_BYTES, what="a height map file")
     where = str(p)
-    try:
-        size = p.stat().st_size
-        if size > MAX_MAP_BYTES:
-            raise ParseError(f"{where}: {size:,} bytes, more than a height map may be ({MAX_MAP_BYTES:,})")
-        raw = p.read_bytes()
-    except FileNotFoundError:
-        raise ParseError(f"{where}: file not found") from None
-    except IsADirectoryError:
-        raise ParseError(f"{where}: is a folder, not a height map file") from None
-    except OSError as exc:
-        raise ParseError(f"{where}: cannot read ({exc.strerror or exc})") from None
     try:
         data = json.loads(raw.decode("utf-8"), parse_constant=_no_constant)
     except UnicodeDecodeError:
