@@ -14,8 +14,12 @@ plans every move, with this machine's ramps; a probe is a seek at the probe feed
 closes; machine time is the mock's simulated clock):
 
 * ``cam``: ``MachineSession.probe_grid`` as ``cam probe grid --area 20,20,120,100 --machine-coords`` runs it
-  (defaults: safe height 2 mm above the work Z zero, probe feed 20 mm/min, at most 4 mm down; serpentine order; per
-  point: travel at the safe height, probe, lift back to it).
+  (defaults: safe height 2 mm above the work Z zero, probe feed 20 mm/min, at most 4 mm down; serpentine order): the
+  first point probed from the safe height; each later one (``cam.drive.probe_grid.GridApproach``) travelled to at
+  0.5 mm above the previous contact plus the map's neighbour limit (1 mm) or above the highest contact so far, a
+  rapid down to the guard height (the previous contact plus the limit), a guarded move (stopped by the probe) at
+  Z's start speed (47 mm/min) down to 0.3 mm above the previous contact, the probe from there at most to 1 mm below
+  the previous contact, a lift back to where it began.
 * bCNC (``vlachoudis/bCNC`` at 23103b0, ``bCNC/CNC.py`` ``Probe.scan``; defaults from ``bCNC/bCNC.ini``
   ``[Probe]`` ``zmax = 5.0``, ``zmin = -10.0``, ``feed = 10.0``, ``cmd = G38.2``, and ``CNC.vars["safe"] = 3.0``):
   ``G0 Z3``, ``G0`` to the first point, then per point ``G0 Z5``, ``G0 X Y``, ``G38.2 Z-10 F10``, serpentine rows
@@ -29,9 +33,9 @@ closes; machine time is the mock's simulated clock):
 Columns: points, moves (straight moves that move the tool), machine time; the ratio is cam / reference (below 1:
 cam is quicker).  One run each: the mock's clock is exact, so the median of repeats is the run.  Where the time
 goes: each probe runs at the probe feed from where it starts, so the time is mostly the height it starts from:
-bCNC 5 mm above the work zero at 10 mm/min, cam 2 mm above at 20 mm/min, OpenCNCPilot 1 mm above the previous
-contact at 20 mm/min (quicker than cam: it travels between points 1 mm above the last contact, cam at a fixed safe
-height above the work zero).
+bCNC 5 mm above the work zero at 10 mm/min, OpenCNCPilot 1 mm above the previous contact at 20 mm/min, cam 0.3 mm
+above the previous contact at 20 mm/min (it travels higher than OpenCNCPilot, 1.5 mm above the previous contact, and
+comes down with a rapid and a guarded move at 47 mm/min before it probes).
 
 (b) The depth error levelling removes: an HPGL isolation drawing (an 80 x 60 mm outline, a track round a pad, a
 diagonal) cut 8 Z steps (0.1256 mm) deep from the work zero, on the mock, decoded from its pin log; once levelled
@@ -59,6 +63,7 @@ from cam.drive.chunks import plan_chunks  # noqa: E402
 from cam.drive.homing import seek  # noqa: E402
 from cam.drive.placement import placed_home  # noqa: E402
 from cam.drive.ports import MockPort, SwitchSchedule, surface_height_mm  # noqa: E402
+from cam.drive.probe_grid import GridApproach  # noqa: E402
 from cam.drive.probing import DEFAULT_FEED_MM_MIN, grid_axis_mm, serpentine  # noqa: E402
 from cam.drive.runner import Controller, run  # noqa: E402
 from cam.drive.session import MachineSession  # noqa: E402
@@ -150,17 +155,24 @@ def by_cam(s, board) -> dict:
     port = MockPort()
     session = MachineSession(port, s)
     session.set_position(start)
-    results = session.probe_grid(points, safe, round(4.0 / mz), DEFAULT_FEED_MM_MIN)
+    approach = GridApproach.of(s)  # as cam probe grid probes (MachineSession.probe_map)
+    results = session.probe_grid(points, safe, round(4.0 / mz), DEFAULT_FEED_MM_MIN, approach=approach)
     heights = np.zeros((len(ys), len(xs)))
     for (i, j), r in zip(order, results):
         heights[j, i] = r.height_mm(s)
-    # its moves: the first travel goes up (or down) to the safe height as it crosses; then across, probe, lift
+    # its moves, as the session's worker makes them (cam.drive.probing.probe_worker): the first point from the safe
+    # height (up or down to it as it crosses); each later one up to its travel height, across, down to where its
+    # probe starts (cam.drive.probe_grid.GridApproach.heights); each probe, then its lift
     moves = 0
     pos = np.asarray(start)
-    for x, y in points:
-        moves += int(pos[2] > safe) + int((x, y) != tuple(pos[:2])) + int(pos[2] < safe)
-        moves += 2  # probe, lift
-        pos = np.array([x, y, safe])
+    contacts = [int(r.contact_steps[2]) for r in results]
+    for k, (x, y) in enumerate(points):
+        travel = guard = start_z = safe
+        if k:
+            travel, guard, start_z, _ = approach.heights(contacts[:k], safe + round(4.0 / mz))
+        moves += int(pos[2] > travel) + int((x, y) != tuple(pos[:2])) + int(min(travel, pos[2]) < guard)
+        moves += int(guard < start_z) + 2  # the guarded move down; the probe, its lift
+        pos = np.array([x, y, start_z])
     return dict(points=len(points), moves=moves, time_s=port.time_offset_ns / 1e9, heights=heights, xs=xs, ys=ys,
                 zero=zero)
 

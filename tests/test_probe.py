@@ -21,8 +21,10 @@ import pytest
 import cam
 from cam.drive.grbl_machine import close_grbl_machines
 from cam.drive.grbl_probe import parse_prb
+from cam.formats.gcode_export import format_mm
 from cam.drive.machines import can
 from cam.drive.ports import MockPort, surface_height_mm
+from cam.drive.probe_grid import TRAVEL_MARGIN_MM, GridApproach
 from cam.drive.probing import ProbeError, grid_axis_mm, serpentine
 from cam.drive.session import MachineSession
 from cam.drive.state import StateHold, read_state
@@ -225,24 +227,72 @@ def test_cli_probe_grid_writes_the_map_probed_serpentine_from_the_safe_height(tm
         for i in range(nx):
             assert_within_a_step(m["height_mm"][j][i], surface_at(WARPED, s, xs[i], ys[j]), s)
     assert proc.stderr.count("probe ") >= nx * ny and "probe 20/20" in proc.stderr
-    # the pin log decoded: each probe straight down from the safe height, no move between points below it
-    safe_z = -round(1.5 / s.mm_per_step_z)
+    # the pin log decoded: the first probe from the safe height; each later point (GridApproach) reached across at
+    # its travel height, a rapid down to its guard height, a guarded move at Z's start speed down to where its probe
+    # starts, the probe at the probe feed down to its contact, a lift back to where the probe began
+    per = s.mm_per_step_z
+    safe_z, floor_z = -round(1.5 / per), -round(1.5 / per) + round(3.5 / per)
+    approach = GridApproach.of(s)
+    motion = decode_pin_log(read_pin_log(log), s)
+    pos, t_ns = motion.position_steps, motion.t_ns
+    order = [(int(xs[i]), int(ys[j])) for i, j in serpentine(nx, ny)]
+    contacts = [-round(m["height_mm"][j][i] / per) for i, j in serpentine(nx, ny)]
+    edges = np.flatnonzero(np.r_[True, np.any(pos[1:, :2] != pos[:-1, :2], axis=1), True])
+    visits = [(a, b) for a, b in zip(edges[:-1], edges[1:]) if (int(pos[a, 0]), int(pos[a, 1])) in order]
+    assert [(int(pos[a, 0]), int(pos[a, 1])) for a, _ in visits] == order  # serpentine, each point once
+    s_per_step = {"probe": per / (20.0 / 60.0), "guarded": per / s.start_speed_z_mm_s}  # 20 mm/min; start speed
+
+    def s_per_step_between(i: int, j: int) -> float:
+        return (t_ns[j] - t_ns[i]) / 1e9 / max(1, abs(int(pos[j, 2]) - int(pos[i, 2])))
+
+    for k, (a, b) in enumerate(visits):
+        zs = pos[a:b, 2]
+        deepest = int(np.argmax(zs))
+        assert zs[deepest] == contacts[k]  # the map is the contact
+        top = int(np.flatnonzero(zs == safe_z)[0]) if k == 0 else 0  # the first: from the safe height
+        assert np.all(np.diff(zs[top:deepest + 1]) >= 0) and np.all(np.diff(zs[deepest:]) <= 0)  # down, then up
+        if k == 0:
+            continue
+        travel_z, guard_z, start_z, depth = approach.heights(contacts[:k], floor_z)
+        stood = safe_z if k == 1 else approach.heights(contacts[:k - 1], floor_z)[2]  # where the probe before began
+        assert zs[0] == min(travel_z, stood)  # across at the travel height (or higher, where it stood)
+        assert travel_z < guard_z < start_z < contacts[k] <= start_z + depth
+        at_guard, at_start = (a + int(np.flatnonzero(zs == z)[0]) for z in (guard_z, start_z))
+        assert start_z in zs[deepest:].tolist()  # the lift back to where the probe began
+        rapid, guarded, probe = (s_per_step_between(a, at_guard), s_per_step_between(at_guard, at_start),
+                                 s_per_step_between(at_start, a + deepest))
+        assert rapid < 0.5 * s_per_step["guarded"], (k, rapid)
+        assert 0.9 * s_per_step["guarded"] <= guarded < 0.9 * s_per_step["probe"], (k, guarded)
+        assert probe >= 0.9 * s_per_step["probe"], (k, probe)
+    last = approach.heights(contacts[:-1], floor_z)[2]
+    assert read_state(state, s).position_steps == (int(xs[0]), int(ys[-1]), last)  # the last point, lifted back
+
+
+def test_grid_travel_stays_above_the_surface_plus_the_margin_everywhere(tmp_path):
+    """On the mock with a domed surface (rising 0.6 mm between two neighbouring points: a travel at a fixed height
+    above the previous contact would cut through it), ``cam probe grid``'s pin log decoded: at every write that
+    moves the tool in X or Y (every point of every travel), its tip is at least the travel margin above the
+    formula's surface there; it never goes below the surface by more than the contact's step; and each probe
+    starts above the surface there, within the approach plus the steepest step between two contacts before it."""
+    dome = (0.0, 0.0, 0.0, -0.002, 20.0, 15.0)  # up to 1.25 mm high in the middle, 0.6 mm rise over 10 mm
+    machine, state, out, log = (machine_file(tmp_path, dome), tmp_path / "state.json", tmp_path / "map.json",
+                                tmp_path / "grid.csv")
+    ok(run_cli("probe", "grid", "--machine", machine, "--state", state, "--area", "0,0,40,30", "--machine-coords",
+               "--spacing", "10", "--safe-height", "3", "--out", out, "--pin-log", log))
+    s = cam.load_settings(machine)
+    mx, my, mz = s.mm_per_step_axes
+    h = load_height_map(out).height_mm
+    steepest = max(np.abs(np.diff(h, axis=0)).max(), np.abs(np.diff(h, axis=1)).max())
+    assert 0.5 < steepest < 1.0  # steep, and still a map levelling takes
     pos = decode_pin_log(read_pin_log(log), s).position_steps
-    xy_moves = np.flatnonzero(np.any(np.diff(pos[:, :2], axis=0) != 0, axis=1)) + 1
-    assert np.all(pos[xy_moves, 2] <= safe_z) and np.all(pos[xy_moves - 1, 2] <= safe_z)
-    below = pos[:, 2] > safe_z
-    below[:int(np.argmax(pos[:, 2] <= safe_z))] = False  # where it stood before the first lift to the safe height
-    starts = np.flatnonzero(below & ~np.concatenate([[False], below[:-1]]))
-    ends = np.flatnonzero(below & ~np.concatenate([below[1:], [False]]))
-    probed = [tuple(pos[a, :2]) for a in starts]
-    assert probed == [(xs[i], ys[j]) for i, j in serpentine(nx, ny)]
-    for a, b in zip(starts, ends):  # each probe: one point, down to its contact, back up to the safe height
-        assert np.all(pos[a:b + 1, :2] == pos[a, :2]) and pos[b + 1, 2] == safe_z
-    contacts = {tuple(pos[a, :2]): int(pos[a:b + 1, 2].max()) for a, b in zip(starts, ends)}
-    for j in range(ny):
-        for i in range(nx):
-            assert m["height_mm"][j][i] == pytest.approx(-contacts[(xs[i], ys[j])] * s.mm_per_step_z)
-    assert read_state(state, s).position_steps == (int(xs[0]), int(ys[-1]), safe_z)  # the last point, lifted
+    tip_mm = -pos[:, 2] * mz
+    above_mm = tip_mm - surface_height_mm(dome, pos[:, 0] * mx, pos[:, 1] * my)
+    travel = np.r_[False, np.any(pos[1:, :2] != pos[:-1, :2], axis=1)]
+    assert travel.sum() > 1000
+    clearance = float(above_mm[travel].min())
+    assert clearance >= TRAVEL_MARGIN_MM - mz, f"a travel {clearance:.4f} mm above the surface"
+    assert float(above_mm.min()) > -mz  # the deepest: a contact, within its step
+    print(f"\ntravel clearance over the dome: min {clearance:.3f} mm, mean {above_mm[travel].mean():.3f} mm")
 
 
 def test_cli_probe_grid_over_a_job_covers_where_it_would_be_drilled(tmp_path):
@@ -323,6 +373,34 @@ def test_grbl_probes_a_grid_with_g38_2(grbl):
     # between probes grbl travelled at the safe height (machine Z -40 steps: grbl's +0.628 mm)
     travels = [b for b in grbl.executed() if b.kind == "G0" and b.start_mm[:2] != b.end_mm[:2]]
     assert travels and all(abs(b.start_mm[2] - 40 * s.mm_per_step_z) < 1e-3 for b in travels)
+
+
+def test_grbl_probes_a_grid_approached_from_the_contacts_before_each_point(grbl):
+    """grbl and a grid's approach (GridApproach, as cam probe grid probes): the first point G38.2 from the safe height,
+    each later one a G0 down to its guard height, a guarded G38.3 at Z's start speed to just above the surface
+    expected, then G38.2 from there with its depth bounded; every contact within a step of the surface, and no XY
+    travel below the travel height the contacts before it give."""
+    s = GRBL_SETTINGS
+    session = MachineSession(f"grbl:{grbl.device_path}", s)
+    points = [(0, 0), (346, 0), (692, 0), (692, 346), (346, 346), (0, 346)]  # 10 mm apart, serpentine
+    approach = GridApproach.of(s)
+    results = session.probe_grid(points, -100, 250, feed_mm_min=60.0, approach=approach)
+    contacts = [r.contact_steps[2] for r in results]
+    for (x, y), r in zip(points, results):
+        assert r.contact_steps[:2] == (x, y)
+        assert_within_a_step(r.height_mm(s), grbl_surface_mm(s, x, y), s)
+    for k in range(1, len(points)):
+        _, _, start_z, depth = approach.heights(contacts[:k], -100 + 250)
+        assert results[k].start_steps == (*points[k], start_z) and results[k].depth_steps == depth
+    sent = [text for _, text, answer in grbl.lines() if "G38" in text]
+    assert [t[:9] for t in sent] == ["G91G38.2Z"] + ["G91G38.3Z", "G91G38.2Z"] * (len(points) - 1), sent
+    guarded = format_mm(max(approach.feed_mm_min, 60.0))  # Z's start speed, or the probe's feed when faster
+    assert all(t.endswith(f"F{guarded}") for t in sent[1::2]) and all(t.endswith("F60") for t in sent[::2])
+    travels = [b for b in grbl.executed() if b.kind == "G0" and b.start_mm[:2] != b.end_mm[:2]]
+    assert len(travels) == len(points) - 1
+    for k, b in enumerate(travels, start=1):  # grbl's Z is up: machine Z steps = -Z / mm per step
+        travel_z = approach.heights(contacts[:k], -100 + 250)[0]
+        assert -b.start_mm[2] / s.mm_per_step_z <= travel_z + 0.5, (k, b.start_mm, travel_z)
 
 
 def test_grbl_probe_at_real_speed(grbl_realtime):
@@ -446,6 +524,13 @@ def test_real_grbl_firmware_probes_a_map_within_a_step(tmp_path):
             want = float(surface_height_mm(k, x * per, -y * per))  # grbl's Y is cam's -Y
             assert_within_a_step(r.height_mm(FW), want, FW)
             assert r.end_steps == (x, y, 0)
+        # as cam probe grid probes (GridApproach: each later point by a G0 and a guarded G38.3 from the contacts
+        # before it, then G38.2): the same map within a step
+        again = session.probe_grid(points, 0, int(4 / FW.mm_per_step_z), feed_mm_min=100.0,
+                                   approach=GridApproach.of(FW))
+        for (x, y), r, first in zip(points, again, results):
+            assert_within_a_step(r.height_mm(FW), float(surface_height_mm(k, x * per, -y * per)), FW)
+            assert abs(r.contact_steps[2] - first.contact_steps[2]) <= 1
     finally:
         close_grbl_machines()
         if proxy is not None:

@@ -752,8 +752,9 @@ def _add_probe(sub: argparse._SubParsersAction) -> None:
     _add_probe_machine(t)
     g = what.add_parser("grid", help="probe a grid over an area and write a height map",
                         description="Probe a grid of points over an area (--area, or --over a job's file where it "
-                        "would run), row by row in serpentine order: each point travelled to at the safe height, "
-                        "probed down at most --depth, lifted back to the safe height. Writes the height map (JSON, "
+                        "would run), row by row in serpentine order: the first point probed from the safe height, "
+                        "each later one travelled to above the contacts before it, approached with a rapid to just "
+                        "above the surface expected there, probed, lifted back. Writes the height map (JSON, "
                         "machine frame, heights in mm up positive) to --out; a progress line per point on stderr.")
     where = g.add_mutually_exclusive_group(required=True)
     where.add_argument("--area", type=_area, metavar="X0,Y0,X1,Y1",
@@ -768,10 +769,10 @@ def _add_probe(sub: argparse._SubParsersAction) -> None:
     g.add_argument("--margin", type=_number("--margin", 0.0, MAX_MM), default=0.0, metavar="MM",
                    help="grow the area by this much on every side (default 0)")
     g.add_argument("--safe-height", type=_number("--safe-height", 0.0, MAX_MM), default=2.0, metavar="MM",
-                   help="the height above the work Z zero every probe starts from and every move between points "
-                   "is made at (default 2)")
+                   help="the height above the work Z zero the first probe starts from (default 2); the later "
+                   "points are approached from the contacts before them")
     g.add_argument("--depth", type=_number("--depth", 0.0, MAX_MM, above=True), metavar="MM",
-                   help="probe at most this far below the safe height (default: the safe height + 2)")
+                   help="no probe goes deeper than this far below the safe height (default: the safe height + 2)")
     g.add_argument("--out", required=True, metavar="MAP.json", help="where to write the height map")
     _add_probe_machine(g)
 

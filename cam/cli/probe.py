@@ -124,8 +124,8 @@ def _probe_grid(args: argparse.Namespace, settings: MachineSettings) -> int:
             depth_mm = args.depth if args.depth is not None else args.safe_height + 2.0
             print(f"probing {len(plan.order)} points ({len(xs)} x {len(ys)}, {args.spacing:g} mm apart) over X "
                   f"{xs[0] * per_x:g}..{xs[-1] * per_x:g}, Y {ys[0] * per_y:g}..{ys[-1] * per_y:g} mm (machine), from "
-                  f"{args.safe_height:g} mm above the work Z zero, at most {max(1, round(depth_mm / per_z)) * per_z:g} "
-                  f"mm down", file=sys.stderr, flush=True)
+                  f"{args.safe_height:g} mm above the work Z zero first (the others from just above the contacts before "
+                  f"them), never more than {max(1, round(depth_mm / per_z)) * per_z:g} mm below it", file=sys.stderr, flush=True)
 
         session, info = run_activity(args, settings, hold, start)
         if info.get("status") != "finished":

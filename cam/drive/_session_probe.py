@@ -25,7 +25,7 @@ from ..errors import CamError, PlanError
 from ..job.heightmap_level import save_height_map
 from ..values import shown
 from ._session_parts import Activity
-from .probe_grid import GridPlan, grid_plan, height_map_of
+from .probe_grid import GridApproach, GridPlan, grid_plan, height_map_of
 from .probing import DEFAULT_DEPTH_MM, ProbeError, Prober, ProbeResult, ProbeRun, probe_worker
 from .state import ToolProbe, check_in_travel, steps_to_mm
 
@@ -101,10 +101,15 @@ class SessionProbe:
         return self._probe_results()[0]
 
     def probe_grid(self, points_steps: Sequence[Sequence[int]], safe_z_steps: int, max_depth_steps: int,
-                   feed_mm_min: Optional[float] = None, *, wait: bool = True) -> Optional[list[ProbeResult]]:
+                   feed_mm_min: Optional[float] = None, *, approach: Optional[GridApproach] = None,
+                   wait: bool = True) -> Optional[list[ProbeResult]]:
         """Probe each of ``points_steps`` (machine X, Y in steps, in the order given): up to ``safe_z_steps``
         (machine Z) first, across at that height, probe down at most ``max_depth_steps`` and lift back to it.
-        A point that does not touch ends the grid in one line (ProbeError, with ``wait``).
+        With ``approach`` (:class:`~cam.drive.probe_grid.GridApproach`; the points a grid's, each a neighbour of
+        the one before) only the first point is probed so; each later one is travelled to at a clearance above the
+        contacts so far, rapided down to just above the surface expected there and probed from there, its depth
+        bounded (see :mod:`cam.drive.probe_grid`).  A point that does not touch ends the grid in one line
+        (ProbeError, with ``wait``).
 
         Returns:
             with ``wait`` one :class:`~cam.drive.probing.ProbeResult` per point; else None (see :meth:`probe_z`)."""
@@ -113,8 +118,10 @@ class SessionProbe:
             raise PlanError(f"a probe grid has 1..{MAX_PROBE_POINTS} points, got {len(pts)}")
         if isinstance(safe_z_steps, bool) or not isinstance(safe_z_steps, (int, np.integer)):
             raise PlanError(f"safe_z_steps must be a whole number of steps, got {shown(safe_z_steps)}")
+        if approach is not None and not isinstance(approach, GridApproach):
+            raise PlanError(f"approach must be a GridApproach or None, got {shown(approach)}")
         run = ProbeRun(tuple(pts), _depth(max_depth_steps), _feed(feed_mm_min), int(safe_z_steps),
-                       f"probe grid of {len(pts)} points")
+                       f"probe grid of {len(pts)} points", approach)
         self.start_probe(run)
         if not wait:
             return None
@@ -189,8 +196,10 @@ class SessionProbe:
                   safe_height_mm: float = 2.0, depth_mm: Optional[float] = None, feed_mm_min: Optional[float] = None,
                   machine: Optional[str] = None, wait: bool = True) -> GridPlan:
         """Probe a height map over ``area_mm`` (machine mm ``x0, y0, x1, y1``, grown by ``margin_mm``) on a grid
-        ``spacing_mm`` apart (:func:`cam.drive.probe_grid.grid_plan`), each point from ``safe_height_mm`` above the
-        work Z zero, at most ``depth_mm`` below that height (None: the safe height + 2 mm), and when it finishes write
+        ``spacing_mm`` apart (:func:`cam.drive.probe_grid.grid_plan`), the first point from ``safe_height_mm``
+        above the work Z zero, every probe at most ``depth_mm`` below that height (None: the safe height + 2 mm), the
+        later points approached from the contacts before them (:class:`~cam.drive.probe_grid.GridApproach`: the
+        travel at a clearance above them, the probe from just above the surface expected), and when it finishes write
         the map (:func:`cam.job.heightmap_level.save_height_map`, atomic) to ``out``: then :attr:`last_map` and
         :attr:`last_map_path` (``cam probe grid``, the page's Probe the job's area).  ``machine``: the machine
         file's path the map names.
@@ -224,7 +233,8 @@ class SessionProbe:
             hold = self.state_hold
             zero_z = int(hold.state.work_zero_steps()[2]) if hold is not None else 0
             safe_z = zero_z - int(round(float(safe_height_mm) / per))
-            self.probe_grid(plan.points_steps, safe_z, depth, feed_mm_min, wait=False)
+            self.probe_grid(plan.points_steps, safe_z, depth, feed_mm_min, approach=GridApproach.of(self.settings),
+                            wait=False)
             self._then = then
         if wait:
             self._probe_results()

@@ -4,7 +4,8 @@ The machine session's probing activity (:mod:`cam.drive.probing`) asks the grbl 
 (:class:`GrblProber`) to travel (``G53 G0``: up to the safe height first, across, down to it) and to probe: ``G91
 G38.2 Z-<depth> F<feed>`` (grbl's Z is up: cam's +Z deeper is grbl's -Z, :func:`~cam.drive.grbl_machine.mpos_to_steps`),
 whose ``[PRB:x,y,z:1]`` report before the ``ok`` is where the probe touched; grbl stops a deceleration past it, and
-the prober lifts back to where the probe began (``G53 G0 Z``).
+the prober lifts back to where the probe began (``G53 G0 Z``).  A grid's guarded move down to just above the surface
+(:meth:`GrblProber.descend`) is ``G91 G38.3 Z-<depth>``: no alarm when it touches nothing (``[PRB:...:0]``).
 
 A probe that touches nothing within its depth is grbl's ``ALARM:5`` (``ALARM:4``: the probe touched before it
 moved).  It comes as every alarm does (:class:`~cam.drive.grbl_link.GrblAlarm`) and is handled by the fault path:
@@ -103,6 +104,27 @@ class GrblProber(Prober):
         contact = tuple(int(r) + int(b) for r, b in zip(raw, self.machine.base_steps))
         self._lift_to(start[2])
         return ProbeResult(start, contact, self.position(), int(depth_steps))  # type: ignore[arg-type]
+
+    def descend(self, depth_steps: int, feed_mm_min: float) -> Optional[Steps3]:
+        """A guarded move down: ``G91 G38.3 Z-<depth>`` (a probe toward the work that raises no alarm when it touches
+        nothing), its ``[PRB:x,y,z:0|1]`` saying whether and where the probe closed; no lift."""
+        depth_mm = int(depth_steps) * self.settings.mm_per_step_z
+        try:
+            lines = self.link.command(f"G91G38.3Z-{format_mm(depth_mm)}F{format_mm(feed_mm_min)}", timeout_s=None)
+        except GrblAlarm as exc:
+            if exc.code != 4:
+                raise
+            self._failed(exc, self.position(), int(depth_steps))  # ALARM:4: a ProbeError, the tool lifted back
+            raise
+        self.link.command("G90")
+        prb = parse_prb(lines)
+        if prb is None:
+            raise GrblError(f"grbl on {self.link.device} answered G38.3 without a probe report [PRB:x,y,z:0|1] "
+                            f"({'; '.join(lines) or 'nothing'})")
+        if not prb[1]:
+            return None
+        raw = mpos_to_steps(prb[0], self.settings)
+        return tuple(int(r) + int(b) for r, b in zip(raw, self.machine.base_steps))  # type: ignore[return-value]
 
     def _failed(self, exc: GrblAlarm, start: Steps3, depth_steps: int) -> ProbeResult:
         """A probe fail (ALARM:4 or 5) by the fault path: grbl stopped (feed hold, soft reset once still), then

@@ -100,13 +100,21 @@ class ProbeResult:
 class ProbeRun:
     """What one probing activity does: probe each of ``points`` (machine X, Y in steps; None: where the tool
     stands) from ``safe_z_steps`` (machine Z; None: from where the tool stands), at most ``depth_steps`` deeper,
-    at ``feed_mm_min``; each probe lifts back to where it began."""
+    at ``feed_mm_min``; each probe lifts back to where it began.
+
+    ``approach``: a grid whose points are each a neighbour of the one before (a
+    :class:`~cam.drive.probe_grid.GridApproach`): only its first point is probed from ``safe_z_steps``; each later
+    one is travelled to at a clearance above the contacts so far, approached down to just above the surface
+    expected there (a rapid as far as the map's neighbour limit allows, then a guarded move at the approach's feed
+    that stops where the probe closes) and probed from there with a bounded depth (never below ``safe_z_steps +
+    depth_steps``).  None: every point from ``safe_z_steps``."""
 
     points: tuple[Optional[tuple[int, int]], ...]
     depth_steps: int
     feed_mm_min: float
     safe_z_steps: Optional[int] = None
     label: str = "probe Z"
+    approach: Any = None
 
 
 class Prober:
@@ -122,6 +130,15 @@ class Prober:
 
     def probe(self, depth_steps: int, feed_mm_min: float) -> ProbeResult:
         """Probe down at most ``depth_steps`` at ``feed_mm_min`` and lift back to where it began.
+
+        Raises:
+            ProbeError: the probe was closed before it moved; ProbeEnded: a stop, an emergency stop, a limit."""
+        raise NotImplementedError
+
+    def descend(self, depth_steps: int, feed_mm_min: float) -> Optional[Steps3]:
+        """Move down at most ``depth_steps`` at ``feed_mm_min``, stopping where the probe closes (a guarded move:
+        a surface higher than expected stops it, it never runs into it); no lift.  Returns where the probe
+        closed, or None (the tool then ``depth_steps`` lower).
 
         Raises:
             ProbeError: the probe was closed before it moved; ProbeEnded: a stop, an emergency stop, a limit."""
@@ -197,6 +214,12 @@ class StepDirProber(Prober):
 
     def probe(self, depth_steps: int, feed_mm_min: float) -> ProbeResult:
         start = self.position()
+        contact = self.descend(depth_steps, feed_mm_min)
+        self._moves([(0, 0, start[2] - int(self.pos[2]))] if int(self.pos[2]) != start[2] else [], "probe lift")
+        return ProbeResult(start, contact, self.position(), int(depth_steps))
+
+    def descend(self, depth_steps: int, feed_mm_min: float) -> Optional[Steps3]:
+        start = self.position()
         if self.opened.reads_inputs and _probe_closed(self.opened.read_inputs(), self.settings):
             raise ProbeError(f"the probe (inputs.probe) is closed before probing at machine Z {start[2]} steps: the "
                              f"tool touches the work already, or the pin is wired or set the wrong way round "
@@ -208,9 +231,7 @@ class StepDirProber(Prober):
         self.pos = self.pos + np.asarray(result.position_steps, np.int64)
         if result.status not in (SWITCHED, FINISHED):
             raise ProbeEnded(result.status, "probing: " + "; ".join(result.messages or [result.status]))
-        contact = self.position() if result.status == SWITCHED else None
-        self._moves([(0, 0, start[2] - int(self.pos[2]))] if int(self.pos[2]) != start[2] else [], "probe lift")
-        return ProbeResult(start, contact, self.position(), int(depth_steps))
+        return self.position() if result.status == SWITCHED else None
 
     def close(self, ctl: Any, fault: str) -> tuple[Optional[Steps3], str]:
         if self.own_port:
@@ -280,9 +301,28 @@ def missed_line(r: ProbeResult, settings: MachineSettings) -> str:
             + "; probe from lower down or give a larger depth")
 
 
+def _approach(prober: Prober, probe_run: ProbeRun, xy: tuple[int, int], results: Sequence[ProbeResult]) -> int:
+    """A grid's later point approached (:meth:`cam.drive.probe_grid.GridApproach.heights`): across at the travel
+    height, a rapid down to the guard height, a guarded move down to where the probe starts (a surface higher than
+    expected stops it: the probe then starts the approach above that contact).  Returns the probe's depth."""
+    a = probe_run.approach
+    travel_z, guard_z, start_z, depth = a.heights([int(r.contact_steps[2]) for r in results],  # type: ignore
+                                                  probe_run.safe_z_steps + probe_run.depth_steps)  # type: ignore
+    lowest = start_z + depth
+    prober.travel((xy[0], xy[1], travel_z))
+    prober.travel((xy[0], xy[1], guard_z))
+    if start_z > guard_z:
+        touched = prober.descend(start_z - guard_z, max(float(a.feed_mm_min), float(probe_run.feed_mm_min)))
+        if touched is not None:  # higher than expected: the probe starts the approach above where it touched
+            start_z = max(travel_z, int(touched[2]) - a.approach_steps)
+            prober.travel((xy[0], xy[1], start_z))
+    return max(1, lowest - start_z)
+
+
 def probe_worker(session: Any, ctl: Any, make_prober: Callable[[], Prober], probe_run: ProbeRun) -> None:
-    """The worker thread of a probing activity: each point travelled to (at the safe height) and probed, a
-    detail line per point, then the end booked (:meth:`~cam.drive.session.MachineSession.finish`): the results in
+    """The worker thread of a probing activity: each point travelled to (at the safe height, or a grid's later
+    points as its ``approach`` says) and probed, a detail line per point, then the end booked
+    (:meth:`~cam.drive.session.MachineSession.finish`): the results in
     ``last_run["probe"]`` and the session's ``last_probe``."""
     s = session.settings
     start = session.position_steps()
@@ -295,10 +335,13 @@ def probe_worker(session: Any, ctl: Any, make_prober: Callable[[], Prober], prob
     try:
         prober = make_prober()
         for k, xy in enumerate(probe_run.points):
-            if xy is not None:
+            depth = probe_run.depth_steps
+            if xy is not None and probe_run.approach is not None and results and probe_run.safe_z_steps is not None:
+                depth = _approach(prober, probe_run, (int(xy[0]), int(xy[1])), results)
+            elif xy is not None:
                 z = probe_run.safe_z_steps if probe_run.safe_z_steps is not None else prober.position()[2]
                 prober.travel((int(xy[0]), int(xy[1]), int(z)))
-            r = prober.probe(probe_run.depth_steps, probe_run.feed_mm_min)
+            r = prober.probe(depth, probe_run.feed_mm_min)
             results.append(r)
             session.progress(k + 1, n, 0)
             if not r.touched:  # the end's one line says it
