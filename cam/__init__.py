@@ -40,6 +40,7 @@ _LAZY = {
     "plan_hpgl": "cam.job.hpgl",
     "load_svg": "cam.formats.svg", "parse_svg": "cam.formats.svg", "SvgDrawing": "cam.formats.svg",
     "plan_svg": "cam.job.svg",
+    "load_dxf": "cam.formats.dxf", "parse_dxf": "cam.formats.dxf", "DxfDrawing": "cam.formats.dxf",
     "trace": "cam.digitize.sketch", "TracedDrawing": "cam.digitize.sketch", "load_sketch": "cam.digitize.sketch",
     "load_excellon": "cam.formats.excellon", "parse_excellon": "cam.formats.excellon",
     "HoleList": "cam.formats.excellon",
@@ -117,6 +118,7 @@ if TYPE_CHECKING:  # pragma: no cover - for type checkers and editors only
     from .formats.hpgl import HpglDrawing, HpglScan, iter_hpgl, load_hpgl, parse_hpgl, scan_hpgl
     from .digitize.sketch import TracedDrawing, load_sketch, trace
     from .formats.svg import SvgDrawing, load_svg, parse_svg
+    from .formats.dxf import DxfDrawing, load_dxf, parse_dxf
     from .job.hpgl import plan_hpgl
     from .job.svg import plan_svg
     from .job.drill import DrillPlan, plan_drill

@@ -21,7 +21,7 @@ from .sniff import decide_kind, read_head, sniff_height_map
 __all__ = ["POSTS", "DEFAULT_PORT", 
     "job_kind", "OPTION_KINDS",
     "DRAWING_SUFFIXES", "DIGITIZED_SUFFIXES", "EXCELLON_SUFFIXES", "HPGL_SUFFIXES", "GCODE_SUFFIXES",
-    "PROFILE_SUFFIXES", "SVG_SUFFIXES", "SUFFIXES", "FILE_JOB_SUFFIXES", "START_RULES", "HEIGHT_MAP_SUFFIXES",
+    "PROFILE_SUFFIXES", "SVG_SUFFIXES", "DXF_SUFFIXES", "SUFFIXES", "FILE_JOB_SUFFIXES", "START_RULES", "HEIGHT_MAP_SUFFIXES",
     "is_height_map",
 ]
 
@@ -37,6 +37,8 @@ GCODE_SUFFIXES = (".ngc", ".nc", ".gcode", ".gc", ".g", ".tap", ".cnc")
 """RS-274/NGC G-code programs."""
 SVG_SUFFIXES = (".svg",)
 """Vector drawings (SVG: Inkscape, Illustrator, logo tools): every visible stroke and outline is cut."""
+DXF_SUFFIXES = (".dxf",)
+"""CAD drawings (DXF: LibreCAD, QCAD, FreeCAD, Inkscape, Fusion 360): every line and curve is cut."""
 PROFILE_SUFFIXES = DRAWING_SUFFIXES + (".csv", ".txt")
 """Files a depth profile may come from (a profile drawing or a CSV of depths)."""
 
@@ -47,10 +49,11 @@ SUFFIXES = {
     "excellon": EXCELLON_SUFFIXES,
     "hpgl": HPGL_SUFFIXES,
     "svg": SVG_SUFFIXES,
+    "dxf": DXF_SUFFIXES,
 }
 """Suffixes of each job kind, in the order :func:`job_kind` tries them."""
 
-FILE_JOB_SUFFIXES = EXCELLON_SUFFIXES + GCODE_SUFFIXES + HPGL_SUFFIXES + SVG_SUFFIXES
+FILE_JOB_SUFFIXES = EXCELLON_SUFFIXES + GCODE_SUFFIXES + HPGL_SUFFIXES + SVG_SUFFIXES + DXF_SUFFIXES
 """Files that are jobs already (not drawings): the job is in the file, not traced from a picture."""
 
 START_RULES = OPTIONS["start"].choices
@@ -64,7 +67,7 @@ def job_kind(path: str | os.PathLike, warnings: Optional[list[str]] = None, *, h
     A readable file's first few kB decide when its suffix is generic (none, .txt, .nc, .cnc) or unknown, and
     when they plainly show another kind than its suffix says (then a warning naming both is appended to
     ``warnings``): see :mod:`cam.sniff`.  ``head``: the file's first bytes when they are at hand (an upload);
-    default: read from ``path`` if it is a file.  The kind may be "svg" (an SVG drawing).
+    default: read from ``path`` if it is a file.  The kind may be "svg" (an SVG drawing) or "dxf" (a DXF drawing).
 
     >>> job_kind("board.DRL"), job_kind("part.ngc"), job_kind("gear.png")
     ('excellon', 'gcode', 'drawing')

@@ -52,7 +52,7 @@ TYPES = ("whole", "number", "wholes", "numbers", "choice", "flag", "text", "tool
 counts, a ``WxH`` size, folders."""
 
 _DRAWINGS = frozenset({"drawing", "digitized"})
-_VECTORS = frozenset({"excellon", "hpgl", "svg"})
+_VECTORS = frozenset({"excellon", "hpgl", "svg", "dxf"})
 _EVERY = _DRAWINGS | _VECTORS | {"gcode"}
 
 
@@ -174,24 +174,24 @@ JOB_OPTIONS: tuple[Option, ...] = (
          "depth of layer k as arithmetic in k and n (layers), e.g. '30*sqrt(1-((n-k)/n)**2)'", metavar="EXPR"),
     # depths and heights in mm, one name on every kind
     _opt("cut_depth_mm", "--cut-depth", "number", "mm", _DRAWINGS | _VECTORS, None,
-         "cutting depth below the surface: drill files (default 2.0: through a 1.6 mm board), HPGL and SVG "
+         "cutting depth below the surface: drill files (default 2.0: through a 1.6 mm board), HPGL, SVG and DXF "
          "pen-down depth (default 0.5), or a drawing's depth for every object instead of --depth",
          lo=0.0, hi=MAX_MM, lo_open=True, metavar="MM"),
     _opt("travel_height_mm", "--travel-height", "number", "mm", _VECTORS, None,
-         "height above the surface between cuts (default 1.0): drill files, HPGL, SVG, and every file "
+         "height above the surface between cuts (default 1.0): drill files, HPGL, SVG, DXF, and every file "
          "'cam export' writes; 0 (at the surface) needs --allow-surface-travel", lo=0.0, hi=MAX_MM, metavar="MM"),
     _opt("allow_surface_travel", "--allow-surface-travel", "flag", "", _VECTORS, False,
          "accept --travel-height 0: the tool travels between cuts touching the surface (a pen or a drag knife), "
          "which on a cutter scratches the work"),
     _opt("origin", "--origin", "choice", "", _DRAWINGS | _VECTORS, None,
          "which point of the job goes to the active work zero (cam zero): file (the file's own zero: a drawing's "
-         "top-left pixel, a drill, HPGL or SVG file's 0,0), upper-left, lower-left or center of what is cut; "
-         "default: file for drawings and digitized matrices (the thesis), upper-left for drill, HPGL and SVG files "
+         "top-left pixel, a drill, HPGL, SVG or DXF file's 0,0), upper-left, lower-left or center of what is cut; "
+         "default: file for drawings and digitized matrices (the thesis), upper-left for drill, HPGL, SVG and DXF files "
          "(file when --offset is given)",
          choices=("file", "upper-left", "lower-left", "center")),
     # drill files, HPGL and SVG
     _opt("offset_mm", "--offset", "numbers", "mm", _VECTORS, None,
-         "where the board, plotter or SVG page origin goes, mm from the work zero (cam export: from the "
+         "where the board, plotter, SVG page or DXF drawing origin goes, mm from the work zero (cam export: from the "
          "program's zero); default: the top-left of what is cut there", lo=-MAX_MM, hi=MAX_MM, count=2, metavar="X,Y"),
     _opt("mirror_x", "--mirror-x", "flag", "", {"excellon"}, False,
          "drill files: mirror the board for drilling from the back"),
@@ -207,7 +207,7 @@ JOB_OPTIONS: tuple[Option, ...] = (
     _opt("kind", "--kind", "choice", "", _DRAWINGS | _VECTORS | {"gcode"}, None,
          "read the file as this kind whatever its name and content say (matrix: a saved digitized matrix); with "
          "--kind excellon the --excellon-* flags apply", choices=("excellon", "gcode", "hpgl", "svg", "drawing",
-                                                                  "matrix")),
+                                                                  "matrix", "dxf")),
     _opt("strict", "--strict", "flag", "", {"excellon"}, False,
          "drill files: refuse a file with a tool that cannot be drilled (zero size, too large) instead of leaving "
          "its holes out with a warning"),
@@ -217,20 +217,21 @@ JOB_OPTIONS: tuple[Option, ...] = (
     # G-code
     _opt("flip_y", "--flip-y", "flag", "", {"gcode"}, False, "G-code input: machine Y = +Y mm instead of -Y mm"),
     # SVG
-    _opt("scale", "--scale", "number", "", {"svg", "hpgl"}, None,
-         "SVG and HPGL: mm cut per mm of the drawing (default 1: its own size)", lo=0.0, hi=MAX_MM, lo_open=True,
+    _opt("scale", "--scale", "number", "", {"svg", "hpgl", "dxf"}, None,
+         "SVG, DXF and HPGL: mm cut per mm of the drawing (default 1: its own size)", lo=0.0, hi=MAX_MM, lo_open=True,
          metavar="FACTOR"),
-    _opt("fit_mm", "--fit", "size", "mm", {"svg", "hpgl"}, None,
-         "SVG and HPGL: scale the drawing to fit WIDTHxHEIGHT mm, keeping its proportions (e.g. 80x40)",
+    _opt("fit_mm", "--fit", "size", "mm", {"svg", "hpgl", "dxf"}, None,
+         "SVG, DXF and HPGL: scale the drawing to fit WIDTHxHEIGHT mm, keeping its proportions (e.g. 80x40)",
          lo=0.0, hi=MAX_MM, lo_open=True, count=2, metavar="WxH"),
-    _opt("layers", "--layers", "text", "", {"svg"}, None,
-         "SVG: cut only these layers, in this order (Inkscape layer names, 'parent/child' for a sublayer, or stroke "
-         "colours such as '#ff0000' or red when the file has no layers; 'cam info' lists them); default: every "
+    _opt("layers", "--layers", "text", "", {"svg", "dxf"}, None,
+         "SVG and DXF: cut only these layers, in this order (Inkscape layer names, 'parent/child' for a sublayer, or "
+         "stroke colours such as '#ff0000' or red when the file has no layers; DXF layer names; 'cam info' lists "
+         "them); default: every "
          "layer in file order", metavar="NAME,NAME"),
-    _opt("pause_between_layers", "--pause-between-layers", "flag", "", {"svg"}, False,
-         "SVG: pause before each layer after the first, to change the pen or the tool (Enter resumes)"),
-    _opt("keep_duplicates", "--keep-duplicates", "flag", "", {"svg"}, False,
-         "SVG: cut a segment that traces one already cut again (by default it is cut once)"),
+    _opt("pause_between_layers", "--pause-between-layers", "flag", "", {"svg", "dxf"}, False,
+         "SVG and DXF: pause before each layer after the first, to change the pen or the tool (Enter resumes)"),
+    _opt("keep_duplicates", "--keep-duplicates", "flag", "", {"svg", "dxf"}, False,
+         "SVG and DXF: cut a segment that traces one already cut again (by default it is cut once)"),
     # G-code programs (the first two name files on the machine that runs cam: command line only)
     _opt("tool_table", "--tool-table", "text", "", {"gcode"}, None,
          "LinuxCNC tool table (T1 P1 Z12.5 D3 ...; mm) for G43 H tool length offsets and G41/G42 D cutter radii",
@@ -251,11 +252,11 @@ JOB_OPTIONS: tuple[Option, ...] = (
     _opt("trace_fill", "--trace-fill", "flag", "", {"drawing"}, False,
          "with --trace: the regions the curves enclose become red (a 3D drawing)"),
     # real cutters
-    _opt("tool", "--tool", "tool", "", _DRAWINGS | {"svg", "hpgl"}, None,
+    _opt("tool", "--tool", "tool", "", _DRAWINGS | {"svg", "hpgl", "dxf"}, None,
          "point (default, or the machine file's [tool]), flat:D, ball:D or v:ANGLE:TIP[:D] (mm, degrees): 3D "
          "reliefs are cut so the tool never goes below them anywhere", metavar="SHAPE"),
-    _opt("line_width_mm", "--line-width", "number", "mm", _DRAWINGS | {"svg", "hpgl"}, None,
-         "2D drawings, SVG and HPGL with a V bit: the engraved lines' width, which sets their depth",
+    _opt("line_width_mm", "--line-width", "number", "mm", _DRAWINGS | {"svg", "hpgl", "dxf"}, None,
+         "2D drawings, SVG, DXF and HPGL with a V bit: the engraved lines' width, which sets their depth",
          lo=0.0, hi=MAX_MM, lo_open=True, metavar="MM"),
     _opt("stepdown_mm", "--stepdown", "number", "mm", _DRAWINGS, None,
          "3D reliefs: rough in levels this far apart before the finishing pass", lo=0.0, hi=MAX_MM, lo_open=True,

@@ -1,4 +1,4 @@
-"""What a file is, from its first few kB: images, Excellon, HPGL, G-code, SVG and saved digitized matrices.
+"""What a file is, from its first few kB: images, Excellon, HPGL, G-code, SVG, DXF and saved digitized matrices.
 
 PCB programs name their drill files by habit, not by the Excellon suffixes
 (Altium ``NC Drill/*-RoundHoles.TXT``, Fritzing ``*_drill.txt``, CNC programs
@@ -35,6 +35,7 @@ GENERIC_SUFFIXES = ("", ".txt", ".nc", ".cnc")
 KIND_NAMES = {
     "drawing": "an image", "digitized": "a digitized matrix", "excellon": "an Excellon drill file",
     "hpgl": "an HPGL file", "gcode": "G-code", "svg": "an SVG drawing",
+    "dxf": "a DXF drawing",
 }
 """How messages name each kind."""
 
@@ -55,6 +56,10 @@ _GC_WORD = re.compile(r"([A-Z])\s*([-+]?(?:\d+(?:\.\d*)?|\.\d+))")
 # cannot start a backtracking storm (a 7 kB drill file hung the sniffer for minutes)
 _GC_LINE = re.compile(r"(?:[A-Z]\s*[-+]?(?:\d+(?:\.\d*)?|\.\d+)\s*)+")
 _GC_COMMENT = re.compile(r"\([^)]*\)|;.*")
+
+# -- DXF: group code 0 (or a 999 comment) and SECTION, or the binary sentinel ---------------------------------
+_DXF_START = re.compile(rb"\s*(?:999\r?\n[^\n]*\n\s*)?0\r?\n\s*SECTION\s*\r?\n")
+_DXF_BINARY = b"AutoCAD Binary DXF\r\n\x1a\x00"
 
 # -- HPGL -------------------------------------------------------------------------------------------------
 _HPGL_TOKEN = re.compile(r"(?:[A-Z]{2}[-+\d.,\s]*)+")
@@ -158,7 +163,7 @@ def sniff_kind(head: bytes, *, truncated: Optional[bool] = None) -> Optional[str
             ``head`` is :data:`HEAD_BYTES` long.
 
     Returns:
-        "drawing" (PNG, JPEG, BMP, TIFF, GIF), "svg", "digitized", "hpgl", "excellon", "gcode" or None.
+        "drawing" (PNG, JPEG, BMP, TIFF, GIF), "svg", "dxf", "digitized", "hpgl", "excellon", "gcode" or None.
 
     >>> sniff_kind(b"M48\\nMETRIC\\nT1C0.8\\n%\\nT1\\nX1.0Y2.0\\nM30\\n")
     'excellon'
@@ -171,6 +176,8 @@ def sniff_kind(head: bytes, *, truncated: Optional[bool] = None) -> Optional[str
         return "drawing"
     if head.startswith(b"\xef\xbb\xbf"):
         head = head[3:]
+    if head.startswith(_DXF_BINARY) or _DXF_START.match(head):
+        return "dxf"
     if b"\0" in head:
         return None
     text = head.decode("latin-1")
@@ -231,7 +238,7 @@ def decide_kind(
 
 
 FORCED_KINDS = {"excellon": "excellon", "gcode": "gcode", "hpgl": "hpgl", "svg": "svg", "drawing": "drawing",
-                "matrix": "digitized"}
+                "matrix": "digitized", "dxf": "dxf"}
 """``--kind`` names (issue #31 point 1) and the job kind each forces ("matrix": a saved digitized matrix)."""
 
 

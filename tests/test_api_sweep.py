@@ -65,7 +65,7 @@ def test_every_job_option_takes_any_json_value_without_a_500(fast):
 
 WEIRD_ARGS = ["nan", "inf", "-inf", "1e308", "1" + "0" * 30, "1" + "0" * 4000, "[]", "{}", "", "-1", "0,0,0,0"]
 SAMPLE_OF_KIND = {"drawing": "two_curves.png", "digitized": "two_curves.png", "excellon": "board.drl",
-                  "hpgl": "inkscape_star.plt", "svg": "logo.svg", "gcode": "bolt_plate.ngc"}
+                  "hpgl": "inkscape_star.plt", "svg": "logo.svg", "gcode": "bolt_plate.ngc", "dxf": "bracket.dxf"}
 
 
 @pytest.mark.slow

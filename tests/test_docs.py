@@ -164,6 +164,7 @@ def test_readme_map_names_every_reader_and_planner():
         "excellon": ("cam.formats.excellon", "cam.job.drill"),
         "hpgl": ("cam.formats.hpgl", "cam.job.hpgl_stream"),
         "svg": ("cam.formats.svg", "cam.job.svg"),
+        "dxf": ("cam.formats.dxf", "cam.job.svg"),  # read into an SvgDrawing, planned as SVG
         "gcode": ("cam.formats.gcode", "cam.job.gcode"),
     }
     assert set(wanted) == set(SUFFIXES), "a new file kind: add its reader and planner to the README's map and here"

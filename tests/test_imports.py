@@ -52,6 +52,8 @@ FUNCTION_LEVEL_IMPORTS = {
     ("cam.drive.machines", "cam.drive.machines"): "the registry's back ends register themselves when a port is "
                                                   "first named: each imports the registry's base, and the grbl "
                                                   "and MAXIMUS hosts load only for a port that needs them",
+    ("cam.formats.dxf", "ezdxf"): "heavy (about 0.7 s): loaded only when a DXF file is read, not with every job "
+                                  "kind's reader (cam.job.jobs imports cam.formats.dxf)",
     ("cam.cli", "numba"): "heavy (about half a second): the first-compile note is registered only when a "
                           "command runs, so --help and bad options stay quick",
 }

@@ -289,7 +289,7 @@ def test_level_options_are_declared_for_every_kind_and_extrapolate_needs_a_map()
     from cam.options import OPTIONS
 
     for name in ("level", "level_extrapolate"):
-        assert OPTIONS[name].kinds == {"drawing", "digitized", "gcode", "excellon", "hpgl", "svg"}
+        assert OPTIONS[name].kinds == {"drawing", "digitized", "gcode", "excellon", "hpgl", "svg", "dxf"}
         assert not OPTIONS[name].web  # a file on the machine that runs cam
     assert OPTIONS["level"].flag == "--level" and OPTIONS["level_extrapolate"].flag == "--level-extrapolate"
     with pytest.raises(CamError, match="option 'level_extrapolate' needs a height map"):

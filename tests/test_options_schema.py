@@ -24,7 +24,7 @@ from conftest import SAMPLES, run_cli
 
 KIND_FILES = {
     "drawing": SAMPLES / "gear.png", "excellon": SAMPLES / "board.drl", "hpgl": SAMPLES / "extended.plt",
-    "gcode": SAMPLES / "bolt_plate.ngc", "svg": SAMPLES / "logo.svg",
+    "gcode": SAMPLES / "bolt_plate.ngc", "svg": SAMPLES / "logo.svg", "dxf": SAMPLES / "bracket.dxf",
     "digitized": Path("no-such-matrix.txt"),  # kind by suffix; refused before it would be read
 }
 """A file of each job kind."""

@@ -284,7 +284,7 @@ def test_cli_text_is_one_line_and_nothing_moves(tmp_path):
 
 def test_scale_on_a_drawing_is_refused(tmp_path):
     out = cli("drill", str(ROOT / "samples" / "ellipse.png"), "--scale", "2")
-    assert out.returncode == 2 and "applies to hpgl and svg" in out.stderr
+    assert out.returncode == 2 and "applies to dxf and hpgl and svg" in out.stderr
 
 
 def test_prepare_job_and_web_options(tmp_path):

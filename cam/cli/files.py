@@ -231,13 +231,15 @@ def _info_svg(args: argparse.Namespace) -> int:
     elements = ", ".join(f"{n} {name}" for name, n in sorted(rep["elements"].items())) or "none"
     segments = ", ".join(f"{n} {name}" for name, n in rep["segments"].items())
     dw, dh = rep["document_mm"]
+    dxf = rep.get("dxf")  # a DXF file: read into the same drawing (cam.formats.dxf)
     lines = [f"{args.image}: {rep['strokes']} strokes from {elements}",
              f"  segments: {segments} (arcs as cubic Béziers)",
-             f"  page {dw:.2f} x {dh:.2f} mm; cut area {w:.2f} x {h:.2f} mm at scale 1, machine time "
+             (f"  DXF {dxf['version']}, units {dxf['units']} (from {dxf['units_from']}); drawing {dw:.2f} x {dh:.2f} mm"
+              if dxf else f"  page {dw:.2f} x {dh:.2f} mm") + f"; cut area {w:.2f} x {h:.2f} mm at scale 1, machine time "
              f"{format_duration(job.estimated_time_s)} at 0.5 mm deep"]
     layers = rep.get("layers", [])  # issue #31 point 6: what --layers can name
-    lines.append(f"  {len(layers)} layer(s), " + ("Inkscape layers" if rep.get("layers_from") == "inkscape" else
-                                                   "by stroke colour") + ", in file order:")
+    named = {"inkscape": "Inkscape layers", "dxf": "DXF layers"}.get(rep.get("layers_from"), "by stroke colour")
+    lines.append(f"  {len(layers)} layer(s), {named}, in file order:")
     lines += [f"    '{layer['name']}': {layer['strokes']} strokes, {layer['length_mm']:.1f} mm" for layer in layers]
     lines += [f"warning: {w}" for w in job.warnings]
     print("\n".join(lines))
@@ -257,7 +259,7 @@ def cmd_info(args: argparse.Namespace) -> int:
 
 
 def _info_of_kind(args: argparse.Namespace, kind: str) -> int:
-    if kind == "svg":
+    if kind in ("svg", "dxf"):
         return _info_svg(args)
     if kind == "hpgl":
         return _info_hpgl(args)
@@ -266,7 +268,7 @@ def _info_of_kind(args: argparse.Namespace, kind: str) -> int:
     if kind == "gcode":
         return _info_gcode(args)
     if kind != "drawing":
-        raise CamError(f"{args.image}: info reads drawings, drill, HPGL and G-code files, not {KIND_NAMES[kind]}")
+        raise CamError(f"{args.image}: info reads drawings, drill, HPGL, SVG, DXF and G-code files, not {KIND_NAMES[kind]}")
     settings = machine_settings(args)
     d = digitize(load_image(args.image), start=args.start)
     rep = image_report(d, settings)

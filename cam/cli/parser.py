@@ -18,7 +18,7 @@ from typing import Callable, Optional, Sequence
 from .. import __version__
 from ..choices import (
     DIGITIZED_SUFFIXES, DRAWING_SUFFIXES, EXCELLON_SUFFIXES, GCODE_SUFFIXES, HPGL_SUFFIXES, PROFILE_SUFFIXES,
-    DEFAULT_PORT, POSTS, SVG_SUFFIXES,
+    DEFAULT_PORT, POSTS, SVG_SUFFIXES, DXF_SUFFIXES,
 )
 from ..options import MAX_MM, OPTIONS, Option
 from ..settings import RAMP_MODES
@@ -40,7 +40,8 @@ def _listed(suffixes: Sequence[str]) -> str:
 
 FILE_KINDS_HELP = (
     f"a drawing ({_listed(DRAWING_SUFFIXES)}), an Excellon drill file ({_listed(EXCELLON_SUFFIXES)}), "
-    f"an HPGL file ({_listed(HPGL_SUFFIXES)}), an SVG file ({_listed(SVG_SUFFIXES)}) or a G-code file "
+    f"an HPGL file ({_listed(HPGL_SUFFIXES)}), an SVG file ({_listed(SVG_SUFFIXES)}), a DXF file "
+    f"({_listed(DXF_SUFFIXES)}) or a G-code file "
     f"({_listed(GCODE_SUFFIXES)})"
 )
 """The files a job command or info takes as its positional argument, by kind."""
@@ -251,7 +252,7 @@ def _tool_text(text: str) -> str:
 
 
 def _add_tool_options(p: argparse.ArgumentParser) -> None:
-    g = p.add_argument_group("the cutter (drawings; --tool and --line-width also SVG and HPGL)")
+    g = p.add_argument_group("the cutter (drawings; --tool and --line-width also SVG, DXF and HPGL)")
     for name in ("tool", "line_width_mm", "stepdown_mm", "stepover", "rough_tool"):
         _add_option(g, name)
 
@@ -265,7 +266,8 @@ def _add_excellon_options(d: argparse.ArgumentParser) -> None:
 
 
 def _add_svg_options(d: argparse.ArgumentParser, scale: bool = True) -> None:
-    g = d.add_argument_group(f"SVG files ({_listed(SVG_SUFFIXES)}; --cut-depth default 0.5, --offset places the page origin)")
+    g = d.add_argument_group(f"SVG and DXF files ({_listed(SVG_SUFFIXES)} {_listed(DXF_SUFFIXES)}; --cut-depth default "
+                             "0.5, --offset places the page or drawing origin)")
     if scale:
         _add_option(g, "scale")
     _add_option(g, "fit_mm")
@@ -278,8 +280,8 @@ def _add_cut_options(d: argparse.ArgumentParser) -> None:
     _add_option(g, "cut_depth_mm")
     _add_option(g, "travel_height_mm")
     _add_option(g, "allow_surface_travel")
-    f = d.add_argument_group(f"drill, HPGL and SVG files ({_listed(EXCELLON_SUFFIXES)} {_listed(HPGL_SUFFIXES)} "
-                             f"{_listed(SVG_SUFFIXES)})")
+    f = d.add_argument_group(f"drill, HPGL, SVG and DXF files ({_listed(EXCELLON_SUFFIXES)} {_listed(HPGL_SUFFIXES)} "
+                             f"{_listed(SVG_SUFFIXES)} {_listed(DXF_SUFFIXES)})")
     for name in ("offset_mm", "mirror_x", "drill_order"):
         _add_option(f, name)
     _add_excellon_options(d)
@@ -372,12 +374,13 @@ def _add_gcode_options(d: argparse.ArgumentParser) -> None:
 
 def _add_drill(sub: argparse._SubParsersAction) -> None:
     d = sub.add_parser(
-        "drill", help="cut a drawing, G-code, drill (Excellon), HPGL or SVG file (mock port by default)",
+        "drill", help="cut a drawing, G-code, drill (Excellon), HPGL, SVG or DXF file (mock port by default)",
         description="Digitize a drawing (or reuse a saved digitized matrix), plan the depth-sorted toolpath "
         f"and send it to a port. A G-code file ({_listed(GCODE_SUFFIXES)}) runs as programmed; an Excellon drill "
         f"file ({_listed(EXCELLON_SUFFIXES)}) is drilled tool by tool in a short order, also on the MAXIMUS board "
         f"(--port maximus:/dev/ttyUSB0); an HPGL file ({_listed(HPGL_SUFFIXES)}) is cut pen-down at --cut-depth, "
-        f"and so is every visible stroke and outline of an SVG file ({_listed(SVG_SUFFIXES)}). "
+        f"and so is every visible stroke and outline of an SVG file ({_listed(SVG_SUFFIXES)}) and every line and "
+        f"curve of a DXF file ({_listed(DXF_SUFFIXES)}). "
         "The default port is the logging mock, so nothing moves unless you name a real port.",
     )
     _add_job_options(d)

@@ -148,7 +148,7 @@ def write_job_preview(args: argparse.Namespace, job: PreparedJob, path: str, sur
     held in memory or made a piece at a time alike, see :func:`write_preview`)."""
     if job.kind in ("drawing", "digitized"):
         write_preview(args, job.toolpath, path, surface=surface, drawing_rgb=job.drawing_rgb)
-    elif job.kind == "svg":  # --scale scaled the drawing, as in drill
+    elif job.kind in ("svg", "dxf"):  # --scale scaled the drawing, as in drill
         write_file_job_preview(job, path)
     else:
         write_file_job_preview(job, path, scale=_picture_scale(args))

@@ -46,7 +46,7 @@ def goto_path(start_steps: Steps3, target_steps: Steps3, safe_z_steps: int, sett
 
 
 PLACED_KINDS = {"drawing": "drawing job", "digitized": "digitized matrix job", "excellon": "drill job",
-                "hpgl": "HPGL job", "svg": "SVG job"}
+                "hpgl": "HPGL job", "svg": "SVG job", "dxf": "DXF job"}
 """The file kinds whose job is placed at the active work zero, and what messages call them (a G-code program is
 not placed: it runs in the state's work offsets from where the tool stands, planned so by ``cam drill``, see
 :func:`cam.job.jobs.prepare_job`'s ``machine_state``)."""

@@ -62,6 +62,7 @@ from ..job.hpgl_stream import hpgl_scale, xy_steps_exact
 from ..job.svg import FLATTEN_STEPS, _selected, svg_layer_order, svg_scale
 from .hpgl import ARC_MNEMONICS, HpglDrawing, iter_hpgl, load_hpgl
 from .svg import load_svg
+from .dxf import load_dxf
 from ..choices import POSTS
 
 __all__ = ["format_mm", "to_gcode", "gcode_pieces", "save_gcode", "feeds_mm_per_min", "exact_geometry", "svg_exact_xy_mm",
@@ -112,7 +113,7 @@ def exact_geometry(prepared: Any, cut_depth_mm: Optional[float] = None, options:
                    ) -> tuple[dict[tuple[int, int], tuple[float, float]], dict[int, float]]:
     """``(exact_xy_mm, exact_z_mm)`` of a :class:`cam.job.jobs.PreparedJob` for :func:`gcode_pieces`: a drill
     file's holes at their mm before rounding to steps (the first hole of a step wins), and ``cut_depth_mm``
-    for its drill depth; an SVG file's strokes (:func:`svg_exact_xy_mm`, with the job's
+    for its drill depth; an SVG or DXF file's strokes (:func:`svg_exact_xy_mm`, with the job's
     :class:`cam.job.jobs.JobOptions` ``options``: scale, fit, offset, layers); an HPGL file's pen-down points
     and which of its chords are arcs (:func:`hpgl_exact_xy_mm`, the same options but layers; not a file of more
     than :data:`MAX_SAMPLES` points); empty for other kinds (their points are the job's own).
@@ -122,12 +123,13 @@ def exact_geometry(prepared: Any, cut_depth_mm: Optional[float] = None, options:
     xy: dict[tuple[int, int], tuple[float, float]] = {}
     z: dict[int, float] = {}
     kind = getattr(prepared, "kind", None)
-    if kind in ("svg", "hpgl") and options is not None:
+    if kind in ("svg", "hpgl", "dxf") and options is not None:
         offset = options.offset_mm
         if offset is None and getattr(options, "origin", None) == "file":
             offset = (0.0, 0.0)  # as cam.job.jobs.prepare_job plans it
-        if kind == "svg":
-            return svg_exact_xy_mm(load_svg(prepared.source), prepared.settings, scale=options.scale,
+        if kind in ("svg", "dxf"):  # a DXF file is read into the same drawing as an SVG file
+            drawing = load_dxf(prepared.source) if kind == "dxf" else load_svg(prepared.source)
+            return svg_exact_xy_mm(drawing, prepared.settings, scale=options.scale,
                                    fit_mm=options.fit_mm, offset_mm=offset, layers=options.layers), z
         if int((getattr(prepared, "report", None) or {}).get("points", 0)) > MAX_SAMPLES:
             return xy, z  # a file streamed a piece at a time: written at its steps

@@ -4,7 +4,7 @@ The CLI and the web server are thin adapters over :func:`prepare_job`::
 
     job = prepare_job("gear.png", JobOptions(depth=(4,)))
     job.steps              # the StepPlan: every port write, timed
-    job.kind               # "drawing", "digitized", "gcode", "excellon", "hpgl" or "svg"
+    job.kind               # "drawing", "digitized", "gcode", "excellon", "hpgl", "svg" or "dxf"
     job.size_mm, job.estimated_time_s, job.warnings, job.tool_changes
     job.preview_png()      # PNG bytes of the toolpath picture
 
@@ -52,6 +52,7 @@ from ..formats.gcode import load_tool_table, open_gcode
 from ..options import JOB_OPTIONS, Option, MAX_DEPTH_PX, MAX_MM, MAX_PX, check_range, degenerate  # noqa: F401 (the limits re-exported)
 from ..formats.hpgl import scan_hpgl
 from ..formats.svg import load_svg
+from ..formats.dxf import load_dxf
 from ..tool import parse_tool, tool_of_settings
 from ..render.picture import LEGEND_PX, depth_colours, encode_png, toolpath_picture
 from ..render.report import job_report
@@ -83,7 +84,7 @@ __all__ = [
     "DRAWING_SUFFIXES", "DIGITIZED_SUFFIXES", "EXCELLON_SUFFIXES", "HPGL_SUFFIXES", "PROFILE_SUFFIXES",
 ]
 
-KINDS = ("drawing", "digitized", "gcode", "excellon", "hpgl", "svg")
+KINDS = ("drawing", "digitized", "gcode", "excellon", "hpgl", "svg", "dxf")
 
 
 def accepted_suffixes() -> dict[str, tuple[str, ...]]:
@@ -142,7 +143,7 @@ class JobOptions:
         ``O<name> call`` finds ``name.ngc``; max_lines: the most lines a program may run (loops count each
         pass).  The first two name files on the machine that runs `cam`, so they are command-line options
         only: :meth:`from_mapping` (the web page's form) refuses them.
-    SVG (also cut_depth_mm, default 0.5, travel_height_mm and offset_mm, the page's origin):
+    SVG and DXF (also cut_depth_mm, default 0.5, travel_height_mm and offset_mm, the page's origin):
         scale: mm cut per mm of the drawing; fit_mm: or ``(width, height)`` mm to scale the drawing to fit.
     Drawings that are sketches or photos:
         trace: trace the image into a drawing first (see :func:`cam.digitize.sketch.trace`: dark lines on
@@ -784,7 +785,7 @@ def own_zero_home(kind: str, options: JobOptions, machine_state: Optional[Any] =
     ``offset_mm`` from it) goes to the active work zero of ``machine_state`` (None: the home, a new machine's
     work zero), and its travel is checked in the machine frame from there, as a G-code program's is.  None for
     every other job (planned in its own frame, placed at the work zero by its extent when it runs)."""
-    if kind not in ("excellon", "hpgl", "svg"):
+    if kind not in ("excellon", "hpgl", "svg", "dxf"):
         return None
     if options.origin != "file" and (options.origin is not None or options.offset_mm is None):
         return None
@@ -860,8 +861,10 @@ def _prepare_hpgl(path: Path, options: JobOptions, settings: MachineSettings, pr
 
 
 def _prepare_svg(path: Path, options: JobOptions, settings: MachineSettings,
-                 home: Optional[tuple[int, int, int]] = None) -> PreparedJob:
-    drawing = load_svg(path)
+                 home: Optional[tuple[int, int, int]] = None, kind: str = "svg") -> PreparedJob:
+    """An SVG file's job, or a DXF file's (``kind`` "dxf": :func:`cam.formats.dxf.load_dxf` reads it into the same
+    drawing, which the SVG planner cuts)."""
+    drawing = load_dxf(path) if kind == "dxf" else load_svg(path)
     depth_mm, engraving = _engraving(options, settings, SVG_CUT_DEPTH_MM)
     toolpath = plan_svg(drawing, settings=settings, cut_depth_mm=depth_mm,
                         travel_height_mm=_or(options.travel_height_mm, SVG_TRAVEL_HEIGHT_MM),
@@ -873,11 +876,13 @@ def _prepare_svg(path: Path, options: JobOptions, settings: MachineSettings,
     layer_list = [{"name": name, "strokes": int((drawing.layer_of_stroke == i).sum()), "length_mm": round(length, 3)}
                   for i, (name, length) in enumerate(zip(drawing.layers(), drawing.layer_lengths_mm()))]
     return PreparedJob(
-        source=str(path), kind="svg", plan=steps, settings=settings, toolpath=toolpath,
+        source=str(path), kind=kind, plan=steps, settings=settings, toolpath=toolpath,
         warnings=list(drawing.warnings), summary=f"{path.name}: {drawing.n_strokes} strokes ({counts})",
         report={"strokes": drawing.n_strokes, "elements": dict(drawing.element_counts),
                 "segments": drawing.segment_counts, "document_mm": [round(v, 3) for v in drawing.size_mm],
                 "layers": layer_list, "layers_from": drawing.layers_from,
+                **({"dxf": {"version": drawing.dxf_version, "units": drawing.units, "units_from": drawing.units_from,
+                            "skipped": dict(drawing.skipped)}} if kind == "dxf" else {}),
                 **engraving},
     )
 
@@ -889,7 +894,7 @@ def prepare_job(
     """Read a job file and plan it into steps.
 
     Args:
-        path: a drawing, a digitized matrix, a G-code, Excellon, HPGL or SVG file (kind by suffix).
+        path: a drawing, a digitized matrix, a G-code, Excellon, HPGL, SVG or DXF file (kind by suffix).
         options: how to cut it (:class:`JobOptions`); None = the defaults.
         settings: the machine settings.
         name: the name the summary gives the file (default: its file name).
@@ -939,8 +944,8 @@ def prepare_job(
         job = _prepare_gcode(p, opts, settings, machine_state)
     elif kind == "excellon":
         job = _prepare_excellon(p, opts, settings, home)
-    elif kind == "svg":
-        job = _prepare_svg(p, opts, settings, home)
+    elif kind in ("svg", "dxf"):
+        job = _prepare_svg(p, opts, settings, home, kind)
     else:
         job = _prepare_hpgl(p, opts, settings, progress, home)
     _refuse_nothing(job, opts, settings)
@@ -1061,7 +1066,7 @@ def _refuse_surface_travel(options: JobOptions, settings: MachineSettings) -> No
                        "meant")
 
 
-_CUTS = {"excellon": "holes", "svg": "strokes", "hpgl": "strokes"}
+_CUTS = {"excellon": "holes", "svg": "strokes", "hpgl": "strokes", "dxf": "strokes"}
 """What a vector job's report counts, whose cuts a scale or a step size could put on one X/Y step."""
 
 
