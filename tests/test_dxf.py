@@ -240,6 +240,21 @@ def test_the_check_sees_a_wrong_cut(tmp_path):
         assert_cuts_as_flattened(cut + [0.0, 1.5 * MM], ezdxf_flattening(data, 1.0))
 
 
+def test_a_spline_fit_polyline_is_cut_along_its_fit_vertices_not_its_frame():
+    """An R12 POLYLINE smoothed by AutoCAD's PEDIT Spline keeps its frame's control points as vertices too (flag
+    16): they are not on the curve and are not cut (ezdxf's make_path would join them in)."""
+    doc = ezdxf.new("R12")
+    for version in ("2d", "3d"):
+        add = doc.modelspace().add_polyline2d if version == "2d" else doc.modelspace().add_polyline3d
+        line = add([(0, 0, 0), (10, 10, 0), (20, 0, 0)] if version == "3d" else [(0, 0), (10, 10), (20, 0)])
+        line.dxf.flags |= 4  # spline-fit vertices added
+        for v in line.vertices:
+            v.dxf.flags |= 8  # made by the fit: on the curve
+        line.append_vertices([(0, 20, 0), (10, 30, 0)], dxfattribs={"flags": 16 | (32 if version == "3d" else 0)})
+    d = parse_dxf(_text(doc))
+    assert [p.tolist() for p in d.polylines(0.01)] == [[[0, 0], [10, -10], [20, 0]]] * 2
+
+
 def test_the_drawing_is_upright_and_the_dxf_origin_is_placed():
     """y up in the file is away from the operator (the machine's -y); --offset puts the DXF's 0,0 there."""
     doc = ezdxf.new("R2000")

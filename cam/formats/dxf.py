@@ -6,9 +6,9 @@ cut, entity by entity, into the strokes of a :class:`DxfDrawing`, an
 :class:`~cam.formats.svg.SvgDrawing` with the file's units and version: the
 SVG planner (:func:`cam.job.svg.plan_svg`) cuts it, layers and all.
 
-* LINE, ARC, CIRCLE, ELLIPSE, LWPOLYLINE and 2D POLYLINE (bulges as arcs), a 3D
-  POLYLINE that lies at one height, SPLINE: one stroke each (a polyline's
-  pieces joined).  Arcs and ellipses are cubic Béziers of at most 1/16 turn
+* LINE, ARC, CIRCLE, ELLIPSE, LWPOLYLINE and 2D POLYLINE (bulges as arcs; a
+  spline-fit POLYLINE along its fit vertices, not its frame), a 3D POLYLINE that
+  lies at one height, SPLINE: one stroke each (a polyline's pieces joined).  Arcs and ellipses are cubic Béziers of at most 1/16 turn
   (:data:`ARC_PIECES_PER_TURN`: within 7e-8 of the radius, 0.07 µm at 1 m); a
   cubic, non-rational, clamped SPLINE (most of them) is its exact Bézier pieces;
   any other (rational, other degrees, periodic) is flattened within
@@ -392,7 +392,7 @@ class _Reader:
                 pts = np.array([tuple(v) for v in tool.flattening(SPLINE_TOLERANCE_MM / self.k, segments=4)], float)
                 segs: list[tuple[list[int], np.ndarray]] = [([LINE] * (len(pts) - 1), pts)]
             else:
-                p = ezpath.make_path(e, segments=_pieces(e, kind))
+                p = _polyline_path(e) if kind == "POLYLINE" else ezpath.make_path(e, segments=_pieces(e, kind))
                 segs = [_commands(sub) for sub in (p.sub_paths() if p.has_sub_paths else [p])]
         except MemoryError:
             raise
@@ -416,6 +416,29 @@ class _Reader:
             self.layer_of.append(layer)
         key = kind.lower()
         self.counts[key] = self.counts.get(key, 0) + 1
+
+
+_FRAME_VERTEX = 16
+"""A POLYLINE vertex that is a control point of a spline-fit polyline's frame (AutoCAD's PEDIT Spline; R12 files):
+not on the curve, which its fit vertices draw."""
+
+
+def _polyline_path(e: Any) -> Any:
+    """The ezdxf path of a POLYLINE: ezdxf's own, but without the frame control points of a spline-fit one."""
+    from ezdxf import path as ezpath
+    from ezdxf.math import Vec3
+
+    segments = _pieces(e, "POLYLINE")
+    drawn = [v for v in e.vertices if not v.dxf.get("flags", 0) & _FRAME_VERTEX]
+    if len(drawn) == len(e.vertices):
+        return ezpath.make_path(e, segments=segments)
+    if e.is_3d_polyline:
+        return ezpath.from_vertices([v.dxf.location for v in drawn], close=e.is_closed)
+    p = ezpath.Path()
+    if drawn:
+        ezpath.add_2d_polyline(p, [v.format("xyb") for v in drawn], close=e.is_closed, ocs=e.ocs(),
+                               elevation=Vec3(e.dxf.get("elevation", (0, 0, 0))).z, segments=segments)
+    return p
 
 
 def _tilted(e: Any) -> bool:
