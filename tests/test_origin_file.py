@@ -1,4 +1,4 @@
-"""--origin file for drill, HPGL and SVG files (issue #29 point 1): the file's own zero goes to the active work
+"""--origin file for drill, HPGL, SVG and DXF files (issue #29 point 1): the file's own zero goes to the active work
 zero, so each hole or stroke is cut at the work zero plus the file's own coordinates; the travel is checked in
 the machine frame before anything moves (one line naming the axis and by how much, exit code 2).  Checked on
 the mock's decoded pin log, put in the machine frame.
@@ -9,9 +9,11 @@ an SVG page has y down (machine y = y).
 """
 from __future__ import annotations
 
+import io
 import json
 from dataclasses import replace
 
+import ezdxf
 import numpy as np
 import pytest
 
@@ -36,6 +38,20 @@ FILES = {
                   '<path d="M10,10 H20 V20 H10 Z" stroke="black" fill="none"/></svg>\n',
 }
 Y_UP = {"board.drl": True, "square.plt": True, "square.svg": False}
+
+
+def _square_dxf() -> str:
+    """The square as a closed LWPOLYLINE of a DXF in mm (y up, as drawn: machine y = -Y, issue #48 point 2)."""
+    doc = ezdxf.new("R2000")
+    doc.units = 4
+    doc.modelspace().add_lwpolyline(CORNERS_MM, close=True)
+    text = io.StringIO()
+    doc.write(text)
+    return text.getvalue()
+
+
+FILES["square.dxf"] = _square_dxf()
+Y_UP["square.dxf"] = True
 
 
 def _file(tmp_path, name: str):
