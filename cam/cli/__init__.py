@@ -34,6 +34,7 @@ COMMANDS = {
     "zero": ("cam.cli.machine_state", "cmd_zero"),
     "home": ("cam.cli.home", "cmd_home"),
     "probe": ("cam.cli.probe", "cmd_probe"),
+    "tools": ("cam.cli.tools", "cmd_tools"),
     "serve": ("cam.cli.serve", "cmd_serve"),
     "emulate-maximus": ("cam.cli.emulate", "cmd_emulate"),
     "emulate-grbl": ("cam.cli.emulate", "cmd_emulate_grbl"),

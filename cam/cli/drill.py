@@ -19,6 +19,7 @@ from ..job.jobs import resume_job
 from ..job.resume import resume_start
 from .checks import check_output_path, job_kind_of
 from ..fileio import atomic_write_text
+from ..tool_table import job_tool_warnings, read_tool_table, tool_table_path
 from ..drive.activities import run_timing_text
 from .common import format_duration, port_settings
 from .execute import Outcome, check_port_options, execute
@@ -218,6 +219,9 @@ def _drill(args: argparse.Namespace, settings, hold: Optional[StateHold],
     if getattr(args, "resume", None):
         assert hold is not None  # taken before planning (_machine_hold)
         job, start_steps = _resumed(args, job, hold, reported_stop)
+    table_path = tool_table_path(args.machine)  # the machine's tool table: named at each tool change (issue #47)
+    args.tool_table_path = str(table_path)
+    job.warnings += job_tool_warnings(job, read_tool_table(table_path))
     for w in job.warnings:
         if w not in getattr(args, "kind_warnings", ()):  # check_args said it already
             print(f"warning: {w}", file=sys.stderr)

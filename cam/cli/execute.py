@@ -249,6 +249,7 @@ def _drive(job: Any, args: argparse.Namespace, settings: MachineSettings, hold: 
     port = _job_port(args, settings, realtime)
     answers = _Answers(args, stopping)
     session = MachineSession(port, settings, realtime=realtime, on_prompt=answers)
+    session.tool_table_path = getattr(args, "tool_table_path", None)  # the prompt names the table's tool
     if getattr(args, "feed_override", None) is not None:  # grbl's override (CapabilityError elsewhere)
         session.feed_override(args.feed_override)
     # --origin, else the job's own (an --offset places the file by its own zero: cam.job.jobs.prepare_job, the rule

@@ -831,9 +831,38 @@ def _add_serve(sub: argparse._SubParsersAction) -> None:
                      help="the memory that worker process may use (default: half the machine's, 2048 to 8192)")
 
 
+def _add_tools(sub: argparse._SubParsersAction) -> None:
+    tl = sub.add_parser("tools", help="the machine's tool table: list, set or remove a tool",
+                        description="The tool table kept with the machine file (beside it, NAME.tools.toml; with no "
+                        "--machine, default.tools.toml in the state folder): each tool's number, shape (flat, ball, "
+                        "V), diameter (a V bit's tip) and length offset. Drill and G-code jobs name the table's tool "
+                        "at each tool change (a drill file's own size wins, and a table tool of another size is a "
+                        "warning). Without an action: list the tools.")
+    tl.add_argument("--machine", metavar="FILE.toml", help="the machine file whose table this is (default: the "
+                    "built-in settings' table in the state folder)")
+    tl.add_argument("--json", action="store_true", help="list the tools as JSON")
+    what = tl.add_subparsers(dest="tools_action", metavar="ACTION", parser_class=_Parser)
+    what.add_parser("list", help="list the tools (the default)",
+                    description="List the tools of the table, one a line (--json before the action: as JSON).")
+    st = what.add_parser("set", help="add a tool, or change the tool of that number",
+                         description="Add tool N to the table, or replace it: cam tools set 3 --shape v --diameter 0.2 "
+                         "--angle 30 --length 12.3. The table is written atomically.")
+    st.add_argument("number", type=_whole("N", 0, 999_999), metavar="N", help="the tool number (T3: 3)")
+    st.add_argument("--shape", required=True, choices=("flat", "ball", "v"), help="the cutter's end: flat, ball or v")
+    st.add_argument("--diameter", required=True, type=_number("--diameter", 0.0, 100.0), metavar="MM",
+                    help="the cutting diameter in mm (a V bit: its tip, 0 sharp)")
+    st.add_argument("--angle", type=_number("--angle", 0.0, 179.0), default=0.0, metavar="DEG",
+                    help="a V bit's included angle in degrees (1..179)")
+    st.add_argument("--length", type=_number("--length", -1000.0, 1000.0), metavar="MM",
+                    help="the tool's length offset in mm (left out: not known)")
+    rm = what.add_parser("remove", help="remove a tool from the table",
+                         description="Remove tool N from the table (written atomically).")
+    rm.add_argument("number", type=_whole("N", 0, 999_999), metavar="N", help="the tool number")
+
+
 _COMMAND_PARSERS = (_add_drill, _add_export, _add_preview, _add_digitize, _add_trace, _add_info, _add_profile, _add_jog,
                     _add_emulate_maximus, _add_emulate_grbl, _add_goto, _add_where, _add_zero, _add_home, _add_probe,
-                    _add_serve)
+                    _add_tools, _add_serve)
 """Each adds one command's subparser, in the order ``cam --help`` lists them."""
 
 

@@ -93,7 +93,10 @@ from ..fileio import atomic_write_bytes
 from ..sniff import HEAD_BYTES
 from ..options import schema_json
 from ..job.jobs import PROFILE_SUFFIXES, JobOptions, PreparedJob, accepted_suffixes, job_kind
+from ..machine_file import backup_path, list_settings, machine_file_of, save_settings
 from ..settings import DEFAULT_SETTINGS, MachineSettings
+from ..tool_table import (TABLE_SHAPES, job_tool_warnings, read_tool_table, tool_from_mapping, tool_table_path,
+                          write_tool_table)
 from ..worker import DEFAULT_TIME_LIMIT_S, Worker, default_memory_limit_bytes
 from .connections import ConnectionGuard, guarded_h11, is_safety_route
 from .work import (
@@ -591,6 +594,7 @@ async def _plan_job(st: _AppState, request: Request) -> dict[str, Any]:
         raise HttpError(404, f"no uploaded job {job_id!r}; upload a file first")
     options = _job_options(st, body.get("options") or {})
     job = await _plan(st, job_id, options)
+    job.warnings += job_tool_warnings(job, read_tool_table(_tools_path(st)))  # the machine's tool table (#47)
     for w in job.warnings:
         st.session.log(f"{st.uploads[job_id]['name']}: {w}", "warning")
     st.session.log(f"planned {job.summary}; {job.estimated_time_s:.1f} s")
@@ -840,6 +844,7 @@ async def _drill_z(st: _AppState, request: Request) -> dict[str, Any]:
     """Z Drill Up / Down (``which``) of a MAXIMUS board from where the head stands."""
     body = await _body_json(request)
     st.session.set_drill_z(body.get("which", ""))
+    _keep_drill_z(st)
     return st.session.state()
 
 
@@ -964,6 +969,116 @@ async def _not_found(st: _AppState, request: Request):
     raise HttpError(404, f"no such API endpoint: {request.method} {request.url.path}")
 
 
+# -- machine settings and the tool table (issue #47 points 4 and 5): thin adapters over cam.machine_file and
+# cam.tool_table --------------------------------------------------------------------------------------------
+
+def _machine_path(st: _AppState) -> Path:
+    """The machine file the page's Settings save to (:func:`cam.machine_file.machine_file_of`)."""
+    return machine_file_of(st.config.machine_file or None)
+
+
+def _tools_path(st: _AppState) -> Path:
+    """The machine's tool table (:func:`cam.tool_table.tool_table_path`)."""
+    return tool_table_path(st.config.machine_file or None)
+
+
+def _settings_answer(st: _AppState) -> dict[str, Any]:
+    path = _machine_path(st)
+    return {"file": str(path), "backup": str(backup_path(path)), "exists": path.is_file(),
+            "settings": [info.to_json() for info in list_settings(st.session.settings)]}
+
+
+async def _get_settings(st: _AppState, request: Request) -> dict[str, Any]:
+    """``GET /api/settings``: every key of the machine file (:func:`cam.machine_file.list_settings`): name, value,
+    kind, unit, range and help, with the file they are saved to."""
+    return _settings_answer(st)
+
+
+def _save_machine(st: _AppState, values: Any, what: str) -> None:
+    """Save ``values`` (key -> value) to the machine file (:func:`cam.machine_file.save_settings`, a backup kept)
+    and run the next job with the file as saved: the session's and the planner's settings, the machine file the
+    state file records (so the next ``cam serve`` on this machine reads it) and its tool table."""
+    session = st.session
+    if session.busy:
+        raise BusyError("the machine is busy: settings are saved while it is idle")
+    path = _machine_path(st)
+    backend = session.backend
+    old = session.settings
+    new = save_settings(path, values, base=backend.base_settings(), adapt=backend.adapt_settings)
+    st.config.settings = session.settings = new
+    st.config.machine_file = str(path)
+    session.tool_table_path = str(_tools_path(st))
+    hold = session.state_hold
+    if hold is not None:  # the file as saved is the machine's now: recorded, no "changed since" at the next start
+        hold.machine = machine_record(str(path))
+        hold.settings = new
+        hold.save(hold.state)
+    session.log(f"{what} saved to {path} (the old file kept as {backup_path(path).name})")
+    if new.mm_per_step_axes != old.mm_per_step_axes or new.travel != old.travel:
+        session.log("the steps per mm or the travel changed: home the machine or Set position before the next job",
+                    "warning")
+
+
+async def _post_settings(st: _AppState, request: Request) -> dict[str, Any]:
+    """``{"values": {key: value}}``: change machine-file keys (numbers, true/false, or their text), saved with a
+    backup and used from the next job on; a value out of range is one 400 line naming the key, unit and range."""
+    from starlette.concurrency import run_in_threadpool
+
+    body = await _body_json(request)
+    values = body.get("values")
+    if not isinstance(values, dict) or not values:
+        raise HttpError(400, "values must be an object of machine-file keys and their new values")
+    await run_in_threadpool(_save_machine, st, values, f"machine settings ({', '.join(sorted(values))[:200]})")
+    return _settings_answer(st)
+
+
+def _keep_drill_z(st: _AppState) -> None:
+    """Z Drill Up / Down set on the page are kept in the machine file (its ``[maximus]`` keys): the next server
+    starts with them.  A file that cannot be written is a warning in the log; the stroke holds until then."""
+    m = st.session.settings.maximus
+    try:
+        _save_machine(st, {"maximus.drill_z_up_steps": m.drill_z_up_steps,
+                           "maximus.drill_z_down_steps": m.drill_z_down_steps}, "Z Drill Up / Down")
+    except CamError as exc:
+        st.session.log(f"Z Drill Up / Down not kept in the machine file: {exc}", "warning")
+
+
+def _tools_answer(st: _AppState) -> dict[str, Any]:
+    path = _tools_path(st)
+    return {"file": str(path), "shapes": list(TABLE_SHAPES),
+            "tools": [t.to_json() for t in read_tool_table(path).sorted()]}
+
+
+async def _get_tools(st: _AppState, request: Request) -> dict[str, Any]:
+    """``GET /api/tools``: the machine's tool table, by number."""
+    return _tools_answer(st)
+
+
+async def _set_tool(st: _AppState, request: Request) -> dict[str, Any]:
+    """``{"number", "shape", "diameter_mm", "angle_deg", "length_mm"}``: add or replace a tool (written atomically;
+    :func:`cam.tool_table.tool_from_mapping` checks every field)."""
+    body = await _body_json(request)
+    tool = tool_from_mapping(body)
+    path = _tools_path(st)
+    write_tool_table(path, read_tool_table(path).with_tool(tool), st.config.machine_file or "")
+    st.session.log(f"tool table: {tool.describe()}")
+    return _tools_answer(st)
+
+
+async def _remove_tool(st: _AppState, request: Request) -> dict[str, Any]:
+    """``{"number": N}``: remove tool N from the table."""
+    body = await _body_json(request)
+    number = body.get("number")
+    if isinstance(number, str) and number.strip().isdigit():
+        number = int(number)
+    if isinstance(number, bool) or not isinstance(number, int):
+        raise HttpError(400, f"number must be a whole number, got {json.dumps(number)[:40]}")
+    path = _tools_path(st)
+    write_tool_table(path, read_tool_table(path).without(number), st.config.machine_file or "")
+    st.session.log(f"tool table: T{number} removed")
+    return _tools_answer(st)
+
+
 def _routes(st: _AppState) -> list:
     """Every URL of the server (all of ``/api`` behind :func:`_api`)."""
     from starlette.routing import Mount, Route
@@ -1003,6 +1118,11 @@ def _routes(st: _AppState) -> list:
         Route("/api/probe-tool", json_api(_probe_tool), methods=post),
         Route("/api/probe-area", json_api(_probe_area), methods=post),
         Route("/api/height-map.png", _api(st, _height_map)),
+        Route("/api/settings", _api(st, _get_settings)),
+        Route("/api/settings", json_api(_post_settings), methods=post),
+        Route("/api/tools", _api(st, _get_tools)),
+        Route("/api/tools", json_api(_set_tool), methods=post),
+        Route("/api/tools/remove", json_api(_remove_tool), methods=post),
         Route("/api/state", _api(st, _state)),
         Route("/api/events", _api(st, _events)),
         Route("/api/pinlog", _api(st, _pinlog)),
@@ -1096,6 +1216,8 @@ def create_app(config: ServerConfig, session: Optional[MachineSession] = None):
             if hold is not None:
                 hold.close()
             raise
+    if session.tool_table_path is None:  # the prompt names the machine's tool (issue #47 point 4)
+        session.tool_table_path = str(tool_table_path(config.machine_file or None))
     worker = Worker(time_limit_s=config.work_time_limit_s,
                     memory_limit_bytes=config.work_memory_limit_bytes or default_memory_limit_bytes(),
                     warm_up=WARM_UP)
