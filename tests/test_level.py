@@ -606,3 +606,77 @@ def test_a_levelled_job_streams_to_grbl_through_its_levelled_points(tmp_path):
     pts = job.toolpath.points_steps
     assert _on_path(pts, ends, PATH_TOLERANCE_STEPS)
     assert np.isin(_keys(ends[1:]), _keys(np.vstack([pts, [[0, 0, 0]]]))).all()  # no point of its own
+
+
+@pytest.mark.skipif(__import__("shutil").which("rs274") is None, reason="rs274 (linuxcnc-uspace) not installed")
+@pytest.mark.parametrize("kind", ["hpgl", "excellon"])
+def test_export_levels_every_move_rapids_included_as_the_machine_runs_it(kind, tmp_path):
+    """``cam export --level`` (issue #46 point 2: every move, rapids included): the program run through LinuxCNC's
+    ``rs274`` (an independent interpreter) moves, at every point of every move, G0 included, at the map's offset
+    above the travel height or the cut depth within a Z step (the moves are split at the map's spacing; the map's
+    twist leaves a straight move within a micrometre of the surface's offset), except where the tool's place is
+    not the job's (the start, a tool change, the end): straight up or down to the clearance plane above the highest
+    probed point, or across on it.  And the program passes, in order, through every point of the job ``cam drill
+    --level`` runs (:func:`cam.prepare_job` with the same work zero), within a step in X/Y and exactly in Z (its
+    last point, the return to its home's Z at the surface, at the travel height as every export's travels are)."""
+    from cam.drive.state import read_state
+    from support.lcnc import parse_canonical, run_rs274
+
+    m = plane_map(a=0.15, bx=0.004, by=-0.003, cxy=2e-5, x=(-20, 60, 140), y=(-20, 50, 120), reference_mm=0.1)
+    level = save_height_map(m, tmp_path / "map.json")
+    state = tmp_path / "state.json"
+    ok(run_cli("zero", "--at", "12,9,0", "--state", state))  # the work zero: machine X 12, Y 9 mm
+    path = tmp_path / {"hpgl": "iso.plt", "excellon": "holes.drl"}[kind]
+    path.write_text({"hpgl": HPGL, "excellon": DRILL}[kind])
+    out = tmp_path / "levelled.ngc"
+    ok(run_cli("export", path, "--level", level, "--state", state, "--arc-tolerance", "0", "-o", out))
+    moves = parse_canonical(run_rs274(str(out)))
+    assert moves and all(mv.kind in ("traverse", "feed") for mv in moves)
+    prepared = cam.prepare_job(path, cam.JobOptions(level=str(level)), S, machine_state=read_state(state, S))
+    home = np.asarray(prepared.levelled_home_steps, np.int64)
+    assert tuple(home[:2]) != (0, 0)  # placed at the work zero: the machine frame is not the program's
+    ends = np.array([(0.0, 0.0, 0.0)] + [mv.end for mv in moves])  # program mm; rs274 starts at 0, 0, 0
+    rapid = np.array([False] + [mv.kind == "traverse" for mv in moves])
+
+    def offset_mm(p: np.ndarray) -> np.ndarray:  # the map's offset under program points (X = x MX, Y = -y MY)
+        return height_at(m, p[..., 0] + home[0] * MX, home[1] * MY - p[..., 1]) - m.reference_mm
+
+    travel_mm = round(1.0 / MZ) * MZ  # the travel height (1 mm) and the depth, in whole Z steps
+    depth_mm = round((0.5 if kind == "hpgl" else 2.0) / MZ) * MZ
+    clear_mm = travel_mm + math.ceil(max(0.0, float(m.offsets_mm().max())) / MZ - 1e-9) * MZ
+    high = np.abs(ends[:, 2] - clear_mm) < 1e-4  # on the clearance plane
+    nominal = ends[:, 2] - offset_mm(ends)
+    at_travel, at_depth = np.abs(nominal - travel_mm) <= MZ, np.abs(nominal + depth_mm) <= MZ
+    assert np.all((at_travel | at_depth | high)[1:]), ends[1:][~(at_travel | at_depth | high)[1:]][:5]
+    assert at_travel[1:][rapid[1:] & ~high[1:]].all() and rapid[1:][high[1:]].all()  # every G0: travel or clearance
+    assert at_depth[~rapid].any() and (rapid & at_travel).sum() >= 10  # cuts and levelled rapids
+    for i in range(1, len(ends)):  # along every move
+        a, b = ends[i - 1], ends[i]
+        if high[i] or high[i - 1]:  # to, from or on the clearance plane: straight up or down, or across on it
+            assert np.allclose(a[:2], b[:2], atol=1e-4) or (high[i] and high[i - 1]), (i, a, b)
+            continue
+        if np.allclose(a[:2], b[:2], atol=1e-4):
+            continue  # straight up or down over one point: a plunge, a retract
+        t = np.linspace(0.0, 1.0, 41)[:, None]
+        p = a + (b - a) * t
+        level_along = p[:, 2] - offset_mm(p)
+        want = travel_mm if at_travel[i] else -depth_mm
+        assert (at_travel[i] == at_travel[i - 1]) and np.abs(level_along - want).max() <= MZ, (i, a, b)
+    # the program and the job the machine runs: the same points in the same order
+    toolpath = prepared.toolpath.joined() if hasattr(prepared.toolpath, "joined") else prepared.toolpath
+    pts = toolpath.points_steps
+    job_mm = np.column_stack([pts[:, 0] * MX, -pts[:, 1] * MY, -pts[:, 2] * MZ])
+    # a travel at or above the surface (the job's return to its home's Z at the end) is written at the travel
+    # height, as every export writes its travels (the job's own travels are at it already)
+    off_steps = -offset_mm(job_mm) / MZ
+    up = np.isin(toolpath.kind, (RETRACT, TRAVEL)) & (pts[:, 2] - off_steps <= 0.5)
+    assert (np.abs(job_mm[up, 2] + np.rint(-round(1.0 / MZ) + off_steps[up]) * MZ) < 1e-9).sum() >= up.sum() - 1
+    job_mm[up, 2] = -np.rint(-round(1.0 / MZ) + off_steps[up]) * MZ
+    job_mm = job_mm[np.r_[True, np.any(np.abs(np.diff(job_mm, axis=0)) > 1e-9, axis=1)]]
+    written = ends[1:][~high[1:]]
+    written = written[np.r_[True, np.any(np.abs(np.diff(written, axis=0)) > 1e-9, axis=1)]]
+    assert len(written) == len(job_mm), (len(written), len(job_mm))
+    assert np.abs(written[:, :2] - job_mm[:, :2]).max() <= MX + 1e-4  # the source's exact X/Y: within a step
+    assert np.abs(written[:, 2] - job_mm[:, 2]).max() < 1e-4  # Z: the machine's levelled steps
+    print(f"\n{kind}: {len(moves)} moves ({int(rapid.sum())} G0, {int((rapid & at_travel & ~high).sum())} of them "
+          f"levelled travels), every one at the map's offset within a step; {len(job_mm)} job points matched")

@@ -22,6 +22,7 @@ from ..formats.gcode import load_tool_table, open_gcode
 from ..formats.gcode_export import exact_geometry, save_gcode
 from ..job.gcode import program_extent_mm, work_zero_range_mm
 from ..job.drill import DEFAULT_CUT_DEPTH_MM
+from ..job.heightmap_level import load_height_map
 from ..formats.hpgl import PLOTTER_UNIT_MM, scan_hpgl
 from ..job.model import pause_points
 from ..render.report import format_report, image_report
@@ -49,14 +50,16 @@ def cmd_export(args: argparse.Namespace) -> int:
         changes = {int(i): (_tool_number(note), note) for i, note in zip(at, notes)}
     exact_xy, exact_z = exact_geometry(job, DEFAULT_CUT_DEPTH_MM if args.cut_depth is None else args.cut_depth,
                                        job_options(args))
+    level = None
     if job.levelled_home_steps is not None:  # levelled (--level): its depths are the surface's, not one asked
-        exact_z = {}
+        exact_z = {}  # and its travels are written levelled too (the map read again when the job is held whole)
+        level = (getattr(job.toolpath, "height_map", None) or load_height_map(args.level), job.levelled_home_steps)
     save_gcode(job.toolpath, args.output, flip_y=args.flip_y, travel_height_mm=travel_height_mm,
                title=f"cam: {args.image or args.load_digitized}", tool_changes=changes,
                post=getattr(args, "post", "generic"), feed_mm_min=getattr(args, "feed", None),
                plunge_feed_mm_min=getattr(args, "plunge_feed", None), spindle_rpm=getattr(args, "spindle_rpm", None),
                exact_xy_mm=exact_xy, exact_z_mm=exact_z, snap=getattr(args, "snap", False),
-               arc_tolerance_mm=getattr(args, "arc_tolerance", None) or None)  # issue #30 point 4
+               arc_tolerance_mm=getattr(args, "arc_tolerance", None) or None, level=level)  # issue #30 point 4
     if job.kind in ("drawing", "digitized"):
         print(f"{args.output}: {job.toolpath.n_targets} points, {job.toolpath.n_retracts} retracts"
               + (f", {len(changes)} pause(s)" if changes else ""))

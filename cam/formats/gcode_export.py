@@ -15,6 +15,16 @@ delay); X/Y moves use the X/Y rate, Z moves the Z rate.  A move in the
 material that changes X/Y and Z together (a job levelled to a height map,
 ``--level``) is one straight ``G1 X Y Z``, as the machine cuts it.
 
+A job levelled to a height map (``level``: the map and where the job's home was placed, issue #46 point 2) is
+written move for move as the machine runs it: every point of the job in order, each move split where the job's
+are (at the map's spacing) and at its levelled Z.  A travel is ``G0 X Y Z`` at the travel height above the
+surface *under it* (the travel height's Z steps offset by the map there, rounded to whole steps as the job's own
+points are), not at one fixed height; a cut from the travel height comes down to the surface under it first.  Only
+where the tool's place is not the job's (the start, around a tool change or pause, the end and its return to X0
+Y0) does the program lift to the *clearance plane*: the travel height above the highest probed point, the height
+the machine's own stops lift to (:attr:`cam.job.heightmap_level.LevelledJob.safe_z_steps`); there it moves
+straight up or down, or across above every probed point.
+
 A job planned for a real cutter (``job.tool``: flat, ball or V, issue #19)
 names it: a ``(tool: ball 1 mm, spec ball:1)`` comment in the header and
 ``T1 M6`` before the first move.  Z is then the tool's tip (the planner's
@@ -56,6 +66,7 @@ import numpy as np
 
 from ..fileio import atomic_write_text
 from ..errors import CamError
+from ..job.heightmap_level import height_at
 from ..job.arcs import Segment, arc_centre_for_ends, fit_path
 from ..job.model import RETRACT, TRAVEL, Job
 from ..job.hpgl_stream import hpgl_scale, xy_steps_exact
@@ -303,6 +314,7 @@ def gcode_pieces(
     exact_z_mm: Optional[dict[int, float]] = None,
     snap: bool = False,
     arc_tolerance_mm: Optional[float] = None,
+    level: Optional[tuple[Any, Any]] = None,
 ) -> Iterator[str]:
     """The program text for ``toolpath`` in consecutive pieces, made a piece of the job at a time (a job planned
     a piece at a time, :mod:`cam.job.drawing_stream`, :mod:`cam.job.hpgl_stream`, is never held whole).
@@ -323,12 +335,17 @@ def gcode_pieces(
             position a point of those steps stands for; exact_z_mm: ``{depth steps: depth mm}`` likewise.
         snap: write every point at its steps even where the exact mm is known.
         arc_tolerance_mm: fit lines and arcs to the cutting runs within this many mm; None: one G1 a point.
+        level: ``(height map, home steps)``: ``toolpath`` is a job levelled to that
+            :class:`~cam.job.heightmap_level.HeightMap` with its home at those machine steps
+            (:attr:`cam.job.jobs.PreparedJob.levelled_home_steps`): its travels are written levelled too, at
+            ``travel_height_mm`` above the surface under each point (see the module).
     """
     _check_options(post, feed_mm_min, plunge_feed_mm_min, spindle_rpm, arc_tolerance_mm)
     g = _Writer(toolpath, flip_y=flip_y, travel_height_mm=travel_height_mm, post=post, feed_mm_min=feed_mm_min,
                 plunge_feed_mm_min=plunge_feed_mm_min, spindle_rpm=spindle_rpm,
                 exact_xy={} if snap or not exact_xy_mm else exact_xy_mm,
-                exact_z={} if snap or not exact_z_mm else exact_z_mm, arc_tolerance_mm=arc_tolerance_mm)
+                exact_z={} if snap or not exact_z_mm else exact_z_mm, arc_tolerance_mm=arc_tolerance_mm,
+                level=level)
     g.header(title, snap, bool(tool_changes))
     tool_changes = tool_changes or {}
     i = -1
@@ -344,13 +361,38 @@ def gcode_pieces(
     yield g.take()
 
 
+class _Levelling:
+    """The height map a written job was levelled to (:func:`gcode_pieces`' ``level``), as the writer needs it: the
+    Z offset under a point of the job, and the heights it travels and lifts at, in the job's Z steps (+Z deeper)."""
+
+    def __init__(self, height_map: Any, home_steps: Any, settings: Any, safe_z_mm: float, oz_mm: float) -> None:
+        self.map = height_map
+        self.home = [int(v) for v in np.asarray(home_steps, np.int64).reshape(3)]
+        self.mx, self.my, self.mz = (float(v) for v in settings.mm_per_step_axes)
+        self.travel_steps = -int(round(safe_z_mm / self.mz))  # the travel height over the work zero's surface
+        self.surface_steps = int(round(oz_mm / self.mz))  # the surface (a drawing's Z origin)
+        rise = max(0.0, float(height_map.offsets_mm().max()))  # the highest probed point over the work zero's
+        self.clear_steps = self.travel_steps - int(np.ceil(rise / self.mz - 1e-9))
+
+    def offset_steps(self, x_steps: int, y_steps: int) -> float:
+        """The Z offset (steps, a higher surface less deep) levelling gives a point of the job, as
+        :func:`cam.job.heightmap_level.level_points` computes it."""
+        x_mm, y_mm = (x_steps + self.home[0]) * self.mx, (y_steps + self.home[1]) * self.my
+        return -(float(height_at(self.map, x_mm, y_mm)) - self.map.reference_mm) / self.mz
+
+    def z_mm(self, nominal_steps: int, offset_steps: float) -> float:
+        """The written Z (mm) of a point ``nominal_steps`` deep from the work zero's surface, levelled."""
+        return -float(np.rint(nominal_steps + offset_steps)) * self.mz
+
+
 class _Writer:
     """The state of :func:`gcode_pieces` while it writes: where the tool stands, the cutting run being
     gathered (vertices in mm, fitted and written when the tool lifts), the feed and spindle written last."""
 
     def __init__(self, toolpath: Any, *, flip_y: bool, travel_height_mm: float, post: str,
                  feed_mm_min: Optional[float], plunge_feed_mm_min: Optional[float], spindle_rpm: Optional[float],
-                 exact_xy: Any, exact_z: Any, arc_tolerance_mm: Optional[float]) -> None:
+                 exact_xy: Any, exact_z: Any, arc_tolerance_mm: Optional[float],
+                 level: Optional[tuple[Any, Any]] = None) -> None:
         s = toolpath.settings
         self.toolpath = toolpath
         self.mm_xy, self.mm_z = s.mm_per_step_xy, s.mm_per_step_z
@@ -366,9 +408,15 @@ class _Writer:
         self.modal_feed = post != "generic" or arc_tolerance_mm is not None
         self.oz_mm = toolpath.pixels.origin_px[2] * s.steps_per_px_z * self.mm_z if toolpath.pixels else 0.0
         self.safe_z = -self.oz_mm + travel_height_mm
+        self.lv = None if level is None else _Levelling(level[0], level[1], s, self.safe_z, self.oz_mm)
+        # where the program lifts to when the tool's place is not the job's: the safe plane, or a levelled job's
+        # clearance plane (above the highest probed point)
+        self.lift_z = self.safe_z if self.lv is None else -self.lv.clear_steps * self.mm_z
+        self.high = True  # at the lift plane (a levelled job's travels are below it)
+        self.at_steps = (0, 0)  # the job's X, Y steps where the tool stands (the job's home first)
         self.spindle = f"M3 S{format_mm(spindle_rpm)}\n" if spindle_rpm else ""
         self.spindle_on = False  # started before the first cut, and after each tool change
-        self.x, self.y, self.z = 0.0, 0.0, self.safe_z
+        self.x, self.y, self.z = 0.0, 0.0, self.lift_z
         # False after a tool change or a pause (and a first T1 M6): a controller may have moved the tool for it,
         # so the next move goes back to the safe height and to X, Y with rapids before anything else (issue #43)
         self.xy_known = True
@@ -411,6 +459,10 @@ class _Writer:
         cutter = getattr(toolpath, "tool", None)
         if cutter is not None and not cutter.is_point:
             w(f"(tool: {_comment(cutter.describe())}, spec {cutter.spec()}; Z is its tip)\n")
+        if self.lv is not None:
+            w(f"(levelled to a height map: every move's Z offset by the surface under it; travels "
+              f"{format_mm(self.safe_z + self.oz_mm)} mm above it; the clearance plane Z{format_mm(self.lift_z)} "
+              f"is that above the highest probed point)\n")
         w("G21 G90 G17 G94\n")
         if self.post == "linuxcnc" and self.tol:
             w(f"G64 P{format_mm(self.tol)}\n")  # blend corners no further from the path than the fit
@@ -420,7 +472,7 @@ class _Writer:
             else:
                 w(f"T1 M6 ({_comment(cutter.describe())})\n")
                 self.xy_known = False
-        w(f"G0 Z{format_mm(self.safe_z)}\n")
+        w(f"G0 Z{format_mm(self.lift_z)}\n")
 
     def tool_change(self, n: Optional[int], comment: str) -> None:
         if self.spindle_on:
@@ -434,8 +486,8 @@ class _Writer:
             self.w(f"T{n} M6 ({_comment(comment)})\n")
         # a tool change may leave the tool anywhere (a changer's position, a jog during the pause): back up to the
         # safe height now, and to X, Y before the next move (point)
-        self.w(f"G0 Z{format_mm(self.safe_z)}\n")
-        self.above, self.z = True, self.safe_z
+        self.w(f"G0 Z{format_mm(self.lift_z)}\n")
+        self.above, self.z, self.high = True, self.lift_z, True
         self.xy_known = False
 
     def start_spindle(self) -> None:
@@ -483,6 +535,11 @@ class _Writer:
 
     def go_up(self) -> None:
         self.flush()
+        if self.lv is not None:  # a levelled job: up to the clearance plane (a tool change, the end)
+            if not self.high:
+                self.w(f"G0 Z{format_mm(self.lift_z)}\n")
+                self.above, self.z, self.high = True, self.lift_z, True
+            return
         if not self.above:
             self.w(f"G0 Z{format_mm(self.safe_z)}\n")
             self.above, self.z = True, self.safe_z
@@ -506,6 +563,9 @@ class _Writer:
         else:
             nx, ny = xp * self.mm_xy, self.y_sign * yp * self.mm_xy
         nz = -float(self.exact_z[zp]) if zp in self.exact_z else -zp * self.mm_z
+        if self.lv is not None:
+            self.levelled_point(xp, yp, zp, kind, nx, ny, nz, last)
+            return
         if kind in (RETRACT, TRAVEL) and nz >= -self.oz_mm - 1e-9:
             # at or above the surface: go up to the safe plane, travel there
             self.go_up()
@@ -532,6 +592,44 @@ class _Writer:
             self.start_spindle()
             self.vertex(nx, ny, nz)
             self.above = False
+
+    def rapid(self, nx: float, ny: float, nz: float) -> None:
+        """A levelled job's ``G0`` to ``(nx, ny, nz)``: one straight move, or from the clearance plane across it first
+        and then straight down."""
+        if self.high and ((nx, ny) != (self.x, self.y) or not self.xy_known):
+            self.w(f"G0 X{format_mm(nx)} Y{format_mm(ny)}\n")
+            self.x, self.y, self.xy_known = nx, ny, True
+        words = f" X{format_mm(nx)} Y{format_mm(ny)}" if (nx, ny) != (self.x, self.y) else ""
+        if _written(nz) != _written(self.z):
+            words += f" Z{format_mm(nz)}"
+        if words:
+            self.w(f"G0{words}\n")
+        self.x, self.y, self.z = nx, ny, nz
+        self.above, self.high = True, False
+
+    def levelled_point(self, xp: int, yp: int, zp: int, kind: int, nx: float, ny: float, nz: float,
+                       last: Optional[tuple[int, int]]) -> None:
+        """One point of a levelled job (its Z levelled already): a travel at the travel height over the surface under
+        it, a cut as the job's straight move (from the travel height: down to the surface first)."""
+        lv = self.lv
+        assert lv is not None
+        off = lv.offset_steps(xp, yp)
+        if kind in (RETRACT, TRAVEL) and zp - off <= lv.surface_steps + 0.5:  # at or above the surface under it
+            self.flush()
+            self.rapid(nx, ny, lv.z_mm(lv.travel_steps, off))
+            self.at_steps = (xp, yp)
+            return
+        if self.high:  # the start, after a tool change: over the tool's point, down to the travel height there
+            self.rapid(self.x, self.y, lv.z_mm(lv.travel_steps, lv.offset_steps(*self.at_steps)))
+        cur = self.run[-1] if self.run else (self.x, self.y, self.z)
+        self.start_spindle()
+        if self.above and (nx, ny) != (cur[0], cur[1]):  # a cut across from the travel height: to the surface first
+            self.vertex(cur[0], cur[1], lv.z_mm(lv.surface_steps, lv.offset_steps(*self.at_steps)))
+            cur = self.run[-1]
+        arc = nz == cur[2] and bool(self.on_arc and last is not None and self.on_arc(last, (xp, yp)))
+        self.vertex(nx, ny, nz, arc)
+        self.above = False
+        self.at_steps = (xp, yp)
 
     def finish(self) -> None:
         self.go_up()
