@@ -182,6 +182,64 @@ def test_z_drill_up_and_down_set_on_the_page_are_kept_across_a_restart(tmp_path,
         s.close()
 
 
+@pytest.fixture
+def page(browser):
+    ctx = browser.new_context(viewport={"width": 1280, "height": 900}, bypass_csp=True)  # wait_for_function evals
+    p = ctx.new_page()
+    p.set_default_timeout(30_000)
+    yield p
+    ctx.close()
+
+
+@pytest.mark.browser
+def test_a_setting_and_a_tool_edited_on_the_page_are_there_after_a_reload(tmp_path, machine, page):
+    s = _server(tmp_path, machine)
+    try:
+        page.goto(s.url + "/")
+        page.wait_for_function("document.getElementById('state').dataset.state === 'idle'")
+        field = page.locator("#settings-list [name='max_speed_x_mm_s']")
+        field.wait_for(state="attached")
+        page.fill("#settings-filter", "max_speed_x")  # the filter opens the group the key is in
+        field.fill("4.25")
+        page.click("#settings-save")
+        page.wait_for_function("document.querySelector(\"#settings-list [name='max_speed_x_mm_s']\").dataset.was"
+                               " === '4.25'")
+        assert load_settings(machine).max_speed_x_mm_s == 4.25
+        # out of range: the server's one line in the page's error banner, nothing saved
+        field = page.locator("#settings-list [name='max_speed_x_mm_s']")
+        field.fill("20000")
+        page.click("#settings-save")
+        page.wait_for_function("!document.getElementById('error').hidden")
+        assert "'max_speed_x_mm_s' must be 0.01..10000 mm/s, got 20000" in page.inner_text("#error-text")
+        assert load_settings(machine).max_speed_x_mm_s == 4.25
+        page.click("#error-close")
+        # a tool
+        page.fill("#tool-number", "3")
+        page.select_option("#tool-shape", "v")
+        page.fill("#tool-diameter", "0.2")
+        page.fill("#tool-angle", "30")
+        page.fill("#tool-length", "12.3")
+        page.click("#tool-save")
+        page.locator("#tools-list li[data-number='3']").wait_for()
+        assert read_tool_table(tmp_path / "mill.tools.toml").get(3).length_mm == 12.3
+        # after a reload both come back from the server
+        page.reload()
+        page.wait_for_function("document.getElementById('state').dataset.state === 'idle'")
+        page.locator("#tools-list li[data-number='3']").wait_for()
+        assert page.inner_text("#tools-list li[data-number='3'] span") == \
+            "T3: V bit 30 degrees, tip 0.2 mm, length 12.3 mm"
+        page.wait_for_function("document.querySelector(\"#settings-list [name='max_speed_x_mm_s']\") !== null")
+        assert page.input_value("#settings-list [name='max_speed_x_mm_s']") == "4.25"
+        # edit it from the list, then remove it
+        page.click("#tools-list li[data-number='3'] .tool-edit")
+        assert page.input_value("#tool-angle") == "30" and page.input_value("#tool-length") == "12.3"
+        page.click("#tools-list li[data-number='3'] .tool-remove")
+        page.locator("#tools-list li[data-number='3']").wait_for(state="detached")
+        assert read_tool_table(tmp_path / "mill.tools.toml").get(3) is None
+    finally:
+        s.close()
+
+
 def test_the_settings_and_tools_routes_take_any_json_value_without_a_500(tmp_path, machine):
     from test_api_sweep import WEIRD_JSON, _checked, _post
 

@@ -338,6 +338,124 @@
   $("prompt-stop").addEventListener("click", () => answer("stop"));
   $("error-close").addEventListener("click", clearError);
 
+  // -- machine settings and tools (issue #47 points 4 and 5) -----------------------
+  // The Settings section lists every key GET /api/settings gives (value, kind, unit, range, help) in a field
+  // each, grouped by the machine file's tables; Save sends the fields changed, as typed: the server checks and
+  // saves them.  The Tools section lists GET /api/tools and sets or removes a tool through its API.
+  const machine = { settings: [] };
+
+  function settingField(e) {
+    let input;
+    if (e.kind === "bool" || e.choices.length) {
+      input = document.createElement("select");
+      (e.kind === "bool" ? ["true", "false"] : e.choices).forEach((c) => {
+        const o = document.createElement("option"); o.value = c; o.textContent = c; input.appendChild(o);
+      });
+    } else {
+      input = document.createElement("input");
+      if (e.kind !== "str") input.inputMode = "decimal";
+    }
+    input.name = e.key;
+    input.value = e.value === null ? "" : String(e.value);
+    input.dataset.was = input.value;
+    const label = document.createElement("label");
+    label.dataset.key = e.key;
+    label.title = e.help;
+    label.textContent = e.key + (e.unit ? " (" + e.unit + ")" : "") + (e.range ? " — " + e.range : "");
+    label.appendChild(input);
+    if (e.help) {  // a phone has no hover: the help under the field
+      const help = document.createElement("small"); help.className = "muted setting-help"; help.textContent = e.help;
+      label.appendChild(help);
+    }
+    return label;
+  }
+
+  function showSettings(r) {
+    machine.settings = r.settings;
+    $("settings-file").textContent = r.file + (r.exists ? "" : " (made at the first save)") + "; backup " + r.backup;
+    const list = $("settings-list");
+    list.textContent = "";
+    const groups = {};
+    r.settings.forEach((e) => {
+      const table = e.key.includes(".") ? e.key.split(".")[0] : "machine";
+      if (!groups[table]) {
+        const d = document.createElement("details");
+        d.dataset.table = table;
+        const sum = document.createElement("summary");
+        sum.textContent = table === "machine" ? "machine (top level)" : "[" + table + "]";
+        d.appendChild(sum);
+        list.appendChild(d);
+        groups[table] = d;
+      }
+      groups[table].appendChild(settingField(e));
+    });
+    filterSettings();
+  }
+
+  function filterSettings() {
+    const words = $("settings-filter").value.trim().toLowerCase();
+    $("settings-list").querySelectorAll("label[data-key]").forEach((l) => {
+      l.hidden = !!words && !l.dataset.key.toLowerCase().includes(words);
+    });
+    $("settings-list").querySelectorAll("details").forEach((d) => {
+      if (words) d.open = !!d.querySelector("label[data-key]:not([hidden])");
+    });
+  }
+
+  function loadSettings() { return api("/api/settings").then(showSettings, () => {}); }
+
+  $("settings-filter").addEventListener("input", filterSettings);
+  $("settings-form").addEventListener("submit", (ev) => {
+    ev.preventDefault();
+    const values = {};
+    $("settings-list").querySelectorAll("[name]").forEach((el) => {
+      if (el.value !== el.dataset.was) values[el.name] = el.value;
+    });
+    if (!Object.keys(values).length) { showError("no setting changed"); return; }
+    api("/api/settings", { json: { values: values } }).then((r) => { clearError(); showSettings(r); }, () => {});
+  });
+
+  function showTools(r) {
+    const shape = $("tool-shape");
+    if (!shape.options.length) {
+      r.shapes.forEach((s) => { const o = document.createElement("option"); o.value = s; o.textContent = s; shape.appendChild(o); });
+    }
+    $("tools-file").textContent = r.file;
+    const list = $("tools-list");
+    list.textContent = "";
+    if (!r.tools.length) {
+      const li = document.createElement("li"); li.className = "muted"; li.textContent = "no tools yet"; list.appendChild(li);
+    }
+    r.tools.forEach((t) => {
+      const li = document.createElement("li");
+      li.dataset.number = String(t.number);
+      const text = document.createElement("span"); text.textContent = t.text;
+      const edit = document.createElement("button"); edit.type = "button"; edit.className = "plain tool-edit";
+      edit.textContent = "✎"; edit.title = "edit T" + t.number;
+      edit.addEventListener("click", () => {
+        $("tool-number").value = t.number; $("tool-shape").value = t.shape; $("tool-diameter").value = t.diameter_mm;
+        $("tool-angle").value = t.angle_deg; $("tool-length").value = t.length_mm === null ? "" : t.length_mm;
+      });
+      const del = document.createElement("button"); del.type = "button"; del.className = "plain tool-remove";
+      del.textContent = "✕"; del.title = "remove T" + t.number;
+      del.addEventListener("click", () => api("/api/tools/remove", { json: { number: t.number } }).then(showTools, () => {}));
+      li.append(text, edit, del);
+      list.appendChild(li);
+    });
+  }
+
+  function loadTools() { return api("/api/tools").then(showTools, () => {}); }
+
+  $("tool-form").addEventListener("submit", (ev) => {
+    ev.preventDefault();
+    const body = {};
+    $("tool-form").querySelectorAll("[data-field]").forEach((el) => { body[el.dataset.field] = el.value; });
+    api("/api/tools", { json: body }).then((r) => { clearError(); showTools(r); }, () => {});
+  });
+
+  loadSettings();
+  loadTools();
+
   // -- live state ------------------------------------------------------------------
   function render(s) {
     if (!s || !s.state) return;
