@@ -222,3 +222,17 @@ def test_cam_drill_names_the_tables_tool_at_each_tool_change(tmp_path):
     assert "tool change: T1 0.800 mm (16 holes) [tool table T1: flat end mill 0.8 mm]" in r.stderr
     assert "tool change: T2 1.000 mm (24 holes) [tool table: no T2; the table's T3: flat end mill 1 mm has that " \
            "size]" in r.stderr
+
+
+def test_cam_drill_of_gcode_names_the_tables_tool_at_t3_m6(tmp_path):
+    machine = tmp_path / "th.toml"
+    shutil.copy(ROOT / "profiles" / "thesis-machine.toml", machine)
+    program = tmp_path / "job.ngc"
+    program.write_text("G21 G90\nG0 Z1\nT3 M6\nG0 X1 Y-1\nG1 Z-0.2 F60\nG0 Z1\nT5 M6\nG0 X2\nM2\n")
+    assert run_cli("tools", "--machine", machine, "set", "3", "--shape", "v", "--diameter", "0.2",
+                   "--angle", "30").returncode == 0
+    r = run_cli("drill", program, "--machine", machine, "--yes", "--no-progress", "--state", tmp_path / "state.json")
+    assert r.returncode == 0, r.stderr
+    assert "tool change: T3 (line 3) [tool table T3: V bit 30 degrees, tip 0.2 mm]" in r.stderr
+    assert "tool change: T5 (line 7) [tool table: no T5]" in r.stderr
+    assert "warning: T5 M6 (line 7): tool T5 is not in the tool table (cam tools set 5 ...)" in r.stderr

@@ -9,6 +9,7 @@ import shutil
 import pytest
 
 from cam.drive.state import read_state
+from cam.machine_file import machine_file_of
 from cam.settings import load_settings
 from cam.tool_table import read_tool_table
 
@@ -268,3 +269,25 @@ def json_of(value) -> str:
     import json
 
     return json.dumps(value)
+
+
+def test_settings_saved_without_a_machine_file_are_read_by_the_next_serve(tmp_path):
+    """The built-in settings (cam serve with no --machine) are saved to default.toml in the state folder, which the
+    mock's default state file records: the next cam serve without --machine runs with it, on the same state file."""
+    import argparse
+
+    from cam.cli.common import state_path_of, use_recorded_machine
+    from cam.drive.state import default_state_path
+
+    state_file = default_state_path(None, "mock")
+    s = Server(tmp_path, realtime=False, machine_file="", state_file=str(state_file))
+    try:
+        status, r = s.call("POST", "/api/settings", {"values": {"max_speed_x_mm_s": 4.0}})
+        assert status == 200, r
+        assert r["file"] == str(machine_file_of(None))
+    finally:
+        s.close()
+    args = argparse.Namespace(machine=None, machine_changed=False, state=None, port="mock")
+    use_recorded_machine(args)
+    assert args.machine == str(machine_file_of(None)) and state_path_of(args) == state_file
+    assert load_settings(args.machine).max_speed_x_mm_s == 4.0
