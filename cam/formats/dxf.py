@@ -401,18 +401,22 @@ class _Reader:
         segs = [(kinds, pts) for kinds, pts in segs if kinds]
         if not segs:
             return  # a circle of radius 0, a polyline of one vertex: nothing to cut
-        z = np.concatenate([pts[:, 2] for _, pts in segs])
-        if float(z.max() - z.min()) > _FLAT_Z * max(1.0, float(np.abs(z).max())):
+        # a few reductions an entity (tens of thousands of entities): a NaN fails every comparison below
+        pts = segs[0][1] if len(segs) == 1 else np.concatenate([p for _, p in segs])
+        z_lo, z_hi = float(pts[:, 2].min()), float(pts[:, 2].max())
+        if z_hi - z_lo > _FLAT_Z * max(1.0, abs(z_lo), abs(z_hi)):
             self.skip(kind + " (3D)")
             return
+        if not float(np.abs(pts[:, :2]).max()) * self.k <= MAX_COORD_MM:
+            xy = pts[:, :2] * self.k
+            bad = xy[~(np.abs(xy) <= MAX_COORD_MM)][0]
+            raise _bad(self.source, f"{name} on layer '{layer}': a coordinate {bad:g} mm lies beyond "
+                                    f"{MAX_COORD_MM:g} mm of the origin")
         for kinds, pts in segs:
-            xy = pts[:, :2] * np.array([self.k, -self.k])
-            if not np.all(np.isfinite(xy)) or float(np.abs(xy).max()) > MAX_COORD_MM:
-                bad = xy[~np.isfinite(xy) | (np.abs(xy) > MAX_COORD_MM)][0]
-                raise _bad(self.source, f"{name} on layer '{layer}': a coordinate {bad:g} mm lies beyond "
-                                        f"{MAX_COORD_MM:g} mm of the origin")
+            xy = pts[:, :2] * (self.k, -self.k)
+            (x0, y0), (x1, y1) = xy[0].tolist(), xy[-1].tolist()
             self.strokes.append(_stroke(kinds, xy))
-            self.closed.append(bool(np.allclose(xy[0], xy[-1], rtol=0.0, atol=1e-9)) and len(xy) > 2)
+            self.closed.append(len(xy) > 2 and abs(x0 - x1) <= 1e-9 and abs(y0 - y1) <= 1e-9)
             self.layer_of.append(layer)
         key = kind.lower()
         self.counts[key] = self.counts.get(key, 0) + 1
