@@ -473,6 +473,13 @@ def test_a_bad_entity_is_named_by_its_handle():
     with pytest.raises(ParseError, match=rf"^far\.dxf: LINE #{line.dxf.handle} on layer '0': a coordinate 1e\+09 mm "
                                          r"lies beyond 1e\+06 mm"):
         parse_dxf(_text(doc), source="far.dxf")
+    doc = ezdxf.new("R2000")
+    spline = doc.modelspace().add_spline(dxfattribs={"layer": "CURVES"})
+    spline.control_points = [(0, 0), (1, 1)]  # a cubic needs 4
+    spline.knots = [0, 0, 1, 1]
+    with pytest.raises(ParseError, match=rf"^bad\.dxf: SPLINE #{spline.dxf.handle} on layer 'CURVES' cannot be read "
+                                         r"\(.*control points"):
+        parse_dxf(_text(doc), source="bad.dxf")
 
 
 def test_a_block_that_inserts_itself_and_a_block_bomb_are_refused_before_expanding():
