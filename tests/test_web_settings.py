@@ -193,7 +193,7 @@ def page(browser):
 
 
 @pytest.mark.browser
-def test_a_setting_and_a_tool_edited_on_the_page_are_there_after_a_reload(tmp_path, machine, page):
+def test_a_setting_and_a_tool_edited_on_the_page_are_there_after_a_reload_and_a_restart(tmp_path, machine, page):
     s = _server(tmp_path, machine)
     try:
         page.goto(s.url + "/")
@@ -231,6 +231,15 @@ def test_a_setting_and_a_tool_edited_on_the_page_are_there_after_a_reload(tmp_pa
             "T3: V bit 30 degrees, tip 0.2 mm, length 12.3 mm"
         page.wait_for_function("document.querySelector(\"#settings-list [name='max_speed_x_mm_s']\") !== null")
         assert page.input_value("#settings-list [name='max_speed_x_mm_s']") == "4.25"
+        # and after the server restarts
+        s.close()
+        s = _server(tmp_path, machine)
+        page.goto(s.url + "/")
+        page.wait_for_function("document.getElementById('state').dataset.state === 'idle'")
+        page.locator("#tools-list li[data-number='3']").wait_for()
+        page.wait_for_function("document.querySelector(\"#settings-list [name='max_speed_x_mm_s']\") !== null")
+        assert page.input_value("#settings-list [name='max_speed_x_mm_s']") == "4.25"
+        assert s.session.settings.max_speed_x_mm_s == 4.25
         # edit it from the list, then remove it
         page.click("#tools-list li[data-number='3'] .tool-edit")
         assert page.input_value("#tool-angle") == "30" and page.input_value("#tool-length") == "12.3"
