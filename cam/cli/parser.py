@@ -756,8 +756,8 @@ def _add_probe(sub: argparse._SubParsersAction) -> None:
     g = what.add_parser("grid", help="probe a grid over an area and write a height map",
                         description="Probe a grid of points over an area (--area, or --over a job's file where it "
                         "would run), row by row in serpentine order: the first point probed from the safe height, "
-                        "each later one travelled to above the contacts before it, approached with a rapid to just "
-                        "above the surface expected there, probed, lifted back. Writes the height map (JSON, "
+                        "each later one travelled to above the contacts before it, approached with a rapid and a "
+                        "guarded move to just above the surface expected there, probed, lifted back. Writes the height map (JSON, "
                         "machine frame, heights in mm up positive) to --out; a progress line per point on stderr.")
     where = g.add_mutually_exclusive_group(required=True)
     where.add_argument("--area", type=_area, metavar="X0,Y0,X1,Y1",
