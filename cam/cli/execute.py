@@ -2,7 +2,8 @@
 
 The session (:class:`cam.drive.session.MachineSession`) does the work on every
 port; here are only the terminal's parts: the progress bar, the prompts at
-tool changes and Pause At points (Enter, or ``--yes``), Ctrl-C (stop: the tool
+tool changes and Pause At points (Enter, or ``--yes``; ``p`` at a tool change probes the new tool while the
+job waits, :meth:`~cam.drive.session.MachineSession.probe_tool_at_prompt`), Ctrl-C (stop: the tool
 is lifted), the pin log file (every write of the command: the travel to the work
 zero, then the job, each part marked), and the machine state file (:mod:`cam.drive.state`):
 every run starts where it says the tool stands and records where it ended.
@@ -102,8 +103,13 @@ def _read_answer(stopping: threading.Event) -> str:
     """A line from stdin, or "" when it is closed; gives up (returns "") as soon as a stop is asked for."""
     try:
         fd = sys.stdin.fileno()
-    except (AttributeError, OSError, ValueError):
+    except AttributeError:
         return ""
+    except (OSError, ValueError):  # a stream with no descriptor (text fed in): read it as it is
+        try:
+            return sys.stdin.readline()
+        except (OSError, ValueError):
+            return ""
     while not stopping.is_set():
         try:
             ready, _, _ = select.select([fd], [], [], 0.1)
@@ -136,12 +142,26 @@ class _Answers:
                 self.flush()
             return "continue"
         self.flush()
-        print(f"{prompt.note}: paused at X={x} Y={y} Z={z} steps; press Enter to resume", file=sys.stderr)
-        if _read_answer(self.stopping) == "":  # stopped meanwhile, or nobody can answer: stop, never carry on blindly
-            if not self.stopping.is_set():
-                print("no answer at the pause (stdin closed): stopping", file=sys.stderr)
-            return "stop"
-        return "continue"
+        if prompt.probed:  # the new tool was probed at this tool change: what it did, then asked again
+            print(prompt.probed, file=sys.stderr)
+        offer = ""
+        if prompt.probe_tool:
+            offer = ", or p and Enter to probe the new tool " + ("again" if prompt.probed else "(cam probe tool)")
+        print(f"{prompt.note}: paused at X={x} Y={y} Z={z} steps; press Enter to resume{offer}", file=sys.stderr)
+        if prompt.probe_tool_why_not and not prompt.probed:
+            print(f"(probing the new tool is not offered: {prompt.probe_tool_why_not})", file=sys.stderr)
+        while True:
+            line = _read_answer(self.stopping)
+            if line == "":  # stopped meanwhile, or nobody can answer: stop, never carry on blindly
+                if not self.stopping.is_set():
+                    print("no answer at the pause (stdin closed): stopping", file=sys.stderr)
+                return "stop"
+            if line.strip().lower() != "p":
+                return "continue"
+            if prompt.probe_tool:
+                return "probe-tool"
+            why = prompt.probe_tool_why_not or "this pause is not a tool change"
+            print(f"cam: probing the new tool is not offered here: {why}; press Enter to resume", file=sys.stderr)
 
     def flush(self) -> None:
         """Write the lines held back."""
@@ -250,6 +270,7 @@ def _drive(job: Any, args: argparse.Namespace, settings: MachineSettings, hold: 
     answers = _Answers(args, stopping)
     session = MachineSession(port, settings, realtime=realtime, on_prompt=answers)
     session.tool_table_path = getattr(args, "tool_table_path", None)  # the prompt names the table's tool
+    session.work_state = hold  # a tool probed at a tool change: the first tool's contact, the work Z set there
     if getattr(args, "feed_override", None) is not None:  # grbl's override (CapabilityError elsewhere)
         session.feed_override(args.feed_override)
     # --origin, else the job's own (an --offset places the file by its own zero: cam.job.jobs.prepare_job, the rule

@@ -24,7 +24,7 @@ from ..settings import MachineSettings
 from ..values import shown, whole_number
 from .machines import require
 
-__all__ = ["Activity", "Prompt", "PromptFn", "SessionControls", "SessionView"]
+__all__ = ["Activity", "Prompt", "PromptFn", "PROMPT_ACTIONS", "SessionControls", "SessionView"]
 
 
 @dataclass
@@ -34,10 +34,20 @@ class Prompt:
     id: int
     note: str
     position_steps: tuple[int, int, int]
+    probe_tool: bool = False
+    """A tool change where the new tool may be probed before the job goes on (answer "probe-tool"): the machine
+    probes and a first probe set the work Z (:meth:`~cam.drive.session.MachineSession.probe_tool_at_prompt`)."""
+    probe_tool_why_not: str = ""
+    """A tool change where it may not: why, in one line ("" otherwise)."""
+    probed: str = ""
+    """What the last probe of the new tool at this pause did, in one line ("" none yet): the prompt asks again."""
 
 
 PromptFn = Callable[[Prompt], str]
-"""on_prompt(prompt) -> "continue" or "stop": answers a prompt from the worker thread (it may block)."""
+"""on_prompt(prompt) -> "continue", "stop" or "probe-tool" (offered when ``prompt.probe_tool``): answers a prompt
+from the worker thread (it may block); after "probe-tool" it is asked again, with what the probe did."""
+
+PROMPT_ACTIONS = ("continue", "stop", "probe-tool")
 
 
 @dataclass
@@ -77,6 +87,7 @@ class SessionView:
     _lock: threading.RLock
     _changed: threading.Condition
     _position: np.ndarray  # (3,) int64 steps from the home, booked at the end of each activity
+    _pause_moved: np.ndarray  # (3,) int64 steps the tool moved at the running job's pauses (not in its cursor)
     _activity: Optional[Activity]
     _last_activity: Optional[Activity]
     _finished_wall: float
@@ -111,6 +122,8 @@ class SessionView:
             a = self._activity
             if a is not None and a.positions is not None and a.done > 0:
                 pos = pos + np.array(a.positions.position_steps, np.int64)
+            if a is not None:  # the tool moved at a pause (a tool probed at a tool change: shifted on Z)
+                pos = pos + self._pause_moved
             return tuple(int(v) for v in pos)  # type: ignore[return-value]
 
     def _state_name(self) -> str:
@@ -173,6 +186,12 @@ class SessionControls(SessionView):
     _answer: threading.Event
     _answer_action: str
     _estop_request_ns: Optional[int]
+    # the probing part's (cam.drive._session_probe.SessionProbe): why the new tool may not be probed at a prompt's
+    # note ("" it may, None not a tool change), probing it while the job waits at (machine steps) -> the line said,
+    # and the one line refusing "probe-tool" where it is not offered
+    _tool_probe_why_not: Callable[[str], Optional[str]]
+    _probe_at_prompt: Callable[[tuple[int, int, int]], str]
+    _refuse_tool_probe: Callable[[str], None]
 
     def _controller(self) -> Any:
         a = self._activity  # no lock: the runner may hold it for a progress update
@@ -223,16 +242,43 @@ class SessionControls(SessionView):
         self.log("EMERGENCY STOP" if ctl is not None else "emergency stop: nothing was moving", "error")
 
     def prompt(self, position_steps: tuple[int, int, int], note: str) -> None:
-        """The job waits at a pause: ask :attr:`on_prompt`, or wait for :meth:`answer`; stop on "stop".
+        """The job waits at a pause: ask :attr:`on_prompt`, or wait for :meth:`answer`; stop on "stop".  At a tool
+        change "probe-tool" probes the new tool while the job waits (:meth:`probe_tool_at_prompt`), then asks
+        again, saying what the probe did.
 
         Called by the worker thread; ``position_steps`` is relative to where the activity started.
         """
         with self._lock:
             a = self._activity
             ctl = a.controller if a else None
-            self._prompt_seq += 1
             (hx, hy, hz), (x, y, z) = self._position.tolist(), position_steps
-            self._prompt = Prompt(self._prompt_seq, note, (hx + int(x), hy + int(y), hz + int(z)))
+            mx, my, mz = self._pause_moved.tolist()
+            at = (hx + int(x) + mx, hy + int(y) + my, hz + int(z) + mz)
+        probed = ""
+        while True:
+            action = self._ask(note, at, ctl, probed)
+            if action != "probe-tool" or ctl is None or ctl.halted:
+                break
+            with self._lock:
+                if self._activity is not None:
+                    self._activity.detail = "probing the new tool"
+                self._bump()
+            probed = self._probe_at_prompt(at)
+            with self._lock:
+                if self._activity is not None:
+                    self._activity.detail = ""
+                mx2, my2, mz2 = self._pause_moved.tolist()
+                at = (at[0] + mx2 - mx, at[1] + my2 - my, at[2] + mz2 - mz)
+                mx, my, mz = mx2, my2, mz2
+        if action == "stop" and ctl is not None:
+            ctl.stop()
+
+    def _ask(self, note: str, at: tuple[int, int, int], ctl: Any, probed: str) -> str:
+        """One prompt (machine frame ``at``), answered by :attr:`on_prompt` or :meth:`answer`; its action."""
+        why_not = self._tool_probe_why_not(note)
+        with self._lock:
+            self._prompt_seq += 1
+            self._prompt = Prompt(self._prompt_seq, note, at, why_not == "", why_not or "", probed)
             prompt = self._prompt
             self._answer.clear()
             self._answer_action = "continue"
@@ -248,15 +294,16 @@ class SessionControls(SessionView):
             self._prompt = None
             action = self._answer_action
             self._bump()
-        if action == "stop" and ctl is not None:
-            ctl.stop()
+        return action
 
     def answer(self, prompt_id: Any, action: str) -> None:
         """Answer the pending prompt ``prompt_id`` (a whole number, the prompt's ``id``; None: whichever waits):
-        ``action`` "continue" or "stop".  PlanError for a bad value (text or a boolean for the id), BusyError when
-        no prompt, or another one, waits."""
-        if not isinstance(action, str) or action not in ("continue", "stop"):
-            raise PlanError(f"action must be 'continue' or 'stop', got {shown(action)}")
+        ``action`` "continue", "stop" or, at a tool change that offers it (``prompt.probe_tool``), "probe-tool"
+        (probe the new tool, then the prompt asks again).  PlanError for a bad value (text or a boolean for the
+        id), BusyError when no prompt, or another one, waits; "probe-tool" where it is not offered: one line
+        saying why (CapabilityError on a machine that cannot probe, else PlanError)."""
+        if not isinstance(action, str) or action not in PROMPT_ACTIONS:
+            raise PlanError(f"action must be 'continue', 'stop' or 'probe-tool', got {shown(action)}")
         if prompt_id is not None:
             prompt_id = whole_number(prompt_id, "prompt")
         with self._lock:
@@ -264,6 +311,8 @@ class SessionControls(SessionView):
                 raise BusyError("no prompt is waiting for an answer")
             if prompt_id is not None and prompt_id != self._prompt.id:
                 raise BusyError(f"prompt {prompt_id!r} is no longer waiting (the current one is {self._prompt.id})")
+            if action == "probe-tool" and not self._prompt.probe_tool:
+                self._refuse_tool_probe(self._prompt.note)
             self._answer_action = action
             note = self._prompt.note
             self._answer.set()

@@ -17,6 +17,7 @@ from .maximus.board import MaximusBoard, drill_arguments, from_board, to_board
 from .journal import HoleJournal, JournalSpec, JournalWriter, journal_state_of
 from .maximus.resume import holes_left, resumed_arguments
 from .machines import open_port, require
+from .pause_probe import probe_at_pause
 from .ports import MockPort
 from .runner import Controller, Cursor, run
 from .chunks import ChunkedPlan
@@ -48,6 +49,7 @@ def run_steps(session: Any, name: str, plan: "StepPlan | ChunkedPlan", ctl: Cont
             if not runner.claimed:  # a new runner process: say once what it got (class, memory, core)
                 runner.start()
                 session.log(f"step runner: {runner.claimed or 'started'}")
+            session._pause_work = runner.pause_work  # a tool probed at a tool change: on the child's port
             result = runner.run(plan, session.port, ctl, progress=session.progress, on_pause=session.prompt,
                                 journal=journal, cursor=cursor)
         else:  # the simulated clock, or a port object the caller opened
@@ -55,6 +57,9 @@ def run_steps(session: Any, name: str, plan: "StepPlan | ChunkedPlan", ctl: Cont
             cursor = cursor or Cursor(plan.settings)
             if journal is not None:
                 writer = JournalWriter(journal, plan, cursor, on_error=ctl.stop)
+            opened = port
+            session._pause_work = lambda request: probe_at_pause(opened, plan.settings, session.realtime, ctl,
+                                                                 request)  # a tool probed at a tool change
             result = run(plan, port, realtime=session.realtime, controller=ctl, progress=session.progress,
                          on_pause=session.prompt, cursor=cursor)
             if writer is not None:
@@ -67,6 +72,7 @@ def run_steps(session: Any, name: str, plan: "StepPlan | ChunkedPlan", ctl: Cont
     except Exception as exc:  # noqa: BLE001 - reported in the log; the runner sent nothing more
         error = f"internal error: {type(exc).__name__}: {exc}"
     finally:
+        session._pause_work = None
         if writer is not None:  # the run failed: the journal says where it got to
             writer.close("failed")
         if port is not None and not isinstance(port, MockPort):

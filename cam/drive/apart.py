@@ -45,6 +45,7 @@ from ..errors import CamError, PortError
 from ..verify.pinlog import PinLog, write_pin_log
 from .journal import JournalSpec, JournalWriter, journal_state_of
 from .machines import open_port
+from .pause_probe import PauseProbe, probe_at_pause
 from .ports import MockPort, Port
 from .priority import claim_machine
 from .runner import Controller, Cursor, PauseFn, ProgressFn, RunResult, run
@@ -167,11 +168,16 @@ def _child(sock_fd: int, page_fd: int, parent_pid: int) -> None:
 
         def on_pause(position_steps: tuple[int, int, int], note: str) -> None:
             conn.send(("prompt", position_steps, note))
-            while not conn.poll(0.01):  # the answer; an emergency stop or a lost parent meanwhile ends the wait
-                ctl._wake.check_parent()
-                if ctl.halted:
+            while True:
+                while not conn.poll(0.01):  # the answer; an emergency stop or a lost parent meanwhile ends the wait
+                    ctl._wake.check_parent()
+                    if ctl.halted:
+                        return
+                message = conn.recv()
+                if message[0] != "pause-probe":
                     return
-            conn.recv()
+                # the new tool probed on this process's open port while the job waits (cam.drive.pause_probe)
+                conn.send(("pause-probed", probe_at_pause(port, plan.settings, True, ctl, message[1])))
 
         port: Optional[Port] = None
         try:
@@ -319,6 +325,24 @@ class RunnerProcess:
             finally:
                 controller.listeners.remove(mirror)
                 slots[_FLAGS] = 0
+
+    def pause_work(self, request: PauseProbe) -> dict:
+        """While the job runs here waits at a pause (in ``on_pause``): probe the new tool on the child's open port
+        (:func:`cam.drive.pause_probe.probe_at_pause`); its reply.
+
+        Raises:
+            PortError: the runner process ended meanwhile."""
+        conn = self._conn
+        assert conn is not None
+        conn.send(("pause-probe", request))
+        while True:
+            try:
+                message = conn.recv()
+            except (EOFError, OSError):
+                raise PortError("the step runner process ended while probing the new tool; the machine stopped "
+                                "where it was") from None
+            if message[0] == "pause-probed":
+                return message[1]
 
     def _follow(self, plan: "StepPlan | ChunkedPlan", ctl: Controller, progress: Optional[ProgressFn],
                 on_pause: Optional[PauseFn], cursor: Cursor) -> RunResult:

@@ -43,8 +43,8 @@ from .ports import MockPort, SwitchSchedule
 from .runner import EMERGENCY_STOPPED, FINISHED, LIMIT_STOPPED, STOPPED, SWITCHED, Controller, run
 
 __all__ = ["ProbeError", "ProbeResult", "ProbeRun", "Prober", "StepDirProber", "probe_worker", "DEFAULT_FEED_MM_MIN",
-           "DEFAULT_DEPTH_MM", "grid_axis_mm", "serpentine", "job_area_mm", "job_cuts_mm", "start_probe_on_steps",
-           "step_dir_feed"]
+           "DEFAULT_DEPTH_MM", "check_step_dir_probe", "grid_axis_mm", "serpentine", "job_area_mm", "job_cuts_mm",
+           "start_probe_on_steps", "step_dir_feed"]
 
 Steps3 = tuple[int, int, int]
 
@@ -179,6 +179,18 @@ class StepDirProber(Prober):
         self.pos = np.asarray(session.position_steps(), np.int64).copy()
         self.in_run = False  # a run was under way when an error came: where the tool is, nobody knows
 
+    @classmethod
+    def on_port(cls, port: Any, settings: MachineSettings, realtime: bool, ctl: Any,
+                position_steps: Steps3) -> "StepDirProber":
+        """A prober on a port that is open already (a job's, while it waits at a tool change: never closed
+        here), the tool at ``position_steps`` (machine frame)."""
+        self = cls.__new__(cls)
+        self.settings, self.realtime, self.ctl = settings, bool(realtime), ctl
+        self.opened, self.own_port = port, False
+        self.pos = np.asarray(position_steps, np.int64).copy()
+        self.in_run = False
+        return self
+
     def position(self) -> Steps3:
         return tuple(int(v) for v in self.pos)  # type: ignore[return-value]
 
@@ -249,6 +261,20 @@ def _probe_closed(levels: int, settings: MachineSettings) -> bool:
     return bool(levels & (1 << INPUT_BITS[pin])) == high
 
 
+def check_step_dir_probe(session: Any) -> None:
+    """A step/dir machine's probe is there: a probe input in ``[inputs]`` and, on the mock, a simulated surface.
+
+    Raises:
+        ProbeError: no probe input wired; CapabilityError: the mock without a probe surface."""
+    s = session.settings
+    if "probe" not in s.inputs.wired():
+        raise ProbeError("no probe input in the machine file: wire it in [inputs] (probe = \"!13\", a pin of its "
+                         "own; see docs/machine-and-ports.md)")
+    if session.backend.can("simulated", session.port) and s.mock.surface() is None:
+        raise CapabilityError("the mock port has no surface to probe: give it in the machine file's [mock] "
+                              "table (probe_surface = \"z0,ax,ay,b,cx,cy\"; see docs/machine-and-ports.md)")
+
+
 def start_probe_on_steps(session: Any, probe_run: ProbeRun) -> None:
     """Start a probing activity on a step/dir port (the step/dir back ends' ``start_probe``): the probe input and,
     on the mock, its simulated surface checked first; the feed checked against Z's start speed.
@@ -256,15 +282,10 @@ def start_probe_on_steps(session: Any, probe_run: ProbeRun) -> None:
     Raises:
         ProbeError: no probe input wired, a feed too fast; CapabilityError: the mock without a probe surface."""
     s = session.settings
-    if "probe" not in s.inputs.wired():
-        raise ProbeError("no probe input in the machine file: wire it in [inputs] (probe = \"!13\", a pin of its "
-                         "own; see docs/machine-and-ports.md)")
+    check_step_dir_probe(session)
     feed = step_dir_feed(s, probe_run.feed_mm_min)
     port: Any = session.port
     if session.backend.can("simulated", session.port):
-        if s.mock.surface() is None:
-            raise CapabilityError("the mock port has no surface to probe: give it in the machine file's [mock] "
-                                  "table (probe_surface = \"z0,ax,ay,b,cx,cy\"; see docs/machine-and-ports.md)")
         switches = SwitchSchedule(s, tuple(int(v) for v in session.position_steps()))
         if isinstance(session.port, MockPort):
             session.port.switches = switches

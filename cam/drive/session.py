@@ -132,6 +132,8 @@ class MachineSession(SessionTools, SessionRecover, SessionPinLogs, SessionProbe)
         self.state_hold = state
         self._activity_start = (0, 0, 0)  # machine frame: where the running activity started
         self._then: Optional[Callable[[], None]] = None  # what starts when the running activity finishes
+        self._pause_moved = np.zeros(3, np.int64)  # the running job's moves at its pauses (a tool probed)
+        self._pause_work: Optional[Callable[[Any], dict]] = None  # probes on the running job's open port
         if state is not None:
             self._position = np.asarray(state.state.position_steps, np.int64).copy()
         self.grbl: Any = None  # the grbl board the grbl back end attaches
@@ -299,6 +301,7 @@ class MachineSession(SessionTools, SessionRecover, SessionPinLogs, SessionProbe)
         if self.state_hold is not None:  # the marker a killed process leaves: the position then unknown
             self.state_hold.mark_running(f"{activity.name}: {activity.label}")
         self._activity_start = tuple(int(v) for v in self._position)
+        self._pause_moved = np.zeros(3, np.int64)
         self._activity = activity
         self._estop_request_ns = None
         self._prompt = None
@@ -332,8 +335,9 @@ class MachineSession(SessionTools, SessionRecover, SessionPinLogs, SessionProbe)
         """The activity ended: book where the tool is and what happened."""
         with self._lock:
             a = self._activity
-            if moved_steps is not None:
-                self._position = self._position + np.asarray(moved_steps, np.int64)
+            if moved_steps is not None:  # and what the job moved at its pauses (a tool probed at a tool change)
+                self._position = self._position + np.asarray(moved_steps, np.int64) + self._pause_moved
+            self._pause_moved = np.zeros(3, np.int64)
             if self._estop_request_ns is not None and result is not None:
                 info["estop_request_job_ns"] = int(self._estop_request_ns - result.started_ns)
             if a is not None and info.get("status") == "finished":

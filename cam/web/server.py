@@ -849,8 +849,16 @@ async def _drill_z(st: _AppState, request: Request) -> dict[str, Any]:
 
 
 async def _answer(st: _AppState, request: Request) -> dict[str, Any]:
+    """``{"prompt": id, "action": "continue" | "stop" | "probe-tool", "plate_mm": null}``: answer the prompt; at a
+    tool change that offers it, "probe-tool" probes the new tool while the job waits (the dialog's Probe tool:
+    :meth:`MachineSession.probe_tool_at_prompt`, ``plate_mm`` null the recorded plate), then the prompt asks
+    again."""
     body = await _body_json(request)
-    st.session.answer(body.get("prompt"), body.get("action", "continue"))
+    action = body.get("action", "continue")
+    if action == "probe-tool":
+        st.session.probe_tool_at_prompt(body.get("prompt"), _mm_field(body, "plate_mm", None))
+    else:
+        st.session.answer(body.get("prompt"), action)
     return st.session.state()
 
 

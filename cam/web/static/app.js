@@ -332,9 +332,12 @@
   function answer(action) {
     const p = page.state && page.state.prompt;
     $("prompt-dialog").close();
-    post("/api/answer", { prompt: p ? p.id : null, action: action });
+    const body = { prompt: p ? p.id : null, action: action };
+    if (action === "probe-tool") body.plate_mm = plateMm();  // the plate of the row's Probe Z and Probe tool
+    post("/api/answer", body);
   }
   $("prompt-continue").addEventListener("click", () => answer("continue"));
+  $("prompt-probe-tool").addEventListener("click", () => answer("probe-tool"));
   $("prompt-stop").addEventListener("click", () => answer("stop"));
   $("error-close").addEventListener("click", clearError);
 
@@ -507,6 +510,14 @@
       if (page.promptShown !== s.prompt.id) {
         page.promptShown = s.prompt.id;
         $("prompt-text").textContent = s.prompt.note + " — tool at " + s.prompt.position_steps.join(", ") + " steps";
+        // a tool change: Probe tool when the machine probes and Probe Z set the work Z, else why not
+        $("prompt-probed").textContent = s.prompt.probed || "";
+        $("prompt-probed").hidden = !s.prompt.probed;
+        $("prompt-why-not").textContent = s.prompt.probe_tool_why_not ?
+          "Probe tool is not offered: " + s.prompt.probe_tool_why_not : "";
+        $("prompt-why-not").hidden = !s.prompt.probe_tool_why_not;
+        $("prompt-probe-tool").hidden = !s.prompt.probe_tool;
+        $("prompt-probe-tool").textContent = s.prompt.probed ? "Probe tool again" : "Probe tool";
         if (!dlg.open) dlg.show();
       }
     } else if (dlg.open) {
