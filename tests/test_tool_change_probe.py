@@ -389,6 +389,40 @@ def test_api_tool_change_answer_probe_tool_probes_the_new_tool_while_the_job_wai
         s.close()
 
 
+def test_api_forget_height_map(tmp_path):
+    """Forget height map: the picture is gone (404), a job planned levelled to it is planned again without it when
+    started, and the next plan is not levelled."""
+    from test_web_probe import _prepared
+
+    s = _page_server(tmp_path)
+    try:
+        assert s.call("POST", "/api/goto", {"xyz": [20, 20, 0], "machine": True})[0] == 200
+        s.wait_idle(60)
+        assert s.call("POST", "/api/zero", {"axes": "XY"})[0] == 200
+        job = _page_job(s)
+        assert s.call("POST", "/api/probe-area", {"job": job, "spacing_mm": 5})[0] == 200
+        s.wait_idle(60)
+        assert s.call("GET", "/api/height-map.png")[0] == 200
+        status, planned = s.call("POST", "/api/plan", {"job": job, "options": {"cut_depth_mm": DEPTH_MM}})
+        assert status == 200 and _prepared(s)[job].levelled_home_steps is not None
+        status, st = s.call("POST", "/api/forget-height-map", {})
+        assert status == 200 and s.session.last_map is None and s.session.last_map_path is None
+        assert any("forgotten" in line["text"] for line in st["log"])
+        status, err = s.call("GET", "/api/height-map.png")
+        assert status == 404 and "Probe the job's area" in err["error"]
+        status, st = s.call("POST", "/api/start", {"job": job})
+        assert status == 200 and "planned" in st, st
+        assert _prepared(s)[job].levelled_home_steps is None  # planned again, not levelled
+        assert any("not levelled: the height map was forgotten" in line["text"] for line in st["log"])
+        s.call("POST", "/api/stop", {})
+        s.wait_idle(60)
+        status, planned = s.call("POST", "/api/plan", {"job": job, "options": {"cut_depth_mm": DEPTH_MM}})
+        assert status == 200 and _prepared(s)[job].levelled_home_steps is None
+        assert s.call("POST", "/api/forget-height-map", {})[0] == 200  # nothing to forget: said, no error
+    finally:
+        s.close()
+
+
 @pytest.mark.browser
 def test_page_tool_change_dialog_probe_tool_button(page, tmp_path):  # noqa: F811
     s = _page_server(tmp_path)

@@ -366,6 +366,16 @@ class SessionProbe:
             self._probe_results()
         return plan
 
+    def forget_map(self) -> None:
+        """Forget the height map :meth:`probe_map` wrote (:attr:`last_map`, :attr:`last_map_path` None): the page
+        levels no job planned from now on to it (its file stays where it was written).  Nothing moves; allowed
+        while a job runs (that job keeps the plan it started with)."""
+        with self._lock:
+            path, self.last_map, self.last_map_path = self.last_map_path, None, None
+            self._bump()
+        self.log(f"height map {path} forgotten: the next jobs are not levelled" if path
+                 else "no height map to forget")
+
     def _after_probe(self, what: str, zero_z: int, probe: ToolProbe, said: str = "") -> None:
         """The end's hook of :meth:`probe_work_z` and :meth:`probe_tool` (the lock held, the probe finished): the
         work Z zero at ``zero_z`` and, with a state file, ``probe`` kept; an error ends the activity in one line."""

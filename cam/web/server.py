@@ -645,6 +645,8 @@ def _levelled(st: _AppState, options: JobOptions) -> JobOptions:
     """``options`` levelled to the map the page probed last (:meth:`MachineSession.probe_map` wrote it), when it
     did; a job planned after Probe the job's area is levelled to it."""
     path = str(_height_map_path(st))
+    if options.level == path and st.session.last_map_path != path:  # planned with the map the page forgot since
+        return replace(options, level=None)
     if st.session.last_map_path != path or options.level:
         return options
     return replace(options, level=path)
@@ -697,6 +699,14 @@ async def _probe_area(st: _AppState, request: Request) -> dict[str, Any]:
     return session.state()
 
 
+async def _forget_height_map(st: _AppState, request: Request) -> dict[str, Any]:
+    """``{}``: Forget the height map (:meth:`MachineSession.forget_map`): the jobs started from now on are not
+    levelled (a planned job is planned again without it when started); its picture is gone (404)."""
+    await _body_json(request)
+    st.session.forget_map()
+    return st.session.state()
+
+
 async def _height_map(st: _AppState, request: Request):
     """The PNG of the page's height map with the job (``?job=ID``, planned) over it where it would run."""
     from starlette.concurrency import run_in_threadpool
@@ -736,9 +746,12 @@ async def _start(st: _AppState, request: Request) -> dict[str, Any]:
         raise HttpError(404 if job_id not in st.uploads else 409,
                         f"job {job_id!r} is not planned; upload it and set its options first")
     replanned = None
-    if st.session.last_map is not st.plan_maps.get(job_id) and st.session.last_map_path == str(_height_map_path(st)):
-        st.session.log(f"{job.name or job_id}: planned again, levelled to the height map probed since")
-        job = await _plan(st, job_id, st.plan_options[job_id])  # levelled to it (_levelled)
+    page_map = str(_height_map_path(st))
+    if st.session.last_map is not st.plan_maps.get(job_id) and page_map in (st.session.last_map_path,
+                                                                            st.plan_options[job_id].level):
+        st.session.log(f"{job.name or job_id}: planned again, " + ("levelled to the height map probed since"
+                       if st.session.last_map_path == page_map else "not levelled: the height map was forgotten"))
+        job = await _plan(st, job_id, st.plan_options[job_id])  # levelled to it, or no more (_levelled)
         replanned = _job_summary(st, job_id, job)
     try:
         _start_planned(st, job_id, job)
@@ -1126,6 +1139,7 @@ def _routes(st: _AppState) -> list:
         Route("/api/probe-tool", json_api(_probe_tool), methods=post),
         Route("/api/probe-area", json_api(_probe_area), methods=post),
         Route("/api/height-map.png", _api(st, _height_map)),
+        Route("/api/forget-height-map", json_api(_forget_height_map), methods=post),
         Route("/api/settings", _api(st, _get_settings)),
         Route("/api/settings", json_api(_post_settings), methods=post),
         Route("/api/tools", _api(st, _get_tools)),

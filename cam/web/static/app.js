@@ -303,7 +303,13 @@
     img.src = withToken("/api/height-map.png?job=" + encodeURIComponent(page.planned ? page.planned.job : "") +
                         "&v=" + Date.now());
     img.hidden = false;
+    $("forget-height-map").hidden = false;
   }
+  $("forget-height-map").addEventListener("click", async () => {  // the next jobs are not levelled to it
+    await post("/api/forget-height-map", {});
+    $("height-map").hidden = true;
+    $("forget-height-map").hidden = true;
+  });
   $("setpos-form").addEventListener("submit", (ev) => {  // the user's word: the position is known again
     ev.preventDefault();
     const xyz = ["x", "y", "z"].map((a) => parseFloat($("setpos-" + a).value));
