@@ -414,7 +414,8 @@ def test_api_forget_height_map(tmp_path):
         assert status == 200 and "planned" in st, st
         assert _prepared(s)[job].levelled_home_steps is None  # planned again, not levelled
         assert any("not levelled: the height map was forgotten" in line["text"] for line in st["log"])
-        s.call("POST", "/api/stop", {})
+        p = _page_prompt(s)  # its first tool change: stop there
+        assert s.call("POST", "/api/answer", {"prompt": p["id"], "action": "stop"})[0] == 200
         s.wait_idle(60)
         status, planned = s.call("POST", "/api/plan", {"job": job, "options": {"cut_depth_mm": DEPTH_MM}})
         assert status == 200 and _prepared(s)[job].levelled_home_steps is None
