@@ -78,6 +78,8 @@ from functools import lru_cache, partial
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Awaitable, Callable, Optional
 
+import numpy as np
+
 try:
     import resource
 except ImportError:  # pragma: no cover - not Unix: no file limit to raise
@@ -86,7 +88,10 @@ except ImportError:  # pragma: no cover - not Unix: no file limit to raise
 from ..drive.journal import read_journal
 from ..drive.machines import DEFAULT_PORT, can
 from ..drive.probing import job_area_mm
+from ..drive.placement import PLACED_KINDS, placed_home
 from ..drive.session import MachineSession
+from ..drive.track import (TABLE_UNITS, drill_holes, hole_states, hole_writes, job_track, job_units, start_at_hole,
+                           to_job_units)
 from ..drive.state import MachineState, StateHold, machine_record
 from ..errors import BusyError, CamError, CapabilityError, StalePlanError
 from ..fileio import atomic_write_bytes
@@ -118,7 +123,8 @@ _MAX_JSON_BYTES = 8 * 1024  # a JSON request body (the largest, planning options
 _MAX_JSON_DEPTH = 16  # arrays and objects inside each other (the requests use 3)
 _MULTIPART_SLACK_BYTES = 64 * 1024  # form boundaries and headers around the file
 _BACKLOG = 2048  # connections the kernel holds for accept (a reconnect flood must not crowd the e-stop out)
-_EVENT_PERIOD_S = 0.25  # live views get at most four snapshots a second (a running job changes all the time)
+_EVENT_PERIOD_S = 0.15  # live views get a snapshot about 6 times a second while something runs (issue #47 point 1:
+# the live track at least 5 times a second), at most that often
 
 
 @dataclass
@@ -246,9 +252,10 @@ class _AppState:
     streams: int = 0  # live event streams now
     pin_log_csv: Optional[tuple[Any, Path]] = None  # (the pin log, its exported CSV)
     broadcast: Any = None  # the _Broadcast of the live views (made with the state)
+    track: dict[str, Any] = field(default_factory=dict)  # the live track's (issue #47): see _track_extra
 
     def __post_init__(self) -> None:
-        self.broadcast = _Broadcast(self.session, self.closing)
+        self.broadcast = _Broadcast(self.session, self.closing, partial(_track_extra, self))
     closing: threading.Event = field(default_factory=threading.Event)
 
     def shut_down(self) -> None:
@@ -770,8 +777,10 @@ async def _start(st: _AppState, request: Request) -> dict[str, Any]:
 
 
 def _start_planned(st: _AppState, job_id: str, job: PreparedJob) -> None:
+    home = _job_home(st, job)  # the live track's (issue #47): where the job runs, before anything moves
     st.session.start(job, label=f"job {job.name or Path(job.source).name}", journal=str(_journal_path(st, job_id)))
     st.last_job = job_id
+    _track_started(st, job_id, job, home)
 
 
 def _journal_path(st: _AppState, job_id: str) -> Path:
@@ -880,7 +889,7 @@ async def _state(st: _AppState, request: Request) -> dict[str, Any]:
         after = int(request.query_params.get("log_after", "0"))
     except ValueError:
         raise HttpError(400, "log_after must be a whole number") from None
-    return st.session.state(after)
+    return _track_extra(st, st.session.state(after))
 
 
 class _Broadcast:
@@ -888,8 +897,10 @@ class _Broadcast:
     :data:`_EVENT_PERIOD_S`, at least every second) and sent to all, so the cost of a snapshot does not grow
     with the number of pages."""
 
-    def __init__(self, session: MachineSession, closing: threading.Event) -> None:
+    def __init__(self, session: MachineSession, closing: threading.Event,
+                 extra: Optional[Callable[[dict[str, Any]], dict[str, Any]]] = None) -> None:
         self.session, self.closing = session, closing
+        self.extra = extra or (lambda snap: snap)  # what the server adds to a snapshot (the job's own units)
         self.seq = 0
         self.message = ""
         self._log_after = 0
@@ -906,8 +917,10 @@ class _Broadcast:
         last_version, last_sent = -1, 0.0
         while not self.closing.is_set():
             version, now = self.session.version, time.monotonic()
-            if version != last_version or now - last_sent > 1.0:
-                snap = self.session.state(self._log_after)
+            # while something runs, a snapshot every period even when the session's version stands still (a MAXIMUS
+            # board reports after each hole): the page's live track is never older than a period
+            if version != last_version or now - last_sent > (_EVENT_PERIOD_S if self.session.busy else 1.0):
+                snap = self.extra(self.session.state(self._log_after))
                 if snap["log"]:
                     self._log_after = snap["log"][-1]["seq"]
                 self.message = f"data: {json.dumps(snap)}\n\n"
@@ -949,7 +962,7 @@ async def _events(st: _AppState, request: Request):
 
     async def stream():
         seq = broadcast.seq
-        yield f"data: {json.dumps(st.session.state(0))}\n\n"
+        yield f"data: {json.dumps(_track_extra(st, st.session.state(0)))}\n\n"
         while not st.closing.is_set():
             new_seq, message = await broadcast.after(seq)
             if new_seq != seq:
@@ -1145,6 +1158,10 @@ def _routes(st: _AppState) -> list:
         Route("/api/tools", _api(st, _get_tools)),
         Route("/api/tools", json_api(_set_tool), methods=post),
         Route("/api/tools/remove", json_api(_remove_tool), methods=post),
+        Route("/api/track", _api(st, _get_track)),
+        Route("/api/holes", _api(st, _get_holes)),
+        Route("/api/goto-hole", json_api(_goto_hole), methods=post),
+        Route("/api/start-at-hole", json_api(_start_at_hole), methods=post),
         Route("/api/state", _api(st, _state)),
         Route("/api/events", _api(st, _events)),
         Route("/api/pinlog", _api(st, _pinlog)),
@@ -1376,3 +1393,191 @@ def serve(config: ServerConfig, announce: Callable[[str], None] = print) -> int:
         if hold is not None:  # the machine's lock goes with the server, however it ended (again: no harm)
             hold.close()
     return 0
+
+
+# -- the live track, the job's own units and the hole table (issue #47 points 1-3): thin adapters over
+# cam.drive.track ---------------------------------------------------------------------------------------------
+
+_NO_LOG = 1 << 62  # a snapshot's log_after that leaves every log line out
+
+
+def _job_home(st: _AppState, job: PreparedJob) -> tuple[int, int, int]:
+    """Where (machine steps) ``job``'s home stands if it started now: a file placed at the active work zero with a
+    state file (:func:`cam.drive.placement.placed_home`), else where the tool stands (a job without a state file,
+    a G-code program); a job started at a hole: where the tool stands minus where it starts in the job."""
+    session = st.session
+    here = tuple(int(v) for v in session.position_steps())
+    resumed = getattr(job, "resumed", None)
+    if resumed is not None:
+        return tuple(h - int(s) for h, s in zip(here, resumed.start_position_steps))  # type: ignore[return-value]
+    if session.state_hold is not None and job.kind in PLACED_KINDS:
+        return tuple(int(v) for v in placed_home(job, session.state_hold.state, None))  # type: ignore[return-value]
+    return here  # type: ignore[return-value]
+
+
+def _track_started(st: _AppState, job_id: str, job: PreparedJob, home: tuple[int, int, int], first: int = 0) -> None:
+    """A job of the page started from ``home`` (machine steps, :func:`_job_home` before it started; ``first`` holes
+    skipped): its run is what the track and the hole states follow from now on."""
+    original = st.prepared.get(job_id, job)
+    plan = getattr(original, "drill_plan", None)
+    writes = None
+    if plan is not None and not _board_drills(st):  # a pass over a drill job's moves (bounded by MAX_HOLES)
+        writes = hole_writes(job)
+    st.track["run"] = {"job": job_id, "prepared": job, "first": first, "home": home, "writes": writes,
+                       "n_holes": 0 if plan is None else len(plan.holes_steps), "states": None}
+
+
+def _board_drills(st: _AppState) -> bool:
+    """The machine drills a drill job by itself (a MAXIMUS board): its progress counts holes, not writes."""
+    return not st.session.backend.can("step_dir", st.session.port)
+
+
+def _hole_states_now(st: _AppState, snap: dict[str, Any], n_holes: int) -> Optional[list[str]]:
+    """The states of the started run's holes from the snapshot's progress (None: no run of a drill job)."""
+    run = st.track.get("run")
+    if run is None:
+        return None
+    job = run["prepared"]
+    ours = snap["activity"] == "job" or (snap["activity"] is None and (snap.get("last") or {}).get("activity") == "job")
+    if not ours:
+        return run["states"]  # a jog since: the run's last states stay shown
+    running = snap["activity"] == "job"
+    done = int(snap["writes_done"])
+    if _board_drills(st):
+        states = hole_states(n_holes, first=run["first"], done=done, drilling=running and done < n_holes - run["first"])
+    else:
+        writes = run["writes"]
+        if writes is None:
+            return run["states"]
+        holes_done = int(np.count_nonzero(writes[:, 1] <= done))
+        drilling = running and holes_done < len(writes) and int(writes[holes_done, 0]) <= done
+        states = hole_states(n_holes, first=run["first"], done=holes_done, drilling=drilling)
+    run["states"] = states
+    return states
+
+
+def _track_extra(st: _AppState, snap: dict[str, Any]) -> dict[str, Any]:
+    """A snapshot with the tool in the job's own units (``job_position``, :func:`cam.drive.track.to_job_units`, for
+    the job whose track the page asked last) and the started drill job's hole states (``holes``: ``{"job", "states"}``)."""
+    units = st.track.get("units")
+    if units is not None:
+        snap["job_position"] = dict(to_job_units(snap["position_steps"], units[1]), job=units[0])
+    run = st.track.get("run")
+    if run is not None and run["n_holes"]:
+        states = _hole_states_now(st, snap, run["n_holes"])
+        if states is not None:
+            snap["holes"] = {"job": run["job"], "states": states}
+    return snap
+
+
+def _track_job(st: _AppState, request: Request) -> tuple[str, PreparedJob]:
+    job_id = request.query_params.get("job", "")
+    job = st.prepared.get(job_id)
+    if job is None:
+        raise HttpError(404, f"job {job_id!r} is not planned")
+    return job_id, job
+
+
+async def _drill_holes_of(st: _AppState, job_id: str, job: PreparedJob) -> Optional[dict[str, Any]]:
+    """:func:`cam.drive.track.drill_holes` of a planned job (in the worker; kept per plan)."""
+    from starlette.concurrency import run_in_threadpool
+
+    kept = st.track.setdefault("holes", {}).get(job_id)
+    if kept is None or kept[0] is not job:
+        holes = await run_in_threadpool(st.worker.call, drill_holes, job, st.plan_options.get(job_id),
+                                        what=f"the holes of {job.name or job_id}")
+        kept = st.track["holes"][job_id] = (job, holes)
+    return kept[1]
+
+
+async def _get_track(st: _AppState, request: Request) -> dict[str, Any]:
+    """``GET /api/track?job=ID``: the job's path and holes in machine mm where it runs (the started run's home
+    while it runs or after it, else where it would run now) and its own units (:func:`cam.drive.track.job_track`);
+    from now on the snapshots carry the tool in those units (``job_position``)."""
+    from starlette.concurrency import run_in_threadpool
+
+    job_id, job = _track_job(st, request)
+    run = st.track.get("run")
+    ours = run is not None and run["job"] == job_id
+    home = run["home"] if ours else _job_home(st, job)
+    holes = await _drill_holes_of(st, job_id, job)
+    track = await run_in_threadpool(st.worker.call, job_track, job, home, st.config.settings, holes,
+                                    what=f"the track of {job.name or job_id}")
+    st.track["units"] = (job_id, job_units(job, home, st.config.settings, holes))
+    return dict(track, job=job_id)
+
+
+async def _get_holes(st: _AppState, request: Request) -> dict[str, Any]:
+    """``GET /api/holes?job=ID&unit=mm|inch|mil``: a drill job's hole table: each hole in drilling order with its
+    number, tool, diameter, X and Y in the file's own frame in ``unit``, and its state (to do, drilling, done,
+    skipped) in the started run; ``{"holes": []}`` for a job that is not one of holes only."""
+    job_id, job = _track_job(st, request)
+    unit = request.query_params.get("unit", "mm")
+    if unit not in TABLE_UNITS:
+        raise HttpError(400, f"unit must be one of {', '.join(TABLE_UNITS)}, got {unit[:20]!r}")
+    holes = await _drill_holes_of(st, job_id, job)
+    if holes is None:
+        return {"job": job_id, "unit": unit, "file_units": None, "holes": []}
+    run = st.track.get("run")
+    states = None
+    if run is not None and run["job"] == job_id:
+        states = (_track_extra(st, st.session.state(_NO_LOG)).get("holes") or {}).get("states")
+    per = TABLE_UNITS[unit]
+    rows = [{"number": i + 1, "tool": int(t), "diameter_mm": round(float(d), 4),
+             "x": round(float(xy[0]) * per, 4), "y": round(float(xy[1]) * per, 4),
+             "state": states[i] if states else "to do"}
+            for i, (xy, t, d) in enumerate(zip(holes["board_mm"], holes["tools"], holes["diameters_mm"]))]
+    return {"job": job_id, "unit": unit, "file_units": holes["units"], "holes": rows}
+
+
+def _hole_number(body: dict[str, Any], job: PreparedJob) -> int:
+    hole = body.get("hole")
+    n = 0 if job.drill_plan is None else len(job.drill_plan.holes_steps)
+    if isinstance(hole, bool) or not isinstance(hole, int) or not 1 <= hole <= n:
+        raise HttpError(400, f"hole must be a whole number 1..{n}, got {json.dumps(hole)[:40]}" if n else
+                        f"{job.name}: no hole table (a drill job of holes only has one)")
+    return hole
+
+
+def _planned_body(st: _AppState, body: dict[str, Any]) -> tuple[str, PreparedJob]:
+    job_id = str(body.get("job", ""))
+    job = st.prepared.get(job_id)
+    if job is None:
+        raise HttpError(404, f"job {job_id!r} is not planned; upload it and set its options first")
+    return job_id, job
+
+
+async def _goto_hole(st: _AppState, request: Request) -> dict[str, Any]:
+    """``{"job": ID, "hole": N}``: Go To above hole N (drilling order) at the job's travel height, where the job
+    would drill it now: the session's Go To in the machine frame (lifted, across, down; refused while a job runs)."""
+    body = await _body_json(request)
+    job_id, job = _planned_body(st, body)
+    k = _hole_number(body, job) - 1
+    home = _job_home(st, job)
+    x, y = (int(v) for v in job.drill_plan.holes_steps[k])
+    target = [home[0] + x, home[1] + y, home[2] + int(job.drill_plan.safe_z_steps)]
+    st.session.go_to(target, "steps", machine_coords=True)
+    return st.session.state()
+
+
+async def _start_at_hole(st: _AppState, request: Request) -> dict[str, Any]:
+    """``{"job": ID, "hole": N}``: Start At: run the drill job from hole N (the holes before it skipped), from
+    where the tool stands: :func:`cam.drive.track.start_at_hole`, the library's resume of a stop after hole N - 1
+    (lift, travel to the hole, its tool asked for); the job's journal is kept as a page's run keeps it."""
+    from starlette.concurrency import run_in_threadpool
+
+    body = await _body_json(request)
+    job_id, job = _planned_body(st, body)
+    hole = _hole_number(body, job)
+    session = st.session
+    if session.busy:
+        raise BusyError("the machine is busy: Start At waits for the running activity to end")
+    home = _job_home(st, job)
+    where = tuple(int(p) - h for p, h in zip(session.position_steps(), home))
+    started = await run_in_threadpool(st.worker.call, start_at_hole, job, hole, where, board=_board_drills(st),
+                                      what=f"starting {job.name or job_id} at hole {hole}")
+    session.start(started, label=f"job {job.name or Path(job.source).name} (from hole {hole})",
+                  journal=str(_journal_path(st, job_id)))
+    st.last_job = job_id
+    _track_started(st, job_id, started, home, first=hole - 1)
+    return session.state()

@@ -1,0 +1,172 @@
+"""The page's live track, the job's own units and the hole table (issue #47 points 1-3): the API in-process (a
+real server on a free port) on the mock, and the library's conversions with literal numbers."""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+
+import cam
+from cam.drive.track import JobUnits, hole_states, job_units, start_at_hole, to_job_units
+from cam.errors import PlanError
+from cam.job.jobs import JobOptions, prepare_job
+from cam.verify.pinlog import decode_pin_log
+
+from conftest import SAMPLES
+from test_web import EXCELLON, FAST, Server
+
+INCH_DRILL = """M48
+INCH,LZ
+T1C0.032
+%
+T1
+X0.1000Y0.2000
+X0.3000Y0.2000
+M30
+"""
+
+
+def _wait(s: Server, cond, timeout_s: float = 30.0) -> dict:
+    deadline = time.monotonic() + timeout_s
+    while True:
+        status, st = s.call("GET", "/api/state")
+        if st["prompt"]:  # a tool change: answered as the page's Continue
+            s.call("POST", "/api/answer", {"prompt": st["prompt"]["id"], "action": "continue"})
+        if cond(st):
+            return st
+        assert time.monotonic() < deadline, st
+        time.sleep(0.02)
+
+
+@pytest.fixture
+def server(tmp_path):
+    s = Server(tmp_path, settings=FAST, realtime=False)
+    yield s
+    s.close()
+
+
+def _plan(s: Server, name: str, data: bytes, options=None) -> str:
+    status, up = s.upload(name, data)
+    assert status == 200, up
+    status, planned = s.call("POST", "/api/plan", {"job": up["job"], "options": options or {}})
+    assert status == 200, planned
+    return planned["job"]
+
+
+def test_to_job_units_literal():
+    u = JobUnits("px", (80, 40, 0), (8, 8, 1))
+    assert to_job_units((80 + 8 * 12, 40 + 8 * 3, 5), u) == {"unit": "px", "xyz": [12.0, 3.0, 5.0]}
+    # a drill file in inches, Y up: 1 inch right and 0.5 inch up of the file's zero
+    u = JobUnits("inch", (1000, 2000, 0), (254.0, -254.0, 254.0), (("mil", 1000.0),))
+    assert to_job_units((1254, 1873, 0), u) == {"unit": "inch", "xyz": [1.0, 0.5, 0.0], "mil": [1000.0, 500.0, 0.0]}
+    assert hole_states(4, first=2, done=1, drilling=True) == ["skipped", "skipped", "done", "drilling"]
+    assert hole_states(3, done=3, drilling=True) == ["done"] * 3
+
+
+def test_drawing_units_are_its_pixels():
+    s = FAST
+    job = prepare_job(SAMPLES / "word.png", JobOptions.from_mapping({"depth": "10", "start_at": "3,4,0"}), s)
+    u = job_units(job, (100, 200, 0), s)
+    k = job.toolpath.pixels.steps_per_px_xy
+    # pixel (col 7, row 5) of the drawing, Start At (3, 4) included in the job's frame
+    assert to_job_units((100 + (7 + 3) * k, 200 + (5 + 4) * k, 0), u)["xyz"] == [7.0, 5.0, 0.0]
+
+
+def test_track_of_a_drill_job_and_its_hole_table(server, tmp_path):
+    job_id = _plan(server, "inch.drl", INCH_DRILL.encode())
+    status, track = server.call("GET", f"/api/track?job={job_id}")
+    assert status == 200, track
+    assert track["units"]["unit"] == "inch" and track["units"]["also"] == [["mil", 1000.0]]
+    holes = np.array(track["holes_mm"])
+    assert holes.shape == (2, 2) and abs(abs(holes[1, 0] - holes[0, 0]) - 5.08) < 0.05  # 0.2 inch apart
+    status, table = server.call("GET", f"/api/holes?job={job_id}&unit=mil")
+    assert status == 200 and table["file_units"] == "inch"
+    assert sorted((round(h["x"]), round(h["y"])) for h in table["holes"]) == [(100, 200), (300, 200)]
+    assert [h["state"] for h in table["holes"]] == ["to do", "to do"] and table["holes"][0]["tool"] == 1
+    status, table = server.call("GET", f"/api/holes?job={job_id}&unit=inch")
+    assert sorted(round(h["x"], 3) for h in table["holes"]) == [0.1, 0.3]
+    assert server.call("GET", f"/api/holes?job={job_id}&unit=furlong")[0] == 400
+    # the tool at the first hole: the snapshot says where, in the file's own inches
+    status, st = server.call("POST", "/api/goto-hole", {"job": job_id, "hole": 1})
+    assert status == 200, st
+    st = _wait(server, lambda st: st["state"] == "idle")
+    first = table["holes"][0]
+    assert st["job_position"]["unit"] == "inch"
+    assert st["job_position"]["xyz"][:2] == pytest.approx([first["x"], first["y"]], abs=0.002)
+    assert st["position_mm"][:2] == pytest.approx(holes[0], abs=0.03)
+    assert st["position_steps"][2] < 0  # above the surface (+Z deeper): the travel height
+    # the job: every hole done, from the session's progress
+    assert server.call("POST", "/api/start", {"job": job_id})[0] == 200
+    st = _wait(server, lambda st: st["state"] == "idle" and st.get("holes"))
+    assert st["last"]["status"] == "finished" and st["holes"]["states"] == ["done", "done"]
+    status, table = server.call("GET", f"/api/holes?job={job_id}&unit=mm")
+    assert [h["state"] for h in table["holes"]] == ["done", "done"]
+    assert server.call("POST", "/api/goto-hole", {"job": job_id, "hole": 3})[0] == 400
+    assert server.call("POST", "/api/goto-hole", {"job": job_id, "hole": "1"})[0] == 400
+
+
+def test_start_at_skips_the_holes_before_and_drills_the_rest(server):
+    job_id = _plan(server, "board.drl", (SAMPLES / "board.drl").read_bytes())
+    status, track = server.call("GET", f"/api/track?job={job_id}")
+    holes = np.array(track["holes_mm"])
+    assert len(holes) == 44 and track["units"]["unit"] == "mm"
+    start = np.array(server.session.position_steps())
+    status, st = server.call("POST", "/api/start-at-hole", {"job": job_id, "hole": 40})
+    assert status == 200, st
+    deadline = time.monotonic() + 60
+    while True:  # the run's tool-change prompts answered as the page does
+        st = server.session.state()
+        if st["prompt"]:
+            server.call("POST", "/api/answer", {"prompt": st["prompt"]["id"], "action": "continue"})
+        if st["state"] == "idle":
+            break
+        assert time.monotonic() < deadline
+        time.sleep(0.01)
+    assert st["last"]["status"] == "finished", st["last"]
+    st = server.call("GET", "/api/state")[1]
+    assert st["holes"]["states"] == ["skipped"] * 39 + ["done"] * 5
+    # the pin log: the tool went below the surface only at holes 40..44
+    motion = decode_pin_log(server.session.last_job_pin_log, FAST).position_steps + start
+    per = np.array(FAST.mm_per_step_axes[:2])
+    bottoms = motion[motion[:, 2] == motion[:, 2].max()][:, :2] * per
+    drilled = {tuple(np.round(p, 1)) for p in bottoms}
+    assert drilled == {tuple(np.round(h, 1)) for h in holes[39:]}
+    status, table = server.call("GET", f"/api/holes?job={job_id}")
+    assert [h["state"] for h in table["holes"]][38:41] == ["skipped", "done", "done"]
+
+
+def test_start_at_refusals_are_one_line():
+    job = prepare_job(SAMPLES / "word.png", JobOptions.from_mapping({"depth": "10"}), FAST)
+    with pytest.raises(PlanError, match="drill job"):
+        start_at_hole(job, 1, (0, 0, 0), board=False)
+
+
+def test_snapshots_while_a_job_runs_come_5_times_a_second(tmp_path):
+    """The event stream gives a running job's position at least 5 times a second (issue #47 point 1)."""
+    import json
+    import urllib.request
+
+    slow = cam.MachineSettings().replace(delay_xy_ms=0.5, delay_z_ms=0.5, ramp="constant")
+    s = Server(tmp_path, settings=slow, realtime=True)
+    try:
+        job_id = _plan(s, "w.drl", EXCELLON.encode())
+        assert s.call("POST", "/api/start", {"job": job_id})[0] == 200
+        times, positions = [], []
+        with urllib.request.urlopen(s.url + "/api/events", timeout=60) as resp:
+            for line in resp:
+                if not line.startswith(b"data: "):
+                    continue
+                snap = json.loads(line[6:])
+                if snap["prompt"]:
+                    s.call("POST", "/api/answer", {"prompt": snap["prompt"]["id"], "action": "continue"})
+                if snap["activity"] == "job" and not snap["prompt"]:
+                    times.append(time.monotonic())
+                    positions.append(tuple(snap["position_steps"]))
+                if snap["state"] == "idle" and times:
+                    break
+        gaps = np.diff(times)
+        assert len(times) >= 5 and float(np.median(gaps)) <= 0.2, gaps
+        assert len(set(positions)) >= 3  # the machine's reported position moves along
+    finally:
+        s.close()
