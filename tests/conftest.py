@@ -7,8 +7,8 @@ Test tiers (markers, declared in pyproject.toml; ``--strict-markers`` refuses an
 ``realtime``
     runs an emulator, a machine session or ``cam drill --realtime`` at real speed (waits on the clock).
 ``packaging``
-    ``pip install``, a virtual environment, the ahead-of-time kernel build, or a check of what an install
-    ships.
+    ``pip install`` or ``pip wheel``, a virtual environment, a fresh kernel cache, or a check of what an
+    install ships.
 ``slow``
     anything else that would make the fast tier too slow (large inputs, many planned jobs, fuzzing, memory
     bounds on 200 MB files, benchmarks, real ``python -m cam`` processes kept for what only a process shows).

@@ -36,9 +36,9 @@ FUNCTION_LEVEL_IMPORTS = {
     ("cam.cli.parser", "cam.errors"): "--tool is checked by cam.tool (numpy) only when given: --help stays light",
     ("cam.cli.parser", "cam.tool"): "cam.tool needs numpy; the parser stays light for --help",
     ("cam.verify.toolcarve", "cv2"): "only a notebook's picture of a comparison needs OpenCV's PNG encoder",
-    ("cam._aot", "cam._aot_signatures"): "the build tool: the table is read only when building",
-    ("cam._aot", "cam.cli"): "the build tool: the sample jobs run only when collecting argument types",
-    ("cam._aot", "numba"): "the build tool: numba's ahead-of-time compiler, only when building",
+    ("cam._kernel_cache", "cam._kernel_signatures"): "the cache filler: the table is read only when compiling",
+    ("cam._kernel_cache", "cam.cli"): "the cache filler: the sample jobs run only when collecting argument types",
+    ("cam._kernel_cache", "numba"): "the cache filler: numba's types, only when reading or writing the table",
     # (importing module, imported module): why it may not be imported at the importing module's top
     ("cam.drive.ports", "parallel"):
         "optional dependency: pyparallel (cam[parport]), needed only when a /dev/parport* port is opened",
@@ -54,6 +54,8 @@ FUNCTION_LEVEL_IMPORTS = {
                                                   "and MAXIMUS hosts load only for a port that needs them",
     ("cam.formats.dxf", "ezdxf"): "heavy (about 0.7 s): loaded only when a DXF file is read, not with every job "
                                   "kind's reader (cam.job.jobs imports cam.formats.dxf)",
+    ("cam.cli", "cam._compiled"): "the kernels' cache folder is chosen (and made) when a command runs, not for "
+                                  "--help or bad options",
     ("cam.cli", "numba"): "heavy (about half a second): the first-compile note is registered only when a "
                           "command runs, so --help and bad options stay quick",
 }

@@ -42,14 +42,23 @@ COMMANDS = {
 """Command name -> (module, function).  The module is imported only when its command runs: lazy by design."""
 
 
+FIRST_COMPILE_NOTE = ("cam: compiling kernels for this machine into {where}, first run only "
+                      "(up to a minute or two; later runs load them from there)")
+"""The line said once on stderr when a run compiles a kernel (:func:`_note_first_compile`)."""
+
+
 def _note_first_compile() -> None:
-    """Say once on stderr when a compiled kernel is not in numba's cache (the first run after installing, or
-    with an empty ``NUMBA_CACHE_DIR``): compiling takes seconds, and the run should not sit silent.  numba
-    reports each real compilation (not a load from its cache) as a ``numba:compile`` event."""
+    """Say once on stderr when a compiled kernel is not in numba's cache (the first run on a machine, or with an
+    empty ``NUMBA_CACHE_DIR``): compiling takes a minute, and the run should not sit silent.  numba reports each
+    real compilation (not a load from its cache) as a ``numba:compile`` event."""
+    from .._compiled import cache_dir  # points numba's cache at cam's folder, before numba is imported
+
     try:
         from numba.core import event
     except ImportError:  # pragma: no cover - another numba layout: say nothing
         return
+    where = cache_dir()
+    note = FIRST_COMPILE_NOTE.format(where=where if where is not None else "numba's cache")
 
     class _Note(event.Listener):
         said = False
@@ -57,7 +66,7 @@ def _note_first_compile() -> None:
         def on_start(self, ev) -> None:
             if not _Note.said:
                 _Note.said = True
-                print("cam: preparing compiled kernels, first run only", file=sys.stderr, flush=True)
+                print(note, file=sys.stderr, flush=True)
 
         def on_end(self, ev) -> None:
             pass
