@@ -170,3 +170,171 @@ def test_snapshots_while_a_job_runs_come_5_times_a_second(tmp_path):
         assert len(set(positions)) >= 3  # the machine's reported position moves along
     finally:
         s.close()
+
+
+# -- in Chromium (Playwright), with screenshots for docs/web.md (issue #47 point 8) --------------------------------
+
+from test_web import MEDIUM, ROOT, browser  # noqa: E402,F401  (the browser fixture: Debian chromium)
+
+DOCS = ROOT / "docs"
+DESKTOP = {"width": 1280, "height": 900}
+PHONE = {"width": 390, "height": 844}
+
+
+def _page(browser, viewport):
+    ctx = browser.new_context(viewport=viewport, bypass_csp=True)  # wait_for_function evals
+    p = ctx.new_page()
+    p.set_default_timeout(60_000)
+    return ctx, p
+
+
+def _open_and_plan(p, server, path) -> None:
+    p.goto(server.url + "/")
+    p.wait_for_function("document.getElementById('state').dataset.state === 'idle'")
+    p.set_input_files("#file", str(path))
+    p.wait_for_function("!document.getElementById('track-box').hidden")
+
+
+def _shot(p, selector: str, name: str) -> None:
+    """A screenshot of one section for docs/web.md (the sticky header bar out of its way)."""
+    p.evaluate("document.querySelector('header.bar').style.position = 'static'")
+    p.locator(selector).screenshot(path=str(DOCS / name))
+
+
+def _answer_prompts_until_idle(p, server, timeout_s: float = 120.0) -> None:
+    deadline = time.monotonic() + timeout_s
+    while server.session.busy or p.evaluate("document.getElementById('state').dataset.state") != "idle":
+        assert time.monotonic() < deadline
+        if p.is_visible("#prompt-continue"):
+            p.click("#prompt-continue")
+        p.wait_for_timeout(50)
+
+
+@pytest.mark.browser
+def test_page_track_of_a_drill_job_on_the_maximus_emulator(browser, tmp_path):
+    """The drill job's picture on the MAXIMUS emulator: the tool where the board reports it, the holes marked done in
+    the picture and the table as the board answers them; screenshots at desktop and phone sizes."""
+    from cam.drive.maximus.board import MAXIMUS_SETTINGS
+    from cam.sim.maximus import start_emulator
+
+    emu = start_emulator(speed=None)
+    s = Server(tmp_path, settings=MAXIMUS_SETTINGS, machine_port=f"maximus:{emu.device_path}", realtime=True)
+    ctx, p = _page(browser, DESKTOP)
+    try:
+        _open_and_plan(p, s, SAMPLES / "board.drl")
+        p.wait_for_function("document.querySelectorAll('#holes-table tbody tr').length === 44")
+        assert p.is_visible("#holes-card")
+        p.click("#start")
+        tools = set()
+        deadline = time.monotonic() + 120
+        while True:  # the tool marker follows the board's reports; answer each tool change as the operator does
+            tools.add(p.evaluate("document.getElementById('track').dataset.tool"))
+            if p.is_visible("#prompt-continue"):
+                p.click("#prompt-continue")
+            done = p.evaluate("document.querySelectorAll('#holes-table tr[data-state=done]').length")
+            if done == 44 and not s.session.busy:
+                break
+            assert time.monotonic() < deadline, done
+            p.wait_for_timeout(30)
+        assert len(tools - {""}) >= 3, tools
+        p.wait_for_function("document.getElementById('state').dataset.state === 'idle'")
+        assert p.evaluate("Array.from(document.querySelectorAll('#holes-table tbody tr')).every("
+                          "(tr) => tr.dataset.state === 'done')")
+        _shot(p, "#preview-card", "web-track-drill.png")
+        p.set_viewport_size(PHONE)
+        p.locator("#holes-card").scroll_into_view_if_needed()
+        p.screenshot(path=str(DOCS / "web-holes-phone.png"))
+    finally:
+        ctx.close()
+        s.close()
+        emu.stop()
+    assert emu.error is None
+
+
+@pytest.mark.browser
+def test_page_track_of_a_drawing_on_the_mock_and_its_pixels(browser, tmp_path):
+    """A drawing on the mock (real time): the trail of what is cut grows from the reported positions while the job
+    runs, and the position shows in the drawing's pixels."""
+    s = Server(tmp_path, settings=MEDIUM, realtime=True)
+    ctx, p = _page(browser, PHONE)
+    try:
+        _open_and_plan(p, s, SAMPLES / "word.png")
+        p.wait_for_function("document.getElementById('job-pos-unit').textContent.includes('pixels')")
+        p.click("#start")
+        p.wait_for_function("document.getElementById('state').dataset.state === 'running'")
+        p.wait_for_function("Number(document.getElementById('track').dataset.trail) >= 5")
+        seen = {p.evaluate("document.getElementById('track').dataset.tool")}
+        p.wait_for_function("(t) => document.getElementById('track').dataset.tool !== t", arg=seen.pop())
+        _shot(p, "#preview-card", "web-track-drawing-phone.png")
+        _answer_prompts_until_idle(p, s)
+        assert p.evaluate("Number(document.getElementById('track').dataset.trail)") >= 5
+        px = p.evaluate("document.getElementById('job-pos').textContent")
+        # the session's home is where the tool stood at the start, where the drawing ran from (no state file)
+        units = job_units(prepare_job(SAMPLES / "word.png", JobOptions(), MEDIUM), (0, 0, 0), MEDIUM)
+        want = to_job_units(s.session.position_steps(), units)
+        assert [float(v) for v in px.split(",")] == pytest.approx(want["xyz"], abs=0.1)
+    finally:
+        ctx.close()
+        s.close()
+
+
+@pytest.mark.browser
+def test_page_hole_table_start_at_and_go_to(browser, tmp_path):
+    """The hole table on the mock: choose hole 40, Start At: holes 1-39 skipped, 40-44 done; Go To hole 2 moves
+    the tool above it."""
+    s = Server(tmp_path, settings=FAST, realtime=True)
+    ctx, p = _page(browser, DESKTOP)
+    try:
+        _open_and_plan(p, s, SAMPLES / "board.drl")
+        p.wait_for_function("document.querySelectorAll('#holes-table tbody tr').length === 44")
+        p.click("#holes-table tbody tr[data-number='40']")
+        assert p.inner_text("#hole-start") == "Start At hole 40"
+        p.click("#hole-start")
+        p.wait_for_function("document.getElementById('state').dataset.state !== 'idle'")
+        _answer_prompts_until_idle(p, s)
+        p.wait_for_function("document.querySelector('#holes-table tr[data-number=\"44\"]').dataset.state === 'done'")
+        states = p.evaluate("Array.from(document.querySelectorAll('#holes-table tbody tr')).map((tr) => tr.dataset.state)")
+        assert states == ["skipped"] * 39 + ["done"] * 5
+        p.select_option("#holes-unit", "mil")
+        p.wait_for_function("document.getElementById('holes-summary').textContent.includes('44 holes')")
+        p.click("#holes-table tbody tr[data-number='2']")
+        track = s.call("GET", f"/api/track?job={s.call('GET', '/api/state')[1]['holes']['job']}")[1]
+        p.click("#hole-goto")
+        deadline = time.monotonic() + 30  # the Go To ends above hole 2
+        while s.session.busy or not np.allclose(s.session.state()["position_mm"][:2], track["holes_mm"][1], atol=0.05):
+            assert time.monotonic() < deadline, s.session.state()["position_mm"]
+            p.wait_for_timeout(20)
+        assert s.session.state()["position_steps"][2] < 0  # at the travel height, above the surface
+        _shot(p, "#holes-card", "web-holes.png")
+    finally:
+        ctx.close()
+        s.close()
+
+
+@pytest.mark.browser
+def test_keyboard_jog_moves_the_mock(browser, tmp_path):
+    """Arrow keys and Page Up / Down jog the mock by the chosen step; keys typed in a field do not."""
+    s = Server(tmp_path, settings=FAST, realtime=True)
+    ctx, p = _page(browser, DESKTOP)
+    try:
+        p.goto(s.url + "/")
+        p.wait_for_function("document.getElementById('state').dataset.state === 'idle'")
+        p.select_option("#jog-steps", "100")
+        start = s.session.position_steps()
+        for key, axis, sign in (("ArrowRight", 0, 1), ("ArrowDown", 1, 1), ("PageDown", 2, 1), ("ArrowLeft", 0, -1),
+                                ("PageUp", 2, -1)):
+            p.wait_for_function("document.getElementById('state').dataset.state === 'idle'")  # the page sees the end
+            before = s.session.position_steps()
+            p.locator("body").press(key)
+            deadline = time.monotonic() + 20
+            while s.session.position_steps()[axis] != before[axis] + sign * 100 or s.session.busy:
+                assert time.monotonic() < deadline, (key, s.session.position_steps())
+                p.wait_for_timeout(20)
+        assert s.session.position_steps() == (start[0], start[1] + 100, start[2])
+        p.fill("#goto-x", "5")
+        p.locator("#goto-x").press("ArrowUp")  # in a field: the field's own key, no jog
+        p.wait_for_timeout(300)
+        assert s.session.position_steps() == (start[0], start[1] + 100, start[2]) and not s.session.busy
+    finally:
+        ctx.close()
+        s.close()

@@ -21,12 +21,17 @@ from typing import Any, Optional
 import numpy as np
 
 from ..errors import CamError, PlanError
-from ..job.model import CUT
+from ..formats.excellon import load_excellon
+from ..job.jobs import resume_job
+from ..job.model import CUT, Job
 from ..job.resume import Journal
+from ..render.picture import LEGEND_PX, _canvas_size, auto_scale
 from ..settings import MachineSettings
 from ..values import shown
+from .maximus.resume import resume_board_job
 
 __all__ = ["JobUnits", "HOLE_STATES", "TABLE_UNITS", "MAX_TRACK_POINTS", "job_units", "to_job_units", "job_track",
+           "preview_frame",
            "drill_holes", "hole_states", "hole_writes", "start_at_hole", "excellon_file_units"]
 
 HOLE_STATES = ("to do", "drilling", "done", "skipped")
@@ -111,8 +116,6 @@ def drill_holes(job: Any, options: Any = None) -> Optional[dict[str, Any]]:
     plan = getattr(job, "drill_plan", None)
     if plan is None or getattr(job, "kind", "") != "excellon":
         return None
-    from ..formats.excellon import load_excellon
-
     units = getattr(options, "excellon_units", None)
     holes = load_excellon(job.source, excellon_units=units, excellon_digits=getattr(options, "excellon_digits", None),
                           excellon_zeros=getattr(options, "excellon_zeros", None))
@@ -151,6 +154,33 @@ def job_units(job: Any, home_steps: Any, settings: MachineSettings, holes: Optio
     return JobUnits("mm", tuple(float(v) for v in home), tuple(float(1 / p) for p in per))
 
 
+def preview_frame(job: Any) -> dict[str, Any]:
+    """Where the job's preview picture (:meth:`~cam.job.jobs.PreparedJob.preview_picture`) draws its moves: picture
+    pixel ``(col, row) = origin_px + px_per_step * (x, y)`` for a point ``(x, y)`` in steps from the job's home, and
+    the picture's ``width`` and ``height`` (the legend below it included), so a page can draw over the picture.
+
+    The same arithmetic as the picture's: a drawing job held whole (:func:`cam.render.picture.toolpath_picture`:
+    drawing pixel ``p`` at ``(p + 0.5) x scale``), any other job :func:`cam.job.jobs.motion_picture` (its extent,
+    a 12-pixel margin, 800 pixels on the longer side).
+    """
+    toolpath = getattr(job, "toolpath", None)
+    if getattr(job, "kind", "") in ("drawing", "digitized") and isinstance(toolpath, Job) and toolpath.pixels:
+        w, h = _canvas_size(toolpath)
+        k = auto_scale(w, h)
+        per = toolpath.pixels.steps_per_px_xy
+        return {"origin_px": [k // 2, k // 2], "px_per_step": [k / per, k / per],
+                "width": max(w * k, 420), "height": h * k + LEGEND_PX}
+    extent = np.asarray(job.extent_steps, np.int64)
+    lo = extent[:2, 0]
+    span = np.maximum(1, extent[:2, 1] - lo)
+    margin, target = 12, 800
+    k = (target - 2 * margin) / float(span.max())
+    w = int(np.rint(span[0] * k)) + 2 * margin + 1
+    h = int(np.rint(span[1] * k)) + 2 * margin + 1
+    return {"origin_px": [float(margin - lo[0] * k), float(margin - lo[1] * k)], "px_per_step": [k, k],
+            "width": max(w, 420), "height": h + LEGEND_PX}
+
+
 def _cut_runs_steps(job: Any) -> list[np.ndarray]:
     """Each run of consecutive points below the surface (z > 0 from the job's home), ``(N, 2)`` steps from the
     home, in the order cut (a run across two pieces is one)."""
@@ -179,7 +209,8 @@ def job_track(job: Any, home_steps: Any, settings: MachineSettings, holes: Optio
     """What the page draws under the live tool: JSON-able, machine mm (x, y) where the job runs from
     ``home_steps``: ``cuts_mm`` (each run of the path below the surface, a hole's bottom one point; thinned evenly
     to at most :data:`MAX_TRACK_POINTS` points in all), ``holes_mm`` (a drill job's holes in drilling order, else
-    []), ``home_mm``, ``extent_mm`` ``[x0, y0, x1, y1]`` of both and the home, and ``units`` (:func:`job_units`)."""
+    []), ``home_mm`` and ``home_steps``, ``mm_per_step``, ``extent_mm`` ``[x0, y0, x1, y1]`` of both and the home,
+    ``picture`` (:func:`preview_frame`: where the preview draws) and ``units`` (:func:`job_units`)."""
     per = np.asarray(settings.mm_per_step_axes, np.float64)
     home = np.asarray(home_steps, np.float64).reshape(3)
     runs = _cut_runs_steps(job)
@@ -195,7 +226,8 @@ def job_track(job: Any, home_steps: Any, settings: MachineSettings, holes: Optio
     pts = np.vstack([np.zeros((0, 2))] + cuts + [holes_mm, (home[:2] * per[:2])[None]])
     units = job_units(job, home, settings, holes)
     return {"cuts_mm": [c.tolist() for c in cuts], "holes_mm": holes_mm.tolist(),
-            "home_mm": [round(float(v), 4) for v in home * per],
+            "home_mm": [round(float(v), 4) for v in home * per], "home_steps": [int(v) for v in home],
+            "mm_per_step": [float(v) for v in per], "picture": preview_frame(job),
             "extent_mm": [float(pts[:, 0].min()), float(pts[:, 1].min()), float(pts[:, 0].max()),
                           float(pts[:, 1].max())],
             "units": units.to_json(), "thinned": every > 1}
@@ -255,14 +287,10 @@ def start_at_hole(job: Any, hole: Any, position_steps: tuple[int, int, int], *, 
     base = dict(identity=job.identity, plan_sha256=job.plan_sha256, source=job.source, state="stopped",
                 position_steps=tuple(int(v) for v in position_steps))
     if board:
-        from .maximus.resume import resume_board_job
-
         journal = Journal(moves=n, last_move=k - 1, holes_done=k,
                           hole_order=tuple(int(v) for v in np.asarray(plan.hole_index).tolist()), **base)
         out = resume_board_job(job, journal, where=f"Start At hole {hole}")
     else:
-        from ..job.jobs import resume_job
-
         toolpath = job.toolpath
         kinds = np.concatenate([np.asarray(p.kind, np.uint8) for p in toolpath.pieces()])
         pauses = np.concatenate([np.asarray(p.pause, bool) for p in toolpath.pieces()])

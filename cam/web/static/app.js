@@ -465,6 +465,173 @@
   loadSettings();
   loadTools();
 
+
+  // -- live track, the job's own units, the hole table, keyboard jog (issue #47 points 1-3 and 7) ------------------
+  // The server gives the job's path and holes in machine mm (GET /api/track) and the tool where the machine reports
+  // it in every snapshot; the page draws them (no plan is replayed here: the trail is the reported positions).
+  const track = { key: null, data: null, trail: [], wasJob: false, holes: null, chosen: null, states: null };
+
+  function loadTrack() {
+    const p = page.planned;
+    if (!p) return;
+    track.key = p.preview;
+    api("/api/track?job=" + encodeURIComponent(p.job)).then((t) => {
+      track.data = t;
+      drawTrack();
+    }, () => {});
+    loadHoles();
+  }
+
+  function loadHoles() {
+    const p = page.planned;
+    if (!p) return;
+    api("/api/holes?job=" + encodeURIComponent(p.job) + "&unit=" + $("holes-unit").value).then(showHoles, () => {});
+  }
+
+  function showHoles(r) {
+    track.holes = r;
+    $("holes-card").hidden = !r.holes.length;
+    const body = $("holes-table").querySelector("tbody");
+    body.textContent = "";
+    const digits = r.unit === "mil" ? 1 : r.unit === "inch" ? 4 : 3;
+    r.holes.forEach((h) => {
+      const tr = document.createElement("tr");
+      tr.dataset.number = String(h.number);
+      [h.number, "T" + h.tool + " " + h.diameter_mm.toFixed(2), h.x.toFixed(digits), h.y.toFixed(digits), h.state]
+        .forEach((v) => { const td = document.createElement("td"); td.textContent = v; tr.appendChild(td); });
+      tr.addEventListener("click", () => chooseHole(h.number));
+      body.appendChild(tr);
+    });
+    $("holes-summary").textContent = r.holes.length + " holes in drilling order; X, Y in the file's own frame" +
+      (r.file_units ? " (the file is in " + r.file_units + ")" : "");
+    if (track.chosen && track.chosen > r.holes.length) track.chosen = null;
+    if (track.states) holeStates(track.states);
+    chooseHole(track.chosen);
+  }
+
+  function chooseHole(number) {
+    track.chosen = number;
+    $("holes-table").querySelectorAll("tbody tr").forEach((tr) => {
+      tr.classList.toggle("chosen", tr.dataset.number === String(number));
+    });
+    const idle = page.state && page.state.state === "idle";
+    $("hole-goto").disabled = !(idle && number);
+    $("hole-start").disabled = !(idle && number);
+    $("hole-goto").textContent = number ? "Go To hole " + number : "Go To";
+    $("hole-start").textContent = number ? "Start At hole " + number : "Start At";
+  }
+
+  function holeStates(states) {
+    track.states = states;
+    $("holes-table").querySelectorAll("tbody tr").forEach((tr, i) => {
+      const st = states[i] || "to do";
+      tr.dataset.state = st;
+      tr.lastChild.textContent = st;
+    });
+  }
+
+  $("holes-unit").addEventListener("change", loadHoles);
+  $("hole-goto").addEventListener("click", () => {
+    if (page.planned && track.chosen) post("/api/goto-hole", { job: page.planned.job, hole: track.chosen });
+  });
+  $("hole-start").addEventListener("click", () => {
+    if (page.planned && track.chosen) post("/api/start-at-hole", { job: page.planned.job, hole: track.chosen });
+  });
+
+  // machine steps -> picture pixels: the preview's own arithmetic, from the library (track.picture)
+  function toPicture(xy) {
+    const t = track.data, f = t.picture;
+    return [f.origin_px[0] + f.px_per_step[0] * (xy[0] - t.home_steps[0]),
+            f.origin_px[1] + f.px_per_step[1] * (xy[1] - t.home_steps[1])];
+  }
+  function mmToSteps(p) { return [p[0] / track.data.mm_per_step[0], p[1] / track.data.mm_per_step[1]]; }
+
+  function drawTrack() {
+    const t = track.data, canvas = $("track");
+    if (!t) return;
+    canvas.hidden = $("preview").hidden;
+    $("track-box").hidden = canvas.hidden;
+    if (canvas.width !== t.picture.width || canvas.height !== t.picture.height) {
+      canvas.width = t.picture.width; canvas.height = t.picture.height;
+    }
+    const g = canvas.getContext("2d");
+    g.clearRect(0, 0, canvas.width, canvas.height);
+    g.lineCap = "round"; g.lineJoin = "round";
+    g.strokeStyle = "#1f5fbf"; g.lineWidth = 3;  // what the tool cut, where the machine said it was
+    track.trail.forEach((run) => {
+      if (run.length < 2) return;
+      g.beginPath(); run.forEach((p, i) => { const [x, y] = toPicture(p); i ? g.lineTo(x, y) : g.moveTo(x, y); });
+      g.stroke();
+    });
+    const states = track.states || [];
+    const colours = { done: "#1d7a34", drilling: "#b86100", skipped: "#9aa5b1" };
+    t.holes_mm.forEach((p, i) => {
+      const [x, y] = toPicture(mmToSteps(p)), st = states[i] || "to do";
+      if (colours[st]) { g.beginPath(); g.arc(x, y, 4, 0, 2 * Math.PI); g.fillStyle = colours[st]; g.fill(); }
+      if (track.chosen === i + 1) {
+        g.beginPath(); g.arc(x, y, 9, 0, 2 * Math.PI); g.strokeStyle = "#c40000"; g.lineWidth = 2; g.stroke();
+      }
+    });
+    const s = page.state;
+    if (s) {  // the tool (kept inside the picture when it stands outside the job)
+      let [x, y] = toPicture(s.position_steps);
+      x = Math.min(Math.max(x, 4), canvas.width - 4); y = Math.min(Math.max(y, 4), canvas.height - 4);
+      const r = 10;
+      g.strokeStyle = "#c40000"; g.lineWidth = 2.5;
+      g.beginPath(); g.moveTo(x - r, y); g.lineTo(x + r, y); g.moveTo(x, y - r); g.lineTo(x, y + r); g.stroke();
+      g.beginPath(); g.arc(x, y, r / 2, 0, 2 * Math.PI); g.stroke();
+    }
+    canvas.dataset.trail = String(track.trail.reduce((n, run) => n + run.length, 0));
+    canvas.dataset.tool = s ? s.position_steps.slice(0, 2).join(",") : "";
+  }
+
+  // called with every snapshot (render): the trail, the positions, the hole states, the picture
+  function liveTrack(s) {
+    if (page.planned && page.planned.preview !== track.key) { track.trail = []; track.states = null; loadTrack(); }
+    const job = s.activity === "job";
+    if (job && !track.wasJob) { track.trail = []; track.states = null; if (page.planned) loadTrack(); }  // a new run
+    track.wasJob = job;
+    if (job && track.data) {  // below the job's surface (+Z deeper): the tool cuts; above it a run of the trail ends
+      const cutting = s.position_steps[2] > track.data.home_steps[2];
+      const last = track.trail[track.trail.length - 1];
+      const p = [s.position_steps[0], s.position_steps[1]];
+      if (cutting) {
+        if (!last || last.open !== true) { const run = [p]; run.open = true; track.trail.push(run); }
+        else last.push(p);
+      } else if (last) { last.open = false; }
+    }
+    if (s.holes && page.planned && s.holes.job === page.planned.job) holeStates(s.holes.states);
+    if (s.where) $("work-steps").textContent = s.where.work_steps.join(", ");
+    const jp = s.job_position;
+    if (jp && page.planned && jp.job === page.planned.job) {
+      const digits = jp.unit === "px" ? 1 : jp.unit === "inch" ? 4 : 3;
+      $("job-pos").textContent = jp.xyz.map((v) => v.toFixed(digits)).join(", ");
+      $("job-pos-unit").textContent = jp.unit === "px" ? "pixels (the drawing's column, row, Z)" : jp.unit + " (the file's frame)";
+      $("job-pos-also").textContent = jp.mil ? jp.mil.map((v) => v.toFixed(1)).join(", ") + " mil" : "";
+    }
+    chooseHole(track.chosen);
+    drawTrack();
+  }
+
+  // keyboard jogging: arrows X and Y (as the pad: up is Y-), Page Up / Page Down Z up / down, the pad's step size;
+  // refused while anything runs (the server refuses too)
+  const JOG_KEYS = { ArrowLeft: ["x", -1], ArrowRight: ["x", 1], ArrowUp: ["y", -1], ArrowDown: ["y", 1],
+                     PageUp: ["z", -1], PageDown: ["z", 1] };
+  document.addEventListener("keydown", (ev) => {
+    const key = JOG_KEYS[ev.key];
+    if (!key || !$("jog-keys").checked || ev.altKey || ev.ctrlKey || ev.metaKey) return;
+    const el = document.activeElement;
+    if (el && (["INPUT", "SELECT", "TEXTAREA"].includes(el.tagName) && el.id !== "jog-keys" || el.isContentEditable)) return;
+    ev.preventDefault();
+    if (ev.repeat) return;  // one jog per key press
+    if (!page.state || page.state.state !== "idle") {
+      showError("keyboard jog refused: the machine is " + (page.state ? page.state.state : "not connected"));
+      return;
+    }
+    const n = parseInt($("jog-steps").value, 10) * key[1];
+    post("/api/jog", { axis: key[0], steps: n, unit: $("jog-unit").value });
+  });
+
   // -- live state ------------------------------------------------------------------
   function render(s) {
     if (!s || !s.state) return;
@@ -540,6 +707,7 @@
       log.prepend(li);
     }
     while (log.children.length > 200) log.removeChild(log.lastChild);
+    liveTrack(s);  // the live track, the job's units, the hole table (issue #47)
   }
 
   function listen() {
