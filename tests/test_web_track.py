@@ -241,6 +241,11 @@ def test_page_track_of_a_drill_job_on_the_maximus_emulator(browser, tmp_path):
         assert p.evaluate("Array.from(document.querySelectorAll('#holes-table tbody tr')).every("
                           "(tr) => tr.dataset.state === 'done')")
         _shot(p, "#preview-card", "web-track-drill.png")
+        assert p.is_visible("#spindle-row")  # the board's spindle switch (point 7)
+        p.click("#spindle-on")
+        p.wait_for_function("document.getElementById('spindle-state').textContent === 'spindle: on'")
+        p.click("#spindle-off")
+        p.wait_for_function("document.getElementById('spindle-state').textContent === 'spindle: off'")
         p.set_viewport_size(PHONE)
         p.locator("#holes-card").scroll_into_view_if_needed()
         p.screenshot(path=str(DOCS / "web-holes-phone.png"))
@@ -338,3 +343,65 @@ def test_keyboard_jog_moves_the_mock(browser, tmp_path):
     finally:
         ctx.close()
         s.close()
+
+
+# -- point 7: the spindle switch, the time left at the feed override ---------------------------------------------
+
+def test_spindle_switch_on_the_maximus_emulator(emu, tmp_path):
+    """The page's spindle switch sets the board's spindle bit (RB2) on the emulator, and the snapshot says so;
+    refused in one line on the mock and with a value that is not true or false."""
+    from cam.drive.maximus.board import MAXIMUS_SETTINGS
+    from cam.sim.maximus import SPINDLE_BIT
+
+    s = Server(tmp_path, settings=MAXIMUS_SETTINGS, machine_port=f"maximus:{emu.device_path}", realtime=True)
+    try:
+        port, bit = SPINDLE_BIT
+        for on in (True, False):
+            status, st = s.call("POST", "/api/spindle", {"on": on})
+            assert status == 200, st
+            st = _wait(s, lambda st: st["state"] == "idle" and st["spindle"] is not None)
+            assert st["spindle"] is on and st["last"]["status"] == "finished", st["last"]
+            writes = [v for _, p, v in emu.port_log() if p in (port, chr(port) if isinstance(port, int) else port)]
+            assert writes and (writes[-1] >> bit) & 1 == int(on), writes[-3:]
+        status, err = s.call("POST", "/api/spindle", {"on": "yes"})
+        assert status == 400 and "true or false" in err["error"]
+    finally:
+        s.close()
+    m = Server(tmp_path, settings=FAST, realtime=False)
+    try:
+        status, err = m.call("POST", "/api/spindle", {"on": True})
+        assert status == 409 and "spindle" in err["error"] and "\n" not in err["error"]
+    finally:
+        m.close()
+
+
+def test_time_left_follows_the_feed_override_on_grbl(tmp_path):
+    """At a 50 % feed override the page's time left is twice the machine time left (issue #47 point 7)."""
+    from cam.drive.grbl_machine import close_grbl_machines
+    from cam.sim.grbl import start_emulator
+    from test_grbl_session import FAST as GRBL_FAST, SETTINGS as GRBL_SETTINGS
+
+    emu = start_emulator(speed=2.0, settings=GRBL_FAST)
+    s = Server(tmp_path, settings=GRBL_SETTINGS, machine_port=f"grbl:{emu.device_path}")
+    try:
+        assert s.call("POST", "/api/feed-override", {"percent": 50})[0] == 200
+        job_id = _plan(s, "two_curves.png", (SAMPLES / "two_curves.png").read_bytes(), {"depth": [2, 3]})
+        assert s.call("POST", "/api/start", {"job": job_id})[0] == 200
+        checked = 0
+        deadline = time.monotonic() + 120
+        while checked < 3:
+            assert time.monotonic() < deadline and s.session.busy, checked
+            before = s.session.state()
+            status, st = s.call("GET", "/api/state")
+            after = s.session.state()
+            if before["activity"] == after["activity"] == st["activity"] == "job" and after["remaining_s"] > 1:
+                assert 2 * after["remaining_s"] - 0.05 <= st["remaining_s"] <= 2 * before["remaining_s"] + 0.05, \
+                    (before["remaining_s"], st["remaining_s"], after["remaining_s"])
+                checked += 1
+            time.sleep(0.05)
+        s.session.stop()
+        s.wait_idle(60)
+    finally:
+        s.close()
+        close_grbl_machines()
+        emu.stop()

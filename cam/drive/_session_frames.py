@@ -146,6 +146,7 @@ class SessionFrames(SessionControls):
         with self._lock:
             snap = super().state(log_after)
             snap["where"] = self.where()
+            snap["spindle"] = self.spindle_state()
             return snap
 
     def where(self) -> dict[str, Any]:
@@ -197,6 +198,37 @@ class SessionFrames(SessionControls):
             self.settings = self.settings.replace(maximus=replace(m, drill_z_up_steps=up, drill_z_down_steps=down))
         self.log(f"Z Drill {which.capitalize()} = {z} steps below the origin"
                  + ("" if down else "; now set Z Drill Down"))
+
+    def spindle(self, on: Any) -> None:
+        """Switch the spindle on (``on`` True) or off, on a machine with a spindle switch (the MAXIMUS board: the PC
+        program's spindle switch, issue #47 point 7), in the background; the snapshot's ``spindle`` says what it
+        was switched to (None: not known, after any other activity).
+
+        Raises:
+            PlanError: ``on`` not true or false; CapabilityError: no spindle switch; BusyError: something runs.
+        """
+        if not isinstance(on, bool):
+            raise PlanError(f"on must be true or false, got {shown(on)}")
+        require(self.port, "spindle", what="the spindle switch")
+        with self._lock:
+            self._check_free()
+            self._spindle_on = None
+            self.backend.spindle(self, on)
+
+    def spindle_switched(self, on: bool) -> None:
+        """The machine confirmed the spindle switch (called by the activity's thread)."""
+        with self._lock:
+            self._spindle_on = bool(on)
+            self._bump()
+
+    def spindle_state(self) -> Optional[bool]:
+        """The spindle as the last switch left it: True, False, or None when not known (never switched, or
+        another activity ran since: a drill job and a jog switch it themselves)."""
+        with self._lock:
+            last = self._last_activity
+            if self._activity is not None or last is None or last.name != "spindle":
+                return None
+            return getattr(self, "_spindle_on", None)
 
     def board_moved(self, done: int, moved_steps: Any) -> None:
         """A MAXIMUS board confirmed a move: the head stands ``moved_steps`` (x, y, z, session frame) from where the

@@ -31,7 +31,7 @@ from ..values import shown
 from .maximus.resume import resume_board_job
 
 __all__ = ["JobUnits", "HOLE_STATES", "TABLE_UNITS", "MAX_TRACK_POINTS", "job_units", "to_job_units", "job_track",
-           "preview_frame",
+           "preview_frame", "remaining_time_s",
            "drill_holes", "hole_states", "hole_writes", "start_at_hole", "excellon_file_units"]
 
 HOLE_STATES = ("to do", "drilling", "done", "skipped")
@@ -299,3 +299,17 @@ def start_at_hole(job: Any, hole: Any, position_steps: tuple[int, int, int], *, 
         out = resume_job(job, journal, position_steps=base["position_steps"], where=f"Start At hole {hole}")
     report = dict(out.report, started_at_hole=hole)
     return dataclasses.replace(out, report=report, summary=f"{job.summary}, started at hole {hole} of {n}")
+
+
+def remaining_time_s(machine_s_left: float, feed_override_pct: Optional[float] = None) -> float:
+    """The time a running job has left, as a page shows it (issue #47 point 7): its machine time left (which stands
+    still while the job is paused or waits at a prompt) at the feed override (``None``: none, 100 %); an estimate
+    that stretches the rapids with the feeds.
+
+    >>> remaining_time_s(60.0), remaining_time_s(60.0, 50), remaining_time_s(60.0, 200)
+    (60.0, 120.0, 30.0)
+    """
+    pct = 100.0 if feed_override_pct is None else float(feed_override_pct)
+    if not pct > 0:
+        raise PlanError(f"feed_override_pct must be > 0, got {shown(feed_override_pct)}")
+    return round(max(0.0, float(machine_s_left)) * 100.0 / pct, 2)

@@ -90,8 +90,8 @@ from ..drive.machines import DEFAULT_PORT, can
 from ..drive.probing import job_area_mm
 from ..drive.placement import PLACED_KINDS, placed_home
 from ..drive.session import MachineSession
-from ..drive.track import (TABLE_UNITS, drill_holes, hole_states, hole_writes, job_track, job_units, start_at_hole,
-                           to_job_units)
+from ..drive.track import (TABLE_UNITS, drill_holes, hole_states, hole_writes, job_track, job_units,
+                           remaining_time_s, start_at_hole, to_job_units)
 from ..drive.state import MachineState, StateHold, machine_record
 from ..errors import BusyError, CamError, CapabilityError, StalePlanError
 from ..fileio import atomic_write_bytes
@@ -1162,6 +1162,7 @@ def _routes(st: _AppState) -> list:
         Route("/api/holes", _api(st, _get_holes)),
         Route("/api/goto-hole", json_api(_goto_hole), methods=post),
         Route("/api/start-at-hole", json_api(_start_at_hole), methods=post),
+        Route("/api/spindle", json_api(_spindle), methods=post),
         Route("/api/state", _api(st, _state)),
         Route("/api/events", _api(st, _events)),
         Route("/api/pinlog", _api(st, _pinlog)),
@@ -1459,6 +1460,11 @@ def _hole_states_now(st: _AppState, snap: dict[str, Any], n_holes: int) -> Optio
 def _track_extra(st: _AppState, snap: dict[str, Any]) -> dict[str, Any]:
     """A snapshot with the tool in the job's own units (``job_position``, :func:`cam.drive.track.to_job_units`, for
     the job whose track the page asked last) and the started drill job's hole states (``holes``: ``{"job", "states"}``)."""
+    if snap["activity"] is not None and st.session.backend.can("overrides", st.session.port):
+        # the time left follows the feed override (issue #47 point 7): the machine's own part of the snapshot says it
+        pct = next((part["feed_override_pct"] for part in snap.values()
+                    if isinstance(part, dict) and "feed_override_pct" in part), None)
+        snap["remaining_s"] = remaining_time_s(snap["remaining_s"], pct)
     units = st.track.get("units")
     if units is not None:
         snap["job_position"] = dict(to_job_units(snap["position_steps"], units[1]), job=units[0])
@@ -1581,3 +1587,11 @@ async def _start_at_hole(st: _AppState, request: Request) -> dict[str, Any]:
     st.last_job = job_id
     _track_started(st, job_id, started, home, first=hole - 1)
     return session.state()
+
+
+async def _spindle(st: _AppState, request: Request) -> dict[str, Any]:
+    """``{"on": true | false}``: the spindle switch (issue #47 point 7; :meth:`MachineSession.spindle`: a machine with
+    one, refused while anything runs)."""
+    body = await _body_json(request)
+    st.session.spindle(body.get("on"))
+    return st.session.state()

@@ -179,6 +179,11 @@ class Backend:
         session's ``_launch_probe``; a machine without a probe refuses in one line."""
         self.require(session.port, "probes", "probing")
 
+    def spindle(self, session: Any, on: bool) -> None:
+        """Switch the spindle on or off (back ends with ``spindle``; the session checked the capability and that
+        nothing runs) in the background (issue #47 point 7)."""
+        self.require(session.port, "spindle", "the spindle switch")
+
     def feed_override(self, session: Any, percent: int) -> None:
         """Set the feed override (back ends with ``overrides``; the session checked the number and the capability)."""
         raise CapabilityError(_CANNOT["overrides"].format(port=str(session.port), what="a feed override"))

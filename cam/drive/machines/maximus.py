@@ -89,6 +89,15 @@ class MaximusBackend(Backend):
     def home_refusal(self, port: Any) -> None:
         raise maximus_cannot_home(port)
 
+    def spindle(self, session: Any, on: bool) -> None:
+        """The board's spindle switch (RB2): a Jog packet of no pulses with the spindle bit
+        (:meth:`~cam.drive.maximus.board.MaximusBoard.set_spindle`), as an activity of its own."""
+        def work(board: Any, s: Any) -> None:
+            board.set_spindle(on)
+            s.spindle_switched(on)
+
+        _launch(session, "spindle", work, None, f"spindle {'on' if on else 'off'}")
+
 
 def _launch(session: Any, name: str, work: BoardWork, job: Optional[MachineJob], label: str,
             moved_steps: Any = (0, 0, 0)) -> None:

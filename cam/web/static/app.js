@@ -530,6 +530,11 @@
     });
   }
 
+  // the spindle switch (a machine with one: the MAXIMUS board)
+  document.querySelectorAll("button.spindle").forEach((b) => b.addEventListener("click", () => {
+    post("/api/spindle", { on: b.dataset.on === "true" });
+  }));
+
   $("holes-unit").addEventListener("change", loadHoles);
   $("hole-goto").addEventListener("click", () => {
     if (page.planned && track.chosen) post("/api/goto-hole", { job: page.planned.job, hole: track.chosen });
@@ -602,6 +607,11 @@
     }
     if (s.holes && page.planned && s.holes.job === page.planned.job) holeStates(s.holes.states);
     if (s.where) $("work-steps").textContent = s.where.work_steps.join(", ");
+    if (s.state === "paused" || s.state === "prompt") $("remaining").textContent += " (paused)";
+    $("spindle-row").hidden = !(s.capabilities || []).includes("spindle");
+    document.querySelectorAll("button.spindle").forEach((b) => { b.disabled = s.state !== "idle"; });
+    $("spindle-state").textContent = "spindle: " + (s.spindle === true ? "on" : s.spindle === false ? "off" : "not known");
+    $("spindle-state").dataset.on = String(s.spindle);
     const jp = s.job_position;
     if (jp && page.planned && jp.job === page.planned.job) {
       const digits = jp.unit === "px" ? 1 : jp.unit === "inch" ? 4 : 3;
