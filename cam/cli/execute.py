@@ -16,7 +16,7 @@ import signal
 import sys
 import threading
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Optional
 
 from tqdm import tqdm
@@ -25,7 +25,7 @@ from ..drive.journal import journal_spec, read_journal
 from ..drive.machine_job import machine_job
 from ..drive.machines import backend_of, can, require
 from ..drive.ports import MockPort, SwitchSchedule
-from ..drive.runner import FINISHED
+from ..drive.runner import FINISHED, STOPPED
 from ..drive.session import MachineSession, Prompt
 from ..drive.state import (
     MachineState, PositionUnknownError, StateHold, check_in_travel, steps_to_mm, still_unknown,
@@ -315,6 +315,10 @@ def _drive(job: Any, args: argparse.Namespace, settings: MachineSettings, hold: 
             runs.append(("travel", ended, start))
             if ended.last_run.get("status") != FINISHED:
                 return _outcome(ended, args, runs)
+            if stopping.is_set():  # Ctrl-C as the travel ended, before the job began: the job is not started
+                out = _outcome(ended, args, runs)
+                return replace(out, status=STOPPED, messages=[
+                    "stopped at the work zero, as the travel there ended: the job was not started"])
             ended, ended_start = session, at
         if isinstance(port, MockPort):
             port.begin_part("job", at, _step_period_ns(settings))
@@ -322,6 +326,8 @@ def _drive(job: Any, args: argparse.Namespace, settings: MachineSettings, hold: 
         spec = None if journal is None else journal_spec(job, journal, home_steps=session.position_steps(),
                                                          pin_log_path=getattr(args, "pin_log", None))
         session.start(job, journal=spec)
+        if stopping.is_set():  # Ctrl-C while it was being started, before it had an activity to stop
+            session.stop()
         if bar is not None and not bar.total:  # a jog or a go-to: its time is known once the session planned it
             bar.total = round(session.state()["remaining_s"], 3)
             bar.refresh()

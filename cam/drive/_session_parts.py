@@ -65,6 +65,7 @@ class Activity:
     detail: str = ""
     started_wall: float = field(default_factory=time.monotonic)
     unknown_reason: str = ""  # the position stays unknown after it, for this reason (a jog made while unknown)
+    halts: tuple[int, int] = (0, 0)  # the session's (stops, emergency stops) counted when it began (or its chain)
 
     @property
     def estimated_s(self) -> float:
@@ -186,6 +187,8 @@ class SessionControls(SessionView):
     _answer: threading.Event
     _answer_action: str
     _estop_request_ns: Optional[int]
+    _halt_lock: threading.RLock
+    _halts: tuple[int, int]  # (stops, emergency stops) asked so far: counted before the activity is read
     # the probing part's (cam.drive._session_probe.SessionProbe): why the new tool may not be probed at a prompt's
     # note ("" it may, None not a tool change), probing it while the job waits at (machine steps) -> the line said,
     # and the one line refusing "probe-tool" where it is not offered
@@ -217,24 +220,54 @@ class SessionControls(SessionView):
             self._bump()
         self.log("resumed")
 
+    def _count_halt(self, emergency: bool) -> None:
+        """Count a stop (``emergency``: an emergency stop) before the activity is read: whatever an activity hands
+        over to as it ends (the job after the travel to its work zero) is not started when the count changed
+        since that activity began, and an activity that begins finds it changed and halts at once
+        (:meth:`~cam.drive.session.MachineSession.finish`, ``_begin``): no stop is lost between two of them."""
+        with self._halt_lock:
+            stops, estops = self._halts
+            self._halts = (stops, estops + 1) if emergency else (stops + 1, estops)
+
+    def _halt_handed_over(self, ctl: Any, emergency: bool) -> Any:
+        """The second half of a stop, under the lock (an activity's hand-over holds it): the activity running now
+        halted too when it is not the one ``ctl`` (read without the lock) belonged to; its controller, or None."""
+        a = self._activity
+        if a is not None and a.controller is not ctl:
+            ctl = a.controller
+            if emergency:
+                ctl.emergency_stop()
+            else:
+                ctl.stop()
+        return ctl
+
     def stop(self) -> None:
-        """Stop and lift the tool to the safe plane (nothing happens when idle)."""
-        ctl = self._controller()
+        """Stop and lift the tool to the safe plane (nothing happens when idle).  A stop as one activity hands
+        over to the next (the travel to the work zero ending, the job about to start) stops the hand-over: the
+        next one does not start."""
+        self._count_halt(False)
+        ctl = self._controller()  # no lock first: the runner stops before its next step
         if ctl is not None:
             ctl.stop()
-            with self._lock:
+        with self._lock:
+            ctl = self._halt_handed_over(ctl, False)
+            if ctl is not None:
                 self._answer_action = "stop"
                 self._answer.set()
                 self._bump()
         self.log("stop requested" if ctl is not None else "stop: nothing was running")
 
     def emergency_stop(self, request_ns: Optional[int] = None) -> None:
-        """Send nothing more at all.  ``request_ns``: ``time.monotonic_ns()`` when the request arrived."""
+        """Send nothing more at all (nothing handed over to after it either, as :meth:`stop`).  ``request_ns``:
+        ``time.monotonic_ns()`` when the request arrived."""
         now = request_ns if request_ns is not None else time.monotonic_ns()
+        self._count_halt(True)
         ctl = self._controller()
         if ctl is not None:
             ctl.emergency_stop()
-            with self._lock:
+        with self._lock:
+            ctl = self._halt_handed_over(ctl, True)
+            if ctl is not None:
                 if self._estop_request_ns is None:
                     self._estop_request_ns = now
                 self._answer.set()
@@ -254,6 +287,8 @@ class SessionControls(SessionView):
             (hx, hy, hz), (x, y, z) = self._position.tolist(), position_steps
             mx, my, mz = self._pause_moved.tolist()
             at = (hx + int(x) + mx, hy + int(y) + my, hz + int(z) + mz)
+        if ctl is not None and ctl.halted:  # stopped as it reached the pause: nobody is asked
+            return
         probed = ""
         while True:
             action = self._ask(note, at, ctl, probed)
@@ -270,6 +305,8 @@ class SessionControls(SessionView):
                 mx2, my2, mz2 = self._pause_moved.tolist()
                 at = (at[0] + mx2 - mx, at[1] + my2 - my, at[2] + mz2 - mz)
                 mx, my, mz = mx2, my2, mz2
+            if ctl.halted:  # stopped while probing: the job ends there, nobody is asked again
+                break
         if action == "stop" and ctl is not None:
             ctl.stop()
 

@@ -40,6 +40,7 @@ def run_steps(session: Any, name: str, plan: "StepPlan | ChunkedPlan", ctl: Cont
     error = None
     port = None
     writer: Optional[JournalWriter] = None
+    ctl.z_top_steps = None  # a controller used again: no top of the travel from an earlier run's frame
     try:
         if session.realtime and isinstance(session.port, str):  # a process of its own: nothing holds it up
             if not session.backend.can("simulated", session.port):

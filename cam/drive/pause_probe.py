@@ -18,13 +18,13 @@ Frames: machine steps, +Z deeper.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Optional
 
 from ..errors import CamError
 from ..settings import MachineSettings
 from .ports import MockPort, SwitchSchedule
 from .probing import ProbeEnded, StepDirProber, missed_line
-from .runner import EMERGENCY_STOPPED, LIMIT_STOPPED
+from .runner import EMERGENCY_STOPPED, LIMIT_STOPPED, STOPPED
 from .state import check_in_travel
 
 __all__ = ["PauseProbe", "probe_at_pause"]
@@ -47,6 +47,10 @@ class PauseProbe:
     feed_mm_min: float
     old_surface_steps: int
     plate_steps: int
+    job_z_steps: Optional[int] = None
+    """Where the waiting job stands on Z in its own frame (steps from where its run started: its cursor's), for
+    the top of the Z travel in that frame after the probe (:attr:`cam.drive.runner.Controller.z_top_steps`: a
+    stop's lift from where the probe left the tool stays in the travel); None: not told."""
 
 
 class _OnJobPort(StepDirProber):
@@ -73,11 +77,17 @@ def probe_at_pause(port: Any, settings: MachineSettings, realtime: bool, ctl: An
                    ) -> dict[str, Any]:
     """Probe the new tool on the job's open ``port`` while it waits (see the module); never raises.
 
+    A job stopped before it starts: nothing moves.  Wherever it leaves the tool, the job's stop lift from then on
+    goes no higher than the top of the Z travel (``ctl.z_top_steps``, with ``request.job_z_steps``).
+
     Returns:
         ``status`` ("finished": touched, the tool back at the shifted place; "missed": no contact, back where it
         waited; "error": refused or failed; or the runner's stopped / emergency-stopped / limit-stopped),
         ``message`` (one line, "" when finished), ``contact_steps`` (or None), ``shift_steps`` (the work Z's
         shift, 0 unless finished) and ``end_steps`` (where the tool stands now; None: unknown)."""
+    if ctl.halted:  # stopped before the probe began (as the answer came): nothing moves
+        return {"status": EMERGENCY_STOPPED if ctl.estop_requested else STOPPED, "message": "stopped before the "
+                "probe began", "contact_steps": None, "shift_steps": 0, "end_steps": tuple(request.at_steps)}
     mock = port if isinstance(port, MockPort) else None
     own_switches = False
     t_before = 0
@@ -128,5 +138,7 @@ def probe_at_pause(port: Any, settings: MachineSettings, realtime: bool, ctl: An
     end, lost = prober.close(ctl, message if status == "error" else "")
     if lost:
         status, message, end = "error", lost, None
+    if end is not None and request.job_z_steps is not None:  # machine Z less the job's own Z, from now on
+        ctl.z_top_steps = settings.travel.z_min_steps - (int(end[2]) - int(request.job_z_steps))
     return {"status": status, "message": message, "contact_steps": contact, "shift_steps": int(shift),
             "end_steps": end}

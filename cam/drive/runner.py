@@ -72,6 +72,11 @@ thread making the next chunk may hold the interpreter while a write is due."""
 class Controller:
     """Pause, resume, stop and emergency-stop a running job (thread-safe)."""
 
+    z_top_steps: Optional[int] = None
+    """The highest Z a stop's lift may reach, in the run's own frame (steps from where it started, +Z deeper): the top
+    of the Z travel, set by what moved the tool at a pause where the plan does not know it (a tool probed at a tool
+    change, :func:`cam.drive.pause_probe.probe_at_pause`).  None: the plan's safe plane, checked with the job."""
+
     def __init__(self) -> None:
         self._wake = threading.Event()
         self.paused = False
@@ -731,6 +736,11 @@ def _ending(plan: Plan, p: Port, ctl: Controller, cursor: Cursor, t0: Optional[i
             status, position = _stop(plan, p, ctl, cursor, t0, lateness, watch)
             messages.append(watch.message(position) if watch is not None and watch.tripped else
                             f"stopped at X={position[0]} Y={position[1]} steps; tool lifted to Z={position[2]}")
+            top = _lift_target(plan, ctl)
+            if top > plan.safe_z_steps and cursor.position_steps[2] > top:  # the safe plane above the travel's top
+                messages.append(f"the stop lifted the tool to the top of the Z travel only, {top - plan.safe_z_steps} "
+                                f"steps below the job's safe plane (the tool was moved at a pause: a tool probed at a "
+                                f"tool change)")
     if isinstance(p, MockPort):
         p._flush()
     return status, position, messages
@@ -742,9 +752,17 @@ def _switch_status(watch: SwitchWatch) -> str:
                                             else SWITCHED)
 
 
+def _lift_target(plan: Plan, ctl: Controller) -> int:
+    """The Z a stop lifts the tool to (the run's frame): the plan's safe plane, or the top of the Z travel when the
+    controller knows that to be lower (:attr:`Controller.z_top_steps`: the lift never leaves the travel)."""
+    top = getattr(ctl, "z_top_steps", None)
+    return int(plan.safe_z_steps) if top is None else max(int(plan.safe_z_steps), int(top))
+
+
 def _stop(plan: Plan, p: Port, ctl: Controller, cursor: Cursor, t0: Optional[int], lateness: Lateness,
           watch: Optional[SwitchWatch] = None) -> tuple[str, tuple[int, int, int]]:
-    """Lift the tool straight up to the safe plane where the cursor is; returns (status, position_steps).
+    """Lift the tool straight up to the safe plane where the cursor is (no higher than the top of the Z travel,
+    :func:`_lift_target`); returns (status, position_steps).
 
     ``t0``: the real-time job start (monotonic ns), None on the simulated clock.  An emergency stop
     during a real-time lift ends it (status :data:`EMERGENCY_STOPPED`).  A late lift write moves the
@@ -752,7 +770,8 @@ def _stop(plan: Plan, p: Port, ctl: Controller, cursor: Cursor, t0: Optional[int
     limit switch or the e-stop ends the lift, :func:`_switch_status`).
     """
     position = cursor.position_steps
-    lift_t, lift_d = _lift_writes(plan.settings, plan.safe_z_steps, cursor.last_data, position[2])
+    safe_z = _lift_target(plan, ctl)
+    lift_t, lift_d = _lift_writes(plan.settings, safe_z, cursor.last_data, position[2])
     strobe = 1 if plan.settings.half_step else 0
     if t0 is None:
         n = len(lift_t)
@@ -763,7 +782,7 @@ def _stop(plan: Plan, p: Port, ctl: Controller, cursor: Cursor, t0: Optional[int
             z_clock = int(axis_bits(plan.settings)[0][2])
             return _switch_status(watch), (position[0], position[1],  # type: ignore[arg-type]
                                            position[2] - int(np.count_nonzero(lift_d[:n] & z_clock)))
-        return STOPPED, (position[0], position[1], min(position[2], plan.safe_z_steps))
+        return STOPPED, (position[0], position[1], min(position[2], safe_z))
     start = time.monotonic_ns() - t0
     z_clock = int(axis_bits(plan.settings)[0][2])
     lift_began = t_lift0 = time.monotonic_ns()  # t_lift0 moves later with each late write

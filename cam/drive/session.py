@@ -66,7 +66,7 @@ from .activities import run_steps
 from .machine_job import JobInput, MachineJob, machine_job
 from .machines import DEFAULT_PORT, backend_of
 from .ports import MockPort, Port
-from .runner import Controller, Cursor, RunResult
+from .runner import EMERGENCY_STOPPED, STOPPED, Controller, Cursor, RunResult
 from .chunks import ChunkedPlan, plan_chunks
 from .steps import StepPlan
 from .state import StateHold
@@ -118,6 +118,9 @@ class MachineSession(SessionTools, SessionRecover, SessionPinLogs, SessionProbe)
         self._answer = threading.Event()
         self._answer_action = "continue"
         self._estop_request_ns: Optional[int] = None
+        self._halt_lock = threading.RLock()  # held only to count a stop (re-entrant: a signal handler may stop)
+        self._halts = (0, 0)  # (stops, emergency stops) asked so far
+        self._chain_halts: Optional[tuple[int, int]] = None  # the counts an activity handed over to begins with
         self._log: collections.deque = collections.deque(maxlen=500)
         self._log_seq = 0
         self.last_run: dict[str, Any] = {}
@@ -302,9 +305,16 @@ class MachineSession(SessionTools, SessionRecover, SessionPinLogs, SessionProbe)
             self.state_hold.mark_running(f"{activity.name}: {activity.label}")
         self._activity_start = tuple(int(v) for v in self._position)
         self._pause_moved = np.zeros(3, np.int64)
+        # the stops counted when it was asked for: the activity it follows began then (a job after its travel)
+        activity.halts = self._chain_halts if self._chain_halts is not None else self._halts
         self._activity = activity
         self._estop_request_ns = None
         self._prompt = None
+        now, ctl = self._halts, activity.controller  # a stop counted since, whose reader found no activity yet
+        if ctl is not None and now[1] != activity.halts[1]:
+            ctl.emergency_stop()
+        elif ctl is not None and now[0] != activity.halts[0]:
+            ctl.stop()
         self._bump()
 
     def _launch_steps(self, name: str, plan: "StepPlan | ChunkedPlan", label: str, estimated_s: Callable[[], float],
@@ -335,6 +345,8 @@ class MachineSession(SessionTools, SessionRecover, SessionPinLogs, SessionProbe)
         """The activity ended: book where the tool is and what happened."""
         with self._lock:
             a = self._activity
+            goes_on = self._then is not None and info.get("status") == "finished"
+            halted = self._halted_since(a)  # a stop as it ended: what it hands over to does not start
             if moved_steps is not None:  # and what the job moved at its pauses (a tool probed at a tool change)
                 self._position = self._position + np.asarray(moved_steps, np.int64) + self._pause_moved
             self._pause_moved = np.zeros(3, np.int64)
@@ -348,20 +360,44 @@ class MachineSession(SessionTools, SessionRecover, SessionPinLogs, SessionProbe)
             self._last_activity = a
             self.last_result = result
             self._book_pin_log(None if a is None else a.name, pin_log, tuple(int(v) for v in self._activity_start),
-                               self._then is not None and info.get("status") == "finished")
+                               goes_on and not halted)
             self._activity = None
             self._prompt = None
             self._finished_wall = time.monotonic()
             self._record_state()
             self._bump()
             then, self._then = self._then, None
-            if then is not None and info.get("status") == "finished":
+            halted = halted or self._halted_since(a)  # (a stop that came as the end was booked too)
+            if goes_on and halted:
+                self._travel_port = None
+                what = "an emergency stop" if halted == EMERGENCY_STOPPED else "a stop"
+                line = f"{what} came as {a.label if a is not None else 'the run'} ended: what was to follow it " \
+                       f"(the job after the travel to its work zero, a probe's work Z or height map) was not started"
+                self.log(line, "error" if halted == EMERGENCY_STOPPED else "info")
+                self.last_run = dict(info, status=halted, messages=[line])
+            elif goes_on and then is not None:
+                self._chain_halts = a.halts if a is not None else None  # a stop counted from now halts the next
                 try:
                     then()
                 except CamError as e:
                     self._travel_port = None
                     self.log(f"the job did not start: {e}")
                     self.last_run = dict(info, status="error", messages=[str(e)])
+                finally:
+                    self._chain_halts = None
+
+    def _halted_since(self, a: Optional[Activity]) -> str:
+        """Whether a stop came since activity ``a`` began (counted, or its controller halted; the lock held):
+        :data:`~cam.drive.runner.STOPPED`, :data:`~cam.drive.runner.EMERGENCY_STOPPED`, or "" none."""
+        if a is None:
+            return ""
+        stops, estops = self._halts
+        ctl = a.controller
+        if estops != a.halts[1] or getattr(ctl, "estop_requested", False):
+            return EMERGENCY_STOPPED
+        if stops != a.halts[0] or getattr(ctl, "halted", False):
+            return STOPPED
+        return ""
 
 def run(job: JobInput, port: Any = DEFAULT_PORT, *, realtime: bool = False, controller: Optional[Controller] = None,
         progress: Optional[Callable[[int, int, int], None]] = None,
