@@ -60,7 +60,7 @@ def run_steps(session: Any, name: str, plan: "StepPlan | ChunkedPlan", ctl: Cont
                 writer = JournalWriter(journal, plan, cursor, on_error=ctl.stop)
             opened = port
             session._pause_work = lambda request: probe_at_pause(opened, plan.settings, session.realtime, ctl,
-                                                                 request)  # a tool probed at a tool change
+                                                                 request, writer)  # a tool probed at a tool change
             result = run(plan, port, realtime=session.realtime, controller=ctl, progress=session.progress,
                          on_pause=session.prompt, cursor=cursor)
             if writer is not None:

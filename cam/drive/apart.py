@@ -177,7 +177,7 @@ def _child(sock_fd: int, page_fd: int, parent_pid: int) -> None:
                 if message[0] != "pause-probe":
                     return
                 # the new tool probed on this process's open port while the job waits (cam.drive.pause_probe)
-                conn.send(("pause-probed", probe_at_pause(port, plan.settings, True, ctl, message[1])))
+                conn.send(("pause-probed", probe_at_pause(port, plan.settings, True, ctl, message[1], writer)))
 
         port: Optional[Port] = None
         try:

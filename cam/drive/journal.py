@@ -22,6 +22,7 @@ from where the machine state has the tool, once that is known.
 """
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import threading
@@ -54,7 +55,8 @@ class JournalSpec:
     Attributes:
         path: the journal file.
         base: the job, and where the run starts in it (:class:`cam.job.resume.JournalBase`).
-        home_steps: the job's home in the machine session's frame.
+        home_steps: the job's home in the machine session's frame (moved by a tool probed at a tool change:
+            :meth:`JournalWriter.home_moved`).
         pin_log_path: where the runner process writes the mock's pin log itself when its parent died
             (None: nowhere).
     """
@@ -161,6 +163,17 @@ class JournalWriter:
                 self.error = str(exc)
                 if first and state == "running" and self._written >= 0 and self.on_error is not None:
                     self.on_error()
+
+    def home_moved(self, by_steps: Sequence[int]) -> None:
+        """The tool was moved at a pause and the job goes on from there (a tool probed at a tool change: the work Z
+        shifted by ``by_steps``, :mod:`cam.drive.pause_probe`): its later moves, all relative, land shifted by as
+        much, as if the job had started there.  The journal's home (``home_steps``, machine frame) moves so, written
+        at once: a resumed run goes on from it at the new work Z, where the machine state has the tool."""
+        with self._lock:
+            home = tuple(int(h) + int(b) for h, b in zip(self.spec.home_steps, by_steps))
+            self.spec = dataclasses.replace(self.spec, home_steps=home)  # type: ignore[arg-type]
+        sent, position = self._sent_and_position()
+        self._write(sent, position, "running")
 
     def close(self, state: str, writes_done: Optional[int] = None,
               position_steps: Optional[tuple[int, int, int]] = None) -> Optional[str]:

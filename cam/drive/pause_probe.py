@@ -24,6 +24,7 @@ from ..errors import CamError
 from ..settings import MachineSettings
 from .ports import MockPort, SwitchSchedule
 from .probing import ProbeEnded, StepDirProber, missed_line
+from .journal import JournalWriter
 from .runner import EMERGENCY_STOPPED, LIMIT_STOPPED, STOPPED
 from .state import check_in_travel
 
@@ -73,12 +74,14 @@ class _OnJobPort(StepDirProber):
         return super().probe(depth_steps, feed_mm_min)
 
 
-def probe_at_pause(port: Any, settings: MachineSettings, realtime: bool, ctl: Any, request: PauseProbe
-                   ) -> dict[str, Any]:
+def probe_at_pause(port: Any, settings: MachineSettings, realtime: bool, ctl: Any, request: PauseProbe,
+                   journal: Optional[JournalWriter] = None) -> dict[str, Any]:
     """Probe the new tool on the job's open ``port`` while it waits (see the module); never raises.
 
     A job stopped before it starts: nothing moves.  Wherever it leaves the tool, the job's stop lift from then on
-    goes no higher than the top of the Z travel (``ctl.z_top_steps``, with ``request.job_z_steps``).
+    goes no higher than the top of the Z travel (``ctl.z_top_steps``, with ``request.job_z_steps``).  The job's
+    ``journal`` (its writer, None: none kept) books the work Z's shift of a probe that touched: its home moves by
+    as much (:meth:`cam.drive.journal.JournalWriter.home_moved`), so a resumed run goes on at the new work Z.
 
     Returns:
         ``status`` ("finished": touched, the tool back at the shifted place; "missed": no contact, back where it
@@ -140,5 +143,7 @@ def probe_at_pause(port: Any, settings: MachineSettings, realtime: bool, ctl: An
         status, message, end = "error", lost, None
     if end is not None and request.job_z_steps is not None:  # machine Z less the job's own Z, from now on
         ctl.z_top_steps = settings.travel.z_min_steps - (int(end[2]) - int(request.job_z_steps))
+    if journal is not None and status == "finished" and shift:
+        journal.home_moved((0, 0, int(shift)))
     return {"status": status, "message": message, "contact_steps": contact, "shift_steps": int(shift),
             "end_steps": end}
