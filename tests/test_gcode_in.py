@@ -135,7 +135,8 @@ def test_feed_rate_sets_step_periods():
         ("G21\nG1 X1 F100 Q3\n", 2, "unsupported word 'Q3'"),
         ("G21\nG1 X F100\n", 2, "word 'X' has no number"),
         ("G21\nG1 X1 F100\nG2 X5 Y0 R1\n", 3, "radius 1 is too small"),
-        ("G21\nG38.2 Z-5 F10\n", 2, "'G38.2': probing is not supported"),
+        ("G21\nG38.4 Z-5 F10\n", 2, "'G38.4': probing away from the work (G38.4/G38.5) is not supported"),
+        ("G21\nG38.2 X1 Z-5 F10\n", 2, "a probe along X is not supported"),
         ("G21\nG0 X1 A90\n", 2, "rotary axis word 'A90' is not supported"),
         ("G21\nG41 D1\n", 2, "'G41': cutter radius compensation G41/G42 takes the tool's radius from the tool table"),
         ("G21\nG71 P1 Q2\n", 2, "'G71': lathe cycles are not supported"),
@@ -205,7 +206,7 @@ def test_cli_runs_gcode_and_rejects_bad(tmp_path):
     bad = tmp_path / "b.ngc"
     bad.write_text("G21\nG1 X1 F100\nG2 X5 Y0 R1\n")
     assert_one_line_error(cli("drill", bad), "b.ngc:3:", "too small")
-    for text, fragment in (("G21\nG1 X1 F100 Q3\n", "'Q3'"), ("G21\nG38.3 Z1\n", "'G38.3'"),
+    for text, fragment in (("G21\nG1 X1 F100 Q3\n", "'Q3'"), ("G21\nG38.3 Z-1\n", "G38.3 without a feed rate 'F'"),
                            ("G21\nG1 Y F9\n", "'Y'")):
         bad.write_text(text)
         assert_one_line_error(cli("drill", bad), "b.ngc:2:", fragment)

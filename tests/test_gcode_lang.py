@@ -755,7 +755,8 @@ def test_linuxcnc_example_programs_match_rs274_or_are_refused_naming_the_feature
 
 def test_refused_features_say_why_in_one_line():
     cases = {
-        "G38.2 Z-5 F10": "probing is not supported: the machine has no probe input",
+        "G38.5 Z-5 F10": "'G38.5': probing away from the work (G38.4/G38.5) is not supported",
+        "G38.2 Y1 Z-5 F10": "a probe along Y is not supported: cam probes down Z only",
         "G0 X1 B90": "rotary axis word 'B90' is not supported",
         "G0 X1 C-4": "rotary axis word 'C-4' is not supported",
         "G41 D2": "'G41': cutter radius compensation G41/G42 takes the tool's radius from the tool table",

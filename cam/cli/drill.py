@@ -179,6 +179,10 @@ def _gcode_hold(args: argparse.Namespace, settings) -> Optional[StateHold]:
 def _offsets_kept(args: argparse.Namespace, job, hold: Optional[StateHold]) -> dict:
     """The work offsets the program changed (G10 L2/L20), machine steps, checked against the travel before
     anything moves when --keep-offsets keeps them; says on stderr when they are not kept."""
+    if getattr(args, "keep_offsets", False) and job.probing is not None:
+        raise CamError(f"--keep-offsets: {job.name} probes ({job.probing.probes[0]}): the offsets it sets after a "
+                       "probe depend on where the probe touches, known only as it runs; set them after the run with "
+                       "cam zero")
     if hold is None:
         return {}
     ends = job.report.get("work_offsets_end_steps") or {}
@@ -234,6 +238,10 @@ def _drill(args: argparse.Namespace, settings, hold: Optional[StateHold],
         require_drilling(job, args.port)  # slots or milled holes: a milling tool path, which the board cannot run
         job.report["board"] = board_report(job, settings)
     journal = journal_path(args)
+    if journal is not None and job.probing is not None:  # its moves after a probe depend on the contact: no resume
+        print(f"note: no journal kept: {job.name} probes, so a stopped run is run again from its start",
+              file=sys.stderr)
+        journal = None
     if journal is not None:
         job.report["journal"] = journal
     kept = _offsets_kept(args, job, hold)

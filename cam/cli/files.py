@@ -89,7 +89,18 @@ def cmd_preview(args: argparse.Namespace) -> int:
     job = prepare(args)
     write_job_preview(args, job, args.output, surface=args.surface)
     print(f"{args.output}: {'cut surface' if args.surface else 'toolpath'} picture")
+    if job.probing is not None:
+        print("\n".join(_probe_lines(job)))
     return 0
+
+
+def _probe_lines(job) -> list[str]:
+    """What ``cam info`` and ``cam preview`` say of a program that probes (G38.2/G38.3): each probe, and that the
+    moves after it depend on the contact."""
+    return [f"  probe {p}" for p in job.probing.probes] + [
+        "  the moves after a probe depend on where it touches: shown and planned here as if each touched at its "
+        "target (its deepest); a machine that probes plans them from the contact as it runs (the MAXIMUS board and "
+        "cmd: have no probe)"]
 
 
 def cmd_profile(args: argparse.Namespace) -> int:
@@ -218,6 +229,7 @@ def _info_gcode(args: argparse.Namespace) -> int:
                          "frame of cam where, cam zero --at and cam goto: from the home, +Y toward the operator, "
                          "+Z deeper)")
     if job is not None:
+        lines += _probe_lines(job) if job.probing is not None else []
         lines += [f"  {note}" for note in job.tool_changes]
         lines += [f"warning: {w}" for w in job.warnings]
     print("\n".join(lines))

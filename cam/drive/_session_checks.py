@@ -28,6 +28,9 @@ class SessionChecks(SessionFrames):
             self._check_job(machine_job(job))
 
     def _check_job(self, mj: MachineJob) -> None:
+        if mj.probing is not None:  # a program that probes (G38.2/G38.3): a machine without a probe, in one line first
+            port = self.port if isinstance(self.port, str) else getattr(self.port, "name", self.port)  # (its name)
+            self.backend.require(port, "probes", f"a G-code program that probes ({mj.probing.probes[0]})")
         settings = mj.settings
         if settings is not None and (settings.travel != self.settings.travel or settings.pins != self.settings.pins):
             raise CamError("the job was planned for other machine settings; plan it again")

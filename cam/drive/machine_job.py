@@ -15,6 +15,7 @@ import numpy as np
 
 from ..errors import CapabilityError
 from ..job.drill import DrillPlan
+from ..job.gcode_probing import ProbingProgram
 from ..job.jobs import PlannedIn, PreparedJob
 from ..job.model import TRAVEL, Job, JobLike
 from ..settings import MachineSettings
@@ -49,6 +50,9 @@ class MachineJob:
         levelled_home_steps: a job levelled to a height map: the machine position it was levelled for (it starts
             there, :func:`cam.drive.placement.placed_home`), else None.
         estimated_s: its machine time in seconds, worked out when called (a pass over a plan's ramps).
+        probing: a G-code program that probes (:class:`~cam.job.gcode_probing.ProbingProgram`): a machine that
+            probes runs it a part at a time from each probe's contact (:mod:`cam.drive.program_probe`), never its
+            ``plan`` (as if each probe touched at its target); None: no probe.
     """
 
     given: JobInput
@@ -66,16 +70,21 @@ class MachineJob:
     estimated_s: Callable[[], float]
     origin: Optional[str] = None
     levelled_home_steps: Optional[tuple[int, int, int]] = None
+    probing: Optional[ProbingProgram] = None
 
 
 def machine_job(job: JobInput) -> MachineJob:
     """Read ``job`` once, by its type, into a :class:`MachineJob`.
 
     Raises:
-        CapabilityError: not one of the five shapes (:data:`JobInput`).
+        CapabilityError: not one of the five shapes (:data:`JobInput`); the moves (or a plan of them) of a G-code
+        program that probes, planned as if each probe touched at its target (:attr:`cam.job.model.Job.probes`):
+        only the prepared program runs, from each probe's contact.
     """
     if isinstance(job, MachineJob):
         return job
+    if not isinstance(job, PreparedJob):
+        _refuse_nominal(job)
     if isinstance(job, PreparedJob):
         plan = job.plan if isinstance(job.plan, (ChunkedPlan, StepPlan)) else None
         moves = plan.job if isinstance(plan, ChunkedPlan) else (job.toolpath if isinstance(job.toolpath, JobLike)
@@ -83,7 +92,7 @@ def machine_job(job: JobInput) -> MachineJob:
         return MachineJob(job, job, job.kind, job.name or job.source, job.settings, moves, plan,
                           job.drill_plan if isinstance(job.drill_plan, DrillPlan) else None,
                           np.asarray(job.extent_steps, np.int64), job.planned_in, job.resumed is not None, False,
-                          lambda: float(job.estimated_time_s), job.origin, _levelled_home(job))
+                          lambda: float(job.estimated_time_s), job.origin, _levelled_home(job), job.probing)
     if isinstance(job, StepPlan):
         return MachineJob(job, None, "steps", "step plan", job.settings, None, job, None, None, None, False, False,
                           lambda: float(job.estimated_time_s))
@@ -98,6 +107,17 @@ def machine_job(job: JobInput) -> MachineJob:
         return MachineJob(job, None, "moves", job.source or "moves", job.settings, job, None, None, None, None,
                           False, False, lambda: 0.0)
     raise CapabilityError(f"a machine cannot run a {type(job).__name__}: give a Job, a prepared job or a step plan")
+
+
+def _refuse_nominal(job: JobInput) -> None:
+    """Refuse the moves of a program that probes, planned as if each probe touched at its target (a job, a job kept
+    as pieces, a chunked plan of one): run as they are, the tool would go on as if the work were there."""
+    moves = job.job if isinstance(job, ChunkedPlan) else job
+    probes = getattr(moves, "probes", None) if isinstance(moves, (Job, JobLike)) else None
+    if probes:
+        raise CapabilityError(f"{probes[0]}: these moves of a program that probes are planned as if each probe "
+                              "touched at its target; a machine runs the program itself, a part at a time from where "
+                              "each probe touches: give it the prepared job (cam drill, cam.prepare_job)")
 
 
 def _levelled_home(job: PreparedJob) -> Optional[tuple[int, int, int]]:

@@ -183,6 +183,10 @@ class MachineSession(SessionTools, SessionRecover, SessionPinLogs, SessionProbe)
                 :func:`cam.drive.placement.origin_anchor`); the session travels there first (lifted), then runs
                 the job.  A resumed job (a journal) and a G-code program start where the tool stands.
 
+        A G-code program that probes (G38.2/G38.3: :attr:`~cam.job.jobs.PreparedJob.probing`) runs on a machine that
+        probes only, a part at a time, each planned from where the probe before it touched
+        (:mod:`cam.drive.program_probe`), and keeps no journal.
+
         A prepared job holds for the machine state it was planned in (:attr:`~cam.job.jobs.PreparedJob.planned_in`):
         a G-code program runs from where the tool stood when it was planned, in those work offsets, as ``cam drill``
         plans it; anywhere else it is refused (StalePlanError: plan it again), never run shifted.
@@ -203,6 +207,11 @@ class MachineSession(SessionTools, SessionRecover, SessionPinLogs, SessionProbe)
             name = label or f"job {mj.name}"
             if mj.travel_only:  # a jog or a go-to
                 self._start_moves("jog", mj.given, label or mj.name)  # type: ignore[arg-type]
+                return
+            if mj.probing is not None:  # a part at a time, each from its probe's contact (cam.drive.program_probe)
+                if journal is not None:
+                    self.log(f"{name}: no journal kept: a program that probes runs again from its start", "warning")
+                self.backend.start_program(self, mj, name, controller)
                 return
             self.backend.start_job(self, mj, name, journal, controller)
 

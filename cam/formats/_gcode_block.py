@@ -283,6 +283,8 @@ class _Block(_State):
         if m not in _CYCLES or not in_cycle:
             self.cycle_il = None  # a new series of canned cycles starts from where the tool stands
         self.motion = None if m == 800 else m // 10
+        if m in (382, 383):
+            self.probe_code = m  # motion mode 38: G38.2 or G38.3 (:mod:`._gcode_probe`)
         if m == 800:
             self.cycle_il = None
 

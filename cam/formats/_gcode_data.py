@@ -20,12 +20,14 @@ PLANE_AXES = {"XY": (0, 1, 2), "XZ": (2, 0, 1), "YZ": (1, 2, 0)}
 class GcodeMove:
     """One programmed move in mm (machine frame, G-code axes: +Y up, +Z up).
 
-    ``kind``: "rapid", "feed", "arc", "spline", "dwell" or "pause".  ``end`` is absolute mm; arcs carry
+    ``kind``: "rapid", "feed", "arc", "spline", "probe", "dwell" or "pause".  ``end`` is absolute mm; arcs carry
     ``center`` (mm, in the (first, second) axes of ``plane``, see :data:`PLANE_AXES`), ``clockwise``
     and ``turns``; a spline (G5, G5.1) is the Bezier curve from where the last move ended through its inner
     ``controls`` (absolute mm: one for G5.1, two for G5; Z as at the start) to ``end``; dwell carries
-    ``seconds``; pause carries ``note``; ``feed_mm_min`` applies to feed, arc and spline moves, or
-    ``minutes`` (G93 inverse time) when it is more than 0.  ``spindle`` is the spindle's state the move runs
+    ``seconds``; pause carries ``note``; a probe (G38.2, G38.3: :mod:`._gcode_probe`) is the straight feed move
+    toward its target ``end`` that stops where the probe trips, its code in ``note`` (``"G38.2"``, ``"G38.3"``);
+    ``feed_mm_min`` applies to feed, arc, spline and probe moves, or ``minutes`` (G93 inverse time) when it is
+    more than 0.  ``spindle`` is the spindle's state the move runs
     with (3: M3 clockwise, 4: M4 counter-clockwise, 0: stopped, M5) and ``spindle_rpm`` the S word in force:
     recorded for ports that switch a spindle; the step/dir planner ignores them.
 
@@ -120,7 +122,8 @@ def _shown(word: str) -> str:
 # -- refused features: one message each ---------------------------------------------------------------------------
 
 _REFUSED_G = {
-    **{c: "probing is not supported: the machine has no probe input" for c in (382, 383, 384, 385)},
+    **{c: "probing away from the work (G38.4/G38.5) is not supported: cam probes down to the work (G38.2/G38.3)"
+       for c in (384, 385)},
     **{c: "lathe cycles are not supported: the machine is a 3-axis mill" for c in (700, 710, 711, 720, 721, 760)},
     70: "lathe diameter mode is not supported: the machine is a 3-axis mill",
     331: "rigid tapping is not supported: the machine has no spindle encoder",
@@ -132,15 +135,16 @@ _REFUSED_G = {
     171: "user-defined planes are not supported", 181: "user-defined planes are not supported",
     191: "user-defined planes are not supported",
 }
-_SUPPORTED_G = {0, 10, 20, 30, 40, 50, 51, 330, 80, 100, 170, 180, 190, 200, 210, 280, 281, 300, 301, 400, 410, 411,
-                420, 421,
+_SUPPORTED_G = {0, 10, 20, 30, 40, 50, 51, 330, 382, 383, 80, 100, 170, 180, 190, 200, 210, 280, 281, 300, 301, 400,
+                410, 411, 420, 421,
                 430, 431, 490, 530,
                 540, 550, 560, 570, 580, 590, 591, 592, 593, 610, 611, 640, 730, 800, 810, 820, 830, 850, 890,
                 900, 901, 910, 911, 920, 921, 922, 923, 930, 940, 960, 970, 980, 990}
 COMP_NO_TABLE = ("cutter radius compensation G41/G42 takes the tool's radius from the tool table's diameter, and "
                  "there is none: give one (--tool-table FILE), or G41.1/G42.1 D<diameter>, or the tool centre's path")
 _CYCLES = {730, 810, 820, 830, 850, 890}
-_MOTION = {0, 10, 20, 30, 330, 800} | _CYCLES
+_PROBES = {382, 383}  # G38.2, G38.3 (:mod:`._gcode_probe`)
+_MOTION = {0, 10, 20, 30, 330, 800} | _CYCLES | _PROBES
 _SPLINES = {50, 51}  # G5, G5.1: motion on their own line only (rs274 keeps the modal motion mode)
 _CS = {540: 1, 550: 2, 560: 3, 570: 4, 580: 5, 590: 6, 591: 7, 592: 8, 593: 9}
 CS_NAMES = ("G54", "G55", "G56", "G57", "G58", "G59", "G59.1", "G59.2", "G59.3")

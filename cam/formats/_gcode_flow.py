@@ -133,7 +133,9 @@ class _Flow(_PlainLines):
 
     def run(self) -> Iterator[None]:
         """Run the program a line at a time: a generator that yields after each line that made moves (the caller
-        takes :attr:`moves` then; :func:`cam.formats.gcode.interpret`), and ends with the program."""
+        takes :attr:`moves` then; :func:`cam.formats.gcode.interpret`), and ends with the program.  After a probe
+        (G38.2, G38.3) nothing more is read until the caller asks again: then where the probe tripped is asked
+        (:meth:`~._gcode_probe._Probe.after_probe`)."""
         src, idx = self.main, 0
         executed = 0
         budget = self.max_lines + src.n_lines  # one pass of the file's own lines, then max_lines more
@@ -187,6 +189,8 @@ class _Flow(_PlainLines):
                 return
             if self.moves:
                 yield
+            if self.probe_pending is not None:  # the caller ran the probe before it asked for more: where it tripped
+                self.after_probe()
             idx += 1
 
     def _after_percent(self, src: _Source, idx: int) -> None:

@@ -1,4 +1,5 @@
-"""G-code in, motion: G0, G1, G2/G3 arcs, G5/G5.1 splines, G33, G28/G30 and G53, each made a :class:`GcodeMove`.
+"""G-code in, motion: G0, G1, G2/G3 arcs, G5/G5.1 splines, G33, G28/G30 and G53, each made a :class:`GcodeMove`
+(probes, G38.2/G38.3: :mod:`._gcode_probe`).
 
 A line's axis words lead to a program position (absolute or incremental, X Y Z or polar ``@`` ``^``);
 :meth:`_Motion.go` turns it into machine mm through the offsets, checks it against :mod:`cam.limits` and
@@ -93,6 +94,11 @@ class _Motion(_State):
             for i, a in enumerate("xyz"):
                 if a in vals:
                     t[i] = vals[a] * self.scale - off[i]
+        elif self.motion == 38:  # G38.2, G38.3 (:mod:`._gcode_probe`)
+            if any(k in vals for k in "ijk") or ("r" in vals):
+                raise self.err("I, J, K or R given without G2/G3")
+            self.probe(self.target(vals))
+            return
         elif self.motion in (0, 1, 2, 3, 33):
             if self.motion in (2, 3) and self.comp_exit is not None:
                 raise self.err("the move just after cutter compensation is turned off (G40) must be straight, not an "

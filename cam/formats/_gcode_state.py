@@ -26,10 +26,13 @@ class _State:
     comp_side = 0  # cutter radius compensation (:class:`~._gcode_comp._Comp`): +1 left, -1 right, 0 off
     comp_emitting = False  # its held moves are being recorded
     comp_exit = None  # after G40: the programmed position the exit move starts from (machine mm)
+    probe_code = 382  # motion mode 38's probe (:mod:`._gcode_probe`): 382 (G38.2) or 383 (G38.3)
+    probe_pending = None  # the probe given last: where it tripped is asked before the next line runs
 
     def __init__(self, source: _Source, *, home_g28_mm, home_g30_mm, tool_lengths_mm, subroutine_path,
-                 max_lines, start_mm=(0.0, 0.0, 0.0), work_offsets_mm=None, active_offset="G54") -> None:
+                 max_lines, start_mm=(0.0, 0.0, 0.0), work_offsets_mm=None, active_offset="G54", probed=None) -> None:
         self.main = source
+        self.probed = probed  # where a probe tripped, asked after it (:mod:`._gcode_probe`); None: at its target
         self.tool_lengths_mm = None if tool_lengths_mm is None else dict(tool_lengths_mm)
         # tool number -> diameter mm, for G41/G42 (a tool table's, see cam.formats.gcode.ToolTable; G10 L1 R)
         self.tool_diameters_mm = None if tool_lengths_mm is None else dict(getattr(tool_lengths_mm, "diameters_mm",
@@ -169,7 +172,8 @@ class _State:
             "_selected_tool": float(self.selected_tool), "_line": float(self.line_no),
             "_coord_system": float({1: 540, 2: 550, 3: 560, 4: 570, 5: 580, 6: 590, 7: 591, 8: 592, 9: 593}[self.cs]),
             "_plane": float({"XY": 170, "XZ": 180, "YZ": 190}[self.plane]),
-            "_motion_mode": float(self.motion * 10 if self.motion is not None else 800),
+            "_motion_mode": float(self.probe_code if self.motion == 38 else
+                                  self.motion * 10 if self.motion is not None else 800),
             "_retract_r_plane": float(self.retract_r), "_retract_old_z": float(not self.retract_r),
             "_task": 0.0, "_rpm": self.spindle_rpm,
         }

@@ -24,6 +24,13 @@ A small interpreter for the LinuxCNC language (tested against LinuxCNC's own ``r
   motion code gives way to it (``G0 G90 G40 G21 G17 G94 G80`` leaves G0 the motion mode);
 * accepted without motion: G61, G61.1, G64 (P Q), G93/G94 feed modes (G93 gives each move its time),
   G40, G8, G96/G97, M48..M53, M61 Q; M7/M8/M9 (no coolant output: one warning);
+* probing (:mod:`._gcode_probe`): G38.2 and G38.3 along Z, down, with LinuxCNC's semantics: a straight feed move
+  toward the target that stops where the probe trips (G38.2 an error if it never trips, G38.3 not), the program's
+  position then the trip point and #5061..#5063 the trip point in the coordinate system of the probe (#5070: it
+  tripped); refused as rs274 refuses them (no feed, G93, cutter compensation on, a target nearer than 0.254 mm).
+  The interpreter reads nothing after a probe before the probe has run: the batch ends with it, and the next one
+  is read when asked for, its trip point asked then (``probed``, :meth:`GcodeFile.move_batches`); without a machine
+  every probe trips at its target;
 * pauses: M6 with T (tool change), M0, M1, M60; M2/M30 (and a second ``%``) end the program;
 * the language: numbered and named parameters (local ``#<name>``, global ``#<_name>``), expressions
   (:mod:`cam.formats.ngc`), O words (sub/endsub/call/return, if/elseif/else/endif, while/endwhile,
@@ -36,7 +43,8 @@ arcs offset about their centres, concave corners between lines and arcs met wher
 rounded, Z-only moves, G40 and the exit move; a tool too big for an arc it runs inside or for a corner refused):
 :mod:`._gcode_comp`.
 
-Refused, each with a message saying why: probing (G38.x), rotary axes (A B C) and U V W, cutter
+Refused, each with a message saying why: probing away from the work (G38.4, G38.5) and along X or Y or upward, rotary
+axes (A B C) and U V W, cutter
 radius compensation G41/G42 by tool number without a tool table, and splines, cycles, dwells,
 pauses or frame changes while it is on, lathe cycles and modes (G7, G7x, G76), rigid tapping (G33.1), NURBS blocks
 (G5.2/G5.3), spindle cycles (G84, G86..G88), user M codes (M100..M199) and I/O (M62..M68).
@@ -71,10 +79,11 @@ from ._gcode_data import PLANE_AXES, GcodeMove, GcodeProgram, MoveBatch, _shown
 from ._gcode_flow import _Flow
 from ._gcode_lines import _Source
 from ._gcode_motion import _Motion
+from ._gcode_probe import ProbeFn, _Probe
 
 __all__ = [
     "GcodeMove", "GcodeProgram", "GcodeFile", "MoveBatch", "PLANE_AXES", "parse_gcode", "load_gcode", "open_gcode",
-    "load_tool_table", "ToolTable", "GCODE_SUFFIXES", "BATCH_MOVES",
+    "load_tool_table", "ToolTable", "GCODE_SUFFIXES", "BATCH_MOVES", "ProbeFn",
 ]
 
 
@@ -125,10 +134,10 @@ def load_tool_table(path: str | os.PathLike) -> ToolTable:
     return table
 
 
-class _Interp(_Flow, _Block, _Motion, _Cycles, _Comp):
+class _Interp(_Flow, _Block, _Motion, _Cycles, _Comp, _Probe):
     """The interpreter: one run of one program (its parts, each a module: the state and parameters
     :mod:`._gcode_state`, the lines and O words :mod:`._gcode_flow`, one block :mod:`._gcode_block`, motion
-    :mod:`._gcode_motion`, canned cycles :mod:`._gcode_cycles`)."""
+    :mod:`._gcode_motion`, canned cycles :mod:`._gcode_cycles`, probes :mod:`._gcode_probe`)."""
 
 
 BATCH_MOVES = 1 << 12
@@ -138,7 +147,8 @@ BATCH_MOVES = 1 << 12
 def _interpret(src: _Source, batch_moves: int, options: dict) -> Iterator[MoveBatch]:
     """Run the program of ``src`` (``options`` as :func:`parse_gcode`'s) and give its moves in batches of at least
     ``batch_moves`` (the last may be shorter, and is given even when empty), each with the warnings first given
-    while its moves were made."""
+    while its moves were made.  A batch ends after a probe (G38.2, G38.3): the program reads on only when the next
+    batch is asked for, once the probe has run (``options["probed"]`` says where it tripped)."""
     interp = _Interp(src, **options)
     interp.batch_moves = batch_moves
     warned = 0
@@ -151,7 +161,7 @@ def _interpret(src: _Source, batch_moves: int, options: dict) -> Iterator[MoveBa
 
     try:
         for _ in interp.run():
-            if len(interp.moves) >= batch_moves:
+            if len(interp.moves) >= batch_moves or interp.probe_pending is not None:
                 yield take()
         interp.comp_off()  # the file ends with compensation on: its held moves run
         last = take()
@@ -192,8 +202,12 @@ class GcodeFile:
     active_offset: str = "G54"
     end_offsets_mm: dict[str, tuple[float, float, float]] | None = None
 
-    def move_batches(self, batch_moves: int = BATCH_MOVES) -> Iterator[MoveBatch]:
+    def move_batches(self, batch_moves: int = BATCH_MOVES, *, probed: ProbeFn | None = None) -> Iterator[MoveBatch]:
         """The program's moves in order, in batches of at least ``batch_moves`` (see :class:`MoveBatch`).
+
+        A probe (G38.2, G38.3) ends its batch: the next batch is read from the program once it is asked for, and
+        ``probed`` is asked then where the probe tripped (:data:`ProbeFn`: the probe has run on the machine; None:
+        every probe trips at its target, :mod:`._gcode_probe`).
 
         Raises:
             ParseError: as :func:`parse_gcode` (``file:line``), when the line is reached.
@@ -201,7 +215,7 @@ class GcodeFile:
         options = dict(home_g28_mm=self.home_g28_mm, home_g30_mm=self.home_g30_mm,
                        tool_lengths_mm=self.tool_lengths_mm, subroutine_path=self.subroutine_path,
                        max_lines=self.max_lines, start_mm=self.start_mm, work_offsets_mm=self.work_offsets_mm,
-                       active_offset=self.active_offset)
+                       active_offset=self.active_offset, probed=probed)
         found: list[str] = []
         for batch in _interpret(_Source(self.source, path=self.path), max(1, int(batch_moves)), options):
             found += batch.warnings

@@ -340,6 +340,10 @@ def gcode_pieces(
             (:attr:`cam.job.jobs.PreparedJob.levelled_home_steps`): its travels are written levelled too, at
             ``travel_height_mm`` above the surface under each point (see the module).
     """
+    probes = getattr(toolpath, "probes", None)
+    if probes:  # a program's G38.2/G38.3: the moves after it depend on where it touches (cam.job.gcode_probing)
+        raise CamError(f"{probes[0]}: the moves of a program that probes are not written as G-code: after a probe "
+                       "they depend on where it touches, known only as it runs (run the program itself)")
     _check_options(post, feed_mm_min, plunge_feed_mm_min, spindle_rpm, arc_tolerance_mm)
     g = _Writer(toolpath, flip_y=flip_y, travel_height_mm=travel_height_mm, post=post, feed_mm_min=feed_mm_min,
                 plunge_feed_mm_min=plunge_feed_mm_min, spindle_rpm=spindle_rpm,

@@ -49,8 +49,9 @@ __all__ = ["plan_gcode", "stream_gcode", "GcodeJobStream", "PIECE_MOVES", "STREA
 
 PIECE_MOVES = 1 << 12
 """Program moves planned into one piece of a :class:`GcodeJobStream` (at most: see :data:`PIECE_ROWS`)."""
-_MOTIONS = ("rapid", "feed", "arc", "spline")
-"""The kinds of :class:`~cam.formats.gcode.GcodeMove` that move the tool."""
+_MOTIONS = ("rapid", "feed", "arc", "spline", "probe")
+"""The kinds of :class:`~cam.formats.gcode.GcodeMove` that move the tool (a probe, G38.2/G38.3, planned as the feed
+move to its target: as if it touched there, :mod:`cam.job.gcode_probing`)."""
 PIECE_ROWS = 1 << 17
 """A piece ends after the move that makes its rows this many or more."""
 STREAM_MOVES = 1 << 20
@@ -236,6 +237,7 @@ class _Moves:
         self.pause: list[np.ndarray] = []
         self.pause_notes: list[str] = []
         self.at = np.zeros(3, np.int64)  # where the last move ends, steps
+        self.origin = np.zeros(3, np.int64)  # where the job starts (its pieces' points are from there), steps
         self.n_rows = 0  # rows collected since the last piece
 
     def _add(self, points: np.ndarray, period_ns: int, periods: np.ndarray, kind: int, *,
@@ -298,7 +300,7 @@ class _Moves:
                 return np.concatenate(parts)
             return np.zeros((0, width) if width else 0, dtype)
 
-        pts = cat(self.points, np.int64, 3)
+        pts = cat(self.points, np.int64, 3) - self.origin
         kind = cat(self.kind, np.uint8)
         job = Job(points_steps=pts, kind=kind, target=(kind == CUT) & (pts[:, 2] > 0), pause=cat(self.pause, bool),
                   settings=settings, pause_notes=list(self.pause_notes), warnings=list(warnings), source=source,
@@ -473,13 +475,19 @@ class _Planner:
     move ended (in mm, its exact path point in steps, and the rounded position the rows reached) and the
     program's time so far."""
 
-    def __init__(self, settings: MachineSettings, flip_y: bool, source: str, home_steps=(0, 0, 0)) -> None:
+    def __init__(self, settings: MachineSettings, flip_y: bool, source: str, home_steps=(0, 0, 0),
+                 start_mm=None, start_steps=None) -> None:
         self.settings, self.source = settings, source
         self.frame = _Frame(settings, flip_y, home_steps)
         self.moves = _Moves()
         self.cur_mm = np.zeros(3)  # G-code frame
         self.cur_steps = np.zeros(3)  # the exact path point, in steps
         self.program_ns = 0  # the program's time so far at its feeds and dwells
+        if start_mm is not None:  # a part of a program that probes: from where its probe left the tool
+            self.cur_mm = np.asarray(start_mm, np.float64).reshape(3).copy()
+            self.cur_steps = self.cur_mm * self.frame.to_steps
+            self.moves.at = np.asarray(start_steps, np.int64).reshape(3).copy()
+            self.moves.origin = self.moves.at.copy()
 
     def move(self, mv: GcodeMove) -> None:
         """Plan one move (see :func:`plan_gcode` for the checks)."""
@@ -603,6 +611,13 @@ class GcodeJobStream:
         safe_z_steps: 0 (a stop lifts to the home plane); pixels, tool: None (no drawing frame; the point tool).
         home_steps: the machine position of the job's zero, where the tool stands when it starts (the program's
             ``start_mm``): the travel is checked in the machine frame, before anything moves.
+        start_mm, start_steps: a part of a program that probes (:mod:`cam.job.gcode_probing`): where its moves
+            start, G-code mm and the steps the tool stands at (from the program's start, ``home_steps``); its pieces'
+            points are from there.  None: the program's start.
+        probes: what each probe (G38.2, G38.3) of the program asks, in order (``file:line: G38.2 down at most 10
+            mm at F60 mm/min``), once a pass ended; its moves after a probe are planned as if it touched at its
+            target (a machine runs them planned from the contact: :mod:`cam.job.gcode_probing`).
+        probe_feeds_mm_min: each probe's feed, in the same order.
     """
 
     src: Union[GcodeProgram, GcodeFile]
@@ -620,10 +635,28 @@ class GcodeJobStream:
     _spilled: Optional[_Spill] = field(default=None, repr=False)
     _spilling: bool = field(default=False, repr=False)
     home_steps: tuple[int, int, int] = (0, 0, 0)
+    start_mm: Optional[tuple[float, float, float]] = None
+    start_steps: Optional[tuple[int, int, int]] = None
+    _probes: list[tuple[str, float]] = field(default_factory=list, repr=False)
 
     @property
     def source(self) -> str:
         return self.src.source
+
+    @property
+    def probes(self) -> Optional[list[str]]:
+        """What each probe of the program asks (see the class docstring; a pass is made when none has ended), or
+        None: it has none (as :attr:`cam.job.model.Job.probes`)."""
+        if self.n_moves < 0:
+            len(self)
+        return [text for text, _ in self._probes] or None
+
+    @property
+    def probe_feeds_mm_min(self) -> list[float]:
+        """Each probe's feed (mm/min), in the order of :attr:`probes`."""
+        if self.n_moves < 0:
+            len(self)
+        return [feed for _, feed in self._probes]
 
     @property
     def warnings(self) -> list[str]:
@@ -686,15 +719,21 @@ class GcodeJobStream:
 
     def _planned(self) -> Iterator[Job]:
         """The pieces, planned from the program's moves (see :meth:`pieces`)."""
-        planner = _Planner(self.settings, self.flip_y, self.source, self.home_steps)
+        planner = _Planner(self.settings, self.flip_y, self.source, self.home_steps, self.start_mm, self.start_steps)
         notes: list[str] = []
         warnings: list[str] = []
+        probes: list[tuple[str, float]] = []
         n_rows = n_program = n_motions = 0
         given = False
-        last_end_mm: tuple[float, float, float] = (0.0, 0.0, 0.0)  # the moves are given from where the tool starts
+        # the moves are given from where the tool starts
+        last_end_mm: tuple[float, float, float] = self.start_mm or (0.0, 0.0, 0.0)  # type: ignore[assignment]
         for batch in self.src.move_batches(self.piece_moves):
             warnings += batch.warnings
             for mv in batch.moves:
+                if mv.kind == "probe":
+                    probes.append((f"{mv.file or self.source}:{mv.line}: {mv.note} down at most "
+                                   f"{last_end_mm[2] - mv.end[2]:.4g} mm at F{mv.feed_mm_min:g} mm/min",
+                                   mv.feed_mm_min))
                 if mv.kind in _MOTIONS:
                     n_motions += mv.end != last_end_mm or mv.kind == "arc"
                     last_end_mm = mv.end
@@ -709,7 +748,7 @@ class GcodeJobStream:
         if warnings or not given:
             yield planner.piece(warnings)
         self.n_moves, self.n_program_moves, self.pause_notes = n_rows, n_program, notes
-        self.n_motions = n_motions
+        self.n_motions, self._probes = n_motions, probes
 
 
 def stream_gcode(src: Union[GcodeProgram, GcodeFile], settings: MachineSettings = DEFAULT_SETTINGS, *,

@@ -65,6 +65,7 @@ from .drill import DEFAULT_TRAVEL_HEIGHT_MM as DRILL_TRAVEL_HEIGHT_MM
 from .drill import plan_drill
 from .gcode import STREAM_MOVES as GCODE_STREAM_MOVES
 from .gcode import gcode_mm_to_steps, steps_to_gcode_mm, stream_gcode
+from .gcode_probing import ProbingProgram
 from .hpgl import DEFAULT_CUT_DEPTH_MM as HPGL_CUT_DEPTH_MM
 from .hpgl import DEFAULT_TRAVEL_HEIGHT_MM as HPGL_TRAVEL_HEIGHT_MM
 from .drawing_stream import STREAM_TARGETS, plan, stream_drawing
@@ -450,6 +451,10 @@ class PreparedJob:
         levelled_home_steps: a job levelled to a height map (``JobOptions.level``): the machine position of its
             home its levelling holds for, where the session places it
             (:func:`cam.drive.placement.placed_home`); None: not levelled.
+        probing: a G-code program that probes (G38.2, G38.3): how a machine runs it, a part at a time from each
+            probe's contact (:class:`~cam.job.gcode_probing.ProbingProgram`); its :attr:`plan` and :attr:`toolpath`
+            are the program as if each probe touched at its target (pictures, reports, the checks made before
+            anything moves), never run as they are.  None: no probe.
     """
 
     source: str
@@ -475,6 +480,7 @@ class PreparedJob:
     home_steps: Optional[tuple[int, int, int]] = None
     planned_in: Optional[PlannedIn] = None
     levelled_home_steps: Optional[tuple[int, int, int]] = None
+    probing: Optional[ProbingProgram] = None
     _steps: Any = field(default=None, repr=False)
 
     @property
@@ -761,16 +767,21 @@ def _prepare_gcode(path: Path, options: JobOptions, settings: MachineSettings,
     # after a whole pass (held's or this) the program's moves and warnings are known; the travel checked in the
     # machine frame, from where the tool stands
     steps = plan_chunks(toolpath, start_steps=start, fingerprint=True)  # type: ignore[arg-type]
+    probes = stream.probes or []  # G38.2/G38.3: as if each touched at its target; a machine runs it from the contact
+    probing = ProbingProgram(program, settings, bool(options.flip_y), start, tuple(probes),  # type: ignore[arg-type]
+                             tuple(stream.probe_feeds_mm_min)) if probes else None
     return PreparedJob(
         source=str(path), kind="gcode", plan=steps, settings=settings, toolpath=toolpath, warnings=stream.warnings,
-        home_steps=start,  # type: ignore[arg-type]
-        summary=f"{path.name}: {stream.n_program_moves} moves",
+        home_steps=start, probing=probing,  # type: ignore[arg-type]
+        summary=f"{path.name}: {stream.n_program_moves} moves" + (f", {len(probes)} probe(s)" if probes else ""),
         report={"moves": stream.n_program_moves, "motions": stream.n_motions, "start_steps": list(start),
+                **({"probes": probes} if probes else {}),
                 # the program's Z = 0 (the active work zero's), from where it starts: depths are below it
                 "surface_z_steps": 0 if machine_state is None else int(machine_state.work_zero_steps()[2]) - start[2],
                 # the work offsets as the program left them (G10 L2/L20), machine steps: cam drill --keep-offsets
-                "work_offsets_end_steps": {k: list(gcode_mm_to_steps(v, s, flip_y=options.flip_y))
-                                           for k, v in (program.end_offsets_mm or {}).items()}},
+                # (after a probe they depend on its contact: not known before the run)
+                "work_offsets_end_steps": {} if probes else {k: list(gcode_mm_to_steps(v, s, flip_y=options.flip_y))
+                                                             for k, v in (program.end_offsets_mm or {}).items()}},
     )
 
 
@@ -964,6 +975,10 @@ def prepare_job(
             PlannedIn.of(machine_state, position=True, every_offset=True)
     elif home is not None and machine_state is not None:  # from the active work zero, wherever the tool stands
         job.planned_in = PlannedIn.of(machine_state, position=False, every_offset=False)
+    if height_map is not None and job.probing is not None:
+        raise PlanError(f"{p.name}: --level: the program probes ({job.probing.probes[0]}): its moves after a probe "
+                        "are planned from where the probe touches, when it runs, and cannot be levelled before; "
+                        "level it without its probes, or let its probes find the surface")
     if height_map is not None:  # where the job goes is known now: level it there (issue #46 point 2)
         _level(job, height_map, opts, settings, machine_state)
     job.plan_sha256 = job.plan.job_sha256 or plan_fingerprint(job.toolpath)  # (made in the planning pass)
@@ -1132,6 +1147,10 @@ def resume_job(job: PreparedJob, journal: Journal, *, position_steps: Optional[t
     Raises:
         CamError: the journal was written for another input, options, settings or plan, or its job finished.
     """
+    if job.probing is not None:
+        raise CamError(f"{job.name}: a program that probes cannot be resumed ({job.probing.probes[0]}): its moves "
+                       "after a probe depend on where the probe touched in the run that stopped; run it again from "
+                       "its start")
     start = tuple(int(v) for v in (journal.position_steps if position_steps is None else position_steps))
     # every number against the travel before anything is planned from them (a tampered journal: one line, at once)
     check_journal_numbers(dataclasses.replace(journal, position_steps=start), job.settings, where)

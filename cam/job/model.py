@@ -111,6 +111,9 @@ class Job:
             ``linear40`` mode), or None: every move.
         rest: ``(N,)`` bool, the machine is at rest before and after this move (a dwell), or None.
         tool: the cutter the job was planned for (:class:`cam.tool.Tool`; None: the point tool).
+        probes: a G-code program's probes (G38.2, G38.3), what each asks: the moves after each are planned as if
+            it touched at its target, so a machine never runs the job as it is (:mod:`cam.job.gcode_probing` plans
+            them from the contact); None or empty: it has none.
     """
 
     points_steps: np.ndarray
@@ -128,6 +131,7 @@ class Job:
     move_start: Optional[np.ndarray] = None
     rest: Optional[np.ndarray] = None
     tool: Any = None
+    probes: Optional[list[str]] = None
 
     def __len__(self) -> int:
         return len(self.points_steps)

@@ -94,7 +94,8 @@ def parse_canonical(text: str) -> list[CanonMove]:
             raise CamError(f"rs274 rotates the XY plane ({args[0]} degrees): not compared")
         elif name == "SET_G92_OFFSET":
             g92 = [float(a) * scale for a in args[0:3]]
-        elif name in ("STRAIGHT_TRAVERSE", "STRAIGHT_FEED"):
+        elif name in ("STRAIGHT_TRAVERSE", "STRAIGHT_FEED", "STRAIGHT_PROBE"):
+            # a probe (G38.x): rs274 alone has no probe and runs it to its target, as cam does without a machine
             x, y, z = (float(a) * scale + o for a, o in zip(args[:3], off))
             moves.append(CanonMove("traverse" if name == "STRAIGHT_TRAVERSE" else "feed", (x, y, z)))
         elif name == "SELECT_PLANE":

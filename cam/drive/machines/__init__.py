@@ -179,6 +179,11 @@ class Backend:
         session's ``_launch_probe``; a machine without a probe refuses in one line."""
         self.require(session.port, "probes", "probing")
 
+    def start_program(self, session: Any, job: MachineJob, name: str, controller: Any) -> None:
+        """Start a G-code program that probes (``job.probing``: :mod:`cam.drive.program_probe`), checked by the
+        session, in the background; a machine without a probe refuses in one line."""
+        self.require(session.port, "probes", "a G-code program that probes (G38.2/G38.3)")
+
     def spindle(self, session: Any, on: bool) -> None:
         """Switch the spindle on or off (back ends with ``spindle``; the session checked the capability and that
         nothing runs) in the background (issue #47 point 7)."""

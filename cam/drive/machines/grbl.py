@@ -21,6 +21,7 @@ from ..grbl_link import parse_grbl_url
 from ..grbl_machine import (GRBL_OFFSETS, GrblControl, GrblPosition, adopt_position, finish_stop, grbl_machine,
                             job_lines, run_on_grbl, steps_to_mpos, travel_advice)
 from ..grbl_probe import grbl_set_work_z, start_probe_on_grbl
+from ..grbl_program import start_program_on_grbl
 from ..grbl_time import grbl_time_s
 from ..journal import JournalSpec
 from ..machine_job import MachineJob
@@ -129,6 +130,12 @@ class GrblBackend(Backend):
     def start_probe(self, session: Any, probe_run: Any) -> None:
         """Probe with ``G38.2`` (:mod:`cam.drive.grbl_probe`)."""
         start_probe_on_grbl(session, probe_run)
+
+    def start_program(self, session: Any, job: MachineJob, name: str, controller: Any) -> None:
+        """A program that probes: its parts streamed, its probes grbl's own G38.2/G38.3
+        (:mod:`cam.drive.grbl_program`)."""
+        _moves(session, job)  # a job with moves: a step plan has none
+        start_program_on_grbl(session, job, name, controller)
 
 
 def _moves(session: Any, job: MachineJob) -> JobLike:

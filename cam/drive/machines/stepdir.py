@@ -11,6 +11,7 @@ from typing import Any
 from ...settings import MachineSettings
 from ..ports import MockPort, ParallelPort, Port
 from ..probing import start_probe_on_steps
+from ..program_probe import start_program_on_steps
 from . import Backend, register
 
 __all__ = ["MockBackend", "ParportBackend"]
@@ -19,10 +20,14 @@ _STEP_DIR = frozenset({"step_dir", "pause", "drill_files", "jog", "home_switches
 
 
 class _StepDir(Backend):
-    """What both step/dir back ends do alike: probing on the probe input of ``[inputs]``."""
+    """What both step/dir back ends do alike: probing on the probe input of ``[inputs]`` (``cam probe``, and a G-code
+    program's G38.2/G38.3)."""
 
     def start_probe(self, session: Any, probe_run: Any) -> None:
         start_probe_on_steps(session, probe_run)
+
+    def start_program(self, session: Any, job: Any, name: str, controller: Any) -> None:
+        start_program_on_steps(session, job, name, controller)
 
 
 class MockBackend(_StepDir):
