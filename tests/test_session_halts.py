@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import signal
 import threading
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -232,3 +233,45 @@ def test_cam_drill_ctrl_c_as_the_travel_to_the_work_zero_ends_does_not_start_the
     pos = decode_pin_log(read_pin_log(log), s).position_steps
     assert tuple(int(v) for v in pos[-1]) == after.position_steps
     assert int(pos[:, 2].max()) <= 0  # nothing went down into the work: no hole was drilled
+
+
+def test_a_shorter_tool_whose_shift_would_take_the_job_below_the_travel_is_not_shifted(tmp_path):
+    """A drill job whose holes go 20 steps short of the bottom of the Z travel; T2 is 0.7 mm shorter (45 steps):
+    probed at its tool change, the shift would take T2's holes 25 steps below the travel, while where the job waits
+    (at its travel height) would still be inside it.  The work Z is not shifted (one line at the prompt, saying
+    why), the tool is back where the job waits; stopped there, nothing in the decoded pin log leaves the travel."""
+    from test_tool_change_probe import SHORTER_MM, _wait_prompt
+    from test_probe import _raised
+    from cam.drive.ports import SwitchSchedule
+
+    s = mock_settings(FLAT)
+    with StateHold(tmp_path / "state.json", s, "test") as hold:
+        port = MockPort()
+        session = MachineSession(port, s, state=hold)
+        session.go_to((30, 30, 0), "mm")
+        assert session.wait_idle(120)
+        session.probe_work_z(0.0, max_depth_steps=300)
+        session.go_to((20, 15, -1), "mm")
+        assert session.wait_idle(120)
+        session.zero("XY")
+        zero = hold.state.work_zero_steps()
+        job = _two_tool_job(tmp_path, s, hold.state)
+        bottom = zero[2] + int(job.plan.motion_extent()[0][2][1]) + 20  # the Z travel's bottom: 20 below the holes
+        s = s.replace(travel=replace(s.travel, z_max_steps=bottom))
+        session.settings = s
+        session.start(_two_tool_job(tmp_path, s, hold.state))
+        p = _wait_prompt(session)
+        session.answer(p["id"], "continue")
+        p = _wait_prompt(session, p["id"])
+        port.switches = SwitchSchedule(mock_settings(_raised(FLAT, -SHORTER_MM)), tuple(p["position_steps"]))
+        session.probe_tool_at_prompt(p["id"], clearance_mm=1.0)  # its deepest probe inside the travel
+        again = _wait_prompt(session, p["id"])
+        assert again["probed"].startswith("the new tool was not probed: the work Z was not shifted: the job's moves")
+        assert "beyond the Z travel" in again["probed"] and "\n" not in again["probed"], again
+        assert again["position_steps"] == p["position_steps"]  # back where it waits, not shifted
+        assert hold.state.work_zero_steps() == zero  # the work Z kept
+        session.answer(again["id"], "stop")
+        assert session.wait_idle(60) and session.last_run["status"] == "stopped", session.last_run
+    pos = decode_pin_log(port.pin_log(), s).position_steps
+    assert int(pos[:, 2].max()) <= bottom  # never below the travel
+    assert tuple(int(v) for v in pos[-1]) == session.position_steps()

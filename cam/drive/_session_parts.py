@@ -66,6 +66,7 @@ class Activity:
     started_wall: float = field(default_factory=time.monotonic)
     unknown_reason: str = ""  # the position stays unknown after it, for this reason (a jog made while unknown)
     halts: tuple[int, int] = (0, 0)  # the session's (stops, emergency stops) counted when it began (or its chain)
+    reach: Optional[Callable[[], Any]] = None  # a run's (3, 2) min/max steps from where it started, when asked
 
     @property
     def estimated_s(self) -> float:

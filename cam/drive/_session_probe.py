@@ -290,10 +290,14 @@ class SessionProbe:
         check_in_travel((x, y, top), self.settings, "the lift over the first tool's probe point")
         check_in_travel((x, y, top + depth), self.settings, f"the deepest probe ({depth * per:g} mm down)")
         with self._lock:  # the job's own Z (its run's frame): where it waits less where it started and had moved
-            job_z = int(at[2]) - int(self._position[2]) - int(self._pause_moved[2])
+            base_z = int(self._position[2]) + int(self._pause_moved[2])
+            job_z = int(at[2]) - base_z
+            reach_of = None if self._activity is None else self._activity.reach
+        reach = None if reach_of is None else reach_of()  # the whole run's, checked shifted (outside the lock)
+        z_range = None if reach is None else (base_z + int(reach[2][0]), base_z + int(reach[2][1]))
         request = PauseProbe(tuple(int(v) for v in at), (x, y), top, depth,  # type: ignore[arg-type]
                              step_dir_feed(self.settings, feed_mm_min), z_old + int(round(old.plate_mm / per)),
-                             int(round(plate / per)), job_z)
+                             int(round(plate / per)), job_z, z_range)
         self.log(f"probing the new tool at X={x} Y={y} steps (where the first tool touched), from Z={top}")
         reply = self._pause_work(request)  # type: ignore[misc]
         end = reply["end_steps"]

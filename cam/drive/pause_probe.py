@@ -20,7 +20,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, Optional
 
-from ..errors import CamError
+from ..errors import CamError, TravelError
 from ..settings import MachineSettings
 from .ports import MockPort, SwitchSchedule
 from .probing import ProbeEnded, StepDirProber, missed_line
@@ -52,6 +52,9 @@ class PauseProbe:
     """Where the waiting job stands on Z in its own frame (steps from where its run started: its cursor's), for
     the top of the Z travel in that frame after the probe (:attr:`cam.drive.runner.Controller.z_top_steps`: a
     stop's lift from where the probe left the tool stays in the travel); None: not told."""
+    job_z_range_steps: Optional[tuple[int, int]] = None
+    """The machine Z the job's moves reach, highest and deepest (its run's whole extent, in the frame it goes on
+    in): a shift that would take them out of the Z travel is refused, the work Z kept; None: not told."""
 
 
 class _OnJobPort(StepDirProber):
@@ -72,6 +75,19 @@ class _OnJobPort(StepDirProber):
     def probe(self, depth_steps: int, feed_mm_min: float) -> Any:
         self._after_last_write()
         return super().probe(depth_steps, feed_mm_min)
+
+
+def _check_shifted_job(request: PauseProbe, shift_steps: int, settings: MachineSettings) -> None:
+    """Refuse a work Z shift that takes the job's moves (``request.job_z_range_steps``, shifted by ``shift_steps``)
+    out of the Z travel (TravelError, one line): the job goes on only where all of it stays in the travel."""
+    if request.job_z_range_steps is None:
+        return
+    lo, hi = (int(v) + int(shift_steps) for v in request.job_z_range_steps)
+    z_min, z_max = settings.travel.bounds_steps()[2]
+    if lo < z_min or hi > z_max:
+        v, beyond = (lo, z_min - lo) if lo < z_min else (hi, hi - z_max)
+        raise TravelError(f"the job's moves, {shift_steps:+d} steps on Z with the new tool, would reach Z {v}, "
+                          f"{beyond} steps beyond the Z travel ({z_min}..{z_max} steps from the home)")
 
 
 def probe_at_pause(port: Any, settings: MachineSettings, realtime: bool, ctl: Any, request: PauseProbe,
@@ -119,6 +135,7 @@ def probe_at_pause(port: Any, settings: MachineSettings, realtime: bool, ctl: An
             shifted = (back[0], back[1], back[2] + shift)
             try:
                 check_in_travel(shifted, settings, "where the job goes on with the new tool")
+                _check_shifted_job(request, shift, settings)
                 back = shifted
             except CamError as exc:
                 status, message, shift = "error", f"the work Z was not shifted: {exc}", 0

@@ -55,6 +55,7 @@ from ..job.moves import jog as jog_job
 from ..job.moves import jog_steps, to_origin
 from ..settings import DEFAULT_SETTINGS, MachineSettings
 from ..values import FEED_OVERRIDE_RANGE, finite_number
+from ..verify.pinlog import motion_extent
 from .apart import RunnerProcess
 from .journal import JournalSpec, journal_spec
 from ._session_parts import Activity, Prompt, PromptFn
@@ -330,7 +331,8 @@ class MachineSession(SessionTools, SessionRecover, SessionPinLogs, SessionProbe)
                       controller: Optional[Controller] = None, journal: Optional[JournalSpec] = None) -> None:
         ctl = controller or Controller()
         cursor = Cursor(plan.settings)  # the runner moves it on; the live position reads it
-        self._begin(Activity(name, label, ctl, len(plan), estimated_s, cursor))
+        self._begin(Activity(name, label, ctl, len(plan), estimated_s, cursor, reach=lambda: plan.motion_extent()[0]
+                             if isinstance(plan, ChunkedPlan) else motion_extent(plan.data, plan.settings)[0]))
         self.log(f"{label}: started")
         self._spawn(run_steps, (self, name, plan, ctl, label, journal, cursor), name)
 
