@@ -262,17 +262,25 @@ def _job_port(args: argparse.Namespace, settings: MachineSettings, realtime: boo
     return args.port
 
 
+def _job_session(port: Any, args: argparse.Namespace, settings: MachineSettings, hold: StateHold,
+                 stopping: threading.Event) -> "tuple[MachineSession, _Answers]":
+    """The job's session on ``port``: its prompts answered from the terminal (or ``--yes``), the machine's tool
+    table named at tool changes, the state file a tool probed at a tool change books to, grbl's feed override."""
+    answers = _Answers(args, stopping)
+    session = MachineSession(port, settings, realtime=getattr(args, "realtime", False), on_prompt=answers)
+    session.tool_table_path = getattr(args, "tool_table_path", None)  # the prompt names the table's tool
+    session.work_state = hold  # a tool probed at a tool change: the first tool's contact, the work Z set there
+    if getattr(args, "feed_override", None) is not None:  # grbl's override (CapabilityError elsewhere)
+        session.feed_override(args.feed_override)
+    return session, answers
+
+
 def _drive(job: Any, args: argparse.Namespace, settings: MachineSettings, hold: StateHold,
            start: tuple[int, int, int], journal: Optional[str], unrecorded: list[str]) -> Outcome:
     stopping = threading.Event()
     realtime = getattr(args, "realtime", False)
     port = _job_port(args, settings, realtime)
-    answers = _Answers(args, stopping)
-    session = MachineSession(port, settings, realtime=realtime, on_prompt=answers)
-    session.tool_table_path = getattr(args, "tool_table_path", None)  # the prompt names the table's tool
-    session.work_state = hold  # a tool probed at a tool change: the first tool's contact, the work Z set there
-    if getattr(args, "feed_override", None) is not None:  # grbl's override (CapabilityError elsewhere)
-        session.feed_override(args.feed_override)
+    session, answers = _job_session(port, args, settings, hold, stopping)
     # --origin, else the job's own (an --offset places the file by its own zero: cam.job.jobs.prepare_job, the rule
     # the page's offset_mm follows too)
     origin = getattr(args, "origin", None)

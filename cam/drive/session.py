@@ -62,6 +62,7 @@ from ._session_parts import Activity, Prompt, PromptFn
 from ._session_recover import UNKNOWN_JOG_LINE, SessionRecover, maximus_cannot_home
 from ._session_pinlog import SessionPinLogs
 from ._session_probe import SessionProbe
+from ._session_prompt_probe import SessionPromptProbe
 from ._session_tools import SessionTools
 from .activities import run_steps
 from .machine_job import JobInput, MachineJob, machine_job
@@ -78,7 +79,7 @@ MAX_JOG_STEPS = 100_000
 """The longest jog one request may ask for, either way."""
 
 
-class MachineSession(SessionTools, SessionRecover, SessionPinLogs, SessionProbe):
+class MachineSession(SessionTools, SessionRecover, SessionPinLogs, SessionProbe, SessionPromptProbe):
     """The machine as every front end sees it (thread-safe).
 
     Args:
