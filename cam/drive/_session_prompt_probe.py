@@ -19,7 +19,7 @@ import numpy as np
 from ..errors import CamError, CapabilityError, PlanError
 from ._session_probe import DEFAULT_TOOL_CLEARANCE_MM, _clearance, _feed, _plate
 from .pause_probe import PauseProbe
-from .probing import check_step_dir_probe, step_dir_feed
+from .probing import DEFAULT_FEED_MM_MIN, check_step_dir_probe, step_dir_feed
 from .state import ToolProbe, check_in_travel
 
 __all__ = ["SessionPromptProbe"]
@@ -42,9 +42,10 @@ class SessionPromptProbe:
                             "before the job): the new tool has nothing to be measured against")
         if self._pause_work is None:
             raise CapabilityError(f"{name} runs the job on its own: probing the new tool while a job waits runs "
-                                  f"on step/dir machines (the mock, a parallel port); stop the job, probe the tool "
-                                  f"(cam probe tool) and resume it")
-        check_step_dir_probe(self)
+                                  f"on step/dir machines (the mock, a parallel port) and grbl; stop the job, probe "
+                                  f"the tool (cam probe tool) and resume it")
+        if self.backend.can("step_dir", self.port):  # grbl: its own probe input (G38.2)
+            check_step_dir_probe(self)
 
     def _tool_probe_why_not(self, note: str) -> Optional[str]:
         if not str(note).startswith("tool change"):
@@ -75,8 +76,8 @@ class SessionPromptProbe:
 
         Raises:
             PlanError: a bad plate, feed or clearance, no prompt's tool change, no first probe; CapabilityError: a
-            machine that cannot probe, or a board that runs the job itself (grbl, MAXIMUS); BusyError: no prompt
-            waits."""
+            machine that cannot probe, or a board that runs the job itself (the MAXIMUS board); BusyError: no
+            prompt waits."""
         plate = None if plate_mm is None else _plate(plate_mm)
         feed = _feed(feed_mm_min)
         clearance = _clearance(clearance_mm)
@@ -117,7 +118,8 @@ class SessionPromptProbe:
         reach = None if reach_of is None else reach_of()  # the whole run's, checked shifted (outside the lock)
         z_range = None if reach is None else (base_z + int(reach[2][0]), base_z + int(reach[2][1]))
         request = PauseProbe(tuple(int(v) for v in at), (x, y), top, depth,  # type: ignore[arg-type]
-                             step_dir_feed(self.settings, feed_mm_min), z_old + int(round(old.plate_mm / per)),
+                             step_dir_feed(self.settings, feed_mm_min) if self.backend.can("step_dir", self.port)
+                             else (feed_mm_min or DEFAULT_FEED_MM_MIN), z_old + int(round(old.plate_mm / per)),
                              int(round(plate / per)), job_z, z_range)
         self.log(f"probing the new tool at X={x} Y={y} steps (where the first tool touched), from Z={top}")
         reply = self._pause_work(request)  # type: ignore[misc]

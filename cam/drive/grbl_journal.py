@@ -19,6 +19,7 @@ the run started (+Y toward the operator, +Z deeper), as the job's points.
 """
 from __future__ import annotations
 
+import dataclasses
 import threading
 from collections import deque
 from typing import Any, Callable, Optional
@@ -180,6 +181,17 @@ class GrblJournal:
             self.lines.all_done(point)
             self.pending = int(point)
             self.update()
+
+    def home_moved(self, by_steps: Any) -> None:
+        """The job's frame moved at its pause by ``by_steps`` (a tool probed at a tool change: the work Z shifted,
+        :mod:`cam.drive.grbl_pause_probe`): its later lines, the tool and its reports are from a start shifted by as
+        much.  The journal's home (``home_steps``, machine frame) moves so, written at once, as a step/dir run's
+        (:meth:`cam.drive.journal.JournalWriter.home_moved`): a resumed run goes on at the new work Z."""
+        with self._lock:
+            home = tuple(int(h) + int(b) for h, b in zip(self.spec.home_steps, by_steps))
+            self.spec = dataclasses.replace(self.spec, home_steps=home)  # type: ignore[arg-type]
+            self._written = None  # the key does not hold the home: written again
+            self._write("running")
 
     def answered(self) -> None:
         """The pause's prompt was answered: the job goes on."""

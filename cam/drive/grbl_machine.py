@@ -165,7 +165,8 @@ class _Runs:
 
 def job_lines(job: Any, start_steps: Steps3, base_steps: Steps3, settings: MachineSettings,
               on_point: Optional[Callable[[int], None]] = None,
-              on_line: Optional[Callable[[np.ndarray, int], None]] = None) -> Iterator["str | GrblPause"]:
+              on_line: Optional[Callable[[np.ndarray, int], None]] = None,
+              shift_steps: Optional[np.ndarray] = None) -> Iterator["str | GrblPause"]:
     """The G-code lines that move grbl through ``job`` (any :class:`~cam.job.model.JobLike`), a piece at a time.
 
     Args:
@@ -175,12 +176,16 @@ def job_lines(job: Any, start_steps: Steps3, base_steps: Steps3, settings: Machi
         on_point: told the index of the last point a yielded line reaches (progress).
         on_line: told each line's end (``(3,)`` steps from ``start_steps``) and the index of the last point it
             reaches, before the line is yielded (the journal, :class:`~cam.drive.grbl_journal.GrblLines`).
+        shift_steps: a ``(3,)`` int64 array the caller may change while the job waits at a pause (a tool probed
+            at a tool change: the work Z shifted): every line drawn after that lands shifted by it, as if the job
+            had started ``shift_steps`` from ``start_steps`` (None: no shift).
 
     Yields:
         ``"G53G1X..Y..Z..F.."`` lines (no spaces: fewer bytes on the link) and a :class:`GrblPause` after each
         point the job pauses at.  Moves are joined into the straight lines of the job's path (:class:`_Runs`):
         a G-code program's line goes out as one line at its own feed, not as the staircase of steps it is
-        planned into for a step/dir drive.
+        planned into for a step/dir drive.  The first feed move after a pause says its feed again: whatever ran
+        at the pause (a probe's ``G38.2 F..``, grbl's soft reset after a probe fail) may have changed grbl's.
     """
     origin = np.asarray(start_steps, np.int64) - np.asarray(base_steps, np.int64)  # grbl frame, in steps
     prev = np.zeros(3, np.int64)
@@ -192,7 +197,7 @@ def job_lines(job: Any, start_steps: Steps3, base_steps: Steps3, settings: Machi
 
     def text(end: np.ndarray, rapid: bool, feed: float) -> str:
         nonlocal feed_now
-        mm = steps_to_mpos(origin + end, settings)
+        mm = steps_to_mpos(origin + end if shift_steps is None else origin + end + shift_steps, settings)
         words = "".join(f"{a}{t}" for a, t, w in zip("XYZ", (format_mm(v) for v in mm), written) if t != w)
         for i, t in enumerate(format_mm(v) for v in mm):
             written[i] = t
@@ -254,6 +259,7 @@ def job_lines(job: Any, start_steps: Steps3, base_steps: Steps3, settings: Machi
                     on_point(index)
                 note = notes.pop(0) if notes else "Pause At"
                 yield GrblPause(index, (int(p[0]), int(p[1]), int(p[2])), note)
+                feed_now = None  # grbl's modal feed may have changed at the pause: the next feed move says it
     yield from lines_of_move()
     if on_point is not None:
         on_point(index)
@@ -572,17 +578,31 @@ def _stream_until_pause(link: GrblLink, items: Iterator[Any], position: GrblPosi
 
 
 def run_on_grbl(session: Any, name: str, job: Any, ctl: GrblControl, label: str, start_steps: Steps3,
-                position: GrblPosition, total: int, estimated_s: float, journal: Optional[JournalSpec] = None) -> None:
+                position: GrblPosition, total: int, estimated_s: float, journal: Optional[JournalSpec] = None,
+                pause_probe: Optional[Callable[..., dict]] = None) -> None:
     """The worker thread of an activity on grbl: stream ``job`` (points relative to ``start_steps``), prompt at
     its pauses, end a stop as :func:`finish_stop` does, and book where grbl says the tool stands.  ``journal``:
     keep the job's journal (:class:`~cam.drive.grbl_journal.GrblJournal`: never ahead of where grbl reports the
-    tool, closed with where it reports it after the stop)."""
+    tool, closed with where it reports it after the stop).
+
+    ``pause_probe(session, ctl, request, frame_moved)`` (:func:`cam.drive.grbl_pause_probe.probe_at_grbl_pause`;
+    None: not offered) probes the new tool while the job waits at a tool change (the session's ``_pause_work``):
+    the lines are in machine coordinates (``G53``), so a work Z shifted there shifts the job's frame (``shift``):
+    the lines after it, the live position, the journal's home and the end booked all go on from ``start_steps``
+    shifted by as much."""
     machine: GrblMachine = session.grbl
     link = machine.link
     error = lost = ""
     keeper: Optional[GrblJournal] = None
     lines: Optional[GrblLines] = None
     sending = False
+    shift = np.zeros(3, np.int64)  # the job's frame moved at its pauses (a tool probed at a tool change)
+
+    def frame_moved(by_steps: Any) -> None:
+        shift[:] += np.asarray(by_steps, np.int64)
+        position.start = tuple(int(s) + int(d) for s, d in zip(start_steps, shift))  # type: ignore[assignment]
+        if keeper is not None:
+            keeper.home_moved(by_steps)
 
     def on_point(index: int) -> None:
         done = min(total, index + 1)
@@ -597,7 +617,9 @@ def run_on_grbl(session: Any, name: str, job: Any, ctl: GrblControl, label: str,
         sending = True
         link.allow()
         items = job_lines(job, start_steps, machine.base_steps, session.settings, on_point,
-                          None if lines is None else lines.add)
+                          None if lines is None else lines.add, shift)
+        if pause_probe is not None:
+            session._pause_work = lambda request: pause_probe(session, ctl, request, frame_moved)
         link.stream(["G21G90G94"], wait_idle=False)
         while True:
             pause = _stream_until_pause(link, items, position)
@@ -616,6 +638,9 @@ def run_on_grbl(session: Any, name: str, job: Any, ctl: GrblControl, label: str,
         error = str(exc)
     except Exception as exc:  # noqa: BLE001 - reported in the log; nothing more is sent
         error = f"internal error: {type(exc).__name__}: {exc}"
+    finally:
+        if pause_probe is not None:
+            session._pause_work = None
     if ctl.halted:
         try:
             lost = finish_stop(machine, ctl)
@@ -623,7 +648,9 @@ def run_on_grbl(session: Any, name: str, job: Any, ctl: GrblControl, label: str,
             lost = str(exc)
     elif error and sending:  # (a journal that could not be written: nothing was sent, nothing to stop)
         lost = fault_stop(machine, error)
-    _book_end(session, name, label, ctl, start_steps, error, lost, estimated_s, keeper, position)
+    # the end from the shifted start: the session adds what the tool moved at the pauses (its _pause_moved)
+    _book_end(session, name, label, ctl, tuple(int(s) + int(d) for s, d in zip(start_steps, shift)),  # type: ignore
+              error, lost, estimated_s, keeper, position)
 
 
 def _book_end(session: Any, name: str, label: str, ctl: GrblControl, start_steps: Steps3, error: str,

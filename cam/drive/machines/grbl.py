@@ -20,6 +20,7 @@ from .._session_parts import Activity
 from ..grbl_link import parse_grbl_url
 from ..grbl_machine import (GRBL_OFFSETS, GrblControl, GrblPosition, adopt_position, finish_stop, grbl_machine,
                             job_lines, run_on_grbl, steps_to_mpos, travel_advice)
+from ..grbl_pause_probe import probe_at_grbl_pause
 from ..grbl_probe import grbl_set_work_z, start_probe_on_grbl
 from ..grbl_program import start_program_on_grbl
 from ..grbl_time import grbl_time_s
@@ -160,10 +161,22 @@ def _launch(session: Any, name: str, job: JobLike, label: str, estimated_s: floa
                               start_mm) or estimated_s
     position = GrblPosition(grbl, start)  # type: ignore[arg-type]
     total = sum(len(piece) for piece in job.pieces())
-    session._begin(Activity(name, label, ctl, total, estimated_s, position))
+    session._begin(Activity(name, label, ctl, total, estimated_s, position, reach=lambda: _reach(job)))
     session.log(f"{label}: started on {session.port}")
-    session._spawn(run_on_grbl, (session, name, job, ctl, label, start, position, total, estimated_s, journal),
-                   name)
+    pause_probe = probe_at_grbl_pause if name == "job" else None  # a tool change's prompt offers probing the tool
+    session._spawn(run_on_grbl, (session, name, job, ctl, label, start, position, total, estimated_s, journal,
+                                 pause_probe), name)
+
+
+def _reach(job: JobLike) -> np.ndarray:
+    """The lowest and highest steps ``job`` reaches on each axis from where it starts, its start included: (3, 2)
+    (a tool probed at a tool change checks the job's shifted Z against the travel)."""
+    lo, hi = np.zeros(3, np.int64), np.zeros(3, np.int64)
+    for piece in job.pieces():
+        pts = np.asarray(piece.points_steps, np.int64).reshape(-1, 3)
+        if len(pts):
+            lo, hi = np.minimum(lo, pts.min(axis=0)), np.maximum(hi, pts.max(axis=0))
+    return np.stack([lo, hi], axis=1)
 
 
 def _home_on_grbl(session: Any, ctl: GrblControl) -> None:
