@@ -9,8 +9,9 @@ declaration of a setting of a job.  From it come:
   shared ones of ``info``, ``digitize`` and ``trace``): :mod:`cam.cli.parser`;
 * which option applies to which file kind, for the command line's checks
   (:mod:`cam.cli.checks`), :meth:`JobOptions.check_kind` and the page;
-* the web page's form: ``GET /api/options`` serves :func:`schema_json`, and
-  ``app.js`` shows, hides and range-checks its fields from it.
+* the web page's form: ``GET /api/options`` serves :func:`schema_json`, and ``app.js`` makes a field of
+  each option from it (label, unit, range, help, the kinds it shows for, under its :attr:`Option.group`): a
+  new option here is on the page with no page code.
 
 One name for one setting: the field is ``cut_depth_mm``, the flag
 ``--cut-depth`` (the field without its unit, ``_`` as ``-``), and the
@@ -35,7 +36,7 @@ from .limits import DEFAULT_GCODE_LINES, MAX_GCODE_LINES
 
 __all__ = [
     "Option", "JOB_OPTIONS", "OPTIONS", "OPTION_KINDS", "OPTION_OF_DEST", "schema_json", "check_range", "degenerate",
-    "MAX_MM", "MAX_PX", "MAX_DEPTH_PX", "TYPES",
+    "MAX_MM", "MAX_PX", "MAX_DEPTH_PX", "TYPES", "GROUPS",
 ]
 
 MAX_MM = 10_000.0
@@ -74,6 +75,7 @@ class Option:
         metavar: the value's name in ``--help``.
         web: whether the page may set it (False: it names files on the machine that runs `cam`).
         aliases: older flags still accepted for it, hidden from ``--help`` (``--excellon-format``).
+        group: what it is about, the heading of its fields on the page (:data:`GROUPS`).
     """
 
     name: str
@@ -91,6 +93,13 @@ class Option:
     metavar: Optional[str] = None
     web: bool = True
     aliases: tuple[str, ...] = ()
+    group: str = "Other"
+
+    @property
+    def label(self) -> str:
+        """The option's name in words, without its unit, for the page (``cut_depth_mm`` -> "Cut depth")."""
+        words = self.name.removesuffix("_mm").removesuffix("_px").replace("_", " ")
+        return words[:1].upper() + words[1:]
 
     @property
     def dest(self) -> str:
@@ -151,142 +160,153 @@ def _opt(name: str, flag: str, type: str, unit: str, kinds: frozenset[str] | set
     return Option(name, flag, type, unit, frozenset(kinds), default, help, **more)
 
 
+def _in(group: str) -> Callable[..., Option]:
+    """:func:`_opt` for the options of one group (what they are about: the page's headings)."""
+    return lambda *args, **more: _opt(*args, group=group, **more)
+
+
+GROUPS = ("Drawing", "Depth and placement", "Drill file", "Reading the file", "G-code", "SVG, DXF and HPGL",
+          "Sketch or photo", "Cutter", "Height map", "Levelling")
+"""What the options are about, in the page's order (each :attr:`Option.group` is one of them)."""
+_drawing, _placing, _drill, _reading, _gcode, _vector, _sketch, _cutter, _relief, _level = map(_in, GROUPS)
+
+
 JOB_OPTIONS: tuple[Option, ...] = (
     # drawings and digitized matrices, in pixels
-    _opt("depth", "--depth", "wholes", "Z px", _DRAWINGS, None,
+    _drawing("depth", "--depth", "wholes", "Z px", _DRAWINGS, None,
          "cutting depth in Z pixels: one value for all objects, or one per object (0 skips one); default 10; on a "
          "3D drawing one value cuts every layer at N (a flat-bottomed pocket) instead of a profile",
          lo=0, hi=MAX_DEPTH_PX, metavar="N|N1,N2,..."),
-    _opt("passes", "--passes", "whole", "", _DRAWINGS, 1,
+    _drawing("passes", "--passes", "whole", "", _DRAWINGS, 1,
          "Repeat Drill: cut in N passes of increasing depth (default 1)", lo=1, hi=1000, metavar="N"),
-    _opt("start", "--start", "choice", "", {"drawing"}, "top",
+    _drawing("start", "--start", "choice", "", {"drawing"}, "top",
          "2D: where each object starts: first pixel in scan order (top), nearest the tool (min-distance), or "
          "nearest the origin, the thesis's Min Distance rule (thesis)",
          choices=("top", "min-distance", "thesis")),
-    _opt("start_at", "--start-at", "wholes", "px", _DRAWINGS, (0, 0, 0),
+    _drawing("start_at", "--start-at", "wholes", "px", _DRAWINGS, (0, 0, 0),
          "offset the whole job by this many pixels", lo=-MAX_PX, hi=MAX_PX, count=3, metavar="X,Y,Z"),
-    _opt("pause_at", "--pause-at", "points", "px", _DRAWINGS, (),
+    _drawing("pause_at", "--pause-at", "points", "px", _DRAWINGS, (),
          "pause when the tool reaches this drawing point (repeatable); Enter resumes",
          lo=-MAX_PX, hi=MAX_PX, count=2, metavar="X,Y"),
-    _opt("profile", "--profile", "text", "", _DRAWINGS, None,
+    _drawing("profile", "--profile", "text", "", _DRAWINGS, None,
          "profile drawing (blue curve over black axes, red origin) or CSV of depths per layer", metavar="PROFILE"),
-    _opt("profile_expr", "--profile-expr", "text", "", _DRAWINGS, None,
+    _drawing("profile_expr", "--profile-expr", "text", "", _DRAWINGS, None,
          "depth of layer k as arithmetic in k and n (layers), e.g. '30*sqrt(1-((n-k)/n)**2)'", metavar="EXPR"),
     # depths and heights in mm, one name on every kind
-    _opt("cut_depth_mm", "--cut-depth", "number", "mm", _DRAWINGS | _VECTORS, None,
+    _placing("cut_depth_mm", "--cut-depth", "number", "mm", _DRAWINGS | _VECTORS, None,
          "cutting depth below the surface: drill files (default 2.0: through a 1.6 mm board), HPGL, SVG and DXF "
          "pen-down depth (default 0.5), or a drawing's depth for every object instead of --depth",
          lo=0.0, hi=MAX_MM, lo_open=True, metavar="MM"),
-    _opt("travel_height_mm", "--travel-height", "number", "mm", _VECTORS, None,
+    _placing("travel_height_mm", "--travel-height", "number", "mm", _VECTORS, None,
          "height above the surface between cuts (default 1.0): drill files, HPGL, SVG, DXF, and every file "
          "'cam export' writes; 0 (at the surface) needs --allow-surface-travel", lo=0.0, hi=MAX_MM, metavar="MM"),
-    _opt("allow_surface_travel", "--allow-surface-travel", "flag", "", _VECTORS, False,
+    _placing("allow_surface_travel", "--allow-surface-travel", "flag", "", _VECTORS, False,
          "accept --travel-height 0: the tool travels between cuts touching the surface (a pen or a drag knife), "
          "which on a cutter scratches the work"),
-    _opt("origin", "--origin", "choice", "", _DRAWINGS | _VECTORS, None,
+    _placing("origin", "--origin", "choice", "", _DRAWINGS | _VECTORS, None,
          "which point of the job goes to the active work zero (cam zero): file (the file's own zero: a drawing's "
          "top-left pixel, a drill, HPGL, SVG or DXF file's 0,0), upper-left, lower-left or center of what is cut; "
          "default: file for drawings and digitized matrices (the thesis), upper-left for drill, HPGL, SVG and DXF files "
          "(file when --offset is given)",
          choices=("file", "upper-left", "lower-left", "center")),
     # drill files, HPGL and SVG
-    _opt("offset_mm", "--offset", "numbers", "mm", _VECTORS, None,
+    _placing("offset_mm", "--offset", "numbers", "mm", _VECTORS, None,
          "where the board, plotter, SVG page or DXF drawing origin goes, mm from the work zero (cam export: from the "
          "program's zero); default: the top-left of what is cut there", lo=-MAX_MM, hi=MAX_MM, count=2, metavar="X,Y"),
-    _opt("mirror_x", "--mirror-x", "flag", "", {"excellon"}, False,
+    _drill("mirror_x", "--mirror-x", "flag", "", {"excellon"}, False,
          "drill files: mirror the board for drilling from the back"),
-    _opt("drill_order", "--drill-order", "choice", "", {"excellon"}, "tour",
+    _drill("drill_order", "--drill-order", "choice", "", {"excellon"}, "tour",
          "drill files: short tour per tool (default) or the file's order", choices=("tour", "file")),
-    _opt("excellon_units", "--excellon-units", "choice", "", {"excellon"}, None,
+    _drill("excellon_units", "--excellon-units", "choice", "", {"excellon"}, None,
          "units when the file does not say", choices=("inch", "metric")),
-    _opt("excellon_digits", "--excellon-digits", "digits", "digits", {"excellon"}, None,
+    _drill("excellon_digits", "--excellon-digits", "digits", "digits", {"excellon"}, None,
          "integer:fraction digits when the file does not say (e.g. 2:4)", lo=0, hi=8,
          count=2, metavar="I:F", aliases=("--excellon-format",)),
-    _opt("excellon_zeros", "--excellon-zeros", "choice", "", {"excellon"}, None,
+    _drill("excellon_zeros", "--excellon-zeros", "choice", "", {"excellon"}, None,
          "zero suppression when the file does not say", choices=("LZ", "TZ")),
-    _opt("kind", "--kind", "choice", "", _DRAWINGS | _VECTORS | {"gcode"}, None,
+    _reading("kind", "--kind", "choice", "", _DRAWINGS | _VECTORS | {"gcode"}, None,
          "read the file as this kind whatever its name and content say (matrix: a saved digitized matrix); with "
          "--kind excellon the --excellon-* flags apply", choices=("excellon", "gcode", "hpgl", "svg", "drawing",
                                                                   "matrix", "dxf")),
-    _opt("strict", "--strict", "flag", "", {"excellon"}, False,
+    _drill("strict", "--strict", "flag", "", {"excellon"}, False,
          "drill files: refuse a file with a tool that cannot be drilled (zero size, too large) instead of leaving "
          "its holes out with a warning"),
-    _opt("mill_holes_over_mm", "--mill-holes-over", "number", "mm", {"excellon"}, None,
+    _drill("mill_holes_over_mm", "--mill-holes-over", "number", "mm", {"excellon"}, None,
          "drill files: mill holes larger than MM with an MM bit (circles at the cut depth, within the hole) "
          "instead of drilling them", lo=0.0, hi=100.0, lo_open=True, metavar="MM"),
     # G-code
-    _opt("flip_y", "--flip-y", "flag", "", {"gcode"}, False, "G-code input: machine Y = +Y mm instead of -Y mm"),
+    _gcode("flip_y", "--flip-y", "flag", "", {"gcode"}, False, "G-code input: machine Y = +Y mm instead of -Y mm"),
     # SVG
-    _opt("scale", "--scale", "number", "", {"svg", "hpgl", "dxf"}, None,
+    _vector("scale", "--scale", "number", "", {"svg", "hpgl", "dxf"}, None,
          "SVG, DXF and HPGL: mm cut per mm of the drawing (default 1: its own size)", lo=0.0, hi=MAX_MM, lo_open=True,
          metavar="FACTOR"),
-    _opt("fit_mm", "--fit", "size", "mm", {"svg", "hpgl", "dxf"}, None,
+    _vector("fit_mm", "--fit", "size", "mm", {"svg", "hpgl", "dxf"}, None,
          "SVG, DXF and HPGL: scale the drawing to fit WIDTHxHEIGHT mm, keeping its proportions (e.g. 80x40)",
          lo=0.0, hi=MAX_MM, lo_open=True, count=2, metavar="WxH"),
-    _opt("layers", "--layers", "text", "", {"svg", "dxf"}, None,
+    _vector("layers", "--layers", "text", "", {"svg", "dxf"}, None,
          "SVG and DXF: cut only these layers, in this order (Inkscape layer names, 'parent/child' for a sublayer, or "
          "stroke colours such as '#ff0000' or red when the file has no layers; DXF layer names; 'cam info' lists "
          "them); default: every "
          "layer in file order", metavar="NAME,NAME"),
-    _opt("pause_between_layers", "--pause-between-layers", "flag", "", {"svg", "dxf"}, False,
+    _vector("pause_between_layers", "--pause-between-layers", "flag", "", {"svg", "dxf"}, False,
          "SVG and DXF: pause before each layer after the first, to change the pen or the tool (Enter resumes)"),
-    _opt("keep_duplicates", "--keep-duplicates", "flag", "", {"svg", "dxf"}, False,
+    _vector("keep_duplicates", "--keep-duplicates", "flag", "", {"svg", "dxf"}, False,
          "SVG and DXF: cut a segment that traces one already cut again (by default it is cut once)"),
     # G-code programs (the first two name files on the machine that runs cam: command line only)
-    _opt("tool_table", "--tool-table", "text", "", {"gcode"}, None,
+    _gcode("tool_table", "--tool-table", "text", "", {"gcode"}, None,
          "LinuxCNC tool table (T1 P1 Z12.5 D3 ...; mm) for G43 H tool length offsets and G41/G42 D cutter radii",
          metavar="FILE.tbl", web=False),
-    _opt("subroutine_path", "--subroutine-path", "paths", "", {"gcode"}, (),
+    _gcode("subroutine_path", "--subroutine-path", "paths", "", {"gcode"}, (),
          "folder where 'O<name> call' finds name.ngc (repeatable, searched in order)", metavar="DIR", web=False),
-    _opt("max_lines", "--max-lines", "whole", "lines", {"gcode"}, DEFAULT_GCODE_LINES,
+    _gcode("max_lines", "--max-lines", "whole", "lines", {"gcode"}, DEFAULT_GCODE_LINES,
          f"stop a program that runs N lines more than its own length, loops and subroutine calls counted each "
          f"pass (default {DEFAULT_GCODE_LINES:,}): a loop that never ends is an error, not a hang; a long "
          "program runs whole", lo=1, hi=MAX_GCODE_LINES, metavar="N"),
     # sketches and photos traced into drawings
-    _opt("trace", "--trace", "flag", "", {"drawing"}, False,
+    _sketch("trace", "--trace", "flag", "", {"drawing"}, False,
          "the image is a scanned sketch or a photo of one: trace it into 1-pixel curves first (as 'cam trace' "
          "does)"),
-    _opt("trace_min_length_px", "--trace-min-length", "whole", "px", {"drawing"}, 10,
+    _sketch("trace_min_length_px", "--trace-min-length", "whole", "px", {"drawing"}, 10,
          "with --trace: specks and spurs shorter than this many pixels go (default 10)", lo=2, hi=10_000,
          metavar="PX"),
-    _opt("trace_fill", "--trace-fill", "flag", "", {"drawing"}, False,
+    _sketch("trace_fill", "--trace-fill", "flag", "", {"drawing"}, False,
          "with --trace: the regions the curves enclose become red (a 3D drawing)"),
     # real cutters
-    _opt("tool", "--tool", "tool", "", _DRAWINGS | {"svg", "hpgl", "dxf"}, None,
+    _cutter("tool", "--tool", "tool", "", _DRAWINGS | {"svg", "hpgl", "dxf"}, None,
          "point (default, or the machine file's [tool]), flat:D, ball:D or v:ANGLE:TIP[:D] (mm, degrees): 3D "
          "reliefs are cut so the tool never goes below them anywhere", metavar="SHAPE"),
-    _opt("line_width_mm", "--line-width", "number", "mm", _DRAWINGS | {"svg", "hpgl", "dxf"}, None,
+    _cutter("line_width_mm", "--line-width", "number", "mm", _DRAWINGS | {"svg", "hpgl", "dxf"}, None,
          "2D drawings, SVG, DXF and HPGL with a V bit: the engraved lines' width, which sets their depth",
          lo=0.0, hi=MAX_MM, lo_open=True, metavar="MM"),
-    _opt("stepdown_mm", "--stepdown", "number", "mm", _DRAWINGS, None,
+    _cutter("stepdown_mm", "--stepdown", "number", "mm", _DRAWINGS, None,
          "3D reliefs: rough in levels this far apart before the finishing pass", lo=0.0, hi=MAX_MM, lo_open=True,
          metavar="MM"),
-    _opt("stepover", "--stepover", "number", "", _DRAWINGS, 0.5,
+    _cutter("stepover", "--stepover", "number", "", _DRAWINGS, 0.5,
          "roughing rings' spacing as a fraction of the roughing tool's diameter (default 0.5)", lo=0.0, hi=1.0,
          lo_open=True, metavar="FRACTION"),
-    _opt("rough_tool", "--rough-tool", "tool", "", _DRAWINGS, None,
+    _cutter("rough_tool", "--rough-tool", "tool", "", _DRAWINGS, None,
          "a larger roughing tool (as --tool); the job pauses at the home to change to --tool", metavar="SHAPE"),
     # grey-level reliefs (issue #31 point 7)
-    _opt("heightmap", "--heightmap", "flag", "", {"drawing"}, False,
+    _relief("heightmap", "--heightmap", "flag", "", {"drawing"}, False,
          "the image is a height map: each pixel's grey is its depth (black deepest), cut in rows with the tool "
          "by the drop-cutter rule (never below the depth asked)"),
-    _opt("invert", "--invert", "flag", "", {"drawing"}, False,
+    _relief("invert", "--invert", "flag", "", {"drawing"}, False,
          "with --heightmap: white is deepest instead of black"),
-    _opt("max_depth_mm", "--max-depth", "number", "mm", {"drawing"}, None,
+    _relief("max_depth_mm", "--max-depth", "number", "mm", {"drawing"}, None,
          "with --heightmap: the depth of the deepest grey (default 1.0)", lo=0.0, hi=100.0, lo_open=True,
          metavar="MM"),
-    _opt("pixel_size_mm", "--pixel-size", "number", "mm", {"drawing"}, None,
+    _relief("pixel_size_mm", "--pixel-size", "number", "mm", {"drawing"}, None,
          "with --heightmap: a pixel's width (default the machine's drawing pixel, rounded to whole steps)",
          lo=0.0, hi=100.0, lo_open=True, metavar="MM"),
-    _opt("heightmap_order", "--heightmap-order", "choice", "", {"drawing"}, "rows",
+    _relief("heightmap_order", "--heightmap-order", "choice", "", {"drawing"}, "rows",
          "with --heightmap: rows (zig-zag along X) or peel (the thesis's order: level by level, shallowest first)",
          choices=("rows", "peel")),
     # levelling to a probed surface (issue #46 point 2; a file on the machine that runs cam: command line only)
-    _opt("level", "--level", "text", "", _EVERY, None,
+    _level("level", "--level", "text", "", _EVERY, None,
          "level the job to a height map probed on this machine (cam probe grid --out MAP.json): every move, rapids "
          "included, is split at the map's spacing and its Z offset by the surface under it (bilinear); the job is "
          "placed at the active work zero first, whose Z zero must be on the surface", metavar="MAP.json", web=False),
-    _opt("level_extrapolate", "--level-extrapolate", "flag", "", _EVERY, False,
+    _level("level_extrapolate", "--level-extrapolate", "flag", "", _EVERY, False,
          "with --level: level moves outside the probed area by extending the map's edge cells (without it such a "
          "job is refused, naming how far outside)", web=False),
 )
@@ -323,8 +343,15 @@ def _json_value(value: Any) -> Any:
     return [_json_value(v) for v in value] if isinstance(value, (tuple, list)) else value
 
 
-def schema_json() -> list[dict[str, Any]]:
-    """The schema as JSON-able records (``GET /api/options``): every field of each :class:`Option`, kinds sorted."""
-    return [{"name": o.name, "flag": o.flag, "type": o.type, "unit": o.unit, "kinds": sorted(o.kinds),
-             "default": _json_value(o.default), "help": o.help, "min": o.lo, "max": o.hi, "min_open": o.lo_open,
-             "count": o.count, "choices": list(o.choices), "web": o.web, "aliases": list(o.aliases)} for o in JOB_OPTIONS]
+def schema_json(kind_defaults: Optional[dict[str, dict[str, Any]]] = None) -> list[dict[str, Any]]:
+    """The schema as JSON-able records (``GET /api/options``): every field of each :class:`Option`, kinds sorted,
+    with its :attr:`~Option.label`, its range in words (``range``, as the errors say it) and ``defaults``, the
+    value each kind it applies to takes when it is not given: ``kind_defaults[kind][name]`` where the library
+    has one (:func:`cam.job.jobs.kind_defaults`: a drill file's cut depth), else the option's default."""
+    every = kind_defaults or {}
+    return [{"name": o.name, "label": o.label, "group": o.group, "flag": o.flag, "type": o.type, "unit": o.unit,
+             "kinds": sorted(o.kinds), "default": _json_value(o.default),
+             "defaults": {k: _json_value(every.get(k, {}).get(o.name, o.default)) for k in sorted(o.kinds)},
+             "help": o.help, "min": o.lo, "max": o.hi, "min_open": o.lo_open, "range": o.range_text(),
+             "count": o.count, "choices": list(o.choices), "metavar": o.metavar, "web": o.web,
+             "aliases": list(o.aliases)} for o in JOB_OPTIONS]

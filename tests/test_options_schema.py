@@ -108,19 +108,24 @@ def test_the_page_is_served_the_schema(tmp_path):
     finally:
         app.state.session.shutdown()
     assert status == 200
-    assert json.loads(body) == json.loads(json.dumps(schema_json()))
+    from cam.job.jobs import kind_defaults
+
+    assert json.loads(body) == json.loads(json.dumps(schema_json(kind_defaults())))
     assert [o["name"] for o in json.loads(body)] == [o.name for o in JOB_OPTIONS]
 
 
 def test_the_page_builds_its_fields_from_the_schema():
-    """app.js keeps no copy of which option applies to which kind: the form has no data-kinds, and each named
-    field of the form is a schema option or one of the cutter's parts."""
+    """The page holds no option field of its own (issue #47 point 6): index.html's options form is empty, app.js
+    makes a field of each option from /api/options and names no option but those whose field is special (the
+    profile file it uploads, the Read as select of kind)."""
     static = Path(__file__).parent.parent / "cam" / "web" / "static"
     html = (static / "index.html").read_text()
-    assert "data-kinds" not in html
-    names = set(re.findall(r'<(?:input|select)[^>]* name="(\w+)"', html))
-    assert names - {o.name for o in JOB_OPTIONS} == {"tool_shape", "tool_diameter_mm", "tool_angle_deg", "tool_tip_mm"}
-    assert "/api/options" in (static / "app.js").read_text()
+    form = html[html.index('<form id="options-form"'):html.index("</form>", html.index('<form id="options-form"'))]
+    assert "data-kinds" not in html and not re.findall(r"<(?:input|select)", form)
+    js = (static / "app.js").read_text()
+    assert "/api/options" in js
+    assert set(re.findall(r'name === "(\w+)"', js)) == {"profile"}
+    assert not {o.name for o in JOB_OPTIONS} & set(re.findall(r'name="(\w+)"', js) + re.findall(r'\bo\.(\w+)\b', js))
 
 
 def _boundary_values(o: Option) -> list[float]:

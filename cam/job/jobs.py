@@ -81,7 +81,7 @@ from .svg import plan_svg
 
 __all__ = [
     "JobOptions", "PreparedJob", "PlannedIn", "prepare_job", "own_zero_home", "resume_job", "job_kind", "accepted_suffixes", "KINDS",
-    "origin_anchor_steps",
+    "origin_anchor_steps", "kind_defaults",
     "DRAWING_SUFFIXES", "DIGITIZED_SUFFIXES", "EXCELLON_SUFFIXES", "HPGL_SUFFIXES", "PROFILE_SUFFIXES",
 ]
 
@@ -340,6 +340,11 @@ def _fit(value: Any) -> tuple[float, ...]:
     return _floats(2)(value.lower().replace("x", ",") if isinstance(value, str) else value)
 
 
+def _digits(value: Any) -> tuple[int, ...]:
+    """Excellon ``I:F`` digit counts, as the command line takes them (``2:4``; also ``2,4`` or a list)."""
+    return _ints(2)(value.replace(":", ",") if isinstance(value, str) else value)
+
+
 def _parser_of(o: Option) -> Any:
     """How :meth:`JobOptions.from_mapping` reads option ``o`` from JSON or form text (None: not from the page)."""
     if not o.web:
@@ -349,7 +354,7 @@ def _parser_of(o: Option) -> Any:
     else:
         base = {"whole": _int, "number": _float, "wholes": _ints(o.count), "numbers": _floats(o.count or 1),
                 "choice": _text, "flag": _bool, "text": _text, "tool": _text, "points": _points,
-                "digits": _ints(o.count), "size": _fit}[o.type]
+                "digits": _digits, "size": _fit}[o.type]
     return _optional(base) if o.default is None else base
 
 
@@ -787,6 +792,20 @@ def _prepare_gcode(path: Path, options: JobOptions, settings: MachineSettings,
 
 def _or(value: Optional[float], default: float) -> float:
     return default if value is None else value
+
+
+def kind_defaults() -> dict[str, dict[str, Any]]:
+    """The values options take on a job kind when they are not given, where that depends on the kind (their
+    :data:`cam.options.JOB_OPTIONS` default is None): the cut depth and travel height of drill, HPGL, SVG and DXF
+    files, as :func:`prepare_job` plans them.  ``GET /api/options`` shows them on the page.
+
+    >>> kind_defaults()["excellon"]["cut_depth_mm"]
+    2.0
+    """
+    vector = {"cut_depth_mm": SVG_CUT_DEPTH_MM, "travel_height_mm": SVG_TRAVEL_HEIGHT_MM}
+    return {"excellon": {"cut_depth_mm": DRILL_DEPTH_MM, "travel_height_mm": DRILL_TRAVEL_HEIGHT_MM},
+            "hpgl": {"cut_depth_mm": HPGL_CUT_DEPTH_MM, "travel_height_mm": HPGL_TRAVEL_HEIGHT_MM},
+            "svg": vector, "dxf": dict(vector)}
 
 
 def own_zero_home(kind: str, options: JobOptions, machine_state: Optional[Any] = None

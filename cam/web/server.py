@@ -97,7 +97,7 @@ from ..errors import BusyError, CamError, CapabilityError, StalePlanError
 from ..fileio import atomic_write_bytes
 from ..sniff import HEAD_BYTES
 from ..options import schema_json
-from ..job.jobs import PROFILE_SUFFIXES, JobOptions, PreparedJob, accepted_suffixes, job_kind
+from ..job.jobs import PROFILE_SUFFIXES, JobOptions, PreparedJob, accepted_suffixes, job_kind, kind_defaults
 from ..machine_file import backup_path, list_settings, machine_file_of, save_settings
 from ..settings import DEFAULT_SETTINGS, MachineSettings
 from ..tool_table import (TABLE_SHAPES, job_tool_warnings, read_tool_table, tool_from_mapping, tool_table_path,
@@ -487,10 +487,11 @@ async def _get_config(st: _AppState, request: Request) -> dict[str, Any]:
 
 
 async def _get_options(st: _AppState, request: Request) -> list[dict[str, Any]]:
-    """``GET /api/options``: the job options' schema (:func:`cam.options.schema_json`): each option's name, flag,
-    type, unit, range, the file kinds it applies to, default and help; the page builds and checks its form
-    fields from it."""
-    return schema_json()
+    """``GET /api/options``: the job options' schema (:func:`cam.options.schema_json`): each option's name, label,
+    group, flag, type, unit, range, choices, the file kinds it applies to, its default on each of them
+    (:func:`cam.job.jobs.kind_defaults`) and help; the page makes its job-options form from it (issue #47
+    point 6)."""
+    return schema_json(kind_defaults())
 
 
 async def _read_capped(request: Request, cap_bytes: int, *, drain_bytes: int = _DRAIN_LIMIT_BYTES) -> Optional[bytes]:

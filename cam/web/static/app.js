@@ -48,130 +48,195 @@
   }
 
   // -- job: upload, options, plan ------------------------------------------------
-  // The job options' schema (GET /api/options, cam/options.py): each option's name (the form field's name),
-  // the file kinds it applies to, its range and help.  Which fields a kind shows, what is sent and the ranges
-  // checked before planning all come from it, not from a copy here.
+  // The job-options form is made from the options' schema (GET /api/options, cam/options.py; issue #47 point 6):
+  // one field per option, named by it, labelled with its label, unit and range, its help under it, in a fieldset
+  // per group; only the options of the loaded file's kind show, each with that kind's default as its placeholder.
+  // A new option of the schema is on the page with no code here: its type alone picks its widget.  Ranges are
+  // checked by the server, which refuses a value out of range in one line (the error banner).
   const schema = { byName: {}, ready: Promise.resolve() };
+  // options whose field is elsewhere on the page: the file read as a kind (the Read as select, by the file)
+  const ELSEWHERE = { kind: "read-as" };
+  // a cutter ("tool" type): its shape, and the parts of that shape, or a spec typed in (which wins)
+  const TOOL_SHAPES = [["", "default"], ["point", "point (the thesis)"], ["flat", "flat end mill"],
+                       ["ball", "ball end mill"], ["v", "V bit"]];
+  const TOOL_PARTS = [["diameter", "Diameter (mm; a V bit's shank, empty: 1/8 inch)", "1", "flat ball v"],
+                      ["angle", "Angle (degrees, included)", "60", "v"], ["tip", "Tip (mm, 0: sharp)", "0.1", "v"]];
+  const NUMERIC = ["whole", "number", "wholes", "numbers", "points", "digits", "size"];
 
   function applies(name, kind) {
     const o = schema.byName[name];
     return !kind || !o || o.kinds.includes(kind);
   }
 
-  // the form fields of the schema's options: [element, option]
-  function schemaFields() {
-    return Array.from($("options-form").querySelectorAll("[name]"))
-      .filter((el) => schema.byName[el.name]).map((el) => [el, schema.byName[el.name]]);
+  // an option's field id: opt- and its command-line flag (--cut-depth: opt-cut-depth; a cutter's spec: -spec)
+  function fieldId(o) { return "opt-" + o.flag.replace(/^-+/, ""); }
+
+  // a value of the schema as typed in its field (2:4, 80x40, 1,2;3,4, 0,0,0)
+  function asText(o, v) {
+    if (v === null || v === undefined || typeof v === "boolean") return "";
+    if (!Array.isArray(v)) return String(v);
+    if (o.type === "points") return v.map((p) => p.join(",")).join("; ");
+    return v.join(o.type === "digits" ? ":" : o.type === "size" ? "x" : ",");
+  }
+
+  function make(tag, props, ...children) {
+    const el = document.createElement(tag);
+    Object.assign(el, props || {});
+    children.forEach((c) => el.append(c));
+    return el;
+  }
+
+  function labelText(o) {
+    const about = [o.unit, o.range].filter((v) => v).join(", ");
+    return o.label + (o.metavar && !["whole", "number", "text", "tool"].includes(o.type) ? " " + o.metavar : "") +
+      (about ? " (" + about + ")" : "");
+  }
+
+  function toolField(o, label) {
+    const id = fieldId(o);
+    const shape = make("select", { id: id + "-shape" });
+    TOOL_SHAPES.forEach(([v, t]) => shape.append(make("option", { value: v, textContent: t })));
+    label.append(make("label", {}, "Cutter", shape));
+    TOOL_PARTS.forEach(([part, text, value, shapes]) => {
+      const part_label = make("label", {}, text, make("input", { id: id + "-" + part, value: value, inputMode: "decimal" }));
+      part_label.dataset.shapes = shapes;
+      label.append(part_label);
+    });
+    const spec = make("input", { id: id + "-spec", name: o.name, placeholder: "ball:1, flat:2, v:60:0.1" });
+    label.append(make("label", {}, "or tool spec", spec));
+    const showParts = () => label.querySelectorAll("label[data-shapes]").forEach((l) => {
+      l.hidden = !l.dataset.shapes.split(" ").includes(shape.value);
+    });
+    shape.addEventListener("change", showParts);
+    showParts();
+  }
+
+  // the profile option names a file: the page uploads it (role "profile") and sends its upload id
+  function profileField(o, label) {
+    const input = make("input", { id: "profile-file", type: "file", accept: ".png,.bmp,.jpg,.jpeg,.tif,.tiff,.csv,.txt" });
+    const button = make("label", { className: "filebtn" }, o.label + " file (drawing or CSV)", input);
+    label.append(button, make("div", { id: "profile-name", className: "muted" }));
+    input.addEventListener("change", async (ev) => {
+      const file = ev.target.files[0];
+      if (!file) return;
+      clearError();
+      try {
+        const r = await upload(file, "profile");
+        page.profile = r.job;
+        $("profile-name").textContent = "profile: " + r.name;
+        if (page.job) await planJob();
+      } catch (e) {
+        page.profile = null;
+        $("profile-name").textContent = "";
+      } finally {
+        ev.target.value = "";
+      }
+    });
+  }
+
+  // one option's field, in a wrapper that carries its name (data-option): shown or hidden by the file's kind
+  function optionField(o) {
+    const id = fieldId(o);
+    let wrap;
+    if (!o.web) {  // a file on the machine that runs cam: the command line's
+      wrap = make("p", { className: "muted", textContent: o.label + ": on the command line only (" + o.flag + ")" });
+    } else if (o.type === "flag") {
+      wrap = make("div", {}, make("label", { className: "check" }, make("input", { id: id, name: o.name, type: "checkbox" }),
+                                  " " + o.label));
+    } else if (o.type === "tool") {
+      wrap = make("div", { className: "tool-field" });
+      toolField(o, wrap);
+    } else if (o.name === "profile") {
+      wrap = make("div");
+      profileField(o, wrap);
+    } else if (o.type === "choice") {
+      const select = make("select", { id: id, name: o.name });
+      select.append(make("option", { value: "", textContent: "default" }));
+      o.choices.forEach((c) => select.append(make("option", { value: c, textContent: c })));
+      wrap = make("label", {}, labelText(o), select);
+    } else {
+      const input = make("input", { id: id, name: o.name });
+      if (NUMERIC.includes(o.type)) input.inputMode = ["whole", "wholes", "points"].includes(o.type) ? "numeric" : "decimal";
+      wrap = make("label", {}, labelText(o), input);
+    }
+    wrap.dataset.option = o.name;
+    wrap.title = o.help;
+    if (o.web) wrap.append(make("small", { className: "muted setting-help", textContent: o.help }));  // no hover on a phone
+    return wrap;
+  }
+
+  // the form: a fieldset per group, in the schema's order
+  function buildForm(options) {
+    const box = $("options-fields");
+    box.textContent = "";
+    const groups = {};
+    options.forEach((o) => {
+      if (ELSEWHERE[o.name]) { $(ELSEWHERE[o.name]).dataset.option = o.name; return; }
+      if (!groups[o.group]) {
+        groups[o.group] = make("fieldset", {}, make("legend", { textContent: o.group }));
+        groups[o.group].dataset.group = o.group;
+        box.append(groups[o.group]);
+      }
+      groups[o.group].append(optionField(o));
+    });
   }
 
   function loadSchema() {
     return api("/api/options").then((options) => {
       options.forEach((o) => { schema.byName[o.name] = o; });
-      schemaFields().forEach(([el, o]) => {
-        el.title = o.help + (o.unit ? " (" + o.unit + ")" : "");
-        if (el.type === "number") {
-          if (o.min !== null) el.min = o.min_open ? "" : String(o.min);
-          if (o.max !== null) el.max = String(o.max);
-        }
-      });
+      buildForm(options);
       showKind(page.kind);
     }, () => {});
   }
 
-  // a fieldset shows when one of its options applies to the kind; an option's label hides when it does not
+  // the options of the kind show (every option before a file is loaded), with the kind's defaults as placeholders
   function showKind(kind) {
-    document.querySelectorAll("#options-form fieldset").forEach((fs) => {
-      const named = Array.from(fs.querySelectorAll("[name]")).filter((el) => schema.byName[el.name]);
-      fs.hidden = kind ? !named.some((el) => applies(el.name, kind)) : false;
-      named.forEach((el) => {
-        const label = el.closest("label");
-        if (label) label.style.display = applies(el.name, kind) ? "" : "none";
-      });
+    document.querySelectorAll("#options-fields [data-option]").forEach((wrap) => {
+      const o = schema.byName[wrap.dataset.option];
+      wrap.style.display = applies(o.name, kind) ? "" : "none";
+      const shown = asText(o, kind && o.defaults[kind] !== undefined ? o.defaults[kind] : o.default);
+      const field = wrap.querySelector('[name="' + o.name + '"]');
+      if (!field || o.type === "tool") return;
+      if (field.tagName === "SELECT") field.options[0].textContent = shown ? "default (" + shown + ")" : "default";
+      else if (field.type !== "checkbox") field.placeholder = shown ? shown : (o.metavar || "");
+    });
+    document.querySelectorAll("#options-fields fieldset").forEach((fs) => {
+      fs.hidden = !Array.from(fs.querySelectorAll("[data-option]")).some((w) => w.style.display !== "none");
     });
   }
 
-  // why a value is outside its option's range (the server's words), or null
-  function outOfRange(name, value) {
-    const o = schema.byName[name];
-    if (!o || o.min === null || o.max === null || typeof value === "boolean") return null;
-    if (!["whole", "number", "wholes", "numbers", "points", "size"].includes(o.type)) return null;
-    const parts = String(value).split(/[\s,;xX]+/).filter((v) => v !== "");
-    const whole = ["whole", "wholes", "points"].includes(o.type);
-    for (const part of parts) {
-      const v = Number(part);
-      const bad = !Number.isFinite(v) || (whole && !Number.isInteger(v)) ||
-        (o.min_open ? v <= o.min : v < o.min) || v > o.max;
-      if (bad) {
-        const range = o.min_open ? "> " + o.min + " and at most " + o.max : o.min + ".." + o.max;
-        return "option '" + name + "' must be " + range + (o.unit ? " " + o.unit : "") + ", got '" + value + "'";
-      }
-    }
-    return null;
-  }
-
-  // the cutter: a spec typed in wins; else the select and its inputs ("" = the machine's [tool])
-  function toolSpec() {
-    const val = (id) => $(id).value.trim();
-    if (val("opt-tool-spec")) return val("opt-tool-spec");
-    const shape = val("opt-tool-shape");
-    if (shape === "flat" || shape === "ball") return shape + ":" + val("opt-tool-diameter");
+  // a cutter's spec: the spec typed in wins; else the shape and its parts ("": not given)
+  function toolSpec(o) {
+    const id = fieldId(o), val = (part) => $(id + "-" + part).value.trim();
+    if (val("spec")) return val("spec");
+    const shape = val("shape");
+    if (shape === "flat" || shape === "ball") return shape + ":" + val("diameter");
     if (shape === "v") {
-      const d = val("opt-tool-diameter");
-      return "v:" + val("opt-tool-angle") + ":" + (val("opt-tool-tip") || "0") + (d ? ":" + d : "");
+      const d = val("diameter");
+      return "v:" + val("angle") + ":" + (val("tip") || "0") + (d ? ":" + d : "");
     }
     return shape;  // "point" or ""
   }
 
-  // a line width is a V bit's (the width sets its depth); "" when none is given or the tool is no V bit
-  function lineWidth() {
-    const width = $("opt-line-width").value.trim();
-    return width && toolSpec().toLowerCase().startsWith("v") ? width : "";
-  }
-
-  function showToolInputs() {
-    const shape = $("opt-tool-shape").value;
-    document.querySelectorAll("#tool-options label[data-shapes]").forEach((l) => {
-      l.hidden = !l.dataset.shapes.split(" ").includes(shape);
-    });
-  }
-  $("opt-tool-shape").addEventListener("change", showToolInputs);
-  showToolInputs();
-
-  // the options of the schema that apply to the kind, each read from the form field of its name; then the few
-  // rules between fields: the cutter's spec is made of several fields, one depth is sent, trace's own options
-  // only when tracing
+  // the options that apply to the kind and are given: each read from its field (a box ticked, a value typed or
+  // chosen, a cutter, the profile uploaded); what is left empty is not sent (the kind's default)
   function collectOptions() {
     const kind = page.kind;
-    const o = {};
-    const form = $("options-form");
-    Object.values(schema.byName).forEach((opt) => {
-      if (!opt.web || !applies(opt.name, kind)) return;
-      const el = form.querySelector('[name="' + opt.name + '"]');
-      if (!el) return;
-      if (el.type === "checkbox") { o[opt.name] = el.checked; return; }
-      const v = el.value.trim();
-      if (v !== "") o[opt.name] = v;
+    const out = {};
+    Object.values(schema.byName).forEach((o) => {
+      if (!o.web || ELSEWHERE[o.name] || !applies(o.name, kind)) return;
+      let v;
+      if (o.type === "tool") v = toolSpec(o);
+      else if (o.name === "profile") v = page.profile || "";
+      else {
+        const el = $("options-fields").querySelector('[name="' + o.name + '"]');
+        if (!el) return;
+        v = el.type === "checkbox" ? el.checked : el.value.trim();
+      }
+      if (v !== "" && v !== false) out[o.name] = v;
     });
-    if (!Object.keys(schema.byName).length) return collectWithoutSchema(kind);
-    delete o.tool; delete o.line_width_mm;
-    if (applies("tool", kind) && toolSpec()) o.tool = toolSpec();
-    if (applies("line_width_mm", kind) && lineWidth()) o.line_width_mm = lineWidth();  // a V bit's sets the depth
-    if (applies("profile", kind) && page.profile) o.profile = page.profile;
-    // one depth: a profile (a shaped relief), its expression, a V bit's line width, mm for every object, Z pixels
-    const order = ["profile", "profile_expr", "line_width_mm", "cut_depth_mm", "depth"];
-    const first = order.findIndex((name) => o[name] !== undefined);
-    order.slice(first + 1).forEach((name) => { if (first >= 0) delete o[name]; });
-    if (!o.trace) { delete o.trace; delete o.trace_min_length_px; delete o.trace_fill; }
-    delete o.kind;
-    if ($("read-as").value) o.kind = $("read-as").value;  // cam drill --kind: the file read as this kind
-    return o;
-  }
-
-  // before the schema has come: the fields every kind had
-  function collectWithoutSchema(kind) {
-    const val = (id) => $(id).value.trim();
-    if (kind === "drawing" || kind === "digitized") return { depth: val("opt-depth"), passes: val("opt-passes") };
-    return {};
+    if ($("read-as").value) out.kind = $("read-as").value;  // cam drill --kind: the file read as this kind
+    return out;
   }
 
   async function upload(file, role) {
@@ -190,10 +255,7 @@
     const forced = { matrix: "digitized" }[$("read-as").value] || $("read-as").value;
     if (forced && forced !== page.kind) { page.kind = forced; showKind(forced); }  // its options apply
     try {
-      const options = collectOptions();
-      const bad = Object.keys(options).map((name) => outOfRange(name, options[name])).find((why) => why);
-      if (bad) { showError(bad); throw new Error(bad); }
-      const r = await api("/api/plan", { json: { job: page.job, options } });
+      const r = await api("/api/plan", { json: { job: page.job, options: collectOptions() } });
       page.planned = r;
       $("job-size").textContent = r.size_mm[0].toFixed(2) + " × " + r.size_mm[1].toFixed(2) + " mm, depth " +
         r.depth_mm.toFixed(2) + " mm";
@@ -239,23 +301,6 @@
   });
 
   $("read-as").addEventListener("change", () => planJob());
-
-  $("profile-file").addEventListener("change", async (ev) => {
-    const file = ev.target.files[0];
-    if (!file) return;
-    clearError();
-    try {
-      const r = await upload(file, "profile");
-      page.profile = r.job;
-      $("profile-name").textContent = "profile: " + r.name;
-      if (page.job) await planJob();
-    } catch (e) {
-      page.profile = null;
-      $("profile-name").textContent = "";
-    } finally {
-      ev.target.value = "";
-    }
-  });
 
   $("options-form").addEventListener("submit", (ev) => { ev.preventDefault(); planJob(); });
 
