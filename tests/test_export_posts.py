@@ -514,3 +514,108 @@ def test_export_moves_to_every_hole_before_plunging(tmp_path, post):
         assert sum(ev[0] == "change" for ev in events) == changes
         holes_mm, drilled_mm = _file_holes_mm(src)
         _check_every_plunge(events, holes_mm, drilled_mm, f"{post} {src.name}")
+
+
+def _eagle_drills_xln(tmp_path):
+    """The issue's ``eagle_drills.xln``: an old Eagle drill file (``excellon_gen.eagle_inch_2_4``) of three tools
+    whose first hole is the board's top-left (X0 Y0 once placed: where the program starts) and whose T2 has one
+    hole, at T1's last: both tool changes used to be followed by the plunge alone (``T2 M6`` then ``G1 Z-2``)."""
+    import excellon_gen
+
+    board = excellon_gen.Board(holes_mm=np.array([[0.0, 10.16], [5.08, 10.16], [5.08, 10.16], [20.32, 2.54]]),
+                               tool=np.array([0, 0, 1, 2]), diameters_mm=[0.8, 1.0, 3.2], size_mm=(25.0, 12.0))
+    path = tmp_path / "eagle_drills.xln"
+    path.write_text(excellon_gen.eagle_inch_2_4(board).text)
+    return path
+
+
+def _emulator_events(program: str) -> list[tuple]:
+    """The grbl program as the grbl emulator runs it (cycle start at each ``M0``): ("G0"|"G1", x, y, z) for each
+    block it executed (machine frame = the program's: no offsets) and ("change",) where it held at a pause.  Every
+    line must be answered ``ok``."""
+    import threading
+
+    from cam.drive.grbl_link import GrblLink
+    from cam.sim.grbl import start_emulator
+
+    emu = start_emulator(speed=None, settings={110: 5000.0, 111: 5000.0, 112: 5000.0, 120: 500.0, 121: 500.0,
+                                                122: 500.0})
+    pauses: list[int] = []
+    try:
+        with GrblLink(f"grbl:{emu.device_path}?baud=115200", welcome_timeout_s=1.0) as link:
+            done = threading.Event()
+
+            def cycle_start_at_each_pause():
+                while not done.is_set():
+                    if emu.wait_for(lambda e: e.state == "Hold:0" and e.planner_blocks == 0, 0.2):
+                        pauses.append(len(emu.executed()))
+                        link.resume()
+                        emu.wait_for(lambda e: not e.state.startswith("Hold"), 2.0)
+
+            helper = threading.Thread(target=cycle_start_at_each_pause)
+            helper.start()
+            try:
+                link.stream(program.splitlines())
+            finally:
+                done.set()
+                helper.join()
+    finally:
+        emu.stop()
+    assert emu.error is None and all(a == "ok" for _, _, a in emu.lines()), emu.lines()
+    events: list[tuple] = []
+    for k, b in enumerate(emu.executed()):
+        events += [("change",)] * pauses.count(k)
+        if b.kind in ("G0", "G1"):
+            events.append((b.kind, *b.end_mm))
+    return events
+
+
+def _check_plunges_on_grbl(events: list[tuple], holes_mm: np.ndarray, drilled_mm: np.ndarray) -> None:
+    """As :func:`_check_every_plunge`, for what grbl executed: a move of no length (the tool already over the
+    hole at the safe height) is no block, so after a pause the tool must stand at the safe height over the hole
+    when it plunges, with nothing but rapids since the pause."""
+    tol_mm = 0.5 * cam.MachineSettings().mm_per_step_xy + 1e-4
+    at, since_change, plunged, n_after_change = None, None, [], 0
+    for ev in events:
+        if ev[0] == "change":
+            since_change = []
+            continue
+        kind, x, y, z = ev
+        if kind == "G1" and z < -1e-9 and at is not None and at[2] >= -1e-9:
+            where = f"grbl emulator: plunge at X{x:g} Y{y:g}"
+            assert abs(x - at[0]) < 1e-6 and abs(y - at[1]) < 1e-6, f"{where} is not straight down from {at}"
+            assert np.abs(holes_mm - (x, y)).max(axis=1).min() <= tol_mm, f"{where} is not over a hole"
+            if since_change is not None:
+                n_after_change += 1
+                assert all(k == "G0" for k, *_ in since_change), f"{where}: a cut before the move to it"
+                assert at[2] >= _SAFE_Z_MM - 1e-6, f"{where}: not from the safe height ({at})"
+            plunged.append((x, y))
+            since_change = None
+        elif since_change is not None:
+            since_change.append(ev)
+        at = (x, y, z)
+    assert n_after_change >= 2, n_after_change
+    got = np.array(plunged)
+    assert not [h for h in drilled_mm if np.abs(got - h).max(axis=1).min() > tol_mm]
+
+
+@needs_rs274
+@pytest.mark.usefixtures("quick_thread_switches")
+def test_cam_export_eagle_drills_xln_moves_to_each_hole_for_linuxcnc_and_grbl(tmp_path):
+    """Issue #43 point 9's own example: ``cam export eagle_drills.xln --post linuxcnc`` read back by rs274, and
+    ``--post grbl`` read back line by line and run on the grbl emulator: after ``T1 M6`` and ``T2 M6`` (grbl:
+    ``M0``) the program goes up and over the hole before it plunges, and every plunge is a hole of the file."""
+    src = _eagle_drills_xln(tmp_path)
+    holes_mm, drilled_mm = _file_holes_mm(src)
+    assert len(drilled_mm) == 4
+    for post in ("linuxcnc", "grbl"):
+        out = tmp_path / f"eagle_drills-{post}.ngc"
+        assert main(["export", str(src), "--post", post, "-o", str(out)]) == 0
+        text = out.read_text()
+        assert len(re.findall(r"^T\d+ M6\b|^M0$", text, re.M)) >= 3, text
+        if post == "linuxcnc":
+            assert re.search(r"^T2 M6\b.*\n(?:\(.*\)\n)*G0 Z", text, re.M), text  # not G1 Z-2 straight after
+            _check_every_plunge(_rs274_events(out), holes_mm, drilled_mm, "linuxcnc eagle_drills.xln")
+        else:
+            _check_every_plunge(_grbl_events(text), holes_mm, drilled_mm, "grbl eagle_drills.xln")
+            _check_plunges_on_grbl(_emulator_events(text), holes_mm, drilled_mm)

@@ -184,6 +184,52 @@ def test_at_real_speed_error_mid_job_stops_within_the_deceleration():
         assert emu.machine_position_mm[0] < 29.0
 
 
+def push_at_ok(k: int, push: bytes, keep_ok: bool = True) -> Callable[[bytes], bytes]:
+    """A board-line filter that puts ``push`` (a line grbl sends unasked) at the ``k``-th ``ok``, before it or (a
+    welcome: a reset answers nothing) instead of it; grbl itself goes on running its queue, so only cam's own stop
+    can keep the queued blocks from running."""
+    count = [0]
+
+    def edit(line: bytes) -> bytes:
+        if line.strip() == b"ok":
+            count[0] += 1
+            if count[0] == k:
+                return push + b"\r\n" + (line if keep_ok else b"")
+        return line
+    return edit
+
+
+@pytest.mark.parametrize("push, keep_ok, words", [(b"ALARM:1", True, ("ALARM:1 (hard limit",)),
+                                                  (b"Grbl 1.1h ['$' for help]", False, ("reset itself",))],
+                         ids=["ALARM mid-job", "a reset cam did not ask for"])
+def test_an_alarm_or_a_reset_mid_job_holds_then_resets_grbl(tmp_path, push, keep_ok, words):
+    """Issue #43 point 1 for grbl's push messages: an ``ALARM:n`` or a welcome line (grbl reset) mid-job.  Here the
+    emulator has not stopped by itself (the proxy says it), so the test sees cam's own stop: a feed hold, then a
+    soft reset, no block queued before the fault runs to its end, one line, and the position is unknown."""
+    marks: dict = {}
+    with emulator_rig() as (emu, proxy):
+        filt = push_at_ok(25, push, keep_ok)
+
+        def mark(line: bytes) -> bytes:
+            out = filt(line)
+            if out != line and "fault" not in marks:
+                marks["fault"] = len(proxy.to_board)
+            return out
+        proxy.board_line_filter = mark
+        hold = StateHold(tmp_path / "m.json", SETTINGS, "test")
+        hold.record(replace(hold.state, position_known=True))
+        session = open_session(proxy, state=hold)
+        run_to_end(session, zigzag_job(SETTINGS))
+        msg = fault_message(session)
+        assert all(w in msg for w in words) and "soft reset" in msg and "position is unknown" in msg, msg
+        assert "fault" in marks, "the proxy never sent the push"
+        assert_stopped_by_hold_then_reset(emu)
+        assert_no_line_after(proxy, marks["fault"])
+        assert emu.machine_position_mm[0] < 39.0
+        assert not hold.state.position_known
+        hold.close()
+
+
 # ---------------------------------------------------------------------------------------------- counting
 def drop_ok(k: int) -> Callable[[bytes], bytes]:
     count = [0]

@@ -224,6 +224,60 @@ def test_second_opener_of_a_grbl_port_is_refused(grbl, tmp_path, state_home):
         assert hold.state.position_known and hold.state.position_steps == (400, 0, 0)
 
 
+def test_the_page_locks_the_device_and_a_second_page_or_command_is_refused(grbl, tmp_path, state_home):
+    """Point 4 through ``cam serve``'s own app (create_app): while the page holds a grbl port, a command with
+    another state file, and a second page, are refused in one line naming the holder; the lock goes with the
+    page."""
+    from test_web import Server
+
+    port = url(grbl)
+    write_state(tmp_path / "page.json", MachineState())
+    s = Server(tmp_path, settings=SETTINGS, machine_port=port, state_file=str(tmp_path / "page.json"))
+    try:
+        lines = len(grbl.lines())
+        one_line_error(run_cli("where", "--port", port), "refused", "cam serve", f"pid {os.getpid()}")
+        one_line_error(run_cli("jog", "X+", "10", "--port", port, "--state", tmp_path / "other.json"), "refused",
+                       "cam serve")
+        with pytest.raises(StateBusyError, match="cam serve"):
+            Server(tmp_path, settings=SETTINGS, machine_port=port, state_file=str(tmp_path / "second.json"))
+        assert len(grbl.lines()) == lines or all(t.startswith("?") for _, t, _ in grbl.lines()[lines:])
+        assert not (tmp_path / "other.json").exists() and not (tmp_path / "second.json").exists()
+    finally:
+        s.close()
+    ok(run_cli("where", "--port", port, "--state", tmp_path / "page.json"))  # the page gone, the port is free
+
+
+def test_a_failed_home_from_the_cli_or_the_page_leaves_the_position_unknown(grbl, tmp_path):
+    """Point 5, the issue's case from each front end: grbl with homing disabled answers ``$H`` with ``error:5``
+    after an emergency stop; ``cam home`` is one line and the page's Home ends in an error, the position stays
+    unknown, and a jog sent then is not booked as known."""
+    from cam.drive.grbl_machine import close_grbl_machines
+    from test_web import Server
+
+    port, path = url(grbl), tmp_path / "m.json"
+    write_state(path, MachineState(position_steps=(100, 0, 0)).lost("an emergency stop ended the job"))
+    r = run_cli("home", "--port", port, "--state", path)
+    assert r.returncode == 2 and "Traceback" not in r.stderr, r.stderr
+    assert "error:5" in r.stderr.splitlines()[-1] and "position unknown" in r.stderr.splitlines()[-1], r.stderr
+    assert not read_state(path, SETTINGS).position_known
+    close_grbl_machines()  # as a new process
+    s = Server(tmp_path, settings=SETTINGS, machine_port=port, state_file=str(path))
+    try:
+        status, st = s.call("POST", "/api/home", {})
+        st = s.wait_idle(30) if status == 200 else st
+        assert (status >= 400 and "error:5" in st["error"]) or \
+            (st["last"]["status"] == "error" and "error:5" in st["last"]["messages"][0]), (status, st)
+        status, st = s.call("GET", "/api/state")
+        assert not st["where"]["position_known"], st["where"]
+        status, st = s.call("POST", "/api/jog", {"axis": "x", "steps": 10, "unit": "steps"})
+        assert status == 200, st
+        st = s.wait_idle()
+        assert st["last"]["status"] == "finished" and not st["where"]["position_known"], (st["last"], st["where"])
+        assert not read_state(path, SETTINGS).position_known
+    finally:
+        s.close()
+
+
 # -- issue #44 point 5: a state file names the machine, not only the device path --------------------------
 
 ADAPTER = "usb-1a86_USB2.0-Serial-if00-port0"  # a CH340 adapter without a serial number, as udev names it
