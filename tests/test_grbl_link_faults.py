@@ -270,6 +270,48 @@ def test_a_lost_ok_is_a_fault_in_bounded_time_not_a_hang():
         assert any(text.startswith("soft reset") for _, text in emu.events)
 
 
+def go_silent(k: int) -> Callable[[bytes], bytes]:
+    """A board-line filter that passes nothing from the ``k``-th ``ok`` on (a board whose transmit line died)."""
+    count = [0]
+
+    def edit(line: bytes) -> bytes:
+        if line.strip() == b"ok":
+            count[0] += 1
+        return b"" if count[0] >= k else line
+    return edit
+
+
+@pytest.mark.slow  # the silence must last the link's timeout_s (5 s), then the hold's own wait
+def test_a_board_gone_silent_is_one_line_after_a_hold_and_a_reset(tmp_path):
+    """Issue #43 points 1 and 2, a timeout: grbl stops answering (nothing at all, status polls included) mid-job.
+    After ``timeout_s`` cam says so in one line, still sends a feed hold then a soft reset (the port is open: only
+    the answers are gone), says it could not confirm the stop, and the position is unknown."""
+    marks: dict = {}
+    with emulator_rig() as (emu, proxy):
+        silent = go_silent(20)
+
+        def mark(line: bytes) -> bytes:
+            out = silent(line)
+            if not out and "silent" not in marks:
+                marks["silent"] = len(proxy.to_board)
+            return out
+        hold = StateHold(tmp_path / "m.json", SETTINGS, "test")
+        hold.record(replace(hold.state, position_known=True))
+        session = open_session(proxy, state=hold)
+        proxy.board_line_filter = mark
+        t0 = time.monotonic()
+        run_to_end(session, zigzag_job(SETTINGS))
+        msg = fault_message(session)
+        assert "stopped answering" in msg and "could not reach grbl" in msg and "position is unknown" in msg, msg
+        assert time.monotonic() - t0 < 60
+        later = bytes(proxy.to_board[marks["silent"]:])
+        assert b"!" in later and b"\x18" in later[later.index(b"!"):], later  # a hold, then a reset
+        assert_no_line_after(proxy, marks["silent"])
+        assert any(text.startswith("soft reset") for _, text in emu.events)
+        assert not hold.state.position_known
+        hold.close()
+
+
 def test_an_ok_with_nothing_outstanding_is_a_fault_never_credit():
     """Issue #43 point 2: one duplicated ``ok``.  It is found out at the latest when the count runs dry (an
     ``ok`` with no line outstanding), and the machine is stopped."""
