@@ -18,7 +18,7 @@ from numba import njit
 from .._compiled import entry
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _walk(flat, cur, offsets, out, n_out):
     """Greedy walk from ``cur`` (already marked); appends visited pixels to ``out``; returns the new length."""
     while True:
@@ -37,7 +37,7 @@ def _walk(flat, cur, offsets, out, n_out):
 
 
 @entry
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def trace2d_kernel(flat, scan, wp, offsets, min_distance, tool_x, tool_y, from_origin):
     """2D trace of every set pixel of ``flat`` (modified in place).
 
@@ -116,7 +116,7 @@ def trace2d_kernel(flat, scan, wp, offsets, min_distance, tool_x, tool_y, from_o
 
 
 @entry
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def pad_mask_kernel(classes, value):
     """``(flat, scan)``: the pixels equal to ``value`` as a padded, flattened uint8 mask, and their flat
     indices in scan order -- one pass, no full-size temporaries."""
@@ -141,7 +141,7 @@ def pad_mask_kernel(classes, value):
     return flat, scan
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _flood_ring(lay, ring_of, start, k, ring, wp, stack):
     """Mark the 8-connected piece of layer ``k`` (traced pixels hold -k) holding ``start`` as ``ring``.
 
@@ -166,7 +166,7 @@ def _flood_ring(lay, ring_of, start, k, ring, wp, stack):
     return left
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _layer_order(lay, n_layers, bounds):
     """Pixels of layers 1.. grouped by layer, scan order within a layer (a counting sort)."""
     fill = bounds.copy()
@@ -179,7 +179,7 @@ def _layer_order(lay, n_layers, bounds):
     return order
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _layer_bounds(lay):
     """``(n_layers, first, bounds)`` of a layer map: layer k's first pixel in scan order is ``first[k]``
     and its pixels are ``bounds[k]:bounds[k + 1]`` of :func:`_layer_order`."""
@@ -202,7 +202,7 @@ def _layer_bounds(lay):
     return n_layers, first, bounds
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _nearest(lay, order, lo, hi, wp, row, col, ring_of, ring):
     """The untraced pixel of ``order[lo:hi]`` nearest to (``row``, ``col``) of the padded image (ties: the
     first in scan order); only pixels flood-filled as ``ring`` when ``ring > 0``.  -1 if there is none."""
@@ -220,7 +220,7 @@ def _nearest(lay, order, lo, hi, wp, row, col, ring_of, ring):
     return s
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _walk_layer(lay, k, cur, cr, cc, offsets, drow, dcol, xy, n_path):
     """Trace from the untraced pixel ``cur`` (row ``cr``, column ``cc`` of the padded image) of layer ``k``:
     mark it, append it to ``xy`` at ``n_path``, and go on greedily in the Figure 4.15 order within the layer.
@@ -247,7 +247,7 @@ def _walk_layer(lay, k, cur, cr, cc, offsets, drow, dcol, xy, n_path):
     return cur, cr, cc, n_path
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _grown(ring_starts, ring_levels, n_rings):
     """The ring arrays with twice the room, holding their first ``n_rings`` entries."""
     grown_s = np.empty(2 * ring_levels.shape[0] + 1, np.int64)
@@ -258,7 +258,7 @@ def _grown(ring_starts, ring_levels, n_rings):
 
 
 @entry
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def trace_layers_kernel(layer_flat, wp, offsets, drow, dcol):
     """Trace every layer of a padded, flattened layer map into rings (see :mod:`.peel3d`).
 
@@ -330,7 +330,7 @@ def trace_layers_kernel(layer_flat, wp, offsets, drow, dcol):
 
 
 @entry
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def peel_padded_kernel(classes, black, red, white):
     """Layer numbers of a 3D drawing, padded by one pixel, in two chamfer passes (see :mod:`.peel3d`).
 

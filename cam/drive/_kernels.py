@@ -22,7 +22,7 @@ def _dda_axis(r, ad, n, d, dir_state, axis, clock_bit):
     return r, 0
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _fill_periods(pts, delay_xy_ns, delay_z_ns, clock, dirbit, n_per_move, nominal, dir_state, i0, k0,
                   high, dirs, period):
     """The step loop of :func:`stretch_kernel`: fill ``high``, ``dirs`` and ``period`` (each ``(P,)``) with the periods
@@ -80,7 +80,7 @@ def _fill_periods(pts, delay_xy_ns, delay_z_ns, clock, dirbit, n_per_move, nomin
 
 
 @entry
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def stretch_kernel(pts, delay_xy_ns, delay_z_ns, clock, dirbit, n_per_move, nominal, dir_state, i0, k0, max_periods):
     """Up to ``max_periods`` periods of the moves between rows of ``pts``, from period ``k0`` of move ``i0`` on.
 
@@ -104,7 +104,7 @@ def stretch_kernel(pts, delay_xy_ns, delay_z_ns, clock, dirbit, n_per_move, nomi
 
 
 @entry
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def chunk_writes_kernel(high, dirs, per, next_dirs, t0):
     """Writes of consecutive periods inside a job: ``(2P,)`` times and data, the first period starting at
     ``t0`` ns; the last period's falling edge writes ``next_dirs`` (the next period's directions)."""
@@ -184,7 +184,7 @@ def _put_int(out, k, v, pairs):
 
 
 @entry
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def net_steps_kernel(data, prev_byte, clock, dirbit, ends):
     """``(K, 3)`` int64 steps each axis made over the writes ``data[:ends[k]]``, as
     :func:`cam.verify.pinlog.net_steps` counts them (a step per rising clock, + with its direction bit set), in one

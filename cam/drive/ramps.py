@@ -117,7 +117,7 @@ def _breaks(per, up, stop_idx, start_ns, still_ns):
     return brk
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _pair_cap(m1, m2, s, v_start, acc, u_hi):
     """Largest steady path rate (<= ``u_hi``) at which intervals of ``m1`` then ``m2`` periods pass R2.
 

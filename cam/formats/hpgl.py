@@ -219,28 +219,28 @@ def _arrays(n: int, dtypes) -> tuple[np.ndarray, ...]:
     return tuple(np.empty(n, t) for t in dtypes)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _letter(c):
     return (65 <= c <= 90) or (97 <= c <= 122)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _space(c):
     # space, tab, LF, VT, FF, CR; NUL, ETX and SUB (^Z) padding outside labels
     return c == 32 or (9 <= c <= 13) or c == 0 or c == 3 or c == 26
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _upper(c):
     return c - 32 if 97 <= c <= 122 else c
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _coord_cmd(code):
     return code == 0x5055 or code == 0x5044 or code == 0x5041 or code == 0x5052  # PU PD PA PR
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _known(code):
     return (_coord_cmd(code) or code == 0x494E or code == 0x4446 or code == 0x5350  # IN DF SP
             or code == 0x5343 or code == 0x4950 or code == 0x4349 or code == 0x4141  # SC IP CI AA
@@ -248,7 +248,7 @@ def _known(code):
             or code == 0x524F or code == 0x4952 or code == 0x4957)  # RO IR IW
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _mode_of(code):
     """The tokenizer mode after the mnemonic ``code``."""
     if code == C_LB:
@@ -262,7 +262,7 @@ def _mode_of(code):
     return M_SKIP
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _emit(c_code, c_off, c_line, c_col, c_p0, c_np, nc, st, npar):
     """Record the current command (mnemonic code, byte offset, line, column in ``st``) with its parameters
     ``st[S_P0]`` to ``npar`` as command ``nc``; return nc + 1."""
@@ -283,7 +283,7 @@ def _emit(c_code, c_off, c_line, c_col, c_p0, c_np, nc, st, npar):
 # _params are inlined into the kernel (numba IR), so their calls cost nothing either.
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _pow10(exp):
     """``10.0 ** exp`` for ``exp >= 0``, computed exactly as numba computes a float to an integer power."""
     if exp > 0x10000:
@@ -351,7 +351,7 @@ def _number(buf, i, final):
     return status, sign * value, j
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _begin_chunk(st):
     """Set the current command's slots for a new chunk; returns the mode to start in."""
     line = st[S_LINE]
@@ -376,7 +376,7 @@ def _begin_chunk(st):
     return M_IDLE
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _between(buf, i, st, base, line, lstart):
     """M_IDLE: blanks and ';' up to the next mnemonic.  Returns ``(i, mode, line, lstart, err)``."""
     n = buf.shape[0]
@@ -400,7 +400,7 @@ def _between(buf, i, st, base, line, lstart):
     return i, mode, line, lstart, err
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _mnemonic(buf, i, st, base, line, lstart, npar):
     """M_MN1: ``buf[i]`` ends the mnemonic begun at ``st[S_CSTART]``; records the command.
 
@@ -483,7 +483,7 @@ def _params(buf, i, final, st, base, line, lstart, npar, p_val, p_line, p_col):
     return i, ended, npar, line, lstart, err, incomplete
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _skip(buf, i, mode, st, base, line, lstart):
     """An unknown command (M_SKIP, with its quoted strings M_QUOTE), PE, DT or a label (M_LABEL), up to its end.
 
@@ -518,7 +518,7 @@ def _skip(buf, i, mode, st, base, line, lstart):
     return i, mode, line, lstart, ended
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _hand_over(st, mode, n, npar, line, lstart):
     """The chunk ends (not the file): what is consumed, and where the next chunk starts.
 
@@ -537,7 +537,7 @@ def _hand_over(st, mode, n, npar, line, lstart):
     return (st[S_P0] if mode != M_MN1 else npar), safe, st[S_SAFE_LINE], st[S_SAFE_LSTART], resume, False
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _end_of_file(st, mode, n, base):
     """The file ends in ``mode``.  Returns ``(err, emit)``; ``emit``: record the current command."""
     if mode == M_MN1:
@@ -552,7 +552,7 @@ def _end_of_file(st, mode, n, base):
     return E_NONE, mode != M_IDLE
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _error_at(st, err, line, lstart):
     """Line and column of the error at file offset ``st[S_ERRPOS]`` (from the last known line start)."""
     at = st[S_ERRPOS]
@@ -570,7 +570,7 @@ def _error_at(st, err, line, lstart):
 
 
 @entry
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _tokenize(buf, final, st, c_code, c_off, c_line, c_col, c_p0, c_np, p_val, p_line, p_col):
     """Commands and numeric parameters of one chunk (see :func:`_chunks` for the contract).
 
@@ -624,7 +624,7 @@ def _tokenize(buf, final, st, c_code, c_off, c_line, c_col, c_p0, c_np, p_val, p
     return nc
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _point(o_x, o_y, o_line, o_col, o_start, o_pen, k, x, y, line, col, start, pen, write, ro=0.0):
     """Record pen-down point ``k`` (:data:`_POINT_DTYPES`) when ``write`` (else only count it); return k + 1.
     ``(x, y)`` is in the coordinate system turned ``ro`` quarter turns (``RO``): recorded as plotted."""
@@ -635,7 +635,7 @@ def _point(o_x, o_y, o_line, o_col, o_start, o_pen, k, x, y, line, col, start, p
     return k + 1
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _clip(ax, ay, bx, by, x0, y0, x1, y1):
     """The part of the segment from ``(ax, ay)`` to ``(bx, by)`` inside the box ``x0..x1`` by ``y0..y1`` (edges
     included): its parameters ``(t0, t1)`` along the segment, ``t0 > t1`` when it misses the box (Liang and
@@ -667,7 +667,7 @@ def _clip(ax, ay, bx, by, x0, y0, x1, y1):
     return t0, t1
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _along(ax, ay, bx, by, t, ist):
     """The point at ``t`` along the segment from ``(ax, ay)`` to ``(bx, by)``, kept inside the window (a point
     computed on its edge may not stray off it by rounding); its ends exactly."""
@@ -680,7 +680,7 @@ def _along(ax, ay, bx, by, t, ist):
     return x, y
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _plot(ist, o_x, o_y, o_line, o_col, o_start, o_pen, k, x, y, line, col, start, pen, write):
     """The pen down at ``(x, y)`` (the coordinate system turned ``ist[I_RO]``, a stroke's first point when
     ``start``): the points it plots, recorded from ``k`` (:func:`_point`) as plotted, or only counted; returns the
@@ -715,7 +715,7 @@ def _plot(ist, o_x, o_y, o_line, o_col, o_start, o_pen, k, x, y, line, col, star
     return k
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _window(ist):
     """The input window's corners as plotted (``ist[I_IWX0..I_IWY1]``, lower left and upper right) from its
     corners as ``IW`` gave them (``ist[I_IWU0..I_IWU3]``, in the units in force then: user units, through the
@@ -731,7 +731,7 @@ def _window(ist):
     ist[I_LIN] = 1.0 if ist[I_LIN] != 0 and inside else 0.0
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _iw(m, p0, p_val, p_line, p_col, line, col, ist, err):
     """``IW xll,yll,xur,yur``: the input window, in the current units (user units while scaling is on; the window
     then keeps its user coordinates when P1 and P2 move, until an ``SC`` binds it to plotter units); ``IW;``: no
@@ -753,7 +753,7 @@ def _iw(m, p0, p_val, p_line, p_col, line, col, ist, err):
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _turn(x, y, quarters):
     """``(x, y)`` turned ``quarters`` quarter turns counter-clockwise (+X toward +Y) about (0, 0); exact."""
     q = int(quarters) % 4
@@ -766,7 +766,7 @@ def _turn(x, y, quarters):
     return x, y
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _rescale(ist):
     """The user-to-plotter transform (``ist[I_AX..I_BY]``) from P1, P2 and the ``SC`` parameters (HP-GL/2):
     type 0 maps (xmin, ymin) to P1 and (xmax, ymax) to P2; type 1 does so with one unit size for both axes
@@ -796,7 +796,7 @@ def _rescale(ist):
     ist[I_AX], ist[I_BX], ist[I_AY], ist[I_BY] = ax, bx, ay, by
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _reset(ist, initialise):
     """``DF`` (scaling off, chord angles) and, with ``initialise``, ``IN`` (also P1 and P2 to their defaults)."""
     ist[I_SC] = 0.0
@@ -808,7 +808,7 @@ def _reset(ist, initialise):
     _rescale(ist)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _chords(ist, sweep_deg, radius_user, has_chord, chord):
     """The number of equal chords of an arc of ``sweep_deg`` (float: it may be huge): the chord angle (or, in
     ``CT1`` mode, the angle whose chord strays ``chord`` from the arc, in the radius's units) clamped to
@@ -827,12 +827,12 @@ def _chords(ist, sweep_deg, radius_user, has_chord, chord):
     return max(n, 1.0) if sweep_deg != 0 else 0.0
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _fail(err, code, line, col, aux, aux2):
     err[0], err[1], err[2], err[3], err[4] = code, line, col, aux, aux2
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _ip(m, p0, p_val, p_line, p_col, line, col, ist, err):
     """``IP``: the scaling points P1 and P2 (plotter units).  Returns False after recording an error in ``err``."""
     if not (m == 0 or m == 2 or m == 4):
@@ -846,7 +846,7 @@ def _ip(m, p0, p_val, p_line, p_col, line, col, ist, err):
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _ir(m, p0, p_val, p_line, p_col, line, col, ist, err):
     """``IR``: P1 and P2 at percentages (0..100) of the rectangle between the default P1 and P2 (the page this
     reader assumes, :data:`DEFAULT_P1_PU`, :data:`DEFAULT_P2_PU`).  Returns False after recording an error."""
@@ -864,7 +864,7 @@ def _ir(m, p0, p_val, p_line, p_col, line, col, ist, err):
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _p1p2(m, at, ist):
     """P1 (and P2) at ``at`` (plotter units; ``m`` 0: the defaults; 2: P2 keeps its place relative to P1)."""
     if m == 0:
@@ -886,7 +886,7 @@ def _p1p2(m, at, ist):
         _window(ist)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _turn_to(quarters, ist, cx, cy):
     """``RO`` (``IN``: back to none): the coordinate system turned ``quarters`` quarter turns from the plotter's.
     The pen stays where it is on the paper, so its coordinates in the new system change; returns them."""
@@ -895,7 +895,7 @@ def _turn_to(quarters, ist, cx, cy):
     return x, y
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _setting(code, m, p0, p_val, p_line, p_col, line, col, ist, cx, cy, err):
     """``CT``, ``RO`` or ``IR``.  Returns ``(cx, cy, ok)``, the pen in the (new) coordinate system; not ``ok``: an
     error is recorded in ``err``."""
@@ -915,7 +915,7 @@ def _setting(code, m, p0, p_val, p_line, p_col, line, col, ist, cx, cy, err):
     return cx, cy, True
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _three_points(ui, vi, ue, ve):
     """The arc from (0, 0) through ``(ui, vi)`` to ``(ue, ve)`` (``AT``/``RT`` in user units from the pen), as
     HP-GL/2 draws it: ``(kind, centre x, centre y, radius, start angle (radians), sweep (degrees))``, kind 1 an
@@ -941,7 +941,7 @@ def _three_points(ui, vi, ue, ve):
     return 1, ux, uy, math.hypot(ux, uy), theta0, math.degrees(sweep)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _arc3(code, m, p0, p_val, p_line, p_col, line, col, ist, cx, cy, pen_down, pending, pen, write, k,
           o_x, o_y, o_line, o_col, o_start, o_pen, err):
     """``AT``/``RT`` from the pen at ``(cx, cy)`` (plotter units) through an intermediate point to an end point
@@ -993,7 +993,7 @@ def _arc3(code, m, p0, p_val, p_line, p_col, line, col, ist, cx, cy, pen_down, p
     return k, ex, ey, pending, True
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _sc(m, p0, p_val, line, col, ist, err):
     """``SC``: scaling on (its type and parameters) or off.  Returns False after recording an error in ``err``."""
     kind = p_val[p0 + 4] if m >= 5 else 0.0
@@ -1019,7 +1019,7 @@ def _sc(m, p0, p_val, line, col, ist, err):
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _arc(code, m, p0, p_val, p_line, p_col, line, col, ist, cx, cy, pen_down, pending, pen, write, k,
          o_x, o_y, o_line, o_col, o_start, o_pen, err):
     """``CI``, ``AA`` or ``AR`` (``AT``, ``RT``: :func:`_arc3`) from the pen at ``(cx, cy)`` (plotter units): its
@@ -1090,7 +1090,7 @@ def _arc(code, m, p0, p_val, p_line, p_col, line, col, ist, cx, cy, pen_down, pe
     return k, cx, cy, pending, True
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _pairs(p0, m, p_val, p_line, p_col, ist, cx, cy, cl, cc, pen_down, pending, rel, pen, write, k,
            o_x, o_y, o_line, o_col, o_start, o_pen, err):
     """The coordinate pairs of a ``PU``/``PD``/``PA``/``PR`` (user units, absolute or ``rel``): the pen moves, and
@@ -1118,7 +1118,7 @@ def _pairs(p0, m, p_val, p_line, p_col, ist, cx, cy, cl, cc, pen_down, pending, 
 
 
 @entry
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _interpret(c0, c1, c_code, c_line, c_col, c_p0, c_np, p_val, p_line, p_col, ist,
                o_x, o_y, o_line, o_col, o_start, o_pen, err, write, counts):
     """Pen-down points of commands ``c0`` to ``c1`` of a chunk; ``ist`` carries the plotter state between chunks

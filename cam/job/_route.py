@@ -20,7 +20,7 @@ __all__ = ["bfs_kernel"]
 
 
 @entry
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def bfs_kernel(ok, start, goal, max_len, parent):
     """Breadth-first search over the set pixels of ``ok`` from ``start`` to ``goal`` (flat row-major indices).
 

@@ -21,7 +21,7 @@ __all__ = ["duplicate_pieces_kernel", "nearest_order_kernel"]
 
 
 @entry
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def duplicate_pieces_kernel(a, b, near):
     """Which pieces trace an earlier piece that is kept.
 
@@ -97,7 +97,7 @@ def duplicate_pieces_kernel(a, b, near):
 
 
 @entry
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def nearest_order_kernel(ends, at):
     """The greedy nearest-stroke order.
 
@@ -142,7 +142,7 @@ def nearest_order_kernel(ends, at):
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _nearest_in_cell(ends, ax, ay, c, cell_start, items, alive, n, best, best_s, best_d):
     """The nearest so far ``(best end, its stroke, distance)`` after the ends left in grid cell ``c`` (ties to the
     lowest stroke)."""
@@ -155,7 +155,7 @@ def _nearest_in_cell(ends, ax, ay, c, cell_start, items, alive, n, best, best_s,
     return best, best_s, best_d
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _nearest_end(ends, ax, ay, x0, y0, cell, gx, gy, cell_start, items, alive, size):
     """The end left (index into ``ends``) of the stroke whose nearer end is nearest ``(ax, ay)``, ties to the
     lowest stroke; rings of grid cells around the point until no end outside them can be as near (by a
@@ -196,7 +196,7 @@ def _nearest_end(ends, ax, ay, x0, y0, cell, gx, gy, cell_start, items, alive, s
 
 
 @entry
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def cells_kernel(vert, poly_start, sample_steps, corner_cos, reach_steps):
     """The step positions of many polylines (step 2 of :mod:`cam.job.svg`), one polyline at a time.
 
@@ -281,7 +281,7 @@ def cells_kernel(vert, poly_start, sample_steps, corner_cos, reach_steps):
     return out[:used + n_poly + 1]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _sharp(px, py, plen, dx, dy, length, corner_cos):
     """Whether the turn from segment ``(px, py)`` (length ``plen``) to ``(dx, dy)`` is sharper than the corner
     angle (numpy's arithmetic: a zero-length segment never turns, a zero product of lengths divides to an
@@ -300,7 +300,7 @@ def _sharp(px, py, plen, dx, dy, length, corner_cos):
     return ok and cos < corner_cos
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _corner_reach(vert, v1, sample_steps, cell, fixed, begin, k, worst):
     """``worst[r]``: the farthest any sample of position ``r`` lies from the nearer of its two neighbours, for
     the positions that may be staircase corners (not fixed, not an end, the neighbours 8-neighbours of each
@@ -337,7 +337,7 @@ def _corner_reach(vert, v1, sample_steps, cell, fixed, begin, k, worst):
             j = 0
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _keep(cell, fixed, worst, k, reach_steps, out, used):
     """Write one polyline's positions to ``out`` from row ``used`` without its dropped staircase corners and
     the positions inside runs of one unit move; return the rows used."""
@@ -369,7 +369,7 @@ def _keep(cell, fixed, worst, k, reach_steps, out, used):
     return w
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _room(out, rows):
     """``out``, or a copy twice as long when it has fewer than ``rows`` rows."""
     if rows <= out.shape[0]:
@@ -379,7 +379,7 @@ def _room(out, rows):
     return bigger
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _grow(cell, fixed, worst, begin):
     """The buffers of one polyline's positions, twice as long."""
     n = cell.shape[0]

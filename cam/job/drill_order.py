@@ -174,7 +174,7 @@ def drill_order(points_mm: np.ndarray, start_mm: tuple[float, float] = (0.0, 0.0
 
 
 @entry
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _exact_path(pts, start, end, to_end):
     """Held-Karp over subsets: the shortest path from ``start`` through all ``pts`` (N <= ~15), open or, with
     ``to_end``, on to ``end``."""
@@ -222,7 +222,7 @@ def _exact_path(pts, start, end, to_end):
     return order
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _grid(xy, idx):
     """Bucket the points ``xy[idx]`` in a uniform grid of about 2 points per cell.
 
@@ -272,7 +272,7 @@ def _grid(xy, idx):
 
 
 @entry
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _nn_path(pts, start):
     """Exact nearest-neighbour path from ``start`` (ties: lowest index), on a grid with removal."""
     n = pts.shape[0]
@@ -336,7 +336,7 @@ def _nn_path(pts, start):
     return order
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _grid_remove(x, y, item, x0, y0, cell, gx, gy, cell_start, items, where, alive):
     """Take ``item`` (at ``(x, y)``) out of its grid cell (:func:`_grid`): it swaps places with the cell's last item
     still there, and the cell holds one item less."""
@@ -351,7 +351,7 @@ def _grid_remove(x, y, item, x0, y0, cell, gx, gy, cell_start, items, where, ali
     alive[c] -= 1
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _ring_reach(px, py, x0, y0, cell, ccx, ccy, r):
     """Distance from (px, py) to the outside of the box of cells within Chebyshev ring ``r`` of (ccx, ccy)."""
     lo_x = x0 + (ccx - r) * cell
@@ -362,7 +362,7 @@ def _ring_reach(px, py, x0, y0, cell, ccx, ccy, r):
 
 
 @entry
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _knn(xy, k):
     """``(M, k)`` int64: the ``k`` nearest other points of each point, nearest first (ties: lowest index)."""
     m = xy.shape[0]
@@ -426,7 +426,7 @@ def _d(xy, a, b, free):
     return math.sqrt(dx * dx + dy * dy)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _reverse(tour, pos, i, j):
     while i < j:
         a = tour[i]
@@ -439,7 +439,7 @@ def _reverse(tour, pos, i, j):
         j -= 1
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _push(queue, inq, head_tail, city, end):
     if city == end or inq[city]:
         return
@@ -449,7 +449,7 @@ def _push(queue, inq, head_tail, city, end):
     head_tail[1] += 1
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _n_nearer(xy, neigh, x, limit, free):
     """How many of ``x``'s neighbours (nearest first) lie nearer to it than ``limit``."""
     k = neigh.shape[1]
@@ -459,7 +459,7 @@ def _n_nearer(xy, neigh, x, limit, free):
     return t
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _two_opt(xy, tour, pos, neigh, a, end, free, span, queue, inq, ht):
     """Best-first 2-opt move around ``a``; applies it and returns the gain (0: none).
 
@@ -499,7 +499,7 @@ def _two_opt(xy, tour, pos, neigh, a, end, free, span, queue, inq, ht):
     return 0.0
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _move_run(tour, pos, i, j, pu, span):
     """Move the run ``tour[i..j]`` (1 to 3 holes, already turned the way it goes in) to just after position
     ``pu`` (outside the run), shifting the holes in between; widens ``span`` to what changed."""
@@ -533,7 +533,7 @@ def _move_run(tour, pos, i, j, pu, span):
         pos[seg2] = base + 2
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _or_opt(xy, tour, pos, neigh, a, end, free, span, queue, inq, ht):
     """Or-opt around ``a``: move a run of 1-3 holes that ends at ``a`` between two other neighbours."""
     eps = 1e-12
@@ -593,7 +593,7 @@ def _or_opt(xy, tour, pos, neigh, a, end, free, span, queue, inq, ht):
     return 0.0
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _local_search(xy, tour, pos, neigh, end, free, span, queue, inq, ht):
     """Run 2-opt and Or-opt until no queued hole has an improving move; returns the total gain (mm)."""
     total = 0.0
@@ -610,7 +610,7 @@ def _local_search(xy, tour, pos, neigh, end, free, span, queue, inq, ht):
 
 
 @entry
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _improve(xy, tour, neigh, kicks, max_segment, seed, closed):
     """Improve the path ``tour`` = ``[start, holes..., end]`` in place (see the module docstring).
 

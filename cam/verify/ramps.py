@@ -88,7 +88,7 @@ not an interval of one motion (issue #32: an axis that waited 112 ms at a corner
 speed, within the quantisation tolerance of R2)."""
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def standstill_ns(s_mm: float, v_start: float) -> float:
     """The interval (ns) between two steps of an axis beyond which it stood still: :data:`STANDSTILL_STEPS`
     steps of ``s_mm`` mm at its start speed ``v_start`` (mm/s).  A kernel for kernels; Python calls its
@@ -122,7 +122,7 @@ def _standstills_kernel(t_ns, still_ns, brk):
 
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _pair_excess(d1, d2, e_lo, e_hi, s_ns, vs, acc, ds_ns):
     """Smallest R2 excess (mm/s) of the pair over the tried shifts of the middle step."""
     best = np.inf
@@ -231,7 +231,7 @@ def check_steps_range(t_ns, slot_of_step, slot_t_ns, brk, s_mm, v_start, v_max, 
     return n_bad
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _shift_limits(slot_of_step, slot_t_ns, j):
     """How far step ``j`` of one axis may move toward a free slot: ``(q_lo_ns, q_hi_ns)``, one period
     (the smaller slot gap around its slot) on a side where the axis left a slot free, else 0."""
