@@ -680,7 +680,8 @@
     ev.preventDefault();
     if (ev.repeat) return;  // one jog per key press
     if (!page.state || page.state.state !== "idle") {
-      showError("keyboard jog refused: the machine is " + (page.state ? page.state.state : "not connected"));
+      const busy = page.state ? page.state.state : "not connected";
+      showError("keyboard jog refused: the machine is " + (busy === "prompt" ? "waiting at a prompt" : busy));
       return;
     }
     const n = parseInt($("jog-steps").value, 10) * key[1];
