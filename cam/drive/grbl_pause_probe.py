@@ -23,10 +23,9 @@ from typing import Any, Callable
 from ..errors import CamError
 from .grbl_machine import GrblControl, fault_stop
 from .grbl_probe import GrblProber
-from .pause_probe import PauseProbe, _check_shifted_job
-from .probing import ProbeError, missed_line
+from .pause_probe import PauseProbe, probe_and_go_back
+from .probing import ProbeError
 from .runner import EMERGENCY_STOPPED, STOPPED
-from .state import check_in_travel
 
 __all__ = ["probe_at_grbl_pause"]
 
@@ -56,23 +55,7 @@ def probe_at_grbl_pause(session: Any, ctl: GrblControl, request: PauseProbe,
     prober = None
     try:
         prober = GrblProber(session, ctl)
-        x, y = request.point_steps
-        prober.travel((int(x), int(y), int(request.top_z_steps)))
-        result = prober.probe(int(request.depth_steps), float(request.feed_mm_min))
-        back = at
-        if result.contact_steps is None:
-            status, message = "missed", missed_line(result, settings)
-        else:
-            contact = tuple(int(v) for v in result.contact_steps)
-            shift = contact[2] + int(request.plate_steps) - int(request.old_surface_steps)
-            shifted = (at[0], at[1], at[2] + shift)
-            try:
-                check_in_travel(shifted, settings, "where the job goes on with the new tool")
-                _check_shifted_job(request, shift, settings)
-                back = shifted
-            except CamError as exc:
-                status, message, shift = "error", f"the work Z was not shifted: {exc}", 0
-        prober.travel(back)  # type: ignore[arg-type]
+        status, message, contact, shift = probe_and_go_back(prober, request, settings)
     except ProbeError as exc:  # ALARM:4: lifted back, the position known; the tool goes on from where it waits
         status, message, shift = "error", str(exc), 0
         try:

@@ -90,6 +90,35 @@ def _check_shifted_job(request: PauseProbe, shift_steps: int, settings: MachineS
                           f"{beyond} steps beyond the Z travel ({z_min}..{z_max} steps from the home)")
 
 
+def probe_and_go_back(prober: Any, request: PauseProbe, settings: MachineSettings
+                      ) -> tuple[str, str, Optional[tuple[int, int, int]], int]:
+    """The probe of a new tool while its job waits, on any machine's ``prober``: lifted and across to over the
+    first tool's contact, probed, then back to where the job waits, shifted on Z by the difference of the
+    contacts when that shift keeps the tool and the rest of the job in the travel (else not shifted: "error").
+
+    Returns ``(status, message, contact_steps, shift_steps)``: "finished" (the contact, the shift), "missed" (no
+    contact: back where the job waits, nothing shifted) or "error" (the shift refused)."""
+    x, y = request.point_steps
+    prober.travel((int(x), int(y), int(request.top_z_steps)))
+    result = prober.probe(int(request.depth_steps), float(request.feed_mm_min))
+    back = tuple(int(v) for v in request.at_steps)
+    if result.contact_steps is None:
+        prober.travel(back)
+        return "missed", missed_line(result, settings), None, 0
+    contact = tuple(int(v) for v in result.contact_steps)
+    shift = contact[2] + int(request.plate_steps) - int(request.old_surface_steps)
+    status, message = "finished", ""
+    try:
+        shifted = (back[0], back[1], back[2] + shift)
+        check_in_travel(shifted, settings, "where the job goes on with the new tool")
+        _check_shifted_job(request, shift, settings)
+        back = shifted
+    except CamError as exc:
+        status, message, shift = "error", f"the work Z was not shifted: {exc}", 0
+    prober.travel(back)
+    return status, message, contact, shift  # type: ignore[return-value]
+
+
 def probe_at_pause(port: Any, settings: MachineSettings, realtime: bool, ctl: Any, request: PauseProbe,
                    journal: Optional[JournalWriter] = None) -> dict[str, Any]:
     """Probe the new tool on the job's open ``port`` while it waits (see the module); never raises.
@@ -123,23 +152,7 @@ def probe_at_pause(port: Any, settings: MachineSettings, realtime: bool, ctl: An
     shift = 0
     status, message = "finished", ""
     try:
-        x, y = request.point_steps
-        prober.travel((int(x), int(y), int(request.top_z_steps)))
-        result = prober.probe(request.depth_steps, request.feed_mm_min)
-        back = tuple(int(v) for v in request.at_steps)
-        if result.contact_steps is None:
-            status, message = "missed", missed_line(result, settings)
-        else:
-            contact = tuple(int(v) for v in result.contact_steps)
-            shift = contact[2] + int(request.plate_steps) - int(request.old_surface_steps)
-            shifted = (back[0], back[1], back[2] + shift)
-            try:
-                check_in_travel(shifted, settings, "where the job goes on with the new tool")
-                _check_shifted_job(request, shift, settings)
-                back = shifted
-            except CamError as exc:
-                status, message, shift = "error", f"the work Z was not shifted: {exc}", 0
-        prober.travel(back)  # type: ignore[arg-type]
+        status, message, contact, shift = probe_and_go_back(prober, request, settings)
     except ProbeEnded as exc:
         status, message, shift = exc.status, str(exc), 0
         if exc.status in (EMERGENCY_STOPPED, LIMIT_STOPPED):  # the job sends nothing more either

@@ -340,6 +340,29 @@ def _approach(prober: Prober, probe_run: ProbeRun, xy: tuple[int, int], results:
     return max(1, lowest - start_z)
 
 
+def activity_end(exc: BaseException) -> tuple[str, list[str], str]:
+    """How a probing activity (points, or a program's parts and probes) that raised ``exc`` ended: its status,
+    its one-line messages and the link fault it leaves ("" none: the position is still known)."""
+    if isinstance(exc, ProbeEnded):
+        return exc.status, [str(exc)], ""
+    if isinstance(exc, ProbeError):
+        return "error", [str(exc)], ""
+    if isinstance(exc, CamError):
+        return "error", [str(exc)], str(exc)
+    line = f"internal error: {type(exc).__name__}: {exc}"
+    return "error", [line], line
+
+
+def halted_status(ctl: Any, status: str) -> str:
+    """``status``, or what the controller ``ctl`` says ended the activity: an emergency stop, or a stop that
+    made it fail."""
+    if getattr(ctl, "estop_requested", False) or getattr(ctl, "estopped", False):
+        return EMERGENCY_STOPPED
+    if status == "error" and getattr(ctl, "halted", False):
+        return STOPPED
+    return status
+
+
 def probe_worker(session: Any, ctl: Any, make_prober: Callable[[], Prober], probe_run: ProbeRun) -> None:
     """The worker thread of a probing activity: each point travelled to (at the safe height, or a grid's later
     points as its ``approach`` says) and probed, a detail line per point, then the end booked
@@ -368,19 +391,9 @@ def probe_worker(session: Any, ctl: Any, make_prober: Callable[[], Prober], prob
             if not r.touched:  # the end's one line says it
                 raise ProbeError(missed_line(r, s))
             session.detail(point_line(k, n, r, s, reference))
-    except ProbeEnded as exc:
-        status, messages = exc.status, [str(exc)]
-    except ProbeError as exc:
-        status, messages = "error", [str(exc)]
-    except CamError as exc:
-        status, messages, fault = "error", [str(exc)], str(exc)
     except Exception as exc:  # noqa: BLE001 - reported in the log; nothing more is sent
-        status, messages = "error", [f"internal error: {type(exc).__name__}: {exc}"]
-        fault = messages[0]
-    if getattr(ctl, "estop_requested", False) or getattr(ctl, "estopped", False):
-        status = EMERGENCY_STOPPED
-    elif status == "error" and getattr(ctl, "halted", False):
-        status = STOPPED
+        status, messages, fault = activity_end(exc)
+    status = halted_status(ctl, status)
     end: Optional[Steps3] = start
     lost = ""
     if prober is not None:

@@ -38,7 +38,7 @@ from ._session_parts import Activity
 from .chunks import plan_chunks
 from .homing import seek
 from .ports import MockPort, SwitchSchedule
-from .probing import ProbeEnded, ProbeError, StepDirProber, step_dir_feed
+from .probing import ProbeEnded, ProbeError, StepDirProber, activity_end, halted_status, step_dir_feed
 from .runner import EMERGENCY_STOPPED, FINISHED, LIMIT_STOPPED, STOPPED, SWITCHED, Controller, RunResult, run
 from .state import check_in_travel
 
@@ -184,19 +184,9 @@ def program_worker(session: Any, ctl: Any, make_machine: Callable[[], Any], spec
     try:
         machine = make_machine()
         probes = _run_parts(session, machine, spec, total)
-    except ProbeEnded as exc:
-        status, messages = exc.status, [str(exc)]
-    except ProbeError as exc:
-        status, messages = "error", [str(exc)]
-    except CamError as exc:
-        status, messages, fault = "error", [str(exc)], str(exc)
     except Exception as exc:  # noqa: BLE001 - reported in the log; nothing more is sent
-        status, messages = "error", [f"internal error: {type(exc).__name__}: {exc}"]
-        fault = messages[0]
-    if getattr(ctl, "estop_requested", False) or getattr(ctl, "estopped", False):
-        status = EMERGENCY_STOPPED
-    elif status == "error" and getattr(ctl, "halted", False):
-        status = STOPPED
+        status, messages, fault = activity_end(exc)
+    status = halted_status(ctl, status)
     _book_end(session, machine, label, start, status, messages, fault, time.monotonic() - wall0, probes)
 
 
