@@ -33,7 +33,7 @@ from typing import Any, Callable, Optional, Sequence
 import numpy as np
 
 from ..errors import CamError, CapabilityError, PlanError
-from ..job.model import travel_job
+from ..job.model import cut_runs_steps, travel_job
 from ..settings import INPUT_BITS, MachineSettings
 from .chunks import plan_chunks
 from .homing import seek
@@ -460,21 +460,7 @@ def job_cuts_mm(job: Any, state: Any, settings: MachineSettings, origin: Optiona
     job's plan (a run across two pieces is one)."""
     hx, hy, _ = _home_of(job, state, origin)
     per = settings.mm_per_step_axes
-    runs: list[np.ndarray] = []
-    open_run: Optional[np.ndarray] = None  # the last run of the previous piece, when it reached its end
-    for piece in job.plan.job.pieces():
-        pts = np.asarray(piece.points_steps, np.int64).reshape(-1, 3)
-        if not len(pts):
-            continue
-        below = pts[:, 2] > 0
-        edges = np.flatnonzero(np.diff(np.r_[0, below.astype(np.int8), 0]))
-        for a, b in zip(edges[::2], edges[1::2]):
-            xy = pts[a:b, :2]
-            if a == 0 and open_run is not None:
-                xy = np.vstack([open_run, xy])
-                runs.pop()
-            runs.append(xy)
-        open_run = runs[-1] if len(edges) and edges[-1] == len(pts) else None
+    runs = cut_runs_steps(job.plan.job)
     return [np.column_stack([(hx + r[:, 0]) * per[0], (hy + r[:, 1]) * per[1]]) for r in runs]
 
 

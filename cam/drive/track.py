@@ -23,7 +23,7 @@ import numpy as np
 from ..errors import CamError, PlanError
 from ..formats.excellon import load_excellon
 from ..job.jobs import resume_job
-from ..job.model import CUT, Job
+from ..job.model import CUT, Job, cut_runs_steps
 from ..job.resume import Journal
 from ..render.picture import LEGEND_PX, _canvas_size, auto_scale
 from ..settings import MachineSettings
@@ -182,26 +182,10 @@ def preview_frame(job: Any) -> dict[str, Any]:
 
 
 def _cut_runs_steps(job: Any) -> list[np.ndarray]:
-    """Each run of consecutive points below the surface (z > 0 from the job's home), ``(N, 2)`` steps from the
-    home, in the order cut (a run across two pieces is one)."""
+    """Each run of the job's path below the surface (:func:`cam.job.model.cut_runs_steps`), ``(N, 2)`` steps from
+    the home; none for a job without a toolpath."""
     toolpath = getattr(getattr(job, "plan", None), "job", None) or getattr(job, "toolpath", None)
-    if toolpath is None:
-        return []
-    runs: list[np.ndarray] = []
-    open_run = False
-    for piece in toolpath.pieces():
-        pts = np.asarray(piece.points_steps, np.int64).reshape(-1, 3)
-        if not len(pts):
-            continue
-        below = pts[:, 2] > 0
-        edges = np.flatnonzero(np.diff(np.r_[0, below.astype(np.int8), 0]))
-        for a, b in zip(edges[::2], edges[1::2]):
-            xy = pts[a:b, :2]
-            if a == 0 and open_run:
-                xy = np.vstack([runs.pop(), xy])
-            runs.append(xy)
-        open_run = bool(len(edges)) and edges[-1] == len(pts)
-    return runs
+    return [] if toolpath is None else cut_runs_steps(toolpath)
 
 
 def job_track(job: Any, home_steps: Any, settings: MachineSettings, holes: Optional[dict[str, Any]] = None

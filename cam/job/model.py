@@ -432,6 +432,26 @@ def travel_job(points_steps: np.ndarray, settings: MachineSettings, *, source: s
                pause=np.zeros(n, bool), settings=settings, source=source)
 
 
+def cut_runs_steps(toolpath: JobLike) -> list[np.ndarray]:
+    """Each run of consecutive points of ``toolpath`` below the surface (Z > 0 from its home), ``(N, 2)`` X, Y
+    steps from the home, in the order cut; a run that goes on from one piece into the next is one run (the
+    pieces streamed, one at a time)."""
+    runs: list[np.ndarray] = []
+    open_run = False  # the last run of the previous piece reached its end
+    for piece in toolpath.pieces():
+        pts = np.asarray(piece.points_steps, np.int64).reshape(-1, 3)
+        if not len(pts):
+            continue
+        edges = np.flatnonzero(np.diff(np.r_[0, (pts[:, 2] > 0).astype(np.int8), 0]))
+        for a, b in zip(edges[::2], edges[1::2]):
+            xy = pts[a:b, :2]
+            if a == 0 and open_run:
+                xy = np.vstack([runs.pop(), xy])
+            runs.append(xy)
+        open_run = bool(len(edges)) and edges[-1] == len(pts)
+    return runs
+
+
 def pause_points(toolpath: JobLike) -> np.ndarray:
     """``(P,)`` int64 indices of a job's points that pause (one pass over its pieces)."""
     found, first = [], 0
