@@ -1,7 +1,7 @@
 """The page's machine settings and tool table (issue #47 points 4 and 5): GET/POST /api/settings and /api/tools,
 thin adapters over cam.machine_file and cam.tool_table, tested with the real server in-process; Z Drill Up / Down
 and the work offsets kept across a server restart; in Chromium, a setting and a tool edited on the page are
-there after a reload."""
+there after a reload and a restart, with screenshots for docs/web.md."""
 from __future__ import annotations
 
 import shutil
@@ -15,6 +15,7 @@ from cam.tool_table import read_tool_table
 
 from conftest import ROOT, SAMPLES
 from test_web import Server, browser  # noqa: F401 (the browser fixture)
+from test_web_track import DESKTOP, PHONE, _shot
 
 SLOW_CASES: set[str] = set()
 
@@ -185,7 +186,7 @@ def test_z_drill_up_and_down_set_on_the_page_are_kept_across_a_restart(tmp_path,
 
 @pytest.fixture
 def page(browser):
-    ctx = browser.new_context(viewport={"width": 1280, "height": 900}, bypass_csp=True)  # wait_for_function evals
+    ctx = browser.new_context(viewport=DESKTOP, bypass_csp=True)  # wait_for_function evals
     p = ctx.new_page()
     p.set_default_timeout(30_000)
     yield p
@@ -240,6 +241,13 @@ def test_a_setting_and_a_tool_edited_on_the_page_are_there_after_a_reload_and_a_
         page.wait_for_function("document.querySelector(\"#settings-list [name='max_speed_x_mm_s']\") !== null")
         assert page.input_value("#settings-list [name='max_speed_x_mm_s']") == "4.25"
         assert s.session.settings.max_speed_x_mm_s == 4.25
+        # screenshots for docs/web.md: the saved setting after the restart (desktop), the tool table (phone size)
+        page.fill("#settings-filter", "max_speed")
+        page.locator("#settings-list [name='max_speed_x_mm_s']").wait_for(state="visible")
+        _shot(page, "#settings-card", "web-settings-restart.png")
+        page.set_viewport_size(PHONE)
+        _shot(page, "#tools-card", "web-tools-phone.png")
+        page.set_viewport_size(DESKTOP)
         # edit it from the list, then remove it
         page.click("#tools-list li[data-number='3'] .tool-edit")
         assert page.input_value("#tool-angle") == "30" and page.input_value("#tool-length") == "12.3"

@@ -195,10 +195,19 @@ def _open_and_plan(p, server, path) -> None:
     p.wait_for_function("!document.getElementById('track-box').hidden")
 
 
-def _shot(p, selector: str, name: str) -> None:
-    """A screenshot of one section for docs/web.md (the sticky header bar out of its way)."""
+def _shot(p, selector: str, name: str, *more: str) -> None:
+    """A screenshot of one section for docs/web.md (the sticky header bar out of its way); with more selectors, of
+    the smallest rectangle around all those elements, a few pixels around it."""
     p.evaluate("document.querySelector('header.bar').style.position = 'static'")
-    p.locator(selector).screenshot(path=str(DOCS / name))
+    if not more:
+        p.locator(selector).screenshot(path=str(DOCS / name))
+        return
+    boxes = [p.evaluate("(s) => { const r = document.querySelector(s).getBoundingClientRect();"
+                        " return [r.left + scrollX, r.top + scrollY, r.right + scrollX, r.bottom + scrollY]; }", s)
+             for s in (selector, *more)]
+    x0, y0 = min(b[0] for b in boxes) - 4, min(b[1] for b in boxes) - 4
+    x1, y1 = max(b[2] for b in boxes) + 4, max(b[3] for b in boxes) + 4
+    p.screenshot(path=str(DOCS / name), full_page=True, clip={"x": x0, "y": y0, "width": x1 - x0, "height": y1 - y0})
 
 
 def _answer_prompts_until_idle(p, server, timeout_s: float = 120.0) -> None:
@@ -318,7 +327,8 @@ def test_page_hole_table_start_at_and_go_to(browser, tmp_path):
 
 @pytest.mark.browser
 def test_keyboard_jog_moves_the_mock(browser, tmp_path):
-    """Arrow keys and Page Up / Down jog the mock by the chosen step; keys typed in a field do not."""
+    """Arrow keys and Page Up / Down jog the mock by the chosen step; keys typed in a field do not; a screenshot of
+    the position after the jogs, with the jog pad."""
     s = Server(tmp_path, settings=FAST, realtime=True)
     ctx, p = _page(browser, DESKTOP)
     try:
@@ -328,14 +338,22 @@ def test_keyboard_jog_moves_the_mock(browser, tmp_path):
         start = s.session.position_steps()
         for key, axis, sign in (("ArrowRight", 0, 1), ("ArrowDown", 1, 1), ("PageDown", 2, 1), ("ArrowLeft", 0, -1),
                                 ("PageUp", 2, -1)):
-            p.wait_for_function("document.getElementById('state').dataset.state === 'idle'")  # the page sees the end
             before = s.session.position_steps()
+            # the page has the jog's end: idle at the position reached (an idle seen before a late snapshot of the
+            # jog running would have the key refused)
+            p.wait_for_function("(t) => document.getElementById('state').dataset.state === 'idle'"
+                                " && document.getElementById('pos-steps').textContent === t",
+                                arg=", ".join(str(v) for v in before))
             p.locator("body").press(key)
             deadline = time.monotonic() + 20
             while s.session.position_steps()[axis] != before[axis] + sign * 100 or s.session.busy:
                 assert time.monotonic() < deadline, (key, s.session.position_steps())
                 p.wait_for_timeout(20)
         assert s.session.position_steps() == (start[0], start[1] + 100, start[2])
+        moved = ", ".join(str(v) for v in (start[0], start[1] + 100, start[2]))
+        p.wait_for_function("(t) => document.getElementById('pos-steps').textContent === t", arg=moved)
+        # the position after the jogs (machine and work), the step size and the pad beside it (to its next row)
+        _shot(p, "#run-card h2", "web-keyboard-jog.png", "#pos-known", "#jog-card .pad", "#set-offset")
         p.fill("#goto-x", "5")
         p.locator("#goto-x").press("ArrowUp")  # in a field: the field's own key, no jog
         p.wait_for_timeout(300)
