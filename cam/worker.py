@@ -77,14 +77,27 @@ def _out_of_memory(exc: BaseException) -> bool:
     return type(exc).__module__.startswith("cv2") and getattr(exc, "code", None) == _CV_NO_MEMORY
 
 
+def _load_cached_kernels() -> None:
+    """Load the compiled kernels numba's cache holds (cam._kernel_cache's table; none is compiled here) before the
+    memory limit: numba links a cached kernel into the process with LLVM on its first call, and under an
+    address-space limit that first call took about two minutes, mostly system time, so a job over the memory
+    limit ran into the 120 s time limit instead (test_planning_over_the_work_memory_limit_is_a_clean_error)."""
+    from ._kernel_cache import is_cached, signatures
+
+    for _name, dispatcher, arg_types in signatures():
+        if is_cached(dispatcher, arg_types):
+            dispatcher.compile(arg_types)  # from the cache: milliseconds
+
+
 def _serve(fd: int, memory_limit_bytes: int, warm_up: tuple[str, ...]) -> None:
     """The child: set the memory limit, import what calls need, then answer calls until the socket closes."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle
     os.nice(_NICE)  # the machine's runner and the server come first
     conn = Connection(fd)
-    _limit_memory(memory_limit_bytes)
     for name in warm_up:
         importlib.import_module(name)
+    _load_cached_kernels()
+    _limit_memory(memory_limit_bytes)
     while True:
         try:
             message = conn.recv_bytes()

@@ -38,6 +38,8 @@ FUNCTION_LEVEL_IMPORTS = {
     ("cam.verify.toolcarve", "cv2"): "only a notebook's picture of a comparison needs OpenCV's PNG encoder",
     ("cam._kernel_cache", "cam._kernel_signatures"): "the cache filler: the table is read only when compiling",
     ("cam._kernel_cache", "cam.cli"): "the cache filler: the sample jobs run only when collecting argument types",
+    ("cam.worker", "cam._kernel_cache"): "the worker child loads the cached kernels before its memory limit; the "
+                                         "parent never needs the table",
     ("cam._kernel_cache", "numba"): "the cache filler: numba's types, only when reading or writing the table",
     # (importing module, imported module): why it may not be imported at the importing module's top
     ("cam.drive.ports", "parallel"):
