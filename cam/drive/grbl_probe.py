@@ -116,10 +116,18 @@ class GrblProber(Prober):
                 raise
             self._failed(exc, self.position(), int(depth_steps))  # ALARM:4: a ProbeError, the tool lifted back
             raise
+        return self._trip_after(lines, "G38.3")
+
+    def _trip_after(self, lines: list[str], code: str) -> Optional[Steps3]:
+        """After a probing move ``code`` answered ``lines``: back to absolute (G90), and where its probe report
+        says the probe tripped (machine steps), or None when it did not trip.
+
+        Raises:
+            GrblError: no probe report among ``lines``."""
         self.link.command("G90")
         prb = parse_prb(lines)
         if prb is None:
-            raise GrblError(f"grbl on {self.link.device} answered G38.3 without a probe report [PRB:x,y,z:0|1] "
+            raise GrblError(f"grbl on {self.link.device} answered {code} without a probe report [PRB:x,y,z:0|1] "
                             f"({'; '.join(lines) or 'nothing'})")
         if not prb[1]:
             return None

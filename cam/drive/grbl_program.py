@@ -5,9 +5,9 @@ from __future__ import annotations
 from typing import Any, Optional
 
 from ..formats.gcode_export import format_mm
-from .grbl_link import GrblAlarm, GrblError
-from .grbl_machine import GrblControl, GrblPosition, _stream_until_pause, job_lines, mpos_to_steps
-from .grbl_probe import GrblProber, parse_prb
+from .grbl_link import GrblAlarm
+from .grbl_machine import GrblControl, GrblPosition, _stream_until_pause, job_lines
+from .grbl_probe import GrblProber
 from .probing import ProbeEnded, ProbeError
 from .program_probe import PauseFn, ProgressFn, launch_program
 from .runner import EMERGENCY_STOPPED, STOPPED
@@ -54,15 +54,7 @@ class GrblProgram(GrblProber):
                                  "probe is already tripped; or $6, the probe pin's inversion, is wrong); the tool is "
                                  f"back at machine Z {self.position()[2]} steps") from None
             return None
-        self.link.command("G90")
-        prb = parse_prb(lines)
-        if prb is None:
-            raise GrblError(f"grbl on {self.link.device} answered {code} without a probe report [PRB:x,y,z:n] "
-                            f"({'; '.join(lines) or 'nothing'})")
-        if not prb[1]:
-            return None
-        raw = mpos_to_steps(prb[0], self.settings)
-        return tuple(int(r) + int(b) for r, b in zip(raw, self.machine.base_steps))  # type: ignore[return-value]
+        return self._trip_after(lines, code)
 
     def lift_to(self, z_steps: int) -> None:
         if self.position()[2] != int(z_steps):
