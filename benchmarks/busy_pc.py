@@ -35,7 +35,7 @@ sys.path.insert(0, str(ROOT))
 import cam  # noqa: E402
 from cam.drive.priority import CLAIM_ENV  # noqa: E402
 from cam.drive.session import MachineSession  # noqa: E402
-from cam.job.jobs import JobOptions, prepare_job  # noqa: E402
+from cam.kinds.jobs import JobOptions, prepare_job  # noqa: E402
 from machine_first import print_table  # noqa: E402 (this folder: the benchmarks' table)
 
 

@@ -30,7 +30,7 @@ sys.path.insert(0, str(ROOT))
 
 import cam  # noqa: E402
 from cam.drive.grbl_link import GrblLink  # noqa: E402
-from cam.formats.gcode_export import to_gcode  # noqa: E402
+from cam.kinds.gcode_export import to_gcode  # noqa: E402
 from cam.sim.grbl import start_emulator  # noqa: E402
 
 GRBL = {110: 3000.0, 111: 3000.0, 112: 1500.0, 120: 200.0, 121: 200.0, 122: 200.0}

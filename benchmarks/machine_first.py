@@ -49,7 +49,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 import cam  # noqa: E402
-from cam.job.jobs import JobOptions, prepare_job  # noqa: E402
+from cam.kinds.jobs import JobOptions, prepare_job  # noqa: E402
 
 SETTINGS = cam.MachineSettings().replace(delay_xy_ms=0.5, delay_z_ms=0.5, ramp="constant")
 JOB_FILE = ROOT / "samples" / "ellipse.png"

@@ -46,7 +46,7 @@ _LAZY = {
     "HoleList": "cam.formats.excellon",
     "load_hpgl": "cam.formats.hpgl", "parse_hpgl": "cam.formats.hpgl", "scan_hpgl": "cam.formats.hpgl",
     "iter_hpgl": "cam.formats.hpgl", "HpglDrawing": "cam.formats.hpgl", "HpglScan": "cam.formats.hpgl",
-    "to_gcode": "cam.formats.gcode_export", "save_gcode": "cam.formats.gcode_export",
+    "to_gcode": "cam.kinds.gcode_export", "save_gcode": "cam.kinds.gcode_export",
     "plan_steps": "cam.drive.steps", "StepPlan": "cam.drive.steps",
     "run": "cam.drive.session", "MachineSession": "cam.drive.session",
     "Controller": "cam.drive.runner", "RunResult": "cam.drive.runner",
@@ -61,8 +61,8 @@ _LAZY = {
     "PlanError": "cam.errors", "PortError": "cam.errors", "SettingsError": "cam.errors",
     "TravelError": "cam.errors",
     "job_kind": "cam.choices", "sniff_kind": "cam.sniff",
-    "prepare_job": "cam.job.jobs", "resume_job": "cam.job.jobs", "JobOptions": "cam.job.jobs",
-    "PreparedJob": "cam.job.jobs", "Journal": "cam.job.resume", "read_journal": "cam.drive.journal",
+    "prepare_job": "cam.kinds.jobs", "resume_job": "cam.kinds.jobs", "JobOptions": "cam.kinds.jobs",
+    "PreparedJob": "cam.kinds.jobs", "Journal": "cam.job.resume", "read_journal": "cam.drive.journal",
     "HeightMap": "cam.job.heightmap_level", "load_height_map": "cam.job.heightmap_level",
     "save_height_map": "cam.job.heightmap_level",
 }
@@ -114,7 +114,7 @@ if TYPE_CHECKING:  # pragma: no cover - for type checkers and editors only
     from .sniff import sniff_kind
     from .errors import CamError, DrawingError, ParseError, PlanError, PortError, SettingsError, TravelError
     from .formats.excellon import HoleList, load_excellon, parse_excellon
-    from .formats.gcode_export import save_gcode, to_gcode
+    from .kinds.gcode_export import save_gcode, to_gcode
     from .formats.hpgl import HpglDrawing, HpglScan, iter_hpgl, load_hpgl, parse_hpgl, scan_hpgl
     from .digitize.sketch import TracedDrawing, load_sketch, trace
     from .formats.svg import SvgDrawing, load_svg, parse_svg
@@ -125,7 +125,7 @@ if TYPE_CHECKING:  # pragma: no cover - for type checkers and editors only
     from .job.drill_order import drill_order
     from .job.drawing_stream import plan
     from .job.model import Job, PixelFrame
-    from .job.jobs import JobOptions, PreparedJob, prepare_job, resume_job
+    from .kinds.jobs import JobOptions, PreparedJob, prepare_job, resume_job
     from .job.resume import Journal
     from .job.heightmap_level import HeightMap, load_height_map, save_height_map
     from .drive.journal import read_journal

@@ -104,7 +104,7 @@ def is_height_map(path: str | os.PathLike) -> bool:
 
 
 POSTS = ("generic", "grbl", "linuxcnc")
-"""The controllers G-code is written for (``cam export --post``; :mod:`cam.formats.gcode_export`)."""
+"""The controllers G-code is written for (``cam export --post``; :mod:`cam.kinds.gcode_export`)."""
 
 DEFAULT_PORT = "mock"
 """The port every command and the page use when none is named: the logging mock (nothing leaves the PC;

@@ -9,7 +9,7 @@ ranges are what a small 3-axis machine can mean, far wider than any real
 job; the machine's travel, checked later, refuses far less.
 
 Job options have their bounds in their one declaration, :mod:`cam.options`
-(the command line and :class:`cam.job.jobs.JobOptions` check them alike);
+(the command line and :class:`cam.kinds.jobs.JobOptions` check them alike);
 settings theirs in :mod:`cam.settings`, profile depths in
 :mod:`cam.digitize.profile`.
 

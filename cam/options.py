@@ -3,7 +3,7 @@
 Issue #28 point 6.  Each :class:`Option` in :data:`JOB_OPTIONS` is the one
 declaration of a setting of a job.  From it come:
 
-* the fields of :class:`cam.job.jobs.JobOptions` (same names, same defaults)
+* the fields of :class:`cam.kinds.jobs.JobOptions` (same names, same defaults)
   and their range checks (:meth:`JobOptions.checked`);
 * the command-line flags of ``cam drill``, ``export``, ``preview`` (and the
   shared ones of ``info``, ``digitize`` and ``trace``): :mod:`cam.cli.parser`;
@@ -62,7 +62,7 @@ class Option:
     """One job option.
 
     Attributes:
-        name: the :class:`cam.job.jobs.JobOptions` field and the planners' keyword (units in the name).
+        name: the :class:`cam.kinds.jobs.JobOptions` field and the planners' keyword (units in the name).
         flag: the command-line flag (``--cut-depth``); its argparse dest is :attr:`dest`.
         type: one of :data:`TYPES`.
         unit: what the numbers count ("mm", "px", "Z px", "" for none).
@@ -310,7 +310,7 @@ JOB_OPTIONS: tuple[Option, ...] = (
          "with --level: level moves outside the probed area by extending the map's edge cells (without it such a "
          "job is refused, naming how far outside)", web=False),
 )
-"""Every job option, in the order of :class:`cam.job.jobs.JobOptions`' fields."""
+"""Every job option, in the order of :class:`cam.kinds.jobs.JobOptions`' fields."""
 
 
 def degenerate(value_of: Callable[[str], Any]) -> Optional[tuple[str, str]]:
@@ -318,8 +318,8 @@ def degenerate(value_of: Callable[[str], Any]) -> Optional[tuple[str, str]]:
 
     ``value_of(name)`` gives an option's value (None: not given).  Zero is a choice, not an accident (issue #33
     point 8): a travel height at the surface needs ``allow_surface_travel``.  (A scale or a machine's step size
-    that rounds a whole job to nothing is found once the job is planned: :func:`cam.job.jobs.prepare_job`.)
-    The command line (:func:`cam.cli.checks.check_args`) and :meth:`cam.job.jobs.JobOptions.checked` (the page)
+    that rounds a whole job to nothing is found once the job is planned: :func:`cam.kinds.jobs.prepare_job`.)
+    The command line (:func:`cam.cli.checks.check_args`) and :meth:`cam.kinds.jobs.JobOptions.checked` (the page)
     both ask it.
     """
     height = value_of("travel_height_mm")
@@ -347,7 +347,7 @@ def schema_json(kind_defaults: Optional[dict[str, dict[str, Any]]] = None) -> li
     """The schema as JSON-able records (``GET /api/options``): every field of each :class:`Option`, kinds sorted,
     with its :attr:`~Option.label`, its range in words (``range``, as the errors say it) and ``defaults``, the
     value each kind it applies to takes when it is not given: ``kind_defaults[kind][name]`` where the library
-    has one (:func:`cam.job.jobs.kind_defaults`: a drill file's cut depth), else the option's default."""
+    has one (:func:`cam.kinds.jobs.kind_defaults`: a drill file's cut depth), else the option's default."""
     every = kind_defaults or {}
     return [{"name": o.name, "label": o.label, "group": o.group, "flag": o.flag, "type": o.type, "unit": o.unit,
              "kinds": sorted(o.kinds), "default": _json_value(o.default),

@@ -330,7 +330,7 @@ def tool_table_warnings(kind: str, tool_changes: Iterable[str], table: ToolTable
 
 
 def job_tool_warnings(job: Any, table: ToolTable) -> list[str]:
-    """:func:`tool_table_warnings` of a prepared job (:class:`cam.job.jobs.PreparedJob`: its kind, tool changes and
+    """:func:`tool_table_warnings` of a prepared job (:class:`cam.kinds.jobs.PreparedJob`: its kind, tool changes and
     drill plan), those it has not yet."""
     plan = getattr(job, "drill_plan", None)
     found = tool_table_warnings(job.kind, job.tool_changes, table, plan.tool_sequence if plan is not None else ())

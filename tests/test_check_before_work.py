@@ -15,9 +15,9 @@ from cam.digitize import drawing as drawing_module
 from cam.digitize.image_size import image_size_px
 from cam.drive.chunks import plan_chunks
 from cam.job import drawing as planner
-from cam.job import jobs
+from cam.kinds import jobs
 from cam.job.drawing import check_drawing_size, max_drawing_size_px
-from cam.job.jobs import JobOptions, prepare_job
+from cam.kinds.jobs import JobOptions, prepare_job
 
 from conftest import SAMPLES, drawing_from_rows
 from test_cli_checks import ENV, cli, refused

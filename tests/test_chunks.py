@@ -10,7 +10,7 @@ import cam
 from cam.drive.chunks import lookahead_margin, plan_chunks
 from cam.drive.ports import MockPort
 from cam.drive.runner import Controller, run
-from cam.job.jobs import prepare_job
+from cam.kinds.jobs import prepare_job
 from cam.drive.steps import plan_steps
 from cam.job.model import CUT, Job
 from cam.verify.pinlog import PinLog, carve, decode_pin_log, read_pin_log

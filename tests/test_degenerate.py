@@ -10,7 +10,7 @@ import pytest
 
 import cam
 from cam.errors import CamError
-from cam.job.jobs import JobOptions, prepare_job
+from cam.kinds.jobs import JobOptions, prepare_job
 from cam.options import OPTIONS, degenerate
 
 from conftest import SAMPLES, run_cli

@@ -110,7 +110,7 @@ def test_the_checks_catch_what_they_should():
     text = "Use `cam.plan(x)` and\n```python\ncam.job.gcode.plan_gcode(p)\n```\nnot cam.nothing in prose."
     assert dotted_names(text) == {"cam.plan", "cam.job.gcode.plan_gcode"}
     assert resolve("cam.digitize") is cam.digitize  # the function, not the package
-    assert resolve("cam.job.jobs.prepare_job") is cam.prepare_job
+    assert resolve("cam.kinds.jobs.prepare_job") is cam.prepare_job
     for wrong in ("cam.load_gcode", "cam.plan_gcode", "cam.job.no_such_module.x"):
         with pytest.raises((AttributeError, ImportError)):
             resolve(wrong)
@@ -123,7 +123,7 @@ STALE = (
     (r"placed where the tool stands", "drill, HPGL and SVG jobs are placed at the active work zero"),
 )
 """Statements the docs once made about where a job runs that the code no longer does (issue #44 point 7), and
-what is true instead (cam.drive.placement, cam.job.jobs.prepare_job's machine_state)."""
+what is true instead (cam.drive.placement, cam.kinds.jobs.prepare_job's machine_state)."""
 
 
 def test_docs_do_not_say_gcode_runs_from_where_the_tool_stands():

@@ -15,12 +15,12 @@ import numpy as np
 import pytest
 
 import cam
-import cam.job.jobs as jobs
+import cam.kinds.jobs as jobs
 from cam.cli.planning import carved_surface, write_job_preview, write_preview
 from cam.drive.chunks import plan_chunks
-from cam.formats.gcode_export import to_gcode
+from cam.kinds.gcode_export import to_gcode
 from cam.job.drawing_stream import DrawingJobStream, stream_drawing
-from cam.job.jobs import JobOptions, prepare_job
+from cam.kinds.jobs import JobOptions, prepare_job
 from cam.job.model import Job
 from cam.verify.pinlog import write_pin_log
 from conftest import SAMPLES

@@ -11,13 +11,13 @@ import pytest
 
 import cam
 import cam.job.drawing_stream
-import cam.job.jobs as jobs
+import cam.kinds.jobs as jobs
 from cam.cli import main
 from cam.drive.chunks import plan_chunks
 from cam.drive.ports import MockPort
 from cam.drive.runner import run
 from cam.job.drawing_stream import stream_drawing
-from cam.job.jobs import JobOptions, prepare_job, resume_job
+from cam.kinds.jobs import JobOptions, prepare_job, resume_job
 from cam.verify.pinlog import read_pin_log
 from conftest import SAMPLES, assert_surface_equal
 

@@ -17,7 +17,7 @@ from cam.drive.runner import run
 from cam.errors import ParseError
 from cam.formats.excellon import load_excellon, parse_excellon, parse_nc_param
 from cam.job.drill import milled_hole_path_mm, plan_drill
-from cam.job.jobs import JobOptions, prepare_job
+from cam.kinds.jobs import JobOptions, prepare_job
 from cam.sniff import forced_kind, sniff_kind
 from cam.verify.pinlog import decode_pin_log
 

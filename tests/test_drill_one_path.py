@@ -14,7 +14,7 @@ from cam.drive.chunks import plan_chunks
 from cam.drive.ports import MockPort
 from cam.drive.runner import run
 from cam.formats.excellon import load_excellon, parse_excellon
-from cam.formats.gcode_export import gcode_pieces, to_gcode
+from cam.kinds.gcode_export import gcode_pieces, to_gcode
 from cam.job.drill import DrillJobStream, _machine_mm, _tool_runs, plan_drill
 from cam.job.model import CUT, RETRACT, TRAVEL, JobLike
 from cam.job.resume import plan_fingerprint

@@ -25,7 +25,7 @@ from scipy.spatial import cKDTree
 import cam
 from cam.errors import ParseError, PlanError
 from cam.formats.dxf import load_dxf, parse_dxf
-from cam.job.jobs import JobOptions, prepare_job
+from cam.kinds.jobs import JobOptions, prepare_job
 from cam.job.svg import plan_svg
 from cam.verify.pinlog import decode_pin_log, read_pin_log
 

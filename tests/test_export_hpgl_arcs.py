@@ -1,6 +1,6 @@
 """HPGL circles and arcs come out of `cam export --post grbl|linuxcnc` as G2/G3 (issue #30 point 4).
 
-The exporter writes an HPGL job's points at their exact mm (:func:`cam.formats.gcode_export.hpgl_exact_xy_mm`,
+The exporter writes an HPGL job's points at their exact mm (:func:`cam.kinds.gcode_export.hpgl_exact_xy_mm`,
 placed as the HPGL planner places them) and knows which moves are chords of a ``CI``/``AA``/``AR``, so the arc
 fitter holds an arc to the chords' ends (on the file's circle) and not to the chords.  Checked against the
 circles the file describes, through LinuxCNC's rs274 for the linuxcnc post."""
@@ -16,7 +16,7 @@ import pytest
 
 import cam
 from cam.cli import main
-from cam.formats.gcode_export import hpgl_exact_xy_mm
+from cam.kinds.gcode_export import hpgl_exact_xy_mm
 from cam.formats.hpgl import iter_hpgl, load_hpgl
 from cam.job.hpgl import plan_hpgl
 from cam.job.model import CUT

@@ -17,7 +17,7 @@ from scipy.spatial import cKDTree
 
 import cam
 from cam.cli import main
-from cam.formats.gcode_export import to_gcode
+from cam.kinds.gcode_export import to_gcode
 from cam.job.arcs import fit_path
 from conftest import SAMPLES
 from support.lcnc import canonical_polyline_mm, parse_canonical, run_rs274
@@ -296,7 +296,7 @@ CIRCLE_SVG = """<svg xmlns="http://www.w3.org/2000/svg" width="40mm" height="40m
 
 
 def test_every_svg_job_point_gets_a_point_of_the_drawings_own_curves(tmp_path):
-    from cam.formats.gcode_export import svg_exact_xy_mm
+    from cam.kinds.gcode_export import svg_exact_xy_mm
     from cam.formats.svg import load_svg
 
     src = tmp_path / "c.svg"

@@ -11,7 +11,7 @@ import pytest
 import cam
 from cam.choices import job_kind
 from cam.sniff import HEAD_BYTES, sniff_kind
-from cam.job.jobs import prepare_job
+from cam.kinds.jobs import prepare_job
 
 import excellon_gen
 from conftest import SAMPLES

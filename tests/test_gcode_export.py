@@ -5,7 +5,7 @@ import shutil
 import pytest
 
 import cam
-from cam.formats.gcode_export import feeds_mm_per_min, to_gcode
+from cam.kinds.gcode_export import feeds_mm_per_min, to_gcode
 from support.lcnc import carve_canonical, parse_canonical, run_rs274
 
 from conftest import ROOT, SAMPLES, carve_job, assert_surface_equal, drawing_from_rows

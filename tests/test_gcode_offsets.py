@@ -17,7 +17,7 @@ from scipy.spatial import cKDTree
 import cam
 from cam.drive.state import MachineState, read_state, write_state
 from cam.formats.gcode import parse_gcode
-from cam.job.jobs import prepare_job
+from cam.kinds.jobs import prepare_job
 from support.lcnc import canonical_polyline_mm, parse_canonical, run_rs274
 
 from test_cli import assert_one_line_error, cli

@@ -21,10 +21,10 @@ from cam.drive.ports import MockPort
 from cam.drive.runner import run
 from cam.formats import _gcode_lines
 from cam.formats.gcode import GcodeFile, load_gcode, open_gcode, parse_gcode
-from cam.formats.gcode_export import gcode_pieces, to_gcode
+from cam.kinds.gcode_export import gcode_pieces, to_gcode
 from cam.job import gcode as gcode_job
 from cam.job.gcode import GcodeJobStream, plan_gcode, stream_gcode
-from cam.job.jobs import JobOptions, prepare_job
+from cam.kinds.jobs import JobOptions, prepare_job
 from cam.job.model import Job, JobLike
 from cam.job.resume import plan_fingerprint
 from conftest import SAMPLES
@@ -272,7 +272,7 @@ def test_prepare_job_keeps_a_large_job_as_its_pieces(tmp_path, monkeypatch):
     path = SAMPLES / "bolt_plate.ngc"
     held = prepare_job(path, JobOptions(), SETTINGS)
     assert isinstance(held.toolpath, Job)
-    monkeypatch.setattr("cam.job.jobs.GCODE_STREAM_MOVES", 100)
+    monkeypatch.setattr("cam.kinds.jobs.GCODE_STREAM_MOVES", 100)
     streamed = prepare_job(path, JobOptions(), SETTINGS)
     assert isinstance(streamed.toolpath, GcodeJobStream) and isinstance(streamed.toolpath.src, GcodeFile)
     assert streamed.summary == held.summary and streamed.report == held.report

@@ -25,7 +25,7 @@ from cam.drive.grbl_journal import GrblLines, on_path_tolerance_steps
 from cam.drive.grbl_machine import PATH_TOLERANCE_STEPS, close_grbl_machines, job_lines
 from cam.drive.journal import read_journal
 from cam.drive.session import MachineSession
-from cam.job.jobs import JobOptions, prepare_job, resume_job
+from cam.kinds.jobs import JobOptions, prepare_job, resume_job
 from cam.job.resume import cutting_moves
 from cam.sim.grbl import start_emulator
 from cam.verify.pinlog import Motion, carve

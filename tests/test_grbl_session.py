@@ -18,7 +18,7 @@ from cam.drive.grbl_machine import PATH_TOLERANCE_STEPS, close_grbl_machines, jo
 from cam.drive.session import MachineSession
 from cam.drive.state import MachineState, StateHold, write_state
 from cam.errors import CapabilityError, TravelError
-from cam.job.jobs import JobOptions, prepare_job
+from cam.kinds.jobs import JobOptions, prepare_job
 from cam.settings import Travel
 from cam.sim.grbl import start_emulator
 from cam.verify.pinlog import Motion

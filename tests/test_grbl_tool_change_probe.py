@@ -19,7 +19,7 @@ from cam.drive.journal import read_journal
 from cam.drive.session import MachineSession
 from cam.drive.state import StateHold
 from cam.errors import PlanError
-from cam.job.jobs import resume_job
+from cam.kinds.jobs import resume_job
 from cam.sim.grbl import start_emulator
 from support.grbl import quick_thread_switches  # noqa: F401 (autouse)
 
@@ -114,7 +114,7 @@ def test_grbl_tool_change_prompt_offers_probe_tool(grbl, tmp_path):
         assert session.position_steps() == tuple(again["position_steps"])
         sent = [text for _, text, _ in grbl.lines()[lines_before:]]
         assert sum("G38.2" in t for t in sent) == 1, sent
-        assert f"G10L2P1Z{cam.formats.gcode_export.format_mm(-zero2[2] * per)}" in sent, sent  # grbl's own G54
+        assert f"G10L2P1Z{cam.kinds.gcode_export.format_mm(-zero2[2] * per)}" in sent, sent  # grbl's own G54
         session.answer(again["id"], "continue")
         assert session.wait_idle(60) and session.last_run["status"] == "finished", session.last_run
         assert hold.state.tool_probe.contact_steps[:2] == first.contact_steps[:2]

@@ -10,7 +10,7 @@ import cam
 from cam.errors import CamError
 from cam.job.heightmap import (depth_steps_of, drop_surface_steps, plan_heightmap, pixel_steps_of,
                                row_spacing_px)
-from cam.job.jobs import JobOptions, prepare_job
+from cam.kinds.jobs import JobOptions, prepare_job
 from cam.job.model import RETRACT, TRAVEL
 from cam.tool import drop_depth_px, parse_tool, reach_depth_px
 from cam.verify.toolcarve import carve_tool, compare_surface

@@ -11,7 +11,7 @@ import pytest
 import cam
 from cam.drive.ports import MockPort
 from cam.drive.runner import run
-from cam.formats.gcode_export import gcode_pieces, to_gcode
+from cam.kinds.gcode_export import gcode_pieces, to_gcode
 from cam.formats.hpgl import load_hpgl, parse_hpgl
 from cam.job.hpgl import plan_hpgl
 from cam.job.hpgl_stream import HpglJobStream, stream_hpgl

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import cam
-import cam.job.jobs as jobs
+import cam.kinds.jobs as jobs
 from cam.drive.chunks import plan_chunks
 from cam.drive.ports import MockPort
 from cam.drive.runner import run
@@ -19,7 +19,7 @@ from cam.errors import CamError
 from cam.formats.hpgl import load_hpgl
 from cam.job.hpgl import plan_hpgl
 from cam.job.hpgl_stream import stream_hpgl
-from cam.job.jobs import JobOptions, prepare_job
+from cam.kinds.jobs import JobOptions, prepare_job
 from cam.verify.pinlog import read_pin_log
 
 SLOW_CASES = {'test_streamed_plan_equals_whole_plan[lookahead]',

@@ -20,7 +20,7 @@ from typing import Iterator, Optional
 from cam import choices
 from cam.cli import COMMANDS
 from cam.cli.parser import build_parser
-from cam.job import jobs
+from cam.kinds import jobs
 
 from conftest import ROOT, parsed_source
 
@@ -49,13 +49,13 @@ FUNCTION_LEVEL_IMPORTS = {
         "can name the extra in one line",
     ("cam.web.server", "uvicorn"): "optional dependency: the web stack (cam[web]), as starlette",
     ("cam.web.connections", "uvicorn"): "optional dependency: the web stack (cam[web]), as cam.web.server",
-    ("cam.job.jobs", "cam.digitize.sketch"): "heavy (scipy.ndimage and scikit-image, about 0.6 s): loaded only "
+    ("cam.kinds.jobs", "cam.digitize.sketch"): "heavy (scipy.ndimage and scikit-image, about 0.6 s): loaded only "
                                              "when a sketch is traced (--trace), not for every job",
     ("cam.drive.machines", "cam.drive.machines"): "the registry's back ends register themselves when a port is "
                                                   "first named: each imports the registry's base, and the grbl "
                                                   "and MAXIMUS hosts load only for a port that needs them",
     ("cam.formats.dxf", "ezdxf"): "heavy (about 0.7 s): loaded only when a DXF file is read, not with every job "
-                                  "kind's reader (cam.job.jobs imports cam.formats.dxf)",
+                                  "kind's reader (cam.kinds.jobs imports cam.formats.dxf)",
     ("cam.cli", "cam._compiled"): "the kernels' cache folder is chosen (and made) when a command runs, not for "
                                   "--help or bad options",
     ("cam.cli", "numba"): "heavy (about half a second): the first-compile note is registered only when a "

@@ -1,4 +1,4 @@
-"""cam.job.jobs: a file and its options to a ready job, for every kind."""
+"""cam.kinds.jobs: a file and its options to a ready job, for every kind."""
 from __future__ import annotations
 
 import numpy as np
@@ -6,7 +6,7 @@ import pytest
 
 import cam
 from cam.errors import CamError
-from cam.job.jobs import JobOptions, job_kind, prepare_job
+from cam.kinds.jobs import JobOptions, job_kind, prepare_job
 
 from conftest import ROOT, SAMPLES, assert_surface_equal
 

@@ -488,7 +488,7 @@ def test_a_job_levelled_by_a_map_probed_on_the_mock_cuts_at_the_asked_depth(kind
 def test_a_job_kept_as_pieces_is_levelled_a_piece_at_a_time_to_the_same_moves(kind, tmp_path, monkeypatch):
     """One implementation: a large job's pieces are levelled as they are made (bounded memory), a small one's joined;
     the levelled moves are the same whatever the pieces."""
-    import cam.job.jobs as jobs
+    import cam.kinds.jobs as jobs
 
     m = HeightMap([-5, 60, 140], [-5, 50, 110], [[0.0, 0.2, 0.1], [0.1, 0.4, 0.3], [0.3, 0.2, 0.5]],
                   reference_mm=0.1, spacing_mm=10)

@@ -168,7 +168,7 @@ def test_cmd_emergency_stop_then_resume_carves_as_an_uninterrupted_run(tmp_path)
     opens the port by name), an emergency stop, the journal, the resumed rest (planned time not 0 s); the two
     command logs read back and carved equal one uninterrupted run."""
     from cam.drive.journal import read_journal
-    from cam.job.jobs import resume_job
+    from cam.kinds.jobs import resume_job
     from cam.verify.pinlog import write_pin_log
     from test_resume import _check_union, _prepared, estop_run
 

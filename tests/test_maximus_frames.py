@@ -11,7 +11,7 @@ from cam.cli import main
 from cam.drive.maximus.board import MAXIMUS_SETTINGS
 from cam.drive.session import MachineSession
 from cam.drive.state import MachineState, PositionUnknownError, StateHold, read_state, write_state
-from cam.job.jobs import JobOptions, prepare_job
+from cam.kinds.jobs import JobOptions, prepare_job
 from cam.sim.maximus import LIMIT_SWITCH_X
 from support.maximus_log import decode_port_log
 

@@ -168,7 +168,7 @@ def test_the_web_page_jogs_and_goes_to_the_origin_on_the_board(tmp_path, emu):
 def test_z_drill_up_and_down_set_by_jogging_drive_the_drill_stroke(emu, tmp_path):
     board = tmp_path / "two.drl"
     board.write_text("M48\nMETRIC\nT1C0.800\n%\nT1\nX1.0Y1.0\nX1.5Y1.0\nM30\n")
-    from cam.job.jobs import JobOptions, prepare_job
+    from cam.kinds.jobs import JobOptions, prepare_job
 
     s = session_on(emu)
     run(s, s.jog, "z", 300)  # down 300 below the origin: where the head travels between holes

@@ -30,7 +30,7 @@ from cam.drive.maximus.packets import drill_moves, jog_packet
 from cam.drive.maximus.resume import resumed_arguments
 from cam.drive.session import MachineSession
 from cam.errors import PlanError, PortError
-from cam.job.jobs import JobOptions, prepare_job
+from cam.kinds.jobs import JobOptions, prepare_job
 from cam.drive.maximus.protocol import (
     EMERGENCYSTOP, ISMACHINEREADY, JOGMODEON, LIMIT_SWITCH_X, LIMIT_SWITCH_Y, MACHINEREADY, MACHINESTOPPED, OPENJOGMODE,
 )

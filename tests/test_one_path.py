@@ -14,7 +14,7 @@ import pytest
 import cam
 from cam.drive.chunks import plan_chunks
 from cam.drive.runner import Controller, Cursor, run
-from cam.job.jobs import JobOptions, prepare_job
+from cam.kinds.jobs import JobOptions, prepare_job
 from cam.verify.pinlog import read_pin_log, write_pin_log
 from conftest import SAMPLES, run_cli
 

@@ -17,7 +17,7 @@ import pytest
 from cam.cli.checks import check_args
 from cam.cli.parser import build_parser
 from cam.errors import CamError
-from cam.job.jobs import JobOptions
+from cam.kinds.jobs import JobOptions
 from cam.options import JOB_OPTIONS, Option, schema_json
 
 from conftest import SAMPLES, run_cli
@@ -108,7 +108,7 @@ def test_the_page_is_served_the_schema(tmp_path):
     finally:
         app.state.session.shutdown()
     assert status == 200
-    from cam.job.jobs import kind_defaults
+    from cam.kinds.jobs import kind_defaults
 
     assert json.loads(body) == json.loads(json.dumps(schema_json(kind_defaults())))
     assert [o["name"] for o in json.loads(body)] == [o.name for o in JOB_OPTIONS]
@@ -282,7 +282,7 @@ def test_the_drawing_planner_takes_the_cut_depth_in_mm(monkeypatch):
     """cam.plan(cut_depth_mm=) is --cut-depth: prepare_job gives the option unchanged, the planner makes it whole
     Z pixels (depth_px_of), the same job as the depth in Z pixels."""
     import cam
-    from cam.job import jobs
+    from cam.kinds import jobs
     from cam.job.drawing_stream import depth_px_of
 
     s = cam.MachineSettings()
@@ -311,7 +311,7 @@ def test_the_stepdown_is_converted_in_one_place(monkeypatch):
     """The planner takes stepdown_mm, as JobOptions and --stepdown do: prepare_job gives it the option's value
     unchanged, and the planner's levels are stepdown_px_of(stepdown_mm) Z pixels apart."""
     import cam
-    from cam.job import jobs
+    from cam.kinds import jobs
     from cam.job.drawing_stream import stepdown_px_of
 
     s = cam.MachineSettings()

@@ -20,7 +20,7 @@ import pytest
 from cam.drive.session import MachineSession
 from cam.drive.state import MachineState, StateHold
 from cam.errors import TravelError
-from cam.job.jobs import JobOptions, prepare_job
+from cam.kinds.jobs import JobOptions, prepare_job
 from cam.settings import DEFAULT_SETTINGS as S
 from cam.verify.pinlog import decode_pin_log, read_pin_log
 

@@ -12,8 +12,8 @@ import pytest
 
 import cam
 from cam.drive.chunks import plan_chunks
-from cam.formats.gcode_export import to_gcode
-from cam.job.jobs import JobOptions, motion_picture, prepare_job
+from cam.kinds.gcode_export import to_gcode
+from cam.kinds.jobs import JobOptions, motion_picture, prepare_job
 from cam.job.model import JobLike
 from cam.job.resume import plan_fingerprint
 from cam.render.picture import encode_png

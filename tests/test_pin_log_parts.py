@@ -155,7 +155,7 @@ def test_parts_round_trip_through_the_csv_and_a_log_without_parts_is_the_job(tmp
 def test_the_sessions_pin_log_holds_the_travel_and_the_page_exports_it(tmp_path):
     from cam.drive.session import MachineSession
     from cam.drive.state import StateHold
-    from cam.job.jobs import JobOptions, prepare_job
+    from cam.kinds.jobs import JobOptions, prepare_job
     from cam.web.work import pin_log_csv, save_pin_log_raw
 
     job = prepare_job(SAMPLES / "board.drl", JobOptions(), S)

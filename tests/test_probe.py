@@ -21,7 +21,7 @@ import pytest
 import cam
 from cam.drive.grbl_machine import close_grbl_machines
 from cam.drive.grbl_probe import parse_prb
-from cam.formats.gcode_export import format_mm
+from cam.kinds.gcode_export import format_mm
 from cam.drive.machines import can
 from cam.drive.ports import MockPort, surface_height_mm
 from cam.drive.probe_grid import TRAVEL_MARGIN_MM, GridApproach

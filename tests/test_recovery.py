@@ -26,7 +26,7 @@ from cam.drive.maximus.board import MAXIMUS_SETTINGS
 from cam.drive.session import UNKNOWN_JOG_LINE, MachineSession
 from cam.drive.state import MachineState, PositionUnknownError, StateHold, read_state, write_state
 from cam.errors import CamError, CapabilityError, TravelError
-from cam.job.jobs import JobOptions, prepare_job
+from cam.kinds.jobs import JobOptions, prepare_job
 from cam.settings import load_settings
 from cam.sim.grbl import start_emulator as start_grbl
 from cam.sim.maximus import start_emulator as start_maximus

@@ -241,7 +241,7 @@ def test_a_resumed_run_can_be_stopped_and_resumed_again(tmp_path):
     job, _ = _prepared(_drill_args(kind, tmp_path))
     journal, first = _interrupt(kind, "estop", 2, tmp_path)
     start1 = read_journal(journal).position_steps
-    resumed = cam.job.jobs.resume_job(job, read_journal(journal))
+    resumed = cam.kinds.jobs.resume_job(job, read_journal(journal))
     session = MachineSession("mock", job.settings, realtime=True)
     session.set_position(start1)
     session.on_progress = lambda done, total, t_ns: session.stop() if done >= total // 2 else None
@@ -378,7 +378,7 @@ def test_the_page_resumes_a_stopped_job_from_where_the_tool_stands(tmp_path):
 def prepare_job_like_the_page(path: Path):
     from test_web import MEDIUM
 
-    from cam.job.jobs import JobOptions, prepare_job
+    from cam.kinds.jobs import JobOptions, prepare_job
 
     return prepare_job(path, JobOptions(depth=(2,)), MEDIUM)
 

@@ -22,7 +22,7 @@ import cam
 from cam.errors import CamError
 from cam.job.drawing_stream import stream_drawing
 from cam.job.hpgl_stream import stream_hpgl
-from cam.job.jobs import JobOptions, prepare_job
+from cam.kinds.jobs import JobOptions, prepare_job
 from cam.job.model import Job, JobLike, PixelFrame, join_pieces
 from cam.job.resume import MoveIndex, PlanFingerprint, ResumedJob, plan_fingerprint, resume_pieces, resume_toolpath
 from cam.settings import MachineSettings, Travel

@@ -13,7 +13,7 @@ from cam.drive.journal import read_journal
 from cam.drive.ports import MockPort, SwitchSchedule
 from cam.drive.session import MachineSession
 from cam.drive.state import StateHold
-from cam.job.jobs import resume_job
+from cam.kinds.jobs import resume_job
 from cam.verify.pinlog import decode_pin_log
 
 from test_probe import FLAT, LONGER_MM, _raised, mock_settings

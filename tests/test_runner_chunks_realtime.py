@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 
 import cam
-import cam.job.jobs as jobs
+import cam.kinds.jobs as jobs
 from cam.drive.chunks import ChunkedPlan, plan_chunks
 from cam.drive.runner import FINISHED, STOPPED, Controller, Cursor, run
 from cam.drive.session import MachineSession
-from cam.job.jobs import JobOptions, prepare_job
+from cam.kinds.jobs import JobOptions, prepare_job
 from conftest import drawing_from_rows
 from test_runner_stall import StallingPort
 

@@ -12,7 +12,7 @@ import cam
 from cam.drive.session import MachineSession
 from cam.drive.state import PositionUnknownError, StateHold, read_state
 from cam.errors import PlanError, TravelError
-from cam.job.jobs import JobOptions, prepare_job
+from cam.kinds.jobs import JobOptions, prepare_job
 from cam.verify.pinlog import decode_pin_log
 from conftest import SAMPLES
 

@@ -237,7 +237,7 @@ def test_cli_bad_input_is_one_line(tmp_path, args, fragment):
 def test_drill_trace_option_plans_what_trace_then_drill_plans(tmp_path):
     """``cam drill PHOTO --trace`` (and JobOptions.trace) is ``cam trace`` then ``cam drill`` in one step."""
     from cam.digitize.sketch import load_sketch, trace
-    from cam.job.jobs import JobOptions, prepare_job
+    from cam.kinds.jobs import JobOptions, prepare_job
 
     sketch = ROOT / "samples" / "sketch.jpg"
     job = prepare_job(sketch, JobOptions(depth=(2,), trace=True, trace_min_length_px=12), cam.MachineSettings())

@@ -289,14 +289,14 @@ def test_scale_on_a_drawing_is_refused(tmp_path):
 
 def test_prepare_job_and_web_options(tmp_path):
     logo = write(tmp_path, "logo.svg", svg('<rect x="1" y="1" width="10" height="10" stroke="black"/>'))
-    import cam.job.jobs
+    import cam.kinds.jobs
 
-    opts = cam.job.jobs.JobOptions.from_mapping({"fit_mm": "20x40", "cut_depth_mm": "0.2"})
-    job = cam.job.jobs.prepare_job(logo, opts)
+    opts = cam.kinds.jobs.JobOptions.from_mapping({"fit_mm": "20x40", "cut_depth_mm": "0.2"})
+    job = cam.kinds.jobs.prepare_job(logo, opts)
     assert job.kind == "svg" and abs(job.size_mm[0] - 20) < 0.1 and abs(job.size_mm[1] - 20) < 0.1
     assert job.preview_png()[:4] == b"\x89PNG"
     with pytest.raises(CamError, match="does not apply"):
-        cam.job.jobs.prepare_job(logo, cam.job.jobs.JobOptions(depth=(3,)))
+        cam.kinds.jobs.prepare_job(logo, cam.kinds.jobs.JobOptions(depth=(3,)))
 
 
 def test_notebook_pictures():

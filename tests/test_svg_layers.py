@@ -327,7 +327,7 @@ def test_a_partial_duplicate_leaves_the_rest_of_its_stroke_and_curves_are_compar
 def test_the_page_options_reach_the_job(tmp_path):
     """The page sends its form as a mapping (JobOptions.from_mapping): the layers, their pauses (the job's tool
     changes, which the page lists) and the report's layers."""
-    from cam.job.jobs import JobOptions, prepare_job
+    from cam.kinds.jobs import JobOptions, prepare_job
 
     card = write(tmp_path, "birthday-card.svg", card_svg())
     opts = JobOptions.from_mapping({"layers": "blue pen, red pen", "pause_between_layers": "on", "offset_mm": "0,0"})

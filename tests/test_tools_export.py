@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import cam
-from cam.formats.gcode_export import to_gcode
+from cam.kinds.gcode_export import to_gcode
 from cam.tool import parse_tool
 from cam.verify.toolcarve import carve_tool, compare_surface
 from support.lcnc import canonical_motion, canonical_time_s, parse_canonical, run_rs274

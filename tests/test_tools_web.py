@@ -6,7 +6,7 @@ import pytest
 
 import cam
 from cam.errors import CamError
-from cam.job.jobs import JobOptions, prepare_job
+from cam.kinds.jobs import JobOptions, prepare_job
 
 from conftest import ROOT, SAMPLES
 

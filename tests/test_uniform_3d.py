@@ -4,7 +4,7 @@ import pytest
 
 import cam
 from cam.digitize.peel3d import peel_layers
-from cam.job.jobs import JobOptions, prepare_job
+from cam.kinds.jobs import JobOptions, prepare_job
 
 from conftest import ROOT, SAMPLES, assert_surface_equal, carve_job
 from test_cli import assert_one_line_error, cli

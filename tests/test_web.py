@@ -22,7 +22,7 @@ import uvicorn
 
 import cam
 from cam.drive.runner import EMERGENCY_STOPPED, FINISHED
-from cam.job.jobs import JobOptions, prepare_job
+from cam.kinds.jobs import JobOptions, prepare_job
 
 from conftest import SAMPLES, assert_surface_equal
 

@@ -10,7 +10,7 @@ import pytest
 
 import cam
 from cam.drive.state import read_state
-from cam.job.jobs import JobOptions, prepare_job
+from cam.kinds.jobs import JobOptions, prepare_job
 from cam.verify.pinlog import decode_pin_log
 from conftest import SAMPLES
 from test_web import FAST, Server, _load, _open, _wait_done, browser, page  # noqa: F401 (fixtures)

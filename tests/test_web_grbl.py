@@ -11,7 +11,7 @@ import pytest
 import cam
 from cam.drive.grbl_machine import close_grbl_machines
 from cam.drive.state import read_state
-from cam.job.jobs import JobOptions, prepare_job
+from cam.kinds.jobs import JobOptions, prepare_job
 from cam.sim.grbl import start_emulator
 from cam.verify.pinlog import decode_pin_log
 from conftest import SAMPLES, assert_surface_equal

@@ -45,7 +45,7 @@ def test_planning_and_previews_during_a_job_leave_its_step_timing_alone(servers)
     st = s.wait_idle(60)
     assert st["last"]["status"] == "finished"
     log = s.session.last_job_pin_log
-    planned = cam.job.jobs.prepare_job(SAMPLES / "ellipse.png", cam.job.jobs.JobOptions(depth=(2,)), HALF_MS).steps
+    planned = cam.kinds.jobs.prepare_job(SAMPLES / "ellipse.png", cam.kinds.jobs.JobOptions(depth=(2,)), HALF_MS).steps
     assert np.array_equal(log.data, planned.data)
     assert np.all(np.diff(log.t_ns) >= np.diff(planned.t_ns)), "a step came sooner than planned"
     # the pin log export is a file made by the worker: the same writes, as CSV

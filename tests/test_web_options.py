@@ -15,7 +15,7 @@ import pytest
 
 from cam.drive.state import MachineState
 from cam.errors import CamError
-from cam.job.jobs import JobOptions, kind_defaults, prepare_job
+from cam.kinds.jobs import JobOptions, kind_defaults, prepare_job
 from cam.options import GROUPS, JOB_OPTIONS, Option, schema_json
 
 from conftest import ROOT, SAMPLES

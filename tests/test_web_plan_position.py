@@ -15,7 +15,7 @@ import cam
 from cam.drive.session import MachineSession
 from cam.drive.state import MachineState, read_state, write_state
 from cam.errors import StalePlanError
-from cam.job.jobs import JobOptions, prepare_job
+from cam.kinds.jobs import JobOptions, prepare_job
 from cam.verify.pinlog import decode_pin_log, read_pin_log
 from conftest import ROOT, run_cli
 from test_web import Server

@@ -10,7 +10,7 @@ import pytest
 import cam
 from cam.drive.track import JobUnits, hole_states, job_units, start_at_hole, to_job_units
 from cam.errors import PlanError
-from cam.job.jobs import JobOptions, prepare_job
+from cam.kinds.jobs import JobOptions, prepare_job
 from cam.verify.pinlog import decode_pin_log
 
 from conftest import SAMPLES

@@ -15,7 +15,7 @@ from ..drive.journal import read_journal
 from ..drive.state import StateHold, check_in_travel, read_state
 from ..drive.machines import can
 from ..errors import CamError
-from ..job.jobs import resume_job
+from ..kinds.jobs import resume_job
 from ..job.resume import resume_start
 from .checks import check_output_path, job_kind_of
 from ..fileio import atomic_write_text

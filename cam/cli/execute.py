@@ -281,7 +281,7 @@ def _drive(job: Any, args: argparse.Namespace, settings: MachineSettings, hold: 
     realtime = getattr(args, "realtime", False)
     port = _job_port(args, settings, realtime)
     session, answers = _job_session(port, args, settings, hold, stopping)
-    # --origin, else the job's own (an --offset places the file by its own zero: cam.job.jobs.prepare_job, the rule
+    # --origin, else the job's own (an --offset places the file by its own zero: cam.kinds.jobs.prepare_job, the rule
     # the page's offset_mm follows too)
     origin = getattr(args, "origin", None)
     approach = None if getattr(args, "resume", None) else approach_to_work_zero(job, hold.state, start, settings,

@@ -19,7 +19,7 @@ from ..drive.machines import DEFAULT_PORT, can
 from ..errors import CamError, TravelError
 from ..formats.excellon import HoleList, load_excellon
 from ..formats.gcode import load_tool_table, open_gcode
-from ..formats.gcode_export import exact_geometry, save_gcode
+from ..kinds.gcode_export import exact_geometry, save_gcode
 from ..job.gcode import program_extent_mm, work_zero_range_mm
 from ..job.drill import DEFAULT_CUT_DEPTH_MM
 from ..job.heightmap_level import load_height_map

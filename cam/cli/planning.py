@@ -14,7 +14,7 @@ from ..drive.chunks import ChunkedPlan, plan_chunks
 from ..drive.pins import axis_bits
 from ..drive.state import MachineState, read_state
 from ..errors import CamError, TravelError
-from ..job.jobs import JobOptions, PreparedJob, own_zero_home, prepare_job
+from ..kinds.jobs import JobOptions, PreparedJob, own_zero_home, prepare_job
 from ..options import JOB_OPTIONS, Option
 from ..job.model import JobLike
 from ..render.picture import save_picture, surface_picture, toolpath_picture, toolpath_svg
@@ -43,13 +43,13 @@ def placed_by_own_zero(args: argparse.Namespace) -> bool:
     """Whether the command's drill, HPGL or SVG file is placed by its own zero (--origin file, or --offset without
     --origin): ``cam drill`` then holds the machine before planning and plans the file from the active work zero
     (``args.machine_state``), its travel checked in the machine frame, as it plans a G-code program
-    (:func:`cam.job.jobs.own_zero_home`)."""
+    (:func:`cam.kinds.jobs.own_zero_home`)."""
     return own_zero_home(job_kind_of(args) or "", job_options(args)) is not None
 
 
 def prepare(args: argparse.Namespace, settings: Optional[MachineSettings] = None) -> PreparedJob:
     """The command's file (a drawing, --load-digitized matrix, G-code, drill or HPGL file) planned with its
-    options by :func:`cam.job.jobs.prepare_job`, the call the web page makes too (progress bar by bytes read)."""
+    options by :func:`cam.kinds.jobs.prepare_job`, the call the web page makes too (progress bar by bytes read)."""
     path = getattr(args, "load_digitized", None) or args.image
     if not path:
         raise CamError(f"{args.command} needs an IMAGE or --load-digitized FILE")
@@ -119,7 +119,7 @@ def _job_value(o: Option, value: Any) -> Any:
 
 
 def job_options(args: argparse.Namespace) -> JobOptions:
-    """The command's job options as :class:`cam.job.jobs.JobOptions`, one field per flag of
+    """The command's job options as :class:`cam.kinds.jobs.JobOptions`, one field per flag of
     :data:`cam.options.JOB_OPTIONS`.  The flags were checked against the file's kind by
     :func:`cam.cli.checks.check_args`; a flag given for another kind (``cam export``'s --travel-height and
     --flip-y of every kind, ``cam preview``'s --scale of pictures) is its export or picture meaning, not the

@@ -24,7 +24,7 @@ from ..drive.probing import job_area_mm
 from ..drive.session import MachineSession
 from ..drive.state import steps_to_mm
 from ..errors import CamError
-from ..job.jobs import JobOptions, prepare_job
+from ..kinds.jobs import JobOptions, prepare_job
 from ..settings import MachineSettings
 from .common import port_settings
 from .machine_state import hold_machine, run_activity

@@ -6,7 +6,7 @@ it.  :func:`image_size_px` reads the width and height from the header of a
 PNG (``IHDR``), JPEG (the first start-of-frame marker), BMP (the DIB header),
 GIF (the logical screen) or TIFF file (the first image's ``ImageWidth`` and ``ImageLength`` tags), so a
 drawing too large for the machine is refused before it is decoded
-(:func:`cam.digitize.drawing.load_image`, :func:`cam.job.jobs.prepare_job`).
+(:func:`cam.digitize.drawing.load_image`, :func:`cam.kinds.jobs.prepare_job`).
 
 Pure computation on bytes, standard library only.
 

@@ -57,7 +57,7 @@ class SessionChecks(SessionFrames):
     def _check_planned_in(self, mj: MachineJob) -> None:
         """Refuse a prepared job planned for another machine state than the session's now (issue #43 point 6): a
         G-code program planned with the tool elsewhere, or a job planned from another work zero
-        (:class:`~cam.job.jobs.PlannedIn`; the work offsets compared when the session keeps the state file)."""
+        (:class:`~cam.kinds.jobs.PlannedIn`; the work offsets compared when the session keeps the state file)."""
         planned = mj.planned_in
         if planned is None or mj.resumed:
             return

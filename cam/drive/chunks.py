@@ -596,7 +596,7 @@ def plan_chunks(job: JobLike, *, start_steps: Optional[tuple[int, int, int]] = (
             :class:`~cam.job.model.JobLike`: a :class:`~cam.job.model.Job` is one piece).
         start_steps: where the tool stands in the machine frame (the job is checked against the travel).  None:
             the job is planned in its own frame and placed when it runs (a drawing, a relief, a file placed by its
-            extent: :func:`cam.job.jobs.prepare_job`): checked here to fit the travel's span
+            extent: :func:`cam.kinds.jobs.prepare_job`): checked here to fit the travel's span
             (:class:`~cam.job.model.TravelSpan`), and in the machine frame where it is placed (the session checks
             the plan's extent from where it starts).
         chunk_periods: step periods per chunk.

@@ -36,7 +36,7 @@ from typing import Any, Callable, Iterator, Optional
 import numpy as np
 
 from ..errors import CamError, PlanError, PortError
-from ..formats.gcode_export import format_mm
+from ..kinds.gcode_export import format_mm
 from ..job.model import CUT
 from ..settings import MachineSettings, Travel
 from ..values import FEED_OVERRIDE_RANGE

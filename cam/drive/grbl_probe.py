@@ -22,7 +22,7 @@ from typing import Any, Optional
 
 import numpy as np
 
-from ..formats.gcode_export import format_mm
+from ..kinds.gcode_export import format_mm
 from ..settings import MachineSettings
 from .grbl_link import GrblAlarm, GrblError
 from .grbl_machine import GRBL_OFFSETS, GrblControl, GrblMachine, fault_stop, finish_stop, mpos_to_steps, steps_to_mpos

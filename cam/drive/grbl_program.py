@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Any, Optional
 
-from ..formats.gcode_export import format_mm
+from ..kinds.gcode_export import format_mm
 from .grbl_link import GrblAlarm
 from .grbl_machine import GrblControl, GrblPosition, _stream_until_pause, job_lines
 from .grbl_probe import GrblProber

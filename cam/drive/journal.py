@@ -69,7 +69,7 @@ class JournalSpec:
 
 def journal_spec(job: Any, path: str | os.PathLike, *, home_steps: tuple[int, int, int] = (0, 0, 0),
                  pin_log_path: Optional[str] = None) -> JournalSpec:
-    """The journal spec of a run of ``job`` (a :class:`~cam.job.jobs.PreparedJob` or a :class:`~cam.job.model.Job`).
+    """The journal spec of a run of ``job`` (a :class:`~cam.kinds.jobs.PreparedJob` or a :class:`~cam.job.model.Job`).
 
     ``home_steps``: where the tool stands when the run starts, in the session's frame; a resumed job's home
     is where its journal says (``home_steps`` minus where the run starts in the job).

@@ -1,7 +1,7 @@
 """The one typed job that crosses into a machine (issue #45 point 1).
 
 A front end hands the session a job in one of five shapes: a :class:`~cam.job.model.Job` (moves in memory), a
-:class:`~cam.job.model.JobLike` kept as pieces, a :class:`~cam.job.jobs.PreparedJob` (a file planned with its
+:class:`~cam.job.model.JobLike` kept as pieces, a :class:`~cam.kinds.jobs.PreparedJob` (a file planned with its
 options), a :class:`~cam.drive.chunks.ChunkedPlan` or a :class:`~cam.drive.steps.StepPlan` (steps already
 timed).  :func:`machine_job` reads it once, by its type, into a :class:`MachineJob`: the session and every back
 end read those typed fields, never the shape's attributes.
@@ -16,7 +16,7 @@ import numpy as np
 from ..errors import CapabilityError
 from ..job.drill import DrillPlan
 from ..job.gcode_probing import ProbingProgram
-from ..job.jobs import PlannedIn, PreparedJob
+from ..kinds.jobs import PlannedIn, PreparedJob
 from ..job.model import TRAVEL, Job, JobLike
 from ..settings import MachineSettings
 from .chunks import ChunkedPlan
@@ -43,7 +43,7 @@ class MachineJob:
         plan: its step plan when one was made (a prepared job's, a plan given), else None.
         drill_plan: a drill file's holes (boards that drill by themselves take it), else None.
         extent_steps: ``(3, 2)`` int64 reach from its home (a prepared job's), else None.
-        planned_in: the machine state its plan holds for (:class:`~cam.job.jobs.PlannedIn`), else None.
+        planned_in: the machine state its plan holds for (:class:`~cam.kinds.jobs.PlannedIn`), else None.
         resumed: a run resumed from a journal (it starts where the tool stands).
         travel_only: moves that travel only (a jog, a go-to).
         origin: a prepared job's own ``--origin`` (:func:`cam.drive.placement.origin_anchor`), else None.

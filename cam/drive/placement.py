@@ -13,7 +13,7 @@ from typing import Any, Optional
 import numpy as np
 
 from ..errors import CamError, TravelError
-from ..job.jobs import origin_anchor_steps
+from ..kinds.jobs import origin_anchor_steps
 from ..job.model import Job, travel_job
 from ..settings import MachineSettings
 from .chunks import ChunkedPlan
@@ -49,7 +49,7 @@ PLACED_KINDS = {"drawing": "drawing job", "digitized": "digitized matrix job", "
                 "hpgl": "HPGL job", "svg": "SVG job", "dxf": "DXF job"}
 """The file kinds whose job is placed at the active work zero, and what messages call them (a G-code program is
 not placed: it runs in the state's work offsets from where the tool stands, planned so by ``cam drill``, see
-:func:`cam.job.jobs.prepare_job`'s ``machine_state``)."""
+:func:`cam.kinds.jobs.prepare_job`'s ``machine_state``)."""
 
 
 ORIGINS = ("file", "upper-left", "lower-left", "center")
@@ -89,7 +89,7 @@ def approach_to_work_zero(job: "JobInput | MachineJob", state: MachineState, sta
     board drills a file's holes from where its head stands, so it travels there first too): its
     home, its own frame's (0, 0, 0), goes to the work zero: a drawing's top-left pixel at the surface (the
     thesis's), a drill file's top-left hole, or with ``origin`` "file" (or an ``--offset``) a drill, HPGL or SVG
-    file's own zero (its job planned from the work zero, :func:`cam.job.jobs.own_zero_home`).  None when the
+    file's own zero (its job planned from the work zero, :func:`cam.kinds.jobs.own_zero_home`).  None when the
     tool is there already, or for a G-code program (its
     own work offsets place it) or any other job (planned from where the tool stands).  Positions in the machine frame.
 

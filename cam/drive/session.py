@@ -171,7 +171,7 @@ class MachineSession(SessionTools, SessionRecover, SessionPinLogs, SessionProbe,
 
         Args:
             job: a :class:`~cam.job.model.Job` (planned into steps here, checked against the travel from
-                where the tool stands), a job kept as pieces, a :class:`~cam.job.jobs.PreparedJob`, a chunked
+                where the tool stands), a job kept as pieces, a :class:`~cam.kinds.jobs.PreparedJob`, a chunked
                 plan or a :class:`StepPlan` (:data:`cam.drive.machine_job.JobInput`: read once into the typed
                 :class:`~cam.drive.machine_job.MachineJob` the machine's back end takes).
             label: what the log calls it.
@@ -179,17 +179,17 @@ class MachineSession(SessionTools, SessionRecover, SessionPinLogs, SessionProbe,
                 :meth:`pause` and the other controls work either way.
             journal: keep the job's journal (:mod:`cam.drive.journal`) in this file (a path), or as a
                 :class:`~cam.drive.journal.JournalSpec` says; None: no journal.  A resumed job
-                (:func:`cam.job.jobs.resume_job`) starts where its journal says the tool stands.
+                (:func:`cam.kinds.jobs.resume_job`) starts where its journal says the tool stands.
             origin: with a state file, which point of a file's job goes to the active work zero (``file``,
                 ``upper-left``, ``lower-left``, ``center``; None: the kind's default, see
                 :func:`cam.drive.placement.origin_anchor`); the session travels there first (lifted), then runs
                 the job.  A resumed job (a journal) and a G-code program start where the tool stands.
 
-        A G-code program that probes (G38.2/G38.3: :attr:`~cam.job.jobs.PreparedJob.probing`) runs on a machine that
+        A G-code program that probes (G38.2/G38.3: :attr:`~cam.kinds.jobs.PreparedJob.probing`) runs on a machine that
         probes only, a part at a time, each planned from where the probe before it touched
         (:mod:`cam.drive.program_probe`), and keeps no journal.
 
-        A prepared job holds for the machine state it was planned in (:attr:`~cam.job.jobs.PreparedJob.planned_in`):
+        A prepared job holds for the machine state it was planned in (:attr:`~cam.kinds.jobs.PreparedJob.planned_in`):
         a G-code program runs from where the tool stood when it was planned, in those work offsets, as ``cam drill``
         plans it; anywhere else it is refused (StalePlanError: plan it again), never run shifted.
 

@@ -22,7 +22,7 @@ import numpy as np
 
 from ..errors import CamError, PlanError
 from ..formats.excellon import load_excellon
-from ..job.jobs import resume_job
+from ..kinds.jobs import resume_job
 from ..job.model import CUT, Job, cut_runs_steps
 from ..job.resume import Journal
 from ..render.picture import LEGEND_PX, _canvas_size, auto_scale
@@ -109,10 +109,10 @@ def excellon_file_units(path: str, given: Optional[str] = None) -> str:
 
 def drill_holes(job: Any, options: Any = None) -> Optional[dict[str, Any]]:
     """A drill job's holes in drilling order (None for another job, or one with slots or milled holes: no
-    :attr:`~cam.job.jobs.PreparedJob.drill_plan`): ``{"board_mm": (N, 2) file frame X right, Y up, mm, "tools":
+    :attr:`~cam.kinds.jobs.PreparedJob.drill_plan`): ``{"board_mm": (N, 2) file frame X right, Y up, mm, "tools":
     (N,) tool numbers, "diameters_mm": (N,), "units": the file's unit, "origin_mm": (2,) machine mm from the job's
     home of the file's (0, 0), "sign_x": -1 when mirrored}``, read again from the file with ``options``' Excellon
-    settings (a :class:`~cam.job.jobs.JobOptions`)."""
+    settings (a :class:`~cam.kinds.jobs.JobOptions`)."""
     plan = getattr(job, "drill_plan", None)
     if plan is None or getattr(job, "kind", "") != "excellon":
         return None
@@ -155,12 +155,12 @@ def job_units(job: Any, home_steps: Any, settings: MachineSettings, holes: Optio
 
 
 def preview_frame(job: Any) -> dict[str, Any]:
-    """Where the job's preview picture (:meth:`~cam.job.jobs.PreparedJob.preview_picture`) draws its moves: picture
+    """Where the job's preview picture (:meth:`~cam.kinds.jobs.PreparedJob.preview_picture`) draws its moves: picture
     pixel ``(col, row) = origin_px + px_per_step * (x, y)`` for a point ``(x, y)`` in steps from the job's home, and
     the picture's ``width`` and ``height`` (the legend below it included), so a page can draw over the picture.
 
     The same arithmetic as the picture's: a drawing job held whole (:func:`cam.render.picture.toolpath_picture`:
-    drawing pixel ``p`` at ``(p + 0.5) x scale``), any other job :func:`cam.job.jobs.motion_picture` (its extent,
+    drawing pixel ``p`` at ``(p + 0.5) x scale``), any other job :func:`cam.kinds.jobs.motion_picture` (its extent,
     a 12-pixel margin, 800 pixels on the longer side).
     """
     toolpath = getattr(job, "toolpath", None)
@@ -253,7 +253,7 @@ def hole_states(n_holes: int, *, first: int = 0, done: int = 0, drilling: bool =
 def start_at_hole(job: Any, hole: Any, position_steps: tuple[int, int, int], *, board: bool) -> Any:
     """The drill job ``job`` started at hole number ``hole`` (1-based, drilling order; the page's Start At), from
     where the tool stands (``position_steps``, steps from the job's home): the holes before it are skipped, and
-    the run is the resume of a stop after them (the library's own resume: :func:`cam.job.jobs.resume_job` on a
+    the run is the resume of a stop after them (the library's own resume: :func:`cam.kinds.jobs.resume_job` on a
     step/dir port, :func:`cam.drive.maximus.resume.resume_board_job` on a MAXIMUS board), so the tool lifts, travels
     to the hole and the hole's tool is asked for.
 

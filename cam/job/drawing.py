@@ -57,7 +57,7 @@ def max_drawing_size_px(settings: MachineSettings) -> tuple[int, int]:
 
 def check_drawing_size(width_px: int, height_px: int, settings: MachineSettings, source: str = "<drawing>") -> None:
     """Refuse a drawing larger than the machine's travel holds (:func:`max_drawing_size_px`), wherever it is
-    placed; :func:`cam.job.jobs.prepare_job` checks it from the file's header, before decoding and tracing.
+    placed; :func:`cam.kinds.jobs.prepare_job` checks it from the file's header, before decoding and tracing.
 
     Raises:
         TravelError: naming the drawing, its size, the steps per pixel, the travel and the largest size.

@@ -24,7 +24,7 @@ The job has up to three parts, each starting where the one before ended:
 
 Memory: the maps (a few bytes per pixel, the finer pass's per finer position) and the roughing and finer
 targets are held; nothing per move of the pixel-centre pass.  A :class:`~cam.drive.chunks.ChunkedPlan`
-plans the stream a block of moves at a time (:func:`cam.job.jobs.prepare_job` keeps a drawing of over
+plans the stream a block of moves at a time (:func:`cam.kinds.jobs.prepare_job` keeps a drawing of over
 :data:`STREAM_TARGETS` cut points as a stream, a smaller one joined: the same moves).
 """
 from __future__ import annotations
@@ -50,7 +50,7 @@ __all__ = ["plan", "DrawingJobStream", "stream_drawing", "depth_px_of", "stepdow
 
 STREAM_TARGETS = 2_000_000
 """Drawings with more cut points than this (targets of every pass) are kept as a stream by
-:func:`cam.job.jobs.prepare_job` (smaller ones are joined into one Job: the same moves).  A 2048^2 relief (3.3M
+:func:`cam.kinds.jobs.prepare_job` (smaller ones are joined into one Job: the same moves).  A 2048^2 relief (3.3M
 points) joined took a `cam drill` process to 515-553 MB; as a stream 371 MB (and 2 s longer: every pass over the
 job plans its pieces again)."""
 PIECE_TARGETS = 1 << 16

@@ -78,7 +78,7 @@ class DrillPlan:
         n_slots: slots milled (``G85`` and routed); n_milled: holes milled with the ``mill_holes_over_mm`` bit.
         extent_steps: ``(2, 2)`` int64 smallest and largest machine (x, y) steps of every hole and milled path.
         holes_mm: ``(N, 2)`` machine (x, y) mm of each hole in drilling order, before rounding to steps (exact
-            G-code out, :mod:`cam.formats.gcode_export`).
+            G-code out, :mod:`cam.kinds.gcode_export`).
     """
 
     toolpath: Job

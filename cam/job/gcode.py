@@ -1,6 +1,6 @@
 """The G-code planner: an RS-274 program to a job in machine steps.
 
-Frames, as for G-code out (:mod:`cam.formats.gcode_export`): machine X steps = X mm / mm per step;
+Frames, as for G-code out (:mod:`cam.kinds.gcode_export`): machine X steps = X mm / mm per step;
 machine Y steps = -Y mm / mm per step (machine Y grows upward, the drawing
 frame's rows downward; ``flip_y`` uses +Y); machine Z steps = -Z mm / mm per
 step Z (+Z up in G-code, deeper is + in `cam`).  G-code (0, 0, 0) is the job's zero: where the tool
@@ -56,7 +56,7 @@ PIECE_ROWS = 1 << 17
 """A piece ends after the move that makes its rows this many or more."""
 STREAM_MOVES = 1 << 20
 """A G-code job of more moves (rows) than this is kept as its pieces, made again on each pass, rather than held
-joined (:func:`cam.job.jobs.prepare_job`, :meth:`GcodeJobStream.held`)."""
+joined (:func:`cam.kinds.jobs.prepare_job`, :meth:`GcodeJobStream.held`)."""
 
 
 @dataclass(frozen=True)

@@ -75,7 +75,7 @@ class ProgramPart:
 
 @dataclass(frozen=True)
 class ProbingProgram:
-    """A prepared program that probes, as a machine runs it (:attr:`cam.job.jobs.PreparedJob.probing`): the file
+    """A prepared program that probes, as a machine runs it (:attr:`cam.kinds.jobs.PreparedJob.probing`): the file
     with the options it was planned with, the machine settings and frame, and what its probes ask (the planning
     pass's: ``probes``, ``feeds_mm_min``), which a machine checks before anything moves."""
 

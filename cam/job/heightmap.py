@@ -40,7 +40,7 @@
 :func:`plan_heightmap` is the planner (a :class:`~cam.job.model.Job` in
 machine steps with its :class:`~cam.job.model.PixelFrame`: ``steps_per_px_z``
 is 1, depths are Z steps); :func:`prepare_heightmap` is the job of
-:func:`cam.job.jobs.prepare_job` for ``JobOptions(heightmap=True)``.
+:func:`cam.kinds.jobs.prepare_job` for ``JobOptions(heightmap=True)``.
 """
 from __future__ import annotations
 
@@ -407,8 +407,8 @@ def check_heightmap_options(options: Any, source: str) -> None:
 
 
 def prepare_heightmap(path: Path, options: Any, settings: MachineSettings) -> dict[str, Any]:
-    """The fields of the :class:`cam.job.jobs.PreparedJob` of an image cut as a height map (``options.heightmap``,
-    a :class:`cam.job.jobs.JobOptions`)."""
+    """The fields of the :class:`cam.kinds.jobs.PreparedJob` of an image cut as a height map (``options.heightmap``,
+    a :class:`cam.kinds.jobs.JobOptions`)."""
     check_heightmap_options(options, path.name)
 
     grey = load_heightmap(path)

@@ -2,7 +2,7 @@
 
 A warped board is cut at the same depth everywhere when each point of the job is offset in Z by how far the
 surface under it lies above or below the surface where the work Z zero was set.  ``cam probe grid`` writes the
-surface as a :class:`HeightMap` (``--out MAP.json``); ``--level MAP.json`` (:attr:`cam.job.jobs.JobOptions.level`)
+surface as a :class:`HeightMap` (``--out MAP.json``); ``--level MAP.json`` (:attr:`cam.kinds.jobs.JobOptions.level`)
 levels a job by it.
 
 Frames and units:

@@ -44,7 +44,7 @@ DEFAULT_CUT_DEPTH_MM = 0.5
 DEFAULT_TRAVEL_HEIGHT_MM = 1.0
 STREAM_POINTS = 1_000_000
 """HPGL files with more pen-down points than this are read from the file on every pass rather than held
-(:func:`cam.job.jobs.prepare_job`); either way their job is this planner's pieces."""
+(:func:`cam.kinds.jobs.prepare_job`); either way their job is this planner's pieces."""
 PIECE_POINTS = 1 << 17
 """Pen-down points planned into one piece (at least; a piece of a file ends with a chunk of the file)."""
 

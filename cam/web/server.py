@@ -2,7 +2,7 @@
 
 The page (``static/``) talks to a small JSON API under ``/api``; live status
 comes as server-sent events (``GET /api/events``).  The server is a thin
-adapter: jobs are prepared by :func:`cam.job.jobs.prepare_job` and run by
+adapter: jobs are prepared by :func:`cam.kinds.jobs.prepare_job` and run by
 the :class:`~cam.drive.session.MachineSession` that the CLI and the Python API
 use too, on the same ports.
 
@@ -97,7 +97,7 @@ from ..errors import BusyError, CamError, CapabilityError, StalePlanError
 from ..fileio import atomic_write_bytes
 from ..sniff import HEAD_BYTES
 from ..options import schema_json
-from ..job.jobs import PROFILE_SUFFIXES, JobOptions, PreparedJob, accepted_suffixes, job_kind, kind_defaults
+from ..kinds.jobs import PROFILE_SUFFIXES, JobOptions, PreparedJob, accepted_suffixes, job_kind, kind_defaults
 from ..machine_file import backup_path, list_settings, machine_file_of, save_settings
 from ..settings import DEFAULT_SETTINGS, MachineSettings
 from ..tool_table import (TABLE_SHAPES, job_tool_warnings, read_tool_table, tool_from_mapping, tool_table_path,
@@ -489,7 +489,7 @@ async def _get_config(st: _AppState, request: Request) -> dict[str, Any]:
 async def _get_options(st: _AppState, request: Request) -> list[dict[str, Any]]:
     """``GET /api/options``: the job options' schema (:func:`cam.options.schema_json`): each option's name, label,
     group, flag, type, unit, range, choices, the file kinds it applies to, its default on each of them
-    (:func:`cam.job.jobs.kind_defaults`) and help; the page makes its job-options form from it (issue #47
+    (:func:`cam.kinds.jobs.kind_defaults`) and help; the page makes its job-options form from it (issue #47
     point 6)."""
     return schema_json(kind_defaults())
 
@@ -791,7 +791,7 @@ def _journal_path(st: _AppState, job_id: str) -> Path:
 
 async def _resume_job(st: _AppState, request: Request) -> dict[str, Any]:
     """Resume the last job started after its stop (the page's Resume job button), from where the tool stands:
-    the same library call as ``cam drill --resume`` (:func:`cam.job.jobs.resume_job`), in the worker."""
+    the same library call as ``cam drill --resume`` (:func:`cam.kinds.jobs.resume_job`), in the worker."""
     from starlette.concurrency import run_in_threadpool
 
     body = await _body_json(request)

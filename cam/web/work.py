@@ -17,7 +17,7 @@ from ..drive.journal import read_journal
 from ..drive.maximus.resume import resume_board_job
 from ..drive.probing import job_cuts_mm
 from ..job.heightmap_level import load_height_map
-from ..job.jobs import JobOptions, PreparedJob, prepare_job, resume_job
+from ..kinds.jobs import JobOptions, PreparedJob, prepare_job, resume_job
 from ..render.map_picture import height_map_picture
 from ..render.picture import encode_png
 from ..settings import MachineSettings
@@ -26,7 +26,7 @@ from ..verify.pinlog import PinLog, PinLogPart, write_pin_log
 __all__ = ["plan_with_preview", "preview_of", "height_map_png", "resumed_from_journal",
            "save_pin_log_raw", "pin_log_csv", "WARM_UP"]
 
-WARM_UP = ("cam.job.jobs", "cam.web.work", "cam.digitize._kernels", "cam.drive.ramps", "cv2")
+WARM_UP = ("cam.kinds.jobs", "cam.web.work", "cam.digitize._kernels", "cam.drive.ramps", "cv2")
 """What the worker imports as it starts: the first planning does not wait for it."""
 
 
@@ -41,7 +41,7 @@ def plan_with_preview(path: str, options: JobOptions, settings: MachineSettings,
 
 def resumed_from_journal(job: PreparedJob, journal_path: str, position_steps: tuple[int, int, int]) -> PreparedJob:
     """The page's job resumed after the stop its journal records, from where the tool stands (in the worker):
-    :func:`cam.job.jobs.resume_job`, the function ``cam drill --resume`` calls (a MAXIMUS board job's journal:
+    :func:`cam.kinds.jobs.resume_job`, the function ``cam drill --resume`` calls (a MAXIMUS board job's journal:
     :func:`~cam.drive.maximus.resume.resume_board_job`, on from the next hole)."""
     journal = read_journal(journal_path)
     if journal.holes_done is not None:

@@ -332,7 +332,7 @@ def mutate(rng: np.random.Generator, data: bytes, kind: str = "") -> bytes:
 
 def _job(path: Path) -> None:
     """What ``cam drill FILE`` plans (a drawing or matrix at depth 3: a 3D one as a flat pocket)."""
-    from cam.job.jobs import JobOptions, prepare_job
+    from cam.kinds.jobs import JobOptions, prepare_job
 
     prepare_job(path, JobOptions(depth=(3,)) if path.suffix in (".png", ".jpg", ".bmp", ".dig") else JobOptions(),
                 SETTINGS)
@@ -357,7 +357,7 @@ def _pinlog(path: Path) -> None:
 
 def _svg(path: Path) -> None:
     """What ``cam drill`` and ``cam preview`` do with an SVG file: plan it, then draw its preview."""
-    from cam.job.jobs import JobOptions, prepare_job
+    from cam.kinds.jobs import JobOptions, prepare_job
     from cam.web.work import preview_of
 
     preview_of(prepare_job(path, JobOptions(), SETTINGS))

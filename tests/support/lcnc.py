@@ -205,7 +205,7 @@ def carve_canonical(
 ) -> np.ndarray:
     """Surface cut by a point tool following rs274's feed moves below Z = 0, on the drawing's pixel grid.
 
-    Frames as in :mod:`cam.formats.gcode_export`: column = X / (steps/px x mm/step), row = -Y / (...) (or +Y with
+    Frames as in :mod:`cam.kinds.gcode_export`: column = X / (steps/px x mm/step), row = -Y / (...) (or +Y with
     ``flip_y``), depth in Z steps = -Z / mm/step Z.  Each feed segment is sampled at the midpoints of
     an even number (about ``samples_per_px x length_px``) of equal parts plus its end, so a
     move between pixel centres is never sampled exactly on a pixel border.
@@ -245,7 +245,7 @@ def canonical_motion(moves: list[CanonMove], settings, *, flip_y: bool = False,
     :class:`cam.verify.pinlog.Motion` for :func:`cam.verify.toolcarve.carve_tool` (only ``position_steps`` is
     meaningful; times are 0).
 
-    Frames as in :mod:`cam.formats.gcode_export`: x steps = X / mm/step, y steps = -Y / mm/step (+Y with
+    Frames as in :mod:`cam.kinds.gcode_export`: x steps = X / mm/step, y steps = -Y / mm/step (+Y with
     ``flip_y``), z steps = -Z / mm/step Z, plus ``offset_steps``.  Each feed segment is split into as many
     equal parts as its longest axis has steps, every part's end rounded to the nearest step: for a move along an
     axis or at 45 degrees (the only cutting moves `cam` makes) these are exactly the positions of the DDA that

@@ -59,25 +59,25 @@ from ..render.report import job_report
 from ..sniff import KIND_NAMES, forced_kind
 from ..settings import DEFAULT_SETTINGS, MachineSettings
 from ..verify.pinlog import PinLog, decode_pin_log
-from .drawing import check_drawing_size
-from .drill import DEFAULT_CUT_DEPTH_MM as DRILL_DEPTH_MM
-from .drill import DEFAULT_TRAVEL_HEIGHT_MM as DRILL_TRAVEL_HEIGHT_MM
-from .drill import plan_drill
-from .gcode import STREAM_MOVES as GCODE_STREAM_MOVES
-from .gcode import gcode_mm_to_steps, steps_to_gcode_mm, stream_gcode
-from .gcode_probing import ProbingProgram
-from .hpgl import DEFAULT_CUT_DEPTH_MM as HPGL_CUT_DEPTH_MM
-from .hpgl import DEFAULT_TRAVEL_HEIGHT_MM as HPGL_TRAVEL_HEIGHT_MM
-from .drawing_stream import STREAM_TARGETS, plan, stream_drawing
-from .hpgl_stream import STREAM_POINTS, stream_hpgl
-from .heightmap import check_heightmap_options, prepare_heightmap
-from .heightmap_level import check_map, level_job, load_height_map, outside_text
-from .model import Job
-from .resume import (Journal, JournalBase, check_journal, check_journal_numbers, job_identity, plan_fingerprint,
+from ..job.drawing import check_drawing_size
+from ..job.drill import DEFAULT_CUT_DEPTH_MM as DRILL_DEPTH_MM
+from ..job.drill import DEFAULT_TRAVEL_HEIGHT_MM as DRILL_TRAVEL_HEIGHT_MM
+from ..job.drill import plan_drill
+from ..job.gcode import STREAM_MOVES as GCODE_STREAM_MOVES
+from ..job.gcode import gcode_mm_to_steps, steps_to_gcode_mm, stream_gcode
+from ..job.gcode_probing import ProbingProgram
+from ..job.hpgl import DEFAULT_CUT_DEPTH_MM as HPGL_CUT_DEPTH_MM
+from ..job.hpgl import DEFAULT_TRAVEL_HEIGHT_MM as HPGL_TRAVEL_HEIGHT_MM
+from ..job.drawing_stream import STREAM_TARGETS, plan, stream_drawing
+from ..job.hpgl_stream import STREAM_POINTS, stream_hpgl
+from ..job.heightmap import check_heightmap_options, prepare_heightmap
+from ..job.heightmap_level import check_map, level_job, load_height_map, outside_text
+from ..job.model import Job
+from ..job.resume import (Journal, JournalBase, check_journal, check_journal_numbers, job_identity, plan_fingerprint,
                      resume_pieces)
-from .svg import DEFAULT_CUT_DEPTH_MM as SVG_CUT_DEPTH_MM
-from .svg import DEFAULT_TRAVEL_HEIGHT_MM as SVG_TRAVEL_HEIGHT_MM
-from .svg import plan_svg
+from ..job.svg import DEFAULT_CUT_DEPTH_MM as SVG_CUT_DEPTH_MM
+from ..job.svg import DEFAULT_TRAVEL_HEIGHT_MM as SVG_TRAVEL_HEIGHT_MM
+from ..job.svg import plan_svg
 
 __all__ = [
     "JobOptions", "PreparedJob", "PlannedIn", "prepare_job", "own_zero_home", "resume_job", "job_kind", "accepted_suffixes", "KINDS",

@@ -71,9 +71,9 @@ from ..job.arcs import Segment, arc_centre_for_ends, fit_path
 from ..job.model import RETRACT, TRAVEL, Job
 from ..job.hpgl_stream import hpgl_scale, xy_steps_exact
 from ..job.svg import FLATTEN_STEPS, _selected, svg_layer_order, svg_scale
-from .hpgl import ARC_MNEMONICS, HpglDrawing, iter_hpgl, load_hpgl
-from .svg import load_svg
-from .dxf import load_dxf
+from ..formats.hpgl import ARC_MNEMONICS, HpglDrawing, iter_hpgl, load_hpgl
+from ..formats.svg import load_svg
+from ..formats.dxf import load_dxf
 from ..choices import POSTS
 
 __all__ = ["format_mm", "to_gcode", "gcode_pieces", "save_gcode", "feeds_mm_per_min", "exact_geometry", "svg_exact_xy_mm",
@@ -122,10 +122,10 @@ def _point_pieces(toolpath: Any) -> Iterator[tuple[list, list]]:
 
 def exact_geometry(prepared: Any, cut_depth_mm: Optional[float] = None, options: Any = None
                    ) -> tuple[dict[tuple[int, int], tuple[float, float]], dict[int, float]]:
-    """``(exact_xy_mm, exact_z_mm)`` of a :class:`cam.job.jobs.PreparedJob` for :func:`gcode_pieces`: a drill
+    """``(exact_xy_mm, exact_z_mm)`` of a :class:`cam.kinds.jobs.PreparedJob` for :func:`gcode_pieces`: a drill
     file's holes at their mm before rounding to steps (the first hole of a step wins), and ``cut_depth_mm``
     for its drill depth; an SVG or DXF file's strokes (:func:`svg_exact_xy_mm`, with the job's
-    :class:`cam.job.jobs.JobOptions` ``options``: scale, fit, offset, layers); an HPGL file's pen-down points
+    :class:`cam.kinds.jobs.JobOptions` ``options``: scale, fit, offset, layers); an HPGL file's pen-down points
     and which of its chords are arcs (:func:`hpgl_exact_xy_mm`, the same options but layers; not a file of more
     than :data:`MAX_SAMPLES` points); empty for other kinds (their points are the job's own).
 
@@ -137,7 +137,7 @@ def exact_geometry(prepared: Any, cut_depth_mm: Optional[float] = None, options:
     if kind in ("svg", "hpgl", "dxf") and options is not None:
         offset = options.offset_mm
         if offset is None and getattr(options, "origin", None) == "file":
-            offset = (0.0, 0.0)  # as cam.job.jobs.prepare_job plans it
+            offset = (0.0, 0.0)  # as cam.kinds.jobs.prepare_job plans it
         if kind in ("svg", "dxf"):  # a DXF file is read into the same drawing as an SVG file
             drawing = load_dxf(prepared.source) if kind == "dxf" else load_svg(prepared.source)
             return svg_exact_xy_mm(drawing, prepared.settings, scale=options.scale,
@@ -337,7 +337,7 @@ def gcode_pieces(
         arc_tolerance_mm: fit lines and arcs to the cutting runs within this many mm; None: one G1 a point.
         level: ``(height map, home steps)``: ``toolpath`` is a job levelled to that
             :class:`~cam.job.heightmap_level.HeightMap` with its home at those machine steps
-            (:attr:`cam.job.jobs.PreparedJob.levelled_home_steps`): its travels are written levelled too, at
+            (:attr:`cam.kinds.jobs.PreparedJob.levelled_home_steps`): its travels are written levelled too, at
             ``travel_height_mm`` above the surface under each point (see the module).
     """
     probes = getattr(toolpath, "probes", None)
