@@ -35,7 +35,7 @@ from typing import Any, Callable, Optional
 from .limits import DEFAULT_GCODE_LINES, MAX_GCODE_LINES
 
 __all__ = [
-    "Option", "JOB_OPTIONS", "OPTIONS", "OPTION_KINDS", "OPTION_OF_DEST", "schema_json", "check_range", "degenerate",
+    "Option", "JOB_OPTIONS", "OPTIONS", "OPTION_OF_DEST", "schema_json", "check_range", "degenerate",
     "MAX_MM", "MAX_PX", "MAX_DEPTH_PX", "TYPES", "GROUPS",
 ]
 
@@ -52,9 +52,14 @@ TYPES = ("whole", "number", "wholes", "numbers", "choice", "flag", "text", "tool
 ``choices``, on/off, text, a cutter spec (:func:`cam.tool.parse_tool`), x,y points, Excellon ``I:F`` digit
 counts, a ``WxH`` size, folders."""
 
-_DRAWINGS = frozenset({"drawing", "digitized"})
-_VECTORS = frozenset({"excellon", "hpgl", "svg", "dxf"})
-_EVERY = _DRAWINGS | _VECTORS | {"gcode"}
+_DRAWINGS = frozenset({"pixels"})
+_VECTORS = frozenset({"placed"})
+_EVERY = frozenset({"every"})
+_STROKES = frozenset({"strokes"})
+_LAYERS = frozenset({"layers"})
+_HOLES = frozenset({"holes"})
+# what an option applies to is said by traits (cam.kinds.TRAITS: every, pixels, placed, holes, strokes, layers)
+# or a kind's own name; each kind module says its traits, so a new kind gets its options with no line here
 
 
 @dataclass(frozen=True)
@@ -66,7 +71,7 @@ class Option:
         flag: the command-line flag (``--cut-depth``); its argparse dest is :attr:`dest`.
         type: one of :data:`TYPES`.
         unit: what the numbers count ("mm", "px", "Z px", "" for none).
-        kinds: the job kinds (:data:`cam.choices.SUFFIXES`) it applies to.
+        traits: what it applies to: kinds having one of these traits (:data:`cam.kinds.TRAITS`) or names.
         default: the JobOptions default (None: the kind's own default, or not given).
         help: what it does, for ``--help`` and the page.
         lo, hi: the range of each number (None: no bound); lo_open: ``lo`` itself is refused (> lo).
@@ -76,13 +81,17 @@ class Option:
         web: whether the page may set it (False: it names files on the machine that runs `cam`).
         aliases: older flags still accepted for it, hidden from ``--help`` (``--excellon-format``).
         group: what it is about, the heading of its fields on the page (:data:`GROUPS`).
+        trait_defaults: ``((trait, value), ...)``: the value it takes, when not given, on a kind having the
+            trait (the first that matches; the cut depth of drill files and of pen strokes), declared here once:
+            the planners' defaults, ``--help``, the page and :func:`cam.kinds.kind_defaults` read it.
+        kinds: the kinds it applies to, filled in by :func:`cam.kinds.job_options` from the kinds' traits.
     """
 
     name: str
     flag: str
     type: str
     unit: str
-    kinds: frozenset[str]
+    traits: frozenset[str]
     default: Any
     help: str
     lo: Optional[float] = None
@@ -94,6 +103,17 @@ class Option:
     web: bool = True
     aliases: tuple[str, ...] = ()
     group: str = "Other"
+    trait_defaults: tuple[tuple[str, Any], ...] = ()
+    kinds: frozenset[str] = frozenset()
+
+    def default_for(self, traits: "frozenset[str] | set[str]") -> Any:
+        """The value it takes on a kind with ``traits`` when not given: its first matching
+        :attr:`trait_defaults`, else :attr:`default`.
+
+        >>> OPTIONS["cut_depth_mm"].default_for({"holes"}), OPTIONS["cut_depth_mm"].default_for({"pixels"})
+        (2.0, None)
+        """
+        return next((value for trait, value in self.trait_defaults if trait in traits), self.default)
 
     @property
     def label(self) -> str:
@@ -155,9 +175,9 @@ def check_range(option: Option, value: Any) -> Optional[str]:
     return f"{each}must be {option.range_text()}{unit}"
 
 
-def _opt(name: str, flag: str, type: str, unit: str, kinds: frozenset[str] | set[str], default: Any, help: str,
+def _opt(name: str, flag: str, type: str, unit: str, traits: frozenset[str] | set[str], default: Any, help: str,
          **more: Any) -> Option:
-    return Option(name, flag, type, unit, frozenset(kinds), default, help, **more)
+    return Option(name, flag, type, unit, frozenset(traits), default, help, **more)
 
 
 def _in(group: str) -> Callable[..., Option]:
@@ -196,10 +216,11 @@ JOB_OPTIONS: tuple[Option, ...] = (
     _placing("cut_depth_mm", "--cut-depth", "number", "mm", _DRAWINGS | _VECTORS, None,
          "cutting depth below the surface: drill files (default 2.0: through a 1.6 mm board), HPGL, SVG and DXF "
          "pen-down depth (default 0.5), or a drawing's depth for every object instead of --depth",
-         lo=0.0, hi=MAX_MM, lo_open=True, metavar="MM"),
+         lo=0.0, hi=MAX_MM, lo_open=True, metavar="MM", trait_defaults=(("holes", 2.0), ("strokes", 0.5))),
     _placing("travel_height_mm", "--travel-height", "number", "mm", _VECTORS, None,
          "height above the surface between cuts (default 1.0): drill files, HPGL, SVG, DXF, and every file "
-         "'cam export' writes; 0 (at the surface) needs --allow-surface-travel", lo=0.0, hi=MAX_MM, metavar="MM"),
+         "'cam export' writes; 0 (at the surface) needs --allow-surface-travel", lo=0.0, hi=MAX_MM, metavar="MM",
+         trait_defaults=(("placed", 1.0),)),
     _placing("allow_surface_travel", "--allow-surface-travel", "flag", "", _VECTORS, False,
          "accept --travel-height 0: the tool travels between cuts touching the surface (a pen or a drag knife), "
          "which on a cutter scratches the work"),
@@ -213,9 +234,9 @@ JOB_OPTIONS: tuple[Option, ...] = (
     _placing("offset_mm", "--offset", "numbers", "mm", _VECTORS, None,
          "where the board, plotter, SVG page or DXF drawing origin goes, mm from the work zero (cam export: from the "
          "program's zero); default: the top-left of what is cut there", lo=-MAX_MM, hi=MAX_MM, count=2, metavar="X,Y"),
-    _drill("mirror_x", "--mirror-x", "flag", "", {"excellon"}, False,
+    _drill("mirror_x", "--mirror-x", "flag", "", _HOLES, False,
          "drill files: mirror the board for drilling from the back"),
-    _drill("drill_order", "--drill-order", "choice", "", {"excellon"}, "tour",
+    _drill("drill_order", "--drill-order", "choice", "", _HOLES, "tour",
          "drill files: short tour per tool (default) or the file's order", choices=("tour", "file")),
     _drill("excellon_units", "--excellon-units", "choice", "", {"excellon"}, None,
          "units when the file does not say", choices=("inch", "metric")),
@@ -224,33 +245,32 @@ JOB_OPTIONS: tuple[Option, ...] = (
          count=2, metavar="I:F", aliases=("--excellon-format",)),
     _drill("excellon_zeros", "--excellon-zeros", "choice", "", {"excellon"}, None,
          "zero suppression when the file does not say", choices=("LZ", "TZ")),
-    _reading("kind", "--kind", "choice", "", _DRAWINGS | _VECTORS | {"gcode"}, None,
+    _reading("kind", "--kind", "choice", "", _EVERY, None,
          "read the file as this kind whatever its name and content say (matrix: a saved digitized matrix); with "
-         "--kind excellon the --excellon-* flags apply", choices=("excellon", "gcode", "hpgl", "svg", "drawing",
-                                                                  "matrix", "dxf")),
-    _drill("strict", "--strict", "flag", "", {"excellon"}, False,
+         "--kind excellon the --excellon-* flags apply (its choices: each kind's --kind name, cam.kinds)"),
+    _drill("strict", "--strict", "flag", "", _HOLES, False,
          "drill files: refuse a file with a tool that cannot be drilled (zero size, too large) instead of leaving "
          "its holes out with a warning"),
-    _drill("mill_holes_over_mm", "--mill-holes-over", "number", "mm", {"excellon"}, None,
+    _drill("mill_holes_over_mm", "--mill-holes-over", "number", "mm", _HOLES, None,
          "drill files: mill holes larger than MM with an MM bit (circles at the cut depth, within the hole) "
          "instead of drilling them", lo=0.0, hi=100.0, lo_open=True, metavar="MM"),
     # G-code
     _gcode("flip_y", "--flip-y", "flag", "", {"gcode"}, False, "G-code input: machine Y = +Y mm instead of -Y mm"),
     # SVG
-    _vector("scale", "--scale", "number", "", {"svg", "hpgl", "dxf"}, None,
+    _vector("scale", "--scale", "number", "", _STROKES, None,
          "SVG, DXF and HPGL: mm cut per mm of the drawing (default 1: its own size)", lo=0.0, hi=MAX_MM, lo_open=True,
          metavar="FACTOR"),
-    _vector("fit_mm", "--fit", "size", "mm", {"svg", "hpgl", "dxf"}, None,
+    _vector("fit_mm", "--fit", "size", "mm", _STROKES, None,
          "SVG, DXF and HPGL: scale the drawing to fit WIDTHxHEIGHT mm, keeping its proportions (e.g. 80x40)",
          lo=0.0, hi=MAX_MM, lo_open=True, count=2, metavar="WxH"),
-    _vector("layers", "--layers", "text", "", {"svg", "dxf"}, None,
+    _vector("layers", "--layers", "text", "", _LAYERS, None,
          "SVG and DXF: cut only these layers, in this order (Inkscape layer names, 'parent/child' for a sublayer, or "
          "stroke colours such as '#ff0000' or red when the file has no layers; DXF layer names; 'cam info' lists "
          "them); default: every "
          "layer in file order", metavar="NAME,NAME"),
-    _vector("pause_between_layers", "--pause-between-layers", "flag", "", {"svg", "dxf"}, False,
+    _vector("pause_between_layers", "--pause-between-layers", "flag", "", _LAYERS, False,
          "SVG and DXF: pause before each layer after the first, to change the pen or the tool (Enter resumes)"),
-    _vector("keep_duplicates", "--keep-duplicates", "flag", "", {"svg", "dxf"}, False,
+    _vector("keep_duplicates", "--keep-duplicates", "flag", "", _LAYERS, False,
          "SVG and DXF: cut a segment that traces one already cut again (by default it is cut once)"),
     # G-code programs (the first two name files on the machine that runs cam: command line only)
     _gcode("tool_table", "--tool-table", "text", "", {"gcode"}, None,
@@ -272,10 +292,10 @@ JOB_OPTIONS: tuple[Option, ...] = (
     _sketch("trace_fill", "--trace-fill", "flag", "", {"drawing"}, False,
          "with --trace: the regions the curves enclose become red (a 3D drawing)"),
     # real cutters
-    _cutter("tool", "--tool", "tool", "", _DRAWINGS | {"svg", "hpgl", "dxf"}, None,
+    _cutter("tool", "--tool", "tool", "", _DRAWINGS | _STROKES, None,
          "point (default, or the machine file's [tool]), flat:D, ball:D or v:ANGLE:TIP[:D] (mm, degrees): 3D "
          "reliefs are cut so the tool never goes below them anywhere", metavar="SHAPE"),
-    _cutter("line_width_mm", "--line-width", "number", "mm", _DRAWINGS | {"svg", "hpgl", "dxf"}, None,
+    _cutter("line_width_mm", "--line-width", "number", "mm", _DRAWINGS | _STROKES, None,
          "2D drawings, SVG, DXF and HPGL with a V bit: the engraved lines' width, which sets their depth",
          lo=0.0, hi=MAX_MM, lo_open=True, metavar="MM"),
     _cutter("stepdown_mm", "--stepdown", "number", "mm", _DRAWINGS, None,
@@ -332,8 +352,6 @@ def degenerate(value_of: Callable[[str], Any]) -> Optional[tuple[str, str]]:
 OPTIONS: dict[str, Option] = {o.name: o for o in JOB_OPTIONS}
 """The options by name."""
 
-OPTION_KINDS: dict[str, frozenset[str]] = {o.name: o.kinds for o in JOB_OPTIONS}
-"""The job kinds each option applies to (re-exported by :mod:`cam.choices`)."""
 
 OPTION_OF_DEST: dict[str, Option] = {o.dest: o for o in JOB_OPTIONS}
 """The options by their argparse dest (``cut_depth`` -> the ``cut_depth_mm`` option)."""
@@ -343,15 +361,17 @@ def _json_value(value: Any) -> Any:
     return [_json_value(v) for v in value] if isinstance(value, (tuple, list)) else value
 
 
-def schema_json(kind_defaults: Optional[dict[str, dict[str, Any]]] = None) -> list[dict[str, Any]]:
-    """The schema as JSON-able records (``GET /api/options``): every field of each :class:`Option`, kinds sorted,
-    with its :attr:`~Option.label`, its range in words (``range``, as the errors say it) and ``defaults``, the
-    value each kind it applies to takes when it is not given: ``kind_defaults[kind][name]`` where the library
-    has one (:func:`cam.kinds.jobs.kind_defaults`: a drill file's cut depth), else the option's default."""
+def schema_json(options: tuple[Option, ...], kind_defaults: Optional[dict[str, dict[str, Any]]] = None
+                ) -> list[dict[str, Any]]:
+    """The schema as JSON-able records (``GET /api/options``, :func:`cam.kinds.schema_json`): every field of each
+    of ``options`` (their kinds filled in, :func:`cam.kinds.job_options`), kinds sorted, with its
+    :attr:`~Option.label`, its range in words (``range``, as the errors say it) and ``defaults``, the value each
+    kind it applies to takes when it is not given: ``kind_defaults[kind][name]`` where it depends on the kind (a
+    drill file's cut depth, :func:`cam.kinds.kind_defaults`), else the option's default."""
     every = kind_defaults or {}
     return [{"name": o.name, "label": o.label, "group": o.group, "flag": o.flag, "type": o.type, "unit": o.unit,
              "kinds": sorted(o.kinds), "default": _json_value(o.default),
              "defaults": {k: _json_value(every.get(k, {}).get(o.name, o.default)) for k in sorted(o.kinds)},
              "help": o.help, "min": o.lo, "max": o.hi, "min_open": o.lo_open, "range": o.range_text(),
              "count": o.count, "choices": list(o.choices), "metavar": o.metavar, "web": o.web,
-             "aliases": list(o.aliases)} for o in JOB_OPTIONS]
+             "aliases": list(o.aliases)} for o in options]

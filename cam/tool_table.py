@@ -297,35 +297,33 @@ def annotate_tool_change(note: str, table: ToolTable) -> str:
     return note
 
 
-def tool_table_warnings(kind: str, tool_changes: Iterable[str], table: ToolTable,
+def tool_table_warnings(tool_changes: Iterable[str], table: ToolTable,
                         drill_tools: Iterable[tuple[int, float, int]] = ()) -> list[str]:
     """The warnings of a job planned for a machine with ``table`` (none for an empty table): a drill file's tool
     (``drill_tools``: the plan's ``tool_sequence``, ``(tool, diameter_mm, holes)``) whose table tool has another
     size (the file's size wins), a G-code program's tool change to a tool the table does not have.
 
     >>> t = ToolTable().with_tool(TableTool(3, "v", 0.2, 30))
-    >>> tool_table_warnings("excellon", [], t, [(3, 0.8, 12)])[0][:40]
+    >>> tool_table_warnings([], t, [(3, 0.8, 12)])[0][:40]
     "T3: the drill file's 0.8 mm wins (its ho"
-    >>> tool_table_warnings("gcode", ["tool change: T4 (line 9)"], t)
+    >>> tool_table_warnings(["tool change: T4 (line 9)"], t)
     ['T4 M6 (line 9): tool T4 is not in the tool table (cam tools set 4 ...)']
     """
     if not len(table):
         return []
     out: list[str] = []
-    if kind == "excellon":
-        for number, dia, _ in drill_tools:
-            warning = _drill_says(table, int(number), float(dia))[1]
-            if warning is not None and warning not in out:
-                out.append(warning)
-    elif kind == "gcode":
-        for note in tool_changes:
-            m = _GCODE_NOTE.match(note)
-            if m is not None and table.get(int(m.group(1))) is None:
-                line = note.split("(", 1)[1].rstrip(")")
-                text = f"T{m.group(1)} M6 ({line}): tool T{m.group(1)} is not in the tool table " \
-                       f"(cam tools set {m.group(1)} ...)"
-                if text not in out:
-                    out.append(text)
+    for number, dia, _ in drill_tools:
+        warning = _drill_says(table, int(number), float(dia))[1]
+        if warning is not None and warning not in out:
+            out.append(warning)
+    for note in tool_changes:  # only a program's tool changes read "T4 (line 9)"
+        m = _GCODE_NOTE.match(note)
+        if m is not None and table.get(int(m.group(1))) is None:
+            line = note.split("(", 1)[1].rstrip(")")
+            text = f"T{m.group(1)} M6 ({line}): tool T{m.group(1)} is not in the tool table " \
+                   f"(cam tools set {m.group(1)} ...)"
+            if text not in out:
+                out.append(text)
     return out
 
 
@@ -333,7 +331,7 @@ def job_tool_warnings(job: Any, table: ToolTable) -> list[str]:
     """:func:`tool_table_warnings` of a prepared job (:class:`cam.kinds.jobs.PreparedJob`: its kind, tool changes and
     drill plan), those it has not yet."""
     plan = getattr(job, "drill_plan", None)
-    found = tool_table_warnings(job.kind, job.tool_changes, table, plan.tool_sequence if plan is not None else ())
+    found = tool_table_warnings(job.tool_changes, table, plan.tool_sequence if plan is not None else ())
     return [w for w in found if w not in job.warnings]
 
 

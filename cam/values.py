@@ -17,7 +17,8 @@ from typing import Any, Optional
 
 from .errors import PlanError
 
-__all__ = ["MAX_ABS_STEPS", "FEED_OVERRIDE_RANGE", "finite_number", "whole_number", "xyz_numbers", "xyz_steps", "steps_in_range", "shown"]
+__all__ = ["MAX_ABS_STEPS", "FEED_OVERRIDE_RANGE", "finite_number", "whole_number", "xyz_numbers", "xyz_steps", "steps_in_range", "shown",
+           "format_duration"]
 
 FEED_OVERRIDE_RANGE = (10, 200)
 """A feed override's limits, percent (grbl's config.h defaults: MIN 10, MAX 200; checked on every machine first)."""
@@ -142,3 +143,13 @@ def _range_text(lo: Optional[float], hi: Optional[float], unit: str) -> str:
     if hi is not None:
         return f" <= {hi:g}{u}"
     return ""
+
+
+def format_duration(seconds: float) -> str:
+    """``H:MM:SS``, rounded to the second: how every machine time is shown.
+
+    >>> format_duration(3725.4)
+    '1:02:05'
+    """
+    s = int(round(seconds))
+    return f"{s // 3600}:{s % 3600 // 60:02d}:{s % 60:02d}"

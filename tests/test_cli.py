@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 
 import cam
-from cam import choices
+from cam import choices, kinds
 from cam.cli.parser import build_parser
 
 from conftest import wait_for_progress, ROOT, SAMPLES, run_cli
@@ -166,7 +166,7 @@ def _suffix_named(suffix: str, text: str) -> bool:
 def test_help_names_every_file_kind():
     info = cli("info", "--help")
     assert info.returncode == 0
-    for kind, suffixes in choices.SUFFIXES.items():
+    for kind, suffixes in kinds.suffixes().items():
         for suffix in suffixes:
             assert _suffix_named(suffix, info.stdout), (kind, suffix)
     sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
@@ -174,7 +174,7 @@ def test_help_names_every_file_kind():
         image = next(a for a in sub.choices[command]._actions if a.dest == "image")
         for words in ("drawing", "digitized matrix", "Excellon", "HPGL", "G-code"):
             assert words in image.help, (command, words)
-        for suffix in sum(choices.SUFFIXES.values(), ()):
+        for suffix in sum(kinds.suffixes().values(), ()):
             assert _suffix_named(suffix, image.help), (command, suffix)
 
 

@@ -11,14 +11,14 @@ import numpy as np
 import pytest
 
 import cam
-from cam.choices import job_kind
+from cam.kinds import job_kind
 from cam.cli import main
 from cam.drive.runner import run
 from cam.errors import ParseError
 from cam.formats.excellon import load_excellon, parse_excellon, parse_nc_param
 from cam.job.drill import milled_hole_path_mm, plan_drill
 from cam.kinds.jobs import JobOptions, prepare_job
-from cam.sniff import forced_kind, sniff_kind
+from cam.kinds import forced_kind, sniff_kind
 from cam.verify.pinlog import decode_pin_log
 
 DATA = Path(__file__).parent / "data" / "drill_round2"

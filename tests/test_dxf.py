@@ -518,7 +518,7 @@ def test_binary_dxf_and_a_dxf_by_content_are_read(tmp_path):
     doc.saveas(binary, fmt="bin")
     assert binary.read_bytes().startswith(b"AutoCAD Binary DXF")
     assert load_dxf(binary).element_counts == {"circle": 1}
-    from cam.choices import job_kind
+    from cam.kinds import job_kind
 
     txt = write(tmp_path, "drawing.txt", inkscape_r12())  # a generic suffix: the content says DXF
     assert job_kind(txt) == "dxf" and job_kind(binary) == "dxf"

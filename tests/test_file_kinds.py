@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 
 import cam
-from cam.choices import job_kind
-from cam.sniff import HEAD_BYTES, sniff_kind
+from cam.kinds import job_kind
+from cam.kinds import sniff_kind
+from cam.sniff import HEAD_BYTES
 from cam.kinds.jobs import prepare_job
 
 import excellon_gen

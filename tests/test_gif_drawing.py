@@ -14,7 +14,7 @@ from PIL import Image
 import cam
 from cam.digitize.image_size import image_size_px
 from cam.errors import DrawingError
-from cam.sniff import sniff_kind
+from cam.kinds import sniff_kind
 
 from conftest import SAMPLES, assert_surface_equal, carve_job
 

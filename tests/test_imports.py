@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Iterator, Optional
 
 from cam import choices
+from cam.kinds import KIND_MODULES
 from cam.cli import COMMANDS
 from cam.cli.parser import build_parser
 from cam.kinds import jobs
@@ -28,6 +29,11 @@ ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
 
 HEAVY = ("numba", "cv2", "scipy", "starlette", "uvicorn", "skimage")
 """Packages that make start-up slow (numba alone takes most of a second) or are optional extras."""
+
+KIND_HOOK_MODULES = {f"cam.kinds.{name}" for name in KIND_MODULES}
+"""The file kinds' modules (issue #48 point 1) may import inside their hooks: a kind's module is read for its name,
+suffixes and sniffer by ``--help``, the sniffer and every flag's check, so it loads its reader and planner only when
+a hook plans, reports or exports a file."""
 
 FUNCTION_LEVEL_IMPORTS = {
     ("cam.drive.ports", "cam.drive._kernels"): "numba: loaded only when the mock streams its pin log to a file, so "
@@ -49,8 +55,6 @@ FUNCTION_LEVEL_IMPORTS = {
         "can name the extra in one line",
     ("cam.web.server", "uvicorn"): "optional dependency: the web stack (cam[web]), as starlette",
     ("cam.web.connections", "uvicorn"): "optional dependency: the web stack (cam[web]), as cam.web.server",
-    ("cam.kinds.jobs", "cam.digitize.sketch"): "heavy (scipy.ndimage and scikit-image, about 0.6 s): loaded only "
-                                             "when a sketch is traced (--trace), not for every job",
     ("cam.drive.machines", "cam.drive.machines"): "the registry's back ends register themselves when a port is "
                                                   "first named: each imports the registry's base, and the grbl "
                                                   "and MAXIMUS hosts load only for a port that needs them",
@@ -280,6 +284,7 @@ def test_cli_parser_imports_only_light_modules():
             seen.add(name)
             todo.extend(graph[name])
     assert seen <= {"cam", "cam.cli", "cam.cli.parser", "cam.cli.checks", "cam.choices", "cam.sniff", "cam.errors",
+                    "cam.kinds",  # the file kinds' registry (its kind modules are light: KIND_HOOK_MODULES)
                     "cam.settings", "cam.limits", "cam.options",  # cam.limits, cam.options: standard library
                     "cam.drive", "cam.drive.machines"}, seen  # the registry's base: its back ends load when asked
 
@@ -298,7 +303,7 @@ def test_only_the_emulator_command_imports_the_emulator():
 def test_function_level_imports_are_only_the_allowed_ones():
     found = function_level_imports()
     unexpected = {f"{m} imports {t} inside a function ({', '.join(where)})" for (m, t), where in found.items()
-                  if (m, t) not in FUNCTION_LEVEL_IMPORTS}
+                  if (m, t) not in FUNCTION_LEVEL_IMPORTS and m not in KIND_HOOK_MODULES}
     assert not unexpected, "move these to the module top, or allow them with a reason:\n" + "\n".join(sorted(unexpected))
     stale = set(FUNCTION_LEVEL_IMPORTS) - set(found)
     assert not stale, f"allowed but no longer there (remove from FUNCTION_LEVEL_IMPORTS): {sorted(stale)}"
@@ -323,10 +328,12 @@ def test_cli_functions_are_short():
 
 
 def test_suffix_lists_agree_with_the_job_model():
-    """cam.choices holds the suffix lists the --help texts use; the job model must accept exactly those."""
-    assert jobs.accepted_suffixes() == choices.SUFFIXES
+    """The kinds' suffixes (cam.kinds, what the --help texts list) are what the job model accepts."""
+    from cam import kinds
+
+    assert jobs.accepted_suffixes() == kinds.suffixes()
     assert jobs.PROFILE_SUFFIXES == choices.PROFILE_SUFFIXES
-    assert tuple(jobs.KINDS) == tuple(choices.SUFFIXES)
+    assert set(kinds.kind_names()) == {"drawing", "digitized", "gcode", "excellon", "hpgl", "svg", "dxf"}
 
 
 def test_no_steps_per_pixel_trick_in_the_library():

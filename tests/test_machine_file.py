@@ -152,11 +152,11 @@ def test_a_drill_files_size_wins_and_a_table_tool_of_another_size_is_a_warning()
     note = "tool change: T3 3.200 mm (4 holes)"
     said = annotate_tool_change(note, table)
     assert said.startswith(note) and "T3: flat end mill 1 mm: NOT the file's 3.2 mm" in said and "T7" in said
-    warnings = tool_table_warnings("excellon", [note], table, [(3, 3.2, 4)])
+    warnings = tool_table_warnings([note], table, [(3, 3.2, 4)])
     assert warnings == ["T3: the drill file's 3.2 mm wins (its holes are drilled at that size), not the tool table's "
                         "T3: flat end mill 1 mm: put in a 3.2 mm tool at the prompt; the table's T7: flat end mill "
                         "3.2 mm has that size"]
-    assert tool_table_warnings("excellon", [], table, [(7, 3.2, 4)]) == []
+    assert tool_table_warnings([], table, [(7, 3.2, 4)]) == []
     assert annotate_tool_change("tool change: pen 2", table) == "tool change: pen 2"
     assert annotate_tool_change(note, ToolTable()) == note
 
@@ -165,7 +165,7 @@ def test_a_gcode_tool_change_names_the_tables_tool(tmp_path):
     table = ToolTable().with_tool(TableTool(3, "v", 0.2, 30))
     assert annotate_tool_change("tool change: T3 (line 4)", table) == \
         "tool change: T3 (line 4) [tool table T3: V bit 30 degrees, tip 0.2 mm]"
-    assert tool_table_warnings("gcode", ["tool change: T3 (line 4)", "tool change: T5 (line 9)"], table) == \
+    assert tool_table_warnings(["tool change: T3 (line 4)", "tool change: T5 (line 9)"], table) == \
         ["T5 M6 (line 9): tool T5 is not in the tool table (cam tools set 5 ...)"]
 
 

@@ -18,7 +18,11 @@ from cam.cli.checks import check_args
 from cam.cli.parser import build_parser
 from cam.errors import CamError
 from cam.kinds.jobs import JobOptions
-from cam.options import JOB_OPTIONS, Option, schema_json
+from cam.kinds import job_options, schema_json
+from cam.options import Option
+
+JOB_OPTIONS = job_options()
+"""Every option, the kinds it applies to filled in from the kinds' traits (cam.kinds)."""
 
 from conftest import SAMPLES, run_cli
 
@@ -108,9 +112,8 @@ def test_the_page_is_served_the_schema(tmp_path):
     finally:
         app.state.session.shutdown()
     assert status == 200
-    from cam.kinds.jobs import kind_defaults
 
-    assert json.loads(body) == json.loads(json.dumps(schema_json(kind_defaults())))
+    assert json.loads(body) == json.loads(json.dumps(schema_json()))
     assert [o["name"] for o in json.loads(body)] == [o.name for o in JOB_OPTIONS]
 
 
@@ -282,6 +285,7 @@ def test_the_drawing_planner_takes_the_cut_depth_in_mm(monkeypatch):
     """cam.plan(cut_depth_mm=) is --cut-depth: prepare_job gives the option unchanged, the planner makes it whole
     Z pixels (depth_px_of), the same job as the depth in Z pixels."""
     import cam
+    from cam.job import drawing_stream
     from cam.kinds import jobs
     from cam.job.drawing_stream import depth_px_of
 
@@ -296,13 +300,13 @@ def test_the_drawing_planner_takes_the_cut_depth_in_mm(monkeypatch):
     with pytest.raises(CamError, match="give the depth once"):
         cam.plan(d, depth=5, cut_depth_mm=1.0)
     seen: dict = {}
-    real = jobs.plan
+    real = drawing_stream.plan
 
     def spy(digitized, **kw):
         seen.update(kw)
         return real(digitized, **kw)
 
-    monkeypatch.setattr(jobs, "plan", spy)
+    monkeypatch.setattr(drawing_stream, "plan", spy)  # the drawing kind's planner (cam.kinds.drawing)
     jobs.prepare_job(SAMPLES / "ellipse.png", JobOptions(cut_depth_mm=0.2), s)
     assert seen["cut_depth_mm"] == 0.2 and seen["depth"] is None
 
@@ -311,6 +315,7 @@ def test_the_stepdown_is_converted_in_one_place(monkeypatch):
     """The planner takes stepdown_mm, as JobOptions and --stepdown do: prepare_job gives it the option's value
     unchanged, and the planner's levels are stepdown_px_of(stepdown_mm) Z pixels apart."""
     import cam
+    from cam.job import drawing_stream
     from cam.kinds import jobs
     from cam.job.drawing_stream import stepdown_px_of
 
@@ -318,13 +323,13 @@ def test_the_stepdown_is_converted_in_one_place(monkeypatch):
     one = s.px_to_mm_z(1)
     assert [stepdown_px_of(k * one, s) for k in (0.01, 1, 2, 30, 30.5)] == [1, 1, 2, 30, 30]
     seen: dict = {}
-    real = jobs.plan
+    real = drawing_stream.plan
 
     def spy(digitized, **kw):
         seen.update(kw)
         return real(digitized, **kw)
 
-    monkeypatch.setattr(jobs, "plan", spy)
+    monkeypatch.setattr(drawing_stream, "plan", spy)  # the drawing kind's planner (cam.kinds.drawing)
     jobs.prepare_job(SAMPLES / "disc.png", JobOptions(profile_expr="k", tool="ball:1", stepdown_mm=0.1), s)
     assert seen["stepdown_mm"] == 0.1 and "stepdown_px" not in seen
     with pytest.raises(CamError, match="stepdown_mm must be > 0"):

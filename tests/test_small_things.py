@@ -20,10 +20,13 @@ import cam
 from cam.cli.parser import build_parser
 from cam.digitize.trace2d import START_RULES
 from cam.drive.state import MachineState, StateHold, read_state, unknown_message, write_state
-from cam.options import JOB_OPTIONS, schema_json
+from cam.kinds import job_options, schema_json
 from cam.settings import load_settings
 from conftest import (assert_surface_equal, carve_job, drawing_from_rows, expected_surface_2d, ok, one_line_error,
                       run_cli)
+
+JOB_OPTIONS = job_options()
+"""Every option, its kinds filled in from the file kinds' traits (cam.kinds)."""
 
 S = cam.MachineSettings()
 

@@ -15,8 +15,12 @@ import pytest
 
 from cam.drive.state import MachineState
 from cam.errors import CamError
-from cam.kinds.jobs import JobOptions, kind_defaults, prepare_job
-from cam.options import GROUPS, JOB_OPTIONS, Option, schema_json
+from cam.kinds import job_options, kind_defaults, schema_json
+from cam.kinds.jobs import JobOptions, prepare_job
+from cam.options import GROUPS, Option
+
+JOB_OPTIONS = job_options()
+"""Every option, its kinds filled in from the file kinds' traits (cam.kinds)."""
 
 from conftest import ROOT, SAMPLES
 from test_web import FAST, Server, browser  # noqa: F401 (the browser fixture)

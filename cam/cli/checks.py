@@ -19,25 +19,26 @@ import sys
 from pathlib import Path
 from typing import Optional
 
-from ..choices import DIGITIZED_SUFFIXES, SUFFIXES, is_height_map, job_kind
+from ..choices import is_height_map
 from ..errors import CamError
+from ..kinds import forced_kind, job_kind, job_options, kind, kind_names, kinds
 from ..options import OPTION_OF_DEST, OPTIONS, degenerate
-from ..sniff import forced_kind
 
-__all__ = ["check_args", "job_kind_of", "OUTPUTS", "APPLIES_TO", "check_output_path"]
+__all__ = ["check_args", "job_kind_of", "OUTPUTS", "applies_to", "check_output_path"]
 
-DRAWINGS = frozenset({"drawing", "digitized"})
-EVERY_KIND = frozenset(SUFFIXES)
 
-APPLIES_TO = {
-    **{dest: option.kinds for dest, option in OPTION_OF_DEST.items()},  # the job options: cam.options' kinds
-    # flags of the command line only
-    "load_digitized": DRAWINGS, "steps_per_pixel": DRAWINGS, "save_digitized": frozenset({"drawing"}),
-    "surface": DRAWINGS,
-}
-"""Which file kinds each option applies to (drill, export, preview and info); ``cam export`` widens some."""
 
-_EXPORT_APPLIES_TO = {"travel_height": EVERY_KIND, "flip_y": EVERY_KIND}
+def applies_to() -> dict[str, frozenset[str]]:
+    """Which file kinds each option applies to (drill, export, preview and info): the job options' kinds
+    (:func:`cam.kinds.job_options`, from the kinds' traits) and the command line's own flags for drawings in
+    pixels; ``cam export`` widens some (:func:`_check_applies`)."""
+    pixels = frozenset(k.name for k in kinds() if "pixels" in k.all_traits)
+    return {**{o.dest: o.kinds for o in job_options()},
+            "load_digitized": pixels, "steps_per_pixel": pixels, "save_digitized": frozenset({"drawing"}),
+            "surface": pixels}
+
+
+_EXPORT_WIDENS = ("travel_height", "flip_y")
 """export writes every kind's travel at --travel-height, and --flip-y mirrors Y of every kind."""
 
 OUTPUTS = {
@@ -46,14 +47,14 @@ OUTPUTS = {
     "report": ("--report", (".json",)),
     "journal": ("--journal", (".json",)),
     "preview": ("--preview", (".png", ".svg")),
-    "save_digitized": ("--save-digitized", DIGITIZED_SUFFIXES),
+    "save_digitized": ("--save-digitized", None),  # a digitized matrix's suffixes (cam.kinds.digitized)
     "output": ("--output", None),
     "log": ("--log", (".csv",)),
     "out": ("--out", (".json",)),
 }
 """Files a command writes, checked before it starts."""
 
-_OUTPUT_SUFFIXES = {"preview": (".png", ".svg"), "digitize": DIGITIZED_SUFFIXES, "export": None,
+_OUTPUT_SUFFIXES = {"preview": (".png", ".svg"), "digitize": "digitized", "export": None,
                     "trace": (".png", ".bmp", ".tif", ".tiff")}
 """What ``-o`` of each command writes."""
 
@@ -66,7 +67,7 @@ None when left out: 10 Z pixels on a 2D drawing, and a 3D drawing then needs a p
 
 def job_kind_of(args: argparse.Namespace, warnings: Optional[list[str]] = None) -> Optional[str]:
     """The kind of the command's input file ("drawing", "excellon", ...) by its suffix and, where the suffix is
-    generic, unknown or contradicted, its first few kB (:func:`cam.choices.job_kind`), or None."""
+    generic, unknown or contradicted, its first few kB (:func:`cam.kinds.job_kind`), or None."""
     image = getattr(args, "image", None)
     if image and getattr(args, "kind", None):  # --kind: what the user says, whatever the name and content
         return forced_kind(args.kind)
@@ -97,18 +98,19 @@ def _given(args: argparse.Namespace, dest: str) -> bool:
 
 
 def _check_applies(args: argparse.Namespace, kind: str) -> None:
-    table = dict(APPLIES_TO)
+    table = applies_to()
+    every = frozenset(kind_names())
     if args.command == "export":
-        table.update(_EXPORT_APPLIES_TO)
+        table.update({dest: every for dest in _EXPORT_WIDENS})
     if args.command == "preview":
-        table["scale"] = EVERY_KIND  # picture pixels per drawing pixel, or an SVG's scale
-    for dest, kinds in table.items():
-        if hasattr(args, dest) and _given(args, dest) and kind not in kinds:
+        table["scale"] = every  # picture pixels per drawing pixel, or an SVG's scale
+    for dest, applies in table.items():
+        if hasattr(args, dest) and _given(args, dest) and kind not in applies:
             flag = OPTION_OF_DEST[dest].flag if dest in OPTION_OF_DEST else "--" + dest.replace("_", "-")
-            applies = " and ".join(sorted(kinds))
+            names = " and ".join(sorted(applies))
             raise CamError(f"{flag} does not apply to {getattr(args, 'image', None) or 'this job'} "
-                           f"(a {kind} file); it applies to {applies} files")
-    if kind in DRAWINGS and _given(args, "cut_depth") and _given(args, "depth"):
+                           f"(a {kind} file); it applies to {names} files")
+    if kind in table["depth"] and _given(args, "cut_depth") and _given(args, "depth"):
         raise CamError("give the depth once: --depth in Z pixels per object, or --cut-depth in mm for every object")
 
 
@@ -119,6 +121,8 @@ def _check_outputs(args: argparse.Namespace) -> None:
             continue
         if dest == "output":
             suffixes = _OUTPUT_SUFFIXES.get(args.command)
+        if dest == "save_digitized" or suffixes == "digitized":
+            suffixes = kind("digitized").suffixes
         check_output_path(path, flag, suffixes)
 
 

@@ -11,7 +11,7 @@ from typing import Any
 from tqdm import tqdm
 
 from ..drive.maximus.board import with_delays
-from ..drive.activities import format_duration
+from ..values import format_duration
 from ..drive.machines import DEFAULT_PORT, backend_of
 from ..drive.ramps import check_delay_speeds, top_speeds_mm_s
 from ..drive.state import default_state_path, recorded_machine

@@ -15,6 +15,7 @@ from ..drive.journal import read_journal
 from ..drive.state import StateHold, check_in_travel, read_state
 from ..drive.machines import can
 from ..errors import CamError
+from ..kinds import kind
 from ..kinds.jobs import resume_job
 from ..job.resume import resume_start
 from .checks import check_output_path, job_kind_of
@@ -157,7 +158,8 @@ def _gcode_hold(args: argparse.Namespace, settings) -> Optional[StateHold]:
     kinds (planned from their own zero, placed at the work zero when they run) but a drill, HPGL or SVG file
     placed by its own zero (--origin file: planned from the work zero as a program is) and a job levelled to a
     height map (--level: levelled where it will run, at the active work zero, issue #46 point 2)."""
-    if job_kind_of(args) != "gcode":
+    name = job_kind_of(args)
+    if name is None or kind(name).job_noun is not None:  # placed at the work zero: not run in place as a program
         if getattr(args, "keep_offsets", False):
             raise CamError("--keep-offsets keeps the work offsets a G-code program sets (G10 L2/L20); this is not "
                            "a G-code program")
@@ -258,4 +260,4 @@ def _drill(args: argparse.Namespace, settings, hold: Optional[StateHold],
     report = job.full_report()  # after the run: the run's pass over the ramps gave the machine time
     run_s = time.monotonic() - t0
     report.update(planning_s=round(planning_s, 3), run_s=round(run_s, 3))  # wall times of this process
-    return _finish(args, outcome, report, f"{summary} from {args.image}" if job.kind == "hpgl" else summary, run_s)
+    return _finish(args, outcome, report, summary, run_s)

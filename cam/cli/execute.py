@@ -32,17 +32,18 @@ from ..drive.state import (
 )
 from ..errors import CamError, CapabilityError, PortError
 from ..job.model import Job
+from ..kinds import has
 from ..settings import MachineSettings
 from ..verify.pinlog import join_pin_logs, write_pin_log
 from .checks import job_kind_of
 from .common import progress_wanted
 from .machine_state import hold_machine
 from ..drive.placement import (
-    ORIGINS, PLACED_KINDS, approach_to_work_zero, ended_state, origin_anchor, placed_home,
+    ORIGINS, placed_kinds, approach_to_work_zero, ended_state, origin_anchor, placed_home,
 )
 
 __all__ = ["execute", "Outcome", "check_port_options", "ended_state", "unrecorded_message", "approach_to_work_zero",
-           "PLACED_KINDS", "ORIGINS", "origin_anchor", "placed_home"]
+           "placed_kinds", "ORIGINS", "origin_anchor", "placed_home"]
 
 
 @dataclass
@@ -75,7 +76,7 @@ def check_port_options(args: argparse.Namespace, settings: Optional[MachineSetti
     """
     kind = job_kind_of(args)
     drills_alone = can(args.port, "drills_alone")
-    if kind is not None and kind != "excellon" and drills_alone:
+    if kind is not None and not has(kind, "holes") and drills_alone:
         require(args.port, "step_dir", what=f"a {kind} job")
     if getattr(args, "pin_log", None):
         require(args.port, "pin_log")

@@ -16,9 +16,9 @@ import re
 from typing import Callable, Optional, Sequence
 
 from .. import __version__
+from ..kinds import kind, kinds, job_options
 from ..choices import (
-    DIGITIZED_SUFFIXES, DRAWING_SUFFIXES, EXCELLON_SUFFIXES, GCODE_SUFFIXES, HPGL_SUFFIXES, PROFILE_SUFFIXES,
-    DEFAULT_PORT, POSTS, SVG_SUFFIXES, DXF_SUFFIXES,
+    IMAGE_SUFFIXES, PROFILE_SUFFIXES, DEFAULT_PORT, POSTS,
 )
 from ..options import MAX_MM, OPTIONS, Option
 from ..settings import RAMP_MODES
@@ -38,13 +38,37 @@ def _listed(suffixes: Sequence[str]) -> str:
     return " ".join(suffixes)
 
 
-FILE_KINDS_HELP = (
-    f"a drawing ({_listed(DRAWING_SUFFIXES)}), an Excellon drill file ({_listed(EXCELLON_SUFFIXES)}), "
-    f"an HPGL file ({_listed(HPGL_SUFFIXES)}), an SVG file ({_listed(SVG_SUFFIXES)}), a DXF file "
-    f"({_listed(DXF_SUFFIXES)}) or a G-code file "
-    f"({_listed(GCODE_SUFFIXES)})"
-)
-"""The files a job command or info takes as its positional argument, by kind."""
+def _words(items: Sequence[str]) -> str:
+    """``a, b or c``."""
+    items = list(items)
+    return items[0] if len(items) == 1 else ", ".join(items[:-1]) + " or " + items[-1]
+
+
+def _kinds_with(trait: str) -> list:
+    return [k for k in kinds() if trait in k.all_traits]
+
+
+def _suffixes_of(trait: str) -> str:
+    """The suffixes of the kinds with ``trait``, for a group's title."""
+    return " ".join(_listed(k.suffixes) for k in _kinds_with(trait))
+
+
+def _titles_of(trait: str) -> str:
+    """``SVG and DXF``: the titles of the kinds with ``trait``."""
+    titles = [k.title for k in _kinds_with(trait)]
+    return titles[0] if len(titles) == 1 else ", ".join(titles[:-1]) + " and " + titles[-1]
+
+
+def _file_kinds_help() -> str:
+    """The files a job command or info takes as its positional argument, by kind (every kind of
+    :mod:`cam.kinds` but the digitized matrix, which each command names on its own)."""
+    return _words([f"{k.listed_as} ({_listed(k.suffixes)})" for k in kinds() if k.name != "digitized"])
+
+
+def _drill_description() -> str:
+    """What ``cam drill`` does with each kind (each kind's :attr:`cam.kinds.Kind.help`)."""
+    said = "; ".join(f"{k.listed_as} ({_listed(k.suffixes)}) {k.help}" for k in kinds() if k.name != "digitized")
+    return said[:1].upper() + said[1:] + "."
 
 
 NEGATIVE_VALUE = re.compile(r"^-\.?\d[0-9.,;:eE+-]*$")
@@ -172,7 +196,7 @@ def _add_option(container: argparse._ActionsContainer, name: str, flag: Optional
     """Add the job option ``name`` of :data:`cam.options.OPTIONS` as its flag: its type and range, metavar and
     help come from the schema (``overrides``: argparse keywords that differ on this command, such as its help;
     ``hidden``: old spellings this command still accepts, besides the option's own aliases)."""
-    o = OPTIONS[name]
+    o = next(o for o in job_options() if o.name == name)  # its kinds and choices from the file kinds (cam.kinds)
     flag = flag or o.flag
     kw: dict = {"help": o.help}
     if o.metavar:
@@ -252,13 +276,14 @@ def _tool_text(text: str) -> str:
 
 
 def _add_tool_options(p: argparse.ArgumentParser) -> None:
-    g = p.add_argument_group("the cutter (drawings; --tool and --line-width also SVG, DXF and HPGL)")
+    g = p.add_argument_group(f"the cutter (drawings; --tool and --line-width also {_titles_of('strokes')})")
     for name in ("tool", "line_width_mm", "stepdown_mm", "stepover", "rough_tool"):
         _add_option(g, name)
 
 
 def _add_excellon_options(d: argparse.ArgumentParser) -> None:
-    g = d.add_argument_group(f"drill files that do not say their number format (Excellon: {_listed(EXCELLON_SUFFIXES)})")
+    g = d.add_argument_group(f"drill files that do not say their number format (Excellon: "
+                             f"{_listed(kind('excellon').suffixes)})")
     for name in ("excellon_units", "excellon_digits", "excellon_zeros"):
         _add_option(g, name)
     for name in ("kind", "strict", "mill_holes_over_mm"):  # issue #31: the kind forced, bad tools, large holes
@@ -266,8 +291,9 @@ def _add_excellon_options(d: argparse.ArgumentParser) -> None:
 
 
 def _add_svg_options(d: argparse.ArgumentParser, scale: bool = True) -> None:
-    g = d.add_argument_group(f"SVG and DXF files ({_listed(SVG_SUFFIXES)} {_listed(DXF_SUFFIXES)}; --cut-depth default "
-                             "0.5, --offset places the page or drawing origin)")
+    g = d.add_argument_group(f"{_titles_of('layers')} files ({_suffixes_of('layers')}; --cut-depth default "
+                             f"{OPTIONS['cut_depth_mm'].default_for({'strokes'})}, --offset places the page or "
+                             "drawing origin)")
     if scale:
         _add_option(g, "scale")
     _add_option(g, "fit_mm")
@@ -280,8 +306,7 @@ def _add_cut_options(d: argparse.ArgumentParser) -> None:
     _add_option(g, "cut_depth_mm")
     _add_option(g, "travel_height_mm")
     _add_option(g, "allow_surface_travel")
-    f = d.add_argument_group(f"drill, HPGL, SVG and DXF files ({_listed(EXCELLON_SUFFIXES)} {_listed(HPGL_SUFFIXES)} "
-                             f"{_listed(SVG_SUFFIXES)} {_listed(DXF_SUFFIXES)})")
+    f = d.add_argument_group(f"{_titles_of('placed')} files ({_suffixes_of('placed')})")
     for name in ("offset_mm", "mirror_x", "drill_order"):
         _add_option(f, name)
     _add_excellon_options(d)
@@ -338,10 +363,10 @@ def _float_triple(name: str) -> Callable[[str], list[float]]:
 def _add_job_options(d: argparse.ArgumentParser) -> None:
     """Options that say what to cut and how deep (shared by drill, export and preview)."""
     d.add_argument("image", nargs="?", metavar="IMAGE",
-                   help=f"the file: {FILE_KINDS_HELP}; a digitized matrix ({_listed(DIGITIZED_SUFFIXES)}) "
+                   help=f"the file: {_file_kinds_help()}; a digitized matrix ({_listed(kind('digitized').suffixes)}) "
                    "goes with --load-digitized")
     d.add_argument("--load-digitized", metavar="FILE",
-                   help=f"reuse a saved digitized matrix ({_listed(DIGITIZED_SUFFIXES)}) instead of digitizing")
+                   help=f"reuse a saved digitized matrix ({_listed(kind('digitized').suffixes)}) instead of digitizing")
     _add_digitize_options(d)
     _add_option(d, "depth")
     _add_profile_options(d)
@@ -374,13 +399,10 @@ def _add_gcode_options(d: argparse.ArgumentParser) -> None:
 
 def _add_drill(sub: argparse._SubParsersAction) -> None:
     d = sub.add_parser(
-        "drill", help="cut a drawing, G-code, drill (Excellon), HPGL, SVG or DXF file (mock port by default)",
-        description="Digitize a drawing (or reuse a saved digitized matrix), plan the depth-sorted toolpath "
-        f"and send it to a port. A G-code file ({_listed(GCODE_SUFFIXES)}) runs as programmed; an Excellon drill "
-        f"file ({_listed(EXCELLON_SUFFIXES)}) is drilled tool by tool in a short order, also on the MAXIMUS board "
-        f"(--port maximus:/dev/ttyUSB0); an HPGL file ({_listed(HPGL_SUFFIXES)}) is cut pen-down at --cut-depth, "
-        f"and so is every visible stroke and outline of an SVG file ({_listed(SVG_SUFFIXES)}) and every line and "
-        f"curve of a DXF file ({_listed(DXF_SUFFIXES)}). "
+        "drill", help=f"cut {_words([k.title for k in kinds() if k.name != 'digitized'])} files (mock port by "
+        "default)",
+        description="Plan a file's job in machine steps and send it to a port (a saved digitized matrix is cut as "
+        f"its drawing). {_drill_description()} "
         "The default port is the logging mock, so nothing moves unless you name a real port.",
     )
     _add_job_options(d)
@@ -472,25 +494,26 @@ def _add_preview(sub: argparse._SubParsersAction) -> None:
 def _add_digitize(sub: argparse._SubParsersAction) -> None:
     z = sub.add_parser("digitize", help="digitize a drawing and save the digitized matrix",
                        description="Digitize a drawing and save its digitized matrix for later jobs (--load-digitized).")
-    z.add_argument("image", metavar="IMAGE", help=f"the drawing ({_listed(DRAWING_SUFFIXES)})")
+    z.add_argument("image", metavar="IMAGE", help=f"the drawing ({_listed(kind('drawing').suffixes)})")
     z.add_argument("-o", "--output", required=True, metavar="FILE",
-                   help=f"where to write the matrix ({_listed(DIGITIZED_SUFFIXES)})")
+                   help=f"where to write the matrix ({_listed(kind('digitized').suffixes)})")
     _add_digitize_options(z)
 
 
 def _add_info(sub: argparse._SubParsersAction) -> None:
-    i = sub.add_parser("info", help="print the report of a drawing, drill file, HPGL or G-code file",
-                       description=f"Digitize a drawing ({_listed(DRAWING_SUFFIXES)}) and print its size in pixels "
-                       "and mm, its object count and warnings; for an Excellon drill file "
-                       f"({_listed(EXCELLON_SUFFIXES)}) its tools (diameter, hole count), extent and warnings; for "
-                       f"an HPGL file ({_listed(HPGL_SUFFIXES)}) its strokes, pens, extent and unknown commands; for "
-                       f"a G-code file ({_listed(GCODE_SUFFIXES)}) its moves, cut area, depth and machine time; for a "
+    readers = [k for k in kinds() if k.info is not None]
+    i = sub.add_parser("info", help=f"print the report of {_words([k.listed_as for k in readers])}",
+                       description="Print what a file holds: for a drawing its size in pixels and mm, its object "
+                       "count and warnings; for a drill file its tools (diameter, hole count), extent and warnings; "
+                       "for a plotter file its strokes, pens, extent and unknown commands; for a vector drawing its "
+                       "strokes, layers and size; for a G-code file its moves, cut area, depth and machine time "
+                       f"(the files: {_words([f'{k.listed_as} ({_listed(k.suffixes)})' for k in readers])}); for a "
                        "height map (cam probe grid --out MAP.json) its grid, area, heights and largest neighbour "
                        "difference. "
-                       f"A saved digitized matrix ({_listed(DIGITIZED_SUFFIXES)}) is not read here: cut it with "
+                       f"A saved digitized matrix ({_listed(kind('digitized').suffixes)}) is not read here: cut it with "
                        "'cam drill --load-digitized FILE'.")
     i.add_argument("image", metavar="IMAGE",
-                   help=f"{FILE_KINDS_HELP}; not a digitized matrix ({_listed(DIGITIZED_SUFFIXES)})")
+                   help=f"{_file_kinds_help()}; not a digitized matrix ({_listed(kind('digitized').suffixes)})")
     _add_digitize_options(i)
     _add_machine_options(i)
     _add_profile_options(i)
@@ -510,7 +533,7 @@ def _add_trace(sub: argparse._SubParsersAction) -> None:
         "touches the border. --trace-fill makes every closed region red (a 3D drawing). The result is ready for "
         "'cam drill' (whose --trace does the same in one step, with the same two options).",
     )
-    t.add_argument("image", metavar="PHOTO", help=f"the sketch ({_listed(DRAWING_SUFFIXES)})")
+    t.add_argument("image", metavar="PHOTO", help=f"the sketch ({_listed(IMAGE_SUFFIXES)})")
     t.add_argument("-o", "--output", required=True, metavar="DRAWING.png",
                    help="where to write the drawing (.png, .bmp or .tif: never JPEG, which blurs 1-pixel lines)")
     # the job options of 'drill --trace', under the same names (--min-length and --fill: their old spellings)
@@ -763,7 +786,7 @@ def _add_probe(sub: argparse._SubParsersAction) -> None:
     where.add_argument("--area", type=_area, metavar="X0,Y0,X1,Y1",
                        help="the area in mm, in the active work offset's X, Y (--machine-coords: the machine's)")
     where.add_argument("--over", metavar="FILE", help=f"the XY extent of what this job cuts where it would run ("
-                       f"{FILE_KINDS_HELP}), placed at the active work zero as cam drill places it")
+                       f"{_file_kinds_help()}), placed at the active work zero as cam drill places it")
     g.add_argument("--origin", choices=("file", "upper-left", "lower-left", "center"),
                    help="with --over: which point of the file goes to the work zero (as cam drill's --origin)")
     g.add_argument("--machine-coords", action="store_true", help="--area is in the machine frame")

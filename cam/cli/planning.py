@@ -15,7 +15,8 @@ from ..drive.pins import axis_bits
 from ..drive.state import MachineState, read_state
 from ..errors import CamError, TravelError
 from ..kinds.jobs import JobOptions, PreparedJob, own_zero_home, prepare_job
-from ..options import JOB_OPTIONS, Option
+from ..kinds import has, job_options as kind_job_options
+from ..options import Option
 from ..job.model import JobLike
 from ..render.picture import save_picture, surface_picture, toolpath_picture, toolpath_svg
 from ..settings import MachineSettings
@@ -24,19 +25,10 @@ from .checks import job_kind_of
 from .common import machine_settings, reading_bar
 from .machine_state import state_path_of
 
-FILE_JOB_KINDS = ("excellon", "gcode", "hpgl")
-"""Kinds of file that are jobs already (not drawings)."""
-
 __all__ = [
-    "is_file_job", "placed_by_own_zero", "prepare", "summary_of", "job_options", "excellon_digits", "profile_of",
+    "placed_by_own_zero", "prepare", "summary_of", "job_options", "excellon_digits", "profile_of",
     "write_preview", "write_job_preview", "write_file_job_preview", "carved_surface",
 ]
-
-
-def is_file_job(args: argparse.Namespace) -> bool:
-    """Whether the IMAGE argument is a G-code, drill or HPGL file (a job already), not a drawing (kind by suffix
-    and content, :func:`cam.cli.checks.job_kind_of`)."""
-    return bool(getattr(args, "image", None)) and job_kind_of(args) in FILE_JOB_KINDS
 
 
 def placed_by_own_zero(args: argparse.Namespace) -> bool:
@@ -126,7 +118,7 @@ def job_options(args: argparse.Namespace) -> JobOptions:
     job's, and leaves the field at its default."""
     kind = job_kind_of(args)
     values: dict[str, Any] = {}
-    for o in JOB_OPTIONS:
+    for o in kind_job_options():
         value = getattr(args, o.dest, None)
         if value is None or value == [] or (kind is not None and kind not in o.kinds):
             continue
@@ -146,9 +138,9 @@ def profile_of(args: argparse.Namespace, digitized: Digitized) -> Optional[Profi
 def write_job_preview(args: argparse.Namespace, job: PreparedJob, path: str, surface: bool = False) -> None:
     """A prepared job's picture: a drawing's toolpath over it or its cut surface, a file job's preview (a job
     held in memory or made a piece at a time alike, see :func:`write_preview`)."""
-    if job.kind in ("drawing", "digitized"):
+    if has(job.kind, "pixels"):
         write_preview(args, job.toolpath, path, surface=surface, drawing_rgb=job.drawing_rgb)
-    elif job.kind in ("svg", "dxf"):  # --scale scaled the drawing, as in drill
+    elif has(job.kind, "layers"):  # --scale scaled the drawing, as in drill
         write_file_job_preview(job, path)
     else:
         write_file_job_preview(job, path, scale=_picture_scale(args))

@@ -13,6 +13,7 @@ import numpy as np
 
 from ..errors import CamError, PortError
 from ..settings import MachineSettings
+from ..values import format_duration
 from .maximus.board import MaximusBoard, drill_arguments, from_board, to_board
 from .journal import HoleJournal, JournalSpec, JournalWriter, journal_state_of
 from .maximus.resume import holes_left, resumed_arguments
@@ -110,12 +111,6 @@ def run_steps(session: Any, name: str, plan: "StepPlan | ChunkedPlan", ctl: Cont
     if result.messages:
         text += " (" + "; ".join(result.messages) + ")"
     session.log(text, "info" if result.status == "finished" else "warning")
-
-
-def format_duration(seconds: float) -> str:
-    """``H:MM:SS``, rounded to the second."""
-    s = int(round(seconds))
-    return f"{s // 3600}:{s % 3600 // 60:02d}:{s % 60:02d}"
 
 
 def run_timing_text(machine_time_s: float, wall_s: float, timing: dict, ramp: str, *, simulated: bool) -> str:

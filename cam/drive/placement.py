@@ -13,6 +13,7 @@ from typing import Any, Optional
 import numpy as np
 
 from ..errors import CamError, TravelError
+from ..kinds import kind, kind_names, kinds
 from ..kinds.jobs import origin_anchor_steps
 from ..job.model import Job, travel_job
 from ..settings import MachineSettings
@@ -21,7 +22,7 @@ from .machine_job import JobInput, MachineJob, machine_job
 from .runner import EMERGENCY_STOPPED, FINISHED, LIMIT_STOPPED, STOPPED
 from .state import MachineState
 
-__all__ = ["goto_path", "PLACED_KINDS", "ORIGINS", "origin_anchor", "placed_home", "approach_to_work_zero",
+__all__ = ["goto_path", "placed_kinds", "ORIGINS", "origin_anchor", "placed_home", "approach_to_work_zero",
            "ended_state"]
 
 Steps3 = tuple[int, int, int]
@@ -45,11 +46,11 @@ def goto_path(start_steps: Steps3, target_steps: Steps3, safe_z_steps: int, sett
     return travel_job(np.array(rel, np.int64).reshape(-1, 3), settings, source="go to")
 
 
-PLACED_KINDS = {"drawing": "drawing job", "digitized": "digitized matrix job", "excellon": "drill job",
-                "hpgl": "HPGL job", "svg": "SVG job", "dxf": "DXF job"}
-"""The file kinds whose job is placed at the active work zero, and what messages call them (a G-code program is
-not placed: it runs in the state's work offsets from where the tool stands, planned so by ``cam drill``, see
-:func:`cam.kinds.jobs.prepare_job`'s ``machine_state``)."""
+def placed_kinds() -> dict[str, str]:
+    """The file kinds whose job is placed at the active work zero, and what messages call them (each kind's
+    :attr:`cam.kinds.Kind.job_noun`; a G-code program is not placed: it runs in the state's work offsets from where
+    the tool stands, planned so by ``cam drill``, see :func:`cam.kinds.jobs.prepare_job`'s ``machine_state``)."""
+    return {k.name: k.job_noun for k in kinds() if k.job_noun is not None}
 
 
 ORIGINS = ("file", "upper-left", "lower-left", "center")
@@ -64,7 +65,7 @@ def origin_anchor(job: "JobInput | MachineJob", origin: Optional[str]) -> tuple[
     ``JobOptions.origin``), else ``file`` for drawings and digitized matrices, ``upper-left`` for the other kinds
     (the command line passes ``file`` for an ``--offset`` without ``--origin``)."""
     mj = machine_job(job)
-    origin = origin or mj.origin or ("file" if mj.kind in ("drawing", "digitized") else "upper-left")
+    origin = origin or mj.origin or (kind(mj.kind).default_origin if mj.kind in kind_names() else "upper-left")
     if origin != "file" and not isinstance(mj.plan, ChunkedPlan):
         raise CamError(f"--origin {origin} places a file's job: {mj.name} has no plan of its own to measure")
     return origin_anchor_steps(mj.kind, origin, mj.plan)  # the rule, where the job layer needs it too (--level)
@@ -98,8 +99,8 @@ def approach_to_work_zero(job: "JobInput | MachineJob", state: MachineState, sta
         anything moves.
     """
     mj = machine_job(job)
-    job_kind = mj.kind  # a prepared job's file kind; moves alone and step plans are not placed
-    if job_kind not in PLACED_KINDS:
+    noun = placed_kinds().get(mj.kind)  # a prepared job's file kind; moves alone and step plans are not placed
+    if noun is None:
         return None
     zero = placed_home(mj, state, origin)
     extent = mj.extent_steps
@@ -109,7 +110,7 @@ def approach_to_work_zero(job: "JobInput | MachineJob", state: MachineState, sta
             if reach[0] < lo or reach[1] > hi:
                 v, beyond = (reach[0], lo - reach[0]) if reach[0] < lo else (reach[1], reach[1] - hi)
                 raise TravelError(
-                    f"the {PLACED_KINDS[job_kind]} placed at the {state.active_offset} work zero (machine "
+                    f"the {noun} placed at the {state.active_offset} work zero (machine "
                     f"{list(state.work_zero_steps())} steps) "
                     f"leaves the {'XYZ'[a]} travel ({lo}..{hi} steps from the home): it reaches {v}, {beyond} "
                     f"steps beyond; set the work zero elsewhere (cam zero)")

@@ -38,7 +38,7 @@ from ..settings import INPUT_BITS, MachineSettings
 from .chunks import plan_chunks
 from .homing import seek
 from .machines import open_port
-from .placement import PLACED_KINDS, placed_home
+from .placement import placed_kinds, placed_home
 from .ports import MockPort, SwitchSchedule
 from .runner import EMERGENCY_STOPPED, FINISHED, LIMIT_STOPPED, STOPPED, SWITCHED, Controller, run
 
@@ -450,7 +450,7 @@ def serpentine(nx: int, ny: int) -> list[tuple[int, int]]:
 def _home_of(job: Any, state: Any, origin: Optional[str]) -> tuple[int, int, int]:
     """Where (machine steps) a prepared job's home stands when it runs: see :func:`job_area_mm`."""
     kind = getattr(job, "kind", "")
-    return placed_home(job, state, origin) if kind in PLACED_KINDS else tuple(state.position_steps)
+    return placed_home(job, state, origin) if kind in placed_kinds() else tuple(state.position_steps)
 
 
 def job_cuts_mm(job: Any, state: Any, settings: MachineSettings, origin: Optional[str] = None) -> list[np.ndarray]:

@@ -23,6 +23,7 @@ import numpy as np
 from ..errors import CamError, PlanError
 from ..formats.excellon import load_excellon
 from ..kinds.jobs import resume_job
+from ..kinds import has
 from ..job.model import CUT, Job, cut_runs_steps
 from ..job.resume import Journal
 from ..render.picture import LEGEND_PX, _canvas_size, auto_scale
@@ -114,7 +115,7 @@ def drill_holes(job: Any, options: Any = None) -> Optional[dict[str, Any]]:
     home of the file's (0, 0), "sign_x": -1 when mirrored}``, read again from the file with ``options``' Excellon
     settings (a :class:`~cam.kinds.jobs.JobOptions`)."""
     plan = getattr(job, "drill_plan", None)
-    if plan is None or getattr(job, "kind", "") != "excellon":
+    if plan is None or not has(getattr(job, "kind", None), "holes"):
         return None
     units = getattr(options, "excellon_units", None)
     holes = load_excellon(job.source, excellon_units=units, excellon_digits=getattr(options, "excellon_digits", None),
@@ -139,7 +140,7 @@ def job_units(job: Any, home_steps: Any, settings: MachineSettings, holes: Optio
     home = np.asarray(home_steps, np.float64).reshape(3)
     per = np.asarray(settings.mm_per_step_axes, np.float64)
     pixels = getattr(getattr(job, "toolpath", None), "pixels", None)
-    if getattr(job, "kind", "") in ("drawing", "digitized") and pixels is not None:
+    if has(getattr(job, "kind", None), "pixels") and pixels is not None:
         scale = np.array([pixels.steps_per_px_xy, pixels.steps_per_px_xy, pixels.steps_per_px_z], np.float64)
         origin = home + np.asarray(pixels.origin_px, np.float64) * scale
         return JobUnits("px", tuple(float(v) for v in origin), tuple(float(v) for v in scale))
@@ -164,7 +165,7 @@ def preview_frame(job: Any) -> dict[str, Any]:
     a 12-pixel margin, 800 pixels on the longer side).
     """
     toolpath = getattr(job, "toolpath", None)
-    if getattr(job, "kind", "") in ("drawing", "digitized") and isinstance(toolpath, Job) and toolpath.pixels:
+    if has(getattr(job, "kind", None), "pixels") and isinstance(toolpath, Job) and toolpath.pixels:
         w, h = _canvas_size(toolpath)
         k = auto_scale(w, h)
         per = toolpath.pixels.steps_per_px_xy

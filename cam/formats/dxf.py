@@ -69,13 +69,12 @@ from typing import Any, Iterable, Optional, Union
 
 import numpy as np
 
-from ..choices import DXF_SUFFIXES
 from ..errors import ParseError
 from ..fileio import read_bytes
 from ..limits import MAX_COORD_MM
 from .svg import LINE, Stroke, SvgDrawing
 
-__all__ = ["DxfDrawing", "parse_dxf", "load_dxf", "DXF_SUFFIXES", "MAX_DXF_BYTES", "MAX_DXF_ENTITIES", "INSUNITS",
+__all__ = ["DxfDrawing", "parse_dxf", "load_dxf", "MAX_DXF_BYTES", "MAX_DXF_ENTITIES", "INSUNITS",
            "ARC_PIECES_PER_TURN", "SPLINE_TOLERANCE_MM"]
 
 MAX_DXF_BYTES = 64 * 1024 * 1024

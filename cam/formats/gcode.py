@@ -68,7 +68,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Iterator, Mapping, Sequence
 
-from ..choices import GCODE_SUFFIXES
 from ..errors import ParseError
 from ..fileio import read_text
 from ..limits import DEFAULT_GCODE_LINES, MAX_COORD_MM, MAX_TOOL_NUMBER
@@ -83,7 +82,7 @@ from ._gcode_probe import ProbeFn, _Probe
 
 __all__ = [
     "GcodeMove", "GcodeProgram", "GcodeFile", "MoveBatch", "PLANE_AXES", "parse_gcode", "load_gcode", "open_gcode",
-    "load_tool_table", "ToolTable", "GCODE_SUFFIXES", "BATCH_MOVES", "ProbeFn",
+    "load_tool_table", "ToolTable", "BATCH_MOVES", "ProbeFn",
 ]
 
 

@@ -128,12 +128,11 @@ from numba import njit
 
 from .._compiled import entry
 from ..arrays import column_range
-from ..choices import HPGL_SUFFIXES
 from ..errors import ParseError
 from ..limits import MAX_COORD_MM, MAX_TOOL_NUMBER
 
 __all__ = [
-    "HPGL_SUFFIXES", "PLOTTER_UNIT_MM", "CHUNK_BYTES", "MAX_COORD_PU", "MAX_ARC_CHORDS", "ARC_MNEMONICS",
+    "PLOTTER_UNIT_MM", "CHUNK_BYTES", "MAX_COORD_PU", "MAX_ARC_CHORDS", "ARC_MNEMONICS",
     "DEFAULT_P1_PU", "DEFAULT_P2_PU", "KNOWN",
     "HpglCommand", "HpglScan", "HpglDrawing", "PointBatch",
     "iter_hpgl", "scan_hpgl", "load_hpgl", "parse_hpgl", "point_batches",

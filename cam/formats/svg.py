@@ -59,11 +59,10 @@ import cv2
 import numpy as np
 import svgelements as se
 
-from ..choices import SVG_SUFFIXES
 from ..errors import ParseError
 from ..render.picture import encode_png
 
-__all__ = ["SvgDrawing", "parse_svg", "load_svg", "SVG_SUFFIXES", "MM_PER_PX", "MAX_SVG_BYTES", "MAX_SVG_ELEMENTS",
+__all__ = ["SvgDrawing", "parse_svg", "load_svg", "MM_PER_PX", "MAX_SVG_BYTES", "MAX_SVG_ELEMENTS",
            "expanded_size", "NO_LAYER"]
 
 MM_PER_PX = 25.4 / 96.0

@@ -50,6 +50,7 @@ from typing import Any, Iterator, Optional
 import numpy as np
 
 from ..errors import PlanError, TravelError
+from ..options import OPTIONS
 from ..settings import DEFAULT_SETTINGS, MachineSettings
 from .model import CUT, RETRACT, TRAVEL, Job, PixelFrame, TravelSpan, check_span, check_travel, join_pieces
 from .drill_order import drill_order
@@ -57,9 +58,9 @@ from .hpgl_stream import outside_travel, z_span_check
 
 __all__ = ["DrillPlan", "DrillJobStream", "plan_drill", "DEFAULT_CUT_DEPTH_MM", "DEFAULT_TRAVEL_HEIGHT_MM"]
 
-DEFAULT_CUT_DEPTH_MM = 2.0
-"""Through a 1.6 mm board with a little margin into the spoil board."""
-DEFAULT_TRAVEL_HEIGHT_MM = 1.0
+DEFAULT_CUT_DEPTH_MM: float = OPTIONS["cut_depth_mm"].default_for({"holes"})
+"""Through a 1.6 mm board with a little margin into the spoil board (2.0: declared once, with the option)."""
+DEFAULT_TRAVEL_HEIGHT_MM: float = OPTIONS["travel_height_mm"].default_for({"placed"})
 
 
 @dataclass

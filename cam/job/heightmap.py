@@ -25,7 +25,7 @@
   than both ends allow (going deeper it moves then plunges, going shallower
   it lifts then moves); a pixel centre is then nearest one end of every
   move, so no position along it cuts any pixel centre below its target.
-  :func:`prepare_heightmap` plans both and keeps the one with the shorter
+  :func:`cam.kinds.drawing` plans both and keeps the one with the shorter
   machine time.
 * **Order.** ``rows``: rows ``stepover`` x the tool's diameter apart (at
   least one pixel; every row for the point tool), the last row always cut,
@@ -39,7 +39,7 @@
 
 :func:`plan_heightmap` is the planner (a :class:`~cam.job.model.Job` in
 machine steps with its :class:`~cam.job.model.PixelFrame`: ``steps_per_px_z``
-is 1, depths are Z steps); :func:`prepare_heightmap` is the job of
+is 1, depths are Z steps); the drawing kind (:mod:`cam.kinds.drawing`) makes the job of
 :func:`cam.kinds.jobs.prepare_job` for ``JobOptions(heightmap=True)``.
 """
 from __future__ import annotations
@@ -51,7 +51,6 @@ from typing import Any, Optional
 import numpy as np
 
 from ..digitize.drawing import _read_image
-from ..drive.chunks import plan_chunks
 from ..errors import CamError
 from ..settings import DEFAULT_SETTINGS, MachineSettings
 from ..tool import POINT, Tool, _lowest, drop_depth_px, footprint_px, parse_tool, tool_of_settings
@@ -59,7 +58,7 @@ from .model import CUT, RETRACT, TRAVEL, Job, PixelFrame, check_span
 
 __all__ = ["DEFAULT_MAX_DEPTH_MM", "BAND_ROWS", "grey_of_image", "load_heightmap", "depth_steps_of",
            "drop_surface_steps", "sub_drop_steps", "pixel_steps_of", "row_spacing_px", "plan_heightmap",
-           "prepare_heightmap", "check_heightmap_options"]
+           "check_heightmap_options"]
 
 DEFAULT_MAX_DEPTH_MM = 1.0
 """The depth of the deepest grey when ``max_depth_mm`` is not given."""
@@ -404,38 +403,3 @@ def check_heightmap_options(options: Any, source: str) -> None:
             raise CamError(f"{source}: {flag} applies with --heightmap only (an image read as a height map)")
     if options.heightmap_order != "rows":
         raise CamError(f"{source}: --heightmap-order applies with --heightmap only (an image read as a height map)")
-
-
-def prepare_heightmap(path: Path, options: Any, settings: MachineSettings) -> dict[str, Any]:
-    """The fields of the :class:`cam.kinds.jobs.PreparedJob` of an image cut as a height map (``options.heightmap``,
-    a :class:`cam.kinds.jobs.JobOptions`)."""
-    check_heightmap_options(options, path.name)
-
-    grey = load_heightmap(path)
-    cutter = parse_tool(options.tool, "--tool") if options.tool else tool_of_settings(settings.tool)
-    max_depth_mm = options.max_depth_mm if options.max_depth_mm is not None else DEFAULT_MAX_DEPTH_MM
-    depth = depth_steps_of(grey, max_depth_mm, settings, invert=bool(options.invert))
-    # the path at every X step (X and Z together) is faster on smooth slopes, the staircase at pixel centres on
-    # jagged ones (a flat end mill's drop-cutter depth between centres): both are planned, the faster kept
-    best = None
-    for slopes in ((True, False) if not cutter.is_point else (False,)):
-        candidate = plan_heightmap(depth, tool=cutter, settings=settings, pixel_size_mm=options.pixel_size_mm,
-                                   stepover=options.stepover, heightmap_order=options.heightmap_order,
-                                   stepdown_mm=options.stepdown_mm, slopes=slopes, source=path.name)
-        steps = plan_chunks(candidate, start_steps=None, fingerprint=True)  # its own frame: placed when it runs
-        if best is None or steps.estimated_time_s < best[1].estimated_time_s:
-            best = (candidate, steps, slopes)
-    job, steps, slopes = best  # type: ignore[misc]
-    spp = job.pixels.steps_per_px_xy
-    h, w = depth.shape
-    levels = len(np.unique(np.rint(grey * 255)))
-    summary = (f"{path.name}: height map {w}x{h} px of {spp * settings.mm_per_step_xy:.4g} mm, {levels} grey levels, "
-               f"{max_depth_mm:g} mm deep, {cutter.describe()}, {len(job)} points")
-    rgb = np.repeat(np.rint(grey * 255).astype(np.uint8)[:, :, None], 3, axis=2)
-    report = {"heightmap": {"width_px": w, "height_px": h, "pixel_size_mm": spp * settings.mm_per_step_xy,
-                            "max_depth_mm": max_depth_mm, "invert": bool(options.invert),
-                            "order": options.heightmap_order, "grey_levels": levels,
-                            "path": "every X step" if slopes else "pixel centres"},
-              "points": len(job), "tool": cutter.describe()}
-    return dict(source=str(path), kind="drawing", plan=steps, settings=settings, toolpath=job,
-                warnings=list(job.warnings), summary=summary, report=report, drawing_rgb=rgb)

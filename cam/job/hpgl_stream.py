@@ -31,6 +31,7 @@ from typing import Any, Callable, Iterator, Optional, Union
 import numpy as np
 
 from ..errors import PlanError, TravelError
+from ..options import OPTIONS
 from ..formats.hpgl import (CHUNK_BYTES, PLOTTER_UNIT_MM, HpglDrawing, HpglScan, PointBatch, point_batches,
                             scan_hpgl)
 from ..settings import DEFAULT_SETTINGS, MachineSettings
@@ -40,8 +41,9 @@ __all__ = ["HpglJobStream", "stream_hpgl", "xy_steps", "xy_steps_exact", "hpgl_s
            "z_span_check", "STREAM_POINTS", "PIECE_POINTS",
            "DEFAULT_CUT_DEPTH_MM", "DEFAULT_TRAVEL_HEIGHT_MM"]
 
-DEFAULT_CUT_DEPTH_MM = 0.5
-DEFAULT_TRAVEL_HEIGHT_MM = 1.0
+DEFAULT_CUT_DEPTH_MM: float = OPTIONS["cut_depth_mm"].default_for({"strokes"})
+"""A pen stroke's depth (0.5: declared once, with the option)."""
+DEFAULT_TRAVEL_HEIGHT_MM: float = OPTIONS["travel_height_mm"].default_for({"placed"})
 STREAM_POINTS = 1_000_000
 """HPGL files with more pen-down points than this are read from the file on every pass rather than held
 (:func:`cam.kinds.jobs.prepare_job`); either way their job is this planner's pieces."""

@@ -63,6 +63,7 @@ from typing import Optional, Sequence, Union
 import numpy as np
 
 from ..errors import PlanError, TravelError
+from ..options import OPTIONS
 from ..formats.svg import SvgDrawing
 from ..settings import DEFAULT_SETTINGS, MachineSettings
 from ._svg_kernels import cells_kernel, duplicate_pieces_kernel, nearest_order_kernel
@@ -73,9 +74,9 @@ from .model import CUT, Job, TravelSpan, check_span, check_travel
 __all__ = ["plan_svg", "svg_strokes_steps", "svg_scale", "svg_layer_order", "DEFAULT_CUT_DEPTH_MM",
            "DEFAULT_TRAVEL_HEIGHT_MM", "DUPLICATE_STEPS", "MIN_DUPLICATE_STEPS"]
 
-DEFAULT_CUT_DEPTH_MM = 0.5
-"""As HPGL's pen-down depth: a vector drawing engraved."""
-DEFAULT_TRAVEL_HEIGHT_MM = 1.0
+DEFAULT_CUT_DEPTH_MM: float = OPTIONS["cut_depth_mm"].default_for({"strokes"})
+"""As HPGL's pen-down depth: a vector drawing engraved (declared once, with the option)."""
+DEFAULT_TRAVEL_HEIGHT_MM: float = OPTIONS["travel_height_mm"].default_for({"placed"})
 FLATTEN_STEPS = 0.15
 """Curves are flattened to within this many steps (the rounding to whole steps takes at most half a step more)."""
 SAMPLE_STEPS = 0.25

@@ -71,13 +71,12 @@ from ..job.arcs import Segment, arc_centre_for_ends, fit_path
 from ..job.model import RETRACT, TRAVEL, Job
 from ..job.hpgl_stream import hpgl_scale, xy_steps_exact
 from ..job.svg import FLATTEN_STEPS, _selected, svg_layer_order, svg_scale
-from ..formats.hpgl import ARC_MNEMONICS, HpglDrawing, iter_hpgl, load_hpgl
-from ..formats.svg import load_svg
-from ..formats.dxf import load_dxf
+from ..formats.hpgl import ARC_MNEMONICS, HpglDrawing, iter_hpgl
+from . import kind as kind_named, kind_names
 from ..choices import POSTS
 
 __all__ = ["format_mm", "to_gcode", "gcode_pieces", "save_gcode", "feeds_mm_per_min", "exact_geometry", "svg_exact_xy_mm",
-           "hpgl_exact_xy_mm", "POSTS"]
+           "hpgl_exact_xy_mm", "own_offset", "arc_positions", "POSTS"]
 
 MAX_RUN_POINTS = 50_000
 """The most points of a cutting run held for fitting at once (a longer run is fitted in parts this long)."""
@@ -122,39 +121,25 @@ def _point_pieces(toolpath: Any) -> Iterator[tuple[list, list]]:
 
 def exact_geometry(prepared: Any, cut_depth_mm: Optional[float] = None, options: Any = None
                    ) -> tuple[dict[tuple[int, int], tuple[float, float]], dict[int, float]]:
-    """``(exact_xy_mm, exact_z_mm)`` of a :class:`cam.kinds.jobs.PreparedJob` for :func:`gcode_pieces`: a drill
-    file's holes at their mm before rounding to steps (the first hole of a step wins), and ``cut_depth_mm``
-    for its drill depth; an SVG or DXF file's strokes (:func:`svg_exact_xy_mm`, with the job's
-    :class:`cam.kinds.jobs.JobOptions` ``options``: scale, fit, offset, layers); an HPGL file's pen-down points
-    and which of its chords are arcs (:func:`hpgl_exact_xy_mm`, the same options but layers; not a file of more
-    than :data:`MAX_SAMPLES` points); empty for other kinds (their points are the job's own).
+    """``(exact_xy_mm, exact_z_mm)`` of a :class:`cam.kinds.jobs.PreparedJob` for :func:`gcode_pieces`: its kind's
+    exact positions (:attr:`cam.kinds.Kind.exact_geometry`: a drill file's holes and drill depth ``cut_depth_mm``
+    before rounding to steps, an SVG or DXF file's strokes and an HPGL file's pen-down points and arcs with the
+    job's :class:`cam.kinds.jobs.JobOptions` ``options``); empty for other kinds (their points are the job's own).
 
     A file placed by its own zero (``options.origin`` "file" and no offset) is placed as the planner placed it:
-    its zero at the job's home."""
-    xy: dict[tuple[int, int], tuple[float, float]] = {}
-    z: dict[int, float] = {}
-    kind = getattr(prepared, "kind", None)
-    if kind in ("svg", "hpgl", "dxf") and options is not None:
-        offset = options.offset_mm
-        if offset is None and getattr(options, "origin", None) == "file":
-            offset = (0.0, 0.0)  # as cam.kinds.jobs.prepare_job plans it
-        if kind in ("svg", "dxf"):  # a DXF file is read into the same drawing as an SVG file
-            drawing = load_dxf(prepared.source) if kind == "dxf" else load_svg(prepared.source)
-            return svg_exact_xy_mm(drawing, prepared.settings, scale=options.scale,
-                                   fit_mm=options.fit_mm, offset_mm=offset, layers=options.layers), z
-        if int((getattr(prepared, "report", None) or {}).get("points", 0)) > MAX_SAMPLES:
-            return xy, z  # a file streamed a piece at a time: written at its steps
-        return hpgl_exact_xy_mm(load_hpgl(prepared.source), prepared.settings, scale=options.scale,
-                                fit_mm=options.fit_mm, offset_mm=offset, arc_positions=_arc_positions(
-                                    prepared.source)), z
-    plan = getattr(prepared, "drill_plan", None)
-    if plan is not None and getattr(plan, "holes_mm", None) is not None:
-        for (xs, ys), (xm, ym) in zip(np.asarray(plan.holes_steps).tolist(), np.asarray(plan.holes_mm).tolist()):
-            xy.setdefault((int(xs), int(ys)), (float(xm), float(ym)))
-        mm_z = prepared.settings.mm_per_step_z
-        if cut_depth_mm is not None and plan.depth_steps > 0 and round(cut_depth_mm / mm_z) == plan.depth_steps:
-            z[int(plan.depth_steps)] = float(cut_depth_mm)
-    return xy, z
+    its zero at the job's home (:func:`own_offset`)."""
+    name = getattr(prepared, "kind", None)
+    hook = kind_named(name).exact_geometry if name in kind_names() else None
+    return ({}, {}) if hook is None else hook(prepared, cut_depth_mm, options)
+
+
+def own_offset(options: Any) -> Optional[tuple[float, float]]:
+    """Where a file's zero goes, as :func:`cam.kinds.jobs.prepare_job` plans it: ``options.offset_mm``, or (0, 0)
+    for a file placed by its own zero (``origin`` "file" and no offset); None: by the extent of what is cut."""
+    offset = options.offset_mm
+    if offset is None and getattr(options, "origin", None) == "file":
+        offset = (0.0, 0.0)
+    return offset
 
 
 SAMPLE_STEPS = 0.2
@@ -217,7 +202,7 @@ def svg_exact_xy_mm(drawing: Any, settings: Any, *, scale: Optional[float] = Non
     return found
 
 
-def _arc_positions(path: Any) -> set[tuple[int, int]]:
+def arc_positions(path: Any) -> set[tuple[int, int]]:
     """``{(line, column)}`` of the circle and arc commands (``CI``, ``AA``, ``AR``) of an HPGL file."""
     return {(c.line, c.column) for c in iter_hpgl(path) if c.name in ARC_MNEMONICS}
 

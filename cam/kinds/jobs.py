@@ -37,60 +37,31 @@ import cv2
 import numpy as np
 
 from ..arrays import column_range
-from ..choices import (
-    DIGITIZED_SUFFIXES, DRAWING_SUFFIXES, EXCELLON_SUFFIXES, HPGL_SUFFIXES, OPTION_KINDS, PROFILE_SUFFIXES, SUFFIXES,
-    job_kind,
-)
-from ..digitize import digitize
-from ..digitize.digitized import load_digitized
-from ..digitize.drawing import drawing_size_px, load_image
-from ..digitize.profile import load_profile, profile_from_expr
+from ..choices import PROFILE_SUFFIXES
 from ..drive.chunks import plan_chunks
 from ..errors import CamError, PlanError
-from ..formats.excellon import load_excellon
-from ..formats.gcode import load_tool_table, open_gcode
 from ..options import JOB_OPTIONS, Option, MAX_DEPTH_PX, MAX_MM, MAX_PX, check_range, degenerate  # noqa: F401 (the limits re-exported)
-from ..formats.hpgl import scan_hpgl
-from ..formats.svg import load_svg
-from ..formats.dxf import load_dxf
 from ..tool import parse_tool, tool_of_settings
 from ..render.picture import LEGEND_PX, depth_colours, encode_png, toolpath_picture
-from ..render.report import job_report
-from ..sniff import KIND_NAMES, forced_kind
 from ..settings import DEFAULT_SETTINGS, MachineSettings
 from ..verify.pinlog import PinLog, decode_pin_log
-from ..job.drawing import check_drawing_size
-from ..job.drill import DEFAULT_CUT_DEPTH_MM as DRILL_DEPTH_MM
-from ..job.drill import DEFAULT_TRAVEL_HEIGHT_MM as DRILL_TRAVEL_HEIGHT_MM
-from ..job.drill import plan_drill
-from ..job.gcode import STREAM_MOVES as GCODE_STREAM_MOVES
-from ..job.gcode import gcode_mm_to_steps, steps_to_gcode_mm, stream_gcode
 from ..job.gcode_probing import ProbingProgram
-from ..job.hpgl import DEFAULT_CUT_DEPTH_MM as HPGL_CUT_DEPTH_MM
-from ..job.hpgl import DEFAULT_TRAVEL_HEIGHT_MM as HPGL_TRAVEL_HEIGHT_MM
-from ..job.drawing_stream import STREAM_TARGETS, plan, stream_drawing
-from ..job.hpgl_stream import STREAM_POINTS, stream_hpgl
-from ..job.heightmap import check_heightmap_options, prepare_heightmap
 from ..job.heightmap_level import check_map, level_job, load_height_map, outside_text
 from ..job.model import Job
 from ..job.resume import (Journal, JournalBase, check_journal, check_journal_numbers, job_identity, plan_fingerprint,
-                     resume_pieces)
-from ..job.svg import DEFAULT_CUT_DEPTH_MM as SVG_CUT_DEPTH_MM
-from ..job.svg import DEFAULT_TRAVEL_HEIGHT_MM as SVG_TRAVEL_HEIGHT_MM
-from ..job.svg import plan_svg
+                          resume_pieces)
+from . import forced_kind, has, job_kind, job_options, kind_defaults, option_kinds, suffixes
+from . import kind as kind_named
 
 __all__ = [
-    "JobOptions", "PreparedJob", "PlannedIn", "prepare_job", "own_zero_home", "resume_job", "job_kind", "accepted_suffixes", "KINDS",
-    "origin_anchor_steps", "kind_defaults",
-    "DRAWING_SUFFIXES", "DIGITIZED_SUFFIXES", "EXCELLON_SUFFIXES", "HPGL_SUFFIXES", "PROFILE_SUFFIXES",
+    "JobOptions", "PreparedJob", "PlannedIn", "prepare_job", "own_zero_home", "resume_job", "job_kind", "accepted_suffixes",
+    "origin_anchor_steps", "kind_defaults", "engraving", "line_depth_mm", "plan_chunks", "PROFILE_SUFFIXES",
 ]
-
-KINDS = ("drawing", "digitized", "gcode", "excellon", "hpgl", "svg", "dxf")
 
 
 def accepted_suffixes() -> dict[str, tuple[str, ...]]:
-    """File name suffixes of each job kind (lower case, with the dot)."""
-    return dict(SUFFIXES)
+    """File name suffixes of each job kind (lower case, with the dot; :func:`cam.kinds.suffixes`)."""
+    return suffixes()
 
 
 _ANNOTATIONS = {
@@ -199,7 +170,9 @@ class JobOptions:
         def bad(key: str, why: str) -> CamError:
             return CamError(f"{source}: option '{key}' {why}, got {getattr(self, key)!r}")
 
-        for o in JOB_OPTIONS:  # the ranges and choices of cam.options, as the command line checks them
+        declared = {o.name: o for o in job_options()}
+        for f in fields(self):  # the ranges and choices of cam.options, as the command line checks them
+            o = declared[f.name]
             value = getattr(self, o.name)
             if value is None:
                 continue
@@ -237,9 +210,10 @@ class JobOptions:
         """Refuse an option given for a job kind it does not apply to (the kinds of :data:`cam.options.JOB_OPTIONS`);
         returns self."""
         for f in fields(self):
-            if getattr(self, f.name) != f.default and kind not in OPTION_KINDS[f.name]:
+            applies = option_kinds()[f.name]
+            if getattr(self, f.name) != f.default and kind not in applies:
                 raise CamError(f"{source}: option '{f.name}' does not apply to a {kind} file; it applies to "
-                               f"{' and '.join(sorted(OPTION_KINDS[f.name]))} files")
+                               f"{' and '.join(sorted(applies))} files")
         return self
 
 
@@ -515,7 +489,7 @@ class PreparedJob:
 
     def preview_picture(self) -> np.ndarray:
         """The preview as an ``(H, W, 3)`` uint8 RGB array (see :mod:`cam.render.picture`)."""
-        if self.kind in ("drawing", "digitized") and isinstance(self.toolpath, Job):
+        if has(self.kind, "pixels") and isinstance(self.toolpath, Job):
             return toolpath_picture(self.toolpath, drawing_rgb=self.drawing_rgb,
                                     estimated_time_s=self.estimated_time_s)
         # the job's points, a piece at a time: the step plan moves in straight lines between them (its DDA
@@ -524,7 +498,7 @@ class PreparedJob:
         pieces = (lambda: (p.points_steps for p in self.toolpath.pieces())) if self.toolpath is not None else \
             self.positions_steps()
         return motion_picture(pieces, self.settings, legend=self._legend(), extent_steps=self.extent_steps,
-                              holes=self.kind == "excellon")
+                              holes=has(self.kind, "holes"))
 
     def preview_png(self) -> bytes:
         """PNG bytes of :meth:`preview_picture`."""
@@ -684,130 +658,6 @@ def _finish(job: PreparedJob) -> PreparedJob:
     return job
 
 
-def _drawing_depth(options: JobOptions) -> Any:
-    """The drawing planner's ``depth`` in Z pixels (one for all or one per object), or None (``cut_depth_mm``,
-    which the planner takes as it is and converts, or the default)."""
-    if options.depth is None:
-        return None
-    return options.depth[0] if len(options.depth) == 1 else list(options.depth)
-
-
-def _prepare_pixels(path: Path, kind: str, options: JobOptions, settings: MachineSettings) -> PreparedJob:
-
-    drawing = None
-    traced: list[str] = []
-    if kind == "drawing" and options.trace:  # a sketch or a photo: its size is checked once traced (shrunk)
-        from ..digitize.sketch import load_sketch, trace  # scipy and scikit-image: 0.6 s, for a traced sketch only
-
-        drawing = trace(load_sketch(path), trace_min_length_px=options.trace_min_length_px,
-                        trace_fill=options.trace_fill, source=str(path))
-        check_drawing_size(drawing.width_px, drawing.height_px, settings, str(path))
-        traced.append(f"{path.name}: traced: {drawing.summary()}")
-        digitized = digitize(drawing, start=options.start)
-    elif kind == "drawing":
-        check_drawing_size(*drawing_size_px(path), settings, str(path))  # from the header: before decoding
-        drawing = load_image(path)
-        digitized = digitize(drawing, start=options.start)
-    else:
-        digitized = load_digitized(path)
-        check_drawing_size(digitized.width_px, digitized.height_px, settings, str(path))
-    profile = None
-    if options.profile:
-        profile = load_profile(options.profile)
-    elif options.profile_expr:
-        profile = profile_from_expr(options.profile_expr, max(1, digitized.n_layers))
-    cutter = parse_tool(options.tool, "--tool") if options.tool else tool_of_settings(settings.tool)
-    depth, cut_depth_mm = _drawing_depth(options), options.cut_depth_mm
-    if options.line_width_mm is not None:
-        if digitized.mode == "3d":
-            raise CamError("--line-width sets the depth of a 2D drawing's engraved lines; this drawing is 3D")
-        depth_px = _line_depth_mm(cutter, options.line_width_mm) / settings.px_to_mm_z(1)
-        if not depth_px <= MAX_DEPTH_PX:
-            raise CamError(f"--line-width: a {options.line_width_mm:g} mm line of a {cutter.describe()} is "
-                           f"{depth_px:.3g} Z pixels deep, more than {MAX_DEPTH_PX}")
-        depth, cut_depth_mm = max(1, int(round(depth_px))), None
-    kw: dict[str, Any] = dict(depth=depth, settings=settings, passes=options.passes, start_at=options.start_at,
-                              pause_at=list(options.pause_at), profile=profile, tool=cutter,
-                              stepdown_mm=options.stepdown_mm, stepover=options.stepover, rough_tool=options.rough_tool,
-                              cut_depth_mm=cut_depth_mm)
-    # one planner at every size: a large job is kept in pieces (bounded memory), a smaller one joined (the
-    # same moves, held in memory)
-    big = digitized.n_points * options.passes > STREAM_TARGETS
-    toolpath = stream_drawing(digitized, **kw) if big else plan(digitized, **kw)
-    steps = plan_chunks(toolpath, start_steps=None, fingerprint=True)  # its own frame: placed when it runs
-    report = job_report(digitized, toolpath, steps)
-    rgb = drawing.to_rgb() if drawing is not None else None  # made after the report: not held while it counts
-    summary = (f"{path.name}: {report['objects']} object(s), {report['points']} points, "
-               f"{report['retracts']} retracts")
-    return PreparedJob(
-        source=str(path), kind=kind, plan=steps, settings=settings, toolpath=toolpath,
-        size_mm=(report["width_mm"], report["height_mm"]), depth_mm=report["depth_mm"],
-        warnings=traced + list(report["warnings"]), summary=summary, report=report, drawing_rgb=rgb,
-        digitized=digitized,
-    )
-
-
-def _prepare_gcode(path: Path, options: JobOptions, settings: MachineSettings,
-                   machine_state: Optional[Any] = None) -> PreparedJob:
-    """``machine_state``: a :class:`cam.drive.state.MachineState` (the tool's machine position, the work offsets,
-    the active one): the program runs as a G-code sender runs it from there (None: from the home, offsets 0)."""
-    s = settings
-    start = (0, 0, 0) if machine_state is None else tuple(int(v) for v in machine_state.position_steps)
-    frame: dict[str, Any] = {}
-    if machine_state is not None:
-        frame = dict(start_mm=steps_to_gcode_mm(start, s, flip_y=options.flip_y),
-                     work_offsets_mm={k: steps_to_gcode_mm(v, s, flip_y=options.flip_y)
-                                      for k, v in machine_state.offsets_steps.items()},
-                     active_offset=machine_state.active_offset)
-    program = open_gcode(
-        path, home_g28_mm=(s.g28_x_mm, s.g28_y_mm, s.g28_z_mm), home_g30_mm=(s.g30_x_mm, s.g30_y_mm, s.g30_z_mm),
-        tool_lengths_mm=load_tool_table(options.tool_table) if options.tool_table else None,
-        subroutine_path=options.subroutine_path, max_lines=options.max_lines, **frame)
-    stream = stream_gcode(program, settings, flip_y=options.flip_y, spill=True, home_steps=start)
-    # one planner whatever the size: a job of over STREAM_MOVES moves is kept as its pieces (bounded memory), the
-    # file interpreted once, a line at a time, and the pieces kept in a temporary file for the later passes; a
-    # smaller one is held joined
-    held = stream.held(GCODE_STREAM_MOVES)
-    toolpath = stream if held is None else held
-    # after a whole pass (held's or this) the program's moves and warnings are known; the travel checked in the
-    # machine frame, from where the tool stands
-    steps = plan_chunks(toolpath, start_steps=start, fingerprint=True)  # type: ignore[arg-type]
-    probes = stream.probes or []  # G38.2/G38.3: as if each touched at its target; a machine runs it from the contact
-    probing = ProbingProgram(program, settings, bool(options.flip_y), start, tuple(probes),  # type: ignore[arg-type]
-                             tuple(stream.probe_feeds_mm_min)) if probes else None
-    return PreparedJob(
-        source=str(path), kind="gcode", plan=steps, settings=settings, toolpath=toolpath, warnings=stream.warnings,
-        home_steps=start, probing=probing,  # type: ignore[arg-type]
-        summary=f"{path.name}: {stream.n_program_moves} moves" + (f", {len(probes)} probe(s)" if probes else ""),
-        report={"moves": stream.n_program_moves, "motions": stream.n_motions, "start_steps": list(start),
-                **({"probes": probes} if probes else {}),
-                # the program's Z = 0 (the active work zero's), from where it starts: depths are below it
-                "surface_z_steps": 0 if machine_state is None else int(machine_state.work_zero_steps()[2]) - start[2],
-                # the work offsets as the program left them (G10 L2/L20), machine steps: cam drill --keep-offsets
-                # (after a probe they depend on its contact: not known before the run)
-                "work_offsets_end_steps": {} if probes else {k: list(gcode_mm_to_steps(v, s, flip_y=options.flip_y))
-                                                             for k, v in (program.end_offsets_mm or {}).items()}},
-    )
-
-
-def _or(value: Optional[float], default: float) -> float:
-    return default if value is None else value
-
-
-def kind_defaults() -> dict[str, dict[str, Any]]:
-    """The values options take on a job kind when they are not given, where that depends on the kind (their
-    :data:`cam.options.JOB_OPTIONS` default is None): the cut depth and travel height of drill, HPGL, SVG and DXF
-    files, as :func:`prepare_job` plans them.  ``GET /api/options`` shows them on the page.
-
-    >>> kind_defaults()["excellon"]["cut_depth_mm"]
-    2.0
-    """
-    vector = {"cut_depth_mm": SVG_CUT_DEPTH_MM, "travel_height_mm": SVG_TRAVEL_HEIGHT_MM}
-    return {"excellon": {"cut_depth_mm": DRILL_DEPTH_MM, "travel_height_mm": DRILL_TRAVEL_HEIGHT_MM},
-            "hpgl": {"cut_depth_mm": HPGL_CUT_DEPTH_MM, "travel_height_mm": HPGL_TRAVEL_HEIGHT_MM},
-            "svg": vector, "dxf": dict(vector)}
-
-
 def own_zero_home(kind: str, options: JobOptions, machine_state: Optional[Any] = None
                   ) -> Optional[tuple[int, int, int]]:
     """Where (machine frame, steps) a drill, HPGL or SVG file placed by its own zero is planned from (issue #29
@@ -815,40 +665,14 @@ def own_zero_home(kind: str, options: JobOptions, machine_state: Optional[Any] =
     ``offset_mm`` from it) goes to the active work zero of ``machine_state`` (None: the home, a new machine's
     work zero), and its travel is checked in the machine frame from there, as a G-code program's is.  None for
     every other job (planned in its own frame, placed at the work zero by its extent when it runs)."""
-    if kind not in ("excellon", "hpgl", "svg", "dxf"):
+    if not has(kind, "placed"):
         return None
     if options.origin != "file" and (options.origin is not None or options.offset_mm is None):
         return None
     return (0, 0, 0) if machine_state is None else tuple(int(v) for v in machine_state.work_zero_steps())
 
 
-def _prepare_excellon(path: Path, options: JobOptions, settings: MachineSettings,
-                      home: Optional[tuple[int, int, int]] = None) -> PreparedJob:
-    holes = load_excellon(path, excellon_units=options.excellon_units, excellon_digits=options.excellon_digits,
-                          excellon_zeros=options.excellon_zeros, strict=bool(options.strict))
-    depth_mm = _or(options.cut_depth_mm, DRILL_DEPTH_MM)
-    dp = plan_drill(holes, settings=settings, cut_depth_mm=depth_mm,
-                    travel_height_mm=_or(options.travel_height_mm, DRILL_TRAVEL_HEIGHT_MM), offset_mm=options.offset_mm,
-                    mirror_x=options.mirror_x, drill_order=options.drill_order,
-                    mill_holes_over_mm=options.mill_holes_over_mm, home_steps=home)
-    steps = plan_chunks(dp.toolpath, start_steps=home, fingerprint=True)
-    tools = ", ".join(f"T{t} {dia:.3f} mm x{n}" for t, dia, n in dp.tool_sequence)
-    hole_xy = np.asarray(dp.holes_steps, np.int64).reshape(-1, 2)
-    span = dp.extent_steps[1] - dp.extent_steps[0]  # holes and milled slots (issue #31 point 4)
-    milled = (f", {dp.n_slots} slots" if dp.n_slots else "") + (f", {dp.n_milled} holes milled" if dp.n_milled else "")
-    return PreparedJob(
-        source=str(path), kind="excellon", plan=steps, settings=settings, toolpath=dp.toolpath,
-        size_mm=(round(float(span[0]) * settings.mm_per_step_axes[0], 3),
-                 round(float(span[1]) * settings.mm_per_step_axes[1], 3)),
-        depth_mm=round(depth_mm, 4),
-        warnings=list(holes.warnings), summary=f"{path.name}: {len(hole_xy)} holes{milled} ({tools})",
-        report={"holes": len(hole_xy), "tools": [list(t) for t in dp.tool_sequence],
-                **({"slots": dp.n_slots} if dp.n_slots else {}), **({"milled_holes": dp.n_milled} if dp.n_milled else {})},
-        drill_plan=dp if not (dp.n_slots or dp.n_milled) else None,  # the MAXIMUS board's drill mode only drills
-    )
-
-
-def _line_depth_mm(cutter: Any, width_mm: float) -> float:
+def line_depth_mm(cutter: Any, width_mm: float) -> float:
     """The depth at which ``cutter`` (a V bit) cuts a line ``width_mm`` wide, at most :data:`MAX_MM`: CamError
     naming ``--line-width`` for a deeper one (a very sharp bit), so no depth downstream overflows."""
     depth_mm = cutter.depth_for_width_mm(width_mm)
@@ -858,63 +682,17 @@ def _line_depth_mm(cutter: Any, width_mm: float) -> float:
     return depth_mm
 
 
-def _engraving(options: JobOptions, settings: MachineSettings, default_depth_mm: float
-               ) -> tuple[float, dict[str, Any]]:
+def engraving(options: JobOptions, settings: MachineSettings, default_depth_mm: float
+              ) -> tuple[float, dict[str, Any]]:
     """A vector file's cut depth (mm) and the report's tool and line width: ``--line-width`` with a V bit sets
     the depth; a tool's groove at the depth is the line width."""
     cutter = parse_tool(options.tool, "--tool") if options.tool else tool_of_settings(settings.tool)
-    depth_mm = _or(options.cut_depth_mm, default_depth_mm)
+    depth_mm = default_depth_mm if options.cut_depth_mm is None else options.cut_depth_mm
     if options.line_width_mm is not None:
-        depth_mm = _line_depth_mm(cutter, options.line_width_mm)
+        depth_mm = line_depth_mm(cutter, options.line_width_mm)
     if cutter.is_point:
         return depth_mm, {}
     return depth_mm, {"tool": cutter.describe(), "line_width_mm": round(cutter.width_at_depth_mm(depth_mm), 4)}
-
-
-def _prepare_hpgl(path: Path, options: JobOptions, settings: MachineSettings, progress=None,
-                  home: Optional[tuple[int, int, int]] = None) -> PreparedJob:
-    depth_mm, engraving = _engraving(options, settings, HPGL_CUT_DEPTH_MM)
-    scan = scan_hpgl(path, progress=progress)
-    stream = stream_hpgl(path, settings=settings, cut_depth_mm=depth_mm,
-                         travel_height_mm=_or(options.travel_height_mm, HPGL_TRAVEL_HEIGHT_MM),
-                         offset_mm=options.offset_mm, scan=scan, scale=options.scale, fit_mm=options.fit_mm,
-                         home_steps=home)
-    # one planner whatever the size: above STREAM_POINTS its pieces are read from the file on every pass (bounded
-    # memory), below they are joined and held (the step planner then sees every move: linear40 ramps)
-    toolpath = stream if scan.n_points > STREAM_POINTS else stream.joined()
-    return PreparedJob(
-        source=str(path), kind="hpgl", plan=plan_chunks(toolpath, start_steps=home, fingerprint=True),
-        settings=settings, toolpath=toolpath,
-        warnings=list(scan.warnings), summary=f"{path.name}: {scan.n_strokes} pen-down strokes",
-        report={"strokes": scan.n_strokes, "points": scan.n_points, "pens": sorted(set(scan.pens)), **engraving},
-    )
-
-
-def _prepare_svg(path: Path, options: JobOptions, settings: MachineSettings,
-                 home: Optional[tuple[int, int, int]] = None, kind: str = "svg") -> PreparedJob:
-    """An SVG file's job, or a DXF file's (``kind`` "dxf": :func:`cam.formats.dxf.load_dxf` reads it into the same
-    drawing, which the SVG planner cuts)."""
-    drawing = load_dxf(path) if kind == "dxf" else load_svg(path)
-    depth_mm, engraving = _engraving(options, settings, SVG_CUT_DEPTH_MM)
-    toolpath = plan_svg(drawing, settings=settings, cut_depth_mm=depth_mm,
-                        travel_height_mm=_or(options.travel_height_mm, SVG_TRAVEL_HEIGHT_MM),
-                        scale=options.scale, fit_mm=options.fit_mm, offset_mm=options.offset_mm,
-                        layers=options.layers, pause_between_layers=bool(options.pause_between_layers),
-                        keep_duplicates=bool(options.keep_duplicates), home_steps=home)
-    steps = plan_chunks(toolpath, start_steps=home, fingerprint=True)
-    counts = ", ".join(f"{n} {name}" for name, n in sorted(drawing.element_counts.items()))
-    layer_list = [{"name": name, "strokes": int((drawing.layer_of_stroke == i).sum()), "length_mm": round(length, 3)}
-                  for i, (name, length) in enumerate(zip(drawing.layers(), drawing.layer_lengths_mm()))]
-    return PreparedJob(
-        source=str(path), kind=kind, plan=steps, settings=settings, toolpath=toolpath,
-        warnings=list(drawing.warnings), summary=f"{path.name}: {drawing.n_strokes} strokes ({counts})",
-        report={"strokes": drawing.n_strokes, "elements": dict(drawing.element_counts),
-                "segments": drawing.segment_counts, "document_mm": [round(v, 3) for v in drawing.size_mm],
-                "layers": layer_list, "layers_from": drawing.layers_from,
-                **({"dxf": {"version": drawing.dxf_version, "units": drawing.units, "units_from": drawing.units_from,
-                            "skipped": dict(drawing.skipped)}} if kind == "dxf" else {}),
-                **engraving},
-    )
 
 
 def prepare_job(
@@ -951,11 +729,10 @@ def prepare_job(
         raise CamError(f"{p}: file not found")
     kind_warnings: list[str] = []
     kind = forced_kind(options.kind) if options is not None and options.kind else job_kind(p, kind_warnings)
-    if kind not in KINDS:
-        raise CamError(f"{p.name}: {KIND_NAMES.get(kind, kind)} cannot be cut by this version of cam")
+    the_kind = kind_named(kind)
     opts = (options or JobOptions()).checked().check_kind(kind, p.name)
-    if kind != "excellon" and settings.mm_per_step_axes[1] != settings.mm_per_step_xy:
-        raise CamError(f"{p.name}: {KIND_NAMES.get(kind, kind)} is planned with one step for X and Y, and this "
+    if "holes" not in the_kind.all_traits and settings.mm_per_step_axes[1] != settings.mm_per_step_xy:
+        raise CamError(f"{p.name}: {the_kind.noun} is planned with one step for X and Y, and this "
                        f"machine's differ (X {settings.mm_per_step_xy:g} mm, Y {settings.mm_per_step_axes[1]:g} mm "
                        f"per step): only drill files run on it")
     home = own_zero_home(kind, opts, machine_state)
@@ -965,19 +742,7 @@ def prepare_job(
     if not p.is_file():
         raise CamError(f"{p}: file not found")
     height_map = _height_map(opts)  # a bad map: one line, before the file is planned
-    if kind == "drawing" and opts.heightmap:  # a grey-level relief (issue #31 point 7)
-        job = PreparedJob(**prepare_heightmap(p, opts, settings))
-    elif kind in ("drawing", "digitized"):
-        check_heightmap_options(opts, p.name)  # --invert, --max-depth, ... only with --heightmap
-        job = _prepare_pixels(p, kind, opts, settings)
-    elif kind == "gcode":
-        job = _prepare_gcode(p, opts, settings, machine_state)
-    elif kind == "excellon":
-        job = _prepare_excellon(p, opts, settings, home)
-    elif kind in ("svg", "dxf"):
-        job = _prepare_svg(p, opts, settings, home, kind)
-    else:
-        job = _prepare_hpgl(p, opts, settings, progress, home)
+    job = the_kind.prepare(p, opts, settings, home=home, progress=progress, machine_state=machine_state)
     _refuse_nothing(job, opts, settings)
     job.warnings[:0] = kind_warnings
     job.name = name or p.name
@@ -1010,7 +775,7 @@ def origin_anchor_steps(kind: str, origin: Optional[str], plan: Any) -> tuple[in
     ``center`` of what its ``plan`` (a :class:`~cam.drive.chunks.ChunkedPlan`) cuts, the XY extent of the tool
     below the surface (the whole extent when nothing is); None: ``file`` for drawings and digitized matrices,
     ``upper-left`` for the other kinds."""
-    origin = origin or ("file" if kind in ("drawing", "digitized") else "upper-left")
+    origin = origin or kind_named(kind).default_origin
     if origin == "file":
         return 0, 0
     extent, cut = plan.motion_extent()

@@ -88,7 +88,7 @@ except ImportError:  # pragma: no cover - not Unix: no file limit to raise
 from ..drive.journal import read_journal
 from ..drive.machines import DEFAULT_PORT, can
 from ..drive.probing import job_area_mm
-from ..drive.placement import PLACED_KINDS, placed_home
+from ..drive.placement import placed_kinds, placed_home
 from ..drive.session import MachineSession
 from ..drive.track import (TABLE_UNITS, drill_holes, hole_states, hole_writes, job_track, job_units,
                            remaining_time_s, start_at_hole, to_job_units)
@@ -96,8 +96,8 @@ from ..drive.state import MachineState, StateHold, machine_record
 from ..errors import BusyError, CamError, CapabilityError, StalePlanError
 from ..fileio import atomic_write_bytes
 from ..sniff import HEAD_BYTES
-from ..options import schema_json
-from ..kinds.jobs import PROFILE_SUFFIXES, JobOptions, PreparedJob, accepted_suffixes, job_kind, kind_defaults
+from ..kinds import kinds_json, schema_json
+from ..kinds.jobs import PROFILE_SUFFIXES, JobOptions, PreparedJob, accepted_suffixes, job_kind
 from ..machine_file import backup_path, list_settings, machine_file_of, save_settings
 from ..settings import DEFAULT_SETTINGS, MachineSettings
 from ..tool_table import (TABLE_SHAPES, job_tool_warnings, read_tool_table, tool_from_mapping, tool_table_path,
@@ -487,11 +487,17 @@ async def _get_config(st: _AppState, request: Request) -> dict[str, Any]:
 
 
 async def _get_options(st: _AppState, request: Request) -> list[dict[str, Any]]:
-    """``GET /api/options``: the job options' schema (:func:`cam.options.schema_json`): each option's name, label,
+    """``GET /api/options``: the job options' schema (:func:`cam.kinds.schema_json`): each option's name, label,
     group, flag, type, unit, range, choices, the file kinds it applies to, its default on each of them
-    (:func:`cam.kinds.jobs.kind_defaults`) and help; the page makes its job-options form from it (issue #47
+    (:func:`cam.kinds.kind_defaults`) and help; the page makes its job-options form from it (issue #47
     point 6)."""
-    return schema_json(kind_defaults())
+    return schema_json()
+
+
+async def _get_kinds(st: _AppState, request: Request) -> list[dict[str, Any]]:
+    """``GET /api/kinds``: the file kinds (:func:`cam.kinds.kinds_json`): the page's "Read as" list and the
+    names it shows come from it, so a new kind (one module of :mod:`cam.kinds`) is on the page with no page code."""
+    return kinds_json()
 
 
 async def _read_capped(request: Request, cap_bytes: int, *, drain_bytes: int = _DRAIN_LIMIT_BYTES) -> Optional[bytes]:
@@ -1129,6 +1135,7 @@ def _routes(st: _AppState) -> list:
         Route("/", _index),
         Route("/api/config", _api(st, _get_config)),
         Route("/api/options", _api(st, _get_options)),
+        Route("/api/kinds", _api(st, _get_kinds)),
         Route("/api/upload", _api(st, _upload, body="multipart/form-data"), methods=post),
         Route("/api/plan", json_api(_plan_job), methods=post),
         Route("/api/preview/{job}.png", _api(st, _preview)),
@@ -1412,7 +1419,7 @@ def _job_home(st: _AppState, job: PreparedJob) -> tuple[int, int, int]:
     resumed = getattr(job, "resumed", None)
     if resumed is not None:
         return tuple(h - int(s) for h, s in zip(here, resumed.start_position_steps))  # type: ignore[return-value]
-    if session.state_hold is not None and job.kind in PLACED_KINDS:
+    if session.state_hold is not None and job.kind in placed_kinds():
         return tuple(int(v) for v in placed_home(job, session.state_hold.state, None))  # type: ignore[return-value]
     return here  # type: ignore[return-value]
 

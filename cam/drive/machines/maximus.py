@@ -12,6 +12,7 @@ from typing import Any, Optional
 import numpy as np
 
 from ...settings import MachineSettings
+from ...kinds import has
 from .._session_recover import maximus_cannot_home
 from .._session_parts import Activity
 from ..activities import BoardControl, BoardWork, drill_work, move_work, run_on_board
@@ -70,7 +71,7 @@ class MaximusBackend(Backend):
         holes refused (the firmware drills only)."""
         kind = job.kind
         self.require(session.port, "drill_files", f"a {kind} job")
-        if kind == "excellon":
+        if has(kind, "holes"):
             require_drilling(job.given, session.port)
         if job.drill_plan is None:
             self.require(session.port, "step_dir", f"a {kind} job")

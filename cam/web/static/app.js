@@ -182,11 +182,26 @@
   }
 
   function loadSchema() {
-    return api("/api/options").then((options) => {
+    return Promise.all([api("/api/options"), api("/api/kinds")]).then(([options, kinds]) => {
       options.forEach((o) => { schema.byName[o.name] = o; });
+      showKinds(kinds);
       buildForm(options);
       showKind(page.kind);
     }, () => {});
+  }
+
+  // the file kinds (GET /api/kinds, cam/kinds/): the "Read as" list, what --kind NAME reads a file as
+  function showKinds(kinds) {
+    const select = $("read-as");
+    schema.forcedKind = {};
+    kinds.forEach((k) => {
+      schema.forcedKind[k.forced_as] = k.name;
+      const option = document.createElement("option");
+      option.value = k.forced_as;
+      option.textContent = k.title;
+      select.append(option);
+    });
+    if (!page.job) $("job-name").textContent = kinds.map((k) => k.title).join(", ");
   }
 
   // the options of the kind show (every option before a file is loaded), with the kind's defaults as placeholders
@@ -252,7 +267,7 @@
     clearError();
     $("plan").disabled = true;
     $("job-summary").textContent = "planning…";
-    const forced = { matrix: "digitized" }[$("read-as").value] || $("read-as").value;
+    const forced = (schema.forcedKind || {})[$("read-as").value] || $("read-as").value;
     if (forced && forced !== page.kind) { page.kind = forced; showKind(forced); }  // its options apply
     try {
       const r = await api("/api/plan", { json: { job: page.job, options: collectOptions() } });
