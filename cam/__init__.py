@@ -60,7 +60,7 @@ _LAZY = {
     "CamError": "cam.errors", "DrawingError": "cam.errors", "ParseError": "cam.errors",
     "PlanError": "cam.errors", "PortError": "cam.errors", "SettingsError": "cam.errors",
     "TravelError": "cam.errors",
-    "job_kind": "cam.kinds", "sniff_kind": "cam.kinds", "kinds": "cam.kinds",
+    "job_kind": "cam.kinds", "sniff_kind": "cam.kinds",
     "prepare_job": "cam.kinds.jobs", "resume_job": "cam.kinds.jobs", "JobOptions": "cam.kinds.jobs",
     "PreparedJob": "cam.kinds.jobs", "Journal": "cam.job.resume", "read_journal": "cam.drive.journal",
     "HeightMap": "cam.job.heightmap_level", "load_height_map": "cam.job.heightmap_level",
@@ -110,7 +110,7 @@ if TYPE_CHECKING:  # pragma: no cover - for type checkers and editors only
     from .drive.runner import Controller, RunResult, simulate_surface
     from .drive.session import MachineSession, run
     from .drive.steps import StepPlan, plan_steps
-    from .kinds import job_kind, kinds, sniff_kind
+    from .kinds import job_kind, sniff_kind
     from .errors import CamError, DrawingError, ParseError, PlanError, PortError, SettingsError, TravelError
     from .formats.excellon import HoleList, load_excellon, parse_excellon
     from .kinds.gcode_export import save_gcode, to_gcode

@@ -15,7 +15,6 @@ from cam.digitize import drawing as drawing_module
 from cam.digitize.image_size import image_size_px
 from cam.drive.chunks import plan_chunks
 from cam.job import drawing as planner
-from cam.kinds import jobs
 from cam.job.drawing import check_drawing_size, max_drawing_size_px
 from cam.kinds.jobs import JobOptions, prepare_job
 
@@ -122,12 +121,18 @@ def test_a_drawing_too_large_for_the_travel_is_refused_before_it_is_decoded_or_t
     """The 1500 x 1500 checkerboard: routing ran over 600 s before the travel error."""
     path = tmp_path / "board.png"
     cv2.imwrite(str(path), checkerboard(1500))
-    for name in ("load_image", "digitize", "plan"):
-        monkeypatch.setattr(jobs, name, lambda *a, _name=name, **k: pytest.fail(f"{_name} ran"))
+    import cam.digitize
+    import cam.digitize.drawing
+    import cam.job.drawing_stream
+
+    # the drawing kind's reader, digitizer and planner (cam.kinds.drawing loads them when it plans)
+    for module, name in ((cam.digitize.drawing, "load_image"), (cam.digitize, "digitize"),
+                         (cam.job.drawing_stream, "plan")):
+        monkeypatch.setattr(module, name, lambda *a, _name=name, **k: pytest.fail(f"{_name} ran"))
     with pytest.raises(cam.TravelError, match=r"board\.png: the drawing is 1500x1500 px; .* holds at most 1251x1251"):
         prepare_job(path, JobOptions(depth=(3,)))
     # a machine with 2 steps per pixel holds it: then it is decoded (and traced)
-    monkeypatch.setattr(jobs, "load_image", lambda *a, **k: pytest.fail("decoded, as it should be"))
+    monkeypatch.setattr(cam.digitize.drawing, "load_image", lambda *a, **k: pytest.fail("decoded, as it should be"))
     with pytest.raises(pytest.fail.Exception, match="decoded, as it should be"):
         prepare_job(path, JobOptions(depth=(3,)), cam.MachineSettings().replace(steps_per_px_xy=2))
 

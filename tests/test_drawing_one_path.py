@@ -181,7 +181,7 @@ def test_a_prepared_job_is_the_same_held_or_in_pieces(tmp_path, monkeypatch, opt
     src = _disc_png(tmp_path)
     s = cam.MachineSettings()
     held = prepare_job(src, options, s)
-    monkeypatch.setattr(jobs, "STREAM_TARGETS", 10)
+    monkeypatch.setattr("cam.job.drawing_stream.STREAM_TARGETS", 10)
     monkeypatch.setattr(cam.job.drawing_stream, "PIECE_TARGETS", 13)
     pieces = prepare_job(src, options, s)
     assert isinstance(held.toolpath, Job) and isinstance(pieces.toolpath, DrawingJobStream)

@@ -103,7 +103,7 @@ def test_prepared_stream_runs_as_the_in_memory_job(tmp_path, monkeypatch):
     opts = JobOptions(profile_expr="1 + k // 3")
     s = cam.MachineSettings().replace(ramp="lookahead", steps_per_px_xy=2)
     whole = prepare_job(src, opts, s)
-    monkeypatch.setattr(jobs, "STREAM_TARGETS", 100)
+    monkeypatch.setattr("cam.job.drawing_stream.STREAM_TARGETS", 100)
     streamed = prepare_job(src, opts, s)
     assert not hasattr(streamed.toolpath, "points_steps") and streamed.toolpath.n_targets > 100
     streamed.toolpath.piece_targets = 37  # many pieces
@@ -147,7 +147,7 @@ def test_a_stopped_streamed_drawing_resumes_and_carves_as_an_uninterrupted_run(t
     src = _big_relief(tmp_path)
     opts = JobOptions(profile_expr="1 + k // 3")
     s = cam.MachineSettings().replace(ramp="constant", delay_xy_ms=0.05, delay_z_ms=0.05)
-    monkeypatch.setattr(jobs, "STREAM_TARGETS", 100)
+    monkeypatch.setattr("cam.job.drawing_stream.STREAM_TARGETS", 100)
     stop_and_resume(prepare_job(src, opts, s), tmp_path, stop_at, lambda: prepare_job(src, opts, s))
 
 
@@ -160,7 +160,7 @@ def test_cli_streams_a_large_drawing(tmp_path, monkeypatch):
     assert main(["drill", *args, "--yes", "--no-progress", "--pin-log", str(tmp_path / "w.csv")]) == 0
     assert main(["export", *args, "-o", str(tmp_path / "w.ngc")]) == 0
     assert main(["preview", *args, "--surface", "-o", str(tmp_path / "wc.png")]) == 0
-    monkeypatch.setattr(jobs, "STREAM_TARGETS", 100)
+    monkeypatch.setattr("cam.job.drawing_stream.STREAM_TARGETS", 100)
     monkeypatch.setattr(cam.job.drawing_stream, "PIECE_TARGETS", 50)
     assert main(["drill", *args, "--yes", "--no-progress", "--pin-log", str(tmp_path / "s.csv"),
                  "--preview", str(tmp_path / "p.png")]) == 0

@@ -272,7 +272,7 @@ def test_prepare_job_keeps_a_large_job_as_its_pieces(tmp_path, monkeypatch):
     path = SAMPLES / "bolt_plate.ngc"
     held = prepare_job(path, JobOptions(), SETTINGS)
     assert isinstance(held.toolpath, Job)
-    monkeypatch.setattr("cam.kinds.jobs.GCODE_STREAM_MOVES", 100)
+    monkeypatch.setattr("cam.job.gcode.STREAM_MOVES", 100)
     streamed = prepare_job(path, JobOptions(), SETTINGS)
     assert isinstance(streamed.toolpath, GcodeJobStream) and isinstance(streamed.toolpath.src, GcodeFile)
     assert streamed.summary == held.summary and streamed.report == held.report

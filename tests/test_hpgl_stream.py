@@ -110,7 +110,7 @@ def test_prepared_stream_runs_as_the_in_memory_job(tmp_path, monkeypatch):
     opts = JobOptions()
     s = cam.MachineSettings().replace(ramp="lookahead")
     whole = prepare_job(src, opts, s)
-    monkeypatch.setattr(jobs, "STREAM_POINTS", 2)
+    monkeypatch.setattr("cam.job.hpgl_stream.STREAM_POINTS", 2)
     streamed = prepare_job(src, opts, s)
     assert not hasattr(streamed.toolpath, "points_steps")
     np.testing.assert_array_equal(streamed.extent_steps, whole.extent_steps)
@@ -135,7 +135,7 @@ def test_a_stopped_streamed_hpgl_job_resumes_and_carves_as_an_uninterrupted_run(
     from test_drawing_stream import stop_and_resume
     src = SAMPLES / "extended.plt"
     s = cam.MachineSettings().replace(ramp="constant", delay_xy_ms=0.02, delay_z_ms=0.02)
-    monkeypatch.setattr(jobs, "STREAM_POINTS", 2)
+    monkeypatch.setattr("cam.job.hpgl_stream.STREAM_POINTS", 2)
     stop_and_resume(prepare_job(src, JobOptions(), s), tmp_path, stop_at, lambda: prepare_job(src, JobOptions(), s))
 
 
@@ -190,7 +190,7 @@ def test_streamed_preview_equals_the_in_memory_one(monkeypatch):
     """The preview of a streamed job is drawn a piece at a time and is the in-memory job's picture."""
     src = SAMPLES / "extended.plt"
     whole = prepare_job(src)
-    monkeypatch.setattr(jobs, "STREAM_POINTS", 2)
+    monkeypatch.setattr("cam.job.hpgl_stream.STREAM_POINTS", 2)
     streamed = prepare_job(src)
     streamed.toolpath.piece_points, streamed.toolpath.chunk_bytes = 3, 64
     assert sum(1 for _ in streamed.toolpath.pieces()) > 5
@@ -202,7 +202,7 @@ def test_streamed_gcode_out_equals_the_in_memory_one(tmp_path, monkeypatch):
     from cam.cli import main
     src = SAMPLES / "extended.plt"
     assert main(["export", str(src), "-o", str(tmp_path / "w.ngc")]) == 0
-    monkeypatch.setattr(jobs, "STREAM_POINTS", 2)
+    monkeypatch.setattr("cam.job.hpgl_stream.STREAM_POINTS", 2)
     assert main(["export", str(src), "-o", str(tmp_path / "s.ngc")]) == 0
     text = (tmp_path / "s.ngc").read_text()
     assert text == (tmp_path / "w.ngc").read_text() and "M6" in text

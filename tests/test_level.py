@@ -488,7 +488,6 @@ def test_a_job_levelled_by_a_map_probed_on_the_mock_cuts_at_the_asked_depth(kind
 def test_a_job_kept_as_pieces_is_levelled_a_piece_at_a_time_to_the_same_moves(kind, tmp_path, monkeypatch):
     """One implementation: a large job's pieces are levelled as they are made (bounded memory), a small one's joined;
     the levelled moves are the same whatever the pieces."""
-    import cam.kinds.jobs as jobs
 
     m = HeightMap([-5, 60, 140], [-5, 50, 110], [[0.0, 0.2, 0.1], [0.1, 0.4, 0.3], [0.3, 0.2, 0.5]],
                   reference_mm=0.1, spacing_mm=10)
@@ -500,8 +499,8 @@ def test_a_job_kept_as_pieces_is_levelled_a_piece_at_a_time_to_the_same_moves(ki
     options = cam.JobOptions(level=str(save_height_map(m, tmp_path / "map.json")))
     held = cam.prepare_job(path, options)
     assert isinstance(held.toolpath, Job)
-    monkeypatch.setattr(jobs, {"hpgl": "STREAM_POINTS", "gcode": "GCODE_STREAM_MOVES",
-                               "drawing": "STREAM_TARGETS"}[kind], 0)
+    monkeypatch.setattr({"hpgl": "cam.job.hpgl_stream.STREAM_POINTS", "gcode": "cam.job.gcode.STREAM_MOVES",
+                         "drawing": "cam.job.drawing_stream.STREAM_TARGETS"}[kind], 0)
     streamed = cam.prepare_job(path, options)
     assert isinstance(streamed.toolpath, LevelledJob) and sum(1 for _ in streamed.toolpath.pieces()) >= 1
     a, b = held.toolpath, streamed.toolpath.joined()

@@ -94,7 +94,7 @@ def test_chunked_pauses_and_stop_in_real_time_are_the_whole_plans(no_whole_plan)
 def test_a_streamed_drawing_runs_in_the_runner_process_a_chunk_at_a_time(tmp_path, monkeypatch):
     """A session's real-time runner process takes the chunked plan of a streamed drawing and makes its writes
     itself: its pin log has the writes of the simulated run."""
-    monkeypatch.setattr(jobs, "STREAM_TARGETS", 10)
+    monkeypatch.setattr("cam.job.drawing_stream.STREAM_TARGETS", 10)
     src = tmp_path / "bar.png"
     import cv2
     cv2.imwrite(str(src), drawing_from_rows(ROWS))

@@ -54,7 +54,7 @@ OUTPUTS = {
 }
 """Files a command writes, checked before it starts."""
 
-_OUTPUT_SUFFIXES = {"preview": (".png", ".svg"), "digitize": "digitized", "export": None,
+_OUTPUT_SUFFIXES = {"preview": (".png", ".svg"), "digitize": None, "export": None,
                     "trace": (".png", ".bmp", ".tif", ".tiff")}
 """What ``-o`` of each command writes."""
 
@@ -121,8 +121,8 @@ def _check_outputs(args: argparse.Namespace) -> None:
             continue
         if dest == "output":
             suffixes = _OUTPUT_SUFFIXES.get(args.command)
-        if dest == "save_digitized" or suffixes == "digitized":
-            suffixes = kind("digitized").suffixes
+        if dest == "save_digitized" or (dest == "output" and args.command == "digitize"):
+            suffixes = kind("digitized").suffixes  # a saved digitized matrix
         check_output_path(path, flag, suffixes)
 
 

@@ -159,7 +159,7 @@ def _gcode_hold(args: argparse.Namespace, settings) -> Optional[StateHold]:
     placed by its own zero (--origin file: planned from the work zero as a program is) and a job levelled to a
     height map (--level: levelled where it will run, at the active work zero, issue #46 point 2)."""
     name = job_kind_of(args)
-    if name is None or kind(name).job_noun is not None:  # placed at the work zero: not run in place as a program
+    if name is None or not kind(name).runs_in_place:  # placed at the work zero, unlike a G-code program
         if getattr(args, "keep_offsets", False):
             raise CamError("--keep-offsets keeps the work offsets a G-code program sets (G10 L2/L20); this is not "
                            "a G-code program")

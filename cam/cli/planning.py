@@ -15,7 +15,7 @@ from ..drive.pins import axis_bits
 from ..drive.state import MachineState, read_state
 from ..errors import CamError, TravelError
 from ..kinds.jobs import JobOptions, PreparedJob, own_zero_home, prepare_job
-from ..kinds import has, job_options as kind_job_options
+from ..kinds import has, kind, job_options as kind_job_options
 from ..options import Option
 from ..job.model import JobLike
 from ..render.picture import save_picture, surface_picture, toolpath_picture, toolpath_svg
@@ -47,8 +47,8 @@ def prepare(args: argparse.Namespace, settings: Optional[MachineSettings] = None
         raise CamError(f"{args.command} needs an IMAGE or --load-digitized FILE")
     state = getattr(args, "machine_state", None)  # where it runs (cam drill): G-code, and a drill, HPGL or SVG
     # file placed by its own zero (placed_by_own_zero), or any job levelled to a height map (--level)
-    if state is None and ((args.command in ("info", "preview") and (job_kind_of(args) == "gcode"
-                                                                   or placed_by_own_zero(args)))
+    in_place = kind(job_kind_of(args)).runs_in_place if job_kind_of(args) else False  # a G-code program
+    if state is None and ((args.command in ("info", "preview") and (in_place or placed_by_own_zero(args)))
                           or (args.command in ("info", "preview", "export") and getattr(args, "level", None))):
         state = _state_to_view(args, settings or machine_settings(args))
     try:
@@ -56,7 +56,7 @@ def prepare(args: argparse.Namespace, settings: Optional[MachineSettings] = None
             job = prepare_job(path, job_options(args), settings or machine_settings(args), name=path,
                               progress=progress, machine_state=state)
     except TravelError as exc:
-        if state is None or job_kind_of(args) == "gcode" or not placed_by_own_zero(args):
+        if state is None or in_place or not placed_by_own_zero(args):
             raise
         raise TravelError(f"{exc}; the file's own zero goes to the {state.active_offset} work zero (machine "
                           f"{list(state.work_zero_steps())} steps): set the work zero elsewhere (cam zero) or "

@@ -147,6 +147,12 @@ class Kind:
         if not self.listed_as:
             object.__setattr__(self, "listed_as", self.noun)
 
+    @property
+    def runs_in_place(self) -> bool:
+        """Whether its job runs from where the tool stands, in the machine state's work offsets (a G-code program),
+        instead of being placed at the work zero (no :attr:`job_noun`)."""
+        return self.job_noun is None
+
     def default(self, option: str) -> Any:
         """The value option ``option`` takes on this kind when it is not given (its per-trait default, else its
         default): ``kind("excellon").default("cut_depth_mm")`` is 2.0."""

@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any, Optional
 
-from ..errors import TravelError
+from ..errors import CamError, TravelError
 from . import Head, Kind
 from .excellon import excellon_or_gcode, plain_text
 
@@ -56,6 +56,9 @@ def _prepare(path: Path, options: Any, settings: Any, *, home: Any = None, progr
     # after a whole pass (held's or this) the program's moves and warnings are known; the travel checked in the
     # machine frame, from where the tool stands
     steps = plan_chunks(toolpath, start_steps=start, fingerprint=True)  # type: ignore[arg-type]
+    if stream.n_motions == 0 and not any(int(v) for v in steps.steps_total):
+        raise CamError(f"{path}: the program makes no moves (no G0, G1, G2, G3, G5 or canned cycle that goes "
+                       "anywhere): there is nothing to run")
     probes = stream.probes or []  # G38.2/G38.3: as if each touched at its target; a machine runs it from the contact
     probing = ProbingProgram(program, settings, bool(options.flip_y), start, tuple(probes),  # type: ignore[arg-type]
                              tuple(stream.probe_feeds_mm_min)) if probes else None

@@ -754,7 +754,7 @@ def prepare_job(
     job.origin = "file" if home is not None else opts.origin
     if home is not None:
         job.home_steps = home
-    if kind == "gcode":  # it runs from where the tool stood, in the work offsets it was planned in
+    if the_kind.runs_in_place:  # a program: from where the tool stood, in the work offsets it was planned in
         job.planned_in = PlannedIn((0, 0, 0)) if machine_state is None else \
             PlannedIn.of(machine_state, position=True, every_offset=True)
     elif home is not None and machine_state is not None:  # from the active work zero, wherever the tool stands
@@ -865,18 +865,11 @@ def _refuse_surface_travel(options: JobOptions, settings: MachineSettings) -> No
                        "meant")
 
 
-_CUTS = {"excellon": "holes", "svg": "strokes", "hpgl": "strokes", "dxf": "strokes"}
-"""What a vector job's report counts, whose cuts a scale or a step size could put on one X/Y step."""
-
-
 def _refuse_nothing(job: PreparedJob, options: JobOptions, settings: MachineSettings) -> None:
     """Refuse a job that its scale or the machine's step size rounds to nothing (issue #33 point 8): the whole
     job moves 0 steps, or a drill, SVG or HPGL job of several holes or strokes puts them all on one X/Y step."""
     total = np.asarray(job.plan.steps_total, np.int64)
-    if job.kind == "gcode" and job.report.get("motions") == 0 and not total.any():
-        raise CamError(f"{job.source}: the program makes no moves (no G0, G1, G2, G3, G5 or canned cycle that goes "
-                       "anywhere): there is nothing to run")
-    cuts = _CUTS.get(job.kind, "")
+    cuts = "holes" if has(job.kind, "holes") else "strokes" if has(job.kind, "strokes") else ""
     n_cuts = int(job.report.get(cuts, 0)) if cuts else 0
     if total.any() and not (n_cuts > 1 and not total[:2].any()):
         return
