@@ -11,7 +11,7 @@ from ..digitize.digitized import Digitized
 from ..digitize.drawing import load_image
 from ..digitize.profile import Profile, load_profile, profile_from_expr
 from ..drive.chunks import ChunkedPlan, plan_chunks
-from ..drive.pins import axis_bits
+from ..pins import axis_bits
 from ..drive.state import MachineState, read_state
 from ..errors import CamError, TravelError
 from ..job.jobs import JobOptions, PreparedJob, own_zero_home, prepare_job

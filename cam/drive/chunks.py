@@ -37,7 +37,7 @@ import numpy as np
 from ..job.model import Job, JobLike, PlanFingerprint, TravelSpan, check_span, check_travel
 from ..settings import MachineSettings
 from ._kernels import chunk_writes_kernel, move_extent_kernel, move_periods_kernel, stretch_kernel
-from .pins import axis_bits
+from ..pins import axis_bits
 from .ramps import _lookahead, linear40_periods
 
 __all__ = ["StepChunk", "StepPlan", "ChunkedPlan", "plan_chunks", "plan_steps", "lookahead_margin", "move_extent",

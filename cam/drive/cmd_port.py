@@ -10,7 +10,7 @@ bytes.
 a pure translation (:func:`step_writes_to_commands`):
 
 * every rising clock edge of an axis in a step/dir write (a clock bit high in this write, low in the one
-  before, :func:`cam.drive.pins.axis_bits`) is that axis's command byte: ``<axis>_plus`` with the axis's
+  before, :func:`cam.pins.axis_bits`) is that axis's command byte: ``<axis>_plus`` with the axis's
   direction bit high in the write (a step toward + of the machine frame, +Z deeper), ``<axis>_minus`` with
   it low;
 * the byte is written with strobe 1 at the write's time, and strobe goes back to 0 ``strobe_us`` later (the
@@ -38,7 +38,7 @@ import numpy as np
 
 from ..errors import CapabilityError, PortError
 from ..settings import MachineSettings
-from .pins import axis_bits
+from ..pins import axis_bits
 from .ports import MockPort, ParallelPort
 
 __all__ = ["step_writes_to_commands", "CommandMockPort", "CommandParallelPort", "needed_commands", "check_commands",

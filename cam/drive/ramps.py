@@ -65,7 +65,7 @@ from .._compiled import entry
 from ..settings import RAMP_MODES, MachineSettings
 from ..verify.ramps import check_steps_range, mark_standstills, standstill_ns
 from ..errors import CamError
-from .pins import axis_bits
+from ..pins import axis_bits
 
 __all__ = ["RAMP_MODES", "ramp_periods", "linear40_periods", "RAMP_STEPS_LINEAR40", "top_speeds_mm_s",
            "check_delay_speeds"]

@@ -39,7 +39,7 @@ from ._kernels import net_steps_kernel
 from .priority import as_background, real_time_class
 from .machines import open_port
 from .ports import MockPort, Port
-from .pins import axis_bits
+from ..pins import axis_bits
 from .chunks import ChunkedPlan, StepChunk, plan_chunks
 from .steps import StepPlan
 

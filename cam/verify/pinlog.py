@@ -46,7 +46,7 @@ from ..errors import CamError, ParseError
 from ..fileio import atomic_write_text
 from ..render.picture import encode_png, surface_picture
 from ..settings import DEFAULT_SETTINGS, MachineSettings
-from ..drive.pins import axis_bits
+from ..pins import axis_bits
 
 __all__ = ["Surface", "PinLog", "PinLogPart", "join_pin_logs", "Motion", "decode_pin_log", "read_pin_log", "iter_pin_log", "write_pin_log", "carve",
            "motion_extent", "rising_edges"]

@@ -75,7 +75,7 @@ from ..errors import CamError
 
 from ..settings import DEFAULT_SETTINGS, MachineSettings
 from .pinlog import PinLog, iter_pin_log, rising_edges
-from ..drive.pins import axis_bits
+from ..pins import axis_bits
 
 __all__ = ["RampViolation", "RampReport", "check_ramps", "check_axis_steps", "standstills", "standstill_ns",
            "mark_standstills", "STANDSTILL_STEPS"]

@@ -362,7 +362,7 @@ def port_writes(step_signed, period_ns, settings):
     """
     import numpy as np
 
-    from cam.drive.pins import axis_bits
+    from cam.pins import axis_bits
     from cam.drive.ramps import ramp_periods
 
     step_signed = np.asarray(step_signed)
