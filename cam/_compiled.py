@@ -33,8 +33,8 @@ __all__ = ["entry", "resolved", "KERNEL_MODULES", "ENTRIES", "cache_dir", "defau
 KERNEL_MODULES = (
     "cam.digitize._classify",
     "cam.digitize._kernels",
-    "cam.drive._kernels",
-    "cam.drive.ramps",
+    "cam.motion.kernels",
+    "cam.motion.ramps",
     "cam.job.drill_order",
     "cam.job._route",
     "cam.job._svg_kernels",

@@ -30,7 +30,7 @@ HEAVY = ("numba", "cv2", "scipy", "starlette", "uvicorn", "skimage")
 """Packages that make start-up slow (numba alone takes most of a second) or are optional extras."""
 
 FUNCTION_LEVEL_IMPORTS = {
-    ("cam.drive.ports", "cam.drive._kernels"): "numba: loaded only when the mock streams its pin log to a file, so "
+    ("cam.drive.ports", "cam.motion.kernels"): "numba: loaded only when the mock streams its pin log to a file, so "
                                               "opening a port stays light",
     ("cam.settings", "cam.tool"): "cam.tool needs numpy; the settings module stays light for --help",
     ("cam.cli.parser", "cam.errors"): "--tool is checked by cam.tool (numpy) only when given: --help stays light",

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import cam
-from cam.drive.chunks import plan_chunks
+from cam.motion.chunks import plan_chunks
 from cam.verify.pinlog import PinLog, write_pin_log
 from cam.verify.ramps import check_ramps
 from conftest import SAMPLES

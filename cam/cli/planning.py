@@ -10,7 +10,7 @@ import numpy as np
 from ..digitize.digitized import Digitized
 from ..digitize.drawing import load_image
 from ..digitize.profile import Profile, load_profile, profile_from_expr
-from ..drive.chunks import ChunkedPlan, plan_chunks
+from ..motion.chunks import ChunkedPlan, plan_chunks
 from ..pins import axis_bits
 from ..drive.state import MachineState, read_state
 from ..errors import CamError, TravelError
@@ -185,7 +185,7 @@ def write_preview(args: argparse.Namespace, job: JobLike, path: str, surface: bo
 
 def carved_surface(job: JobLike, steps: Optional[ChunkedPlan] = None) -> np.ndarray:
     """``(height_px, width_px)`` int64 cut surface of a drawing job, depth in Z steps (drawing frame): its port
-    writes (``steps``, None: :func:`cam.drive.chunks.plan_chunks` of it) decoded and carved by a point tool a
+    writes (``steps``, None: :func:`cam.motion.chunks.plan_chunks` of it) decoded and carved by a point tool a
     chunk at a time, in bounded memory; the same surface as :func:`cam.drive.runner.simulate_surface` of the
     whole job (tested).
 

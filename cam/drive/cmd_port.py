@@ -6,7 +6,7 @@ latched by a strobe pulse, sent at the step's time by a timer interrupt; the ste
 how fast the bytes come.  The machine file's ``[commands]`` table (:class:`cam.settings.Commands`) gives the
 bytes.
 
-`cam` plans every job as step/dir writes (:mod:`cam.drive.steps`); here those writes become command writes,
+`cam` plans every job as step/dir writes (:mod:`cam.motion.steps`); here those writes become command writes,
 a pure translation (:func:`step_writes_to_commands`):
 
 * every rising clock edge of an axis in a step/dir write (a clock bit high in this write, low in the one
@@ -319,7 +319,7 @@ def check_commands(job_or_pieces: Any, settings: MachineSettings, *,
     the job's home (0, 0, 0).  A job that goes deeper needs ``z_minus`` too: a stop lifts the tool.
 
     ``start_steps``: where the tool stands in the machine frame when the job starts (as
-    :func:`~cam.drive.chunks.plan_chunks` takes it).  The job's points are steps from there, so it changes no
+    :func:`~cam.motion.chunks.plan_chunks` takes it).  The job's points are steps from there, so it changes no
     byte the job needs; it is not read.
 
     Raises:

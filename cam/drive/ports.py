@@ -124,7 +124,7 @@ class _PinLogWriter:
         return self.error
 
     def _run(self) -> None:
-        from ._kernels import pin_rows_kernel  # numba: only when a pin log streams
+        from ..motion.kernels import pin_rows_kernel  # numba: only when a pin log streams
 
         while True:
             parts = self._queue.get()

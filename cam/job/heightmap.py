@@ -51,7 +51,7 @@ from typing import Any, Optional
 import numpy as np
 
 from ..digitize.drawing import _read_image
-from ..drive.chunks import plan_chunks
+from ..motion.chunks import plan_chunks
 from ..errors import CamError
 from ..settings import DEFAULT_SETTINGS, MachineSettings
 from ..tool import POINT, Tool, _lowest, drop_depth_px, footprint_px, parse_tool, tool_of_settings

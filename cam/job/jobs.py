@@ -45,7 +45,7 @@ from ..digitize import digitize
 from ..digitize.digitized import load_digitized
 from ..digitize.drawing import drawing_size_px, load_image
 from ..digitize.profile import load_profile, profile_from_expr
-from ..drive.chunks import plan_chunks
+from ..motion.chunks import plan_chunks
 from ..errors import CamError, PlanError
 from ..formats.excellon import load_excellon
 from ..formats.gcode import load_tool_table, open_gcode

@@ -58,7 +58,7 @@ def job_report(
 ) -> dict[str, Any]:
     """The JSON job report: image report plus depth, points, retracts, steps, time and the speed ramp mode.
 
-    ``plan`` is the :class:`~cam.drive.steps.StepPlan` of ``toolpath``.
+    ``plan`` is the :class:`~cam.motion.steps.StepPlan` of ``toolpath``.
     """
     s = toolpath.settings
     rep: dict[str, Any] = image_report(digitized, s) if digitized is not None else {"warnings": []}

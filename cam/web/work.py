@@ -26,7 +26,7 @@ from ..verify.pinlog import PinLog, PinLogPart, write_pin_log
 __all__ = ["plan_with_preview", "preview_of", "height_map_png", "resumed_from_journal",
            "save_pin_log_raw", "pin_log_csv", "WARM_UP"]
 
-WARM_UP = ("cam.job.jobs", "cam.web.work", "cam.digitize._kernels", "cam.drive.ramps", "cv2")
+WARM_UP = ("cam.job.jobs", "cam.web.work", "cam.digitize._kernels", "cam.motion.ramps", "cv2")
 """What the worker imports as it starts: the first planning does not wait for it."""
 
 

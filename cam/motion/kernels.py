@@ -1,4 +1,4 @@
-"""Compiled step-plan kernels (numba): the per-period loop of :mod:`cam.drive.chunks`, a stretch at a time.
+"""Compiled step-plan kernels (numba): the per-period loop of :mod:`cam.motion.chunks`, a stretch at a time.
 
 It makes exactly what the vectorised reference makes (tests compare them) without the
 ``(periods, 3)`` temporaries, so planning tens of millions of steps stays fast and small.
@@ -293,7 +293,7 @@ def _widen(box, a, v):
 @entry
 @njit(cache=True, nogil=True)
 def move_extent_kernel(pts, n_per_move, extent, cut):
-    """:func:`cam.drive.chunks.move_extent` in one pass: widen ``extent`` and ``cut`` (``(3, 2)`` int64 min/max,
+    """:func:`cam.motion.chunks.move_extent` in one pass: widen ``extent`` and ``cut`` (``(3, 2)`` int64 min/max,
     in place) by the positions the moves between rows of ``(B + 1, 3)`` int64 ``pts`` take the tool through,
     ``(B,)`` int64 ``n_per_move`` periods each.  A move that enters the work (z from <= 0 to > 0) is cut from
     the first period k with ``z_a + floor(k |dz| / n) >= 1``; one that leaves it up to the last such period."""
