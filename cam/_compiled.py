@@ -38,6 +38,7 @@ KERNEL_MODULES = (
     "cam.job.drill_order",
     "cam.job._route",
     "cam.job._svg_kernels",
+    "cam.job._gcode_kernels",
     "cam.formats.hpgl",
     "cam.verify.ramps",
 )

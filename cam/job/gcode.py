@@ -37,7 +37,7 @@ from typing import Any, Iterator, Optional, Union
 
 import numpy as np
 
-from ..motion.kernels import straight_rows_kernel
+from ._gcode_kernels import straight_rows_kernel
 from ..errors import PlanError, TravelError
 from ..formats.gcode import PLANE_AXES, GcodeFile, GcodeMove, GcodeProgram
 from ..limits import MAX_MOVE_PERIODS, MAX_MOVE_S, MAX_PROGRAM_S
