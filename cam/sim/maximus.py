@@ -159,7 +159,7 @@ from ._maximus_base import (  # noqa: F401  (the labels are part of this module'
     _Halt, _PowerOn, _ReplyFault,
 )
 from ..drive.maximus._trust import EMULATOR_SPEEDS_ENV, clear_fault_marker
-from ..cli.parser import add_maximus_switch_options
+from ..drive.maximus.switch_options import add_maximus_switch_options
 from ._maximus_hardware import _Hardware
 from ._maximus_program import _Program
 from ._maximus_uart import _Uart
