@@ -70,7 +70,7 @@ from .hpgl import _rows, _z_steps, scale_to_fit
 from .hpgl_stream import outside_travel
 from .model import CUT, Job, TravelSpan, check_span, check_travel
 
-__all__ = ["plan_svg", "svg_strokes_steps", "svg_scale", "svg_layer_order", "DEFAULT_CUT_DEPTH_MM",
+__all__ = ["plan_svg", "svg_strokes_steps", "svg_scale", "svg_layer_order", "selected_layers", "DEFAULT_CUT_DEPTH_MM",
            "DEFAULT_TRAVEL_HEIGHT_MM", "DUPLICATE_STEPS", "MIN_DUPLICATE_STEPS"]
 
 DEFAULT_CUT_DEPTH_MM = 0.5
@@ -373,7 +373,7 @@ def plan_svg(
         raise PlanError("the cutting depth must be > 0 mm and the safe height >= 0 mm")
     chosen = svg_layer_order(drawing, layers)
     names = drawing.layers()
-    part, part_layer = _selected(drawing, chosen)
+    part, part_layer = selected_layers(drawing, chosen)
     pts, bounds = _polylines_steps(part, settings, scale, fit_mm, offset_mm)
     if len(bounds) < 2:
         raise PlanError(f"{drawing.source}: nothing to cut (no visible stroke or outline)")
@@ -450,7 +450,7 @@ def _gather(cells: np.ndarray, bounds: np.ndarray, order: np.ndarray, backwards:
     return cells[index], first
 
 
-def _selected(drawing: SvgDrawing, chosen: list[int]) -> tuple[SvgDrawing, np.ndarray]:
+def selected_layers(drawing: SvgDrawing, chosen: list[int]) -> tuple[SvgDrawing, np.ndarray]:
     """The drawing with only the strokes of the ``chosen`` layers, in that order (file order within a layer),
     and the layer of each of its strokes."""
     layer_of = drawing.layer_of_stroke
@@ -461,6 +461,11 @@ def _selected(drawing: SvgDrawing, chosen: list[int]) -> tuple[SvgDrawing, np.nd
     part = dataclasses.replace(drawing, strokes=[drawing.strokes[i] for i in idx],
                                closed=np.asarray(drawing.closed)[idx], stroke_layer=layer_of[idx])
     return part, layer_of[idx]
+
+
+_selected = selected_layers
+"""The old private name, kept only for :mod:`cam.formats.gcode_export` until it imports :func:`selected_layers`
+(issue #48 point 1 moves that module to cam/kinds)."""
 
 
 def _check_extent(drawing: SvgDrawing, pts: np.ndarray, settings: MachineSettings,
