@@ -39,8 +39,8 @@ MAX_V_ANGLE_DEG = 179.0
 """A V bit's included angle is 1..179 degrees: a sharper one would cut a line 0.3 mm wide deeper than any
 machine's travel (the depth grows as 1 / tan(angle / 2), infinite at 0), a flatter one would be no V bit."""
 
-__all__ = ["Tool", "POINT", "parse_tool", "drop_depth_px", "reach_depth_px", "tool_of_settings", "corner_depth_px", "footprint_px", "TOOL_SHAPES",
-           "lowest_under_footprint"]
+__all__ = ["Tool", "POINT", "parse_tool", "drop_depth_px", "reach_depth_px", "tool_of_settings", "corner_depth_px",
+           "footprint_px", "TOOL_SHAPES", "lowest_under_footprint"]
 
 TOOL_SHAPES = ("point", "flat", "ball", "v")
 V_SHANK_MM = 3.175
