@@ -36,11 +36,13 @@ FUNCTION_LEVEL_IMPORTS = {
     ("cam.cli.parser", "cam.errors"): "--tool is checked by cam.tool (numpy) only when given: --help stays light",
     ("cam.cli.parser", "cam.tool"): "cam.tool needs numpy; the parser stays light for --help",
     ("cam.verify.toolcarve", "cv2"): "only a notebook's picture of a comparison needs OpenCV's PNG encoder",
-    ("cam._kernel_cache", "cam._kernel_signatures"): "the cache filler: the table is read only when compiling",
+    ("cam._compiled", "cam._kernel_signatures"): "the kernels' table is read only when compiling or loading them",
+    ("cam._compiled", "numba"): "numba's types, only when the kernels' table is read: importing the kernel list "
+                                "loads no numba",
     ("cam._kernel_cache", "cam.cli"): "the cache filler: the sample jobs run only when collecting argument types",
-    ("cam.worker", "cam._kernel_cache"): "the worker child loads the cached kernels before its memory limit; the "
+    ("cam.worker", "cam._compiled"): "the worker child loads the cached kernels before its memory limit; the "
                                          "parent never needs the table",
-    ("cam._kernel_cache", "numba"): "the cache filler: numba's types, only when reading or writing the table",
+    ("cam._kernel_cache", "numba"): "the cache filler: numba's types, only when writing the table",
     # (importing module, imported module): why it may not be imported at the importing module's top
     ("cam.drive.ports", "parallel"):
         "optional dependency: pyparallel (cam[parport]), needed only when a /dev/parport* port is opened",
