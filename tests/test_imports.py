@@ -80,12 +80,12 @@ def _module_name(path: Path) -> str:
 MODULES = {_module_name(p): p for p in sorted((ROOT / "cam").rglob("*.py"))}
 
 
-def _is_type_checking(test: ast.expr) -> bool:
+def is_type_checking(test: ast.expr) -> bool:
     return (isinstance(test, ast.Name) and test.id == "TYPE_CHECKING") or (
         isinstance(test, ast.Attribute) and test.attr == "TYPE_CHECKING")
 
 
-def _imports(tree: ast.AST) -> Iterator[tuple[ast.stmt, Optional[str]]]:
+def import_statements(tree: ast.AST) -> Iterator[tuple[ast.stmt, Optional[str]]]:
     """Every import statement that runs, with the function it is in (None: runs when the module loads).
 
     Imports under ``if TYPE_CHECKING:`` never run and are left out.
@@ -96,7 +96,7 @@ def _imports(tree: ast.AST) -> Iterator[tuple[ast.stmt, Optional[str]]]:
                 yield child, function
             elif isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda)):
                 yield from walk(child, getattr(child, "name", "<lambda>") if function is None else function)
-            elif isinstance(child, ast.If) and _is_type_checking(child.test):
+            elif isinstance(child, ast.If) and is_type_checking(child.test):
                 for stmt in child.orelse:
                     yield from walk(ast.Module(body=[stmt], type_ignores=[]), function)
             else:
@@ -105,7 +105,7 @@ def _imports(tree: ast.AST) -> Iterator[tuple[ast.stmt, Optional[str]]]:
     return walk(tree, None)
 
 
-def _targets(importer: str, node: ast.stmt) -> list[str]:
+def import_targets(importer: str, node: ast.stmt) -> list[str]:
     """The modules an import statement loads, relative imports resolved; ``from p import m`` loads ``p.m``
     too when ``m`` is a module of the package."""
     if isinstance(node, ast.Import):
@@ -122,16 +122,16 @@ def _targets(importer: str, node: ast.stmt) -> list[str]:
     return [base] + [f"{base}.{a.name}" for a in node.names if f"{base}.{a.name}" in MODULES]
 
 
-def _ancestors(name: str) -> list[str]:
+def ancestors(name: str) -> list[str]:
     parts = name.split(".")
     return [".".join(parts[:i]) for i in range(1, len(parts))]
 
 
 @functools.lru_cache(maxsize=None)
-def _module_imports(name: str) -> list[tuple[ast.stmt, Optional[str]]]:
-    """The import statements of cam module ``name`` (:func:`_imports`), its source parsed once for every test."""
+def module_imports(name: str) -> list[tuple[ast.stmt, Optional[str]]]:
+    """The import statements of cam module ``name`` (:func:`import_statements`), its source parsed once for all."""
     path = MODULES[name]
-    return list(_imports(parsed_source(path)))
+    return list(import_statements(parsed_source(path)))
 
 
 def import_graph() -> dict[str, set[str]]:
@@ -142,14 +142,14 @@ def import_graph() -> dict[str, set[str]]:
     """
     graph: dict[str, set[str]] = {name: set() for name in MODULES}
     for importer, path in MODULES.items():
-        own = set(_ancestors(importer)) | {importer}
-        for node, function in _module_imports(importer):
+        own = set(ancestors(importer)) | {importer}
+        for node, function in module_imports(importer):
             if function is not None:
                 continue
-            for target in _targets(importer, node):
+            for target in import_targets(importer, node):
                 if target in MODULES:
                     graph[importer].add(target)
-                graph[importer].update(a for a in _ancestors(target) if a in MODULES and a not in own)
+                graph[importer].update(a for a in ancestors(target) if a in MODULES and a not in own)
     return graph
 
 
@@ -187,10 +187,10 @@ def function_level_imports() -> dict[tuple[str, str], list[str]]:
     """
     found: dict[tuple[str, str], list[str]] = {}
     for importer, path in MODULES.items():
-        for node, function in _module_imports(importer):
+        for node, function in module_imports(importer):
             if function is None:
                 continue
-            target = _targets(importer, node)[0]
+            target = import_targets(importer, node)[0]
             key = (importer, target if target.startswith("cam.") or target == "cam" else target.split(".")[0])
             found.setdefault(key, []).append(f"{path.relative_to(ROOT)}:{node.lineno} in {function}()")
     return found
@@ -310,7 +310,7 @@ def test_function_level_imports_are_only_the_allowed_ones():
 
 def test_function_level_import_finder_sees_nested_and_skips_type_checking():
     tree = ast.parse("import os\nif TYPE_CHECKING:\n    import numpy\ndef f():\n    def g():\n        import cv2\n")
-    assert [(n.names[0].name, f) for n, f in _imports(tree)] == [("os", None), ("cv2", "f")]
+    assert [(n.names[0].name, f) for n, f in import_statements(tree)] == [("os", None), ("cv2", "f")]
 
 
 def test_cli_functions_are_short():
