@@ -284,7 +284,8 @@ def test_cli_parser_imports_only_light_modules():
     assert seen <= {"cam", "cam.cli", "cam.cli.parser", "cam.cli.checks", "cam.choices", "cam.sniff", "cam.errors",
                     "cam.settings", "cam.limits", "cam.options",  # cam.limits, cam.options: standard library
                     "cam.drive", "cam.drive.machines",  # the registry's base: its back ends load when asked
-                    "cam.drive.maximus", "cam.drive.maximus.switch_options"}, seen  # emulate-maximus's options: argparse
+                    "cam.drive.maximus",  # emulate-maximus's switch options (argparse only):
+                    "cam.drive.maximus.switch_options"}, seen
 
 
 def test_only_the_emulator_command_imports_the_emulator():

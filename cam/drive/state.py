@@ -18,8 +18,8 @@ Frames (every position here says which):
 * **work frame**: steps from the active work offset's zero, ``work = machine - offset``; each offset is the
   machine position of its zero.
 
-Everything here is pure computation except :func:`read_state`, :func:`write_state`, :func:`state_dir` (from :mod:`cam.fileio`)
-(reads the environment) and :class:`MachineLock`.
+Everything here is pure computation except :func:`read_state`, :func:`write_state`, :func:`state_dir`
+(from :mod:`cam.fileio`: reads the environment) and :class:`MachineLock`.
 
 A missing file is a new machine, every offset zero, not homed: on the mock the tool at the home, position known;
 on a real port the position **unknown** (a new machine, or a ``--state`` typo: nothing says where the tool

@@ -48,8 +48,8 @@ from ..render.picture import encode_png, surface_picture
 from ..settings import DEFAULT_SETTINGS, MachineSettings
 from ..pins import axis_bits
 
-__all__ = ["Surface", "PinLog", "PinLogPart", "join_pin_logs", "Motion", "decode_pin_log", "read_pin_log", "iter_pin_log",
-           "write_pin_log", "carve", "motion_extent", "rising_edges", "decode_writes", "pixel_under"]
+__all__ = ["Surface", "PinLog", "PinLogPart", "join_pin_logs", "Motion", "decode_pin_log", "read_pin_log",
+           "iter_pin_log", "write_pin_log", "carve", "motion_extent", "rising_edges", "decode_writes", "pixel_under"]
 
 HEADER = "t_ns,data,strobe"
 
