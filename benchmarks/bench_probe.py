@@ -59,7 +59,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 import cam  # noqa: E402
-from cam.drive.chunks import plan_chunks  # noqa: E402
+from cam.motion.chunks import plan_chunks  # noqa: E402
 from cam.drive.homing import seek  # noqa: E402
 from cam.drive.placement import placed_home  # noqa: E402
 from cam.drive.ports import MockPort, SwitchSchedule, surface_height_mm  # noqa: E402

@@ -48,7 +48,7 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 
 import cam  # noqa: E402
 from cam.job.heightmap import depth_steps_of, load_heightmap, row_spacing_px  # noqa: E402
-from cam.drive.chunks import plan_chunks  # noqa: E402
+from cam.motion.chunks import plan_chunks  # noqa: E402
 from cam.kinds.jobs import JobOptions, prepare_job  # noqa: E402
 from cam.tool import parse_tool  # noqa: E402
 from cam.verify.toolcarve import carve_tool, compare_surface  # noqa: E402

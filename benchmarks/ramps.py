@@ -26,7 +26,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 import cam  # noqa: E402
-from cam.drive.ramps import ramp_periods  # noqa: E402
+from cam.motion.ramps import ramp_periods  # noqa: E402
 from cam.verify.ramps import check_ramps  # noqa: E402
 
 MODES = ("constant", "linear40", "lookahead")

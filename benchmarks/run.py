@@ -32,7 +32,7 @@ sys.path.insert(0, str(ROOT / "tests"))  # tests/support: the LinuxCNC reference
 
 import cam  # noqa: E402
 from cam.digitize.drawing import BLACK, RED, WHITE, Drawing  # noqa: E402
-from cam.drive.chunks import plan_chunks  # noqa: E402
+from cam.motion.chunks import plan_chunks  # noqa: E402
 
 
 def median_time(fn, repeats: int) -> tuple[float, object]:

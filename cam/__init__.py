@@ -47,7 +47,7 @@ _LAZY = {
     "load_hpgl": "cam.formats.hpgl", "parse_hpgl": "cam.formats.hpgl", "scan_hpgl": "cam.formats.hpgl",
     "iter_hpgl": "cam.formats.hpgl", "HpglDrawing": "cam.formats.hpgl", "HpglScan": "cam.formats.hpgl",
     "to_gcode": "cam.kinds.gcode_export", "save_gcode": "cam.kinds.gcode_export",
-    "plan_steps": "cam.drive.steps", "StepPlan": "cam.drive.steps",
+    "plan_steps": "cam.motion.steps", "StepPlan": "cam.motion.steps",
     "run": "cam.drive.session", "MachineSession": "cam.drive.session",
     "Controller": "cam.drive.runner", "RunResult": "cam.drive.runner",
     "simulate_surface": "cam.drive.runner",
@@ -109,7 +109,7 @@ if TYPE_CHECKING:  # pragma: no cover - for type checkers and editors only
     from .drive.ports import MockPort
     from .drive.runner import Controller, RunResult, simulate_surface
     from .drive.session import MachineSession, run
-    from .drive.steps import StepPlan, plan_steps
+    from .motion.steps import StepPlan, plan_steps
     from .kinds import job_kind, sniff_kind
     from .errors import CamError, DrawingError, ParseError, PlanError, PortError, SettingsError, TravelError
     from .formats.excellon import HoleList, load_excellon, parse_excellon

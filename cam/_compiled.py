@@ -19,25 +19,30 @@ folder is always safe.
 The command line says once on stderr when it compiles (see
 :func:`cam.cli._note_first_compile`).  ``python -m cam._kernel_cache compile``
 fills the cache with every kernel for the argument types the sample jobs use
-(:mod:`cam._kernel_signatures`), so that no later run compiles.
+(:mod:`cam._kernel_signatures`), so that no later run compiles; :func:`signatures` and
+:func:`is_cached` read that table here, below every layer (the planning worker loads the cached kernels
+with them, tests/test_layers.py).
 """
 from __future__ import annotations
 
+import importlib
 import os
 import sys
 from pathlib import Path
 from typing import Any, Callable, Optional
 
-__all__ = ["entry", "resolved", "KERNEL_MODULES", "ENTRIES", "cache_dir", "default_cache_dir", "use_cache_dir"]
+__all__ = ["entry", "resolved", "KERNEL_MODULES", "ENTRIES", "cache_dir", "default_cache_dir", "use_cache_dir",
+           "load_kernels", "signatures", "is_cached"]
 
 KERNEL_MODULES = (
     "cam.digitize._classify",
     "cam.digitize._kernels",
-    "cam.drive._kernels",
-    "cam.drive.ramps",
+    "cam.motion.kernels",
+    "cam.motion.ramps",
     "cam.job.drill_order",
     "cam.job._route",
     "cam.job._svg_kernels",
+    "cam.job._gcode_kernels",
     "cam.formats.hpgl",
     "cam.verify.ramps",
 )
@@ -104,3 +109,35 @@ def resolved(kernel: Any, *args: Any) -> Callable:
     """What serves ``kernel`` for arguments of the types of ``args`` (a caller making many small calls with the
     same types asks once): numba's dispatcher itself."""
     return kernel
+
+
+def load_kernels() -> None:
+    """Import every module of :data:`KERNEL_MODULES` (fills :data:`ENTRIES`)."""
+    for name in KERNEL_MODULES:
+        importlib.import_module(name)
+
+
+def signatures() -> list[tuple[str, Any, tuple]]:
+    """(kernel name, dispatcher, argument types) for every line of :mod:`cam._kernel_signatures` (the kernel
+    modules imported first); numba's types are loaded here, only when the table is read."""
+    import numba.core.types as nbtypes
+
+    from ._kernel_signatures import SIGNATURES
+
+    load_kernels()
+    names = dict(vars(nbtypes))
+    out = []
+    for qualname, sigs in SIGNATURES.items():
+        dispatcher = ENTRIES.get(qualname)
+        if dispatcher is None:
+            raise SystemExit(f"{qualname}: no such kernel (run python -m cam._kernel_cache collect)")
+        for expr in sigs:
+            out.append((qualname, dispatcher, tuple(eval(expr, names))))  # noqa: S307 - our own generated table
+    return out
+
+
+def is_cached(dispatcher: Any, arg_types: tuple) -> bool:
+    """Whether numba's cache holds ``dispatcher`` for ``arg_types`` on this machine (loads it if so)."""
+    if tuple(arg_types) in dispatcher.overloads:
+        return True
+    return dispatcher._cache.load_overload(arg_types, dispatcher.targetctx) is not None

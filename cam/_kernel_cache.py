@@ -16,7 +16,6 @@ changing a kernel's arguments; a test checks the list is complete).
 from __future__ import annotations
 
 import argparse
-import importlib
 import os
 import sys
 import tempfile
@@ -24,7 +23,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from ._compiled import ENTRIES, KERNEL_MODULES, cache_dir
+from ._compiled import ENTRIES, cache_dir, is_cached, load_kernels, signatures
 
 ROOT = Path(__file__).resolve().parent
 SAMPLES = ROOT.parent / "samples"
@@ -46,37 +45,6 @@ def type_expr(t: Any) -> str:
     if isinstance(t, (types.Integer, types.Float, types.NoneType)):
         return str(t)
     raise TypeError(f"no written form for argument type {t}")
-
-
-def load_kernels() -> None:
-    """Import every module of :data:`cam._compiled.KERNEL_MODULES` (fills :data:`cam._compiled.ENTRIES`)."""
-    for name in KERNEL_MODULES:
-        importlib.import_module(name)
-
-
-def signatures() -> list[tuple[str, Any, tuple]]:
-    """(kernel name, dispatcher, argument types) for every line of :mod:`cam._kernel_signatures`."""
-    import numba.core.types as nbtypes
-
-    from ._kernel_signatures import SIGNATURES
-
-    load_kernels()
-    names = dict(vars(nbtypes))
-    out = []
-    for qualname, sigs in SIGNATURES.items():
-        dispatcher = ENTRIES.get(qualname)
-        if dispatcher is None:
-            raise SystemExit(f"{qualname}: no such kernel (run python -m cam._kernel_cache collect)")
-        for expr in sigs:
-            out.append((qualname, dispatcher, tuple(eval(expr, names))))  # noqa: S307 - our own generated table
-    return out
-
-
-def is_cached(dispatcher: Any, arg_types: tuple) -> bool:
-    """Whether numba's cache holds ``dispatcher`` for ``arg_types`` on this machine (loads it if so)."""
-    if tuple(arg_types) in dispatcher.overloads:
-        return True
-    return dispatcher._cache.load_overload(arg_types, dispatcher.targetctx) is not None
 
 
 def compile_all(progress: bool = True) -> tuple[int, int]:

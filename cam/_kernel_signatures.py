@@ -20,35 +20,14 @@ SIGNATURES = {
     'cam.digitize._kernels.trace_layers_kernel': [
         "(Array(int32, 1, 'C'), int64, Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), )",
     ],
-    'cam.drive._kernels.chunk_writes_kernel': [
-        "(Array(uint8, 1, 'C'), Array(uint8, 1, 'C'), Array(int64, 1, 'C'), uint8, int64, )",
-    ],
-    'cam.drive._kernels.move_extent_kernel': [
-        "(Array(int64, 2, 'C'), Array(int64, 1, 'C'), Array(int64, 2, 'C'), Array(int64, 2, 'C'), )",
-    ],
-    'cam.drive._kernels.move_periods_kernel': [
-        "(Array(int64, 2, 'C'), Array(int64, 1, 'C'), )",
-    ],
-    'cam.drive._kernels.net_steps_kernel': [
-        "(Array(uint8, 1, 'C'), int64, Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), )",
-    ],
-    'cam.drive._kernels.pin_rows_kernel': [
-        "(Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), )",
-    ],
-    'cam.drive._kernels.straight_rows_kernel': [
-        "(Array(float64, 2, 'C'), Array(float64, 2, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), )",
-    ],
-    'cam.drive._kernels.stretch_kernel': [
-        "(Array(int64, 2, 'C'), int64, int64, Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), int64, int64, int64, )",
-    ],
-    'cam.drive.ramps._plan_window': [
-        "(Array(uint8, 1, 'C'), Array(int64, 1, 'C'), Array(boolean, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), boolean, )",
-    ],
     'cam.formats.hpgl._interpret': [
         "(int64, int64, Array(int64, 1, 'C'), Array(int32, 1, 'C'), Array(int32, 1, 'C'), Array(int32, 1, 'C'), Array(int32, 1, 'C'), Array(float64, 1, 'C'), Array(int32, 1, 'C'), Array(int32, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(int32, 1, 'C'), Array(int32, 1, 'C'), Array(boolean, 1, 'C'), Array(int32, 1, 'C'), Array(int64, 1, 'C'), boolean, Array(int64, 1, 'C'), )",
     ],
     'cam.formats.hpgl._tokenize': [
         "(Array(uint8, 1, 'C', readonly=True), boolean, Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int32, 1, 'C'), Array(int32, 1, 'C'), Array(int32, 1, 'C'), Array(int32, 1, 'C'), Array(float64, 1, 'C'), Array(int32, 1, 'C'), Array(int32, 1, 'C'), )",
+    ],
+    'cam.job._gcode_kernels.straight_rows_kernel': [
+        "(Array(float64, 2, 'C'), Array(float64, 2, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), )",
     ],
     'cam.job._route.bfs_kernel': [
         "(Array(boolean, 2, 'C'), int64, int64, int64, Array(int32, 1, 'C'), )",
@@ -73,6 +52,27 @@ SIGNATURES = {
     ],
     'cam.job.drill_order._nn_path': [
         "(Array(float64, 2, 'C'), Array(float64, 1, 'C'), )",
+    ],
+    'cam.motion.kernels.chunk_writes_kernel': [
+        "(Array(uint8, 1, 'C'), Array(uint8, 1, 'C'), Array(int64, 1, 'C'), uint8, int64, )",
+    ],
+    'cam.motion.kernels.move_extent_kernel': [
+        "(Array(int64, 2, 'C'), Array(int64, 1, 'C'), Array(int64, 2, 'C'), Array(int64, 2, 'C'), )",
+    ],
+    'cam.motion.kernels.move_periods_kernel': [
+        "(Array(int64, 2, 'C'), Array(int64, 1, 'C'), )",
+    ],
+    'cam.motion.kernels.net_steps_kernel': [
+        "(Array(uint8, 1, 'C'), int64, Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), )",
+    ],
+    'cam.motion.kernels.pin_rows_kernel': [
+        "(Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), )",
+    ],
+    'cam.motion.kernels.stretch_kernel': [
+        "(Array(int64, 2, 'C'), int64, int64, Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), int64, int64, int64, )",
+    ],
+    'cam.motion.ramps._plan_window': [
+        "(Array(uint8, 1, 'C'), Array(int64, 1, 'C'), Array(boolean, 1, 'C'), Array(int64, 1, 'C'), Array(int64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), Array(float64, 1, 'C'), boolean, )",
     ],
     'cam.verify.ramps._standstills_kernel': [
         "(Array(int64, 1, 'C'), float64, Array(boolean, 1, 'C'), )",

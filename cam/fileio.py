@@ -1,5 +1,5 @@
-"""File helpers: atomic writes (a failed run never leaves a half-written output behind) and bounded reads
-whose failures are one-line parse errors naming the file."""
+"""File helpers: atomic writes (a failed run never leaves a half-written output behind), bounded reads
+whose failures are one-line parse errors naming the file, and the user's state folder (:func:`state_dir`)."""
 from __future__ import annotations
 
 import glob
@@ -7,11 +7,11 @@ import os
 import secrets
 import time
 from pathlib import Path
-from typing import Iterable, Optional
+from typing import Iterable, Mapping, Optional
 
 from .errors import CamError, ParseError
 
-__all__ = ["atomic_write_bytes", "atomic_write_text", "read_bytes", "read_text"]
+__all__ = ["atomic_write_bytes", "atomic_write_text", "read_bytes", "read_text", "state_dir"]
 
 _NEW_FILE_MODE = 0o666
 """Mode asked for a new output; the process umask takes its bits away (0o644 under umask 022), as for open()."""
@@ -151,3 +151,15 @@ def read_text(path: str | os.PathLike, *, not_text: str, max_bytes: Optional[int
     except UnicodeDecodeError:
         raise ParseError(f"{p}:1: {not_text}") from None
     return p, text.replace("\r\n", "\n").replace("\r", "\n")
+
+
+def state_dir(environ: Optional[Mapping[str, str]] = None) -> Path:
+    """The user's state folder for `cam`: ``$XDG_STATE_HOME/cam``, else ``~/.local/state/cam``.
+
+    The machine state files (:mod:`cam.drive.state`), the default machine file (:mod:`cam.machine_file`) and the
+    default tool table (:mod:`cam.tool_table`) live there; ``environ`` stands for :data:`os.environ` (tests)."""
+    env = os.environ if environ is None else environ
+    base = env.get("XDG_STATE_HOME") or ""
+    if not os.path.isabs(base):  # the XDG rule: a relative path is ignored
+        base = os.path.join(os.path.expanduser("~"), ".local", "state")
+    return Path(base) / "cam"

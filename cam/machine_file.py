@@ -35,9 +35,8 @@ else:  # pragma: no cover
     import tomli as tomllib
 
 from . import settings as _settings
-from .drive.state import state_dir
 from .errors import SettingsError
-from .fileio import atomic_write_bytes, atomic_write_text
+from .fileio import atomic_write_bytes, atomic_write_text, state_dir
 from .settings import (COMMAND_KEYS, MAX_TRAVEL_STEPS, MIN_MM_PER_STEP, MIN_SPEED_MM_S, RAMP_MODES, MachineSettings,
                        settings_from_mapping)
 from .tool import TOOL_SHAPES

@@ -21,7 +21,7 @@ and then keeps its built-in value.  An unknown key or a bad value is a
     mm_per_step_z = 0.0157
     half_step = false
 
-    # speed ramps (cam.drive.ramps): "lookahead" (default), "linear40" or "constant"
+    # speed ramps (cam.motion.ramps): "lookahead" (default), "linear40" or "constant"
     ramp = "lookahead"
     start_speed_x_mm_s = 1.445    # pull-in: the axis starts and stops at once at this speed
     start_speed_y_mm_s = 1.445
@@ -140,7 +140,7 @@ __all__ = ["Travel", "Pins", "Maximus", "Commands", "COMMAND_KEYS", "Inputs", "H
            "parse_surface", "MachineSettings", "load_settings", "DEFAULT_SETTINGS", "RAMP_MODES", "INPUT_PINS", "INPUT_BITS", "SWITCH_NAMES"]
 
 RAMP_MODES = ("lookahead", "linear40", "constant")
-"""Speed ramp modes (see :mod:`cam.drive.ramps`)."""
+"""Speed ramp modes (see :mod:`cam.motion.ramps`)."""
 MIN_SPEED_MM_S = 0.01
 """The slowest start speed, top speed and acceleration (mm/s, mm/s^2) a setting may give: slower ones made
 step periods of hours and machine times that overflow."""

@@ -39,7 +39,8 @@ MAX_V_ANGLE_DEG = 179.0
 """A V bit's included angle is 1..179 degrees: a sharper one would cut a line 0.3 mm wide deeper than any
 machine's travel (the depth grows as 1 / tan(angle / 2), infinite at 0), a flatter one would be no V bit."""
 
-__all__ = ["Tool", "POINT", "parse_tool", "drop_depth_px", "reach_depth_px", "tool_of_settings", "corner_depth_px", "footprint_px", "TOOL_SHAPES"]
+__all__ = ["Tool", "POINT", "parse_tool", "drop_depth_px", "reach_depth_px", "tool_of_settings", "corner_depth_px",
+           "footprint_px", "TOOL_SHAPES", "lowest_under_footprint"]
 
 TOOL_SHAPES = ("point", "flat", "ball", "v")
 V_SHANK_MM = 3.175
@@ -242,8 +243,8 @@ def _over_footprint(a: np.ndarray, dy: np.ndarray, dx: np.ndarray, add: np.ndarr
     return out
 
 
-def _lowest(d: np.ndarray, dy: np.ndarray, dx: np.ndarray, rise: np.ndarray, out_hw: tuple[int, int],
-            shift: int) -> np.ndarray:
+def lowest_under_footprint(d: np.ndarray, dy: np.ndarray, dx: np.ndarray, rise: np.ndarray, out_hw: tuple[int, int],
+                           shift: int) -> np.ndarray:
     """``floor(min over k of d[i + dy_k - shift, j + dx_k - shift] + rise_k)`` for each ``(i, j)`` of
     ``out_hw`` (whole Z pixels, rounded down once, after the least is taken: never below any target); outside
     ``d`` is the surface (0)."""
@@ -274,7 +275,7 @@ def drop_depth_px(depth_px: np.ndarray, tool: Tool, px_mm: float, zpx_mm: float)
     if tool.is_point:
         return d.copy()
     dy, dx, rise = footprint_px(tool, px_mm, zpx_mm)
-    return np.maximum(np.minimum(_lowest(d, dy, dx, rise, d.shape, 0), d), 0)
+    return np.maximum(np.minimum(lowest_under_footprint(d, dy, dx, rise, d.shape, 0), d), 0)
 
 
 def corner_depth_px(depth_px: np.ndarray, tool: Tool, px_mm: float, zpx_mm: float) -> np.ndarray:
@@ -287,7 +288,7 @@ def corner_depth_px(depth_px: np.ndarray, tool: Tool, px_mm: float, zpx_mm: floa
     """
     d = np.asarray(depth_px, np.int64)
     dy, dx, rise = footprint_px(tool, px_mm, zpx_mm, centre=(-0.5, -0.5))
-    return np.maximum(_lowest(d, dy, dx, rise, (d.shape[0] + 1, d.shape[1] + 1), 0), 0)
+    return np.maximum(lowest_under_footprint(d, dy, dx, rise, (d.shape[0] + 1, d.shape[1] + 1), 0), 0)
 
 
 def reach_depth_px(allowed_px: np.ndarray, tool: Tool, px_mm: float, zpx_mm: float) -> np.ndarray:

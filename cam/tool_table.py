@@ -37,8 +37,7 @@ else:  # pragma: no cover
     import tomli as tomllib
 
 from .errors import CamError
-from .drive.state import state_dir
-from .fileio import atomic_write_text
+from .fileio import atomic_write_text, state_dir
 from .limits import MAX_TOOL_NUMBER
 from .tool import MAX_MM, MAX_V_ANGLE_DEG, MIN_MM, MIN_V_ANGLE_DEG, V_SHANK_MM, Tool
 
@@ -187,7 +186,7 @@ class ToolTable:
 
 def tool_table_path(machine_file: Optional[str | os.PathLike], environ: Optional[Mapping[str, str]] = None) -> Path:
     """Where the tool table of ``machine_file`` is kept: beside it, ``NAME.tools.toml`` for ``NAME.toml``; with
-    no machine file (None or ""), ``{state folder}/default.tools.toml`` (:func:`cam.drive.state.state_dir`).
+    no machine file (None or ""), ``{state folder}/default.tools.toml`` (:func:`cam.fileio.state_dir`).
 
     >>> tool_table_path("shop/mill.toml").as_posix()
     'shop/mill.tools.toml'

@@ -78,11 +78,11 @@ def _out_of_memory(exc: BaseException) -> bool:
 
 
 def _load_cached_kernels() -> None:
-    """Load the compiled kernels numba's cache holds (cam._kernel_cache's table; none is compiled here) before the
-    memory limit: numba links a cached kernel into the process with LLVM on its first call, and under an
+    """Load the compiled kernels numba's cache holds (the table of cam._kernel_signatures; none is compiled here)
+    before the memory limit: numba links a cached kernel into the process with LLVM on its first call, and under an
     address-space limit that first call took about two minutes, mostly system time, so a job over the memory
     limit ran into the 120 s time limit instead (test_planning_over_the_work_memory_limit_is_a_clean_error)."""
-    from ._kernel_cache import is_cached, signatures
+    from ._compiled import is_cached, signatures
 
     for _name, dispatcher, arg_types in signatures():
         if is_cached(dispatcher, arg_types):

@@ -13,7 +13,7 @@ import pytest
 import cam
 from cam.digitize import drawing as drawing_module
 from cam.digitize.image_size import image_size_px
-from cam.drive.chunks import plan_chunks
+from cam.motion.chunks import plan_chunks
 from cam.job import drawing as planner
 from cam.job.drawing import check_drawing_size, max_drawing_size_px
 from cam.kinds.jobs import JobOptions, prepare_job

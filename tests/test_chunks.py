@@ -1,4 +1,4 @@
-"""The step plan made a chunk at a time (cam.drive.chunks) equals the whole plan, and runs in bounded memory."""
+"""The step plan made a chunk at a time (cam.motion.chunks) equals the whole plan, and runs in bounded memory."""
 from __future__ import annotations
 
 import tracemalloc
@@ -7,11 +7,11 @@ import numpy as np
 import pytest
 
 import cam
-from cam.drive.chunks import lookahead_margin, plan_chunks
+from cam.motion.chunks import lookahead_margin, plan_chunks
 from cam.drive.ports import MockPort
 from cam.drive.runner import Controller, run
 from cam.kinds.jobs import prepare_job
-from cam.drive.steps import plan_steps
+from cam.motion.steps import plan_steps
 from cam.job.model import CUT, Job
 from cam.verify.pinlog import PinLog, carve, decode_pin_log, read_pin_log
 from cam.verify.ramps import check_ramps
@@ -127,7 +127,7 @@ def test_windows_end_at_rests_and_plan_what_the_whole_job_plans(chunk, monkeypat
     """A look-ahead window ends at the nearest rest outside its chunk: on a machine file of long ramps (a margin
     of about a million periods) a job of tool changes every few hundred periods is planned in windows of about
     its chunk's size, and the writes are those of the whole job planned at once."""
-    from cam.drive import chunks as chunks_module
+    from cam.motion import chunks as chunks_module
 
     s = cam.MachineSettings().replace(ramp="lookahead", delay_xy_ms=0.05, delay_z_ms=0.05, max_speed_x_mm_s=600.0,
                                       max_speed_y_mm_s=600.0, max_speed_z_mm_s=300.0, travel=BIG)

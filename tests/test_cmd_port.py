@@ -13,7 +13,7 @@ import pytest
 import cam
 from cam.drive.cmd_port import (CommandMockPort, CommandParallelPort, check_command_timing, check_commands,
                                 needed_commands, step_writes_to_commands)
-from cam.drive.pins import axis_bits
+from cam.pins import axis_bits
 from cam.drive.ports import MockPort
 from cam.errors import CamError, CapabilityError, SettingsError
 from cam.settings import Commands, MachineSettings, settings_from_mapping

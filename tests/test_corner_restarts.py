@@ -5,8 +5,8 @@ import dataclasses
 import numpy as np
 
 import cam
-from cam.drive.pins import axis_bits
-from cam.drive.steps import plan_steps
+from cam.pins import axis_bits
+from cam.motion.steps import plan_steps
 from cam.settings import DEFAULT_SETTINGS
 from cam.verify.pinlog import PinLog, rising_edges
 from cam.verify.ramps import STANDSTILL_STEPS, check_ramps

@@ -17,7 +17,7 @@ import pytest
 import cam
 import cam.kinds.jobs as jobs
 from cam.cli.planning import carved_surface, write_job_preview, write_preview
-from cam.drive.chunks import plan_chunks
+from cam.motion.chunks import plan_chunks
 from cam.kinds.gcode_export import to_gcode
 from cam.job.drawing_stream import DrawingJobStream, stream_drawing
 from cam.kinds.jobs import JobOptions, prepare_job

@@ -13,7 +13,7 @@ import cam
 import cam.job.drawing_stream
 import cam.kinds.jobs as jobs
 from cam.cli import main
-from cam.drive.chunks import plan_chunks
+from cam.motion.chunks import plan_chunks
 from cam.drive.ports import MockPort
 from cam.drive.runner import run
 from cam.job.drawing_stream import stream_drawing

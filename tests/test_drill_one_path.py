@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import cam
-from cam.drive.chunks import plan_chunks
+from cam.motion.chunks import plan_chunks
 from cam.drive.ports import MockPort
 from cam.drive.runner import run
 from cam.formats.excellon import load_excellon, parse_excellon

@@ -7,7 +7,7 @@ import pytest
 from scipy.spatial import cKDTree
 
 import cam
-from cam.drive.steps import plan_steps
+from cam.motion.steps import plan_steps
 from cam.formats.gcode import load_gcode, parse_gcode
 from cam.job.gcode import plan_gcode
 from support.lcnc import canonical_polyline_mm, parse_canonical, run_rs274

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 import cam
-from cam.drive.chunks import plan_chunks
+from cam.motion.chunks import plan_chunks
 from cam.drive.ports import MockPort
 from cam.drive.runner import run
 from cam.formats import _gcode_lines
@@ -300,7 +300,7 @@ def test_a_big_file_runs_through_cam_drill_in_bounded_memory(tmp_path):
     """Two million lines (29 MB) planned, checked and run on the mock by ``cam drill --yes``: the peak RSS of the
     process stays under 500 MB (the file's moves are never all held).  The thesis machine's step delays: with much
     shorter ones (0.05 ms) the look-ahead ramps plan windows of a million periods on each side of a chunk, which
-    alone take some 350 MB (cam/drive/chunks.py, whatever the job)."""
+    alone take some 350 MB (cam/motion/chunks.py, whatever the job)."""
     n = 2_000_000
     path = tmp_path / "big.ngc"
     _big_program(path, n)

@@ -14,7 +14,7 @@ import pytest
 
 from cam.choices import is_height_map
 from cam.job.heightmap_level import HeightMap, save_height_map
-from cam.render.map_picture import CUT_RGB, MARGIN_PX, height_map_picture, map_pixel
+from cam.job.map_picture import CUT_RGB, MARGIN_PX, height_map_picture, map_pixel
 from cam.sniff import sniff_height_map
 from conftest import one_line_error, ok, run_cli
 

@@ -11,10 +11,10 @@ import pytest
 
 import cam
 import cam.kinds.jobs as jobs
-from cam.drive.chunks import plan_chunks
+from cam.motion.chunks import plan_chunks
 from cam.drive.ports import MockPort
 from cam.drive.runner import run
-from cam.drive.steps import plan_steps
+from cam.motion.steps import plan_steps
 from cam.errors import CamError
 from cam.formats.hpgl import load_hpgl
 from cam.job.hpgl import plan_hpgl

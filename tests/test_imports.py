@@ -36,17 +36,19 @@ suffixes and sniffer by ``--help``, the sniffer and every flag's check, so it lo
 a hook plans, reports or exports a file."""
 
 FUNCTION_LEVEL_IMPORTS = {
-    ("cam.drive.ports", "cam.drive._kernels"): "numba: loaded only when the mock streams its pin log to a file, so "
+    ("cam.drive.ports", "cam.motion.kernels"): "numba: loaded only when the mock streams its pin log to a file, so "
                                               "opening a port stays light",
     ("cam.settings", "cam.tool"): "cam.tool needs numpy; the settings module stays light for --help",
     ("cam.cli.parser", "cam.errors"): "--tool is checked by cam.tool (numpy) only when given: --help stays light",
     ("cam.cli.parser", "cam.tool"): "cam.tool needs numpy; the parser stays light for --help",
     ("cam.verify.toolcarve", "cv2"): "only a notebook's picture of a comparison needs OpenCV's PNG encoder",
-    ("cam._kernel_cache", "cam._kernel_signatures"): "the cache filler: the table is read only when compiling",
+    ("cam._compiled", "cam._kernel_signatures"): "the kernels' table is read only when compiling or loading them",
+    ("cam._compiled", "numba"): "numba's types, only when the kernels' table is read: importing the kernel list "
+                                "loads no numba",
     ("cam._kernel_cache", "cam.cli"): "the cache filler: the sample jobs run only when collecting argument types",
-    ("cam.worker", "cam._kernel_cache"): "the worker child loads the cached kernels before its memory limit; the "
+    ("cam.worker", "cam._compiled"): "the worker child loads the cached kernels before its memory limit; the "
                                          "parent never needs the table",
-    ("cam._kernel_cache", "numba"): "the cache filler: numba's types, only when reading or writing the table",
+    ("cam._kernel_cache", "numba"): "the cache filler: numba's types, only when writing the table",
     # (importing module, imported module): why it may not be imported at the importing module's top
     ("cam.drive.ports", "parallel"):
         "optional dependency: pyparallel (cam[parport]), needed only when a /dev/parport* port is opened",
@@ -82,12 +84,12 @@ def _module_name(path: Path) -> str:
 MODULES = {_module_name(p): p for p in sorted((ROOT / "cam").rglob("*.py"))}
 
 
-def _is_type_checking(test: ast.expr) -> bool:
+def is_type_checking(test: ast.expr) -> bool:
     return (isinstance(test, ast.Name) and test.id == "TYPE_CHECKING") or (
         isinstance(test, ast.Attribute) and test.attr == "TYPE_CHECKING")
 
 
-def _imports(tree: ast.AST) -> Iterator[tuple[ast.stmt, Optional[str]]]:
+def import_statements(tree: ast.AST) -> Iterator[tuple[ast.stmt, Optional[str]]]:
     """Every import statement that runs, with the function it is in (None: runs when the module loads).
 
     Imports under ``if TYPE_CHECKING:`` never run and are left out.
@@ -98,7 +100,7 @@ def _imports(tree: ast.AST) -> Iterator[tuple[ast.stmt, Optional[str]]]:
                 yield child, function
             elif isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda)):
                 yield from walk(child, getattr(child, "name", "<lambda>") if function is None else function)
-            elif isinstance(child, ast.If) and _is_type_checking(child.test):
+            elif isinstance(child, ast.If) and is_type_checking(child.test):
                 for stmt in child.orelse:
                     yield from walk(ast.Module(body=[stmt], type_ignores=[]), function)
             else:
@@ -107,7 +109,7 @@ def _imports(tree: ast.AST) -> Iterator[tuple[ast.stmt, Optional[str]]]:
     return walk(tree, None)
 
 
-def _targets(importer: str, node: ast.stmt) -> list[str]:
+def import_targets(importer: str, node: ast.stmt) -> list[str]:
     """The modules an import statement loads, relative imports resolved; ``from p import m`` loads ``p.m``
     too when ``m`` is a module of the package."""
     if isinstance(node, ast.Import):
@@ -124,16 +126,16 @@ def _targets(importer: str, node: ast.stmt) -> list[str]:
     return [base] + [f"{base}.{a.name}" for a in node.names if f"{base}.{a.name}" in MODULES]
 
 
-def _ancestors(name: str) -> list[str]:
+def ancestors(name: str) -> list[str]:
     parts = name.split(".")
     return [".".join(parts[:i]) for i in range(1, len(parts))]
 
 
 @functools.lru_cache(maxsize=None)
-def _module_imports(name: str) -> list[tuple[ast.stmt, Optional[str]]]:
-    """The import statements of cam module ``name`` (:func:`_imports`), its source parsed once for every test."""
+def module_imports(name: str) -> list[tuple[ast.stmt, Optional[str]]]:
+    """The import statements of cam module ``name`` (:func:`import_statements`), its source parsed once for all."""
     path = MODULES[name]
-    return list(_imports(parsed_source(path)))
+    return list(import_statements(parsed_source(path)))
 
 
 def import_graph() -> dict[str, set[str]]:
@@ -144,14 +146,14 @@ def import_graph() -> dict[str, set[str]]:
     """
     graph: dict[str, set[str]] = {name: set() for name in MODULES}
     for importer, path in MODULES.items():
-        own = set(_ancestors(importer)) | {importer}
-        for node, function in _module_imports(importer):
+        own = set(ancestors(importer)) | {importer}
+        for node, function in module_imports(importer):
             if function is not None:
                 continue
-            for target in _targets(importer, node):
+            for target in import_targets(importer, node):
                 if target in MODULES:
                     graph[importer].add(target)
-                graph[importer].update(a for a in _ancestors(target) if a in MODULES and a not in own)
+                graph[importer].update(a for a in ancestors(target) if a in MODULES and a not in own)
     return graph
 
 
@@ -189,10 +191,10 @@ def function_level_imports() -> dict[tuple[str, str], list[str]]:
     """
     found: dict[tuple[str, str], list[str]] = {}
     for importer, path in MODULES.items():
-        for node, function in _module_imports(importer):
+        for node, function in module_imports(importer):
             if function is None:
                 continue
-            target = _targets(importer, node)[0]
+            target = import_targets(importer, node)[0]
             key = (importer, target if target.startswith("cam.") or target == "cam" else target.split(".")[0])
             found.setdefault(key, []).append(f"{path.relative_to(ROOT)}:{node.lineno} in {function}()")
     return found
@@ -286,7 +288,9 @@ def test_cli_parser_imports_only_light_modules():
     assert seen <= {"cam", "cam.cli", "cam.cli.parser", "cam.cli.checks", "cam.choices", "cam.sniff", "cam.errors",
                     "cam.kinds",  # the file kinds' registry (its kind modules are light: KIND_HOOK_MODULES)
                     "cam.settings", "cam.limits", "cam.options",  # cam.limits, cam.options: standard library
-                    "cam.drive", "cam.drive.machines"}, seen  # the registry's base: its back ends load when asked
+                    "cam.drive", "cam.drive.machines",  # the registry's base: its back ends load when asked
+                    "cam.drive.maximus",  # emulate-maximus's switch options (argparse only):
+                    "cam.drive.maximus.switch_options"}, seen
 
 
 def test_only_the_emulator_command_imports_the_emulator():
@@ -312,7 +316,7 @@ def test_function_level_imports_are_only_the_allowed_ones():
 
 def test_function_level_import_finder_sees_nested_and_skips_type_checking():
     tree = ast.parse("import os\nif TYPE_CHECKING:\n    import numpy\ndef f():\n    def g():\n        import cv2\n")
-    assert [(n.names[0].name, f) for n, f in _imports(tree)] == [("os", None), ("cv2", "f")]
+    assert [(n.names[0].name, f) for n, f in import_statements(tree)] == [("os", None), ("cv2", "f")]
 
 
 def test_cli_functions_are_short():

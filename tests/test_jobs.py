@@ -83,7 +83,7 @@ def test_digitized_matrix_and_3d_profile_jobs(tmp_path):
 
 
 def test_gcode_job_with_tool_change(tmp_path):
-    from cam.drive.steps import plan_steps
+    from cam.motion.steps import plan_steps
     from cam.formats.gcode import load_gcode
     from cam.job.gcode import plan_gcode
 

@@ -19,7 +19,8 @@ from pathlib import Path
 import pytest
 
 from cam import _compiled
-from cam._kernel_cache import load_kernels, sample_commands, type_expr
+from cam._compiled import load_kernels
+from cam._kernel_cache import sample_commands, type_expr
 
 ROOT = Path(__file__).resolve().parents[1]
 NOTE = "first run only"

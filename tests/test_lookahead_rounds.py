@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 import cam
-from cam.drive import chunks, ramps
+from cam.motion import chunks, ramps
 from cam.formats.hpgl import load_hpgl
 from cam.job.hpgl import plan_hpgl
 

@@ -23,7 +23,7 @@ from cam.cli import main  # noqa: E402
 from cam.drive.maximus.board import LinkFault, MaximusBoard  # noqa: E402
 from cam.drive.maximus._link import SLOWER_FACTOR  # noqa: E402
 from cam.drive.maximus.packets import switch_time_ns  # noqa: E402
-from cam.drive.maximus._trust import fault_marker  # noqa: E402
+from cam.drive.maximus.trust import fault_marker  # noqa: E402
 from cam.drive.maximus.protocol import (  # noqa: E402
     ATOFFSETPOS, DRILLMODE1DONE, DRILLMODE1INITIALIZED, DRILLMODE1ON, JOGMODEDONE, JOGMODEOFF, JOGMODEON,
     ONEHOLEDRILLED,

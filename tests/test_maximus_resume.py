@@ -23,7 +23,7 @@ import serial
 
 import cam.sim.maximus as maximus_sim
 from cam.cli import main
-from cam.cli.parser import MAXIMUS_SWITCHES
+from cam.drive.maximus.switch_options import MAXIMUS_SWITCHES
 from cam.drive.journal import read_journal
 from cam.drive.maximus.board import MAXIMUS_SETTINGS, MaximusBoard, maximus_holes
 from cam.drive.maximus.packets import drill_moves, jog_packet

@@ -1,11 +1,11 @@
-"""The extent of a job's motion from its moves (:func:`cam.drive.chunks.move_extent`) equals the extent of its
+"""The extent of a job's motion from its moves (:func:`cam.motion.chunks.move_extent`) equals the extent of its
 decoded writes, and the machine time without writes equals the writes' last time, for every ramp mode."""
 import dataclasses
 
 import numpy as np
 import pytest
 
-from cam.drive.chunks import plan_chunks
+from cam.motion.chunks import plan_chunks
 from cam.job.model import travel_job
 from cam.settings import DEFAULT_SETTINGS
 from cam.verify.pinlog import motion_extent

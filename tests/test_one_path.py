@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 import cam
-from cam.drive.chunks import plan_chunks
+from cam.motion.chunks import plan_chunks
 from cam.drive.runner import Controller, Cursor, run
 from cam.kinds.jobs import JobOptions, prepare_job
 from cam.verify.pinlog import read_pin_log, write_pin_log
@@ -110,8 +110,8 @@ def test_any_chunk_size_makes_the_same_writes(ramp, chunk_periods):
 
 
 def test_linear40_in_chunks_equals_the_whole_job_ramp():
-    """The streamed linear40 ramp is the seed's ramp over the whole job's periods (cam.drive.ramps)."""
-    from cam.drive.ramps import ramp_periods
+    """The streamed linear40 ramp is the seed's ramp over the whole job's periods (cam.motion.ramps)."""
+    from cam.motion.ramps import ramp_periods
     from cam.formats.gcode import load_gcode
     from cam.job.gcode import plan_gcode
 

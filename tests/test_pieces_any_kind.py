@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import cam
-from cam.drive.chunks import plan_chunks
+from cam.motion.chunks import plan_chunks
 from cam.kinds.gcode_export import to_gcode
 from cam.kinds.jobs import JobOptions, motion_picture, prepare_job
 from cam.job.model import JobLike

@@ -3,7 +3,7 @@ import io
 
 import numpy as np
 
-from cam.drive._kernels import pin_rows_kernel
+from cam.motion.kernels import pin_rows_kernel
 
 
 def test_pin_rows_are_the_text_savetxt_writes():

@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 
 import cam
-from cam.drive.ramps import RAMP_STEPS_LINEAR40, ramp_periods
+from cam.motion.ramps import RAMP_STEPS_LINEAR40, ramp_periods
 from cam.verify.ramps import check_axis_steps, check_ramps
-from cam.drive.pins import axis_bits
-from cam.drive.steps import plan_steps
+from cam.pins import axis_bits
+from cam.motion.steps import plan_steps
 from cam.errors import SettingsError
 from cam.settings import DEFAULT_SETTINGS, settings_from_mapping
 

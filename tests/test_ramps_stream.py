@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import cam
-from cam.drive.chunks import plan_chunks
+from cam.motion.chunks import plan_chunks
 from cam.verify.pinlog import PinLog, write_pin_log
 from cam.verify.ramps import check_ramps
 from conftest import SAMPLES
@@ -82,7 +82,7 @@ def test_a_chunked_plans_chunks_pass_the_checker():
 def test_broken_logs_are_reported_or_refused_in_one_line():
     """Two steps of one axis at one time break R1 (not a division by zero); time going back is refused."""
     from cam.errors import CamError
-    clock = int(cam.drive.pins.axis_bits(S)[0][0])
+    clock = int(cam.pins.axis_bits(S)[0][0])
     t = np.array([0, 10_000_000, 10_000_000, 10_000_000, 20_000_000, 30_000_000, 40_000_000], np.int64)
     data = np.array([0, clock, 0, clock, 0, clock, 0], np.uint8)
     report = check_ramps(PinLog(t, data, np.zeros(len(t), np.uint8)), S)

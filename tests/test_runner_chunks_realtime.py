@@ -7,7 +7,7 @@ import pytest
 
 import cam
 import cam.kinds.jobs as jobs
-from cam.drive.chunks import ChunkedPlan, plan_chunks
+from cam.motion.chunks import ChunkedPlan, plan_chunks
 from cam.drive.runner import FINISHED, STOPPED, Controller, Cursor, run
 from cam.drive.session import MachineSession
 from cam.kinds.jobs import JobOptions, prepare_job

@@ -7,7 +7,7 @@ import pytest
 
 import cam
 from cam.drive.runner import EMERGENCY_STOPPED, FINISHED, STOPPED
-from cam.drive.pins import axis_bits
+from cam.pins import axis_bits
 
 from conftest import assert_surface_equal, drawing_from_rows, expected_surface_2d
 

@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 import cam
-from cam.drive.steps import plan_steps
+from cam.motion.steps import plan_steps
 from cam.settings import DEFAULT_SETTINGS
 
 from conftest import SAMPLES
@@ -127,7 +127,7 @@ def test_the_position_at_each_pause_is_the_decoded_one(monkeypatch, tmp_path, ba
     pause is told, and the run's end, are those decoded from the pin log, with pauses at chunk borders and inside
     chunks, and with batches that end between pauses (a small ``_BATCH``)."""
     from cam.drive import runner
-    from cam.drive.chunks import plan_chunks
+    from cam.motion.chunks import plan_chunks
     from cam.formats.hpgl import load_hpgl
     from cam.job.hpgl import plan_hpgl
 

@@ -17,7 +17,7 @@ import pytest
 import cam
 from cam.drive.homing import HomingError, home
 from cam.drive.ports import IDLE_INPUTS, MockPort, SwitchSchedule, input_mask
-from cam.drive.chunks import plan_chunks
+from cam.motion.chunks import plan_chunks
 from cam.drive.runner import LIMIT_STOPPED, Controller, SwitchWatch, run
 from cam.job.model import travel_job
 from cam.settings import load_settings, settings_from_mapping

@@ -507,7 +507,7 @@ def test_page_runs_gcode_with_a_tool_change_prompt(page, fast, tmp_path):
     page.click("#prompt-continue")
     st = _wait_done(page, fast)
     assert st["last"]["status"] == FINISHED
-    from cam.drive.steps import plan_steps
+    from cam.motion.steps import plan_steps
     from cam.formats.gcode import load_gcode
     from cam.job.gcode import plan_gcode
 

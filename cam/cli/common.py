@@ -13,7 +13,7 @@ from tqdm import tqdm
 from ..drive.maximus.board import with_delays
 from ..values import format_duration
 from ..drive.machines import DEFAULT_PORT, backend_of
-from ..drive.ramps import check_delay_speeds, top_speeds_mm_s
+from ..motion.ramps import check_delay_speeds, top_speeds_mm_s
 from ..drive.state import default_state_path, recorded_machine
 from ..errors import CamError
 from ..settings import MachineSettings, load_settings

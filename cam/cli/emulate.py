@@ -16,7 +16,7 @@ def cmd_emulate(args: argparse.Namespace) -> int:
     if bad:
         raise CamError(bad)
     argv = ["--speed", str(args.speed)] + (["--log", args.log] if args.log else [])
-    for axis in "xyz":  # the limit switches (cam.cli.parser.add_maximus_switch_options)
+    for axis in "xyz":  # the limit switches (cam.drive.maximus.switch_options.add_maximus_switch_options)
         ends = getattr(args, f"travel_{axis}", None)
         if ends is not None:
             argv += [f"--travel-{axis}", str(ends[0]), str(ends[1])]

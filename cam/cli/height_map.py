@@ -1,7 +1,7 @@
 """``cam info MAP.json`` and ``cam preview MAP.json [--over FILE] -o PIC.png``: a height map shown (issue #46 point 1).
 
 Thin adapters: :func:`cam.job.heightmap_level.map_summary` says what the map holds,
-:func:`cam.render.map_picture.height_map_picture` draws it, and :func:`cam.drive.probing.job_cuts_mm` places a job
+:func:`cam.job.map_picture.height_map_picture` draws it, and :func:`cam.drive.probing.job_cuts_mm` places a job
 over it where ``cam drill`` would run it (the state file's active work zero, ``--origin`` as drill's), as ``cam probe
 grid --over`` finds the job's area.  A map is recognised by its content (:func:`cam.choices.is_height_map`).
 """
@@ -15,7 +15,7 @@ from ..drive.probing import job_cuts_mm, job_area_mm
 from ..drive.state import new_machine_state
 from ..errors import CamError
 from ..job.heightmap_level import load_height_map, map_summary, outside_text
-from ..render.map_picture import height_map_picture
+from ..job.map_picture import height_map_picture
 from ..render.picture import save_picture
 from .checks import check_output_path
 from .common import machine_settings

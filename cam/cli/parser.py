@@ -20,6 +20,7 @@ from ..kinds import kind, kinds, job_options
 from ..choices import (
     IMAGE_SUFFIXES, PROFILE_SUFFIXES, DEFAULT_PORT, POSTS,
 )
+from ..drive.maximus.switch_options import add_maximus_switch_options
 from ..options import MAX_MM, OPTIONS, Option
 from ..settings import RAMP_MODES
 
@@ -571,54 +572,6 @@ def _add_jog(sub: argparse._SubParsersAction) -> None:
     jg.add_argument("--realtime", action="store_true", help="run the mock in real time")
     jg.add_argument("--pin-log", metavar="FILE.csv", help="write the mock's pin log")
     _add_progress_options(jg)
-
-
-MAXIMUS_SWITCHES = ("home-x", "limit-x", "home-y", "limit-y", "home-z", "limit-z")
-"""The MAXIMUS board's switches as ``--trip`` names them (HOME_SWITCH_X, LIMIT_SWITCH_X, ... of the firmware)."""
-
-
-def _trip(text: str) -> tuple[str, int]:
-    """``--trip SWITCH[@MOVES]``: a switch of :data:`MAXIMUS_SWITCHES` and the moves that go by before it closes."""
-    name, _, moves = str(text).strip().lower().partition("@")
-    if name not in MAXIMUS_SWITCHES:
-        raise argparse.ArgumentTypeError(f"--trip names one of {', '.join(MAXIMUS_SWITCHES)}, got '{text}'")
-    skip = int(moves) if moves.isdigit() else 0 if not moves else -1
-    if not 0 <= skip <= 1_000_000:
-        raise argparse.ArgumentTypeError(f"--trip {name}@MOVES takes a whole number of moves 0..1000000, got '{text}'")
-    return name, skip
-
-
-def add_maximus_switch_options(parser: argparse.ArgumentParser) -> None:
-    """The limit-switch options of the MAXIMUS emulator (``cam emulate-maximus``, ``python -m cam.sim.maximus``):
-    where the switches close, the back-off delay, switches pressed on purpose."""
-    for axis in "xy":
-        parser.add_argument(f"--travel-{axis}", type=int, nargs=2, metavar=("LOW", "HIGH"),
-                            help=f"{axis.upper()} travel ends in pulses from the power-up position: HOME_SWITCH_"
-                            f"{axis.upper()} closes below LOW, LIMIT_SWITCH_{axis.upper()} above HIGH "
-                            "(default: no switches on this axis)")
-    parser.add_argument("--travel-z", type=int, nargs=2, metavar=("LOW", "HIGH"),
-                        help="Z travel ends in pulses from the power-up position, height (+ up): HOME_SWITCH_Z "
-                        "closes above HIGH, LIMIT_SWITCH_Z below LOW (default: no switches on Z)")
-    parser.add_argument("--axis-delay", type=_int_in("--axis-delay", 0, 255), default=0, metavar="DELAY",
-                        help="the Delay byte (0..255) of the firmware's back-off off a limit switch until a Jog "
-                        "packet sets it (the listing's axisDelay, 0 at power-up)")
-    parser.add_argument("--trip", type=_trip, action="append", default=[], metavar="SWITCH[@MOVES]",
-                        help=f"press SWITCH ({', '.join(MAXIMUS_SWITCHES)}) at the first step pulse of a move, "
-                        "after MOVES moves (Jog, Offset or Drill Data packets; default 0: the next one); it is let "
-                        "go once the firmware has read it; repeatable")
-
-
-def _int_in(name: str, lo: int, hi: int) -> Callable[[str], int]:
-    def parse(text: str) -> int:
-        try:
-            value = int(text)
-        except ValueError:
-            value = lo - 1
-        if not lo <= value <= hi:
-            raise argparse.ArgumentTypeError(f"{name} takes a whole number {lo}..{hi}, got '{text}'")
-        return value
-
-    return parse
 
 
 def _add_emulate_maximus(sub: argparse._SubParsersAction) -> None:

@@ -10,8 +10,8 @@ import numpy as np
 from ..digitize.digitized import Digitized
 from ..digitize.drawing import load_image
 from ..digitize.profile import Profile, load_profile, profile_from_expr
-from ..drive.chunks import ChunkedPlan, plan_chunks
-from ..drive.pins import axis_bits
+from ..motion.chunks import ChunkedPlan, plan_chunks
+from ..pins import axis_bits
 from ..drive.state import MachineState, read_state
 from ..errors import CamError, TravelError
 from ..kinds.jobs import JobOptions, PreparedJob, own_zero_home, prepare_job
@@ -20,7 +20,7 @@ from ..options import Option
 from ..job.model import JobLike
 from ..render.picture import save_picture, surface_picture, toolpath_picture, toolpath_svg
 from ..settings import MachineSettings
-from ..verify.pinlog import Motion, _decode, _pixel_under, carve
+from ..verify.pinlog import Motion, carve, decode_writes, pixel_under
 from .checks import job_kind_of
 from .common import machine_settings, reading_bar
 from .machine_state import state_path_of
@@ -177,7 +177,7 @@ def write_preview(args: argparse.Namespace, job: JobLike, path: str, surface: bo
 
 def carved_surface(job: JobLike, steps: Optional[ChunkedPlan] = None) -> np.ndarray:
     """``(height_px, width_px)`` int64 cut surface of a drawing job, depth in Z steps (drawing frame): its port
-    writes (``steps``, None: :func:`cam.drive.chunks.plan_chunks` of it) decoded and carved by a point tool a
+    writes (``steps``, None: :func:`cam.motion.chunks.plan_chunks` of it) decoded and carved by a point tool a
     chunk at a time, in bounded memory; the same surface as :func:`cam.drive.runner.simulate_surface` of the
     whole job (tested).
 
@@ -194,11 +194,11 @@ def carved_surface(job: JobLike, steps: Optional[ChunkedPlan] = None) -> np.ndar
     for chunk in (steps or plan_chunks(job, start_steps=None)).chunks():  # its own frame: nothing moves
         if not len(chunk.data):
             continue
-        p, counts = _decode(chunk.data, prev_byte, pos, clock, dirbit)
+        p, counts = decode_writes(chunk.data, prev_byte, pos, clock, dirbit)
         if before is not None:
             p = np.vstack([before, p])
         np.maximum(out, carve(Motion(chunk.t_ns, p, counts), (h, w), st, origin_px=job.pixels.origin_px), out=out)
-        under = [int(_pixel_under(p[:, a], spp)[-1]) for a in (0, 1)]
+        under = [int(pixel_under(p[:, a], spp)[-1]) for a in (0, 1)]
         before = np.array([[under[0] * spp, under[1] * spp, surface_steps]], np.int64)
         pos, prev_byte = p[-1].copy(), int(chunk.data[-1])
     return out

@@ -289,12 +289,14 @@ def drawing_size_px(path: str | os.PathLike) -> tuple[int, int]:
 
 
 def _read_rgb(path: Path) -> np.ndarray:
-    img, bgr = _read_image(path)
+    img, bgr = read_image(path)
     return _to_rgb(img, bgr=bgr, source=str(path))
 
 
-def _read_image(path: Path) -> tuple[np.ndarray, bool]:
-    """The decoded image as OpenCV gives it (size checked before decoding), and whether its channels are BGR."""
+def read_image(path: Path) -> tuple[np.ndarray, bool]:
+    """The image file at ``path`` decoded as OpenCV gives it (``(H, W)`` or ``(H, W, C)``, its size checked
+    before decoding), and whether its channels are BGR (a GIF's are RGB).  The drawings' reader and the height
+    map's (:mod:`cam.job.heightmap`) both read images with it: the same formats and the same size checks."""
     _check_file(path)
     data = np.fromfile(str(path), dtype=np.uint8)
     header = data[:_HEADER_BYTES].tobytes()
@@ -379,7 +381,7 @@ def load_image(path_or_array: str | os.PathLike | np.ndarray) -> Drawing:
         source, img, bgr = "<array>", path_or_array, False
     else:
         source = str(path_or_array)
-        img, bgr = _read_image(Path(path_or_array))
+        img, bgr = read_image(Path(path_or_array))
     if not (img.dtype == np.uint8 and img.ndim == 3 and img.shape[2] == 3):  # grey, alpha, 16-bit: to RGB first
         img, bgr = _to_rgb(img, bgr=bgr, source=source), False
     if img.shape[0] < 1 or img.shape[1] < 1:

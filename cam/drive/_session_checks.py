@@ -11,9 +11,9 @@ import numpy as np
 from ..errors import CamError, StalePlanError
 from ..job.model import Job, check_reach, check_travel
 from ..verify.pinlog import motion_extent
-from .chunks import ChunkedPlan
+from ..motion.chunks import ChunkedPlan
 from .machine_job import JobInput, MachineJob, machine_job
-from .steps import StepPlan
+from ..motion.steps import StepPlan
 from ._session_frames import SessionFrames
 
 __all__ = ["SessionChecks"]

@@ -21,8 +21,8 @@ from .machines import open_port, require
 from .pause_probe import probe_at_pause
 from .ports import MockPort
 from .runner import Controller, Cursor, run
-from .chunks import ChunkedPlan
-from .steps import StepPlan
+from ..motion.chunks import ChunkedPlan
+from ..motion.steps import StepPlan
 
 __all__ = ["run_steps", "run_on_board", "BoardControl", "drill_work", "move_work"]
 

@@ -49,8 +49,8 @@ from .pause_probe import PauseProbe, probe_at_pause
 from .ports import MockPort, Port
 from .priority import claim_machine
 from .runner import Controller, Cursor, PauseFn, ProgressFn, RunResult, run
-from .chunks import ChunkedPlan
-from .steps import StepPlan
+from ..motion.chunks import ChunkedPlan
+from ..motion.steps import StepPlan
 
 __all__ = ["RunnerProcess"]
 
@@ -292,7 +292,7 @@ class RunnerProcess:
             journal: Optional[JournalSpec] = None, cursor: Optional[Cursor] = None) -> RunResult:
         """Run ``plan`` in real time on the port ``port_name``, in the child; as :func:`cam.drive.runner.run`.
 
-        A :class:`~cam.drive.chunks.ChunkedPlan` goes to the child as its job and settings; the child makes its
+        A :class:`~cam.motion.chunks.ChunkedPlan` goes to the child as its job and settings; the child makes its
         writes a chunk at a time, so neither process holds every write.
 
         ``journal``: the child keeps the job's journal (:class:`~cam.drive.journal.JournalWriter`); if this

@@ -6,11 +6,11 @@ latched by a strobe pulse, sent at the step's time by a timer interrupt; the ste
 how fast the bytes come.  The machine file's ``[commands]`` table (:class:`cam.settings.Commands`) gives the
 bytes.
 
-`cam` plans every job as step/dir writes (:mod:`cam.drive.steps`); here those writes become command writes,
+`cam` plans every job as step/dir writes (:mod:`cam.motion.steps`); here those writes become command writes,
 a pure translation (:func:`step_writes_to_commands`):
 
 * every rising clock edge of an axis in a step/dir write (a clock bit high in this write, low in the one
-  before, :func:`cam.drive.pins.axis_bits`) is that axis's command byte: ``<axis>_plus`` with the axis's
+  before, :func:`cam.pins.axis_bits`) is that axis's command byte: ``<axis>_plus`` with the axis's
   direction bit high in the write (a step toward + of the machine frame, +Z deeper), ``<axis>_minus`` with
   it low;
 * the byte is written with strobe 1 at the write's time, and strobe goes back to 0 ``strobe_us`` later (the
@@ -38,7 +38,7 @@ import numpy as np
 
 from ..errors import CapabilityError, PortError
 from ..settings import MachineSettings
-from .pins import axis_bits
+from ..pins import axis_bits
 from .ports import MockPort, ParallelPort
 
 __all__ = ["step_writes_to_commands", "CommandMockPort", "CommandParallelPort", "needed_commands", "check_commands",
@@ -319,7 +319,7 @@ def check_commands(job_or_pieces: Any, settings: MachineSettings, *,
     the job's home (0, 0, 0).  A job that goes deeper needs ``z_minus`` too: a stop lifts the tool.
 
     ``start_steps``: where the tool stands in the machine frame when the job starts (as
-    :func:`~cam.drive.chunks.plan_chunks` takes it).  The job's points are steps from there, so it changes no
+    :func:`~cam.motion.chunks.plan_chunks` takes it).  The job's points are steps from there, so it changes no
     byte the job needs; it is not read.
 
     Raises:

@@ -26,7 +26,7 @@ import numpy as np
 from ..errors import CamError
 from ..job.model import travel_job
 from ..settings import MAX_TRAVEL_STEPS, MachineSettings, Travel
-from .chunks import plan_chunks
+from ..motion.chunks import plan_chunks
 from .ports import MockPort, Port
 from .runner import FINISHED, SWITCHED, Controller, RunResult, SwitchWatch, run
 

@@ -2,7 +2,7 @@
 
 A front end hands the session a job in one of five shapes: a :class:`~cam.job.model.Job` (moves in memory), a
 :class:`~cam.job.model.JobLike` kept as pieces, a :class:`~cam.kinds.jobs.PreparedJob` (a file planned with its
-options), a :class:`~cam.drive.chunks.ChunkedPlan` or a :class:`~cam.drive.steps.StepPlan` (steps already
+options), a :class:`~cam.motion.chunks.ChunkedPlan` or a :class:`~cam.motion.steps.StepPlan` (steps already
 timed).  :func:`machine_job` reads it once, by its type, into a :class:`MachineJob`: the session and every back
 end read those typed fields, never the shape's attributes.
 """
@@ -19,8 +19,8 @@ from ..job.gcode_probing import ProbingProgram
 from ..kinds.jobs import PlannedIn, PreparedJob
 from ..job.model import TRAVEL, Job, JobLike
 from ..settings import MachineSettings
-from .chunks import ChunkedPlan
-from .steps import StepPlan
+from ..motion.chunks import ChunkedPlan
+from ..motion.steps import StepPlan
 
 __all__ = ["MachineJob", "JobInput", "machine_job"]
 

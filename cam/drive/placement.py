@@ -17,7 +17,7 @@ from ..kinds import kind, kind_names, kinds
 from ..kinds.jobs import origin_anchor_steps
 from ..job.model import Job, travel_job
 from ..settings import MachineSettings
-from .chunks import ChunkedPlan
+from ..motion.chunks import ChunkedPlan
 from .machine_job import JobInput, MachineJob, machine_job
 from .runner import EMERGENCY_STOPPED, FINISHED, LIMIT_STOPPED, STOPPED
 from .state import MachineState

@@ -34,7 +34,7 @@ from ..errors import CapabilityError, PortError
 from ..settings import INPUT_BITS, MachineSettings
 from ..verify.pinlog import HEADER as PIN_LOG_HEADER
 from ..verify.pinlog import PinLog, PinLogPart, read_pin_log
-from .pins import axis_bits
+from ..pins import axis_bits
 
 __all__ = ["Port", "MockPort", "ParallelPort", "MAXIMUS_PREFIX",
            "GRBL_PREFIX", "SwitchSchedule", "IDLE_INPUTS", "input_mask", "surface_height_mm"]
@@ -124,7 +124,7 @@ class _PinLogWriter:
         return self.error
 
     def _run(self) -> None:
-        from ._kernels import pin_rows_kernel  # numba: only when a pin log streams
+        from ..motion.kernels import pin_rows_kernel  # numba: only when a pin log streams
 
         while True:
             parts = self._queue.get()

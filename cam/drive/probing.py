@@ -35,7 +35,7 @@ import numpy as np
 from ..errors import CamError, CapabilityError, PlanError
 from ..job.model import cut_runs_steps, travel_job
 from ..settings import INPUT_BITS, MachineSettings
-from .chunks import plan_chunks
+from ..motion.chunks import plan_chunks
 from .homing import seek
 from .machines import open_port
 from .placement import placed_kinds, placed_home

@@ -35,7 +35,7 @@ from ..errors import CamError, CapabilityError, PlanError
 from ..job.gcode_probing import ProbingProgram, ProgramProbe
 from ..settings import INPUT_BITS, MachineSettings
 from ._session_parts import Activity
-from .chunks import plan_chunks
+from ..motion.chunks import plan_chunks
 from .homing import seek
 from .ports import MockPort, SwitchSchedule
 from .probing import ProbeEnded, ProbeError, StepDirProber, activity_end, halted_status, step_dir_feed

@@ -35,13 +35,13 @@ from ..job.model import Job, JobLike
 from ..settings import INPUT_BITS, MachineSettings
 from ..verify.pinlog import PinLog, carve, decode_pin_log
 from .._compiled import resolved
-from ._kernels import net_steps_kernel
+from ..motion.kernels import net_steps_kernel
 from .priority import as_background, real_time_class
 from .machines import open_port
 from .ports import MockPort, Port
-from .pins import axis_bits
-from .chunks import ChunkedPlan, StepChunk, plan_chunks
-from .steps import StepPlan
+from ..pins import axis_bits
+from ..motion.chunks import ChunkedPlan, StepChunk, plan_chunks
+from ..motion.steps import StepPlan
 
 __all__ = ["Controller", "Cursor", "RunResult", "Lateness", "STALL_NS", "JITTER_NS", "run", "simulate_surface", "FINISHED",
            "STOPPED", "EMERGENCY_STOPPED", "LIMIT_STOPPED", "SWITCHED", "SwitchWatch"]
@@ -647,8 +647,8 @@ def run(
     """Run a job on a port: its step plan a chunk at a time, through one send loop.
 
     Args:
-        job: a job (any :class:`~cam.job.model.JobLike`: planned here with :func:`cam.drive.chunks.plan_chunks`)
-            or a step plan (:class:`~cam.drive.chunks.ChunkedPlan`, or a :class:`StepPlan` held whole).
+        job: a job (any :class:`~cam.job.model.JobLike`: planned here with :func:`cam.motion.chunks.plan_chunks`)
+            or a step plan (:class:`~cam.motion.chunks.ChunkedPlan`, or a :class:`StepPlan` held whole).
         port: a port name (``"mock"``, ``"/dev/parport0"``) or an open :class:`Port`.
         realtime: wait for each write's time.  Forced on for real ports.
         controller: pause / resume / stop / emergency stop from elsewhere.

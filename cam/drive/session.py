@@ -69,8 +69,8 @@ from .machine_job import JobInput, MachineJob, machine_job
 from .machines import DEFAULT_PORT, backend_of
 from .ports import MockPort, Port
 from .runner import EMERGENCY_STOPPED, STOPPED, Controller, Cursor, RunResult
-from .chunks import ChunkedPlan, plan_chunks
-from .steps import StepPlan
+from ..motion.chunks import ChunkedPlan, plan_chunks
+from ..motion.steps import StepPlan
 from .state import StateHold
 
 __all__ = ["MachineSession", "Prompt", "PromptFn", "MAX_JOG_STEPS", "UNKNOWN_JOG_LINE", "maximus_cannot_home", "run"]
@@ -417,7 +417,7 @@ def run(job: JobInput, port: Any = DEFAULT_PORT, *, realtime: bool = False, cont
     """Run a job on any machine and wait for the end: a one-job :class:`MachineSession`.
 
     Args:
-        job: a :class:`~cam.job.model.Job`, a :class:`~cam.drive.steps.StepPlan` or a prepared job (a board takes
+        job: a :class:`~cam.job.model.Job`, a :class:`~cam.motion.steps.StepPlan` or a prepared job (a board takes
             what its session takes: grbl any job with moves, the MAXIMUS board drill files).
         port: a port name (``mock``, ``/dev/parport0``, ``cmd:mock``, ``grbl:/dev/ttyUSB0``, ``maximus:/dev/ttyUSB0``)
             or an open step/dir port.

@@ -19,7 +19,7 @@ Frames (every position here says which):
   machine position of its zero.
 
 Everything here is pure computation except :func:`read_state`, :func:`write_state`, :func:`state_dir`
-(reads the environment) and :class:`MachineLock`.
+(from :mod:`cam.fileio`: reads the environment) and :class:`MachineLock`.
 
 A missing file is a new machine, every offset zero, not homed: on the mock the tool at the home, position known;
 on a real port the position **unknown** (a new machine, or a ``--state`` typo: nothing says where the tool
@@ -43,7 +43,7 @@ except ImportError:  # pragma: no cover - not a POSIX system: no lock (one comma
     fcntl = None  # type: ignore[assignment]
 
 from ..errors import BusyError, CamError, PortError, TravelError
-from ..fileio import atomic_write_text
+from ..fileio import atomic_write_text, state_dir
 from ..settings import MAX_TRAVEL_STEPS, MachineSettings, Travel
 from .machines import backend_of, can, port_kind
 
@@ -467,15 +467,6 @@ def unknown_message(state: MachineState, port: Any = None) -> str:
 
 
 # -- where the file is ---------------------------------------------------------------------------------------
-
-def state_dir(environ: Optional[Mapping[str, str]] = None) -> Path:
-    """The user's state folder for `cam`: ``$XDG_STATE_HOME/cam``, else ``~/.local/state/cam``."""
-    env = os.environ if environ is None else environ
-    base = env.get("XDG_STATE_HOME") or ""
-    if not os.path.isabs(base):  # the XDG rule: a relative path is ignored
-        base = os.path.join(os.path.expanduser("~"), ".local", "state")
-    return Path(base) / "cam"
-
 
 def _slug(text: str) -> str:
     return re.sub(r"[^A-Za-z0-9._]+", "-", text).strip("-.") or "port"

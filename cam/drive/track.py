@@ -26,7 +26,7 @@ from ..kinds.jobs import resume_job
 from ..kinds import has
 from ..job.model import CUT, Job, cut_runs_steps
 from ..job.resume import Journal
-from ..render.picture import LEGEND_PX, _canvas_size, auto_scale
+from ..render.picture import LEGEND_PX, auto_scale, canvas_size_px
 from ..settings import MachineSettings
 from ..values import shown
 from .maximus.resume import resume_board_job
@@ -166,7 +166,7 @@ def preview_frame(job: Any) -> dict[str, Any]:
     """
     toolpath = getattr(job, "toolpath", None)
     if has(getattr(job, "kind", None), "pixels") and isinstance(toolpath, Job) and toolpath.pixels:
-        w, h = _canvas_size(toolpath)
+        w, h = canvas_size_px(toolpath)
         k = auto_scale(w, h)
         per = toolpath.pixels.steps_per_px_xy
         return {"origin_px": [k // 2, k // 2], "px_per_step": [k / per, k / per],

@@ -23,7 +23,7 @@ The job has up to three parts, each starting where the one before ended:
    a warning beyond), alike for every job.
 
 Memory: the maps (a few bytes per pixel, the finer pass's per finer position) and the roughing and finer
-targets are held; nothing per move of the pixel-centre pass.  A :class:`~cam.drive.chunks.ChunkedPlan`
+targets are held; nothing per move of the pixel-centre pass.  A :class:`~cam.motion.chunks.ChunkedPlan`
 plans the stream a block of moves at a time (:func:`cam.kinds.jobs.prepare_job` keeps a drawing of over
 :data:`STREAM_TARGETS` cut points as a stream, a smaller one joined: the same moves).
 """

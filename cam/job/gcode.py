@@ -15,7 +15,7 @@ The job is the motion itself: per move (a G-code line, the points of an arc
 or of a G5/G5.1 spline, no axis more than 0.9 step apart) the planner
 computes the exact path point at the end of every step period and rounds
 it; consecutive periods that step the same axes the same way are one
-straight move of the job (so :func:`cam.drive.steps.plan_steps` makes exactly
+straight move of the job (so :func:`cam.motion.steps.plan_steps` makes exactly
 these periods again), with the move's feed as its nominal period.
 
 The job is made a piece at a time (:class:`GcodeJobStream`, a :class:`~cam.job.model.JobLike`) from the
@@ -37,7 +37,7 @@ from typing import Any, Iterator, Optional, Union
 
 import numpy as np
 
-from ..drive._kernels import straight_rows_kernel
+from ._gcode_kernels import straight_rows_kernel
 from ..errors import PlanError, TravelError
 from ..formats.gcode import PLANE_AXES, GcodeFile, GcodeMove, GcodeProgram
 from ..limits import MAX_MOVE_PERIODS, MAX_MOVE_S, MAX_PROGRAM_S
@@ -770,7 +770,7 @@ def plan_gcode(program: Union[GcodeProgram, GcodeFile], settings: MachineSetting
     :func:`stream_gcode` joined.
 
     Rapids run at the configured step delays; feed moves at their F, never faster than the delays allow;
-    :func:`cam.drive.steps.plan_steps` then lengthens periods with the speed ramps of ``settings.ramp``,
+    :func:`cam.motion.steps.plan_steps` then lengthens periods with the speed ramps of ``settings.ramp``,
     stopping at pauses and dwells.
 
     Every move is checked before its points are made: an arc's bounding box against the travel (a huge

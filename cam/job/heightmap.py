@@ -50,10 +50,10 @@ from typing import Any, Optional
 
 import numpy as np
 
-from ..digitize.drawing import _read_image
+from ..digitize.drawing import read_image
 from ..errors import CamError
 from ..settings import DEFAULT_SETTINGS, MachineSettings
-from ..tool import POINT, Tool, _lowest, drop_depth_px, footprint_px, parse_tool, tool_of_settings
+from ..tool import POINT, Tool, drop_depth_px, footprint_px, lowest_under_footprint, parse_tool, tool_of_settings
 from .model import CUT, RETRACT, TRAVEL, Job, PixelFrame, check_span
 
 __all__ = ["DEFAULT_MAX_DEPTH_MM", "BAND_ROWS", "grey_of_image", "load_heightmap", "depth_steps_of",
@@ -92,7 +92,7 @@ def load_heightmap(path: str | Path) -> np.ndarray:
     Raises:
         CamError: unreadable, too large.
     """
-    img, bgr = _read_image(Path(path))  # the drawings' reader: the same formats and size checks
+    img, bgr = read_image(Path(path))  # the drawings' reader: the same formats and size checks
     return grey_of_image(img, bgr=bgr)
 
 
@@ -160,7 +160,7 @@ def sub_drop_steps(depth_steps: np.ndarray, tool: Tool, px_mm: float, steps_per_
         r1 = min(h, r0 + band_rows)
         a0, a1 = max(0, r0 - reach), min(h, r1 + reach)
         for m, (dy, dx, rise) in enumerate(feet):
-            low = _lowest(d[a0:a1], dy, dx, rise, (a1 - a0, w), 0)[r0 - a0:r1 - a0]
+            low = lowest_under_footprint(d[a0:a1], dy, dx, rise, (a1 - a0, w), 0)[r0 - a0:r1 - a0]
             out[r0:r1, :, m] = np.maximum(low, 0)
     out[:, :, 0] = np.minimum(out[:, :, 0], d)
     return out

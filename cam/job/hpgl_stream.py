@@ -15,7 +15,7 @@ pieces joined (:meth:`HpglJobStream.joined`).
 A file's job is made from the file each time it is asked for: nothing per
 point is kept between passes, so a 200 MB file of 40 million points is
 planned, checked, run and pictured in bounded memory
-(:func:`cam.drive.chunks.plan_chunks` plans a stream a block of moves at a time).
+(:func:`cam.motion.chunks.plan_chunks` plans a stream a block of moves at a time).
 
 Frames and units: see :mod:`cam.job.hpgl` (HPGL X right, Y up, plotter
 units; machine x = X, y = -Y, nearest step; +Z deeper).

@@ -3,7 +3,7 @@
 Every planner returns a :class:`Job`: the drawing planner (:func:`cam.plan`,
 a digitized matrix), drill files (:func:`cam.plan_drill`), HPGL
 (:func:`cam.plan_hpgl`), jogs and go-tos (:mod:`cam.job.moves`).  Steps
-are planned from it (:func:`cam.drive.steps.plan_steps`), it is checked
+are planned from it (:func:`cam.motion.steps.plan_steps`), it is checked
 against the travel before a step is sent, pictured, exported as G-code and
 run by the machine session.
 
@@ -463,7 +463,7 @@ def pause_points(toolpath: JobLike) -> np.ndarray:
 
 class PlanFingerprint:
     """sha256 of a job's moves fed a piece at a time, in bounded memory (:func:`cam.job.resume.plan_fingerprint`;
-    :func:`cam.drive.chunks.plan_chunks` makes it in its own pass when asked).
+    :func:`cam.motion.chunks.plan_chunks` makes it in its own pass when asked).
 
     The bytes hashed are those of the whole job's arrays, whatever the pieces: its ``(N, 3)`` int64 points,
     ``0``, its ``(N,)`` uint8 kinds, ``0``, its ``(N,)`` bool pauses, ``0``.  The points go to the hash as

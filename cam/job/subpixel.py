@@ -32,7 +32,7 @@ import numpy as np
 
 from ..digitize.trace2d import trace_curves
 from ..settings import MachineSettings
-from ..tool import Tool, _lowest, footprint_px
+from ..tool import Tool, footprint_px, lowest_under_footprint
 from .drill_order import nearest_neighbour_order
 
 __all__ = ["MAX_K", "MIN_GAIN_ZPX", "finer_grid", "finer_grids", "sub_depth_px", "rest_positions", "nearest_first"]
@@ -80,8 +80,8 @@ def sub_depth_px(depth_px: np.ndarray, tool: Tool, px_mm: float, zpx_mm: float, 
         for sx in range(k):
             dy, dx, rise = footprint_px(tool, px_mm, zpx_mm, centre=((sx + offset) / k, (sy + offset) / k))
             rows, cols = len(range(sy, h * k + extra, k)), len(range(sx, w * k + extra, k))
-            out[sy::k, sx::k] = np.clip(_lowest(d, dy, dx, rise, (h + extra, w + extra), 0)[:rows, :cols], 0,
-                                        np.iinfo(np.int32).max)
+            low = lowest_under_footprint(d, dy, dx, rise, (h + extra, w + extra), 0)
+            out[sy::k, sx::k] = np.clip(low[:rows, :cols], 0, np.iinfo(np.int32).max)
     return out
 
 

@@ -71,7 +71,7 @@ from .hpgl import _rows, _z_steps, scale_to_fit
 from .hpgl_stream import outside_travel
 from .model import CUT, Job, TravelSpan, check_span, check_travel
 
-__all__ = ["plan_svg", "svg_strokes_steps", "svg_scale", "svg_layer_order", "DEFAULT_CUT_DEPTH_MM",
+__all__ = ["plan_svg", "svg_strokes_steps", "svg_scale", "svg_layer_order", "selected_layers", "DEFAULT_CUT_DEPTH_MM",
            "DEFAULT_TRAVEL_HEIGHT_MM", "DUPLICATE_STEPS", "MIN_DUPLICATE_STEPS"]
 
 DEFAULT_CUT_DEPTH_MM: float = OPTIONS["cut_depth_mm"].default_for({"strokes"})
@@ -374,7 +374,7 @@ def plan_svg(
         raise PlanError("the cutting depth must be > 0 mm and the safe height >= 0 mm")
     chosen = svg_layer_order(drawing, layers)
     names = drawing.layers()
-    part, part_layer = _selected(drawing, chosen)
+    part, part_layer = selected_layers(drawing, chosen)
     pts, bounds = _polylines_steps(part, settings, scale, fit_mm, offset_mm)
     if len(bounds) < 2:
         raise PlanError(f"{drawing.source}: nothing to cut (no visible stroke or outline)")
@@ -451,7 +451,7 @@ def _gather(cells: np.ndarray, bounds: np.ndarray, order: np.ndarray, backwards:
     return cells[index], first
 
 
-def _selected(drawing: SvgDrawing, chosen: list[int]) -> tuple[SvgDrawing, np.ndarray]:
+def selected_layers(drawing: SvgDrawing, chosen: list[int]) -> tuple[SvgDrawing, np.ndarray]:
     """The drawing with only the strokes of the ``chosen`` layers, in that order (file order within a layer),
     and the layer of each of its strokes."""
     layer_of = drawing.layer_of_stroke

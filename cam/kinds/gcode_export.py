@@ -70,7 +70,7 @@ from ..job.heightmap_level import height_at
 from ..job.arcs import Segment, arc_centre_for_ends, fit_path
 from ..job.model import RETRACT, TRAVEL, Job
 from ..job.hpgl_stream import hpgl_scale, xy_steps_exact
-from ..job.svg import FLATTEN_STEPS, _selected, svg_layer_order, svg_scale
+from ..job.svg import FLATTEN_STEPS, selected_layers, svg_layer_order, svg_scale
 from ..formats.hpgl import ARC_MNEMONICS, HpglDrawing, iter_hpgl
 from . import kind as kind_named, kind_names
 from ..choices import POSTS
@@ -164,7 +164,7 @@ def svg_exact_xy_mm(drawing: Any, settings: Any, *, scale: Optional[float] = Non
     is written on the drawing's own curve, within a step of where the steps put it, and a circle's points lie
     on the circle (an arc fits them).
     """
-    part, _ = _selected(drawing, svg_layer_order(drawing, layers))
+    part, _ = selected_layers(drawing, svg_layer_order(drawing, layers))
     k = svg_scale(part, scale=scale, fit_mm=fit_mm)
     mm = settings.mm_per_step_xy
     if offset_mm is None:

@@ -38,7 +38,7 @@ import numpy as np
 
 from ..arrays import column_range
 from ..choices import PROFILE_SUFFIXES
-from ..drive.chunks import plan_chunks
+from ..motion.chunks import plan_chunks
 from ..errors import CamError, PlanError
 from ..options import JOB_OPTIONS, Option, MAX_DEPTH_PX, MAX_MM, MAX_PX, check_range, degenerate  # noqa: F401 (the limits re-exported)
 from ..tool import parse_tool, tool_of_settings
@@ -395,9 +395,9 @@ class PreparedJob:
 
     Attributes:
         source: the file it came from; name: what to call it; kind: one of :data:`KINDS`.
-        plan: the step plan as a :class:`~cam.drive.chunks.ChunkedPlan` (machine frame, steps from the job
+        plan: the step plan as a :class:`~cam.motion.chunks.ChunkedPlan` (machine frame, steps from the job
             home): made a chunk at a time, so a job of any length runs in bounded memory.
-        steps: the same plan with every write at once, a :class:`~cam.drive.steps.StepPlan` (made on first
+        steps: the same plan with every write at once, a :class:`~cam.motion.steps.StepPlan` (made on first
             use and kept: small jobs, pictures of every write, tests).
         settings: the machine settings of ``plan``.
         toolpath: the :class:`~cam.job.model.Job` when the kind has one (not G-code).
@@ -475,7 +475,7 @@ class PreparedJob:
 
     @property
     def steps(self) -> Any:
-        """Every write of :attr:`plan` at once (a :class:`~cam.drive.steps.StepPlan`, its chunks joined, made on
+        """Every write of :attr:`plan` at once (a :class:`~cam.motion.steps.StepPlan`, its chunks joined, made on
         first use: pictures of every write and tests; a run sends :attr:`plan` a chunk at a time)."""
         if self._steps is None:
             self._steps = self.plan.to_plan()
@@ -772,7 +772,7 @@ def prepare_job(
 def origin_anchor_steps(kind: str, origin: Optional[str], plan: Any) -> tuple[int, int]:
     """The ``(x, y)`` point of a job of file ``kind`` (its own frame, steps) that ``origin`` puts at the work zero
     (:func:`cam.drive.placement.origin_anchor`): ``file`` its frame's zero, ``upper-left``, ``lower-left`` or
-    ``center`` of what its ``plan`` (a :class:`~cam.drive.chunks.ChunkedPlan`) cuts, the XY extent of the tool
+    ``center`` of what its ``plan`` (a :class:`~cam.motion.chunks.ChunkedPlan`) cuts, the XY extent of the tool
     below the surface (the whole extent when nothing is); None: ``file`` for drawings and digitized matrices,
     ``upper-left`` for the other kinds."""
     origin = origin or kind_named(kind).default_origin

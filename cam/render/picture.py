@@ -22,7 +22,7 @@ from ..errors import CamError
 from ..fileio import atomic_write_bytes, atomic_write_text
 
 __all__ = ["depth_colours", "toolpath_picture", "toolpath_svg", "surface_picture", "save_picture", "auto_scale",
-           "encode_png"]
+           "encode_png", "canvas_size_px"]
 
 LEGEND_PX = 44
 _START = (0, 170, 0)
@@ -77,7 +77,9 @@ def _legend_text(job, estimated_time_s: Optional[float]) -> str:
     return text
 
 
-def _canvas_size(job) -> tuple[int, int]:
+def canvas_size_px(job) -> tuple[int, int]:
+    """``(width, height)`` in pixels of the picture that holds ``job`` whole: its drawing from the picture's
+    origin and every point it moves to (:func:`toolpath_picture`'s canvas; the tracker draws on the same)."""
     pts, origin, (w_draw, h_draw), _ = _grid(job)
     w = max(w_draw + origin[0], int(pts[:, 0].max()) + 1)
     h = max(h_draw + origin[1], int(pts[:, 1].max()) + 1)
@@ -106,7 +108,7 @@ def toolpath_picture(
     ``((x + 0.5) x scale, (y + 0.5) x scale)``; a job without a drawing is drawn on its machine-step grid.
     """
     grid_pts, origin, _, _ = _grid(toolpath)
-    w, h = _canvas_size(toolpath)
+    w, h = canvas_size_px(toolpath)
     k = scale or auto_scale(w, h)
     img = np.full((h * k + LEGEND_PX, max(w * k, 420), 3), 255, np.uint8)
     if drawing_rgb is not None:
@@ -154,7 +156,7 @@ def toolpath_picture(
 def toolpath_svg(toolpath, *, scale: Optional[int] = None, estimated_time_s: Optional[float] = None) -> str:
     """The same picture as :func:`toolpath_picture`, as SVG text (vector; no drawing underneath)."""
     grid_pts, origin, _, _ = _grid(toolpath)
-    w, h = _canvas_size(toolpath)
+    w, h = canvas_size_px(toolpath)
     k = scale or auto_scale(w, h)
     pts = np.vstack([[0, 0, 0], grid_pts])
     surface = origin[2]

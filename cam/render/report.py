@@ -1,14 +1,16 @@
 """Reports: the image property report (thesis 4.2.2) and the job report (JSON)."""
 from __future__ import annotations
 
-from typing import Any, Optional
+from typing import TYPE_CHECKING, Any, Optional
 
 import cv2
 import numpy as np
 
-from ..digitize.digitized import Digitized
 from ..settings import DEFAULT_SETTINGS, MachineSettings
-from ..job.model import Job
+
+if TYPE_CHECKING:  # names in annotations only: render sits below digitize and job (tests/test_layers.py)
+    from ..digitize.digitized import Digitized
+    from ..job.model import Job
 
 __all__ = ["image_report", "job_report", "format_report"]
 
@@ -58,7 +60,7 @@ def job_report(
 ) -> dict[str, Any]:
     """The JSON job report: image report plus depth, points, retracts, steps, time and the speed ramp mode.
 
-    ``plan`` is the :class:`~cam.drive.steps.StepPlan` of ``toolpath``.
+    ``plan`` is the :class:`~cam.motion.steps.StepPlan` of ``toolpath``.
     """
     s = toolpath.settings
     rep: dict[str, Any] = image_report(digitized, s) if digitized is not None else {"warnings": []}

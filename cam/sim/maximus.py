@@ -158,8 +158,8 @@ from ._maximus_base import (  # noqa: F401  (the labels are part of this module'
     BUSY, DRILL_MODE1_INITIALIZE, DRILL_MODE1_INPUT, INITIALIZE_DRILL_MODE, JOG_DATA_INPUT, MODE_SELECTION, POWER_UP,
     _Halt, _PowerOn, _ReplyFault,
 )
-from ..drive.maximus._trust import EMULATOR_SPEEDS_ENV, clear_fault_marker
-from ..cli.parser import add_maximus_switch_options
+from ..drive.maximus.trust import EMULATOR_SPEEDS_ENV, clear_fault_marker
+from ..drive.maximus.switch_options import add_maximus_switch_options
 from ._maximus_hardware import _Hardware
 from ._maximus_program import _Program
 from ._maximus_uart import _Uart
@@ -493,7 +493,7 @@ class MaximusEmulator(_Program, _Hardware, _Uart, AbstractContextManager):
 def _register_speed(device: str, speed: float | None) -> None:
     """List (or, at speed 1, unlist) ``device`` in the host's ``CAM_MAXIMUS_EMULATOR_SPEEDS``: an emulator that
     runs faster than the firmware answers sooner than a real board could, which the host refuses unless it
-    knows (:mod:`cam.drive.maximus._trust`).  Hosts in this process and in processes it starts read it."""
+    knows (:mod:`cam.drive.maximus.trust`).  Hosts in this process and in processes it starts read it."""
     items = [item for item in os.environ.get(EMULATOR_SPEEDS_ENV, "").split(",")
              if item and item.rpartition("=")[0] != device]
     if speed != 1.0:

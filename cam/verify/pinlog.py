@@ -46,10 +46,10 @@ from ..errors import CamError, ParseError
 from ..fileio import atomic_write_text
 from ..render.picture import encode_png, surface_picture
 from ..settings import DEFAULT_SETTINGS, MachineSettings
-from ..drive.pins import axis_bits
+from ..pins import axis_bits
 
-__all__ = ["Surface", "PinLog", "PinLogPart", "join_pin_logs", "Motion", "decode_pin_log", "read_pin_log", "iter_pin_log", "write_pin_log", "carve",
-           "motion_extent", "rising_edges"]
+__all__ = ["Surface", "PinLog", "PinLogPart", "join_pin_logs", "Motion", "decode_pin_log", "read_pin_log",
+           "iter_pin_log", "write_pin_log", "carve", "motion_extent", "rising_edges", "decode_writes", "pixel_under"]
 
 HEADER = "t_ns,data,strobe"
 
@@ -309,7 +309,7 @@ def rising_edges(data: np.ndarray, mask: int, prev_byte: int = 0) -> np.ndarray:
 
 def net_steps(data: np.ndarray, prev_byte: int, clock: np.ndarray, dirbit: np.ndarray) -> np.ndarray:
     """``(3,)`` int64 steps each axis made over a stretch of writes (+ for a step with its direction bit set),
-    ``prev_byte`` the register before the stretch: where :func:`_decode`'s last position lands, without the
+    ``prev_byte`` the register before the stretch: where :func:`decode_writes`'s last position lands, without the
     position after every write (one histogram of the rising clocks and direction bits)."""
     data = np.asarray(data, np.uint8)
     if not len(data):
@@ -329,11 +329,14 @@ def _step_table(clock: tuple[int, ...], dirbit: tuple[int, ...]) -> np.ndarray:
     return np.stack([np.where(v & c, np.where(v & d, 1, -1), 0) for c, d in zip(clock, dirbit)], axis=1)
 
 
-def _decode(data: np.ndarray, prev_byte: int, start_steps: np.ndarray, clock: np.ndarray,
-            dirbit: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Positions ``(len(data), 3)`` after each write of a stretch of writes, and its steps per axis.
+def decode_writes(data: np.ndarray, prev_byte: int, start_steps: np.ndarray, clock: np.ndarray,
+                  dirbit: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Positions ``(len(data), 3)`` int64 in steps after each write of a stretch of writes, and its ``(3,)`` steps
+    per axis (each rising clock edge counts one, whatever its direction).
 
-    ``prev_byte`` is the register before the stretch, ``start_steps`` the ``(3,)`` position there.
+    ``data`` is the ``(N,)`` uint8 data register of each write, ``prev_byte`` the register before the stretch,
+    ``start_steps`` the ``(3,)`` position there, ``clock`` and ``dirbit`` the ``(3,)`` bit masks of each axis
+    (:func:`cam.pins.axis_bits`).
     """
     data = np.asarray(data, np.uint8)
     pos = np.empty((len(data), 3), np.int64)
@@ -360,7 +363,7 @@ def decode_pin_log(
     elif part is not None:
         log = log.part(part)
     clock, dirbit = axis_bits(settings)
-    pos, counts = _decode(log.data, 0, np.zeros(3, np.int64), clock, dirbit)
+    pos, counts = decode_writes(log.data, 0, np.zeros(3, np.int64), clock, dirbit)
     return Motion(t_ns=np.asarray(log.t_ns, np.int64), position_steps=pos, step_counts=counts)
 
 
@@ -371,7 +374,7 @@ def _decoded_chunks(data: np.ndarray, start: int, stop: int, pos0: np.ndarray, c
     pos = np.asarray(pos0, np.int64)
     for i in range(start, stop, _CHUNK):
         end = min(stop, i + _CHUNK)
-        chunk, _ = _decode(data[i:end], int(data[i - 1]) if i else 0, pos, clock, dirbit)
+        chunk, _ = decode_writes(data[i:end], int(data[i - 1]) if i else 0, pos, clock, dirbit)
         pos = chunk[-1]
         yield chunk
 
@@ -410,8 +413,9 @@ def motion_extent(data: np.ndarray, settings: MachineSettings = DEFAULT_SETTINGS
     return extent, (cut if cut[0, 0] != big else np.zeros((3, 2), np.int64))
 
 
-def _pixel_under(v_steps: np.ndarray, spp: int) -> np.ndarray:
-    """Pixel index along one axis of each position; border positions keep the previous pixel."""
+def pixel_under(v_steps: np.ndarray, spp: int) -> np.ndarray:
+    """Pixel index along one axis of each position ``v_steps`` (``(N,)`` steps, ``spp`` steps a pixel), rounded
+    half up; a position on the border between two pixels keeps the previous position's pixel."""
     v = np.asarray(v_steps, np.int64)
     pix = np.floor_divide(2 * v + spp, 2 * spp)  # round half up
     if spp % 2 == 0:
@@ -452,8 +456,8 @@ def carve(
     s = settings
     ox, oy, oz = origin_px
     p = motion.position_steps
-    col = _pixel_under(p[:, 0], s.steps_per_px_xy) - ox
-    row = _pixel_under(p[:, 1], s.steps_per_px_xy) - oy
+    col = pixel_under(p[:, 0], s.steps_per_px_xy) - ox
+    row = pixel_under(p[:, 1], s.steps_per_px_xy) - oy
     depth = p[:, 2] - oz * s.steps_per_px_z
     below = depth > 0
     col, row, d = col[below], row[below], depth[below]

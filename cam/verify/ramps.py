@@ -75,7 +75,7 @@ from ..errors import CamError
 
 from ..settings import DEFAULT_SETTINGS, MachineSettings
 from .pinlog import PinLog, iter_pin_log, rising_edges
-from ..drive.pins import axis_bits
+from ..pins import axis_bits
 
 __all__ = ["RampViolation", "RampReport", "check_ramps", "check_axis_steps", "standstills", "standstill_ns",
            "mark_standstills", "STANDSTILL_STEPS"]
@@ -108,7 +108,7 @@ def standstills(t_ns: np.ndarray, s_mm: float, v_start: float) -> np.ndarray:
 def mark_standstills(t_ns, still_ns, brk):
     """Set ``brk[j]`` (``(n,)`` bool) where the interval from step j - 1 to step j (``(n,)`` int64 times ``t_ns``)
     is longer than ``still_ns``: the standstill rule, for :func:`standstills` and the look-ahead planner's judge
-    (:func:`cam.drive.ramps._judge_steps`) alike."""
+    (:func:`cam.motion.ramps._judge_steps`) alike."""
     for j in range(1, t_ns.shape[0]):
         if float(t_ns[j] - t_ns[j - 1]) > still_ns:
             brk[j] = True
@@ -178,7 +178,7 @@ def check_steps_range(t_ns, slot_of_step, slot_t_ns, brk, s_mm, v_start, v_max, 
     """:func:`check_axis_steps` judging only the intervals from steps ``j_lo .. j_hi - 1`` and the pairs around
     them (the arrays hold the steps around them too, which decide whether a judged interval starts or ends a
     run); records only there, and only the breaks (``r1``..``r3`` are zero there when called: the look-ahead
-    planner's :func:`~cam.drive.ramps._drop_caps` leaves them so).  A kernel for other kernels (the planner
+    planner's :func:`~cam.motion.ramps._drop_caps` leaves them so).  A kernel for other kernels (the planner
     re-judges only what changed)."""
     n = t_ns.shape[0]
     n_bad = 0
@@ -313,7 +313,7 @@ def check_ramps(
 
     Args:
         log: the pin log, a CSV path (read a piece at a time: a log of any length), or consecutive pieces of
-            one (e.g. a :class:`~cam.drive.chunks.ChunkedPlan`'s chunks as pin logs); pieces give the report
+            one (e.g. a :class:`~cam.motion.chunks.ChunkedPlan`'s chunks as pin logs); pieces give the report
             the whole log gives.
         settings: mm per step, start / top speed and acceleration per axis; pin map.
         pause_writes: write indices after which the job paused (``StepPlan.pause_writes``): rests.

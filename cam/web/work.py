@@ -18,7 +18,7 @@ from ..drive.maximus.resume import resume_board_job
 from ..drive.probing import job_cuts_mm
 from ..job.heightmap_level import load_height_map
 from ..kinds.jobs import JobOptions, PreparedJob, prepare_job, resume_job
-from ..render.map_picture import height_map_picture
+from ..job.map_picture import height_map_picture
 from ..render.picture import encode_png
 from ..settings import MachineSettings
 from ..verify.pinlog import PinLog, PinLogPart, write_pin_log
@@ -26,7 +26,7 @@ from ..verify.pinlog import PinLog, PinLogPart, write_pin_log
 __all__ = ["plan_with_preview", "preview_of", "height_map_png", "resumed_from_journal",
            "save_pin_log_raw", "pin_log_csv", "WARM_UP"]
 
-WARM_UP = ("cam.kinds.jobs", "cam.web.work", "cam.digitize._kernels", "cam.drive.ramps", "cv2")
+WARM_UP = ("cam.kinds.jobs", "cam.web.work", "cam.digitize._kernels", "cam.motion.ramps", "cv2")
 """What the worker imports as it starts: the first planning does not wait for it."""
 
 
@@ -55,7 +55,7 @@ def preview_of(job: PreparedJob) -> bytes:
 
 
 def height_map_png(map_path: str, job: Any, machine_state: Any, settings: MachineSettings) -> bytes:
-    """The PNG of the height map at ``map_path`` (:func:`cam.render.map_picture.height_map_picture`) with ``job``'s
+    """The PNG of the height map at ``map_path`` (:func:`cam.job.map_picture.height_map_picture`) with ``job``'s
     cuts over it where it would run in ``machine_state`` (:func:`cam.drive.probing.job_cuts_mm`; None: the map
     alone), as ``cam preview MAP.json --over FILE`` draws it (in the worker)."""
     cuts = None if job is None else job_cuts_mm(job, machine_state, settings)

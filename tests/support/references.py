@@ -356,14 +356,14 @@ def port_writes(step_signed, period_ns, settings):
     """The port writes of step periods (plain numpy): the step plan's writes made without its kernels.
 
     ``step_signed``: ``(P, 3)`` the step each axis makes in each period (-1, 0, +1); ``period_ns``: ``(P,)``
-    nominal lengths, lengthened by ``settings.ramp`` as :func:`cam.drive.ramps.ramp_periods` does.
+    nominal lengths, lengthened by ``settings.ramp`` as :func:`cam.motion.ramps.ramp_periods` does.
     Returns ``(t_ns, data, strobe)``, each ``(1 + 2P,)``: a first write at t = 0 with the first directions,
     then per period the rising edges at mid-period and the next directions at its end.
     """
     import numpy as np
 
-    from cam.drive.pins import axis_bits
-    from cam.drive.ramps import ramp_periods
+    from cam.pins import axis_bits
+    from cam.motion.ramps import ramp_periods
 
     step_signed = np.asarray(step_signed)
     per = np.asarray(period_ns, np.int64)

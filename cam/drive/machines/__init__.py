@@ -24,7 +24,7 @@ from typing import Any, Optional
 from ...choices import DEFAULT_PORT
 from ...errors import CapabilityError, PortError
 from ...settings import DEFAULT_SETTINGS, MachineSettings
-from ..chunks import plan_chunks
+from ...motion.chunks import plan_chunks
 from ..machine_job import MachineJob
 from ..ports import Port
 

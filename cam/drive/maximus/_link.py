@@ -7,7 +7,7 @@ The board object tracks where the firmware waits (``_MODE``, ``_JOG``, ``_OFFSET
 Every reply is awaited for as long as the firmware needs to make the move it answers (computed from the
 packet by :mod:`.packets`), plus the time a limit switch would add, plus the margin ``timeout_s``: a long
 move never times out and a dead board is found soon after its move should have ended.  A reply that comes
-too soon for its move, any other byte, or none at all is a link fault (:mod:`._trust`): nothing more is sent.
+too soon for its move, any other byte, or none at all is a link fault (:mod:`.trust`): nothing more is sent.
 """
 from __future__ import annotations
 
@@ -21,7 +21,7 @@ from .packets import (
     close_drill_packet, finish_pulse_packet, init_packet, jog_exit_packet, jog_moved, jog_packet, offset_packet,
     stopped_between, switch_time_ns,
 )
-from ._trust import LinkFault, _Trust
+from .trust import LinkFault, _Trust
 from .protocol import (
     ATOFFSETPOS, BYTE_NAMES, DRILLMODE1DONE, DRILLMODE1INITIALIZED, EMERGENCYSTOP, JOGMODEDONE, JOGMODEOFF, JOGMODEON,
     MACHINESTOPPED, OPENJOGMODE, SWITCH_NAMES,

@@ -25,12 +25,12 @@ Safety rules kept by every method:
   (``timeout_s``): a long move never times out, a dead board is found soon;
 * a reply that comes sooner than its move could have ended, any byte the
   host did not ask for, a wrong reply or none in time is a link fault
-  (:class:`LinkFault`, :mod:`._trust`): nothing more is sent, not even the
+  (:class:`LinkFault`, :mod:`.trust`): nothing more is sent, not even the
   stop byte (the firmware may hold part of a packet that any byte would
   complete into a move), the firmware's state and the head's position are
   unknown, and every later call fails until :meth:`MaximusBoard.handshake`
   succeeds again (after the board is switched off and on); the fault leaves
-  a marker file (:func:`~._trust.fault_marker`) and no handshake sends a
+  a marker file (:func:`~.trust.fault_marker`) and no handshake sends a
   byte on that device while it stands;
 * a limit switch or an emergency stop ends the job with a one-line
   ``PortError`` naming the hole (numbered from 1) and the last known position; the
@@ -54,7 +54,7 @@ import serial
 from ...errors import CapabilityError, PlanError, PortError, SettingsError
 from ...settings import DEFAULT_SETTINGS, MachineSettings, Maximus, Travel
 from ._drill import _Drilling, drill_job
-from ._trust import LinkFault, emulator_speed
+from .trust import LinkFault, emulator_speed
 from ._link import _CLOSE_DRILL, _DRILL, _INIT, _JOG, _MODE, _OFFSET, _UNKNOWN, _Exchange, _Link
 from .packets import (
     MAX_FIELD, close_drill_packet, drill_directions, drill_moved, drill_moves, drill_packet, drill_time_ns, init_packet,
@@ -246,7 +246,7 @@ class MaximusBoard(_Drilling, _Link, AbstractContextManager):
         banner: ``"MAXIMUS_V1.0"`` if the power-up banner was seen, else None.
         position_pulses: ``(x, y, z)`` board-frame pulses (y up, z height) from where the board was opened, as
             far as confirmed replies tell.
-        position_known: False after a link fault (:class:`~._trust.LinkFault`) or an unanswered stop: the head
+        position_known: False after a link fault (:class:`~.trust.LinkFault`) or an unanswered stop: the head
             may have moved since ``position_pulses``.  After a stopped move ``position_pulses`` is an estimate
             from the time the move ran (the firmware does not say where it stopped), to the nearest whole pulse: a
             pulse the stop left half made is ended at once (``_Link._finish_pulses``), so no later move adds it.

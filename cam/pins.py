@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..settings import MachineSettings
+from .settings import MachineSettings
 
 __all__ = ["axis_bits"]
 

@@ -15,7 +15,7 @@ from typing import Optional, Sequence
 import cv2
 import numpy as np
 
-from ..job.heightmap_level import HeightMap, height_at
+from .heightmap_level import HeightMap, height_at
 
 __all__ = ["height_map_picture", "map_pixel", "height_colours", "MARGIN_PX", "CUT_RGB", "POINT_RGB"]
 

@@ -16,7 +16,7 @@ X/Y delay when X or Y moves, the Z delay for Z-only moves, and the larger of
 the two when both move.  Those are the *nominal* periods (the thesis's constant
 delay); the speed ramps of ``settings.ramp`` (look-ahead, the seed's 40-step
 ramp, or none) then lengthen them.  Every step plan is made a chunk at a time
-(:mod:`cam.drive.chunks`, where the step plan's types live); :class:`StepPlan` is
+(:mod:`cam.motion.chunks`, where the step plan's types live); :class:`StepPlan` is
 one held whole, :func:`plan_steps` the chunks joined.
 
 Pin 1 (strobe) carries Half/Full* and is held low for full steps.

@@ -5,8 +5,8 @@
 A :class:`ChunkedPlan` makes the same writes a chunk at a time:
 
 1. the moves are turned into step periods a stretch of at most
-   ``chunk_periods`` at a time (:func:`cam.drive._kernels.stretch_kernel`,
-   the DDA of :mod:`cam.drive.steps` resumed inside a move);
+   ``chunk_periods`` at a time (:func:`cam.motion.kernels.stretch_kernel`,
+   the DDA of :mod:`cam.motion.steps` resumed inside a move);
 2. the speed ramps lengthen them: ``constant`` keeps the nominal periods,
    ``linear40`` ramps each source move from its length and step counts (known
    from the moves, so a move may span chunks), ``lookahead`` plans a *window*:
@@ -17,7 +17,7 @@ A :class:`ChunkedPlan` makes the same writes a chunk at a time:
    periods are those of the whole-job planner: a ramp that must slow down
    before a stop in the next chunk starts in this one.  Tests check the
    identity on jobs whose chunk boundaries fall inside ramps;
-3. the writes follow (:func:`cam.drive._kernels.chunk_writes_kernel`) with
+3. the writes follow (:func:`cam.motion.kernels.chunk_writes_kernel`) with
    absolute times and write indices.
 
 Memory: the job's points and a few per-move integers (``n_per_move``), plus
@@ -36,8 +36,8 @@ import numpy as np
 
 from ..job.model import Job, JobLike, PlanFingerprint, TravelSpan, check_span, check_travel
 from ..settings import MachineSettings
-from ._kernels import chunk_writes_kernel, move_extent_kernel, move_periods_kernel, stretch_kernel
-from .pins import axis_bits
+from .kernels import chunk_writes_kernel, move_extent_kernel, move_periods_kernel, stretch_kernel
+from ..pins import axis_bits
 from .ramps import _lookahead, linear40_periods
 
 __all__ = ["StepChunk", "StepPlan", "ChunkedPlan", "plan_chunks", "plan_steps", "lookahead_margin", "move_extent",
@@ -157,7 +157,7 @@ def move_extent(pts: np.ndarray, n_per_move: np.ndarray, extent: np.ndarray, cut
     Args:
         pts: ``(B + 1, 3)`` int64 positions in steps (+Z deeper), the point before the moves first.
         n_per_move: ``(B,)`` int64 periods of each move; after period k of n an axis of a move of ``ad``
-            steps has made ``floor(k ad / n)`` of them (:func:`cam.drive._kernels.stretch_kernel`).
+            steps has made ``floor(k ad / n)`` of them (:func:`cam.motion.kernels.stretch_kernel`).
         extent: every position; cut: the positions below the surface (z > 0).
 
     Every axis moves one way within a move, so the positions' extent is the points'.  A move with both
@@ -278,7 +278,7 @@ class ChunkedPlan:
         settings: the machine settings.
         n_periods: step periods of the job; its writes number ``1 + 2 n_periods``.
         pause_writes: ``(P,)`` int64 write indices after which the job pauses.
-        pause_notes, warnings, safe_z_steps, end_steps, steps_total: as :class:`~cam.drive.steps.StepPlan`.
+        pause_notes, warnings, safe_z_steps, end_steps, steps_total: as :class:`~cam.motion.steps.StepPlan`.
         chunk_periods: step periods per chunk; margin_periods: look-ahead periods on each side of a chunk.
         any_move_start: whether some piece marks where source moves begin (``linear40`` ramps); if none
             does, the job is one ramp segment from its first move, as the whole-job ramp planner takes it.
@@ -439,7 +439,7 @@ class ChunkedPlan:
             yield from self._windows()
 
     def _linear40(self) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray]]:
-        """The seed's per-move ramp (:func:`cam.drive.ramps.linear40_periods`), a closed ramp segment at a time:
+        """The seed's per-move ramp (:func:`cam.motion.ramps.linear40_periods`), a closed ramp segment at a time:
         the periods of a segment are held until the next one begins (a source move's periods at most)."""
         starts: list[int] = []
         s_mm, v_start, _, _ = self.settings.axis_limits()

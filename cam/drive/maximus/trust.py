@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import Any, Optional
 
 from ...errors import PortError
-from ..state import state_dir
+from ...fileio import state_dir
 from .protocol import BANNER, BYTE_NAMES, DEBOUNCE_NS, SWITCH_NAMES
 
 __all__ = ["LinkFault", "EARLY_FRACTION", "EARLY_MARGIN_S", "QUIET_S", "EMULATOR_SPEEDS_ENV", "emulator_speed",

@@ -1,7 +1,7 @@
 """Speed planning: the length of every step period, with acceleration ramps.
 
 Every job kind (drawings, drill files, G-code) becomes a sequence of step
-periods (:mod:`cam.drive.steps`): in each period some axes step once (a DDA
+periods (:mod:`cam.motion.steps`): in each period some axes step once (a DDA
 spreads the minor axes of a move over its periods) and the period has a
 *nominal* length -- the thesis's constant step delay, or a G-code feed.  This
 module only lengthens periods; the path, and so the carve, never changes.
@@ -52,7 +52,7 @@ The look-ahead planner, with the period index ``k`` as the path parameter and
 
 Everything per period runs compiled (numba) over flat arrays: a window is one
 call (:func:`_plan_window`) that lets go of the GIL, so windows are planned
-in parallel (:meth:`cam.drive.chunks.ChunkedPlan._windows`) while the send
+in parallel (:meth:`cam.motion.chunks.ChunkedPlan._windows`) while the send
 loop runs.
 """
 from __future__ import annotations
@@ -65,7 +65,7 @@ from .._compiled import entry
 from ..settings import RAMP_MODES, MachineSettings
 from ..verify.ramps import check_steps_range, mark_standstills, standstill_ns
 from ..errors import CamError
-from .pins import axis_bits
+from ..pins import axis_bits
 
 __all__ = ["RAMP_MODES", "ramp_periods", "linear40_periods", "RAMP_STEPS_LINEAR40", "top_speeds_mm_s",
            "check_delay_speeds"]
@@ -273,7 +273,7 @@ def _passes(cap, alpha, upull, stop_before, fwd, u, changed, dirty, n_dirty, ful
 @njit(cache=True, nogil=True)
 def _periods_from_rates(u, floor_ns, out, mid):
     """Period lengths from the rates (never below the nominal), and each period's rising-edge time
-    (start + T // 2, as :func:`cam.drive.steps._writes` places it)."""
+    (start + T // 2, as :func:`cam.motion.steps._writes` places it)."""
     t_ns = 0
     for k in range(u.shape[0]):
         t = np.ceil(1e9 / u[k]) if u[k] > 0 else floor_ns[k]
