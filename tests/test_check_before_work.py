@@ -1,6 +1,7 @@
 """Check before work (part of #20): image sizes are read from the file's header and refused before decoding, a
 drawing too large for the travel is refused before it is traced, and a job that leaves the travel before it is
 routed.  Behaviour is asserted (nothing decoded, traced or routed, memory bounded), never time."""
+import importlib
 import struct
 import subprocess
 import sys
@@ -121,18 +122,15 @@ def test_a_drawing_too_large_for_the_travel_is_refused_before_it_is_decoded_or_t
     """The 1500 x 1500 checkerboard: routing ran over 600 s before the travel error."""
     path = tmp_path / "board.png"
     cv2.imwrite(str(path), checkerboard(1500))
-    import cam.digitize
-    import cam.digitize.drawing
-    import cam.job.drawing_stream
-
     # the drawing kind's reader, digitizer and planner (cam.kinds.drawing loads them when it plans)
-    for module, name in ((cam.digitize.drawing, "load_image"), (cam.digitize, "digitize"),
-                         (cam.job.drawing_stream, "plan")):
+    reader, digitizer, planner = (importlib.import_module(m) for m in ("cam.digitize.drawing", "cam.digitize",
+                                                                        "cam.job.drawing_stream"))
+    for module, name in ((reader, "load_image"), (digitizer, "digitize"), (planner, "plan")):
         monkeypatch.setattr(module, name, lambda *a, _name=name, **k: pytest.fail(f"{_name} ran"))
     with pytest.raises(cam.TravelError, match=r"board\.png: the drawing is 1500x1500 px; .* holds at most 1251x1251"):
         prepare_job(path, JobOptions(depth=(3,)))
     # a machine with 2 steps per pixel holds it: then it is decoded (and traced)
-    monkeypatch.setattr(cam.digitize.drawing, "load_image", lambda *a, **k: pytest.fail("decoded, as it should be"))
+    monkeypatch.setattr(reader, "load_image", lambda *a, **k: pytest.fail("decoded, as it should be"))
     with pytest.raises(pytest.fail.Exception, match="decoded, as it should be"):
         prepare_job(path, JobOptions(depth=(3,)), cam.MachineSettings().replace(steps_per_px_xy=2))
 
