@@ -49,7 +49,7 @@ from ..drive.chunks import plan_chunks
 from ..errors import CamError, PlanError
 from ..formats.excellon import load_excellon
 from ..formats.gcode import load_tool_table, open_gcode
-from ..options import JOB_OPTIONS, Option, MAX_DEPTH_PX, MAX_MM, MAX_PX, check_range, degenerate  # noqa: F401 (the limits re-exported)
+from ..options import JOB_OPTIONS, Option, MAX_DEPTH_PX, MAX_MM, MAX_PX, broken_rule, check_range, degenerate  # noqa: F401 (the limits re-exported)
 from ..formats.hpgl import scan_hpgl
 from ..formats.svg import load_svg
 from ..formats.dxf import load_dxf
@@ -70,7 +70,7 @@ from .hpgl import DEFAULT_CUT_DEPTH_MM as HPGL_CUT_DEPTH_MM
 from .hpgl import DEFAULT_TRAVEL_HEIGHT_MM as HPGL_TRAVEL_HEIGHT_MM
 from .drawing_stream import STREAM_TARGETS, plan, stream_drawing
 from .hpgl_stream import STREAM_POINTS, stream_hpgl
-from .heightmap import check_heightmap_options, prepare_heightmap
+from .heightmap import prepare_heightmap
 from .heightmap_level import check_map, level_job, load_height_map, outside_text
 from .model import Job
 from .resume import (Journal, JournalBase, check_journal, check_journal_numbers, job_identity, plan_fingerprint,
@@ -195,7 +195,9 @@ class JobOptions:
         return cls(**out).checked(source)
 
     def checked(self, source: str = "options") -> "JobOptions":
-        """Range checks; returns self.  Raises CamError naming the option."""
+        """Range checks (:func:`cam.options.check_range`) and the rules between options (:func:`cam.options.broken_rule`:
+        one depth, a scale or a size to fit, the options of a height map, a traced sketch or levelling only with
+        it); returns self.  Raises CamError naming the option."""
         def bad(key: str, why: str) -> CamError:
             return CamError(f"{source}: option '{key}' {why}, got {getattr(self, key)!r}")
 
@@ -212,22 +214,15 @@ class JobOptions:
                 why = "takes at least one whole number"
             if why is not None:
                 raise bad(o.name, why)
-        if self.scale is not None and self.fit_mm is not None:
-            raise bad("fit_mm", "cannot be given together with scale")
-        if self.profile is not None and self.profile_expr is not None:
-            raise bad("profile_expr", "cannot be given together with a profile file")
         if self.tool is not None:
             parse_tool(self.tool, f"{source}: option 'tool'")
         if self.rough_tool is not None:
             parse_tool(self.rough_tool, f"{source}: option 'rough_tool'")
-        if self.line_width_mm is not None and (self.depth is not None or self.cut_depth_mm is not None):
-            raise bad("line_width_mm", "cannot be given together with a depth (the width sets it)")
-        if self.cut_depth_mm is not None and self.depth is not None:
-            raise bad("cut_depth_mm", "cannot be given together with depth (Z pixels per object)")
         if self.level is not None and not self.level.strip():
             raise bad("level", "must name a height map file")
-        if self.level_extrapolate and not self.level:
-            raise bad("level_extrapolate", "needs a height map to level by (level)")
+        broken = broken_rule(lambda name: getattr(self, name))  # the rules between options (cam.options.RULES)
+        if broken is not None:
+            raise bad(*broken)
         odd = degenerate(lambda name: getattr(self, name))  # zero where zero is unsafe (cam.options)
         if odd is not None:
             raise bad(*odd)
@@ -967,8 +962,7 @@ def prepare_job(
     height_map = _height_map(opts)  # a bad map: one line, before the file is planned
     if kind == "drawing" and opts.heightmap:  # a grey-level relief (issue #31 point 7)
         job = PreparedJob(**prepare_heightmap(p, opts, settings))
-    elif kind in ("drawing", "digitized"):
-        check_heightmap_options(opts, p.name)  # --invert, --max-depth, ... only with --heightmap
+    elif kind in ("drawing", "digitized"):  # (--invert, --max-depth, ... only with --heightmap: JobOptions.checked)
         job = _prepare_pixels(p, kind, opts, settings)
     elif kind == "gcode":
         job = _prepare_gcode(p, opts, settings, machine_state)
