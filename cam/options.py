@@ -44,7 +44,7 @@ from .limits import DEFAULT_GCODE_LINES, MAX_GCODE_LINES
 
 __all__ = [
     "Option", "JOB_OPTIONS", "OPTIONS", "OPTION_KINDS", "OPTION_OF_DEST", "schema_json", "check_range", "degenerate",
-    "Rule", "RULES", "RULE_KINDS", "broken_rule", "given", "keyword_error",
+    "Rule", "RULES", "RULE_KINDS", "broken_rule", "given", "keyword_error", "own_zero",
     "MAX_MM", "MAX_PX", "MAX_DEPTH_PX", "TYPES", "GROUPS",
 ]
 
@@ -408,7 +408,8 @@ def given(name: str, value: Any) -> bool:
     out; a list as the command line holds it is its tuple)."""
     if value is None or value is False or (isinstance(value, (str, list, tuple)) and not value):
         return False
-    return _plain(value) != _plain(OPTIONS[name].default)
+    default = OPTIONS[name].default
+    return default is None or bool(_plain(value) != _plain(default))
 
 
 _HEIGHTMAP_DEPTH = "does not apply with {heightmap} (the grey of each pixel is its depth, down to {max_depth_mm})"
@@ -421,8 +422,12 @@ RULES: tuple[Rule, ...] = (
     Rule("not_with", "profile_expr", ("profile",),
          "cannot be given together with {profile}: give a profile file ({profile}) or an expression "
          "({profile_expr}), not both"),
-    Rule("not_with", "line_width_mm", ("depth", "cut_depth_mm"),
-         "cannot be given together with {other}: the line width sets the depth"),
+    *(Rule("not_with", name, ("depth", "cut_depth_mm"),
+           "cannot be given together with {other}: give a 3D drawing's depth once, a profile ({profile} or "
+           "{profile_expr}) for a shaped relief or one depth for every layer ({depth} or {cut_depth_mm}, a "
+           "flat-bottomed pocket)") for name in ("profile", "profile_expr")),
+    Rule("not_with", "line_width_mm", ("depth", "cut_depth_mm", "profile", "profile_expr"),
+         "cannot be given together with {other}: the line width sets the depth (of a 2D drawing's lines)"),
     *(Rule("not_with", name, ("heightmap",), _HEIGHTMAP_DEPTH)
       for name in ("trace", "trace_fill", "profile", "profile_expr", "depth", "cut_depth_mm", "line_width_mm",
                    "rough_tool", "pause_at")),
@@ -438,6 +443,15 @@ RULES: tuple[Rule, ...] = (
 """Every rule between job options, declared once (issue #48 point 3), in the order they are asked: the command
 line, :class:`cam.job.jobs.JobOptions`, the planners and the page all ask :func:`broken_rule` (or
 :func:`keyword_error`), the page from the rules :func:`schema_json` gives each option."""
+
+
+def own_zero(value_of: Callable[[str], Any]) -> bool:
+    """Whether a drill, HPGL, SVG or DXF file is placed by its own zero: ``origin`` "file", or an ``offset_mm``
+    given and no ``origin`` (an offset places the file's zero, so it makes the origin "file"), the one place this
+    rule is written (:func:`cam.job.jobs.own_zero_home` asks it for those kinds, the G-code export's exact
+    points too).  ``value_of(name)``: an option's value, None when not given."""
+    origin = value_of("origin")
+    return origin == "file" or (origin is None and value_of("offset_mm") is not None)
 
 
 def broken_rule(value_of: Callable[[str], Any], term: Callable[[str], str] = str) -> Optional[tuple[str, str]]:
@@ -481,7 +495,8 @@ def schema_json(kind_defaults: Optional[dict[str, dict[str, Any]]] = None) -> li
     value each kind it applies to takes when it is not given: ``kind_defaults[kind][name]`` where the library
     has one (:func:`cam.job.jobs.kind_defaults`: a drill file's cut depth), else the option's default; and
     ``rules``, the :data:`RULES` about it (``kind``, ``others``, ``why``: the page says ``{name}`` as the name
-    and ``{other}`` as the partner it finds, as the API does).  An option counts as given as :func:`given` says:
+    and ``{other}`` as the partner it finds, as the API does; ``index``: its place in :data:`RULES`, the order
+    they are asked in).  An option counts as given as :func:`given` says:
     set, and not to its default."""
     every = kind_defaults or {}
     return [{"name": o.name, "label": o.label, "group": o.group, "flag": o.flag, "type": o.type, "unit": o.unit,
@@ -490,5 +505,6 @@ def schema_json(kind_defaults: Optional[dict[str, dict[str, Any]]] = None) -> li
              "help": o.help, "min": o.lo, "max": o.hi, "min_open": o.lo_open, "range": o.range_text(),
              "count": o.count, "choices": list(o.choices), "metavar": o.metavar, "web": o.web,
              "aliases": list(o.aliases),
-             "rules": [{"kind": r.kind, "others": list(r.others), "why": r.why} for r in RULES if r.option == o.name]}
+             "rules": [{"kind": r.kind, "others": list(r.others), "why": r.why, "index": i}
+                       for i, r in enumerate(RULES) if r.option == o.name]}
             for o in JOB_OPTIONS]

@@ -66,6 +66,7 @@ import numpy as np
 
 from ..fileio import atomic_write_text
 from ..errors import CamError
+from ..options import own_zero
 from ..job.heightmap_level import height_at
 from ..job.arcs import Segment, arc_centre_for_ends, fit_path
 from ..job.model import RETRACT, TRAVEL, Job
@@ -136,7 +137,7 @@ def exact_geometry(prepared: Any, cut_depth_mm: Optional[float] = None, options:
     kind = getattr(prepared, "kind", None)
     if kind in ("svg", "hpgl", "dxf") and options is not None:
         offset = options.offset_mm
-        if offset is None and getattr(options, "origin", None) == "file":
+        if offset is None and own_zero(lambda name: getattr(options, name, None)):
             offset = (0.0, 0.0)  # as cam.job.jobs.prepare_job plans it
         if kind in ("svg", "dxf"):  # a DXF file is read into the same drawing as an SVG file
             drawing = load_dxf(prepared.source) if kind == "dxf" else load_svg(prepared.source)

@@ -125,10 +125,7 @@ def _object_depths(digitized: Digitized, depth: int | Sequence[int] | None, prof
     n_obj = len(digitized.objects)
     if n_obj == 0:
         raise PlanError("nothing to cut: the digitized drawing has no objects")
-    if digitized.mode == "3d":
-        if profile is not None and depth is not None:
-            raise PlanError("give a 3D drawing's depth once: --depth N (every layer at N Z pixels, a flat-bottomed "
-                            "pocket) or a profile (--profile, --profile-expr) for a shaped relief")
+    if digitized.mode == "3d":  # (not both a depth and a profile: a rule of cam.options, asked by plan)
         if profile is None and depth is None:
             raise PlanError("this is a 3D drawing (red interior): give --depth N for a flat-bottomed pocket N Z "
                             "pixels deep, or a profile for its layer depths (--profile FILE, --profile-expr EXPR)")

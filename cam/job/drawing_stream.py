@@ -341,8 +341,8 @@ def stream_drawing(
         first point that makes it too wide is named).  A job planned in its own frame: where it runs is checked
         when it is placed (issue #45 point 4).
     """
-    wrong = keyword_error({"depth": depth, "cut_depth_mm": cut_depth_mm, "passes": passes, "stepdown_mm": stepdown_mm,
-                           "stepover": stepover, "rough_tool": rough_tool})  # ranges and rules: cam.options
+    wrong = keyword_error({"depth": depth, "cut_depth_mm": cut_depth_mm, "profile": profile, "passes": passes,
+                           "stepdown_mm": stepdown_mm, "stepover": stepover, "rough_tool": rough_tool})  # cam.options
     if wrong is not None:
         raise PlanError(wrong)
     if cut_depth_mm is not None:

@@ -49,7 +49,7 @@ from ..drive.chunks import plan_chunks
 from ..errors import CamError, PlanError
 from ..formats.excellon import load_excellon
 from ..formats.gcode import load_tool_table, open_gcode
-from ..options import JOB_OPTIONS, Option, MAX_DEPTH_PX, MAX_MM, MAX_PX, broken_rule, check_range, degenerate  # noqa: F401 (the limits re-exported)
+from ..options import JOB_OPTIONS, Option, MAX_DEPTH_PX, MAX_MM, MAX_PX, broken_rule, check_range, degenerate, own_zero  # noqa: F401 (the limits re-exported)
 from ..formats.hpgl import scan_hpgl
 from ..formats.svg import load_svg
 from ..formats.dxf import load_dxf
@@ -810,9 +810,7 @@ def own_zero_home(kind: str, options: JobOptions, machine_state: Optional[Any] =
     ``offset_mm`` from it) goes to the active work zero of ``machine_state`` (None: the home, a new machine's
     work zero), and its travel is checked in the machine frame from there, as a G-code program's is.  None for
     every other job (planned in its own frame, placed at the work zero by its extent when it runs)."""
-    if kind not in ("excellon", "hpgl", "svg", "dxf"):
-        return None
-    if options.origin != "file" and (options.origin is not None or options.offset_mm is None):
+    if kind not in ("excellon", "hpgl", "svg", "dxf") or not own_zero(lambda name: getattr(options, name)):
         return None
     return (0, 0, 0) if machine_state is None else tuple(int(v) for v in machine_state.work_zero_steps())
 
