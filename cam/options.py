@@ -496,8 +496,8 @@ def schema_json(kind_defaults: Optional[dict[str, dict[str, Any]]] = None) -> li
     has one (:func:`cam.job.jobs.kind_defaults`: a drill file's cut depth), else the option's default; and
     ``rules``, the :data:`RULES` about it (``kind``, ``others``, ``why``: the page says ``{name}`` as the name
     and ``{other}`` as the partner it finds, as the API does; ``index``: its place in :data:`RULES`, the order
-    they are asked in).  An option counts as given as :func:`given` says:
-    set, and not to its default."""
+    they are asked in).  The page counts an option as given as :func:`given` does: set, and not to its
+    default."""
     every = kind_defaults or {}
     return [{"name": o.name, "label": o.label, "group": o.group, "flag": o.flag, "type": o.type, "unit": o.unit,
              "kinds": sorted(o.kinds), "default": _json_value(o.default),

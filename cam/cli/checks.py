@@ -4,8 +4,8 @@
 every command: each output path must be writable where it points, and each
 flag must apply to the file's kind (a flag that does not apply is an error,
 never ignored), and the flags must keep the rules between options
-(:data:`cam.options.RULES`: one depth, ...).  A bad one is one line on stderr and exit code 2, and nothing
-has moved.  It then fills in the defaults of options left out.  (Options that
+(:data:`cam.options.RULES`: one depth, ...).  A bad one is one line on stderr
+and exit code 2, and nothing has moved.  It then fills in the defaults of options left out.  (Options that
 need a port's capability are checked by the commands that open a port, before
 they plan: :func:`cam.cli.execute.check_port_options`.)
 
@@ -133,7 +133,8 @@ def check_args(args: argparse.Namespace) -> None:
 
     Raises:
         CamError: an unwritable output, a flag that does not apply to the file's kind, or flags that break a rule
-        between options (:func:`cam.options.broken_rule`); the message names the flags.  Options against the port are checked by :func:`cam.cli.execute.check_port_options`.
+        between options (:func:`cam.options.broken_rule`); the message names the flags.  Options against the
+        port are checked by :func:`cam.cli.execute.check_port_options`.
     """
     _check_outputs(args)
     warnings: list[str] = []
