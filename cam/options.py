@@ -13,6 +13,14 @@ declaration of a setting of a job.  From it come:
   each option from it (label, unit, range, help, the kinds it shows for, under its :attr:`Option.group`): a
   new option here is on the page with no page code.
 
+The rules between options (one depth, a scale or a size to fit, the options that go with ``--heightmap``,
+``--trace`` or ``--level`` only) are declared once too, as :data:`RULES`, and asked through one function,
+:func:`broken_rule`: by the command line (:func:`cam.cli.checks.check_args`, naming flags),
+:meth:`cam.kinds.jobs.JobOptions.checked` (the API and the page's server, naming options), the planners
+(:func:`keyword_error`, naming their keywords) and the page itself (each option's record in :func:`schema_json`
+carries its rules; ``app.js`` refuses a form that breaks one before sending it).  Ranges likewise have one check,
+:func:`check_range`.
+
 One name for one setting: the field is ``cut_depth_mm``, the flag
 ``--cut-depth`` (the field without its unit, ``_`` as ``-``), and the
 planners, readers and the tracer take the field's name as their keyword, in
@@ -36,6 +44,7 @@ from .limits import DEFAULT_GCODE_LINES, MAX_GCODE_LINES
 
 __all__ = [
     "Option", "JOB_OPTIONS", "OPTIONS", "OPTION_OF_DEST", "schema_json", "check_range", "degenerate",
+    "Rule", "RULES", "RULE_KINDS", "broken_rule", "given", "keyword_error", "own_zero",
     "MAX_MM", "MAX_PX", "MAX_DEPTH_PX", "TYPES", "GROUPS",
 ]
 
@@ -164,6 +173,7 @@ def check_range(option: Option, value: Any) -> Optional[str]:
     stack = [value]
     while stack:
         v = stack.pop()
+        v = v.tolist() if hasattr(v, "tolist") else v  # a numpy array or number, as a planner may be given
         if isinstance(v, (list, tuple)):
             stack.extend(v)
         else:
@@ -357,6 +367,142 @@ OPTION_OF_DEST: dict[str, Option] = {o.dest: o for o in JOB_OPTIONS}
 """The options by their argparse dest (``cut_depth`` -> the ``cut_depth_mm`` option)."""
 
 
+RULE_KINDS = ("not_with", "needs")
+"""What a :class:`Rule` says: its option cannot be given together with another, or needs one of others given."""
+
+
+@dataclass(frozen=True)
+class Rule:
+    """A rule between job options, about one of them (the one its message names first).
+
+    Attributes:
+        kind: one of :data:`RULE_KINDS`: "not_with": :attr:`option` cannot be given together with any of
+            :attr:`others`; "needs": :attr:`option` needs one of :attr:`others` given.
+        option: the option the rule is about: the one to leave out, or to give with what it needs.
+        others: the options it goes against, or one of which it needs.
+        why: what is wrong, said after the option's name: ``{name}`` of an option stands for it as the user
+            names it (its flag on the command line, its name in the API and on the page), ``{other}`` for the
+            one of :attr:`others` given (not_with) or for them all, joined by "or" (needs).
+    """
+
+    kind: str
+    option: str
+    others: tuple[str, ...]
+    why: str
+
+    def broken(self, value_of: Callable[[str], Any], term: Callable[[str], str] = str) -> Optional[str]:
+        """Why the values ``value_of(name)`` (None: not given) break the rule, its :attr:`why` said in ``term``'s
+        names, or None."""
+        if not given(self.option, value_of(self.option)):
+            return None
+        with_ = [n for n in self.others if given(n, value_of(n))]
+        if self.kind == "not_with" and with_:
+            other = term(with_[0])
+        elif self.kind == "needs" and not with_:
+            other = " or ".join(term(n) for n in self.others)
+        else:
+            return None
+        return self.why.format_map(_Terms(term, other))
+
+
+class _Terms(dict):
+    """The names a rule's :attr:`Rule.why` uses, as ``term`` says them (``{other}``: the partner it names)."""
+
+    def __init__(self, term: Callable[[str], str], other: str) -> None:
+        super().__init__(other=other)
+        self.term = term
+
+    def __missing__(self, name: str) -> str:
+        return self.term(name)
+
+
+def _plain(value: Any) -> Any:
+    return tuple(_plain(v) for v in value) if isinstance(value, (list, tuple)) else value
+
+
+def given(name: str, value: Any) -> bool:
+    """Whether option ``name`` is given as ``value`` for its rules: not None, off or empty, nor its default (a
+    value equal to the default changes nothing, and :class:`cam.kinds.jobs.JobOptions` cannot tell it from one left
+    out; a list as the command line holds it is its tuple)."""
+    if value is None or value is False or (isinstance(value, (str, list, tuple)) and not value):
+        return False
+    default = OPTIONS[name].default
+    return default is None or bool(_plain(value) != _plain(default))
+
+
+_HEIGHTMAP_DEPTH = "does not apply with {heightmap} (the grey of each pixel is its depth, down to {max_depth_mm})"
+
+RULES: tuple[Rule, ...] = (
+    Rule("not_with", "cut_depth_mm", ("depth",),
+         "cannot be given together with {depth}: give the depth once, {depth} in Z pixels per object or "
+         "{cut_depth_mm} in mm for every object"),
+    Rule("not_with", "fit_mm", ("scale",), "cannot be given together with {scale}: give {scale} or {fit_mm}, not both"),
+    Rule("not_with", "profile_expr", ("profile",),
+         "cannot be given together with {profile}: give a profile file ({profile}) or an expression "
+         "({profile_expr}), not both"),
+    *(Rule("not_with", name, ("depth", "cut_depth_mm"),
+           "cannot be given together with {other}: give a 3D drawing's depth once, a profile ({profile} or "
+           "{profile_expr}) for a shaped relief or one depth for every layer ({depth} or {cut_depth_mm}, a "
+           "flat-bottomed pocket)") for name in ("profile", "profile_expr")),
+    Rule("not_with", "line_width_mm", ("depth", "cut_depth_mm", "profile", "profile_expr"),
+         "cannot be given together with {other}: the line width sets the depth (of a 2D drawing's lines)"),
+    *(Rule("not_with", name, ("heightmap",), _HEIGHTMAP_DEPTH)
+      for name in ("trace", "trace_fill", "profile", "profile_expr", "depth", "cut_depth_mm", "line_width_mm",
+                   "rough_tool", "pause_at")),
+    *(Rule("needs", name, ("heightmap",), "applies with {heightmap} only (an image read as a height map)")
+      for name in ("invert", "max_depth_mm", "pixel_size_mm", "heightmap_order")),
+    *(Rule("needs", name, ("trace",), "applies with {trace} only (a sketch or a photo traced into a drawing first)")
+      for name in ("trace_min_length_px", "trace_fill")),
+    Rule("needs", "rough_tool", ("stepdown_mm",), "is for roughing in levels: it needs {stepdown_mm} (their spacing)"),
+    Rule("needs", "stepover", ("stepdown_mm", "heightmap"),
+         "spaces the roughing rings ({stepdown_mm}) or a height map's rows ({heightmap}): it needs one of them"),
+    Rule("needs", "level_extrapolate", ("level",), "needs a height map to level by ({level})"),
+)
+"""Every rule between job options, declared once (issue #48 point 3), in the order they are asked: the command
+line, :class:`cam.kinds.jobs.JobOptions`, the planners and the page all ask :func:`broken_rule` (or
+:func:`keyword_error`), the page from the rules :func:`schema_json` gives each option."""
+
+
+def own_zero(value_of: Callable[[str], Any]) -> bool:
+    """Whether a drill, HPGL, SVG or DXF file is placed by its own zero: ``origin`` "file", or an ``offset_mm``
+    given and no ``origin`` (an offset places the file's zero, so it makes the origin "file"), the one place this
+    rule is written (:func:`cam.kinds.jobs.own_zero_home` asks it for those kinds, the G-code export's exact
+    points too).  ``value_of(name)``: an option's value, None when not given."""
+    origin = value_of("origin")
+    return origin == "file" or (origin is None and value_of("offset_mm") is not None)
+
+
+def broken_rule(value_of: Callable[[str], Any], term: Callable[[str], str] = str) -> Optional[tuple[str, str]]:
+    """The first rule of :data:`RULES` the options break, ``(option name, why)``, or None.
+
+    ``value_of(name)`` gives an option's value (None: not given); ``term(name)`` how the message names an option
+    (the command line: its flag; by default its name, as the API and the page say it).  Like :func:`degenerate`,
+    the caller puts the option before ``why``: ``--cut-depth cannot be given together with --depth: ...``.
+    """
+    for rule in RULES:
+        why = rule.broken(value_of, term)
+        if why is not None:
+            return rule.option, why
+    return None
+
+
+def keyword_error(values: dict[str, Any]) -> Optional[str]:
+    """Why a planner's keywords ``values`` (option names, as :data:`OPTIONS` has them; None: not given) cannot be
+    planned, as one line naming the keyword: the first out of its option's range (:func:`check_range`), then the
+    first rule of :data:`RULES` among these keywords broken; None when none is.  The planners ask it, so that a
+    planner called by itself refuses what ``JobOptions`` refuses, in the same words."""
+    for name, value in values.items():
+        why = check_range(OPTIONS[name], value)
+        if why is not None:
+            return f"{name} {why}, got {value!r}"
+    for rule in RULES:
+        if rule.option in values and all(n in values for n in rule.others):
+            why = rule.broken(values.get)
+            if why is not None:
+                return f"{rule.option} {why}"
+    return None
+
+
 def _json_value(value: Any) -> Any:
     return [_json_value(v) for v in value] if isinstance(value, (tuple, list)) else value
 
@@ -367,11 +513,17 @@ def schema_json(options: tuple[Option, ...], kind_defaults: Optional[dict[str, d
     of ``options`` (their kinds filled in, :func:`cam.kinds.job_options`), kinds sorted, with its
     :attr:`~Option.label`, its range in words (``range``, as the errors say it) and ``defaults``, the value each
     kind it applies to takes when it is not given: ``kind_defaults[kind][name]`` where it depends on the kind (a
-    drill file's cut depth, :func:`cam.kinds.kind_defaults`), else the option's default."""
+    drill file's cut depth, :func:`cam.kinds.kind_defaults`), else the option's default; and ``rules``, the
+    :data:`RULES` about it (``kind``, ``others``, ``why``: the page says ``{name}`` as the name and ``{other}`` as
+    the partner it finds, as the API does; ``index``: its place in :data:`RULES`, the order they are asked in).
+    The page counts an option as given as :func:`given` does: set, and not to its default."""
     every = kind_defaults or {}
     return [{"name": o.name, "label": o.label, "group": o.group, "flag": o.flag, "type": o.type, "unit": o.unit,
              "kinds": sorted(o.kinds), "default": _json_value(o.default),
              "defaults": {k: _json_value(every.get(k, {}).get(o.name, o.default)) for k in sorted(o.kinds)},
              "help": o.help, "min": o.lo, "max": o.hi, "min_open": o.lo_open, "range": o.range_text(),
              "count": o.count, "choices": list(o.choices), "metavar": o.metavar, "web": o.web,
-             "aliases": list(o.aliases)} for o in options]
+             "aliases": list(o.aliases),
+             "rules": [{"kind": r.kind, "others": list(r.others), "why": r.why, "index": i}
+                       for i, r in enumerate(RULES) if r.option == o.name]}
+            for o in options]

@@ -193,9 +193,9 @@ def test_line_drawings_get_no_hint():
 def test_options_that_do_not_go_together_are_refused(tmp_path):
     path = tmp_path / "torus.png"
     cv2.imwrite(str(path), torus_grey(16))
-    with pytest.raises(CamError, match="--depth does not apply with --heightmap"):
+    with pytest.raises(CamError, match="option 'depth' does not apply with heightmap"):
         prepare_job(path, JobOptions(heightmap=True, depth=(3,)))
-    with pytest.raises(CamError, match="--max-depth applies with --heightmap only"):
+    with pytest.raises(CamError, match="option 'max_depth_mm' applies with heightmap only"):
         prepare_job(path, JobOptions(max_depth_mm=1.0))
     out = run_cli("drill", str(path), "--heightmap", "--trace")
     assert out.returncode == 2 and "--trace does not apply" in out.stderr and len(out.stderr.strip().splitlines()) == 1

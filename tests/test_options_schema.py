@@ -19,12 +19,12 @@ from cam.cli.parser import build_parser
 from cam.errors import CamError
 from cam.kinds.jobs import JobOptions
 from cam.kinds import job_options, schema_json
-from cam.options import Option
+from cam.options import Option, degenerate
+
+from conftest import SAMPLES, run_cli
 
 JOB_OPTIONS = job_options()
 """Every option, the kinds it applies to filled in from the kinds' traits (cam.kinds)."""
-
-from conftest import SAMPLES, run_cli
 
 KIND_FILES = {
     "drawing": SAMPLES / "gear.png", "excellon": SAMPLES / "board.drl", "hpgl": SAMPLES / "extended.plt",
@@ -42,10 +42,26 @@ def sample_value(o: Option) -> Optional[str]:
     return o.choices[-1] if o.type == "choice" else one[o.type]
 
 
-def argv_of(o: Option, path: Path, value: Optional[str] = None) -> list[str]:
-    """``cam drill PATH FLAG=VALUE`` (with ``=``: a value such as -1,-1,-1 is no flag to argparse)."""
+def _flag_argv(o: Option, value: Optional[str] = None) -> str:
+    """``FLAG=VALUE`` (with ``=``: a value such as -1,-1,-1 is no flag to argparse), or the flag of an on/off one."""
     value = sample_value(o) if value is None else value
-    return ["drill", str(path), o.flag if o.type == "flag" else f"{o.flag}={value}"]
+    return o.flag if o.type == "flag" else f"{o.flag}={value}"
+
+
+def needed(o: Option, kind: str) -> list[Option]:
+    """The options ``o`` needs given with it by :data:`cam.options.RULES` (the first of each "needs" rule's others
+    that applies to ``kind``)."""
+    from cam.options import RULES
+
+    by_name = {option.name: option for option in JOB_OPTIONS}  # with their kinds (cam.kinds)
+    return [next(by_name[n] for n in r.others if kind in by_name[n].kinds)
+            for r in RULES if r.option == o.name and r.kind == "needs"]
+
+
+def argv_of(o: Option, path: Path, value: Optional[str] = None, kind: Optional[str] = None) -> list[str]:
+    """``cam drill PATH FLAG=VALUE``, with the flags the option needs (:func:`needed`) on a file of ``kind``."""
+    return ["drill", str(path), _flag_argv(o, value), *(_flag_argv(n) for n in needed(o, kind or ""))] if kind \
+        else ["drill", str(path), _flag_argv(o, value)]
 
 
 def test_every_joboptions_field_has_exactly_one_schema_entry():
@@ -75,8 +91,8 @@ def test_every_schema_flag_is_in_drill_help():
 def test_drill_refuses_a_flag_for_the_kinds_the_schema_leaves_out(o):
     for kind, path in KIND_FILES.items():
         if kind in o.kinds:
-            args = build_parser().parse_args(argv_of(o, path))
-            check_args(args)  # no error: the flag applies (nothing is planned here)
+            args = build_parser().parse_args(argv_of(o, path, kind=kind))
+            check_args(args)  # no error: the flag applies, with what it needs (nothing is planned here)
         else:
             out = run_cli(*argv_of(o, path))
             assert out.returncode == 2, (kind, out.stderr)
@@ -152,9 +168,10 @@ def _cli_accepts(argv: list[str]) -> bool:
     return True
 
 
-def _options_accept(o: Option, value: Any) -> bool:
+def _options_accept(o: Option, value: Any, kind: str = "") -> bool:
+    partners = {n.name: {"flag": True, "number": 1.0, "text": "k"}[n.type] for n in needed(o, kind)}
     try:
-        JobOptions(**{o.name: value}).checked()
+        JobOptions(**{o.name: value}, **partners).checked()
     except CamError:
         return False
     return True
@@ -162,7 +179,8 @@ def _options_accept(o: Option, value: Any) -> bool:
 
 @pytest.mark.parametrize("o", [o for o in JOB_OPTIONS if o.lo is not None], ids=lambda o: o.name)
 def test_ranges_are_enforced_alike_by_the_cli_and_joboptions(o):
-    path = next(KIND_FILES[k] for k in KIND_FILES if k in o.kinds)
+    kind = next(k for k in KIND_FILES if k in o.kinds)
+    path = KIND_FILES[kind]
     for v in _boundary_values(o):
         whole = o.type in ("whole", "wholes", "points", "digits")
         text = str(int(v)) if whole else repr(v)
@@ -176,7 +194,10 @@ def test_ranges_are_enforced_alike_by_the_cli_and_joboptions(o):
             text, value = f"{text}:{text}", (value, value)
         elif o.type == "size":
             text, value = f"{text}x{text}", (value, value)
-        assert _cli_accepts(argv_of(o, path, text)) == _options_accept(o, value), (o.name, v)
+        accepted = _options_accept(o, value, kind)
+        assert _cli_accepts(argv_of(o, path, text, kind)) == accepted, (o.name, v)
+        # with what the option needs: only its range refuses it (or a zero that cannot be meant as given)
+        assert accepted == (o.in_range(v) and degenerate({o.name: value}.get) is None), (o.name, v)
 
 
 def test_trace_min_length_is_one_range_in_trace_and_drill():
@@ -185,7 +206,7 @@ def test_trace_min_length_is_one_range_in_trace_and_drill():
         accepted = o.lo <= v <= o.hi
         assert _cli_accepts(["trace", "photo.jpg", "-o", "d.png", "--trace-min-length", str(int(v))]) == accepted
         assert _cli_accepts(["trace", "photo.jpg", "-o", "d.png", "--min-length", str(int(v))]) == accepted
-        assert _cli_accepts(["drill", "photo.jpg", "--trace-min-length", str(int(v))]) == accepted
+        assert _cli_accepts(["drill", "photo.jpg", "--trace", "--trace-min-length", str(int(v))]) == accepted
 
 
 def test_one_name_for_the_depth_and_height_in_the_planners():

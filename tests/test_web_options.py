@@ -3,8 +3,9 @@
 ``GET /api/options`` gives each option of :data:`cam.options.JOB_OPTIONS` (name, label, group, type, unit, range,
 choices, the kinds it applies to, the default on each, help); a job planned through the page's API with each option
 set is the library's plan with it; an option added to the schema is served with no other change; and in Chromium
-the form is made from it: a drill file's options and a drawing's, a depth that reaches the plan, and a value out of
-range refused by the server in one line in the error banner.
+the form is made from it: a drill file's options and a drawing's, a depth that reaches the plan, a value out of
+range refused by the server in one line in the error banner, and two depths refused by the page itself (a rule
+between options, served with the schema).
 """
 from __future__ import annotations
 
@@ -240,5 +241,21 @@ def test_the_form_is_made_from_the_schema_and_its_values_reach_the_plan(page, tm
         want = prepare_job(SAMPLES / "ellipse.png", JobOptions(depth=(3,)), FAST)
         assert planned.value.json()["writes"] == len(want.plan)
         assert planned.value.json()["depth_mm"] == want.depth_mm
+        # two depths: a rule between options (cam.options.RULES, served with the schema) refused by the page
+        # itself, in the server's words, both fields marked, and nothing sent
+        sent: list[str] = []
+        page.on("request", lambda r: sent.append(r.url) if r.url.endswith("/api/plan") else None)
+        page.fill("#opt-cut-depth", "0.1")
+        page.click("#plan")
+        page.wait_for_selector("#error:not([hidden])")
+        text = page.text_content("#error-text")
+        assert text.startswith("option 'cut_depth_mm' cannot be given together with depth: give the depth once"), text
+        assert not sent
+        marked = page.eval_on_selector_all("#options-fields .broken", "els => els.map(e => e.dataset.option)")
+        assert sorted(marked) == ["cut_depth_mm", "depth"]
+        page.fill("#opt-cut-depth", "")
+        with page.expect_response(lambda r: r.url.endswith("/api/plan")) as planned:
+            page.click("#plan")
+        assert planned.value.status == 200 and not page.eval_on_selector_all("#options-fields .broken", "els => els.length")
     finally:
         s.close()

@@ -3,8 +3,9 @@
 :func:`check_args` runs in :func:`cam.cli.main` right after parsing, for
 every command: each output path must be writable where it points, and each
 flag must apply to the file's kind (a flag that does not apply is an error,
-never ignored).  A bad one is one line on stderr and exit code 2, and nothing
-has moved.  It then fills in the defaults of options left out.  (Options that
+never ignored), and the flags must keep the rules between options
+(:data:`cam.options.RULES`: one depth, ...).  A bad one is one line on stderr
+and exit code 2, and nothing has moved.  It then fills in the defaults of options left out.  (Options that
 need a port's capability are checked by the commands that open a port, before
 they plan: :func:`cam.cli.execute.check_port_options`.)
 
@@ -22,7 +23,7 @@ from typing import Optional
 from ..choices import is_height_map
 from ..errors import CamError
 from ..kinds import forced_kind, job_kind, job_options, kind, kind_names, kinds
-from ..options import OPTION_OF_DEST, OPTIONS, degenerate
+from ..options import OPTION_OF_DEST, OPTIONS, broken_rule, degenerate
 
 __all__ = ["check_args", "job_kind_of", "OUTPUTS", "applies_to", "check_output_path"]
 
@@ -110,8 +111,13 @@ def _check_applies(args: argparse.Namespace, kind: str) -> None:
             names = " and ".join(sorted(applies))
             raise CamError(f"{flag} does not apply to {getattr(args, 'image', None) or 'this job'} "
                            f"(a {kind} file); it applies to {names} files")
-    if kind in table["depth"] and _given(args, "cut_depth") and _given(args, "depth"):
-        raise CamError("give the depth once: --depth in Z pixels per object, or --cut-depth in mm for every object")
+
+
+def _check_rules(args: argparse.Namespace) -> None:
+    """The rules between the job options (:data:`cam.options.RULES`: one depth, ...), named by their flags."""
+    broken = broken_rule(lambda name: getattr(args, OPTIONS[name].dest, None), lambda name: OPTIONS[name].flag)
+    if broken is not None:
+        raise CamError(f"{OPTIONS[broken[0]].flag} {broken[1]}")
 
 
 def _check_outputs(args: argparse.Namespace) -> None:
@@ -130,8 +136,9 @@ def check_args(args: argparse.Namespace) -> None:
     """Check every option of ``args`` before the command runs, then fill kind-dependent defaults.
 
     Raises:
-        CamError: an unwritable output or a flag that does not apply to the file's kind (the message names
-        the flag).  Options against the port are checked by :func:`cam.cli.execute.check_port_options`.
+        CamError: an unwritable output, a flag that does not apply to the file's kind, or flags that break a rule
+        between options (:func:`cam.options.broken_rule`); the message names the flags.  Options against the
+        port are checked by :func:`cam.cli.execute.check_port_options`.
     """
     _check_outputs(args)
     warnings: list[str] = []
@@ -149,6 +156,8 @@ def check_args(args: argparse.Namespace) -> None:
         print(f"warning: {w}", file=sys.stderr)
     if kind is not None:
         _check_applies(args, kind)
+    if args.command in ("drill", "export", "preview", "info"):  # (cam trace's own --trace-min-length needs no --trace)
+        _check_rules(args)
     odd = degenerate(lambda name: getattr(args, OPTIONS[name].dest, None))  # zero where zero is unsafe
     if odd is not None:
         raise CamError(f"{OPTIONS[odd[0]].flag} {odd[1]}")

@@ -21,7 +21,7 @@ from ..choices import (
     IMAGE_SUFFIXES, PROFILE_SUFFIXES, DEFAULT_PORT, POSTS,
 )
 from ..drive.maximus.switch_options import add_maximus_switch_options
-from ..options import MAX_MM, OPTIONS, Option
+from ..options import MAX_MM, OPTIONS, Option, check_range
 from ..settings import RAMP_MODES
 
 JOG_UNIT_NAMES = ("steps", "full-steps", "0.1mm", "mm", "0.1in")
@@ -157,15 +157,24 @@ def _float_pair(name: str) -> Callable[[str], list[float]]:
 # -- the job options of cam.options, as flags ------------------------------------------------------
 
 
-def _schema_number(o: Option, flag: str) -> Callable[[str], float]:
-    """A number in ``o``'s range (finite: no inf or nan reaches a plan, a file or a report)."""
+def _in_range(o: Option, flag: str, value: object, text: str) -> None:
+    """Refuse a value out of ``o``'s range: :func:`cam.options.check_range`, the one range check (JobOptions asks
+    it too), in its words."""
+    why = check_range(o, value)
+    if why is not None:
+        raise argparse.ArgumentTypeError(f"{flag} {why}, got '{text}'")
+
+
+def _schema_number(o: Option, flag: str, whole: bool = False) -> Callable[[str], float]:
+    """A number (``whole``: a whole number) in ``o``'s range (finite: no inf or nan reaches a plan, a file or a
+    report)."""
     def parse(text: str) -> float:
         try:
-            value = float(text)
+            value = int(text) if whole else float(text)
         except ValueError:
-            raise argparse.ArgumentTypeError(f"{flag} takes a number, got '{text}'") from None
-        if not o.in_range(value):
-            raise argparse.ArgumentTypeError(f"{flag} must be a number {o.range_text()}, got '{text}'")
+            raise argparse.ArgumentTypeError(f"{flag} takes a {'whole ' if whole else ''}number, got '{text}'") \
+                from None
+        _in_range(o, flag, value, text)
         return value
 
     return parse
@@ -185,8 +194,7 @@ def _schema_list(o: Option, flag: str, whole: bool, separator: str = ",",
             raise argparse.ArgumentTypeError(f"{flag} takes {what} as {shape}, got '{text}'") from None
         if o.count is not None and len(values) != o.count:
             raise argparse.ArgumentTypeError(f"{flag} takes {o.count} {what} as {shape}, got '{text}'")
-        if not all(o.in_range(v) for v in values):
-            raise argparse.ArgumentTypeError(f"{flag} values must be {o.range_text()}, got '{text}'")
+        _in_range(o, flag, values, text)
         return values
 
     return parse
@@ -203,7 +211,7 @@ def _add_option(container: argparse._ActionsContainer, name: str, flag: Optional
     if o.metavar:
         kw["metavar"] = o.metavar
     if o.type == "whole":
-        kw["type"] = _whole(flag, int(o.lo), int(o.hi))  # type: ignore[arg-type]
+        kw["type"] = _schema_number(o, flag, whole=True)
     elif o.type == "number":
         kw["type"] = _schema_number(o, flag)
     elif o.type in ("wholes", "numbers"):
@@ -258,10 +266,9 @@ def _add_digitize_options(p: argparse.ArgumentParser) -> None:
 
 
 def _add_profile_options(p: argparse.ArgumentParser) -> None:
-    g = p.add_argument_group("3D depth profile (for drawings with a red interior)")
-    x = g.add_mutually_exclusive_group()
-    _add_option(x, "profile")
-    _add_option(x, "profile_expr")
+    g = p.add_argument_group("3D depth profile (for drawings with a red interior; one of the two)")
+    _add_option(g, "profile")  # not both: a rule of cam.options.RULES, checked by cam.cli.checks
+    _add_option(g, "profile_expr")
 
 
 def _tool_text(text: str) -> str:

@@ -83,8 +83,6 @@ def _depths_per_object(depth: int | Sequence[int], n_objects: int) -> tuple[np.n
         if len(values) > n_objects:
             warnings.append(f"{len(values)} depth values given for {n_objects} objects; the extra ones are unused")
             values = values[:n_objects]
-    if np.any(values < 0):
-        raise PlanError(f"depths must be >= 0 Z pixels, got {int(values.min())}")
     return values, warnings
 
 
@@ -122,17 +120,12 @@ def _object_depths(digitized: Digitized, depth: int | Sequence[int] | None, prof
     """``(depth per object (n_objects,) in Z pixels, warnings)`` from :func:`plan`'s ``depth``/``profile`` options.
 
     Raises:
-        PlanError: bad options (see :func:`plan`).
+        PlanError: bad options (see :func:`plan`; their ranges are checked there, :func:`cam.options.keyword_error`).
     """
-    if passes < 1:
-        raise PlanError(f"passes must be >= 1, got {passes}")
     n_obj = len(digitized.objects)
     if n_obj == 0:
         raise PlanError("nothing to cut: the digitized drawing has no objects")
-    if digitized.mode == "3d":
-        if profile is not None and depth is not None:
-            raise PlanError("give a 3D drawing's depth once: --depth N (every layer at N Z pixels, a flat-bottomed "
-                            "pocket) or a profile (--profile, --profile-expr) for a shaped relief")
+    if digitized.mode == "3d":  # (not both a depth and a profile: a rule of cam.options, asked by plan)
         if profile is None and depth is None:
             raise PlanError("this is a 3D drawing (red interior): give --depth N for a flat-bottomed pocket N Z "
                             "pixels deep, or a profile for its layer depths (--profile FILE, --profile-expr EXPR)")
@@ -141,8 +134,6 @@ def _object_depths(digitized: Digitized, depth: int | Sequence[int] | None, prof
             if uniform.size != 1:
                 raise PlanError(f"a 3D drawing takes one --depth for every layer (a flat-bottomed pocket), got "
                                 f"{uniform.size} values; use a profile for a depth per layer")
-            if int(uniform[0]) < 0:
-                raise PlanError(f"depths must be >= 0 Z pixels, got {int(uniform[0])}")
             depth_px, warnings = np.full(len(digitized.levels), int(uniform[0]), np.int64), []
         else:
             prof = as_profile(profile, digitized.n_layers)

@@ -37,7 +37,7 @@ import numpy as np
 from ..digitize.digitized import Digitized
 from ..digitize.profile import ProfileLike
 from ..errors import PlanError
-from ..options import OPTIONS
+from ..options import keyword_error
 from ..settings import DEFAULT_SETTINGS, MachineSettings
 from ..tool import Tool, parse_tool, reach_depth_px
 from .drawing import (_assemble, _drop_maps, _fits_travel, _guard_diagonals, _object_depths, _pass_order,
@@ -341,9 +341,11 @@ def stream_drawing(
         first point that makes it too wide is named).  A job planned in its own frame: where it runs is checked
         when it is placed (issue #45 point 4).
     """
+    wrong = keyword_error({"depth": depth, "cut_depth_mm": cut_depth_mm, "profile": profile, "passes": passes,
+                           "stepdown_mm": stepdown_mm, "stepover": stepover, "rough_tool": rough_tool})  # cam.options
+    if wrong is not None:
+        raise PlanError(wrong)
     if cut_depth_mm is not None:
-        if depth is not None:
-            raise PlanError("give the depth once: depth in Z pixels per object, or cut_depth_mm for every object")
         depth = depth_px_of(cut_depth_mm, settings)
     depth_px, warnings = _object_depths(digitized, depth, profile, passes)
     order = _pass_order(depth_px, passes)
@@ -433,9 +435,9 @@ def depth_px_of(cut_depth_mm: float, settings: MachineSettings) -> int:
     Raises:
         PlanError: out of the option's range, or less than half a Z pixel (it would cut nothing).
     """
-    o = OPTIONS["cut_depth_mm"]
-    if not o.in_range(float(cut_depth_mm)):
-        raise PlanError(f"cut_depth_mm must be {o.range_text()} mm, got {cut_depth_mm}")
+    wrong = keyword_error({"cut_depth_mm": cut_depth_mm})
+    if wrong is not None:
+        raise PlanError(wrong)
     depth_px = int(round(cut_depth_mm / settings.px_to_mm_z(1)))
     if depth_px < 1:
         raise PlanError(f"a cut depth of {cut_depth_mm:g} mm is less than one Z pixel ({settings.px_to_mm_z(1):g} mm)")
@@ -463,10 +465,9 @@ def _roughing_part(depth_px: np.ndarray, mode: str, cutter: Tool, rough_tool: To
         return None
     if mode != "3d":
         raise PlanError("roughing (a step-down) applies to 3D reliefs; a 2D drawing's lines are cut at once")
-    for name, value in (("stepdown_mm", stepdown_mm), ("stepover", stepover)):
-        o = OPTIONS[name]
-        if not o.in_range(float(value)):
-            raise PlanError(f"{name} must be {o.range_text()}{' ' + o.unit if o.unit else ''}, got {value}")
+    wrong = keyword_error({"stepdown_mm": stepdown_mm, "stepover": stepover})
+    if wrong is not None:
+        raise PlanError(wrong)
     stepdown_px = stepdown_px_of(float(stepdown_mm), settings)
     rough = parse_tool(rough_tool, "rough tool") if rough_tool else cutter
     depth_px = np.asarray(depth_px, np.int64)

@@ -50,7 +50,7 @@ from typing import Any, Iterator, Optional
 import numpy as np
 
 from ..errors import PlanError, TravelError
-from ..options import OPTIONS
+from ..options import OPTIONS, keyword_error
 from ..settings import DEFAULT_SETTINGS, MachineSettings
 from .model import CUT, RETRACT, TRAVEL, Job, PixelFrame, TravelSpan, check_span, check_travel, join_pieces
 from .drill_order import drill_order
@@ -177,12 +177,12 @@ def plan_drill(
         job wider than the travel (naming the hole and its line).
     """
 
-    if cut_depth_mm <= 0 or travel_height_mm < 0:
-        raise PlanError("drill depth must be > 0 mm and the safe height >= 0 mm")
+    wrong = keyword_error({"cut_depth_mm": cut_depth_mm, "travel_height_mm": travel_height_mm,
+                           "mill_holes_over_mm": mill_holes_over_mm})  # their ranges: cam.options
+    if wrong is not None:
+        raise PlanError(wrong)
     if drill_order not in ("tour", "file"):
         raise PlanError(f"drill_order must be 'tour' or 'file', got {drill_order!r}")
-    if mill_holes_over_mm is not None and not 0 < mill_holes_over_mm <= 100:
-        raise PlanError(f"mill_holes_over_mm must be > 0 and at most 100 mm, got {mill_holes_over_mm!r}")
     slot_paths = list(getattr(holes, "slot_paths_mm", []) or [])
     if len(holes.holes_mm) == 0 and not slot_paths:
         raise PlanError(f"{holes.source}: no holes to drill")

@@ -58,7 +58,7 @@ from .model import CUT, RETRACT, TRAVEL, Job, PixelFrame, check_span
 
 __all__ = ["DEFAULT_MAX_DEPTH_MM", "BAND_ROWS", "grey_of_image", "load_heightmap", "depth_steps_of",
            "drop_surface_steps", "sub_drop_steps", "pixel_steps_of", "row_spacing_px", "plan_heightmap",
-           "check_heightmap_options"]
+           ]
 
 DEFAULT_MAX_DEPTH_MM = 1.0
 """The depth of the deepest grey when ``max_depth_mm`` is not given."""
@@ -379,27 +379,3 @@ def plan_heightmap(
                warnings=warnings, safe_z_steps=0, pixels=frame, source=source, tool=None if cutter.is_point else cutter)
 
 
-_NOT_WITH = (("trace", "--trace"), ("trace_fill", "--trace-fill"), ("profile", "--profile"),
-             ("profile_expr", "--profile-expr"), ("depth", "--depth"), ("cut_depth_mm", "--cut-depth"),
-             ("line_width_mm", "--line-width"), ("rough_tool", "--rough-tool"), ("pause_at", "--pause-at"))
-_ONLY_WITH = (("invert", "--invert"), ("max_depth_mm", "--max-depth"), ("pixel_size_mm", "--pixel-size"))
-
-
-def check_heightmap_options(options: Any, source: str) -> None:
-    """Refuse a drawing option that a height map does not take (its depth comes from the grey), or a height
-    map's option without ``--heightmap``.
-
-    Raises:
-        CamError: naming the file and the flag.
-    """
-    if options.heightmap:
-        for name, flag in _NOT_WITH:
-            if getattr(options, name) not in (None, False, ()):
-                raise CamError(f"{source}: {flag} does not apply with --heightmap (the grey of each pixel is its "
-                               f"depth, down to --max-depth)")
-        return
-    for name, flag in _ONLY_WITH:
-        if getattr(options, name) not in (None, False):
-            raise CamError(f"{source}: {flag} applies with --heightmap only (an image read as a height map)")
-    if options.heightmap_order != "rows":
-        raise CamError(f"{source}: --heightmap-order applies with --heightmap only (an image read as a height map)")

@@ -31,7 +31,7 @@ from typing import Any, Callable, Iterator, Optional, Union
 import numpy as np
 
 from ..errors import PlanError, TravelError
-from ..options import OPTIONS
+from ..options import OPTIONS, keyword_error
 from ..formats.hpgl import (CHUNK_BYTES, PLOTTER_UNIT_MM, HpglDrawing, HpglScan, PointBatch, point_batches,
                             scan_hpgl)
 from ..settings import DEFAULT_SETTINGS, MachineSettings
@@ -98,17 +98,14 @@ def scale_to_fit(size_mm: Callable[[], tuple[float, float]], source: str, *, sca
     Raises:
         PlanError: both given, a factor that is not > 0, nothing to fit (named by ``source``).
     """
-    if scale is not None and fit_mm is not None:
-        raise PlanError("give --scale or --fit, not both")
+    wrong = keyword_error({"scale": scale, "fit_mm": fit_mm})  # their ranges, and not both: cam.options
+    if wrong is not None:
+        raise PlanError(wrong)
     if scale is not None:
-        if not (math.isfinite(scale) and scale > 0):
-            raise PlanError(f"the scale must be a number > 0, got {scale:g}")
         return float(scale)
     if fit_mm is None:
         return 1.0
     fw, fh = (float(v) for v in fit_mm)
-    if not (fw > 0 and fh > 0 and math.isfinite(fw) and math.isfinite(fh)):
-        raise PlanError(f"--fit takes a width and a height > 0 mm, got {fw:g}x{fh:g}")
     w, h = size_mm()
     if w <= 0 and h <= 0:
         raise PlanError(f"{source}: nothing to fit (the drawing has no extent)")
@@ -473,8 +470,9 @@ def stream_hpgl(src: Union[str, os.PathLike, HpglDrawing], *, settings: MachineS
         PlanError: bad options (both scale and fit_mm), nothing drawn; ParseError: a malformed file; TravelError: the depths outside
         the Z travel, a point outside the travel (found as the pieces are made).
     """
-    if not (cut_depth_mm > 0) or not (travel_height_mm >= 0):
-        raise PlanError("the cutting depth must be > 0 mm and the safe height >= 0 mm")
+    wrong = keyword_error({"cut_depth_mm": cut_depth_mm, "travel_height_mm": travel_height_mm})  # cam.options
+    if wrong is not None:
+        raise PlanError(wrong)
     if isinstance(src, HpglDrawing):
         points: Union[Path, HpglDrawing] = src
         scan = src.summary()

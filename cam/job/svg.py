@@ -63,7 +63,7 @@ from typing import Optional, Sequence, Union
 import numpy as np
 
 from ..errors import PlanError, TravelError
-from ..options import OPTIONS
+from ..options import OPTIONS, keyword_error
 from ..formats.svg import SvgDrawing
 from ..settings import DEFAULT_SETTINGS, MachineSettings
 from ._svg_kernels import cells_kernel, duplicate_pieces_kernel, nearest_order_kernel
@@ -370,8 +370,9 @@ def plan_svg(
         its extent in mm, naming the axis and by how much); in its own frame, the job with its home is wider than
         the travel.
     """
-    if not (cut_depth_mm > 0) or not (travel_height_mm >= 0):
-        raise PlanError("the cutting depth must be > 0 mm and the safe height >= 0 mm")
+    wrong = keyword_error({"cut_depth_mm": cut_depth_mm, "travel_height_mm": travel_height_mm})  # cam.options
+    if wrong is not None:
+        raise PlanError(wrong)
     chosen = svg_layer_order(drawing, layers)
     names = drawing.layers()
     part, part_layer = selected_layers(drawing, chosen)

@@ -19,10 +19,8 @@ def _sniff(head: Head) -> bool:
 
 def _prepare(path: Path, options: Any, settings: Any, *, home: Any = None, progress: Any = None,
              machine_state: Any = None) -> Any:
-    from ..job.heightmap import check_heightmap_options
     from .drawing import prepare_pixels
 
-    check_heightmap_options(options, path.name)
     return prepare_pixels(path, "digitized", options, settings)
 
 

@@ -108,12 +108,9 @@ def _prepare_heightmap(path: Path, options: Any, settings: Any) -> Any:
     (:mod:`cam.job.heightmap`)."""
     import numpy as np
 
-    from ..job.heightmap import (DEFAULT_MAX_DEPTH_MM, check_heightmap_options, depth_steps_of, load_heightmap,
-                                 plan_heightmap)
+    from ..job.heightmap import DEFAULT_MAX_DEPTH_MM, depth_steps_of, load_heightmap, plan_heightmap
     from ..tool import parse_tool, tool_of_settings
     from .jobs import PreparedJob, plan_chunks
-
-    check_heightmap_options(options, path.name)
 
     grey = load_heightmap(path)
     cutter = parse_tool(options.tool, "--tool") if options.tool else tool_of_settings(settings.tool)
@@ -147,11 +144,8 @@ def _prepare_heightmap(path: Path, options: Any, settings: Any) -> Any:
 
 def _prepare(path: Path, options: Any, settings: Any, *, home: Any = None, progress: Any = None,
              machine_state: Any = None) -> Any:
-    from ..job.heightmap import check_heightmap_options
-
-    if options.heightmap:  # a grey-level relief (issue #31 point 7)
+    if options.heightmap:  # a grey-level relief (issue #31 point 7; its options' rules: JobOptions.checked)
         return _prepare_heightmap(path, options, settings)
-    check_heightmap_options(options, path.name)  # --invert, --max-depth, ... only with --heightmap
     return prepare_pixels(path, "drawing", options, settings)
 
 

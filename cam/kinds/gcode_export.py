@@ -66,6 +66,7 @@ import numpy as np
 
 from ..fileio import atomic_write_text
 from ..errors import CamError
+from ..options import own_zero
 from ..job.heightmap_level import height_at
 from ..job.arcs import Segment, arc_centre_for_ends, fit_path
 from ..job.model import RETRACT, TRAVEL, Job
@@ -137,7 +138,7 @@ def own_offset(options: Any) -> Optional[tuple[float, float]]:
     """Where a file's zero goes, as :func:`cam.kinds.jobs.prepare_job` plans it: ``options.offset_mm``, or (0, 0)
     for a file placed by its own zero (``origin`` "file" and no offset); None: by the extent of what is cut."""
     offset = options.offset_mm
-    if offset is None and getattr(options, "origin", None) == "file":
+    if offset is None and own_zero(lambda name: getattr(options, name, None)):
         offset = (0.0, 0.0)
     return offset
 

@@ -40,7 +40,7 @@ from ..arrays import column_range
 from ..choices import PROFILE_SUFFIXES
 from ..motion.chunks import plan_chunks
 from ..errors import CamError, PlanError
-from ..options import JOB_OPTIONS, Option, MAX_DEPTH_PX, MAX_MM, MAX_PX, check_range, degenerate  # noqa: F401 (the limits re-exported)
+from ..options import JOB_OPTIONS, Option, MAX_DEPTH_PX, MAX_MM, MAX_PX, broken_rule, check_range, degenerate, own_zero  # noqa: F401 (the limits re-exported)
 from ..tool import parse_tool, tool_of_settings
 from ..render.picture import LEGEND_PX, depth_colours, encode_png, toolpath_picture
 from ..settings import DEFAULT_SETTINGS, MachineSettings
@@ -166,7 +166,9 @@ class JobOptions:
         return cls(**out).checked(source)
 
     def checked(self, source: str = "options") -> "JobOptions":
-        """Range checks; returns self.  Raises CamError naming the option."""
+        """Range checks (:func:`cam.options.check_range`) and the rules between options (:func:`cam.options.broken_rule`:
+        one depth, a scale or a size to fit, the options of a height map, a traced sketch or levelling only with
+        it); returns self.  Raises CamError naming the option."""
         def bad(key: str, why: str) -> CamError:
             return CamError(f"{source}: option '{key}' {why}, got {getattr(self, key)!r}")
 
@@ -185,22 +187,15 @@ class JobOptions:
                 why = "takes at least one whole number"
             if why is not None:
                 raise bad(o.name, why)
-        if self.scale is not None and self.fit_mm is not None:
-            raise bad("fit_mm", "cannot be given together with scale")
-        if self.profile is not None and self.profile_expr is not None:
-            raise bad("profile_expr", "cannot be given together with a profile file")
         if self.tool is not None:
             parse_tool(self.tool, f"{source}: option 'tool'")
         if self.rough_tool is not None:
             parse_tool(self.rough_tool, f"{source}: option 'rough_tool'")
-        if self.line_width_mm is not None and (self.depth is not None or self.cut_depth_mm is not None):
-            raise bad("line_width_mm", "cannot be given together with a depth (the width sets it)")
-        if self.cut_depth_mm is not None and self.depth is not None:
-            raise bad("cut_depth_mm", "cannot be given together with depth (Z pixels per object)")
         if self.level is not None and not self.level.strip():
             raise bad("level", "must name a height map file")
-        if self.level_extrapolate and not self.level:
-            raise bad("level_extrapolate", "needs a height map to level by (level)")
+        broken = broken_rule(lambda name: getattr(self, name))  # the rules between options (cam.options.RULES)
+        if broken is not None:
+            raise bad(*broken)
         odd = degenerate(lambda name: getattr(self, name))  # zero where zero is unsafe (cam.options)
         if odd is not None:
             raise bad(*odd)
@@ -665,9 +660,7 @@ def own_zero_home(kind: str, options: JobOptions, machine_state: Optional[Any] =
     ``offset_mm`` from it) goes to the active work zero of ``machine_state`` (None: the home, a new machine's
     work zero), and its travel is checked in the machine frame from there, as a G-code program's is.  None for
     every other job (planned in its own frame, placed at the work zero by its extent when it runs)."""
-    if not has(kind, "placed"):
-        return None
-    if options.origin != "file" and (options.origin is not None or options.offset_mm is None):
+    if not has(kind, "placed") or not own_zero(lambda name: getattr(options, name)):
         return None
     return (0, 0, 0) if machine_state is None else tuple(int(v) for v in machine_state.work_zero_steps())
 

@@ -52,7 +52,10 @@
   // one field per option, named by it, labelled with its label, unit and range, its help under it, in a fieldset
   // per group; only the options of the loaded file's kind show, each with that kind's default as its placeholder.
   // A new option of the schema is on the page with no code here: its type alone picks its widget.  Ranges are
-  // checked by the server, which refuses a value out of range in one line (the error banner).
+  // checked by the server, which refuses a value out of range in one line (the error banner).  The rules between
+  // options (cam/options.py RULES: one depth, ...) come with the schema, each option with its own: a form that
+  // breaks one is refused here in the server's words, its fields marked, before it is sent (the server checks
+  // them again).
   const schema = { byName: {}, ready: Promise.resolve() };
   // options whose field is elsewhere on the page: the file read as a kind (the Read as select, by the file)
   const ELSEWHERE = { kind: "read-as" };
@@ -254,6 +257,42 @@
     return out;
   }
 
+  // whether an option's value, as collectOptions sends it, counts for its rules: set, and not to its default
+  // (cam.options.given)
+  function given(o, v) {
+    if (v === undefined || v === "" || v === false) return false;
+    if (v === true) return o.default !== true;
+    if (["whole", "number"].includes(o.type) && String(v).trim() !== "" && !isNaN(Number(v))) return Number(v) !== o.default;
+    return String(v) !== asText(o, o.default);
+  }
+
+  // the first rule between options (in the server's order) the options ``out`` break, as the server says it:
+  // { names: [the option, its partner], text }, or null
+  function brokenRule(out) {
+    const rules = [];
+    Object.values(schema.byName).forEach((o) => (o.rules || []).forEach((r) => rules.push([o, r])));
+    rules.sort((a, b) => a[1].index - b[1].index);
+    const on = (name) => !!schema.byName[name] && given(schema.byName[name], out[name]);
+    for (const [o, r] of rules) {
+      if (!on(o.name)) continue;
+      const withIt = r.others.filter(on);
+      let other;
+      if (r.kind === "not_with" && withIt.length) other = withIt[0];
+      else if (r.kind === "needs" && !withIt.length) other = r.others.join(" or ");
+      else continue;
+      const text = "option '" + o.name + "' " + r.why.replace(/\{(\w+)\}/g, (m, k) => (k === "other" ? other : k));
+      return { names: [o.name, ...(withIt.length ? [other] : r.others)], text: text };
+    }
+    return null;
+  }
+
+  // mark the fields of the options a broken rule names (none: clear the marks)
+  function markBroken(names) {
+    document.querySelectorAll("#options-fields [data-option]").forEach((wrap) => {
+      wrap.classList.toggle("broken", names.includes(wrap.dataset.option));
+    });
+  }
+
   async function upload(file, role) {
     const fd = new FormData();
     fd.append("role", role);
@@ -269,8 +308,12 @@
     $("job-summary").textContent = "planning…";
     const forced = (schema.forcedKind || {})[$("read-as").value] || $("read-as").value;
     if (forced && forced !== page.kind) { page.kind = forced; showKind(forced); }  // its options apply
+    const options = collectOptions();
+    const broken = brokenRule(options);
+    markBroken(broken ? broken.names : []);
     try {
-      const r = await api("/api/plan", { json: { job: page.job, options: collectOptions() } });
+      if (broken) { showError(broken.text); throw new Error(broken.text); }  // not sent: the server would refuse it
+      const r = await api("/api/plan", { json: { job: page.job, options: options } });
       page.planned = r;
       $("job-size").textContent = r.size_mm[0].toFixed(2) + " × " + r.size_mm[1].toFixed(2) + " mm, depth " +
         r.depth_mm.toFixed(2) + " mm";
