@@ -286,10 +286,12 @@ def test_a_job_levelled_a_piece_at_a_time_is_the_job_levelled_whole():
 
 
 def test_level_options_are_declared_for_every_kind_and_extrapolate_needs_a_map():
-    from cam.options import OPTIONS
+    from cam.kinds import job_options, kind_names
 
+    OPTIONS = {o.name: o for o in job_options()}  # with the kinds their traits give (cam.kinds)
     for name in ("level", "level_extrapolate"):
-        assert OPTIONS[name].kinds == {"drawing", "digitized", "gcode", "excellon", "hpgl", "svg", "dxf"}
+        assert OPTIONS[name].kinds == set(kind_names()) == {"drawing", "digitized", "gcode", "excellon", "hpgl",
+                                                             "svg", "dxf"}
         assert not OPTIONS[name].web  # a file on the machine that runs cam
     assert OPTIONS["level"].flag == "--level" and OPTIONS["level_extrapolate"].flag == "--level-extrapolate"
     with pytest.raises(CamError, match="option 'level_extrapolate' needs a height map"):

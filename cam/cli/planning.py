@@ -15,7 +15,7 @@ from ..pins import axis_bits
 from ..drive.state import MachineState, read_state
 from ..errors import CamError, TravelError
 from ..kinds.jobs import JobOptions, PreparedJob, own_zero_home, prepare_job
-from ..kinds import has, kind, job_options as kind_job_options
+from ..kinds import has, kind, job_options as kind_job_options, option_kinds
 from ..options import Option
 from ..job.model import JobLike
 from ..render.picture import save_picture, surface_picture, toolpath_picture, toolpath_svg
@@ -140,7 +140,7 @@ def write_job_preview(args: argparse.Namespace, job: PreparedJob, path: str, sur
     held in memory or made a piece at a time alike, see :func:`write_preview`)."""
     if has(job.kind, "pixels"):
         write_preview(args, job.toolpath, path, surface=surface, drawing_rgb=job.drawing_rgb)
-    elif has(job.kind, "layers"):  # --scale scaled the drawing, as in drill
+    elif job.kind in option_kinds()["scale"]:  # --scale scaled the drawing (SVG, DXF, HPGL), as in drill
         write_file_job_preview(job, path)
     else:
         write_file_job_preview(job, path, scale=_picture_scale(args))

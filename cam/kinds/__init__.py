@@ -23,7 +23,7 @@ import os
 from dataclasses import dataclass, field, replace
 from functools import lru_cache
 from pathlib import Path
-from typing import Any, Callable, Mapping, Optional
+from typing import Any, Callable, Optional
 
 from ..errors import CamError
 from .. import options as _options
@@ -110,6 +110,10 @@ class Kind:
         info_lines: ``info_lines(report) -> list[str]``: what ``cam info`` prints of that report.
         exact_geometry: ``(prepared, cut_depth_mm, options) -> (exact_xy_mm, exact_z_mm)`` for ``cam export``
             (:func:`cam.kinds.gcode_export.exact_geometry`); None: its points are the job's own.
+        picture: ``picture(prepared) -> (H, W, 3) uint8 RGB array or None``: its preview (the page's and
+            ``cam preview``'s picture; a drawing's toolpath over the drawing); None, or a hook returning None: the
+            job's moves seen from above (:func:`cam.kinds.jobs.motion_picture`, holes marked on a kind with the
+            ``holes`` trait).
         forced_as: its ``--kind`` name (default ``name``).
         job_noun: what placement messages call its job ("drill job"); None: it is not placed at the work zero
             (a G-code program runs in its own work offsets).
@@ -131,6 +135,7 @@ class Kind:
     info: Optional[Callable[..., dict]] = None
     info_lines: Optional[Callable[[dict], list[str]]] = None
     exact_geometry: Optional[Callable[..., Any]] = None
+    picture: Optional[Callable[[Any], Any]] = None
     forced_as: str = ""
     job_noun: Optional[str] = None
     default_origin: str = "upper-left"
@@ -364,8 +369,3 @@ def kinds_json() -> list[dict[str, Any]]:
     return [{"name": k.name, "title": k.title, "noun": k.noun, "suffixes": list(k.suffixes), "forced_as": k.forced_as,
              "traits": sorted(k.all_traits)} for k in kinds()]
 
-
-def listed(mapping: Mapping[str, Any]) -> str:
-    """``a, b and c`` of a mapping's keys or a sequence (messages)."""
-    names = list(mapping)
-    return names[0] if len(names) == 1 else ", ".join(names[:-1]) + " and " + names[-1]

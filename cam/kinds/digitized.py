@@ -24,9 +24,16 @@ def _prepare(path: Path, options: Any, settings: Any, *, home: Any = None, progr
     return prepare_pixels(path, "digitized", options, settings)
 
 
+def _picture(job: Any) -> Any:
+    from .drawing import pixels_picture
+
+    return pixels_picture(job)
+
+
 KIND = Kind(
     name="digitized", noun="a digitized matrix", title="digitized matrix", suffixes=(".txt", ".dig"),
     traits=frozenset({"pixels"}), prepare=_prepare, sniff=_sniff, sniff_rank=40, forced_as="matrix",
+    picture=_picture,
     job_noun="digitized matrix job", default_origin="file", file_job=False,
     help="is cut as the drawing it was digitized from",
 )

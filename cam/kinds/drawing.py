@@ -12,7 +12,7 @@ from ..errors import CamError
 from ..options import MAX_DEPTH_PX
 from . import Head, Kind
 
-__all__ = ["KIND", "prepare_pixels"]
+__all__ = ["KIND", "prepare_pixels", "pixels_picture"]
 
 _IMAGE_MAGIC = (b"\x89PNG\r\n\x1a\n", b"\xff\xd8\xff", b"II*\x00", b"MM\x00*", b"GIF87a", b"GIF89a")
 """PNG, JPEG, TIFF (both byte orders) and GIF signatures."""
@@ -142,6 +142,17 @@ def _prepare_heightmap(path: Path, options: Any, settings: Any) -> Any:
                        warnings=list(job.warnings), summary=summary, report=report, drawing_rgb=rgb)
 
 
+def pixels_picture(job: Any) -> Any:
+    """A drawing's (or digitized matrix's) preview: its toolpath over the drawing, in drawing pixels
+    (:func:`cam.render.picture.toolpath_picture`); None for a job kept in pieces (the moves seen from above)."""
+    from ..job.model import Job
+    from ..render.picture import toolpath_picture
+
+    if not isinstance(job.toolpath, Job):
+        return None
+    return toolpath_picture(job.toolpath, drawing_rgb=job.drawing_rgb, estimated_time_s=job.estimated_time_s)
+
+
 def _prepare(path: Path, options: Any, settings: Any, *, home: Any = None, progress: Any = None,
              machine_state: Any = None) -> Any:
     if options.heightmap:  # a grey-level relief (issue #31 point 7; its options' rules: JobOptions.checked)
@@ -175,6 +186,7 @@ def _info_lines(rep: dict, name: str) -> list[str]:
 KIND = Kind(
     name="drawing", noun="an image", title="drawing", suffixes=IMAGE_SUFFIXES,
     traits=frozenset({"pixels"}), prepare=_prepare, sniff=_sniff, sniff_rank=10, info=_info, info_lines=_info_lines,
+    picture=pixels_picture,
     job_noun="drawing job", default_origin="file", file_job=False, listed_as="a drawing",
     help="is digitized and cut by the thesis's rules (black curves: 2D; a black contour around red: 3D)",
 )

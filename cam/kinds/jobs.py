@@ -42,7 +42,7 @@ from ..motion.chunks import plan_chunks
 from ..errors import CamError, PlanError
 from ..options import JOB_OPTIONS, Option, MAX_DEPTH_PX, MAX_MM, MAX_PX, broken_rule, check_range, degenerate, own_zero  # noqa: F401 (the limits re-exported)
 from ..tool import parse_tool, tool_of_settings
-from ..render.picture import LEGEND_PX, depth_colours, encode_png, toolpath_picture
+from ..render.picture import LEGEND_PX, depth_colours, encode_png
 from ..settings import DEFAULT_SETTINGS, MachineSettings
 from ..verify.pinlog import PinLog, decode_pin_log
 from ..job.gcode_probing import ProbingProgram
@@ -50,7 +50,7 @@ from ..job.heightmap_level import check_map, level_job, load_height_map, outside
 from ..job.model import Job
 from ..job.resume import (Journal, JournalBase, check_journal, check_journal_numbers, job_identity, plan_fingerprint,
                           resume_pieces)
-from . import forced_kind, has, job_kind, job_options, kind_defaults, option_kinds, suffixes
+from . import forced_kind, has, job_kind, job_options, kind_defaults, kind_names, option_kinds, suffixes
 from . import kind as kind_named
 
 __all__ = [
@@ -484,9 +484,10 @@ class PreparedJob:
 
     def preview_picture(self) -> np.ndarray:
         """The preview as an ``(H, W, 3)`` uint8 RGB array (see :mod:`cam.render.picture`)."""
-        if has(self.kind, "pixels") and isinstance(self.toolpath, Job):
-            return toolpath_picture(self.toolpath, drawing_rgb=self.drawing_rgb,
-                                    estimated_time_s=self.estimated_time_s)
+        hook = kind_named(self.kind).picture if self.kind in kind_names() else None
+        own = hook(self) if hook is not None else None
+        if own is not None:
+            return own
         # the job's points, a piece at a time: the step plan moves in straight lines between them (its DDA
         # spreads the shorter axes evenly), so they draw the same picture as every write would, at a fraction
         # of the cost
