@@ -1,4 +1,4 @@
-"""The job options, declared once: name, command-line flag, type, unit, range, file kinds, default and help.
+"""The job options, declared once: name, flag, type, unit, range, the kinds it applies to, defaults and help.
 
 Issue #28 point 6.  Each :class:`Option` in :data:`JOB_OPTIONS` is the one
 declaration of a setting of a job.  From it come:
@@ -8,7 +8,15 @@ declaration of a setting of a job.  From it come:
 * the command-line flags of ``cam drill``, ``export``, ``preview`` (and the
   shared ones of ``info``, ``digitize`` and ``trace``): :mod:`cam.cli.parser`;
 * which option applies to which file kind, for the command line's checks
-  (:mod:`cam.cli.checks`), :meth:`JobOptions.check_kind` and the page;
+  (:mod:`cam.cli.checks`), :meth:`JobOptions.check_kind` and the page: an
+  option names traits (``pixels``, ``placed``, ``holes``, ``strokes``,
+  ``layers``, ``every``, or a kind's own name) and each kind's module says
+  its traits (:mod:`cam.kinds`), so a new kind takes the options of what it
+  is with no line here;
+* the value an option takes on a kind when it is not given, declared by trait
+  (:attr:`Option.trait_defaults`: a drill file's 2.0 mm cut depth, a pen
+  stroke's 0.5 mm): the planners' defaults, ``--help``, the page and
+  :func:`cam.kinds.kind_defaults` read it;
 * the web page's form: ``GET /api/options`` serves :func:`schema_json`, and ``app.js`` makes a field of
   each option from it (label, unit, range, help, the kinds it shows for, under its :attr:`Option.group`): a
   new option here is on the page with no page code.

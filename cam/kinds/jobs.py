@@ -10,9 +10,13 @@ The CLI and the web server are thin adapters over :func:`prepare_job`::
 
 The kind comes from the file name's suffix and, when the suffix is generic
 (none, ``.txt``, ``.nc``, ``.cnc``), unknown or contradicted by the content,
-from the file's first few kB (:func:`job_kind`, :mod:`cam.sniff`); a suffix
-the content contradicts is a warning of the job.  A file neither tells is a
-:class:`~cam.errors.CamError` naming the file and the accepted types.  Every job is planned relative to where the tool stands when it
+from the file's first few kB (:func:`cam.kinds.job_kind`: each kind's module
+has its sniffer); a suffix the content contradicts is a warning of the job.
+A file neither tells is a :class:`~cam.errors.CamError` naming the file and
+the accepted types.  The kind's module (:mod:`cam.kinds`) plans it
+(:attr:`cam.kinds.Kind.prepare`); what is the same for every kind (the
+options checked, placement by the file's own zero, levelling, the report's
+common fields, resuming) is here.  Every job is planned relative to where the tool stands when it
 starts (the job's home, (0, 0, 0) in machine steps); :attr:`PreparedJob.extent_steps`
 says how far it reaches from there, so a caller that knows where the tool
 stands can check the job against the machine travel before it starts.  A job
@@ -389,7 +393,7 @@ class PreparedJob:
     """A job ready to run.
 
     Attributes:
-        source: the file it came from; name: what to call it; kind: one of :data:`KINDS`.
+        source: the file it came from; name: what to call it; kind: its file kind's name (:func:`cam.kinds.kind_names`).
         plan: the step plan as a :class:`~cam.motion.chunks.ChunkedPlan` (machine frame, steps from the job
             home): made a chunk at a time, so a job of any length runs in bounded memory.
         steps: the same plan with every write at once, a :class:`~cam.motion.steps.StepPlan` (made on first
