@@ -33,8 +33,12 @@ def refused(out, *fragments: str) -> str:
 
 
 def test_the_allow_option_is_declared_once_for_the_travel_heights_kinds():
+    from cam.kinds import option_kinds
+
     allow, height = OPTIONS["allow_surface_travel"], OPTIONS["travel_height_mm"]
-    assert allow.type == "flag" and allow.default is False and allow.kinds == height.kinds
+    assert allow.type == "flag" and allow.default is False and allow.traits == height.traits
+    assert option_kinds()["allow_surface_travel"] == option_kinds()["travel_height_mm"] == {"excellon", "hpgl", "svg",
+                                                                                          "dxf"}
     assert allow.flag == "--allow-surface-travel"
 
 

@@ -105,9 +105,11 @@ class Kind:
         sniff: whether a file's first bytes (a :class:`Head`) are of this kind; None: by suffix only.
         sniff_rank: the order sniffers are asked in (lower first: the more certain signatures).
         prepare: plans a file of it (:data:`Prepare`).
-        info: ``info(path, options, settings, *, machine_state, progress) -> dict``: what ``cam info --json``
-            prints; None: ``cam info`` does not read it.
-        info_lines: ``info_lines(report) -> list[str]``: what ``cam info`` prints of that report.
+        info: ``info(path, options, settings, *, prepare, progress) -> dict``: what ``cam info --json`` prints
+            (``prepare()``: the file planned where it would run, as the command plans it; ``progress(done,
+            total)``: bytes read); None: ``cam info`` does not read it.
+        info_lines: ``info_lines(report, name) -> list[str]``: what ``cam info`` prints of that report, the file
+            called ``name``.
         exact_geometry: ``(prepared, cut_depth_mm, options) -> (exact_xy_mm, exact_z_mm)`` for ``cam export``
             (:func:`cam.kinds.gcode_export.exact_geometry`); None: its points are the job's own.
         picture: ``picture(prepared) -> (H, W, 3) uint8 RGB array or None``: its preview (the page's and
@@ -118,7 +120,6 @@ class Kind:
         job_noun: what placement messages call its job ("drill job"); None: it is not placed at the work zero
             (a G-code program runs in its own work offsets).
         default_origin: the point of its job placed at the work zero when ``--origin`` is not given.
-        file_job: the job is in the file (not traced from a picture).
         export_refusal: why ``cam export`` does not write it (G-code is G-code already); None: it does.
         help: one sentence for ``cam drill --help``.
         listed_as: how lists of files in ``--help`` name it (default :attr:`noun`).
@@ -133,13 +134,12 @@ class Kind:
     sniff: Optional[Callable[[Head], bool]] = None
     sniff_rank: int = 50
     info: Optional[Callable[..., dict]] = None
-    info_lines: Optional[Callable[[dict], list[str]]] = None
+    info_lines: Optional[Callable[[dict, str], list[str]]] = None
     exact_geometry: Optional[Callable[..., Any]] = None
     picture: Optional[Callable[[Any], Any]] = None
     forced_as: str = ""
     job_noun: Optional[str] = None
     default_origin: str = "upper-left"
-    file_job: bool = True
     export_refusal: Optional[str] = None
     help: str = ""
     listed_as: str = ""

@@ -34,6 +34,6 @@ KIND = Kind(
     name="digitized", noun="a digitized matrix", title="digitized matrix", suffixes=(".txt", ".dig"),
     traits=frozenset({"pixels"}), prepare=_prepare, sniff=_sniff, sniff_rank=40, forced_as="matrix",
     picture=_picture,
-    job_noun="digitized matrix job", default_origin="file", file_job=False,
+    job_noun="digitized matrix job", default_origin="file",
     help="is cut as the drawing it was digitized from",
 )

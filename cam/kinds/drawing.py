@@ -187,6 +187,6 @@ KIND = Kind(
     name="drawing", noun="an image", title="drawing", suffixes=IMAGE_SUFFIXES,
     traits=frozenset({"pixels"}), prepare=_prepare, sniff=_sniff, sniff_rank=10, info=_info, info_lines=_info_lines,
     picture=pixels_picture,
-    job_noun="drawing job", default_origin="file", file_job=False, listed_as="a drawing",
+    job_noun="drawing job", default_origin="file", listed_as="a drawing",
     help="is digitized and cut by the thesis's rules (black curves: 2D; a black contour around red: 3D)",
 )
