@@ -10,6 +10,7 @@ import math
 import re
 import shutil
 import sys
+from typing import Any, Callable
 
 import numpy as np
 import pytest
@@ -341,21 +342,17 @@ def test_an_svg_circle_is_written_on_the_circle_as_a_few_arcs(tmp_path):
     assert len(_code_lines(out.read_text())) > 10 * len(code)   # at the steps, the circle is a staircase
 
 
-@pytest.mark.slow
-@pytest.mark.usefixtures("quick_thread_switches")
-def test_grbl_emulator_pauses_at_each_tool_change_and_drills_the_exact_holes(tmp_path):
+def _stream_to_grbl_emulator(program: str, at_pause: Callable[[Any], None]) -> Any:
+    """Stream ``program`` to the grbl emulator through :class:`cam.drive.grbl_link.GrblLink`, pressing cycle start
+    at each pause (``M0``) once the planner is empty, after ``at_pause(emulator)`` has looked at it; returns the
+    stopped emulator (its executed blocks and answered lines)."""
     import threading
 
     from cam.drive.grbl_link import GrblLink
     from cam.sim.grbl import start_emulator
 
-    src = _drill_file(tmp_path, ((1, 0.8, [(7.62, 2.54), (10.16, 5.08)]), (2, 1.0, [(3.3, 4.4)])))
-    out = tmp_path / "g.ngc"
-    assert main(["export", str(src), "-o", str(out), "--post", "grbl", "--offset", "0,10", "--cut-depth", "1.5",
-                 "--spindle-rpm", "9000", "--feed", "600", "--plunge-feed", "300"]) == 0
     emu = start_emulator(speed=None, settings={110: 5000.0, 111: 5000.0, 112: 5000.0, 120: 500.0, 121: 500.0,
                                                 122: 500.0})
-    pauses: list[tuple] = []
     try:
         with GrblLink(f"grbl:{emu.device_path}?baud=115200", welcome_timeout_s=1.0) as link:
             done = threading.Event()
@@ -363,19 +360,31 @@ def test_grbl_emulator_pauses_at_each_tool_change_and_drills_the_exact_holes(tmp
             def cycle_start_at_each_pause():
                 while not done.is_set():
                     if emu.wait_for(lambda e: e.state == "Hold:0" and e.planner_blocks == 0, 0.2):
-                        pauses.append(emu.machine_position_mm)
+                        at_pause(emu)
                         link.resume()
                         emu.wait_for(lambda e: not e.state.startswith("Hold"), 2.0)
 
             helper = threading.Thread(target=cycle_start_at_each_pause)
             helper.start()
             try:
-                link.stream(out.read_text().splitlines())
+                link.stream(program.splitlines())
             finally:
                 done.set()
                 helper.join()
     finally:
         emu.stop()
+    return emu
+
+
+@pytest.mark.slow
+@pytest.mark.usefixtures("quick_thread_switches")
+def test_grbl_emulator_pauses_at_each_tool_change_and_drills_the_exact_holes(tmp_path):
+    src = _drill_file(tmp_path, ((1, 0.8, [(7.62, 2.54), (10.16, 5.08)]), (2, 1.0, [(3.3, 4.4)])))
+    out = tmp_path / "g.ngc"
+    assert main(["export", str(src), "-o", str(out), "--post", "grbl", "--offset", "0,10", "--cut-depth", "1.5",
+                 "--spindle-rpm", "9000", "--feed", "600", "--plunge-feed", "300"]) == 0
+    pauses: list[tuple] = []
+    emu = _stream_to_grbl_emulator(out.read_text(), lambda e: pauses.append(e.machine_position_mm))
     assert emu.error is None and all(a == "ok" for _, _, a in emu.lines())
     assert len(pauses) == 2 and all(p[2] == pytest.approx(1.0) for p in pauses)   # lifted to the safe height
     bottoms = {(round(b.end_mm[0], 6), round(b.end_mm[1], 6)) for b in emu.executed()
@@ -533,34 +542,8 @@ def _emulator_events(program: str) -> list[tuple]:
     """The grbl program as the grbl emulator runs it (cycle start at each ``M0``): ("G0"|"G1", x, y, z) for each
     block it executed (machine frame = the program's: no offsets) and ("change",) where it held at a pause.  Every
     line must be answered ``ok``."""
-    import threading
-
-    from cam.drive.grbl_link import GrblLink
-    from cam.sim.grbl import start_emulator
-
-    emu = start_emulator(speed=None, settings={110: 5000.0, 111: 5000.0, 112: 5000.0, 120: 500.0, 121: 500.0,
-                                                122: 500.0})
     pauses: list[int] = []
-    try:
-        with GrblLink(f"grbl:{emu.device_path}?baud=115200", welcome_timeout_s=1.0) as link:
-            done = threading.Event()
-
-            def cycle_start_at_each_pause():
-                while not done.is_set():
-                    if emu.wait_for(lambda e: e.state == "Hold:0" and e.planner_blocks == 0, 0.2):
-                        pauses.append(len(emu.executed()))
-                        link.resume()
-                        emu.wait_for(lambda e: not e.state.startswith("Hold"), 2.0)
-
-            helper = threading.Thread(target=cycle_start_at_each_pause)
-            helper.start()
-            try:
-                link.stream(program.splitlines())
-            finally:
-                done.set()
-                helper.join()
-    finally:
-        emu.stop()
+    emu = _stream_to_grbl_emulator(program, lambda e: pauses.append(len(e.executed())))
     assert emu.error is None and all(a == "ok" for _, _, a in emu.lines()), emu.lines()
     events: list[tuple] = []
     for k, b in enumerate(emu.executed()):

@@ -139,6 +139,16 @@ def run_to_end(session: MachineSession, job: Job, timeout_s: float = 120.0) -> N
     assert session.wait_idle(timeout_s), "the activity never ended: a hang"
 
 
+def zigzag_from_a_known_position(proxy, tmp_path: Path) -> tuple[StateHold, str]:
+    """The zigzag job run to its end through ``proxy`` by a session whose machine state says the position is known;
+    the state's hold (still open) and the line the session said of the fault."""
+    hold = StateHold(tmp_path / "m.json", SETTINGS, "test")
+    hold.record(replace(hold.state, position_known=True))
+    session = open_session(proxy, state=hold)
+    run_to_end(session, zigzag_job(SETTINGS))
+    return hold, fault_message(session)
+
+
 # ---------------------------------------------------------------------------------------------- error:N
 def test_error_mid_job_holds_then_resets_grbl_before_exiting(tmp_path):
     """Issue #43 point 1: grbl refuses a line mid-job; cam stops the machine (feed hold, soft reset) so the
@@ -153,11 +163,7 @@ def test_error_mid_job_holds_then_resets_grbl_before_exiting(tmp_path):
                 marks["error"] = len(proxy.to_board)
             return line
         proxy.board_line_filter = mark
-        hold = StateHold(tmp_path / "m.json", SETTINGS, "test")
-        hold.record(replace(hold.state, position_known=True))
-        session = open_session(proxy, state=hold)
-        run_to_end(session, zigzag_job(SETTINGS))
-        msg = fault_message(session)
+        hold, msg = zigzag_from_a_known_position(proxy, tmp_path)
         assert "error:20" in msg and "feed hold and a soft reset" in msg and "position is unknown" in msg, msg
         assert seen, "the proxy never refused a line"
         assert_stopped_by_hold_then_reset(emu)
@@ -216,11 +222,7 @@ def test_an_alarm_or_a_reset_mid_job_holds_then_resets_grbl(tmp_path, push, keep
                 marks["fault"] = len(proxy.to_board)
             return out
         proxy.board_line_filter = mark
-        hold = StateHold(tmp_path / "m.json", SETTINGS, "test")
-        hold.record(replace(hold.state, position_known=True))
-        session = open_session(proxy, state=hold)
-        run_to_end(session, zigzag_job(SETTINGS))
-        msg = fault_message(session)
+        hold, msg = zigzag_from_a_known_position(proxy, tmp_path)
         assert all(w in msg for w in words) and "soft reset" in msg and "position is unknown" in msg, msg
         assert "fault" in marks, "the proxy never sent the push"
         assert_stopped_by_hold_then_reset(emu)
