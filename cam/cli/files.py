@@ -113,14 +113,15 @@ def cmd_info(args: argparse.Namespace) -> int:
         return info_height_map(args)
     port = getattr(args, "port", None) or DEFAULT_PORT
     # a delay the ramps would not honour: refused before anything is read; a MAXIMUS board: its own settings
-    settings = port_settings(args, port) if can(port, "board_settings") else machine_settings(args)
+    machine = machine_settings(args)
+    settings = port_settings(args, port) if can(port, "board_settings") else machine
     the_kind = kind(job_kind_of(args))
     if the_kind.info is None or the_kind.info_lines is None:
         readers = [k.listed_as for k in kinds() if k.info is not None]
         raise CamError(f"{args.image}: info reads {', '.join(readers[:-1])} and {readers[-1]}, not {the_kind.noun}")
     args.no_progress = getattr(args, "no_progress", True)
     with reading_bar(args) as progress:
-        rep = the_kind.info(args.image, job_options(args), machine_settings(args), prepare=lambda: prepare(args),
+        rep = the_kind.info(args.image, job_options(args), machine, prepare=lambda: prepare(args, machine),
                             progress=progress)
     print(json.dumps(rep, indent=2) if args.json else "\n".join(the_kind.info_lines(rep, args.image)))
     if not args.json:

@@ -13,8 +13,8 @@ from typing import Any, Optional
 import numpy as np
 
 from ..errors import CamError, TravelError
-from ..kinds import kind, kind_names, kinds
-from ..kinds.jobs import origin_anchor_steps
+from ..kinds import kinds
+from ..kinds.jobs import default_origin, origin_anchor_steps
 from ..job.model import Job, travel_job
 from ..settings import MachineSettings
 from ..motion.chunks import ChunkedPlan
@@ -65,7 +65,7 @@ def origin_anchor(job: "JobInput | MachineJob", origin: Optional[str]) -> tuple[
     ``JobOptions.origin``), else ``file`` for drawings and digitized matrices, ``upper-left`` for the other kinds
     (the command line passes ``file`` for an ``--offset`` without ``--origin``)."""
     mj = machine_job(job)
-    origin = origin or mj.origin or (kind(mj.kind).default_origin if mj.kind in kind_names() else "upper-left")
+    origin = origin or mj.origin or default_origin(mj.kind)
     if origin != "file" and not isinstance(mj.plan, ChunkedPlan):
         raise CamError(f"--origin {origin} places a file's job: {mj.name} has no plan of its own to measure")
     return origin_anchor_steps(mj.kind, origin, mj.plan)  # the rule, where the job layer needs it too (--level)

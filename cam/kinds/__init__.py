@@ -70,6 +70,11 @@ class Head:
     text: Optional[str]
     lines: tuple[str, ...]
 
+    @property
+    def plain_text(self) -> bool:
+        """Whether the head is text with lines that is not markup (what the line-based sniffers read)."""
+        return self.text is not None and bool(self.lines) and not self.text.lstrip().startswith("<")
+
     @classmethod
     def of(cls, head: bytes, truncated: Optional[bool] = None) -> "Head":
         """The head of a file from its first bytes (``truncated``: it goes on; default when ``head`` is

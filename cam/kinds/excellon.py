@@ -101,13 +101,8 @@ def excellon_or_gcode(lines: tuple[str, ...]) -> Optional[str]:
     return None
 
 
-def plain_text(head: Head) -> bool:
-    """Whether a head is text that is not markup (the line-based sniffers read only such files)."""
-    return head.text is not None and bool(head.lines) and not head.text.lstrip().startswith("<")
-
-
 def _sniff(head: Head) -> bool:
-    return plain_text(head) and excellon_or_gcode(head.lines) == "excellon"
+    return head.plain_text and excellon_or_gcode(head.lines) == "excellon"
 
 
 def _options_of(options: Any) -> dict[str, Any]:

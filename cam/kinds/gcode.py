@@ -7,13 +7,13 @@ from typing import Any, Optional
 
 from ..errors import CamError, TravelError
 from . import Head, Kind
-from .excellon import excellon_or_gcode, plain_text
+from .excellon import excellon_or_gcode
 
 __all__ = ["KIND", "probe_lines"]
 
 
 def _sniff(head: Head) -> bool:
-    return plain_text(head) and excellon_or_gcode(head.lines) == "gcode"
+    return head.plain_text and excellon_or_gcode(head.lines) == "gcode"
 
 
 def _open(path: Any, options: Any, settings: Any, machine_state: Any = None) -> Any:

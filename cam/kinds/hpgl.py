@@ -7,7 +7,6 @@ from pathlib import Path
 from typing import Any, Optional
 
 from . import Head, Kind
-from .excellon import plain_text
 
 __all__ = ["KIND"]
 
@@ -18,7 +17,7 @@ _ESCAPE = re.compile(r"\x1b\.[^A-Za-z:]*[A-Za-z:]?")  # an HP-GL/2 device escape
 
 def _sniff(head: Head) -> bool:
     """Mostly two-letter mnemonics with numbers, split by ``;``, some of them pen moves."""
-    if not plain_text(head):
+    if not head.plain_text:
         return False
     text = _ESCAPE.sub("", " ".join(head.lines))
     tokens = [t.strip() for t in re.split(r";", text) if t.strip()]

@@ -59,7 +59,7 @@ from . import kind as kind_named
 
 __all__ = [
     "JobOptions", "PreparedJob", "PlannedIn", "prepare_job", "own_zero_home", "resume_job", "job_kind", "accepted_suffixes",
-    "origin_anchor_steps", "kind_defaults", "engraving", "line_depth_mm", "plan_chunks", "PROFILE_SUFFIXES",
+    "origin_anchor_steps", "default_origin", "kind_defaults", "engraving", "line_depth_mm", "plan_chunks", "PROFILE_SUFFIXES",
 ]
 
 
@@ -208,8 +208,9 @@ class JobOptions:
     def check_kind(self, kind: str, source: str = "options") -> "JobOptions":
         """Refuse an option given for a job kind it does not apply to (the kinds of :data:`cam.options.JOB_OPTIONS`);
         returns self."""
+        kinds_of = option_kinds()
         for f in fields(self):
-            applies = option_kinds()[f.name]
+            applies = kinds_of[f.name]
             if getattr(self, f.name) != f.default and kind not in applies:
                 raise CamError(f"{source}: option '{f.name}' does not apply to a {kind} file; it applies to "
                                f"{' and '.join(sorted(applies))} files")
@@ -767,13 +768,20 @@ def prepare_job(
     return _finish(job)
 
 
+def default_origin(kind: str) -> str:
+    """The point of a job of file kind ``kind`` placed at the work zero when no ``origin`` is chosen: the kind's
+    :attr:`cam.kinds.Kind.default_origin` ("file" for drawings and digitized matrices, the thesis's top-left pixel),
+    "upper-left" for moves of no file kind."""
+    return kind_named(kind).default_origin if kind in kind_names() else "upper-left"
+
+
 def origin_anchor_steps(kind: str, origin: Optional[str], plan: Any) -> tuple[int, int]:
     """The ``(x, y)`` point of a job of file ``kind`` (its own frame, steps) that ``origin`` puts at the work zero
     (:func:`cam.drive.placement.origin_anchor`): ``file`` its frame's zero, ``upper-left``, ``lower-left`` or
     ``center`` of what its ``plan`` (a :class:`~cam.motion.chunks.ChunkedPlan`) cuts, the XY extent of the tool
     below the surface (the whole extent when nothing is); None: ``file`` for drawings and digitized matrices,
     ``upper-left`` for the other kinds."""
-    origin = origin or kind_named(kind).default_origin
+    origin = origin or default_origin(kind)
     if origin == "file":
         return 0, 0
     extent, cut = plan.motion_extent()
