@@ -41,6 +41,8 @@ ROOT = Path(__file__).resolve().parents[2]
 REGRESSIONS = Path(__file__).resolve().parent / "regressions"
 TIME_LIMIT_S = 10.0
 """An input whose call takes longer than this is a failure (a hang)."""
+SETUP_WAIT_S = 600.0
+"""How long the live server's set-up (its planning worker's first start) is waited for: not a limit on an input."""
 
 SETTINGS = cam.MachineSettings()
 
@@ -388,8 +390,11 @@ class _LiveServer:
         threading.Thread(target=self.server.run, kwargs={"sockets": [sock]}, daemon=True).start()
         while not self.server.started:
             time.sleep(0.01)
-        _, body, _ = self.post("/api/upload", WEB_BODIES[-1][1], "multipart/form-data; boundary=B")
-        self.post("/api/plan", b'{"job": "1", "options": {}}')
+        # set-up, not an input: the first plan starts the page's planning worker (numpy, numba, the cached
+        # kernels), which on a busy machine takes longer than an input may; it is waited for, not timed
+        _, body, _ = self.post("/api/upload", WEB_BODIES[-1][1], "multipart/form-data; boundary=B",
+                               timeout_s=SETUP_WAIT_S)
+        self.post("/api/plan", b'{"job": "1", "options": {}}', timeout_s=SETUP_WAIT_S)
 
     @classmethod
     def get(cls) -> "_LiveServer":
@@ -397,14 +402,15 @@ class _LiveServer:
             cls.instance = cls()
         return cls.instance
 
-    def post(self, route: str, body: bytes, ctype: str = "application/json") -> tuple[int, bytes, str]:
+    def post(self, route: str, body: bytes, ctype: str = "application/json", *, timeout_s: float = TIME_LIMIT_S
+             ) -> tuple[int, bytes, str]:
         import urllib.error
         import urllib.request
 
         req = urllib.request.Request(self.url + route, data=body, method="POST", headers={
             "Content-Type": ctype, "Origin": self.url, "X-Requested-With": "cam"})
         try:
-            with urllib.request.urlopen(req, timeout=TIME_LIMIT_S) as resp:
+            with urllib.request.urlopen(req, timeout=timeout_s) as resp:
                 return resp.status, resp.read(), resp.headers.get("content-type", "")
         except urllib.error.HTTPError as exc:
             return exc.code, exc.read(), exc.headers.get("content-type", "")
