@@ -42,6 +42,9 @@ DEFAULT_TIME_LIMIT_S = 120.0
 """How long one call may take by default (a large drawing plans in well under a minute)."""
 
 _END_GRACE_S = 1.0  # after SIGTERM, wait this long before SIGKILL
+_START_LIMIT_S = 300.0
+"""The longest a child may take to start (its imports and cached kernels) before a call gives up on it: a start is
+waited for, not counted against the call's time limit (on a busy machine it takes seconds)."""
 _NICE = 10  # the worker's niceness step: heavy work yields the CPU to the machine
 
 
@@ -98,6 +101,7 @@ def _serve(fd: int, memory_limit_bytes: int, warm_up: tuple[str, ...]) -> None:
         importlib.import_module(name)
     _load_cached_kernels()
     _limit_memory(memory_limit_bytes)
+    conn.send(("ready", None))  # the calls' time limits count from here
     while True:
         try:
             message = conn.recv_bytes()
@@ -143,6 +147,7 @@ class Worker:
         self._lock = threading.Lock()
         self._process: Any = None
         self._conn: Any = None
+        self._ready = False
         self._closed = False
         self.restarts = 0
 
@@ -167,6 +172,7 @@ class Worker:
         finally:
             theirs.close()
         self._process, self._conn = process, Connection(ours.detach())
+        self._ready = False
 
     def _end(self) -> None:
         process, conn = self._process, self._conn
@@ -196,6 +202,7 @@ class Worker:
             if self._closed:
                 raise CamError(f"{what}: the worker is closed")
             self._ensure()
+            self._await_ready(what)
             try:
                 self._conn.send((fn, args, kwargs))
                 ready = self._conn.poll(self.time_limit_s)
@@ -221,6 +228,26 @@ class Worker:
             if kind == "bug":
                 raise RuntimeError(f"{what} failed: {value}")
             return value
+
+    def _await_ready(self, what: str) -> None:
+        """Wait until the child has started (imported its warm-up modules, loaded the cached kernels, set its
+        memory limit): a start is not work, and the call's time limit counts from its end.
+
+        Raises:
+            WorkerLimitError: the child died while starting, or took over :data:`_START_LIMIT_S`.
+        """
+        if self._ready:
+            return
+        try:
+            said = self._conn.recv() if self._conn.poll(_START_LIMIT_S) else ("time", None)
+        except (EOFError, OSError):
+            said = ("died", None)
+        if said[0] != "ready":
+            code = self._process.poll() if self._process is not None else None
+            self._restart()
+            raise WorkerLimitError(f"{what}: the worker process did not start "
+                                   + (f"within {_START_LIMIT_S:g} s" if said[0] == "time" else f"(exit code {code})"))
+        self._ready = True
 
     def _restart(self) -> None:
         self._end()
